@@ -1,0 +1,568 @@
+//! The [`Codec`]: loads message types, then encodes and decodes them.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+
+use prost_reflect::{
+    Cardinality, DescriptorPool, DynamicMessage, Kind, MessageDescriptor, ReflectMessage, Value,
+};
+use protos::dccl::DcclFieldOptions;
+
+use crate::bits::{BitReader, BitWriter};
+use crate::codecs::identifier;
+use crate::crypto::CryptoKey;
+use crate::error::{CodecError, Error, Result};
+use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart};
+use crate::options::{has_message_options, message_options};
+use crate::registry::CodecRegistry;
+
+/// A loaded message type with its codecs and sizes.
+#[derive(Debug)]
+pub(crate) struct LoadedMessage {
+    pub(crate) descriptor: MessageDescriptor,
+    pub(crate) id: u32,
+    pub(crate) omit_id: bool,
+    pub(crate) max_bytes: u32,
+    pub(crate) head: Arc<dyn FieldCodec>,
+    pub(crate) body: Arc<dyn FieldCodec>,
+    /// Bits of the identifier (0 with `omit_id`).
+    pub(crate) id_bits: u32,
+}
+
+impl LoadedMessage {
+    pub(crate) fn head_bytes(&self) -> usize {
+        ((self.id_bits + self.head.max_size()) as usize).div_ceil(8)
+    }
+
+    pub(crate) fn max_body_bytes(&self) -> usize {
+        (self.body.max_size() as usize).div_ceil(8)
+    }
+
+    pub(crate) fn min_body_bytes(&self) -> usize {
+        (self.body.min_size() as usize).div_ceil(8)
+    }
+}
+
+type Clock = Arc<dyn Fn() -> i64 + Send + Sync>;
+
+/// Encodes and decodes DCCL messages, byte for byte as libdccl 4 does.
+///
+/// ```
+/// use dccl::Codec;
+///
+/// let pool = dccl::compile_sources(&[(
+///     "status.proto",
+///     r#"syntax = "proto2";
+///        import "dccl/option_extensions.proto";
+///        message Status {
+///          option (dccl.msg) = { id: 3 max_bytes: 8 codec_version: 4 };
+///          required double depth = 1 [(dccl.field) = { min: 0 max: 100 precision: 1 }];
+///        }"#,
+/// )])?;
+/// let desc = pool.get_message_by_name("Status").unwrap();
+/// let mut codec = Codec::new();
+/// codec.load(&desc)?;
+///
+/// let msg = prost_reflect::DynamicMessage::parse_text_format(desc, "depth: 12.34")?;
+/// let bytes = codec.encode(&msg)?;
+/// assert_eq!(bytes.len(), 3); // 1 byte of id + 10 bits of depth
+/// let back = codec.decode(&bytes)?;
+/// assert_eq!(back.get_field_by_name("depth").unwrap().as_f64(), Some(12.3));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone)]
+pub struct Codec {
+    registry: Arc<CodecRegistry>,
+    by_id: HashMap<u32, Arc<LoadedMessage>>,
+    by_name: HashMap<String, Arc<LoadedMessage>>,
+    strict: bool,
+    key: Option<CryptoKey>,
+    skip_crypto_ids: HashSet<u32>,
+    clock: Clock,
+}
+
+impl std::fmt::Debug for Codec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut names: Vec<_> = self.by_name.keys().collect();
+        names.sort();
+        f.debug_struct("Codec")
+            .field("loaded", &names)
+            .field("strict", &self.strict)
+            .field("encrypted", &self.key.is_some())
+            .finish()
+    }
+}
+
+impl Default for Codec {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn system_clock() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as i64)
+        .unwrap_or(0)
+}
+
+impl Codec {
+    /// A codec with the built-in codecs and nothing loaded.
+    pub fn new() -> Self {
+        Self::with_registry(CodecRegistry::with_builtin())
+    }
+
+    /// A codec whose field codecs come from `registry` (e.g. the built-ins
+    /// plus codecs of your own).
+    pub fn with_registry(registry: CodecRegistry) -> Self {
+        Codec {
+            registry: Arc::new(registry),
+            by_id: HashMap::new(),
+            by_name: HashMap::new(),
+            strict: false,
+            key: None,
+            skip_crypto_ids: HashSet::new(),
+            clock: Arc::new(system_clock),
+        }
+    }
+
+    /// In strict mode, out-of-range values, over-long strings and repeated
+    /// fields over `max_repeat` are errors. By default they are handled as
+    /// libdccl does: numbers become "not present" (the minimum for required
+    /// fields), strings and arrays are truncated.
+    pub fn set_strict(&mut self, strict: bool) {
+        self.strict = strict;
+    }
+
+    /// Encrypts message bodies with a key derived from `passphrase` (as libdccl does).
+    pub fn set_passphrase(&mut self, passphrase: &str) {
+        self.set_passphrase_with_exceptions(passphrase, std::iter::empty());
+    }
+
+    /// As [`Codec::set_passphrase`], leaving the listed DCCL ids in the clear.
+    pub fn set_passphrase_with_exceptions(
+        &mut self,
+        passphrase: &str,
+        clear_ids: impl IntoIterator<Item = u32>,
+    ) {
+        self.key = Some(CryptoKey::from_passphrase(passphrase));
+        self.skip_crypto_ids = clear_ids.into_iter().collect();
+    }
+
+    /// Stops encrypting.
+    pub fn clear_passphrase(&mut self) {
+        self.key = None;
+        self.skip_crypto_ids.clear();
+    }
+
+    /// Sets the clock (seconds since the UNIX epoch) the time codec uses to
+    /// restore the date on decoding.
+    pub fn set_clock(&mut self, clock: impl Fn() -> i64 + Send + Sync + 'static) {
+        self.clock = Arc::new(clock);
+    }
+
+    /// Validates and loads a message type. Errors name the message and the field.
+    pub fn load(&mut self, desc: &MessageDescriptor) -> Result<()> {
+        let loaded = self.build(desc)?;
+        if let Some(existing) = self.by_name.get(desc.full_name()) {
+            if existing.id == loaded.id {
+                self.by_name
+                    .insert(desc.full_name().to_string(), Arc::new(loaded));
+                let l = self.by_name[desc.full_name()].clone();
+                self.by_id.insert(l.id, l);
+                return Ok(());
+            }
+        }
+        if !loaded.omit_id {
+            if let Some(existing) = self.by_id.get(&loaded.id) {
+                if existing.descriptor.full_name() != desc.full_name() {
+                    return Err(Error::DuplicateId {
+                        id: loaded.id,
+                        existing: existing.descriptor.full_name().to_string(),
+                        new: desc.full_name().to_string(),
+                    });
+                }
+            }
+        }
+        let loaded = Arc::new(loaded);
+        if !loaded.omit_id {
+            self.by_id.insert(loaded.id, loaded.clone());
+        }
+        self.by_name.insert(desc.full_name().to_string(), loaded);
+        Ok(())
+    }
+
+    /// Loads the type of a prost-generated struct (one deriving `ReflectMessage`).
+    pub fn load_type<T: ReflectMessage + Default>(&mut self) -> Result<()> {
+        self.load(&T::default().descriptor())
+    }
+
+    /// Loads every message of the file `file_name` of `pool` that carries a
+    /// `(dccl.msg)` option; returns their names. Stops at the first invalid one.
+    pub fn load_file_messages(
+        &mut self,
+        pool: &DescriptorPool,
+        file_name: &str,
+    ) -> Result<Vec<String>> {
+        let file = pool
+            .get_file_by_name(file_name)
+            .ok_or_else(|| Error::Proto(format!("{file_name}: not in the descriptor pool")))?;
+        let mut names = Vec::new();
+        let mut stack: Vec<MessageDescriptor> = file.messages().collect();
+        while let Some(desc) = stack.pop() {
+            stack.extend(desc.child_messages());
+            if has_message_options(&desc) {
+                self.load(&desc)?;
+                names.push(desc.full_name().to_string());
+            }
+        }
+        names.sort();
+        Ok(names)
+    }
+
+    /// Removes a loaded type.
+    pub fn unload(&mut self, full_name: &str) {
+        if let Some(l) = self.by_name.remove(full_name) {
+            if self
+                .by_id
+                .get(&l.id)
+                .is_some_and(|x| x.descriptor.full_name() == full_name)
+            {
+                self.by_id.remove(&l.id);
+            }
+        }
+    }
+
+    /// Names of the loaded types, sorted.
+    pub fn loaded(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.by_name.keys().cloned().collect();
+        v.sort();
+        v
+    }
+
+    /// Descriptor of a loaded type.
+    pub fn descriptor(&self, full_name: &str) -> Option<MessageDescriptor> {
+        self.by_name.get(full_name).map(|l| l.descriptor.clone())
+    }
+
+    /// DCCL id of a loaded type.
+    pub fn id_of(&self, full_name: &str) -> Result<u32> {
+        Ok(self.get(full_name)?.id)
+    }
+
+    pub(crate) fn get(&self, full_name: &str) -> Result<&Arc<LoadedMessage>> {
+        self.by_name
+            .get(full_name)
+            .ok_or_else(|| Error::UnknownType(full_name.to_string()))
+    }
+
+    fn build(&self, desc: &MessageDescriptor) -> Result<LoadedMessage> {
+        let name = desc.full_name();
+        let opts = message_options(desc).map_err(|e| e.into_definition(name))?;
+        let omit_id = opts.omit_id();
+        let Some(id) = opts.id.or(if omit_id { Some(0) } else { None }) else {
+            return Err(Error::definition(
+                name,
+                "",
+                "missing message option `(dccl.msg).id`",
+            ));
+        };
+        let Some(max_bytes) = opts.max_bytes else {
+            return Err(Error::definition(
+                name,
+                "",
+                "missing message option `(dccl.msg).max_bytes`",
+            ));
+        };
+        let Some(version) = opts.codec_version else {
+            return Err(Error::definition(
+                name,
+                "",
+                format!(
+                    "no (dccl.msg).codec_version set; for new messages set \
+                     'option (dccl.msg).codec_version = 4' in {name}"
+                ),
+            ));
+        };
+        if !(2..=4).contains(&version) {
+            return Err(Error::definition(
+                name,
+                "",
+                format!("(dccl.msg).codec_version {version} is not supported (2, 3 or 4)"),
+            ));
+        }
+        if id < 0 || id as u32 > identifier::TWO_BYTE_MAX_ID {
+            return Err(Error::definition(
+                name,
+                "",
+                format!(
+                    "(dccl.msg).id {id} is outside 0..={}",
+                    identifier::TWO_BYTE_MAX_ID
+                ),
+            ));
+        }
+        let id = id as u32;
+        let group = opts
+            .codec_group
+            .clone()
+            .unwrap_or_else(|| format!("dccl.default{version}"));
+        let root_name = opts.codec.clone().unwrap_or_else(|| group.clone());
+        let field_options = DcclFieldOptions::default();
+        let make = |part: MessagePart| -> Result<Arc<dyn FieldCodec>> {
+            let spec = FieldSpec {
+                field: None,
+                kind: Kind::Message(desc.clone()),
+                options: &field_options,
+                codec_version: version,
+                codec_group: &group,
+                use_required: true,
+                part,
+                children_follow_parent: false,
+                depth: 0,
+                registry: &self.registry,
+            };
+            self.registry
+                .create(&root_name, &spec)
+                .map_err(|e| e.into_definition(name))
+        };
+        let head = make(MessagePart::Head)?;
+        let body = make(MessagePart::Body)?;
+        let id_bits = if omit_id { 0 } else { identifier::size(id) };
+        let loaded = LoadedMessage {
+            descriptor: desc.clone(),
+            id,
+            omit_id,
+            max_bytes,
+            head,
+            body,
+            id_bits,
+        };
+        let actual = loaded.head_bytes() + loaded.max_body_bytes();
+        if actual > max_bytes as usize {
+            return Err(Error::definition(
+                name,
+                "",
+                format!(
+                    "actual maximum size of message ({actual}B) exceeds allowed maximum \
+                     ({max_bytes}B); tighten bounds, remove fields, improve codecs, or \
+                     increase (dccl.msg).max_bytes"
+                ),
+            ));
+        }
+        Ok(loaded)
+    }
+
+    /// Encodes a message of a loaded type.
+    pub fn encode(&self, msg: &DynamicMessage) -> Result<Vec<u8>> {
+        let mut out = Vec::new();
+        self.encode_into(msg, &mut out)?;
+        Ok(out)
+    }
+
+    /// Encodes a message, appending the bytes to `out` (several calls stitch
+    /// messages together; [`Codec::decode_all`] splits them).
+    pub fn encode_into(&self, msg: &DynamicMessage, out: &mut Vec<u8>) -> Result<()> {
+        let name = msg.descriptor().full_name().to_string();
+        let loaded = self.get(&name)?;
+        check_initialized(msg).map_err(|e| e.into_encode(&name))?;
+        let ctx = EncodeContext {
+            strict: self.strict,
+        };
+        let mut head = BitWriter::with_capacity(loaded.head_bytes());
+        if !loaded.omit_id {
+            identifier::encode(&mut head, loaded.id).map_err(|e| e.into_encode(&name))?;
+        }
+        loaded
+            .head
+            .encode_message(&mut head, msg, &ctx)
+            .map_err(|e| e.into_encode(&name))?;
+        let mut body = BitWriter::with_capacity(loaded.max_body_bytes());
+        loaded
+            .body
+            .encode_message(&mut body, msg, &ctx)
+            .map_err(|e| e.into_encode(&name))?;
+        let start = out.len();
+        out.extend_from_slice(head.as_bytes());
+        let head_end = out.len();
+        out.extend_from_slice(body.as_bytes());
+        if let Some(key) = &self.key {
+            if !self.skip_crypto_ids.contains(&loaded.id) {
+                let (h, b) = out[start..].split_at_mut(head_end - start);
+                key.apply(h, b);
+            }
+        }
+        Ok(())
+    }
+
+    /// Encodes a prost-generated message.
+    pub fn encode_message<T: ReflectMessage>(&self, msg: &T) -> Result<Vec<u8>> {
+        self.encode(&msg.transcode_to_dynamic())
+    }
+
+    /// Encoded size in bytes of a message.
+    pub fn size(&self, msg: &DynamicMessage) -> Result<usize> {
+        Ok(self.encode(msg)?.len())
+    }
+
+    /// Largest encoded size in bytes of a loaded type.
+    pub fn max_size(&self, full_name: &str) -> Result<usize> {
+        let l = self.get(full_name)?;
+        Ok(l.head_bytes() + l.max_body_bytes())
+    }
+
+    /// Smallest encoded size in bytes of a loaded type.
+    pub fn min_size(&self, full_name: &str) -> Result<usize> {
+        let l = self.get(full_name)?;
+        Ok(l.head_bytes() + l.min_body_bytes())
+    }
+
+    /// Reads the DCCL id at the start of `bytes`.
+    pub fn id(&self, bytes: &[u8]) -> Result<u32> {
+        identifier::decode(&mut BitReader::new(bytes)).map_err(|e| Error::Decode {
+            location: Default::default(),
+            reason: format!("cannot read the DCCL id: {}", e.reason),
+        })
+    }
+
+    /// Decodes one message (its type found by its DCCL id). Bytes after the
+    /// message are ignored.
+    pub fn decode(&self, bytes: &[u8]) -> Result<DynamicMessage> {
+        Ok(self.decode_prefix(bytes)?.0)
+    }
+
+    /// Decodes the first message in `bytes`; returns it with the number of bytes it used.
+    pub fn decode_prefix(&self, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
+        let id = self.id(bytes)?;
+        let loaded = self.by_id.get(&id).ok_or(Error::UnknownId(id))?;
+        self.decode_loaded(loaded, bytes)
+    }
+
+    /// Decodes `bytes` as a message of a given loaded type (needed for
+    /// types with `omit_id`).
+    pub fn decode_as(&self, full_name: &str, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
+        let loaded = self.get(full_name)?;
+        if !loaded.omit_id {
+            let id = self.id(bytes)?;
+            if id != loaded.id {
+                return Err(Error::Decode {
+                    location: crate::error::Location {
+                        message: full_name.to_string(),
+                        field: String::new(),
+                    },
+                    reason: format!("received id {id}, expected {}", loaded.id),
+                });
+            }
+        }
+        self.decode_loaded(loaded, bytes)
+    }
+
+    /// Decodes every message of a byte string holding several concatenated messages.
+    pub fn decode_all(&self, bytes: &[u8]) -> Result<Vec<DynamicMessage>> {
+        let mut out = Vec::new();
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            let (msg, used) = self.decode_prefix(rest)?;
+            out.push(msg);
+            rest = &rest[used.min(rest.len())..];
+            if used == 0 {
+                break;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Decodes into a prost-generated struct.
+    pub fn decode_message<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
+        let msg = self.decode(bytes)?;
+        let name = msg.descriptor().full_name().to_string();
+        msg.transcode_to::<T>().map_err(|e| Error::Decode {
+            location: crate::error::Location {
+                message: name,
+                field: String::new(),
+            },
+            reason: format!("does not fit the requested type: {e}"),
+        })
+    }
+
+    fn decode_loaded(
+        &self,
+        loaded: &LoadedMessage,
+        bytes: &[u8],
+    ) -> Result<(DynamicMessage, usize)> {
+        let name = loaded.descriptor.full_name();
+        let head_len = loaded.head_bytes();
+        if bytes.len() < head_len {
+            return Err(CodecError::new(format!(
+                "message is truncated: {} bytes, the header alone takes {head_len}",
+                bytes.len()
+            ))
+            .into_decode(name));
+        }
+        let ctx = DecodeContext {
+            now_secs: (self.clock)(),
+        };
+        let mut msg = DynamicMessage::new(loaded.descriptor.clone());
+        let (head_bytes, body_bytes) = bytes.split_at(head_len);
+        let mut head = BitReader::new(head_bytes);
+        head.skip(loaded.id_bits as usize)
+            .map_err(|e| e.into_decode(name))?;
+        loaded
+            .head
+            .decode_message(&mut head, &mut msg, &ctx)
+            .map_err(|e| e.into_decode(name))?;
+        let decrypted;
+        let body_bytes = match &self.key {
+            Some(key) if !self.skip_crypto_ids.contains(&loaded.id) => {
+                let n = body_bytes.len().min(loaded.max_body_bytes());
+                let mut b = body_bytes[..n].to_vec();
+                key.apply(head_bytes, &mut b);
+                decrypted = b;
+                &decrypted[..]
+            }
+            _ => body_bytes,
+        };
+        let mut body = BitReader::new(body_bytes);
+        loaded
+            .body
+            .decode_message(&mut body, &mut msg, &ctx)
+            .map_err(|e| e.into_decode(name))?;
+        Ok((msg, head_len + body.bytes_consumed()))
+    }
+
+    /// Field-by-field size report of a loaded type, in the layout of
+    /// libdccl's `analyze` output.
+    pub fn analyze(&self, full_name: &str) -> Result<String> {
+        Ok(crate::analyze::report(self.get(full_name)?))
+    }
+}
+
+/// Checks that every required field (recursively) is set.
+fn check_initialized(msg: &DynamicMessage) -> std::result::Result<(), CodecError> {
+    for field in msg.descriptor().fields() {
+        if field.cardinality() == Cardinality::Required && !msg.has_field(&field) {
+            return Err(CodecError::new(
+                "message is not properly initialized: required field is not set",
+            )
+            .in_field(field.name()));
+        }
+        if let Kind::Message(_) = field.kind() {
+            if !msg.has_field(&field) {
+                continue;
+            }
+            match msg.get_field(&field).as_ref() {
+                Value::Message(m) => {
+                    check_initialized(m).map_err(|e| e.in_field(field.name()))?
+                }
+                Value::List(items) => {
+                    for item in items {
+                        if let Value::Message(m) = item {
+                            check_initialized(m).map_err(|e| e.in_field(field.name()))?;
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,63 @@
+//! Default identifier codec (`dccl.default.id`): ids 0–127 take one byte
+//! (`id << 1`, low bit 0), ids 128–32767 two bytes (`id << 1 | 1`), low byte first.
+
+use crate::bits::{BitReader, BitWriter};
+use crate::error::CodecError;
+
+/// Name of the identifier codec, as `analyze` reports it.
+pub const NAME: &str = "dccl.default.id";
+/// Largest id of the one-byte form.
+pub const ONE_BYTE_MAX_ID: u32 = 127;
+/// Largest id of the two-byte form.
+pub const TWO_BYTE_MAX_ID: u32 = 32767;
+
+/// Bits the id takes.
+pub fn size(id: u32) -> u32 {
+    if id <= ONE_BYTE_MAX_ID {
+        8
+    } else {
+        16
+    }
+}
+
+/// Writes the id.
+pub fn encode(out: &mut BitWriter, id: u32) -> Result<(), CodecError> {
+    if id > TWO_BYTE_MAX_ID {
+        return Err(CodecError::new(format!(
+            "dccl id {id} exceeds the maximum {TWO_BYTE_MAX_ID}"
+        )));
+    }
+    if id <= ONE_BYTE_MAX_ID {
+        out.write((id as u64) << 1, 8);
+    } else {
+        out.write(((id as u64) << 1) | 1, 16);
+    }
+    Ok(())
+}
+
+/// Reads the id.
+pub fn decode(input: &mut BitReader<'_>) -> Result<u32, CodecError> {
+    if input.peek_bool()? {
+        Ok((input.read(16)? >> 1) as u32)
+    } else {
+        Ok((input.read(8)? >> 1) as u32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn short_and_long_forms() {
+        let mut w = BitWriter::new();
+        encode(&mut w, 10).unwrap();
+        encode(&mut w, 300).unwrap();
+        assert_eq!(w.as_bytes(), &[0x14, 0x59, 0x02]);
+        let mut r = BitReader::new(w.as_bytes());
+        assert_eq!(decode(&mut r).unwrap(), 10);
+        assert_eq!(decode(&mut r).unwrap(), 300);
+        assert!(decode(&mut r).is_err());
+        assert!(encode(&mut w, 40000).is_err());
+    }
+}

@@ -1,0 +1,483 @@
+//! Default message codec (`dccl.default2/3/4` for embedded messages and for
+//! the root message): the fields in declaration order, each with its own
+//! codec. Version 3 and later prefix an optional embedded message with a
+//! presence bit; version 4 writes, at the start of the body part of each
+//! message, the case of every `oneof` and then encodes only the member that
+//! is set.
+
+use std::sync::Arc;
+
+use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
+
+use crate::bits::{BitReader, BitWriter};
+use crate::error::CodecError;
+use crate::field_codec::{
+    DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart, RepeatBounds,
+};
+use crate::options::field_options;
+use crate::rounding::ceil_log2_u64;
+
+/// Deepest nesting of embedded messages accepted (guards recursive types).
+pub const MAX_DEPTH: usize = 32;
+
+/// One field of a message as its codec sees it.
+#[derive(Debug)]
+pub struct FieldEntry {
+    /// The field.
+    pub field: FieldDescriptor,
+    /// Its codec.
+    pub codec: Arc<dyn FieldCodec>,
+    /// Repetition bounds of a repeated field.
+    pub repeat: Option<RepeatBounds>,
+    /// `(oneof index in the message, member index)` of a version 4 oneof member.
+    pub oneof: Option<(usize, usize)>,
+}
+
+impl FieldEntry {
+    /// Fewest bits of this field.
+    pub fn min_size(&self) -> u32 {
+        match self.repeat {
+            Some(b) => self.codec.min_size_repeated(b),
+            None => self.codec.min_size(),
+        }
+    }
+
+    /// Most bits of this field.
+    pub fn max_size(&self) -> u32 {
+        match self.repeat {
+            Some(b) => self.codec.max_size_repeated(b),
+            None => self.codec.max_size(),
+        }
+    }
+}
+
+/// A oneof of a version 4 message.
+#[derive(Debug)]
+pub struct OneofEntry {
+    /// Name of the oneof.
+    pub name: String,
+    /// Declaration index of the oneof in its message.
+    pub index: usize,
+    /// Bits of the case value (`ceil(log2(members + 1))`).
+    pub bits: u32,
+    /// The members, in declaration order.
+    pub members: Vec<FieldDescriptor>,
+}
+
+/// The default message codec.
+#[derive(Debug)]
+pub struct MessageCodec {
+    name: String,
+    version: i32,
+    descriptor: MessageDescriptor,
+    fields: Vec<FieldEntry>,
+    oneofs: Vec<OneofEntry>,
+    presence: bool,
+    min_bits: u32,
+    max_bits: u32,
+}
+
+fn use_required(field: &FieldDescriptor, version: i32) -> bool {
+    let required = field.cardinality() == Cardinality::Required;
+    let repeated = field.is_list() || field.is_map();
+    let in_oneof = field.containing_oneof().is_some();
+    match version {
+        v if v > 3 => required || repeated || in_oneof,
+        3 => required || repeated,
+        _ => required,
+    }
+}
+
+impl MessageCodec {
+    /// Creates the codec for a message field (or the root), or `None` for other types.
+    /// `codec_version` selects the behaviour of this codec (2, 3 or 4).
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+        codec_version: i32,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+        if spec.message_type().is_none() {
+            return Ok(None);
+        }
+        Ok(Some(Arc::new(Self::build(spec, name, codec_version)?)))
+    }
+
+    /// Builds the message codec.
+    pub fn build(
+        spec: &FieldSpec<'_>,
+        name: &str,
+        codec_version: i32,
+    ) -> Result<MessageCodec, CodecError> {
+        let descriptor = spec
+            .message_type()
+            .ok_or_else(|| CodecError::new("not a message field"))?;
+        if spec.depth > MAX_DEPTH {
+            return Err(CodecError::new(format!(
+                "messages nested deeper than {MAX_DEPTH} levels (recursive type {}?)",
+                descriptor.full_name()
+            )));
+        }
+        if codec_version == 3 && descriptor.oneofs().next().is_some() {
+            return Err(CodecError::new(
+                "DCCL codec version 3 does not support 'oneof' declarations",
+            ));
+        }
+        let presence = match codec_version {
+            v if v > 3 => spec.is_optional() && !spec.use_required,
+            3 => spec.is_optional(),
+            _ => false,
+        };
+        let with_oneofs = codec_version > 3 && spec.part == MessagePart::Body;
+        let oneofs: Vec<OneofEntry> = if with_oneofs {
+            descriptor
+                .oneofs()
+                .enumerate()
+                .map(|(index, o)| {
+                    let members: Vec<FieldDescriptor> = o.fields().collect();
+                    OneofEntry {
+                        name: o.name().to_string(),
+                        index,
+                        bits: ceil_log2_u64(members.len() as u64 + 1),
+                        members,
+                    }
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        let mut fields = Vec::new();
+        for field in descriptor.fields() {
+            let options = field_options(&field).map_err(|e| e.in_field(field.name()))?;
+            if options.omit() {
+                continue;
+            }
+            let included = spec.children_follow_parent
+                || (options.in_head() == (spec.part == MessagePart::Head));
+            if !included {
+                continue;
+            }
+            let entry = Self::build_entry(spec, &field, &options, with_oneofs, &oneofs)
+                .map_err(|e| e.in_field(field.name()))?;
+            fields.push(entry);
+        }
+
+        let mut codec = MessageCodec {
+            name: name.to_string(),
+            version: codec_version,
+            descriptor,
+            fields,
+            oneofs,
+            presence,
+            min_bits: 0,
+            max_bits: 0,
+        };
+        codec.compute_sizes();
+        Ok(codec)
+    }
+
+    fn build_entry(
+        parent: &FieldSpec<'_>,
+        field: &FieldDescriptor,
+        options: &protos::dccl::DcclFieldOptions,
+        with_oneofs: bool,
+        oneofs: &[OneofEntry],
+    ) -> Result<FieldEntry, CodecError> {
+        if field.is_map() {
+            return Err(CodecError::new("map fields are not supported by DCCL"));
+        }
+        if options.dynamic_conditions.is_some() {
+            return Err(CodecError::new(
+                "(dccl.field).dynamic_conditions are not supported",
+            ));
+        }
+        let in_head = options.in_head();
+        if in_head && field.containing_oneof().is_some() {
+            return Err(CodecError::new(
+                "oneof fields cannot be encoded in the header",
+            ));
+        }
+        let repeat = if field.is_list() {
+            let max = options.max_repeat.ok_or_else(|| {
+                CodecError::new("missing (dccl.field).max_repeat option on `repeated` field")
+            })?;
+            let min = options.min_repeat();
+            if max < 1 {
+                return Err(CodecError::new(
+                    "(dccl.field).max_repeat must not be less than 1",
+                ));
+            }
+            if max < min {
+                return Err(CodecError::new(
+                    "(dccl.field).max_repeat must not be less than (dccl.field).min_repeat",
+                ));
+            }
+            Some(RepeatBounds { min, max })
+        } else {
+            None
+        };
+        let spec = FieldSpec {
+            field: Some(field),
+            kind: field.kind(),
+            options,
+            codec_version: parent.codec_version,
+            codec_group: parent.codec_group,
+            use_required: use_required(field, parent.codec_version),
+            part: parent.part,
+            children_follow_parent: parent.children_follow_parent || options.in_head.is_some(),
+            depth: parent.depth + 1,
+            registry: parent.registry,
+        };
+        let codec = parent.registry.codec_for_field(&spec)?;
+        if in_head && codec.min_size() != codec.max_size() {
+            return Err(CodecError::new(
+                "variable size codec used in header - header fields must be encoded with fixed size codec",
+            ));
+        }
+        let oneof = if with_oneofs {
+            field.containing_oneof().and_then(|o| {
+                oneofs
+                    .iter()
+                    .position(|e| e.name == o.name())
+                    .and_then(|i| {
+                        oneofs[i]
+                            .members
+                            .iter()
+                            .position(|m| m.number() == field.number())
+                            .map(|j| (i, j))
+                    })
+            })
+        } else {
+            None
+        };
+        Ok(FieldEntry {
+            field: field.clone(),
+            codec,
+            repeat,
+            oneof,
+        })
+    }
+
+    fn compute_sizes(&mut self) {
+        let mut min = 0u32;
+        let mut max = 0u32;
+        let mut oneof_max = vec![0u32; self.oneofs.len()];
+        for o in &self.oneofs {
+            min += o.bits;
+            max += o.bits;
+        }
+        for f in &self.fields {
+            match f.oneof {
+                Some((i, _)) => oneof_max[i] = oneof_max[i].max(f.max_size()),
+                None => {
+                    min += f.min_size();
+                    max += f.max_size();
+                }
+            }
+        }
+        max += oneof_max.iter().sum::<u32>();
+        if self.presence {
+            self.min_bits = 1;
+            self.max_bits = max + 1;
+        } else {
+            self.min_bits = min;
+            self.max_bits = max;
+        }
+    }
+
+    /// The message type.
+    pub fn descriptor(&self) -> &MessageDescriptor {
+        &self.descriptor
+    }
+
+    /// The fields this codec encodes, in order.
+    pub fn fields(&self) -> &[FieldEntry] {
+        &self.fields
+    }
+
+    /// The oneofs whose case this codec writes.
+    pub fn oneofs(&self) -> &[OneofEntry] {
+        &self.oneofs
+    }
+
+    /// Writes the fields of `msg` (no presence bit).
+    pub fn encode_fields(
+        &self,
+        out: &mut BitWriter,
+        msg: &DynamicMessage,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        for o in &self.oneofs {
+            let case = o
+                .members
+                .iter()
+                .position(|m| msg.has_field(m))
+                .map(|i| i + 1)
+                .unwrap_or(0);
+            out.write(case as u64, o.bits);
+        }
+        for f in &self.fields {
+            let result = if let Some(bounds) = f.repeat {
+                match msg.get_field(&f.field).as_ref() {
+                    Value::List(values) => f.codec.encode_repeated(out, values, bounds, ctx),
+                    other => Err(CodecError::new(format!(
+                        "expected a list for a repeated field, got {other:?}"
+                    ))),
+                }
+            } else if msg.has_field(&f.field) {
+                f.codec.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
+            } else if f.oneof.is_some() {
+                Ok(())
+            } else {
+                f.codec.encode(out, None, ctx)
+            };
+            result.map_err(|e| e.in_field(f.field.name()))?;
+        }
+        Ok(())
+    }
+
+    /// Reads the fields into `msg` (no presence bit).
+    pub fn decode_fields(
+        &self,
+        input: &mut BitReader<'_>,
+        msg: &mut DynamicMessage,
+        ctx: &DecodeContext,
+    ) -> Result<(), CodecError> {
+        let mut cases = [0usize; 8];
+        let mut cases_vec;
+        let cases: &mut [usize] = if self.oneofs.len() <= cases.len() {
+            &mut cases[..self.oneofs.len()]
+        } else {
+            cases_vec = vec![0usize; self.oneofs.len()];
+            &mut cases_vec
+        };
+        for (i, o) in self.oneofs.iter().enumerate() {
+            cases[i] = input
+                .read(o.bits)
+                .map_err(|e| e.in_field(&o.name))? as usize;
+        }
+        for f in &self.fields {
+            let result = if let Some(bounds) = f.repeat {
+                f.codec.decode_repeated(input, bounds, ctx).map(|values| {
+                    if !values.is_empty() {
+                        msg.set_field(&f.field, Value::List(values));
+                    }
+                })
+            } else {
+                if let Some((i, j)) = f.oneof {
+                    if cases[i] != j + 1 {
+                        continue;
+                    }
+                }
+                f.codec.decode(input, ctx).map(|value| {
+                    if let Some(v) = value {
+                        msg.set_field(&f.field, v);
+                    }
+                })
+            };
+            result.map_err(|e| e.in_field(f.field.name()))?;
+        }
+        Ok(())
+    }
+}
+
+impl FieldCodec for MessageCodec {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn codec_version(&self) -> i32 {
+        self.version
+    }
+    fn min_size(&self) -> u32 {
+        self.min_bits
+    }
+    fn max_size(&self) -> u32 {
+        self.max_bits
+    }
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        match value {
+            None => {
+                out.write_zeros(self.min_bits as usize);
+                Ok(())
+            }
+            Some(Value::Message(m)) => {
+                if self.presence {
+                    out.write_bool(true);
+                }
+                self.encode_fields(out, m, ctx)
+            }
+            Some(other) => Err(CodecError::new(format!("value {other:?} is not a message"))),
+        }
+    }
+    fn decode(
+        &self,
+        input: &mut BitReader<'_>,
+        ctx: &DecodeContext,
+    ) -> Result<Option<Value>, CodecError> {
+        if self.presence && !input.read_bool()? {
+            return Ok(None);
+        }
+        let mut msg = DynamicMessage::new(self.descriptor.clone());
+        self.decode_fields(input, &mut msg, ctx)?;
+        if self.version < 3 && msg.fields().next().is_none() {
+            return Ok(None);
+        }
+        Ok(Some(Value::Message(msg)))
+    }
+    fn decode_repeated(
+        &self,
+        input: &mut BitReader<'_>,
+        bounds: RepeatBounds,
+        ctx: &DecodeContext,
+    ) -> Result<Vec<Value>, CodecError> {
+        let count = if self.codec_version() > 2 {
+            input.read(bounds.prefix_bits())? as usize + bounds.min as usize
+        } else {
+            bounds.max as usize
+        };
+        let mut out = Vec::with_capacity(count);
+        let mut empties = 0;
+        for _ in 0..count {
+            match self.decode(input, ctx)? {
+                Some(v) => out.push(v),
+                None => {
+                    // Version 2 keeps the empty element in place and drops the
+                    // last element instead, as the reference does.
+                    empties += 1;
+                    out.push(Value::Message(DynamicMessage::new(self.descriptor.clone())));
+                }
+            }
+        }
+        out.truncate(count - empties);
+        Ok(out)
+    }
+    fn encode_message(
+        &self,
+        out: &mut BitWriter,
+        msg: &DynamicMessage,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        self.encode_fields(out, msg, ctx)
+    }
+    fn decode_message(
+        &self,
+        input: &mut BitReader<'_>,
+        msg: &mut DynamicMessage,
+        ctx: &DecodeContext,
+    ) -> Result<(), CodecError> {
+        self.decode_fields(input, msg, ctx)
+    }
+    fn children(&self) -> Option<&MessageCodec> {
+        Some(self)
+    }
+}
+
+/// Whether a field kind is a message.
+pub fn is_message(kind: &Kind) -> bool {
+    matches!(kind, Kind::Message(_))
+}

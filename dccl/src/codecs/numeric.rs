@@ -1,0 +1,422 @@
+//! Default numeric codec (`dccl.default2/3/4` for integer and floating-point
+//! fields): the value is quantized to the field's resolution, offset by the
+//! minimum and written in the fewest bits that hold `(max - min) / resolution + 1`
+//! values, plus one "not present" value for optional fields.
+
+use std::sync::Arc;
+
+use prost_reflect::{Kind, Value};
+
+use crate::bits::{BitReader, BitWriter};
+use crate::error::CodecError;
+use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec};
+use crate::rounding::{
+    ceil_log2_f64, pow10, quantize_f32, quantize_f64, quantize_int, round_f32, round_f64, IntWire,
+};
+
+/// The wire (arithmetic) type of a numeric field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WireKind {
+    /// 32-bit signed integer.
+    I32,
+    /// 64-bit signed integer.
+    I64,
+    /// 32-bit unsigned integer.
+    U32,
+    /// 64-bit unsigned integer.
+    U64,
+    /// Single-precision float.
+    F32,
+    /// Double-precision float.
+    F64,
+}
+
+impl WireKind {
+    /// The wire kind of a protobuf field kind, if numeric.
+    pub fn of(kind: &Kind) -> Option<WireKind> {
+        Some(match kind {
+            Kind::Int32 | Kind::Sint32 | Kind::Sfixed32 => WireKind::I32,
+            Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => WireKind::I64,
+            Kind::Uint32 | Kind::Fixed32 => WireKind::U32,
+            Kind::Uint64 | Kind::Fixed64 => WireKind::U64,
+            Kind::Float => WireKind::F32,
+            Kind::Double => WireKind::F64,
+            _ => return None,
+        })
+    }
+
+    fn lowest(self) -> f64 {
+        match self {
+            WireKind::I32 => i32::MIN as f64,
+            WireKind::I64 => i64::MIN as f64,
+            WireKind::U32 | WireKind::U64 => 0.0,
+            WireKind::F32 => f32::MIN as f64,
+            WireKind::F64 => f64::MIN,
+        }
+    }
+
+    fn highest(self) -> f64 {
+        match self {
+            WireKind::I32 => i32::MAX as f64,
+            WireKind::I64 => i64::MAX as f64,
+            WireKind::U32 => u32::MAX as f64,
+            WireKind::U64 => u64::MAX as f64,
+            WireKind::F32 => f32::MAX as f64,
+            WireKind::F64 => f64::MAX,
+        }
+    }
+
+    /// Reads a protobuf value as this wire kind.
+    pub fn from_value(self, v: &Value) -> Option<WireValue> {
+        Some(match (self, v) {
+            (WireKind::I32, Value::I32(x)) => WireValue::I32(*x),
+            (WireKind::I32, Value::EnumNumber(x)) => WireValue::I32(*x),
+            (WireKind::I64, Value::I64(x)) => WireValue::I64(*x),
+            (WireKind::U32, Value::U32(x)) => WireValue::U32(*x),
+            (WireKind::U64, Value::U64(x)) => WireValue::U64(*x),
+            (WireKind::F32, Value::F32(x)) => WireValue::F32(*x),
+            (WireKind::F64, Value::F64(x)) => WireValue::F64(*x),
+            _ => return None,
+        })
+    }
+}
+
+/// A value in its wire type.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WireValue {
+    /// 32-bit signed integer.
+    I32(i32),
+    /// 64-bit signed integer.
+    I64(i64),
+    /// 32-bit unsigned integer.
+    U32(u32),
+    /// 64-bit unsigned integer.
+    U64(u64),
+    /// Single-precision float.
+    F32(f32),
+    /// Double-precision float.
+    F64(f64),
+}
+
+impl WireValue {
+    /// As a protobuf value.
+    pub fn to_value(self) -> Value {
+        match self {
+            WireValue::I32(x) => Value::I32(x),
+            WireValue::I64(x) => Value::I64(x),
+            WireValue::U32(x) => Value::U32(x),
+            WireValue::U64(x) => Value::U64(x),
+            WireValue::F32(x) => Value::F32(x),
+            WireValue::F64(x) => Value::F64(x),
+        }
+    }
+}
+
+/// Bounds and arithmetic of a numeric field, shared by the numeric, enum and time codecs.
+#[derive(Debug, Clone)]
+pub struct NumericBounds {
+    /// Wire type.
+    pub kind: WireKind,
+    /// Lower bound.
+    pub min: f64,
+    /// Upper bound.
+    pub max: f64,
+    /// Quantization step.
+    pub resolution: f64,
+    /// No "not present" value.
+    pub required: bool,
+    /// Encoded size in bits.
+    pub bits: u32,
+}
+
+fn int_encode<I: IntWire>(value: I, b: &NumericBounds) -> Option<u64> {
+    let res = b.resolution;
+    let q = quantize_int(value, res);
+    if q.to_f64() < b.min || q.to_f64() > b.max {
+        return None;
+    }
+    let mut w = q.sub(quantize_int(I::from_f64(b.min), res));
+    w = if res >= 1.0 {
+        I::from_f64(w.to_f64() / res)
+    } else {
+        I::from_f64(w.to_f64() * (1.0 / res))
+    };
+    Some(w.to_u64())
+}
+
+fn int_decode<I: IntWire>(u: u64, b: &NumericBounds) -> I {
+    let res = b.resolution;
+    let mut w = I::from_u64(u);
+    w = if res >= 1.0 {
+        I::from_f64(w.to_f64() * res)
+    } else {
+        I::from_f64(w.to_f64() / (1.0 / res))
+    };
+    quantize_int(w.add(quantize_int(I::from_f64(b.min), res)), res)
+}
+
+impl NumericBounds {
+    /// Builds the bounds, computing the size as the reference does.
+    pub fn new(kind: WireKind, min: f64, max: f64, resolution: f64, required: bool) -> Self {
+        let null = if required { 0.0 } else { 1.0 };
+        let bits = ceil_log2_f64((max - min) / resolution + 1.0 + null);
+        NumericBounds {
+            kind,
+            min,
+            max,
+            resolution,
+            required,
+            bits,
+        }
+    }
+
+    /// The unsigned integer written for `value`, before the presence offset;
+    /// `None` when the value is out of bounds.
+    fn to_wire_uint(&self, value: WireValue) -> Option<u64> {
+        let res = self.resolution;
+        match value {
+            WireValue::I32(v) => int_encode(v, self),
+            WireValue::I64(v) => int_encode(v, self),
+            WireValue::U32(v) => int_encode(v, self),
+            WireValue::U64(v) => int_encode(v, self),
+            WireValue::F64(v) => {
+                let q = quantize_f64(v, res);
+                if q < self.min || q > self.max || q.is_nan() {
+                    return None;
+                }
+                let mut w = q - quantize_f64(self.min, res);
+                w = if res >= 1.0 { w / res } else { w * (1.0 / res) };
+                Some(round_f64(w, 0) as u64)
+            }
+            WireValue::F32(v) => {
+                let q = quantize_f32(v, res);
+                if (q as f64) < self.min || (q as f64) > self.max || q.is_nan() {
+                    return None;
+                }
+                let mut w = q - quantize_f32(self.min as f32, res);
+                w = if res >= 1.0 {
+                    (w as f64 / res) as f32
+                } else {
+                    (w as f64 * (1.0 / res)) as f32
+                };
+                Some(round_f32(w, 0) as u64)
+            }
+        }
+    }
+
+    fn from_wire_uint(&self, u: u64) -> WireValue {
+        let res = self.resolution;
+        match self.kind {
+            WireKind::I32 => WireValue::I32(int_decode(u, self)),
+            WireKind::I64 => WireValue::I64(int_decode(u, self)),
+            WireKind::U32 => WireValue::U32(int_decode(u, self)),
+            WireKind::U64 => WireValue::U64(int_decode(u, self)),
+            WireKind::F64 => {
+                let mut w = u as f64;
+                w = if res >= 1.0 { w * res } else { w / (1.0 / res) };
+                WireValue::F64(quantize_f64(w + quantize_f64(self.min, res), res))
+            }
+            WireKind::F32 => {
+                let mut w = u as f32;
+                w = if res >= 1.0 {
+                    (w as f64 * res) as f32
+                } else {
+                    (w as f64 / (1.0 / res)) as f32
+                };
+                WireValue::F32(quantize_f32(w + quantize_f32(self.min as f32, res), res))
+            }
+        }
+    }
+
+    /// Writes a value (`None`: not present). Out-of-range values are written
+    /// as "not present" (the minimum for required fields), or refused when strict.
+    pub fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<WireValue>,
+        strict: bool,
+    ) -> Result<(), CodecError> {
+        let Some(value) = value else {
+            out.write(0, self.bits);
+            return Ok(());
+        };
+        match self.to_wire_uint(value) {
+            Some(u) => {
+                let u = if self.required { u } else { u.wrapping_add(1) };
+                out.write(u, self.bits);
+                Ok(())
+            }
+            None if strict => Err(CodecError::new(format!(
+                "value {} is outside [{}, {}]",
+                display(value),
+                self.min,
+                self.max
+            ))),
+            None => {
+                out.write(0, self.bits);
+                Ok(())
+            }
+        }
+    }
+
+    /// Reads a value; `None` is "not present".
+    pub fn decode(&self, input: &mut BitReader<'_>) -> Result<Option<WireValue>, CodecError> {
+        let mut u = input.read(self.bits)?;
+        if !self.required {
+            if u == 0 {
+                return Ok(None);
+            }
+            u -= 1;
+        }
+        Ok(Some(self.from_wire_uint(u)))
+    }
+
+    /// Checks the bounds as the reference does at load time.
+    pub fn validate(&self, has_resolution: bool) -> Result<(), CodecError> {
+        if self.resolution <= 0.0 || self.resolution.is_nan() {
+            return Err(CodecError::new(
+                "(dccl.field).resolution must be greater than 0",
+            ));
+        }
+        if !(self.min >= self.kind.lowest()) {
+            return Err(CodecError::new(
+                "(dccl.field).min must be >= minimum of this field type",
+            ));
+        }
+        if !(self.max <= self.kind.highest()) {
+            return Err(CodecError::new(
+                "(dccl.field).max must be <= maximum of this field type",
+            ));
+        }
+        if self.max < self.min {
+            return Err(CodecError::new("(dccl.field).max must be >= (dccl.field).min"));
+        }
+        if has_resolution {
+            let eps = 1e-10;
+            if (quantize_f64(self.min, self.resolution) - self.min).abs() >= eps {
+                return Err(CodecError::new(
+                    "(dccl.field).min must be an exact multiple of (dccl.field).resolution",
+                ));
+            }
+            if (quantize_f64(self.max, self.resolution) - self.max).abs() >= eps {
+                return Err(CodecError::new(
+                    "(dccl.field).max must be an exact multiple of (dccl.field).resolution",
+                ));
+            }
+        }
+        if (self.max - self.min).log2() - self.resolution.log2() > f64::MANTISSA_DIGITS as f64 {
+            return Err(CodecError::new(
+                "[(dccl.field).max-(dccl.field).min]/(dccl.field).resolution must fit in a \
+                 double-precision floating point value",
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn display(v: WireValue) -> String {
+    match v {
+        WireValue::I32(x) => x.to_string(),
+        WireValue::I64(x) => x.to_string(),
+        WireValue::U32(x) => x.to_string(),
+        WireValue::U64(x) => x.to_string(),
+        WireValue::F32(x) => x.to_string(),
+        WireValue::F64(x) => x.to_string(),
+    }
+}
+
+/// The resolution of a field: `10^-precision` when `precision` is set,
+/// else `resolution` (default 1).
+pub fn field_resolution(spec: &FieldSpec<'_>) -> Result<f64, CodecError> {
+    let o = spec.options;
+    if o.precision.is_some() && o.resolution.is_some() {
+        return Err(CodecError::new(
+            "at most one of either (dccl.field).precision or (dccl.field).resolution can be set",
+        ));
+    }
+    Ok(match o.precision {
+        Some(p) => pow10(-(p as f64)),
+        None => o.resolution(),
+    })
+}
+
+/// The default numeric codec.
+#[derive(Debug)]
+pub struct NumericCodec {
+    name: String,
+    version: i32,
+    bounds: NumericBounds,
+}
+
+impl NumericCodec {
+    /// Creates the codec for a numeric field, or `None` for other field types.
+    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+        let Some(kind) = WireKind::of(&spec.kind()) else {
+            return Ok(None);
+        };
+        Ok(Some(Arc::new(Self::build(spec, name, kind, spec.use_required)?)))
+    }
+
+    /// Builds the codec with an explicit presence rule (used by the presence codec).
+    pub fn build(
+        spec: &FieldSpec<'_>,
+        name: &str,
+        kind: WireKind,
+        required: bool,
+    ) -> Result<NumericCodec, CodecError> {
+        let o = spec.options;
+        let min = o
+            .min
+            .ok_or_else(|| CodecError::new("missing (dccl.field).min"))?;
+        let max = o
+            .max
+            .ok_or_else(|| CodecError::new("missing (dccl.field).max"))?;
+        let resolution = field_resolution(spec)?;
+        let bounds = NumericBounds::new(kind, min, max, resolution, required);
+        bounds.validate(o.resolution.is_some())?;
+        Ok(NumericCodec {
+            name: name.to_string(),
+            version: spec.codec_version,
+            bounds,
+        })
+    }
+}
+
+impl FieldCodec for NumericCodec {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn codec_version(&self) -> i32 {
+        self.version
+    }
+    fn min_size(&self) -> u32 {
+        self.bounds.bits
+    }
+    fn max_size(&self) -> u32 {
+        self.bounds.bits
+    }
+    fn size(&self, _value: Option<&Value>) -> u32 {
+        self.bounds.bits
+    }
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        let wire = match value {
+            None => None,
+            Some(v) => Some(self.bounds.kind.from_value(v).ok_or_else(|| {
+                CodecError::new(format!("value {v:?} does not match the field type"))
+            })?),
+        };
+        self.bounds.encode(out, wire, ctx.strict)
+    }
+    fn decode(
+        &self,
+        input: &mut BitReader<'_>,
+        _ctx: &DecodeContext,
+    ) -> Result<Option<Value>, CodecError> {
+        Ok(self.bounds.decode(input)?.map(WireValue::to_value))
+    }
+}

@@ -1,0 +1,277 @@
+//! The field codec interface: every codec, built in or supplied by a user,
+//! implements [`FieldCodec`] and is created by a [`FieldCodecFactory`]
+//! registered by name in a [`CodecRegistry`](crate::CodecRegistry).
+
+use std::fmt::Debug;
+use std::sync::Arc;
+
+use prost_reflect::{DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
+use protos::dccl::DcclFieldOptions;
+
+use crate::bits::{BitReader, BitWriter};
+use crate::error::CodecError;
+use crate::registry::CodecRegistry;
+
+/// Which part of the encoded message a codec is working on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MessagePart {
+    /// The header: identifier and `in_head` fields, never encrypted.
+    Head,
+    /// The body: every other field, encrypted when a passphrase is set.
+    Body,
+}
+
+/// Settings in force while one message is encoded.
+#[derive(Debug, Clone, Copy)]
+pub struct EncodeContext {
+    /// Out-of-range values are errors instead of being encoded as "not present".
+    pub strict: bool,
+}
+
+/// Settings in force while one message is decoded.
+#[derive(Debug, Clone, Copy)]
+pub struct DecodeContext {
+    /// Current time in whole seconds since the UNIX epoch (used by the time codec).
+    pub now_secs: i64,
+}
+
+/// What a factory is told about the field whose codec it creates.
+pub struct FieldSpec<'a> {
+    /// The field (`None` for the root message).
+    pub field: Option<&'a FieldDescriptor>,
+    /// The field's kind (for the root message: its message type).
+    pub kind: Kind,
+    /// Its `(dccl.field)` options (defaults filled in by prost; `Option::is_some` tells presence).
+    pub options: &'a DcclFieldOptions,
+    /// The `codec_version` of the root message (2, 3 or 4).
+    pub codec_version: i32,
+    /// The codec group of the root message (e.g. `dccl.default4`).
+    pub codec_group: &'a str,
+    /// True when the field carries no "not present" value (required fields;
+    /// in version 3+ repeated fields; in version 4 oneof members).
+    pub use_required: bool,
+    /// The part being built (head or body).
+    pub part: MessagePart,
+    /// For message fields: whether children are all in `part` (the field set
+    /// `in_head` explicitly) or filtered by their own `in_head`.
+    pub children_follow_parent: bool,
+    /// Nesting depth (the root message's fields are at depth 1).
+    pub depth: usize,
+    /// The registry, so that message codecs can build the codecs of their fields.
+    pub registry: &'a CodecRegistry,
+}
+
+impl FieldSpec<'_> {
+    /// The field's kind (for the root message: its message type).
+    pub fn kind(&self) -> Kind {
+        self.kind.clone()
+    }
+
+    /// The field's name (the message's full name for the root).
+    pub fn name(&self) -> &str {
+        match self.field {
+            Some(f) => f.name(),
+            None => match &self.kind {
+                Kind::Message(m) => m.full_name(),
+                _ => "",
+            },
+        }
+    }
+
+    /// The message type of a message field (or of the root).
+    pub fn message_type(&self) -> Option<MessageDescriptor> {
+        match &self.kind {
+            Kind::Message(m) => Some(m.clone()),
+            _ => None,
+        }
+    }
+
+    /// True when the field is a proto2/proto3 `optional` field (not required, not repeated).
+    pub fn is_optional(&self) -> bool {
+        self.field
+            .map(|f| f.cardinality() == prost_reflect::Cardinality::Optional)
+            .unwrap_or(false)
+    }
+}
+
+/// Creates the codec of one field from its descriptor and options.
+pub trait FieldCodecFactory: Send + Sync {
+    /// Returns `Ok(None)` when this factory does not handle the field's type
+    /// (the registry then reports that no codec of that name fits the type),
+    /// `Err` when the options are invalid for this codec.
+    fn create(&self, spec: &FieldSpec<'_>) -> Result<Option<Arc<dyn FieldCodec>>, CodecError>;
+}
+
+impl<F> FieldCodecFactory for F
+where
+    F: Fn(&FieldSpec<'_>) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> + Send + Sync,
+{
+    fn create(&self, spec: &FieldSpec<'_>) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+        self(spec)
+    }
+}
+
+/// Repetition bounds of a repeated field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RepeatBounds {
+    /// `(dccl.field).min_repeat`.
+    pub min: u32,
+    /// `(dccl.field).max_repeat`.
+    pub max: u32,
+}
+
+impl RepeatBounds {
+    /// Bits of the element-count prefix (codec version 3 and later).
+    pub fn prefix_bits(&self) -> u32 {
+        crate::rounding::ceil_log2_u64((self.max - self.min) as u64 + 1)
+    }
+}
+
+/// A field codec: turns one field value into bits and back.
+///
+/// A codec must read on decode exactly the bits it wrote on encode. Values
+/// are `prost_reflect::Value`s of the field's type; `None` means "not set".
+pub trait FieldCodec: Send + Sync + Debug {
+    /// The registered name reported by `analyze` (e.g. `dccl.default4`).
+    fn name(&self) -> &str;
+
+    /// Fewest bits one value (or absence) can take.
+    fn min_size(&self) -> u32;
+
+    /// Most bits one value can take.
+    fn max_size(&self) -> u32;
+
+    /// Bits this value would take.
+    fn size(&self, value: Option<&Value>) -> u32 {
+        let mut w = BitWriter::new();
+        match self.encode(&mut w, value, &EncodeContext { strict: false }) {
+            Ok(()) => w.len() as u32,
+            Err(_) => self.max_size(),
+        }
+    }
+
+    /// Writes one value (`None`: not set).
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError>;
+
+    /// Reads one value; `Ok(None)` means "not present".
+    fn decode(
+        &self,
+        input: &mut BitReader<'_>,
+        ctx: &DecodeContext,
+    ) -> Result<Option<Value>, CodecError>;
+
+    /// Codec version whose repeated framing applies (3+: count prefix; 2: always `max_repeat`).
+    fn codec_version(&self) -> i32;
+
+    /// Writes a repeated field: DCCL's element-count prefix (version 3+) and
+    /// the elements. Override for codecs that encode a whole array at once.
+    fn encode_repeated(
+        &self,
+        out: &mut BitWriter,
+        values: &[Value],
+        bounds: RepeatBounds,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        if ctx.strict && values.len() > bounds.max as usize {
+            return Err(CodecError::new(format!(
+                "{} values exceed max_repeat {}",
+                values.len(),
+                bounds.max
+            )));
+        }
+        if ctx.strict && values.len() < bounds.min as usize {
+            return Err(CodecError::new(format!(
+                "{} values are fewer than min_repeat {}",
+                values.len(),
+                bounds.min
+            )));
+        }
+        let count = if self.codec_version() > 2 {
+            let n = values.len().min(bounds.max as usize).max(bounds.min as usize);
+            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
+            n
+        } else {
+            bounds.max as usize
+        };
+        for i in 0..count {
+            self.encode(out, values.get(i), ctx)?;
+        }
+        Ok(())
+    }
+
+    /// Reads a repeated field written by [`FieldCodec::encode_repeated`];
+    /// elements that decode as "not present" are dropped.
+    fn decode_repeated(
+        &self,
+        input: &mut BitReader<'_>,
+        bounds: RepeatBounds,
+        ctx: &DecodeContext,
+    ) -> Result<Vec<Value>, CodecError> {
+        let count = if self.codec_version() > 2 {
+            input.read(bounds.prefix_bits())? as usize + bounds.min as usize
+        } else {
+            bounds.max as usize
+        };
+        let mut out = Vec::with_capacity(count);
+        for _ in 0..count {
+            if let Some(v) = self.decode(input, ctx)? {
+                out.push(v);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Fewest bits of a repeated field.
+    fn min_size_repeated(&self, bounds: RepeatBounds) -> u32 {
+        if self.codec_version() > 2 {
+            bounds.prefix_bits() + self.min_size() * bounds.min
+        } else {
+            self.min_size() * bounds.max
+        }
+    }
+
+    /// Most bits of a repeated field.
+    fn max_size_repeated(&self, bounds: RepeatBounds) -> u32 {
+        if self.codec_version() > 2 {
+            bounds.prefix_bits() + self.max_size() * bounds.max
+        } else {
+            self.max_size() * bounds.max
+        }
+    }
+
+    /// Writes a whole message held by this (message) codec. The default
+    /// goes through [`FieldCodec::encode`]; message codecs override it to avoid a copy.
+    fn encode_message(
+        &self,
+        out: &mut BitWriter,
+        msg: &DynamicMessage,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        self.encode(out, Some(&Value::Message(msg.clone())), ctx)
+    }
+
+    /// Reads a whole message into `msg`. The default goes through [`FieldCodec::decode`].
+    fn decode_message(
+        &self,
+        input: &mut BitReader<'_>,
+        msg: &mut DynamicMessage,
+        ctx: &DecodeContext,
+    ) -> Result<(), CodecError> {
+        if let Some(Value::Message(m)) = self.decode(input, ctx)? {
+            for (field, value) in m.fields() {
+                msg.set_field(&field, value.clone());
+            }
+        }
+        Ok(())
+    }
+
+    /// Nested layout for `analyze` (message codecs list their fields).
+    fn children(&self) -> Option<&crate::codecs::message::MessageCodec> {
+        None
+    }
+}

@@ -1,0 +1,72 @@
+//! # DCCL — Dynamic Compact Control Language
+//!
+//! Packs protobuf messages into the fewest bits their declared bounds allow,
+//! for links that carry a few dozen bytes at a time (acoustic modems,
+//! satellite, low-rate radio). Messages are ordinary `.proto` files annotated
+//! with `(dccl.msg)` and `(dccl.field)` options; the encoding is byte for byte
+//! that of the reference C++ library (libdccl 4), codec versions 2, 3 and 4.
+//!
+//! Message types come from `.proto` files compiled at run time
+//! ([`compile_protos`]) or from prost-generated structs that derive
+//! `prost_reflect::ReflectMessage` ([`Codec::load_type`]); both go through the
+//! same code.
+//!
+//! ```
+//! use dccl::Codec;
+//! use prost_reflect::DynamicMessage;
+//!
+//! // A program embedding dccl: compile its message definitions...
+//! let pool = dccl::compile_sources(&[(
+//!     "ping.proto",
+//!     r#"syntax = "proto2";
+//!        import "dccl/option_extensions.proto";
+//!        package demo;
+//!        message Ping {
+//!          option (dccl.msg) = { id: 20 max_bytes: 16 codec_version: 4 };
+//!          required int32 src = 1 [(dccl.field) = { min: 0 max: 31 in_head: true }];
+//!          optional double range = 2 [(dccl.field) = { min: 0 max: 5000 precision: 1 }];
+//!          optional string note = 3 [(dccl.field).max_length = 8];
+//!        }"#,
+//! )])?;
+//! let desc = pool.get_message_by_name("demo.Ping").unwrap();
+//!
+//! // ...load them into a codec...
+//! let mut codec = Codec::new();
+//! codec.load(&desc)?;
+//! assert_eq!(codec.max_size("demo.Ping")?, 12);
+//!
+//! // ...and encode and decode.
+//! let msg = DynamicMessage::parse_text_format(desc, r#"src: 3 range: 1234.56 note: "hi""#)?;
+//! let bytes = codec.encode(&msg)?;
+//! assert_eq!(bytes.len(), 8);
+//! let back = codec.decode(&bytes)?;
+//! assert_eq!(back.get_field_by_name("range").unwrap().as_f64(), Some(1234.6));
+//!
+//! // Several messages in one frame decode one after the other.
+//! let mut frame = bytes.clone();
+//! frame.extend(&bytes);
+//! assert_eq!(codec.decode_all(&frame)?.len(), 2);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
+
+mod analyze;
+pub mod bits;
+mod codec;
+pub mod codecs;
+mod crypto;
+mod error;
+pub mod field_codec;
+mod loader;
+pub mod options;
+pub mod registry;
+pub mod rounding;
+
+pub use codec::Codec;
+pub use error::{CodecError, Error, Location, Result};
+pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec};
+pub use loader::{compile_protos, compile_sources};
+pub use registry::CodecRegistry;
+
+pub use prost_reflect;

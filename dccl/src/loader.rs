@@ -1,0 +1,104 @@
+//! Compiling `.proto` files at run time with pure-Rust tooling (protox).
+//!
+//! `dccl/option_extensions.proto` is embedded: a file that imports it needs
+//! no include path for it and no copy on disk.
+
+use std::path::{Path, PathBuf};
+
+use prost_reflect::DescriptorPool;
+use protox::file::{ChainFileResolver, File, FileResolver, GoogleFileResolver, IncludeFileResolver};
+
+use crate::error::{Error, Result};
+
+/// Serves the embedded DCCL option extensions.
+struct EmbeddedResolver;
+
+impl FileResolver for EmbeddedResolver {
+    fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
+        if name == protos::OPTION_EXTENSIONS_PATH {
+            File::from_source(name, protos::OPTION_EXTENSIONS_PROTO)
+        } else {
+            Err(protox::Error::file_not_found(name))
+        }
+    }
+}
+
+fn absolute(path: &Path) -> PathBuf {
+    std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// Compiles `.proto` files into a descriptor pool (custom options preserved).
+///
+/// Imports are searched in `include_dirs`, then in the directory of each
+/// file, then among the embedded files (`dccl/option_extensions.proto` and
+/// the `google/protobuf/*.proto` well-known types).
+pub fn compile_protos(
+    files: &[impl AsRef<Path>],
+    include_dirs: &[impl AsRef<Path>],
+) -> Result<DescriptorPool> {
+    let mut dirs: Vec<PathBuf> = include_dirs.iter().map(|d| absolute(d.as_ref())).collect();
+    let mut paths = Vec::with_capacity(files.len());
+    for file in files {
+        let file = file.as_ref();
+        if !file.is_file() {
+            return Err(Error::Proto(format!("{}: no such file", file.display())));
+        }
+        let path = absolute(file);
+        if let Some(parent) = path.parent() {
+            if !dirs.iter().any(|d| d == parent) {
+                dirs.push(parent.to_path_buf());
+            }
+        }
+        paths.push(path);
+    }
+    let mut resolver = ChainFileResolver::new();
+    for dir in dirs {
+        resolver.add(IncludeFileResolver::new(dir));
+    }
+    resolver.add(EmbeddedResolver);
+    resolver.add(GoogleFileResolver::new());
+    let mut compiler = protox::Compiler::with_file_resolver(resolver);
+    compiler.include_imports(true).include_source_info(false);
+    for path in &paths {
+        compiler
+            .open_file(path)
+            .map_err(|e| Error::Proto(format!("{}: {e}", path.display())))?;
+    }
+    decode_pool(&compiler.encode_file_descriptor_set())
+}
+
+/// Compiles `.proto` sources held in memory: `(file name, source text)` pairs,
+/// which may import each other by those names.
+pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {
+    struct Memory(Vec<(String, String)>);
+    impl FileResolver for Memory {
+        fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
+            match self.0.iter().find(|(n, _)| n == name) {
+                Some((n, s)) => File::from_source(n, s),
+                None => Err(protox::Error::file_not_found(name)),
+            }
+        }
+    }
+    let memory = Memory(
+        sources
+            .iter()
+            .map(|(n, s)| (n.to_string(), s.to_string()))
+            .collect(),
+    );
+    let mut resolver = ChainFileResolver::new();
+    resolver.add(memory);
+    resolver.add(EmbeddedResolver);
+    resolver.add(GoogleFileResolver::new());
+    let mut compiler = protox::Compiler::with_file_resolver(resolver);
+    compiler.include_imports(true).include_source_info(false);
+    for (name, _) in sources {
+        compiler
+            .open_file(name)
+            .map_err(|e| Error::Proto(format!("{name}: {e}")))?;
+    }
+    decode_pool(&compiler.encode_file_descriptor_set())
+}
+
+fn decode_pool(bytes: &[u8]) -> Result<DescriptorPool> {
+    DescriptorPool::decode(bytes).map_err(|e| Error::Proto(e.to_string()))
+}
