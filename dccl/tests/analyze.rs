@@ -1,0 +1,61 @@
+//! `Codec::analyze` against the reference `analyze` output of
+//! `../shared/dccl-vectors/analyze.txt` (every line but the definition hash,
+//! which the title line of the reference carries).
+
+use std::path::PathBuf;
+
+use dccl::Codec;
+
+fn vectors_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/dccl-vectors")
+}
+
+/// Removes the ` {0x…}` hash from a title line.
+fn without_hash(line: &str) -> String {
+    match (line.find(" {0x"), line.rfind('}')) {
+        (Some(start), Some(end)) if line.starts_with('=') && end > start => {
+            format!("{}{}", &line[..start], &line[end + 1..])
+        }
+        _ => line.to_string(),
+    }
+}
+
+#[test]
+fn analyze_matches_reference_layout() {
+    let mut codec = Codec::new();
+    for proto in ["vectors.proto", "legacy.proto"] {
+        let pool = dccl::compile_protos(&[vectors_dir().join(proto)], &[] as &[PathBuf]).unwrap();
+        codec.load_file_messages(&pool, proto).unwrap();
+    }
+    let reference = std::fs::read_to_string(vectors_dir().join("analyze.txt")).unwrap();
+    // Split the reference into one section per message (title lines start with '=').
+    let mut sections: Vec<Vec<&str>> = Vec::new();
+    for line in reference.lines() {
+        if line.starts_with("==") {
+            sections.push(Vec::new());
+        }
+        if let Some(s) = sections.last_mut() {
+            s.push(line);
+        }
+    }
+    assert_eq!(sections.len(), 7);
+    for section in sections {
+        let title = section[0];
+        let name = title
+            .split_whitespace()
+            .find(|w| w.contains('.'))
+            .expect("title names the message");
+        let ours = codec.analyze(name).unwrap();
+        let ours: Vec<String> = ours.lines().map(str::to_string).collect();
+        // Our title has no hash: remove the hash and re-centre the reference title.
+        let expected_title = without_hash(title);
+        let expected_title = {
+            let inner = expected_title.trim_matches('=').trim();
+            let g = "=".repeat((60 - inner.len()) / 2);
+            format!("{g} {inner} {g}")
+        };
+        assert_eq!(ours[0], expected_title, "title of {name}");
+        let expected: Vec<String> = section[1..].iter().map(|s| s.to_string()).collect();
+        assert_eq!(&ours[1..], &expected[..], "analyze of {name}");
+    }
+}
