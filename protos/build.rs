@@ -7,7 +7,10 @@ use std::path::PathBuf;
 
 use prost::Message;
 
-const FILES: &[&str] = &["dccl/option_extensions.proto", "goby/example/navigation.proto"];
+const FILES: &[&str] = &[
+    "dccl/option_extensions.proto",
+    "goby/example/navigation.proto",
+];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let proto_dir = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR")?).join("proto");
@@ -30,7 +33,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let mut names = Vec::new();
         for msg in &file.message_type {
-            collect(&format!("{}.{}", file.package(), msg.name()), msg, &mut names);
+            collect(
+                &format!("{}.{}", file.package(), msg.name()),
+                msg,
+                &mut names,
+            );
         }
         for name in names {
             config.type_attribute(
@@ -50,7 +57,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 fn collect(name: &str, msg: &prost_types::DescriptorProto, out: &mut Vec<String>) {
     out.push(name.to_string());
     for nested in &msg.nested_type {
-        if nested.options.as_ref().and_then(|o| o.map_entry).unwrap_or(false) {
+        if nested
+            .options
+            .as_ref()
+            .and_then(|o| o.map_entry)
+            .unwrap_or(false)
+        {
             continue;
         }
         collect(&format!("{name}.{}", nested.name()), nested, out);

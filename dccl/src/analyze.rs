@@ -46,7 +46,13 @@ fn field_lines(out: &mut String, entry: &FieldEntry, level: usize, extra_indent:
     let (min, max) = (entry.min_size(), entry.max_size());
     if max > 0 {
         let width = NAME_WIDTH.saturating_sub(name.len()).max(1);
-        dotted(out, INDENT * level + extra_indent, &name, width, &range(min, max));
+        dotted(
+            out,
+            INDENT * level + extra_indent,
+            &name,
+            width,
+            &range(min, max),
+        );
         let _ = writeln!(out, " {{{}}}", entry.codec.name());
     }
     if let Some(children) = entry.codec.children() {
@@ -65,7 +71,13 @@ fn message_lines(out: &mut String, codec: &MessageCodec, level: usize) {
         let max_member = members.iter().map(|f| f.max_size()).max().unwrap_or(0);
         let name = format!("{}. {} [oneof]", o.index, o.name);
         let width = NAME_WIDTH.saturating_sub(name.len()).max(1);
-        dotted(out, INDENT * level, &name, width, &range(o.bits, o.bits + max_member));
+        dotted(
+            out,
+            INDENT * level,
+            &name,
+            width,
+            &range(o.bits, o.bits + max_member),
+        );
         let _ = writeln!(out, " {{");
         for member in members {
             field_lines(out, member, level, INDENT / 2);
@@ -116,7 +128,13 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
         ("body", body_bits as usize),
         ("padding to full byte", byte_size * 8 - bit_size as usize),
     ] {
-        dotted(&mut out, INDENT, label, NAME_WIDTH - label.len(), &value.to_string());
+        dotted(
+            &mut out,
+            INDENT,
+            label,
+            NAME_WIDTH - label.len(),
+            &value.to_string(),
+        );
         out.push('\n');
     }
     let _ = writeln!(

@@ -74,7 +74,7 @@ impl BitWriter {
 
     /// Writes whole bytes, each least significant bit first.
     pub fn write_bytes(&mut self, bytes: &[u8]) {
-        if self.len % 8 == 0 {
+        if self.len.is_multiple_of(8) {
             self.bytes.extend_from_slice(bytes);
             self.len += bytes.len() * 8;
         } else {
@@ -200,7 +200,7 @@ impl<'a> BitReader<'a> {
     /// Reads `n` whole bytes.
     pub fn read_bytes(&mut self, n: usize) -> Result<Vec<u8>, CodecError> {
         self.need(n * 8)?;
-        if self.pos % 8 == 0 {
+        if self.pos.is_multiple_of(8) {
             let start = self.pos / 8;
             self.pos += n * 8;
             return Ok(self.bytes[start..start + n].to_vec());

@@ -550,9 +550,7 @@ fn check_initialized(msg: &DynamicMessage) -> std::result::Result<(), CodecError
                 continue;
             }
             match msg.get_field(&field).as_ref() {
-                Value::Message(m) => {
-                    check_initialized(m).map_err(|e| e.in_field(field.name()))?
-                }
+                Value::Message(m) => check_initialized(m).map_err(|e| e.in_field(field.name()))?,
                 Value::List(items) => {
                     for item in items {
                         if let Value::Message(m) = item {

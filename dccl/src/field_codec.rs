@@ -192,7 +192,10 @@ pub trait FieldCodec: Send + Sync + Debug {
             )));
         }
         let count = if self.codec_version() > 2 {
-            let n = values.len().min(bounds.max as usize).max(bounds.min as usize);
+            let n = values
+                .len()
+                .min(bounds.max as usize)
+                .max(bounds.min as usize);
             out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
             n
         } else {

@@ -23,7 +23,9 @@ impl std::fmt::Debug for CodecRegistry {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let mut names: Vec<_> = self.factories.keys().collect();
         names.sort();
-        f.debug_struct("CodecRegistry").field("codecs", &names).finish()
+        f.debug_struct("CodecRegistry")
+            .field("codecs", &names)
+            .finish()
     }
 }
 
@@ -62,7 +64,11 @@ impl CodecRegistry {
     }
 
     /// Creates a codec by name for the field described by `spec`.
-    pub fn create(&self, name: &str, spec: &FieldSpec<'_>) -> Result<Arc<dyn FieldCodec>, CodecError> {
+    pub fn create(
+        &self,
+        name: &str,
+        spec: &FieldSpec<'_>,
+    ) -> Result<Arc<dyn FieldCodec>, CodecError> {
         let name = self.aliases.get(name).map(String::as_str).unwrap_or(name);
         let mut candidates = Vec::with_capacity(2);
         if !name.ends_with(|c: char| c.is_ascii_digit()) {

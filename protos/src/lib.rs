@@ -21,8 +21,7 @@ pub const OPTION_EXTENSIONS_PROTO: &str = include_str!("../proto/dccl/option_ext
 pub const EXAMPLE_NAVIGATION_PATH: &str = "goby/example/navigation.proto";
 
 /// Source text of the example messages (`goby/example/navigation.proto`).
-pub const EXAMPLE_NAVIGATION_PROTO: &str =
-    include_str!("../proto/goby/example/navigation.proto");
+pub const EXAMPLE_NAVIGATION_PROTO: &str = include_str!("../proto/goby/example/navigation.proto");
 
 /// Encoded `FileDescriptorSet` of every file in this crate (custom options kept).
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/descriptors.bin"));

@@ -19,7 +19,10 @@ pub struct BoolCodec {
 
 impl BoolCodec {
     /// Creates the codec for a bool field, or `None` for other field types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         if spec.kind() != Kind::Bool {
             return Ok(None);
         }

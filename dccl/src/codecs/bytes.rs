@@ -21,7 +21,10 @@ pub struct FixedBytesCodec {
 
 impl FixedBytesCodec {
     /// Creates the codec for a bytes field, or `None` for other field types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         if spec.kind() != Kind::Bytes {
             return Ok(None);
         }

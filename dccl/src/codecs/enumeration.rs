@@ -25,7 +25,10 @@ pub struct EnumCodec {
 
 impl EnumCodec {
     /// Creates the codec for an enum field, or `None` for other field types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         Ok(Self::build(spec, name, spec.use_required)?.map(|c| Arc::new(c) as Arc<dyn FieldCodec>))
     }
 

@@ -325,7 +325,8 @@ impl MessageCodec {
                     ))),
                 }
             } else if msg.has_field(&f.field) {
-                f.codec.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
+                f.codec
+                    .encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
             } else if f.oneof.is_some() {
                 Ok(())
             } else {
@@ -352,9 +353,7 @@ impl MessageCodec {
             &mut cases_vec
         };
         for (i, o) in self.oneofs.iter().enumerate() {
-            cases[i] = input
-                .read(o.bits)
-                .map_err(|e| e.in_field(&o.name))? as usize;
+            cases[i] = input.read(o.bits).map_err(|e| e.in_field(&o.name))? as usize;
         }
         for f in &self.fields {
             let result = if let Some(bounds) = f.repeat {

@@ -49,7 +49,9 @@ pub fn register_builtin(registry: &mut CodecRegistry) {
         });
         let time = format!("dccl.time{version}");
         let name = time.clone();
-        registry.register(&time, move |spec: &FieldSpec<'_>| time::TimeCodec::create(spec, &name));
+        registry.register(&time, move |spec: &FieldSpec<'_>| {
+            time::TimeCodec::create(spec, &name)
+        });
         let stat = format!("dccl.static{version}");
         let name = stat.clone();
         registry.register(&stat, move |spec: &FieldSpec<'_>| {
@@ -70,7 +72,9 @@ pub fn register_builtin(registry: &mut CodecRegistry) {
                 let Some(inner) = default_codec(&inner_spec, &name, version)? else {
                     return Ok(None);
                 };
-                Ok(Some(Arc::new(presence::PresenceCodec::new(spec, &name, inner))))
+                Ok(Some(Arc::new(presence::PresenceCodec::new(
+                    spec, &name, inner,
+                ))))
             });
             let var_bytes = format!("dccl.var_bytes{version}");
             let name = var_bytes.clone();

@@ -204,7 +204,7 @@ impl NumericBounds {
         }
     }
 
-    fn from_wire_uint(&self, u: u64) -> WireValue {
+    fn wire_uint_to_value(&self, u: u64) -> WireValue {
         let res = self.resolution;
         match self.kind {
             WireKind::I32 => WireValue::I32(int_decode(u, self)),
@@ -268,7 +268,7 @@ impl NumericBounds {
             }
             u -= 1;
         }
-        Ok(Some(self.from_wire_uint(u)))
+        Ok(Some(self.wire_uint_to_value(u)))
     }
 
     /// Checks the bounds as the reference does at load time.
@@ -278,18 +278,20 @@ impl NumericBounds {
                 "(dccl.field).resolution must be greater than 0",
             ));
         }
-        if !(self.min >= self.kind.lowest()) {
+        if self.min.is_nan() || self.min < self.kind.lowest() {
             return Err(CodecError::new(
                 "(dccl.field).min must be >= minimum of this field type",
             ));
         }
-        if !(self.max <= self.kind.highest()) {
+        if self.max.is_nan() || self.max > self.kind.highest() {
             return Err(CodecError::new(
                 "(dccl.field).max must be <= maximum of this field type",
             ));
         }
         if self.max < self.min {
-            return Err(CodecError::new("(dccl.field).max must be >= (dccl.field).min"));
+            return Err(CodecError::new(
+                "(dccl.field).max must be >= (dccl.field).min",
+            ));
         }
         if has_resolution {
             let eps = 1e-10;
@@ -350,11 +352,19 @@ pub struct NumericCodec {
 
 impl NumericCodec {
     /// Creates the codec for a numeric field, or `None` for other field types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         let Some(kind) = WireKind::of(&spec.kind()) else {
             return Ok(None);
         };
-        Ok(Some(Arc::new(Self::build(spec, name, kind, spec.use_required)?)))
+        Ok(Some(Arc::new(Self::build(
+            spec,
+            name,
+            kind,
+            spec.use_required,
+        )?)))
     }
 
     /// Builds the codec with an explicit presence rule (used by the presence codec).

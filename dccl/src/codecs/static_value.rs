@@ -28,7 +28,10 @@ fn parse_prefix<T: std::str::FromStr>(token: &str) -> Option<T> {
 
 impl StaticCodec {
     /// Creates the codec for a string or numeric field, or `None` for other types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         let Some(text) = spec.options.static_value.as_deref() else {
             return Err(CodecError::new("missing (dccl.field).static_value"));
         };
@@ -37,8 +40,12 @@ impl StaticCodec {
             Kind::String => Some(Value::String(token.to_string())),
             Kind::Double => parse_prefix::<f64>(token).map(Value::F64),
             Kind::Float => parse_prefix::<f32>(token).map(Value::F32),
-            Kind::Int32 | Kind::Sint32 | Kind::Sfixed32 => parse_prefix::<i32>(token).map(Value::I32),
-            Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => parse_prefix::<i64>(token).map(Value::I64),
+            Kind::Int32 | Kind::Sint32 | Kind::Sfixed32 => {
+                parse_prefix::<i32>(token).map(Value::I32)
+            }
+            Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => {
+                parse_prefix::<i64>(token).map(Value::I64)
+            }
             Kind::Uint32 | Kind::Fixed32 => parse_prefix::<u32>(token).map(Value::U32),
             Kind::Uint64 | Kind::Fixed64 => parse_prefix::<u64>(token).map(Value::U64),
             _ => return Ok(None),

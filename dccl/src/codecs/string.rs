@@ -25,7 +25,10 @@ pub struct StringCodec {
 
 impl StringCodec {
     /// Creates the codec for a string field, or `None` for other field types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         if spec.kind() != Kind::String {
             return Ok(None);
         }

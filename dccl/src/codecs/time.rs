@@ -35,8 +35,11 @@ pub struct TimeCodec {
 
 impl TimeCodec {
     /// Creates the codec for a double, int64 or uint64 field, or `None` for other types.
-    pub fn create(spec: &FieldSpec<'_>, name: &str) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
-        let (time_type, conversion) = match spec.kind() {
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+        let (time_type, conversion): (TimeType, f64) = match spec.kind() {
             Kind::Double => (TimeType::Seconds, 1.0),
             Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => (TimeType::MicrosI64, 1e6),
             Kind::Uint64 | Kind::Fixed64 => (TimeType::MicrosU64, 1e6),
@@ -45,7 +48,7 @@ impl TimeCodec {
         let o = spec.options;
         let precision = match o.precision {
             None => 0.0,
-            Some(p) => p as f64 + (conversion as f64).log10(),
+            Some(p) => p as f64 + conversion.log10(),
         };
         let resolution = if o.precision.is_some() {
             pow10(-precision)
@@ -75,7 +78,7 @@ impl TimeCodec {
         Ok((t / self.conversion) % self.bounds.max)
     }
 
-    fn from_time_of_day(&self, encoded: f64, now_secs: i64) -> Value {
+    fn time_of_day_to_value(&self, encoded: f64, now_secs: i64) -> Value {
         let max_secs = self.bounds.max as i64;
         if max_secs <= 0 {
             return Value::F64(encoded);
@@ -93,9 +96,7 @@ impl TimeCodec {
         match self.time_type {
             TimeType::Seconds => Value::F64(round_f64(scaled, round_to)),
             TimeType::MicrosI64 => Value::I64(round_int(scaled as i64, round_to)),
-            TimeType::MicrosU64 => {
-                Value::U64(round_int(scaled as i64, round_to).max(0) as u64)
-            }
+            TimeType::MicrosU64 => Value::U64(round_int(scaled as i64, round_to).max(0) as u64),
         }
     }
 }
@@ -151,7 +152,7 @@ impl FieldCodec for TimeCodec {
         ctx: &DecodeContext,
     ) -> Result<Option<Value>, CodecError> {
         Ok(match self.bounds.decode(input)? {
-            Some(WireValue::F64(t)) => Some(self.from_time_of_day(t, ctx.now_secs)),
+            Some(WireValue::F64(t)) => Some(self.time_of_day_to_value(t, ctx.now_secs)),
             _ => None,
         })
     }

@@ -1,0 +1,216 @@
+//! The `goby` shell tool and the `gobyd` daemon.
+//!
+//! The binaries are thin wrappers around [`goby_main`] and [`gobyd_main`];
+//! everything they do lives in this library so that it can be tested and
+//! reused.
+//!
+//! `goby dccl ...` works with DCCL messages defined in `.proto` files:
+//!
+//! - `goby dccl encode -f FILE.proto -m NAME` reads one message per line
+//!   (protobuf text format or proto3 JSON) and writes each encoded
+//!   (hex, base64 or raw bytes);
+//! - `goby dccl decode -f FILE.proto` reads encoded messages and writes each
+//!   decoded, its type found by its DCCL id;
+//! - `goby dccl analyze -f FILE.proto -m NAME` prints the size of each field;
+//! - `goby dccl bench -f FILE.proto -m NAME --repeat N` times encoding and
+//!   decoding in-process.
+//!
+//! Exit status: 0 on success, [`EXIT_BAD_INPUT`] when some input lines could
+//! not be handled (each is reported on standard error as `line N: <error>`;
+//! the other lines are still processed), [`EXIT_SETUP`] for usage errors and
+//! errors that stop a command before it reads its input (a `.proto` file that
+//! cannot be compiled, an unknown message type, ...).
+
+#![warn(missing_docs)]
+
+pub mod dccl_cmd;
+mod lines;
+
+use std::ffi::OsString;
+use std::fmt;
+use std::io::{self, BufRead, Write};
+use std::process::ExitCode;
+
+use clap::{ColorChoice, Parser, Subcommand};
+
+/// Exit status when every input was handled.
+pub const EXIT_OK: u8 = 0;
+/// Exit status when some input lines could not be handled.
+pub const EXIT_BAD_INPUT: u8 = 1;
+/// Exit status for usage errors and errors found before any input is read.
+pub const EXIT_SETUP: u8 = 2;
+
+/// Command line of `goby`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "goby",
+    version,
+    about = "The goby shell tool: work with DCCL messages from the command line.",
+    color = ColorChoice::Auto,
+    propagate_version = true
+)]
+pub struct GobyCli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: GobyCommand,
+}
+
+/// Subcommands of `goby`.
+#[derive(Debug, Subcommand)]
+pub enum GobyCommand {
+    /// Encode, decode, analyze and benchmark DCCL messages.
+    #[command(subcommand)]
+    Dccl(dccl_cmd::DcclCommand),
+}
+
+/// Command line of `gobyd`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "gobyd",
+    version,
+    about = "The goby daemon.",
+    color = ColorChoice::Auto
+)]
+pub struct GobydCli {}
+
+/// A failure that ends a command.
+#[derive(Debug)]
+pub enum CliError {
+    /// The command cannot run: bad arguments, a `.proto` file that does not
+    /// compile, an unknown message type, ...
+    Setup(String),
+    /// Reading standard input failed.
+    Input(io::Error),
+    /// Writing standard output or standard error failed.
+    Output(io::Error),
+}
+
+impl CliError {
+    /// Builds a [`CliError::Setup`].
+    pub fn setup(message: impl Into<String>) -> Self {
+        CliError::Setup(message.into())
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CliError::Setup(m) => f.write_str(m),
+            CliError::Input(e) => write!(f, "cannot read standard input: {e}"),
+            CliError::Output(e) => write!(f, "cannot write the output: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for CliError {}
+
+/// I/O errors met with `?` are output errors; reads are mapped to
+/// [`CliError::Input`] explicitly.
+impl From<io::Error> for CliError {
+    fn from(e: io::Error) -> Self {
+        CliError::Output(e)
+    }
+}
+
+/// How a command that ran to its end went.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// Every input was handled.
+    Ok,
+    /// This many input lines (or chunks) could not be handled; each was
+    /// reported on standard error.
+    BadInput(usize),
+}
+
+impl Status {
+    /// The process exit status for this outcome.
+    pub fn exit_code(self) -> u8 {
+        match self {
+            Status::Ok => EXIT_OK,
+            Status::BadInput(_) => EXIT_BAD_INPUT,
+        }
+    }
+
+    /// [`Status::Ok`] when `bad` is zero, [`Status::BadInput`] otherwise.
+    pub fn from_bad_count(bad: usize) -> Self {
+        if bad == 0 {
+            Status::Ok
+        } else {
+            Status::BadInput(bad)
+        }
+    }
+}
+
+/// Runs a parsed `goby` command line on the given streams and returns the
+/// process exit status. Errors are written to `stderr`.
+pub fn run_goby(
+    cli: GobyCli,
+    stdin: &mut dyn BufRead,
+    stdout: &mut dyn Write,
+    stderr: &mut dyn Write,
+) -> u8 {
+    let result = match cli.command {
+        GobyCommand::Dccl(cmd) => dccl_cmd::run(&cmd, stdin, stdout, stderr),
+    };
+    let flushed = stdout.flush().map_err(CliError::from);
+    match result.and_then(|status| flushed.map(|()| status)) {
+        Ok(status) => status.exit_code(),
+        Err(CliError::Output(e)) if e.kind() == io::ErrorKind::BrokenPipe => {
+            // The reader went away (e.g. `| head`): stop quietly.
+            EXIT_BAD_INPUT
+        }
+        Err(e) => {
+            let _ = writeln!(stderr, "goby: error: {e}");
+            EXIT_SETUP
+        }
+    }
+}
+
+/// Parses the command line; on `--help`, `--version` or a usage error,
+/// prints what clap has to say and returns the exit status to use.
+fn parse_or_exit<P: Parser>(args: impl IntoIterator<Item = OsString>) -> Result<P, ExitCode> {
+    P::try_parse_from(args).map_err(|e| {
+        let _ = e.print();
+        let code = u8::try_from(e.exit_code()).unwrap_or(EXIT_SETUP);
+        ExitCode::from(code)
+    })
+}
+
+/// Entry point of the `goby` binary: parses the process arguments and runs
+/// the command on the process's standard streams.
+pub fn goby_main() -> ExitCode {
+    let cli = match parse_or_exit::<GobyCli>(std::env::args_os()) {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let stdin = io::stdin();
+    let mut stdin = stdin.lock();
+    let mut stdout = io::BufWriter::new(io::stdout().lock());
+    let mut stderr = io::stderr().lock();
+    ExitCode::from(run_goby(cli, &mut stdin, &mut stdout, &mut stderr))
+}
+
+/// Runs a parsed `gobyd` command line: for now the daemon only introduces
+/// itself.
+pub fn run_gobyd(_cli: GobydCli, stdout: &mut dyn Write) -> u8 {
+    let written = writeln!(stdout, "gobyd {}", env!("CARGO_PKG_VERSION")).and_then(|()| {
+        writeln!(
+            stdout,
+            "gobyd is the goby daemon; this version has no services to run yet."
+        )
+    });
+    match written.and_then(|()| stdout.flush()) {
+        Ok(()) => EXIT_OK,
+        Err(_) => EXIT_SETUP,
+    }
+}
+
+/// Entry point of the `gobyd` binary.
+pub fn gobyd_main() -> ExitCode {
+    let cli = match parse_or_exit::<GobydCli>(std::env::args_os()) {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let mut stdout = io::stdout().lock();
+    ExitCode::from(run_gobyd(cli, &mut stdout))
+}
