@@ -28,9 +28,8 @@ fn load() -> (Codec, Vec<DynamicMessage>, Vec<Vec<u8>>) {
         let desc = pool
             .get_message_by_name(v["message"].as_str().unwrap())
             .unwrap();
-        messages.push(
-            DynamicMessage::parse_text_format(desc, v["input"].as_str().unwrap()).unwrap(),
-        );
+        messages
+            .push(DynamicMessage::parse_text_format(desc, v["input"].as_str().unwrap()).unwrap());
     }
     let encoded = messages.iter().map(|m| codec.encode(m).unwrap()).collect();
     (codec, messages, encoded)

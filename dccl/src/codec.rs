@@ -473,7 +473,8 @@ impl Codec {
 
     /// Decodes into a prost-generated struct.
     pub fn decode_message<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
-        let msg = self.decode(bytes)?;
+        let wanted = T::default().descriptor();
+        let (msg, _) = self.decode_as(wanted.full_name(), bytes)?;
         let name = msg.descriptor().full_name().to_string();
         msg.transcode_to::<T>().map_err(|e| Error::Decode {
             location: crate::error::Location {

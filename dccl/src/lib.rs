@@ -33,12 +33,12 @@
 //! // ...load them into a codec...
 //! let mut codec = Codec::new();
 //! codec.load(&desc)?;
-//! assert_eq!(codec.max_size("demo.Ping")?, 12);
+//! assert_eq!(codec.max_size("demo.Ping")?, 13);
 //!
 //! // ...and encode and decode.
 //! let msg = DynamicMessage::parse_text_format(desc, r#"src: 3 range: 1234.56 note: "hi""#)?;
 //! let bytes = codec.encode(&msg)?;
-//! assert_eq!(bytes.len(), 8);
+//! assert_eq!(bytes.len(), 7); // 2 header bytes (id, src) + 37 body bits
 //! let back = codec.decode(&bytes)?;
 //! assert_eq!(back.get_field_by_name("range").unwrap().as_f64(), Some(1234.6));
 //!

@@ -28,7 +28,10 @@ fn codec_for(proto: &str, passphrase: Option<&str>) -> (Codec, DescriptorPool) {
     (codec, pool)
 }
 
-fn parse_json(desc: dccl::prost_reflect::MessageDescriptor, v: &serde_json::Value) -> DynamicMessage {
+fn parse_json(
+    desc: dccl::prost_reflect::MessageDescriptor,
+    v: &serde_json::Value,
+) -> DynamicMessage {
     let text = v.to_string();
     let mut de = serde_json::Deserializer::from_str(&text);
     DynamicMessage::deserialize(desc, &mut de).expect("decoded_json parses")
@@ -102,7 +105,12 @@ fn run(proto: &str, vectors: &str, passphrase: Option<&str>) {
         failures.is_empty(),
         "{vectors}: {} of {count} vectors failed:\n{}",
         failures.len(),
-        failures.iter().take(12).cloned().collect::<Vec<_>>().join("\n")
+        failures
+            .iter()
+            .take(12)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join("\n")
     );
 }
 
