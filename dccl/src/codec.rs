@@ -416,6 +416,20 @@ impl Codec {
         Ok(l.head_bytes() + l.min_body_bytes())
     }
 
+    /// Smallest and largest size in bits of every field of a loaded type,
+    /// embedded messages' fields included (paths such as `pos.x`), in
+    /// encoding order: header fields first, then body fields.
+    pub fn field_sizes(&self, full_name: &str) -> Result<Vec<FieldSize>> {
+        let l = self.get(full_name)?;
+        let mut out = Vec::new();
+        for (part, codec) in [(MessagePart::Head, &l.head), (MessagePart::Body, &l.body)] {
+            if let Some(m) = codec.children() {
+                collect_field_sizes(m, "", part, &mut out);
+            }
+        }
+        Ok(out)
+    }
+
     /// Reads the DCCL id at the start of `bytes`.
     pub fn id(&self, bytes: &[u8]) -> Result<u32> {
         identifier::decode(&mut BitReader::new(bytes)).map_err(|e| Error::Decode {
@@ -534,6 +548,46 @@ impl Codec {
     /// libdccl's `analyze` output.
     pub fn analyze(&self, full_name: &str) -> Result<String> {
         Ok(crate::analyze::report(self.get(full_name)?))
+    }
+}
+
+/// Size bounds of one field, as [`Codec::field_sizes`] reports them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FieldSize {
+    /// Dotted path of the field (`pos.x`).
+    pub path: String,
+    /// Header or body.
+    pub part: MessagePart,
+    /// Fewest bits the field takes (a repeated field: the whole array).
+    pub min_bits: u32,
+    /// Most bits the field takes.
+    pub max_bits: u32,
+    /// Name of the codec (e.g. `dccl.default4`).
+    pub codec: String,
+}
+
+fn collect_field_sizes(
+    codec: &crate::codecs::message::MessageCodec,
+    prefix: &str,
+    part: MessagePart,
+    out: &mut Vec<FieldSize>,
+) {
+    for entry in codec.fields() {
+        let path = if prefix.is_empty() {
+            entry.field.name().to_string()
+        } else {
+            format!("{prefix}.{}", entry.field.name())
+        };
+        out.push(FieldSize {
+            path: path.clone(),
+            part,
+            min_bits: entry.min_size(),
+            max_bits: entry.max_size(),
+            codec: entry.codec.name().to_string(),
+        });
+        if let Some(children) = entry.codec.children() {
+            collect_field_sizes(children, &path, part, out);
+        }
     }
 }
 

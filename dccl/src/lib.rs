@@ -63,9 +63,9 @@ pub mod options;
 pub mod registry;
 pub mod rounding;
 
-pub use codec::Codec;
+pub use codec::{Codec, FieldSize};
 pub use error::{CodecError, Error, Location, Result};
-pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec};
+pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources};
 pub use registry::CodecRegistry;
 

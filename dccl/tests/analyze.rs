@@ -59,3 +59,27 @@ fn analyze_matches_reference_layout() {
         assert_eq!(&ours[1..], &expected[..], "analyze of {name}");
     }
 }
+
+#[test]
+fn field_sizes_match_the_reference_report() {
+    let mut codec = Codec::new();
+    let pool =
+        dccl::compile_protos(&[vectors_dir().join("vectors.proto")], &[] as &[PathBuf]).unwrap();
+    codec.load_file_messages(&pool, "vectors.proto").unwrap();
+    let sizes = codec.field_sizes("vec.Nested").unwrap();
+    let find = |p: &str| sizes.iter().find(|s| s.path == p).unwrap().clone();
+    // From analyze.txt: pos 49, goal 1-50, track[3] 2-149, note 3-51, pos.x 18.
+    assert_eq!((find("pos").min_bits, find("pos").max_bits), (49, 49));
+    assert_eq!((find("goal").min_bits, find("goal").max_bits), (1, 50));
+    assert_eq!((find("track").min_bits, find("track").max_bits), (2, 149));
+    assert_eq!((find("note").min_bits, find("note").max_bits), (3, 51));
+    assert_eq!(find("pos.x").max_bits, 18);
+    assert_eq!(find("pos.x").codec, "dccl.default4");
+    let wide = codec.field_sizes("vec.Wide").unwrap();
+    assert_eq!(wide[0].path, "src");
+    assert_eq!(wide[0].part, dccl::MessagePart::Head);
+    assert_eq!(wide[2].part, dccl::MessagePart::Body);
+    assert!(codec.field_sizes("vec.Nope").is_err());
+    assert_eq!(codec.min_size("vec.Nested").unwrap(), 1 + 7);
+    assert_eq!(codec.max_size("vec.Nested").unwrap(), 39);
+}
