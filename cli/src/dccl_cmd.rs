@@ -302,7 +302,7 @@ fn parse_message(
 /// Formats one decoded message on one line.
 fn format_message(msg: &DynamicMessage, form: OutputForm) -> Result<String, String> {
     match form {
-        OutputForm::Text => Ok(msg.to_text_format()),
+        OutputForm::Text => Ok(dccl::text_format::short_debug_string(msg)),
         OutputForm::Json => {
             let mut buf = Vec::new();
             let mut ser = serde_json::Serializer::new(&mut buf);

@@ -132,6 +132,10 @@ fn check_decode(proto: &str, jsonl: &str, form: Out, passphrase: Option<&str>) {
                     Out::Text => from_text(&desc, &line),
                 };
                 match parsed {
+                    // Text output is also the reference's exact one-line form.
+                    Ok(_) if matches!(form, Out::Text) && line != v.decoded_text => {
+                        Some(format!("{line} (not the reference's text)"))
+                    }
                     Ok(m) if same_message(&m, &want) => None,
                     Ok(_) => Some(line),
                     Err(e) => Some(format!("{line} (does not parse as {}: {e})", v.message)),

@@ -62,6 +62,7 @@ mod loader;
 pub mod options;
 pub mod registry;
 pub mod rounding;
+pub mod text_format;
 
 pub use codec::{Codec, FieldSize};
 pub use error::{CodecError, Error, Location, Result};

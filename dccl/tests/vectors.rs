@@ -90,7 +90,16 @@ fn run(proto: &str, vectors: &str, passphrase: Option<&str>) {
         let bytes = hex::decode(expected_hex).unwrap();
         let expected = parse_json(desc, &v["decoded_json"]);
         match codec.decode(&bytes) {
-            Ok(got) if same(&got, &expected) => {}
+            Ok(got) if same(&got, &expected) => {
+                let text = dccl::text_format::short_debug_string(&got);
+                let want = v["decoded_text"].as_str().unwrap();
+                if text != want {
+                    failures.push(format!(
+                        "line {}: {name} text\n  want {want}\n  got  {text}",
+                        n + 1
+                    ));
+                }
+            }
             Ok(got) => failures.push(format!(
                 "line {}: {name} decode\n  hex  {expected_hex}\n  want {}\n  got  {}",
                 n + 1,
