@@ -27,6 +27,8 @@ pub(crate) struct LoadedMessage {
     pub(crate) body: Arc<dyn FieldCodec>,
     /// Bits of the identifier (0 with `omit_id`).
     pub(crate) id_bits: u32,
+    /// Required fields to check before encoding.
+    pub(crate) required: RequiredFields,
 }
 
 impl LoadedMessage {
@@ -336,6 +338,7 @@ impl Codec {
             head,
             body,
             id_bits,
+            required: RequiredFields::of(desc, 0),
         };
         let actual = loaded.head_bytes() + loaded.max_body_bytes();
         if actual > max_bytes as usize {
@@ -364,7 +367,10 @@ impl Codec {
     pub fn encode_into(&self, msg: &DynamicMessage, out: &mut Vec<u8>) -> Result<()> {
         let name = msg.descriptor().full_name().to_string();
         let loaded = self.get(&name)?;
-        check_initialized(msg).map_err(|e| e.into_encode(&name))?;
+        loaded
+            .required
+            .check(msg)
+            .map_err(|e| e.into_encode(&name))?;
         let ctx = EncodeContext {
             strict: self.strict,
         };
@@ -591,31 +597,57 @@ fn collect_field_sizes(
     }
 }
 
-/// Checks that every required field (recursively) is set.
-fn check_initialized(msg: &DynamicMessage) -> std::result::Result<(), CodecError> {
-    for field in msg.descriptor().fields() {
-        if field.cardinality() == Cardinality::Required && !msg.has_field(&field) {
-            return Err(CodecError::new(
-                "message is not properly initialized: required field is not set",
-            )
-            .in_field(field.name()));
+/// The required fields of a message type and the embedded messages to look
+/// into, computed once at load time.
+#[derive(Debug, Default)]
+pub(crate) struct RequiredFields {
+    fields: Vec<(prost_reflect::FieldDescriptor, bool, Option<RequiredFields>)>,
+}
+
+impl RequiredFields {
+    pub(crate) fn of(desc: &MessageDescriptor, depth: usize) -> RequiredFields {
+        let mut fields = Vec::new();
+        for field in desc.fields() {
+            let required = field.cardinality() == Cardinality::Required;
+            let nested = match field.kind() {
+                Kind::Message(m) if depth < crate::codecs::message::MAX_DEPTH => {
+                    Some(RequiredFields::of(&m, depth + 1)).filter(|r| !r.fields.is_empty())
+                }
+                _ => None,
+            };
+            if required || nested.is_some() {
+                fields.push((field, required, nested));
+            }
         }
-        if let Kind::Message(_) = field.kind() {
-            if !msg.has_field(&field) {
+        RequiredFields { fields }
+    }
+
+    /// Checks that every required field (recursively) is set.
+    fn check(&self, msg: &DynamicMessage) -> std::result::Result<(), CodecError> {
+        for (field, required, nested) in &self.fields {
+            let set = msg.has_field(field);
+            if *required && !set {
+                return Err(CodecError::new(
+                    "message is not properly initialized: required field is not set",
+                )
+                .in_field(field.name()));
+            }
+            let Some(nested) = nested else { continue };
+            if !set {
                 continue;
             }
-            match msg.get_field(&field).as_ref() {
-                Value::Message(m) => check_initialized(m).map_err(|e| e.in_field(field.name()))?,
+            match msg.get_field(field).as_ref() {
+                Value::Message(m) => nested.check(m).map_err(|e| e.in_field(field.name()))?,
                 Value::List(items) => {
                     for item in items {
                         if let Value::Message(m) = item {
-                            check_initialized(m).map_err(|e| e.in_field(field.name()))?;
+                            nested.check(m).map_err(|e| e.in_field(field.name()))?;
                         }
                     }
                 }
                 _ => {}
             }
         }
+        Ok(())
     }
-    Ok(())
 }
