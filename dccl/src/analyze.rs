@@ -108,7 +108,7 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
     let full_name = l.descriptor.full_name();
     let head_bits = l.head.max_size();
     let body_bits = l.body.max_size();
-    let bit_size = l.id_bits + head_bits + body_bits;
+    let bit_size = l.id_bits as usize + head_bits as usize + body_bits as usize;
     let byte_size = l.head_bytes() + l.max_body_bytes();
     let title = if l.omit_id {
         full_name.to_string()
@@ -126,7 +126,10 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
         ("dccl.id head", l.id_bits as usize),
         ("user head", head_bits as usize),
         ("body", body_bits as usize),
-        ("padding to full byte", byte_size * 8 - bit_size as usize),
+        (
+            "padding to full byte",
+            (byte_size * 8).saturating_sub(bit_size),
+        ),
     ] {
         dotted(
             &mut out,
@@ -141,7 +144,7 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
         out,
         "Allowed maximum size of message: {} bytes / {} bits",
         l.max_bytes,
-        l.max_bytes * 8
+        l.max_bytes as u64 * 8
     );
     let g = guard("Header", '-');
     let _ = writeln!(out, "{g} Header {g}");

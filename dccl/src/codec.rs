@@ -33,7 +33,7 @@ pub(crate) struct LoadedMessage {
 
 impl LoadedMessage {
     pub(crate) fn head_bytes(&self) -> usize {
-        ((self.id_bits + self.head.max_size()) as usize).div_ceil(8)
+        (self.id_bits as usize + self.head.max_size() as usize).div_ceil(8)
     }
 
     pub(crate) fn max_body_bytes(&self) -> usize {

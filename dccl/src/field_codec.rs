@@ -232,18 +232,22 @@ pub trait FieldCodec: Send + Sync + Debug {
     /// Fewest bits of a repeated field.
     fn min_size_repeated(&self, bounds: RepeatBounds) -> u32 {
         if self.codec_version() > 2 {
-            bounds.prefix_bits() + self.min_size() * bounds.min
+            bounds
+                .prefix_bits()
+                .saturating_add(self.min_size().saturating_mul(bounds.min))
         } else {
-            self.min_size() * bounds.max
+            self.min_size().saturating_mul(bounds.max)
         }
     }
 
     /// Most bits of a repeated field.
     fn max_size_repeated(&self, bounds: RepeatBounds) -> u32 {
         if self.codec_version() > 2 {
-            bounds.prefix_bits() + self.max_size() * bounds.max
+            bounds
+                .prefix_bits()
+                .saturating_add(self.max_size().saturating_mul(bounds.max))
         } else {
-            self.max_size() * bounds.max
+            self.max_size().saturating_mul(bounds.max)
         }
     }
 
@@ -267,7 +271,7 @@ pub trait FieldCodec: Send + Sync + Debug {
     ) -> Result<(), CodecError> {
         if let Some(Value::Message(m)) = self.decode(input, ctx)? {
             for (field, value) in m.fields() {
-                msg.set_field(&field, value.clone());
+                crate::codecs::message::set(msg, &field, value.clone())?;
             }
         }
         Ok(())

@@ -900,3 +900,85 @@ fn sizes_worked_out_by_hand() {
     assert_eq!(codec.min_size("rt.TwoByte").unwrap(), 2 + 2);
     assert_eq!(codec.max_size("rt.TwoByte").unwrap(), 2 + 7);
 }
+
+/// A user codec registered by name is selected with `(dccl.field).codec`;
+/// one that decodes a value of the wrong type gives an error, not a panic.
+#[test]
+fn user_codec_by_name_and_wrong_type_is_an_error() {
+    use dccl::bits::{BitReader, BitWriter};
+    use dccl::field_codec::{DecodeContext, EncodeContext};
+    use dccl::{CodecError, CodecRegistry, FieldCodec, FieldSpec};
+    use std::sync::Arc;
+
+    /// Always four bits; decodes as an int32 whatever the field type.
+    #[derive(Debug)]
+    struct Nibble;
+    impl FieldCodec for Nibble {
+        fn name(&self) -> &str {
+            "test.nibble"
+        }
+        fn codec_version(&self) -> i32 {
+            4
+        }
+        fn min_size(&self) -> u32 {
+            4
+        }
+        fn max_size(&self) -> u32 {
+            4
+        }
+        fn encode(
+            &self,
+            out: &mut BitWriter,
+            value: Option<&Value>,
+            _ctx: &EncodeContext,
+        ) -> Result<(), CodecError> {
+            let v = match value {
+                Some(Value::I32(x)) => (*x as u64) & 0xf,
+                _ => 0,
+            };
+            out.write(v, 4);
+            Ok(())
+        }
+        fn decode(
+            &self,
+            input: &mut BitReader<'_>,
+            _ctx: &DecodeContext,
+        ) -> Result<Option<Value>, CodecError> {
+            Ok(Some(Value::I32(input.read(4)? as i32)))
+        }
+    }
+
+    let mut registry = CodecRegistry::with_builtin();
+    registry.register("test.nibble", |_spec: &FieldSpec<'_>| {
+        Ok(Some(Arc::new(Nibble) as Arc<dyn FieldCodec>))
+    });
+    let src = r#"syntax = "proto2";
+        import "dccl/option_extensions.proto";
+        message Good {
+          option (dccl.msg) = { id: 50 max_bytes: 4 codec_version: 4 };
+          required int32 n = 1 [(dccl.field).codec = "test.nibble"];
+        }
+        message Bad {
+          option (dccl.msg) = { id: 51 max_bytes: 4 codec_version: 4 };
+          optional string s = 1 [(dccl.field).codec = "test.nibble"];
+        }"#;
+    let pool = dccl::compile_sources(&[("user.proto", src)]).unwrap();
+    let mut codec = Codec::with_registry(registry);
+    codec
+        .load(&pool.get_message_by_name("Good").unwrap())
+        .unwrap();
+    codec
+        .load(&pool.get_message_by_name("Bad").unwrap())
+        .unwrap();
+    let good = DynamicMessage::parse_text_format(pool.get_message_by_name("Good").unwrap(), "n: 9")
+        .unwrap();
+    let bytes = codec.encode(&good).unwrap();
+    assert_eq!(bytes, vec![50 << 1, 9]);
+    assert_eq!(codec.decode(&bytes).unwrap(), good);
+    let err = codec.decode(&[51 << 1, 0x05]).unwrap_err();
+    assert!(matches!(err, Error::Decode { .. }), "{err}");
+    assert!(
+        err.to_string().contains("Bad") && err.to_string().contains('s'),
+        "{err}"
+    );
+}

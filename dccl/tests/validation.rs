@@ -687,3 +687,40 @@ fn unknown_type_on_encode_and_size_queries() {
         assert!(err.to_string().contains("val.NotLoaded"));
     }
 }
+
+/// Bounds so large that naive size arithmetic would overflow: a clear error
+/// (or a successful load when max_bytes allows it), never a panic.
+#[test]
+fn huge_bounds_do_not_overflow() {
+    for (field, max_bytes) in [
+        ("optional string s = 1 [(dccl.field).max_length = 4294967295];", 64),
+        ("optional bytes b = 1 [(dccl.field).max_length = 4294967295];", 64),
+        (
+            "repeated string s = 1 [(dccl.field) = { max_length: 4000000 max_repeat: 4294967295 }];",
+            64,
+        ),
+        ("repeated int32 r = 1 [(dccl.field) = { min: 0 max: 1 max_repeat: 4294967295 }];", 64),
+        ("optional uint64 u = 1 [(dccl.field) = { min: 0 max: 1e300 }];", 64),
+    ] {
+        let src = format!(
+            "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\nmessage Huge {{\n  \
+             option (dccl.msg) = {{ id: 1 max_bytes: {max_bytes} codec_version: 4 }};\n  {field}\n}}\n"
+        );
+        let pool = dccl::compile_sources(&[("huge.proto", &src)]).unwrap();
+        let mut codec = dccl::Codec::new();
+        let err = codec
+            .load(&pool.get_message_by_name("Huge").unwrap())
+            .expect_err(field);
+        assert!(err.to_string().contains("Huge"), "{err}");
+    }
+    // A large but allowed maximum size loads and analyzes.
+    let src = "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\nmessage Big {\n  \
+               option (dccl.msg) = { id: 1 max_bytes: 4294967295 codec_version: 4 };\n  \
+               optional bytes b = 1 [(dccl.field).max_length = 100000];\n}\n";
+    let pool = dccl::compile_sources(&[("big.proto", src)]).unwrap();
+    let mut codec = dccl::Codec::new();
+    codec
+        .load(&pool.get_message_by_name("Big").unwrap())
+        .unwrap();
+    assert!(codec.analyze("Big").unwrap().contains("4294967295 bytes"));
+}

@@ -56,7 +56,9 @@ impl FieldCodec for FixedBytesCodec {
         }
     }
     fn max_size(&self) -> u32 {
-        self.max_length * 8 + u32::from(!self.required)
+        self.max_length
+            .saturating_mul(8)
+            .saturating_add(u32::from(!self.required))
     }
     fn encode(
         &self,

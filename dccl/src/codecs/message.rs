@@ -263,22 +263,22 @@ impl MessageCodec {
         let mut max = 0u32;
         let mut oneof_max = vec![0u32; self.oneofs.len()];
         for o in &self.oneofs {
-            min += o.bits;
-            max += o.bits;
+            min = min.saturating_add(o.bits);
+            max = max.saturating_add(o.bits);
         }
         for f in &self.fields {
             match f.oneof {
                 Some((i, _)) => oneof_max[i] = oneof_max[i].max(f.max_size()),
                 None => {
-                    min += f.min_size();
-                    max += f.max_size();
+                    min = min.saturating_add(f.min_size());
+                    max = max.saturating_add(f.max_size());
                 }
             }
         }
-        max += oneof_max.iter().sum::<u32>();
+        max = oneof_max.iter().fold(max, |a, b| a.saturating_add(*b));
         if self.presence {
             self.min_bits = 1;
-            self.max_bits = max + 1;
+            self.max_bits = max.saturating_add(1);
         } else {
             self.min_bits = min;
             self.max_bits = max;
@@ -357,21 +357,24 @@ impl MessageCodec {
         }
         for f in &self.fields {
             let result = if let Some(bounds) = f.repeat {
-                f.codec.decode_repeated(input, bounds, ctx).map(|values| {
-                    if !values.is_empty() {
-                        msg.set_field(&f.field, Value::List(values));
-                    }
-                })
+                f.codec
+                    .decode_repeated(input, bounds, ctx)
+                    .and_then(|values| {
+                        if values.is_empty() {
+                            Ok(())
+                        } else {
+                            set(msg, &f.field, Value::List(values))
+                        }
+                    })
             } else {
                 if let Some((i, j)) = f.oneof {
                     if cases[i] != j + 1 {
                         continue;
                     }
                 }
-                f.codec.decode(input, ctx).map(|value| {
-                    if let Some(v) = value {
-                        msg.set_field(&f.field, v);
-                    }
+                f.codec.decode(input, ctx).and_then(|value| match value {
+                    Some(v) => set(msg, &f.field, v),
+                    None => Ok(()),
                 })
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
@@ -474,6 +477,17 @@ impl FieldCodec for MessageCodec {
     fn children(&self) -> Option<&MessageCodec> {
         Some(self)
     }
+}
+
+/// Sets a decoded value, refusing (rather than panicking on) a value of the
+/// wrong type, as a faulty user codec could produce.
+pub(crate) fn set(
+    msg: &mut DynamicMessage,
+    field: &FieldDescriptor,
+    value: Value,
+) -> Result<(), CodecError> {
+    msg.try_set_field(field, value)
+        .map_err(|e| CodecError::new(format!("codec produced a value of the wrong type: {e}")))
 }
 
 /// Whether a field kind is a message.

@@ -47,7 +47,9 @@ impl FieldCodec for PresenceCodec {
         }
     }
     fn max_size(&self) -> u32 {
-        self.inner.max_size() + u32::from(!self.required)
+        self.inner
+            .max_size()
+            .saturating_add(u32::from(!self.required))
     }
     fn encode(
         &self,

@@ -66,7 +66,8 @@ impl FieldCodec for StringCodec {
         self.prefix_bits
     }
     fn max_size(&self) -> u32 {
-        self.prefix_bits + self.max_length * 8
+        self.prefix_bits
+            .saturating_add(self.max_length.saturating_mul(8))
     }
     fn encode(
         &self,

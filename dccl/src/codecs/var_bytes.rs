@@ -78,7 +78,7 @@ impl FieldCodec for VarBytesCodec {
         }
     }
     fn max_size(&self) -> u32 {
-        self.presence_bits() + self.prefix_bits + self.max_length * 8
+        (self.presence_bits() + self.prefix_bits).saturating_add(self.max_length.saturating_mul(8))
     }
     fn encode(
         &self,
