@@ -651,3 +651,12 @@ impl RequiredFields {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn codec_can_be_shared_between_threads() {
+        fn assert_send_sync<T: Send + Sync + Clone>() {}
+        assert_send_sync::<super::Codec>();
+    }
+}
