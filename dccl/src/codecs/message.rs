@@ -7,7 +7,7 @@
 
 use std::sync::Arc;
 
-use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
+use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, MessageDescriptor, Value};
 
 use crate::bits::{BitReader, BitWriter};
 use crate::error::CodecError;
@@ -488,9 +488,4 @@ pub(crate) fn set(
 ) -> Result<(), CodecError> {
     msg.try_set_field(field, value)
         .map_err(|e| CodecError::new(format!("codec produced a value of the wrong type: {e}")))
-}
-
-/// Whether a field kind is a message.
-pub fn is_message(kind: &Kind) -> bool {
-    matches!(kind, Kind::Message(_))
 }
