@@ -10,6 +10,8 @@ use prost::Message;
 const FILES: &[&str] = &[
     "dccl/option_extensions.proto",
     "goby/example/navigation.proto",
+    "goby/acomms/modem_message.proto",
+    "goby/acomms/queue.proto",
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -5,6 +5,7 @@
 //!   `import "dccl/option_extensions.proto";` resolves with no file on disk.
 //! - [`dccl`]: prost structs of those options.
 //! - [`goby::example`]: the example messages shipped with the toolkit.
+//! - [`goby::acomms::protobuf`]: modem transmissions and the queue configuration.
 //! - [`DESCRIPTOR_POOL`]: every file above, with custom options preserved.
 
 use std::sync::LazyLock;
@@ -39,6 +40,15 @@ pub mod dccl {
 
 /// Messages of the `goby` packages.
 pub mod goby {
+    /// Messages shared by the communication layers.
+    pub mod acomms {
+        /// `ModemTransmission` and the queue configuration, with Goby's field numbers.
+        #[allow(missing_docs, clippy::all)]
+        pub mod protobuf {
+            include!(concat!(env!("OUT_DIR"), "/goby.acomms.protobuf.rs"));
+        }
+    }
+
     /// The example messages shipped with the toolkit.
     #[allow(missing_docs, clippy::all)]
     pub mod example {

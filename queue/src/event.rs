@@ -1,0 +1,68 @@
+//! What the queue manager reports to its subscribers.
+
+use prost_reflect::DynamicMessage;
+
+use crate::clock::Micros;
+
+/// A message delivered to this node (decoded from a received frame, or
+/// looped back locally).
+#[derive(Debug, Clone)]
+pub struct ReceivedMessage {
+    /// The decoded message.
+    pub message: DynamicMessage,
+    /// Its DCCL id.
+    pub dccl_id: u32,
+    /// Source id from the type's role (or the transmission's source).
+    pub src: i32,
+    /// Destination id from the type's role (0, broadcast, when none).
+    pub dest: i32,
+    /// Time from the type's role, if it has one.
+    pub time: Option<Micros>,
+}
+
+/// An event of the queue manager.
+#[derive(Debug, Clone)]
+pub enum QueueEvent {
+    /// A message arrived for this node.
+    Received(ReceivedMessage),
+    /// A sent message was acknowledged by `by` and left its queue.
+    Acked {
+        /// The acknowledged message.
+        message: DynamicMessage,
+        /// Its DCCL id.
+        dccl_id: u32,
+        /// Number of the frame that carried it.
+        frame: u32,
+        /// Modem id of the node that acknowledged it (our own id for a
+        /// message looped back to ourselves).
+        by: i32,
+    },
+    /// A message outlived its type's `ttl` unsent (or unacknowledged).
+    Expired {
+        /// The message.
+        message: DynamicMessage,
+        /// Its DCCL id.
+        dccl_id: u32,
+    },
+    /// A message was dropped because its queue exceeded `max_queue`.
+    Dropped {
+        /// The message.
+        message: DynamicMessage,
+        /// Its DCCL id.
+        dccl_id: u32,
+    },
+    /// A queue changed size.
+    QueueSize {
+        /// DCCL id of the queue.
+        dccl_id: u32,
+        /// Messages now held (including those waiting for an ack).
+        size: usize,
+    },
+    /// A data-on-demand provider returned a message that could not be queued.
+    OnDemandRejected {
+        /// DCCL id of the type.
+        dccl_id: u32,
+        /// Why.
+        error: String,
+    },
+}

@@ -1,0 +1,700 @@
+//! The queue manager: one queue per DCCL type, the priority contest that
+//! fills each frame of a data request, acks, expiry and received frames.
+
+use std::collections::HashMap;
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::Arc;
+
+use dccl::Codec;
+use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, Manipulator, ModemTransmission, QueueManagerConfig,
+    QueuedMessageEntry,
+};
+
+use crate::clock::{seconds_to_micros, Clock, Micros, SystemClock};
+use crate::error::{QueueError, Result};
+use crate::event::{QueueEvent, ReceivedMessage};
+use crate::queue::{Queue, QueueSettings, QueuedMessage};
+use crate::role::Roles;
+use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
+
+/// Generates the message of a data-on-demand type at the moment of a data
+/// request (`None`: nothing to send this time).
+pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
+
+/// A sent message awaiting its acknowledgement.
+#[derive(Debug, Clone, Copy)]
+struct AwaitingAck {
+    frame: u32,
+    dccl_id: u32,
+    seq: u64,
+}
+
+/// A queue taking part in the priority contest of one data request.
+#[derive(Debug, Clone, Copy)]
+struct Contender {
+    index: usize,
+    priority: f64,
+    last_send_time: Micros,
+    dccl_id: u32,
+}
+
+impl Contender {
+    /// Whether `self` beats `other`: higher priority, then the longer
+    /// unsent, then the lower DCCL id.
+    fn beats(&self, other: &Contender) -> bool {
+        if self.priority != other.priority {
+            return self.priority > other.priority;
+        }
+        if self.last_send_time != other.last_send_time {
+            return self.last_send_time < other.last_send_time;
+        }
+        self.dccl_id < other.dccl_id
+    }
+}
+
+/// Dynamic priority queuing of DCCL messages for one node.
+///
+/// Push messages with [`push`](Self::push); the link layer asks for data with
+/// [`handle_modem_data_request`](Self::handle_modem_data_request) and hands
+/// over what it receives with
+/// [`handle_modem_receive`](Self::handle_modem_receive). Received messages,
+/// acks, expiries and queue sizes reach the receivers returned by
+/// [`subscribe`](Self::subscribe).
+pub struct QueueManager {
+    codec: Arc<Codec>,
+    clock: Arc<dyn Clock>,
+    modem_id: i32,
+    on_demand_skew: Micros,
+    minimum_ack_wait: Micros,
+    max_frame_bytes: Option<usize>,
+    /// Sorted by DCCL id.
+    queues: Vec<Queue>,
+    by_name: HashMap<String, u32>,
+    on_demand: HashMap<u32, OnDemandProvider>,
+    awaiting: Vec<AwaitingAck>,
+    next_seq: u64,
+    subscribers: Vec<Sender<QueueEvent>>,
+}
+
+impl std::fmt::Debug for QueueManager {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("QueueManager")
+            .field("modem_id", &self.modem_id)
+            .field("queues", &self.by_name)
+            .field("awaiting_acks", &self.awaiting.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl QueueManager {
+    /// A manager on the system clock. Every message type named in
+    /// `config.message_entry` must be loaded in `codec`.
+    pub fn new(codec: Arc<Codec>, config: &QueueManagerConfig) -> Result<Self> {
+        Self::with_clock(codec, config, Arc::new(SystemClock))
+    }
+
+    /// A manager reading time from `clock`.
+    pub fn with_clock(
+        codec: Arc<Codec>,
+        config: &QueueManagerConfig,
+        clock: Arc<dyn Clock>,
+    ) -> Result<Self> {
+        let config_error = |reason: String| QueueError::Config {
+            message: "QueueManagerConfig".into(),
+            reason,
+        };
+        let skew = config.on_demand_skew_seconds();
+        let wait = config.minimum_ack_wait_seconds();
+        if !(skew.is_finite() && skew >= 0.0) {
+            return Err(config_error(format!(
+                "on_demand_skew_seconds {skew} is not valid"
+            )));
+        }
+        if !(wait.is_finite() && wait >= 0.0) {
+            return Err(config_error(format!(
+                "minimum_ack_wait_seconds {wait} is not valid"
+            )));
+        }
+        let mut manager = Self {
+            codec,
+            clock,
+            modem_id: config.modem_id(),
+            on_demand_skew: seconds_to_micros(skew),
+            minimum_ack_wait: seconds_to_micros(wait),
+            max_frame_bytes: config.max_frame_bytes.map(|b| b as usize),
+            queues: Vec::new(),
+            by_name: HashMap::new(),
+            on_demand: HashMap::new(),
+            awaiting: Vec::new(),
+            next_seq: 0,
+            subscribers: Vec::new(),
+        };
+        for entry in &config.message_entry {
+            manager.configure_queue(entry)?;
+        }
+        Ok(manager)
+    }
+
+    /// Modem id of this node.
+    pub fn modem_id(&self) -> i32 {
+        self.modem_id
+    }
+
+    /// The DCCL codec used to encode and decode.
+    pub fn codec(&self) -> &Arc<Codec> {
+        &self.codec
+    }
+
+    /// Creates the queue of a type, or changes the settings of an existing
+    /// one (its messages are kept).
+    pub fn configure_queue(&mut self, entry: &QueuedMessageEntry) -> Result<()> {
+        let name = entry.protobuf_name.as_str();
+        let descriptor = self
+            .codec
+            .descriptor(name)
+            .ok_or_else(|| QueueError::Config {
+                message: name.to_string(),
+                reason: "this message type is not loaded in the DCCL codec".into(),
+            })?;
+        let id = self.codec.id_of(name)?;
+        let settings = QueueSettings::from_entry(entry)?;
+        let roles = Roles::resolve(&descriptor, &entry.role)?;
+        if let Some(max) = self.max_frame_bytes {
+            let min = self.codec.min_size(name)?;
+            if min > max {
+                return Err(QueueError::Config {
+                    message: name.to_string(),
+                    reason: format!(
+                        "its smallest encoding ({min} bytes) exceeds the largest frame ({max} bytes)"
+                    ),
+                });
+            }
+        }
+        match self.queues.binary_search_by_key(&id, |q| q.id) {
+            Ok(i) => {
+                let q = &mut self.queues[i];
+                q.settings = settings;
+                q.roles = roles;
+            }
+            Err(i) => {
+                let q = Queue::new(id, descriptor, settings, roles, self.clock.now());
+                self.queues.insert(i, q);
+                self.by_name.insert(name.to_string(), id);
+                self.emit(QueueEvent::QueueSize {
+                    dccl_id: id,
+                    size: 0,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// A new receiver of every event from now on. Dropping the receiver
+    /// unsubscribes it.
+    pub fn subscribe(&mut self) -> Receiver<QueueEvent> {
+        let (tx, rx) = channel();
+        self.subscribers.push(tx);
+        rx
+    }
+
+    /// Makes a configured type data-on-demand: at each data request, when its
+    /// queue has nothing to send or its newest message is older than
+    /// `on_demand_skew_seconds`, `provider` is asked for a fresh message.
+    pub fn set_on_demand(
+        &mut self,
+        name: &str,
+        provider: impl FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send + 'static,
+    ) -> Result<()> {
+        let id = self.id_of_configured(name)?;
+        self.on_demand.insert(id, Box::new(provider));
+        Ok(())
+    }
+
+    /// Queues a message of a configured type. It is encoded now: a message
+    /// that cannot be encoded is refused with the DCCL error (naming the
+    /// field), and nothing else changes.
+    pub fn push(&mut self, message: &DynamicMessage) -> Result<()> {
+        let now = self.clock.now();
+        let name = message.descriptor().full_name().to_string();
+        let id = self.id_of_configured(&name)?;
+        let index = self.index_of(id);
+        let queue = &self.queues[index];
+        let loopback = queue.settings.has(Manipulator::Loopback);
+        let no_queue = queue.settings.has(Manipulator::NoQueue);
+
+        let encoded = self.codec.encode(message)?;
+        if let Some(max) = self.max_frame_bytes {
+            if encoded.len() > max {
+                return Err(QueueError::TooLarge {
+                    message: name,
+                    size: encoded.len(),
+                    max,
+                });
+            }
+        }
+        let role_id = |v: Option<i64>, role: &'static str, default: i32| -> Result<i32> {
+            match v {
+                None => Ok(default),
+                Some(v) => i32::try_from(v).map_err(|_| QueueError::Role {
+                    message: name.clone(),
+                    role,
+                    field: String::new(),
+                    reason: format!("{v} is not a modem id"),
+                }),
+            }
+        };
+        let src = role_id(queue.roles.source(message)?, "SOURCE_ID", self.modem_id)?;
+        let dest = role_id(
+            queue.roles.destination(message)?,
+            "DESTINATION_ID",
+            BROADCAST_ID,
+        )?;
+        let time = queue.roles.timestamp(message)?.unwrap_or(now);
+        let ack_requested = queue.settings.ack;
+
+        if loopback {
+            self.emit(QueueEvent::Received(ReceivedMessage {
+                message: message.clone(),
+                dccl_id: id,
+                src,
+                dest,
+                time: Some(time),
+            }));
+        }
+        if no_queue {
+            return Ok(());
+        }
+        if dest == self.modem_id {
+            // Addressed to ourselves: delivered here, never sent.
+            self.emit(QueueEvent::Received(ReceivedMessage {
+                message: message.clone(),
+                dccl_id: id,
+                src,
+                dest,
+                time: Some(time),
+            }));
+            if ack_requested {
+                self.emit(QueueEvent::Acked {
+                    message: message.clone(),
+                    dccl_id: id,
+                    frame: 0,
+                    by: self.modem_id,
+                });
+            }
+            return Ok(());
+        }
+
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        let dropped = self.queues[index].push(QueuedMessage {
+            seq,
+            message: message.clone(),
+            encoded,
+            src,
+            dest,
+            time,
+            ack_requested,
+            awaiting_frame: None,
+            last_sent: None,
+        });
+        for d in dropped {
+            self.emit(QueueEvent::Dropped {
+                message: d.message,
+                dccl_id: id,
+            });
+        }
+        self.emit_size(index);
+        Ok(())
+    }
+
+    /// Queues a prost-generated message (see [`push`](Self::push)).
+    pub fn push_message<T: ReflectMessage>(&mut self, message: &T) -> Result<()> {
+        self.push(&message.transcode_to_dynamic())
+    }
+
+    /// Fills the frames of a data request.
+    ///
+    /// `request.max_frame_bytes` must be set. For each frame from
+    /// `frame_start` (up to `max_num_frames`) the highest-priority eligible
+    /// queue gives its next message, then further winners are stitched after
+    /// it while bytes remain. A query destination (-1) takes the destination
+    /// of the first message; a query source takes this node's id;
+    /// `ack_requested` is set when any message sent wants an ack. Existing
+    /// bytes in `request.frame` are kept and appended to.
+    pub fn handle_modem_data_request(&mut self, request: &mut ModemTransmission) -> Result<()> {
+        let max_frame_bytes = request
+            .max_frame_bytes
+            .ok_or_else(|| QueueError::Request("max_frame_bytes is not set".into()))?
+            as usize;
+        let now = self.clock.now();
+        self.clear_awaiting(request.frame_start(), now);
+        self.expire();
+        self.run_on_demand(request, now);
+
+        let ack_forbidden = request.ack_requested == Some(false);
+        let mut packet_ack = request.ack_requested.unwrap_or(false);
+        let mut first_message = true;
+        let mut changed = vec![false; self.queues.len()];
+
+        let mut contenders: Vec<Contender> = Vec::with_capacity(self.queues.len());
+        for index in 0..self.queues.len() {
+            if let Some(c) = self.contender(index, now) {
+                insert_sorted(&mut contenders, c);
+            }
+        }
+
+        let frame_start = request.frame_start();
+        let frames = request.max_num_frames();
+        for slot in 0..frames as usize {
+            let frame_number = frame_start + slot as u32;
+            if request.frame.len() <= slot {
+                request.frame.push(Vec::new());
+            }
+            loop {
+                let used = request.frame[slot].len();
+                let remaining = max_frame_bytes.saturating_sub(used);
+                if remaining == 0 {
+                    break;
+                }
+                let dest = request.dest();
+                let winner = contenders.iter().position(|c| {
+                    let q = &self.queues[c.index];
+                    let Some(next) = q.next_index() else {
+                        return false;
+                    };
+                    let m = &q.messages[next];
+                    let wants_ack = m.ack_requested && m.dest != BROADCAST_ID;
+                    m.encoded.len() <= remaining
+                        && (dest == QUERY_DESTINATION_ID
+                            || m.dest == BROADCAST_ID
+                            || m.dest == dest)
+                        && !(ack_forbidden && wants_ack && dest != BROADCAST_ID)
+                });
+                let Some(position) = winner else {
+                    break;
+                };
+                let contender = contenders.remove(position);
+                let index = contender.index;
+                let queue = &mut self.queues[index];
+                let next = queue.next_index().expect("checked eligible");
+                let (sent, left) = queue.give(next, frame_number, now);
+                let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
+                request.frame[slot].extend_from_slice(&sent.encoded);
+                if sent.ack_requested {
+                    packet_ack = true;
+                    self.awaiting.push(AwaitingAck {
+                        frame: frame_number,
+                        dccl_id: contender.dccl_id,
+                        seq: sent.seq,
+                    });
+                }
+                if left {
+                    changed[index] = true;
+                }
+                if first_message {
+                    first_message = false;
+                    if request.dest() == QUERY_DESTINATION_ID {
+                        request.dest = Some(sent.dest);
+                    }
+                    if request.src() == QUERY_SOURCE_ID {
+                        request.src = Some(self.modem_id);
+                    }
+                }
+                if loopback_as_sent {
+                    self.emit(QueueEvent::Received(ReceivedMessage {
+                        message: sent.message,
+                        dccl_id: contender.dccl_id,
+                        src: sent.src,
+                        dest: sent.dest,
+                        time: Some(sent.time),
+                    }));
+                }
+                if let Some(c) = self.contender(index, now) {
+                    insert_sorted(&mut contenders, c);
+                }
+            }
+        }
+        request.ack_requested = Some(packet_ack);
+        for (index, changed) in changed.into_iter().enumerate() {
+            if changed {
+                self.emit_size(index);
+            }
+        }
+        Ok(())
+    }
+
+    /// Handles a received transmission: an ACK removes the acknowledged
+    /// messages; DATA frames are split into their DCCL messages, which are
+    /// delivered as [`QueueEvent::Received`] when addressed to this node (or
+    /// broadcast). A frame that does not decode yields an error for that
+    /// frame; the messages before the fault and the other frames are still
+    /// delivered. Returns the errors.
+    pub fn handle_modem_receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
+        if transmission.r#type() == TransmissionType::Ack {
+            self.process_ack(transmission);
+            return Vec::new();
+        }
+        let mut errors = Vec::new();
+        for (frame_index, frame) in transmission.frame.iter().enumerate() {
+            let mut rest = frame.as_slice();
+            let mut decoded = 0usize;
+            while !rest.is_empty() {
+                // Zero bytes after the messages are padding, not a message.
+                if decoded > 0 && rest.iter().all(|&b| b == 0) {
+                    break;
+                }
+                match self.codec.decode_prefix(rest) {
+                    Ok((message, used)) => {
+                        decoded += 1;
+                        if let Err(e) = self.deliver(message, transmission.src()) {
+                            errors.push(e);
+                        }
+                        if used == 0 || used > rest.len() {
+                            break;
+                        }
+                        rest = &rest[used..];
+                    }
+                    Err(source) => {
+                        errors.push(QueueError::Frame {
+                            frame: frame_index,
+                            source,
+                        });
+                        break;
+                    }
+                }
+            }
+        }
+        errors
+    }
+
+    /// Removes the messages older than their type's `ttl` (reported as
+    /// [`QueueEvent::Expired`]). Also done at each data request.
+    pub fn expire(&mut self) {
+        let now = self.clock.now();
+        for index in 0..self.queues.len() {
+            let expired = self.queues[index].expire(now);
+            if expired.is_empty() {
+                continue;
+            }
+            let id = self.queues[index].id;
+            for m in expired {
+                self.emit(QueueEvent::Expired {
+                    message: m.message,
+                    dccl_id: id,
+                });
+            }
+            self.emit_size(index);
+        }
+    }
+
+    /// Empties the queue of a type; returns how many messages it held.
+    pub fn flush(&mut self, name: &str) -> Result<usize> {
+        let id = self.id_of_configured(name)?;
+        let index = self.index_of(id);
+        let n = self.queues[index].flush().len();
+        self.emit_size(index);
+        Ok(n)
+    }
+
+    /// Messages held for a type (including those awaiting an ack).
+    pub fn size(&self, name: &str) -> Result<usize> {
+        let id = self.id_of_configured(name)?;
+        Ok(self.queues[self.index_of(id)].len())
+    }
+
+    /// Current priority of a type's queue, `value_base · (t − t_last) / ttl`.
+    pub fn priority(&self, name: &str) -> Result<f64> {
+        let id = self.id_of_configured(name)?;
+        Ok(self.queues[self.index_of(id)].priority(self.clock.now()))
+    }
+
+    /// Names of the configured types, by DCCL id.
+    pub fn configured(&self) -> Vec<String> {
+        self.queues
+            .iter()
+            .map(|q| q.descriptor.full_name().to_string())
+            .collect()
+    }
+
+    fn id_of_configured(&self, name: &str) -> Result<u32> {
+        self.by_name
+            .get(name)
+            .copied()
+            .ok_or_else(|| QueueError::NotConfigured(name.to_string()))
+    }
+
+    fn index_of(&self, id: u32) -> usize {
+        self.queues
+            .binary_search_by_key(&id, |q| q.id)
+            .expect("configured ids have queues")
+    }
+
+    fn contender(&self, index: usize, now: Micros) -> Option<Contender> {
+        let q = &self.queues[index];
+        if !q.has_sendable() || q.in_blackout(now) {
+            return None;
+        }
+        Some(Contender {
+            index,
+            priority: q.priority(now),
+            last_send_time: q.last_send_time,
+            dccl_id: q.id,
+        })
+    }
+
+    /// Frees messages awaiting acks that can no longer come: those of frames
+    /// numbered from `frame_start` on (the numbers are about to be reused) and
+    /// those waiting longer than `minimum_ack_wait_seconds`. They stay queued.
+    fn clear_awaiting(&mut self, frame_start: u32, now: Micros) {
+        let awaiting = std::mem::take(&mut self.awaiting);
+        let sent_before = now.saturating_sub(self.minimum_ack_wait);
+        for a in awaiting {
+            let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
+                continue;
+            };
+            let q = &mut self.queues[index];
+            if a.frame >= frame_start {
+                q.stop_awaiting(a.seq, a.frame, None);
+            } else {
+                q.stop_awaiting(a.seq, a.frame, Some(sent_before));
+            }
+            if q.is_awaiting(a.seq, a.frame) {
+                self.awaiting.push(a);
+            }
+        }
+    }
+
+    fn run_on_demand(&mut self, request: &ModemTransmission, now: Micros) {
+        if self.on_demand.is_empty() {
+            return;
+        }
+        let mut ids: Vec<u32> = self.on_demand.keys().copied().collect();
+        ids.sort_unstable();
+        for id in ids {
+            let q = &self.queues[self.index_of(id)];
+            let stale = match q.newest_time() {
+                None => true,
+                Some(t) => t.saturating_add(self.on_demand_skew) < now,
+            };
+            if q.has_sendable() && !stale {
+                continue;
+            }
+            let Some(provider) = self.on_demand.get_mut(&id) else {
+                continue;
+            };
+            let Some(message) = provider(request) else {
+                continue;
+            };
+            let outcome = if message.descriptor().full_name() != q.descriptor.full_name() {
+                Err(QueueError::Request(format!(
+                    "the provider of {} returned a {}",
+                    q.descriptor.full_name(),
+                    message.descriptor().full_name()
+                )))
+            } else {
+                self.push(&message)
+            };
+            if let Err(e) = outcome {
+                self.emit(QueueEvent::OnDemandRejected {
+                    dccl_id: id,
+                    error: e.to_string(),
+                });
+            }
+        }
+    }
+
+    fn process_ack(&mut self, ack: &ModemTransmission) {
+        if ack.dest() != self.modem_id {
+            return;
+        }
+        for &frame in &ack.acked_frame {
+            let Ok(frame) = u32::try_from(frame) else {
+                continue;
+            };
+            let (hits, rest): (Vec<AwaitingAck>, Vec<AwaitingAck>) =
+                self.awaiting.iter().partition(|a| a.frame == frame);
+            self.awaiting = rest;
+            for a in hits {
+                let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
+                    continue;
+                };
+                if let Some(m) = self.queues[index].take_acked(a.seq, frame) {
+                    self.emit(QueueEvent::Acked {
+                        message: m.message,
+                        dccl_id: a.dccl_id,
+                        frame,
+                        by: ack.src(),
+                    });
+                    self.emit_size(index);
+                }
+            }
+        }
+    }
+
+    fn deliver(&mut self, message: DynamicMessage, link_src: i32) -> Result<()> {
+        let name = message.descriptor().full_name().to_string();
+        let id = self.codec.id_of(&name)?;
+        let queue = self
+            .queues
+            .binary_search_by_key(&id, |q| q.id)
+            .ok()
+            .map(|i| &self.queues[i]);
+        let (src, dest, time, promiscuous, no_dequeue) = match queue {
+            Some(q) => {
+                let to_i32 = |v: i64| i32::try_from(v).unwrap_or(BROADCAST_ID);
+                (
+                    q.roles.source(&message)?.map(to_i32).unwrap_or(link_src),
+                    q.roles
+                        .destination(&message)?
+                        .map(to_i32)
+                        .unwrap_or(BROADCAST_ID),
+                    q.roles.timestamp(&message)?,
+                    q.settings.has(Manipulator::Promiscuous),
+                    q.settings.has(Manipulator::NoDequeue),
+                )
+            }
+            None => (link_src, BROADCAST_ID, None, false, false),
+        };
+        if dest != BROADCAST_ID && dest != self.modem_id && !promiscuous {
+            return Ok(());
+        }
+        if dest == BROADCAST_ID && src == self.modem_id {
+            return Ok(());
+        }
+        if no_dequeue {
+            return Ok(());
+        }
+        self.emit(QueueEvent::Received(ReceivedMessage {
+            message,
+            dccl_id: id,
+            src,
+            dest,
+            time,
+        }));
+        Ok(())
+    }
+
+    fn emit_size(&mut self, index: usize) {
+        let q = &self.queues[index];
+        let event = QueueEvent::QueueSize {
+            dccl_id: q.id,
+            size: q.len(),
+        };
+        self.emit(event);
+    }
+
+    fn emit(&mut self, event: QueueEvent) {
+        if self.subscribers.is_empty() {
+            return;
+        }
+        self.subscribers.retain(|s| s.send(event.clone()).is_ok());
+    }
+}
+
+/// Inserts `c` keeping `list` ordered from the strongest contender down.
+fn insert_sorted(list: &mut Vec<Contender>, c: Contender) {
+    let at = list.partition_point(|other| other.beats(&c));
+    list.insert(at, c);
+}

@@ -1,0 +1,272 @@
+//! One queue: the messages of one DCCL type, with that type's settings.
+
+use std::collections::{HashSet, VecDeque};
+
+use prost_reflect::{DynamicMessage, MessageDescriptor};
+use protos::goby::acomms::protobuf::{Manipulator, QueuedMessageEntry};
+
+use crate::clock::{seconds_to_micros, Micros, MICROS_PER_SECOND};
+use crate::error::{QueueError, Result};
+use crate::role::Roles;
+
+/// The settings of one queue, validated.
+#[derive(Debug, Clone)]
+pub struct QueueSettings {
+    /// Keep sent messages until acknowledged.
+    pub ack: bool,
+    /// Minimum time between two sends.
+    pub blackout: Micros,
+    /// Most messages held (0: no limit).
+    pub max_queue: usize,
+    /// Last in, first out.
+    pub newest_first: bool,
+    /// Lifetime of a message, seconds (> 0); also the priority time constant.
+    pub ttl: f64,
+    /// Base value in the priority contest.
+    pub value_base: f64,
+    /// Manipulators in force.
+    pub manipulators: HashSet<Manipulator>,
+}
+
+impl QueueSettings {
+    /// Validates a configuration entry.
+    pub fn from_entry(entry: &QueuedMessageEntry) -> Result<Self> {
+        let error = |reason: String| QueueError::Config {
+            message: entry.protobuf_name.clone(),
+            reason,
+        };
+        if entry.ttl() <= 0 {
+            return Err(error(format!("ttl must be positive, not {}", entry.ttl())));
+        }
+        if !entry.value_base().is_finite() {
+            return Err(error(format!(
+                "value_base must be finite, not {}",
+                entry.value_base()
+            )));
+        }
+        let mut manipulators = HashSet::new();
+        for &raw in &entry.manipulator {
+            let m = Manipulator::try_from(raw)
+                .map_err(|_| error(format!("unknown manipulator {raw}")))?;
+            if m != Manipulator::NoManip {
+                manipulators.insert(m);
+            }
+        }
+        Ok(Self {
+            ack: entry.ack(),
+            blackout: i64::from(entry.blackout_time()) * MICROS_PER_SECOND as i64,
+            max_queue: entry.max_queue() as usize,
+            newest_first: entry.newest_first(),
+            ttl: f64::from(entry.ttl()),
+            value_base: entry.value_base(),
+            manipulators,
+        })
+    }
+
+    /// Whether a manipulator is in force.
+    pub fn has(&self, m: Manipulator) -> bool {
+        self.manipulators.contains(&m)
+    }
+}
+
+/// A message waiting in a queue, already encoded.
+#[derive(Debug, Clone)]
+pub(crate) struct QueuedMessage {
+    /// Order of arrival (unique, increasing within the manager).
+    pub seq: u64,
+    pub message: DynamicMessage,
+    pub encoded: Vec<u8>,
+    pub src: i32,
+    pub dest: i32,
+    pub time: Micros,
+    pub ack_requested: bool,
+    /// Frame it was last sent in while its ack is awaited.
+    pub awaiting_frame: Option<u32>,
+    pub last_sent: Option<Micros>,
+}
+
+/// The queue of one DCCL type.
+pub(crate) struct Queue {
+    pub id: u32,
+    pub descriptor: MessageDescriptor,
+    pub settings: QueueSettings,
+    pub roles: Roles,
+    pub messages: VecDeque<QueuedMessage>,
+    /// Messages sent and awaiting their ack (not sendable until cleared).
+    awaiting: usize,
+    pub last_send_time: Micros,
+    /// A lower bound of the times of the messages held.
+    oldest_time: Micros,
+}
+
+impl Queue {
+    pub fn new(
+        id: u32,
+        descriptor: MessageDescriptor,
+        settings: QueueSettings,
+        roles: Roles,
+        now: Micros,
+    ) -> Self {
+        Self {
+            id,
+            descriptor,
+            settings,
+            roles,
+            messages: VecDeque::new(),
+            awaiting: 0,
+            last_send_time: now,
+            oldest_time: Micros::MAX,
+        }
+    }
+
+    /// Messages held, including those awaiting an ack.
+    pub fn len(&self) -> usize {
+        self.messages.len()
+    }
+
+    /// Whether a message can be given out now (one not awaiting an ack).
+    pub fn has_sendable(&self) -> bool {
+        self.messages.len() > self.awaiting
+    }
+
+    /// `value_base · (now − t_last) / ttl`.
+    pub fn priority(&self, now: Micros) -> f64 {
+        (now - self.last_send_time) as f64 / MICROS_PER_SECOND / self.settings.ttl
+            * self.settings.value_base
+    }
+
+    pub fn in_blackout(&self, now: Micros) -> bool {
+        self.settings.blackout > 0
+            && self.last_send_time.saturating_add(self.settings.blackout) > now
+    }
+
+    /// Index of the next message to give: the newest (or oldest) one not
+    /// awaiting an ack.
+    pub fn next_index(&self) -> Option<usize> {
+        if !self.has_sendable() {
+            return None;
+        }
+        if self.settings.newest_first {
+            (0..self.messages.len())
+                .rev()
+                .find(|&i| self.messages[i].awaiting_frame.is_none())
+        } else {
+            (0..self.messages.len()).find(|&i| self.messages[i].awaiting_frame.is_none())
+        }
+    }
+
+    /// Time of the newest message held.
+    pub fn newest_time(&self) -> Option<Micros> {
+        self.messages.iter().map(|m| m.time).max()
+    }
+
+    /// Adds a message; returns those dropped because the queue overflowed
+    /// (the oldest first).
+    pub fn push(&mut self, msg: QueuedMessage) -> Vec<QueuedMessage> {
+        self.oldest_time = self.oldest_time.min(msg.time);
+        self.messages.push_back(msg);
+        let mut dropped = Vec::new();
+        while self.settings.max_queue > 0 && self.messages.len() > self.settings.max_queue {
+            if let Some(old) = self.messages.pop_front() {
+                if old.awaiting_frame.is_some() {
+                    self.awaiting -= 1;
+                }
+                dropped.push(old);
+            }
+        }
+        dropped
+    }
+
+    /// Gives out the message at `index` for frame `frame`: it stays queued
+    /// awaiting its ack, or leaves the queue when no ack is wanted. Returns
+    /// a copy of it (with the ack flag as sent) and whether it left.
+    pub fn give(&mut self, index: usize, frame: u32, now: Micros) -> (QueuedMessage, bool) {
+        self.last_send_time = now;
+        let msg = &mut self.messages[index];
+        // A broadcast cannot be acknowledged.
+        if msg.dest == crate::BROADCAST_ID {
+            msg.ack_requested = false;
+        }
+        msg.last_sent = Some(now);
+        if msg.ack_requested {
+            msg.awaiting_frame = Some(frame);
+            self.awaiting += 1;
+            (msg.clone(), false)
+        } else {
+            let gone = self.messages.remove(index).expect("index from next_index");
+            (gone, true)
+        }
+    }
+
+    fn position(&self, seq: u64) -> Option<usize> {
+        self.messages.binary_search_by_key(&seq, |m| m.seq).ok()
+    }
+
+    /// Removes message `seq` if it is awaiting an ack for `frame`.
+    pub fn take_acked(&mut self, seq: u64, frame: u32) -> Option<QueuedMessage> {
+        let i = self.position(seq)?;
+        if self.messages[i].awaiting_frame != Some(frame) {
+            return None;
+        }
+        self.awaiting -= 1;
+        self.messages.remove(i)
+    }
+
+    /// Makes message `seq` sendable again if it still awaits an ack for
+    /// `frame` and it was sent before `sent_before`.
+    pub fn stop_awaiting(&mut self, seq: u64, frame: u32, sent_before: Option<Micros>) {
+        if let Some(i) = self.position(seq) {
+            let m = &mut self.messages[i];
+            let old_enough = match (sent_before, m.last_sent) {
+                (None, _) => true,
+                (Some(limit), Some(sent)) => sent < limit,
+                (Some(_), None) => true,
+            };
+            if m.awaiting_frame == Some(frame) && old_enough {
+                m.awaiting_frame = None;
+                self.awaiting -= 1;
+            }
+        }
+    }
+
+    /// Whether message `seq` is still awaiting an ack for `frame`.
+    pub fn is_awaiting(&self, seq: u64, frame: u32) -> bool {
+        self.position(seq)
+            .is_some_and(|i| self.messages[i].awaiting_frame == Some(frame))
+    }
+
+    /// Removes and returns the messages older than `ttl` at `now`.
+    pub fn expire(&mut self, now: Micros) -> Vec<QueuedMessage> {
+        let ttl = seconds_to_micros(self.settings.ttl);
+        if self.messages.is_empty() || self.oldest_time.saturating_add(ttl) >= now {
+            return Vec::new();
+        }
+        let mut expired = Vec::new();
+        let mut kept = VecDeque::with_capacity(self.messages.len());
+        for m in self.messages.drain(..) {
+            if m.time.saturating_add(ttl) < now {
+                if m.awaiting_frame.is_some() {
+                    self.awaiting -= 1;
+                }
+                expired.push(m);
+            } else {
+                kept.push_back(m);
+            }
+        }
+        self.messages = kept;
+        self.oldest_time = self
+            .messages
+            .iter()
+            .map(|m| m.time)
+            .min()
+            .unwrap_or(Micros::MAX);
+        expired
+    }
+
+    /// Empties the queue.
+    pub fn flush(&mut self) -> Vec<QueuedMessage> {
+        self.awaiting = 0;
+        self.oldest_time = Micros::MAX;
+        self.messages.drain(..).collect()
+    }
+}
