@@ -1,7 +1,8 @@
 //! The queue manager: one queue per DCCL type, the priority contest that
 //! fills each frame of a data request, acks, expiry and received frames.
 
-use std::collections::HashMap;
+use std::cmp::Ordering;
+use std::collections::{BinaryHeap, HashMap};
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
 
@@ -29,6 +30,8 @@ struct AwaitingAck {
     frame: u32,
     dccl_id: u32,
     seq: u64,
+    /// Where the message was in its queue when sent.
+    hint: usize,
 }
 
 /// A queue taking part in the priority contest of one data request.
@@ -40,19 +43,30 @@ struct Contender {
     dccl_id: u32,
 }
 
-impl Contender {
-    /// Whether `self` beats `other`: higher priority, then the longer
-    /// unsent, then the lower DCCL id.
-    fn beats(&self, other: &Contender) -> bool {
-        if self.priority != other.priority {
-            return self.priority > other.priority;
-        }
-        if self.last_send_time != other.last_send_time {
-            return self.last_send_time < other.last_send_time;
-        }
-        self.dccl_id < other.dccl_id
+/// The stronger contender is the greater: higher priority, then the longer
+/// unsent, then the lower DCCL id.
+impl Ord for Contender {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.priority
+            .total_cmp(&other.priority)
+            .then(other.last_send_time.cmp(&self.last_send_time))
+            .then(other.dccl_id.cmp(&self.dccl_id))
     }
 }
+
+impl PartialOrd for Contender {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl PartialEq for Contender {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+
+impl Eq for Contender {}
 
 /// Dynamic priority queuing of DCCL messages for one node.
 ///
@@ -69,6 +83,8 @@ pub struct QueueManager {
     on_demand_skew: Micros,
     minimum_ack_wait: Micros,
     max_frame_bytes: Option<usize>,
+    /// Fewest bytes any configured type encodes to (at least 1).
+    smallest_message: usize,
     /// Sorted by DCCL id.
     queues: Vec<Queue>,
     by_name: HashMap<String, u32>,
@@ -76,6 +92,8 @@ pub struct QueueManager {
     awaiting: Vec<AwaitingAck>,
     next_seq: u64,
     subscribers: Vec<Sender<QueueEvent>>,
+    /// Storage of the priority contest, kept between data requests.
+    scratch: Vec<Contender>,
 }
 
 impl std::fmt::Debug for QueueManager {
@@ -124,12 +142,14 @@ impl QueueManager {
             on_demand_skew: seconds_to_micros(skew),
             minimum_ack_wait: seconds_to_micros(wait),
             max_frame_bytes: config.max_frame_bytes.map(|b| b as usize),
+            smallest_message: usize::MAX,
             queues: Vec::new(),
             by_name: HashMap::new(),
             on_demand: HashMap::new(),
             awaiting: Vec::new(),
             next_seq: 0,
             subscribers: Vec::new(),
+            scratch: Vec::new(),
         };
         for entry in &config.message_entry {
             manager.configure_queue(entry)?;
@@ -161,8 +181,8 @@ impl QueueManager {
         let id = self.codec.id_of(name)?;
         let settings = QueueSettings::from_entry(entry)?;
         let roles = Roles::resolve(&descriptor, &entry.role)?;
+        let min = self.codec.min_size(name)?;
         if let Some(max) = self.max_frame_bytes {
-            let min = self.codec.min_size(name)?;
             if min > max {
                 return Err(QueueError::Config {
                     message: name.to_string(),
@@ -172,6 +192,7 @@ impl QueueManager {
                 });
             }
         }
+        self.smallest_message = self.smallest_message.min(min.max(1));
         match self.queues.binary_search_by_key(&id, |q| q.id) {
             Ok(i) => {
                 let q = &mut self.queues[i];
@@ -338,12 +359,15 @@ impl QueueManager {
         let mut first_message = true;
         let mut changed = vec![false; self.queues.len()];
 
-        let mut contenders: Vec<Contender> = Vec::with_capacity(self.queues.len());
-        for index in 0..self.queues.len() {
-            if let Some(c) = self.contender(index, now) {
-                insert_sorted(&mut contenders, c);
-            }
-        }
+        // The strongest contender on top; those that cannot join the current
+        // frame wait aside until the next frame (within a frame a queue only
+        // becomes less able to join: fewer bytes remain, the destination is
+        // fixed once chosen).
+        let mut contenders = std::mem::take(&mut self.scratch);
+        contenders.clear();
+        contenders.extend((0..self.queues.len()).filter_map(|index| self.contender(index, now)));
+        let mut contenders = BinaryHeap::from(contenders);
+        let mut aside: Vec<Contender> = Vec::new();
 
         let frame_start = request.frame_start();
         let frames = request.max_num_frames();
@@ -352,46 +376,38 @@ impl QueueManager {
             if request.frame.len() <= slot {
                 request.frame.push(Vec::new());
             }
+            contenders.extend(aside.drain(..));
             loop {
                 let used = request.frame[slot].len();
                 let remaining = max_frame_bytes.saturating_sub(used);
-                if remaining == 0 {
+                if remaining < self.smallest_message {
                     break;
                 }
                 let dest = request.dest();
-                let winner = contenders.iter().position(|c| {
-                    let q = &self.queues[c.index];
-                    let Some(next) = q.next_index() else {
-                        return false;
-                    };
-                    let m = &q.messages[next];
-                    let wants_ack = m.ack_requested && m.dest != BROADCAST_ID;
-                    m.encoded.len() <= remaining
-                        && (dest == QUERY_DESTINATION_ID
-                            || m.dest == BROADCAST_ID
-                            || m.dest == dest)
-                        && !(ack_forbidden && wants_ack && dest != BROADCAST_ID)
-                });
-                let Some(position) = winner else {
+                let mut winner = None;
+                while let Some(c) = contenders.pop() {
+                    if can_join(&self.queues[c.index], remaining, dest, ack_forbidden) {
+                        winner = Some(c);
+                        break;
+                    }
+                    aside.push(c);
+                }
+                let Some(contender) = winner else {
                     break;
                 };
-                let contender = contenders.remove(position);
                 let index = contender.index;
                 let queue = &mut self.queues[index];
                 let next = queue.next_index().expect("checked eligible");
-                let (sent, left) = queue.give(next, frame_number, now);
+                let sent = queue.give(next, frame_number, now, &mut request.frame[slot]);
                 let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
-                request.frame[slot].extend_from_slice(&sent.encoded);
                 if sent.ack_requested {
                     packet_ack = true;
                     self.awaiting.push(AwaitingAck {
                         frame: frame_number,
                         dccl_id: contender.dccl_id,
                         seq: sent.seq,
+                        hint: sent.index,
                     });
-                }
-                if left {
-                    changed[index] = true;
                 }
                 if first_message {
                     first_message = false;
@@ -402,21 +418,32 @@ impl QueueManager {
                         request.src = Some(self.modem_id);
                     }
                 }
+                let left = sent.removed.is_some();
+                if left {
+                    changed[index] = true;
+                }
                 if loopback_as_sent {
-                    self.emit(QueueEvent::Received(ReceivedMessage {
-                        message: sent.message,
-                        dccl_id: contender.dccl_id,
-                        src: sent.src,
-                        dest: sent.dest,
-                        time: Some(sent.time),
-                    }));
+                    let message = match sent.removed {
+                        Some(m) => Some(m.message),
+                        None => self.queues[index].get(sent.seq).map(|m| m.message.clone()),
+                    };
+                    if let Some(message) = message {
+                        self.emit(QueueEvent::Received(ReceivedMessage {
+                            message,
+                            dccl_id: contender.dccl_id,
+                            src: sent.src,
+                            dest: sent.dest,
+                            time: Some(sent.time),
+                        }));
+                    }
                 }
                 if let Some(c) = self.contender(index, now) {
-                    insert_sorted(&mut contenders, c);
+                    contenders.push(c);
                 }
             }
         }
         request.ack_requested = Some(packet_ack);
+        self.scratch = contenders.into_vec();
         for (index, changed) in changed.into_iter().enumerate() {
             if changed {
                 self.emit_size(index);
@@ -554,13 +581,8 @@ impl QueueManager {
             let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
                 continue;
             };
-            let q = &mut self.queues[index];
-            if a.frame >= frame_start {
-                q.stop_awaiting(a.seq, a.frame, None);
-            } else {
-                q.stop_awaiting(a.seq, a.frame, Some(sent_before));
-            }
-            if q.is_awaiting(a.seq, a.frame) {
+            let limit = (a.frame < frame_start).then_some(sent_before);
+            if self.queues[index].stop_awaiting(a.seq, a.hint, a.frame, limit) {
                 self.awaiting.push(a);
             }
         }
@@ -620,7 +642,7 @@ impl QueueManager {
                 let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
                     continue;
                 };
-                if let Some(m) = self.queues[index].take_acked(a.seq, frame) {
+                if let Some(m) = self.queues[index].take_acked(a.seq, a.hint, frame) {
                     self.emit(QueueEvent::Acked {
                         message: m.message,
                         dccl_id: a.dccl_id,
@@ -693,8 +715,16 @@ impl QueueManager {
     }
 }
 
-/// Inserts `c` keeping `list` ordered from the strongest contender down.
-fn insert_sorted(list: &mut Vec<Contender>, c: Contender) {
-    let at = list.partition_point(|other| other.beats(&c));
-    list.insert(at, c);
+/// Whether the next message of `queue` can join a frame with `remaining`
+/// bytes free, for destination `dest`, in a transmission that may
+/// (`ack_forbidden` false) or may not carry acked messages.
+fn can_join(queue: &Queue, remaining: usize, dest: i32, ack_forbidden: bool) -> bool {
+    let Some(next) = queue.next_index() else {
+        return false;
+    };
+    let m = &queue.messages[next];
+    let wants_ack = m.ack_requested && m.dest != BROADCAST_ID;
+    m.encoded.len() <= remaining
+        && (dest == QUERY_DESTINATION_ID || m.dest == BROADCAST_ID || m.dest == dest)
+        && !(ack_forbidden && wants_ack && dest != BROADCAST_ID)
 }

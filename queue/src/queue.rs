@@ -5,7 +5,7 @@ use std::collections::{HashSet, VecDeque};
 use prost_reflect::{DynamicMessage, MessageDescriptor};
 use protos::goby::acomms::protobuf::{Manipulator, QueuedMessageEntry};
 
-use crate::clock::{seconds_to_micros, Micros, MICROS_PER_SECOND};
+use crate::clock::{Micros, MICROS_PER_SECOND};
 use crate::error::{QueueError, Result};
 use crate::role::Roles;
 
@@ -26,6 +26,10 @@ pub struct QueueSettings {
     pub value_base: f64,
     /// Manipulators in force.
     pub manipulators: HashSet<Manipulator>,
+    /// `ttl` in microseconds.
+    ttl_micros: Micros,
+    /// `value_base / ttl`, per microsecond.
+    priority_rate: f64,
 }
 
 impl QueueSettings {
@@ -60,6 +64,8 @@ impl QueueSettings {
             ttl: f64::from(entry.ttl()),
             value_base: entry.value_base(),
             manipulators,
+            ttl_micros: i64::from(entry.ttl()) * MICROS_PER_SECOND as i64,
+            priority_rate: entry.value_base() / f64::from(entry.ttl()) / MICROS_PER_SECOND,
         })
     }
 
@@ -83,6 +89,21 @@ pub(crate) struct QueuedMessage {
     /// Frame it was last sent in while its ack is awaited.
     pub awaiting_frame: Option<u32>,
     pub last_sent: Option<Micros>,
+}
+
+/// What [`Queue::give`] gave out.
+#[derive(Debug)]
+pub(crate) struct Given {
+    pub seq: u64,
+    /// Where the message was in its queue.
+    pub index: usize,
+    pub src: i32,
+    pub dest: i32,
+    pub time: Micros,
+    /// Whether an ack is awaited (false for broadcasts).
+    pub ack_requested: bool,
+    /// The message, when it left the queue.
+    pub removed: Option<QueuedMessage>,
 }
 
 /// The queue of one DCCL type.
@@ -131,8 +152,7 @@ impl Queue {
 
     /// `value_base · (now − t_last) / ttl`.
     pub fn priority(&self, now: Micros) -> f64 {
-        (now - self.last_send_time) as f64 / MICROS_PER_SECOND / self.settings.ttl
-            * self.settings.value_base
+        (now - self.last_send_time) as f64 * self.settings.priority_rate
     }
 
     pub fn in_blackout(&self, now: Micros) -> bool {
@@ -177,10 +197,10 @@ impl Queue {
         dropped
     }
 
-    /// Gives out the message at `index` for frame `frame`: it stays queued
-    /// awaiting its ack, or leaves the queue when no ack is wanted. Returns
-    /// a copy of it (with the ack flag as sent) and whether it left.
-    pub fn give(&mut self, index: usize, frame: u32, now: Micros) -> (QueuedMessage, bool) {
+    /// Gives out the message at `index` for frame `frame`, appending its
+    /// encoding to `out`: it stays queued awaiting its ack, or leaves the
+    /// queue when no ack is wanted.
+    pub fn give(&mut self, index: usize, frame: u32, now: Micros, out: &mut Vec<u8>) -> Given {
         self.last_send_time = now;
         let msg = &mut self.messages[index];
         // A broadcast cannot be acknowledged.
@@ -188,23 +208,41 @@ impl Queue {
             msg.ack_requested = false;
         }
         msg.last_sent = Some(now);
+        out.extend_from_slice(&msg.encoded);
+        let given = Given {
+            seq: msg.seq,
+            index,
+            src: msg.src,
+            dest: msg.dest,
+            time: msg.time,
+            ack_requested: msg.ack_requested,
+            removed: None,
+        };
         if msg.ack_requested {
             msg.awaiting_frame = Some(frame);
             self.awaiting += 1;
-            (msg.clone(), false)
+            given
         } else {
-            let gone = self.messages.remove(index).expect("index from next_index");
-            (gone, true)
+            Given {
+                removed: self.messages.remove(index),
+                ..given
+            }
         }
+    }
+
+    /// The message with sequence number `seq`, if still held.
+    pub fn get(&self, seq: u64) -> Option<&QueuedMessage> {
+        self.position(seq).map(|i| &self.messages[i])
     }
 
     fn position(&self, seq: u64) -> Option<usize> {
         self.messages.binary_search_by_key(&seq, |m| m.seq).ok()
     }
 
-    /// Removes message `seq` if it is awaiting an ack for `frame`.
-    pub fn take_acked(&mut self, seq: u64, frame: u32) -> Option<QueuedMessage> {
-        let i = self.position(seq)?;
+    /// Removes message `seq` if it is awaiting an ack for `frame`; `hint`
+    /// is where it probably is.
+    pub fn take_acked(&mut self, seq: u64, hint: usize, frame: u32) -> Option<QueuedMessage> {
+        let i = self.locate(seq, hint)?;
         if self.messages[i].awaiting_frame != Some(frame) {
             return None;
         }
@@ -213,31 +251,45 @@ impl Queue {
     }
 
     /// Makes message `seq` sendable again if it still awaits an ack for
-    /// `frame` and it was sent before `sent_before`.
-    pub fn stop_awaiting(&mut self, seq: u64, frame: u32, sent_before: Option<Micros>) {
-        if let Some(i) = self.position(seq) {
-            let m = &mut self.messages[i];
-            let old_enough = match (sent_before, m.last_sent) {
-                (None, _) => true,
-                (Some(limit), Some(sent)) => sent < limit,
-                (Some(_), None) => true,
-            };
-            if m.awaiting_frame == Some(frame) && old_enough {
-                m.awaiting_frame = None;
-                self.awaiting -= 1;
-            }
+    /// `frame` and was sent before `sent_before` (`None`: whenever it was
+    /// sent). `hint` is where the message probably is. Returns whether it
+    /// still awaits that ack.
+    pub fn stop_awaiting(
+        &mut self,
+        seq: u64,
+        hint: usize,
+        frame: u32,
+        sent_before: Option<Micros>,
+    ) -> bool {
+        let Some(i) = self.locate(seq, hint) else {
+            return false;
+        };
+        let m = &mut self.messages[i];
+        if m.awaiting_frame != Some(frame) {
+            return false;
         }
+        let old_enough = match (sent_before, m.last_sent) {
+            (Some(limit), Some(sent)) => sent < limit,
+            _ => true,
+        };
+        if old_enough {
+            m.awaiting_frame = None;
+            self.awaiting -= 1;
+        }
+        !old_enough
     }
 
-    /// Whether message `seq` is still awaiting an ack for `frame`.
-    pub fn is_awaiting(&self, seq: u64, frame: u32) -> bool {
-        self.position(seq)
-            .is_some_and(|i| self.messages[i].awaiting_frame == Some(frame))
+    /// Index of message `seq`, trying `hint` first.
+    fn locate(&self, seq: u64, hint: usize) -> Option<usize> {
+        match self.messages.get(hint) {
+            Some(m) if m.seq == seq => Some(hint),
+            _ => self.position(seq),
+        }
     }
 
     /// Removes and returns the messages older than `ttl` at `now`.
     pub fn expire(&mut self, now: Micros) -> Vec<QueuedMessage> {
-        let ttl = seconds_to_micros(self.settings.ttl);
+        let ttl = self.settings.ttl_micros;
         if self.messages.is_empty() || self.oldest_time.saturating_add(ttl) >= now {
             return Vec::new();
         }
