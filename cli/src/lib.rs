@@ -15,6 +15,10 @@
 //! - `goby dccl bench -f FILE.proto -m NAME --repeat N` times encoding and
 //!   decoding in-process.
 //!
+//! `goby queue simulate` scores the dynamic priority queue against two
+//! fixed-priority queues in the thesis' data marketplace and writes a table,
+//! a CSV file and PNG plots.
+//!
 //! Exit status: 0 on success, [`EXIT_BAD_INPUT`] when some input lines could
 //! not be handled (each is reported on standard error as `line N: <error>`;
 //! the other lines are still processed), [`EXIT_SETUP`] for usage errors and
@@ -25,6 +29,8 @@
 
 pub mod dccl_cmd;
 mod lines;
+pub mod plot;
+pub mod queue_cmd;
 
 use std::ffi::OsString;
 use std::fmt;
@@ -45,7 +51,7 @@ pub const EXIT_SETUP: u8 = 2;
 #[command(
     name = "goby",
     version,
-    about = "The goby shell tool: work with DCCL messages from the command line.",
+    about = "The goby shell tool: DCCL messages and the acoustic networking stack from the command line.",
     color = ColorChoice::Auto,
     propagate_version = true
 )]
@@ -61,6 +67,9 @@ pub enum GobyCommand {
     /// Encode, decode, analyze and benchmark DCCL messages.
     #[command(subcommand)]
     Dccl(dccl_cmd::DcclCommand),
+    /// Run the dynamic priority queue's simulations.
+    #[command(subcommand)]
+    Queue(queue_cmd::QueueCommand),
 }
 
 /// Command line of `gobyd`.
@@ -151,6 +160,7 @@ pub fn run_goby(
 ) -> u8 {
     let result = match cli.command {
         GobyCommand::Dccl(cmd) => dccl_cmd::run(&cmd, stdin, stdout, stderr),
+        GobyCommand::Queue(cmd) => queue_cmd::run(&cmd, stdout),
     };
     let flushed = stdout.flush().map_err(CliError::from);
     match result.and_then(|status| flushed.map(|()| status)) {

@@ -133,7 +133,10 @@ pub fn simulate(config: &MarketConfig) -> Result<Vec<MarketPoint>> {
     let mut market = DynamicQueueRunner::new(config)?;
     let mut out = Vec::new();
     for (row, &p_empty) in config.p_empty.iter().enumerate() {
-        let mut totals: Vec<Vec<f64>> = vec![Vec::with_capacity(config.trials); 3];
+        let mut totals: Vec<Vec<f64>> = Scheme::ALL
+            .iter()
+            .map(|_| Vec::with_capacity(config.trials))
+            .collect();
         let mut sent = [0usize; 3];
         for trial in 0..config.trials {
             let stream = (row as u64) << 32 | trial as u64;
