@@ -4,6 +4,11 @@ use prost_reflect::DynamicMessage;
 
 use crate::clock::Micros;
 
+/// Id of a queued message, returned by
+/// [`QueueManager::push`](crate::QueueManager::push) and carried by the
+/// events that end its stay; unique within one manager.
+pub type MessageId = u64;
+
 /// A message delivered to this node (decoded from a received frame, or
 /// looped back locally).
 #[derive(Debug, Clone)]
@@ -29,6 +34,9 @@ pub enum QueueEvent {
     Acked {
         /// The acknowledged message.
         message: DynamicMessage,
+        /// Its id in the queue (`None` for a message addressed to this node,
+        /// delivered and acknowledged without being queued).
+        id: Option<MessageId>,
         /// Its DCCL id.
         dccl_id: u32,
         /// Number of the frame that carried it.
@@ -41,6 +49,8 @@ pub enum QueueEvent {
     Expired {
         /// The message.
         message: DynamicMessage,
+        /// Its id in the queue.
+        id: MessageId,
         /// Its DCCL id.
         dccl_id: u32,
     },
@@ -48,6 +58,8 @@ pub enum QueueEvent {
     Dropped {
         /// The message.
         message: DynamicMessage,
+        /// Its id in the queue.
+        id: MessageId,
         /// Its DCCL id.
         dccl_id: u32,
     },

@@ -56,6 +56,7 @@
 pub mod clock;
 pub mod error;
 pub mod event;
+pub mod journal;
 pub mod manager;
 pub mod market;
 pub mod queue;
@@ -63,7 +64,8 @@ mod role;
 
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
 pub use error::{QueueError, Result};
-pub use event::{QueueEvent, ReceivedMessage};
+pub use event::{MessageId, QueueEvent, ReceivedMessage};
+pub use journal::{Journal, JournalEntry, JournalError, Replay};
 pub use manager::{OnDemandProvider, QueueManager};
 pub use queue::QueueSettings;
 

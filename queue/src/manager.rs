@@ -15,7 +15,7 @@ use protos::goby::acomms::protobuf::{
 
 use crate::clock::{seconds_to_micros, Clock, Micros, SystemClock};
 use crate::error::{QueueError, Result};
-use crate::event::{QueueEvent, ReceivedMessage};
+use crate::event::{MessageId, QueueEvent, ReceivedMessage};
 use crate::queue::{Queue, QueueSettings, QueuedMessage};
 use crate::role::Roles;
 use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
@@ -236,8 +236,25 @@ impl QueueManager {
     /// Queues a message of a configured type. It is encoded now: a message
     /// that cannot be encoded is refused with the DCCL error (naming the
     /// field), and nothing else changes.
-    pub fn push(&mut self, message: &DynamicMessage) -> Result<()> {
-        let now = self.clock.now();
+    ///
+    /// Returns the id the message has in its queue (carried by the
+    /// [`QueueEvent::Acked`], [`QueueEvent::Expired`] and
+    /// [`QueueEvent::Dropped`] events that end its stay), or `None` when it
+    /// was not queued: addressed to this node (delivered at once) or of a
+    /// `NO_QUEUE` type.
+    pub fn push(&mut self, message: &DynamicMessage) -> Result<Option<MessageId>> {
+        self.push_created_at(message, None)
+    }
+
+    /// Queues a message as [`push`](Self::push) does, its age (for `ttl`)
+    /// counted from `created` instead of now when its type has no timestamp
+    /// role: for messages accepted earlier and queued again after a restart.
+    pub fn push_created_at(
+        &mut self,
+        message: &DynamicMessage,
+        created: Option<Micros>,
+    ) -> Result<Option<MessageId>> {
+        let now = created.unwrap_or_else(|| self.clock.now());
         let name = message.descriptor().full_name().to_string();
         let id = self.id_of_configured(&name)?;
         let index = self.index_of(id);
@@ -285,7 +302,7 @@ impl QueueManager {
             }));
         }
         if no_queue {
-            return Ok(());
+            return Ok(None);
         }
         if dest == self.modem_id {
             // Addressed to ourselves: delivered here, never sent.
@@ -299,12 +316,13 @@ impl QueueManager {
             if ack_requested {
                 self.emit(QueueEvent::Acked {
                     message: message.clone(),
+                    id: None,
                     dccl_id: id,
                     frame: 0,
                     by: self.modem_id,
                 });
             }
-            return Ok(());
+            return Ok(None);
         }
 
         let seq = self.next_seq;
@@ -323,15 +341,16 @@ impl QueueManager {
         for d in dropped {
             self.emit(QueueEvent::Dropped {
                 message: d.message,
+                id: d.seq,
                 dccl_id: id,
             });
         }
         self.emit_size(index);
-        Ok(())
+        Ok(Some(seq))
     }
 
     /// Queues a prost-generated message (see [`push`](Self::push)).
-    pub fn push_message<T: ReflectMessage>(&mut self, message: &T) -> Result<()> {
+    pub fn push_message<T: ReflectMessage>(&mut self, message: &T) -> Result<Option<MessageId>> {
         self.push(&message.transcode_to_dynamic())
     }
 
@@ -509,6 +528,7 @@ impl QueueManager {
             for m in expired {
                 self.emit(QueueEvent::Expired {
                     message: m.message,
+                    id: m.seq,
                     dccl_id: id,
                 });
             }
@@ -645,6 +665,7 @@ impl QueueManager {
                 if let Some(m) = self.queues[index].take_acked(a.seq, a.hint, frame) {
                     self.emit(QueueEvent::Acked {
                         message: m.message,
+                        id: Some(m.seq),
                         dccl_id: a.dccl_id,
                         frame,
                         by: ack.src(),

@@ -6,7 +6,7 @@ use common::{contents, entry, serial, short_name, Node, T0};
 use protos::goby::acomms::protobuf::{
     modem_transmission::TransmissionType, ModemTransmission, QueueManagerConfig,
 };
-use queue::{QueueError, QueueEvent};
+use queue::{MessageId, QueueError, QueueEvent};
 
 fn ack_for(frames: &[i32], from: i32, to: i32) -> ModemTransmission {
     ModemTransmission {
@@ -131,22 +131,23 @@ fn max_queue_drops_the_oldest_and_reports_it() {
     status.max_queue = Some(3);
     let mut node = Node::new(1, vec![status]);
     node.drain();
-    for i in 0..5 {
-        node.push("Status", 1, 2, i);
-    }
+    let ids: Vec<MessageId> = (0..5)
+        .map(|i| node.push("Status", 1, 2, i).expect("queued"))
+        .collect();
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 3);
     let events = node.drain();
-    let dropped: Vec<u32> = events
+    let dropped: Vec<(u32, MessageId)> = events
         .iter()
         .filter_map(|e| match e {
             QueueEvent::Dropped {
                 message,
+                id,
                 dccl_id: 1,
-            } => Some(serial(message)),
+            } => Some((serial(message), *id)),
             _ => None,
         })
         .collect();
-    assert_eq!(dropped, vec![0, 1]);
+    assert_eq!(dropped, vec![(0, ids[0]), (1, ids[1])]);
     assert_eq!(sizes(&events, 1), vec![1, 2, 3, 3, 3]);
 }
 
@@ -728,4 +729,37 @@ fn flushing_empties_a_queue() {
     }
     assert_eq!(node.manager.flush("test.queue.Status").unwrap(), 4);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 0);
+}
+
+#[test]
+fn a_message_queued_again_keeps_its_creation_time_and_reports_its_id() {
+    use protos::goby::acomms::protobuf::queued_message_entry::RoleType;
+    // No timestamp role: age counts from push, or from the time given.
+    let mut status = entry("Status");
+    status
+        .role
+        .retain(|r| r.r#type != RoleType::Timestamp as i32);
+    status.ttl = Some(100);
+    let mut node = Node::new(1, vec![status]);
+    let replayed = node.message("Status", 1, 2, 7);
+    let old_id = node
+        .manager
+        .push_created_at(&replayed, Some(queue::clock::seconds_to_micros(T0 - 90.0)))
+        .unwrap()
+        .expect("queued");
+    let new_id = node.push("Status", 1, 2, 8).expect("queued");
+    assert_ne!(old_id, new_id);
+    node.drain();
+    node.clock.advance_seconds(11.0);
+    node.manager.expire();
+    let expired: Vec<(u32, MessageId)> = node
+        .drain()
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::Expired { message, id, .. } => Some((serial(message), *id)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(expired, vec![(7, old_id)]);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
 }

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use prost_reflect::{DynamicMessage, Value};
 use protos::goby::acomms::protobuf::queued_message_entry::{role::RoleSetting, Role, RoleType};
 use protos::goby::acomms::protobuf::{ModemTransmission, QueueManagerConfig, QueuedMessageEntry};
-use queue::{ManualClock, QueueEvent, QueueManager};
+use queue::{ManualClock, MessageId, QueueEvent, QueueManager};
 
 /// Test messages: `Status` (id 1), `Contact` (id 2), `Track` (id 3) carry
 /// source, destination and time fields; `Big` (id 4) is large.
@@ -134,9 +134,10 @@ impl Node {
     }
 
     /// Pushes a message and panics on error.
-    pub fn push(&mut self, name: &str, src: i32, dest: i32, serial: u32) {
+    /// Pushes a message; returns its id in the queue.
+    pub fn push(&mut self, name: &str, src: i32, dest: i32, serial: u32) -> Option<MessageId> {
         let m = self.message(name, src, dest, serial);
-        self.manager.push(&m).expect("push");
+        self.manager.push(&m).expect("push")
     }
 
     /// Asks for one transmission and returns it.
