@@ -9,9 +9,16 @@ use prost::Message;
 
 const FILES: &[&str] = &[
     "dccl/option_extensions.proto",
+    "dccl/arithmetic/protobuf/arithmetic.proto",
     "goby/example/navigation.proto",
     "goby/acomms/modem_message.proto",
     "goby/acomms/queue.proto",
+    "goby/acomms/amac.proto",
+    "goby/acomms/driver_base.proto",
+    "goby/acomms/udp_driver.proto",
+    "goby/acomms/simulator_driver.proto",
+    "goby/acomms/micromodem.proto",
+    "goby/apps/gobyd_config.proto",
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -44,6 +44,10 @@ pub struct ProtoArgs {
     /// A further directory to search for imports (may be repeated).
     #[arg(short = 'I', long = "include", value_name = "DIR")]
     pub include: Vec<PathBuf>,
+    /// Models of the arithmetic codec (`dccl.arithmetic`): one
+    /// `dccl.arith.protobuf.ArithmeticModel` per line in protobuf text format.
+    #[arg(long = "arithmetic-models", value_name = "FILE")]
+    pub arithmetic_models: Option<PathBuf>,
 }
 
 /// Form of the messages read by `encode` and `bench`.
@@ -168,6 +172,8 @@ struct Definitions {
     file_name: String,
     /// The `-f` path as given, for messages.
     shown: String,
+    /// Text of the `--arithmetic-models` file.
+    arithmetic_models: Option<String>,
 }
 
 impl Definitions {
@@ -195,11 +201,36 @@ impl Definitions {
                 "{shown}: compiled, but not found among the compiled files"
             ))
         })?;
+        let arithmetic_models = match &args.arithmetic_models {
+            None => None,
+            Some(path) => {
+                let text = fs::read_to_string(path).map_err(|e| {
+                    CliError::setup(format!("{}: cannot read: {e}", path.display()))
+                })?;
+                // Checked now, so that a bad model file is reported as such.
+                new_codec(None, false)
+                    .load_arithmetic_models(&text)
+                    .map_err(|e| CliError::setup(format!("{}: {e}", path.display())))?;
+                Some(text)
+            }
+        };
         Ok(Definitions {
             pool,
             file_name,
             shown,
+            arithmetic_models,
         })
+    }
+
+    /// A codec with the `--arithmetic-models` registered.
+    fn new_codec(&self, passphrase: Option<&str>, strict: bool) -> Result<Codec, CliError> {
+        let mut codec = new_codec(passphrase, strict);
+        if let Some(text) = &self.arithmetic_models {
+            codec
+                .load_arithmetic_models(text)
+                .map_err(|e| CliError::setup(e.to_string()))?;
+        }
+        Ok(codec)
     }
 
     /// Descriptor of the message type `name`.
@@ -234,7 +265,7 @@ impl Definitions {
         strict: bool,
     ) -> Result<(Codec, MessageDescriptor), CliError> {
         let desc = self.message(name)?;
-        let mut codec = new_codec(passphrase, strict);
+        let mut codec = self.new_codec(passphrase, strict)?;
         codec
             .load(&desc)
             .map_err(|e| CliError::setup(format!("cannot load {name}: {e}")))?;
@@ -253,7 +284,11 @@ fn new_codec(passphrase: Option<&str>, strict: bool) -> Codec {
 
 /// Name given by the compiler to `file`: its path relative to the first
 /// include directory that holds it (the `-I` directories, then its own).
-fn pool_file_name(pool: &DescriptorPool, file: &Path, include: &[PathBuf]) -> Option<String> {
+pub(crate) fn pool_file_name(
+    pool: &DescriptorPool,
+    file: &Path,
+    include: &[PathBuf],
+) -> Option<String> {
     let path = fs::canonicalize(file).ok()?;
     let mut dirs: Vec<PathBuf> = include
         .iter()
@@ -357,7 +392,7 @@ fn decode(
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
     let defs = Definitions::compile(&args.proto)?;
-    let mut codec = new_codec(args.passphrase.as_deref(), false);
+    let mut codec = defs.new_codec(args.passphrase.as_deref(), false)?;
     let names = codec
         .load_file_messages(&defs.pool, &defs.file_name)
         .map_err(|e| CliError::setup(format!("cannot load the messages of {}: {e}", defs.shown)))?;

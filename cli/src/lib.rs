@@ -27,8 +27,11 @@
 
 #![warn(missing_docs)]
 
+pub mod amac_cmd;
+pub mod daemon;
 pub mod dccl_cmd;
 mod lines;
+pub mod modem_cmd;
 pub mod plot;
 pub mod queue_cmd;
 
@@ -67,9 +70,15 @@ pub enum GobyCommand {
     /// Encode, decode, analyze and benchmark DCCL messages.
     #[command(subcommand)]
     Dccl(dccl_cmd::DcclCommand),
+    /// Run the medium access control's simulations.
+    #[command(subcommand)]
+    Amac(amac_cmd::AmacCommand),
     /// Run the dynamic priority queue's simulations.
     #[command(subcommand)]
     Queue(queue_cmd::QueueCommand),
+    /// Modem drivers: emulate WHOI Micro-Modems for bench tests.
+    #[command(subcommand)]
+    Modem(modem_cmd::ModemCommand),
 }
 
 /// Command line of `gobyd`.
@@ -77,10 +86,33 @@ pub enum GobyCommand {
 #[command(
     name = "gobyd",
     version,
-    about = "The goby daemon.",
+    about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.",
+    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.",
     color = ColorChoice::Auto
 )]
-pub struct GobydCli {}
+pub struct GobydCli {
+    /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
+    #[arg(short, long, value_name = "FILE")]
+    pub config: Option<std::path::PathBuf>,
+    /// Print a commented working configuration and exit.
+    #[arg(long)]
+    pub example_config: bool,
+    /// Check the configuration (and the .proto files it names) and exit.
+    #[arg(long)]
+    pub check: bool,
+    /// Override the configuration's modem_id.
+    #[arg(long, value_name = "ID")]
+    pub modem_id: Option<i32>,
+    /// Override the configuration's data_dir (journal and raw log).
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<std::path::PathBuf>,
+    /// Override the JSON interface's TCP address (empty: none).
+    #[arg(long, value_name = "ADDR")]
+    pub json_tcp: Option<String>,
+    /// Log lines as JSON objects.
+    #[arg(long)]
+    pub log_json: bool,
+}
 
 /// A failure that ends a command.
 #[derive(Debug)]
@@ -160,7 +192,9 @@ pub fn run_goby(
 ) -> u8 {
     let result = match cli.command {
         GobyCommand::Dccl(cmd) => dccl_cmd::run(&cmd, stdin, stdout, stderr),
+        GobyCommand::Amac(cmd) => amac_cmd::run(&cmd, stdout),
         GobyCommand::Queue(cmd) => queue_cmd::run(&cmd, stdout),
+        GobyCommand::Modem(cmd) => modem_cmd::run(&cmd, stdout),
     };
     let flushed = stdout.flush().map_err(CliError::from);
     match result.and_then(|status| flushed.map(|()| status)) {
@@ -200,27 +234,11 @@ pub fn goby_main() -> ExitCode {
     ExitCode::from(run_goby(cli, &mut stdin, &mut stdout, &mut stderr))
 }
 
-/// Runs a parsed `gobyd` command line: for now the daemon only introduces
-/// itself.
-pub fn run_gobyd(_cli: GobydCli, stdout: &mut dyn Write) -> u8 {
-    let written = writeln!(stdout, "gobyd {}", env!("CARGO_PKG_VERSION")).and_then(|()| {
-        writeln!(
-            stdout,
-            "gobyd is the goby daemon; this version has no services to run yet."
-        )
-    });
-    match written.and_then(|()| stdout.flush()) {
-        Ok(()) => EXIT_OK,
-        Err(_) => EXIT_SETUP,
-    }
-}
-
 /// Entry point of the `gobyd` binary.
 pub fn gobyd_main() -> ExitCode {
     let cli = match parse_or_exit::<GobydCli>(std::env::args_os()) {
         Ok(cli) => cli,
         Err(code) => return code,
     };
-    let mut stdout = io::stdout().lock();
-    ExitCode::from(run_gobyd(cli, &mut stdout))
+    ExitCode::from(daemon::run_cli(cli))
 }

@@ -110,10 +110,11 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
     let body_bits = l.body.max_size();
     let bit_size = l.id_bits as usize + head_bits as usize + body_bits as usize;
     let byte_size = l.head_bytes() + l.max_body_bytes();
+    let hash = crate::definition_hash::hash_as_string(l.hash);
     let title = if l.omit_id {
-        full_name.to_string()
+        format!("{full_name} {{{hash}}}")
     } else {
-        format!("{}: {full_name}", l.id)
+        format!("{}: {full_name} {{{hash}}}", l.id)
     };
     let g = guard(&title, '=');
     let _ = writeln!(out, "{g} {title} {g}");

@@ -9,6 +9,7 @@ use prost_reflect::{
 use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
+use crate::codecs::arithmetic::ArithmeticModel;
 use crate::codecs::identifier;
 use crate::crypto::CryptoKey;
 use crate::error::{CodecError, Error, Result};
@@ -29,6 +30,8 @@ pub(crate) struct LoadedMessage {
     pub(crate) id_bits: u32,
     /// Required fields to check before encoding.
     pub(crate) required: RequiredFields,
+    /// The message-definition hash.
+    pub(crate) hash: u64,
 }
 
 impl LoadedMessage {
@@ -163,6 +166,40 @@ impl Codec {
         self.clock = Arc::new(clock);
     }
 
+    /// Registers (or replaces) a model of the arithmetic codec
+    /// (`dccl.arithmetic`), which fields select by name with
+    /// `[arithmetic] { model: "name" }`. Register models before loading the
+    /// messages that use them. Replacing a model restarts an adaptive model;
+    /// the sender's and the receiver's codecs must be given the same models.
+    /// Clones of a codec share its models and their adaptive state.
+    pub fn set_arithmetic_model(&mut self, model: ArithmeticModel) -> Result<()> {
+        let name = model.name.clone();
+        self.registry
+            .arithmetic_models()
+            .set(model)
+            .map_err(|e| Error::InvalidModel {
+                name,
+                reason: e.reason,
+            })
+    }
+
+    /// Registers every model of a text file in the form libdccl's tools use
+    /// (one `dccl.arith.protobuf.ArithmeticModel` per line, protobuf text
+    /// format); returns their names.
+    pub fn load_arithmetic_models(&mut self, text: &str) -> Result<Vec<String>> {
+        let models =
+            crate::codecs::arithmetic::parse_models(text).map_err(|e| Error::InvalidModel {
+                name: String::new(),
+                reason: e.reason,
+            })?;
+        let mut names = Vec::with_capacity(models.len());
+        for model in models {
+            names.push(model.name.clone());
+            self.set_arithmetic_model(model)?;
+        }
+        Ok(names)
+    }
+
     /// Validates and loads a message type. Errors name the message and the field.
     pub fn load(&mut self, desc: &MessageDescriptor) -> Result<()> {
         let loaded = self.build(desc)?;
@@ -245,6 +282,13 @@ impl Codec {
     /// Descriptor of a loaded type.
     pub fn descriptor(&self, full_name: &str) -> Option<MessageDescriptor> {
         self.by_name.get(full_name).map(|l| l.descriptor.clone())
+    }
+
+    /// The message-definition hash of a loaded type: the value libdccl 4
+    /// computes for the same definition (printed by `analyze`). Two nodes
+    /// whose hashes differ would not decode each other's messages correctly.
+    pub fn hash(&self, full_name: &str) -> Result<u64> {
+        Ok(self.get(full_name)?.hash)
     }
 
     /// DCCL id of a loaded type.
@@ -339,7 +383,10 @@ impl Codec {
             body,
             id_bits,
             required: RequiredFields::of(desc, 0),
+            hash: 0,
         };
+        let mut loaded = loaded;
+        loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
         let actual = loaded.head_bytes() + loaded.max_body_bytes();
         if actual > max_bytes as usize {
             return Err(Error::definition(
@@ -365,6 +412,10 @@ impl Codec {
     /// Encodes a message, appending the bytes to `out` (several calls stitch
     /// messages together; [`Codec::decode_all`] splits them).
     pub fn encode_into(&self, msg: &DynamicMessage, out: &mut Vec<u8>) -> Result<()> {
+        self.encode_with(msg, out, false)
+    }
+
+    fn encode_with(&self, msg: &DynamicMessage, out: &mut Vec<u8>, dry_run: bool) -> Result<()> {
         let name = msg.descriptor().full_name().to_string();
         let loaded = self.get(&name)?;
         loaded
@@ -373,6 +424,8 @@ impl Codec {
             .map_err(|e| e.into_encode(&name))?;
         let ctx = EncodeContext {
             strict: self.strict,
+            dry_run,
+            definition_hash: loaded.hash,
         };
         let mut head = BitWriter::with_capacity(loaded.head_bytes());
         if !loaded.omit_id {
@@ -406,8 +459,11 @@ impl Codec {
     }
 
     /// Encoded size in bytes of a message.
+    /// Adaptive arithmetic models are left as they are.
     pub fn size(&self, msg: &DynamicMessage) -> Result<usize> {
-        Ok(self.encode(msg)?.len())
+        let mut out = Vec::new();
+        self.encode_with(msg, &mut out, true)?;
+        Ok(out.len())
     }
 
     /// Largest encoded size in bytes of a loaded type.
@@ -521,6 +577,7 @@ impl Codec {
         }
         let ctx = DecodeContext {
             now_secs: (self.clock)(),
+            definition_hash: loaded.hash,
         };
         let mut msg = DynamicMessage::new(loaded.descriptor.clone());
         let (head_bytes, body_bytes) = bytes.split_at(head_len);
@@ -555,6 +612,18 @@ impl Codec {
     pub fn analyze(&self, full_name: &str) -> Result<String> {
         Ok(crate::analyze::report(self.get(full_name)?))
     }
+}
+
+/// The definition hash over the parts' codecs (head, then body).
+fn definition_hash(desc: &MessageDescriptor, parts: &[&dyn FieldCodec]) -> u64 {
+    use crate::definition_hash::{hash_combine, hash_combine_text, message_options_text};
+    let options = message_options_text(desc);
+    let mut hash = 0;
+    for part in parts {
+        hash_combine_text(&mut hash, &options);
+        hash_combine(&mut hash, part.definition_hash());
+    }
+    hash
 }
 
 /// Size bounds of one field, as [`Codec::field_sizes`] reports them.

@@ -53,6 +53,14 @@ pub enum Error {
     /// The DCCL id read from the bytes belongs to no loaded type.
     #[error("message id {0} has not been loaded")]
     UnknownId(u32),
+    /// A codec model (e.g. an arithmetic model) is invalid.
+    #[error("invalid model `{name}`: {reason}")]
+    InvalidModel {
+        /// Name of the model.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
     /// A value could not be encoded (strict mode: out of range; or a missing required field).
     #[error("cannot encode ({location}): {reason}")]
     Encode {

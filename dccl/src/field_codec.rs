@@ -1,6 +1,61 @@
 //! The field codec interface: every codec, built in or supplied by a user,
 //! implements [`FieldCodec`] and is created by a [`FieldCodecFactory`]
 //! registered by name in a [`CodecRegistry`](crate::CodecRegistry).
+//!
+//! A user codec, registered by name and selected with `(dccl.field).codec`:
+//!
+//! ```
+//! use std::sync::Arc;
+//! use dccl::bits::{BitReader, BitWriter};
+//! use dccl::field_codec::{DecodeContext, EncodeContext};
+//! use dccl::prost_reflect::{DynamicMessage, Kind, Value};
+//! use dccl::{Codec, CodecError, CodecRegistry, FieldCodec, FieldSpec};
+//!
+//! /// A percentage in 0..=100 in 7 bits (127: not set).
+//! #[derive(Debug)]
+//! struct Percent;
+//!
+//! impl FieldCodec for Percent {
+//!     fn name(&self) -> &str { "demo.percent" }
+//!     fn codec_version(&self) -> i32 { 4 }
+//!     fn min_size(&self) -> u32 { 7 }
+//!     fn max_size(&self) -> u32 { 7 }
+//!     fn encode(&self, out: &mut BitWriter, v: Option<&Value>, _: &EncodeContext)
+//!         -> Result<(), CodecError> {
+//!         let p = v.and_then(Value::as_u32).filter(|p| *p <= 100).unwrap_or(127);
+//!         out.write(p as u64, 7);
+//!         Ok(())
+//!     }
+//!     fn decode(&self, input: &mut BitReader<'_>, _: &DecodeContext)
+//!         -> Result<Option<Value>, CodecError> {
+//!         let p = input.read(7)? as u32; // exactly the bits written
+//!         Ok((p <= 100).then_some(Value::U32(p)))
+//!     }
+//! }
+//!
+//! let mut registry = CodecRegistry::with_builtin();
+//! registry.register("demo.percent", |spec: &FieldSpec<'_>| {
+//!     if spec.kind() != Kind::Uint32 {
+//!         return Ok(None); // "no codec demo.percent for this type" at load
+//!     }
+//!     Ok(Some(Arc::new(Percent) as Arc<dyn FieldCodec>))
+//! });
+//! let mut codec = Codec::with_registry(registry);
+//! let pool = dccl::compile_sources(&[("battery.proto", r#"
+//!     syntax = "proto2";
+//!     import "dccl/option_extensions.proto";
+//!     message Battery {
+//!       option (dccl.msg) = { id: 9 max_bytes: 4 codec_version: 4 };
+//!       optional uint32 charge = 1 [(dccl.field).codec = "demo.percent"];
+//!     }"#)])?;
+//! let desc = pool.get_message_by_name("Battery").unwrap();
+//! codec.load(&desc)?;
+//! let msg = DynamicMessage::parse_text_format(desc, "charge: 87")?;
+//! let bytes = codec.encode(&msg)?;
+//! assert_eq!(bytes.len(), 2);
+//! assert_eq!(codec.decode(&bytes)?.get_field_by_name("charge").unwrap().as_u32(), Some(87));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use std::fmt::Debug;
 use std::sync::Arc;
@@ -22,17 +77,24 @@ pub enum MessagePart {
 }
 
 /// Settings in force while one message is encoded.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct EncodeContext {
     /// Out-of-range values are errors instead of being encoded as "not present".
     pub strict: bool,
+    /// Only the size is wanted: codecs with state (adaptive models) must
+    /// leave it unchanged.
+    pub dry_run: bool,
+    /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
+    pub definition_hash: u64,
 }
 
 /// Settings in force while one message is decoded.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct DecodeContext {
     /// Current time in whole seconds since the UNIX epoch (used by the time codec).
     pub now_secs: i64,
+    /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
+    pub definition_hash: u64,
 }
 
 /// What a factory is told about the field whose codec it creates.
@@ -83,6 +145,25 @@ impl FieldSpec<'_> {
         match &self.kind {
             Kind::Message(m) => Some(m.clone()),
             _ => None,
+        }
+    }
+
+    /// A codec-specific option: the extension of `dccl.DCCLFieldOptions`
+    /// named `full_name` (e.g. `arithmetic` for
+    /// `[(dccl.field) = { codec: "dccl.arithmetic" [arithmetic] { model: "m" } }]`),
+    /// decoded as `T`; `Ok(None)` when the field does not set it.
+    pub fn option_extension<T: prost::Message + Default>(
+        &self,
+        full_name: &str,
+    ) -> Result<Option<T>, CodecError> {
+        let Some(field) = self.field else {
+            return Ok(None);
+        };
+        match crate::options::field_option_extension(field, full_name) {
+            None => Ok(None),
+            Some(m) => T::decode(prost::Message::encode_to_vec(&m).as_slice())
+                .map(Some)
+                .map_err(|e| CodecError::new(format!("cannot read option [{full_name}]: {e}"))),
         }
     }
 
@@ -144,7 +225,11 @@ pub trait FieldCodec: Send + Sync + Debug {
     /// Bits this value would take.
     fn size(&self, value: Option<&Value>) -> u32 {
         let mut w = BitWriter::new();
-        match self.encode(&mut w, value, &EncodeContext { strict: false }) {
+        let ctx = EncodeContext {
+            dry_run: true,
+            ..Default::default()
+        };
+        match self.encode(&mut w, value, &ctx) {
             Ok(()) => w.len() as u32,
             Err(_) => self.max_size(),
         }
@@ -275,6 +360,16 @@ pub trait FieldCodec: Send + Sync + Debug {
             }
         }
         Ok(())
+    }
+
+    /// This codec's part of the message-definition hash (see
+    /// [`Codec::hash`](crate::Codec::hash)): a value that changes when
+    /// something outside the field's descriptor and `(dccl.field)` options
+    /// changes its encoding. Both already enter the hash, so most codecs keep
+    /// the default 0; message codecs hash their fields, the default enum codec
+    /// the enum's values.
+    fn definition_hash(&self) -> u64 {
+        0
     }
 
     /// Nested layout for `analyze` (message codecs list their fields).

@@ -56,6 +56,7 @@ pub mod bits;
 mod codec;
 pub mod codecs;
 mod crypto;
+pub mod definition_hash;
 mod error;
 pub mod field_codec;
 mod loader;

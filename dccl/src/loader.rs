@@ -1,7 +1,10 @@
 //! Compiling `.proto` files at run time with pure-Rust tooling (protox).
 //!
-//! `dccl/option_extensions.proto` is embedded: a file that imports it needs
-//! no include path for it and no copy on disk.
+//! `dccl/option_extensions.proto` and the codec option files
+//! (`dccl/arithmetic/protobuf/arithmetic_extensions.proto`,
+//! `dccl/arithmetic/protobuf/arithmetic.proto`, `goby/dccl/delta_extensions.proto`)
+//! are embedded: a file that imports them needs no include path for them and
+//! no copy on disk.
 
 use std::path::{Path, PathBuf};
 
@@ -12,15 +15,17 @@ use protox::file::{
 
 use crate::error::{Error, Result};
 
-/// Serves the embedded DCCL option extensions.
+/// Serves the embedded DCCL option extensions and codec option files.
 struct EmbeddedResolver;
 
 impl FileResolver for EmbeddedResolver {
     fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
-        if name == protos::OPTION_EXTENSIONS_PATH {
-            File::from_source(name, protos::OPTION_EXTENSIONS_PROTO)
-        } else {
-            Err(protox::Error::file_not_found(name))
+        match protos::DCCL_EMBEDDED_PROTOS
+            .iter()
+            .find(|(path, _)| *path == name)
+        {
+            Some((path, source)) => File::from_source(path, source),
+            None => Err(protox::Error::file_not_found(name)),
         }
     }
 }
@@ -32,8 +37,8 @@ fn absolute(path: &Path) -> PathBuf {
 /// Compiles `.proto` files into a descriptor pool (custom options preserved).
 ///
 /// Imports are searched in `include_dirs`, then in the directory of each
-/// file, then among the embedded files (`dccl/option_extensions.proto` and
-/// the `google/protobuf/*.proto` well-known types).
+/// file, then among the embedded files (`dccl/option_extensions.proto`, the
+/// codec option files and the `google/protobuf/*.proto` well-known types).
 pub fn compile_protos(
     files: &[impl AsRef<Path>],
     include_dirs: &[impl AsRef<Path>],

@@ -1,7 +1,7 @@
 //! Reading the `(dccl.msg)` and `(dccl.field)` options from descriptors.
 
 use prost::Message;
-use prost_reflect::{DynamicMessage, FieldDescriptor, MessageDescriptor, Value};
+use prost_reflect::{DynamicMessage, FieldDescriptor, MessageDescriptor, ReflectMessage, Value};
 use protos::dccl::{DcclFieldOptions, DcclMessageOptions};
 
 use crate::error::CodecError;
@@ -40,4 +40,35 @@ pub fn has_message_options(desc: &MessageDescriptor) -> bool {
         return false;
     };
     desc.options().has_extension(&ext)
+}
+
+/// The `(dccl.field)` options of a field as a dynamic message, with the
+/// codec-specific extensions of `dccl.DCCLFieldOptions` (`None` when unset).
+pub fn raw_field_options(field: &FieldDescriptor) -> Option<DynamicMessage> {
+    let ext = field.parent_pool().get_extension_by_name("dccl.field")?;
+    let options = field.options();
+    if !options.has_extension(&ext) {
+        return None;
+    }
+    match options.get_extension(&ext).as_ref() {
+        Value::Message(m) => Some(m.clone()),
+        _ => None,
+    }
+}
+
+/// A codec-specific extension of `dccl.DCCLFieldOptions` set on a field,
+/// by the extension's full name (e.g. `arithmetic`, `goby.dccl.delta`).
+pub fn field_option_extension(field: &FieldDescriptor, full_name: &str) -> Option<DynamicMessage> {
+    let options = raw_field_options(field)?;
+    let ext = options
+        .descriptor()
+        .parent_pool()
+        .get_extension_by_name(full_name)?;
+    if !options.has_extension(&ext) {
+        return None;
+    }
+    match options.get_extension(&ext).as_ref() {
+        Value::Message(m) => Some(m.clone()),
+        _ => None,
+    }
 }

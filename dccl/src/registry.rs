@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use prost_reflect::Kind;
 
+use crate::codecs::arithmetic::ArithmeticModels;
 use crate::error::CodecError;
 use crate::field_codec::{FieldCodec, FieldCodecFactory, FieldSpec};
 use crate::options::message_options;
@@ -17,6 +18,7 @@ use crate::options::message_options;
 pub struct CodecRegistry {
     factories: HashMap<String, Vec<Arc<dyn FieldCodecFactory>>>,
     aliases: HashMap<String, String>,
+    arithmetic_models: Arc<ArithmeticModels>,
 }
 
 impl std::fmt::Debug for CodecRegistry {
@@ -35,11 +37,20 @@ impl CodecRegistry {
         Self::default()
     }
 
-    /// A registry holding every built-in codec.
+    /// A registry holding every built-in codec (the arithmetic codec takes
+    /// its models from [`CodecRegistry::arithmetic_models`]).
     pub fn with_builtin() -> Self {
         let mut r = Self::empty();
         crate::codecs::register_builtin(&mut r);
+        let models = r.arithmetic_models.clone();
+        crate::codecs::arithmetic::register(&mut r, models);
         r
+    }
+
+    /// The models of the built-in arithmetic codec (shared by the clones of
+    /// this registry and by the codecs built from it).
+    pub fn arithmetic_models(&self) -> &Arc<ArithmeticModels> {
+        &self.arithmetic_models
     }
 
     /// Registers a factory under `name`. Several factories may share a name

@@ -49,6 +49,49 @@ fn write_message(out: &mut String, msg: &DynamicMessage) {
     }
 }
 
+/// The multi-line text form of a message as the C++ protobuf library prints
+/// it (`DebugString`): one `name: value` per line, embedded messages as
+/// `name {` … `}` indented by two spaces, extensions as `[full.name]`,
+/// fields and extensions in field-number order.
+pub fn debug_string(msg: &DynamicMessage) -> String {
+    let mut out = String::new();
+    write_message_lines(&mut out, msg, 0);
+    out
+}
+
+fn write_message_lines(out: &mut String, msg: &DynamicMessage, indent: usize) {
+    let mut entries: Vec<(u32, String, Kind, &Value)> = msg
+        .fields()
+        .map(|(f, v)| (f.number(), f.name().to_string(), f.kind(), v))
+        .chain(
+            msg.extensions()
+                .map(|(e, v)| (e.number(), format!("[{}]", e.full_name()), e.kind(), v)),
+        )
+        .collect();
+    entries.sort_by_key(|(number, ..)| *number);
+    for (_, name, kind, value) in entries {
+        let items: &[Value] = match value {
+            Value::List(items) => items,
+            other => std::slice::from_ref(other),
+        };
+        for item in items {
+            let _ = write!(out, "{:indent$}{name}", "");
+            match item {
+                Value::Message(m) => {
+                    out.push_str(" {\n");
+                    write_message_lines(out, m, indent + 2);
+                    let _ = writeln!(out, "{:indent$}}}", "");
+                }
+                _ => {
+                    out.push_str(": ");
+                    write_scalar(out, item, &kind);
+                    out.push('\n');
+                }
+            }
+        }
+    }
+}
+
 fn write_scalar(out: &mut String, value: &Value, kind: &Kind) {
     match value {
         Value::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
@@ -86,7 +129,7 @@ fn write_scalar(out: &mut String, value: &Value, kind: &Kind) {
     }
 }
 
-fn c_escape(out: &mut String, bytes: &[u8]) {
+pub(crate) fn c_escape(out: &mut String, bytes: &[u8]) {
     out.push('"');
     for &b in bytes {
         match b {

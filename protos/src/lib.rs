@@ -5,7 +5,8 @@
 //!   `import "dccl/option_extensions.proto";` resolves with no file on disk.
 //! - [`dccl`]: prost structs of those options.
 //! - [`goby::example`]: the example messages shipped with the toolkit.
-//! - [`goby::acomms::protobuf`]: modem transmissions and the queue configuration.
+//! - [`goby::acomms::protobuf`]: modem transmissions, the queue configuration and
+//!   the medium access control configuration.
 //! - [`DESCRIPTOR_POOL`]: every file above, with custom options preserved.
 
 use std::sync::LazyLock;
@@ -17,6 +18,35 @@ pub const OPTION_EXTENSIONS_PATH: &str = "dccl/option_extensions.proto";
 
 /// Source text of `dccl/option_extensions.proto`.
 pub const OPTION_EXTENSIONS_PROTO: &str = include_str!("../proto/dccl/option_extensions.proto");
+
+/// Import path of the arithmetic codec's models (`dccl.arith.protobuf.ArithmeticModel`).
+pub const ARITHMETIC_PATH: &str = "dccl/arithmetic/protobuf/arithmetic.proto";
+
+/// Source text of `dccl/arithmetic/protobuf/arithmetic.proto`.
+pub const ARITHMETIC_PROTO: &str =
+    include_str!("../proto/dccl/arithmetic/protobuf/arithmetic.proto");
+
+/// Import path of the arithmetic codec's field options (extension 1001 of `dccl.DCCLFieldOptions`).
+pub const ARITHMETIC_EXTENSIONS_PATH: &str = "dccl/arithmetic/protobuf/arithmetic_extensions.proto";
+
+/// Source text of `dccl/arithmetic/protobuf/arithmetic_extensions.proto`.
+pub const ARITHMETIC_EXTENSIONS_PROTO: &str =
+    include_str!("../proto/dccl/arithmetic/protobuf/arithmetic_extensions.proto");
+
+/// Import path of the delta-difference codec's field options (extension 1100 of `dccl.DCCLFieldOptions`).
+pub const DELTA_EXTENSIONS_PATH: &str = "goby/dccl/delta_extensions.proto";
+
+/// Source text of `goby/dccl/delta_extensions.proto`.
+pub const DELTA_EXTENSIONS_PROTO: &str = include_str!("../proto/goby/dccl/delta_extensions.proto");
+
+/// Every DCCL `.proto` file a user's definitions may import without a copy
+/// on disk: `(import path, source text)`.
+pub const DCCL_EMBEDDED_PROTOS: &[(&str, &str)] = &[
+    (OPTION_EXTENSIONS_PATH, OPTION_EXTENSIONS_PROTO),
+    (ARITHMETIC_PATH, ARITHMETIC_PROTO),
+    (ARITHMETIC_EXTENSIONS_PATH, ARITHMETIC_EXTENSIONS_PROTO),
+    (DELTA_EXTENSIONS_PATH, DELTA_EXTENSIONS_PROTO),
+];
 
 /// Import path of the example messages.
 pub const EXAMPLE_NAVIGATION_PATH: &str = "goby/example/navigation.proto";
@@ -36,16 +66,35 @@ pub static DESCRIPTOR_POOL: LazyLock<DescriptorPool> = LazyLock::new(|| {
 #[allow(missing_docs, clippy::all)]
 pub mod dccl {
     include!(concat!(env!("OUT_DIR"), "/dccl.rs"));
+
+    /// The arithmetic codec's messages.
+    pub mod arith {
+        /// `ArithmeticModel`.
+        #[allow(missing_docs, clippy::all)]
+        pub mod protobuf {
+            include!(concat!(env!("OUT_DIR"), "/dccl.arith.protobuf.rs"));
+        }
+    }
 }
 
 /// Messages of the `goby` packages.
 pub mod goby {
     /// Messages shared by the communication layers.
     pub mod acomms {
-        /// `ModemTransmission` and the queue configuration, with Goby's field numbers.
+        /// `ModemTransmission`, the queue and MAC configurations, the modem
+        /// drivers' configurations and Micro-Modem specifics, with Goby's field numbers.
         #[allow(missing_docs, clippy::all)]
         pub mod protobuf {
             include!(concat!(env!("OUT_DIR"), "/goby.acomms.protobuf.rs"));
+        }
+    }
+
+    /// Configurations of the programs (`gobyd`).
+    pub mod apps {
+        /// `GobydConfig`.
+        #[allow(missing_docs, clippy::all)]
+        pub mod protobuf {
+            include!(concat!(env!("OUT_DIR"), "/goby.apps.protobuf.rs"));
         }
     }
 

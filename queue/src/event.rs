@@ -30,6 +30,20 @@ pub struct ReceivedMessage {
 pub enum QueueEvent {
     /// A message arrived for this node.
     Received(ReceivedMessage),
+    /// A message was placed in a frame of a data request. Without an ack
+    /// wanted it has left its queue; with one, it waits for the ack.
+    Sent {
+        /// The message.
+        message: DynamicMessage,
+        /// Its id in the queue.
+        id: MessageId,
+        /// Its DCCL id.
+        dccl_id: u32,
+        /// Number of the frame carrying it.
+        frame: u32,
+        /// It stays queued until the ack for `frame` arrives.
+        awaiting_ack: bool,
+    },
     /// A sent message was acknowledged by `by` and left its queue.
     Acked {
         /// The acknowledged message.

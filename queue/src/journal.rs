@@ -200,6 +200,11 @@ impl Journal {
         self.live.is_empty()
     }
 
+    /// The message `id`, if still owed.
+    pub fn get(&self, id: EntryId) -> Option<&JournalEntry> {
+        self.live.get(&id)
+    }
+
     /// The messages still owed, oldest first.
     pub fn entries(&self) -> impl Iterator<Item = &JournalEntry> {
         self.live.values()
@@ -208,6 +213,21 @@ impl Journal {
     /// Appends an accepted message and syncs it to disk; returns its id.
     /// When this returns `Ok`, the message survives a crash.
     pub fn accept(
+        &mut self,
+        message_name: &str,
+        message: &[u8],
+        time: Micros,
+    ) -> Result<EntryId, JournalError> {
+        let id = self.accept_unsynced(message_name, message, time)?;
+        self.sync()?;
+        Ok(id)
+    }
+
+    /// Appends an accepted message without waiting for the disk; it
+    /// survives a crash once a later [`sync`](Self::sync) (or a sync of a
+    /// [`sync_handle`](Self::sync_handle)) returns. Lets a caller sync many
+    /// messages at once, off its own thread.
+    pub fn accept_unsynced(
         &mut self,
         message_name: &str,
         message: &[u8],
@@ -234,8 +254,28 @@ impl Journal {
         Ok(id)
     }
 
+    /// Waits until everything appended so far is on disk.
+    pub fn sync(&mut self) -> Result<(), JournalError> {
+        self.file.sync_data().map_err(|source| JournalError::Io {
+            path: self.path.clone(),
+            source,
+        })
+    }
+
+    /// A second handle on the journal file whose `sync_data` makes
+    /// everything appended before the call durable (for syncing on another
+    /// thread).
+    pub fn sync_handle(&self) -> Result<File, JournalError> {
+        self.file.try_clone().map_err(|source| JournalError::Io {
+            path: self.path.clone(),
+            source,
+        })
+    }
+
     /// Records that a message left its queue for good (acknowledged,
-    /// expired or dropped). Unknown ids are ignored.
+    /// expired or dropped). Unknown ids are ignored. Not synced: if the
+    /// record is lost in a crash, the message is sent once more after the
+    /// restart (a duplicate, never a loss).
     pub fn remove(&mut self, id: EntryId) -> Result<(), JournalError> {
         let Some(entry) = self.live.remove(&id) else {
             return Ok(());
@@ -290,7 +330,6 @@ impl Journal {
             source,
         };
         self.file.write_all(record).map_err(io_err)?;
-        self.file.sync_data().map_err(io_err)?;
         self.len += record.len() as u64;
         Ok(())
     }

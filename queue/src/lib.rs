@@ -65,7 +65,7 @@ mod role;
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
 pub use error::{QueueError, Result};
 pub use event::{MessageId, QueueEvent, ReceivedMessage};
-pub use journal::{Journal, JournalEntry, JournalError, Replay};
+pub use journal::{EntryId, Journal, JournalEntry, JournalError, Replay};
 pub use manager::{OnDemandProvider, QueueManager};
 pub use queue::QueueSettings;
 

@@ -157,6 +157,11 @@ impl QueueManager {
         Ok(manager)
     }
 
+    /// Current time on the manager's clock.
+    pub fn now(&self) -> Micros {
+        self.clock.now()
+    }
+
     /// Modem id of this node.
     pub fn modem_id(&self) -> i32 {
         self.modem_id
@@ -441,12 +446,21 @@ impl QueueManager {
                 if left {
                     changed[index] = true;
                 }
-                if loopback_as_sent {
+                if loopback_as_sent || !self.subscribers.is_empty() {
                     let message = match sent.removed {
                         Some(m) => Some(m.message),
                         None => self.queues[index].get(sent.seq).map(|m| m.message.clone()),
                     };
-                    if let Some(message) = message {
+                    if let Some(message) = &message {
+                        self.emit(QueueEvent::Sent {
+                            message: message.clone(),
+                            id: sent.seq,
+                            dccl_id: contender.dccl_id,
+                            frame: frame_number,
+                            awaiting_ack: !left,
+                        });
+                    }
+                    if let Some(message) = message.filter(|_| loopback_as_sent) {
                         self.emit(QueueEvent::Received(ReceivedMessage {
                             message,
                             dccl_id: contender.dccl_id,

@@ -763,3 +763,34 @@ fn a_message_queued_again_keeps_its_creation_time_and_reports_its_id() {
     assert_eq!(expired, vec![(7, old_id)]);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
 }
+
+#[test]
+fn every_message_placed_in_a_frame_is_reported_as_sent() {
+    let mut status = entry("Status");
+    status.ack = Some(false);
+    let contact = entry("Contact");
+    let mut node = Node::new(1, vec![status, contact]);
+    let status_id = node.push("Status", 1, 2, 1).expect("queued");
+    let contact_id = node.push("Contact", 1, 2, 2).expect("queued");
+    node.drain();
+    node.clock.advance_seconds(1.0);
+    let tx = node.request(64, 1, -1);
+    assert_eq!(tx.ack_requested, Some(true));
+    let mut sent: Vec<(MessageId, u32, bool)> = node
+        .drain()
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::Sent {
+                id,
+                frame,
+                awaiting_ack,
+                ..
+            } => Some((*id, *frame, *awaiting_ack)),
+            _ => None,
+        })
+        .collect();
+    sent.sort();
+    let mut expected = vec![(status_id, 0, false), (contact_id, 0, true)];
+    expected.sort();
+    assert_eq!(sent, expected);
+}

@@ -119,6 +119,11 @@ impl FieldCodec for EnumCodec {
         }
         self.bounds.encode(out, wire, ctx.strict)
     }
+    fn definition_hash(&self) -> u64 {
+        crate::definition_hash::std_string_hash(
+            crate::definition_hash::enum_declaration_text(&self.enum_type).as_bytes(),
+        )
+    }
     fn decode(
         &self,
         input: &mut BitReader<'_>,

@@ -154,11 +154,23 @@ impl MessageCodec {
             }
             let included = spec.children_follow_parent
                 || (options.in_head() == (spec.part == MessagePart::Head));
-            if !included {
+            // Version 2 expands an embedded message that uses the default
+            // message codec in both parts, each child then going to its own
+            // part (so the message also appears, usually empty, in the other
+            // part: it takes no bits but enters the definition hash).
+            let v2_expanded = !included
+                && codec_version == 2
+                && !spec.children_follow_parent
+                && options.in_head.is_none()
+                && matches!(field.kind(), prost_reflect::Kind::Message(_));
+            if !included && !v2_expanded {
                 continue;
             }
             let entry = Self::build_entry(spec, &field, &options, with_oneofs, &oneofs)
                 .map_err(|e| e.in_field(field.name()))?;
+            if v2_expanded && (entry.codec.name() != "dccl.default2" || entry.repeat.is_some()) {
+                continue;
+            }
             fields.push(entry);
         }
 
@@ -373,7 +385,7 @@ impl MessageCodec {
                     }
                 }
                 f.codec.decode(input, ctx).and_then(|value| match value {
-                    Some(v) => set(msg, &f.field, v),
+                    Some(v) => merge_set(msg, &f.field, v),
                     None => Ok(()),
                 })
             };
@@ -477,6 +489,39 @@ impl FieldCodec for MessageCodec {
     fn children(&self) -> Option<&MessageCodec> {
         Some(self)
     }
+    fn definition_hash(&self) -> u64 {
+        use crate::definition_hash::{combine_field, hash_combine_text, oneof_declaration_text};
+        let mut hash = 0;
+        for o in &self.oneofs {
+            if let Some(desc) = self.descriptor.oneofs().nth(o.index) {
+                hash_combine_text(&mut hash, &oneof_declaration_text(&desc));
+            }
+        }
+        for f in &self.fields {
+            combine_field(&mut hash, &f.field, f.codec.as_ref());
+        }
+        hash
+    }
+}
+
+/// Sets a decoded value; an embedded message already partly decoded (its
+/// header fields) is completed rather than replaced.
+fn merge_set(
+    msg: &mut DynamicMessage,
+    field: &FieldDescriptor,
+    value: Value,
+) -> Result<(), CodecError> {
+    if let Value::Message(decoded) = &value {
+        if msg.has_field(field) {
+            if let Value::Message(existing) = msg.get_field_mut(field) {
+                for (f, v) in decoded.fields() {
+                    merge_set(existing, &f, v.clone())?;
+                }
+                return Ok(());
+            }
+        }
+    }
+    set(msg, field, value)
 }
 
 /// Sets a decoded value, refusing (rather than panicking on) a value of the

@@ -1,10 +1,14 @@
 //! The built-in codecs, one per file, and their registration under the
 //! libdccl names (`dccl.default2/3/4`, `dccl.time`, `dccl.static`,
-//! `dccl.presence`, `dccl.var_bytes`).
+//! `dccl.presence`, `dccl.var_bytes`, `dccl.hash`, `dccl.arithmetic`,
+//! `dccl.delta`).
 
+pub mod arithmetic;
 pub mod boolean;
 pub mod bytes;
+pub mod delta;
 pub mod enumeration;
+pub mod hash;
 pub mod identifier;
 pub mod message;
 pub mod numeric;
@@ -57,6 +61,11 @@ pub fn register_builtin(registry: &mut CodecRegistry) {
         registry.register(&stat, move |spec: &FieldSpec<'_>| {
             static_value::StaticCodec::create(spec, &name)
         });
+        let hash = format!("dccl.hash{version}");
+        let name = hash.clone();
+        registry.register(&hash, move |spec: &FieldSpec<'_>| {
+            hash::HashCodec::create(spec, &name)
+        });
         if version >= 3 {
             let presence = format!("dccl.presence{version}");
             let name = presence.clone();
@@ -83,6 +92,9 @@ pub fn register_builtin(registry: &mut CodecRegistry) {
             });
         }
     }
+    registry.register(delta::NAME, |spec: &FieldSpec<'_>| {
+        delta::DeltaCodec::create(spec, delta::NAME)
+    });
     registry.alias("_time", "dccl.time2");
     registry.alias("_static", "dccl.static2");
 }

@@ -1,0 +1,225 @@
+//! The line protocol of the JSON autonomy interface: one JSON object per
+//! line in each direction.
+//!
+//! Client to daemon:
+//!
+//! ```text
+//! {"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO"}}
+//! {"subscribe": ["ack", "expire", "queue_size"]}
+//! ```
+//!
+//! Daemon to client: `{"accepted": NAME, "id": N}` (written to disk before
+//! this line is sent), `{"error": TEXT}` for a line that was not accepted,
+//! `{"received": NAME, "src": S, "dest": D, "msg": {...}}` for every message
+//! received, and when subscribed `{"ack": NAME, "by": B, "msg": {...}}`,
+//! `{"expire": NAME, "msg": {...}}`, `{"drop": NAME, "msg": {...}}`,
+//! `{"queue_size": NAME, "size": N}`. Messages are in proto3 JSON with the
+//! field names of the `.proto` file.
+
+use dccl::Codec;
+use prost_reflect::{DynamicMessage, ReflectMessage, SerializeOptions};
+use queue::QueueEvent;
+use serde_json::{json, Value};
+
+/// Event kinds a client may subscribe to (received messages always reach
+/// every client).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Topic {
+    /// Acknowledgements of sent messages.
+    Ack,
+    /// Messages that expired unsent or unacknowledged.
+    Expire,
+    /// Messages dropped from a full queue.
+    Drop,
+    /// Queue size changes.
+    QueueSize,
+}
+
+impl Topic {
+    /// Every topic.
+    pub const ALL: [Topic; 4] = [Topic::Ack, Topic::Expire, Topic::Drop, Topic::QueueSize];
+
+    /// The topic's name in the protocol.
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::Ack => "ack",
+            Topic::Expire => "expire",
+            Topic::Drop => "drop",
+            Topic::QueueSize => "queue_size",
+        }
+    }
+
+    fn from_name(name: &str) -> Option<Topic> {
+        Topic::ALL.into_iter().find(|t| t.name() == name)
+    }
+}
+
+/// A request line from a client.
+#[derive(Debug, Clone)]
+pub enum Request {
+    /// Queue this message for sending.
+    Publish(DynamicMessage),
+    /// Also send these events.
+    Subscribe(Vec<Topic>),
+}
+
+/// Parses one request line; messages may be of any type loaded in
+/// `codec`. The error is the text of the `error` reply.
+pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
+    let value: Value = serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
+    let Value::Object(object) = value else {
+        return Err("not a JSON object".into());
+    };
+    if let Some(name) = object.get("publish") {
+        let name = name
+            .as_str()
+            .ok_or("\"publish\" must be a message type name")?;
+        let desc = codec
+            .descriptor(name)
+            .ok_or_else(|| format!("unknown message type {name}: it is not a loaded DCCL type"))?;
+        let msg = object
+            .get("msg")
+            .ok_or_else(|| format!("{name}: \"msg\" is missing"))?;
+        let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
+        return Ok(Request::Publish(message));
+    }
+    if let Some(topics) = object.get("subscribe") {
+        let topics = topics
+            .as_array()
+            .ok_or("\"subscribe\" must be a list of topics")?;
+        return topics
+            .iter()
+            .map(|t| {
+                t.as_str().and_then(Topic::from_name).ok_or_else(|| {
+                    format!(
+                        "unknown topic {t}; topics are {}",
+                        Topic::ALL.map(Topic::name).join(", ")
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Request::Subscribe);
+    }
+    Err("expected \"publish\" or \"subscribe\"".into())
+}
+
+/// A message as proto3 JSON with the `.proto` field names.
+pub fn message_json(message: &DynamicMessage) -> Value {
+    let options = SerializeOptions::new().use_proto_field_name(true);
+    message
+        .serialize_with_options(serde_json::value::Serializer, &options)
+        .unwrap_or_else(|e| json!({ "unserializable": e.to_string() }))
+}
+
+/// The `accepted` reply.
+pub fn accepted_line(name: &str, id: Option<u64>) -> String {
+    match id {
+        Some(id) => json!({ "accepted": name, "id": id }).to_string(),
+        None => json!({ "accepted": name, "delivered": true }).to_string(),
+    }
+}
+
+/// The `error` reply.
+pub fn error_line(text: &str) -> String {
+    json!({ "error": text }).to_string()
+}
+
+/// The line for a queue event, with the topic it belongs to (`None`:
+/// received messages, sent to every client); `None` for events clients do
+/// not see.
+pub fn event_line(
+    event: &QueueEvent,
+    queue_name: impl Fn(u32) -> String,
+) -> Option<(Option<Topic>, String)> {
+    let name = |m: &DynamicMessage| m.descriptor().full_name().to_string();
+    let line = match event {
+        QueueEvent::Received(r) => (
+            None,
+            json!({
+                "received": name(&r.message),
+                "src": r.src,
+                "dest": r.dest,
+                "msg": message_json(&r.message),
+            }),
+        ),
+        QueueEvent::Acked {
+            message, frame, by, ..
+        } => (
+            Some(Topic::Ack),
+            json!({ "ack": name(message), "by": by, "frame": frame, "msg": message_json(message) }),
+        ),
+        QueueEvent::Expired { message, .. } => (
+            Some(Topic::Expire),
+            json!({ "expire": name(message), "msg": message_json(message) }),
+        ),
+        QueueEvent::Dropped { message, .. } => (
+            Some(Topic::Drop),
+            json!({ "drop": name(message), "msg": message_json(message) }),
+        ),
+        QueueEvent::QueueSize { dccl_id, size } => (
+            Some(Topic::QueueSize),
+            json!({ "queue_size": queue_name(*dccl_id), "size": size }),
+        ),
+        QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => return None,
+    };
+    Some((line.0, line.1.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pool() -> Codec {
+        let mut codec = Codec::new();
+        codec
+            .load_type::<protos::goby::example::Command>()
+            .expect("example loads");
+        codec
+    }
+
+    #[test]
+    fn publish_lines_become_messages() {
+        let line = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "survey A"}}"#;
+        let Request::Publish(m) = parse_request(line, &pool()).unwrap() else {
+            panic!("not a publish");
+        };
+        assert_eq!(m.descriptor().full_name(), "goby.example.Command");
+        assert_eq!(
+            message_json(&m),
+            json!({"destination": 2, "action": "GOTO", "note": "survey A"})
+        );
+    }
+
+    #[test]
+    fn bad_lines_say_what_is_wrong() {
+        for (line, expected) in [
+            ("not json", "not a JSON object"),
+            ("[1, 2]", "not a JSON object"),
+            (r#"{"publish": 5}"#, "must be a message type name"),
+            (r#"{"publish": "no.Such"}"#, "unknown message type no.Such"),
+            (
+                r#"{"publish": "goby.example.Command"}"#,
+                "\"msg\" is missing",
+            ),
+            (
+                r#"{"publish": "goby.example.Command", "msg": {"nope": 1}}"#,
+                "goby.example.Command: ",
+            ),
+            (r#"{"subscribe": ["ack", "weather"]}"#, "unknown topic"),
+            (r#"{"hello": 1}"#, "expected \"publish\" or \"subscribe\""),
+        ] {
+            let err = parse_request(line, &pool()).unwrap_err();
+            assert!(err.contains(expected), "{line}: {err}");
+        }
+    }
+
+    #[test]
+    fn subscriptions_name_their_topics() {
+        let Request::Subscribe(t) =
+            parse_request(r#"{"subscribe": ["ack", "queue_size"]}"#, &pool()).unwrap()
+        else {
+            panic!("not a subscribe");
+        };
+        assert_eq!(t, [Topic::Ack, Topic::QueueSize]);
+    }
+}

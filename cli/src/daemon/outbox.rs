@@ -1,0 +1,432 @@
+//! The daemon's outbox: the queue manager with every accepted message in a
+//! journal on disk until it is acknowledged, expires or is dropped, so that
+//! a crash or restart of `gobyd` loses nothing.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::mpsc::Receiver;
+
+use prost::Message as _;
+use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::ModemTransmission;
+use queue::{EntryId, Journal, JournalError, MessageId, QueueError, QueueEvent, QueueManager};
+
+/// Why a message was not accepted.
+#[derive(Debug, thiserror::Error)]
+pub enum OutboxError {
+    /// The queue refused it (unconfigured type, value out of range in strict
+    /// mode, too large, ...).
+    #[error(transparent)]
+    Queue(#[from] QueueError),
+    /// It could not be written to the journal: it was not accepted.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+}
+
+/// What became of an accepted message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Accepted {
+    /// Journaled and queued for sending.
+    Queued(EntryId),
+    /// Delivered at once without sending (addressed to this node, or a
+    /// type that is never queued); not kept.
+    Delivered,
+}
+
+/// A message found in the journal that could not be queued again.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReplayFailure {
+    /// Type named by the journal record.
+    pub message_name: String,
+    /// Why it could not be queued.
+    pub reason: String,
+}
+
+/// What opening the outbox found in the journal.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct OutboxReplay {
+    /// Messages queued again.
+    pub requeued: usize,
+    /// Messages that could not be (their type is gone from the
+    /// configuration, or they no longer encode); removed from the journal.
+    pub failed: Vec<ReplayFailure>,
+    /// Bytes of a torn or damaged journal tail that were dropped.
+    pub discarded_bytes: u64,
+}
+
+/// The queue manager and its journal.
+pub struct Outbox {
+    queue: QueueManager,
+    journal: Journal,
+    events: Receiver<QueueEvent>,
+    /// Journal entry of each queued message.
+    entries: HashMap<MessageId, EntryId>,
+    /// Messages without ack placed in frames of the transmission under way:
+    /// they leave the journal once it went out, and are queued again if it
+    /// failed.
+    in_flight: Vec<(EntryId, DynamicMessage)>,
+}
+
+impl std::fmt::Debug for Outbox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Outbox")
+            .field("queue", &self.queue)
+            .field("journal", &self.journal.path())
+            .field("owed", &self.journal.len())
+            .finish()
+    }
+}
+
+impl Outbox {
+    /// Opens the journal at `journal_path` and queues again every message it
+    /// still owes.
+    pub fn open(
+        mut queue: QueueManager,
+        journal_path: &Path,
+    ) -> Result<(Self, OutboxReplay), OutboxError> {
+        let events = queue.subscribe();
+        let (journal, replay) = Journal::open(journal_path)?;
+        let mut outbox = Self {
+            queue,
+            journal,
+            events,
+            entries: HashMap::new(),
+            in_flight: Vec::new(),
+        };
+        let mut report = OutboxReplay {
+            discarded_bytes: replay.discarded_bytes,
+            ..Default::default()
+        };
+        for entry in replay.entries {
+            let queued = outbox
+                .queue
+                .codec()
+                .descriptor(&entry.message_name)
+                .ok_or_else(|| "the type is not loaded".to_string())
+                .and_then(|desc| {
+                    DynamicMessage::decode(desc, entry.message.as_slice())
+                        .map_err(|e| format!("the journaled bytes do not parse: {e}"))
+                })
+                .and_then(|message| {
+                    outbox
+                        .queue
+                        .push_created_at(&message, Some(entry.time))
+                        .map_err(|e| e.to_string())
+                });
+            match queued {
+                Ok(Some(id)) => {
+                    outbox.entries.insert(id, entry.id);
+                    report.requeued += 1;
+                }
+                Ok(None) => outbox.journal.remove(entry.id)?,
+                Err(reason) => {
+                    outbox.journal.remove(entry.id)?;
+                    report.failed.push(ReplayFailure {
+                        message_name: entry.message_name,
+                        reason,
+                    });
+                }
+            }
+        }
+        Ok((outbox, report))
+    }
+
+    /// The queue manager (sizes, codec, configuration).
+    pub fn queue(&self) -> &QueueManager {
+        &self.queue
+    }
+
+    /// Messages journaled and not yet acknowledged, expired or dropped.
+    pub fn owed(&self) -> usize {
+        self.journal.len()
+    }
+
+    /// Accepts a message for sending: appended to the journal, then queued
+    /// (it may go out at once). It survives a crash once the journal is
+    /// synced: tell the client "accepted" only after a sync of
+    /// [`sync_handle`](Self::sync_handle) (or [`sync`](Self::sync)).
+    pub fn accept(&mut self, message: &DynamicMessage) -> Result<Accepted, OutboxError> {
+        let name = message.descriptor().full_name().to_string();
+        let entry =
+            self.journal
+                .accept_unsynced(&name, &message.encode_to_vec(), self.queue.now())?;
+        match self.queue.push(message) {
+            Ok(Some(id)) => {
+                self.entries.insert(id, entry);
+                Ok(Accepted::Queued(entry))
+            }
+            Ok(None) => {
+                self.journal.remove(entry)?;
+                Ok(Accepted::Delivered)
+            }
+            Err(e) => {
+                self.journal.remove(entry)?;
+                Err(e.into())
+            }
+        }
+    }
+
+    /// Waits until every accepted message is on disk.
+    pub fn sync(&mut self) -> Result<(), JournalError> {
+        self.journal.sync()
+    }
+
+    /// A handle whose `sync_data` makes every message accepted so far
+    /// durable, for syncing off the caller's thread.
+    pub fn sync_handle(&self) -> Result<std::fs::File, JournalError> {
+        self.journal.sync_handle()
+    }
+
+    /// Fills the frames of a data request from the queues.
+    pub fn data_request(&mut self, request: &mut ModemTransmission) -> Result<(), QueueError> {
+        self.queue.handle_modem_data_request(request)
+    }
+
+    /// Hands a received transmission (data or ack) to the queues; returns
+    /// the frames that did not decode (the others are still delivered).
+    pub fn receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
+        self.queue.handle_modem_receive(transmission)
+    }
+
+    /// Expires the messages older than their ttl.
+    pub fn expire(&mut self) {
+        self.queue.expire();
+    }
+
+    /// The queue events since the last call. Messages that left their queue
+    /// for good are removed from the journal first; messages sent without
+    /// ack wait for [`transmitted`](Self::transmitted).
+    pub fn events(&mut self) -> Result<Vec<QueueEvent>, JournalError> {
+        let events: Vec<QueueEvent> = self.events.try_iter().collect();
+        for event in &events {
+            match event {
+                QueueEvent::Acked { id: Some(id), .. }
+                | QueueEvent::Expired { id, .. }
+                | QueueEvent::Dropped { id, .. } => {
+                    if let Some(entry) = self.entries.remove(id) {
+                        self.journal.remove(entry)?;
+                    }
+                }
+                QueueEvent::Sent {
+                    message,
+                    id,
+                    awaiting_ack: false,
+                    ..
+                } => {
+                    if let Some(entry) = self.entries.remove(id) {
+                        self.in_flight.push((entry, message.clone()));
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(events)
+    }
+
+    /// Settles the messages sent without ack in the transmission under way:
+    /// `went_out` removes them from the journal; otherwise (the driver failed
+    /// to send) they are queued again with their original age. Returns how
+    /// many were queued again.
+    pub fn transmitted(&mut self, went_out: bool) -> Result<usize, OutboxError> {
+        let in_flight = std::mem::take(&mut self.in_flight);
+        let mut requeued = 0;
+        for (entry, message) in in_flight {
+            if went_out {
+                self.journal.remove(entry)?;
+                continue;
+            }
+            let created = self.journal.get(entry).map(|e| e.time);
+            match self.queue.push_created_at(&message, created) {
+                Ok(Some(id)) => {
+                    self.entries.insert(id, entry);
+                    requeued += 1;
+                }
+                Ok(None) | Err(_) => self.journal.remove(entry)?,
+            }
+        }
+        Ok(requeued)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+    use std::sync::Arc;
+
+    use protos::goby::acomms::protobuf::{
+        queued_message_entry::{Role, RoleType},
+        QueueManagerConfig, QueuedMessageEntry,
+    };
+    use protos::goby::example::Command;
+    use queue::ManualClock;
+
+    use super::*;
+
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(name: &str) -> Self {
+            let dir =
+                std::env::temp_dir().join(format!("goby-outbox-{}-{name}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir).unwrap();
+            Self(dir)
+        }
+        fn journal(&self) -> PathBuf {
+            self.0.join("outbox.journal")
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn queue(ack: bool, clock: &ManualClock) -> QueueManager {
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<Command>().unwrap();
+        let config = QueueManagerConfig {
+            modem_id: Some(1),
+            message_entry: vec![QueuedMessageEntry {
+                protobuf_name: "goby.example.Command".into(),
+                ack: Some(ack),
+                ttl: Some(100),
+                role: vec![Role {
+                    r#type: RoleType::DestinationId as i32,
+                    field: Some("destination".into()),
+                    ..Default::default()
+                }],
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        QueueManager::with_clock(Arc::new(codec), &config, Arc::new(clock.clone())).unwrap()
+    }
+
+    fn command(destination: i32, note: &str) -> DynamicMessage {
+        Command {
+            destination,
+            action: 1,
+            note: Some(note.into()),
+            ..Default::default()
+        }
+        .transcode_to_dynamic()
+    }
+
+    fn request(outbox: &mut Outbox) -> ModemTransmission {
+        let mut tx = ModemTransmission {
+            max_frame_bytes: Some(32),
+            max_num_frames: Some(1),
+            ..Default::default()
+        };
+        outbox.data_request(&mut tx).unwrap();
+        outbox.events().unwrap();
+        tx
+    }
+
+    fn notes(outbox: &Outbox, frame: &[u8]) -> Vec<String> {
+        outbox
+            .queue()
+            .codec()
+            .decode_all(frame)
+            .unwrap()
+            .iter()
+            .map(|m| {
+                m.get_field_by_name("note")
+                    .unwrap()
+                    .as_str()
+                    .unwrap()
+                    .to_string()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn accepted_messages_survive_a_restart_until_acknowledged() {
+        let dir = Scratch::new("restart");
+        let clock = ManualClock::at_seconds(1_000.0);
+        {
+            let (mut outbox, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
+            assert_eq!(replay, OutboxReplay::default());
+            for note in ["a", "b"] {
+                assert!(matches!(
+                    outbox.accept(&command(2, note)).unwrap(),
+                    Accepted::Queued(_)
+                ));
+            }
+            // To ourselves: delivered, not kept.
+            assert_eq!(
+                outbox.accept(&command(1, "me")).unwrap(),
+                Accepted::Delivered
+            );
+            clock.advance_seconds(1.0);
+            let tx = request(&mut outbox);
+            assert_eq!(notes(&outbox, &tx.frame[0]), ["b", "a"]);
+            // The ack for that frame arrives: both leave the journal.
+            outbox.receive(&ModemTransmission {
+                src: Some(2),
+                dest: Some(1),
+                r#type: Some(2),
+                acked_frame: vec![0],
+                ..Default::default()
+            });
+            outbox.events().unwrap();
+            assert_eq!(outbox.owed(), 0);
+            // Two more, sent but never acknowledged.
+            outbox.accept(&command(2, "c")).unwrap();
+            outbox.accept(&command(2, "d")).unwrap();
+            clock.advance_seconds(1.0);
+            let tx = request(&mut outbox);
+            assert_eq!(notes(&outbox, &tx.frame[0]).len(), 2);
+            assert_eq!(outbox.owed(), 2);
+            // The process dies here (no clean shutdown).
+        }
+        let (outbox, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
+        assert_eq!(replay.requeued, 2);
+        assert!(replay.failed.is_empty());
+        assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 2);
+    }
+
+    #[test]
+    fn messages_without_ack_are_queued_again_when_the_transmission_fails() {
+        let dir = Scratch::new("failed");
+        let clock = ManualClock::at_seconds(1_000.0);
+        let (mut outbox, _) = Outbox::open(queue(false, &clock), &dir.journal()).unwrap();
+        outbox.accept(&command(2, "x")).unwrap();
+        clock.advance_seconds(1.0);
+        let tx = request(&mut outbox);
+        assert_eq!(notes(&outbox, &tx.frame[0]), ["x"]);
+        assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 0);
+        // Still owed until the driver says it went out.
+        assert_eq!(outbox.owed(), 1);
+        assert_eq!(outbox.transmitted(false).unwrap(), 1);
+        assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 1);
+        clock.advance_seconds(1.0);
+        let tx = request(&mut outbox);
+        assert_eq!(notes(&outbox, &tx.frame[0]), ["x"]);
+        assert_eq!(outbox.transmitted(true).unwrap(), 0);
+        assert_eq!(outbox.owed(), 0);
+    }
+
+    #[test]
+    fn refused_and_expired_messages_leave_no_journal_entry() {
+        let dir = Scratch::new("refused");
+        let clock = ManualClock::at_seconds(1_000.0);
+        let (mut outbox, _) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
+        let nav = protos::goby::example::NavigationReport::default().transcode_to_dynamic();
+        assert!(matches!(outbox.accept(&nav), Err(OutboxError::Queue(_))));
+        outbox.accept(&command(2, "old")).unwrap();
+        assert_eq!(outbox.owed(), 1);
+        clock.advance_seconds(101.0);
+        outbox.expire();
+        let events = outbox.events().unwrap();
+        assert!(events
+            .iter()
+            .any(|e| matches!(e, QueueEvent::Expired { .. })));
+        assert_eq!(outbox.owed(), 0);
+        drop(outbox);
+        let (_, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
+        assert_eq!(replay.requeued, 0);
+    }
+}

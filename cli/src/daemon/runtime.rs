@@ -1,0 +1,480 @@
+//! The daemon's core: one task that owns the outbox (queue and journal), the
+//! medium access control and the modem driver, and serves the autonomy
+//! interfaces through channels.
+//!
+//! ```text
+//!  JSON / MOOS clients ──publish──▶ ┌────────┐ ◀──data request── driver
+//!                     ◀──events──── │  core  │ ──initiate──────▶ driver
+//!                                   └────────┘ ◀──received────── driver
+//!                                    ▲  MAC slots (clock)
+//! ```
+
+use std::collections::HashMap;
+use std::future::Future;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use amac::MacManager;
+use modemdriver::{Driver, DriverEvent, DriverStatus, TransmitOutcome};
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{driver_config, DriverType};
+use protos::goby::apps::protobuf::GobydConfig;
+use queue::{Clock, QueueEvent, QueueManager, SystemClock};
+use tokio::net::{TcpListener, UdpSocket};
+use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::task::JoinSet;
+
+use super::config::{self, ConfigError};
+use super::json_protocol::{accepted_line, error_line, event_line, message_json};
+use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
+use super::outbox::{Accepted, Outbox, OutboxError};
+use super::raw_log::RawLog;
+
+/// Why the daemon could not start or had to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// The configuration is not usable.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The queue or its journal could not be set up.
+    #[error("outgoing queue: {0}")]
+    Outbox(#[from] OutboxError),
+    /// The queue configuration is not valid.
+    #[error("queue: {0}")]
+    Queue(#[from] queue::QueueError),
+    /// The medium access control configuration is not valid.
+    #[error("mac: {0}")]
+    Mac(#[from] amac::AmacError),
+    /// The modem driver could not start.
+    #[error("driver: {0}")]
+    Driver(#[from] modemdriver::DriverError),
+    /// A file or socket could not be opened.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+fn io_error(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> DaemonError {
+    let context = context.into();
+    move |source| DaemonError::Io { context, source }
+}
+
+/// Starts the driver named by the configuration.
+pub async fn start_driver(
+    config: &protos::goby::acomms::protobuf::DriverConfig,
+) -> Result<Driver, DaemonError> {
+    let kind = match &config.driver {
+        Some(driver_config::Driver::DriverType(t)) => DriverType::try_from(*t).ok(),
+        Some(driver_config::Driver::DriverName(name)) => {
+            return Err(DaemonError::Driver(modemdriver::DriverError::Config(
+                format!("no driver named {name:?} is built in"),
+            )))
+        }
+        None => Some(DriverType::DriverNone),
+    };
+    match kind {
+        Some(DriverType::DriverAcousticSimulator) => {
+            Ok(modemdriver::sim::SimulatorDriver::start(config)?)
+        }
+        Some(DriverType::DriverUdp) => Ok(modemdriver::udp::UdpDriver::start(config).await?),
+        Some(DriverType::DriverWhoiMicromodem) => {
+            Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
+        }
+        other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
+            format!(
+                "driver {} is not supported by gobyd (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
+                other.map(|t| t.as_str_name()).unwrap_or("unknown")
+            ),
+        ))),
+    }
+}
+
+/// Checks a configuration without starting anything: the DCCL types load,
+/// and the queue and medium access settings are valid. Returns the DCCL
+/// types.
+pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
+    let config = config::complete(config)?;
+    let defs = config::load_definitions(&config)?;
+    let mut queue_config = config.queue.clone().unwrap_or_default();
+    config::default_entries(&mut queue_config, &defs.loaded);
+    QueueManager::new(Arc::new(defs.codec), &queue_config)?;
+    MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
+    Ok(defs.loaded)
+}
+
+/// A started daemon, ready to [`run`](Daemon::run).
+pub struct Daemon {
+    outbox: Outbox,
+    mac: MacManager,
+    driver: Driver,
+    /// Type names by DCCL id.
+    names: HashMap<u32, String>,
+    events: broadcast::Sender<EventLine>,
+    publish_rx: mpsc::Receiver<Publish>,
+    publish_tx: mpsc::Sender<Publish>,
+    raw_log: Option<RawLog>,
+    /// Replies to send once the journal holding their messages is synced.
+    pending_replies: Vec<(oneshot::Sender<String>, String)>,
+    tasks: JoinSet<()>,
+    json_tcp: Option<SocketAddr>,
+    json_udp: Option<SocketAddr>,
+    data_dir: PathBuf,
+}
+
+impl std::fmt::Debug for Daemon {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Daemon")
+            .field("outbox", &self.outbox)
+            .field("json_tcp", &self.json_tcp)
+            .field("json_udp", &self.json_udp)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Daemon {
+    /// Loads the DCCL types, replays the journal, starts the driver and
+    /// opens the autonomy interfaces.
+    pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
+        let config = config::complete(config)?;
+        let driver = start_driver(config.driver.as_ref().expect("completed")).await?;
+        Self::start_with_driver(config, driver).await
+    }
+
+    /// Starts the daemon on a driver started by the caller (the
+    /// configuration's driver section is then only used for the modem id).
+    pub async fn start_with_driver(
+        config: GobydConfig,
+        driver: Driver,
+    ) -> Result<Self, DaemonError> {
+        let config = config::complete(config)?;
+        let defs = config::load_definitions(&config)?;
+        let codec = Arc::new(defs.codec);
+        let mut queue_config = config.queue.clone().unwrap_or_default();
+        config::default_entries(&mut queue_config, &defs.loaded);
+        let queue = QueueManager::new(codec.clone(), &queue_config)?;
+
+        let data_dir = PathBuf::from(config.data_dir());
+        std::fs::create_dir_all(&data_dir)
+            .map_err(io_error(format!("cannot create {}", data_dir.display())))?;
+        let journal_path = data_dir.join("outbox.journal");
+        let (outbox, replay) = Outbox::open(queue, &journal_path)?;
+        if replay.requeued > 0 || replay.discarded_bytes > 0 {
+            tracing::info!(
+                requeued = replay.requeued,
+                discarded_bytes = replay.discarded_bytes,
+                "journal {} replayed",
+                journal_path.display()
+            );
+        }
+        for failure in &replay.failed {
+            tracing::warn!(
+                "journaled {} could not be queued again: {}",
+                failure.message_name,
+                failure.reason
+            );
+        }
+
+        let log = config.log.clone().unwrap_or_default();
+        let raw_log = if log.raw_log() {
+            let path = data_dir.join("raw.log");
+            Some(RawLog::open(&path).map_err(io_error(format!("cannot open {}", path.display())))?)
+        } else {
+            None
+        };
+
+        let mac = MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
+        let (events, _) = broadcast::channel(1024);
+        let (publish_tx, publish_rx) = mpsc::channel(256);
+        let interface = JsonInterface {
+            codec: codec.clone(),
+            publish: publish_tx.clone(),
+            events: events.clone(),
+        };
+        let mut tasks = JoinSet::new();
+        let json = config.json.clone().unwrap_or_default();
+        let mut json_tcp = None;
+        if !json.tcp_bind().is_empty() {
+            let listener = TcpListener::bind(json.tcp_bind())
+                .await
+                .map_err(io_error(format!(
+                    "JSON interface: cannot listen on {}",
+                    json.tcp_bind()
+                )))?;
+            json_tcp = listener.local_addr().ok();
+            tasks.spawn(interface.clone().serve_tcp(listener));
+        }
+        let mut json_udp = None;
+        if !json.udp_bind().is_empty() {
+            let socket = UdpSocket::bind(json.udp_bind())
+                .await
+                .map_err(io_error(format!(
+                    "JSON interface: cannot bind {}",
+                    json.udp_bind()
+                )))?;
+            json_udp = socket.local_addr().ok();
+            tasks.spawn(interface.serve_udp(socket));
+        }
+        if let Some(moos) = config.moos.clone() {
+            tasks.spawn(super::moos_bridge::run(
+                moos,
+                codec.clone(),
+                publish_tx.clone(),
+                events.subscribe(),
+            ));
+        }
+        tracing::info!(
+            modem_id = config.modem_id(),
+            driver = driver.name(),
+            mac = mac.scheme_name(),
+            types = defs.loaded.len(),
+            "gobyd started"
+        );
+        let names = defs
+            .loaded
+            .iter()
+            .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
+            .collect();
+        Ok(Self {
+            outbox,
+            mac,
+            driver,
+            names,
+            events,
+            publish_rx,
+            publish_tx,
+            raw_log,
+            pending_replies: Vec::new(),
+            tasks,
+            json_tcp,
+            json_udp,
+            data_dir,
+        })
+    }
+
+    /// Address of the JSON TCP interface, if open.
+    pub fn json_tcp_addr(&self) -> Option<SocketAddr> {
+        self.json_tcp
+    }
+
+    /// Address of the JSON UDP interface, if open.
+    pub fn json_udp_addr(&self) -> Option<SocketAddr> {
+        self.json_udp
+    }
+
+    /// Where the journal and the raw log live.
+    pub fn data_dir(&self) -> &std::path::Path {
+        &self.data_dir
+    }
+
+    /// A sender for messages to publish (as the JSON interface uses); for
+    /// other interfaces embedded in the same process.
+    pub fn publisher(&self) -> mpsc::Sender<Publish> {
+        self.publish_tx.clone()
+    }
+
+    /// A receiver of the event lines sent to clients.
+    pub fn subscribe(&self) -> broadcast::Receiver<EventLine> {
+        self.events.subscribe()
+    }
+
+    /// Runs until `shutdown` completes, then stops the driver and closes the
+    /// interfaces. Messages not yet sent stay in the journal.
+    pub async fn run(mut self, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
+        tokio::pin!(shutdown);
+        let mut expire = tokio::time::interval(Duration::from_secs(1));
+        loop {
+            let mac_wait = self
+                .mac
+                .next_event_time()
+                .map(|t| Duration::from_micros((t - SystemClock.now()).max(0) as u64))
+                .unwrap_or(Duration::from_secs(3600));
+            tokio::select! {
+                () = &mut shutdown => break,
+                Some(publish) = self.publish_rx.recv() => self.publish(publish),
+                event = self.driver.next_event() => match event {
+                    Some(event) => self.driver_event(event),
+                    None => {
+                        tracing::error!("the modem driver stopped");
+                        break;
+                    }
+                },
+                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
+                _ = expire.tick() => self.outbox.expire(),
+            }
+            self.forward_queue_events();
+            self.commit_replies();
+        }
+        // Clients still waiting hear back once their messages are on disk.
+        let sync = self.outbox.sync();
+        for (reply, line) in self.pending_replies.drain(..) {
+            let _ = reply.send(match &sync {
+                Ok(()) => line,
+                Err(e) => error_line(&format!("not saved to disk: {e}")),
+            });
+        }
+        tracing::info!(owed = self.outbox.owed(), "gobyd stopping");
+        self.tasks.shutdown().await;
+        let _ = self.driver.stop().await;
+        Ok(())
+    }
+
+    /// Accepts a message; its reply waits for the journal sync
+    /// ([`commit_replies`](Self::commit_replies)) unless it was refused.
+    fn publish(&mut self, publish: Publish) {
+        let name = publish.message.descriptor().full_name().to_string();
+        match self.outbox.accept(&publish.message) {
+            Ok(Accepted::Queued(id)) => self
+                .pending_replies
+                .push((publish.reply, accepted_line(&name, Some(id)))),
+            Ok(Accepted::Delivered) => {
+                let _ = publish.reply.send(accepted_line(&name, None));
+            }
+            Err(e) => {
+                let _ = publish.reply.send(error_line(&e.to_string()));
+            }
+        }
+    }
+
+    /// Syncs the journal off the core's thread (one sync for every message
+    /// accepted since the last), then sends the waiting replies: a client
+    /// hears "accepted" only once its message is on disk, while the message
+    /// itself may already be on its way to the modem.
+    fn commit_replies(&mut self) {
+        if self.pending_replies.is_empty() {
+            return;
+        }
+        let replies = std::mem::take(&mut self.pending_replies);
+        let handle = match self.outbox.sync_handle() {
+            Ok(handle) => handle,
+            Err(e) => {
+                for (reply, _) in replies {
+                    let _ = reply.send(error_line(&format!("not saved to disk: {e}")));
+                }
+                return;
+            }
+        };
+        tokio::spawn(async move {
+            let synced = tokio::task::spawn_blocking(move || handle.sync_data()).await;
+            let failure = match synced {
+                Ok(Ok(())) => None,
+                Ok(Err(e)) => Some(e.to_string()),
+                Err(e) => Some(e.to_string()),
+            };
+            if let Some(reason) = &failure {
+                tracing::error!("journal sync failed: {reason}");
+            }
+            for (reply, line) in replies {
+                let _ = reply.send(match &failure {
+                    None => line,
+                    Some(reason) => error_line(&format!("not saved to disk: {reason}")),
+                });
+            }
+        });
+    }
+
+    fn driver_event(&mut self, event: DriverEvent) {
+        match event {
+            DriverEvent::DataRequest(request) => {
+                let mut filled = request.template().clone();
+                if let Err(e) = self.outbox.data_request(&mut filled) {
+                    tracing::warn!("data request: {e}");
+                }
+                request.respond(filled);
+            }
+            DriverEvent::Received(transmission) => {
+                self.mac.handle_received(transmission.src());
+                for e in self.outbox.receive(&transmission) {
+                    tracing::warn!(src = transmission.src(), "received: {e}");
+                }
+            }
+            DriverEvent::TransmitResult(result) => {
+                let went_out = matches!(result.outcome, TransmitOutcome::Sent);
+                if let TransmitOutcome::Failed(reason) = &result.outcome {
+                    tracing::warn!("transmission failed: {reason}");
+                }
+                match self.outbox.transmitted(went_out) {
+                    Ok(n) if n > 0 => {
+                        tracing::info!("{n} messages queued again after a failed transmission")
+                    }
+                    Ok(_) => {}
+                    Err(e) => tracing::error!("journal: {e}"),
+                }
+            }
+            DriverEvent::Raw(raw) => {
+                if let Some(log) = &mut self.raw_log {
+                    if let Err(e) = log.raw(SystemClock.now(), &raw) {
+                        tracing::error!("raw log {}: {e}", log.path().display());
+                    }
+                }
+            }
+            DriverEvent::Status(status) => match status {
+                DriverStatus::Ready => tracing::info!("driver ready"),
+                other => tracing::warn!("driver: {other:?}"),
+            },
+            DriverEvent::Specific(report) => tracing::info!("driver report: {report:?}"),
+        }
+    }
+
+    fn mac_slots(&mut self) {
+        for event in self.mac.poll(SystemClock.now()) {
+            if let Some(transmission) = event.initiate() {
+                if let Err(e) = self.driver.initiate_transmission(transmission.clone()) {
+                    tracing::error!("cannot initiate a transmission: {e}");
+                }
+            }
+        }
+    }
+
+    fn forward_queue_events(&mut self) {
+        let events = match self.outbox.events() {
+            Ok(events) => events,
+            Err(e) => {
+                tracing::error!("journal: {e}");
+                return;
+            }
+        };
+        let now = SystemClock.now();
+        for event in events {
+            if let Some(log) = &mut self.raw_log {
+                let logged = match &event {
+                    QueueEvent::Sent { message, frame, .. } => log.message(
+                        now,
+                        "out",
+                        message.descriptor().full_name(),
+                        message_json(message),
+                        &[("frame", (*frame).into())],
+                    ),
+                    QueueEvent::Received(r) => log.message(
+                        now,
+                        "in",
+                        r.message.descriptor().full_name(),
+                        message_json(&r.message),
+                        &[("src", r.src.into()), ("dest", r.dest.into())],
+                    ),
+                    _ => Ok(()),
+                };
+                if let Err(e) = logged {
+                    tracing::error!("raw log: {e}");
+                }
+            }
+            let names = &self.names;
+            let name_of = |id: u32| {
+                names
+                    .get(&id)
+                    .cloned()
+                    .unwrap_or_else(|| format!("dccl id {id}"))
+            };
+            if let Some((topic, line)) = event_line(&event, name_of) {
+                let _ = self
+                    .events
+                    .send(Arc::new(ClientEvent { topic, line, event }));
+            }
+        }
+    }
+}

@@ -1,0 +1,326 @@
+//! `goby modem ...`: modem drivers from the command line.
+//!
+//! `goby modem emulate` runs emulated WHOI Micro-Modems for bench work
+//! without hardware: each speaks NMEA on a pseudo-terminal (or a given serial
+//! port) whose path is printed, one line per modem (`modem 1: /dev/pts/7`),
+//! for a driver (e.g. `gobyd` with the Micro-Modem driver) to open. Several
+//! modems in one process hear each other through the acoustic channel
+//! simulator; a single modem can join emulators in other processes over UDP.
+
+use std::io::Write;
+use std::net::{IpAddr, SocketAddr};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use clap::{Args, Subcommand};
+use modemdriver::micromodem::emulator::{self, EmulatorConfig, EmulatorHandle, EmulatorPort};
+use modemdriver::sim::medium::Medium;
+use modemdriver::sim::SimulatorDriver;
+use modemdriver::udp::UdpDriver;
+use modemdriver::{Driver, DriverConfig};
+use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
+use protos::goby::acomms::protobuf::udp_driver_config::EndPoint;
+use protos::goby::acomms::protobuf::{SimulatorDriverConfig, UdpDriverConfig};
+
+use crate::{CliError, Status};
+
+/// Subcommands of `goby modem`.
+#[derive(Debug, Subcommand)]
+pub enum ModemCommand {
+    /// Emulate WHOI Micro-Modems on pseudo-terminals for bench tests without
+    /// hardware. Prints one line per modem, `modem ID: PATH`; connect a
+    /// Micro-Modem driver to PATH. Runs until interrupted (or --duration).
+    Emulate(EmulateArgs),
+}
+
+/// Options of `goby modem emulate`.
+#[derive(Debug, Args)]
+pub struct EmulateArgs {
+    /// Modem id of an emulated modem; repeat for several modems, which then
+    /// hear each other through the acoustic channel simulator.
+    #[arg(long = "modem-id", default_value = "1", value_name = "ID")]
+    pub modem_ids: Vec<u32>,
+    /// Keep a symbolic link at PATH to each modem's pseudo-terminal (in the
+    /// order of --modem-id).
+    #[arg(long = "link", value_name = "PATH")]
+    pub links: Vec<PathBuf>,
+    /// Speak on this serial port instead of a pseudo-terminal (one modem only).
+    #[arg(long, value_name = "DEVICE", conflicts_with = "links")]
+    pub serial: Option<String>,
+    /// Baud rate of --serial.
+    #[arg(long, default_value_t = 19_200)]
+    pub baud: u32,
+    /// Metres between consecutive simulated modems (along x).
+    #[arg(long, default_value_t = 1000.0)]
+    pub spacing: f64,
+    /// Probability that a simulated packet is lost.
+    #[arg(long, default_value_t = 0.0)]
+    pub loss: f64,
+    /// Seed of the simulator's loss draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// One modem only: UDP port (on 127.0.0.1 unless --udp-ip) to join
+    /// emulators in other processes.
+    #[arg(long, value_name = "PORT")]
+    pub udp_local: Option<u16>,
+    /// Address of this process's UDP endpoint.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub udp_ip: IpAddr,
+    /// Another process's emulated modem, ID@HOST:PORT (repeatable).
+    #[arg(long = "udp-peer", value_name = "ID@HOST:PORT", requires = "udp_local")]
+    pub udp_peers: Vec<String>,
+    /// With no other modem: range in metres that two-way pings report.
+    #[arg(long, value_name = "METRES")]
+    pub lone_range: Option<f64>,
+    /// Seconds between $CAREV messages.
+    #[arg(long, default_value_t = 10.0)]
+    pub revision_interval: f64,
+    /// Stop after this many seconds (default: run until interrupted).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+}
+
+/// Runs a `goby modem` command.
+pub fn run(cmd: &ModemCommand, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    match cmd {
+        ModemCommand::Emulate(args) => emulate(args, stdout),
+    }
+}
+
+fn seconds(value: f64, option: &str) -> Result<Duration, CliError> {
+    Duration::try_from_secs_f64(value)
+        .ok()
+        .filter(|d| !d.is_zero())
+        .ok_or_else(|| {
+            CliError::setup(format!(
+                "{option} must be a positive number of seconds, not {value}"
+            ))
+        })
+}
+
+fn parse_peer(text: &str) -> Result<(u32, SocketAddr), CliError> {
+    let bad = || CliError::setup(format!("--udp-peer {text:?} is not ID@HOST:PORT"));
+    let (id, addr) = text.split_once('@').ok_or_else(bad)?;
+    Ok((
+        id.parse().map_err(|_| bad())?,
+        addr.parse().map_err(|_| bad())?,
+    ))
+}
+
+/// Checks the options and builds one backend description per modem.
+fn plan(args: &EmulateArgs) -> Result<Vec<Backend>, CliError> {
+    let n = args.modem_ids.len();
+    if args.modem_ids.iter().any(|&id| id == 0 || id > 127) {
+        return Err(CliError::setup("--modem-id must be in 1..=127"));
+    }
+    let mut sorted = args.modem_ids.clone();
+    sorted.sort_unstable();
+    sorted.dedup();
+    if sorted.len() != n {
+        return Err(CliError::setup("--modem-id values must differ"));
+    }
+    if !args.links.is_empty() && args.links.len() != n {
+        return Err(CliError::setup(format!(
+            "--link given {} times for {n} modems",
+            args.links.len()
+        )));
+    }
+    if n > 1 && (args.serial.is_some() || args.udp_local.is_some()) {
+        return Err(CliError::setup(
+            "--serial and --udp-local take a single --modem-id",
+        ));
+    }
+    if !(0.0..=1.0).contains(&args.loss) {
+        return Err(CliError::setup(format!(
+            "--loss must be in [0, 1], not {}",
+            args.loss
+        )));
+    }
+    if !args.spacing.is_finite() || args.spacing < 0.0 {
+        return Err(CliError::setup(format!(
+            "--spacing must be a distance, not {}",
+            args.spacing
+        )));
+    }
+    if let Some(port) = args.udp_local {
+        let peers = args
+            .udp_peers
+            .iter()
+            .map(|p| parse_peer(p))
+            .collect::<Result<Vec<_>, _>>()?;
+        return Ok(vec![Backend::Udp {
+            local: SocketAddr::new(args.udp_ip, port),
+            peers,
+        }]);
+    }
+    if n == 1 {
+        return Ok(vec![Backend::None]);
+    }
+    Ok((0..n).map(|_| Backend::Simulator).collect())
+}
+
+enum Backend {
+    None,
+    Simulator,
+    Udp {
+        local: SocketAddr,
+        peers: Vec<(u32, SocketAddr)>,
+    },
+}
+
+async fn backend_driver(
+    args: &EmulateArgs,
+    backend: &Backend,
+    modem_id: u32,
+    medium: &std::sync::Arc<Medium>,
+) -> Result<Option<Driver>, CliError> {
+    let id = modem_id as i32;
+    match backend {
+        Backend::None => Ok(None),
+        Backend::Simulator => {
+            let node = args
+                .modem_ids
+                .iter()
+                .enumerate()
+                .map(|(i, &m)| NodePosition {
+                    modem_id: m as i32,
+                    x: Some(i as f64 * args.spacing),
+                    ..Default::default()
+                })
+                .collect();
+            let config = DriverConfig {
+                modem_id: Some(id),
+                simulator: Some(SimulatorDriverConfig {
+                    node,
+                    packet_loss: Some(args.loss),
+                    seed: Some(args.seed ^ u64::from(modem_id)),
+                    ..Default::default()
+                }),
+                ..Default::default()
+            };
+            SimulatorDriver::start_on(&config, medium.clone())
+                .map(Some)
+                .map_err(|e| CliError::setup(e.to_string()))
+        }
+        Backend::Udp { local, peers } => {
+            let endpoint = |id: u32, addr: &SocketAddr| EndPoint {
+                modem_id: Some(id),
+                ip: Some(addr.ip().to_string()),
+                port: u32::from(addr.port()),
+            };
+            let config = DriverConfig {
+                modem_id: Some(id),
+                udp: Some(UdpDriverConfig {
+                    local: endpoint(modem_id, local),
+                    remote: peers.iter().map(|(i, a)| endpoint(*i, a)).collect(),
+                    ..Default::default()
+                }),
+                ..Default::default()
+            };
+            UdpDriver::start(&config)
+                .await
+                .map(Some)
+                .map_err(|e| CliError::setup(e.to_string()))
+        }
+    }
+}
+
+fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    let backends = plan(args)?;
+    let revision_interval = seconds(args.revision_interval, "--revision-interval")?;
+    let duration = args
+        .duration
+        .map(|d| seconds(d, "--duration"))
+        .transpose()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(async {
+        let medium = Medium::new();
+        let mut emulators: Vec<EmulatorHandle> = Vec::new();
+        for (i, &modem_id) in args.modem_ids.iter().enumerate() {
+            let backend_kind = backends.get(i).unwrap_or(&Backend::None);
+            let backend = backend_driver(args, backend_kind, modem_id, &medium).await?;
+            let port = match &args.serial {
+                Some(path) => EmulatorPort::Serial {
+                    path: path.clone(),
+                    baud: args.baud,
+                },
+                None => EmulatorPort::Pty {
+                    link: args.links.get(i).cloned(),
+                },
+            };
+            let config = EmulatorConfig {
+                modem_id,
+                revision_interval,
+                lone_range: args.lone_range,
+                ping_packet: match backend_kind {
+                    Backend::Simulator => Duration::from_millis(500),
+                    _ => Duration::ZERO,
+                },
+                ..EmulatorConfig::default()
+            };
+            let mut handle = emulator::start(config, port, backend)
+                .map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
+            let path = handle
+                .path()
+                .await
+                .ok_or_else(|| CliError::setup(format!("modem {modem_id}: no device")))?;
+            writeln!(stdout, "modem {modem_id}: {path}")?;
+            stdout.flush()?;
+            emulators.push(handle);
+        }
+        match duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+        for e in emulators {
+            e.stop().await;
+        }
+        Ok(Status::Ok)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        cmd: ModemCommand,
+    }
+
+    fn plan_of(args: &[&str]) -> Result<Vec<Backend>, CliError> {
+        let cli = Cli::try_parse_from(["x", "emulate"].iter().chain(args)).expect("parses");
+        let ModemCommand::Emulate(a) = cli.cmd;
+        plan(&a)
+    }
+
+    #[test]
+    fn plans_backends_and_rejects_bad_options() {
+        assert!(matches!(plan_of(&[]).unwrap()[..], [Backend::None]));
+        assert!(matches!(
+            plan_of(&["--modem-id", "1", "--modem-id", "2"]).unwrap()[..],
+            [Backend::Simulator, Backend::Simulator]
+        ));
+        assert!(matches!(
+            plan_of(&["--udp-local", "5000", "--udp-peer", "2@127.0.0.1:5001"]).unwrap()[..],
+            [Backend::Udp { .. }]
+        ));
+        for bad in [
+            &["--modem-id", "0"][..],
+            &["--modem-id", "2", "--modem-id", "2"],
+            &["--udp-local", "5000", "--udp-peer", "2@nowhere"],
+            &["--loss", "1.5"],
+            &["--modem-id", "1", "--modem-id", "2", "--link", "/tmp/x"],
+        ] {
+            assert!(plan_of(bad).is_err(), "{bad:?}");
+        }
+    }
+}

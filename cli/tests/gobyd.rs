@@ -1,0 +1,384 @@
+//! Two `gobyd` processes talking over UDP on loopback, a JSON client on
+//! each: messages published on one arrive decoded on the other, with acks;
+//! a sender killed with SIGKILL and restarted loses nothing it accepted.
+
+use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{TcpStream, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// Upper bound of any wait in these tests.
+const PATIENCE: Duration = Duration::from_secs(40);
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A free UDP port on loopback.
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// The driver section of node `id` of a two-node UDP network, one
+/// Command per frame.
+fn udp_driver(id: i32, ports: [u16; 2]) -> String {
+    let me = ports[(id - 1) as usize];
+    let other_id = 3 - id;
+    let other = ports[(other_id - 1) as usize];
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_UDP
+  udp {{
+    local {{ port: {me} }}
+    remote {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
+    max_frame_size: 10
+  }}
+}}"#
+    )
+}
+
+/// The driver section of node `id` on the acoustic channel simulator, the
+/// two nodes 150 m apart in two processes (packets between them over UDP).
+fn simulator_driver(id: i32, ports: [u16; 2]) -> String {
+    let me = ports[(id - 1) as usize];
+    let other_id = 3 - id;
+    let other = ports[(other_id - 1) as usize];
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{
+    node {{ modem_id: 1 x: 0 y: 0 z: 10 }}
+    node {{ modem_id: 2 x: 150 y: 0 z: 10 }}
+    packet_overhead_seconds: 0.05
+    channel: "node{id}"
+    udp_local {{ modem_id: {id} port: {me} }}
+    udp_peer {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
+  }}
+}}"#
+    )
+}
+
+/// Configuration of node `id`: TDMA slots of `slot` seconds at rate 6 (on
+/// the simulator: six 32-byte frames at 2400 bit/s, 0.64 s on the water),
+/// Command acked and addressed by its `destination` field.
+fn node_config(id: i32, driver: &str, slot: f64, data_dir: &Path) -> String {
+    format!(
+        r#"
+modem_id: {id}
+{driver}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: {slot} }}
+  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: {slot} }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 600
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "127.0.0.1:0" }}
+data_dir: "{dir}"
+log {{ level: "info" raw_log: true }}
+"#,
+        dir = data_dir.display()
+    )
+}
+
+/// Writes the configuration files of a two-node network.
+fn network(dir: &Path, driver: fn(i32, [u16; 2]) -> String, slot: f64) -> Vec<PathBuf> {
+    let ports = [free_udp_port(), free_udp_port()];
+    [1, 2]
+        .into_iter()
+        .map(|id| {
+            let data = dir.join(format!("node{id}"));
+            let path = dir.join(format!("node{id}.cfg"));
+            std::fs::write(&path, node_config(id, &driver(id, ports), slot, &data)).unwrap();
+            path
+        })
+        .collect()
+}
+
+/// A running daemon and a JSON client connected to it.
+struct Node {
+    child: Child,
+    client: TcpStream,
+    lines: mpsc::Receiver<Value>,
+}
+
+impl Node {
+    fn start(config_path: &Path) -> Node {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .arg("--config")
+            .arg(config_path)
+            .env_remove("RUST_BACKTRACE")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("gobyd starts");
+        // The log says where the JSON interface listens.
+        let stderr = child.stderr.take().unwrap();
+        let (addr_tx, addr_rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if let Some(addr) = line.split("JSON interface on tcp://").nth(1) {
+                    let _ = addr_tx.send(addr.trim().to_string());
+                }
+            }
+        });
+        let addr = addr_rx
+            .recv_timeout(PATIENCE)
+            .expect("gobyd reports its JSON address");
+        let client = TcpStream::connect(&addr).expect("connect to the JSON interface");
+        let reader = BufReader::new(client.try_clone().unwrap());
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in reader.lines().map_while(Result::ok) {
+                let value: Value = serde_json::from_str(&line).expect("a JSON line");
+                if tx.send(value).is_err() {
+                    break;
+                }
+            }
+        });
+        Node {
+            child,
+            client,
+            lines,
+        }
+    }
+
+    fn send(&mut self, line: &str) {
+        self.client.write_all(line.as_bytes()).unwrap();
+        self.client.write_all(b"\n").unwrap();
+    }
+
+    /// The next line for which `pick` returns something, within the patience.
+    fn wait_for<T>(&self, what: &str, mut pick: impl FnMut(&Value) -> Option<T>) -> T {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = self
+                .lines
+                .recv_timeout(left)
+                .unwrap_or_else(|_| panic!("timed out waiting for {what}"));
+            if let Some(t) = pick(&line) {
+                return t;
+            }
+        }
+    }
+
+    fn publish_command(&mut self, destination: i32, note: &str) -> u64 {
+        self.send(&format!(
+            r#"{{"publish": "goby.example.Command", "msg": {{"destination": {destination}, "action": "GOTO", "note": "{note}"}}}}"#
+        ));
+        self.wait_for("the accepted reply", |v| {
+            assert!(v.get("error").is_none(), "{v}");
+            v.get("accepted").and_then(|_| v["id"].as_u64())
+        })
+    }
+
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Node {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn note_of(v: &Value) -> Option<String> {
+    v["msg"]["note"].as_str().map(str::to_string)
+}
+
+#[test]
+fn messages_cross_with_acks_and_survive_a_killed_sender() {
+    let dir = scratch("e2e");
+    let config_paths = network(&dir, udp_driver, 0.5);
+    let mut receiver = Node::start(&config_paths[1]);
+    let mut sender = Node::start(&config_paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+
+    // One message crosses and is acknowledged.
+    sender.publish_command(2, "first");
+    let got = receiver.wait_for("the first message", |v| {
+        (v.get("received").is_some()).then(|| v.clone())
+    });
+    assert_eq!(got["received"], "goby.example.Command");
+    assert_eq!(got["src"], 1);
+    assert_eq!(got["msg"]["note"], "first");
+    assert_eq!(got["msg"]["action"], "GOTO");
+    let acked = sender.wait_for("the ack", |v| v.get("ack").and_then(|_| note_of(v)));
+    assert_eq!(acked, "first");
+
+    // Several more (one per frame, one frame per 1 s cycle); the sender is
+    // killed once the first of them has arrived, then restarted.
+    let notes: BTreeSet<String> = (0..6).map(|i| format!("m{i}")).collect();
+    for note in &notes {
+        sender.publish_command(2, note);
+    }
+    let mut arrived = BTreeSet::new();
+    arrived.insert(receiver.wait_for("a message before the kill", |v| {
+        v.get("received").and_then(|_| note_of(v))
+    }));
+    sender.kill();
+    // The killed sender still owed messages: they are in its journal.
+    let (_, owed) = queue::Journal::open(dir.join("node1").join("outbox.journal")).unwrap();
+    assert!(
+        !owed.entries.is_empty(),
+        "the kill came too late to test anything"
+    );
+    let mut sender = Node::start(&config_paths[0]);
+    while !arrived.is_superset(&notes) {
+        arrived.insert(receiver.wait_for("the messages after the restart", |v| {
+            v.get("received").and_then(|_| note_of(v))
+        }));
+    }
+    assert_eq!(arrived, notes);
+
+    // A malformed line is answered with an error; the connection and the
+    // daemon stay up.
+    receiver.send("{ not json");
+    receiver.wait_for("the error line", |v| v.get("error").map(|_| ()));
+    sender.publish_command(2, "last");
+    receiver.wait_for("a message after the error", |v| {
+        (note_of(v).as_deref() == Some("last")).then_some(())
+    });
+
+    // The mission log has the raw datagrams and the messages.
+    let log = std::fs::read_to_string(dir.join("node2").join("raw.log")).unwrap();
+    assert!(log.lines().any(|l| l.contains(r#""raw":"in""#)), "{log}");
+    assert!(log.lines().any(|l| l.contains(r#""msg":"in""#)), "{log}");
+    drop(sender);
+    drop(receiver);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn messages_cross_the_simulated_acoustic_channel_with_acks() {
+    let dir = scratch("sim");
+    // Slots long enough for the data, the travel time and the ack.
+    let config_paths = network(&dir, simulator_driver, 1.2);
+    let mut receiver = Node::start(&config_paths[1]);
+    let mut sender = Node::start(&config_paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    for note in ["s1", "s2"] {
+        sender.publish_command(2, note);
+    }
+    let mut arrived = BTreeSet::new();
+    while arrived.len() < 2 {
+        arrived.insert(receiver.wait_for("messages over the simulator", |v| {
+            v.get("received").and_then(|_| note_of(v))
+        }));
+    }
+    assert_eq!(
+        arrived,
+        BTreeSet::from(["s1".to_string(), "s2".to_string()])
+    );
+    let mut acked = BTreeSet::new();
+    while acked.len() < 2 {
+        acked.insert(sender.wait_for("acks over the simulator", |v| {
+            v.get("ack").and_then(|_| note_of(v))
+        }));
+    }
+    // Broadcast the other way: a Command to 0 reaches node 1.
+    receiver.publish_command(0, "all");
+    sender.wait_for("the broadcast", |v| {
+        (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
+    });
+    drop(sender);
+    drop(receiver);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The driver section of node `id` on an emulated WHOI Micro-Modem.
+fn micromodem_driver(path: &Path) -> String {
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_WHOI_MICROMODEM
+  serial_port: "{}"
+  serial_baud: 19200
+}}"#,
+        path.display()
+    )
+}
+
+#[test]
+fn messages_cross_two_emulated_micro_modems_with_acks() {
+    let dir = scratch("micromodem");
+    let links: Vec<PathBuf> = [1, 2].iter().map(|id| dir.join(format!("modem{id}"))).collect();
+    // Two emulated modems 150 m apart on the simulated channel, each on a pty.
+    let mut emulator = Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(["modem", "emulate", "--modem-id", "1", "--modem-id", "2"])
+        .args(["--spacing", "150", "--duration", "60", "--link"])
+        .arg(&links[0])
+        .arg("--link")
+        .arg(&links[1])
+        .env_remove("RUST_BACKTRACE")
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("goby modem emulate starts");
+    let mut lines = BufReader::new(emulator.stdout.take().unwrap()).lines();
+    for id in [1, 2] {
+        let line = lines.next().expect("a line per modem").unwrap();
+        assert!(line.starts_with(&format!("modem {id}: ")), "{line}");
+    }
+    let mut paths = Vec::new();
+    for id in [1, 2] {
+        let config = node_config(
+            id,
+            &micromodem_driver(&links[(id - 1) as usize]),
+            5.0,
+            &dir.join(format!("node{id}")),
+        )
+        // The Micro-Modem's rate 0: one 32-byte frame.
+        .replace("rate: 6", "rate: 0");
+        let path = dir.join(format!("node{id}.cfg"));
+        std::fs::write(&path, config).unwrap();
+        paths.push(path);
+    }
+    let receiver = Node::start(&paths[1]);
+    let mut sender = Node::start(&paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    sender.publish_command(2, "acoustic");
+    let got = receiver.wait_for("the message through the modems", |v| {
+        v.get("received").map(|_| v.clone())
+    });
+    assert_eq!(got["msg"]["note"], "acoustic");
+    assert_eq!(got["src"], 1);
+    let acked = sender.wait_for("the ack through the modems", |v| {
+        v.get("ack").and_then(|_| note_of(v))
+    });
+    assert_eq!(acked, "acoustic");
+    // The mission log holds the NMEA sentences exchanged with the modem.
+    let log = std::fs::read_to_string(dir.join("node1").join("raw.log")).unwrap();
+    assert!(
+        log.lines().any(|l| l.contains(r#""text":"$CCCYC,"#)),
+        "no $CCCYC in the raw log"
+    );
+    drop(sender);
+    drop(receiver);
+    let _ = emulator.kill();
+    let _ = emulator.wait();
+    std::fs::remove_dir_all(&dir).unwrap();
+}

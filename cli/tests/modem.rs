@@ -1,0 +1,207 @@
+//! `goby modem emulate`: the printed pseudo-terminal speaks the Micro-Modem's
+//! NMEA, and drivers on two emulated modems talk through the simulator.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use modemdriver::micromodem::nmea::NmeaSentence;
+use modemdriver::micromodem::MicroModemDriver;
+use modemdriver::{DriverConfig, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome};
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
+use protos::goby::acomms::protobuf::MicroModemConfig;
+
+/// The emulator process, killed when dropped.
+struct Emulator {
+    child: Child,
+    paths: Vec<String>,
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts `goby modem emulate ARGS` and reads one `modem ID: PATH` line per modem.
+fn emulate(args: &[&str], modems: usize) -> Emulator {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(["modem", "emulate"])
+        .args(args)
+        .env_remove("RUST_BACKTRACE")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("goby runs");
+    let stdout = child.stdout.take().expect("piped");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut emulator = Emulator {
+        child,
+        paths: Vec::new(),
+    };
+    for _ in 0..modems {
+        let line = rx
+            .recv_timeout(Duration::from_secs(10))
+            .expect("a `modem ID: PATH` line");
+        let (_, path) = line.split_once(": ").expect("modem ID: PATH");
+        emulator.paths.push(path.to_string());
+    }
+    emulator
+}
+
+#[test]
+fn the_printed_pty_speaks_micromodem_nmea() {
+    let emulator = emulate(&["--modem-id", "3", "--duration", "20"], 1);
+    let mut tty = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&emulator.paths[0])
+        .expect("open the printed path");
+    let (tx, rx) = mpsc::channel();
+    let mut reader = tty.try_clone().expect("clone");
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 256];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 || tx.send(buf[..n].to_vec()).is_err() {
+                break;
+            }
+        }
+    });
+    let query = NmeaSentence::new("CC", "CFQ", vec!["SRC".into()]).to_string();
+    let clock = NmeaSentence::new(
+        "CC",
+        "CLK",
+        ["2024", "01", "02", "03", "04", "05"]
+            .map(String::from)
+            .to_vec(),
+    )
+    .to_string();
+    write!(tty, "{query}\r\n{clock}\r\n$CCCFQ,SRC*00\r\n").unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut text = String::new();
+    while !(text.contains("$CACLK") && text.contains("$CAERR")) && Instant::now() < deadline {
+        if let Ok(bytes) = rx.recv_timeout(Duration::from_millis(200)) {
+            text.push_str(&String::from_utf8_lossy(&bytes));
+        }
+    }
+    let lines: Vec<NmeaSentence> = text
+        .split("\r\n")
+        .filter_map(|l| NmeaSentence::parse(l.as_bytes()).ok())
+        .collect();
+    let addresses: Vec<String> = lines.iter().map(|s| s.address()).collect();
+    let cfg = lines.iter().find(|s| s.address() == "CACFG").expect(&text);
+    assert_eq!(cfg.fields, vec!["SRC", "3"]);
+    let clk = lines.iter().find(|s| s.address() == "CACLK").expect(&text);
+    assert_eq!(clk.fields, vec!["2024", "01", "02", "03", "04", "05"]);
+    // The line with a wrong checksum is refused with an error.
+    assert!(addresses.contains(&"CAERR".to_string()), "{text}");
+}
+
+fn mm_config(id: i32, path: &str) -> DriverConfig {
+    DriverConfig {
+        modem_id: Some(id),
+        serial_port: Some(path.to_string()),
+        micromodem: Some(MicroModemConfig {
+            response_timeout_ms: Some(1000),
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn drivers_talk_through_two_emulated_modems() {
+    let emulator = emulate(
+        &[
+            "--modem-id",
+            "1",
+            "--modem-id",
+            "2",
+            "--spacing",
+            "150",
+            "--duration",
+            "30",
+        ],
+        2,
+    );
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let limit = Duration::from_secs(15);
+        let mut d1 = MicroModemDriver::start(&mm_config(1, &emulator.paths[0])).unwrap();
+        let mut d2 = MicroModemDriver::start(&mm_config(2, &emulator.paths[1])).unwrap();
+        d1.initiate_transmission(ModemTransmission {
+            dest: Some(2),
+            rate: Some(0),
+            ack_requested: Some(true),
+            r#type: Some(TransmissionType::Data as i32),
+            ..Default::default()
+        })
+        .unwrap();
+        let frame = b"bench test, no modem".to_vec();
+        // Driver 1: answer the data request, then see the result and the ack.
+        let one = async {
+            let mut sent = false;
+            loop {
+                match d1.next_event().await.expect("running") {
+                    DriverEvent::DataRequest(r) => {
+                        let mut filled = r.template().clone();
+                        filled.frame = vec![frame.clone()];
+                        r.respond(filled);
+                    }
+                    DriverEvent::TransmitResult(r) => {
+                        assert_eq!(r.outcome, TransmitOutcome::Sent);
+                        sent = true;
+                    }
+                    DriverEvent::Received(mt) if mt.r#type() == TransmissionType::Ack => {
+                        assert!(sent);
+                        assert_eq!(mt.acked_frame, vec![0]);
+                        return;
+                    }
+                    DriverEvent::Status(DriverStatus::Disconnected { reason }) => {
+                        panic!("{reason}")
+                    }
+                    _ => {}
+                }
+            }
+        };
+        let two = async {
+            loop {
+                if let DriverEvent::Received(mt) = d2.next_event().await.expect("running") {
+                    if mt.r#type() == TransmissionType::Data {
+                        return mt;
+                    }
+                }
+            }
+        };
+        let (got, ()) = tokio::time::timeout(limit, async { tokio::join!(two, one) })
+            .await
+            .expect("data and ack through the simulated channel in time");
+        assert_eq!((got.src(), got.dest()), (1, 2));
+        assert_eq!(got.frame, vec![frame.clone()]);
+        d1.stop().await.unwrap();
+        d2.stop().await.unwrap();
+    });
+}
+
+#[test]
+fn bad_options_are_refused() {
+    let out = Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(["modem", "emulate", "--modem-id", "0"])
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--modem-id"));
+}

@@ -1,0 +1,756 @@
+//! Arithmetic codec (`dccl.arithmetic`), bit for bit that of libdccl 4:
+//! integer arithmetic coding (Witten, Neal and Cleary, 1987) with 32-bit code
+//! values, driven by a probability model registered by name on the codec
+//! (`dccl.arith.protobuf.ArithmeticModel`) and selected by the field option
+//! `[(dccl.field) = { codec: "dccl.arithmetic" [arithmetic] { model: "name" } }]`.
+//!
+//! A model maps values to symbols (`value_bound`), gives each symbol a
+//! frequency, and has two special symbols: end-of-array (ends a repeated
+//! field shorter than `max_repeat`, or stands for an absent optional field)
+//! and out-of-range (any value outside the bounds). Adaptive models add one
+//! to a symbol's frequency each time it is coded; the sender's and the
+//! receiver's copies therefore stay in step only if every message is decoded
+//! in the order it was encoded.
+//!
+//! The decoder starts from the field's minimum size and reads one more bit
+//! only while the next symbol is ambiguous, so it reads exactly the bits the
+//! encoder wrote and the fields after it decode correctly.
+//!
+//! Where libdccl's behaviour is undefined, this codec differs on purpose:
+//! a value outside the model's bounds is coded with the out-of-range symbol
+//! when the model gives it a frequency, and is an error otherwise; the
+//! out-of-range symbol decodes as NaN for `double`/`float` fields and as
+//! "not present" for other types; values nearest to the top bound are coded
+//! with the last symbol; with `eof_frequency: 0`, arrays shorter
+//! than `max_repeat` are filled up with the most probable symbol.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, PoisonError, RwLock};
+
+use prost_reflect::{EnumDescriptor, Kind, Value};
+
+use crate::bits::{BitReader, BitWriter};
+use crate::error::CodecError;
+use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec, RepeatBounds};
+use crate::registry::CodecRegistry;
+
+pub use protos::dccl::arith::protobuf::ArithmeticModel;
+
+/// Name under which the codec is registered.
+pub const NAME: &str = "dccl.arithmetic";
+/// Full name of the field option extension (number 1001 of `dccl.DCCLFieldOptions`).
+pub const OPTION_EXTENSION: &str = "arithmetic";
+
+const CODE_VALUE_BITS: u32 = 32;
+const TOP_VALUE: u64 = (1 << CODE_VALUE_BITS) - 1;
+const HALF: u64 = 1 << (CODE_VALUE_BITS - 1);
+const FIRST_QTR: u64 = HALF >> 1;
+const THIRD_QTR: u64 = HALF + FIRST_QTR;
+/// Largest allowed sum of a model's frequencies (keeps products within 64 bits).
+pub const MAX_FREQUENCY: u64 = (1 << (CODE_VALUE_BITS - 2)) - 1;
+
+/// A symbol: `EOF_SYMBOL`, `OUT_OF_RANGE_SYMBOL` or an index into `frequency`.
+type Symbol = i64;
+const EOF_SYMBOL: Symbol = -2;
+const OUT_OF_RANGE_SYMBOL: Symbol = -1;
+
+/// The field option (`[arithmetic] { model: "..." }`).
+#[derive(Clone, PartialEq, prost::Message)]
+struct ArithmeticOptions {
+    #[prost(string, optional, tag = "1")]
+    model: Option<String>,
+    #[prost(bool, optional, tag = "2")]
+    debug_assert: Option<bool>,
+}
+
+/// Cumulative frequencies, indexed by `symbol - EOF_SYMBOL`: entry `i` is the
+/// sum of the frequencies of every symbol up to and including symbol `i`.
+#[derive(Debug, Clone)]
+struct Cumulative(Vec<u64>);
+
+impl Cumulative {
+    fn total(&self) -> u64 {
+        self.0.last().copied().unwrap_or(0)
+    }
+
+    fn max_symbol(&self) -> Symbol {
+        self.0.len() as Symbol + EOF_SYMBOL - 1
+    }
+
+    fn at(&self, symbol: Symbol) -> u64 {
+        self.0[(symbol - EOF_SYMBOL) as usize]
+    }
+
+    /// `[low, high)` of a symbol.
+    fn range(&self, symbol: Symbol) -> (u64, u64) {
+        let low = if symbol == EOF_SYMBOL {
+            0
+        } else {
+            self.at(symbol - 1)
+        };
+        (low, self.at(symbol))
+    }
+
+    /// The symbols of the lowest and highest cumulative frequency of an
+    /// interval; equal when the interval holds one symbol only.
+    fn symbols(&self, low_freq: u64, high_freq: u64) -> (Symbol, Symbol) {
+        let first = (EOF_SYMBOL..=self.max_symbol())
+            .find(|&s| low_freq < self.at(s))
+            .unwrap_or(0);
+        let second = if first == self.max_symbol() || self.at(first) > high_freq {
+            first
+        } else {
+            first + 1
+        };
+        (first, second)
+    }
+
+    /// Adaptive update: one more occurrence of `symbol`.
+    fn update(&mut self, symbol: Symbol) {
+        let start = (symbol - EOF_SYMBOL) as usize;
+        for c in &mut self.0[start..] {
+            *c += 1;
+        }
+    }
+}
+
+/// A validated model with its adaptive state (one copy for encoding, one for decoding).
+#[derive(Debug)]
+pub struct Model {
+    user: ArithmeticModel,
+    initial: Cumulative,
+    encoder: Mutex<Cumulative>,
+    decoder: Mutex<Cumulative>,
+}
+
+fn invalid(model: &ArithmeticModel, reason: &str) -> CodecError {
+    CodecError::new(format!(
+        "invalid arithmetic model `{}`: {reason}",
+        model.name
+    ))
+}
+
+impl Model {
+    /// Validates a model as libdccl does.
+    pub fn new(user: ArithmeticModel) -> Result<Model, CodecError> {
+        if user.name.is_empty() {
+            return Err(invalid(&user, "missing required field `name`"));
+        }
+        if user.frequency.is_empty() {
+            return Err(invalid(&user, "no symbol (`frequency` is empty)"));
+        }
+        if user.frequency.contains(&0) {
+            return Err(invalid(&user, "all frequencies must be nonzero"));
+        }
+        let mut cumulative = Vec::with_capacity(user.frequency.len() + 2);
+        let mut sum = 0u64;
+        for f in [user.eof_frequency(), user.out_of_range_frequency()]
+            .into_iter()
+            .chain(user.frequency.iter().copied())
+        {
+            sum += f as u64;
+            cumulative.push(sum);
+        }
+        if sum > MAX_FREQUENCY {
+            return Err(invalid(
+                &user,
+                &format!("sum of all frequencies must be less than {MAX_FREQUENCY}"),
+            ));
+        }
+        if user.value_bound.len() != user.frequency.len() + 1 {
+            return Err(invalid(
+                &user,
+                "`value_bound` size must be exactly 1 more than number of symbols (= size of \
+                 `frequency`)",
+            ));
+        }
+        if user.value_bound.iter().any(|b| b.is_nan())
+            || user.value_bound.windows(2).any(|w| w[0] >= w[1])
+        {
+            return Err(invalid(&user, "`value_bound` must be strictly increasing"));
+        }
+        let initial = Cumulative(cumulative);
+        Ok(Model {
+            encoder: Mutex::new(initial.clone()),
+            decoder: Mutex::new(initial.clone()),
+            initial,
+            user,
+        })
+    }
+
+    /// The model as the user gave it.
+    pub fn user_model(&self) -> &ArithmeticModel {
+        &self.user
+    }
+
+    /// The symbol of a value (out-of-range symbol when outside the bounds).
+    fn value_to_symbol(&self, value: f64) -> Symbol {
+        let bounds = &self.user.value_bound;
+        let (first, last) = (bounds[0], bounds[bounds.len() - 1]);
+        if value.is_nan() || value < first || value > last {
+            return OUT_OF_RANGE_SYMBOL;
+        }
+        // Nearest of the two surrounding bounds, compared as libdccl does
+        // (on the squares of the values).
+        let upper = bounds.partition_point(|b| *b <= value);
+        let lower = upper.saturating_sub(1);
+        let symbol = match bounds.get(upper) {
+            Some(up) => {
+                let lower_diff = (bounds[lower] * bounds[lower] - value * value).abs();
+                let upper_diff = (up * up - value * value).abs();
+                if lower_diff < upper_diff {
+                    lower
+                } else {
+                    upper
+                }
+            }
+            None => lower,
+        };
+        // The top bound itself has no symbol of its own (libdccl's behaviour
+        // is undefined there): values nearest to it belong to the last symbol.
+        symbol.min(self.user.frequency.len() - 1) as Symbol
+    }
+
+    fn symbol_to_value(&self, symbol: Symbol) -> f64 {
+        if symbol == OUT_OF_RANGE_SYMBOL {
+            f64::NAN
+        } else {
+            self.user.value_bound[symbol as usize]
+        }
+    }
+
+    /// The most probable value symbol (first of equals).
+    fn most_probable_symbol(&self) -> Symbol {
+        let mut best = 0;
+        for (i, f) in self.user.frequency.iter().enumerate() {
+            if *f > self.user.frequency[best] {
+                best = i;
+            }
+        }
+        best as Symbol
+    }
+
+    fn lock(state: &Mutex<Cumulative>) -> std::sync::MutexGuard<'_, Cumulative> {
+        state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Largest size in bits of `max_repeat` values (libdccl's bound:
+    /// `ceil(log2(1/P)) + 1` for the least probable sequence).
+    fn max_size(&self, max_repeat: u32) -> u32 {
+        let total = (self.initial.total() as f64).log2();
+        let oor = match self.user.out_of_range_frequency() {
+            0 => MAX_FREQUENCY as u32,
+            f => f,
+        };
+        let lowest = oor.min(*self.user.frequency.iter().min().unwrap_or(&1)) as f64;
+        let n = max_repeat as f64;
+        let least_probable = (n * (total - lowest.log2())).ceil() as u32;
+        let eof = self.user.eof_frequency();
+        let least_probable_plus_eof = if eof != 0 {
+            (n * total - (n - 1.0) * lowest.log2() - (eof as f64).log2()).ceil() as u32
+        } else {
+            0
+        };
+        least_probable_plus_eof
+            .max(least_probable)
+            .saturating_add(1)
+    }
+
+    /// Smallest size in bits (0 for adaptive models: the decoder then looks
+    /// at the bits from the first one).
+    fn min_size(&self, max_repeat: u32) -> u32 {
+        if self.user.is_adaptive() {
+            return 0;
+        }
+        let total = (self.initial.total() as f64).log2();
+        let oor = self.user.out_of_range_frequency().max(1);
+        let eof = self.user.eof_frequency();
+        let empty = if eof != 0 {
+            (total - (eof as f64).log2()).ceil() as u32
+        } else {
+            u32::MAX
+        };
+        let highest = oor.max(*self.user.frequency.iter().max().unwrap_or(&1)) as f64;
+        let most_probable = (max_repeat as f64 * (total - highest.log2())).ceil() as u32;
+        empty.min(most_probable)
+    }
+
+    /// Encodes up to `max_repeat` values (fewer: followed by the end-of-array symbol).
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        values: &[f64],
+        max_repeat: u32,
+        update: bool,
+    ) -> Result<(), CodecError> {
+        let mut state = Self::lock(&self.encoder);
+        // A dry run codes on a copy, leaving the adaptive state as it is.
+        let mut scratch;
+        let model: &mut Cumulative = if update {
+            &mut state
+        } else {
+            scratch = state.clone();
+            &mut scratch
+        };
+        let mut low = 0u64;
+        let mut high = TOP_VALUE;
+        let mut follow = 0u32;
+        let mut bits = Vec::new();
+        for index in 0..max_repeat as usize {
+            let mut symbol = match values.get(index) {
+                Some(v) => self.value_to_symbol(*v),
+                None => EOF_SYMBOL,
+            };
+            if symbol == OUT_OF_RANGE_SYMBOL && self.user.out_of_range_frequency() == 0 {
+                return Err(CodecError::new(format!(
+                    "value {} is outside the bounds [{}, {}] of arithmetic model `{}`, \
+                     which has no out-of-range symbol (out_of_range_frequency: 0)",
+                    values[index],
+                    self.user.value_bound[0],
+                    self.user.value_bound[self.user.value_bound.len() - 1],
+                    self.user.name
+                )));
+            }
+            if symbol == EOF_SYMBOL && self.user.eof_frequency() == 0 {
+                symbol = self.most_probable_symbol();
+            }
+            let range = high - low + 1;
+            let (c_low, c_high) = model.range(symbol);
+            let total = model.total();
+            high = low + (range * c_high) / total - 1;
+            low += (range * c_low) / total;
+            model.update_if(self.user.is_adaptive(), symbol);
+            loop {
+                if high < HALF {
+                    emit(&mut bits, &mut follow, false);
+                } else if low >= HALF {
+                    emit(&mut bits, &mut follow, true);
+                    low -= HALF;
+                    high -= HALF;
+                } else if low >= FIRST_QTR && high < THIRD_QTR {
+                    follow += 1;
+                    low -= FIRST_QTR;
+                    high -= FIRST_QTR;
+                } else {
+                    break;
+                }
+                low <<= 1;
+                high = (high << 1) + 1;
+            }
+            if index == values.len() && self.user.eof_frequency() != 0 {
+                break;
+            }
+        }
+        // The fewest bits that pin the final interval down.
+        if low == 0 {
+            if high != TOP_VALUE || follow > 0 {
+                emit(&mut bits, &mut follow, false);
+            }
+        } else if high == TOP_VALUE {
+            emit(&mut bits, &mut follow, true);
+        } else {
+            follow += 1;
+            emit(&mut bits, &mut follow, low >= FIRST_QTR);
+        }
+        for bit in bits {
+            out.write_bool(bit);
+        }
+        Ok(())
+    }
+
+    /// Decodes up to `max_repeat` values, reading `min_bits` bits first and
+    /// then one bit at a time while the next symbol is ambiguous.
+    fn decode(
+        &self,
+        input: &mut BitReader<'_>,
+        max_repeat: u32,
+        min_bits: u32,
+    ) -> Result<Vec<f64>, CodecError> {
+        let mut model = Self::lock(&self.decoder);
+        let mut value = 0u64;
+        for i in 0..min_bits {
+            let bit = input.read_bool()?;
+            if i < CODE_VALUE_BITS && bit {
+                value |= 1 << (CODE_VALUE_BITS - 1 - i);
+            }
+        }
+        // Number of low bits of `value` not read yet (negative: more read than used).
+        let mut unknown = CODE_VALUE_BITS as i64 - min_bits as i64;
+        let mut low = 0u64;
+        let mut high = TOP_VALUE;
+        let mut values = Vec::new();
+        for _ in 0..max_repeat {
+            let range = high - low + 1;
+            let symbol = loop {
+                let total = model.total();
+                let value_high = if unknown > 0 {
+                    value.wrapping_add((1u64 << unknown.min(63)) - 1)
+                } else {
+                    value
+                };
+                let c_low = (value.wrapping_sub(low).wrapping_add(1))
+                    .wrapping_mul(total)
+                    .wrapping_sub(1)
+                    / range;
+                let c_high = (value_high.wrapping_sub(low).wrapping_add(1))
+                    .wrapping_mul(total)
+                    .wrapping_sub(1)
+                    / range;
+                // libdccl keeps these in 32-bit unsigned integers.
+                let (first, second) = model.symbols(c_low as u32 as u64, c_high as u32 as u64);
+                if first == second {
+                    break first;
+                }
+                let bit = input.read_bool()?;
+                unknown -= 1;
+                if unknown >= 0 && bit {
+                    value |= 1 << unknown;
+                }
+            };
+            let (c_low, c_high) = model.range(symbol);
+            let total = model.total();
+            high = low + (range * c_high) / total - 1;
+            low += (range * c_low) / total;
+            model.update_if(self.user.is_adaptive(), symbol);
+            if symbol == EOF_SYMBOL {
+                break;
+            }
+            values.push(self.symbol_to_value(symbol));
+            loop {
+                if high < HALF {
+                } else if low >= HALF {
+                    value = value.wrapping_sub(HALF);
+                    low -= HALF;
+                    high -= HALF;
+                } else if low >= FIRST_QTR && high < THIRD_QTR {
+                    value = value.wrapping_sub(FIRST_QTR);
+                    low -= FIRST_QTR;
+                    high -= FIRST_QTR;
+                } else {
+                    break;
+                }
+                low <<= 1;
+                high = (high << 1) + 1;
+                value = value.wrapping_shl(1);
+                unknown += 1;
+            }
+        }
+        Ok(values)
+    }
+}
+
+impl Cumulative {
+    fn update_if(&mut self, adaptive: bool, symbol: Symbol) {
+        if adaptive {
+            self.update(symbol);
+        }
+    }
+}
+
+fn emit(bits: &mut Vec<bool>, follow: &mut u32, bit: bool) {
+    bits.push(bit);
+    while *follow > 0 {
+        bits.push(!bit);
+        *follow -= 1;
+    }
+}
+
+/// The models of one codec, by name. Shared by every field that uses them;
+/// setting a model again replaces it (and restarts an adaptive model).
+#[derive(Debug, Default)]
+pub struct ArithmeticModels {
+    models: RwLock<HashMap<String, Arc<Model>>>,
+}
+
+impl ArithmeticModels {
+    /// An empty set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Validates and registers (or replaces) a model under its name.
+    pub fn set(&self, model: ArithmeticModel) -> Result<(), CodecError> {
+        let model = Model::new(model)?;
+        let name = model.user.name.clone();
+        self.models
+            .write()
+            .unwrap_or_else(PoisonError::into_inner)
+            .insert(name, Arc::new(model));
+        Ok(())
+    }
+
+    /// The model registered under `name`.
+    pub fn get(&self, name: &str) -> Option<Arc<Model>> {
+        self.models
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .get(name)
+            .cloned()
+    }
+
+    /// Names of the registered models, sorted.
+    pub fn names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self
+            .models
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .keys()
+            .cloned()
+            .collect();
+        v.sort();
+        v
+    }
+}
+
+/// Parses models in protobuf text format, one `ArithmeticModel` per line
+/// (blank lines and lines starting with `#` are skipped).
+pub fn parse_models(text: &str) -> Result<Vec<ArithmeticModel>, CodecError> {
+    let desc = protos::DESCRIPTOR_POOL
+        .get_message_by_name("dccl.arith.protobuf.ArithmeticModel")
+        .ok_or_else(|| CodecError::new("ArithmeticModel descriptor missing"))?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let msg = prost_reflect::DynamicMessage::parse_text_format(desc.clone(), line)
+            .map_err(|e| CodecError::new(format!("arithmetic model on line {}: {e}", n + 1)))?;
+        let has_name = msg.has_field_by_name("name");
+        let model: ArithmeticModel = msg
+            .transcode_to()
+            .map_err(|e| CodecError::new(format!("arithmetic model on line {}: {e}", n + 1)))?;
+        if !has_name {
+            return Err(CodecError::new(format!(
+                "arithmetic model on line {}: missing required field `name`",
+                n + 1
+            )));
+        }
+        out.push(model);
+    }
+    Ok(out)
+}
+
+/// How field values map to the codec's `f64` values.
+#[derive(Debug, Clone)]
+enum FieldType {
+    Int32,
+    Int64,
+    Uint32,
+    Uint64,
+    Double,
+    Float,
+    Bool,
+    Enum(EnumDescriptor),
+}
+
+impl FieldType {
+    fn of(kind: &Kind) -> Option<FieldType> {
+        Some(match kind {
+            Kind::Int32 | Kind::Sint32 | Kind::Sfixed32 => FieldType::Int32,
+            Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => FieldType::Int64,
+            Kind::Uint32 | Kind::Fixed32 => FieldType::Uint32,
+            Kind::Uint64 | Kind::Fixed64 => FieldType::Uint64,
+            Kind::Double => FieldType::Double,
+            Kind::Float => FieldType::Float,
+            Kind::Bool => FieldType::Bool,
+            Kind::Enum(e) => FieldType::Enum(e.clone()),
+            _ => return None,
+        })
+    }
+
+    fn to_f64(&self, value: &Value) -> Result<f64, CodecError> {
+        Ok(match value {
+            Value::I32(x) => *x as f64,
+            Value::I64(x) => *x as f64,
+            Value::U32(x) => *x as f64,
+            Value::U64(x) => *x as f64,
+            Value::F64(x) => *x,
+            Value::F32(x) => *x as f64,
+            Value::Bool(b) => *b as u8 as f64,
+            Value::EnumNumber(n) => *n as f64,
+            other => {
+                return Err(CodecError::new(format!(
+                    "value {other:?} cannot be arithmetic coded"
+                )))
+            }
+        })
+    }
+
+    /// The field value of a decoded number (`None`: not present).
+    fn value_of(&self, v: f64) -> Option<Value> {
+        if v.is_nan() {
+            return match self {
+                FieldType::Double => Some(Value::F64(v)),
+                FieldType::Float => Some(Value::F32(v as f32)),
+                _ => None,
+            };
+        }
+        Some(match self {
+            FieldType::Int32 => Value::I32(v as i32),
+            FieldType::Int64 => Value::I64(v as i64),
+            FieldType::Uint32 => Value::U32(v as u32),
+            FieldType::Uint64 => Value::U64(v as u64),
+            FieldType::Double => Value::F64(v),
+            FieldType::Float => Value::F32(v as f32),
+            FieldType::Bool => Value::Bool(v != 0.0),
+            FieldType::Enum(e) => Value::EnumNumber(e.get_value(v as i32)?.number()),
+        })
+    }
+}
+
+/// The arithmetic field codec.
+#[derive(Debug)]
+pub struct ArithmeticCodec {
+    name: String,
+    version: i32,
+    model_name: String,
+    models: Arc<ArithmeticModels>,
+    field_type: FieldType,
+    /// Its model when the field was loaded (sizes are computed from it).
+    loaded_model: Arc<Model>,
+}
+
+impl ArithmeticCodec {
+    /// Creates the codec for a field, or `None` for types it cannot code
+    /// (strings, bytes, messages). Fails when the option or the model is missing.
+    pub fn create(
+        spec: &FieldSpec<'_>,
+        name: &str,
+        models: &Arc<ArithmeticModels>,
+    ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+        let Some(field_type) = FieldType::of(&spec.kind) else {
+            return Ok(None);
+        };
+        let options: ArithmeticOptions = spec
+            .option_extension(OPTION_EXTENSION)?
+            .ok_or_else(|| CodecError::new("missing (dccl.field).arithmetic"))?;
+        let model_name = options
+            .model
+            .ok_or_else(|| CodecError::new("missing (dccl.field).arithmetic.model"))?;
+        let loaded_model = models.get(&model_name).ok_or_else(|| {
+            CodecError::new(format!(
+                "no such (dccl.field).arithmetic.model called \"{model_name}\" loaded"
+            ))
+        })?;
+        Ok(Some(Arc::new(ArithmeticCodec {
+            name: name.to_string(),
+            version: spec.codec_version,
+            model_name,
+            models: models.clone(),
+            field_type,
+            loaded_model,
+        })))
+    }
+
+    /// The model now registered under the field's model name.
+    fn model(&self) -> Result<Arc<Model>, CodecError> {
+        self.models.get(&self.model_name).ok_or_else(|| {
+            CodecError::new(format!(
+                "arithmetic model \"{}\" is no longer registered",
+                self.model_name
+            ))
+        })
+    }
+
+    fn encode_values(
+        &self,
+        out: &mut BitWriter,
+        values: &[Value],
+        max_repeat: u32,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        let numbers = values
+            .iter()
+            .take(max_repeat as usize)
+            .map(|v| self.field_type.to_f64(v))
+            .collect::<Result<Vec<f64>, _>>()?;
+        self.model()?
+            .encode(out, &numbers, max_repeat, !ctx.dry_run)
+    }
+
+    fn decode_values(
+        &self,
+        input: &mut BitReader<'_>,
+        max_repeat: u32,
+    ) -> Result<Vec<Value>, CodecError> {
+        let model = self.model()?;
+        let min_bits = model.min_size(max_repeat);
+        Ok(model
+            .decode(input, max_repeat, min_bits)?
+            .into_iter()
+            .filter_map(|v| self.field_type.value_of(v))
+            .collect())
+    }
+}
+
+impl FieldCodec for ArithmeticCodec {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn codec_version(&self) -> i32 {
+        self.version
+    }
+    fn min_size(&self) -> u32 {
+        self.loaded_model.min_size(1)
+    }
+    fn max_size(&self) -> u32 {
+        self.loaded_model.max_size(1)
+    }
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        self.encode_values(out, value.map(std::slice::from_ref).unwrap_or(&[]), 1, ctx)
+    }
+    fn decode(
+        &self,
+        input: &mut BitReader<'_>,
+        _ctx: &DecodeContext,
+    ) -> Result<Option<Value>, CodecError> {
+        Ok(self.decode_values(input, 1)?.into_iter().next())
+    }
+    fn encode_repeated(
+        &self,
+        out: &mut BitWriter,
+        values: &[Value],
+        bounds: RepeatBounds,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        if ctx.strict && values.len() > bounds.max as usize {
+            return Err(CodecError::new(format!(
+                "{} values exceed max_repeat {}",
+                values.len(),
+                bounds.max
+            )));
+        }
+        self.encode_values(out, values, bounds.max, ctx)
+    }
+    fn decode_repeated(
+        &self,
+        input: &mut BitReader<'_>,
+        bounds: RepeatBounds,
+        _ctx: &DecodeContext,
+    ) -> Result<Vec<Value>, CodecError> {
+        self.decode_values(input, bounds.max)
+    }
+    fn min_size_repeated(&self, bounds: RepeatBounds) -> u32 {
+        self.loaded_model.min_size(bounds.max)
+    }
+    fn max_size_repeated(&self, bounds: RepeatBounds) -> u32 {
+        self.loaded_model.max_size(bounds.max)
+    }
+}
+
+/// Registers the codec as `dccl.arithmetic` (and libdccl's older name
+/// `_arithmetic`), its models taken from `models`.
+pub fn register(registry: &mut CodecRegistry, models: Arc<ArithmeticModels>) {
+    for name in [NAME, "_arithmetic"] {
+        let models = models.clone();
+        registry.register(name, move |spec: &FieldSpec<'_>| {
+            ArithmeticCodec::create(spec, NAME, &models)
+        });
+    }
+}

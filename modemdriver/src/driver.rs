@@ -1,0 +1,420 @@
+//! The driver interface: a running driver task, the commands it takes and the
+//! events it reports.
+//!
+//! A driver is started by its own constructor (e.g.
+//! [`UdpDriver::start`](crate::udp::UdpDriver::start)), which spawns a tokio
+//! task and returns a [`Driver`]. The layer above then
+//! - asks for transmissions with [`Driver::initiate_transmission`] (or
+//!   [`DriverHandle::initiate_transmission`] from another task),
+//! - reads [`DriverEvent`]s with [`Driver::next_event`], answering each
+//!   [`DriverEvent::DataRequest`] with the frames to send,
+//! - stops the driver with [`Driver::stop`].
+
+use std::time::Duration;
+
+use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::ModemTransmission;
+use tokio::sync::{mpsc, oneshot};
+use tokio::task::JoinHandle;
+
+/// Why a driver could not start or take a command.
+#[derive(Debug, thiserror::Error)]
+pub enum DriverError {
+    /// The configuration is missing something or holds a bad value.
+    #[error("bad driver configuration: {0}")]
+    Config(String),
+    /// An I/O operation failed (e.g. binding a socket, opening a port).
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The driver task has ended.
+    #[error("the driver has stopped")]
+    Stopped,
+}
+
+impl DriverError {
+    /// Builds a [`DriverError::Io`].
+    pub fn io(context: impl Into<String>, source: std::io::Error) -> Self {
+        DriverError::Io {
+            context: context.into(),
+            source,
+        }
+    }
+}
+
+/// A command to a driver task.
+#[derive(Debug)]
+pub enum DriverCommand {
+    /// Start a transmission (data, or an acknowledgement ...).
+    Initiate(ModemTransmission),
+    /// A driver-specific request (e.g. a Micro-Modem two-way ping); drivers
+    /// that do not know the message report [`DriverStatus::Unsupported`].
+    Specific(DynamicMessage),
+    /// Stop; the sender is told when the task is done.
+    Stop(oneshot::Sender<()>),
+}
+
+/// What a driver reports.
+#[derive(Debug)]
+pub enum DriverEvent {
+    /// A transmission heard on the link (data or acknowledgement), whoever it
+    /// is addressed to.
+    Received(ModemTransmission),
+    /// The outcome of a transmission this node initiated.
+    TransmitResult(TransmitResult),
+    /// The driver is about to send and asks for the frames.
+    DataRequest(DataRequest),
+    /// A raw line or datagram, as read from or written to the device.
+    Raw(RawMessage),
+    /// A fault met, or a recovery from one.
+    Status(DriverStatus),
+    /// A driver-specific result (e.g. a Micro-Modem ranging reply).
+    Specific(SpecificReport),
+}
+
+/// A request to fill the frames of a transmission at the moment of sending.
+///
+/// Answer with [`DataRequest::respond`]. Dropping the request (or not
+/// answering within the driver's data request timeout) sends no data.
+#[derive(Debug)]
+pub struct DataRequest {
+    template: ModemTransmission,
+    reply: oneshot::Sender<ModemTransmission>,
+}
+
+impl DataRequest {
+    /// The transmission to fill: `src`, `dest`, `rate`, `max_num_frames`,
+    /// `max_frame_bytes` and `frame_start` are set by the driver.
+    pub fn template(&self) -> &ModemTransmission {
+        &self.template
+    }
+
+    /// Answers with the filled transmission (frames added to the template;
+    /// `dest` may be set when the template's is -1).
+    pub fn respond(self, filled: ModemTransmission) {
+        // The driver may have given up waiting: nothing to do then.
+        let _ = self.reply.send(filled);
+    }
+}
+
+/// The outcome of an initiated transmission.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransmitResult {
+    /// The transmission as sent (frames included) or as attempted.
+    pub transmission: ModemTransmission,
+    /// What happened.
+    pub outcome: TransmitOutcome,
+}
+
+/// What happened to an initiated transmission.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TransmitOutcome {
+    /// It went out on the link.
+    Sent,
+    /// The layer above gave no data to send: nothing went out.
+    NothingToSend,
+    /// It could not be sent; the frames (if any were filled) are in the
+    /// result's transmission so that the caller can queue them again.
+    Failed(String),
+}
+
+/// Direction of a raw message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RawDirection {
+    /// Read from the device.
+    Incoming,
+    /// Written to the device.
+    Outgoing,
+}
+
+/// A raw line (delimiter removed) or datagram, for logging and debugging.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawMessage {
+    /// Read or written.
+    pub direction: RawDirection,
+    /// The bytes.
+    pub bytes: Vec<u8>,
+    /// The peer (e.g. a socket address), when the device has several.
+    pub peer: Option<String>,
+}
+
+/// A fault met by a driver, or a recovery from one.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DriverStatus {
+    /// The driver configured its device and is ready.
+    Ready,
+    /// A line whose checksum does not match; it was ignored.
+    BadChecksum {
+        /// The line as read.
+        line: String,
+    },
+    /// A line or datagram that cannot be understood; it was ignored.
+    Unparseable {
+        /// The line or datagram as read (lossy UTF-8).
+        line: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A command got no answer in time.
+    ResponseTimeout {
+        /// The command.
+        command: String,
+        /// Attempts made so far.
+        attempt: u32,
+    },
+    /// A transmission is attempted again after a failure.
+    Retrying {
+        /// Why.
+        reason: String,
+        /// The attempt about to be made (2 for the first retry).
+        attempt: u32,
+    },
+    /// The modem restarted; the driver configures it again.
+    ModemReset,
+    /// Nothing was heard from the modem for this long.
+    ModemSilent {
+        /// Seconds of silence.
+        seconds: f64,
+    },
+    /// The modem reported an error ($CAERR, $CAMSG).
+    ModemError {
+        /// The modem's words.
+        message: String,
+    },
+    /// The device went away.
+    Disconnected {
+        /// Why.
+        reason: String,
+    },
+    /// The device is back.
+    Reconnected,
+    /// The answer to a data request broke the template's limits; the
+    /// offending frames were dropped.
+    DataRejected {
+        /// What was wrong.
+        reason: String,
+    },
+    /// Sending or receiving on the device failed (the driver goes on).
+    LinkError {
+        /// What failed.
+        reason: String,
+    },
+    /// The driver does not know a driver-specific request.
+    Unsupported {
+        /// The request's message type.
+        message: String,
+    },
+}
+
+/// A driver-specific result: a protobuf message whose type the driver
+/// documents (e.g. `goby.acomms.protobuf.MicroModemSpecific`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpecificReport {
+    /// The result.
+    pub message: DynamicMessage,
+}
+
+impl SpecificReport {
+    /// Wraps a generated message.
+    pub fn new(message: &impl ReflectMessage) -> Self {
+        SpecificReport {
+            message: message.transcode_to_dynamic(),
+        }
+    }
+
+    /// The result as a generated message type, when it is of that type.
+    pub fn to<T: ReflectMessage + Default>(&self) -> Option<T> {
+        if self.message.descriptor() != T::default().descriptor() {
+            return None;
+        }
+        self.message.transcode_to::<T>().ok()
+    }
+}
+
+/// Where a driver task sends its events; also asks the layer above for data.
+#[derive(Debug, Clone)]
+pub struct EventSink {
+    events: mpsc::UnboundedSender<DriverEvent>,
+}
+
+impl EventSink {
+    /// Sends an event (dropped silently if nobody listens any more).
+    pub fn emit(&self, event: DriverEvent) {
+        let _ = self.events.send(event);
+    }
+
+    /// Reports a status.
+    pub fn status(&self, status: DriverStatus) {
+        self.emit(DriverEvent::Status(status));
+    }
+
+    /// Asks the layer above to fill `template` and waits up to `timeout`.
+    ///
+    /// The answer is checked against the template: at most `max_num_frames`
+    /// frames, each at most `max_frame_bytes` long (longer ones are dropped
+    /// and reported); `src`, `rate` and `frame_start` are kept from the
+    /// template. With no answer, the template comes back without frames.
+    pub async fn request_data(
+        &self,
+        template: ModemTransmission,
+        timeout: Duration,
+    ) -> ModemTransmission {
+        let (reply, answer) = oneshot::channel();
+        self.emit(DriverEvent::DataRequest(DataRequest {
+            template: template.clone(),
+            reply,
+        }));
+        let filled = match tokio::time::timeout(timeout, answer).await {
+            Ok(Ok(filled)) => filled,
+            _ => return template,
+        };
+        let mut out = template.clone();
+        if template.dest() == -1 {
+            out.dest = filled.dest;
+        }
+        out.ack_requested = filled.ack_requested.or(template.ack_requested);
+        let max_frames = template.max_num_frames() as usize;
+        for (i, frame) in filled.frame.into_iter().enumerate() {
+            if i >= max_frames {
+                self.status(DriverStatus::DataRejected {
+                    reason: format!(
+                        "data request answer holds more than max_num_frames = {max_frames} frames; frames from {i} on dropped"
+                    ),
+                });
+                break;
+            }
+            match template.max_frame_bytes {
+                Some(max) if frame.len() > max as usize => {
+                    self.status(DriverStatus::DataRejected {
+                        reason: format!(
+                            "frame {i} of {} bytes exceeds max_frame_bytes = {max}; dropped",
+                            frame.len()
+                        ),
+                    });
+                    out.frame.push(Vec::new());
+                }
+                _ => out.frame.push(frame),
+            }
+        }
+        // Trailing empty frames carry nothing.
+        while out.frame.last().is_some_and(|f| f.is_empty()) {
+            out.frame.pop();
+        }
+        out
+    }
+}
+
+/// What a driver task is given: its commands and its event sink.
+#[derive(Debug)]
+pub struct DriverContext {
+    /// Commands from the [`Driver`].
+    pub commands: mpsc::UnboundedReceiver<DriverCommand>,
+    /// Where to report.
+    pub events: EventSink,
+}
+
+/// A cloneable sender of commands to a running driver.
+#[derive(Debug, Clone)]
+pub struct DriverHandle {
+    commands: mpsc::UnboundedSender<DriverCommand>,
+}
+
+impl DriverHandle {
+    /// Asks the driver to initiate a transmission.
+    pub fn initiate_transmission(
+        &self,
+        transmission: ModemTransmission,
+    ) -> Result<(), DriverError> {
+        self.commands
+            .send(DriverCommand::Initiate(transmission))
+            .map_err(|_| DriverError::Stopped)
+    }
+
+    /// Sends a driver-specific request (a protobuf message the driver documents).
+    pub fn initiate_specific(&self, request: &impl ReflectMessage) -> Result<(), DriverError> {
+        self.commands
+            .send(DriverCommand::Specific(request.transcode_to_dynamic()))
+            .map_err(|_| DriverError::Stopped)
+    }
+}
+
+/// A running driver.
+#[derive(Debug)]
+pub struct Driver {
+    name: &'static str,
+    handle: DriverHandle,
+    events: mpsc::UnboundedReceiver<DriverEvent>,
+    task: JoinHandle<()>,
+}
+
+impl Driver {
+    /// Spawns a driver task. `run` gets the task's [`DriverContext`] and
+    /// returns when it is told to stop (or its commands are closed).
+    pub fn spawn<F, Fut>(name: &'static str, run: F) -> Driver
+    where
+        F: FnOnce(DriverContext) -> Fut,
+        Fut: std::future::Future<Output = ()> + Send + 'static,
+    {
+        let (command_tx, command_rx) = mpsc::unbounded_channel();
+        let (event_tx, event_rx) = mpsc::unbounded_channel();
+        let context = DriverContext {
+            commands: command_rx,
+            events: EventSink { events: event_tx },
+        };
+        let task = tokio::spawn(run(context));
+        Driver {
+            name,
+            handle: DriverHandle {
+                commands: command_tx,
+            },
+            events: event_rx,
+            task,
+        }
+    }
+
+    /// Name of the driver ("udp", "simulator", "micromodem", ...).
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+
+    /// A sender of commands usable from other tasks.
+    pub fn handle(&self) -> DriverHandle {
+        self.handle.clone()
+    }
+
+    /// Asks the driver to initiate a transmission.
+    pub fn initiate_transmission(
+        &self,
+        transmission: ModemTransmission,
+    ) -> Result<(), DriverError> {
+        self.handle.initiate_transmission(transmission)
+    }
+
+    /// Sends a driver-specific request.
+    pub fn initiate_specific(&self, request: &impl ReflectMessage) -> Result<(), DriverError> {
+        self.handle.initiate_specific(request)
+    }
+
+    /// The next event; `None` once the driver has stopped and every event was read.
+    pub async fn next_event(&mut self) -> Option<DriverEvent> {
+        self.events.recv().await
+    }
+
+    /// Stops the driver and waits for its task to end.
+    pub async fn stop(self) -> Result<(), DriverError> {
+        let (done_tx, done_rx) = oneshot::channel();
+        if self
+            .handle
+            .commands
+            .send(DriverCommand::Stop(done_tx))
+            .is_ok()
+        {
+            let _ = done_rx.await;
+        }
+        self.task.await.map_err(|_| DriverError::Stopped)
+    }
+}

@@ -1,0 +1,45 @@
+//! Modem drivers behind one interface.
+//!
+//! No two acoustic modems speak alike. The rest of the stack talks to a
+//! [`Driver`]: it asks for a transmission with a
+//! [`ModemTransmission`](protos::goby::acomms::protobuf::ModemTransmission)
+//! and reads [`DriverEvent`]s — received transmissions, transmit results, data
+//! requests (the driver asks the layer above to fill frames at the moment of
+//! sending), raw lines or datagrams for logging, and status reports (faults
+//! and recoveries). Hardware-specific features (Micro-Modem ranging,
+//! mini-packets) travel as protobuf messages through
+//! [`Driver::initiate_specific`] and [`DriverEvent::Specific`], so the common
+//! interface stays the same for every driver.
+//!
+//! Drivers:
+//! - [`udp::UdpDriver`]: one datagram per transmission, holding its protobuf
+//!   encoding (as Goby's UDP driver does).
+//! - [`sim::SimulatorDriver`]: a multi-node acoustic channel on one machine
+//!   (propagation delay, Micro-Modem rates and bit rates, seeded loss, half
+//!   duplex, collisions).
+//! - [`micromodem::MicroModemDriver`]: the WHOI Micro-Modem, NMEA-0183 over a
+//!   serial port; [`micromodem::emulator`] speaks the modem's side.
+//!
+//! Layers, one concept per module: [`link`] moves lines or datagrams and
+//! composes a fault injector ([`link::fault`]) and a raw tracer
+//! ([`link::trace`]) around any device; [`micromodem::nmea`] and
+//! [`micromodem::sentence`] are the wire representations; the drivers sit on
+//! top.
+
+#![warn(missing_docs)]
+
+pub mod config;
+pub mod driver;
+pub mod link;
+pub mod micromodem;
+pub mod rate;
+pub mod sim;
+pub mod time;
+pub mod udp;
+
+pub use driver::{
+    DataRequest, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverHandle,
+    DriverStatus, EventSink, RawDirection, RawMessage, SpecificReport, TransmitOutcome,
+    TransmitResult,
+};
+pub use protos::goby::acomms::protobuf::{DriverConfig, ModemTransmission};

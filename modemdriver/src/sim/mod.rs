@@ -1,0 +1,396 @@
+//! The acoustic channel simulator: a driver whose "water" is shared by the
+//! nodes of one process ([`medium::Medium`]).
+//!
+//! - Propagation: a packet sent at `t` by a node at `p_s` starts arriving at
+//!   a node at `p_r` at `t + |p_r - p_s| / sound_speed` (1500 m/s by default).
+//! - Rates as on the Micro-Modem ([`crate::rate`]): the rate fixes the frame
+//!   count and size offered to the layer above and, with the bit rate, the
+//!   time on the water (`packet_overhead_seconds` + whole frames' bits).
+//!   Acknowledgements and driver-specific packets take the overhead only.
+//! - Loss: each reception is lost with probability `packet_loss`, drawn
+//!   from the receiver's `seed`, the sender's id and the sender's packet
+//!   number, so runs repeat exactly whatever the order of events.
+//! - Half duplex: a node hears nothing while it transmits, and a node sends
+//!   one packet at a time.
+//! - Collisions: receptions that overlap in time at a receiver are all lost.
+//!
+//! Data addressed to a node with `ack_requested` is acknowledged by that
+//! node with an `ACK` packet, itself subject to the channel.
+//!
+//! Nodes in several processes: with `udp_local` and `udp_peer` set, each
+//! packet also goes to the peers over UDP ([`udp_medium`]), with its
+//! wall-clock start time; use real time (not tokio's paused clock) then.
+
+pub mod medium;
+pub mod reception;
+pub mod udp_medium;
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::time::Duration;
+
+use prost_reflect::ReflectMessage;
+use std::net::{IpAddr, SocketAddr};
+
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, udp_driver_config::EndPoint, DriverConfig,
+    ModemTransmission, SimulatorDriverConfig,
+};
+use tokio::net::UdpSocket;
+use tokio::sync::mpsc;
+use tokio::time::Instant;
+
+use crate::config;
+use crate::driver::{
+    Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
+    TransmitOutcome, TransmitResult,
+};
+use crate::rate;
+use crate::time::now_micros;
+use medium::{Airborne, Medium};
+use reception::{Position, Receiver};
+use udp_medium::UdpMedium;
+
+/// How long the simulator waits for the layer above to fill a data request.
+pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// The acoustic channel simulator driver.
+#[derive(Debug)]
+pub struct SimulatorDriver;
+
+impl SimulatorDriver {
+    /// Starts a node on the in-process channel named by
+    /// `simulator.channel`, and on UDP when `udp_local` is set.
+    /// Must be called within a tokio runtime.
+    pub fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
+        let sim = sim_config(config)?;
+        let medium = Medium::named(sim.channel());
+        let udp = match &sim.udp_local {
+            None => None,
+            Some(local) => {
+                let addr = endpoint(local, "udp_local")?;
+                let bound = std::net::UdpSocket::bind(addr)
+                    .and_then(|s| s.set_nonblocking(true).map(|()| s))
+                    .and_then(UdpSocket::from_std)
+                    .map_err(|e| DriverError::io(format!("cannot bind UDP {addr}"), e))?;
+                let socket = bound;
+                let peers = sim
+                    .udp_peer
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| endpoint(p, &format!("udp_peer[{i}]")))
+                    .collect::<Result<Vec<_>, _>>()?;
+                Some(UdpMedium::new(socket, peers))
+            }
+        };
+        Self::spawn(config, medium, udp)
+    }
+
+    /// Starts a node on the given in-process channel only.
+    pub fn start_on(config: &DriverConfig, medium: Arc<Medium>) -> Result<Driver, DriverError> {
+        Self::spawn(config, medium, None)
+    }
+
+    fn spawn(
+        config: &DriverConfig,
+        medium: Arc<Medium>,
+        udp: Option<UdpMedium>,
+    ) -> Result<Driver, DriverError> {
+        let modem_id = config::modem_id(config)?;
+        let sim = sim_config(config)?.clone();
+        if !sim.sound_speed().is_finite() || sim.sound_speed() <= 0.0 {
+            return Err(DriverError::Config(format!(
+                "SimulatorDriverConfig.sound_speed: {} is not positive",
+                sim.sound_speed()
+            )));
+        }
+        if !(0.0..=1.0).contains(&sim.packet_loss()) {
+            return Err(DriverError::Config(format!(
+                "SimulatorDriverConfig.packet_loss: {} is not a probability",
+                sim.packet_loss()
+            )));
+        }
+        if !sim.packet_overhead_seconds().is_finite() || sim.packet_overhead_seconds() < 0.0 {
+            return Err(DriverError::Config(format!(
+                "SimulatorDriverConfig.packet_overhead_seconds: {} is negative",
+                sim.packet_overhead_seconds()
+            )));
+        }
+        for (i, n) in sim.node.iter().enumerate() {
+            if ![n.x(), n.y(), n.z()].iter().all(|v| v.is_finite()) {
+                return Err(DriverError::Config(format!(
+                    "SimulatorDriverConfig.node[{i}]: position of modem_id {} is not finite",
+                    n.modem_id
+                )));
+            }
+        }
+        let position = |id: i32| {
+            sim.node
+                .iter()
+                .find(|n| n.modem_id == id)
+                .map(|n| Position::new(n.x(), n.y(), n.z()))
+        };
+        if position(modem_id).is_none() {
+            return Err(DriverError::Config(format!(
+                "SimulatorDriverConfig.node: no position for this node's modem_id {modem_id}"
+            )));
+        }
+        let airborne = medium.join(modem_id);
+        Ok(Driver::spawn("simulator", move |ctx| {
+            run(modem_id, sim, medium, udp, airborne, ctx)
+        }))
+    }
+}
+
+fn endpoint(ep: &EndPoint, what: &str) -> Result<SocketAddr, DriverError> {
+    let ip: IpAddr = ep.ip().parse().map_err(|e| {
+        DriverError::Config(format!(
+            "SimulatorDriverConfig.{what}.ip: {:?} is not an IP address ({e})",
+            ep.ip()
+        ))
+    })?;
+    let port = u16::try_from(ep.port).map_err(|_| {
+        DriverError::Config(format!(
+            "SimulatorDriverConfig.{what}.port: {} is not a UDP port",
+            ep.port
+        ))
+    })?;
+    Ok(SocketAddr::new(ip, port))
+}
+
+fn sim_config(config: &DriverConfig) -> Result<&SimulatorDriverConfig, DriverError> {
+    config.simulator.as_ref().ok_or_else(|| {
+        DriverError::Config("DriverConfig.simulator: required for the simulator driver".into())
+    })
+}
+
+struct Node {
+    modem_id: i32,
+    sim: SimulatorDriverConfig,
+    medium: Arc<Medium>,
+    udp: Option<UdpMedium>,
+    overhead: Duration,
+    receiver: Receiver,
+    queue: VecDeque<ModemTransmission>,
+    busy_until: Instant,
+    seq: u64,
+    results: Vec<(Instant, TransmitResult)>,
+}
+
+impl Node {
+    fn position_of(&self, id: i32) -> Option<Position> {
+        self.sim
+            .node
+            .iter()
+            .find(|n| n.modem_id == id)
+            .map(|n| Position::new(n.x(), n.y(), n.z()))
+    }
+
+    fn next_wakeup(&self) -> Option<Instant> {
+        let tx = (!self.queue.is_empty()).then_some(self.busy_until);
+        [
+            tx,
+            self.receiver.next_end(),
+            self.results.iter().map(|(t, _)| *t).min(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    async fn start_next_transmission(&mut self, events: &EventSink) {
+        let Some(mut mt) = self.queue.pop_front() else {
+            return;
+        };
+        if mt.src.is_none() || mt.src() == -1 {
+            mt.src = Some(self.modem_id);
+        }
+        let duration = match mt.r#type() {
+            TransmissionType::Data => {
+                let Some(spec) = rate::spec(mt.rate()) else {
+                    let reason = format!("rate {} is not a Micro-Modem rate (0-6)", mt.rate());
+                    events.emit(DriverEvent::TransmitResult(TransmitResult {
+                        transmission: mt,
+                        outcome: TransmitOutcome::Failed(reason),
+                    }));
+                    return;
+                };
+                mt.max_num_frames = Some(
+                    mt.max_num_frames
+                        .map_or(spec.frames, |n| n.min(spec.frames)),
+                );
+                mt.max_frame_bytes = Some(spec.frame_bytes);
+                if mt.frame.is_empty() {
+                    mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
+                }
+                if mt.frame.iter().all(|f| f.is_empty()) {
+                    events.emit(DriverEvent::TransmitResult(TransmitResult {
+                        transmission: mt,
+                        outcome: TransmitOutcome::NothingToSend,
+                    }));
+                    return;
+                }
+                spec.packet_duration(self.overhead)
+            }
+            _ => self.overhead,
+        };
+        if mt.dest() == -1 {
+            mt.dest = Some(0);
+        }
+        mt.time = Some(now_micros());
+        let start = Instant::now();
+        let end = start + duration;
+        self.busy_until = end;
+        self.receiver.transmitting(start, end);
+        self.seq += 1;
+        let position = self.position_of(self.modem_id).unwrap_or_default();
+        let packet = Arc::new(Airborne {
+            src: self.modem_id,
+            seq: self.seq,
+            position,
+            start,
+            duration,
+            transmission: mt.clone(),
+        });
+        self.medium.transmit(packet.clone());
+        if let Some(udp) = &self.udp {
+            for reason in udp.transmit(&packet).await {
+                events.status(DriverStatus::LinkError { reason });
+            }
+        }
+        self.results.push((
+            end,
+            TransmitResult {
+                transmission: mt,
+                outcome: TransmitOutcome::Sent,
+            },
+        ));
+    }
+
+    fn hear(&mut self, packet: &Airborne) {
+        let Some(me) = self.position_of(self.modem_id) else {
+            return;
+        };
+        let distance = me.distance(&packet.position);
+        let Ok(delay) = Duration::try_from_secs_f64(distance / self.sim.sound_speed()) else {
+            return;
+        };
+        let lost = reception::draw_loss(
+            self.sim.seed(),
+            packet.src,
+            packet.seq,
+            self.sim.packet_loss(),
+        );
+        self.receiver.arrive(
+            packet.start + delay,
+            packet.start + delay + packet.duration,
+            packet.transmission.clone(),
+            lost,
+        );
+    }
+
+    fn deliver_due(&mut self, now: Instant, events: &EventSink) {
+        for mt in self.receiver.complete(now) {
+            let ack = (mt.r#type() == TransmissionType::Data
+                && mt.ack_requested()
+                && mt.dest() == self.modem_id
+                && !mt.frame.is_empty())
+            .then(|| ModemTransmission {
+                src: Some(self.modem_id),
+                dest: Some(mt.src()),
+                rate: mt.rate,
+                r#type: Some(TransmissionType::Ack as i32),
+                acked_frame: (0..mt.frame.len())
+                    .map(|i| mt.frame_start() as i32 + i as i32)
+                    .collect(),
+                ..Default::default()
+            });
+            events.emit(DriverEvent::Received(mt));
+            if let Some(ack) = ack {
+                // Acknowledgements go first.
+                self.queue.push_front(ack);
+            }
+        }
+        let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.results)
+            .into_iter()
+            .partition(|(t, _)| *t <= now);
+        self.results = later;
+        for (_, result) in due {
+            events.emit(DriverEvent::TransmitResult(result));
+        }
+    }
+}
+
+async fn run(
+    modem_id: i32,
+    sim: SimulatorDriverConfig,
+    medium: Arc<Medium>,
+    udp: Option<UdpMedium>,
+    mut airborne: mpsc::UnboundedReceiver<Arc<Airborne>>,
+    mut ctx: DriverContext,
+) {
+    let events = ctx.events.clone();
+    let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
+    let mut node = Node {
+        modem_id,
+        sim,
+        medium: medium.clone(),
+        udp,
+        overhead,
+        receiver: Receiver::default(),
+        queue: VecDeque::new(),
+        busy_until: Instant::now(),
+        seq: 0,
+        results: Vec::new(),
+    };
+    events.status(DriverStatus::Ready);
+    loop {
+        let now = Instant::now();
+        node.deliver_due(now, &events);
+        if !node.queue.is_empty() && now >= node.busy_until {
+            node.start_next_transmission(&events).await;
+            continue;
+        }
+        let wakeup = node.next_wakeup();
+        tokio::select! {
+            command = ctx.commands.recv() => match command {
+                Some(DriverCommand::Initiate(mt)) => node.queue.push_back(mt),
+                Some(DriverCommand::Specific(m)) => events.status(DriverStatus::Unsupported {
+                    message: m.descriptor().full_name().to_string(),
+                }),
+                Some(DriverCommand::Stop(done)) => {
+                    medium.leave(modem_id);
+                    let _ = done.send(());
+                    return;
+                }
+                None => {
+                    medium.leave(modem_id);
+                    return;
+                }
+            },
+            Some(packet) = airborne.recv() => node.hear(&packet),
+            packet = recv_udp(&node.udp) => match packet {
+                Ok(packet) => node.hear(&packet),
+                Err(reason) => events.status(DriverStatus::Unparseable {
+                    line: String::new(),
+                    reason,
+                }),
+            },
+            () = sleep_until_opt(wakeup) => {}
+        }
+    }
+}
+
+async fn recv_udp(udp: &Option<UdpMedium>) -> Result<Airborne, String> {
+    match udp {
+        Some(udp) => udp.recv().await,
+        None => std::future::pending().await,
+    }
+}
+
+async fn sleep_until_opt(at: Option<Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}

@@ -1,0 +1,248 @@
+//! The UDP driver: each `ModemTransmission` travels as one datagram holding
+//! its protobuf encoding, as Goby's UDP driver does, so the two can talk.
+//!
+//! Configuration: `DriverConfig.udp` (`local` endpoint, `remote` endpoints
+//! with their modem ids, `max_frame_size`). A transmission to modem id N goes
+//! to every remote endpoint of modem id N; a broadcast (dest 0) to every
+//! remote endpoint. Data addressed to this node with `ack_requested` is
+//! acknowledged (an `ACK` transmission listing the frames) to its sender.
+
+use std::net::{IpAddr, SocketAddr};
+use std::time::Duration;
+
+use prost::Message;
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, udp_driver_config::EndPoint, DriverConfig,
+    ModemTransmission, UdpDriverConfig,
+};
+use tokio::net::UdpSocket;
+
+use crate::config;
+use crate::driver::{
+    Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
+    TransmitOutcome, TransmitResult,
+};
+use crate::link::datagram::DatagramLink;
+use crate::link::trace::Tracer;
+use crate::link::Link;
+use crate::time::now_micros;
+
+/// How long the driver waits for the layer above to fill a data request.
+pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// The UDP driver.
+#[derive(Debug)]
+pub struct UdpDriver;
+
+fn endpoint_addr(ep: &EndPoint, what: &str) -> Result<SocketAddr, DriverError> {
+    let ip: IpAddr = ep.ip().parse().map_err(|e| {
+        DriverError::Config(format!(
+            "UDPDriverConfig.{what}.ip: {:?} is not an IP address ({e})",
+            ep.ip()
+        ))
+    })?;
+    let port = u16::try_from(ep.port).map_err(|_| {
+        DriverError::Config(format!(
+            "UDPDriverConfig.{what}.port: {} is not a UDP port",
+            ep.port
+        ))
+    })?;
+    Ok(SocketAddr::new(ip, port))
+}
+
+fn udp_config(config: &DriverConfig) -> Result<&UdpDriverConfig, DriverError> {
+    config
+        .udp
+        .as_ref()
+        .ok_or_else(|| DriverError::Config("DriverConfig.udp: required for the UDP driver".into()))
+}
+
+impl UdpDriver {
+    /// Binds `udp.local` and starts the driver.
+    pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
+        let udp = udp_config(config)?;
+        let local = endpoint_addr(&udp.local, "local")?;
+        let socket = UdpSocket::bind(local)
+            .await
+            .map_err(|e| DriverError::io(format!("cannot bind UDP {local}"), e))?;
+        Self::start_on(config, socket)
+    }
+
+    /// Starts the driver on a socket already bound (its address then stands
+    /// for `udp.local`).
+    pub fn start_on(config: &DriverConfig, socket: UdpSocket) -> Result<Driver, DriverError> {
+        let modem_id = config::modem_id(config)?;
+        let udp = udp_config(config)?;
+        let mut remotes = Vec::new();
+        for (i, ep) in udp.remote.iter().enumerate() {
+            remotes.push((ep.modem_id(), endpoint_addr(ep, &format!("remote[{i}]"))?));
+        }
+        let max_frame_size = u32::try_from(udp.max_frame_size()).map_err(|_| {
+            DriverError::Config(format!(
+                "UDPDriverConfig.max_frame_size: {} is negative",
+                udp.max_frame_size()
+            ))
+        })?;
+        let mut ack_ids = vec![modem_id];
+        ack_ids.extend(
+            udp.additional_application_ack_modem_id
+                .iter()
+                .filter_map(|&id| i32::try_from(id).ok()),
+        );
+        let state = UdpState {
+            modem_id,
+            remotes,
+            max_frame_size,
+            ack_ids,
+        };
+        Ok(Driver::spawn("udp", move |ctx| run(state, socket, ctx)))
+    }
+}
+
+struct UdpState {
+    modem_id: i32,
+    remotes: Vec<(u32, SocketAddr)>,
+    max_frame_size: u32,
+    ack_ids: Vec<i32>,
+}
+
+impl UdpState {
+    fn destinations(&self, dest: i32) -> Vec<SocketAddr> {
+        self.remotes
+            .iter()
+            .filter(|(id, _)| dest == 0 || i64::from(*id) == i64::from(dest))
+            .map(|(_, addr)| *addr)
+            .collect()
+    }
+}
+
+async fn run(state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {
+    let events = ctx.events.clone();
+    let mut link = Tracer::new(DatagramLink::new(socket), events.clone());
+    events.status(DriverStatus::Ready);
+    loop {
+        tokio::select! {
+            command = ctx.commands.recv() => match command {
+                Some(DriverCommand::Initiate(mt)) => transmit(&state, &mut link, &events, mt).await,
+                Some(DriverCommand::Specific(m)) => events.status(DriverStatus::Unsupported {
+                    message: m.descriptor().full_name().to_string(),
+                }),
+                Some(DriverCommand::Stop(done)) => {
+                    let _ = done.send(());
+                    return;
+                }
+                None => return,
+            },
+            received = link.recv() => match received {
+                Ok((bytes, from)) => receive(&state, &mut link, &events, &bytes, from).await,
+                Err(e) => {
+                    // A UDP socket reports e.g. ICMP port unreachable here: go on.
+                    events.status(DriverStatus::LinkError {
+                        reason: format!("UDP receive error: {e}"),
+                    });
+                }
+            },
+        }
+    }
+}
+
+async fn transmit(
+    state: &UdpState,
+    link: &mut Tracer<DatagramLink>,
+    events: &EventSink,
+    mut mt: ModemTransmission,
+) {
+    if mt.src() == -1 || mt.src.is_none() {
+        mt.src = Some(state.modem_id);
+    }
+    if mt.time.is_none() {
+        mt.time = Some(now_micros());
+    }
+    if mt.r#type() == TransmissionType::Data {
+        mt.max_frame_bytes = Some(
+            mt.max_frame_bytes
+                .map_or(state.max_frame_size, |m| m.min(state.max_frame_size)),
+        );
+        if mt.max_num_frames.is_none() {
+            mt.max_num_frames = Some(1);
+        }
+        if mt.frame.is_empty() {
+            mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
+        }
+        if mt.frame.iter().all(|f| f.is_empty()) {
+            events.emit(DriverEvent::TransmitResult(TransmitResult {
+                transmission: mt,
+                outcome: TransmitOutcome::NothingToSend,
+            }));
+            return;
+        }
+    }
+    if mt.dest() == -1 {
+        mt.dest = Some(0);
+    }
+    let destinations = state.destinations(mt.dest());
+    if destinations.is_empty() {
+        let reason = format!("no remote endpoint for modem id {}", mt.dest());
+        events.emit(DriverEvent::TransmitResult(TransmitResult {
+            transmission: mt,
+            outcome: TransmitOutcome::Failed(reason),
+        }));
+        return;
+    }
+    let bytes = mt.encode_to_vec();
+    let mut failure = None;
+    for addr in destinations {
+        if let Err(e) = link.send(&bytes, &addr).await {
+            failure = Some(format!("cannot send to {addr}: {e}"));
+        }
+    }
+    let outcome = failure.map_or(TransmitOutcome::Sent, TransmitOutcome::Failed);
+    events.emit(DriverEvent::TransmitResult(TransmitResult {
+        transmission: mt,
+        outcome,
+    }));
+}
+
+async fn receive(
+    state: &UdpState,
+    link: &mut Tracer<DatagramLink>,
+    events: &EventSink,
+    bytes: &[u8],
+    from: SocketAddr,
+) {
+    let mt = match ModemTransmission::decode(bytes) {
+        Ok(mt) => mt,
+        Err(e) => {
+            events.status(DriverStatus::Unparseable {
+                line: String::from_utf8_lossy(bytes).into_owned(),
+                reason: format!("datagram from {from} is not a ModemTransmission: {e}"),
+            });
+            return;
+        }
+    };
+    let wants_ack = mt.r#type() == TransmissionType::Data
+        && mt.ack_requested()
+        && state.ack_ids.contains(&mt.dest())
+        && !mt.frame.is_empty();
+    let ack = wants_ack.then(|| ModemTransmission {
+        src: Some(mt.dest()),
+        dest: Some(mt.src()),
+        time: Some(now_micros()),
+        rate: mt.rate,
+        r#type: Some(TransmissionType::Ack as i32),
+        acked_frame: (0..mt.frame.len())
+            .map(|i| mt.frame_start() as i32 + i as i32)
+            .collect(),
+        ..Default::default()
+    });
+    events.emit(DriverEvent::Received(mt));
+    if let Some(ack) = ack {
+        // Reply to the endpoint the data came from.
+        if let Err(e) = link.send(&ack.encode_to_vec(), &from).await {
+            events.status(DriverStatus::LinkError {
+                reason: format!("cannot send the acknowledgement to {from}: {e}"),
+            });
+        }
+    }
+}

@@ -1,0 +1,534 @@
+//! The Micro-Modem driver against the emulator over real pseudo-terminals:
+//! two emulated modems joined by UDP on 127.0.0.1, each driven by a driver
+//! that opens its tty path as it would at sea. Data with acknowledgement at
+//! rates 0 and 2, ping, mini-packets, and each fault with its recovery.
+
+mod common;
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use common::*;
+use modemdriver::link::fault::{Fault, FaultConfig, FaultScript};
+use modemdriver::micromodem::emulator::{
+    self, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
+};
+use modemdriver::micromodem::MicroModemDriver;
+use modemdriver::udp::UdpDriver;
+use modemdriver::{
+    Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission, RawDirection,
+    TransmitOutcome,
+};
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
+use protos::goby::acomms::protobuf::udp_driver_config::EndPoint;
+use protos::goby::acomms::protobuf::{
+    MicroModemConfig, MicroModemSpecific, MicroModemTransmissionType, UdpDriverConfig,
+};
+use tokio::net::UdpSocket;
+
+const LIMIT: Duration = Duration::from_secs(10);
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("goby-mm-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn udp_config(id: i32, local: u16, remote_id: u32, remote: u16) -> DriverConfig {
+    DriverConfig {
+        modem_id: Some(id),
+        udp: Some(UdpDriverConfig {
+            local: EndPoint {
+                modem_id: Some(id as u32),
+                ip: Some("127.0.0.1".into()),
+                port: u32::from(local),
+            },
+            remote: vec![EndPoint {
+                modem_id: Some(remote_id),
+                ip: Some("127.0.0.1".into()),
+                port: u32::from(remote),
+            }],
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+fn mm_config(id: i32, path: &str) -> DriverConfig {
+    DriverConfig {
+        modem_id: Some(id),
+        serial_port: Some(path.to_string()),
+        serial_baud: Some(19_200),
+        micromodem: Some(MicroModemConfig {
+            nvram_cfg: vec!["DTO,2".into()],
+            response_timeout_ms: Some(300),
+            max_retries: Some(5),
+            max_cycle_attempts: Some(3),
+            reconnect_interval_ms: Some(100),
+            receive_timeout_ms: Some(2000),
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+fn emulator_config(id: u32) -> EmulatorConfig {
+    EmulatorConfig {
+        modem_id: id,
+        data_timeout: Duration::from_millis(1000),
+        ping_timeout: Duration::from_secs(3),
+        ..EmulatorConfig::default()
+    }
+}
+
+struct Bench {
+    d1: Driver,
+    d2: Driver,
+    e1: EmulatorHandle,
+    e2: EmulatorHandle,
+    script: FaultScript,
+    _dir: PathBuf,
+}
+
+async fn ready(driver: &mut Driver) {
+    wait_for(driver, &[], LIMIT, |e| {
+        matches!(e, DriverEvent::Status(DriverStatus::Ready)).then_some(())
+    })
+    .await;
+}
+
+/// Two emulated modems (ids 1 and 2) joined by UDP; a driver on each pty.
+/// Scripted faults apply to what driver 1 reads.
+async fn bench(name: &str) -> Bench {
+    let dir = scratch(name);
+    let s1 = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let s2 = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let (p1, p2) = (
+        s1.local_addr().unwrap().port(),
+        s2.local_addr().unwrap().port(),
+    );
+    let b1 = UdpDriver::start_on(&udp_config(1, p1, 2, p2), s1).unwrap();
+    let b2 = UdpDriver::start_on(&udp_config(2, p2, 1, p1), s2).unwrap();
+    let mut e1 = emulator::start(
+        emulator_config(1),
+        EmulatorPort::Pty {
+            link: Some(dir.join("modem1")),
+        },
+        Some(b1),
+    )
+    .expect("pty");
+    let mut e2 = emulator::start(
+        emulator_config(2),
+        EmulatorPort::Pty { link: None },
+        Some(b2),
+    )
+    .expect("pty");
+    let path1 = e1.path().await.unwrap();
+    let path2 = e2.path().await.unwrap();
+    let script = FaultScript::new();
+    let mut d1 = MicroModemDriver::start_with_faults(
+        &mm_config(1, &path1),
+        FaultConfig::default(),
+        script.clone(),
+    )
+    .unwrap();
+    let mut d2 = MicroModemDriver::start(&mm_config(2, &path2)).unwrap();
+    ready(&mut d1).await;
+    ready(&mut d2).await;
+    Bench {
+        d1,
+        d2,
+        e1,
+        e2,
+        script,
+        _dir: dir,
+    }
+}
+
+impl Bench {
+    async fn stop(self) {
+        self.d1.stop().await.unwrap();
+        self.d2.stop().await.unwrap();
+        self.e1.stop().await;
+        self.e2.stop().await;
+    }
+}
+
+fn data(dest: i32, rate: i32, ack: bool) -> ModemTransmission {
+    ModemTransmission {
+        dest: Some(dest),
+        rate: Some(rate),
+        ack_requested: Some(ack),
+        r#type: Some(TransmissionType::Data as i32),
+        ..Default::default()
+    }
+}
+
+/// Everything driver 1 reports until its transmission ends, answering data
+/// requests with `frames`; `on_request` runs when the data request arrives.
+async fn transmit(
+    driver: &mut Driver,
+    frames: &[Vec<u8>],
+    mut on_request: impl FnMut(),
+) -> (TransmitOutcome, Vec<DriverEvent>) {
+    let mut seen = Vec::new();
+    let result = tokio::time::timeout(LIMIT, async {
+        loop {
+            let event = driver.next_event().await.expect("driver running");
+            match event {
+                DriverEvent::DataRequest(request) => {
+                    on_request();
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                    let mut filled = request.template().clone();
+                    filled.frame = frames.to_vec();
+                    request.respond(filled);
+                }
+                DriverEvent::TransmitResult(r) => return r.outcome,
+                other => seen.push(other),
+            }
+        }
+    })
+    .await
+    .expect("a transmit result in time");
+    (result, seen)
+}
+
+fn statuses(events: &[DriverEvent]) -> Vec<DriverStatus> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::Status(s) => Some(s.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Data received by `driver` within `limit` (acks and other events skipped).
+async fn data_received(driver: &mut Driver, limit: Duration) -> Vec<ModemTransmission> {
+    collect_received(driver, &[], limit)
+        .await
+        .into_iter()
+        .filter(|mt| mt.r#type() == TransmissionType::Data)
+        .collect()
+}
+
+async fn acks(driver: &mut Driver, count: usize) -> Vec<i32> {
+    let mut frames = Vec::new();
+    while frames.len() < count {
+        let mt = received(driver, LIMIT).await;
+        if mt.r#type() == TransmissionType::Ack {
+            assert_eq!((mt.src(), mt.dest()), (2, 1));
+            frames.extend(mt.acked_frame);
+        }
+    }
+    frames
+}
+
+#[tokio::test]
+async fn rate0_data_with_ack() {
+    let mut b = bench("rate0").await;
+    b.d1.initiate_transmission(data(2, 0, true)).unwrap();
+    let frame = vec![b"hello from modem one, 32 bytes!!".to_vec()];
+    let (outcome, seen) = transmit(&mut b.d1, &frame, || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent);
+    // The raw log shows the cycle initialization with its checksum.
+    assert!(seen.iter().any(|e| matches!(e, DriverEvent::Raw(r)
+        if r.direction == RawDirection::Outgoing && r.bytes.starts_with(b"$CCCYC,0,1,2,0,1,1*"))));
+    assert!(seen.iter().any(|e| matches!(e, DriverEvent::Raw(r)
+        if r.direction == RawDirection::Incoming && r.bytes.starts_with(b"$CATXF"))));
+
+    let got = data_received(&mut b.d2, Duration::from_millis(500)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!((got[0].src(), got[0].dest(), got[0].rate()), (1, 2, 0));
+    assert_eq!(got[0].frame, frame);
+    assert_eq!(acks(&mut b.d1, 1).await, vec![0]);
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn rate2_three_frames_with_ack() {
+    let mut b = bench("rate2").await;
+    b.d1.initiate_transmission(data(2, 2, true)).unwrap();
+    let frames = vec![vec![0xa1; 64], vec![0xb2; 64], vec![0xc3; 20]];
+    let (outcome, seen) = transmit(&mut b.d1, &frames, || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent);
+    let drq: Vec<_> = seen
+        .iter()
+        .filter(|e| matches!(e, DriverEvent::Raw(r) if r.bytes.starts_with(b"$CADRQ")))
+        .collect();
+    assert_eq!(drq.len(), 3, "one $CADRQ per frame");
+    let got = data_received(&mut b.d2, Duration::from_millis(500)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].frame, frames);
+    let mut acked = acks(&mut b.d1, 3).await;
+    acked.sort();
+    assert_eq!(acked, vec![0, 1, 2]);
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn two_way_ping_and_mini_packet() {
+    let mut b = bench("ping").await;
+    b.d1.initiate_specific(&MicroModemSpecific {
+        r#type: MicroModemTransmissionType::MicromodemTwoWayPing as i32,
+        dest: Some(2),
+        ..Default::default()
+    })
+    .unwrap();
+    let report = wait_for(&mut b.d1, &[], LIMIT, |e| match e {
+        DriverEvent::Specific(s) => s.to::<MicroModemSpecific>(),
+        _ => None,
+    })
+    .await;
+    assert_eq!(
+        report.r#type(),
+        MicroModemTransmissionType::MicromodemTwoWayPing
+    );
+    assert_eq!((report.src(), report.dest()), (2, 1));
+    let owtt = report.ranging_reply.unwrap().one_way_travel_time;
+    // Over loopback UDP the round trip is nearly instant.
+    assert!(owtt.len() == 1 && (0.0..0.5).contains(&owtt[0]), "{owtt:?}");
+
+    b.d1.initiate_specific(&MicroModemSpecific {
+        r#type: MicroModemTransmissionType::MicromodemMiniData as i32,
+        dest: Some(2),
+        mini_data: Some(0x0abc),
+        ..Default::default()
+    })
+    .unwrap();
+    let mini = wait_for(&mut b.d2, &[], LIMIT, |e| match e {
+        DriverEvent::Specific(s) => s.to::<MicroModemSpecific>(),
+        _ => None,
+    })
+    .await;
+    assert_eq!(
+        mini.r#type(),
+        MicroModemTransmissionType::MicromodemMiniData
+    );
+    assert_eq!((mini.src(), mini.dest(), mini.mini_data()), (1, 2, 0x0abc));
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn lone_emulator_reports_its_configured_range() {
+    let mut e = emulator::start(
+        EmulatorConfig {
+            modem_id: 4,
+            lone_range: Some(750.0),
+            ..emulator_config(4)
+        },
+        EmulatorPort::Pty { link: None },
+        None,
+    )
+    .unwrap();
+    let path = e.path().await.unwrap();
+    let mut d = MicroModemDriver::start(&mm_config(4, &path)).unwrap();
+    ready(&mut d).await;
+    let start = tokio::time::Instant::now();
+    d.initiate_specific(&MicroModemSpecific {
+        r#type: MicroModemTransmissionType::MicromodemTwoWayPing as i32,
+        dest: Some(9),
+        ..Default::default()
+    })
+    .unwrap();
+    let report = wait_for(&mut d, &[], LIMIT, |e| match e {
+        DriverEvent::Specific(s) => s.to::<MicroModemSpecific>(),
+        _ => None,
+    })
+    .await;
+    // 750 m at 1500 m/s: 0.5 s one way, replied after the 1 s round trip.
+    assert_eq!(report.ranging_reply.unwrap().one_way_travel_time, vec![0.5]);
+    assert!(start.elapsed() >= Duration::from_secs(1));
+    d.stop().await.unwrap();
+    e.stop().await;
+}
+
+/// Sends rate 0 data from 1 to 2 with `fault` scripted on what driver 1
+/// reads next (after `skip` intact lines); the data must arrive exactly once.
+async fn survives_line_fault(name: &str, skip: usize, fault: Fault) -> Vec<DriverStatus> {
+    let mut b = bench(name).await;
+    for _ in 0..skip {
+        b.script.push(Fault::Delay(Duration::ZERO));
+    }
+    b.script.push(fault);
+    b.d1.initiate_transmission(data(2, 0, true)).unwrap();
+    let frame = vec![b"through the fault".to_vec()];
+    let (outcome, seen) = transmit(&mut b.d1, &frame, || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent, "{seen:?}");
+    assert_eq!(b.script.pending(), 0, "the fault was applied");
+    let got = data_received(&mut b.d2, Duration::from_millis(800)).await;
+    assert_eq!(got.len(), 1, "delivered exactly once");
+    assert_eq!(got[0].frame, frame);
+    let st = statuses(&seen);
+    b.stop().await;
+    st
+}
+
+#[tokio::test]
+async fn bad_checksum_is_reported_and_survived() {
+    // The $CACYC echo arrives with a flipped bit.
+    let st = survives_line_fault("checksum", 0, Fault::Corrupt).await;
+    assert!(
+        st.iter()
+            .any(|s| matches!(s, DriverStatus::BadChecksum { line } if line.starts_with("$CACYC"))),
+        "{st:?}"
+    );
+}
+
+#[tokio::test]
+async fn garbled_line_is_reported_and_survived() {
+    let st = survives_line_fault("garbled", 0, Fault::Garble).await;
+    assert!(
+        st.iter()
+            .any(|s| matches!(s, DriverStatus::Unparseable { .. })),
+        "{st:?}"
+    );
+}
+
+#[tokio::test]
+async fn partial_line_is_reported_and_survived() {
+    let st = survives_line_fault("partial", 0, Fault::Truncate).await;
+    assert!(
+        st.iter()
+            .any(|s| matches!(s, DriverStatus::Unparseable { .. })),
+        "{st:?}"
+    );
+}
+
+#[tokio::test]
+async fn lost_data_request_is_retried() {
+    // The $CADRQ (second line after $CCCYC) is dropped: the driver, having
+    // no $CADRQ within its response timeout, runs the cycle again.
+    let st = survives_line_fault("lost-drq", 1, Fault::Drop).await;
+    assert!(
+        st.iter().any(|s| matches!(s, DriverStatus::Retrying { attempt: 2, reason } if reason.contains("CADRQ"))),
+        "{st:?}"
+    );
+}
+
+#[tokio::test]
+async fn modem_reset_mid_cycle_is_recovered() {
+    let mut b = bench("reset").await;
+    b.d1.initiate_transmission(data(2, 0, true)).unwrap();
+    let frame = vec![b"after the reset".to_vec()];
+    let e1 = &b.e1;
+    let mut requests = 0;
+    let (outcome, seen) = transmit(&mut b.d1, &frame, || {
+        requests += 1;
+        e1.control(EmulatorControl::Reset);
+    })
+    .await;
+    assert_eq!(outcome, TransmitOutcome::Sent, "{seen:?}");
+    assert_eq!(requests, 1, "the frames are kept across attempts");
+    let st = statuses(&seen);
+    assert!(st.contains(&DriverStatus::ModemReset), "{st:?}");
+    assert!(
+        st.iter()
+            .any(|s| matches!(s, DriverStatus::Retrying { attempt: 2, .. })),
+        "{st:?}"
+    );
+    assert!(
+        st.contains(&DriverStatus::Ready),
+        "configured again: {st:?}"
+    );
+    let got = data_received(&mut b.d2, Duration::from_millis(800)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].frame, frame);
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn silent_modem_gets_commands_again() {
+    let mut b = bench("silence").await;
+    b.e1.control(EmulatorControl::Silence(Duration::from_millis(1000)));
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    b.d1.initiate_transmission(data(2, 0, false)).unwrap();
+    let frame = vec![b"after the silence".to_vec()];
+    let (outcome, seen) = transmit(&mut b.d1, &frame, || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent, "{seen:?}");
+    let st = statuses(&seen);
+    let timeouts = st
+        .iter()
+        .filter(|s| matches!(s, DriverStatus::ResponseTimeout { command, .. } if command.starts_with("$CCCYC")))
+        .count();
+    assert!(timeouts >= 2, "{st:?}");
+    let got = data_received(&mut b.d2, Duration::from_millis(800)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].frame, frame);
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn vanished_device_is_reopened_and_queued_data_goes_out() {
+    let mut b = bench("vanish").await;
+    b.e1.control(EmulatorControl::Disconnect(Duration::from_millis(600)));
+    wait_for(&mut b.d1, &[], LIMIT, |e| {
+        matches!(e, DriverEvent::Status(DriverStatus::Disconnected { .. })).then_some(())
+    })
+    .await;
+    // Queued while the device is away.
+    b.d1.initiate_transmission(data(2, 0, true)).unwrap();
+    let frame = vec![b"queued while unplugged".to_vec()];
+    let (outcome, seen) = transmit(&mut b.d1, &frame, || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent, "{seen:?}");
+    let st = statuses(&seen);
+    let reconnected = st.iter().position(|s| *s == DriverStatus::Reconnected);
+    let ready = st.iter().rposition(|s| *s == DriverStatus::Ready);
+    assert!(reconnected.is_some() && ready > reconnected, "{st:?}");
+    let got = data_received(&mut b.d2, Duration::from_millis(800)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].frame, frame);
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn bad_configurations_are_refused() {
+    let err = MicroModemDriver::start(&DriverConfig {
+        modem_id: Some(1),
+        ..Default::default()
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("serial_port"), "{err}");
+    let err = MicroModemDriver::start(&mm_config(0, "/dev/null"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("modem_id"), "{err}");
+    let err = MicroModemDriver::start(&mm_config(1, "/nonexistent/tty"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("/nonexistent/tty"), "{err}");
+}
+
+#[tokio::test]
+async fn query_destination_is_filled_by_the_data_request() {
+    let mut b = bench("query-dest").await;
+    b.d1.initiate_transmission(data(-1, 0, true)).unwrap();
+    let frame = b"dest chosen by the queue".to_vec();
+    let template = tokio::time::timeout(LIMIT, async {
+        loop {
+            if let DriverEvent::DataRequest(r) = b.d1.next_event().await.unwrap() {
+                let t = r.template().clone();
+                let mut filled = t.clone();
+                filled.dest = Some(2);
+                filled.frame = vec![frame.clone()];
+                r.respond(filled);
+                return t;
+            }
+        }
+    })
+    .await
+    .unwrap();
+    assert_eq!(template.dest(), -1);
+    assert_eq!(
+        (template.max_num_frames(), template.max_frame_bytes()),
+        (1, 32)
+    );
+    let got = data_received(&mut b.d2, Duration::from_secs(2)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!((got[0].src(), got[0].dest()), (1, 2));
+    assert_eq!(got[0].frame, vec![frame]);
+    assert_eq!(acks(&mut b.d1, 1).await, vec![0]);
+    b.stop().await;
+}
