@@ -324,7 +324,10 @@ fn micromodem_driver(path: &Path) -> String {
 #[test]
 fn messages_cross_two_emulated_micro_modems_with_acks() {
     let dir = scratch("micromodem");
-    let links: Vec<PathBuf> = [1, 2].iter().map(|id| dir.join(format!("modem{id}"))).collect();
+    let links: Vec<PathBuf> = [1, 2]
+        .iter()
+        .map(|id| dir.join(format!("modem{id}")))
+        .collect();
     // Two emulated modems 150 m apart on the simulated channel, each on a pty.
     let mut emulator = Command::new(env!("CARGO_BIN_EXE_goby"))
         .args(["modem", "emulate", "--modem-id", "1", "--modem-id", "2"])
@@ -380,5 +383,112 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
     drop(receiver);
     let _ = emulator.kill();
     let _ = emulator.wait();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn json_over_udp_and_a_clean_stop_on_sigterm() {
+    let dir = scratch("udp-json");
+    let port = free_udp_port();
+    let config = format!(
+        r#"
+modem_id: 1
+driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "udp-json" }} }}
+mac {{ type: MAC_NONE }}
+queue {{ message_entry {{ protobuf_name: "goby.example.Command" role {{ type: DESTINATION_ID field: "destination" }} }} }}
+json {{ tcp_bind: "" udp_bind: "127.0.0.1:{port}" }}
+data_dir: "{}"
+"#,
+        dir.join("data").display()
+    );
+    let path = dir.join("node.cfg");
+    std::fs::write(&path, config).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .arg("--config")
+        .arg(&path)
+        .env_remove("RUST_BACKTRACE")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gobyd starts");
+    let stderr = child.stderr.take().unwrap();
+    let (log_tx, log) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = log_tx.send(line);
+        }
+    });
+    let wait_log = |needle: &str| loop {
+        let line = log
+            .recv_timeout(PATIENCE)
+            .unwrap_or_else(|_| panic!("no log line with {needle:?}"));
+        if line.contains(needle) {
+            return;
+        }
+    };
+    wait_log("gobyd started");
+
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket.set_read_timeout(Some(PATIENCE)).unwrap();
+    let daemon = format!("127.0.0.1:{port}");
+    let receive = || {
+        let mut buf = [0u8; 4096];
+        let n = socket.recv(&mut buf).expect("a datagram from gobyd");
+        serde_json::from_slice::<Value>(&buf[..n]).expect("a JSON datagram")
+    };
+    socket
+        .send_to(br#"{"subscribe": ["ack"]}"#, &daemon)
+        .unwrap();
+    socket
+        .send_to(
+            br#"{"publish": "goby.example.Command", "msg": {"destination": 1, "action": "SURFACE"}}"#,
+            &daemon,
+        )
+        .unwrap();
+    // Addressed to this node: delivered at once, and acknowledged.
+    let mut seen = Vec::new();
+    while seen.len() < 3 {
+        seen.push(receive());
+    }
+    assert!(
+        seen.iter()
+            .any(|v| v["accepted"] == "goby.example.Command" && v["delivered"] == true),
+        "{seen:?}"
+    );
+    assert!(
+        seen.iter()
+            .any(|v| v["received"] == "goby.example.Command" && v["msg"]["action"] == "SURFACE"),
+        "{seen:?}"
+    );
+    assert!(
+        seen.iter().any(|v| v["ack"] == "goby.example.Command"),
+        "{seen:?}"
+    );
+    socket.send_to(b"{\"publish\": 7}", &daemon).unwrap();
+    let error = receive();
+    assert!(
+        error["error"]
+            .as_str()
+            .unwrap()
+            .contains("message type name"),
+        "{error}"
+    );
+
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    wait_log("gobyd stopping");
+    let deadline = Instant::now() + PATIENCE;
+    let exit = loop {
+        if let Some(exit) = child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(Instant::now() < deadline, "gobyd did not stop on SIGTERM");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(exit.success(), "{exit:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

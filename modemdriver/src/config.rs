@@ -1,8 +1,10 @@
 //! Reading a [`DriverConfig`](protos::goby::acomms::protobuf::DriverConfig)
 //! from protobuf text format, and checks shared by the drivers.
 
+use std::net::{IpAddr, SocketAddr};
+
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::acomms::protobuf::DriverConfig;
+use protos::goby::acomms::protobuf::{udp_driver_config::EndPoint, DriverConfig};
 
 use crate::driver::DriverError;
 
@@ -28,6 +30,20 @@ pub fn modem_id(config: &DriverConfig) -> Result<i32, DriverError> {
             "DriverConfig.modem_id: required field is not set".into(),
         )),
     }
+}
+
+/// The socket address of a UDP endpoint; `field` names it in errors (e.g.
+/// `UDPDriverConfig.remote[0]`).
+pub fn endpoint_addr(ep: &EndPoint, field: &str) -> Result<SocketAddr, DriverError> {
+    let ip: IpAddr = ep.ip().parse().map_err(|e| {
+        DriverError::Config(format!(
+            "{field}.ip: {:?} is not an IP address ({e})",
+            ep.ip()
+        ))
+    })?;
+    let port = u16::try_from(ep.port)
+        .map_err(|_| DriverError::Config(format!("{field}.port: {} is not a UDP port", ep.port)))?;
+    Ok(SocketAddr::new(ip, port))
 }
 
 #[cfg(test)]

@@ -7,14 +7,13 @@
 //! remote endpoint. Data addressed to this node with `ack_requested` is
 //! acknowledged (an `ACK` transmission listing the frames) to its sender.
 
-use std::net::{IpAddr, SocketAddr};
+use std::net::SocketAddr;
 use std::time::Duration;
 
 use prost::Message;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, udp_driver_config::EndPoint, DriverConfig,
-    ModemTransmission, UdpDriverConfig,
+    modem_transmission::TransmissionType, DriverConfig, ModemTransmission, UdpDriverConfig,
 };
 use tokio::net::UdpSocket;
 
@@ -35,22 +34,6 @@ pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
 #[derive(Debug)]
 pub struct UdpDriver;
 
-fn endpoint_addr(ep: &EndPoint, what: &str) -> Result<SocketAddr, DriverError> {
-    let ip: IpAddr = ep.ip().parse().map_err(|e| {
-        DriverError::Config(format!(
-            "UDPDriverConfig.{what}.ip: {:?} is not an IP address ({e})",
-            ep.ip()
-        ))
-    })?;
-    let port = u16::try_from(ep.port).map_err(|_| {
-        DriverError::Config(format!(
-            "UDPDriverConfig.{what}.port: {} is not a UDP port",
-            ep.port
-        ))
-    })?;
-    Ok(SocketAddr::new(ip, port))
-}
-
 fn udp_config(config: &DriverConfig) -> Result<&UdpDriverConfig, DriverError> {
     config
         .udp
@@ -62,7 +45,7 @@ impl UdpDriver {
     /// Binds `udp.local` and starts the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let udp = udp_config(config)?;
-        let local = endpoint_addr(&udp.local, "local")?;
+        let local = config::endpoint_addr(&udp.local, "UDPDriverConfig.local")?;
         let socket = UdpSocket::bind(local)
             .await
             .map_err(|e| DriverError::io(format!("cannot bind UDP {local}"), e))?;
@@ -76,7 +59,10 @@ impl UdpDriver {
         let udp = udp_config(config)?;
         let mut remotes = Vec::new();
         for (i, ep) in udp.remote.iter().enumerate() {
-            remotes.push((ep.modem_id(), endpoint_addr(ep, &format!("remote[{i}]"))?));
+            remotes.push((
+                ep.modem_id(),
+                config::endpoint_addr(ep, &format!("UDPDriverConfig.remote[{i}]"))?,
+            ));
         }
         let max_frame_size = u32::try_from(udp.max_frame_size()).map_err(|_| {
             DriverError::Config(format!(

@@ -30,11 +30,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use prost_reflect::ReflectMessage;
-use std::net::{IpAddr, SocketAddr};
 
 use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, udp_driver_config::EndPoint, DriverConfig,
-    ModemTransmission, SimulatorDriverConfig,
+    modem_transmission::TransmissionType, DriverConfig, ModemTransmission, SimulatorDriverConfig,
 };
 use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
@@ -68,7 +66,7 @@ impl SimulatorDriver {
         let udp = match &sim.udp_local {
             None => None,
             Some(local) => {
-                let addr = endpoint(local, "udp_local")?;
+                let addr = config::endpoint_addr(local, "SimulatorDriverConfig.udp_local")?;
                 let bound = std::net::UdpSocket::bind(addr)
                     .and_then(|s| s.set_nonblocking(true).map(|()| s))
                     .and_then(UdpSocket::from_std)
@@ -78,7 +76,9 @@ impl SimulatorDriver {
                     .udp_peer
                     .iter()
                     .enumerate()
-                    .map(|(i, p)| endpoint(p, &format!("udp_peer[{i}]")))
+                    .map(|(i, p)| {
+                        config::endpoint_addr(p, &format!("SimulatorDriverConfig.udp_peer[{i}]"))
+                    })
                     .collect::<Result<Vec<_>, _>>()?;
                 Some(UdpMedium::new(socket, peers))
             }
@@ -140,22 +140,6 @@ impl SimulatorDriver {
             run(modem_id, sim, medium, udp, airborne, ctx)
         }))
     }
-}
-
-fn endpoint(ep: &EndPoint, what: &str) -> Result<SocketAddr, DriverError> {
-    let ip: IpAddr = ep.ip().parse().map_err(|e| {
-        DriverError::Config(format!(
-            "SimulatorDriverConfig.{what}.ip: {:?} is not an IP address ({e})",
-            ep.ip()
-        ))
-    })?;
-    let port = u16::try_from(ep.port).map_err(|_| {
-        DriverError::Config(format!(
-            "SimulatorDriverConfig.{what}.port: {} is not a UDP port",
-            ep.port
-        ))
-    })?;
-    Ok(SocketAddr::new(ip, port))
 }
 
 fn sim_config(config: &DriverConfig) -> Result<&SimulatorDriverConfig, DriverError> {
