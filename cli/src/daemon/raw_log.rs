@@ -49,7 +49,10 @@ impl RawLog {
         });
         // Text protocols (NMEA) are also written as text, to be read as is.
         if let Ok(text) = std::str::from_utf8(&raw.bytes) {
-            if text.chars().all(|c| !c.is_control() || c == '\r' || c == '\n') {
+            if text
+                .chars()
+                .all(|c| !c.is_control() || c == '\r' || c == '\n')
+            {
                 record["text"] = Value::String(text.to_string());
             }
         }
