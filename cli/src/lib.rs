@@ -19,6 +19,11 @@
 //! fixed-priority queues in the thesis' data marketplace and writes a table,
 //! a CSV file and PNG plots.
 //!
+//! `goby position synth` writes a synthetic AUV trajectory and `goby position
+//! eval` codes a trajectory with every state observer and probability model
+//! (bits per delta, as thesis Table 3.2) and computes the cost per sample
+//! under frame loss (Fig. 3.10a) as a table, a CSV file and a PNG plot.
+//!
 //! Exit status: 0 on success, [`EXIT_BAD_INPUT`] when some input lines could
 //! not be handled (each is reported on standard error as `line N: <error>`;
 //! the other lines are still processed), [`EXIT_SETUP`] for usage errors and
@@ -33,6 +38,7 @@ pub mod dccl_cmd;
 mod lines;
 pub mod modem_cmd;
 pub mod plot;
+pub mod position_cmd;
 pub mod queue_cmd;
 
 use std::ffi::OsString;
@@ -76,6 +82,9 @@ pub enum GobyCommand {
     /// Run the dynamic priority queue's simulations.
     #[command(subcommand)]
     Queue(queue_cmd::QueueCommand),
+    /// Position telemetry: synthetic trajectories and the observer/model evaluation.
+    #[command(subcommand)]
+    Position(position_cmd::PositionCommand),
     /// Modem drivers: emulate WHOI Micro-Modems for bench tests.
     #[command(subcommand)]
     Modem(modem_cmd::ModemCommand),
@@ -194,6 +203,7 @@ pub fn run_goby(
         GobyCommand::Dccl(cmd) => dccl_cmd::run(&cmd, stdin, stdout, stderr),
         GobyCommand::Amac(cmd) => amac_cmd::run(&cmd, stdout),
         GobyCommand::Queue(cmd) => queue_cmd::run(&cmd, stdout),
+        GobyCommand::Position(cmd) => position_cmd::run(&cmd, stdout),
         GobyCommand::Modem(cmd) => modem_cmd::run(&cmd, stdout),
     };
     let flushed = stdout.flush().map_err(CliError::from);

@@ -135,7 +135,6 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         let daemon = match runtime::Daemon::start(config).await {
             Ok(d) => d,
             Err(e) => {
-                tracing::error!("{e}");
                 eprintln!("gobyd: error: {e}");
                 return EXIT_SETUP;
             }

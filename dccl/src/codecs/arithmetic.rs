@@ -69,40 +69,9 @@ struct ArithmeticOptions {
 struct Cumulative(Vec<u64>);
 
 impl Cumulative {
-    fn total(&self) -> u64 {
-        self.0.last().copied().unwrap_or(0)
-    }
-
-    fn max_symbol(&self) -> Symbol {
-        self.0.len() as Symbol + EOF_SYMBOL - 1
-    }
-
-    fn at(&self, symbol: Symbol) -> u64 {
-        self.0[(symbol - EOF_SYMBOL) as usize]
-    }
-
-    /// `[low, high)` of a symbol.
-    fn range(&self, symbol: Symbol) -> (u64, u64) {
-        let low = if symbol == EOF_SYMBOL {
-            0
-        } else {
-            self.at(symbol - 1)
-        };
-        (low, self.at(symbol))
-    }
-
-    /// The symbols of the lowest and highest cumulative frequency of an
-    /// interval; equal when the interval holds one symbol only.
-    fn symbols(&self, low_freq: u64, high_freq: u64) -> (Symbol, Symbol) {
-        let first = (EOF_SYMBOL..=self.max_symbol())
-            .find(|&s| low_freq < self.at(s))
-            .unwrap_or(0);
-        let second = if first == self.max_symbol() || self.at(first) > high_freq {
-            first
-        } else {
-            first + 1
-        };
-        (first, second)
+    /// The coder's symbol index of a model symbol.
+    fn index(symbol: Symbol) -> usize {
+        (symbol - EOF_SYMBOL) as usize
     }
 
     /// Adaptive update: one more occurrence of `symbol`.
@@ -292,10 +261,7 @@ impl Model {
             scratch = state.clone();
             &mut scratch
         };
-        let mut low = 0u64;
-        let mut high = TOP_VALUE;
-        let mut follow = 0u32;
-        let mut bits = Vec::new();
+        let mut coder = ArithmeticEncoder::new();
         for index in 0..max_repeat as usize {
             let mut symbol = match values.get(index) {
                 Some(v) => self.value_to_symbol(*v),
@@ -314,47 +280,13 @@ impl Model {
             if symbol == EOF_SYMBOL && self.user.eof_frequency() == 0 {
                 symbol = self.most_probable_symbol();
             }
-            let range = high - low + 1;
-            let (c_low, c_high) = model.range(symbol);
-            let total = model.total();
-            high = low + (range * c_high) / total - 1;
-            low += (range * c_low) / total;
+            coder.encode(&*model, Cumulative::index(symbol));
             model.update_if(self.user.is_adaptive(), symbol);
-            loop {
-                if high < HALF {
-                    emit(&mut bits, &mut follow, false);
-                } else if low >= HALF {
-                    emit(&mut bits, &mut follow, true);
-                    low -= HALF;
-                    high -= HALF;
-                } else if low >= FIRST_QTR && high < THIRD_QTR {
-                    follow += 1;
-                    low -= FIRST_QTR;
-                    high -= FIRST_QTR;
-                } else {
-                    break;
-                }
-                low <<= 1;
-                high = (high << 1) + 1;
-            }
             if index == values.len() && self.user.eof_frequency() != 0 {
                 break;
             }
         }
-        // The fewest bits that pin the final interval down.
-        if low == 0 {
-            if high != TOP_VALUE || follow > 0 {
-                emit(&mut bits, &mut follow, false);
-            }
-        } else if high == TOP_VALUE {
-            emit(&mut bits, &mut follow, true);
-        } else {
-            follow += 1;
-            emit(&mut bits, &mut follow, low >= FIRST_QTR);
-        }
-        for bit in bits {
-            out.write_bool(bit);
-        }
+        coder.finish(out);
         Ok(())
     }
 
@@ -367,75 +299,41 @@ impl Model {
         min_bits: u32,
     ) -> Result<Vec<f64>, CodecError> {
         let mut model = Self::lock(&self.decoder);
-        let mut value = 0u64;
-        for i in 0..min_bits {
-            let bit = input.read_bool()?;
-            if i < CODE_VALUE_BITS && bit {
-                value |= 1 << (CODE_VALUE_BITS - 1 - i);
-            }
-        }
-        // Number of low bits of `value` not read yet (negative: more read than used).
-        let mut unknown = CODE_VALUE_BITS as i64 - min_bits as i64;
-        let mut low = 0u64;
-        let mut high = TOP_VALUE;
+        let mut coder = ArithmeticDecoder::new(input, min_bits)?;
         let mut values = Vec::new();
         for _ in 0..max_repeat {
-            let range = high - low + 1;
-            let symbol = loop {
-                let total = model.total();
-                let value_high = if unknown > 0 {
-                    value.wrapping_add((1u64 << unknown.min(63)) - 1)
-                } else {
-                    value
-                };
-                let c_low = (value.wrapping_sub(low).wrapping_add(1))
-                    .wrapping_mul(total)
-                    .wrapping_sub(1)
-                    / range;
-                let c_high = (value_high.wrapping_sub(low).wrapping_add(1))
-                    .wrapping_mul(total)
-                    .wrapping_sub(1)
-                    / range;
-                // libdccl keeps these in 32-bit unsigned integers.
-                let (first, second) = model.symbols(c_low as u32 as u64, c_high as u32 as u64);
-                if first == second {
-                    break first;
-                }
-                let bit = input.read_bool()?;
-                unknown -= 1;
-                if unknown >= 0 && bit {
-                    value |= 1 << unknown;
-                }
-            };
-            let (c_low, c_high) = model.range(symbol);
-            let total = model.total();
-            high = low + (range * c_high) / total - 1;
-            low += (range * c_low) / total;
+            let symbol = coder.decode(input, &*model)? as Symbol + EOF_SYMBOL;
             model.update_if(self.user.is_adaptive(), symbol);
             if symbol == EOF_SYMBOL {
                 break;
             }
             values.push(self.symbol_to_value(symbol));
-            loop {
-                if high < HALF {
-                } else if low >= HALF {
-                    value = value.wrapping_sub(HALF);
-                    low -= HALF;
-                    high -= HALF;
-                } else if low >= FIRST_QTR && high < THIRD_QTR {
-                    value = value.wrapping_sub(FIRST_QTR);
-                    low -= FIRST_QTR;
-                    high -= FIRST_QTR;
-                } else {
-                    break;
-                }
-                low <<= 1;
-                high = (high << 1) + 1;
-                value = value.wrapping_shl(1);
-                unknown += 1;
-            }
         }
         Ok(values)
+    }
+}
+
+impl CumulativeFrequencies for Cumulative {
+    fn symbol_count(&self) -> usize {
+        self.0.len()
+    }
+
+    fn cumulative(&self, index: usize) -> u64 {
+        self.0[index]
+    }
+
+    fn total(&self) -> u64 {
+        self.0.last().copied().unwrap_or(0)
+    }
+
+    /// libdccl's search, linear from the end-of-array symbol; when no symbol
+    /// fits (a value past the total, from bits that belong to a later
+    /// field), libdccl takes value symbol 0.
+    fn symbol_above(&self, frequency: u64) -> usize {
+        self.0
+            .iter()
+            .position(|&c| frequency < c)
+            .unwrap_or(Self::index(0))
     }
 }
 
@@ -447,11 +345,303 @@ impl Cumulative {
     }
 }
 
-fn emit(bits: &mut Vec<bool>, follow: &mut u32, bit: bool) {
-    bits.push(bit);
-    while *follow > 0 {
-        bits.push(!bit);
-        *follow -= 1;
+/// A probability model as the integer arithmetic coder sees it: symbols
+/// `0..symbol_count()` with cumulative frequencies.
+///
+/// This is the coder core that the `dccl.arithmetic` codec runs on, open to
+/// codecs that compute their models themselves (for example a distribution
+/// that changes from one symbol to the next). Frequencies must be nonzero
+/// for every symbol that is coded, and the total must not exceed
+/// [`MAX_FREQUENCY`].
+pub trait CumulativeFrequencies {
+    /// Number of symbols.
+    fn symbol_count(&self) -> usize;
+
+    /// Sum of the frequencies of symbols `0..=index`.
+    fn cumulative(&self, index: usize) -> u64;
+
+    /// Sum of all frequencies.
+    fn total(&self) -> u64 {
+        self.cumulative(self.symbol_count() - 1)
+    }
+
+    /// The first symbol whose cumulative frequency exceeds `frequency` (the
+    /// last symbol when none does).
+    fn symbol_above(&self, frequency: u64) -> usize {
+        let (mut lo, mut hi) = (0, self.symbol_count() - 1);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.cumulative(mid) > frequency {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    }
+}
+
+/// A model given as a table of symbol frequencies.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FrequencyTable {
+    cumulative: Vec<u64>,
+}
+
+impl FrequencyTable {
+    /// The table of `frequencies` (symbol `i` has frequency `frequencies[i]`).
+    /// Fails when there is no symbol, a frequency is zero, or the total
+    /// exceeds [`MAX_FREQUENCY`].
+    pub fn new(frequencies: &[u64]) -> Result<FrequencyTable, CodecError> {
+        if frequencies.is_empty() {
+            return Err(CodecError::new("frequency table without symbols"));
+        }
+        if frequencies.contains(&0) {
+            return Err(CodecError::new("frequency table with a zero frequency"));
+        }
+        let mut cumulative = Vec::with_capacity(frequencies.len());
+        let mut sum = 0u64;
+        for f in frequencies {
+            sum = sum.saturating_add(*f);
+            cumulative.push(sum);
+        }
+        if sum > MAX_FREQUENCY {
+            return Err(CodecError::new(format!(
+                "frequency table total {sum} exceeds {MAX_FREQUENCY}"
+            )));
+        }
+        Ok(FrequencyTable { cumulative })
+    }
+
+    /// The frequency of one symbol.
+    pub fn frequency(&self, index: usize) -> u64 {
+        match index {
+            0 => self.cumulative[0],
+            i => self.cumulative[i] - self.cumulative[i - 1],
+        }
+    }
+}
+
+impl CumulativeFrequencies for FrequencyTable {
+    fn symbol_count(&self) -> usize {
+        self.cumulative.len()
+    }
+
+    fn cumulative(&self, index: usize) -> u64 {
+        self.cumulative[index]
+    }
+
+    fn total(&self) -> u64 {
+        self.cumulative[self.cumulative.len() - 1]
+    }
+}
+
+/// Encodes a sequence of symbols, each with its own model, into the fewest
+/// bits that identify it (the integer coder of Witten, Neal and Cleary with
+/// 32-bit code values, ended as libdccl ends it).
+///
+/// ```
+/// use dccl::bits::{BitReader, BitWriter};
+/// use dccl::codecs::arithmetic::{ArithmeticDecoder, ArithmeticEncoder, FrequencyTable};
+///
+/// let table = FrequencyTable::new(&[1, 6, 1])?;
+/// let mut encoder = ArithmeticEncoder::new();
+/// for symbol in [1, 1, 2, 1] {
+///     encoder.encode(&table, symbol);
+/// }
+/// let mut out = BitWriter::new();
+/// encoder.finish(&mut out);
+/// out.write(5, 3); // whatever follows
+///
+/// let bytes = out.into_bytes();
+/// let mut input = BitReader::new(&bytes);
+/// let mut decoder = ArithmeticDecoder::new(&mut input, 0)?;
+/// let symbols: Vec<usize> = (0..4)
+///     .map(|_| decoder.decode(&mut input, &table))
+///     .collect::<Result<_, _>>()?;
+/// assert_eq!(symbols, [1, 1, 2, 1]);
+/// assert_eq!(input.read(3)?, 5); // the decoder read exactly the coded bits
+/// # Ok::<(), dccl::CodecError>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct ArithmeticEncoder {
+    low: u64,
+    high: u64,
+    follow: u32,
+    bits: Vec<bool>,
+}
+
+impl Default for ArithmeticEncoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ArithmeticEncoder {
+    /// An encoder with the full interval.
+    pub fn new() -> Self {
+        ArithmeticEncoder {
+            low: 0,
+            high: TOP_VALUE,
+            follow: 0,
+            bits: Vec::new(),
+        }
+    }
+
+    /// Narrows the interval to symbol `index` of `table`.
+    ///
+    /// # Panics
+    /// When `index` is not a symbol of `table` or its frequency is zero.
+    pub fn encode<T: CumulativeFrequencies + ?Sized>(&mut self, table: &T, index: usize) {
+        let range = self.high - self.low + 1;
+        let c_low = if index == 0 {
+            0
+        } else {
+            table.cumulative(index - 1)
+        };
+        let c_high = table.cumulative(index);
+        let total = table.total();
+        self.high = self.low + (range * c_high) / total - 1;
+        self.low += (range * c_low) / total;
+        loop {
+            if self.high < HALF {
+                self.emit(false);
+            } else if self.low >= HALF {
+                self.emit(true);
+                self.low -= HALF;
+                self.high -= HALF;
+            } else if self.low >= FIRST_QTR && self.high < THIRD_QTR {
+                self.follow += 1;
+                self.low -= FIRST_QTR;
+                self.high -= FIRST_QTR;
+            } else {
+                break;
+            }
+            self.low <<= 1;
+            self.high = (self.high << 1) + 1;
+        }
+    }
+
+    fn emit(&mut self, bit: bool) {
+        self.bits.push(bit);
+        while self.follow > 0 {
+            self.bits.push(!bit);
+            self.follow -= 1;
+        }
+    }
+
+    /// Ends the code with the fewest bits that pin the final interval down
+    /// and writes every bit to `out`.
+    pub fn finish(mut self, out: &mut BitWriter) {
+        if self.low == 0 {
+            if self.high != TOP_VALUE || self.follow > 0 {
+                self.emit(false);
+            }
+        } else if self.high == TOP_VALUE {
+            self.emit(true);
+        } else {
+            self.follow += 1;
+            let bit = self.low >= FIRST_QTR;
+            self.emit(bit);
+        }
+        for bit in self.bits {
+            out.write_bool(bit);
+        }
+    }
+}
+
+/// Decodes what an [`ArithmeticEncoder`] wrote, reading one bit at a time
+/// only while the next symbol is ambiguous, so that it consumes exactly the
+/// encoder's bits and whatever follows them stays in place.
+#[derive(Debug, Clone)]
+pub struct ArithmeticDecoder {
+    value: u64,
+    /// Low bits of `value` not read yet (negative: more read than used).
+    unknown: i64,
+    low: u64,
+    high: u64,
+}
+
+impl ArithmeticDecoder {
+    /// Starts decoding, reading `min_bits` bits at once (0 is always safe;
+    /// more is allowed only when every code is at least that long).
+    pub fn new(input: &mut BitReader<'_>, min_bits: u32) -> Result<Self, CodecError> {
+        let mut value = 0u64;
+        for i in 0..min_bits {
+            let bit = input.read_bool()?;
+            if i < CODE_VALUE_BITS && bit {
+                value |= 1 << (CODE_VALUE_BITS - 1 - i);
+            }
+        }
+        Ok(ArithmeticDecoder {
+            value,
+            unknown: CODE_VALUE_BITS as i64 - min_bits as i64,
+            low: 0,
+            high: TOP_VALUE,
+        })
+    }
+
+    /// Decodes the next symbol, which the encoder coded with `table`.
+    pub fn decode<T: CumulativeFrequencies + ?Sized>(
+        &mut self,
+        input: &mut BitReader<'_>,
+        table: &T,
+    ) -> Result<usize, CodecError> {
+        let range = self.high - self.low + 1;
+        let total = table.total();
+        let last = table.symbol_count() - 1;
+        let index = loop {
+            let value_high = if self.unknown > 0 {
+                self.value.wrapping_add((1u64 << self.unknown.min(63)) - 1)
+            } else {
+                self.value
+            };
+            let c_low = (self.value.wrapping_sub(self.low).wrapping_add(1))
+                .wrapping_mul(total)
+                .wrapping_sub(1)
+                / range;
+            let c_high = (value_high.wrapping_sub(self.low).wrapping_add(1))
+                .wrapping_mul(total)
+                .wrapping_sub(1)
+                / range;
+            // libdccl keeps these in 32-bit unsigned integers.
+            let (c_low, c_high) = (c_low as u32 as u64, c_high as u32 as u64);
+            let first = table.symbol_above(c_low);
+            if first == last || table.cumulative(first) > c_high {
+                break first;
+            }
+            let bit = input.read_bool()?;
+            self.unknown -= 1;
+            if self.unknown >= 0 && bit {
+                self.value |= 1 << self.unknown;
+            }
+        };
+        let c_low = if index == 0 {
+            0
+        } else {
+            table.cumulative(index - 1)
+        };
+        let c_high = table.cumulative(index);
+        self.high = self.low + (range * c_high) / total - 1;
+        self.low += (range * c_low) / total;
+        loop {
+            if self.high < HALF {
+            } else if self.low >= HALF {
+                self.value = self.value.wrapping_sub(HALF);
+                self.low -= HALF;
+                self.high -= HALF;
+            } else if self.low >= FIRST_QTR && self.high < THIRD_QTR {
+                self.value = self.value.wrapping_sub(FIRST_QTR);
+                self.low -= FIRST_QTR;
+                self.high -= FIRST_QTR;
+            } else {
+                break;
+            }
+            self.low <<= 1;
+            self.high = (self.high << 1) + 1;
+            self.value = self.value.wrapping_shl(1);
+            self.unknown += 1;
+        }
+        Ok(index)
     }
 }
 
@@ -752,5 +942,62 @@ pub fn register(registry: &mut CodecRegistry, models: Arc<ArithmeticModels>) {
         registry.register(name, move |spec: &FieldSpec<'_>| {
             ArithmeticCodec::create(spec, NAME, &models)
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The public coder over a frequency table writes the very bits the
+    /// model-driven codec writes for the same frequencies.
+    #[test]
+    fn public_coder_matches_the_codec() {
+        let model = Model::new(ArithmeticModel {
+            name: "m".into(),
+            frequency: vec![3, 1, 5, 2],
+            value_bound: vec![0.0, 1.0, 2.0, 3.0, 4.0],
+            eof_frequency: Some(1),
+            out_of_range_frequency: Some(1),
+            ..Default::default()
+        })
+        .unwrap();
+        let values = [1.0, 3.0, 0.0, 2.0, 9.0];
+        let mut by_model = BitWriter::new();
+        model
+            .encode(&mut by_model, &values, values.len() as u32, true)
+            .unwrap();
+        // Table order: end-of-array, out-of-range, then the values.
+        let table = FrequencyTable::new(&[1, 1, 3, 1, 5, 2]).unwrap();
+        let mut coder = ArithmeticEncoder::new();
+        for symbol in [3, 5, 2, 4, 1] {
+            coder.encode(&table, symbol);
+        }
+        let mut by_table = BitWriter::new();
+        coder.finish(&mut by_table);
+        assert_eq!(by_model.len(), by_table.len());
+        assert_eq!(by_model.as_bytes(), by_table.as_bytes());
+
+        let bytes = by_table.into_bytes();
+        let mut input = BitReader::new(&bytes);
+        let mut decoder = ArithmeticDecoder::new(&mut input, 0).unwrap();
+        let decoded: Vec<usize> = (0..5)
+            .map(|_| decoder.decode(&mut input, &table).unwrap())
+            .collect();
+        assert_eq!(decoded, [3, 5, 2, 4, 1]);
+        assert_eq!(input.position(), by_model.len());
+    }
+
+    #[test]
+    fn frequency_tables_are_validated() {
+        assert!(FrequencyTable::new(&[]).is_err());
+        assert!(FrequencyTable::new(&[1, 0]).is_err());
+        assert!(FrequencyTable::new(&[MAX_FREQUENCY, 1]).is_err());
+        let t = FrequencyTable::new(&[2, 3]).unwrap();
+        assert_eq!((t.frequency(0), t.frequency(1), t.total()), (2, 3, 5));
+        assert_eq!(
+            (t.symbol_above(1), t.symbol_above(2), t.symbol_above(9)),
+            (0, 1, 1)
+        );
     }
 }
