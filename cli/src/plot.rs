@@ -108,7 +108,7 @@ impl LineChart {
 
     /// The corner of the plot area with the fewest points near it, where the
     /// legend hides the least.
-    fn emptiest_corner(&self, x: (f64, f64), y: (f64, f64)) -> SeriesLabelPosition {
+    fn emptiest_corner(&self, x: (f64, f64), y: (f64, f64)) -> (SeriesLabelPosition, usize) {
         let corners = [
             (SeriesLabelPosition::UpperRight, true, true),
             (SeriesLabelPosition::UpperLeft, false, true),
@@ -130,17 +130,31 @@ impl LineChart {
         };
         corners
             .into_iter()
-            .min_by_key(|&(_, right, upper)| near(right, upper))
-            .map(|(position, _, _)| position)
-            .unwrap_or(SeriesLabelPosition::UpperRight)
+            .map(|(position, right, upper)| (position, near(right, upper)))
+            .min_by_key(|&(_, count)| count)
+            .unwrap_or((SeriesLabelPosition::UpperRight, 0))
+    }
+
+    /// The vertical range and legend corner: when every corner has points,
+    /// the range grows upwards to leave the legend room of its own.
+    fn layout(&self, x: (f64, f64), y: (f64, f64)) -> ((f64, f64), SeriesLabelPosition) {
+        match self.emptiest_corner(x, y) {
+            (position, 0) => (y, position),
+            _ => {
+                let rows = self.series.len() as f64;
+                let grown = (y.0, y.1 + (y.1 - y.0) * (0.1 + 0.07 * rows));
+                (grown, self.emptiest_corner(x, grown).0)
+            }
+        }
     }
 
     /// Draws the chart into a `width` × `height` PNG file at `path`.
     pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), PlotError> {
         ensure_font()?;
-        let ((x_lo, x_hi), (y_lo, y_hi)) = self
+        let ((x_lo, x_hi), y) = self
             .ranges()
             .ok_or_else(|| PlotError(format!("chart \"{}\" has no finite point", self.title)))?;
+        let ((y_lo, y_hi), legend) = self.layout((x_lo, x_hi), y);
         let draw_error =
             |e: &dyn fmt::Display| PlotError(format!("cannot draw chart {}: {e}", path.display()));
         let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
@@ -188,7 +202,7 @@ impl LineChart {
             .label_font((FONT_FAMILY, 14))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
-            .position(self.emptiest_corner((x_lo, x_hi), (y_lo, y_hi)))
+            .position(legend)
             .draw()
             .map_err(|e| draw_error(&e))?;
         root.present().map_err(|e| draw_error(&e))?;
