@@ -346,49 +346,40 @@ fn charts(results: &[CaseResult], coolness: &[u32]) -> Vec<(String, LineChart)> 
             },
         ));
     }
+    let thesis_chart = |title: &str, y_label: &str, value: fn(&CaseResult) -> f64| LineChart {
+        title: title.into(),
+        x_label: "coolness C".into(),
+        y_label: y_label.into(),
+        series: THESIS_SIZES
+            .iter()
+            .map(|&n| {
+                series(
+                    results,
+                    format!("{n} nodes"),
+                    coolness,
+                    DiscoveryRule::Thesis,
+                    n,
+                    1.0,
+                    value,
+                )
+            })
+            .collect(),
+    };
     charts.push((
         "amac_fig2_12_slots.png".into(),
-        LineChart {
-            title: "Mean slots to agreement (runs that agree), thesis rule, p_collide = 1".into(),
-            x_label: "coolness C".into(),
-            y_label: "slots".into(),
-            series: THESIS_SIZES
-                .iter()
-                .map(|&n| {
-                    series(
-                        results,
-                        format!("{n} nodes"),
-                        coolness,
-                        DiscoveryRule::Thesis,
-                        n,
-                        1.0,
-                        |r| r.mean_slots,
-                    )
-                })
-                .collect(),
-        },
+        thesis_chart(
+            "Mean slots to agreement (runs that agree), thesis rule, p_collide = 1",
+            "slots",
+            |r| r.mean_slots,
+        ),
     ));
     charts.push((
         "amac_fig2_12_failures.png".into(),
-        LineChart {
-            title: "Runs never agreeing, thesis rule, p_collide = 1".into(),
-            x_label: "coolness C".into(),
-            y_label: "share of runs".into(),
-            series: THESIS_SIZES
-                .iter()
-                .map(|&n| {
-                    series(
-                        results,
-                        format!("{n} nodes"),
-                        coolness,
-                        DiscoveryRule::Thesis,
-                        n,
-                        1.0,
-                        |r| r.failure_share(),
-                    )
-                })
-                .collect(),
-        },
+        thesis_chart(
+            "Runs never agreeing, thesis rule, p_collide = 1",
+            "share of runs",
+            |r| r.failure_share(),
+        ),
     ));
     let compared = [4, 6, 8];
     let both = [DiscoveryRule::Thesis, DiscoveryRule::ThesisWithBackoff];

@@ -120,30 +120,51 @@ struct Node {
     lines: mpsc::Receiver<Value>,
 }
 
+/// Starts `gobyd` on a configuration file; its log lines (standard error)
+/// come through the receiver.
+fn spawn_gobyd(config_path: &Path) -> (Child, mpsc::Receiver<String>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .arg("--config")
+        .arg(config_path)
+        .env_remove("RUST_BACKTRACE")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gobyd starts");
+    let stderr = child.stderr.take().unwrap();
+    let (log_tx, log) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = log_tx.send(line);
+        }
+    });
+    (child, log)
+}
+
+/// The first log line containing `needle`, within the patience.
+fn wait_log(log: &mpsc::Receiver<String>, needle: &str) -> String {
+    loop {
+        let line = log
+            .recv_timeout(PATIENCE)
+            .unwrap_or_else(|_| panic!("no log line with {needle:?}"));
+        if line.contains(needle) {
+            return line;
+        }
+    }
+}
+
 impl Node {
     fn start(config_path: &Path) -> Node {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
-            .arg("--config")
-            .arg(config_path)
-            .env_remove("RUST_BACKTRACE")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("gobyd starts");
+        let (child, log) = spawn_gobyd(config_path);
         // The log says where the JSON interface listens.
-        let stderr = child.stderr.take().unwrap();
-        let (addr_tx, addr_rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                if let Some(addr) = line.split("JSON interface on tcp://").nth(1) {
-                    let _ = addr_tx.send(addr.trim().to_string());
-                }
-            }
-        });
-        let addr = addr_rx
-            .recv_timeout(PATIENCE)
-            .expect("gobyd reports its JSON address");
+        let line = wait_log(&log, "JSON interface on tcp://");
+        let addr = line
+            .split("JSON interface on tcp://")
+            .nth(1)
+            .expect("an address")
+            .trim()
+            .to_string();
         let client = TcpStream::connect(&addr).expect("connect to the JSON interface");
         let reader = BufReader::new(client.try_clone().unwrap());
         let (tx, lines) = mpsc::channel();
@@ -403,31 +424,8 @@ data_dir: "{}"
     );
     let path = dir.join("node.cfg");
     std::fs::write(&path, config).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
-        .arg("--config")
-        .arg(&path)
-        .env_remove("RUST_BACKTRACE")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("gobyd starts");
-    let stderr = child.stderr.take().unwrap();
-    let (log_tx, log) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = log_tx.send(line);
-        }
-    });
-    let wait_log = |needle: &str| loop {
-        let line = log
-            .recv_timeout(PATIENCE)
-            .unwrap_or_else(|_| panic!("no log line with {needle:?}"));
-        if line.contains(needle) {
-            return;
-        }
-    };
-    wait_log("gobyd started");
+    let (mut child, log) = spawn_gobyd(&path);
+    wait_log(&log, "gobyd started");
 
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
     socket.set_read_timeout(Some(PATIENCE)).unwrap();
@@ -480,7 +478,7 @@ data_dir: "{}"
         .status()
         .unwrap();
     assert!(status.success());
-    wait_log("gobyd stopping");
+    wait_log(&log, "gobyd stopping");
     let deadline = Instant::now() + PATIENCE;
     let exit = loop {
         if let Some(exit) = child.try_wait().unwrap() {
