@@ -19,6 +19,14 @@
 //! fixed-priority queues in the thesis' data marketplace and writes a table,
 //! a CSV file and PNG plots.
 //!
+//! `goby amac simulate` runs the Monte Carlo of the auto-discovery TDMA
+//! schemes (thesis Figs. 2.11, 2.12) and `goby modem emulate` runs emulated
+//! WHOI Micro-Modems on pseudo-terminals for bench tests without hardware.
+//!
+//! `gobyd` ([`daemon`]) composes DCCL, the queue, medium access and a modem
+//! driver from one configuration file and serves the autonomy software over
+//! JSON (TCP, UDP) and MOOS.
+//!
 //! `goby position synth` writes a synthetic AUV trajectory and `goby position
 //! eval` codes a trajectory with every state observer and probability model
 //! (bits per delta, as thesis Table 3.2) and computes the cost per sample
