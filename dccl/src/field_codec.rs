@@ -206,6 +206,18 @@ impl RepeatBounds {
     pub fn prefix_bits(&self) -> u32 {
         crate::rounding::ceil_log2_u64((self.max - self.min) as u64 + 1)
     }
+
+    /// In strict mode, refuses `len` values beyond `max_repeat` (otherwise
+    /// the extra values are dropped by the encoder).
+    pub fn check_max(&self, len: usize, ctx: &EncodeContext) -> Result<(), CodecError> {
+        if ctx.strict && len > self.max as usize {
+            return Err(CodecError::new(format!(
+                "{len} values exceed max_repeat {}",
+                self.max
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// A field codec: turns one field value into bits and back.
@@ -262,13 +274,7 @@ pub trait FieldCodec: Send + Sync + Debug {
         bounds: RepeatBounds,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        if ctx.strict && values.len() > bounds.max as usize {
-            return Err(CodecError::new(format!(
-                "{} values exceed max_repeat {}",
-                values.len(),
-                bounds.max
-            )));
-        }
+        bounds.check_max(values.len(), ctx)?;
         if ctx.strict && values.len() < bounds.min as usize {
             return Err(CodecError::new(format!(
                 "{} values are fewer than min_repeat {}",

@@ -909,13 +909,7 @@ impl FieldCodec for ArithmeticCodec {
         bounds: RepeatBounds,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        if ctx.strict && values.len() > bounds.max as usize {
-            return Err(CodecError::new(format!(
-                "{} values exceed max_repeat {}",
-                values.len(),
-                bounds.max
-            )));
-        }
+        bounds.check_max(values.len(), ctx)?;
         self.encode_values(out, values, bounds.max, ctx)
     }
     fn decode_repeated(

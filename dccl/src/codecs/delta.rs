@@ -237,13 +237,7 @@ impl FieldCodec for DeltaCodec {
         bounds: RepeatBounds,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        if ctx.strict && values.len() > bounds.max as usize {
-            return Err(CodecError::new(format!(
-                "{} values exceed max_repeat {}",
-                values.len(),
-                bounds.max
-            )));
-        }
+        bounds.check_max(values.len(), ctx)?;
         let samples = values
             .iter()
             .take(bounds.max as usize)
