@@ -92,8 +92,9 @@ pub fn load_proto_file(path: PathBuf) -> dccl::Result<Vec<String>> {
 }
 
 /// Adds one file from its serialized `FileDescriptorProto` (custom options
-/// kept). A file whose name is already in the pool is left as it is, so a
-/// generated module of a file loaded from its `.proto` adds nothing.
+/// kept). A file whose name, or one of whose top-level types, is already in
+/// the pool is left out, so a generated module of a file loaded from its
+/// `.proto` adds nothing and the loaded definitions stay.
 /// Returns whether the file was added.
 pub fn add_serialized_file(bytes: &[u8]) -> dccl::Result<bool> {
     let proto = dccl::prost_reflect::prost_types::FileDescriptorProto::decode(bytes)
@@ -101,6 +102,27 @@ pub fn add_serialized_file(bytes: &[u8]) -> dccl::Result<bool> {
     let name = proto.name().to_string();
     let mut s = state();
     if s.pool.get_file_by_name(&name).is_some() {
+        return Ok(false);
+    }
+    // The same definitions loaded from the `.proto` under another file name
+    // (its path relative to another include directory): those stay.
+    let package = proto.package();
+    let full = |n: &str| {
+        if package.is_empty() {
+            n.to_string()
+        } else {
+            format!("{package}.{n}")
+        }
+    };
+    if proto
+        .message_type
+        .iter()
+        .any(|m| s.pool.get_message_by_name(&full(m.name())).is_some())
+        || proto
+            .enum_type
+            .iter()
+            .any(|e| s.pool.get_enum_by_name(&full(e.name())).is_some())
+    {
         return Ok(false);
     }
     s.pool
