@@ -34,6 +34,7 @@ import json as _json
 import os as _os
 
 from google.protobuf import descriptor_pool as _descriptor_pool
+from google.protobuf import message as _message
 from google.protobuf import message_factory as _message_factory
 
 from . import _dccl
@@ -88,8 +89,10 @@ load_proto_file = loadProtoFile
 _registered_files = set()
 # Full names of message types the native pool knows.
 _known_types = set()
-# Full name -> (class, generated) for decoded messages.
+# Full name -> the message class decoded messages get.
 _classes = {}
+# Message class -> full name, for the classes seen in encode, size and load.
+_names = {}
 # Classes for types that only the native pool knows (from loadProtoFile).
 _own_pool = None
 
@@ -121,6 +124,22 @@ def register(obj):
     return file_descriptor.name
 
 
+def _class_name(cls):
+    """Full type name of the message class ``cls``; its file is made known
+    to the native pool, and decoded messages of the type get this class."""
+    name = _names.get(cls)
+    if name is None:
+        descriptor = getattr(cls, "DESCRIPTOR", None)
+        name = getattr(descriptor, "full_name", None)
+        if not isinstance(name, str) or not hasattr(descriptor, "file"):
+            raise TypeError("expected a protobuf message, got an instance of %r" % (cls,))
+        _register_file(descriptor.file)
+        _known_types.add(name)
+        _names[cls] = name
+        _classes[name] = cls
+    return name
+
+
 def _type_name(obj):
     """Full type name of ``obj`` (a name, message, class or descriptor),
     making its file known to the native pool when it comes from Python."""
@@ -134,49 +153,53 @@ def _type_name(obj):
             _register_file(descriptor.file)
         _known_types.add(obj)
         return obj
-    descriptor = getattr(obj, "DESCRIPTOR", obj)
-    name = getattr(descriptor, "full_name", None)
-    if not isinstance(name, str):
+    if isinstance(obj, type):
+        return _class_name(obj)
+    if isinstance(obj, _message.Message):
+        return _class_name(type(obj))
+    name = getattr(obj, "full_name", None)
+    if not isinstance(name, str) or not hasattr(obj, "file"):
         raise TypeError(
             "expected a message type name, a protobuf message or class, or a Descriptor, got %r"
             % (obj,)
         )
     if name not in _known_types:
-        _register_file(descriptor.file)
+        _register_file(obj.file)
         _known_types.add(name)
     return name
 
 
 def message_class(name):
-    """The ``google.protobuf`` message class of the full type name ``name``:
-    the generated class when its ``_pb2`` module has been imported, else a
-    class built from the descriptor the native pool holds (for types from
-    :func:`loadProtoFile`). Raises ``KeyError`` for an unknown type."""
+    """The ``google.protobuf`` message class that decoded messages of the
+    full type name ``name`` get: the last generated class passed to a codec
+    (by :meth:`Codec.load`, :meth:`Codec.encode` ...) or, the first time, the
+    generated class of an imported ``_pb2`` module; else a class built from
+    the descriptor the native pool holds (types from :func:`loadProtoFile`).
+    Raises ``KeyError`` for an unknown type."""
     global _own_pool
-    entry = _classes.get(name)
-    if entry is not None and entry[1]:
-        return entry[0]
+    cls = _classes.get(name)
+    if cls is not None:
+        return cls
     try:
         descriptor = _descriptor_pool.Default().FindMessageTypeByName(name)
     except KeyError:
         descriptor = None
     if descriptor is not None:
         cls = _message_factory.GetMessageClass(descriptor)
-        _classes[name] = (cls, True)
-        return cls
-    if entry is not None:
-        return entry[0]
-    if not _dccl.has_message(name):
-        raise KeyError("message type %s is not known: load its .proto file or import its _pb2 module" % name)
-    if _own_pool is None:
-        _own_pool = _descriptor_pool.DescriptorPool()
-    for file_name, data in _dccl.files_for_message(name):
-        try:
-            _own_pool.FindFileByName(file_name)
-        except KeyError:
-            _own_pool.AddSerializedFile(data)
-    cls = _message_factory.GetMessageClass(_own_pool.FindMessageTypeByName(name))
-    _classes[name] = (cls, False)
+    else:
+        if not _dccl.has_message(name):
+            raise KeyError(
+                "message type %s is not known: load its .proto file or import its _pb2 module" % name
+            )
+        if _own_pool is None:
+            _own_pool = _descriptor_pool.DescriptorPool()
+        for file_name, data in _dccl.files_for_message(name):
+            try:
+                _own_pool.FindFileByName(file_name)
+            except KeyError:
+                _own_pool.AddSerializedFile(data)
+        cls = _message_factory.GetMessageClass(_own_pool.FindMessageTypeByName(name))
+    _classes[name] = cls
     return cls
 
 
@@ -189,9 +212,8 @@ def _as_bytes(data):
 
 
 def _to_message(name, wire):
-    msg = message_class(name)()
-    msg.ParseFromString(wire)
-    return msg
+    cls = _classes.get(name) or message_class(name)
+    return cls.FromString(wire)
 
 
 class Codec:
@@ -248,7 +270,7 @@ class Codec:
 
     def size(self, message):
         """Encoded size in bytes (int) of ``message`` (a protobuf message of a loaded type)."""
-        return self._codec.size(_type_name(message), message.SerializePartialToString())
+        return self._codec.size(_class_name(type(message)), message.SerializePartialToString())
 
     def encode(self, message, header_only=False):
         """Encodes ``message`` (a protobuf message of a loaded type); returns
@@ -260,7 +282,7 @@ class Codec:
         supported (raises)."""
         if header_only:
             raise DcclException("encode(header_only=True) is not supported")
-        return self._codec.encode(_type_name(message), message.SerializePartialToString())
+        return self._codec.encode(_class_name(type(message)), message.SerializePartialToString())
 
     def decode(self, data, header_only=False):
         """Decodes one message from ``data`` (bytes; extra bytes after the
