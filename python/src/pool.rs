@@ -10,6 +10,7 @@
 use std::path::PathBuf;
 use std::sync::{LazyLock, Mutex, MutexGuard};
 
+use dccl::prost_reflect::prost_types::FileDescriptorProto;
 use dccl::prost_reflect::{DescriptorPool, FileDescriptor, MessageDescriptor};
 use prost::Message;
 
@@ -97,32 +98,14 @@ pub fn load_proto_file(path: PathBuf) -> dccl::Result<Vec<String>> {
 /// `.proto` adds nothing and the loaded definitions stay.
 /// Returns whether the file was added.
 pub fn add_serialized_file(bytes: &[u8]) -> dccl::Result<bool> {
-    let proto = dccl::prost_reflect::prost_types::FileDescriptorProto::decode(bytes)
+    let proto = FileDescriptorProto::decode(bytes)
         .map_err(|e| dccl::Error::Proto(format!("not a serialized FileDescriptorProto: {e}")))?;
     let name = proto.name().to_string();
     let mut s = state();
     if s.pool.get_file_by_name(&name).is_some() {
         return Ok(false);
     }
-    // The same definitions loaded from the `.proto` under another file name
-    // (its path relative to another include directory): those stay.
-    let package = proto.package();
-    let full = |n: &str| {
-        if package.is_empty() {
-            n.to_string()
-        } else {
-            format!("{package}.{n}")
-        }
-    };
-    if proto
-        .message_type
-        .iter()
-        .any(|m| s.pool.get_message_by_name(&full(m.name())).is_some())
-        || proto
-            .enum_type
-            .iter()
-            .any(|e| s.pool.get_enum_by_name(&full(e.name())).is_some())
-    {
+    if defined_elsewhere(&s.pool, &proto) {
         return Ok(false);
     }
     s.pool
@@ -131,8 +114,31 @@ pub fn add_serialized_file(bytes: &[u8]) -> dccl::Result<bool> {
     Ok(true)
 }
 
+/// Whether a top-level message or enum of `file` is already in the pool:
+/// the same definitions entered under another file name (a `.proto`
+/// compiled from one include directory, its generated module from another).
+/// Those already there stay.
+fn defined_elsewhere(pool: &DescriptorPool, file: &FileDescriptorProto) -> bool {
+    let full = |n: &str| {
+        if file.package().is_empty() {
+            n.to_string()
+        } else {
+            format!("{}.{n}", file.package())
+        }
+    };
+    file.message_type
+        .iter()
+        .any(|m| pool.get_message_by_name(&full(m.name())).is_some())
+        || file
+            .enum_type
+            .iter()
+            .any(|e| pool.get_enum_by_name(&full(e.name())).is_some())
+}
+
 fn merge(pool: &mut DescriptorPool, file: &FileDescriptor) -> dccl::Result<()> {
-    if pool.get_file_by_name(file.name()).is_some() {
+    if pool.get_file_by_name(file.name()).is_some()
+        || defined_elsewhere(pool, file.file_descriptor_proto())
+    {
         return Ok(());
     }
     pool.decode_file_descriptor_proto(file.encode_to_vec().as_slice())

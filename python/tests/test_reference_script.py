@@ -53,10 +53,14 @@ def test_generated_module_alone_without_the_proto(protos_dir, tmp_path):
         "assert type(back) is nav.Command, type(back)\n"
         "assert back == m, back\n"
         "assert c.max_size('goby.example.Command') >= len(data)\n"
+        "import sys\n"
+        "dccl.loadProtoFile(sys.argv[1])  # the same types again, from the .proto: they stay\n"
+        "assert c.encode(m) == data\n"
         "print('ok', data.hex())\n"
     )
     out = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True,
+        [sys.executable, "-c", script, str(protos_dir / "goby" / "example" / "navigation.proto")],
+        capture_output=True, text=True,
         env=dict(os.environ, PYTHONPATH=str(tmp_path)), cwd=str(tmp_path), timeout=120,
     )
     assert out.returncode == 0, out.stderr
