@@ -3,7 +3,7 @@ version-4 vectors of ../shared/dccl-vectors (the set the Rust benchmark
 uses). Prints one line per operation: microseconds per message, the best of
 several rounds (the machine is shared: the minimum is the least disturbed).
 
-Usage: python python/benches/bench.py [--rounds N] [PATH/TO/dccl-vectors]
+Usage: python python/benches/bench.py [--rounds N] [--message TYPE] [PATH/TO/dccl-vectors]
 """
 
 import argparse
@@ -35,6 +35,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("vectors", nargs="?", default=str(DEFAULT_VECTORS))
     parser.add_argument("--rounds", type=int, default=20)
+    parser.add_argument("--message", help="only the vectors of this type (e.g. vec.Basic)")
     args = parser.parse_args()
     vectors = pathlib.Path(args.vectors)
     if not (vectors / "vectors.jsonl").is_file():
@@ -43,6 +44,10 @@ def main():
     dccl.loadProtoFile(str(vectors / "vectors.proto"))
     codec = dccl.Codec()
     lines = [json.loads(l) for l in (vectors / "vectors.jsonl").read_text().splitlines() if l.strip()]
+    if args.message:
+        lines = [v for v in lines if v["message"] == args.message]
+        if not lines:
+            sys.exit("bench.py: no vector of type %s" % args.message)
     for name in sorted({v["message"] for v in lines}):
         codec.load(name)
     messages = [text_format.Parse(v["input"], dccl.message_class(v["message"])()) for v in lines]
