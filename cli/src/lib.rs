@@ -41,12 +41,16 @@
 #![warn(missing_docs)]
 
 pub mod amac_cmd;
+mod byte_text;
 pub mod daemon;
 pub mod dccl_cmd;
+pub mod dccl_tool;
 mod lines;
 pub mod modem_cmd;
+pub mod passphrase;
 pub mod plot;
 pub mod position_cmd;
+mod proto_display;
 pub mod queue_cmd;
 
 use std::ffi::OsString;
@@ -82,8 +86,7 @@ pub struct GobyCli {
 #[derive(Debug, Subcommand)]
 pub enum GobyCommand {
     /// Encode, decode, analyze and benchmark DCCL messages.
-    #[command(subcommand)]
-    Dccl(dccl_cmd::DcclCommand),
+    Dccl(dccl_cmd::DcclCli),
     /// Run the medium access control's simulations.
     #[command(subcommand)]
     Amac(amac_cmd::AmacCommand),
