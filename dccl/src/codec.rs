@@ -9,6 +9,7 @@ use prost_reflect::{
 use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
+use crate::changes::{ChangeLog, ValueChange};
 use crate::codecs::arithmetic::ArithmeticModel;
 use crate::codecs::identifier;
 use crate::crypto::CryptoKey;
@@ -412,10 +413,38 @@ impl Codec {
     /// Encodes a message, appending the bytes to `out` (several calls stitch
     /// messages together; [`Codec::decode_all`] splits them).
     pub fn encode_into(&self, msg: &DynamicMessage, out: &mut Vec<u8>) -> Result<()> {
-        self.encode_with(msg, out, false)
+        self.encode_with(msg, out, false, None)
     }
 
-    fn encode_with(&self, msg: &DynamicMessage, out: &mut Vec<u8>, dry_run: bool) -> Result<()> {
+    /// Encodes a message (the same bytes as [`Codec::encode`]) and reports
+    /// every value the codec changed on the way: out-of-range numbers sent as
+    /// "not present", NaN sent as the minimum, strings, bytes and arrays
+    /// truncated, undefined enum values. In strict mode the first such value
+    /// is an error instead, as with `encode`.
+    pub fn encode_with_changes(&self, msg: &DynamicMessage) -> Result<(Vec<u8>, Vec<ValueChange>)> {
+        let log = ChangeLog::new();
+        let mut out = Vec::new();
+        self.encode_with(msg, &mut out, false, Some(&log))?;
+        Ok((out, log.into_changes(msg.descriptor().full_name())))
+    }
+
+    /// The values encoding `msg` would change (see
+    /// [`Codec::encode_with_changes`]), without encoding it for sending:
+    /// adaptive arithmetic models are left as they are.
+    pub fn check(&self, msg: &DynamicMessage) -> Result<Vec<ValueChange>> {
+        let log = ChangeLog::new();
+        let mut out = Vec::new();
+        self.encode_with(msg, &mut out, true, Some(&log))?;
+        Ok(log.into_changes(msg.descriptor().full_name()))
+    }
+
+    fn encode_with(
+        &self,
+        msg: &DynamicMessage,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+    ) -> Result<()> {
         let name = msg.descriptor().full_name().to_string();
         let loaded = self.get(&name)?;
         loaded
@@ -426,6 +455,7 @@ impl Codec {
             strict: self.strict,
             dry_run,
             definition_hash: loaded.hash,
+            changes,
         };
         let mut head = BitWriter::with_capacity(loaded.head_bytes());
         if !loaded.omit_id {
@@ -462,7 +492,7 @@ impl Codec {
     /// Adaptive arithmetic models are left as they are.
     pub fn size(&self, msg: &DynamicMessage) -> Result<usize> {
         let mut out = Vec::new();
-        self.encode_with(msg, &mut out, true)?;
+        self.encode_with(msg, &mut out, true, None)?;
         Ok(out.len())
     }
 

@@ -53,6 +53,7 @@
 
 mod analyze;
 pub mod bits;
+pub mod changes;
 mod codec;
 pub mod codecs;
 mod crypto;
@@ -65,6 +66,7 @@ pub mod registry;
 pub mod rounding;
 pub mod text_format;
 
+pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};

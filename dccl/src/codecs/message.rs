@@ -329,6 +329,7 @@ impl MessageCodec {
             out.write(case as u64, o.bits);
         }
         for f in &self.fields {
+            let mark = ctx.change_mark();
             let result = if let Some(bounds) = f.repeat {
                 match msg.get_field(&f.field).as_ref() {
                     Value::List(values) => f.codec.encode_repeated(out, values, bounds, ctx),
@@ -345,6 +346,7 @@ impl MessageCodec {
                 f.codec.encode(out, None, ctx)
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
+            ctx.name_changes(mark, || f.field.name().to_string());
         }
         Ok(())
     }
