@@ -21,7 +21,7 @@ use prost_reflect::{
 
 use crate::byte_text;
 use crate::dccl_tool::ToolArgs;
-use crate::lines::{for_each_line, LineError};
+use crate::lines::{for_each_line, warn, LineError};
 use crate::passphrase::PassphraseArgs;
 use crate::{CliError, Status};
 
@@ -571,7 +571,7 @@ pub(crate) fn encode(
         defs.load_named(&mut codec, std::slice::from_ref(name))?;
     }
     let engine = base64_engine();
-    let bad = for_each_line(stdin, stderr, |_, line| {
+    let bad = for_each_line(stdin, stderr, |number, line, stderr| {
         let (named, text) = split_type_prefix(line).map_err(LineError::Bad)?;
         let name = match named.or(job.message.as_deref()) {
             Some(name) => name,
@@ -594,9 +594,13 @@ pub(crate) fn encode(
             }
         };
         let msg = parse_message(&desc, job.input, text).map_err(LineError::Bad)?;
-        let bytes = codec
-            .encode(&msg)
+        let (bytes, changes) = codec
+            .encode_with_changes(&msg)
             .map_err(|e| LineError::Bad(e.to_string()))?;
+        for change in &changes {
+            let warning = format!("{}.{}: {}", change.message, change.field, change.reason);
+            warn(stderr, number, &warning)?;
+        }
         match job.format {
             ByteFormat::Hex => writeln!(stdout, "{}", hex::encode(&bytes))?,
             ByteFormat::Base64 => writeln!(stdout, "{}", engine.encode(&bytes))?,
@@ -664,7 +668,7 @@ pub(crate) fn decode(
         };
     }
     let engine = base64_engine();
-    let bad = for_each_line(stdin, stderr, |_, line| {
+    let bad = for_each_line(stdin, stderr, |_, line, _| {
         let bytes = match job.format {
             ByteFormat::Hex => {
                 hex::decode(line).map_err(|e| LineError::Bad(format!("not valid hex: {e}")))?
@@ -822,7 +826,7 @@ fn bench(
 
     let mut messages = Vec::new();
     let mut encoded = Vec::new();
-    let bad = for_each_line(stdin, stderr, |_, line| {
+    let bad = for_each_line(stdin, stderr, |_, line, _| {
         let msg = parse_message(&desc, args.input, line).map_err(LineError::Bad)?;
         let bytes = codec
             .encode(&msg)

@@ -151,12 +151,15 @@ pub fn stderr_text(out: &Output) -> String {
 }
 
 /// Input line numbers reported as bad on standard error (`line N: ...`),
-/// with their messages.
+/// with their messages; warnings (`line N: warning: ...`) are not.
 pub fn bad_lines(stderr: &str) -> BTreeMap<usize, String> {
     let mut map = BTreeMap::new();
     for l in stderr.lines() {
         if let Some(rest) = l.strip_prefix("line ") {
             if let Some((n, msg)) = rest.split_once(": ") {
+                if msg.starts_with("warning: ") {
+                    continue;
+                }
                 if let Ok(n) = n.parse() {
                     map.insert(n, msg.to_string());
                 }
