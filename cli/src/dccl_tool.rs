@@ -68,6 +68,12 @@ pub struct ToolArgs {
     /// Accepted for compatibility; prints nothing more.
     #[arg(short = 'v', long = "verbose")]
     pub verbose: bool,
+    /// Not supported (compiled message libraries): give the `.proto` files with -f.
+    #[arg(short = 'l', long = "dlopen", value_name = "LIB")]
+    pub dlopen: Vec<String>,
+    /// The DCCL id codec; only the default, `dccl.default.id`, is supported.
+    #[arg(short = 'i', long = "id_codec", value_name = "NAME")]
+    pub id_codec: Option<String>,
     /// Passphrase for encryption and decryption.
     #[command(flatten)]
     pub passphrase: PassphraseArgs,
@@ -84,6 +90,18 @@ pub fn run(
     stdout: &mut dyn Write,
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
+    if let Some(lib) = args.dlopen.first() {
+        return Err(CliError::setup(format!(
+            "-l {lib}: loading compiled message libraries is not supported; give the .proto files with -f"
+        )));
+    }
+    if let Some(id_codec) = args.id_codec.as_deref() {
+        if id_codec != "dccl.default.id" {
+            return Err(CliError::setup(format!(
+                "-i {id_codec}: only the default id codec, dccl.default.id, is supported"
+            )));
+        }
+    }
     let defs = Definitions::compile(&args.proto)?;
     if args.encode {
         let message = match args.message.as_slice() {

@@ -20,7 +20,8 @@ pub struct PassphraseArgs {
     #[arg(long, value_name = "P", conflicts_with = "passphrase_file")]
     pub passphrase: Option<String>,
     /// Read the passphrase from this file (its whole content, one trailing
-    /// line break removed).
+    /// line break removed). Without either option, a non-empty
+    /// DCCL_PASSPHRASE in the environment is used.
     #[arg(long = "passphrase-file", value_name = "FILE")]
     pub passphrase_file: Option<PathBuf>,
 }

@@ -137,6 +137,26 @@ fn reference_encode_without_m_takes_the_first_message_and_reads_type_prefixes() 
     // No action at all is a usage error.
     let out = goby(&["dccl", "-f", NAV], "");
     assert_eq!(out.status.code(), Some(2));
+    // What cannot be done is said plainly.
+    for (args, says) in [
+        (
+            &["dccl", "-a", "-f", NAV, "-l", "libmsgs.so"][..],
+            "not supported",
+        ),
+        (
+            &["dccl", "-a", "-f", NAV, "-i", "my.id"][..],
+            "dccl.default.id",
+        ),
+    ] {
+        let out = goby(args, "");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(stderr_text(&out).contains(says), "{}", stderr_text(&out));
+    }
+    let out = goby(
+        &["dccl", "-a", "-H", "-f", NAV, "-i", "dccl.default.id"],
+        "",
+    );
+    assert!(out.status.success(), "{}", stderr_text(&out));
 }
 
 #[test]
