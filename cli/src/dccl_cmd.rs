@@ -14,13 +14,14 @@ use base64::engine::general_purpose::{GeneralPurpose, GeneralPurposeConfig};
 use base64::engine::DecodePaddingMode;
 use base64::Engine;
 use clap::{Args, Subcommand, ValueEnum};
-use dccl::{Codec, MessagePart};
+use dccl::Codec;
 use prost_reflect::{
     DescriptorPool, DynamicMessage, MessageDescriptor, ReflectMessage, SerializeOptions,
 };
 
 use crate::byte_text;
 use crate::dccl_tool::ToolArgs;
+use crate::frame_decoder::{FrameDecoder, FrameError};
 use crate::lines::{for_each_line, warn, LineError};
 use crate::passphrase::PassphraseArgs;
 use crate::{CliError, Status};
@@ -525,6 +526,10 @@ fn format_message(msg: &DynamicMessage, form: OutputForm, prefix: bool) -> Resul
     }
 }
 
+/// Length of a full line of base64 as libb64 (the reference tool's base64
+/// library) wraps its output.
+const BASE64_WRAP: usize = 72;
+
 fn base64_engine() -> GeneralPurpose {
     GeneralPurpose::new(
         &base64::alphabet::STANDARD,
@@ -660,16 +665,18 @@ pub(crate) fn decode(
         stdin.read_to_end(&mut bytes).map_err(CliError::Input)?;
         return match decoder.decode(&bytes, |m| emit(stdout, m)) {
             Ok(()) => Ok(Status::Ok),
-            Err(LineError::Bad(e)) => {
-                writeln!(stderr, "{e}")?;
+            Err(FrameError::Output(LineError::Fatal(e))) => Err(e),
+            Err(e) => {
+                writeln!(stderr, "{}", e.describe())?;
                 Ok(Status::BadInput(1))
             }
-            Err(LineError::Fatal(e)) => Err(e),
         };
     }
     let engine = base64_engine();
-    let bad = for_each_line(stdin, stderr, |_, line, _| {
-        let bytes = match job.format {
+    // The start of a message continued on the next line: (its line, its bytes).
+    let mut pending: Option<(usize, Vec<u8>)> = None;
+    let mut bad = for_each_line(stdin, stderr, |number, line, _| {
+        let decoded = match job.format {
             ByteFormat::Hex => {
                 hex::decode(line).map_err(|e| LineError::Bad(format!("not valid hex: {e}")))?
             }
@@ -679,91 +686,45 @@ pub(crate) fn decode(
             ByteFormat::Textformat | ByteFormat::Bin => byte_text::unescape(line)
                 .map_err(|e| LineError::Bad(format!("not a text-format byte string: {e}")))?,
         };
+        let (first_line, bytes) = match pending.take() {
+            Some((first, mut bytes)) => {
+                bytes.extend_from_slice(&decoded);
+                (first, bytes)
+            }
+            None => (number, decoded),
+        };
         let result = decoder.decode(&bytes, |m| emit(stdout, m));
         stdout.flush()?;
-        result
-    })?;
-    Ok(Status::from_bad_count(bad))
-}
-
-/// Decodes byte strings holding one or more messages back to back.
-struct FrameDecoder<'a> {
-    codec: &'a Codec,
-    /// Decode every message as this type rather than by its id.
-    as_type: Option<&'a str>,
-    /// A passphrase is set.
-    encrypted: bool,
-}
-
-impl FrameDecoder<'_> {
-    /// Decodes every message of `bytes`, handing each to `emit`. The first
-    /// message that cannot be decoded ends the string: the error says at
-    /// which byte (from 0) and how many bytes are left.
-    fn decode(
-        &self,
-        bytes: &[u8],
-        mut emit: impl FnMut(&DynamicMessage) -> Result<(), LineError>,
-    ) -> Result<(), LineError> {
-        let mut offset = 0usize;
-        while offset < bytes.len() {
-            let rest = &bytes[offset..];
-            let decoded = match self.as_type {
-                Some(name) => self.codec.decode_as(name, rest),
-                None => self.codec.decode_prefix(rest),
-            };
-            match decoded {
-                Ok((msg, used)) => {
-                    emit(&msg)?;
-                    if used == 0 {
-                        break;
-                    }
-                    offset += used;
-                }
-                Err(e) => {
-                    let hint = if !self.encrypted {
-                        ""
-                    } else if offset > 0 {
-                        " (likely a wrong passphrase: the body of the message before decodes to another length)"
-                    } else if self.body_failed(&e) {
-                        " (the header decodes but the body does not: likely a wrong passphrase)"
-                    } else {
-                        ""
-                    };
-                    let text = match &e {
-                        dccl::Error::Decode { location, reason } if location.message.is_empty() => {
-                            format!("cannot decode: {reason}")
-                        }
-                        other => other.to_string(),
-                    };
-                    return Err(LineError::Bad(format!(
-                        "byte {offset}: {text}{hint} ({} byte(s) left undecoded)",
-                        rest.len()
-                    )));
-                }
+        match result {
+            Ok(()) => Ok(()),
+            // A full line of wrapped base64 (as libb64 writes messages over 54
+            // bytes) that ends inside a message: the message goes on.
+            Err(FrameError::Bad {
+                offset, truncated, ..
+            }) if truncated && job.format == ByteFormat::Base64 && line.len() == BASE64_WRAP => {
+                pending = Some((first_line, bytes[offset..].to_vec()));
+                Ok(())
+            }
+            Err(FrameError::Output(e)) => Err(e),
+            Err(e) => {
+                let continued = if first_line == number {
+                    String::new()
+                } else {
+                    format!(" (continued from line {first_line})")
+                };
+                Err(LineError::Bad(format!("{}{continued}", e.describe())))
             }
         }
-        Ok(())
+    })?;
+    if let Some((first_line, bytes)) = pending {
+        bad += 1;
+        writeln!(
+            stderr,
+            "line {first_line}: the input ends inside a message ({} byte(s) left undecoded)",
+            bytes.len()
+        )?;
     }
-
-    /// The error is in the (encrypted) body of a message whose clear header
-    /// decoded: with a passphrase set, that points at a wrong passphrase.
-    fn body_failed(&self, e: &dccl::Error) -> bool {
-        let dccl::Error::Decode { location, reason } = e else {
-            return false;
-        };
-        if location.message.is_empty() || reason.contains("header") {
-            return false;
-        }
-        let Ok(sizes) = self.codec.field_sizes(&location.message) else {
-            return false;
-        };
-        let in_head = sizes.iter().any(|f| {
-            f.part == MessagePart::Head
-                && !location.field.is_empty()
-                && (location.field == f.path || location.field.starts_with(&format!("{}.", f.path)))
-        });
-        !in_head && !reason.starts_with("received id")
-    }
+    Ok(Status::from_bad_count(bad))
 }
 
 /// `goby dccl analyze` / `goby dccl -a`: the size report of each type, or

@@ -47,6 +47,7 @@ mod byte_text;
 pub mod daemon;
 pub mod dccl_cmd;
 pub mod dccl_tool;
+mod frame_decoder;
 mod lines;
 pub mod modem_cmd;
 pub mod passphrase;

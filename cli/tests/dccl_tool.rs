@@ -630,3 +630,66 @@ fn options_nested_too_deep_are_an_error_not_a_crash() {
     assert!(stderr_text(&out).contains("deep.proto"));
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// Base64 wrapped at 72 characters with a final line break, as the
+/// reference tool's base64 library (libb64) writes each message.
+fn libb64(bytes: &[u8]) -> String {
+    let text = base64::engine::general_purpose::STANDARD.encode(bytes);
+    let mut out = String::new();
+    for chunk in text.as_bytes().chunks(72) {
+        out.push_str(std::str::from_utf8(chunk).unwrap());
+        out.push('\n');
+    }
+    if text.len() % 72 == 0 {
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn base64_wrapped_as_the_reference_writes_it_decodes() {
+    let dir = scratch("wrapped");
+    let proto = dir.join("long.proto");
+    std::fs::write(
+        &proto,
+        "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage long;\n\
+         message Note {\n  option (dccl.msg) = { id: 9 max_bytes: 200 codec_version: 4 };\n  \
+         optional string text = 1 [(dccl.field) = { max_length: 150 }];\n}\n",
+    )
+    .unwrap();
+    let proto = path_str(&proto);
+    let texts = ["a".repeat(100), "b".repeat(51), "c".repeat(10)];
+    let mut wrapped = String::new();
+    let mut want = String::new();
+    for t in &texts {
+        let out = goby(
+            &["dccl", "-e", "-f", proto, "-m", "long.Note"],
+            format!("text: \"{t}\"\n"),
+        );
+        assert!(out.status.success(), "{}", stderr_text(&out));
+        wrapped.push_str(&libb64(&out.stdout));
+        want.push_str(&format!("text: \"{t}\"\n"));
+    }
+    // 100 characters: over one line of base64; 51: 54 bytes, exactly one
+    // full line (then an empty one).
+    assert!(wrapped.lines().count() > texts.len(), "{wrapped}");
+    assert!(wrapped.contains("\n\n"), "{wrapped}");
+    let out = goby(
+        &["dccl", "-d", "-o", "--format", "base64", "-f", proto],
+        &*wrapped,
+    );
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    assert_eq!(stdout_text(&out), want);
+
+    // The input ending inside a message is an error for the line it started on.
+    let first_line = wrapped.lines().next().unwrap();
+    let out = goby(
+        &["dccl", "decode", "--format", "base64", "-f", proto],
+        format!("{first_line}\n"),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(out.stdout.is_empty());
+    let bad = bad_lines(&stderr_text(&out));
+    assert!(bad[&1].contains("ends inside a message"), "{:?}", bad);
+    let _ = std::fs::remove_dir_all(dir);
+}
