@@ -640,7 +640,7 @@ fn libb64(bytes: &[u8]) -> String {
         out.push_str(std::str::from_utf8(chunk).unwrap());
         out.push('\n');
     }
-    if text.len().is_multiple_of(72) {
+    if text.as_bytes().chunks(72).last().is_some_and(|c| c.len() == 72) {
         out.push('\n');
     }
     out
