@@ -4,7 +4,7 @@
 use std::fs;
 use std::hint::black_box;
 use std::io::{BufRead, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use base64::engine::general_purpose::{GeneralPurpose, GeneralPurposeConfig};
@@ -196,11 +196,12 @@ impl Definitions {
         }
         let pool = dccl::compile_protos(std::slice::from_ref(&args.file), args.include.as_slice())
             .map_err(|e| CliError::setup(e.to_string()))?;
-        let file_name = pool_file_name(&pool, &args.file, &args.include).ok_or_else(|| {
-            CliError::setup(format!(
-                "{shown}: compiled, but not found among the compiled files"
-            ))
-        })?;
+        let file_name =
+            dccl::pool_file_name(&pool, &args.file, &args.include).ok_or_else(|| {
+                CliError::setup(format!(
+                    "{shown}: compiled, but not found among the compiled files"
+                ))
+            })?;
         let arithmetic_models = match &args.arithmetic_models {
             None => None,
             Some(path) => {
@@ -280,39 +281,6 @@ fn new_codec(passphrase: Option<&str>, strict: bool) -> Codec {
         codec.set_passphrase(p);
     }
     codec
-}
-
-/// Name given by the compiler to `file`: its path relative to the first
-/// include directory that holds it (the `-I` directories, then its own).
-pub(crate) fn pool_file_name(
-    pool: &DescriptorPool,
-    file: &Path,
-    include: &[PathBuf],
-) -> Option<String> {
-    let path = fs::canonicalize(file).ok()?;
-    let mut dirs: Vec<PathBuf> = include
-        .iter()
-        .filter_map(|d| fs::canonicalize(d).ok())
-        .collect();
-    if let Some(parent) = path.parent() {
-        dirs.push(parent.to_path_buf());
-    }
-    for dir in &dirs {
-        if let Ok(rel) = path.strip_prefix(dir) {
-            let name = rel
-                .components()
-                .map(|c| c.as_os_str().to_string_lossy().into_owned())
-                .collect::<Vec<_>>()
-                .join("/");
-            if pool.get_file_by_name(&name).is_some() {
-                return Some(name);
-            }
-        }
-    }
-    pool.files()
-        .filter(|f| path.ends_with(f.name()))
-        .max_by_key(|f| f.name().len())
-        .map(|f| f.name().to_string())
 }
 
 /// Parses one input message.
