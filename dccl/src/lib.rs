@@ -67,7 +67,7 @@ pub mod rounding;
 pub mod text_format;
 
 pub use changes::ValueChange;
-pub use codec::{Codec, FieldSize};
+pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources};

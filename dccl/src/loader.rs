@@ -4,7 +4,8 @@
 //! (`dccl/arithmetic/protobuf/arithmetic_extensions.proto`,
 //! `dccl/arithmetic/protobuf/arithmetic.proto`, `goby/dccl/delta_extensions.proto`)
 //! are embedded: a file that imports them needs no include path for them and
-//! no copy on disk.
+//! no copy on disk. The older path of the options,
+//! `dccl/protobuf/option_extensions.proto`, resolves to the same options.
 
 use std::path::{Path, PathBuf};
 
@@ -15,11 +16,22 @@ use protox::file::{
 
 use crate::error::{Error, Result};
 
+/// The import path of the DCCL options used by older message sets; libdccl
+/// 4 still ships it as a file that publicly imports the current one.
+pub const LEGACY_OPTION_EXTENSIONS_PATH: &str = "dccl/protobuf/option_extensions.proto";
+
 /// Serves the embedded DCCL option extensions and codec option files.
 struct EmbeddedResolver;
 
 impl FileResolver for EmbeddedResolver {
     fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
+        if name == LEGACY_OPTION_EXTENSIONS_PATH {
+            let source = format!(
+                "syntax = \"proto2\";\nimport public \"{}\";\n",
+                protos::OPTION_EXTENSIONS_PATH
+            );
+            return File::from_source(name, &source);
+        }
         match protos::DCCL_EMBEDDED_PROTOS
             .iter()
             .find(|(path, _)| *path == name)
