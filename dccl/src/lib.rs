@@ -61,6 +61,7 @@ pub mod definition_hash;
 mod error;
 pub mod field_codec;
 mod loader;
+pub mod nesting;
 pub mod options;
 pub mod registry;
 pub mod rounding;

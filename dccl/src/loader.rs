@@ -42,6 +42,37 @@ impl FileResolver for EmbeddedResolver {
     }
 }
 
+/// An include directory whose files are checked for runaway nesting
+/// ([`crate::nesting`]) before the parser sees them.
+struct GuardedInclude {
+    dir: PathBuf,
+    inner: IncludeFileResolver,
+}
+
+impl GuardedInclude {
+    fn new(dir: PathBuf) -> Self {
+        GuardedInclude {
+            inner: IncludeFileResolver::new(dir.clone()),
+            dir,
+        }
+    }
+}
+
+impl FileResolver for GuardedInclude {
+    fn resolve_path(&self, path: &Path) -> Option<String> {
+        self.inner.resolve_path(path)
+    }
+
+    fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
+        let path = self.dir.join(name);
+        if let Ok(source) = std::fs::read_to_string(&path) {
+            crate::nesting::check(&path.display().to_string(), &source)
+                .map_err(protox::Error::new)?;
+        }
+        self.inner.open_file(name)
+    }
+}
+
 fn absolute(path: &Path) -> PathBuf {
     std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
 }
@@ -72,7 +103,7 @@ pub fn compile_protos(
     }
     let mut resolver = ChainFileResolver::new();
     for dir in dirs {
-        resolver.add(IncludeFileResolver::new(dir));
+        resolver.add(GuardedInclude::new(dir));
     }
     resolver.add(EmbeddedResolver);
     resolver.add(GoogleFileResolver::new());
@@ -93,7 +124,10 @@ pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {
     impl FileResolver for Memory {
         fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
             match self.0.iter().find(|(n, _)| n == name) {
-                Some((n, s)) => File::from_source(n, s),
+                Some((n, s)) => {
+                    crate::nesting::check(n, s).map_err(protox::Error::new)?;
+                    File::from_source(n, s)
+                }
                 None => Err(protox::Error::file_not_found(name)),
             }
         }
