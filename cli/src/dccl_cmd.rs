@@ -7,7 +7,7 @@ use std::collections::BTreeSet;
 use std::fs;
 use std::hint::black_box;
 use std::io::{BufRead, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use base64::engine::general_purpose::{GeneralPurpose, GeneralPurposeConfig};
@@ -292,7 +292,7 @@ impl Definitions {
             .map_err(|e| CliError::setup(e.to_string()))?;
         let mut file_names = Vec::new();
         for (file, name) in args.file.iter().zip(&shown) {
-            let in_pool = pool_file_name(&pool, file, &args.include).ok_or_else(|| {
+            let in_pool = dccl::pool_file_name(&pool, file, &args.include).ok_or_else(|| {
                 CliError::setup(format!(
                     "{name}: compiled, but not found among the compiled files"
                 ))
@@ -360,18 +360,6 @@ impl Definitions {
         first
     }
 
-    /// The messages of the `-f` files meant for DCCL (those with a
-    /// `(dccl.msg)` option), sorted by full name.
-    fn dccl_messages(&self) -> Vec<MessageDescriptor> {
-        let mut v: Vec<MessageDescriptor> = self
-            .all_messages()
-            .into_iter()
-            .filter(dccl::options::has_message_options)
-            .collect();
-        v.sort_by(|a, b| a.full_name().cmp(b.full_name()));
-        v
-    }
-
     /// Descriptor of the message type `name`.
     pub(crate) fn message(&self, name: &str) -> Result<MessageDescriptor, CliError> {
         self.pool.get_message_by_name(name).ok_or_else(|| {
@@ -405,30 +393,44 @@ impl Definitions {
     }
 
     /// Loads every valid DCCL message of the files into `codec`, one type at
-    /// a time; each type that cannot be loaded is named on `stderr` with the
-    /// reason and skipped. Returns the names loaded, sorted. None is an error.
+    /// a time (as the reference tool does: each top-level message and each
+    /// nested one with a `(dccl.msg)` option); each type with a `(dccl.msg)`
+    /// option that cannot be loaded is named on `stderr` with the reason and
+    /// skipped (top-level messages without one are helpers, skipped quietly).
+    /// Returns the names loaded, sorted. None is an error.
     pub(crate) fn load_valid(
         &self,
         codec: &mut Codec,
         stderr: &mut dyn Write,
     ) -> Result<Vec<String>, CliError> {
-        let candidates = self.dccl_messages();
-        if candidates.is_empty() {
+        let mut names = Vec::new();
+        let mut meant_for_dccl = 0usize;
+        for file in &self.file_names {
+            let report = codec
+                .load_valid_messages(&self.pool, file)
+                .map_err(|e| CliError::setup(e.to_string()))?;
+            meant_for_dccl += report.loaded.len();
+            names.extend(report.loaded);
+            for skipped in report.skipped {
+                let has_options = self
+                    .pool
+                    .get_message_by_name(&skipped.name)
+                    .is_some_and(|d| dccl::options::has_message_options(&d));
+                if has_options {
+                    meant_for_dccl += 1;
+                    writeln!(
+                        stderr,
+                        "goby: warning: skipped {}, not a valid DCCL message: {}",
+                        skipped.name, skipped.error
+                    )?;
+                }
+            }
+        }
+        if meant_for_dccl == 0 {
             return Err(CliError::setup(format!(
                 "{} defines no DCCL message (none has a (dccl.msg) option)",
                 self.shown
             )));
-        }
-        let mut names = Vec::new();
-        for desc in candidates {
-            match codec.load(&desc) {
-                Ok(()) => names.push(desc.full_name().to_string()),
-                Err(e) => writeln!(
-                    stderr,
-                    "goby: warning: skipped {}, not a valid DCCL message: {e}",
-                    desc.full_name()
-                )?,
-            }
         }
         if names.is_empty() {
             return Err(CliError::setup(format!(
@@ -436,6 +438,7 @@ impl Definitions {
                 self.shown
             )));
         }
+        names.sort();
         Ok(names)
     }
 }
@@ -447,39 +450,6 @@ fn new_codec(passphrase: Option<&str>, strict: bool) -> Codec {
         codec.set_passphrase(p);
     }
     codec
-}
-
-/// Name given by the compiler to `file`: its path relative to the first
-/// include directory that holds it (the `-I` directories, then its own).
-pub(crate) fn pool_file_name(
-    pool: &DescriptorPool,
-    file: &Path,
-    include: &[PathBuf],
-) -> Option<String> {
-    let path = fs::canonicalize(file).ok()?;
-    let mut dirs: Vec<PathBuf> = include
-        .iter()
-        .filter_map(|d| fs::canonicalize(d).ok())
-        .collect();
-    if let Some(parent) = path.parent() {
-        dirs.push(parent.to_path_buf());
-    }
-    for dir in &dirs {
-        if let Ok(rel) = path.strip_prefix(dir) {
-            let name = rel
-                .components()
-                .map(|c| c.as_os_str().to_string_lossy().into_owned())
-                .collect::<Vec<_>>()
-                .join("/");
-            if pool.get_file_by_name(&name).is_some() {
-                return Some(name);
-            }
-        }
-    }
-    pool.files()
-        .filter(|f| path.ends_with(f.name()))
-        .max_by_key(|f| f.name().len())
-        .map(|f| f.name().to_string())
 }
 
 /// Parses one input message.

@@ -2,7 +2,7 @@
 //! (a modem frame of stitched messages), with an error that says where the
 //! bytes stopped being a message.
 
-use dccl::{Codec, MessagePart};
+use dccl::Codec;
 use prost_reflect::DynamicMessage;
 
 use crate::lines::LineError;
@@ -14,7 +14,7 @@ pub(crate) struct FrameDecoder<'a> {
     /// Decode every message as this type rather than by its id (needed for
     /// `omit_id` types).
     pub as_type: Option<&'a str>,
-    /// A passphrase is set: failures are checked for a likely wrong one.
+    /// A passphrase is set: leftover bytes may come from a wrong one.
     pub encrypted: bool,
 }
 
@@ -78,48 +78,25 @@ impl FrameDecoder<'_> {
                         }
                         other => other.to_string(),
                     };
-                    if self.encrypted && !text.contains("passphrase") {
-                        if offset > 0 {
-                            text.push_str(
-                                " (likely a wrong passphrase: the body of the message before \
-                                 decodes to another length)",
-                            );
-                        } else if self.body_failed(&e) {
-                            text.push_str(
-                                " (the header decodes but the body does not: likely a wrong \
-                                 passphrase)",
-                            );
-                        }
+                    // The library names a body that does not decode under a
+                    // clear header; a message after the first may have started
+                    // in the wrong place because the one before was misread.
+                    if self.encrypted && offset > 0 && !text.contains("passphrase") {
+                        text.push_str(
+                            " (likely a wrong passphrase: the body of the message before \
+                             decodes to another length)",
+                        );
                     }
                     return Err(FrameError::Bad {
                         offset,
                         left: rest.len(),
-                        truncated: text.contains("truncated"),
+                        truncated: text.contains("truncated")
+                            && !matches!(e, dccl::Error::WrongPassphrase { .. }),
                         text,
                     });
                 }
             }
         }
         Ok(())
-    }
-
-    /// The error is in the (encrypted) body of a message whose clear header
-    /// decoded: with a passphrase set, that points at a wrong passphrase.
-    fn body_failed(&self, e: &dccl::Error) -> bool {
-        let dccl::Error::Decode { location, reason } = e else {
-            return false;
-        };
-        if location.message.is_empty() || reason.contains("header") {
-            return false;
-        }
-        let Ok(sizes) = self.codec.field_sizes(&location.message) else {
-            return false;
-        };
-        let in_head = sizes.iter().any(|f| {
-            f.part == MessagePart::Head
-                && !location.field.is_empty()
-                && (location.field == f.path || location.field.starts_with(&format!("{}.", f.path)))
-        });
-        !in_head && !reason.starts_with("received id")
     }
 }
