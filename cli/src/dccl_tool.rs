@@ -13,6 +13,12 @@
 //! Without `-m`, decode, analyze and display work on every valid DCCL type
 //! of the `-f` files (each invalid one is named on standard error and
 //! skipped) and encode takes the first message of the first file.
+//!
+//! Differences, on purpose: a bad input line is reported with its number
+//! and the next lines are still handled (the reference stops at the first);
+//! a file with no valid type is an error; base64 is written one message per
+//! line (the reference's libb64 wraps at 72 characters; both are read); `-l`
+//! (compiled message libraries) is not supported.
 
 use std::io::{BufRead, Write};
 
