@@ -228,6 +228,98 @@ message Command {
     assert_eq!(stdout_text(&out), want);
 }
 
+/// Nested types, an enum value option, a oneof, defaults with escapes,
+/// standard options beside DCCL ones, reserved numbers and names, extension
+/// ranges.
+const RICH_PROTO: &str = r#"syntax = "proto2";
+import "dccl/option_extensions.proto";
+package rich;
+message Outer {
+  option (dccl.msg) = { id: 10 max_bytes: 64 codec_version: 4 unit_system: "si" };
+  message Inner {
+    enum Kind { A = 0; B = 1 [deprecated = true]; }
+    optional Kind kind = 1 [default = B];
+    optional double v = 2 [(dccl.field) = { min: -1.5 max: 1e6 precision: 2 units { base_dimensions: "L" } }];
+  }
+  required Inner inner = 1;
+  oneof choice {
+    int32 a = 2 [(dccl.field) = { min: 0 max: 7 }];
+    bool b = 3;
+  }
+  optional string s = 4 [default = "a\"b\n", (dccl.field).max_length = 5];
+  optional float f = 5 [default = 0.1, (dccl.field) = { min: 0 max: 1 precision: 1 }];
+  repeated int32 r = 6 [(dccl.field) = { min: 0 max: 3 max_repeat: 2 }, packed = false];
+  optional bytes by = 7 [(dccl.field).max_length = 3, deprecated = true];
+  reserved 20, 22 to 25;
+  reserved "old";
+  extensions 100 to 199;
+}
+"#;
+
+#[test]
+fn display_proto_of_a_rich_definition_is_the_reference_text() {
+    let dir = scratch("rich");
+    let proto = dir.join("rich.proto");
+    std::fs::write(&proto, RICH_PROTO).unwrap();
+    let out = goby(&["dccl", "-p", "-f", path_str(&proto)], "");
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    // Printed by the reference tool (libdccl 4.2 on protobuf 3.21).
+    let want = r#"Please note that for Google Protobuf versions < 2.5.0, the dccl extensions will not be show below, so you'll need to refer to the original .proto file.
+message Outer {
+  option (.dccl.msg) = {
+    id: 10
+    max_bytes: 64
+    codec_version: 4
+    unit_system: "si"
+  };
+  message Inner {
+    enum Kind {
+      A = 0;
+      B = 1 [deprecated = true];
+    }
+    optional .rich.Outer.Inner.Kind kind = 1 [default = B];
+    optional double v = 2 [(.dccl.field) = {
+      precision: 2
+      min: -1.5
+      max: 1000000
+      units {
+        base_dimensions: "L"
+      }
+    }];
+  }
+  required .rich.Outer.Inner inner = 1;
+  oneof choice {
+    int32 a = 2 [(.dccl.field) = {
+      min: 0
+      max: 7
+    }];
+    bool b = 3;
+  }
+  optional string s = 4 [default = "a\"b\n", (.dccl.field) = {
+    max_length: 5
+  }];
+  optional float f = 5 [default = 0.1, (.dccl.field) = {
+    precision: 1
+    min: 0
+    max: 1
+  }];
+  repeated int32 r = 6 [packed = false, (.dccl.field) = {
+    min: 0
+    max: 3
+    max_repeat: 2
+  }];
+  optional bytes by = 7 [deprecated = true, (.dccl.field) = {
+    max_length: 3
+  }];
+  extensions 100 to 199;
+  reserved 20, 22 to 25;
+  reserved "old";
+}
+"#;
+    assert_eq!(stdout_text(&out), want);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 #[test]
 fn several_proto_files_at_once() {
     let dir = scratch("several");
