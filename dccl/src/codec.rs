@@ -9,6 +9,7 @@ use prost_reflect::{
 use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
+use crate::changes::{ChangeLog, ValueChange};
 use crate::codecs::arithmetic::ArithmeticModel;
 use crate::codecs::identifier;
 use crate::crypto::CryptoKey;
@@ -259,6 +260,43 @@ impl Codec {
         Ok(names)
     }
 
+    /// Loads every valid DCCL message of the file `file_name` of `pool`, as
+    /// libdccl's tool does when no type is named: each top-level message (and
+    /// each nested one with a `(dccl.msg)` option), in order of full name. A
+    /// type that cannot be loaded (a helper message without an id, an id
+    /// already used, a bad bound...) is skipped and reported with the reason;
+    /// the others are loaded. Errors only when the file is not in the pool.
+    pub fn load_valid_messages(
+        &mut self,
+        pool: &DescriptorPool,
+        file_name: &str,
+    ) -> Result<FileLoad> {
+        let file = pool
+            .get_file_by_name(file_name)
+            .ok_or_else(|| Error::Proto(format!("{file_name}: not in the descriptor pool")))?;
+        let mut candidates: Vec<MessageDescriptor> = file.messages().collect();
+        let mut stack: Vec<MessageDescriptor> =
+            candidates.iter().flat_map(|m| m.child_messages()).collect();
+        while let Some(desc) = stack.pop() {
+            stack.extend(desc.child_messages());
+            if has_message_options(&desc) && !desc.is_map_entry() {
+                candidates.push(desc);
+            }
+        }
+        candidates.sort_by(|a, b| a.full_name().cmp(b.full_name()));
+        let mut report = FileLoad::default();
+        for desc in candidates {
+            match self.load(&desc) {
+                Ok(()) => report.loaded.push(desc.full_name().to_string()),
+                Err(error) => report.skipped.push(SkippedType {
+                    name: desc.full_name().to_string(),
+                    error,
+                }),
+            }
+        }
+        Ok(report)
+    }
+
     /// Removes a loaded type.
     pub fn unload(&mut self, full_name: &str) {
         if let Some(l) = self.by_name.remove(full_name) {
@@ -412,10 +450,38 @@ impl Codec {
     /// Encodes a message, appending the bytes to `out` (several calls stitch
     /// messages together; [`Codec::decode_all`] splits them).
     pub fn encode_into(&self, msg: &DynamicMessage, out: &mut Vec<u8>) -> Result<()> {
-        self.encode_with(msg, out, false)
+        self.encode_with(msg, out, false, None)
     }
 
-    fn encode_with(&self, msg: &DynamicMessage, out: &mut Vec<u8>, dry_run: bool) -> Result<()> {
+    /// Encodes a message (the same bytes as [`Codec::encode`]) and reports
+    /// every value the codec changed on the way: out-of-range numbers sent as
+    /// "not present", NaN sent as the minimum, strings, bytes and arrays
+    /// truncated, undefined enum values. In strict mode the first such value
+    /// is an error instead, as with `encode`.
+    pub fn encode_with_changes(&self, msg: &DynamicMessage) -> Result<(Vec<u8>, Vec<ValueChange>)> {
+        let log = ChangeLog::new();
+        let mut out = Vec::new();
+        self.encode_with(msg, &mut out, false, Some(&log))?;
+        Ok((out, log.into_changes(msg.descriptor().full_name())))
+    }
+
+    /// The values encoding `msg` would change (see
+    /// [`Codec::encode_with_changes`]), without encoding it for sending:
+    /// adaptive arithmetic models are left as they are.
+    pub fn check(&self, msg: &DynamicMessage) -> Result<Vec<ValueChange>> {
+        let log = ChangeLog::new();
+        let mut out = Vec::new();
+        self.encode_with(msg, &mut out, true, Some(&log))?;
+        Ok(log.into_changes(msg.descriptor().full_name()))
+    }
+
+    fn encode_with(
+        &self,
+        msg: &DynamicMessage,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+    ) -> Result<()> {
         let name = msg.descriptor().full_name().to_string();
         let loaded = self.get(&name)?;
         loaded
@@ -426,6 +492,7 @@ impl Codec {
             strict: self.strict,
             dry_run,
             definition_hash: loaded.hash,
+            changes,
         };
         let mut head = BitWriter::with_capacity(loaded.head_bytes());
         if !loaded.omit_id {
@@ -462,7 +529,7 @@ impl Codec {
     /// Adaptive arithmetic models are left as they are.
     pub fn size(&self, msg: &DynamicMessage) -> Result<usize> {
         let mut out = Vec::new();
-        self.encode_with(msg, &mut out, true)?;
+        self.encode_with(msg, &mut out, true, None)?;
         Ok(out.len())
     }
 
@@ -532,12 +599,18 @@ impl Codec {
         self.decode_loaded(loaded, bytes)
     }
 
-    /// Decodes every message of a byte string holding several concatenated messages.
+    /// Decodes every message of a byte string holding several concatenated
+    /// messages. Bytes that are not a message are an error; after the first
+    /// message the error says at which byte they start and how many messages
+    /// came before.
     pub fn decode_all(&self, bytes: &[u8]) -> Result<Vec<DynamicMessage>> {
         let mut out = Vec::new();
         let mut rest = bytes;
         while !rest.is_empty() {
-            let (msg, used) = self.decode_prefix(rest)?;
+            let offset = bytes.len() - rest.len();
+            let (msg, used) = self
+                .decode_prefix(rest)
+                .map_err(|e| leftover_error(e, offset, out.len()))?;
             out.push(msg);
             rest = &rest[used.min(rest.len())..];
             if used == 0 {
@@ -589,8 +662,10 @@ impl Codec {
             .decode_message(&mut head, &mut msg, &ctx)
             .map_err(|e| e.into_decode(name))?;
         let decrypted;
+        let mut encrypted = false;
         let body_bytes = match &self.key {
             Some(key) if !self.skip_crypto_ids.contains(&loaded.id) => {
+                encrypted = true;
                 let n = body_bytes.len().min(loaded.max_body_bytes());
                 let mut b = body_bytes[..n].to_vec();
                 key.apply(head_bytes, &mut b);
@@ -603,7 +678,18 @@ impl Codec {
         loaded
             .body
             .decode_message(&mut body, &mut msg, &ctx)
-            .map_err(|e| e.into_decode(name))?;
+            .map_err(|e| {
+                if encrypted {
+                    // The header (never encrypted) was read, the body was not:
+                    // decrypted with another key, it reads as noise.
+                    Error::WrongPassphrase {
+                        message: name.to_string(),
+                        reason: e.to_string(),
+                    }
+                } else {
+                    e.into_decode(name)
+                }
+            })?;
         Ok((msg, head_len + body.bytes_consumed()))
     }
 
@@ -611,6 +697,26 @@ impl Codec {
     /// libdccl's `analyze` output.
     pub fn analyze(&self, full_name: &str) -> Result<String> {
         Ok(crate::analyze::report(self.get(full_name)?))
+    }
+}
+
+/// Adds to an error of a message after the first of a frame where it starts.
+fn leftover_error(err: Error, offset: usize, decoded: usize) -> Error {
+    if decoded == 0 {
+        return err;
+    }
+    let plural = if decoded == 1 { "" } else { "s" };
+    let at = format!("at byte {offset}, after {decoded} message{plural}");
+    match err {
+        Error::Decode { location, reason } => Error::Decode {
+            location,
+            reason: format!("{at}: {reason}"),
+        },
+        Error::WrongPassphrase { message, reason } => Error::WrongPassphrase {
+            message,
+            reason: format!("{at}: {reason}"),
+        },
+        other => other,
     }
 }
 
@@ -624,6 +730,24 @@ fn definition_hash(desc: &MessageDescriptor, parts: &[&dyn FieldCodec]) -> u64 {
         hash_combine(&mut hash, part.definition_hash());
     }
     hash
+}
+
+/// What [`Codec::load_valid_messages`] did with the messages of a file.
+#[derive(Debug, Default)]
+pub struct FileLoad {
+    /// Full names of the types loaded, sorted.
+    pub loaded: Vec<String>,
+    /// The types that are not valid DCCL messages, each with the reason.
+    pub skipped: Vec<SkippedType>,
+}
+
+/// A message type of a file that could not be loaded.
+#[derive(Debug)]
+pub struct SkippedType {
+    /// Its full name.
+    pub name: String,
+    /// Why it is not a valid DCCL message.
+    pub error: Error,
 }
 
 /// Size bounds of one field, as [`Codec::field_sizes`] reports them.
@@ -676,7 +800,7 @@ pub(crate) struct RequiredFields {
 impl RequiredFields {
     pub(crate) fn of(desc: &MessageDescriptor, depth: usize) -> RequiredFields {
         let mut fields = Vec::new();
-        for field in desc.fields() {
+        for field in crate::codecs::message::declared_fields(desc) {
             let required = field.cardinality() == Cardinality::Required;
             let nested = match field.kind() {
                 Kind::Message(m) if depth < crate::codecs::message::MAX_DEPTH => {

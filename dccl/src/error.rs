@@ -69,6 +69,19 @@ pub enum Error {
         /// What is wrong.
         reason: String,
     },
+    /// The header of an encrypted message was read but its body could not
+    /// be: the body was most likely encrypted with another passphrase (or
+    /// the message is truncated or not a DCCL message).
+    #[error(
+        "cannot decode (message {message}): likely wrong passphrase \
+         (the header decodes but the body does not: {reason})"
+    )]
+    WrongPassphrase {
+        /// Full name of the message type read from the header.
+        message: String,
+        /// The error met in the body.
+        reason: String,
+    },
     /// Bytes could not be decoded (truncated, garbage, unknown id...).
     #[error("cannot decode ({location}): {reason}")]
     Decode {

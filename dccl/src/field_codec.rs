@@ -64,6 +64,7 @@ use prost_reflect::{DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Va
 use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
+use crate::changes::ChangeLog;
 use crate::error::CodecError;
 use crate::registry::CodecRegistry;
 
@@ -78,7 +79,7 @@ pub enum MessagePart {
 
 /// Settings in force while one message is encoded.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct EncodeContext {
+pub struct EncodeContext<'a> {
     /// Out-of-range values are errors instead of being encoded as "not present".
     pub strict: bool,
     /// Only the size is wanted: codecs with state (adaptive models) must
@@ -86,6 +87,49 @@ pub struct EncodeContext {
     pub dry_run: bool,
     /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
     pub definition_hash: u64,
+    /// Where values changed by the codec are recorded, when the caller asked
+    /// for them ([`Codec::encode_with_changes`](crate::Codec::encode_with_changes)).
+    pub changes: Option<&'a ChangeLog>,
+}
+
+impl EncodeContext<'_> {
+    /// Reports a value the codec changes instead of sending it as given
+    /// (out of range, NaN, too long, undefined): in strict mode an error
+    /// saying `what`; otherwise, when changes are being collected, the change
+    /// `"{what}: {action}"` (e.g. `"99 is out of range [0, 31]"`, `"sent as not
+    /// present"`). `what` is only formatted when it is used.
+    #[inline]
+    pub fn value_changed(
+        &self,
+        what: impl FnOnce() -> String,
+        action: &str,
+    ) -> Result<(), CodecError> {
+        if self.strict {
+            return Err(CodecError::new(what()));
+        }
+        if let Some(log) = self.changes {
+            log.record(format!("{}: {action}", what()));
+        }
+        Ok(())
+    }
+
+    /// Marks the change log before a field (or element) is encoded; pass the
+    /// mark to [`EncodeContext::name_changes`] after it.
+    #[inline]
+    pub fn change_mark(&self) -> usize {
+        self.changes.map_or(0, ChangeLog::len)
+    }
+
+    /// Prefixes with `segment` (a field name or `[index]`) the path of the
+    /// changes recorded since `mark`.
+    #[inline]
+    pub fn name_changes(&self, mark: usize, segment: impl FnOnce() -> String) {
+        if let Some(log) = self.changes {
+            if log.len() > mark {
+                log.prefix_since(mark, &segment());
+            }
+        }
+    }
 }
 
 /// Settings in force while one message is decoded.
@@ -207,14 +251,33 @@ impl RepeatBounds {
         crate::rounding::ceil_log2_u64((self.max - self.min) as u64 + 1)
     }
 
-    /// In strict mode, refuses `len` values beyond `max_repeat` (otherwise
-    /// the extra values are dropped by the encoder).
+    /// Reports `len` values beyond `max_repeat` (an error in strict mode;
+    /// otherwise the encoder drops the extra values) and, in strict mode,
+    /// fewer than `min_repeat`.
     pub fn check_max(&self, len: usize, ctx: &EncodeContext) -> Result<(), CodecError> {
-        if ctx.strict && len > self.max as usize {
-            return Err(CodecError::new(format!(
-                "{len} values exceed max_repeat {}",
-                self.max
-            )));
+        if len > self.max as usize {
+            ctx.value_changed(
+                || format!("{len} elements over max_repeat {}", self.max),
+                "truncated",
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Reports `len` values under `min_repeat` (an error in strict mode;
+    /// otherwise version 3+ encoders pad with empty values, version 2 always
+    /// sends `max_repeat` values).
+    pub fn check_min(
+        &self,
+        len: usize,
+        codec_version: i32,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        if len < self.min as usize && (codec_version > 2 || ctx.strict) {
+            ctx.value_changed(
+                || format!("{len} elements under min_repeat {}", self.min),
+                "padded with empty elements",
+            )?;
         }
         Ok(())
     }
@@ -275,13 +338,7 @@ pub trait FieldCodec: Send + Sync + Debug {
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         bounds.check_max(values.len(), ctx)?;
-        if ctx.strict && values.len() < bounds.min as usize {
-            return Err(CodecError::new(format!(
-                "{} values are fewer than min_repeat {}",
-                values.len(),
-                bounds.min
-            )));
-        }
+        bounds.check_min(values.len(), self.codec_version(), ctx)?;
         let count = if self.codec_version() > 2 {
             let n = values
                 .len()
@@ -293,7 +350,9 @@ pub trait FieldCodec: Send + Sync + Debug {
             bounds.max as usize
         };
         for i in 0..count {
+            let mark = ctx.change_mark();
             self.encode(out, values.get(i), ctx)?;
+            ctx.name_changes(mark, || format!("[{i}]"));
         }
         Ok(())
     }

@@ -53,6 +53,7 @@
 
 mod analyze;
 pub mod bits;
+pub mod changes;
 mod codec;
 pub mod codecs;
 mod crypto;
@@ -60,15 +61,17 @@ pub mod definition_hash;
 mod error;
 pub mod field_codec;
 mod loader;
+pub mod nesting;
 pub mod options;
 pub mod registry;
 pub mod rounding;
 pub mod text_format;
 
-pub use codec::{Codec, FieldSize};
+pub use changes::ValueChange;
+pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
-pub use loader::{compile_protos, compile_sources};
+pub use loader::{compile_protos, compile_sources, pool_file_name};
 pub use registry::CodecRegistry;
 
 pub use prost_reflect;

@@ -4,7 +4,8 @@
 //! (`dccl/arithmetic/protobuf/arithmetic_extensions.proto`,
 //! `dccl/arithmetic/protobuf/arithmetic.proto`, `goby/dccl/delta_extensions.proto`)
 //! are embedded: a file that imports them needs no include path for them and
-//! no copy on disk.
+//! no copy on disk. The older path of the options,
+//! `dccl/protobuf/option_extensions.proto`, resolves to the same options.
 
 use std::path::{Path, PathBuf};
 
@@ -15,11 +16,22 @@ use protox::file::{
 
 use crate::error::{Error, Result};
 
+/// The import path of the DCCL options used by older message sets; libdccl
+/// 4 still ships it as a file that publicly imports the current one.
+pub const LEGACY_OPTION_EXTENSIONS_PATH: &str = "dccl/protobuf/option_extensions.proto";
+
 /// Serves the embedded DCCL option extensions and codec option files.
 struct EmbeddedResolver;
 
 impl FileResolver for EmbeddedResolver {
     fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
+        if name == LEGACY_OPTION_EXTENSIONS_PATH {
+            let source = format!(
+                "syntax = \"proto2\";\nimport public \"{}\";\n",
+                protos::OPTION_EXTENSIONS_PATH
+            );
+            return File::from_source(name, &source);
+        }
         match protos::DCCL_EMBEDDED_PROTOS
             .iter()
             .find(|(path, _)| *path == name)
@@ -27,6 +39,37 @@ impl FileResolver for EmbeddedResolver {
             Some((path, source)) => File::from_source(path, source),
             None => Err(protox::Error::file_not_found(name)),
         }
+    }
+}
+
+/// An include directory whose files are checked for runaway nesting
+/// ([`crate::nesting`]) before the parser sees them.
+struct GuardedInclude {
+    dir: PathBuf,
+    inner: IncludeFileResolver,
+}
+
+impl GuardedInclude {
+    fn new(dir: PathBuf) -> Self {
+        GuardedInclude {
+            inner: IncludeFileResolver::new(dir.clone()),
+            dir,
+        }
+    }
+}
+
+impl FileResolver for GuardedInclude {
+    fn resolve_path(&self, path: &Path) -> Option<String> {
+        self.inner.resolve_path(path)
+    }
+
+    fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
+        let path = self.dir.join(name);
+        if let Ok(source) = std::fs::read_to_string(&path) {
+            crate::nesting::check(&path.display().to_string(), &source)
+                .map_err(protox::Error::new)?;
+        }
+        self.inner.open_file(name)
     }
 }
 
@@ -60,7 +103,7 @@ pub fn compile_protos(
     }
     let mut resolver = ChainFileResolver::new();
     for dir in dirs {
-        resolver.add(IncludeFileResolver::new(dir));
+        resolver.add(GuardedInclude::new(dir));
     }
     resolver.add(EmbeddedResolver);
     resolver.add(GoogleFileResolver::new());
@@ -74,6 +117,37 @@ pub fn compile_protos(
     decode_pool(&compiler.encode_file_descriptor_set())
 }
 
+/// Name given by the compiler to `file`: its path relative to the first
+/// include directory that holds it (the `-I` directories, then its own), or
+/// failing that the longest file name of the pool that ends `file`'s path.
+/// `None` when the pool holds no such file.
+pub fn pool_file_name(pool: &DescriptorPool, file: &Path, include: &[PathBuf]) -> Option<String> {
+    let path = std::fs::canonicalize(file).ok()?;
+    let mut dirs: Vec<PathBuf> = include
+        .iter()
+        .filter_map(|d| std::fs::canonicalize(d).ok())
+        .collect();
+    if let Some(parent) = path.parent() {
+        dirs.push(parent.to_path_buf());
+    }
+    for dir in &dirs {
+        if let Ok(rel) = path.strip_prefix(dir) {
+            let name = rel
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join("/");
+            if pool.get_file_by_name(&name).is_some() {
+                return Some(name);
+            }
+        }
+    }
+    pool.files()
+        .filter(|f| path.ends_with(f.name()))
+        .max_by_key(|f| f.name().len())
+        .map(|f| f.name().to_string())
+}
+
 /// Compiles `.proto` sources held in memory: `(file name, source text)` pairs,
 /// which may import each other by those names.
 pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {
@@ -81,7 +155,10 @@ pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {
     impl FileResolver for Memory {
         fn open_file(&self, name: &str) -> std::result::Result<File, protox::Error> {
             match self.0.iter().find(|(n, _)| n == name) {
-                Some((n, s)) => File::from_source(n, s),
+                Some((n, s)) => {
+                    crate::nesting::check(n, s).map_err(protox::Error::new)?;
+                    File::from_source(n, s)
+                }
                 None => Err(protox::Error::file_not_found(name)),
             }
         }

@@ -929,12 +929,12 @@ impl FieldCodec for ArithmeticCodec {
 }
 
 /// Registers the codec as `dccl.arithmetic` (and libdccl's older name
-/// `_arithmetic`), its models taken from `models`.
+/// `_arithmetic`, reported as written), its models taken from `models`.
 pub fn register(registry: &mut CodecRegistry, models: Arc<ArithmeticModels>) {
     for name in [NAME, "_arithmetic"] {
         let models = models.clone();
         registry.register(name, move |spec: &FieldSpec<'_>| {
-            ArithmeticCodec::create(spec, NAME, &models)
+            ArithmeticCodec::create(spec, name, &models)
         });
     }
 }

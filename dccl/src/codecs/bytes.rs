@@ -74,12 +74,17 @@ impl FieldCodec for FixedBytesCodec {
             Some(Value::Bytes(b)) => b,
             Some(other) => return Err(CodecError::new(format!("value {other:?} is not bytes"))),
         };
-        if bytes.len() * 8 > self.max_size() as usize && ctx.strict {
-            return Err(CodecError::new(format!(
-                "{} bytes exceed max_length {}",
-                bytes.len(),
-                self.max_length
-            )));
+        if bytes.len() > self.max_length as usize {
+            ctx.value_changed(
+                || {
+                    format!(
+                        "{} bytes longer than max_length {}",
+                        bytes.len(),
+                        self.max_length
+                    )
+                },
+                "truncated",
+            )?;
         }
         if !self.required {
             out.write_bool(true);

@@ -256,11 +256,16 @@ impl FieldCodec for DeltaCodec {
             .enumerate()
             .find_map(|(i, x)| self.key_of(*x).map(|k| (i, k)));
         let Some((key_index, (key_value, key_wire))) = key else {
-            if ctx.strict && !samples.is_empty() {
-                return Err(CodecError::new(format!(
-                    "no sample within [{}, {}] to serve as the key",
-                    self.key.min, self.key.max
-                )));
+            if !samples.is_empty() {
+                ctx.value_changed(
+                    || {
+                        format!(
+                            "no sample within [{}, {}] to serve as the key",
+                            self.key.min, self.key.max
+                        )
+                    },
+                    "every sample sent as not present",
+                )?;
             }
             out.write(0, self.key.bits);
             out.write_zeros(self.delta_bits as usize * (n - 1));
@@ -273,12 +278,19 @@ impl FieldCodec for DeltaCodec {
                 continue;
             }
             let d = self.delta_of(*x, key_value);
-            if d == 0 && ctx.strict {
-                return Err(CodecError::new(format!(
-                    "sample {x} differs from the key {key_value} by more than max_delta {} \
-                     (or is outside [{}, {}])",
-                    self.max_delta, self.key.min, self.key.max
-                )));
+            if d == 0 {
+                let mark = ctx.change_mark();
+                ctx.value_changed(
+                    || {
+                        format!(
+                            "sample {x} differs from the key {key_value} by more than \
+                             max_delta {} (or is outside [{}, {}])",
+                            self.max_delta, self.key.min, self.key.max
+                        )
+                    },
+                    "sent as not present",
+                )?;
+                ctx.name_changes(mark, || format!("[{i}]"));
             }
             out.write(d, self.delta_bits);
             written += 1;

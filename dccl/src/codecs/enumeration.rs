@@ -110,14 +110,24 @@ impl FieldCodec for EnumCodec {
                 return Err(CodecError::new(format!("value {other:?} is not an enum")));
             }
         };
-        if wire.is_none() && value.is_some() && ctx.strict {
-            return Err(CodecError::new(format!(
-                "value {:?} is not a value of enum {}",
-                value,
-                self.enum_type.full_name()
-            )));
+        if wire.is_none() {
+            if let Some(Value::EnumNumber(n)) = value {
+                ctx.value_changed(
+                    || {
+                        format!(
+                            "undefined enum value {n} (not a value of {})",
+                            self.enum_type.full_name()
+                        )
+                    },
+                    if self.bounds.required {
+                        "sent as the first value (the field is required)"
+                    } else {
+                        "sent as not present"
+                    },
+                )?;
+            }
         }
-        self.bounds.encode(out, wire, ctx.strict)
+        self.bounds.encode(out, wire, ctx)
     }
     fn definition_hash(&self) -> u64 {
         crate::definition_hash::std_string_hash(

@@ -85,7 +85,14 @@ impl FieldCodec for HashCodec {
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         let hash = self.masked(ctx.definition_hash);
-        self.bounds.encode(out, Some(WireValue::U32(hash)), true)
+        self.bounds.encode(
+            out,
+            Some(WireValue::U32(hash)),
+            &EncodeContext {
+                strict: true,
+                ..*ctx
+            },
+        )
     }
     fn decode(
         &self,

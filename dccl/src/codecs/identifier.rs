@@ -1,8 +1,16 @@
 //! Default identifier codec (`dccl.default.id`): ids 0–127 take one byte
 //! (`id << 1`, low bit 0), ids 128–32767 two bytes (`id << 1 | 1`), low byte first.
+//! It codes the DCCL id of every message and, as in libdccl, may also be
+//! selected for a `uint32` field (`codec: "dccl.default.id"`, e.g. a field
+//! that carries another message's id).
+
+use std::sync::Arc;
+
+use prost_reflect::{Kind, Value};
 
 use crate::bits::{BitReader, BitWriter};
 use crate::error::CodecError;
+use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec};
 
 /// Name of the identifier codec, as `analyze` reports it.
 pub const NAME: &str = "dccl.default.id";
@@ -41,6 +49,70 @@ pub fn decode(input: &mut BitReader<'_>) -> Result<u32, CodecError> {
         Ok((input.read(16)? >> 1) as u32)
     } else {
         Ok((input.read(8)? >> 1) as u32)
+    }
+}
+
+/// The identifier codec on a `uint32` field: an unset field is sent as id 0
+/// (one byte), a value over 32767 keeps its low 15 bits (as libdccl's two-byte
+/// form does), which is reported as a change.
+#[derive(Debug)]
+pub struct IdFieldCodec {
+    version: i32,
+}
+
+impl IdFieldCodec {
+    /// Creates the codec for a `uint32` field, or `None` for other types.
+    pub fn create(spec: &FieldSpec<'_>) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
+        if !matches!(spec.kind(), Kind::Uint32 | Kind::Fixed32) {
+            return Ok(None);
+        }
+        Ok(Some(Arc::new(IdFieldCodec {
+            version: spec.codec_version,
+        })))
+    }
+}
+
+impl FieldCodec for IdFieldCodec {
+    fn name(&self) -> &str {
+        NAME
+    }
+    fn codec_version(&self) -> i32 {
+        self.version
+    }
+    fn min_size(&self) -> u32 {
+        8
+    }
+    fn max_size(&self) -> u32 {
+        16
+    }
+    fn size(&self, value: Option<&Value>) -> u32 {
+        size(value.and_then(Value::as_u32).unwrap_or(0) & TWO_BYTE_MAX_ID)
+    }
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        let id = match value {
+            None => 0,
+            Some(Value::U32(id)) => *id,
+            Some(other) => return Err(CodecError::new(format!("value {other:?} is not a uint32"))),
+        };
+        if id > TWO_BYTE_MAX_ID {
+            ctx.value_changed(
+                || format!("{id} is over the largest DCCL id {TWO_BYTE_MAX_ID}"),
+                &format!("sent as {}", id & TWO_BYTE_MAX_ID),
+            )?;
+        }
+        encode(out, id & TWO_BYTE_MAX_ID)
+    }
+    fn decode(
+        &self,
+        input: &mut BitReader<'_>,
+        _ctx: &DecodeContext,
+    ) -> Result<Option<Value>, CodecError> {
+        Ok(Some(Value::U32(decode(input)?)))
     }
 }
 

@@ -77,6 +77,16 @@ pub struct MessageCodec {
     max_bits: u32,
 }
 
+/// The fields of a message in the order they are declared in the `.proto`
+/// file, the order in which libdccl codes, sizes, hashes and lists them
+/// (`MessageDescriptor::fields` goes by field number instead).
+pub fn declared_fields(desc: &MessageDescriptor) -> impl Iterator<Item = FieldDescriptor> + '_ {
+    desc.descriptor_proto()
+        .field
+        .iter()
+        .filter_map(|f| desc.get_field(f.number() as u32))
+}
+
 fn use_required(field: &FieldDescriptor, version: i32) -> bool {
     let required = field.cardinality() == Cardinality::Required;
     let repeated = field.is_list() || field.is_map();
@@ -117,10 +127,10 @@ impl MessageCodec {
                 descriptor.full_name()
             )));
         }
-        if codec_version == 3 && descriptor.oneofs().next().is_some() {
-            return Err(CodecError::new(
-                "DCCL codec version 3 does not support 'oneof' declarations",
-            ));
+        if codec_version < 4 && descriptor.oneofs().next().is_some() {
+            return Err(CodecError::new(format!(
+                "DCCL codec version {codec_version} does not support 'oneof' declarations"
+            )));
         }
         let presence = match codec_version {
             v if v > 3 => spec.is_optional() && !spec.use_required,
@@ -147,7 +157,7 @@ impl MessageCodec {
         };
 
         let mut fields = Vec::new();
-        for field in descriptor.fields() {
+        for field in declared_fields(&descriptor) {
             let options = field_options(&field).map_err(|e| e.in_field(field.name()))?;
             if options.omit() {
                 continue;
@@ -241,10 +251,25 @@ impl MessageCodec {
             registry: parent.registry,
         };
         let codec = parent.registry.codec_for_field(&spec)?;
-        if in_head && codec.min_size() != codec.max_size() {
-            return Err(CodecError::new(
-                "variable size codec used in header - header fields must be encoded with fixed size codec",
-            ));
+        if in_head {
+            // As libdccl: a header field must have one size (a repeated
+            // field: the whole array, so in version 3+ only with
+            // min_repeat == max_repeat).
+            match repeat {
+                Some(b) if codec.min_size_repeated(b) != codec.max_size_repeated(b) => {
+                    return Err(CodecError::new(
+                        "a repeated field cannot be in the header (its size varies): \
+                         header fields must be encoded with a fixed size codec",
+                    ));
+                }
+                None if codec.min_size() != codec.max_size() => {
+                    return Err(CodecError::new(
+                        "variable size codec used in header - header fields must be encoded \
+                         with fixed size codec",
+                    ));
+                }
+                _ => {}
+            }
         }
         let oneof = if with_oneofs {
             field.containing_oneof().and_then(|o| {
@@ -329,6 +354,7 @@ impl MessageCodec {
             out.write(case as u64, o.bits);
         }
         for f in &self.fields {
+            let mark = ctx.change_mark();
             let result = if let Some(bounds) = f.repeat {
                 match msg.get_field(&f.field).as_ref() {
                     Value::List(values) => f.codec.encode_repeated(out, values, bounds, ctx),
@@ -345,6 +371,7 @@ impl MessageCodec {
                 f.codec.encode(out, None, ctx)
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
+            ctx.name_changes(mark, || f.field.name().to_string());
         }
         Ok(())
     }

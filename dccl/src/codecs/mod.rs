@@ -95,6 +95,15 @@ pub fn register_builtin(registry: &mut CodecRegistry) {
     registry.register(delta::NAME, |spec: &FieldSpec<'_>| {
         delta::DeltaCodec::create(spec, delta::NAME)
     });
-    registry.alias("_time", "dccl.time2");
-    registry.alias("_static", "dccl.static2");
+    registry.register(identifier::NAME, |spec: &FieldSpec<'_>| {
+        identifier::IdFieldCodec::create(spec)
+    });
+    // libdccl's older names of the version 2 codecs, reported (by analyze)
+    // as written.
+    registry.register("_time", |spec: &FieldSpec<'_>| {
+        time::TimeCodec::create(spec, "_time")
+    });
+    registry.register("_static", |spec: &FieldSpec<'_>| {
+        static_value::StaticCodec::create(spec, "_static")
+    });
 }

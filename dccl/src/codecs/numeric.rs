@@ -99,6 +99,15 @@ pub enum WireValue {
 }
 
 impl WireValue {
+    /// True for a floating-point NaN.
+    pub fn is_nan(self) -> bool {
+        match self {
+            WireValue::F32(x) => x.is_nan(),
+            WireValue::F64(x) => x.is_nan(),
+            _ => false,
+        }
+    }
+
     /// As a protobuf value.
     pub fn to_value(self) -> Value {
         match self {
@@ -228,35 +237,62 @@ impl NumericBounds {
         }
     }
 
-    /// Writes a value (`None`: not present). Out-of-range values are written
-    /// as "not present" (the minimum for required fields), or refused when strict.
+    /// Writes a value (`None`: not present). As the reference does, an
+    /// out-of-range value is written as "not present" (the minimum for
+    /// required fields) and NaN as the minimum; either is reported through
+    /// [`EncodeContext::value_changed`] (refused in strict mode).
     pub fn encode(
         &self,
         out: &mut BitWriter,
         value: Option<WireValue>,
-        strict: bool,
+        ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         let Some(value) = value else {
             out.write(0, self.bits);
             return Ok(());
         };
+        if value.is_nan() {
+            // libdccl's bound check lets NaN through (every comparison is
+            // false) and the conversion to an integer then yields 0: the minimum.
+            ctx.value_changed(|| "NaN".to_string(), &self.sent_as_minimum())?;
+            self.write_minimum(out);
+            return Ok(());
+        }
         match self.to_wire_uint(value) {
             Some(u) => {
                 let u = if self.required { u } else { u.wrapping_add(1) };
                 out.write(u, self.bits);
                 Ok(())
             }
-            None if strict => Err(CodecError::new(format!(
-                "value {} is outside [{}, {}]",
-                display(value),
-                self.min,
-                self.max
-            ))),
             None => {
+                ctx.value_changed(
+                    || {
+                        format!(
+                            "{} is out of range [{}, {}]",
+                            display(value),
+                            self.min,
+                            self.max
+                        )
+                    },
+                    if self.required {
+                        "sent as the minimum (the field is required)"
+                    } else {
+                        "sent as not present"
+                    },
+                )?;
                 out.write(0, self.bits);
                 Ok(())
             }
         }
+    }
+
+    /// Writes the minimum value (as a present value for optional fields).
+    pub fn write_minimum(&self, out: &mut BitWriter) {
+        out.write(u64::from(!self.required), self.bits);
+    }
+
+    fn sent_as_minimum(&self) -> String {
+        format!("sent as the minimum {}", self.min)
     }
 
     /// Reads a value; `None` is "not present".
@@ -420,7 +456,7 @@ impl FieldCodec for NumericCodec {
                 CodecError::new(format!("value {v:?} does not match the field type"))
             })?),
         };
-        self.bounds.encode(out, wire, ctx.strict)
+        self.bounds.encode(out, wire, ctx)
     }
     fn decode(
         &self,

@@ -83,12 +83,17 @@ impl FieldCodec for StringCodec {
             Some(Value::String(s)) => s.as_bytes(),
             Some(other) => return Err(CodecError::new(format!("value {other:?} is not a string"))),
         };
-        if bytes.len() > self.max_length as usize && ctx.strict {
-            return Err(CodecError::new(format!(
-                "string of {} bytes exceeds max_length {}",
-                bytes.len(),
-                self.max_length
-            )));
+        if bytes.len() > self.max_length as usize {
+            ctx.value_changed(
+                || {
+                    format!(
+                        "string of {} bytes longer than max_length {}",
+                        bytes.len(),
+                        self.max_length
+                    )
+                },
+                "truncated",
+            )?;
         }
         let bytes = &bytes[..bytes.len().min(self.max_length as usize)];
         out.write(bytes.len() as u64, self.prefix_bits);

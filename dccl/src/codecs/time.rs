@@ -101,6 +101,13 @@ impl TimeCodec {
     }
 }
 
+fn display_time(v: &Value) -> String {
+    match v {
+        Value::F64(x) => x.to_string(),
+        other => format!("{other:?}"),
+    }
+}
+
 /// Rounds an integer to `precision` decimal places (negative: tens, hundreds...).
 fn round_int(value: i64, precision: i32) -> i64 {
     if precision >= 0 {
@@ -142,9 +149,22 @@ impl FieldCodec for TimeCodec {
     ) -> Result<(), CodecError> {
         let wire = match value {
             None => None,
-            Some(v) => Some(WireValue::F64(self.to_time_of_day(v)?)),
+            Some(v) => {
+                let t = self.to_time_of_day(v)?;
+                if t.is_nan() {
+                    // NaN and infinities have no time of day; the reference
+                    // sends them as midnight (the minimum).
+                    ctx.value_changed(
+                        || format!("{} is not a time", display_time(v)),
+                        "sent as midnight",
+                    )?;
+                    self.bounds.write_minimum(out);
+                    return Ok(());
+                }
+                Some(WireValue::F64(t))
+            }
         };
-        self.bounds.encode(out, wire, ctx.strict)
+        self.bounds.encode(out, wire, ctx)
     }
     fn decode(
         &self,

@@ -99,12 +99,18 @@ impl FieldCodec for VarBytesCodec {
                 )))
             }
         };
-        if bytes.len() > self.max_length as usize && ctx.strict {
-            return Err(CodecError::new(format!(
-                "{} bytes exceed max_length {}",
-                bytes.len(),
-                self.max_length
-            )));
+        if bytes.len() > self.max_length as usize {
+            ctx.value_changed(
+                || {
+                    format!(
+                        "{}{} bytes longer than max_length {}",
+                        if self.is_string { "string of " } else { "" },
+                        bytes.len(),
+                        self.max_length
+                    )
+                },
+                "truncated",
+            )?;
         }
         let bytes = &bytes[..bytes.len().min(self.max_length as usize)];
         if !self.required {

@@ -342,6 +342,113 @@ fn micromodem_driver(path: &Path) -> String {
     )
 }
 
+/// Two emulated WHOI Micro-Modems on the acoustic channel simulator, each on
+/// a pseudo-terminal reached through a symbolic link, run on a thread of
+/// their own until stopped (or for at most a minute).
+struct EmulatedModems {
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl EmulatedModems {
+    fn start(links: &[PathBuf], spacing: f64) -> Self {
+        use modemdriver::micromodem::emulator::{self, EmulatorConfig, EmulatorPort};
+        use modemdriver::sim::{medium::Medium, SimulatorDriver};
+        use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
+        use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+
+        let links = links.to_vec();
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
+        let thread = std::thread::spawn(move || {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .expect("a runtime for the emulators");
+            runtime.block_on(async move {
+                let medium = Medium::new();
+                let ids: Vec<u32> = (1..=links.len() as u32).collect();
+                let node: Vec<NodePosition> = ids
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &m)| NodePosition {
+                        modem_id: m as i32,
+                        x: Some(i as f64 * spacing),
+                        ..Default::default()
+                    })
+                    .collect();
+                let mut handles = Vec::new();
+                for (&id, link) in ids.iter().zip(&links) {
+                    let config = modemdriver::DriverConfig {
+                        modem_id: Some(id as i32),
+                        simulator: Some(SimulatorDriverConfig {
+                            node: node.clone(),
+                            packet_loss: Some(0.0),
+                            seed: Some(1 ^ u64::from(id)),
+                            ..Default::default()
+                        }),
+                        ..Default::default()
+                    };
+                    let backend = SimulatorDriver::start_on(&config, medium.clone())
+                        .expect("simulator backend starts");
+                    let emulated = EmulatorConfig {
+                        modem_id: id,
+                        ping_packet: Duration::from_millis(500),
+                        ..EmulatorConfig::default()
+                    };
+                    let port = EmulatorPort::Pty {
+                        link: Some(link.clone()),
+                    };
+                    let mut handle = match emulator::start(emulated, port, Some(backend)) {
+                        Ok(h) => h,
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(format!("modem {id}: {e}")));
+                            return;
+                        }
+                    };
+                    if handle.path().await.is_none() {
+                        let _ = ready_tx.send(Err(format!("modem {id}: no device")));
+                        return;
+                    }
+                    handles.push(handle);
+                }
+                let _ = ready_tx.send(Ok(()));
+                let _ = tokio::time::timeout(Duration::from_secs(60), stop_rx).await;
+                for h in handles {
+                    h.stop().await;
+                }
+            });
+        });
+        ready_rx
+            .recv_timeout(PATIENCE)
+            .expect("the emulators start in time")
+            .expect("the emulators start");
+        EmulatedModems {
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        }
+    }
+
+    fn stop(mut self) {
+        self.halt();
+    }
+
+    fn halt(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Drop for EmulatedModems {
+    fn drop(&mut self) {
+        self.halt();
+    }
+}
+
 #[test]
 fn messages_cross_two_emulated_micro_modems_with_acks() {
     let dir = scratch("micromodem");
@@ -350,23 +457,7 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
         .map(|id| dir.join(format!("modem{id}")))
         .collect();
     // Two emulated modems 150 m apart on the simulated channel, each on a pty.
-    let mut emulator = Command::new(env!("CARGO_BIN_EXE_goby"))
-        .args(["modem", "emulate", "--modem-id", "1", "--modem-id", "2"])
-        .args(["--spacing", "150", "--duration", "60", "--link"])
-        .arg(&links[0])
-        .arg("--link")
-        .arg(&links[1])
-        .env_remove("RUST_BACKTRACE")
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("goby modem emulate starts");
-    let mut lines = BufReader::new(emulator.stdout.take().unwrap()).lines();
-    for id in [1, 2] {
-        let line = lines.next().expect("a line per modem").unwrap();
-        assert!(line.starts_with(&format!("modem {id}: ")), "{line}");
-    }
+    let emulator = EmulatedModems::start(&links, 150.0);
     let mut paths = Vec::new();
     for id in [1, 2] {
         let config = node_config(
@@ -402,8 +493,7 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
     );
     drop(sender);
     drop(receiver);
-    let _ = emulator.kill();
-    let _ = emulator.wait();
+    emulator.stop();
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

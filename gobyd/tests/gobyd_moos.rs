@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use goby_cli::daemon::{config, runtime::Daemon};
+use gobyd::{config, runtime::Daemon};
 use moos::{ClientConfig, MoosClient, Value};
 use tokio::sync::oneshot;
 

@@ -2,7 +2,7 @@
 //! latency from a client's line to the frame handed to the driver, and the
 //! daemon's resident memory at idle.
 //!
-//! `cargo bench -p goby-cli --bench gobyd` prints one JSON object. The
+//! `cargo bench -p gobyd --bench gobyd` prints one JSON object. The
 //! journal lives under `target/` (the disk the project is built on): every
 //! accepted message is synced to it before the client hears "accepted".
 
@@ -11,7 +11,7 @@ use std::net::TcpStream;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use goby_cli::daemon::{config, runtime::Daemon};
+use gobyd::{config, runtime::Daemon};
 use modemdriver::{Driver, DriverCommand};
 use protos::goby::acomms::protobuf::ModemTransmission;
 use tokio::sync::{mpsc, oneshot};

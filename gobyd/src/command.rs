@@ -1,20 +1,58 @@
-//! `gobyd`, the daemon between a modem and an autonomy process: it composes
-//! DCCL, the queue, medium access and a modem driver from one configuration
-//! and connects them to the vehicle's autonomy software.
+//! The `gobyd` command line: options, logging, signals and exit statuses
+//! around [`Daemon`](crate::runtime::Daemon).
+//!
+//! Exit status: [`EXIT_OK`] after a clean stop (SIGINT, SIGTERM) or a
+//! successful `--check`, [`EXIT_SETUP`] when the configuration or the
+//! start-up fails (the reason is written on standard error as
+//! `gobyd: error: ...`).
 
-pub mod config;
-pub mod json_protocol;
-pub mod json_server;
-pub mod moos_bridge;
-pub mod outbox;
-pub mod raw_log;
-pub mod runtime;
-
+use std::ffi::OsString;
 use std::io::{IsTerminal, Write};
+use std::process::ExitCode;
+
+use clap::{ColorChoice, Parser};
 
 use protos::goby::apps::protobuf::{gobyd_config::JsonInterface, GobydConfig};
 
-use crate::{GobydCli, EXIT_OK, EXIT_SETUP};
+use crate::{config, runtime};
+
+/// Exit status after a clean stop or a successful check.
+pub const EXIT_OK: u8 = 0;
+/// Exit status for usage errors, a bad configuration and a failed start.
+pub const EXIT_SETUP: u8 = 2;
+
+/// Command line of `gobyd`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "gobyd",
+    version,
+    about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.",
+    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.",
+    color = ColorChoice::Auto
+)]
+pub struct GobydCli {
+    /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
+    #[arg(short, long, value_name = "FILE")]
+    pub config: Option<std::path::PathBuf>,
+    /// Print a commented working configuration and exit.
+    #[arg(long)]
+    pub example_config: bool,
+    /// Check the configuration (and the .proto files it names) and exit.
+    #[arg(long)]
+    pub check: bool,
+    /// Override the configuration's modem_id.
+    #[arg(long, value_name = "ID")]
+    pub modem_id: Option<i32>,
+    /// Override the configuration's data_dir (journal and raw log).
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<std::path::PathBuf>,
+    /// Override the JSON interface's TCP address (empty: none).
+    #[arg(long, value_name = "ADDR")]
+    pub json_tcp: Option<String>,
+    /// Log lines as JSON objects.
+    #[arg(long)]
+    pub log_json: bool,
+}
 
 /// The configuration named by the command line, with its overrides applied.
 fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
@@ -150,4 +188,22 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             }
         }
     })
+}
+
+/// Parses the command line; on `--help`, `--version` or a usage error,
+/// prints what clap has to say and returns the exit status to use.
+fn parse_or_exit(args: impl IntoIterator<Item = OsString>) -> Result<GobydCli, ExitCode> {
+    GobydCli::try_parse_from(args).map_err(|e| {
+        let _ = e.print();
+        let code = u8::try_from(e.exit_code()).unwrap_or(EXIT_SETUP);
+        ExitCode::from(code)
+    })
+}
+
+/// Entry point of the `gobyd` binary: parses the process arguments and runs.
+pub fn main() -> ExitCode {
+    match parse_or_exit(std::env::args_os()) {
+        Ok(cli) => ExitCode::from(run_cli(cli)),
+        Err(code) => code,
+    }
 }

@@ -168,10 +168,9 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
         let user_pool = dccl::compile_protos(&files, &includes)
             .map_err(|e| ConfigError::Invalid(e.to_string()))?;
         for f in &files {
-            let name =
-                crate::dccl_cmd::pool_file_name(&user_pool, f, &includes).ok_or_else(|| {
-                    ConfigError::Invalid(format!("{}: not found after compiling", f.display()))
-                })?;
+            let name = dccl::pool_file_name(&user_pool, f, &includes).ok_or_else(|| {
+                ConfigError::Invalid(format!("{}: not found after compiling", f.display()))
+            })?;
             loaded.extend(
                 codec
                     .load_file_messages(&user_pool, &name)

@@ -1,0 +1,157 @@
+//! The report of values changed by encoding in the default (non-strict)
+//! mode: `Codec::encode_with_changes` and `Codec::check`.
+
+use dccl::prost_reflect::DynamicMessage;
+use dccl::{Codec, Error, ValueChange};
+
+const SOURCE: &str = r#"
+syntax = "proto2";
+import "dccl/option_extensions.proto";
+package vc;
+
+enum Mode { IDLE = 0; SURVEY = 1; }
+
+message Point {
+  optional double x = 1 [(dccl.field) = { min: -100 max: 100 precision: 1 }];
+  optional double y = 2 [(dccl.field) = { min: -100 max: 100 precision: 1 }];
+}
+
+message Report {
+  option (dccl.msg) = { id: 12 max_bytes: 64 codec_version: 4 };
+  optional uint32 level = 1 [(dccl.field) = { min: 0 max: 31 }];
+  required int32 r = 2 [(dccl.field) = { min: 5 max: 10 }];
+  optional double heading = 3 [(dccl.field) = { min: 0 max: 360 precision: 1 }];
+  optional string note = 4 [(dccl.field).max_length = 10];
+  repeated int32 samples = 5 [(dccl.field) = { min: 0 max: 100 max_repeat: 4 }];
+  optional Point waypoint = 6;
+  repeated Point track = 7 [(dccl.field).max_repeat = 3];
+  optional Mode mode = 8;
+  optional double t = 9 [(dccl.field).codec = "dccl.time"];
+}
+"#;
+
+fn setup() -> (Codec, dccl::prost_reflect::MessageDescriptor) {
+    let pool = dccl::compile_sources(&[("vc.proto", SOURCE)]).unwrap();
+    let desc = pool.get_message_by_name("vc.Report").unwrap();
+    let mut codec = Codec::new();
+    codec.load(&desc).unwrap();
+    (codec, desc)
+}
+
+fn changes(
+    codec: &Codec,
+    desc: &dccl::prost_reflect::MessageDescriptor,
+    text: &str,
+) -> Vec<ValueChange> {
+    let msg = DynamicMessage::parse_text_format(desc.clone(), text).unwrap();
+    let (bytes, changes) = codec.encode_with_changes(&msg).unwrap();
+    assert_eq!(
+        bytes,
+        codec.encode(&msg).unwrap(),
+        "same bytes as encode for {text}"
+    );
+    assert_eq!(
+        codec.check(&msg).unwrap(),
+        changes,
+        "check agrees for {text}"
+    );
+    changes
+}
+
+fn fields(changes: &[ValueChange]) -> Vec<(&str, &str)> {
+    changes
+        .iter()
+        .map(|c| (c.field.as_str(), c.reason.as_str()))
+        .collect()
+}
+
+#[test]
+fn a_message_that_fits_changes_nothing() {
+    let (codec, desc) = setup();
+    let c = changes(
+        &codec,
+        &desc,
+        r#"level: 3 r: 7 heading: 12.3 note: "ok" samples: 1 samples: 2 waypoint { x: 1 }"#,
+    );
+    assert!(c.is_empty(), "{c:?}");
+}
+
+#[test]
+fn every_kind_of_change_is_reported_with_its_path() {
+    let (codec, desc) = setup();
+    let long = "x".repeat(6000);
+    let text = format!(
+        r#"level: 99 r: 70 heading: nan note: "{long}"
+           samples: 1 samples: 200 samples: 3 samples: 4 samples: 5 samples: 6 samples: 7
+           waypoint {{ x: 1000 }} track {{ y: -500 }} track {{ }} track {{ x: nan }}
+           mode: 9 t: inf"#
+    );
+    let c = changes(&codec, &desc, &text);
+    assert!(c.iter().all(|v| v.message == "vc.Report"));
+    assert_eq!(
+        fields(&c),
+        vec![
+            ("level", "99 is out of range [0, 31]: sent as not present"),
+            (
+                "r",
+                "70 is out of range [5, 10]: sent as the minimum (the field is required)"
+            ),
+            ("heading", "NaN: sent as the minimum 0"),
+            (
+                "note",
+                "string of 6000 bytes longer than max_length 10: truncated"
+            ),
+            ("samples", "7 elements over max_repeat 4: truncated"),
+            (
+                "samples[1]",
+                "200 is out of range [0, 100]: sent as the minimum (the field is required)"
+            ),
+            (
+                "waypoint.x",
+                "1000 is out of range [-100, 100]: sent as not present"
+            ),
+            (
+                "track[0].y",
+                "-500 is out of range [-100, 100]: sent as not present"
+            ),
+            ("track[2].x", "NaN: sent as the minimum -100"),
+            (
+                "mode",
+                "undefined enum value 9 (not a value of vc.Mode): sent as not present"
+            ),
+            ("t", "inf is not a time: sent as midnight"),
+        ]
+    );
+    let display = c[6].to_string();
+    assert_eq!(
+        display,
+        "message vc.Report, field waypoint.x: 1000 is out of range [-100, 100]: sent as not present"
+    );
+}
+
+#[test]
+fn strict_mode_refuses_the_first_change() {
+    let (mut codec, desc) = setup();
+    codec.set_strict(true);
+    for (text, field) in [
+        ("r: 7 heading: nan", "heading"),
+        ("r: 7 waypoint { y: 500 }", "waypoint.y"),
+        ("r: 7 mode: 9", "mode"),
+        ("r: 7 t: nan", "t"),
+    ] {
+        let msg = DynamicMessage::parse_text_format(desc.clone(), text).unwrap();
+        for err in [
+            codec.encode(&msg).unwrap_err(),
+            codec.encode_with_changes(&msg).unwrap_err(),
+            codec.check(&msg).unwrap_err(),
+        ] {
+            match err {
+                Error::Encode { location, .. } => {
+                    assert_eq!(location.message, "vc.Report");
+                    assert_eq!(location.field, field, "{text}");
+                }
+                other => panic!("{text}: {other}"),
+            }
+        }
+    }
+}
