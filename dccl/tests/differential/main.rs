@@ -1,0 +1,550 @@
+//! Differential test against the reference C++ library, libdccl 4.2.
+//!
+//! Random instances of every message of a set of `.proto` files are encoded
+//! and decoded by this crate and by libdccl, and everything observable is
+//! compared: whether a type loads, its definition hash, minimum and maximum
+//! size; for each instance whether it encodes, the bytes (without and with a
+//! passphrase), `size()`, and the decoded message (one-line text form).
+//!
+//! # Pointing it at a libdccl build
+//!
+//! The reference side is a small program ("driver") linked against libdccl
+//! 4.2, built outside this repository. It takes `-f FILE.proto`
+//! (repeatable), `-I DIR` (repeatable) and `-p PASSPHRASE`, prints `ready`,
+//! then answers one line per command read on stdin (fields separated by
+//! tabs):
+//!
+//! - `L NAME` loads a type: `ok HASH MIN_BYTES MAX_BYTES` (hash as libdccl's
+//!   `hash_as_string`, sizes from `Codec::min_size` / `max_size`) or `err REASON`;
+//! - `M NAME` selects the type for `E`: `ok`;
+//! - `E TEXT` parses one text-format message (partial messages allowed) and
+//!   encodes it: `ok HEX SIZE DECODED HEX_WITH_PASSPHRASE DECODED_WITH_PASSPHRASE`
+//!   (`DECODED` is `ShortDebugString()` of the decoded message, a value starting
+//!   with `!` is an error), `err REASON` when encoding fails, `perr REASON` when the
+//!   text does not parse;
+//! - `D HEX` decodes bytes (no passphrase): `ok TYPE DECODED BYTES_USED` or `err REASON`.
+//!
+//! To build one: build libdccl 4.2 from its source (tag `4.2.0`) with
+//! cryptography enabled (Crypto++), then compile a C++ program doing the
+//! above with `dccl::DynamicProtobufManager` (`enable_compilation`,
+//! `add_include_path`, `load_from_proto_file`), two `dccl::Codec`s (one with
+//! `set_crypto_passphrase`), `google::protobuf::TextFormat::Parser` with
+//! `AllowPartialMessage(true)` and `Message::ShortDebugString()`.
+//!
+//! # Running
+//!
+//! ```text
+//! DCCL_REFERENCE_DRIVER=/path/to/driver cargo test -p dccl --test differential -- --nocapture
+//! ```
+//!
+//! Without `DCCL_REFERENCE_DRIVER` the test prints that it is skipped and
+//! passes. Other variables:
+//!
+//! - `DCCL_DIFF_PROTOS`: `:`-separated `.proto` files or directories
+//!   (searched recursively for files using `dccl.msg`); default: this
+//!   repository's example messages and the committed reference cases;
+//! - `DCCL_DIFF_INCLUDE`: `:`-separated import directories;
+//! - `DCCL_DIFF_INSTANCES` (default 40), `DCCL_DIFF_SEED` (default 1);
+//! - `DCCL_DIFF_REPORT`: a file to write every difference to.
+//!
+//! The test fails when any difference is found and prints them by class.
+
+mod generator;
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+
+use dccl::prost_reflect::{DynamicMessage, MessageDescriptor};
+use dccl::Codec;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+const PASSPHRASE: &str = "differential";
+
+/// One running reference driver.
+struct Reference {
+    child: Child,
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+}
+
+impl Reference {
+    fn start(driver: &Path, file: &Path, includes: &[PathBuf]) -> Result<Self, String> {
+        let mut cmd = Command::new(driver);
+        cmd.arg("-f").arg(file).arg("-p").arg(PASSPHRASE);
+        for dir in includes {
+            cmd.arg("-I").arg(dir);
+        }
+        let mut child = cmd
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", driver.display()))?;
+        let stdin = child.stdin.take().expect("piped stdin");
+        let stdout = BufReader::new(child.stdout.take().expect("piped stdout"));
+        let mut reference = Reference {
+            child,
+            stdin,
+            stdout,
+        };
+        let first = reference.read_line()?;
+        if first != "ready" {
+            return Err(format!("reference cannot read {}: {first}", file.display()));
+        }
+        Ok(reference)
+    }
+
+    fn read_line(&mut self) -> Result<String, String> {
+        let mut line = String::new();
+        match self.stdout.read_line(&mut line) {
+            Ok(0) => Err("reference driver exited".into()),
+            Ok(_) => Ok(line.trim_end_matches(['\n', '\r']).to_string()),
+            Err(e) => Err(format!("reading from reference driver: {e}")),
+        }
+    }
+
+    /// Sends one command line; returns the reply split at tabs.
+    fn ask(&mut self, command: &str) -> Result<Vec<String>, String> {
+        writeln!(self.stdin, "{command}").map_err(|e| format!("writing to driver: {e}"))?;
+        self.stdin.flush().map_err(|e| e.to_string())?;
+        Ok(self.read_line()?.split('\t').map(str::to_string).collect())
+    }
+}
+
+impl Drop for Reference {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// One observed difference.
+#[derive(Debug)]
+struct Difference {
+    file: String,
+    message: String,
+    class: &'static str,
+    detail: String,
+}
+
+fn env_paths(name: &str) -> Vec<PathBuf> {
+    std::env::var(name)
+        .ok()
+        .map(|v| {
+            v.split(':')
+                .filter(|s| !s.is_empty())
+                .map(PathBuf::from)
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn collect_protos(path: &Path, out: &mut Vec<PathBuf>) {
+    if path.is_dir() {
+        let mut entries: Vec<_> = std::fs::read_dir(path)
+            .map(|d| d.filter_map(|e| e.ok()).map(|e| e.path()).collect())
+            .unwrap_or_default();
+        entries.sort();
+        for entry in entries {
+            collect_protos(&entry, out);
+        }
+    } else if path.extension().is_some_and(|e| e == "proto") {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        if text.contains("dccl.msg") {
+            out.push(path.to_path_buf());
+        }
+    }
+}
+
+fn default_protos() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    vec![
+        root.join("../protos/proto/goby/example"),
+        root.join("tests/data/reference-cases"),
+    ]
+}
+
+/// Types compared in a file: its top-level messages and nested messages
+/// with `(dccl.msg)` options, in declaration order.
+fn types_of(pool: &dccl::prost_reflect::DescriptorPool, file: &Path) -> Vec<MessageDescriptor> {
+    let name = file.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    let mut out = Vec::new();
+    for fd in pool.files() {
+        let fname = fd.name().to_string();
+        if !(fname == name || fname.ends_with(&format!("/{name}"))) {
+            continue;
+        }
+        if !std::fs::canonicalize(file)
+            .map(|p| p.to_string_lossy().ends_with(&fname))
+            .unwrap_or(false)
+        {
+            continue;
+        }
+        fn walk(m: MessageDescriptor, top: bool, out: &mut Vec<MessageDescriptor>) {
+            if top || dccl::options::has_message_options(&m) {
+                out.push(m.clone());
+            }
+            for child in m.child_messages() {
+                walk(child, false, out);
+            }
+        }
+        for m in fd.messages() {
+            walk(m, true, &mut out);
+        }
+        break;
+    }
+    out
+}
+
+struct Ours {
+    plain: Codec,
+    crypt: Codec,
+}
+
+fn outcome<T, E: std::fmt::Display>(r: Result<T, E>) -> Result<T, String> {
+    r.map_err(|e| e.to_string())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn compare_file(
+    driver: &Path,
+    file: &Path,
+    includes: &[PathBuf],
+    instances: usize,
+    seed: u64,
+    diffs: &mut Vec<Difference>,
+    counts: &mut BTreeMap<&'static str, usize>,
+) {
+    let fname = file.display().to_string();
+    let push = |diffs: &mut Vec<Difference>, message: &str, class: &'static str, detail: String| {
+        diffs.push(Difference {
+            file: fname.clone(),
+            message: message.to_string(),
+            class,
+            detail,
+        })
+    };
+    let pool = dccl::compile_protos(&[file], includes);
+    let reference = Reference::start(driver, file, includes);
+    let (pool, mut reference) = match (pool, reference) {
+        (Ok(p), Ok(r)) => (p, r),
+        (Err(e), Ok(_)) => {
+            push(
+                diffs,
+                "",
+                "file-acceptance",
+                format!("ours: {e}; reference reads it"),
+            );
+            return;
+        }
+        (Ok(_), Err(e)) => {
+            push(
+                diffs,
+                "",
+                "file-acceptance",
+                format!("ours reads it; reference: {e}"),
+            );
+            return;
+        }
+        (Err(_), Err(_)) => return,
+    };
+    *counts.entry("files").or_default() += 1;
+    let mut ours = Ours {
+        plain: Codec::new(),
+        crypt: Codec::new(),
+    };
+    ours.crypt.set_passphrase(PASSPHRASE);
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0);
+    for desc in types_of(&pool, file) {
+        let name = desc.full_name().to_string();
+        *counts.entry("types").or_default() += 1;
+        let Ok(reply) = reference.ask(&format!("L {name}")) else {
+            push(diffs, &name, "reference-crash", "on load".into());
+            return;
+        };
+        let our_load = ours.plain.load(&desc).and_then(|_| ours.crypt.load(&desc));
+        match (reply[0].as_str(), &our_load) {
+            ("ok", Ok(())) => {
+                *counts.entry("types loaded").or_default() += 1;
+                let hash = ours
+                    .plain
+                    .hash(&name)
+                    .map(dccl::definition_hash::hash_as_string)
+                    .unwrap_or_default();
+                if hash != reply[1] {
+                    push(
+                        diffs,
+                        &name,
+                        "hash",
+                        format!("ours {hash} reference {}", reply[1]),
+                    );
+                }
+                let min = ours.plain.min_size(&name).map(|s| s.to_string());
+                if min.as_deref().unwrap_or("?") != reply[2] {
+                    push(
+                        diffs,
+                        &name,
+                        "min_size",
+                        format!("ours {min:?} reference {}", reply[2]),
+                    );
+                }
+                let max = ours.plain.max_size(&name).map(|s| s.to_string());
+                if max.as_deref().unwrap_or("?") != reply[3] {
+                    push(
+                        diffs,
+                        &name,
+                        "max_size",
+                        format!("ours {max:?} reference {}", reply[3]),
+                    );
+                }
+            }
+            ("ok", Err(e)) => {
+                push(
+                    diffs,
+                    &name,
+                    "load-acceptance",
+                    format!("ours refuses: {e}"),
+                );
+                continue;
+            }
+            (_, Ok(())) => {
+                push(
+                    diffs,
+                    &name,
+                    "load-acceptance",
+                    format!(
+                        "reference refuses: {}",
+                        reply.get(1).cloned().unwrap_or_default()
+                    ),
+                );
+                ours.plain.unload(&name);
+                ours.crypt.unload(&name);
+                continue;
+            }
+            (_, Err(_)) => {
+                *counts.entry("types refused by both").or_default() += 1;
+                continue;
+            }
+        }
+        if reference.ask(&format!("M {name}")).map(|r| r[0] == "ok") != Ok(true) {
+            push(diffs, &name, "reference-crash", "on select".into());
+            return;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            seed ^ dccl::definition_hash::std_string_hash(name.as_bytes()),
+        );
+        for _ in 0..instances {
+            let text = generator::Generator::new(&mut rng, now).instance(&desc);
+            *counts.entry("instances").or_default() += 1;
+            let Ok(reply) = reference.ask(&format!("E {text}")) else {
+                push(diffs, &name, "reference-crash", format!("on input {text}"));
+                return;
+            };
+            let msg = DynamicMessage::parse_text_format(desc.clone(), &text);
+            let msg = match (reply[0].as_str(), msg) {
+                ("perr", Err(_)) => continue,
+                ("perr", Ok(_)) => {
+                    push(
+                        diffs,
+                        &name,
+                        "text-parse",
+                        format!("reference cannot parse {text}: {}", reply[1]),
+                    );
+                    continue;
+                }
+                (_, Err(e)) => {
+                    push(
+                        diffs,
+                        &name,
+                        "text-parse",
+                        format!("we cannot parse {text}: {e}"),
+                    );
+                    continue;
+                }
+                (_, Ok(m)) => m,
+            };
+            let encoded = outcome(ours.plain.encode(&msg));
+            match (reply[0].as_str(), &encoded) {
+                ("ok", Ok(bytes)) => {
+                    *counts.entry("instances encoded by both").or_default() += 1;
+                    let hex = hex::encode(bytes);
+                    if hex != reply[1] {
+                        // How does the reference read our bytes?
+                        let theirs = reference
+                            .ask(&format!("D {hex}"))
+                            .map(|r| r.join(" "))
+                            .unwrap_or_default();
+                        push(
+                            diffs,
+                            &name,
+                            "encoding",
+                            format!("input {text}\n      ours {hex}\n      ref  {}\n      ref reads ours as: {theirs}\n      ref decoded: {}", reply[1], reply[3]),
+                        );
+                    }
+                    let size = outcome(ours.plain.size(&msg)).map(|s| s.to_string());
+                    if size.as_deref().unwrap_or("?") != reply[2] {
+                        push(
+                            diffs,
+                            &name,
+                            "size",
+                            format!("input {text}: ours {size:?} reference {}", reply[2]),
+                        );
+                    }
+                    let decoded = match ours.plain.decode(bytes) {
+                        Ok(m) => dccl::text_format::short_debug_string(&m),
+                        Err(e) => format!("!{e}"),
+                    };
+                    if decoded != reply[3] && hex == reply[1] {
+                        push(
+                            diffs,
+                            &name,
+                            "decoded",
+                            format!(
+                                "input {text}\n      ours {decoded}\n      ref  {}",
+                                reply[3]
+                            ),
+                        );
+                    }
+                    let crypt = outcome(ours.crypt.encode(&msg));
+                    match &crypt {
+                        Ok(b) => {
+                            let chex = hex::encode(b);
+                            if chex != reply[4] && hex == reply[1] {
+                                push(
+                                    diffs,
+                                    &name,
+                                    "encoding-with-passphrase",
+                                    format!(
+                                        "input {text}\n      ours {chex}\n      ref  {}",
+                                        reply[4]
+                                    ),
+                                );
+                            }
+                            let cdec = match ours.crypt.decode(b) {
+                                Ok(m) => dccl::text_format::short_debug_string(&m),
+                                Err(e) => format!("!{e}"),
+                            };
+                            if cdec != reply[5] && chex == reply[4] && decoded == reply[3] {
+                                push(
+                                    diffs,
+                                    &name,
+                                    "decoded-with-passphrase",
+                                    format!(
+                                        "input {text}\n      ours {cdec}\n      ref  {}",
+                                        reply[5]
+                                    ),
+                                );
+                            }
+                        }
+                        Err(e) => push(
+                            diffs,
+                            &name,
+                            "encoding-with-passphrase",
+                            format!("input {text}: ours fails: {e}"),
+                        ),
+                    }
+                }
+                ("ok", Err(e)) => push(
+                    diffs,
+                    &name,
+                    "encode-acceptance",
+                    format!(
+                        "input {text}\n      ours refuses: {e}\n      ref  {}",
+                        reply[1]
+                    ),
+                ),
+                (_, Ok(bytes)) => push(
+                    diffs,
+                    &name,
+                    "encode-acceptance",
+                    format!(
+                        "input {text}\n      reference refuses: {}\n      ours {}",
+                        reply.get(1).cloned().unwrap_or_default(),
+                        hex::encode(bytes)
+                    ),
+                ),
+                (_, Err(_)) => {
+                    *counts.entry("instances refused by both").or_default() += 1;
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn differential_against_libdccl_when_a_reference_driver_is_given() {
+    let Some(driver) = std::env::var_os("DCCL_REFERENCE_DRIVER").map(PathBuf::from) else {
+        println!(
+            "skipped: set DCCL_REFERENCE_DRIVER=path to a libdccl 4.2 reference driver \
+             (see the doc comment of dccl/tests/differential/main.rs)"
+        );
+        return;
+    };
+    let mut roots = env_paths("DCCL_DIFF_PROTOS");
+    if roots.is_empty() {
+        roots = default_protos();
+    }
+    let includes = env_paths("DCCL_DIFF_INCLUDE");
+    let instances = std::env::var("DCCL_DIFF_INSTANCES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(40);
+    let seed = std::env::var("DCCL_DIFF_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let mut files = Vec::new();
+    for root in &roots {
+        collect_protos(
+            &std::fs::canonicalize(root).unwrap_or(root.clone()),
+            &mut files,
+        );
+    }
+    let mut diffs = Vec::new();
+    let mut counts = BTreeMap::new();
+    for file in &files {
+        compare_file(
+            &driver,
+            file,
+            &includes,
+            instances,
+            seed,
+            &mut diffs,
+            &mut counts,
+        );
+    }
+    let mut by_class: BTreeMap<&str, Vec<&Difference>> = BTreeMap::new();
+    for d in &diffs {
+        by_class.entry(d.class).or_default().push(d);
+    }
+    println!("compared: {counts:?}");
+    let mut report = String::new();
+    for (class, list) in &by_class {
+        let mut types: Vec<&str> = list.iter().map(|d| d.message.as_str()).collect();
+        types.dedup();
+        report.push_str(&format!(
+            "== {class}: {} differences in {} types\n",
+            list.len(),
+            types.len()
+        ));
+        for d in list {
+            report.push_str(&format!("  [{}] {}: {}\n", d.file, d.message, d.detail));
+        }
+    }
+    if let Ok(path) = std::env::var("DCCL_DIFF_REPORT") {
+        std::fs::write(&path, &report).expect("write report");
+    }
+    for (class, list) in &by_class {
+        println!("{class}: {} differences", list.len());
+        for d in list.iter().take(3) {
+            println!("  {}: {}", d.message, d.detail);
+        }
+    }
+    assert!(diffs.is_empty(), "{} differences with libdccl", diffs.len());
+}
