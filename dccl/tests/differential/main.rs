@@ -45,7 +45,9 @@
 //!   repository's example messages and the committed reference cases;
 //! - `DCCL_DIFF_INCLUDE`: `:`-separated import directories;
 //! - `DCCL_DIFF_INSTANCES` (default 40), `DCCL_DIFF_SEED` (default 1);
-//! - `DCCL_DIFF_REPORT`: a file to write every difference to.
+//! - `DCCL_DIFF_REPORT`: a file to write every difference to;
+//! - `DCCL_DIFF_TYPES`: `,`-separated full type names to compare (others skipped);
+//! - `DCCL_DIFF_TEXT`: one text-format instance used instead of random ones.
 //!
 //! The test fails when any difference is found and prints them by class.
 
@@ -72,8 +74,17 @@ struct Reference {
 
 impl Reference {
     fn start(driver: &Path, file: &Path, includes: &[PathBuf]) -> Result<Self, String> {
+        // The file by its name relative to the first import directory holding
+        // it, as an `import` names it (and as this crate's compiler names it).
+        let virtual_name = includes
+            .iter()
+            .find_map(|dir| {
+                let dir = std::fs::canonicalize(dir).ok()?;
+                file.strip_prefix(dir).ok().map(Path::to_path_buf)
+            })
+            .unwrap_or_else(|| file.to_path_buf());
         let mut cmd = Command::new(driver);
-        cmd.arg("-f").arg(file).arg("-p").arg(PASSPHRASE);
+        cmd.arg("-f").arg(virtual_name).arg("-p").arg(PASSPHRASE);
         for dir in includes {
             cmd.arg("-I").arg(dir);
         }
@@ -249,7 +260,11 @@ fn compare_file(
             );
             return;
         }
-        (Err(_), Err(_)) => return,
+        (Err(e), Err(_)) => {
+            *counts.entry("files unreadable by both").or_default() += 1;
+            eprintln!("both cannot read {fname}: {e}");
+            return;
+        }
     };
     *counts.entry("files").or_default() += 1;
     let mut ours = Ours {
@@ -261,8 +276,15 @@ fn compare_file(
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs_f64())
         .unwrap_or(0.0);
+    let only: Vec<String> = std::env::var("DCCL_DIFF_TYPES")
+        .map(|v| v.split(',').map(str::to_string).collect())
+        .unwrap_or_default();
+    let fixed_text = std::env::var("DCCL_DIFF_TEXT").ok();
     for desc in types_of(&pool, file) {
         let name = desc.full_name().to_string();
+        if !only.is_empty() && !only.contains(&name) {
+            continue;
+        }
         *counts.entry("types").or_default() += 1;
         let Ok(reply) = reference.ask(&format!("L {name}")) else {
             push(diffs, &name, "reference-crash", "on load".into());
@@ -339,8 +361,11 @@ fn compare_file(
         let mut rng = ChaCha8Rng::seed_from_u64(
             seed ^ dccl::definition_hash::std_string_hash(name.as_bytes()),
         );
-        for _ in 0..instances {
-            let text = generator::Generator::new(&mut rng, now).instance(&desc);
+        for _ in 0..if fixed_text.is_some() { 1 } else { instances } {
+            let text = match &fixed_text {
+                Some(t) => t.clone(),
+                None => generator::Generator::new(&mut rng, now).instance(&desc),
+            };
             *counts.entry("instances").or_default() += 1;
             let Ok(reply) = reference.ask(&format!("E {text}")) else {
                 push(diffs, &name, "reference-crash", format!("on input {text}"));
