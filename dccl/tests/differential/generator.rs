@@ -24,12 +24,18 @@ const CHARS: &[&str] = &[
 pub struct Generator<'r, R: RngCore> {
     rng: &'r mut R,
     now: f64,
+    /// When false, no NaN or infinity is generated.
+    pub non_finite: bool,
 }
 
 impl<'r, R: RngCore> Generator<'r, R> {
     /// A generator drawing from `rng`; `now` centres the time fields.
     pub fn new(rng: &'r mut R, now: f64) -> Self {
-        Generator { rng, now }
+        Generator {
+            rng,
+            now,
+            non_finite: true,
+        }
     }
 
     /// One instance of `desc` as one line of text format.
@@ -191,9 +197,9 @@ impl<'r, R: RngCore> Generator<'r, R> {
         let t = self.now + offset;
         match kind {
             Kind::Double | Kind::Float => match self.rng.random_range(0..12) {
-                0 => "nan".to_string(),
-                1 => "inf".to_string(),
-                2 => "-inf".to_string(),
+                0 if self.non_finite => "nan".to_string(),
+                1 if self.non_finite => "inf".to_string(),
+                2 if self.non_finite => "-inf".to_string(),
                 3 => format!("{:?}", t.floor()),
                 4 => format!("{:?}", (t * 1000.0).round() / 1000.0),
                 _ => format!("{:?}", t),
@@ -227,9 +233,9 @@ impl<'r, R: RngCore> Generator<'r, R> {
             3 => max + step,
             4 => max + (max - min).abs() * 3.0 + 1.0,
             5 => min - (max - min).abs() * 3.0 - 1.0,
-            6 if !integer => f64::NAN,
-            7 if !integer => f64::INFINITY,
-            8 if !integer => f64::NEG_INFINITY,
+            6 if !integer && self.non_finite => f64::NAN,
+            7 if !integer && self.non_finite => f64::INFINITY,
+            8 if !integer && self.non_finite => f64::NEG_INFINITY,
             9 | 10 => {
                 // on a rounding half-step
                 let k = ((max - min) / step).floor().max(1.0);

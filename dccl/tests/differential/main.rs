@@ -47,7 +47,8 @@
 //! - `DCCL_DIFF_INSTANCES` (default 40), `DCCL_DIFF_SEED` (default 1);
 //! - `DCCL_DIFF_REPORT`: a file to write every difference to;
 //! - `DCCL_DIFF_TYPES`: `,`-separated full type names to compare (others skipped);
-//! - `DCCL_DIFF_TEXT`: one text-format instance used instead of random ones.
+//! - `DCCL_DIFF_TEXT`: one text-format instance used instead of random ones;
+//! - `DCCL_DIFF_NO_NAN`: when set, no NaN or infinity is generated.
 //!
 //! The test fails when any difference is found and prints them by class.
 
@@ -60,7 +61,7 @@ use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 
 use dccl::prost_reflect::{DynamicMessage, MessageDescriptor};
 use dccl::Codec;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 const PASSPHRASE: &str = "differential";
@@ -316,6 +317,28 @@ fn compare_file(
                         format!("ours {min:?} reference {}", reply[2]),
                     );
                 }
+                // The size report, line by line.
+                if let Ok(reply) = reference.ask(&format!("A {name}")) {
+                    let theirs = reply
+                        .get(1)
+                        .cloned()
+                        .unwrap_or_default()
+                        .replace('\u{1f}', "\n");
+                    let ours_text = ours
+                        .plain
+                        .analyze(&name)
+                        .unwrap_or_else(|e| format!("!{e}"));
+                    let differing: Vec<String> = theirs
+                        .lines()
+                        .zip(ours_text.lines())
+                        .filter(|(a, b)| a.trim_end() != b.trim_end())
+                        .map(|(a, b)| format!("\n      ref  {a}\n      ours {b}"))
+                        .collect();
+                    if !differing.is_empty() || theirs.lines().count() != ours_text.lines().count()
+                    {
+                        push(diffs, &name, "analyze", differing.concat());
+                    }
+                }
                 let max = ours.plain.max_size(&name).map(|s| s.to_string());
                 if max.as_deref().unwrap_or("?") != reply[3] {
                     push(
@@ -364,7 +387,11 @@ fn compare_file(
         for _ in 0..if fixed_text.is_some() { 1 } else { instances } {
             let text = match &fixed_text {
                 Some(t) => t.clone(),
-                None => generator::Generator::new(&mut rng, now).instance(&desc),
+                None => {
+                    let mut generator = generator::Generator::new(&mut rng, now);
+                    generator.non_finite = std::env::var_os("DCCL_DIFF_NO_NAN").is_none();
+                    generator.instance(&desc)
+                }
             };
             *counts.entry("instances").or_default() += 1;
             let Ok(reply) = reference.ask(&format!("E {text}")) else {
@@ -411,6 +438,22 @@ fn compare_file(
                             "encoding",
                             format!("input {text}\n      ours {hex}\n      ref  {}\n      ref reads ours as: {theirs}\n      ref decoded: {}", reply[1], reply[3]),
                         );
+                    }
+                    // Damaged bytes (cut, a bit flipped, a byte added) decode
+                    // (or fail) alike.
+                    if hex == reply[1] && !bytes.is_empty() {
+                        let mut damaged = bytes.clone();
+                        match rng.random_range(0..3) {
+                            0 => {
+                                damaged.truncate(rng.random_range(0..bytes.len()));
+                            }
+                            1 => {
+                                let bit = rng.random_range(0..bytes.len() * 8);
+                                damaged[bit / 8] ^= 0x80 >> (bit % 8);
+                            }
+                            _ => damaged.push(rng.random()),
+                        }
+                        compare_decode(&mut reference, &ours.plain, &damaged, &name, diffs, &push);
                     }
                     let size = outcome(ours.plain.size(&msg)).map(|s| s.to_string());
                     if size.as_deref().unwrap_or("?") != reply[2] {
@@ -499,6 +542,60 @@ fn compare_file(
                 }
             }
         }
+    }
+}
+
+/// Decodes `bytes` on both sides and records a difference in acceptance,
+/// decoded message or bytes used.
+fn compare_decode(
+    reference: &mut Reference,
+    ours: &Codec,
+    bytes: &[u8],
+    name: &str,
+    diffs: &mut Vec<Difference>,
+    push: &dyn Fn(&mut Vec<Difference>, &str, &'static str, String),
+) {
+    let hex = hex::encode(bytes);
+    let Ok(theirs) = reference.ask(&format!("D {hex}")) else {
+        push(diffs, name, "reference-crash", format!("on decoding {hex}"));
+        return;
+    };
+    let ours = ours
+        .decode_prefix(bytes)
+        .map(|(m, used)| (dccl::text_format::short_debug_string(&m), used));
+    match (theirs[0].as_str(), ours) {
+        ("ok", Ok((text, used))) => {
+            if text != theirs[2] || used.to_string() != theirs[3] {
+                push(
+                    diffs,
+                    name,
+                    "decode-damaged",
+                    format!(
+                        "bytes {hex}\n      ours {text} ({used} bytes)\n      ref  {} ({} bytes)",
+                        theirs[2], theirs[3]
+                    ),
+                );
+            }
+        }
+        ("ok", Err(e)) => push(
+            diffs,
+            name,
+            "decode-damaged-acceptance",
+            format!(
+                "bytes {hex}\n      ours refuses: {e}\n      ref  {}",
+                theirs[2]
+            ),
+        ),
+        (_, Ok((text, _))) => push(
+            diffs,
+            name,
+            "decode-damaged-acceptance",
+            format!(
+                "bytes {hex}\n      ours {text}\n      ref refuses: {}",
+                theirs.get(1).cloned().unwrap_or_default()
+            ),
+        ),
+        (_, Err(_)) => {}
     }
 }
 
