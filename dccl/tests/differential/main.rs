@@ -133,6 +133,9 @@ impl Drop for Reference {
     }
 }
 
+/// Records one difference: `(list, type name, class, detail)`.
+type RecordFn<'a> = &'a dyn Fn(&mut Vec<Difference>, &str, &'static str, String);
+
 /// One observed difference.
 #[derive(Debug)]
 struct Difference {
@@ -214,6 +217,7 @@ fn types_of(pool: &dccl::prost_reflect::DescriptorPool, file: &Path) -> Vec<Mess
 struct Ours {
     plain: Codec,
     crypt: Codec,
+    strict: Codec,
 }
 
 fn outcome<T, E: std::fmt::Display>(r: Result<T, E>) -> Result<T, String> {
@@ -271,8 +275,10 @@ fn compare_file(
     let mut ours = Ours {
         plain: Codec::new(),
         crypt: Codec::new(),
+        strict: Codec::new(),
     };
     ours.crypt.set_passphrase(PASSPHRASE);
+    ours.strict.set_strict(true);
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs_f64())
@@ -291,7 +297,11 @@ fn compare_file(
             push(diffs, &name, "reference-crash", "on load".into());
             return;
         };
-        let our_load = ours.plain.load(&desc).and_then(|_| ours.crypt.load(&desc));
+        let our_load = ours
+            .plain
+            .load(&desc)
+            .and_then(|_| ours.crypt.load(&desc))
+            .and_then(|_| ours.strict.load(&desc));
         match (reply[0].as_str(), &our_load) {
             ("ok", Ok(())) => {
                 *counts.entry("types loaded").or_default() += 1;
@@ -370,6 +380,7 @@ fn compare_file(
                 );
                 ours.plain.unload(&name);
                 ours.crypt.unload(&name);
+                ours.strict.unload(&name);
                 continue;
             }
             (_, Err(_)) => {
@@ -454,6 +465,30 @@ fn compare_file(
                             _ => damaged.push(rng.random()),
                         }
                         compare_decode(&mut reference, &ours.plain, &damaged, &name, diffs, &push);
+                    }
+                    // Strict mode: the same values refused, the others coded alike.
+                    let strict = ours.strict.encode(&msg).map(hex::encode);
+                    let theirs_strict = reply.get(6).cloned().unwrap_or_default();
+                    match (&strict, theirs_strict.strip_prefix('!')) {
+                        (Ok(ours_hex), None) if *ours_hex != theirs_strict && hex == reply[1] => push(
+                            diffs,
+                            &name,
+                            "strict-encoding",
+                            format!("input {text}\n      ours {ours_hex}\n      ref  {theirs_strict}"),
+                        ),
+                        (Ok(ours_hex), Some(reason)) => push(
+                            diffs,
+                            &name,
+                            "strict-acceptance",
+                            format!("input {text}\n      ours {ours_hex}\n      ref refuses: {reason}"),
+                        ),
+                        (Err(e), None) => push(
+                            diffs,
+                            &name,
+                            "strict-acceptance",
+                            format!("input {text}\n      ours refuses: {e}\n      ref  {theirs_strict}"),
+                        ),
+                        _ => {}
                     }
                     let size = outcome(ours.plain.size(&msg)).map(|s| s.to_string());
                     if size.as_deref().unwrap_or("?") != reply[2] {
@@ -553,7 +588,7 @@ fn compare_decode(
     bytes: &[u8],
     name: &str,
     diffs: &mut Vec<Difference>,
-    push: &dyn Fn(&mut Vec<Difference>, &str, &'static str, String),
+    push: RecordFn<'_>,
 ) {
     let hex = hex::encode(bytes);
     let Ok(theirs) = reference.ask(&format!("D {hex}")) else {
