@@ -21,7 +21,7 @@ use crate::rounding::ceil_log2_u64;
 pub const MAX_DEPTH: usize = 32;
 
 /// One field of a message as its codec sees it.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct FieldEntry {
     /// The field.
     pub field: FieldDescriptor,
@@ -71,6 +71,9 @@ pub struct MessageCodec {
     version: i32,
     descriptor: MessageDescriptor,
     fields: Vec<FieldEntry>,
+    /// The fields entering the definition hash: `fields` and, in version 2,
+    /// repeated embedded messages of the other part (coded in theirs only).
+    hash_fields: Vec<FieldEntry>,
     oneofs: Vec<OneofEntry>,
     presence: bool,
     min_bits: u32,
@@ -147,6 +150,7 @@ impl MessageCodec {
         };
 
         let mut fields = Vec::new();
+        let mut hash_fields = Vec::new();
         for field in descriptor.fields() {
             let options = field_options(&field).map_err(|e| e.in_field(field.name()))?;
             if options.omit() {
@@ -169,8 +173,14 @@ impl MessageCodec {
             let entry = Self::build_entry(spec, &field, &options, with_oneofs, &oneofs)
                 .map_err(|e| e.in_field(field.name()))?;
             if v2_expanded && (entry.codec.name() != "dccl.default2" || entry.repeat.is_some()) {
+                // libdccl's version 2 message codec expands (and so hashes)
+                // a repeated embedded message in both parts too.
+                if entry.codec.name() == "dccl.default2" {
+                    hash_fields.push(entry);
+                }
                 continue;
             }
+            hash_fields.push(entry.clone());
             fields.push(entry);
         }
 
@@ -179,6 +189,7 @@ impl MessageCodec {
             version: codec_version,
             descriptor,
             fields,
+            hash_fields,
             oneofs,
             presence,
             min_bits: 0,
@@ -497,7 +508,7 @@ impl FieldCodec for MessageCodec {
                 hash_combine_text(&mut hash, &oneof_declaration_text(&desc));
             }
         }
-        for f in &self.fields {
+        for f in &self.hash_fields {
             combine_field(&mut hash, &f.field, f.codec.as_ref());
         }
         hash
