@@ -9,7 +9,9 @@
 //! - `expected-decoded.txt`: libdccl's `ShortDebugString()` of each decoded line;
 //! - `expected-size.txt`: libdccl's `Codec::size()` of each line;
 //! - `expected-hash.txt`: `TypeName HASH MIN_SIZE MAX_SIZE` from libdccl's
-//!   `Codec::load`, `min_size` and `max_size`.
+//!   `Codec::load`, `min_size` and `max_size`;
+//! - `expected-analyze.txt`: libdccl's size report (`Codec::info`) of each
+//!   type, in the order the types first appear in `input.txt`.
 //!
 //! Where this crate deliberately or for now behaves otherwise the test says
 //! so in its `#[ignore]` reason.
@@ -177,6 +179,21 @@ impl Case {
         }
     }
 
+    /// The size report of each type is libdccl's.
+    fn check_analyze(&self) {
+        let expected = std::fs::read_to_string(self.dir.join("expected-analyze.txt"))
+            .expect("expected-analyze.txt");
+        let mut ours = String::new();
+        let mut seen: Vec<&str> = Vec::new();
+        for (ty, _) in &self.inputs {
+            if !seen.contains(&ty.as_str()) {
+                seen.push(ty);
+                ours.push_str(&self.plain.analyze(ty).expect("analyze"));
+            }
+        }
+        assert_eq!(ours, expected);
+    }
+
     /// `min_size` / `max_size` of each type are libdccl's.
     fn check_min_max(&self) {
         for line in lines(&self.dir, "expected-hash.txt") {
@@ -203,6 +220,7 @@ fn every_reference_case_is_tested() {
         "size-bounds-and-id-width",
         "v2-repeated-embedded-message-hash",
         "v2-repeated-embedded-message-in-head",
+        "analyze-oneof-sizes",
     ];
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference-cases");
     for entry in std::fs::read_dir(dir).expect("reference-cases") {
@@ -225,6 +243,7 @@ fn every_reference_case_is_tested() {
 fn v2_codec_named_in_newer_message() {
     let case = Case::open("v2-codec-named-in-newer-message");
     case.check_hashes();
+    case.check_analyze();
     case.check_encoding();
     case.check_decoding();
     case.check_size();
@@ -236,6 +255,7 @@ fn v2_codec_named_in_newer_message() {
 fn utf8_cut_at_max_length_encoding() {
     let case = Case::open("utf8-cut-at-max-length");
     case.check_hashes();
+    case.check_analyze();
     case.check_encoding();
     case.check_size();
 }
@@ -254,6 +274,7 @@ fn utf8_cut_at_max_length_decoding() {
 fn size_under_min_repeat_encoding() {
     let case = Case::open("size-under-min-repeat");
     case.check_hashes();
+    case.check_analyze();
     case.check_encoding();
     case.check_decoding();
     case.check_size_is_encoded_length();
@@ -271,6 +292,7 @@ fn size_under_min_repeat_reference_size() {
 fn size_bounds_and_id_width_encoding() {
     let case = Case::open("size-bounds-and-id-width");
     case.check_hashes();
+    case.check_analyze();
     case.check_encoding();
     case.check_decoding();
     case.check_size();
@@ -291,6 +313,7 @@ fn size_bounds_and_id_width_min_max() {
 fn v2_repeated_embedded_message_hash() {
     let case = Case::open("v2-repeated-embedded-message-hash");
     case.check_hashes();
+    case.check_analyze();
     case.check_encoding();
     case.check_decoding();
     case.check_size();
@@ -310,4 +333,14 @@ fn v2_repeated_embedded_message_in_head_coding() {
     case.check_encoding();
     case.check_decoding();
     case.check_size();
+}
+
+// The size report writes a oneof's sizes as `min-max` even when they are equal.
+#[test]
+fn analyze_oneof_sizes() {
+    let case = Case::open("analyze-oneof-sizes");
+    case.check_hashes();
+    case.check_encoding();
+    case.check_decoding();
+    case.check_analyze();
 }

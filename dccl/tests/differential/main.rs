@@ -48,10 +48,14 @@
 //! - `DCCL_DIFF_REPORT`: a file to write every difference to;
 //! - `DCCL_DIFF_TYPES`: `,`-separated full type names to compare (others skipped);
 //! - `DCCL_DIFF_TEXT`: one text-format instance used instead of random ones;
-//! - `DCCL_DIFF_NO_NAN`: when set, no NaN or infinity is generated.
+//! - `DCCL_DIFF_NO_NAN`: when set, no NaN or infinity is generated;
+//! - `DCCL_DIFF_RANDOM_DEFS=N`: also compare N random definitions (written to
+//!   a temporary directory, kept there with `DCCL_DIFF_KEEP`; fields in number
+//!   order only with `DCCL_DIFF_ORDERED`).
 //!
 //! The test fails when any difference is found and prints them by class.
 
+mod definitions;
 mod generator;
 
 use std::collections::BTreeMap;
@@ -675,6 +679,40 @@ fn differential_against_libdccl_when_a_reference_driver_is_given() {
             &mut diffs,
             &mut counts,
         );
+    }
+    // Random definitions, written to a temporary directory.
+    let random_defs: usize = std::env::var("DCCL_DIFF_RANDOM_DEFS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
+    if random_defs > 0 {
+        let dir =
+            std::env::temp_dir().join(format!("dccl-differential-{}-{seed}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temporary directory");
+        let dir = std::fs::canonicalize(&dir).expect("temporary directory");
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let opts = definitions::DefinitionOptions {
+            ordered: std::env::var_os("DCCL_DIFF_ORDERED").is_some(),
+        };
+        for i in 0..random_defs {
+            let text = definitions::definition(&mut rng, 1 + (i as u32 % 500), &opts);
+            let file = dir.join(format!("def{i}.proto"));
+            std::fs::write(&file, text).expect("write definition");
+            compare_file(
+                &driver,
+                &file,
+                std::slice::from_ref(&dir),
+                instances,
+                seed,
+                &mut diffs,
+                &mut counts,
+            );
+        }
+        if std::env::var_os("DCCL_DIFF_KEEP").is_none() {
+            let _ = std::fs::remove_dir_all(&dir);
+        } else {
+            println!("random definitions kept in {}", dir.display());
+        }
     }
     let mut by_class: BTreeMap<&str, Vec<&Difference>> = BTreeMap::new();
     for d in &diffs {
