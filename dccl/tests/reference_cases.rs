@@ -221,6 +221,7 @@ fn every_reference_case_is_tested() {
         "v2-repeated-embedded-message-hash",
         "v2-repeated-embedded-message-in-head",
         "analyze-oneof-sizes",
+        "v2-embedded-message-in-head-hash",
     ];
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference-cases");
     for entry in std::fs::read_dir(dir).expect("reference-cases") {
@@ -343,4 +344,16 @@ fn analyze_oneof_sizes() {
     case.check_encoding();
     case.check_decoding();
     case.check_analyze();
+}
+
+// Version 2 hashes an embedded message with `in_head` set in the other part
+// too (with none of its fields there).
+#[test]
+fn v2_embedded_message_in_head_hash() {
+    let case = Case::open("v2-embedded-message-in-head-hash");
+    case.check_hashes();
+    case.check_analyze();
+    case.check_encoding();
+    case.check_decoding();
+    case.check_size();
 }

@@ -21,7 +21,7 @@ use crate::rounding::ceil_log2_u64;
 pub const MAX_DEPTH: usize = 32;
 
 /// One field of a message as its codec sees it.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct FieldEntry {
     /// The field.
     pub field: FieldDescriptor,
@@ -71,9 +71,10 @@ pub struct MessageCodec {
     version: i32,
     descriptor: MessageDescriptor,
     fields: Vec<FieldEntry>,
-    /// The fields entering the definition hash: `fields` and, in version 2,
-    /// repeated embedded messages of the other part (coded in theirs only).
-    hash_fields: Vec<FieldEntry>,
+    /// The fields entering the definition hash with their codec's hash:
+    /// `fields` and, in version 2, embedded messages that libdccl also
+    /// expands in the other part but codes in their own only.
+    hash_fields: Vec<(FieldDescriptor, u64)>,
     oneofs: Vec<OneofEntry>,
     presence: bool,
     min_bits: u32,
@@ -165,22 +166,30 @@ impl MessageCodec {
             let v2_expanded = !included
                 && codec_version == 2
                 && !spec.children_follow_parent
-                && options.in_head.is_none()
                 && matches!(field.kind(), prost_reflect::Kind::Message(_));
             if !included && !v2_expanded {
                 continue;
             }
             let entry = Self::build_entry(spec, &field, &options, with_oneofs, &oneofs)
                 .map_err(|e| e.in_field(field.name()))?;
-            if v2_expanded && (entry.codec.name() != "dccl.default2" || entry.repeat.is_some()) {
-                // libdccl's version 2 message codec expands (and so hashes)
-                // a repeated embedded message in both parts too.
-                if entry.codec.name() == "dccl.default2" {
-                    hash_fields.push(entry);
+            if v2_expanded {
+                // libdccl's version 2 message codec expands an embedded
+                // message with the default codec in both parts, repeated or
+                // not, and with `in_head` set (then none of its fields is
+                // in this part: its codec hash is 0).
+                if entry.codec.name() != "dccl.default2" {
+                    continue;
                 }
-                continue;
+                if options.in_head.is_some() {
+                    hash_fields.push((field.clone(), 0));
+                    continue;
+                }
+                if entry.repeat.is_some() {
+                    hash_fields.push((field.clone(), entry.codec.definition_hash()));
+                    continue;
+                }
             }
-            hash_fields.push(entry.clone());
+            hash_fields.push((field.clone(), entry.codec.definition_hash()));
             fields.push(entry);
         }
 
@@ -501,15 +510,20 @@ impl FieldCodec for MessageCodec {
         Some(self)
     }
     fn definition_hash(&self) -> u64 {
-        use crate::definition_hash::{combine_field, hash_combine_text, oneof_declaration_text};
+        use crate::definition_hash::{
+            field_descriptor_text, field_options_text, hash_combine, hash_combine_text,
+            oneof_declaration_text,
+        };
         let mut hash = 0;
         for o in &self.oneofs {
             if let Some(desc) = self.descriptor.oneofs().nth(o.index) {
                 hash_combine_text(&mut hash, &oneof_declaration_text(&desc));
             }
         }
-        for f in &self.hash_fields {
-            combine_field(&mut hash, &f.field, f.codec.as_ref());
+        for (field, codec_hash) in &self.hash_fields {
+            hash_combine_text(&mut hash, &field_descriptor_text(field));
+            hash_combine_text(&mut hash, &field_options_text(field));
+            hash_combine(&mut hash, *codec_hash);
         }
         hash
     }

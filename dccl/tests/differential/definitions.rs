@@ -69,6 +69,13 @@ fn fields<R: RngCore>(
 ) -> String {
     let count = rng.random_range(1..=6);
     let mut numbers: Vec<u32> = (1..=count as u32).collect();
+    // Members of the oneof (version 4): a run of consecutive numbers.
+    let oneof_range = if version == 4 && rng.random_bool(0.3) {
+        let start = rng.random_range(1..=count as u32);
+        start..start + rng.random_range(1..=3)
+    } else {
+        0..0
+    };
     if !opts.ordered && rng.random_bool(0.3) {
         numbers.reverse();
     }
@@ -88,7 +95,7 @@ fn fields<R: RngCore>(
                 false,
             )
         };
-        let in_oneof = version == 4 && rng.random_bool(0.15);
+        let in_oneof = oneof_range.contains(&number);
         let label = if in_oneof {
             ""
         } else {
