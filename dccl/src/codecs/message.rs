@@ -121,10 +121,10 @@ impl MessageCodec {
                 descriptor.full_name()
             )));
         }
-        if codec_version == 3 && descriptor.oneofs().next().is_some() {
-            return Err(CodecError::new(
-                "DCCL codec version 3 does not support 'oneof' declarations",
-            ));
+        if codec_version < 4 && descriptor.oneofs().next().is_some() {
+            return Err(CodecError::new(format!(
+                "DCCL codec version {codec_version} does not support 'oneof' declarations"
+            )));
         }
         let presence = match codec_version {
             v if v > 3 => spec.is_optional() && !spec.use_required,
