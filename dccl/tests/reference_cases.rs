@@ -245,6 +245,7 @@ fn every_reference_case_is_tested() {
         "analyze-oneof-sizes",
         "v2-embedded-message-in-head-hash",
         "oneof-in-v2-message-refused",
+        "v3-message-codec-in-v2-message",
     ];
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference-cases");
     for entry in std::fs::read_dir(dir).expect("reference-cases") {
@@ -386,6 +387,18 @@ fn v2_embedded_message_in_head_hash() {
 #[test]
 fn oneof_in_v2_message_refused() {
     let case = Case::open("oneof-in-v2-message-refused");
+    case.check_hashes();
+    case.check_analyze();
+    case.check_encoding();
+    case.check_decoding();
+    case.check_size();
+}
+
+// The repeated framing of a field follows the root message's codec_version,
+// also for an embedded message coded with a codec of another version.
+#[test]
+fn v3_message_codec_in_v2_message() {
+    let case = Case::open("v3-message-codec-in-v2-message");
     case.check_hashes();
     case.check_analyze();
     case.check_encoding();
