@@ -68,7 +68,11 @@ pub struct OneofEntry {
 #[derive(Debug)]
 pub struct MessageCodec {
     name: String,
+    /// Version of this codec as named (`dccl.default2/3/4`): presence bits,
+    /// oneofs, empty messages.
     version: i32,
+    /// `codec_version` of the root message: framing of repeated fields.
+    root_version: i32,
     descriptor: MessageDescriptor,
     fields: Vec<FieldEntry>,
     /// The fields entering the definition hash with their codec's hash:
@@ -196,6 +200,7 @@ impl MessageCodec {
         let mut codec = MessageCodec {
             name: name.to_string(),
             version: codec_version,
+            root_version: spec.codec_version,
             descriptor,
             fields,
             hash_fields,
@@ -420,7 +425,7 @@ impl FieldCodec for MessageCodec {
         &self.name
     }
     fn codec_version(&self) -> i32 {
-        self.version
+        self.root_version
     }
     fn min_size(&self) -> u32 {
         self.min_bits
