@@ -246,6 +246,7 @@ fn every_reference_case_is_tested() {
         "v2-embedded-message-in-head-hash",
         "oneof-in-v2-message-refused",
         "v3-message-codec-in-v2-message",
+        "oneof-inside-head-message",
     ];
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference-cases");
     for entry in std::fs::read_dir(dir).expect("reference-cases") {
@@ -404,4 +405,15 @@ fn v3_message_codec_in_v2_message() {
     case.check_encoding();
     case.check_decoding();
     case.check_size();
+}
+
+// libdccl accepts a oneof inside an embedded message placed in the head, but
+// its decoding does not give back what it encoded (see expected-decoded.txt);
+// here such a message is refused at load (its head size is not fixed).
+#[test]
+#[ignore = "known difference: a oneof inside an in_head embedded message: libdccl loads it and codes it without the oneof case (and does not decode its own bytes to the values given); here it is refused at load"]
+fn oneof_inside_head_message() {
+    let case = Case::open("oneof-inside-head-message");
+    case.check_hashes();
+    case.check_encoding();
 }
