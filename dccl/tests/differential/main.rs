@@ -3,8 +3,10 @@
 //! Random instances of every message of a set of `.proto` files are encoded
 //! and decoded by this crate and by libdccl, and everything observable is
 //! compared: whether a type loads, its definition hash, minimum and maximum
-//! size; for each instance whether it encodes, the bytes (without and with a
-//! passphrase), `size()`, and the decoded message (one-line text form).
+//! size and size report (`analyze`); for each instance whether it encodes, the
+//! bytes (without and with a passphrase, and in strict mode), `size()`, the
+//! decoded message (one-line text form), and how a damaged copy of the bytes
+//! (cut, one bit flipped, one byte added) decodes.
 //!
 //! # Pointing it at a libdccl build
 //!
@@ -18,18 +20,24 @@
 //!   `hash_as_string`, sizes from `Codec::min_size` / `max_size`) or `err REASON`;
 //! - `M NAME` selects the type for `E`: `ok`;
 //! - `E TEXT` parses one text-format message (partial messages allowed) and
-//!   encodes it: `ok HEX SIZE DECODED HEX_WITH_PASSPHRASE DECODED_WITH_PASSPHRASE`
-//!   (`DECODED` is `ShortDebugString()` of the decoded message, a value starting
-//!   with `!` is an error), `err REASON` when encoding fails, `perr REASON` when the
-//!   text does not parse;
-//! - `D HEX` decodes bytes (no passphrase): `ok TYPE DECODED BYTES_USED` or `err REASON`.
+//!   encodes it: `ok HEX SIZE DECODED HEX_WITH_PASSPHRASE DECODED_WITH_PASSPHRASE
+//!   HEX_STRICT` (`DECODED` is `ShortDebugString()` of the decoded message; a
+//!   value starting with `!` is that codec's error), `err REASON` when encoding
+//!   fails, `perr REASON` when the text does not parse;
+//! - `D HEX` decodes bytes (no passphrase): `ok TYPE DECODED BYTES_USED` or `err REASON`;
+//! - `A NAME` gives the size report (`Codec::info`): `ok TEXT` with each line
+//!   break written as the byte 0x1f.
 //!
 //! To build one: build libdccl 4.2 from its source (tag `4.2.0`) with
 //! cryptography enabled (Crypto++), then compile a C++ program doing the
 //! above with `dccl::DynamicProtobufManager` (`enable_compilation`,
-//! `add_include_path`, `load_from_proto_file`), two `dccl::Codec`s (one with
-//! `set_crypto_passphrase`), `google::protobuf::TextFormat::Parser` with
-//! `AllowPartialMessage(true)` and `Message::ShortDebugString()`.
+//! `add_include_path`, `load_from_proto_file`), three `dccl::Codec`s (plain,
+//! with `set_crypto_passphrase`, with `set_strict(true)`),
+//! `google::protobuf::TextFormat::Parser` with `AllowPartialMessage(true)` and
+//! `Message::ShortDebugString()`. libdccl 4.2 sometimes throws a bare
+//! `const google::protobuf::Descriptor*` when refusing a definition: catch it
+//! (and anything else) and answer `err`. Files are passed to `-f` by their
+//! name relative to the first `-I` directory holding them, as imports name them.
 //!
 //! # Running
 //!
