@@ -179,17 +179,14 @@ impl MessageCodec {
             if v2_expanded {
                 // libdccl's version 2 message codec expands an embedded
                 // message with the default codec in both parts, repeated or
-                // not, and with `in_head` set (then none of its fields is
-                // in this part: its codec hash is 0).
+                // not (the elements of a repeated one then get their fields
+                // of each part in that part), and with `in_head` set (then
+                // none of its fields is in this part: its codec hash is 0).
                 if entry.codec.name() != "dccl.default2" {
                     continue;
                 }
                 if options.in_head.is_some() {
                     hash_fields.push((field.clone(), 0));
-                    continue;
-                }
-                if entry.repeat.is_some() {
-                    hash_fields.push((field.clone(), entry.codec.definition_hash()));
                     continue;
                 }
             }
@@ -396,12 +393,18 @@ impl MessageCodec {
             let result = if let Some(bounds) = f.repeat {
                 f.codec
                     .decode_repeated(input, bounds, ctx)
-                    .and_then(|values| {
+                    .and_then(|mut values| {
                         if values.is_empty() {
-                            Ok(())
-                        } else {
-                            set(msg, &f.field, Value::List(values))
+                            return Ok(());
                         }
+                        // Version 2 reads a repeated embedded message in both
+                        // parts: the body's elements follow the head's.
+                        if let Value::List(head) = msg.get_field(&f.field).as_ref() {
+                            let mut all = head.clone();
+                            all.append(&mut values);
+                            values = all;
+                        }
+                        set(msg, &f.field, Value::List(values))
                     })
             } else {
                 if let Some((i, j)) = f.oneof {
