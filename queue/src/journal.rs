@@ -283,16 +283,21 @@ impl Journal {
             }
             let mut at = MAGIC.len();
             let mut end = at;
+            // Bytes skipped since the last good record: discarded once a
+            // good record follows them, else part of the tail.
+            let mut skipped = 0;
             while at < bytes.len() {
                 match read_payload(&bytes, at, true) {
                     Some((record, next)) => {
                         apply(record);
+                        discarded_bytes += skipped;
+                        skipped = 0;
                         at = next;
                         end = next;
                     }
                     None => match find_sync(&bytes, at + 1) {
                         Some(next) => {
-                            discarded_bytes += (next - at) as u64;
+                            skipped += (next - at) as u64;
                             at = next;
                         }
                         None => break,
@@ -1075,6 +1080,22 @@ mod tests {
         assert!(std::fs::read(dir.file()).unwrap().starts_with(MAGIC));
         let (_, replay) = Journal::open(dir.file()).unwrap();
         assert_eq!(replay.entries.len(), 3);
+    }
+
+    #[test]
+    fn skipped_bytes_before_a_torn_tail_are_counted_once() {
+        // Found by the journal_replay fuzz target: garbage, then a sync word
+        // with nothing after it.
+        let mut bytes = MAGIC.to_vec();
+        bytes.extend_from_slice(&[0x14, 0x03, 0xA7, 0x47, 0x4A, 0x52]);
+        assert_eq!(replay_bytes(&bytes).unwrap().discarded_bytes, 6);
+        // And skipped bytes between good records count as well.
+        let (good, records) = small_journal();
+        let mut bytes = good[..records[1].0.start].to_vec();
+        bytes.extend_from_slice(&[1, 2, 3]);
+        bytes.extend_from_slice(&good[records[1].0.start..]);
+        bytes.extend_from_slice(&[0xA7, 0x47]);
+        assert_eq!(replay_bytes(&bytes).unwrap().discarded_bytes, 5);
     }
 
     #[test]
