@@ -1,6 +1,6 @@
 //! The field codec interface: every codec, built in or supplied by a user,
 //! implements [`FieldCodec`] and is created by a [`FieldCodecFactory`]
-//! registered by name in a [`CodecRegistry`](crate::CodecRegistry).
+//! registered by name in a [`CodecRegistry`].
 //!
 //! A user codec, registered by name and selected with `(dccl.field).codec`:
 //!
