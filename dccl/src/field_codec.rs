@@ -113,6 +113,17 @@ impl EncodeContext<'_> {
         Ok(())
     }
 
+    /// Records, when changes are being collected, a change libdccl makes
+    /// even in strict mode (never an error): e.g. a value outside an
+    /// arithmetic model's bounds, a value that differs from a field's
+    /// `static_value`.
+    #[inline]
+    pub fn note_change(&self, what: impl FnOnce() -> String, action: &str) {
+        if let Some(log) = self.changes {
+            log.record(format!("{}: {action}", what()));
+        }
+    }
+
     /// Marks the change log before a field (or element) is encoded; pass the
     /// mark to [`EncodeContext::name_changes`] after it.
     #[inline]
