@@ -1,8 +1,8 @@
-//! The `goby` shell tool and the `gobyd` daemon.
+//! The `goby` shell tool.
 //!
-//! The binaries are thin wrappers around [`goby_main`] and [`gobyd_main`];
-//! everything they do lives in this library so that it can be tested and
-//! reused.
+//! The binary is a thin wrapper around [`goby_main`]; everything it does
+//! lives in this library so that it can be tested and reused. The daemon,
+//! `gobyd`, is its own crate (`gobyd/`).
 //!
 //! `goby dccl ...` works with DCCL messages defined in `.proto` files:
 //!
@@ -13,7 +13,9 @@
 //!   decoded, its type found by its DCCL id;
 //! - `goby dccl analyze -f FILE.proto -m NAME` prints the size of each field;
 //! - `goby dccl bench -f FILE.proto -m NAME --repeat N` times encoding and
-//!   decoding in-process.
+//!   decoding in-process;
+//! - `goby dccl -e|-d|-a|-p -f FILE.proto ...` takes the reference `dccl`
+//!   tool's flags and prints its output forms ([`dccl_tool`]).
 //!
 //! `goby queue simulate` scores the dynamic priority queue against two
 //! fixed-priority queues in the thesis' data marketplace and writes a table,
@@ -22,10 +24,6 @@
 //! `goby amac simulate` runs the Monte Carlo of the auto-discovery TDMA
 //! schemes (thesis Figs. 2.11, 2.12) and `goby modem emulate` runs emulated
 //! WHOI Micro-Modems on pseudo-terminals for bench tests without hardware.
-//!
-//! `gobyd` ([`daemon`]) composes DCCL, the queue, medium access and a modem
-//! driver from one configuration file and serves the autonomy software over
-//! JSON (TCP, UDP) and MOOS.
 //!
 //! `goby position synth` writes a synthetic AUV trajectory and `goby position
 //! eval` codes a trajectory with every state observer and probability model
@@ -41,12 +39,16 @@
 #![warn(missing_docs)]
 
 pub mod amac_cmd;
-pub mod daemon;
+mod byte_text;
 pub mod dccl_cmd;
+pub mod dccl_tool;
+mod frame_decoder;
 mod lines;
 pub mod modem_cmd;
+pub mod passphrase;
 pub mod plot;
 pub mod position_cmd;
+mod proto_display;
 pub mod queue_cmd;
 
 use std::ffi::OsString;
@@ -81,9 +83,9 @@ pub struct GobyCli {
 /// Subcommands of `goby`.
 #[derive(Debug, Subcommand)]
 pub enum GobyCommand {
-    /// Encode, decode, analyze and benchmark DCCL messages.
-    #[command(subcommand)]
-    Dccl(dccl_cmd::DcclCommand),
+    /// Encode, decode, analyze and benchmark DCCL messages (subcommands, or
+    /// the reference `dccl` tool's flags: -e, -d, -a, -p).
+    Dccl(dccl_cmd::DcclCli),
     /// Run the medium access control's simulations.
     #[command(subcommand)]
     Amac(amac_cmd::AmacCommand),
@@ -96,39 +98,6 @@ pub enum GobyCommand {
     /// Modem drivers: emulate WHOI Micro-Modems for bench tests.
     #[command(subcommand)]
     Modem(modem_cmd::ModemCommand),
-}
-
-/// Command line of `gobyd`.
-#[derive(Debug, Parser)]
-#[command(
-    name = "gobyd",
-    version,
-    about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.",
-    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.",
-    color = ColorChoice::Auto
-)]
-pub struct GobydCli {
-    /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
-    #[arg(short, long, value_name = "FILE")]
-    pub config: Option<std::path::PathBuf>,
-    /// Print a commented working configuration and exit.
-    #[arg(long)]
-    pub example_config: bool,
-    /// Check the configuration (and the .proto files it names) and exit.
-    #[arg(long)]
-    pub check: bool,
-    /// Override the configuration's modem_id.
-    #[arg(long, value_name = "ID")]
-    pub modem_id: Option<i32>,
-    /// Override the configuration's data_dir (journal and raw log).
-    #[arg(long, value_name = "DIR")]
-    pub data_dir: Option<std::path::PathBuf>,
-    /// Override the JSON interface's TCP address (empty: none).
-    #[arg(long, value_name = "ADDR")]
-    pub json_tcp: Option<String>,
-    /// Log lines as JSON objects.
-    #[arg(long)]
-    pub log_json: bool,
 }
 
 /// A failure that ends a command.
@@ -230,8 +199,8 @@ pub fn run_goby(
 
 /// Parses the command line; on `--help`, `--version` or a usage error,
 /// prints what clap has to say and returns the exit status to use.
-fn parse_or_exit<P: Parser>(args: impl IntoIterator<Item = OsString>) -> Result<P, ExitCode> {
-    P::try_parse_from(args).map_err(|e| {
+fn parse_or_exit(args: impl IntoIterator<Item = OsString>) -> Result<GobyCli, ExitCode> {
+    GobyCli::try_parse_from(args).map_err(|e| {
         let _ = e.print();
         let code = u8::try_from(e.exit_code()).unwrap_or(EXIT_SETUP);
         ExitCode::from(code)
@@ -241,7 +210,7 @@ fn parse_or_exit<P: Parser>(args: impl IntoIterator<Item = OsString>) -> Result<
 /// Entry point of the `goby` binary: parses the process arguments and runs
 /// the command on the process's standard streams.
 pub fn goby_main() -> ExitCode {
-    let cli = match parse_or_exit::<GobyCli>(std::env::args_os()) {
+    let cli = match parse_or_exit(std::env::args_os()) {
         Ok(cli) => cli,
         Err(code) => return code,
     };
@@ -250,13 +219,4 @@ pub fn goby_main() -> ExitCode {
     let mut stdout = io::BufWriter::new(io::stdout().lock());
     let mut stderr = io::stderr().lock();
     ExitCode::from(run_goby(cli, &mut stdin, &mut stdout, &mut stderr))
-}
-
-/// Entry point of the `gobyd` binary.
-pub fn gobyd_main() -> ExitCode {
-    let cli = match parse_or_exit::<GobydCli>(std::env::args_os()) {
-        Ok(cli) => cli,
-        Err(code) => return code,
-    };
-    ExitCode::from(daemon::run_cli(cli))
 }

@@ -1,4 +1,4 @@
-//! Behaviour of the `goby` and `gobyd` binaries: formats, error reports,
+//! Behaviour of the `goby` binary: formats, error reports,
 //! exit statuses, `analyze`, `bench` and the example message.
 
 mod common;
@@ -48,84 +48,6 @@ fn versions() {
         stdout_text(&out).trim(),
         format!("goby {}", env!("CARGO_PKG_VERSION"))
     );
-
-    let out = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
-        .arg("--version")
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .expect("gobyd runs");
-    assert!(out.status.success());
-    assert_eq!(
-        stdout_text(&out).trim(),
-        format!("gobyd {}", env!("CARGO_PKG_VERSION"))
-    );
-}
-
-fn gobyd(args: &[&str]) -> std::process::Output {
-    assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
-        .args(args)
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .expect("gobyd runs")
-}
-
-#[test]
-fn gobyd_example_and_shipped_configurations_check_out() {
-    let out = gobyd(&["--example-config"]);
-    assert!(out.status.success());
-    let example = stdout_text(&out);
-    assert!(example.contains("modem_id: 1"), "{example}");
-    let dir = scratch("gobyd-config");
-    let path = dir.join("example.pb.txt");
-    std::fs::write(&path, &example).unwrap();
-    let mut configs = vec![path.to_str().unwrap().to_string()];
-    for v in ["vehicle1", "vehicle2"] {
-        let p = workspace_dir()
-            .join("cli/config")
-            .join(format!("{v}.pb.txt"));
-        configs.push(p.to_str().unwrap().to_string());
-    }
-    for config in &configs {
-        let out = gobyd(&["--check", "--config", config]);
-        assert!(out.status.success(), "{config}: {}", stderr_text(&out));
-        assert_eq!(
-            stdout_text(&out).trim(),
-            "configuration is valid; DCCL types: goby.example.Command, goby.example.NavigationReport"
-        );
-    }
-    std::fs::remove_dir_all(&dir).unwrap();
-}
-
-#[test]
-fn gobyd_refuses_bad_configurations_with_their_place() {
-    let dir = scratch("gobyd-bad");
-    for (text, expected) in [
-        ("modem_id: \"one\"", "bad.pb.txt:"),
-        ("no_such_setting: 1", "no_such_setting"),
-        ("modem_id: 0", "modem_id 0 is not valid"),
-        (
-            "queue { message_entry { protobuf_name: \"goby.example.Nope\" } }",
-            "goby.example.Nope",
-        ),
-        (
-            "mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 slot_seconds: -1 } }",
-            "mac:",
-        ),
-    ] {
-        let path = dir.join("bad.pb.txt");
-        std::fs::write(&path, text).unwrap();
-        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
-        assert_eq!(out.status.code(), Some(2), "{text}");
-        let err = stderr_text(&out);
-        assert!(
-            err.starts_with("gobyd: error: ") && err.contains(expected),
-            "{text}: {err}"
-        );
-    }
-    let out = gobyd(&["--config", "/no/such/file.pb.txt"]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(stderr_text(&out).contains("cannot read /no/such/file.pb.txt"));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -692,4 +614,44 @@ fn relative_proto_path_from_another_directory() {
     );
     assert!(out.status.success(), "{}", stderr_text(&out));
     assert_eq!(lines(&stdout_text(&out)), vec![&*vs[0].hex, &*vs[1].hex]);
+}
+
+#[test]
+fn encode_warns_about_each_value_it_changes() {
+    let proto = vectors_proto();
+    let input = "depth: 7000 lat: 0 ok: true req_mode: IDLE name: \"abcdefghijk\" heading: nan\n\
+                 depth: 7 lat: 0 ok: true req_mode: IDLE\n";
+    for args in [
+        &["dccl", "encode", "-f", &proto, "-m", "vec.Basic"][..],
+        &[
+            "dccl",
+            "-e",
+            "--format",
+            "hex",
+            "-f",
+            &proto,
+            "-m",
+            "vec.Basic",
+        ][..],
+    ] {
+        let out = goby(args, input);
+        assert!(out.status.success(), "{args:?}: {}", stderr_text(&out));
+        assert_eq!(lines(&stdout_text(&out)).len(), 2, "both lines are encoded");
+        let err = stderr_text(&out);
+        let warnings: Vec<&str> = err.lines().collect();
+        assert_eq!(warnings.len(), 3, "{err}");
+        for (warning, field) in warnings.iter().zip(["depth", "heading", "name"]) {
+            assert!(
+                warning.starts_with(&format!("line 1: warning: vec.Basic.{field}: ")),
+                "{err}"
+            );
+        }
+        assert!(warnings[0].contains("6000"), "the bound is given: {err}");
+    }
+    // Values within their bounds: no warning.
+    let out = goby(
+        &["dccl", "encode", "-f", &proto, "-m", "vec.Basic"],
+        "depth: 7 lat: 0 ok: true req_mode: IDLE\n",
+    );
+    assert!(out.status.success() && out.stderr.is_empty());
 }

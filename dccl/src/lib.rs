@@ -85,7 +85,7 @@ pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
-pub use loader::{compile_protos, compile_sources};
+pub use loader::{compile_protos, compile_sources, pool_file_name};
 pub use registry::CodecRegistry;
 
 pub use prost_reflect;

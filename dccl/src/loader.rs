@@ -119,6 +119,37 @@ pub fn compile_protos(
     })
 }
 
+/// Name given by the compiler to `file`: its path relative to the first
+/// include directory that holds it (the `-I` directories, then its own), or
+/// failing that the longest file name of the pool that ends `file`'s path.
+/// `None` when the pool holds no such file.
+pub fn pool_file_name(pool: &DescriptorPool, file: &Path, include: &[PathBuf]) -> Option<String> {
+    let path = std::fs::canonicalize(file).ok()?;
+    let mut dirs: Vec<PathBuf> = include
+        .iter()
+        .filter_map(|d| std::fs::canonicalize(d).ok())
+        .collect();
+    if let Some(parent) = path.parent() {
+        dirs.push(parent.to_path_buf());
+    }
+    for dir in &dirs {
+        if let Ok(rel) = path.strip_prefix(dir) {
+            let name = rel
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join("/");
+            if pool.get_file_by_name(&name).is_some() {
+                return Some(name);
+            }
+        }
+    }
+    pool.files()
+        .filter(|f| path.ends_with(f.name()))
+        .max_by_key(|f| f.name().len())
+        .map(|f| f.name().to_string())
+}
+
 /// Compiles `.proto` sources held in memory: `(file name, source text)` pairs,
 /// which may import each other by those names.
 pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {

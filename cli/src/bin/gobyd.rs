@@ -1,5 +1,0 @@
-//! `gobyd`: the goby daemon.
-
-fn main() -> std::process::ExitCode {
-    goby_cli::gobyd_main()
-}

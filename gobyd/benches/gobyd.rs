@@ -1,0 +1,191 @@
+//! gobyd figures: messages per second accepted on the JSON interface, the
+//! latency from a client's line to the frame handed to the driver, and the
+//! daemon's resident memory at idle.
+//!
+//! `cargo bench -p gobyd --bench gobyd` prints one JSON object. The
+//! journal lives under `target/` (the disk the project is built on): every
+//! accepted message is synced to it before the client hears "accepted".
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use gobyd::{config, runtime::Daemon};
+use modemdriver::{Driver, DriverCommand};
+use protos::goby::acomms::protobuf::ModemTransmission;
+use tokio::sync::{mpsc, oneshot};
+
+const ACCEPT_COUNT: usize = 2000;
+const LATENCY_COUNT: usize = 300;
+
+/// A driver that, told to transmit, asks for data again and again until it
+/// gets a frame with something in it (as if a slot started the moment the
+/// client's line was written), and reports when that frame came back.
+fn bench_driver(frames: mpsc::UnboundedSender<(Instant, Vec<Vec<u8>>)>) -> Driver {
+    Driver::spawn("bench", move |mut ctx| async move {
+        while let Some(command) = ctx.commands.recv().await {
+            match command {
+                DriverCommand::Initiate(template) => loop {
+                    let filled = ctx
+                        .events
+                        .request_data(template.clone(), Duration::from_secs(1))
+                        .await;
+                    if filled.frame.iter().any(|f| !f.is_empty()) {
+                        let _ = frames.send((Instant::now(), filled.frame));
+                        break;
+                    }
+                    tokio::task::yield_now().await;
+                },
+                DriverCommand::Stop(done) => {
+                    let _ = done.send(());
+                    break;
+                }
+                DriverCommand::Specific(_) => {}
+            }
+        }
+    })
+}
+
+fn percentile(sorted: &[Duration], p: f64) -> f64 {
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[i].as_secs_f64() * 1e6
+}
+
+fn publish_line(i: usize) -> String {
+    format!(
+        "{{\"publish\": \"goby.example.NavigationReport\", \"msg\": {{\"source\": 1, \"destination\": 0, \"time\": 1800000000, \"x\": {i}, \"y\": -3.5, \"z\": -10}}}}\n"
+    )
+}
+
+fn resident_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status
+        .lines()
+        .find(|l| l.starts_with("VmRSS:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
+fn idle_memory(data_dir: &std::path::Path) -> Option<u64> {
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .args(["--json-tcp", "127.0.0.1:0", "--data-dir"])
+        .arg(data_dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .ok()?;
+    std::thread::sleep(Duration::from_secs(3));
+    let rss = resident_kib(child.id());
+    let _ = child.kill();
+    let _ = child.wait();
+    rss
+}
+
+fn main() {
+    let data_root = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../target/gobyd-bench")
+        .join(std::process::id().to_string());
+    let _ = std::fs::remove_dir_all(&data_root);
+    std::fs::create_dir_all(&data_root).unwrap();
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (frames_tx, mut frames_rx) = mpsc::unbounded_channel();
+    let text = format!(
+        "modem_id: 1\nmac {{ type: MAC_NONE }}\njson {{ tcp_bind: \"127.0.0.1:0\" }}\n\
+         queue {{ message_entry {{ protobuf_name: \"goby.example.NavigationReport\" ack: false max_queue: 100000 }} }}\n\
+         data_dir: \"{}\"\nlog {{ raw_log: false }}\n",
+        data_root.join("daemon").display()
+    );
+    let (addr, handle, stop, running) = runtime.block_on(async {
+        let driver = bench_driver(frames_tx);
+        let handle = driver.handle();
+        let daemon = Daemon::start_with_driver(config::parse(&text, "bench").unwrap(), driver)
+            .await
+            .expect("gobyd starts");
+        let addr = daemon.json_tcp_addr().expect("JSON interface");
+        let (stop, stopped) = oneshot::channel::<()>();
+        let running = tokio::spawn(daemon.run(async {
+            let _ = stopped.await;
+        }));
+        (addr, handle, stop, running)
+    });
+
+    let stream = TcpStream::connect(addr).unwrap();
+    stream.set_nodelay(true).unwrap();
+    let mut writer = stream.try_clone().unwrap();
+    let mut reader = BufReader::new(stream);
+    let mut line = String::new();
+
+    // Throughput: every line written at once, then every reply read.
+    let lines: String = (0..ACCEPT_COUNT).map(publish_line).collect();
+    let start = Instant::now();
+    writer.write_all(lines.as_bytes()).unwrap();
+    for _ in 0..ACCEPT_COUNT {
+        line.clear();
+        reader.read_line(&mut line).unwrap();
+        assert!(line.contains("\"accepted\""), "{line}");
+    }
+    let accept_rate = ACCEPT_COUNT as f64 / start.elapsed().as_secs_f64();
+
+    // Empty the queue: one transmission of many frames.
+    handle
+        .initiate_transmission(ModemTransmission {
+            max_frame_bytes: Some(1 << 20),
+            max_num_frames: Some(1),
+            ..Default::default()
+        })
+        .unwrap();
+    runtime.block_on(frames_rx.recv()).unwrap();
+
+    // Latency: the driver is asking for data when the line is written; the
+    // frame holding the message comes back, then the "accepted" reply
+    // (after the journal sync).
+    let mut accept_latency = Vec::with_capacity(LATENCY_COUNT);
+    let mut frame_latency = Vec::with_capacity(LATENCY_COUNT);
+    for i in 0..LATENCY_COUNT {
+        handle
+            .initiate_transmission(ModemTransmission {
+                max_frame_bytes: Some(32),
+                max_num_frames: Some(1),
+                ..Default::default()
+            })
+            .unwrap();
+        let sent = Instant::now();
+        writer.write_all(publish_line(i).as_bytes()).unwrap();
+        let (at, frames) = runtime.block_on(frames_rx.recv()).unwrap();
+        assert!(frames.first().is_some_and(|f| !f.is_empty()), "no frame");
+        frame_latency.push(at - sent);
+        line.clear();
+        reader.read_line(&mut line).unwrap();
+        assert!(line.contains("\"accepted\""), "{line}");
+        accept_latency.push(sent.elapsed());
+    }
+    accept_latency.sort();
+    frame_latency.sort();
+
+    let _ = stop.send(());
+    runtime.block_on(running).unwrap().unwrap();
+    let rss = idle_memory(&data_root.join("idle"));
+    let _ = std::fs::remove_dir_all(&data_root);
+
+    let report = serde_json::json!({
+        "accepted_per_second": accept_rate.round(),
+        "accept_latency_us": {
+            "p50": percentile(&accept_latency, 0.5).round(),
+            "p99": percentile(&accept_latency, 0.99).round(),
+        },
+        "line_to_frame_us": {
+            "p50": percentile(&frame_latency, 0.5).round(),
+            "p99": percentile(&frame_latency, 0.99).round(),
+        },
+        "idle_rss_mib": rss.map(|kib| (kib as f64 / 1024.0 * 10.0).round() / 10.0),
+    });
+    println!("{report}");
+}

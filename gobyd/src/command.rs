@@ -1,0 +1,209 @@
+//! The `gobyd` command line: options, logging, signals and exit statuses
+//! around [`Daemon`](crate::runtime::Daemon).
+//!
+//! Exit status: [`EXIT_OK`] after a clean stop (SIGINT, SIGTERM) or a
+//! successful `--check`, [`EXIT_SETUP`] when the configuration or the
+//! start-up fails (the reason is written on standard error as
+//! `gobyd: error: ...`).
+
+use std::ffi::OsString;
+use std::io::{IsTerminal, Write};
+use std::process::ExitCode;
+
+use clap::{ColorChoice, Parser};
+
+use protos::goby::apps::protobuf::{gobyd_config::JsonInterface, GobydConfig};
+
+use crate::{config, runtime};
+
+/// Exit status after a clean stop or a successful check.
+pub const EXIT_OK: u8 = 0;
+/// Exit status for usage errors, a bad configuration and a failed start.
+pub const EXIT_SETUP: u8 = 2;
+
+/// Command line of `gobyd`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "gobyd",
+    version,
+    about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.",
+    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.",
+    color = ColorChoice::Auto
+)]
+pub struct GobydCli {
+    /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
+    #[arg(short, long, value_name = "FILE")]
+    pub config: Option<std::path::PathBuf>,
+    /// Print a commented working configuration and exit.
+    #[arg(long)]
+    pub example_config: bool,
+    /// Check the configuration (and the .proto files it names) and exit.
+    #[arg(long)]
+    pub check: bool,
+    /// Override the configuration's modem_id.
+    #[arg(long, value_name = "ID")]
+    pub modem_id: Option<i32>,
+    /// Override the configuration's data_dir (journal and raw log).
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<std::path::PathBuf>,
+    /// Override the JSON interface's TCP address (empty: none).
+    #[arg(long, value_name = "ADDR")]
+    pub json_tcp: Option<String>,
+    /// Log lines as JSON objects.
+    #[arg(long)]
+    pub log_json: bool,
+}
+
+/// The configuration named by the command line, with its overrides applied.
+fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
+    let mut config = match &cli.config {
+        Some(path) => config::load(path)?,
+        None => GobydConfig::default(),
+    };
+    if let Some(id) = cli.modem_id {
+        config.modem_id = Some(id);
+        for id_field in [
+            config.driver.as_mut().map(|d| &mut d.modem_id),
+            config.mac.as_mut().map(|m| &mut m.modem_id),
+            config.queue.as_mut().map(|q| &mut q.modem_id),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            *id_field = Some(id);
+        }
+    }
+    if let Some(dir) = &cli.data_dir {
+        config.data_dir = Some(dir.display().to_string());
+    }
+    if let Some(addr) = &cli.json_tcp {
+        config
+            .json
+            .get_or_insert_with(JsonInterface::default)
+            .tcp_bind = Some(addr.clone());
+    }
+    if cli.log_json {
+        config.log.get_or_insert_with(Default::default).json = Some(true);
+    }
+    Ok(config)
+}
+
+/// Sets up logging to standard error: human-readable, or JSON objects.
+fn init_logging(config: &GobydConfig) {
+    let log = config.log.clone().unwrap_or_default();
+    let filter = tracing_subscriber::EnvFilter::try_new(log.level())
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal());
+    let _ = if log.json() {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+/// Completes on SIGINT or SIGTERM.
+async fn shutdown_signal() {
+    let interrupt = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut terminate) => {
+                tokio::select! {
+                    _ = interrupt => {}
+                    _ = terminate.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = interrupt.await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = interrupt.await;
+    }
+    tracing::info!("signal received: shutting down");
+}
+
+/// Runs `gobyd` with a parsed command line; returns the exit status.
+pub fn run_cli(cli: GobydCli) -> u8 {
+    if cli.example_config {
+        let mut out = std::io::stdout().lock();
+        return match out.write_all(config::EXAMPLE_CONFIG.as_bytes()) {
+            Ok(()) => EXIT_OK,
+            Err(_) => EXIT_SETUP,
+        };
+    }
+    let config = match configuration(&cli) {
+        Ok(config) => config,
+        Err(e) => {
+            eprintln!("gobyd: error: {e}");
+            return EXIT_SETUP;
+        }
+    };
+    if cli.check {
+        return match runtime::check(config) {
+            Ok(types) => {
+                println!("configuration is valid; DCCL types: {}", types.join(", "));
+                EXIT_OK
+            }
+            Err(e) => {
+                eprintln!("gobyd: error: {e}");
+                EXIT_SETUP
+            }
+        };
+    }
+    init_logging(&config);
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("gobyd: error: cannot start the runtime: {e}");
+            return EXIT_SETUP;
+        }
+    };
+    runtime.block_on(async {
+        let daemon = match runtime::Daemon::start(config).await {
+            Ok(d) => d,
+            Err(e) => {
+                eprintln!("gobyd: error: {e}");
+                return EXIT_SETUP;
+            }
+        };
+        if let Some(addr) = daemon.json_tcp_addr() {
+            tracing::info!("JSON interface on tcp://{addr}");
+        }
+        match daemon.run(shutdown_signal()).await {
+            Ok(()) => EXIT_OK,
+            Err(e) => {
+                eprintln!("gobyd: error: {e}");
+                EXIT_SETUP
+            }
+        }
+    })
+}
+
+/// Parses the command line; on `--help`, `--version` or a usage error,
+/// prints what clap has to say and returns the exit status to use.
+fn parse_or_exit(args: impl IntoIterator<Item = OsString>) -> Result<GobydCli, ExitCode> {
+    GobydCli::try_parse_from(args).map_err(|e| {
+        let _ = e.print();
+        let code = u8::try_from(e.exit_code()).unwrap_or(EXIT_SETUP);
+        ExitCode::from(code)
+    })
+}
+
+/// Entry point of the `gobyd` binary: parses the process arguments and runs.
+pub fn main() -> ExitCode {
+    match parse_or_exit(std::env::args_os()) {
+        Ok(cli) => ExitCode::from(run_cli(cli)),
+        Err(code) => code,
+    }
+}

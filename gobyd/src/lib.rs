@@ -1,0 +1,33 @@
+//! `gobyd`, the daemon between a modem and an autonomy process, as a
+//! library: it composes DCCL, the queue, medium access and a modem driver
+//! from one configuration and connects them to the vehicle's autonomy
+//! software over JSON (TCP, UDP) and MOOS.
+//!
+//! The `gobyd` binary is a thin wrapper around [`command::main`]; a Rust
+//! program can run the whole stack in-process instead:
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
+//! let config = gobyd::config::load(std::path::Path::new("gobyd.pb.txt"))?;
+//! let daemon = gobyd::runtime::Daemon::start(config).await?;
+//! daemon.run(std::future::pending::<()>()).await?;
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! Modules: [`config`] loads and checks the configuration, [`runtime`]
+//! composes and runs the stack, [`outbox`] is the queue with its on-disk
+//! journal, [`json_protocol`] and [`json_server`] serve JSON clients,
+//! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
+//! and came from the modem, and [`command`] is the `gobyd` command line.
+
+#![warn(missing_docs)]
+
+pub mod command;
+pub mod config;
+pub mod json_protocol;
+pub mod json_server;
+pub mod moos_bridge;
+pub mod outbox;
+pub mod raw_log;
+pub mod runtime;

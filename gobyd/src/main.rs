@@ -1,0 +1,5 @@
+//! `gobyd`: the goby daemon.
+
+fn main() -> std::process::ExitCode {
+    gobyd::command::main()
+}

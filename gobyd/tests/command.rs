@@ -1,0 +1,137 @@
+//! The `gobyd` command line: version, the example and shipped
+//! configurations, and bad configurations refused with their place.
+
+use std::path::PathBuf;
+use std::process::Output;
+
+/// Root of the workspace.
+fn workspace_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+/// A scratch directory of this test process.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-cmd-test-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn stdout_text(out: &Output) -> String {
+    String::from_utf8(out.stdout.clone()).expect("stdout is UTF-8")
+}
+
+fn stderr_text(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn version() {
+    let out = gobyd(&["--version"]);
+    assert!(out.status.success());
+    assert_eq!(
+        stdout_text(&out).trim(),
+        format!("gobyd {}", env!("CARGO_PKG_VERSION"))
+    );
+}
+
+fn gobyd(args: &[&str]) -> std::process::Output {
+    assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .args(args)
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("gobyd runs")
+}
+
+#[test]
+fn gobyd_example_and_shipped_configurations_check_out() {
+    let out = gobyd(&["--example-config"]);
+    assert!(out.status.success());
+    let example = stdout_text(&out);
+    assert!(example.contains("modem_id: 1"), "{example}");
+    let dir = scratch("gobyd-config");
+    let path = dir.join("example.pb.txt");
+    std::fs::write(&path, &example).unwrap();
+    let mut configs = vec![path.to_str().unwrap().to_string()];
+    for v in ["vehicle1", "vehicle2"] {
+        let p = workspace_dir()
+            .join("gobyd/config")
+            .join(format!("{v}.pb.txt"));
+        configs.push(p.to_str().unwrap().to_string());
+    }
+    for config in &configs {
+        let out = gobyd(&["--check", "--config", config]);
+        assert!(out.status.success(), "{config}: {}", stderr_text(&out));
+        assert_eq!(
+            stdout_text(&out).trim(),
+            "configuration is valid; DCCL types: goby.example.Command, goby.example.NavigationReport"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn gobyd_refuses_bad_configurations_with_their_place() {
+    let dir = scratch("gobyd-bad");
+    for (text, expected) in [
+        ("modem_id: \"one\"", "bad.pb.txt:"),
+        ("no_such_setting: 1", "no_such_setting"),
+        ("modem_id: 0", "modem_id 0 is not valid"),
+        (
+            "queue { message_entry { protobuf_name: \"goby.example.Nope\" } }",
+            "goby.example.Nope",
+        ),
+        (
+            "mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 slot_seconds: -1 } }",
+            "mac:",
+        ),
+    ] {
+        let path = dir.join("bad.pb.txt");
+        std::fs::write(&path, text).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let err = stderr_text(&out);
+        assert!(
+            err.starts_with("gobyd: error: ") && err.contains(expected),
+            "{text}: {err}"
+        );
+    }
+    let out = gobyd(&["--config", "/no/such/file.pb.txt"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr_text(&out).contains("cannot read /no/such/file.pb.txt"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn check_refuses_options_nested_too_deep_without_crashing() {
+    let dir = scratch("gobyd-deep");
+    let depth = 100_000;
+    let mut text = String::from(
+        "syntax = \"proto2\";\nimport \"google/protobuf/descriptor.proto\";\n\
+         import \"dccl/option_extensions.proto\";\npackage deep;\n\
+         message R { optional R r = 1; }\n\
+         extend google.protobuf.MessageOptions { optional R rr = 50000; }\n\
+         message M {\n  option (dccl.msg) = { id: 2 max_bytes: 8 codec_version: 4 };\n  option (rr) = { ",
+    );
+    text.push_str(&"r { ".repeat(depth));
+    text.push_str(&"} ".repeat(depth));
+    text.push_str("};\n  optional int32 x = 1 [(dccl.field) = { min: 0 max: 10 }];\n}\n");
+    let proto = dir.join("deep.proto");
+    std::fs::write(&proto, text).unwrap();
+    let config = dir.join("deep.pb.txt");
+    std::fs::write(
+        &config,
+        format!(
+            "modem_id: 1\ndccl {{ proto_file: \"{}\" }}\n",
+            proto.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr_text(&out));
+    let err = stderr_text(&out);
+    assert!(
+        err.starts_with("gobyd: error: ") && err.contains("deep.proto"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

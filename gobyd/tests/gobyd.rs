@@ -1,0 +1,582 @@
+//! Two `gobyd` processes talking over UDP on loopback, a JSON client on
+//! each: messages published on one arrive decoded on the other, with acks;
+//! a sender killed with SIGKILL and restarted loses nothing it accepted.
+
+use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{TcpStream, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// Upper bound of any wait in these tests.
+const PATIENCE: Duration = Duration::from_secs(40);
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A free UDP port on loopback.
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// The driver section of node `id` of a two-node UDP network, one
+/// Command per frame.
+fn udp_driver(id: i32, ports: [u16; 2]) -> String {
+    let me = ports[(id - 1) as usize];
+    let other_id = 3 - id;
+    let other = ports[(other_id - 1) as usize];
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_UDP
+  udp {{
+    local {{ port: {me} }}
+    remote {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
+    max_frame_size: 10
+  }}
+}}"#
+    )
+}
+
+/// The driver section of node `id` on the acoustic channel simulator, the
+/// two nodes 150 m apart in two processes (packets between them over UDP).
+fn simulator_driver(id: i32, ports: [u16; 2]) -> String {
+    let me = ports[(id - 1) as usize];
+    let other_id = 3 - id;
+    let other = ports[(other_id - 1) as usize];
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{
+    node {{ modem_id: 1 x: 0 y: 0 z: 10 }}
+    node {{ modem_id: 2 x: 150 y: 0 z: 10 }}
+    packet_overhead_seconds: 0.05
+    channel: "node{id}"
+    udp_local {{ modem_id: {id} port: {me} }}
+    udp_peer {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
+  }}
+}}"#
+    )
+}
+
+/// Configuration of node `id`: TDMA slots of `slot` seconds at rate 6 (on
+/// the simulator: six 32-byte frames at 2400 bit/s, 0.64 s on the water),
+/// Command acked and addressed by its `destination` field.
+fn node_config(id: i32, driver: &str, slot: f64, data_dir: &Path) -> String {
+    format!(
+        r#"
+modem_id: {id}
+{driver}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: {slot} }}
+  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: {slot} }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 600
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "127.0.0.1:0" }}
+data_dir: "{dir}"
+log {{ level: "info" raw_log: true }}
+"#,
+        dir = data_dir.display()
+    )
+}
+
+/// Writes the configuration files of a two-node network.
+fn network(dir: &Path, driver: fn(i32, [u16; 2]) -> String, slot: f64) -> Vec<PathBuf> {
+    let ports = [free_udp_port(), free_udp_port()];
+    [1, 2]
+        .into_iter()
+        .map(|id| {
+            let data = dir.join(format!("node{id}"));
+            let path = dir.join(format!("node{id}.cfg"));
+            std::fs::write(&path, node_config(id, &driver(id, ports), slot, &data)).unwrap();
+            path
+        })
+        .collect()
+}
+
+/// A running daemon and a JSON client connected to it.
+struct Node {
+    child: Child,
+    client: TcpStream,
+    lines: mpsc::Receiver<Value>,
+}
+
+/// Starts `gobyd` on a configuration file; its log lines (standard error)
+/// come through the receiver.
+fn spawn_gobyd(config_path: &Path) -> (Child, mpsc::Receiver<String>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .arg("--config")
+        .arg(config_path)
+        .env_remove("RUST_BACKTRACE")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gobyd starts");
+    let stderr = child.stderr.take().unwrap();
+    let (log_tx, log) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = log_tx.send(line);
+        }
+    });
+    (child, log)
+}
+
+/// The first log line containing `needle`, within the patience.
+fn wait_log(log: &mpsc::Receiver<String>, needle: &str) -> String {
+    loop {
+        let line = log
+            .recv_timeout(PATIENCE)
+            .unwrap_or_else(|_| panic!("no log line with {needle:?}"));
+        if line.contains(needle) {
+            return line;
+        }
+    }
+}
+
+impl Node {
+    fn start(config_path: &Path) -> Node {
+        let (child, log) = spawn_gobyd(config_path);
+        // The log says where the JSON interface listens.
+        let line = wait_log(&log, "JSON interface on tcp://");
+        let addr = line
+            .split("JSON interface on tcp://")
+            .nth(1)
+            .expect("an address")
+            .trim()
+            .to_string();
+        let client = TcpStream::connect(&addr).expect("connect to the JSON interface");
+        let reader = BufReader::new(client.try_clone().unwrap());
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in reader.lines().map_while(Result::ok) {
+                let value: Value = serde_json::from_str(&line).expect("a JSON line");
+                if tx.send(value).is_err() {
+                    break;
+                }
+            }
+        });
+        Node {
+            child,
+            client,
+            lines,
+        }
+    }
+
+    fn send(&mut self, line: &str) {
+        self.client.write_all(line.as_bytes()).unwrap();
+        self.client.write_all(b"\n").unwrap();
+    }
+
+    /// The next line for which `pick` returns something, within the patience.
+    fn wait_for<T>(&self, what: &str, mut pick: impl FnMut(&Value) -> Option<T>) -> T {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = self
+                .lines
+                .recv_timeout(left)
+                .unwrap_or_else(|_| panic!("timed out waiting for {what}"));
+            if let Some(t) = pick(&line) {
+                return t;
+            }
+        }
+    }
+
+    fn publish_command(&mut self, destination: i32, note: &str) -> u64 {
+        self.send(&format!(
+            r#"{{"publish": "goby.example.Command", "msg": {{"destination": {destination}, "action": "GOTO", "note": "{note}"}}}}"#
+        ));
+        self.wait_for("the accepted reply", |v| {
+            assert!(v.get("error").is_none(), "{v}");
+            v.get("accepted").and_then(|_| v["id"].as_u64())
+        })
+    }
+
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Node {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn note_of(v: &Value) -> Option<String> {
+    v["msg"]["note"].as_str().map(str::to_string)
+}
+
+#[test]
+fn messages_cross_with_acks_and_survive_a_killed_sender() {
+    let dir = scratch("e2e");
+    let config_paths = network(&dir, udp_driver, 0.5);
+    let mut receiver = Node::start(&config_paths[1]);
+    let mut sender = Node::start(&config_paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+
+    // One message crosses and is acknowledged.
+    sender.publish_command(2, "first");
+    let got = receiver.wait_for("the first message", |v| {
+        (v.get("received").is_some()).then(|| v.clone())
+    });
+    assert_eq!(got["received"], "goby.example.Command");
+    assert_eq!(got["src"], 1);
+    assert_eq!(got["msg"]["note"], "first");
+    assert_eq!(got["msg"]["action"], "GOTO");
+    let acked = sender.wait_for("the ack", |v| v.get("ack").and_then(|_| note_of(v)));
+    assert_eq!(acked, "first");
+
+    // Several more (one per frame, one frame per 1 s cycle); the sender is
+    // killed once the first of them has arrived, then restarted.
+    let notes: BTreeSet<String> = (0..6).map(|i| format!("m{i}")).collect();
+    for note in &notes {
+        sender.publish_command(2, note);
+    }
+    let mut arrived = BTreeSet::new();
+    arrived.insert(receiver.wait_for("a message before the kill", |v| {
+        v.get("received").and_then(|_| note_of(v))
+    }));
+    sender.kill();
+    // The killed sender still owed messages: they are in its journal.
+    let (_, owed) = queue::Journal::open(dir.join("node1").join("outbox.journal")).unwrap();
+    assert!(
+        !owed.entries.is_empty(),
+        "the kill came too late to test anything"
+    );
+    let mut sender = Node::start(&config_paths[0]);
+    while !arrived.is_superset(&notes) {
+        arrived.insert(receiver.wait_for("the messages after the restart", |v| {
+            v.get("received").and_then(|_| note_of(v))
+        }));
+    }
+    assert_eq!(arrived, notes);
+
+    // A malformed line is answered with an error; the connection and the
+    // daemon stay up.
+    receiver.send("{ not json");
+    receiver.wait_for("the error line", |v| v.get("error").map(|_| ()));
+    sender.publish_command(2, "last");
+    receiver.wait_for("a message after the error", |v| {
+        (note_of(v).as_deref() == Some("last")).then_some(())
+    });
+
+    // The mission log has the raw datagrams and the messages.
+    let log = std::fs::read_to_string(dir.join("node2").join("raw.log")).unwrap();
+    assert!(log.lines().any(|l| l.contains(r#""raw":"in""#)), "{log}");
+    assert!(log.lines().any(|l| l.contains(r#""msg":"in""#)), "{log}");
+    drop(sender);
+    drop(receiver);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn messages_cross_the_simulated_acoustic_channel_with_acks() {
+    let dir = scratch("sim");
+    // Slots long enough for the data, the travel time and the ack.
+    let config_paths = network(&dir, simulator_driver, 1.2);
+    let mut receiver = Node::start(&config_paths[1]);
+    let mut sender = Node::start(&config_paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    for note in ["s1", "s2"] {
+        sender.publish_command(2, note);
+    }
+    let mut arrived = BTreeSet::new();
+    while arrived.len() < 2 {
+        arrived.insert(receiver.wait_for("messages over the simulator", |v| {
+            v.get("received").and_then(|_| note_of(v))
+        }));
+    }
+    assert_eq!(
+        arrived,
+        BTreeSet::from(["s1".to_string(), "s2".to_string()])
+    );
+    let mut acked = BTreeSet::new();
+    while acked.len() < 2 {
+        acked.insert(sender.wait_for("acks over the simulator", |v| {
+            v.get("ack").and_then(|_| note_of(v))
+        }));
+    }
+    // Broadcast the other way: a Command to 0 reaches node 1.
+    receiver.publish_command(0, "all");
+    sender.wait_for("the broadcast", |v| {
+        (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
+    });
+    drop(sender);
+    drop(receiver);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The driver section of node `id` on an emulated WHOI Micro-Modem.
+fn micromodem_driver(path: &Path) -> String {
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_WHOI_MICROMODEM
+  serial_port: "{}"
+  serial_baud: 19200
+}}"#,
+        path.display()
+    )
+}
+
+/// Two emulated WHOI Micro-Modems on the acoustic channel simulator, each on
+/// a pseudo-terminal reached through a symbolic link, run on a thread of
+/// their own until stopped (or for at most a minute).
+struct EmulatedModems {
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl EmulatedModems {
+    fn start(links: &[PathBuf], spacing: f64) -> Self {
+        use modemdriver::micromodem::emulator::{self, EmulatorConfig, EmulatorPort};
+        use modemdriver::sim::{medium::Medium, SimulatorDriver};
+        use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
+        use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+
+        let links = links.to_vec();
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
+        let thread = std::thread::spawn(move || {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .expect("a runtime for the emulators");
+            runtime.block_on(async move {
+                let medium = Medium::new();
+                let ids: Vec<u32> = (1..=links.len() as u32).collect();
+                let node: Vec<NodePosition> = ids
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &m)| NodePosition {
+                        modem_id: m as i32,
+                        x: Some(i as f64 * spacing),
+                        ..Default::default()
+                    })
+                    .collect();
+                let mut handles = Vec::new();
+                for (&id, link) in ids.iter().zip(&links) {
+                    let config = modemdriver::DriverConfig {
+                        modem_id: Some(id as i32),
+                        simulator: Some(SimulatorDriverConfig {
+                            node: node.clone(),
+                            packet_loss: Some(0.0),
+                            seed: Some(1 ^ u64::from(id)),
+                            ..Default::default()
+                        }),
+                        ..Default::default()
+                    };
+                    let backend = SimulatorDriver::start_on(&config, medium.clone())
+                        .expect("simulator backend starts");
+                    let emulated = EmulatorConfig {
+                        modem_id: id,
+                        ping_packet: Duration::from_millis(500),
+                        ..EmulatorConfig::default()
+                    };
+                    let port = EmulatorPort::Pty {
+                        link: Some(link.clone()),
+                    };
+                    let mut handle = match emulator::start(emulated, port, Some(backend)) {
+                        Ok(h) => h,
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(format!("modem {id}: {e}")));
+                            return;
+                        }
+                    };
+                    if handle.path().await.is_none() {
+                        let _ = ready_tx.send(Err(format!("modem {id}: no device")));
+                        return;
+                    }
+                    handles.push(handle);
+                }
+                let _ = ready_tx.send(Ok(()));
+                let _ = tokio::time::timeout(Duration::from_secs(60), stop_rx).await;
+                for h in handles {
+                    h.stop().await;
+                }
+            });
+        });
+        ready_rx
+            .recv_timeout(PATIENCE)
+            .expect("the emulators start in time")
+            .expect("the emulators start");
+        EmulatedModems {
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        }
+    }
+
+    fn stop(mut self) {
+        self.halt();
+    }
+
+    fn halt(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Drop for EmulatedModems {
+    fn drop(&mut self) {
+        self.halt();
+    }
+}
+
+#[test]
+fn messages_cross_two_emulated_micro_modems_with_acks() {
+    let dir = scratch("micromodem");
+    let links: Vec<PathBuf> = [1, 2]
+        .iter()
+        .map(|id| dir.join(format!("modem{id}")))
+        .collect();
+    // Two emulated modems 150 m apart on the simulated channel, each on a pty.
+    let emulator = EmulatedModems::start(&links, 150.0);
+    let mut paths = Vec::new();
+    for id in [1, 2] {
+        let config = node_config(
+            id,
+            &micromodem_driver(&links[(id - 1) as usize]),
+            5.0,
+            &dir.join(format!("node{id}")),
+        )
+        // The Micro-Modem's rate 0: one 32-byte frame.
+        .replace("rate: 6", "rate: 0");
+        let path = dir.join(format!("node{id}.cfg"));
+        std::fs::write(&path, config).unwrap();
+        paths.push(path);
+    }
+    let receiver = Node::start(&paths[1]);
+    let mut sender = Node::start(&paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    sender.publish_command(2, "acoustic");
+    let got = receiver.wait_for("the message through the modems", |v| {
+        v.get("received").map(|_| v.clone())
+    });
+    assert_eq!(got["msg"]["note"], "acoustic");
+    assert_eq!(got["src"], 1);
+    let acked = sender.wait_for("the ack through the modems", |v| {
+        v.get("ack").and_then(|_| note_of(v))
+    });
+    assert_eq!(acked, "acoustic");
+    // The mission log holds the NMEA sentences exchanged with the modem.
+    let log = std::fs::read_to_string(dir.join("node1").join("raw.log")).unwrap();
+    assert!(
+        log.lines().any(|l| l.contains(r#""text":"$CCCYC,"#)),
+        "no $CCCYC in the raw log"
+    );
+    drop(sender);
+    drop(receiver);
+    emulator.stop();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn json_over_udp_and_a_clean_stop_on_sigterm() {
+    let dir = scratch("udp-json");
+    let port = free_udp_port();
+    let config = format!(
+        r#"
+modem_id: 1
+driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "udp-json" }} }}
+mac {{ type: MAC_NONE }}
+queue {{ message_entry {{ protobuf_name: "goby.example.Command" role {{ type: DESTINATION_ID field: "destination" }} }} }}
+json {{ tcp_bind: "" udp_bind: "127.0.0.1:{port}" }}
+data_dir: "{}"
+"#,
+        dir.join("data").display()
+    );
+    let path = dir.join("node.cfg");
+    std::fs::write(&path, config).unwrap();
+    let (mut child, log) = spawn_gobyd(&path);
+    wait_log(&log, "gobyd started");
+
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket.set_read_timeout(Some(PATIENCE)).unwrap();
+    let daemon = format!("127.0.0.1:{port}");
+    let receive = || {
+        let mut buf = [0u8; 4096];
+        let n = socket.recv(&mut buf).expect("a datagram from gobyd");
+        serde_json::from_slice::<Value>(&buf[..n]).expect("a JSON datagram")
+    };
+    socket
+        .send_to(br#"{"subscribe": ["ack"]}"#, &daemon)
+        .unwrap();
+    socket
+        .send_to(
+            br#"{"publish": "goby.example.Command", "msg": {"destination": 1, "action": "SURFACE"}}"#,
+            &daemon,
+        )
+        .unwrap();
+    // Addressed to this node: delivered at once, and acknowledged.
+    let mut seen = Vec::new();
+    while seen.len() < 3 {
+        seen.push(receive());
+    }
+    assert!(
+        seen.iter()
+            .any(|v| v["accepted"] == "goby.example.Command" && v["delivered"] == true),
+        "{seen:?}"
+    );
+    assert!(
+        seen.iter()
+            .any(|v| v["received"] == "goby.example.Command" && v["msg"]["action"] == "SURFACE"),
+        "{seen:?}"
+    );
+    assert!(
+        seen.iter().any(|v| v["ack"] == "goby.example.Command"),
+        "{seen:?}"
+    );
+    socket.send_to(b"{\"publish\": 7}", &daemon).unwrap();
+    let error = receive();
+    assert!(
+        error["error"]
+            .as_str()
+            .unwrap()
+            .contains("message type name"),
+        "{error}"
+    );
+
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    wait_log(&log, "gobyd stopping");
+    let deadline = Instant::now() + PATIENCE;
+    let exit = loop {
+        if let Some(exit) = child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(Instant::now() < deadline, "gobyd did not stop on SIGTERM");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(exit.success(), "{exit:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

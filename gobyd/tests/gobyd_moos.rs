@@ -1,0 +1,199 @@
+//! `gobyd`'s MOOS interface: a message written to a MOOS variable is queued,
+//! delivered (here to the node itself) and published back to MOOS with its
+//! acknowledgement; against the minimal in-process DB always, and against a
+//! real MOOSDB when one is on the PATH.
+
+use std::net::{TcpListener, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use gobyd::{config, runtime::Daemon};
+use moos::{ClientConfig, MoosClient, Value};
+use tokio::sync::oneshot;
+
+const PATIENCE: Duration = Duration::from_secs(20);
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-moos-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn daemon_config(port: u16, data_dir: &Path, channel: &str) -> String {
+    format!(
+        r#"
+modem_id: 1
+driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{ node {{ modem_id: 1 }} channel: "{channel}" }}
+}}
+mac {{ type: MAC_NONE }}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "" }}
+moos {{ server: "127.0.0.1" port: {port} name: "gobyd_test" send_var: "ACOMMS_SEND" }}
+data_dir: "{dir}"
+log {{ raw_log: false }}
+"#,
+        dir = data_dir.display()
+    )
+}
+
+/// Runs gobyd against the DB at `port` and checks the round trip.
+async fn round_trip_through(port: u16, name: &str) {
+    let dir = scratch(name);
+    let text = daemon_config(port, &dir.join("data"), name);
+    let daemon = Daemon::start(config::parse(&text, "test").unwrap())
+        .await
+        .expect("gobyd starts");
+    let (stop, stopped) = oneshot::channel::<()>();
+    let running = tokio::spawn(daemon.run(async {
+        let _ = stopped.await;
+    }));
+
+    // A DB just started may not listen yet: try for a while.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let (client, mut mail) = loop {
+        let config = ClientConfig::new("autonomy").with_address("127.0.0.1", port);
+        match MoosClient::connect(config).await {
+            Ok(connected) => break connected,
+            Err(e) if tokio::time::Instant::now() > deadline => {
+                panic!("the test client cannot connect: {e}")
+            }
+            Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
+        }
+    };
+    client.register("ACOMMS_RECEIVED", Duration::ZERO).unwrap();
+    client.register("ACOMMS_ACK", Duration::ZERO).unwrap();
+
+    // gobyd registers once connected; keep writing until it has taken one.
+    let send = "@PB[goby.example.Command] destination: 1 action: GOTO note: \"moos\"";
+    let expected = "@PB[goby.example.Command] destination: 1 action: GOTO note: \"moos\"";
+    let mut received = None;
+    let mut acked = None;
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let mut resend = tokio::time::interval(Duration::from_millis(500));
+    while received.is_none() || acked.is_none() {
+        tokio::select! {
+            _ = resend.tick(), if received.is_none() => {
+                let _ = client.notify_string("ACOMMS_SEND", send);
+            }
+            m = mail.recv() => {
+                let m = m.expect("mail channel open");
+                let Value::String(s) = m.value else { continue };
+                match m.key.as_str() {
+                    "ACOMMS_RECEIVED" => received = Some(s),
+                    "ACOMMS_ACK" => acked = Some(s),
+                    _ => {}
+                }
+            }
+            _ = tokio::time::sleep_until(deadline) => {
+                panic!("timed out: received {received:?}, acked {acked:?}")
+            }
+        }
+    }
+    assert_eq!(received.as_deref(), Some(expected));
+    assert_eq!(acked.as_deref(), Some(expected));
+
+    // A bad value is refused without harm: gobyd keeps serving.
+    client
+        .notify_string("ACOMMS_SEND", "@PB[no.Such] x: 1")
+        .unwrap();
+    client
+        .notify_string(
+            "ACOMMS_SEND",
+            "@PB[goby.example.Command] destination: 1 action: HOLD",
+        )
+        .unwrap();
+    let again = tokio::time::timeout(PATIENCE, async {
+        loop {
+            let m = mail.recv().await.expect("mail channel open");
+            if let (true, Value::String(s)) = (m.key == "ACOMMS_RECEIVED", m.value) {
+                if s.contains("HOLD") {
+                    return s;
+                }
+            }
+        }
+    })
+    .await
+    .expect("the second message arrives");
+    assert_eq!(
+        again,
+        "@PB[goby.example.Command] destination: 1 action: HOLD"
+    );
+
+    client.close().await;
+    let _ = stop.send(());
+    running.await.unwrap().unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn moos_variables_in_and_out_with_the_minimal_db() {
+    let db = moos::testing::MiniDb::start("127.0.0.1:0", "gobytest")
+        .await
+        .unwrap();
+    round_trip_through(db.port(), "minidb").await;
+    db.stop().await;
+}
+
+fn moosdb_on_path() -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .map(|dir| dir.join("MOOSDB"))
+        .find(|p| p.is_file())
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+struct KillOnDrop(Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn moos_variables_in_and_out_with_a_real_moosdb() {
+    let Some(exe) = moosdb_on_path() else {
+        eprintln!("skipped: no MOOSDB on PATH");
+        return;
+    };
+    let dir = scratch("moosdb-run");
+    let port = free_port();
+    let audit = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let _db = KillOnDrop(
+        Command::new(&exe)
+            .arg(format!("--moos_port={port}"))
+            .arg("--moos_community=gobytest")
+            .arg("--moos_suicide_disable")
+            .arg(format!("--audit_port={audit}"))
+            .arg("--moos_no_colour")
+            .current_dir(&dir)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("MOOSDB starts"),
+    );
+    round_trip_through(port, "moosdb").await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
