@@ -536,7 +536,7 @@ data_dir: "{}"
         .unwrap();
     // Addressed to this node: delivered at once, and acknowledged.
     let mut seen = Vec::new();
-    while seen.len() < 3 {
+    while seen.len() < 4 {
         seen.push(receive());
     }
     assert!(
