@@ -158,6 +158,11 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         };
     }
     init_logging(&config);
+    if let Ok(completed) = config::complete(config.clone()) {
+        if let Some(problem) = config::mac_slot_problem(&completed) {
+            tracing::warn!("{problem}");
+        }
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

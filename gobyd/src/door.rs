@@ -57,10 +57,7 @@ impl Door {
         let name = message.descriptor().full_name().to_string();
         let changes = self.codec.check(&message).map_err(|e| e.to_string())?;
         if changes.is_empty() {
-            return Ok(Admitted {
-                message,
-                changes,
-            });
+            return Ok(Admitted { message, changes });
         }
         if !self.clamp.contains(&name) {
             let fields: Vec<String> = changes

@@ -98,9 +98,13 @@ pub async fn start_driver(
 
 /// Checks a configuration without starting anything: the DCCL types load,
 /// and the queue and medium access settings are valid. Returns the DCCL
-/// types.
+/// types. A modem id with no slot of its own under fixed TDMA is an
+/// error here (the daemon itself starts with a warning).
 pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     let config = config::complete(config)?;
+    if let Some(problem) = config::mac_slot_problem(&config) {
+        return Err(ConfigError::Invalid(problem).into());
+    }
     let defs = config::load_definitions(&config)?;
     let mut queue_config = config.queue.clone().unwrap_or_default();
     config::default_entries(&mut queue_config, &defs.loaded);

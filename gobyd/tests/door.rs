@@ -76,10 +76,13 @@ impl Daemon {
     }
 
     fn start_with(config: &Path, adjust: impl FnOnce(&mut Command)) -> Daemon {
+        Self::start_args(&["--config".as_ref(), config.as_os_str()], adjust)
+    }
+
+    fn start_args(args: &[&std::ffi::OsStr], adjust: impl FnOnce(&mut Command)) -> Daemon {
         let mut command = Command::new(env!("CARGO_BIN_EXE_gobyd"));
         command
-            .arg("--config")
-            .arg(config)
+            .args(args)
             .env_remove("RUST_BACKTRACE")
             .env_remove("RUST_LOG")
             .stdin(Stdio::null())
@@ -215,11 +218,7 @@ fn values_the_codec_would_change_are_refused_naming_field_and_bound() {
         (command(99, "0", "ok"), "field destination", "31"),
         (command(2, "120000", "ok"), "field waypoint[0].x", "10000"),
         (command(2, "\"NaN\"", "ok"), "field waypoint[0].x", "NaN"),
-        (
-            command(2, "0", &"n".repeat(60_000)),
-            "field note",
-            "10",
-        ),
+        (command(2, "0", &"n".repeat(60_000)), "field note", "10"),
     ] {
         let reply = client.request(&line);
         let error = reply["error"].as_str().unwrap_or_else(|| panic!("{reply}"));
@@ -267,7 +266,10 @@ data_dir: "{data}"
     assert!(reply["id"].as_u64().is_some(), "{reply}");
     assert_eq!(reply["changed"][0]["field"], "note", "{reply}");
     assert!(
-        reply["changed"][0]["reason"].as_str().unwrap().contains("10"),
+        reply["changed"][0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("10"),
         "{reply}"
     );
     daemon.wait_log("changed by the codec");
@@ -489,5 +491,47 @@ fn the_accept_loop_backs_off_when_descriptors_run_out() {
     assert!(accept_lines <= 4, "{accept_lines} log lines about accept");
     drop(late);
     drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_message_to_this_node_is_delivered_here_with_or_without_a_configuration() {
+    let dir = scratch("self");
+    let example = dir.join("example.pb.txt");
+    std::fs::write(
+        &example,
+        Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .arg("--example-config")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    let data = dir.join("data");
+    let common = [
+        "--data-dir".as_ref(),
+        data.as_os_str(),
+        "--json-tcp".as_ref(),
+        "127.0.0.1:0".as_ref(),
+    ];
+    let with_example = [&["--config".as_ref(), example.as_os_str()][..], &common[..]].concat();
+    for args in [&common[..], &with_example[..]] {
+        let daemon = Daemon::start_args(args, |_| {});
+        let mut client = daemon.connect();
+        client.send(&command(1, "0", "to me"));
+        // The reply and the event, in either order.
+        let (mut reply, mut received) = (None, None);
+        while reply.is_none() || received.is_none() {
+            let v = client.next();
+            if v.get("reply").is_some() {
+                reply = Some(v);
+            } else if v["event"] == "received" {
+                received = Some(v);
+            }
+        }
+        let (reply, received) = (reply.unwrap(), received.unwrap());
+        assert_eq!(reply["delivered"], true, "{args:?}: {reply}");
+        assert_eq!(received["msg"]["note"], "to me", "{received}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
