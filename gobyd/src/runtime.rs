@@ -491,6 +491,15 @@ impl Daemon {
                         message_json(message),
                         &[("frame", (*frame).into())],
                     ),
+                    QueueEvent::Acked {
+                        message, by, frame, ..
+                    } => log.message(
+                        now,
+                        "ack",
+                        message.descriptor().full_name(),
+                        message_json(message),
+                        &[("by", (*by).into()), ("frame", (*frame).into())],
+                    ),
                     QueueEvent::Received(r) => log.message(
                         now,
                         "in",
