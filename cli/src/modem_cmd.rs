@@ -225,20 +225,32 @@ async fn backend_driver(
     }
 }
 
-/// Completes on SIGINT or SIGTERM.
-async fn interrupted() {
+/// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
+/// before announcing anything); the future completes on either.
+fn interrupted() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
-        if let Ok(mut terminate) = signal(SignalKind::terminate()) {
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => {}
-                _ = terminate.recv() => {}
+        let interrupt = signal(SignalKind::interrupt());
+        let terminate = signal(SignalKind::terminate());
+        async move {
+            match (interrupt, terminate) {
+                (Ok(mut interrupt), Ok(mut terminate)) => {
+                    tokio::select! {
+                        _ = interrupt.recv() => {}
+                        _ = terminate.recv() => {}
+                    }
+                }
+                _ => {
+                    let _ = tokio::signal::ctrl_c().await;
+                }
             }
-            return;
         }
     }
-    let _ = tokio::signal::ctrl_c().await;
+    #[cfg(not(unix))]
+    async {
+        let _ = tokio::signal::ctrl_c().await;
+    }
 }
 
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
@@ -254,6 +266,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
+        let stop = interrupted();
         let medium = Medium::new();
         let mut emulators: Vec<EmulatorHandle> = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -290,7 +303,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         }
         match duration {
             Some(d) => tokio::time::sleep(d).await,
-            None => interrupted().await,
+            None => stop.await,
         }
         // Each emulator removes its link as it stops.
         for e in emulators {
