@@ -30,19 +30,30 @@ pub struct Door {
     codec: Arc<Codec>,
     /// Types whose out-of-range values are clamped rather than refused.
     clamp: HashSet<String>,
+    /// Codecs of their own that turn a clamped message into the message the
+    /// receiver decodes (encoder, decoder): adaptive arithmetic models
+    /// advance with each use, so the daemon's codec is never used for this.
+    clamp_codecs: Option<Arc<(Codec, Codec)>>,
 }
 
 impl Door {
-    /// The door for `codec`, clamping the types whose queue entry sets
-    /// `clamp_out_of_range`.
-    pub fn new(codec: Arc<Codec>, queue: &QueueManagerConfig) -> Self {
-        let clamp = queue
+    /// The door for `codec` (only checked against, never changed), clamping
+    /// the types whose queue entry sets `clamp_out_of_range`; `fresh` makes
+    /// another codec with the same definitions, asked for twice if any type
+    /// clamps.
+    pub fn new(codec: Arc<Codec>, queue: &QueueManagerConfig, fresh: impl Fn() -> Codec) -> Self {
+        let clamp: HashSet<String> = queue
             .message_entry
             .iter()
             .filter(|e| e.clamp_out_of_range())
             .map(|e| e.protobuf_name.clone())
             .collect();
-        Self { codec, clamp }
+        let clamp_codecs = (!clamp.is_empty()).then(|| Arc::new((fresh(), fresh())));
+        Self {
+            codec,
+            clamp,
+            clamp_codecs,
+        }
     }
 
     /// True when values of type `name` out of range are clamped (not refused).
@@ -71,9 +82,13 @@ impl Door {
             ));
         }
         // As the receiver will decode it.
-        let bytes = self.codec.encode(&message).map_err(|e| e.to_string())?;
-        let sent = self
-            .codec
+        let (encoder, decoder) = self
+            .clamp_codecs
+            .as_deref()
+            .map(|(e, d)| (e, d))
+            .ok_or_else(|| format!("{name}: no codec to clamp with"))?;
+        let bytes = encoder.encode(&message).map_err(|e| e.to_string())?;
+        let sent = decoder
             .decode(&bytes)
             .map_err(|e| format!("{name}: the clamped message does not decode: {e}"))?;
         Ok(Admitted {
@@ -90,9 +105,13 @@ mod tests {
 
     use super::*;
 
-    fn door(clamp: bool) -> Door {
+    fn codec() -> Codec {
         let mut codec = Codec::new();
         codec.load_type::<Command>().unwrap();
+        codec
+    }
+
+    fn door(clamp: bool) -> Door {
         let queue = QueueManagerConfig {
             message_entry: vec![QueuedMessageEntry {
                 protobuf_name: "goby.example.Command".into(),
@@ -101,7 +120,7 @@ mod tests {
             }],
             ..Default::default()
         };
-        Door::new(Arc::new(codec), &queue)
+        Door::new(Arc::new(codec()), &queue, codec)
     }
 
     fn command(destination: i32, x: f64, note: &str) -> DynamicMessage {

@@ -165,7 +165,11 @@ impl Daemon {
         let mut queue_config = config.queue.clone().unwrap_or_default();
         config::default_entries(&mut queue_config, &defs.loaded);
         let queue = QueueManager::new(codec.clone(), &queue_config)?;
-        let door = Door::new(codec.clone(), &queue_config);
+        let door = Door::new(codec.clone(), &queue_config, || {
+            config::load_definitions(&config)
+                .map(|d| d.codec)
+                .unwrap_or_default()
+        });
 
         let data_dir = PathBuf::from(config.data_dir());
         std::fs::create_dir_all(&data_dir)
