@@ -288,4 +288,32 @@ mod tests {
         };
         assert_eq!(t, [Topic::Ack, Topic::QueueSize]);
     }
+
+    #[test]
+    fn replies_are_numbered_and_events_are_tagged() {
+        let v: Value = serde_json::from_str(&numbered_reply(&error_line("no"), 7)).unwrap();
+        assert_eq!(v, json!({"reply": 7, "error": "no"}));
+        let message = protos::goby::example::Command::default().transcode_to_dynamic();
+        let events = [
+            QueueEvent::Dropped {
+                message: message.clone(),
+                id: 3,
+                dccl_id: 125,
+            },
+            QueueEvent::QueueSize {
+                dccl_id: 125,
+                size: 2,
+            },
+        ];
+        for event in &events {
+            let (_, line) = event_line(event, Some(9), |_| "goby.example.Command".into()).unwrap();
+            let v: Value = serde_json::from_str(&line).unwrap();
+            assert!(v["event"].is_string(), "{v}");
+            for reply_key in ["reply", "error", "accepted"] {
+                assert!(v.get(reply_key).is_none(), "{v}");
+            }
+        }
+        let lost: Value = serde_json::from_str(&lost_line(4)).unwrap();
+        assert_eq!(lost, json!({"event": "lost", "count": 4}));
+    }
 }
