@@ -104,29 +104,31 @@ fn init_logging(config: &GobydConfig) {
     };
 }
 
-/// Completes on SIGINT or SIGTERM.
-async fn shutdown_signal() {
-    let interrupt = tokio::signal::ctrl_c();
+/// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
+/// before the daemon announces itself, so that no early signal is missed);
+/// the future completes on either.
+fn shutdown_signal() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
-    {
+    let listeners = {
         use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut terminate) => {
-                tokio::select! {
-                    _ = interrupt => {}
-                    _ = terminate.recv() => {}
-                }
+        (
+            signal(SignalKind::interrupt()),
+            signal(SignalKind::terminate()),
+        )
+    };
+    async move {
+        #[cfg(unix)]
+        if let (Ok(mut interrupt), Ok(mut terminate)) = listeners {
+            tokio::select! {
+                _ = interrupt.recv() => {}
+                _ = terminate.recv() => {}
             }
-            Err(_) => {
-                let _ = interrupt.await;
-            }
+            tracing::info!("signal received: shutting down");
+            return;
         }
+        let _ = tokio::signal::ctrl_c().await;
+        tracing::info!("signal received: shutting down");
     }
-    #[cfg(not(unix))]
-    {
-        let _ = interrupt.await;
-    }
-    tracing::info!("signal received: shutting down");
 }
 
 /// Runs `gobyd` with a parsed command line; returns the exit status.
@@ -158,6 +160,11 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         };
     }
     init_logging(&config);
+    if let Ok(completed) = config::complete(config.clone()) {
+        if let Some(problem) = config::mac_slot_problem(&completed) {
+            tracing::warn!("{problem}");
+        }
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -170,6 +177,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         }
     };
     runtime.block_on(async {
+        let stop = shutdown_signal();
         let daemon = match runtime::Daemon::start(config).await {
             Ok(d) => d,
             Err(e) => {
@@ -180,7 +188,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         if let Some(addr) = daemon.json_tcp_addr() {
             tracing::info!("JSON interface on tcp://{addr}");
         }
-        match daemon.run(shutdown_signal()).await {
+        match daemon.run(stop).await {
             Ok(()) => EXIT_OK,
             Err(e) => {
                 eprintln!("gobyd: error: {e}");

@@ -16,9 +16,10 @@
 //! ```
 //!
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
-//! composes and runs the stack, [`outbox`] is the queue with its on-disk
-//! journal, [`data_dir`] holds the data directory (one daemon each, private
-//! files), [`json_protocol`] and [`json_server`] serve JSON clients,
+//! composes and runs the stack, [`door`] checks published values,
+//! [`outbox`] is the queue with its on-disk journal, [`data_dir`] holds the
+//! data directory (one daemon each, private files), [`json_protocol`] and
+//! [`json_server`] serve JSON clients,
 //! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
 //! and came from the modem, and [`command`] is the `gobyd` command line.
 
@@ -27,6 +28,7 @@
 pub mod command;
 pub mod config;
 pub mod data_dir;
+pub mod door;
 pub mod json_protocol;
 pub mod json_server;
 pub mod moos_bridge;

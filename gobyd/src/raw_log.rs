@@ -5,7 +5,13 @@
 //! {"t":1700000000123456,"raw":"out","bytes_hex":"2443434359432c...","text":"$CCCYC,..."}
 //! {"t":1700000000200000,"msg":"out","name":"goby.example.Command","frame":0,"value":{...}}
 //! {"t":1700000012000000,"msg":"in","name":"goby.example.NavigationReport","src":2,"value":{...}}
+//! {"t":1700000013000000,"msg":"ack","name":"goby.example.Command","by":2,"frame":0,"value":{...}}
 //! ```
+//!
+//! Raw records are what the driver wrote and read: NMEA lines for the
+//! Micro-Modem, datagrams for UDP, and for the acoustic simulator the
+//! protobuf encoding of each transmission (data and acks) it put on or took
+//! off the simulated water.
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
@@ -65,8 +71,8 @@ impl RawLog {
         self.write(&record)
     }
 
-    /// Logs a message sent (`direction` "out") or received ("in"), with
-    /// extra fields (source, frame, ...).
+    /// Logs a message sent (`direction` "out"), received ("in") or
+    /// acknowledged ("ack"), with extra fields (source, frame, ...).
     pub fn message(
         &mut self,
         time: i64,

@@ -28,7 +28,8 @@ use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
 use super::data_dir::{DataDir, DataDirError};
-use super::json_protocol::{accepted_line, error_line, event_line, message_json};
+use super::door::Door;
+use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
@@ -101,9 +102,13 @@ pub async fn start_driver(
 
 /// Checks a configuration without starting anything: the DCCL types load,
 /// and the queue and medium access settings are valid. Returns the DCCL
-/// types.
+/// types. A modem id with no slot of its own under fixed TDMA is an
+/// error here (the daemon itself starts with a warning).
 pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     let config = config::complete(config)?;
+    if let Some(problem) = config::mac_slot_problem(&config) {
+        return Err(ConfigError::Invalid(problem).into());
+    }
     let defs = config::load_definitions(&config)?;
     let mut queue_config = config.queue.clone().unwrap_or_default();
     config::default_entries(&mut queue_config, &defs.loaded);
@@ -115,6 +120,8 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
 /// A started daemon, ready to [`run`](Daemon::run).
 pub struct Daemon {
     outbox: Outbox,
+    /// Checks published values against their DCCL definitions.
+    door: Door,
     mac: MacManager,
     driver: Driver,
     /// Type names by DCCL id.
@@ -173,6 +180,11 @@ impl Daemon {
         let mut queue_config = config.queue.clone().unwrap_or_default();
         config::default_entries(&mut queue_config, &defs.loaded);
         let queue = QueueManager::new(codec.clone(), &queue_config)?;
+        let door = Door::new(codec.clone(), &queue_config, || {
+            config::load_definitions(&config)
+                .map(|d| d.codec)
+                .unwrap_or_default()
+        });
 
         let journal_path = data_dir.path().join("outbox.journal");
         let (outbox, replay) = Outbox::open(queue, &journal_path)?;
@@ -254,6 +266,7 @@ impl Daemon {
             .collect();
         Ok(Self {
             outbox,
+            door,
             mac,
             driver,
             names,
@@ -319,7 +332,7 @@ impl Daemon {
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
                 _ = expire.tick() => self.outbox.expire(),
             }
-            self.forward_queue_events();
+            let _ = self.forward_queue_events();
             self.commit_replies();
         }
         // Clients still waiting hear back once their messages are on disk.
@@ -337,15 +350,41 @@ impl Daemon {
     }
 
     /// Accepts a message; its reply waits for the journal sync
-    /// ([`commit_replies`](Self::commit_replies)) unless it was refused.
+    /// ([`commit_replies`](Self::commit_replies)) unless it was refused. A
+    /// message the codec would change is refused, or for a clamping type
+    /// accepted as it will be sent with the changes in its reply; the
+    /// messages it pushes out of a full queue are named in its reply.
     fn publish(&mut self, publish: Publish) {
         let name = publish.message.descriptor().full_name().to_string();
-        match self.outbox.accept(&publish.message) {
-            Ok(Accepted::Queued(id)) => self
-                .pending_replies
-                .push((publish.reply, accepted_line(&name, Some(id)))),
+        let admitted = match self.door.admit(publish.message) {
+            Ok(admitted) => admitted,
+            Err(e) => {
+                tracing::info!("publish refused: {e}");
+                let _ = publish.reply.send(error_line(&e));
+                return;
+            }
+        };
+        for change in &admitted.changes {
+            tracing::warn!("accepted with a value changed by the codec: {change}");
+        }
+        match self.outbox.accept(&admitted.message) {
+            Ok(Accepted::Queued(id)) => {
+                let dropped = self.forward_queue_events();
+                for (entry, _) in &dropped {
+                    tracing::warn!(
+                        id = entry,
+                        "{name}: a message was dropped from its full queue (max_queue)"
+                    );
+                }
+                self.pending_replies.push((
+                    publish.reply,
+                    accepted_reply(&name, Some(id), &dropped, &admitted.changes),
+                ))
+            }
             Ok(Accepted::Delivered) => {
-                let _ = publish.reply.send(accepted_line(&name, None));
+                let _ = publish
+                    .reply
+                    .send(accepted_reply(&name, None, &[], &admitted.changes));
             }
             Err(e) => {
                 let _ = publish.reply.send(error_line(&e.to_string()));
@@ -443,16 +482,22 @@ impl Daemon {
         }
     }
 
-    fn forward_queue_events(&mut self) {
-        let events = match self.outbox.events() {
+    /// Logs the queue events and sends them to the clients; returns the
+    /// messages dropped from a full queue (journal id, message).
+    fn forward_queue_events(&mut self) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
+        let mut dropped = Vec::new();
+        let events = match self.outbox.events_with_entries() {
             Ok(events) => events,
             Err(e) => {
                 tracing::error!("journal: {e}");
-                return;
+                return dropped;
             }
         };
         let now = SystemClock.now();
-        for event in events {
+        for (event, entry) in events {
+            if let QueueEvent::Dropped { message, .. } = &event {
+                dropped.push((entry, message.clone()));
+            }
             if let Some(log) = &mut self.raw_log {
                 let logged = match &event {
                     QueueEvent::Sent { message, frame, .. } => log.message(
@@ -461,6 +506,15 @@ impl Daemon {
                         message.descriptor().full_name(),
                         message_json(message),
                         &[("frame", (*frame).into())],
+                    ),
+                    QueueEvent::Acked {
+                        message, by, frame, ..
+                    } => log.message(
+                        now,
+                        "ack",
+                        message.descriptor().full_name(),
+                        message_json(message),
+                        &[("by", (*by).into()), ("frame", (*frame).into())],
                     ),
                     QueueEvent::Received(r) => log.message(
                         now,
@@ -482,11 +536,12 @@ impl Daemon {
                     .cloned()
                     .unwrap_or_else(|| format!("dccl id {id}"))
             };
-            if let Some((topic, line)) = event_line(&event, name_of) {
+            if let Some((topic, line)) = event_line(&event, entry, name_of) {
                 let _ = self
                     .events
                     .send(Arc::new(ClientEvent { topic, line, event }));
             }
         }
+        dropped
     }
 }

@@ -325,6 +325,12 @@ fn messages_cross_the_simulated_acoustic_channel_with_acks() {
     sender.wait_for("the broadcast", |v| {
         (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
     });
+    // The sender's mission log has what went on and came off the simulated
+    // water (its data out, the acks in) and the acks of its messages.
+    let log = std::fs::read_to_string(dir.join("node1").join("raw.log")).unwrap();
+    for needle in [r#""raw":"out""#, r#""raw":"in""#, r#""msg":"ack""#] {
+        assert!(log.contains(needle), "no {needle} in the raw log:\n{log}");
+    }
     drop(sender);
     drop(receiver);
     std::fs::remove_dir_all(&dir).unwrap();
@@ -536,7 +542,7 @@ data_dir: "{}"
         .unwrap();
     // Addressed to this node: delivered at once, and acknowledged.
     let mut seen = Vec::new();
-    while seen.len() < 3 {
+    while seen.len() < 4 {
         seen.push(receive());
     }
     assert!(

@@ -532,3 +532,32 @@ async fn query_destination_is_filled_by_the_data_request() {
     assert_eq!(acks(&mut b.d1, 1).await, vec![0]);
     b.stop().await;
 }
+
+#[tokio::test]
+async fn the_start_up_reset_is_not_reported_as_a_modem_reset() {
+    let mut e =
+        emulator::start(emulator_config(1), EmulatorPort::Pty { link: None }, None).expect("pty");
+    let path = e.path().await.unwrap();
+    let mut d = MicroModemDriver::start(&mm_config(1, &path)).unwrap();
+    // Every status up to the first Ready: the modem's own $CAREV,INIT at
+    // start-up is expected, not a reset to report.
+    let mut seen = Vec::new();
+    wait_for(&mut d, &[], LIMIT, |e| match e {
+        DriverEvent::Status(DriverStatus::Ready) => Some(()),
+        DriverEvent::Status(s) => {
+            seen.push(s.clone());
+            None
+        }
+        _ => None,
+    })
+    .await;
+    assert!(!seen.contains(&DriverStatus::ModemReset), "{seen:?}");
+    // A reset once running still is reported.
+    e.control(EmulatorControl::Reset);
+    wait_for(&mut d, &[], LIMIT, |e| {
+        matches!(e, DriverEvent::Status(DriverStatus::ModemReset)).then_some(())
+    })
+    .await;
+    d.stop().await.unwrap();
+    e.stop().await;
+}

@@ -666,7 +666,13 @@ impl Mm {
                 });
             }
             MmSentence::Revision { ident, .. } if ident.eq_ignore_ascii_case("INIT") => {
-                self.events.status(DriverStatus::ModemReset);
+                if self.initializing && self.active.is_none() {
+                    // The modem's own start-up (or the one the driver is
+                    // configuring after a reconnection): expected.
+                    tracing::info!("Micro-Modem started ($CAREV INIT): configuring it");
+                } else {
+                    self.events.status(DriverStatus::ModemReset);
+                }
                 self.awaiting = None;
                 self.queue_initialization();
                 if self

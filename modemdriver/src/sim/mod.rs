@@ -41,7 +41,7 @@ use tokio::time::Instant;
 use crate::config;
 use crate::driver::{
     Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
-    TransmitOutcome, TransmitResult,
+    RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
 use crate::rate;
 use crate::time::now_micros;
@@ -236,6 +236,7 @@ impl Node {
             duration,
             transmission: mt.clone(),
         });
+        events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
         self.medium.transmit(packet.clone());
         if let Some(udp) = &self.udp {
             for reason in udp.transmit(&packet).await {
@@ -289,6 +290,7 @@ impl Node {
                     .collect(),
                 ..Default::default()
             });
+            events.emit(DriverEvent::Raw(raw(RawDirection::Incoming, &mt)));
             events.emit(DriverEvent::Received(mt));
             if let Some(ack) = ack {
                 // Acknowledgements go first.
@@ -302,6 +304,21 @@ impl Node {
         for (_, result) in due {
             events.emit(DriverEvent::TransmitResult(result));
         }
+    }
+}
+
+/// What the simulated modem put on or took off the water, for the raw log:
+/// the transmission's protobuf encoding (data, acks and driver-specific
+/// packets alike), with the other node's modem id as the peer.
+fn raw(direction: RawDirection, mt: &ModemTransmission) -> RawMessage {
+    let peer = match direction {
+        RawDirection::Outgoing => mt.dest(),
+        RawDirection::Incoming => mt.src(),
+    };
+    RawMessage {
+        direction,
+        bytes: prost::Message::encode_to_vec(mt),
+        peer: Some(format!("modem {peer}")),
     }
 }
 
