@@ -276,6 +276,74 @@ pub fn default_entries(queue: &mut QueueManagerConfig, loaded: &[String]) {
     }
 }
 
+/// Environment variable read for the DCCL passphrase when the configuration
+/// gives neither `dccl.passphrase` nor `dccl.passphrase_file`.
+pub const PASSPHRASE_ENV: &str = "GOBYD_PASSPHRASE";
+
+/// The DCCL passphrase, if any: `dccl.passphrase`, then the content of
+/// `dccl.passphrase_file` (one trailing line break removed), then `env` (the
+/// value of [`PASSPHRASE_ENV`], ignored when empty).
+///
+/// Errors: both options set, a passphrase file that cannot be read or is
+/// empty, an empty `passphrase`, an environment value that is not UTF-8. A
+/// passphrase file that other users may read is used, with a warning.
+pub fn passphrase(
+    dccl: &protos::goby::apps::protobuf::gobyd_config::DcclConfig,
+    env: Option<&std::ffi::OsStr>,
+) -> Result<Option<String>, ConfigError> {
+    match (&dccl.passphrase, &dccl.passphrase_file) {
+        (Some(_), Some(_)) => Err(ConfigError::Invalid(
+            "dccl: give passphrase or passphrase_file, not both".into(),
+        )),
+        (Some(p), None) if p.is_empty() => Err(ConfigError::Invalid(
+            "dccl.passphrase is empty (leave it out to send in the clear)".into(),
+        )),
+        (Some(p), None) => Ok(Some(p.clone())),
+        (None, Some(file)) => {
+            let path = Path::new(file);
+            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            warn_if_readable_by_others(path);
+            let p = text
+                .strip_suffix("\r\n")
+                .or_else(|| text.strip_suffix('\n'))
+                .unwrap_or(&text);
+            if p.is_empty() {
+                return Err(ConfigError::Invalid(format!(
+                    "dccl.passphrase_file {}: the file is empty",
+                    path.display()
+                )));
+            }
+            Ok(Some(p.to_string()))
+        }
+        (None, None) => match env {
+            None => Ok(None),
+            Some(v) if v.is_empty() => Ok(None),
+            Some(v) => v.to_str().map(|p| Some(p.to_string())).ok_or_else(|| {
+                ConfigError::Invalid(format!("{PASSPHRASE_ENV} is not valid UTF-8"))
+            }),
+        },
+    }
+}
+
+#[cfg(unix)]
+fn warn_if_readable_by_others(path: &Path) {
+    use std::os::unix::fs::PermissionsExt;
+    if let Ok(meta) = std::fs::metadata(path) {
+        if meta.permissions().mode() & 0o077 != 0 {
+            tracing::warn!(
+                "passphrase file {} can be read by other users (chmod 600 it)",
+                path.display()
+            );
+        }
+    }
+}
+
+#[cfg(not(unix))]
+fn warn_if_readable_by_others(_path: &Path) {}
+
 /// The loaded DCCL definitions.
 #[derive(Debug)]
 pub struct Definitions {
@@ -290,9 +358,10 @@ pub struct Definitions {
 pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError> {
     let dccl_config = config.dccl.clone().unwrap_or_default();
     let mut codec = dccl::Codec::new();
-    if let Some(passphrase) = dccl_config.passphrase.as_deref() {
+    let env = std::env::var_os(PASSPHRASE_ENV);
+    if let Some(passphrase) = passphrase(&dccl_config, env.as_deref())? {
         codec.set_passphrase_with_exceptions(
-            passphrase,
+            &passphrase,
             dccl_config.skip_crypto_for_id.iter().copied(),
         );
     }
@@ -339,6 +408,67 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protos::goby::apps::protobuf::gobyd_config::DcclConfig;
+
+    #[test]
+    fn the_passphrase_comes_from_the_configuration_a_file_or_the_environment() {
+        let dir = std::env::temp_dir().join(format!("gobyd-passphrase-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("key");
+        std::fs::write(&file, "sesame\n").unwrap();
+        let from_file = DcclConfig {
+            passphrase_file: Some(file.to_str().unwrap().into()),
+            ..Default::default()
+        };
+        let env = Some(std::ffi::OsStr::new("from-env"));
+        assert_eq!(passphrase(&from_file, env).unwrap().as_deref(), Some("sesame"));
+        let inline = DcclConfig {
+            passphrase: Some("inline".into()),
+            ..Default::default()
+        };
+        assert_eq!(passphrase(&inline, env).unwrap().as_deref(), Some("inline"));
+        let none = DcclConfig::default();
+        assert_eq!(passphrase(&none, env).unwrap().as_deref(), Some("from-env"));
+        assert_eq!(passphrase(&none, Some("".as_ref())).unwrap(), None);
+        assert_eq!(passphrase(&none, None).unwrap(), None);
+
+        let both = DcclConfig {
+            passphrase: Some("a".into()),
+            passphrase_file: from_file.passphrase_file.clone(),
+            ..Default::default()
+        };
+        assert!(passphrase(&both, None).unwrap_err().to_string().contains("not both"));
+        std::fs::write(&file, "\n").unwrap();
+        assert!(passphrase(&from_file, None).unwrap_err().to_string().contains("empty"));
+        let missing = DcclConfig {
+            passphrase_file: Some(dir.join("nope").to_str().unwrap().into()),
+            ..Default::default()
+        };
+        assert!(passphrase(&missing, None).unwrap_err().to_string().contains("nope"));
+
+        // The file's passphrase encrypts exactly as the same one given inline.
+        std::fs::write(&file, "sesame").unwrap();
+        let config = |dccl: DcclConfig| GobydConfig {
+            dccl: Some(dccl),
+            ..Default::default()
+        };
+        let encode = |config: GobydConfig| {
+            let defs = load_definitions(&config).unwrap();
+            let desc = defs.codec.descriptor("goby.example.Command").unwrap();
+            let msg = DynamicMessage::parse_text_format(desc, "destination: 2 action: HOLD")
+                .unwrap();
+            defs.codec.encode(&msg).unwrap()
+        };
+        let clear = encode(config(DcclConfig::default()));
+        let by_file = encode(config(from_file));
+        let by_inline = encode(config(DcclConfig {
+            passphrase: Some("sesame".into()),
+            ..Default::default()
+        }));
+        assert_eq!(by_file, by_inline);
+        assert_ne!(by_file, clear);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn the_example_configuration_parses_and_completes() {
