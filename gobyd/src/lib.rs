@@ -19,7 +19,8 @@
 //! composes and runs the stack, [`outbox`] is the queue with its on-disk
 //! journal, [`json_protocol`] and [`json_server`] serve JSON clients,
 //! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
-//! and came from the modem, and [`command`] is the `gobyd` command line.
+//! and came from the modem, [`translator`] turns MOOS variables into DCCL
+//! messages and back (pAcommsHandler's `translator_entry`), and [`command`] is the `gobyd` command line.
 
 #![warn(missing_docs)]
 
@@ -31,3 +32,4 @@ pub mod moos_bridge;
 pub mod outbox;
 pub mod raw_log;
 pub mod runtime;
+pub mod translator;
