@@ -18,7 +18,8 @@
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
 //! composes and runs the stack, [`outbox`] is the queue with its on-disk
 //! journal, [`json_protocol`] and [`json_server`] serve JSON clients,
-//! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
+//! [`moos_bridge`] joins a MOOS community, [`mission_file`]
+//! reads the configuration from a MOOS mission file, [`raw_log`] writes what went to
 //! and came from the modem, [`translator`] turns MOOS variables into DCCL
 //! messages and back (pAcommsHandler's `translator_entry`), and [`command`] is the `gobyd` command line.
 
@@ -28,6 +29,7 @@ pub mod command;
 pub mod config;
 pub mod json_protocol;
 pub mod json_server;
+pub mod mission_file;
 pub mod moos_bridge;
 pub mod outbox;
 pub mod raw_log;
