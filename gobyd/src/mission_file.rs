@@ -292,7 +292,10 @@ ProcessConfig = gobyd   // the acoustic link
         assert!(err.starts_with("a.moos:") && err.contains("'one'"), "{err}");
         // The block keeps the file's lines and columns, so that positions
         // in parse errors are the file's: `modem_id` is at line 16, column 3.
-        let block = MissionFile::parse(MISSION, "gobyd").unwrap().process_config.unwrap();
+        let block = MissionFile::parse(MISSION, "gobyd")
+            .unwrap()
+            .process_config
+            .unwrap();
         let line16 = block.lines().nth(15).unwrap();
         assert_eq!(line16.find("modem_id"), Some(2), "{line16:?}");
         let err = MissionFile::parse(MISSION, "other")
