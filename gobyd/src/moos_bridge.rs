@@ -454,6 +454,106 @@ mod tests {
         );
     }
 
+    fn settings(config: &str) -> BridgeSettings {
+        let config = crate::config::parse(config, "test").unwrap();
+        let mut codec = Codec::new();
+        codec.load_type::<Command>().unwrap();
+        BridgeSettings::from_config(&config, &codec).unwrap()
+    }
+
+    fn command() -> DynamicMessage {
+        Command {
+            destination: 2,
+            action: 1,
+            ..Default::default()
+        }
+        .transcode_to_dynamic()
+    }
+
+    fn received(message: DynamicMessage) -> QueueEvent {
+        QueueEvent::Received(queue::ReceivedMessage {
+            message,
+            dccl_id: 125,
+            src: 2,
+            dest: 1,
+            time: None,
+        })
+    }
+
+    fn s(v: &str) -> Value {
+        Value::String(v.into())
+    }
+
+    #[test]
+    fn pacommshandler_variables_and_translated_receptions() {
+        let with_entry = settings(
+            r#"modem_id: 1 moos {}
+            translator_entry {
+              protobuf_name: "goby.example.Command"
+              publish { technique: TECHNIQUE_FORMAT moos_var: "CMD_%1%" format: "ACTION=%2%" }
+              publish { technique: TECHNIQUE_FORMAT moos_var: "CMD_DEST" format: "%1%" }
+            }"#,
+        );
+        let text = "@PB[goby.example.Command] destination: 2 action: GOTO";
+        assert_eq!(
+            publications(&with_entry, &received(command())),
+            [
+                ("ACOMMS_QUEUE_RECEIVE".to_string(), s(text)),
+                ("CMD_2".to_string(), s("ACTION=GOTO")),
+                ("CMD_DEST".to_string(), Value::Double(2.0)),
+            ]
+        );
+        let acked = QueueEvent::Acked {
+            message: command(),
+            id: None,
+            dccl_id: 125,
+            frame: 3,
+            by: 2,
+        };
+        assert_eq!(
+            publications(&with_entry, &acked),
+            [
+                (
+                    "ACOMMS_ACK".to_string(),
+                    s("@PB[goby.acomms.protobuf.ModemTransmission] src: 2 dest: 1 type: ACK acked_frame: 3")
+                ),
+                ("ACOMMS_ACK_ORIGINAL".to_string(), s(text)),
+            ]
+        );
+        let size = QueueEvent::QueueSize {
+            dccl_id: 125,
+            size: 4,
+        };
+        assert_eq!(
+            publications(&with_entry, &size),
+            [(
+                "ACOMMS_QSIZE".to_string(),
+                s("@PB[goby.acomms.protobuf.QueueSize] dccl_id: 125 size: 4")
+            )]
+        );
+
+        // Custom names and prefix; the plain variables where free.
+        let custom = settings(
+            r#"moos { receive_var: "GOT" }
+            moos_var { prefix: "AC_" queue_receive: "IN" queue_expire: "GONE" }"#,
+        );
+        assert_eq!(
+            publications(&custom, &received(command())),
+            [("AC_IN".to_string(), s(text)), ("GOT".to_string(), s(text))]
+        );
+
+        // Without translator entries or moos_var: only the plain interface.
+        let plain = settings("moos {}");
+        assert_eq!(
+            publications(&plain, &received(command())),
+            [("ACOMMS_RECEIVED".to_string(), s(text))]
+        );
+        assert_eq!(
+            publications(&plain, &acked),
+            [("ACOMMS_ACK".to_string(), s(text))]
+        );
+    }
+
     #[test]
     fn bad_values_say_what_is_wrong() {
         let codec = codec();
