@@ -361,11 +361,7 @@ pub fn parse(
                 }
                 continue;
             }
-            if after.starts_with('%') {
-                fmt = &after[1..];
-            } else {
-                fmt = after;
-            }
+            fmt = after.strip_prefix('%').unwrap_or(after);
         } else {
             fmt = &fmt[c.len_utf8()..];
         }

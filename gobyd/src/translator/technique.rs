@@ -2,9 +2,9 @@
 //! form, and the protobuf encoding as bytes or hexadecimal, each with or
 //! without the prefix.
 //!
-//! A prefixed value is `@PB[` + the message's full name + `] ` (one space)
-//! + the unprefixed form. Parsing accepts a value without the prefix as the
-//! unprefixed form, and refuses a prefix naming another type.
+//! A prefixed value is `@PB[`, the message's full name, `] ` (one space)
+//! and the unprefixed form. Parsing accepts a value without the prefix as
+//! the unprefixed form, and refuses a prefix naming another type.
 
 use moos::Value as MoosValue;
 use prost::Message as _;
