@@ -259,7 +259,7 @@ async fn connect(settings: &BridgeSettings) -> Option<(MoosClient, moos::MailRec
             Err(e) => {
                 if wait > warned_at {
                     tracing::warn!(
-                        "MOOS: cannot connect to {}:{port} ({e}); trying again every {} s",
+                        "MOOS: cannot connect to {}:{port} ({e}); trying again in {} s (waiting longer each time, up to 30 s)",
                         config.server(),
                         wait.as_secs()
                     );
