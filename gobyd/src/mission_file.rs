@@ -98,14 +98,14 @@ impl MissionFile {
                     let cleaned = hash_comments(lines[j]);
                     let mut quote: Option<char> = None;
                     let mut kept = String::new();
-                    for c in cleaned.chars() {
+                    for (at, c) in cleaned.char_indices() {
                         let mut keep = started;
                         match quote {
                             Some(q) if c == q => quote = None,
                             Some(_) => {}
                             None if c == '#' => {
                                 // The rest of the line is a comment.
-                                kept.push_str(&cleaned[cleaned.find('#').unwrap_or(0)..]);
+                                kept.push_str(&cleaned[at..]);
                                 break;
                             }
                             None if c == '"' || c == '\'' => quote = Some(c),
@@ -254,7 +254,7 @@ ProcessConfig = gobyd   // the acoustic link
     protobuf_name: "goby.moos.example.NodeReport"
     trigger { type: TRIGGER_PUBLISH moos_var: "NODE_REPORT_LOCAL" }
     create { technique: TECHNIQUE_COMMA_SEPARATED_KEY_EQUALS_VALUE_PAIRS moos_var: "NODE_REPORT_LOCAL" }
-    publish { technique: TECHNIQUE_FORMAT moos_var: "NODE_REPORT" format: "NAME=%1%,URL=http://x{y}" }
+    publish { technique: TECHNIQUE_FORMAT moos_var: "NODE_REPORT" format: "NAME=%1%,URL=http://x{y}#z" } # {
   }
 }
 "#;
@@ -277,7 +277,7 @@ ProcessConfig = gobyd   // the acoustic link
         // "//" inside a string is kept; braces inside strings do not count.
         assert_eq!(
             config.translator_entry[0].publish[0].format(),
-            "NAME=%1%,URL=http://x{y}"
+            "NAME=%1%,URL=http://x{y}#z"
         );
     }
 

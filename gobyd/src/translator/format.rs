@@ -63,6 +63,10 @@ pub fn run_publish_algorithms(
     Ok(outputs)
 }
 
+/// Indexes of repeated fields in a format stay below this (reading fills a
+/// repeated field up to the index).
+const MAX_INDEX: usize = 10_000;
+
 /// A `%...%` reference: each step a field number with an optional index.
 fn parse_spec(spec: &str) -> Result<Vec<(u32, Option<usize>)>, String> {
     spec.split(':')
@@ -75,9 +79,12 @@ fn parse_spec(spec: &str) -> Result<Vec<(u32, Option<usize>)>, String> {
                 .parse::<u32>()
                 .map_err(|_| format!("%{spec}%: {field:?} is not a field number"))?;
             let index = index
-                .map(|i| {
-                    i.parse::<usize>()
-                        .map_err(|_| format!("%{spec}%: {i:?} is not an index"))
+                .map(|i| match i.parse::<usize>() {
+                    Ok(i) if i < MAX_INDEX => Ok(i),
+                    _ => Err(format!(
+                        "%{spec}%: {i:?} is not an index (0 to {})",
+                        MAX_INDEX - 1
+                    )),
                 })
                 .transpose()?;
             Ok((field, index))

@@ -429,6 +429,18 @@ fn untranslatable_values_say_variable_value_and_reason() {
     }
     let t = translator(&[entry(
         vec![create(
+            Technique::TechniqueFormat,
+            "BIG",
+            Some("%10.99999999%"),
+        )],
+        vec![],
+    )]);
+    let values: HashMap<String, MoosValue> =
+        [("BIG".to_string(), MoosValue::String("1".into()))].into();
+    let err = t.create("test.Report", &values).unwrap_err();
+    assert!(err.reason.contains("is not an index"), "{err}");
+    let t = translator(&[entry(
+        vec![create(
             Technique::TechniqueCommaSeparatedKeyEqualsValuePairs,
             "KV",
             None,
