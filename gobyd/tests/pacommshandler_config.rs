@@ -207,3 +207,78 @@ fn gobyd_checks_a_mission_file_as_moos_file_or_as_pantler_passes_it() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A TRIGGER_TIME entry makes its message every period from the latest
+/// value of its create variable; the message, addressed to this node, comes
+/// back and is written through the entry's publish format.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_timed_trigger_makes_messages_from_the_latest_values() {
+    let db = moos::testing::MiniDb::start("127.0.0.1:0", "timed")
+        .await
+        .unwrap();
+    let dir = std::env::temp_dir().join(format!("gobyd-pacomms-timed-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let text = format!(
+        r#"
+modem_id: 1
+driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{ node {{ modem_id: 1 }} channel: "timed-trigger" }}
+}}
+mac {{ type: MAC_NONE }}
+queue {{ message_entry {{ protobuf_name: "goby.example.Command" ack: false role {{ type: DESTINATION_ID field: "destination" }} }} }}
+json {{ tcp_bind: "" }}
+moos {{ server: "127.0.0.1" port: {port} }}
+data_dir: "{dir}"
+log {{ raw_log: false }}
+translator_entry {{
+  protobuf_name: "goby.example.Command"
+  trigger {{ type: TRIGGER_TIME period: 1 }}
+  create {{ technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "COMMAND_OUT" }}
+  publish {{ technique: TECHNIQUE_FORMAT moos_var: "COMMAND_IN" format: "ACTION=%2%,NOTE=%4%" }}
+}}
+"#,
+        port = db.port(),
+        dir = dir.display()
+    );
+    let daemon = gobyd::runtime::Daemon::start(config::parse(&text, "test").unwrap())
+        .await
+        .unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let running = tokio::spawn(daemon.run(async {
+        let _ = stopped.await;
+    }));
+    let (client, mut mail) = moos::MoosClient::connect(
+        moos::ClientConfig::new("helm").with_address("127.0.0.1", db.port()),
+    )
+    .await
+    .unwrap();
+    client
+        .register("COMMAND_IN", std::time::Duration::ZERO)
+        .unwrap();
+    let got = tokio::time::timeout(std::time::Duration::from_secs(30), async {
+        let mut write = tokio::time::interval(std::time::Duration::from_millis(500));
+        loop {
+            tokio::select! {
+                _ = write.tick() => {
+                    let _ = client.notify_string(
+                        "COMMAND_OUT",
+                        "@PB[goby.example.Command] destination: 1 action: SURFACE note: \"timed\"",
+                    );
+                }
+                m = mail.recv() => {
+                    let m = m.expect("mail");
+                    if let Value::String(s) = m.value { return s; }
+                }
+            }
+        }
+    })
+    .await
+    .expect("COMMAND_IN within 30 s");
+    assert_eq!(got, "ACTION=SURFACE,NOTE=timed");
+    client.close().await;
+    let _ = stop.send(());
+    running.await.unwrap().unwrap();
+    db.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
