@@ -34,6 +34,18 @@ pub struct GobydCli {
     /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<std::path::PathBuf>,
+    /// MOOS mission file: the configuration is its `ProcessConfig = gobyd`
+    /// block, with ServerHost, ServerPort, LatOrigin and LongOrigin.
+    #[arg(long, value_name = "FILE", conflicts_with = "config")]
+    pub moos_file: Option<std::path::PathBuf>,
+    /// Mission file and process name as pAntler passes them
+    /// (`gobyd mission.moos [name]`): the same as --moos-file, reading the
+    /// block `ProcessConfig = name`.
+    #[arg(value_name = "MISSION", conflicts_with_all = ["config", "moos_file"])]
+    pub mission: Option<std::path::PathBuf>,
+    /// Process name in the mission file (with MISSION).
+    #[arg(value_name = "NAME", requires = "mission")]
+    pub process_name: Option<String>,
     /// Print a commented working configuration and exit.
     #[arg(long)]
     pub example_config: bool,
@@ -56,9 +68,13 @@ pub struct GobydCli {
 
 /// The configuration named by the command line, with its overrides applied.
 fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
-    let mut config = match &cli.config {
-        Some(path) => config::load(path)?,
-        None => GobydConfig::default(),
+    let mission = cli.moos_file.as_ref().or(cli.mission.as_ref());
+    let mut config = match (&cli.config, mission) {
+        (Some(path), _) => config::load(path)?,
+        (None, Some(path)) => {
+            crate::mission_file::load(path, cli.process_name.as_deref().unwrap_or("gobyd"))?
+        }
+        (None, None) => GobydConfig::default(),
     };
     if let Some(id) = cli.modem_id {
         config.modem_id = Some(id);

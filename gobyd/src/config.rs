@@ -400,6 +400,19 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             );
         }
     }
+    // Built-in types a translator entry names (goby.moos.example.NodeReport).
+    for entry in &config.translator_entry {
+        if loaded.contains(&entry.protobuf_name) {
+            continue;
+        }
+        if let Some(desc) = pool.get_message_by_name(&entry.protobuf_name) {
+            loaded.extend(
+                codec
+                    .load_file_messages(pool, desc.parent_file().name())
+                    .map_err(|e| ConfigError::Invalid(format!("{}: {e}", entry.protobuf_name)))?,
+            );
+        }
+    }
     loaded.sort();
     loaded.dedup();
     Ok(Definitions { codec, loaded })

@@ -19,9 +19,11 @@
 //! composes and runs the stack, [`door`] checks published values,
 //! [`outbox`] is the queue with its on-disk journal, [`data_dir`] holds the
 //! data directory (one daemon each, private files), [`json_protocol`] and
-//! [`json_server`] serve JSON clients,
-//! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
-//! and came from the modem, and [`command`] is the `gobyd` command line.
+//! [`json_server`] serve JSON clients, [`moos_bridge`] joins a MOOS
+//! community, [`mission_file`] reads the configuration from a MOOS mission
+//! file, [`translator`] turns MOOS variables into DCCL messages and back
+//! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
+//! came from the modem, and [`command`] is the `gobyd` command line.
 
 #![warn(missing_docs)]
 
@@ -31,7 +33,9 @@ pub mod data_dir;
 pub mod door;
 pub mod json_protocol;
 pub mod json_server;
+pub mod mission_file;
 pub mod moos_bridge;
 pub mod outbox;
 pub mod raw_log;
 pub mod runtime;
+pub mod translator;

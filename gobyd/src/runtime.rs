@@ -112,6 +112,7 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     let defs = config::load_definitions(&config)?;
     let mut queue_config = config.queue.clone().unwrap_or_default();
     config::default_entries(&mut queue_config, &defs.loaded);
+    crate::translator::from_config(&config, &defs.codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(Arc::new(defs.codec), &queue_config)?;
     MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
     Ok(defs.loaded)
@@ -244,9 +245,11 @@ impl Daemon {
             json_udp = socket.local_addr().ok();
             tasks.spawn(interface.serve_udp(socket));
         }
-        if let Some(moos) = config.moos.clone() {
+        if config.moos.is_some() {
+            let settings = super::moos_bridge::BridgeSettings::from_config(&config, &codec)
+                .map_err(config::ConfigError::Invalid)?;
             tasks.spawn(super::moos_bridge::run(
-                moos,
+                settings,
                 codec.clone(),
                 publish_tx.clone(),
                 events.subscribe(),
