@@ -525,7 +525,7 @@ async fn query_destination_is_filled_by_the_data_request() {
         (template.max_num_frames(), template.max_frame_bytes()),
         (1, 32)
     );
-    let got = data_received(&mut b.d2, Duration::from_secs(2)).await;
+    let got = data_received(&mut b.d2, LIMIT).await;
     assert_eq!(got.len(), 1);
     assert_eq!((got[0].src(), got[0].dest()), (1, 2));
     assert_eq!(got[0].frame, vec![frame]);
