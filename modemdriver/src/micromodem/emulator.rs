@@ -167,10 +167,14 @@ pub enum EmulatorControl {
     /// The modem restarts: the cycle in progress is forgotten and
     /// `$CAREV,…,INIT,…` is sent.
     Reset,
-    /// The modem reads nothing and says nothing for this long.
+    /// The modem hangs for this long: it reads nothing, says nothing (what
+    /// it had to say meanwhile is lost) and decodes nothing from the water
+    /// (so acknowledges nothing); a packet already on the water goes on.
     Silence(Duration),
-    /// The serial device vanishes for this long, then returns (a new
-    /// pseudo-terminal; the symbolic link follows it).
+    /// The modem is unplugged for this long: its serial device vanishes,
+    /// the packet on the water is cut, nothing is heard or acknowledged;
+    /// then it returns (a new pseudo-terminal, the symbolic link follows
+    /// it) and starts up (`$CAREV,…,INIT`).
     Disconnect(Duration),
     /// The modem resets in the middle of each of its next this many data
     /// packets (the packet is aborted).
@@ -418,6 +422,12 @@ impl Modem {
             });
         }
         self.revision("INIT");
+    }
+
+    /// The modem loses power: everything under way stops.
+    fn power_off(&mut self) {
+        self.reset();
+        self.out.clear();
     }
 
     fn log_air(&self, time: AirTime) {
@@ -932,7 +942,9 @@ async fn run(
         }
         // Write what the modem has to say, unless it is silent or unplugged.
         let silent = silent_until.is_some_and(|t| t > Instant::now());
-        if !silent {
+        if silent {
+            modem.out.clear();
+        } else {
             silent_until = None;
             if let Some(d) = &mut device {
                 for sentence in std::mem::take(&mut modem.out) {
@@ -982,7 +994,12 @@ async fn run(
                     tokio::time::sleep(Duration::from_millis(20)).await;
                 }
             },
-            Some(event) = next_backend_event(&mut backend) => modem.backend_event(event),
+            Some(event) = next_backend_event(&mut backend) => {
+                let away = device.is_none() || silent_until.is_some_and(|t| t > Instant::now());
+                if !(away && matches!(event, DriverEvent::Received(_))) {
+                    modem.backend_event(event);
+                }
+            }
             c = control.recv() => match c {
                 Some(EmulatorControl::Reset) => modem.reset(),
                 Some(EmulatorControl::Silence(d)) => silent_until = Some(Instant::now() + d),
@@ -996,6 +1013,7 @@ async fn run(
                     device = None;
                     path.send_replace(None);
                     back_at = Some(Instant::now() + d);
+                    modem.power_off();
                 }
                 Some(EmulatorControl::Stop) | None => {
                     if let EmulatorPort::Pty { link: Some(link) } = &port {
@@ -1019,6 +1037,7 @@ async fn run(
                         Ok(d) => {
                             device = Some(d);
                             back_at = None;
+                            modem.revision("INIT");
                         }
                         Err(_) => back_at = Some(now + Duration::from_millis(200)),
                     }
