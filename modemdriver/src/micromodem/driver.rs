@@ -2,11 +2,21 @@
 //!
 //! On start (and after a modem reset or a reconnection) the driver sets the
 //! modem's id and the configured NVRAM values (`$CCCFG`) and its clock
-//! (`$CCCLK`). A data transmission is a cycle: `$CCCYC` (echoed `$CACYC`),
-//! then for each `$CADRQ` the driver answers `$CCTXD` with a frame obtained
-//! from the layer above by one data request, and `$CATXF` ends it.
-//! Received `$CACYC` + `$CARXD` become a received `DATA` transmission;
-//! `$CAACK` an `ACK` one.
+//! (`$CCCLK`). A data transmission is a cycle: the frames are obtained from
+//! the layer above by one data request first (with none, and without
+//! `always_initiate`, nothing is sent), then `$CCCYC` (echoed `$CACYC`), a
+//! `$CCTXD` for each `$CADRQ`, and `$CATXF` ends it. Received `$CACYC` +
+//! `$CARXD` become a received `DATA` transmission; `$CAACK` an `ACK` one,
+//! carrying the `unique_id` of the transmission it answers: the last one
+//! whose `$CATXF` was seen, when the ack comes from its destination, to this
+//! modem, for one of its frames, within `receive_timeout_ms` (else none, and
+//! the layer above credits nothing).
+//!
+//! Slots: a transmission carrying its slot (`time`, `slot_seconds`, see
+//! [`crate::slot`]) is started, or attempted again after a fault, only while
+//! the packet fits before the slot ends; at most
+//! [`MAX_PENDING_TRANSMISSIONS`] wait while the modem is busy or away, older
+//! ones are dropped ([`DriverStatus::Skipped`]).
 //!
 //! Micro-Modem specifics go through
 //! [`Driver::initiate_specific`](crate::Driver::initiate_specific) with a
