@@ -1,6 +1,9 @@
 //! `goby dccl ...`: encode, decode, analyze and benchmark DCCL messages
-//! defined in `.proto` files.
+//! defined in `.proto` files, with subcommands (`goby dccl encode ...`) or
+//! with the flags of the reference `dccl` tool (`goby dccl -e ...`, see
+//! [`crate::dccl_tool`]).
 
+use std::collections::BTreeSet;
 use std::fs;
 use std::hint::black_box;
 use std::io::{BufRead, Write};
@@ -12,21 +15,42 @@ use base64::engine::DecodePaddingMode;
 use base64::Engine;
 use clap::{Args, Subcommand, ValueEnum};
 use dccl::Codec;
-use prost_reflect::{DescriptorPool, DynamicMessage, MessageDescriptor, SerializeOptions};
+use prost_reflect::{
+    DescriptorPool, DynamicMessage, MessageDescriptor, ReflectMessage, SerializeOptions,
+};
 
-use crate::lines::{for_each_line, LineError};
+use crate::byte_text;
+use crate::dccl_tool::ToolArgs;
+use crate::frame_decoder::{FrameDecoder, FrameError};
+use crate::lines::{for_each_line, warn, LineError};
+use crate::passphrase::PassphraseArgs;
 use crate::{CliError, Status};
+
+/// `goby dccl`: a subcommand, or the reference `dccl` tool's flags
+/// (`-e`, `-d`, `-a`, `-p` with `-f`, `-I`, `-m`, `--format`, `-o`, `-H`).
+#[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct DcclCli {
+    /// The subcommand, when one is given.
+    #[command(subcommand)]
+    pub command: Option<DcclCommand>,
+    /// The reference tool's flags, when no subcommand is given.
+    #[command(flatten)]
+    pub tool: ToolArgs,
+}
 
 /// Subcommands of `goby dccl`.
 #[derive(Debug, Subcommand)]
 pub enum DcclCommand {
     /// Encode messages read from standard input, one per line (protobuf text
-    /// format or proto3 JSON); write one encoded message per line (or raw
-    /// bytes with `--format bin`).
+    /// format or proto3 JSON; a line may start with `|full.Name|` to give its
+    /// type); write one encoded message per line (or raw bytes with
+    /// `--format bin`).
     Encode(EncodeArgs),
-    /// Decode messages read from standard input, one per line (or raw bytes,
-    /// possibly several messages back to back, with `--format bin`); each
-    /// message's type is found by its DCCL id among the messages of the file.
+    /// Decode messages read from standard input, one or more per line (or raw
+    /// bytes, messages back to back, with `--format bin`); each message's type
+    /// is found by its DCCL id among the messages of the files, or given
+    /// with `-m`.
     Decode(DecodeArgs),
     /// Print the size in bits of each field of a message type.
     Analyze(AnalyzeArgs),
@@ -37,12 +61,24 @@ pub enum DcclCommand {
 /// Where the message definitions come from.
 #[derive(Debug, Args)]
 pub struct ProtoArgs {
-    /// The `.proto` file that defines the messages. Its own directory is
-    /// searched for imports; `dccl/option_extensions.proto` is built in.
-    #[arg(short = 'f', long = "file", value_name = "FILE.proto")]
-    pub file: PathBuf,
+    /// A `.proto` file that defines the messages (may be repeated). Its own
+    /// directory is searched for imports; `dccl/option_extensions.proto` is
+    /// built in.
+    #[arg(
+        short = 'f',
+        long = "file",
+        visible_alias = "proto_file",
+        value_name = "FILE.proto",
+        required = true
+    )]
+    pub file: Vec<PathBuf>,
     /// A further directory to search for imports (may be repeated).
-    #[arg(short = 'I', long = "include", value_name = "DIR")]
+    #[arg(
+        short = 'I',
+        long = "include",
+        visible_alias = "proto_path",
+        value_name = "DIR"
+    )]
     pub include: Vec<PathBuf>,
     /// Models of the arithmetic codec (`dccl.arithmetic`): one
     /// `dccl.arith.protobuf.ArithmeticModel` per line in protobuf text format.
@@ -71,10 +107,14 @@ pub enum OutputForm {
 /// How encoded messages are written (by `encode`) or read (by `decode`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ByteFormat {
-    /// Lower-case hexadecimal, one message per line.
+    /// Lower-case hexadecimal, one line per message (on input, a line may
+    /// hold several messages back to back).
     Hex,
-    /// Standard base64, one message per line.
+    /// Standard base64, one line per message (as for hex, a line may hold
+    /// several).
     Base64,
+    /// A protobuf text-format byte string (`"\004\006"`), one line per message.
+    Textformat,
     /// Raw bytes, messages back to back.
     Bin,
 }
@@ -94,9 +134,9 @@ pub struct EncodeArgs {
     /// Form of the encoded output.
     #[arg(long, value_enum, default_value_t = ByteFormat::Hex)]
     pub format: ByteFormat,
-    /// Encrypt message bodies with this passphrase (key = SHA-256 of it).
-    #[arg(long, value_name = "P")]
-    pub passphrase: Option<String>,
+    /// Passphrase for encryption.
+    #[command(flatten)]
+    pub passphrase: PassphraseArgs,
     /// Refuse values out of their bounds instead of clamping or dropping them.
     #[arg(long)]
     pub strict: bool,
@@ -105,18 +145,22 @@ pub struct EncodeArgs {
 /// Arguments of `goby dccl decode`.
 #[derive(Debug, Args)]
 pub struct DecodeArgs {
-    /// Message definitions: every DCCL message of the file can be decoded.
+    /// Message definitions: every valid DCCL message of the files can be decoded.
     #[command(flatten)]
     pub proto: ProtoArgs,
+    /// Decode as this type (needed for `omit_id` types); may be repeated, and
+    /// then the types given are found by their ids.
+    #[arg(short = 'm', long = "message", value_name = "FULL.Name")]
+    pub message: Vec<String>,
     /// Form of the encoded input.
     #[arg(long, value_enum, default_value_t = ByteFormat::Hex)]
     pub format: ByteFormat,
     /// Form of the decoded output.
     #[arg(long = "out", value_enum, default_value_t = OutputForm::Text)]
     pub output: OutputForm,
-    /// Decrypt message bodies with this passphrase (key = SHA-256 of it).
-    #[arg(long, value_name = "P")]
-    pub passphrase: Option<String>,
+    /// Passphrase for decryption.
+    #[command(flatten)]
+    pub passphrase: PassphraseArgs,
 }
 
 /// Arguments of `goby dccl analyze`.
@@ -128,6 +172,9 @@ pub struct AnalyzeArgs {
     /// Full name of the message type to analyze.
     #[arg(short = 'm', long = "message", value_name = "FULL.Name")]
     pub message: String,
+    /// Print only the definition hash.
+    #[arg(short = 'H', long = "hash-only", visible_alias = "hash_only")]
+    pub hash_only: bool,
 }
 
 /// Arguments of `goby dccl bench`.
@@ -145,46 +192,93 @@ pub struct BenchArgs {
     /// Form of the input messages.
     #[arg(long = "in", value_enum, default_value_t = InputForm::Text)]
     pub input: InputForm,
-    /// Encrypt message bodies with this passphrase (key = SHA-256 of it).
-    #[arg(long, value_name = "P")]
-    pub passphrase: Option<String>,
+    /// Passphrase for encryption.
+    #[command(flatten)]
+    pub passphrase: PassphraseArgs,
+}
+
+/// Runs `goby dccl ...`.
+pub fn run(
+    cli: &DcclCli,
+    stdin: &mut dyn BufRead,
+    stdout: &mut dyn Write,
+    stderr: &mut dyn Write,
+) -> Result<Status, CliError> {
+    match &cli.command {
+        Some(cmd) => run_command(cmd, stdin, stdout, stderr),
+        None => crate::dccl_tool::run(&cli.tool, stdin, stdout, stderr),
+    }
 }
 
 /// Runs a `goby dccl` subcommand.
-pub fn run(
+pub fn run_command(
     cmd: &DcclCommand,
     stdin: &mut dyn BufRead,
     stdout: &mut dyn Write,
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
     match cmd {
-        DcclCommand::Encode(args) => encode(args, stdin, stdout, stderr),
-        DcclCommand::Decode(args) => decode(args, stdin, stdout, stderr),
-        DcclCommand::Analyze(args) => analyze(args, stdout),
+        DcclCommand::Encode(args) => {
+            let defs = Definitions::compile(&args.proto)?;
+            let job = EncodeJob {
+                message: Some(args.message.clone()),
+                input: args.input,
+                format: args.format,
+                passphrase: args.passphrase.resolve()?,
+                strict: args.strict,
+            };
+            encode(&defs, &job, stdin, stdout, stderr)
+        }
+        DcclCommand::Decode(args) => {
+            let defs = Definitions::compile(&args.proto)?;
+            let job = DecodeJob {
+                messages: args.message.clone(),
+                format: args.format,
+                output: args.output,
+                prefix: false,
+                passphrase: args.passphrase.resolve()?,
+            };
+            decode(&defs, &job, stdin, stdout, stderr)
+        }
+        DcclCommand::Analyze(args) => {
+            let defs = Definitions::compile(&args.proto)?;
+            analyze(
+                &defs,
+                std::slice::from_ref(&args.message),
+                args.hash_only,
+                stdout,
+                stderr,
+            )
+        }
         DcclCommand::Bench(args) => bench(args, stdin, stdout, stderr),
     }
 }
 
-/// A compiled `.proto` file.
-struct Definitions {
+/// Compiled `.proto` files.
+pub(crate) struct Definitions {
     pool: DescriptorPool,
-    /// Name of the `-f` file inside the pool (relative to its include directory).
-    file_name: String,
-    /// The `-f` path as given, for messages.
+    /// Names of the `-f` files inside the pool (relative to their include
+    /// directory), in the order given.
+    file_names: Vec<String>,
+    /// The `-f` paths as given, for messages.
     shown: String,
     /// Text of the `--arithmetic-models` file.
     arithmetic_models: Option<String>,
 }
 
 impl Definitions {
-    /// Compiles the `-f` file.
-    fn compile(args: &ProtoArgs) -> Result<Self, CliError> {
-        let shown = args.file.display().to_string();
-        if !args.file.exists() {
-            return Err(CliError::setup(format!("{shown}: no such file")));
-        }
-        if !args.file.is_file() {
-            return Err(CliError::setup(format!("{shown}: not a file")));
+    /// Compiles the `-f` files.
+    pub(crate) fn compile(args: &ProtoArgs) -> Result<Self, CliError> {
+        let mut shown = Vec::new();
+        for file in &args.file {
+            let name = file.display().to_string();
+            if !file.exists() {
+                return Err(CliError::setup(format!("{name}: no such file")));
+            }
+            if !file.is_file() {
+                return Err(CliError::setup(format!("{name}: not a file")));
+            }
+            shown.push(name);
         }
         for dir in &args.include {
             if !dir.is_dir() {
@@ -194,14 +288,17 @@ impl Definitions {
                 )));
             }
         }
-        let pool = dccl::compile_protos(std::slice::from_ref(&args.file), args.include.as_slice())
+        let pool = dccl::compile_protos(args.file.as_slice(), args.include.as_slice())
             .map_err(|e| CliError::setup(e.to_string()))?;
-        let file_name =
-            dccl::pool_file_name(&pool, &args.file, &args.include).ok_or_else(|| {
+        let mut file_names = Vec::new();
+        for (file, name) in args.file.iter().zip(&shown) {
+            let in_pool = dccl::pool_file_name(&pool, file, &args.include).ok_or_else(|| {
                 CliError::setup(format!(
-                    "{shown}: compiled, but not found among the compiled files"
+                    "{name}: compiled, but not found among the compiled files"
                 ))
             })?;
+            file_names.push(in_pool);
+        }
         let arithmetic_models = match &args.arithmetic_models {
             None => None,
             Some(path) => {
@@ -217,14 +314,18 @@ impl Definitions {
         };
         Ok(Definitions {
             pool,
-            file_name,
-            shown,
+            file_names,
+            shown: shown.join(", "),
             arithmetic_models,
         })
     }
 
     /// A codec with the `--arithmetic-models` registered.
-    fn new_codec(&self, passphrase: Option<&str>, strict: bool) -> Result<Codec, CliError> {
+    pub(crate) fn new_codec(
+        &self,
+        passphrase: Option<&str>,
+        strict: bool,
+    ) -> Result<Codec, CliError> {
         let mut codec = new_codec(passphrase, strict);
         if let Some(text) = &self.arithmetic_models {
             codec
@@ -234,22 +335,44 @@ impl Definitions {
         Ok(codec)
     }
 
-    /// Descriptor of the message type `name`.
-    fn message(&self, name: &str) -> Result<MessageDescriptor, CliError> {
-        self.pool.get_message_by_name(name).ok_or_else(|| {
-            let mut known = Vec::new();
-            if let Some(file) = self.pool.get_file_by_name(&self.file_name) {
+    /// Every message of the `-f` files, nested ones included, in declaration order.
+    fn all_messages(&self) -> Vec<MessageDescriptor> {
+        let mut out = Vec::new();
+        for name in &self.file_names {
+            if let Some(file) = self.pool.get_file_by_name(name) {
                 let mut stack: Vec<MessageDescriptor> = file.messages().collect();
+                stack.reverse();
                 while let Some(m) = stack.pop() {
-                    stack.extend(m.child_messages());
-                    known.push(m.full_name().to_string());
+                    let mut children: Vec<MessageDescriptor> = m.child_messages().collect();
+                    children.reverse();
+                    stack.extend(children);
+                    out.push(m);
                 }
             }
+        }
+        out
+    }
+
+    /// The first top-level message of the first `-f` file.
+    pub(crate) fn first_message(&self) -> Option<MessageDescriptor> {
+        let file = self.pool.get_file_by_name(self.file_names.first()?)?;
+        let first = file.messages().next();
+        first
+    }
+
+    /// Descriptor of the message type `name`.
+    pub(crate) fn message(&self, name: &str) -> Result<MessageDescriptor, CliError> {
+        self.pool.get_message_by_name(name).ok_or_else(|| {
+            let mut known: Vec<String> = self
+                .all_messages()
+                .iter()
+                .map(|m| m.full_name().to_string())
+                .collect();
             known.sort();
             let hint = if known.is_empty() {
-                String::from("it defines no message")
+                String::from("they define no message")
             } else {
-                format!("it defines: {}", known.join(", "))
+                format!("they define: {}", known.join(", "))
             };
             CliError::setup(format!(
                 "message type {name} is not defined in {} ({hint})",
@@ -258,19 +381,65 @@ impl Definitions {
         })
     }
 
-    /// A codec with the message type `name` loaded.
-    fn codec_for(
+    /// Loads the types `names` into `codec`; each must be valid.
+    pub(crate) fn load_named(&self, codec: &mut Codec, names: &[String]) -> Result<(), CliError> {
+        for name in names {
+            let desc = self.message(name)?;
+            codec
+                .load(&desc)
+                .map_err(|e| CliError::setup(format!("cannot load {name}: {e}")))?;
+        }
+        Ok(())
+    }
+
+    /// Loads every valid DCCL message of the files into `codec`, one type at
+    /// a time (as the reference tool does: each top-level message and each
+    /// nested one with a `(dccl.msg)` option); each type with a `(dccl.msg)`
+    /// option that cannot be loaded is named on `stderr` with the reason and
+    /// skipped (top-level messages without one are helpers, skipped quietly).
+    /// Returns the names loaded, sorted. None is an error.
+    pub(crate) fn load_valid(
         &self,
-        name: &str,
-        passphrase: Option<&str>,
-        strict: bool,
-    ) -> Result<(Codec, MessageDescriptor), CliError> {
-        let desc = self.message(name)?;
-        let mut codec = self.new_codec(passphrase, strict)?;
-        codec
-            .load(&desc)
-            .map_err(|e| CliError::setup(format!("cannot load {name}: {e}")))?;
-        Ok((codec, desc))
+        codec: &mut Codec,
+        stderr: &mut dyn Write,
+    ) -> Result<Vec<String>, CliError> {
+        let mut names = Vec::new();
+        let mut meant_for_dccl = 0usize;
+        for file in &self.file_names {
+            let report = codec
+                .load_valid_messages(&self.pool, file)
+                .map_err(|e| CliError::setup(e.to_string()))?;
+            meant_for_dccl += report.loaded.len();
+            names.extend(report.loaded);
+            for skipped in report.skipped {
+                let has_options = self
+                    .pool
+                    .get_message_by_name(&skipped.name)
+                    .is_some_and(|d| dccl::options::has_message_options(&d));
+                if has_options {
+                    meant_for_dccl += 1;
+                    writeln!(
+                        stderr,
+                        "goby: warning: skipped {}, not a valid DCCL message: {}",
+                        skipped.name, skipped.error
+                    )?;
+                }
+            }
+        }
+        if meant_for_dccl == 0 {
+            return Err(CliError::setup(format!(
+                "{} defines no DCCL message (none has a (dccl.msg) option)",
+                self.shown
+            )));
+        }
+        if names.is_empty() {
+            return Err(CliError::setup(format!(
+                "{} defines no valid DCCL message",
+                self.shown
+            )));
+        }
+        names.sort();
+        Ok(names)
     }
 }
 
@@ -302,10 +471,18 @@ fn parse_message(
     }
 }
 
-/// Formats one decoded message on one line.
-fn format_message(msg: &DynamicMessage, form: OutputForm) -> Result<String, String> {
+/// Formats one decoded message on one line; `prefix` puts `|full.Name| `
+/// before the text form, as the reference tool prints it.
+fn format_message(msg: &DynamicMessage, form: OutputForm, prefix: bool) -> Result<String, String> {
     match form {
-        OutputForm::Text => Ok(dccl::text_format::short_debug_string(msg)),
+        OutputForm::Text => {
+            let text = dccl::text_format::short_debug_string(msg);
+            if prefix {
+                Ok(format!("|{}| {text}", msg.descriptor().full_name()))
+            } else {
+                Ok(text)
+            }
+        }
         OutputForm::Json => {
             let mut buf = Vec::new();
             let mut ser = serde_json::Serializer::new(&mut buf);
@@ -319,6 +496,10 @@ fn format_message(msg: &DynamicMessage, form: OutputForm) -> Result<String, Stri
     }
 }
 
+/// Length of a full line of base64 as libb64 (the reference tool's base64
+/// library) wraps its output.
+const BASE64_WRAP: usize = 72;
+
 fn base64_engine() -> GeneralPurpose {
     GeneralPurpose::new(
         &base64::alphabet::STANDARD,
@@ -326,24 +507,79 @@ fn base64_engine() -> GeneralPurpose {
     )
 }
 
-/// `goby dccl encode`.
-fn encode(
-    args: &EncodeArgs,
+/// What `encode` does, however it was asked for.
+pub(crate) struct EncodeJob {
+    /// Type of the lines that do not start with `|full.Name|`.
+    pub message: Option<String>,
+    /// Form of the input lines.
+    pub input: InputForm,
+    /// Form of the output.
+    pub format: ByteFormat,
+    /// Passphrase for encryption.
+    pub passphrase: Option<String>,
+    /// Refuse the values the codec would change.
+    pub strict: bool,
+}
+
+/// Splits a leading `|full.Name|` (the reference tool's way of giving the
+/// type on the line) from the message text.
+fn split_type_prefix(line: &str) -> Result<(Option<&str>, &str), String> {
+    match line.strip_prefix('|') {
+        None => Ok((None, line)),
+        Some(rest) => match rest.split_once('|') {
+            Some((name, text)) => Ok((Some(name.trim()), text.trim())),
+            None => Err("a line starting with '|' must name its type as |full.Name|".into()),
+        },
+    }
+}
+
+/// `goby dccl encode` / `goby dccl -e`.
+pub(crate) fn encode(
+    defs: &Definitions,
+    job: &EncodeJob,
     stdin: &mut dyn BufRead,
     stdout: &mut dyn Write,
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
-    let defs = Definitions::compile(&args.proto)?;
-    let (codec, desc) = defs.codec_for(&args.message, args.passphrase.as_deref(), args.strict)?;
+    let mut codec = defs.new_codec(job.passphrase.as_deref(), job.strict)?;
+    if let Some(name) = &job.message {
+        defs.load_named(&mut codec, std::slice::from_ref(name))?;
+    }
     let engine = base64_engine();
-    let bad = for_each_line(stdin, stderr, |_, line| {
-        let msg = parse_message(&desc, args.input, line).map_err(LineError::Bad)?;
-        let bytes = codec
-            .encode(&msg)
+    let bad = for_each_line(stdin, stderr, |number, line, stderr| {
+        let (named, text) = split_type_prefix(line).map_err(LineError::Bad)?;
+        let name = match named.or(job.message.as_deref()) {
+            Some(name) => name,
+            None => {
+                return Err(LineError::Bad(
+                    "no message type: give -m NAME or start the line with |full.Name|".into(),
+                ))
+            }
+        };
+        let desc = match codec.descriptor(name) {
+            Some(desc) => desc,
+            None => {
+                let desc = defs
+                    .message(name)
+                    .map_err(|e| LineError::Bad(e.to_string()))?;
+                codec
+                    .load(&desc)
+                    .map_err(|e| LineError::Bad(format!("cannot load {name}: {e}")))?;
+                desc
+            }
+        };
+        let msg = parse_message(&desc, job.input, text).map_err(LineError::Bad)?;
+        let (bytes, changes) = codec
+            .encode_with_changes(&msg)
             .map_err(|e| LineError::Bad(e.to_string()))?;
-        match args.format {
+        for change in &changes {
+            let warning = format!("{}.{}: {}", change.message, change.field, change.reason);
+            warn(stderr, number, &warning)?;
+        }
+        match job.format {
             ByteFormat::Hex => writeln!(stdout, "{}", hex::encode(&bytes))?,
             ByteFormat::Base64 => writeln!(stdout, "{}", engine.encode(&bytes))?,
+            ByteFormat::Textformat => writeln!(stdout, "{}", byte_text::escape(&bytes))?,
             ByteFormat::Bin => stdout.write_all(&bytes)?,
         }
         stdout.flush()?;
@@ -352,101 +588,156 @@ fn encode(
     Ok(Status::from_bad_count(bad))
 }
 
-/// `goby dccl decode`.
-fn decode(
-    args: &DecodeArgs,
+/// What `decode` does, however it was asked for.
+pub(crate) struct DecodeJob {
+    /// The types to decode (`-m`): none, every valid type of the files; one,
+    /// the bytes are decoded as that type; several, found by their ids.
+    pub messages: Vec<String>,
+    /// Form of the input.
+    pub format: ByteFormat,
+    /// Form of the output.
+    pub output: OutputForm,
+    /// Put `|full.Name| ` before each text line.
+    pub prefix: bool,
+    /// Passphrase for decryption.
+    pub passphrase: Option<String>,
+}
+
+/// `goby dccl decode` / `goby dccl -d`.
+pub(crate) fn decode(
+    defs: &Definitions,
+    job: &DecodeJob,
     stdin: &mut dyn BufRead,
     stdout: &mut dyn Write,
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
-    let defs = Definitions::compile(&args.proto)?;
-    let mut codec = defs.new_codec(args.passphrase.as_deref(), false)?;
-    let names = codec
-        .load_file_messages(&defs.pool, &defs.file_name)
-        .map_err(|e| CliError::setup(format!("cannot load the messages of {}: {e}", defs.shown)))?;
-    if names.is_empty() {
-        return Err(CliError::setup(format!(
-            "{} defines no DCCL message (none has a (dccl.msg) option)",
-            defs.shown
-        )));
+    let mut codec = defs.new_codec(job.passphrase.as_deref(), false)?;
+    if job.messages.is_empty() {
+        defs.load_valid(&mut codec, stderr)?;
+    } else {
+        defs.load_named(&mut codec, &job.messages)?;
     }
-    if args.format == ByteFormat::Bin {
-        return decode_stream(&codec, args.output, stdin, stdout, stderr);
+    let decoder = FrameDecoder {
+        codec: &codec,
+        as_type: match job.messages.as_slice() {
+            [one] => Some(one.as_str()),
+            _ => None,
+        },
+        encrypted: job.passphrase.is_some(),
+    };
+    let emit = |stdout: &mut dyn Write, msg: &DynamicMessage| -> Result<(), LineError> {
+        let text = format_message(msg, job.output, job.prefix).map_err(LineError::Bad)?;
+        writeln!(stdout, "{text}")?;
+        Ok(())
+    };
+    if job.format == ByteFormat::Bin {
+        let mut bytes = Vec::new();
+        stdin.read_to_end(&mut bytes).map_err(CliError::Input)?;
+        return match decoder.decode(&bytes, |m| emit(stdout, m)) {
+            Ok(()) => Ok(Status::Ok),
+            Err(FrameError::Output(LineError::Fatal(e))) => Err(e),
+            Err(e) => {
+                writeln!(stderr, "{}", e.describe())?;
+                Ok(Status::BadInput(1))
+            }
+        };
     }
     let engine = base64_engine();
-    let bad = for_each_line(stdin, stderr, |_, line| {
-        let bytes = match args.format {
+    // The start of a message continued on the next line: (its line, its bytes).
+    let mut pending: Option<(usize, Vec<u8>)> = None;
+    let mut bad = for_each_line(stdin, stderr, |number, line, _| {
+        let decoded = match job.format {
             ByteFormat::Hex => {
                 hex::decode(line).map_err(|e| LineError::Bad(format!("not valid hex: {e}")))?
             }
-            _ => engine
+            ByteFormat::Base64 => engine
                 .decode(line)
                 .map_err(|e| LineError::Bad(format!("not valid base64: {e}")))?,
+            ByteFormat::Textformat | ByteFormat::Bin => byte_text::unescape(line)
+                .map_err(|e| LineError::Bad(format!("not a text-format byte string: {e}")))?,
         };
-        let msg = codec
-            .decode(&bytes)
-            .map_err(|e| LineError::Bad(e.to_string()))?;
-        let text = format_message(&msg, args.output).map_err(LineError::Bad)?;
-        writeln!(stdout, "{text}")?;
-        stdout.flush()?;
-        Ok(())
-    })?;
-    Ok(Status::from_bad_count(bad))
-}
-
-/// `goby dccl decode --format bin`: all of the input is one byte string
-/// holding one or more messages back to back.
-fn decode_stream(
-    codec: &Codec,
-    form: OutputForm,
-    stdin: &mut dyn BufRead,
-    stdout: &mut dyn Write,
-    stderr: &mut dyn Write,
-) -> Result<Status, CliError> {
-    let mut bytes = Vec::new();
-    stdin.read_to_end(&mut bytes).map_err(CliError::Input)?;
-    let mut offset = 0usize;
-    let mut bad = 0usize;
-    while offset < bytes.len() {
-        match codec.decode_prefix(&bytes[offset..]) {
-            Ok((msg, used)) => {
-                match format_message(&msg, form) {
-                    Ok(text) => writeln!(stdout, "{text}")?,
-                    Err(e) => {
-                        bad += 1;
-                        writeln!(stderr, "byte {offset}: {e}")?;
-                    }
-                }
-                if used == 0 {
-                    break;
-                }
-                offset += used;
+        let (first_line, bytes) = match pending.take() {
+            Some((first, mut bytes)) => {
+                bytes.extend_from_slice(&decoded);
+                (first, bytes)
             }
+            None => (number, decoded),
+        };
+        let result = decoder.decode(&bytes, |m| emit(stdout, m));
+        stdout.flush()?;
+        match result {
+            Ok(()) => Ok(()),
+            // A full line of wrapped base64 (as libb64 writes messages over 54
+            // bytes) that ends inside a message: the message goes on.
+            Err(FrameError::Bad {
+                offset, truncated, ..
+            }) if truncated && job.format == ByteFormat::Base64 && line.len() == BASE64_WRAP => {
+                pending = Some((first_line, bytes[offset..].to_vec()));
+                Ok(())
+            }
+            Err(FrameError::Output(e)) => Err(e),
             Err(e) => {
-                // Without a message length there is no way to find the next one.
-                bad += 1;
-                writeln!(
-                    stderr,
-                    "byte {offset}: {e} ({} byte(s) left undecoded)",
-                    bytes.len() - offset
-                )?;
-                break;
+                let continued = if first_line == number {
+                    String::new()
+                } else {
+                    format!(" (continued from line {first_line})")
+                };
+                Err(LineError::Bad(format!("{}{continued}", e.describe())))
             }
         }
+    })?;
+    if let Some((first_line, bytes)) = pending {
+        bad += 1;
+        writeln!(
+            stderr,
+            "line {first_line}: the input ends inside a message ({} byte(s) left undecoded)",
+            bytes.len()
+        )?;
     }
     Ok(Status::from_bad_count(bad))
 }
 
-/// `goby dccl analyze`.
-fn analyze(args: &AnalyzeArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    let defs = Definitions::compile(&args.proto)?;
-    let (codec, desc) = defs.codec_for(&args.message, None, false)?;
-    let report = codec
-        .analyze(desc.full_name())
-        .map_err(|e| CliError::setup(e.to_string()))?;
-    stdout.write_all(report.as_bytes())?;
-    if !report.ends_with('\n') {
-        writeln!(stdout)?;
+/// `goby dccl analyze` / `goby dccl -a`: the size report of each type, or
+/// with `hash_only` its definition hash (`name: hash` when there are several).
+pub(crate) fn analyze(
+    defs: &Definitions,
+    names: &[String],
+    hash_only: bool,
+    stdout: &mut dyn Write,
+    stderr: &mut dyn Write,
+) -> Result<Status, CliError> {
+    let mut codec = defs.new_codec(None, false)?;
+    let names: Vec<String> = if names.is_empty() {
+        defs.load_valid(&mut codec, stderr)?
+    } else {
+        defs.load_named(&mut codec, names)?;
+        names
+            .iter()
+            .cloned()
+            .collect::<BTreeSet<String>>()
+            .into_iter()
+            .collect()
+    };
+    for name in &names {
+        if hash_only {
+            let hash = codec
+                .hash(name)
+                .map_err(|e| CliError::setup(e.to_string()))?;
+            let hash = dccl::definition_hash::hash_as_string(hash);
+            if names.len() > 1 {
+                writeln!(stdout, "{name}: {hash}")?;
+            } else {
+                writeln!(stdout, "{hash}")?;
+            }
+        } else {
+            let report = codec
+                .analyze(name)
+                .map_err(|e| CliError::setup(e.to_string()))?;
+            stdout.write_all(report.as_bytes())?;
+            if !report.ends_with('\n') {
+                writeln!(stdout)?;
+            }
+        }
     }
     Ok(Status::Ok)
 }
@@ -459,11 +750,14 @@ fn bench(
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
     let defs = Definitions::compile(&args.proto)?;
-    let (codec, desc) = defs.codec_for(&args.message, args.passphrase.as_deref(), false)?;
+    let passphrase = args.passphrase.resolve()?;
+    let mut codec = defs.new_codec(passphrase.as_deref(), false)?;
+    defs.load_named(&mut codec, std::slice::from_ref(&args.message))?;
+    let desc = defs.message(&args.message)?;
 
     let mut messages = Vec::new();
     let mut encoded = Vec::new();
-    let bad = for_each_line(stdin, stderr, |_, line| {
+    let bad = for_each_line(stdin, stderr, |_, line, _| {
         let msg = parse_message(&desc, args.input, line).map_err(LineError::Bad)?;
         let bytes = codec
             .encode(&msg)

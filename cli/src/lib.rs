@@ -13,7 +13,9 @@
 //!   decoded, its type found by its DCCL id;
 //! - `goby dccl analyze -f FILE.proto -m NAME` prints the size of each field;
 //! - `goby dccl bench -f FILE.proto -m NAME --repeat N` times encoding and
-//!   decoding in-process.
+//!   decoding in-process;
+//! - `goby dccl -e|-d|-a|-p -f FILE.proto ...` takes the reference `dccl`
+//!   tool's flags and prints its output forms ([`dccl_tool`]).
 //!
 //! `goby queue simulate` scores the dynamic priority queue against two
 //! fixed-priority queues in the thesis' data marketplace and writes a table,
@@ -37,11 +39,16 @@
 #![warn(missing_docs)]
 
 pub mod amac_cmd;
+mod byte_text;
 pub mod dccl_cmd;
+pub mod dccl_tool;
+mod frame_decoder;
 mod lines;
 pub mod modem_cmd;
+pub mod passphrase;
 pub mod plot;
 pub mod position_cmd;
+mod proto_display;
 pub mod queue_cmd;
 
 use std::ffi::OsString;
@@ -76,9 +83,9 @@ pub struct GobyCli {
 /// Subcommands of `goby`.
 #[derive(Debug, Subcommand)]
 pub enum GobyCommand {
-    /// Encode, decode, analyze and benchmark DCCL messages.
-    #[command(subcommand)]
-    Dccl(dccl_cmd::DcclCommand),
+    /// Encode, decode, analyze and benchmark DCCL messages (subcommands, or
+    /// the reference `dccl` tool's flags: -e, -d, -a, -p).
+    Dccl(dccl_cmd::DcclCli),
     /// Run the medium access control's simulations.
     #[command(subcommand)]
     Amac(amac_cmd::AmacCommand),

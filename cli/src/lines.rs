@@ -19,14 +19,22 @@ impl From<io::Error> for LineError {
     }
 }
 
-/// Calls `handle(line_number, line)` on each non-blank line of `input`, with
-/// surrounding whitespace removed. Line numbers start at 1 and count blank
-/// lines too, so that they match the input. Each bad line is reported on
-/// `stderr` as `line N: <error>`; returns how many there were.
+/// Writes a warning about input line `number` on `stderr`, as
+/// `line N: warning: <message>`; warnings do not make the line bad.
+pub(crate) fn warn(stderr: &mut dyn Write, number: usize, message: &str) -> Result<(), LineError> {
+    writeln!(stderr, "line {number}: warning: {message}")?;
+    Ok(())
+}
+
+/// Calls `handle(line_number, line, stderr)` on each non-blank line of
+/// `input`, with surrounding whitespace removed (`stderr` is there for
+/// [`warn`]). Line numbers start at 1 and count blank lines too, so that they
+/// match the input. Each bad line is reported on `stderr` as
+/// `line N: <error>`; returns how many there were.
 pub(crate) fn for_each_line(
     input: &mut dyn BufRead,
     stderr: &mut dyn Write,
-    mut handle: impl FnMut(usize, &str) -> Result<(), LineError>,
+    mut handle: impl FnMut(usize, &str, &mut dyn Write) -> Result<(), LineError>,
 ) -> Result<usize, CliError> {
     let mut buf = Vec::new();
     let mut number = 0usize;
@@ -43,7 +51,7 @@ pub(crate) fn for_each_line(
                 if line.is_empty() {
                     continue;
                 }
-                handle(number, line)
+                handle(number, line, &mut *stderr)
             }
             Err(e) => Err(LineError::Bad(format!("not valid UTF-8: {e}"))),
         };

@@ -615,3 +615,43 @@ fn relative_proto_path_from_another_directory() {
     assert!(out.status.success(), "{}", stderr_text(&out));
     assert_eq!(lines(&stdout_text(&out)), vec![&*vs[0].hex, &*vs[1].hex]);
 }
+
+#[test]
+fn encode_warns_about_each_value_it_changes() {
+    let proto = vectors_proto();
+    let input = "depth: 7000 lat: 0 ok: true req_mode: IDLE name: \"abcdefghijk\" heading: nan\n\
+                 depth: 7 lat: 0 ok: true req_mode: IDLE\n";
+    for args in [
+        &["dccl", "encode", "-f", &proto, "-m", "vec.Basic"][..],
+        &[
+            "dccl",
+            "-e",
+            "--format",
+            "hex",
+            "-f",
+            &proto,
+            "-m",
+            "vec.Basic",
+        ][..],
+    ] {
+        let out = goby(args, input);
+        assert!(out.status.success(), "{args:?}: {}", stderr_text(&out));
+        assert_eq!(lines(&stdout_text(&out)).len(), 2, "both lines are encoded");
+        let err = stderr_text(&out);
+        let warnings: Vec<&str> = err.lines().collect();
+        assert_eq!(warnings.len(), 3, "{err}");
+        for (warning, field) in warnings.iter().zip(["depth", "heading", "name"]) {
+            assert!(
+                warning.starts_with(&format!("line 1: warning: vec.Basic.{field}: ")),
+                "{err}"
+            );
+        }
+        assert!(warnings[0].contains("6000"), "the bound is given: {err}");
+    }
+    // Values within their bounds: no warning.
+    let out = goby(
+        &["dccl", "encode", "-f", &proto, "-m", "vec.Basic"],
+        "depth: 7 lat: 0 ok: true req_mode: IDLE\n",
+    );
+    assert!(out.status.success() && out.stderr.is_empty());
+}

@@ -27,6 +27,8 @@
 //! dccl_id: u32 LE | digest: u64 LE | crc32: u32 LE` (CRC-32/ISO-HDLC of the
 //! 24 bytes before it). A torn or corrupt record (power loss) ends the
 //! replay; the file is rewritten without it and without expired records.
+//! The file holds digests only, no message content (mode 0600, as the other
+//! files of the data directory).
 
 use std::collections::HashMap;
 use std::fs::{File, OpenOptions};
@@ -35,6 +37,8 @@ use std::path::{Path, PathBuf};
 
 use crc::{Crc, CRC_32_ISO_HDLC};
 use sha2::{Digest, Sha256};
+
+use crate::data_dir::private_file_options;
 
 const CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 const RECORD: usize = 28;
@@ -119,7 +123,10 @@ impl DeliveredLog {
         seen.retain(|_, t| t.saturating_add(window_micros) > now);
         let mut log = DeliveredLog {
             path: path.to_path_buf(),
-            file: OpenOptions::new().create(true).append(true).open(path)?,
+            file: private_file_options()
+                .create(true)
+                .append(true)
+                .open(path)?,
             window: window_micros,
             records: at / RECORD,
             seen,
@@ -196,7 +203,11 @@ impl DeliveredLog {
     fn rewrite(&mut self) -> std::io::Result<()> {
         let tmp = self.path.with_extension("tmp");
         {
-            let mut out = File::create(&tmp)?;
+            let mut out = private_file_options()
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .open(&tmp)?;
             let mut entries: Vec<(&Identity, &u64)> = self.seen.iter().collect();
             entries.sort_by_key(|(_, t)| **t);
             let mut bytes = Vec::with_capacity(entries.len() * RECORD);

@@ -17,7 +17,9 @@
 //!
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
 //! composes and runs the stack, [`outbox`] is the queue with its on-disk
-//! journal, [`dedup`] the receiver's duplicate filter, [`json_protocol`] and [`json_server`] serve JSON clients,
+//! journal, [`data_dir`] holds the data directory (one daemon each, private
+//! files), [`dedup`] is the receiver's duplicate filter, [`json_protocol`]
+//! and [`json_server`] serve JSON clients,
 //! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
 //! and came from the modem, and [`command`] is the `gobyd` command line.
 
@@ -25,6 +27,7 @@
 
 pub mod command;
 pub mod config;
+pub mod data_dir;
 pub mod dedup;
 pub mod json_protocol;
 pub mod json_server;

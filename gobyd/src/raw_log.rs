@@ -7,7 +7,7 @@
 //! {"t":1700000012000000,"msg":"in","name":"goby.example.NavigationReport","src":2,"value":{...}}
 //! ```
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -22,9 +22,12 @@ pub struct RawLog {
 }
 
 impl RawLog {
-    /// Opens `path` for appending (created if needed).
+    /// Opens `path` for appending (created if needed, mode 0600).
     pub fn open(path: &Path) -> io::Result<Self> {
-        let file = OpenOptions::new().create(true).append(true).open(path)?;
+        let file = crate::data_dir::private_file_options()
+            .create(true)
+            .append(true)
+            .open(path)?;
         Ok(Self {
             path: path.to_path_buf(),
             out: BufWriter::new(file),

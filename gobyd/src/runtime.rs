@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::future::Future;
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -27,6 +27,7 @@ use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
+use super::data_dir::{DataDir, DataDirError};
 use super::dedup::{DeliveredLog, Identity};
 use super::json_protocol::{accepted_line, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
@@ -39,6 +40,9 @@ pub enum DaemonError {
     /// The configuration is not usable.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// The data directory could not be created, or another daemon holds it.
+    #[error(transparent)]
+    DataDir(#[from] DataDirError),
     /// The queue or its journal could not be set up.
     #[error("outgoing queue: {0}")]
     Outbox(#[from] OutboxError),
@@ -125,7 +129,7 @@ pub struct Daemon {
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
-    data_dir: PathBuf,
+    data_dir: DataDir,
     codec: Arc<dccl::Codec>,
     /// Messages handed to clients recently (`None`: no duplicate filter).
     delivered: Option<DeliveredLog>,
@@ -144,12 +148,14 @@ impl std::fmt::Debug for Daemon {
 }
 
 impl Daemon {
-    /// Loads the DCCL types, replays the journal, starts the driver and
-    /// opens the autonomy interfaces.
+    /// Takes the data directory ([`DaemonError::DataDir`] when another
+    /// daemon holds it), loads the DCCL types, replays the journal, starts
+    /// the driver and opens the autonomy interfaces.
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
+        let data_dir = DataDir::open(Path::new(config.data_dir()))?;
         let driver = start_driver(config.driver.as_ref().expect("completed")).await?;
-        Self::start_with_driver(config, driver).await
+        Self::start_in(config, driver, data_dir).await
     }
 
     /// Starts the daemon on a driver started by the caller (the
@@ -159,16 +165,22 @@ impl Daemon {
         driver: Driver,
     ) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
+        let data_dir = DataDir::open(Path::new(config.data_dir()))?;
+        Self::start_in(config, driver, data_dir).await
+    }
+
+    async fn start_in(
+        config: GobydConfig,
+        driver: Driver,
+        data_dir: DataDir,
+    ) -> Result<Self, DaemonError> {
         let defs = config::load_definitions(&config)?;
         let codec = Arc::new(defs.codec);
         let mut queue_config = config.queue.clone().unwrap_or_default();
         config::default_entries(&mut queue_config, &defs.loaded);
         let queue = QueueManager::new(codec.clone(), &queue_config)?;
 
-        let data_dir = PathBuf::from(config.data_dir());
-        std::fs::create_dir_all(&data_dir)
-            .map_err(io_error(format!("cannot create {}", data_dir.display())))?;
-        let journal_path = data_dir.join("outbox.journal");
+        let journal_path = data_dir.path().join("outbox.journal");
         let (outbox, replay) = Outbox::open(queue, &journal_path)?;
         if replay.requeued > 0 || replay.discarded_bytes > 0 {
             tracing::info!(
@@ -199,7 +211,7 @@ impl Daemon {
             ))));
         }
         let delivered = if window_seconds > 0.0 {
-            let path = data_dir.join("delivered.log");
+            let path = data_dir.path().join("delivered.log");
             let now = u64::try_from(SystemClock.now()).unwrap_or(0);
             let (log, replay) = DeliveredLog::open(&path, (window_seconds * 1e6) as u64, now)
                 .map_err(io_error(format!("cannot open {}", path.display())))?;
@@ -218,7 +230,7 @@ impl Daemon {
 
         let log = config.log.clone().unwrap_or_default();
         let raw_log = if log.raw_log() {
-            let path = data_dir.join("raw.log");
+            let path = data_dir.path().join("raw.log");
             Some(RawLog::open(&path).map_err(io_error(format!("cannot open {}", path.display())))?)
         } else {
             None
@@ -309,8 +321,8 @@ impl Daemon {
     }
 
     /// Where the journal and the raw log live.
-    pub fn data_dir(&self) -> &std::path::Path {
-        &self.data_dir
+    pub fn data_dir(&self) -> &Path {
+        self.data_dir.path()
     }
 
     /// A sender for messages to publish (as the JSON interface uses); for

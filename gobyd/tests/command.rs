@@ -100,3 +100,38 @@ fn gobyd_refuses_bad_configurations_with_their_place() {
     assert!(stderr_text(&out).contains("cannot read /no/such/file.pb.txt"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn check_refuses_options_nested_too_deep_without_crashing() {
+    let dir = scratch("gobyd-deep");
+    let depth = 100_000;
+    let mut text = String::from(
+        "syntax = \"proto2\";\nimport \"google/protobuf/descriptor.proto\";\n\
+         import \"dccl/option_extensions.proto\";\npackage deep;\n\
+         message R { optional R r = 1; }\n\
+         extend google.protobuf.MessageOptions { optional R rr = 50000; }\n\
+         message M {\n  option (dccl.msg) = { id: 2 max_bytes: 8 codec_version: 4 };\n  option (rr) = { ",
+    );
+    text.push_str(&"r { ".repeat(depth));
+    text.push_str(&"} ".repeat(depth));
+    text.push_str("};\n  optional int32 x = 1 [(dccl.field) = { min: 0 max: 10 }];\n}\n");
+    let proto = dir.join("deep.proto");
+    std::fs::write(&proto, text).unwrap();
+    let config = dir.join("deep.pb.txt");
+    std::fs::write(
+        &config,
+        format!(
+            "modem_id: 1\ndccl {{ proto_file: \"{}\" }}\n",
+            proto.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr_text(&out));
+    let err = stderr_text(&out);
+    assert!(
+        err.starts_with("gobyd: error: ") && err.contains("deep.proto"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -97,13 +97,47 @@ pub fn goby(args: &[&str], stdin: impl Into<Vec<u8>>) -> Output {
 
 /// Runs `goby` in the directory `dir`.
 pub fn goby_in(dir: &Path, args: &[&str], stdin: impl Into<Vec<u8>>) -> Output {
-    assert_cmd::Command::new(env!("CARGO_BIN_EXE_goby"))
-        .current_dir(dir)
+    goby_with_env(dir, args, stdin, &[])
+}
+
+/// Runs `goby` in the directory `dir` with the environment variables `env`
+/// set (and neither RUST_BACKTRACE nor DCCL_PASSPHRASE unless given).
+pub fn goby_with_env(
+    dir: &Path,
+    args: &[&str],
+    stdin: impl Into<Vec<u8>>,
+    env: &[(&str, &str)],
+) -> Output {
+    let mut cmd = assert_cmd::Command::new(env!("CARGO_BIN_EXE_goby"));
+    cmd.current_dir(dir)
         .args(args)
         .env_remove("RUST_BACKTRACE")
-        .write_stdin(stdin.into())
-        .output()
-        .expect("goby runs")
+        .env_remove("DCCL_PASSPHRASE");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.write_stdin(stdin.into()).output().expect("goby runs")
+}
+
+/// One folder of the shared DCCL field cases (`../shared/dccl-field-cases`).
+pub fn field_case(name: &str) -> PathBuf {
+    let dir = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/dccl-field-cases"
+    ))
+    .join(name);
+    assert!(
+        dir.join("case.proto").is_file(),
+        "the DCCL field cases are missing: expected {}",
+        dir.display()
+    );
+    dir
+}
+
+/// A file of a field case, as text.
+pub fn field_case_file(case: &str, file: &str) -> String {
+    let path = field_case(case).join(file);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// Standard output as text.
@@ -117,12 +151,15 @@ pub fn stderr_text(out: &Output) -> String {
 }
 
 /// Input line numbers reported as bad on standard error (`line N: ...`),
-/// with their messages.
+/// with their messages; warnings (`line N: warning: ...`) are not.
 pub fn bad_lines(stderr: &str) -> BTreeMap<usize, String> {
     let mut map = BTreeMap::new();
     for l in stderr.lines() {
         if let Some(rest) = l.strip_prefix("line ") {
             if let Some((n, msg)) = rest.split_once(": ") {
+                if msg.starts_with("warning: ") {
+                    continue;
+                }
                 if let Ok(n) = n.parse() {
                     map.insert(n, msg.to_string());
                 }

@@ -1,0 +1,102 @@
+//! Decoding a byte string that holds one or more DCCL messages back to back
+//! (a modem frame of stitched messages), with an error that says where the
+//! bytes stopped being a message.
+
+use dccl::Codec;
+use prost_reflect::DynamicMessage;
+
+use crate::lines::LineError;
+
+/// Decodes byte strings of messages back to back.
+pub(crate) struct FrameDecoder<'a> {
+    /// The codec with the types loaded.
+    pub codec: &'a Codec,
+    /// Decode every message as this type rather than by its id (needed for
+    /// `omit_id` types).
+    pub as_type: Option<&'a str>,
+    /// A passphrase is set: leftover bytes may come from a wrong one.
+    pub encrypted: bool,
+}
+
+/// Why decoding a byte string stopped.
+pub(crate) enum FrameError {
+    /// The bytes from `offset` (from 0) on are not a message.
+    Bad {
+        /// Where the message that failed starts.
+        offset: usize,
+        /// How many bytes are left from there.
+        left: usize,
+        /// The bytes end inside the message (it may go on elsewhere).
+        truncated: bool,
+        /// The error, worded for the user.
+        text: String,
+    },
+    /// A decoded message could not be written.
+    Output(LineError),
+}
+
+impl FrameError {
+    /// `byte K: <error> (N byte(s) left undecoded)`, or the output error.
+    pub(crate) fn describe(&self) -> String {
+        match self {
+            FrameError::Bad {
+                offset, left, text, ..
+            } => format!("byte {offset}: {text} ({left} byte(s) left undecoded)"),
+            FrameError::Output(LineError::Bad(e)) => e.clone(),
+            FrameError::Output(LineError::Fatal(e)) => e.to_string(),
+        }
+    }
+}
+
+impl FrameDecoder<'_> {
+    /// Decodes every message of `bytes`, handing each to `emit`. The first
+    /// message that cannot be decoded ends the string.
+    pub(crate) fn decode(
+        &self,
+        bytes: &[u8],
+        mut emit: impl FnMut(&DynamicMessage) -> Result<(), LineError>,
+    ) -> Result<(), FrameError> {
+        let mut offset = 0usize;
+        while offset < bytes.len() {
+            let rest = &bytes[offset..];
+            let decoded = match self.as_type {
+                Some(name) => self.codec.decode_as(name, rest),
+                None => self.codec.decode_prefix(rest),
+            };
+            match decoded {
+                Ok((msg, used)) => {
+                    emit(&msg).map_err(FrameError::Output)?;
+                    if used == 0 {
+                        break;
+                    }
+                    offset += used;
+                }
+                Err(e) => {
+                    let mut text = match &e {
+                        dccl::Error::Decode { location, reason } if location.message.is_empty() => {
+                            format!("cannot decode: {reason}")
+                        }
+                        other => other.to_string(),
+                    };
+                    // The library names a body that does not decode under a
+                    // clear header; a message after the first may have started
+                    // in the wrong place because the one before was misread.
+                    if self.encrypted && offset > 0 && !text.contains("passphrase") {
+                        text.push_str(
+                            " (likely a wrong passphrase: the body of the message before \
+                             decodes to another length)",
+                        );
+                    }
+                    return Err(FrameError::Bad {
+                        offset,
+                        left: rest.len(),
+                        truncated: text.contains("truncated")
+                            && !matches!(e, dccl::Error::WrongPassphrase { .. }),
+                        text,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}

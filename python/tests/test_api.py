@@ -1,0 +1,274 @@
+"""The package's API beyond the vectors: the reference binding's calls,
+errors that name message and field, JSON and dict in and out, frames."""
+
+import textwrap
+
+import pytest
+
+import dccl
+
+PING = textwrap.dedent(
+    """
+    syntax = "proto2";
+    import "dccl/option_extensions.proto";
+    package apitest;
+    message Ping {
+      option (dccl.msg) = { id: 20 max_bytes: 32 codec_version: 4 };
+      required int32 src = 1 [(dccl.field) = { min: 0 max: 31 in_head: true }];
+      optional double range = 2 [(dccl.field) = { min: 0 max: 5000 precision: 1 }];
+      optional string note = 3 [(dccl.field).max_length = 8];
+      repeated int32 hops = 4 [(dccl.field) = { min: 0 max: 7 max_repeat: 3 }];
+      optional int64 stamp = 5 [(dccl.field) = { min: 0 max: 1000000 }];
+    }
+    message Pong {
+      option (dccl.msg) = { id: 21 max_bytes: 8 codec_version: 4 };
+      required bool ok = 1;
+    }
+    """
+)
+
+
+@pytest.fixture(scope="module")
+def ping_proto(tmp_path_factory):
+    path = tmp_path_factory.mktemp("protos") / "apitest_ping.proto"
+    path.write_text(PING)
+    names = dccl.loadProtoFile(str(path))
+    assert names == ["apitest.Ping", "apitest.Pong"]
+    return path
+
+
+@pytest.fixture
+def codec(ping_proto):
+    c = dccl.Codec()
+    c.load("apitest.Ping")
+    c.load("apitest.Pong")
+    return c
+
+
+def ping(**kw):
+    return dccl.message_class("apitest.Ping")(**kw)
+
+
+def test_encode_decode_round_trip_with_rounding(codec):
+    data = codec.encode(ping(src=3, range=1234.56, note="hi"))
+    assert isinstance(data, bytes) and len(data) == codec.size(ping(src=3, range=1234.56, note="hi"))
+    back = codec.decode(data)
+    assert back.src == 3 and back.note == "hi"
+    assert back.range == pytest.approx(1234.6)
+    assert codec.decode(bytearray(data)) == back
+    assert codec.decode(memoryview(data)) == back
+
+
+def test_ids_of_types_and_bytes(codec):
+    data = codec.encode(ping(src=1))
+    assert codec.id(data) == 20
+    assert codec.id("apitest.Ping") == 20
+    assert codec.id(dccl.message_class("apitest.Pong")) == 21
+    assert codec.id(ping(src=1)) == 20
+
+
+def test_sizes_hash_and_analyze(codec):
+    assert codec.max_size("apitest.Ping") >= codec.min_size("apitest.Ping") > 0
+    assert codec.max_size("apitest.Ping") <= 32
+    h = codec.hash("apitest.Ping")
+    assert isinstance(h, int) and 0 <= h < 2**64
+    report = codec.analyze("apitest.Ping")
+    assert "apitest.Ping" in report and "range" in report and "0x%016x" % h in report
+
+
+def test_decode_all_splits_a_frame(codec):
+    pong = dccl.message_class("apitest.Pong")(ok=True)
+    frame = codec.encode(ping(src=2, hops=[1, 2])) + codec.encode(pong) + codec.encode(ping(src=5))
+    msgs = codec.decode_all(frame)
+    assert [type(m).DESCRIPTOR.full_name for m in msgs] == ["apitest.Ping", "apitest.Pong", "apitest.Ping"]
+    assert list(msgs[0].hops) == [1, 2] and msgs[1].ok and msgs[2].src == 5
+
+
+def test_json_and_dict_in_and_out(codec):
+    data = codec.encode_dict("apitest.Ping", {"src": 4, "range": 10.04, "note": "abc", "stamp": 12345})
+    assert data == codec.encode(ping(src=4, range=10.04, note="abc", stamp=12345))
+    assert codec.encode_json("apitest.Ping", '{"src": 4, "range": 10.04, "note": "abc", "stamp": "12345"}') == data
+    assert codec.decode_dict(data) == {"src": 4, "range": 10.0, "note": "abc", "stamp": 12345}
+    name, text = codec.decode_json(data, with_name=True)
+    assert name == "apitest.Ping" and '"note":"abc"' in text
+    assert codec.decode_text(data) == 'src: 4 range: 10 note: "abc" stamp: 12345'
+
+
+def test_bad_json_names_the_message(codec):
+    with pytest.raises(dccl.DcclException, match="apitest.Ping"):
+        codec.encode_json("apitest.Ping", '{"src": "many"}')
+    with pytest.raises(dccl.DcclException, match="apitest.Ping"):
+        codec.encode_dict("apitest.Ping", {"nope": 1})
+
+
+def test_missing_required_field_names_message_and_field(codec):
+    with pytest.raises(dccl.DcclException, match=r"apitest\.Ping, field src") as e:
+        codec.encode(ping(range=3))
+    assert not isinstance(e.value, dccl.DcclOutOfRangeException)
+
+
+def test_out_of_range_is_dropped_or_truncated_unless_strict(codec):
+    lenient = codec.decode(codec.encode(ping(src=1, range=9999, note="far too long", hops=[1, 2, 3, 4])))
+    assert not lenient.HasField("range")
+    assert lenient.note == "far too "
+    assert list(lenient.hops) == [1, 2, 3]
+    codec.set_strict(True)
+    with pytest.raises(dccl.DcclOutOfRangeException, match=r"apitest\.Ping, field range"):
+        codec.encode(ping(src=1, range=9999))
+    with pytest.raises(dccl.DcclOutOfRangeException, match=r"field note"):
+        codec.encode(ping(src=1, note="far too long"))
+    with pytest.raises(dccl.DcclException, match=r"field src"):
+        codec.encode(ping(range=1))  # missing, not out of range: the base class
+    codec.set_strict(False)
+    assert codec.encode(ping(src=1, range=9999))
+
+
+def test_decode_errors(codec):
+    with pytest.raises(dccl.DcclException, match="id 99"):
+        codec.decode(bytes([99 << 1, 0, 0]))
+    with pytest.raises(dccl.DcclException, match="apitest.Ping"):
+        codec.decode(codec.encode(ping(src=1, note="abcdefgh"))[:2])
+    with pytest.raises(dccl.DcclException):
+        codec.decode(b"")
+
+
+def test_unknown_and_unloaded_types(ping_proto):
+    c = dccl.Codec()
+    with pytest.raises(LookupError):
+        c.load("apitest.NoSuchType")
+    with pytest.raises(dccl.DcclException, match="apitest.Ping has not been loaded"):
+        c.encode(ping(src=1))
+    with pytest.raises(dccl.DcclException, match="id 20 has not been loaded"):
+        c.decode(bytes([40, 0, 0]))
+    with pytest.raises(KeyError):
+        dccl.message_class("apitest.NoSuchType")
+
+
+def test_crypto_with_skipped_ids(codec, ping_proto):
+    clear = codec.encode(ping(src=3, range=100))
+    codec.set_crypto_passphrase("secret")
+    hidden = codec.encode(ping(src=3, range=100))
+    assert hidden != clear and hidden[:2] == clear[:2]  # header (id, src) stays clear
+    assert codec.decode(hidden).range == 100
+    other = dccl.Codec()
+    other.load("apitest.Ping")
+    try:
+        assert other.decode(hidden).range != 100
+    except dccl.DcclException:
+        pass  # the garbled body may not even decode
+    codec.set_crypto_passphrase("secret", ids_to_skip=[20])
+    assert codec.encode(ping(src=3, range=100)) == clear
+    with pytest.raises(TypeError):
+        codec.set_crypto_passphrase("secret", ids_to_skip=[-1])
+    codec.set_crypto_passphrase("")
+    assert codec.encode(ping(src=3, range=100)) == clear
+
+
+def test_invalid_definition_names_message_and_field(tmp_path):
+    path = tmp_path / "apitest_bad.proto"
+    path.write_text(
+        'syntax = "proto2"; import "dccl/option_extensions.proto"; package apibad;\n'
+        "message Big { option (dccl.msg) = { id: 30 max_bytes: 2 codec_version: 4 };\n"
+        "  required int32 a = 1 [(dccl.field) = { min: 0 max: 100000 }];\n"
+        "  required int32 b = 2; }\n"
+    )
+    dccl.loadProtoFile(path)
+    with pytest.raises(dccl.DcclException, match=r"apibad\.Big.*field b"):
+        dccl.Codec().load("apibad.Big")
+
+
+def test_proto_syntax_error_names_the_file(tmp_path):
+    path = tmp_path / "apitest_syntax.proto"
+    path.write_text('syntax = "proto2";\nmessage Broken {\n  required int32 = 1;\n}\n')
+    with pytest.raises(dccl.DcclException, match=r"apitest_syntax\.proto: expected an identifier"):
+        dccl.loadProtoFile(str(path))
+    with pytest.raises(dccl.DcclException, match="no such file"):
+        dccl.loadProtoFile(str(tmp_path / "absent.proto"))
+
+
+def test_include_path_resolves_imports(tmp_path):
+    lib = tmp_path / "lib" / "apiinc"
+    lib.mkdir(parents=True)
+    (lib / "units.proto").write_text('syntax = "proto2"; package apiinc; enum Unit { M = 1; FT = 2; }\n')
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "apiinc_depth.proto").write_text(
+        'syntax = "proto2"; import "dccl/option_extensions.proto"; import "apiinc/units.proto";\n'
+        "package apiinc; message Depth { option (dccl.msg) = { id: 40 max_bytes: 4 codec_version: 4 };\n"
+        "  required Unit unit = 1; }\n"
+    )
+    with pytest.raises(dccl.DcclException, match="apiinc/units.proto"):
+        dccl.loadProtoFile(str(user / "apiinc_depth.proto"))
+    dccl.addProtoIncludePath(str(tmp_path / "lib"))
+    dccl.loadProtoFile(str(user / "apiinc_depth.proto"))
+    c = dccl.Codec()
+    c.load("apiinc.Depth")
+    cls = dccl.message_class("apiinc.Depth")
+    assert c.decode(c.encode(cls(unit=2))).unit == 2
+
+
+def test_reference_constructor_and_unsupported_parts():
+    dccl.Codec()
+    dccl.Codec("dccl.default.id")
+    dccl.Codec(id_codec=None, library_path=None)
+    with pytest.raises(dccl.DcclException):
+        dccl.Codec(library_path="/usr/lib/libmycodecs.so")
+    with pytest.raises(dccl.DcclException):
+        dccl.Codec(id_codec="my.id")
+    with pytest.raises(dccl.DcclException):
+        dccl.Codec().load_library("/usr/lib/libmycodecs.so")
+
+
+def test_exceptions_are_the_reference_names():
+    assert issubclass(dccl.DcclException, Exception)
+    assert issubclass(dccl.DcclOutOfRangeException, dccl.DcclException)
+
+
+def test_shipped_option_extensions_module():
+    from google.protobuf import descriptor_pb2
+
+    from dccl import option_extensions_pb2 as opts
+
+    assert opts.DESCRIPTOR.name == "dccl/option_extensions.proto"
+    assert opts.field.number == 1012 and opts.msg.number == 1012
+    assert opts.field.containing_type is descriptor_pb2.FieldOptions.DESCRIPTOR
+    o = opts.DCCLFieldOptions(min=0, max=10, precision=2)
+    assert opts.DCCLFieldOptions.FromString(o.SerializeToString()) == o
+    fo = descriptor_pb2.FieldOptions()
+    fo.Extensions[opts.field].max_length = 8
+    assert descriptor_pb2.FieldOptions.FromString(fo.SerializeToString()).Extensions[opts.field].max_length == 8
+
+    from dccl.arithmetic.protobuf import arithmetic_extensions_pb2, arithmetic_pb2
+
+    assert arithmetic_pb2.ArithmeticModel.DESCRIPTOR.full_name == "dccl.arith.protobuf.ArithmeticModel"
+    assert arithmetic_extensions_pb2.DESCRIPTOR.name.endswith("arithmetic_extensions.proto")
+
+
+def test_message_types_built_from_python_descriptors():
+    """A type defined only in Python (no .proto, no protoc): its file goes to
+    the codec through the descriptor, options included."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    from dccl import option_extensions_pb2 as opts
+
+    f = descriptor_pb2.FileDescriptorProto(
+        name="apitest/py_only.proto", package="apipy", syntax="proto2",
+        dependency=["dccl/option_extensions.proto"],
+    )
+    m = f.message_type.add(name="Beacon")
+    m.options.Extensions[opts.msg].id = 50
+    m.options.Extensions[opts.msg].max_bytes = 8
+    m.options.Extensions[opts.msg].codec_version = 4
+    fld = m.field.add(name="depth", number=1, type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
+                      label=descriptor_pb2.FieldDescriptorProto.LABEL_REQUIRED)
+    fld.options.Extensions[opts.field].min = 0
+    fld.options.Extensions[opts.field].max = 100
+    fld.options.Extensions[opts.field].precision = 1
+    descriptor_pool.Default().Add(f)
+    cls = message_factory.GetMessageClass(descriptor_pool.Default().FindMessageTypeByName("apipy.Beacon"))
+    c = dccl.Codec()
+    c.load(cls)
+    data = c.encode(cls(depth=12.34))
+    assert len(data) == 3  # 1 byte of id, 10 bits of depth
+    back = c.decode(data)
+    assert type(back) is cls and back.depth == pytest.approx(12.3)

@@ -1,0 +1,22 @@
+"""The README's Python example runs and prints what its comment says."""
+
+import os
+import re
+import subprocess
+import sys
+
+from conftest import WORKSPACE
+
+
+def test_readme_python_example():
+    text = (WORKSPACE / "README.md").read_text()
+    section = text[text.index("## Python") :]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    assert len(code.strip().splitlines()) == 5
+    expected = re.search(r"# (\d+ [\d.]+)\s*$", code.strip()).group(1)
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=str(WORKSPACE), capture_output=True, text=True, timeout=120,
+        env=dict(os.environ, PYTHONPATH=""),
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == expected
