@@ -18,7 +18,8 @@
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
 //! composes and runs the stack, [`door`] checks published values,
 //! [`outbox`] is the queue with its on-disk journal, [`data_dir`] holds the
-//! data directory (one daemon each, private files), [`json_protocol`] and
+//! data directory (one daemon each, private files), [`dedup`] is the
+//! receiver's duplicate filter, [`json_protocol`] and
 //! [`json_server`] serve JSON clients, [`moos_bridge`] joins a MOOS
 //! community, [`mission_file`] reads the configuration from a MOOS mission
 //! file, [`translator`] turns MOOS variables into DCCL messages and back
@@ -30,6 +31,7 @@
 pub mod command;
 pub mod config;
 pub mod data_dir;
+pub mod dedup;
 pub mod door;
 pub mod json_protocol;
 pub mod json_server;

@@ -28,6 +28,7 @@ use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
 use super::data_dir::{DataDir, DataDirError};
+use super::dedup::{DeliveredLog, Identity};
 use super::door::Door;
 use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
@@ -137,6 +138,11 @@ pub struct Daemon {
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
     data_dir: DataDir,
+    codec: Arc<dccl::Codec>,
+    /// Messages handed to clients recently (`None`: no duplicate filter).
+    delivered: Option<DeliveredLog>,
+    /// `unique_id` of the next transmission initiated.
+    next_transmission: u32,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -204,6 +210,36 @@ impl Daemon {
                 failure.reason
             );
         }
+
+        let window_seconds = config.duplicate_window_seconds.unwrap_or_else(|| {
+            queue_config
+                .message_entry
+                .iter()
+                .map(|e| f64::from(e.ttl()))
+                .fold(0.0, f64::max)
+        });
+        if !(window_seconds.is_finite() && window_seconds >= 0.0) {
+            return Err(DaemonError::Config(ConfigError::Invalid(format!(
+                "duplicate_window_seconds {window_seconds} is not valid"
+            ))));
+        }
+        let delivered = if window_seconds > 0.0 {
+            let path = data_dir.path().join("delivered.log");
+            let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+            let (log, replay) = DeliveredLog::open(&path, (window_seconds * 1e6) as u64, now)
+                .map_err(io_error(format!("cannot open {}", path.display())))?;
+            if replay.remembered > 0 || replay.discarded_bytes > 0 {
+                tracing::info!(
+                    remembered = replay.remembered,
+                    discarded_bytes = replay.discarded_bytes,
+                    "{} replayed",
+                    path.display()
+                );
+            }
+            Some(log)
+        } else {
+            None
+        };
 
         let log = config.log.clone().unwrap_or_default();
         let raw_log = if log.raw_log() {
@@ -282,6 +318,11 @@ impl Daemon {
             json_tcp,
             json_udp,
             data_dir,
+            codec,
+            delivered,
+            // Numbers of a previous run (whose acks may still come) are
+            // not reused soon: start from the clock.
+            next_transmission: (SystemClock.now() / 1000) as u32,
         })
     }
 
@@ -446,6 +487,8 @@ impl Daemon {
                 for e in self.outbox.receive(&transmission) {
                     tracing::warn!(src = transmission.src(), "received: {e}");
                 }
+                // Messages from the link pass the duplicate filter.
+                let _ = self.forward_events(true);
             }
             DriverEvent::TransmitResult(result) => {
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
@@ -475,10 +518,31 @@ impl Daemon {
         }
     }
 
+    /// Starts the slots due. Each transmission initiated gets a `unique_id`
+    /// (the acks that answer it name it) and, in `time` and `slot_seconds`,
+    /// the time left in its slot: the driver drops it rather than run it
+    /// after its slot (e.g. when the modem was away).
     fn mac_slots(&mut self) {
         for event in self.mac.poll(SystemClock.now()) {
-            if let Some(transmission) = event.initiate() {
-                if let Err(e) = self.driver.initiate_transmission(transmission.clone()) {
+            let amac::MacEvent::Slot(slot) = &event else {
+                continue;
+            };
+            if let Some(transmission) = slot.initiate() {
+                let mut transmission = transmission.clone();
+                self.next_transmission = self.next_transmission.wrapping_add(1);
+                transmission.unique_id = Some(self.next_transmission);
+                let opened = transmission
+                    .time
+                    .and_then(|t| i64::try_from(t).ok())
+                    .unwrap_or(slot.position.start);
+                transmission.time = u64::try_from(opened).ok();
+                transmission.slot_seconds = Some((slot.position.end - opened).max(0) as f64 / 1e6);
+                tracing::debug!(
+                    unique_id = self.next_transmission,
+                    slot = slot.position.index,
+                    "initiating a transmission"
+                );
+                if let Err(e) = self.driver.initiate_transmission(transmission) {
                     tracing::error!("cannot initiate a transmission: {e}");
                 }
             }
@@ -488,6 +552,48 @@ impl Daemon {
     /// Logs the queue events and sends them to the clients; returns the
     /// messages dropped from a full queue (journal id, message).
     fn forward_queue_events(&mut self) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
+        self.forward_events(false)
+    }
+
+    /// Whether a message received from `src` is new to the clients
+    /// (recorded durably then) or a repeat to suppress.
+    fn first_delivery(&mut self, received: &queue::ReceivedMessage) -> bool {
+        let Some(log) = &mut self.delivered else {
+            return true;
+        };
+        let bytes = match self.codec.encode(&received.message) {
+            Ok(bytes) => bytes,
+            Err(e) => {
+                tracing::warn!("duplicate filter: cannot encode a received message: {e}");
+                return true;
+            }
+        };
+        let id = Identity::of(received.src, received.dccl_id, &bytes);
+        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        match log.first_time(id, now) {
+            Ok(true) => true,
+            Ok(false) => {
+                tracing::info!(
+                    src = received.src,
+                    dccl_id = received.dccl_id,
+                    "a repeat of a message already handed over: suppressed"
+                );
+                false
+            }
+            Err(e) => {
+                // Handed over all the same: nothing received is lost.
+                tracing::error!("{}: {e}", log.path().display());
+                true
+            }
+        }
+    }
+
+    /// As [`forward_queue_events`](Self::forward_queue_events); with
+    /// `from_link`, received messages already handed over are suppressed.
+    fn forward_events(
+        &mut self,
+        from_link: bool,
+    ) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
         let mut dropped = Vec::new();
         let events = match self.outbox.events_with_entries() {
             Ok(events) => events,
@@ -500,6 +606,11 @@ impl Daemon {
         for (event, entry) in events {
             if let QueueEvent::Dropped { message, .. } = &event {
                 dropped.push((entry, message.clone()));
+            }
+            if let QueueEvent::Received(received) = &event {
+                if from_link && !self.first_delivery(received) {
+                    continue;
+                }
             }
             if let Some(log) = &mut self.raw_log {
                 let logged = match &event {

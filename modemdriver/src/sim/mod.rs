@@ -204,10 +204,18 @@ impl Node {
                         .map_or(spec.frames, |n| n.min(spec.frames)),
                 );
                 mt.max_frame_bytes = Some(spec.frame_bytes);
+                let duration = spec.packet_duration(self.overhead);
+                if crate::slot::too_late(&mt, duration) {
+                    events.status(DriverStatus::Skipped {
+                        reason: "the slot of a transmission waiting for the channel has passed"
+                            .into(),
+                    });
+                    return;
+                }
                 if mt.frame.is_empty() {
                     mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
                 }
-                if mt.frame.iter().all(|f| f.is_empty()) {
+                if mt.frame.iter().all(|f| f.is_empty()) && !mt.always_initiate() {
                     events.emit(DriverEvent::TransmitResult(TransmitResult {
                         transmission: mt,
                         outcome: TransmitOutcome::NothingToSend,
@@ -288,6 +296,8 @@ impl Node {
                 acked_frame: (0..mt.frame.len())
                     .map(|i| mt.frame_start() as i32 + i as i32)
                     .collect(),
+                // The ack names the transmission it answers.
+                unique_id: mt.unique_id,
                 ..Default::default()
             });
             events.emit(DriverEvent::Raw(raw(RawDirection::Incoming, &mt)));
