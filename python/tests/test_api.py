@@ -180,7 +180,7 @@ def test_invalid_definition_names_message_and_field(tmp_path):
 def test_proto_syntax_error_names_the_file(tmp_path):
     path = tmp_path / "apitest_syntax.proto"
     path.write_text('syntax = "proto2";\nmessage Broken {\n  required int32 = 1;\n}\n')
-    with pytest.raises(dccl.DcclException, match=r"apitest_syntax\.proto: expected an identifier"):
+    with pytest.raises(dccl.DcclException, match=r"apitest_syntax\.proto:3:18: expected an identifier"):
         dccl.loadProtoFile(str(path))
     with pytest.raises(dccl.DcclException, match="no such file"):
         dccl.loadProtoFile(str(tmp_path / "absent.proto"))
