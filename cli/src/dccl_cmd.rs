@@ -222,6 +222,7 @@ pub fn run_command(
             let defs = Definitions::compile(&args.proto)?;
             let job = EncodeJob {
                 message: Some(args.message.clone()),
+                load_first: true,
                 input: args.input,
                 format: args.format,
                 passphrase: args.passphrase.resolve()?,
@@ -511,6 +512,11 @@ fn base64_engine() -> GeneralPurpose {
 pub(crate) struct EncodeJob {
     /// Type of the lines that do not start with `|full.Name|`.
     pub message: Option<String>,
+    /// Load `message` before reading any line, so that an invalid type stops
+    /// the command; otherwise it is loaded by the first line without
+    /// `|full.Name|`, and a line that names its type never needs it (the
+    /// reference tool's type assumed from the file without `-m`).
+    pub load_first: bool,
     /// Form of the input lines.
     pub input: InputForm,
     /// Form of the output.
@@ -542,7 +548,7 @@ pub(crate) fn encode(
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
     let mut codec = defs.new_codec(job.passphrase.as_deref(), job.strict)?;
-    if let Some(name) = &job.message {
+    if let (Some(name), true) = (&job.message, job.load_first) {
         defs.load_named(&mut codec, std::slice::from_ref(name))?;
     }
     let engine = base64_engine();

@@ -12,7 +12,9 @@
 //!
 //! Without `-m`, decode, analyze and display work on every valid DCCL type
 //! of the `-f` files (each invalid one is named on standard error and
-//! skipped) and encode takes the first message of the first file.
+//! skipped) and encode takes the first message of the first file for the
+//! lines that do not name their type with `|full.Name|` (loaded only when
+//! such a line comes).
 //!
 //! Differences, on purpose: a bad input line is reported with its number
 //! and the next lines are still handled (the reference stops at the first);
@@ -110,15 +112,15 @@ pub fn run(
     }
     let defs = Definitions::compile(&args.proto)?;
     if args.encode {
-        let message = match args.message.as_slice() {
+        let (message, load_first) = match args.message.as_slice() {
             [] => {
                 let first = defs.first_message().ok_or_else(|| {
                     CliError::setup("no message to encode: give one with -m NAME")
                 })?;
                 writeln!(stderr, "Encoding assuming message: {}", first.full_name())?;
-                first.full_name().to_string()
+                (first.full_name().to_string(), false)
             }
-            [one] => one.clone(),
+            [one] => (one.clone(), true),
             _ => {
                 return Err(CliError::setup(
                     "no more than one message type can be given with -m for encoding",
@@ -127,6 +129,7 @@ pub fn run(
         };
         let job = EncodeJob {
             message: Some(message),
+            load_first,
             input: InputForm::Text,
             format: args.format,
             passphrase: args.passphrase.resolve()?,

@@ -118,6 +118,22 @@ fn broken_proto_file_and_unknown_type_exit_2() {
         stderr_text(&out)
     );
 
+    // The fault is placed at its line and column: a missing ';' at the end of
+    // line 5 is found at the start of line 6.
+    std::fs::write(
+        &broken,
+        "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage b;\n\
+         message X {\n  required int32 a = 1\n  required int32 b = 2;\n}\n",
+    )
+    .expect("write");
+    let out = goby(
+        &["dccl", "encode", "-f", broken.to_str().unwrap(), "-m", "X"],
+        "a: 1 b: 2\n",
+    );
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(err.contains("broken.proto:6:3: expected ';'"), "{err}");
+
     let plain = dir.join("plain.proto");
     std::fs::write(
         &plain,

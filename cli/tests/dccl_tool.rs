@@ -773,3 +773,41 @@ fn base64_wrapped_as_the_reference_writes_it_decodes() {
     assert!(bad[&1].contains("ends inside a message"), "{:?}", bad);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn reference_encode_without_m_uses_the_type_named_on_the_line() {
+    // The first message of the file is a helper, not a DCCL type: the lines
+    // that name their type do not need it.
+    let dir = scratch("named-lines");
+    let proto = dir.join("helper_first.proto");
+    std::fs::write(
+        &proto,
+        "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage pkg;\n\
+         message Helper { optional int32 a = 1; }\n\
+         message Name {\n  option (dccl.msg) = { id: 3 max_bytes: 8 codec_version: 4 };\n  \
+         required int32 x = 1 [(dccl.field) = { min: 0 max: 10 }];\n}\n",
+    )
+    .expect("write");
+    let out = goby(
+        &["dccl", "-e", "-f", path_str(&proto), "--format", "hex"],
+        "|pkg.Name| x: 3\n",
+    );
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    assert_eq!(stdout_text(&out), "0603\n");
+
+    // A line without the prefix is of the assumed first type, which cannot
+    // be loaded: that line is reported, the named one still encoded.
+    let out = goby(
+        &["dccl", "-e", "-f", path_str(&proto), "--format", "hex"],
+        "a: 1\n|pkg.Name| x: 4\n",
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", stderr_text(&out));
+    assert_eq!(stdout_text(&out), "0604\n");
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("Encoding assuming message: pkg.Helper"),
+        "{err}"
+    );
+    assert!(bad_lines(&err)[&1].contains("pkg.Helper"), "{err}");
+    let _ = std::fs::remove_dir_all(dir);
+}

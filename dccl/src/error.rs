@@ -28,8 +28,9 @@ impl fmt::Display for Location {
 /// applies, the field.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A `.proto` file could not be read or compiled.
-    #[error("cannot compile .proto files: {0}")]
+    /// A `.proto` file could not be read or compiled. The text starts
+    /// `path:LINE:COLUMN: ` (1-based) when the fault has a place in a file.
+    #[error("{0}")]
     Proto(String),
     /// A message type is not valid for DCCL (missing option, bad bounds, too large, ...).
     #[error("invalid DCCL definition ({location}): {reason}")]

@@ -9,6 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
+use miette::Diagnostic;
 use prost_reflect::DescriptorPool;
 use protox::file::{
     ChainFileResolver, File, FileResolver, GoogleFileResolver, IncludeFileResolver,
@@ -103,17 +104,19 @@ pub fn compile_protos(
     }
     on_large_stack(move || {
         let mut resolver = ChainFileResolver::new();
-        for dir in dirs {
-            resolver.add(GuardedInclude::new(dir));
+        for dir in &dirs {
+            resolver.add(GuardedInclude::new(dir.clone()));
         }
         resolver.add(EmbeddedResolver);
         resolver.add(GoogleFileResolver::new());
         let mut compiler = protox::Compiler::with_file_resolver(resolver);
         compiler.include_imports(true).include_source_info(false);
         for path in &paths {
-            compiler
-                .open_file(path)
-                .map_err(|e| Error::Proto(format!("{}: {e}", path.display())))?;
+            compiler.open_file(path).map_err(|e| {
+                Error::Proto(describe(&e, &path.display().to_string(), |name| {
+                    on_disk(&dirs, name)
+                }))
+            })?;
         }
         decode_pool(&compiler.encode_file_descriptor_set())
     })
@@ -182,10 +185,65 @@ pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {
         for name in &names {
             compiler
                 .open_file(name)
-                .map_err(|e| Error::Proto(format!("{name}: {e}")))?;
+                .map_err(|e| Error::Proto(describe(&e, name, str::to_string)))?;
         }
         decode_pool(&compiler.encode_file_descriptor_set())
     })
+}
+
+/// The text of a compiler error: `file:LINE:COLUMN: message` (1-based; the
+/// column counts bytes, as protoc's does) when the error has a place in a
+/// file, `file: message` when it names a file only. The file is the one the
+/// fault is in, which may be an imported one; `shown` turns the compiler's
+/// name for it into the name given to the user. `opened` (the file being
+/// compiled) is named when the error names no file. The causes the
+/// compiler gives (such as the unknown key inside an option value) follow
+/// the message.
+fn describe(err: &protox::Error, opened: &str, shown: impl Fn(&str) -> String) -> String {
+    let file = match err.file() {
+        Some(name) => shown(name),
+        None => opened.to_string(),
+    };
+    let mut message = err.to_string();
+    let mut cause = err.diagnostic_source();
+    while let Some(inner) = cause {
+        message = format!("{message}: {inner}");
+        cause = inner.diagnostic_source();
+    }
+    match place(err) {
+        Some((line, column)) => format!("{file}:{line}:{column}: {message}"),
+        None => format!("{file}: {message}"),
+    }
+}
+
+/// Line and column (1-based) of the fault `err` reports. The compiler's own
+/// `name:LINE:COLUMN: message` rendering (its `Debug` form) places the error
+/// at its primary span; failing that, the first labelled span is used.
+fn place(err: &protox::Error) -> Option<(usize, usize)> {
+    let rendered = format!("{err:?}");
+    let from_rendering = err.file().and_then(|name| {
+        let middle = rendered
+            .strip_prefix(name)?
+            .strip_prefix(':')?
+            .strip_suffix(&err.to_string())?;
+        let (line, column) = middle.strip_suffix(": ")?.split_once(':')?;
+        Some((line.parse().ok()?, column.parse().ok()?))
+    });
+    from_rendering.or_else(|| {
+        let source = err.source_code()?;
+        let label = err.labels()?.next()?;
+        let contents = source.read_span(label.inner(), 0, 0).ok()?;
+        Some((contents.line() + 1, contents.column() + 1))
+    })
+}
+
+/// The path of the file the compiler calls `name`: in the first of `dirs`
+/// that holds it, or `name` itself for an embedded file.
+fn on_disk(dirs: &[PathBuf], name: &str) -> String {
+    dirs.iter()
+        .map(|dir| dir.join(name))
+        .find(|path| path.is_file())
+        .map_or_else(|| name.to_string(), |path| path.display().to_string())
 }
 
 /// Stack of the thread that parses `.proto` files: the parser recurses once

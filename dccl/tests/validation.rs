@@ -724,3 +724,100 @@ fn huge_bounds_do_not_overflow() {
         .unwrap();
     assert!(codec.analyze("Big").unwrap().contains("4294967295 bytes"));
 }
+
+/// Compiles one in-memory file and returns the text of the error it must give.
+fn source_error(name: &str, source: &str) -> String {
+    match dccl::compile_sources(&[(name, source)]) {
+        Ok(_) => panic!("{name} compiled but must be refused"),
+        Err(e @ Error::Proto(_)) => e.to_string(),
+        Err(other) => panic!("expected Error::Proto, got {other:?}"),
+    }
+}
+
+/// Header shared by the located-error cases: lines 1-3.
+const HEAD: &str = "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage loc;\n";
+
+#[test]
+fn proto_errors_name_file_line_and_column() {
+    // Missing ';' at the end of line 5: found at the start of line 6.
+    let text = source_error(
+        "broken.proto",
+        &format!(
+            "{HEAD}message M {{\n  required int32 a = 1 [(dccl.field) = {{ min: 0 max: 3 }}]\n  required int32 b = 2;\n}}\n"
+        ),
+    );
+    assert!(text.starts_with("broken.proto:6:3: "), "{text}");
+    assert!(text.contains("expected ';'"), "{text}");
+
+    // An undefined type, line 5 column 12.
+    let text = source_error(
+        "undef.proto",
+        &format!("{HEAD}message M {{\n  required Nope a = 1;\n}}\n"),
+    );
+    assert!(text.starts_with("undef.proto:5:12: "), "{text}");
+    assert!(text.contains("Nope"), "{text}");
+
+    // An unterminated string, line 5.
+    let text = source_error(
+        "string.proto",
+        &format!("{HEAD}message M {{\n  optional string s = 1 [default = \"abc];\n}}\n"),
+    );
+    assert!(text.starts_with("string.proto:5:"), "{text}");
+
+    // A duplicate field number, on the second use (line 6).
+    let text = source_error(
+        "dup.proto",
+        &format!("{HEAD}message M {{\n  optional int32 a = 1;\n  optional int32 b = 1;\n}}\n"),
+    );
+    assert!(text.starts_with("dup.proto:6:"), "{text}");
+
+    // An unknown key inside (dccl.field) is named, on its line.
+    let text = source_error(
+        "badopt.proto",
+        &format!(
+            "{HEAD}message M {{\n  optional int32 a = 1 [(dccl.field) = {{ bogus: 3 }}];\n}}\n"
+        ),
+    );
+    assert!(text.starts_with("badopt.proto:5:"), "{text}");
+    assert!(text.contains("bogus"), "{text}");
+}
+
+#[test]
+fn error_in_imported_file_names_that_file() {
+    // `inner.proto` uses the DCCL options without importing them; the error
+    // belongs to it, not to `outer.proto` which imports it.
+    let inner = "syntax = \"proto2\";\npackage loc;\nmessage Inner {\n  \
+                 option (dccl.msg) = { id: 1 max_bytes: 4 codec_version: 4 };\n  \
+                 required bool b = 1;\n}\n";
+    let outer = "syntax = \"proto2\";\nimport \"inner.proto\";\npackage loc;\n\
+                 message Outer { optional Inner i = 1; }\n";
+    let err = dccl::compile_sources(&[("outer.proto", outer), ("inner.proto", inner)])
+        .expect_err("inner.proto lacks the options import");
+    let text = err.to_string();
+    assert!(text.starts_with("inner.proto:4:"), "{text}");
+    assert!(!text.contains("outer.proto"), "{text}");
+
+    // The same on disk: the path of the imported file is given.
+    let dir = TempDir::new("imported");
+    std::fs::write(dir.0.join("inner.proto"), inner).unwrap();
+    std::fs::write(dir.0.join("outer.proto"), outer).unwrap();
+    let err = dccl::compile_protos(&[dir.0.join("outer.proto")], &[] as &[PathBuf])
+        .expect_err("inner.proto lacks the options import");
+    let text = err.to_string();
+    let want = format!("{}:4:", dir.0.join("inner.proto").display());
+    assert!(text.contains(&want), "{text} does not contain {want}");
+}
+
+#[test]
+fn syntax_error_on_disk_names_path_line_and_column() {
+    let dir = TempDir::new("located");
+    let file = dir.0.join("broken.proto");
+    std::fs::write(
+        &file,
+        format!("{HEAD}message M {{\n  required int32 a = 1\n  required int32 b = 2;\n}}\n"),
+    )
+    .unwrap();
+    let err = dccl::compile_protos(&[&file], &[] as &[PathBuf]).unwrap_err();
+    let text = err.to_string();
+    assert!(text.contains("broken.proto:6:3: expected ';'"), "{text}");
+}

@@ -27,11 +27,15 @@ proto3-JSON and ``dict`` in and out, and :func:`message_class`.
 
 Errors raise :class:`DcclException` (strict-mode range errors its subclass
 :class:`DcclOutOfRangeException`); the text names the message type and the
-field.
+field. Outside strict mode, each value that encoding changes (an
+out-of-range number sent as not present, a string or array truncated ...)
+emits a :class:`DcclValueChangedWarning`; :meth:`Codec.check` lists them
+without encoding.
 """
 
 import json as _json
 import os as _os
+import warnings as _warnings
 
 from google.protobuf import descriptor_pool as _descriptor_pool
 from google.protobuf import message as _message
@@ -51,6 +55,7 @@ __all__ = [
     "Codec",
     "DcclException",
     "DcclOutOfRangeException",
+    "DcclValueChangedWarning",
     "addProtoIncludePath",
     "loadProtoFile",
     "add_proto_include_path",
@@ -59,13 +64,28 @@ __all__ = [
     "message_class",
 ]
 
+
+
+class DcclValueChangedWarning(UserWarning):
+    """Outside strict mode, a value that encoding changed: a number outside
+    its ``(dccl.field)`` bounds sent as not present, NaN sent as the minimum,
+    a string, bytes or repeated field cut to its maximum, an undefined enum
+    value dropped. One warning per value; the text names the message type,
+    the field path and what was done (``message apitest.Ping, field range:
+    9999 is out of range [0, 5000]: sent as not present``). Silence them with
+    ``warnings.simplefilter("ignore", dccl.DcclValueChangedWarning)``, or
+    turn them into errors with ``"error"``; :meth:`Codec.check` lists them
+    without encoding, and :meth:`Codec.set_strict` raises instead."""
+
+
 # The id codec of libdccl 4 (the only one): one byte for ids 0-127, two for 128-32767.
 DEFAULT_ID_CODEC = "dccl.default.id"
 
 
 def addProtoIncludePath(path):
     """Adds a directory searched for the ``import`` s of ``.proto`` files
-    loaded afterwards. ``path``: str or path-like."""
+    loaded afterwards. ``path``: str or path-like. Raises
+    :class:`DcclException` when it is not a directory."""
     _dccl.add_include_path(_os.fspath(path))
 
 
@@ -78,7 +98,11 @@ def loadProtoFile(path):
 
     Returns the full names of the message types the file defines (the
     reference binding returns None). Raises :class:`DcclException` naming
-    file, line and column when the file does not compile."""
+    file, line and column when the file does not compile. A type has one
+    definition per process: loading the same file again, or another file
+    defining the same types identically, is fine; a file that defines an
+    already loaded type differently raises :class:`DcclException` naming the
+    type, and nothing of it is loaded."""
     return _dccl.load_proto_file(_os.fspath(path))
 
 
@@ -211,6 +235,14 @@ def _as_bytes(data):
     return bytes(data)
 
 
+def _warn_changes(name, changes):
+    for field, reason in changes:
+        _warnings.warn(
+            DcclValueChangedWarning("message %s, field %s: %s" % (name, field, reason)),
+            stacklevel=3,
+        )
+
+
 def _to_message(name, wire):
     cls = _classes.get(name) or message_class(name)
     return cls.FromString(wire)
@@ -255,17 +287,13 @@ class Codec:
         return self._codec.loaded()
 
     def id(self, obj):
-        """The DCCL id (int) of a type (``obj``: its full name, class,
-        message or ``Descriptor``) or of encoded bytes (read from their first
-        one or two bytes). A str that names no known type is read as bytes,
-        as the reference binding does."""
+        """The DCCL id (int) of a type (``obj``: its full name as a str,
+        class, message or ``Descriptor``) or of encoded bytes (``bytes``,
+        ``bytearray`` or ``memoryview``: read from their first one or two
+        bytes). A str is always a type name: an unknown one raises
+        :class:`DcclException`."""
         if isinstance(obj, (bytes, bytearray, memoryview)):
             return self._codec.id_of_bytes(bytes(obj))
-        if isinstance(obj, str):
-            name = _type_name(obj)
-            if _dccl.has_message(name):
-                return self._codec.id_of_name(name)
-            return self._codec.id_of_bytes(obj.encode("utf-8"))
         return self._codec.id_of_name(_type_name(obj))
 
     def size(self, message):
@@ -277,12 +305,30 @@ class Codec:
         bytes (header and body, encrypted when a passphrase is set).
 
         Values outside their bounds are dropped or clamped as libdccl does,
-        or raise :class:`DcclOutOfRangeException` in strict mode; a missing
-        required field raises :class:`DcclException`. ``header_only`` is not
+        each with a :class:`DcclValueChangedWarning`, or raise
+        :class:`DcclOutOfRangeException` in strict mode; a missing required
+        field raises :class:`DcclException`. ``header_only`` is not
         supported (raises)."""
         if header_only:
             raise DcclException("encode(header_only=True) is not supported")
-        return self._codec.encode(_class_name(type(message)), message.SerializePartialToString())
+        name = _class_name(type(message))
+        data, changes = self._codec.encode(name, message.SerializePartialToString())
+        _warn_changes(name, changes)
+        return data
+
+    def check(self, message):
+        """The values encoding ``message`` (a protobuf message of a loaded
+        type) would change, without encoding it: a list of ``(field,
+        reason)`` str pairs, ``field`` the path from the message
+        (``waypoint.x``, ``hops[3]``), empty when nothing would change.
+        Reports the same in strict mode (where encoding raises at the first);
+        adaptive arithmetic models are left as they are."""
+        return [
+            (field, reason)
+            for field, reason in self._codec.check(
+                _class_name(type(message)), message.SerializePartialToString()
+            )
+        ]
 
     def decode(self, data, header_only=False):
         """Decodes one message from ``data`` (bytes; extra bytes after the
@@ -302,13 +348,20 @@ class Codec:
     def encode_json(self, type_name, text):
         """Encodes a message of type ``type_name`` given as proto3 JSON text
         (field names as in the ``.proto`` or lowerCamelCase, enums by name,
-        bytes base64); returns bytes."""
-        return self._codec.encode_json(_type_name(type_name), text)
+        bytes base64); returns bytes. Changed values warn as in :meth:`encode`."""
+        name = _type_name(type_name)
+        data, changes = self._codec.encode_json(name, text)
+        _warn_changes(name, changes)
+        return data
 
     def encode_dict(self, type_name, values):
         """Encodes a message of type ``type_name`` given as a dict in the
-        proto3-JSON shape (``{"x": 450.0, "veh_class": "AUV"}``); returns bytes."""
-        return self._codec.encode_json(_type_name(type_name), _json.dumps(values))
+        proto3-JSON shape (``{"x": 450.0, "veh_class": "AUV"}``); returns bytes.
+        Changed values warn as in :meth:`encode`."""
+        name = _type_name(type_name)
+        data, changes = self._codec.encode_json(name, _json.dumps(values))
+        _warn_changes(name, changes)
+        return data
 
     def decode_json(self, data, with_name=False):
         """Decodes one message to proto3 JSON text (field names as in the
@@ -350,7 +403,8 @@ class Codec:
     def set_crypto_passphrase(self, passphrase, ids_to_skip=None):
         """Encrypts message bodies (AES-256-CTR keyed by SHA-256 of
         ``passphrase``; headers stay clear) except for the DCCL ids in
-        ``ids_to_skip`` (iterable of int). An empty passphrase turns it off."""
+        ``ids_to_skip`` (iterable of int). The empty passphrase is a key
+        too (SHA-256 of ""), as in libdccl; ``None`` turns encryption off."""
         skip = []
         if ids_to_skip is not None:
             try:

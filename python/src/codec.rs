@@ -15,6 +15,13 @@ use pyo3::types::PyBytes;
 use crate::errors::{to_py, DcclException, DcclOutOfRangeException};
 use crate::pool;
 
+/// Values changed by encoding, as `(field path, reason)` pairs.
+type Changes = Vec<(String, String)>;
+
+fn pairs(changes: Vec<dccl::ValueChange>) -> Changes {
+    changes.into_iter().map(|c| (c.field, c.reason)).collect()
+}
+
 /// A DCCL codec: load message types by full name, then encode and decode
 /// them. Messages go in and out as `(full name, protobuf wire bytes)`.
 #[pyclass(module = "dccl._dccl", name = "Codec")]
@@ -41,19 +48,23 @@ impl Codec {
         })
     }
 
-    /// Encodes; in strict mode an error that the lenient codec would not
+    /// Encodes, reporting the values the codec changed (as `(field path,
+    /// reason)`); in strict mode an error that the lenient codec would not
     /// raise is a value out of its bounds: `DcclOutOfRangeException`.
-    fn encode_checked(&self, msg: &DynamicMessage) -> PyResult<Vec<u8>> {
-        self.inner.encode(msg).map_err(|e| {
-            if self.strict && matches!(e, dccl::Error::Encode { .. }) {
-                let mut lenient = self.inner.clone();
-                lenient.set_strict(false);
-                if lenient.encode(msg).is_ok() {
-                    return DcclOutOfRangeException::new_err(e.to_string());
+    fn encode_checked(&self, msg: &DynamicMessage) -> PyResult<(Vec<u8>, Changes)> {
+        match self.inner.encode_with_changes(msg) {
+            Ok((bytes, changes)) => Ok((bytes, pairs(changes))),
+            Err(e) => {
+                if self.strict && matches!(e, dccl::Error::Encode { .. }) {
+                    let mut lenient = self.inner.clone();
+                    lenient.set_strict(false);
+                    if lenient.encode(msg).is_ok() {
+                        return Err(DcclOutOfRangeException::new_err(e.to_string()));
+                    }
                 }
+                Err(to_py(e))
             }
-            to_py(e)
-        })
+        }
     }
 
     fn json_options() -> SerializeOptions {
@@ -118,24 +129,43 @@ impl Codec {
         self.inner.id(data).map_err(to_py)
     }
 
-    /// Encodes the message `name` given as protobuf wire bytes; returns the DCCL bytes.
+    /// Encodes the message `name` given as protobuf wire bytes; returns the
+    /// DCCL bytes and the values encoding changed, as `(field path, reason)`
+    /// pairs (none in strict mode, which raises instead).
     fn encode<'py>(
         &self,
         py: Python<'py>,
         name: &str,
         data: &[u8],
-    ) -> PyResult<Bound<'py, PyBytes>> {
+    ) -> PyResult<(Bound<'py, PyBytes>, Changes)> {
         let msg = self.parse(name, data)?;
-        Ok(PyBytes::new(py, &self.encode_checked(&msg)?))
+        let (bytes, changes) = self.encode_checked(&msg)?;
+        Ok((PyBytes::new(py, &bytes), changes))
     }
 
-    /// Encodes a message given as proto3 JSON text (field names as in the `.proto` or lowerCamelCase).
+    /// The values encoding the message `name` (protobuf wire bytes) would
+    /// change, as `(field path, reason)` pairs, strict mode or not; adaptive
+    /// arithmetic models are left as they are.
+    fn check(&self, name: &str, data: &[u8]) -> PyResult<Changes> {
+        let msg = self.parse(name, data)?;
+        let changes = if self.strict {
+            let mut lenient = self.inner.clone();
+            lenient.set_strict(false);
+            lenient.check(&msg)
+        } else {
+            self.inner.check(&msg)
+        };
+        changes.map(pairs).map_err(to_py)
+    }
+
+    /// Encodes a message given as proto3 JSON text (field names as in the
+    /// `.proto` or lowerCamelCase); returns bytes and changes as `encode` does.
     fn encode_json<'py>(
         &self,
         py: Python<'py>,
         name: &str,
         text: &str,
-    ) -> PyResult<Bound<'py, PyBytes>> {
+    ) -> PyResult<(Bound<'py, PyBytes>, Changes)> {
         let desc = self.descriptor(name)?;
         let mut de = serde_json::Deserializer::from_str(text);
         let msg =
@@ -146,7 +176,8 @@ impl Codec {
                         "cannot encode (message {name}): invalid JSON: {e}"
                     ))
                 })?;
-        Ok(PyBytes::new(py, &self.encode_checked(&msg)?))
+        let (bytes, changes) = self.encode_checked(&msg)?;
+        Ok((PyBytes::new(py, &bytes), changes))
     }
 
     /// Encoded size in bytes of the message `name` given as protobuf wire bytes.
@@ -229,14 +260,15 @@ impl Codec {
         self.inner.set_strict(enabled);
     }
 
-    /// Encrypts message bodies (AES-256-CTR, key SHA-256 of the passphrase),
-    /// except for the DCCL ids in `skip_ids`. An empty passphrase turns encryption off.
-    fn set_crypto_passphrase(&mut self, passphrase: &str, skip_ids: Vec<u32>) {
-        if passphrase.is_empty() {
-            self.inner.clear_passphrase();
-        } else {
-            self.inner
-                .set_passphrase_with_exceptions(passphrase, skip_ids);
+    /// Encrypts message bodies (AES-256-CTR, key SHA-256 of the passphrase,
+    /// the empty one included, as libdccl does), except for the DCCL ids in
+    /// `skip_ids`. `None` turns encryption off.
+    fn set_crypto_passphrase(&mut self, passphrase: Option<&str>, skip_ids: Vec<u32>) {
+        match passphrase {
+            Some(passphrase) => self
+                .inner
+                .set_passphrase_with_exceptions(passphrase, skip_ids),
+            None => self.inner.clear_passphrase(),
         }
     }
 

@@ -14,10 +14,11 @@ use pyo3::types::PyBytes;
 
 use errors::{to_py, DcclException, DcclOutOfRangeException};
 
-/// Adds a directory searched for the imports of `.proto` files loaded later.
+/// Adds a directory searched for the imports of `.proto` files loaded
+/// later; raises `DcclException` when it is not a directory.
 #[pyfunction]
-fn add_include_path(dir: PathBuf) {
-    pool::add_include_path(dir);
+fn add_include_path(dir: PathBuf) -> PyResult<()> {
+    pool::add_include_path(dir).map_err(to_py)
 }
 
 /// Compiles a `.proto` file (no `protoc`) into the pool; returns the full

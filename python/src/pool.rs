@@ -10,8 +10,8 @@
 use std::path::PathBuf;
 use std::sync::{LazyLock, Mutex, MutexGuard};
 
-use dccl::prost_reflect::prost_types::FileDescriptorProto;
-use dccl::prost_reflect::{DescriptorPool, FileDescriptor, MessageDescriptor};
+use dccl::prost_reflect::prost_types::{DescriptorProto, FileDescriptorProto};
+use dccl::prost_reflect::{DescriptorPool, EnumDescriptor, FileDescriptor, MessageDescriptor};
 use prost::Message;
 
 /// Import paths of the embedded option files, as user files import them.
@@ -61,16 +61,27 @@ fn state() -> MutexGuard<'static, State> {
 }
 
 /// Adds a directory searched for `import`s of files loaded later.
-pub fn add_include_path(dir: PathBuf) {
+/// Errors when `dir` is not a directory.
+pub fn add_include_path(dir: PathBuf) -> dccl::Result<()> {
+    if !dir.is_dir() {
+        return Err(dccl::Error::Proto(format!(
+            "{}: no such directory (include path)",
+            dir.display()
+        )));
+    }
     let mut s = state();
     if !s.include_dirs.contains(&dir) {
         s.include_dirs.push(dir);
     }
+    Ok(())
 }
 
 /// Compiles a `.proto` file (and its imports) into the pool; returns the
 /// full names of the message types the file itself defines, nested ones
-/// included.
+/// included. A type has one definition in the pool: loading a file again,
+/// or another file defining the same types the same way, adds nothing; a
+/// file defining an already loaded type differently is refused (the error
+/// names the type) and the pool is left as it was.
 pub fn load_proto_file(path: PathBuf) -> dccl::Result<Vec<String>> {
     let dirs = state().include_dirs.clone();
     let compiled = dccl::compile_protos(&[&path], &dirs)?;
@@ -78,6 +89,11 @@ pub fn load_proto_file(path: PathBuf) -> dccl::Result<Vec<String>> {
     // The file asked for is the last one of the compiled set (imports come first).
     let mut names = Vec::new();
     let files: Vec<FileDescriptor> = compiled.files().collect();
+    for file in &files {
+        if let Some(clash) = clash(&s.pool, file) {
+            return Err(dccl::Error::Proto(format!("{}: {clash}", path.display())));
+        }
+    }
     for file in &files {
         merge(&mut s.pool, file)?;
     }
@@ -133,6 +149,99 @@ fn defined_elsewhere(pool: &DescriptorPool, file: &FileDescriptorProto) -> bool 
             .enum_type
             .iter()
             .any(|e| pool.get_enum_by_name(&full(e.name())).is_some())
+}
+
+/// How `file` contradicts the pool: a message or enum type the pool holds
+/// with another definition (the innermost differing type is named), or a
+/// file of the same name that lacks one of `file`'s types. `None` when every
+/// type of `file` already there is defined the same way.
+fn clash(pool: &DescriptorPool, file: &FileDescriptor) -> Option<String> {
+    let differing = file
+        .messages()
+        .find_map(|m| differing_message(pool, &m))
+        .or_else(|| file.enums().find_map(|e| differing_enum(pool, &e)));
+    if let Some((name, old_file)) = differing {
+        return Some(format!(
+            "type {name} is already loaded with another definition (from {old_file}); \
+             a type has one definition per process"
+        ));
+    }
+    pool.get_file_by_name(file.name())?;
+    let mut stack: Vec<MessageDescriptor> = file.messages().collect();
+    while let Some(m) = stack.pop() {
+        if pool.get_message_by_name(m.full_name()).is_none() {
+            return Some(format!(
+                "file {} is already loaded, without type {}",
+                file.name(),
+                m.full_name()
+            ));
+        }
+        stack.extend(m.child_messages());
+    }
+    None
+}
+
+/// `(full name, file of the pool's definition)` of `new` or of the innermost
+/// type nested in it that the pool defines differently.
+fn differing_message(pool: &DescriptorPool, new: &MessageDescriptor) -> Option<(String, String)> {
+    let old = pool.get_message_by_name(new.full_name())?;
+    if message_definition(&old) == message_definition(new) {
+        return None;
+    }
+    new.child_messages()
+        .find_map(|m| differing_message(pool, &m))
+        .or_else(|| new.child_enums().find_map(|e| differing_enum(pool, &e)))
+        .or_else(|| {
+            Some((
+                new.full_name().to_string(),
+                old.parent_file().name().to_string(),
+            ))
+        })
+}
+
+fn differing_enum(pool: &DescriptorPool, new: &EnumDescriptor) -> Option<(String, String)> {
+    let old = pool.get_enum_by_name(new.full_name())?;
+    (enum_definition(&old) != enum_definition(new)).then(|| {
+        (
+            new.full_name().to_string(),
+            old.parent_file().name().to_string(),
+        )
+    })
+}
+
+/// A message type's definition as comparable bytes: its descriptor
+/// without the derived JSON names (which some compilers record and others
+/// leave out) and the options (custom ones, such as `(dccl.field)`,
+/// included) of the message, its fields and oneofs, then the same of each
+/// nested type.
+fn message_definition(m: &MessageDescriptor) -> Vec<Vec<u8>> {
+    let mut proto: DescriptorProto = m.descriptor_proto().clone();
+    for field in proto.field.iter_mut().chain(proto.extension.iter_mut()) {
+        field.json_name = None;
+    }
+    proto.nested_type.clear();
+    proto.enum_type.clear();
+    let mut out = vec![proto.encode_to_vec(), m.options().encode_to_vec()];
+    out.extend(m.fields().map(|f| f.options().encode_to_vec()));
+    out.extend(m.oneofs().map(|o| o.options().encode_to_vec()));
+    for child in m.child_messages() {
+        out.extend(message_definition(&child));
+    }
+    for child in m.child_enums() {
+        out.extend(enum_definition(&child));
+    }
+    out
+}
+
+/// An enum type's definition as comparable bytes: its descriptor and the
+/// options of the enum and of its values.
+fn enum_definition(e: &EnumDescriptor) -> Vec<Vec<u8>> {
+    let mut out = vec![
+        e.enum_descriptor_proto().encode_to_vec(),
+        e.options().encode_to_vec(),
+    ];
+    out.extend(e.values().map(|v| v.options().encode_to_vec()));
+    out
 }
 
 fn merge(pool: &mut DescriptorPool, file: &FileDescriptor) -> dccl::Result<()> {

@@ -2,6 +2,7 @@
 errors that name message and field, JSON and dict in and out, frames."""
 
 import textwrap
+import warnings
 
 import pytest
 
@@ -59,6 +60,92 @@ def test_encode_decode_round_trip_with_rounding(codec):
     assert codec.decode(memoryview(data)) == back
 
 
+def test_id_of_an_unknown_name_raises(codec):
+    # A str is a type name, never encoded bytes: a misspelt name is an error.
+    with pytest.raises(dccl.DcclException, match=r"apitest\.Pingg"):
+        codec.id("apitest.Pingg")
+    with pytest.raises(dccl.DcclException):
+        codec.id("\x28\x00")
+    assert codec.id(codec.encode(ping(src=1))) == 20
+
+
+def test_include_path_must_be_a_directory(tmp_path):
+    with pytest.raises(dccl.DcclException, match="no_such_dir"):
+        dccl.addProtoIncludePath(tmp_path / "no_such_dir")
+    (tmp_path / "plain_file").write_text("")
+    with pytest.raises(dccl.DcclException, match="plain_file"):
+        dccl.addProtoIncludePath(str(tmp_path / "plain_file"))
+    dccl.addProtoIncludePath(tmp_path)
+
+
+CLASH = textwrap.dedent(
+    """
+    syntax = "proto2";
+    import "dccl/option_extensions.proto";
+    package apiclash;
+    message Thing {
+      option (dccl.msg) = { id: 50 max_bytes: 8 codec_version: 4 };
+      required int32 x = 1 [(dccl.field) = { min: 0 max: %d }];
+      message Inner { optional int32 y = 1 [(dccl.field) = { min: 0 max: %d }]; }
+      optional Inner inner = 2;
+    }
+    """
+)
+
+
+def test_clashing_definitions_are_refused(tmp_path):
+    for d in ("a", "b", "c", "d"):
+        (tmp_path / d).mkdir()
+    first = tmp_path / "a" / "apiclash.proto"
+    first.write_text(CLASH % (10, 10))
+    assert dccl.loadProtoFile(first) == ["apiclash.Thing", "apiclash.Thing.Inner"]
+    # The same file again, and an identical copy elsewhere, are fine.
+    assert dccl.loadProtoFile(first) == ["apiclash.Thing", "apiclash.Thing.Inner"]
+    copy = tmp_path / "b" / "apiclash_copy.proto"
+    copy.write_text(CLASH % (10, 10))
+    dccl.loadProtoFile(copy)
+    # Another definition of the same type, under another file name...
+    other = tmp_path / "c" / "apiclash_other.proto"
+    other.write_text(CLASH % (20, 10))
+    with pytest.raises(dccl.DcclException, match=r"apiclash\.Thing\b"):
+        dccl.loadProtoFile(other)
+    # ... or the same file name: the nested type that differs is named.
+    same_name = tmp_path / "d" / "apiclash.proto"
+    same_name.write_text(CLASH % (10, 20))
+    with pytest.raises(dccl.DcclException, match=r"apiclash\.Thing\.Inner"):
+        dccl.loadProtoFile(same_name)
+    # The first definition stays.
+    c = dccl.Codec()
+    c.load("apiclash.Thing")
+    thing = dccl.message_class("apiclash.Thing")
+    assert [field for field, _ in c.check(thing(x=15))] == ["x"]  # max 10, not 20
+
+
+def test_check_and_value_changed_warnings(codec):
+    changed = ping(src=1, range=9999, note="far too long")
+    changes = codec.check(changed)
+    assert [field for field, _ in changes] == ["range", "note"]
+    assert all(isinstance(reason, str) and reason for _, reason in changes)
+    with pytest.warns(dccl.DcclValueChangedWarning) as record:
+        codec.encode(changed)
+    texts = [str(w.message) for w in record if issubclass(w.category, dccl.DcclValueChangedWarning)]
+    assert len(texts) == 2
+    assert "apitest.Ping" in texts[0] and "field range" in texts[0]
+    assert "field note" in texts[1]
+    assert codec.check(ping(src=1)) == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        codec.encode(ping(src=1))
+        # Strict mode raises instead of warning; check still reports.
+        codec.set_strict(True)
+        try:
+            with pytest.raises(dccl.DcclOutOfRangeException):
+                codec.encode(changed)
+            assert [field for field, _ in codec.check(changed)] == ["range", "note"]
+        finally:
+            codec.set_strict(False)
+
+
 def test_ids_of_types_and_bytes(codec):
     data = codec.encode(ping(src=1))
     assert codec.id(data) == 20
@@ -107,6 +194,7 @@ def test_missing_required_field_names_message_and_field(codec):
     assert not isinstance(e.value, dccl.DcclOutOfRangeException)
 
 
+@pytest.mark.filterwarnings("ignore::dccl.DcclValueChangedWarning")
 def test_out_of_range_is_dropped_or_truncated_unless_strict(codec):
     lenient = codec.decode(codec.encode(ping(src=1, range=9999, note="far too long", hops=[1, 2, 3, 4])))
     assert not lenient.HasField("range")
@@ -160,8 +248,20 @@ def test_crypto_with_skipped_ids(codec, ping_proto):
     assert codec.encode(ping(src=3, range=100)) == clear
     with pytest.raises(TypeError):
         codec.set_crypto_passphrase("secret", ids_to_skip=[-1])
-    codec.set_crypto_passphrase("")
+    codec.set_crypto_passphrase(None)
     assert codec.encode(ping(src=3, range=100)) == clear
+
+
+def test_empty_passphrase_encrypts_as_the_reference_does(codec):
+    # libdccl keys AES with SHA-256 of the passphrase, the empty one too.
+    clear = codec.encode(ping(src=3, range=100))
+    codec.set_crypto_passphrase("")
+    hidden = codec.encode(ping(src=3, range=100))
+    assert hidden != clear and hidden[:2] == clear[:2]
+    other = dccl.Codec()
+    other.load("apitest.Ping")
+    other.set_crypto_passphrase("")
+    assert other.decode(hidden).range == 100
 
 
 def test_invalid_definition_names_message_and_field(tmp_path):
@@ -180,7 +280,7 @@ def test_invalid_definition_names_message_and_field(tmp_path):
 def test_proto_syntax_error_names_the_file(tmp_path):
     path = tmp_path / "apitest_syntax.proto"
     path.write_text('syntax = "proto2";\nmessage Broken {\n  required int32 = 1;\n}\n')
-    with pytest.raises(dccl.DcclException, match=r"apitest_syntax\.proto: expected an identifier"):
+    with pytest.raises(dccl.DcclException, match=r"apitest_syntax\.proto:3:18: expected an identifier"):
         dccl.loadProtoFile(str(path))
     with pytest.raises(dccl.DcclException, match="no such file"):
         dccl.loadProtoFile(str(tmp_path / "absent.proto"))
