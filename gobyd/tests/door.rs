@@ -243,7 +243,7 @@ fn a_clamping_type_is_sent_changed_and_every_change_is_reported_and_logged() {
         r#"
 modem_id: 1
 driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "door-clamp-{pid}" }} }}
-mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 0.5 }} }}
+mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 5 }} }}
 queue {{
   message_entry {{
     protobuf_name: "goby.example.Command"
