@@ -434,7 +434,10 @@ mod tests {
             ..Default::default()
         };
         let env = Some(std::ffi::OsStr::new("from-env"));
-        assert_eq!(passphrase(&from_file, env).unwrap().as_deref(), Some("sesame"));
+        assert_eq!(
+            passphrase(&from_file, env).unwrap().as_deref(),
+            Some("sesame")
+        );
         let inline = DcclConfig {
             passphrase: Some("inline".into()),
             ..Default::default()
@@ -450,14 +453,23 @@ mod tests {
             passphrase_file: from_file.passphrase_file.clone(),
             ..Default::default()
         };
-        assert!(passphrase(&both, None).unwrap_err().to_string().contains("not both"));
+        assert!(passphrase(&both, None)
+            .unwrap_err()
+            .to_string()
+            .contains("not both"));
         std::fs::write(&file, "\n").unwrap();
-        assert!(passphrase(&from_file, None).unwrap_err().to_string().contains("empty"));
+        assert!(passphrase(&from_file, None)
+            .unwrap_err()
+            .to_string()
+            .contains("empty"));
         let missing = DcclConfig {
             passphrase_file: Some(dir.join("nope").to_str().unwrap().into()),
             ..Default::default()
         };
-        assert!(passphrase(&missing, None).unwrap_err().to_string().contains("nope"));
+        assert!(passphrase(&missing, None)
+            .unwrap_err()
+            .to_string()
+            .contains("nope"));
 
         // The file's passphrase encrypts exactly as the same one given inline.
         std::fs::write(&file, "sesame").unwrap();
@@ -468,8 +480,8 @@ mod tests {
         let encode = |config: GobydConfig| {
             let defs = load_definitions(&config).unwrap();
             let desc = defs.codec.descriptor("goby.example.Command").unwrap();
-            let msg = DynamicMessage::parse_text_format(desc, "destination: 2 action: HOLD")
-                .unwrap();
+            let msg =
+                DynamicMessage::parse_text_format(desc, "destination: 2 action: HOLD").unwrap();
             defs.codec.encode(&msg).unwrap()
         };
         let clear = encode(config(DcclConfig::default()));

@@ -27,7 +27,9 @@
 //!   `{"event": "ack", "ack": NAME, "id": ID, "by": B, "msg": {...}}`,
 //!   `{"event": "expire", "expire": NAME, "id": ID, "msg": {...}}`,
 //!   `{"event": "drop", "drop": NAME, "id": ID, "msg": {...}}`,
-//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`, and
+//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`, the
+//!   modem and medium access events of topics `modem` and `mac` (see
+//!   [`crate::modem_event`]), and
 //!   `{"event": "lost", "count": N}` when a client read too slowly and
 //!   missed N events.
 //!
@@ -50,11 +52,23 @@ pub enum Topic {
     Drop,
     /// Queue size changes.
     QueueSize,
+    /// The modem driver: raw lines, transmissions received and sent, and
+    /// its status ([`crate::modem_event`]).
+    Modem,
+    /// The medium access control: slot starts and cycle changes.
+    Mac,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 4] = [Topic::Ack, Topic::Expire, Topic::Drop, Topic::QueueSize];
+    pub const ALL: [Topic; 6] = [
+        Topic::Ack,
+        Topic::Expire,
+        Topic::Drop,
+        Topic::QueueSize,
+        Topic::Modem,
+        Topic::Mac,
+    ];
 
     /// The topic's name in the protocol.
     pub fn name(self) -> &'static str {
@@ -63,6 +77,8 @@ impl Topic {
             Topic::Expire => "expire",
             Topic::Drop => "drop",
             Topic::QueueSize => "queue_size",
+            Topic::Modem => "modem",
+            Topic::Mac => "mac",
         }
     }
 
