@@ -27,7 +27,9 @@
 //!   `{"event": "ack", "ack": NAME, "id": ID, "by": B, "msg": {...}}`,
 //!   `{"event": "expire", "expire": NAME, "id": ID, "msg": {...}}`,
 //!   `{"event": "drop", "drop": NAME, "id": ID, "msg": {...}}`,
-//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`, the
+//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`,
+//!   `{"event": "sent", "sent": NAME, "frame": F, "msg": {...}}` for a
+//!   message placed in a frame, the
 //!   modem and medium access events of topics `modem` and `mac` (see
 //!   [`crate::modem_event`]), and
 //!   `{"event": "lost", "count": N}` when a client read too slowly and
@@ -52,6 +54,8 @@ pub enum Topic {
     Drop,
     /// Queue size changes.
     QueueSize,
+    /// Messages placed in a frame for sending.
+    Sent,
     /// The modem driver: raw lines, transmissions received and sent, and
     /// its status ([`crate::modem_event`]).
     Modem,
@@ -61,11 +65,12 @@ pub enum Topic {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 6] = [
+    pub const ALL: [Topic; 7] = [
         Topic::Ack,
         Topic::Expire,
         Topic::Drop,
         Topic::QueueSize,
+        Topic::Sent,
         Topic::Modem,
         Topic::Mac,
     ];
@@ -77,6 +82,7 @@ impl Topic {
             Topic::Expire => "expire",
             Topic::Drop => "drop",
             Topic::QueueSize => "queue_size",
+            Topic::Sent => "sent",
             Topic::Modem => "modem",
             Topic::Mac => "mac",
         }
@@ -242,7 +248,11 @@ pub fn event_line(
             Some(Topic::QueueSize),
             json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size }),
         ),
-        QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => return None,
+        QueueEvent::Sent { message, frame, .. } => (
+            Some(Topic::Sent),
+            json!({ "event": "sent", "sent": name(message), "frame": frame, "msg": message_json(message) }),
+        ),
+        QueueEvent::OnDemandRejected { .. } => return None,
     };
     Some((line.0, line.1.to_string()))
 }

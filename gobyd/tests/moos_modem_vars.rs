@@ -183,6 +183,7 @@ async fn driver_and_mac_variables_then_a_driver_reset() {
         "ACOMMS_MODEM_TRANSMIT",
         "ACOMMS_MAC_SLOT_START",
         "ACOMMS_ACK_ORIGINAL",
+        "ACOMMS_QUEUE_TRANSMIT",
     ];
     let (client, mut mail) = client(db.port(), &vars).await;
     let mut latest = HashMap::new();
@@ -206,6 +207,12 @@ async fn driver_and_mac_variables_then_a_driver_reset() {
         );
     }
     assert!(latest["ACOMMS_MODEM_TRANSMIT"].contains("src: 1"));
+    assert!(
+        latest["ACOMMS_QUEUE_TRANSMIT"]
+            .starts_with("@PB[goby.example.Command] destination: 2 action: GOTO"),
+        "{}",
+        latest["ACOMMS_QUEUE_TRANSMIT"]
+    );
     assert!(latest["ACOMMS_MAC_SLOT_START"].contains("slot_seconds: 1"));
     for var in ["ACOMMS_RAW_INCOMING", "ACOMMS_RAW_OUTGOING"] {
         assert!(
