@@ -101,6 +101,13 @@ impl BridgeSettings {
             v.queue_ack_original_msg(),
             v.queue_expire(),
             v.queue_size(),
+            v.driver_raw_in(),
+            v.driver_raw_out(),
+            v.driver_raw_msg_in(),
+            v.driver_raw_msg_out(),
+            v.driver_receive(),
+            v.driver_transmit(),
+            v.mac_slot_start(),
         ];
         !taken.iter().any(|t| format!("{}{t}", v.prefix()) == plain)
     }

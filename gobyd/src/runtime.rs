@@ -531,7 +531,9 @@ impl Daemon {
     }
 
     /// Stops the driver and starts it again from its configuration;
-    /// messages of a transmission under way are queued again.
+    /// messages of a transmission under way are queued again. When the
+    /// driver cannot start again the daemon stops as for a driver that
+    /// stopped (its messages stay in the journal).
     async fn reset_driver(&mut self) -> Result<(), String> {
         let Some(config) = self.driver_config.clone() else {
             return Err(
