@@ -27,7 +27,11 @@
 //!   `{"event": "ack", "ack": NAME, "id": ID, "by": B, "msg": {...}}`,
 //!   `{"event": "expire", "expire": NAME, "id": ID, "msg": {...}}`,
 //!   `{"event": "drop", "drop": NAME, "id": ID, "msg": {...}}`,
-//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`, and
+//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`,
+//!   `{"event": "sent", "sent": NAME, "frame": F, "msg": {...}}` for a
+//!   message placed in a frame, the
+//!   modem and medium access events of topics `modem` and `mac` (see
+//!   [`crate::modem_event`]), and
 //!   `{"event": "lost", "count": N}` when a client read too slowly and
 //!   missed N events.
 //!
@@ -50,11 +54,26 @@ pub enum Topic {
     Drop,
     /// Queue size changes.
     QueueSize,
+    /// Messages placed in a frame for sending.
+    Sent,
+    /// The modem driver: raw lines, transmissions received and sent, and
+    /// its status ([`crate::modem_event`]).
+    Modem,
+    /// The medium access control: slot starts and cycle changes.
+    Mac,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 4] = [Topic::Ack, Topic::Expire, Topic::Drop, Topic::QueueSize];
+    pub const ALL: [Topic; 7] = [
+        Topic::Ack,
+        Topic::Expire,
+        Topic::Drop,
+        Topic::QueueSize,
+        Topic::Sent,
+        Topic::Modem,
+        Topic::Mac,
+    ];
 
     /// The topic's name in the protocol.
     pub fn name(self) -> &'static str {
@@ -63,6 +82,9 @@ impl Topic {
             Topic::Expire => "expire",
             Topic::Drop => "drop",
             Topic::QueueSize => "queue_size",
+            Topic::Sent => "sent",
+            Topic::Modem => "modem",
+            Topic::Mac => "mac",
         }
     }
 
@@ -226,7 +248,11 @@ pub fn event_line(
             Some(Topic::QueueSize),
             json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size }),
         ),
-        QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => return None,
+        QueueEvent::Sent { message, frame, .. } => (
+            Some(Topic::Sent),
+            json!({ "event": "sent", "sent": name(message), "frame": frame, "msg": message_json(message) }),
+        ),
+        QueueEvent::OnDemandRejected { .. } => return None,
     };
     Some((line.0, line.1.to_string()))
 }

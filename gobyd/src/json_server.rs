@@ -41,7 +41,7 @@ pub struct Publish {
     pub reply: oneshot::Sender<String>,
 }
 
-/// A queue event as clients see it.
+/// A queue, modem or medium access event as clients see it.
 #[derive(Debug)]
 pub struct ClientEvent {
     /// Its topic (`None`: for every client).
@@ -49,7 +49,16 @@ pub struct ClientEvent {
     /// Its JSON line.
     pub line: String,
     /// The event itself (for interfaces that format it otherwise).
-    pub event: queue::QueueEvent,
+    pub event: DaemonEvent,
+}
+
+/// What a [`ClientEvent`] reports.
+#[derive(Debug)]
+pub enum DaemonEvent {
+    /// A queue event.
+    Queue(queue::QueueEvent),
+    /// A modem driver or medium access event.
+    Modem(crate::modem_event::ModemEvent),
 }
 
 /// A shared [`ClientEvent`].

@@ -30,12 +30,14 @@
 
 pub mod command;
 pub mod config;
+pub mod control;
 pub mod data_dir;
 pub mod dedup;
 pub mod door;
 pub mod json_protocol;
 pub mod json_server;
 pub mod mission_file;
+pub mod modem_event;
 pub mod moos_bridge;
 pub mod outbox;
 pub mod raw_log;

@@ -13,7 +13,11 @@
 //!   placed in a frame (`QUEUE_TRANSMIT`), acknowledgements (`ACK`: the
 //!   `goby.acomms.protobuf.ModemTransmission` of type ACK; `ACK_ORIGINAL`:
 //!   the message), expiries (`EXPIRE`) and queue sizes (`QSIZE`), each as
-//!   `@PB[full.Name] text format`.
+//!   `@PB[full.Name] text format`; raw modem lines (`NMEA_IN`, `NMEA_OUT`,
+//!   `RAW_INCOMING`, `RAW_OUTGOING`), transmissions heard and sent by the
+//!   modem (`MODEM_RECEIVE`, `MODEM_TRANSMIT`) and slot starts
+//!   (`MAC_SLOT_START`). Read: `FLUSH_QUEUE` (empty a queue by DCCL id)
+//!   and `DRIVER_RESET` (restart the driver), see [`crate::control`].
 //! - The plain interface: string values of the `send_var` variables are
 //!   messages to send, either `@PB[full.MessageName] <text format>` or
 //!   `full.MessageName:<hex of the protobuf encoding>`; received messages
@@ -26,6 +30,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use dccl::Codec;
+use modemdriver::RawDirection;
 use moos::{ClientConfig, Mail, MoosClient, Value};
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{modem_transmission, ModemTransmission, QueueSize};
@@ -34,7 +39,9 @@ use protos::goby::apps::protobuf::GobydConfig;
 use queue::QueueEvent;
 use tokio::sync::{broadcast, mpsc, oneshot};
 
-use super::json_server::{EventLine, Publish};
+use super::json_server::{DaemonEvent, EventLine, Publish};
+use crate::control::{parse_flush, Control};
+use crate::modem_event::ModemEvent;
 use crate::translator::{self, TranslateError, Translator};
 
 /// Longest wait between two attempts to reach an absent MOOSDB.
@@ -94,6 +101,13 @@ impl BridgeSettings {
             v.queue_ack_original_msg(),
             v.queue_expire(),
             v.queue_size(),
+            v.driver_raw_in(),
+            v.driver_raw_out(),
+            v.driver_raw_msg_in(),
+            v.driver_raw_msg_out(),
+            v.driver_receive(),
+            v.driver_transmit(),
+            v.mac_slot_start(),
         ];
         !taken.iter().any(|t| format!("{}{t}", v.prefix()) == plain)
     }
@@ -203,6 +217,74 @@ fn publications(settings: &BridgeSettings, event: &QueueEvent) -> Vec<(String, V
     out
 }
 
+/// The variables and values a modem or medium access event is written to
+/// (pAcommsHandler's driver and MAC variables): raw lines as they are
+/// (`NMEA_IN`, `NMEA_OUT`) and as `goby.acomms.protobuf.ModemRaw`
+/// (`RAW_INCOMING`, `RAW_OUTGOING`), transmissions received and sent by
+/// the modem (`MODEM_RECEIVE`, `MODEM_TRANSMIT`) and slot starts
+/// (`MAC_SLOT_START`) as `goby.acomms.protobuf.ModemTransmission`.
+fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(String, Value)> {
+    let mut out = Vec::new();
+    let mut text = |var: Option<String>, value: String| {
+        if let Some(var) = var {
+            out.push((var, Value::String(value)));
+        }
+    };
+    let transmission = |t: &ModemTransmission| format_value(&t.transcode_to_dynamic());
+    match event {
+        ModemEvent::Raw(raw) => {
+            let line = ModemEvent::raw_text(raw);
+            let (plain, wrapped) = match raw.direction {
+                RawDirection::Incoming => (
+                    settings.var(|v| v.driver_raw_in()),
+                    settings.var(|v| v.driver_raw_msg_in()),
+                ),
+                RawDirection::Outgoing => (
+                    settings.var(|v| v.driver_raw_out()),
+                    settings.var(|v| v.driver_raw_msg_out()),
+                ),
+            };
+            text(
+                wrapped,
+                format!(
+                    "@PB[goby.acomms.protobuf.ModemRaw] raw: {}",
+                    text_format_string(&line)
+                ),
+            );
+            text(plain, line);
+        }
+        ModemEvent::Received(t) => text(settings.var(|v| v.driver_receive()), transmission(t)),
+        ModemEvent::Transmitted {
+            transmission: t, ..
+        } => text(settings.var(|v| v.driver_transmit()), transmission(t)),
+        ModemEvent::SlotStart(t) => text(settings.var(|v| v.mac_slot_start()), transmission(t)),
+        // pAcommsHandler reads MAC_CYCLE_UPDATE (it does not write it) and
+        // has no variable for the driver's status: these stay in the log
+        // and on the JSON interface.
+        ModemEvent::CycleUpdate { .. } | ModemEvent::Status(_) => {}
+    }
+    out
+}
+
+/// A string as a protobuf text format string literal.
+fn text_format_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            c if (c as u32) < 0x20 => out.push_str(&format!("\\{:03o}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
 /// The error variable's value for an untranslatable value, logged too.
 fn translation_error(settings: &BridgeSettings, e: &TranslateError) -> (String, Value) {
     tracing::warn!(
@@ -278,14 +360,19 @@ pub async fn run(
     settings: BridgeSettings,
     codec: Arc<Codec>,
     publish: mpsc::Sender<Publish>,
+    control: mpsc::Sender<Control>,
     mut events: broadcast::Receiver<EventLine>,
 ) {
     let Some((client, mut mail)) = connect(&settings).await else {
         return;
     };
+    let connected_at = unix_seconds();
     let translator = settings.translator.clone();
     let mut registered: Vec<String> = settings.moos.send_var.clone();
     registered.extend(translator.variables());
+    let flush_var = settings.var(|v| v.queue_flush());
+    let reset_var = settings.var(|v| v.driver_reset());
+    registered.extend(flush_var.iter().chain(&reset_var).cloned());
     registered.sort();
     registered.dedup();
     for var in &registered {
@@ -314,6 +401,16 @@ pub async fn run(
     loop {
         tokio::select! {
             got = mail.recv() => match got {
+                Some(m) if Some(&m.key) == flush_var.as_ref() => {
+                    if fresh(&m, connected_at) {
+                        flush(&control, &m).await
+                    }
+                }
+                Some(m) if Some(&m.key) == reset_var.as_ref() => {
+                    if fresh(&m, connected_at) {
+                        reset(&control).await
+                    }
+                }
                 Some(m) => {
                     handle_mail(&settings, &codec, &publish, &client, &mut latest, m).await
                 }
@@ -324,7 +421,11 @@ pub async fn run(
             }
             event = events.recv() => match event {
                 Ok(event) => {
-                    for (var, value) in publications(&settings, &event.event) {
+                    let values = match &event.event {
+                        DaemonEvent::Queue(q) => publications(&settings, q),
+                        DaemonEvent::Modem(m) => modem_publications(&settings, m),
+                    };
+                    for (var, value) in values {
                         notify(&client, &var, &value);
                     }
                 }
@@ -337,6 +438,70 @@ pub async fn run(
     }
     tickers.abort_all();
     client.close().await;
+}
+
+/// Now, seconds since the Unix epoch (MOOS time).
+fn unix_seconds() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}
+
+/// Whether a request was written after the bridge connected: the MOOSDB
+/// hands a new client the last value of each variable it registers for,
+/// and an old flush or reset request must not be carried out again when
+/// `gobyd` starts.
+fn fresh(mail: &Mail, connected_at: f64) -> bool {
+    let fresh = mail.time >= connected_at;
+    if !fresh {
+        tracing::info!(
+            "MOOS: {} ignored: written {:.1} s before gobyd connected",
+            mail.key,
+            connected_at - mail.time
+        );
+    }
+    fresh
+}
+
+/// Flushes the queue named by a flush request (`FLUSH_QUEUE`).
+async fn flush(control: &mpsc::Sender<Control>, mail: &Mail) {
+    let text = match &mail.value {
+        Value::String(s) => s.clone(),
+        Value::Double(d) => d.to_string(),
+        Value::Binary(_) => String::from("(bytes)"),
+    };
+    let dccl_id = match parse_flush(&text) {
+        Ok(id) => id,
+        Err(e) => {
+            tracing::warn!("MOOS: {} = {text:?}: {e}", mail.key);
+            return;
+        }
+    };
+    let (reply, answer) = oneshot::channel();
+    if control
+        .send(Control::FlushQueue { dccl_id, reply })
+        .await
+        .is_err()
+    {
+        return;
+    }
+    match answer.await {
+        Ok(Ok(n)) => tracing::info!("MOOS: {}: {n} messages flushed", mail.key),
+        Ok(Err(e)) => tracing::warn!("MOOS: {} = {text:?}: {e}", mail.key),
+        Err(_) => {}
+    }
+}
+
+/// Restarts the modem driver (`DRIVER_RESET`, whatever its value).
+async fn reset(control: &mpsc::Sender<Control>) {
+    let (reply, answer) = oneshot::channel();
+    if control.send(Control::ResetDriver { reply }).await.is_err() {
+        return;
+    }
+    if let Ok(Err(e)) = answer.await {
+        tracing::error!("MOOS: driver reset: {e}");
+    }
 }
 
 /// Queues a message and reports a refusal.

@@ -188,6 +188,18 @@ impl Outbox {
         self.queue.handle_modem_receive(transmission)
     }
 
+    /// Empties the queue of a type and removes its messages from the
+    /// journal (as expiry does); returns how many were flushed.
+    pub fn flush(&mut self, name: &str) -> Result<usize, OutboxError> {
+        let ids = self.queue.flush_ids(name)?;
+        for id in &ids {
+            if let Some(entry) = self.entries.remove(id) {
+                self.journal.remove(entry)?;
+            }
+        }
+        Ok(ids.len())
+    }
+
     /// Expires the messages older than their ttl.
     pub fn expire(&mut self) {
         self.queue.expire();

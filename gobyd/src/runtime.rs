@@ -27,11 +27,13 @@ use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
+use super::control::Control;
 use super::data_dir::{DataDir, DataDirError};
 use super::dedup::{DeliveredLog, Identity};
 use super::door::Door;
 use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
-use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
+use super::json_server::{ClientEvent, DaemonEvent, EventLine, JsonInterface, Publish};
+use super::modem_event::ModemEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
 
@@ -131,6 +133,11 @@ pub struct Daemon {
     events: broadcast::Sender<EventLine>,
     publish_rx: mpsc::Receiver<Publish>,
     publish_tx: mpsc::Sender<Publish>,
+    control_rx: mpsc::Receiver<Control>,
+    control_tx: mpsc::Sender<Control>,
+    /// The driver's configuration, for a reset (`None`: started by the
+    /// caller).
+    driver_config: Option<protos::goby::acomms::protobuf::DriverConfig>,
     raw_log: Option<RawLog>,
     /// Replies to send once the journal holding their messages is synced.
     pending_replies: Vec<(oneshot::Sender<String>, String)>,
@@ -162,8 +169,11 @@ impl Daemon {
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
         let data_dir = DataDir::open(Path::new(config.data_dir()))?;
-        let driver = start_driver(config.driver.as_ref().expect("completed")).await?;
-        Self::start_in(config, driver, data_dir).await
+        let driver_config = config.driver.clone().expect("completed");
+        let driver = start_driver(&driver_config).await?;
+        let mut daemon = Self::start_in(config, driver, data_dir).await?;
+        daemon.driver_config = Some(driver_config);
+        Ok(daemon)
     }
 
     /// Starts the daemon on a driver started by the caller (the
@@ -252,6 +262,7 @@ impl Daemon {
         let mac = MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
         let (events, _) = broadcast::channel(1024);
         let (publish_tx, publish_rx) = mpsc::channel(256);
+        let (control_tx, control_rx) = mpsc::channel(16);
         let interface = JsonInterface {
             codec: codec.clone(),
             publish: publish_tx.clone(),
@@ -288,6 +299,7 @@ impl Daemon {
                 settings,
                 codec.clone(),
                 publish_tx.clone(),
+                control_tx.clone(),
                 events.subscribe(),
             ));
         }
@@ -312,6 +324,9 @@ impl Daemon {
             events,
             publish_rx,
             publish_tx,
+            control_rx,
+            control_tx,
+            driver_config: None,
             raw_log,
             pending_replies: Vec::new(),
             tasks,
@@ -347,6 +362,11 @@ impl Daemon {
         self.publish_tx.clone()
     }
 
+    /// A sender of requests to flush a queue or reset the driver.
+    pub fn control(&self) -> mpsc::Sender<Control> {
+        self.control_tx.clone()
+    }
+
     /// A receiver of the event lines sent to clients.
     pub fn subscribe(&self) -> broadcast::Receiver<EventLine> {
         self.events.subscribe()
@@ -366,6 +386,7 @@ impl Daemon {
             tokio::select! {
                 () = &mut shutdown => break,
                 Some(publish) = self.publish_rx.recv() => self.publish(publish),
+                Some(control) = self.control_rx.recv() => self.control_request(control).await,
                 event = self.driver.next_event() => match event {
                     Some(event) => self.driver_event(event),
                     None => {
@@ -474,6 +495,9 @@ impl Daemon {
     }
 
     fn driver_event(&mut self, event: DriverEvent) {
+        if let Some(reported) = ModemEvent::of_driver(&event) {
+            self.report(reported);
+        }
         match event {
             DriverEvent::DataRequest(request) => {
                 let mut filled = request.template().clone();
@@ -524,6 +548,7 @@ impl Daemon {
     /// after its slot (e.g. when the modem was away).
     fn mac_slots(&mut self) {
         for event in self.mac.poll(SystemClock.now()) {
+            self.report(ModemEvent::of_mac(&event));
             let amac::MacEvent::Slot(slot) = &event else {
                 continue;
             };
@@ -547,6 +572,65 @@ impl Daemon {
                 }
             }
         }
+    }
+
+    /// Flushes a queue or resets the driver.
+    async fn control_request(&mut self, control: Control) {
+        match control {
+            Control::FlushQueue { dccl_id, reply } => {
+                let flushed = match self.names.get(&dccl_id) {
+                    Some(name) => self.outbox.flush(name).map_err(|e| e.to_string()),
+                    None => Err(format!("no queue for DCCL id {dccl_id}")),
+                };
+                match &flushed {
+                    Ok(n) => tracing::info!(dccl_id, "queue flushed: {n} messages"),
+                    Err(e) => tracing::warn!(dccl_id, "queue flush: {e}"),
+                }
+                let _ = reply.send(flushed);
+            }
+            Control::ResetDriver { reply } => {
+                let _ = reply.send(self.reset_driver().await);
+            }
+        }
+    }
+
+    /// Stops the driver and starts it again from its configuration;
+    /// messages of a transmission under way are queued again. When the
+    /// driver cannot start again the daemon stops as for a driver that
+    /// stopped (its messages stay in the journal).
+    async fn reset_driver(&mut self) -> Result<(), String> {
+        let Some(config) = self.driver_config.clone() else {
+            return Err(
+                "the driver was started by the embedding program: it cannot be reset".into(),
+            );
+        };
+        tracing::warn!("driver reset requested: stopping {}", self.driver.name());
+        // A stand-in that has stopped already, while the driver restarts.
+        let stand_in = Driver::spawn("stopped", |_| async {});
+        let old = std::mem::replace(&mut self.driver, stand_in);
+        if let Err(e) = old.stop().await {
+            tracing::warn!("driver stop: {e}");
+        }
+        if let Err(e) = self.outbox.transmitted(false) {
+            tracing::error!("journal: {e}");
+        }
+        let driver = start_driver(&config).await.map_err(|e| {
+            tracing::error!("driver reset: {e}");
+            e.to_string()
+        })?;
+        tracing::info!("driver {} started again", driver.name());
+        self.driver = driver;
+        Ok(())
+    }
+
+    /// Sends a modem or medium access event to the clients.
+    fn report(&self, event: ModemEvent) {
+        let (topic, line) = event.line();
+        let _ = self.events.send(Arc::new(ClientEvent {
+            topic: Some(topic),
+            line,
+            event: DaemonEvent::Modem(event),
+        }));
     }
 
     /// Logs the queue events and sends them to the clients; returns the
@@ -651,9 +735,11 @@ impl Daemon {
                     .unwrap_or_else(|| format!("dccl id {id}"))
             };
             if let Some((topic, line)) = event_line(&event, entry, name_of) {
-                let _ = self
-                    .events
-                    .send(Arc::new(ClientEvent { topic, line, event }));
+                let _ = self.events.send(Arc::new(ClientEvent {
+                    topic,
+                    line,
+                    event: DaemonEvent::Queue(event),
+                }));
             }
         }
         dropped

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use gobyd::json_server::Publish;
+use gobyd::json_server::{DaemonEvent, Publish};
 use gobyd::runtime::Daemon;
 use modemdriver::micromodem::emulator::{
     self, AirKind, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
@@ -211,8 +211,10 @@ async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
                 let (note, delivered) = match &e.event {
-                    QueueEvent::Received(r) => (r.message.clone(), true),
-                    QueueEvent::Acked { message, .. } => (message.clone(), false),
+                    DaemonEvent::Queue(QueueEvent::Received(r)) => (r.message.clone(), true),
+                    DaemonEvent::Queue(QueueEvent::Acked { message, .. }) => {
+                        (message.clone(), false)
+                    }
                     _ => continue,
                 };
                 let note = note

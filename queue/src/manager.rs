@@ -559,11 +559,21 @@ impl QueueManager {
 
     /// Empties the queue of a type; returns how many messages it held.
     pub fn flush(&mut self, name: &str) -> Result<usize> {
+        Ok(self.flush_ids(name)?.len())
+    }
+
+    /// Empties the queue of a type; returns the ids of the messages it
+    /// held (those awaiting an ack included).
+    pub fn flush_ids(&mut self, name: &str) -> Result<Vec<MessageId>> {
         let id = self.id_of_configured(name)?;
         let index = self.index_of(id);
-        let n = self.queues[index].flush().len();
+        let ids = self.queues[index]
+            .flush()
+            .into_iter()
+            .map(|m| m.seq)
+            .collect();
         self.emit_size(index);
-        Ok(n)
+        Ok(ids)
     }
 
     /// Messages held for a type (including those awaiting an ack).
