@@ -18,7 +18,8 @@
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
 //! composes and runs the stack, [`outbox`] is the queue with its on-disk
 //! journal, [`json_protocol`] and [`json_server`] serve JSON clients,
-//! [`moos_bridge`] joins a MOOS community, [`raw_log`] writes what went to
+//! [`moos_bridge`] joins a MOOS community, [`mqtt`] bridges to an MQTT
+//! broker (with [`link_event`] the link's own events), [`raw_log`] writes what went to
 //! and came from the modem, and [`command`] is the `gobyd` command line.
 
 #![warn(missing_docs)]
@@ -27,7 +28,9 @@ pub mod command;
 pub mod config;
 pub mod json_protocol;
 pub mod json_server;
+pub mod link_event;
 pub mod moos_bridge;
+pub mod mqtt;
 pub mod outbox;
 pub mod raw_log;
 pub mod runtime;

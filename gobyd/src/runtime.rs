@@ -29,6 +29,7 @@ use tokio::task::JoinSet;
 use super::config::{self, ConfigError};
 use super::json_protocol::{accepted_line, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
+use super::link_event::LinkEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
 
@@ -116,6 +117,7 @@ pub struct Daemon {
     /// Type names by DCCL id.
     names: HashMap<u32, String>,
     events: broadcast::Sender<EventLine>,
+    link: broadcast::Sender<LinkEvent>,
     publish_rx: mpsc::Receiver<Publish>,
     publish_tx: mpsc::Sender<Publish>,
     raw_log: Option<RawLog>,
@@ -220,6 +222,18 @@ impl Daemon {
             json_udp = socket.local_addr().ok();
             tasks.spawn(interface.serve_udp(socket));
         }
+        let (link, _) = broadcast::channel(1024);
+        if let Some(mqtt) = config.mqtt.clone() {
+            let bridge = super::mqtt::Bridge::new(
+                mqtt,
+                config.modem_id(),
+                codec.clone(),
+                publish_tx.clone(),
+            )?;
+            if let Some(bridge) = bridge {
+                tasks.spawn(bridge.run(events.subscribe(), link.subscribe()));
+            }
+        }
         if let Some(moos) = config.moos.clone() {
             tasks.spawn(super::moos_bridge::run(
                 moos,
@@ -246,6 +260,7 @@ impl Daemon {
             driver,
             names,
             events,
+            link,
             publish_rx,
             publish_tx,
             raw_log,
@@ -281,6 +296,12 @@ impl Daemon {
     /// A receiver of the event lines sent to clients.
     pub fn subscribe(&self) -> broadcast::Receiver<EventLine> {
         self.events.subscribe()
+    }
+
+    /// A receiver of the link's own events (driver state, MAC slots,
+    /// receptions).
+    pub fn link_events(&self) -> broadcast::Receiver<LinkEvent> {
+        self.link.subscribe()
     }
 
     /// Runs until `shutdown` completes, then stops the driver and closes the
@@ -379,6 +400,7 @@ impl Daemon {
     }
 
     fn driver_event(&mut self, event: DriverEvent) {
+        self.link_event(&event);
         match event {
             DriverEvent::DataRequest(request) => {
                 let mut filled = request.template().clone();
@@ -421,8 +443,24 @@ impl Daemon {
         }
     }
 
+    /// Tells embedded interfaces about the link (nothing waits for them).
+    fn link_event(&self, event: &DriverEvent) {
+        let link = match event {
+            DriverEvent::Status(status) => LinkEvent::Driver(Arc::new(status.clone())),
+            DriverEvent::Received(transmission) => LinkEvent::Received {
+                transmission: Arc::new(transmission.clone()),
+                time: SystemClock.now(),
+            },
+            _ => return,
+        };
+        let _ = self.link.send(link);
+    }
+
     fn mac_slots(&mut self) {
         for event in self.mac.poll(SystemClock.now()) {
+            let _ = self.link.send(LinkEvent::Slot(
+                event.initiate().map(|t| Arc::new(t.clone())),
+            ));
             if let Some(transmission) = event.initiate() {
                 if let Err(e) = self.driver.initiate_transmission(transmission.clone()) {
                     tracing::error!("cannot initiate a transmission: {e}");
