@@ -2,6 +2,7 @@
 //! (`.ci/mosquitto.sh` installs it), and an MQTT test client.
 
 #![allow(dead_code)]
+#![allow(unused_imports)]
 
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
