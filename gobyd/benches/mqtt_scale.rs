@@ -15,7 +15,6 @@
 //! says so and exits without it. Journals live under `target/`.
 
 #[path = "../tests/support/broker.rs"]
-#[allow(dead_code)]
 mod broker;
 
 use std::path::PathBuf;
