@@ -59,9 +59,14 @@ impl Fleet {
         let (kind, type_name) = leaf.split_once('/').unwrap_or((leaf, ""));
         let note = match kind {
             "status" => {
+                let before = (view.online, view.reconnects, view.dropped);
                 view.online = value["online"].as_bool();
                 view.reconnects = value["reconnects"].as_u64().unwrap_or(0);
                 view.dropped = value["dropped"].as_u64().unwrap_or(0);
+                if before == (view.online, view.reconnects, view.dropped) {
+                    // The periodic refresh: nothing new to say.
+                    return None;
+                }
                 match view.online {
                     Some(false) => "offline".to_string(),
                     _ => format!(
@@ -188,6 +193,10 @@ mod tests {
         assert_eq!(
             fleet.update("fleet/1/status", br#"{"online": true, "reconnects": 2}"#),
             Some("1 online, 2 reconnections, 0 dropped".into())
+        );
+        assert_eq!(
+            fleet.update("fleet/1/status", br#"{"online": true, "reconnects": 2}"#),
+            None
         );
         fleet.update(
             "fleet/1/queue/goby.example.Command",

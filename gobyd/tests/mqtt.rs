@@ -240,3 +240,17 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     drop(broker);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The README's fleet configurations check, and name their nodes.
+#[test]
+fn the_fleet_configurations_check() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    for (i, node) in [(1, "auv1"), (2, "auv2")] {
+        let config = gobyd::config::load(&dir.join(format!("fleet-vehicle{i}.pb.txt"))).unwrap();
+        gobyd::runtime::check(config.clone()).unwrap();
+        let settings = gobyd::mqtt::settings::settings(config.mqtt.as_ref().unwrap(), i)
+            .unwrap()
+            .unwrap();
+        assert_eq!(settings.topics.node("tx/x"), format!("fleet/{node}/tx/x"));
+    }
+}
