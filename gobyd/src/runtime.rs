@@ -101,6 +101,9 @@ pub async fn start_driver(
 /// types.
 pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     let config = config::complete(config)?;
+    if let Some(mqtt) = &config.mqtt {
+        super::mqtt::settings::settings(mqtt, config.modem_id())?;
+    }
     let defs = config::load_definitions(&config)?;
     let mut queue_config = config.queue.clone().unwrap_or_default();
     config::default_entries(&mut queue_config, &defs.loaded);

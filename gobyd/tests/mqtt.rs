@@ -253,4 +253,8 @@ fn the_fleet_configurations_check() {
             .unwrap();
         assert_eq!(settings.topics.node("tx/x"), format!("fleet/{node}/tx/x"));
     }
+    // `gobyd --check` looks at the mqtt section too.
+    let config = gobyd::config::parse("mqtt { broker: \"h:1\" qos: 2 }", "x").unwrap();
+    let e = gobyd::runtime::check(config).unwrap_err().to_string();
+    assert!(e.contains("mqtt.qos 2"), "{e}");
 }
