@@ -218,6 +218,10 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     }
     watcher.wait_pubacks(4 + burst.len());
     broker.stop();
+    assert!(
+        broker.persistence_file().is_file(),
+        "the broker saved no sessions"
+    );
     std::thread::sleep(std::time::Duration::from_secs(2));
     broker.restart();
     wait_all_received(&watcher, &burst);
@@ -258,3 +262,129 @@ fn the_fleet_configurations_check() {
     let e = gobyd::runtime::check(config).unwrap_err().to_string();
     assert!(e.contains("mqtt.qos 2"), "{e}");
 }
+
+/// Runs openssl with `args` in `dir`; false (and a notice) if it is missing
+/// or fails.
+#[cfg(feature = "mqtt-tls")]
+fn openssl(dir: &Path, args: &[&str]) -> bool {
+    match Command::new("openssl")
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+    {
+        Ok(s) if s.success() => true,
+        other => {
+            eprintln!("openssl {args:?}: {other:?}");
+            false
+        }
+    }
+}
+
+/// gobyd reaches a broker over TLS (its certificate signed by a test
+/// authority made here with openssl): its status arrives and a message
+/// published on its tx topic is accepted. A console reads on a plain
+/// listener of the same broker.
+#[cfg(feature = "mqtt-tls")]
+#[test]
+fn the_bridge_speaks_tls() {
+    let dir = scratch("tls");
+    let made = openssl(
+        &dir,
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=goby test authority",
+            "-keyout",
+            "ca.key",
+            "-out",
+            "ca.pem",
+        ],
+    ) && openssl(
+        &dir,
+        &[
+            "req",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-subj",
+            "/CN=127.0.0.1",
+            "-keyout",
+            "server.key",
+            "-out",
+            "server.csr",
+        ],
+    ) && {
+        std::fs::write(
+            dir.join("ext.cnf"),
+            "subjectAltName=IP:127.0.0.1\nbasicConstraints=CA:FALSE\n",
+        )
+        .unwrap();
+        openssl(
+            &dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                "server.csr",
+                "-CA",
+                "ca.pem",
+                "-CAkey",
+                "ca.key",
+                "-CAcreateserial",
+                "-days",
+                "2",
+                "-extfile",
+                "ext.cnf",
+                "-out",
+                "server.pem",
+            ],
+        )
+    };
+    if !made {
+        eprintln!("SKIPPED the_bridge_speaks_tls: openssl could not make the test certificates");
+        return;
+    }
+    let tls_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let extra = format!(
+        "listener {tls_port} 127.0.0.1\ncafile {d}/ca.pem\ncertfile {d}/server.pem\nkeyfile {d}/server.key\n",
+        d = dir.display()
+    );
+    let Some(broker) = Broker::start_with(&dir, "the_bridge_speaks_tls", &extra) else {
+        return;
+    };
+    let config = format!(
+        r#"
+modem_id: 1
+json {{ tcp_bind: "" }}
+mqtt {{ broker: "127.0.0.1:{tls_port}" topic_prefix: "secure" tls {{ ca_file: "{d}/ca.pem" }} }}
+data_dir: "{d}/node1"
+"#,
+        d = dir.display()
+    );
+    std::fs::write(dir.join("node1.cfg"), config).unwrap();
+    let watcher = Watcher::start(&broker.address(), "console", "secure/#");
+    let _node = Gobyd::start(&dir, 1);
+    watcher.wait_on("secure/1/status", |v| (v["online"] == true).then_some(()));
+    watcher.publish("secure/1/tx/goby.example.Command", command("sealed"));
+    let accepted = watcher.wait_on("secure/1/accepted", |v| Some(v.clone()));
+    assert_eq!(accepted["accepted"], "goby.example.Command", "{accepted}");
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[cfg(not(feature = "mqtt-tls"))]
+#[test]
+#[ignore = "TLS to the broker needs gobyd built with --features mqtt-tls: cargo test -p gobyd --features mqtt-tls --test mqtt"]
+fn the_bridge_speaks_tls() {}

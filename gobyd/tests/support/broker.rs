@@ -45,6 +45,12 @@ impl Broker {
     /// Starts a broker with its persistence in `dir`; `None` (and a
     /// printed notice) when Mosquitto is not installed.
     pub fn start(dir: &Path, test: &str) -> Option<Broker> {
+        Self::start_with(dir, test, "")
+    }
+
+    /// As [`Broker::start`], with more lines for its configuration file
+    /// (e.g. another listener).
+    pub fn start_with(dir: &Path, test: &str, extra: &str) -> Option<Broker> {
         let Some(exe) = mosquitto() else {
             eprintln!("SKIPPED {test}: mosquitto not found (install it with .ci/mosquitto.sh)");
             return None;
@@ -55,10 +61,13 @@ impl Broker {
             .unwrap()
             .port();
         let config = dir.join("mosquitto.conf");
+        // Run as root, Mosquitto would switch to its own user, which cannot
+        // write in this directory; stay (only applies as root).
+        let user = "user root\n";
         std::fs::write(
             &config,
             format!(
-                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\npersistence_location {}/\nlog_dest file {}\n",
+                "listener {port} 127.0.0.1\nallow_anonymous true\n{user}persistence true\npersistence_location {}/\nlog_dest file {}\n{extra}\n",
                 dir.display(),
                 dir.join("mosquitto.log").display()
             ),
@@ -97,6 +106,11 @@ impl Broker {
             assert!(Instant::now() < deadline, "mosquitto does not listen");
             std::thread::sleep(Duration::from_millis(50));
         }
+    }
+
+    /// Its persistence file (written when it stops).
+    pub fn persistence_file(&self) -> PathBuf {
+        self.config.with_file_name("mosquitto.db")
     }
 
     /// Stops it with SIGTERM (it writes its persistence file) and waits.
