@@ -94,7 +94,7 @@ pub async fn run(
                     let reply: Value = serde_json::from_str(&line).unwrap_or(Value::Null);
                     let notice = match reply.get("error").and_then(Value::as_str) {
                         Some(reason) => formatter.error(&publish.topic, reason),
-                        None => formatter.accepted(&publish.topic, &reply),
+                        None => formatter.accepted(&publish.topic, &reply, &publish.payload),
                     };
                     (publish, notice)
                 }

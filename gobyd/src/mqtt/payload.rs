@@ -3,7 +3,7 @@
 //! | topic under `PREFIX/NODE/` | retained | payload |
 //! |---|---|---|
 //! | `rx/TYPE` | no | `{"type", "src", "dest", "time", "msg", "link"}` |
-//! | `accepted` | no | `{"accepted": TYPE, "id", "topic"}` |
+//! | `accepted` | no | `{"accepted": TYPE, "id", "topic", "msg"}` |
 //! | `ack/TYPE` | no | `{"type", "by", "frame", "time", "msg"}` |
 //! | `expire/TYPE`, `drop/TYPE` | no | `{"type", "time", "msg"}` |
 //! | `queue/TYPE` | yes | `{"type", "size", "time"}` |
@@ -180,10 +180,12 @@ impl Formatter {
         )
     }
 
-    /// The notice that a message to send was queued (and is on disk).
-    pub fn accepted(&self, topic: &str, reply: &Value) -> Outgoing {
+    /// The notice that a message to send was queued (and is on disk):
+    /// the core's reply with the topic and the message as published.
+    pub fn accepted(&self, topic: &str, reply: &Value, published: &[u8]) -> Outgoing {
         let mut payload = reply.clone();
         payload["topic"] = topic.into();
+        payload["msg"] = serde_json::from_slice(published).unwrap_or(Value::Null);
         Outgoing::new(self.topics.node("accepted"), payload, false)
     }
 

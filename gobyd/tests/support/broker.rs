@@ -67,7 +67,7 @@ impl Broker {
         std::fs::write(
             &config,
             format!(
-                "listener {port} 127.0.0.1\nallow_anonymous true\n{user}persistence true\npersistence_location {}/\nlog_dest file {}\n{extra}\n",
+                "listener {port} 127.0.0.1\nallow_anonymous true\n{user}persistence true\nautosave_interval 1\npersistence_location {}/\nlog_dest file {}\n{extra}\n",
                 dir.display(),
                 dir.join("mosquitto.log").display()
             ),
@@ -111,6 +111,15 @@ impl Broker {
     /// Its persistence file (written when it stops).
     pub fn persistence_file(&self) -> PathBuf {
         self.config.with_file_name("mosquitto.db")
+    }
+
+    /// Kills it with SIGKILL: it keeps only what it saved last (it saves
+    /// every second).
+    pub fn kill(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
     }
 
     /// Stops it with SIGTERM (it writes its persistence file) and waits.
