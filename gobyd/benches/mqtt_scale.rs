@@ -2,13 +2,15 @@
 //! own acoustic simulator, each bridged to one Mosquitto broker on
 //! loopback) and C consoles.
 //!
-//! A console publishes M Command messages spread over the gateways' `tx`
+//! A console publishes 200 Command messages per gateway (at least 2000)
+//! spread over the gateways' `tx`
 //! topics (QoS 1). Each gateway parses one, queues it, syncs its journal,
 //! acknowledges it to the broker and publishes `accepted` and the new
 //! queue size; every console is subscribed to those. Figures: messages
 //! per second end to end (console publish → journaled → `accepted` back at
 //! the consoles) and publications per second delivered by the broker to
-//! the consoles (fan-out).
+//! the consoles (fan-out), and the share of one processor the broker used
+//! meanwhile.
 //!
 //! `cargo bench -p gobyd --bench mqtt_scale [-- N...]` (default N = 1 10
 //! 50) prints one JSON object per N. Needs Mosquitto (`.ci/mosquitto.sh`);
@@ -26,8 +28,10 @@ use gobyd::{config, runtime::Daemon};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use serde_json::json;
 
-/// Messages per gateway per run.
+/// Messages per gateway per run (at least [`MIN_TOTAL`] in all).
 const PER_GATEWAY: usize = 200;
+/// Fewest messages in a run.
+const MIN_TOTAL: usize = 2000;
 /// Consoles watching.
 const CONSOLES: usize = 4;
 
@@ -63,7 +67,10 @@ fn console(broker: &str, name: &str) -> (AsyncClient, rumqttc::EventLoop) {
     AsyncClient::new(options, 10_000)
 }
 
-async fn run(n: usize, broker: &str, dir: &std::path::Path) -> serde_json::Value {
+async fn run(n: usize, broker: &broker::Broker, dir: &std::path::Path) -> serde_json::Value {
+    let broker_cpu = || broker.cpu_seconds().unwrap_or(f64::NAN);
+    let address = broker.address();
+    let broker = address.as_str();
     let mut daemons = Vec::new();
     let mut stops = Vec::new();
     for id in 1..=n {
@@ -83,11 +90,11 @@ async fn run(n: usize, broker: &str, dir: &std::path::Path) -> serde_json::Value
     for c in 0..CONSOLES {
         let (client, mut eventloop) = console(broker, &format!("console{c}-{n}"));
         client
-            .subscribe("bench/+/accepted", QoS::AtMostOnce)
+            .subscribe("bench/+/accepted", QoS::AtLeastOnce)
             .await
             .unwrap();
         client
-            .subscribe("bench/+/queue/+", QoS::AtMostOnce)
+            .subscribe("bench/+/queue/+", QoS::AtLeastOnce)
             .await
             .unwrap();
         let (accepted, delivered) = (accepted.clone(), delivered.clone());
@@ -109,7 +116,7 @@ async fn run(n: usize, broker: &str, dir: &std::path::Path) -> serde_json::Value
     }
     // Every gateway online (its retained status seen), consoles subscribed.
     tokio::time::sleep(Duration::from_secs(2)).await;
-    let total = n * PER_GATEWAY;
+    let total = (n * PER_GATEWAY).max(MIN_TOTAL);
     let (publisher, mut eventloop) = console(broker, &format!("commander-{n}"));
     let pumping = tokio::spawn(async move {
         loop {
@@ -119,6 +126,7 @@ async fn run(n: usize, broker: &str, dir: &std::path::Path) -> serde_json::Value
         }
     });
     let delivered_before = delivered.load(Ordering::Relaxed);
+    let cpu_before = broker_cpu();
     let start = Instant::now();
     for i in 0..total {
         let gateway = i % n + 1;
@@ -133,11 +141,27 @@ async fn run(n: usize, broker: &str, dir: &std::path::Path) -> serde_json::Value
             .await
             .unwrap();
     }
-    let deadline = start + Duration::from_secs(600);
-    while (accepted.load(Ordering::Relaxed) as usize) < total && Instant::now() < deadline {
+    // Until every message is back, or nothing more came for 10 s.
+    let (mut last, mut last_change) = (0, Instant::now());
+    loop {
+        let now_accepted = accepted.load(Ordering::Relaxed);
+        if now_accepted as usize >= total || last_change.elapsed() > Duration::from_secs(10) {
+            break;
+        }
+        if now_accepted != last {
+            (last, last_change) = (now_accepted, Instant::now());
+        }
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
-    let seconds = start.elapsed().as_secs_f64();
+    // An incomplete run is timed to its last progress.
+    let complete = accepted.load(Ordering::Relaxed) as usize >= total;
+    let end = if complete {
+        Instant::now()
+    } else {
+        last_change
+    };
+    let seconds = end.duration_since(start).as_secs_f64().max(1e-3);
+    let broker_busy = (broker_cpu() - cpu_before) / seconds;
     let got = accepted.load(Ordering::Relaxed);
     let fan_out = delivered.load(Ordering::Relaxed) - delivered_before;
     pumping.abort();
@@ -159,6 +183,7 @@ async fn run(n: usize, broker: &str, dir: &std::path::Path) -> serde_json::Value
         "end_to_end_per_second": (got as f64 / seconds).round(),
         "console_deliveries": fan_out,
         "fan_out_per_second": (fan_out as f64 / seconds).round(),
+        "broker_cpu_share": (broker_busy * 100.0).round() / 100.0,
     })
 }
 
@@ -177,7 +202,10 @@ fn main() {
         .join(std::process::id().to_string());
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let Some(broker) = broker::Broker::start(&dir, "mqtt_scale") else {
+    // The broker may queue any number of messages for a console that lags
+    // (its default drops beyond 1000).
+    let Some(broker) = broker::Broker::start_with(&dir, "mqtt_scale", "max_queued_messages 0")
+    else {
         return;
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -185,7 +213,7 @@ fn main() {
         .build()
         .unwrap();
     for n in counts {
-        let figures = runtime.block_on(run(n, &broker.address(), &dir.join(n.to_string())));
+        let figures = runtime.block_on(run(n, &broker, &dir.join(n.to_string())));
         println!("{figures}");
     }
     drop(broker);

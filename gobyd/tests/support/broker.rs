@@ -108,6 +108,23 @@ impl Broker {
         }
     }
 
+    /// Its process id, while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.as_ref().map(Child::id)
+    }
+
+    /// Its processor time so far (user and system), seconds; Linux only.
+    pub fn cpu_seconds(&self) -> Option<f64> {
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.pid()?)).ok()?;
+        // Fields after the command name (in parentheses): utime and stime
+        // are the 12th and 13th, in clock ticks (100 per second on Linux).
+        let after = &stat[stat.rfind(')')? + 2..];
+        let fields: Vec<&str> = after.split_whitespace().collect();
+        let ticks: f64 =
+            fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+        Some(ticks / 100.0)
+    }
+
     /// Its persistence file (written when it stops).
     pub fn persistence_file(&self) -> PathBuf {
         self.config.with_file_name("mosquitto.db")
