@@ -12,11 +12,12 @@
 //! journal, so nothing the broker handed over is lost if gobyd or the
 //! broker stops. Topics and payloads: [`payload`].
 
+pub mod backlog;
 pub mod inbound;
 pub mod payload;
 pub mod settings;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -29,6 +30,7 @@ use tokio::sync::{broadcast, mpsc};
 use crate::config::ConfigError;
 use crate::json_server::{EventLine, Publish};
 use crate::link_event::LinkEvent;
+use backlog::Backlog;
 use payload::{BridgeStatus, Formatter, Outgoing};
 use settings::Settings;
 
@@ -98,15 +100,17 @@ impl Bridge {
             incoming_rx,
             notice_tx,
         ));
+        let settings_buffer = settings.buffer;
         let mut state = Loop {
             settings,
             client,
             formatter,
-            buffer: VecDeque::new(),
+            buffer: Backlog::new(settings_buffer),
             status: BridgeStatus {
                 modem_id,
                 ..Default::default()
             },
+            lagged: 0,
             connected: false,
             ever_connected: false,
             lost_at: None,
@@ -122,7 +126,9 @@ struct Loop {
     settings: Settings,
     client: AsyncClient,
     formatter: Formatter,
-    buffer: VecDeque<Outgoing>,
+    buffer: Backlog,
+    /// Broadcast events the bridge missed by falling behind the core.
+    lagged: u64,
     status: BridgeStatus,
     connected: bool,
     ever_connected: bool,
@@ -158,7 +164,7 @@ impl Loop {
                             self.push(out);
                         }
                     }
-                    Err(broadcast::error::RecvError::Lagged(n)) => self.status.dropped += n,
+                    Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
                 got = events.recv() => match got {
@@ -167,7 +173,7 @@ impl Loop {
                             self.push(out);
                         }
                     }
-                    Err(broadcast::error::RecvError::Lagged(n)) => self.status.dropped += n,
+                    Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
                 Some(notice) = notices.recv() => self.push(notice),
@@ -213,7 +219,7 @@ impl Loop {
         self.ever_connected = true;
         tracing::info!(
             reconnects = self.status.reconnects,
-            dropped = self.status.dropped,
+            dropped = self.buffer.dropped() + self.lagged,
             buffered = self.buffer.len(),
             "MQTT: connected to {broker}"
         );
@@ -227,6 +233,7 @@ impl Loop {
 
     fn push_status(&mut self) {
         self.status.buffered = self.buffer.len();
+        self.status.dropped = self.buffer.dropped() + self.lagged;
         let status = self.formatter.status(&self.status, SystemClock.now());
         // The status goes ahead of what waits, so consoles see the node is
         // back before its backlog.
@@ -235,11 +242,7 @@ impl Loop {
 
     /// Buffers a publication, dropping the oldest beyond the bound.
     fn push(&mut self, out: Outgoing) {
-        self.buffer.push_back(out);
-        while self.buffer.len() > self.settings.buffer {
-            self.buffer.pop_front();
-            self.status.dropped += 1;
-        }
+        self.buffer.push(out);
     }
 
     /// Hands what waits to the client while connected, as far as it takes.
@@ -255,7 +258,7 @@ impl Loop {
                 out.payload.clone(),
             ) {
                 Ok(()) => {
-                    self.buffer.pop_front();
+                    self.buffer.pop();
                 }
                 Err(_) => break,
             }
