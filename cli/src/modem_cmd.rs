@@ -225,6 +225,34 @@ async fn backend_driver(
     }
 }
 
+/// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
+/// before announcing anything); the future completes on either.
+fn interrupted() -> impl std::future::Future<Output = ()> {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        let interrupt = signal(SignalKind::interrupt());
+        let terminate = signal(SignalKind::terminate());
+        async move {
+            match (interrupt, terminate) {
+                (Ok(mut interrupt), Ok(mut terminate)) => {
+                    tokio::select! {
+                        _ = interrupt.recv() => {}
+                        _ = terminate.recv() => {}
+                    }
+                }
+                _ => {
+                    let _ = tokio::signal::ctrl_c().await;
+                }
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    async {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let backends = plan(args)?;
     let revision_interval = seconds(args.revision_interval, "--revision-interval")?;
@@ -238,6 +266,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
+        let stop = interrupted();
         let medium = Medium::new();
         let mut emulators: Vec<EmulatorHandle> = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -274,10 +303,9 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         }
         match duration {
             Some(d) => tokio::time::sleep(d).await,
-            None => {
-                let _ = tokio::signal::ctrl_c().await;
-            }
+            None => stop.await,
         }
+        // Each emulator removes its link as it stops.
         for e in emulators {
             e.stop().await;
         }

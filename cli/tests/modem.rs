@@ -205,3 +205,52 @@ fn bad_options_are_refused() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--modem-id"));
 }
+
+#[test]
+fn sigterm_removes_the_links() {
+    let dir = std::env::temp_dir().join(format!("goby-emulate-term-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let links = [dir.join("modem1"), dir.join("modem2")];
+    let mut emulator = emulate(
+        &[
+            "--modem-id",
+            "1",
+            "--modem-id",
+            "2",
+            "--link",
+            links[0].to_str().unwrap(),
+            "--link",
+            links[1].to_str().unwrap(),
+        ],
+        2,
+    );
+    for link in &links {
+        assert!(link.symlink_metadata().is_ok(), "{} made", link.display());
+    }
+    let status = Command::new("kill")
+        .args(["-TERM", &emulator.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let exit = loop {
+        if let Some(exit) = emulator.child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "goby modem emulate ignored SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(exit.success(), "{exit:?}");
+    for link in &links {
+        assert!(
+            link.symlink_metadata().is_err(),
+            "{} left behind",
+            link.display()
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

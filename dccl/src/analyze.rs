@@ -76,7 +76,8 @@ fn message_lines(out: &mut String, codec: &MessageCodec, level: usize) {
             INDENT * level,
             &name,
             width,
-            &range(o.bits, o.bits + max_member),
+            // libdccl writes a oneof's sizes as `min-max` even when equal.
+            &format!("{}-{}", o.bits, o.bits + max_member),
         );
         let _ = writeln!(out, " {{");
         for member in members {

@@ -261,8 +261,8 @@ impl Codec {
     }
 
     /// Loads every valid DCCL message of the file `file_name` of `pool`, as
-    /// libdccl's tool does when no type is named: each top-level message (and
-    /// each nested one with a `(dccl.msg)` option), in order of full name. A
+    /// libdccl's tool does when no type is named: each top-level message in
+    /// order of full name, then each nested one with a `(dccl.msg)` option. A
     /// type that cannot be loaded (a helper message without an id, an id
     /// already used, a bad bound...) is skipped and reported with the reason;
     /// the others are loaded. Errors only when the file is not in the pool.
@@ -274,16 +274,24 @@ impl Codec {
         let file = pool
             .get_file_by_name(file_name)
             .ok_or_else(|| Error::Proto(format!("{file_name}: not in the descriptor pool")))?;
+        let by_name =
+            |a: &MessageDescriptor, b: &MessageDescriptor| a.full_name().cmp(b.full_name());
         let mut candidates: Vec<MessageDescriptor> = file.messages().collect();
+        candidates.sort_by(by_name);
+        // Nested types with a (dccl.msg) option come after the top-level
+        // ones (which alone libdccl's tool loads), so that they never take
+        // an id from one of them.
+        let mut nested = Vec::new();
         let mut stack: Vec<MessageDescriptor> =
             candidates.iter().flat_map(|m| m.child_messages()).collect();
         while let Some(desc) = stack.pop() {
             stack.extend(desc.child_messages());
             if has_message_options(&desc) && !desc.is_map_entry() {
-                candidates.push(desc);
+                nested.push(desc);
             }
         }
-        candidates.sort_by(|a, b| a.full_name().cmp(b.full_name()));
+        nested.sort_by(by_name);
+        candidates.extend(nested);
         let mut report = FileLoad::default();
         for desc in candidates {
             match self.load(&desc) {
@@ -735,7 +743,7 @@ fn definition_hash(desc: &MessageDescriptor, parts: &[&dyn FieldCodec]) -> u64 {
 /// What [`Codec::load_valid_messages`] did with the messages of a file.
 #[derive(Debug, Default)]
 pub struct FileLoad {
-    /// Full names of the types loaded, sorted.
+    /// Full names of the types loaded, in the order they were loaded.
     pub loaded: Vec<String>,
     /// The types that are not valid DCCL messages, each with the reason.
     pub skipped: Vec<SkippedType>,

@@ -14,7 +14,9 @@ pub struct Location {
 
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.field.is_empty() {
+        if self.message.is_empty() && self.field.is_empty() {
+            f.write_str("message type not known")
+        } else if self.field.is_empty() {
             write!(f, "message {}", self.message)
         } else {
             write!(f, "message {}, field {}", self.message, self.field)

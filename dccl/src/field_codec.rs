@@ -1,6 +1,6 @@
 //! The field codec interface: every codec, built in or supplied by a user,
 //! implements [`FieldCodec`] and is created by a [`FieldCodecFactory`]
-//! registered by name in a [`CodecRegistry`](crate::CodecRegistry).
+//! registered by name in a [`CodecRegistry`].
 //!
 //! A user codec, registered by name and selected with `(dccl.field).codec`:
 //!
@@ -111,6 +111,17 @@ impl EncodeContext<'_> {
             log.record(format!("{}: {action}", what()));
         }
         Ok(())
+    }
+
+    /// Records, when changes are being collected, a change libdccl makes
+    /// even in strict mode (never an error): e.g. a value outside an
+    /// arithmetic model's bounds, a value that differs from a field's
+    /// `static_value`.
+    #[inline]
+    pub fn note_change(&self, what: impl FnOnce() -> String, action: &str) {
+        if let Some(log) = self.changes {
+            log.record(format!("{}: {action}", what()));
+        }
     }
 
     /// Marks the change log before a field (or element) is encoded; pass the

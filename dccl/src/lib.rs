@@ -49,6 +49,20 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+//!
+//! ## Agreement with libdccl 4.2
+//!
+//! Fields (and `oneof`s) are coded, sized, hashed and listed in the order
+//! they are declared in the `.proto` file, at every level of nesting. Values
+//! that do not fit are changed as libdccl changes them (out of range: not
+//! present; NaN: the minimum; strings and arrays: truncated);
+//! [`Codec::encode_with_changes`] and [`Codec::check`] list every such
+//! change ([`ValueChange`]), and strict mode ([`Codec::set_strict`]) refuses
+//! them. [`Codec::load_valid_messages`] loads every valid DCCL message of a
+//! file that also holds helper types and reports the others with the reason.
+//! `.proto` sources nested deeper than [`nesting::MAX_NESTING`] brackets are
+//! refused before parsing.
+
 #![warn(missing_docs)]
 
 mod analyze;

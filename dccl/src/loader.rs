@@ -101,20 +101,22 @@ pub fn compile_protos(
         }
         paths.push(path);
     }
-    let mut resolver = ChainFileResolver::new();
-    for dir in dirs {
-        resolver.add(GuardedInclude::new(dir));
-    }
-    resolver.add(EmbeddedResolver);
-    resolver.add(GoogleFileResolver::new());
-    let mut compiler = protox::Compiler::with_file_resolver(resolver);
-    compiler.include_imports(true).include_source_info(false);
-    for path in &paths {
-        compiler
-            .open_file(path)
-            .map_err(|e| Error::Proto(format!("{}: {e}", path.display())))?;
-    }
-    decode_pool(&compiler.encode_file_descriptor_set())
+    on_large_stack(move || {
+        let mut resolver = ChainFileResolver::new();
+        for dir in dirs {
+            resolver.add(GuardedInclude::new(dir));
+        }
+        resolver.add(EmbeddedResolver);
+        resolver.add(GoogleFileResolver::new());
+        let mut compiler = protox::Compiler::with_file_resolver(resolver);
+        compiler.include_imports(true).include_source_info(false);
+        for path in &paths {
+            compiler
+                .open_file(path)
+                .map_err(|e| Error::Proto(format!("{}: {e}", path.display())))?;
+        }
+        decode_pool(&compiler.encode_file_descriptor_set())
+    })
 }
 
 /// Name given by the compiler to `file`: its path relative to the first
@@ -169,18 +171,42 @@ pub fn compile_sources(sources: &[(&str, &str)]) -> Result<DescriptorPool> {
             .map(|(n, s)| (n.to_string(), s.to_string()))
             .collect(),
     );
-    let mut resolver = ChainFileResolver::new();
-    resolver.add(memory);
-    resolver.add(EmbeddedResolver);
-    resolver.add(GoogleFileResolver::new());
-    let mut compiler = protox::Compiler::with_file_resolver(resolver);
-    compiler.include_imports(true).include_source_info(false);
-    for (name, _) in sources {
-        compiler
-            .open_file(name)
-            .map_err(|e| Error::Proto(format!("{name}: {e}")))?;
-    }
-    decode_pool(&compiler.encode_file_descriptor_set())
+    let names: Vec<String> = sources.iter().map(|(n, _)| n.to_string()).collect();
+    on_large_stack(move || {
+        let mut resolver = ChainFileResolver::new();
+        resolver.add(memory);
+        resolver.add(EmbeddedResolver);
+        resolver.add(GoogleFileResolver::new());
+        let mut compiler = protox::Compiler::with_file_resolver(resolver);
+        compiler.include_imports(true).include_source_info(false);
+        for name in &names {
+            compiler
+                .open_file(name)
+                .map_err(|e| Error::Proto(format!("{name}: {e}")))?;
+        }
+        decode_pool(&compiler.encode_file_descriptor_set())
+    })
+}
+
+/// Stack of the thread that parses `.proto` files: the parser recurses once
+/// per nested option value (about 20 KiB a level in a debug build), so the
+/// [`MAX_NESTING`](crate::nesting::MAX_NESTING) levels the nesting guard
+/// lets through must not depend on the caller's stack (2 MiB on a spawned
+/// thread). Reserved address space, not memory in use.
+const COMPILER_STACK_BYTES: usize = 64 << 20;
+
+/// Runs the compilation `f` on a thread with [`COMPILER_STACK_BYTES`] of stack.
+fn on_large_stack(f: impl FnOnce() -> Result<DescriptorPool> + Send) -> Result<DescriptorPool> {
+    std::thread::scope(|scope| {
+        let handle = std::thread::Builder::new()
+            .name("proto-compiler".into())
+            .stack_size(COMPILER_STACK_BYTES)
+            .spawn_scoped(scope, f)
+            .map_err(|e| Error::Proto(format!("cannot start the .proto compiler thread: {e}")))?;
+        handle
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }
 
 fn decode_pool(bytes: &[u8]) -> Result<DescriptorPool> {

@@ -14,6 +14,19 @@ fn deep_option_source(depth: usize) -> String {
     )
 }
 
+/// A custom option of a recursive message type whose value nests `depth`
+/// levels inside the option's own braces (themselves inside `message M {`).
+fn recursive_option_source(depth: usize) -> String {
+    format!(
+        "syntax = \"proto2\";\nimport \"google/protobuf/descriptor.proto\";\n\
+         message Node {{ optional Node child = 1; optional int32 v = 2; }}\n\
+         extend google.protobuf.MessageOptions {{ optional Node tree = 50001; }}\n\
+         message M {{\n  option (tree) = {{ {}v: 1{} }};\n}}\n",
+        "child { ".repeat(depth),
+        " }".repeat(depth)
+    )
+}
+
 /// Messages declared inside each other, `depth` levels.
 fn nested_messages_source(depth: usize) -> String {
     let mut s = String::from("syntax = \"proto2\";\n");
@@ -81,4 +94,24 @@ fn nesting_up_to_the_limit_reaches_the_parser() {
     assert_eq!(pool.all_messages().count(), 20);
     std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
     std::fs::remove_dir_all(path2.parent().unwrap()).unwrap();
+}
+
+#[test]
+fn a_recursive_option_value_at_the_limit_compiles_on_a_small_stack() {
+    // 98 levels of `child` + the option's braces + `message M {` = 100.
+    // The parser recurses once per level; on this test thread's 2 MiB stack
+    // it would overflow well before 100 levels of a debug build.
+    let pool = dccl::compile_sources(&[("tree.proto", &recursive_option_source(98))]).unwrap();
+    assert!(pool.get_message_by_name("M").is_some());
+    let err = dccl::compile_sources(&[("tree.proto", &recursive_option_source(99))])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("tree.proto:6:") && err.contains("nested deeper"),
+        "{err}"
+    );
+    // And from a file, with the same result.
+    let path = temp_file("tree.proto", &recursive_option_source(98));
+    assert!(dccl::compile_protos(&[&path], &[] as &[PathBuf]).is_ok());
+    std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
 }

@@ -155,3 +155,57 @@ fn strict_mode_refuses_the_first_change() {
         }
     }
 }
+
+#[test]
+fn changes_libdccl_makes_even_in_strict_mode_are_reported_but_not_refused() {
+    let mut codec = Codec::new();
+    codec
+        .set_arithmetic_model(dccl::codecs::arithmetic::ArithmeticModel {
+            name: "m".into(),
+            frequency: vec![1, 2],
+            value_bound: vec![0.0, 1.0, 2.0],
+            out_of_range_frequency: Some(1),
+            eof_frequency: Some(1),
+            ..Default::default()
+        })
+        .unwrap();
+    let pool = dccl::compile_sources(&[(
+        "s.proto",
+        r#"syntax = "proto2";
+           import "dccl/option_extensions.proto";
+           import "dccl/arithmetic/protobuf/arithmetic_extensions.proto";
+           message S {
+             option (dccl.msg) = { id: 5 max_bytes: 32 codec_version: 4 };
+             optional int32 k = 1 [(dccl.field) = { codec: "dccl.static" static_value: "42" }];
+             repeated double v = 2 [(dccl.field) = { codec: "dccl.arithmetic" max_repeat: 4 [arithmetic] { model: "m" } }];
+             optional double one = 3 [(dccl.field) = { codec: "dccl.arithmetic" [arithmetic] { model: "m" } }];
+           }"#,
+    )])
+    .unwrap();
+    let desc = pool.get_message_by_name("S").unwrap();
+    codec.load(&desc).unwrap();
+    let msg = DynamicMessage::parse_text_format(desc, "k: 7 v: 1 v: 9 one: -3").unwrap();
+    let (bytes, c) = codec.encode_with_changes(&msg).unwrap();
+    assert_eq!(bytes, codec.encode(&msg).unwrap());
+    assert_eq!(
+        fields(&c),
+        vec![
+            (
+                "k",
+                "7 differs from static_value 42: not sent (received as the static value)"
+            ),
+            (
+                "v[1]",
+                "9 is outside the bounds [0, 2] of arithmetic model `m`: sent as out of range \
+                 (received as NaN)"
+            ),
+            (
+                "one",
+                "-3 is outside the bounds [0, 2] of arithmetic model `m`: sent as out of range \
+                 (received as NaN)"
+            ),
+        ]
+    );
+    codec.set_strict(true);
+    assert_eq!(codec.encode(&msg).unwrap(), bytes);
+}

@@ -1,6 +1,8 @@
-//! gobyd figures: messages per second accepted on the JSON interface, the
-//! latency from a client's line to the frame handed to the driver, and the
-//! daemon's resident memory at idle.
+//! gobyd figures: messages per second accepted on the JSON interface (one
+//! pipelining client; four concurrent clients, each waiting for its reply),
+//! the latency from a client's line to the frame handed to the driver (alone
+//! and under the four clients' load), and the daemon's resident memory at
+//! idle and under load.
 //!
 //! `cargo bench -p gobyd --bench gobyd` prints one JSON object. The
 //! journal lives under `target/` (the disk the project is built on): every
@@ -18,6 +20,15 @@ use tokio::sync::{mpsc, oneshot};
 
 const ACCEPT_COUNT: usize = 2000;
 const LATENCY_COUNT: usize = 300;
+/// Concurrent clients of the load run.
+const LOAD_CLIENTS: usize = 4;
+/// Messages each load client publishes, one at a time.
+const LOAD_PER_CLIENT: usize = 500;
+/// Destination of the load's messages; probes go to another node, and the
+/// driver asks only for frames to that one, so the load piles up in its
+/// queue (journaled) while each probe leaves at once.
+const LOAD_DEST: i32 = 2;
+const PROBE_DEST: i32 = 3;
 
 /// A driver that, told to transmit, asks for data again and again until it
 /// gets a frame with something in it (as if a slot started the moment the
@@ -58,11 +69,28 @@ fn publish_line(i: usize) -> String {
     )
 }
 
+fn probe_line(i: usize) -> String {
+    format!(
+        "{{\"publish\": \"goby.example.Command\", \"msg\": {{\"destination\": {PROBE_DEST}, \"action\": \"GOTO\", \"note\": \"p{i}\"}}}}\n"
+    )
+}
+
+fn load_line(client: usize, i: usize) -> String {
+    format!(
+        "{{\"publish\": \"goby.example.NavigationReport\", \"msg\": {{\"source\": 1, \"destination\": {LOAD_DEST}, \"time\": 1800000000, \"x\": {i}, \"y\": {client}, \"z\": -10}}}}\n"
+    )
+}
+
 fn resident_kib(pid: u32) -> Option<u64> {
+    status_kib(pid, "VmRSS:")
+}
+
+/// A memory figure (kB) of `/proc/PID/status`.
+fn status_kib(pid: u32, field: &str) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     status
         .lines()
-        .find(|l| l.starts_with("VmRSS:"))?
+        .find(|l| l.starts_with(field))?
         .split_whitespace()
         .nth(1)?
         .parse()
@@ -99,7 +127,10 @@ fn main() {
     let (frames_tx, mut frames_rx) = mpsc::unbounded_channel();
     let text = format!(
         "modem_id: 1\nmac {{ type: MAC_NONE }}\njson {{ tcp_bind: \"127.0.0.1:0\" }}\n\
-         queue {{ message_entry {{ protobuf_name: \"goby.example.NavigationReport\" ack: false max_queue: 100000 }} }}\n\
+         queue {{ message_entry {{ protobuf_name: \"goby.example.NavigationReport\" ack: false max_queue: 100000 \
+         role {{ type: DESTINATION_ID field: \"destination\" }} }} \
+         message_entry {{ protobuf_name: \"goby.example.Command\" ack: false max_queue: 100000 \
+         role {{ type: DESTINATION_ID field: \"destination\" }} }} }}\n\
          data_dir: \"{}\"\nlog {{ raw_log: false }}\n",
         data_root.join("daemon").display()
     );
@@ -170,6 +201,70 @@ fn main() {
     accept_latency.sort();
     frame_latency.sort();
 
+    // Load: four clients publish at once, each waiting for its reply (its
+    // message on disk) before the next; meanwhile probes measure the line
+    // to frame latency on this connection.
+    let started = std::sync::Barrier::new(LOAD_CLIENTS + 1);
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let mut load_frame_latency = Vec::new();
+    let mut load_accept_latency = Vec::new();
+    let load_elapsed = std::thread::scope(|scope| {
+        let clients: Vec<_> = (0..LOAD_CLIENTS)
+            .map(|c| {
+                let started = &started;
+                let done = &done;
+                scope.spawn(move || {
+                    let stream = TcpStream::connect(addr).unwrap();
+                    stream.set_nodelay(true).unwrap();
+                    let mut writer = stream.try_clone().unwrap();
+                    let mut reader = BufReader::new(stream);
+                    let mut line = String::new();
+                    started.wait();
+                    for i in 0..LOAD_PER_CLIENT {
+                        writer.write_all(load_line(c, i).as_bytes()).unwrap();
+                        line.clear();
+                        reader.read_line(&mut line).unwrap();
+                        assert!(line.contains("\"accepted\""), "{line}");
+                    }
+                    done.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                })
+            })
+            .collect();
+        started.wait();
+        let start = Instant::now();
+        let mut i = 0;
+        while done.load(std::sync::atomic::Ordering::SeqCst) < LOAD_CLIENTS {
+            handle
+                .initiate_transmission(ModemTransmission {
+                    dest: Some(PROBE_DEST),
+                    max_frame_bytes: Some(32),
+                    max_num_frames: Some(1),
+                    ..Default::default()
+                })
+                .unwrap();
+            let sent = Instant::now();
+            writer.write_all(probe_line(i).as_bytes()).unwrap();
+            let (at, frames) = runtime.block_on(frames_rx.recv()).unwrap();
+            assert!(frames.first().is_some_and(|f| !f.is_empty()), "no frame");
+            load_frame_latency.push(at - sent);
+            line.clear();
+            reader.read_line(&mut line).unwrap();
+            assert!(line.contains("\"accepted\""), "{line}");
+            load_accept_latency.push(sent.elapsed());
+            i += 1;
+        }
+        for c in clients {
+            c.join().unwrap();
+        }
+        start.elapsed()
+    });
+    let load_rate = (LOAD_CLIENTS * LOAD_PER_CLIENT) as f64 / load_elapsed.as_secs_f64();
+    load_frame_latency.sort();
+    load_accept_latency.sort();
+    // The daemon runs in this process: its peak resident memory, clients
+    // and the queued load included.
+    let load_peak_kib = status_kib(std::process::id(), "VmHWM:");
+
     let _ = stop.send(());
     runtime.block_on(running).unwrap().unwrap();
     let rss = idle_memory(&data_root.join("idle"));
@@ -186,6 +281,20 @@ fn main() {
             "p99": percentile(&frame_latency, 0.99).round(),
         },
         "idle_rss_mib": rss.map(|kib| (kib as f64 / 1024.0 * 10.0).round() / 10.0),
+        "load": {
+            "clients": LOAD_CLIENTS,
+            "accepted_per_second": load_rate.round(),
+            "probes": load_frame_latency.len(),
+            "line_to_frame_us": {
+                "p50": percentile(&load_frame_latency, 0.5).round(),
+                "p99": percentile(&load_frame_latency, 0.99).round(),
+            },
+            "accept_latency_us": {
+                "p50": percentile(&load_accept_latency, 0.5).round(),
+                "p99": percentile(&load_accept_latency, 0.99).round(),
+            },
+            "peak_rss_mib": load_peak_kib.map(|kib| (kib as f64 / 1024.0 * 10.0).round() / 10.0),
+        },
     });
     println!("{report}");
 }

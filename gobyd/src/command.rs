@@ -34,6 +34,18 @@ pub struct GobydCli {
     /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<std::path::PathBuf>,
+    /// MOOS mission file: the configuration is its `ProcessConfig = gobyd`
+    /// block, with ServerHost, ServerPort, LatOrigin and LongOrigin.
+    #[arg(long, value_name = "FILE", conflicts_with = "config")]
+    pub moos_file: Option<std::path::PathBuf>,
+    /// Mission file and process name as pAntler passes them
+    /// (`gobyd mission.moos [name]`): the same as --moos-file, reading the
+    /// block `ProcessConfig = name`.
+    #[arg(value_name = "MISSION", conflicts_with_all = ["config", "moos_file"])]
+    pub mission: Option<std::path::PathBuf>,
+    /// Process name in the mission file (with MISSION).
+    #[arg(value_name = "NAME", requires = "mission")]
+    pub process_name: Option<String>,
     /// Print a commented working configuration and exit.
     #[arg(long)]
     pub example_config: bool,
@@ -56,9 +68,13 @@ pub struct GobydCli {
 
 /// The configuration named by the command line, with its overrides applied.
 fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
-    let mut config = match &cli.config {
-        Some(path) => config::load(path)?,
-        None => GobydConfig::default(),
+    let mission = cli.moos_file.as_ref().or(cli.mission.as_ref());
+    let mut config = match (&cli.config, mission) {
+        (Some(path), _) => config::load(path)?,
+        (None, Some(path)) => {
+            crate::mission_file::load(path, cli.process_name.as_deref().unwrap_or("gobyd"))?
+        }
+        (None, None) => GobydConfig::default(),
     };
     if let Some(id) = cli.modem_id {
         config.modem_id = Some(id);
@@ -104,29 +120,31 @@ fn init_logging(config: &GobydConfig) {
     };
 }
 
-/// Completes on SIGINT or SIGTERM.
-async fn shutdown_signal() {
-    let interrupt = tokio::signal::ctrl_c();
+/// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
+/// before the daemon announces itself, so that no early signal is missed);
+/// the future completes on either.
+fn shutdown_signal() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
-    {
+    let listeners = {
         use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut terminate) => {
-                tokio::select! {
-                    _ = interrupt => {}
-                    _ = terminate.recv() => {}
-                }
+        (
+            signal(SignalKind::interrupt()),
+            signal(SignalKind::terminate()),
+        )
+    };
+    async move {
+        #[cfg(unix)]
+        if let (Ok(mut interrupt), Ok(mut terminate)) = listeners {
+            tokio::select! {
+                _ = interrupt.recv() => {}
+                _ = terminate.recv() => {}
             }
-            Err(_) => {
-                let _ = interrupt.await;
-            }
+            tracing::info!("signal received: shutting down");
+            return;
         }
+        let _ = tokio::signal::ctrl_c().await;
+        tracing::info!("signal received: shutting down");
     }
-    #[cfg(not(unix))]
-    {
-        let _ = interrupt.await;
-    }
-    tracing::info!("signal received: shutting down");
 }
 
 /// Runs `gobyd` with a parsed command line; returns the exit status.
@@ -158,6 +176,11 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         };
     }
     init_logging(&config);
+    if let Ok(completed) = config::complete(config.clone()) {
+        if let Some(problem) = config::mac_slot_problem(&completed) {
+            tracing::warn!("{problem}");
+        }
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -170,6 +193,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         }
     };
     runtime.block_on(async {
+        let stop = shutdown_signal();
         let daemon = match runtime::Daemon::start(config).await {
             Ok(d) => d,
             Err(e) => {
@@ -180,7 +204,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         if let Some(addr) = daemon.json_tcp_addr() {
             tracing::info!("JSON interface on tcp://{addr}");
         }
-        match daemon.run(shutdown_signal()).await {
+        match daemon.run(stop).await {
             Ok(()) => EXIT_OK,
             Err(e) => {
                 eprintln!("gobyd: error: {e}");

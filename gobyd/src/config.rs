@@ -28,9 +28,9 @@ pub enum ConfigError {
     /// The text is not a valid `GobydConfig`.
     #[error("{origin}: {reason}")]
     Parse {
-        /// Where the text came from.
+        /// Where the text came from, with `:LINE:COLUMN` when known.
         origin: String,
-        /// The parser's message (with line and column).
+        /// The parser's message.
         reason: String,
     },
     /// A value is not usable.
@@ -38,21 +38,128 @@ pub enum ConfigError {
     Invalid(String),
 }
 
+/// Goby3's extensions of `DriverConfig` and the fields of ours that hold the
+/// same settings.
+const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
+    ("goby.acomms.udp.protobuf.config", "udp"),
+    ("goby.acomms.micromodem.protobuf.config", "micromodem"),
+];
+
 /// Parses a configuration in protobuf text format; `origin` names it in
-/// errors.
+/// errors, which give the line and column (`origin:LINE:COLUMN: reason`).
+///
+/// Goby3's way of writing the driver, MAC and queue sections is read too:
+/// `driver_cfg`, `mac_cfg` and `queue_cfg`, and its extension syntax for the
+/// driver-specific settings (`[goby.acomms.udp.protobuf.config] { ... }`,
+/// `[goby.acomms.micromodem.protobuf.config] { ... }`).
 pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
     let desc = GobydConfig::default().descriptor();
+    let rewritten = goby3_extensions(text);
     let dynamic =
-        DynamicMessage::parse_text_format(desc, text).map_err(|e| ConfigError::Parse {
-            origin: origin.to_string(),
+        DynamicMessage::parse_text_format(desc, &rewritten).map_err(|e| ConfigError::Parse {
+            origin: match error_offset(&e) {
+                Some(offset) => {
+                    let (line, column) = line_and_column(text, offset);
+                    format!("{origin}:{line}:{column}")
+                }
+                None => origin.to_string(),
+            },
             reason: e.to_string(),
         })?;
-    dynamic
+    let mut config = dynamic
         .transcode_to::<GobydConfig>()
         .map_err(|e| ConfigError::Parse {
             origin: origin.to_string(),
             reason: e.to_string(),
-        })
+        })?;
+    let both = |ours: &str, goby: &str| ConfigError::Parse {
+        origin: origin.to_string(),
+        reason: format!("both {ours} and {goby} are given: they are the same section (give one)"),
+    };
+    if let Some(driver) = config.driver_cfg.take() {
+        if config.driver.replace(driver).is_some() {
+            return Err(both("driver", "driver_cfg"));
+        }
+    }
+    if let Some(mac) = config.mac_cfg.take() {
+        if config.mac.replace(mac).is_some() {
+            return Err(both("mac", "mac_cfg"));
+        }
+    }
+    if let Some(queue) = config.queue_cfg.take() {
+        if config.queue.replace(queue).is_some() {
+            return Err(both("queue", "queue_cfg"));
+        }
+    }
+    Ok(config)
+}
+
+/// Byte offset of a text-format error, if the parser gives one.
+fn error_offset(e: &prost_reflect::text_format::ParseError) -> Option<usize> {
+    use miette::Diagnostic;
+    e.labels()?.next().map(|l| l.offset())
+}
+
+/// 1-based line and column (in characters) of a byte offset of `text`.
+fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().unwrap_or("").chars().count() + 1;
+    (line, column)
+}
+
+/// `text` with each Goby3 driver extension name (`[goby.acomms.udp.protobuf.config]`)
+/// replaced by the name of our field holding those settings, padded with
+/// spaces to the same length so that every line and column stays where it
+/// was. Strings and comments are left alone; other bracketed names are kept
+/// (the parser then says which extension it does not know, and where).
+fn goby3_extensions(text: &str) -> String {
+    let bytes = text.as_bytes();
+    let mut out = String::with_capacity(text.len());
+    let mut i = 0;
+    let mut copied = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'#' => {
+                while i < bytes.len() && bytes[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            quote @ (b'"' | b'\'') => {
+                i += 1;
+                while i < bytes.len() && bytes[i] != quote && bytes[i] != b'\n' {
+                    i += if bytes[i] == b'\\' { 2 } else { 1 };
+                }
+                i += 1;
+            }
+            b'[' => {
+                let Some(len) = text[i..].find(']') else {
+                    break;
+                };
+                let inner = text[i + 1..i + len].trim();
+                if let Some((_, field)) = GOBY3_DRIVER_EXTENSIONS.iter().find(|(n, _)| *n == inner)
+                {
+                    out.push_str(&text[copied..i]);
+                    out.push_str(field);
+                    let span = &text[i..=i + len];
+                    // Newlines inside the brackets stay, so lines keep their numbers.
+                    let newlines = span.matches('\n').count();
+                    let width = span.chars().count() - field.len() - newlines;
+                    out.push_str(&" ".repeat(width));
+                    out.push_str(&"\n".repeat(newlines));
+                    copied = i + len + 1;
+                }
+                i += len + 1;
+            }
+            _ => i += 1,
+        }
+    }
+    out.push_str(&text[copied.min(text.len())..]);
+    out
 }
 
 /// Reads and parses a configuration file.
@@ -111,17 +218,131 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
     Ok(config)
 }
 
-/// Queue entries for the loaded types that have none, with the defaults.
+/// Why this node would never transmit under its medium access settings, if
+/// so: with fixed TDMA (`MAC_FIXED_DECENTRALIZED`) a modem id with no slot
+/// of its own (`slot { src: ID ... }`) never initiates a transmission.
+/// Expects a [`complete`]d configuration.
+pub fn mac_slot_problem(config: &GobydConfig) -> Option<String> {
+    let mac = config.mac.as_ref()?;
+    if mac.r#type() != MacType::MacFixedDecentralized {
+        return None;
+    }
+    let id = mac.modem_id();
+    if mac.slot.iter().any(|s| s.src() == id) {
+        return None;
+    }
+    let mut owners: Vec<i32> = mac.slot.iter().map(|s| s.src()).collect();
+    owners.sort_unstable();
+    owners.dedup();
+    Some(format!(
+        "modem_id {id} has no slot in mac (MAC_FIXED_DECENTRALIZED): it would never transmit; \
+         add slot {{ src: {id} ... }} (slots are for modem ids {})",
+        if owners.is_empty() {
+            "none".to_string()
+        } else {
+            owners
+                .iter()
+                .map(i32::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    ))
+}
+
+/// Queue entries for the loaded types that have none, with the defaults;
+/// the example types also get the roles of [`EXAMPLE_CONFIG`] (their
+/// `source` and `destination` fields), so that they are addressed the same
+/// with or without a configuration (a message to this node is delivered
+/// here, as Goby does).
 pub fn default_entries(queue: &mut QueueManagerConfig, loaded: &[String]) {
+    let examples = parse(EXAMPLE_CONFIG, "example configuration")
+        .ok()
+        .and_then(|c| c.queue)
+        .map(|q| q.message_entry)
+        .unwrap_or_default();
     for name in loaded {
         if !queue.message_entry.iter().any(|e| &e.protobuf_name == name) {
+            let role = examples
+                .iter()
+                .find(|e| &e.protobuf_name == name)
+                .map(|e| e.role.clone())
+                .unwrap_or_default();
             queue.message_entry.push(QueuedMessageEntry {
                 protobuf_name: name.clone(),
+                role,
                 ..Default::default()
             });
         }
     }
 }
+
+/// Environment variable read for the DCCL passphrase when the configuration
+/// gives neither `dccl.passphrase` nor `dccl.passphrase_file`.
+pub const PASSPHRASE_ENV: &str = "GOBYD_PASSPHRASE";
+
+/// The DCCL passphrase, if any: `dccl.passphrase`, then the content of
+/// `dccl.passphrase_file` (one trailing line break removed), then `env` (the
+/// value of [`PASSPHRASE_ENV`], ignored when empty).
+///
+/// Errors: both options set, a passphrase file that cannot be read or is
+/// empty, an empty `passphrase`, an environment value that is not UTF-8. A
+/// passphrase file that other users may read is used, with a warning.
+pub fn passphrase(
+    dccl: &protos::goby::apps::protobuf::gobyd_config::DcclConfig,
+    env: Option<&std::ffi::OsStr>,
+) -> Result<Option<String>, ConfigError> {
+    match (&dccl.passphrase, &dccl.passphrase_file) {
+        (Some(_), Some(_)) => Err(ConfigError::Invalid(
+            "dccl: give passphrase or passphrase_file, not both".into(),
+        )),
+        (Some(p), None) if p.is_empty() => Err(ConfigError::Invalid(
+            "dccl.passphrase is empty (leave it out to send in the clear)".into(),
+        )),
+        (Some(p), None) => Ok(Some(p.clone())),
+        (None, Some(file)) => {
+            let path = Path::new(file);
+            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            warn_if_readable_by_others(path);
+            let p = text
+                .strip_suffix("\r\n")
+                .or_else(|| text.strip_suffix('\n'))
+                .unwrap_or(&text);
+            if p.is_empty() {
+                return Err(ConfigError::Invalid(format!(
+                    "dccl.passphrase_file {}: the file is empty",
+                    path.display()
+                )));
+            }
+            Ok(Some(p.to_string()))
+        }
+        (None, None) => match env {
+            None => Ok(None),
+            Some(v) if v.is_empty() => Ok(None),
+            Some(v) => v.to_str().map(|p| Some(p.to_string())).ok_or_else(|| {
+                ConfigError::Invalid(format!("{PASSPHRASE_ENV} is not valid UTF-8"))
+            }),
+        },
+    }
+}
+
+#[cfg(unix)]
+fn warn_if_readable_by_others(path: &Path) {
+    use std::os::unix::fs::PermissionsExt;
+    if let Ok(meta) = std::fs::metadata(path) {
+        if meta.permissions().mode() & 0o077 != 0 {
+            tracing::warn!(
+                "passphrase file {} can be read by other users (chmod 600 it)",
+                path.display()
+            );
+        }
+    }
+}
+
+#[cfg(not(unix))]
+fn warn_if_readable_by_others(_path: &Path) {}
 
 /// The loaded DCCL definitions.
 #[derive(Debug)]
@@ -137,9 +358,10 @@ pub struct Definitions {
 pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError> {
     let dccl_config = config.dccl.clone().unwrap_or_default();
     let mut codec = dccl::Codec::new();
-    if let Some(passphrase) = dccl_config.passphrase.as_deref() {
+    let env = std::env::var_os(PASSPHRASE_ENV);
+    if let Some(passphrase) = passphrase(&dccl_config, env.as_deref())? {
         codec.set_passphrase_with_exceptions(
-            passphrase,
+            &passphrase,
             dccl_config.skip_crypto_for_id.iter().copied(),
         );
     }
@@ -178,6 +400,19 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             );
         }
     }
+    // Built-in types a translator entry names (goby.moos.example.NodeReport).
+    for entry in &config.translator_entry {
+        if loaded.contains(&entry.protobuf_name) {
+            continue;
+        }
+        if let Some(desc) = pool.get_message_by_name(&entry.protobuf_name) {
+            loaded.extend(
+                codec
+                    .load_file_messages(pool, desc.parent_file().name())
+                    .map_err(|e| ConfigError::Invalid(format!("{}: {e}", entry.protobuf_name)))?,
+            );
+        }
+    }
     loaded.sort();
     loaded.dedup();
     Ok(Definitions { codec, loaded })
@@ -186,6 +421,79 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protos::goby::apps::protobuf::gobyd_config::DcclConfig;
+
+    #[test]
+    fn the_passphrase_comes_from_the_configuration_a_file_or_the_environment() {
+        let dir = std::env::temp_dir().join(format!("gobyd-passphrase-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("key");
+        std::fs::write(&file, "sesame\n").unwrap();
+        let from_file = DcclConfig {
+            passphrase_file: Some(file.to_str().unwrap().into()),
+            ..Default::default()
+        };
+        let env = Some(std::ffi::OsStr::new("from-env"));
+        assert_eq!(
+            passphrase(&from_file, env).unwrap().as_deref(),
+            Some("sesame")
+        );
+        let inline = DcclConfig {
+            passphrase: Some("inline".into()),
+            ..Default::default()
+        };
+        assert_eq!(passphrase(&inline, env).unwrap().as_deref(), Some("inline"));
+        let none = DcclConfig::default();
+        assert_eq!(passphrase(&none, env).unwrap().as_deref(), Some("from-env"));
+        assert_eq!(passphrase(&none, Some("".as_ref())).unwrap(), None);
+        assert_eq!(passphrase(&none, None).unwrap(), None);
+
+        let both = DcclConfig {
+            passphrase: Some("a".into()),
+            passphrase_file: from_file.passphrase_file.clone(),
+            ..Default::default()
+        };
+        assert!(passphrase(&both, None)
+            .unwrap_err()
+            .to_string()
+            .contains("not both"));
+        std::fs::write(&file, "\n").unwrap();
+        assert!(passphrase(&from_file, None)
+            .unwrap_err()
+            .to_string()
+            .contains("empty"));
+        let missing = DcclConfig {
+            passphrase_file: Some(dir.join("nope").to_str().unwrap().into()),
+            ..Default::default()
+        };
+        assert!(passphrase(&missing, None)
+            .unwrap_err()
+            .to_string()
+            .contains("nope"));
+
+        // The file's passphrase encrypts exactly as the same one given inline.
+        std::fs::write(&file, "sesame").unwrap();
+        let config = |dccl: DcclConfig| GobydConfig {
+            dccl: Some(dccl),
+            ..Default::default()
+        };
+        let encode = |config: GobydConfig| {
+            let defs = load_definitions(&config).unwrap();
+            let desc = defs.codec.descriptor("goby.example.Command").unwrap();
+            let msg =
+                DynamicMessage::parse_text_format(desc, "destination: 2 action: HOLD").unwrap();
+            defs.codec.encode(&msg).unwrap()
+        };
+        let clear = encode(config(DcclConfig::default()));
+        let by_file = encode(config(from_file));
+        let by_inline = encode(config(DcclConfig {
+            passphrase: Some("sesame".into()),
+            ..Default::default()
+        }));
+        assert_eq!(by_file, by_inline);
+        assert_ne!(by_file, clear);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn the_example_configuration_parses_and_completes() {
@@ -228,5 +536,43 @@ mod tests {
         config = complete(config).unwrap();
         let err = load_definitions(&config).unwrap_err().to_string();
         assert!(err.contains("/no/such.proto: no such file"), "{err}");
+    }
+
+    #[test]
+    fn goby3_extensions_become_our_fields_in_place() {
+        let text = "driver {\n  [goby.acomms.udp.protobuf.config] { local { port: 1 } }\n  # [goby.acomms.udp.protobuf.config]\n  serial_port: \"[goby.acomms.udp.protobuf.config]\"\n}\n";
+        let rewritten = goby3_extensions(text);
+        assert_eq!(rewritten.len(), text.len());
+        assert_eq!(rewritten.lines().count(), text.lines().count());
+        let lines: Vec<&str> = rewritten.lines().collect();
+        assert!(lines[1].starts_with("  udp  "), "{rewritten}");
+        // Comments and strings are left alone.
+        assert_eq!(lines[2], "  # [goby.acomms.udp.protobuf.config]");
+        assert!(lines[3].contains("\"[goby.acomms.udp.protobuf.config]\""));
+        let config = parse(text, "x").unwrap();
+        assert_eq!(config.driver.unwrap().udp.unwrap().local.port, 1);
+    }
+
+    #[test]
+    fn parse_errors_give_line_and_column() {
+        let err = parse("modem_id: 1\n  mac { nope: 1 }", "f.cfg")
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("f.cfg:2:9: "), "{err}");
+        assert_eq!(line_and_column("ab\ncé\nx", 6), (2, 3));
+    }
+
+    #[test]
+    fn without_a_configuration_the_examples_are_addressed_as_in_the_example() {
+        let mut queue = QueueManagerConfig::default();
+        default_entries(&mut queue, &["goby.example.Command".to_string()]);
+        let example = parse(EXAMPLE_CONFIG, "example").unwrap().queue.unwrap();
+        let command = example
+            .message_entry
+            .iter()
+            .find(|e| e.protobuf_name == "goby.example.Command")
+            .unwrap();
+        assert_eq!(queue.message_entry[0].role, command.role);
+        assert!(!command.role.is_empty());
     }
 }

@@ -8,13 +8,30 @@
 //! {"subscribe": ["ack", "expire", "queue_size"]}
 //! ```
 //!
-//! Daemon to client: `{"accepted": NAME, "id": N}` (written to disk before
-//! this line is sent), `{"error": TEXT}` for a line that was not accepted,
-//! `{"received": NAME, "src": S, "dest": D, "msg": {...}}` for every message
-//! received, and when subscribed `{"ack": NAME, "by": B, "msg": {...}}`,
-//! `{"expire": NAME, "msg": {...}}`, `{"drop": NAME, "msg": {...}}`,
-//! `{"queue_size": NAME, "size": N}`. Messages are in proto3 JSON with the
-//! field names of the `.proto` file.
+//! Daemon to client, two kinds of line that never mix:
+//!
+//! - **Replies**, exactly one per request line, in the order of the
+//!   requests; each has `"reply": N`, the number of its request line on this
+//!   connection (for UDP: from this peer), counted from 1:
+//!   `{"reply": N, "accepted": NAME, "id": ID}` (written to disk before this
+//!   line is sent; `"delivered": true` instead of `"id"` for a message
+//!   addressed to this node), `{"reply": N, "subscribed": [TOPIC, ...]}`,
+//!   or `{"reply": N, "error": TEXT}` for a line that was not accepted. An
+//!   accepted reply also lists the messages its message pushed out of their
+//!   full queue (`"dropped": [{"id": ID, "name": NAME, "msg": {...}}]`) and,
+//!   for a type with `clamp_out_of_range`, the values the codec changed
+//!   (`"changed": [{"field": PATH, "reason": TEXT}]`).
+//! - **Events**, each with `"event": KIND`: `{"event": "received",
+//!   "received": NAME, "src": S, "dest": D, "msg": {...}}` for every
+//!   message received (to every client), and when subscribed
+//!   `{"event": "ack", "ack": NAME, "id": ID, "by": B, "msg": {...}}`,
+//!   `{"event": "expire", "expire": NAME, "id": ID, "msg": {...}}`,
+//!   `{"event": "drop", "drop": NAME, "id": ID, "msg": {...}}`,
+//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`, and
+//!   `{"event": "lost", "count": N}` when a client read too slowly and
+//!   missed N events.
+//!
+//! Messages are in proto3 JSON with the field names of the `.proto` file.
 
 use dccl::Codec;
 use prost_reflect::{DynamicMessage, ReflectMessage, SerializeOptions};
@@ -111,17 +128,64 @@ pub fn message_json(message: &DynamicMessage) -> Value {
         .unwrap_or_else(|e| json!({ "unserializable": e.to_string() }))
 }
 
-/// The `accepted` reply.
+/// The `accepted` reply (without its reply number).
 pub fn accepted_line(name: &str, id: Option<u64>) -> String {
-    match id {
-        Some(id) => json!({ "accepted": name, "id": id }).to_string(),
-        None => json!({ "accepted": name, "delivered": true }).to_string(),
+    accepted_reply(name, id, &[], &[])
+}
+
+/// The `accepted` reply with the messages its message pushed out of a full
+/// queue (journal id, message) and the values the codec changed.
+pub fn accepted_reply(
+    name: &str,
+    id: Option<u64>,
+    dropped: &[(Option<u64>, DynamicMessage)],
+    changes: &[dccl::ValueChange],
+) -> String {
+    let mut reply = match id {
+        Some(id) => json!({ "accepted": name, "id": id }),
+        None => json!({ "accepted": name, "delivered": true }),
+    };
+    if !dropped.is_empty() {
+        reply["dropped"] = dropped
+            .iter()
+            .map(|(id, m)| {
+                json!({ "id": id, "name": m.descriptor().full_name(), "msg": message_json(m) })
+            })
+            .collect();
+    }
+    if !changes.is_empty() {
+        reply["changed"] = changes
+            .iter()
+            .map(|c| json!({ "field": c.field, "reason": c.reason }))
+            .collect();
+    }
+    reply.to_string()
+}
+
+/// The `subscribed` reply: every topic the client now receives.
+pub fn subscribed_line(topics: &[Topic]) -> String {
+    json!({ "subscribed": topics.iter().map(|t| t.name()).collect::<Vec<_>>() }).to_string()
+}
+
+/// The `error` reply (without its reply number).
+pub fn error_line(text: &str) -> String {
+    json!({ "error": text }).to_string()
+}
+
+/// A reply line numbered `number`: `"reply": number` added to the object.
+pub fn numbered_reply(line: &str, number: u64) -> String {
+    match serde_json::from_str::<Value>(line) {
+        Ok(Value::Object(mut object)) => {
+            object.insert("reply".into(), number.into());
+            Value::Object(object).to_string()
+        }
+        _ => json!({ "reply": number, "error": line }).to_string(),
     }
 }
 
-/// The `error` reply.
-pub fn error_line(text: &str) -> String {
-    json!({ "error": text }).to_string()
+/// The event telling a client that it missed `count` events.
+pub fn lost_line(count: u64) -> String {
+    json!({ "event": "lost", "count": count }).to_string()
 }
 
 /// The line for a queue event, with the topic it belongs to (`None`:
@@ -129,6 +193,7 @@ pub fn error_line(text: &str) -> String {
 /// not see.
 pub fn event_line(
     event: &QueueEvent,
+    entry: Option<u64>,
     queue_name: impl Fn(u32) -> String,
 ) -> Option<(Option<Topic>, String)> {
     let name = |m: &DynamicMessage| m.descriptor().full_name().to_string();
@@ -136,6 +201,7 @@ pub fn event_line(
         QueueEvent::Received(r) => (
             None,
             json!({
+                "event": "received",
                 "received": name(&r.message),
                 "src": r.src,
                 "dest": r.dest,
@@ -146,19 +212,19 @@ pub fn event_line(
             message, frame, by, ..
         } => (
             Some(Topic::Ack),
-            json!({ "ack": name(message), "by": by, "frame": frame, "msg": message_json(message) }),
+            json!({ "event": "ack", "ack": name(message), "id": entry, "by": by, "frame": frame, "msg": message_json(message) }),
         ),
         QueueEvent::Expired { message, .. } => (
             Some(Topic::Expire),
-            json!({ "expire": name(message), "msg": message_json(message) }),
+            json!({ "event": "expire", "expire": name(message), "id": entry, "msg": message_json(message) }),
         ),
         QueueEvent::Dropped { message, .. } => (
             Some(Topic::Drop),
-            json!({ "drop": name(message), "msg": message_json(message) }),
+            json!({ "event": "drop", "drop": name(message), "id": entry, "msg": message_json(message) }),
         ),
         QueueEvent::QueueSize { dccl_id, size } => (
             Some(Topic::QueueSize),
-            json!({ "queue_size": queue_name(*dccl_id), "size": size }),
+            json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size }),
         ),
         QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => return None,
     };
@@ -221,5 +287,33 @@ mod tests {
             panic!("not a subscribe");
         };
         assert_eq!(t, [Topic::Ack, Topic::QueueSize]);
+    }
+
+    #[test]
+    fn replies_are_numbered_and_events_are_tagged() {
+        let v: Value = serde_json::from_str(&numbered_reply(&error_line("no"), 7)).unwrap();
+        assert_eq!(v, json!({"reply": 7, "error": "no"}));
+        let message = protos::goby::example::Command::default().transcode_to_dynamic();
+        let events = [
+            QueueEvent::Dropped {
+                message: message.clone(),
+                id: 3,
+                dccl_id: 125,
+            },
+            QueueEvent::QueueSize {
+                dccl_id: 125,
+                size: 2,
+            },
+        ];
+        for event in &events {
+            let (_, line) = event_line(event, Some(9), |_| "goby.example.Command".into()).unwrap();
+            let v: Value = serde_json::from_str(&line).unwrap();
+            assert!(v["event"].is_string(), "{v}");
+            for reply_key in ["reply", "error", "accepted"] {
+                assert!(v.get(reply_key).is_none(), "{v}");
+            }
+        }
+        let lost: Value = serde_json::from_str(&lost_line(4)).unwrap();
+        assert_eq!(lost, json!({"event": "lost", "count": 4}));
     }
 }

@@ -1,25 +1,36 @@
 //! The JSON autonomy interface over TCP (one connection per client, one line
-//! per request or event) and UDP (one datagram per line; a peer receives
-//! events once it has sent any datagram).
+//! per request, reply or event) and UDP (one datagram per line; a peer
+//! receives events once it has sent any datagram).
 //!
 //! Connections parse their lines themselves and hand messages to publish to
 //! the daemon's core through a channel, with a one-shot channel for the
 //! reply line; events come back through a broadcast channel and each client
-//! keeps those it subscribed to. A malformed line gets an `error` line back;
-//! the connection and the daemon stay up.
+//! keeps those it subscribed to. Every request line gets exactly one reply,
+//! numbered (see [`json_protocol`](super::json_protocol)); a malformed line
+//! gets an `error` reply; the connection and the daemon stay up.
+//!
+//! Resources are bounded: a line is cut off at [`MAX_LINE`] bytes as it
+//! arrives (the rest of it is skipped), the line buffer shrinks back after a
+//! long line, the accept loop backs off while file descriptors run out, and
+//! the UDP peer table holds at most [`MAX_UDP_PEERS`] peers, forgetting those
+//! silent for [`UDP_PEER_IDLE`].
 
 use std::collections::{HashMap, HashSet};
+use std::io;
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use dccl::Codec;
 use prost_reflect::DynamicMessage;
-use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
-use super::json_protocol::{error_line, parse_request, Request, Topic};
+use super::json_protocol::{
+    error_line, lost_line, numbered_reply, parse_request, subscribed_line, Request, Topic,
+};
 
 /// A message a client wants sent, with where to send the reply line.
 #[derive(Debug)]
@@ -44,8 +55,130 @@ pub struct ClientEvent {
 /// A shared [`ClientEvent`].
 pub type EventLine = Arc<ClientEvent>;
 
-/// Longest request line accepted, bytes.
-const MAX_LINE: usize = 1024 * 1024;
+/// Longest request line accepted, bytes (without its newline).
+pub const MAX_LINE: usize = 1024 * 1024;
+
+/// Capacity a connection's line buffer shrinks back to after a long line.
+const KEPT_CAPACITY: usize = 64 * 1024;
+
+/// Most UDP peers remembered (for their subscriptions and reply numbers);
+/// a new peer beyond this replaces the one silent the longest.
+pub const MAX_UDP_PEERS: usize = 256;
+
+/// A UDP peer silent this long is forgotten.
+pub const UDP_PEER_IDLE: Duration = Duration::from_secs(600);
+
+/// Most UDP publishes waiting for their reply at once; beyond this a
+/// publish is answered with an error at once.
+const MAX_UDP_WAITING: usize = 256;
+
+/// First and longest pause of the accept loop while descriptors run out.
+const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(10), Duration::from_secs(1));
+
+/// What a request line leads to.
+enum Handled {
+    /// The reply, at once.
+    Reply(String),
+    /// The reply comes from the core.
+    Waiting(oneshot::Receiver<String>),
+}
+
+/// The reply line once the core answers.
+async fn answer(waiting: oneshot::Receiver<String>) -> String {
+    waiting
+        .await
+        .unwrap_or_else(|_| error_line("the daemon is shutting down"))
+}
+
+/// What the next read of a [`LineReader`] found.
+#[derive(Debug, PartialEq, Eq)]
+pub enum LineRead {
+    /// A complete line (trimmed).
+    Line(String),
+    /// A line passed the limit; what arrived of it was dropped and the rest
+    /// up to its newline is skipped.
+    TooLong,
+    /// The peer closed the connection.
+    End,
+}
+
+/// Splits a byte stream into lines of at most `max` bytes, never holding
+/// more than `max` bytes of a line (plus one read buffer) however long it is.
+/// [`next`](LineReader::next) is cancel-safe: its state lives in the reader.
+#[derive(Debug)]
+pub struct LineReader<R> {
+    reader: BufReader<R>,
+    line: Vec<u8>,
+    max: usize,
+    /// Skipping the rest of a line that was too long.
+    skipping: bool,
+}
+
+impl<R: AsyncRead + Unpin> LineReader<R> {
+    /// Reads lines of at most `max` bytes from `reader`.
+    pub fn new(reader: R, max: usize) -> Self {
+        Self {
+            reader: BufReader::new(reader),
+            line: Vec::new(),
+            max,
+            skipping: false,
+        }
+    }
+
+    /// Bytes held for the line being read (its capacity).
+    pub fn held(&self) -> usize {
+        self.line.capacity()
+    }
+
+    /// The next line, or [`LineRead::TooLong`] as soon as a line passes the
+    /// limit.
+    pub async fn next(&mut self) -> io::Result<LineRead> {
+        loop {
+            let available = self.reader.fill_buf().await?;
+            if available.is_empty() {
+                if !self.skipping && !self.line.is_empty() {
+                    return Ok(LineRead::Line(self.take_line()));
+                }
+                return Ok(LineRead::End);
+            }
+            let (length, ends) = match available.iter().position(|&b| b == b'\n') {
+                Some(i) => (i + 1, true),
+                None => (available.len(), false),
+            };
+            if self.skipping {
+                self.reader.consume(length);
+                self.skipping = !ends;
+                continue;
+            }
+            let content = length - usize::from(ends);
+            if self.line.len() + content > self.max {
+                self.reader.consume(length);
+                self.line.clear();
+                self.shrink();
+                self.skipping = !ends;
+                return Ok(LineRead::TooLong);
+            }
+            self.line.extend_from_slice(&available[..content]);
+            self.reader.consume(length);
+            if ends {
+                return Ok(LineRead::Line(self.take_line()));
+            }
+        }
+    }
+
+    fn take_line(&mut self) -> String {
+        let text = String::from_utf8_lossy(&self.line).trim().to_string();
+        self.line.clear();
+        self.shrink();
+        text
+    }
+
+    fn shrink(&mut self) {
+        if self.line.capacity() > KEPT_CAPACITY {
+            self.line.shrink_to(KEPT_CAPACITY);
+        }
+    }
+}
 
 /// What the connections share.
 #[derive(Debug, Clone)]
@@ -59,38 +192,55 @@ pub struct JsonInterface {
 }
 
 impl JsonInterface {
-    /// Handles one request line: the reply line to send now, if any
-    /// (`None` after a subscription, which has no reply).
-    async fn handle_line(&self, line: &str, topics: &mut HashSet<Topic>) -> Option<String> {
+    /// Handles one request line: its reply now, or the channel it comes
+    /// through.
+    async fn handle_line(&self, line: &str, topics: &mut HashSet<Topic>) -> Handled {
         match parse_request(line, &self.codec) {
-            Err(e) => Some(error_line(&e)),
+            Err(e) => Handled::Reply(error_line(&e)),
             Ok(Request::Subscribe(t)) => {
                 topics.extend(t);
-                None
+                let mut all: Vec<Topic> = topics.iter().copied().collect();
+                all.sort_by_key(|t| t.name());
+                Handled::Reply(subscribed_line(&all))
             }
             Ok(Request::Publish(message)) => {
                 let (reply, answer) = oneshot::channel();
                 if self.publish.send(Publish { message, reply }).await.is_err() {
-                    return Some(error_line("the daemon is shutting down"));
+                    return Handled::Reply(error_line("the daemon is shutting down"));
                 }
-                Some(
-                    answer
-                        .await
-                        .unwrap_or_else(|_| error_line("the daemon is shutting down")),
-                )
+                Handled::Waiting(answer)
             }
         }
     }
 
-    /// Accepts TCP clients until the task is dropped.
+    /// Accepts TCP clients until the task is dropped. While file
+    /// descriptors run out, it pauses between attempts (10 ms doubling up
+    /// to 1 s) and logs once until a connection is accepted again.
     pub async fn serve_tcp(self, listener: TcpListener) {
         let mut connections = JoinSet::new();
+        let mut backoff = ACCEPT_BACKOFF.0;
+        let mut exhausted = false;
         loop {
             tokio::select! {
                 accepted = listener.accept() => match accepted {
                     Ok((stream, peer)) => {
+                        if exhausted {
+                            tracing::info!("JSON interface: accepting connections again");
+                            exhausted = false;
+                            backoff = ACCEPT_BACKOFF.0;
+                        }
                         tracing::info!(%peer, "JSON client connected");
                         connections.spawn(self.clone().serve_connection(stream, peer));
+                    }
+                    Err(e) if out_of_descriptors(&e) => {
+                        if !exhausted {
+                            tracing::warn!(
+                                "JSON interface: cannot accept connections ({e}); pausing until descriptors are free"
+                            );
+                            exhausted = true;
+                        }
+                        tokio::time::sleep(backoff).await;
+                        backoff = (backoff * 2).min(ACCEPT_BACKOFF.1);
                     }
                     Err(e) => tracing::warn!("JSON interface: accept failed: {e}"),
                 },
@@ -101,25 +251,35 @@ impl JsonInterface {
 
     async fn serve_connection(self, stream: TcpStream, peer: SocketAddr) {
         let (read, mut write) = stream.into_split();
-        let mut lines = BufReader::new(read);
+        let mut lines = LineReader::new(read, MAX_LINE);
         let mut events = self.events.subscribe();
         let mut topics = HashSet::new();
-        let mut buf = Vec::new();
+        // Number of the last request line.
+        let mut number = 0u64;
+        // The reply being waited for (requests are answered in order).
+        let mut waiting: Option<oneshot::Receiver<String>> = None;
         loop {
             let out = tokio::select! {
-                read = lines.read_until(b'\n', &mut buf) => match read {
-                    Ok(0) => break,
-                    Ok(_) if buf.len() > MAX_LINE => {
-                        buf.clear();
-                        Some(error_line("line too long"))
+                read = lines.next(), if waiting.is_none() => match read {
+                    Ok(LineRead::End) => break,
+                    Ok(LineRead::TooLong) => {
+                        number += 1;
+                        Some(numbered_reply(
+                            &error_line(&format!(
+                                "line too long: the limit is {MAX_LINE} bytes; the rest of the line is skipped"
+                            )),
+                            number,
+                        ))
                     }
-                    Ok(_) => {
-                        let text = String::from_utf8_lossy(&buf).trim().to_string();
-                        buf.clear();
-                        if text.is_empty() {
-                            None
-                        } else {
-                            self.handle_line(&text, &mut topics).await
+                    Ok(LineRead::Line(text)) if text.is_empty() => None,
+                    Ok(LineRead::Line(text)) => {
+                        number += 1;
+                        match self.handle_line(&text, &mut topics).await {
+                            Handled::Reply(line) => Some(numbered_reply(&line, number)),
+                            Handled::Waiting(answer) => {
+                                waiting = Some(answer);
+                                None
+                            }
                         }
                     }
                     Err(e) => {
@@ -127,11 +287,20 @@ impl JsonInterface {
                         break;
                     }
                 },
+                line = async { waiting.as_mut().expect("guarded").await }, if waiting.is_some() => {
+                    // The receiver is polled in place: a turn of the loop
+                    // that serves an event in between loses nothing.
+                    waiting = None;
+                    let line = line.unwrap_or_else(|_| error_line("the daemon is shutting down"));
+                    Some(numbered_reply(&line, number))
+                }
                 event = events.recv() => match event {
                     Ok(event) => wanted(&event, &topics).then(|| event.line.clone()),
-                    Err(broadcast::error::RecvError::Lagged(n)) => {
-                        Some(error_line(&format!("{n} events were lost: the client reads too slowly")))
+                    Err(broadcast::error::RecvError::Lagged(n)) if topics.is_empty() => {
+                        tracing::info!(%peer, "JSON client read too slowly: {n} events not sent");
+                        None
                     }
+                    Err(broadcast::error::RecvError::Lagged(n)) => Some(lost_line(n)),
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
             };
@@ -145,33 +314,74 @@ impl JsonInterface {
         tracing::info!(%peer, "JSON client disconnected");
     }
 
-    /// Serves UDP peers until the task is dropped.
+    /// Serves UDP peers until the task is dropped. Every datagram gets a
+    /// reply for each of its lines (an empty or unreadable datagram gets an
+    /// error); replies to publishes are sent when the core answers, while
+    /// other datagrams are read and answered.
     pub async fn serve_udp(self, socket: UdpSocket) {
+        let socket = Arc::new(socket);
         let mut events = self.events.subscribe();
-        let mut peers: HashMap<SocketAddr, HashSet<Topic>> = HashMap::new();
+        let mut peers = UdpPeers::default();
+        let mut waiting: JoinSet<()> = JoinSet::new();
         let mut buf = vec![0u8; 65_536];
         loop {
             tokio::select! {
                 got = socket.recv_from(&mut buf) => {
-                    let Ok((n, peer)) = got else { continue };
+                    let (n, from) = match got {
+                        Ok(got) => got,
+                        Err(e) => {
+                            tracing::debug!("JSON UDP interface: receive failed: {e}");
+                            continue;
+                        }
+                    };
                     let text = String::from_utf8_lossy(&buf[..n]).to_string();
-                    let topics = peers.entry(peer).or_default();
-                    for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
-                        if let Some(reply) = self.handle_line(line, topics).await {
-                            let _ = socket.send_to(reply.as_bytes(), peer).await;
+                    let peer = peers.touch(from, Instant::now());
+                    let mut lines: Vec<&str> =
+                        text.lines().map(str::trim).filter(|l| !l.is_empty()).collect();
+                    if lines.is_empty() {
+                        lines.push("");
+                    }
+                    for line in lines {
+                        peer.replies += 1;
+                        let number = peer.replies;
+                        let handled = if line.is_empty() {
+                            Handled::Reply(error_line("empty datagram: expected a JSON request"))
+                        } else if waiting.len() >= MAX_UDP_WAITING {
+                            Handled::Reply(error_line("busy: too many publishes waiting; send again later"))
+                        } else {
+                            self.handle_line(line, &mut peer.topics).await
+                        };
+                        match handled {
+                            Handled::Reply(reply) => {
+                                let _ = socket.send_to(numbered_reply(&reply, number).as_bytes(), from).await;
+                            }
+                            Handled::Waiting(reply) => {
+                                let socket = socket.clone();
+                                waiting.spawn(async move {
+                                    let line = numbered_reply(&answer(reply).await, number);
+                                    let _ = socket.send_to(line.as_bytes(), from).await;
+                                });
+                            }
                         }
                     }
                 }
+                Some(_) = waiting.join_next(), if !waiting.is_empty() => {}
                 event = events.recv() => match event {
                     Ok(event) => {
-                        for (peer, topics) in &peers {
-                            if wanted(&event, topics) {
-                                let _ = socket.send_to(event.line.as_bytes(), peer).await;
+                        for (addr, peer) in &peers.peers {
+                            if wanted(&event, &peer.topics) {
+                                let _ = socket.send_to(event.line.as_bytes(), addr).await;
                             }
                         }
                     }
                     Err(broadcast::error::RecvError::Lagged(n)) => {
                         tracing::warn!("JSON UDP interface lost {n} events");
+                        let line = lost_line(n);
+                        for (addr, peer) in &peers.peers {
+                            if !peer.topics.is_empty() {
+                                let _ = socket.send_to(line.as_bytes(), addr).await;
+                            }
+                        }
                     }
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
@@ -180,9 +390,109 @@ impl JsonInterface {
     }
 }
 
+/// What the UDP interface remembers of a peer.
+#[derive(Debug, Default)]
+struct UdpPeer {
+    topics: HashSet<Topic>,
+    /// Number of the last request line.
+    replies: u64,
+    last_seen: Option<Instant>,
+}
+
+/// The UDP peers heard from, at most [`MAX_UDP_PEERS`], none silent for
+/// longer than [`UDP_PEER_IDLE`].
+#[derive(Debug, Default)]
+struct UdpPeers {
+    peers: HashMap<SocketAddr, UdpPeer>,
+}
+
+impl UdpPeers {
+    /// The peer at `addr`, heard from at `now` (remembered if new).
+    fn touch(&mut self, addr: SocketAddr, now: Instant) -> &mut UdpPeer {
+        if !self.peers.contains_key(&addr) {
+            self.peers.retain(|_, p| {
+                p.last_seen
+                    .is_some_and(|t| now.duration_since(t) < UDP_PEER_IDLE)
+            });
+            if self.peers.len() >= MAX_UDP_PEERS {
+                let oldest = self
+                    .peers
+                    .iter()
+                    .min_by_key(|(_, p)| p.last_seen)
+                    .map(|(a, _)| *a);
+                if let Some(oldest) = oldest {
+                    self.peers.remove(&oldest);
+                }
+            }
+        }
+        let peer = self.peers.entry(addr).or_default();
+        peer.last_seen = Some(now);
+        peer
+    }
+}
+
+/// True for the errors of running out of file descriptors (EMFILE, ENFILE),
+/// which last until some are closed.
+fn out_of_descriptors(e: &io::Error) -> bool {
+    const EMFILE: i32 = 24;
+    const ENFILE: i32 = 23;
+    matches!(e.raw_os_error(), Some(EMFILE | ENFILE))
+}
+
 fn wanted(event: &EventLine, topics: &HashSet<Topic>) -> bool {
     match event.topic {
         None => true,
         Some(topic) => topics.contains(&topic),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn lines_are_cut_off_at_their_limit_as_they_arrive() {
+        let (mut client, server) = tokio::io::duplex(4096);
+        let mut lines = LineReader::new(server, 1000);
+        let writer = tokio::spawn(async move {
+            client.write_all(b"short\n").await.unwrap();
+            // 100 000 bytes, no newline yet.
+            for _ in 0..100 {
+                client.write_all(&[b'x'; 1000]).await.unwrap();
+            }
+            client.write_all(b"\nafter\n").await.unwrap();
+        });
+        assert_eq!(lines.next().await.unwrap(), LineRead::Line("short".into()));
+        assert_eq!(lines.next().await.unwrap(), LineRead::TooLong);
+        // Reported before the line ends, and nothing of it is held.
+        assert!(lines.held() <= 1000, "{}", lines.held());
+        assert_eq!(lines.next().await.unwrap(), LineRead::Line("after".into()));
+        writer.await.unwrap();
+        assert_eq!(lines.next().await.unwrap(), LineRead::End);
+    }
+
+    #[tokio::test]
+    async fn the_buffer_shrinks_back_after_a_long_line() {
+        let long = "y".repeat(500_000);
+        let input = format!("{long}\nz\n");
+        let mut lines = LineReader::new(input.as_bytes(), MAX_LINE);
+        assert_eq!(lines.next().await.unwrap(), LineRead::Line(long));
+        assert!(lines.held() <= KEPT_CAPACITY, "{}", lines.held());
+        assert_eq!(lines.next().await.unwrap(), LineRead::Line("z".into()));
+    }
+
+    #[test]
+    fn the_udp_peer_table_is_bounded_and_forgets_silent_peers() {
+        let mut peers = UdpPeers::default();
+        let start = Instant::now();
+        let addr = |i: usize| SocketAddr::from(([127, 0, 0, 1], 10_000 + i as u16));
+        for i in 0..MAX_UDP_PEERS + 10 {
+            peers.touch(addr(i), start + Duration::from_millis(i as u64));
+        }
+        assert_eq!(peers.peers.len(), MAX_UDP_PEERS);
+        assert!(!peers.peers.contains_key(&addr(0)));
+        // Much later, a new peer: every silent one is forgotten.
+        peers.touch(addr(9_000), start + UDP_PEER_IDLE * 2);
+        assert_eq!(peers.peers.len(), 1);
     }
 }

@@ -16,21 +16,31 @@
 //! ```
 //!
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
-//! composes and runs the stack, [`outbox`] is the queue with its on-disk
-//! journal, [`json_protocol`] and [`json_server`] serve JSON clients,
-//! [`moos_bridge`] joins a MOOS community, [`mqtt`] bridges to an MQTT
-//! broker (with [`link_event`] the link's own events), [`raw_log`] writes what went to
-//! and came from the modem, and [`command`] is the `gobyd` command line.
+//! composes and runs the stack, [`door`] checks published values,
+//! [`outbox`] is the queue with its on-disk journal, [`data_dir`] holds the
+//! data directory (one daemon each, private files), [`dedup`] is the
+//! receiver's duplicate filter, [`json_protocol`] and
+//! [`json_server`] serve JSON clients, [`moos_bridge`] joins a MOOS
+//! community, [`mqtt`] bridges to an MQTT broker (with [`link_event`] the
+//! link's own events), [`mission_file`] reads the configuration from a MOOS mission
+//! file, [`translator`] turns MOOS variables into DCCL messages and back
+//! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
+//! came from the modem, and [`command`] is the `gobyd` command line.
 
 #![warn(missing_docs)]
 
 pub mod command;
 pub mod config;
+pub mod data_dir;
+pub mod dedup;
+pub mod door;
 pub mod json_protocol;
 pub mod json_server;
 pub mod link_event;
+pub mod mission_file;
 pub mod moos_bridge;
 pub mod mqtt;
 pub mod outbox;
 pub mod raw_log;
 pub mod runtime;
+pub mod translator;

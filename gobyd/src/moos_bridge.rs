@@ -1,23 +1,103 @@
-//! The MOOS interface: `gobyd` as a client of a MOOS community, as
-//! pAcommsHandler was for Goby 1/2.
+//! The MOOS interface: `gobyd` as a client of a MOOS community, in the
+//! place of pAcommsHandler.
 //!
-//! String values of the configured `send_var` variables are messages to
-//! send, either `@PB[full.MessageName] <text format>` or
-//! `full.MessageName:<hex of the protobuf encoding>`. Received messages,
-//! acks and expiries are published as `@PB[full.MessageName] <text format>`
-//! to `receive_var`, `ack_var` and `expire_var`.
+//! - Translator entries (`translator_entry`, see [`crate::translator`]):
+//!   when a trigger fires the message is made from the latest values of
+//!   its `create` variables and queued; a received message of the type is
+//!   written to its `publish` variables. A value that cannot be translated
+//!   is written to `ACOMMS_TRANSLATOR_ERROR` as `VAR = "value": reason`
+//!   and logged.
+//! - pAcommsHandler's variables (`moos_var`, prefix `ACOMMS_`), written
+//!   when the configuration has translator entries or a `moos_var`
+//!   section: every received message (`QUEUE_RECEIVE`), every message
+//!   placed in a frame (`QUEUE_TRANSMIT`), acknowledgements (`ACK`: the
+//!   `goby.acomms.protobuf.ModemTransmission` of type ACK; `ACK_ORIGINAL`:
+//!   the message), expiries (`EXPIRE`) and queue sizes (`QSIZE`), each as
+//!   `@PB[full.Name] text format`.
+//! - The plain interface: string values of the `send_var` variables are
+//!   messages to send, either `@PB[full.MessageName] <text format>` or
+//!   `full.MessageName:<hex of the protobuf encoding>`; received messages
+//!   of types without a translator entry, acks and expiries are written as
+//!   `@PB[full.MessageName] <text format>` to `receive_var`, `ack_var` and
+//!   `expire_var` (each unless a pAcommsHandler variable has its name).
 
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
 use dccl::Codec;
 use moos::{ClientConfig, Mail, MoosClient, Value};
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::apps::protobuf::gobyd_config::MoosInterface;
+use protos::goby::acomms::protobuf::{modem_transmission, ModemTransmission, QueueSize};
+use protos::goby::apps::protobuf::gobyd_config::{MoosInterface, MoosVariables};
+use protos::goby::apps::protobuf::GobydConfig;
 use queue::QueueEvent;
 use tokio::sync::{broadcast, mpsc, oneshot};
 
 use super::json_server::{EventLine, Publish};
+use crate::translator::{self, TranslateError, Translator};
+
+/// Longest wait between two attempts to reach an absent MOOSDB.
+const MAX_BACKOFF: Duration = Duration::from_secs(30);
+
+/// What the bridge needs from the configuration.
+#[derive(Debug, Clone)]
+pub struct BridgeSettings {
+    /// The MOOS section.
+    pub moos: MoosInterface,
+    /// pAcommsHandler's variables; `None`: not written.
+    pub variables: Option<MoosVariables>,
+    /// The translator.
+    pub translator: Arc<Translator>,
+    /// This node's modem id.
+    pub modem_id: i32,
+}
+
+impl BridgeSettings {
+    /// The settings of `config` (which has a `moos` section); an error for
+    /// translator entries that do not check.
+    pub fn from_config(config: &GobydConfig, codec: &Codec) -> Result<Self, String> {
+        let translator = translator::from_config(config, codec)?;
+        let variables = (config.moos_var.is_some() || !config.translator_entry.is_empty())
+            .then(|| config.moos_var.clone().unwrap_or_default());
+        Ok(BridgeSettings {
+            moos: config.moos.clone().unwrap_or_default(),
+            variables,
+            translator: Arc::new(translator),
+            modem_id: config.modem_id(),
+        })
+    }
+
+    /// The full name of a pAcommsHandler variable (`prefix` + `name`).
+    fn var(&self, name: impl Fn(&MoosVariables) -> &str) -> Option<String> {
+        self.variables
+            .as_ref()
+            .map(|v| format!("{}{}", v.prefix(), name(v)))
+    }
+
+    /// The name of the translator's error variable.
+    fn error_var(&self) -> String {
+        let v = self.variables.clone().unwrap_or_default();
+        format!("{}{}", v.prefix(), v.translator_error())
+    }
+
+    /// Whether a plain-interface variable is free (no pAcommsHandler
+    /// variable has its name).
+    fn plain_free(&self, plain: &str) -> bool {
+        let Some(v) = &self.variables else {
+            return true;
+        };
+        let taken = [
+            v.queue_receive(),
+            v.queue_transmit(),
+            v.queue_ack_transmission(),
+            v.queue_ack_original_msg(),
+            v.queue_expire(),
+            v.queue_size(),
+        ];
+        !taken.iter().any(|t| format!("{}{t}", v.prefix()) == plain)
+    }
+}
 
 /// Parses a MOOS string value into a message to send.
 pub fn parse_value(value: &str, codec: &Codec) -> Result<DynamicMessage, String> {
@@ -55,66 +135,197 @@ pub fn format_value(message: &DynamicMessage) -> String {
     )
 }
 
-/// The variable and value an event is published as, if any.
-fn publication<'a>(config: &'a MoosInterface, event: &QueueEvent) -> Option<(&'a str, String)> {
+/// The variables and values an event is written to.
+fn publications(settings: &BridgeSettings, event: &QueueEvent) -> Vec<(String, Value)> {
+    let mut out: Vec<(String, Value)> = Vec::new();
+    let mut text = |var: Option<String>, value: String| {
+        if let Some(var) = var {
+            out.push((var, Value::String(value)));
+        }
+    };
+    let plain = |name: &str| settings.plain_free(name).then(|| name.to_string());
+    let moos = &settings.moos;
     match event {
-        QueueEvent::Received(r) => Some((config.receive_var(), format_value(&r.message))),
-        QueueEvent::Acked { message, .. } => Some((config.ack_var(), format_value(message))),
-        QueueEvent::Expired { message, .. } => Some((config.expire_var(), format_value(message))),
-        _ => None,
+        QueueEvent::Received(r) => {
+            text(
+                settings.var(|v| v.queue_receive()),
+                format_value(&r.message),
+            );
+            let name = r.message.descriptor().full_name().to_string();
+            if settings.translator.has_entry(&name) {
+                match settings.translator.publish(&r.message) {
+                    Ok(values) => out.extend(values),
+                    Err(e) => out.push(translation_error(settings, &e)),
+                }
+            } else {
+                text(plain(moos.receive_var()), format_value(&r.message));
+            }
+        }
+        QueueEvent::Sent { message, .. } => {
+            text(settings.var(|v| v.queue_transmit()), format_value(message));
+        }
+        QueueEvent::Acked {
+            message, frame, by, ..
+        } => {
+            let ack = ModemTransmission {
+                src: Some(*by),
+                dest: Some(settings.modem_id),
+                r#type: Some(modem_transmission::TransmissionType::Ack as i32),
+                acked_frame: vec![*frame as i32],
+                ..Default::default()
+            };
+            text(
+                settings.var(|v| v.queue_ack_transmission()),
+                format_value(&ack.transcode_to_dynamic()),
+            );
+            text(
+                settings.var(|v| v.queue_ack_original_msg()),
+                format_value(message),
+            );
+            text(plain(moos.ack_var()), format_value(message));
+        }
+        QueueEvent::Expired { message, .. } => {
+            text(settings.var(|v| v.queue_expire()), format_value(message));
+            text(plain(moos.expire_var()), format_value(message));
+        }
+        QueueEvent::QueueSize { dccl_id, size } => {
+            let q = QueueSize {
+                dccl_id: *dccl_id,
+                size: u32::try_from(*size).unwrap_or(u32::MAX),
+            };
+            text(
+                settings.var(|v| v.queue_size()),
+                format_value(&q.transcode_to_dynamic()),
+            );
+        }
+        _ => {}
+    }
+    out
+}
+
+/// The error variable's value for an untranslatable value, logged too.
+fn translation_error(settings: &BridgeSettings, e: &TranslateError) -> (String, Value) {
+    tracing::warn!(
+        variable = %e.variable,
+        value = %e.value,
+        "MOOS translator: {}: {}",
+        e.protobuf_name,
+        e.reason
+    );
+    (
+        settings.error_var(),
+        Value::String(format!(
+            "{} = {:?}: {}: {}",
+            e.variable, e.value, e.protobuf_name, e.reason
+        )),
+    )
+}
+
+fn notify(client: &MoosClient, var: &str, value: &Value) {
+    let sent = match value {
+        Value::String(s) => client.notify_string(var, s),
+        Value::Double(d) => client.notify_double(var, *d),
+        Value::Binary(b) => client.notify_binary(var, b),
+    };
+    if let Err(e) = sent {
+        tracing::warn!("MOOS: cannot publish {var}: {e}");
     }
 }
 
-/// Connects to the MOOSDB (retrying until it answers) and bridges until the
-/// task is dropped.
-pub async fn run(
-    config: MoosInterface,
-    codec: Arc<Codec>,
-    publish: mpsc::Sender<Publish>,
-    mut events: broadcast::Receiver<EventLine>,
-) {
+/// Connects to the MOOSDB, waiting longer between attempts while it is
+/// away (1 s doubling to 30 s, one warning per doubling).
+async fn connect(settings: &BridgeSettings) -> Option<(MoosClient, moos::MailReceiver)> {
+    let config = &settings.moos;
     let port = match u16::try_from(config.port()) {
         Ok(port) => port,
         Err(_) => {
             tracing::error!("moos.port {} is not a TCP port", config.port());
-            return;
+            return None;
         }
     };
     let client_config = ClientConfig::new(config.name()).with_address(config.server(), port);
-    let (client, mut mail) = loop {
+    let mut wait = Duration::from_secs(1);
+    let mut warned_at = Duration::ZERO;
+    loop {
         match MoosClient::connect(client_config.clone()).await {
-            Ok(connected) => break connected,
-            Err(e) => {
-                tracing::warn!(
-                    "MOOS: cannot connect to {}:{port} ({e}); retrying",
-                    config.server()
+            Ok(connected) => {
+                tracing::info!(
+                    "MOOS: connected to {}:{port} as {}",
+                    config.server(),
+                    config.name()
                 );
-                tokio::time::sleep(Duration::from_secs(1)).await;
+                return Some(connected);
+            }
+            Err(e) => {
+                if wait > warned_at {
+                    tracing::warn!(
+                        "MOOS: cannot connect to {}:{port} ({e}); trying again in {} s (waiting longer each time, up to 30 s)",
+                        config.server(),
+                        wait.as_secs()
+                    );
+                    warned_at = wait;
+                }
+                tokio::time::sleep(wait).await;
+                wait = (wait * 2).min(MAX_BACKOFF);
             }
         }
+    }
+}
+
+/// Connects to the MOOSDB (trying until it answers) and bridges until the
+/// task is dropped.
+pub async fn run(
+    settings: BridgeSettings,
+    codec: Arc<Codec>,
+    publish: mpsc::Sender<Publish>,
+    mut events: broadcast::Receiver<EventLine>,
+) {
+    let Some((client, mut mail)) = connect(&settings).await else {
+        return;
     };
-    tracing::info!(
-        "MOOS: connected to {}:{port} as {}",
-        config.server(),
-        config.name()
-    );
-    for var in &config.send_var {
+    let translator = settings.translator.clone();
+    let mut registered: Vec<String> = settings.moos.send_var.clone();
+    registered.extend(translator.variables());
+    registered.sort();
+    registered.dedup();
+    for var in &registered {
         if let Err(e) = client.register(var, Duration::ZERO) {
             tracing::error!("MOOS: cannot register for {var}: {e}");
         }
     }
+    // Timed triggers: one ticker per type.
+    let (timed_tx, mut timed_rx) = mpsc::channel::<String>(16);
+    let mut tickers = tokio::task::JoinSet::new();
+    for (name, period) in translator.timed() {
+        let name = name.to_string();
+        let tx = timed_tx.clone();
+        tickers.spawn(async move {
+            let mut ticks = tokio::time::interval(period);
+            ticks.tick().await;
+            loop {
+                ticks.tick().await;
+                if tx.send(name.clone()).await.is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    let mut latest: HashMap<String, Value> = HashMap::new();
     loop {
         tokio::select! {
             got = mail.recv() => match got {
-                Some(m) => handle_mail(&config, &codec, &publish, m).await,
+                Some(m) => {
+                    handle_mail(&settings, &codec, &publish, &client, &mut latest, m).await
+                }
                 None => break,
             },
+            Some(name) = timed_rx.recv() => {
+                make_and_queue(&settings, &publish, &client, &latest, &name).await;
+            }
             event = events.recv() => match event {
                 Ok(event) => {
-                    if let Some((var, value)) = publication(&config, &event.event) {
-                        if let Err(e) = client.notify_string(var, &value) {
-                            tracing::warn!("MOOS: cannot publish {var}: {e}");
-                        }
+                    for (var, value) in publications(&settings, &event.event) {
+                        notify(&client, &var, &value);
                     }
                 }
                 Err(broadcast::error::RecvError::Lagged(n)) => {
@@ -124,16 +335,66 @@ pub async fn run(
             },
         }
     }
+    tickers.abort_all();
     client.close().await;
 }
 
+/// Queues a message and reports a refusal.
+async fn queue_message(publish: &mpsc::Sender<Publish>, message: DynamicMessage) -> Option<String> {
+    let (reply, answer) = oneshot::channel();
+    if publish.send(Publish { message, reply }).await.is_err() {
+        return None;
+    }
+    match answer.await {
+        Ok(line) if line.contains("\"error\"") => Some(line),
+        _ => None,
+    }
+}
+
+/// Makes a message of type `name` from the latest values and queues it.
+async fn make_and_queue(
+    settings: &BridgeSettings,
+    publish: &mpsc::Sender<Publish>,
+    client: &MoosClient,
+    latest: &HashMap<String, Value>,
+    name: &str,
+) {
+    match settings.translator.create(name, latest) {
+        Ok(message) => {
+            if let Some(line) = queue_message(publish, message).await {
+                tracing::warn!("MOOS translator: {name} not queued: {line}");
+                let reason = format!("{name} not queued: {line}");
+                notify(client, &settings.error_var(), &Value::String(reason));
+            }
+        }
+        Err(e) => {
+            let (var, value) = translation_error(settings, &e);
+            notify(client, &var, &value);
+        }
+    }
+}
+
 async fn handle_mail(
-    config: &MoosInterface,
+    settings: &BridgeSettings,
     codec: &Codec,
     publish: &mpsc::Sender<Publish>,
+    client: &MoosClient,
+    latest: &mut HashMap<String, Value>,
     mail: Mail,
 ) {
-    if !config.send_var.contains(&mail.key) {
+    if settings.translator.variables().contains(&mail.key) {
+        latest.insert(mail.key.clone(), mail.value.clone());
+        let names: Vec<String> = settings
+            .translator
+            .triggered(&mail.key, &mail.value)
+            .into_iter()
+            .map(String::from)
+            .collect();
+        for name in names {
+            make_and_queue(settings, publish, client, latest, &name).await;
+        }
+    }
+    if !settings.moos.send_var.contains(&mail.key) {
         return;
     }
     let Value::String(text) = &mail.value else {
@@ -150,17 +411,10 @@ async fn handle_mail(
             return;
         }
     };
-    let (reply, answer) = oneshot::channel();
-    if publish.send(Publish { message, reply }).await.is_err() {
-        return;
-    }
-    if let Ok(line) = answer.await {
-        if line.contains("\"error\"") {
-            tracing::warn!("MOOS: {} not queued: {line}", mail.key);
-        }
+    if let Some(line) = queue_message(publish, message).await {
+        tracing::warn!("MOOS: {} not queued: {line}", mail.key);
     }
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -197,6 +451,106 @@ mod tests {
         assert_eq!(
             format_value(&m),
             "@PB[goby.example.Command] destination: 3 action: SURFACE"
+        );
+    }
+
+    fn settings(config: &str) -> BridgeSettings {
+        let config = crate::config::parse(config, "test").unwrap();
+        let mut codec = Codec::new();
+        codec.load_type::<Command>().unwrap();
+        BridgeSettings::from_config(&config, &codec).unwrap()
+    }
+
+    fn command() -> DynamicMessage {
+        Command {
+            destination: 2,
+            action: 1,
+            ..Default::default()
+        }
+        .transcode_to_dynamic()
+    }
+
+    fn received(message: DynamicMessage) -> QueueEvent {
+        QueueEvent::Received(queue::ReceivedMessage {
+            message,
+            dccl_id: 125,
+            src: 2,
+            dest: 1,
+            time: None,
+        })
+    }
+
+    fn s(v: &str) -> Value {
+        Value::String(v.into())
+    }
+
+    #[test]
+    fn pacommshandler_variables_and_translated_receptions() {
+        let with_entry = settings(
+            r#"modem_id: 1 moos {}
+            translator_entry {
+              protobuf_name: "goby.example.Command"
+              publish { technique: TECHNIQUE_FORMAT moos_var: "CMD_%1%" format: "ACTION=%2%" }
+              publish { technique: TECHNIQUE_FORMAT moos_var: "CMD_DEST" format: "%1%" }
+            }"#,
+        );
+        let text = "@PB[goby.example.Command] destination: 2 action: GOTO";
+        assert_eq!(
+            publications(&with_entry, &received(command())),
+            [
+                ("ACOMMS_QUEUE_RECEIVE".to_string(), s(text)),
+                ("CMD_2".to_string(), s("ACTION=GOTO")),
+                ("CMD_DEST".to_string(), Value::Double(2.0)),
+            ]
+        );
+        let acked = QueueEvent::Acked {
+            message: command(),
+            id: None,
+            dccl_id: 125,
+            frame: 3,
+            by: 2,
+        };
+        assert_eq!(
+            publications(&with_entry, &acked),
+            [
+                (
+                    "ACOMMS_ACK".to_string(),
+                    s("@PB[goby.acomms.protobuf.ModemTransmission] src: 2 dest: 1 type: ACK acked_frame: 3")
+                ),
+                ("ACOMMS_ACK_ORIGINAL".to_string(), s(text)),
+            ]
+        );
+        let size = QueueEvent::QueueSize {
+            dccl_id: 125,
+            size: 4,
+        };
+        assert_eq!(
+            publications(&with_entry, &size),
+            [(
+                "ACOMMS_QSIZE".to_string(),
+                s("@PB[goby.acomms.protobuf.QueueSize] dccl_id: 125 size: 4")
+            )]
+        );
+
+        // Custom names and prefix; the plain variables where free.
+        let custom = settings(
+            r#"moos { receive_var: "GOT" }
+            moos_var { prefix: "AC_" queue_receive: "IN" queue_expire: "GONE" }"#,
+        );
+        assert_eq!(
+            publications(&custom, &received(command())),
+            [("AC_IN".to_string(), s(text)), ("GOT".to_string(), s(text))]
+        );
+
+        // Without translator entries or moos_var: only the plain interface.
+        let plain = settings("moos {}");
+        assert_eq!(
+            publications(&plain, &received(command())),
+            [("ACOMMS_RECEIVED".to_string(), s(text))]
+        );
+        assert_eq!(
+            publications(&plain, &acked),
+            [("ACOMMS_ACK".to_string(), s(text))]
         );
     }
 

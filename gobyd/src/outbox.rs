@@ -197,14 +197,30 @@ impl Outbox {
     /// for good are removed from the journal first; messages sent without
     /// ack wait for [`transmitted`](Self::transmitted).
     pub fn events(&mut self) -> Result<Vec<QueueEvent>, JournalError> {
+        Ok(self
+            .events_with_entries()?
+            .into_iter()
+            .map(|(event, _)| event)
+            .collect())
+    }
+
+    /// The queue events since the last call, as [`events`](Self::events),
+    /// each with the journal entry id (the id clients were given) of the
+    /// message it ends, for acks, expiries and drops.
+    pub fn events_with_entries(
+        &mut self,
+    ) -> Result<Vec<(QueueEvent, Option<EntryId>)>, JournalError> {
         let events: Vec<QueueEvent> = self.events.try_iter().collect();
-        for event in &events {
-            match event {
+        let mut out = Vec::with_capacity(events.len());
+        for event in events {
+            let mut ended = None;
+            match &event {
                 QueueEvent::Acked { id: Some(id), .. }
                 | QueueEvent::Expired { id, .. }
                 | QueueEvent::Dropped { id, .. } => {
                     if let Some(entry) = self.entries.remove(id) {
                         self.journal.remove(entry)?;
+                        ended = Some(entry);
                     }
                 }
                 QueueEvent::Sent {
@@ -219,8 +235,9 @@ impl Outbox {
                 }
                 _ => {}
             }
+            out.push((event, ended));
         }
-        Ok(events)
+        Ok(out)
     }
 
     /// Settles the messages sent without ack in the transmission under way:

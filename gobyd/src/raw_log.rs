@@ -5,9 +5,15 @@
 //! {"t":1700000000123456,"raw":"out","bytes_hex":"2443434359432c...","text":"$CCCYC,..."}
 //! {"t":1700000000200000,"msg":"out","name":"goby.example.Command","frame":0,"value":{...}}
 //! {"t":1700000012000000,"msg":"in","name":"goby.example.NavigationReport","src":2,"value":{...}}
+//! {"t":1700000013000000,"msg":"ack","name":"goby.example.Command","by":2,"frame":0,"value":{...}}
 //! ```
+//!
+//! Raw records are what the driver wrote and read: NMEA lines for the
+//! Micro-Modem, datagrams for UDP, and for the acoustic simulator the
+//! protobuf encoding of each transmission (data and acks) it put on or took
+//! off the simulated water.
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -22,9 +28,12 @@ pub struct RawLog {
 }
 
 impl RawLog {
-    /// Opens `path` for appending (created if needed).
+    /// Opens `path` for appending (created if needed, mode 0600).
     pub fn open(path: &Path) -> io::Result<Self> {
-        let file = OpenOptions::new().create(true).append(true).open(path)?;
+        let file = crate::data_dir::private_file_options()
+            .create(true)
+            .append(true)
+            .open(path)?;
         Ok(Self {
             path: path.to_path_buf(),
             out: BufWriter::new(file),
@@ -62,8 +71,8 @@ impl RawLog {
         self.write(&record)
     }
 
-    /// Logs a message sent (`direction` "out") or received ("in"), with
-    /// extra fields (source, frame, ...).
+    /// Logs a message sent (`direction` "out"), received ("in") or
+    /// acknowledged ("ack"), with extra fields (source, frame, ...).
     pub fn message(
         &mut self,
         time: i64,

@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::future::Future;
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -27,7 +27,10 @@ use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
-use super::json_protocol::{accepted_line, error_line, event_line, message_json};
+use super::data_dir::{DataDir, DataDirError};
+use super::dedup::{DeliveredLog, Identity};
+use super::door::Door;
+use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, EventLine, JsonInterface, Publish};
 use super::link_event::LinkEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
@@ -39,6 +42,9 @@ pub enum DaemonError {
     /// The configuration is not usable.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// The data directory could not be created, or another daemon holds it.
+    #[error(transparent)]
+    DataDir(#[from] DataDirError),
     /// The queue or its journal could not be set up.
     #[error("outgoing queue: {0}")]
     Outbox(#[from] OutboxError),
@@ -98,15 +104,20 @@ pub async fn start_driver(
 
 /// Checks a configuration without starting anything: the DCCL types load,
 /// and the queue and medium access settings are valid. Returns the DCCL
-/// types.
+/// types. A modem id with no slot of its own under fixed TDMA is an
+/// error here (the daemon itself starts with a warning).
 pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     let config = config::complete(config)?;
+    if let Some(problem) = config::mac_slot_problem(&config) {
+        return Err(ConfigError::Invalid(problem).into());
+    }
     if let Some(mqtt) = &config.mqtt {
         super::mqtt::settings::settings(mqtt, config.modem_id())?;
     }
     let defs = config::load_definitions(&config)?;
     let mut queue_config = config.queue.clone().unwrap_or_default();
     config::default_entries(&mut queue_config, &defs.loaded);
+    crate::translator::from_config(&config, &defs.codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(Arc::new(defs.codec), &queue_config)?;
     MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
     Ok(defs.loaded)
@@ -115,6 +126,8 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
 /// A started daemon, ready to [`run`](Daemon::run).
 pub struct Daemon {
     outbox: Outbox,
+    /// Checks published values against their DCCL definitions.
+    door: Door,
     mac: MacManager,
     driver: Driver,
     /// Type names by DCCL id.
@@ -129,7 +142,12 @@ pub struct Daemon {
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
-    data_dir: PathBuf,
+    data_dir: DataDir,
+    codec: Arc<dccl::Codec>,
+    /// Messages handed to clients recently (`None`: no duplicate filter).
+    delivered: Option<DeliveredLog>,
+    /// `unique_id` of the next transmission initiated.
+    next_transmission: u32,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -143,12 +161,14 @@ impl std::fmt::Debug for Daemon {
 }
 
 impl Daemon {
-    /// Loads the DCCL types, replays the journal, starts the driver and
-    /// opens the autonomy interfaces.
+    /// Takes the data directory ([`DaemonError::DataDir`] when another
+    /// daemon holds it), loads the DCCL types, replays the journal, starts
+    /// the driver and opens the autonomy interfaces.
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
+        let data_dir = DataDir::open(Path::new(config.data_dir()))?;
         let driver = start_driver(config.driver.as_ref().expect("completed")).await?;
-        Self::start_with_driver(config, driver).await
+        Self::start_in(config, driver, data_dir).await
     }
 
     /// Starts the daemon on a driver started by the caller (the
@@ -158,16 +178,27 @@ impl Daemon {
         driver: Driver,
     ) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
+        let data_dir = DataDir::open(Path::new(config.data_dir()))?;
+        Self::start_in(config, driver, data_dir).await
+    }
+
+    async fn start_in(
+        config: GobydConfig,
+        driver: Driver,
+        data_dir: DataDir,
+    ) -> Result<Self, DaemonError> {
         let defs = config::load_definitions(&config)?;
         let codec = Arc::new(defs.codec);
         let mut queue_config = config.queue.clone().unwrap_or_default();
         config::default_entries(&mut queue_config, &defs.loaded);
         let queue = QueueManager::new(codec.clone(), &queue_config)?;
+        let door = Door::new(codec.clone(), &queue_config, || {
+            config::load_definitions(&config)
+                .map(|d| d.codec)
+                .unwrap_or_default()
+        });
 
-        let data_dir = PathBuf::from(config.data_dir());
-        std::fs::create_dir_all(&data_dir)
-            .map_err(io_error(format!("cannot create {}", data_dir.display())))?;
-        let journal_path = data_dir.join("outbox.journal");
+        let journal_path = data_dir.path().join("outbox.journal");
         let (outbox, replay) = Outbox::open(queue, &journal_path)?;
         if replay.requeued > 0 || replay.discarded_bytes > 0 {
             tracing::info!(
@@ -185,9 +216,39 @@ impl Daemon {
             );
         }
 
+        let window_seconds = config.duplicate_window_seconds.unwrap_or_else(|| {
+            queue_config
+                .message_entry
+                .iter()
+                .map(|e| f64::from(e.ttl()))
+                .fold(0.0, f64::max)
+        });
+        if !(window_seconds.is_finite() && window_seconds >= 0.0) {
+            return Err(DaemonError::Config(ConfigError::Invalid(format!(
+                "duplicate_window_seconds {window_seconds} is not valid"
+            ))));
+        }
+        let delivered = if window_seconds > 0.0 {
+            let path = data_dir.path().join("delivered.log");
+            let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+            let (log, replay) = DeliveredLog::open(&path, (window_seconds * 1e6) as u64, now)
+                .map_err(io_error(format!("cannot open {}", path.display())))?;
+            if replay.remembered > 0 || replay.discarded_bytes > 0 {
+                tracing::info!(
+                    remembered = replay.remembered,
+                    discarded_bytes = replay.discarded_bytes,
+                    "{} replayed",
+                    path.display()
+                );
+            }
+            Some(log)
+        } else {
+            None
+        };
+
         let log = config.log.clone().unwrap_or_default();
         let raw_log = if log.raw_log() {
-            let path = data_dir.join("raw.log");
+            let path = data_dir.path().join("raw.log");
             Some(RawLog::open(&path).map_err(io_error(format!("cannot open {}", path.display())))?)
         } else {
             None
@@ -237,9 +298,11 @@ impl Daemon {
                 tasks.spawn(bridge.run(events.subscribe(), link.subscribe()));
             }
         }
-        if let Some(moos) = config.moos.clone() {
+        if config.moos.is_some() {
+            let settings = super::moos_bridge::BridgeSettings::from_config(&config, &codec)
+                .map_err(config::ConfigError::Invalid)?;
             tasks.spawn(super::moos_bridge::run(
-                moos,
+                settings,
                 codec.clone(),
                 publish_tx.clone(),
                 events.subscribe(),
@@ -259,6 +322,7 @@ impl Daemon {
             .collect();
         Ok(Self {
             outbox,
+            door,
             mac,
             driver,
             names,
@@ -272,6 +336,11 @@ impl Daemon {
             json_tcp,
             json_udp,
             data_dir,
+            codec,
+            delivered,
+            // Numbers of a previous run (whose acks may still come) are
+            // not reused soon: start from the clock.
+            next_transmission: (SystemClock.now() / 1000) as u32,
         })
     }
 
@@ -286,8 +355,8 @@ impl Daemon {
     }
 
     /// Where the journal and the raw log live.
-    pub fn data_dir(&self) -> &std::path::Path {
-        &self.data_dir
+    pub fn data_dir(&self) -> &Path {
+        self.data_dir.path()
     }
 
     /// A sender for messages to publish (as the JSON interface uses); for
@@ -331,7 +400,7 @@ impl Daemon {
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
                 _ = expire.tick() => self.outbox.expire(),
             }
-            self.forward_queue_events();
+            let _ = self.forward_queue_events();
             self.commit_replies();
         }
         // Clients still waiting hear back once their messages are on disk.
@@ -349,15 +418,41 @@ impl Daemon {
     }
 
     /// Accepts a message; its reply waits for the journal sync
-    /// ([`commit_replies`](Self::commit_replies)) unless it was refused.
+    /// ([`commit_replies`](Self::commit_replies)) unless it was refused. A
+    /// message the codec would change is refused, or for a clamping type
+    /// accepted as it will be sent with the changes in its reply; the
+    /// messages it pushes out of a full queue are named in its reply.
     fn publish(&mut self, publish: Publish) {
         let name = publish.message.descriptor().full_name().to_string();
-        match self.outbox.accept(&publish.message) {
-            Ok(Accepted::Queued(id)) => self
-                .pending_replies
-                .push((publish.reply, accepted_line(&name, Some(id)))),
+        let admitted = match self.door.admit(publish.message) {
+            Ok(admitted) => admitted,
+            Err(e) => {
+                tracing::info!("publish refused: {e}");
+                let _ = publish.reply.send(error_line(&e));
+                return;
+            }
+        };
+        for change in &admitted.changes {
+            tracing::warn!("accepted with a value changed by the codec: {change}");
+        }
+        match self.outbox.accept(&admitted.message) {
+            Ok(Accepted::Queued(id)) => {
+                let dropped = self.forward_queue_events();
+                for (entry, _) in &dropped {
+                    tracing::warn!(
+                        id = entry,
+                        "{name}: a message was dropped from its full queue (max_queue)"
+                    );
+                }
+                self.pending_replies.push((
+                    publish.reply,
+                    accepted_reply(&name, Some(id), &dropped, &admitted.changes),
+                ))
+            }
             Ok(Accepted::Delivered) => {
-                let _ = publish.reply.send(accepted_line(&name, None));
+                let _ = publish
+                    .reply
+                    .send(accepted_reply(&name, None, &[], &admitted.changes));
             }
             Err(e) => {
                 let _ = publish.reply.send(error_line(&e.to_string()));
@@ -417,6 +512,8 @@ impl Daemon {
                 for e in self.outbox.receive(&transmission) {
                     tracing::warn!(src = transmission.src(), "received: {e}");
                 }
+                // Messages from the link pass the duplicate filter.
+                let _ = self.forward_events(true);
             }
             DriverEvent::TransmitResult(result) => {
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
@@ -459,29 +556,106 @@ impl Daemon {
         let _ = self.link.send(link);
     }
 
+    /// Starts the slots due. Each transmission initiated gets a `unique_id`
+    /// (the acks that answer it name it) and, in `time` and `slot_seconds`,
+    /// the time left in its slot: the driver drops it rather than run it
+    /// after its slot (e.g. when the modem was away).
     fn mac_slots(&mut self) {
         for event in self.mac.poll(SystemClock.now()) {
-            let _ = self.link.send(LinkEvent::Slot(
-                event.initiate().map(|t| Arc::new(t.clone())),
-            ));
-            if let Some(transmission) = event.initiate() {
-                if let Err(e) = self.driver.initiate_transmission(transmission.clone()) {
+            let amac::MacEvent::Slot(slot) = &event else {
+                continue;
+            };
+            if slot.initiate().is_none() {
+                let _ = self.link.send(LinkEvent::Slot(None));
+            }
+            if let Some(transmission) = slot.initiate() {
+                let mut transmission = transmission.clone();
+                self.next_transmission = self.next_transmission.wrapping_add(1);
+                transmission.unique_id = Some(self.next_transmission);
+                let opened = transmission
+                    .time
+                    .and_then(|t| i64::try_from(t).ok())
+                    .unwrap_or(slot.position.start);
+                transmission.time = u64::try_from(opened).ok();
+                transmission.slot_seconds = Some((slot.position.end - opened).max(0) as f64 / 1e6);
+                tracing::debug!(
+                    unique_id = self.next_transmission,
+                    slot = slot.position.index,
+                    "initiating a transmission"
+                );
+                let _ = self
+                    .link
+                    .send(LinkEvent::Slot(Some(Arc::new(transmission.clone()))));
+                if let Err(e) = self.driver.initiate_transmission(transmission) {
                     tracing::error!("cannot initiate a transmission: {e}");
                 }
             }
         }
     }
 
-    fn forward_queue_events(&mut self) {
-        let events = match self.outbox.events() {
+    /// Logs the queue events and sends them to the clients; returns the
+    /// messages dropped from a full queue (journal id, message).
+    fn forward_queue_events(&mut self) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
+        self.forward_events(false)
+    }
+
+    /// Whether a message received from `src` is new to the clients
+    /// (recorded durably then) or a repeat to suppress.
+    fn first_delivery(&mut self, received: &queue::ReceivedMessage) -> bool {
+        let Some(log) = &mut self.delivered else {
+            return true;
+        };
+        let bytes = match self.codec.encode(&received.message) {
+            Ok(bytes) => bytes,
+            Err(e) => {
+                tracing::warn!("duplicate filter: cannot encode a received message: {e}");
+                return true;
+            }
+        };
+        let id = Identity::of(received.src, received.dccl_id, &bytes);
+        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        match log.first_time(id, now) {
+            Ok(true) => true,
+            Ok(false) => {
+                tracing::info!(
+                    src = received.src,
+                    dccl_id = received.dccl_id,
+                    "a repeat of a message already handed over: suppressed"
+                );
+                false
+            }
+            Err(e) => {
+                // Handed over all the same: nothing received is lost.
+                tracing::error!("{}: {e}", log.path().display());
+                true
+            }
+        }
+    }
+
+    /// As [`forward_queue_events`](Self::forward_queue_events); with
+    /// `from_link`, received messages already handed over are suppressed.
+    fn forward_events(
+        &mut self,
+        from_link: bool,
+    ) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
+        let mut dropped = Vec::new();
+        let events = match self.outbox.events_with_entries() {
             Ok(events) => events,
             Err(e) => {
                 tracing::error!("journal: {e}");
-                return;
+                return dropped;
             }
         };
         let now = SystemClock.now();
-        for event in events {
+        for (event, entry) in events {
+            if let QueueEvent::Dropped { message, .. } = &event {
+                dropped.push((entry, message.clone()));
+            }
+            if let QueueEvent::Received(received) = &event {
+                if from_link && !self.first_delivery(received) {
+                    continue;
+                }
+            }
             if let Some(log) = &mut self.raw_log {
                 let logged = match &event {
                     QueueEvent::Sent { message, frame, .. } => log.message(
@@ -490,6 +664,15 @@ impl Daemon {
                         message.descriptor().full_name(),
                         message_json(message),
                         &[("frame", (*frame).into())],
+                    ),
+                    QueueEvent::Acked {
+                        message, by, frame, ..
+                    } => log.message(
+                        now,
+                        "ack",
+                        message.descriptor().full_name(),
+                        message_json(message),
+                        &[("by", (*by).into()), ("frame", (*frame).into())],
                     ),
                     QueueEvent::Received(r) => log.message(
                         now,
@@ -511,11 +694,12 @@ impl Daemon {
                     .cloned()
                     .unwrap_or_else(|| format!("dccl id {id}"))
             };
-            if let Some((topic, line)) = event_line(&event, name_of) {
+            if let Some((topic, line)) = event_line(&event, entry, name_of) {
                 let _ = self
                     .events
                     .send(Arc::new(ClientEvent { topic, line, event }));
             }
         }
+        dropped
     }
 }

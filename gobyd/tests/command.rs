@@ -102,6 +102,109 @@ fn gobyd_refuses_bad_configurations_with_their_place() {
 }
 
 #[test]
+fn configuration_errors_give_file_line_and_column() {
+    let dir = scratch("gobyd-position");
+    for (text, expected) in [
+        (
+            "modem_id: 1\nmac {\n  type: MAC_NONE\n  bogus: 3\n}\n",
+            "bad.pb.txt:4:3: ",
+        ),
+        ("modem_id: 1\n\n   modem_id: \"one\"\n", "bad.pb.txt:3:14: "),
+        (
+            "driver {\n  driver_type: DRIVER_UDP\n  [goby.acomms.nope.protobuf.config] { }\n}\n",
+            "bad.pb.txt:3:",
+        ),
+        // A Goby3 Micro-Modem setting this driver does not have.
+        (
+            "driver_cfg {\n  driver_type: DRIVER_WHOI_MICROMODEM\n  [goby.acomms.micromodem.protobuf.config] {\n    reset_nvram: true\n    hydroid_gateway_id: 1\n  }\n}\n",
+            "bad.pb.txt:5:5: ",
+        ),
+    ] {
+        let path = dir.join("bad.pb.txt");
+        std::fs::write(&path, text).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let err = stderr_text(&out);
+        assert!(err.contains(expected), "{text}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn check_refuses_a_modem_id_with_no_mac_slot() {
+    let dir = scratch("gobyd-noslot");
+    let path = dir.join("noslot.pb.txt");
+    std::fs::write(
+        &path,
+        "modem_id: 3\nmac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 slot_seconds: 5 } slot { src: 2 slot_seconds: 5 } }\n",
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("modem_id 3 has no slot") && err.contains("1, 2"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn driver_sections_written_as_goby3_writes_them_are_read() {
+    let dir = scratch("gobyd-goby3");
+    let path = dir.join("goby3.pb.txt");
+    // As a goby_modemdriver / pAcommsHandler configuration writes them.
+    std::fs::write(
+        &path,
+        r#"modem_id: 1
+driver_cfg {
+  driver_type: DRIVER_UDP
+  [goby.acomms.udp.protobuf.config] {  # the UDP driver's settings
+    local { port: 50001 }
+    remote { modem_id: 2 ip: "127.0.0.1" port: 50002 }
+    max_frame_size: 64
+  }
+}
+mac_cfg {
+  type: MAC_FIXED_DECENTRALIZED
+  slot { src: 1 dest: -1 slot_seconds: 5 }
+  slot { src: 2 dest: -1 slot_seconds: 5 }
+}
+queue_cfg {
+  message_entry { protobuf_name: "goby.example.Command" ack: true }
+}
+"#,
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    let mm = dir.join("mm.pb.txt");
+    std::fs::write(
+        &mm,
+        r#"modem_id: 1
+driver_cfg {
+  driver_type: DRIVER_WHOI_MICROMODEM
+  serial_port: "/dev/ttyUSB0"
+  [goby.acomms.micromodem.protobuf.config] {
+    reset_nvram: true
+    nvram_cfg: "DQF,1"
+    keep_alive_seconds: 10
+  }
+}
+"#,
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", mm.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    // Both names of one section: refused.
+    std::fs::write(&mm, "driver {}\ndriver_cfg {}\n").unwrap();
+    let out = gobyd(&["--check", "--config", mm.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr_text(&out).contains("both driver and driver_cfg"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn check_refuses_options_nested_too_deep_without_crashing() {
     let dir = scratch("gobyd-deep");
     let depth = 100_000;

@@ -325,6 +325,12 @@ fn messages_cross_the_simulated_acoustic_channel_with_acks() {
     sender.wait_for("the broadcast", |v| {
         (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
     });
+    // The sender's mission log has what went on and came off the simulated
+    // water (its data out, the acks in) and the acks of its messages.
+    let log = std::fs::read_to_string(dir.join("node1").join("raw.log")).unwrap();
+    for needle in [r#""raw":"out""#, r#""raw":"in""#, r#""msg":"ack""#] {
+        assert!(log.contains(needle), "no {needle} in the raw log:\n{log}");
+    }
     drop(sender);
     drop(receiver);
     std::fs::remove_dir_all(&dir).unwrap();
@@ -536,7 +542,7 @@ data_dir: "{}"
         .unwrap();
     // Addressed to this node: delivered at once, and acknowledged.
     let mut seen = Vec::new();
-    while seen.len() < 3 {
+    while seen.len() < 4 {
         seen.push(receive());
     }
     assert!(
@@ -578,5 +584,58 @@ data_dir: "{}"
         std::thread::sleep(Duration::from_millis(50));
     };
     assert!(exit.success(), "{exit:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn one_daemon_per_data_directory_and_a_crash_releases_it() {
+    let dir = scratch("one-per-dir");
+    let data = dir.join("data");
+    let config = format!(
+        r#"
+modem_id: 1
+driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "one-per-dir" }} }}
+mac {{ type: MAC_NONE }}
+json {{ tcp_bind: "127.0.0.1:0" }}
+data_dir: "{}"
+"#,
+        data.display()
+    );
+    let path = dir.join("node.cfg");
+    std::fs::write(&path, config).unwrap();
+    let first = Node::start(&path);
+    // A second daemon on the same directory is refused at start.
+    let second = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .arg("--config")
+        .arg(&path)
+        .env_remove("RUST_BACKTRACE")
+        .stdin(Stdio::null())
+        .output()
+        .expect("gobyd runs");
+    assert_eq!(second.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(
+        err.contains(&format!(
+            "data directory {} is in use by another gobyd (pid {})",
+            data.display(),
+            first.child.id()
+        )),
+        "{err}"
+    );
+    // The directory and its files are private to their owner.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&data), 0o700);
+        for file in ["outbox.journal", "gobyd.lock"] {
+            assert_eq!(mode(&data.join(file)), 0o600, "{file}");
+        }
+    }
+    // SIGKILL leaves no stale lock behind.
+    first.kill();
+    let mut third = Node::start(&path);
+    third.send(r#"{"subscribe": ["queue_size"]}"#);
+    drop(third);
     std::fs::remove_dir_all(&dir).unwrap();
 }

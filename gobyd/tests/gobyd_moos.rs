@@ -105,6 +105,14 @@ async fn round_trip_through(port: u16, name: &str) {
     client
         .notify_string("ACOMMS_SEND", "@PB[no.Such] x: 1")
         .unwrap();
+    // A value the codec would change (a note over its 10 characters) is
+    // refused at the door, not delivered cut short.
+    client
+        .notify_string(
+            "ACOMMS_SEND",
+            "@PB[goby.example.Command] destination: 1 action: ABORT note: \"much too long\"",
+        )
+        .unwrap();
     client
         .notify_string(
             "ACOMMS_SEND",
@@ -115,6 +123,7 @@ async fn round_trip_through(port: u16, name: &str) {
         loop {
             let m = mail.recv().await.expect("mail channel open");
             if let (true, Value::String(s)) = (m.key == "ACOMMS_RECEIVED", m.value) {
+                assert!(!s.contains("ABORT"), "accepted at the door: {s}");
                 if s.contains("HOLD") {
                     return s;
                 }

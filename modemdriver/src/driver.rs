@@ -203,6 +203,12 @@ pub enum DriverStatus {
         /// What failed.
         reason: String,
     },
+    /// A transmission was not made: its slot had passed (e.g. it waited
+    /// while the modem was unreachable), or newer ones replaced it.
+    Skipped {
+        /// Why.
+        reason: String,
+    },
     /// The driver does not know a driver-specific request.
     Unsupported {
         /// The request's message type.

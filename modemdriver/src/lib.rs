@@ -34,6 +34,7 @@ pub mod link;
 pub mod micromodem;
 pub mod rate;
 pub mod sim;
+pub mod slot;
 pub mod time;
 pub mod udp;
 

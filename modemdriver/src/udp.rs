@@ -5,7 +5,10 @@
 //! with their modem ids, `max_frame_size`). A transmission to modem id N goes
 //! to every remote endpoint of modem id N; a broadcast (dest 0) to every
 //! remote endpoint. Data addressed to this node with `ack_requested` is
-//! acknowledged (an `ACK` transmission listing the frames) to its sender.
+//! acknowledged (an `ACK` transmission listing the frames, with the data's
+//! `unique_id` so that the sender credits the transmission it answers) to
+//! its sender. A data transmission whose slot has passed
+//! ([`slot`](crate::slot)) is dropped.
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -81,6 +84,7 @@ impl UdpDriver {
             remotes,
             max_frame_size,
             ack_ids,
+            last_acked_data: None,
         };
         Ok(Driver::spawn("udp", move |ctx| run(state, socket, ctx)))
     }
@@ -91,6 +95,10 @@ struct UdpState {
     remotes: Vec<(u32, SocketAddr)>,
     max_frame_size: u32,
     ack_ids: Vec<i32>,
+    /// Destination and `unique_id` of the last data sent asking for acks:
+    /// an ack from a peer that does not echo `unique_id` (e.g. Goby's UDP
+    /// driver) is taken to answer it when it comes from that destination.
+    last_acked_data: Option<(i32, u32)>,
 }
 
 impl UdpState {
@@ -103,14 +111,14 @@ impl UdpState {
     }
 }
 
-async fn run(state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {
+async fn run(mut state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {
     let events = ctx.events.clone();
     let mut link = Tracer::new(DatagramLink::new(socket), events.clone());
     events.status(DriverStatus::Ready);
     loop {
         tokio::select! {
             command = ctx.commands.recv() => match command {
-                Some(DriverCommand::Initiate(mt)) => transmit(&state, &mut link, &events, mt).await,
+                Some(DriverCommand::Initiate(mt)) => transmit(&mut state, &mut link, &events, mt).await,
                 Some(DriverCommand::Specific(m)) => events.status(DriverStatus::Unsupported {
                     message: m.descriptor().full_name().to_string(),
                 }),
@@ -134,7 +142,7 @@ async fn run(state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {
 }
 
 async fn transmit(
-    state: &UdpState,
+    state: &mut UdpState,
     link: &mut Tracer<DatagramLink>,
     events: &EventSink,
     mut mt: ModemTransmission,
@@ -146,6 +154,12 @@ async fn transmit(
         mt.time = Some(now_micros());
     }
     if mt.r#type() == TransmissionType::Data {
+        if crate::slot::too_late(&mt, Duration::ZERO) {
+            events.status(DriverStatus::Skipped {
+                reason: "the slot of the transmission has passed".into(),
+            });
+            return;
+        }
         mt.max_frame_bytes = Some(
             mt.max_frame_bytes
                 .map_or(state.max_frame_size, |m| m.min(state.max_frame_size)),
@@ -156,7 +170,7 @@ async fn transmit(
         if mt.frame.is_empty() {
             mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
         }
-        if mt.frame.iter().all(|f| f.is_empty()) {
+        if mt.frame.iter().all(|f| f.is_empty()) && !mt.always_initiate() {
             events.emit(DriverEvent::TransmitResult(TransmitResult {
                 transmission: mt,
                 outcome: TransmitOutcome::NothingToSend,
@@ -176,6 +190,11 @@ async fn transmit(
         }));
         return;
     }
+    state.last_acked_data = match (mt.r#type(), mt.ack_requested(), mt.unique_id) {
+        (TransmissionType::Data, true, Some(id)) => Some((mt.dest(), id)),
+        (TransmissionType::Data, _, _) => None,
+        _ => state.last_acked_data,
+    };
     let bytes = mt.encode_to_vec();
     let mut failure = None;
     for addr in destinations {
@@ -197,7 +216,7 @@ async fn receive(
     bytes: &[u8],
     from: SocketAddr,
 ) {
-    let mt = match ModemTransmission::decode(bytes) {
+    let mut mt = match ModemTransmission::decode(bytes) {
         Ok(mt) => mt,
         Err(e) => {
             events.status(DriverStatus::Unparseable {
@@ -220,8 +239,17 @@ async fn receive(
         acked_frame: (0..mt.frame.len())
             .map(|i| mt.frame_start() as i32 + i as i32)
             .collect(),
+        // The ack names the transmission it answers.
+        unique_id: mt.unique_id,
         ..Default::default()
     });
+    if mt.r#type() == TransmissionType::Ack && mt.unique_id.is_none() {
+        if let Some((dest, id)) = state.last_acked_data {
+            if mt.src() == dest && mt.dest() == state.modem_id {
+                mt.unique_id = Some(id);
+            }
+        }
+    }
     events.emit(DriverEvent::Received(mt));
     if let Some(ack) = ack {
         // Reply to the endpoint the data came from.

@@ -525,10 +525,91 @@ async fn query_destination_is_filled_by_the_data_request() {
         (template.max_num_frames(), template.max_frame_bytes()),
         (1, 32)
     );
-    let got = data_received(&mut b.d2, Duration::from_secs(2)).await;
+    let got = data_received(&mut b.d2, LIMIT).await;
     assert_eq!(got.len(), 1);
     assert_eq!((got[0].src(), got[0].dest()), (1, 2));
     assert_eq!(got[0].frame, vec![frame]);
     assert_eq!(acks(&mut b.d1, 1).await, vec![0]);
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn the_start_up_reset_is_not_reported_as_a_modem_reset() {
+    let mut e =
+        emulator::start(emulator_config(1), EmulatorPort::Pty { link: None }, None).expect("pty");
+    let path = e.path().await.unwrap();
+    let mut d = MicroModemDriver::start(&mm_config(1, &path)).unwrap();
+    // Every status up to the first Ready: the modem's own $CAREV,INIT at
+    // start-up is expected, not a reset to report.
+    let mut seen = Vec::new();
+    wait_for(&mut d, &[], LIMIT, |e| match e {
+        DriverEvent::Status(DriverStatus::Ready) => Some(()),
+        DriverEvent::Status(s) => {
+            seen.push(s.clone());
+            None
+        }
+        _ => None,
+    })
+    .await;
+    assert!(!seen.contains(&DriverStatus::ModemReset), "{seen:?}");
+    // A reset once running still is reported.
+    e.control(EmulatorControl::Reset);
+    wait_for(&mut d, &[], LIMIT, |e| {
+        matches!(e, DriverEvent::Status(DriverStatus::ModemReset)).then_some(())
+    })
+    .await;
+    d.stop().await.unwrap();
+    e.stop().await;
+}
+
+#[tokio::test]
+async fn a_transmission_whose_slot_passed_is_dropped_and_an_empty_one_is_not_sent() {
+    let mut b = bench("slots").await;
+    // Its slot ended 10 s ago (the modem was away): skipped, no data asked.
+    let now = modemdriver::time::now_micros();
+    let mut late = data(2, 0, true);
+    late.time = Some(now - 20_000_000);
+    late.slot_seconds = Some(10.0);
+    b.d1.initiate_transmission(late).unwrap();
+    let skipped = wait_for(&mut b.d1, &[], LIMIT, |e| match e {
+        DriverEvent::DataRequest(_) => Some(false),
+        DriverEvent::Status(DriverStatus::Skipped { .. }) => Some(true),
+        _ => None,
+    })
+    .await;
+    assert!(skipped, "a data request came for a slot that had passed");
+
+    // Nothing to send: no cycle goes out.
+    b.d1.initiate_transmission(data(2, 0, true)).unwrap();
+    let (outcome, _) = transmit(&mut b.d1, &[], || {}).await;
+    assert_eq!(outcome, TransmitOutcome::NothingToSend);
+    // Unless the slot asks for it.
+    let mut always = data(2, 0, false);
+    always.always_initiate = Some(true);
+    b.d1.initiate_transmission(always).unwrap();
+    let (outcome, _) = transmit(&mut b.d1, &[], || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent);
+    let air = b.e1.air_log();
+    assert_eq!(
+        air.iter()
+            .filter(|a| a.kind == emulator::AirKind::Data)
+            .count(),
+        1,
+        "{air:?}"
+    );
+    b.stop().await;
+}
+
+#[tokio::test]
+async fn an_ack_names_the_transmission_it_answers() {
+    let mut b = bench("ack-id").await;
+    let mut first = data(2, 0, true);
+    first.unique_id = Some(41);
+    b.d1.initiate_transmission(first).unwrap();
+    let (outcome, _) = transmit(&mut b.d1, &[b"numbered".to_vec()], || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent);
+    let ack = received(&mut b.d1, LIMIT).await;
+    assert_eq!(ack.r#type(), TransmissionType::Ack);
+    assert_eq!((ack.src(), ack.dest(), ack.unique_id), (2, 1, Some(41)));
     b.stop().await;
 }

@@ -257,3 +257,61 @@ async fn answers_beyond_the_template_limits_are_cut_and_reported() {
         "{rejected:?}"
     );
 }
+
+#[tokio::test]
+async fn acks_name_the_transmission_they_answer() {
+    // Between two of our drivers the ack echoes the data's unique_id.
+    let ((sa, aa), (sb, ab)) = (bind().await, bind().await);
+    let mut a = UdpDriver::start_on(&config(1, aa, &[(2, ab)]), sa).unwrap();
+    let mut b = UdpDriver::start_on(&config(2, ab, &[(1, aa)]), sb).unwrap();
+    let mut numbered = data_to(2, true);
+    numbered.unique_id = Some(7);
+    a.initiate_transmission(numbered).unwrap();
+    let ack = wait_for(&mut a, &[b"x".to_vec()], LIMIT, |e| match e {
+        DriverEvent::Received(mt) if mt.r#type() == TransmissionType::Ack => Some(mt.clone()),
+        _ => None,
+    })
+    .await;
+    assert_eq!(ack.unique_id, Some(7));
+    let _ = received(&mut b, LIMIT).await;
+    a.stop().await.unwrap();
+    b.stop().await.unwrap();
+
+    // A peer that does not echo it (a bare socket standing for Goby's UDP
+    // driver): its ack is taken for the last transmission sent to it, and
+    // an ack from another node is not.
+    let ((sa, aa), (peer, pa)) = (bind().await, bind().await);
+    let (stranger, _) = bind().await;
+    let mut a = UdpDriver::start_on(&config(1, aa, &[(5, pa)]), sa).unwrap();
+    let mut numbered = data_to(5, true);
+    numbered.unique_id = Some(9);
+    a.initiate_transmission(numbered).unwrap();
+    wait_for(&mut a, &[vec![1]], LIMIT, |e| {
+        matches!(e, DriverEvent::TransmitResult(_)).then_some(())
+    })
+    .await;
+    let mut buf = [0u8; 2048];
+    let _ = tokio::time::timeout(LIMIT, peer.recv_from(&mut buf))
+        .await
+        .unwrap()
+        .unwrap();
+    let plain_ack = |src: i32| ModemTransmission {
+        src: Some(src),
+        dest: Some(1),
+        r#type: Some(TransmissionType::Ack as i32),
+        acked_frame: vec![0],
+        ..Default::default()
+    };
+    stranger
+        .send_to(&plain_ack(6).encode_to_vec(), aa)
+        .await
+        .unwrap();
+    let other = received(&mut a, LIMIT).await;
+    assert_eq!((other.src(), other.unique_id), (6, None));
+    peer.send_to(&plain_ack(5).encode_to_vec(), aa)
+        .await
+        .unwrap();
+    let ack = received(&mut a, LIMIT).await;
+    assert_eq!((ack.src(), ack.unique_id), (5, Some(9)));
+    a.stop().await.unwrap();
+}

@@ -11,7 +11,8 @@
 //!   [`ClientConfig::silence_timeout`] without a packet;
 //! - it forwards registrations and notifications given to the [`MoosClient`] handle;
 //! - it delivers every notification the DB pushes to the [`MailReceiver`];
-//! - when the connection fails it reconnects every [`ClientConfig::reconnect_delay`] and
+//! - when the connection fails it reconnects after [`ClientConfig::reconnect_delay`]
+//!   (doubling with each failed attempt up to 30 s while the MOOSDB is away) and
 //!   registers again for every variable registered so far.
 //!
 //! Notifications made while disconnected are refused with [`ClientError::NotConnected`];
@@ -289,6 +290,7 @@ impl MoosClient {
             mail: mail_tx,
             next_id: 0,
             session: 0,
+            failures: 0,
         };
         // Publish "connected" before returning, so the handle can notify at once.
         let worker = worker.start_session(&welcome);
@@ -496,6 +498,18 @@ struct Worker {
     mail: mpsc::Sender<Mail>,
     next_id: i32,
     session: u64,
+    /// Reconnection attempts failed in a row (the pause doubles with each).
+    failures: u32,
+}
+
+/// Longest pause between reconnection attempts while the MOOSDB is away.
+const MAX_RECONNECT_PAUSE: Duration = Duration::from_secs(30);
+
+/// The pause after `failures` failed attempts in a row: `base` doubled for
+/// each, at most 30 s (or `base` if longer).
+fn reconnect_pause(base: Duration, failures: u32) -> Duration {
+    let grown = base.saturating_mul(1u32 << failures.min(16));
+    grown.min(MAX_RECONNECT_PAUSE.max(base))
 }
 
 impl Worker {
@@ -518,14 +532,19 @@ impl Worker {
                     if self.drop_stale_commands() {
                         break;
                     }
+                    self.failures = 0;
                     self = self.start_session(&welcome);
                     first = Some(stream);
                 }
                 // The DB being down is expected while reconnecting; anything else is news.
                 Err(e @ ClientError::Connect { .. }) => {
+                    self.failures = self.failures.saturating_add(1);
                     debug!(client = %self.config.name, "reconnect failed: {e}")
                 }
-                Err(e) => warn!(client = %self.config.name, "reconnect failed: {e}"),
+                Err(e) => {
+                    self.failures = self.failures.saturating_add(1);
+                    warn!(client = %self.config.name, "reconnect failed: {e}")
+                }
             }
         }
         self.state.send_replace(ConnectionState::Closed);
@@ -555,9 +574,16 @@ impl Worker {
         self
     }
 
-    /// Waits the reconnect delay; true if the client was closed meanwhile.
+    /// The pause before the next reconnection attempt: the reconnect delay,
+    /// doubled for each attempt failed in a row, at most 30 s (or the
+    /// reconnect delay if longer).
+    fn reconnect_pause(&self) -> Duration {
+        reconnect_pause(self.config.reconnect_delay, self.failures)
+    }
+
+    /// Waits the reconnect pause; true if the client was closed meanwhile.
     async fn pause_is_closed(&mut self) -> bool {
-        let deadline = Instant::now() + self.config.reconnect_delay;
+        let deadline = Instant::now() + self.reconnect_pause();
         loop {
             tokio::select! {
                 _ = sleep_until(deadline) => return false,
@@ -774,6 +800,15 @@ async fn write_loop(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reconnection_pauses_grow_to_thirty_seconds_while_the_db_is_away() {
+        let s = Duration::from_secs;
+        let pauses: Vec<Duration> = (0..8).map(|n| reconnect_pause(s(1), n)).collect();
+        assert_eq!(pauses, [s(1), s(2), s(4), s(8), s(16), s(30), s(30), s(30)]);
+        assert_eq!(reconnect_pause(s(60), 3), s(60));
+        assert_eq!(reconnect_pause(Duration::from_millis(100), 40), s(30));
+    }
 
     #[test]
     fn config_is_checked() {

@@ -54,6 +54,9 @@ pub const EXAMPLE_NAVIGATION_PATH: &str = "goby/example/navigation.proto";
 /// Source text of the example messages (`goby/example/navigation.proto`).
 pub const EXAMPLE_NAVIGATION_PROTO: &str = include_str!("../proto/goby/example/navigation.proto");
 
+/// Import path of the MOOS-IvP example message (`goby.moos.example.NodeReport`).
+pub const NODE_REPORT_PATH: &str = "goby/moos/node_report.proto";
+
 /// Encoded `FileDescriptorSet` of every file in this crate (custom options kept).
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/descriptors.bin"));
 
@@ -102,5 +105,21 @@ pub mod goby {
     #[allow(missing_docs, clippy::all)]
     pub mod example {
         include!(concat!(env!("OUT_DIR"), "/goby.example.rs"));
+    }
+
+    /// MOOS: the translator's configuration and the MOOS-IvP example message.
+    pub mod moos {
+        /// `TranslatorEntry`, with the names and numbers of Goby's
+        /// `goby.moos.protobuf.TranslatorEntry`.
+        #[allow(missing_docs, clippy::all)]
+        pub mod protobuf {
+            include!(concat!(env!("OUT_DIR"), "/goby.moos.protobuf.rs"));
+        }
+
+        /// `NodeReport`, MOOS-IvP's NODE_REPORT as a DCCL message.
+        #[allow(missing_docs, clippy::all)]
+        pub mod example {
+            include!(concat!(env!("OUT_DIR"), "/goby.moos.example.rs"));
+        }
     }
 }

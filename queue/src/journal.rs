@@ -7,20 +7,37 @@
 //! On opening, the records are replayed: the accepted messages without a
 //! removed record are the ones still owed.
 //!
-//! The file starts with a magic string; each record is
+//! The file starts with a magic string (`GOBYJNL2`); each record is
 //!
 //! ```text
-//! length: u32 LE (of the payload) | crc32: u32 LE (of length and payload) | payload
+//! sync: 4 bytes A7 47 4A 52 | length: u32 LE (of the payload) | crc32: u32 LE (of length and payload) | payload
 //! payload = kind: u8 | id: u64 LE | (accepted only) time: i64 LE µs | name length: u16 LE | name | message bytes
 //! ```
 //!
-//! A record whose length runs past the end of the file or whose CRC-32 does
-//! not match is where a write was torn (power lost mid-write) or the file was
-//! damaged: it and everything after it are dropped (the file is truncated
-//! there) and reported in [`Replay::discarded_bytes`], never replayed as
-//! garbage. When removed records dominate, the file is rewritten with the
-//! live records only (to a temporary file, synced, then renamed over the
-//! journal).
+//! Faults cost the records they touch, never those after them:
+//!
+//! - a record whose CRC-32 (ISO-HDLC) does not match, or whose length runs
+//!   past the end of the file, is skipped: replay looks for the next sync
+//!   word and goes on from the first record there that checks out (a
+//!   single flipped bit anywhere loses at most the record holding it; a
+//!   damaged header is recognised within two bits and rewritten);
+//! - bytes after the last good record (a write torn by a crash) are cut
+//!   off; the file is never cut behind a good record. Skipped and cut
+//!   bytes are counted in [`Replay::discarded_bytes`];
+//! - a write that fails (full disk, I/O error) is undone (the file is cut
+//!   back to its last whole record) and reported: nothing is accepted that
+//!   is not in the file. While the undo itself fails, every new message is
+//!   refused; once there is room again, appending resumes. Should the
+//!   process die first, the partial record is skipped at the next start;
+//! - ids are `u64` and never wrap: when they run out, messages are refused
+//!   ([`JournalError::IdsExhausted`]).
+//!
+//! A removed record lost to damage makes its message owed again: it is sent
+//! once more (a duplicate, never a loss). When removed records dominate, the
+//! file is rewritten with the live records only (to a temporary file,
+//! synced, then renamed over the journal). Journals of the first format
+//! (`GOBYJNL1`, no sync words) are read and rewritten in this one. New
+//! files are created with mode 0600 (on Unix).
 
 use std::collections::BTreeMap;
 use std::fs::{File, OpenOptions};
@@ -31,16 +48,20 @@ use crc::{Crc, CRC_32_ISO_HDLC};
 
 use crate::clock::Micros;
 
-/// First bytes of a journal file (format version 1).
-const MAGIC: &[u8; 8] = b"GOBYJNL1";
+/// First bytes of a journal file (format version 2).
+const MAGIC: &[u8; 8] = b"GOBYJNL2";
+/// First bytes of a journal of the first format (no sync words).
+const MAGIC_V1: &[u8; 8] = b"GOBYJNL1";
+/// First bytes of every record (format version 2).
+const SYNC: [u8; 4] = [0xA7, 0x47, 0x4A, 0x52];
 /// Kind byte of an accepted record.
 const KIND_ACCEPTED: u8 = 1;
 /// Kind byte of a removed record.
 const KIND_REMOVED: u8 = 2;
 /// Largest payload a record may have; a length above it marks damage.
 const MAX_PAYLOAD: usize = 16 * 1024 * 1024;
-/// Bytes of record framing (length and CRC).
-const FRAMING: usize = 8;
+/// Bytes of record framing (sync word, length and CRC).
+const FRAMING: usize = 12;
 /// The journal is compacted when it is larger than this and at least half
 /// of it is dead.
 const COMPACT_MIN_BYTES: u64 = 1024 * 1024;
@@ -68,8 +89,8 @@ pub struct JournalEntry {
 pub struct Replay {
     /// Messages still owed, oldest first.
     pub entries: Vec<JournalEntry>,
-    /// Bytes dropped at the end of the file: a torn or damaged record and
-    /// whatever followed it (0 for a clean file).
+    /// Bytes skipped or cut off: damaged records, a torn tail, a damaged
+    /// header (0 for a clean file).
     pub discarded_bytes: u64,
 }
 
@@ -93,91 +114,219 @@ pub enum JournalError {
     /// A message too large for a record.
     #[error("message of {0} bytes is too large for the journal")]
     MessageTooLarge(usize),
+    /// Every id up to `u64::MAX` was used; ids never wrap.
+    #[error("journal {0}: message ids are exhausted; move the journal away to start again")]
+    IdsExhausted(PathBuf),
+}
+
+/// The file under a journal: the few operations the journal needs, so that
+/// faults (a full disk, failing writes) can be injected in tests. Implemented
+/// for [`File`].
+pub trait JournalFile: Send + std::fmt::Debug {
+    /// The whole content.
+    fn read_all(&mut self) -> io::Result<Vec<u8>>;
+    /// Writes `bytes` at `offset`; on error, a prefix may have been written.
+    fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()>;
+    /// Cuts or extends the file to `len` bytes.
+    fn set_len(&mut self, len: u64) -> io::Result<()>;
+    /// Waits until the content is on disk.
+    fn sync(&mut self) -> io::Result<()>;
+    /// A second handle on the same file whose `sync_data` makes everything
+    /// written before the call durable.
+    fn sync_handle(&self) -> io::Result<File>;
+    /// Points at the file now at `path` (after the journal was rewritten
+    /// and renamed over it).
+    fn reopen(&mut self, path: &Path) -> io::Result<()>;
+}
+
+impl JournalFile for File {
+    fn read_all(&mut self) -> io::Result<Vec<u8>> {
+        let mut bytes = Vec::new();
+        self.seek(SeekFrom::Start(0))?;
+        self.read_to_end(&mut bytes)?;
+        Ok(bytes)
+    }
+
+    fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()> {
+        self.seek(SeekFrom::Start(offset))?;
+        self.write_all(bytes)
+    }
+
+    fn set_len(&mut self, len: u64) -> io::Result<()> {
+        File::set_len(self, len)
+    }
+
+    fn sync(&mut self) -> io::Result<()> {
+        self.sync_data()
+    }
+
+    fn sync_handle(&self) -> io::Result<File> {
+        self.try_clone()
+    }
+
+    fn reopen(&mut self, path: &Path) -> io::Result<()> {
+        *self = OpenOptions::new().read(true).write(true).open(path)?;
+        Ok(())
+    }
+}
+
+/// Options that create files with mode 0600 (on Unix).
+fn private_file_options() -> OpenOptions {
+    #[allow(unused_mut)]
+    let mut options = OpenOptions::new();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    options
 }
 
 /// An open journal file.
 #[derive(Debug)]
 pub struct Journal {
     path: PathBuf,
-    file: File,
-    next_id: EntryId,
+    file: Box<dyn JournalFile>,
+    /// Id of the next message; `None` once every id was used.
+    next_id: Option<EntryId>,
     /// Live entries by id (kept for compaction).
     live: BTreeMap<EntryId, JournalEntry>,
-    /// Current file length.
+    /// Length of the file up to the end of its last whole record.
     len: u64,
+    /// A failed write may have left bytes after `len`: cut them before the
+    /// next append.
+    dirty: bool,
     /// Bytes of live accepted records.
     live_bytes: u64,
 }
 
 impl Journal {
-    /// Opens (or creates) the journal at `path` and replays it.
+    /// Opens (or creates, mode 0600) the journal at `path` and replays it.
     pub fn open(path: impl AsRef<Path>) -> Result<(Self, Replay), JournalError> {
-        let path = path.as_ref().to_path_buf();
-        let io_err = |source| JournalError::Io {
-            path: path.clone(),
-            source,
-        };
-        let mut file = OpenOptions::new()
+        let path = path.as_ref();
+        let file = private_file_options()
             .read(true)
             .write(true)
             .create(true)
             .truncate(false)
-            .open(&path)
-            .map_err(io_err)?;
-        let mut bytes = Vec::new();
-        file.read_to_end(&mut bytes).map_err(io_err)?;
+            .open(path)
+            .map_err(|source| JournalError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        Self::open_with(path, file)
+    }
+
+    /// Replays the journal held by `file` (named `path` in errors, and
+    /// where compaction writes).
+    pub fn open_with(
+        path: impl AsRef<Path>,
+        file: impl JournalFile + 'static,
+    ) -> Result<(Self, Replay), JournalError> {
+        let path = path.as_ref().to_path_buf();
+        let mut file: Box<dyn JournalFile> = Box::new(file);
+        let io_err = |source| JournalError::Io {
+            path: path.clone(),
+            source,
+        };
+        let bytes = file.read_all().map_err(io_err)?;
 
         let mut live = BTreeMap::new();
-        let mut next_id = 0;
+        let mut next_id = Some(0);
         let mut discarded_bytes = 0;
-        let valid_len = if bytes.is_empty() {
-            file.write_all(MAGIC).map_err(io_err)?;
-            file.sync_all().map_err(io_err)?;
-            sync_parent(&path).map_err(io_err)?;
-            MAGIC.len()
-        } else if bytes.len() < MAGIC.len() && MAGIC.starts_with(&bytes) {
-            // Torn while writing the header: nothing was ever journaled.
+        let mut apply = |record: Record| {
+            let id = match record {
+                Record::Accepted(entry) => {
+                    let id = entry.id;
+                    live.insert(id, entry);
+                    id
+                }
+                Record::Removed(id) => {
+                    live.remove(&id);
+                    id
+                }
+            };
+            next_id = match (next_id, id.checked_add(1)) {
+                (Some(n), Some(after)) => Some(n.max(after)),
+                _ => None,
+            };
+        };
+        let mut rewrite = false;
+        let valid_len = if bytes.len() < MAGIC.len() && MAGIC.starts_with(&bytes) {
+            // New, or torn while writing the header: nothing was journaled.
             discarded_bytes = bytes.len() as u64;
             file.set_len(0).map_err(io_err)?;
-            file.seek(SeekFrom::Start(0)).map_err(io_err)?;
-            file.write_all(MAGIC).map_err(io_err)?;
-            file.sync_all().map_err(io_err)?;
+            file.write_at(0, MAGIC).map_err(io_err)?;
+            file.sync().map_err(io_err)?;
+            sync_parent(&path).map_err(io_err)?;
             MAGIC.len()
-        } else if !bytes.starts_with(MAGIC) {
-            return Err(JournalError::NotAJournal(path));
-        } else {
-            let mut at = MAGIC.len();
-            while let Some((record, next)) = read_record(&bytes, at) {
-                match record {
-                    Record::Accepted(entry) => {
-                        next_id = next_id.max(entry.id + 1);
-                        live.insert(entry.id, entry);
-                    }
-                    Record::Removed(id) => {
-                        next_id = next_id.max(id + 1);
-                        live.remove(&id);
-                    }
-                }
+        } else if bytes.starts_with(MAGIC_V1) {
+            // The first format: records without sync words, replayed up to
+            // the first bad one, then rewritten in this format.
+            let mut at = MAGIC_V1.len();
+            while let Some((record, next)) = read_payload(&bytes, at, false) {
+                apply(record);
                 at = next;
             }
-            if at < bytes.len() {
-                discarded_bytes = (bytes.len() - at) as u64;
-                file.set_len(at as u64).map_err(io_err)?;
-                file.sync_all().map_err(io_err)?;
+            discarded_bytes = (bytes.len() - at) as u64;
+            rewrite = true;
+            bytes.len()
+        } else {
+            let header_ok = bytes.starts_with(MAGIC);
+            if !header_ok {
+                if !looks_like_header(&bytes) {
+                    return Err(JournalError::NotAJournal(path));
+                }
+                // A damaged header on our records: put it right in place.
+                discarded_bytes += MAGIC.len() as u64;
+                file.write_at(0, MAGIC).map_err(io_err)?;
             }
-            at
+            let mut at = MAGIC.len();
+            let mut end = at;
+            // Bytes skipped since the last good record: discarded once a
+            // good record follows them, else part of the tail.
+            let mut skipped = 0;
+            while at < bytes.len() {
+                match read_payload(&bytes, at, true) {
+                    Some((record, next)) => {
+                        apply(record);
+                        discarded_bytes += skipped;
+                        skipped = 0;
+                        at = next;
+                        end = next;
+                    }
+                    None => match find_sync(&bytes, at + 1) {
+                        Some(next) => {
+                            skipped += (next - at) as u64;
+                            at = next;
+                        }
+                        None => break,
+                    },
+                }
+            }
+            if end < bytes.len() {
+                // A torn or damaged tail, with no good record after it.
+                discarded_bytes += (bytes.len() - end) as u64;
+                file.set_len(end as u64).map_err(io_err)?;
+            }
+            if !header_ok || end < bytes.len() {
+                file.sync().map_err(io_err)?;
+            }
+            end
         };
-        file.seek(SeekFrom::Start(valid_len as u64))
-            .map_err(io_err)?;
         let live_bytes = live.values().map(|e| accepted_size(e) as u64).sum();
-        let journal = Self {
+        let mut journal = Self {
             path,
             file,
             next_id,
             live,
             len: valid_len as u64,
+            dirty: false,
             live_bytes,
         };
+        if rewrite {
+            journal.compact()?;
+        }
         let replay = Replay {
             entries: journal.live.values().cloned().collect(),
             discarded_bytes,
@@ -236,8 +385,11 @@ impl Journal {
         if message_name.len() > usize::from(u16::MAX) {
             return Err(JournalError::NameTooLong(message_name.len()));
         }
+        let id = self
+            .next_id
+            .ok_or_else(|| JournalError::IdsExhausted(self.path.clone()))?;
         let entry = JournalEntry {
-            id: self.next_id,
+            id,
             time,
             message_name: message_name.to_string(),
             message: message.to_vec(),
@@ -247,16 +399,15 @@ impl Journal {
         }
         let record = encode_accepted(&entry);
         self.append(&record)?;
-        self.next_id += 1;
+        self.next_id = id.checked_add(1);
         self.live_bytes += record.len() as u64;
-        let id = entry.id;
         self.live.insert(id, entry);
         Ok(id)
     }
 
     /// Waits until everything appended so far is on disk.
     pub fn sync(&mut self) -> Result<(), JournalError> {
-        self.file.sync_data().map_err(|source| JournalError::Io {
+        self.file.sync().map_err(|source| JournalError::Io {
             path: self.path.clone(),
             source,
         })
@@ -266,7 +417,7 @@ impl Journal {
     /// everything appended before the call durable (for syncing on another
     /// thread).
     pub fn sync_handle(&self) -> Result<File, JournalError> {
-        self.file.try_clone().map_err(|source| JournalError::Io {
+        self.file.sync_handle().map_err(|source| JournalError::Io {
             path: self.path.clone(),
             source,
         })
@@ -303,33 +454,48 @@ impl Journal {
         }
         // Keep the id sequence going across compactions even if the newest
         // entries were removed: a removed record of the last id preserves it.
-        if let Some(last) = self.next_id.checked_sub(1) {
+        let last = match self.next_id {
+            Some(next) => next.checked_sub(1),
+            None => Some(EntryId::MAX),
+        };
+        if let Some(last) = last {
             if !self.live.contains_key(&last) {
                 bytes.extend_from_slice(&encode_removed(last));
             }
         }
-        let mut tmp = File::create(&tmp_path).map_err(io_err)?;
+        let mut tmp = private_file_options()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&tmp_path)
+            .map_err(io_err)?;
         tmp.write_all(&bytes).map_err(io_err)?;
         tmp.sync_all().map_err(io_err)?;
         drop(tmp);
         std::fs::rename(&tmp_path, &self.path).map_err(io_err)?;
         sync_parent(&self.path).map_err(io_err)?;
-        self.file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&self.path)
-            .map_err(io_err)?;
-        self.file.seek(SeekFrom::End(0)).map_err(io_err)?;
+        self.file.reopen(&self.path).map_err(io_err)?;
         self.len = bytes.len() as u64;
+        self.dirty = false;
         Ok(())
     }
 
+    /// Appends whole records after the last whole one. A failed write is
+    /// undone (the file cut back); while that fails too, every append is
+    /// refused.
     fn append(&mut self, record: &[u8]) -> Result<(), JournalError> {
         let io_err = |source| JournalError::Io {
             path: self.path.clone(),
             source,
         };
-        self.file.write_all(record).map_err(io_err)?;
+        if self.dirty {
+            self.file.set_len(self.len).map_err(io_err)?;
+            self.dirty = false;
+        }
+        if let Err(e) = self.file.write_at(self.len, record) {
+            self.dirty = self.file.set_len(self.len).is_err();
+            return Err(io_err(e));
+        }
         self.len += record.len() as u64;
         Ok(())
     }
@@ -355,6 +521,7 @@ fn frame(payload: &[u8]) -> Vec<u8> {
     digest.update(&len);
     digest.update(payload);
     let mut out = Vec::with_capacity(FRAMING + payload.len());
+    out.extend_from_slice(&SYNC);
     out.extend_from_slice(&len);
     out.extend_from_slice(&digest.finalize().to_le_bytes());
     out.extend_from_slice(payload);
@@ -388,16 +555,61 @@ fn le<const N: usize>(bytes: &[u8], at: usize) -> Option<[u8; N]> {
     bytes.get(at..at.checked_add(N)?)?.try_into().ok()
 }
 
+/// Offset of the first sync word at or after `from`.
+fn find_sync(bytes: &[u8], from: usize) -> Option<usize> {
+    bytes
+        .get(from..)?
+        .windows(SYNC.len())
+        .position(|w| w == SYNC)
+        .map(|p| from + p)
+}
+
+/// Whether a file that does not start with the magic string is a journal
+/// whose header was damaged: its first bytes differ from the magic string
+/// in at most two bits, and it holds nothing or at least one good record.
+fn looks_like_header(bytes: &[u8]) -> bool {
+    let close = bytes.len() >= MAGIC.len()
+        && MAGIC
+            .iter()
+            .zip(bytes)
+            .map(|(a, b)| (a ^ b).count_ones())
+            .sum::<u32>()
+            <= 2;
+    if !close {
+        return false;
+    }
+    let mut at = MAGIC.len();
+    if at == bytes.len() {
+        return true;
+    }
+    while let Some(found) = find_sync(bytes, at) {
+        if read_payload(bytes, found, true).is_some() {
+            return true;
+        }
+        at = found + 1;
+    }
+    false
+}
+
 /// The record at `at` and the offset after it; `None` at the end of the
-/// file, or where the record is torn or damaged.
-fn read_record(bytes: &[u8], at: usize) -> Option<(Record, usize)> {
+/// file, or where the record is torn or damaged. `synced`: records start
+/// with the sync word (format 2), else not (format 1).
+fn read_payload(bytes: &[u8], at: usize, synced: bool) -> Option<(Record, usize)> {
+    let at = if synced {
+        if le::<4>(bytes, at)? != SYNC {
+            return None;
+        }
+        at + SYNC.len()
+    } else {
+        at
+    };
     let len_bytes = le::<4>(bytes, at)?;
     let len = u32::from_le_bytes(len_bytes) as usize;
     if len > MAX_PAYLOAD {
         return None;
     }
     let crc = u32::from_le_bytes(le::<4>(bytes, at + 4)?);
-    let start = at + FRAMING;
+    let start = at + 8;
     let payload = bytes.get(start..start.checked_add(len)?)?;
     let mut digest = CRC32.digest();
     digest.update(&len_bytes);
@@ -428,6 +640,65 @@ fn read_record(bytes: &[u8], at: usize) -> Option<(Record, usize)> {
         }
         _ => None,
     }
+}
+
+/// Replays journal bytes in memory, as opening a journal file does, without
+/// touching any file: for fuzzing and inspection. `None` when the bytes are
+/// not a journal.
+pub fn replay_bytes(bytes: &[u8]) -> Option<Replay> {
+    #[derive(Debug)]
+    struct Memory(Vec<u8>);
+    impl JournalFile for Memory {
+        fn read_all(&mut self) -> io::Result<Vec<u8>> {
+            Ok(self.0.clone())
+        }
+        fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()> {
+            let offset = usize::try_from(offset).map_err(io::Error::other)?;
+            let end = offset + bytes.len();
+            if self.0.len() < end {
+                self.0.resize(end, 0);
+            }
+            self.0[offset..end].copy_from_slice(bytes);
+            Ok(())
+        }
+        fn set_len(&mut self, len: u64) -> io::Result<()> {
+            self.0
+                .resize(usize::try_from(len).map_err(io::Error::other)?, 0);
+            Ok(())
+        }
+        fn sync(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+        fn sync_handle(&self) -> io::Result<File> {
+            Err(io::Error::other("an in-memory journal has no file"))
+        }
+        fn reopen(&mut self, _: &Path) -> io::Result<()> {
+            Err(io::Error::other("an in-memory journal has no file"))
+        }
+    }
+    if bytes.starts_with(MAGIC_V1) {
+        // Replaying the first format rewrites the file; read it only.
+        let mut entries = BTreeMap::new();
+        let mut at = MAGIC_V1.len();
+        while let Some((record, next)) = read_payload(bytes, at, false) {
+            match record {
+                Record::Accepted(e) => {
+                    entries.insert(e.id, e);
+                }
+                Record::Removed(id) => {
+                    entries.remove(&id);
+                }
+            }
+            at = next;
+        }
+        return Some(Replay {
+            entries: entries.into_values().collect(),
+            discarded_bytes: (bytes.len() - at) as u64,
+        });
+    }
+    Journal::open_with("(memory)", Memory(bytes.to_vec()))
+        .ok()
+        .map(|(_, replay)| replay)
 }
 
 #[cfg(test)]
@@ -561,5 +832,287 @@ mod tests {
         assert_eq!(ids, (0..40).step_by(4).collect::<Vec<_>>());
         assert!(replay.entries.iter().all(|e| e.message == big));
         assert_eq!(j.accept("a.A", b"next", 100).unwrap(), 41);
+    }
+
+    /// The records of a small journal, written by hand: the file's bytes
+    /// and the byte range of each record.
+    fn small_journal() -> (Vec<u8>, Vec<(std::ops::Range<usize>, Record)>) {
+        let entry = |id, message: &[u8]| JournalEntry {
+            id,
+            time: 100 + id as i64,
+            message_name: "a.A".into(),
+            message: message.to_vec(),
+        };
+        let records = vec![
+            Record::Accepted(entry(0, b"one")),
+            Record::Accepted(entry(1, b"two")),
+            Record::Removed(0),
+            Record::Accepted(entry(2, b"three")),
+        ];
+        let mut bytes = MAGIC.to_vec();
+        let mut ranges = Vec::new();
+        for r in records {
+            let encoded = match &r {
+                Record::Accepted(e) => encode_accepted(e),
+                Record::Removed(id) => encode_removed(*id),
+            };
+            let start = bytes.len();
+            bytes.extend_from_slice(&encoded);
+            ranges.push((start..bytes.len(), r));
+        }
+        (bytes, ranges)
+    }
+
+    /// Entries owed after applying `records`, in id order.
+    fn owed<'a>(records: impl Iterator<Item = &'a Record>) -> Vec<JournalEntry> {
+        let mut live = BTreeMap::new();
+        for r in records {
+            match r {
+                Record::Accepted(e) => {
+                    live.insert(e.id, e.clone());
+                }
+                Record::Removed(id) => {
+                    live.remove(id);
+                }
+            }
+        }
+        live.into_values().collect()
+    }
+
+    #[test]
+    fn a_flipped_bit_anywhere_costs_at_most_its_own_record() {
+        let dir = TempDir::new("every-bit");
+        let (bytes, records) = small_journal();
+        std::fs::write(dir.file(), &bytes).unwrap();
+        let (_, clean) = Journal::open(dir.file()).unwrap();
+        assert_eq!(clean.entries, owed(records.iter().map(|(_, r)| r)));
+        assert_eq!(clean.entries.len(), 2);
+        for at in 0..bytes.len() {
+            for bit in 0..8 {
+                let mut damaged = bytes.clone();
+                damaged[at] ^= 1 << bit;
+                std::fs::write(dir.file(), &damaged).unwrap();
+                let hit = records.iter().position(|(range, _)| range.contains(&at));
+                let expected = owed(
+                    records
+                        .iter()
+                        .enumerate()
+                        .filter(|(i, _)| Some(*i) != hit)
+                        .map(|(_, (_, r))| r),
+                );
+                let what = format!("bit {bit} of byte {at} (record {hit:?})");
+                let (mut j, replay) =
+                    Journal::open(dir.file()).unwrap_or_else(|e| panic!("{what}: not opened: {e}"));
+                assert_eq!(replay.entries, expected, "{what}");
+                assert!(replay.discarded_bytes > 0, "{what}: damage not reported");
+                // What was kept stays kept, and new records are found after
+                // the damage.
+                j.accept_unsynced("b.B", b"after", 999).unwrap();
+                drop(j);
+                let (_, again) = Journal::open(dir.file()).unwrap();
+                let mut kept: Vec<&[u8]> =
+                    again.entries.iter().map(|e| e.message.as_slice()).collect();
+                assert_eq!(kept.pop(), Some(&b"after"[..]), "{what}");
+                let before: Vec<&[u8]> = expected.iter().map(|e| e.message.as_slice()).collect();
+                assert_eq!(kept, before, "{what}");
+                let ids: std::collections::BTreeSet<EntryId> =
+                    again.entries.iter().map(|e| e.id).collect();
+                assert_eq!(ids.len(), again.entries.len(), "{what}: an id reused");
+            }
+        }
+    }
+
+    #[test]
+    fn a_partial_record_between_good_ones_is_skipped_exactly() {
+        let dir = TempDir::new("partial");
+        let (bytes, records) = small_journal();
+        // The second record half written (the process died mid-write, the
+        // next run appended after it).
+        let second = records[1].0.clone();
+        let cut = second.start + second.len() / 2;
+        let mut file = bytes[..cut].to_vec();
+        file.extend_from_slice(&bytes[second.end..]);
+        std::fs::write(dir.file(), &file).unwrap();
+        let (_, replay) = Journal::open(dir.file()).unwrap();
+        let expected = owed(
+            records
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != 1)
+                .map(|(_, (_, r))| r),
+        );
+        assert_eq!(replay.entries, expected);
+        assert_eq!(replay.discarded_bytes, (cut - second.start) as u64);
+        // Nothing behind the good records was cut.
+        assert_eq!(std::fs::read(dir.file()).unwrap(), file);
+    }
+
+    /// A journal file on a disk with `room` bytes: a write past it writes
+    /// what fits and fails; cutting the file back fails while
+    /// `fail_set_len`.
+    #[derive(Debug)]
+    struct SmallDisk {
+        file: File,
+        faults: std::sync::Arc<std::sync::Mutex<(u64, bool)>>,
+    }
+
+    impl JournalFile for SmallDisk {
+        fn read_all(&mut self) -> io::Result<Vec<u8>> {
+            self.file.read_all()
+        }
+        fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()> {
+            let room = self.faults.lock().unwrap().0;
+            let fits = room.saturating_sub(offset).min(bytes.len() as u64) as usize;
+            JournalFile::write_at(&mut self.file, offset, &bytes[..fits])?;
+            if fits < bytes.len() {
+                return Err(io::Error::other("no space left on device"));
+            }
+            Ok(())
+        }
+        fn set_len(&mut self, len: u64) -> io::Result<()> {
+            if self.faults.lock().unwrap().1 {
+                return Err(io::Error::other("I/O error"));
+            }
+            JournalFile::set_len(&mut self.file, len)
+        }
+        fn sync(&mut self) -> io::Result<()> {
+            self.file.sync()
+        }
+        fn sync_handle(&self) -> io::Result<File> {
+            self.file.sync_handle()
+        }
+        fn reopen(&mut self, path: &Path) -> io::Result<()> {
+            self.file.reopen(path)
+        }
+    }
+
+    #[test]
+    fn a_failed_write_is_refused_and_leaves_no_partial_record() {
+        let dir = TempDir::new("full-disk");
+        let faults = std::sync::Arc::new(std::sync::Mutex::new((u64::MAX, false)));
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(dir.file())
+            .unwrap();
+        let disk = SmallDisk {
+            file,
+            faults: faults.clone(),
+        };
+        let (mut j, _) = Journal::open_with(dir.file(), disk).unwrap();
+        assert_eq!(j.accept("a.A", b"first", 1).unwrap(), 0);
+        let size = || std::fs::metadata(dir.file()).unwrap().len();
+        let before = size();
+        // The disk fills up: the record does not fit.
+        faults.lock().unwrap().0 = before + 10;
+        let err = j.accept("a.A", b"does not fit", 2).unwrap_err();
+        assert!(err.to_string().contains("no space left"), "{err}");
+        assert_eq!(size(), before, "a partial record was left behind");
+        assert_eq!(j.len(), 1);
+        // Cutting back fails too: the partial record stays, and every new
+        // message is refused until the journal is whole again.
+        *faults.lock().unwrap() = (before + 10, true);
+        j.accept("a.A", b"does not fit", 3).unwrap_err();
+        assert_eq!(size(), before + 10);
+        faults.lock().unwrap().0 = u64::MAX;
+        j.accept("a.A", b"refused", 4).unwrap_err();
+        j.remove(0).unwrap_err();
+        // Room again: the partial record goes, appending resumes.
+        faults.lock().unwrap().1 = false;
+        assert_eq!(j.accept("a.A", b"second", 5).unwrap(), 1);
+        drop(j);
+        let (_, replay) = Journal::open(dir.file()).unwrap();
+        assert_eq!(replay.discarded_bytes, 0);
+        // The removal of 0 was refused: 0 is owed again after a restart (a
+        // duplicate, never a loss).
+        assert_eq!(
+            names(&replay),
+            [(0, "a.A", &b"first"[..]), (1, "a.A", &b"second"[..])]
+        );
+    }
+
+    #[test]
+    fn ids_never_wrap() {
+        let dir = TempDir::new("ids");
+        let mut bytes = MAGIC.to_vec();
+        bytes.extend_from_slice(&encode_removed(u64::MAX - 1));
+        std::fs::write(dir.file(), &bytes).unwrap();
+        let (mut j, _) = Journal::open(dir.file()).unwrap();
+        assert_eq!(j.accept("a.A", b"last", 1).unwrap(), u64::MAX);
+        let err = j.accept("a.A", b"one too many", 2).unwrap_err();
+        assert!(matches!(err, JournalError::IdsExhausted(_)), "{err}");
+        drop(j);
+        // Still exhausted after a restart, and after a compaction.
+        let (mut j, replay) = Journal::open(dir.file()).unwrap();
+        assert_eq!(replay.entries.len(), 1);
+        j.remove(u64::MAX).unwrap();
+        j.compact().unwrap();
+        assert!(matches!(
+            j.accept("a.A", b"x", 3),
+            Err(JournalError::IdsExhausted(_))
+        ));
+        drop(j);
+        let (mut j, _) = Journal::open(dir.file()).unwrap();
+        assert!(matches!(
+            j.accept("a.A", b"x", 3),
+            Err(JournalError::IdsExhausted(_))
+        ));
+    }
+
+    #[test]
+    fn a_journal_of_the_first_format_is_read_and_rewritten() {
+        let dir = TempDir::new("v1");
+        let (bytes, records) = small_journal();
+        // The first format: the same records without their sync words.
+        let mut v1 = MAGIC_V1.to_vec();
+        for (range, _) in &records {
+            v1.extend_from_slice(&bytes[range.start + SYNC.len()..range.end]);
+        }
+        std::fs::write(dir.file(), &v1).unwrap();
+        let expected = owed(records.iter().map(|(_, r)| r));
+        assert_eq!(replay_bytes(&v1).unwrap().entries, expected);
+        let (mut j, replay) = Journal::open(dir.file()).unwrap();
+        assert_eq!(replay.entries, expected);
+        assert_eq!(j.accept("a.A", b"four", 5).unwrap(), 3);
+        drop(j);
+        assert!(std::fs::read(dir.file()).unwrap().starts_with(MAGIC));
+        let (_, replay) = Journal::open(dir.file()).unwrap();
+        assert_eq!(replay.entries.len(), 3);
+    }
+
+    #[test]
+    fn skipped_bytes_before_a_torn_tail_are_counted_once() {
+        // Found by the journal_replay fuzz target: garbage, then a sync word
+        // with nothing after it.
+        let mut bytes = MAGIC.to_vec();
+        bytes.extend_from_slice(&[0x14, 0x03, 0xA7, 0x47, 0x4A, 0x52]);
+        assert_eq!(replay_bytes(&bytes).unwrap().discarded_bytes, 6);
+        // And skipped bytes between good records count as well.
+        let (good, records) = small_journal();
+        let mut bytes = good[..records[1].0.start].to_vec();
+        bytes.extend_from_slice(&[1, 2, 3]);
+        bytes.extend_from_slice(&good[records[1].0.start..]);
+        bytes.extend_from_slice(&[0xA7, 0x47]);
+        assert_eq!(replay_bytes(&bytes).unwrap().discarded_bytes, 5);
+    }
+
+    #[test]
+    fn replay_in_memory_matches_the_file() {
+        let (bytes, records) = small_journal();
+        let replay = replay_bytes(&bytes).unwrap();
+        assert_eq!(replay.entries, owed(records.iter().map(|(_, r)| r)));
+        assert!(replay_bytes(b"not a journal at all").is_none());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_new_journal_is_private() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = TempDir::new("mode");
+        Journal::open(dir.file()).unwrap();
+        let mode = std::fs::metadata(dir.file()).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
     }
 }

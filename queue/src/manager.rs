@@ -28,6 +28,11 @@ pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicM
 #[derive(Debug, Clone, Copy)]
 struct AwaitingAck {
     frame: u32,
+    /// The transmission that carried it (`ModemTransmission.unique_id` of
+    /// the data request), when the link layer numbers its transmissions.
+    transmission: Option<u32>,
+    /// The node whose ack it awaits (the message's destination).
+    dest: i32,
     dccl_id: u32,
     seq: u64,
     /// Where the message was in its queue when sent.
@@ -374,7 +379,7 @@ impl QueueManager {
             .ok_or_else(|| QueueError::Request("max_frame_bytes is not set".into()))?
             as usize;
         let now = self.clock.now();
-        self.clear_awaiting(request.frame_start(), now);
+        self.clear_awaiting(request.frame_start(), request.unique_id, now);
         self.expire();
         self.run_on_demand(request, now);
 
@@ -428,6 +433,8 @@ impl QueueManager {
                     packet_ack = true;
                     self.awaiting.push(AwaitingAck {
                         frame: frame_number,
+                        transmission: request.unique_id,
+                        dest: sent.dest,
                         dccl_id: contender.dccl_id,
                         seq: sent.seq,
                         hint: sent.index,
@@ -606,16 +613,21 @@ impl QueueManager {
     }
 
     /// Frees messages awaiting acks that can no longer come: those of frames
-    /// numbered from `frame_start` on (the numbers are about to be reused) and
-    /// those waiting longer than `minimum_ack_wait_seconds`. They stay queued.
-    fn clear_awaiting(&mut self, frame_start: u32, now: Micros) {
+    /// numbered from `frame_start` on in an unnumbered transmission (the
+    /// numbers are about to be reused) and those waiting longer than
+    /// `minimum_ack_wait_seconds`. They stay queued. A message sent in a
+    /// numbered transmission (`unique_id`) other than `transmission` keeps
+    /// waiting up to `minimum_ack_wait_seconds`: its ack names its own
+    /// transmission, so the reuse of frame numbers cannot confuse them.
+    fn clear_awaiting(&mut self, frame_start: u32, transmission: Option<u32>, now: Micros) {
         let awaiting = std::mem::take(&mut self.awaiting);
         let sent_before = now.saturating_sub(self.minimum_ack_wait);
         for a in awaiting {
             let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
                 continue;
             };
-            let limit = (a.frame < frame_start).then_some(sent_before);
+            let other_transmission = a.transmission.is_some() && a.transmission != transmission;
+            let limit = (a.frame < frame_start || other_transmission).then_some(sent_before);
             if self.queues[index].stop_awaiting(a.seq, a.hint, a.frame, limit) {
                 self.awaiting.push(a);
             }
@@ -661,6 +673,14 @@ impl QueueManager {
         }
     }
 
+    /// Credits an ACK to the messages it answers, and to no other: the ack
+    /// must come from the node a message was sent to (`ack.src` = the
+    /// message's destination), be addressed to this node, name the frame
+    /// that carried the message, and belong to the same transmission
+    /// (`ack.unique_id` equal to the data request's; both unset for a link
+    /// layer that does not number its transmissions). An ack that matches
+    /// nothing awaiting (late, for an older transmission, from another node)
+    /// is ignored: the message stays queued and is sent again.
     fn process_ack(&mut self, ack: &ModemTransmission) {
         if ack.dest() != self.modem_id {
             return;
@@ -670,7 +690,9 @@ impl QueueManager {
                 continue;
             };
             let (hits, rest): (Vec<AwaitingAck>, Vec<AwaitingAck>) =
-                self.awaiting.iter().partition(|a| a.frame == frame);
+                self.awaiting.iter().partition(|a| {
+                    a.frame == frame && a.dest == ack.src() && a.transmission == ack.unique_id
+                });
             self.awaiting = rest;
             for a in hits {
                 let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {

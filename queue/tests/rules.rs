@@ -794,3 +794,72 @@ fn every_message_placed_in_a_frame_is_reported_as_sent() {
     expected.sort();
     assert_eq!(sent, expected);
 }
+
+fn numbered_request(node: &mut Node, bytes: u32, unique_id: u32) -> ModemTransmission {
+    let mut tx = ModemTransmission {
+        src: Some(1),
+        dest: Some(-1),
+        max_frame_bytes: Some(bytes),
+        max_num_frames: Some(1),
+        unique_id: Some(unique_id),
+        ..Default::default()
+    };
+    node.manager.handle_modem_data_request(&mut tx).unwrap();
+    tx
+}
+
+fn numbered_ack(frames: &[i32], from: i32, to: i32, unique_id: Option<u32>) -> ModemTransmission {
+    ModemTransmission {
+        unique_id,
+        ..ack_for(frames, from, to)
+    }
+}
+
+fn acked_serials(events: &[QueueEvent]) -> Vec<u32> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::Acked { message, .. } => Some(serial(message)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn an_ack_is_credited_only_to_the_transmission_and_node_it_answers() {
+    let mut node = Node::new(1, vec![entry("Status")]);
+    node.push("Status", 1, 2, 10);
+    node.push("Status", 1, 2, 11);
+    let codec = node.manager.codec().clone();
+    let each = codec.size(&node.message("Status", 1, 2, 0)).unwrap() as u32;
+    node.clock.advance_seconds(1.0);
+    let first = numbered_request(&mut node, each, 100);
+    assert_eq!(contents(&codec, &first.frame[0])[0].1, 11);
+    node.drain();
+
+    // Back to back: transmission 101 carries a newer message in frame 0.
+    node.clock.advance_seconds(1.0);
+    node.push("Status", 1, 2, 12);
+    let second = numbered_request(&mut node, each, 101);
+    assert_eq!(contents(&codec, &second.frame[0])[0].1, 12);
+    node.drain();
+
+    // The late ack of transmission 100 (frame 0 too) does not credit 101.
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(100)));
+    assert!(acked_serials(&node.drain()).is_empty());
+    // Nor does an ack of the right number from a node it was not sent to,
+    // nor one that names no transmission.
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 3, 1, Some(101)));
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, None));
+    assert!(acked_serials(&node.drain()).is_empty());
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 3);
+
+    // Its own ack removes it.
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(101)));
+    assert_eq!(acked_serials(&node.drain()), vec![12]);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 2);
+}

@@ -848,6 +848,7 @@ impl ArithmeticCodec {
         out: &mut BitWriter,
         values: &[Value],
         max_repeat: u32,
+        repeated: bool,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         let numbers = values
@@ -855,8 +856,30 @@ impl ArithmeticCodec {
             .take(max_repeat as usize)
             .map(|v| self.field_type.to_f64(v))
             .collect::<Result<Vec<f64>, _>>()?;
-        self.model()?
-            .encode(out, &numbers, max_repeat, !ctx.dry_run)
+        let model = self.model()?;
+        if ctx.changes.is_some() && model.user.out_of_range_frequency() != 0 {
+            let bounds = &model.user.value_bound;
+            for (i, x) in numbers.iter().enumerate() {
+                if model.value_to_symbol(*x) == OUT_OF_RANGE_SYMBOL {
+                    let mark = ctx.change_mark();
+                    ctx.note_change(
+                        || {
+                            format!(
+                                "{x} is outside the bounds [{}, {}] of arithmetic model `{}`",
+                                bounds[0],
+                                bounds[bounds.len() - 1],
+                                model.user.name
+                            )
+                        },
+                        "sent as out of range (received as NaN)",
+                    );
+                    if repeated {
+                        ctx.name_changes(mark, || format!("[{i}]"));
+                    }
+                }
+            }
+        }
+        model.encode(out, &numbers, max_repeat, !ctx.dry_run)
     }
 
     fn decode_values(
@@ -893,7 +916,13 @@ impl FieldCodec for ArithmeticCodec {
         value: Option<&Value>,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        self.encode_values(out, value.map(std::slice::from_ref).unwrap_or(&[]), 1, ctx)
+        self.encode_values(
+            out,
+            value.map(std::slice::from_ref).unwrap_or(&[]),
+            1,
+            false,
+            ctx,
+        )
     }
     fn decode(
         &self,
@@ -910,7 +939,7 @@ impl FieldCodec for ArithmeticCodec {
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         bounds.check_max(values.len(), ctx)?;
-        self.encode_values(out, values, bounds.max, ctx)
+        self.encode_values(out, values, bounds.max, true, ctx)
     }
     fn decode_repeated(
         &self,

@@ -1,6 +1,7 @@
 //! Default enum codec: the value's index in the enum declaration (packed, the
 //! default) or its number (`packed_enum: false`), bounded like a numeric field.
-//! Codec version 2 always packs.
+//! The version 2 codec (`dccl.default2`, whatever the message's
+//! `codec_version`) always packs.
 
 use std::sync::Arc;
 
@@ -25,23 +26,28 @@ pub struct EnumCodec {
 
 impl EnumCodec {
     /// Creates the codec for an enum field, or `None` for other field types.
+    /// `codec_version` is the version of the codec as named.
     pub fn create(
         spec: &FieldSpec<'_>,
         name: &str,
+        codec_version: i32,
     ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
-        Ok(Self::build(spec, name, spec.use_required)?.map(|c| Arc::new(c) as Arc<dyn FieldCodec>))
+        Ok(Self::build(spec, name, codec_version, spec.use_required)?
+            .map(|c| Arc::new(c) as Arc<dyn FieldCodec>))
     }
 
-    /// Builds the codec with an explicit presence rule.
+    /// Builds the codec with an explicit presence rule; `codec_version` is
+    /// the version of the codec as named (2 always packs).
     pub fn build(
         spec: &FieldSpec<'_>,
         name: &str,
+        codec_version: i32,
         required: bool,
     ) -> Result<Option<EnumCodec>, CodecError> {
         let Kind::Enum(enum_type) = spec.kind() else {
             return Ok(None);
         };
-        let packed = spec.codec_version < 3 || spec.options.packed_enum();
+        let packed = codec_version < 3 || spec.options.packed_enum();
         // Declaration order, as written in the .proto file.
         let numbers: Vec<i32> = enum_type
             .enum_descriptor_proto()

@@ -53,8 +53,8 @@ pub fn decode(input: &mut BitReader<'_>) -> Result<u32, CodecError> {
 }
 
 /// The identifier codec on a `uint32` field: an unset field is sent as id 0
-/// (one byte), a value over 32767 keeps its low 15 bits (as libdccl's two-byte
-/// form does), which is reported as a change.
+/// (one byte); a value over 32767 cannot be encoded (an error, as in libdccl,
+/// strict or not).
 #[derive(Debug)]
 pub struct IdFieldCodec {
     version: i32,
@@ -86,26 +86,20 @@ impl FieldCodec for IdFieldCodec {
         16
     }
     fn size(&self, value: Option<&Value>) -> u32 {
-        size(value.and_then(Value::as_u32).unwrap_or(0) & TWO_BYTE_MAX_ID)
+        size(value.and_then(Value::as_u32).unwrap_or(0))
     }
     fn encode(
         &self,
         out: &mut BitWriter,
         value: Option<&Value>,
-        ctx: &EncodeContext,
+        _ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         let id = match value {
             None => 0,
             Some(Value::U32(id)) => *id,
             Some(other) => return Err(CodecError::new(format!("value {other:?} is not a uint32"))),
         };
-        if id > TWO_BYTE_MAX_ID {
-            ctx.value_changed(
-                || format!("{id} is over the largest DCCL id {TWO_BYTE_MAX_ID}"),
-                &format!("sent as {}", id & TWO_BYTE_MAX_ID),
-            )?;
-        }
-        encode(out, id & TWO_BYTE_MAX_ID)
+        encode(out, id)
     }
     fn decode(
         &self,

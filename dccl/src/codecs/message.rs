@@ -68,9 +68,17 @@ pub struct OneofEntry {
 #[derive(Debug)]
 pub struct MessageCodec {
     name: String,
+    /// Version of this codec as named (`dccl.default2/3/4`): presence bits,
+    /// oneofs, empty messages.
     version: i32,
+    /// `codec_version` of the root message: framing of repeated fields.
+    root_version: i32,
     descriptor: MessageDescriptor,
     fields: Vec<FieldEntry>,
+    /// The fields entering the definition hash with their codec's hash:
+    /// `fields` and, in version 2, embedded messages that libdccl also
+    /// expands in the other part but codes in their own only.
+    hash_fields: Vec<(FieldDescriptor, u64)>,
     oneofs: Vec<OneofEntry>,
     presence: bool,
     min_bits: u32,
@@ -157,6 +165,7 @@ impl MessageCodec {
         };
 
         let mut fields = Vec::new();
+        let mut hash_fields = Vec::new();
         for field in declared_fields(&descriptor) {
             let options = field_options(&field).map_err(|e| e.in_field(field.name()))?;
             if options.omit() {
@@ -171,24 +180,37 @@ impl MessageCodec {
             let v2_expanded = !included
                 && codec_version == 2
                 && !spec.children_follow_parent
-                && options.in_head.is_none()
                 && matches!(field.kind(), prost_reflect::Kind::Message(_));
             if !included && !v2_expanded {
                 continue;
             }
             let entry = Self::build_entry(spec, &field, &options, with_oneofs, &oneofs)
                 .map_err(|e| e.in_field(field.name()))?;
-            if v2_expanded && (entry.codec.name() != "dccl.default2" || entry.repeat.is_some()) {
-                continue;
+            if v2_expanded {
+                // libdccl's version 2 message codec expands an embedded
+                // message with the default codec in both parts, repeated or
+                // not (the elements of a repeated one then get their fields
+                // of each part in that part), and with `in_head` set (then
+                // none of its fields is in this part: its codec hash is 0).
+                if entry.codec.name() != "dccl.default2" {
+                    continue;
+                }
+                if options.in_head.is_some() {
+                    hash_fields.push((field.clone(), 0));
+                    continue;
+                }
             }
+            hash_fields.push((field.clone(), entry.codec.definition_hash()));
             fields.push(entry);
         }
 
         let mut codec = MessageCodec {
             name: name.to_string(),
             version: codec_version,
+            root_version: spec.codec_version,
             descriptor,
             fields,
+            hash_fields,
             oneofs,
             presence,
             min_bits: 0,
@@ -398,12 +420,18 @@ impl MessageCodec {
             let result = if let Some(bounds) = f.repeat {
                 f.codec
                     .decode_repeated(input, bounds, ctx)
-                    .and_then(|values| {
+                    .and_then(|mut values| {
                         if values.is_empty() {
-                            Ok(())
-                        } else {
-                            set(msg, &f.field, Value::List(values))
+                            return Ok(());
                         }
+                        // Version 2 reads a repeated embedded message in both
+                        // parts: the body's elements follow the head's.
+                        if let Value::List(head) = msg.get_field(&f.field).as_ref() {
+                            let mut all = head.clone();
+                            all.append(&mut values);
+                            values = all;
+                        }
+                        set(msg, &f.field, Value::List(values))
                     })
             } else {
                 if let Some((i, j)) = f.oneof {
@@ -427,7 +455,7 @@ impl FieldCodec for MessageCodec {
         &self.name
     }
     fn codec_version(&self) -> i32 {
-        self.version
+        self.root_version
     }
     fn min_size(&self) -> u32 {
         self.min_bits
@@ -517,15 +545,20 @@ impl FieldCodec for MessageCodec {
         Some(self)
     }
     fn definition_hash(&self) -> u64 {
-        use crate::definition_hash::{combine_field, hash_combine_text, oneof_declaration_text};
+        use crate::definition_hash::{
+            field_descriptor_text, field_options_text, hash_combine, hash_combine_text,
+            oneof_declaration_text,
+        };
         let mut hash = 0;
         for o in &self.oneofs {
             if let Some(desc) = self.descriptor.oneofs().nth(o.index) {
                 hash_combine_text(&mut hash, &oneof_declaration_text(&desc));
             }
         }
-        for f in &self.fields {
-            combine_field(&mut hash, &f.field, f.codec.as_ref());
+        for (field, codec_hash) in &self.hash_fields {
+            hash_combine_text(&mut hash, &field_descriptor_text(field));
+            hash_combine_text(&mut hash, &field_options_text(field));
+            hash_combine(&mut hash, *codec_hash);
         }
         hash
     }

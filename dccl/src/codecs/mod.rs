@@ -34,9 +34,9 @@ fn default_codec(
 ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
     match spec.kind() {
         Kind::Bool => boolean::BoolCodec::create(spec, name),
-        Kind::Enum(_) => enumeration::EnumCodec::create(spec, name),
+        Kind::Enum(_) => enumeration::EnumCodec::create(spec, name, version),
         Kind::Message(_) => message::MessageCodec::create(spec, name, version),
-        Kind::String if version < 4 => string::StringCodec::create(spec, name),
+        Kind::String if version < 4 => string::StringCodec::create(spec, name, version),
         Kind::Bytes if version < 4 => bytes::FixedBytesCodec::create(spec, name),
         Kind::String | Kind::Bytes => var_bytes::VarBytesCodec::create(spec, name),
         _ => numeric::NumericCodec::create(spec, name),

@@ -77,9 +77,17 @@ impl FieldCodec for StaticCodec {
     fn encode(
         &self,
         _out: &mut BitWriter,
-        _value: Option<&Value>,
-        _ctx: &EncodeContext,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
+        if let Some(v) = value {
+            if ctx.changes.is_some() && *v != self.value {
+                ctx.note_change(
+                    || format!("{v} differs from static_value {}", self.value),
+                    "not sent (received as the static value)",
+                );
+            }
+        }
         Ok(())
     }
     fn decode(

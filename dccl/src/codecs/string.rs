@@ -25,9 +25,12 @@ pub struct StringCodec {
 
 impl StringCodec {
     /// Creates the codec for a string field, or `None` for other field types.
+    /// `codec_version` is the version of the codec as named (`dccl.default2`
+    /// keeps the 8-bit prefix of version 2 even in a version 3 message).
     pub fn create(
         spec: &FieldSpec<'_>,
         name: &str,
+        codec_version: i32,
     ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         if spec.kind() != Kind::String {
             return Ok(None);
@@ -36,7 +39,7 @@ impl StringCodec {
             .options
             .max_length
             .ok_or_else(|| CodecError::new("missing (dccl.field).max_length"))?;
-        let prefix_bits = if spec.codec_version < 3 {
+        let prefix_bits = if codec_version < 3 {
             if max_length > V2_MAX_STRING_LENGTH {
                 return Err(CodecError::new(format!(
                     "(dccl.field).max_length must be <= {V2_MAX_STRING_LENGTH}"

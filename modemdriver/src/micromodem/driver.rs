@@ -2,11 +2,21 @@
 //!
 //! On start (and after a modem reset or a reconnection) the driver sets the
 //! modem's id and the configured NVRAM values (`$CCCFG`) and its clock
-//! (`$CCCLK`). A data transmission is a cycle: `$CCCYC` (echoed `$CACYC`),
-//! then for each `$CADRQ` the driver answers `$CCTXD` with a frame obtained
-//! from the layer above by one data request, and `$CATXF` ends it.
-//! Received `$CACYC` + `$CARXD` become a received `DATA` transmission;
-//! `$CAACK` an `ACK` one.
+//! (`$CCCLK`). A data transmission is a cycle: the frames are obtained from
+//! the layer above by one data request first (with none, and without
+//! `always_initiate`, nothing is sent), then `$CCCYC` (echoed `$CACYC`), a
+//! `$CCTXD` for each `$CADRQ`, and `$CATXF` ends it. Received `$CACYC` +
+//! `$CARXD` become a received `DATA` transmission; `$CAACK` an `ACK` one,
+//! carrying the `unique_id` of the transmission it answers: the last one
+//! whose `$CATXF` was seen, when the ack comes from its destination, to this
+//! modem, for one of its frames, within `receive_timeout_ms` (else none, and
+//! the layer above credits nothing).
+//!
+//! Slots: a transmission carrying its slot (`time`, `slot_seconds`, see
+//! [`crate::slot`]) is started, or attempted again after a fault, only while
+//! the packet fits before the slot ends; at most
+//! [`MAX_PENDING_TRANSMISSIONS`] wait while the modem is busy or away, older
+//! ones are dropped ([`DriverStatus::Skipped`]).
 //!
 //! Micro-Modem specifics go through
 //! [`Driver::initiate_specific`](crate::Driver::initiate_specific) with a
@@ -54,6 +64,21 @@ pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// Baud rate when `serial_baud` is not set.
 pub const DEFAULT_BAUD: u32 = 19_200;
+
+/// Data transmissions waiting for the modem at most; beyond, the oldest is
+/// dropped (reported as [`DriverStatus::Skipped`]): while the modem is
+/// unreachable, slot requests must not pile up and then run back to back.
+pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
+
+/// Probe and header time assumed on top of a packet's frames when checking
+/// that a transmission fits in what is left of its slot.
+pub const PACKET_OVERHEAD: Duration = Duration::from_secs(1);
+
+/// Estimated time on the water of a data transmission.
+fn packet_estimate(mt: &ModemTransmission) -> Duration {
+    let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
+    spec.packet_duration(PACKET_OVERHEAD)
+}
 
 /// The WHOI Micro-Modem driver.
 #[derive(Debug)]
@@ -187,6 +212,17 @@ struct Awaiting {
     for_job: bool,
 }
 
+/// The last data transmission that went out asking for acks: the acks
+/// (`$CAACK`) heard afterwards are matched to it.
+#[derive(Debug, Clone, Copy)]
+struct SentData {
+    unique_id: Option<u32>,
+    dest: u32,
+    frames: u32,
+    /// Acks heard later belong to no transmission of ours.
+    until: Instant,
+}
+
 #[derive(Debug)]
 struct Incoming {
     cycle: Cycle,
@@ -211,6 +247,7 @@ struct Mm {
     incoming: Option<Incoming>,
     last_heard: Instant,
     silence_reported: bool,
+    last_sent: Option<SentData>,
 }
 
 fn answers(command: &MmSentence, reply: &MmSentence) -> bool {
@@ -366,6 +403,15 @@ impl Mm {
                 let Some(job) = self.pending.pop_front() else {
                     return;
                 };
+                if let Job::Data(mt) = &job {
+                    if crate::slot::too_late(mt, packet_estimate(mt)) {
+                        self.events.status(DriverStatus::Skipped {
+                            reason: "the slot of a transmission waiting for the modem has passed"
+                                .into(),
+                        });
+                        continue;
+                    }
+                }
                 self.active = Some(Active {
                     job,
                     filled: None,
@@ -380,13 +426,24 @@ impl Mm {
             if active.stage != Stage::NeedStart {
                 return;
             }
-            // "Query destination": the frames (and so the destination) are
-            // needed before the cycle names it.
-            let query = match &active.job {
-                Job::Data(mt) if mt.dest() == -1 && active.filled.is_none() => Some(mt.clone()),
+            // A cycle (first or again after a fault) starts only while the
+            // packet fits in what is left of its slot.
+            if let Job::Data(mt) = &active.job {
+                if crate::slot::too_late(mt, packet_estimate(mt)) {
+                    self.finish(TransmitOutcome::Failed(
+                        "its slot passed before the modem could send it".into(),
+                    ));
+                    continue;
+                }
+            }
+            // The frames are asked for before the cycle: the destination
+            // may be a query (-1), and an empty transmission is not sent
+            // unless it asks to be (`always_initiate`).
+            let unfilled = match &active.job {
+                Job::Data(mt) if active.filled.is_none() => Some(mt.clone()),
                 _ => None,
             };
-            if let Some(mt) = query {
+            if let Some(mt) = unfilled {
                 let template = self.data_template(&mt, None);
                 let mut filled = self
                     .events
@@ -395,11 +452,15 @@ impl Mm {
                 if filled.dest() == -1 {
                     filled.dest = Some(0);
                 }
+                let empty = filled.frame.iter().all(|f| f.is_empty());
                 if let Some(active) = &mut self.active {
                     if let Job::Data(job) = &mut active.job {
                         job.dest = filled.dest;
                     }
                     active.filled = Some(filled);
+                }
+                if empty && !mt.always_initiate() {
+                    self.finish(TransmitOutcome::NothingToSend);
                 }
                 continue;
             }
@@ -571,6 +632,7 @@ impl Mm {
                         && matches!(a.stage, Stage::AwaitTransmitDone | Stage::AwaitDataRequest)
                 }) =>
             {
+                self.remember_sent();
                 self.finish(TransmitOutcome::Sent);
             }
             MmSentence::Cycle {
@@ -621,12 +683,14 @@ impl Mm {
                 self.check_incoming_complete();
             }
             MmSentence::Ack { src, dest, frame } => {
+                let unique_id = self.ack_belongs_to(src, dest, frame);
                 self.events.emit(DriverEvent::Received(ModemTransmission {
                     src: Some(src as i32),
                     dest: Some(dest as i32),
                     time: Some(now_micros()),
                     r#type: Some(TransmissionType::Ack as i32),
                     acked_frame: vec![frame.saturating_sub(1) as i32],
+                    unique_id,
                     ..Default::default()
                 }));
             }
@@ -666,7 +730,13 @@ impl Mm {
                 });
             }
             MmSentence::Revision { ident, .. } if ident.eq_ignore_ascii_case("INIT") => {
-                self.events.status(DriverStatus::ModemReset);
+                if self.initializing && self.active.is_none() {
+                    // The modem's own start-up (or the one the driver is
+                    // configuring after a reconnection): expected.
+                    tracing::info!("Micro-Modem started ($CAREV INIT): configuring it");
+                } else {
+                    self.events.status(DriverStatus::ModemReset);
+                }
                 self.awaiting = None;
                 self.queue_initialization();
                 if self
@@ -718,6 +788,50 @@ impl Mm {
                 }
             }
             _ => {}
+        }
+    }
+
+    /// The active data transmission went out (`$CATXF`): acks heard from
+    /// now on, until the receive timeout, answer it.
+    fn remember_sent(&mut self) {
+        let Some(Active {
+            job: Job::Data(mt),
+            filled,
+            ..
+        }) = &self.active
+        else {
+            return;
+        };
+        let sent = filled.as_ref().unwrap_or(mt);
+        if !sent.ack_requested() {
+            self.last_sent = None;
+            return;
+        }
+        let receive = Duration::from_millis(u64::from(self.mm.receive_timeout_ms()));
+        self.last_sent = Some(SentData {
+            unique_id: mt.unique_id,
+            dest: mt.dest().max(0) as u32,
+            frames: sent.frame.len().max(1) as u32,
+            until: Instant::now() + receive,
+        });
+    }
+
+    /// The transmission an ack (`$CAACK` from `src` to `dest` for `frame`,
+    /// from 1) answers: the last one sent, when the ack comes from its
+    /// destination, to us, for one of its frames, within the receive
+    /// timeout. An ack heard before our packet went out cannot answer it
+    /// (it belongs to an earlier cycle, or to someone else): `None` then,
+    /// and nothing is credited.
+    fn ack_belongs_to(&self, src: u32, dest: u32, frame: u32) -> Option<u32> {
+        let sent = self.last_sent?;
+        let matches = dest == self.modem_id
+            && src == sent.dest
+            && (1..=sent.frames).contains(&frame)
+            && Instant::now() <= sent.until;
+        if matches {
+            sent.unique_id
+        } else {
+            None
         }
     }
 
@@ -919,7 +1033,26 @@ impl Mm {
                     mt.src = Some(self.modem_id as i32);
                 }
                 match mt.r#type() {
-                    TransmissionType::Data => self.pending.push_back(Job::Data(mt)),
+                    TransmissionType::Data => {
+                        let waiting = self
+                            .pending
+                            .iter()
+                            .filter(|j| matches!(j, Job::Data(_)))
+                            .count();
+                        if waiting >= MAX_PENDING_TRANSMISSIONS {
+                            if let Some(i) =
+                                self.pending.iter().position(|j| matches!(j, Job::Data(_)))
+                            {
+                                self.pending.remove(i);
+                                self.events.status(DriverStatus::Skipped {
+                                    reason: format!(
+                                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
+                                    ),
+                                });
+                            }
+                        }
+                        self.pending.push_back(Job::Data(mt));
+                    }
                     other => self.events.status(DriverStatus::Unsupported {
                         message: format!(
                             "ModemTransmission.type {other:?} (use MicroModemSpecific)"
@@ -995,6 +1128,7 @@ async fn run(
         incoming: None,
         last_heard: now,
         silence_reported: false,
+        last_sent: None,
     };
     state.link = Some(state.port.wrap(lines, &events));
     state.queue_initialization();

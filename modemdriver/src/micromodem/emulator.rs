@@ -15,12 +15,23 @@
 //! sends `$CAREV` periodically (ident `INIT` when it starts or restarts) and
 //! `$CAERR` for lines it cannot read or a missing `$CCTXD`.
 //!
-//! Between emulators, pings and mini-packets travel as `DRIVER_SPECIFIC`
-//! transmissions whose single frame holds a
-//! `goby.acomms.protobuf.MicroModemEmulatedPacket`.
+//! Between emulators, data, acknowledgements, pings and mini-packets travel
+//! as `DRIVER_SPECIFIC` transmissions whose single frame holds a
+//! `goby.acomms.protobuf.MicroModemEmulatedPacket`: the receiving emulator,
+//! as a modem, decides whether each frame passed its CRC and acknowledges
+//! only those that did (the channel never acknowledges for it).
 //!
-//! [`EmulatorControl`] injects what a bench sees from real hardware: a reset,
-//! a silent modem, and the serial device vanishing and returning.
+//! A packet is on the water from `$CATXP` for its duration at its rate
+//! ([`EmulatorConfig::packet_overhead`] plus its frames' bits), and only then
+//! goes to the backend and `$CATXF` is sent; a reset while it is on the
+//! water aborts it (nothing is received, no `$CATXF`). Acknowledgements take
+//! the overhead on the water. Every packet's time on the water is recorded
+//! ([`EmulatorHandle::air_log`]).
+//!
+//! [`EmulatorControl`] and [`EmulatorFaults`] inject what a bench sees from
+//! real hardware: a reset, a silent modem, the serial device vanishing and
+//! returning, frames failing their CRC (`$CAMSG,BAD_CRC` instead of
+//! `$CARXD`, and no acknowledgement), acknowledgements lost on the water.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -31,6 +42,8 @@ use protos::goby::acomms::protobuf::{
     micro_modem_emulated_packet::Kind, modem_transmission::TransmissionType,
     MicroModemEmulatedPacket, ModemTransmission,
 };
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::{sleep_until, Instant};
@@ -63,6 +76,54 @@ pub struct EmulatorConfig {
     /// With no backend: the range (metres) a ping reports, replied after
     /// the matching round trip at 1500 m/s. `None`: pings time out.
     pub lone_range: Option<f64>,
+    /// Probe and header time of a packet on the water, on top of its
+    /// frames' bits (also the time on the water of an acknowledgement).
+    pub packet_overhead: Duration,
+    /// Random faults.
+    pub faults: EmulatorFaults,
+}
+
+/// Random faults of an emulated modem, drawn from a seeded generator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmulatorFaults {
+    /// Probability that a received data frame fails its CRC.
+    pub bad_crc: f64,
+    /// Probability that an acknowledgement this modem sends is lost.
+    pub lost_ack: f64,
+    /// Seed of the generator (mixed with the modem id).
+    pub seed: u64,
+}
+
+impl Default for EmulatorFaults {
+    fn default() -> Self {
+        EmulatorFaults {
+            bad_crc: 0.0,
+            lost_ack: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+/// What a packet on the water was.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AirKind {
+    /// A data packet of this modem's cycle.
+    Data,
+    /// A data packet cut short by a reset.
+    Aborted,
+    /// An acknowledgement.
+    Ack,
+}
+
+/// One packet this modem put on the water.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AirTime {
+    /// Start (`$CATXP`), microseconds since the epoch.
+    pub start: u64,
+    /// End (`$CATXF`, or the reset that aborted it).
+    pub end: u64,
+    /// What it was.
+    pub kind: AirKind,
 }
 
 impl Default for EmulatorConfig {
@@ -75,6 +136,8 @@ impl Default for EmulatorConfig {
             ping_timeout: Duration::from_secs(10),
             ping_packet: Duration::ZERO,
             lone_range: None,
+            packet_overhead: Duration::from_millis(500),
+            faults: EmulatorFaults::default(),
         }
     }
 }
@@ -104,11 +167,22 @@ pub enum EmulatorControl {
     /// The modem restarts: the cycle in progress is forgotten and
     /// `$CAREV,…,INIT,…` is sent.
     Reset,
-    /// The modem reads nothing and says nothing for this long.
+    /// The modem hangs for this long: it reads nothing, says nothing (what
+    /// it had to say meanwhile is lost) and decodes nothing from the water
+    /// (so acknowledges nothing); a packet already on the water goes on.
     Silence(Duration),
-    /// The serial device vanishes for this long, then returns (a new
-    /// pseudo-terminal; the symbolic link follows it).
+    /// The modem is unplugged for this long: its serial device vanishes,
+    /// the packet on the water is cut, nothing is heard or acknowledged;
+    /// then it returns (a new pseudo-terminal, the symbolic link follows
+    /// it) and starts up (`$CAREV,…,INIT`).
     Disconnect(Duration),
+    /// The modem resets in the middle of each of its next this many data
+    /// packets (the packet is aborted).
+    ResetMidPacket(u32),
+    /// The next this many received data frames fail their CRC.
+    BadCrc(u32),
+    /// The next this many acknowledgements this modem sends are lost.
+    LoseAcks(u32),
     /// Stop the emulator.
     Stop,
 }
@@ -118,10 +192,26 @@ pub enum EmulatorControl {
 pub struct EmulatorHandle {
     control: mpsc::UnboundedSender<EmulatorControl>,
     path: watch::Receiver<Option<String>>,
+    air: AirLog,
     task: JoinHandle<()>,
 }
 
+type AirLog = std::sync::Arc<std::sync::Mutex<Vec<AirTime>>>;
+
 impl EmulatorHandle {
+    /// A function that sends controls, for another task.
+    pub fn controller(&self) -> impl Fn(EmulatorControl) + Send + Sync + 'static {
+        let control = self.control.clone();
+        move |c| {
+            let _ = control.send(c);
+        }
+    }
+
+    /// Every packet put on the water so far, in order.
+    pub fn air_log(&self) -> Vec<AirTime> {
+        self.air.lock().map(|l| l.clone()).unwrap_or_default()
+    }
+
     /// Sends a control.
     pub fn control(&self, control: EmulatorControl) {
         let _ = self.control.send(control);
@@ -155,10 +245,20 @@ pub fn start(
     let (path_tx, path_rx) = watch::channel(None);
     // Open the first device now so that errors reach the caller.
     let device = Device::open(&port)?;
-    let task = tokio::spawn(run(config, port, device, backend, control_rx, path_tx));
+    let air = AirLog::default();
+    let task = tokio::spawn(run(
+        config,
+        port,
+        device,
+        backend,
+        control_rx,
+        path_tx,
+        air.clone(),
+    ));
     Ok(EmulatorHandle {
         control: control_tx,
         path: path_rx,
+        air,
         task,
     })
 }
@@ -221,8 +321,24 @@ struct TxCycle {
     deadline: Instant,
 }
 
+/// A packet on the water, handed to the backend when it ends.
+struct OnWater {
+    start: u64,
+    ends: Instant,
+    packet: ModemTransmission,
+    /// Data: the bytes reported by `$CATXF`.
+    data_bytes: Option<u32>,
+}
+
 struct Modem {
     config: EmulatorConfig,
+    on_water: Vec<OnWater>,
+    air: AirLog,
+    rng: ChaCha8Rng,
+    bad_crc_next: u32,
+    lose_acks_next: u32,
+    reset_mid_packet: u32,
+    reset_at: Option<Instant>,
     settings: BTreeMap<String, String>,
     tx: Option<TxCycle>,
     /// Frames handed to the backend, waiting for its data request.
@@ -238,13 +354,23 @@ fn now_time() -> String {
 }
 
 impl Modem {
-    fn new(config: EmulatorConfig) -> Modem {
+    fn new(config: EmulatorConfig, air: AirLog) -> Modem {
         let mut settings = BTreeMap::new();
         settings.insert("SRC".to_string(), config.modem_id.to_string());
         settings.insert("BND".to_string(), "0".to_string());
         settings.insert("DTO".to_string(), "5".to_string());
+        let rng = ChaCha8Rng::seed_from_u64(
+            config.faults.seed ^ u64::from(config.modem_id).wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        );
         Modem {
             config,
+            on_water: Vec::new(),
+            air,
+            rng,
+            bad_crc_next: 0,
+            lose_acks_next: 0,
+            reset_mid_packet: 0,
+            reset_at: None,
             settings,
             tx: None,
             backend_frames: Vec::new(),
@@ -282,7 +408,56 @@ impl Modem {
         self.tx = None;
         self.ping = None;
         self.backend_frames.clear();
+        // What is on the water stops: nobody receives it.
+        let now = now_micros();
+        for p in std::mem::take(&mut self.on_water) {
+            self.log_air(AirTime {
+                start: p.start,
+                end: now,
+                kind: if p.data_bytes.is_some() {
+                    AirKind::Aborted
+                } else {
+                    AirKind::Ack
+                },
+            });
+        }
         self.revision("INIT");
+    }
+
+    /// The modem loses power: everything under way stops.
+    fn power_off(&mut self) {
+        self.reset();
+        self.out.clear();
+    }
+
+    fn log_air(&self, time: AirTime) {
+        if let Ok(mut log) = self.air.lock() {
+            log.push(time);
+        }
+    }
+
+    /// Puts a packet on the water for `duration`.
+    fn transmit(&mut self, packet: ModemTransmission, duration: Duration, data_bytes: Option<u32>) {
+        if data_bytes.is_some() && self.reset_mid_packet > 0 {
+            self.reset_mid_packet -= 1;
+            self.reset_at = Some(Instant::now() + duration / 2);
+        }
+        self.on_water.push(OnWater {
+            start: now_micros(),
+            ends: Instant::now() + duration,
+            packet,
+            data_bytes,
+        });
+    }
+
+    /// Draws a fault: a scripted one first, then by probability.
+    fn draw(&mut self, scripted: fn(&mut Modem) -> &mut u32, probability: f64) -> bool {
+        let n = scripted(self);
+        if *n > 0 {
+            *n -= 1;
+            return true;
+        }
+        probability > 0.0 && self.rng.random_bool(probability.min(1.0))
     }
 
     fn request_frame(&mut self, frame: u32) {
@@ -445,22 +620,55 @@ impl Modem {
         let bytes: u32 = tx.frames.iter().map(|f| f.len() as u32).sum();
         self.out.push(MmSentence::TransmitStart { bytes });
         if has_backend {
-            self.backend_frames = tx.frames.clone();
-            self.backend_out.push(ModemTransmission {
+            let spec = rate::spec(tx.cycle.rate as i32).unwrap_or(rate::spec(0).expect("rate 0"));
+            let packet = MicroModemEmulatedPacket {
+                kind: Kind::Data as i32,
+                rate: Some(tx.cycle.rate),
+                ack_requested: Some(tx.cycle.ack),
+                frame: tx.frames,
+                ..Default::default()
+            };
+            let mt = ModemTransmission {
                 src: Some(tx.cycle.src as i32),
                 dest: Some(tx.cycle.dest as i32),
-                rate: Some(tx.cycle.rate as i32),
-                ack_requested: Some(tx.cycle.ack),
-                r#type: Some(TransmissionType::Data as i32),
-                max_num_frames: Some(tx.cycle.frames),
+                r#type: Some(TransmissionType::DriverSpecific as i32),
+                frame: vec![packet.encode_to_vec()],
                 ..Default::default()
-            });
+            };
+            self.transmit(
+                mt,
+                spec.packet_duration(self.config.packet_overhead),
+                Some(bytes),
+            );
         } else {
             self.out.push(MmSentence::TransmitDone { bytes });
         }
     }
 
     fn timers(&mut self, now: Instant) {
+        if self.reset_at.is_some_and(|t| t <= now) {
+            self.reset_at = None;
+            self.reset();
+        }
+        let (done, going): (Vec<OnWater>, Vec<OnWater>) = std::mem::take(&mut self.on_water)
+            .into_iter()
+            .partition(|p| p.ends <= now);
+        self.on_water = going;
+        for p in done {
+            self.log_air(AirTime {
+                start: p.start,
+                end: now_micros(),
+                kind: if p.data_bytes.is_some() {
+                    AirKind::Data
+                } else {
+                    AirKind::Ack
+                },
+            });
+            self.backend_out.push(p.packet);
+            if let Some(bytes) = p.data_bytes {
+                self.out.push(MmSentence::TransmitDone { bytes });
+            }
+        }
         if self.tx.as_ref().is_some_and(|tx| tx.deadline <= now) {
             self.tx = None;
             self.error("CYC", "4", "DATA_TIMEOUT");
@@ -488,10 +696,16 @@ impl Modem {
         let ping = self
             .ping
             .map(|p| p.reply_at.map_or(p.deadline, |at| at.min(p.deadline)));
-        [self.tx.as_ref().map(|t| t.deadline), ping]
-            .into_iter()
-            .flatten()
-            .min()
+        let water = self.on_water.iter().map(|p| p.ends).min();
+        [
+            self.tx.as_ref().map(|t| t.deadline),
+            ping,
+            water,
+            self.reset_at,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     fn backend_event(&mut self, event: DriverEvent) {
@@ -561,6 +775,17 @@ impl Modem {
                             return;
                         };
                         match packet.kind() {
+                            Kind::Data => self.receive_data(src, dest, &packet),
+                            Kind::Ack if mt.dest() == me => {
+                                for frame in &packet.acked_frame {
+                                    self.out.push(MmSentence::Ack {
+                                        src,
+                                        dest,
+                                        frame: *frame,
+                                    });
+                                }
+                            }
+                            Kind::Ack => {}
                             Kind::Ping => {
                                 self.out.push(MmSentence::PingHeard { src, dest });
                                 self.backend_out
@@ -600,10 +825,72 @@ impl Modem {
     }
 }
 
+impl Modem {
+    /// A data packet heard: `$CACYC`, then per frame `$CARXD` or, for a
+    /// frame failing its CRC, `$CAMSG,BAD_CRC`; frames addressed to this
+    /// modem that passed are acknowledged (unless the ack is lost).
+    fn receive_data(&mut self, src: u32, dest: u32, packet: &MicroModemEmulatedPacket) {
+        let ack = packet.ack_requested();
+        self.out.push(MmSentence::Cycle {
+            from_modem: true,
+            cycle: Cycle {
+                src,
+                dest,
+                rate: packet.rate(),
+                ack,
+                frames: packet.frame.len() as u32,
+            },
+        });
+        let mut good = Vec::new();
+        for (i, data) in packet.frame.iter().enumerate() {
+            let frame = i as u32 + 1;
+            let bad_crc = self.config.faults.bad_crc;
+            if self.draw(|m| &mut m.bad_crc_next, bad_crc) {
+                self.out.push(MmSentence::Message {
+                    kind: "BAD_CRC".into(),
+                    value: frame.to_string(),
+                });
+                continue;
+            }
+            good.push(frame);
+            self.out.push(MmSentence::ReceiveData {
+                src,
+                dest,
+                ack,
+                frame,
+                data: data.clone(),
+            });
+        }
+        if !ack || dest != self.id() || good.is_empty() {
+            return;
+        }
+        let lost_ack = self.config.faults.lost_ack;
+        let lost = self.draw(|m| &mut m.lose_acks_next, lost_ack);
+        let reply = MicroModemEmulatedPacket {
+            kind: Kind::Ack as i32,
+            acked_frame: good,
+            ..Default::default()
+        };
+        let mut mt = ModemTransmission {
+            src: Some(dest as i32),
+            dest: Some(src as i32),
+            r#type: Some(TransmissionType::DriverSpecific as i32),
+            frame: vec![reply.encode_to_vec()],
+            ..Default::default()
+        };
+        if lost {
+            // On the water all the same, but nobody hears it.
+            mt.dest = Some(i32::MAX);
+        }
+        self.transmit(mt, self.config.packet_overhead, None);
+    }
+}
+
 fn special(src: u32, dest: u32, kind: Kind, mini: u32) -> ModemTransmission {
     let packet = MicroModemEmulatedPacket {
         kind: kind as i32,
         mini_data: (kind == Kind::Mini).then_some(mini),
+        ..Default::default()
     };
     ModemTransmission {
         src: Some(src as i32),
@@ -641,8 +928,9 @@ async fn run(
     mut backend: Option<Driver>,
     mut control: mpsc::UnboundedReceiver<EmulatorControl>,
     path: watch::Sender<Option<String>>,
+    air: AirLog,
 ) {
-    let mut modem = Modem::new(config.clone());
+    let mut modem = Modem::new(config.clone(), air);
     let mut device = Some(first);
     modem.revision("INIT");
     let mut next_revision = Instant::now() + config.revision_interval;
@@ -654,7 +942,9 @@ async fn run(
         }
         // Write what the modem has to say, unless it is silent or unplugged.
         let silent = silent_until.is_some_and(|t| t > Instant::now());
-        if !silent {
+        if silent {
+            modem.out.clear();
+        } else {
             silent_until = None;
             if let Some(d) = &mut device {
                 for sentence in std::mem::take(&mut modem.out) {
@@ -704,10 +994,18 @@ async fn run(
                     tokio::time::sleep(Duration::from_millis(20)).await;
                 }
             },
-            Some(event) = next_backend_event(&mut backend) => modem.backend_event(event),
+            Some(event) = next_backend_event(&mut backend) => {
+                let away = device.is_none() || silent_until.is_some_and(|t| t > Instant::now());
+                if !(away && matches!(event, DriverEvent::Received(_))) {
+                    modem.backend_event(event);
+                }
+            }
             c = control.recv() => match c {
                 Some(EmulatorControl::Reset) => modem.reset(),
                 Some(EmulatorControl::Silence(d)) => silent_until = Some(Instant::now() + d),
+                Some(EmulatorControl::BadCrc(n)) => modem.bad_crc_next += n,
+                Some(EmulatorControl::ResetMidPacket(n)) => modem.reset_mid_packet += n,
+                Some(EmulatorControl::LoseAcks(n)) => modem.lose_acks_next += n,
                 Some(EmulatorControl::Disconnect(d)) => {
                     if let EmulatorPort::Pty { link: Some(link) } = &port {
                         let _ = std::fs::remove_file(link);
@@ -715,6 +1013,7 @@ async fn run(
                     device = None;
                     path.send_replace(None);
                     back_at = Some(Instant::now() + d);
+                    modem.power_off();
                 }
                 Some(EmulatorControl::Stop) | None => {
                     if let EmulatorPort::Pty { link: Some(link) } = &port {
@@ -738,6 +1037,7 @@ async fn run(
                         Ok(d) => {
                             device = Some(d);
                             back_at = None;
+                            modem.revision("INIT");
                         }
                         Err(_) => back_at = Some(now + Duration::from_millis(200)),
                     }

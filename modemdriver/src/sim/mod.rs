@@ -41,7 +41,7 @@ use tokio::time::Instant;
 use crate::config;
 use crate::driver::{
     Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
-    TransmitOutcome, TransmitResult,
+    RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
 use crate::rate;
 use crate::time::now_micros;
@@ -204,10 +204,18 @@ impl Node {
                         .map_or(spec.frames, |n| n.min(spec.frames)),
                 );
                 mt.max_frame_bytes = Some(spec.frame_bytes);
+                let duration = spec.packet_duration(self.overhead);
+                if crate::slot::too_late(&mt, duration) {
+                    events.status(DriverStatus::Skipped {
+                        reason: "the slot of a transmission waiting for the channel has passed"
+                            .into(),
+                    });
+                    return;
+                }
                 if mt.frame.is_empty() {
                     mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
                 }
-                if mt.frame.iter().all(|f| f.is_empty()) {
+                if mt.frame.iter().all(|f| f.is_empty()) && !mt.always_initiate() {
                     events.emit(DriverEvent::TransmitResult(TransmitResult {
                         transmission: mt,
                         outcome: TransmitOutcome::NothingToSend,
@@ -236,6 +244,7 @@ impl Node {
             duration,
             transmission: mt.clone(),
         });
+        events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
         self.medium.transmit(packet.clone());
         if let Some(udp) = &self.udp {
             for reason in udp.transmit(&packet).await {
@@ -287,8 +296,11 @@ impl Node {
                 acked_frame: (0..mt.frame.len())
                     .map(|i| mt.frame_start() as i32 + i as i32)
                     .collect(),
+                // The ack names the transmission it answers.
+                unique_id: mt.unique_id,
                 ..Default::default()
             });
+            events.emit(DriverEvent::Raw(raw(RawDirection::Incoming, &mt)));
             events.emit(DriverEvent::Received(mt));
             if let Some(ack) = ack {
                 // Acknowledgements go first.
@@ -302,6 +314,21 @@ impl Node {
         for (_, result) in due {
             events.emit(DriverEvent::TransmitResult(result));
         }
+    }
+}
+
+/// What the simulated modem put on or took off the water, for the raw log:
+/// the transmission's protobuf encoding (data, acks and driver-specific
+/// packets alike), with the other node's modem id as the peer.
+fn raw(direction: RawDirection, mt: &ModemTransmission) -> RawMessage {
+    let peer = match direction {
+        RawDirection::Outgoing => mt.dest(),
+        RawDirection::Incoming => mt.src(),
+    };
+    RawMessage {
+        direction,
+        bytes: prost::Message::encode_to_vec(mt),
+        peer: Some(format!("modem {peer}")),
     }
 }
 

@@ -1,0 +1,173 @@
+//! Values checked at the door: a published message that the DCCL codec would
+//! change on the way out (a number out of its field's range, NaN, a string,
+//! bytes or an array over its limit, an undefined enum value) is refused with
+//! an error naming the field and the bound, unless its queue entry sets
+//! `clamp_out_of_range: true`. Then it is accepted as libdccl sends it, and
+//! the changes are handed back to be reported to the client and logged.
+//!
+//! The message that goes on (into the journal, the queue and the raw log) is
+//! the one the receiver will decode, never the value before it was changed.
+
+use std::collections::HashSet;
+use std::sync::Arc;
+
+use dccl::{Codec, ValueChange};
+use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::QueueManagerConfig;
+
+/// A message let through the door.
+#[derive(Debug, Clone)]
+pub struct Admitted {
+    /// The message as it will be sent (changed when `changes` is not empty).
+    pub message: DynamicMessage,
+    /// The values the codec changed (empty: sent as published).
+    pub changes: Vec<ValueChange>,
+}
+
+/// The check of published messages against their DCCL definitions.
+#[derive(Debug, Clone)]
+pub struct Door {
+    codec: Arc<Codec>,
+    /// Types whose out-of-range values are clamped rather than refused.
+    clamp: HashSet<String>,
+    /// Codecs of their own that turn a clamped message into the message the
+    /// receiver decodes (encoder, decoder): adaptive arithmetic models
+    /// advance with each use, so the daemon's codec is never used for this.
+    clamp_codecs: Option<Arc<(Codec, Codec)>>,
+}
+
+impl Door {
+    /// The door for `codec` (only checked against, never changed), clamping
+    /// the types whose queue entry sets `clamp_out_of_range`; `fresh` makes
+    /// another codec with the same definitions, asked for twice if any type
+    /// clamps.
+    pub fn new(codec: Arc<Codec>, queue: &QueueManagerConfig, fresh: impl Fn() -> Codec) -> Self {
+        let clamp: HashSet<String> = queue
+            .message_entry
+            .iter()
+            .filter(|e| e.clamp_out_of_range())
+            .map(|e| e.protobuf_name.clone())
+            .collect();
+        let clamp_codecs = (!clamp.is_empty()).then(|| Arc::new((fresh(), fresh())));
+        Self {
+            codec,
+            clamp,
+            clamp_codecs,
+        }
+    }
+
+    /// True when values of type `name` out of range are clamped (not refused).
+    pub fn clamps(&self, name: &str) -> bool {
+        self.clamp.contains(name)
+    }
+
+    /// Checks `message`: unchanged, it passes as it is; changed by the
+    /// codec, it is refused (the error names each field, its value and the
+    /// bound) or, for a clamping type, passed on as it will be sent.
+    pub fn admit(&self, message: DynamicMessage) -> Result<Admitted, String> {
+        let name = message.descriptor().full_name().to_string();
+        let changes = self.codec.check(&message).map_err(|e| e.to_string())?;
+        if changes.is_empty() {
+            return Ok(Admitted { message, changes });
+        }
+        if !self.clamp.contains(&name) {
+            let fields: Vec<String> = changes
+                .iter()
+                .map(|c| format!("field {}: {}", c.field, c.reason))
+                .collect();
+            return Err(format!(
+                "{name} refused: {} (the codec would change {}; set clamp_out_of_range: true in its queue entry to send it changed)",
+                fields.join("; "),
+                if changes.len() == 1 { "this value" } else { "these values" }
+            ));
+        }
+        // As the receiver will decode it.
+        let (encoder, decoder) = self
+            .clamp_codecs
+            .as_deref()
+            .map(|(e, d)| (e, d))
+            .ok_or_else(|| format!("{name}: no codec to clamp with"))?;
+        let bytes = encoder.encode(&message).map_err(|e| e.to_string())?;
+        let sent = decoder
+            .decode(&bytes)
+            .map_err(|e| format!("{name}: the clamped message does not decode: {e}"))?;
+        Ok(Admitted {
+            message: sent,
+            changes,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use protos::goby::acomms::protobuf::QueuedMessageEntry;
+    use protos::goby::example::{Command, Waypoint};
+
+    use super::*;
+
+    fn codec() -> Codec {
+        let mut codec = Codec::new();
+        codec.load_type::<Command>().unwrap();
+        codec
+    }
+
+    fn door(clamp: bool) -> Door {
+        let queue = QueueManagerConfig {
+            message_entry: vec![QueuedMessageEntry {
+                protobuf_name: "goby.example.Command".into(),
+                clamp_out_of_range: Some(clamp),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        Door::new(Arc::new(codec()), &queue, codec)
+    }
+
+    fn command(destination: i32, x: f64, note: &str) -> DynamicMessage {
+        Command {
+            destination,
+            action: 1,
+            waypoint: vec![Waypoint { x, y: 0.0 }],
+            note: Some(note.into()),
+        }
+        .transcode_to_dynamic()
+    }
+
+    #[test]
+    fn values_the_codec_keeps_pass_as_they_are() {
+        let admitted = door(false).admit(command(2, 100.0, "ok")).unwrap();
+        assert!(admitted.changes.is_empty());
+        assert_eq!(admitted.message, command(2, 100.0, "ok"));
+    }
+
+    #[test]
+    fn out_of_range_nan_and_long_values_are_refused_naming_field_and_bound() {
+        let door = door(false);
+        let err = door.admit(command(99, 0.0, "ok")).unwrap_err();
+        assert!(err.contains("field destination"), "{err}");
+        assert!(err.contains("99") && err.contains("31"), "{err}");
+        let err = door.admit(command(2, 120_000.0, "ok")).unwrap_err();
+        assert!(err.contains("field waypoint[0].x"), "{err}");
+        assert!(err.contains("10000"), "{err}");
+        let err = door.admit(command(2, f64::NAN, "ok")).unwrap_err();
+        assert!(err.contains("waypoint[0].x"), "{err}");
+        let err = door
+            .admit(command(2, 0.0, &"n".repeat(60_000)))
+            .unwrap_err();
+        assert!(err.contains("field note"), "{err}");
+        assert!(err.len() < 2_000, "the error does not repeat the value");
+    }
+
+    #[test]
+    fn a_clamping_type_passes_as_it_will_be_sent_with_its_changes() {
+        let admitted = door(true)
+            .admit(command(2, 0.0, "a note much too long"))
+            .unwrap();
+        assert_eq!(admitted.changes.len(), 1);
+        assert_eq!(admitted.changes[0].field, "note");
+        assert_eq!(
+            admitted.message.get_field_by_name("note").unwrap().as_str(),
+            Some("a note muc")
+        );
+    }
+}

@@ -1,0 +1,318 @@
+//! `gobyd`'s configuration from a MOOS mission file (`.moos`), as a Goby
+//! MOOS application such as pAcommsHandler reads its own: the global
+//! `ServerHost`, `ServerPort`, `Community`, `LatOrigin` and `LongOrigin`,
+//! and the `ProcessConfig = gobyd { ... }` block, whose inside is the
+//! configuration in protobuf text format (`//` comments allowed, as in the
+//! rest of the file).
+//!
+//! The globals fill the `moos` section where the block leaves it unset
+//! (server, port, lat_origin, lon_origin), and pAcommsHandler's variables
+//! (`moos_var`) are written with their default names unless the block
+//! configures them. The block is parsed where it stands in the file, so
+//! line and column numbers in errors are the mission file's.
+
+use std::path::Path;
+
+use protos::goby::apps::protobuf::GobydConfig;
+
+use crate::config::{self, ConfigError};
+
+/// What a mission file holds for `gobyd`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MissionFile {
+    /// `ServerHost`.
+    pub server_host: Option<String>,
+    /// `ServerPort`.
+    pub server_port: Option<String>,
+    /// `Community`.
+    pub community: Option<String>,
+    /// `LatOrigin`, degrees.
+    pub lat_origin: Option<String>,
+    /// `LongOrigin`, degrees.
+    pub long_origin: Option<String>,
+    /// The inside of the process's block, placed at its line and column in
+    /// the file (blanks before it), with `//` comments turned into `#`.
+    pub process_config: Option<String>,
+}
+
+/// `line` with a `//` comment outside quotes turned into `#`.
+fn hash_comments(line: &str) -> String {
+    let mut out = String::with_capacity(line.len());
+    let mut quote: Option<char> = None;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match quote {
+            Some(q) => {
+                out.push(c);
+                if c == '\\' {
+                    if let Some(n) = chars.next() {
+                        out.push(n);
+                    }
+                } else if c == q {
+                    quote = None;
+                }
+            }
+            None if c == '"' || c == '\'' => {
+                quote = Some(c);
+                out.push(c);
+            }
+            None if c == '/' && chars.peek() == Some(&'/') => {
+                // Same width, so that columns stay the file's.
+                out.push('#');
+                out.push(' ');
+                chars.next();
+            }
+            None => out.push(c),
+        }
+    }
+    out
+}
+
+/// The text of `line` before a `//` comment.
+fn strip_comment(line: &str) -> &str {
+    line.find("//").map_or(line, |p| &line[..p])
+}
+
+impl MissionFile {
+    /// Reads the globals and the block of process `app` from the text of
+    /// a mission file.
+    pub fn parse(text: &str, app: &str) -> Result<Self, String> {
+        let mut mission = MissionFile::default();
+        let lines: Vec<&str> = text.lines().collect();
+        let mut i = 0;
+        while i < lines.len() {
+            let line = strip_comment(lines[i]).trim();
+            let Some((key, value)) = line.split_once('=') else {
+                i += 1;
+                continue;
+            };
+            let (key, value) = (key.trim(), value.trim());
+            if key.eq_ignore_ascii_case("ProcessConfig") {
+                // The block: from its "{" to the matching "}".
+                let is_ours = value.eq_ignore_ascii_case(app);
+                let mut depth = 0usize;
+                let mut started = false;
+                let mut block = String::new();
+                let mut j = i;
+                'lines: while j < lines.len() {
+                    let cleaned = hash_comments(lines[j]);
+                    let mut quote: Option<char> = None;
+                    let mut kept = String::new();
+                    for (at, c) in cleaned.char_indices() {
+                        let mut keep = started;
+                        match quote {
+                            Some(q) if c == q => quote = None,
+                            Some(_) => {}
+                            None if c == '#' => {
+                                // The rest of the line is a comment.
+                                kept.push_str(&cleaned[at..]);
+                                break;
+                            }
+                            None if c == '"' || c == '\'' => quote = Some(c),
+                            None if c == '{' => {
+                                if !started {
+                                    started = true;
+                                    keep = false;
+                                }
+                                depth += 1;
+                            }
+                            None if c == '}' => {
+                                depth = depth.saturating_sub(1);
+                                if started && depth == 0 {
+                                    block.push_str(&kept);
+                                    block.push('\n');
+                                    break 'lines;
+                                }
+                            }
+                            None => {}
+                        }
+                        kept.push(if keep { c } else { ' ' });
+                    }
+                    // Keep the line numbering of the file.
+                    if started {
+                        block.push_str(&kept);
+                    }
+                    block.push('\n');
+                    j += 1;
+                }
+                if !started || depth != 0 {
+                    return Err(format!(
+                        "line {}: ProcessConfig = {value} has no {{ ... }} block (or no closing }})",
+                        i + 1
+                    ));
+                }
+                if is_ours {
+                    if mission.process_config.is_some() {
+                        return Err(format!(
+                            "line {}: a second ProcessConfig = {value} block",
+                            i + 1
+                        ));
+                    }
+                    let before = "\n".repeat(i);
+                    mission.process_config = Some(before + &block);
+                }
+                i = j + 1;
+                continue;
+            }
+            let value = Some(value.to_string());
+            match key.to_ascii_lowercase().as_str() {
+                "serverhost" => mission.server_host = value,
+                "serverport" => mission.server_port = value,
+                "community" => mission.community = value,
+                "latorigin" => mission.lat_origin = value,
+                "longorigin" => mission.long_origin = value,
+                _ => {}
+            }
+            i += 1;
+        }
+        Ok(mission)
+    }
+
+    /// `gobyd`'s configuration: the block (named `origin` in errors) with
+    /// the globals filled in.
+    pub fn configuration(&self, origin: &str, app: &str) -> Result<GobydConfig, ConfigError> {
+        let block = self.process_config.as_deref().ok_or_else(|| {
+            ConfigError::Invalid(format!("{origin}: no ProcessConfig = {app} block"))
+        })?;
+        let mut config = config::parse(block, origin)?;
+        let number = |what: &str, v: &Option<String>| -> Result<Option<f64>, ConfigError> {
+            v.as_deref()
+                .map(|t| {
+                    t.parse::<f64>().map_err(|_| {
+                        ConfigError::Invalid(format!("{origin}: {what} = {t} is not a number"))
+                    })
+                })
+                .transpose()
+        };
+        let lat = number("LatOrigin", &self.lat_origin)?;
+        let lon = number("LongOrigin", &self.long_origin)?;
+        let port = self
+            .server_port
+            .as_deref()
+            .map(|p| {
+                p.parse::<u16>().map_err(|_| {
+                    ConfigError::Invalid(format!("{origin}: ServerPort = {p} is not a TCP port"))
+                })
+            })
+            .transpose()?;
+        let moos = config.moos.get_or_insert_with(Default::default);
+        if moos.server.is_none() {
+            moos.server = self.server_host.clone();
+        }
+        if moos.port.is_none() {
+            moos.port = port.map(u32::from);
+        }
+        if moos.name.is_none() {
+            moos.name = Some(app.to_string());
+        }
+        if moos.lat_origin.is_none() {
+            moos.lat_origin = lat;
+        }
+        if moos.lon_origin.is_none() {
+            moos.lon_origin = lon;
+        }
+        config.moos_var.get_or_insert_with(Default::default);
+        Ok(config)
+    }
+}
+
+/// Reads `gobyd`'s configuration from the mission file at `path`, from the
+/// block of process `app` (`gobyd` unless pAntler gives another name).
+pub fn load(path: &Path, app: &str) -> Result<GobydConfig, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let origin = path.display().to_string();
+    let mission = MissionFile::parse(&text, app)
+        .map_err(|e| ConfigError::Invalid(format!("{origin}: {e}")))?;
+    mission.configuration(&origin, app)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MISSION: &str = r#"// Vehicle A
+ServerHost = localhost
+ServerPort = 9001
+Community  = alpha
+LatOrigin  = 42.358456
+LongOrigin = -71.087589
+
+ProcessConfig = ANTLER
+{
+  Run = MOOSDB @ NewConsole = false
+  Run = gobyd  @ NewConsole = false
+}
+
+ProcessConfig = gobyd   // the acoustic link
+{
+  modem_id: 1   // this vehicle
+  dccl { load_examples: false }  // only the NodeReport
+  translator_entry {
+    protobuf_name: "goby.moos.example.NodeReport"
+    trigger { type: TRIGGER_PUBLISH moos_var: "NODE_REPORT_LOCAL" }
+    create { technique: TECHNIQUE_COMMA_SEPARATED_KEY_EQUALS_VALUE_PAIRS moos_var: "NODE_REPORT_LOCAL" }
+    publish { technique: TECHNIQUE_FORMAT moos_var: "NODE_REPORT" format: "NAME=%1%,URL=http://x{y}#z" } # {
+  }
+}
+"#;
+
+    #[test]
+    fn globals_and_the_block_make_the_configuration() {
+        let mission = MissionFile::parse(MISSION, "gobyd").unwrap();
+        assert_eq!(mission.server_port.as_deref(), Some("9001"));
+        assert_eq!(mission.community.as_deref(), Some("alpha"));
+        let config = mission.configuration("a.moos", "gobyd").unwrap();
+        assert_eq!(config.modem_id(), 1);
+        let moos = config.moos.as_ref().unwrap();
+        assert_eq!(
+            (moos.server(), moos.port(), moos.name()),
+            ("localhost", 9001, "gobyd")
+        );
+        assert_eq!(moos.lat_origin, Some(42.358456));
+        assert_eq!(moos.lon_origin, Some(-71.087589));
+        assert!(config.moos_var.is_some());
+        // "//" inside a string is kept; braces inside strings do not count.
+        assert_eq!(
+            config.translator_entry[0].publish[0].format(),
+            "NAME=%1%,URL=http://x{y}#z"
+        );
+    }
+
+    #[test]
+    fn errors_point_into_the_mission_file() {
+        let bad = MISSION.replace("modem_id: 1", "modem_id: one");
+        let err = MissionFile::parse(&bad, "gobyd")
+            .unwrap()
+            .configuration("a.moos", "gobyd")
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("a.moos:") && err.contains("'one'"), "{err}");
+        // The block keeps the file's lines and columns, so that positions
+        // in parse errors are the file's: `modem_id` is at line 16, column 3.
+        let block = MissionFile::parse(MISSION, "gobyd")
+            .unwrap()
+            .process_config
+            .unwrap();
+        let line16 = block.lines().nth(15).unwrap();
+        assert_eq!(line16.find("modem_id"), Some(2), "{line16:?}");
+        let err = MissionFile::parse(MISSION, "other")
+            .unwrap()
+            .configuration("a.moos", "other")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("no ProcessConfig = other block"), "{err}");
+        let err =
+            MissionFile::parse("ProcessConfig = gobyd\n{\n modem_id: 1\n", "gobyd").unwrap_err();
+        assert!(err.contains("line 1"), "{err}");
+        let bad = MISSION.replace("ServerPort = 9001", "ServerPort = lots");
+        let err = MissionFile::parse(&bad, "gobyd")
+            .unwrap()
+            .configuration("a.moos", "gobyd")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("ServerPort = lots"), "{err}");
+    }
+}

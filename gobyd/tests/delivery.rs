@@ -1,0 +1,531 @@
+//! Delivery under modem faults: two `gobyd` (in-process, through the
+//! library) exchange acknowledged messages over two emulated WHOI
+//! Micro-Modems on real pseudo-terminals (the emulators' packets on the
+//! in-process acoustic simulator), and over the simulator driver alone,
+//! while the modems are unplugged, lose frames to bad CRCs, lose acks, reset
+//! mid-packet and fall silent, one fault kind at a time and all together.
+//!
+//! Every published message is counted. Must hold: each is delivered to the
+//! other daemon's clients exactly once or is still owed in the sender's
+//! journal; no ack reaches the sender before the message reached the
+//! receiver's clients; no message acked and never delivered; every data
+//! packet a modem puts on the water lies within its node's TDMA slot.
+//!
+//! `cargo test -p gobyd --test delivery -- --nocapture` prints one summary
+//! line per run.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use gobyd::json_server::Publish;
+use gobyd::runtime::Daemon;
+use modemdriver::micromodem::emulator::{
+    self, AirKind, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
+};
+use modemdriver::sim::{medium::Medium, SimulatorDriver};
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
+use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+use protos::goby::example::Command;
+use queue::QueueEvent;
+use tokio::sync::oneshot;
+
+/// Seconds per TDMA slot; node 1 has slot 0, node 2 slot 1.
+const SLOT_SECONDS: f64 = 3.0;
+/// Messages each node publishes.
+const MESSAGES_PER_NODE: usize = 20;
+/// Longest a run lasts (it ends earlier once everything is acknowledged).
+const RUN_LIMIT: Duration = Duration::from_secs(150);
+
+use modemdriver::time::now_micros;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-delivery-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The faults of one run.
+#[derive(Debug, Clone, Default)]
+struct Faults {
+    name: &'static str,
+    bad_crc: f64,
+    lost_ack: f64,
+    /// Modem 1 unplugged at this many seconds for this many.
+    unplug: Option<(f64, f64)>,
+    /// Modem 1 resets in the middle of this many of its packets.
+    resets: u32,
+    /// Modem 2 silent at these seconds for these many.
+    silences: Vec<(f64, f64)>,
+    seed: u64,
+}
+
+#[derive(Debug, Clone)]
+enum Seen {
+    Delivered { note: String, at: u64 },
+    Acked { note: String, at: u64 },
+}
+
+#[derive(Debug, Default)]
+struct Tally {
+    published: usize,
+    delivered: usize,
+    duplicates: usize,
+    acked_before_delivered: usize,
+    owed: usize,
+    lost: usize,
+    acked: usize,
+}
+
+fn daemon_config(
+    id: i32,
+    driver: &str,
+    data_dir: &Path,
+) -> protos::goby::apps::protobuf::GobydConfig {
+    let text = format!(
+        r#"
+modem_id: {id}
+{driver}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1  dest: -1  rate: 6  slot_seconds: {SLOT_SECONDS} }}
+  slot {{ src: 2  dest: -1  rate: 6  slot_seconds: {SLOT_SECONDS} }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 1800
+    role {{ type: DESTINATION_ID  field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "" }}
+data_dir: "{}"
+log {{ raw_log: false }}
+"#,
+        data_dir.display()
+    );
+    gobyd::config::parse(&text, "delivery test").expect("test configuration")
+}
+
+fn micromodem_driver(link: &Path) -> String {
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_WHOI_MICROMODEM
+  serial_port: "{}"
+  micromodem {{ reconnect_interval_ms: 300  response_timeout_ms: 600  receive_timeout_ms: 2500 }}
+}}"#,
+        link.display()
+    )
+}
+
+fn simulator_driver(channel: &str, loss: f64, seed: u64) -> String {
+    format!(
+        r#"driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{
+    node {{ modem_id: 1  x: 0 }}
+    node {{ modem_id: 2  x: 300 }}
+    packet_loss: {loss}
+    seed: {seed}
+    packet_overhead_seconds: 0.3
+    channel: "{channel}"
+  }}
+}}"#
+    )
+}
+
+/// Two emulated modems 300 m apart on an in-process channel.
+fn start_emulators(dir: &Path, faults: &Faults) -> Vec<EmulatorHandle> {
+    let medium = Medium::new();
+    let node: Vec<NodePosition> = (1..=2)
+        .map(|m| NodePosition {
+            modem_id: m,
+            x: Some(f64::from(m - 1) * 300.0),
+            ..Default::default()
+        })
+        .collect();
+    (1..=2u32)
+        .map(|id| {
+            let config = modemdriver::DriverConfig {
+                modem_id: Some(id as i32),
+                simulator: Some(SimulatorDriverConfig {
+                    node: node.clone(),
+                    packet_overhead_seconds: Some(0.05),
+                    ..Default::default()
+                }),
+                ..Default::default()
+            };
+            let backend = SimulatorDriver::start_on(&config, medium.clone()).unwrap();
+            let emulated = EmulatorConfig {
+                modem_id: id,
+                packet_overhead: Duration::from_millis(300),
+                faults: EmulatorFaults {
+                    bad_crc: faults.bad_crc,
+                    lost_ack: faults.lost_ack,
+                    seed: faults.seed,
+                },
+                ..EmulatorConfig::default()
+            };
+            let port = EmulatorPort::Pty {
+                link: Some(dir.join(format!("modem{id}"))),
+            };
+            emulator::start(emulated, port, Some(backend)).expect("emulator starts")
+        })
+        .collect()
+}
+
+/// Runs the two daemons while `inject` applies the faults; returns the
+/// tally and the emulators' slot report.
+async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
+    let dir = scratch(name);
+    let emulators = if emulated {
+        let mut e = start_emulators(&dir, &faults);
+        for h in &mut e {
+            h.path().await.expect("emulated modem present");
+        }
+        e
+    } else {
+        Vec::new()
+    };
+    let seen: Arc<Mutex<Vec<(i32, Seen)>>> = Arc::default();
+    let mut stops = Vec::new();
+    let mut runs = Vec::new();
+    let mut publishers = Vec::new();
+    for id in 1..=2 {
+        let driver = if emulated {
+            micromodem_driver(&dir.join(format!("modem{id}")))
+        } else {
+            simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed)
+        };
+        let data_dir = dir.join(format!("data{id}"));
+        let daemon = Daemon::start(daemon_config(id, &driver, &data_dir))
+            .await
+            .expect("gobyd starts");
+        publishers.push(daemon.publisher());
+        let mut events = daemon.subscribe();
+        let seen = seen.clone();
+        tokio::spawn(async move {
+            while let Ok(e) = events.recv().await {
+                let (note, delivered) = match &e.event {
+                    QueueEvent::Received(r) => (r.message.clone(), true),
+                    QueueEvent::Acked { message, .. } => (message.clone(), false),
+                    _ => continue,
+                };
+                let note = note
+                    .transcode_to::<Command>()
+                    .map(|c| c.note().to_string())
+                    .unwrap_or_default();
+                let at = now_micros();
+                let event = if delivered {
+                    Seen::Delivered { note, at }
+                } else {
+                    Seen::Acked { note, at }
+                };
+                seen.lock().unwrap().push((id, event));
+            }
+        });
+        let (stop_tx, stop_rx) = oneshot::channel::<()>();
+        stops.push(stop_tx);
+        runs.push(tokio::spawn(daemon.run(async move {
+            let _ = stop_rx.await;
+        })));
+    }
+
+    // Faults on their schedule.
+    let started = tokio::time::Instant::now();
+    let at = |s: f64| started + Duration::from_secs_f64(s);
+    let mut schedule: Vec<(tokio::time::Instant, usize, EmulatorControl)> = Vec::new();
+    if let Some((when, length)) = faults.unplug {
+        schedule.push((
+            at(when),
+            0,
+            EmulatorControl::Disconnect(Duration::from_secs_f64(length)),
+        ));
+    }
+    if faults.resets > 0 {
+        schedule.push((at(1.0), 0, EmulatorControl::ResetMidPacket(faults.resets)));
+    }
+    for &(when, length) in &faults.silences {
+        schedule.push((
+            at(when),
+            1,
+            EmulatorControl::Silence(Duration::from_secs_f64(length)),
+        ));
+    }
+    schedule.sort_by_key(|(t, _, _)| *t);
+    let controls: Vec<_> = emulators.iter().map(|e| e.controller()).collect();
+    let injector = tokio::spawn(async move {
+        for (when, modem, control) in schedule {
+            tokio::time::sleep_until(when).await;
+            if let Some(c) = controls.get(modem) {
+                c(control);
+            }
+        }
+    });
+
+    // Each node publishes to the other, one message a second.
+    let mut published: Vec<(i32, String)> = Vec::new();
+    for i in 0..MESSAGES_PER_NODE {
+        for (index, publisher) in publishers.iter().enumerate() {
+            let from = index as i32 + 1;
+            let to = 3 - from;
+            let note = format!("{from}-{i}");
+            let command = Command {
+                destination: to,
+                action: 1,
+                note: Some(note.clone()),
+                ..Default::default()
+            };
+            let (reply, answer) = oneshot::channel();
+            publisher
+                .send(Publish {
+                    message: command.transcode_to_dynamic(),
+                    reply,
+                })
+                .await
+                .unwrap();
+            let line = answer.await.unwrap();
+            assert!(line.contains("accepted"), "{line}");
+            published.push((from, note));
+        }
+        tokio::time::sleep(Duration::from_millis(1000)).await;
+    }
+
+    // Until every message is acknowledged (or the limit).
+    let total = published.len();
+    while started.elapsed() < RUN_LIMIT {
+        let acked = seen
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|(_, s)| matches!(s, Seen::Acked { .. }))
+            .count();
+        if acked >= total && injector.is_finished() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    injector.abort();
+    for stop in stops {
+        let _ = stop.send(());
+    }
+    for r in runs {
+        r.await.unwrap().unwrap();
+    }
+    let air: Vec<_> = emulators.iter().map(|e| e.air_log()).collect();
+    for e in emulators {
+        e.stop().await;
+    }
+
+    // Still owed: what the senders' journals hold.
+    let mut owed: HashMap<String, usize> = HashMap::new();
+    for id in 1..=2 {
+        let path = dir.join(format!("data{id}")).join("outbox.journal");
+        let (journal, _) = queue::Journal::open(&path).unwrap();
+        for entry in journal.entries() {
+            let command: Command = prost::Message::decode(entry.message.as_slice()).unwrap();
+            *owed.entry(command.note().to_string()).or_default() += 1;
+        }
+    }
+
+    let seen = seen.lock().unwrap().clone();
+    let mut tally = Tally {
+        published: total,
+        ..Default::default()
+    };
+    for (from, note) in &published {
+        let to = 3 - from;
+        let deliveries: Vec<u64> = seen
+            .iter()
+            .filter_map(|(node, s)| match s {
+                Seen::Delivered { note: n, at } if *node == to && n == note => Some(*at),
+                _ => None,
+            })
+            .collect();
+        let ack = seen.iter().find_map(|(node, s)| match s {
+            Seen::Acked { note: n, at } if node == from && n == note => Some(*at),
+            _ => None,
+        });
+        let is_owed = owed.get(note).copied().unwrap_or(0) > 0;
+        if !deliveries.is_empty() {
+            tally.delivered += 1;
+        }
+        tally.duplicates += deliveries.len().saturating_sub(1);
+        if ack.is_some() {
+            tally.acked += 1;
+        }
+        if let (Some(ack), Some(first)) = (ack, deliveries.iter().min()) {
+            if ack < *first {
+                tally.acked_before_delivered += 1;
+            }
+        }
+        if is_owed {
+            tally.owed += 1;
+        }
+        if deliveries.is_empty() && !is_owed {
+            tally.lost += 1;
+        }
+    }
+    let slots = slot_report(&air);
+    let _ = std::fs::remove_dir_all(&dir);
+    (tally, slots)
+}
+
+/// Checks every data packet of modem i (slot i-1) lies in its slot of the
+/// cycle (slots counted from the start of the UTC day); returns the report.
+fn slot_report(air: &[Vec<emulator::AirTime>]) -> String {
+    if air.is_empty() {
+        return "slots: not observed (no modem emulator)".into();
+    }
+    let slot = (SLOT_SECONDS * 1e6) as u64;
+    let cycle = slot * air.len() as u64;
+    let mut parts = Vec::new();
+    let mut outside = 0;
+    for (i, packets) in air.iter().enumerate() {
+        let own = i as u64 * slot;
+        let mut earliest = u64::MAX;
+        let mut latest_end = 0;
+        let mut data = 0;
+        let mut aborted = 0;
+        for p in packets {
+            if p.kind == AirKind::Ack {
+                continue;
+            }
+            if p.kind == AirKind::Aborted {
+                aborted += 1;
+            }
+            data += 1;
+            let offset = p.start % cycle;
+            let end_offset = offset + (p.end - p.start);
+            if offset < own || end_offset > own + slot {
+                outside += 1;
+                eprintln!(
+                    "modem {}: packet at {:.3}..{:.3} s of the cycle, outside its slot {:.0}..{:.0} s",
+                    i + 1,
+                    offset as f64 / 1e6,
+                    end_offset as f64 / 1e6,
+                    own as f64 / 1e6,
+                    (own + slot) as f64 / 1e6
+                );
+            }
+            earliest = earliest.min(offset - own.min(offset));
+            latest_end = latest_end.max(end_offset.saturating_sub(own));
+        }
+        parts.push(format!(
+            "modem {}: {data} packets ({aborted} aborted), on the water from +{:.2} s to +{:.2} s of its {SLOT_SECONDS} s slot",
+            i + 1,
+            if data > 0 { earliest as f64 / 1e6 } else { 0.0 },
+            latest_end as f64 / 1e6
+        ));
+    }
+    format!("slots: {} outside; {}", outside, parts.join("; "))
+}
+
+async fn check(name: &str, faults: Faults, emulated: bool) {
+    let (t, slots) = run(name, faults, emulated).await;
+    println!(
+        "delivery {name}: published {} delivered {} duplicates {} acked-before-delivered {} owed {} lost {} (acked {}); {slots}",
+        t.published, t.delivered, t.duplicates, t.acked_before_delivered, t.owed, t.lost, t.acked
+    );
+    assert_eq!(
+        t.duplicates, 0,
+        "{name}: a message reached the client twice"
+    );
+    assert_eq!(
+        t.acked_before_delivered, 0,
+        "{name}: an ack came before its message was delivered"
+    );
+    assert_eq!(
+        t.lost, 0,
+        "{name}: a message was neither delivered nor owed"
+    );
+    assert!(
+        slots.starts_with("slots: 0 outside") || slots.contains("not observed"),
+        "{name}: {slots}"
+    );
+    assert!(t.delivered > 0, "{name}: nothing got through");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem_long_unplug() {
+    let faults = Faults {
+        name: "unplug",
+        unplug: Some((2.0, 20.0)),
+        seed: 1,
+        ..Default::default()
+    };
+    check(faults.name, faults, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem_bad_crc() {
+    let faults = Faults {
+        name: "bad-crc",
+        bad_crc: 0.3,
+        seed: 2,
+        ..Default::default()
+    };
+    check(faults.name, faults, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem_lost_acks() {
+    let faults = Faults {
+        name: "lost-acks",
+        lost_ack: 0.5,
+        seed: 3,
+        ..Default::default()
+    };
+    check(faults.name, faults, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem_reset_mid_packet() {
+    let faults = Faults {
+        name: "reset",
+        resets: 3,
+        seed: 4,
+        ..Default::default()
+    };
+    check(faults.name, faults, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem_silences() {
+    let faults = Faults {
+        name: "silence",
+        silences: vec![(3.0, 7.0), (16.0, 5.0)],
+        seed: 5,
+        ..Default::default()
+    };
+    check(faults.name, faults, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem_combined() {
+    let faults = Faults {
+        name: "combined",
+        bad_crc: 0.2,
+        lost_ack: 0.3,
+        unplug: Some((4.0, 15.0)),
+        resets: 2,
+        silences: vec![(2.0, 5.0), (25.0, 4.0)],
+        seed: 6,
+    };
+    check(faults.name, faults, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn simulator_lost_packets_and_acks() {
+    // 30 % of packets (data and acks alike) lost on the channel.
+    let faults = Faults {
+        name: "simulator-loss",
+        seed: 7,
+        ..Default::default()
+    };
+    check(faults.name, faults, false).await;
+}

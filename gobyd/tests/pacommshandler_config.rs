@@ -1,0 +1,284 @@
+//! `translator_entry` blocks written for pAcommsHandler, the way Goby's
+//! documentation lays them out (every field of the entry, `//` comments,
+//! `modem_id_lookup_path`), load unchanged in gobyd's ProcessConfig block
+//! and translate.
+
+use std::collections::HashMap;
+
+use gobyd::{config, mission_file::MissionFile, translator};
+use moos::Value;
+
+const MISSION: &str = r#"
+ServerHost = localhost
+ServerPort = 9000
+LatOrigin  = 42.5
+LongOrigin = 10.8
+
+ProcessConfig = gobyd
+{
+  modem_id: 3
+
+  // From here on, as in a pAcommsHandler block.
+  translator_entry {
+    protobuf_name: "goby.moos.example.NodeReport"
+    trigger {
+      type: TRIGGER_PUBLISH
+      moos_var: "NODE_REPORT_LOCAL"
+      mandatory_content: "NAME="
+    }
+    create {
+      technique: TECHNIQUE_COMMA_SEPARATED_KEY_EQUALS_VALUE_PAIRS
+      moos_var: "NODE_REPORT_LOCAL"
+    }
+    create {
+      technique: TECHNIQUE_FORMAT
+      moos_var: "VEHICLE_NAME"
+      format: "%1%"
+      repeated_delimiter: ","
+      algorithm {
+        name: "to_lower"
+        primary_field: 1
+      }
+    }
+    publish {
+      technique: TECHNIQUE_FORMAT
+      moos_var: "NODE_REPORT_%1%"
+      format: "NAME=%1%,TYPE=%2%,X=%4%,Y=%5%,LAT=%100%,LON=%101%,ID=%102%"
+      repeated_delimiter: ","
+      algorithm {
+        name: "utm_y2lat"
+        output_virtual_field: 100
+        primary_field: 5
+        reference_field: 4
+      }
+      algorithm {
+        name: "utm_x2lon"
+        output_virtual_field: 101
+        primary_field: 4
+        reference_field: 5
+      }
+      algorithm {
+        name: "name2modem_id"
+        output_virtual_field: 102
+        primary_field: 1
+      }
+    }
+    publish {
+      technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT
+      moos_var: "NODE_REPORT_PB"
+    }
+    use_short_enum: false
+  }
+  translator_entry {
+    protobuf_name: "goby.example.Command"
+    trigger {
+      type: TRIGGER_TIME
+      period: 10
+    }
+    create {
+      technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT
+      moos_var: "COMMAND_OUT"
+    }
+    publish {
+      technique: TECHNIQUE_COMMA_SEPARATED_KEY_EQUALS_VALUE_PAIRS
+      moos_var: "COMMAND_IN"
+    }
+  }
+  modem_id_lookup_path: "LOOKUP"
+}
+"#;
+
+#[test]
+fn pacommshandler_translator_entries_load_and_translate() {
+    let dir = std::env::temp_dir().join(format!("gobyd-pacomms-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let lookup = dir.join("modemidlookup.txt");
+    std::fs::write(
+        &lookup,
+        "// modem id, vehicle name, vehicle type\n1, resolution, ship\n3, unicorn, auv\n",
+    )
+    .unwrap();
+    let text = MISSION.replace("LOOKUP", &lookup.display().to_string());
+    let config = MissionFile::parse(&text, "gobyd")
+        .unwrap()
+        .configuration("mission.moos", "gobyd")
+        .unwrap();
+    assert_eq!(config.translator_entry.len(), 2);
+    let config = config::complete(config).unwrap();
+    let defs = config::load_definitions(&config).unwrap();
+    assert!(defs
+        .loaded
+        .contains(&"goby.moos.example.NodeReport".to_string()));
+    let t = translator::from_config(&config, &defs.codec).unwrap();
+
+    let values: HashMap<String, Value> = [
+        (
+            "NODE_REPORT_LOCAL".to_string(),
+            Value::String("NAME=x,X=550,Y=1023.5,TIME=1700000000,TYPE=auv".into()),
+        ),
+        ("VEHICLE_NAME".to_string(), Value::String("UNICORN".into())),
+    ]
+    .into();
+    assert_eq!(
+        t.triggered("NODE_REPORT_LOCAL", &values["NODE_REPORT_LOCAL"]),
+        ["goby.moos.example.NodeReport"]
+    );
+    assert!(t
+        .triggered("NODE_REPORT_LOCAL", &Value::String("X=1".into()))
+        .is_empty());
+    let report = t.create("goby.moos.example.NodeReport", &values).unwrap();
+    let published = t.publish(&report).unwrap();
+    assert_eq!(published[0].0, "NODE_REPORT_unicorn");
+    let Value::String(s) = &published[0].1 else {
+        panic!("{published:?}")
+    };
+    assert!(
+        s.starts_with("NAME=unicorn,TYPE=auv,X=550,Y=1023.5,LAT=42.509") && s.ends_with(",ID=3"),
+        "{s}"
+    );
+    assert_eq!(
+        published[1],
+        (
+            "NODE_REPORT_PB".to_string(),
+            Value::String(
+                "@PB[goby.moos.example.NodeReport] name: \"unicorn\" type: \"auv\" time: 1700000000 x: 550 y: 1023.5".into()
+            )
+        )
+    );
+    assert_eq!(
+        t.timed(),
+        [("goby.example.Command", std::time::Duration::from_secs(10))]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gobyd_checks_a_mission_file_as_moos_file_or_as_pantler_passes_it() {
+    let mission = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/moos/alpha.moos");
+    for args in [
+        vec!["--check", "--moos-file", mission],
+        vec!["--check", mission, "gobyd"],
+    ] {
+        let out = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .args(&args)
+            .env_remove("RUST_BACKTRACE")
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            stdout.trim(),
+            "configuration is valid; DCCL types: goby.moos.example.NodeReport"
+        );
+    }
+    // A process name with no block, and a translator entry naming an
+    // unknown algorithm, are refused with the place.
+    let out = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .args(["--check", mission, "pAcommsHandler"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no ProcessConfig = pAcommsHandler block"),
+        "{err}"
+    );
+    let dir = std::env::temp_dir().join(format!("gobyd-pacomms-check-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.moos");
+    let text = std::fs::read_to_string(mission)
+        .unwrap()
+        .replace("moos_var: \"NODE_REPORT_LOCAL\"\n    }", "moos_var: \"NODE_REPORT_LOCAL\"\n      algorithm { name: \"frobnicate\" primary_field: 1 }\n    }");
+    std::fs::write(&bad, text).unwrap();
+    let out = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .args(["--check", "--moos-file"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("translator_entry goby.moos.example.NodeReport: create 1 (NODE_REPORT_LOCAL): unknown algorithm \"frobnicate\""),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A TRIGGER_TIME entry makes its message every period from the latest
+/// value of its create variable; the message, addressed to this node, comes
+/// back and is written through the entry's publish format.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_timed_trigger_makes_messages_from_the_latest_values() {
+    let db = moos::testing::MiniDb::start("127.0.0.1:0", "timed")
+        .await
+        .unwrap();
+    let dir = std::env::temp_dir().join(format!("gobyd-pacomms-timed-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let text = format!(
+        r#"
+modem_id: 1
+driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{ node {{ modem_id: 1 }} channel: "timed-trigger" }}
+}}
+mac {{ type: MAC_NONE }}
+queue {{ message_entry {{ protobuf_name: "goby.example.Command" ack: false role {{ type: DESTINATION_ID field: "destination" }} }} }}
+json {{ tcp_bind: "" }}
+moos {{ server: "127.0.0.1" port: {port} }}
+data_dir: "{dir}"
+log {{ raw_log: false }}
+translator_entry {{
+  protobuf_name: "goby.example.Command"
+  trigger {{ type: TRIGGER_TIME period: 1 }}
+  create {{ technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "COMMAND_OUT" }}
+  publish {{ technique: TECHNIQUE_FORMAT moos_var: "COMMAND_IN" format: "ACTION=%2%,NOTE=%4%" }}
+}}
+"#,
+        port = db.port(),
+        dir = dir.display()
+    );
+    let daemon = gobyd::runtime::Daemon::start(config::parse(&text, "test").unwrap())
+        .await
+        .unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let running = tokio::spawn(daemon.run(async {
+        let _ = stopped.await;
+    }));
+    let (client, mut mail) = moos::MoosClient::connect(
+        moos::ClientConfig::new("helm").with_address("127.0.0.1", db.port()),
+    )
+    .await
+    .unwrap();
+    client
+        .register("COMMAND_IN", std::time::Duration::ZERO)
+        .unwrap();
+    let got = tokio::time::timeout(std::time::Duration::from_secs(30), async {
+        let mut write = tokio::time::interval(std::time::Duration::from_millis(500));
+        loop {
+            tokio::select! {
+                _ = write.tick() => {
+                    let _ = client.notify_string(
+                        "COMMAND_OUT",
+                        "@PB[goby.example.Command] destination: 1 action: SURFACE note: \"timed\"",
+                    );
+                }
+                m = mail.recv() => {
+                    let m = m.expect("mail");
+                    if let Value::String(s) = m.value { return s; }
+                }
+            }
+        }
+    })
+    .await
+    .expect("COMMAND_IN within 30 s");
+    assert_eq!(got, "ACTION=SURFACE,NOTE=timed");
+    client.close().await;
+    let _ = stop.send(());
+    running.await.unwrap().unwrap();
+    db.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
