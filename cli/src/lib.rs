@@ -42,9 +42,11 @@ pub mod amac_cmd;
 mod byte_text;
 pub mod dccl_cmd;
 pub mod dccl_tool;
+pub mod fleet;
 mod frame_decoder;
 mod lines;
 pub mod modem_cmd;
+pub mod mqtt_cmd;
 pub mod passphrase;
 pub mod plot;
 pub mod position_cmd;
@@ -98,6 +100,9 @@ pub enum GobyCommand {
     /// Modem drivers: emulate WHOI Micro-Modems for bench tests.
     #[command(subcommand)]
     Modem(modem_cmd::ModemCommand),
+    /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.
+    #[command(subcommand)]
+    Mqtt(mqtt_cmd::MqttCommand),
 }
 
 /// A failure that ends a command.
@@ -182,6 +187,7 @@ pub fn run_goby(
         GobyCommand::Queue(cmd) => queue_cmd::run(&cmd, stdout),
         GobyCommand::Position(cmd) => position_cmd::run(&cmd, stdout),
         GobyCommand::Modem(cmd) => modem_cmd::run(&cmd, stdout),
+        GobyCommand::Mqtt(cmd) => mqtt_cmd::run(&cmd, stdout),
     };
     let flushed = stdout.flush().map_err(CliError::from);
     match result.and_then(|status| flushed.map(|()| status)) {

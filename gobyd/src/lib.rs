@@ -21,7 +21,8 @@
 //! data directory (one daemon each, private files), [`dedup`] is the
 //! receiver's duplicate filter, [`json_protocol`] and
 //! [`json_server`] serve JSON clients, [`moos_bridge`] joins a MOOS
-//! community, [`mission_file`] reads the configuration from a MOOS mission
+//! community, [`mqtt`] bridges to an MQTT broker (with [`link_event`] the
+//! link's own events), [`mission_file`] reads the configuration from a MOOS mission
 //! file, [`translator`] turns MOOS variables into DCCL messages and back
 //! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
 //! came from the modem, and [`command`] is the `gobyd` command line.
@@ -36,9 +37,11 @@ pub mod dedup;
 pub mod door;
 pub mod json_protocol;
 pub mod json_server;
+pub mod link_event;
 pub mod mission_file;
 pub mod modem_event;
 pub mod moos_bridge;
+pub mod mqtt;
 pub mod outbox;
 pub mod raw_log;
 pub mod runtime;

@@ -33,6 +33,7 @@ use super::dedup::{DeliveredLog, Identity};
 use super::door::Door;
 use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, DaemonEvent, EventLine, JsonInterface, Publish};
+use super::link_event::LinkEvent;
 use super::modem_event::ModemEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
@@ -112,6 +113,9 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     if let Some(problem) = config::mac_slot_problem(&config) {
         return Err(ConfigError::Invalid(problem).into());
     }
+    if let Some(mqtt) = &config.mqtt {
+        super::mqtt::settings::settings(mqtt, config.modem_id())?;
+    }
     let defs = config::load_definitions(&config)?;
     let mut queue_config = config.queue.clone().unwrap_or_default();
     config::default_entries(&mut queue_config, &defs.loaded);
@@ -131,6 +135,7 @@ pub struct Daemon {
     /// Type names by DCCL id.
     names: HashMap<u32, String>,
     events: broadcast::Sender<EventLine>,
+    link: broadcast::Sender<LinkEvent>,
     publish_rx: mpsc::Receiver<Publish>,
     publish_tx: mpsc::Sender<Publish>,
     control_rx: mpsc::Receiver<Control>,
@@ -292,6 +297,18 @@ impl Daemon {
             json_udp = socket.local_addr().ok();
             tasks.spawn(interface.serve_udp(socket));
         }
+        let (link, _) = broadcast::channel(1024);
+        if let Some(mqtt) = config.mqtt.clone() {
+            let bridge = super::mqtt::Bridge::new(
+                mqtt,
+                config.modem_id(),
+                codec.clone(),
+                publish_tx.clone(),
+            )?;
+            if let Some(bridge) = bridge {
+                tasks.spawn(bridge.run(events.subscribe(), link.subscribe()));
+            }
+        }
         if config.moos.is_some() {
             let settings = super::moos_bridge::BridgeSettings::from_config(&config, &codec)
                 .map_err(config::ConfigError::Invalid)?;
@@ -322,6 +339,7 @@ impl Daemon {
             driver,
             names,
             events,
+            link,
             publish_rx,
             publish_tx,
             control_rx,
@@ -370,6 +388,12 @@ impl Daemon {
     /// A receiver of the event lines sent to clients.
     pub fn subscribe(&self) -> broadcast::Receiver<EventLine> {
         self.events.subscribe()
+    }
+
+    /// A receiver of the link's own events (driver state, MAC slots,
+    /// receptions).
+    pub fn link_events(&self) -> broadcast::Receiver<LinkEvent> {
+        self.link.subscribe()
     }
 
     /// Runs until `shutdown` completes, then stops the driver and closes the
@@ -498,6 +522,7 @@ impl Daemon {
         if let Some(reported) = ModemEvent::of_driver(&event) {
             self.report(reported);
         }
+        self.link_event(&event);
         match event {
             DriverEvent::DataRequest(request) => {
                 let mut filled = request.template().clone();
@@ -542,6 +567,19 @@ impl Daemon {
         }
     }
 
+    /// Tells embedded interfaces about the link (nothing waits for them).
+    fn link_event(&self, event: &DriverEvent) {
+        let link = match event {
+            DriverEvent::Status(status) => LinkEvent::Driver(Arc::new(status.clone())),
+            DriverEvent::Received(transmission) => LinkEvent::Received {
+                transmission: Arc::new(transmission.clone()),
+                time: SystemClock.now(),
+            },
+            _ => return,
+        };
+        let _ = self.link.send(link);
+    }
+
     /// Starts the slots due. Each transmission initiated gets a `unique_id`
     /// (the acks that answer it name it) and, in `time` and `slot_seconds`,
     /// the time left in its slot: the driver drops it rather than run it
@@ -552,6 +590,9 @@ impl Daemon {
             let amac::MacEvent::Slot(slot) = &event else {
                 continue;
             };
+            if slot.initiate().is_none() {
+                let _ = self.link.send(LinkEvent::Slot(None));
+            }
             if let Some(transmission) = slot.initiate() {
                 let mut transmission = transmission.clone();
                 self.next_transmission = self.next_transmission.wrapping_add(1);
@@ -567,6 +608,9 @@ impl Daemon {
                     slot = slot.position.index,
                     "initiating a transmission"
                 );
+                let _ = self
+                    .link
+                    .send(LinkEvent::Slot(Some(Arc::new(transmission.clone()))));
                 if let Err(e) = self.driver.initiate_transmission(transmission) {
                     tracing::error!("cannot initiate a transmission: {e}");
                 }

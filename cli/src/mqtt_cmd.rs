@@ -1,0 +1,140 @@
+//! `goby mqtt`: the fleet as the gateways publish it on an MQTT broker.
+
+use std::io::{IsTerminal, Write};
+use std::time::Duration;
+
+use clap::{Args, Subcommand};
+use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+
+use crate::fleet::Fleet;
+use crate::{CliError, Status};
+
+/// Subcommands of `goby mqtt`.
+#[derive(Debug, Subcommand)]
+pub enum MqttCommand {
+    /// Print a live table of the fleet under PREFIX: nodes, bridge state,
+    /// queued messages, last reception (link), last messages, driver state.
+    /// On a terminal the table is redrawn on every change; otherwise one
+    /// line per publication is printed, and the table at the end.
+    Watch(WatchArgs),
+}
+
+/// Options of `goby mqtt watch`.
+#[derive(Debug, Args)]
+pub struct WatchArgs {
+    /// The topic prefix the gateways publish under (their `mqtt.topic_prefix`).
+    #[arg(value_name = "PREFIX")]
+    pub prefix: String,
+    /// The broker, HOST:PORT.
+    #[arg(long, default_value = "127.0.0.1:1883")]
+    pub broker: String,
+    /// Print the table once the retained values have arrived (no new
+    /// publication for half a second) and exit.
+    #[arg(long, conflicts_with = "duration")]
+    pub once: bool,
+    /// Watch for this many seconds, then print the table and exit.
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+}
+
+/// Runs a `goby mqtt` command.
+pub fn run(cmd: &MqttCommand, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    match cmd {
+        MqttCommand::Watch(args) => watch(args, stdout),
+    }
+}
+
+fn now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}
+
+fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    let (host, port) = args
+        .broker
+        .rsplit_once(':')
+        .and_then(|(h, p)| Some((h.trim_matches(['[', ']']), p.parse::<u16>().ok()?)))
+        .ok_or_else(|| CliError::setup(format!("--broker {:?} is not HOST:PORT", args.broker)))?;
+    let duration = args
+        .duration
+        .map(|d| {
+            Duration::try_from_secs_f64(d)
+                .ok()
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    CliError::setup(format!(
+                        "--duration must be a positive number of seconds, not {d}"
+                    ))
+                })
+        })
+        .transpose()?;
+    let prefix = args.prefix.trim_end_matches('/');
+    if prefix.is_empty() || prefix.contains(['+', '#']) {
+        return Err(CliError::setup(format!(
+            "PREFIX {:?} must be a topic prefix without wildcards",
+            args.prefix
+        )));
+    }
+    let redraw = std::io::stdout().is_terminal() && !args.once;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
+    let mut fleet = Fleet::new(prefix);
+    runtime.block_on(async {
+        let mut options =
+            MqttOptions::new(format!("goby-watch-{}", std::process::id()), host, port);
+        options.set_keep_alive(Duration::from_secs(30));
+        let (client, mut eventloop) = AsyncClient::new(options, 16);
+        client
+            .subscribe(format!("{prefix}/#"), QoS::AtMostOnce)
+            .await
+            .map_err(|e| CliError::setup(e.to_string()))?;
+        let end = duration.map(|d| tokio::time::Instant::now() + d);
+        let quiet = Duration::from_millis(500);
+        let mut connected = false;
+        loop {
+            let wait = if args.once && connected {
+                quiet
+            } else {
+                Duration::from_secs(3600)
+            };
+            let polled = tokio::select! {
+                polled = eventloop.poll() => polled,
+                () = tokio::time::sleep(wait) => break,
+                () = async { match end { Some(end) => tokio::time::sleep_until(end).await, None => std::future::pending().await } } => break,
+            };
+            match polled {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => connected = true,
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    if let Some(line) = fleet.update(&p.topic, &p.payload) {
+                        if redraw {
+                            write!(stdout, "\x1b[H\x1b[2J{}", fleet.table(now()))?;
+                            stdout.flush()?;
+                        } else if !args.once {
+                            writeln!(stdout, "{line}")?;
+                        }
+                    }
+                }
+                Ok(_) => {}
+                Err(e) if !connected => {
+                    return Err(CliError::setup(format!(
+                        "cannot reach the broker {}: {e}",
+                        args.broker
+                    )))
+                }
+                Err(e) => {
+                    eprintln!("goby mqtt watch: {e}; reconnecting");
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                }
+            }
+        }
+        Ok::<(), CliError>(())
+    })?;
+    if !redraw {
+        write!(stdout, "{}", fleet.table(now()))?;
+    }
+    Ok(Status::Ok)
+}

@@ -1,0 +1,276 @@
+//! The MQTT bridge: gobyd as a client of an MQTT broker, so that any
+//! number of gateways and shore consoles share one picture of a fleet.
+//!
+//! The bridge is a task of its own fed by the core's channels: the core
+//! never waits for it or for the broker. What it must publish while the
+//! broker is away waits in a bounded buffer (the oldest dropped first, and
+//! counted in the status); it reconnects with a doubling backoff.
+//!
+//! Messages to send come from `PREFIX/NODE/tx/TYPE` and `PREFIX/all/tx/TYPE`
+//! in a persistent session with manual acknowledgements: a message is
+//! acknowledged to the broker only once the core has written it to its
+//! journal, so nothing the broker handed over is lost if gobyd or the
+//! broker stops. Topics and payloads: [`payload`].
+
+pub mod backlog;
+pub mod inbound;
+pub mod payload;
+pub mod settings;
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use dccl::Codec;
+use protos::goby::apps::protobuf::gobyd_config::MqttBridge;
+use queue::{Clock, SystemClock};
+use rumqttc::{AsyncClient, Event, EventLoop, Packet};
+use tokio::sync::{broadcast, mpsc};
+
+use crate::config::ConfigError;
+use crate::json_server::{EventLine, Publish};
+use crate::link_event::LinkEvent;
+use backlog::Backlog;
+use payload::{BridgeStatus, Formatter, Outgoing};
+use settings::Settings;
+
+/// Requests the client holds for its connection beyond the bridge's own
+/// buffer.
+const CLIENT_CAPACITY: usize = 256;
+
+/// How often the retained status is refreshed, seconds.
+const STATUS_PERIOD: Duration = Duration::from_secs(10);
+
+/// A configured bridge, ready to [`run`](Bridge::run).
+#[derive(Debug)]
+pub struct Bridge {
+    settings: Settings,
+    modem_id: i32,
+    codec: Arc<Codec>,
+    core: mpsc::Sender<Publish>,
+}
+
+impl Bridge {
+    /// Checks the `mqtt` section; `None` when it names no broker. `core` is
+    /// the daemon's publish channel ([`crate::runtime::Daemon::publisher`]).
+    pub fn new(
+        config: MqttBridge,
+        modem_id: i32,
+        codec: Arc<Codec>,
+        core: mpsc::Sender<Publish>,
+    ) -> Result<Option<Self>, ConfigError> {
+        Ok(
+            settings::settings(&config, modem_id)?.map(|settings| Bridge {
+                settings,
+                modem_id,
+                codec,
+                core,
+            }),
+        )
+    }
+
+    /// Bridges until the task is dropped: publishes the core's `events`
+    /// and `link` events, and hands messages from `tx` topics to the core.
+    pub async fn run(
+        self,
+        events: broadcast::Receiver<EventLine>,
+        link: broadcast::Receiver<LinkEvent>,
+    ) {
+        let Bridge {
+            settings,
+            modem_id,
+            codec,
+            core,
+        } = self;
+        let names: HashMap<u32, String> = codec
+            .loaded()
+            .into_iter()
+            .filter_map(|n| codec.id_of(&n).ok().map(|id| (id, n)))
+            .collect();
+        let formatter = Formatter::new(settings.topics.clone(), names);
+        let (client, eventloop) = AsyncClient::new(settings.options.clone(), CLIENT_CAPACITY);
+        let (incoming_tx, incoming_rx) = mpsc::unbounded_channel();
+        let (notice_tx, notice_rx) = mpsc::unbounded_channel();
+        let inbound = tokio::spawn(inbound::run(
+            settings.topics.clone(),
+            codec,
+            core,
+            client.clone(),
+            Arc::new(Formatter::new(settings.topics.clone(), HashMap::new())),
+            incoming_rx,
+            notice_tx,
+        ));
+        let settings_buffer = settings.buffer;
+        let mut state = Loop {
+            settings,
+            client,
+            formatter,
+            buffer: Backlog::new(settings_buffer),
+            status: BridgeStatus {
+                modem_id,
+                ..Default::default()
+            },
+            lagged: 0,
+            connected: false,
+            ever_connected: false,
+            lost_at: None,
+            incoming: incoming_tx,
+        };
+        state.run(eventloop, events, link, notice_rx).await;
+        inbound.abort();
+    }
+}
+
+/// The bridge's state while it runs.
+struct Loop {
+    settings: Settings,
+    client: AsyncClient,
+    formatter: Formatter,
+    buffer: Backlog,
+    /// Broadcast events the bridge missed by falling behind the core.
+    lagged: u64,
+    status: BridgeStatus,
+    connected: bool,
+    ever_connected: bool,
+    lost_at: Option<Instant>,
+    incoming: mpsc::UnboundedSender<rumqttc::Publish>,
+}
+
+impl Loop {
+    async fn run(
+        &mut self,
+        mut eventloop: EventLoop,
+        mut events: broadcast::Receiver<EventLine>,
+        mut link: broadcast::Receiver<LinkEvent>,
+        mut notices: mpsc::UnboundedReceiver<Outgoing>,
+    ) {
+        let mut backoff = self.settings.backoff.0;
+        let mut retry_at: Option<tokio::time::Instant> = None;
+        let mut status_tick = tokio::time::interval(STATUS_PERIOD);
+        let broker = format!(
+            "{}:{}",
+            self.settings.options.broker_address().0,
+            self.settings.options.broker_address().1
+        );
+        loop {
+            self.flush();
+            tokio::select! {
+                biased;
+                // Link events first: a reception's statistics precede the
+                // messages it carried.
+                got = link.recv() => match got {
+                    Ok(event) => {
+                        if let Some(out) = self.formatter.link_event(&event, SystemClock.now()) {
+                            self.push(out);
+                        }
+                    }
+                    Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,
+                    Err(broadcast::error::RecvError::Closed) => break,
+                },
+                got = events.recv() => match got {
+                    Ok(event) => {
+                        if let crate::json_server::DaemonEvent::Queue(queue_event) = &event.event {
+                            if let Some(out) = self.formatter.queue_event(queue_event, SystemClock.now()) {
+                                self.push(out);
+                            }
+                        }
+                    }
+                    Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,
+                    Err(broadcast::error::RecvError::Closed) => break,
+                },
+                Some(notice) = notices.recv() => self.push(notice),
+                polled = eventloop.poll(), if retry_at.is_none() => match polled {
+                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                        backoff = self.settings.backoff.0;
+                        self.connected(&broker);
+                    }
+                    Ok(Event::Incoming(Packet::Publish(publish))) => {
+                        let _ = self.incoming.send(publish);
+                    }
+                    Ok(_) => {}
+                    Err(e) => {
+                        if self.connected || !self.ever_connected && self.lost_at.is_none() {
+                            tracing::warn!("MQTT: broker {broker} away ({e}); buffering and reconnecting");
+                            self.lost_at = Some(Instant::now());
+                        }
+                        self.connected = false;
+                        retry_at = Some(tokio::time::Instant::now() + backoff);
+                        backoff = (backoff * 2).min(self.settings.backoff.1);
+                    }
+                },
+                () = sleep_until(retry_at), if retry_at.is_some() => retry_at = None,
+                _ = status_tick.tick() => {
+                    if self.connected {
+                        self.push_status();
+                    }
+                }
+            }
+        }
+    }
+
+    /// On every connection: subscribe (again, in case the broker lost the
+    /// session) and publish the status.
+    fn connected(&mut self, broker: &str) {
+        self.connected = true;
+        if let Some(lost) = self.lost_at.take() {
+            self.status.last_outage_seconds = lost.elapsed().as_secs_f64();
+            if self.ever_connected {
+                self.status.reconnects += 1;
+            }
+        }
+        self.ever_connected = true;
+        tracing::info!(
+            reconnects = self.status.reconnects,
+            dropped = self.buffer.dropped() + self.lagged,
+            buffered = self.buffer.len(),
+            "MQTT: connected to {broker}"
+        );
+        for filter in self.settings.topics.tx_filters() {
+            if let Err(e) = self.client.try_subscribe(filter.clone(), self.settings.qos) {
+                tracing::error!("MQTT: cannot subscribe to {filter}: {e}");
+            }
+        }
+        self.push_status();
+    }
+
+    fn push_status(&mut self) {
+        self.status.buffered = self.buffer.len();
+        self.status.dropped = self.buffer.dropped() + self.lagged;
+        let status = self.formatter.status(&self.status, SystemClock.now());
+        // The status goes ahead of what waits, so consoles see the node is
+        // back before its backlog.
+        self.buffer.push_front(status);
+    }
+
+    /// Buffers a publication, dropping the oldest beyond the bound.
+    fn push(&mut self, out: Outgoing) {
+        self.buffer.push(out);
+    }
+
+    /// Hands what waits to the client while connected, as far as it takes.
+    fn flush(&mut self) {
+        if !self.connected {
+            return;
+        }
+        while let Some(out) = self.buffer.front() {
+            match self.client.try_publish(
+                out.topic.clone(),
+                self.settings.qos,
+                out.retain,
+                out.payload.clone(),
+            ) {
+                Ok(()) => {
+                    self.buffer.pop();
+                }
+                Err(_) => break,
+            }
+        }
+    }
+}
+
+async fn sleep_until(at: Option<tokio::time::Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}

@@ -1,0 +1,408 @@
+//! gobyd's MQTT bridge against a real Mosquitto broker on loopback: two
+//! gobyd processes on the acoustic simulator, each bridged to the broker; a
+//! message published on one node's `tx` topic arrives on the other's `rx`
+//! topic with its ack; nothing accepted is lost when the broker (stopped
+//! or killed), or a gobyd, stops and starts again mid-run. Skipped, visibly, without
+//! Mosquitto (`.ci/mosquitto.sh` installs it).
+
+mod support;
+
+use std::collections::BTreeSet;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use serde_json::Value;
+use support::broker::{Broker, Watcher};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-mqtt-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Node `id` of two on the acoustic simulator (150 m apart, packets between
+/// the processes over UDP), TDMA slots of 1.2 s, bridged to `broker`.
+fn node_config(id: i32, ports: [u16; 2], broker: &str, data_dir: &Path) -> String {
+    let me = ports[(id - 1) as usize];
+    let other_id = 3 - id;
+    let other = ports[(other_id - 1) as usize];
+    format!(
+        r#"
+modem_id: {id}
+driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{
+    node {{ modem_id: 1 x: 0 y: 0 z: 10 }}
+    node {{ modem_id: 2 x: 150 y: 0 z: 10 }}
+    packet_overhead_seconds: 0.05
+    channel: "node{id}"
+    udp_local {{ modem_id: {id} port: {me} }}
+    udp_peer {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
+  }}
+}}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: 1.2 }}
+  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: 1.2 }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 600
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "" }}
+mqtt {{
+  broker: "{broker}"
+  topic_prefix: "fleet"
+  reconnect_min_seconds: 0.1
+  reconnect_max_seconds: 1
+}}
+data_dir: "{dir}"
+log {{ level: "info" raw_log: false }}
+"#,
+        dir = data_dir.display()
+    )
+}
+
+/// A gobyd process; its log goes to `DIR/nodeN.log`.
+struct Gobyd {
+    child: Child,
+}
+
+impl Gobyd {
+    fn start(dir: &Path, id: i32) -> Gobyd {
+        let log = File::options()
+            .create(true)
+            .append(true)
+            .open(dir.join(format!("node{id}.log")))
+            .unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .arg("--config")
+            .arg(dir.join(format!("node{id}.cfg")))
+            .env_remove("RUST_BACKTRACE")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("gobyd starts");
+        Gobyd { child }
+    }
+
+    /// SIGKILL: no chance to tidy up.
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Gobyd {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+const TX: &str = "fleet/1/tx/goby.example.Command";
+const RX: &str = "fleet/2/rx/goby.example.Command";
+
+fn command(note: &str) -> String {
+    format!(r#"{{"destination": 2, "action": "GOTO", "note": "{note}"}}"#)
+}
+
+fn note_of(v: &Value) -> Option<String> {
+    v["msg"]["note"].as_str().map(str::to_string)
+}
+
+/// Waits until every one of `notes` has been received by node 2.
+fn wait_all_received(watcher: &Watcher, notes: &BTreeSet<String>) {
+    let mut arrived = BTreeSet::new();
+    while !arrived.is_superset(notes) {
+        let note = watcher.wait_on(RX, note_of);
+        arrived.insert(note);
+    }
+}
+
+/// Waits for a retained status of `node` that `pick` likes.
+fn wait_status(watcher: &Watcher, node: i32, mut pick: impl FnMut(&Value) -> bool) -> Value {
+    watcher.wait_on(&format!("fleet/{node}/status"), |v| {
+        pick(v).then(|| v.clone())
+    })
+}
+
+#[test]
+fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
+    let dir = scratch("fleet");
+    let Some(mut broker) = Broker::start(
+        &dir,
+        "two_gateways_share_a_broker_through_its_restart_and_theirs",
+    ) else {
+        return;
+    };
+    let ports = [free_udp_port(), free_udp_port()];
+    for id in [1, 2] {
+        let config = node_config(id, ports, &broker.address(), &dir.join(format!("node{id}")));
+        std::fs::write(dir.join(format!("node{id}.cfg")), config).unwrap();
+    }
+    let watcher = Watcher::start(&broker.address(), "console", "fleet/#");
+    let _node2 = Gobyd::start(&dir, 2);
+    let mut node1 = Gobyd::start(&dir, 1);
+    for node in [1, 2] {
+        wait_status(&watcher, node, |v| v["online"] == true);
+    }
+
+    // A message on node 1's tx topic is queued (and said so), crosses the
+    // simulated water, appears on node 2's rx topic with its source and the
+    // reception's statistics, and its ack on node 1's ack topic.
+    watcher.publish(TX, command("first"));
+    let accepted = watcher.wait_on("fleet/1/accepted", |v| Some(v.clone()));
+    assert_eq!(accepted["accepted"], "goby.example.Command", "{accepted}");
+    assert_eq!(accepted["topic"], TX);
+    assert_eq!(accepted["msg"]["note"], "first");
+    let rx = watcher.wait_on(RX, |v| {
+        (note_of(v).as_deref() == Some("first")).then(|| v.clone())
+    });
+    assert_eq!(rx["src"], 1, "{rx}");
+    assert_eq!(rx["dest"], 2, "{rx}");
+    assert_eq!(rx["msg"]["action"], "GOTO", "{rx}");
+    assert_eq!(rx["link"]["src"], 1, "{rx}");
+    assert!(rx["time"].as_f64().unwrap() > 1.6e9, "{rx}");
+    let acked = watcher.wait_on("fleet/1/ack/goby.example.Command", note_of);
+    assert_eq!(acked, "first");
+    let size = watcher.wait_on("fleet/1/queue/goby.example.Command", |v| v["size"].as_u64());
+    assert!(size <= 1);
+
+    // Bad publications get the reason on the node's error topic.
+    watcher.publish(TX, "{not json");
+    let error = watcher.wait_on("fleet/1/error", |v| Some(v.clone()));
+    assert!(
+        error["error"].as_str().unwrap().contains("not JSON"),
+        "{error}"
+    );
+    assert_eq!(error["topic"], TX);
+    watcher.publish("fleet/1/tx/no.Such", "{}");
+    let error = watcher.wait_on("fleet/1/error", |v| Some(v.clone()));
+    assert!(
+        error["error"]
+            .as_str()
+            .unwrap()
+            .contains("unknown message type no.Such"),
+        "{error}"
+    );
+    watcher.publish(TX, r#"{"destination": 2, "nope": 1}"#);
+    let error = watcher.wait_on("fleet/1/error", |v| Some(v.clone()));
+    assert!(
+        error["error"]
+            .as_str()
+            .unwrap()
+            .contains("goby.example.Command"),
+        "{error}"
+    );
+
+    // The broker stops right after taking a burst and starts again: every
+    // message arrives, and node 1's status counts the reconnection.
+    let burst: BTreeSet<String> = (0..5).map(|i| format!("b{i}")).collect();
+    for note in &burst {
+        watcher.publish(TX, command(note));
+    }
+    watcher.wait_pubacks(4 + burst.len());
+    broker.stop();
+    assert!(
+        broker.persistence_file().is_file(),
+        "the broker saved no sessions"
+    );
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    broker.restart();
+    wait_all_received(&watcher, &burst);
+    let status = wait_status(&watcher, 1, |v| v["reconnects"].as_u64() >= Some(1));
+    assert_eq!(status["online"], true);
+
+    // The broker is killed (SIGKILL) once node 1 has accepted a burst, and
+    // started again: every accepted message arrives (what node 2 received
+    // meanwhile waited in its bridge).
+    let burst: BTreeSet<String> = (0..5).map(|i| format!("k{i}")).collect();
+    for note in &burst {
+        watcher.publish(TX, command(note));
+    }
+    let mut accepted = BTreeSet::new();
+    while !accepted.is_superset(&burst) {
+        accepted.insert(watcher.wait_on("fleet/1/accepted", note_of));
+    }
+    broker.kill();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    broker.restart();
+    wait_all_received(&watcher, &burst);
+    wait_status(&watcher, 1, |v| v["reconnects"].as_u64() >= Some(2));
+
+    // Node 1 is killed right after the broker took a burst for it, and
+    // started again: every message arrives (the broker kept what node 1
+    // had not acknowledged, node 1's journal what it had).
+    let burst: BTreeSet<String> = (0..5).map(|i| format!("c{i}")).collect();
+    for note in &burst {
+        watcher.publish(TX, command(note));
+    }
+    watcher.wait_pubacks(burst.len());
+    node1.kill();
+    wait_status(&watcher, 1, |v| v["online"] == false);
+    node1 = Gobyd::start(&dir, 1);
+    wait_all_received(&watcher, &burst);
+    drop(node1);
+    drop(broker);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The README's fleet configurations check, and name their nodes.
+#[test]
+fn the_fleet_configurations_check() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    for (i, node) in [(1, "auv1"), (2, "auv2")] {
+        let config = gobyd::config::load(&dir.join(format!("fleet-vehicle{i}.pb.txt"))).unwrap();
+        gobyd::runtime::check(config.clone()).unwrap();
+        let settings = gobyd::mqtt::settings::settings(config.mqtt.as_ref().unwrap(), i)
+            .unwrap()
+            .unwrap();
+        assert_eq!(settings.topics.node("tx/x"), format!("fleet/{node}/tx/x"));
+    }
+    // `gobyd --check` looks at the mqtt section too.
+    let config = gobyd::config::parse("mqtt { broker: \"h:1\" qos: 2 }", "x").unwrap();
+    let e = gobyd::runtime::check(config).unwrap_err().to_string();
+    assert!(e.contains("mqtt.qos 2"), "{e}");
+}
+
+/// Runs openssl with `args` in `dir`; false (and a notice) if it is missing
+/// or fails.
+#[cfg(feature = "mqtt-tls")]
+fn openssl(dir: &Path, args: &[&str]) -> bool {
+    match Command::new("openssl")
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+    {
+        Ok(s) if s.success() => true,
+        other => {
+            eprintln!("openssl {args:?}: {other:?}");
+            false
+        }
+    }
+}
+
+/// gobyd reaches a broker over TLS (its certificate signed by a test
+/// authority made here with openssl): its status arrives and a message
+/// published on its tx topic is accepted. A console reads on a plain
+/// listener of the same broker.
+#[cfg(feature = "mqtt-tls")]
+#[test]
+fn the_bridge_speaks_tls() {
+    let dir = scratch("tls");
+    let made = openssl(
+        &dir,
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=goby test authority",
+            "-keyout",
+            "ca.key",
+            "-out",
+            "ca.pem",
+        ],
+    ) && openssl(
+        &dir,
+        &[
+            "req",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-subj",
+            "/CN=127.0.0.1",
+            "-keyout",
+            "server.key",
+            "-out",
+            "server.csr",
+        ],
+    ) && {
+        std::fs::write(
+            dir.join("ext.cnf"),
+            "subjectAltName=IP:127.0.0.1\nbasicConstraints=CA:FALSE\n",
+        )
+        .unwrap();
+        openssl(
+            &dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                "server.csr",
+                "-CA",
+                "ca.pem",
+                "-CAkey",
+                "ca.key",
+                "-CAcreateserial",
+                "-days",
+                "2",
+                "-extfile",
+                "ext.cnf",
+                "-out",
+                "server.pem",
+            ],
+        )
+    };
+    if !made {
+        eprintln!("SKIPPED the_bridge_speaks_tls: openssl could not make the test certificates");
+        return;
+    }
+    let tls_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let extra = format!(
+        "listener {tls_port} 127.0.0.1\ncafile {d}/ca.pem\ncertfile {d}/server.pem\nkeyfile {d}/server.key\n",
+        d = dir.display()
+    );
+    let Some(broker) = Broker::start_with(&dir, "the_bridge_speaks_tls", &extra) else {
+        return;
+    };
+    let config = format!(
+        r#"
+modem_id: 1
+json {{ tcp_bind: "" }}
+mqtt {{ broker: "127.0.0.1:{tls_port}" topic_prefix: "secure" tls {{ ca_file: "{d}/ca.pem" }} }}
+data_dir: "{d}/node1"
+"#,
+        d = dir.display()
+    );
+    std::fs::write(dir.join("node1.cfg"), config).unwrap();
+    let watcher = Watcher::start(&broker.address(), "console", "secure/#");
+    let _node = Gobyd::start(&dir, 1);
+    watcher.wait_on("secure/1/status", |v| (v["online"] == true).then_some(()));
+    watcher.publish("secure/1/tx/goby.example.Command", command("sealed"));
+    let accepted = watcher.wait_on("secure/1/accepted", |v| Some(v.clone()));
+    assert_eq!(accepted["accepted"], "goby.example.Command", "{accepted}");
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[cfg(not(feature = "mqtt-tls"))]
+#[test]
+#[ignore = "TLS to the broker needs gobyd built with --features mqtt-tls: cargo test -p gobyd --features mqtt-tls --test mqtt"]
+fn the_bridge_speaks_tls() {}
