@@ -249,6 +249,46 @@ pub fn mac_slot_problem(config: &GobydConfig) -> Option<String> {
     ))
 }
 
+/// Settings that parse but cannot work, found before the daemon runs: a JSON
+/// interface address that is not `HOST:PORT`, and a MAC slot rate that the
+/// Micro-Modem (and the simulator, which models it) does not have. Expects a
+/// [`complete`]d configuration.
+pub fn settings_problem(config: &GobydConfig) -> Option<String> {
+    use std::net::ToSocketAddrs;
+    let json = config.json.clone().unwrap_or_default();
+    for (name, bind) in [("tcp_bind", json.tcp_bind()), ("udp_bind", json.udp_bind())] {
+        if bind.is_empty() {
+            continue;
+        }
+        if let Err(e) = bind.to_socket_addrs() {
+            return Some(format!(
+                "json.{name} {bind:?} is not an address to listen on (HOST:PORT): {e}"
+            ));
+        }
+    }
+    let modem_rates = matches!(
+        config.driver.as_ref().and_then(|d| d.driver.as_ref()),
+        Some(driver_config::Driver::DriverType(t))
+            if *t == DriverType::DriverWhoiMicromodem as i32
+                || *t == DriverType::DriverAcousticSimulator as i32
+    );
+    if modem_rates {
+        if let Some(slot) = config
+            .mac
+            .iter()
+            .flat_map(|m| m.slot.iter())
+            .find(|s| modemdriver::rate::spec(s.rate()).is_none())
+        {
+            return Some(format!(
+                "mac slot {{ src: {} rate: {} }}: not a Micro-Modem rate (0-6); every transmission in that slot would fail",
+                slot.src(),
+                slot.rate()
+            ));
+        }
+    }
+    None
+}
+
 /// Queue entries for the loaded types that have none, with the defaults;
 /// the example types also get the roles of [`EXAMPLE_CONFIG`] (their
 /// `source` and `destination` fields), so that they are addressed the same

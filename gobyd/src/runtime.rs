@@ -113,6 +113,9 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     if let Some(problem) = config::mac_slot_problem(&config) {
         return Err(ConfigError::Invalid(problem).into());
     }
+    if let Some(problem) = config::settings_problem(&config) {
+        return Err(ConfigError::Invalid(problem).into());
+    }
     if let Some(mqtt) = &config.mqtt {
         super::mqtt::settings::settings(mqtt, config.modem_id())?;
     }

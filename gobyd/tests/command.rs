@@ -150,6 +150,33 @@ fn check_refuses_a_modem_id_with_no_mac_slot() {
 }
 
 #[test]
+fn check_refuses_settings_that_cannot_work() {
+    let dir = scratch("gobyd-cannot-work");
+    let path = dir.join("bad.pb.txt");
+    for (text, expected) in [
+        (
+            "modem_id: 1\nmac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 9 slot_seconds: 10 } }\n",
+            "rate: 9 }: not a Micro-Modem rate",
+        ),
+        (
+            "modem_id: 1\njson { tcp_bind: \"127.0.0.1:99999\" }\n",
+            "json.tcp_bind \"127.0.0.1:99999\" is not an address",
+        ),
+        (
+            "modem_id: 1\njson { tcp_bind: \"localhost\" }\n",
+            "json.tcp_bind \"localhost\" is not an address",
+        ),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let err = stderr_text(&out);
+        assert!(err.contains(expected), "{text}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn driver_sections_written_as_goby3_writes_them_are_read() {
     let dir = scratch("gobyd-goby3");
     let path = dir.join("goby3.pb.txt");

@@ -15,6 +15,7 @@
 pub mod backlog;
 pub mod inbound;
 pub mod payload;
+pub mod retained;
 pub mod settings;
 
 use std::collections::HashMap;
@@ -32,6 +33,7 @@ use crate::json_server::{EventLine, Publish};
 use crate::link_event::LinkEvent;
 use backlog::Backlog;
 use payload::{BridgeStatus, Formatter, Outgoing};
+use retained::Retained;
 use settings::Settings;
 
 /// Requests the client holds for its connection beyond the bridge's own
@@ -106,6 +108,7 @@ impl Bridge {
             client,
             formatter,
             buffer: Backlog::new(settings_buffer),
+            retained: Retained::default(),
             status: BridgeStatus {
                 modem_id,
                 ..Default::default()
@@ -127,6 +130,9 @@ struct Loop {
     client: AsyncClient,
     formatter: Formatter,
     buffer: Backlog,
+    /// The newest retained publication of each topic, published again on
+    /// every reconnection.
+    retained: Retained,
     /// Broadcast events the bridge missed by falling behind the core.
     lagged: u64,
     status: BridgeStatus,
@@ -230,6 +236,21 @@ impl Loop {
                 tracing::error!("MQTT: cannot subscribe to {filter}: {e}");
             }
         }
+        // The broker may have lost its retained values (restarted without
+        // persistence): publish the newest of each again, ahead of the
+        // backlog (which may hold newer ones, then published after).
+        // Never at the cost of what waits: only while the backlog has room.
+        let again: Vec<Outgoing> = self.retained.all().cloned().collect();
+        if self.buffer.len() + again.len() < self.settings.buffer {
+            for out in again.into_iter().rev() {
+                self.buffer.push_front(out);
+            }
+        } else if !again.is_empty() {
+            tracing::warn!(
+                "MQTT: backlog too full to publish the {} retained values again",
+                again.len()
+            );
+        }
         self.push_status();
     }
 
@@ -244,6 +265,7 @@ impl Loop {
 
     /// Buffers a publication, dropping the oldest beyond the bound.
     fn push(&mut self, out: Outgoing) {
+        self.retained.remember(&out);
         self.buffer.push(out);
     }
 
