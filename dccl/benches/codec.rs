@@ -14,7 +14,13 @@ use dccl::prost_reflect::DynamicMessage;
 use dccl::Codec;
 
 fn load() -> (Codec, Vec<DynamicMessage>, Vec<Vec<u8>>) {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/dccl-vectors");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let shared = root.join("../../shared/dccl-vectors");
+    let dir = if shared.is_dir() {
+        shared
+    } else {
+        root.join("tests/data/dccl-vectors")
+    };
     let pool = dccl::compile_protos(&[dir.join("vectors.proto")], &[] as &[PathBuf])
         .expect("vectors.proto compiles");
     let mut codec = Codec::new();

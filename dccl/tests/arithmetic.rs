@@ -11,7 +11,14 @@ use dccl::prost_reflect::{DescriptorPool, DynamicMessage, Value};
 use dccl::Codec;
 
 fn arithmetic_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/dccl-vectors/arithmetic")
+    // ../shared beside the project when present, else the committed copy.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let shared = root.join("../../shared/dccl-vectors/arithmetic");
+    if shared.is_dir() {
+        shared
+    } else {
+        root.join("tests/data/dccl-vectors/arithmetic")
+    }
 }
 
 fn models_text() -> String {

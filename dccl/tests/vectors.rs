@@ -7,7 +7,14 @@ use dccl::prost_reflect::{DescriptorPool, DynamicMessage};
 use dccl::Codec;
 
 fn vectors_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/dccl-vectors")
+    // ../shared beside the project when present, else the committed copy.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let shared = root.join("../../shared/dccl-vectors");
+    if shared.is_dir() {
+        shared
+    } else {
+        root.join("tests/data/dccl-vectors")
+    }
 }
 
 /// A fixed clock for the time codec (none of the shared vectors uses it).

@@ -8,7 +8,11 @@ HERE = pathlib.Path(__file__).resolve().parent
 # The workspace root is two levels up (python/tests); the shared reference
 # data lies beside the workspace, as CI lays it out.
 WORKSPACE = HERE.parent.parent
+# ../shared beside the workspace when present, else the copy committed with
+# the dccl crate's tests.
 VECTORS = WORKSPACE.parent / "shared" / "dccl-vectors"
+if not VECTORS.is_dir():
+    VECTORS = WORKSPACE / "dccl" / "tests" / "data" / "dccl-vectors"
 PROTOS = WORKSPACE / "protos" / "proto"
 
 

@@ -10,10 +10,20 @@ use prost_reflect::{DescriptorPool, DynamicMessage, MessageDescriptor, ReflectMe
 
 /// The shared wire-compatibility vectors.
 pub fn vectors_dir() -> PathBuf {
-    let dir = PathBuf::from(concat!(
+    // ../shared beside the project when present, else the copy committed
+    // with the dccl crate's tests.
+    let shared = PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../shared/dccl-vectors"
     ));
+    let dir = if shared.is_dir() {
+        shared
+    } else {
+        PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../dccl/tests/data/dccl-vectors"
+        ))
+    };
     assert!(
         dir.join("README.md").is_file(),
         "the DCCL vectors are missing: expected them in {}",
