@@ -129,13 +129,24 @@ pub fn goby_with_env(
     cmd.write_stdin(stdin.into()).output().expect("goby runs")
 }
 
-/// One folder of the shared DCCL field cases (`../shared/dccl-field-cases`).
+/// One folder of the DCCL field cases (`../shared/dccl-field-cases`, or the
+/// committed copy `dccl/tests/data/field-cases`).
 pub fn field_case(name: &str) -> PathBuf {
-    let dir = PathBuf::from(concat!(
+    // ../shared beside the project when present, else the copy committed
+    // with the dccl crate's tests.
+    let shared = PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../shared/dccl-field-cases"
-    ))
-    .join(name);
+    ));
+    let base = if shared.is_dir() {
+        shared
+    } else {
+        PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../dccl/tests/data/field-cases"
+        ))
+    };
+    let dir = base.join(name);
     assert!(
         dir.join("case.proto").is_file(),
         "the DCCL field cases are missing: expected {}",
