@@ -83,15 +83,15 @@ fn config(id: u32) -> EmulatorConfig {
     }
 }
 
-/// Modem 1 at the origin, modem 2 `RANGE` m east.
-fn geometry_of_two() -> Geometry {
+/// Modem 1 at the origin, modem 2 `RANGE` m east moving at `velocity2`.
+fn geometry_of_two(velocity2: [f64; 3]) -> Geometry {
     let mut g = Geometry::default();
-    for (id, x) in [(1, 0.0), (2, RANGE)] {
+    for (id, x, velocity) in [(1, 0.0, [0.0; 3]), (2, RANGE, velocity2)] {
         g.nodes.insert(
             id,
             Node {
                 position: Position::new(x, 0.0, 0.0),
-                velocity: [0.0; 3],
+                velocity,
             },
         );
     }
@@ -100,6 +100,12 @@ fn geometry_of_two() -> Geometry {
 
 /// Two emulated Micro-Modem 2s on the in-process channel simulator.
 async fn pair() -> (EmulatorHandle, EmulatorHandle, Host, Host) {
+    pair_moving([0.0; 3]).await
+}
+
+/// As [`pair`], modem 2 moving at `velocity2` (m/s) as far as the modems'
+/// Doppler goes.
+async fn pair_moving(velocity2: [f64; 3]) -> (EmulatorHandle, EmulatorHandle, Host, Host) {
     let medium = Medium::new();
     let mut handles = Vec::new();
     for id in [1u32, 2] {
@@ -125,7 +131,7 @@ async fn pair() -> (EmulatorHandle, EmulatorHandle, Host, Host) {
         };
         let backend = SimulatorDriver::start_on(&sim, medium.clone()).expect("simulator");
         let cfg = EmulatorConfig {
-            geometry: geometry_of_two(),
+            geometry: geometry_of_two(velocity2),
             ..config(id)
         };
         handles
@@ -148,7 +154,8 @@ fn field(s: &NmeaSentence, i: usize) -> &str {
 }
 
 /// Checks a `$CACST` (version 8): mode, rate, src, dest, packet type,
-/// frames and bad frames, and for PSK the SNR from the range.
+/// frames and bad frames, and for PSK the SNR from the range (for FSK the
+/// data quality factor from it).
 #[allow(clippy::too_many_arguments)]
 fn check_cst(
     s: &NmeaSentence,
@@ -181,7 +188,6 @@ fn check_cst(
         assert_eq!(field(s, 21), format!("{snr:.1}"), "SNR in of {s}");
         assert_eq!(field(s, 25), "-01", "{s}");
     }
-    assert_eq!(field(s, 26), "0.00", "Doppler of {s}");
 }
 
 /// Checks a `$CAXST` (version 7): rate, src, dest, ack, frames expected and
@@ -315,7 +321,9 @@ async fn rate1_cycle_with_ack_and_then_a_bad_crc() {
     h2.expect_line("CACYC,0,1,2,1,1,2").await;
     h2.expect_line("CARXD,1,2,1,1,AABB").await;
     h2.expect_line("CARXD,1,2,1,2,CCDDEE").await;
-    check_cst(&h2.expect("CACST").await, 0, 1, 1, 2, 3, 2, 0);
+    let cst = h2.expect("CACST").await;
+    check_cst(&cst, 0, 1, 1, 2, 3, 2, 0);
+    assert_eq!(field(&cst, 26), "0.00", "Doppler between still modems");
     h2.expect_line("CATXP,0").await;
     h2.expect_line("CATXF,0").await;
     check_xst(&h2.expect("CAXST").await, 1, 2, 1, 0, (0, 0), 4, 0);
@@ -378,14 +386,17 @@ async fn a_reset_aborts_the_packet_on_the_water() {
 
 #[tokio::test]
 async fn flexible_data_packets_and_their_limits() {
-    let (e1, e2, mut h1, mut h2) = pair().await;
+    // Modem 2 heads for modem 1 at 1.5 m/s: they close at 1.5 m/s.
+    let (e1, e2, mut h1, mut h2) = pair_moving([-1.5, 0.0, 0.0]).await;
     h1.send("CCTDP,2,1,0,0,DEADBEEF").await;
     h1.expect_line("CATDP,0,1,2,1,0,0,4").await;
     h1.expect_line("CATXP,4").await;
     h1.expect_line("CATXF,4").await;
     check_xst(&h1.expect("CAXST").await, 1, 1, 2, 0, (1, 1), 5, 4);
     h2.expect_line("CARDP,1,2,1,0,0,,1;4;DEADBEEF").await;
-    check_cst(&h2.expect("CACST").await, 0, 1, 1, 2, 5, 1, 0);
+    let cst = h2.expect("CACST").await;
+    check_cst(&cst, 0, 1, 1, 2, 5, 1, 0);
+    assert_eq!(field(&cst, 26), "1.50", "Doppler of closing modems");
 
     // 70 bytes at rate 1 take two 64-byte frames.
     let data: String = (0..70u8).map(|b| format!("{b:02X}")).collect();
@@ -486,4 +497,33 @@ async fn long_baseline_travel_times_follow_the_geometry() {
     h.send("CCPDT,1,2,0,0,soon,1,1,0,1").await;
     assert!(field(&h.expect("CAERR").await, 3).contains("field 4 (timeout)"));
     e.stop().await;
+}
+
+#[tokio::test]
+async fn a_lost_ack_is_sent_but_never_heard() {
+    let (e1, e2, mut h1, mut h2) = pair().await;
+    e2.control(EmulatorControl::LoseAcks(1));
+    h1.send("CCCYC,0,1,2,1,1,1").await;
+    h1.expect("CACYC").await;
+    h1.expect("CADRQ").await;
+    h1.send("CCTXD,1,2,1,0A0B").await;
+    h1.expect("CATXD").await;
+    h1.expect_line("CATXP,2").await;
+    h1.expect_line("CATXF,2").await;
+    h1.expect("CAXST").await;
+    h2.expect_line("CACYC,0,1,2,1,1,1").await;
+    h2.expect_line("CARXD,1,2,1,1,0A0B").await;
+    h2.expect("CACST").await;
+    // The receiver sends its acknowledgement ...
+    h2.expect_line("CATXP,0").await;
+    h2.expect_line("CATXF,0").await;
+    h2.expect("CAXST").await;
+    // ... and then a packet of its own, which reaches modem 1 after where the
+    // acknowledgement would have: modem 1 hears that packet, no $CAACK.
+    h2.send("CCTDP,1,1,0,0,C0FFEE").await;
+    h2.expect("CATDP").await;
+    h1.expect_line("CARDP,2,1,1,0,0,,1;3;C0FFEE").await;
+    h1.expect("CACST").await;
+    e1.stop().await;
+    e2.stop().await;
 }
