@@ -527,3 +527,30 @@ async fn a_lost_ack_is_sent_but_never_heard() {
     e1.stop().await;
     e2.stop().await;
 }
+
+#[tokio::test]
+async fn a_packet_waits_for_the_one_on_the_water() {
+    let (e1, e2, mut h1, mut h2) = pair().await;
+    h1.send("CCCYC,0,1,2,1,0,1").await;
+    h1.expect("CACYC").await;
+    h1.expect("CADRQ").await;
+    h1.send("CCTXD,1,2,0,0102").await;
+    h1.expect("CATXD").await;
+    h1.expect_line("CATXP,2").await;
+    // Asked for while the data packet (a full rate-1 packet: seconds) is on
+    // the water: taken at once, sent after it.
+    h1.send("CCTDP,2,1,0,0,DEADBEEF").await;
+    h1.expect_line("CATDP,0,1,2,1,0,0,4").await;
+    h1.expect_line("CATXF,2").await;
+    check_xst(&h1.expect("CAXST").await, 1, 1, 2, 0, (1, 1), 3, 2);
+    h1.expect_line("CATXP,4").await;
+    h1.expect_line("CATXF,4").await;
+    check_xst(&h1.expect("CAXST").await, 1, 1, 2, 0, (1, 1), 5, 4);
+    h2.expect("CACYC").await;
+    h2.expect_line("CARXD,1,2,0,1,0102").await;
+    h2.expect("CACST").await;
+    h2.expect_line("CARDP,1,2,1,0,0,,1;4;DEADBEEF").await;
+    h2.expect("CACST").await;
+    e1.stop().await;
+    e2.stop().await;
+}

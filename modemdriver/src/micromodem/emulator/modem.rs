@@ -267,7 +267,7 @@ impl Modem {
         if self.mm2.is_some() && nmea.talker != "CA" && self.mm2_busy(&nmea) {
             return;
         }
-        if self.mm2.is_some() && self.mm2_line(&nmea, has_backend) {
+        if self.mm2.is_some() && self.mm2_line(&nmea) {
             return;
         }
         let sentence = match MmSentence::from_nmea(&nmea) {

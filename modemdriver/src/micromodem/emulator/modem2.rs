@@ -126,7 +126,7 @@ impl Modem {
 
     /// Handles what a Micro-Modem 2 answers differently; `false` leaves the
     /// sentence to the common handling.
-    pub(super) fn mm2_line(&mut self, nmea: &NmeaSentence, _has_backend: bool) -> bool {
+    pub(super) fn mm2_line(&mut self, nmea: &NmeaSentence) -> bool {
         if nmea.talker != "CC" {
             return false;
         }
@@ -254,7 +254,18 @@ impl Modem {
             .into_iter()
             .partition(|(t, _)| *t <= now);
         m.timers = later;
+        // One packet on the water at a time: a transmission waits for the
+        // one under way.
+        let water_clear = self.on_water.iter().map(|p| p.ends).max();
         for (_, timer) in due {
+            if let (Some(clear), Timer::SendInit | Timer::SendData | Timer::SendFdp(_)) =
+                (water_clear, &timer)
+            {
+                if clear > now {
+                    self.schedule(clear, timer);
+                    continue;
+                }
+            }
             match timer {
                 Timer::ClockSet {
                     time,
