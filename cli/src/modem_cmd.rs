@@ -342,6 +342,24 @@ fn interrupted() -> impl std::future::Future<Output = ()> {
     }
 }
 
+/// Tells on stderr, as they happen, of host lines an emulated modem ignored
+/// (a Micro-Modem 2 ignores commands during its configuration echo). Never
+/// completes.
+async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
+    let mut seen = vec![0; emulators.len()];
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    loop {
+        tick.tick().await;
+        for ((e, seen), id) in emulators.iter().zip(&mut seen).zip(ids) {
+            let ignored = e.ignored();
+            for line in ignored.iter().skip(*seen) {
+                eprintln!("modem {id}: ignored {line} (configuration echo under way)");
+            }
+            *seen = ignored.len();
+        }
+    }
+}
+
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let backends = plan(args)?;
     let geometry = geometry(args)?;
@@ -400,9 +418,15 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             stdout.flush()?;
             emulators.push(handle);
         }
-        match duration {
-            Some(d) => tokio::time::sleep(d).await,
-            None => stop.await,
+        let end = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => stop.await,
+            }
+        };
+        tokio::select! {
+            () = end => {}
+            () = report_ignored(&args.modem_ids, &emulators) => {}
         }
         // Each emulator removes its link as it stops.
         for e in emulators {

@@ -27,12 +27,17 @@ impl Drop for Emulator {
 
 /// Starts `goby modem emulate ARGS` and reads one `modem ID: PATH` line per modem.
 fn emulate(args: &[&str], modems: usize) -> Emulator {
+    emulate_to(args, modems, Stdio::inherit())
+}
+
+/// As [`emulate`], its standard error to `stderr`.
+fn emulate_to(args: &[&str], modems: usize, stderr: Stdio) -> Emulator {
     let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
         .args(["modem", "emulate"])
         .args(args)
         .env_remove("RUST_BACKTRACE")
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .expect("goby runs");
     let stdout = child.stdout.take().expect("piped");
@@ -171,7 +176,8 @@ fn fields(v: &[&str]) -> Vec<String> {
 
 #[test]
 fn micromodem2_dialect_from_the_command_line() {
-    let emulator = emulate(
+    let log = std::env::temp_dir().join(format!("goby-emulate-mm2-{}.log", std::process::id()));
+    let emulator = emulate_to(
         &[
             "--micromodem",
             "2",
@@ -183,6 +189,7 @@ fn micromodem2_dialect_from_the_command_line() {
             "20",
         ],
         1,
+        Stdio::from(std::fs::File::create(&log).expect("log file")),
     );
     let mut tty = Tty::open(&emulator.paths[0]);
     let rev = tty.next();
@@ -190,6 +197,12 @@ fn micromodem2_dialect_from_the_command_line() {
     assert_eq!(rev.fields[1..], fields(&["INIT", "2.0.27087"]));
     assert_eq!(tty.next().fields[1..], fields(&["COPROC", "0.20.0.56"]));
     tty.send(NmeaSentence::new("CC", "CFQ", fields(&["TOP"])));
+    // Too early: ignored, and told on standard error.
+    tty.send(NmeaSentence::new(
+        "CC",
+        "CYC",
+        fields(&["0", "3", "2", "1", "0", "1"]),
+    ));
     let mut count = 0;
     loop {
         let s = tty.next();
@@ -210,6 +223,13 @@ fn micromodem2_dialect_from_the_command_line() {
     let tta = tty.next();
     assert_eq!(tta.address(), "SNTTA");
     assert_eq!(tta.fields[..4], fields(&["1.0000", "", "", ""]));
+    drop(emulator);
+    let stderr = std::fs::read_to_string(&log).unwrap_or_default();
+    let _ = std::fs::remove_file(&log);
+    assert!(
+        stderr.contains("modem 3: ignored $CCCYC,0,3,2,1,0,1*"),
+        "{stderr}"
+    );
 }
 
 fn mm_config(id: i32, path: &str) -> DriverConfig {
