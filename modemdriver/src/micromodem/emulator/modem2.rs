@@ -3,6 +3,11 @@
 //! cycle-initialization packet of a rate-0 cycle, the transmit delay,
 //! statistics after each packet, Flexible Data Protocol packets and
 //! long-baseline ranging.
+//!
+//! `$CCCLK` is still answered (with `$CACLK`) rather than refused: Goby3's
+//! driver sends it to any modem whose `$CAREV,…,AUV` it has not seen yet,
+//! which at start-up includes a Micro-Modem 2, and expects `$CACLK` back;
+//! once it knows the version it uses `$CCTMS`.
 
 use std::time::Duration;
 
