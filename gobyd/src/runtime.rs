@@ -856,48 +856,18 @@ impl Daemon {
         }
     }
 
-    /// Hands a queue event over: the mission log's line, then the event
-    /// line to the clients connected now and the bridges (MQTT, MOOS).
-    /// `recovered`: a received message handed over after a restart.
+    /// Hands a queue event over: its event line to the clients connected
+    /// now and to the bridges (MQTT, MOOS), then its line in the mission
+    /// log (the inbox's mark follows that write at once). `recovered`: a
+    /// received message handed over after a restart.
     fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, recovered: bool) {
         let now = SystemClock.now();
-        if let Some(log) = &mut self.raw_log {
-            let logged = match &event {
-                QueueEvent::Sent { message, frame, .. } => log.message(
-                    now,
-                    "out",
-                    message.descriptor().full_name(),
-                    message_json(message),
-                    &[("frame", (*frame).into())],
-                ),
-                QueueEvent::Acked {
-                    message, by, frame, ..
-                } => log.message(
-                    now,
-                    "ack",
-                    message.descriptor().full_name(),
-                    message_json(message),
-                    &[("by", (*by).into()), ("frame", (*frame).into())],
-                ),
-                QueueEvent::Received(r) => {
-                    let mut extra = vec![("src", r.src.into()), ("dest", r.dest.into())];
-                    if recovered {
-                        extra.push(("recovered", true.into()));
-                    }
-                    log.message(
-                        now,
-                        "in",
-                        r.message.descriptor().full_name(),
-                        message_json(&r.message),
-                        &extra,
-                    )
-                }
-                _ => Ok(()),
-            };
-            if let Err(e) = logged {
-                tracing::error!("raw log: {e}");
-            }
-        }
+        // The mission log's line is written last: the inbox marks a received
+        // message handed over right after it.
+        let record = self
+            .raw_log
+            .as_ref()
+            .and_then(|_| log_record(&event, recovered));
         let names = &self.names;
         let name_of = |id: u32| {
             names
@@ -912,5 +882,51 @@ impl Daemon {
                 event: DaemonEvent::Queue(event),
             }));
         }
+        if let (Some(log), Some((direction, name, value, extra))) = (&mut self.raw_log, record) {
+            if let Err(e) = log.message(now, direction, &name, value, &extra) {
+                tracing::error!("raw log: {e}");
+            }
+        }
+    }
+}
+
+/// The mission log's line of a queue event: direction, type name, value
+/// and extra fields (`None`: not logged).
+type LogRecord = (
+    &'static str,
+    String,
+    serde_json::Value,
+    Vec<(&'static str, serde_json::Value)>,
+);
+
+fn log_record(event: &QueueEvent, recovered: bool) -> Option<LogRecord> {
+    match event {
+        QueueEvent::Sent { message, frame, .. } => Some((
+            "out",
+            message.descriptor().full_name().to_string(),
+            message_json(message),
+            vec![("frame", (*frame).into())],
+        )),
+        QueueEvent::Acked {
+            message, by, frame, ..
+        } => Some((
+            "ack",
+            message.descriptor().full_name().to_string(),
+            message_json(message),
+            vec![("by", (*by).into()), ("frame", (*frame).into())],
+        )),
+        QueueEvent::Received(r) => {
+            let mut extra = vec![("src", r.src.into()), ("dest", r.dest.into())];
+            if recovered {
+                extra.push(("recovered", true.into()));
+            }
+            Some((
+                "in",
+                r.message.descriptor().full_name().to_string(),
+                message_json(&r.message),
+                extra,
+            ))
+        }
+        _ => None,
     }
 }
