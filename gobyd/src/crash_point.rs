@@ -7,6 +7,9 @@
 //! (`N` defaults to 1). Unset, a point costs one relaxed atomic load.
 //! Points, in the order a received transmission meets them:
 //!
+//! - `received`: a data transmission from the driver, nothing of it
+//!   recorded, handed over or acknowledged (by `gobyd`: a driver acking on
+//!   reception has acked already);
 //! - `recorded`: its messages are in the inbox, synced; none is handed
 //!   over, nothing acknowledged;
 //! - `handed-over`: they are handed over and marked so; nothing
@@ -21,6 +24,8 @@ pub const ENV: &str = "GOBYD_CRASH_POINT";
 /// A moment of the receive path.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CrashPoint {
+    /// A data transmission received, nothing recorded, nothing acked.
+    Received,
     /// Messages recorded in the inbox (synced), not handed over, not acked.
     Recorded,
     /// Messages handed over and marked, not acked.
@@ -31,6 +36,7 @@ impl CrashPoint {
     /// The point's name in [`ENV`].
     pub fn name(self) -> &'static str {
         match self {
+            CrashPoint::Received => "received",
             CrashPoint::Recorded => "recorded",
             CrashPoint::HandedOver => "handed-over",
         }
@@ -65,10 +71,16 @@ pub fn parse(text: &str) -> Result<(CrashPoint, u64), String> {
         ),
         None => (text, 1),
     };
-    let point = [CrashPoint::Recorded, CrashPoint::HandedOver]
-        .into_iter()
-        .find(|p| p.name() == name)
-        .ok_or_else(|| format!("{ENV}: no crash point named {name:?} (recorded, handed-over)"))?;
+    let point = [
+        CrashPoint::Received,
+        CrashPoint::Recorded,
+        CrashPoint::HandedOver,
+    ]
+    .into_iter()
+    .find(|p| p.name() == name)
+    .ok_or_else(|| {
+        format!("{ENV}: no crash point named {name:?} (received, recorded, handed-over)")
+    })?;
     Ok((point, n))
 }
 
@@ -93,6 +105,7 @@ mod tests {
     #[test]
     fn names_and_counts_parse() {
         assert_eq!(parse("recorded"), Ok((CrashPoint::Recorded, 1)));
+        assert_eq!(parse("received:2"), Ok((CrashPoint::Received, 2)));
         assert_eq!(parse("handed-over:7"), Ok((CrashPoint::HandedOver, 7)));
         assert!(parse("recorded:0").unwrap_err().contains("positive"));
         assert!(parse("nowhere").unwrap_err().contains("no crash point"));

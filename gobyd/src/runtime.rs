@@ -722,6 +722,9 @@ impl Daemon {
     /// written (the messages are handed over all the same: nothing received
     /// is lost, but a retry may then reach the clients twice).
     fn receive(&mut self, transmission: ModemTransmission) {
+        if transmission.r#type() == TransmissionType::Data && !transmission.frame.is_empty() {
+            CrashPoint::Received.reached();
+        }
         let mut bad_frames = std::collections::BTreeSet::new();
         let mut unplaced = false;
         for e in self.outbox.receive(&transmission) {

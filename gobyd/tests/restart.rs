@@ -5,8 +5,9 @@
 //!
 //! - killed with SIGKILL at moments drawn from a seeded generator, or
 //! - aborting on its own at a crash point of the receive path
-//!   (`GOBYD_CRASH_POINT`, see `gobyd::crash_point`): right after its inbox
-//!   recorded a transmission's messages (nothing handed over, nothing
+//!   (`GOBYD_CRASH_POINT`, see `gobyd::crash_point`): as a data
+//!   transmission arrives (nothing recorded), right after its inbox recorded
+//!   the transmission's messages (nothing handed over, nothing
 //!   acknowledged), or right after handing them over (nothing acknowledged).
 //!
 //! Every message accepted must then be delivered exactly once to the
@@ -213,18 +214,15 @@ fn start(config: &Path, crash: Option<&str>) -> Gobyd {
     }
 }
 
-/// A crash point, armed in one restart of two: `recorded` or
-/// `handed-over`, at the first to third transmission received.
+/// A crash point, armed in one restart of two: `received`, `recorded` or
+/// `handed-over`, at the first or second transmission received. An armed
+/// node is not the next victim of a SIGKILL (unless both are armed).
 fn draw_crash_point(draw: &mut Draw) -> Option<String> {
     if draw.next().is_multiple_of(2) {
         return None;
     }
-    let point = if draw.next().is_multiple_of(2) {
-        "recorded"
-    } else {
-        "handed-over"
-    };
-    Some(format!("{point}:{}", 1 + draw.next() % 3))
+    let point = ["received", "recorded", "handed-over"][(draw.next() % 3) as usize];
+    Some(format!("{point}:{}", 1 + draw.next() % 2))
 }
 
 fn run(seed: u64, rounds: usize) -> Totals {
@@ -250,20 +248,23 @@ fn run(seed: u64, rounds: usize) -> Totals {
         runs: 1,
         ..Default::default()
     };
+    // Whether a node runs with a crash point armed.
+    let mut armed = [false; 2];
     // A node that died at its crash point comes back (unarmed).
-    let revive = |nodes: &mut Vec<Option<Gobyd>>, totals: &mut Totals| {
+    let revive = |nodes: &mut Vec<Option<Gobyd>>, armed: &mut [bool; 2], totals: &mut Totals| {
         for (i, node) in nodes.iter_mut().enumerate() {
             if node.as_mut().is_some_and(|n| n.has_exited()) {
                 totals.crash_points += 1;
                 node.take().unwrap().kill();
                 *node = Some(start(&configs[i], None));
+                armed[i] = false;
             }
         }
     };
     for round in 0..rounds {
         for i in 0..PER_ROUND {
             for from in 1..=2i32 {
-                revive(&mut nodes, &mut totals);
+                revive(&mut nodes, &mut armed, &mut totals);
                 let note = format!("{from}r{round}m{i}");
                 let node = nodes[(from - 1) as usize].as_mut().unwrap();
                 let line = format!(
@@ -281,13 +282,18 @@ fn run(seed: u64, rounds: usize) -> Totals {
         }
         // A random moment later, one of the two dies and comes back,
         // perhaps armed to die again at a crash point.
-        revive(&mut nodes, &mut totals);
+        revive(&mut nodes, &mut armed, &mut totals);
         std::thread::sleep(draw.millis(100, 2500));
-        let victim = (draw.next() % 2) as usize;
+        let mut victim = (draw.next() % 2) as usize;
+        if armed[victim] && !armed[1 - victim] {
+            // Left to reach its crash point.
+            victim = 1 - victim;
+        }
         nodes[victim].take().unwrap().kill();
         totals.kills += 1;
         std::thread::sleep(draw.millis(0, 1500));
         let crash = draw_crash_point(&mut draw);
+        armed[victim] = crash.is_some();
         nodes[victim] = Some(start(&configs[victim], crash.as_deref()));
     }
     // Both unarmed from here on: time to deliver what is owed.
