@@ -354,6 +354,47 @@ impl Inbox {
         Ok(self.next_seq - 1)
     }
 
+    /// Remembers `id`, received at `time` and handed over already (a
+    /// *seen* record, appended, not synced), unless it is past the window.
+    pub fn remember(&mut self, id: Identity, time: u64, now: u64) -> io::Result<()> {
+        if time.saturating_add(self.window) <= now || self.seen.contains_key(&id) {
+            return Ok(());
+        }
+        self.append(&framed(&seen_payload(&id, time)))?;
+        self.seen.insert(id, time);
+        Ok(())
+    }
+
+    /// Takes over the identities of a duplicate filter file of the previous
+    /// format (`delivered.log`: records of 28 bytes, `time: u64 | src: i32 |
+    /// dccl_id: u32 | digest: u64 | crc32: u32`, little-endian, the CRC of
+    /// the 24 bytes before it; replay stops at the first bad record), syncs,
+    /// and removes the old file. Returns how many were taken over.
+    pub fn take_over_delivered_log(&mut self, old: &Path, now: u64) -> io::Result<usize> {
+        let bytes = match std::fs::read(old) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(0),
+            Err(e) => return Err(e),
+        };
+        let before = self.seen.len();
+        for record in bytes.chunks_exact(28) {
+            let crc = u32::from_le_bytes(record[24..28].try_into().expect("4 bytes"));
+            if CRC.checksum(&record[..24]) != crc {
+                break;
+            }
+            let time = u64::from_le_bytes(record[0..8].try_into().expect("8 bytes"));
+            let id = Identity {
+                src: i32::from_le_bytes(record[8..12].try_into().expect("4 bytes")),
+                dccl_id: u32::from_le_bytes(record[12..16].try_into().expect("4 bytes")),
+                digest: u64::from_le_bytes(record[16..24].try_into().expect("8 bytes")),
+            };
+            self.remember(id, time, now)?;
+        }
+        self.sync()?;
+        std::fs::remove_file(old)?;
+        Ok(self.seen.len() - before)
+    }
+
     /// Syncs the records appended so far to disk.
     pub fn sync(&mut self) -> io::Result<()> {
         self.file.sync_data()
@@ -555,6 +596,36 @@ mod tests {
         assert_eq!(inbox.pending()[0].incoming.bytes, 7u32.to_le_bytes());
         assert!(inbox.is_duplicate(&Identity::of(2, 4, &2999u32.to_le_bytes()), 29_995));
         assert!(!inbox.is_duplicate(&Identity::of(2, 4, &2000u32.to_le_bytes()), 29_995));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn identities_of_the_previous_duplicate_filter_file_are_taken_over() {
+        let d = dir("legacy");
+        let old = d.join("delivered.log");
+        let a = Identity::of(2, 4, b"a");
+        let expired = Identity::of(2, 4, b"b");
+        let mut bytes = Vec::new();
+        for (id, time) in [(a, 15_000u64), (expired, 1)] {
+            let start = bytes.len();
+            bytes.extend_from_slice(&time.to_le_bytes());
+            bytes.extend_from_slice(&id.src.to_le_bytes());
+            bytes.extend_from_slice(&id.dccl_id.to_le_bytes());
+            bytes.extend_from_slice(&id.digest.to_le_bytes());
+            let crc = CRC.checksum(&bytes[start..]);
+            bytes.extend_from_slice(&crc.to_le_bytes());
+        }
+        bytes.extend_from_slice(&[9, 9, 9]); // torn
+        std::fs::write(&old, &bytes).unwrap();
+        let path = d.join("inbox.log");
+        let (mut inbox, _) = Inbox::open(&path, 10_000, 20_000).unwrap();
+        assert_eq!(inbox.take_over_delivered_log(&old, 20_000).unwrap(), 1);
+        assert!(!old.exists());
+        drop(inbox);
+        let (inbox, replay) = Inbox::open(&path, 10_000, 20_000).unwrap();
+        assert_eq!(replay.remembered, 1);
+        assert!(inbox.is_duplicate(&a, 20_000));
+        assert!(!inbox.is_duplicate(&expired, 20_000));
         let _ = std::fs::remove_dir_all(&d);
     }
 

@@ -257,8 +257,15 @@ impl Daemon {
         let inbox = {
             let path = data_dir.path().join("inbox.log");
             let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-            let (inbox, replay) = Inbox::open(&path, (window_seconds * 1e6) as u64, now)
+            let (mut inbox, replay) = Inbox::open(&path, (window_seconds * 1e6) as u64, now)
                 .map_err(io_error(format!("cannot open {}", path.display())))?;
+            // The duplicate filter's file of earlier versions.
+            let old = data_dir.path().join("delivered.log");
+            match inbox.take_over_delivered_log(&old, now) {
+                Ok(0) => {}
+                Ok(n) => tracing::info!("{n} identities taken over from {}", old.display()),
+                Err(e) => tracing::warn!("{}: {e}", old.display()),
+            }
             if replay != Default::default() {
                 tracing::info!(
                     remembered = replay.remembered,
