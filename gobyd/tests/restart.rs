@@ -17,7 +17,7 @@
 //! `cargo test -p gobyd --test restart -- --nocapture` prints the totals.
 //! More runs: `GOBYD_RESTART_RUNS=N` (seeds follow one another from
 //! `GOBYD_RESTART_SEED`, default 1), `GOBYD_RESTART_ROUNDS=R` kill-and-restart
-//! rounds per run (default 6).
+//! rounds per run (default 8).
 
 mod support;
 
@@ -363,7 +363,7 @@ fn run(seed: u64, rounds: usize) -> Totals {
 fn killed_daemons_lose_nothing_and_deliver_nothing_twice() {
     let runs = env_number("GOBYD_RESTART_RUNS", 1);
     let first = env_number("GOBYD_RESTART_SEED", 1);
-    let rounds = env_number("GOBYD_RESTART_ROUNDS", 6) as usize;
+    let rounds = env_number("GOBYD_RESTART_ROUNDS", 8) as usize;
     let mut all = Totals::default();
     for seed in first..first + runs {
         all.add(&run(seed, rounds));
