@@ -1082,6 +1082,8 @@ impl Mm {
                         .status(DriverStatus::Unsupported { message: name }),
                 }
             }
+            // The modem acknowledges in hardware, on reception.
+            DriverCommand::Acknowledge(_) => {}
             DriverCommand::Stop(done) => return Some(done),
         }
         None
