@@ -173,7 +173,7 @@ impl MicroModemDriver {
 /// What the layer above asked for.
 #[derive(Debug, Clone)]
 enum Job {
-    Data(ModemTransmission),
+    Data(Box<ModemTransmission>),
     Ping { dest: u32 },
     Mini { dest: u32, value: u16 },
 }
@@ -316,7 +316,7 @@ fn job_transmission(
     modem_id: u32,
 ) -> ModemTransmission {
     match job {
-        Job::Data(mt) => filled.cloned().unwrap_or_else(|| mt.clone()),
+        Job::Data(mt) => filled.cloned().unwrap_or_else(|| (**mt).clone()),
         Job::Ping { dest } | Job::Mini { dest, .. } => ModemTransmission {
             src: Some(modem_id as i32),
             dest: Some(*dest as i32),
@@ -1051,7 +1051,7 @@ impl Mm {
                                 });
                             }
                         }
-                        self.pending.push_back(Job::Data(mt));
+                        self.pending.push_back(Job::Data(Box::new(mt)));
                     }
                     other => self.events.status(DriverStatus::Unsupported {
                         message: format!(

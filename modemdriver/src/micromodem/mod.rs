@@ -2,6 +2,7 @@
 //!
 //! - [`nmea`]: sentence framing and checksums.
 //! - [`sentence`]: the Micro-Modem's sentences, typed.
+//! - [`statistics`]: receive and transmit statistics ($CACST, $CAXST).
 //! - [`driver`]: the driver ([`MicroModemDriver`]).
 //! - [`emulator`]: the modem's side, for tests and bench work.
 
@@ -9,5 +10,6 @@ pub mod driver;
 pub mod emulator;
 pub mod nmea;
 pub mod sentence;
+pub mod statistics;
 
 pub use driver::MicroModemDriver;
