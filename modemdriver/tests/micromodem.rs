@@ -63,6 +63,7 @@ fn mm_config(id: i32, path: &str) -> DriverConfig {
         micromodem: Some(MicroModemConfig {
             nvram_cfg: vec!["DTO,2".into()],
             response_timeout_ms: Some(300),
+            config_echo_quiet_ms: Some(300),
             max_retries: Some(5),
             max_cycle_attempts: Some(3),
             reconnect_interval_ms: Some(100),

@@ -1,0 +1,188 @@
+//! Setting the modem's clock: `$CCCLK` (Micro-Modem 1, whole seconds) or
+//! `$CCTMS` (Micro-Modem 2, ISO 8601), and checking the time the modem says
+//! it set against the time asked for.
+
+use crate::time::civil;
+
+use super::sentence::MmSentence;
+use super::statistics::micros_since_epoch;
+
+/// Which Micro-Modem the driver talks to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Generation {
+    /// Not yet known (no `$CAREV` and no telling configuration line).
+    Unknown,
+    /// Micro-Modem 1 (firmware 0.x / 1.x).
+    One,
+    /// Micro-Modem 2 (firmware 2.x and up).
+    Two,
+}
+
+impl Generation {
+    /// The generation of a `$CAREV` firmware version, e.g. "0.94.0.00" (1)
+    /// or "2.0.16421" (2); `None` when the major number cannot be read.
+    pub fn of_version(version: &str) -> Option<Generation> {
+        let major: u32 = version.trim().split('.').next()?.trim().parse().ok()?;
+        Some(if major >= 2 {
+            Generation::Two
+        } else {
+            Generation::One
+        })
+    }
+
+    /// What a `$CACFG` parameter name tells: Micro-Modem 2 names its newer
+    /// parameters with dots (e.g. `xmit.txfrequency`).
+    pub fn of_config_key(key: &str) -> Option<Generation> {
+        key.contains('.').then_some(Generation::Two)
+    }
+}
+
+/// ISO 8601 UTC of microseconds since the epoch, whole seconds:
+/// `YYYY-MM-DDThh:mm:ssZ`.
+pub fn iso8601(micros: u64) -> String {
+    let (y, mo, d, h, mi, s) = civil(micros / 1_000_000);
+    format!("{y:04}-{mo:02}-{d:02}T{h:02}:{mi:02}:{s:02}Z")
+}
+
+/// Microseconds since the epoch of `YYYY-MM-DDThh:mm:ss[.f…][Z]`; `None`
+/// when malformed.
+pub fn parse_iso8601(text: &str) -> Option<u64> {
+    let t = text.trim().trim_end_matches('Z');
+    let (date, time) = t.split_once('T')?;
+    let date: String = date.split('-').collect();
+    let (hms, frac) = match time.split_once('.') {
+        Some((hms, frac)) => (hms, Some(frac)),
+        None => (time, None),
+    };
+    let mut time: String = hms.split(':').collect();
+    if let Some(frac) = frac {
+        time.push('.');
+        time.push_str(frac);
+    }
+    micros_since_epoch(&date, &time)
+}
+
+/// The command that sets the clock of a `generation` modem at `now`
+/// (microseconds since the epoch), and the time (µs, whole seconds) it asks
+/// for: `$CCTMS` gives the next whole second (the modem sets it at the top
+/// of that second), `$CCCLK` the current one.
+pub fn set_clock(generation: Generation, now: u64) -> (MmSentence, u64) {
+    let second = now / 1_000_000 * 1_000_000;
+    match generation {
+        Generation::Two => {
+            let at = second + 1_000_000;
+            (
+                MmSentence::TimeSet {
+                    time: iso8601(at),
+                    mode: 0,
+                },
+                at,
+            )
+        }
+        Generation::One | Generation::Unknown => {
+            let (y, mo, d, h, mi, s) = civil(second / 1_000_000);
+            (
+                MmSentence::Clock {
+                    from_modem: false,
+                    date_time: [u32::try_from(y).unwrap_or(0), mo, d, h, mi, s],
+                },
+                second,
+            )
+        }
+    }
+}
+
+/// Checks the modem's answer to a clock command that asked for `asked`
+/// (µs): `Ok` when it set a time within `allowed_skew_ms`, else why not.
+pub fn check_reply(reply: &MmSentence, asked: u64, allowed_skew_ms: i64) -> Result<(), String> {
+    let set = match reply {
+        MmSentence::TimeSetReply { timed_out, time } => {
+            if *timed_out != 0 {
+                return Err(format!("$CATMS says the setting timed out ({timed_out})"));
+            }
+            parse_iso8601(time).ok_or_else(|| format!("$CATMS time {time:?} is not ISO 8601"))?
+        }
+        MmSentence::Clock {
+            from_modem: true,
+            date_time: [y, mo, d, h, mi, s],
+        } => micros_since_epoch(
+            &format!("{y:04}{mo:02}{d:02}"),
+            &format!("{h:02}{mi:02}{s:02}"),
+        )
+        .ok_or_else(|| "$CACLK is not a date and time".to_string())?,
+        other => {
+            return Err(format!(
+                "{} does not answer a clock command",
+                other.to_line()
+            ))
+        }
+    };
+    let skew_ms = (i128::from(set) - i128::from(asked)) / 1000;
+    if skew_ms.abs() <= i128::from(allowed_skew_ms) {
+        Ok(())
+    } else {
+        Err(format!(
+            "the modem set its clock {skew_ms} ms away from the time asked for"
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generations() {
+        assert_eq!(Generation::of_version("0.94.0.00"), Some(Generation::One));
+        assert_eq!(Generation::of_version("2.0.16421"), Some(Generation::Two));
+        assert_eq!(Generation::of_version("x"), None);
+        assert_eq!(
+            Generation::of_config_key("xmit.txfrequency"),
+            Some(Generation::Two)
+        );
+        assert_eq!(Generation::of_config_key("SRC"), None);
+    }
+
+    #[test]
+    fn iso_round_trip_and_clock_commands() {
+        // 2013-06-01 12:34:56.5 UTC
+        let now = 1_370_090_096_500_000;
+        assert_eq!(iso8601(now), "2013-06-01T12:34:56Z");
+        assert_eq!(
+            parse_iso8601("2013-06-01T12:34:56.500000Z"),
+            Some(1_370_090_096_500_000)
+        );
+        assert_eq!(parse_iso8601("2013-06-01 12:34:56"), None);
+        let (tms, asked) = set_clock(Generation::Two, now);
+        assert!(tms.to_line().starts_with("$CCTMS,2013-06-01T12:34:57Z,0*"));
+        assert_eq!(asked, 1_370_090_097_000_000);
+        let (clk, asked) = set_clock(Generation::One, now);
+        assert!(clk.to_line().starts_with("$CCCLK,2013,06,01,12,34,56*"));
+        assert_eq!(asked, 1_370_090_096_000_000);
+    }
+
+    #[test]
+    fn replies_are_checked() {
+        let asked = 1_370_090_097_000_000;
+        let ok = MmSentence::TimeSetReply {
+            timed_out: 0,
+            time: "2013-06-01T12:34:57.000100Z".into(),
+        };
+        assert_eq!(check_reply(&ok, asked, 1000), Ok(()));
+        let off = MmSentence::TimeSetReply {
+            timed_out: 0,
+            time: "2000-01-01T00:00:00Z".into(),
+        };
+        assert!(check_reply(&off, asked, 1000).is_err());
+        let timed_out = MmSentence::TimeSetReply {
+            timed_out: 1,
+            time: "2013-06-01T12:34:57Z".into(),
+        };
+        assert!(check_reply(&timed_out, asked, 1000).is_err());
+        let clk = MmSentence::Clock {
+            from_modem: true,
+            date_time: [2013, 6, 1, 12, 34, 57],
+        };
+        assert_eq!(check_reply(&clk, asked, 1000), Ok(()));
+    }
+}
