@@ -21,7 +21,8 @@ use modemdriver::{
 };
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::{
-    MicroModemConfig, MicroModemReceiveMode, MicroModemTransmitMode,
+    MicroModemConfig, MicroModemNarrowbandLblParams, MicroModemReceiveMode, MicroModemSpecific,
+    MicroModemTransmissionType, MicroModemTransmitMode,
 };
 use tokio::sync::mpsc;
 
@@ -224,6 +225,20 @@ async fn replay(
     transmit: Option<ModemTransmission>,
     frames: &[&[u8]],
 ) -> (Vec<String>, Vec<DriverEvent>) {
+    replay_with(scripts, frames, |driver| {
+        if let Some(mt) = transmit {
+            driver.initiate_transmission(mt).unwrap();
+        }
+    })
+    .await
+}
+
+/// As [`replay`], with the requests made by `start`.
+async fn replay_with(
+    scripts: &[&str],
+    frames: &[&[u8]],
+    start: impl FnOnce(&Driver),
+) -> (Vec<String>, Vec<DriverEvent>) {
     let steps = script(scripts);
     let PtyPair {
         primary,
@@ -233,9 +248,7 @@ async fn replay(
     let modem = LineLink::new(primary, b"\r\n");
     let brief = scripts.first() == Some(&"startup_brief.nmea");
     let mut driver: Driver = MicroModemDriver::start(&config(&path, brief)).expect("driver starts");
-    if let Some(mt) = transmit {
-        driver.initiate_transmission(mt).unwrap();
-    }
+    start(&driver);
     let player = tokio::spawn(play(modem, steps));
     let mut events = Vec::new();
     let frames: Vec<Vec<u8>> = frames.iter().map(|f| f.to_vec()).collect();
@@ -435,4 +448,116 @@ async fn a_reset_mid_cycle_reconfigures_the_modem_and_runs_the_cycle_again() {
     assert_eq!(r.len(), 1, "{events:?}");
     assert_eq!(r[0].0, TransmitOutcome::Sent);
     assert_eq!(r[0].1.transmit_stat.len(), 1);
+}
+
+#[tokio::test]
+async fn flexible_data_packets_go_out_and_come_in_with_their_statistics() {
+    let frame: &[u8] = b"flexible data packet from modem one";
+    let (_, events) = replay_with(&["startup_brief.nmea", "fdp.nmea"], &[frame], |d| {
+        d.initiate_specific(&MicroModemSpecific {
+            r#type: MicroModemTransmissionType::MicromodemFlexibleData as i32,
+            dest: Some(2),
+            rate: Some(1),
+            ..Default::default()
+        })
+        .unwrap();
+    })
+    .await;
+    let r = results(&events);
+    assert_eq!(r.len(), 1, "{events:?}");
+    assert_eq!(r[0].0, TransmitOutcome::Sent);
+    assert_eq!(r[0].1.frame, vec![frame.to_vec()]);
+    assert_eq!(r[0].1.transmit_stat.len(), 1);
+    let got = received(&events, TransmissionType::Data);
+    assert_eq!(got.len(), 1, "{events:?}");
+    assert_eq!((got[0].src(), got[0].dest(), got[0].rate()), (2, 1, 1));
+    assert_eq!(
+        got[0].frame,
+        vec![b"FDP heard from modem two, in two frames".to_vec()]
+    );
+    assert_eq!(got[0].receive_stat.len(), 1);
+    assert_eq!(got[0].receive_stat[0].snr_out, Some(11));
+}
+
+#[tokio::test]
+async fn lbl_pings_report_their_travel_times() {
+    let (_, events) = replay_with(&["startup_brief.nmea", "lbl.nmea"], &[], |d| {
+        d.initiate_specific(&MicroModemSpecific {
+            r#type: MicroModemTransmissionType::MicromodemRemusLblRanging as i32,
+            ..Default::default()
+        })
+        .unwrap();
+        d.initiate_specific(&MicroModemSpecific {
+            r#type: MicroModemTransmissionType::MicromodemNarrowbandLblRanging as i32,
+            narrowband_lbl: Some(MicroModemNarrowbandLblParams {
+                transmit_freq: Some(26000),
+                transmit_ping_ms: Some(5),
+                receive_freq: vec![25000, 25500],
+                receive_ping_ms: Some(5),
+                turnaround_ms: Some(20),
+                ..Default::default()
+            }),
+            ..Default::default()
+        })
+        .unwrap();
+    })
+    .await;
+    let reports: Vec<MicroModemSpecific> = events
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::Specific(s) => s.to::<MicroModemSpecific>(),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(reports.len(), 2, "{events:?}");
+    assert_eq!(
+        reports[0].r#type(),
+        MicroModemTransmissionType::MicromodemRemusLblRanging
+    );
+    assert_eq!(
+        reports[0]
+            .ranging_reply
+            .clone()
+            .unwrap()
+            .one_way_travel_time,
+        vec![0.4233, 0.0, 1.0001, 0.0]
+    );
+    assert_eq!(reports[0].modem_time(), "013000.12");
+    assert_eq!(
+        reports[1].r#type(),
+        MicroModemTransmissionType::MicromodemNarrowbandLblRanging
+    );
+    assert_eq!(
+        reports[1]
+            .ranging_reply
+            .clone()
+            .unwrap()
+            .one_way_travel_time,
+        vec![0.8125, 1.25, 0.0, 0.0]
+    );
+    let r = results(&events);
+    assert_eq!(r.len(), 2, "{events:?}");
+    assert!(r.iter().all(|(o, _)| *o == TransmitOutcome::Sent), "{r:?}");
+}
+
+#[tokio::test]
+async fn a_clock_the_modem_did_not_set_is_set_again() {
+    let (lines, events) = replay(&["clock_again.nmea"], None, &[]).await;
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("$CCTMS")).count(),
+        2,
+        "{lines:?}"
+    );
+    let st = statuses(&events);
+    assert!(
+        st.iter().any(
+            |s| matches!(s, DriverStatus::ModemError { message } if message.contains("clock not set"))
+        ),
+        "{st:?}"
+    );
+    assert_eq!(
+        st.iter().filter(|s| **s == DriverStatus::Ready).count(),
+        1,
+        "{st:?}"
+    );
 }

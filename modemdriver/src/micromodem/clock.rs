@@ -93,8 +93,15 @@ pub fn set_clock(generation: Generation, now: u64) -> (MmSentence, u64) {
 }
 
 /// Checks the modem's answer to a clock command that asked for `asked`
-/// (µs): `Ok` when it set a time within `allowed_skew_ms`, else why not.
-pub fn check_reply(reply: &MmSentence, asked: u64, allowed_skew_ms: i64) -> Result<(), String> {
+/// (µs), heard at `now` (µs): `Ok` when the time it gives is within
+/// `allowed_skew_ms` of the time asked for or of now (firmware versions
+/// answer with either), else why not.
+pub fn check_reply(
+    reply: &MmSentence,
+    asked: u64,
+    now: u64,
+    allowed_skew_ms: i64,
+) -> Result<(), String> {
     let set = match reply {
         MmSentence::TimeSetReply { timed_out, time } => {
             if *timed_out != 0 {
@@ -117,7 +124,12 @@ pub fn check_reply(reply: &MmSentence, asked: u64, allowed_skew_ms: i64) -> Resu
             ))
         }
     };
-    let skew_ms = (i128::from(set) - i128::from(asked)) / 1000;
+    let skew_ms = |t: u64| (i128::from(set) - i128::from(t)) / 1000;
+    let skew_ms = if skew_ms(asked).abs() <= skew_ms(now).abs() {
+        skew_ms(asked)
+    } else {
+        skew_ms(now)
+    };
     if skew_ms.abs() <= i128::from(allowed_skew_ms) {
         Ok(())
     } else {
@@ -168,21 +180,28 @@ mod tests {
             timed_out: 0,
             time: "2013-06-01T12:34:57.000100Z".into(),
         };
-        assert_eq!(check_reply(&ok, asked, 1000), Ok(()));
+        assert_eq!(check_reply(&ok, asked, asked, 1000), Ok(()));
+        // The modem's clock some time after it was set.
+        let later = MmSentence::TimeSetReply {
+            timed_out: 0,
+            time: "2013-06-01T12:35:07Z".into(),
+        };
+        assert!(check_reply(&later, asked, asked, 1000).is_err());
+        assert_eq!(check_reply(&later, asked, asked + 10_200_000, 1000), Ok(()));
         let off = MmSentence::TimeSetReply {
             timed_out: 0,
             time: "2000-01-01T00:00:00Z".into(),
         };
-        assert!(check_reply(&off, asked, 1000).is_err());
+        assert!(check_reply(&off, asked, asked, 1000).is_err());
         let timed_out = MmSentence::TimeSetReply {
             timed_out: 1,
             time: "2013-06-01T12:34:57Z".into(),
         };
-        assert!(check_reply(&timed_out, asked, 1000).is_err());
+        assert!(check_reply(&timed_out, asked, asked, 1000).is_err());
         let clk = MmSentence::Clock {
             from_modem: true,
             date_time: [2013, 6, 1, 12, 34, 57],
         };
-        assert_eq!(check_reply(&clk, asked, 1000), Ok(()));
+        assert_eq!(check_reply(&clk, asked, asked, 1000), Ok(()));
     }
 }

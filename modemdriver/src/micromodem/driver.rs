@@ -697,6 +697,16 @@ impl Mm {
             active.cycle_frames = cycle_frames;
             active.requested = 0;
             active.transmit_stats.clear();
+            if let Some(listen) = ranging::listening_time(&sentence) {
+                // An LBL ping is written once: the modem listens for the
+                // replies and may not echo it; sent again, it would ping
+                // again. Its travel times (or their absence) end it.
+                active.stage = Stage::AwaitReply;
+                let wait = listen + self.response_timeout();
+                self.expect(wait, "no $SNTTA travel times");
+                self.write(&sentence).await;
+                continue;
+            }
             self.send_awaiting(sentence, 1, true).await;
         }
     }
@@ -933,7 +943,7 @@ impl Mm {
                 });
             } else if let Some(asked) = a.clock_asked {
                 let skew = i64::from(self.mm.allowed_skew_ms());
-                if let Err(why) = clock::check_reply(&sentence, asked, skew) {
+                if let Err(why) = clock::check_reply(&sentence, asked, now_micros(), skew) {
                     self.events.status(DriverStatus::ModemError {
                         message: format!("clock not set: {why}"),
                     });
@@ -1328,11 +1338,7 @@ impl Mm {
                 active.stage = Stage::AwaitReply;
                 self.expect(receive, "no reply to the ping");
             }
-            Job::Lbl { ping, .. } => {
-                let listen = ranging::listening_time(ping).unwrap_or_default();
-                active.stage = Stage::AwaitReply;
-                self.expect(listen + timeout, "no $SNTTA travel times");
-            }
+            Job::Lbl { .. } => {}
             Job::Mini { .. } => self.finish(TransmitOutcome::Sent),
         }
     }
