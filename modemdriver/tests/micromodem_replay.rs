@@ -561,3 +561,31 @@ async fn a_clock_the_modem_did_not_set_is_set_again() {
         "{st:?}"
     );
 }
+
+#[tokio::test]
+async fn echoes_that_cannot_be_read_never_make_the_driver_send_again() {
+    let (lines, events) = replay(
+        &["startup_brief.nmea", "odd_echoes.nmea"],
+        Some(data(1)),
+        &[RATE1_FRAME],
+    )
+    .await;
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("$CCCYC")).count(),
+        1,
+        "{lines:?}"
+    );
+    let st = statuses(&events);
+    let unreadable: Vec<_> = st
+        .iter()
+        .filter_map(|s| match s {
+            DriverStatus::Unparseable { line, .. } => Some(line.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(unreadable.len(), 2, "{st:?}");
+    assert!(unreadable[0].starts_with("$CACYC") && unreadable[1].starts_with("$CATXD"));
+    let r = results(&events);
+    assert_eq!(r.len(), 1, "{events:?}");
+    assert_eq!(r[0].0, TransmitOutcome::Sent);
+}

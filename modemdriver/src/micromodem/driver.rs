@@ -1329,7 +1329,13 @@ impl Mm {
             return;
         }
         match &active.job {
-            Job::Data(_) => self.expect(timeout, "no $CADRQ from the modem"),
+            // The first data request may follow a cycle-initialization
+            // packet (rate 0), or come late: the modem gives up on its own
+            // ($CAERR) sooner than this.
+            Job::Data(mt) => {
+                let wait = packet_estimate(mt) + timeout;
+                self.expect(wait, "no $CADRQ from the modem");
+            }
             Job::Fdp(mt) => {
                 let on_water = packet_estimate(mt) + timeout;
                 self.expect(on_water, "no $CATXF from the modem");

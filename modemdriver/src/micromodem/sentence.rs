@@ -40,9 +40,16 @@ pub struct FdpFrame {
     pub data: Vec<u8>,
 }
 
-/// Command echoes whose layout differs between firmware versions: the
-/// driver needs only their name, so their fields are kept as given.
-pub const LOOSE_ECHOES: &[&str] = &["TDP", "PDT", "PNT", "MSC", "MEC", "TMQ"];
+/// Modem sentences read by name only, their fields kept as given: command
+/// echoes whose layout differs between firmware versions (`$CATDP`,
+/// `$CAPDT`, `$CAPNT`, `$CAMSC`, `$CAMEC`, `$CATMQ`) and informational
+/// sentences the driver has no use for (`$CARXP` receive start, `$CADQF`
+/// data quality, `$CAMFD` matched filter, `$CASNR` SNR, `$CATOA` time of
+/// arrival, `$CAMER` hardware-line reply, `$CAHIB` / `$CAHBR` hibernation).
+pub const LOOSE_ECHOES: &[&str] = &[
+    "TDP", "PDT", "PNT", "MSC", "MEC", "TMQ", "RXP", "DQF", "MFD", "SNR", "TOA", "MER", "HIB",
+    "HBR",
+];
 
 /// One Micro-Modem sentence.
 #[derive(Debug, Clone, PartialEq)]
@@ -332,8 +339,9 @@ pub enum MmSentence {
         /// Time of the ping, `hhmmss.ss`.
         time: String,
     },
-    /// A `$CA` echo of a command whose fields differ between firmware
-    /// versions (ids in [`LOOSE_ECHOES`]), fields as given.
+    /// A `$CA` sentence read by name only (ids in [`LOOSE_ECHOES`]): an
+    /// echo whose fields differ between firmware versions, or information
+    /// the driver does not use; fields as given.
     Echo {
         /// Sentence id, e.g. "TDP".
         id: String,
