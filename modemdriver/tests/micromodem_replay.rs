@@ -589,3 +589,21 @@ async fn echoes_that_cannot_be_read_never_make_the_driver_send_again() {
     assert_eq!(r.len(), 1, "{events:?}");
     assert_eq!(r[0].0, TransmitOutcome::Sent);
 }
+
+#[tokio::test]
+async fn an_error_after_the_packet_went_out_does_not_send_it_again() {
+    let (lines, events) = replay(
+        &["startup_brief.nmea", "error_after_packet.nmea"],
+        Some(data(1)),
+        &[RATE1_FRAME],
+    )
+    .await;
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("$CCCYC")).count(),
+        1,
+        "{lines:?}"
+    );
+    let r = results(&events);
+    assert_eq!(r.len(), 1, "{events:?}");
+    assert_eq!(r[0].0, TransmitOutcome::Sent);
+}

@@ -1144,12 +1144,8 @@ impl Mm {
                     if let Some(a) = &mut self.awaiting {
                         a.deadline = Instant::now();
                     }
-                } else if self
-                    .active
-                    .as_ref()
-                    .is_some_and(|a| a.stage != Stage::NeedStart)
-                {
-                    self.fail_active(format!("modem error: {module} {code} {message}"));
+                } else {
+                    self.interrupt_active(format!("modem error: {module} {code} {message}"));
                 }
             }
             MmSentence::Message { kind, value } => {
@@ -1205,12 +1201,17 @@ impl Mm {
         }
         self.awaiting = None;
         self.queue_initialization();
-        if self
-            .active
-            .as_ref()
-            .is_some_and(|a| a.stage != Stage::NeedStart)
-        {
-            self.fail_active("the modem reset".into());
+        self.interrupt_active("the modem reset".into());
+    }
+
+    /// A modem error or reset while a transmission is under way: attempted
+    /// again, unless its packet already went out (only its statistics were
+    /// awaited), which is never sent twice.
+    fn interrupt_active(&mut self, reason: String) {
+        match self.active.as_ref().map(|a| a.stage) {
+            None | Some(Stage::NeedStart) => {}
+            Some(Stage::AwaitStats) => self.finish(TransmitOutcome::Sent),
+            Some(_) => self.fail_active(reason),
         }
     }
 
@@ -1692,6 +1693,9 @@ async fn run(
             command = ctx.commands.recv() => match command {
                 Some(command) => {
                     if let Some(done) = state.command(command) {
+                        // A whole reception waiting for its statistics is
+                        // reported without them.
+                        state.release_held();
                         let _ = done.send(());
                         return;
                     }
