@@ -92,6 +92,21 @@ pub fn set_clock(generation: Generation, now: u64) -> (MmSentence, u64) {
     }
 }
 
+/// Part of a second (µs) after its top within which a clock command is
+/// sent: the modem takes whole seconds, so the command goes out early in a
+/// second, well before the next one (Goby's driver waits for 50-100 ms).
+pub const SEND_WINDOW_MICROS: std::ops::Range<u64> = 50_000..100_000;
+
+/// How long to wait from `now` (µs since the epoch) until the send window
+/// of a second; zero when inside it.
+pub fn wait_for_send(now: u64) -> std::time::Duration {
+    let frac = now % 1_000_000;
+    if SEND_WINDOW_MICROS.contains(&frac) {
+        return std::time::Duration::ZERO;
+    }
+    std::time::Duration::from_micros((1_000_000 + SEND_WINDOW_MICROS.start - frac) % 1_000_000)
+}
+
 /// Checks the modem's answer to a clock command that asked for `asked`
 /// (µs), heard at `now` (µs): `Ok` when the time it gives is within
 /// `allowed_skew_ms` of the time asked for or of now (firmware versions
@@ -171,6 +186,15 @@ mod tests {
         let (clk, asked) = set_clock(Generation::One, now);
         assert!(clk.to_line().starts_with("$CCCLK,2013,06,01,12,34,56*"));
         assert_eq!(asked, 1_370_090_096_000_000);
+    }
+
+    #[test]
+    fn clock_commands_wait_for_the_top_of_a_second() {
+        use std::time::Duration;
+        assert_eq!(wait_for_send(7_060_000), Duration::ZERO);
+        assert_eq!(wait_for_send(7_030_000), Duration::from_millis(20));
+        assert_eq!(wait_for_send(7_500_000), Duration::from_millis(550));
+        assert_eq!(wait_for_send(7_100_000), Duration::from_millis(950));
     }
 
     #[test]

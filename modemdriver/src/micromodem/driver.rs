@@ -550,6 +550,12 @@ impl Mm {
                     }
                     Command::SetClock => {
                         self.clock_attempts += 1;
+                        // Sent just after the top of a second, as the modem
+                        // takes whole seconds (Goby does likewise).
+                        let wait = clock::wait_for_send(now_micros());
+                        if !wait.is_zero() {
+                            tokio::time::sleep(wait).await;
+                        }
                         let (sentence, asked) = clock::set_clock(self.generation, now_micros());
                         self.send_command(sentence, 1, false, false, Some(asked))
                             .await;
