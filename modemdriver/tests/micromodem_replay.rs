@@ -21,8 +21,8 @@ use modemdriver::{
 };
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::{
-    MicroModemConfig, MicroModemNarrowbandLblParams, MicroModemReceiveMode, MicroModemSpecific,
-    MicroModemTransmissionType, MicroModemTransmitMode,
+    MicroModemConfig, MicroModemHardwareControl, MicroModemNarrowbandLblParams,
+    MicroModemReceiveMode, MicroModemSpecific, MicroModemTransmissionType, MicroModemTransmitMode,
 };
 use tokio::sync::mpsc;
 
@@ -606,4 +606,39 @@ async fn an_error_after_the_packet_went_out_does_not_send_it_again() {
     let r = results(&events);
     assert_eq!(r.len(), 1, "{events:?}");
     assert_eq!(r[0].0, TransmitOutcome::Sent);
+}
+
+#[tokio::test]
+async fn a_hardware_line_is_set_and_its_answer_reported() {
+    let (_, events) = replay_with(&["startup_brief.nmea", "hardware_line.nmea"], &[], |d| {
+        d.initiate_specific(&MicroModemSpecific {
+            r#type: MicroModemTransmissionType::MicromodemHardwareControl as i32,
+            dest: Some(2),
+            hw_ctl: Some(MicroModemHardwareControl {
+                line: Some(5),
+                mode: Some(1),
+                arg: Some(1),
+            }),
+            ..Default::default()
+        })
+        .unwrap();
+    })
+    .await;
+    let r = results(&events);
+    assert_eq!(r.len(), 1, "{events:?}");
+    assert_eq!(r[0].0, TransmitOutcome::Sent);
+    let reply = events
+        .iter()
+        .find_map(|e| match e {
+            DriverEvent::Specific(s) => s.to::<MicroModemSpecific>(),
+            _ => None,
+        })
+        .expect("a hardware line answer");
+    assert_eq!(
+        reply.r#type(),
+        MicroModemTransmissionType::MicromodemHardwareControlReply
+    );
+    assert_eq!((reply.src(), reply.dest()), (2, 1));
+    let ctl = reply.hw_ctl.unwrap();
+    assert_eq!((ctl.line(), ctl.mode(), ctl.arg()), (5, 1, 1));
 }

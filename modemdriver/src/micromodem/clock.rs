@@ -4,38 +4,9 @@
 
 use crate::time::civil;
 
+use super::firmware::Generation;
 use super::sentence::MmSentence;
 use super::statistics::micros_since_epoch;
-
-/// Which Micro-Modem the driver talks to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Generation {
-    /// Not yet known (no `$CAREV` and no telling configuration line).
-    Unknown,
-    /// Micro-Modem 1 (firmware 0.x / 1.x).
-    One,
-    /// Micro-Modem 2 (firmware 2.x and up).
-    Two,
-}
-
-impl Generation {
-    /// The generation of a `$CAREV` firmware version, e.g. "0.94.0.00" (1)
-    /// or "2.0.16421" (2); `None` when the major number cannot be read.
-    pub fn of_version(version: &str) -> Option<Generation> {
-        let major: u32 = version.trim().split('.').next()?.trim().parse().ok()?;
-        Some(if major >= 2 {
-            Generation::Two
-        } else {
-            Generation::One
-        })
-    }
-
-    /// What a `$CACFG` parameter name tells: Micro-Modem 2 names its newer
-    /// parameters with dots (e.g. `xmit.txfrequency`).
-    pub fn of_config_key(key: &str) -> Option<Generation> {
-        key.contains('.').then_some(Generation::Two)
-    }
-}
 
 /// ISO 8601 UTC of microseconds since the epoch, whole seconds:
 /// `YYYY-MM-DDThh:mm:ssZ`.
@@ -157,18 +128,6 @@ pub fn check_reply(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn generations() {
-        assert_eq!(Generation::of_version("0.94.0.00"), Some(Generation::One));
-        assert_eq!(Generation::of_version("2.0.16421"), Some(Generation::Two));
-        assert_eq!(Generation::of_version("x"), None);
-        assert_eq!(
-            Generation::of_config_key("xmit.txfrequency"),
-            Some(Generation::Two)
-        );
-        assert_eq!(Generation::of_config_key("SRC"), None);
-    }
 
     #[test]
     fn iso_round_trip_and_clock_commands() {

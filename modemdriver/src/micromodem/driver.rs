@@ -54,9 +54,11 @@
 //! `$CCTDP` (one frame asked for from the layer above, sized by the FDP rate;
 //! a `$CARDP` received becomes a received `DATA` transmission),
 //! `MICROMODEM_REMUS_LBL_RANGING` → `$CCPDT`,
-//! `MICROMODEM_NARROWBAND_LBL_RANGING` → `$CCPNT`. Results come back as
+//! `MICROMODEM_NARROWBAND_LBL_RANGING` → `$CCPNT`,
+//! `MICROMODEM_HARDWARE_CONTROL` → `$CCMEC`. Results come back as
 //! [`DriverEvent::Specific`] with the same message: ranging reply from
-//! `$CAMPR` or `$SNTTA`, mini-packet from `$CAMUA`.
+//! `$CAMPR` or `$SNTTA`, mini-packet from `$CAMUA`, hardware line answer
+//! (`MICROMODEM_HARDWARE_CONTROL_REPLY`) from `$CAMER`.
 //!
 //! Robustness: lines with bad checksums or that cannot be parsed are reported
 //! and ignored; a command without answer is sent again (`max_retries`); a
@@ -73,13 +75,15 @@ use std::time::Duration;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, micro_modem_ranging_reply::OwttAmbiguity,
-    modem_transmission::TransmissionType, DriverConfig, MicroModemConfig, MicroModemRangingReply,
-    MicroModemReceiveStatistics, MicroModemSpecific, MicroModemTransmissionType,
-    MicroModemTransmitStatistics, ModemTransmission,
+    modem_transmission::TransmissionType, DriverConfig, MicroModemConfig,
+    MicroModemHardwareControl, MicroModemRangingReply, MicroModemReceiveStatistics,
+    MicroModemSpecific, MicroModemTransmissionType, MicroModemTransmitStatistics,
+    ModemTransmission,
 };
 use tokio::time::{sleep_until, Instant};
 
-use super::clock::{self, Generation};
+use super::clock;
+use super::firmware::{self, Generation};
 use super::nmea::NmeaError;
 use super::sentence::{Cycle, MmSentence, SentenceError};
 use super::statistics::{ReceiveStatisticsSentence, TransmitStatisticsSentence};
@@ -231,6 +235,11 @@ enum Job {
         ping: MmSentence,
         kind: MicroModemTransmissionType,
     },
+    /// A hardware line command ($CCMEC).
+    HardwareControl {
+        dest: u32,
+        ctl: MicroModemHardwareControl,
+    },
 }
 
 impl Job {
@@ -342,6 +351,8 @@ struct Mm {
     initializing: bool,
     clock_attempts: u32,
     generation: Generation,
+    /// Firmware version of the last `$CAREV`.
+    firmware: Option<String>,
     /// The modem has sent `$CACST` / `$CAXST`.
     sends_cst: bool,
     sends_xst: bool,
@@ -381,6 +392,7 @@ fn answer_id(command: &MmSentence) -> Option<&'static str> {
         S::FdpTransmit { .. } => "TDP",
         S::RemusLblPing { .. } => "PDT",
         S::NarrowbandLblPing { .. } => "PNT",
+        S::HardwareControl { .. } => "MEC",
         _ => return None,
     })
 }
@@ -416,13 +428,15 @@ fn job_transmission(
 ) -> ModemTransmission {
     match job {
         Job::Data(mt) | Job::Fdp(mt) => filled.cloned().unwrap_or_else(|| (**mt).clone()),
-        Job::Ping { dest } | Job::Mini { dest, .. } => ModemTransmission {
-            src: Some(modem_id as i32),
-            dest: Some(*dest as i32),
-            r#type: Some(TransmissionType::DriverSpecific as i32),
-            time: Some(now_micros()),
-            ..Default::default()
-        },
+        Job::Ping { dest } | Job::Mini { dest, .. } | Job::HardwareControl { dest, .. } => {
+            ModemTransmission {
+                src: Some(modem_id as i32),
+                dest: Some(*dest as i32),
+                r#type: Some(TransmissionType::DriverSpecific as i32),
+                time: Some(now_micros()),
+                ..Default::default()
+            }
+        }
         Job::Lbl { .. } => ModemTransmission {
             src: Some(modem_id as i32),
             r#type: Some(TransmissionType::DriverSpecific as i32),
@@ -697,6 +711,16 @@ impl Mm {
                     self.last_lbl = *kind;
                     (ping.clone(), 0)
                 }
+                Job::HardwareControl { dest, ctl } => (
+                    MmSentence::HardwareControl {
+                        src: me,
+                        dest: *dest,
+                        line: ctl.line(),
+                        mode: ctl.mode(),
+                        arg: ctl.arg(),
+                    },
+                    0,
+                ),
             };
             active.stage = Stage::Running;
             active.deadline = None;
@@ -1121,10 +1145,40 @@ impl Mm {
                     ..Default::default()
                 });
             }
+            MmSentence::HardwareControlReply {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            } => {
+                let (src, dest) = if self
+                    .firmware
+                    .as_deref()
+                    .is_some_and(firmware::swaps_hardware_reply)
+                {
+                    (dest, src)
+                } else {
+                    (src, dest)
+                };
+                self.specific(MicroModemSpecific {
+                    r#type: MicroModemTransmissionType::MicromodemHardwareControlReply as i32,
+                    src: Some(src as i32),
+                    dest: Some(dest as i32),
+                    hw_ctl: Some(MicroModemHardwareControl {
+                        line: Some(line),
+                        mode: Some(mode),
+                        arg: Some(arg),
+                    }),
+                    time: Some(now_micros()),
+                    ..Default::default()
+                });
+            }
             MmSentence::Revision { ident, version, .. } => {
                 if let Some(g) = Generation::of_version(&version) {
                     self.set_generation(g);
                 }
+                self.firmware = Some(version);
                 if ident.eq_ignore_ascii_case("INIT") {
                     self.modem_started();
                 }
@@ -1352,7 +1406,7 @@ impl Mm {
                 self.expect(receive, "no reply to the ping");
             }
             Job::Lbl { .. } => {}
-            Job::Mini { .. } => self.finish(TransmitOutcome::Sent),
+            Job::Mini { .. } | Job::HardwareControl { .. } => self.finish(TransmitOutcome::Sent),
         }
     }
 
@@ -1621,6 +1675,10 @@ impl Mm {
                     ..Default::default()
                 }))
             }
+            T::MicromodemHardwareControl => Job::HardwareControl {
+                dest,
+                ctl: r.hw_ctl.unwrap_or_default(),
+            },
             T::MicromodemRemusLblRanging => Job::Lbl {
                 ping: ranging::remus_ping(
                     self.modem_id,
@@ -1677,6 +1735,7 @@ async fn run(
         initializing: false,
         clock_attempts: 0,
         generation: Generation::Unknown,
+        firmware: None,
         sends_cst: false,
         sends_xst: false,
         cst_configured: false,

@@ -3,7 +3,8 @@
 //! - [`nmea`]: sentence framing and checksums.
 //! - [`sentence`]: the Micro-Modem's sentences, typed.
 //! - [`statistics`]: receive and transmit statistics ($CACST, $CAXST).
-//! - [`clock`]: setting the modem's clock ($CCCLK, $CCTMS) and telling Micro-Modem 1 from 2.
+//! - [`clock`]: setting the modem's clock ($CCCLK, $CCTMS) and checking it.
+//! - [`firmware`]: Micro-Modem 1 or 2, and quirks of firmware versions.
 //! - [`fdp`]: Flexible Data Protocol rates and received packets.
 //! - [`ranging`]: LBL pings ($CCPDT, $CCPNT) and their travel times ($SNTTA).
 //! - [`driver`]: the driver ([`MicroModemDriver`]).
@@ -13,6 +14,7 @@ pub mod clock;
 pub mod driver;
 pub mod emulator;
 pub mod fdp;
+pub mod firmware;
 pub mod nmea;
 pub mod ranging;
 pub mod sentence;

@@ -45,10 +45,9 @@ pub struct FdpFrame {
 /// `$CAPDT`, `$CAPNT`, `$CAMSC`, `$CAMEC`, `$CATMQ`) and informational
 /// sentences the driver has no use for (`$CARXP` receive start, `$CADQF`
 /// data quality, `$CAMFD` matched filter, `$CASNR` SNR, `$CATOA` time of
-/// arrival, `$CAMER` hardware-line reply, `$CAHIB` / `$CAHBR` hibernation).
+/// arrival, `$CAHIB` / `$CAHBR` hibernation).
 pub const LOOSE_ECHOES: &[&str] = &[
-    "TDP", "PDT", "PNT", "MSC", "MEC", "TMQ", "RXP", "DQF", "MFD", "SNR", "TOA", "MER", "HIB",
-    "HBR",
+    "TDP", "PDT", "PNT", "MSC", "MEC", "TMQ", "RXP", "DQF", "MFD", "SNR", "TOA", "HIB", "HBR",
 ];
 
 /// One Micro-Modem sentence.
@@ -338,6 +337,34 @@ pub enum MmSentence {
         times: [Option<f64>; 4],
         /// Time of the ping, `hhmmss.ss`.
         time: String,
+    },
+    /// `$CCMEC,src,dest,line,mode,arg`: set or read a hardware line of
+    /// modem `dest`.
+    HardwareControl {
+        /// Commanding modem.
+        src: u32,
+        /// Modem whose line is set.
+        dest: u32,
+        /// The line.
+        line: u32,
+        /// 0 read, 1 set, 2 toggle high, 3 toggle low.
+        mode: u32,
+        /// Value or toggle length.
+        arg: u32,
+    },
+    /// `$CAMER,src,dest,line,mode,arg`: the answer to a hardware line
+    /// command (older Micro-Modem 2 firmware swaps src and dest).
+    HardwareControlReply {
+        /// Answering modem.
+        src: u32,
+        /// Commanding modem.
+        dest: u32,
+        /// The line.
+        line: u32,
+        /// Mode.
+        mode: u32,
+        /// Value.
+        arg: u32,
     },
     /// A `$CA` sentence read by name only (ids in [`LOOSE_ECHOES`]): an
     /// echo whose fields differ between firmware versions, or information
@@ -722,6 +749,20 @@ impl MmSentence {
                 ],
                 time: f.text(4, "time")?,
             },
+            ("CC", "MEC") => MmSentence::HardwareControl {
+                src: f.uint(0, "src")?,
+                dest: f.uint(1, "dest")?,
+                line: f.uint(2, "line")?,
+                mode: f.uint(3, "mode")?,
+                arg: f.uint(4, "arg")?,
+            },
+            ("CA", "MER") => MmSentence::HardwareControlReply {
+                src: f.uint(0, "src")?,
+                dest: f.uint(1, "dest")?,
+                line: f.uint(2, "line")?,
+                mode: f.uint(3, "mode")?,
+                arg: f.uint(4, "arg")?,
+            },
             ("CA", id) if LOOSE_ECHOES.contains(&id) => MmSentence::Echo {
                 id: id.to_string(),
                 fields: s.fields.clone(),
@@ -1021,6 +1062,34 @@ impl MmSentence {
                 fields.push(time.clone());
                 n("SN", "TTA", fields)
             }
+            MmSentence::HardwareControl {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            } => n(
+                "CC",
+                "MEC",
+                [src, dest, line, mode, arg]
+                    .iter()
+                    .map(|v| v.to_string())
+                    .collect(),
+            ),
+            MmSentence::HardwareControlReply {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            } => n(
+                "CA",
+                "MER",
+                [src, dest, line, mode, arg]
+                    .iter()
+                    .map(|v| v.to_string())
+                    .collect(),
+            ),
             MmSentence::Echo { id, fields } => n("CA", id, fields.clone()),
         }
     }
@@ -1220,6 +1289,20 @@ mod tests {
             MmSentence::TravelTimes {
                 times: [Some(0.5), None, Some(1.25), None],
                 time: "012345.67".into(),
+            },
+            MmSentence::HardwareControl {
+                src: 1,
+                dest: 2,
+                line: 5,
+                mode: 1,
+                arg: 1,
+            },
+            MmSentence::HardwareControlReply {
+                src: 2,
+                dest: 1,
+                line: 5,
+                mode: 1,
+                arg: 1,
             },
             MmSentence::Echo {
                 id: "TDP".into(),
@@ -1505,7 +1588,7 @@ mod tests {
 
         #[test]
         fn never_panics_on_valid_nmea_with_random_fields(
-            id in prop::sample::select(vec!["CFG", "CFQ", "CLK", "CYC", "DRQ", "TXD", "TXP", "TXF", "RXD", "ACK", "REV", "ERR", "MSG", "MPC", "MPA", "MPR", "MUC", "MUA", "TMS", "TMG", "TMQ", "CST", "XST", "TDP", "RDP", "PDT", "PNT", "TTA"]),
+            id in prop::sample::select(vec!["CFG", "CFQ", "CLK", "CYC", "DRQ", "TXD", "TXP", "TXF", "RXD", "ACK", "REV", "ERR", "MSG", "MPC", "MPA", "MPR", "MUC", "MUA", "TMS", "TMG", "TMQ", "CST", "XST", "TDP", "RDP", "PDT", "PNT", "TTA", "MEC", "MER"]),
             talker in prop::sample::select(vec!["CA", "CC", "SN"]),
             fields in proptest::collection::vec("[0-9A-Fa-f.;\\-x]{0,8}", 0..34),
         ) {
