@@ -642,3 +642,17 @@ async fn a_hardware_line_is_set_and_its_answer_reported() {
     let ctl = reply.hw_ctl.unwrap();
     assert_eq!((ctl.line(), ctl.mode(), ctl.arg()), (5, 1, 1));
 }
+
+#[tokio::test]
+async fn a_poll_from_another_node_is_answered_with_queued_frames() {
+    let (_, events) = replay(
+        &["startup_brief.nmea", "poll.nmea"],
+        None,
+        &[b"polled frame one", b"polled frame two"],
+    )
+    .await;
+    let acks = received(&events, TransmissionType::Ack);
+    let acked: Vec<i32> = acks.iter().flat_map(|a| a.acked_frame.clone()).collect();
+    assert_eq!(acked, vec![0, 1], "{events:?}");
+    assert!(acks.iter().all(|a| a.unique_id.is_none()));
+}

@@ -26,6 +26,11 @@
 //! transmit statistics (`$CAXST`), the result waits for them (at most
 //! `statistics_timeout_ms`) and carries them in `transmit_stat`.
 //!
+//! A `$CACYC` naming this modem as sender that the driver did not start is
+//! a poll from another node: the modem's data requests are answered with
+//! frames asked for from the layer above, and acks heard after the packet
+//! answer it.
+//!
 //! Received `$CACYC` + `$CARXD` become a received `DATA` transmission, with
 //! the modem's receive statistics (`$CACST`, after the last `$CARXD`) in
 //! `receive_stat`: once the modem has been seen to send them, a whole
@@ -331,6 +336,13 @@ struct Incoming {
     stats: Vec<MicroModemReceiveStatistics>,
 }
 
+/// A cycle another node asked this modem to send (a poll).
+#[derive(Debug)]
+struct Poll {
+    cycle: Cycle,
+    filled: Option<ModemTransmission>,
+}
+
 /// A whole reception waiting for its `$CACST`.
 #[derive(Debug)]
 struct Held {
@@ -363,6 +375,7 @@ struct Mm {
     active: Option<Active>,
     incoming: Option<Incoming>,
     held: Option<Held>,
+    polled: Option<Poll>,
     last_lbl: MicroModemTransmissionType,
     last_heard: Instant,
     silence_reported: bool,
@@ -1018,6 +1031,23 @@ impl Mm {
                 self.start_incoming(cycle);
                 self.check_incoming_complete();
             }
+            MmSentence::Cycle {
+                from_modem: true,
+                cycle,
+            } => {
+                // This modem is to send: our own cycle's echo, or a poll
+                // from another node.
+                let own = self.active.as_ref().is_some_and(|a| {
+                    matches!(a.job, Job::Data(_))
+                        && matches!(a.stage, Stage::Running | Stage::Transmitting)
+                });
+                if !own {
+                    self.polled = Some(Poll {
+                        cycle,
+                        filled: None,
+                    });
+                }
+            }
             MmSentence::ReceiveData {
                 src,
                 dest,
@@ -1437,6 +1467,58 @@ impl Mm {
         template
     }
 
+    /// Frame `frame` (from 1) of the cycle another node polled this modem
+    /// for (a `$CACYC` naming this modem as sender that it did not start),
+    /// asked for from the layer above at the first request. Acks heard
+    /// afterwards answer it (with no `unique_id`, as nothing of ours
+    /// numbered it).
+    async fn polled_frame(
+        &mut self,
+        dest: u32,
+        ack: bool,
+        max_bytes: u32,
+        frame: u32,
+    ) -> Option<Vec<u8>> {
+        let poll = self.polled.as_ref().filter(|p| p.cycle.dest == dest)?;
+        if poll.filled.is_none() {
+            let c = poll.cycle;
+            let spec = rate::spec(c.rate as i32).unwrap_or(rate::spec(0).expect("rate 0"));
+            let template = ModemTransmission {
+                src: Some(self.modem_id as i32),
+                dest: Some(dest as i32),
+                rate: Some(c.rate as i32),
+                r#type: Some(TransmissionType::Data as i32),
+                ack_requested: Some(ack),
+                max_num_frames: Some(c.frames.clamp(1, spec.frames)),
+                max_frame_bytes: Some(max_bytes),
+                frame_start: Some(0),
+                time: Some(now_micros()),
+                ..Default::default()
+            };
+            let filled = self
+                .events
+                .request_data(template, DATA_REQUEST_TIMEOUT)
+                .await;
+            if let Some(poll) = &mut self.polled {
+                poll.filled = Some(filled);
+            }
+        }
+        let poll = self.polled.as_ref()?;
+        let filled = poll.filled.as_ref()?;
+        let data = filled.frame.get(frame.saturating_sub(1) as usize).cloned();
+        if frame >= poll.cycle.frames {
+            let frames = filled.frame.len().max(1) as u32;
+            self.last_sent = (ack && !filled.frame.is_empty()).then(|| SentData {
+                unique_id: None,
+                dest,
+                frames,
+                until: Instant::now() + self.receive_timeout(),
+            });
+            self.polled = None;
+        }
+        data
+    }
+
     /// `$CADRQ`: the modem asks for frame `frame` (from 1) of a cycle.
     async fn data_request(&mut self, src: u32, dest: u32, ack: bool, max_bytes: u32, frame: u32) {
         let timeout = self.response_timeout();
@@ -1448,13 +1530,18 @@ impl Mm {
                     && a.stage != Stage::AwaitStats
             });
         if !ours {
-            // A request of no cycle of ours (e.g. one we gave up on, or a
-            // poll): an empty frame lets the modem go on.
+            let data = if src == self.modem_id {
+                self.polled_frame(dest, ack, max_bytes, frame).await
+            } else {
+                None
+            };
+            // A request of no cycle of ours with nothing for it (e.g. a cycle
+            // we gave up on): an empty frame lets the modem go on.
             self.write(&MmSentence::TransmitData {
                 src,
                 dest,
                 ack,
-                data: Vec::new(),
+                data: data.unwrap_or_default(),
             })
             .await;
             return;
@@ -1744,6 +1831,7 @@ async fn run(
         active: None,
         incoming: None,
         held: None,
+        polled: None,
         last_lbl: MicroModemTransmissionType::MicromodemRemusLblRanging,
         last_heard: now,
         silence_reported: false,
