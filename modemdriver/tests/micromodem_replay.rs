@@ -19,7 +19,7 @@ use modemdriver::micromodem::MicroModemDriver;
 use modemdriver::{
     Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome,
 };
-use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
+use protos::goby::acomms::protobuf::modem_transmission::{TimeSource, TransmissionType};
 use protos::goby::acomms::protobuf::{
     MicroModemConfig, MicroModemHardwareControl, MicroModemNarrowbandLblParams,
     MicroModemReceiveMode, MicroModemSpecific, MicroModemTransmissionType, MicroModemTransmitMode,
@@ -406,8 +406,10 @@ async fn a_reception_carries_the_statistics_of_its_packets() {
         (Some(8), Some(8), Some(-0.4))
     );
     assert_eq!(data.date.as_deref(), Some("20261130"));
-    // 2026-11-30 01:25:06.25 UTC
+    // 2026-11-30 01:25:06.25 UTC, the time of the reception too.
     assert_eq!(data.time, Some(1_796_001_906_250_000));
+    assert_eq!(mt.time, data.time);
+    assert_eq!(mt.time_source(), TimeSource::ModemTime);
 }
 
 #[tokio::test]

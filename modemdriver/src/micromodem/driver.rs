@@ -79,11 +79,12 @@ use std::time::Duration;
 
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, micro_modem_ranging_reply::OwttAmbiguity,
-    modem_transmission::TransmissionType, DriverConfig, MicroModemConfig,
-    MicroModemHardwareControl, MicroModemRangingReply, MicroModemReceiveStatistics,
-    MicroModemSpecific, MicroModemTransmissionType, MicroModemTransmitStatistics,
-    ModemTransmission,
+    driver_config::ConnectionType,
+    micro_modem_ranging_reply::OwttAmbiguity,
+    modem_transmission::{TimeSource, TransmissionType},
+    DriverConfig, MicroModemConfig, MicroModemHardwareControl, MicroModemRangingReply,
+    MicroModemReceiveStatistics, MicroModemSpecific, MicroModemTransmissionType,
+    MicroModemTransmitStatistics, ModemTransmission,
 };
 use tokio::time::{sleep_until, Instant};
 
@@ -812,8 +813,18 @@ impl Mm {
     /// Reports a held reception now.
     fn release_held(&mut self) {
         if let Some(held) = self.held.take() {
-            self.events.emit(DriverEvent::Received(held.transmission));
+            self.report_reception(held.transmission);
         }
+    }
+
+    /// Reports a reception; with statistics, its time is the modem's time
+    /// of arrival of the last packet.
+    fn report_reception(&self, mut transmission: ModemTransmission) {
+        if let Some(t) = transmission.receive_stat.last().and_then(|s| s.time) {
+            transmission.time = Some(t);
+            transmission.time_source = Some(TimeSource::ModemTime as i32);
+        }
+        self.events.emit(DriverEvent::Received(transmission));
     }
 
     /// A whole reception: reported at once, or held for the `$CACST` that
@@ -827,7 +838,7 @@ impl Mm {
                 deadline: Instant::now() + self.statistics_timeout(),
             });
         } else {
-            self.events.emit(DriverEvent::Received(transmission));
+            self.report_reception(transmission);
         }
     }
 
