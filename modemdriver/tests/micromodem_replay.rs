@@ -658,3 +658,20 @@ async fn a_poll_from_another_node_is_answered_with_queued_frames() {
     assert_eq!(acked, vec![0, 1], "{events:?}");
     assert!(acks.iter().all(|a| a.unique_id.is_none()));
 }
+
+#[tokio::test]
+async fn a_reception_whose_statistics_never_come_is_reported_all_the_same() {
+    let (_, events) = replay(
+        &["startup_brief.nmea", "receive_without_statistics.nmea"],
+        None,
+        &[],
+    )
+    .await;
+    let got = received(&events, TransmissionType::Data);
+    assert_eq!(got.len(), 1, "{events:?}");
+    assert_eq!(
+        got[0].frame,
+        vec![b"no statistics follow this frame".to_vec()]
+    );
+    assert!(got[0].receive_stat.is_empty());
+}
