@@ -63,6 +63,7 @@ fn mm_config(id: i32, path: &str) -> DriverConfig {
         micromodem: Some(MicroModemConfig {
             nvram_cfg: vec!["DTO,2".into()],
             response_timeout_ms: Some(300),
+            config_echo_quiet_ms: Some(300),
             max_retries: Some(5),
             max_cycle_attempts: Some(3),
             reconnect_interval_ms: Some(100),
@@ -398,11 +399,15 @@ async fn partial_line_is_reported_and_survived() {
 
 #[tokio::test]
 async fn lost_data_request_is_retried() {
-    // The $CADRQ (second line after $CCCYC) is dropped: the driver, having
-    // no $CADRQ within its response timeout, runs the cycle again.
+    // The $CADRQ (second line after $CCCYC) is dropped: the modem gives up
+    // on the cycle when no data comes ($CAERR DATA_TIMEOUT, before the
+    // driver's own wait for the request ends) and the driver runs it again.
     let st = survives_line_fault("lost-drq", 1, Fault::Drop).await;
     assert!(
-        st.iter().any(|s| matches!(s, DriverStatus::Retrying { attempt: 2, reason } if reason.contains("CADRQ"))),
+        st.iter().any(
+            |s| matches!(s, DriverStatus::Retrying { attempt: 2, reason }
+            if reason.contains("CADRQ") || reason.contains("DATA_TIMEOUT"))
+        ),
         "{st:?}"
     );
 }
