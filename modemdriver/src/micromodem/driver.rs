@@ -676,6 +676,9 @@ impl Mm {
                     let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
                     let have = active.filled.as_ref().map_or(0, |f| f.frame.len() as u32);
                     let frames = have.clamp(1, spec.frames);
+                    // Whether acks are wanted is the filled transmission's
+                    // to say (the layer above knows what it queued).
+                    let ack = active.filled.as_ref().unwrap_or(mt).ack_requested();
                     (
                         MmSentence::Cycle {
                             from_modem: false,
@@ -683,7 +686,7 @@ impl Mm {
                                 src: me,
                                 dest: mt.dest().max(0) as u32,
                                 rate: mt.rate().max(0) as u32,
-                                ack: mt.ack_requested(),
+                                ack,
                                 frames,
                             },
                         },
