@@ -6,6 +6,9 @@
 //! for a driver (e.g. `gobyd` with the Micro-Modem driver) to open. Several
 //! modems in one process hear each other through the acoustic channel
 //! simulator; a single modem can join emulators in other processes over UDP.
+//! `--micromodem 2` makes them speak as Micro-Modem 2s (clock, configuration
+//! echo, statistics, Flexible Data Protocol, long-baseline ranging to the
+//! `--transponder`s given).
 
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
@@ -13,8 +16,11 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, Subcommand};
-use modemdriver::micromodem::emulator::{self, EmulatorConfig, EmulatorHandle, EmulatorPort};
+use modemdriver::micromodem::emulator::{
+    self, EmulatorConfig, EmulatorHandle, EmulatorPort, Geometry, Node, StatsLayout, Transponder,
+};
 use modemdriver::sim::medium::Medium;
+use modemdriver::sim::reception::Position;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::udp::UdpDriver;
 use modemdriver::{Driver, DriverConfig};
@@ -78,6 +84,21 @@ pub struct EmulateArgs {
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
+    /// Which Micro-Modem to emulate: 1 or 2 (a Micro-Modem 2 as fielded:
+    /// $CCTMS clock, configuration echo, $CACST/$CAXST statistics, Flexible
+    /// Data Protocol, long-baseline ranging).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub micromodem: u8,
+    /// Micro-Modem 2: a long-baseline transponder at X,Y,Z metres (same
+    /// frame as the modems, which sit along x every --spacing metres),
+    /// optionally with its narrowband reply frequency, X,Y,Z@HZ; repeat for
+    /// transponders A, B, C, D in order.
+    #[arg(long = "transponder", value_name = "X,Y,Z[@HZ]")]
+    pub transponders: Vec<String>,
+    /// Micro-Modem 2: layout of $CACST / $CAXST: `current` ($CACST version
+    /// 8, $CAXST version 7), `v6`, or `legacy` (no version field).
+    #[arg(long, default_value = "current", value_name = "LAYOUT")]
+    pub stats_layout: String,
 }
 
 /// Runs a `goby modem` command.
@@ -105,6 +126,74 @@ fn parse_peer(text: &str) -> Result<(u32, SocketAddr), CliError> {
         id.parse().map_err(|_| bad())?,
         addr.parse().map_err(|_| bad())?,
     ))
+}
+
+fn parse_transponder(text: &str) -> Result<Transponder, CliError> {
+    let bad = || {
+        CliError::setup(format!(
+            "--transponder {text:?} is not X,Y,Z or X,Y,Z@HZ (metres, hertz)"
+        ))
+    };
+    let (xyz, frequency) = match text.split_once('@') {
+        Some((xyz, hz)) => (xyz, Some(hz.parse::<u32>().map_err(|_| bad())?)),
+        None => (text, None),
+    };
+    let v: Vec<f64> = xyz
+        .split(',')
+        .map(|c| c.trim().parse::<f64>().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Transponder {
+            position: Position::new(x, y, z),
+            frequency,
+        }),
+        _ => Err(bad()),
+    }
+}
+
+fn parse_layout(text: &str) -> Result<StatsLayout, CliError> {
+    match text {
+        "current" => Ok(StatsLayout::Current),
+        "v6" => Ok(StatsLayout::V6),
+        "legacy" => Ok(StatsLayout::Legacy),
+        _ => Err(CliError::setup(format!(
+            "--stats-layout {text:?} is not current, v6 or legacy"
+        ))),
+    }
+}
+
+/// Where this process's modems and the transponders are.
+fn geometry(args: &EmulateArgs) -> Result<Geometry, CliError> {
+    if args.micromodem != 2 && !args.transponders.is_empty() {
+        return Err(CliError::setup("--transponder needs --micromodem 2"));
+    }
+    let transponders = args
+        .transponders
+        .iter()
+        .map(|t| parse_transponder(t))
+        .collect::<Result<Vec<_>, _>>()?;
+    if transponders.len() > 4 {
+        return Err(CliError::setup("--transponder: at most four (A, B, C, D)"));
+    }
+    let nodes = args
+        .modem_ids
+        .iter()
+        .enumerate()
+        .map(|(i, &id)| {
+            (
+                id,
+                Node {
+                    position: Position::new(i as f64 * args.spacing, 0.0, 0.0),
+                    velocity: [0.0; 3],
+                },
+            )
+        })
+        .collect();
+    Ok(Geometry {
+        nodes,
+        transponders,
+        ..Geometry::default()
+    })
 }
 
 /// Checks the options and builds one backend description per modem.
@@ -253,8 +342,28 @@ fn interrupted() -> impl std::future::Future<Output = ()> {
     }
 }
 
+/// Tells on stderr, as they happen, of host lines an emulated modem ignored
+/// (a Micro-Modem 2 ignores commands during its configuration echo). Never
+/// completes.
+async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
+    let mut seen = vec![0; emulators.len()];
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    loop {
+        tick.tick().await;
+        for ((e, seen), id) in emulators.iter().zip(&mut seen).zip(ids) {
+            let ignored = e.ignored();
+            for line in ignored.iter().skip(*seen) {
+                eprintln!("modem {id}: ignored {line} (configuration echo under way)");
+            }
+            *seen = ignored.len();
+        }
+    }
+}
+
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let backends = plan(args)?;
+    let geometry = geometry(args)?;
+    let stats_layout = parse_layout(&args.stats_layout)?;
     let revision_interval = seconds(args.revision_interval, "--revision-interval")?;
     let duration = args
         .duration
@@ -281,6 +390,14 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
                     link: args.links.get(i).cloned(),
                 },
             };
+            let base = match args.micromodem {
+                2 => EmulatorConfig {
+                    geometry: geometry.clone(),
+                    stats_layout,
+                    ..EmulatorConfig::micromodem2(modem_id)
+                },
+                _ => EmulatorConfig::default(),
+            };
             let config = EmulatorConfig {
                 modem_id,
                 revision_interval,
@@ -289,7 +406,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
                     Backend::Simulator => Duration::from_millis(500),
                     _ => Duration::ZERO,
                 },
-                ..EmulatorConfig::default()
+                ..base
             };
             let mut handle = emulator::start(config, port, backend)
                 .map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
@@ -301,9 +418,15 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             stdout.flush()?;
             emulators.push(handle);
         }
-        match duration {
-            Some(d) => tokio::time::sleep(d).await,
-            None => stop.await,
+        let end = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => stop.await,
+            }
+        };
+        tokio::select! {
+            () = end => {}
+            () = report_ignored(&args.modem_ids, &emulators) => {}
         }
         // Each emulator removes its link as it stops.
         for e in emulators {
@@ -350,5 +473,46 @@ mod tests {
         ] {
             assert!(plan_of(bad).is_err(), "{bad:?}");
         }
+    }
+
+    fn args_of(args: &[&str]) -> Result<EmulateArgs, clap::Error> {
+        Cli::try_parse_from(["x", "emulate"].iter().chain(args)).map(|c| {
+            let ModemCommand::Emulate(a) = c.cmd;
+            a
+        })
+    }
+
+    #[test]
+    fn the_dialect_and_the_geometry_of_a_micromodem2() {
+        assert_eq!(args_of(&[]).unwrap().micromodem, 1);
+        assert!(args_of(&["--micromodem", "3"]).is_err());
+        let a = args_of(&[
+            "--micromodem",
+            "2",
+            "--modem-id",
+            "1",
+            "--modem-id",
+            "4",
+            "--spacing",
+            "500",
+            "--transponder",
+            "0,750,-20",
+            "--transponder",
+            "100,0,0@26000",
+        ])
+        .unwrap();
+        let g = geometry(&a).unwrap();
+        assert_eq!(g.nodes[&4].position, Position::new(500.0, 0.0, 0.0));
+        assert_eq!(g.transponders[0].position, Position::new(0.0, 750.0, -20.0));
+        assert_eq!(g.transponders[1].frequency, Some(26_000));
+        for bad in ["1,2", "1,2,x", "1,2,3@", "1,2,3@-5", "inf,0,0"] {
+            let a = args_of(&["--micromodem", "2", "--transponder", bad]).unwrap();
+            let e = geometry(&a).unwrap_err().to_string();
+            assert!(e.contains("--transponder"), "{bad}: {e}");
+        }
+        let a = args_of(&["--transponder", "0,0,0"]).unwrap();
+        assert!(geometry(&a).is_err(), "transponders are a Micro-Modem 2's");
+        assert_eq!(parse_layout("v6").unwrap(), StatsLayout::V6);
+        assert!(parse_layout("v7").is_err());
     }
 }

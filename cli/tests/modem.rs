@@ -27,12 +27,17 @@ impl Drop for Emulator {
 
 /// Starts `goby modem emulate ARGS` and reads one `modem ID: PATH` line per modem.
 fn emulate(args: &[&str], modems: usize) -> Emulator {
+    emulate_to(args, modems, Stdio::inherit())
+}
+
+/// As [`emulate`], its standard error to `stderr`.
+fn emulate_to(args: &[&str], modems: usize, stderr: Stdio) -> Emulator {
     let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
         .args(["modem", "emulate"])
         .args(args)
         .env_remove("RUST_BACKTRACE")
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .expect("goby runs");
     let stdout = child.stdout.take().expect("piped");
@@ -104,6 +109,127 @@ fn the_printed_pty_speaks_micromodem_nmea() {
     assert_eq!(clk.fields, vec!["2024", "01", "02", "03", "04", "05"]);
     // The line with a wrong checksum is refused with an error.
     assert!(addresses.contains(&"CAERR".to_string()), "{text}");
+}
+
+/// The tty of an emulated modem, its lines read on a thread.
+struct Tty {
+    file: std::fs::File,
+    bytes: mpsc::Receiver<Vec<u8>>,
+    text: String,
+}
+
+impl Tty {
+    fn open(path: &str) -> Tty {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(path)
+            .expect("open the printed path");
+        let (tx, bytes) = mpsc::channel();
+        let mut reader = file.try_clone().expect("clone");
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 256];
+            while let Ok(n) = reader.read(&mut buf) {
+                if n == 0 || tx.send(buf[..n].to_vec()).is_err() {
+                    break;
+                }
+            }
+        });
+        Tty {
+            file,
+            bytes,
+            text: String::new(),
+        }
+    }
+
+    fn send(&mut self, sentence: NmeaSentence) {
+        write!(self.file, "{sentence}\r\n").unwrap();
+    }
+
+    /// The next sentence from the modem (within 10 s).
+    fn next(&mut self) -> NmeaSentence {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            if let Some((line, rest)) = self.text.split_once("\r\n") {
+                let line = line.to_string();
+                self.text = rest.to_string();
+                if let Ok(s) = NmeaSentence::parse(line.as_bytes()) {
+                    return s;
+                }
+                continue;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "no line within 10 s: {:?}",
+                self.text
+            );
+            if let Ok(bytes) = self.bytes.recv_timeout(Duration::from_millis(200)) {
+                self.text.push_str(&String::from_utf8_lossy(&bytes));
+            }
+        }
+    }
+}
+
+fn fields(v: &[&str]) -> Vec<String> {
+    v.iter().map(|f| f.to_string()).collect()
+}
+
+#[test]
+fn micromodem2_dialect_from_the_command_line() {
+    let log = std::env::temp_dir().join(format!("goby-emulate-mm2-{}.log", std::process::id()));
+    let emulator = emulate_to(
+        &[
+            "--micromodem",
+            "2",
+            "--modem-id",
+            "3",
+            "--transponder",
+            "0,750,0",
+            "--duration",
+            "20",
+        ],
+        1,
+        Stdio::from(std::fs::File::create(&log).expect("log file")),
+    );
+    let mut tty = Tty::open(&emulator.paths[0]);
+    let rev = tty.next();
+    assert_eq!(rev.address(), "CAREV");
+    assert_eq!(rev.fields[1..], fields(&["INIT", "2.0.27087"]));
+    assert_eq!(tty.next().fields[1..], fields(&["COPROC", "0.20.0.56"]));
+    tty.send(NmeaSentence::new("CC", "CFQ", fields(&["TOP"])));
+    // Too early: ignored, and told on standard error.
+    tty.send(NmeaSentence::new(
+        "CC",
+        "CYC",
+        fields(&["0", "3", "2", "1", "0", "1"]),
+    ));
+    let mut count = 0;
+    loop {
+        let s = tty.next();
+        assert_eq!(s.address(), "CACFG", "{s}");
+        count += 1;
+        if s.fields[0] == "XST" {
+            break;
+        }
+    }
+    assert!(count > 60, "{count} parameters");
+    // A REMUS interrogation of transponder A, 750 m away: 1 s round trip.
+    tty.send(NmeaSentence::new(
+        "CC",
+        "PDT",
+        fields(&["1", "2", "0", "0", "2000", "1", "0", "0", "0"]),
+    ));
+    assert_eq!(tty.next().address(), "SNPDT");
+    let tta = tty.next();
+    assert_eq!(tta.address(), "SNTTA");
+    assert_eq!(tta.fields[..4], fields(&["1.0000", "", "", ""]));
+    drop(emulator);
+    let stderr = std::fs::read_to_string(&log).unwrap_or_default();
+    let _ = std::fs::remove_file(&log);
+    assert!(
+        stderr.contains("modem 3: ignored $CCCYC,0,3,2,1,0,1*"),
+        "{stderr}"
+    );
 }
 
 fn mm_config(id: i32, path: &str) -> DriverConfig {
