@@ -1022,6 +1022,21 @@ impl Mm {
                 frame,
                 ..
             } => self.data_request(src, dest, ack, max_bytes, frame).await,
+            MmSentence::Echo { id, fields, .. } if id == "TDP" => {
+                // `$CATDP,error,id,dest,rate,ack,reserved,...`: error 1 is a
+                // refusal, and nothing goes on the water.
+                let refused = fields.len() >= 6 && fields[0].trim() == "1";
+                if refused
+                    && self
+                        .active
+                        .as_ref()
+                        .is_some_and(|a| matches!(a.job, Job::Fdp(_)))
+                {
+                    self.finish(TransmitOutcome::Failed(
+                        "the modem refused the FDP packet ($CATDP error 1)".into(),
+                    ));
+                }
+            }
             MmSentence::TransmitStart { .. } => self.transmit_start(),
             MmSentence::TransmitDone { .. } => self.transmit_done(),
             MmSentence::TransmitStatistics(xst) => self.transmit_statistics(&xst),
@@ -1219,10 +1234,18 @@ impl Mm {
                 });
             }
             MmSentence::Revision { ident, version, .. } => {
-                if let Some(g) = Generation::of_version(&version) {
-                    self.set_generation(g);
+                // The modem's own firmware (AUV, or INIT at a start); a
+                // Micro-Modem 2 also reports its coprocessor's (COPROC),
+                // whose version says nothing of the generation.
+                let main = ["AUV", "INIT"]
+                    .iter()
+                    .any(|i| ident.eq_ignore_ascii_case(i));
+                if main {
+                    if let Some(g) = Generation::of_version(&version) {
+                        self.set_generation(g);
+                    }
+                    self.firmware = Some(version);
                 }
-                self.firmware = Some(version);
                 if ident.eq_ignore_ascii_case("INIT") {
                     self.modem_started();
                 }
