@@ -675,3 +675,25 @@ async fn a_reception_whose_statistics_never_come_is_reported_all_the_same() {
     );
     assert!(got[0].receive_stat.is_empty());
 }
+
+#[tokio::test]
+async fn a_refused_flexible_data_packet_fails_at_once() {
+    let frame: &[u8] = b"too much for the modem";
+    let (lines, events) = replay_with(&["startup_brief.nmea", "fdp_refused.nmea"], &[frame], |d| {
+        d.initiate_specific(&MicroModemSpecific {
+            r#type: MicroModemTransmissionType::MicromodemFlexibleData as i32,
+            dest: Some(2),
+            rate: Some(1),
+            ..Default::default()
+        })
+        .unwrap();
+    })
+    .await;
+    assert_eq!(lines.iter().filter(|l| l.starts_with("$CCTDP")).count(), 1);
+    let r = results(&events);
+    assert_eq!(r.len(), 1, "{events:?}");
+    assert!(
+        matches!(&r[0].0, TransmitOutcome::Failed(why) if why.contains("refused")),
+        "{r:?}"
+    );
+}

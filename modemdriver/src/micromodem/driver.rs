@@ -676,6 +676,9 @@ impl Mm {
                     let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
                     let have = active.filled.as_ref().map_or(0, |f| f.frame.len() as u32);
                     let frames = have.clamp(1, spec.frames);
+                    // Whether acks are wanted is the filled transmission's
+                    // to say (the layer above knows what it queued).
+                    let ack = active.filled.as_ref().unwrap_or(mt).ack_requested();
                     (
                         MmSentence::Cycle {
                             from_modem: false,
@@ -683,7 +686,7 @@ impl Mm {
                                 src: me,
                                 dest: mt.dest().max(0) as u32,
                                 rate: mt.rate().max(0) as u32,
-                                ack: mt.ack_requested(),
+                                ack,
                                 frames,
                             },
                         },
@@ -1019,6 +1022,21 @@ impl Mm {
                 frame,
                 ..
             } => self.data_request(src, dest, ack, max_bytes, frame).await,
+            MmSentence::Echo { id, fields, .. } if id == "TDP" => {
+                // `$CATDP,error,id,dest,rate,ack,reserved,...`: error 1 is a
+                // refusal, and nothing goes on the water.
+                let refused = fields.len() >= 6 && fields[0].trim() == "1";
+                if refused
+                    && self
+                        .active
+                        .as_ref()
+                        .is_some_and(|a| matches!(a.job, Job::Fdp(_)))
+                {
+                    self.finish(TransmitOutcome::Failed(
+                        "the modem refused the FDP packet ($CATDP error 1)".into(),
+                    ));
+                }
+            }
             MmSentence::TransmitStart { .. } => self.transmit_start(),
             MmSentence::TransmitDone { .. } => self.transmit_done(),
             MmSentence::TransmitStatistics(xst) => self.transmit_statistics(&xst),
@@ -1216,10 +1234,18 @@ impl Mm {
                 });
             }
             MmSentence::Revision { ident, version, .. } => {
-                if let Some(g) = Generation::of_version(&version) {
-                    self.set_generation(g);
+                // The modem's own firmware (AUV, or INIT at a start); a
+                // Micro-Modem 2 also reports its coprocessor's (COPROC),
+                // whose version says nothing of the generation.
+                let main = ["AUV", "INIT"]
+                    .iter()
+                    .any(|i| ident.eq_ignore_ascii_case(i));
+                if main {
+                    if let Some(g) = Generation::of_version(&version) {
+                        self.set_generation(g);
+                    }
+                    self.firmware = Some(version);
                 }
-                self.firmware = Some(version);
                 if ident.eq_ignore_ascii_case("INIT") {
                     self.modem_started();
                 }

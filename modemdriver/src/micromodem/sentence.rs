@@ -42,7 +42,7 @@ pub struct FdpFrame {
 
 /// Modem sentences read by name only, their fields kept as given: command
 /// echoes whose layout differs between firmware versions (`$CATDP`,
-/// `$CAPDT`, `$CAPNT`, `$CAMSC`, `$CAMEC`, `$CATMQ`) and informational
+/// `$CAPDT` / `$SNPDT`, `$CAPNT` / `$SNPNT`, `$CAMSC`, `$CAMEC`, `$CATMQ`) and informational
 /// sentences the driver has no use for (`$CARXP` receive start, `$CADQF`
 /// data quality, `$CAMFD` matched filter, `$CASNR` SNR, `$CATOA` time of
 /// arrival, `$CAHIB` / `$CAHBR` hibernation).
@@ -370,6 +370,9 @@ pub enum MmSentence {
     /// echo whose fields differ between firmware versions, or information
     /// the driver does not use; fields as given.
     Echo {
+        /// Talker: "CA", or "SN" for the echoes of LBL pings (`$SNPDT`,
+        /// `$SNPNT`).
+        talker: String,
         /// Sentence id, e.g. "TDP".
         id: String,
         /// The fields.
@@ -763,10 +766,13 @@ impl MmSentence {
                 mode: f.uint(3, "mode")?,
                 arg: f.uint(4, "arg")?,
             },
-            ("CA", id) if LOOSE_ECHOES.contains(&id) => MmSentence::Echo {
-                id: id.to_string(),
-                fields: s.fields.clone(),
-            },
+            ("CA", id) | ("SN", id @ ("PDT" | "PNT")) if LOOSE_ECHOES.contains(&id) => {
+                MmSentence::Echo {
+                    talker: s.talker.clone(),
+                    id: id.to_string(),
+                    fields: s.fields.clone(),
+                }
+            }
             _ => return Err(SentenceError::Unknown(s.address())),
         })
     }
@@ -1090,7 +1096,7 @@ impl MmSentence {
                     .map(|v| v.to_string())
                     .collect(),
             ),
-            MmSentence::Echo { id, fields } => n("CA", id, fields.clone()),
+            MmSentence::Echo { talker, id, fields } => n(talker, id, fields.clone()),
         }
     }
 
@@ -1305,6 +1311,12 @@ mod tests {
                 arg: 1,
             },
             MmSentence::Echo {
+                talker: "SN".into(),
+                id: "PDT".into(),
+                fields: vec!["1".into(), "2".into()],
+            },
+            MmSentence::Echo {
+                talker: "CA".into(),
                 id: "TDP".into(),
                 fields: vec!["2".into(), "1".into(), "0".into(), "0".into()],
             },
