@@ -1,7 +1,9 @@
 //! The Micro-Modem driver against the emulator over real pseudo-terminals:
 //! two emulated modems joined by UDP on 127.0.0.1, each driven by a driver
 //! that opens its tty path as it would at sea. Data with acknowledgement at
-//! rates 0 and 2, ping, mini-packets, and each fault with its recovery.
+//! rates 0 and 2, ping, mini-packets, and each fault with its recovery; and
+//! two emulated Micro-Modem 2s on the channel simulator, traffic both ways
+//! at rates 0 and 1 with acks and statistics.
 
 mod common;
 
@@ -63,6 +65,7 @@ fn mm_config(id: i32, path: &str) -> DriverConfig {
         micromodem: Some(MicroModemConfig {
             nvram_cfg: vec!["DTO,2".into()],
             response_timeout_ms: Some(300),
+            config_echo_quiet_ms: Some(300),
             max_retries: Some(5),
             max_cycle_attempts: Some(3),
             reconnect_interval_ms: Some(100),
@@ -398,11 +401,15 @@ async fn partial_line_is_reported_and_survived() {
 
 #[tokio::test]
 async fn lost_data_request_is_retried() {
-    // The $CADRQ (second line after $CCCYC) is dropped: the driver, having
-    // no $CADRQ within its response timeout, runs the cycle again.
+    // The $CADRQ (second line after $CCCYC) is dropped: the modem gives up
+    // on the cycle when no data comes ($CAERR DATA_TIMEOUT, before the
+    // driver's own wait for the request ends) and the driver runs it again.
     let st = survives_line_fault("lost-drq", 1, Fault::Drop).await;
     assert!(
-        st.iter().any(|s| matches!(s, DriverStatus::Retrying { attempt: 2, reason } if reason.contains("CADRQ"))),
+        st.iter().any(
+            |s| matches!(s, DriverStatus::Retrying { attempt: 2, reason }
+            if reason.contains("CADRQ") || reason.contains("DATA_TIMEOUT"))
+        ),
         "{st:?}"
     );
 }
@@ -612,4 +619,146 @@ async fn an_ack_names_the_transmission_it_answers() {
     assert_eq!(ack.r#type(), TransmissionType::Ack);
     assert_eq!((ack.src(), ack.dest(), ack.unique_id), (2, 1, Some(41)));
     b.stop().await;
+}
+
+/// Two emulated Micro-Modem 2s 1000 m apart on the in-process channel
+/// simulator, a driver on each pty.
+async fn bench_mm2(name: &str) -> (Driver, Driver, EmulatorHandle, EmulatorHandle, PathBuf) {
+    use modemdriver::sim::medium::Medium;
+    use modemdriver::sim::SimulatorDriver;
+    use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
+    use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+    let dir = scratch(name);
+    let medium = Medium::new();
+    let mut emulators = Vec::new();
+    let mut drivers = Vec::new();
+    for id in [1u32, 2] {
+        let sim = DriverConfig {
+            modem_id: Some(id as i32),
+            simulator: Some(SimulatorDriverConfig {
+                node: vec![
+                    NodePosition {
+                        modem_id: 1,
+                        x: Some(0.0),
+                        ..Default::default()
+                    },
+                    NodePosition {
+                        modem_id: 2,
+                        x: Some(1000.0),
+                        ..Default::default()
+                    },
+                ],
+                packet_overhead_seconds: Some(0.1),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let backend = SimulatorDriver::start_on(&sim, medium.clone()).expect("simulator");
+        let cfg = EmulatorConfig {
+            packet_overhead: Duration::from_millis(100),
+            data_timeout: Duration::from_millis(1000),
+            ..EmulatorConfig::micromodem2(id)
+        };
+        let mut e =
+            emulator::start(cfg, EmulatorPort::Pty { link: None }, Some(backend)).expect("pty");
+        let path = e.path().await.unwrap();
+        drivers.push(MicroModemDriver::start(&mm_config(id as i32, &path)).unwrap());
+        emulators.push(e);
+    }
+    let mut d2 = drivers.pop().unwrap();
+    let mut d1 = drivers.pop().unwrap();
+    ready(&mut d1).await;
+    ready(&mut d2).await;
+    let e2 = emulators.pop().unwrap();
+    let e1 = emulators.pop().unwrap();
+    (d1, d2, e1, e2, dir)
+}
+
+/// Sends `frame` from `tx` to `rx` (modem `dest`) at `rate` with an ack;
+/// returns the transmit result's transmission, what `rx` received in
+/// `window` after it, and the acks `tx` heard.
+async fn one_way(
+    tx: &mut Driver,
+    rx: &mut Driver,
+    dest: i32,
+    rate: i32,
+    frame: &[u8],
+) -> (
+    ModemTransmission,
+    Vec<ModemTransmission>,
+    Vec<ModemTransmission>,
+) {
+    tx.initiate_transmission(data(dest, rate, true)).unwrap();
+    let mut acks = Vec::new();
+    let sent = tokio::time::timeout(Duration::from_secs(30), async {
+        loop {
+            match tx.next_event().await.expect("driver running") {
+                DriverEvent::DataRequest(request) => {
+                    let mut filled = request.template().clone();
+                    filled.frame = vec![frame.to_vec()];
+                    request.respond(filled);
+                }
+                DriverEvent::TransmitResult(r) => {
+                    assert_eq!(r.outcome, TransmitOutcome::Sent, "{r:?}");
+                    return r.transmission;
+                }
+                DriverEvent::Received(mt) if mt.r#type() == TransmissionType::Ack => acks.push(mt),
+                _ => {}
+            }
+        }
+    })
+    .await
+    .expect("a transmit result in time");
+    let got = data_received(rx, Duration::from_millis(2500)).await;
+    let deadline = tokio::time::Instant::now() + Duration::from_millis(1500);
+    while let Ok(Some(event)) = tokio::time::timeout_at(deadline, tx.next_event()).await {
+        if let DriverEvent::Received(mt) = event {
+            if mt.r#type() == TransmissionType::Ack {
+                acks.push(mt);
+            }
+        }
+    }
+    (sent, got, acks)
+}
+
+#[tokio::test]
+async fn micromodem2_traffic_both_ways_at_rates_0_and_1_arrives_once_with_statistics() {
+    let (mut d1, mut d2, e1, e2, _dir) = bench_mm2("mm2-both-ways").await;
+    let mut delivered = 0;
+    for (n, rate) in [0, 0, 1, 1].into_iter().enumerate() {
+        for (from, to) in [(1, 2), (2, 1)] {
+            let frame = format!("message {n} at rate {rate} from {from} to {to}").into_bytes();
+            let (tx, rx) = if from == 1 {
+                (&mut d1, &mut d2)
+            } else {
+                (&mut d2, &mut d1)
+            };
+            let (sent, got, acks) = one_way(tx, rx, to, rate, &frame).await;
+            assert_eq!(
+                got.len(),
+                1,
+                "message {n} {from}->{to} arrives once: {got:?}"
+            );
+            assert!(!sent.transmit_stat.is_empty(), "{sent:?}");
+            assert_eq!(sent.transmit_stat.last().unwrap().rate, Some(rate));
+            assert_eq!(got[0].frame, vec![frame.clone()]);
+            assert_eq!(
+                (got[0].src(), got[0].dest(), got[0].rate()),
+                (from, to, rate)
+            );
+            let stat = got[0].receive_stat.last().expect("receive statistics");
+            assert_eq!(
+                (stat.source, stat.dest, stat.rate),
+                (Some(from), Some(to), Some(rate))
+            );
+            assert_eq!(acks.len(), 1, "{acks:?}");
+            assert_eq!(acks[0].acked_frame, vec![0]);
+            delivered += 1;
+        }
+    }
+    assert_eq!(delivered, 8);
+    d1.stop().await.unwrap();
+    d2.stop().await.unwrap();
+    e1.stop().await;
+    e2.stop().await;
 }

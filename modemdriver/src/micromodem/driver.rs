@@ -1,16 +1,50 @@
-//! The WHOI Micro-Modem driver: NMEA-0183 over a serial port.
+//! The WHOI Micro-Modem driver (Micro-Modem 1 and 2): NMEA-0183 over a
+//! serial port.
 //!
-//! On start (and after a modem reset or a reconnection) the driver sets the
-//! modem's id and the configured NVRAM values (`$CCCFG`) and its clock
-//! (`$CCCLK`). A data transmission is a cycle: the frames are obtained from
-//! the layer above by one data request first (with none, and without
-//! `always_initiate`, nothing is sent), then `$CCCYC` (echoed `$CACYC`), a
-//! `$CCTXD` for each `$CADRQ`, and `$CATXF` ends it. Received `$CACYC` +
-//! `$CARXD` become a received `DATA` transmission; `$CAACK` an `ACK` one,
+//! Start-up (and again after a modem reset or a reconnection): the modem's
+//! id and the configured NVRAM values (`$CCCFG`; `CST,1` and `XST,1` too,
+//! for the statistics, unless configured otherwise), then the whole
+//! configuration is queried (`$CCCFQ,ALL`, or `TOP` on a Micro-Modem 2) and
+//! its echo — one `$CACFG` per parameter, dozens on a Micro-Modem 2 — is
+//! awaited until `config_echo_quiet_ms` pass without one; then the clock is
+//! set (`$CCTMS` on a Micro-Modem 2, `$CCCLK` on a Micro-Modem 1) and the
+//! time the modem answers (`$CATMS` / `$CACLK`) is checked against the time
+//! asked for (`allowed_skew_ms`; set again if off). The generation is told
+//! from the firmware version in `$CAREV` (2.x and up: Micro-Modem 2) or from
+//! the configuration echo (dotted parameter names are Micro-Modem 2's).
+//! Only then is the driver [`DriverStatus::Ready`].
+//!
+//! A data transmission is a cycle, followed as the modem runs it: the
+//! frames are obtained from the layer above by one data request first (with
+//! none, and without `always_initiate`, nothing is sent); `$CCCYC` announces
+//! as many frames as there are (echoed `$CACYC`); at rate 0 the modem first
+//! sends a cycle-initialization packet (`$CATXP`, `$CATXF`) and only then
+//! asks for data; each `$CADRQ` is answered once with its frame (`$CCTXD`,
+//! never sent again for want of its echo); `$CATXP` tells the packet is on
+//! the water, and the driver waits for its `$CATXF` as long as the packet
+//! takes, never starting the cycle again meanwhile. When the modem sends
+//! transmit statistics (`$CAXST`), the result waits for them (at most
+//! `statistics_timeout_ms`) and carries them in `transmit_stat`.
+//!
+//! A `$CACYC` naming this modem as sender that the driver did not start is
+//! a poll from another node: the modem's data requests are answered with
+//! frames asked for from the layer above, and acks heard after the packet
+//! answer it.
+//!
+//! Received `$CACYC` + `$CARXD` become a received `DATA` transmission, with
+//! the modem's receive statistics (`$CACST`, after the last `$CARXD`) in
+//! `receive_stat`: once the modem has been seen to send them, a whole
+//! reception waits for its `$CACST` at most `statistics_timeout_ms`, so that
+//! none is lost or held for ever. `$CAACK` becomes an `ACK` transmission,
 //! carrying the `unique_id` of the transmission it answers: the last one
 //! whose `$CATXF` was seen, when the ack comes from its destination, to this
 //! modem, for one of its frames, within `receive_timeout_ms` (else none, and
 //! the layer above credits nothing).
+//!
+//! Echoes of host commands are matched by sentence name, whatever fields a
+//! firmware version gives them; an echo that cannot be read is reported
+//! ([`DriverStatus::Unparseable`]) and still counts as the answer, so it
+//! never makes a command go out again.
 //!
 //! Slots: a transmission carrying its slot (`time`, `slot_seconds`, see
 //! [`crate::slot`]) is started, or attempted again after a fault, only while
@@ -20,10 +54,16 @@
 //!
 //! Micro-Modem specifics go through
 //! [`Driver::initiate_specific`](crate::Driver::initiate_specific) with a
-//! `goby.acomms.protobuf.MicroModemSpecific` (type `MICROMODEM_TWO_WAY_PING`
-//! → `$CCMPC`, `MICROMODEM_MINI_DATA` → `$CCMUC`); results come back as
-//! [`DriverEvent::Specific`] with the same message (ranging reply from
-//! `$CAMPR`, mini-packet from `$CAMUA`).
+//! `goby.acomms.protobuf.MicroModemSpecific`: `MICROMODEM_TWO_WAY_PING` →
+//! `$CCMPC`, `MICROMODEM_MINI_DATA` → `$CCMUC`, `MICROMODEM_FLEXIBLE_DATA` →
+//! `$CCTDP` (one frame asked for from the layer above, sized by the FDP rate;
+//! a `$CARDP` received becomes a received `DATA` transmission),
+//! `MICROMODEM_REMUS_LBL_RANGING` → `$CCPDT`,
+//! `MICROMODEM_NARROWBAND_LBL_RANGING` → `$CCPNT`,
+//! `MICROMODEM_HARDWARE_CONTROL` → `$CCMEC`. Results come back as
+//! [`DriverEvent::Specific`] with the same message: ranging reply from
+//! `$CAMPR` or `$SNTTA`, mini-packet from `$CAMUA`, hardware line answer
+//! (`MICROMODEM_HARDWARE_CONTROL_REPLY`) from `$CAMER`.
 //!
 //! Robustness: lines with bad checksums or that cannot be parsed are reported
 //! and ignored; a command without answer is sent again (`max_retries`); a
@@ -39,14 +79,21 @@ use std::time::Duration;
 
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, micro_modem_ranging_reply::OwttAmbiguity,
-    modem_transmission::TransmissionType, DriverConfig, MicroModemConfig, MicroModemRangingReply,
-    MicroModemSpecific, MicroModemTransmissionType, ModemTransmission,
+    driver_config::ConnectionType,
+    micro_modem_ranging_reply::OwttAmbiguity,
+    modem_transmission::{TimeSource, TransmissionType},
+    DriverConfig, MicroModemConfig, MicroModemHardwareControl, MicroModemRangingReply,
+    MicroModemReceiveStatistics, MicroModemSpecific, MicroModemTransmissionType,
+    MicroModemTransmitStatistics, ModemTransmission,
 };
 use tokio::time::{sleep_until, Instant};
 
+use super::clock;
+use super::firmware::{self, Generation};
 use super::nmea::NmeaError;
 use super::sentence::{Cycle, MmSentence, SentenceError};
+use super::statistics::{ReceiveStatisticsSentence, TransmitStatisticsSentence};
+use super::{fdp, ranging};
 use crate::config;
 use crate::driver::{
     Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
@@ -57,10 +104,14 @@ use crate::link::serial::{self, SerialLineLink};
 use crate::link::trace::Tracer;
 use crate::link::Link;
 use crate::rate;
-use crate::time::{clock_fields, now_micros};
+use crate::time::now_micros;
 
 /// How long the driver waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// NVRAM settings that make the modem report receive ($CACST) and transmit
+/// ($CAXST) statistics; set to 1 at start unless `nvram_cfg` sets them.
+pub const STATISTICS_SETTINGS: [&str; 2] = ["CST", "XST"];
 
 /// Baud rate when `serial_baud` is not set.
 pub const DEFAULT_BAUD: u32 = 19_200;
@@ -173,25 +224,53 @@ impl MicroModemDriver {
 /// What the layer above asked for.
 #[derive(Debug, Clone)]
 enum Job {
-    Data(ModemTransmission),
-    Ping { dest: u32 },
-    Mini { dest: u32, value: u16 },
+    /// A data cycle ($CCCYC).
+    Data(Box<ModemTransmission>),
+    /// A Flexible Data Protocol packet ($CCTDP); the transmission carries
+    /// the FDP rate.
+    Fdp(Box<ModemTransmission>),
+    Ping {
+        dest: u32,
+    },
+    Mini {
+        dest: u32,
+        value: u16,
+    },
+    /// An LBL ping ($CCPDT or $CCPNT).
+    Lbl {
+        ping: MmSentence,
+        kind: MicroModemTransmissionType,
+    },
+    /// A hardware line command ($CCMEC).
+    HardwareControl {
+        dest: u32,
+        ctl: MicroModemHardwareControl,
+    },
+}
+
+impl Job {
+    /// A job whose frames are asked for from the layer above.
+    fn data(&self) -> Option<&ModemTransmission> {
+        match self {
+            Job::Data(mt) | Job::Fdp(mt) => Some(mt),
+            _ => None,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Stage {
     /// The first command is yet to be sent.
     NeedStart,
-    /// Waiting for the echo of the first command.
-    AwaitEcho,
-    /// Waiting for a `$CADRQ`.
-    AwaitDataRequest,
-    /// Waiting for `$CATXD` of frame n (from 1).
-    AwaitTxdEcho(u32),
-    /// Waiting for `$CATXF`.
-    AwaitTransmitDone,
-    /// Waiting for `$CAMPR`.
-    AwaitPingReply,
+    /// The command is out; for data, the modem runs the cycle: the
+    /// cycle-initialization packet (rate 0), data requests, the packet.
+    Running,
+    /// `$CATXP` seen: the packet is on the water until `$CATXF`.
+    Transmitting,
+    /// The packet went out; waiting for its `$CAXST`.
+    AwaitStats,
+    /// Waiting for a reply (`$CAMPR` to a ping, `$SNTTA` to an LBL ping).
+    AwaitReply,
 }
 
 #[derive(Debug)]
@@ -202,6 +281,25 @@ struct Active {
     attempt: u32,
     stage: Stage,
     deadline: Option<Instant>,
+    /// What is missing when `deadline` passes.
+    waiting_for: &'static str,
+    /// Frames announced in the `$CCCYC`.
+    cycle_frames: u32,
+    /// Data requests of this cycle answered.
+    requested: u32,
+    /// `$CAXST` of this transmission (two at rate 0: the cycle
+    /// initialization and the data packet).
+    transmit_stats: Vec<MicroModemTransmitStatistics>,
+}
+
+/// What the driver sends outside of transmissions.
+#[derive(Debug, Clone)]
+enum Command {
+    Send(MmSentence),
+    /// `$CCCFQ,ALL` (or TOP on a Micro-Modem 2), answered by many lines.
+    QueryConfig,
+    /// `$CCCLK` or `$CCTMS`, chosen when sent.
+    SetClock,
 }
 
 #[derive(Debug)]
@@ -210,6 +308,12 @@ struct Awaiting {
     attempt: u32,
     deadline: Instant,
     for_job: bool,
+    /// Answered by many lines: done when they stop.
+    multi: bool,
+    /// A line of a multi-line answer arrived.
+    heard: bool,
+    /// For a clock command: the time asked for, µs since the epoch.
+    clock_asked: Option<u64>,
 }
 
 /// The last data transmission that went out asking for acks: the acks
@@ -223,11 +327,27 @@ struct SentData {
     until: Instant,
 }
 
+/// A packet being received ($CACYC / $CARXD lines).
 #[derive(Debug)]
 struct Incoming {
     cycle: Cycle,
     frames: BTreeMap<u32, Vec<u8>>,
     bad: u32,
+    deadline: Instant,
+    stats: Vec<MicroModemReceiveStatistics>,
+}
+
+/// A cycle another node asked this modem to send (a poll).
+#[derive(Debug)]
+struct Poll {
+    cycle: Cycle,
+    filled: Option<ModemTransmission>,
+}
+
+/// A whole reception waiting for its `$CACST`.
+#[derive(Debug)]
+struct Held {
+    transmission: ModemTransmission,
     deadline: Instant,
 }
 
@@ -239,74 +359,79 @@ struct Mm {
     events: EventSink,
     link: Option<MmLink>,
     reconnect_at: Instant,
-    out: VecDeque<MmSentence>,
+    out: VecDeque<Command>,
     awaiting: Option<Awaiting>,
     initializing: bool,
+    clock_attempts: u32,
+    generation: Generation,
+    /// Firmware version of the last `$CAREV`.
+    firmware: Option<String>,
+    /// The modem has sent `$CACST` / `$CAXST`.
+    sends_cst: bool,
+    sends_xst: bool,
+    /// Its configuration echo has CST / XST on.
+    cst_configured: bool,
+    xst_configured: bool,
     pending: VecDeque<Job>,
     active: Option<Active>,
     incoming: Option<Incoming>,
+    held: Option<Held>,
+    polled: Option<Poll>,
+    last_lbl: MicroModemTransmissionType,
     last_heard: Instant,
     silence_reported: bool,
     last_sent: Option<SentData>,
 }
 
-fn answers(command: &MmSentence, reply: &MmSentence) -> bool {
+/// The sentence id of the modem's answer to a host command.
+fn answer_id(command: &MmSentence) -> Option<&'static str> {
     use MmSentence as S;
+    Some(match command {
+        S::SetConfig { .. } | S::QueryConfig { .. } => "CFG",
+        S::Clock {
+            from_modem: false, ..
+        } => "CLK",
+        S::TimeSet { .. } => "TMS",
+        S::TimeQuery { .. } => "TMQ",
+        S::Cycle {
+            from_modem: false, ..
+        } => "CYC",
+        S::TransmitData { .. } => "TXD",
+        S::Ping {
+            from_modem: false, ..
+        } => "MPC",
+        S::MiniPacket {
+            from_modem: false, ..
+        } => "MUC",
+        S::FdpTransmit { .. } => "TDP",
+        S::RemusLblPing { .. } => "PDT",
+        S::NarrowbandLblPing { .. } => "PNT",
+        S::HardwareControl { .. } => "MEC",
+        _ => return None,
+    })
+}
+
+/// Whether the modem's line `reply` (talker and id; parsed when it could
+/// be) answers `command`. Answers are matched by sentence name, so that the
+/// field differences between firmware versions do not matter; only a
+/// configuration echo must name the parameter set, and a `$CACYC` naming
+/// another sender is a packet heard, not our echo.
+fn answers(command: &MmSentence, talker: &str, id: &str, reply: Option<&MmSentence>) -> bool {
+    if talker != "CA" || answer_id(command) != Some(id) {
+        return false;
+    }
     match (command, reply) {
-        (S::SetConfig { key, .. } | S::QueryConfig { key }, S::Config { key: k, .. }) => {
+        (MmSentence::SetConfig { key, .. }, Some(MmSentence::Config { key: k, .. })) => {
             k.eq_ignore_ascii_case(key)
         }
         (
-            S::Clock {
-                from_modem: false, ..
-            },
-            S::Clock {
-                from_modem: true, ..
-            },
-        ) => true,
-        (
-            S::Cycle {
-                from_modem: false,
-                cycle: a,
-            },
-            S::Cycle {
+            MmSentence::Cycle { cycle: a, .. },
+            Some(MmSentence::Cycle {
                 from_modem: true,
                 cycle: b,
-            },
-        ) => a.src == b.src && a.dest == b.dest,
-        (
-            S::TransmitData { src, dest, .. },
-            S::TransmitDataEcho {
-                src: s, dest: d, ..
-            },
-        ) => src == s && dest == d,
-        (
-            S::Ping {
-                from_modem: false,
-                src,
-                dest,
-            },
-            S::Ping {
-                from_modem: true,
-                src: s,
-                dest: d,
-            },
-        ) => src == s && dest == d,
-        (
-            S::MiniPacket {
-                from_modem: false,
-                src,
-                dest,
-                ..
-            },
-            S::MiniPacket {
-                from_modem: true,
-                src: s,
-                dest: d,
-                ..
-            },
-        ) => src == s && dest == d,
-        _ => false,
+            }),
+        ) => a.src == b.src,
+        _ => true,
     }
 }
 
@@ -316,10 +441,18 @@ fn job_transmission(
     modem_id: u32,
 ) -> ModemTransmission {
     match job {
-        Job::Data(mt) => filled.cloned().unwrap_or_else(|| mt.clone()),
-        Job::Ping { dest } | Job::Mini { dest, .. } => ModemTransmission {
+        Job::Data(mt) | Job::Fdp(mt) => filled.cloned().unwrap_or_else(|| (**mt).clone()),
+        Job::Ping { dest } | Job::Mini { dest, .. } | Job::HardwareControl { dest, .. } => {
+            ModemTransmission {
+                src: Some(modem_id as i32),
+                dest: Some(*dest as i32),
+                r#type: Some(TransmissionType::DriverSpecific as i32),
+                time: Some(now_micros()),
+                ..Default::default()
+            }
+        }
+        Job::Lbl { .. } => ModemTransmission {
             src: Some(modem_id as i32),
-            dest: Some(*dest as i32),
             r#type: Some(TransmissionType::DriverSpecific as i32),
             time: Some(now_micros()),
             ..Default::default()
@@ -327,35 +460,62 @@ fn job_transmission(
     }
 }
 
+/// Today (UTC) as `YYYYMMDD`, to date the original `$CACST` layout.
+fn today() -> String {
+    let (y, m, d, ..) = crate::time::civil(now_micros() / 1_000_000);
+    format!("{y:04}{m:02}{d:02}")
+}
+
 impl Mm {
     fn response_timeout(&self) -> Duration {
         Duration::from_millis(u64::from(self.mm.response_timeout_ms()))
     }
 
+    fn statistics_timeout(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.statistics_timeout_ms()))
+    }
+
+    fn receive_timeout(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.receive_timeout_ms()))
+    }
+
     fn queue_initialization(&mut self) {
         self.out.clear();
+        let mut set = |key: &str, value: &str| {
+            self.out.push_back(Command::Send(MmSentence::SetConfig {
+                key: key.into(),
+                value: value.into(),
+            }))
+        };
         if self.mm.reset_nvram() {
-            self.out.push_back(MmSentence::SetConfig {
-                key: "ALL".into(),
-                value: "0".into(),
-            });
+            set("ALL", "0");
         }
-        self.out.push_back(MmSentence::SetConfig {
-            key: "SRC".into(),
-            value: self.modem_id.to_string(),
-        });
+        set("SRC", &self.modem_id.to_string());
+        let mut configured = Vec::new();
         for cfg in &self.mm.nvram_cfg {
             if let Some((key, value)) = cfg.split_once(',') {
-                self.out.push_back(MmSentence::SetConfig {
+                configured.push(key.trim().to_ascii_uppercase());
+                self.out.push_back(Command::Send(MmSentence::SetConfig {
                     key: key.trim().to_string(),
                     value: value.trim().to_string(),
-                });
+                }));
             }
         }
-        self.out.push_back(MmSentence::Clock {
-            from_modem: false,
-            date_time: clock_fields(),
-        });
+        // Receive and transmit statistics after every packet, unless the
+        // configuration says otherwise.
+        for key in STATISTICS_SETTINGS {
+            if !configured.iter().any(|k| k == key) {
+                self.out.push_back(Command::Send(MmSentence::SetConfig {
+                    key: key.to_string(),
+                    value: "1".into(),
+                }));
+            }
+        }
+        if self.mm.query_cfg_on_startup() {
+            self.out.push_back(Command::QueryConfig);
+        }
+        self.out.push_back(Command::SetClock);
+        self.clock_attempts = 0;
         self.initializing = true;
     }
 
@@ -373,15 +533,29 @@ impl Mm {
     }
 
     async fn send_awaiting(&mut self, sentence: MmSentence, attempt: u32, for_job: bool) {
+        self.send_command(sentence, attempt, for_job, false, None)
+            .await;
+    }
+
+    async fn send_command(
+        &mut self,
+        sentence: MmSentence,
+        attempt: u32,
+        for_job: bool,
+        multi: bool,
+        clock_asked: Option<u64>,
+    ) {
+        // Sent again after reconnection (initialization is queued again then).
         if self.write(&sentence).await {
             self.awaiting = Some(Awaiting {
                 sentence,
                 attempt,
                 deadline: Instant::now() + self.response_timeout(),
                 for_job,
+                multi,
+                heard: false,
+                clock_asked,
             });
-        } else if !for_job {
-            // Sent again after reconnection (initialization is queued again then).
         }
     }
 
@@ -391,8 +565,30 @@ impl Mm {
             if self.link.is_none() || self.awaiting.is_some() {
                 return;
             }
-            if let Some(sentence) = self.out.pop_front() {
-                self.send_awaiting(sentence, 1, false).await;
+            if let Some(command) = self.out.pop_front() {
+                match command {
+                    Command::Send(sentence) => self.send_awaiting(sentence, 1, false).await,
+                    Command::QueryConfig => {
+                        let key = match self.generation {
+                            Generation::Two => "TOP",
+                            _ => "ALL",
+                        };
+                        let q = MmSentence::QueryConfig { key: key.into() };
+                        self.send_command(q, 1, false, true, None).await;
+                    }
+                    Command::SetClock => {
+                        self.clock_attempts += 1;
+                        // Sent just after the top of a second, as the modem
+                        // takes whole seconds (Goby does likewise).
+                        let wait = clock::wait_for_send(now_micros());
+                        if !wait.is_zero() {
+                            tokio::time::sleep(wait).await;
+                        }
+                        let (sentence, asked) = clock::set_clock(self.generation, now_micros());
+                        self.send_command(sentence, 1, false, false, Some(asked))
+                            .await;
+                    }
+                }
                 continue;
             }
             if self.initializing {
@@ -418,6 +614,10 @@ impl Mm {
                     attempt: 1,
                     stage: Stage::NeedStart,
                     deadline: None,
+                    waiting_for: "",
+                    cycle_frames: 0,
+                    requested: 0,
+                    transmit_stats: Vec::new(),
                 });
             }
             let Some(active) = &mut self.active else {
@@ -437,14 +637,17 @@ impl Mm {
                 }
             }
             // The frames are asked for before the cycle: the destination
-            // may be a query (-1), and an empty transmission is not sent
-            // unless it asks to be (`always_initiate`).
+            // may be a query (-1), the cycle announces how many frames
+            // follow, and an empty transmission is not sent unless it asks
+            // to be (`always_initiate`).
             let unfilled = match &active.job {
-                Job::Data(mt) if active.filled.is_none() => Some(mt.clone()),
+                job @ (Job::Data(_) | Job::Fdp(_)) if active.filled.is_none() => {
+                    job.data().cloned().map(|mt| (job.clone(), mt))
+                }
                 _ => None,
             };
-            if let Some(mt) = unfilled {
-                let template = self.data_template(&mt, None);
+            if let Some((job, mt)) = unfilled {
+                let template = self.data_template(&job, &mt, None);
                 let mut filled = self
                     .events
                     .request_data(template, DATA_REQUEST_TIMEOUT)
@@ -452,9 +655,12 @@ impl Mm {
                 if filled.dest() == -1 {
                     filled.dest = Some(0);
                 }
-                let empty = filled.frame.iter().all(|f| f.is_empty());
+                while filled.frame.last().is_some_and(|f| f.is_empty()) {
+                    filled.frame.pop();
+                }
+                let empty = filled.frame.is_empty();
                 if let Some(active) = &mut self.active {
-                    if let Job::Data(job) = &mut active.job {
+                    if let Job::Data(job) | Job::Fdp(job) = &mut active.job {
                         job.dest = filled.dest;
                     }
                     active.filled = Some(filled);
@@ -465,44 +671,98 @@ impl Mm {
                 continue;
             }
             let me = self.modem_id;
-            let sentence = match &active.job {
+            let (sentence, cycle_frames) = match &active.job {
                 Job::Data(mt) => {
                     let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
-                    let frames = mt
-                        .max_num_frames
-                        .map_or(spec.frames, |n| n.clamp(1, spec.frames));
-                    MmSentence::Cycle {
-                        from_modem: false,
-                        cycle: Cycle {
-                            src: me,
-                            dest: mt.dest().max(0) as u32,
-                            rate: mt.rate().max(0) as u32,
-                            ack: mt.ack_requested(),
-                            frames,
+                    let have = active.filled.as_ref().map_or(0, |f| f.frame.len() as u32);
+                    let frames = have.clamp(1, spec.frames);
+                    // Whether acks are wanted is the filled transmission's
+                    // to say (the layer above knows what it queued).
+                    let ack = active.filled.as_ref().unwrap_or(mt).ack_requested();
+                    (
+                        MmSentence::Cycle {
+                            from_modem: false,
+                            cycle: Cycle {
+                                src: me,
+                                dest: mt.dest().max(0) as u32,
+                                rate: mt.rate().max(0) as u32,
+                                ack,
+                                frames,
+                            },
                         },
-                    }
+                        frames,
+                    )
                 }
-                Job::Ping { dest } => MmSentence::Ping {
-                    from_modem: false,
-                    src: me,
-                    dest: *dest,
-                },
-                Job::Mini { dest, value } => MmSentence::MiniPacket {
-                    from_modem: false,
-                    src: me,
-                    dest: *dest,
-                    value: *value,
-                },
+                Job::Fdp(mt) => (
+                    MmSentence::FdpTransmit {
+                        dest: mt.dest().max(0) as u32,
+                        rate: mt.rate().max(0) as u32,
+                        ack: false,
+                        reserved: 0,
+                        data: active
+                            .filled
+                            .as_ref()
+                            .and_then(|f| f.frame.first().cloned())
+                            .unwrap_or_default(),
+                    },
+                    1,
+                ),
+                Job::Ping { dest } => (
+                    MmSentence::Ping {
+                        from_modem: false,
+                        src: me,
+                        dest: *dest,
+                    },
+                    0,
+                ),
+                Job::Mini { dest, value } => (
+                    MmSentence::MiniPacket {
+                        from_modem: false,
+                        src: me,
+                        dest: *dest,
+                        value: *value,
+                    },
+                    0,
+                ),
+                Job::Lbl { ping, kind } => {
+                    self.last_lbl = *kind;
+                    (ping.clone(), 0)
+                }
+                Job::HardwareControl { dest, ctl } => (
+                    MmSentence::HardwareControl {
+                        src: me,
+                        dest: *dest,
+                        line: ctl.line(),
+                        mode: ctl.mode(),
+                        arg: ctl.arg(),
+                    },
+                    0,
+                ),
             };
-            active.stage = Stage::AwaitEcho;
+            active.stage = Stage::Running;
             active.deadline = None;
+            active.cycle_frames = cycle_frames;
+            active.requested = 0;
+            active.transmit_stats.clear();
+            if let Some(listen) = ranging::listening_time(&sentence) {
+                // An LBL ping is written once: the modem listens for the
+                // replies and may not echo it; sent again, it would ping
+                // again. Its travel times (or their absence) end it.
+                active.stage = Stage::AwaitReply;
+                let wait = listen + self.response_timeout();
+                self.expect(wait, "no $SNTTA travel times");
+                self.write(&sentence).await;
+                continue;
+            }
             self.send_awaiting(sentence, 1, true).await;
         }
     }
 
     fn finish(&mut self, outcome: TransmitOutcome) {
         if let Some(active) = self.active.take() {
-            let transmission = job_transmission(&active.job, active.filled.as_ref(), self.modem_id);
+            let mut transmission =
+                job_transmission(&active.job, active.filled.as_ref(), self.modem_id);
+            transmission.transmit_stat = active.transmit_stats;
             self.events
                 .emit(DriverEvent::TransmitResult(TransmitResult {
                     transmission,
@@ -520,7 +780,7 @@ impl Mm {
         let Some(active) = &mut self.active else {
             return;
         };
-        let retry = matches!(active.job, Job::Data(_)) && active.attempt < max;
+        let retry = active.job.data().is_some() && active.attempt < max;
         if retry {
             active.attempt += 1;
             active.stage = Stage::NeedStart;
@@ -545,6 +805,47 @@ impl Mm {
         self.events.status(DriverStatus::Disconnected { reason });
     }
 
+    /// Sets the deadline of the active job.
+    fn expect(&mut self, within: Duration, what: &'static str) {
+        if let Some(active) = &mut self.active {
+            active.deadline = Some(Instant::now() + within);
+            active.waiting_for = what;
+        }
+    }
+
+    /// Reports a held reception now.
+    fn release_held(&mut self) {
+        if let Some(held) = self.held.take() {
+            self.report_reception(held.transmission);
+        }
+    }
+
+    /// Reports a reception; with statistics, its time is the modem's time
+    /// of arrival of the last packet.
+    fn report_reception(&self, mut transmission: ModemTransmission) {
+        if let Some(t) = transmission.receive_stat.last().and_then(|s| s.time) {
+            transmission.time = Some(t);
+            transmission.time_source = Some(TimeSource::ModemTime as i32);
+        }
+        self.events.emit(DriverEvent::Received(transmission));
+    }
+
+    /// A whole reception: reported at once, or held for the `$CACST` that
+    /// follows it when the modem sends them (at most the statistics
+    /// timeout).
+    fn received(&mut self, transmission: ModemTransmission) {
+        self.release_held();
+        if self.expects_cst() {
+            self.held = Some(Held {
+                transmission,
+                deadline: Instant::now() + self.statistics_timeout(),
+            });
+        } else {
+            self.report_reception(transmission);
+        }
+    }
+
+    /// The packet being received is over (all frames, or its time is up).
     fn flush_incoming(&mut self) {
         let Some(incoming) = self.incoming.take() else {
             return;
@@ -562,7 +863,7 @@ impl Mm {
         if frames.is_empty() {
             return;
         }
-        self.events.emit(DriverEvent::Received(ModemTransmission {
+        self.received(ModemTransmission {
             src: Some(c.src as i32),
             dest: Some(c.dest as i32),
             time: Some(now_micros()),
@@ -571,8 +872,9 @@ impl Mm {
             ack_requested: Some(c.ack),
             frame_start: Some(0),
             frame: frames,
+            receive_stat: incoming.stats,
             ..Default::default()
-        }));
+        });
     }
 
     fn check_incoming_complete(&mut self) {
@@ -583,9 +885,83 @@ impl Mm {
         }
     }
 
+    fn start_incoming(&mut self, cycle: Cycle) {
+        self.flush_incoming();
+        self.release_held();
+        self.incoming = Some(Incoming {
+            cycle,
+            frames: BTreeMap::new(),
+            bad: 0,
+            deadline: Instant::now() + self.receive_timeout(),
+            stats: Vec::new(),
+        });
+    }
+
+    /// `$CACST`: attached to the reception it closes (held), or to the one
+    /// under way (at rate 0 the cycle-initialization packet has its own).
+    fn receive_statistics(&mut self, cst: &ReceiveStatisticsSentence) {
+        self.sends_cst = true;
+        let stat = cst.to_proto(&today());
+        if let Some(held) = &mut self.held {
+            held.transmission.receive_stat.push(stat);
+            self.release_held();
+        } else if let Some(incoming) = &mut self.incoming {
+            incoming.stats.push(stat);
+        } else {
+            tracing::debug!(
+                "$CACST with no reception to attach to (e.g. of an acknowledgement or a timeout)"
+            );
+        }
+    }
+
+    /// `$CAXST`: attached to the active transmission's result.
+    fn transmit_statistics(&mut self, xst: &TransmitStatisticsSentence) {
+        self.sends_xst = true;
+        let Some(active) = &mut self.active else {
+            tracing::debug!("$CAXST with no transmission of ours under way");
+            return;
+        };
+        if active.job.data().is_none() {
+            return;
+        }
+        active.transmit_stats.push(xst.to_proto());
+        if active.stage == Stage::AwaitStats {
+            self.finish(TransmitOutcome::Sent);
+        }
+    }
+
     fn specific(&self, report: MicroModemSpecific) {
         self.events
             .emit(DriverEvent::Specific(SpecificReport::new(&report)));
+    }
+
+    /// A line that is NMEA but not a sentence the driver can read: when it
+    /// bears the name of the answer awaited, the command was heard (and is
+    /// not sent again); nothing else follows from it.
+    fn unreadable_answer(&mut self, bytes: &[u8]) {
+        let Ok(nmea) = super::nmea::NmeaSentence::parse(bytes) else {
+            return;
+        };
+        let matched = self
+            .awaiting
+            .as_ref()
+            .is_some_and(|a| answers(&a.sentence, &nmea.talker, &nmea.id, None));
+        if matched {
+            let a = self.awaiting.take().expect("checked");
+            if a.multi {
+                self.awaiting = Some(Awaiting {
+                    heard: true,
+                    deadline: Instant::now() + self.config_quiet(),
+                    ..a
+                });
+            } else if a.for_job {
+                self.job_answered();
+            }
+        }
+    }
+
+    fn config_quiet(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.config_echo_quiet_ms()))
     }
 
     async fn line(&mut self, bytes: &[u8]) {
@@ -597,6 +973,9 @@ impl Mm {
                 });
             }
             Err(e) => {
+                self.last_heard = Instant::now();
+                self.silence_reported = false;
+                self.unreadable_answer(bytes);
                 return self.events.status(DriverStatus::Unparseable {
                     line: String::from_utf8_lossy(bytes).into_owned(),
                     reason: e.to_string(),
@@ -605,15 +984,32 @@ impl Mm {
         };
         self.last_heard = Instant::now();
         self.silence_reported = false;
+        let nmea = sentence.to_nmea();
         let answered = self
             .awaiting
             .as_ref()
-            .filter(|a| answers(&a.sentence, &sentence))
-            .map(|a| a.for_job);
-        if let Some(for_job) = answered {
-            self.awaiting = None;
-            if for_job {
-                self.job_answered(&sentence);
+            .is_some_and(|a| answers(&a.sentence, &nmea.talker, &nmea.id, Some(&sentence)));
+        if answered {
+            let a = self.awaiting.take().expect("checked");
+            if a.multi {
+                // Many lines answer: done when they stop.
+                self.awaiting = Some(Awaiting {
+                    heard: true,
+                    deadline: Instant::now() + self.config_quiet(),
+                    ..a
+                });
+            } else if let Some(asked) = a.clock_asked {
+                let skew = i64::from(self.mm.allowed_skew_ms());
+                if let Err(why) = clock::check_reply(&sentence, asked, now_micros(), skew) {
+                    self.events.status(DriverStatus::ModemError {
+                        message: format!("clock not set: {why}"),
+                    });
+                    if self.clock_attempts <= self.mm.max_retries() {
+                        self.out.push_front(Command::SetClock);
+                    }
+                }
+            } else if a.for_job {
+                self.job_answered();
             }
         }
         let me = self.modem_id;
@@ -626,28 +1022,60 @@ impl Mm {
                 frame,
                 ..
             } => self.data_request(src, dest, ack, max_bytes, frame).await,
-            MmSentence::TransmitDone { .. }
-                if self.active.as_ref().is_some_and(|a| {
-                    matches!(a.job, Job::Data(_))
-                        && matches!(a.stage, Stage::AwaitTransmitDone | Stage::AwaitDataRequest)
-                }) =>
-            {
-                self.remember_sent();
-                self.finish(TransmitOutcome::Sent);
+            MmSentence::Echo { id, fields, .. } if id == "TDP" => {
+                // `$CATDP,error,id,dest,rate,ack,reserved,...`: error 1 is a
+                // refusal, and nothing goes on the water.
+                let refused = fields.len() >= 6 && fields[0].trim() == "1";
+                if refused
+                    && self
+                        .active
+                        .as_ref()
+                        .is_some_and(|a| matches!(a.job, Job::Fdp(_)))
+                {
+                    self.finish(TransmitOutcome::Failed(
+                        "the modem refused the FDP packet ($CATDP error 1)".into(),
+                    ));
+                }
+            }
+            MmSentence::TransmitStart { .. } => self.transmit_start(),
+            MmSentence::TransmitDone { .. } => self.transmit_done(),
+            MmSentence::TransmitStatistics(xst) => self.transmit_statistics(&xst),
+            MmSentence::ReceiveStatistics(cst) => self.receive_statistics(&cst),
+            MmSentence::Config { key, value } => {
+                if let Some(g) = Generation::of_config_key(&key) {
+                    self.set_generation(g);
+                }
+                let on = value.trim() == "1";
+                if key.eq_ignore_ascii_case("CST") {
+                    self.cst_configured = on;
+                }
+                if key.eq_ignore_ascii_case("XST") {
+                    self.xst_configured = on;
+                }
             }
             MmSentence::Cycle {
                 from_modem: true,
                 cycle,
             } if cycle.src != me => {
-                self.flush_incoming();
-                self.incoming = Some(Incoming {
-                    cycle,
-                    frames: BTreeMap::new(),
-                    bad: 0,
-                    deadline: Instant::now()
-                        + Duration::from_millis(u64::from(self.mm.receive_timeout_ms())),
-                });
+                self.start_incoming(cycle);
                 self.check_incoming_complete();
+            }
+            MmSentence::Cycle {
+                from_modem: true,
+                cycle,
+            } => {
+                // This modem is to send: our own cycle's echo, or a poll
+                // from another node.
+                let own = self.active.as_ref().is_some_and(|a| {
+                    matches!(a.job, Job::Data(_))
+                        && matches!(a.stage, Stage::Running | Stage::Transmitting)
+                });
+                if !own {
+                    self.polled = Some(Poll {
+                        cycle,
+                        filled: None,
+                    });
+                }
             }
             MmSentence::ReceiveData {
                 src,
@@ -662,19 +1090,12 @@ impl Mm {
                     .is_some_and(|i| i.cycle.src == src && i.cycle.dest == dest);
                 if !same {
                     // The $CACYC was missed: the frame tells enough.
-                    self.flush_incoming();
-                    self.incoming = Some(Incoming {
-                        cycle: Cycle {
-                            src,
-                            dest,
-                            rate: 0,
-                            ack,
-                            frames: frame,
-                        },
-                        frames: BTreeMap::new(),
-                        bad: 0,
-                        deadline: Instant::now()
-                            + Duration::from_millis(u64::from(self.mm.receive_timeout_ms())),
+                    self.start_incoming(Cycle {
+                        src,
+                        dest,
+                        rate: 0,
+                        ack,
+                        frames: frame,
                     });
                 }
                 if let Some(incoming) = &mut self.incoming {
@@ -682,6 +1103,34 @@ impl Mm {
                 }
                 self.check_incoming_complete();
             }
+            MmSentence::FdpReceive {
+                src,
+                dest,
+                rate,
+                ack,
+                mini_frames,
+                data_frames,
+                ..
+            } => match fdp::packet_bytes(&mini_frames, &data_frames) {
+                Some(bytes) if !bytes.is_empty() => {
+                    self.flush_incoming();
+                    self.received(ModemTransmission {
+                        src: Some(src as i32),
+                        dest: Some(dest as i32),
+                        time: Some(now_micros()),
+                        rate: Some(rate as i32),
+                        r#type: Some(TransmissionType::Data as i32),
+                        ack_requested: Some(ack),
+                        frame_start: Some(0),
+                        frame: vec![bytes],
+                        ..Default::default()
+                    });
+                }
+                Some(_) => {}
+                None => self.events.status(DriverStatus::ModemError {
+                    message: format!("$CARDP from {src}: a frame failed its CRC"),
+                }),
+            },
             MmSentence::Ack { src, dest, frame } => {
                 let unique_id = self.ack_belongs_to(src, dest, frame);
                 self.events.emit(DriverEvent::Received(ModemTransmission {
@@ -716,6 +1165,32 @@ impl Mm {
                     .as_ref()
                     .is_some_and(|a| matches!(a.job, Job::Ping { dest } if dest == src))
                 {
+                    self.job_progress();
+                    self.finish(TransmitOutcome::Sent);
+                }
+            }
+            MmSentence::TravelTimes { times, time } => {
+                let kind = match &self.active {
+                    Some(Active {
+                        job: Job::Lbl { kind, .. },
+                        ..
+                    }) => *kind,
+                    _ => self.last_lbl,
+                };
+                self.specific(MicroModemSpecific {
+                    r#type: kind as i32,
+                    src: Some(me as i32),
+                    ranging_reply: Some(ranging::reply(&times)),
+                    time: Some(now_micros()),
+                    modem_time: Some(time),
+                    ..Default::default()
+                });
+                if self
+                    .active
+                    .as_ref()
+                    .is_some_and(|a| matches!(a.job, Job::Lbl { .. }))
+                {
+                    self.job_progress();
                     self.finish(TransmitOutcome::Sent);
                 }
             }
@@ -729,24 +1204,59 @@ impl Mm {
                     ..Default::default()
                 });
             }
-            MmSentence::Revision { ident, .. } if ident.eq_ignore_ascii_case("INIT") => {
-                if self.initializing && self.active.is_none() {
-                    // The modem's own start-up (or the one the driver is
-                    // configuring after a reconnection): expected.
-                    tracing::info!("Micro-Modem started ($CAREV INIT): configuring it");
-                } else {
-                    self.events.status(DriverStatus::ModemReset);
-                }
-                self.awaiting = None;
-                self.queue_initialization();
-                if self
-                    .active
-                    .as_ref()
-                    .is_some_and(|a| a.stage != Stage::NeedStart)
+            MmSentence::HardwareControlReply {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            } => {
+                let (src, dest) = if self
+                    .firmware
+                    .as_deref()
+                    .is_some_and(firmware::swaps_hardware_reply)
                 {
-                    self.fail_active("the modem reset".into());
+                    (dest, src)
+                } else {
+                    (src, dest)
+                };
+                self.specific(MicroModemSpecific {
+                    r#type: MicroModemTransmissionType::MicromodemHardwareControlReply as i32,
+                    src: Some(src as i32),
+                    dest: Some(dest as i32),
+                    hw_ctl: Some(MicroModemHardwareControl {
+                        line: Some(line),
+                        mode: Some(mode),
+                        arg: Some(arg),
+                    }),
+                    time: Some(now_micros()),
+                    ..Default::default()
+                });
+            }
+            MmSentence::Revision { ident, version, .. } => {
+                // The modem's own firmware (AUV, or INIT at a start); a
+                // Micro-Modem 2 also reports its coprocessor's (COPROC),
+                // whose version says nothing of the generation.
+                let main = ["AUV", "INIT"]
+                    .iter()
+                    .any(|i| ident.eq_ignore_ascii_case(i));
+                if main {
+                    if let Some(g) = Generation::of_version(&version) {
+                        self.set_generation(g);
+                    }
+                    self.firmware = Some(version);
+                }
+                if ident.eq_ignore_ascii_case("INIT") {
+                    self.modem_started();
                 }
             }
+            MmSentence::TimingSource {
+                time,
+                clock_source,
+                pps_source,
+            } => tracing::info!(
+                "Micro-Modem timing: {time}, clock source {clock_source}, PPS source {pps_source}"
+            ),
             MmSentence::Error {
                 module,
                 code,
@@ -761,19 +1271,15 @@ impl Mm {
                     if let Some(a) = &mut self.awaiting {
                         a.deadline = Instant::now();
                     }
-                } else if self
-                    .active
-                    .as_ref()
-                    .is_some_and(|a| a.stage != Stage::NeedStart)
-                {
-                    self.fail_active(format!("modem error: {module} {code} {message}"));
+                } else {
+                    self.interrupt_active(format!("modem error: {module} {code} {message}"));
                 }
             }
             MmSentence::Message { kind, value } => {
                 self.events.status(DriverStatus::ModemError {
                     message: format!("$CAMSG {kind} {value}"),
                 });
-                if kind == "BAD_CRC" {
+                if kind == "BAD_CRC" || kind == "Bad CRC" {
                     if let Some(incoming) = &mut self.incoming {
                         incoming.bad += 1;
                     }
@@ -788,6 +1294,112 @@ impl Mm {
                 }
             }
             _ => {}
+        }
+    }
+
+    /// Receptions wait for their `$CACST` when the modem has sent one, or is
+    /// a Micro-Modem 2 configured to (a Micro-Modem 1 may take the setting
+    /// and send none).
+    fn expects_cst(&self) -> bool {
+        self.sends_cst || (self.generation == Generation::Two && self.cst_configured)
+    }
+
+    /// Transmit results wait for their `$CAXST`, likewise.
+    fn expects_xst(&self) -> bool {
+        self.sends_xst || (self.generation == Generation::Two && self.xst_configured)
+    }
+
+    fn set_generation(&mut self, g: Generation) {
+        if self.generation != g {
+            tracing::info!("Micro-Modem generation: {g:?}");
+            self.generation = g;
+        }
+    }
+
+    /// `$CAREV` with ident `INIT`: the modem (re)started and forgot its
+    /// configuration and clock.
+    fn modem_started(&mut self) {
+        if self.initializing && self.active.is_none() {
+            // The modem's own start-up (or the one the driver is configuring
+            // after a reconnection): expected.
+            tracing::info!("Micro-Modem started ($CAREV INIT): configuring it");
+        } else {
+            self.events.status(DriverStatus::ModemReset);
+        }
+        self.awaiting = None;
+        self.queue_initialization();
+        self.interrupt_active("the modem reset".into());
+    }
+
+    /// A modem error or reset while a transmission is under way: attempted
+    /// again, unless its packet already went out (only its statistics were
+    /// awaited), which is never sent twice.
+    fn interrupt_active(&mut self, reason: String) {
+        match self.active.as_ref().map(|a| a.stage) {
+            None | Some(Stage::NeedStart) => {}
+            Some(Stage::AwaitStats) => self.finish(TransmitOutcome::Sent),
+            Some(_) => self.fail_active(reason),
+        }
+    }
+
+    /// The modem did something of the active job: its command was heard.
+    fn job_progress(&mut self) {
+        if self.awaiting.as_ref().is_some_and(|a| a.for_job) {
+            self.awaiting = None;
+        }
+    }
+
+    /// `$CATXP`: a packet of ours is on the water.
+    fn transmit_start(&mut self) {
+        let timeout = self.response_timeout();
+        let Some(active) = &mut self.active else {
+            return;
+        };
+        let Some(mt) = active.job.data() else {
+            return;
+        };
+        if !matches!(active.stage, Stage::Running | Stage::Transmitting) {
+            return;
+        }
+        let on_water = packet_estimate(mt) + timeout;
+        active.stage = Stage::Transmitting;
+        self.job_progress();
+        self.expect(on_water, "no $CATXF from the modem");
+    }
+
+    /// `$CATXF`: a packet of ours went out. At rate 0 the first one of a
+    /// cycle, before any data request, is the cycle-initialization packet:
+    /// the data requests follow it.
+    fn transmit_done(&mut self) {
+        let timeout = self.response_timeout();
+        let Some(active) = &mut self.active else {
+            return;
+        };
+        if !matches!(active.stage, Stage::Running | Stage::Transmitting) {
+            return;
+        }
+        let cycle_init = matches!(active.job, Job::Data(_)) && active.requested == 0;
+        match &active.job {
+            Job::Data(_) | Job::Fdp(_) => {}
+            _ => return,
+        }
+        self.job_progress();
+        if cycle_init {
+            if let Some(active) = &mut self.active {
+                active.stage = Stage::Running;
+            }
+            self.expect(timeout, "no $CADRQ from the modem");
+            return;
+        }
+        self.remember_sent();
+        if self.expects_xst() {
+            if let Some(active) = &mut self.active {
+                active.stage = Stage::AwaitStats;
+            }
+            let wait = self.statistics_timeout();
+            self.expect(wait, "no $CAXST");
+        } else {
+            self.finish(TransmitOutcome::Sent);
         }
     }
 
@@ -807,12 +1419,11 @@ impl Mm {
             self.last_sent = None;
             return;
         }
-        let receive = Duration::from_millis(u64::from(self.mm.receive_timeout_ms()));
         self.last_sent = Some(SentData {
             unique_id: mt.unique_id,
             dest: mt.dest().max(0) as u32,
             frames: sent.frame.len().max(1) as u32,
-            until: Instant::now() + receive,
+            until: Instant::now() + self.receive_timeout(),
         });
     }
 
@@ -835,89 +1446,154 @@ impl Mm {
         }
     }
 
-    /// The modem echoed a command of the active job.
-    fn job_answered(&mut self, reply: &MmSentence) {
+    /// The modem echoed the command of the active job.
+    fn job_answered(&mut self) {
         let timeout = self.response_timeout();
-        let receive = Duration::from_millis(u64::from(self.mm.receive_timeout_ms()));
+        let receive = self.receive_timeout();
         let Some(active) = &mut self.active else {
             return;
         };
-        let now = Instant::now();
-        match (&active.job, active.stage, reply) {
-            (Job::Data(_), Stage::AwaitEcho, _) => {
-                active.stage = Stage::AwaitDataRequest;
-                active.deadline = Some(now + timeout);
+        if active.stage != Stage::Running || active.deadline.is_some() {
+            return;
+        }
+        match &active.job {
+            // The first data request may follow a cycle-initialization
+            // packet (rate 0), or come late: the modem gives up on its own
+            // ($CAERR) sooner than this.
+            Job::Data(mt) => {
+                let wait = packet_estimate(mt) + timeout;
+                self.expect(wait, "no $CADRQ from the modem");
             }
-            (Job::Data(mt), Stage::AwaitTxdEcho(n), _) => {
-                let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
-                let frames = mt
-                    .max_num_frames
-                    .map_or(spec.frames, |f| f.clamp(1, spec.frames));
-                if n >= frames {
-                    active.stage = Stage::AwaitTransmitDone;
-                    active.deadline =
-                        Some(now + timeout + spec.packet_duration(Duration::from_secs(1)));
-                } else {
-                    active.stage = Stage::AwaitDataRequest;
-                    active.deadline = Some(now + timeout);
-                }
+            Job::Fdp(mt) => {
+                let on_water = packet_estimate(mt) + timeout;
+                self.expect(on_water, "no $CATXF from the modem");
             }
-            (Job::Ping { .. }, Stage::AwaitEcho, _) => {
-                active.stage = Stage::AwaitPingReply;
-                active.deadline = Some(now + receive);
+            Job::Ping { .. } => {
+                active.stage = Stage::AwaitReply;
+                self.expect(receive, "no reply to the ping");
             }
-            (Job::Mini { .. }, Stage::AwaitEcho, _) => self.finish(TransmitOutcome::Sent),
-            _ => {}
+            Job::Lbl { .. } => {}
+            Job::Mini { .. } | Job::HardwareControl { .. } => self.finish(TransmitOutcome::Sent),
         }
     }
 
-    /// What the layer above is asked to fill for a data transmission.
-    fn data_template(&self, mt: &ModemTransmission, max_bytes: Option<u32>) -> ModemTransmission {
-        let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
+    /// What the layer above is asked to fill for a data or FDP transmission.
+    fn data_template(
+        &self,
+        job: &Job,
+        mt: &ModemTransmission,
+        max_bytes: Option<u32>,
+    ) -> ModemTransmission {
         let mut template = mt.clone();
         template.src = Some(self.modem_id as i32);
-        template.max_num_frames = Some(
-            mt.max_num_frames
-                .map_or(spec.frames, |n| n.clamp(1, spec.frames)),
-        );
-        template.max_frame_bytes = Some(max_bytes.unwrap_or(spec.frame_bytes));
+        if let (Job::Fdp(_), Some(r)) = (job, fdp::rate(mt.rate())) {
+            template.max_num_frames = Some(1);
+            template.max_frame_bytes = Some(r.max_bytes());
+        } else {
+            let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
+            template.max_num_frames = Some(
+                mt.max_num_frames
+                    .map_or(spec.frames, |n| n.clamp(1, spec.frames)),
+            );
+            template.max_frame_bytes = Some(max_bytes.unwrap_or(spec.frame_bytes));
+        }
+        template.r#type = Some(TransmissionType::Data as i32);
         template.frame_start = Some(template.frame_start());
         template.time = Some(now_micros());
         template.frame.clear();
         template
     }
 
+    /// Frame `frame` (from 1) of the cycle another node polled this modem
+    /// for (a `$CACYC` naming this modem as sender that it did not start),
+    /// asked for from the layer above at the first request. Acks heard
+    /// afterwards answer it (with no `unique_id`, as nothing of ours
+    /// numbered it).
+    async fn polled_frame(
+        &mut self,
+        dest: u32,
+        ack: bool,
+        max_bytes: u32,
+        frame: u32,
+    ) -> Option<Vec<u8>> {
+        let poll = self.polled.as_ref().filter(|p| p.cycle.dest == dest)?;
+        if poll.filled.is_none() {
+            let c = poll.cycle;
+            let spec = rate::spec(c.rate as i32).unwrap_or(rate::spec(0).expect("rate 0"));
+            let template = ModemTransmission {
+                src: Some(self.modem_id as i32),
+                dest: Some(dest as i32),
+                rate: Some(c.rate as i32),
+                r#type: Some(TransmissionType::Data as i32),
+                ack_requested: Some(ack),
+                max_num_frames: Some(c.frames.clamp(1, spec.frames)),
+                max_frame_bytes: Some(max_bytes),
+                frame_start: Some(0),
+                time: Some(now_micros()),
+                ..Default::default()
+            };
+            let filled = self
+                .events
+                .request_data(template, DATA_REQUEST_TIMEOUT)
+                .await;
+            if let Some(poll) = &mut self.polled {
+                poll.filled = Some(filled);
+            }
+        }
+        let poll = self.polled.as_ref()?;
+        let filled = poll.filled.as_ref()?;
+        let data = filled.frame.get(frame.saturating_sub(1) as usize).cloned();
+        if frame >= poll.cycle.frames {
+            let frames = filled.frame.len().max(1) as u32;
+            self.last_sent = (ack && !filled.frame.is_empty()).then(|| SentData {
+                unique_id: None,
+                dest,
+                frames,
+                until: Instant::now() + self.receive_timeout(),
+            });
+            self.polled = None;
+        }
+        data
+    }
+
+    /// `$CADRQ`: the modem asks for frame `frame` (from 1) of a cycle.
     async fn data_request(&mut self, src: u32, dest: u32, ack: bool, max_bytes: u32, frame: u32) {
-        let ours = self.active.as_ref().is_some_and(|a| {
-            matches!(a.job, Job::Data(_))
-                && matches!(a.stage, Stage::AwaitEcho | Stage::AwaitDataRequest)
-        }) && src == self.modem_id;
+        let timeout = self.response_timeout();
+        // Ours: the cycle of the active data transmission, at whatever step
+        // the driver thinks it is (the modem's request tells where it is).
+        let ours = src == self.modem_id
+            && self.active.as_ref().is_some_and(|a| {
+                matches!(&a.job, Job::Data(mt) if mt.dest().max(0) as u32 == dest)
+                    && a.stage != Stage::AwaitStats
+            });
         if !ours {
-            // A request we did not expect (e.g. a cycle we gave up on): an
-            // empty frame lets the modem go on.
+            let data = if src == self.modem_id {
+                self.polled_frame(dest, ack, max_bytes, frame).await
+            } else {
+                None
+            };
+            // A request of no cycle of ours with nothing for it (e.g. a cycle
+            // we gave up on): an empty frame lets the modem go on.
             self.write(&MmSentence::TransmitData {
                 src,
                 dest,
                 ack,
-                data: Vec::new(),
+                data: data.unwrap_or_default(),
             })
             .await;
             return;
         }
-        // A $CADRQ also tells that our $CCCYC arrived (its echo may be lost).
-        if self.awaiting.as_ref().is_some_and(|a| a.for_job) {
-            self.awaiting = None;
-        }
+        self.job_progress();
         let unfilled = match &self.active {
             Some(Active {
-                job: Job::Data(mt),
+                job: job @ Job::Data(mt),
                 filled: None,
                 ..
-            }) => Some(mt.clone()),
+            }) => Some((job.clone(), mt.clone())),
             _ => None,
         };
-        if let Some(mt) = unfilled {
-            let template = self.data_template(&mt, Some(max_bytes));
+        if let Some((job, mt)) = unfilled {
+            let template = self.data_template(&job, &mt, Some(max_bytes));
             let filled = self
                 .events
                 .request_data(template, DATA_REQUEST_TIMEOUT)
@@ -934,19 +1610,24 @@ impl Mm {
             .as_ref()
             .and_then(|f| f.frame.get(frame.saturating_sub(1) as usize).cloned())
             .unwrap_or_default();
-        active.stage = Stage::AwaitTxdEcho(frame);
-        active.deadline = None;
-        self.send_awaiting(
-            MmSentence::TransmitData {
-                src,
-                dest,
-                ack,
-                data,
-            },
-            1,
-            true,
-        )
+        active.stage = Stage::Running;
+        active.requested = active.requested.max(frame);
+        let last = frame >= active.cycle_frames;
+        let on_water = active.job.data().map(packet_estimate).unwrap_or_default();
+        // The frame is written once: its echo is not awaited, so that a lost
+        // or unreadable `$CATXD` never puts a frame on the water twice.
+        self.write(&MmSentence::TransmitData {
+            src,
+            dest,
+            ack,
+            data,
+        })
         .await;
+        if last {
+            self.expect(timeout + on_water, "no $CATXF from the modem");
+        } else {
+            self.expect(timeout, "no $CADRQ from the modem");
+        }
     }
 
     fn next_deadline(&self) -> Option<Instant> {
@@ -956,6 +1637,7 @@ impl Mm {
             self.awaiting.as_ref().map(|a| a.deadline),
             self.active.as_ref().and_then(|a| a.deadline),
             self.incoming.as_ref().map(|i| i.deadline),
+            self.held.as_ref().map(|h| h.deadline),
             self.link.is_none().then_some(self.reconnect_at),
             (!self.silence_reported && self.link.is_some())
                 .then_some(self.last_heard + keep_alive * 3),
@@ -970,16 +1652,26 @@ impl Mm {
         if let Some(a) = &self.awaiting {
             if a.deadline <= now {
                 let a = self.awaiting.take().expect("checked");
-                let command = a.sentence.to_line();
-                self.events.status(DriverStatus::ResponseTimeout {
-                    command: command.clone(),
-                    attempt: a.attempt,
-                });
-                if a.attempt <= self.mm.max_retries() {
-                    self.send_awaiting(a.sentence, a.attempt + 1, a.for_job)
+                if a.heard {
+                    // A multi-line answer ended.
+                } else {
+                    let command = a.sentence.to_line();
+                    self.events.status(DriverStatus::ResponseTimeout {
+                        command: command.clone(),
+                        attempt: a.attempt,
+                    });
+                    if a.attempt <= self.mm.max_retries() {
+                        self.send_command(
+                            a.sentence,
+                            a.attempt + 1,
+                            a.for_job,
+                            a.multi,
+                            a.clock_asked,
+                        )
                         .await;
-                } else if a.for_job {
-                    self.fail_active(format!("no answer to {command}"));
+                    } else if a.for_job {
+                        self.fail_active(format!("no answer to {command}"));
+                    }
                 }
             }
         }
@@ -989,20 +1681,23 @@ impl Mm {
             .and_then(|a| a.deadline)
             .is_some_and(|d| d <= now)
         {
-            let stage = self.active.as_ref().map(|a| a.stage);
-            let reason = match stage {
-                Some(Stage::AwaitPingReply) => "no reply to the ping",
-                Some(Stage::AwaitTransmitDone) => "no $CATXF from the modem",
-                _ => "no $CADRQ from the modem",
-            };
-            if stage == Some(Stage::AwaitPingReply) {
-                self.finish(TransmitOutcome::Failed(reason.into()));
-            } else {
-                self.fail_active(reason.into());
+            let (stage, reason) = self
+                .active
+                .as_ref()
+                .map(|a| (a.stage, a.waiting_for))
+                .expect("checked");
+            match stage {
+                // The packet went out; its statistics did not come.
+                Stage::AwaitStats => self.finish(TransmitOutcome::Sent),
+                Stage::AwaitReply => self.finish(TransmitOutcome::Failed(reason.into())),
+                _ => self.fail_active(reason.into()),
             }
         }
         if self.incoming.as_ref().is_some_and(|i| i.deadline <= now) {
             self.flush_incoming();
+        }
+        if self.held.as_ref().is_some_and(|h| h.deadline <= now) {
+            self.release_held();
         }
         if self.link.is_none() && self.reconnect_at <= now {
             match self.port.open(&self.events) {
@@ -1051,7 +1746,7 @@ impl Mm {
                                 });
                             }
                         }
-                        self.pending.push_back(Job::Data(mt));
+                        self.pending.push_back(Job::Data(Box::new(mt)));
                     }
                     other => self.events.status(DriverStatus::Unsupported {
                         message: format!(
@@ -1065,19 +1760,10 @@ impl Mm {
                 let request = (name == MicroModemSpecific::default().descriptor().full_name())
                     .then(|| message.transcode_to::<MicroModemSpecific>().ok())
                     .flatten();
-                match request {
-                    Some(r) if r.r#type() == MicroModemTransmissionType::MicromodemTwoWayPing => {
-                        self.pending.push_back(Job::Ping {
-                            dest: r.dest().max(0) as u32,
-                        });
-                    }
-                    Some(r) if r.r#type() == MicroModemTransmissionType::MicromodemMiniData => {
-                        self.pending.push_back(Job::Mini {
-                            dest: r.dest().max(0) as u32,
-                            value: (r.mini_data() & 0x1fff) as u16,
-                        });
-                    }
-                    _ => self
+                match request.map(|r| self.specific_job(r)) {
+                    Some(Ok(job)) => self.pending.push_back(job),
+                    Some(Err(message)) => self.events.status(DriverStatus::Unsupported { message }),
+                    None => self
                         .events
                         .status(DriverStatus::Unsupported { message: name }),
                 }
@@ -1087,6 +1773,54 @@ impl Mm {
             DriverCommand::Stop(done) => return Some(done),
         }
         None
+    }
+
+    /// The job of a `MicroModemSpecific` request, or why there is none.
+    fn specific_job(&self, r: MicroModemSpecific) -> Result<Job, String> {
+        use MicroModemTransmissionType as T;
+        let dest = r.dest().max(0) as u32;
+        Ok(match r.r#type() {
+            T::MicromodemTwoWayPing => Job::Ping { dest },
+            T::MicromodemMiniData => Job::Mini {
+                dest,
+                value: (r.mini_data() & 0x1fff) as u16,
+            },
+            T::MicromodemFlexibleData => {
+                let rate = r.rate.unwrap_or(1);
+                if fdp::rate(rate).is_none() {
+                    return Err(format!(
+                        "MicroModemSpecific.rate: {rate} is not an FDP rate (1, 3 or 5)"
+                    ));
+                }
+                Job::Fdp(Box::new(ModemTransmission {
+                    src: Some(self.modem_id as i32),
+                    dest: Some(r.dest.unwrap_or(-1)),
+                    rate: Some(rate),
+                    r#type: Some(TransmissionType::Data as i32),
+                    ack_requested: Some(false),
+                    ..Default::default()
+                }))
+            }
+            T::MicromodemHardwareControl => Job::HardwareControl {
+                dest,
+                ctl: r.hw_ctl.unwrap_or_default(),
+            },
+            T::MicromodemRemusLblRanging => Job::Lbl {
+                ping: ranging::remus_ping(
+                    self.modem_id,
+                    &ranging::merge_remus(self.mm.remus_lbl.as_ref(), r.remus_lbl.as_ref()),
+                ),
+                kind: T::MicromodemRemusLblRanging,
+            },
+            T::MicromodemNarrowbandLblRanging => Job::Lbl {
+                ping: ranging::narrowband_ping(&ranging::merge_narrowband(
+                    self.mm.narrowband_lbl.as_ref(),
+                    r.narrowband_lbl.as_ref(),
+                )),
+                kind: T::MicromodemNarrowbandLblRanging,
+            },
+            other => return Err(format!("MicroModemSpecific.type {other:?}")),
+        })
     }
 }
 
@@ -1125,9 +1859,19 @@ async fn run(
         out: VecDeque::new(),
         awaiting: None,
         initializing: false,
+        clock_attempts: 0,
+        generation: Generation::Unknown,
+        firmware: None,
+        sends_cst: false,
+        sends_xst: false,
+        cst_configured: false,
+        xst_configured: false,
         pending: VecDeque::new(),
         active: None,
         incoming: None,
+        held: None,
+        polled: None,
+        last_lbl: MicroModemTransmissionType::MicromodemRemusLblRanging,
         last_heard: now,
         silence_reported: false,
         last_sent: None,
@@ -1141,6 +1885,9 @@ async fn run(
             command = ctx.commands.recv() => match command {
                 Some(command) => {
                     if let Some(done) = state.command(command) {
+                        // A whole reception waiting for its statistics is
+                        // reported without them.
+                        state.release_held();
                         let _ = done.send(());
                         return;
                     }

@@ -2,12 +2,22 @@
 //!
 //! - [`nmea`]: sentence framing and checksums.
 //! - [`sentence`]: the Micro-Modem's sentences, typed.
+//! - [`statistics`]: receive and transmit statistics ($CACST, $CAXST).
+//! - [`clock`]: setting the modem's clock ($CCCLK, $CCTMS) and checking it.
+//! - [`firmware`]: Micro-Modem 1 or 2, and quirks of firmware versions.
+//! - [`fdp`]: Flexible Data Protocol rates and received packets.
+//! - [`ranging`]: LBL pings ($CCPDT, $CCPNT) and their travel times ($SNTTA).
 //! - [`driver`]: the driver ([`MicroModemDriver`]).
 //! - [`emulator`]: the modem's side, for tests and bench work.
 
+pub mod clock;
 pub mod driver;
 pub mod emulator;
+pub mod fdp;
+pub mod firmware;
 pub mod nmea;
+pub mod ranging;
 pub mod sentence;
+pub mod statistics;
 
 pub use driver::MicroModemDriver;

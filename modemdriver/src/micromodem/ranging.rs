@@ -1,0 +1,167 @@
+//! Long-baseline ranging: the `$CCPDT` (REMUS digital transponders) and
+//! `$CCPNT` (narrowband transponders) commands built from their parameters,
+//! and the `$SNTTA` travel times turned into a ranging reply.
+//!
+//! The listening time the modem is given is twice the farthest beacon's
+//! range at [`ROUGH_SPEED_OF_SOUND`] plus the transponders' turn-around time,
+//! as Goby's driver computes it.
+
+use protos::goby::acomms::protobuf::{
+    micro_modem_ranging_reply::OwttAmbiguity, MicroModemNarrowbandLblParams,
+    MicroModemRangingReply, MicroModemRemusLblParams,
+};
+
+use super::sentence::MmSentence;
+
+/// Speed of sound assumed for the listening time, m/s.
+pub const ROUGH_SPEED_OF_SOUND: f64 = 1500.0;
+
+/// Beacons a ping can listen to (A-D).
+pub const MAX_BEACONS: usize = 4;
+
+fn listening_ms(max_range_m: u32, turnaround_ms: u32) -> u32 {
+    let round_trip = f64::from(max_range_m) * 2.0 / ROUGH_SPEED_OF_SOUND * 1000.0;
+    (round_trip as u32).saturating_add(turnaround_ms)
+}
+
+/// Parameters of a request over those of the configuration (fields set in
+/// `request` win).
+pub fn merge_remus(
+    config: Option<&MicroModemRemusLblParams>,
+    request: Option<&MicroModemRemusLblParams>,
+) -> MicroModemRemusLblParams {
+    let mut p = config.cloned().unwrap_or_default();
+    if let Some(r) = request {
+        p.enable_beacons = r.enable_beacons.or(p.enable_beacons);
+        p.turnaround_ms = r.turnaround_ms.or(p.turnaround_ms);
+        p.lbl_max_range = r.lbl_max_range.or(p.lbl_max_range);
+    }
+    p
+}
+
+/// Parameters of a request over those of the configuration (fields set in
+/// `request` win; its receive frequencies replace the configured ones when
+/// it gives any).
+pub fn merge_narrowband(
+    config: Option<&MicroModemNarrowbandLblParams>,
+    request: Option<&MicroModemNarrowbandLblParams>,
+) -> MicroModemNarrowbandLblParams {
+    let mut p = config.cloned().unwrap_or_default();
+    if let Some(r) = request {
+        p.transmit_freq = r.transmit_freq.or(p.transmit_freq);
+        p.transmit_ping_ms = r.transmit_ping_ms.or(p.transmit_ping_ms);
+        if !r.receive_freq.is_empty() {
+            p.receive_freq = r.receive_freq.clone();
+        }
+        p.receive_ping_ms = r.receive_ping_ms.or(p.receive_ping_ms);
+        p.turnaround_ms = r.turnaround_ms.or(p.turnaround_ms);
+        p.transmit_flag = r.transmit_flag.or(p.transmit_flag);
+        p.lbl_max_range = r.lbl_max_range.or(p.lbl_max_range);
+    }
+    p
+}
+
+/// `$CCPDT` for modem `src`: group 1, channel `src % 4 + 1` (the modem has
+/// four), no synchronization.
+pub fn remus_ping(src: u32, p: &MicroModemRemusLblParams) -> MmSentence {
+    let beacons = p.enable_beacons();
+    MmSentence::RemusLblPing {
+        group: 1,
+        channel: src % 4 + 1,
+        sf: 0,
+        sto: 0,
+        timeout_ms: listening_ms(p.lbl_max_range(), p.turnaround_ms()),
+        beacons: [0, 1, 2, 3].map(|i| beacons >> i & 1 == 1),
+    }
+}
+
+/// `$CCPNT`: at most four receive frequencies, the rest 0.
+pub fn narrowband_ping(p: &MicroModemNarrowbandLblParams) -> MmSentence {
+    let mut receive_freq = [0; MAX_BEACONS];
+    for (slot, f) in receive_freq.iter_mut().zip(&p.receive_freq) {
+        *slot = *f;
+    }
+    MmSentence::NarrowbandLblPing {
+        transmit_freq: p.transmit_freq(),
+        transmit_ping_ms: p.transmit_ping_ms(),
+        receive_ping_ms: p.receive_ping_ms(),
+        timeout_ms: listening_ms(p.lbl_max_range(), p.turnaround_ms()),
+        receive_freq,
+        transmit_flag: p.transmit_flag(),
+    }
+}
+
+/// How long the modem listens after a ping it was given.
+pub fn listening_time(ping: &MmSentence) -> Option<std::time::Duration> {
+    match ping {
+        MmSentence::RemusLblPing { timeout_ms, .. }
+        | MmSentence::NarrowbandLblPing { timeout_ms, .. } => {
+            Some(std::time::Duration::from_millis(u64::from(*timeout_ms)))
+        }
+        _ => None,
+    }
+}
+
+/// The ranging reply of `$SNTTA` travel times: four, of beacons A-D, 0 for
+/// a beacon not heard.
+pub fn reply(times: &[Option<f64>; MAX_BEACONS]) -> MicroModemRangingReply {
+    MicroModemRangingReply {
+        one_way_travel_time: times.iter().map(|t| t.unwrap_or(0.0)).collect(),
+        ambiguity: Some(OwttAmbiguity::OwttExact as i32),
+        is_one_way_synchronous: Some(false),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn remus_ping_from_defaults() {
+        let p = merge_remus(None, None);
+        // 1000 m at 1500 m/s there and back, plus 50 ms turn-around.
+        let line = remus_ping(6, &p).to_line();
+        assert!(line.starts_with("$CCPDT,1,3,0,0,1383,1,1,1,1*"), "{line}");
+        let p = merge_remus(
+            Some(&MicroModemRemusLblParams {
+                enable_beacons: Some(0b0101),
+                ..Default::default()
+            }),
+            Some(&MicroModemRemusLblParams {
+                lbl_max_range: Some(1500),
+                ..Default::default()
+            }),
+        );
+        let line = remus_ping(1, &p).to_line();
+        assert!(line.starts_with("$CCPDT,1,2,0,0,2050,1,0,1,0*"), "{line}");
+    }
+
+    #[test]
+    fn narrowband_ping_pads_frequencies() {
+        let p = merge_narrowband(
+            Some(&MicroModemNarrowbandLblParams {
+                transmit_freq: Some(26000),
+                transmit_ping_ms: Some(5),
+                receive_freq: vec![25000, 25500, 26500, 27000, 27500],
+                receive_ping_ms: Some(5),
+                turnaround_ms: Some(20),
+                ..Default::default()
+            }),
+            Some(&MicroModemNarrowbandLblParams {
+                receive_freq: vec![25000, 25500],
+                ..Default::default()
+            }),
+        );
+        let line = narrowband_ping(&p).to_line();
+        assert!(
+            line.starts_with("$CCPNT,26000,5,5,2686,25000,25500,0,0,1*"),
+            "{line}"
+        );
+    }
+
+    #[test]
+    fn travel_times_to_reply() {
+        let r = reply(&[Some(0.5), None, Some(1.25), None]);
+        assert_eq!(r.one_way_travel_time, vec![0.5, 0.0, 1.25, 0.0]);
+    }
+}
