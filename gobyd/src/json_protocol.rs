@@ -22,8 +22,11 @@
 //!   for a type with `clamp_out_of_range`, the values the codec changed
 //!   (`"changed": [{"field": PATH, "reason": TEXT}]`).
 //! - **Events**, each with `"event": KIND`: `{"event": "received",
-//!   "received": NAME, "src": S, "dest": D, "msg": {...}}` for every
-//!   message received (to every client), and when subscribed
+//!   "received": NAME, "src": S, "dest": D, "msg": {...}, "link": {...}}`
+//!   for every message received (to every client; `link` summarizes the
+//!   transmission it came in, with a Micro-Modem's receive statistics in
+//!   `receive_stat`; `"recovered": true` marks one handed over after a
+//!   restart), and when subscribed
 //!   `{"event": "ack", "ack": NAME, "id": ID, "by": B, "msg": {...}}`,
 //!   `{"event": "expire", "expire": NAME, "id": ID, "msg": {...}}`,
 //!   `{"event": "drop", "drop": NAME, "id": ID, "msg": {...}}`,
@@ -210,26 +213,50 @@ pub fn lost_line(count: u64) -> String {
     json!({ "event": "lost", "count": count }).to_string()
 }
 
+/// How a received message came: the reception that carried it, and
+/// whether it is handed over after a restart. Other events ignore it.
+#[derive(Debug, Clone, Default)]
+pub struct Reception {
+    /// Summary of the transmission it came in (`None`: not known, e.g. a
+    /// message looped back locally or recovered after a restart).
+    pub link: Option<serde_json::Value>,
+    /// Handed over after a restart.
+    pub recovered: bool,
+}
+
 /// The line for a queue event, with the topic it belongs to (`None`:
 /// received messages, sent to every client); `None` for events clients do
 /// not see.
+///
+/// A received message's line carries `reception`: `"link"` (the summary of
+/// the transmission it came in, [`reception_summary`](crate::link_event::reception_summary),
+/// with the modem's link statistics when the driver gives them) and
+/// `"recovered": true` when it is handed over after a restart (it was
+/// received before; a client that may have seen it then can tell).
 pub fn event_line(
     event: &QueueEvent,
     entry: Option<u64>,
+    reception: &Reception,
     queue_name: impl Fn(u32) -> String,
 ) -> Option<(Option<Topic>, String)> {
     let name = |m: &DynamicMessage| m.descriptor().full_name().to_string();
     let line = match event {
-        QueueEvent::Received(r) => (
-            None,
-            json!({
+        QueueEvent::Received(r) => {
+            let mut line = json!({
                 "event": "received",
                 "received": name(&r.message),
                 "src": r.src,
                 "dest": r.dest,
                 "msg": message_json(&r.message),
-            }),
-        ),
+            });
+            if let Some(link) = &reception.link {
+                line["link"] = link.clone();
+            }
+            if reception.recovered {
+                line["recovered"] = true.into();
+            }
+            (None, line)
+        }
         QueueEvent::Acked {
             message, frame, by, ..
         } => (
@@ -332,7 +359,10 @@ mod tests {
             },
         ];
         for event in &events {
-            let (_, line) = event_line(event, Some(9), |_| "goby.example.Command".into()).unwrap();
+            let (_, line) = event_line(event, Some(9), &Reception::default(), |_| {
+                "goby.example.Command".into()
+            })
+            .unwrap();
             let v: Value = serde_json::from_str(&line).unwrap();
             assert!(v["event"].is_string(), "{v}");
             for reply_key in ["reply", "error", "accepted"] {

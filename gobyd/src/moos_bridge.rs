@@ -592,6 +592,45 @@ mod tests {
     }
 
     #[test]
+    fn a_micromodem_reception_carries_its_statistics_to_modem_receive() {
+        use protos::goby::acomms::protobuf::{MicroModemReceiveStatistics, ModemTransmission};
+        let with_vars = settings("moos {} moos_var {}");
+        let transmission = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            rate: Some(1),
+            frame: vec![vec![1, 2, 3]],
+            receive_stat: vec![MicroModemReceiveStatistics {
+                source: Some(2),
+                dest: Some(1),
+                snr_in: Some(18),
+                snr_out: Some(17),
+                doppler: Some(-0.3),
+                number_bad_frames: Some(1),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        let published = modem_publications(&with_vars, &ModemEvent::Received(transmission));
+        let (var, Value::String(text)) = &published[0] else {
+            panic!("{published:?}");
+        };
+        assert_eq!(var, "ACOMMS_MODEM_RECEIVE");
+        assert!(
+            text.starts_with("@PB[goby.acomms.protobuf.ModemTransmission] src: 2 dest: 1"),
+            "{text}"
+        );
+        for part in [
+            "snr_in: 18",
+            "snr_out: 17",
+            "doppler: -0.3",
+            "number_bad_frames: 1",
+        ] {
+            assert!(text.contains(part), "{part} missing from {text}");
+        }
+    }
+
+    #[test]
     fn text_and_hex_values_parse() {
         let codec = codec();
         let m = parse_value(

@@ -37,9 +37,9 @@ use super::data_dir::{DataDir, DataDirError};
 use super::dedup::Identity;
 use super::door::Door;
 use super::inbox::{Inbox, Incoming};
-use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
+use super::json_protocol::{accepted_reply, error_line, event_line, message_json, Reception};
 use super::json_server::{ClientEvent, DaemonEvent, EventLine, JsonInterface, Publish};
-use super::link_event::LinkEvent;
+use super::link_event::{reception_summary, LinkEvent};
 use super::modem_event::ModemEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
@@ -711,7 +711,7 @@ impl Daemon {
             if let QueueEvent::Dropped { message, .. } = &event {
                 dropped.push((entry, message.clone()));
             }
-            self.hand_over(event, entry, false);
+            self.hand_over(event, entry, &Reception::default());
         }
         dropped
     }
@@ -732,6 +732,11 @@ impl Daemon {
         if transmission.r#type() == TransmissionType::Data && !transmission.frame.is_empty() {
             CrashPoint::Received.reached();
         }
+        // Each message handed over carries the reception it came in.
+        let reception = Reception {
+            link: Some(reception_summary(&transmission, SystemClock.now())),
+            recovered: false,
+        };
         let mut bad_frames = std::collections::BTreeSet::new();
         let mut unplaced = false;
         for e in self.outbox.receive(&transmission) {
@@ -755,7 +760,7 @@ impl Daemon {
         let mut unrecorded = false;
         for (event, entry) in events {
             let QueueEvent::Received(received) = event else {
-                self.hand_over(event, entry, false);
+                self.hand_over(event, entry, &Reception::default());
                 continue;
             };
             let bytes = match self.codec.encode(&received.message) {
@@ -763,7 +768,7 @@ impl Daemon {
                 Err(e) => {
                     tracing::error!("inbox: cannot encode a received message: {e}");
                     unrecorded = true;
-                    self.hand_over(QueueEvent::Received(received), None, false);
+                    self.hand_over(QueueEvent::Received(received), None, &reception);
                     continue;
                 }
             };
@@ -800,7 +805,7 @@ impl Daemon {
         }
         let handed_over = !recorded.is_empty();
         for (seq, received) in recorded {
-            self.hand_over(QueueEvent::Received(received), None, false);
+            self.hand_over(QueueEvent::Received(received), None, &reception);
             if let Some(seq) = seq {
                 if let Err(e) = self.inbox.handed(seq, now) {
                     tracing::error!("{}: {e}", self.inbox.path().display());
@@ -852,7 +857,11 @@ impl Daemon {
                         dest: incoming.dest,
                         time: incoming.role_time,
                     };
-                    self.hand_over(QueueEvent::Received(received), None, true);
+                    let recovered = Reception {
+                        link: None,
+                        recovered: true,
+                    };
+                    self.hand_over(QueueEvent::Received(received), None, &recovered);
                 }
                 Err(e) => tracing::error!(
                     "{}: a message received before a restart no longer decodes (DCCL id {}): {e}",
@@ -868,16 +877,17 @@ impl Daemon {
 
     /// Hands a queue event over: its event line to the clients connected
     /// now and to the bridges (MQTT, MOOS), then its line in the mission
-    /// log (the inbox's mark follows that write at once). `recovered`: a
-    /// received message handed over after a restart.
-    fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, recovered: bool) {
+    /// log (the inbox's mark follows that write at once). `reception`: for
+    /// a received message, the transmission it came in and whether it is
+    /// handed over after a restart.
+    fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, reception: &Reception) {
         let now = SystemClock.now();
         // The mission log's line is written last: the inbox marks a received
         // message handed over right after it.
         let record = self
             .raw_log
             .as_ref()
-            .and_then(|_| log_record(&event, recovered));
+            .and_then(|_| log_record(&event, reception));
         let names = &self.names;
         let name_of = |id: u32| {
             names
@@ -885,7 +895,7 @@ impl Daemon {
                 .cloned()
                 .unwrap_or_else(|| format!("dccl id {id}"))
         };
-        if let Some((topic, line)) = event_line(&event, entry, name_of) {
+        if let Some((topic, line)) = event_line(&event, entry, reception, name_of) {
             let _ = self.events.send(Arc::new(ClientEvent {
                 topic,
                 line,
@@ -909,7 +919,7 @@ type LogRecord = (
     Vec<(&'static str, serde_json::Value)>,
 );
 
-fn log_record(event: &QueueEvent, recovered: bool) -> Option<LogRecord> {
+fn log_record(event: &QueueEvent, reception: &Reception) -> Option<LogRecord> {
     match event {
         QueueEvent::Sent { message, frame, .. } => Some((
             "out",
@@ -927,8 +937,11 @@ fn log_record(event: &QueueEvent, recovered: bool) -> Option<LogRecord> {
         )),
         QueueEvent::Received(r) => {
             let mut extra = vec![("src", r.src.into()), ("dest", r.dest.into())];
-            if recovered {
+            if reception.recovered {
                 extra.push(("recovered", true.into()));
+            }
+            if let Some(link) = &reception.link {
+                extra.push(("link", link.clone()));
             }
             Some((
                 "in",

@@ -139,6 +139,10 @@ struct Tally {
     /// Data transmissions received, and those with receive statistics.
     receptions: usize,
     receptions_with_stats: usize,
+    /// Received-message lines on the JSON interface, and those with the
+    /// link statistics.
+    json_lines: usize,
+    json_lines_with_stats: usize,
 }
 
 fn daemon_config(
@@ -265,6 +269,9 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     // Data receptions, and those carrying the modem's receive statistics
     // for the packet (source and destination as the packet's).
     let receptions: Arc<Mutex<(usize, usize)>> = Arc::default();
+    // Received-message lines of the JSON interface, and those whose `link`
+    // carries the modem's receive statistics.
+    let json_lines: Arc<Mutex<(usize, usize)>> = Arc::default();
     let mut stops = Vec::new();
     let mut runs = Vec::new();
     let mut publishers = Vec::new();
@@ -302,8 +309,21 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
             }
         });
         let seen = seen.clone();
+        let json_lines = json_lines.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
+                if let DaemonEvent::Queue(QueueEvent::Received(_)) = &e.event {
+                    let line: serde_json::Value = serde_json::from_str(&e.line).unwrap();
+                    let stats = &line["link"]["receive_stat"];
+                    let mut j = json_lines.lock().unwrap();
+                    j.0 += 1;
+                    if stats.as_array().is_some_and(|a| {
+                        a.iter()
+                            .any(|s| s["snr_in"].is_number() && s["doppler"].is_number())
+                    }) {
+                        j.1 += 1;
+                    }
+                }
                 let (note, delivered) = match &e.event {
                     DaemonEvent::Queue(QueueEvent::Received(r)) => (r.message.clone(), true),
                     DaemonEvent::Queue(QueueEvent::Acked { message, .. }) => {
@@ -470,6 +490,9 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let (heard, with_stats) = *receptions.lock().unwrap();
     tally.receptions = heard;
     tally.receptions_with_stats = with_stats;
+    let (lines, lines_with_stats) = *json_lines.lock().unwrap();
+    tally.json_lines = lines;
+    tally.json_lines_with_stats = lines_with_stats;
     let _ = std::fs::remove_dir_all(&dir);
     (tally, slots)
 }
@@ -527,14 +550,18 @@ fn slot_report(air: &[Vec<emulator::AirTime>], slot_seconds: f64) -> String {
 async fn check(name: &str, faults: Faults, link: Link) {
     let (t, slots) = run(name, faults, link).await;
     println!(
-        "delivery {name}: published {} delivered {} duplicates {} acked-before-delivered {} owed {} lost {} (acked {}); receptions {} with statistics {}; {slots}",
+        "delivery {name}: published {} delivered {} duplicates {} acked-before-delivered {} owed {} lost {} (acked {}); receptions {} with statistics {}, JSON lines {} with statistics {}; {slots}",
         t.published, t.delivered, t.duplicates, t.acked_before_delivered, t.owed, t.lost, t.acked,
-        t.receptions, t.receptions_with_stats
+        t.receptions, t.receptions_with_stats, t.json_lines, t.json_lines_with_stats
     );
     if link.kind == LinkKind::MicroModem2 {
         assert_eq!(
             t.receptions_with_stats, t.receptions,
             "{name}: a reception over a Micro-Modem 2 without its $CACST statistics"
+        );
+        assert_eq!(
+            t.json_lines_with_stats, t.json_lines,
+            "{name}: a received message on the JSON interface without the link statistics"
         );
     }
     assert_eq!(

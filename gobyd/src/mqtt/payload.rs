@@ -25,7 +25,7 @@ use serde_json::{json, Value};
 
 use super::settings::Topics;
 use crate::json_protocol::message_json;
-use crate::link_event::LinkEvent;
+use crate::link_event::{reception_summary, LinkEvent};
 
 /// One publication.
 #[derive(Debug, Clone, PartialEq)]
@@ -61,15 +61,9 @@ pub fn offline(topics: &Topics) -> Vec<u8> {
 }
 
 /// A transmission's summary: everything but the frames' bytes, with their
-/// count.
+/// count (see [`reception_summary`]).
 pub fn transmission_json(t: &ModemTransmission, time: i64) -> Value {
-    let mut value = message_json(&t.transcode_to_dynamic());
-    if let Value::Object(map) = &mut value {
-        map.remove("frame");
-        map.insert("frames".into(), t.frame.len().into());
-        map.insert("time".into(), seconds(time).into());
-    }
-    value
+    reception_summary(t, time)
 }
 
 /// Turns events into publications; keeps the last reception from each
