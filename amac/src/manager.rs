@@ -57,8 +57,8 @@ impl SlotEvent {
 /// Something the medium access control reports.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MacEvent {
-    /// A slot started.
-    Slot(SlotEvent),
+    /// A slot started (boxed: a slot carries a whole transmission).
+    Slot(Box<SlotEvent>),
     /// Auto-discovery: a node was heard for the first time and joins the cycle.
     Discovered {
         /// Its modem id.
@@ -480,11 +480,11 @@ fn start_listed(
         (false, _) if transmission.src() == BROADCAST_ID => SlotAction::Blank,
         (false, _) => SlotAction::Listen,
     };
-    events.push(MacEvent::Slot(SlotEvent {
+    events.push(MacEvent::Slot(Box::new(SlotEvent {
         position,
         action,
         transmission,
-    }));
+    })));
     Some(position.start)
 }
 
@@ -549,11 +549,11 @@ fn start_auto(
     };
     a.next_k += 1;
     let transmission = auto_transmission(a, owner, position.index, Some(start + guard));
-    events.push(MacEvent::Slot(SlotEvent {
+    events.push(MacEvent::Slot(Box::new(SlotEvent {
         position,
         action: slot_action,
         transmission,
-    }));
+    })));
     Some(start)
 }
 

@@ -52,7 +52,7 @@ fn bench_driver(frames: mpsc::UnboundedSender<(Instant, Vec<Vec<u8>>)>) -> Drive
                     let _ = done.send(());
                     break;
                 }
-                DriverCommand::Specific(_) => {}
+                DriverCommand::Specific(_) | DriverCommand::Acknowledge(_) => {}
             }
         }
     })

@@ -18,8 +18,10 @@
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
 //! composes and runs the stack, [`door`] checks published values,
 //! [`outbox`] is the queue with its on-disk journal, [`data_dir`] holds the
-//! data directory (one daemon each, private files), [`dedup`] is the
-//! receiver's duplicate filter, [`json_protocol`] and
+//! data directory (one daemon each, private files), [`inbox`] records what
+//! the link delivers before it is handed over or acknowledged, [`dedup`] is
+//! the receiver's duplicate filter, [`crash_point`] lets restart tests kill
+//! the daemon at chosen moments, [`json_protocol`] and
 //! [`json_server`] serve JSON clients, [`moos_bridge`] joins a MOOS
 //! community, [`mqtt`] bridges to an MQTT broker (with [`link_event`] the
 //! link's own events), [`mission_file`] reads the configuration from a MOOS mission
@@ -32,9 +34,11 @@
 pub mod command;
 pub mod config;
 pub mod control;
+pub mod crash_point;
 pub mod data_dir;
 pub mod dedup;
 pub mod door;
+pub mod inbox;
 pub mod json_protocol;
 pub mod json_server;
 pub mod link_event;

@@ -17,9 +17,13 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use amac::MacManager;
-use modemdriver::{Driver, DriverEvent, DriverStatus, TransmitOutcome};
+use modemdriver::{
+    Acknowledgement, Driver, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome,
+};
 use prost_reflect::ReflectMessage;
-use protos::goby::acomms::protobuf::{driver_config, DriverType};
+use protos::goby::acomms::protobuf::{
+    driver_config, modem_transmission::TransmissionType, DriverType,
+};
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{Clock, QueueEvent, QueueManager, SystemClock};
 use tokio::net::{TcpListener, UdpSocket};
@@ -28,9 +32,11 @@ use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
 use super::control::Control;
+use super::crash_point::CrashPoint;
 use super::data_dir::{DataDir, DataDirError};
-use super::dedup::{DeliveredLog, Identity};
+use super::dedup::Identity;
 use super::door::Door;
+use super::inbox::{Inbox, Incoming};
 use super::json_protocol::{accepted_reply, error_line, event_line, message_json};
 use super::json_server::{ClientEvent, DaemonEvent, EventLine, JsonInterface, Publish};
 use super::link_event::LinkEvent;
@@ -154,8 +160,9 @@ pub struct Daemon {
     json_udp: Option<SocketAddr>,
     data_dir: DataDir,
     codec: Arc<dccl::Codec>,
-    /// Messages handed to clients recently (`None`: no duplicate filter).
-    delivered: Option<DeliveredLog>,
+    /// Messages received from the link: recorded before they are handed
+    /// over or acknowledged, and remembered by the duplicate filter.
+    inbox: Inbox,
     /// `unique_id` of the next transmission initiated.
     next_transmission: u32,
 }
@@ -177,7 +184,10 @@ impl Daemon {
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
         let data_dir = DataDir::open(Path::new(config.data_dir()))?;
-        let driver_config = config.driver.clone().expect("completed");
+        let mut driver_config = config.driver.clone().expect("completed");
+        // Acks (where software sends them) only once the inbox holds the
+        // message.
+        driver_config.deferred_ack = Some(true);
         let driver = start_driver(&driver_config).await?;
         let mut daemon = Self::start_in(config, driver, data_dir).await?;
         daemon.driver_config = Some(driver_config);
@@ -186,6 +196,9 @@ impl Daemon {
 
     /// Starts the daemon on a driver started by the caller (the
     /// configuration's driver section is then only used for the modem id).
+    /// Start a UDP or simulator driver with `deferred_ack: true`, so that it
+    /// acknowledges received data only once the daemon has recorded it (the
+    /// daemon asks for every ack); without it the driver acks on reception.
     pub async fn start_with_driver(
         config: GobydConfig,
         driver: Driver,
@@ -241,22 +254,28 @@ impl Daemon {
                 "duplicate_window_seconds {window_seconds} is not valid"
             ))));
         }
-        let delivered = if window_seconds > 0.0 {
-            let path = data_dir.path().join("delivered.log");
+        let inbox = {
+            let path = data_dir.path().join("inbox.log");
             let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-            let (log, replay) = DeliveredLog::open(&path, (window_seconds * 1e6) as u64, now)
+            let (mut inbox, replay) = Inbox::open(&path, (window_seconds * 1e6) as u64, now)
                 .map_err(io_error(format!("cannot open {}", path.display())))?;
-            if replay.remembered > 0 || replay.discarded_bytes > 0 {
+            // The duplicate filter's file of earlier versions.
+            let old = data_dir.path().join("delivered.log");
+            match inbox.take_over_delivered_log(&old, now) {
+                Ok(0) => {}
+                Ok(n) => tracing::info!("{n} identities taken over from {}", old.display()),
+                Err(e) => tracing::warn!("{}: {e}", old.display()),
+            }
+            if replay != Default::default() {
                 tracing::info!(
                     remembered = replay.remembered,
+                    pending = replay.pending,
                     discarded_bytes = replay.discarded_bytes,
                     "{} replayed",
                     path.display()
                 );
             }
-            Some(log)
-        } else {
-            None
+            inbox
         };
 
         let log = config.log.clone().unwrap_or_default();
@@ -355,7 +374,7 @@ impl Daemon {
             json_udp,
             data_dir,
             codec,
-            delivered,
+            inbox,
             // Numbers of a previous run (whose acks may still come) are
             // not reused soon: start from the clock.
             next_transmission: (SystemClock.now() / 1000) as u32,
@@ -403,6 +422,7 @@ impl Daemon {
     /// interfaces. Messages not yet sent stay in the journal.
     pub async fn run(mut self, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
         tokio::pin!(shutdown);
+        self.hand_over_pending();
         let mut expire = tokio::time::interval(Duration::from_secs(1));
         loop {
             let mac_wait = self
@@ -536,11 +556,7 @@ impl Daemon {
             }
             DriverEvent::Received(transmission) => {
                 self.mac.handle_received(transmission.src());
-                for e in self.outbox.receive(&transmission) {
-                    tracing::warn!(src = transmission.src(), "received: {e}");
-                }
-                // Messages from the link pass the duplicate filter.
-                let _ = self.forward_events(true);
+                self.receive(transmission);
             }
             DriverEvent::TransmitResult(result) => {
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
@@ -683,48 +699,6 @@ impl Daemon {
     /// Logs the queue events and sends them to the clients; returns the
     /// messages dropped from a full queue (journal id, message).
     fn forward_queue_events(&mut self) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
-        self.forward_events(false)
-    }
-
-    /// Whether a message received from `src` is new to the clients
-    /// (recorded durably then) or a repeat to suppress.
-    fn first_delivery(&mut self, received: &queue::ReceivedMessage) -> bool {
-        let Some(log) = &mut self.delivered else {
-            return true;
-        };
-        let bytes = match self.codec.encode(&received.message) {
-            Ok(bytes) => bytes,
-            Err(e) => {
-                tracing::warn!("duplicate filter: cannot encode a received message: {e}");
-                return true;
-            }
-        };
-        let id = Identity::of(received.src, received.dccl_id, &bytes);
-        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-        match log.first_time(id, now) {
-            Ok(true) => true,
-            Ok(false) => {
-                tracing::info!(
-                    src = received.src,
-                    dccl_id = received.dccl_id,
-                    "a repeat of a message already handed over: suppressed"
-                );
-                false
-            }
-            Err(e) => {
-                // Handed over all the same: nothing received is lost.
-                tracing::error!("{}: {e}", log.path().display());
-                true
-            }
-        }
-    }
-
-    /// As [`forward_queue_events`](Self::forward_queue_events); with
-    /// `from_link`, received messages already handed over are suppressed.
-    fn forward_events(
-        &mut self,
-        from_link: bool,
-    ) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
         let mut dropped = Vec::new();
         let events = match self.outbox.events_with_entries() {
             Ok(events) => events,
@@ -733,62 +707,236 @@ impl Daemon {
                 return dropped;
             }
         };
-        let now = SystemClock.now();
         for (event, entry) in events {
             if let QueueEvent::Dropped { message, .. } = &event {
                 dropped.push((entry, message.clone()));
             }
-            if let QueueEvent::Received(received) = &event {
-                if from_link && !self.first_delivery(received) {
-                    continue;
-                }
-            }
-            if let Some(log) = &mut self.raw_log {
-                let logged = match &event {
-                    QueueEvent::Sent { message, frame, .. } => log.message(
-                        now,
-                        "out",
-                        message.descriptor().full_name(),
-                        message_json(message),
-                        &[("frame", (*frame).into())],
-                    ),
-                    QueueEvent::Acked {
-                        message, by, frame, ..
-                    } => log.message(
-                        now,
-                        "ack",
-                        message.descriptor().full_name(),
-                        message_json(message),
-                        &[("by", (*by).into()), ("frame", (*frame).into())],
-                    ),
-                    QueueEvent::Received(r) => log.message(
-                        now,
-                        "in",
-                        r.message.descriptor().full_name(),
-                        message_json(&r.message),
-                        &[("src", r.src.into()), ("dest", r.dest.into())],
-                    ),
-                    _ => Ok(()),
-                };
-                if let Err(e) = logged {
-                    tracing::error!("raw log: {e}");
-                }
-            }
-            let names = &self.names;
-            let name_of = |id: u32| {
-                names
-                    .get(&id)
-                    .cloned()
-                    .unwrap_or_else(|| format!("dccl id {id}"))
-            };
-            if let Some((topic, line)) = event_line(&event, entry, name_of) {
-                let _ = self.events.send(Arc::new(ClientEvent {
-                    topic,
-                    line,
-                    event: DaemonEvent::Queue(event),
-                }));
-            }
+            self.hand_over(event, entry, false);
         }
         dropped
+    }
+
+    /// A transmission from the link: its messages are recorded in the inbox
+    /// (synced) unless the duplicate filter knows them, then handed over,
+    /// then the frames are acknowledged (by drivers that ack in software
+    /// with `deferred_ack`).
+    ///
+    /// A frame is acknowledged when every message in it is recorded or a
+    /// repeat. Not acknowledged (the sender retries until the message
+    /// expires there, and is told then): a frame that does not decode, all
+    /// frames when a message cannot be placed in a frame (an error the
+    /// queue does not tie to one), and all frames when the inbox cannot be
+    /// written (the messages are handed over all the same: nothing received
+    /// is lost, but a retry may then reach the clients twice).
+    fn receive(&mut self, transmission: ModemTransmission) {
+        if transmission.r#type() == TransmissionType::Data && !transmission.frame.is_empty() {
+            CrashPoint::Received.reached();
+        }
+        let mut bad_frames = std::collections::BTreeSet::new();
+        let mut unplaced = false;
+        for e in self.outbox.receive(&transmission) {
+            tracing::warn!(src = transmission.src(), "received: {e}");
+            match e {
+                queue::QueueError::Frame { frame, .. } => {
+                    bad_frames.insert(frame);
+                }
+                _ => unplaced = true,
+            }
+        }
+        let events = match self.outbox.events_with_entries() {
+            Ok(events) => events,
+            Err(e) => {
+                tracing::error!("journal: {e}");
+                Vec::new()
+            }
+        };
+        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        let mut recorded = Vec::new();
+        let mut unrecorded = false;
+        for (event, entry) in events {
+            let QueueEvent::Received(received) = event else {
+                self.hand_over(event, entry, false);
+                continue;
+            };
+            let bytes = match self.codec.encode(&received.message) {
+                Ok(bytes) => bytes,
+                Err(e) => {
+                    tracing::error!("inbox: cannot encode a received message: {e}");
+                    unrecorded = true;
+                    self.hand_over(QueueEvent::Received(received), None, false);
+                    continue;
+                }
+            };
+            let identity = Identity::of(received.src, received.dccl_id, &bytes);
+            if self.inbox.is_duplicate(&identity, now) {
+                tracing::info!(
+                    src = received.src,
+                    dccl_id = received.dccl_id,
+                    "a repeat of a message already received: suppressed"
+                );
+                continue;
+            }
+            let incoming = Incoming {
+                identity,
+                dest: received.dest,
+                role_time: received.time,
+                bytes,
+            };
+            match self.inbox.record(incoming, now) {
+                Ok(seq) => recorded.push((Some(seq), received)),
+                Err(e) => {
+                    tracing::error!("{}: {e}", self.inbox.path().display());
+                    unrecorded = true;
+                    recorded.push((None, received));
+                }
+            }
+        }
+        if !recorded.is_empty() {
+            if let Err(e) = self.inbox.sync() {
+                tracing::error!("{}: {e}", self.inbox.path().display());
+                unrecorded = true;
+            }
+            CrashPoint::Recorded.reached();
+        }
+        let handed_over = !recorded.is_empty();
+        for (seq, received) in recorded {
+            self.hand_over(QueueEvent::Received(received), None, false);
+            if let Some(seq) = seq {
+                if let Err(e) = self.inbox.handed(seq, now) {
+                    tracing::error!("{}: {e}", self.inbox.path().display());
+                }
+            }
+        }
+        if handed_over {
+            CrashPoint::HandedOver.reached();
+        }
+        if transmission.r#type() == TransmissionType::Data
+            && transmission.ack_requested()
+            && !unplaced
+            && !unrecorded
+        {
+            let frames: Vec<usize> = (0..transmission.frame.len())
+                .filter(|i| !bad_frames.contains(i))
+                .collect();
+            if !frames.is_empty() {
+                let ack = Acknowledgement {
+                    received: transmission,
+                    frames,
+                };
+                if let Err(e) = self.driver.acknowledge(ack) {
+                    tracing::error!("cannot acknowledge: {e}");
+                }
+            }
+        }
+    }
+
+    /// Hands over, once, the messages a previous run recorded in the inbox
+    /// and did not hand over (it was killed in between). Messages whose
+    /// hand-over mark alone was lost are flagged `recovered` in the mission
+    /// log.
+    fn hand_over_pending(&mut self) {
+        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        for entry in self.inbox.pending() {
+            let incoming = &entry.incoming;
+            match self.codec.decode(&incoming.bytes) {
+                Ok(message) => {
+                    tracing::info!(
+                        src = incoming.identity.src,
+                        dccl_id = incoming.identity.dccl_id,
+                        "a message received before a restart is handed over now"
+                    );
+                    let received = queue::ReceivedMessage {
+                        message,
+                        dccl_id: incoming.identity.dccl_id,
+                        src: incoming.identity.src,
+                        dest: incoming.dest,
+                        time: incoming.role_time,
+                    };
+                    self.hand_over(QueueEvent::Received(received), None, true);
+                }
+                Err(e) => tracing::error!(
+                    "{}: a message received before a restart no longer decodes (DCCL id {}): {e}",
+                    self.inbox.path().display(),
+                    incoming.identity.dccl_id
+                ),
+            }
+            if let Err(e) = self.inbox.handed(entry.seq, now) {
+                tracing::error!("{}: {e}", self.inbox.path().display());
+            }
+        }
+    }
+
+    /// Hands a queue event over: its event line to the clients connected
+    /// now and to the bridges (MQTT, MOOS), then its line in the mission
+    /// log (the inbox's mark follows that write at once). `recovered`: a
+    /// received message handed over after a restart.
+    fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, recovered: bool) {
+        let now = SystemClock.now();
+        // The mission log's line is written last: the inbox marks a received
+        // message handed over right after it.
+        let record = self
+            .raw_log
+            .as_ref()
+            .and_then(|_| log_record(&event, recovered));
+        let names = &self.names;
+        let name_of = |id: u32| {
+            names
+                .get(&id)
+                .cloned()
+                .unwrap_or_else(|| format!("dccl id {id}"))
+        };
+        if let Some((topic, line)) = event_line(&event, entry, name_of) {
+            let _ = self.events.send(Arc::new(ClientEvent {
+                topic,
+                line,
+                event: DaemonEvent::Queue(event),
+            }));
+        }
+        if let (Some(log), Some((direction, name, value, extra))) = (&mut self.raw_log, record) {
+            if let Err(e) = log.message(now, direction, &name, value, &extra) {
+                tracing::error!("raw log: {e}");
+            }
+        }
+    }
+}
+
+/// The mission log's line of a queue event: direction, type name, value
+/// and extra fields (`None`: not logged).
+type LogRecord = (
+    &'static str,
+    String,
+    serde_json::Value,
+    Vec<(&'static str, serde_json::Value)>,
+);
+
+fn log_record(event: &QueueEvent, recovered: bool) -> Option<LogRecord> {
+    match event {
+        QueueEvent::Sent { message, frame, .. } => Some((
+            "out",
+            message.descriptor().full_name().to_string(),
+            message_json(message),
+            vec![("frame", (*frame).into())],
+        )),
+        QueueEvent::Acked {
+            message, by, frame, ..
+        } => Some((
+            "ack",
+            message.descriptor().full_name().to_string(),
+            message_json(message),
+            vec![("by", (*by).into()), ("frame", (*frame).into())],
+        )),
+        QueueEvent::Received(r) => {
+            let mut extra = vec![("src", r.src.into()), ("dest", r.dest.into())];
+            if recovered {
+                extra.push(("recovered", true.into()));
+            }
+            Some((
+                "in",
+                r.message.descriptor().full_name().to_string(),
+                message_json(&r.message),
+                extra,
+            ))
+        }
+        _ => None,
     }
 }

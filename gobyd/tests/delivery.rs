@@ -11,6 +11,13 @@
 //! receiver's clients; no message acked and never delivered; every data
 //! packet a modem puts on the water lies within its node's TDMA slot.
 //!
+//! The Micro-Modem runs are made with the emulator speaking as a Micro-Modem
+//! 1 and, again, as a Micro-Modem 2 at rates 1 and 0 (the rate-0 cycle opens
+//! with a cycle-initialization packet; at rate 1 the modem starts
+//! transmitting within half a second of the last frame). Over a Micro-Modem
+//! 2 every reception must also carry the modem's receive statistics
+//! (`$CACST`).
+//!
 //! `cargo test -p gobyd --test delivery -- --nocapture` prints one summary
 //! line per run.
 
@@ -20,22 +27,73 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use gobyd::json_server::{DaemonEvent, Publish};
+use gobyd::link_event::LinkEvent;
 use gobyd::runtime::Daemon;
 use modemdriver::micromodem::emulator::{
     self, AirKind, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
 };
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
 use protos::goby::acomms::protobuf::SimulatorDriverConfig;
 use protos::goby::example::Command;
 use queue::QueueEvent;
 use tokio::sync::oneshot;
 
-/// Seconds per TDMA slot; node 1 has slot 0, node 2 slot 1.
-const SLOT_SECONDS: f64 = 3.0;
-/// Messages each node publishes.
-const MESSAGES_PER_NODE: usize = 20;
+/// The link of a run: what each daemon's driver talks to, the rate of the
+/// TDMA slots, their length (node 1 has slot 0, node 2 slot 1) and the
+/// number of messages each node publishes.
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    kind: LinkKind,
+    rate: u32,
+    slot_seconds: f64,
+    messages: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum LinkKind {
+    MicroModem1,
+    MicroModem2,
+    Simulator,
+}
+
+impl Link {
+    /// Emulated Micro-Modem 1s at rate 6, 3 s slots.
+    const MICROMODEM1: Link = Link {
+        kind: LinkKind::MicroModem1,
+        rate: 6,
+        slot_seconds: 3.0,
+        messages: 20,
+    };
+    /// Emulated Micro-Modem 2s at rate 1 (three 64-byte frames, 250 bit/s).
+    const MICROMODEM2_RATE1: Link = Link {
+        kind: LinkKind::MicroModem2,
+        rate: 1,
+        slot_seconds: 8.0,
+        messages: 20,
+    };
+    /// Emulated Micro-Modem 2s at rate 0 (one 32-byte frame, 80 bit/s, after
+    /// a cycle-initialization packet).
+    const MICROMODEM2_RATE0: Link = Link {
+        kind: LinkKind::MicroModem2,
+        rate: 0,
+        slot_seconds: 6.0,
+        messages: 6,
+    };
+    /// The acoustic simulator driver alone.
+    const SIMULATOR: Link = Link {
+        kind: LinkKind::Simulator,
+        rate: 6,
+        slot_seconds: 3.0,
+        messages: 20,
+    };
+
+    fn emulated(&self) -> bool {
+        self.kind != LinkKind::Simulator
+    }
+}
 /// Longest a run lasts (it ends earlier once everything is acknowledged).
 const RUN_LIMIT: Duration = Duration::from_secs(150);
 
@@ -78,21 +136,28 @@ struct Tally {
     owed: usize,
     lost: usize,
     acked: usize,
+    /// Data transmissions received, and those with receive statistics.
+    receptions: usize,
+    receptions_with_stats: usize,
 }
 
 fn daemon_config(
     id: i32,
     driver: &str,
     data_dir: &Path,
+    link: Link,
 ) -> protos::goby::apps::protobuf::GobydConfig {
+    let Link {
+        rate, slot_seconds, ..
+    } = link;
     let text = format!(
         r#"
 modem_id: {id}
 {driver}
 mac {{
   type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1  dest: -1  rate: 6  slot_seconds: {SLOT_SECONDS} }}
-  slot {{ src: 2  dest: -1  rate: 6  slot_seconds: {SLOT_SECONDS} }}
+  slot {{ src: 1  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
+  slot {{ src: 2  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
 }}
 queue {{
   message_entry {{
@@ -139,7 +204,7 @@ fn simulator_driver(channel: &str, loss: f64, seed: u64) -> String {
 }
 
 /// Two emulated modems 300 m apart on an in-process channel.
-fn start_emulators(dir: &Path, faults: &Faults) -> Vec<EmulatorHandle> {
+fn start_emulators(dir: &Path, faults: &Faults, kind: LinkKind) -> Vec<EmulatorHandle> {
     let medium = Medium::new();
     let node: Vec<NodePosition> = (1..=2)
         .map(|m| NodePosition {
@@ -160,6 +225,10 @@ fn start_emulators(dir: &Path, faults: &Faults) -> Vec<EmulatorHandle> {
                 ..Default::default()
             };
             let backend = SimulatorDriver::start_on(&config, medium.clone()).unwrap();
+            let base = match kind {
+                LinkKind::MicroModem2 => EmulatorConfig::micromodem2(id),
+                _ => EmulatorConfig::default(),
+            };
             let emulated = EmulatorConfig {
                 modem_id: id,
                 packet_overhead: Duration::from_millis(300),
@@ -168,7 +237,7 @@ fn start_emulators(dir: &Path, faults: &Faults) -> Vec<EmulatorHandle> {
                     lost_ack: faults.lost_ack,
                     seed: faults.seed,
                 },
-                ..EmulatorConfig::default()
+                ..base
             };
             let port = EmulatorPort::Pty {
                 link: Some(dir.join(format!("modem{id}"))),
@@ -180,10 +249,11 @@ fn start_emulators(dir: &Path, faults: &Faults) -> Vec<EmulatorHandle> {
 
 /// Runs the two daemons while `inject` applies the faults; returns the
 /// tally and the emulators' slot report.
-async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
+async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let dir = scratch(name);
+    let emulated = link.emulated();
     let emulators = if emulated {
-        let mut e = start_emulators(&dir, &faults);
+        let mut e = start_emulators(&dir, &faults, link.kind);
         for h in &mut e {
             h.path().await.expect("emulated modem present");
         }
@@ -192,6 +262,9 @@ async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
         Vec::new()
     };
     let seen: Arc<Mutex<Vec<(i32, Seen)>>> = Arc::default();
+    // Data receptions, and those carrying the modem's receive statistics
+    // for the packet (source and destination as the packet's).
+    let receptions: Arc<Mutex<(usize, usize)>> = Arc::default();
     let mut stops = Vec::new();
     let mut runs = Vec::new();
     let mut publishers = Vec::new();
@@ -202,11 +275,32 @@ async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
             simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed)
         };
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(id, &driver, &data_dir))
+        let daemon = Daemon::start(daemon_config(id, &driver, &data_dir, link))
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());
         let mut events = daemon.subscribe();
+        let mut link_events = daemon.link_events();
+        let receptions = receptions.clone();
+        tokio::spawn(async move {
+            while let Ok(e) = link_events.recv().await {
+                if let LinkEvent::Received { transmission, .. } = e {
+                    if transmission.r#type() == TransmissionType::Data
+                        && !transmission.frame.is_empty()
+                    {
+                        let mut r = receptions.lock().unwrap();
+                        r.0 += 1;
+                        if transmission.receive_stat.iter().any(|s| {
+                            s.source == Some(3 - id) && s.dest == Some(id) && s.snr_in.is_some()
+                        }) {
+                            r.1 += 1;
+                        } else {
+                            eprintln!("node {id}: a reception without matching statistics: {transmission:?}");
+                        }
+                    }
+                }
+            }
+        });
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
@@ -271,7 +365,7 @@ async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
 
     // Each node publishes to the other, one message a second.
     let mut published: Vec<(i32, String)> = Vec::new();
-    for i in 0..MESSAGES_PER_NODE {
+    for i in 0..link.messages {
         for (index, publisher) in publishers.iter().enumerate() {
             let from = index as i32 + 1;
             let to = 3 - from;
@@ -372,18 +466,21 @@ async fn run(name: &str, faults: Faults, emulated: bool) -> (Tally, String) {
             tally.lost += 1;
         }
     }
-    let slots = slot_report(&air);
+    let slots = slot_report(&air, link.slot_seconds);
+    let (heard, with_stats) = *receptions.lock().unwrap();
+    tally.receptions = heard;
+    tally.receptions_with_stats = with_stats;
     let _ = std::fs::remove_dir_all(&dir);
     (tally, slots)
 }
 
 /// Checks every data packet of modem i (slot i-1) lies in its slot of the
 /// cycle (slots counted from the start of the UTC day); returns the report.
-fn slot_report(air: &[Vec<emulator::AirTime>]) -> String {
+fn slot_report(air: &[Vec<emulator::AirTime>], slot_seconds: f64) -> String {
     if air.is_empty() {
         return "slots: not observed (no modem emulator)".into();
     }
-    let slot = (SLOT_SECONDS * 1e6) as u64;
+    let slot = (slot_seconds * 1e6) as u64;
     let cycle = slot * air.len() as u64;
     let mut parts = Vec::new();
     let mut outside = 0;
@@ -418,7 +515,7 @@ fn slot_report(air: &[Vec<emulator::AirTime>]) -> String {
             latest_end = latest_end.max(end_offset.saturating_sub(own));
         }
         parts.push(format!(
-            "modem {}: {data} packets ({aborted} aborted), on the water from +{:.2} s to +{:.2} s of its {SLOT_SECONDS} s slot",
+            "modem {}: {data} packets ({aborted} aborted), on the water from +{:.2} s to +{:.2} s of its {slot_seconds} s slot",
             i + 1,
             if data > 0 { earliest as f64 / 1e6 } else { 0.0 },
             latest_end as f64 / 1e6
@@ -427,12 +524,19 @@ fn slot_report(air: &[Vec<emulator::AirTime>]) -> String {
     format!("slots: {} outside; {}", outside, parts.join("; "))
 }
 
-async fn check(name: &str, faults: Faults, emulated: bool) {
-    let (t, slots) = run(name, faults, emulated).await;
+async fn check(name: &str, faults: Faults, link: Link) {
+    let (t, slots) = run(name, faults, link).await;
     println!(
-        "delivery {name}: published {} delivered {} duplicates {} acked-before-delivered {} owed {} lost {} (acked {}); {slots}",
-        t.published, t.delivered, t.duplicates, t.acked_before_delivered, t.owed, t.lost, t.acked
+        "delivery {name}: published {} delivered {} duplicates {} acked-before-delivered {} owed {} lost {} (acked {}); receptions {} with statistics {}; {slots}",
+        t.published, t.delivered, t.duplicates, t.acked_before_delivered, t.owed, t.lost, t.acked,
+        t.receptions, t.receptions_with_stats
     );
+    if link.kind == LinkKind::MicroModem2 {
+        assert_eq!(
+            t.receptions_with_stats, t.receptions,
+            "{name}: a reception over a Micro-Modem 2 without its $CACST statistics"
+        );
+    }
     assert_eq!(
         t.duplicates, 0,
         "{name}: a message reached the client twice"
@@ -460,7 +564,7 @@ async fn micromodem_long_unplug() {
         seed: 1,
         ..Default::default()
     };
-    check(faults.name, faults, true).await;
+    check(faults.name, faults, Link::MICROMODEM1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -471,7 +575,7 @@ async fn micromodem_bad_crc() {
         seed: 2,
         ..Default::default()
     };
-    check(faults.name, faults, true).await;
+    check(faults.name, faults, Link::MICROMODEM1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -482,7 +586,7 @@ async fn micromodem_lost_acks() {
         seed: 3,
         ..Default::default()
     };
-    check(faults.name, faults, true).await;
+    check(faults.name, faults, Link::MICROMODEM1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -493,7 +597,7 @@ async fn micromodem_reset_mid_packet() {
         seed: 4,
         ..Default::default()
     };
-    check(faults.name, faults, true).await;
+    check(faults.name, faults, Link::MICROMODEM1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -504,7 +608,7 @@ async fn micromodem_silences() {
         seed: 5,
         ..Default::default()
     };
-    check(faults.name, faults, true).await;
+    check(faults.name, faults, Link::MICROMODEM1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -518,7 +622,7 @@ async fn micromodem_combined() {
         silences: vec![(2.0, 5.0), (25.0, 4.0)],
         seed: 6,
     };
-    check(faults.name, faults, true).await;
+    check(faults.name, faults, Link::MICROMODEM1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -529,5 +633,44 @@ async fn simulator_lost_packets_and_acks() {
         seed: 7,
         ..Default::default()
     };
-    check(faults.name, faults, false).await;
+    check(faults.name, faults, Link::SIMULATOR).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem2_rate1_combined() {
+    let faults = Faults {
+        name: "mm2-rate1-combined",
+        bad_crc: 0.2,
+        lost_ack: 0.3,
+        unplug: Some((4.0, 15.0)),
+        resets: 2,
+        silences: vec![(2.0, 5.0), (25.0, 4.0)],
+        seed: 8,
+    };
+    check(faults.name, faults, Link::MICROMODEM2_RATE1).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem2_rate1_bad_crc_and_lost_acks() {
+    let faults = Faults {
+        name: "mm2-rate1-crc-acks",
+        bad_crc: 0.3,
+        lost_ack: 0.4,
+        seed: 9,
+        ..Default::default()
+    };
+    check(faults.name, faults, Link::MICROMODEM2_RATE1).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem2_rate0_with_faults() {
+    let faults = Faults {
+        name: "mm2-rate0",
+        bad_crc: 0.2,
+        lost_ack: 0.3,
+        resets: 1,
+        seed: 10,
+        ..Default::default()
+    };
+    check(faults.name, faults, Link::MICROMODEM2_RATE0).await;
 }

@@ -8,12 +8,15 @@
 //!   [`DriverHandle::initiate_transmission`] from another task),
 //! - reads [`DriverEvent`]s with [`Driver::next_event`], answering each
 //!   [`DriverEvent::DataRequest`] with the frames to send,
+//! - acknowledges received data once it has recorded it, with
+//!   [`Driver::acknowledge`], when the driver was started with
+//!   `DriverConfig.deferred_ack` (drivers that ack in software only),
 //! - stops the driver with [`Driver::stop`].
 
 use std::time::Duration;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::acomms::protobuf::ModemTransmission;
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
@@ -54,8 +57,73 @@ pub enum DriverCommand {
     /// A driver-specific request (e.g. a Micro-Modem two-way ping); drivers
     /// that do not know the message report [`DriverStatus::Unsupported`].
     Specific(DynamicMessage),
+    /// Acknowledge frames of a received transmission, now that the layer
+    /// above has recorded their messages. Acted on by drivers that send
+    /// acknowledgements in software and were started with
+    /// `DriverConfig.deferred_ack`; ignored otherwise (a driver acking on
+    /// reception, a modem acking in hardware).
+    Acknowledge(Acknowledgement),
     /// Stop; the sender is told when the task is done.
     Stop(oneshot::Sender<()>),
+}
+
+/// Frames of a received transmission to acknowledge
+/// ([`DriverCommand::Acknowledge`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Acknowledgement {
+    /// The transmission as the driver reported it in
+    /// [`DriverEvent::Received`] (its `src`, `dest`, `rate`, `frame_start`
+    /// and `unique_id` name what the acknowledgement answers).
+    pub received: ModemTransmission,
+    /// Indices into `received.frame` of the frames to acknowledge.
+    pub frames: Vec<usize>,
+}
+
+impl Acknowledgement {
+    /// Acknowledges every frame of `received`.
+    pub fn all(received: ModemTransmission) -> Self {
+        let frames = (0..received.frame.len()).collect();
+        Acknowledgement { received, frames }
+    }
+
+    /// Whether a driver acknowledging in software answers `received` at
+    /// all: data with `ack_requested`, frames in it, addressed to one of
+    /// `ack_ids` (this node and any it acknowledges for).
+    pub fn wanted(received: &ModemTransmission, ack_ids: &[i32]) -> bool {
+        received.r#type() == TransmissionType::Data
+            && received.ack_requested()
+            && ack_ids.contains(&received.dest())
+            && !received.frame.is_empty()
+    }
+
+    /// The `ACK` transmission answering the frames: from the data's
+    /// destination to its source, at its rate, listing the frame numbers
+    /// (`frame_start` + index, indices past the last frame left out) and
+    /// echoing its `unique_id` so that the sender credits the transmission
+    /// it answers. `None` when no frame is left to acknowledge.
+    pub fn transmission(&self) -> Option<ModemTransmission> {
+        let mt = &self.received;
+        let mut acked: Vec<i32> = self
+            .frames
+            .iter()
+            .filter(|&&i| i < mt.frame.len())
+            .map(|&i| mt.frame_start() as i32 + i as i32)
+            .collect();
+        acked.sort_unstable();
+        acked.dedup();
+        if acked.is_empty() {
+            return None;
+        }
+        Some(ModemTransmission {
+            src: Some(mt.dest()),
+            dest: Some(mt.src()),
+            rate: mt.rate,
+            r#type: Some(TransmissionType::Ack as i32),
+            acked_frame: acked,
+            unique_id: mt.unique_id,
+            ..Default::default()
+        })
+    }
 }
 
 /// What a driver reports.
@@ -346,6 +414,14 @@ impl DriverHandle {
             .send(DriverCommand::Specific(request.transcode_to_dynamic()))
             .map_err(|_| DriverError::Stopped)
     }
+
+    /// Asks the driver to acknowledge frames of a received transmission
+    /// ([`DriverCommand::Acknowledge`]).
+    pub fn acknowledge(&self, acknowledgement: Acknowledgement) -> Result<(), DriverError> {
+        self.commands
+            .send(DriverCommand::Acknowledge(acknowledgement))
+            .map_err(|_| DriverError::Stopped)
+    }
 }
 
 /// A running driver.
@@ -403,6 +479,11 @@ impl Driver {
     /// Sends a driver-specific request.
     pub fn initiate_specific(&self, request: &impl ReflectMessage) -> Result<(), DriverError> {
         self.handle.initiate_specific(request)
+    }
+
+    /// Asks the driver to acknowledge frames of a received transmission.
+    pub fn acknowledge(&self, acknowledgement: Acknowledgement) -> Result<(), DriverError> {
+        self.handle.acknowledge(acknowledgement)
     }
 
     /// The next event; `None` once the driver has stopped and every event was read.

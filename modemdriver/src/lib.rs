@@ -39,8 +39,8 @@ pub mod time;
 pub mod udp;
 
 pub use driver::{
-    DataRequest, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverHandle,
-    DriverStatus, EventSink, RawDirection, RawMessage, SpecificReport, TransmitOutcome,
-    TransmitResult,
+    Acknowledgement, DataRequest, Driver, DriverCommand, DriverContext, DriverError, DriverEvent,
+    DriverHandle, DriverStatus, EventSink, RawDirection, RawMessage, SpecificReport,
+    TransmitOutcome, TransmitResult,
 };
 pub use protos::goby::acomms::protobuf::{DriverConfig, ModemTransmission};

@@ -7,7 +7,9 @@
 //! remote endpoint. Data addressed to this node with `ack_requested` is
 //! acknowledged (an `ACK` transmission listing the frames, with the data's
 //! `unique_id` so that the sender credits the transmission it answers) to
-//! its sender. A data transmission whose slot has passed
+//! the endpoint it came from: on reception, or with `deferred_ack` only when
+//! the layer above asks ([`DriverCommand::Acknowledge`]), for the frames it
+//! names. A data transmission whose slot has passed
 //! ([`slot`](crate::slot)) is dropped.
 
 use std::net::SocketAddr;
@@ -22,8 +24,8 @@ use tokio::net::UdpSocket;
 
 use crate::config;
 use crate::driver::{
-    Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
-    TransmitOutcome, TransmitResult,
+    Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
+    EventSink, TransmitOutcome, TransmitResult,
 };
 use crate::link::datagram::DatagramLink;
 use crate::link::trace::Tracer;
@@ -85,6 +87,8 @@ impl UdpDriver {
             max_frame_size,
             ack_ids,
             last_acked_data: None,
+            deferred_ack: config.deferred_ack(),
+            awaiting_ack: std::collections::VecDeque::new(),
         };
         Ok(Driver::spawn("udp", move |ctx| run(state, socket, ctx)))
     }
@@ -99,7 +103,16 @@ struct UdpState {
     /// an ack from a peer that does not echo `unique_id` (e.g. Goby's UDP
     /// driver) is taken to answer it when it comes from that destination.
     last_acked_data: Option<(i32, u32)>,
+    /// Acks are sent when the layer above asks, not on reception.
+    deferred_ack: bool,
+    /// With `deferred_ack`: the endpoints recent data to acknowledge came
+    /// from, by source and `unique_id` (newest last, at most
+    /// [`AWAITING_ACK_LIMIT`]).
+    awaiting_ack: std::collections::VecDeque<((i32, Option<u32>), SocketAddr)>,
 }
+
+/// Received transmissions whose endpoint is remembered for a deferred ack.
+const AWAITING_ACK_LIMIT: usize = 64;
 
 impl UdpState {
     fn destinations(&self, dest: i32) -> Vec<SocketAddr> {
@@ -119,6 +132,11 @@ async fn run(mut state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {
         tokio::select! {
             command = ctx.commands.recv() => match command {
                 Some(DriverCommand::Initiate(mt)) => transmit(&mut state, &mut link, &events, mt).await,
+                Some(DriverCommand::Acknowledge(ack)) => {
+                    if state.deferred_ack {
+                        acknowledge(&mut state, &mut link, &events, &ack).await;
+                    }
+                }
                 Some(DriverCommand::Specific(m)) => events.status(DriverStatus::Unsupported {
                     message: m.descriptor().full_name().to_string(),
                 }),
@@ -129,7 +147,7 @@ async fn run(mut state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {
                 None => return,
             },
             received = link.recv() => match received {
-                Ok((bytes, from)) => receive(&state, &mut link, &events, &bytes, from).await,
+                Ok((bytes, from)) => receive(&mut state, &mut link, &events, &bytes, from).await,
                 Err(e) => {
                     // A UDP socket reports e.g. ICMP port unreachable here: go on.
                     events.status(DriverStatus::LinkError {
@@ -210,7 +228,7 @@ async fn transmit(
 }
 
 async fn receive(
-    state: &UdpState,
+    state: &mut UdpState,
     link: &mut Tracer<DatagramLink>,
     events: &EventSink,
     bytes: &[u8],
@@ -226,23 +244,18 @@ async fn receive(
             return;
         }
     };
-    let wants_ack = mt.r#type() == TransmissionType::Data
-        && mt.ack_requested()
-        && state.ack_ids.contains(&mt.dest())
-        && !mt.frame.is_empty();
-    let ack = wants_ack.then(|| ModemTransmission {
-        src: Some(mt.dest()),
-        dest: Some(mt.src()),
-        time: Some(now_micros()),
-        rate: mt.rate,
-        r#type: Some(TransmissionType::Ack as i32),
-        acked_frame: (0..mt.frame.len())
-            .map(|i| mt.frame_start() as i32 + i as i32)
-            .collect(),
-        // The ack names the transmission it answers.
-        unique_id: mt.unique_id,
-        ..Default::default()
-    });
+    let wants_ack = Acknowledgement::wanted(&mt, &state.ack_ids);
+    let mut ack = None;
+    if wants_ack && state.deferred_ack {
+        state
+            .awaiting_ack
+            .push_back(((mt.src(), mt.unique_id), from));
+        if state.awaiting_ack.len() > AWAITING_ACK_LIMIT {
+            state.awaiting_ack.pop_front();
+        }
+    } else if wants_ack {
+        ack = Acknowledgement::all(mt.clone()).transmission();
+    }
     if mt.r#type() == TransmissionType::Ack && mt.unique_id.is_none() {
         if let Some((dest, id)) = state.last_acked_data {
             if mt.src() == dest && mt.dest() == state.modem_id {
@@ -252,11 +265,44 @@ async fn receive(
     }
     events.emit(DriverEvent::Received(mt));
     if let Some(ack) = ack {
-        // Reply to the endpoint the data came from.
-        if let Err(e) = link.send(&ack.encode_to_vec(), &from).await {
-            events.status(DriverStatus::LinkError {
-                reason: format!("cannot send the acknowledgement to {from}: {e}"),
-            });
-        }
+        send_ack(link, events, ack, from).await;
+    }
+}
+
+/// Sends a deferred ack to the endpoint its data came from (or, when that
+/// is forgotten, to the source's remote endpoints).
+async fn acknowledge(
+    state: &mut UdpState,
+    link: &mut Tracer<DatagramLink>,
+    events: &EventSink,
+    ack: &Acknowledgement,
+) {
+    if !Acknowledgement::wanted(&ack.received, &state.ack_ids) {
+        return;
+    }
+    let Some(transmission) = ack.transmission() else {
+        return;
+    };
+    let key = (ack.received.src(), ack.received.unique_id);
+    let to = match state.awaiting_ack.iter().rposition(|(k, _)| *k == key) {
+        Some(i) => vec![state.awaiting_ack[i].1],
+        None => state.destinations(ack.received.src()),
+    };
+    for addr in to {
+        send_ack(link, events, transmission.clone(), addr).await;
+    }
+}
+
+async fn send_ack(
+    link: &mut Tracer<DatagramLink>,
+    events: &EventSink,
+    mut ack: ModemTransmission,
+    to: SocketAddr,
+) {
+    ack.time = Some(now_micros());
+    if let Err(e) = link.send(&ack.encode_to_vec(), &to).await {
+        events.status(DriverStatus::LinkError {
+            reason: format!("cannot send the acknowledgement to {to}: {e}"),
+        });
     }
 }

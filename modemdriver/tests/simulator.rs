@@ -335,3 +335,41 @@ async fn nodes_join_over_udp_with_wall_clock_delays() {
     assert!((1.23..2.0).contains(&back), "{back}");
     pump_b.abort();
 }
+
+#[tokio::test(start_paused = true)]
+async fn with_deferred_ack_the_receiver_acks_only_when_asked() {
+    let nodes = [(1, 0.0), (2, 1500.0)];
+    let medium = Medium::new();
+    let mut a = SimulatorDriver::start_on(&config(1, &nodes, 0.0, 1), medium.clone()).unwrap();
+    let mut cfg = config(2, &nodes, 0.0, 1);
+    cfg.deferred_ack = Some(true);
+    let mut b = SimulatorDriver::start_on(&cfg, medium).unwrap();
+
+    // Rate 2: three frames.
+    let mut out = data(2, 2, true);
+    out.unique_id = Some(12);
+    a.initiate_transmission(out).unwrap();
+    let frames = vec![b"f0".to_vec(), b"f1".to_vec(), b"f2".to_vec()];
+    let pump_a = tokio::spawn(async move {
+        let acks = collect_received(&mut a, &frames, Duration::from_secs(60)).await;
+        (a, acks)
+    });
+    let got = received(&mut b, Duration::from_secs(60)).await;
+    assert_eq!(got.frame.len(), 3);
+    // Not asked: no ack for 20 s.
+    tokio::time::sleep(Duration::from_secs(20)).await;
+    // Asked for frames 0 and 1.
+    b.acknowledge(modemdriver::Acknowledgement {
+        received: got,
+        frames: vec![0, 1],
+    })
+    .unwrap();
+    let pump_b =
+        tokio::spawn(async move { collect_received(&mut b, &[], Duration::from_secs(30)).await });
+    let (_a, acks) = pump_a.await.unwrap();
+    pump_b.await.unwrap();
+    assert_eq!(acks.len(), 1, "{acks:?}");
+    assert_eq!(acks[0].r#type(), TransmissionType::Ack);
+    assert_eq!(acks[0].acked_frame, vec![0, 1]);
+    assert_eq!(acks[0].unique_id, Some(12));
+}

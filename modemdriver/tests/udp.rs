@@ -315,3 +315,80 @@ async fn acks_name_the_transmission_they_answer() {
     assert_eq!((ack.src(), ack.unique_id), (5, Some(9)));
     a.stop().await.unwrap();
 }
+
+#[tokio::test]
+async fn with_deferred_ack_only_the_frames_named_are_acknowledged_when_asked() {
+    // A bare socket sends data asking for acks to a driver that defers them.
+    let ((sa, aa), (peer, pa)) = (bind().await, bind().await);
+    let mut cfg = config(1, aa, &[(5, pa)]);
+    cfg.deferred_ack = Some(true);
+    let mut a = UdpDriver::start_on(&cfg, sa).unwrap();
+    let incoming = ModemTransmission {
+        src: Some(5),
+        dest: Some(1),
+        r#type: Some(TransmissionType::Data as i32),
+        ack_requested: Some(true),
+        frame_start: Some(3),
+        frame: vec![b"x".to_vec(), b"y".to_vec(), b"z".to_vec()],
+        unique_id: Some(44),
+        ..Default::default()
+    };
+    peer.send_to(&incoming.encode_to_vec(), aa).await.unwrap();
+    let got = received(&mut a, LIMIT).await;
+    assert_eq!(got, incoming);
+    // Nothing comes back on reception.
+    let mut buf = vec![0u8; 2048];
+    let early = tokio::time::timeout(Duration::from_millis(300), peer.recv_from(&mut buf)).await;
+    assert!(early.is_err(), "acknowledged before being asked");
+
+    // Asked for frames 0 and 2 (indices): frame numbers 3 and 5.
+    a.acknowledge(modemdriver::Acknowledgement {
+        received: got,
+        frames: vec![2, 0],
+    })
+    .unwrap();
+    let (n, from) = tokio::time::timeout(LIMIT, peer.recv_from(&mut buf))
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(from, aa);
+    let ack = ModemTransmission::decode(&buf[..n]).unwrap();
+    assert_eq!(ack.r#type(), TransmissionType::Ack);
+    assert_eq!((ack.src(), ack.dest(), ack.unique_id), (1, 5, Some(44)));
+    assert_eq!(ack.acked_frame, vec![3, 5]);
+
+    // Data not asking for an ack is never acknowledged, even when asked.
+    let mut quiet = incoming.clone();
+    quiet.ack_requested = Some(false);
+    a.acknowledge(modemdriver::Acknowledgement::all(quiet))
+        .unwrap();
+    let none = tokio::time::timeout(Duration::from_millis(300), peer.recv_from(&mut buf)).await;
+    assert!(none.is_err(), "acknowledged data that asked for no ack");
+}
+
+#[tokio::test]
+async fn without_deferred_ack_an_acknowledge_command_sends_nothing_more() {
+    let ((sa, aa), (peer, pa)) = (bind().await, bind().await);
+    let mut a = UdpDriver::start_on(&config(1, aa, &[(5, pa)]), sa).unwrap();
+    let incoming = ModemTransmission {
+        src: Some(5),
+        dest: Some(1),
+        r#type: Some(TransmissionType::Data as i32),
+        ack_requested: Some(true),
+        frame: vec![b"x".to_vec()],
+        ..Default::default()
+    };
+    peer.send_to(&incoming.encode_to_vec(), aa).await.unwrap();
+    let got = received(&mut a, LIMIT).await;
+    let mut buf = vec![0u8; 2048];
+    // The ack on reception...
+    tokio::time::timeout(LIMIT, peer.recv_from(&mut buf))
+        .await
+        .unwrap()
+        .unwrap();
+    // ... and no second one when asked.
+    a.acknowledge(modemdriver::Acknowledgement::all(got))
+        .unwrap();
+    let again = tokio::time::timeout(Duration::from_millis(300), peer.recv_from(&mut buf)).await;
+    assert!(again.is_err(), "a second ack");
+}

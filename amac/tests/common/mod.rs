@@ -60,7 +60,7 @@ pub fn slots(events: &[MacEvent]) -> Vec<&amac::SlotEvent> {
     events
         .iter()
         .filter_map(|e| match e {
-            MacEvent::Slot(s) => Some(s),
+            MacEvent::Slot(s) => Some(&**s),
             _ => None,
         })
         .collect()

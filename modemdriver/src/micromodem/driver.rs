@@ -1768,6 +1768,8 @@ impl Mm {
                         .status(DriverStatus::Unsupported { message: name }),
                 }
             }
+            // The modem acknowledges in hardware, on reception.
+            DriverCommand::Acknowledge(_) => {}
             DriverCommand::Stop(done) => return Some(done),
         }
         None

@@ -15,7 +15,9 @@
 //! - Collisions: receptions that overlap in time at a receiver are all lost.
 //!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
-//! node with an `ACK` packet, itself subject to the channel.
+//! node with an `ACK` packet, itself subject to the channel: on reception,
+//! or with `DriverConfig.deferred_ack` only when the layer above asks
+//! ([`DriverCommand::Acknowledge`]), for the frames it names.
 //!
 //! Nodes in several processes: with `udp_local` and `udp_peer` set, each
 //! packet also goes to the peers over UDP ([`udp_medium`]), with its
@@ -40,8 +42,8 @@ use tokio::time::Instant;
 
 use crate::config;
 use crate::driver::{
-    Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
-    RawDirection, RawMessage, TransmitOutcome, TransmitResult,
+    Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
+    EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
 use crate::rate;
 use crate::time::now_micros;
@@ -136,8 +138,9 @@ impl SimulatorDriver {
             )));
         }
         let airborne = medium.join(modem_id);
+        let deferred_ack = config.deferred_ack();
         Ok(Driver::spawn("simulator", move |ctx| {
-            run(modem_id, sim, medium, udp, airborne, ctx)
+            run(modem_id, sim, deferred_ack, medium, udp, airborne, ctx)
         }))
     }
 }
@@ -150,6 +153,8 @@ fn sim_config(config: &DriverConfig) -> Result<&SimulatorDriverConfig, DriverErr
 
 struct Node {
     modem_id: i32,
+    /// Acks are sent when the layer above asks, not on reception.
+    deferred_ack: bool,
     sim: SimulatorDriverConfig,
     medium: Arc<Medium>,
     udp: Option<UdpMedium>,
@@ -260,6 +265,16 @@ impl Node {
         ));
     }
 
+    /// A deferred ack asked for by the layer above: queued first.
+    fn acknowledge(&mut self, ack: &Acknowledgement) {
+        if !self.deferred_ack || !Acknowledgement::wanted(&ack.received, &[self.modem_id]) {
+            return;
+        }
+        if let Some(ack) = ack.transmission() {
+            self.queue.push_front(ack);
+        }
+    }
+
     fn hear(&mut self, packet: &Airborne) {
         let Some(me) = self.position_of(self.modem_id) else {
             return;
@@ -284,22 +299,9 @@ impl Node {
 
     fn deliver_due(&mut self, now: Instant, events: &EventSink) {
         for mt in self.receiver.complete(now) {
-            let ack = (mt.r#type() == TransmissionType::Data
-                && mt.ack_requested()
-                && mt.dest() == self.modem_id
-                && !mt.frame.is_empty())
-            .then(|| ModemTransmission {
-                src: Some(self.modem_id),
-                dest: Some(mt.src()),
-                rate: mt.rate,
-                r#type: Some(TransmissionType::Ack as i32),
-                acked_frame: (0..mt.frame.len())
-                    .map(|i| mt.frame_start() as i32 + i as i32)
-                    .collect(),
-                // The ack names the transmission it answers.
-                unique_id: mt.unique_id,
-                ..Default::default()
-            });
+            let ack = (!self.deferred_ack && Acknowledgement::wanted(&mt, &[self.modem_id]))
+                .then(|| Acknowledgement::all(mt.clone()).transmission())
+                .flatten();
             events.emit(DriverEvent::Raw(raw(RawDirection::Incoming, &mt)));
             events.emit(DriverEvent::Received(mt));
             if let Some(ack) = ack {
@@ -335,6 +337,7 @@ fn raw(direction: RawDirection, mt: &ModemTransmission) -> RawMessage {
 async fn run(
     modem_id: i32,
     sim: SimulatorDriverConfig,
+    deferred_ack: bool,
     medium: Arc<Medium>,
     udp: Option<UdpMedium>,
     mut airborne: mpsc::UnboundedReceiver<Arc<Airborne>>,
@@ -344,6 +347,7 @@ async fn run(
     let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
     let mut node = Node {
         modem_id,
+        deferred_ack,
         sim,
         medium: medium.clone(),
         udp,
@@ -366,6 +370,7 @@ async fn run(
         tokio::select! {
             command = ctx.commands.recv() => match command {
                 Some(DriverCommand::Initiate(mt)) => node.queue.push_back(mt),
+                Some(DriverCommand::Acknowledge(ack)) => node.acknowledge(&ack),
                 Some(DriverCommand::Specific(m)) => events.status(DriverStatus::Unsupported {
                     message: m.descriptor().full_name().to_string(),
                 }),

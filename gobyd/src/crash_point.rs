@@ -1,0 +1,113 @@
+//! Crash points for restart tests: moments of the receive path where the
+//! daemon can be made to die on purpose, as a `kill -9` landing exactly
+//! there would.
+//!
+//! Set `GOBYD_CRASH_POINT=NAME:N` in the daemon's environment and it aborts
+//! (no clean-up, no flushing) the `N`-th time it reaches point `NAME`
+//! (`N` defaults to 1). Unset, a point costs one relaxed atomic load.
+//! Points, in the order a received transmission meets them:
+//!
+//! - `received`: a data transmission from the driver, nothing of it
+//!   recorded, handed over or acknowledged (by `gobyd`: a driver acking on
+//!   reception has acked already);
+//! - `recorded`: its messages are in the inbox, synced; none is handed
+//!   over, nothing acknowledged;
+//! - `handed-over`: they are handed over and marked so; nothing
+//!   acknowledged.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
+
+/// Name of the environment variable that arms a crash point.
+pub const ENV: &str = "GOBYD_CRASH_POINT";
+
+/// A moment of the receive path.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CrashPoint {
+    /// A data transmission received, nothing recorded, nothing acked.
+    Received,
+    /// Messages recorded in the inbox (synced), not handed over, not acked.
+    Recorded,
+    /// Messages handed over and marked, not acked.
+    HandedOver,
+}
+
+impl CrashPoint {
+    /// The point's name in [`ENV`].
+    pub fn name(self) -> &'static str {
+        match self {
+            CrashPoint::Received => "received",
+            CrashPoint::Recorded => "recorded",
+            CrashPoint::HandedOver => "handed-over",
+        }
+    }
+
+    /// Called when the point is reached: aborts the process when this is
+    /// the armed point's `N`-th time.
+    pub fn reached(self) {
+        let Some((point, n)) = armed() else {
+            return;
+        };
+        if *point != self {
+            return;
+        }
+        static COUNT: AtomicU64 = AtomicU64::new(0);
+        if COUNT.fetch_add(1, Ordering::Relaxed) + 1 == *n {
+            eprintln!("{ENV}: aborting at {} (time {n})", self.name());
+            std::process::abort();
+        }
+    }
+}
+
+/// Parses `NAME[:N]`.
+pub fn parse(text: &str) -> Result<(CrashPoint, u64), String> {
+    let (name, n) = match text.split_once(':') {
+        Some((name, n)) => (
+            name,
+            n.parse::<u64>()
+                .ok()
+                .filter(|&n| n > 0)
+                .ok_or_else(|| format!("{ENV}: {n:?} is not a positive count"))?,
+        ),
+        None => (text, 1),
+    };
+    let point = [
+        CrashPoint::Received,
+        CrashPoint::Recorded,
+        CrashPoint::HandedOver,
+    ]
+    .into_iter()
+    .find(|p| p.name() == name)
+    .ok_or_else(|| {
+        format!("{ENV}: no crash point named {name:?} (received, recorded, handed-over)")
+    })?;
+    Ok((point, n))
+}
+
+fn armed() -> &'static Option<(CrashPoint, u64)> {
+    static ARMED: OnceLock<Option<(CrashPoint, u64)>> = OnceLock::new();
+    ARMED.get_or_init(|| {
+        let text = std::env::var(ENV).ok()?;
+        match parse(&text) {
+            Ok(armed) => Some(armed),
+            Err(e) => {
+                eprintln!("{e}; ignored");
+                None
+            }
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_and_counts_parse() {
+        assert_eq!(parse("recorded"), Ok((CrashPoint::Recorded, 1)));
+        assert_eq!(parse("received:2"), Ok((CrashPoint::Received, 2)));
+        assert_eq!(parse("handed-over:7"), Ok((CrashPoint::HandedOver, 7)));
+        assert!(parse("recorded:0").unwrap_err().contains("positive"));
+        assert!(parse("nowhere").unwrap_err().contains("no crash point"));
+    }
+}

@@ -1,0 +1,135 @@
+//! What a receiving `gobyd` acknowledges, over the UDP driver (which it
+//! starts with `deferred_ack`): a bare UDP socket plays the sending modem
+//! and sends a transmission holding a good frame and one that does not
+//! decode, then the same again. The ack names the good frame only, and
+//! only after the message reached the daemon's inbox; the repeat is
+//! acknowledged as well but not handed over a second time.
+
+mod support;
+
+use std::time::Duration;
+
+use gobyd::json_server::DaemonEvent;
+use gobyd::runtime::Daemon;
+use modemdriver::ModemTransmission;
+use prost::Message;
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
+use protos::goby::example::Command;
+use queue::QueueEvent;
+use support::daemon::{free_udp_port, scratch};
+use tokio::net::UdpSocket;
+
+const LIMIT: Duration = Duration::from_secs(20);
+
+fn config(port: u16, peer: u16, data_dir: &std::path::Path) -> String {
+    format!(
+        r#"
+modem_id: 1
+driver {{
+  driver_type: DRIVER_UDP
+  udp {{
+    local {{ port: {port} }}
+    remote {{ modem_id: 2 ip: "127.0.0.1" port: {peer} }}
+  }}
+}}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: 1 }}
+  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: 1 }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 600
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "" }}
+data_dir: "{}"
+log {{ raw_log: true }}
+"#,
+        data_dir.display()
+    )
+}
+
+/// The next ACK datagram on `socket`.
+async fn next_ack(socket: &UdpSocket) -> ModemTransmission {
+    let mut buf = vec![0u8; 4096];
+    tokio::time::timeout(LIMIT, async {
+        loop {
+            let (n, _) = socket.recv_from(&mut buf).await.unwrap();
+            let mt = ModemTransmission::decode(&buf[..n]).unwrap();
+            if mt.r#type() == TransmissionType::Ack {
+                return mt;
+            }
+        }
+    })
+    .await
+    .expect("an ack")
+}
+
+#[tokio::test]
+async fn only_frames_recorded_or_repeated_are_acknowledged() {
+    let dir = scratch("acknowledge", "frames");
+    let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let port = free_udp_port();
+    let text = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
+    let daemon = Daemon::start(gobyd::config::parse(&text, "test").unwrap())
+        .await
+        .expect("gobyd starts");
+    let inbox = daemon.data_dir().join("inbox.log");
+    let mut events = daemon.subscribe();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let run = tokio::spawn(daemon.run(async move {
+        let _ = stopped.await;
+    }));
+
+    let mut codec = dccl::Codec::new();
+    codec.load(&Command::default().descriptor()).unwrap();
+    let command = Command {
+        destination: 1,
+        action: 1,
+        note: Some("once".into()),
+        ..Default::default()
+    };
+    let good = codec.encode(&command.transcode_to_dynamic()).unwrap();
+    let data = ModemTransmission {
+        src: Some(2),
+        dest: Some(1),
+        r#type: Some(TransmissionType::Data as i32),
+        ack_requested: Some(true),
+        unique_id: Some(77),
+        frame_start: Some(4),
+        // Frame 5: a DCCL id nobody knows.
+        frame: vec![good, vec![0x7f, 0xff, 0xff, 0x01]],
+        ..Default::default()
+    };
+    let to = format!("127.0.0.1:{port}");
+    peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
+    let ack = next_ack(&peer).await;
+    // The message is in the inbox by the time the ack leaves.
+    let recorded = std::fs::metadata(&inbox).unwrap().len();
+    assert!(recorded > 8, "inbox holds {recorded} bytes");
+    assert_eq!((ack.src(), ack.dest(), ack.unique_id), (1, 2, Some(77)));
+    assert_eq!(ack.acked_frame, vec![4], "only the frame that decoded");
+
+    // The same transmission again (the sender missed the ack): a repeat,
+    // acknowledged again, not handed over again.
+    peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
+    let again = next_ack(&peer).await;
+    assert_eq!(again.acked_frame, vec![4]);
+
+    let _ = stop.send(());
+    run.await.unwrap().unwrap();
+    let mut handed = 0;
+    while let Ok(e) = events.try_recv() {
+        if let DaemonEvent::Queue(QueueEvent::Received(r)) = &e.event {
+            assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
+            handed += 1;
+        }
+    }
+    assert_eq!(handed, 1, "handed over once");
+    let _ = std::fs::remove_dir_all(&dir);
+}

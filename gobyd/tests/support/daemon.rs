@@ -1,0 +1,129 @@
+//! Scratch directories, free loopback ports and a `gobyd` process with a
+//! JSON client, for the tests that run the daemon as a program.
+
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::{TcpStream, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// Upper bound of a wait for the daemon (start, reply).
+pub const PATIENCE: Duration = Duration::from_secs(20);
+
+/// An empty directory `gobyd-TEST-PID-NAME` under the system's temporary
+/// directory.
+pub fn scratch(test: &str, name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gobyd-{test}-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A UDP port free on 127.0.0.1 a moment ago.
+pub fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A running `gobyd` (killed when dropped) and a JSON client connected to it.
+pub struct Gobyd {
+    child: Child,
+    client: TcpStream,
+    lines: mpsc::Receiver<Value>,
+}
+
+impl Gobyd {
+    /// Starts `gobyd --config CONFIG` with extra environment variables; the
+    /// configuration must open the JSON interface over TCP. Waits for the
+    /// daemon to name its JSON address and connects to it.
+    pub fn start(config: &Path, env: &[(&str, &str)]) -> Gobyd {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_gobyd"));
+        command
+            .arg("--config")
+            .arg(config)
+            .env_remove("RUST_BACKTRACE")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        for (k, v) in env {
+            command.env(k, v);
+        }
+        let mut child = command.spawn().expect("gobyd starts");
+        let stderr = child.stderr.take().unwrap();
+        let (log_tx, log) = mpsc::channel::<String>();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = log_tx.send(line);
+            }
+        });
+        let addr = loop {
+            let line = log
+                .recv_timeout(PATIENCE)
+                .expect("gobyd names its JSON address");
+            if let Some(a) = line.split("JSON interface on tcp://").nth(1) {
+                break a.trim().to_string();
+            }
+        };
+        // Keep draining the log so that the daemon never blocks on it.
+        std::thread::spawn(move || while log.recv().is_ok() {});
+        let client = TcpStream::connect(&addr).expect("connect to the JSON interface");
+        let reader = BufReader::new(client.try_clone().unwrap());
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in reader.lines().map_while(Result::ok) {
+                if let Ok(v) = serde_json::from_str::<Value>(&line) {
+                    if tx.send(v).is_err() {
+                        break;
+                    }
+                }
+            }
+        });
+        Gobyd {
+            child,
+            client,
+            lines,
+        }
+    }
+
+    /// Sends a JSON request line and waits for its reply (a line holding
+    /// `accepted` or `error`); `None` when none comes (the daemon died).
+    pub fn request(&mut self, line: &str) -> Option<Value> {
+        self.client.write_all(format!("{line}\n").as_bytes()).ok()?;
+        let deadline = Instant::now() + PATIENCE;
+        while let Ok(v) = self
+            .lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            if v.get("accepted").is_some() || v.get("error").is_some() {
+                return Some(v);
+            }
+        }
+        None
+    }
+
+    /// Whether the process has ended (e.g. at an armed crash point).
+    pub fn has_exited(&mut self) -> bool {
+        !matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// SIGKILL, and wait for the end.
+    pub fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Gobyd {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
