@@ -762,3 +762,91 @@ async fn micromodem2_traffic_both_ways_at_rates_0_and_1_arrives_once_with_statis
     e1.stop().await;
     e2.stop().await;
 }
+
+#[tokio::test]
+async fn micromodem2_flexible_data_packet_arrives_with_statistics() {
+    let (mut d1, mut d2, e1, e2, _dir) = bench_mm2("mm2-fdp").await;
+    let frame = b"a flexible data packet between two Micro-Modem 2s".to_vec();
+    d1.initiate_specific(&MicroModemSpecific {
+        r#type: MicroModemTransmissionType::MicromodemFlexibleData as i32,
+        dest: Some(2),
+        rate: Some(1),
+        ..Default::default()
+    })
+    .unwrap();
+    let sent = wait_for(
+        &mut d1,
+        std::slice::from_ref(&frame),
+        Duration::from_secs(30),
+        |e| match e {
+            DriverEvent::TransmitResult(r) => Some(r.clone()),
+            _ => None,
+        },
+    )
+    .await;
+    assert_eq!(sent.outcome, TransmitOutcome::Sent, "{sent:?}");
+    assert!(!sent.transmission.transmit_stat.is_empty());
+    let got = data_received(&mut d2, Duration::from_millis(2500)).await;
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(got[0].frame, vec![frame]);
+    assert_eq!((got[0].src(), got[0].dest(), got[0].rate()), (1, 2, 1));
+    assert!(!got[0].receive_stat.is_empty());
+    d1.stop().await.unwrap();
+    d2.stop().await.unwrap();
+    e1.stop().await;
+    e2.stop().await;
+}
+
+#[tokio::test]
+async fn micromodem2_lbl_ping_reports_the_travel_times_the_modem_gives() {
+    use modemdriver::micromodem::emulator::{Geometry, Node, Transponder};
+    use modemdriver::sim::reception::Position;
+    let at = |x: f64| Position::new(x, 0.0, 0.0);
+    let mut g = Geometry::default();
+    g.nodes.insert(
+        1,
+        Node {
+            position: at(0.0),
+            velocity: [0.0; 3],
+        },
+    );
+    g.transponders = [750.0, 1000.0, 3000.0, 4000.0]
+        .map(|x| Transponder {
+            position: at(x),
+            frequency: None,
+        })
+        .to_vec();
+    let cfg = EmulatorConfig {
+        geometry: g,
+        ..EmulatorConfig::micromodem2(1)
+    };
+    let mut e = emulator::start(cfg, EmulatorPort::Pty { link: None }, None).unwrap();
+    let path = e.path().await.unwrap();
+    let mut d = MicroModemDriver::start(&mm_config(1, &path)).unwrap();
+    ready(&mut d).await;
+    // Listening for 1500 m: C and D are too far to be heard.
+    d.initiate_specific(&MicroModemSpecific {
+        r#type: MicroModemTransmissionType::MicromodemRemusLblRanging as i32,
+        remus_lbl: Some(protos::goby::acomms::protobuf::MicroModemRemusLblParams {
+            lbl_max_range: Some(1500),
+            ..Default::default()
+        }),
+        ..Default::default()
+    })
+    .unwrap();
+    let report = wait_for(&mut d, &[], LIMIT, |e| match e {
+        DriverEvent::Specific(s) => s.to::<MicroModemSpecific>(),
+        _ => None,
+    })
+    .await;
+    assert_eq!(
+        report.r#type(),
+        MicroModemTransmissionType::MicromodemRemusLblRanging
+    );
+    let times = report.ranging_reply.unwrap().one_way_travel_time;
+    assert_eq!(times.len(), 4, "{times:?}");
+    assert!(times[0] > 0.0 && times[1] > times[0], "{times:?}");
+    assert_eq!(&times[2..], [0.0, 0.0]);
+    d.stop().await.unwrap();
+    e.stop().await;
+}
