@@ -455,9 +455,9 @@ async fn long_baseline_travel_times_follow_the_geometry() {
             frequency: None,
         },
     ];
-    let round_trip =
-        |t: usize| 2.0 * g.transponders[t].position.distance(&at(100.0, 100.0)) / 1500.0;
-    let expected: Vec<String> = (0..4).map(|t| format!("{:.4}", round_trip(t))).collect();
+    // One-way travel times, as the modem reports them.
+    let one_way = |t: usize| g.transponders[t].position.distance(&at(100.0, 100.0)) / 1500.0;
+    let expected: Vec<String> = (0..4).map(|t| format!("{:.4}", one_way(t))).collect();
     let cfg = EmulatorConfig {
         geometry: g.clone(),
         ..config(1)

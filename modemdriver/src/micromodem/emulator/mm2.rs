@@ -22,9 +22,9 @@
 //!   timeout_ms,f_A,f_B,f_C,f_D,tx_flag` (narrowband transponders by reply
 //!   frequency, 0 unused) are echoed with talker `SN`; after the timeout
 //!   `$SNTTA,t_A,t_B,t_C,t_D,hhmmss.ss` gives each transponder's travel time,
-//!   empty for one that did not reply. The times are round trips, the
-//!   transponder's turn-around time taken out (Goby's narrowband diagram
-//!   shows times beyond a one-way reading of its maximum range).
+//!   empty for one that did not reply. The times are one-way: half the
+//!   round trip, the transponder's turn-around time taken out (as Goby's
+//!   driver and WHOI's `acomms` host library read them).
 
 use crate::micromodem::nmea::NmeaSentence;
 use crate::time::civil;

@@ -46,7 +46,7 @@
 //!   `$CATDP`; `$CARDP` at the receiver) at rates 1, 3 and 5;
 //! - answers REMUS (`$CCPDT`) and narrowband (`$CCPNT`) long-baseline
 //!   interrogations with `$SNPDT` / `$SNPNT` and, after the timeout,
-//!   `$SNTTA` with the two-way travel times to the transponders of
+//!   `$SNTTA` with the one-way travel times to the transponders of
 //!   [`EmulatorConfig::geometry`].
 //!
 //! # Between emulators

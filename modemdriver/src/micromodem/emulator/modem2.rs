@@ -400,8 +400,10 @@ impl Modem {
         );
     }
 
-    /// Two-way travel times (s) to transponders A-D that reply within the
-    /// timeout (travel plus their turn-around time, NVRAM `TAT`, ms).
+    /// One-way travel times (s) to transponders A-D whose replies arrive
+    /// within the timeout (the round trip plus their turn-around time,
+    /// NVRAM `TAT`, ms); reported as the modem does, half the round trip
+    /// with the turn-around taken out.
     fn travel_times(&self, request: &LblRequest) -> [Option<f64>; 4] {
         let g = &self.config.geometry;
         let me = self.id();
@@ -422,7 +424,8 @@ impl Modem {
             };
             *time = transponder
                 .and_then(|t| g.round_trip(me, t))
-                .filter(|t| t + turnaround <= timeout);
+                .filter(|t| t + turnaround <= timeout)
+                .map(|round_trip| round_trip / 2.0);
         }
         times
     }
