@@ -286,6 +286,39 @@ pub fn settings_problem(config: &GobydConfig) -> Option<String> {
             ));
         }
     }
+    let micromodem = matches!(
+        config.driver.as_ref().and_then(|d| d.driver.as_ref()),
+        Some(driver_config::Driver::DriverType(t)) if *t == DriverType::DriverWhoiMicromodem as i32
+    );
+    if micromodem {
+        // The driver drops a transmission that no longer fits what is left
+        // of its slot, judged by this estimate: a slot shorter than it
+        // never sends anything.
+        for slot in config.mac.iter().flat_map(|m| m.slot.iter()) {
+            let Some(spec) = modemdriver::rate::spec(slot.rate()) else {
+                continue;
+            };
+            let needed = spec
+                .packet_duration(modemdriver::micromodem::driver::PACKET_OVERHEAD)
+                .as_secs_f64();
+            if slot.slot_seconds() < needed {
+                return Some(format!(
+                    "mac slot {{ src: {} rate: {} slot_seconds: {} }}: a rate-{} packet needs about {needed:.1} s on the water \
+                     ({} frames of {} bytes at {} bit/s, plus {} s of probe and header), so the Micro-Modem driver would drop \
+                     every transmission in this slot as not fitting; make slot_seconds at least {}",
+                    slot.src(),
+                    slot.rate(),
+                    slot.slot_seconds(),
+                    slot.rate(),
+                    spec.frames,
+                    spec.frame_bytes,
+                    spec.bits_per_second,
+                    modemdriver::micromodem::driver::PACKET_OVERHEAD.as_secs_f64(),
+                    needed.ceil()
+                ));
+            }
+        }
+    }
     None
 }
 

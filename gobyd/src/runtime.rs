@@ -181,8 +181,21 @@ impl Daemon {
     /// Takes the data directory ([`DaemonError::DataDir`] when another
     /// daemon holds it), loads the DCCL types, replays the journal, starts
     /// the driver and opens the autonomy interfaces.
+    ///
+    /// Settings that parse but cannot work (see `gobyd --check`) are
+    /// logged as errors and the daemon starts all the same: at sea a node
+    /// that still receives is better than none.
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
+        for problem in [
+            config::mac_slot_problem(&config),
+            config::settings_problem(&config),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            tracing::error!("configuration: {problem} (gobyd --check refuses it)");
+        }
         let data_dir = DataDir::open(Path::new(config.data_dir()))?;
         let mut driver_config = config.driver.clone().expect("completed");
         // Acks (where software sends them) only once the inbox holds the

@@ -159,6 +159,11 @@ fn check_refuses_settings_that_cannot_work() {
             "rate: 9 }: not a Micro-Modem rate",
         ),
         (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" }\n\
+             mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 1 slot_seconds: 5 } }\n",
+            "a rate-1 packet needs about 7.1 s on the water (3 frames of 64 bytes at 250 bit/s, plus 1 s of probe and header)",
+        ),
+        (
             "modem_id: 1\njson { tcp_bind: \"127.0.0.1:99999\" }\n",
             "json.tcp_bind \"127.0.0.1:99999\" is not an address",
         ),
