@@ -107,7 +107,14 @@ fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
 /// Sets up logging to standard error: human-readable, or JSON objects.
 fn init_logging(config: &GobydConfig) {
     let log = config.log.clone().unwrap_or_default();
-    let filter = tracing_subscriber::EnvFilter::try_new(log.level())
+    let level = match crate::config::log_level_problem(log.level()) {
+        Some(problem) => {
+            eprintln!("gobyd: {problem}; logging at info");
+            "info"
+        }
+        None => log.level(),
+    };
+    let filter = tracing_subscriber::EnvFilter::try_new(level)
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)

@@ -249,12 +249,61 @@ pub fn mac_slot_problem(config: &GobydConfig) -> Option<String> {
     ))
 }
 
+/// Levels `log.level` may name.
+const LOG_LEVELS: [&str; 6] = ["trace", "debug", "info", "warn", "error", "off"];
+
+/// Why `level` (`log.level`: a level, or comma-separated directives such
+/// as `info,modemdriver=debug`) is not one, if it is not. A bare word that
+/// is not a level would be read by the log filter as a module name and
+/// silence every other line, so it is refused.
+pub fn log_level_problem(level: &str) -> Option<String> {
+    for directive in level.split(',').map(str::trim) {
+        let word = directive.rsplit_once('=').map_or(directive, |(_, l)| l);
+        if !LOG_LEVELS.iter().any(|l| l.eq_ignore_ascii_case(word)) {
+            return Some(format!(
+                "log.level {level:?}: {word:?} is not a level (one of {}, or TARGET=LEVEL, comma-separated)",
+                LOG_LEVELS.join(", ")
+            ));
+        }
+    }
+    None
+}
+
+/// A Micro-Modem `nvram_cfg` entry setting the modem's address (`SRC,N`)
+/// to another id than `modem_id`: it is sent after `SRC` from `modem_id`
+/// and would make the modem answer to another address than the one the
+/// MAC and the queues use.
+fn nvram_address_problem(config: &GobydConfig) -> Option<String> {
+    let mm = config.driver.as_ref()?.micromodem.as_ref()?;
+    let id = config.modem_id();
+    mm.nvram_cfg.iter().find_map(|entry| {
+        let (key, value) = entry.split_once(',')?;
+        let value = value.trim();
+        (key.trim().eq_ignore_ascii_case("SRC") && value.parse::<i32>().ok() != Some(id)).then(|| {
+            format!(
+                "driver.micromodem.nvram_cfg {entry:?} sets the modem's address to {value} but modem_id is {id}; \
+                 leave SRC out (it is set from modem_id)"
+            )
+        })
+    })
+}
+
 /// Settings that parse but cannot work, found before the daemon runs: a JSON
 /// interface address that is not `HOST:PORT`, and a MAC slot rate that the
 /// Micro-Modem (and the simulator, which models it) does not have. Expects a
 /// [`complete`]d configuration.
 pub fn settings_problem(config: &GobydConfig) -> Option<String> {
     use std::net::ToSocketAddrs;
+    if let Some(problem) = config
+        .log
+        .as_ref()
+        .and_then(|l| log_level_problem(l.level()))
+    {
+        return Some(problem);
+    }
+    if let Some(problem) = nvram_address_problem(config) {
+        return Some(problem);
+    }
     let json = config.json.clone().unwrap_or_default();
     for (name, bind) in [("tcp_bind", json.tcp_bind()), ("udp_bind", json.udp_bind())] {
         if bind.is_empty() {
@@ -494,6 +543,23 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_levels_and_directives() {
+        for ok in [
+            "info",
+            "WARN",
+            "off",
+            "info,modemdriver=debug",
+            "gobyd=trace, warn",
+        ] {
+            assert_eq!(log_level_problem(ok), None, "{ok}");
+        }
+        for bad in ["warning", "inf", "info,modemdriver=loud", ""] {
+            let problem = log_level_problem(bad).expect(bad);
+            assert!(problem.contains("is not a level"), "{problem}");
+        }
+    }
     use protos::goby::apps::protobuf::gobyd_config::DcclConfig;
 
     #[test]

@@ -164,6 +164,15 @@ fn check_refuses_settings_that_cannot_work() {
             "a rate-1 packet needs about 7.1 s on the water (3 frames of 64 bytes at 250 bit/s, plus 1 s of probe and header)",
         ),
         (
+            "modem_id: 1\nlog { level: \"warning\" }\n",
+            "log.level \"warning\": \"warning\" is not a level",
+        ),
+        (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
+             micromodem { nvram_cfg: \"SRC,5\" } }\n",
+            "nvram_cfg \"SRC,5\" sets the modem's address to 5 but modem_id is 1",
+        ),
+        (
             "modem_id: 1\njson { tcp_bind: \"127.0.0.1:99999\" }\n",
             "json.tcp_bind \"127.0.0.1:99999\" is not an address",
         ),

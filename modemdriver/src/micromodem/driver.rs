@@ -86,7 +86,7 @@ use protos::goby::acomms::protobuf::{
     MicroModemReceiveStatistics, MicroModemSpecific, MicroModemTransmissionType,
     MicroModemTransmitStatistics, ModemTransmission,
 };
-use tokio::time::{sleep_until, Instant};
+use tokio::time::Instant;
 
 use super::clock;
 use super::firmware::{self, Generation};
@@ -104,7 +104,7 @@ use crate::link::serial::{self, SerialLineLink};
 use crate::link::trace::Tracer;
 use crate::link::Link;
 use crate::rate;
-use crate::time::now_micros;
+use crate::time::{now_micros, sleep_until_opt};
 
 /// How long the driver waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
@@ -600,11 +600,18 @@ impl Mm {
                     return;
                 };
                 if let Job::Data(mt) = &job {
-                    if crate::slot::too_late(mt, packet_estimate(mt)) {
-                        self.events.status(DriverStatus::Skipped {
-                            reason: "the slot of a transmission waiting for the modem has passed"
-                                .into(),
-                        });
+                    let estimate = packet_estimate(mt);
+                    if crate::slot::too_late(mt, estimate) {
+                        let reason = match mt.slot_seconds {
+                            Some(slot) if slot < estimate.as_secs_f64() => format!(
+                                "the slot ({slot} s) is shorter than a rate-{} packet (about {:.1} s on the water): \
+                                 nothing can be sent in it; lengthen slot_seconds or lower the rate",
+                                mt.rate(),
+                                estimate.as_secs_f64()
+                            ),
+                            _ => "the slot of a transmission waiting for the modem has passed".into(),
+                        };
+                        self.events.status(DriverStatus::Skipped { reason });
                         continue;
                     }
                 }
@@ -1827,13 +1834,6 @@ impl Mm {
 async fn recv_opt(link: &mut Option<MmLink>) -> std::io::Result<Vec<u8>> {
     match link {
         Some(link) => link.recv().await.map(|(line, ())| line),
-        None => std::future::pending().await,
-    }
-}
-
-async fn sleep_until_opt(at: Option<Instant>) {
-    match at {
-        Some(at) => sleep_until(at).await,
         None => std::future::pending().await,
     }
 }

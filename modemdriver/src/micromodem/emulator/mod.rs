@@ -81,12 +81,13 @@ use std::time::Duration;
 
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
-use tokio::time::{sleep_until, Instant};
+use tokio::time::Instant;
 
 use crate::driver::{Driver, DriverEvent};
 use crate::link::line::LineLink;
 use crate::link::serial::{self, PtyPair};
 use crate::link::Link;
+use crate::time::sleep_until_opt;
 pub use geometry::{Geometry, Node, Transponder};
 use modem::Modem;
 pub use stats::StatsLayout;
@@ -398,13 +399,6 @@ impl Device {
 async fn next_backend_event(backend: &mut Option<Driver>) -> Option<DriverEvent> {
     match backend {
         Some(driver) => driver.next_event().await,
-        None => std::future::pending().await,
-    }
-}
-
-async fn sleep_until_opt(at: Option<Instant>) {
-    match at {
-        Some(at) => sleep_until(at).await,
         None => std::future::pending().await,
     }
 }
