@@ -14,6 +14,15 @@ pub enum Control {
         /// How many messages were flushed, or why none could be.
         reply: oneshot::Sender<Result<usize, String>>,
     },
+    /// A driver-specific request (e.g. `goby.acomms.protobuf.MicroModemSpecific`
+    /// for a ping or a long-baseline interrogation): handed to the driver;
+    /// its result comes later as a driver-specific report.
+    DriverSpecific {
+        /// The request.
+        message: prost_reflect::DynamicMessage,
+        /// Handed to the driver, or why not.
+        reply: oneshot::Sender<Result<(), String>>,
+    },
     /// Stop the modem driver and start it again from the configuration.
     ResetDriver {
         /// Done, or why the driver could not start again.

@@ -103,6 +103,10 @@ pub enum Request {
     Publish(DynamicMessage),
     /// Also send these events.
     Subscribe(Vec<Topic>),
+    /// A driver-specific request (e.g. a Micro-Modem two-way ping or
+    /// long-baseline interrogation), for the driver to carry out; its
+    /// result comes as a `driver_specific` event on topic `modem`.
+    DriverSpecific(DynamicMessage),
 }
 
 /// Parses one request line; messages may be of any type loaded in
@@ -125,6 +129,19 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
         let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
         return Ok(Request::Publish(message));
     }
+    if let Some(name) = object.get("driver_specific") {
+        let name = name
+            .as_str()
+            .ok_or("\"driver_specific\" must be a message type name (e.g. goby.acomms.protobuf.MicroModemSpecific)")?;
+        let desc = protos::DESCRIPTOR_POOL
+            .get_message_by_name(name)
+            .ok_or_else(|| format!("unknown driver request type {name} (e.g. goby.acomms.protobuf.MicroModemSpecific)"))?;
+        let msg = object
+            .get("msg")
+            .ok_or_else(|| format!("{name}: \"msg\" is missing"))?;
+        let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
+        return Ok(Request::DriverSpecific(message));
+    }
     if let Some(topics) = object.get("subscribe") {
         let topics = topics
             .as_array()
@@ -142,7 +159,7 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
             .collect::<Result<Vec<_>, _>>()
             .map(Request::Subscribe);
     }
-    Err("expected \"publish\" or \"subscribe\"".into())
+    Err("expected \"publish\", \"subscribe\" or \"driver_specific\"".into())
 }
 
 /// A message as proto3 JSON with the `.proto` field names.
@@ -325,7 +342,19 @@ mod tests {
                 "goby.example.Command: ",
             ),
             (r#"{"subscribe": ["ack", "weather"]}"#, "unknown topic"),
-            (r#"{"hello": 1}"#, "expected \"publish\" or \"subscribe\""),
+            (
+                r#"{"hello": 1}"#,
+                "expected \"publish\", \"subscribe\" or \"driver_specific\"",
+            ),
+            (r#"{"driver_specific": 1}"#, "must be a message type name"),
+            (
+                r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific"}"#,
+                "\"msg\" is missing",
+            ),
+            (
+                r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "NO_SUCH"}}"#,
+                "goby.acomms.protobuf.MicroModemSpecific: ",
+            ),
         ] {
             let err = parse_request(line, &pool()).unwrap_err();
             assert!(err.contains(expected), "{line}: {err}");

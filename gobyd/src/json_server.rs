@@ -22,7 +22,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use dccl::Codec;
-use prost_reflect::DynamicMessage;
+use prost_reflect::{DynamicMessage, ReflectMessage};
 use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot};
@@ -196,6 +196,8 @@ pub struct JsonInterface {
     pub codec: Arc<Codec>,
     /// Where publish requests go.
     pub publish: mpsc::Sender<Publish>,
+    /// Where driver-specific requests go.
+    pub control: mpsc::Sender<crate::control::Control>,
     /// Where event lines come from.
     pub events: broadcast::Sender<EventLine>,
 }
@@ -218,6 +220,24 @@ impl JsonInterface {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
                 Handled::Waiting(answer)
+            }
+            Ok(Request::DriverSpecific(message)) => {
+                let name = message.descriptor().full_name().to_string();
+                let (reply, outcome) = oneshot::channel();
+                let control = crate::control::Control::DriverSpecific { message, reply };
+                if self.control.send(control).await.is_err() {
+                    return Handled::Reply(error_line("the daemon is shutting down"));
+                }
+                let (line_tx, line_rx) = oneshot::channel();
+                tokio::spawn(async move {
+                    let line = match outcome.await {
+                        Ok(Ok(())) => serde_json::json!({ "driver_specific": name }).to_string(),
+                        Ok(Err(e)) => error_line(&e),
+                        Err(_) => error_line("the daemon is shutting down"),
+                    };
+                    let _ = line_tx.send(line);
+                });
+                Handled::Waiting(line_rx)
             }
         }
     }

@@ -12,7 +12,11 @@
 //!   "outcome": "sent"|"nothing_to_send"|"failed", "reason": TEXT}`: the
 //!   outcome of a transmission this node initiated;
 //! - `{"event": "driver_status", "driver_status": TEXT}`: a fault met by
-//!   the driver or a recovery from one.
+//!   the driver or a recovery from one;
+//! - `{"event": "driver_specific", "driver_specific": NAME, "msg": {...}}`:
+//!   a driver-specific result, e.g. a `goby.acomms.protobuf.MicroModemSpecific`
+//!   with the travel times of a ping or long-baseline interrogation
+//!   (`ranging_reply.one_way_travel_time`, seconds).
 //!
 //! JSON lines (topic `mac`):
 //!
@@ -26,7 +30,7 @@
 
 use amac::MacEvent;
 use modemdriver::{DriverEvent, DriverStatus, RawDirection, RawMessage, TransmitOutcome};
-use prost_reflect::ReflectMessage;
+use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::ModemTransmission;
 use serde_json::json;
 
@@ -57,11 +61,12 @@ pub enum ModemEvent {
     },
     /// A driver status report.
     Status(DriverStatus),
+    /// A driver-specific result (ranging, mini-packets ...).
+    Specific(DynamicMessage),
 }
 
 impl ModemEvent {
-    /// The event a driver event is reported as (`None`: data requests and
-    /// driver-specific reports).
+    /// The event a driver event is reported as (`None`: data requests).
     pub fn of_driver(event: &DriverEvent) -> Option<Self> {
         Some(match event {
             DriverEvent::Raw(raw) => ModemEvent::Raw(raw.clone()),
@@ -71,7 +76,8 @@ impl ModemEvent {
                 outcome: r.outcome.clone(),
             },
             DriverEvent::Status(status) => ModemEvent::Status(status.clone()),
-            DriverEvent::DataRequest(_) | DriverEvent::Specific(_) => return None,
+            DriverEvent::Specific(report) => ModemEvent::Specific(report.message.clone()),
+            DriverEvent::DataRequest(_) => return None,
         })
     }
 
@@ -153,6 +159,14 @@ impl ModemEvent {
             ModemEvent::Status(status) => (
                 Topic::Modem,
                 json!({ "event": "driver_status", "driver_status": format!("{status:?}") }),
+            ),
+            ModemEvent::Specific(message) => (
+                Topic::Modem,
+                json!({
+                    "event": "driver_specific",
+                    "driver_specific": message.descriptor().full_name(),
+                    "msg": message_json(message),
+                }),
             ),
         };
         (topic, line.to_string())

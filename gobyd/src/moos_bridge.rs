@@ -261,7 +261,7 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
         // pAcommsHandler reads MAC_CYCLE_UPDATE (it does not write it) and
         // has no variable for the driver's status: these stay in the log
         // and on the JSON interface.
-        ModemEvent::CycleUpdate { .. } | ModemEvent::Status(_) => {}
+        ModemEvent::CycleUpdate { .. } | ModemEvent::Status(_) | ModemEvent::Specific(_) => {}
     }
     out
 }

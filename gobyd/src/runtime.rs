@@ -306,6 +306,7 @@ impl Daemon {
         let interface = JsonInterface {
             codec: codec.clone(),
             publish: publish_tx.clone(),
+            control: control_tx.clone(),
             events: events.clone(),
         };
         let mut tasks = JoinSet::new();
@@ -666,6 +667,17 @@ impl Daemon {
             }
             Control::ResetDriver { reply } => {
                 let _ = reply.send(self.reset_driver().await);
+            }
+            Control::DriverSpecific { message, reply } => {
+                let name = message.descriptor().full_name().to_string();
+                let outcome = self
+                    .driver
+                    .initiate_specific(&message)
+                    .map_err(|e| format!("{name}: {e}"));
+                if let Err(e) = &outcome {
+                    tracing::warn!("driver-specific request: {e}");
+                }
+                let _ = reply.send(outcome);
             }
         }
     }

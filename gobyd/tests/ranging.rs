@@ -1,0 +1,158 @@
+//! Ranging through the daemon: a JSON client asks `gobyd` (on an emulated
+//! WHOI Micro-Modem 2 on a real pseudo-terminal) for a REMUS long-baseline
+//! interrogation and gets the one-way travel times to the transponders the
+//! emulator places, as a `driver_specific` event.
+//!
+//! `cargo test -p gobyd --test ranging`
+
+use std::time::Duration;
+
+use gobyd::runtime::Daemon;
+use modemdriver::micromodem::emulator::{
+    self, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
+};
+use modemdriver::sim::reception::Position;
+use serde_json::Value;
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::net::TcpStream;
+use tokio::sync::oneshot;
+
+/// Longest wait for one line.
+const PATIENCE: Duration = Duration::from_secs(30);
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_json_client_gets_long_baseline_travel_times() {
+    let dir = std::env::temp_dir().join(format!("gobyd-ranging-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+
+    let at = |x: f64| Position::new(x, 0.0, 0.0);
+    let mut geometry = Geometry::default();
+    geometry.nodes.insert(
+        1,
+        Node {
+            position: at(0.0),
+            velocity: [0.0; 3],
+        },
+    );
+    geometry.transponders = [750.0, 1200.0]
+        .map(|x| Transponder {
+            position: at(x),
+            frequency: None,
+        })
+        .to_vec();
+    let link = dir.join("modem1");
+    let mut modem = emulator::start(
+        EmulatorConfig {
+            geometry,
+            ..EmulatorConfig::micromodem2(1)
+        },
+        EmulatorPort::Pty {
+            link: Some(link.clone()),
+        },
+        None,
+    )
+    .expect("emulator starts");
+    modem.path().await.expect("emulated modem present");
+
+    let config = format!(
+        r#"
+modem_id: 1
+driver {{
+  driver_type: DRIVER_WHOI_MICROMODEM
+  serial_port: "{}"
+  micromodem {{ config_echo_quiet_ms: 300 }}
+}}
+mac {{ type: MAC_FIXED_DECENTRALIZED  slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 30 }} }}
+json {{ tcp_bind: "127.0.0.1:0" }}
+data_dir: "{}"
+"#,
+        link.display(),
+        dir.join("data").display()
+    );
+    let daemon = Daemon::start(gobyd::config::parse(&config, "ranging test").unwrap())
+        .await
+        .expect("gobyd starts");
+    let addr = daemon.json_tcp_addr().expect("JSON over TCP");
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let running = tokio::spawn(daemon.run(async move {
+        let _ = stop_rx.await;
+    }));
+
+    let stream = TcpStream::connect(addr).await.unwrap();
+    let (read, mut write) = stream.into_split();
+    let mut lines = BufReader::new(read).lines();
+    let mut next = async || -> Value {
+        let line = tokio::time::timeout(PATIENCE, lines.next_line())
+            .await
+            .expect("a line in time")
+            .unwrap()
+            .expect("the connection stays open");
+        serde_json::from_str(&line).unwrap()
+    };
+    write
+        .write_all(b"{\"subscribe\": [\"modem\"]}\n")
+        .await
+        .unwrap();
+    assert_eq!(next().await["reply"], 1);
+
+    // A request that is not one names what is wrong.
+    write
+        .write_all(b"{\"driver_specific\": \"goby.acomms.protobuf.NoSuchThing\", \"msg\": {}}\n")
+        .await
+        .unwrap();
+    let refused = loop {
+        let v = next().await;
+        if v.get("reply").is_some() {
+            break v;
+        }
+    };
+    assert!(
+        refused["error"]
+            .as_str()
+            .is_some_and(|e| e.contains("unknown driver request type")),
+        "{refused}"
+    );
+
+    let request = r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_REMUS_LBL_RANGING", "remus_lbl": {"enable_beacons": 3, "lbl_max_range": 2000}}}"#;
+    // The modem may still be starting up: ask again until a result comes.
+    let mut result = None;
+    for _ in 0..5 {
+        write
+            .write_all(format!("{request}\n").as_bytes())
+            .await
+            .unwrap();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+        while tokio::time::Instant::now() < deadline {
+            let v = next().await;
+            if v.get("reply").is_some() {
+                assert_eq!(
+                    v["driver_specific"], "goby.acomms.protobuf.MicroModemSpecific",
+                    "{v}"
+                );
+            }
+            if v["event"] == "driver_specific" && v["msg"].get("ranging_reply").is_some() {
+                result = Some(v);
+                break;
+            }
+        }
+        if result.is_some() {
+            break;
+        }
+    }
+    let result = result.expect("a ranging result");
+    let times: Vec<f64> = result["msg"]["ranging_reply"]["one_way_travel_time"]
+        .as_array()
+        .expect("travel times")
+        .iter()
+        .map(|t| t.as_f64().unwrap())
+        .collect();
+    // One way at 1500 m/s: 750 m and 1200 m.
+    assert!((times[0] - 0.5).abs() < 1e-3, "{times:?}");
+    assert!((times[1] - 0.8).abs() < 1e-3, "{times:?}");
+
+    let _ = stop_tx.send(());
+    running.await.unwrap().unwrap();
+    modem.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
