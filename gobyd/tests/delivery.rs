@@ -36,6 +36,7 @@ use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
+use protos::goby::acomms::protobuf::MicroModemClockMode;
 use protos::goby::acomms::protobuf::SimulatorDriverConfig;
 use protos::goby::example::Command;
 use queue::QueueEvent;
@@ -298,7 +299,10 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
                         let mut r = receptions.lock().unwrap();
                         r.0 += 1;
                         if transmission.receive_stat.iter().any(|s| {
-                            s.source == Some(3 - id) && s.dest == Some(id) && s.snr_in.is_some()
+                            s.source == Some(3 - id)
+                                && s.dest == Some(id)
+                                && s.snr_in.is_some()
+                                && s.clock_mode() != MicroModemClockMode::InvalidClockMode
                         }) {
                             r.1 += 1;
                         } else {

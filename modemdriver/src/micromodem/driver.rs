@@ -908,7 +908,11 @@ impl Mm {
     /// under way (at rate 0 the cycle-initialization packet has its own).
     fn receive_statistics(&mut self, cst: &ReceiveStatisticsSentence) {
         self.sends_cst = true;
-        let stat = cst.to_proto(&today());
+        let bitfield = self
+            .firmware
+            .as_deref()
+            .is_some_and(firmware::toa_mode_is_bitfield);
+        let stat = cst.to_proto(&today(), bitfield);
         if let Some(held) = &mut self.held {
             held.transmission.receive_stat.push(stat);
             self.release_held();

@@ -53,6 +53,16 @@ pub fn swaps_hardware_reply(version: &str) -> bool {
     matches!(version_numbers(version), Some((2, 0, patch)) if patch < 18307)
 }
 
+/// Micro-Modem 2 firmware from 2.0.26038 on gives the clock field of
+/// `$CACST` (its time-of-arrival mode) as bits: the real-time clock's
+/// source in bits 0-1 (2 or 3: set by the host) and the pulse-per-second
+/// source in bits 2-4 (3: an external pulse); earlier firmware gives the
+/// clock mode itself (0-3).
+pub fn toa_mode_is_bitfield(version: &str) -> bool {
+    matches!(version_numbers(version), Some((major, minor, patch))
+        if major > 2 || (major == 2 && (minor > 0 || patch >= 26038)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

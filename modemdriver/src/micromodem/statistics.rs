@@ -295,8 +295,11 @@ impl ReceiveStatisticsSentence {
     /// The statistics as [`MicroModemReceiveStatistics`]. `today` (`YYYYMMDD`)
     /// dates an original-layout time of arrival, which has none. Integer
     /// fields given with decimals are rounded; enumerations out of range map
-    /// to their INVALID / UNKNOWN value.
-    pub fn to_proto(&self, today: &str) -> MicroModemReceiveStatistics {
+    /// to their INVALID / UNKNOWN value. `toa_bitfield`: the clock field is
+    /// the bit field of newer Micro-Modem 2 firmware
+    /// ([`toa_mode_is_bitfield`](super::firmware::toa_mode_is_bitfield)),
+    /// read by [`clock_mode_of_toa`].
+    pub fn to_proto(&self, today: &str, toa_bitfield: bool) -> MicroModemReceiveStatistics {
         let r = |v: Option<f64>| v.map(|v| v.round() as i32);
         let date = self.date.as_deref().unwrap_or(today);
         MicroModemReceiveStatistics {
@@ -306,8 +309,12 @@ impl ReceiveStatisticsSentence {
             ),
             time: micros_since_epoch(date, &self.time),
             clock_mode: self.clock_mode.map(|c| {
-                MicroModemClockMode::try_from(c).unwrap_or(MicroModemClockMode::InvalidClockMode)
-                    as i32
+                if toa_bitfield {
+                    clock_mode_of_toa(c) as i32
+                } else {
+                    MicroModemClockMode::try_from(c)
+                        .unwrap_or(MicroModemClockMode::InvalidClockMode) as i32
+                }
             }),
             mfd_peak: r(self.mfd_peak),
             mfd_power: r(self.mfd_power),
@@ -506,10 +513,53 @@ impl TransmitStatisticsSentence {
     }
 }
 
+/// The clock mode a newer Micro-Modem 2's time-of-arrival bit field
+/// means: the real-time clock's source in bits 0-1 (0 or 1: not set by the
+/// host; 2 or 3: set) and the pulse-per-second source in bits 2-4 (3: an
+/// external pulse the clock follows; 0, 1, 2 or 4: none followed), as Goby's
+/// Micro-Modem driver reads it.
+pub fn clock_mode_of_toa(mode: i32) -> MicroModemClockMode {
+    let clock_set = matches!(mode & 0x3, 2 | 3);
+    match ((mode >> 2) & 0x7, clock_set) {
+        (0 | 1 | 2 | 4, false) => MicroModemClockMode::NoSyncToPpsAndCcclkBad,
+        (0 | 1 | 2 | 4, true) => MicroModemClockMode::NoSyncToPpsAndCcclkGood,
+        (3, false) => MicroModemClockMode::SyncToPpsAndCcclkBad,
+        (3, true) => MicroModemClockMode::SyncToPpsAndCcclkGood,
+        _ => MicroModemClockMode::InvalidClockMode,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::sentence::MmSentence;
     use super::*;
+
+    #[test]
+    fn clock_field_by_firmware() {
+        use super::super::firmware::toa_mode_is_bitfield;
+        assert!(toa_mode_is_bitfield("2.0.27087"));
+        assert!(toa_mode_is_bitfield("2.1.0"));
+        assert!(!toa_mode_is_bitfield("2.0.16421"));
+        assert!(!toa_mode_is_bitfield("0.94.0.52"));
+        // RTC set by the host (2), pulse per second from the RTC (1): no
+        // external pulse followed, clock good.
+        assert_eq!(
+            clock_mode_of_toa(0b00110),
+            MicroModemClockMode::NoSyncToPpsAndCcclkGood
+        );
+        assert_eq!(
+            clock_mode_of_toa(0b01111),
+            MicroModemClockMode::SyncToPpsAndCcclkGood
+        );
+        assert_eq!(
+            clock_mode_of_toa(0b01101),
+            MicroModemClockMode::SyncToPpsAndCcclkBad
+        );
+        assert_eq!(
+            clock_mode_of_toa(0b10100),
+            MicroModemClockMode::InvalidClockMode
+        );
+    }
 
     #[test]
     fn original_cacst_layout() {
@@ -527,7 +577,7 @@ mod tests {
         assert_eq!(cst.dest, Some(6));
         assert_eq!(cst.doppler, Some(-1.2));
         assert_eq!(cst.bandwidth, Some(2000.0));
-        let p = cst.to_proto("20260102");
+        let p = cst.to_proto("20260102", false);
         assert_eq!(p.snr_in, Some(3));
         assert_eq!(p.snr_out, Some(4));
         assert_eq!(p.mfd_ratio, Some(175));
