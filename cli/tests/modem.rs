@@ -213,7 +213,7 @@ fn micromodem2_dialect_from_the_command_line() {
         }
     }
     assert!(count > 60, "{count} parameters");
-    // A REMUS interrogation of transponder A, 750 m away: 1 s round trip.
+    // A REMUS interrogation of transponder A, 750 m away: 0.5 s one way.
     tty.send(NmeaSentence::new(
         "CC",
         "PDT",
@@ -222,7 +222,7 @@ fn micromodem2_dialect_from_the_command_line() {
     assert_eq!(tty.next().address(), "SNPDT");
     let tta = tty.next();
     assert_eq!(tta.address(), "SNTTA");
-    assert_eq!(tta.fields[..4], fields(&["1.0000", "", "", ""]));
+    assert_eq!(tta.fields[..4], fields(&["0.5000", "", "", ""]));
     drop(emulator);
     let stderr = std::fs::read_to_string(&log).unwrap_or_default();
     let _ = std::fs::remove_file(&log);

@@ -20,7 +20,7 @@ use amac::MacManager;
 use modemdriver::{
     Acknowledgement, Driver, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome,
 };
-use prost_reflect::ReflectMessage;
+use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
     driver_config, modem_transmission::TransmissionType, DriverType,
 };
@@ -134,6 +134,10 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     Ok(defs.loaded)
 }
 
+/// Driver-specific requests (pings, interrogations) that may wait for this
+/// node's slot at once; more are refused.
+pub const MAX_SPECIFIC_REQUESTS: usize = 4;
+
 /// A started daemon, ready to [`run`](Daemon::run).
 pub struct Daemon {
     outbox: Outbox,
@@ -152,6 +156,10 @@ pub struct Daemon {
     /// The driver's configuration, for a reset (`None`: started by the
     /// caller).
     driver_config: Option<protos::goby::acomms::protobuf::DriverConfig>,
+    /// This node's modem id.
+    modem_id: i32,
+    /// Driver-specific requests waiting for this node's next slot.
+    specific_requests: std::collections::VecDeque<DynamicMessage>,
     raw_log: Option<RawLog>,
     /// Replies to send once the journal holding their messages is synced.
     pending_replies: Vec<(oneshot::Sender<String>, String)>,
@@ -381,6 +389,8 @@ impl Daemon {
             control_rx,
             control_tx,
             driver_config: None,
+            modem_id: config.modem_id(),
+            specific_requests: std::collections::VecDeque::new(),
             raw_log,
             pending_replies: Vec::new(),
             tasks,
@@ -626,6 +636,19 @@ impl Daemon {
             if slot.initiate().is_none() {
                 let _ = self.link.send(LinkEvent::Slot(None));
             }
+            if slot.initiate().is_some() {
+                if let Some(request) = self.specific_requests.pop_front() {
+                    tracing::info!(
+                        slot = slot.position.index,
+                        "this node's slot carries a driver-specific request ({})",
+                        request.descriptor().full_name()
+                    );
+                    if let Err(e) = self.driver.initiate_specific(&request) {
+                        tracing::error!("cannot start a driver-specific request: {e}");
+                    }
+                    continue;
+                }
+            }
             if let Some(transmission) = slot.initiate() {
                 let mut transmission = transmission.clone();
                 self.next_transmission = self.next_transmission.wrapping_add(1);
@@ -669,17 +692,54 @@ impl Daemon {
                 let _ = reply.send(self.reset_driver().await);
             }
             Control::DriverSpecific { message, reply } => {
-                let name = message.descriptor().full_name().to_string();
-                let outcome = self
-                    .driver
-                    .initiate_specific(&message)
-                    .map_err(|e| format!("{name}: {e}"));
+                let outcome = self.take_specific_request(message);
                 if let Err(e) = &outcome {
                     tracing::warn!("driver-specific request: {e}");
                 }
                 let _ = reply.send(outcome);
             }
         }
+    }
+
+    /// Takes a driver-specific request to start at this node's next slot
+    /// (TDMA is kept: a ping or an interrogation takes the slot in place of
+    /// data), or says why not: a request the configured driver cannot carry
+    /// out (see [`modemdriver::micromodem::ranging::request_problem`]), or
+    /// [`MAX_SPECIFIC_REQUESTS`] waiting already.
+    fn take_specific_request(&mut self, message: DynamicMessage) -> Result<(), String> {
+        use protos::goby::acomms::protobuf::MicroModemSpecific;
+        let name = message.descriptor().full_name().to_string();
+        if let Some(config) = &self.driver_config {
+            let micromodem = matches!(config.driver, Some(driver_config::Driver::DriverType(t))
+                if t == DriverType::DriverWhoiMicromodem as i32);
+            if !micromodem {
+                return Err(format!(
+                    "{name}: only the Micro-Modem driver takes driver-specific requests"
+                ));
+            }
+            let takes = MicroModemSpecific::default().descriptor();
+            let request = (message.descriptor() == takes)
+                .then(|| message.transcode_to::<MicroModemSpecific>().ok())
+                .flatten()
+                .ok_or_else(|| {
+                    format!("{name}: the Micro-Modem driver takes {}", takes.full_name())
+                })?;
+            let settings = config.micromodem.clone().unwrap_or_default();
+            if let Some(problem) = modemdriver::micromodem::ranging::request_problem(
+                &request,
+                self.modem_id,
+                &settings,
+            ) {
+                return Err(problem);
+            }
+        }
+        if self.specific_requests.len() >= MAX_SPECIFIC_REQUESTS {
+            return Err(format!(
+                "{name}: {MAX_SPECIFIC_REQUESTS} driver-specific requests already wait for this node's slot"
+            ));
+        }
+        self.specific_requests.push_back(message);
+        Ok(())
     }
 
     /// Stops the driver and starts it again from its configuration;

@@ -63,7 +63,7 @@ driver {{
   serial_port: "{}"
   micromodem {{ config_echo_quiet_ms: 300 }}
 }}
-mac {{ type: MAC_FIXED_DECENTRALIZED  slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 30 }} }}
+mac {{ type: MAC_FIXED_DECENTRALIZED  slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 8 }} }}
 json {{ tcp_bind: "127.0.0.1:0" }}
 data_dir: "{}"
 "#,
@@ -96,47 +96,65 @@ data_dir: "{}"
         .unwrap();
     assert_eq!(next().await["reply"], 1);
 
-    // A request that is not one names what is wrong.
-    write
-        .write_all(b"{\"driver_specific\": \"goby.acomms.protobuf.NoSuchThing\", \"msg\": {}}\n")
-        .await
-        .unwrap();
-    let refused = loop {
-        let v = next().await;
-        if v.get("reply").is_some() {
-            break v;
-        }
-    };
-    assert!(
-        refused["error"]
-            .as_str()
-            .is_some_and(|e| e.contains("unknown driver request type")),
-        "{refused}"
-    );
-
-    let request = r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_REMUS_LBL_RANGING", "remus_lbl": {"enable_beacons": 3, "lbl_max_range": 2000}}}"#;
-    // The modem may still be starting up: ask again until a result comes.
-    let mut result = None;
-    for _ in 0..5 {
+    // Requests that cannot be carried out are refused, naming what is wrong.
+    for (request, expected) in [
+        (
+            r#"{"driver_specific": "goby.acomms.protobuf.NoSuchThing", "msg": {}}"#,
+            "unknown driver request type",
+        ),
+        (
+            r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {}}"#,
+            "MicroModemSpecific.type: required",
+        ),
+        (
+            r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_TWO_WAY_PING", "dest": 1}}"#,
+            "dest: 1 is this modem",
+        ),
+        (
+            r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_REMUS_LBL_RANGING", "remus_lbl": {"enable_beacons": 0}}}"#,
+            "enable_beacons: 0",
+        ),
+        (
+            r#"{"driver_specific": "goby.example.Command", "msg": {}}"#,
+            "takes goby.acomms.protobuf.MicroModemSpecific",
+        ),
+    ] {
         write
             .write_all(format!("{request}\n").as_bytes())
             .await
             .unwrap();
-        let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
-        while tokio::time::Instant::now() < deadline {
+        let refused = loop {
             let v = next().await;
             if v.get("reply").is_some() {
-                assert_eq!(
-                    v["driver_specific"], "goby.acomms.protobuf.MicroModemSpecific",
-                    "{v}"
-                );
+                break v;
             }
-            if v["event"] == "driver_specific" && v["msg"].get("ranging_reply").is_some() {
-                result = Some(v);
-                break;
-            }
+        };
+        assert!(
+            refused["error"]
+                .as_str()
+                .is_some_and(|e| e.contains(expected)),
+            "{request}: {refused}"
+        );
+    }
+
+    let request = r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_REMUS_LBL_RANGING", "remus_lbl": {"enable_beacons": 3, "lbl_max_range": 2000}}}"#;
+    // Taken now, carried out in this node's next slot.
+    write
+        .write_all(format!("{request}\n").as_bytes())
+        .await
+        .unwrap();
+    let mut result = None;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while tokio::time::Instant::now() < deadline {
+        let v = next().await;
+        if v.get("reply").is_some() {
+            assert_eq!(
+                v["driver_specific"], "goby.acomms.protobuf.MicroModemSpecific",
+                "{v}"
+            );
         }
-        if result.is_some() {
+        if v["event"] == "driver_specific" && v["msg"].get("ranging_reply").is_some() {
+            result = Some(v);
             break;
         }
     }

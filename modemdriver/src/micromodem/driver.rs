@@ -1789,6 +1789,9 @@ impl Mm {
     /// The job of a `MicroModemSpecific` request, or why there is none.
     fn specific_job(&self, r: MicroModemSpecific) -> Result<Job, String> {
         use MicroModemTransmissionType as T;
+        if let Some(problem) = ranging::request_problem(&r, self.modem_id as i32, &self.mm) {
+            return Err(problem);
+        }
         let dest = r.dest().max(0) as u32;
         Ok(match r.r#type() {
             T::MicromodemTwoWayPing => Job::Ping { dest },

@@ -112,9 +112,134 @@ pub fn reply(times: &[Option<f64>; MAX_BEACONS]) -> MicroModemRangingReply {
     }
 }
 
+/// Longest listening range a long-baseline request may ask for, m: 10 km
+/// is about 13 s of listening, longer than any TDMA slot in use.
+pub const MAX_LBL_RANGE_M: u32 = 10_000;
+
+/// Why a `MicroModemSpecific` request cannot be carried out as asked by
+/// modem `modem_id` with the driver settings `config`, if it cannot: a
+/// missing or base `type`; a ping or mini-packet without a destination
+/// modem (1-127, not this one); LBL parameters (the request's over the
+/// configuration's) beyond what the modem takes: beacons other than a mask
+/// of A-D (1-15), more than four narrowband reply frequencies or none, no
+/// narrowband transmit frequency, a listening range over
+/// [`MAX_LBL_RANGE_M`]. The text names the field.
+pub fn request_problem(
+    r: &protos::goby::acomms::protobuf::MicroModemSpecific,
+    modem_id: i32,
+    config: &protos::goby::acomms::protobuf::MicroModemConfig,
+) -> Option<String> {
+    use protos::goby::acomms::protobuf::MicroModemTransmissionType as T;
+    let range = |range: u32| {
+        (range > MAX_LBL_RANGE_M).then(|| {
+            format!(
+                "MicroModemSpecific: lbl_max_range {range} m is over {MAX_LBL_RANGE_M} m (the modem would listen for {:.0} s)",
+                f64::from(listening_ms(range, 0)) / 1000.0
+            )
+        })
+    };
+    match r.r#type() {
+        T::MicromodemBaseType => Some(
+            "MicroModemSpecific.type: required (MICROMODEM_TWO_WAY_PING, MICROMODEM_REMUS_LBL_RANGING, \
+             MICROMODEM_NARROWBAND_LBL_RANGING, MICROMODEM_MINI_DATA, MICROMODEM_FLEXIBLE_DATA ...)"
+                .into(),
+        ),
+        T::MicromodemTwoWayPing | T::MicromodemMiniData => match r.dest {
+            Some(d) if (1..=127).contains(&d) && d != modem_id => None,
+            Some(d) if d == modem_id => Some(format!(
+                "MicroModemSpecific.dest: {d} is this modem; name another (1-127)"
+            )),
+            Some(d) => Some(format!("MicroModemSpecific.dest: {d} is not a modem id (1-127)")),
+            None => Some("MicroModemSpecific.dest: required (the modem to reach, 1-127)".into()),
+        },
+        T::MicromodemRemusLblRanging => {
+            let p = merge_remus(config.remus_lbl.as_ref(), r.remus_lbl.as_ref());
+            if !(1..=15).contains(&p.enable_beacons()) {
+                return Some(format!(
+                    "MicroModemSpecific.remus_lbl.enable_beacons: {} is not a mask of beacons A-D (1-15)",
+                    p.enable_beacons()
+                ));
+            }
+            range(p.lbl_max_range())
+        }
+        T::MicromodemNarrowbandLblRanging => {
+            let p = merge_narrowband(config.narrowband_lbl.as_ref(), r.narrowband_lbl.as_ref());
+            if p.receive_freq.is_empty() || p.receive_freq.len() > MAX_BEACONS {
+                return Some(format!(
+                    "MicroModemSpecific.narrowband_lbl.receive_freq: {} given; give 1 to {MAX_BEACONS} reply frequencies (Hz)",
+                    p.receive_freq.len()
+                ));
+            }
+            if p.transmit_freq() == 0 {
+                return Some(
+                    "MicroModemSpecific.narrowband_lbl.transmit_freq: required (Hz), in the request or the driver's narrowband_lbl"
+                        .into(),
+                );
+            }
+            range(p.lbl_max_range())
+        }
+        _ => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn requests_that_cannot_be_carried_out_name_their_field() {
+        use protos::goby::acomms::protobuf::{
+            MicroModemConfig, MicroModemSpecific, MicroModemTransmissionType as T,
+        };
+        let config = MicroModemConfig::default();
+        let ask = |r: MicroModemSpecific| request_problem(&r, 1, &config);
+        let ping = |dest| MicroModemSpecific {
+            r#type: T::MicromodemTwoWayPing as i32,
+            dest,
+            ..Default::default()
+        };
+        assert!(ask(MicroModemSpecific::default())
+            .unwrap()
+            .contains("type: required"));
+        assert!(ask(ping(None)).unwrap().contains("dest: required"));
+        assert!(ask(ping(Some(1))).unwrap().contains("is this modem"));
+        assert!(ask(ping(Some(99999))).unwrap().contains("not a modem id"));
+        assert_eq!(ask(ping(Some(2))), None);
+        let remus = |beacons, range| MicroModemSpecific {
+            r#type: T::MicromodemRemusLblRanging as i32,
+            remus_lbl: Some(MicroModemRemusLblParams {
+                enable_beacons: Some(beacons),
+                lbl_max_range: Some(range),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(ask(remus(3, 2000)), None);
+        assert!(ask(remus(0, 2000)).unwrap().contains("enable_beacons: 0"));
+        assert!(ask(remus(31, 2000)).unwrap().contains("enable_beacons: 31"));
+        assert!(ask(remus(3, 100_000))
+            .unwrap()
+            .contains("lbl_max_range 100000"));
+        let narrowband = |freqs: Vec<u32>, tx| MicroModemSpecific {
+            r#type: T::MicromodemNarrowbandLblRanging as i32,
+            narrowband_lbl: Some(MicroModemNarrowbandLblParams {
+                transmit_freq: tx,
+                receive_freq: freqs,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(ask(narrowband(vec![25000, 26000], Some(24000))), None);
+        assert!(ask(narrowband(vec![], Some(24000)))
+            .unwrap()
+            .contains("0 given"));
+        assert!(ask(narrowband(vec![1; 6], Some(24000)))
+            .unwrap()
+            .contains("6 given"));
+        assert!(ask(narrowband(vec![25000], None))
+            .unwrap()
+            .contains("transmit_freq"));
+    }
 
     #[test]
     fn remus_ping_from_defaults() {
