@@ -134,6 +134,11 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     Ok(defs.loaded)
 }
 
+/// Longest a message received before a restart, and not handed over then,
+/// waits at the next start for a JSON client to connect before it is
+/// handed over to whoever is there (the bridges, the mission log).
+pub const RECOVERY_WAIT: Duration = Duration::from_secs(30);
+
 /// Driver-specific requests (pings, interrogations) that may wait for this
 /// node's slot at once; more are refused.
 pub const MAX_SPECIFIC_REQUESTS: usize = 4;
@@ -446,7 +451,15 @@ impl Daemon {
     /// interfaces. Messages not yet sent stay in the journal.
     pub async fn run(mut self, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
         tokio::pin!(shutdown);
-        self.hand_over_pending();
+        // Messages received before a restart and not handed over wait for a
+        // taker: a JSON client connecting (the subscribers present now are
+        // the bridges and the UDP interface), or RECOVERY_WAIT.
+        let mut recovery = (!self.inbox.pending().is_empty()).then(|| {
+            (
+                self.events.receiver_count(),
+                tokio::time::Instant::now() + RECOVERY_WAIT,
+            )
+        });
         let mut expire = tokio::time::interval(Duration::from_secs(1));
         loop {
             let mac_wait = self
@@ -467,6 +480,12 @@ impl Daemon {
                 },
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
                 _ = expire.tick() => self.outbox.expire(),
+            }
+            if let Some((present, due)) = recovery {
+                if self.events.receiver_count() > present || tokio::time::Instant::now() >= due {
+                    self.hand_over_pending();
+                    recovery = None;
+                }
             }
             let _ = self.forward_queue_events();
             self.commit_replies();

@@ -381,3 +381,54 @@ fn killed_daemons_lose_nothing_and_deliver_nothing_twice() {
     );
     assert!(all.delivered > 0, "nothing was delivered");
 }
+
+/// A receiver that dies right after recording a message (crash point
+/// `recorded`: in its inbox, not handed over, not acked) hands it over once
+/// to the JSON client that connects after the restart, flagged
+/// `recovered`; the sender's retry is suppressed as a repeat.
+#[test]
+fn a_message_recorded_before_a_crash_reaches_the_client_after_the_restart() {
+    let dir = scratch("restart", "recovered");
+    let ports = [free_udp_port(), free_udp_port()];
+    let configs: Vec<PathBuf> = [1, 2]
+        .into_iter()
+        .map(|id| {
+            let path = dir.join(format!("node{id}.cfg"));
+            std::fs::write(&path, config(id, ports, &dir.join(format!("node{id}")))).unwrap();
+            path
+        })
+        .collect();
+    let mut receiver = Gobyd::start(&configs[1], &[("GOBYD_CRASH_POINT", "recorded:1")]);
+    let mut sender = Gobyd::start(&configs[0], &[]);
+    let published = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "kept"}}"#;
+    let reply = sender.request(published).expect("a reply");
+    assert!(reply.get("accepted").is_some(), "{reply}");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !receiver.has_exited() {
+        assert!(
+            Instant::now() < deadline,
+            "the receiver never reached its crash point"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let mut receiver = Gobyd::start(&configs[1], &[]);
+    let is_kept = |v: &Value| v["event"] == "received" && v["msg"]["note"] == "kept";
+    let got = receiver
+        .wait_for(Duration::from_secs(20), is_kept)
+        .expect("the recorded message reaches the client after the restart");
+    assert_eq!(got["recovered"], true, "{got}");
+    // The sender retries until acked (its mission log shows the ack); the
+    // repeat is not handed over again.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !logged(&dir.join("node1"), "ack").contains_key("kept") {
+        assert!(Instant::now() < deadline, "the sender never heard the ack");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(
+        receiver.wait_for(Duration::from_secs(5), is_kept).is_none(),
+        "handed over twice"
+    );
+    drop(receiver);
+    drop(sender);
+    let _ = std::fs::remove_dir_all(&dir);
+}

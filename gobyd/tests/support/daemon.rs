@@ -109,6 +109,20 @@ impl Gobyd {
         None
     }
 
+    /// The next line from the daemon that `wanted` picks, within `limit`.
+    pub fn wait_for(&mut self, limit: Duration, wanted: impl Fn(&Value) -> bool) -> Option<Value> {
+        let deadline = Instant::now() + limit;
+        while let Ok(v) = self
+            .lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            if wanted(&v) {
+                return Some(v);
+            }
+        }
+        None
+    }
+
     /// Whether the process has ended (e.g. at an armed crash point).
     pub fn has_exited(&mut self) -> bool {
         !matches!(self.child.try_wait(), Ok(None))
