@@ -354,7 +354,8 @@ pub fn settings_problem(config: &GobydConfig) -> Option<String> {
                 return Some(format!(
                     "mac slot {{ src: {} rate: {} slot_seconds: {} }}: a rate-{} packet needs about {needed:.1} s on the water \
                      ({} frames of {} bytes at {} bit/s, plus {} s of probe and header), so the Micro-Modem driver would drop \
-                     every transmission in this slot as not fitting; make slot_seconds at least {}",
+                     every transmission in this slot as not fitting; make slot_seconds at least {} plus the travel \
+                     time to the farthest node and, with acks, back (about 1.3 s per km){}",
                     slot.src(),
                     slot.rate(),
                     slot.slot_seconds(),
@@ -363,7 +364,12 @@ pub fn settings_problem(config: &GobydConfig) -> Option<String> {
                     spec.frame_bytes,
                     spec.bits_per_second,
                     modemdriver::micromodem::driver::PACKET_OVERHEAD.as_secs_f64(),
-                    needed.ceil()
+                    needed.ceil(),
+                    if slot.rate() == 0 {
+                        ", and about 1 s more for the cycle-initialization packet a Micro-Modem 2 sends first at rate 0"
+                    } else {
+                        ""
+                    }
                 ));
             }
         }
