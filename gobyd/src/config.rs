@@ -276,6 +276,28 @@ pub fn log_level_problem(level: &str) -> Option<String> {
 fn nvram_address_problem(config: &GobydConfig) -> Option<String> {
     let mm = config.driver.as_ref()?.micromodem.as_ref()?;
     let id = config.modem_id();
+    if let Some(entry) = mm
+        .nvram_cfg
+        .iter()
+        .find(|e| e.trim_start().starts_with('$') || e.contains('*') || !e.contains(','))
+    {
+        return Some(format!(
+            "driver.micromodem.nvram_cfg {entry:?}: give KEY,VALUE (e.g. \"DQF,1\"); the driver writes the $CCCFG sentence around it"
+        ));
+    }
+    for (field, zero) in [
+        ("keep_alive_seconds", mm.keep_alive_seconds() <= 0),
+        ("response_timeout_ms", mm.response_timeout_ms() == 0),
+        ("receive_timeout_ms", mm.receive_timeout_ms() == 0),
+        ("max_cycle_attempts", mm.max_cycle_attempts() == 0),
+        ("statistics_timeout_ms", mm.statistics_timeout_ms() == 0),
+    ] {
+        if zero {
+            return Some(format!(
+                "driver.micromodem.{field}: must be positive (leave it out for the default)"
+            ));
+        }
+    }
     mm.nvram_cfg.iter().find_map(|entry| {
         let (key, value) = entry.split_once(',')?;
         let value = value.trim();
@@ -340,6 +362,15 @@ pub fn settings_problem(config: &GobydConfig) -> Option<String> {
         Some(driver_config::Driver::DriverType(t)) if *t == DriverType::DriverWhoiMicromodem as i32
     );
     if micromodem {
+        let driver = config.driver.as_ref().expect("a Micro-Modem driver");
+        if driver.connection_type()
+            == protos::goby::acomms::protobuf::driver_config::ConnectionType::ConnectionSerial
+            && driver.serial_port().trim().is_empty()
+        {
+            return Some(
+                "driver.serial_port: required for the Micro-Modem (e.g. \"/dev/ttyUSB0\")".into(),
+            );
+        }
         // The driver drops a transmission that no longer fits what is left
         // of its slot, judged by this estimate: a slot shorter than it
         // never sends anything.

@@ -164,6 +164,20 @@ fn check_refuses_settings_that_cannot_work() {
             "a rate-1 packet needs about 7.1 s on the water (3 frames of 64 bytes at 250 bit/s, plus 1 s of probe and header)",
         ),
         (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM }\n",
+            "driver.serial_port: required for the Micro-Modem",
+        ),
+        (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
+             micromodem { nvram_cfg: \"$CCCFG,DQF,1\" } }\n",
+            "give KEY,VALUE",
+        ),
+        (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
+             micromodem { response_timeout_ms: 0 } }\n",
+            "driver.micromodem.response_timeout_ms: must be positive",
+        ),
+        (
             "modem_id: 1\nlog { level: \"warning\" }\n",
             "log.level \"warning\": \"warning\" is not a level",
         ),
