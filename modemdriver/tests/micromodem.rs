@@ -848,7 +848,10 @@ async fn micromodem2_lbl_ping_reports_the_travel_times_the_modem_gives() {
     // One-way: 750 m and 1000 m at 1500 m/s.
     assert!((times[0] - 0.5).abs() < 1e-3, "{times:?}");
     assert!((times[1] - 1000.0 / 1500.0).abs() < 1e-3, "{times:?}");
-    assert_eq!(&times[2..], [0.0, 0.0]);
+    assert!(
+        times[2..].iter().all(|t| t.is_nan()),
+        "not heard: {times:?}"
+    );
     d.stop().await.unwrap();
     e.stop().await;
 }

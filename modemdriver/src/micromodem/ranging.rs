@@ -102,11 +102,12 @@ pub fn listening_time(ping: &MmSentence) -> Option<std::time::Duration> {
     }
 }
 
-/// The ranging reply of `$SNTTA` travel times: four, of beacons A-D, 0 for
-/// a beacon not heard.
+/// The ranging reply of `$SNTTA` travel times: four, of beacons A-D, NaN
+/// for a beacon not heard (as Goby's driver reports it; never 0, which a
+/// navigation filter would read as a range of 0 m).
 pub fn reply(times: &[Option<f64>; MAX_BEACONS]) -> MicroModemRangingReply {
     MicroModemRangingReply {
-        one_way_travel_time: times.iter().map(|t| t.unwrap_or(0.0)).collect(),
+        one_way_travel_time: times.iter().map(|t| t.unwrap_or(f64::NAN)).collect(),
         ambiguity: Some(OwttAmbiguity::OwttExact as i32),
         is_one_way_synchronous: Some(false),
     }
@@ -287,6 +288,8 @@ mod tests {
     #[test]
     fn travel_times_to_reply() {
         let r = reply(&[Some(0.5), None, Some(1.25), None]);
-        assert_eq!(r.one_way_travel_time, vec![0.5, 0.0, 1.25, 0.0]);
+        let t = &r.one_way_travel_time;
+        assert_eq!((t.len(), t[0], t[2]), (4, 0.5, 1.25));
+        assert!(t[1].is_nan() && t[3].is_nan(), "{t:?}");
     }
 }
