@@ -5,6 +5,8 @@
 //!
 //! `cargo test -p gobyd --test ranging`
 
+mod support;
+
 use std::time::Duration;
 
 use gobyd::runtime::Daemon;
@@ -22,9 +24,7 @@ const PATIENCE: Duration = Duration::from_secs(30);
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_json_client_gets_long_baseline_travel_times() {
-    let dir = std::env::temp_dir().join(format!("gobyd-ranging-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = support::daemon::scratch("ranging", "lbl");
 
     let at = |x: f64| Position::new(x, 0.0, 0.0);
     let mut geometry = Geometry::default();

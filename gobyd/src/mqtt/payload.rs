@@ -19,7 +19,6 @@
 use std::collections::HashMap;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::QueueEvent;
 use serde_json::{json, Value};
 
@@ -58,12 +57,6 @@ pub fn offline(topics: &Topics) -> Vec<u8> {
     json!({ "node": topics.node, "online": false })
         .to_string()
         .into_bytes()
-}
-
-/// A transmission's summary: everything but the frames' bytes, with their
-/// count (see [`reception_summary`]).
-pub fn transmission_json(t: &ModemTransmission, time: i64) -> Value {
-    reception_summary(t, time)
 }
 
 /// Turns events into publications; keeps the last reception from each
@@ -158,7 +151,7 @@ impl Formatter {
                 false,
             ),
             LinkEvent::Received { transmission, time } => {
-                let summary = transmission_json(transmission, *time);
+                let summary = reception_summary(transmission, *time);
                 self.last_link.insert(transmission.src(), summary.clone());
                 Outgoing::new(t.node("link"), summary, true)
             }
@@ -222,6 +215,7 @@ pub struct BridgeStatus {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protos::goby::acomms::protobuf::ModemTransmission;
 
     #[test]
     fn received_messages_carry_their_link() {
