@@ -21,6 +21,8 @@
 //! `cargo test -p gobyd --test delivery -- --nocapture` prints one summary
 //! line per run.
 
+mod support;
+
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -29,17 +31,13 @@ use std::time::Duration;
 use gobyd::json_server::{DaemonEvent, Publish};
 use gobyd::link_event::LinkEvent;
 use gobyd::runtime::Daemon;
-use modemdriver::micromodem::emulator::{
-    self, AirKind, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
-};
-use modemdriver::sim::{medium::Medium, SimulatorDriver};
+use modemdriver::micromodem::emulator::{Dialect, EmulatorControl, EmulatorFaults};
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
-use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
-use protos::goby::acomms::protobuf::SimulatorDriverConfig;
 use protos::goby::example::Command;
 use queue::QueueEvent;
+use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
 use tokio::sync::oneshot;
 
 /// The link of a run: what each daemon's driver talks to, the rate of the
@@ -181,17 +179,6 @@ log {{ raw_log: false }}
     gobyd::config::parse(&text, "delivery test").expect("test configuration")
 }
 
-fn micromodem_driver(link: &Path) -> String {
-    format!(
-        r#"driver {{
-  driver_type: DRIVER_WHOI_MICROMODEM
-  serial_port: "{}"
-  micromodem {{ reconnect_interval_ms: 300  response_timeout_ms: 600  receive_timeout_ms: 2500 }}
-}}"#,
-        link.display()
-    )
-}
-
 fn simulator_driver(channel: &str, loss: f64, seed: u64) -> String {
     format!(
         r#"driver {{
@@ -208,57 +195,25 @@ fn simulator_driver(channel: &str, loss: f64, seed: u64) -> String {
     )
 }
 
-/// Two emulated modems 300 m apart on an in-process channel.
-fn start_emulators(dir: &Path, faults: &Faults, kind: LinkKind) -> Vec<EmulatorHandle> {
-    let medium = Medium::new();
-    let node: Vec<NodePosition> = (1..=2)
-        .map(|m| NodePosition {
-            modem_id: m,
-            x: Some(f64::from(m - 1) * 300.0),
-            ..Default::default()
-        })
-        .collect();
-    (1..=2u32)
-        .map(|id| {
-            let config = modemdriver::DriverConfig {
-                modem_id: Some(id as i32),
-                simulator: Some(SimulatorDriverConfig {
-                    node: node.clone(),
-                    packet_overhead_seconds: Some(0.05),
-                    ..Default::default()
-                }),
-                ..Default::default()
-            };
-            let backend = SimulatorDriver::start_on(&config, medium.clone()).unwrap();
-            let base = match kind {
-                LinkKind::MicroModem2 => EmulatorConfig::micromodem2(id),
-                _ => EmulatorConfig::default(),
-            };
-            let emulated = EmulatorConfig {
-                modem_id: id,
-                packet_overhead: Duration::from_millis(300),
-                faults: EmulatorFaults {
-                    bad_crc: faults.bad_crc,
-                    lost_ack: faults.lost_ack,
-                    seed: faults.seed,
-                },
-                ..base
-            };
-            let port = EmulatorPort::Pty {
-                link: Some(dir.join(format!("modem{id}"))),
-            };
-            emulator::start(emulated, port, Some(backend)).expect("emulator starts")
-        })
-        .collect()
-}
-
 /// Runs the two daemons while `inject` applies the faults; returns the
 /// tally and the emulators' slot report.
 async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let dir = scratch(name);
     let emulated = link.emulated();
     let emulators = if emulated {
-        let mut e = start_emulators(&dir, &faults, link.kind);
+        let dialect = match link.kind {
+            LinkKind::MicroModem2 => Dialect::MicroModem2,
+            _ => Dialect::MicroModem1,
+        };
+        let mut e = start_emulators(
+            &dir,
+            dialect,
+            EmulatorFaults {
+                bad_crc: faults.bad_crc,
+                lost_ack: faults.lost_ack,
+                seed: faults.seed,
+            },
+        );
         for h in &mut e {
             h.path().await.expect("emulated modem present");
         }
@@ -278,7 +233,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let mut publishers = Vec::new();
     for id in 1..=2 {
         let driver = if emulated {
-            micromodem_driver(&dir.join(format!("modem{id}")))
+            micromodem_driver(&modem_path(&dir, id as u32), "")
         } else {
             simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed)
         };
@@ -499,56 +454,6 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     tally.json_lines_with_stats = lines_with_stats;
     let _ = std::fs::remove_dir_all(&dir);
     (tally, slots)
-}
-
-/// Checks every data packet of modem i (slot i-1) lies in its slot of the
-/// cycle (slots counted from the start of the UTC day); returns the report.
-fn slot_report(air: &[Vec<emulator::AirTime>], slot_seconds: f64) -> String {
-    if air.is_empty() {
-        return "slots: not observed (no modem emulator)".into();
-    }
-    let slot = (slot_seconds * 1e6) as u64;
-    let cycle = slot * air.len() as u64;
-    let mut parts = Vec::new();
-    let mut outside = 0;
-    for (i, packets) in air.iter().enumerate() {
-        let own = i as u64 * slot;
-        let mut earliest = u64::MAX;
-        let mut latest_end = 0;
-        let mut data = 0;
-        let mut aborted = 0;
-        for p in packets {
-            if p.kind == AirKind::Ack {
-                continue;
-            }
-            if p.kind == AirKind::Aborted {
-                aborted += 1;
-            }
-            data += 1;
-            let offset = p.start % cycle;
-            let end_offset = offset + (p.end - p.start);
-            if offset < own || end_offset > own + slot {
-                outside += 1;
-                eprintln!(
-                    "modem {}: packet at {:.3}..{:.3} s of the cycle, outside its slot {:.0}..{:.0} s",
-                    i + 1,
-                    offset as f64 / 1e6,
-                    end_offset as f64 / 1e6,
-                    own as f64 / 1e6,
-                    (own + slot) as f64 / 1e6
-                );
-            }
-            earliest = earliest.min(offset - own.min(offset));
-            latest_end = latest_end.max(end_offset.saturating_sub(own));
-        }
-        parts.push(format!(
-            "modem {}: {data} packets ({aborted} aborted), on the water from +{:.2} s to +{:.2} s of its {slot_seconds} s slot",
-            i + 1,
-            if data > 0 { earliest as f64 / 1e6 } else { 0.0 },
-            latest_end as f64 / 1e6
-        ));
-    }
-    format!("slots: {} outside; {}", outside, parts.join("; "))
 }
 
 async fn check(name: &str, faults: Faults, link: Link) {

@@ -21,42 +21,26 @@
 
 mod support;
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch, Gobyd};
+use support::restart::{draw_crash_point, env_number, logged, Pace, Totals};
 
-/// Messages each node publishes per round.
-const PER_ROUND: usize = 3;
-/// Longest the last phase waits for what is owed to be delivered and acked.
-const SETTLE: Duration = Duration::from_secs(120);
-
-/// A small seeded generator (xorshift64*), so that a failing run replays.
-struct Draw(u64);
-
-impl Draw {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    fn millis(&mut self, low: u64, high: u64) -> Duration {
-        Duration::from_millis(low + self.next() % (high - low))
-    }
-}
-
-fn env_number(name: &str, default: u64) -> u64 {
-    match std::env::var(name) {
-        Ok(v) => v
-            .parse()
-            .unwrap_or_else(|_| panic!("{name}={v:?} is not a number")),
-        Err(_) => default,
-    }
-}
+/// How a run goes: three messages from each node per round, a kill 0.1 to
+/// 2.5 s after them, down for up to 1.5 s, a crash point armed at one
+/// restart in two; at most 120 s for what is owed to be delivered.
+const PACE: Pace = Pace {
+    per_round: 3,
+    publish_gap: (50, 400),
+    before_kill: (100, 2500),
+    down: (0, 1500),
+    arm: draw_crash_point,
+    settle: Duration::from_secs(120),
+    revive_while_waiting: false,
+    await_crash_point: Duration::ZERO,
+};
 
 fn config(id: i32, ports: [u16; 2], data_dir: &Path) -> String {
     let me = ports[(id - 1) as usize];
@@ -99,260 +83,16 @@ log {{ level: "info" raw_log: true }}
     )
 }
 
-/// Notes of the messages node `dir` handed to its clients, from its
-/// mission log.
-fn delivered(data_dir: &Path) -> HashMap<String, usize> {
-    logged(data_dir, "in")
-}
-
-/// Notes of the messages of mission log lines `"msg": kind` ("in": handed
-/// to clients, "ack": acknowledged).
-fn logged(data_dir: &Path, kind: &str) -> HashMap<String, usize> {
-    let mut count = HashMap::new();
-    let Ok(text) = std::fs::read_to_string(data_dir.join("raw.log")) else {
-        return count;
-    };
-    for line in text.lines() {
-        let Ok(v) = serde_json::from_str::<Value>(line) else {
-            continue;
-        };
-        if v["msg"] == kind {
-            if let Some(note) = v["value"]["note"].as_str() {
-                *count.entry(note.to_string()).or_default() += 1;
-            }
-        }
-    }
-    count
-}
-
-fn owed(data_dir: &Path) -> HashMap<String, usize> {
-    let mut count = HashMap::new();
-    let (journal, _) = queue::Journal::open(data_dir.join("outbox.journal")).unwrap();
-    for entry in journal.entries() {
-        let c: protos::goby::example::Command =
-            prost::Message::decode(entry.message.as_slice()).unwrap();
-        *count.entry(c.note().to_string()).or_default() += 1;
-    }
-    count
-}
-
-/// Notes of the messages node `dir` handed over again after a restart
-/// (flagged `recovered` in its mission log).
-fn recovered(data_dir: &Path) -> HashMap<String, usize> {
-    let mut count = HashMap::new();
-    let Ok(text) = std::fs::read_to_string(data_dir.join("raw.log")) else {
-        return count;
-    };
-    for line in text.lines() {
-        let Ok(v) = serde_json::from_str::<Value>(line) else {
-            continue;
-        };
-        if v["msg"] == "in" && v["recovered"] == true {
-            if let Some(note) = v["value"]["note"].as_str() {
-                *count.entry(note.to_string()).or_default() += 1;
-            }
-        }
-    }
-    count
-}
-
-/// What one run (or several) came to.
-#[derive(Debug, Default, Clone, Copy)]
-struct Totals {
-    runs: usize,
-    kills: usize,
-    crash_points: usize,
-    accepted: usize,
-    delivered: usize,
-    duplicates: usize,
-    recovered_repeats: usize,
-    /// Messages handed over after a restart, from the inbox.
-    handed_after_restart: usize,
-    owed: usize,
-    lost: usize,
-    awaiting_ack: usize,
-}
-
-impl Totals {
-    fn add(&mut self, o: &Totals) {
-        self.runs += o.runs;
-        self.kills += o.kills;
-        self.crash_points += o.crash_points;
-        self.accepted += o.accepted;
-        self.delivered += o.delivered;
-        self.duplicates += o.duplicates;
-        self.recovered_repeats += o.recovered_repeats;
-        self.handed_after_restart += o.handed_after_restart;
-        self.owed += o.owed;
-        self.lost += o.lost;
-        self.awaiting_ack += o.awaiting_ack;
-    }
-
-    fn line(&self) -> String {
-        format!(
-            "{} runs: {} SIGKILLs, {} crash points; accepted {} delivered {} duplicates {} (of which flagged recovered {}) owed {} lost {} (delivered, ack not yet heard: {}; handed over from the inbox after a restart: {})",
-            self.runs,
-            self.kills,
-            self.crash_points,
-            self.accepted,
-            self.delivered,
-            self.duplicates,
-            self.recovered_repeats,
-            self.owed,
-            self.lost,
-            self.awaiting_ack,
-            self.handed_after_restart
-        )
-    }
-}
-
-/// A node's daemon, started again with a crash point armed or not.
-fn start(config: &Path, crash: Option<&str>) -> Gobyd {
-    match crash {
-        Some(point) => Gobyd::start(config, &[("GOBYD_CRASH_POINT", point)]),
-        None => Gobyd::start(config, &[]),
-    }
-}
-
-/// A crash point, armed in one restart of two: `received`, `recorded` or
-/// `handed-over`, at the first or second transmission received. An armed
-/// node is not the next victim of a SIGKILL (unless both are armed).
-fn draw_crash_point(draw: &mut Draw) -> Option<String> {
-    if draw.next().is_multiple_of(2) {
-        return None;
-    }
-    let point = ["received", "recorded", "handed-over"][(draw.next() % 3) as usize];
-    Some(format!("{point}:{}", 1 + draw.next() % 2))
-}
-
 fn run(seed: u64, rounds: usize) -> Totals {
     let dir = scratch("restart", &format!("seed{seed}"));
     let ports = [free_udp_port(), free_udp_port()];
-    let configs: Vec<PathBuf> = [1, 2]
-        .into_iter()
-        .map(|id| {
-            let path = dir.join(format!("node{id}.cfg"));
-            let data = dir.join(format!("node{id}"));
-            std::fs::write(&path, config(id, ports, &data)).unwrap();
-            path
-        })
-        .collect();
-    let data: Vec<PathBuf> = [1, 2]
-        .iter()
-        .map(|id| dir.join(format!("node{id}")))
-        .collect();
-    let mut nodes: Vec<Option<Gobyd>> = configs.iter().map(|c| Some(start(c, None))).collect();
-    let mut draw = Draw(0x5eed_2026 ^ seed.wrapping_mul(0x9e37_79b9_7f4a_7c15));
-    let mut accepted: Vec<(i32, String)> = Vec::new();
-    let mut totals = Totals {
-        runs: 1,
-        ..Default::default()
-    };
-    // Whether a node runs with a crash point armed.
-    let mut armed = [false; 2];
-    // A node that died at its crash point comes back (unarmed).
-    let revive = |nodes: &mut Vec<Option<Gobyd>>, armed: &mut [bool; 2], totals: &mut Totals| {
-        for (i, node) in nodes.iter_mut().enumerate() {
-            if node.as_mut().is_some_and(|n| n.has_exited()) {
-                totals.crash_points += 1;
-                node.take().unwrap().kill();
-                *node = Some(start(&configs[i], None));
-                armed[i] = false;
-            }
-        }
-    };
-    for round in 0..rounds {
-        for i in 0..PER_ROUND {
-            for from in 1..=2i32 {
-                revive(&mut nodes, &mut armed, &mut totals);
-                let note = format!("{from}r{round}m{i}");
-                let node = nodes[(from - 1) as usize].as_mut().unwrap();
-                let line = format!(
-                    r#"{{"publish": "goby.example.Command", "msg": {{"destination": {}, "action": "GOTO", "note": "{note}"}}}}"#,
-                    3 - from
-                );
-                if node
-                    .request(&line)
-                    .is_some_and(|v| v.get("accepted").is_some())
-                {
-                    accepted.push((from, note));
-                }
-            }
-            std::thread::sleep(draw.millis(50, 400));
-        }
-        // A random moment later, one of the two dies and comes back,
-        // perhaps armed to die again at a crash point.
-        revive(&mut nodes, &mut armed, &mut totals);
-        std::thread::sleep(draw.millis(100, 2500));
-        let mut victim = (draw.next() % 2) as usize;
-        if armed[victim] && !armed[1 - victim] {
-            // Left to reach its crash point.
-            victim = 1 - victim;
-        }
-        nodes[victim].take().unwrap().kill();
-        totals.kills += 1;
-        std::thread::sleep(draw.millis(0, 1500));
-        let crash = draw_crash_point(&mut draw);
-        armed[victim] = crash.is_some();
-        nodes[victim] = Some(start(&configs[victim], crash.as_deref()));
-    }
-    // Both unarmed from here on: time to deliver what is owed.
-    for (i, node) in nodes.iter_mut().enumerate() {
-        let mut old = node.take().unwrap();
-        if old.has_exited() {
-            totals.crash_points += 1;
-        }
-        old.kill();
-        *node = Some(start(&configs[i], None));
-    }
-    let deadline = Instant::now() + SETTLE;
-    loop {
-        // The logs only (the journals are read once the daemons are gone).
-        let got = [delivered(&data[0]), delivered(&data[1])];
-        let acked = [logged(&data[0], "ack"), logged(&data[1], "ack")];
-        let done = accepted.iter().all(|(from, note)| {
-            got[(2 - from) as usize].contains_key(note)
-                && acked[(from - 1) as usize].contains_key(note)
-        });
-        if done || Instant::now() > deadline {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(500));
-    }
-    for node in nodes.iter_mut() {
-        node.take().unwrap().kill();
-    }
-    let got = [delivered(&data[0]), delivered(&data[1])];
-    let recovered = [recovered(&data[0]), recovered(&data[1])];
-    let owes = [owed(&data[0]), owed(&data[1])];
-    totals.accepted = accepted.len();
-    totals.handed_after_restart = recovered.iter().map(|r| r.values().sum::<usize>()).sum();
-    for (from, note) in &accepted {
-        let receiver = (2 - from) as usize;
-        let n = got[receiver].get(note).copied().unwrap_or(0);
-        let is_owed = owes[(from - 1) as usize].contains_key(note);
-        match n {
-            0 if is_owed => totals.owed += 1,
-            0 => {
-                totals.lost += 1;
-                println!("seed {seed}: lost {note}");
-            }
-            1 => totals.delivered += 1,
-            _ => {
-                totals.delivered += 1;
-                totals.duplicates += n - 1;
-                // Repeats flagged as handed over again after a restart
-                // (the moment between a hand-over and its mark).
-                let flagged = recovered[receiver].get(note).copied().unwrap_or(0);
-                totals.recovered_repeats += flagged.min(n - 1);
-                println!("seed {seed}: {note} handed over {n} times");
-            }
-        }
-        if n > 0 && is_owed {
-            totals.awaiting_ack += 1;
-        }
-    }
-    println!("restart seed {seed}: {}", totals.line());
+    let data: [PathBuf; 2] = [1, 2].map(|id| dir.join(format!("node{id}")));
+    let configs: [PathBuf; 2] = [1, 2].map(|id| {
+        let path = dir.join(format!("node{id}.cfg"));
+        std::fs::write(&path, config(id, ports, &data[(id - 1) as usize])).unwrap();
+        path
+    });
+    let totals = support::restart::run("restart", seed, rounds, &configs, &data, &PACE);
     if totals.lost == 0 && totals.duplicates == 0 {
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -369,17 +109,7 @@ fn killed_daemons_lose_nothing_and_deliver_nothing_twice() {
         all.add(&run(seed, rounds));
     }
     println!("restart total, {rounds} rounds each: {}", all.line());
-    assert!(all.kills + all.crash_points > 0, "nothing was killed");
-    assert_eq!(
-        all.duplicates - all.recovered_repeats,
-        0,
-        "a message reached a client twice"
-    );
-    assert_eq!(
-        all.lost, 0,
-        "an accepted message was neither delivered nor owed"
-    );
-    assert!(all.delivered > 0, "nothing was delivered");
+    all.check();
 }
 
 /// A receiver that dies right after recording a message (crash point

@@ -4,3 +4,5 @@
 
 pub mod broker;
 pub mod daemon;
+pub mod micromodem;
+pub mod restart;

@@ -1,0 +1,175 @@
+//! Restarts over WHOI Micro-Modems: two `gobyd` processes exchange
+//! acknowledged messages over two emulated Micro-Modem 2s (in this test's
+//! process, on real pseudo-terminals, rate 1, fixed TDMA with 8 s slots,
+//! 10 % of data frames failing their CRC and 10 % of acks lost) while either
+//! daemon dies, several times a run, and is started again on the same modem
+//! (the emulators live on; the restarted daemon opens the pseudo-terminal
+//! again):
+//!
+//! - killed with SIGKILL at moments drawn from a seeded generator, or
+//! - aborting on its own at a crash point of the receive path
+//!   (`GOBYD_CRASH_POINT`, see `gobyd::crash_point`), armed at every
+//!   restart, the points taken in turn: `received` (the driver has reported
+//!   a data transmission its modem decoded, nothing recorded yet),
+//!   `recorded` and `handed-over`, each at the first data transmission the
+//!   restarted daemon receives; the next kill waits (up to 35 s) for the
+//!   armed daemon to reach its point.
+//!
+//! Every message accepted must then be delivered exactly once to the
+//! receiver's clients or be still owed in the sender's journal; none lost,
+//! none twice (the assertions of `restart.rs`).
+//!
+//! The `received` crash point is the window of the Micro-Modem's own acks:
+//! a modem that acknowledges a frame as soon as it decodes it has acked
+//! the messages the receiving daemon then dies without recording, and the
+//! sender drops them as delivered. With those hardware acks this test
+//! reports such messages as lost and fails (see "The limit of modem acks"
+//! in the README); it passes only when the receiving side acknowledges
+//! after its inbox recorded the messages (the driver's
+//! `use_application_acks`). Each lost message is printed with what
+//! happened to its receiver around the moment the ack reached its sender.
+//!
+//! `GOBYD_MM_RESTART_APP_ACKS=0` or `=1` writes `use_application_acks:
+//! false` or `true` into the driver's `micromodem { … }` block (unset: the
+//! driver's default, nothing written). `cargo test -p gobyd --test
+//! micromodem_restart -- --nocapture` prints the totals and the slots the
+//! modems kept. More runs: `GOBYD_MM_RESTART_RUNS=N` (seeds follow one
+//! another from `GOBYD_MM_RESTART_SEED`, default 1),
+//! `GOBYD_MM_RESTART_ROUNDS=R` kill-and-restart rounds per run (default 4).
+
+mod support;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+use support::daemon::scratch;
+use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
+use support::restart::{env_number, every_crash_point_in_turn, Pace, Totals};
+
+/// Length of each node's TDMA slot at rate 1 (three 64-byte frames at
+/// 250 bit/s: 6.1 s on the water, with the packet's overhead and the
+/// modem's delay before it).
+const SLOT_SECONDS: f64 = 8.0;
+
+/// How a run goes, scaled to a 16 s TDMA cycle: three messages from each
+/// node per round; up to 35 s (two cycles) for a daemon armed with a
+/// crash point to reach it; a kill 1 to 8 s later; down for up to 3 s; a
+/// crash point armed at every restart (in turn); at most 150 s for what is
+/// owed to be delivered.
+const PACE: Pace = Pace {
+    per_round: 3,
+    publish_gap: (100, 1500),
+    before_kill: (1000, 8000),
+    down: (0, 3000),
+    arm: every_crash_point_in_turn,
+    settle: Duration::from_secs(150),
+    revive_while_waiting: true,
+    await_crash_point: Duration::from_secs(35),
+};
+
+/// The `micromodem { … }` fields `GOBYD_MM_RESTART_APP_ACKS` asks for.
+fn application_acks() -> String {
+    match std::env::var("GOBYD_MM_RESTART_APP_ACKS").as_deref() {
+        Err(_) => String::new(),
+        Ok("0") => "use_application_acks: false".into(),
+        Ok("1") => "use_application_acks: true".into(),
+        Ok(v) => panic!("GOBYD_MM_RESTART_APP_ACKS={v:?}: 0 or 1"),
+    }
+}
+
+fn config(id: u32, modem: &Path, data_dir: &Path, extra: &str) -> String {
+    format!(
+        r#"
+modem_id: {id}
+{}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1  dest: -1  rate: 1  slot_seconds: {SLOT_SECONDS} }}
+  slot {{ src: 2  dest: -1  rate: 1  slot_seconds: {SLOT_SECONDS} }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 1800
+    role {{ type: DESTINATION_ID  field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "127.0.0.1:0" }}
+data_dir: "{}"
+log {{ level: "info" raw_log: true }}
+"#,
+        micromodem_driver(modem, extra),
+        data_dir.display()
+    )
+}
+
+fn run(seed: u64, rounds: usize, runtime: &tokio::runtime::Runtime) -> Totals {
+    let dir = scratch("mm-restart", &format!("seed{seed}"));
+    let faults = EmulatorFaults {
+        bad_crc: 0.1,
+        lost_ack: 0.1,
+        seed,
+    };
+    let emulators = runtime.block_on(async {
+        let mut e = start_emulators(&dir, Dialect::MicroModem2, faults);
+        for h in &mut e {
+            h.path().await.expect("emulated modem present");
+        }
+        e
+    });
+    let extra = application_acks();
+    let data: [PathBuf; 2] = [1, 2].map(|id| dir.join(format!("node{id}")));
+    let configs: [PathBuf; 2] = [1u32, 2].map(|id| {
+        let path = dir.join(format!("node{id}.cfg"));
+        let text = config(id, &modem_path(&dir, id), &data[(id - 1) as usize], &extra);
+        std::fs::write(&path, text).unwrap();
+        path
+    });
+    let totals = support::restart::run("micromodem restart", seed, rounds, &configs, &data, &PACE);
+    let air: Vec<_> = emulators.iter().map(|e| e.air_log()).collect();
+    runtime.block_on(async {
+        for e in emulators {
+            e.stop().await;
+        }
+    });
+    println!(
+        "micromodem restart seed {seed}: {}",
+        slot_report(&air, SLOT_SECONDS)
+    );
+    if totals.lost == 0 && totals.duplicates == 0 {
+        let _ = std::fs::remove_dir_all(&dir);
+    } else {
+        println!(
+            "micromodem restart seed {seed}: data directories and mission logs kept in {}",
+            dir.display()
+        );
+    }
+    totals
+}
+
+#[test]
+fn killed_daemons_over_micromodems_lose_nothing_and_deliver_nothing_twice() {
+    let runs = env_number("GOBYD_MM_RESTART_RUNS", 1);
+    let first = env_number("GOBYD_MM_RESTART_SEED", 1);
+    let rounds = env_number("GOBYD_MM_RESTART_ROUNDS", 4) as usize;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let acks = match application_acks() {
+        e if e.is_empty() => "the driver's default acks".to_string(),
+        e => e,
+    };
+    let mut all = Totals::default();
+    for seed in first..first + runs {
+        all.add(&run(seed, rounds, &runtime));
+    }
+    println!(
+        "micromodem restart total, {rounds} rounds each, {acks}: {}",
+        all.line()
+    );
+    all.check();
+}
