@@ -1,6 +1,6 @@
 //! Restarts over WHOI Micro-Modems: two `gobyd` processes exchange
 //! acknowledged messages over two emulated Micro-Modem 2s (in this test's
-//! process, on real pseudo-terminals, rate 1, fixed TDMA with 8 s slots,
+//! process, on real pseudo-terminals, rate 5, fixed TDMA with 5 s slots,
 //! 10 % of data frames failing their CRC and 10 % of acks lost) while either
 //! daemon dies, several times a run, and is started again on the same modem
 //! (the emulators live on; the restarted daemon opens the pseudo-terminal
@@ -12,7 +12,7 @@
 //!   restart, the points taken in turn: `received` (the driver has reported
 //!   a data transmission its modem decoded, nothing recorded yet),
 //!   `recorded` and `handed-over`, each at the first data transmission the
-//!   restarted daemon receives; the next kill waits (up to 35 s) for the
+//!   restarted daemon receives; the next kill waits (up to 25 s) for the
 //!   armed daemon to reach its point.
 //!
 //! Every message accepted must then be delivered exactly once to the
@@ -47,25 +47,29 @@ use support::daemon::scratch;
 use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
 use support::restart::{env_number, every_crash_point_in_turn, Pace, Totals};
 
-/// Length of each node's TDMA slot at rate 1 (three 64-byte frames at
-/// 250 bit/s: 6.1 s on the water, with the packet's overhead and the
-/// modem's delay before it).
-const SLOT_SECONDS: f64 = 8.0;
+/// Rate of the TDMA slots: eight 256-byte frames at 5300 bit/s.
+const RATE: u32 = 5;
+/// Length of each node's TDMA slot (the packet 3.6 s on the water, with its
+/// overhead and the modem's delay before it, then the way to the other
+/// modem and its ack back).
+const SLOT_SECONDS: f64 = 5.0;
 
-/// How a run goes, scaled to a 16 s TDMA cycle: three messages from each
-/// node per round; up to 35 s (two cycles) for a daemon armed with a
-/// crash point to reach it; a kill 1 to 8 s later; down for up to 3 s; a
-/// crash point armed at every restart (in turn); at most 150 s for what is
-/// owed to be delivered.
+/// How a run goes, scaled to the 10 s TDMA cycle: three messages from
+/// each node per round; up to 25 s (two and a half cycles) for a daemon
+/// armed with a crash point to reach it; a kill 1 to 6 s later; down for
+/// up to 3 s; a crash point armed at every restart (in turn); at most 75 s
+/// (seven cycles) for what is owed to be delivered and acknowledged (a run
+/// that lost messages waits all of it).
 const PACE: Pace = Pace {
     per_round: 3,
     publish_gap: (100, 1500),
-    before_kill: (1000, 8000),
+    before_kill: (1000, 6000),
     down: (0, 3000),
     arm: every_crash_point_in_turn,
-    settle: Duration::from_secs(150),
+    settle: Duration::from_secs(75),
     revive_while_waiting: true,
-    await_crash_point: Duration::from_secs(35),
+    settle_restarts_all: false,
+    await_crash_point: Duration::from_secs(25),
 };
 
 /// The `micromodem { … }` fields `GOBYD_MM_RESTART_APP_ACKS` asks for.
@@ -85,8 +89,8 @@ modem_id: {id}
 {}
 mac {{
   type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1  dest: -1  rate: 1  slot_seconds: {SLOT_SECONDS} }}
-  slot {{ src: 2  dest: -1  rate: 1  slot_seconds: {SLOT_SECONDS} }}
+  slot {{ src: 1  dest: -1  rate: {RATE}  slot_seconds: {SLOT_SECONDS} }}
+  slot {{ src: 2  dest: -1  rate: {RATE}  slot_seconds: {SLOT_SECONDS} }}
 }}
 queue {{
   message_entry {{

@@ -39,6 +39,7 @@ const PACE: Pace = Pace {
     arm: draw_crash_point,
     settle: Duration::from_secs(120),
     revive_while_waiting: false,
+    settle_restarts_all: true,
     await_crash_point: Duration::ZERO,
 };
 

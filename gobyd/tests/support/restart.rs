@@ -245,6 +245,10 @@ pub struct Pace {
     /// at all; an armed node is then left alone by the kill, unless both
     /// are armed, and is started again unarmed for the last phase).
     pub await_crash_point: Duration,
+    /// Whether both daemons are started again (unarmed) for the last
+    /// phase; else only one still armed (or dead) is (one that is not keeps
+    /// running, its cycle in flight and the ack it awaits with it).
+    pub settle_restarts_all: bool,
 }
 
 /// What happened to a node, and when (microseconds since the epoch).
@@ -390,6 +394,10 @@ pub fn run(
     }
     // Both unarmed from here on: time to deliver what is owed.
     for (i, node) in nodes.iter_mut().enumerate() {
+        let exited = node.as_mut().is_some_and(|n| n.has_exited());
+        if !pace.settle_restarts_all && armed[i].is_none() && !exited {
+            continue;
+        }
         let mut old = node.take().unwrap();
         if old.has_exited() {
             totals.crash_points += 1;
