@@ -128,6 +128,11 @@ fn run(seed: u64, rounds: usize, runtime: &tokio::runtime::Runtime) -> Totals {
     let configs: [PathBuf; 2] = [1u32, 2].map(|id| {
         let path = dir.join(format!("node{id}.cfg"));
         let text = config(id, &modem_path(&dir, id), &data[(id - 1) as usize], &extra);
+        // Refused here, naming the field, rather than by a daemon that
+        // never opens its JSON interface.
+        if let Err(e) = gobyd::config::parse(&text, "micromodem restart test") {
+            panic!("the test's gobyd configuration is refused: {e}");
+        }
         std::fs::write(&path, text).unwrap();
         path
     });
