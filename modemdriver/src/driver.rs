@@ -331,7 +331,9 @@ impl EventSink {
     /// The answer is checked against the template: at most `max_num_frames`
     /// frames, each at most `max_frame_bytes` long (longer ones are dropped
     /// and reported); `src`, `rate` and `frame_start` are kept from the
-    /// template. With no answer, the template comes back without frames.
+    /// template. Bytes already in the template's frames (e.g. a driver's
+    /// own header) are the answer's to keep: the answer's frames replace
+    /// them. With no answer, the template comes back as it was.
     pub async fn request_data(
         &self,
         template: ModemTransmission,
@@ -347,6 +349,7 @@ impl EventSink {
             _ => return template,
         };
         let mut out = template.clone();
+        out.frame.clear();
         if template.dest() == -1 {
             out.dest = filled.dest;
         }

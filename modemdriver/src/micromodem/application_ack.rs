@@ -1,0 +1,576 @@
+//! Application acks over the Micro-Modem (`use_application_acks`).
+//!
+//! A Micro-Modem acknowledges a frame in hardware as soon as it decodes it,
+//! before the host has read it: a host that dies in between loses a message
+//! its sender was told was received. With application acks the modem is
+//! asked for none; instead every data (or FDP) transmission of a node
+//! starts, in frame 0, with a [`MicroModemApplicationAck`] — Goby's
+//! `MMApplicationAck`, DCCL id 10, same bytes — that
+//!
+//! - numbers the transmission's frames: `frame_start`, then one number per
+//!   frame, counting on from transmission to transmission and back to 0
+//!   when the next packet's frames would pass 31 (as Goby does);
+//! - says whether its data asks to be acknowledged (`ack_requested`);
+//! - acknowledges frames of other nodes (`part`: the node, and a bit per
+//!   frame number), at most four nodes at a time.
+//!
+//! The receiving driver strips it before handing the frames up, turns the
+//! parts naming this node into `ACK` transmissions (carrying the
+//! `unique_id` of the transmission that sent the frame, so that the queue
+//! credits that transmission and no other), and owes an ack for the frames
+//! received once the layer above acknowledges them (`Driver::acknowledge`,
+//! with `DriverConfig.deferred_ack`) or at once (without). Owed acks ride
+//! in this node's next transmission heard by their node: one addressed to
+//! it, or a broadcast; a transmission with nothing else to send still goes
+//! out when it carries acks.
+//!
+//! This module keeps that bookkeeping; it does no input or output.
+
+use dccl::Codec;
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{
+    micro_modem_application_ack::AckPart, modem_transmission::TransmissionType,
+    MicroModemApplicationAck, ModemTransmission,
+};
+
+use crate::driver::Acknowledgement;
+use crate::time::now_micros;
+
+/// Frame numbers run from 0 to 31 (the width of `acked_frames`).
+pub const FRAME_NUMBERS: u32 = 32;
+
+/// Nodes acknowledged in one transmission at most (`part` max_repeat).
+pub const MAX_PARTS: usize = 4;
+
+/// Highest modem id an ack can name (`ack_dest` is 0-31).
+pub const MAX_MODEM_ID: u32 = 31;
+
+/// The DCCL id of [`MicroModemApplicationAck`].
+pub const DCCL_ID: u32 = 10;
+
+/// Broadcast destination.
+const BROADCAST: i32 = 0;
+/// Destination chosen by the layer above.
+const QUERY: i32 = -1;
+
+/// A frame of ours that went out, by its number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct SentFrame {
+    unique_id: Option<u32>,
+    dest: i32,
+}
+
+/// The acks placed in a transmission being filled, given back when it
+/// finally fails to go out.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Placed {
+    parts: Vec<(u32, u32)>,
+    /// The ack message as placed at the start of frame 0.
+    placeholder: Vec<u8>,
+}
+
+/// Why a filled transmission could not carry its ack message.
+#[derive(Debug, thiserror::Error)]
+pub enum CompleteError {
+    /// The answer to the data request did not start with the ack message.
+    #[error("the answer to the data request dropped the application ack placed in frame 0")]
+    Dropped,
+    /// The ack message changed size (cannot happen with its definition).
+    #[error("the application ack changed size when completed")]
+    Size,
+    /// The ack message did not encode.
+    #[error("the application ack does not encode: {0}")]
+    Encode(dccl::Error),
+}
+
+/// Application-ack bookkeeping of one driver.
+#[derive(Debug)]
+pub struct ApplicationAcks {
+    codec: Codec,
+    modem_id: u32,
+    next_frame: u32,
+    /// Our frames by number: the transmission that last used the number.
+    sent: [Option<SentFrame>; FRAME_NUMBERS as usize],
+    /// Frames of others to acknowledge: (node, bit per frame number), in the
+    /// order first owed.
+    owed: Vec<(u32, u32)>,
+}
+
+/// What a received transmission held for this bookkeeping.
+#[derive(Debug, Default)]
+pub struct Heard {
+    /// `ACK` transmissions for our frames it acknowledged.
+    pub acks: Vec<ModemTransmission>,
+    /// Its ack message could not be decoded (the frame is left as it was).
+    pub error: Option<String>,
+}
+
+impl ApplicationAcks {
+    /// Bookkeeping for the node `modem_id`.
+    ///
+    /// # Errors
+    /// The ack message does not load in the DCCL codec (a build fault).
+    pub fn new(modem_id: u32) -> Result<Self, dccl::Error> {
+        let mut codec = Codec::new();
+        codec.load(&MicroModemApplicationAck::default().descriptor())?;
+        Ok(ApplicationAcks {
+            codec,
+            modem_id,
+            next_frame: 0,
+            sent: [None; FRAME_NUMBERS as usize],
+            owed: Vec::new(),
+        })
+    }
+
+    /// Whether acks are owed to anyone.
+    pub fn owes(&self) -> bool {
+        !self.owed.is_empty()
+    }
+
+    /// Prepares a data request: numbers its frames (`frame_start`), sends a
+    /// transmission whose destination is left to the layer above (-1) to a
+    /// node owed acks, and places the ack message (with `ack_requested`
+    /// unset for now, the same size) at the start of frame 0, so that the
+    /// layer above fills the rest. The acks placed are those the
+    /// destination hears: all (at most four nodes) for a broadcast, else
+    /// the destination's own.
+    pub fn prepare(&mut self, template: &mut ModemTransmission) -> Result<Placed, dccl::Error> {
+        let frames = template.max_num_frames().clamp(1, FRAME_NUMBERS);
+        if self.next_frame + frames > FRAME_NUMBERS {
+            self.next_frame = 0;
+        }
+        template.frame_start = Some(self.next_frame);
+        if template.dest() == QUERY {
+            if let Some(&(node, _)) = self.owed.first() {
+                template.dest = Some(node as i32);
+            }
+        }
+        let dest = template.dest();
+        let mut parts = Vec::new();
+        self.owed.retain(|&(node, mask)| {
+            let heard = dest == BROADCAST || dest == node as i32;
+            if heard && parts.len() < MAX_PARTS {
+                parts.push((node, mask));
+                false
+            } else {
+                true
+            }
+        });
+        let placeholder = self.encode(&parts, false, self.next_frame)?;
+        template.frame.clear();
+        template.frame.push(placeholder.clone());
+        Ok(Placed { parts, placeholder })
+    }
+
+    /// Completes a filled data request prepared by
+    /// [`prepare`](Self::prepare): the ack message now says whether the
+    /// data asks for acks, the frames are remembered by number (with the
+    /// transmission's `unique_id` and destination), and the numbering moves
+    /// on. A transmission carrying neither data nor acks is emptied (nothing
+    /// to send). The hardware ack is not asked for (`ack_requested` stays
+    /// the data's: the caller sends the modem no ack flag).
+    pub fn complete(
+        &mut self,
+        filled: &mut ModemTransmission,
+        placed: &Placed,
+    ) -> Result<(), CompleteError> {
+        let len = placed.placeholder.len();
+        let kept = filled
+            .frame
+            .first()
+            .is_some_and(|f| f.starts_with(&placed.placeholder));
+        if !kept {
+            // The layer above did not keep the ack message: its acks are
+            // owed again, and the frames go unnumbered.
+            self.restore(placed);
+            return Err(CompleteError::Dropped);
+        }
+        let frame_start = filled.frame_start();
+        let data =
+            filled.frame[0].len() > len || filled.frame.iter().skip(1).any(|f| !f.is_empty());
+        if !data && placed.parts.is_empty() {
+            filled.frame.clear();
+            return Ok(());
+        }
+        let bytes = self
+            .encode(&placed.parts, filled.ack_requested(), frame_start)
+            .map_err(CompleteError::Encode)?;
+        if bytes.len() != len {
+            self.restore(placed);
+            return Err(CompleteError::Size);
+        }
+        filled.frame[0].splice(0..len, bytes);
+        let frames = (filled.frame.len() as u32).clamp(1, FRAME_NUMBERS - frame_start);
+        for n in frame_start..frame_start + frames {
+            self.sent[n as usize] = Some(SentFrame {
+                unique_id: filled.unique_id,
+                dest: filled.dest(),
+            });
+        }
+        self.next_frame = frame_start + frames;
+        Ok(())
+    }
+
+    /// The acks placed in a transmission that finally did not go out (or
+    /// whose ack message was lost on the way) are owed again.
+    pub fn restore(&mut self, placed: &Placed) {
+        for &(node, mask) in &placed.parts {
+            self.owe(node, mask);
+        }
+    }
+
+    /// Handles a received data transmission: when frame 0 starts with an
+    /// ack message, strips it, takes `frame_start` and `ack_requested` from
+    /// it, and returns the acks of our frames it carries. A transmission
+    /// without one (a peer not using application acks) is left as it is.
+    /// Frames left empty at the end are removed (an ack-only transmission
+    /// has none left).
+    pub fn receive(&mut self, mt: &mut ModemTransmission) -> Heard {
+        let mut heard = Heard::default();
+        let Some(first) = mt.frame.first() else {
+            return heard;
+        };
+        if first.is_empty() || self.codec.id(first).ok() != Some(DCCL_ID) {
+            return heard;
+        }
+        let (ack, used) = match self
+            .codec
+            .decode_prefix(first)
+            .map_err(|e| e.to_string())
+            .and_then(|(m, used)| {
+                m.transcode_to::<MicroModemApplicationAck>()
+                    .map(|a| (a, used))
+                    .map_err(|e| e.to_string())
+            }) {
+            Ok(decoded) => decoded,
+            Err(e) => {
+                heard.error = Some(format!(
+                    "the application ack from {} does not decode: {e}",
+                    mt.src()
+                ));
+                return heard;
+            }
+        };
+        let used = used.min(mt.frame[0].len());
+        mt.frame[0].drain(..used);
+        while mt.frame.last().is_some_and(|f| f.is_empty()) {
+            mt.frame.pop();
+        }
+        mt.frame_start = Some(ack.frame_start);
+        mt.ack_requested = Some(ack.ack_requested);
+        let from = mt.src();
+        for part in &ack.part {
+            if part.ack_dest != self.modem_id as i32 {
+                continue;
+            }
+            for n in 0..FRAME_NUMBERS {
+                if part.acked_frames & (1 << n) == 0 {
+                    continue;
+                }
+                // Only the node the frame was sent to answers it.
+                let Some(sent) = self.sent[n as usize].filter(|s| s.dest == from) else {
+                    continue;
+                };
+                self.sent[n as usize] = None;
+                heard.acks.push(ModemTransmission {
+                    src: Some(from),
+                    dest: Some(self.modem_id as i32),
+                    time: Some(now_micros()),
+                    r#type: Some(TransmissionType::Ack as i32),
+                    acked_frame: vec![n as i32],
+                    unique_id: sent.unique_id,
+                    ..Default::default()
+                });
+            }
+        }
+        heard
+    }
+
+    /// Owes acks for the frames of a received transmission (as returned by
+    /// [`receive`](Self::receive)): those the layer above names, when the
+    /// data asked for acks and was addressed to this node.
+    pub fn acknowledge(&mut self, ack: &Acknowledgement) {
+        let mt = &ack.received;
+        if !Acknowledgement::wanted(mt, &[self.modem_id as i32]) {
+            return;
+        }
+        let Some(node) = u32::try_from(mt.src()).ok().filter(|&n| n <= MAX_MODEM_ID) else {
+            return;
+        };
+        let mask = ack
+            .frames
+            .iter()
+            .filter(|&&i| i < mt.frame.len())
+            .map(|&i| mt.frame_start() as usize + i)
+            .filter(|&n| n < FRAME_NUMBERS as usize)
+            .fold(0u32, |m, n| m | (1 << n));
+        if mask != 0 {
+            self.owe(node, mask);
+        }
+    }
+
+    fn owe(&mut self, node: u32, mask: u32) {
+        match self.owed.iter_mut().find(|(n, _)| *n == node) {
+            Some((_, m)) => *m |= mask,
+            None => self.owed.push((node, mask)),
+        }
+    }
+
+    fn encode(
+        &self,
+        parts: &[(u32, u32)],
+        ack_requested: bool,
+        frame_start: u32,
+    ) -> Result<Vec<u8>, dccl::Error> {
+        let ack = MicroModemApplicationAck {
+            part: parts
+                .iter()
+                .map(|&(node, mask)| AckPart {
+                    ack_dest: node as i32,
+                    acked_frames: mask,
+                })
+                .collect(),
+            ack_requested,
+            frame_start,
+        };
+        self.codec.encode(&ack.transcode_to_dynamic())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hex(s: &str) -> Vec<u8> {
+        (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+            .collect()
+    }
+
+    /// A data request as the driver makes it: `frames` frames of 32 bytes.
+    fn template(dest: i32, frames: u32, unique_id: u32) -> ModemTransmission {
+        ModemTransmission {
+            src: Some(1),
+            dest: Some(dest),
+            r#type: Some(TransmissionType::Data as i32),
+            max_num_frames: Some(frames),
+            max_frame_bytes: Some(32),
+            unique_id: Some(unique_id),
+            ..Default::default()
+        }
+    }
+
+    /// The layer above: appends `data` to frame 0 (keeping what is there).
+    fn fill(mut request: ModemTransmission, data: &[u8], ack: bool) -> ModemTransmission {
+        if !data.is_empty() {
+            request.frame[0].extend_from_slice(data);
+            request.ack_requested = Some(ack);
+        }
+        request
+    }
+
+    /// Sends one transmission from `a`, returns it as `b` hears it.
+    fn send(
+        a: &mut ApplicationAcks,
+        dest: i32,
+        data: &[u8],
+        unique_id: u32,
+    ) -> Option<ModemTransmission> {
+        let mut t = template(dest, 3, unique_id);
+        t.src = Some(a.modem_id as i32);
+        let placed = a.prepare(&mut t).unwrap();
+        let mut filled = fill(t, data, true);
+        a.complete(&mut filled, &placed).unwrap();
+        (!filled.frame.is_empty()).then_some(filled)
+    }
+
+    /// Bytes of the ack message from libdccl 4.2 (`dccl -e --format hex`
+    /// with Goby's MMApplicationAck definition), for the same values.
+    #[test]
+    fn ack_messages_encode_as_libdccl_does() {
+        let app = ApplicationAcks::new(1).unwrap();
+        let cases: [(&[(u32, u32)], bool, u32, &str); 4] = [
+            (&[], false, 0, "140000"),
+            (&[(2, 7)], true, 7, "1411070000000f"),
+            (
+                &[(2, 0xffff_ffff), (31, 1), (0, 0x8000_0000), (5, 96)],
+                true,
+                31,
+                "1414ffffffff3f000000000000000016300000801f",
+            ),
+            (&[(1, 8)], false, 3, "14090800000006"),
+        ];
+        for (parts, ack_requested, frame_start, reference) in cases {
+            let bytes = app.encode(parts, ack_requested, frame_start).unwrap();
+            assert_eq!(
+                bytes,
+                hex(reference),
+                "{parts:?} {ack_requested} {frame_start}"
+            );
+            let mut b = ApplicationAcks::new(9).unwrap();
+            let mut mt = ModemTransmission {
+                src: Some(1),
+                dest: Some(9),
+                frame: vec![bytes],
+                ..Default::default()
+            };
+            let heard = b.receive(&mut mt);
+            assert!(heard.error.is_none());
+            assert!(mt.frame.is_empty(), "an ack-only frame leaves nothing");
+            assert_eq!(mt.frame_start(), frame_start);
+            assert_eq!(mt.ack_requested(), ack_requested);
+        }
+    }
+
+    #[test]
+    fn frames_are_numbered_on_and_back_to_zero_before_passing_31() {
+        let mut a = ApplicationAcks::new(1).unwrap();
+        let mut starts = Vec::new();
+        for id in 0..12 {
+            let mut t = template(2, 3, id);
+            let placed = a.prepare(&mut t).unwrap();
+            starts.push(t.frame_start());
+            let mut filled = fill(t, &[0xaa; 3], true);
+            filled.frame.push(vec![0xbb; 4]);
+            filled.frame.push(vec![0xcc; 4]);
+            a.complete(&mut filled, &placed).unwrap();
+        }
+        assert_eq!(starts, [0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 0, 3]);
+    }
+
+    #[test]
+    fn an_ack_credits_the_transmission_that_sent_the_frame_and_only_from_its_destination() {
+        let mut a = ApplicationAcks::new(1).unwrap();
+        let mut b = ApplicationAcks::new(2).unwrap();
+        let mut c = ApplicationAcks::new(3).unwrap();
+        // 1 sends to 2 (transmission 41, frame 0), then to 3 (42, frame 1).
+        let mut to_b = send(&mut a, 2, &[0xaa, 0xbb], 41).unwrap();
+        let header = a.encode(&[], true, 0).unwrap();
+        assert!(
+            to_b.frame[0].starts_with(&header),
+            "frame 0 starts with the ack message"
+        );
+        let _to_c = send(&mut a, 3, &[0xcc], 42).unwrap();
+        // 2 strips the ack message and sees 1's data, numbered from 0.
+        assert!(b.receive(&mut to_b).acks.is_empty());
+        assert_eq!(to_b.frame, vec![vec![0xaa, 0xbb]]);
+        assert_eq!(to_b.frame_start(), 0);
+        assert!(to_b.ack_requested());
+        // Not acknowledged until the layer above says so.
+        let mut reply = send(&mut b, -1, &[], 7);
+        assert!(reply.is_none(), "nothing to send, nothing owed");
+        b.acknowledge(&Acknowledgement::all(to_b.clone()));
+        assert!(b.owes());
+        // 2's next transmission goes to 1 (owed) and carries the ack.
+        reply = send(&mut b, -1, &[], 7);
+        let mut reply = reply.expect("an ack-only transmission");
+        assert_eq!(reply.dest(), 1);
+        assert!(!b.owes());
+        // 3 hears it too (say, broadcast): nothing for 3.
+        let mut overheard = reply.clone();
+        assert!(c.receive(&mut overheard).acks.is_empty());
+        let acks = a.receive(&mut reply).acks;
+        assert_eq!(acks.len(), 1);
+        assert_eq!(acks[0].src(), 2);
+        assert_eq!(acks[0].dest(), 1);
+        assert_eq!(acks[0].acked_frame, vec![0]);
+        assert_eq!(acks[0].unique_id, Some(41));
+        assert!(reply.frame.is_empty());
+        // The same ack again credits nothing more; an ack from 2 for the
+        // frame sent to 3 credits nothing.
+        let mut again = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            frame: vec![a.encode(&[(1, 0b11)], false, 0).unwrap()],
+            ..Default::default()
+        };
+        assert!(a.receive(&mut again).acks.is_empty());
+    }
+
+    #[test]
+    fn acks_ride_only_where_their_node_hears_them() {
+        let mut b = ApplicationAcks::new(2).unwrap();
+        let received = |src: i32| ModemTransmission {
+            src: Some(src),
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(4),
+            frame: vec![vec![1], vec![2]],
+            ..Default::default()
+        };
+        b.acknowledge(&Acknowledgement::all(received(1)));
+        b.acknowledge(&Acknowledgement {
+            received: received(3),
+            frames: vec![1],
+        });
+        // Not asked for acks, or addressed elsewhere: nothing owed.
+        let mut unasked = received(4);
+        unasked.ack_requested = Some(false);
+        b.acknowledge(&Acknowledgement::all(unasked));
+        let mut elsewhere = received(5);
+        elsewhere.dest = Some(6);
+        b.acknowledge(&Acknowledgement::all(elsewhere));
+        // To node 3: only 3's ack.
+        let mut to_3 = template(3, 1, 1);
+        let placed = b.prepare(&mut to_3).unwrap();
+        assert_eq!(placed.parts, vec![(3, 1 << 5)]);
+        b.restore(&placed);
+        // Broadcast: both.
+        let mut all = template(0, 1, 2);
+        let placed = b.prepare(&mut all).unwrap();
+        assert_eq!(placed.parts, vec![(1, 0b11 << 4), (3, 1 << 5)]);
+        assert!(!b.owes());
+        // Failed to go out: owed again.
+        b.restore(&placed);
+        assert!(b.owes());
+    }
+
+    #[test]
+    fn data_from_a_peer_without_application_acks_is_left_alone() {
+        let mut b = ApplicationAcks::new(2).unwrap();
+        // A DCCL message of another id (124) first.
+        let mut mt = ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            frame_start: Some(0),
+            frame: vec![vec![0xf8, 1, 2, 3]],
+            ..Default::default()
+        };
+        let before = mt.clone();
+        let heard = b.receive(&mut mt);
+        assert!(heard.acks.is_empty() && heard.error.is_none());
+        assert_eq!(mt, before);
+        // Id 10 but cut short: reported, left as it was.
+        let mut cut = ModemTransmission {
+            src: Some(1),
+            frame: vec![vec![0x14, 0x11]],
+            ..Default::default()
+        };
+        assert!(b.receive(&mut cut).error.is_some());
+        assert_eq!(cut.frame, vec![vec![0x14, 0x11]]);
+    }
+
+    #[test]
+    fn an_answer_that_drops_the_ack_message_is_refused_and_its_acks_owed_again() {
+        let mut b = ApplicationAcks::new(2).unwrap();
+        b.acknowledge(&Acknowledgement::all(ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame: vec![vec![1]],
+            ..Default::default()
+        }));
+        let mut t = template(1, 1, 1);
+        let placed = b.prepare(&mut t).unwrap();
+        assert!(!b.owes());
+        t.frame = vec![vec![0xf8, 1]];
+        assert!(matches!(
+            b.complete(&mut t, &placed),
+            Err(CompleteError::Dropped)
+        ));
+        assert!(b.owes());
+    }
+}
