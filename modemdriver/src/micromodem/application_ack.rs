@@ -390,7 +390,8 @@ mod tests {
     #[test]
     fn ack_messages_encode_as_libdccl_does() {
         let app = ApplicationAcks::new(1).unwrap();
-        let cases: [(&[(u32, u32)], bool, u32, &str); 4] = [
+        type Case = (&'static [(u32, u32)], bool, u32, &'static str);
+        let cases: [Case; 4] = [
             (&[], false, 0, "140000"),
             (&[(2, 7)], true, 7, "1411070000000f"),
             (
