@@ -11,6 +11,11 @@
 //! receiver's clients; no message acked and never delivered; every data
 //! packet a modem puts on the water lies within its node's TDMA slot.
 //!
+//! Over the Micro-Modem the daemons send application acks (the default):
+//! a receiver acks a message only once its inbox holds it, in its own slot.
+//! The two runs with the modem's lost-ack fault use the modem's hardware
+//! acks instead (`use_application_acks: false`), which that fault drops.
+//!
 //! The Micro-Modem runs are made with the emulator speaking as a Micro-Modem
 //! 1 and, again, as a Micro-Modem 2 at rates 1 and 0 (the rate-0 cycle opens
 //! with a cycle-initialization packet; at rate 1 the modem starts
@@ -120,6 +125,10 @@ struct Faults {
     /// Modem 2 silent at these seconds for these many.
     silences: Vec<(f64, f64)>,
     seed: u64,
+    /// Micro-Modem runs: acks from the modem, on decode
+    /// (`use_application_acks: false`), instead of the daemon's
+    /// application acks; the emulator's lost-ack fault drops those.
+    hardware_acks: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -181,14 +190,19 @@ log {{ raw_log: false }}
     gobyd::config::parse(&text, "delivery test").expect("test configuration")
 }
 
-fn micromodem_driver(link: &Path) -> String {
+fn micromodem_driver(link: &Path, hardware_acks: bool) -> String {
     format!(
         r#"driver {{
   driver_type: DRIVER_WHOI_MICROMODEM
   serial_port: "{}"
-  micromodem {{ reconnect_interval_ms: 300  response_timeout_ms: 600  receive_timeout_ms: 2500 }}
+  micromodem {{ reconnect_interval_ms: 300  response_timeout_ms: 600  receive_timeout_ms: 2500{} }}
 }}"#,
-        link.display()
+        link.display(),
+        if hardware_acks {
+            "  use_application_acks: false"
+        } else {
+            ""
+        }
     )
 }
 
@@ -278,7 +292,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let mut publishers = Vec::new();
     for id in 1..=2 {
         let driver = if emulated {
-            micromodem_driver(&dir.join(format!("modem{id}")))
+            micromodem_driver(&dir.join(format!("modem{id}")), faults.hardware_acks)
         } else {
             simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed)
         };
@@ -615,6 +629,7 @@ async fn micromodem_lost_acks() {
         name: "lost-acks",
         lost_ack: 0.5,
         seed: 3,
+        hardware_acks: true,
         ..Default::default()
     };
     check(faults.name, faults, Link::MICROMODEM1).await;
@@ -688,6 +703,7 @@ async fn micromodem2_rate1_bad_crc_and_lost_acks() {
         bad_crc: 0.3,
         lost_ack: 0.4,
         seed: 9,
+        hardware_acks: true,
         ..Default::default()
     };
     check(faults.name, faults, Link::MICROMODEM2_RATE1).await;
