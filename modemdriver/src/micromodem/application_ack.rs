@@ -60,11 +60,21 @@ struct SentFrame {
     dest: i32,
 }
 
+/// Acks owed to one node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Owed {
+    node: u32,
+    /// Bit per frame number.
+    mask: u32,
+    /// Transmissions of ours that went elsewhere meanwhile.
+    waited: u32,
+}
+
 /// The acks placed in a transmission being filled, given back when it
 /// finally fails to go out.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Placed {
-    parts: Vec<(u32, u32)>,
+    parts: Vec<Owed>,
     /// The ack message as placed at the start of frame 0.
     placeholder: Vec<u8>,
 }
@@ -91,9 +101,8 @@ pub struct ApplicationAcks {
     next_frame: u32,
     /// Our frames by number: the transmission that last used the number.
     sent: [Option<SentFrame>; FRAME_NUMBERS as usize],
-    /// Frames of others to acknowledge: (node, bit per frame number), in the
-    /// order first owed.
-    owed: Vec<(u32, u32)>,
+    /// Frames of others to acknowledge, in the order first owed.
+    owed: Vec<Owed>,
 }
 
 /// What a received transmission held for this bookkeeping.
@@ -127,13 +136,16 @@ impl ApplicationAcks {
         !self.owed.is_empty()
     }
 
-    /// Prepares a data request: numbers its frames (`frame_start`), sends a
-    /// transmission whose destination is left to the layer above (-1) to a
-    /// node owed acks, and places the ack message (with `ack_requested`
-    /// unset for now, the same size) at the start of frame 0, so that the
-    /// layer above fills the rest. The acks placed are those the
-    /// destination hears: all (at most four nodes) for a broadcast, else
-    /// the destination's own.
+    /// Prepares a data request: numbers its frames (`frame_start`) and
+    /// places the ack message (with `ack_requested` unset for now) at the
+    /// start of frame 0, so that the layer above fills the rest.
+    ///
+    /// The acks placed are those the destination can hear: its own, or all
+    /// (at most four nodes) for a broadcast or a destination left to the
+    /// layer above (-1), which [`complete`](Self::complete) narrows to the
+    /// destination chosen. So that acks owed to one node are not held back
+    /// for ever by data for others, a transmission whose destination is
+    /// left open goes to a node whose acks already waited a transmission.
     pub fn prepare(&mut self, template: &mut ModemTransmission) -> Result<Placed, dccl::Error> {
         let frames = template.max_num_frames().clamp(1, FRAME_NUMBERS);
         if self.next_frame + frames > FRAME_NUMBERS {
@@ -141,16 +153,16 @@ impl ApplicationAcks {
         }
         template.frame_start = Some(self.next_frame);
         if template.dest() == QUERY {
-            if let Some(&(node, _)) = self.owed.first() {
-                template.dest = Some(node as i32);
+            if let Some(o) = self.owed.iter().find(|o| o.waited > 0) {
+                template.dest = Some(o.node as i32);
             }
         }
         let dest = template.dest();
         let mut parts = Vec::new();
-        self.owed.retain(|&(node, mask)| {
-            let heard = dest == BROADCAST || dest == node as i32;
+        self.owed.retain(|&o| {
+            let heard = dest == QUERY || dest == BROADCAST || dest == o.node as i32;
             if heard && parts.len() < MAX_PARTS {
-                parts.push((node, mask));
+                parts.push(o);
                 false
             } else {
                 true
@@ -163,16 +175,18 @@ impl ApplicationAcks {
     }
 
     /// Completes a filled data request prepared by
-    /// [`prepare`](Self::prepare): the ack message now says whether the
-    /// data asks for acks, the frames are remembered by number (with the
-    /// transmission's `unique_id` and destination), and the numbering moves
-    /// on. A transmission carrying neither data nor acks is emptied (nothing
-    /// to send). The hardware ack is not asked for (`ack_requested` stays
-    /// the data's: the caller sends the modem no ack flag).
+    /// [`prepare`](Self::prepare). The ack message now says whether the
+    /// data asks for acks and keeps only the acks the destination hears
+    /// (the others are owed still); a transmission with acks and no data
+    /// whose destination was left open goes to the one node owed, or as a
+    /// broadcast to several. The frames are remembered by number (with the
+    /// transmission's `unique_id` and destination) and the numbering moves
+    /// on. A transmission carrying neither data nor acks is emptied
+    /// (nothing to send). `placed` is left holding the acks carried.
     pub fn complete(
         &mut self,
         filled: &mut ModemTransmission,
-        placed: &Placed,
+        placed: &mut Placed,
     ) -> Result<(), CompleteError> {
         let len = placed.placeholder.len();
         let kept = filled
@@ -192,19 +206,45 @@ impl ApplicationAcks {
             filled.frame.clear();
             return Ok(());
         }
-        let bytes = self
-            .encode(&placed.parts, filled.ack_requested(), frame_start)
-            .map_err(CompleteError::Encode)?;
-        if bytes.len() != len {
-            self.restore(placed);
-            return Err(CompleteError::Size);
+        if filled.dest() == QUERY {
+            filled.dest = Some(match placed.parts.as_slice() {
+                [only] if !data => only.node as i32,
+                _ => BROADCAST,
+            });
         }
+        let dest = filled.dest();
+        let (carried, held): (Vec<Owed>, Vec<Owed>) = placed
+            .parts
+            .iter()
+            .partition(|o| dest == BROADCAST || dest == o.node as i32);
+        for o in held {
+            self.owe(Owed {
+                waited: o.waited + 1,
+                ..o
+            });
+        }
+        placed.parts = carried;
+        if !data && placed.parts.is_empty() {
+            filled.frame.clear();
+            return Ok(());
+        }
+        let bytes = match self.encode(&placed.parts, filled.ack_requested(), frame_start) {
+            Ok(bytes) if bytes.len() <= len => bytes,
+            Ok(_) => {
+                self.restore(placed);
+                return Err(CompleteError::Size);
+            }
+            Err(e) => {
+                self.restore(placed);
+                return Err(CompleteError::Encode(e));
+            }
+        };
         filled.frame[0].splice(0..len, bytes);
         let frames = (filled.frame.len() as u32).clamp(1, FRAME_NUMBERS - frame_start);
         for n in frame_start..frame_start + frames {
             self.sent[n as usize] = Some(SentFrame {
                 unique_id: filled.unique_id,
-                dest: filled.dest(),
+                dest,
             });
         }
         self.next_frame = frame_start + frames;
@@ -214,8 +254,11 @@ impl ApplicationAcks {
     /// The acks placed in a transmission that finally did not go out (or
     /// whose ack message was lost on the way) are owed again.
     pub fn restore(&mut self, placed: &Placed) {
-        for &(node, mask) in &placed.parts {
-            self.owe(node, mask);
+        for &o in &placed.parts {
+            self.owe(Owed {
+                waited: o.waited + 1,
+                ..o
+            });
         }
     }
 
@@ -305,29 +348,36 @@ impl ApplicationAcks {
             .filter(|&n| n < FRAME_NUMBERS as usize)
             .fold(0u32, |m, n| m | (1 << n));
         if mask != 0 {
-            self.owe(node, mask);
+            self.owe(Owed {
+                node,
+                mask,
+                waited: 0,
+            });
         }
     }
 
-    fn owe(&mut self, node: u32, mask: u32) {
-        match self.owed.iter_mut().find(|(n, _)| *n == node) {
-            Some((_, m)) => *m |= mask,
-            None => self.owed.push((node, mask)),
+    fn owe(&mut self, owed: Owed) {
+        match self.owed.iter_mut().find(|o| o.node == owed.node) {
+            Some(o) => {
+                o.mask |= owed.mask;
+                o.waited = o.waited.max(owed.waited);
+            }
+            None => self.owed.push(owed),
         }
     }
 
     fn encode(
         &self,
-        parts: &[(u32, u32)],
+        parts: &[Owed],
         ack_requested: bool,
         frame_start: u32,
     ) -> Result<Vec<u8>, dccl::Error> {
         let ack = MicroModemApplicationAck {
             part: parts
                 .iter()
-                .map(|&(node, mask)| AckPart {
-                    ack_dest: node as i32,
-                    acked_frames: mask,
+                .map(|o| AckPart {
+                    ack_dest: o.node as i32,
+                    acked_frames: o.mask,
                 })
                 .collect(),
             ack_requested,
@@ -379,10 +429,25 @@ mod tests {
     ) -> Option<ModemTransmission> {
         let mut t = template(dest, 3, unique_id);
         t.src = Some(a.modem_id as i32);
-        let placed = a.prepare(&mut t).unwrap();
+        let mut placed = a.prepare(&mut t).unwrap();
         let mut filled = fill(t, data, true);
-        a.complete(&mut filled, &placed).unwrap();
+        a.complete(&mut filled, &mut placed).unwrap();
         (!filled.frame.is_empty()).then_some(filled)
+    }
+
+    fn owed(parts: &[(u32, u32)]) -> Vec<Owed> {
+        parts
+            .iter()
+            .map(|&(node, mask)| Owed {
+                node,
+                mask,
+                waited: 0,
+            })
+            .collect()
+    }
+
+    fn nodes(placed: &Placed) -> Vec<(u32, u32)> {
+        placed.parts.iter().map(|o| (o.node, o.mask)).collect()
     }
 
     /// Bytes of the ack message from libdccl 4.2 (`dccl -e --format hex`
@@ -403,7 +468,9 @@ mod tests {
             (&[(1, 8)], false, 3, "14090800000006"),
         ];
         for (parts, ack_requested, frame_start, reference) in cases {
-            let bytes = app.encode(parts, ack_requested, frame_start).unwrap();
+            let bytes = app
+                .encode(&owed(parts), ack_requested, frame_start)
+                .unwrap();
             assert_eq!(
                 bytes,
                 hex(reference),
@@ -430,12 +497,12 @@ mod tests {
         let mut starts = Vec::new();
         for id in 0..12 {
             let mut t = template(2, 3, id);
-            let placed = a.prepare(&mut t).unwrap();
+            let mut placed = a.prepare(&mut t).unwrap();
             starts.push(t.frame_start());
             let mut filled = fill(t, &[0xaa; 3], true);
             filled.frame.push(vec![0xbb; 4]);
             filled.frame.push(vec![0xcc; 4]);
-            a.complete(&mut filled, &placed).unwrap();
+            a.complete(&mut filled, &mut placed).unwrap();
         }
         assert_eq!(starts, [0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 0, 3]);
     }
@@ -483,14 +550,14 @@ mod tests {
         let mut again = ModemTransmission {
             src: Some(2),
             dest: Some(1),
-            frame: vec![a.encode(&[(1, 0b11)], false, 0).unwrap()],
+            frame: vec![a.encode(&owed(&[(1, 0b11)]), false, 0).unwrap()],
             ..Default::default()
         };
         assert!(a.receive(&mut again).acks.is_empty());
     }
 
     #[test]
-    fn acks_ride_only_where_their_node_hears_them() {
+    fn acks_ride_only_where_their_node_hears_them_and_are_not_held_back_for_ever() {
         let mut b = ApplicationAcks::new(2).unwrap();
         let received = |src: i32| ModemTransmission {
             src: Some(src),
@@ -513,19 +580,70 @@ mod tests {
         let mut elsewhere = received(5);
         elsewhere.dest = Some(6);
         b.acknowledge(&Acknowledgement::all(elsewhere));
-        // To node 3: only 3's ack.
+        // To node 3: only 3's ack is placed.
         let mut to_3 = template(3, 1, 1);
         let placed = b.prepare(&mut to_3).unwrap();
-        assert_eq!(placed.parts, vec![(3, 1 << 5)]);
+        assert_eq!(nodes(&placed), vec![(3, 1 << 5)]);
         b.restore(&placed);
-        // Broadcast: both.
+        // Broadcast: both, and a failure owes them again.
         let mut all = template(0, 1, 2);
         let placed = b.prepare(&mut all).unwrap();
-        assert_eq!(placed.parts, vec![(1, 0b11 << 4), (3, 1 << 5)]);
+        assert_eq!(nodes(&placed), vec![(1, 0b11 << 4), (3, 1 << 5)]);
         assert!(!b.owes());
-        // Failed to go out: owed again.
         b.restore(&placed);
         assert!(b.owes());
+
+        // Destination left to the queue, which picks node 4 for its data:
+        // nothing for 1 or 3 rides (their modems would not hear it) ...
+        let mut c = ApplicationAcks::new(2).unwrap();
+        c.acknowledge(&Acknowledgement::all(received(1)));
+        c.acknowledge(&Acknowledgement::all(received(3)));
+        let mut open = template(-1, 1, 3);
+        let mut placed = c.prepare(&mut open).unwrap();
+        assert_eq!(open.dest(), -1);
+        let mut filled = fill(open, &[0xf8, 0x11], true);
+        filled.dest = Some(4);
+        c.complete(&mut filled, &mut placed).unwrap();
+        assert!(placed.parts.is_empty());
+        let bare = c.encode(&[], true, 0).unwrap();
+        assert_eq!(filled.frame[0], [bare.as_slice(), &[0xf8, 0x11]].concat());
+        // ... so the next open transmission goes to node 1, which waited,
+        // whatever the queue has for others.
+        let mut next = template(-1, 1, 4);
+        let mut placed = c.prepare(&mut next).unwrap();
+        assert_eq!(next.dest(), 1);
+        assert_eq!(nodes(&placed), vec![(1, 0b11 << 4)]);
+        let mut filled = fill(next, &[], false);
+        c.complete(&mut filled, &mut placed).unwrap();
+        assert_eq!(filled.dest(), 1, "acks alone, to the one node owed");
+        assert_eq!(filled.frame.len(), 1);
+        // The last one owed (3) goes next, with the queue's data for it.
+        let mut last = template(-1, 1, 5);
+        c.prepare(&mut last).unwrap();
+        assert_eq!(last.dest(), 3);
+        assert!(!c.owes());
+    }
+
+    #[test]
+    fn acks_alone_to_several_nodes_go_as_one_broadcast() {
+        let mut b = ApplicationAcks::new(2).unwrap();
+        for src in [1, 3] {
+            b.acknowledge(&Acknowledgement::all(ModemTransmission {
+                src: Some(src),
+                dest: Some(2),
+                r#type: Some(TransmissionType::Data as i32),
+                ack_requested: Some(true),
+                frame: vec![vec![1]],
+                ..Default::default()
+            }));
+        }
+        let mut open = template(-1, 1, 1);
+        let mut placed = b.prepare(&mut open).unwrap();
+        let mut filled = fill(open, &[], false);
+        b.complete(&mut filled, &mut placed).unwrap();
+        assert_eq!(filled.dest(), 0);
+        assert_eq!(nodes(&placed), vec![(1, 1), (3, 1)]);
+        assert!(!b.owes());
     }
 
     #[test]
@@ -565,11 +683,11 @@ mod tests {
             ..Default::default()
         }));
         let mut t = template(1, 1, 1);
-        let placed = b.prepare(&mut t).unwrap();
+        let mut placed = b.prepare(&mut t).unwrap();
         assert!(!b.owes());
         t.frame = vec![vec![0xf8, 1]];
         assert!(matches!(
-            b.complete(&mut t, &placed),
+            b.complete(&mut t, &mut placed),
             Err(CompleteError::Dropped)
         ));
         assert!(b.owes());

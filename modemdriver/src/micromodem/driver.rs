@@ -1575,7 +1575,7 @@ impl Mm {
             .request_data(template, DATA_REQUEST_TIMEOUT)
             .await;
         let placed = match (&mut self.app_acks, placed) {
-            (Some(app), Some(placed)) => match app.complete(&mut filled, &placed) {
+            (Some(app), Some(mut placed)) => match app.complete(&mut filled, &mut placed) {
                 Ok(()) => Some(placed),
                 Err(e) => {
                     self.events.status(DriverStatus::DataRejected {
