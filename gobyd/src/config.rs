@@ -385,6 +385,24 @@ pub fn settings_problem(config: &GobydConfig) -> Option<String> {
                 driver.modem_id()
             ));
         }
+        let lifetime = driver
+            .micromodem
+            .as_ref()
+            .map_or(300, |m| m.application_ack_lifetime_seconds());
+        let cycle: f64 = config
+            .mac
+            .iter()
+            .flat_map(|m| m.slot.iter())
+            .map(|s| s.slot_seconds())
+            .sum();
+        if application_acks(config) && cycle * 2.0 > f64::from(lifetime) {
+            return Some(format!(
+                "driver.micromodem.application_ack_lifetime_seconds {lifetime}: the TDMA cycle lasts {cycle} s, \
+                 so an ack owed could be dropped before this node's slot carries it; make it at least {} \
+                 (twice the cycle, the same at every node)",
+                (cycle * 2.0).ceil()
+            ));
+        }
         if driver.connection_type()
             == protos::goby::acomms::protobuf::driver_config::ConnectionType::ConnectionSerial
             && driver.serial_port().trim().is_empty()

@@ -187,6 +187,12 @@ fn check_refuses_settings_that_cannot_work() {
             "nvram_cfg \"SRC,5\" sets the modem's address to 5 but modem_id is 1",
         ),
         (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
+             micromodem { application_ack_lifetime_seconds: 30 } }\n\
+             mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 1 slot_seconds: 10 } slot { src: 2 rate: 1 slot_seconds: 10 } }\n",
+            "application_ack_lifetime_seconds 30: the TDMA cycle lasts 20 s",
+        ),
+        (
             "modem_id: 40\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" }\n",
             "modem_id 40: the Micro-Modem's application acks name nodes 0-31",
         ),

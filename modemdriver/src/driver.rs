@@ -277,6 +277,13 @@ pub enum DriverStatus {
         /// Why.
         reason: String,
     },
+    /// The driver goes on with a weaker guarantee than it should (e.g. a
+    /// Micro-Modem application-ack frame number used again while an ack of
+    /// its earlier use may still come).
+    Degraded {
+        /// What is weaker, and why.
+        reason: String,
+    },
     /// The driver does not know a driver-specific request.
     Unsupported {
         /// The request's message type.

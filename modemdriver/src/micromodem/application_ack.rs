@@ -24,7 +24,18 @@
 //! it, or a broadcast; a transmission with nothing else to send still goes
 //! out when it carries acks.
 //!
+//! Frame numbers are few (32), so an ack naming one must not be taken for
+//! an ack of a later use of the number. Owed acks therefore live at most
+//! `lifetime` (`application_ack_lifetime_seconds`): one not sent by then is
+//! dropped (the sender sends the data again, and the repeat is acked
+//! anew). And the sender does not use a number again within `lifetime` of
+//! a use still awaiting its ack, as long as other numbers are free; it
+//! starts its numbering at a number drawn at random, so that acks owed to
+//! a run of it that ended (a restart) are unlikely to name its new frames.
+//!
 //! This module keeps that bookkeeping; it does no input or output.
+
+use std::time::{Duration, Instant};
 
 use dccl::Codec;
 use prost_reflect::ReflectMessage;
@@ -53,11 +64,12 @@ const BROADCAST: i32 = 0;
 /// Destination chosen by the layer above.
 const QUERY: i32 = -1;
 
-/// A frame of ours that went out, by its number.
+/// A frame of ours that went out asking for an ack, by its number.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct SentFrame {
     unique_id: Option<u32>,
     dest: i32,
+    at: Instant,
 }
 
 /// Acks owed to one node.
@@ -68,6 +80,8 @@ struct Owed {
     mask: u32,
     /// Transmissions of ours that went elsewhere meanwhile.
     waited: u32,
+    /// When the oldest of these acks became owed.
+    since: Instant,
 }
 
 /// The acks placed in a transmission being filled, given back when it
@@ -77,6 +91,10 @@ pub struct Placed {
     parts: Vec<Owed>,
     /// The ack message as placed at the start of frame 0.
     placeholder: Vec<u8>,
+    /// Every frame number had a use awaiting its ack within the lifetime:
+    /// one is used again, and a late ack of its earlier use would be taken
+    /// for this one.
+    pub reused: bool,
 }
 
 /// Why a filled transmission could not carry its ack message.
@@ -98,6 +116,7 @@ pub enum CompleteError {
 pub struct ApplicationAcks {
     codec: Codec,
     modem_id: u32,
+    lifetime: Duration,
     next_frame: u32,
     /// Our frames by number: the transmission that last used the number.
     sent: [Option<SentFrame>; FRAME_NUMBERS as usize],
@@ -115,17 +134,20 @@ pub struct Heard {
 }
 
 impl ApplicationAcks {
-    /// Bookkeeping for the node `modem_id`.
+    /// Bookkeeping for the node `modem_id`: acks owed live at most
+    /// `lifetime`; numbering starts at `first_frame` (taken modulo 32; the
+    /// driver draws it at random).
     ///
     /// # Errors
     /// The ack message does not load in the DCCL codec (a build fault).
-    pub fn new(modem_id: u32) -> Result<Self, dccl::Error> {
+    pub fn new(modem_id: u32, lifetime: Duration, first_frame: u32) -> Result<Self, dccl::Error> {
         let mut codec = Codec::new();
         codec.load(&MicroModemApplicationAck::default().descriptor())?;
         Ok(ApplicationAcks {
             codec,
             modem_id,
-            next_frame: 0,
+            lifetime,
+            next_frame: first_frame % FRAME_NUMBERS,
             sent: [None; FRAME_NUMBERS as usize],
             owed: Vec::new(),
         })
@@ -146,12 +168,40 @@ impl ApplicationAcks {
     /// destination chosen. So that acks owed to one node are not held back
     /// for ever by data for others, a transmission whose destination is
     /// left open goes to a node whose acks already waited a transmission.
-    pub fn prepare(&mut self, template: &mut ModemTransmission) -> Result<Placed, dccl::Error> {
+    ///
+    /// The frames are numbered from the next number on when those numbers
+    /// are free (never used, acked, or used longer than `lifetime` ago),
+    /// else from the first free run of numbers; with none free (many
+    /// frames lost within `lifetime`), from the next number anyway, and
+    /// [`Placed::reused`] says so.
+    pub fn prepare(
+        &mut self,
+        template: &mut ModemTransmission,
+        now: Instant,
+    ) -> Result<Placed, dccl::Error> {
+        let lifetime = self.lifetime;
+        self.owed
+            .retain(|o| now.saturating_duration_since(o.since) < lifetime);
         let frames = template.max_num_frames().clamp(1, FRAME_NUMBERS);
         if self.next_frame + frames > FRAME_NUMBERS {
             self.next_frame = 0;
         }
-        template.frame_start = Some(self.next_frame);
+        let free = |n: u32| {
+            self.sent[n as usize].is_none_or(|s| now.saturating_duration_since(s.at) >= lifetime)
+        };
+        let starts = (0..FRAME_NUMBERS)
+            .map(|i| (self.next_frame + i) % FRAME_NUMBERS)
+            .filter(|&s| s + frames <= FRAME_NUMBERS);
+        let mut reused = false;
+        let start = match starts.clone().find(|&s| (s..s + frames).all(free)) {
+            Some(s) => s,
+            None => {
+                reused = true;
+                self.next_frame
+            }
+        };
+        self.next_frame = start;
+        template.frame_start = Some(start);
         if template.dest() == QUERY {
             if let Some(o) = self.owed.iter().find(|o| o.waited > 0) {
                 template.dest = Some(o.node as i32);
@@ -171,7 +221,11 @@ impl ApplicationAcks {
         let placeholder = self.encode(&parts, false, self.next_frame)?;
         template.frame.clear();
         template.frame.push(placeholder.clone());
-        Ok(Placed { parts, placeholder })
+        Ok(Placed {
+            parts,
+            placeholder,
+            reused,
+        })
     }
 
     /// Completes a filled data request prepared by
@@ -187,6 +241,7 @@ impl ApplicationAcks {
         &mut self,
         filled: &mut ModemTransmission,
         placed: &mut Placed,
+        now: Instant,
     ) -> Result<(), CompleteError> {
         let len = placed.placeholder.len();
         let kept = filled
@@ -242,9 +297,11 @@ impl ApplicationAcks {
         filled.frame[0].splice(0..len, bytes);
         let frames = (filled.frame.len() as u32).clamp(1, FRAME_NUMBERS - frame_start);
         for n in frame_start..frame_start + frames {
-            self.sent[n as usize] = Some(SentFrame {
+            // A number is held only while an ack of it may come.
+            self.sent[n as usize] = filled.ack_requested().then_some(SentFrame {
                 unique_id: filled.unique_id,
                 dest,
+                at: now,
             });
         }
         self.next_frame = frame_start + frames;
@@ -332,7 +389,7 @@ impl ApplicationAcks {
     /// Owes acks for the frames of a received transmission (as returned by
     /// [`receive`](Self::receive)): those the layer above names, when the
     /// data asked for acks and was addressed to this node.
-    pub fn acknowledge(&mut self, ack: &Acknowledgement) {
+    pub fn acknowledge(&mut self, ack: &Acknowledgement, now: Instant) {
         let mt = &ack.received;
         if !Acknowledgement::wanted(mt, &[self.modem_id as i32]) {
             return;
@@ -352,6 +409,7 @@ impl ApplicationAcks {
                 node,
                 mask,
                 waited: 0,
+                since: now,
             });
         }
     }
@@ -361,6 +419,7 @@ impl ApplicationAcks {
             Some(o) => {
                 o.mask |= owed.mask;
                 o.waited = o.waited.max(owed.waited);
+                o.since = o.since.min(owed.since);
             }
             None => self.owed.push(owed),
         }
@@ -390,6 +449,19 @@ impl ApplicationAcks {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const LIFETIME: Duration = Duration::from_secs(300);
+
+    fn acks(id: u32) -> ApplicationAcks {
+        ApplicationAcks::new(id, LIFETIME, 0).unwrap()
+    }
+
+    /// One moment for the tests that do not age anything.
+    fn now() -> Instant {
+        use std::sync::OnceLock;
+        static START: OnceLock<Instant> = OnceLock::new();
+        *START.get_or_init(Instant::now)
+    }
 
     fn hex(s: &str) -> Vec<u8> {
         (0..s.len())
@@ -429,9 +501,9 @@ mod tests {
     ) -> Option<ModemTransmission> {
         let mut t = template(dest, 3, unique_id);
         t.src = Some(a.modem_id as i32);
-        let mut placed = a.prepare(&mut t).unwrap();
+        let mut placed = a.prepare(&mut t, now()).unwrap();
         let mut filled = fill(t, data, true);
-        a.complete(&mut filled, &mut placed).unwrap();
+        a.complete(&mut filled, &mut placed, now()).unwrap();
         (!filled.frame.is_empty()).then_some(filled)
     }
 
@@ -442,6 +514,7 @@ mod tests {
                 node,
                 mask,
                 waited: 0,
+                since: now(),
             })
             .collect()
     }
@@ -454,7 +527,7 @@ mod tests {
     /// with Goby's MMApplicationAck definition), for the same values.
     #[test]
     fn ack_messages_encode_as_libdccl_does() {
-        let app = ApplicationAcks::new(1).unwrap();
+        let app = acks(1);
         type Case = (&'static [(u32, u32)], bool, u32, &'static str);
         let cases: [Case; 4] = [
             (&[], false, 0, "140000"),
@@ -476,7 +549,7 @@ mod tests {
                 hex(reference),
                 "{parts:?} {ack_requested} {frame_start}"
             );
-            let mut b = ApplicationAcks::new(9).unwrap();
+            let mut b = acks(9);
             let mut mt = ModemTransmission {
                 src: Some(1),
                 dest: Some(9),
@@ -493,25 +566,26 @@ mod tests {
 
     #[test]
     fn frames_are_numbered_on_and_back_to_zero_before_passing_31() {
-        let mut a = ApplicationAcks::new(1).unwrap();
+        let mut a = acks(1);
         let mut starts = Vec::new();
         for id in 0..12 {
             let mut t = template(2, 3, id);
-            let mut placed = a.prepare(&mut t).unwrap();
+            let mut placed = a.prepare(&mut t, now()).unwrap();
             starts.push(t.frame_start());
-            let mut filled = fill(t, &[0xaa; 3], true);
+            // No acks asked for: no number is held.
+            let mut filled = fill(t, &[0xaa; 3], false);
             filled.frame.push(vec![0xbb; 4]);
             filled.frame.push(vec![0xcc; 4]);
-            a.complete(&mut filled, &mut placed).unwrap();
+            a.complete(&mut filled, &mut placed, now()).unwrap();
         }
         assert_eq!(starts, [0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 0, 3]);
     }
 
     #[test]
     fn an_ack_credits_the_transmission_that_sent_the_frame_and_only_from_its_destination() {
-        let mut a = ApplicationAcks::new(1).unwrap();
-        let mut b = ApplicationAcks::new(2).unwrap();
-        let mut c = ApplicationAcks::new(3).unwrap();
+        let mut a = acks(1);
+        let mut b = acks(2);
+        let mut c = acks(3);
         // 1 sends to 2 (transmission 41, frame 0), then to 3 (42, frame 1).
         let mut to_b = send(&mut a, 2, &[0xaa, 0xbb], 41).unwrap();
         let header = a.encode(&[], true, 0).unwrap();
@@ -528,7 +602,7 @@ mod tests {
         // Not acknowledged until the layer above says so.
         let mut reply = send(&mut b, -1, &[], 7);
         assert!(reply.is_none(), "nothing to send, nothing owed");
-        b.acknowledge(&Acknowledgement::all(to_b.clone()));
+        b.acknowledge(&Acknowledgement::all(to_b.clone()), now());
         assert!(b.owes());
         // 2's next transmission goes to 1 (owed) and carries the ack.
         reply = send(&mut b, -1, &[], 7);
@@ -558,7 +632,7 @@ mod tests {
 
     #[test]
     fn acks_ride_only_where_their_node_hears_them_and_are_not_held_back_for_ever() {
-        let mut b = ApplicationAcks::new(2).unwrap();
+        let mut b = acks(2);
         let received = |src: i32| ModemTransmission {
             src: Some(src),
             dest: Some(2),
@@ -568,26 +642,29 @@ mod tests {
             frame: vec![vec![1], vec![2]],
             ..Default::default()
         };
-        b.acknowledge(&Acknowledgement::all(received(1)));
-        b.acknowledge(&Acknowledgement {
-            received: received(3),
-            frames: vec![1],
-        });
+        b.acknowledge(&Acknowledgement::all(received(1)), now());
+        b.acknowledge(
+            &Acknowledgement {
+                received: received(3),
+                frames: vec![1],
+            },
+            now(),
+        );
         // Not asked for acks, or addressed elsewhere: nothing owed.
         let mut unasked = received(4);
         unasked.ack_requested = Some(false);
-        b.acknowledge(&Acknowledgement::all(unasked));
+        b.acknowledge(&Acknowledgement::all(unasked), now());
         let mut elsewhere = received(5);
         elsewhere.dest = Some(6);
-        b.acknowledge(&Acknowledgement::all(elsewhere));
+        b.acknowledge(&Acknowledgement::all(elsewhere), now());
         // To node 3: only 3's ack is placed.
         let mut to_3 = template(3, 1, 1);
-        let placed = b.prepare(&mut to_3).unwrap();
+        let placed = b.prepare(&mut to_3, now()).unwrap();
         assert_eq!(nodes(&placed), vec![(3, 1 << 5)]);
         b.restore(&placed);
         // Broadcast: both, and a failure owes them again.
         let mut all = template(0, 1, 2);
-        let placed = b.prepare(&mut all).unwrap();
+        let placed = b.prepare(&mut all, now()).unwrap();
         assert_eq!(nodes(&placed), vec![(1, 0b11 << 4), (3, 1 << 5)]);
         assert!(!b.owes());
         b.restore(&placed);
@@ -595,52 +672,55 @@ mod tests {
 
         // Destination left to the queue, which picks node 4 for its data:
         // nothing for 1 or 3 rides (their modems would not hear it) ...
-        let mut c = ApplicationAcks::new(2).unwrap();
-        c.acknowledge(&Acknowledgement::all(received(1)));
-        c.acknowledge(&Acknowledgement::all(received(3)));
+        let mut c = acks(2);
+        c.acknowledge(&Acknowledgement::all(received(1)), now());
+        c.acknowledge(&Acknowledgement::all(received(3)), now());
         let mut open = template(-1, 1, 3);
-        let mut placed = c.prepare(&mut open).unwrap();
+        let mut placed = c.prepare(&mut open, now()).unwrap();
         assert_eq!(open.dest(), -1);
         let mut filled = fill(open, &[0xf8, 0x11], true);
         filled.dest = Some(4);
-        c.complete(&mut filled, &mut placed).unwrap();
+        c.complete(&mut filled, &mut placed, now()).unwrap();
         assert!(placed.parts.is_empty());
         let bare = c.encode(&[], true, 0).unwrap();
         assert_eq!(filled.frame[0], [bare.as_slice(), &[0xf8, 0x11]].concat());
         // ... so the next open transmission goes to node 1, which waited,
         // whatever the queue has for others.
         let mut next = template(-1, 1, 4);
-        let mut placed = c.prepare(&mut next).unwrap();
+        let mut placed = c.prepare(&mut next, now()).unwrap();
         assert_eq!(next.dest(), 1);
         assert_eq!(nodes(&placed), vec![(1, 0b11 << 4)]);
         let mut filled = fill(next, &[], false);
-        c.complete(&mut filled, &mut placed).unwrap();
+        c.complete(&mut filled, &mut placed, now()).unwrap();
         assert_eq!(filled.dest(), 1, "acks alone, to the one node owed");
         assert_eq!(filled.frame.len(), 1);
         // The last one owed (3) goes next, with the queue's data for it.
         let mut last = template(-1, 1, 5);
-        c.prepare(&mut last).unwrap();
+        c.prepare(&mut last, now()).unwrap();
         assert_eq!(last.dest(), 3);
         assert!(!c.owes());
     }
 
     #[test]
     fn acks_alone_to_several_nodes_go_as_one_broadcast() {
-        let mut b = ApplicationAcks::new(2).unwrap();
+        let mut b = acks(2);
         for src in [1, 3] {
-            b.acknowledge(&Acknowledgement::all(ModemTransmission {
-                src: Some(src),
-                dest: Some(2),
-                r#type: Some(TransmissionType::Data as i32),
-                ack_requested: Some(true),
-                frame: vec![vec![1]],
-                ..Default::default()
-            }));
+            b.acknowledge(
+                &Acknowledgement::all(ModemTransmission {
+                    src: Some(src),
+                    dest: Some(2),
+                    r#type: Some(TransmissionType::Data as i32),
+                    ack_requested: Some(true),
+                    frame: vec![vec![1]],
+                    ..Default::default()
+                }),
+                now(),
+            );
         }
         let mut open = template(-1, 1, 1);
-        let mut placed = b.prepare(&mut open).unwrap();
+        let mut placed = b.prepare(&mut open, now()).unwrap();
         let mut filled = fill(open, &[], false);
-        b.complete(&mut filled, &mut placed).unwrap();
+        b.complete(&mut filled, &mut placed, now()).unwrap();
         assert_eq!(filled.dest(), 0);
         assert_eq!(nodes(&placed), vec![(1, 1), (3, 1)]);
         assert!(!b.owes());
@@ -648,7 +728,7 @@ mod tests {
 
     #[test]
     fn data_from_a_peer_without_application_acks_is_left_alone() {
-        let mut b = ApplicationAcks::new(2).unwrap();
+        let mut b = acks(2);
         // A DCCL message of another id (124) first.
         let mut mt = ModemTransmission {
             src: Some(1),
@@ -673,23 +753,100 @@ mod tests {
 
     #[test]
     fn an_answer_that_drops_the_ack_message_is_refused_and_its_acks_owed_again() {
-        let mut b = ApplicationAcks::new(2).unwrap();
-        b.acknowledge(&Acknowledgement::all(ModemTransmission {
-            src: Some(1),
-            dest: Some(2),
-            r#type: Some(TransmissionType::Data as i32),
-            ack_requested: Some(true),
-            frame: vec![vec![1]],
-            ..Default::default()
-        }));
+        let mut b = acks(2);
+        b.acknowledge(
+            &Acknowledgement::all(ModemTransmission {
+                src: Some(1),
+                dest: Some(2),
+                r#type: Some(TransmissionType::Data as i32),
+                ack_requested: Some(true),
+                frame: vec![vec![1]],
+                ..Default::default()
+            }),
+            now(),
+        );
         let mut t = template(1, 1, 1);
-        let mut placed = b.prepare(&mut t).unwrap();
+        let mut placed = b.prepare(&mut t, now()).unwrap();
         assert!(!b.owes());
         t.frame = vec![vec![0xf8, 1]];
         assert!(matches!(
-            b.complete(&mut t, &mut placed),
+            b.complete(&mut t, &mut placed, now()),
             Err(CompleteError::Dropped)
         ));
         assert!(b.owes());
+    }
+
+    fn received_from(src: i32) -> ModemTransmission {
+        ModemTransmission {
+            src: Some(src),
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(0),
+            frame: vec![vec![1]],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn an_ack_not_sent_within_its_lifetime_is_dropped() {
+        let mut b = acks(2);
+        let t0 = now();
+        b.acknowledge(&Acknowledgement::all(received_from(1)), t0);
+        let mut late = template(-1, 1, 1);
+        let placed = b.prepare(&mut late, t0 + LIFETIME).unwrap();
+        assert!(placed.parts.is_empty(), "dropped at its lifetime");
+        assert!(!b.owes());
+        b.acknowledge(&Acknowledgement::all(received_from(1)), t0);
+        let mut in_time = template(-1, 1, 2);
+        let placed = b
+            .prepare(&mut in_time, t0 + LIFETIME - Duration::from_secs(1))
+            .unwrap();
+        assert_eq!(nodes(&placed), vec![(1, 1)]);
+    }
+
+    /// A frame number whose use awaits its ack is not used again within
+    /// the lifetime while others are free; acked, or sent without asking
+    /// for an ack, it is free at once.
+    #[test]
+    fn numbers_awaiting_acks_are_not_used_again_while_others_are_free() {
+        let mut a = ApplicationAcks::new(1, LIFETIME, 30).unwrap();
+        let t0 = now();
+        let send = |a: &mut ApplicationAcks, frames: u32, ack: bool, at: Instant| {
+            let mut t = template(2, frames, 1);
+            let mut placed = a.prepare(&mut t, at).unwrap();
+            let start = t.frame_start();
+            let mut filled = fill(t, &[0xf8], ack);
+            filled.ack_requested = Some(ack);
+            while (filled.frame.len() as u32) < frames {
+                filled.frame.push(vec![0xf8]);
+            }
+            a.complete(&mut filled, &mut placed, at).unwrap();
+            (start, placed.reused)
+        };
+        // Drawn start 30: a 3-frame packet does not fit before 32, so 0.
+        assert_eq!(send(&mut a, 3, true, t0), (0, false));
+        // 3..31 then wrap: 0-2 still await their acks, so 3.
+        for expected in [3, 6, 9, 12, 15, 18, 21, 24, 27] {
+            assert_eq!(send(&mut a, 3, true, t0).0, expected);
+        }
+        // Every run of three numbers held: one is used again, flagged.
+        assert_eq!(send(&mut a, 3, true, t0), (0, true));
+        // Past the lifetime they are free again.
+        assert_eq!(send(&mut a, 3, true, t0 + LIFETIME), (3, false));
+
+        // Acked numbers are free at once; so are numbers sent without asking.
+        let mut b = ApplicationAcks::new(1, LIFETIME, 0).unwrap();
+        assert_eq!(send(&mut b, 8, true, t0), (0, false));
+        let mut ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            frame: vec![b.encode(&owed(&[(1, 0xff)]), false, 0).unwrap()],
+            ..Default::default()
+        };
+        assert_eq!(b.receive(&mut ack).acks.len(), 8);
+        for expected in [8, 16, 24, 0] {
+            assert_eq!(send(&mut b, 8, false, t0), (expected, false));
+        }
     }
 }

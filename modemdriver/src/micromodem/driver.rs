@@ -210,8 +210,12 @@ impl MicroModemDriver {
         }
         let app_acks = if mm.use_application_acks() {
             Some(
-                ApplicationAcks::new(modem_id)
-                    .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?,
+                ApplicationAcks::new(
+                    modem_id,
+                    Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
+                    first_frame_number(),
+                )
+                .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?,
             )
         } else {
             None
@@ -893,7 +897,10 @@ impl Mm {
                 return;
             }
             if !self.deferred_ack {
-                app.acknowledge(&Acknowledgement::all(transmission.clone()));
+                app.acknowledge(
+                    &Acknowledgement::all(transmission.clone()),
+                    std::time::Instant::now(),
+                );
             }
         }
         self.events.emit(DriverEvent::Received(transmission));
@@ -1560,8 +1567,24 @@ impl Mm {
         max_bytes: Option<u32>,
     ) -> (ModemTransmission, Option<Placed>) {
         let mut template = self.data_template(job, mt, max_bytes);
-        let placed = match self.app_acks.as_mut().map(|app| app.prepare(&mut template)) {
-            Some(Ok(placed)) => Some(placed),
+        let now = std::time::Instant::now();
+        let placed = match self
+            .app_acks
+            .as_mut()
+            .map(|app| app.prepare(&mut template, now))
+        {
+            Some(Ok(placed)) => {
+                if placed.reused {
+                    self.events.status(DriverStatus::Degraded {
+                        reason: format!(
+                            "every application-ack frame number awaits an ack: frame {} is numbered again, \
+                             and a late ack of its earlier use would be taken for this one",
+                            template.frame_start()
+                        ),
+                    });
+                }
+                Some(placed)
+            }
             Some(Err(e)) => {
                 self.events.status(DriverStatus::LinkError {
                     reason: format!("the application ack does not encode: {e}"),
@@ -1575,7 +1598,7 @@ impl Mm {
             .request_data(template, DATA_REQUEST_TIMEOUT)
             .await;
         let placed = match (&mut self.app_acks, placed) {
-            (Some(app), Some(mut placed)) => match app.complete(&mut filled, &mut placed) {
+            (Some(app), Some(mut placed)) => match app.complete(&mut filled, &mut placed, now) {
                 Ok(()) => Some(placed),
                 Err(e) => {
                     self.events.status(DriverStatus::DataRejected {
@@ -1881,7 +1904,7 @@ impl Mm {
             // hardware, on reception.
             DriverCommand::Acknowledge(ack) => {
                 if let (Some(app), true) = (&mut self.app_acks, self.deferred_ack) {
-                    app.acknowledge(&ack);
+                    app.acknowledge(&ack, std::time::Instant::now());
                 }
             }
             DriverCommand::Stop(done) => return Some(done),
@@ -1946,6 +1969,15 @@ async fn recv_opt(link: &mut Option<MmLink>) -> std::io::Result<Vec<u8>> {
         Some(link) => link.recv().await.map(|(line, ())| line),
         None => std::future::pending().await,
     }
+}
+
+/// A frame number drawn at random (from the standard library's randomly
+/// keyed hasher) to start the application-ack numbering at.
+fn first_frame_number() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(now_micros());
+    (hasher.finish() % u64::from(application_ack::FRAME_NUMBERS)) as u32
 }
 
 /// What the driver task starts from.
