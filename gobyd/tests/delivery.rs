@@ -667,6 +667,7 @@ async fn micromodem_combined() {
         resets: 2,
         silences: vec![(2.0, 5.0), (25.0, 4.0)],
         seed: 6,
+        hardware_acks: false,
     };
     check(faults.name, faults, Link::MICROMODEM1).await;
 }
@@ -692,6 +693,7 @@ async fn micromodem2_rate1_combined() {
         resets: 2,
         silences: vec![(2.0, 5.0), (25.0, 4.0)],
         seed: 8,
+        hardware_acks: false,
     };
     check(faults.name, faults, Link::MICROMODEM2_RATE1).await;
 }
