@@ -30,8 +30,16 @@
 //! dropped (the sender sends the data again, and the repeat is acked
 //! anew). And the sender does not use a number again within `lifetime` of
 //! a use still awaiting its ack, as long as other numbers are free; it
-//! starts its numbering at a number drawn at random, so that acks owed to
-//! a run of it that ended (a restart) are unlikely to name its new frames.
+//! starts its numbering at a number drawn at random.
+//!
+//! A restarted sender does not know which of its numbers other nodes still
+//! owe acks for (from its run before the restart), so until it has heard
+//! from a node (a transmission addressed to it, or a broadcast carrying
+//! every ack owed, which empties that node's acks owed to it) or
+//! `lifetime` has passed, it credits no ack from that node: its frames to
+//! the node still ask for acks, so the node answers and the next
+//! transmission is credited. A restart costs one round, never a message
+//! taken for acked.
 //!
 //! This module keeps that bookkeeping; it does no input or output.
 
@@ -122,6 +130,10 @@ pub struct ApplicationAcks {
     sent: [Option<SentFrame>; FRAME_NUMBERS as usize],
     /// Frames of others to acknowledge, in the order first owed.
     owed: Vec<Owed>,
+    /// When the bookkeeping started (the driver's start).
+    started: Instant,
+    /// Bit per node heard from since the start (see the module's text).
+    heard_from: u32,
 }
 
 /// What a received transmission held for this bookkeeping.
@@ -134,13 +146,18 @@ pub struct Heard {
 }
 
 impl ApplicationAcks {
-    /// Bookkeeping for the node `modem_id`: acks owed live at most
-    /// `lifetime`; numbering starts at `first_frame` (taken modulo 32; the
-    /// driver draws it at random).
+    /// Bookkeeping for the node `modem_id`, started at `now`: acks owed
+    /// live at most `lifetime`; numbering starts at `first_frame` (taken
+    /// modulo 32; the driver draws it at random).
     ///
     /// # Errors
     /// The ack message does not load in the DCCL codec (a build fault).
-    pub fn new(modem_id: u32, lifetime: Duration, first_frame: u32) -> Result<Self, dccl::Error> {
+    pub fn new(
+        modem_id: u32,
+        lifetime: Duration,
+        first_frame: u32,
+        now: Instant,
+    ) -> Result<Self, dccl::Error> {
         let mut codec = Codec::new();
         codec.load(&MicroModemApplicationAck::default().descriptor())?;
         Ok(ApplicationAcks {
@@ -150,7 +167,19 @@ impl ApplicationAcks {
             next_frame: first_frame % FRAME_NUMBERS,
             sent: [None; FRAME_NUMBERS as usize],
             owed: Vec::new(),
+            started: now,
+            heard_from: 0,
         })
+    }
+
+    /// Whether an ack from `node` can be credited: it has been heard from
+    /// since the start, or the start is `lifetime` ago.
+    fn credits(&self, node: i32, now: Instant) -> bool {
+        let heard = u32::try_from(node)
+            .ok()
+            .filter(|&n| n <= MAX_MODEM_ID)
+            .is_some_and(|n| self.heard_from & (1 << n) != 0);
+        heard || now.saturating_duration_since(self.started) >= self.lifetime
     }
 
     /// Whether acks are owed to anyone.
@@ -296,9 +325,11 @@ impl ApplicationAcks {
         };
         filled.frame[0].splice(0..len, bytes);
         let frames = (filled.frame.len() as u32).clamp(1, FRAME_NUMBERS - frame_start);
+        // A number is held only while an ack of it may come and be
+        // credited (not to a node not heard from since a restart).
+        let awaits = filled.ack_requested() && self.credits(dest, now);
         for n in frame_start..frame_start + frames {
-            // A number is held only while an ack of it may come.
-            self.sent[n as usize] = filled.ack_requested().then_some(SentFrame {
+            self.sent[n as usize] = awaits.then_some(SentFrame {
                 unique_id: filled.unique_id,
                 dest,
                 at: now,
@@ -325,6 +356,10 @@ impl ApplicationAcks {
     /// without one (a peer not using application acks) is left as it is.
     /// Frames left empty at the end are removed (an ack-only transmission
     /// has none left).
+    ///
+    /// A transmission addressed to this node, or a broadcast with room for
+    /// every ack its sender owed, counts as heard from its sender (acks
+    /// from it are credited from then on).
     pub fn receive(&mut self, mt: &mut ModemTransmission) -> Heard {
         let mut heard = Heard::default();
         let Some(first) = mt.frame.first() else {
@@ -381,6 +416,13 @@ impl ApplicationAcks {
                     unique_id: sent.unique_id,
                     ..Default::default()
                 });
+            }
+        }
+        let emptied = mt.dest() == self.modem_id as i32
+            || (mt.dest() == BROADCAST && ack.part.len() < MAX_PARTS);
+        if let Some(n) = u32::try_from(from).ok().filter(|&n| n <= MAX_MODEM_ID) {
+            if emptied {
+                self.heard_from |= 1 << n;
             }
         }
         heard
@@ -452,15 +494,21 @@ mod tests {
 
     const LIFETIME: Duration = Duration::from_secs(300);
 
+    /// Bookkeeping started at [`base`] (so that, at [`now`], a lifetime
+    /// later, acks from every node are credited).
     fn acks(id: u32) -> ApplicationAcks {
-        ApplicationAcks::new(id, LIFETIME, 0).unwrap()
+        ApplicationAcks::new(id, LIFETIME, 0, base()).unwrap()
+    }
+
+    fn base() -> Instant {
+        use std::sync::OnceLock;
+        static START: OnceLock<Instant> = OnceLock::new();
+        *START.get_or_init(Instant::now)
     }
 
     /// One moment for the tests that do not age anything.
     fn now() -> Instant {
-        use std::sync::OnceLock;
-        static START: OnceLock<Instant> = OnceLock::new();
-        *START.get_or_init(Instant::now)
+        base() + LIFETIME
     }
 
     fn hex(s: &str) -> Vec<u8> {
@@ -810,7 +858,7 @@ mod tests {
     /// for an ack, it is free at once.
     #[test]
     fn numbers_awaiting_acks_are_not_used_again_while_others_are_free() {
-        let mut a = ApplicationAcks::new(1, LIFETIME, 30).unwrap();
+        let mut a = ApplicationAcks::new(1, LIFETIME, 30, base()).unwrap();
         let t0 = now();
         let send = |a: &mut ApplicationAcks, frames: u32, ack: bool, at: Instant| {
             let mut t = template(2, frames, 1);
@@ -836,7 +884,7 @@ mod tests {
         assert_eq!(send(&mut a, 3, true, t0 + LIFETIME), (3, false));
 
         // Acked numbers are free at once; so are numbers sent without asking.
-        let mut b = ApplicationAcks::new(1, LIFETIME, 0).unwrap();
+        let mut b = ApplicationAcks::new(1, LIFETIME, 0, base()).unwrap();
         assert_eq!(send(&mut b, 8, true, t0), (0, false));
         let mut ack = ModemTransmission {
             src: Some(2),
@@ -848,5 +896,68 @@ mod tests {
         for expected in [8, 16, 24, 0] {
             assert_eq!(send(&mut b, 8, false, t0), (expected, false));
         }
+    }
+
+    /// A sender restarted: a node may still owe acks for its frames of
+    /// before, under the numbers it uses now.
+    #[test]
+    fn after_a_start_no_ack_is_credited_from_a_node_not_yet_heard_from() {
+        let t0 = base();
+        let t = t0 + Duration::from_secs(1);
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        let mut b = acks(2);
+        // 2 owes an ack for frame 0 of 1's run before its restart.
+        b.acknowledge(&Acknowledgement::all(received_from(1)), t);
+        // 1, restarted, numbers its first frame 0 too; 2 does not get it.
+        let mut to_b = template(2, 1, 77);
+        let mut placed = a.prepare(&mut to_b, t).unwrap();
+        let mut lost = fill(to_b, &[0xf8, 0x11], true);
+        a.complete(&mut lost, &mut placed, t).unwrap();
+        assert_eq!(lost.frame_start(), 0);
+        assert!(lost.ack_requested(), "it still asks 2 to answer");
+        // 2's next transmission, to 1, carries the old ack: not credited.
+        let mut open = template(-1, 1, 5);
+        open.src = Some(2);
+        let mut placed = b.prepare(&mut open, t).unwrap();
+        let mut reply = fill(open, &[], false);
+        b.complete(&mut reply, &mut placed, t).unwrap();
+        assert_eq!(reply.dest(), 1);
+        assert!(a.receive(&mut reply).acks.is_empty());
+        // 1 has heard from 2 since: its next frame to 2 is credited.
+        let mut to_b = template(2, 1, 78);
+        let mut placed = a.prepare(&mut to_b, t).unwrap();
+        let mut got = fill(to_b, &[0xf8, 0x12], true);
+        a.complete(&mut got, &mut placed, t).unwrap();
+        assert!(b.receive(&mut got).acks.is_empty());
+        b.acknowledge(&Acknowledgement::all(got.clone()), t);
+        let mut open = template(-1, 1, 6);
+        open.src = Some(2);
+        let mut placed = b.prepare(&mut open, t).unwrap();
+        let mut reply = fill(open, &[], false);
+        b.complete(&mut reply, &mut placed, t).unwrap();
+        let acks = a.receive(&mut reply).acks;
+        assert_eq!(acks.len(), 1);
+        assert_eq!(acks[0].unique_id, Some(78));
+        assert_eq!(acks[0].acked_frame, vec![got.frame_start() as i32]);
+    }
+
+    #[test]
+    fn a_node_not_heard_from_is_credited_once_the_lifetime_has_passed() {
+        let t0 = base();
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        let later = t0 + LIFETIME;
+        let mut to_b = template(2, 1, 9);
+        let mut placed = a.prepare(&mut to_b, later).unwrap();
+        let mut sent = fill(to_b, &[0xf8], true);
+        a.complete(&mut sent, &mut placed, later).unwrap();
+        let mut ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(7),
+            frame: vec![a
+                .encode(&owed(&[(1, 1 << sent.frame_start())]), false, 3)
+                .unwrap()],
+            ..Default::default()
+        };
+        assert_eq!(a.receive(&mut ack).acks.len(), 1);
     }
 }

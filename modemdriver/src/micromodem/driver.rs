@@ -214,6 +214,7 @@ impl MicroModemDriver {
                     modem_id,
                     Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
                     first_frame_number(),
+                    std::time::Instant::now(),
                 )
                 .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?,
             )
