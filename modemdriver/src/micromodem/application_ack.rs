@@ -439,10 +439,11 @@ impl ApplicationAcks {
         let Some(node) = u32::try_from(mt.src()).ok().filter(|&n| n <= MAX_MODEM_ID) else {
             return;
         };
+        // An empty frame is one lost to a bad CRC: never acknowledged.
         let mask = ack
             .frames
             .iter()
-            .filter(|&&i| i < mt.frame.len())
+            .filter(|&&i| mt.frame.get(i).is_some_and(|f| !f.is_empty()))
             .map(|&i| mt.frame_start() as usize + i)
             .filter(|&n| n < FRAME_NUMBERS as usize)
             .fold(0u32, |m, n| m | (1 << n));
@@ -959,5 +960,18 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(a.receive(&mut ack).acks.len(), 1);
+    }
+
+    #[test]
+    fn a_frame_lost_to_a_bad_crc_is_never_acknowledged() {
+        let mut b = acks(2);
+        let mut mt = received_from(1);
+        mt.frame_start = Some(5);
+        // Frame 1 of three failed its CRC: the driver reports it empty.
+        mt.frame = vec![vec![1], Vec::new(), vec![3]];
+        b.acknowledge(&Acknowledgement::all(mt), now());
+        let mut open = template(1, 1, 1);
+        let placed = b.prepare(&mut open, now()).unwrap();
+        assert_eq!(nodes(&placed), vec![(1, (1 << 5) | (1 << 7))]);
     }
 }
