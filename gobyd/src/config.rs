@@ -188,6 +188,20 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
         ..Default::default()
     });
     driver.modem_id.get_or_insert(id);
+    if driver.driver
+        == Some(driver_config::Driver::DriverType(
+            DriverType::DriverWhoiMicromodem as i32,
+        ))
+    {
+        // A modem acks on decode, before the daemon has kept the message:
+        // acks are sent in software, after the inbox sync, unless the
+        // configuration says otherwise (e.g. to talk to peers without them).
+        driver
+            .micromodem
+            .get_or_insert_with(Default::default)
+            .use_application_acks
+            .get_or_insert(true);
+    }
     let is_simulator = driver.driver
         == Some(driver_config::Driver::DriverType(
             DriverType::DriverAcousticSimulator as i32,
@@ -363,6 +377,32 @@ pub fn settings_problem(config: &GobydConfig) -> Option<String> {
     );
     if micromodem {
         let driver = config.driver.as_ref().expect("a Micro-Modem driver");
+        let most = modemdriver::micromodem::application_ack::MAX_MODEM_ID as i32;
+        if application_acks(config) && driver.modem_id() > most {
+            return Some(format!(
+                "modem_id {}: the Micro-Modem's application acks name nodes 0-{most}; \
+                 use a lower id, or set driver.micromodem.use_application_acks: false",
+                driver.modem_id()
+            ));
+        }
+        let lifetime = driver
+            .micromodem
+            .as_ref()
+            .map_or(300, |m| m.application_ack_lifetime_seconds());
+        let cycle: f64 = config
+            .mac
+            .iter()
+            .flat_map(|m| m.slot.iter())
+            .map(|s| s.slot_seconds())
+            .sum();
+        if application_acks(config) && cycle * 2.0 > f64::from(lifetime) {
+            return Some(format!(
+                "driver.micromodem.application_ack_lifetime_seconds {lifetime}: the TDMA cycle lasts {cycle} s, \
+                 so an ack owed could be dropped before this node's slot carries it; make it at least {} \
+                 (twice the cycle, the same at every node)",
+                (cycle * 2.0).ceil()
+            ));
+        }
         if driver.connection_type()
             == protos::goby::acomms::protobuf::driver_config::ConnectionType::ConnectionSerial
             && driver.serial_port().trim().is_empty()
@@ -574,7 +614,30 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
     }
     loaded.sort();
     loaded.dedup();
+    if application_acks(config) {
+        let id = modemdriver::micromodem::application_ack::DCCL_ID;
+        if let Some(name) = loaded.iter().find(|n| codec.id_of(n).ok() == Some(id)) {
+            return Err(ConfigError::Invalid(format!(
+                "{name} has DCCL id {id}, which the Micro-Modem's application acks take \
+                 (driver.micromodem.use_application_acks): give it another id, or set \
+                 use_application_acks: false (acks then come from the modem, on decode)"
+            )));
+        }
+    }
     Ok(Definitions { codec, loaded })
+}
+
+/// Whether the driver is a Micro-Modem sending application acks.
+pub fn application_acks(config: &GobydConfig) -> bool {
+    config.driver.as_ref().is_some_and(|d| {
+        d.driver
+            == Some(driver_config::Driver::DriverType(
+                DriverType::DriverWhoiMicromodem as i32,
+            ))
+            && d.micromodem
+                .as_ref()
+                .is_some_and(|m| m.use_application_acks())
+    })
 }
 
 #[cfg(test)]

@@ -826,7 +826,7 @@ impl Daemon {
     /// with `deferred_ack`).
     ///
     /// A frame is acknowledged when every message in it is recorded or a
-    /// repeat. Not acknowledged (the sender retries until the message
+    /// repeat. Not acknowledged: an empty frame (lost on the link); (the sender retries until the message
     /// expires there, and is told then): a frame that does not decode, all
     /// frames when a message cannot be placed in a frame (an error the
     /// queue does not tie to one), and all frames when the inbox cannot be
@@ -924,8 +924,11 @@ impl Daemon {
             && !unplaced
             && !unrecorded
         {
+            // An empty frame is one the link lost (e.g. a bad CRC): never
+            // acknowledged, or its sender would take its messages for
+            // delivered.
             let frames: Vec<usize> = (0..transmission.frame.len())
-                .filter(|i| !bad_frames.contains(i))
+                .filter(|&i| !bad_frames.contains(&i) && !transmission.frame[i].is_empty())
                 .collect();
             if !frames.is_empty() {
                 let ack = Acknowledgement {

@@ -187,6 +187,16 @@ fn check_refuses_settings_that_cannot_work() {
             "nvram_cfg \"SRC,5\" sets the modem's address to 5 but modem_id is 1",
         ),
         (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
+             micromodem { application_ack_lifetime_seconds: 30 } }\n\
+             mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 1 slot_seconds: 10 } slot { src: 2 rate: 1 slot_seconds: 10 } }\n",
+            "application_ack_lifetime_seconds 30: the TDMA cycle lasts 20 s",
+        ),
+        (
+            "modem_id: 40\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" }\n",
+            "modem_id 40: the Micro-Modem's application acks name nodes 0-31",
+        ),
+        (
             "modem_id: 1\njson { tcp_bind: \"127.0.0.1:99999\" }\n",
             "json.tcp_bind \"127.0.0.1:99999\" is not an address",
         ),
@@ -200,6 +210,46 @@ fn check_refuses_settings_that_cannot_work() {
         assert_eq!(out.status.code(), Some(2), "{text}");
         let err = stderr_text(&out);
         assert!(err.contains(expected), "{text}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn check_refuses_a_dccl_id_the_application_acks_take() {
+    let dir = scratch("gobyd-app-ack-id");
+    let proto = dir.join("status.proto");
+    std::fs::write(
+        &proto,
+        "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage test;\n\
+         message Status {\n  option (dccl.msg) = { id: 10 max_bytes: 32 codec_version: 4 };\n\
+         optional int32 depth = 1 [(dccl.field) = { min: 0 max: 100 }];\n}\n",
+    )
+    .unwrap();
+    let path = dir.join("mm.pb.txt");
+    let config = |driver: &str| {
+        format!(
+            "modem_id: 1\ndccl {{ proto_file: \"{}\" }}\ndriver {{ {driver} }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 1 slot_seconds: 10 }} }}\n",
+            proto.display()
+        )
+    };
+    let mm = "driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\"";
+    std::fs::write(&path, config(mm)).unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("test.Status has DCCL id 10, which the Micro-Modem's application acks take"),
+        "{err}"
+    );
+    // Without application acks, or over another driver, the id is free.
+    for driver in [
+        format!("{mm} micromodem {{ use_application_acks: false }}"),
+        "driver_type: DRIVER_UDP udp { local { port: 50001 } }".to_string(),
+    ] {
+        std::fs::write(&path, config(&driver)).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        assert!(out.status.success(), "{driver}: {}", stderr_text(&out));
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

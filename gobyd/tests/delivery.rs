@@ -11,6 +11,11 @@
 //! receiver's clients; no message acked and never delivered; every data
 //! packet a modem puts on the water lies within its node's TDMA slot.
 //!
+//! Over the Micro-Modem the daemons send application acks (the default):
+//! a receiver acks a message only once its inbox holds it, in its own slot.
+//! The two runs with the modem's lost-ack fault use the modem's hardware
+//! acks instead (`use_application_acks: false`), which that fault drops.
+//!
 //! The Micro-Modem runs are made with the emulator speaking as a Micro-Modem
 //! 1 and, again, as a Micro-Modem 2 at rates 1 and 0 (the rate-0 cycle opens
 //! with a cycle-initialization packet; at rate 1 the modem starts
@@ -118,6 +123,10 @@ struct Faults {
     /// Modem 2 silent at these seconds for these many.
     silences: Vec<(f64, f64)>,
     seed: u64,
+    /// Micro-Modem runs: acks from the modem, on decode
+    /// (`use_application_acks: false`), instead of the daemon's
+    /// application acks; the emulator's lost-ack fault drops those.
+    hardware_acks: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -233,7 +242,12 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let mut publishers = Vec::new();
     for id in 1..=2 {
         let driver = if emulated {
-            micromodem_driver(&modem_path(&dir, id as u32), "")
+            let acks = if faults.hardware_acks {
+                "use_application_acks: false"
+            } else {
+                ""
+            };
+            micromodem_driver(&modem_path(&dir, id as u32), acks)
         } else {
             simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed)
         };
@@ -520,6 +534,7 @@ async fn micromodem_lost_acks() {
         name: "lost-acks",
         lost_ack: 0.5,
         seed: 3,
+        hardware_acks: true,
         ..Default::default()
     };
     check(faults.name, faults, Link::MICROMODEM1).await;
@@ -557,6 +572,7 @@ async fn micromodem_combined() {
         resets: 2,
         silences: vec![(2.0, 5.0), (25.0, 4.0)],
         seed: 6,
+        hardware_acks: false,
     };
     check(faults.name, faults, Link::MICROMODEM1).await;
 }
@@ -582,6 +598,7 @@ async fn micromodem2_rate1_combined() {
         resets: 2,
         silences: vec![(2.0, 5.0), (25.0, 4.0)],
         seed: 8,
+        hardware_acks: false,
     };
     check(faults.name, faults, Link::MICROMODEM2_RATE1).await;
 }
@@ -593,6 +610,7 @@ async fn micromodem2_rate1_bad_crc_and_lost_acks() {
         bad_crc: 0.3,
         lost_ack: 0.4,
         seed: 9,
+        hardware_acks: true,
         ..Default::default()
     };
     check(faults.name, faults, Link::MICROMODEM2_RATE1).await;

@@ -277,6 +277,13 @@ pub enum DriverStatus {
         /// Why.
         reason: String,
     },
+    /// The driver goes on with a weaker guarantee than it should (e.g. a
+    /// Micro-Modem application-ack frame number used again while an ack of
+    /// its earlier use may still come).
+    Degraded {
+        /// What is weaker, and why.
+        reason: String,
+    },
     /// The driver does not know a driver-specific request.
     Unsupported {
         /// The request's message type.
@@ -331,7 +338,9 @@ impl EventSink {
     /// The answer is checked against the template: at most `max_num_frames`
     /// frames, each at most `max_frame_bytes` long (longer ones are dropped
     /// and reported); `src`, `rate` and `frame_start` are kept from the
-    /// template. With no answer, the template comes back without frames.
+    /// template. Bytes already in the template's frames (e.g. a driver's
+    /// own header) are the answer's to keep: the answer's frames replace
+    /// them. With no answer, the template comes back as it was.
     pub async fn request_data(
         &self,
         template: ModemTransmission,
@@ -347,6 +356,7 @@ impl EventSink {
             _ => return template,
         };
         let mut out = template.clone();
+        out.frame.clear();
         if template.dest() == -1 {
             out.dest = filled.dest;
         }

@@ -18,8 +18,8 @@ use modemdriver::micromodem::emulator::{
 use modemdriver::micromodem::MicroModemDriver;
 use modemdriver::udp::UdpDriver;
 use modemdriver::{
-    Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission, RawDirection,
-    TransmitOutcome,
+    Acknowledgement, Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission,
+    RawDirection, TransmitOutcome, TransmitResult,
 };
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::udp_driver_config::EndPoint;
@@ -624,6 +624,14 @@ async fn an_ack_names_the_transmission_it_answers() {
 /// Two emulated Micro-Modem 2s 1000 m apart on the in-process channel
 /// simulator, a driver on each pty.
 async fn bench_mm2(name: &str) -> (Driver, Driver, EmulatorHandle, EmulatorHandle, PathBuf) {
+    bench_mm2_with(name, |_| {}).await
+}
+
+/// [`bench_mm2`] with each driver's configuration changed by `adjust`.
+async fn bench_mm2_with(
+    name: &str,
+    adjust: impl Fn(&mut DriverConfig),
+) -> (Driver, Driver, EmulatorHandle, EmulatorHandle, PathBuf) {
     use modemdriver::sim::medium::Medium;
     use modemdriver::sim::SimulatorDriver;
     use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
@@ -662,7 +670,9 @@ async fn bench_mm2(name: &str) -> (Driver, Driver, EmulatorHandle, EmulatorHandl
         let mut e =
             emulator::start(cfg, EmulatorPort::Pty { link: None }, Some(backend)).expect("pty");
         let path = e.path().await.unwrap();
-        drivers.push(MicroModemDriver::start(&mm_config(id as i32, &path)).unwrap());
+        let mut config = mm_config(id as i32, &path);
+        adjust(&mut config);
+        drivers.push(MicroModemDriver::start(&config).unwrap());
         emulators.push(e);
     }
     let mut d2 = drivers.pop().unwrap();
@@ -854,4 +864,141 @@ async fn micromodem2_lbl_ping_reports_the_travel_times_the_modem_gives() {
     );
     d.stop().await.unwrap();
     e.stop().await;
+}
+
+/// Answers `driver`'s data request as a queue does: `data` appended to what
+/// frame 0 already holds (with application acks, the ack message). Returns
+/// the transmission's outcome and everything else the driver reported.
+async fn send_appending(
+    driver: &mut Driver,
+    mut mt: ModemTransmission,
+    data: &[u8],
+) -> (TransmitResult, Vec<DriverEvent>) {
+    mt.r#type = Some(TransmissionType::Data as i32);
+    driver.initiate_transmission(mt).unwrap();
+    let mut seen = Vec::new();
+    let result = tokio::time::timeout(Duration::from_secs(30), async {
+        loop {
+            match driver.next_event().await.expect("driver running") {
+                DriverEvent::DataRequest(request) => {
+                    let mut filled = request.template().clone();
+                    if !data.is_empty() {
+                        if filled.frame.is_empty() {
+                            filled.frame.push(Vec::new());
+                        }
+                        filled.frame[0].extend_from_slice(data);
+                        filled.ack_requested = Some(true);
+                        if filled.dest() == -1 {
+                            filled.dest = Some(2);
+                        }
+                    }
+                    request.respond(filled);
+                }
+                DriverEvent::TransmitResult(r) => return r,
+                other => seen.push(other),
+            }
+        }
+    })
+    .await
+    .expect("a transmit result in time");
+    (result, seen)
+}
+
+/// The lines a driver wrote, among its events.
+fn written(events: &[DriverEvent]) -> Vec<String> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::Raw(raw) if raw.direction == RawDirection::Outgoing => {
+                Some(String::from_utf8_lossy(&raw.bytes).trim().to_string())
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// With `use_application_acks` and `deferred_ack`, the receiving modem is
+/// asked for no hardware ack, and the receiver's driver acks a frame only
+/// once the layer above acknowledges it, in its own next transmission;
+/// the sender's driver credits the ack to the transmission that carried
+/// the frame.
+#[tokio::test]
+async fn micromodem2_application_acks_wait_for_the_layer_above() {
+    let (mut d1, mut d2, e1, e2, _dir) = bench_mm2_with("mm2-app-ack", |c| {
+        c.deferred_ack = Some(true);
+        c.micromodem
+            .get_or_insert_with(Default::default)
+            .use_application_acks = Some(true);
+    })
+    .await;
+    let mut first = data(2, 1, true);
+    first.unique_id = Some(41);
+    let (result, seen) = send_appending(&mut d1, first, b"kept before acked").await;
+    assert_eq!(result.outcome, TransmitOutcome::Sent, "{result:?}");
+    let cycles: Vec<String> = written(&seen)
+        .into_iter()
+        .filter(|l| l.starts_with("$CCCYC"))
+        .collect();
+    assert_eq!(cycles.len(), 1, "{cycles:?}");
+    let fields: Vec<&str> = cycles[0].split('*').next().unwrap().split(',').collect();
+    assert_eq!(fields[5], "0", "no hardware ack asked for: {}", cycles[0]);
+
+    // Node 2 gets the data without the ack message, numbered as node 1
+    // numbered it (from a number drawn at random when its driver started).
+    let got = data_received(&mut d2, Duration::from_millis(3000)).await;
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(got[0].frame, vec![b"kept before acked".to_vec()]);
+    assert!(got[0].frame_start() < 32);
+    assert!(got[0].ack_requested());
+
+    // Not yet acknowledged by the layer above: node 2's slot sends nothing.
+    let (result, _) = send_appending(&mut d2, data(-1, 1, false), b"").await;
+    assert_eq!(result.outcome, TransmitOutcome::NothingToSend, "{result:?}");
+
+    // Acknowledged: node 2's next transmission carries the ack alone, to 1.
+    d2.acknowledge(Acknowledgement::all(got[0].clone()))
+        .unwrap();
+    let (result, _) = send_appending(&mut d2, data(-1, 1, false), b"").await;
+    assert_eq!(result.outcome, TransmitOutcome::Sent, "{result:?}");
+    assert_eq!(result.transmission.dest(), 1);
+
+    // Node 1 hears it, and no data; but just started, it had not heard
+    // from node 2 when it sent: node 2 might have owed acks under the same
+    // numbers from before a restart, so nothing is credited this once.
+    let heard = collect_received(&mut d1, &[], Duration::from_millis(3000)).await;
+    assert!(
+        heard.is_empty(),
+        "no data and no credited ack on the first round: {heard:?}"
+    );
+
+    // The next transmission is credited: an ack naming transmission 42.
+    let mut second = data(2, 1, true);
+    second.unique_id = Some(42);
+    let (result, _) = send_appending(&mut d1, second, b"sent again").await;
+    assert_eq!(result.outcome, TransmitOutcome::Sent, "{result:?}");
+    let got = data_received(&mut d2, Duration::from_millis(3000)).await;
+    assert_eq!(got.len(), 1, "{got:?}");
+    d2.acknowledge(Acknowledgement::all(got[0].clone()))
+        .unwrap();
+    let (result, _) = send_appending(&mut d2, data(-1, 1, false), b"").await;
+    assert_eq!(result.outcome, TransmitOutcome::Sent, "{result:?}");
+    let heard = collect_received(&mut d1, &[], Duration::from_millis(3000)).await;
+    let acks: Vec<&ModemTransmission> = heard
+        .iter()
+        .filter(|mt| mt.r#type() == TransmissionType::Ack)
+        .collect();
+    assert_eq!(acks.len(), 1, "{heard:?}");
+    assert_eq!(
+        (acks[0].src(), acks[0].dest(), acks[0].unique_id),
+        (2, 1, Some(42))
+    );
+    assert_eq!(acks[0].acked_frame, vec![got[0].frame_start() as i32]);
+    assert!(
+        !heard.iter().any(|mt| mt.r#type() == TransmissionType::Data),
+        "an ack-only transmission is no data: {heard:?}"
+    );
+    d1.stop().await.unwrap();
+    d2.stop().await.unwrap();
+    e1.stop().await;
+    e2.stop().await;
 }

@@ -88,6 +88,7 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
+use super::application_ack::{self, ApplicationAcks, Placed};
 use super::clock;
 use super::firmware::{self, Generation};
 use super::nmea::NmeaError;
@@ -96,8 +97,8 @@ use super::statistics::{ReceiveStatisticsSentence, TransmitStatisticsSentence};
 use super::{fdp, ranging};
 use crate::config;
 use crate::driver::{
-    Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus, EventSink,
-    SpecificReport, TransmitOutcome, TransmitResult,
+    Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
+    EventSink, SpecificReport, TransmitOutcome, TransmitResult,
 };
 use crate::link::fault::{FaultConfig, FaultInjector, FaultScript};
 use crate::link::serial::{self, SerialLineLink};
@@ -201,6 +202,26 @@ impl MicroModemDriver {
                 )));
             }
         }
+        if mm.use_application_acks() && modem_id > application_ack::MAX_MODEM_ID {
+            return Err(DriverError::Config(format!(
+                "MicroModemConfig.use_application_acks: modem_id {modem_id} cannot be named in an application ack (ids 0-{})",
+                application_ack::MAX_MODEM_ID
+            )));
+        }
+        let app_acks = if mm.use_application_acks() {
+            Some(
+                ApplicationAcks::new(
+                    modem_id,
+                    Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
+                    first_frame_number(),
+                    std::time::Instant::now(),
+                )
+                .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?,
+            )
+        } else {
+            None
+        };
+        let deferred_ack = config.deferred_ack();
         let port = Port {
             path,
             baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
@@ -216,7 +237,18 @@ impl MicroModemDriver {
         let lines = serial::open(&port.path, port.baud, &port.delimiter)
             .map_err(|e| DriverError::io("DriverConfig.serial_port", e))?;
         Ok(Driver::spawn("micromodem", move |ctx| {
-            run(modem_id, mm, port, lines, reconnect, ctx)
+            run(
+                Settings {
+                    modem_id,
+                    mm,
+                    port,
+                    reconnect,
+                    app_acks,
+                    deferred_ack,
+                },
+                lines,
+                ctx,
+            )
         }))
     }
 }
@@ -290,6 +322,8 @@ struct Active {
     /// `$CAXST` of this transmission (two at rate 0: the cycle
     /// initialization and the data packet).
     transmit_stats: Vec<MicroModemTransmitStatistics>,
+    /// Application acks placed in its frame 0.
+    placed: Option<Placed>,
 }
 
 /// What the driver sends outside of transmissions.
@@ -381,6 +415,10 @@ struct Mm {
     last_heard: Instant,
     silence_reported: bool,
     last_sent: Option<SentData>,
+    /// With `use_application_acks`.
+    app_acks: Option<ApplicationAcks>,
+    /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
+    deferred_ack: bool,
 }
 
 /// The sentence id of the modem's answer to a host command.
@@ -625,6 +663,7 @@ impl Mm {
                     cycle_frames: 0,
                     requested: 0,
                     transmit_stats: Vec::new(),
+                    placed: None,
                 });
             }
             let Some(active) = &mut self.active else {
@@ -654,11 +693,7 @@ impl Mm {
                 _ => None,
             };
             if let Some((job, mt)) = unfilled {
-                let template = self.data_template(&job, &mt, None);
-                let mut filled = self
-                    .events
-                    .request_data(template, DATA_REQUEST_TIMEOUT)
-                    .await;
+                let (mut filled, placed) = self.fill(&job, &mt, None).await;
                 if filled.dest() == -1 {
                     filled.dest = Some(0);
                 }
@@ -671,6 +706,7 @@ impl Mm {
                         job.dest = filled.dest;
                     }
                     active.filled = Some(filled);
+                    active.placed = placed;
                 }
                 if empty && !mt.always_initiate() {
                     self.finish(TransmitOutcome::NothingToSend);
@@ -684,8 +720,10 @@ impl Mm {
                     let have = active.filled.as_ref().map_or(0, |f| f.frame.len() as u32);
                     let frames = have.clamp(1, spec.frames);
                     // Whether acks are wanted is the filled transmission's
-                    // to say (the layer above knows what it queued).
-                    let ack = active.filled.as_ref().unwrap_or(mt).ack_requested();
+                    // to say (the layer above knows what it queued); with
+                    // application acks the modem is asked for none.
+                    let ack = active.filled.as_ref().unwrap_or(mt).ack_requested()
+                        && self.app_acks.is_none();
                     (
                         MmSentence::Cycle {
                             from_modem: false,
@@ -767,6 +805,12 @@ impl Mm {
 
     fn finish(&mut self, outcome: TransmitOutcome) {
         if let Some(active) = self.active.take() {
+            if let (TransmitOutcome::Failed(_), Some(app), Some(placed)) =
+                (&outcome, &mut self.app_acks, &active.placed)
+            {
+                // Not on the water: the acks it carried are owed still.
+                app.restore(placed);
+            }
             let mut transmission =
                 job_transmission(&active.job, active.filled.as_ref(), self.modem_id);
             transmission.transmit_stat = active.transmit_stats;
@@ -829,10 +873,36 @@ impl Mm {
 
     /// Reports a reception; with statistics, its time is the modem's time
     /// of arrival of the last packet.
-    fn report_reception(&self, mut transmission: ModemTransmission) {
+    ///
+    /// With application acks, the ack message starting frame 0 is stripped
+    /// and the acks it carries for our frames are reported first (as `ACK`
+    /// transmissions); an ack-only transmission is not reported as data.
+    /// Without `deferred_ack`, acks for the frames are owed at once.
+    fn report_reception(&mut self, mut transmission: ModemTransmission) {
         if let Some(t) = transmission.receive_stat.last().and_then(|s| s.time) {
             transmission.time = Some(t);
             transmission.time_source = Some(TimeSource::ModemTime as i32);
+        }
+        if let Some(app) = &mut self.app_acks {
+            let heard = app.receive(&mut transmission);
+            if let Some(reason) = heard.error {
+                self.events.status(DriverStatus::Unparseable {
+                    line: format!("frame 0 from {}", transmission.src()),
+                    reason,
+                });
+            }
+            for ack in heard.acks {
+                self.events.emit(DriverEvent::Received(ack));
+            }
+            if transmission.frame.is_empty() {
+                return;
+            }
+            if !self.deferred_ack {
+                app.acknowledge(
+                    &Acknowledgement::all(transmission.clone()),
+                    std::time::Instant::now(),
+                );
+            }
         }
         self.events.emit(DriverEvent::Received(transmission));
     }
@@ -1426,7 +1496,7 @@ impl Mm {
             return;
         };
         let sent = filled.as_ref().unwrap_or(mt);
-        if !sent.ack_requested() {
+        if !sent.ack_requested() || self.app_acks.is_some() {
             self.last_sent = None;
             return;
         }
@@ -1486,6 +1556,61 @@ impl Mm {
             Job::Lbl { .. } => {}
             Job::Mini { .. } | Job::HardwareControl { .. } => self.finish(TransmitOutcome::Sent),
         }
+    }
+
+    /// Asks the layer above for the frames of a data or FDP transmission.
+    /// With application acks, frame 0 starts with the ack message (the acks
+    /// placed are returned, to be owed again if the transmission fails).
+    async fn fill(
+        &mut self,
+        job: &Job,
+        mt: &ModemTransmission,
+        max_bytes: Option<u32>,
+    ) -> (ModemTransmission, Option<Placed>) {
+        let mut template = self.data_template(job, mt, max_bytes);
+        let now = std::time::Instant::now();
+        let placed = match self
+            .app_acks
+            .as_mut()
+            .map(|app| app.prepare(&mut template, now))
+        {
+            Some(Ok(placed)) => {
+                if placed.reused {
+                    self.events.status(DriverStatus::Degraded {
+                        reason: format!(
+                            "every application-ack frame number awaits an ack: frame {} is numbered again, \
+                             and a late ack of its earlier use would be taken for this one",
+                            template.frame_start()
+                        ),
+                    });
+                }
+                Some(placed)
+            }
+            Some(Err(e)) => {
+                self.events.status(DriverStatus::LinkError {
+                    reason: format!("the application ack does not encode: {e}"),
+                });
+                None
+            }
+            None => None,
+        };
+        let mut filled = self
+            .events
+            .request_data(template, DATA_REQUEST_TIMEOUT)
+            .await;
+        let placed = match (&mut self.app_acks, placed) {
+            (Some(app), Some(mut placed)) => match app.complete(&mut filled, &mut placed, now) {
+                Ok(()) => Some(placed),
+                Err(e) => {
+                    self.events.status(DriverStatus::DataRejected {
+                        reason: e.to_string(),
+                    });
+                    None
+                }
+            },
+            _ => None,
+        };
+        (filled, placed)
     }
 
     /// What the layer above is asked to fill for a data or FDP transmission.
@@ -1604,13 +1729,10 @@ impl Mm {
             _ => None,
         };
         if let Some((job, mt)) = unfilled {
-            let template = self.data_template(&job, &mt, Some(max_bytes));
-            let filled = self
-                .events
-                .request_data(template, DATA_REQUEST_TIMEOUT)
-                .await;
+            let (filled, placed) = self.fill(&job, &mt, Some(max_bytes)).await;
             if let Some(active) = &mut self.active {
                 active.filled = Some(filled);
+                active.placed = placed;
             }
         }
         let Some(active) = &mut self.active else {
@@ -1779,8 +1901,13 @@ impl Mm {
                         .status(DriverStatus::Unsupported { message: name }),
                 }
             }
-            // The modem acknowledges in hardware, on reception.
-            DriverCommand::Acknowledge(_) => {}
+            // Without application acks the modem acknowledges in
+            // hardware, on reception.
+            DriverCommand::Acknowledge(ack) => {
+                if let (Some(app), true) = (&mut self.app_acks, self.deferred_ack) {
+                    app.acknowledge(&ack, std::time::Instant::now());
+                }
+            }
             DriverCommand::Stop(done) => return Some(done),
         }
         None
@@ -1845,14 +1972,34 @@ async fn recv_opt(link: &mut Option<MmLink>) -> std::io::Result<Vec<u8>> {
     }
 }
 
-async fn run(
+/// A frame number drawn at random (from the standard library's randomly
+/// keyed hasher) to start the application-ack numbering at.
+fn first_frame_number() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(now_micros());
+    (hasher.finish() % u64::from(application_ack::FRAME_NUMBERS)) as u32
+}
+
+/// What the driver task starts from.
+struct Settings {
     modem_id: u32,
     mm: MicroModemConfig,
     port: Port,
-    lines: SerialLineLink,
     reconnect: Duration,
-    mut ctx: DriverContext,
-) {
+    app_acks: Option<ApplicationAcks>,
+    deferred_ack: bool,
+}
+
+async fn run(settings: Settings, lines: SerialLineLink, mut ctx: DriverContext) {
+    let Settings {
+        modem_id,
+        mm,
+        port,
+        reconnect,
+        app_acks,
+        deferred_ack,
+    } = settings;
     let events = ctx.events.clone();
     let now = Instant::now();
     let mut state = Mm {
@@ -1882,6 +2029,8 @@ async fn run(
         last_heard: now,
         silence_reported: false,
         last_sent: None,
+        app_acks,
+        deferred_ack,
     };
     state.link = Some(state.port.wrap(lines, &events));
     state.queue_initialization();

@@ -7,9 +7,12 @@
 //! - [`firmware`]: Micro-Modem 1 or 2, and quirks of firmware versions.
 //! - [`fdp`]: Flexible Data Protocol rates and received packets.
 //! - [`ranging`]: LBL pings ($CCPDT, $CCPNT) and their travel times ($SNTTA).
+//! - [`application_ack`]: acks sent in software, after the data is kept
+//!   (`use_application_acks`).
 //! - [`driver`]: the driver ([`MicroModemDriver`]).
 //! - [`emulator`]: the modem's side, for tests and bench work.
 
+pub mod application_ack;
 pub mod clock;
 pub mod driver;
 pub mod emulator;

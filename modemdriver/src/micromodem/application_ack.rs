@@ -1,0 +1,977 @@
+//! Application acks over the Micro-Modem (`use_application_acks`).
+//!
+//! A Micro-Modem acknowledges a frame in hardware as soon as it decodes it,
+//! before the host has read it: a host that dies in between loses a message
+//! its sender was told was received. With application acks the modem is
+//! asked for none; instead every data (or FDP) transmission of a node
+//! starts, in frame 0, with a [`MicroModemApplicationAck`] — Goby's
+//! `MMApplicationAck`, DCCL id 10, same bytes — that
+//!
+//! - numbers the transmission's frames: `frame_start`, then one number per
+//!   frame, counting on from transmission to transmission and back to 0
+//!   when the next packet's frames would pass 31 (as Goby does);
+//! - says whether its data asks to be acknowledged (`ack_requested`);
+//! - acknowledges frames of other nodes (`part`: the node, and a bit per
+//!   frame number), at most four nodes at a time.
+//!
+//! The receiving driver strips it before handing the frames up, turns the
+//! parts naming this node into `ACK` transmissions (carrying the
+//! `unique_id` of the transmission that sent the frame, so that the queue
+//! credits that transmission and no other), and owes an ack for the frames
+//! received once the layer above acknowledges them (`Driver::acknowledge`,
+//! with `DriverConfig.deferred_ack`) or at once (without). Owed acks ride
+//! in this node's next transmission heard by their node: one addressed to
+//! it, or a broadcast; a transmission with nothing else to send still goes
+//! out when it carries acks.
+//!
+//! Frame numbers are few (32), so an ack naming one must not be taken for
+//! an ack of a later use of the number. Owed acks therefore live at most
+//! `lifetime` (`application_ack_lifetime_seconds`): one not sent by then is
+//! dropped (the sender sends the data again, and the repeat is acked
+//! anew). And the sender does not use a number again within `lifetime` of
+//! a use still awaiting its ack, as long as other numbers are free; it
+//! starts its numbering at a number drawn at random.
+//!
+//! A restarted sender does not know which of its numbers other nodes still
+//! owe acks for (from its run before the restart), so until it has heard
+//! from a node (a transmission addressed to it, or a broadcast carrying
+//! every ack owed, which empties that node's acks owed to it) or
+//! `lifetime` has passed, it credits no ack from that node: its frames to
+//! the node still ask for acks, so the node answers and the next
+//! transmission is credited. A restart costs one round, never a message
+//! taken for acked.
+//!
+//! This module keeps that bookkeeping; it does no input or output.
+
+use std::time::{Duration, Instant};
+
+use dccl::Codec;
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{
+    micro_modem_application_ack::AckPart, modem_transmission::TransmissionType,
+    MicroModemApplicationAck, ModemTransmission,
+};
+
+use crate::driver::Acknowledgement;
+use crate::time::now_micros;
+
+/// Frame numbers run from 0 to 31 (the width of `acked_frames`).
+pub const FRAME_NUMBERS: u32 = 32;
+
+/// Nodes acknowledged in one transmission at most (`part` max_repeat).
+pub const MAX_PARTS: usize = 4;
+
+/// Highest modem id an ack can name (`ack_dest` is 0-31).
+pub const MAX_MODEM_ID: u32 = 31;
+
+/// The DCCL id of [`MicroModemApplicationAck`].
+pub const DCCL_ID: u32 = 10;
+
+/// Broadcast destination.
+const BROADCAST: i32 = 0;
+/// Destination chosen by the layer above.
+const QUERY: i32 = -1;
+
+/// A frame of ours that went out asking for an ack, by its number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct SentFrame {
+    unique_id: Option<u32>,
+    dest: i32,
+    at: Instant,
+}
+
+/// Acks owed to one node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Owed {
+    node: u32,
+    /// Bit per frame number.
+    mask: u32,
+    /// Transmissions of ours that went elsewhere meanwhile.
+    waited: u32,
+    /// When the oldest of these acks became owed.
+    since: Instant,
+}
+
+/// The acks placed in a transmission being filled, given back when it
+/// finally fails to go out.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Placed {
+    parts: Vec<Owed>,
+    /// The ack message as placed at the start of frame 0.
+    placeholder: Vec<u8>,
+    /// Every frame number had a use awaiting its ack within the lifetime:
+    /// one is used again, and a late ack of its earlier use would be taken
+    /// for this one.
+    pub reused: bool,
+}
+
+/// Why a filled transmission could not carry its ack message.
+#[derive(Debug, thiserror::Error)]
+pub enum CompleteError {
+    /// The answer to the data request did not start with the ack message.
+    #[error("the answer to the data request dropped the application ack placed in frame 0")]
+    Dropped,
+    /// The ack message changed size (cannot happen with its definition).
+    #[error("the application ack changed size when completed")]
+    Size,
+    /// The ack message did not encode.
+    #[error("the application ack does not encode: {0}")]
+    Encode(dccl::Error),
+}
+
+/// Application-ack bookkeeping of one driver.
+#[derive(Debug)]
+pub struct ApplicationAcks {
+    codec: Codec,
+    modem_id: u32,
+    lifetime: Duration,
+    next_frame: u32,
+    /// Our frames by number: the transmission that last used the number.
+    sent: [Option<SentFrame>; FRAME_NUMBERS as usize],
+    /// Frames of others to acknowledge, in the order first owed.
+    owed: Vec<Owed>,
+    /// When the bookkeeping started (the driver's start).
+    started: Instant,
+    /// Bit per node heard from since the start (see the module's text).
+    heard_from: u32,
+}
+
+/// What a received transmission held for this bookkeeping.
+#[derive(Debug, Default)]
+pub struct Heard {
+    /// `ACK` transmissions for our frames it acknowledged.
+    pub acks: Vec<ModemTransmission>,
+    /// Its ack message could not be decoded (the frame is left as it was).
+    pub error: Option<String>,
+}
+
+impl ApplicationAcks {
+    /// Bookkeeping for the node `modem_id`, started at `now`: acks owed
+    /// live at most `lifetime`; numbering starts at `first_frame` (taken
+    /// modulo 32; the driver draws it at random).
+    ///
+    /// # Errors
+    /// The ack message does not load in the DCCL codec (a build fault).
+    pub fn new(
+        modem_id: u32,
+        lifetime: Duration,
+        first_frame: u32,
+        now: Instant,
+    ) -> Result<Self, dccl::Error> {
+        let mut codec = Codec::new();
+        codec.load(&MicroModemApplicationAck::default().descriptor())?;
+        Ok(ApplicationAcks {
+            codec,
+            modem_id,
+            lifetime,
+            next_frame: first_frame % FRAME_NUMBERS,
+            sent: [None; FRAME_NUMBERS as usize],
+            owed: Vec::new(),
+            started: now,
+            heard_from: 0,
+        })
+    }
+
+    /// Whether an ack from `node` can be credited: it has been heard from
+    /// since the start, or the start is `lifetime` ago.
+    fn credits(&self, node: i32, now: Instant) -> bool {
+        let heard = u32::try_from(node)
+            .ok()
+            .filter(|&n| n <= MAX_MODEM_ID)
+            .is_some_and(|n| self.heard_from & (1 << n) != 0);
+        heard || now.saturating_duration_since(self.started) >= self.lifetime
+    }
+
+    /// Whether acks are owed to anyone.
+    pub fn owes(&self) -> bool {
+        !self.owed.is_empty()
+    }
+
+    /// Prepares a data request: numbers its frames (`frame_start`) and
+    /// places the ack message (with `ack_requested` unset for now) at the
+    /// start of frame 0, so that the layer above fills the rest.
+    ///
+    /// The acks placed are those the destination can hear: its own, or all
+    /// (at most four nodes) for a broadcast or a destination left to the
+    /// layer above (-1), which [`complete`](Self::complete) narrows to the
+    /// destination chosen. So that acks owed to one node are not held back
+    /// for ever by data for others, a transmission whose destination is
+    /// left open goes to a node whose acks already waited a transmission.
+    ///
+    /// The frames are numbered from the next number on when those numbers
+    /// are free (never used, acked, or used longer than `lifetime` ago),
+    /// else from the first free run of numbers; with none free (many
+    /// frames lost within `lifetime`), from the next number anyway, and
+    /// [`Placed::reused`] says so.
+    pub fn prepare(
+        &mut self,
+        template: &mut ModemTransmission,
+        now: Instant,
+    ) -> Result<Placed, dccl::Error> {
+        let lifetime = self.lifetime;
+        self.owed
+            .retain(|o| now.saturating_duration_since(o.since) < lifetime);
+        let frames = template.max_num_frames().clamp(1, FRAME_NUMBERS);
+        if self.next_frame + frames > FRAME_NUMBERS {
+            self.next_frame = 0;
+        }
+        let free = |n: u32| {
+            self.sent[n as usize].is_none_or(|s| now.saturating_duration_since(s.at) >= lifetime)
+        };
+        let starts = (0..FRAME_NUMBERS)
+            .map(|i| (self.next_frame + i) % FRAME_NUMBERS)
+            .filter(|&s| s + frames <= FRAME_NUMBERS);
+        let mut reused = false;
+        let start = match starts.clone().find(|&s| (s..s + frames).all(free)) {
+            Some(s) => s,
+            None => {
+                reused = true;
+                self.next_frame
+            }
+        };
+        self.next_frame = start;
+        template.frame_start = Some(start);
+        if template.dest() == QUERY {
+            if let Some(o) = self.owed.iter().find(|o| o.waited > 0) {
+                template.dest = Some(o.node as i32);
+            }
+        }
+        let dest = template.dest();
+        let mut parts = Vec::new();
+        self.owed.retain(|&o| {
+            let heard = dest == QUERY || dest == BROADCAST || dest == o.node as i32;
+            if heard && parts.len() < MAX_PARTS {
+                parts.push(o);
+                false
+            } else {
+                true
+            }
+        });
+        let placeholder = self.encode(&parts, false, self.next_frame)?;
+        template.frame.clear();
+        template.frame.push(placeholder.clone());
+        Ok(Placed {
+            parts,
+            placeholder,
+            reused,
+        })
+    }
+
+    /// Completes a filled data request prepared by
+    /// [`prepare`](Self::prepare). The ack message now says whether the
+    /// data asks for acks and keeps only the acks the destination hears
+    /// (the others are owed still); a transmission with acks and no data
+    /// whose destination was left open goes to the one node owed, or as a
+    /// broadcast to several. The frames are remembered by number (with the
+    /// transmission's `unique_id` and destination) and the numbering moves
+    /// on. A transmission carrying neither data nor acks is emptied
+    /// (nothing to send). `placed` is left holding the acks carried.
+    pub fn complete(
+        &mut self,
+        filled: &mut ModemTransmission,
+        placed: &mut Placed,
+        now: Instant,
+    ) -> Result<(), CompleteError> {
+        let len = placed.placeholder.len();
+        let kept = filled
+            .frame
+            .first()
+            .is_some_and(|f| f.starts_with(&placed.placeholder));
+        if !kept {
+            // The layer above did not keep the ack message: its acks are
+            // owed again, and the frames go unnumbered.
+            self.restore(placed);
+            return Err(CompleteError::Dropped);
+        }
+        let frame_start = filled.frame_start();
+        let data =
+            filled.frame[0].len() > len || filled.frame.iter().skip(1).any(|f| !f.is_empty());
+        if !data && placed.parts.is_empty() {
+            filled.frame.clear();
+            return Ok(());
+        }
+        if filled.dest() == QUERY {
+            filled.dest = Some(match placed.parts.as_slice() {
+                [only] if !data => only.node as i32,
+                _ => BROADCAST,
+            });
+        }
+        let dest = filled.dest();
+        let (carried, held): (Vec<Owed>, Vec<Owed>) = placed
+            .parts
+            .iter()
+            .partition(|o| dest == BROADCAST || dest == o.node as i32);
+        for o in held {
+            self.owe(Owed {
+                waited: o.waited + 1,
+                ..o
+            });
+        }
+        placed.parts = carried;
+        if !data && placed.parts.is_empty() {
+            filled.frame.clear();
+            return Ok(());
+        }
+        let bytes = match self.encode(&placed.parts, filled.ack_requested(), frame_start) {
+            Ok(bytes) if bytes.len() <= len => bytes,
+            Ok(_) => {
+                self.restore(placed);
+                return Err(CompleteError::Size);
+            }
+            Err(e) => {
+                self.restore(placed);
+                return Err(CompleteError::Encode(e));
+            }
+        };
+        filled.frame[0].splice(0..len, bytes);
+        let frames = (filled.frame.len() as u32).clamp(1, FRAME_NUMBERS - frame_start);
+        // A number is held only while an ack of it may come and be
+        // credited (not to a node not heard from since a restart).
+        let awaits = filled.ack_requested() && self.credits(dest, now);
+        for n in frame_start..frame_start + frames {
+            self.sent[n as usize] = awaits.then_some(SentFrame {
+                unique_id: filled.unique_id,
+                dest,
+                at: now,
+            });
+        }
+        self.next_frame = frame_start + frames;
+        Ok(())
+    }
+
+    /// The acks placed in a transmission that finally did not go out (or
+    /// whose ack message was lost on the way) are owed again.
+    pub fn restore(&mut self, placed: &Placed) {
+        for &o in &placed.parts {
+            self.owe(Owed {
+                waited: o.waited + 1,
+                ..o
+            });
+        }
+    }
+
+    /// Handles a received data transmission: when frame 0 starts with an
+    /// ack message, strips it, takes `frame_start` and `ack_requested` from
+    /// it, and returns the acks of our frames it carries. A transmission
+    /// without one (a peer not using application acks) is left as it is.
+    /// Frames left empty at the end are removed (an ack-only transmission
+    /// has none left).
+    ///
+    /// A transmission addressed to this node, or a broadcast with room for
+    /// every ack its sender owed, counts as heard from its sender (acks
+    /// from it are credited from then on).
+    pub fn receive(&mut self, mt: &mut ModemTransmission) -> Heard {
+        let mut heard = Heard::default();
+        let Some(first) = mt.frame.first() else {
+            return heard;
+        };
+        if first.is_empty() || self.codec.id(first).ok() != Some(DCCL_ID) {
+            return heard;
+        }
+        let (ack, used) = match self
+            .codec
+            .decode_prefix(first)
+            .map_err(|e| e.to_string())
+            .and_then(|(m, used)| {
+                m.transcode_to::<MicroModemApplicationAck>()
+                    .map(|a| (a, used))
+                    .map_err(|e| e.to_string())
+            }) {
+            Ok(decoded) => decoded,
+            Err(e) => {
+                heard.error = Some(format!(
+                    "the application ack from {} does not decode: {e}",
+                    mt.src()
+                ));
+                return heard;
+            }
+        };
+        let used = used.min(mt.frame[0].len());
+        mt.frame[0].drain(..used);
+        while mt.frame.last().is_some_and(|f| f.is_empty()) {
+            mt.frame.pop();
+        }
+        mt.frame_start = Some(ack.frame_start);
+        mt.ack_requested = Some(ack.ack_requested);
+        let from = mt.src();
+        for part in &ack.part {
+            if part.ack_dest != self.modem_id as i32 {
+                continue;
+            }
+            for n in 0..FRAME_NUMBERS {
+                if part.acked_frames & (1 << n) == 0 {
+                    continue;
+                }
+                // Only the node the frame was sent to answers it.
+                let Some(sent) = self.sent[n as usize].filter(|s| s.dest == from) else {
+                    continue;
+                };
+                self.sent[n as usize] = None;
+                heard.acks.push(ModemTransmission {
+                    src: Some(from),
+                    dest: Some(self.modem_id as i32),
+                    time: Some(now_micros()),
+                    r#type: Some(TransmissionType::Ack as i32),
+                    acked_frame: vec![n as i32],
+                    unique_id: sent.unique_id,
+                    ..Default::default()
+                });
+            }
+        }
+        let emptied = mt.dest() == self.modem_id as i32
+            || (mt.dest() == BROADCAST && ack.part.len() < MAX_PARTS);
+        if let Some(n) = u32::try_from(from).ok().filter(|&n| n <= MAX_MODEM_ID) {
+            if emptied {
+                self.heard_from |= 1 << n;
+            }
+        }
+        heard
+    }
+
+    /// Owes acks for the frames of a received transmission (as returned by
+    /// [`receive`](Self::receive)): those the layer above names, when the
+    /// data asked for acks and was addressed to this node.
+    pub fn acknowledge(&mut self, ack: &Acknowledgement, now: Instant) {
+        let mt = &ack.received;
+        if !Acknowledgement::wanted(mt, &[self.modem_id as i32]) {
+            return;
+        }
+        let Some(node) = u32::try_from(mt.src()).ok().filter(|&n| n <= MAX_MODEM_ID) else {
+            return;
+        };
+        // An empty frame is one lost to a bad CRC: never acknowledged.
+        let mask = ack
+            .frames
+            .iter()
+            .filter(|&&i| mt.frame.get(i).is_some_and(|f| !f.is_empty()))
+            .map(|&i| mt.frame_start() as usize + i)
+            .filter(|&n| n < FRAME_NUMBERS as usize)
+            .fold(0u32, |m, n| m | (1 << n));
+        if mask != 0 {
+            self.owe(Owed {
+                node,
+                mask,
+                waited: 0,
+                since: now,
+            });
+        }
+    }
+
+    fn owe(&mut self, owed: Owed) {
+        match self.owed.iter_mut().find(|o| o.node == owed.node) {
+            Some(o) => {
+                o.mask |= owed.mask;
+                o.waited = o.waited.max(owed.waited);
+                o.since = o.since.min(owed.since);
+            }
+            None => self.owed.push(owed),
+        }
+    }
+
+    fn encode(
+        &self,
+        parts: &[Owed],
+        ack_requested: bool,
+        frame_start: u32,
+    ) -> Result<Vec<u8>, dccl::Error> {
+        let ack = MicroModemApplicationAck {
+            part: parts
+                .iter()
+                .map(|o| AckPart {
+                    ack_dest: o.node as i32,
+                    acked_frames: o.mask,
+                })
+                .collect(),
+            ack_requested,
+            frame_start,
+        };
+        self.codec.encode(&ack.transcode_to_dynamic())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIFETIME: Duration = Duration::from_secs(300);
+
+    /// Bookkeeping started at [`base`] (so that, at [`now`], a lifetime
+    /// later, acks from every node are credited).
+    fn acks(id: u32) -> ApplicationAcks {
+        ApplicationAcks::new(id, LIFETIME, 0, base()).unwrap()
+    }
+
+    fn base() -> Instant {
+        use std::sync::OnceLock;
+        static START: OnceLock<Instant> = OnceLock::new();
+        *START.get_or_init(Instant::now)
+    }
+
+    /// One moment for the tests that do not age anything.
+    fn now() -> Instant {
+        base() + LIFETIME
+    }
+
+    fn hex(s: &str) -> Vec<u8> {
+        (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+            .collect()
+    }
+
+    /// A data request as the driver makes it: `frames` frames of 32 bytes.
+    fn template(dest: i32, frames: u32, unique_id: u32) -> ModemTransmission {
+        ModemTransmission {
+            src: Some(1),
+            dest: Some(dest),
+            r#type: Some(TransmissionType::Data as i32),
+            max_num_frames: Some(frames),
+            max_frame_bytes: Some(32),
+            unique_id: Some(unique_id),
+            ..Default::default()
+        }
+    }
+
+    /// The layer above: appends `data` to frame 0 (keeping what is there).
+    fn fill(mut request: ModemTransmission, data: &[u8], ack: bool) -> ModemTransmission {
+        if !data.is_empty() {
+            request.frame[0].extend_from_slice(data);
+            request.ack_requested = Some(ack);
+        }
+        request
+    }
+
+    /// Sends one transmission from `a`, returns it as `b` hears it.
+    fn send(
+        a: &mut ApplicationAcks,
+        dest: i32,
+        data: &[u8],
+        unique_id: u32,
+    ) -> Option<ModemTransmission> {
+        let mut t = template(dest, 3, unique_id);
+        t.src = Some(a.modem_id as i32);
+        let mut placed = a.prepare(&mut t, now()).unwrap();
+        let mut filled = fill(t, data, true);
+        a.complete(&mut filled, &mut placed, now()).unwrap();
+        (!filled.frame.is_empty()).then_some(filled)
+    }
+
+    fn owed(parts: &[(u32, u32)]) -> Vec<Owed> {
+        parts
+            .iter()
+            .map(|&(node, mask)| Owed {
+                node,
+                mask,
+                waited: 0,
+                since: now(),
+            })
+            .collect()
+    }
+
+    fn nodes(placed: &Placed) -> Vec<(u32, u32)> {
+        placed.parts.iter().map(|o| (o.node, o.mask)).collect()
+    }
+
+    /// Bytes of the ack message from libdccl 4.2 (`dccl -e --format hex`
+    /// with Goby's MMApplicationAck definition), for the same values.
+    #[test]
+    fn ack_messages_encode_as_libdccl_does() {
+        let app = acks(1);
+        type Case = (&'static [(u32, u32)], bool, u32, &'static str);
+        let cases: [Case; 4] = [
+            (&[], false, 0, "140000"),
+            (&[(2, 7)], true, 7, "1411070000000f"),
+            (
+                &[(2, 0xffff_ffff), (31, 1), (0, 0x8000_0000), (5, 96)],
+                true,
+                31,
+                "1414ffffffff3f000000000000000016300000801f",
+            ),
+            (&[(1, 8)], false, 3, "14090800000006"),
+        ];
+        for (parts, ack_requested, frame_start, reference) in cases {
+            let bytes = app
+                .encode(&owed(parts), ack_requested, frame_start)
+                .unwrap();
+            assert_eq!(
+                bytes,
+                hex(reference),
+                "{parts:?} {ack_requested} {frame_start}"
+            );
+            let mut b = acks(9);
+            let mut mt = ModemTransmission {
+                src: Some(1),
+                dest: Some(9),
+                frame: vec![bytes],
+                ..Default::default()
+            };
+            let heard = b.receive(&mut mt);
+            assert!(heard.error.is_none());
+            assert!(mt.frame.is_empty(), "an ack-only frame leaves nothing");
+            assert_eq!(mt.frame_start(), frame_start);
+            assert_eq!(mt.ack_requested(), ack_requested);
+        }
+    }
+
+    #[test]
+    fn frames_are_numbered_on_and_back_to_zero_before_passing_31() {
+        let mut a = acks(1);
+        let mut starts = Vec::new();
+        for id in 0..12 {
+            let mut t = template(2, 3, id);
+            let mut placed = a.prepare(&mut t, now()).unwrap();
+            starts.push(t.frame_start());
+            // No acks asked for: no number is held.
+            let mut filled = fill(t, &[0xaa; 3], false);
+            filled.frame.push(vec![0xbb; 4]);
+            filled.frame.push(vec![0xcc; 4]);
+            a.complete(&mut filled, &mut placed, now()).unwrap();
+        }
+        assert_eq!(starts, [0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 0, 3]);
+    }
+
+    #[test]
+    fn an_ack_credits_the_transmission_that_sent_the_frame_and_only_from_its_destination() {
+        let mut a = acks(1);
+        let mut b = acks(2);
+        let mut c = acks(3);
+        // 1 sends to 2 (transmission 41, frame 0), then to 3 (42, frame 1).
+        let mut to_b = send(&mut a, 2, &[0xaa, 0xbb], 41).unwrap();
+        let header = a.encode(&[], true, 0).unwrap();
+        assert!(
+            to_b.frame[0].starts_with(&header),
+            "frame 0 starts with the ack message"
+        );
+        let _to_c = send(&mut a, 3, &[0xcc], 42).unwrap();
+        // 2 strips the ack message and sees 1's data, numbered from 0.
+        assert!(b.receive(&mut to_b).acks.is_empty());
+        assert_eq!(to_b.frame, vec![vec![0xaa, 0xbb]]);
+        assert_eq!(to_b.frame_start(), 0);
+        assert!(to_b.ack_requested());
+        // Not acknowledged until the layer above says so.
+        let mut reply = send(&mut b, -1, &[], 7);
+        assert!(reply.is_none(), "nothing to send, nothing owed");
+        b.acknowledge(&Acknowledgement::all(to_b.clone()), now());
+        assert!(b.owes());
+        // 2's next transmission goes to 1 (owed) and carries the ack.
+        reply = send(&mut b, -1, &[], 7);
+        let mut reply = reply.expect("an ack-only transmission");
+        assert_eq!(reply.dest(), 1);
+        assert!(!b.owes());
+        // 3 hears it too (say, broadcast): nothing for 3.
+        let mut overheard = reply.clone();
+        assert!(c.receive(&mut overheard).acks.is_empty());
+        let acks = a.receive(&mut reply).acks;
+        assert_eq!(acks.len(), 1);
+        assert_eq!(acks[0].src(), 2);
+        assert_eq!(acks[0].dest(), 1);
+        assert_eq!(acks[0].acked_frame, vec![0]);
+        assert_eq!(acks[0].unique_id, Some(41));
+        assert!(reply.frame.is_empty());
+        // The same ack again credits nothing more; an ack from 2 for the
+        // frame sent to 3 credits nothing.
+        let mut again = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            frame: vec![a.encode(&owed(&[(1, 0b11)]), false, 0).unwrap()],
+            ..Default::default()
+        };
+        assert!(a.receive(&mut again).acks.is_empty());
+    }
+
+    #[test]
+    fn acks_ride_only_where_their_node_hears_them_and_are_not_held_back_for_ever() {
+        let mut b = acks(2);
+        let received = |src: i32| ModemTransmission {
+            src: Some(src),
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(4),
+            frame: vec![vec![1], vec![2]],
+            ..Default::default()
+        };
+        b.acknowledge(&Acknowledgement::all(received(1)), now());
+        b.acknowledge(
+            &Acknowledgement {
+                received: received(3),
+                frames: vec![1],
+            },
+            now(),
+        );
+        // Not asked for acks, or addressed elsewhere: nothing owed.
+        let mut unasked = received(4);
+        unasked.ack_requested = Some(false);
+        b.acknowledge(&Acknowledgement::all(unasked), now());
+        let mut elsewhere = received(5);
+        elsewhere.dest = Some(6);
+        b.acknowledge(&Acknowledgement::all(elsewhere), now());
+        // To node 3: only 3's ack is placed.
+        let mut to_3 = template(3, 1, 1);
+        let placed = b.prepare(&mut to_3, now()).unwrap();
+        assert_eq!(nodes(&placed), vec![(3, 1 << 5)]);
+        b.restore(&placed);
+        // Broadcast: both, and a failure owes them again.
+        let mut all = template(0, 1, 2);
+        let placed = b.prepare(&mut all, now()).unwrap();
+        assert_eq!(nodes(&placed), vec![(1, 0b11 << 4), (3, 1 << 5)]);
+        assert!(!b.owes());
+        b.restore(&placed);
+        assert!(b.owes());
+
+        // Destination left to the queue, which picks node 4 for its data:
+        // nothing for 1 or 3 rides (their modems would not hear it) ...
+        let mut c = acks(2);
+        c.acknowledge(&Acknowledgement::all(received(1)), now());
+        c.acknowledge(&Acknowledgement::all(received(3)), now());
+        let mut open = template(-1, 1, 3);
+        let mut placed = c.prepare(&mut open, now()).unwrap();
+        assert_eq!(open.dest(), -1);
+        let mut filled = fill(open, &[0xf8, 0x11], true);
+        filled.dest = Some(4);
+        c.complete(&mut filled, &mut placed, now()).unwrap();
+        assert!(placed.parts.is_empty());
+        let bare = c.encode(&[], true, 0).unwrap();
+        assert_eq!(filled.frame[0], [bare.as_slice(), &[0xf8, 0x11]].concat());
+        // ... so the next open transmission goes to node 1, which waited,
+        // whatever the queue has for others.
+        let mut next = template(-1, 1, 4);
+        let mut placed = c.prepare(&mut next, now()).unwrap();
+        assert_eq!(next.dest(), 1);
+        assert_eq!(nodes(&placed), vec![(1, 0b11 << 4)]);
+        let mut filled = fill(next, &[], false);
+        c.complete(&mut filled, &mut placed, now()).unwrap();
+        assert_eq!(filled.dest(), 1, "acks alone, to the one node owed");
+        assert_eq!(filled.frame.len(), 1);
+        // The last one owed (3) goes next, with the queue's data for it.
+        let mut last = template(-1, 1, 5);
+        c.prepare(&mut last, now()).unwrap();
+        assert_eq!(last.dest(), 3);
+        assert!(!c.owes());
+    }
+
+    #[test]
+    fn acks_alone_to_several_nodes_go_as_one_broadcast() {
+        let mut b = acks(2);
+        for src in [1, 3] {
+            b.acknowledge(
+                &Acknowledgement::all(ModemTransmission {
+                    src: Some(src),
+                    dest: Some(2),
+                    r#type: Some(TransmissionType::Data as i32),
+                    ack_requested: Some(true),
+                    frame: vec![vec![1]],
+                    ..Default::default()
+                }),
+                now(),
+            );
+        }
+        let mut open = template(-1, 1, 1);
+        let mut placed = b.prepare(&mut open, now()).unwrap();
+        let mut filled = fill(open, &[], false);
+        b.complete(&mut filled, &mut placed, now()).unwrap();
+        assert_eq!(filled.dest(), 0);
+        assert_eq!(nodes(&placed), vec![(1, 1), (3, 1)]);
+        assert!(!b.owes());
+    }
+
+    #[test]
+    fn data_from_a_peer_without_application_acks_is_left_alone() {
+        let mut b = acks(2);
+        // A DCCL message of another id (124) first.
+        let mut mt = ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            frame_start: Some(0),
+            frame: vec![vec![0xf8, 1, 2, 3]],
+            ..Default::default()
+        };
+        let before = mt.clone();
+        let heard = b.receive(&mut mt);
+        assert!(heard.acks.is_empty() && heard.error.is_none());
+        assert_eq!(mt, before);
+        // Id 10 but cut short: reported, left as it was.
+        let mut cut = ModemTransmission {
+            src: Some(1),
+            frame: vec![vec![0x14, 0x11]],
+            ..Default::default()
+        };
+        assert!(b.receive(&mut cut).error.is_some());
+        assert_eq!(cut.frame, vec![vec![0x14, 0x11]]);
+    }
+
+    #[test]
+    fn an_answer_that_drops_the_ack_message_is_refused_and_its_acks_owed_again() {
+        let mut b = acks(2);
+        b.acknowledge(
+            &Acknowledgement::all(ModemTransmission {
+                src: Some(1),
+                dest: Some(2),
+                r#type: Some(TransmissionType::Data as i32),
+                ack_requested: Some(true),
+                frame: vec![vec![1]],
+                ..Default::default()
+            }),
+            now(),
+        );
+        let mut t = template(1, 1, 1);
+        let mut placed = b.prepare(&mut t, now()).unwrap();
+        assert!(!b.owes());
+        t.frame = vec![vec![0xf8, 1]];
+        assert!(matches!(
+            b.complete(&mut t, &mut placed, now()),
+            Err(CompleteError::Dropped)
+        ));
+        assert!(b.owes());
+    }
+
+    fn received_from(src: i32) -> ModemTransmission {
+        ModemTransmission {
+            src: Some(src),
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(0),
+            frame: vec![vec![1]],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn an_ack_not_sent_within_its_lifetime_is_dropped() {
+        let mut b = acks(2);
+        let t0 = now();
+        b.acknowledge(&Acknowledgement::all(received_from(1)), t0);
+        let mut late = template(-1, 1, 1);
+        let placed = b.prepare(&mut late, t0 + LIFETIME).unwrap();
+        assert!(placed.parts.is_empty(), "dropped at its lifetime");
+        assert!(!b.owes());
+        b.acknowledge(&Acknowledgement::all(received_from(1)), t0);
+        let mut in_time = template(-1, 1, 2);
+        let placed = b
+            .prepare(&mut in_time, t0 + LIFETIME - Duration::from_secs(1))
+            .unwrap();
+        assert_eq!(nodes(&placed), vec![(1, 1)]);
+    }
+
+    /// A frame number whose use awaits its ack is not used again within
+    /// the lifetime while others are free; acked, or sent without asking
+    /// for an ack, it is free at once.
+    #[test]
+    fn numbers_awaiting_acks_are_not_used_again_while_others_are_free() {
+        let mut a = ApplicationAcks::new(1, LIFETIME, 30, base()).unwrap();
+        let t0 = now();
+        let send = |a: &mut ApplicationAcks, frames: u32, ack: bool, at: Instant| {
+            let mut t = template(2, frames, 1);
+            let mut placed = a.prepare(&mut t, at).unwrap();
+            let start = t.frame_start();
+            let mut filled = fill(t, &[0xf8], ack);
+            filled.ack_requested = Some(ack);
+            while (filled.frame.len() as u32) < frames {
+                filled.frame.push(vec![0xf8]);
+            }
+            a.complete(&mut filled, &mut placed, at).unwrap();
+            (start, placed.reused)
+        };
+        // Drawn start 30: a 3-frame packet does not fit before 32, so 0.
+        assert_eq!(send(&mut a, 3, true, t0), (0, false));
+        // 3..31 then wrap: 0-2 still await their acks, so 3.
+        for expected in [3, 6, 9, 12, 15, 18, 21, 24, 27] {
+            assert_eq!(send(&mut a, 3, true, t0).0, expected);
+        }
+        // Every run of three numbers held: one is used again, flagged.
+        assert_eq!(send(&mut a, 3, true, t0), (0, true));
+        // Past the lifetime they are free again.
+        assert_eq!(send(&mut a, 3, true, t0 + LIFETIME), (3, false));
+
+        // Acked numbers are free at once; so are numbers sent without asking.
+        let mut b = ApplicationAcks::new(1, LIFETIME, 0, base()).unwrap();
+        assert_eq!(send(&mut b, 8, true, t0), (0, false));
+        let mut ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            frame: vec![b.encode(&owed(&[(1, 0xff)]), false, 0).unwrap()],
+            ..Default::default()
+        };
+        assert_eq!(b.receive(&mut ack).acks.len(), 8);
+        for expected in [8, 16, 24, 0] {
+            assert_eq!(send(&mut b, 8, false, t0), (expected, false));
+        }
+    }
+
+    /// A sender restarted: a node may still owe acks for its frames of
+    /// before, under the numbers it uses now.
+    #[test]
+    fn after_a_start_no_ack_is_credited_from_a_node_not_yet_heard_from() {
+        let t0 = base();
+        let t = t0 + Duration::from_secs(1);
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        let mut b = acks(2);
+        // 2 owes an ack for frame 0 of 1's run before its restart.
+        b.acknowledge(&Acknowledgement::all(received_from(1)), t);
+        // 1, restarted, numbers its first frame 0 too; 2 does not get it.
+        let mut to_b = template(2, 1, 77);
+        let mut placed = a.prepare(&mut to_b, t).unwrap();
+        let mut lost = fill(to_b, &[0xf8, 0x11], true);
+        a.complete(&mut lost, &mut placed, t).unwrap();
+        assert_eq!(lost.frame_start(), 0);
+        assert!(lost.ack_requested(), "it still asks 2 to answer");
+        // 2's next transmission, to 1, carries the old ack: not credited.
+        let mut open = template(-1, 1, 5);
+        open.src = Some(2);
+        let mut placed = b.prepare(&mut open, t).unwrap();
+        let mut reply = fill(open, &[], false);
+        b.complete(&mut reply, &mut placed, t).unwrap();
+        assert_eq!(reply.dest(), 1);
+        assert!(a.receive(&mut reply).acks.is_empty());
+        // 1 has heard from 2 since: its next frame to 2 is credited.
+        let mut to_b = template(2, 1, 78);
+        let mut placed = a.prepare(&mut to_b, t).unwrap();
+        let mut got = fill(to_b, &[0xf8, 0x12], true);
+        a.complete(&mut got, &mut placed, t).unwrap();
+        assert!(b.receive(&mut got).acks.is_empty());
+        b.acknowledge(&Acknowledgement::all(got.clone()), t);
+        let mut open = template(-1, 1, 6);
+        open.src = Some(2);
+        let mut placed = b.prepare(&mut open, t).unwrap();
+        let mut reply = fill(open, &[], false);
+        b.complete(&mut reply, &mut placed, t).unwrap();
+        let acks = a.receive(&mut reply).acks;
+        assert_eq!(acks.len(), 1);
+        assert_eq!(acks[0].unique_id, Some(78));
+        assert_eq!(acks[0].acked_frame, vec![got.frame_start() as i32]);
+    }
+
+    #[test]
+    fn a_node_not_heard_from_is_credited_once_the_lifetime_has_passed() {
+        let t0 = base();
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        let later = t0 + LIFETIME;
+        let mut to_b = template(2, 1, 9);
+        let mut placed = a.prepare(&mut to_b, later).unwrap();
+        let mut sent = fill(to_b, &[0xf8], true);
+        a.complete(&mut sent, &mut placed, later).unwrap();
+        let mut ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(7),
+            frame: vec![a
+                .encode(&owed(&[(1, 1 << sent.frame_start())]), false, 3)
+                .unwrap()],
+            ..Default::default()
+        };
+        assert_eq!(a.receive(&mut ack).acks.len(), 1);
+    }
+
+    #[test]
+    fn a_frame_lost_to_a_bad_crc_is_never_acknowledged() {
+        let mut b = acks(2);
+        let mut mt = received_from(1);
+        mt.frame_start = Some(5);
+        // Frame 1 of three failed its CRC: the driver reports it empty.
+        mt.frame = vec![vec![1], Vec::new(), vec![3]];
+        b.acknowledge(&Acknowledgement::all(mt), now());
+        let mut open = template(1, 1, 1);
+        let placed = b.prepare(&mut open, now()).unwrap();
+        assert_eq!(nodes(&placed), vec![(1, (1 << 5) | (1 << 7))]);
+    }
+}
