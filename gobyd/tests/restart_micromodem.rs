@@ -22,17 +22,18 @@
 //! The `received` crash point is the window of the Micro-Modem's own acks:
 //! a modem that acknowledges a frame as soon as it decodes it has acked
 //! the messages the receiving daemon then dies without recording, and the
-//! sender drops them as delivered. With those hardware acks this test
-//! reports such messages as lost and fails (see "The limit of modem acks"
-//! in the README); it passes only when the receiving side acknowledges
-//! after its inbox recorded the messages (the driver's
-//! `use_application_acks`). Each lost message is printed with what
-//! happened to its receiver around the moment the ack reached its sender.
+//! sender drops them as delivered. With those hardware acks
+//! (`use_application_acks: false`) this test reports such messages as lost
+//! and fails (see "Application acks over the Micro-Modem" in the README);
+//! with `gobyd`'s default, application acks (the receiving daemon acks a
+//! frame only after its inbox recorded the messages), it must pass. Each
+//! lost message is printed with what happened to its receiver around the
+//! moment the ack reached its sender.
 //!
 //! `GOBYD_MM_RESTART_APP_ACKS=0` or `=1` writes `use_application_acks:
 //! false` or `true` into the driver's `micromodem { … }` block (unset: the
 //! driver's default, nothing written). `cargo test -p gobyd --test
-//! micromodem_restart -- --nocapture` prints the totals and the slots the
+//! restart_micromodem -- --nocapture` prints the totals and the slots the
 //! modems kept. More runs: `GOBYD_MM_RESTART_RUNS=N` (seeds follow one
 //! another from `GOBYD_MM_RESTART_SEED`, default 1),
 //! `GOBYD_MM_RESTART_ROUNDS=R` kill-and-restart rounds per run (default 4).
