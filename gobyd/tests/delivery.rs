@@ -42,7 +42,9 @@ use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
 use protos::goby::example::Command;
 use queue::QueueEvent;
-use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
+use support::micromodem::{
+    micromodem_driver, modem_path, slot_report, start_emulators, two_node_config,
+};
 use tokio::sync::oneshot;
 
 /// The link of a run: what each daemon's driver talks to, the rate of the
@@ -162,28 +164,16 @@ fn daemon_config(
     let Link {
         rate, slot_seconds, ..
     } = link;
-    let text = format!(
-        r#"
-modem_id: {id}
-{driver}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
-  slot {{ src: 2  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 1800
-    role {{ type: DESTINATION_ID  field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "" }}
-data_dir: "{}"
-log {{ raw_log: false }}
-"#,
-        data_dir.display()
+    let text = two_node_config(
+        id,
+        driver,
+        rate,
+        slot_seconds,
+        "",
+        &format!(
+            "data_dir: \"{}\"\nlog {{ raw_log: false }}",
+            data_dir.display()
+        ),
     );
     gobyd::config::parse(&text, "delivery test").expect("test configuration")
 }

@@ -45,7 +45,9 @@ use std::time::Duration;
 
 use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
 use support::daemon::scratch;
-use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
+use support::micromodem::{
+    micromodem_driver, modem_path, slot_report, start_emulators, two_node_config,
+};
 use support::restart::{env_number, every_crash_point_in_turn, Pace, Totals};
 
 /// Rate of the TDMA slots: eight 256-byte frames at 5300 bit/s.
@@ -84,29 +86,16 @@ fn application_acks() -> String {
 }
 
 fn config(id: u32, modem: &Path, data_dir: &Path, extra: &str) -> String {
-    format!(
-        r#"
-modem_id: {id}
-{}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1  dest: -1  rate: {RATE}  slot_seconds: {SLOT_SECONDS} }}
-  slot {{ src: 2  dest: -1  rate: {RATE}  slot_seconds: {SLOT_SECONDS} }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 1800
-    role {{ type: DESTINATION_ID  field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "127.0.0.1:0" }}
-data_dir: "{}"
-log {{ level: "info" raw_log: true }}
-"#,
-        micromodem_driver(modem, extra),
-        data_dir.display()
+    two_node_config(
+        id,
+        &micromodem_driver(modem, extra),
+        RATE,
+        SLOT_SECONDS,
+        "127.0.0.1:0",
+        &format!(
+            "data_dir: \"{}\"\nlog {{ level: \"info\" raw_log: true }}",
+            data_dir.display()
+        ),
     )
 }
 

@@ -131,3 +131,39 @@ pub fn slot_report(air: &[Vec<AirTime>], slot_seconds: f64) -> String {
     }
     format!("slots: {} outside; {}", outside, parts.join("; "))
 }
+
+/// A two-node test configuration: `driver`, fixed TDMA with a slot each
+/// for nodes 1 and 2 (`rate`, `slot_seconds`), acknowledged
+/// `goby.example.Command`s addressed by their `destination`, the JSON
+/// interface on `json_bind` ("" for none) and `rest` (e.g. `data_dir`,
+/// `log`) appended.
+pub fn two_node_config(
+    id: impl std::fmt::Display,
+    driver: &str,
+    rate: impl std::fmt::Display,
+    slot_seconds: f64,
+    json_bind: &str,
+    rest: &str,
+) -> String {
+    format!(
+        r#"
+modem_id: {id}
+{driver}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
+  slot {{ src: 2  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 1800
+    role {{ type: DESTINATION_ID  field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "{json_bind}" }}
+{rest}
+"#
+    )
+}

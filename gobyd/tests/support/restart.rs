@@ -322,6 +322,16 @@ pub fn run(
             revive(nodes, armed, totals, history);
         }
     };
+    // An armed daemon is given time to reach its crash point.
+    let await_crash_points = |nodes: &mut Vec<Option<Gobyd>>,
+                              armed: &mut [Option<String>; 2],
+                              totals: &mut Totals,
+                              history: &mut Vec<Happened>| {
+        let limit = Instant::now() + pace.await_crash_point;
+        while armed.iter().any(Option::is_some) && Instant::now() < limit {
+            wait(Duration::from_millis(100), nodes, armed, totals, history);
+        }
+    };
     for round in 0..rounds {
         for i in 0..pace.per_round {
             for from in 1..=2i32 {
@@ -345,16 +355,7 @@ pub fn run(
         // A random moment later, one of the two dies and comes back,
         // perhaps armed to die again at a crash point.
         revive(&mut nodes, &mut armed, &mut totals, &mut history);
-        let limit = Instant::now() + pace.await_crash_point;
-        while armed.iter().any(Option::is_some) && Instant::now() < limit {
-            wait(
-                Duration::from_millis(100),
-                &mut nodes,
-                &mut armed,
-                &mut totals,
-                &mut history,
-            );
-        }
+        await_crash_points(&mut nodes, &mut armed, &mut totals, &mut history);
         let before = draw.millis(pace.before_kill.0, pace.before_kill.1);
         wait(before, &mut nodes, &mut armed, &mut totals, &mut history);
         let mut victim = (draw.next() % 2) as usize;
@@ -382,16 +383,7 @@ pub fn run(
         nodes[victim] = Some(start(&configs[victim], crash.as_deref()));
         armed[victim] = crash;
     }
-    let limit = Instant::now() + pace.await_crash_point;
-    while armed.iter().any(Option::is_some) && Instant::now() < limit {
-        wait(
-            Duration::from_millis(100),
-            &mut nodes,
-            &mut armed,
-            &mut totals,
-            &mut history,
-        );
-    }
+    await_crash_points(&mut nodes, &mut armed, &mut totals, &mut history);
     // Both unarmed from here on: time to deliver what is owed.
     for (i, node) in nodes.iter_mut().enumerate() {
         let exited = node.as_mut().is_some_and(|n| n.has_exited());
