@@ -159,7 +159,7 @@ fn killed_daemons_over_micromodems_lose_nothing_and_deliver_nothing_twice() {
         .build()
         .unwrap();
     let acks = match application_acks() {
-        e if e.is_empty() => "the driver's default acks".to_string(),
+        e if e.is_empty() => "gobyd's default acks (application acks)".to_string(),
         e => e,
     };
     let mut all = Totals::default();
