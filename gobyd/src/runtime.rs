@@ -43,6 +43,7 @@ use super::link_event::{reception_summary, LinkEvent};
 use super::modem_event::ModemEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
+use modemdriver::time::sleep_until_opt;
 
 /// Why the daemon could not start or had to stop.
 #[derive(Debug, thiserror::Error)]
@@ -178,6 +179,22 @@ pub struct Daemon {
     inbox: Inbox,
     /// `unique_id` of the next transmission initiated.
     next_transmission: u32,
+    /// Received messages recorded in the inbox (and acknowledged) while
+    /// nobody was there to take them: handed over, in order, once a JSON
+    /// client connects, or after [`RECOVERY_WAIT`].
+    held: Vec<Held>,
+    /// Something always takes received messages: a bridge (MOOS, MQTT) or
+    /// the UDP JSON interface.
+    always_taken: bool,
+}
+
+/// A received message waiting for a taker.
+struct Held {
+    /// Its inbox record (`None`: it could not be recorded).
+    seq: Option<u64>,
+    received: queue::ReceivedMessage,
+    reception: Reception,
+    since: tokio::time::Instant,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -407,6 +424,10 @@ impl Daemon {
             // Numbers of a previous run (whose acks may still come) are
             // not reused soon: start from the clock.
             next_transmission: (SystemClock.now() / 1000) as u32,
+            held: Vec::new(),
+            always_taken: config.moos.is_some()
+                || config.mqtt.is_some()
+                || !json.udp_bind().is_empty(),
         })
     }
 
@@ -452,14 +473,8 @@ impl Daemon {
     pub async fn run(mut self, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
         tokio::pin!(shutdown);
         // Messages received before a restart and not handed over wait for a
-        // taker: a JSON client connecting (the subscribers present now are
-        // the bridges and the UDP interface), or RECOVERY_WAIT.
-        let mut recovery = (!self.inbox.pending().is_empty()).then(|| {
-            (
-                self.events.receiver_count(),
-                tokio::time::Instant::now() + RECOVERY_WAIT,
-            )
-        });
+        // taker, as do those received while nobody is there.
+        self.hold_recovered();
         let mut expire = tokio::time::interval(Duration::from_secs(1));
         loop {
             let mac_wait = self
@@ -479,14 +494,10 @@ impl Daemon {
                     }
                 },
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
+                () = sleep_until_opt(self.held.first().map(|h| h.since + RECOVERY_WAIT)) => {}
                 _ = expire.tick() => self.outbox.expire(),
             }
-            if let Some((present, due)) = recovery {
-                if self.events.receiver_count() > present || tokio::time::Instant::now() >= due {
-                    self.hand_over_pending();
-                    recovery = None;
-                }
-            }
+            self.release_held();
             let _ = self.forward_queue_events();
             self.commit_replies();
         }
@@ -907,18 +918,16 @@ impl Daemon {
             }
             CrashPoint::Recorded.reached();
         }
-        let handed_over = !recorded.is_empty();
+        let since = tokio::time::Instant::now();
         for (seq, received) in recorded {
-            self.hand_over(QueueEvent::Received(received), None, &reception);
-            if let Some(seq) = seq {
-                if let Err(e) = self.inbox.handed(seq, now) {
-                    tracing::error!("{}: {e}", self.inbox.path().display());
-                }
-            }
+            self.held.push(Held {
+                seq,
+                received,
+                reception: reception.clone(),
+                since,
+            });
         }
-        if handed_over {
-            CrashPoint::HandedOver.reached();
-        }
+        self.release_held();
         if transmission.r#type() == TransmissionType::Data
             && transmission.ack_requested()
             && !unplaced
@@ -942,44 +951,90 @@ impl Daemon {
         }
     }
 
-    /// Hands over, once, the messages a previous run recorded in the inbox
-    /// and did not hand over (it was killed in between). Messages whose
-    /// hand-over mark alone was lost are flagged `recovered` in the mission
-    /// log.
-    fn hand_over_pending(&mut self) {
+    /// Holds, for a taker, the messages a previous run recorded in the
+    /// inbox and did not hand over (it was killed in between); they are
+    /// handed over once, flagged `recovered`, before anything received
+    /// since.
+    fn hold_recovered(&mut self) {
         let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        let since = tokio::time::Instant::now();
         for entry in self.inbox.pending() {
             let incoming = &entry.incoming;
             match self.codec.decode(&incoming.bytes) {
-                Ok(message) => {
-                    tracing::info!(
-                        src = incoming.identity.src,
-                        dccl_id = incoming.identity.dccl_id,
-                        "a message received before a restart is handed over now"
-                    );
-                    let received = queue::ReceivedMessage {
+                Ok(message) => self.held.push(Held {
+                    seq: Some(entry.seq),
+                    received: queue::ReceivedMessage {
                         message,
                         dccl_id: incoming.identity.dccl_id,
                         src: incoming.identity.src,
                         dest: incoming.dest,
                         time: incoming.role_time,
-                    };
-                    let recovered = Reception {
+                    },
+                    reception: Reception {
                         link: None,
                         recovered: true,
-                    };
-                    self.hand_over(QueueEvent::Received(received), None, &recovered);
+                    },
+                    since,
+                }),
+                Err(e) => {
+                    tracing::error!(
+                        "{}: a message received before a restart no longer decodes (DCCL id {}): {e}",
+                        self.inbox.path().display(),
+                        incoming.identity.dccl_id
+                    );
+                    if let Err(e) = self.inbox.handed(entry.seq, now) {
+                        tracing::error!("{}: {e}", self.inbox.path().display());
+                    }
                 }
-                Err(e) => tracing::error!(
-                    "{}: a message received before a restart no longer decodes (DCCL id {}): {e}",
-                    self.inbox.path().display(),
-                    incoming.identity.dccl_id
-                ),
-            }
-            if let Err(e) = self.inbox.handed(entry.seq, now) {
-                tracing::error!("{}: {e}", self.inbox.path().display());
             }
         }
+    }
+
+    /// Whether a received message handed over now reaches the autonomy
+    /// side: a bridge or the UDP interface takes every message, or someone
+    /// listens to the events (without those, the only listeners are the
+    /// connected TCP JSON clients and the embedding program's
+    /// [`subscribe`](Self::subscribe) receivers).
+    fn taker_present(&self) -> bool {
+        self.always_taken || self.events.receiver_count() > 0
+    }
+
+    /// Hands the held messages over, in the order received, once a taker
+    /// is there or the oldest has waited [`RECOVERY_WAIT`] (then to
+    /// whoever is there: the mission log at least). Each is marked handed
+    /// over in the inbox right after.
+    fn release_held(&mut self) {
+        let Some(oldest) = self.held.first().map(|h| h.since) else {
+            return;
+        };
+        let due = tokio::time::Instant::now() >= oldest + RECOVERY_WAIT;
+        if !self.taker_present() && !due {
+            return;
+        }
+        if due && !self.taker_present() {
+            tracing::warn!(
+                held = self.held.len(),
+                "no JSON client connected within {} s: received messages handed over to the mission log only",
+                RECOVERY_WAIT.as_secs()
+            );
+        }
+        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        for held in std::mem::take(&mut self.held) {
+            if held.reception.recovered {
+                tracing::info!(
+                    src = held.received.src,
+                    dccl_id = held.received.dccl_id,
+                    "a message received before a restart is handed over now"
+                );
+            }
+            self.hand_over(QueueEvent::Received(held.received), None, &held.reception);
+            if let Some(seq) = held.seq {
+                if let Err(e) = self.inbox.handed(seq, now) {
+                    tracing::error!("{}: {e}", self.inbox.path().display());
+                }
+            }
+        }
+        CrashPoint::HandedOver.reached();
     }
 
     /// Hands a queue event over: its event line to the clients connected

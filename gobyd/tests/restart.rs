@@ -163,3 +163,40 @@ fn a_message_recorded_before_a_crash_reaches_the_client_after_the_restart() {
     drop(sender);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A message received (and acknowledged) while no JSON client is connected
+/// waits in the inbox for one, instead of being handed over to nobody.
+#[test]
+fn a_message_received_while_no_client_is_connected_waits_for_one() {
+    let dir = scratch("restart", "no-client");
+    let ports = [free_udp_port(), free_udp_port()];
+    let configs: Vec<PathBuf> = [1, 2]
+        .into_iter()
+        .map(|id| {
+            let path = dir.join(format!("node{id}.cfg"));
+            std::fs::write(&path, config(id, ports, &dir.join(format!("node{id}")))).unwrap();
+            path
+        })
+        .collect();
+    let mut receiver = Gobyd::start_unconnected(&configs[1], &[]);
+    let mut sender = Gobyd::start(&configs[0], &[]);
+    let published = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "waited"}}"#;
+    let reply = sender.request(published).expect("a reply");
+    assert!(reply.get("accepted").is_some(), "{reply}");
+    // Acked: the receiver has it, with nobody connected to take it.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !logged(&dir.join("node1"), "ack").contains_key("waited") {
+        assert!(Instant::now() < deadline, "the sender never heard the ack");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    receiver.connect();
+    let got = receiver
+        .wait_for(Duration::from_secs(10), |v| {
+            v["event"] == "received" && v["msg"]["note"] == "waited"
+        })
+        .expect("the message received before the client connected reaches it");
+    assert!(got.get("recovered").is_none(), "{got}");
+    drop(receiver);
+    drop(sender);
+    let _ = std::fs::remove_dir_all(&dir);
+}

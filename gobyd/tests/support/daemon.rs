@@ -36,8 +36,10 @@ pub fn free_udp_port() -> u16 {
 /// A running `gobyd` (killed when dropped) and a JSON client connected to it.
 pub struct Gobyd {
     child: Child,
-    client: TcpStream,
-    lines: mpsc::Receiver<Value>,
+    /// The JSON interface's address.
+    addr: String,
+    /// The test's JSON client, once connected.
+    client: Option<(TcpStream, mpsc::Receiver<Value>)>,
 }
 
 impl Gobyd {
@@ -45,6 +47,13 @@ impl Gobyd {
     /// configuration must open the JSON interface over TCP. Waits for the
     /// daemon to name its JSON address and connects to it.
     pub fn start(config: &Path, env: &[(&str, &str)]) -> Gobyd {
+        let mut gobyd = Self::start_unconnected(config, env);
+        gobyd.connect();
+        gobyd
+    }
+
+    /// [`start`](Self::start) without connecting a client.
+    pub fn start_unconnected(config: &Path, env: &[(&str, &str)]) -> Gobyd {
         let mut command = Command::new(env!("CARGO_BIN_EXE_gobyd"));
         command
             .arg("--config")
@@ -74,7 +83,16 @@ impl Gobyd {
         };
         // Keep draining the log so that the daemon never blocks on it.
         std::thread::spawn(move || while log.recv().is_ok() {});
-        let client = TcpStream::connect(&addr).expect("connect to the JSON interface");
+        Gobyd {
+            child,
+            addr,
+            client: None,
+        }
+    }
+
+    /// Connects the test's JSON client.
+    pub fn connect(&mut self) {
+        let client = TcpStream::connect(&self.addr).expect("connect to the JSON interface");
         let reader = BufReader::new(client.try_clone().unwrap());
         let (tx, lines) = mpsc::channel();
         std::thread::spawn(move || {
@@ -86,22 +104,16 @@ impl Gobyd {
                 }
             }
         });
-        Gobyd {
-            child,
-            client,
-            lines,
-        }
+        self.client = Some((client, lines));
     }
 
     /// Sends a JSON request line and waits for its reply (a line holding
     /// `accepted` or `error`); `None` when none comes (the daemon died).
     pub fn request(&mut self, line: &str) -> Option<Value> {
-        self.client.write_all(format!("{line}\n").as_bytes()).ok()?;
+        let (client, lines) = self.client.as_mut().expect("a connected client");
+        client.write_all(format!("{line}\n").as_bytes()).ok()?;
         let deadline = Instant::now() + PATIENCE;
-        while let Ok(v) = self
-            .lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-        {
+        while let Ok(v) = lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
             if v.get("accepted").is_some() || v.get("error").is_some() {
                 return Some(v);
             }
@@ -111,11 +123,9 @@ impl Gobyd {
 
     /// The next line from the daemon that `wanted` picks, within `limit`.
     pub fn wait_for(&mut self, limit: Duration, wanted: impl Fn(&Value) -> bool) -> Option<Value> {
+        let (_, lines) = self.client.as_ref().expect("a connected client");
         let deadline = Instant::now() + limit;
-        while let Ok(v) = self
-            .lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-        {
+        while let Ok(v) = lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
             if wanted(&v) {
                 return Some(v);
             }
