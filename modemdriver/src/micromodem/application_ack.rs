@@ -143,6 +143,9 @@ pub struct Heard {
     pub acks: Vec<ModemTransmission>,
     /// Its ack message could not be decoded (the frame is left as it was).
     pub error: Option<String>,
+    /// Its frame 0 holds data and no ack message: its sender does not use
+    /// application acks.
+    pub plain: bool,
 }
 
 impl ApplicationAcks {
@@ -365,7 +368,11 @@ impl ApplicationAcks {
         let Some(first) = mt.frame.first() else {
             return heard;
         };
-        if first.is_empty() || self.codec.id(first).ok() != Some(DCCL_ID) {
+        if first.is_empty() {
+            return heard;
+        }
+        if self.codec.id(first).ok() != Some(DCCL_ID) {
+            heard.plain = true;
             return heard;
         }
         let (ack, used) = match self
@@ -426,6 +433,28 @@ impl ApplicationAcks {
             }
         }
         heard
+    }
+
+    /// For a node that does not use application acks: strips the ack
+    /// message a sender using them put first in frame 0, so that its data
+    /// still reaches the layer above (unacknowledged). Returns whether there
+    /// was one. Frames left empty at the end are removed.
+    pub fn strip(&self, mt: &mut ModemTransmission) -> bool {
+        let Some(first) = mt.frame.first() else {
+            return false;
+        };
+        if first.is_empty() || self.codec.id(first).ok() != Some(DCCL_ID) {
+            return false;
+        }
+        let Ok((_, used)) = self.codec.decode_prefix(first) else {
+            return false;
+        };
+        let used = used.min(first.len());
+        mt.frame[0].drain(..used);
+        while mt.frame.last().is_some_and(|f| f.is_empty()) {
+            mt.frame.pop();
+        }
+        true
     }
 
     /// Owes acks for the frames of a received transmission (as returned by
@@ -973,5 +1002,18 @@ mod tests {
         let mut open = template(1, 1, 1);
         let placed = b.prepare(&mut open, now()).unwrap();
         assert_eq!(nodes(&placed), vec![(1, (1 << 5) | (1 << 7))]);
+    }
+
+    #[test]
+    fn a_node_without_application_acks_strips_the_ack_message_and_keeps_the_data() {
+        let mut a = acks(1);
+        let reader = acks(2);
+        let mut sent = send(&mut a, 2, &[0xf8, 0x11], 3).unwrap();
+        assert!(reader.strip(&mut sent));
+        assert_eq!(sent.frame, vec![vec![0xf8, 0x11]]);
+        assert!(!reader.strip(&mut sent), "plain data is left alone");
+        let mut b = acks(2);
+        let mut plain = sent.clone();
+        assert!(b.receive(&mut plain).plain);
     }
 }

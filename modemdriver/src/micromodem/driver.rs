@@ -222,6 +222,13 @@ impl MicroModemDriver {
             None
         };
         let deferred_ack = config.deferred_ack();
+        let ack_reader = ApplicationAcks::new(
+            modem_id.min(application_ack::MAX_MODEM_ID),
+            Duration::ZERO,
+            0,
+            std::time::Instant::now(),
+        )
+        .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
         let port = Port {
             path,
             baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
@@ -245,6 +252,7 @@ impl MicroModemDriver {
                     reconnect,
                     app_acks,
                     deferred_ack,
+                    ack_reader,
                 },
                 lines,
                 ctx,
@@ -419,6 +427,10 @@ struct Mm {
     app_acks: Option<ApplicationAcks>,
     /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
     deferred_ack: bool,
+    /// Without application acks: strips those a peer sends anyway.
+    ack_reader: ApplicationAcks,
+    /// Nodes found to disagree on application acks (bit per id), reported.
+    ack_mismatch_reported: u64,
 }
 
 /// The sentence id of the modem's answer to a host command.
@@ -878,16 +890,33 @@ impl Mm {
     /// and the acks it carries for our frames are reported first (as `ACK`
     /// transmissions); an ack-only transmission is not reported as data.
     /// Without `deferred_ack`, acks for the frames are owed at once.
+    /// Without application acks, an ack message a peer sends anyway is
+    /// stripped so that its data is taken. A disagreement on application
+    /// acks is reported once per node (`DriverStatus::Degraded`).
     fn report_reception(&mut self, mut transmission: ModemTransmission) {
         if let Some(t) = transmission.receive_stat.last().and_then(|s| s.time) {
             transmission.time = Some(t);
             transmission.time_source = Some(TimeSource::ModemTime as i32);
         }
-        if let Some(app) = &mut self.app_acks {
-            let heard = app.receive(&mut transmission);
+        let src = transmission.src();
+        let heard = self
+            .app_acks
+            .as_mut()
+            .map(|app| app.receive(&mut transmission));
+        if let Some(heard) = heard {
+            if heard.plain && transmission.r#type() == TransmissionType::Data {
+                self.ack_mismatch(
+                    src,
+                    format!(
+                        "node {src} sends no application acks and this node does (use_application_acks): \
+                         its data is acked by its modem on decode, and data from here to it is never \
+                         acknowledged; set use_application_acks the same at both ends"
+                    ),
+                );
+            }
             if let Some(reason) = heard.error {
                 self.events.status(DriverStatus::Unparseable {
-                    line: format!("frame 0 from {}", transmission.src()),
+                    line: format!("frame 0 from {src}"),
                     reason,
                 });
             }
@@ -897,14 +926,41 @@ impl Mm {
             if transmission.frame.is_empty() {
                 return;
             }
-            if !self.deferred_ack {
+            if let (Some(app), false) = (&mut self.app_acks, self.deferred_ack) {
                 app.acknowledge(
                     &Acknowledgement::all(transmission.clone()),
                     std::time::Instant::now(),
                 );
             }
+        } else if self.ack_reader.strip(&mut transmission) {
+            self.ack_mismatch(
+                src,
+                format!(
+                    "node {src} sends application acks and this node does not \
+                     (use_application_acks: false): its data is taken but never acknowledged; \
+                     set use_application_acks the same at both ends"
+                ),
+            );
+            if transmission.frame.is_empty() {
+                return;
+            }
         }
         self.events.emit(DriverEvent::Received(transmission));
+    }
+
+    /// Reports, once per node, that it and this node disagree on
+    /// application acks.
+    fn ack_mismatch(&mut self, src: i32, reason: String) {
+        let bit = u64::try_from(src)
+            .ok()
+            .filter(|&n| n < 64)
+            .map(|n| 1u64 << n);
+        if let Some(bit) = bit {
+            if self.ack_mismatch_reported & bit == 0 {
+                self.ack_mismatch_reported |= bit;
+                self.events.status(DriverStatus::Degraded { reason });
+            }
+        }
     }
 
     /// A whole reception: reported at once, or held for the `$CACST` that
@@ -1989,6 +2045,7 @@ struct Settings {
     reconnect: Duration,
     app_acks: Option<ApplicationAcks>,
     deferred_ack: bool,
+    ack_reader: ApplicationAcks,
 }
 
 async fn run(settings: Settings, lines: SerialLineLink, mut ctx: DriverContext) {
@@ -1999,6 +2056,7 @@ async fn run(settings: Settings, lines: SerialLineLink, mut ctx: DriverContext) 
         reconnect,
         app_acks,
         deferred_ack,
+        ack_reader,
     } = settings;
     let events = ctx.events.clone();
     let now = Instant::now();
@@ -2031,6 +2089,8 @@ async fn run(settings: Settings, lines: SerialLineLink, mut ctx: DriverContext) 
         last_sent: None,
         app_acks,
         deferred_ack,
+        ack_reader,
+        ack_mismatch_reported: 0,
     };
     state.link = Some(state.port.wrap(lines, &events));
     state.queue_initialization();
