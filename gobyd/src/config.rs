@@ -187,6 +187,7 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
         )),
         ..Default::default()
     });
+    same_id("driver.modem_id", driver.modem_id, id)?;
     driver.modem_id.get_or_insert(id);
     if driver.driver
         == Some(driver_config::Driver::DriverType(
@@ -226,10 +227,22 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
         }],
         ..Default::default()
     });
+    same_id("mac.modem_id", mac.modem_id, id)?;
     mac.modem_id.get_or_insert(id);
     let queue = config.queue.get_or_insert_with(QueueManagerConfig::default);
+    same_id("queue.modem_id", queue.modem_id, id)?;
     queue.modem_id.get_or_insert(id);
     Ok(config)
+}
+
+/// A section's own `modem_id`, when given, must be the node's.
+fn same_id(field: &str, given: Option<i32>, id: i32) -> Result<(), ConfigError> {
+    match given {
+        Some(other) if other != id => Err(ConfigError::Invalid(format!(
+            "{field} {other} differs from modem_id {id}: leave it out (it is taken from modem_id)"
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// Why this node would never transmit under its medium access settings, if

@@ -193,6 +193,10 @@ fn check_refuses_settings_that_cannot_work() {
             "application_ack_lifetime_seconds 30: the TDMA cycle lasts 20 s",
         ),
         (
+            "modem_id: 2\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" modem_id: 1 }\n",
+            "driver.modem_id 1 differs from modem_id 2",
+        ),
+        (
             "modem_id: 40\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" }\n",
             "modem_id 40: the Micro-Modem's application acks name nodes 0-31",
         ),
