@@ -113,6 +113,19 @@ fn killed_daemons_lose_nothing_and_deliver_nothing_twice() {
     all.check();
 }
 
+/// The two nodes' configuration files in `dir`, on free UDP ports.
+fn node_configs(dir: &Path) -> Vec<PathBuf> {
+    let ports = [free_udp_port(), free_udp_port()];
+    [1, 2]
+        .into_iter()
+        .map(|id| {
+            let path = dir.join(format!("node{id}.cfg"));
+            std::fs::write(&path, config(id, ports, &dir.join(format!("node{id}")))).unwrap();
+            path
+        })
+        .collect()
+}
+
 /// A receiver that dies right after recording a message (crash point
 /// `recorded`: in its inbox, not handed over, not acked) hands it over once
 /// to the JSON client that connects after the restart, flagged
@@ -120,15 +133,7 @@ fn killed_daemons_lose_nothing_and_deliver_nothing_twice() {
 #[test]
 fn a_message_recorded_before_a_crash_reaches_the_client_after_the_restart() {
     let dir = scratch("restart", "recovered");
-    let ports = [free_udp_port(), free_udp_port()];
-    let configs: Vec<PathBuf> = [1, 2]
-        .into_iter()
-        .map(|id| {
-            let path = dir.join(format!("node{id}.cfg"));
-            std::fs::write(&path, config(id, ports, &dir.join(format!("node{id}")))).unwrap();
-            path
-        })
-        .collect();
+    let configs = node_configs(&dir);
     let mut receiver = Gobyd::start(&configs[1], &[("GOBYD_CRASH_POINT", "recorded:1")]);
     let mut sender = Gobyd::start(&configs[0], &[]);
     let published = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "kept"}}"#;
@@ -169,15 +174,7 @@ fn a_message_recorded_before_a_crash_reaches_the_client_after_the_restart() {
 #[test]
 fn a_message_received_while_no_client_is_connected_waits_for_one() {
     let dir = scratch("restart", "no-client");
-    let ports = [free_udp_port(), free_udp_port()];
-    let configs: Vec<PathBuf> = [1, 2]
-        .into_iter()
-        .map(|id| {
-            let path = dir.join(format!("node{id}.cfg"));
-            std::fs::write(&path, config(id, ports, &dir.join(format!("node{id}")))).unwrap();
-            path
-        })
-        .collect();
+    let configs = node_configs(&dir);
     let mut receiver = Gobyd::start_unconnected(&configs[1], &[]);
     let mut sender = Gobyd::start(&configs[0], &[]);
     let published = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "waited"}}"#;
