@@ -175,19 +175,34 @@ async fn transmit(
     frames: &[Vec<u8>],
     mut on_request: impl FnMut(),
 ) -> (TransmitOutcome, Vec<DriverEvent>) {
+    let (result, seen) = until_result(driver, LIMIT, |filled| {
+        on_request();
+        filled.frame = frames.to_vec();
+    })
+    .await;
+    (result.outcome, seen)
+}
+
+/// Everything `driver` reports until its transmission ends (within
+/// `limit`), answering each data request with its template changed by
+/// `fill` (a moment later, as a queue would).
+async fn until_result(
+    driver: &mut Driver,
+    limit: Duration,
+    mut fill: impl FnMut(&mut ModemTransmission),
+) -> (TransmitResult, Vec<DriverEvent>) {
     let mut seen = Vec::new();
-    let result = tokio::time::timeout(LIMIT, async {
+    let result = tokio::time::timeout(limit, async {
         loop {
             let event = driver.next_event().await.expect("driver running");
             match event {
                 DriverEvent::DataRequest(request) => {
-                    on_request();
-                    tokio::time::sleep(Duration::from_millis(50)).await;
                     let mut filled = request.template().clone();
-                    filled.frame = frames.to_vec();
+                    fill(&mut filled);
+                    tokio::time::sleep(Duration::from_millis(50)).await;
                     request.respond(filled);
                 }
-                DriverEvent::TransmitResult(r) => return r.outcome,
+                DriverEvent::TransmitResult(r) => return r,
                 other => seen.push(other),
             }
         }
@@ -876,32 +891,20 @@ async fn send_appending(
 ) -> (TransmitResult, Vec<DriverEvent>) {
     mt.r#type = Some(TransmissionType::Data as i32);
     driver.initiate_transmission(mt).unwrap();
-    let mut seen = Vec::new();
-    let result = tokio::time::timeout(Duration::from_secs(30), async {
-        loop {
-            match driver.next_event().await.expect("driver running") {
-                DriverEvent::DataRequest(request) => {
-                    let mut filled = request.template().clone();
-                    if !data.is_empty() {
-                        if filled.frame.is_empty() {
-                            filled.frame.push(Vec::new());
-                        }
-                        filled.frame[0].extend_from_slice(data);
-                        filled.ack_requested = Some(true);
-                        if filled.dest() == -1 {
-                            filled.dest = Some(2);
-                        }
-                    }
-                    request.respond(filled);
-                }
-                DriverEvent::TransmitResult(r) => return r,
-                other => seen.push(other),
-            }
+    until_result(driver, Duration::from_secs(30), |filled| {
+        if data.is_empty() {
+            return;
+        }
+        if filled.frame.is_empty() {
+            filled.frame.push(Vec::new());
+        }
+        filled.frame[0].extend_from_slice(data);
+        filled.ack_requested = Some(true);
+        if filled.dest() == -1 {
+            filled.dest = Some(2);
         }
     })
     .await
-    .expect("a transmit result in time");
-    (result, seen)
 }
 
 /// The lines a driver wrote, among its events.
