@@ -136,6 +136,18 @@ pub struct ApplicationAcks {
     heard_from: u32,
 }
 
+/// What starts frame 0 of a received transmission.
+enum Taken {
+    /// No frame 0, or an empty one (lost to a bad CRC).
+    Nothing,
+    /// Data, no ack message.
+    Plain,
+    /// An ack message that does not decode (the frame is left as it was).
+    Bad(String),
+    /// An ack message, taken off.
+    Ack(MicroModemApplicationAck),
+}
+
 /// What a received transmission held for this bookkeeping.
 #[derive(Debug, Default)]
 pub struct Heard {
@@ -365,39 +377,21 @@ impl ApplicationAcks {
     /// from it are credited from then on).
     pub fn receive(&mut self, mt: &mut ModemTransmission) -> Heard {
         let mut heard = Heard::default();
-        let Some(first) = mt.frame.first() else {
-            return heard;
-        };
-        if first.is_empty() {
-            return heard;
-        }
-        if self.codec.id(first).ok() != Some(DCCL_ID) {
-            heard.plain = true;
-            return heard;
-        }
-        let (ack, used) = match self
-            .codec
-            .decode_prefix(first)
-            .map_err(|e| e.to_string())
-            .and_then(|(m, used)| {
-                m.transcode_to::<MicroModemApplicationAck>()
-                    .map(|a| (a, used))
-                    .map_err(|e| e.to_string())
-            }) {
-            Ok(decoded) => decoded,
-            Err(e) => {
+        let ack = match self.take(mt) {
+            Taken::Nothing => return heard,
+            Taken::Plain => {
+                heard.plain = true;
+                return heard;
+            }
+            Taken::Bad(e) => {
                 heard.error = Some(format!(
                     "the application ack from {} does not decode: {e}",
                     mt.src()
                 ));
                 return heard;
             }
+            Taken::Ack(ack) => ack,
         };
-        let used = used.min(mt.frame[0].len());
-        mt.frame[0].drain(..used);
-        while mt.frame.last().is_some_and(|f| f.is_empty()) {
-            mt.frame.pop();
-        }
         mt.frame_start = Some(ack.frame_start);
         mt.ack_requested = Some(ack.ack_requested);
         let from = mt.src();
@@ -440,21 +434,37 @@ impl ApplicationAcks {
     /// still reaches the layer above (unacknowledged). Returns whether there
     /// was one. Frames left empty at the end are removed.
     pub fn strip(&self, mt: &mut ModemTransmission) -> bool {
-        let Some(first) = mt.frame.first() else {
-            return false;
+        matches!(self.take(mt), Taken::Ack(_))
+    }
+
+    /// Takes the ack message off the start of frame 0, when there is one
+    /// that decodes, and the empty frames left at the end.
+    fn take(&self, mt: &mut ModemTransmission) -> Taken {
+        let Some(first) = mt.frame.first().filter(|f| !f.is_empty()) else {
+            return Taken::Nothing;
         };
-        if first.is_empty() || self.codec.id(first).ok() != Some(DCCL_ID) {
-            return false;
+        if self.codec.id(first).ok() != Some(DCCL_ID) {
+            return Taken::Plain;
         }
-        let Ok((_, used)) = self.codec.decode_prefix(first) else {
-            return false;
+        let decoded = self
+            .codec
+            .decode_prefix(first)
+            .map_err(|e| e.to_string())
+            .and_then(|(m, used)| {
+                m.transcode_to::<MicroModemApplicationAck>()
+                    .map(|a| (a, used))
+                    .map_err(|e| e.to_string())
+            });
+        let (ack, used) = match decoded {
+            Ok(decoded) => decoded,
+            Err(e) => return Taken::Bad(e),
         };
         let used = used.min(first.len());
         mt.frame[0].drain(..used);
         while mt.frame.last().is_some_and(|f| f.is_empty()) {
             mt.frame.pop();
         }
-        true
+        Taken::Ack(ack)
     }
 
     /// Owes acks for the frames of a received transmission (as returned by
