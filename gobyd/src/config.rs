@@ -232,6 +232,10 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
     let queue = config.queue.get_or_insert_with(QueueManagerConfig::default);
     same_id("queue.modem_id", queue.modem_id, id)?;
     queue.modem_id.get_or_insert(id);
+    // Receivers tell a retransmission from a repeat on purpose by the
+    // frame's identity trailer (`queue.message_identity: false` sends plain
+    // DCCL frames; their receptions are then all delivered).
+    queue.message_identity.get_or_insert(true);
     Ok(config)
 }
 

@@ -497,7 +497,7 @@ mod tests {
 
     fn incoming(src: i32, bytes: &[u8]) -> Incoming {
         Incoming {
-            identity: Identity::of(src, 4, bytes),
+            identity: Identity::of(src, 4, None, bytes),
             dest: 1,
             role_time: Some(-5),
             bytes: bytes.to_vec(),
@@ -525,9 +525,9 @@ mod tests {
         assert_eq!(pending[0].seq, b);
         assert_eq!(pending[0].incoming, incoming(2, b"\x01\x03"));
         // Both are known to the duplicate filter; another source is not.
-        assert!(inbox.is_duplicate(&Identity::of(2, 4, b"\x01\x02"), 2_000));
-        assert!(inbox.is_duplicate(&Identity::of(2, 4, b"\x01\x03"), 2_000));
-        assert!(!inbox.is_duplicate(&Identity::of(3, 4, b"\x01\x02"), 2_000));
+        assert!(inbox.is_duplicate(&Identity::of(2, 4, None, b"\x01\x02"), 2_000));
+        assert!(inbox.is_duplicate(&Identity::of(2, 4, None, b"\x01\x03"), 2_000));
+        assert!(!inbox.is_duplicate(&Identity::of(3, 4, None, b"\x01\x02"), 2_000));
         inbox.handed(b, 2_000).unwrap();
         // New numbers do not reuse old ones.
         assert!(inbox.record(incoming(2, b"\x09"), 2_000).unwrap() > b);
@@ -535,7 +535,7 @@ mod tests {
         let (inbox, _) = Inbox::open(&path, WINDOW, 3_000).unwrap();
         assert_eq!(inbox.pending().len(), 1);
         // Past the window nothing is a duplicate any more.
-        assert!(!inbox.is_duplicate(&Identity::of(2, 4, b"\x01\x02"), 1_000 + WINDOW));
+        assert!(!inbox.is_duplicate(&Identity::of(2, 4, None, b"\x01\x02"), 1_000 + WINDOW));
         let _ = std::fs::remove_dir_all(&d);
     }
 
@@ -594,8 +594,8 @@ mod tests {
         let (inbox, replay) = Inbox::open(&path, 100, 29_995).unwrap();
         assert_eq!(replay.pending, 1);
         assert_eq!(inbox.pending()[0].incoming.bytes, 7u32.to_le_bytes());
-        assert!(inbox.is_duplicate(&Identity::of(2, 4, &2999u32.to_le_bytes()), 29_995));
-        assert!(!inbox.is_duplicate(&Identity::of(2, 4, &2000u32.to_le_bytes()), 29_995));
+        assert!(inbox.is_duplicate(&Identity::of(2, 4, None, &2999u32.to_le_bytes()), 29_995));
+        assert!(!inbox.is_duplicate(&Identity::of(2, 4, None, &2000u32.to_le_bytes()), 29_995));
         let _ = std::fs::remove_dir_all(&d);
     }
 
@@ -603,8 +603,8 @@ mod tests {
     fn identities_of_the_previous_duplicate_filter_file_are_taken_over() {
         let d = dir("legacy");
         let old = d.join("delivered.log");
-        let a = Identity::of(2, 4, b"a");
-        let expired = Identity::of(2, 4, b"b");
+        let a = Identity::of(2, 4, None, b"a");
+        let expired = Identity::of(2, 4, None, b"b");
         let mut bytes = Vec::new();
         for (id, time) in [(a, 15_000u64), (expired, 1)] {
             let start = bytes.len();

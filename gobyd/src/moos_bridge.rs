@@ -681,6 +681,8 @@ mod tests {
             src: 2,
             dest: 1,
             time: None,
+            bytes: Vec::new(),
+            identity: None,
         })
     }
 

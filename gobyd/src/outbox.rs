@@ -9,7 +9,9 @@ use std::sync::mpsc::Receiver;
 use prost::Message as _;
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::ModemTransmission;
-use queue::{EntryId, Journal, JournalError, MessageId, QueueError, QueueEvent, QueueManager};
+use queue::{
+    EntryId, Journal, JournalError, MessageId, PushOptions, QueueError, QueueEvent, QueueManager,
+};
 
 /// Why a message was not accepted.
 #[derive(Debug, thiserror::Error)]
@@ -85,7 +87,9 @@ impl Outbox {
         journal_path: &Path,
     ) -> Result<(Self, OutboxReplay), OutboxError> {
         let events = queue.subscribe();
-        let (journal, replay) = Journal::open(journal_path)?;
+        let (mut journal, replay) = Journal::open(journal_path)?;
+        // A message's journal id is its publication number on the wire.
+        journal.skip_ids_to(queue::identity::random_start());
         let mut outbox = Self {
             queue,
             journal,
@@ -108,9 +112,15 @@ impl Outbox {
                         .map_err(|e| format!("the journaled bytes do not parse: {e}"))
                 })
                 .and_then(|message| {
+                    // It may have gone out before the restart.
+                    let options = PushOptions {
+                        created: Some(entry.time),
+                        number: Some(entry.id),
+                        resent: true,
+                    };
                     outbox
                         .queue
-                        .push_created_at(&message, Some(entry.time))
+                        .push_with(&message, options)
                         .map_err(|e| e.to_string())
                 });
             match queued {
@@ -150,7 +160,11 @@ impl Outbox {
         let entry =
             self.journal
                 .accept_unsynced(&name, &message.encode_to_vec(), self.queue.now())?;
-        match self.queue.push(message) {
+        let options = PushOptions {
+            number: Some(entry),
+            ..Default::default()
+        };
+        match self.queue.push_with(message, options) {
             Ok(Some(id)) => {
                 self.entries.insert(id, entry);
                 Ok(Accepted::Queued(entry))
@@ -264,8 +278,12 @@ impl Outbox {
                 self.journal.remove(entry)?;
                 continue;
             }
-            let created = self.journal.get(entry).map(|e| e.time);
-            match self.queue.push_created_at(&message, created) {
+            let options = PushOptions {
+                created: self.journal.get(entry).map(|e| e.time),
+                number: Some(entry),
+                resent: true,
+            };
+            match self.queue.push_with(&message, options) {
                 Ok(Some(id)) => {
                     self.entries.insert(id, entry);
                     requeued += 1;

@@ -878,21 +878,20 @@ impl Daemon {
                 self.hand_over(event, entry, &Reception::default());
                 continue;
             };
-            let bytes = match self.codec.encode(&received.message) {
-                Ok(bytes) => bytes,
-                Err(e) => {
-                    tracing::error!("inbox: cannot encode a received message: {e}");
-                    unrecorded = true;
-                    self.hand_over(QueueEvent::Received(received), None, &reception);
-                    continue;
-                }
-            };
-            let identity = Identity::of(received.src, received.dccl_id, &bytes);
-            if self.inbox.is_duplicate(&identity, now) {
+            // The bytes it was decoded from: never encoded again.
+            let identity = Identity::of(
+                received.src,
+                received.dccl_id,
+                received.identity,
+                &received.bytes,
+            );
+            let resent = received.identity.is_some_and(|w| w.resent);
+            if resent && self.inbox.is_duplicate(&identity, now) {
                 tracing::info!(
                     src = received.src,
                     dccl_id = received.dccl_id,
-                    "a repeat of a message already received: suppressed"
+                    number = received.identity.map(|w| w.number),
+                    "a retransmission of a message already received: suppressed"
                 );
                 continue;
             }
@@ -900,7 +899,7 @@ impl Daemon {
                 identity,
                 dest: received.dest,
                 role_time: received.time,
-                bytes,
+                bytes: received.bytes.clone(),
             };
             match self.inbox.record(incoming, now) {
                 Ok(seq) => recorded.push((Some(seq), received)),
@@ -969,6 +968,8 @@ impl Daemon {
                         src: incoming.identity.src,
                         dest: incoming.dest,
                         time: incoming.role_time,
+                        bytes: incoming.bytes.clone(),
+                        identity: None,
                     },
                     reception: Reception {
                         link: None,

@@ -1,9 +1,12 @@
-//! What a receiving `gobyd` acknowledges, over the UDP driver (which it
-//! starts with `deferred_ack`): a bare UDP socket plays the sending modem
-//! and sends a transmission holding a good frame and one that does not
-//! decode, then the same again. The ack names the good frame only, and
-//! only after the message reached the daemon's inbox; the repeat is
-//! acknowledged as well but not handed over a second time.
+//! What a receiving `gobyd` acknowledges and hands over, over the UDP
+//! driver (which it starts with `deferred_ack`): a bare UDP socket plays
+//! the sending modem and sends a transmission holding a good frame (with
+//! its identity trailer) and one that does not decode, then the same again
+//! marked `resent`, then the same content as a new publication, then as a
+//! plain DCCL frame with no identity (as Goby3 sends). The ack names the
+//! good frame only, and only after the message reached the daemon's inbox;
+//! the retransmission is acknowledged but not handed over a second time;
+//! the new publication and the frame without identity are handed over.
 
 mod support;
 
@@ -16,7 +19,7 @@ use prost::Message;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::example::Command;
-use queue::QueueEvent;
+use queue::{QueueEvent, TrailerCodec, WireIdentity};
 use support::daemon::{free_udp_port, scratch};
 use tokio::net::UdpSocket;
 
@@ -71,7 +74,7 @@ async fn next_ack(socket: &UdpSocket) -> ModemTransmission {
 }
 
 #[tokio::test]
-async fn only_frames_recorded_or_repeated_are_acknowledged() {
+async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications_all_handed_over() {
     let dir = scratch("acknowledge", "frames");
     let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let port = free_udp_port();
@@ -94,8 +97,15 @@ async fn only_frames_recorded_or_repeated_are_acknowledged() {
         note: Some("once".into()),
         ..Default::default()
     };
-    let good = codec.encode(&command.transcode_to_dynamic()).unwrap();
-    let data = ModemTransmission {
+    let plain = codec.encode(&command.transcode_to_dynamic()).unwrap();
+    let trailer = TrailerCodec::new();
+    let with_identity = |number, resent| {
+        let mut frame = plain.clone();
+        frame.extend(trailer.encode(&[WireIdentity::new(number, resent)]));
+        frame
+    };
+    let good = with_identity(1500, false);
+    let mut data = ModemTransmission {
         src: Some(2),
         dest: Some(1),
         r#type: Some(TransmissionType::Data as i32),
@@ -115,11 +125,32 @@ async fn only_frames_recorded_or_repeated_are_acknowledged() {
     assert_eq!((ack.src(), ack.dest(), ack.unique_id), (1, 2, Some(77)));
     assert_eq!(ack.acked_frame, vec![4], "only the frame that decoded");
 
-    // The same transmission again (the sender missed the ack): a repeat,
-    // acknowledged again, not handed over again.
+    // The same publication again (the sender missed the ack): a
+    // retransmission, acknowledged again, not handed over again.
+    data.frame[0] = with_identity(1500, true);
+    data.unique_id = Some(78);
     peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
     let again = next_ack(&peer).await;
-    assert_eq!(again.acked_frame, vec![4]);
+    assert_eq!((again.unique_id, again.acked_frame), (Some(78), vec![4]));
+
+    // The same content published again: a new publication, handed over.
+    data.frame[0] = with_identity(1501, false);
+    data.unique_id = Some(79);
+    peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
+    assert_eq!(next_ack(&peer).await.unique_id, Some(79));
+    // A retransmission of a publication whose first sending never came
+    // (numbered 1502): handed over.
+    data.frame[0] = with_identity(1502, true);
+    data.unique_id = Some(80);
+    peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
+    assert_eq!(next_ack(&peer).await.unique_id, Some(80));
+    // Without identity (a Goby3 sender), twice: each reception handed over.
+    data.frame[0] = plain.clone();
+    for unique_id in [81, 82] {
+        data.unique_id = Some(unique_id);
+        peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
+        assert_eq!(next_ack(&peer).await.unique_id, Some(unique_id));
+    }
 
     let _ = stop.send(());
     run.await.unwrap().unwrap();
@@ -130,6 +161,9 @@ async fn only_frames_recorded_or_repeated_are_acknowledged() {
             handed += 1;
         }
     }
-    assert_eq!(handed, 1, "handed over once");
+    assert_eq!(
+        handed, 5,
+        "the publication once, the same content published again, the one whose first sending was lost, two receptions without identity"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

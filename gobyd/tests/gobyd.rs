@@ -639,3 +639,121 @@ data_dir: "{}"
     drop(third);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Configuration of node `id` of a two-node UDP network with frames of up
+/// to 64 bytes: Command acked, NavigationReport not.
+fn repeats_config(id: i32, ports: [u16; 2], data_dir: &Path) -> String {
+    let me = ports[(id - 1) as usize];
+    let other_id = 3 - id;
+    let other = ports[(other_id - 1) as usize];
+    format!(
+        r#"
+modem_id: {id}
+driver {{
+  driver_type: DRIVER_UDP
+  udp {{
+    local {{ port: {me} }}
+    remote {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
+    max_frame_size: 64
+  }}
+}}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 0.5 }}
+  slot {{ src: 2 dest: -1 rate: 0 slot_seconds: 0.5 }}
+}}
+queue {{
+  message_entry {{
+    protobuf_name: "goby.example.Command"
+    ack: true
+    ttl: 600
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+  message_entry {{
+    protobuf_name: "goby.example.NavigationReport"
+    ack: false
+    ttl: 600
+    role {{ type: SOURCE_ID field: "source" }}
+    role {{ type: DESTINATION_ID field: "destination" }}
+  }}
+}}
+json {{ tcp_bind: "127.0.0.1:0" }}
+data_dir: "{dir}"
+log {{ level: "info" }}
+"#,
+        dir = data_dir.display()
+    )
+}
+
+/// The same content published three times is three publications: each is
+/// delivered (acked or not), and each acked one is acked once, whether they
+/// go out in one frame or one per cycle.
+#[test]
+fn identical_publications_are_each_delivered_and_acked() {
+    let dir = scratch("repeats");
+    let ports = [free_udp_port(), free_udp_port()];
+    let paths: Vec<PathBuf> = [1, 2]
+        .into_iter()
+        .map(|id| {
+            let path = dir.join(format!("node{id}.cfg"));
+            let config = repeats_config(id, ports, &dir.join(format!("node{id}")));
+            std::fs::write(&path, config).unwrap();
+            path
+        })
+        .collect();
+    let receiver = Node::start(&paths[1]);
+    let mut sender = Node::start(&paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    let nav = r#"{"publish": "goby.example.NavigationReport", "msg": {"source": 1, "destination": 2, "time": 1800000000, "x": 10, "y": 20, "z": -5}}"#;
+    let command = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "same"}}"#;
+    // Acks may come in while the later publications wait for their replies.
+    let mut acks = 0;
+    // Three at once (one frame), then three one per cycle.
+    for round in 0..2 {
+        for _ in 0..3 {
+            for (line, name) in [
+                (command, "goby.example.Command"),
+                (nav, "goby.example.NavigationReport"),
+            ] {
+                sender.send(line);
+                sender.wait_for("the accepted reply", |v| {
+                    assert!(v.get("error").is_none(), "{v}");
+                    if v.get("ack").is_some() {
+                        acks += 1;
+                    }
+                    (v["accepted"] == name).then_some(())
+                });
+            }
+            if round == 1 {
+                std::thread::sleep(Duration::from_millis(1100));
+            }
+        }
+    }
+    let (mut commands, mut reports) = (0, 0);
+    while commands < 6 || reports < 6 {
+        let name = receiver.wait_for("six of each", |v| {
+            v["received"].as_str().map(str::to_string)
+        });
+        match name.as_str() {
+            "goby.example.Command" => commands += 1,
+            "goby.example.NavigationReport" => reports += 1,
+            other => panic!("received {other}"),
+        }
+    }
+    while acks < 6 {
+        sender.wait_for("six acks", |v| v.get("ack").map(|_| ()));
+        acks += 1;
+    }
+    // Nothing more comes: no publication delivered twice.
+    std::thread::sleep(Duration::from_secs(2));
+    let extra: Vec<Value> = receiver
+        .lines
+        .try_iter()
+        .filter(|v| v.get("received").is_some())
+        .collect();
+    assert!(extra.is_empty(), "delivered again: {extra:?}");
+    assert_eq!((commands, reports), (6, 6));
+    drop(sender);
+    drop(receiver);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -23,6 +23,12 @@ pub struct ReceivedMessage {
     pub dest: i32,
     /// Time from the type's role, if it has one.
     pub time: Option<Micros>,
+    /// The DCCL bytes it was decoded from (for a message looped back
+    /// locally, those it was queued with).
+    pub bytes: Vec<u8>,
+    /// Its identity on the wire (`None`: the frame carried none, or the
+    /// message did not come over the link).
+    pub identity: Option<crate::identity::WireIdentity>,
 }
 
 /// An event of the queue manager.

@@ -30,7 +30,9 @@
 //!   refused; once there is room again, appending resumes. Should the
 //!   process die first, the partial record is skipped at the next start;
 //! - ids are `u64` and never wrap: when they run out, messages are refused
-//!   ([`JournalError::IdsExhausted`]).
+//!   ([`JournalError::IdsExhausted`]). A journal that owes nothing when
+//!   opened goes on from a random id (below 2^32): a message's id is its
+//!   publication number on the wire (see [`crate::identity`]).
 //!
 //! A removed record lost to damage makes its message owed again: it is sent
 //! once more (a duplicate, never a loss). When removed records dominate, the
@@ -347,6 +349,17 @@ impl Journal {
     /// Whether no message is owed.
     pub fn is_empty(&self) -> bool {
         self.live.is_empty()
+    }
+
+    /// While nothing is owed, makes the next id at least `first` (ids
+    /// never go back). A caller that uses ids as publication numbers on the
+    /// wire (see [`crate::identity`]) starts an empty journal at a random
+    /// id, so that a journal compacted empty, or made anew, does not give
+    /// again the numbers of the last messages a receiver may remember.
+    pub fn skip_ids_to(&mut self, first: EntryId) {
+        if self.live.is_empty() {
+            self.next_id = self.next_id.map(|n| n.max(first));
+        }
     }
 
     /// The message `id`, if still owed.

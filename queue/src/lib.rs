@@ -56,6 +56,7 @@
 pub mod clock;
 pub mod error;
 pub mod event;
+pub mod identity;
 pub mod journal;
 pub mod manager;
 pub mod market;
@@ -65,8 +66,9 @@ mod role;
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
 pub use error::{QueueError, Result};
 pub use event::{MessageId, QueueEvent, ReceivedMessage};
+pub use identity::{TrailerCodec, WireIdentity};
 pub use journal::{EntryId, Journal, JournalEntry, JournalError, Replay};
-pub use manager::{OnDemandProvider, QueueManager};
+pub use manager::{OnDemandProvider, PushOptions, QueueManager};
 pub use queue::QueueSettings;
 
 /// Modem id meaning "every node".

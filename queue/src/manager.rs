@@ -16,6 +16,7 @@ use protos::goby::acomms::protobuf::{
 use crate::clock::{seconds_to_micros, Clock, Micros, SystemClock};
 use crate::error::{QueueError, Result};
 use crate::event::{MessageId, QueueEvent, ReceivedMessage};
+use crate::identity::{self, TrailerCodec, WireIdentity};
 use crate::queue::{Queue, QueueSettings, QueuedMessage};
 use crate::role::Roles;
 use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
@@ -23,6 +24,22 @@ use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
 /// Generates the message of a data-on-demand type at the moment of a data
 /// request (`None`: nothing to send this time).
 pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
+
+/// What the caller knows of a message it queues
+/// ([`QueueManager::push_with`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PushOptions {
+    /// Its age (for `ttl`) counts from this time instead of now, when its
+    /// type has no timestamp role: for messages accepted earlier.
+    pub created: Option<Micros>,
+    /// Its publication number (see [`crate::identity`]), when the caller
+    /// keeps one across restarts (gobyd's journal entry id); otherwise the
+    /// manager numbers it.
+    pub number: Option<u64>,
+    /// It may have been sent already (queued again after a restart or a
+    /// failed transmission): its first sending is marked `resent`.
+    pub resent: bool,
+}
 
 /// A sent message awaiting its acknowledgement.
 #[derive(Debug, Clone, Copy)]
@@ -96,6 +113,13 @@ pub struct QueueManager {
     on_demand: HashMap<u32, OnDemandProvider>,
     awaiting: Vec<AwaitingAck>,
     next_seq: u64,
+    /// Publication number of the next message pushed without one.
+    next_number: u64,
+    /// Frames sent end with a [`identity::FrameIdentity`] trailer.
+    ///
+    /// [`identity::FrameIdentity`]: protos::goby::acomms::protobuf::FrameIdentity
+    send_identity: bool,
+    trailer: TrailerCodec,
     subscribers: Vec<Sender<QueueEvent>>,
     /// Storage of the priority contest, kept between data requests.
     scratch: Vec<Contender>,
@@ -153,6 +177,9 @@ impl QueueManager {
             on_demand: HashMap::new(),
             awaiting: Vec::new(),
             next_seq: 0,
+            next_number: identity::random_start(),
+            send_identity: config.message_identity(),
+            trailer: TrailerCodec::new(),
             subscribers: Vec::new(),
             scratch: Vec::new(),
         };
@@ -189,6 +216,14 @@ impl QueueManager {
                 reason: "this message type is not loaded in the DCCL codec".into(),
             })?;
         let id = self.codec.id_of(name)?;
+        if id == identity::DCCL_ID {
+            return Err(QueueError::Config {
+                message: name.to_string(),
+                reason: format!(
+                    "DCCL id {id} is reserved for the frame trailer goby.acomms.protobuf.FrameIdentity"
+                ),
+            });
+        }
         let settings = QueueSettings::from_entry(entry)?;
         let roles = Roles::resolve(&descriptor, &entry.role)?;
         let min = self.codec.min_size(name)?;
@@ -264,7 +299,24 @@ impl QueueManager {
         message: &DynamicMessage,
         created: Option<Micros>,
     ) -> Result<Option<MessageId>> {
-        let now = created.unwrap_or_else(|| self.clock.now());
+        self.push_with(
+            message,
+            PushOptions {
+                created,
+                ..Default::default()
+            },
+        )
+    }
+
+    /// Queues a message as [`push`](Self::push) does, with what the caller
+    /// knows of it: when it was accepted, its publication number, whether
+    /// it may have been sent already.
+    pub fn push_with(
+        &mut self,
+        message: &DynamicMessage,
+        options: PushOptions,
+    ) -> Result<Option<MessageId>> {
+        let now = options.created.unwrap_or_else(|| self.clock.now());
         let name = message.descriptor().full_name().to_string();
         let id = self.id_of_configured(&name)?;
         let index = self.index_of(id);
@@ -309,6 +361,8 @@ impl QueueManager {
                 src,
                 dest,
                 time: Some(time),
+                bytes: encoded.clone(),
+                identity: None,
             }));
         }
         if no_queue {
@@ -322,6 +376,8 @@ impl QueueManager {
                 src,
                 dest,
                 time: Some(time),
+                bytes: encoded,
+                identity: None,
             }));
             if ack_requested {
                 self.emit(QueueEvent::Acked {
@@ -337,7 +393,14 @@ impl QueueManager {
 
         let seq = self.next_seq;
         self.next_seq += 1;
+        let number = options.number.unwrap_or_else(|| {
+            let n = self.next_number;
+            self.next_number = n.wrapping_add(1);
+            n
+        });
         let dropped = self.queues[index].push(QueuedMessage {
+            number,
+            resent: options.resent,
             seq,
             message: message.clone(),
             encoded,
@@ -406,16 +469,33 @@ impl QueueManager {
                 request.frame.push(Vec::new());
             }
             contenders.extend(aside.drain(..));
+            // Identities of the messages placed in this frame; `bare`: a
+            // message took the frame with no room left for the trailer.
+            let mut ids: Vec<WireIdentity> = Vec::new();
+            let mut bare = false;
             loop {
+                if bare || (self.send_identity && ids.len() == identity::MAX_MESSAGES) {
+                    break;
+                }
                 let used = request.frame[slot].len();
-                let remaining = max_frame_bytes.saturating_sub(used);
-                if remaining < self.smallest_message {
+                let free = max_frame_bytes.saturating_sub(used);
+                let reserve = if self.send_identity {
+                    self.trailer.size(ids.len() + 1)
+                } else {
+                    0
+                };
+                let remaining = free.saturating_sub(reserve);
+                // A first message too large to carry its identity in this
+                // frame still goes, alone and without it.
+                let alone = self.send_identity && ids.is_empty();
+                let room = if alone { free } else { remaining };
+                if room < self.smallest_message {
                     break;
                 }
                 let dest = request.dest();
                 let mut winner = None;
                 while let Some(c) = contenders.pop() {
-                    if can_join(&self.queues[c.index], remaining, dest, ack_forbidden) {
+                    if can_join(&self.queues[c.index], room, dest, ack_forbidden) {
                         winner = Some(c);
                         break;
                     }
@@ -428,6 +508,11 @@ impl QueueManager {
                 let queue = &mut self.queues[index];
                 let next = queue.next_index().expect("checked eligible");
                 let sent = queue.give(next, frame_number, now, &mut request.frame[slot]);
+                if sent.len > remaining {
+                    bare = true;
+                } else {
+                    ids.push(sent.identity);
+                }
                 let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
                 if sent.ack_requested {
                     packet_ack = true;
@@ -468,18 +553,26 @@ impl QueueManager {
                         });
                     }
                     if let Some(message) = message.filter(|_| loopback_as_sent) {
+                        let frame = &request.frame[slot];
+                        let bytes = frame[frame.len() - sent.len..].to_vec();
                         self.emit(QueueEvent::Received(ReceivedMessage {
                             message,
                             dccl_id: contender.dccl_id,
                             src: sent.src,
                             dest: sent.dest,
                             time: Some(sent.time),
+                            bytes,
+                            identity: None,
                         }));
                     }
                 }
                 if let Some(c) = self.contender(index, now) {
                     contenders.push(c);
                 }
+            }
+            if self.send_identity && !bare && !ids.is_empty() {
+                let trailer = self.trailer.encode(&ids);
+                request.frame[slot].extend_from_slice(&trailer);
             }
         }
         request.ack_requested = Some(packet_ack);
@@ -506,19 +599,34 @@ impl QueueManager {
         let mut errors = Vec::new();
         for (frame_index, frame) in transmission.frame.iter().enumerate() {
             let mut rest = frame.as_slice();
-            let mut decoded = 0usize;
+            let mut decoded: Vec<(DynamicMessage, &[u8], Option<WireIdentity>)> = Vec::new();
             while !rest.is_empty() {
                 // Zero bytes after the messages are padding, not a message.
-                if decoded > 0 && rest.iter().all(|&b| b == 0) {
+                if !decoded.is_empty() && rest.iter().all(|&b| b == 0) {
+                    break;
+                }
+                if self.trailer.starts_trailer(rest) {
+                    // The identities of the messages before it, in order;
+                    // nothing follows but padding.
+                    match self.trailer.decode(rest) {
+                        Some(ids) if ids.len() <= decoded.len() => {
+                            let first = decoded.len() - ids.len();
+                            for (d, id) in decoded[first..].iter_mut().zip(ids) {
+                                d.2 = Some(id);
+                            }
+                        }
+                        // A trailer that does not decode, or names more
+                        // messages than the frame holds: the messages are
+                        // delivered without identity.
+                        _ => {}
+                    }
                     break;
                 }
                 match self.codec.decode_prefix(rest) {
                     Ok((message, used)) => {
-                        decoded += 1;
-                        if let Err(e) = self.deliver(message, transmission.src()) {
-                            errors.push(e);
-                        }
-                        if used == 0 || used > rest.len() {
+                        let used = used.min(rest.len());
+                        decoded.push((message, &rest[..used], None));
+                        if used == 0 {
                             break;
                         }
                         rest = &rest[used..];
@@ -530,6 +638,11 @@ impl QueueManager {
                         });
                         break;
                     }
+                }
+            }
+            for (message, bytes, identity) in decoded {
+                if let Err(e) = self.deliver(message, transmission.src(), bytes, identity) {
+                    errors.push(e);
                 }
             }
         }
@@ -722,7 +835,13 @@ impl QueueManager {
         }
     }
 
-    fn deliver(&mut self, message: DynamicMessage, link_src: i32) -> Result<()> {
+    fn deliver(
+        &mut self,
+        message: DynamicMessage,
+        link_src: i32,
+        bytes: &[u8],
+        identity: Option<WireIdentity>,
+    ) -> Result<()> {
         let name = message.descriptor().full_name().to_string();
         let id = self.codec.id_of(&name)?;
         let queue = self
@@ -761,6 +880,8 @@ impl QueueManager {
             src,
             dest,
             time,
+            bytes: bytes.to_vec(),
+            identity,
         }));
         Ok(())
     }

@@ -89,6 +89,10 @@ pub(crate) struct QueuedMessage {
     /// Frame it was last sent in while its ack is awaited.
     pub awaiting_frame: Option<u32>,
     pub last_sent: Option<Micros>,
+    /// The sender's number of the publication (see [`crate::identity`]).
+    pub number: u64,
+    /// It may have gone out before (sent in this run, or queued again).
+    pub resent: bool,
 }
 
 /// What [`Queue::give`] gave out.
@@ -102,6 +106,10 @@ pub(crate) struct Given {
     pub time: Micros,
     /// Whether an ack is awaited (false for broadcasts).
     pub ack_requested: bool,
+    /// How it is known on the wire in this sending.
+    pub identity: crate::identity::WireIdentity,
+    /// Bytes it took in the frame.
+    pub len: usize,
     /// The message, when it left the queue.
     pub removed: Option<QueuedMessage>,
 }
@@ -209,7 +217,11 @@ impl Queue {
         }
         msg.last_sent = Some(now);
         out.extend_from_slice(&msg.encoded);
+        let identity = crate::identity::WireIdentity::new(msg.number, msg.resent);
+        msg.resent = true;
         let given = Given {
+            identity,
+            len: msg.encoded.len(),
             seq: msg.seq,
             index,
             src: msg.src,

@@ -254,6 +254,8 @@ mod tests {
                     src: 1,
                     dest: 2,
                     time: None,
+                    bytes: Vec::new(),
+                    identity: None,
                 }),
                 3_000_000,
             )

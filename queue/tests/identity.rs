@@ -1,0 +1,199 @@
+//! Message identity on the wire (`message_identity`): every frame ends with
+//! the numbers of its messages, a retransmission is marked `resent`, and
+//! identical content published twice is two publications.
+
+mod common;
+
+use common::{entry, serial, Node};
+use protos::goby::acomms::protobuf::{ModemTransmission, QueueManagerConfig};
+use queue::{PushOptions, QueueEvent, ReceivedMessage, WireIdentity};
+
+fn node(modem_id: i32, identity: bool, ack: bool) -> Node {
+    let mut status = entry("Status");
+    status.ack = Some(ack);
+    let big = protos::goby::acomms::protobuf::QueuedMessageEntry {
+        protobuf_name: "test.queue.Big".into(),
+        ack: Some(false),
+        ..Default::default()
+    };
+    Node::with_config(QueueManagerConfig {
+        modem_id: Some(modem_id),
+        message_entry: vec![status, big],
+        message_identity: Some(identity),
+        ..Default::default()
+    })
+}
+
+fn received(node: &mut Node, tx: &ModemTransmission) -> Vec<ReceivedMessage> {
+    assert!(node.manager.handle_modem_receive(tx).is_empty());
+    node.drain()
+        .into_iter()
+        .filter_map(|e| match e {
+            QueueEvent::Received(r) => Some(r),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn identical_messages_are_numbered_apart_and_carry_their_bytes() {
+    let mut sender = node(1, true, false);
+    let mut receiver = node(2, true, false);
+    let message = sender.message("Status", 1, 2, 7);
+    for _ in 0..3 {
+        sender.manager.push(&message).unwrap();
+    }
+    sender.clock.advance_seconds(10.0);
+    let tx = sender.request(64, 1, -1);
+    let got = received(&mut receiver, &tx);
+    assert_eq!(got.len(), 3, "three publications, three messages");
+    let mut numbers: Vec<u16> = got.iter().map(|r| r.identity.unwrap().number).collect();
+    numbers.sort();
+    numbers.dedup();
+    assert_eq!(numbers.len(), 3, "three numbers: {numbers:?}");
+    assert!(got.iter().all(|r| !r.identity.unwrap().resent));
+    // The bytes handed up are those the frame held, once per message.
+    let encoded = sender.manager.codec().encode(&message).unwrap();
+    assert!(got.iter().all(|r| r.bytes == encoded));
+    let trailer_len = tx.frame[0].len() - 3 * encoded.len();
+    assert_eq!(trailer_len, 7, "a trailer of three entries");
+}
+
+#[test]
+fn a_retransmission_keeps_its_number_and_is_marked_resent() {
+    let mut sender = node(1, true, true);
+    let mut receiver = node(2, true, true);
+    sender.push("Status", 1, 2, 1);
+    sender.clock.advance_seconds(10.0);
+    let first = sender.request(32, 1, -1);
+    // No ack comes; the next request sends it again.
+    sender.clock.advance_seconds(10.0);
+    let again = sender.request(32, 1, -1);
+    let a = received(&mut receiver, &first);
+    let b = received(&mut receiver, &again);
+    assert_eq!(a.len(), 1);
+    assert_eq!(b.len(), 1);
+    let (a, b) = (a[0].identity.unwrap(), b[0].identity.unwrap());
+    assert_eq!(a.number, b.number);
+    assert!(!a.resent);
+    assert!(b.resent);
+}
+
+#[test]
+fn numbers_given_by_the_caller_are_kept_and_a_message_queued_again_is_resent() {
+    let mut sender = node(1, true, false);
+    let mut receiver = node(2, true, false);
+    let m = sender.message("Status", 1, 2, 3);
+    sender
+        .manager
+        .push_with(
+            &m,
+            PushOptions {
+                number: Some(2048 * 5 + 77),
+                resent: true,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    sender.clock.advance_seconds(10.0);
+    let tx = sender.request(32, 1, -1);
+    let got = received(&mut receiver, &tx);
+    assert_eq!(
+        got[0].identity,
+        Some(WireIdentity {
+            number: 77,
+            resent: true
+        })
+    );
+}
+
+#[test]
+fn without_identity_frames_are_plain_dccl_and_received_messages_have_none() {
+    let mut sender = node(1, false, false);
+    let mut receiver = node(2, true, false);
+    sender.push("Status", 1, 2, 4);
+    sender.clock.advance_seconds(10.0);
+    let tx = sender.request(32, 1, -1);
+    let codec = sender.manager.codec().clone();
+    let encoded = codec.encode(&sender.message("Status", 1, 2, 4)).unwrap();
+    assert_eq!(tx.frame[0].len(), encoded.len());
+    let got = received(&mut receiver, &tx);
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].identity, None);
+}
+
+#[test]
+fn a_receiver_without_the_trailer_type_keeps_the_messages_before_it() {
+    // What Goby3 does with a frame it cannot decode to the end: the
+    // messages decoded so far are kept.
+    let mut sender = node(1, true, false);
+    sender.push("Status", 1, 2, 5);
+    sender.push("Status", 1, 2, 6);
+    sender.clock.advance_seconds(10.0);
+    let tx = sender.request(64, 1, -1);
+    let codec = sender.manager.codec().clone();
+    let mut rest = tx.frame[0].as_slice();
+    let mut serials = Vec::new();
+    while let Ok((m, used)) = codec.decode_prefix(rest) {
+        serials.push(serial(&m));
+        rest = &rest[used..];
+    }
+    serials.sort();
+    assert_eq!(serials, [5, 6]);
+    assert_eq!(rest.len(), 6, "the trailer is left");
+}
+
+#[test]
+fn a_message_filling_the_frame_goes_alone_without_identity() {
+    let mut sender = node(1, true, false);
+    let mut receiver = node(2, true, false);
+    let codec = sender.manager.codec().clone();
+    let desc = codec.descriptor("test.queue.Big").unwrap();
+    let mut big = prost_reflect::DynamicMessage::new(desc);
+    big.set_field_by_name("serial", prost_reflect::Value::U32(9));
+    big.set_field_by_name("blob", prost_reflect::Value::Bytes(vec![0xAB; 60].into()));
+    let len = codec.encode(&big).unwrap().len() as u32;
+    sender.manager.push(&big).unwrap();
+    sender.push("Status", 1, 2, 8);
+    sender.clock.advance_seconds(10.0);
+    // Room for the message but not for its trailer: it goes bare.
+    let tx = sender.request(len + 1, 2, -1);
+    let sizes: Vec<usize> = tx.frame.iter().map(Vec::len).collect();
+    assert!(sizes.contains(&(len as usize)), "{sizes:?}");
+    let got = received(&mut receiver, &tx);
+    assert_eq!(got.len(), 2);
+    for r in got {
+        let is_big = r.dccl_id == 4;
+        assert_eq!(r.identity.is_none(), is_big, "{}", r.dccl_id);
+    }
+}
+
+#[test]
+fn a_type_with_the_reserved_id_is_refused() {
+    let pool = dccl::compile_sources(&[(
+        "reserved.proto",
+        r#"syntax = "proto2";
+import "dccl/option_extensions.proto";
+package test.reserved;
+message Clash {
+  option (dccl.msg) = { id: 32001 max_bytes: 8 codec_version: 4 };
+  required uint32 x = 1 [(dccl.field) = { min: 0 max: 7 }];
+}"#,
+    )])
+    .unwrap();
+    let mut codec = dccl::Codec::new();
+    codec
+        .load(&pool.get_message_by_name("test.reserved.Clash").unwrap())
+        .unwrap();
+    let config = QueueManagerConfig {
+        modem_id: Some(1),
+        message_entry: vec![protos::goby::acomms::protobuf::QueuedMessageEntry {
+            protobuf_name: "test.reserved.Clash".into(),
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let err = queue::QueueManager::new(std::sync::Arc::new(codec), &config).unwrap_err();
+    assert!(err.to_string().contains("reserved"), "{err}");
+    assert!(err.to_string().contains("test.reserved.Clash"), "{err}");
+}
