@@ -282,3 +282,125 @@ translator_entry {{
     db.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A TRIGGER_TIME entry whose create variable never changes (a battery
+/// voltage written once) makes one message a period, all alike: each
+/// crosses to the other community, as pAcommsHandler delivers them, and
+/// none is taken for a repeat of the one before. Two daemons over UDP on
+/// 127.0.0.1, each in its own MOOS community.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unchanged_timed_value_reaches_the_other_community_every_period() {
+    let dir = std::env::temp_dir().join(format!("gobyd-pacomms-period-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let ports = [free_udp_port(), free_udp_port()];
+    let mut dbs = Vec::new();
+    let mut stops = Vec::new();
+    let mut running = Vec::new();
+    for id in [1, 2] {
+        let db = moos::testing::MiniDb::start("127.0.0.1:0", &format!("period{id}"))
+            .await
+            .unwrap();
+        let (me, other) = (ports[id - 1], ports[2 - id]);
+        let text = format!(
+            r#"
+modem_id: {id}
+driver {{
+  driver_type: DRIVER_UDP
+  udp {{ local {{ port: {me} }} remote {{ modem_id: {peer} ip: "127.0.0.1" port: {other} }} }}
+}}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 0.25 }}
+  slot {{ src: 2 dest: -1 rate: 0 slot_seconds: 0.25 }}
+}}
+queue {{ message_entry {{ protobuf_name: "goby.example.Command" ack: false ttl: 600 role {{ type: DESTINATION_ID field: "destination" }} }} }}
+json {{ tcp_bind: "" }}
+moos {{ server: "127.0.0.1" port: {port} }}
+data_dir: "{dir}"
+log {{ raw_log: false }}
+translator_entry {{
+  protobuf_name: "goby.example.Command"
+  trigger {{ type: TRIGGER_TIME period: 1 }}
+  create {{ technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "BATTERY_OUT" }}
+  publish {{ technique: TECHNIQUE_FORMAT moos_var: "BATTERY_IN" format: "NOTE=%4%" }}
+}}
+"#,
+            peer = 3 - id,
+            port = db.port(),
+            dir = dir.join(format!("node{id}")).display()
+        );
+        let daemon = gobyd::runtime::Daemon::start(config::parse(&text, "test").unwrap())
+            .await
+            .unwrap();
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        stops.push(stop);
+        running.push(tokio::spawn(daemon.run(async {
+            let _ = stopped.await;
+        })));
+        dbs.push(db);
+    }
+    let connect = |port: u16, name: &str| {
+        moos::MoosClient::connect(moos::ClientConfig::new(name).with_address("127.0.0.1", port))
+    };
+    let (vehicle, _) = connect(dbs[0].port(), "pBattery").await.unwrap();
+    let (shore, mut mail) = connect(dbs[1].port(), "pShore").await.unwrap();
+    shore
+        .register("BATTERY_IN", std::time::Duration::ZERO)
+        .unwrap();
+    // Written once, after the daemon's MOOS client is up (retried until the
+    // first message arrives, with the same value).
+    let value = "@PB[goby.example.Command] destination: 2 action: HOLD note: \"15.2V\"";
+    let mut arrivals = Vec::new();
+    let first = tokio::time::timeout(std::time::Duration::from_secs(30), async {
+        let mut write = tokio::time::interval(std::time::Duration::from_millis(500));
+        loop {
+            tokio::select! {
+                _ = write.tick() => { let _ = vehicle.notify_string("BATTERY_OUT", value); }
+                m = mail.recv() => {
+                    if let Value::String(s) = m.expect("mail").value { return s; }
+                }
+            }
+        }
+    })
+    .await
+    .expect("BATTERY_IN within 30 s");
+    assert_eq!(first, "NOTE=15.2V");
+    arrivals.push(tokio::time::Instant::now());
+    // No more writes: the trigger makes one message a second from the
+    // same value; each arrives.
+    let watch = std::time::Duration::from_secs(6);
+    let _ = tokio::time::timeout(watch, async {
+        while let Some(m) = mail.recv().await {
+            if let Value::String(s) = m.value {
+                assert_eq!(s, "NOTE=15.2V");
+                arrivals.push(tokio::time::Instant::now());
+            }
+        }
+    })
+    .await;
+    assert!(
+        (4..=8).contains(&(arrivals.len() - 1)),
+        "{} arrivals in {watch:?} after the first (one a second expected)",
+        arrivals.len() - 1
+    );
+    vehicle.close().await;
+    shore.close().await;
+    for stop in stops {
+        let _ = stop.send(());
+    }
+    for r in running {
+        r.await.unwrap().unwrap();
+    }
+    for db in dbs {
+        db.stop().await;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
