@@ -2,9 +2,12 @@
 //! daemon can be made to die on purpose, as a `kill -9` landing exactly
 //! there would.
 //!
-//! Set `GOBYD_CRASH_POINT=NAME:N` in the daemon's environment and it aborts
-//! (no clean-up, no flushing) the `N`-th time it reaches point `NAME`
-//! (`N` defaults to 1). Unset, a point costs one relaxed atomic load.
+//! Built with the `crash-points` feature (the tests build the daemon so;
+//! the shipped daemon has none: a point is then an empty function and the
+//! variable is not read), set `GOBYD_CRASH_POINT=NAME:N` in the daemon's
+//! environment and it aborts (no clean-up, no flushing) the `N`-th time it
+//! reaches point `NAME` (`N` defaults to 1). Unset, a point costs one
+//! relaxed atomic load.
 //! Points, in the order a received transmission meets them:
 //!
 //! - `received`: a data transmission from the driver, nothing of it
@@ -15,7 +18,9 @@
 //! - `handed-over`: they are handed over and marked so; nothing
 //!   acknowledged.
 
+#[cfg(feature = "crash-points")]
 use std::sync::atomic::{AtomicU64, Ordering};
+#[cfg(feature = "crash-points")]
 use std::sync::OnceLock;
 
 /// Name of the environment variable that arms a crash point.
@@ -43,7 +48,16 @@ impl CrashPoint {
     }
 
     /// Called when the point is reached: aborts the process when this is
-    /// the armed point's `N`-th time.
+    /// the armed point's `N`-th time (only with the `crash-points`
+    /// feature).
+    #[cfg(not(feature = "crash-points"))]
+    #[inline(always)]
+    pub fn reached(self) {}
+
+    /// Called when the point is reached: aborts the process when this is
+    /// the armed point's `N`-th time (only with the `crash-points`
+    /// feature).
+    #[cfg(feature = "crash-points")]
     pub fn reached(self) {
         let Some((point, n)) = armed() else {
             return;
@@ -84,6 +98,7 @@ pub fn parse(text: &str) -> Result<(CrashPoint, u64), String> {
     Ok((point, n))
 }
 
+#[cfg(feature = "crash-points")]
 fn armed() -> &'static Option<(CrashPoint, u64)> {
     static ARMED: OnceLock<Option<(CrashPoint, u64)>> = OnceLock::new();
     ARMED.get_or_init(|| {
