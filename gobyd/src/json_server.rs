@@ -4,8 +4,9 @@
 //!
 //! Connections parse their lines themselves and hand messages to publish to
 //! the daemon's core through a channel, with a one-shot channel for the
-//! reply line; events come back through a broadcast channel and each client
-//! keeps those it subscribed to. Every request line gets exactly one reply,
+//! reply line; the core's typed events come back through a broadcast
+//! channel, each client keeps those it subscribed to, and an event's line
+//! is rendered once, by the first client that sends it. Every request line gets exactly one reply,
 //! numbered (see [`json_protocol`](super::json_protocol)); a malformed line
 //! gets an `error` reply; the connection and the daemon stay up.
 //!
@@ -28,8 +29,10 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
+use super::event::SharedEvent;
 use super::json_protocol::{
-    error_line, lost_line, numbered_reply, parse_request, subscribed_line, Request, Topic,
+    error_line, event_line, event_topic, lost_line, numbered_reply, parse_request, subscribed_line,
+    Request, Topic,
 };
 
 /// A message a client wants sent, with where to send the reply line.
@@ -40,29 +43,6 @@ pub struct Publish {
     /// Receives the `accepted` or `error` line.
     pub reply: oneshot::Sender<String>,
 }
-
-/// A queue, modem or medium access event as clients see it.
-#[derive(Debug)]
-pub struct ClientEvent {
-    /// Its topic (`None`: for every client).
-    pub topic: Option<Topic>,
-    /// Its JSON line.
-    pub line: String,
-    /// The event itself (for interfaces that format it otherwise).
-    pub event: DaemonEvent,
-}
-
-/// What a [`ClientEvent`] reports.
-#[derive(Debug)]
-pub enum DaemonEvent {
-    /// A queue event.
-    Queue(queue::QueueEvent),
-    /// A modem driver or medium access event.
-    Modem(crate::modem_event::ModemEvent),
-}
-
-/// A shared [`ClientEvent`].
-pub type EventLine = Arc<ClientEvent>;
 
 /// Longest request line accepted, bytes (without its newline).
 pub const MAX_LINE: usize = 1024 * 1024;
@@ -198,11 +178,26 @@ pub struct JsonInterface {
     pub publish: mpsc::Sender<Publish>,
     /// Where driver-specific requests go.
     pub control: mpsc::Sender<crate::control::Control>,
-    /// Where event lines come from.
-    pub events: broadcast::Sender<EventLine>,
+    /// Where the core's events come from.
+    pub events: broadcast::Sender<SharedEvent>,
+    /// Type names by DCCL id (for the queue size lines).
+    pub names: Arc<HashMap<u32, String>>,
 }
 
 impl JsonInterface {
+    /// An event's line, rendered by the first client that sends it and
+    /// shared with the others (`None`: clients do not see the event).
+    fn line<'a>(&self, event: &'a SharedEvent) -> Option<&'a str> {
+        event.json_line(|e| {
+            event_line(e, |id| {
+                self.names
+                    .get(&id)
+                    .cloned()
+                    .unwrap_or_else(|| format!("dccl id {id}"))
+            })
+        })
+    }
+
     /// Handles one request line: its reply now, or the channel it comes
     /// through.
     async fn handle_line(&self, line: &str, topics: &mut HashSet<Topic>) -> Handled {
@@ -324,7 +319,8 @@ impl JsonInterface {
                     Some(numbered_reply(&line, number))
                 }
                 event = events.recv() => match event {
-                    Ok(event) => wanted(&event, &topics).then(|| event.line.clone()),
+                    Ok(event) if wanted(&event, &topics) => self.line(&event).map(str::to_string),
+                    Ok(_) => None,
                     Err(broadcast::error::RecvError::Lagged(n)) if topics.is_empty() => {
                         tracing::info!(%peer, "JSON client read too slowly: {n} events not sent");
                         None
@@ -398,8 +394,11 @@ impl JsonInterface {
                 event = events.recv() => match event {
                     Ok(event) => {
                         for (addr, peer) in &peers.peers {
-                            if wanted(&event, &peer.topics) {
-                                let _ = socket.send_to(event.line.as_bytes(), addr).await;
+                            if !wanted(&event, &peer.topics) {
+                                continue;
+                            }
+                            if let Some(line) = self.line(&event) {
+                                let _ = socket.send_to(line.as_bytes(), addr).await;
                             }
                         }
                     }
@@ -468,8 +467,8 @@ fn out_of_descriptors(e: &io::Error) -> bool {
     matches!(e.raw_os_error(), Some(EMFILE | ENFILE))
 }
 
-fn wanted(event: &EventLine, topics: &HashSet<Topic>) -> bool {
-    match event.topic {
+fn wanted(event: &SharedEvent, topics: &HashSet<Topic>) -> bool {
+    match event_topic(&event.event) {
         None => true,
         Some(topic) => topics.contains(&topic),
     }

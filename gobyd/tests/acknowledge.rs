@@ -9,14 +9,13 @@ mod support;
 
 use std::time::Duration;
 
-use gobyd::json_server::DaemonEvent;
+use gobyd::event::DaemonEvent;
 use gobyd::runtime::Daemon;
 use modemdriver::ModemTransmission;
 use prost::Message;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::example::Command;
-use queue::QueueEvent;
 use support::daemon::{free_udp_port, scratch};
 use tokio::net::UdpSocket;
 
@@ -125,7 +124,7 @@ async fn only_frames_recorded_or_repeated_are_acknowledged() {
     run.await.unwrap().unwrap();
     let mut handed = 0;
     while let Ok(e) = events.try_recv() {
-        if let DaemonEvent::Queue(QueueEvent::Received(r)) = &e.event {
+        if let DaemonEvent::Received { received: r, .. } = &e.event {
             assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
             handed += 1;
         }
