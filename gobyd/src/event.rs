@@ -9,7 +9,7 @@
 
 use std::sync::{Arc, OnceLock};
 
-use prost_reflect::ReflectMessage;
+use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::{QueueEvent, ReceivedMessage};
 use serde_json::Value;
@@ -124,6 +124,24 @@ impl LinkSummary {
         }
         value
     }
+}
+
+/// The core's answer to a message to publish: accepted (on disk, or
+/// delivered to this node), or the reason it was not.
+pub type PublishReply = Result<AcceptedMessage, String>;
+
+/// A message the core accepted.
+#[derive(Debug, Clone)]
+pub struct AcceptedMessage {
+    /// Its type.
+    pub name: String,
+    /// Its journal id (`None`: addressed to this node, delivered at once).
+    pub id: Option<u64>,
+    /// The messages it pushed out of their full queue (journal id,
+    /// message).
+    pub dropped: Vec<(Option<u64>, DynamicMessage)>,
+    /// The values the codec changed (a type with `clamp_out_of_range`).
+    pub changes: Vec<dccl::ValueChange>,
 }
 
 /// The shared summary of a reception (see [`LinkSummary`]).

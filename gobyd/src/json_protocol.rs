@@ -47,7 +47,7 @@ use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::QueueEvent;
 use serde_json::{json, Value};
 
-use crate::event::{DaemonEvent, Reception};
+use crate::event::{AcceptedMessage, DaemonEvent, PublishReply, Reception};
 use crate::modem_event::ModemEvent;
 
 /// Event kinds a client may subscribe to (received messages always reach
@@ -175,19 +175,24 @@ pub fn message_json(message: &DynamicMessage) -> Value {
         .unwrap_or_else(|e| json!({ "unserializable": e.to_string() }))
 }
 
-/// The `accepted` reply (without its reply number).
-pub fn accepted_line(name: &str, id: Option<u64>) -> String {
-    accepted_reply(name, id, &[], &[])
+/// The reply to a publish (without its reply number): `accepted` or
+/// `error`.
+pub fn reply_line(reply: &PublishReply) -> String {
+    match reply {
+        Ok(accepted) => accepted_value(accepted).to_string(),
+        Err(reason) => error_line(reason),
+    }
 }
 
-/// The `accepted` reply with the messages its message pushed out of a full
-/// queue (journal id, message) and the values the codec changed.
-pub fn accepted_reply(
-    name: &str,
-    id: Option<u64>,
-    dropped: &[(Option<u64>, DynamicMessage)],
-    changes: &[dccl::ValueChange],
-) -> String {
+/// The `accepted` reply as a JSON object, with the messages its message
+/// pushed out of a full queue and the values the codec changed.
+pub fn accepted_value(accepted: &AcceptedMessage) -> Value {
+    let AcceptedMessage {
+        name,
+        id,
+        dropped,
+        changes,
+    } = accepted;
     let mut reply = match id {
         Some(id) => json!({ "accepted": name, "id": id }),
         None => json!({ "accepted": name, "delivered": true }),
@@ -206,7 +211,7 @@ pub fn accepted_reply(
             .map(|c| json!({ "field": c.field, "reason": c.reason }))
             .collect();
     }
-    reply.to_string()
+    reply
 }
 
 /// The `subscribed` reply: every topic the client now receives.

@@ -17,8 +17,10 @@
 //! silent for [`UDP_PEER_IDLE`].
 
 use std::collections::{HashMap, HashSet};
+use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
+use std::pin::Pin;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -29,19 +31,20 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
-use super::event::SharedEvent;
+use super::event::{PublishReply, SharedEvent};
 use super::json_protocol::{
-    error_line, event_line, event_topic, lost_line, numbered_reply, parse_request, subscribed_line,
-    Request, Topic,
+    error_line, event_line, event_topic, lost_line, numbered_reply, parse_request, reply_line,
+    subscribed_line, Request, Topic,
 };
 
-/// A message a client wants sent, with where to send the reply line.
+/// A message a client wants sent, with where to send the reply.
 #[derive(Debug)]
 pub struct Publish {
     /// The message.
     pub message: DynamicMessage,
-    /// Receives the `accepted` or `error` line.
-    pub reply: oneshot::Sender<String>,
+    /// Receives the core's answer (the JSON interface renders it as the
+    /// `accepted` or `error` line).
+    pub reply: oneshot::Sender<PublishReply>,
 }
 
 /// Longest request line accepted, bytes (without its newline).
@@ -68,15 +71,26 @@ const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(10), Duratio
 enum Handled {
     /// The reply, at once.
     Reply(String),
-    /// The reply comes from the core.
-    Waiting(oneshot::Receiver<String>),
+    /// The reply line, once the core answers.
+    Waiting(Answer),
 }
 
-/// The reply line once the core answers.
-async fn answer(waiting: oneshot::Receiver<String>) -> String {
-    waiting
-        .await
-        .unwrap_or_else(|_| error_line("the daemon is shutting down"))
+/// A reply line still to come: the core's typed answer, rendered when it
+/// arrives.
+type Answer = Pin<Box<dyn Future<Output = String> + Send>>;
+
+/// The line of the core's answer when it comes: `render` for an answer,
+/// an error when the core stopped first.
+fn answer<T: Send + 'static>(
+    waiting: oneshot::Receiver<T>,
+    render: impl FnOnce(T) -> String + Send + 'static,
+) -> Answer {
+    Box::pin(async move {
+        match waiting.await {
+            Ok(reply) => render(reply),
+            Err(_) => error_line("the daemon is shutting down"),
+        }
+    })
 }
 
 /// What the next read of a [`LineReader`] found.
@@ -210,11 +224,11 @@ impl JsonInterface {
                 Handled::Reply(subscribed_line(&all))
             }
             Ok(Request::Publish(message)) => {
-                let (reply, answer) = oneshot::channel();
+                let (reply, waiting) = oneshot::channel();
                 if self.publish.send(Publish { message, reply }).await.is_err() {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
-                Handled::Waiting(answer)
+                Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))
             }
             Ok(Request::DriverSpecific(message)) => {
                 let name = message.descriptor().full_name().to_string();
@@ -223,16 +237,10 @@ impl JsonInterface {
                 if self.control.send(control).await.is_err() {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
-                let (line_tx, line_rx) = oneshot::channel();
-                tokio::spawn(async move {
-                    let line = match outcome.await {
-                        Ok(Ok(())) => serde_json::json!({ "driver_specific": name }).to_string(),
-                        Ok(Err(e)) => error_line(&e),
-                        Err(_) => error_line("the daemon is shutting down"),
-                    };
-                    let _ = line_tx.send(line);
-                });
-                Handled::Waiting(line_rx)
+                Handled::Waiting(answer(outcome, move |outcome| match outcome {
+                    Ok(()) => serde_json::json!({ "driver_specific": name }).to_string(),
+                    Err(e) => error_line(&e),
+                }))
             }
         }
     }
@@ -281,7 +289,7 @@ impl JsonInterface {
         // Number of the last request line.
         let mut number = 0u64;
         // The reply being waited for (requests are answered in order).
-        let mut waiting: Option<oneshot::Receiver<String>> = None;
+        let mut waiting: Option<Answer> = None;
         loop {
             let out = tokio::select! {
                 read = lines.next(), if waiting.is_none() => match read {
@@ -312,10 +320,9 @@ impl JsonInterface {
                     }
                 },
                 line = async { waiting.as_mut().expect("guarded").await }, if waiting.is_some() => {
-                    // The receiver is polled in place: a turn of the loop
+                    // The answer is polled in place: a turn of the loop
                     // that serves an event in between loses nothing.
                     waiting = None;
-                    let line = line.unwrap_or_else(|_| error_line("the daemon is shutting down"));
                     Some(numbered_reply(&line, number))
                 }
                 event = events.recv() => match event {
@@ -383,7 +390,7 @@ impl JsonInterface {
                             Handled::Waiting(reply) => {
                                 let socket = socket.clone();
                                 waiting.spawn(async move {
-                                    let line = numbered_reply(&answer(reply).await, number);
+                                    let line = numbered_reply(&reply.await, number);
                                     let _ = socket.send_to(line.as_bytes(), from).await;
                                 });
                             }

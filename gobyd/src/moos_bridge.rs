@@ -521,14 +521,14 @@ async fn reset(control: &mpsc::Sender<Control>) {
     }
 }
 
-/// Queues a message and reports a refusal.
+/// Queues a message; the reason the core refused it, if it did.
 async fn queue_message(publish: &mpsc::Sender<Publish>, message: DynamicMessage) -> Option<String> {
     let (reply, answer) = oneshot::channel();
     if publish.send(Publish { message, reply }).await.is_err() {
         return None;
     }
     match answer.await {
-        Ok(line) if line.contains("\"error\"") => Some(line),
+        Ok(Err(reason)) => Some(reason),
         _ => None,
     }
 }
@@ -543,9 +543,9 @@ async fn make_and_queue(
 ) {
     match settings.translator.create(name, latest) {
         Ok(message) => {
-            if let Some(line) = queue_message(publish, message).await {
-                tracing::warn!("MOOS translator: {name} not queued: {line}");
-                let reason = format!("{name} not queued: {line}");
+            if let Some(refused) = queue_message(publish, message).await {
+                tracing::warn!("MOOS translator: {name} not queued: {refused}");
+                let reason = format!("{name} not queued: {refused}");
                 notify(client, &settings.error_var(), &Value::String(reason));
             }
         }
@@ -593,8 +593,8 @@ async fn handle_mail(
             return;
         }
     };
-    if let Some(line) = queue_message(publish, message).await {
-        tracing::warn!("MOOS: {} not queued: {line}", mail.key);
+    if let Some(refused) = queue_message(publish, message).await {
+        tracing::warn!("MOOS: {} not queued: {refused}", mail.key);
     }
 }
 #[cfg(test)]

@@ -36,9 +36,12 @@ use super::crash_point::CrashPoint;
 use super::data_dir::{DataDir, DataDirError};
 use super::dedup::Identity;
 use super::door::Door;
-use super::event::{reception_summary, CoreEvent, DaemonEvent, Reception, SharedEvent};
+use super::event::{
+    reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
+    SharedEvent,
+};
 use super::inbox::{Inbox, Incoming};
-use super::json_protocol::{accepted_reply, error_line, message_json};
+use super::json_protocol::message_json;
 use super::json_server::{JsonInterface, Publish};
 use super::modem_event::ModemEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
@@ -168,7 +171,7 @@ pub struct Daemon {
     specific_requests: std::collections::VecDeque<DynamicMessage>,
     raw_log: Option<RawLog>,
     /// Replies to send once the journal holding their messages is synced.
-    pending_replies: Vec<(oneshot::Sender<String>, String)>,
+    pending_replies: Vec<(oneshot::Sender<PublishReply>, AcceptedMessage)>,
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
@@ -498,10 +501,10 @@ impl Daemon {
         }
         // Clients still waiting hear back once their messages are on disk.
         let sync = self.outbox.sync();
-        for (reply, line) in self.pending_replies.drain(..) {
+        for (reply, accepted) in self.pending_replies.drain(..) {
             let _ = reply.send(match &sync {
-                Ok(()) => line,
-                Err(e) => error_line(&format!("not saved to disk: {e}")),
+                Ok(()) => Ok(accepted),
+                Err(e) => Err(format!("not saved to disk: {e}")),
             });
         }
         tracing::info!(owed = self.outbox.owed(), "gobyd stopping");
@@ -521,7 +524,7 @@ impl Daemon {
             Ok(admitted) => admitted,
             Err(e) => {
                 tracing::info!("publish refused: {e}");
-                let _ = publish.reply.send(error_line(&e));
+                let _ = publish.reply.send(Err(e));
                 return;
             }
         };
@@ -539,16 +542,24 @@ impl Daemon {
                 }
                 self.pending_replies.push((
                     publish.reply,
-                    accepted_reply(&name, Some(id), &dropped, &admitted.changes),
+                    AcceptedMessage {
+                        name,
+                        id: Some(id),
+                        dropped,
+                        changes: admitted.changes,
+                    },
                 ))
             }
             Ok(Accepted::Delivered) => {
-                let _ = publish
-                    .reply
-                    .send(accepted_reply(&name, None, &[], &admitted.changes));
+                let _ = publish.reply.send(Ok(AcceptedMessage {
+                    name,
+                    id: None,
+                    dropped: Vec::new(),
+                    changes: admitted.changes,
+                }));
             }
             Err(e) => {
-                let _ = publish.reply.send(error_line(&e.to_string()));
+                let _ = publish.reply.send(Err(e.to_string()));
             }
         }
     }
@@ -566,7 +577,7 @@ impl Daemon {
             Ok(handle) => handle,
             Err(e) => {
                 for (reply, _) in replies {
-                    let _ = reply.send(error_line(&format!("not saved to disk: {e}")));
+                    let _ = reply.send(Err(format!("not saved to disk: {e}")));
                 }
                 return;
             }
@@ -581,10 +592,10 @@ impl Daemon {
             if let Some(reason) = &failure {
                 tracing::error!("journal sync failed: {reason}");
             }
-            for (reply, line) in replies {
+            for (reply, accepted) in replies {
                 let _ = reply.send(match &failure {
-                    None => line,
-                    Some(reason) => error_line(&format!("not saved to disk: {reason}")),
+                    None => Ok(accepted),
+                    Some(reason) => Err(format!("not saved to disk: {reason}")),
                 });
             }
         });

@@ -23,8 +23,8 @@ use queue::{QueueEvent, ReceivedMessage};
 use serde_json::{json, Value};
 
 use super::settings::Topics;
-use crate::event::{DaemonEvent, LinkSummary, Reception};
-use crate::json_protocol::message_json;
+use crate::event::{AcceptedMessage, DaemonEvent, LinkSummary, Reception};
+use crate::json_protocol::{accepted_value, message_json};
 use crate::modem_event::ModemEvent;
 
 /// One publication.
@@ -190,9 +190,10 @@ impl Formatter {
     }
 
     /// The notice that a message to send was queued (and is on disk):
-    /// the core's reply with the topic and the message as published.
-    pub fn accepted(&self, topic: &str, reply: &Value, published: &[u8]) -> Outgoing {
-        let mut payload = reply.clone();
+    /// the core's reply as the JSON interface has it, with the topic and
+    /// the message as published.
+    pub fn accepted(&self, topic: &str, accepted: &AcceptedMessage, published: &[u8]) -> Outgoing {
+        let mut payload = accepted_value(accepted);
         payload["topic"] = topic.into();
         payload["msg"] = serde_json::from_slice(published).unwrap_or(Value::Null);
         Outgoing::new(self.topics.node("accepted"), payload, false)
