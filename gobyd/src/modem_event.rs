@@ -63,7 +63,7 @@ pub enum ModemEvent {
         /// driver (its `unique_id`, and in `time` and `slot_seconds` the
         /// time left in the slot); `None`: the slot belongs to another
         /// node, or a driver-specific request takes it.
-        initiated: Option<ModemTransmission>,
+        initiated: Option<Box<ModemTransmission>>,
     },
     /// Auto-discovery changed the cycle.
     CycleUpdate {

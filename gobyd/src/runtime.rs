@@ -678,7 +678,7 @@ impl Daemon {
                 _ => None,
             };
             if let ModemEvent::SlotStart { initiated: i, .. } = &mut reported {
-                i.clone_from(&initiated);
+                *i = initiated.clone().map(Box::new);
             }
             self.report(reported);
             if let Some(request) = specific {

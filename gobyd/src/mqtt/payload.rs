@@ -393,10 +393,10 @@ mod tests {
         assert!(f.event(&DaemonEvent::Modem(theirs), 0).is_none());
         let ours = ModemEvent::SlotStart {
             slot: slot.clone(),
-            initiated: Some(ModemTransmission {
+            initiated: Some(Box::new(ModemTransmission {
                 slot_seconds: Some(4.5),
                 ..slot
-            }),
+            })),
         };
         let out = f.event(&DaemonEvent::Modem(ours), 1_000_000).unwrap();
         assert_eq!(out.topic, "fleet/2/mac");
