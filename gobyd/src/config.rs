@@ -2,6 +2,7 @@
 //! (`goby.apps.protobuf.GobydConfig`), with defaults that run on a machine
 //! with no modem.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
@@ -569,6 +570,51 @@ pub struct Definitions {
     pub loaded: Vec<String>,
 }
 
+/// Why a DCCL type cannot go through gobyd, if a field of it (or of a
+/// message it embeds) is coded with an adaptive arithmetic model
+/// (`adaptive`: whether each model is, by name): such a model advances
+/// with every encoding, and gobyd encodes a message more than once (the
+/// queue when it is published, the door's checks, the inbox and the frames
+/// re-encode it), so the sender's model would run ahead of the receiver's
+/// and the receiver would decode wrong values.
+fn adaptive_model_problem(
+    desc: &prost_reflect::MessageDescriptor,
+    adaptive: &HashMap<String, bool>,
+) -> Option<String> {
+    let mut seen = std::collections::HashSet::new();
+    let mut stack = vec![(desc.clone(), String::new())];
+    while let Some((message, prefix)) = stack.pop() {
+        if !seen.insert(message.full_name().to_string()) {
+            continue;
+        }
+        for field in message.fields() {
+            let path = format!("{prefix}{}", field.name());
+            if let Some(model) = dccl::options::field_option_extension(&field, "arithmetic")
+                .and_then(|o| {
+                    o.get_field_by_name("model")
+                        .and_then(|v| v.as_str().map(str::to_string))
+                })
+            {
+                if adaptive.get(&model).copied().unwrap_or(false) {
+                    return Some(format!(
+                        "{}: field {path} uses the adaptive arithmetic model \"{model}\" \
+                         (is_adaptive: true), which gobyd cannot carry: an adaptive model \
+                         advances with every encoding and gobyd encodes a message more than \
+                         once (queue, publish checks, inbox, frames), so the receiver's model \
+                         would fall out of step and decode wrong values; use a model without \
+                         is_adaptive",
+                        desc.full_name()
+                    ));
+                }
+            }
+            if let prost_reflect::Kind::Message(embedded) = field.kind() {
+                stack.push((embedded, format!("{path}.")));
+            }
+        }
+    }
+    None
+}
+
 /// Compiles and loads the configured `.proto` files (and the examples
 /// unless `load_examples` is false).
 pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError> {
@@ -580,6 +626,21 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             &passphrase,
             dccl_config.skip_crypto_for_id.iter().copied(),
         );
+    }
+    // Whether each arithmetic model is adaptive, by name (a later model of
+    // the same name replaces an earlier one, as on the codec).
+    let mut adaptive = HashMap::new();
+    for file in &dccl_config.arithmetic_model_file {
+        let problem = |e: &dyn std::fmt::Display| {
+            ConfigError::Invalid(format!("dccl.arithmetic_model_file {file}: {e}"))
+        };
+        let text = std::fs::read_to_string(file).map_err(|e| problem(&e))?;
+        codec
+            .load_arithmetic_models(&text)
+            .map_err(|e| problem(&e))?;
+        for model in dccl::codecs::arithmetic::parse_models(&text).map_err(|e| problem(&e))? {
+            adaptive.insert(model.name.clone(), model.is_adaptive());
+        }
     }
     let mut loaded = Vec::new();
     let pool = &protos::DESCRIPTOR_POOL;
@@ -631,6 +692,13 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
     }
     loaded.sort();
     loaded.dedup();
+    for name in &loaded {
+        if let Some(desc) = codec.descriptor(name) {
+            if let Some(problem) = adaptive_model_problem(&desc, &adaptive) {
+                return Err(ConfigError::Invalid(problem));
+            }
+        }
+    }
     if application_acks(config) {
         let id = modemdriver::micromodem::application_ack::DCCL_ID;
         if let Some(name) = loaded.iter().find(|n| codec.id_of(n).ok() == Some(id)) {

@@ -41,9 +41,14 @@
 //! Messages are in proto3 JSON with the field names of the `.proto` file.
 
 use dccl::Codec;
+use modemdriver::{RawDirection, TransmitOutcome};
 use prost_reflect::{DynamicMessage, ReflectMessage, SerializeOptions};
+use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::QueueEvent;
 use serde_json::{json, Value};
+
+use crate::event::{AcceptedMessage, DaemonEvent, PublishReply, Reception};
+use crate::modem_event::ModemEvent;
 
 /// Event kinds a client may subscribe to (received messages always reach
 /// every client).
@@ -170,19 +175,24 @@ pub fn message_json(message: &DynamicMessage) -> Value {
         .unwrap_or_else(|e| json!({ "unserializable": e.to_string() }))
 }
 
-/// The `accepted` reply (without its reply number).
-pub fn accepted_line(name: &str, id: Option<u64>) -> String {
-    accepted_reply(name, id, &[], &[])
+/// The reply to a publish (without its reply number): `accepted` or
+/// `error`.
+pub fn reply_line(reply: &PublishReply) -> String {
+    match reply {
+        Ok(accepted) => accepted_value(accepted).to_string(),
+        Err(reason) => error_line(reason),
+    }
 }
 
-/// The `accepted` reply with the messages its message pushed out of a full
-/// queue (journal id, message) and the values the codec changed.
-pub fn accepted_reply(
-    name: &str,
-    id: Option<u64>,
-    dropped: &[(Option<u64>, DynamicMessage)],
-    changes: &[dccl::ValueChange],
-) -> String {
+/// The `accepted` reply as a JSON object, with the messages its message
+/// pushed out of a full queue and the values the codec changed.
+pub fn accepted_value(accepted: &AcceptedMessage) -> Value {
+    let AcceptedMessage {
+        name,
+        id,
+        dropped,
+        changes,
+    } = accepted;
     let mut reply = match id {
         Some(id) => json!({ "accepted": name, "id": id }),
         None => json!({ "accepted": name, "delivered": true }),
@@ -201,7 +211,7 @@ pub fn accepted_reply(
             .map(|c| json!({ "field": c.field, "reason": c.reason }))
             .collect();
     }
-    reply.to_string()
+    reply
 }
 
 /// The `subscribed` reply: every topic the client now receives.
@@ -230,75 +240,145 @@ pub fn lost_line(count: u64) -> String {
     json!({ "event": "lost", "count": count }).to_string()
 }
 
-/// How a received message came: the reception that carried it, and
-/// whether it is handed over after a restart. Other events ignore it.
-#[derive(Debug, Clone, Default)]
-pub struct Reception {
-    /// Summary of the transmission it came in (`None`: not known, e.g. a
-    /// message looped back locally or recovered after a restart).
-    pub link: Option<serde_json::Value>,
-    /// Handed over after a restart.
-    pub recovered: bool,
+/// The topic an event belongs to (`None`: received messages, sent to
+/// every client).
+pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
+    match event {
+        DaemonEvent::Received { .. } => None,
+        DaemonEvent::Queue { event, .. } => match event {
+            QueueEvent::Received(_) => None,
+            QueueEvent::Acked { .. } => Some(Topic::Ack),
+            QueueEvent::Expired { .. } => Some(Topic::Expire),
+            QueueEvent::Dropped { .. } => Some(Topic::Drop),
+            QueueEvent::QueueSize { .. } => Some(Topic::QueueSize),
+            QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => Some(Topic::Sent),
+        },
+        DaemonEvent::Modem(event) => Some(match event {
+            ModemEvent::SlotStart { .. } | ModemEvent::CycleUpdate { .. } => Topic::Mac,
+            _ => Topic::Modem,
+        }),
+    }
 }
 
-/// The line for a queue event, with the topic it belongs to (`None`:
-/// received messages, sent to every client); `None` for events clients do
-/// not see.
+/// The line of an event (see [`event_topic`] for who receives it);
+/// `None` for events clients do not see. `queue_name` names a queue by
+/// its DCCL id.
 ///
-/// A received message's line carries `reception`: `"link"` (the summary of
-/// the transmission it came in, [`reception_summary`](crate::link_event::reception_summary),
-/// with the modem's link statistics when the driver gives them) and
+/// A received message's line carries its reception: `"link"` (the
+/// summary of the transmission it came in, [`crate::event::LinkSummary::json`], with
+/// the modem's link statistics when the driver gives them) and
 /// `"recovered": true` when it is handed over after a restart (it was
 /// received before; a client that may have seen it then can tell).
-pub fn event_line(
+pub fn event_line(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<String> {
+    let line = match event {
+        DaemonEvent::Received {
+            received,
+            reception,
+        } => received_line(received, reception),
+        DaemonEvent::Queue { event, entry } => queue_line(event, *entry, queue_name)?,
+        DaemonEvent::Modem(event) => modem_line(event),
+    };
+    Some(line.to_string())
+}
+
+fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Value {
+    let mut line = json!({
+        "event": "received",
+        "received": r.message.descriptor().full_name(),
+        "src": r.src,
+        "dest": r.dest,
+        "msg": message_json(&r.message),
+    });
+    if let Some(link) = &reception.link {
+        line["link"] = link.json();
+    }
+    if reception.recovered {
+        line["recovered"] = true.into();
+    }
+    line
+}
+
+fn queue_line(
     event: &QueueEvent,
     entry: Option<u64>,
-    reception: &Reception,
     queue_name: impl Fn(u32) -> String,
-) -> Option<(Option<Topic>, String)> {
+) -> Option<Value> {
     let name = |m: &DynamicMessage| m.descriptor().full_name().to_string();
-    let line = match event {
-        QueueEvent::Received(r) => {
-            let mut line = json!({
-                "event": "received",
-                "received": name(&r.message),
-                "src": r.src,
-                "dest": r.dest,
-                "msg": message_json(&r.message),
-            });
-            if let Some(link) = &reception.link {
-                line["link"] = link.clone();
-            }
-            if reception.recovered {
-                line["recovered"] = true.into();
-            }
-            (None, line)
-        }
+    Some(match event {
+        QueueEvent::Received(r) => received_line(r, &Reception::default()),
         QueueEvent::Acked {
             message, frame, by, ..
-        } => (
-            Some(Topic::Ack),
-            json!({ "event": "ack", "ack": name(message), "id": entry, "by": by, "frame": frame, "msg": message_json(message) }),
-        ),
-        QueueEvent::Expired { message, .. } => (
-            Some(Topic::Expire),
-            json!({ "event": "expire", "expire": name(message), "id": entry, "msg": message_json(message) }),
-        ),
-        QueueEvent::Dropped { message, .. } => (
-            Some(Topic::Drop),
-            json!({ "event": "drop", "drop": name(message), "id": entry, "msg": message_json(message) }),
-        ),
-        QueueEvent::QueueSize { dccl_id, size } => (
-            Some(Topic::QueueSize),
-            json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size }),
-        ),
-        QueueEvent::Sent { message, frame, .. } => (
-            Some(Topic::Sent),
-            json!({ "event": "sent", "sent": name(message), "frame": frame, "msg": message_json(message) }),
-        ),
+        } => {
+            json!({ "event": "ack", "ack": name(message), "id": entry, "by": by, "frame": frame, "msg": message_json(message) })
+        }
+        QueueEvent::Expired { message, .. } => {
+            json!({ "event": "expire", "expire": name(message), "id": entry, "msg": message_json(message) })
+        }
+        QueueEvent::Dropped { message, .. } => {
+            json!({ "event": "drop", "drop": name(message), "id": entry, "msg": message_json(message) })
+        }
+        QueueEvent::QueueSize { dccl_id, size } => {
+            json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size })
+        }
+        QueueEvent::Sent { message, frame, .. } => {
+            json!({ "event": "sent", "sent": name(message), "frame": frame, "msg": message_json(message) })
+        }
         QueueEvent::OnDemandRejected { .. } => return None,
-    };
-    Some((line.0, line.1.to_string()))
+    })
+}
+
+/// The line of a modem or medium access event (see
+/// [`crate::modem_event`]).
+fn modem_line(event: &ModemEvent) -> Value {
+    let t = |t: &ModemTransmission| message_json(&t.transcode_to_dynamic());
+    match event {
+        ModemEvent::Raw(raw) => json!({
+            "event": "raw",
+            "raw": match raw.direction {
+                RawDirection::Incoming => "in",
+                RawDirection::Outgoing => "out",
+            },
+            "line": ModemEvent::raw_text(raw),
+            "peer": raw.peer,
+        }),
+        ModemEvent::Received { transmission, .. } => {
+            json!({ "event": "modem_receive", "modem_receive": t(transmission) })
+        }
+        ModemEvent::Transmitted {
+            transmission,
+            outcome,
+        } => {
+            let (outcome, reason) = match outcome {
+                TransmitOutcome::Sent => ("sent", None),
+                TransmitOutcome::NothingToSend => ("nothing_to_send", None),
+                TransmitOutcome::Failed(reason) => ("failed", Some(reason.clone())),
+            };
+            json!({
+                "event": "modem_transmit",
+                "modem_transmit": t(transmission),
+                "outcome": outcome,
+                "reason": reason,
+            })
+        }
+        ModemEvent::SlotStart { slot, .. } => {
+            json!({ "event": "mac_slot_start", "mac_slot_start": t(slot) })
+        }
+        ModemEvent::CycleUpdate { modem_id, joined } => {
+            if *joined {
+                json!({ "event": "mac_cycle_update", "joined": modem_id })
+            } else {
+                json!({ "event": "mac_cycle_update", "left": modem_id })
+            }
+        }
+        ModemEvent::Status(status) => {
+            json!({ "event": "driver_status", "driver_status": format!("{status:?}") })
+        }
+        ModemEvent::Specific(message) => json!({
+            "event": "driver_specific",
+            "driver_specific": message.descriptor().full_name(),
+            "msg": message_json(message),
+        }),
+    }
 }
 
 #[cfg(test)]
@@ -387,11 +467,12 @@ mod tests {
                 size: 2,
             },
         ];
-        for event in &events {
-            let (_, line) = event_line(event, Some(9), &Reception::default(), |_| {
-                "goby.example.Command".into()
-            })
-            .unwrap();
+        for event in events {
+            let event = DaemonEvent::Queue {
+                event,
+                entry: Some(9),
+            };
+            let line = event_line(&event, |_| "goby.example.Command".into()).unwrap();
             let v: Value = serde_json::from_str(&line).unwrap();
             assert!(v["event"].is_string(), "{v}");
             for reply_key in ["reply", "error", "accepted"] {
@@ -400,5 +481,85 @@ mod tests {
         }
         let lost: Value = serde_json::from_str(&lost_line(4)).unwrap();
         assert_eq!(lost, json!({"event": "lost", "count": 4}));
+    }
+
+    #[test]
+    fn modem_lines_carry_their_kind_and_topic() {
+        use modemdriver::RawMessage;
+        let line = |e: ModemEvent| {
+            let e = DaemonEvent::Modem(e);
+            (event_topic(&e), event_line(&e, |_| String::new()).unwrap())
+        };
+        let (topic, raw) = line(ModemEvent::Raw(RawMessage {
+            direction: RawDirection::Incoming,
+            bytes: b"$CARXD,1,2\r\n".to_vec(),
+            peer: None,
+        }));
+        assert_eq!(topic, Some(Topic::Modem));
+        assert_eq!(
+            raw,
+            r#"{"event":"raw","line":"$CARXD,1,2","peer":null,"raw":"in"}"#
+        );
+        let (topic, slot) = line(ModemEvent::SlotStart {
+            slot: ModemTransmission {
+                src: Some(1),
+                dest: Some(-1),
+                ..Default::default()
+            },
+            initiated: None,
+        });
+        assert_eq!(topic, Some(Topic::Mac));
+        assert!(slot.starts_with(r#"{"event":"mac_slot_start","mac_slot_start":{"#));
+        assert!(slot.contains(r#""src":1"#), "{slot}");
+        let (_, failed) = line(ModemEvent::Transmitted {
+            transmission: ModemTransmission::default(),
+            outcome: TransmitOutcome::Failed("busy".into()),
+        });
+        assert!(failed.contains(r#""outcome":"failed","reason":"busy""#));
+    }
+
+    #[test]
+    fn received_lines_carry_their_reception() {
+        let message = protos::goby::example::Command::default().transcode_to_dynamic();
+        let received = queue::ReceivedMessage {
+            message,
+            dccl_id: 125,
+            src: 1,
+            dest: 2,
+            time: None,
+            bytes: Vec::new(),
+            identity: None,
+        };
+        let transmission = ModemTransmission {
+            src: Some(1),
+            rate: Some(2),
+            frame: vec![vec![1]],
+            ..Default::default()
+        };
+        let event = DaemonEvent::Received {
+            received: received.clone(),
+            reception: Reception {
+                link: Some(crate::event::reception_summary(&transmission, 1_000_000)),
+                recovered: false,
+            },
+        };
+        assert_eq!(event_topic(&event), None);
+        let v: Value =
+            serde_json::from_str(&event_line(&event, |_| String::new()).unwrap()).unwrap();
+        assert_eq!(v["event"], "received");
+        assert_eq!(v["link"]["rate"], 2);
+        assert_eq!(v["link"]["frames"], 1);
+        assert!(v.get("recovered").is_none(), "{v}");
+        let recovered = DaemonEvent::Received {
+            received,
+            reception: Reception {
+                link: None,
+                recovered: true,
+            },
+        };
+        let v: Value =
+            serde_json::from_str(&event_line(&recovered, |_| String::new()).unwrap()).unwrap();
+        assert!(v.get("link").is_none(), "{v}");
+        assert_eq!(v["recovered"], true);
     }
 }

@@ -4,8 +4,9 @@
 //!
 //! Connections parse their lines themselves and hand messages to publish to
 //! the daemon's core through a channel, with a one-shot channel for the
-//! reply line; events come back through a broadcast channel and each client
-//! keeps those it subscribed to. Every request line gets exactly one reply,
+//! reply line; the core's typed events come back through a broadcast
+//! channel, each client keeps those it subscribed to, and an event's line
+//! is rendered once, by the first client that sends it. Every request line gets exactly one reply,
 //! numbered (see [`json_protocol`](super::json_protocol)); a malformed line
 //! gets an `error` reply; the connection and the daemon stay up.
 //!
@@ -16,8 +17,10 @@
 //! silent for [`UDP_PEER_IDLE`].
 
 use std::collections::{HashMap, HashSet};
+use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
+use std::pin::Pin;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -28,41 +31,21 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
 
+use super::event::{PublishReply, SharedEvent};
 use super::json_protocol::{
-    error_line, lost_line, numbered_reply, parse_request, subscribed_line, Request, Topic,
+    error_line, event_line, event_topic, lost_line, numbered_reply, parse_request, reply_line,
+    subscribed_line, Request, Topic,
 };
 
-/// A message a client wants sent, with where to send the reply line.
+/// A message a client wants sent, with where to send the reply.
 #[derive(Debug)]
 pub struct Publish {
     /// The message.
     pub message: DynamicMessage,
-    /// Receives the `accepted` or `error` line.
-    pub reply: oneshot::Sender<String>,
+    /// Receives the core's answer (the JSON interface renders it as the
+    /// `accepted` or `error` line).
+    pub reply: oneshot::Sender<PublishReply>,
 }
-
-/// A queue, modem or medium access event as clients see it.
-#[derive(Debug)]
-pub struct ClientEvent {
-    /// Its topic (`None`: for every client).
-    pub topic: Option<Topic>,
-    /// Its JSON line.
-    pub line: String,
-    /// The event itself (for interfaces that format it otherwise).
-    pub event: DaemonEvent,
-}
-
-/// What a [`ClientEvent`] reports.
-#[derive(Debug)]
-pub enum DaemonEvent {
-    /// A queue event.
-    Queue(queue::QueueEvent),
-    /// A modem driver or medium access event.
-    Modem(crate::modem_event::ModemEvent),
-}
-
-/// A shared [`ClientEvent`].
-pub type EventLine = Arc<ClientEvent>;
 
 /// Longest request line accepted, bytes (without its newline).
 pub const MAX_LINE: usize = 1024 * 1024;
@@ -88,15 +71,26 @@ const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(10), Duratio
 enum Handled {
     /// The reply, at once.
     Reply(String),
-    /// The reply comes from the core.
-    Waiting(oneshot::Receiver<String>),
+    /// The reply line, once the core answers.
+    Waiting(Answer),
 }
 
-/// The reply line once the core answers.
-async fn answer(waiting: oneshot::Receiver<String>) -> String {
-    waiting
-        .await
-        .unwrap_or_else(|_| error_line("the daemon is shutting down"))
+/// A reply line still to come: the core's typed answer, rendered when it
+/// arrives.
+type Answer = Pin<Box<dyn Future<Output = String> + Send>>;
+
+/// The line of the core's answer when it comes: `render` for an answer,
+/// an error when the core stopped first.
+fn answer<T: Send + 'static>(
+    waiting: oneshot::Receiver<T>,
+    render: impl FnOnce(T) -> String + Send + 'static,
+) -> Answer {
+    Box::pin(async move {
+        match waiting.await {
+            Ok(reply) => render(reply),
+            Err(_) => error_line("the daemon is shutting down"),
+        }
+    })
 }
 
 /// What the next read of a [`LineReader`] found.
@@ -198,11 +192,26 @@ pub struct JsonInterface {
     pub publish: mpsc::Sender<Publish>,
     /// Where driver-specific requests go.
     pub control: mpsc::Sender<crate::control::Control>,
-    /// Where event lines come from.
-    pub events: broadcast::Sender<EventLine>,
+    /// Where the core's events come from.
+    pub events: broadcast::Sender<SharedEvent>,
+    /// Type names by DCCL id (for the queue size lines).
+    pub names: Arc<HashMap<u32, String>>,
 }
 
 impl JsonInterface {
+    /// An event's line, rendered by the first client that sends it and
+    /// shared with the others (`None`: clients do not see the event).
+    fn line<'a>(&self, event: &'a SharedEvent) -> Option<&'a str> {
+        event.json_line(|e| {
+            event_line(e, |id| {
+                self.names
+                    .get(&id)
+                    .cloned()
+                    .unwrap_or_else(|| format!("dccl id {id}"))
+            })
+        })
+    }
+
     /// Handles one request line: its reply now, or the channel it comes
     /// through.
     async fn handle_line(&self, line: &str, topics: &mut HashSet<Topic>) -> Handled {
@@ -215,11 +224,11 @@ impl JsonInterface {
                 Handled::Reply(subscribed_line(&all))
             }
             Ok(Request::Publish(message)) => {
-                let (reply, answer) = oneshot::channel();
+                let (reply, waiting) = oneshot::channel();
                 if self.publish.send(Publish { message, reply }).await.is_err() {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
-                Handled::Waiting(answer)
+                Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))
             }
             Ok(Request::DriverSpecific(message)) => {
                 let name = message.descriptor().full_name().to_string();
@@ -228,16 +237,10 @@ impl JsonInterface {
                 if self.control.send(control).await.is_err() {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
-                let (line_tx, line_rx) = oneshot::channel();
-                tokio::spawn(async move {
-                    let line = match outcome.await {
-                        Ok(Ok(())) => serde_json::json!({ "driver_specific": name }).to_string(),
-                        Ok(Err(e)) => error_line(&e),
-                        Err(_) => error_line("the daemon is shutting down"),
-                    };
-                    let _ = line_tx.send(line);
-                });
-                Handled::Waiting(line_rx)
+                Handled::Waiting(answer(outcome, move |outcome| match outcome {
+                    Ok(()) => serde_json::json!({ "driver_specific": name }).to_string(),
+                    Err(e) => error_line(&e),
+                }))
             }
         }
     }
@@ -286,7 +289,7 @@ impl JsonInterface {
         // Number of the last request line.
         let mut number = 0u64;
         // The reply being waited for (requests are answered in order).
-        let mut waiting: Option<oneshot::Receiver<String>> = None;
+        let mut waiting: Option<Answer> = None;
         loop {
             let out = tokio::select! {
                 read = lines.next(), if waiting.is_none() => match read {
@@ -317,14 +320,14 @@ impl JsonInterface {
                     }
                 },
                 line = async { waiting.as_mut().expect("guarded").await }, if waiting.is_some() => {
-                    // The receiver is polled in place: a turn of the loop
+                    // The answer is polled in place: a turn of the loop
                     // that serves an event in between loses nothing.
                     waiting = None;
-                    let line = line.unwrap_or_else(|_| error_line("the daemon is shutting down"));
                     Some(numbered_reply(&line, number))
                 }
                 event = events.recv() => match event {
-                    Ok(event) => wanted(&event, &topics).then(|| event.line.clone()),
+                    Ok(event) if wanted(&event, &topics) => self.line(&event).map(str::to_string),
+                    Ok(_) => None,
                     Err(broadcast::error::RecvError::Lagged(n)) if topics.is_empty() => {
                         tracing::info!(%peer, "JSON client read too slowly: {n} events not sent");
                         None
@@ -387,7 +390,7 @@ impl JsonInterface {
                             Handled::Waiting(reply) => {
                                 let socket = socket.clone();
                                 waiting.spawn(async move {
-                                    let line = numbered_reply(&answer(reply).await, number);
+                                    let line = numbered_reply(&reply.await, number);
                                     let _ = socket.send_to(line.as_bytes(), from).await;
                                 });
                             }
@@ -398,8 +401,11 @@ impl JsonInterface {
                 event = events.recv() => match event {
                     Ok(event) => {
                         for (addr, peer) in &peers.peers {
-                            if wanted(&event, &peer.topics) {
-                                let _ = socket.send_to(event.line.as_bytes(), addr).await;
+                            if !wanted(&event, &peer.topics) {
+                                continue;
+                            }
+                            if let Some(line) = self.line(&event) {
+                                let _ = socket.send_to(line.as_bytes(), addr).await;
                             }
                         }
                     }
@@ -468,8 +474,8 @@ fn out_of_descriptors(e: &io::Error) -> bool {
     matches!(e.raw_os_error(), Some(EMFILE | ENFILE))
 }
 
-fn wanted(event: &EventLine, topics: &HashSet<Topic>) -> bool {
-    match event.topic {
+fn wanted(event: &SharedEvent, topics: &HashSet<Topic>) -> bool {
+    match event_topic(&event.event) {
         None => true,
         Some(topic) => topics.contains(&topic),
     }

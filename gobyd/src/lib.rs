@@ -22,9 +22,10 @@
 //! the link delivers before it is handed over or acknowledged, [`dedup`] is
 //! the receiver's duplicate filter, [`crash_point`] lets restart tests kill
 //! the daemon at chosen moments, [`json_protocol`] and
-//! [`json_server`] serve JSON clients, [`moos_bridge`] joins a MOOS
-//! community, [`mqtt`] bridges to an MQTT broker (with [`link_event`] the
-//! link's own events), [`mission_file`] reads the configuration from a MOOS mission
+//! [`json_server`] serve JSON clients, [`event`] is the one stream of
+//! typed events out of the core (with [`modem_event`] the driver's and
+//! medium access control's), [`moos_bridge`] joins a MOOS
+//! community, [`mqtt`] bridges to an MQTT broker, [`mission_file`] reads the configuration from a MOOS mission
 //! file, [`translator`] turns MOOS variables into DCCL messages and back
 //! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
 //! came from the modem, and [`command`] is the `gobyd` command line.
@@ -38,10 +39,10 @@ pub mod crash_point;
 pub mod data_dir;
 pub mod dedup;
 pub mod door;
+pub mod event;
 pub mod inbox;
 pub mod json_protocol;
 pub mod json_server;
-pub mod link_event;
 pub mod mission_file;
 pub mod modem_event;
 pub mod moos_bridge;

@@ -26,15 +26,15 @@
 //!   auto-discovery, a node joined or left the cycle.
 //!
 //! Transmissions are `goby.acomms.protobuf.ModemTransmission` in proto3
-//! JSON with the `.proto` field names.
+//! JSON with the `.proto` field names. The core sends the typed events;
+//! the JSON interface renders these lines
+//! ([`crate::json_protocol::event_line`]), the MOOS and MQTT bridges
+//! their own forms.
 
 use amac::MacEvent;
-use modemdriver::{DriverEvent, DriverStatus, RawDirection, RawMessage, TransmitOutcome};
-use prost_reflect::{DynamicMessage, ReflectMessage};
+use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};
+use prost_reflect::DynamicMessage;
 use protos::goby::acomms::protobuf::ModemTransmission;
-use serde_json::json;
-
-use crate::json_protocol::{message_json, Topic};
 
 /// A modem driver or medium access event.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,7 +42,12 @@ pub enum ModemEvent {
     /// A raw line or datagram read from or written to the device.
     Raw(RawMessage),
     /// A transmission heard by the modem.
-    Received(ModemTransmission),
+    Received {
+        /// The transmission (frames included).
+        transmission: ModemTransmission,
+        /// When it was received, microseconds since the UNIX epoch.
+        time: i64,
+    },
     /// A transmission this node initiated, as sent or attempted.
     Transmitted {
         /// The transmission (frames included).
@@ -51,7 +56,15 @@ pub enum ModemEvent {
         outcome: TransmitOutcome,
     },
     /// A slot of the medium access control started.
-    SlotStart(ModemTransmission),
+    SlotStart {
+        /// The slot as the medium access control has it.
+        slot: ModemTransmission,
+        /// The transmission this node initiates in it, as handed to the
+        /// driver (its `unique_id`, and in `time` and `slot_seconds` the
+        /// time left in the slot); `None`: the slot belongs to another
+        /// node, or a driver-specific request takes it.
+        initiated: Option<Box<ModemTransmission>>,
+    },
     /// Auto-discovery changed the cycle.
     CycleUpdate {
         /// The node's modem id.
@@ -66,11 +79,15 @@ pub enum ModemEvent {
 }
 
 impl ModemEvent {
-    /// The event a driver event is reported as (`None`: data requests).
-    pub fn of_driver(event: &DriverEvent) -> Option<Self> {
+    /// The event a driver event is reported as (`None`: data requests);
+    /// `now`: microseconds since the UNIX epoch.
+    pub fn of_driver(event: &DriverEvent, now: i64) -> Option<Self> {
         Some(match event {
             DriverEvent::Raw(raw) => ModemEvent::Raw(raw.clone()),
-            DriverEvent::Received(t) => ModemEvent::Received(t.clone()),
+            DriverEvent::Received(t) => ModemEvent::Received {
+                transmission: t.clone(),
+                time: now,
+            },
             DriverEvent::TransmitResult(r) => ModemEvent::Transmitted {
                 transmission: r.transmission.clone(),
                 outcome: r.outcome.clone(),
@@ -81,10 +98,14 @@ impl ModemEvent {
         })
     }
 
-    /// The event a medium access event is reported as.
+    /// The event a medium access event is reported as (a slot without
+    /// the transmission initiated in it).
     pub fn of_mac(event: &MacEvent) -> Self {
         match event {
-            MacEvent::Slot(slot) => ModemEvent::SlotStart(slot.transmission.clone()),
+            MacEvent::Slot(slot) => ModemEvent::SlotStart {
+                slot: slot.transmission.clone(),
+                initiated: None,
+            },
             MacEvent::Discovered { modem_id, .. } => ModemEvent::CycleUpdate {
                 modem_id: *modem_id,
                 joined: true,
@@ -103,109 +124,5 @@ impl ModemEvent {
             Ok(line) => line.trim_end_matches(['\r', '\n']).to_string(),
             Err(_) => hex::encode(&raw.bytes),
         }
-    }
-
-    /// The event's topic and JSON line.
-    pub fn line(&self) -> (Topic, String) {
-        let t = |t: &ModemTransmission| message_json(&t.transcode_to_dynamic());
-        let (topic, line) = match self {
-            ModemEvent::Raw(raw) => (
-                Topic::Modem,
-                json!({
-                    "event": "raw",
-                    "raw": match raw.direction {
-                        RawDirection::Incoming => "in",
-                        RawDirection::Outgoing => "out",
-                    },
-                    "line": Self::raw_text(raw),
-                    "peer": raw.peer,
-                }),
-            ),
-            ModemEvent::Received(m) => (
-                Topic::Modem,
-                json!({ "event": "modem_receive", "modem_receive": t(m) }),
-            ),
-            ModemEvent::Transmitted {
-                transmission,
-                outcome,
-            } => {
-                let (outcome, reason) = match outcome {
-                    TransmitOutcome::Sent => ("sent", None),
-                    TransmitOutcome::NothingToSend => ("nothing_to_send", None),
-                    TransmitOutcome::Failed(reason) => ("failed", Some(reason.clone())),
-                };
-                (
-                    Topic::Modem,
-                    json!({
-                        "event": "modem_transmit",
-                        "modem_transmit": t(transmission),
-                        "outcome": outcome,
-                        "reason": reason,
-                    }),
-                )
-            }
-            ModemEvent::SlotStart(m) => (
-                Topic::Mac,
-                json!({ "event": "mac_slot_start", "mac_slot_start": t(m) }),
-            ),
-            ModemEvent::CycleUpdate { modem_id, joined } => (
-                Topic::Mac,
-                if *joined {
-                    json!({ "event": "mac_cycle_update", "joined": modem_id })
-                } else {
-                    json!({ "event": "mac_cycle_update", "left": modem_id })
-                },
-            ),
-            ModemEvent::Status(status) => (
-                Topic::Modem,
-                json!({ "event": "driver_status", "driver_status": format!("{status:?}") }),
-            ),
-            ModemEvent::Specific(message) => (
-                Topic::Modem,
-                json!({
-                    "event": "driver_specific",
-                    "driver_specific": message.descriptor().full_name(),
-                    "msg": message_json(message),
-                }),
-            ),
-        };
-        (topic, line.to_string())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn lines_carry_their_kind_and_topic() {
-        let raw = ModemEvent::Raw(RawMessage {
-            direction: RawDirection::Incoming,
-            bytes: b"$CARXD,1,2\r\n".to_vec(),
-            peer: None,
-        });
-        let (topic, line) = raw.line();
-        assert_eq!(topic, Topic::Modem);
-        assert_eq!(
-            line,
-            r#"{"event":"raw","line":"$CARXD,1,2","peer":null,"raw":"in"}"#
-        );
-        let slot = ModemEvent::SlotStart(ModemTransmission {
-            src: Some(1),
-            dest: Some(-1),
-            ..Default::default()
-        });
-        let (topic, line) = slot.line();
-        assert_eq!(topic, Topic::Mac);
-        assert!(line.starts_with(r#"{"event":"mac_slot_start","mac_slot_start":{"#));
-        assert!(line.contains(r#""src":1"#), "{line}");
-        let failed = ModemEvent::Transmitted {
-            transmission: ModemTransmission::default(),
-            outcome: TransmitOutcome::Failed("busy".into()),
-        };
-        assert!(failed
-            .line()
-            .1
-            .contains(r#""outcome":"failed","reason":"busy""#));
     }
 }

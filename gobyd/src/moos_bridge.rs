@@ -36,10 +36,11 @@ use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{modem_transmission, ModemTransmission, QueueSize};
 use protos::goby::apps::protobuf::gobyd_config::{MoosInterface, MoosVariables};
 use protos::goby::apps::protobuf::GobydConfig;
-use queue::QueueEvent;
+use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, oneshot};
 
-use super::json_server::{DaemonEvent, EventLine, Publish};
+use super::event::{DaemonEvent, SharedEvent};
+use super::json_server::Publish;
 use crate::control::{parse_flush, Control};
 use crate::modem_event::ModemEvent;
 use crate::translator::{self, TranslateError, Translator};
@@ -149,7 +150,30 @@ pub fn format_value(message: &DynamicMessage) -> String {
     )
 }
 
-/// The variables and values an event is written to.
+/// The variables and values a received message is written to
+/// (`QUEUE_RECEIVE`, its translator entry's variables or the plain
+/// interface's `receive_var`).
+fn received_publications(settings: &BridgeSettings, r: &ReceivedMessage) -> Vec<(String, Value)> {
+    let mut out = Vec::new();
+    if let Some(var) = settings.var(|v| v.queue_receive()) {
+        out.push((var, Value::String(format_value(&r.message))));
+    }
+    let name = r.message.descriptor().full_name().to_string();
+    if settings.translator.has_entry(&name) {
+        match settings.translator.publish(&r.message) {
+            Ok(values) => out.extend(values),
+            Err(e) => out.push(translation_error(settings, &e)),
+        }
+    } else if settings.plain_free(settings.moos.receive_var()) {
+        out.push((
+            settings.moos.receive_var().to_string(),
+            Value::String(format_value(&r.message)),
+        ));
+    }
+    out
+}
+
+/// The variables and values a queue event is written to.
 fn publications(settings: &BridgeSettings, event: &QueueEvent) -> Vec<(String, Value)> {
     let mut out: Vec<(String, Value)> = Vec::new();
     let mut text = |var: Option<String>, value: String| {
@@ -160,21 +184,7 @@ fn publications(settings: &BridgeSettings, event: &QueueEvent) -> Vec<(String, V
     let plain = |name: &str| settings.plain_free(name).then(|| name.to_string());
     let moos = &settings.moos;
     match event {
-        QueueEvent::Received(r) => {
-            text(
-                settings.var(|v| v.queue_receive()),
-                format_value(&r.message),
-            );
-            let name = r.message.descriptor().full_name().to_string();
-            if settings.translator.has_entry(&name) {
-                match settings.translator.publish(&r.message) {
-                    Ok(values) => out.extend(values),
-                    Err(e) => out.push(translation_error(settings, &e)),
-                }
-            } else {
-                text(plain(moos.receive_var()), format_value(&r.message));
-            }
-        }
+        QueueEvent::Received(r) => return received_publications(settings, r),
         QueueEvent::Sent { message, .. } => {
             text(settings.var(|v| v.queue_transmit()), format_value(message));
         }
@@ -253,11 +263,15 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
             );
             text(plain, line);
         }
-        ModemEvent::Received(t) => text(settings.var(|v| v.driver_receive()), transmission(t)),
+        ModemEvent::Received {
+            transmission: t, ..
+        } => text(settings.var(|v| v.driver_receive()), transmission(t)),
         ModemEvent::Transmitted {
             transmission: t, ..
         } => text(settings.var(|v| v.driver_transmit()), transmission(t)),
-        ModemEvent::SlotStart(t) => text(settings.var(|v| v.mac_slot_start()), transmission(t)),
+        ModemEvent::SlotStart { slot, .. } => {
+            text(settings.var(|v| v.mac_slot_start()), transmission(slot))
+        }
         // pAcommsHandler reads MAC_CYCLE_UPDATE (it does not write it) and
         // has no variable for the driver's status: these stay in the log
         // and on the JSON interface.
@@ -361,7 +375,7 @@ pub async fn run(
     codec: Arc<Codec>,
     publish: mpsc::Sender<Publish>,
     control: mpsc::Sender<Control>,
-    mut events: broadcast::Receiver<EventLine>,
+    mut events: broadcast::Receiver<SharedEvent>,
 ) {
     let Some((client, mut mail)) = connect(&settings).await else {
         return;
@@ -422,7 +436,10 @@ pub async fn run(
             event = events.recv() => match event {
                 Ok(event) => {
                     let values = match &event.event {
-                        DaemonEvent::Queue(q) => publications(&settings, q),
+                        DaemonEvent::Received { received, .. } => {
+                            received_publications(&settings, received)
+                        }
+                        DaemonEvent::Queue { event, .. } => publications(&settings, event),
                         DaemonEvent::Modem(m) => modem_publications(&settings, m),
                     };
                     for (var, value) in values {
@@ -504,14 +521,14 @@ async fn reset(control: &mpsc::Sender<Control>) {
     }
 }
 
-/// Queues a message and reports a refusal.
+/// Queues a message; the reason the core refused it, if it did.
 async fn queue_message(publish: &mpsc::Sender<Publish>, message: DynamicMessage) -> Option<String> {
     let (reply, answer) = oneshot::channel();
     if publish.send(Publish { message, reply }).await.is_err() {
         return None;
     }
     match answer.await {
-        Ok(line) if line.contains("\"error\"") => Some(line),
+        Ok(Err(reason)) => Some(reason),
         _ => None,
     }
 }
@@ -526,9 +543,9 @@ async fn make_and_queue(
 ) {
     match settings.translator.create(name, latest) {
         Ok(message) => {
-            if let Some(line) = queue_message(publish, message).await {
-                tracing::warn!("MOOS translator: {name} not queued: {line}");
-                let reason = format!("{name} not queued: {line}");
+            if let Some(refused) = queue_message(publish, message).await {
+                tracing::warn!("MOOS translator: {name} not queued: {refused}");
+                let reason = format!("{name} not queued: {refused}");
                 notify(client, &settings.error_var(), &Value::String(reason));
             }
         }
@@ -576,8 +593,8 @@ async fn handle_mail(
             return;
         }
     };
-    if let Some(line) = queue_message(publish, message).await {
-        tracing::warn!("MOOS: {} not queued: {line}", mail.key);
+    if let Some(refused) = queue_message(publish, message).await {
+        tracing::warn!("MOOS: {} not queued: {refused}", mail.key);
     }
 }
 #[cfg(test)]
@@ -611,7 +628,13 @@ mod tests {
             }],
             ..Default::default()
         };
-        let published = modem_publications(&with_vars, &ModemEvent::Received(transmission));
+        let published = modem_publications(
+            &with_vars,
+            &ModemEvent::Received {
+                transmission,
+                time: 0,
+            },
+        );
         let (var, Value::String(text)) = &published[0] else {
             panic!("{published:?}");
         };

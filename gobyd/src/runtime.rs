@@ -36,10 +36,13 @@ use super::crash_point::CrashPoint;
 use super::data_dir::{DataDir, DataDirError};
 use super::dedup::Identity;
 use super::door::Door;
+use super::event::{
+    reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
+    SharedEvent,
+};
 use super::inbox::{Inbox, Incoming};
-use super::json_protocol::{accepted_reply, error_line, event_line, message_json, Reception};
-use super::json_server::{ClientEvent, DaemonEvent, EventLine, JsonInterface, Publish};
-use super::link_event::{reception_summary, LinkEvent};
+use super::json_protocol::message_json;
+use super::json_server::{JsonInterface, Publish};
 use super::modem_event::ModemEvent;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
@@ -153,8 +156,8 @@ pub struct Daemon {
     driver: Driver,
     /// Type names by DCCL id.
     names: HashMap<u32, String>,
-    events: broadcast::Sender<EventLine>,
-    link: broadcast::Sender<LinkEvent>,
+    /// The core's events, to every interface.
+    events: broadcast::Sender<SharedEvent>,
     publish_rx: mpsc::Receiver<Publish>,
     publish_tx: mpsc::Sender<Publish>,
     control_rx: mpsc::Receiver<Control>,
@@ -168,7 +171,7 @@ pub struct Daemon {
     specific_requests: std::collections::VecDeque<DynamicMessage>,
     raw_log: Option<RawLog>,
     /// Replies to send once the journal holding their messages is synced.
-    pending_replies: Vec<(oneshot::Sender<String>, String)>,
+    pending_replies: Vec<(oneshot::Sender<PublishReply>, AcceptedMessage)>,
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
@@ -333,11 +336,17 @@ impl Daemon {
         let (events, _) = broadcast::channel(1024);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
+        let names: HashMap<u32, String> = defs
+            .loaded
+            .iter()
+            .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
+            .collect();
         let interface = JsonInterface {
             codec: codec.clone(),
             publish: publish_tx.clone(),
             control: control_tx.clone(),
             events: events.clone(),
+            names: Arc::new(names.clone()),
         };
         let mut tasks = JoinSet::new();
         let json = config.json.clone().unwrap_or_default();
@@ -363,7 +372,6 @@ impl Daemon {
             json_udp = socket.local_addr().ok();
             tasks.spawn(interface.serve_udp(socket));
         }
-        let (link, _) = broadcast::channel(1024);
         if let Some(mqtt) = config.mqtt.clone() {
             let bridge = super::mqtt::Bridge::new(
                 mqtt,
@@ -372,7 +380,7 @@ impl Daemon {
                 publish_tx.clone(),
             )?;
             if let Some(bridge) = bridge {
-                tasks.spawn(bridge.run(events.subscribe(), link.subscribe()));
+                tasks.spawn(bridge.run(events.subscribe()));
             }
         }
         if config.moos.is_some() {
@@ -393,11 +401,6 @@ impl Daemon {
             types = defs.loaded.len(),
             "gobyd started"
         );
-        let names = defs
-            .loaded
-            .iter()
-            .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
-            .collect();
         Ok(Self {
             outbox,
             door,
@@ -405,7 +408,6 @@ impl Daemon {
             driver,
             names,
             events,
-            link,
             publish_rx,
             publish_tx,
             control_rx,
@@ -457,15 +459,11 @@ impl Daemon {
         self.control_tx.clone()
     }
 
-    /// A receiver of the event lines sent to clients.
-    pub fn subscribe(&self) -> broadcast::Receiver<EventLine> {
+    /// A receiver of the core's events: queue events, received messages
+    /// (each with its reception), and the driver's and medium access
+    /// control's events. Every interface reads these.
+    pub fn subscribe(&self) -> broadcast::Receiver<SharedEvent> {
         self.events.subscribe()
-    }
-
-    /// A receiver of the link's own events (driver state, MAC slots,
-    /// receptions).
-    pub fn link_events(&self) -> broadcast::Receiver<LinkEvent> {
-        self.link.subscribe()
     }
 
     /// Runs until `shutdown` completes, then stops the driver and closes the
@@ -503,10 +501,10 @@ impl Daemon {
         }
         // Clients still waiting hear back once their messages are on disk.
         let sync = self.outbox.sync();
-        for (reply, line) in self.pending_replies.drain(..) {
+        for (reply, accepted) in self.pending_replies.drain(..) {
             let _ = reply.send(match &sync {
-                Ok(()) => line,
-                Err(e) => error_line(&format!("not saved to disk: {e}")),
+                Ok(()) => Ok(accepted),
+                Err(e) => Err(format!("not saved to disk: {e}")),
             });
         }
         tracing::info!(owed = self.outbox.owed(), "gobyd stopping");
@@ -526,7 +524,7 @@ impl Daemon {
             Ok(admitted) => admitted,
             Err(e) => {
                 tracing::info!("publish refused: {e}");
-                let _ = publish.reply.send(error_line(&e));
+                let _ = publish.reply.send(Err(e));
                 return;
             }
         };
@@ -544,16 +542,24 @@ impl Daemon {
                 }
                 self.pending_replies.push((
                     publish.reply,
-                    accepted_reply(&name, Some(id), &dropped, &admitted.changes),
+                    AcceptedMessage {
+                        name,
+                        id: Some(id),
+                        dropped,
+                        changes: admitted.changes,
+                    },
                 ))
             }
             Ok(Accepted::Delivered) => {
-                let _ = publish
-                    .reply
-                    .send(accepted_reply(&name, None, &[], &admitted.changes));
+                let _ = publish.reply.send(Ok(AcceptedMessage {
+                    name,
+                    id: None,
+                    dropped: Vec::new(),
+                    changes: admitted.changes,
+                }));
             }
             Err(e) => {
-                let _ = publish.reply.send(error_line(&e.to_string()));
+                let _ = publish.reply.send(Err(e.to_string()));
             }
         }
     }
@@ -571,7 +577,7 @@ impl Daemon {
             Ok(handle) => handle,
             Err(e) => {
                 for (reply, _) in replies {
-                    let _ = reply.send(error_line(&format!("not saved to disk: {e}")));
+                    let _ = reply.send(Err(format!("not saved to disk: {e}")));
                 }
                 return;
             }
@@ -586,20 +592,19 @@ impl Daemon {
             if let Some(reason) = &failure {
                 tracing::error!("journal sync failed: {reason}");
             }
-            for (reply, line) in replies {
+            for (reply, accepted) in replies {
                 let _ = reply.send(match &failure {
-                    None => line,
-                    Some(reason) => error_line(&format!("not saved to disk: {reason}")),
+                    None => Ok(accepted),
+                    Some(reason) => Err(format!("not saved to disk: {reason}")),
                 });
             }
         });
     }
 
     fn driver_event(&mut self, event: DriverEvent) {
-        if let Some(reported) = ModemEvent::of_driver(&event) {
+        if let Some(reported) = ModemEvent::of_driver(&event, SystemClock.now()) {
             self.report(reported);
         }
-        self.link_event(&event);
         match event {
             DriverEvent::DataRequest(request) => {
                 let mut filled = request.template().clone();
@@ -640,63 +645,58 @@ impl Daemon {
         }
     }
 
-    /// Tells embedded interfaces about the link (nothing waits for them).
-    fn link_event(&self, event: &DriverEvent) {
-        let link = match event {
-            DriverEvent::Status(status) => LinkEvent::Driver(Arc::new(status.clone())),
-            DriverEvent::Received(transmission) => LinkEvent::Received {
-                transmission: Arc::new(transmission.clone()),
-                time: SystemClock.now(),
-            },
-            _ => return,
-        };
-        let _ = self.link.send(link);
-    }
-
     /// Starts the slots due. Each transmission initiated gets a `unique_id`
     /// (the acks that answer it name it) and, in `time` and `slot_seconds`,
     /// the time left in its slot: the driver drops it rather than run it
     /// after its slot (e.g. when the modem was away).
     fn mac_slots(&mut self) {
         for event in self.mac.poll(SystemClock.now()) {
-            self.report(ModemEvent::of_mac(&event));
+            let mut reported = ModemEvent::of_mac(&event);
             let amac::MacEvent::Slot(slot) = &event else {
+                self.report(reported);
                 continue;
             };
-            if slot.initiate().is_none() {
-                let _ = self.link.send(LinkEvent::Slot(None));
+            // A driver-specific request takes this node's slot in place of
+            // data.
+            let specific = slot
+                .initiate()
+                .and_then(|_| self.specific_requests.pop_front());
+            let initiated = match (slot.initiate(), &specific) {
+                (Some(transmission), None) => {
+                    let mut transmission = transmission.clone();
+                    self.next_transmission = self.next_transmission.wrapping_add(1);
+                    transmission.unique_id = Some(self.next_transmission);
+                    let opened = transmission
+                        .time
+                        .and_then(|t| i64::try_from(t).ok())
+                        .unwrap_or(slot.position.start);
+                    transmission.time = u64::try_from(opened).ok();
+                    transmission.slot_seconds =
+                        Some((slot.position.end - opened).max(0) as f64 / 1e6);
+                    Some(transmission)
+                }
+                _ => None,
+            };
+            if let ModemEvent::SlotStart { initiated: i, .. } = &mut reported {
+                *i = initiated.clone().map(Box::new);
             }
-            if slot.initiate().is_some() {
-                if let Some(request) = self.specific_requests.pop_front() {
-                    tracing::info!(
-                        slot = slot.position.index,
-                        "this node's slot carries a driver-specific request ({})",
-                        request.descriptor().full_name()
-                    );
-                    if let Err(e) = self.driver.initiate_specific(&request) {
-                        tracing::error!("cannot start a driver-specific request: {e}");
-                    }
-                    continue;
+            self.report(reported);
+            if let Some(request) = specific {
+                tracing::info!(
+                    slot = slot.position.index,
+                    "this node's slot carries a driver-specific request ({})",
+                    request.descriptor().full_name()
+                );
+                if let Err(e) = self.driver.initiate_specific(&request) {
+                    tracing::error!("cannot start a driver-specific request: {e}");
                 }
             }
-            if let Some(transmission) = slot.initiate() {
-                let mut transmission = transmission.clone();
-                self.next_transmission = self.next_transmission.wrapping_add(1);
-                transmission.unique_id = Some(self.next_transmission);
-                let opened = transmission
-                    .time
-                    .and_then(|t| i64::try_from(t).ok())
-                    .unwrap_or(slot.position.start);
-                transmission.time = u64::try_from(opened).ok();
-                transmission.slot_seconds = Some((slot.position.end - opened).max(0) as f64 / 1e6);
+            if let Some(transmission) = initiated {
                 tracing::debug!(
                     unique_id = self.next_transmission,
                     slot = slot.position.index,
                     "initiating a transmission"
                 );
-                let _ = self
-                    .link
-                    .send(LinkEvent::Slot(Some(Arc::new(transmission.clone()))));
                 if let Err(e) = self.driver.initiate_transmission(transmission) {
                     tracing::error!("cannot initiate a transmission: {e}");
                 }
@@ -801,14 +801,11 @@ impl Daemon {
         Ok(())
     }
 
-    /// Sends a modem or medium access event to the clients.
+    /// Sends a modem or medium access event to the interfaces.
     fn report(&self, event: ModemEvent) {
-        let (topic, line) = event.line();
-        let _ = self.events.send(Arc::new(ClientEvent {
-            topic: Some(topic),
-            line,
-            event: DaemonEvent::Modem(event),
-        }));
+        let _ = self
+            .events
+            .send(Arc::new(CoreEvent::new(DaemonEvent::Modem(event))));
     }
 
     /// Logs the queue events and sends them to the clients; returns the
@@ -1038,8 +1035,8 @@ impl Daemon {
         CrashPoint::HandedOver.reached();
     }
 
-    /// Hands a queue event over: its event line to the clients connected
-    /// now and to the bridges (MQTT, MOOS), then its line in the mission
+    /// Hands a queue event over: the event to the clients connected now
+    /// and to the bridges (MQTT, MOOS), then its line in the mission
     /// log (the inbox's mark follows that write at once). `reception`: for
     /// a received message, the transmission it came in and whether it is
     /// handed over after a restart.
@@ -1051,20 +1048,14 @@ impl Daemon {
             .raw_log
             .as_ref()
             .and_then(|_| log_record(&event, reception));
-        let names = &self.names;
-        let name_of = |id: u32| {
-            names
-                .get(&id)
-                .cloned()
-                .unwrap_or_else(|| format!("dccl id {id}"))
+        let event = match event {
+            QueueEvent::Received(received) => DaemonEvent::Received {
+                received,
+                reception: reception.clone(),
+            },
+            event => DaemonEvent::Queue { event, entry },
         };
-        if let Some((topic, line)) = event_line(&event, entry, reception, name_of) {
-            let _ = self.events.send(Arc::new(ClientEvent {
-                topic,
-                line,
-                event: DaemonEvent::Queue(event),
-            }));
-        }
+        let _ = self.events.send(Arc::new(CoreEvent::new(event)));
         if let (Some(log), Some((direction, name, value, extra))) = (&mut self.raw_log, record) {
             if let Err(e) = log.message(now, direction, &name, value, &extra) {
                 tracing::error!("raw log: {e}");
@@ -1104,7 +1095,7 @@ fn log_record(event: &QueueEvent, reception: &Reception) -> Option<LogRecord> {
                 extra.push(("recovered", true.into()));
             }
             if let Some(link) = &reception.link {
-                extra.push(("link", link.clone()));
+                extra.push(("link", link.json()));
             }
             Some((
                 "in",

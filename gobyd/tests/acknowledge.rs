@@ -12,14 +12,14 @@ mod support;
 
 use std::time::Duration;
 
-use gobyd::json_server::DaemonEvent;
+use gobyd::event::DaemonEvent;
 use gobyd::runtime::Daemon;
 use modemdriver::ModemTransmission;
 use prost::Message;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::example::Command;
-use queue::{QueueEvent, TrailerCodec, WireIdentity};
+use queue::{TrailerCodec, WireIdentity};
 use support::daemon::{free_udp_port, scratch};
 use tokio::net::UdpSocket;
 
@@ -156,7 +156,7 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     run.await.unwrap().unwrap();
     let mut handed = 0;
     while let Ok(e) = events.try_recv() {
-        if let DaemonEvent::Queue(QueueEvent::Received(r)) = &e.event {
+        if let DaemonEvent::Received { received: r, .. } = &e.event {
             assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
             handed += 1;
         }

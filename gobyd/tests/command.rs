@@ -347,3 +347,82 @@ fn check_refuses_options_nested_too_deep_without_crashing() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A type coded with an arithmetic model, the models' file and a
+/// configuration loading both; `adaptive`: whether the model is.
+fn arithmetic_config(dir: &std::path::Path, adaptive: bool) -> PathBuf {
+    let proto = dir.join("counts.proto");
+    std::fs::write(
+        &proto,
+        r#"syntax = "proto2";
+import "dccl/option_extensions.proto";
+import "dccl/arithmetic/protobuf/arithmetic_extensions.proto";
+package arith;
+message Inner {
+  repeated int32 d = 1 [(dccl.field) = { codec: "dccl.arithmetic" max_repeat: 6 [arithmetic] { model: "counts" } }];
+}
+message Counts {
+  option (dccl.msg) = { id: 41 max_bytes: 64 codec_version: 4 };
+  required bool flag = 1;
+  optional Inner inner = 2;
+}
+"#,
+    )
+    .unwrap();
+    let models = dir.join("models.txt");
+    std::fs::write(
+        &models,
+        format!(
+            "name: \"counts\" value_bound: 0 frequency: 1 value_bound: 1 frequency: 1 value_bound: 2 frequency: 1 value_bound: 3 eof_frequency: 1 out_of_range_frequency: 1{}\n",
+            if adaptive { " is_adaptive: true" } else { "" }
+        ),
+    )
+    .unwrap();
+    let config = dir.join("arith.pb.txt");
+    std::fs::write(
+        &config,
+        format!(
+            "modem_id: 1\ndata_dir: \"{}\"\njson {{ tcp_bind: \"\" }}\ndccl {{ load_examples: false proto_file: \"{}\" arithmetic_model_file: \"{}\" }}\n",
+            dir.join("data").display(),
+            proto.display(),
+            models.display()
+        ),
+    )
+    .unwrap();
+    config
+}
+
+#[test]
+fn adaptive_arithmetic_models_are_refused_naming_message_field_and_model() {
+    let dir = scratch("gobyd-adaptive");
+    let config = arithmetic_config(&dir, false);
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    assert!(stdout_text(&out).contains("arith.Counts"));
+
+    let config = arithmetic_config(&dir, true);
+    let expected = [
+        "arith.Counts",
+        "field inner.d",
+        "adaptive arithmetic model \"counts\"",
+        "encodes a message more than once",
+    ];
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr_text(&out));
+    let err = stderr_text(&out);
+    for part in expected {
+        assert!(err.contains(part), "{part} missing from {err}");
+    }
+    // The daemon does not start with it either.
+    let out = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .args(["--config", config.to_str().unwrap()])
+        .timeout(std::time::Duration::from_secs(20))
+        .output()
+        .expect("gobyd runs");
+    assert!(!out.status.success());
+    let err = stderr_text(&out);
+    for part in expected {
+        assert!(err.contains(part), "{part} missing from {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use gobyd::json_server::{DaemonEvent, EventLine};
+use gobyd::event::{DaemonEvent, SharedEvent};
 use gobyd::modem_event::ModemEvent;
 use gobyd::{config, runtime::Daemon};
 use modemdriver::DriverStatus;
@@ -134,13 +134,15 @@ async fn until(
 }
 
 /// Counts the driver's `Ready` reports on the event broadcast.
-fn readies(events: &mut broadcast::Receiver<EventLine>) -> usize {
+fn readies(events: &mut broadcast::Receiver<SharedEvent>) -> usize {
     let mut n = 0;
     loop {
         match events.try_recv() {
             Ok(e) => {
                 if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = &e.event {
-                    assert!(e.line.contains(r#""event":"driver_status""#), "{}", e.line);
+                    let line = gobyd::json_protocol::event_line(&e.event, |_| String::new())
+                        .expect("a line");
+                    assert!(line.contains(r#""event":"driver_status""#), "{line}");
                     n += 1;
                 }
             }

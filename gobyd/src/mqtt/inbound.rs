@@ -44,7 +44,7 @@ enum Waiting {
     /// Refused before reaching the core.
     Refused(MqttPublish, String),
     /// With the core.
-    Core(MqttPublish, oneshot::Receiver<String>),
+    Core(MqttPublish, oneshot::Receiver<crate::event::PublishReply>),
 }
 
 /// Runs the two tasks of inbound messages until `incoming` closes:
@@ -87,14 +87,15 @@ pub async fn run(
                     (publish, notice)
                 }
                 Waiting::Core(publish, answer) => {
-                    let Ok(line) = answer.await else {
+                    let Ok(reply) = answer.await else {
                         // The core stopped before saving it: no ack.
                         break;
                     };
-                    let reply: Value = serde_json::from_str(&line).unwrap_or(Value::Null);
-                    let notice = match reply.get("error").and_then(Value::as_str) {
-                        Some(reason) => formatter.error(&publish.topic, reason),
-                        None => formatter.accepted(&publish.topic, &reply, &publish.payload),
+                    let notice = match reply {
+                        Err(reason) => formatter.error(&publish.topic, &reason),
+                        Ok(accepted) => {
+                            formatter.accepted(&publish.topic, &accepted, &publish.payload)
+                        }
                     };
                     (publish, notice)
                 }

@@ -29,8 +29,8 @@ use rumqttc::{AsyncClient, Event, EventLoop, Packet};
 use tokio::sync::{broadcast, mpsc};
 
 use crate::config::ConfigError;
-use crate::json_server::{EventLine, Publish};
-use crate::link_event::LinkEvent;
+use crate::event::SharedEvent;
+use crate::json_server::Publish;
 use backlog::Backlog;
 use payload::{BridgeStatus, Formatter, Outgoing};
 use retained::Retained;
@@ -72,12 +72,10 @@ impl Bridge {
     }
 
     /// Bridges until the task is dropped: publishes the core's `events`
-    /// and `link` events, and hands messages from `tx` topics to the core.
-    pub async fn run(
-        self,
-        events: broadcast::Receiver<EventLine>,
-        link: broadcast::Receiver<LinkEvent>,
-    ) {
+    /// (queue events, received messages with their receptions, the
+    /// driver's status, this node's slots, every reception), and hands
+    /// messages from `tx` topics to the core.
+    pub async fn run(self, events: broadcast::Receiver<SharedEvent>) {
         let Bridge {
             settings,
             modem_id,
@@ -119,7 +117,7 @@ impl Bridge {
             lost_at: None,
             incoming: incoming_tx,
         };
-        state.run(eventloop, events, link, notice_rx).await;
+        state.run(eventloop, events, notice_rx).await;
         inbound.abort();
     }
 }
@@ -146,8 +144,7 @@ impl Loop {
     async fn run(
         &mut self,
         mut eventloop: EventLoop,
-        mut events: broadcast::Receiver<EventLine>,
-        mut link: broadcast::Receiver<LinkEvent>,
+        mut events: broadcast::Receiver<SharedEvent>,
         mut notices: mpsc::UnboundedReceiver<Outgoing>,
     ) {
         let mut backoff = self.settings.backoff.0;
@@ -161,24 +158,10 @@ impl Loop {
         loop {
             self.flush();
             tokio::select! {
-                biased;
-                // Link events first: a reception's statistics precede the
-                // messages it carried.
-                got = link.recv() => match got {
-                    Ok(event) => {
-                        if let Some(out) = self.formatter.link_event(&event, SystemClock.now()) {
-                            self.push(out);
-                        }
-                    }
-                    Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,
-                    Err(broadcast::error::RecvError::Closed) => break,
-                },
                 got = events.recv() => match got {
                     Ok(event) => {
-                        if let crate::json_server::DaemonEvent::Queue(queue_event) = &event.event {
-                            if let Some(out) = self.formatter.queue_event(queue_event, SystemClock.now()) {
-                                self.push(out);
-                            }
+                        if let Some(out) = self.formatter.event(&event.event, SystemClock.now()) {
+                            self.push(out);
                         }
                     }
                     Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,

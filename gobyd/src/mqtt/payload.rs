@@ -2,7 +2,7 @@
 //!
 //! | topic under `PREFIX/NODE/` | retained | payload |
 //! |---|---|---|
-//! | `rx/TYPE` | no | `{"type", "src", "dest", "time", "msg", "link"}` |
+//! | `rx/TYPE` | no | `{"type", "src", "dest", "time", "msg", "link"}`; `link`: the reception the message came in (none for a message recovered after a restart or looped back) |
 //! | `accepted` | no | `{"accepted": TYPE, "id", "topic", "msg"}` |
 //! | `ack/TYPE` | no | `{"type", "by", "frame", "time", "msg"}` |
 //! | `expire/TYPE`, `drop/TYPE` | no | `{"type", "time", "msg"}` |
@@ -19,12 +19,13 @@
 use std::collections::HashMap;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use queue::QueueEvent;
+use queue::{QueueEvent, ReceivedMessage};
 use serde_json::{json, Value};
 
 use super::settings::Topics;
-use crate::json_protocol::message_json;
-use crate::link_event::{reception_summary, LinkEvent};
+use crate::event::{AcceptedMessage, DaemonEvent, LinkSummary, Reception};
+use crate::json_protocol::{accepted_value, message_json};
+use crate::modem_event::ModemEvent;
 
 /// One publication.
 #[derive(Debug, Clone, PartialEq)]
@@ -59,46 +60,56 @@ pub fn offline(topics: &Topics) -> Vec<u8> {
         .into_bytes()
 }
 
-/// Turns events into publications; keeps the last reception from each
-/// source to attach to the messages it carried.
+/// Turns the core's events into publications.
 #[derive(Debug)]
 pub struct Formatter {
     topics: Topics,
     names: HashMap<u32, String>,
-    last_link: HashMap<i32, Value>,
 }
 
 impl Formatter {
     /// A formatter for `topics`; `names` are the type names by DCCL id.
     pub fn new(topics: Topics, names: HashMap<u32, String>) -> Self {
-        Formatter {
-            topics,
-            names,
-            last_link: HashMap::new(),
-        }
+        Formatter { topics, names }
     }
 
     fn name(message: &DynamicMessage) -> String {
         message.descriptor().full_name().to_string()
     }
 
-    /// The publication of a queue event, if it has one; `now` in
+    /// The publication of an event of the core, if it has one; `now` in
     /// microseconds since the UNIX epoch.
-    pub fn queue_event(&self, event: &QueueEvent, now: i64) -> Option<Outgoing> {
+    pub fn event(&self, event: &DaemonEvent, now: i64) -> Option<Outgoing> {
+        match event {
+            DaemonEvent::Received {
+                received,
+                reception,
+            } => Some(self.received(received, reception, now)),
+            DaemonEvent::Queue { event, .. } => self.queue_event(event, now),
+            DaemonEvent::Modem(event) => self.modem_event(event, now),
+        }
+    }
+
+    /// The publication of a received message (`rx/TYPE`), with the
+    /// summary of the reception it came in, if it has one.
+    fn received(&self, r: &ReceivedMessage, reception: &Reception, now: i64) -> Outgoing {
+        let name = Self::name(&r.message);
+        let mut payload = json!({
+            "type": name, "src": r.src, "dest": r.dest, "time": seconds(now),
+            "msg": message_json(&r.message),
+        });
+        if let Some(link) = &reception.link {
+            payload["link"] = link.json();
+        }
+        Outgoing::new(self.topics.node(&format!("rx/{name}")), payload, false)
+    }
+
+    /// The publication of a queue event, if it has one.
+    fn queue_event(&self, event: &QueueEvent, now: i64) -> Option<Outgoing> {
         let time = seconds(now);
         let t = &self.topics;
         Some(match event {
-            QueueEvent::Received(r) => {
-                let name = Self::name(&r.message);
-                let mut payload = json!({
-                    "type": name, "src": r.src, "dest": r.dest, "time": time,
-                    "msg": message_json(&r.message),
-                });
-                if let Some(link) = self.last_link.get(&r.src) {
-                    payload["link"] = link.clone();
-                }
-                Outgoing::new(t.node(&format!("rx/{name}")), payload, false)
-            }
+            QueueEvent::Received(r) => self.received(r, &Reception::default(), now),
             QueueEvent::Acked {
                 message, frame, by, ..
             } => {
@@ -132,17 +143,21 @@ impl Formatter {
         })
     }
 
-    /// The publication of a link event, if it has one.
-    pub fn link_event(&mut self, event: &LinkEvent, now: i64) -> Option<Outgoing> {
+    /// The publication of a driver or medium access event, if it has
+    /// one: the driver's status (`driver`), a slot this node transmits in
+    /// (`mac`), a reception (`link`, the last one retained).
+    fn modem_event(&self, event: &ModemEvent, now: i64) -> Option<Outgoing> {
         let t = &self.topics;
         Some(match event {
-            LinkEvent::Driver(status) => Outgoing::new(
+            ModemEvent::Status(status) => Outgoing::new(
                 t.node("driver"),
                 json!({ "status": format!("{status:?}"), "time": seconds(now) }),
                 true,
             ),
-            LinkEvent::Slot(None) => return None,
-            LinkEvent::Slot(Some(slot)) => Outgoing::new(
+            ModemEvent::SlotStart {
+                initiated: Some(slot),
+                ..
+            } => Outgoing::new(
                 t.node("mac"),
                 json!({
                     "src": slot.src(), "dest": slot.dest(), "rate": slot.rate(),
@@ -150,11 +165,18 @@ impl Formatter {
                 }),
                 false,
             ),
-            LinkEvent::Received { transmission, time } => {
-                let summary = reception_summary(transmission, *time);
-                self.last_link.insert(transmission.src(), summary.clone());
-                Outgoing::new(t.node("link"), summary, true)
+            ModemEvent::Received { transmission, time } => Outgoing::new(
+                t.node("link"),
+                LinkSummary::of(transmission, *time).json(),
+                true,
+            ),
+            ModemEvent::SlotStart {
+                initiated: None, ..
             }
+            | ModemEvent::Raw(_)
+            | ModemEvent::Transmitted { .. }
+            | ModemEvent::CycleUpdate { .. }
+            | ModemEvent::Specific(_) => return None,
         })
     }
 
@@ -168,9 +190,10 @@ impl Formatter {
     }
 
     /// The notice that a message to send was queued (and is on disk):
-    /// the core's reply with the topic and the message as published.
-    pub fn accepted(&self, topic: &str, reply: &Value, published: &[u8]) -> Outgoing {
-        let mut payload = reply.clone();
+    /// the core's reply as the JSON interface has it, with the topic and
+    /// the message as published.
+    pub fn accepted(&self, topic: &str, accepted: &AcceptedMessage, published: &[u8]) -> Outgoing {
+        let mut payload = accepted_value(accepted);
         payload["topic"] = topic.into();
         payload["msg"] = serde_json::from_slice(published).unwrap_or(Value::Null);
         Outgoing::new(self.topics.node("accepted"), payload, false)
@@ -217,56 +240,171 @@ mod tests {
     use super::*;
     use protos::goby::acomms::protobuf::ModemTransmission;
 
-    #[test]
-    fn received_messages_carry_their_link() {
+    fn formatter() -> Formatter {
         let topics = Topics {
             prefix: "fleet".into(),
             node: "2".into(),
         };
+        Formatter::new(topics, HashMap::new())
+    }
+
+    fn command(src: i32) -> ReceivedMessage {
         let mut codec = dccl::Codec::new();
         codec.load_type::<protos::goby::example::Command>().unwrap();
         let desc = codec.descriptor("goby.example.Command").unwrap();
         let message =
             DynamicMessage::deserialize(desc, json!({"destination": 2, "action": "GOTO"})).unwrap();
-        let mut f = Formatter::new(topics, HashMap::new());
+        ReceivedMessage {
+            message,
+            dccl_id: 2,
+            src,
+            dest: 2,
+            time: None,
+            bytes: Vec::new(),
+            identity: None,
+        }
+    }
+
+    /// A reception from `src` at `rate`, as the driver reports it.
+    fn heard(src: i32, rate: i32, time: i64) -> ModemEvent {
+        ModemEvent::Received {
+            transmission: ModemTransmission {
+                src: Some(src),
+                dest: Some(2),
+                rate: Some(rate),
+                frame: vec![vec![1, 2, 3]],
+                ..Default::default()
+            },
+            time,
+        }
+    }
+
+    fn payload(out: &Outgoing) -> Value {
+        serde_json::from_slice(&out.payload).unwrap()
+    }
+
+    #[test]
+    fn received_messages_carry_their_link() {
+        let f = formatter();
+        let event = heard(1, 3, 2_000_000);
         let link = f
-            .link_event(
-                &LinkEvent::Received {
-                    transmission: std::sync::Arc::new(ModemTransmission {
-                        src: Some(1),
-                        dest: Some(2),
-                        rate: Some(3),
-                        frame: vec![vec![1, 2, 3]],
-                        ..Default::default()
-                    }),
-                    time: 2_000_000,
-                },
-                2_000_000,
-            )
+            .event(&DaemonEvent::Modem(event.clone()), 2_000_000)
             .unwrap();
         assert_eq!(link.topic, "fleet/2/link");
         assert!(link.retain);
+        let ModemEvent::Received { transmission, time } = &event else {
+            unreachable!()
+        };
         let rx = f
-            .queue_event(
-                &QueueEvent::Received(queue::ReceivedMessage {
-                    message,
-                    dccl_id: 2,
-                    src: 1,
-                    dest: 2,
-                    time: None,
-                    bytes: Vec::new(),
-                    identity: None,
-                }),
+            .event(
+                &DaemonEvent::Received {
+                    received: command(1),
+                    reception: Reception {
+                        link: Some(crate::event::reception_summary(transmission, *time)),
+                        recovered: false,
+                    },
+                },
                 3_000_000,
             )
             .unwrap();
         assert_eq!(rx.topic, "fleet/2/rx/goby.example.Command");
-        let v: Value = serde_json::from_slice(&rx.payload).unwrap();
+        let v = payload(&rx);
         assert_eq!(v["src"], 1);
         assert_eq!(v["time"], 3.0);
         assert_eq!(v["msg"]["action"], "GOTO");
         assert_eq!(v["link"]["rate"], 3);
         assert_eq!(v["link"]["frames"], 1);
         assert!(v["link"].get("frame").is_none());
+        assert_eq!(v["link"], payload(&link));
+    }
+
+    #[test]
+    fn a_message_carries_its_own_reception_not_the_last_from_its_source() {
+        let f = formatter();
+        // The message came in a reception from node 1 at rate 1 ...
+        let first = heard(1, 1, 1_000_000);
+        let ModemEvent::Received { transmission, time } = &first else {
+            unreachable!()
+        };
+        let its_own = crate::event::reception_summary(transmission, *time);
+        let link = f
+            .event(&DaemonEvent::Modem(first.clone()), 1_000_000)
+            .unwrap();
+        // ... and another reception from node 1 (rate 5; e.g. a relay of
+        // node 1's, or the next transmission while this message waited for
+        // a taker) came in before it was handed over.
+        let second = f
+            .event(&DaemonEvent::Modem(heard(1, 5, 2_000_000)), 2_000_000)
+            .unwrap();
+        assert_eq!(payload(&second)["rate"], 5);
+        let rx = f
+            .event(
+                &DaemonEvent::Received {
+                    received: command(1),
+                    reception: Reception {
+                        link: Some(its_own),
+                        recovered: false,
+                    },
+                },
+                3_000_000,
+            )
+            .unwrap();
+        let v = payload(&rx);
+        assert_eq!(v["link"]["rate"], 1, "{v}");
+        assert_eq!(v["link"]["time"], 1.0, "{v}");
+        assert_eq!(v["link"], payload(&link));
+    }
+
+    #[test]
+    fn a_recovered_message_has_no_link() {
+        let f = formatter();
+        // A reception from the same source after the restart ...
+        f.event(&DaemonEvent::Modem(heard(1, 3, 1_000_000)), 1_000_000)
+            .unwrap();
+        // ... does not lend its statistics to a message received before.
+        let rx = f
+            .event(
+                &DaemonEvent::Received {
+                    received: command(1),
+                    reception: Reception {
+                        link: None,
+                        recovered: true,
+                    },
+                },
+                2_000_000,
+            )
+            .unwrap();
+        let v = payload(&rx);
+        assert!(v.get("link").is_none_or(Value::is_null), "{v}");
+        assert_eq!(v["src"], 1);
+    }
+
+    #[test]
+    fn only_this_nodes_slots_are_published() {
+        let f = formatter();
+        let slot = ModemTransmission {
+            src: Some(2),
+            dest: Some(-1),
+            rate: Some(1),
+            ..Default::default()
+        };
+        let theirs = ModemEvent::SlotStart {
+            slot: slot.clone(),
+            initiated: None,
+        };
+        assert!(f.event(&DaemonEvent::Modem(theirs), 0).is_none());
+        let ours = ModemEvent::SlotStart {
+            slot: slot.clone(),
+            initiated: Some(Box::new(ModemTransmission {
+                slot_seconds: Some(4.5),
+                ..slot
+            })),
+        };
+        let out = f.event(&DaemonEvent::Modem(ours), 1_000_000).unwrap();
+        assert_eq!(out.topic, "fleet/2/mac");
+        assert!(!out.retain);
+        let v = payload(&out);
+        assert_eq!(v["src"], 2);
+        assert_eq!(v["slot_seconds"], 4.5);
     }
 }
