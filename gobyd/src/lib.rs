@@ -38,6 +38,7 @@ pub mod control;
 pub mod crash_point;
 pub mod data_dir;
 pub mod dedup;
+pub mod delivery;
 pub mod door;
 pub mod event;
 pub mod inbox;

@@ -17,9 +17,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use amac::MacManager;
-use modemdriver::{
-    Acknowledgement, Driver, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome,
-};
+use modemdriver::{Driver, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome};
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
     driver_config, modem_transmission::TransmissionType, DriverType,
@@ -34,13 +32,12 @@ use super::config::{self, ConfigError};
 use super::control::Control;
 use super::crash_point::CrashPoint;
 use super::data_dir::{DataDir, DataDirError};
-use super::dedup::Identity;
+use super::delivery::{self, Delivery, FrameFaults};
 use super::door::Door;
 use super::event::{
     reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
     SharedEvent,
 };
-use super::inbox::{Inbox, Incoming};
 use super::json_protocol::message_json;
 use super::json_server::{JsonInterface, Publish};
 use super::modem_event::ModemEvent;
@@ -138,10 +135,7 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
     Ok(defs.loaded)
 }
 
-/// Longest a message received before a restart, and not handed over then,
-/// waits at the next start for a JSON client to connect before it is
-/// handed over to whoever is there (the bridges, the mission log).
-pub const RECOVERY_WAIT: Duration = Duration::from_secs(30);
+pub use super::delivery::RECOVERY_WAIT;
 
 /// Driver-specific requests (pings, interrogations) that may wait for this
 /// node's slot at once; more are refused.
@@ -177,27 +171,14 @@ pub struct Daemon {
     json_udp: Option<SocketAddr>,
     data_dir: DataDir,
     codec: Arc<dccl::Codec>,
-    /// Messages received from the link: recorded before they are handed
-    /// over or acknowledged, and remembered by the duplicate filter.
-    inbox: Inbox,
+    /// The receive path: messages received from the link, recorded
+    /// before they are handed over or acknowledged, held for a taker.
+    delivery: Delivery,
     /// `unique_id` of the next transmission initiated.
     next_transmission: u32,
-    /// Received messages recorded in the inbox (and acknowledged) while
-    /// nobody was there to take them: handed over, in order, once a JSON
-    /// client connects, or after [`RECOVERY_WAIT`].
-    held: Vec<Held>,
     /// Something always takes received messages: a bridge (MOOS, MQTT) or
     /// the UDP JSON interface.
     always_taken: bool,
-}
-
-/// A received message waiting for a taker.
-struct Held {
-    /// Its inbox record (`None`: it could not be recorded).
-    seq: Option<u64>,
-    received: queue::ReceivedMessage,
-    reception: Reception,
-    since: tokio::time::Instant,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -300,18 +281,11 @@ impl Daemon {
                 "duplicate_window_seconds {window_seconds} is not valid"
             ))));
         }
-        let inbox = {
+        let delivery = {
             let path = data_dir.path().join("inbox.log");
             let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-            let (mut inbox, replay) = Inbox::open(&path, (window_seconds * 1e6) as u64, now)
+            let (delivery, replay) = Delivery::open(&path, (window_seconds * 1e6) as u64, now)
                 .map_err(io_error(format!("cannot open {}", path.display())))?;
-            // The duplicate filter's file of earlier versions.
-            let old = data_dir.path().join("delivered.log");
-            match inbox.take_over_delivered_log(&old, now) {
-                Ok(0) => {}
-                Ok(n) => tracing::info!("{n} identities taken over from {}", old.display()),
-                Err(e) => tracing::warn!("{}: {e}", old.display()),
-            }
             if replay != Default::default() {
                 tracing::info!(
                     remembered = replay.remembered,
@@ -321,7 +295,7 @@ impl Daemon {
                     path.display()
                 );
             }
-            inbox
+            delivery
         };
 
         let log = config.log.clone().unwrap_or_default();
@@ -422,11 +396,10 @@ impl Daemon {
             json_udp,
             data_dir,
             codec,
-            inbox,
+            delivery,
             // Numbers of a previous run (whose acks may still come) are
             // not reused soon: start from the clock.
             next_transmission: (SystemClock.now() / 1000) as u32,
-            held: Vec::new(),
             always_taken: config.moos.is_some()
                 || config.mqtt.is_some()
                 || !json.udp_bind().is_empty(),
@@ -472,7 +445,9 @@ impl Daemon {
         tokio::pin!(shutdown);
         // Messages received before a restart and not handed over wait for a
         // taker, as do those received while nobody is there.
-        self.hold_recovered();
+        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        self.delivery
+            .hold_recovered(&self.codec, now, tokio::time::Instant::now());
         let mut expire = tokio::time::interval(Duration::from_secs(1));
         loop {
             let mac_wait = self
@@ -492,7 +467,7 @@ impl Daemon {
                     }
                 },
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
-                () = sleep_until_opt(self.held.first().map(|h| h.since + RECOVERY_WAIT)) => {}
+                () = sleep_until_opt(self.delivery.next_due()) => {}
                 _ = expire.tick() => self.outbox.expire(),
             }
             self.release_held();
@@ -828,18 +803,10 @@ impl Daemon {
         dropped
     }
 
-    /// A transmission from the link: its messages are recorded in the inbox
-    /// (synced) unless the duplicate filter knows them, then handed over,
-    /// then the frames are acknowledged (by drivers that ack in software
-    /// with `deferred_ack`).
-    ///
-    /// A frame is acknowledged when every message in it is recorded or a
-    /// repeat. Not acknowledged: an empty frame (lost on the link); (the sender retries until the message
-    /// expires there, and is told then): a frame that does not decode, all
-    /// frames when a message cannot be placed in a frame (an error the
-    /// queue does not tie to one), and all frames when the inbox cannot be
-    /// written (the messages are handed over all the same: nothing received
-    /// is lost, but a retry may then reach the clients twice).
+    /// A transmission from the link: its messages go down the receive path
+    /// ([`delivery`]: recorded, held, handed over), then its frames are
+    /// acknowledged (by drivers that ack in software with `deferred_ack`)
+    /// as [`delivery::acknowledgement`] says.
     fn receive(&mut self, transmission: ModemTransmission) {
         if transmission.r#type() == TransmissionType::Data && !transmission.frame.is_empty() {
             CrashPoint::Received.reached();
@@ -849,16 +816,10 @@ impl Daemon {
             link: Some(reception_summary(&transmission, SystemClock.now())),
             recovered: false,
         };
-        let mut bad_frames = std::collections::BTreeSet::new();
-        let mut unplaced = false;
+        let mut faults = FrameFaults::default();
         for e in self.outbox.receive(&transmission) {
             tracing::warn!(src = transmission.src(), "received: {e}");
-            match e {
-                queue::QueueError::Frame { frame, .. } => {
-                    bad_frames.insert(frame);
-                }
-                _ => unplaced = true,
-            }
+            faults.note(&e);
         }
         let events = match self.outbox.events_with_entries() {
             Ok(events) => events,
@@ -867,123 +828,21 @@ impl Daemon {
                 Vec::new()
             }
         };
-        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-        let mut recorded = Vec::new();
-        let mut unrecorded = false;
+        let mut messages = Vec::new();
         for (event, entry) in events {
-            let QueueEvent::Received(received) = event else {
-                self.hand_over(event, entry, &Reception::default());
-                continue;
-            };
-            // The bytes it was decoded from: never encoded again.
-            let identity = Identity::of(
-                received.src,
-                received.dccl_id,
-                received.identity,
-                &received.bytes,
-            );
-            let resent = received.identity.is_some_and(|w| w.resent);
-            if resent && self.inbox.is_duplicate(&identity, now) {
-                tracing::info!(
-                    src = received.src,
-                    dccl_id = received.dccl_id,
-                    number = received.identity.map(|w| w.number),
-                    "a retransmission of a message already received: suppressed"
-                );
-                continue;
-            }
-            let incoming = Incoming {
-                identity,
-                dest: received.dest,
-                role_time: received.time,
-                bytes: received.bytes.clone(),
-            };
-            match self.inbox.record(incoming, now) {
-                Ok(seq) => recorded.push((Some(seq), received)),
-                Err(e) => {
-                    tracing::error!("{}: {e}", self.inbox.path().display());
-                    unrecorded = true;
-                    recorded.push((None, received));
-                }
+            match event {
+                QueueEvent::Received(received) => messages.push(received),
+                event => self.hand_over(event, entry, &Reception::default()),
             }
         }
-        if !recorded.is_empty() {
-            if let Err(e) = self.inbox.sync() {
-                tracing::error!("{}: {e}", self.inbox.path().display());
-                unrecorded = true;
-            }
-            CrashPoint::Recorded.reached();
-        }
-        let since = tokio::time::Instant::now();
-        for (seq, received) in recorded {
-            self.held.push(Held {
-                seq,
-                received,
-                reception: reception.clone(),
-                since,
-            });
-        }
-        self.release_held();
-        if transmission.r#type() == TransmissionType::Data
-            && transmission.ack_requested()
-            && !unplaced
-            && !unrecorded
-        {
-            // An empty frame is one the link lost (e.g. a bad CRC): never
-            // acknowledged, or its sender would take its messages for
-            // delivered.
-            let frames: Vec<usize> = (0..transmission.frame.len())
-                .filter(|&i| !bad_frames.contains(&i) && !transmission.frame[i].is_empty())
-                .collect();
-            if !frames.is_empty() {
-                let ack = Acknowledgement {
-                    received: transmission,
-                    frames,
-                };
-                if let Err(e) = self.driver.acknowledge(ack) {
-                    tracing::error!("cannot acknowledge: {e}");
-                }
-            }
-        }
-    }
-
-    /// Holds, for a taker, the messages a previous run recorded in the
-    /// inbox and did not hand over (it was killed in between); they are
-    /// handed over once, flagged `recovered`, before anything received
-    /// since.
-    fn hold_recovered(&mut self) {
         let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-        let since = tokio::time::Instant::now();
-        for entry in self.inbox.pending() {
-            let incoming = &entry.incoming;
-            match self.codec.decode(&incoming.bytes) {
-                Ok(message) => self.held.push(Held {
-                    seq: Some(entry.seq),
-                    received: queue::ReceivedMessage {
-                        message,
-                        dccl_id: incoming.identity.dccl_id,
-                        src: incoming.identity.src,
-                        dest: incoming.dest,
-                        time: incoming.role_time,
-                        bytes: incoming.bytes.clone(),
-                        identity: None,
-                    },
-                    reception: Reception {
-                        link: None,
-                        recovered: true,
-                    },
-                    since,
-                }),
-                Err(e) => {
-                    tracing::error!(
-                        "{}: a message received before a restart no longer decodes (DCCL id {}): {e}",
-                        self.inbox.path().display(),
-                        incoming.identity.dccl_id
-                    );
-                    if let Err(e) = self.inbox.handed(entry.seq, now) {
-                        tracing::error!("{}: {e}", self.inbox.path().display());
-                    }
-                }
+        let on_record =
+            self.delivery
+                .record(messages, &reception, now, tokio::time::Instant::now());
+        self.release_held();
+        if let Some(ack) = delivery::acknowledgement(transmission, &faults, on_record) {
+            if let Err(e) = self.driver.acknowledge(ack) {
+                tracing::error!("cannot acknowledge: {e}");
             }
         }
     }
@@ -997,42 +856,26 @@ impl Daemon {
         self.always_taken || self.events.receiver_count() > 0
     }
 
-    /// Hands the held messages over, in the order received, once a taker
-    /// is there or the oldest has waited [`RECOVERY_WAIT`] (then to
-    /// whoever is there: the mission log at least). Each is marked handed
-    /// over in the inbox right after.
+    /// Hands the held messages over once a taker is there (see
+    /// [`Delivery::release`]).
     fn release_held(&mut self) {
-        let Some(oldest) = self.held.first().map(|h| h.since) else {
-            return;
-        };
-        let due = tokio::time::Instant::now() >= oldest + RECOVERY_WAIT;
-        if !self.taker_present() && !due {
-            return;
-        }
-        if due && !self.taker_present() {
-            tracing::warn!(
-                held = self.held.len(),
-                "no JSON client connected within {} s: received messages handed over to the mission log only",
-                RECOVERY_WAIT.as_secs()
-            );
-        }
+        let taker = self.taker_present();
         let now = u64::try_from(SystemClock.now()).unwrap_or(0);
-        for held in std::mem::take(&mut self.held) {
-            if held.reception.recovered {
-                tracing::info!(
-                    src = held.received.src,
-                    dccl_id = held.received.dccl_id,
-                    "a message received before a restart is handed over now"
-                );
-            }
-            self.hand_over(QueueEvent::Received(held.received), None, &held.reception);
-            if let Some(seq) = held.seq {
-                if let Err(e) = self.inbox.handed(seq, now) {
-                    tracing::error!("{}: {e}", self.inbox.path().display());
-                }
-            }
-        }
-        CrashPoint::HandedOver.reached();
+        let (events, raw_log) = (&self.events, &mut self.raw_log);
+        self.delivery.release(
+            taker,
+            tokio::time::Instant::now(),
+            now,
+            |received, reception| {
+                hand_over(
+                    events,
+                    raw_log,
+                    QueueEvent::Received(received),
+                    None,
+                    reception,
+                )
+            },
+        );
     }
 
     /// Hands a queue event over: the event to the clients connected now
@@ -1041,25 +884,34 @@ impl Daemon {
     /// a received message, the transmission it came in and whether it is
     /// handed over after a restart.
     fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, reception: &Reception) {
-        let now = SystemClock.now();
-        // The mission log's line is written last: the inbox marks a received
-        // message handed over right after it.
-        let record = self
-            .raw_log
-            .as_ref()
-            .and_then(|_| log_record(&event, reception));
-        let event = match event {
-            QueueEvent::Received(received) => DaemonEvent::Received {
-                received,
-                reception: reception.clone(),
-            },
-            event => DaemonEvent::Queue { event, entry },
-        };
-        let _ = self.events.send(Arc::new(CoreEvent::new(event)));
-        if let (Some(log), Some((direction, name, value, extra))) = (&mut self.raw_log, record) {
-            if let Err(e) = log.message(now, direction, &name, value, &extra) {
-                tracing::error!("raw log: {e}");
-            }
+        hand_over(&self.events, &mut self.raw_log, event, entry, reception);
+    }
+}
+
+/// Hands a queue event over to `events` and the mission log (see
+/// [`Daemon::hand_over`]).
+fn hand_over(
+    events: &broadcast::Sender<SharedEvent>,
+    raw_log: &mut Option<RawLog>,
+    event: QueueEvent,
+    entry: Option<u64>,
+    reception: &Reception,
+) {
+    let now = SystemClock.now();
+    // The mission log's line is written last: the inbox marks a received
+    // message handed over right after it.
+    let record = raw_log.as_ref().and_then(|_| log_record(&event, reception));
+    let event = match event {
+        QueueEvent::Received(received) => DaemonEvent::Received {
+            received,
+            reception: reception.clone(),
+        },
+        event => DaemonEvent::Queue { event, entry },
+    };
+    let _ = events.send(Arc::new(CoreEvent::new(event)));
+    if let (Some(log), Some((direction, name, value, extra))) = (raw_log, record) {
+        if let Err(e) = log.message(now, direction, &name, value, &extra) {
+            tracing::error!("raw log: {e}");
         }
     }
 }

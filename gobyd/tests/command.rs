@@ -1,19 +1,15 @@
 //! The `gobyd` command line: version, the example and shipped
 //! configurations, and bad configurations refused with their place.
 
+mod support;
+
 use std::path::PathBuf;
 use std::process::Output;
+use support::daemon::scratch;
 
 /// Root of the workspace.
 fn workspace_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
-/// A scratch directory of this test process.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-cmd-test-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    dir
 }
 
 fn stdout_text(out: &Output) -> String {
@@ -48,7 +44,7 @@ fn gobyd_example_and_shipped_configurations_check_out() {
     assert!(out.status.success());
     let example = stdout_text(&out);
     assert!(example.contains("modem_id: 1"), "{example}");
-    let dir = scratch("gobyd-config");
+    let dir = scratch("command", "gobyd-config");
     let path = dir.join("example.pb.txt");
     std::fs::write(&path, &example).unwrap();
     let mut configs = vec![path.to_str().unwrap().to_string()];
@@ -71,7 +67,7 @@ fn gobyd_example_and_shipped_configurations_check_out() {
 
 #[test]
 fn gobyd_refuses_bad_configurations_with_their_place() {
-    let dir = scratch("gobyd-bad");
+    let dir = scratch("command", "gobyd-bad");
     for (text, expected) in [
         ("modem_id: \"one\"", "bad.pb.txt:"),
         ("no_such_setting: 1", "no_such_setting"),
@@ -103,7 +99,7 @@ fn gobyd_refuses_bad_configurations_with_their_place() {
 
 #[test]
 fn configuration_errors_give_file_line_and_column() {
-    let dir = scratch("gobyd-position");
+    let dir = scratch("command", "gobyd-position");
     for (text, expected) in [
         (
             "modem_id: 1\nmac {\n  type: MAC_NONE\n  bogus: 3\n}\n",
@@ -132,7 +128,7 @@ fn configuration_errors_give_file_line_and_column() {
 
 #[test]
 fn check_refuses_a_modem_id_with_no_mac_slot() {
-    let dir = scratch("gobyd-noslot");
+    let dir = scratch("command", "gobyd-noslot");
     let path = dir.join("noslot.pb.txt");
     std::fs::write(
         &path,
@@ -151,7 +147,7 @@ fn check_refuses_a_modem_id_with_no_mac_slot() {
 
 #[test]
 fn check_refuses_settings_that_cannot_work() {
-    let dir = scratch("gobyd-cannot-work");
+    let dir = scratch("command", "gobyd-cannot-work");
     let path = dir.join("bad.pb.txt");
     for (text, expected) in [
         (
@@ -220,7 +216,7 @@ fn check_refuses_settings_that_cannot_work() {
 
 #[test]
 fn check_refuses_a_dccl_id_the_application_acks_take() {
-    let dir = scratch("gobyd-app-ack-id");
+    let dir = scratch("command", "gobyd-app-ack-id");
     let proto = dir.join("status.proto");
     std::fs::write(
         &proto,
@@ -260,7 +256,7 @@ fn check_refuses_a_dccl_id_the_application_acks_take() {
 
 #[test]
 fn driver_sections_written_as_goby3_writes_them_are_read() {
-    let dir = scratch("gobyd-goby3");
+    let dir = scratch("command", "gobyd-goby3");
     let path = dir.join("goby3.pb.txt");
     // As a goby_modemdriver / pAcommsHandler configuration writes them.
     std::fs::write(
@@ -315,7 +311,7 @@ driver_cfg {
 
 #[test]
 fn check_refuses_options_nested_too_deep_without_crashing() {
-    let dir = scratch("gobyd-deep");
+    let dir = scratch("command", "gobyd-deep");
     let depth = 100_000;
     let mut text = String::from(
         "syntax = \"proto2\";\nimport \"google/protobuf/descriptor.proto\";\n\
@@ -394,7 +390,7 @@ message Counts {
 
 #[test]
 fn adaptive_arithmetic_models_are_refused_naming_message_field_and_model() {
-    let dir = scratch("gobyd-adaptive");
+    let dir = scratch("command", "gobyd-adaptive");
     let config = arithmetic_config(&dir, false);
     let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr_text(&out));

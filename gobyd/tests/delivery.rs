@@ -29,7 +29,7 @@
 mod support;
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -105,13 +105,7 @@ impl Link {
 const RUN_LIMIT: Duration = Duration::from_secs(150);
 
 use modemdriver::time::now_micros;
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-delivery-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use support::daemon::scratch;
 
 /// The faults of one run.
 #[derive(Debug, Clone, Default)]
@@ -198,7 +192,7 @@ fn simulator_driver(channel: &str, loss: f64, seed: u64) -> String {
 /// Runs the two daemons while `inject` applies the faults; returns the
 /// tally and the emulators' slot report.
 async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
-    let dir = scratch(name);
+    let dir = scratch("delivery", name);
     let emulated = link.emulated();
     let emulators = if emulated {
         let dialect = match link.kind {

@@ -5,6 +5,8 @@
 //! arrives, the accept loop backs off when descriptors run out, and every
 //! bad UDP datagram gets a reply.
 
+mod support;
+
 use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpStream, UdpSocket};
@@ -14,24 +16,10 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
+use support::daemon::{free_udp_port, scratch};
 
 /// Upper bound of any wait in these tests.
 const PATIENCE: Duration = Duration::from_secs(60);
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-door-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// A node that never transmits (no MAC slots): what is accepted stays queued.
 fn quiet_config(dir: &Path, extra_entry: &str, udp_port: Option<u16>) -> PathBuf {
@@ -211,7 +199,7 @@ fn command(destination: i64, x: &str, note: &str) -> String {
 
 #[test]
 fn values_the_codec_would_change_are_refused_naming_field_and_bound() {
-    let dir = scratch("refuse");
+    let dir = scratch("door", "refuse");
     let daemon = Daemon::start(&quiet_config(&dir, "", None));
     let mut client = daemon.connect();
     for (line, field, bound) in [
@@ -237,7 +225,7 @@ fn values_the_codec_would_change_are_refused_naming_field_and_bound() {
 
 #[test]
 fn a_clamping_type_is_sent_changed_and_every_change_is_reported_and_logged() {
-    let dir = scratch("clamp");
+    let dir = scratch("door", "clamp");
     let port = free_udp_port();
     let config = format!(
         r#"
@@ -306,7 +294,7 @@ data_dir: "{data}"
 #[test]
 fn a_burst_is_either_kept_or_told_and_replies_never_mix_with_events() {
     const BURST: u64 = 20_000;
-    let dir = scratch("burst");
+    let dir = scratch("door", "burst");
     let daemon = Daemon::start(&quiet_config(&dir, "max_queue: 100", None));
     let client = daemon.connect();
     let mut writer = client.stream.try_clone().unwrap();
@@ -352,7 +340,7 @@ fn a_burst_is_either_kept_or_told_and_replies_never_mix_with_events() {
 #[test]
 fn unterminated_lines_are_cut_off_as_they_arrive() {
     const PER_CLIENT: usize = 64 * 1024 * 1024;
-    let dir = scratch("longline");
+    let dir = scratch("door", "longline");
     let daemon = Daemon::start(&quiet_config(&dir, "", None));
     let mut warm = daemon.connect();
     assert!(warm.request(&command(2, "0", "warm")).get("id").is_some());
@@ -398,7 +386,7 @@ fn unterminated_lines_are_cut_off_as_they_arrive() {
 
 #[test]
 fn every_bad_udp_datagram_gets_a_numbered_reply() {
-    let dir = scratch("udp");
+    let dir = scratch("door", "udp");
     let port = free_udp_port();
     let daemon = Daemon::start(&quiet_config(&dir, "", Some(port)));
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -441,7 +429,7 @@ fn every_bad_udp_datagram_gets_a_numbered_reply() {
 #[test]
 fn the_accept_loop_backs_off_when_descriptors_run_out() {
     use std::os::unix::process::CommandExt;
-    let dir = scratch("emfile");
+    let dir = scratch("door", "emfile");
     let daemon = Daemon::start_with(&quiet_config(&dir, "", None), |command| {
         // SAFETY: setrlimit is async-signal-safe; nothing else runs here.
         unsafe {
@@ -496,7 +484,7 @@ fn the_accept_loop_backs_off_when_descriptors_run_out() {
 
 #[test]
 fn a_message_to_this_node_is_delivered_here_with_or_without_a_configuration() {
-    let dir = scratch("self");
+    let dir = scratch("door", "self");
     let example = dir.join("example.pb.txt");
     std::fs::write(
         &example,

@@ -2,6 +2,8 @@
 //! each: messages published on one arrive decoded on the other, with acks;
 //! a sender killed with SIGKILL and restarted loses nothing it accepted.
 
+mod support;
+
 use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpStream, UdpSocket};
@@ -11,25 +13,10 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
+use support::daemon::{free_udp_port, scratch};
 
 /// Upper bound of any wait in these tests.
 const PATIENCE: Duration = Duration::from_secs(40);
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// A free UDP port on loopback.
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// The driver section of node `id` of a two-node UDP network, one
 /// Command per frame.
@@ -232,7 +219,7 @@ fn note_of(v: &Value) -> Option<String> {
 
 #[test]
 fn messages_cross_with_acks_and_survive_a_killed_sender() {
-    let dir = scratch("e2e");
+    let dir = scratch("test", "e2e");
     let config_paths = network(&dir, udp_driver, 0.5);
     let mut receiver = Node::start(&config_paths[1]);
     let mut sender = Node::start(&config_paths[0]);
@@ -295,7 +282,7 @@ fn messages_cross_with_acks_and_survive_a_killed_sender() {
 
 #[test]
 fn messages_cross_the_simulated_acoustic_channel_with_acks() {
-    let dir = scratch("sim");
+    let dir = scratch("test", "sim");
     // Slots long enough for the data, the travel time and the ack.
     let config_paths = network(&dir, simulator_driver, 1.2);
     let mut receiver = Node::start(&config_paths[1]);
@@ -457,7 +444,7 @@ impl Drop for EmulatedModems {
 
 #[test]
 fn messages_cross_two_emulated_micro_modems_with_acks() {
-    let dir = scratch("micromodem");
+    let dir = scratch("test", "micromodem");
     let links: Vec<PathBuf> = [1, 2]
         .iter()
         .map(|id| dir.join(format!("modem{id}")))
@@ -505,7 +492,7 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
 
 #[test]
 fn json_over_udp_and_a_clean_stop_on_sigterm() {
-    let dir = scratch("udp-json");
+    let dir = scratch("test", "udp-json");
     let port = free_udp_port();
     let config = format!(
         r#"
@@ -589,7 +576,7 @@ data_dir: "{}"
 
 #[test]
 fn one_daemon_per_data_directory_and_a_crash_releases_it() {
-    let dir = scratch("one-per-dir");
+    let dir = scratch("test", "one-per-dir");
     let data = dir.join("data");
     let config = format!(
         r#"
@@ -690,7 +677,7 @@ log {{ level: "info" }}
 /// go out in one frame or one per cycle.
 #[test]
 fn identical_publications_are_each_delivered_and_acked() {
-    let dir = scratch("repeats");
+    let dir = scratch("test", "repeats");
     let ports = [free_udp_port(), free_udp_port()];
     let paths: Vec<PathBuf> = [1, 2]
         .into_iter()

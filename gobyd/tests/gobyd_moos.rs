@@ -3,23 +3,19 @@
 //! acknowledgement; against the minimal in-process DB always, and against a
 //! real MOOSDB when one is on the PATH.
 
-use std::net::{TcpListener, UdpSocket};
+mod support;
+
+use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use gobyd::{config, runtime::Daemon};
 use moos::{ClientConfig, MoosClient, Value};
+use support::daemon::{free_tcp_port, scratch};
 use tokio::sync::oneshot;
 
 const PATIENCE: Duration = Duration::from_secs(20);
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-moos-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 fn daemon_config(port: u16, data_dir: &Path, channel: &str) -> String {
     format!(
@@ -47,7 +43,7 @@ log {{ raw_log: false }}
 
 /// Runs gobyd against the DB at `port` and checks the round trip.
 async fn round_trip_through(port: u16, name: &str) {
-    let dir = scratch(name);
+    let dir = scratch("moos", name);
     let text = daemon_config(port, &dir.join("data"), name);
     let daemon = Daemon::start(config::parse(&text, "test").unwrap())
         .await
@@ -159,14 +155,6 @@ fn moosdb_on_path() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 struct KillOnDrop(Child);
 
 impl Drop for KillOnDrop {
@@ -182,8 +170,8 @@ async fn moos_variables_in_and_out_with_a_real_moosdb() {
         eprintln!("skipped: no MOOSDB on PATH");
         return;
     };
-    let dir = scratch("moosdb-run");
-    let port = free_port();
+    let dir = scratch("moos", "moosdb-run");
+    let port = free_tcp_port();
     let audit = UdpSocket::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()

@@ -4,8 +4,10 @@
 //! messages leave the journal) and `ACOMMS_DRIVER_RESET` (the driver starts
 //! again and traffic goes on).
 
+mod support;
+
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use gobyd::event::{DaemonEvent, SharedEvent};
@@ -13,16 +15,10 @@ use gobyd::modem_event::ModemEvent;
 use gobyd::{config, runtime::Daemon};
 use modemdriver::DriverStatus;
 use moos::{ClientConfig, MailReceiver, MoosClient, Value};
+use support::daemon::scratch;
 use tokio::sync::{broadcast, oneshot};
 
 const PATIENCE: Duration = Duration::from_secs(30);
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-modemvars-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// Node `id` of two on the in-process simulator channel `channel`, 150 m
 /// apart, with `mac`; a MOOS client of the DB at `port` when given.
@@ -157,7 +153,7 @@ async fn driver_and_mac_variables_then_a_driver_reset() {
     let db = moos::testing::MiniDb::start("127.0.0.1:0", "modemvars")
         .await
         .unwrap();
-    let dir = scratch("reset");
+    let dir = scratch("moosvars", "reset");
     let channel = format!("modemvars-{}", std::process::id());
     let one = Daemon::start(
         config::parse(
@@ -284,7 +280,7 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
     let db = moos::testing::MiniDb::start("127.0.0.1:0", "flush")
         .await
         .unwrap();
-    let dir = scratch("flush");
+    let dir = scratch("moosvars", "flush");
     let channel = format!("modemvars-flush-{}", std::process::id());
     // No medium access: messages stay queued.
     let text = node(

@@ -7,7 +7,9 @@
 //! against real MOOSDBs when one is on the PATH (skipped, and said so,
 //! otherwise).
 
-use std::net::{TcpListener, UdpSocket};
+mod support;
+
+use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -15,6 +17,7 @@ use std::time::{Duration, Instant};
 use gobyd::{mission_file, runtime::Daemon};
 use moos::{ClientConfig, MoosClient, Value};
 use protos::goby::apps::protobuf::GobydConfig;
+use support::daemon::{free_tcp_port, scratch};
 use tokio::sync::oneshot;
 
 /// Longest wait for the report: two 5 s TDMA slots and the time on the
@@ -27,13 +30,6 @@ fn example(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-node-report-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn free_udp_port() -> u32 {
     UdpSocket::bind("127.0.0.1:0")
         .unwrap()
@@ -41,14 +37,6 @@ fn free_udp_port() -> u32 {
         .unwrap()
         .port()
         .into()
-}
-
-fn free_tcp_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// The mission file's configuration with this run's DB port, UDP ports
@@ -90,7 +78,7 @@ async fn exchange(ports: (u16, u16), name: &str) -> Duration {
         .with_env_filter(std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()))
         .with_test_writer()
         .try_init();
-    let dir = scratch(name);
+    let dir = scratch("nodereport", name);
     let (udp_a, udp_b) = (free_udp_port(), free_udp_port());
     let alpha = mission("alpha", ports.0, (udp_a, udp_b), &dir.join("alpha"));
     let bravo = mission("bravo", ports.1, (udp_b, udp_a), &dir.join("bravo"));
@@ -260,7 +248,7 @@ async fn node_reports_cross_between_two_communities_with_real_moosdbs() {
         eprintln!("skipped: no MOOSDB on PATH (the exchange between two real MOOS communities)");
         return;
     };
-    let dir = scratch("moosdb-run");
+    let dir = scratch("nodereport", "moosdb-run");
     let ports = (free_tcp_port(), free_tcp_port());
     let _a = start_moosdb(&exe, ports.0, "alpha", &dir);
     let _b = start_moosdb(&exe, ports.1, "bravo", &dir);

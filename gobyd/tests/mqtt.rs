@@ -9,26 +9,12 @@ mod support;
 
 use std::collections::BTreeSet;
 use std::fs::File;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
 use serde_json::Value;
 use support::broker::{Broker, Watcher};
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gobyd-mqtt-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
+use support::daemon::{free_udp_port, scratch};
 
 /// Node `id` of two on the acoustic simulator (150 m apart, packets between
 /// the processes over UDP), TDMA slots of 1.2 s, bridged to `broker`.
@@ -144,7 +130,7 @@ fn wait_status(watcher: &Watcher, node: i32, mut pick: impl FnMut(&Value) -> boo
 
 #[test]
 fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
-    let dir = scratch("fleet");
+    let dir = scratch("mqtt", "fleet");
     let Some(mut broker) = Broker::start(
         &dir,
         "two_gateways_share_a_broker_through_its_restart_and_theirs",
@@ -307,7 +293,7 @@ fn openssl(dir: &Path, args: &[&str]) -> bool {
 #[cfg(feature = "mqtt-tls")]
 #[test]
 fn the_bridge_speaks_tls() {
-    let dir = scratch("tls");
+    let dir = scratch("mqtt", "tls");
     let made = openssl(
         &dir,
         &[

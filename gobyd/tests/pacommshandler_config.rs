@@ -3,10 +3,13 @@
 //! `modem_id_lookup_path`), load unchanged in gobyd's ProcessConfig block
 //! and translate.
 
+mod support;
+
 use std::collections::HashMap;
 
 use gobyd::{config, mission_file::MissionFile, translator};
 use moos::Value;
+use support::daemon::free_udp_port;
 
 const MISSION: &str = r#"
 ServerHost = localhost
@@ -395,12 +398,4 @@ translator_entry {{
         db.stop().await;
     }
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }

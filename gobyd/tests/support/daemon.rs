@@ -33,6 +33,15 @@ pub fn free_udp_port() -> u16 {
         .port()
 }
 
+/// A TCP port free on 127.0.0.1 a moment ago.
+pub fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
 /// A running `gobyd` (killed when dropped) and a JSON client connected to it.
 pub struct Gobyd {
     child: Child,
