@@ -179,6 +179,9 @@ pub struct Daemon {
     /// Something always takes received messages: a bridge (MOOS, MQTT) or
     /// the UDP JSON interface.
     always_taken: bool,
+    /// The core's one clock (microseconds since the epoch): the queue's,
+    /// the medium access control's, the inbox's and every stamp.
+    clock: Arc<dyn Clock>,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -216,7 +219,7 @@ impl Daemon {
         // message.
         driver_config.deferred_ack = Some(true);
         let driver = start_driver(&driver_config).await?;
-        let mut daemon = Self::start_in(config, driver, data_dir).await?;
+        let mut daemon = Self::start_in(config, driver, data_dir, Arc::new(SystemClock)).await?;
         daemon.driver_config = Some(driver_config);
         Ok(daemon)
     }
@@ -230,21 +233,37 @@ impl Daemon {
         config: GobydConfig,
         driver: Driver,
     ) -> Result<Self, DaemonError> {
+        Self::start_with_driver_and_clock(config, driver, Arc::new(SystemClock)).await
+    }
+
+    /// Starts the daemon on a driver started by the caller, as
+    /// [`start_with_driver`](Self::start_with_driver), reading time from
+    /// `clock`: the queue, the medium access slots, the inbox and every
+    /// stamp of the core. Give the driver the same clock. With
+    /// [`modemdriver::time::TokioClock`] under tokio's paused clock the
+    /// whole node runs in virtual time (tests of the daemon's logic that do
+    /// not depend on the machine's speed or load).
+    pub async fn start_with_driver_and_clock(
+        config: GobydConfig,
+        driver: Driver,
+        clock: Arc<dyn Clock>,
+    ) -> Result<Self, DaemonError> {
         let config = config::complete(config)?;
         let data_dir = DataDir::open(Path::new(config.data_dir()))?;
-        Self::start_in(config, driver, data_dir).await
+        Self::start_in(config, driver, data_dir, clock).await
     }
 
     async fn start_in(
         config: GobydConfig,
         driver: Driver,
         data_dir: DataDir,
+        clock: Arc<dyn Clock>,
     ) -> Result<Self, DaemonError> {
         let defs = config::load_definitions(&config)?;
         let codec = Arc::new(defs.codec);
         let mut queue_config = config.queue.clone().unwrap_or_default();
         config::default_entries(&mut queue_config, &defs.loaded);
-        let queue = QueueManager::new(codec.clone(), &queue_config)?;
+        let queue = QueueManager::with_clock(codec.clone(), &queue_config, clock.clone())?;
         let door = Door::new(codec.clone(), &queue_config, || {
             config::load_definitions(&config)
                 .map(|d| d.codec)
@@ -283,7 +302,7 @@ impl Daemon {
         }
         let delivery = {
             let path = data_dir.path().join("inbox.log");
-            let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+            let now = u64::try_from(clock.now()).unwrap_or(0);
             let (delivery, replay) = Delivery::open(&path, (window_seconds * 1e6) as u64, now)
                 .map_err(io_error(format!("cannot open {}", path.display())))?;
             if replay != Default::default() {
@@ -306,7 +325,7 @@ impl Daemon {
             None
         };
 
-        let mac = MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
+        let mac = MacManager::new(config.mac.as_ref().expect("completed"), clock.now())?;
         let (events, _) = broadcast::channel(1024);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
@@ -352,6 +371,7 @@ impl Daemon {
                 config.modem_id(),
                 codec.clone(),
                 publish_tx.clone(),
+                clock.clone(),
             )?;
             if let Some(bridge) = bridge {
                 tasks.spawn(bridge.run(events.subscribe()));
@@ -399,7 +419,8 @@ impl Daemon {
             delivery,
             // Numbers of a previous run (whose acks may still come) are
             // not reused soon: start from the clock.
-            next_transmission: (SystemClock.now() / 1000) as u32,
+            next_transmission: (clock.now() / 1000) as u32,
+            clock,
             always_taken: config.moos.is_some()
                 || config.mqtt.is_some()
                 || !json.udp_bind().is_empty(),
@@ -445,7 +466,7 @@ impl Daemon {
         tokio::pin!(shutdown);
         // Messages received before a restart and not handed over wait for a
         // taker, as do those received while nobody is there.
-        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        let now = u64::try_from(self.clock.now()).unwrap_or(0);
         self.delivery
             .hold_recovered(&self.codec, now, tokio::time::Instant::now());
         let mut expire = tokio::time::interval(Duration::from_secs(1));
@@ -453,7 +474,7 @@ impl Daemon {
             let mac_wait = self
                 .mac
                 .next_event_time()
-                .map(|t| Duration::from_micros((t - SystemClock.now()).max(0) as u64))
+                .map(|t| Duration::from_micros((t - self.clock.now()).max(0) as u64))
                 .unwrap_or(Duration::from_secs(3600));
             tokio::select! {
                 () = &mut shutdown => break,
@@ -577,7 +598,7 @@ impl Daemon {
     }
 
     fn driver_event(&mut self, event: DriverEvent) {
-        if let Some(reported) = ModemEvent::of_driver(&event, SystemClock.now()) {
+        if let Some(reported) = ModemEvent::of_driver(&event, self.clock.now()) {
             self.report(reported);
         }
         match event {
@@ -607,7 +628,7 @@ impl Daemon {
             }
             DriverEvent::Raw(raw) => {
                 if let Some(log) = &mut self.raw_log {
-                    if let Err(e) = log.raw(SystemClock.now(), &raw) {
+                    if let Err(e) = log.raw(self.clock.now(), &raw) {
                         tracing::error!("raw log {}: {e}", log.path().display());
                     }
                 }
@@ -625,7 +646,7 @@ impl Daemon {
     /// the time left in its slot: the driver drops it rather than run it
     /// after its slot (e.g. when the modem was away).
     fn mac_slots(&mut self) {
-        for event in self.mac.poll(SystemClock.now()) {
+        for event in self.mac.poll(self.clock.now()) {
             let mut reported = ModemEvent::of_mac(&event);
             let amac::MacEvent::Slot(slot) = &event else {
                 self.report(reported);
@@ -813,7 +834,7 @@ impl Daemon {
         }
         // Each message handed over carries the reception it came in.
         let reception = Reception {
-            link: Some(reception_summary(&transmission, SystemClock.now())),
+            link: Some(reception_summary(&transmission, self.clock.now())),
             recovered: false,
         };
         let mut faults = FrameFaults::default();
@@ -835,7 +856,7 @@ impl Daemon {
                 event => self.hand_over(event, entry, &Reception::default()),
             }
         }
-        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        let now = u64::try_from(self.clock.now()).unwrap_or(0);
         let on_record =
             self.delivery
                 .record(messages, &reception, now, tokio::time::Instant::now());
@@ -860,16 +881,17 @@ impl Daemon {
     /// [`Delivery::release`]).
     fn release_held(&mut self) {
         let taker = self.taker_present();
-        let now = u64::try_from(SystemClock.now()).unwrap_or(0);
+        let now = self.clock.now();
         let (events, raw_log) = (&self.events, &mut self.raw_log);
         self.delivery.release(
             taker,
             tokio::time::Instant::now(),
-            now,
+            u64::try_from(now).unwrap_or(0),
             |received, reception| {
                 hand_over(
                     events,
                     raw_log,
+                    now,
                     QueueEvent::Received(received),
                     None,
                     reception,
@@ -884,7 +906,15 @@ impl Daemon {
     /// a received message, the transmission it came in and whether it is
     /// handed over after a restart.
     fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, reception: &Reception) {
-        hand_over(&self.events, &mut self.raw_log, event, entry, reception);
+        let now = self.clock.now();
+        hand_over(
+            &self.events,
+            &mut self.raw_log,
+            now,
+            event,
+            entry,
+            reception,
+        );
     }
 }
 
@@ -893,11 +923,11 @@ impl Daemon {
 fn hand_over(
     events: &broadcast::Sender<SharedEvent>,
     raw_log: &mut Option<RawLog>,
+    now: i64,
     event: QueueEvent,
     entry: Option<u64>,
     reception: &Reception,
 ) {
-    let now = SystemClock.now();
     // The mission log's line is written last: the inbox marks a received
     // message handed over right after it.
     let record = raw_log.as_ref().and_then(|_| log_record(&event, reception));

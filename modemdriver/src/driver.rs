@@ -17,6 +17,7 @@ use std::time::Duration;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
+use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
@@ -392,13 +393,25 @@ impl EventSink {
     }
 }
 
-/// What a driver task is given: its commands and its event sink.
-#[derive(Debug)]
+/// What a driver task is given: its commands, its event sink and its clock.
 pub struct DriverContext {
     /// Commands from the [`Driver`].
     pub commands: mpsc::UnboundedReceiver<DriverCommand>,
     /// Where to report.
     pub events: EventSink,
+    /// The time the driver stamps transmissions with and keeps slots by
+    /// (microseconds since the epoch); the system clock unless the driver
+    /// was started on another ([`Driver::spawn_with_clock`]).
+    pub clock: Arc<dyn goby_time::Clock>,
+}
+
+impl std::fmt::Debug for DriverContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DriverContext")
+            .field("commands", &self.commands)
+            .field("events", &self.events)
+            .finish_non_exhaustive()
+    }
 }
 
 /// A cloneable sender of commands to a running driver.
@@ -451,11 +464,27 @@ impl Driver {
         F: FnOnce(DriverContext) -> Fut,
         Fut: std::future::Future<Output = ()> + Send + 'static,
     {
+        Self::spawn_with_clock(name, Arc::new(goby_time::SystemClock), run)
+    }
+
+    /// Spawns a driver task as [`spawn`](Self::spawn) does, reading time
+    /// from `clock` (e.g. one on tokio's paused clock, for tests in virtual
+    /// time: see [`crate::time::TokioClock`]).
+    pub fn spawn_with_clock<F, Fut>(
+        name: &'static str,
+        clock: Arc<dyn goby_time::Clock>,
+        run: F,
+    ) -> Driver
+    where
+        F: FnOnce(DriverContext) -> Fut,
+        Fut: std::future::Future<Output = ()> + Send + 'static,
+    {
         let (command_tx, command_rx) = mpsc::unbounded_channel();
         let (event_tx, event_rx) = mpsc::unbounded_channel();
         let context = DriverContext {
             commands: command_rx,
             events: EventSink { events: event_tx },
+            clock,
         };
         let task = tokio::spawn(run(context));
         Driver {

@@ -30,7 +30,6 @@ use crate::driver::{
 use crate::link::datagram::DatagramLink;
 use crate::link::trace::Tracer;
 use crate::link::Link;
-use crate::time::now_micros;
 
 /// How long the driver waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
@@ -60,6 +59,16 @@ impl UdpDriver {
     /// Starts the driver on a socket already bound (its address then stands
     /// for `udp.local`).
     pub fn start_on(config: &DriverConfig, socket: UdpSocket) -> Result<Driver, DriverError> {
+        Self::start_on_with_clock(config, socket, std::sync::Arc::new(goby_time::SystemClock))
+    }
+
+    /// Starts the driver on a socket already bound, reading time from
+    /// `clock` (the times of its transmissions and acks, and its slots).
+    pub fn start_on_with_clock(
+        config: &DriverConfig,
+        socket: UdpSocket,
+        clock: std::sync::Arc<dyn goby_time::Clock>,
+    ) -> Result<Driver, DriverError> {
         let modem_id = config::modem_id(config)?;
         let udp = udp_config(config)?;
         let mut remotes = Vec::new();
@@ -89,12 +98,17 @@ impl UdpDriver {
             last_acked_data: None,
             deferred_ack: config.deferred_ack(),
             awaiting_ack: std::collections::VecDeque::new(),
+            clock: clock.clone(),
         };
-        Ok(Driver::spawn("udp", move |ctx| run(state, socket, ctx)))
+        Ok(Driver::spawn_with_clock("udp", clock, move |ctx| {
+            run(state, socket, ctx)
+        }))
     }
 }
 
 struct UdpState {
+    /// Time for stamps and slots.
+    clock: std::sync::Arc<dyn goby_time::Clock>,
     modem_id: i32,
     remotes: Vec<(u32, SocketAddr)>,
     max_frame_size: u32,
@@ -168,11 +182,12 @@ async fn transmit(
     if mt.src() == -1 || mt.src.is_none() {
         mt.src = Some(state.modem_id);
     }
+    let now = u64::try_from(state.clock.now()).unwrap_or(0);
     if mt.time.is_none() {
-        mt.time = Some(now_micros());
+        mt.time = Some(now);
     }
     if mt.r#type() == TransmissionType::Data {
-        if crate::slot::too_late(&mt, Duration::ZERO) {
+        if crate::slot::too_late_at(&mt, Duration::ZERO, now) {
             events.status(DriverStatus::Skipped {
                 reason: "the slot of the transmission has passed".into(),
             });
@@ -265,7 +280,8 @@ async fn receive(
     }
     events.emit(DriverEvent::Received(mt));
     if let Some(ack) = ack {
-        send_ack(link, events, ack, from).await;
+        let now = u64::try_from(state.clock.now()).unwrap_or(0);
+        send_ack(link, events, ack, from, now).await;
     }
 }
 
@@ -288,8 +304,9 @@ async fn acknowledge(
         Some(i) => vec![state.awaiting_ack[i].1],
         None => state.destinations(ack.received.src()),
     };
+    let now = u64::try_from(state.clock.now()).unwrap_or(0);
     for addr in to {
-        send_ack(link, events, transmission.clone(), addr).await;
+        send_ack(link, events, transmission.clone(), addr, now).await;
     }
 }
 
@@ -298,8 +315,9 @@ async fn send_ack(
     events: &EventSink,
     mut ack: ModemTransmission,
     to: SocketAddr,
+    now: u64,
 ) {
-    ack.time = Some(now_micros());
+    ack.time = Some(now);
     if let Err(e) = link.send(&ack.encode_to_vec(), &to).await {
         events.status(DriverStatus::LinkError {
             reason: format!("cannot send the acknowledgement to {to}: {e}"),

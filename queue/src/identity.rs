@@ -19,7 +19,7 @@
 //! frame at it and keeps the messages before it (with a warning in its
 //! log).
 //!
-//! Sizes: [`trailer_size`]`(n)` bytes for `n` messages, 4 for one, then
+//! Sizes: [`TrailerCodec::size`]`(n)` bytes for `n` messages, 4 for one, then
 //! 1.5 per further message; at most [`MAX_MESSAGES`] messages a frame.
 //!
 //! This module encodes and decodes the trailer; it does no input or output.

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use dccl::Codec;
 use protos::goby::apps::protobuf::gobyd_config::MqttBridge;
-use queue::{Clock, SystemClock};
+use queue::Clock;
 use rumqttc::{AsyncClient, Event, EventLoop, Packet};
 use tokio::sync::{broadcast, mpsc};
 
@@ -44,12 +44,21 @@ const CLIENT_CAPACITY: usize = 256;
 const STATUS_PERIOD: Duration = Duration::from_secs(10);
 
 /// A configured bridge, ready to [`run`](Bridge::run).
-#[derive(Debug)]
 pub struct Bridge {
     settings: Settings,
     modem_id: i32,
     codec: Arc<Codec>,
     core: mpsc::Sender<Publish>,
+    clock: Arc<dyn Clock>,
+}
+
+impl std::fmt::Debug for Bridge {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bridge")
+            .field("settings", &self.settings)
+            .field("modem_id", &self.modem_id)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Bridge {
@@ -60,6 +69,7 @@ impl Bridge {
         modem_id: i32,
         codec: Arc<Codec>,
         core: mpsc::Sender<Publish>,
+        clock: Arc<dyn Clock>,
     ) -> Result<Option<Self>, ConfigError> {
         Ok(
             settings::settings(&config, modem_id)?.map(|settings| Bridge {
@@ -67,6 +77,7 @@ impl Bridge {
                 modem_id,
                 codec,
                 core,
+                clock,
             }),
         )
     }
@@ -81,6 +92,7 @@ impl Bridge {
             modem_id,
             codec,
             core,
+            clock,
         } = self;
         let names: HashMap<u32, String> = codec
             .loaded()
@@ -116,6 +128,7 @@ impl Bridge {
             ever_connected: false,
             lost_at: None,
             incoming: incoming_tx,
+            clock,
         };
         state.run(eventloop, events, notice_rx).await;
         inbound.abort();
@@ -138,6 +151,8 @@ struct Loop {
     ever_connected: bool,
     lost_at: Option<Instant>,
     incoming: mpsc::UnboundedSender<rumqttc::Publish>,
+    /// The core's clock: the times the payloads carry.
+    clock: Arc<dyn Clock>,
 }
 
 impl Loop {
@@ -160,7 +175,7 @@ impl Loop {
             tokio::select! {
                 got = events.recv() => match got {
                     Ok(event) => {
-                        if let Some(out) = self.formatter.event(&event.event, SystemClock.now()) {
+                        if let Some(out) = self.formatter.event(&event.event, self.clock.now()) {
                             self.push(out);
                         }
                     }
@@ -240,7 +255,7 @@ impl Loop {
     fn push_status(&mut self) {
         self.status.buffered = self.buffer.len();
         self.status.dropped = self.buffer.dropped() + self.lagged;
-        let status = self.formatter.status(&self.status, SystemClock.now());
+        let status = self.formatter.status(&self.status, self.clock.now());
         // The status goes ahead of what waits, so consoles see the node is
         // back before its backlog.
         self.buffer.push_front(status);

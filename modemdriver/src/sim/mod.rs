@@ -46,7 +46,6 @@ use crate::driver::{
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
 use crate::rate;
-use crate::time::now_micros;
 use medium::{Airborne, Medium};
 use reception::{Position, Receiver};
 use udp_medium::UdpMedium;
@@ -85,18 +84,31 @@ impl SimulatorDriver {
                 Some(UdpMedium::new(socket, peers))
             }
         };
-        Self::spawn(config, medium, udp)
+        Self::spawn(config, medium, udp, Arc::new(goby_time::SystemClock))
     }
 
     /// Starts a node on the given in-process channel only.
     pub fn start_on(config: &DriverConfig, medium: Arc<Medium>) -> Result<Driver, DriverError> {
-        Self::spawn(config, medium, None)
+        Self::spawn(config, medium, None, Arc::new(goby_time::SystemClock))
+    }
+
+    /// Starts a node on the given in-process channel only, reading time
+    /// from `clock` (a [`crate::time::TokioClock`] under tokio's paused
+    /// clock runs the channel in virtual time: its travel times and packet
+    /// durations are tokio sleeps).
+    pub fn start_on_with_clock(
+        config: &DriverConfig,
+        medium: Arc<Medium>,
+        clock: Arc<dyn goby_time::Clock>,
+    ) -> Result<Driver, DriverError> {
+        Self::spawn(config, medium, None, clock)
     }
 
     fn spawn(
         config: &DriverConfig,
         medium: Arc<Medium>,
         udp: Option<UdpMedium>,
+        clock: Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
         let modem_id = config::modem_id(config)?;
         let sim = sim_config(config)?.clone();
@@ -139,7 +151,7 @@ impl SimulatorDriver {
         }
         let airborne = medium.join(modem_id);
         let deferred_ack = config.deferred_ack();
-        Ok(Driver::spawn("simulator", move |ctx| {
+        Ok(Driver::spawn_with_clock("simulator", clock, move |ctx| {
             run(modem_id, sim, deferred_ack, medium, udp, airborne, ctx)
         }))
     }
@@ -152,6 +164,8 @@ fn sim_config(config: &DriverConfig) -> Result<&SimulatorDriverConfig, DriverErr
 }
 
 struct Node {
+    /// Time for stamps and slots, microseconds since the epoch.
+    clock: Arc<dyn goby_time::Clock>,
     modem_id: i32,
     /// Acks are sent when the layer above asks, not on reception.
     deferred_ack: bool,
@@ -167,6 +181,11 @@ struct Node {
 }
 
 impl Node {
+    /// Now on the node's clock, microseconds since the epoch.
+    fn now(&self) -> u64 {
+        u64::try_from(self.clock.now()).unwrap_or(0)
+    }
+
     fn position_of(&self, id: i32) -> Option<Position> {
         self.sim
             .node
@@ -210,7 +229,7 @@ impl Node {
                 );
                 mt.max_frame_bytes = Some(spec.frame_bytes);
                 let duration = spec.packet_duration(self.overhead);
-                if crate::slot::too_late(&mt, duration) {
+                if crate::slot::too_late_at(&mt, duration, self.now()) {
                     events.status(DriverStatus::Skipped {
                         reason: "the slot of a transmission waiting for the channel has passed"
                             .into(),
@@ -219,6 +238,19 @@ impl Node {
                 }
                 if mt.frame.is_empty() {
                     mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
+                    // The answer may come too late for the packet to end
+                    // within its slot: then it is not sent (its messages are
+                    // queued again, as for any failed transmission).
+                    if crate::slot::too_late_at(&mt, duration, self.now()) {
+                        events.emit(DriverEvent::TransmitResult(TransmitResult {
+                            transmission: mt,
+                            outcome: TransmitOutcome::Failed(
+                                "the data came too late for the packet to end within its slot"
+                                    .into(),
+                            ),
+                        }));
+                        return;
+                    }
                 }
                 if mt.frame.iter().all(|f| f.is_empty()) && !mt.always_initiate() {
                     events.emit(DriverEvent::TransmitResult(TransmitResult {
@@ -234,7 +266,7 @@ impl Node {
         if mt.dest() == -1 {
             mt.dest = Some(0);
         }
-        mt.time = Some(now_micros());
+        mt.time = Some(self.now());
         let start = Instant::now();
         let end = start + duration;
         self.busy_until = end;
@@ -346,6 +378,7 @@ async fn run(
     let events = ctx.events.clone();
     let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
     let mut node = Node {
+        clock: ctx.clock.clone(),
         modem_id,
         deferred_ack,
         sim,
