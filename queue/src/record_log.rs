@@ -21,8 +21,10 @@
 //! accepted) messages up to that size, and a smaller one would turn those
 //! records into "damage" at the next start and lose owed messages. Nothing
 //! the inbox writes comes near it (link frames are a few kilobytes at most).
-//! Replay reads the whole file anyway, and resynchronising costs at most one
-//! CRC over the rest of the file per sync word met, whatever the limit.
+//! What the limit bounds is the work a damaged length costs: replay
+//! computes the CRC over at most that many bytes before it rejects the
+//! record and resynchronises; replay holds the whole file in memory in
+//! either case.
 //!
 //! # Faults
 //!
