@@ -18,10 +18,10 @@
 //! remembers: the identity of every message recorded within the window
 //! (`duplicate_window_seconds`), so a repeat is recognised across restarts.
 //!
-//! The file (`DATA_DIR/inbox.log`) is a record log of the
-//! [`INBOX`](queue::record_log::INBOX) format (magic `GOBYINB1`): framing,
-//! CRC, replay and its faults, appends, rewrites and the payload limit are
-//! described in [`queue::record_log`]. A payload is
+//! The file (`DATA_DIR/inbox.log`) is a record log of the [`INBOX`] format
+//! (magic `GOBYINB1`): framing, CRC, replay and its faults, appends,
+//! rewrites and the payload limit are described in [`queue::record_log`].
+//! A payload is
 //!
 //! ```text
 //! kind 1, received: seq u64 | time u64 µs | src i32 | dccl_id u32 | digest u64 | dest i32
