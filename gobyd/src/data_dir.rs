@@ -108,16 +108,10 @@ pub fn create_private_dir(path: &Path) -> std::io::Result<()> {
     builder.create(path)
 }
 
-/// Options that create files with mode 0600 (on Unix).
+/// Options that create files with mode 0600 (on Unix), as the record logs
+/// (journal, inbox) are created.
 pub fn private_file_options() -> OpenOptions {
-    #[allow(unused_mut)]
-    let mut options = OpenOptions::new();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        options.mode(0o600);
-    }
-    options
+    queue::record_log::private_file_options()
 }
 
 #[cfg(test)]

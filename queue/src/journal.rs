@@ -7,68 +7,50 @@
 //! On opening, the records are replayed: the accepted messages without a
 //! removed record are the ones still owed.
 //!
-//! The file starts with a magic string (`GOBYJNL2`); each record is
+//! The file is a record log of the [`JOURNAL`] format (magic `GOBYJNL2`):
+//! framing, CRC, replay and its faults, appends, rewrites and the payload
+//! limit are described in [`crate::record_log`]. A payload is
 //!
 //! ```text
-//! sync: 4 bytes A7 47 4A 52 | length: u32 LE (of the payload) | crc32: u32 LE (of length and payload) | payload
-//! payload = kind: u8 | id: u64 LE | (accepted only) time: i64 LE µs | name length: u16 LE | name | message bytes
+//! kind: u8 | id: u64 LE | (accepted only) time: i64 LE µs | name length: u16 LE | name | message bytes
 //! ```
 //!
-//! Faults cost the records they touch, never those after them:
+//! with kind 1 for *accepted* and 2 for *removed*. What the journal adds:
 //!
-//! - a record whose CRC-32 (ISO-HDLC) does not match, or whose length runs
-//!   past the end of the file, is skipped: replay looks for the next sync
-//!   word and goes on from the first record there that checks out (a
-//!   single flipped bit anywhere loses at most the record holding it; a
-//!   damaged header is recognised within two bits and rewritten);
-//! - bytes after the last good record (a write torn by a crash) are cut
-//!   off; the file is never cut behind a good record. Skipped and cut
-//!   bytes are counted in [`Replay::discarded_bytes`];
-//! - a write that fails (full disk, I/O error) is undone (the file is cut
-//!   back to its last whole record) and reported: nothing is accepted that
-//!   is not in the file. While the undo itself fails, every new message is
-//!   refused; once there is room again, appending resumes. Should the
-//!   process die first, the partial record is skipped at the next start;
+//! - a write that fails (full disk, I/O error) is undone and reported:
+//!   nothing is accepted that is not in the file; while the undo itself
+//!   fails, every new message is refused;
 //! - ids are `u64` and never wrap: when they run out, messages are refused
 //!   ([`JournalError::IdsExhausted`]). A journal that owes nothing when
 //!   opened goes on from a random id (below 2^32): a message's id is its
-//!   publication number on the wire (see [`crate::identity`]).
+//!   publication number on the wire (see [`crate::identity`]);
+//! - damage between good records is left in place (the file is never cut
+//!   behind a good record) and skipped again at the next start.
 //!
 //! A removed record lost to damage makes its message owed again: it is sent
 //! once more (a duplicate, never a loss). When removed records dominate, the
-//! file is rewritten with the live records only (to a temporary file,
-//! synced, then renamed over the journal). Journals of the first format
-//! (`GOBYJNL1`, no sync words) are read and rewritten in this one. New
-//! files are created with mode 0600 (on Unix).
+//! file is rewritten with the live records only. Journals of the first
+//! format (`GOBYJNL1`: the same framing without sync words, replayed up to
+//! the first bad record) are read and rewritten in this one.
 
 use std::collections::BTreeMap;
-use std::fs::{File, OpenOptions};
-use std::io::{self, Read, Seek, SeekFrom, Write};
+use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use crc::{Crc, CRC_32_ISO_HDLC};
-
 use crate::clock::Micros;
+use crate::record_log::{self, LogError, MemoryFile, RecordLog, FRAMING, JOURNAL, MAX_PAYLOAD};
 
-/// First bytes of a journal file (format version 2).
-const MAGIC: &[u8; 8] = b"GOBYJNL2";
+pub use crate::record_log::LogFile as JournalFile;
+
 /// First bytes of a journal of the first format (no sync words).
 const MAGIC_V1: &[u8; 8] = b"GOBYJNL1";
-/// First bytes of every record (format version 2).
-const SYNC: [u8; 4] = [0xA7, 0x47, 0x4A, 0x52];
 /// Kind byte of an accepted record.
 const KIND_ACCEPTED: u8 = 1;
 /// Kind byte of a removed record.
 const KIND_REMOVED: u8 = 2;
-/// Largest payload a record may have; a length above it marks damage.
-const MAX_PAYLOAD: usize = 16 * 1024 * 1024;
-/// Bytes of record framing (sync word, length and CRC).
-const FRAMING: usize = 12;
 /// The journal is compacted when it is larger than this and at least half
 /// of it is dead.
 const COMPACT_MIN_BYTES: u64 = 1024 * 1024;
-
-const CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 
 /// Identifier of a journaled message, unique within its journal.
 pub type EntryId = u64;
@@ -105,7 +87,7 @@ pub enum JournalError {
         /// The journal file.
         path: PathBuf,
         /// The I/O error.
-        source: io::Error,
+        source: std::io::Error,
     },
     /// The file is not a journal (its first bytes are not the magic string).
     #[error("{0} is not a goby journal (unknown header); refusing to overwrite it")]
@@ -121,83 +103,27 @@ pub enum JournalError {
     IdsExhausted(PathBuf),
 }
 
-/// The file under a journal: the few operations the journal needs, so that
-/// faults (a full disk, failing writes) can be injected in tests. Implemented
-/// for [`File`].
-pub trait JournalFile: Send + std::fmt::Debug {
-    /// The whole content.
-    fn read_all(&mut self) -> io::Result<Vec<u8>>;
-    /// Writes `bytes` at `offset`; on error, a prefix may have been written.
-    fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()>;
-    /// Cuts or extends the file to `len` bytes.
-    fn set_len(&mut self, len: u64) -> io::Result<()>;
-    /// Waits until the content is on disk.
-    fn sync(&mut self) -> io::Result<()>;
-    /// A second handle on the same file whose `sync_data` makes everything
-    /// written before the call durable.
-    fn sync_handle(&self) -> io::Result<File>;
-    /// Points at the file now at `path` (after the journal was rewritten
-    /// and renamed over it).
-    fn reopen(&mut self, path: &Path) -> io::Result<()>;
-}
-
-impl JournalFile for File {
-    fn read_all(&mut self) -> io::Result<Vec<u8>> {
-        let mut bytes = Vec::new();
-        self.seek(SeekFrom::Start(0))?;
-        self.read_to_end(&mut bytes)?;
-        Ok(bytes)
+impl JournalError {
+    fn of(path: &Path, e: impl Into<LogError>) -> Self {
+        match e.into() {
+            LogError::Io(source) => Self::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+            LogError::NotOurs(_) => Self::NotAJournal(path.to_path_buf()),
+            LogError::TooLarge(n) => Self::MessageTooLarge(n),
+        }
     }
-
-    fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()> {
-        self.seek(SeekFrom::Start(offset))?;
-        self.write_all(bytes)
-    }
-
-    fn set_len(&mut self, len: u64) -> io::Result<()> {
-        File::set_len(self, len)
-    }
-
-    fn sync(&mut self) -> io::Result<()> {
-        self.sync_data()
-    }
-
-    fn sync_handle(&self) -> io::Result<File> {
-        self.try_clone()
-    }
-
-    fn reopen(&mut self, path: &Path) -> io::Result<()> {
-        *self = OpenOptions::new().read(true).write(true).open(path)?;
-        Ok(())
-    }
-}
-
-/// Options that create files with mode 0600 (on Unix).
-fn private_file_options() -> OpenOptions {
-    #[allow(unused_mut)]
-    let mut options = OpenOptions::new();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        options.mode(0o600);
-    }
-    options
 }
 
 /// An open journal file.
 #[derive(Debug)]
 pub struct Journal {
-    path: PathBuf,
-    file: Box<dyn JournalFile>,
+    log: RecordLog,
     /// Id of the next message; `None` once every id was used.
     next_id: Option<EntryId>,
     /// Live entries by id (kept for compaction).
     live: BTreeMap<EntryId, JournalEntry>,
-    /// Length of the file up to the end of its last whole record.
-    len: u64,
-    /// A failed write may have left bytes after `len`: cut them before the
-    /// next append.
-    dirty: bool,
     /// Bytes of live accepted records.
     live_bytes: u64,
 }
@@ -206,17 +132,9 @@ impl Journal {
     /// Opens (or creates, mode 0600) the journal at `path` and replays it.
     pub fn open(path: impl AsRef<Path>) -> Result<(Self, Replay), JournalError> {
         let path = path.as_ref();
-        let file = private_file_options()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(path)
-            .map_err(|source| JournalError::Io {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        Self::open_with(path, file)
+        let log =
+            RecordLog::create_or_open(path, JOURNAL).map_err(|e| JournalError::of(path, e))?;
+        Self::open_log(log)
     }
 
     /// Replays the journal held by `file` (named `path` in errors, and
@@ -225,18 +143,35 @@ impl Journal {
         path: impl AsRef<Path>,
         file: impl JournalFile + 'static,
     ) -> Result<(Self, Replay), JournalError> {
-        let path = path.as_ref().to_path_buf();
-        let mut file: Box<dyn JournalFile> = Box::new(file);
-        let io_err = |source| JournalError::Io {
-            path: path.clone(),
-            source,
+        Self::open_log(RecordLog::with_file(path, JOURNAL, file))
+    }
+
+    fn open_log(mut log: RecordLog) -> Result<(Self, Replay), JournalError> {
+        let path = log.path().to_path_buf();
+        let bytes = log.read_all().map_err(|e| JournalError::of(&path, e))?;
+        let (records, discarded_bytes, legacy) = if bytes.starts_with(MAGIC_V1) {
+            // The first format: records without sync words, replayed up to
+            // the first bad one, then rewritten in this format.
+            let mut records = Vec::new();
+            let mut at = MAGIC_V1.len();
+            while let Some(record) = record_log::unsynced_record_at(&bytes, at)
+                .and_then(|(payload, next)| Some((parse_record(payload)?, next)))
+            {
+                records.push(record.0);
+                at = record.1;
+            }
+            (records, (bytes.len() - at) as u64, true)
+        } else {
+            let replayed = log
+                .replay(&bytes, parse_record)
+                .map_err(|e| JournalError::of(&path, e))?;
+            (replayed.records, replayed.discarded_bytes, false)
         };
-        let bytes = file.read_all().map_err(io_err)?;
+        drop(bytes);
 
         let mut live = BTreeMap::new();
         let mut next_id = Some(0);
-        let mut discarded_bytes = 0;
-        let mut apply = |record: Record| {
+        for record in records {
             let id = match record {
                 Record::Accepted(entry) => {
                     let id = entry.id;
@@ -252,81 +187,15 @@ impl Journal {
                 (Some(n), Some(after)) => Some(n.max(after)),
                 _ => None,
             };
-        };
-        let mut rewrite = false;
-        let valid_len = if bytes.len() < MAGIC.len() && MAGIC.starts_with(&bytes) {
-            // New, or torn while writing the header: nothing was journaled.
-            discarded_bytes = bytes.len() as u64;
-            file.set_len(0).map_err(io_err)?;
-            file.write_at(0, MAGIC).map_err(io_err)?;
-            file.sync().map_err(io_err)?;
-            sync_parent(&path).map_err(io_err)?;
-            MAGIC.len()
-        } else if bytes.starts_with(MAGIC_V1) {
-            // The first format: records without sync words, replayed up to
-            // the first bad one, then rewritten in this format.
-            let mut at = MAGIC_V1.len();
-            while let Some((record, next)) = read_payload(&bytes, at, false) {
-                apply(record);
-                at = next;
-            }
-            discarded_bytes = (bytes.len() - at) as u64;
-            rewrite = true;
-            bytes.len()
-        } else {
-            let header_ok = bytes.starts_with(MAGIC);
-            if !header_ok {
-                if !looks_like_header(&bytes) {
-                    return Err(JournalError::NotAJournal(path));
-                }
-                // A damaged header on our records: put it right in place.
-                discarded_bytes += MAGIC.len() as u64;
-                file.write_at(0, MAGIC).map_err(io_err)?;
-            }
-            let mut at = MAGIC.len();
-            let mut end = at;
-            // Bytes skipped since the last good record: discarded once a
-            // good record follows them, else part of the tail.
-            let mut skipped = 0;
-            while at < bytes.len() {
-                match read_payload(&bytes, at, true) {
-                    Some((record, next)) => {
-                        apply(record);
-                        discarded_bytes += skipped;
-                        skipped = 0;
-                        at = next;
-                        end = next;
-                    }
-                    None => match find_sync(&bytes, at + 1) {
-                        Some(next) => {
-                            skipped += (next - at) as u64;
-                            at = next;
-                        }
-                        None => break,
-                    },
-                }
-            }
-            if end < bytes.len() {
-                // A torn or damaged tail, with no good record after it.
-                discarded_bytes += (bytes.len() - end) as u64;
-                file.set_len(end as u64).map_err(io_err)?;
-            }
-            if !header_ok || end < bytes.len() {
-                file.sync().map_err(io_err)?;
-            }
-            end
-        };
+        }
         let live_bytes = live.values().map(|e| accepted_size(e) as u64).sum();
         let mut journal = Self {
-            path,
-            file,
+            log,
             next_id,
             live,
-            len: valid_len as u64,
-            dirty: false,
             live_bytes,
         };
-        if rewrite {
+        if legacy {
             journal.compact()?;
         }
         let replay = Replay {
@@ -338,7 +207,7 @@ impl Journal {
 
     /// Path of the journal file.
     pub fn path(&self) -> &Path {
-        &self.path
+        self.log.path()
     }
 
     /// Number of messages still owed.
@@ -400,7 +269,7 @@ impl Journal {
         }
         let id = self
             .next_id
-            .ok_or_else(|| JournalError::IdsExhausted(self.path.clone()))?;
+            .ok_or_else(|| JournalError::IdsExhausted(self.path().to_path_buf()))?;
         let entry = JournalEntry {
             id,
             time,
@@ -410,30 +279,30 @@ impl Journal {
         if accepted_size(&entry) - FRAMING > MAX_PAYLOAD {
             return Err(JournalError::MessageTooLarge(message.len()));
         }
-        let record = encode_accepted(&entry);
-        self.append(&record)?;
+        let written = self
+            .log
+            .append(&accepted_payload(&entry))
+            .map_err(|e| JournalError::of(self.log.path(), e))?;
         self.next_id = id.checked_add(1);
-        self.live_bytes += record.len() as u64;
+        self.live_bytes += written;
         self.live.insert(id, entry);
         Ok(id)
     }
 
     /// Waits until everything appended so far is on disk.
     pub fn sync(&mut self) -> Result<(), JournalError> {
-        self.file.sync().map_err(|source| JournalError::Io {
-            path: self.path.clone(),
-            source,
-        })
+        self.log
+            .sync()
+            .map_err(|e| JournalError::of(self.log.path(), e))
     }
 
     /// A second handle on the journal file whose `sync_data` makes
     /// everything appended before the call durable (for syncing on another
     /// thread).
     pub fn sync_handle(&self) -> Result<File, JournalError> {
-        self.file.sync_handle().map_err(|source| JournalError::Io {
-            path: self.path.clone(),
-            source,
-        })
+        self.log
+            .sync_handle()
+            .map_err(|e| JournalError::of(self.log.path(), e))
     }
 
     /// Records that a message left its queue for good (acknowledged,
@@ -445,8 +314,11 @@ impl Journal {
             return Ok(());
         };
         self.live_bytes -= accepted_size(&entry) as u64;
-        self.append(&encode_removed(id))?;
-        if self.len > COMPACT_MIN_BYTES && self.live_bytes * 2 < self.len {
+        self.log
+            .append(&removed_payload(id))
+            .map_err(|e| JournalError::of(self.log.path(), e))?;
+        let len = self.log.file_len();
+        if len > COMPACT_MIN_BYTES && self.live_bytes * 2 < len {
             self.compact()?;
         }
         Ok(())
@@ -454,72 +326,18 @@ impl Journal {
 
     /// Rewrites the file with the live records only.
     pub fn compact(&mut self) -> Result<(), JournalError> {
-        let io_err = |source| JournalError::Io {
-            path: self.path.clone(),
-            source,
-        };
-        let mut tmp_name = self.path.as_os_str().to_owned();
-        tmp_name.push(".compact");
-        let tmp_path = PathBuf::from(tmp_name);
-        let mut bytes = MAGIC.to_vec();
-        for entry in self.live.values() {
-            bytes.extend_from_slice(&encode_accepted(entry));
-        }
         // Keep the id sequence going across compactions even if the newest
         // entries were removed: a removed record of the last id preserves it.
         let last = match self.next_id {
             Some(next) => next.checked_sub(1),
             None => Some(EntryId::MAX),
         };
-        if let Some(last) = last {
-            if !self.live.contains_key(&last) {
-                bytes.extend_from_slice(&encode_removed(last));
-            }
-        }
-        let mut tmp = private_file_options()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&tmp_path)
-            .map_err(io_err)?;
-        tmp.write_all(&bytes).map_err(io_err)?;
-        tmp.sync_all().map_err(io_err)?;
-        drop(tmp);
-        std::fs::rename(&tmp_path, &self.path).map_err(io_err)?;
-        sync_parent(&self.path).map_err(io_err)?;
-        self.file.reopen(&self.path).map_err(io_err)?;
-        self.len = bytes.len() as u64;
-        self.dirty = false;
-        Ok(())
-    }
-
-    /// Appends whole records after the last whole one. A failed write is
-    /// undone (the file cut back); while that fails too, every append is
-    /// refused.
-    fn append(&mut self, record: &[u8]) -> Result<(), JournalError> {
-        let io_err = |source| JournalError::Io {
-            path: self.path.clone(),
-            source,
-        };
-        if self.dirty {
-            self.file.set_len(self.len).map_err(io_err)?;
-            self.dirty = false;
-        }
-        if let Err(e) = self.file.write_at(self.len, record) {
-            self.dirty = self.file.set_len(self.len).is_err();
-            return Err(io_err(e));
-        }
-        self.len += record.len() as u64;
-        Ok(())
-    }
-}
-
-/// Syncs the directory holding `path`, so that a created or renamed file
-/// survives power loss.
-fn sync_parent(path: &Path) -> io::Result<()> {
-    match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => File::open(dir)?.sync_all(),
-        _ => File::open(".")?.sync_all(),
+        let last_removed = last
+            .filter(|last| !self.live.contains_key(last))
+            .map(removed_payload);
+        let payloads = self.live.values().map(accepted_payload).chain(last_removed);
+        let rewritten = self.log.rewrite(payloads);
+        rewritten.map_err(|e| JournalError::of(self.log.path(), e))
     }
 }
 
@@ -528,24 +346,11 @@ enum Record {
     Removed(EntryId),
 }
 
-fn frame(payload: &[u8]) -> Vec<u8> {
-    let len = (payload.len() as u32).to_le_bytes();
-    let mut digest = CRC32.digest();
-    digest.update(&len);
-    digest.update(payload);
-    let mut out = Vec::with_capacity(FRAMING + payload.len());
-    out.extend_from_slice(&SYNC);
-    out.extend_from_slice(&len);
-    out.extend_from_slice(&digest.finalize().to_le_bytes());
-    out.extend_from_slice(payload);
-    out
-}
-
 fn accepted_size(entry: &JournalEntry) -> usize {
     FRAMING + 1 + 8 + 8 + 2 + entry.message_name.len() + entry.message.len()
 }
 
-fn encode_accepted(entry: &JournalEntry) -> Vec<u8> {
+fn accepted_payload(entry: &JournalEntry) -> Vec<u8> {
     let mut payload = Vec::with_capacity(accepted_size(entry) - FRAMING);
     payload.push(KIND_ACCEPTED);
     payload.extend_from_slice(&entry.id.to_le_bytes());
@@ -553,14 +358,14 @@ fn encode_accepted(entry: &JournalEntry) -> Vec<u8> {
     payload.extend_from_slice(&(entry.message_name.len() as u16).to_le_bytes());
     payload.extend_from_slice(entry.message_name.as_bytes());
     payload.extend_from_slice(&entry.message);
-    frame(&payload)
+    payload
 }
 
-fn encode_removed(id: EntryId) -> Vec<u8> {
+fn removed_payload(id: EntryId) -> Vec<u8> {
     let mut payload = Vec::with_capacity(9);
     payload.push(KIND_REMOVED);
     payload.extend_from_slice(&id.to_le_bytes());
-    frame(&payload)
+    payload
 }
 
 /// Little-endian integer of `N` bytes at `at`, if there are that many.
@@ -568,88 +373,25 @@ fn le<const N: usize>(bytes: &[u8], at: usize) -> Option<[u8; N]> {
     bytes.get(at..at.checked_add(N)?)?.try_into().ok()
 }
 
-/// Offset of the first sync word at or after `from`.
-fn find_sync(bytes: &[u8], from: usize) -> Option<usize> {
-    bytes
-        .get(from..)?
-        .windows(SYNC.len())
-        .position(|w| w == SYNC)
-        .map(|p| from + p)
-}
-
-/// Whether a file that does not start with the magic string is a journal
-/// whose header was damaged: its first bytes differ from the magic string
-/// in at most two bits, and it holds nothing or at least one good record.
-fn looks_like_header(bytes: &[u8]) -> bool {
-    let close = bytes.len() >= MAGIC.len()
-        && MAGIC
-            .iter()
-            .zip(bytes)
-            .map(|(a, b)| (a ^ b).count_ones())
-            .sum::<u32>()
-            <= 2;
-    if !close {
-        return false;
-    }
-    let mut at = MAGIC.len();
-    if at == bytes.len() {
-        return true;
-    }
-    while let Some(found) = find_sync(bytes, at) {
-        if read_payload(bytes, found, true).is_some() {
-            return true;
-        }
-        at = found + 1;
-    }
-    false
-}
-
-/// The record at `at` and the offset after it; `None` at the end of the
-/// file, or where the record is torn or damaged. `synced`: records start
-/// with the sync word (format 2), else not (format 1).
-fn read_payload(bytes: &[u8], at: usize, synced: bool) -> Option<(Record, usize)> {
-    let at = if synced {
-        if le::<4>(bytes, at)? != SYNC {
-            return None;
-        }
-        at + SYNC.len()
-    } else {
-        at
-    };
-    let len_bytes = le::<4>(bytes, at)?;
-    let len = u32::from_le_bytes(len_bytes) as usize;
-    if len > MAX_PAYLOAD {
-        return None;
-    }
-    let crc = u32::from_le_bytes(le::<4>(bytes, at + 4)?);
-    let start = at + 8;
-    let payload = bytes.get(start..start.checked_add(len)?)?;
-    let mut digest = CRC32.digest();
-    digest.update(&len_bytes);
-    digest.update(payload);
-    if digest.finalize() != crc {
-        return None;
-    }
-    let next = start + len;
+/// The record a payload holds; `None` for one the journal did not write
+/// (counted as damage).
+fn parse_record(payload: &[u8]) -> Option<Record> {
     let (&kind, rest) = payload.split_first()?;
     let id = u64::from_le_bytes(le::<8>(rest, 0)?);
     match kind {
-        KIND_REMOVED if rest.len() == 8 => Some((Record::Removed(id), next)),
+        KIND_REMOVED if rest.len() == 8 => Some(Record::Removed(id)),
         KIND_ACCEPTED => {
             let time = i64::from_le_bytes(le::<8>(rest, 8)?);
             let name_len = u16::from_le_bytes(le::<2>(rest, 16)?) as usize;
             let name = rest.get(18..18 + name_len)?;
             let message_name = String::from_utf8(name.to_vec()).ok()?;
             let message = rest.get(18 + name_len..)?.to_vec();
-            Some((
-                Record::Accepted(JournalEntry {
-                    id,
-                    time,
-                    message_name,
-                    message,
-                }),
-                next,
-            ))
+            Some(Record::Accepted(JournalEntry {
+                id,
+                time,
+                message_name,
+                message,
+            }))
         }
         _ => None,
     }
@@ -659,57 +401,7 @@ fn read_payload(bytes: &[u8], at: usize, synced: bool) -> Option<(Record, usize)
 /// touching any file: for fuzzing and inspection. `None` when the bytes are
 /// not a journal.
 pub fn replay_bytes(bytes: &[u8]) -> Option<Replay> {
-    #[derive(Debug)]
-    struct Memory(Vec<u8>);
-    impl JournalFile for Memory {
-        fn read_all(&mut self) -> io::Result<Vec<u8>> {
-            Ok(self.0.clone())
-        }
-        fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()> {
-            let offset = usize::try_from(offset).map_err(io::Error::other)?;
-            let end = offset + bytes.len();
-            if self.0.len() < end {
-                self.0.resize(end, 0);
-            }
-            self.0[offset..end].copy_from_slice(bytes);
-            Ok(())
-        }
-        fn set_len(&mut self, len: u64) -> io::Result<()> {
-            self.0
-                .resize(usize::try_from(len).map_err(io::Error::other)?, 0);
-            Ok(())
-        }
-        fn sync(&mut self) -> io::Result<()> {
-            Ok(())
-        }
-        fn sync_handle(&self) -> io::Result<File> {
-            Err(io::Error::other("an in-memory journal has no file"))
-        }
-        fn reopen(&mut self, _: &Path) -> io::Result<()> {
-            Err(io::Error::other("an in-memory journal has no file"))
-        }
-    }
-    if bytes.starts_with(MAGIC_V1) {
-        // Replaying the first format rewrites the file; read it only.
-        let mut entries = BTreeMap::new();
-        let mut at = MAGIC_V1.len();
-        while let Some((record, next)) = read_payload(bytes, at, false) {
-            match record {
-                Record::Accepted(e) => {
-                    entries.insert(e.id, e);
-                }
-                Record::Removed(id) => {
-                    entries.remove(&id);
-                }
-            }
-            at = next;
-        }
-        return Some(Replay {
-            entries: entries.into_values().collect(),
-            discarded_bytes: (bytes.len() - at) as u64,
-        });
-    }
-    Journal::open_with("(memory)", Memory(bytes.to_vec()))
+    Journal::open_with("(memory)", MemoryFile::new(bytes.to_vec()))
         .ok()
         .map(|(_, replay)| replay)
 }
@@ -717,6 +409,19 @@ pub fn replay_bytes(bytes: &[u8]) -> Option<Replay> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::fs::OpenOptions;
+    use std::io;
+
+    const MAGIC: &[u8; 8] = JOURNAL.magic;
+    const SYNC: [u8; 4] = JOURNAL.sync;
+
+    fn encode_accepted(entry: &JournalEntry) -> Vec<u8> {
+        JOURNAL.frame(&accepted_payload(entry))
+    }
+
+    fn encode_removed(id: EntryId) -> Vec<u8> {
+        JOURNAL.frame(&removed_payload(id))
+    }
 
     struct TempDir(PathBuf);
 

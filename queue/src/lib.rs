@@ -61,6 +61,7 @@ pub mod journal;
 pub mod manager;
 pub mod market;
 pub mod queue;
+pub mod record_log;
 mod role;
 
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
