@@ -562,4 +562,181 @@ mod tests {
         assert!(v.get("link").is_none(), "{v}");
         assert_eq!(v["recovered"], true);
     }
+
+    /// One event of every kind the core sends, and one reply of every
+    /// kind: the exhaustive matches make a new kind fail to compile here
+    /// until it has a sample (and so a check against the README).
+    fn one_of_each() -> Vec<Value> {
+        let command = protos::goby::example::Command::default().transcode_to_dynamic();
+        let transmission = ModemTransmission {
+            src: Some(1),
+            frame: vec![vec![1]],
+            ..Default::default()
+        };
+        let queue_events = [
+            QueueEvent::Sent {
+                message: command.clone(),
+                id: 1,
+                dccl_id: 125,
+                frame: 0,
+                awaiting_ack: true,
+            },
+            QueueEvent::Acked {
+                message: command.clone(),
+                id: Some(1),
+                dccl_id: 125,
+                frame: 0,
+                by: 2,
+            },
+            QueueEvent::Expired {
+                message: command.clone(),
+                id: 1,
+                dccl_id: 125,
+            },
+            QueueEvent::Dropped {
+                message: command.clone(),
+                id: 1,
+                dccl_id: 125,
+            },
+            QueueEvent::QueueSize {
+                dccl_id: 125,
+                size: 3,
+            },
+        ];
+        for e in &queue_events {
+            match e {
+                QueueEvent::Received(_)
+                | QueueEvent::Sent { .. }
+                | QueueEvent::Acked { .. }
+                | QueueEvent::Expired { .. }
+                | QueueEvent::Dropped { .. }
+                | QueueEvent::QueueSize { .. }
+                | QueueEvent::OnDemandRejected { .. } => {}
+            }
+        }
+        let modem_events = [
+            ModemEvent::Raw(modemdriver::RawMessage {
+                direction: RawDirection::Incoming,
+                bytes: b"$CARXD".to_vec(),
+                peer: None,
+            }),
+            ModemEvent::Received {
+                transmission: transmission.clone(),
+                time: 1,
+            },
+            ModemEvent::Transmitted {
+                transmission: transmission.clone(),
+                outcome: TransmitOutcome::Failed("x".into()),
+            },
+            ModemEvent::SlotStart {
+                slot: transmission.clone(),
+                initiated: None,
+            },
+            ModemEvent::CycleUpdate {
+                modem_id: 3,
+                joined: true,
+            },
+            ModemEvent::Status(modemdriver::DriverStatus::Ready),
+            ModemEvent::Specific(command.clone()),
+        ];
+        for e in &modem_events {
+            match e {
+                ModemEvent::Raw(_)
+                | ModemEvent::Received { .. }
+                | ModemEvent::Transmitted { .. }
+                | ModemEvent::SlotStart { .. }
+                | ModemEvent::CycleUpdate { .. }
+                | ModemEvent::Status(_)
+                | ModemEvent::Specific(_) => {}
+            }
+        }
+        let received = queue::ReceivedMessage {
+            message: command.clone(),
+            dccl_id: 125,
+            src: 1,
+            dest: 2,
+            time: None,
+            bytes: Vec::new(),
+            identity: None,
+        };
+        let mut events = vec![DaemonEvent::Received {
+            received,
+            reception: Reception {
+                link: Some(crate::event::reception_summary(&transmission, 1)),
+                recovered: true,
+            },
+        }];
+        events.extend(queue_events.into_iter().map(|event| DaemonEvent::Queue {
+            event,
+            entry: Some(1),
+        }));
+        events.extend(modem_events.into_iter().map(DaemonEvent::Modem));
+        for e in &events {
+            match e {
+                DaemonEvent::Received { .. }
+                | DaemonEvent::Queue { .. }
+                | DaemonEvent::Modem(_) => {}
+            }
+        }
+        let mut lines: Vec<String> = events
+            .iter()
+            .filter_map(|e| event_line(e, |_| "goby.example.Command".into()))
+            .collect();
+        lines.push(reply_line(&Ok(AcceptedMessage {
+            name: "goby.example.Command".into(),
+            id: Some(1),
+            dropped: vec![(Some(0), command)],
+            changes: Vec::new(),
+        })));
+        lines.push(subscribed_line(&[Topic::Ack]));
+        lines.push(error_line("bad"));
+        lines.push(lost_line(2));
+        lines
+            .iter()
+            .map(|l| serde_json::from_str(l).expect("a JSON line"))
+            .collect()
+    }
+
+    /// The README's table of the JSON interface is the protocol's
+    /// reference: every line kind the daemon renders is there, with each of
+    /// its keys.
+    #[test]
+    fn every_line_kind_and_key_is_in_the_readmes_reference() {
+        let readme = include_str!("../../README.md");
+        let start = readme
+            .find("### The JSON interface")
+            .expect("the JSON interface section");
+        let section = &readme[start..];
+        let section = &section[..section.find("\n### ").unwrap_or(section.len())];
+        for line in one_of_each() {
+            let Value::Object(map) = &line else {
+                panic!("{line} is not an object");
+            };
+            // The row of the table documenting this kind of line: the
+            // event kind, or a reply's distinguishing key.
+            let kind = match map.get("event").and_then(Value::as_str) {
+                Some(kind) => format!(r#""event": "{kind}""#),
+                None => {
+                    let key = ["accepted", "subscribed", "error"]
+                        .into_iter()
+                        .find(|k| map.contains_key(*k))
+                        .unwrap_or_else(|| panic!("{line}: neither an event nor a known reply"));
+                    format!(r#""{key}""#)
+                }
+            };
+            let row = section
+                .lines()
+                .find(|r| r.starts_with('|') && r.contains(&kind))
+                .unwrap_or_else(|| {
+                    panic!("no row of the README's JSON reference shows {kind}: {line}")
+                });
+            for key in map.keys() {
+                let quoted = format!(r#""{key}""#);
+                assert!(
+                    row.contains(&quoted) || section.contains(&format!("`{key}`")),
+                    "the README's JSON reference does not name key {quoted} of {line}"
+                );
+            }
+        }
+    }
 }
