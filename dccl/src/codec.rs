@@ -201,6 +201,14 @@ impl Codec {
         Ok(names)
     }
 
+    /// The arithmetic model registered under `name`, as it was given.
+    pub fn arithmetic_model(&self, name: &str) -> Option<ArithmeticModel> {
+        self.registry
+            .arithmetic_models()
+            .get(name)
+            .map(|m| m.user_model().clone())
+    }
+
     /// Validates and loads a message type. Errors name the message and the field.
     pub fn load(&mut self, desc: &MessageDescriptor) -> Result<()> {
         let loaded = self.build(desc)?;

@@ -38,7 +38,7 @@ impl CodecRegistry {
     }
 
     /// A registry holding every built-in codec (the arithmetic codec takes
-    /// its models from [`CodecRegistry::arithmetic_models`]).
+    /// its models from the codec: [`Codec::set_arithmetic_model`](crate::Codec::set_arithmetic_model)).
     pub fn with_builtin() -> Self {
         let mut r = Self::empty();
         crate::codecs::register_builtin(&mut r);
@@ -49,7 +49,7 @@ impl CodecRegistry {
 
     /// The models of the built-in arithmetic codec (shared by the clones of
     /// this registry and by the codecs built from it).
-    pub fn arithmetic_models(&self) -> &Arc<ArithmeticModels> {
+    pub(crate) fn arithmetic_models(&self) -> &Arc<ArithmeticModels> {
         &self.arithmetic_models
     }
 

@@ -6,8 +6,8 @@
 
 use std::path::PathBuf;
 
-use dccl::codecs::arithmetic::ArithmeticModel;
 use dccl::prost_reflect::{DescriptorPool, DynamicMessage, Value};
+use dccl::ArithmeticModel;
 use dccl::Codec;
 
 fn arithmetic_dir() -> PathBuf {

@@ -905,8 +905,7 @@ fn sizes_worked_out_by_hand() {
 /// one that decodes a value of the wrong type gives an error, not a panic.
 #[test]
 fn user_codec_by_name_and_wrong_type_is_an_error() {
-    use dccl::bits::{BitReader, BitWriter};
-    use dccl::field_codec::{DecodeContext, EncodeContext};
+    use dccl::field::{BitReader, BitWriter, DecodeContext, EncodeContext};
     use dccl::{CodecError, CodecRegistry, FieldCodec, FieldSpec};
     use std::sync::Arc;
 

@@ -440,8 +440,7 @@ impl CumulativeFrequencies for FrequencyTable {
 /// 32-bit code values, ended as libdccl ends it).
 ///
 /// ```
-/// use dccl::bits::{BitReader, BitWriter};
-/// use dccl::codecs::arithmetic::{ArithmeticDecoder, ArithmeticEncoder, FrequencyTable};
+/// use dccl::field::{ArithmeticDecoder, ArithmeticEncoder, BitReader, BitWriter, FrequencyTable};
 ///
 /// let table = FrequencyTable::new(&[1, 6, 1])?;
 /// let mut encoder = ArithmeticEncoder::new();
@@ -653,11 +652,6 @@ pub struct ArithmeticModels {
 }
 
 impl ArithmeticModels {
-    /// An empty set.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
     /// Validates and registers (or replaces) a model under its name.
     pub fn set(&self, model: ArithmeticModel) -> Result<(), CodecError> {
         let model = Model::new(model)?;
@@ -676,19 +670,6 @@ impl ArithmeticModels {
             .unwrap_or_else(PoisonError::into_inner)
             .get(name)
             .cloned()
-    }
-
-    /// Names of the registered models, sorted.
-    pub fn names(&self) -> Vec<String> {
-        let mut v: Vec<String> = self
-            .models
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .keys()
-            .cloned()
-            .collect();
-        v.sort();
-        v
     }
 }
 

@@ -120,16 +120,6 @@ impl DeltaCodec {
         })))
     }
 
-    /// Bits of the key (first sample).
-    pub fn key_bits(&self) -> u32 {
-        self.key.bits
-    }
-
-    /// Bits of each following sample.
-    pub fn delta_bits(&self) -> u32 {
-        self.delta_bits
-    }
-
     fn to_f64(&self, v: &Value) -> Result<f64, CodecError> {
         let w = self
             .kind
