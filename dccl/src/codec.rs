@@ -536,8 +536,9 @@ impl Codec {
         Ok(())
     }
 
-    /// Encodes a prost-generated message.
-    pub fn encode_message<T: ReflectMessage>(&self, msg: &T) -> Result<Vec<u8>> {
+    /// Encodes a prost-generated struct (deriving `ReflectMessage`) of a
+    /// loaded type; [`Codec::decode_typed`] decodes it back.
+    pub fn encode_typed<T: ReflectMessage>(&self, msg: &T) -> Result<Vec<u8>> {
         self.encode(&msg.transcode_to_dynamic())
     }
 
@@ -575,33 +576,44 @@ impl Codec {
         Ok(out)
     }
 
-    /// Reads the DCCL id at the start of `bytes`.
-    pub fn id(&self, bytes: &[u8]) -> Result<u32> {
+    /// Reads the DCCL id at the start of `bytes` (whether a type with that
+    /// id is loaded or not).
+    pub fn read_id(&self, bytes: &[u8]) -> Result<u32> {
         identifier::decode(&mut BitReader::new(bytes)).map_err(|e| Error::Decode {
             location: Default::default(),
             reason: format!("cannot read the DCCL id: {}", e.reason),
         })
     }
 
-    /// Decodes one message (its type found by its DCCL id). Bytes after the
-    /// message are ignored.
+    /// Decodes the message at the start of `bytes`, its type found by its
+    /// DCCL id. Bytes after the message are ignored
+    /// ([`Codec::decode_with_len`] tells where it ends, [`Codec::decode_all`]
+    /// decodes them too).
     pub fn decode(&self, bytes: &[u8]) -> Result<DynamicMessage> {
-        Ok(self.decode_prefix(bytes)?.0)
+        Ok(self.decode_with_len(bytes)?.0)
     }
 
-    /// Decodes the first message in `bytes`; returns it with the number of bytes it used.
-    pub fn decode_prefix(&self, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
-        let id = self.id(bytes)?;
+    /// Decodes the message at the start of `bytes` (its type found by its
+    /// DCCL id) and returns it with its length: the number of bytes it took,
+    /// where the next message of a frame starts.
+    pub fn decode_with_len(&self, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
+        let id = self.read_id(bytes)?;
         let loaded = self.by_id.get(&id).ok_or(Error::UnknownId(id))?;
         self.decode_loaded(loaded, bytes)
     }
 
-    /// Decodes `bytes` as a message of a given loaded type (needed for
-    /// types with `omit_id`).
-    pub fn decode_as(&self, full_name: &str, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
+    /// Decodes the message at the start of `bytes` as one of the loaded type
+    /// `full_name` (the only way to decode types with `omit_id`; for other
+    /// types the id read must be that type's) and returns it with its
+    /// length in bytes, as [`Codec::decode_with_len`] does.
+    pub fn decode_as_with_len(
+        &self,
+        full_name: &str,
+        bytes: &[u8],
+    ) -> Result<(DynamicMessage, usize)> {
         let loaded = self.get(full_name)?;
         if !loaded.omit_id {
-            let id = self.id(bytes)?;
+            let id = self.read_id(bytes)?;
             if id != loaded.id {
                 return Err(Error::Decode {
                     location: crate::error::Location {
@@ -616,16 +628,16 @@ impl Codec {
     }
 
     /// Decodes every message of a byte string holding several concatenated
-    /// messages. Bytes that are not a message are an error; after the first
-    /// message the error says at which byte they start and how many messages
-    /// came before.
+    /// messages (a frame), in order. Bytes that are not a message are an
+    /// error; after the first message the error says at which byte they
+    /// start and how many messages came before.
     pub fn decode_all(&self, bytes: &[u8]) -> Result<Vec<DynamicMessage>> {
         let mut out = Vec::new();
         let mut rest = bytes;
         while !rest.is_empty() {
             let offset = bytes.len() - rest.len();
             let (msg, used) = self
-                .decode_prefix(rest)
+                .decode_with_len(rest)
                 .map_err(|e| leftover_error(e, offset, out.len()))?;
             out.push(msg);
             rest = &rest[used.min(rest.len())..];
@@ -636,10 +648,12 @@ impl Codec {
         Ok(out)
     }
 
-    /// Decodes into a prost-generated struct.
-    pub fn decode_message<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
+    /// Decodes the message at the start of `bytes` into the prost-generated
+    /// struct `T` (deriving `ReflectMessage`), as its type: the counterpart
+    /// of [`Codec::encode_typed`].
+    pub fn decode_typed<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
         let wanted = T::default().descriptor();
-        let (msg, _) = self.decode_as(wanted.full_name(), bytes)?;
+        let (msg, _) = self.decode_as_with_len(wanted.full_name(), bytes)?;
         let name = msg.descriptor().full_name().to_string();
         msg.transcode_to::<T>().map_err(|e| Error::Decode {
             location: crate::error::Location {

@@ -126,7 +126,7 @@ impl Codec {
 
     /// DCCL id at the start of encoded bytes.
     fn id_of_bytes(&self, data: &[u8]) -> PyResult<u32> {
-        self.inner.id(data).map_err(to_py)
+        self.inner.read_id(data).map_err(to_py)
     }
 
     /// Encodes the message `name` given as protobuf wire bytes; returns the

@@ -608,7 +608,7 @@ fn compare_decode(
         return;
     };
     let ours = ours
-        .decode_prefix(bytes)
+        .decode_with_len(bytes)
         .map(|(m, used)| (dccl::short_debug_string(&m), used));
     match (theirs[0].as_str(), ours) {
         ("ok", Ok((text, used))) => {
