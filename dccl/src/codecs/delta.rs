@@ -123,7 +123,7 @@ impl DeltaCodec {
     fn to_f64(&self, v: &Value) -> Result<f64, CodecError> {
         let w = self
             .kind
-            .from_value(v)
+            .read_value(v)
             .ok_or_else(|| CodecError::new(format!("value {v:?} does not match the field type")))?;
         Ok(match w {
             WireValue::I32(x) => x as f64,
