@@ -10,6 +10,7 @@ use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
 use crate::changes::ChangeLog;
+use crate::codecs::arithmetic::ArithmeticSession;
 use crate::error::CodecError;
 use crate::registry::CodecRegistry;
 
@@ -27,14 +28,15 @@ pub enum MessagePart {
 pub struct EncodeContext<'a> {
     /// Out-of-range values are errors instead of being encoded as "not present".
     pub strict: bool,
-    /// Only the size is wanted: codecs with state (adaptive models) must
-    /// leave it unchanged.
+    /// Only the size is wanted (or the changes), the bytes are not sent.
     pub dry_run: bool,
     /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
     pub definition_hash: u64,
     /// Where values changed by the codec are recorded, when the caller asked
     /// for them ([`Codec::encode_with_changes`](crate::Codec::encode_with_changes)).
     pub(crate) changes: Option<&'a ChangeLog>,
+    /// The coding codec's arithmetic models and adaptive state.
+    pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
 }
 
 impl EncodeContext<'_> {
@@ -90,11 +92,13 @@ impl EncodeContext<'_> {
 
 /// Settings in force while one message is decoded.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct DecodeContext {
+pub struct DecodeContext<'a> {
     /// Current time in whole seconds since the UNIX epoch (used by the time codec).
     pub now_secs: i64,
     /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
     pub definition_hash: u64,
+    /// The decoding codec's arithmetic models and adaptive state.
+    pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
 }
 
 /// What a factory is told about the field whose codec it creates.

@@ -67,7 +67,7 @@
 //!
 //! The crate root holds what a program embedding DCCL uses: [`Codec`] and
 //! what its methods take and return, the errors, the `.proto` loaders,
-//! [`ArithmeticModel`], and the text form of
+//! [`ArithmeticModel`] and [`ArithmeticState`], and the text form of
 //! messages as libdccl's tools print it ([`short_debug_string`]). Writing a
 //! codec of your own takes the lower-level items of [`field`]: the
 //! [`FieldCodec`] trait, the bit buffers, the encode and decode contexts,
@@ -95,7 +95,7 @@ mod text_format;
 
 pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
-pub use codecs::arithmetic::ArithmeticModel;
+pub use codecs::arithmetic::{ArithmeticModel, ArithmeticState};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources, pool_file_name};
