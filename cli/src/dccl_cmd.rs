@@ -416,7 +416,7 @@ impl Definitions {
                 let has_options = self
                     .pool
                     .get_message_by_name(&skipped.name)
-                    .is_some_and(|d| dccl::options::has_message_options(&d));
+                    .is_some_and(|d| dccl::field::has_message_options(&d));
                 if has_options {
                     meant_for_dccl += 1;
                     writeln!(
@@ -477,7 +477,7 @@ fn parse_message(
 fn format_message(msg: &DynamicMessage, form: OutputForm, prefix: bool) -> Result<String, String> {
     match form {
         OutputForm::Text => {
-            let text = dccl::text_format::short_debug_string(msg);
+            let text = dccl::short_debug_string(msg);
             if prefix {
                 Ok(format!("|{}| {text}", msg.descriptor().full_name()))
             } else {
@@ -729,7 +729,7 @@ pub(crate) fn analyze(
             let hash = codec
                 .hash(name)
                 .map_err(|e| CliError::setup(e.to_string()))?;
-            let hash = dccl::definition_hash::hash_as_string(hash);
+            let hash = format!("{hash:#018x}"); // as libdccl prints it
             if names.len() > 1 {
                 writeln!(stdout, "{name}: {hash}")?;
             } else {

@@ -60,8 +60,8 @@ impl FrameDecoder<'_> {
         while offset < bytes.len() {
             let rest = &bytes[offset..];
             let decoded = match self.as_type {
-                Some(name) => self.codec.decode_as(name, rest),
-                None => self.codec.decode_prefix(rest),
+                Some(name) => self.codec.decode_as_with_len(name, rest),
+                None => self.codec.decode_with_len(rest),
             };
             match decoded {
                 Ok((msg, used)) => {

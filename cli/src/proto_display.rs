@@ -195,10 +195,8 @@ fn default_text(field: &FieldDescriptor, default: &str) -> String {
     match field.kind() {
         Kind::String | Kind::Bytes => byte_text::escape(default.as_bytes()),
         Kind::Double | Kind::Float => match default.parse::<f64>() {
-            Ok(v) if matches!(field.kind(), Kind::Float) => {
-                dccl::text_format::float_to_text(v as f32)
-            }
-            Ok(v) => dccl::text_format::double_to_text(v),
+            Ok(v) if matches!(field.kind(), Kind::Float) => dccl::float_to_text(v as f32),
+            Ok(v) => dccl::double_to_text(v),
             Err(_) => default.to_string(),
         },
         _ => default.to_string(),
@@ -275,7 +273,7 @@ fn option_value(depth: usize, value: &Value, kind: &Kind) -> String {
         Value::Message(m) => {
             let inner = indent(depth + 1);
             let mut text = String::from("{\n");
-            for line in dccl::text_format::debug_string(m).lines() {
+            for line in dccl::debug_string(m).lines() {
                 let _ = writeln!(text, "{inner}{line}");
             }
             text.push_str(&indent(depth));
@@ -287,8 +285,8 @@ fn option_value(depth: usize, value: &Value, kind: &Kind) -> String {
         Value::I64(x) => x.to_string(),
         Value::U32(x) => x.to_string(),
         Value::U64(x) => x.to_string(),
-        Value::F64(x) => dccl::text_format::double_to_text(*x),
-        Value::F32(x) => dccl::text_format::float_to_text(*x),
+        Value::F64(x) => dccl::double_to_text(*x),
+        Value::F32(x) => dccl::float_to_text(*x),
         Value::String(s) => byte_text::escape(s.as_bytes()),
         Value::Bytes(b) => byte_text::escape(b),
         Value::EnumNumber(n) => match kind {

@@ -7,8 +7,7 @@
 
 use std::sync::Arc;
 
-use dccl::bits::{BitReader, BitWriter};
-use dccl::field_codec::{DecodeContext, EncodeContext};
+use dccl::field::{BitReader, BitWriter, DecodeContext, EncodeContext};
 use dccl::prost_reflect::{DynamicMessage, Kind, Value};
 use dccl::{Codec, CodecError, CodecRegistry, FieldCodec, FieldSpec};
 
@@ -130,9 +129,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let back = codec.decode(&bytes)?;
     println!(
         "{} -> {} bytes -> {}",
-        dccl::text_format::short_debug_string(&msg),
+        dccl::short_debug_string(&msg),
         bytes.len(),
-        dccl::text_format::short_debug_string(&back)
+        dccl::short_debug_string(&back)
     );
     let heading = back.get_field_by_name("heading").unwrap().as_f64().unwrap();
     assert!((heading - 266.6).abs() <= 360.0 / 128.0 / 2.0);

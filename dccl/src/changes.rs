@@ -47,11 +47,6 @@ impl ChangeLog {
         self.entries.borrow().len()
     }
 
-    /// True when nothing has been recorded.
-    pub fn is_empty(&self) -> bool {
-        self.entries.borrow().is_empty()
-    }
-
     /// Records a change of the value being encoded (path filled in by the callers).
     pub fn record(&self, reason: String) {
         self.entries.borrow_mut().push((String::new(), reason));

@@ -10,7 +10,7 @@ use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
 use crate::changes::{ChangeLog, ValueChange};
-use crate::codecs::arithmetic::ArithmeticModel;
+use crate::codecs::arithmetic::{ArithmeticModel, ArithmeticSession, ArithmeticState, SharedState};
 use crate::codecs::identifier;
 use crate::crypto::CryptoKey;
 use crate::error::{CodecError, Error, Result};
@@ -53,6 +53,10 @@ type Clock = Arc<dyn Fn() -> i64 + Send + Sync>;
 
 /// Encodes and decodes DCCL messages, byte for byte as libdccl 4 does.
 ///
+/// A codec can be shared between threads (`&Codec` is enough to encode and
+/// decode). What it holds is its own: a clone has its own loaded types,
+/// arithmetic models and adaptive state ([`Codec::arithmetic_state`]).
+///
 /// ```
 /// use dccl::Codec;
 ///
@@ -85,6 +89,8 @@ pub struct Codec {
     key: Option<CryptoKey>,
     skip_crypto_ids: HashSet<u32>,
     clock: Clock,
+    /// The frequencies of the adaptive arithmetic models (a clone copies them).
+    arithmetic: SharedState,
 }
 
 impl std::fmt::Debug for Codec {
@@ -129,6 +135,7 @@ impl Codec {
             key: None,
             skip_crypto_ids: HashSet::new(),
             clock: Arc::new(system_clock),
+            arithmetic: SharedState::default(),
         }
     }
 
@@ -172,16 +179,46 @@ impl Codec {
     /// `[arithmetic] { model: "name" }`. Register models before loading the
     /// messages that use them. Replacing a model restarts an adaptive model;
     /// the sender's and the receiver's codecs must be given the same models.
-    /// Clones of a codec share its models and their adaptive state.
+    /// The models and what adaptive ones have learnt
+    /// ([`Codec::arithmetic_state`]) belong to this codec: a clone has its own.
     pub fn set_arithmetic_model(&mut self, model: ArithmeticModel) -> Result<()> {
         let name = model.name.clone();
-        self.registry
-            .arithmetic_models()
+        Arc::make_mut(&mut self.registry)
+            .arithmetic_models_mut()
             .set(model)
             .map_err(|e| Error::InvalidModel {
-                name,
+                name: name.clone(),
                 reason: e.reason,
-            })
+            })?;
+        self.arithmetic.lock().restart(&name);
+        Ok(())
+    }
+
+    /// A snapshot of the frequencies this codec's adaptive arithmetic models
+    /// have reached, for encoding and for decoding. Every encoding
+    /// ([`Codec::encode`] and the other `encode` methods) and every decoding
+    /// of a message with a field coded by an adaptive model advances them;
+    /// [`Codec::size`] and [`Codec::check`] do not, nor does a message that
+    /// fails to encode or decode.
+    pub fn arithmetic_state(&self) -> ArithmeticState {
+        self.arithmetic.lock().clone()
+    }
+
+    /// Puts back a snapshot of [`Codec::arithmetic_state`] (of this codec or
+    /// of one with the same models); `ArithmeticState::default()` restarts
+    /// every adaptive model. Errors, changing nothing, when the snapshot
+    /// holds frequencies of a model this codec has not registered as
+    /// adaptive with as many symbols.
+    pub fn set_arithmetic_state(&mut self, state: ArithmeticState) -> Result<()> {
+        if let Some(name) = state.misfit(self.registry.arithmetic_models()) {
+            return Err(Error::InvalidModel {
+                name,
+                reason: "the arithmetic state holds frequencies of another model by that name"
+                    .to_string(),
+            });
+        }
+        *self.arithmetic.lock() = state;
+        Ok(())
     }
 
     /// Registers every model of a text file in the form libdccl's tools use
@@ -199,6 +236,14 @@ impl Codec {
             self.set_arithmetic_model(model)?;
         }
         Ok(names)
+    }
+
+    /// The arithmetic model registered under `name`, as it was given.
+    pub fn arithmetic_model(&self, name: &str) -> Option<ArithmeticModel> {
+        self.registry
+            .arithmetic_models()
+            .get(name)
+            .map(|m| m.user_model().clone())
     }
 
     /// Validates and loads a message type. Errors name the message and the field.
@@ -496,25 +541,21 @@ impl Codec {
             .required
             .check(msg)
             .map_err(|e| e.into_encode(&name))?;
+        let session = ArithmeticSession::new(
+            self.registry.arithmetic_models(),
+            &self.arithmetic,
+            !dry_run,
+        );
         let ctx = EncodeContext {
             strict: self.strict,
             dry_run,
             definition_hash: loaded.hash,
             changes,
+            arithmetic: Some(&session),
         };
-        let mut head = BitWriter::with_capacity(loaded.head_bytes());
-        if !loaded.omit_id {
-            identifier::encode(&mut head, loaded.id).map_err(|e| e.into_encode(&name))?;
-        }
-        loaded
-            .head
-            .encode_message(&mut head, msg, &ctx)
-            .map_err(|e| e.into_encode(&name))?;
-        let mut body = BitWriter::with_capacity(loaded.max_body_bytes());
-        loaded
-            .body
-            .encode_message(&mut body, msg, &ctx)
-            .map_err(|e| e.into_encode(&name))?;
+        let parts = Self::encode_parts(loaded, msg, &ctx).map_err(|e| e.into_encode(&name));
+        session.finish(parts.is_ok());
+        let (head, body) = parts?;
         let start = out.len();
         out.extend_from_slice(head.as_bytes());
         let head_end = out.len();
@@ -528,8 +569,25 @@ impl Codec {
         Ok(())
     }
 
-    /// Encodes a prost-generated message.
-    pub fn encode_message<T: ReflectMessage>(&self, msg: &T) -> Result<Vec<u8>> {
+    /// The header (identifier included) and the body of a message, unencrypted.
+    fn encode_parts(
+        loaded: &LoadedMessage,
+        msg: &DynamicMessage,
+        ctx: &EncodeContext,
+    ) -> std::result::Result<(BitWriter, BitWriter), CodecError> {
+        let mut head = BitWriter::with_capacity(loaded.head_bytes());
+        if !loaded.omit_id {
+            identifier::encode(&mut head, loaded.id)?;
+        }
+        loaded.head.encode_message(&mut head, msg, ctx)?;
+        let mut body = BitWriter::with_capacity(loaded.max_body_bytes());
+        loaded.body.encode_message(&mut body, msg, ctx)?;
+        Ok((head, body))
+    }
+
+    /// Encodes a prost-generated struct (deriving `ReflectMessage`) of a
+    /// loaded type; [`Codec::decode_typed`] decodes it back.
+    pub fn encode_typed<T: ReflectMessage>(&self, msg: &T) -> Result<Vec<u8>> {
         self.encode(&msg.transcode_to_dynamic())
     }
 
@@ -567,33 +625,44 @@ impl Codec {
         Ok(out)
     }
 
-    /// Reads the DCCL id at the start of `bytes`.
-    pub fn id(&self, bytes: &[u8]) -> Result<u32> {
+    /// Reads the DCCL id at the start of `bytes` (whether a type with that
+    /// id is loaded or not).
+    pub fn read_id(&self, bytes: &[u8]) -> Result<u32> {
         identifier::decode(&mut BitReader::new(bytes)).map_err(|e| Error::Decode {
             location: Default::default(),
             reason: format!("cannot read the DCCL id: {}", e.reason),
         })
     }
 
-    /// Decodes one message (its type found by its DCCL id). Bytes after the
-    /// message are ignored.
+    /// Decodes the message at the start of `bytes`, its type found by its
+    /// DCCL id. Bytes after the message are ignored
+    /// ([`Codec::decode_with_len`] tells where it ends, [`Codec::decode_all`]
+    /// decodes them too).
     pub fn decode(&self, bytes: &[u8]) -> Result<DynamicMessage> {
-        Ok(self.decode_prefix(bytes)?.0)
+        Ok(self.decode_with_len(bytes)?.0)
     }
 
-    /// Decodes the first message in `bytes`; returns it with the number of bytes it used.
-    pub fn decode_prefix(&self, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
-        let id = self.id(bytes)?;
+    /// Decodes the message at the start of `bytes` (its type found by its
+    /// DCCL id) and returns it with its length: the number of bytes it took,
+    /// where the next message of a frame starts.
+    pub fn decode_with_len(&self, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
+        let id = self.read_id(bytes)?;
         let loaded = self.by_id.get(&id).ok_or(Error::UnknownId(id))?;
         self.decode_loaded(loaded, bytes)
     }
 
-    /// Decodes `bytes` as a message of a given loaded type (needed for
-    /// types with `omit_id`).
-    pub fn decode_as(&self, full_name: &str, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
+    /// Decodes the message at the start of `bytes` as one of the loaded type
+    /// `full_name` (the only way to decode types with `omit_id`; for other
+    /// types the id read must be that type's) and returns it with its
+    /// length in bytes, as [`Codec::decode_with_len`] does.
+    pub fn decode_as_with_len(
+        &self,
+        full_name: &str,
+        bytes: &[u8],
+    ) -> Result<(DynamicMessage, usize)> {
         let loaded = self.get(full_name)?;
         if !loaded.omit_id {
-            let id = self.id(bytes)?;
+            let id = self.read_id(bytes)?;
             if id != loaded.id {
                 return Err(Error::Decode {
                     location: crate::error::Location {
@@ -608,16 +677,16 @@ impl Codec {
     }
 
     /// Decodes every message of a byte string holding several concatenated
-    /// messages. Bytes that are not a message are an error; after the first
-    /// message the error says at which byte they start and how many messages
-    /// came before.
+    /// messages (a frame), in order. Bytes that are not a message are an
+    /// error; after the first message the error says at which byte they
+    /// start and how many messages came before.
     pub fn decode_all(&self, bytes: &[u8]) -> Result<Vec<DynamicMessage>> {
         let mut out = Vec::new();
         let mut rest = bytes;
         while !rest.is_empty() {
             let offset = bytes.len() - rest.len();
             let (msg, used) = self
-                .decode_prefix(rest)
+                .decode_with_len(rest)
                 .map_err(|e| leftover_error(e, offset, out.len()))?;
             out.push(msg);
             rest = &rest[used.min(rest.len())..];
@@ -628,10 +697,12 @@ impl Codec {
         Ok(out)
     }
 
-    /// Decodes into a prost-generated struct.
-    pub fn decode_message<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
+    /// Decodes the message at the start of `bytes` into the prost-generated
+    /// struct `T` (deriving `ReflectMessage`), as its type: the counterpart
+    /// of [`Codec::encode_typed`].
+    pub fn decode_typed<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
         let wanted = T::default().descriptor();
-        let (msg, _) = self.decode_as(wanted.full_name(), bytes)?;
+        let (msg, _) = self.decode_as_with_len(wanted.full_name(), bytes)?;
         let name = msg.descriptor().full_name().to_string();
         msg.transcode_to::<T>().map_err(|e| Error::Decode {
             location: crate::error::Location {
@@ -656,10 +727,27 @@ impl Codec {
             ))
             .into_decode(name));
         }
+        let session =
+            ArithmeticSession::new(self.registry.arithmetic_models(), &self.arithmetic, true);
         let ctx = DecodeContext {
             now_secs: (self.clock)(),
             definition_hash: loaded.hash,
+            arithmetic: Some(&session),
         };
+        let decoded = self.decode_parts(loaded, bytes, &ctx);
+        session.finish(decoded.is_ok());
+        decoded
+    }
+
+    /// Decodes the header and the body (decrypted) of a message of a loaded type.
+    fn decode_parts(
+        &self,
+        loaded: &LoadedMessage,
+        bytes: &[u8],
+        ctx: &DecodeContext,
+    ) -> Result<(DynamicMessage, usize)> {
+        let name = loaded.descriptor.full_name();
+        let head_len = loaded.head_bytes();
         let mut msg = DynamicMessage::new(loaded.descriptor.clone());
         let (head_bytes, body_bytes) = bytes.split_at(head_len);
         let mut head = BitReader::new(head_bytes);
@@ -667,7 +755,7 @@ impl Codec {
             .map_err(|e| e.into_decode(name))?;
         loaded
             .head
-            .decode_message(&mut head, &mut msg, &ctx)
+            .decode_message(&mut head, &mut msg, ctx)
             .map_err(|e| e.into_decode(name))?;
         let decrypted;
         let mut encrypted = false;
@@ -685,7 +773,7 @@ impl Codec {
         let mut body = BitReader::new(body_bytes);
         loaded
             .body
-            .decode_message(&mut body, &mut msg, &ctx)
+            .decode_message(&mut body, &mut msg, ctx)
             .map_err(|e| {
                 if encrypted {
                     // The header (never encrypted) was read, the body was not:

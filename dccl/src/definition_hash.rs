@@ -23,7 +23,6 @@ use prost_reflect::{
     ReflectMessage, Value,
 };
 
-use crate::field_codec::FieldCodec;
 use crate::text_format::debug_string;
 
 const MURMUR_MUL: u64 = (0xc6a4_a793_u64 << 32) + 0x5bd1_e995;
@@ -129,13 +128,6 @@ pub fn field_descriptor_text(field: &FieldDescriptor) -> String {
         out.push_str("proto3_optional: true\n");
     }
     out
-}
-
-/// Mixes one field into `seed`: descriptor, `(dccl.field)` options, codec hash.
-pub fn combine_field(seed: &mut u64, field: &FieldDescriptor, codec: &dyn FieldCodec) {
-    hash_combine_text(seed, &field_descriptor_text(field));
-    hash_combine_text(seed, &field_options_text(field));
-    hash_combine(seed, codec.definition_hash());
 }
 
 /// The `option = value` entries of an options message, as the C++ library

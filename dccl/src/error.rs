@@ -25,8 +25,9 @@ impl fmt::Display for Location {
 }
 
 /// Every error the library returns. Each names the message and, where it
-/// applies, the field.
+/// applies, the field. More kinds may be added: a `match` needs a `_` arm.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A `.proto` file could not be read or compiled. The text starts
     /// `path:LINE:COLUMN: ` (1-based) when the fault has a place in a file.
@@ -112,8 +113,10 @@ impl Error {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// An error raised inside a field codec, before the message codec adds the
-/// message name and the field path to it.
+/// message name and the field path to it. Built with [`CodecError::new`];
+/// more fields may be added.
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct CodecError {
     /// Dotted path of the field, filled in as the error travels up the message tree.
     pub field: String,

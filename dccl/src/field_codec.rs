@@ -1,61 +1,6 @@
-//! The field codec interface: every codec, built in or supplied by a user,
-//! implements [`FieldCodec`] and is created by a [`FieldCodecFactory`]
-//! registered by name in a [`CodecRegistry`].
-//!
-//! A user codec, registered by name and selected with `(dccl.field).codec`:
-//!
-//! ```
-//! use std::sync::Arc;
-//! use dccl::bits::{BitReader, BitWriter};
-//! use dccl::field_codec::{DecodeContext, EncodeContext};
-//! use dccl::prost_reflect::{DynamicMessage, Kind, Value};
-//! use dccl::{Codec, CodecError, CodecRegistry, FieldCodec, FieldSpec};
-//!
-//! /// A percentage in 0..=100 in 7 bits (127: not set).
-//! #[derive(Debug)]
-//! struct Percent;
-//!
-//! impl FieldCodec for Percent {
-//!     fn name(&self) -> &str { "demo.percent" }
-//!     fn codec_version(&self) -> i32 { 4 }
-//!     fn min_size(&self) -> u32 { 7 }
-//!     fn max_size(&self) -> u32 { 7 }
-//!     fn encode(&self, out: &mut BitWriter, v: Option<&Value>, _: &EncodeContext)
-//!         -> Result<(), CodecError> {
-//!         let p = v.and_then(Value::as_u32).filter(|p| *p <= 100).unwrap_or(127);
-//!         out.write(p as u64, 7);
-//!         Ok(())
-//!     }
-//!     fn decode(&self, input: &mut BitReader<'_>, _: &DecodeContext)
-//!         -> Result<Option<Value>, CodecError> {
-//!         let p = input.read(7)? as u32; // exactly the bits written
-//!         Ok((p <= 100).then_some(Value::U32(p)))
-//!     }
-//! }
-//!
-//! let mut registry = CodecRegistry::with_builtin();
-//! registry.register("demo.percent", |spec: &FieldSpec<'_>| {
-//!     if spec.kind() != Kind::Uint32 {
-//!         return Ok(None); // "no codec demo.percent for this type" at load
-//!     }
-//!     Ok(Some(Arc::new(Percent) as Arc<dyn FieldCodec>))
-//! });
-//! let mut codec = Codec::with_registry(registry);
-//! let pool = dccl::compile_sources(&[("battery.proto", r#"
-//!     syntax = "proto2";
-//!     import "dccl/option_extensions.proto";
-//!     message Battery {
-//!       option (dccl.msg) = { id: 9 max_bytes: 4 codec_version: 4 };
-//!       optional uint32 charge = 1 [(dccl.field).codec = "demo.percent"];
-//!     }"#)])?;
-//! let desc = pool.get_message_by_name("Battery").unwrap();
-//! codec.load(&desc)?;
-//! let msg = DynamicMessage::parse_text_format(desc, "charge: 87")?;
-//! let bytes = codec.encode(&msg)?;
-//! assert_eq!(bytes.len(), 2);
-//! assert_eq!(codec.decode(&bytes)?.get_field_by_name("charge").unwrap().as_u32(), Some(87));
-//! # Ok::<(), Box<dyn std::error::Error>>(())
-//! ```
+//! The field codec interface ([`FieldCodec`], [`FieldCodecFactory`],
+//! [`FieldSpec`]) and the contexts codecs are called with; public through
+//! [`crate::field`].
 
 use std::fmt::Debug;
 use std::sync::Arc;
@@ -65,6 +10,7 @@ use protos::dccl::DcclFieldOptions;
 
 use crate::bits::{BitReader, BitWriter};
 use crate::changes::ChangeLog;
+use crate::codecs::arithmetic::ArithmeticSession;
 use crate::error::CodecError;
 use crate::registry::CodecRegistry;
 
@@ -82,14 +28,15 @@ pub enum MessagePart {
 pub struct EncodeContext<'a> {
     /// Out-of-range values are errors instead of being encoded as "not present".
     pub strict: bool,
-    /// Only the size is wanted: codecs with state (adaptive models) must
-    /// leave it unchanged.
+    /// Only the size is wanted (or the changes), the bytes are not sent.
     pub dry_run: bool,
     /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
     pub definition_hash: u64,
     /// Where values changed by the codec are recorded, when the caller asked
     /// for them ([`Codec::encode_with_changes`](crate::Codec::encode_with_changes)).
-    pub changes: Option<&'a ChangeLog>,
+    pub(crate) changes: Option<&'a ChangeLog>,
+    /// The coding codec's arithmetic models and adaptive state.
+    pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
 }
 
 impl EncodeContext<'_> {
@@ -145,11 +92,13 @@ impl EncodeContext<'_> {
 
 /// Settings in force while one message is decoded.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct DecodeContext {
+pub struct DecodeContext<'a> {
     /// Current time in whole seconds since the UNIX epoch (used by the time codec).
     pub now_secs: i64,
     /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
     pub definition_hash: u64,
+    /// The decoding codec's arithmetic models and adaptive state.
+    pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
 }
 
 /// What a factory is told about the field whose codec it creates.

@@ -60,32 +60,46 @@
 //! change ([`ValueChange`]), and strict mode ([`Codec::set_strict`]) refuses
 //! them. [`Codec::load_valid_messages`] loads every valid DCCL message of a
 //! file that also holds helper types and reports the others with the reason.
-//! `.proto` sources nested deeper than [`nesting::MAX_NESTING`] brackets are
-//! refused before parsing.
+//! `.proto` sources with brackets nested deeper than 100 levels are refused
+//! before parsing.
+//!
+//! ## What is public
+//!
+//! The crate root holds what a program embedding DCCL uses: [`Codec`] and
+//! what its methods take and return, the errors, the `.proto` loaders,
+//! [`ArithmeticModel`] and [`ArithmeticState`], and the text form of
+//! messages as libdccl's tools print it ([`short_debug_string`]). Writing a
+//! codec of your own takes the lower-level items of [`field`]: the
+//! [`FieldCodec`] trait, the bit buffers, the encode and decode contexts,
+//! the `(dccl.field)` options, the built-in message codec and the integer
+//! arithmetic coder.
 
 #![warn(missing_docs)]
 
 mod analyze;
-pub mod bits;
-pub mod changes;
+mod bits;
+mod changes;
 mod codec;
-pub mod codecs;
+mod codecs;
 mod crypto;
-pub mod definition_hash;
+mod definition_hash;
 mod error;
-pub mod field_codec;
+pub mod field;
+mod field_codec;
 mod loader;
-pub mod nesting;
-pub mod options;
-pub mod registry;
-pub mod rounding;
-pub mod text_format;
+mod nesting;
+mod options;
+mod registry;
+mod rounding;
+mod text_format;
 
 pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
+pub use codecs::arithmetic::{ArithmeticModel, ArithmeticState};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources, pool_file_name};
 pub use registry::CodecRegistry;
+pub use text_format::{debug_string, double_to_text, float_to_text, short_debug_string};
 
 pub use prost_reflect;

@@ -18,7 +18,7 @@ use crate::options::message_options;
 pub struct CodecRegistry {
     factories: HashMap<String, Vec<Arc<dyn FieldCodecFactory>>>,
     aliases: HashMap<String, String>,
-    arithmetic_models: Arc<ArithmeticModels>,
+    arithmetic_models: ArithmeticModels,
 }
 
 impl std::fmt::Debug for CodecRegistry {
@@ -38,19 +38,22 @@ impl CodecRegistry {
     }
 
     /// A registry holding every built-in codec (the arithmetic codec takes
-    /// its models from [`CodecRegistry::arithmetic_models`]).
+    /// its models from the codec: [`Codec::set_arithmetic_model`](crate::Codec::set_arithmetic_model)).
     pub fn with_builtin() -> Self {
         let mut r = Self::empty();
         crate::codecs::register_builtin(&mut r);
-        let models = r.arithmetic_models.clone();
-        crate::codecs::arithmetic::register(&mut r, models);
+        crate::codecs::arithmetic::register(&mut r);
         r
     }
 
-    /// The models of the built-in arithmetic codec (shared by the clones of
-    /// this registry and by the codecs built from it).
-    pub fn arithmetic_models(&self) -> &Arc<ArithmeticModels> {
+    /// The models of the built-in arithmetic codec.
+    pub(crate) fn arithmetic_models(&self) -> &ArithmeticModels {
         &self.arithmetic_models
+    }
+
+    /// The models of the built-in arithmetic codec, to register one.
+    pub(crate) fn arithmetic_models_mut(&mut self) -> &mut ArithmeticModels {
+        &mut self.arithmetic_models
     }
 
     /// Registers a factory under `name`. Several factories may share a name

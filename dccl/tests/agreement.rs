@@ -391,14 +391,16 @@ message WithId {
     let m = msg(&pool, "NoId", "x: 200");
     let bytes = codec.encode(&m).unwrap();
     assert_eq!(hex(&bytes), "c8");
-    assert_eq!(codec.decode_as("NoId", &bytes).unwrap(), (m, 1));
+    assert_eq!(codec.decode_as_with_len("NoId", &bytes).unwrap(), (m, 1));
     // A type with an id checks it.
     let w = codec.encode(&msg(&pool, "WithId", "x: 1")).unwrap();
-    assert!(codec.decode_as("WithId", &w).is_ok());
-    let err = codec.decode_as("WithId", &[0x02, 0x01]).unwrap_err();
+    assert!(codec.decode_as_with_len("WithId", &w).is_ok());
+    let err = codec
+        .decode_as_with_len("WithId", &[0x02, 0x01])
+        .unwrap_err();
     assert!(err.to_string().contains("expected 100"), "{err}");
     assert!(matches!(
-        codec.decode_as("Nope", &bytes),
+        codec.decode_as_with_len("Nope", &bytes),
         Err(Error::UnknownType(_))
     ));
 }

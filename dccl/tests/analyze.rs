@@ -62,11 +62,7 @@ fn hashes_match_the_reference() {
     for line in reference.lines().filter(|l| !l.trim().is_empty()) {
         let (name, hash) = line.split_once(' ').expect("`name 0xhash` lines");
         let ours = codec.hash(name).unwrap();
-        assert_eq!(
-            dccl::definition_hash::hash_as_string(ours),
-            hash.trim(),
-            "{name}"
-        );
+        assert_eq!(format!("{ours:#018x}"), hash.trim(), "{name}");
         checked += 1;
     }
     assert_eq!(checked, 7);

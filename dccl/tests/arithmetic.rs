@@ -6,8 +6,8 @@
 
 use std::path::PathBuf;
 
-use dccl::codecs::arithmetic::ArithmeticModel;
 use dccl::prost_reflect::{DescriptorPool, DynamicMessage, Value};
+use dccl::ArithmeticModel;
 use dccl::Codec;
 
 fn arithmetic_dir() -> PathBuf {
@@ -372,4 +372,140 @@ fn sizes_follow_the_reference_bounds() {
     assert_eq!(dx.codec, "dccl.arithmetic");
     let counts = codec.field_sizes("arith.Counts").unwrap();
     assert_eq!(counts[0].min_bits, 0, "adaptive models have no minimum");
+}
+
+/// An adaptive model's frequencies belong to the codec that advanced them:
+/// a clone starts from where the original was and goes on by itself, on
+/// the sending side and on the receiving side.
+#[test]
+fn a_cloned_codec_does_not_share_adaptive_state() {
+    let (sender, pool) = vector_codec();
+    let (receiver, _) = vector_codec();
+    let desc = pool.get_message_by_name("arith.Counts").unwrap();
+    let first =
+        DynamicMessage::parse_text_format(desc.clone(), "d: 1 d: 2 d: 2 flag: true").unwrap();
+    let second = DynamicMessage::parse_text_format(desc, "d: 2 d: 2 d: 7 flag: false").unwrap();
+
+    let sent = sender.encode(&first).unwrap();
+    assert!(same(&receiver.decode(&sent).unwrap(), &first));
+    let sender_clone = sender.clone();
+    let receiver_clone = receiver.clone();
+
+    let by_original = sender.encode(&second).unwrap();
+    let by_clone = sender_clone.encode(&second).unwrap();
+    assert_eq!(
+        by_clone, by_original,
+        "the clone encodes as the original did from the same point"
+    );
+    // Both have advanced by the same two messages: a third message comes out
+    // the same from each, and differs from what a fresh codec would send.
+    let third = sender.encode(&second).unwrap();
+    assert_eq!(sender_clone.encode(&second).unwrap(), third);
+    assert_ne!(third, by_original, "the adaptive model has moved on");
+
+    for (codec, name) in [(&receiver, "original"), (&receiver_clone, "clone")] {
+        assert!(
+            same(&codec.decode(&by_original).unwrap(), &second),
+            "{name}"
+        );
+        assert!(same(&codec.decode(&third).unwrap(), &second), "{name}");
+    }
+}
+
+/// The same message encoded again and again on one codec with an adaptive
+/// model: each time the bytes libdccl gave at that point of the sequence.
+/// `../shared/dccl-vectors/arithmetic/vectors.jsonl` (one libdccl codec
+/// encoding every line in order) has several `arith.Counts` inputs more than
+/// once, e.g. `d: 4 flag: false` at seq 157 (`5229`), 164 (`5219`) and 281
+/// (`5229`).
+#[test]
+fn the_same_message_twice_with_an_adaptive_model_as_libdccl() {
+    let (sender, pool) = vector_codec();
+    let text = std::fs::read_to_string(arithmetic_dir().join("vectors.jsonl")).unwrap();
+    let rows: Vec<serde_json::Value> = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let mut by_input: std::collections::BTreeMap<String, Vec<(String, String)>> =
+        Default::default();
+    for v in &rows {
+        let name = v["message"].as_str().unwrap();
+        let desc = pool.get_message_by_name(name).unwrap();
+        let input = v["input"].as_str().unwrap();
+        let msg = DynamicMessage::parse_text_format(desc, input).unwrap();
+        let ours = hex::encode(sender.encode(&msg).unwrap());
+        assert_eq!(ours, v["hex"].as_str().unwrap(), "seq {}", v["seq"]);
+        if name == "arith.Counts" {
+            by_input
+                .entry(input.to_string())
+                .or_default()
+                .push((v["seq"].to_string(), ours));
+        }
+    }
+    let repeated: Vec<_> = by_input.values().filter(|v| v.len() > 1).collect();
+    assert!(repeated.len() >= 5, "the vectors repeat inputs");
+    assert!(
+        repeated
+            .iter()
+            .any(|occurrences| occurrences.iter().any(|(_, h)| *h != occurrences[0].1)),
+        "some repeated input codes differently as the model adapts"
+    );
+    let d4 = &by_input["d: 4 flag: false"];
+    assert_eq!(
+        d4.iter()
+            .map(|(s, h)| format!("{s}:{h}"))
+            .collect::<Vec<_>>(),
+        ["157:5229", "164:5219", "281:5229"]
+    );
+}
+
+/// The adaptive state is a value of the codec: a snapshot puts the codec
+/// back where it was; sizes, checks and failed encodings leave it alone; a
+/// snapshot of other models is refused.
+#[test]
+fn adaptive_state_snapshot_and_restore() {
+    let (mut sender, pool) = vector_codec();
+    let (receiver, _) = vector_codec();
+    let desc = pool.get_message_by_name("arith.Counts").unwrap();
+    let msg = DynamicMessage::parse_text_format(desc, "d: 3 d: 3 d: 0 flag: true").unwrap();
+
+    let start = sender.arithmetic_state();
+    assert!(start.is_initial());
+    let first = sender.encode(&msg).unwrap();
+    let after_one = sender.arithmetic_state();
+    assert!(!after_one.is_initial());
+    assert_ne!(sender.encode(&msg).unwrap(), first, "the model advanced");
+
+    // Sent again from the same point: the same bytes, which a receiver that
+    // saw only the first sending decodes.
+    sender.set_arithmetic_state(start).unwrap();
+    assert_eq!(sender.encode(&msg).unwrap(), first);
+    assert_eq!(sender.arithmetic_state(), after_one);
+    assert!(same(&receiver.decode(&first).unwrap(), &msg));
+
+    sender.size(&msg).unwrap();
+    sender.check(&msg).unwrap();
+    assert_eq!(sender.arithmetic_state(), after_one, "size and check");
+
+    // A model with no out-of-range symbol: the array is coded, then the
+    // field after it fails; nothing of that message stays in the model.
+    let adaptive = format!("{WITHOUT_OUT_OF_RANGE} is_adaptive: true");
+    let (codec, single) = single_model_codec(&adaptive, "double");
+    let (fresh, _) = single_model_codec(&adaptive, "double");
+    let bad =
+        DynamicMessage::parse_text_format(single.clone(), "v: 1 v: 2 one: 7 after: 1").unwrap();
+    assert!(codec.encode(&bad).is_err());
+    assert!(codec.arithmetic_state().is_initial());
+    let good = DynamicMessage::parse_text_format(single, "v: 1 v: 2 after: 1").unwrap();
+    assert_eq!(codec.encode(&good).unwrap(), fresh.encode(&good).unwrap());
+
+    // Frequencies of the vector's "adaptive" model do not fit a codec
+    // without that model.
+    let mut other = codec.clone();
+    let err = other.set_arithmetic_state(after_one).unwrap_err();
+    assert!(
+        err.to_string().contains("invalid model `adaptive`"),
+        "{err}"
+    );
 }

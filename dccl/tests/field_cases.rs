@@ -86,7 +86,7 @@ fn check_encodings(
         );
         let reference = hex::decode(hex).unwrap();
         let (back, used) = codec
-            .decode_as(type_name, &reference)
+            .decode_as_with_len(type_name, &reference)
             .unwrap_or_else(|e| panic!("{}: decoding {hex}: {e}", dir.display()));
         assert_eq!(used, reference.len(), "{}: {hex}", dir.display());
         assert_eq!(

@@ -432,7 +432,7 @@ proptest! {
         let first = codec.encode(&m).unwrap();
         prop_assert!(first.len() <= codec.max_size("prop.All4").unwrap());
         prop_assert!(first.len() >= codec.min_size("prop.All4").unwrap());
-        let (back, used) = codec.decode_prefix(&first).unwrap();
+        let (back, used) = codec.decode_with_len(&first).unwrap();
         prop_assert_eq!(used, first.len());
         check_v4(&back, &x)?;
         let second = codec.encode(&back).unwrap();
@@ -458,7 +458,7 @@ proptest! {
         for name in ["All3", "All2"] {
             let m = build(&desc(name), &x);
             let first = codec.encode(&m).unwrap();
-            let (back, used) = codec.decode_prefix(&first).unwrap();
+            let (back, used) = codec.decode_with_len(&first).unwrap();
             prop_assert_eq!(used, first.len(), "{}", name);
             let second = codec.encode(&back).unwrap();
             prop_assert_eq!(&second, &first, "{}", name);
@@ -501,7 +501,7 @@ fn any_bytes() -> impl Strategy<Value = Vec<u8>> {
 /// results (a panic fails the property).
 fn decode_everything(codec: &Codec, bytes: &[u8]) -> Result<(), TestCaseError> {
     let one = codec.decode(bytes);
-    let prefix = codec.decode_prefix(bytes);
+    let prefix = codec.decode_with_len(bytes);
     prop_assert_eq!(one.is_ok(), prefix.is_ok());
     if let Ok((m, used)) = &prefix {
         prop_assert!(
@@ -520,9 +520,9 @@ fn decode_everything(codec: &Codec, bytes: &[u8]) -> Result<(), TestCaseError> {
             prop_assert!(prefix.is_ok());
         }
     }
-    let _ = codec.id(bytes);
+    let _ = codec.read_id(bytes);
     for name in codec.loaded() {
-        if let Ok((_, used)) = codec.decode_as(&name, bytes) {
+        if let Ok((_, used)) = codec.decode_as_with_len(&name, bytes) {
             prop_assert!(used <= bytes.len());
         }
     }
@@ -557,11 +557,11 @@ proptest! {
                 let cut = &bytes[..k];
                 let err = codec.decode(cut);
                 prop_assert!(err.is_err(), "{} decoded from {} of {} bytes", name, k, bytes.len());
-                prop_assert!(codec.decode_prefix(cut).is_err());
-                prop_assert!(codec.decode_as(&full, cut).is_err());
+                prop_assert!(codec.decode_with_len(cut).is_err());
+                prop_assert!(codec.decode_as_with_len(&full, cut).is_err());
                 if k < head {
                     // Not even the header: the error says so, naming the message.
-                    if let Err(e) = codec.decode_as(&full, cut) {
+                    if let Err(e) = codec.decode_as_with_len(&full, cut) {
                         prop_assert!(matches!(e, dccl::Error::Decode { .. }), "{:?}", e);
                     }
                 }

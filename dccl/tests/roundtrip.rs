@@ -190,13 +190,13 @@ fn prost_struct_round_trip() {
     assert_eq!(codec.min_size("goby.example.NavigationReport").unwrap(), 15);
 
     let report = report();
-    let bytes = codec.encode_message(&report).unwrap();
+    let bytes = codec.encode_typed(&report).unwrap();
     assert_eq!(bytes.len(), 15);
     // id 124 -> 0xf8; source 3 and destination 7 in 5 bits each, header padded to 3 bytes.
     assert_eq!(&bytes[..3], &[0xf8, 0xe3, 0x00]);
-    assert_eq!(codec.id(&bytes).unwrap(), 124);
+    assert_eq!(codec.read_id(&bytes).unwrap(), 124);
 
-    let back: NavigationReport = codec.decode_message(&bytes).unwrap();
+    let back: NavigationReport = codec.decode_typed(&bytes).unwrap();
     assert_eq!(back, report);
 
     // Values are quantized to their resolution.
@@ -205,7 +205,7 @@ fn prost_struct_round_trip() {
     rough.speed = Some(1.26);
     rough.time = (NOW - 100) as f64 + 0.3;
     let back: NavigationReport = codec
-        .decode_message(&codec.encode_message(&rough).unwrap())
+        .decode_typed(&codec.encode_typed(&rough).unwrap())
         .unwrap();
     assert_eq!(back.x, 123.4);
     assert_eq!(back.speed, Some(1.25));
@@ -220,7 +220,7 @@ fn prost_struct_round_trip() {
         ..report
     };
     let back: NavigationReport = codec
-        .decode_message(&codec.encode_message(&sparse).unwrap())
+        .decode_typed(&codec.encode_typed(&sparse).unwrap())
         .unwrap();
     assert_eq!(back, sparse);
 }
@@ -231,7 +231,7 @@ fn prost_and_dynamic_messages_encode_identically() {
     codec.set_clock(|| NOW);
     codec.load_type::<NavigationReport>().unwrap();
     let report = report();
-    let from_struct = codec.encode_message(&report).unwrap();
+    let from_struct = codec.encode_typed(&report).unwrap();
     assert_eq!(
         codec.encode(&report.transcode_to_dynamic()).unwrap(),
         from_struct
@@ -278,8 +278,8 @@ fn prost_command_with_embedded_messages() {
         ],
         note: Some("survey".to_string()),
     };
-    let bytes = codec.encode_message(&cmd).unwrap();
-    assert_eq!(codec.decode_message::<Command>(&bytes).unwrap(), cmd);
+    let bytes = codec.encode_typed(&cmd).unwrap();
+    assert_eq!(codec.decode_typed::<Command>(&bytes).unwrap(), cmd);
 
     // More waypoints than max_repeat (3) are dropped, extra ones last.
     let mut long = cmd.clone();
@@ -290,15 +290,15 @@ fn prost_command_with_embedded_messages() {
         })
         .collect();
     let back: Command = codec
-        .decode_message(&codec.encode_message(&long).unwrap())
+        .decode_typed(&codec.encode_typed(&long).unwrap())
         .unwrap();
     assert_eq!(back.waypoint, long.waypoint[..3].to_vec());
 
     // Decoding bytes of another type into a struct is an error, not a panic.
     let mut both = codec.clone();
     both.load_type::<NavigationReport>().unwrap();
-    let nav = both.encode_message(&report()).unwrap();
-    assert!(both.decode_message::<Command>(&nav).is_err());
+    let nav = both.encode_typed(&report()).unwrap();
+    assert!(both.decode_typed::<Command>(&nav).is_err());
 }
 
 // ---------------------------------------------------------------------------
@@ -764,10 +764,10 @@ fn decode_all_of_stitched_messages() {
         Some(Value::Bytes(vec![1, 2, 3, 4].into()))
     );
 
-    // decode_prefix walks the same frame.
+    // decode_with_len walks the same frame.
     let mut rest = &frame[..];
     for (expected_len, name) in lengths.iter().zip(&names) {
-        let (m, used) = codec.decode_prefix(rest).unwrap();
+        let (m, used) = codec.decode_with_len(rest).unwrap();
         assert_eq!(used, *expected_len);
         assert_eq!(m.descriptor().full_name(), name.as_str());
         rest = &rest[used..];
@@ -776,7 +776,7 @@ fn decode_all_of_stitched_messages() {
 
     // The two-byte id, low byte first.
     assert_eq!(&frame[3..5], &[0x59, 0x02]);
-    assert_eq!(codec.id(&frame[3..]).unwrap(), 300);
+    assert_eq!(codec.read_id(&frame[3..]).unwrap(), 300);
     // decode ignores what follows the first message.
     assert_eq!(
         get(&codec.decode(&frame).unwrap(), "p"),
@@ -811,16 +811,16 @@ fn unknown_id() {
         Error::UnknownId(300)
     ));
 
-    // decode_as checks the id.
-    let err = full.decode_as("rt.Blob", &bytes).unwrap_err();
+    // decode_as_with_len checks the id.
+    let err = full.decode_as_with_len("rt.Blob", &bytes).unwrap_err();
     assert!(matches!(err, Error::Decode { .. }), "{err:?}");
     assert!(err.to_string().contains("rt.Blob"));
 
     // No bytes at all: no id.
     assert!(full.decode(&[]).is_err());
-    assert!(full.id(&[]).is_err());
+    assert!(full.read_id(&[]).is_err());
     // A two-byte id cut after its first byte.
-    assert!(full.id(&[0x59]).is_err());
+    assert!(full.read_id(&[0x59]).is_err());
 }
 
 #[test]
@@ -828,7 +828,7 @@ fn omit_id_needs_decode_as() {
     let codec = codec();
     let bytes = codec.encode(&msg("NoId", "n: 165")).unwrap();
     assert_eq!(bytes, vec![0xa5]);
-    let (back, used) = codec.decode_as("rt.NoId", &bytes).unwrap();
+    let (back, used) = codec.decode_as_with_len("rt.NoId", &bytes).unwrap();
     assert_eq!(used, 1);
     assert_eq!(get(&back, "n"), Some(Value::U32(165)));
     // Read as an id, 0xa5 is id 82 (two-byte form, cut short) or unknown.
@@ -905,8 +905,7 @@ fn sizes_worked_out_by_hand() {
 /// one that decodes a value of the wrong type gives an error, not a panic.
 #[test]
 fn user_codec_by_name_and_wrong_type_is_an_error() {
-    use dccl::bits::{BitReader, BitWriter};
-    use dccl::field_codec::{DecodeContext, EncodeContext};
+    use dccl::field::{BitReader, BitWriter, DecodeContext, EncodeContext};
     use dccl::{CodecError, CodecRegistry, FieldCodec, FieldSpec};
     use std::sync::Arc;
 

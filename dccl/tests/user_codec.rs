@@ -5,9 +5,7 @@
 
 use std::sync::Arc;
 
-use dccl::bits::{BitReader, BitWriter};
-use dccl::codecs::message::MessageCodec;
-use dccl::field_codec::{DecodeContext, EncodeContext};
+use dccl::field::{BitReader, BitWriter, DecodeContext, EncodeContext, MessageCodec};
 use dccl::prost_reflect::{DynamicMessage, Kind, Value};
 use dccl::{Codec, CodecError, CodecRegistry, FieldCodec, FieldSpec};
 

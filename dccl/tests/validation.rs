@@ -678,7 +678,9 @@ fn unknown_type_on_encode_and_size_queries() {
         codec.encode(&msg).unwrap_err(),
         codec.max_size("val.NotLoaded").unwrap_err(),
         codec.min_size("val.NotLoaded").unwrap_err(),
-        codec.decode_as("val.NotLoaded", &[0x2a]).unwrap_err(),
+        codec
+            .decode_as_with_len("val.NotLoaded", &[0x2a])
+            .unwrap_err(),
     ] {
         match &err {
             Error::UnknownType(name) => assert_eq!(name, "val.NotLoaded"),

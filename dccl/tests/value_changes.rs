@@ -160,7 +160,7 @@ fn strict_mode_refuses_the_first_change() {
 fn changes_libdccl_makes_even_in_strict_mode_are_reported_but_not_refused() {
     let mut codec = Codec::new();
     codec
-        .set_arithmetic_model(dccl::codecs::arithmetic::ArithmeticModel {
+        .set_arithmetic_model(dccl::ArithmeticModel {
             name: "m".into(),
             frequency: vec![1, 2],
             value_bound: vec![0.0, 1.0, 2.0],

@@ -98,7 +98,7 @@ fn run(proto: &str, vectors: &str, passphrase: Option<&str>) {
         let expected = parse_json(desc, &v["decoded_json"]);
         match codec.decode(&bytes) {
             Ok(got) if same(&got, &expected) => {
-                let text = dccl::text_format::short_debug_string(&got);
+                let text = dccl::short_debug_string(&got);
                 let want = v["decoded_text"].as_str().unwrap();
                 if text != want {
                     failures.push(format!(

@@ -589,8 +589,8 @@ fn adaptive_model_problem(
         }
         for field in message.fields() {
             let path = format!("{prefix}{}", field.name());
-            if let Some(model) = dccl::options::field_option_extension(&field, "arithmetic")
-                .and_then(|o| {
+            if let Some(model) =
+                dccl::field::field_option_extension(&field, "arithmetic").and_then(|o| {
                     o.get_field_by_name("model")
                         .and_then(|v| v.as_str().map(str::to_string))
                 })
@@ -635,11 +635,14 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             ConfigError::Invalid(format!("dccl.arithmetic_model_file {file}: {e}"))
         };
         let text = std::fs::read_to_string(file).map_err(|e| problem(&e))?;
-        codec
+        let names = codec
             .load_arithmetic_models(&text)
             .map_err(|e| problem(&e))?;
-        for model in dccl::codecs::arithmetic::parse_models(&text).map_err(|e| problem(&e))? {
-            adaptive.insert(model.name.clone(), model.is_adaptive());
+        for name in names {
+            let is_adaptive = codec
+                .arithmetic_model(&name)
+                .is_some_and(|m| m.is_adaptive());
+            adaptive.insert(name, is_adaptive);
         }
     }
     let mut loaded = Vec::new();

@@ -146,7 +146,7 @@ pub fn format_value(message: &DynamicMessage) -> String {
     format!(
         "@PB[{}] {}",
         message.descriptor().full_name(),
-        dccl::text_format::short_debug_string(message)
+        dccl::short_debug_string(message)
     )
 }
 

@@ -13,7 +13,7 @@
 //! baseline sends every sample once as a full transmission in its own
 //! frame and never repeats it, so its cost per sample sent is constant.
 
-use dccl::bits::BitWriter;
+use dccl::field::BitWriter;
 
 use crate::config::{ModelKind, ObserverKind, PositionConfig};
 use crate::error::PositionError;

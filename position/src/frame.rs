@@ -14,8 +14,7 @@
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use dccl::bits::{BitReader, BitWriter};
-use dccl::field_codec::{DecodeContext, EncodeContext, RepeatBounds};
+use dccl::field::{BitReader, BitWriter, DecodeContext, EncodeContext, RepeatBounds};
 use dccl::prost_reflect::{DynamicMessage, Kind, MessageDescriptor, ReflectMessage, Value};
 use dccl::{CodecError, CodecRegistry, FieldCodec, FieldSpec};
 

@@ -17,7 +17,7 @@
 
 use std::collections::BTreeMap;
 
-use dccl::codecs::arithmetic::{CumulativeFrequencies, FrequencyTable};
+use dccl::field::{CumulativeFrequencies, FrequencyTable};
 
 use crate::config::{ModelKind, PositionConfig};
 

@@ -18,8 +18,7 @@
 //!
 //! The sample index is implied: a delta's time is `t_f + n·τ`.
 
-use dccl::bits::{BitReader, BitWriter};
-use dccl::codecs::arithmetic::{ArithmeticDecoder, ArithmeticEncoder};
+use dccl::field::{ArithmeticDecoder, ArithmeticEncoder, BitReader, BitWriter};
 
 use crate::config::PositionConfig;
 use crate::error::PositionError;

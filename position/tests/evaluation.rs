@@ -72,10 +72,10 @@ fn finer_resolution_round_trips() {
     };
     let mut tx = SampleCoder::new(config.clone()).unwrap();
     let mut rx = SampleCoder::new(config).unwrap();
-    let mut w = dccl::bits::BitWriter::new();
+    let mut w = dccl::field::BitWriter::new();
     let sent: Vec<_> = t.iter().map(|s| tx.encode(s, &mut w).unwrap().1).collect();
     let bytes = w.into_bytes();
-    let mut input = dccl::bits::BitReader::new(&bytes);
+    let mut input = dccl::field::BitReader::new(&bytes);
     for (s, original) in sent.iter().zip(&t) {
         let got = rx.decode(&mut input).unwrap().1;
         assert_eq!(got, *s);

@@ -1,7 +1,7 @@
 //! Sender and receiver stay in step, and what is received is what was sent
 //! (at the configured resolution).
 
-use dccl::bits::{BitReader, BitWriter};
+use dccl::field::{BitReader, BitWriter};
 use position::frame::frame_bytes;
 use position::{
     ModelKind, ObserverKind, PositionConfig, PositionReceiver, PositionSender, Sample, SampleCoder,

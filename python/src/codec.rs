@@ -114,7 +114,7 @@ impl Codec {
             return Ok(id);
         }
         let desc = self.descriptor(name)?;
-        let options = dccl::options::message_options(&desc)
+        let options = dccl::field::message_options(&desc)
             .map_err(|e| DcclException::new_err(format!("message {name}: {e}")))?;
         match options.id {
             Some(id) if id >= 0 => Ok(id as u32),
@@ -126,7 +126,7 @@ impl Codec {
 
     /// DCCL id at the start of encoded bytes.
     fn id_of_bytes(&self, data: &[u8]) -> PyResult<u32> {
-        self.inner.id(data).map_err(to_py)
+        self.inner.read_id(data).map_err(to_py)
     }
 
     /// Encodes the message `name` given as protobuf wire bytes; returns the
@@ -230,7 +230,7 @@ impl Codec {
         let msg = self.inner.decode(data).map_err(to_py)?;
         Ok((
             msg.descriptor().full_name().to_string(),
-            dccl::text_format::short_debug_string(&msg),
+            dccl::short_debug_string(&msg),
         ))
     }
 

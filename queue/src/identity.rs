@@ -124,13 +124,13 @@ impl TrailerCodec {
 
     /// Whether `bytes` (at a message boundary) start with a trailer.
     pub fn starts_trailer(&self, bytes: &[u8]) -> bool {
-        self.codec.id(bytes).ok() == Some(DCCL_ID)
+        self.codec.read_id(bytes).ok() == Some(DCCL_ID)
     }
 
     /// The identities of a trailer starting `bytes`; `None` when it does
     /// not decode.
     pub fn decode(&self, bytes: &[u8]) -> Option<Vec<WireIdentity>> {
-        let (message, _) = self.codec.decode_prefix(bytes).ok()?;
+        let (message, _) = self.codec.decode_with_len(bytes).ok()?;
         let trailer = message.transcode_to::<FrameIdentity>().ok()?;
         Some(
             trailer

@@ -622,7 +622,7 @@ impl QueueManager {
                     }
                     break;
                 }
-                match self.codec.decode_prefix(rest) {
+                match self.codec.decode_with_len(rest) {
                     Ok((message, used)) => {
                         let used = used.min(rest.len());
                         decoded.push((message, &rest[..used], None));

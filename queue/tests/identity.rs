@@ -134,7 +134,7 @@ fn a_receiver_without_the_trailer_type_keeps_the_messages_before_it() {
     let codec = sender.manager.codec().clone();
     let mut rest = tx.frame[0].as_slice();
     let mut serials = Vec::new();
-    while let Ok((m, used)) = codec.decode_prefix(rest) {
+    while let Ok((m, used)) = codec.decode_with_len(rest) {
         serials.push(serial(&m));
         rest = &rest[used..];
     }

@@ -12,6 +12,14 @@
 //! receiver's copies therefore stay in step only if every message is decoded
 //! in the order it was encoded.
 //!
+//! The models are definitions, registered on a [`Codec`](crate::Codec) and
+//! never changed by coding. What adaptive coding changes, the frequencies
+//! each model has reached, is an [`ArithmeticState`] owned by the `Codec`
+//! (a clone of the codec gets its own copy): the `Codec` lends it to the
+//! field codecs through the encode and decode contexts for the length of
+//! one message and keeps the changes only when the whole message was
+//! encoded (or decoded) for real, not for a size or a check, not on an error.
+//!
 //! The decoder starts from the field's minimum size and reads one more bit
 //! only while the next symbol is ambiguous, so it reads exactly the bits the
 //! encoder wrote and the fields after it decode correctly.
@@ -24,8 +32,9 @@
 //! with the last symbol; with `eof_frequency: 0`, arrays shorter
 //! than `max_repeat` are filled up with the most probable symbol.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex, PoisonError, RwLock};
+use std::cell::RefCell;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use prost_reflect::{EnumDescriptor, Kind, Value};
 
@@ -65,7 +74,7 @@ struct ArithmeticOptions {
 
 /// Cumulative frequencies, indexed by `symbol - EOF_SYMBOL`: entry `i` is the
 /// sum of the frequencies of every symbol up to and including symbol `i`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 struct Cumulative(Vec<u64>);
 
 impl Cumulative {
@@ -83,13 +92,12 @@ impl Cumulative {
     }
 }
 
-/// A validated model with its adaptive state (one copy for encoding, one for decoding).
+/// A validated model: the definition and its initial frequencies, never
+/// changed by coding (adaptive frequencies live in an [`ArithmeticState`]).
 #[derive(Debug)]
-pub struct Model {
+pub(crate) struct Model {
     user: ArithmeticModel,
     initial: Cumulative,
-    encoder: Mutex<Cumulative>,
-    decoder: Mutex<Cumulative>,
 }
 
 fn invalid(model: &ArithmeticModel, reason: &str) -> CodecError {
@@ -101,7 +109,7 @@ fn invalid(model: &ArithmeticModel, reason: &str) -> CodecError {
 
 impl Model {
     /// Validates a model as libdccl does.
-    pub fn new(user: ArithmeticModel) -> Result<Model, CodecError> {
+    pub(crate) fn new(user: ArithmeticModel) -> Result<Model, CodecError> {
         if user.name.is_empty() {
             return Err(invalid(&user, "missing required field `name`"));
         }
@@ -138,17 +146,14 @@ impl Model {
         {
             return Err(invalid(&user, "`value_bound` must be strictly increasing"));
         }
-        let initial = Cumulative(cumulative);
         Ok(Model {
-            encoder: Mutex::new(initial.clone()),
-            decoder: Mutex::new(initial.clone()),
-            initial,
+            initial: Cumulative(cumulative),
             user,
         })
     }
 
     /// The model as the user gave it.
-    pub fn user_model(&self) -> &ArithmeticModel {
+    pub(crate) fn user_model(&self) -> &ArithmeticModel {
         &self.user
     }
 
@@ -199,10 +204,6 @@ impl Model {
         best as Symbol
     }
 
-    fn lock(state: &Mutex<Cumulative>) -> std::sync::MutexGuard<'_, Cumulative> {
-        state.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-
     /// Largest size in bits of `max_repeat` values (libdccl's bound:
     /// `ceil(log2(1/P)) + 1` for the least probable sequence).
     fn max_size(&self, max_repeat: u32) -> u32 {
@@ -244,23 +245,17 @@ impl Model {
         empty.min(most_probable)
     }
 
-    /// Encodes up to `max_repeat` values (fewer: followed by the end-of-array symbol).
+    /// Encodes up to `max_repeat` values (fewer: followed by the end-of-array
+    /// symbol) with the frequencies `adaptive` has reached (advanced symbol
+    /// by symbol), or with the initial ones when the model is not adaptive
+    /// (`adaptive` is then `None`).
     fn encode(
         &self,
         out: &mut BitWriter,
         values: &[f64],
         max_repeat: u32,
-        update: bool,
+        mut adaptive: Option<&mut Cumulative>,
     ) -> Result<(), CodecError> {
-        let mut state = Self::lock(&self.encoder);
-        // A dry run codes on a copy, leaving the adaptive state as it is.
-        let mut scratch;
-        let model: &mut Cumulative = if update {
-            &mut state
-        } else {
-            scratch = state.clone();
-            &mut scratch
-        };
         let mut coder = ArithmeticEncoder::new();
         for index in 0..max_repeat as usize {
             let mut symbol = match values.get(index) {
@@ -280,8 +275,13 @@ impl Model {
             if symbol == EOF_SYMBOL && self.user.eof_frequency() == 0 {
                 symbol = self.most_probable_symbol();
             }
-            coder.encode(&*model, Cumulative::index(symbol));
-            model.update_if(self.user.is_adaptive(), symbol);
+            match adaptive.as_deref_mut() {
+                Some(frequencies) => {
+                    coder.encode(&*frequencies, Cumulative::index(symbol));
+                    frequencies.update(symbol);
+                }
+                None => coder.encode(&self.initial, Cumulative::index(symbol)),
+            }
             if index == values.len() && self.user.eof_frequency() != 0 {
                 break;
             }
@@ -291,19 +291,26 @@ impl Model {
     }
 
     /// Decodes up to `max_repeat` values, reading `min_bits` bits first and
-    /// then one bit at a time while the next symbol is ambiguous.
+    /// then one bit at a time while the next symbol is ambiguous; the
+    /// frequencies are those of [`Model::encode`].
     fn decode(
         &self,
         input: &mut BitReader<'_>,
         max_repeat: u32,
         min_bits: u32,
+        mut adaptive: Option<&mut Cumulative>,
     ) -> Result<Vec<f64>, CodecError> {
-        let mut model = Self::lock(&self.decoder);
         let mut coder = ArithmeticDecoder::new(input, min_bits)?;
         let mut values = Vec::new();
         for _ in 0..max_repeat {
-            let symbol = coder.decode(input, &*model)? as Symbol + EOF_SYMBOL;
-            model.update_if(self.user.is_adaptive(), symbol);
+            let symbol = match adaptive.as_deref_mut() {
+                Some(frequencies) => {
+                    let symbol = coder.decode(input, &*frequencies)? as Symbol + EOF_SYMBOL;
+                    frequencies.update(symbol);
+                    symbol
+                }
+                None => coder.decode(input, &self.initial)? as Symbol + EOF_SYMBOL,
+            };
             if symbol == EOF_SYMBOL {
                 break;
             }
@@ -334,14 +341,6 @@ impl CumulativeFrequencies for Cumulative {
             .iter()
             .position(|&c| frequency < c)
             .unwrap_or(Self::index(0))
-    }
-}
-
-impl Cumulative {
-    fn update_if(&mut self, adaptive: bool, symbol: Symbol) {
-        if adaptive {
-            self.update(symbol);
-        }
     }
 }
 
@@ -440,8 +439,7 @@ impl CumulativeFrequencies for FrequencyTable {
 /// 32-bit code values, ended as libdccl ends it).
 ///
 /// ```
-/// use dccl::bits::{BitReader, BitWriter};
-/// use dccl::codecs::arithmetic::{ArithmeticDecoder, ArithmeticEncoder, FrequencyTable};
+/// use dccl::field::{ArithmeticDecoder, ArithmeticEncoder, BitReader, BitWriter, FrequencyTable};
 ///
 /// let table = FrequencyTable::new(&[1, 6, 1])?;
 /// let mut encoder = ArithmeticEncoder::new();
@@ -645,56 +643,172 @@ impl ArithmeticDecoder {
     }
 }
 
-/// The models of one codec, by name. Shared by every field that uses them;
-/// setting a model again replaces it (and restarts an adaptive model).
-#[derive(Debug, Default)]
-pub struct ArithmeticModels {
-    models: RwLock<HashMap<String, Arc<Model>>>,
+/// The models of one codec, by name: definitions only, shared by every
+/// field that uses them and cloned with the registry that holds them.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct ArithmeticModels {
+    models: HashMap<String, Arc<Model>>,
 }
 
 impl ArithmeticModels {
-    /// An empty set.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
     /// Validates and registers (or replaces) a model under its name.
-    pub fn set(&self, model: ArithmeticModel) -> Result<(), CodecError> {
+    pub(crate) fn set(&mut self, model: ArithmeticModel) -> Result<(), CodecError> {
         let model = Model::new(model)?;
-        let name = model.user.name.clone();
-        self.models
-            .write()
-            .unwrap_or_else(PoisonError::into_inner)
-            .insert(name, Arc::new(model));
+        self.models.insert(model.user.name.clone(), Arc::new(model));
         Ok(())
     }
 
     /// The model registered under `name`.
-    pub fn get(&self, name: &str) -> Option<Arc<Model>> {
-        self.models
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .get(name)
-            .cloned()
+    pub(crate) fn get(&self, name: &str) -> Option<&Arc<Model>> {
+        self.models.get(name)
+    }
+}
+
+/// Which copy of an adaptive model's frequencies: the sender's or the receiver's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Direction {
+    Encoder,
+    Decoder,
+}
+
+/// The frequencies the adaptive arithmetic models of a [`Codec`](crate::Codec)
+/// have reached: for each adaptive model, one copy advanced by encoding and
+/// one by decoding (as libdccl keeps them), each starting from the model's
+/// frequencies and adding one to a symbol's frequency each time the symbol
+/// is coded.
+///
+/// A `Codec` owns its state and a clone of the codec starts with a copy of
+/// it, advancing on its own. [`Codec::arithmetic_state`](crate::Codec::arithmetic_state)
+/// takes a snapshot and [`Codec::set_arithmetic_state`](crate::Codec::set_arithmetic_state)
+/// puts one back (for example to send a message again exactly as it was
+/// sent, or to take back a message that was encoded but never sent);
+/// `ArithmeticState::default()` is the state of a codec that has coded
+/// nothing.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ArithmeticState {
+    frequencies: BTreeMap<(String, Direction), Cumulative>,
+}
+
+impl ArithmeticState {
+    /// True when no adaptive model has moved from its initial frequencies.
+    pub fn is_initial(&self) -> bool {
+        self.frequencies.is_empty()
     }
 
-    /// Names of the registered models, sorted.
-    pub fn names(&self) -> Vec<String> {
-        let mut v: Vec<String> = self
-            .models
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .keys()
-            .cloned()
-            .collect();
-        v.sort();
-        v
+    /// Forgets what the adaptive model `name` has learnt (it was replaced).
+    pub(crate) fn restart(&mut self, name: &str) {
+        self.frequencies.retain(|(model, _), _| model != name);
+    }
+
+    /// Checks that every model of the state is an adaptive model of
+    /// `models` with as many symbols; returns the name of one that is not.
+    pub(crate) fn misfit(&self, models: &ArithmeticModels) -> Option<String> {
+        self.frequencies
+            .iter()
+            .find(|((name, _), frequencies)| {
+                !models.get(name).is_some_and(|m| {
+                    m.user.is_adaptive() && m.initial.0.len() == frequencies.0.len()
+                })
+            })
+            .map(|((name, _), _)| name.clone())
+    }
+}
+
+/// A codec's [`ArithmeticState`] behind a lock (so that a `Codec` can be
+/// shared between threads); a clone is a copy, not a share.
+#[derive(Debug, Default)]
+pub(crate) struct SharedState(Mutex<ArithmeticState>);
+
+impl SharedState {
+    pub(crate) fn lock(&self) -> MutexGuard<'_, ArithmeticState> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+impl Clone for SharedState {
+    fn clone(&self) -> Self {
+        SharedState(Mutex::new(self.lock().clone()))
+    }
+}
+
+/// The models and adaptive state lent to the field codecs while one message
+/// is encoded or decoded. An adaptive model's frequencies are copied out of
+/// the codec's state the first time the message uses them; the copies go
+/// back with [`ArithmeticSession::finish`] when the message was coded for
+/// real and without error.
+#[derive(Debug)]
+pub(crate) struct ArithmeticSession<'a> {
+    models: &'a ArithmeticModels,
+    state: &'a SharedState,
+    /// False for a size or a check: the state is left as it is.
+    keep: bool,
+    working: RefCell<BTreeMap<(String, Direction), Cumulative>>,
+}
+
+impl<'a> ArithmeticSession<'a> {
+    pub(crate) fn new(models: &'a ArithmeticModels, state: &'a SharedState, keep: bool) -> Self {
+        ArithmeticSession {
+            models,
+            state,
+            keep,
+            working: RefCell::new(BTreeMap::new()),
+        }
+    }
+
+    /// Runs `code` with the frequencies `model` has reached in `direction`
+    /// during this message (`None` when the model is not adaptive).
+    fn with_frequencies<R>(
+        &self,
+        model: &Model,
+        direction: Direction,
+        code: impl FnOnce(Option<&mut Cumulative>) -> R,
+    ) -> R {
+        if !model.user.is_adaptive() {
+            return code(None);
+        }
+        let mut working = self.working.borrow_mut();
+        let key = (model.user.name.clone(), direction);
+        let frequencies = working.entry(key).or_insert_with_key(|key| {
+            self.state
+                .lock()
+                .frequencies
+                .get(key)
+                .filter(|f| f.0.len() == model.initial.0.len())
+                .cloned()
+                .unwrap_or_else(|| model.initial.clone())
+        });
+        code(Some(frequencies))
+    }
+
+    /// Puts the frequencies this message advanced back into the codec's
+    /// state, when the message was coded for real (`ok`: without error).
+    pub(crate) fn finish(self, ok: bool) {
+        let working = self.working.into_inner();
+        if self.keep && ok && !working.is_empty() {
+            self.state.lock().frequencies.extend(working);
+        }
+    }
+}
+
+/// Runs `code` with the frequencies of `model` in `direction`: those of the
+/// message's session, or (no session: a codec called outside a `Codec`,
+/// e.g. by [`FieldCodec::size`]) a copy of the initial ones of an adaptive model.
+fn with_frequencies<R>(
+    session: Option<&ArithmeticSession<'_>>,
+    model: &Model,
+    direction: Direction,
+    code: impl FnOnce(Option<&mut Cumulative>) -> R,
+) -> R {
+    match session {
+        Some(session) => session.with_frequencies(model, direction, code),
+        None if model.user.is_adaptive() => code(Some(&mut model.initial.clone())),
+        None => code(None),
     }
 }
 
 /// Parses models in protobuf text format, one `ArithmeticModel` per line
 /// (blank lines and lines starting with `#` are skipped).
-pub fn parse_models(text: &str) -> Result<Vec<ArithmeticModel>, CodecError> {
+pub(crate) fn parse_models(text: &str) -> Result<Vec<ArithmeticModel>, CodecError> {
     let desc = protos::DESCRIPTOR_POOL
         .get_message_by_name("dccl.arith.protobuf.ArithmeticModel")
         .ok_or_else(|| CodecError::new("ArithmeticModel descriptor missing"))?;
@@ -791,11 +905,10 @@ impl FieldType {
 
 /// The arithmetic field codec.
 #[derive(Debug)]
-pub struct ArithmeticCodec {
+pub(crate) struct ArithmeticCodec {
     name: String,
     version: i32,
     model_name: String,
-    models: Arc<ArithmeticModels>,
     field_type: FieldType,
     /// Its model when the field was loaded (sizes are computed from it).
     loaded_model: Arc<Model>,
@@ -804,10 +917,9 @@ pub struct ArithmeticCodec {
 impl ArithmeticCodec {
     /// Creates the codec for a field, or `None` for types it cannot code
     /// (strings, bytes, messages). Fails when the option or the model is missing.
-    pub fn create(
+    pub(crate) fn create(
         spec: &FieldSpec<'_>,
         name: &str,
-        models: &Arc<ArithmeticModels>,
     ) -> Result<Option<Arc<dyn FieldCodec>>, CodecError> {
         let Some(field_type) = FieldType::of(&spec.kind) else {
             return Ok(None);
@@ -818,29 +930,31 @@ impl ArithmeticCodec {
         let model_name = options
             .model
             .ok_or_else(|| CodecError::new("missing (dccl.field).arithmetic.model"))?;
-        let loaded_model = models.get(&model_name).ok_or_else(|| {
-            CodecError::new(format!(
-                "no such (dccl.field).arithmetic.model called \"{model_name}\" loaded"
-            ))
-        })?;
+        let loaded_model = spec
+            .registry
+            .arithmetic_models()
+            .get(&model_name)
+            .cloned()
+            .ok_or_else(|| {
+                CodecError::new(format!(
+                    "no such (dccl.field).arithmetic.model called \"{model_name}\" loaded"
+                ))
+            })?;
         Ok(Some(Arc::new(ArithmeticCodec {
             name: name.to_string(),
             version: spec.codec_version,
             model_name,
-            models: models.clone(),
             field_type,
             loaded_model,
         })))
     }
 
-    /// The model now registered under the field's model name.
-    fn model(&self) -> Result<Arc<Model>, CodecError> {
-        self.models.get(&self.model_name).ok_or_else(|| {
-            CodecError::new(format!(
-                "arithmetic model \"{}\" is no longer registered",
-                self.model_name
-            ))
-        })
+    /// The model now registered under the field's model name on the codec
+    /// coding the message (else the one the field was loaded with).
+    fn model<'s>(&'s self, session: Option<&'s ArithmeticSession<'_>>) -> &'s Model {
+        session
+            .and_then(|s| s.models.get(&self.model_name))
+            .unwrap_or(&self.loaded_model)
     }
 
     fn encode_values(
@@ -856,7 +970,7 @@ impl ArithmeticCodec {
             .take(max_repeat as usize)
             .map(|v| self.field_type.to_f64(v))
             .collect::<Result<Vec<f64>, _>>()?;
-        let model = self.model()?;
+        let model = self.model(ctx.arithmetic);
         if ctx.changes.is_some() && model.user.out_of_range_frequency() != 0 {
             let bounds = &model.user.value_bound;
             for (i, x) in numbers.iter().enumerate() {
@@ -879,18 +993,23 @@ impl ArithmeticCodec {
                 }
             }
         }
-        model.encode(out, &numbers, max_repeat, !ctx.dry_run)
+        with_frequencies(ctx.arithmetic, model, Direction::Encoder, |adaptive| {
+            model.encode(out, &numbers, max_repeat, adaptive)
+        })
     }
 
     fn decode_values(
         &self,
         input: &mut BitReader<'_>,
         max_repeat: u32,
+        ctx: &DecodeContext,
     ) -> Result<Vec<Value>, CodecError> {
-        let model = self.model()?;
+        let model = self.model(ctx.arithmetic);
         let min_bits = model.min_size(max_repeat);
-        Ok(model
-            .decode(input, max_repeat, min_bits)?
+        let values = with_frequencies(ctx.arithmetic, model, Direction::Decoder, |adaptive| {
+            model.decode(input, max_repeat, min_bits, adaptive)
+        })?;
+        Ok(values
             .into_iter()
             .filter_map(|v| self.field_type.value_of(v))
             .collect())
@@ -927,9 +1046,9 @@ impl FieldCodec for ArithmeticCodec {
     fn decode(
         &self,
         input: &mut BitReader<'_>,
-        _ctx: &DecodeContext,
+        ctx: &DecodeContext,
     ) -> Result<Option<Value>, CodecError> {
-        Ok(self.decode_values(input, 1)?.into_iter().next())
+        Ok(self.decode_values(input, 1, ctx)?.into_iter().next())
     }
     fn encode_repeated(
         &self,
@@ -945,9 +1064,9 @@ impl FieldCodec for ArithmeticCodec {
         &self,
         input: &mut BitReader<'_>,
         bounds: RepeatBounds,
-        _ctx: &DecodeContext,
+        ctx: &DecodeContext,
     ) -> Result<Vec<Value>, CodecError> {
-        self.decode_values(input, bounds.max)
+        self.decode_values(input, bounds.max, ctx)
     }
     fn min_size_repeated(&self, bounds: RepeatBounds) -> u32 {
         self.loaded_model.min_size(bounds.max)
@@ -958,12 +1077,12 @@ impl FieldCodec for ArithmeticCodec {
 }
 
 /// Registers the codec as `dccl.arithmetic` (and libdccl's older name
-/// `_arithmetic`, reported as written), its models taken from `models`.
-pub fn register(registry: &mut CodecRegistry, models: Arc<ArithmeticModels>) {
+/// `_arithmetic`, reported as written), its models taken from the registry
+/// the field is built with.
+pub(crate) fn register(registry: &mut CodecRegistry) {
     for name in [NAME, "_arithmetic"] {
-        let models = models.clone();
         registry.register(name, move |spec: &FieldSpec<'_>| {
-            ArithmeticCodec::create(spec, name, &models)
+            ArithmeticCodec::create(spec, name)
         });
     }
 }
@@ -988,7 +1107,7 @@ mod tests {
         let values = [1.0, 3.0, 0.0, 2.0, 9.0];
         let mut by_model = BitWriter::new();
         model
-            .encode(&mut by_model, &values, values.len() as u32, true)
+            .encode(&mut by_model, &values, values.len() as u32, None)
             .unwrap();
         // Table order: end-of-array, out-of-range, then the values.
         let table = FrequencyTable::new(&[1, 1, 3, 1, 5, 2]).unwrap();

@@ -120,20 +120,10 @@ impl DeltaCodec {
         })))
     }
 
-    /// Bits of the key (first sample).
-    pub fn key_bits(&self) -> u32 {
-        self.key.bits
-    }
-
-    /// Bits of each following sample.
-    pub fn delta_bits(&self) -> u32 {
-        self.delta_bits
-    }
-
     fn to_f64(&self, v: &Value) -> Result<f64, CodecError> {
         let w = self
             .kind
-            .from_value(v)
+            .read_value(v)
             .ok_or_else(|| CodecError::new(format!("value {v:?} does not match the field type")))?;
         Ok(match w {
             WireValue::I32(x) => x as f64,

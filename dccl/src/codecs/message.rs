@@ -22,7 +22,7 @@ pub const MAX_DEPTH: usize = 32;
 
 /// One field of a message as its codec sees it.
 #[derive(Debug)]
-pub struct FieldEntry {
+pub(crate) struct FieldEntry {
     /// The field.
     pub field: FieldDescriptor,
     /// Its codec.
@@ -53,7 +53,7 @@ impl FieldEntry {
 
 /// A oneof of a version 4 message.
 #[derive(Debug)]
-pub struct OneofEntry {
+pub(crate) struct OneofEntry {
     /// Name of the oneof.
     pub name: String,
     /// Declaration index of the oneof in its message.
@@ -350,12 +350,12 @@ impl MessageCodec {
     }
 
     /// The fields this codec encodes, in order.
-    pub fn fields(&self) -> &[FieldEntry] {
+    pub(crate) fn fields(&self) -> &[FieldEntry] {
         &self.fields
     }
 
     /// The oneofs whose case this codec writes.
-    pub fn oneofs(&self) -> &[OneofEntry] {
+    pub(crate) fn oneofs(&self) -> &[OneofEntry] {
         &self.oneofs
     }
 

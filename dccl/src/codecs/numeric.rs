@@ -67,7 +67,7 @@ impl WireKind {
     }
 
     /// Reads a protobuf value as this wire kind.
-    pub fn from_value(self, v: &Value) -> Option<WireValue> {
+    pub fn read_value(self, v: &Value) -> Option<WireValue> {
         Some(match (self, v) {
             (WireKind::I32, Value::I32(x)) => WireValue::I32(*x),
             (WireKind::I32, Value::EnumNumber(x)) => WireValue::I32(*x),
@@ -452,7 +452,7 @@ impl FieldCodec for NumericCodec {
     ) -> Result<(), CodecError> {
         let wire = match value {
             None => None,
-            Some(v) => Some(self.bounds.kind.from_value(v).ok_or_else(|| {
+            Some(v) => Some(self.bounds.kind.read_value(v).ok_or_else(|| {
                 CodecError::new(format!("value {v:?} does not match the field type"))
             })?),
         };

@@ -8,7 +8,7 @@
 //! `max_length` can fall inside one), repeated fields under `min_repeat`,
 //! between and over `max_repeat`, and required fields left out.
 
-use dccl::options::{field_options, message_options};
+use dccl::field::{field_options, message_options};
 use dccl::prost_reflect::{FieldDescriptor, Kind, MessageDescriptor};
 use rand::{Rng, RngCore};
 

@@ -213,7 +213,7 @@ fn types_of(pool: &dccl::prost_reflect::DescriptorPool, file: &Path) -> Vec<Mess
             continue;
         }
         fn walk(m: MessageDescriptor, top: bool, out: &mut Vec<MessageDescriptor>) {
-            if top || dccl::options::has_message_options(&m) {
+            if top || dccl::field::has_message_options(&m) {
                 out.push(m.clone());
             }
             for child in m.child_messages() {
@@ -322,7 +322,7 @@ fn compare_file(
                 let hash = ours
                     .plain
                     .hash(&name)
-                    .map(dccl::definition_hash::hash_as_string)
+                    .map(|h| format!("{h:#018x}"))
                     .unwrap_or_default();
                 if hash != reply[1] {
                     push(
@@ -406,9 +406,7 @@ fn compare_file(
             push(diffs, &name, "reference-crash", "on select".into());
             return;
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(
-            seed ^ dccl::definition_hash::std_string_hash(name.as_bytes()),
-        );
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ name_hash(name.as_bytes()));
         for _ in 0..if fixed_text.is_some() { 1 } else { instances } {
             let text = match &fixed_text {
                 Some(t) => t.clone(),
@@ -514,7 +512,7 @@ fn compare_file(
                         );
                     }
                     let decoded = match ours.plain.decode(bytes) {
-                        Ok(m) => dccl::text_format::short_debug_string(&m),
+                        Ok(m) => dccl::short_debug_string(&m),
                         Err(e) => format!("!{e}"),
                     };
                     if decoded != reply[3] && hex == reply[1] {
@@ -544,7 +542,7 @@ fn compare_file(
                                 );
                             }
                             let cdec = match ours.crypt.decode(b) {
-                                Ok(m) => dccl::text_format::short_debug_string(&m),
+                                Ok(m) => dccl::short_debug_string(&m),
                                 Err(e) => format!("!{e}"),
                             };
                             if cdec != reply[5] && chex == reply[4] && decoded == reply[3] {
@@ -610,8 +608,8 @@ fn compare_decode(
         return;
     };
     let ours = ours
-        .decode_prefix(bytes)
-        .map(|(m, used)| (dccl::text_format::short_debug_string(&m), used));
+        .decode_with_len(bytes)
+        .map(|(m, used)| (dccl::short_debug_string(&m), used));
     match (theirs[0].as_str(), ours) {
         ("ok", Ok((text, used))) => {
             if text != theirs[2] || used.to_string() != theirs[3] {
@@ -763,4 +761,34 @@ fn differential_against_libdccl_when_a_reference_driver_is_given() {
         failing == 0,
         "{failing} differences with libdccl (classes not in DCCL_DIFF_ACCEPT)"
     );
+}
+
+/// `std::hash<std::string>` of the GNU C++ library on 64-bit targets (a
+/// MurmurHash2 variant), the hash the instance seeds have always been mixed
+/// with, so that a `DCCL_DIFF_SEED` keeps giving the same instances.
+fn name_hash(bytes: &[u8]) -> u64 {
+    const MUL: u64 = 0xc6a4_a793_5bd1_e995;
+    let shift_mix = |v: u64| v ^ (v >> 47);
+    let mut hash = 0xc70f_6907 ^ (bytes.len() as u64).wrapping_mul(MUL);
+    let mut chunks = bytes.chunks_exact(8);
+    for chunk in &mut chunks {
+        let word = u64::from_le_bytes(chunk.try_into().expect("8 bytes"));
+        hash ^= shift_mix(word.wrapping_mul(MUL)).wrapping_mul(MUL);
+        hash = hash.wrapping_mul(MUL);
+    }
+    let rest = chunks.remainder();
+    if !rest.is_empty() {
+        let data = rest
+            .iter()
+            .rev()
+            .fold(0u64, |acc, &b| (acc << 8).wrapping_add(b as u64));
+        hash ^= data;
+        hash = hash.wrapping_mul(MUL);
+    }
+    shift_mix(shift_mix(hash).wrapping_mul(MUL))
+}
+
+#[test]
+fn name_hash_is_the_gnu_string_hash() {
+    assert_eq!(name_hash(b""), 0x553e_9390_1e46_2a6e);
 }

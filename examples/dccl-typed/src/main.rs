@@ -12,8 +12,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         battery_voltage: Some(24.3),
         ..Default::default()
     };
-    let bytes = codec.encode_message(&status)?;
-    let back: Status = codec.decode_message(&bytes)?;
+    let bytes = codec.encode_typed(&status)?;
+    let back: Status = codec.decode_typed(&bytes)?;
     assert_eq!(back, status);
 
     println!("{} bytes: {}", bytes.len(), hex(&bytes));

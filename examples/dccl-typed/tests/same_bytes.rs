@@ -31,7 +31,7 @@ fn typed_and_dynamic_paths_give_the_same_bytes() -> Result<(), Box<dyn std::erro
         lines_done: None,
         fault: Some("leak sensor two".into()),
     };
-    let typed_bytes = typed.encode_message(&status)?;
+    let typed_bytes = typed.encode_typed(&status)?;
 
     let (dynamic_bytes, dynamic) = dynamic_encode(
         r#"vehicle: 3 mode: RETURNING depth: 612.3 battery_voltage: 21.7 fault: "leak sensor two""#,
@@ -44,7 +44,7 @@ fn typed_and_dynamic_paths_give_the_same_bytes() -> Result<(), Box<dyn std::erro
     );
 
     // Each path decodes the other's bytes; the string is cut to max_length.
-    let back: Status = typed.decode_message(&dynamic_bytes)?;
+    let back: Status = typed.decode_typed(&dynamic_bytes)?;
     assert_eq!(back.fault.as_deref(), Some("leak sensor "));
     assert_eq!(back.depth, 612.3);
     let back = dynamic.decode(&typed_bytes)?;
@@ -59,7 +59,7 @@ fn typed_and_dynamic_paths_give_the_same_bytes() -> Result<(), Box<dyn std::erro
 fn main_example_message_matches_the_dynamic_path() -> Result<(), Box<dyn std::error::Error>> {
     let mut codec = dccl::Codec::new();
     codec.load_type::<Status>()?;
-    let bytes = codec.encode_message(&Status {
+    let bytes = codec.encode_typed(&Status {
         vehicle: 3,
         mode: Mode::Survey as i32,
         depth: 42.5,
@@ -70,6 +70,6 @@ fn main_example_message_matches_the_dynamic_path() -> Result<(), Box<dyn std::er
         dynamic_encode("vehicle: 3 mode: SURVEY depth: 42.5 battery_voltage: 24.3")?;
     assert_eq!(bytes, dynamic_bytes);
     // The id comes from the (dccl.msg) option kept in the generated descriptors.
-    assert_eq!(codec.id(&bytes)?, 130);
+    assert_eq!(codec.read_id(&bytes)?, 130);
     Ok(())
 }

@@ -290,7 +290,7 @@ impl Translator {
             let fail = |reason: String| TranslateError {
                 protobuf_name: name.clone(),
                 variable: serializer.moos_var.clone(),
-                value: dccl::text_format::short_debug_string(message),
+                value: dccl::short_debug_string(message),
                 reason,
             };
             let short = entry.use_short_enum();

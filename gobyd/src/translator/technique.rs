@@ -31,7 +31,7 @@ pub fn prefix(name: &str) -> String {
 /// Writes `message` with a protobuf technique.
 pub fn serialize(technique: Technique, message: &DynamicMessage) -> MoosValue {
     let name = message.descriptor().full_name().to_string();
-    let text = || dccl::text_format::short_debug_string(message);
+    let text = || dccl::short_debug_string(message);
     match technique {
         Technique::TechniqueProtobufTextFormat => MoosValue::String(text()),
         Technique::TechniquePrefixedProtobufTextFormat => {

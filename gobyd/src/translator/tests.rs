@@ -255,8 +255,8 @@ fn format_reaches_into_embedded_and_repeated_messages() {
     let mut expected = message.clone();
     expected.set_field_by_name("dbls", Value::List(vec![Value::F64(f64::NAN)]));
     assert_eq!(
-        dccl::text_format::short_debug_string(&back),
-        dccl::text_format::short_debug_string(&expected)
+        dccl::short_debug_string(&back),
+        dccl::short_debug_string(&expected)
     );
 }
 

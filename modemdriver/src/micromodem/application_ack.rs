@@ -443,12 +443,12 @@ impl ApplicationAcks {
         let Some(first) = mt.frame.first().filter(|f| !f.is_empty()) else {
             return Taken::Nothing;
         };
-        if self.codec.id(first).ok() != Some(DCCL_ID) {
+        if self.codec.read_id(first).ok() != Some(DCCL_ID) {
             return Taken::Plain;
         }
         let decoded = self
             .codec
-            .decode_prefix(first)
+            .decode_with_len(first)
             .map_err(|e| e.to_string())
             .and_then(|(m, used)| {
                 m.transcode_to::<MicroModemApplicationAck>()
