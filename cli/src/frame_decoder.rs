@@ -1,6 +1,8 @@
 //! Decoding a byte string that holds one or more DCCL messages back to back
 //! (a modem frame of stitched messages), with an error that says where the
-//! bytes stopped being a message.
+//! bytes stopped being a message. A frame gobyd sent ends with its
+//! identity trailer (`goby.acomms.protobuf.FrameIdentity`, see
+//! `queue::identity`): the messages end there.
 
 use dccl::Codec;
 use prost_reflect::DynamicMessage;
@@ -56,9 +58,24 @@ impl FrameDecoder<'_> {
         bytes: &[u8],
         mut emit: impl FnMut(&DynamicMessage) -> Result<(), LineError>,
     ) -> Result<(), FrameError> {
+        let trailer = queue::TrailerCodec::new();
         let mut offset = 0usize;
         while offset < bytes.len() {
             let rest = &bytes[offset..];
+            // gobyd's identity trailer after the messages (unless the
+            // user's own types take its id).
+            if offset > 0
+                && self.as_type.is_none()
+                && trailer.starts_trailer(rest)
+                && trailer.decode(rest).is_some()
+                && !self
+                    .codec
+                    .loaded()
+                    .iter()
+                    .any(|n| self.codec.id_of(n).ok() == Some(queue::identity::DCCL_ID))
+            {
+                break;
+            }
             let decoded = match self.as_type {
                 Some(name) => self.codec.decode_as_with_len(name, rest),
                 None => self.codec.decode_with_len(rest),

@@ -286,6 +286,28 @@ fn bin_round_trip_with_stitched_messages() {
         assert!(same_message(&got, &want), "hex {}: got {line}", v.hex);
     }
 
+    // A frame as gobyd sends it, its identity trailer after the messages:
+    // the messages, and no error.
+    let mut framed: Vec<u8> = mixed
+        .iter()
+        .flat_map(|v| hex::decode(&v.hex).expect("reference hex"))
+        .collect();
+    framed.extend(
+        queue::TrailerCodec::new().encode(
+            &(0..mixed.len() as u64)
+                .map(|n| queue::WireIdentity::new(n, false))
+                .collect::<Vec<_>>(),
+        ),
+    );
+    let out = goby(
+        &[
+            "dccl", "decode", "-f", &proto, "--format", "bin", "--out", "json",
+        ],
+        framed,
+    );
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    assert_eq!(lines(&stdout_text(&out)).len(), mixed.len());
+
     // Nothing in, nothing out.
     let out = goby(&["dccl", "decode", "-f", &proto, "--format", "bin"], "");
     assert!(out.status.success());
