@@ -321,7 +321,7 @@ fn queue_line(
             json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size })
         }
         QueueEvent::Sent { message, frame, .. } => {
-            json!({ "event": "sent", "sent": name(message), "frame": frame, "msg": message_json(message) })
+            json!({ "event": "sent", "sent": name(message), "id": entry, "frame": frame, "msg": message_json(message) })
         }
         QueueEvent::OnDemandRejected { .. } => return None,
     })

@@ -232,7 +232,7 @@ impl Outbox {
 
     /// The queue events since the last call, as [`events`](Self::events),
     /// each with the journal entry id (the id clients were given) of the
-    /// message it ends, for acks, expiries and drops.
+    /// message it is about: for sendings, acks, expiries and drops.
     pub fn events_with_entries(
         &mut self,
     ) -> Result<Vec<(QueueEvent, Option<EntryId>)>, JournalError> {
@@ -257,8 +257,10 @@ impl Outbox {
                 } => {
                     if let Some(entry) = self.entries.remove(id) {
                         self.in_flight.push((entry, message.clone()));
+                        ended = Some(entry);
                     }
                 }
+                QueueEvent::Sent { id, .. } => ended = self.entries.get(id).copied(),
                 _ => {}
             }
             out.push((event, ended));
@@ -475,5 +477,33 @@ mod tests {
         drop(outbox);
         let (_, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
         assert_eq!(replay.requeued, 0);
+    }
+
+    #[test]
+    fn a_sending_names_the_journal_id_the_client_was_given() {
+        for ack in [true, false] {
+            let dir = Scratch::new(&format!("sent-id-{ack}"));
+            let clock = ManualClock::at_seconds(1_000.0);
+            let (mut outbox, _) = Outbox::open(queue(ack, &clock), &dir.journal()).unwrap();
+            let Accepted::Queued(entry) = outbox.accept(&command(2, "s")).unwrap() else {
+                panic!("not queued");
+            };
+            outbox.events().unwrap();
+            clock.advance_seconds(1.0);
+            let mut tx = ModemTransmission {
+                max_frame_bytes: Some(32),
+                max_num_frames: Some(1),
+                ..Default::default()
+            };
+            outbox.data_request(&mut tx).unwrap();
+            let sent: Vec<_> = outbox
+                .events_with_entries()
+                .unwrap()
+                .into_iter()
+                .filter(|(e, _)| matches!(e, QueueEvent::Sent { .. }))
+                .map(|(_, entry)| entry)
+                .collect();
+            assert_eq!(sent, [Some(entry)], "ack {ack}");
+        }
     }
 }
