@@ -627,9 +627,11 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             dccl_config.skip_crypto_for_id.iter().copied(),
         );
     }
-    // Whether each arithmetic model is adaptive, by name (a later model of
-    // the same name replaces an earlier one, as on the codec).
+    // Whether each arithmetic model is adaptive, by name. A name defined
+    // twice is refused: which definition a node codes with would depend on
+    // the order of its files (libdccl takes the last one).
     let mut adaptive = HashMap::new();
+    let mut defined_in: HashMap<String, &String> = HashMap::new();
     for file in &dccl_config.arithmetic_model_file {
         let problem = |e: &dyn std::fmt::Display| {
             ConfigError::Invalid(format!("dccl.arithmetic_model_file {file}: {e}"))
@@ -639,6 +641,11 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             .load_arithmetic_models(&text)
             .map_err(|e| problem(&e))?;
         for name in names {
+            if let Some(first) = defined_in.insert(name.clone(), file) {
+                return Err(problem(&format!(
+                    "arithmetic model {name:?} is defined twice (first in {first}): give each model one definition"
+                )));
+            }
             let is_adaptive = codec
                 .arithmetic_model(&name)
                 .is_some_and(|m| m.is_adaptive());

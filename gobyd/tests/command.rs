@@ -422,3 +422,22 @@ fn adaptive_arithmetic_models_are_refused_naming_message_field_and_model() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn an_arithmetic_model_defined_twice_is_refused() {
+    let dir = scratch("command", "gobyd-model-twice");
+    let config = arithmetic_config(&dir, false);
+    let models = dir.join("models.txt");
+    let once = std::fs::read_to_string(&models).unwrap();
+    // The same name again, with other frequencies.
+    let again = once.replace("frequency: 1 value_bound: 1", "frequency: 5 value_bound: 1");
+    std::fs::write(&models, format!("{once}{again}")).unwrap();
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stdout_text(&out));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("models.txt") && err.contains("\"counts\" is defined twice"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
