@@ -27,7 +27,13 @@ pub fn slot_end(mt: &ModemTransmission) -> Option<u64> {
 /// Whether a packet of `duration` started now would end after the slot of
 /// `mt` (`false` when `mt` has no slot).
 pub fn too_late(mt: &ModemTransmission, duration: Duration) -> bool {
-    slot_end(mt).is_some_and(|end| now_micros().saturating_add(duration.as_micros() as u64) > end)
+    too_late_at(mt, duration, now_micros())
+}
+
+/// Whether a packet of `duration` started at `now` (µs since the epoch)
+/// would end after the slot of `mt` (`false` when `mt` has no slot).
+pub fn too_late_at(mt: &ModemTransmission, duration: Duration, now: u64) -> bool {
+    slot_end(mt).is_some_and(|end| now.saturating_add(duration.as_micros() as u64) > end)
 }
 
 #[cfg(test)]
