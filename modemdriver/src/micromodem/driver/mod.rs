@@ -110,6 +110,8 @@ mod reception;
 pub mod shell;
 mod specific;
 mod startup;
+#[cfg(test)]
+mod tests;
 
 use std::time::Duration;
 
