@@ -332,15 +332,10 @@ impl Machine {
 
     /// The command out got no answer in time: sent again, or given up.
     pub(super) fn command_timers(&mut self) {
-        if !self
-            .startup
-            .awaiting
-            .as_ref()
-            .is_some_and(|a| a.deadline <= self.now.at)
-        {
+        let now = self.now.at;
+        let Some(a) = self.startup.awaiting.take_if(|a| a.deadline <= now) else {
             return;
-        }
-        let a = self.startup.awaiting.take().expect("checked");
+        };
         if a.heard {
             // A multi-line answer ended.
             return;
