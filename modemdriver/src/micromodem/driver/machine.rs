@@ -34,10 +34,9 @@ use super::reception::Reception;
 use super::startup::Startup;
 use super::MAX_PENDING_TRANSMISSIONS;
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus};
-use crate::time::now_micros;
 
-/// The time of an input, read once by the shell as the input comes (or
-/// made up by a test).
+/// The time of an input, read once by the shell as the input comes
+/// ([`shell::now`](super::shell::now)), or made up by a test.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Now {
     /// Monotonic time: what deadlines are kept in.
@@ -49,14 +48,6 @@ pub struct Now {
 }
 
 impl Now {
-    /// The time now, from both clocks.
-    pub fn read() -> Now {
-        Now {
-            at: Instant::now(),
-            micros: now_micros(),
-        }
-    }
-
     /// `d` later, on both clocks.
     pub fn after(self, d: Duration) -> Now {
         Now {

@@ -2,7 +2,7 @@
 //!
 //! One loop waits for whichever comes first: a command of the layer above,
 //! a line from the serial link, the answer to a data request outstanding,
-//! or the machine's next deadline. It reads the clock once ([`Now::read`])
+//! or the machine's next deadline. It reads the clock once ([`now`])
 //! and hands the input to the machine, then does the outputs in order:
 //! writes lines (a failed write is an input of its own, the link lost),
 //! gives events to the layer above, makes data requests (each answer, or
@@ -24,7 +24,15 @@ use crate::link::fault::{FaultConfig, FaultInjector, FaultScript};
 use crate::link::serial::{self, SerialLineLink};
 use crate::link::trace::Tracer;
 use crate::link::Link;
-use crate::time::sleep_until_opt;
+use crate::time::{now_micros, sleep_until_opt};
+
+/// The time now, from both clocks: the one clock read of the driver.
+pub fn now() -> Now {
+    Now {
+        at: tokio::time::Instant::now(),
+        micros: now_micros(),
+    }
+}
 
 type MmLink = Tracer<FaultInjector<SerialLineLink>>;
 
@@ -91,11 +99,11 @@ pub(super) async fn run(
 ) {
     let events = ctx.events.clone();
     let mut link = Some(port.wrap(lines, &events));
-    let mut machine = Machine::new(settings, Now::read());
+    let mut machine = Machine::new(settings, now());
     let mut answers: Answers = Vec::new();
     let mut input = Input::Tick;
     loop {
-        let outputs = machine.handle(Now::read(), input);
+        let outputs = machine.handle(now(), input);
         perform(
             outputs,
             &mut machine,
@@ -110,7 +118,7 @@ pub(super) async fn run(
         input = tokio::select! {
             command = ctx.commands.recv() => match command {
                 Some(DriverCommand::Stop(done)) => {
-                    let outputs = machine.handle(Now::read(), Input::Stop);
+                    let outputs = machine.handle(now(), Input::Stop);
                     perform(outputs, &mut machine, &mut link, &port, &events, &mut answers).await;
                     let _ = done.send(());
                     return;
@@ -151,10 +159,8 @@ async fn perform(
                 let Some(l) = link.as_mut() else { continue };
                 if let Err(e) = l.send(sentence.to_line().as_bytes(), &()).await {
                     *link = None;
-                    let more = machine.handle(
-                        Now::read(),
-                        Input::Disconnected(format!("write failed: {e}")),
-                    );
+                    let more =
+                        machine.handle(now(), Input::Disconnected(format!("write failed: {e}")));
                     queue.extend(more);
                 }
             }
@@ -172,7 +178,7 @@ async fn perform(
                     }
                     Err(_) => false,
                 };
-                queue.extend(machine.handle(Now::read(), Input::Opened(opened)));
+                queue.extend(machine.handle(now(), Input::Opened(opened)));
             }
         }
     }
