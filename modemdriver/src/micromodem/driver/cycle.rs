@@ -27,7 +27,8 @@
 //!   [`HAND_OVER`](super::HAND_OVER): otherwise no `$CCTXD` is written (the
 //!   modem, without its data, sends nothing and gives the cycle up on its
 //!   own), the job fails, and no other job starts until the modem has
-//!   given up (its `$CAERR`, a reset, or twice `response_timeout_ms`).
+//!   given up (its `$CAERR`, a reset, or its data timeout `DTO`, s, from
+//!   the configuration echo, plus `response_timeout_ms`).
 //!
 //! A failed job is reported with its frames (the layer above queues their
 //! messages again).
@@ -725,9 +726,13 @@ impl Machine {
     /// after its slot: its data requests go unanswered (the modem sends
     /// nothing), and the job fails.
     pub(super) fn give_up_in_cycle(&mut self, dest: u32, reason: String) {
+        let dto = self
+            .startup
+            .data_timeout_s
+            .unwrap_or(super::startup::DEFAULT_DATA_TIMEOUT_S);
         self.tx.abandoned = Some(Abandoned {
             dest,
-            until: self.now.at + self.response_timeout() * 2,
+            until: self.now.at + Duration::from_secs(dto) + self.response_timeout(),
         });
         self.job_progress();
         self.finish(TransmitOutcome::Failed(reason));

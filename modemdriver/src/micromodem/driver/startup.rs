@@ -81,7 +81,14 @@ pub(super) struct Startup {
     /// `TXD` from its configuration echo: ms between the last `$CCTXD` and
     /// the packet on a Micro-Modem 2 (0 when not heard).
     pub tx_delay_ms: u64,
+    /// `DTO` from its configuration echo: seconds the modem waits for the
+    /// data of a cycle before giving it up (`None` when not heard: the
+    /// Micro-Modem's default, [`DEFAULT_DATA_TIMEOUT_S`]).
+    pub data_timeout_s: Option<u64>,
 }
+
+/// The Micro-Modem's data timeout (`DTO`) when its echo was not heard, s.
+pub(super) const DEFAULT_DATA_TIMEOUT_S: u64 = 5;
 
 impl Startup {
     pub fn next_deadline(&self) -> Option<Instant> {
@@ -363,6 +370,11 @@ impl Machine {
         }
         if key.eq_ignore_ascii_case("XST") {
             self.startup.xst_configured = on;
+        }
+        if key.eq_ignore_ascii_case("DTO") {
+            if let Ok(s) = value.trim().parse::<u64>() {
+                self.startup.data_timeout_s = Some(s);
+            }
         }
         if key.eq_ignore_ascii_case("TXD") {
             if let Ok(ms) = value.trim().parse::<u64>() {
