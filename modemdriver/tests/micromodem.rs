@@ -1063,7 +1063,8 @@ async fn a_data_request_too_late_for_its_slot_puts_nothing_on_the_water() {
 /// the water, and the transmission fails. Checks the guarantee through the
 /// driver task (a rate-6 packet in a 2.5 s slot must start by +0.86 s; the
 /// answer comes at +1.2 s, and the driver gives up at +0.86 s without
-/// waiting for it).
+/// waiting for it). Fails on the old driver, which waited out its 1 s data
+/// request timeout and reported nothing to send.
 #[tokio::test]
 async fn a_data_answer_too_late_for_its_slot_sends_no_cycle() {
     let mut b = bench("late-answer").await;

@@ -462,7 +462,9 @@ fn a_data_request_too_late_for_the_slot_gets_no_frame() {
 }
 
 /// A data request in time is answered with its frame, the slot check
-/// passing (the same cycle as above, the modem asking at once).
+/// passing (the same cycle as above, the modem asking at once). Checks the
+/// new guarantee's other side: the check at a `$CADRQ` gives up only a
+/// packet that cannot fit.
 #[test]
 fn a_data_request_in_time_gets_its_frame() {
     let mut bench = Bench::ready(MicroModemConfig::default());
