@@ -347,50 +347,76 @@ impl EventSink {
         template: ModemTransmission,
         timeout: Duration,
     ) -> ModemTransmission {
-        let (reply, answer) = oneshot::channel();
-        self.emit(DriverEvent::DataRequest(DataRequest {
-            template: template.clone(),
-            reply,
-        }));
-        let filled = match tokio::time::timeout(timeout, answer).await {
-            Ok(Ok(filled)) => filled,
-            _ => return template,
-        };
-        let mut out = template.clone();
-        out.frame.clear();
-        if template.dest() == -1 {
-            out.dest = filled.dest;
-        }
-        out.ack_requested = filled.ack_requested.or(template.ack_requested);
-        let max_frames = template.max_num_frames() as usize;
-        for (i, frame) in filled.frame.into_iter().enumerate() {
-            if i >= max_frames {
-                self.status(DriverStatus::DataRejected {
-                    reason: format!(
-                        "data request answer holds more than max_num_frames = {max_frames} frames; frames from {i} on dropped"
-                    ),
-                });
-                break;
-            }
-            match template.max_frame_bytes {
-                Some(max) if frame.len() > max as usize => {
-                    self.status(DriverStatus::DataRejected {
-                        reason: format!(
-                            "frame {i} of {} bytes exceeds max_frame_bytes = {max}; dropped",
-                            frame.len()
-                        ),
-                    });
-                    out.frame.push(Vec::new());
-                }
-                _ => out.frame.push(frame),
-            }
-        }
-        // Trailing empty frames carry nothing.
-        while out.frame.last().is_some_and(|f| f.is_empty()) {
-            out.frame.pop();
+        let (request, answer) = DataRequest::new(template.clone());
+        self.emit(DriverEvent::DataRequest(request));
+        let filled = tokio::time::timeout(timeout, answer)
+            .await
+            .ok()
+            .and_then(Result::ok);
+        let (out, problems) = checked_answer(&template, filled);
+        for status in problems {
+            self.status(status);
         }
         out
     }
+}
+
+impl DataRequest {
+    /// A request to fill `template`, and where its answer comes.
+    pub(crate) fn new(template: ModemTransmission) -> (Self, oneshot::Receiver<ModemTransmission>) {
+        let (reply, answer) = oneshot::channel();
+        (DataRequest { template, reply }, answer)
+    }
+}
+
+/// The answer to a data request for `template` (`None`: no answer),
+/// checked against it: at most `max_num_frames` frames, each at most
+/// `max_frame_bytes` long (longer ones are dropped, and reported in the
+/// statuses returned); `src`, `rate` and `frame_start` are kept from the
+/// template, `dest` taken from the answer when the template's is -1,
+/// trailing empty frames dropped. With no answer, the template as it was.
+pub(crate) fn checked_answer(
+    template: &ModemTransmission,
+    filled: Option<ModemTransmission>,
+) -> (ModemTransmission, Vec<DriverStatus>) {
+    let Some(filled) = filled else {
+        return (template.clone(), Vec::new());
+    };
+    let mut problems = Vec::new();
+    let mut out = template.clone();
+    out.frame.clear();
+    if template.dest() == -1 {
+        out.dest = filled.dest;
+    }
+    out.ack_requested = filled.ack_requested.or(template.ack_requested);
+    let max_frames = template.max_num_frames() as usize;
+    for (i, frame) in filled.frame.into_iter().enumerate() {
+        if i >= max_frames {
+            problems.push(DriverStatus::DataRejected {
+                reason: format!(
+                    "data request answer holds more than max_num_frames = {max_frames} frames; frames from {i} on dropped"
+                ),
+            });
+            break;
+        }
+        match template.max_frame_bytes {
+            Some(max) if frame.len() > max as usize => {
+                problems.push(DriverStatus::DataRejected {
+                    reason: format!(
+                        "frame {i} of {} bytes exceeds max_frame_bytes = {max}; dropped",
+                        frame.len()
+                    ),
+                });
+                out.frame.push(Vec::new());
+            }
+            _ => out.frame.push(frame),
+        }
+    }
+    // Trailing empty frames carry nothing.
+    while out.frame.last().is_some_and(|f| f.is_empty()) {
+        out.frame.pop();
+    }
+    (out, problems)
 }
 
 /// What a driver task is given: its commands, its event sink and its clock.

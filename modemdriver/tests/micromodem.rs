@@ -1005,3 +1005,114 @@ async fn micromodem2_application_acks_wait_for_the_layer_above() {
     e1.stop().await;
     e2.stop().await;
 }
+
+/// A rate-6 transmission (a packet of about 1.64 s by the driver's
+/// estimate) in a slot opening now and lasting `slot_seconds`.
+fn slotted(slot_seconds: f64) -> ModemTransmission {
+    ModemTransmission {
+        time: Some(modemdriver::time::now_micros()),
+        slot_seconds: Some(slot_seconds),
+        ..data(2, 6, false)
+    }
+}
+
+fn data_packets(air: &[emulator::AirTime]) -> usize {
+    air.iter()
+        .filter(|a| a.kind == emulator::AirKind::Data)
+        .count()
+}
+
+/// The modem's data request reaches the driver too late for the packet to
+/// end within its 2.5 s slot (held back 1.2 s on the line, as under load):
+/// no `$CCTXD` is written, nothing goes on the water, the transmission
+/// fails with its frames, and the next one goes out. Fails on the old
+/// driver, which answered the data request whatever the time (a modem
+/// still waiting for its data would then have sent the packet after its
+/// slot; this emulator gives up first, after its 1 s data timeout).
+#[tokio::test]
+async fn a_data_request_too_late_for_its_slot_puts_nothing_on_the_water() {
+    let mut b = bench("late-request").await;
+    // After the $CCCYC: its echo, then the $CADRQ, held back.
+    b.script.push(Fault::Delay(Duration::ZERO));
+    b.script.push(Fault::Delay(Duration::from_millis(1200)));
+    b.d1.initiate_transmission(slotted(2.5)).unwrap();
+    let frame = vec![b"too late".to_vec()];
+    let (result, seen) = until_result(&mut b.d1, LIMIT, |filled| {
+        filled.frame = frame.clone();
+    })
+    .await;
+    assert!(
+        matches!(&result.outcome, TransmitOutcome::Failed(reason) if reason.contains("slot")),
+        "{result:?} {seen:?}"
+    );
+    assert_eq!(result.transmission.frame, frame, "reported with its frames");
+    assert!(
+        !written(&seen).iter().any(|l| l.starts_with("$CCTXD")),
+        "{seen:?}"
+    );
+    // The modem gives the cycle up; the next transmission goes out.
+    b.d1.initiate_transmission(data(2, 6, false)).unwrap();
+    let (outcome, seen) = transmit(&mut b.d1, &[b"in time".to_vec()], || {}).await;
+    assert_eq!(outcome, TransmitOutcome::Sent, "{seen:?}");
+    assert_eq!(data_packets(&b.e1.air_log()), 1, "{:?}", b.e1.air_log());
+    b.stop().await;
+}
+
+/// The layer above answers the data request when the packet could no
+/// longer end within its slot: no `$CCCYC` is written, nothing goes on
+/// the water, and the transmission fails. Checks the guarantee through the
+/// driver task (a rate-6 packet in a 2.5 s slot must start by +0.86 s; the
+/// answer comes at +1.2 s, and the driver gives up at +0.86 s without
+/// waiting for it). Fails on the old driver, which waited out its 1 s data
+/// request timeout and reported nothing to send.
+#[tokio::test]
+async fn a_data_answer_too_late_for_its_slot_sends_no_cycle() {
+    let mut b = bench("late-answer").await;
+    b.d1.initiate_transmission(slotted(2.5)).unwrap();
+    let mut seen = Vec::new();
+    // The data request, and when it is answered.
+    let mut answer: Option<(modemdriver::DataRequest, tokio::time::Instant)> = None;
+    let started = std::time::Instant::now();
+    let result = tokio::time::timeout(LIMIT, async {
+        loop {
+            let at = answer.as_ref().map(|(_, at)| *at);
+            let event = tokio::select! {
+                event = b.d1.next_event() => event.expect("driver running"),
+                () = modemdriver::time::sleep_until_opt(at) => {
+                    let (request, _) = answer.take().expect("armed");
+                    let mut filled = request.template().clone();
+                    filled.frame = vec![b"too late".to_vec()];
+                    request.respond(filled);
+                    continue;
+                }
+            };
+            match event {
+                DriverEvent::DataRequest(request) => {
+                    let at = tokio::time::Instant::now() + Duration::from_millis(1200);
+                    answer = Some((request, at));
+                }
+                DriverEvent::TransmitResult(r) => return r,
+                other => seen.push(other),
+            }
+        }
+    })
+    .await
+    .expect("a transmit result in time");
+    assert!(
+        matches!(&result.outcome, TransmitOutcome::Failed(reason) if reason.contains("slot")),
+        "{result:?} {seen:?}"
+    );
+    assert!(
+        started.elapsed() < Duration::from_millis(1200),
+        "given up when the packet had to start, not when the answer came"
+    );
+    assert!(
+        !written(&seen)
+            .iter()
+            .any(|l| l.starts_with("$CCCYC") || l.starts_with("$CCTXD")),
+        "{seen:?}"
+    );
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(data_packets(&b.e1.air_log()), 0, "{:?}", b.e1.air_log());
+    b.stop().await;
+}

@@ -2,9 +2,10 @@
 //! quirks of particular versions.
 
 /// Which Micro-Modem the driver talks to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Generation {
     /// Not yet known (no `$CAREV` and no telling configuration line).
+    #[default]
     Unknown,
     /// Micro-Modem 1 (firmware 0.x / 1.x).
     One,

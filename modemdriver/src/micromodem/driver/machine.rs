@@ -1,0 +1,549 @@
+//! The driver as a state machine: no input or output, no clock read.
+//!
+//! Each input ([`Input`]: a line read from the modem, a tick, a command of
+//! the layer above, the answer to a data request, the serial device opened
+//! or lost) comes with the time it happened ([`Now`]), and its handling
+//! returns, in order, what to do ([`Output`]: lines to write, events for the
+//! layer above, data requests to make, the device to open).
+//! [`Machine::next_deadline`] tells when the next tick is due (`None`: no
+//! timer armed). Nothing in the machine waits: a data request is an output
+//! and its answer a later input, and meanwhile lines, commands and ticks are
+//! handled as ever.
+//!
+//! The state is split by concept, each in its module:
+//! [`startup`](super::startup) (configuration, host commands and their
+//! answers), [`cycle`](super::cycle) (the transmit cycle and its slot),
+//! [`fill`](super::fill) (data requests outstanding),
+//! [`reception`](super::reception) (receptions, statistics, acks heard);
+//! this module holds the link's state and routes each input.
+
+use std::time::Duration;
+
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, MicroModemConfig, MicroModemSpecific, ModemTransmission,
+};
+use tokio::time::Instant;
+
+use super::super::application_ack::ApplicationAcks;
+use super::super::nmea::NmeaError;
+use super::super::sentence::{MmSentence, SentenceError};
+use super::cycle::{Job, Transmit};
+use super::fill::Requests;
+use super::reception::Reception;
+use super::startup::Startup;
+use super::MAX_PENDING_TRANSMISSIONS;
+use crate::driver::{DriverCommand, DriverEvent, DriverStatus};
+
+/// The time of an input, read once by the shell as the input comes
+/// ([`shell::now`](super::shell::now)), or made up by a test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Now {
+    /// Monotonic time: what deadlines are kept in.
+    pub at: Instant,
+    /// Wall clock (UTC), microseconds since the Unix epoch: the unit of
+    /// `ModemTransmission.time` and of slots, and what the modem's clock is
+    /// set to.
+    pub micros: u64,
+}
+
+impl Now {
+    /// `d` later, on both clocks.
+    pub fn after(self, d: Duration) -> Now {
+        Now {
+            at: self.at + d,
+            micros: self.micros.saturating_add(d.as_micros() as u64),
+        }
+    }
+}
+
+/// Names a data request made by the machine ([`Output::Request`]); its
+/// answer comes back with it ([`Input::Answer`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct RequestId(pub u64);
+
+/// What happened.
+#[derive(Debug)]
+pub enum Input {
+    /// A line read from the modem (without its delimiter).
+    Line(Vec<u8>),
+    /// Time passed: deadlines up to now fire.
+    Tick,
+    /// A command of the layer above (other than `Stop`).
+    Command(DriverCommand),
+    /// The layer above answered a data request: the filled transmission,
+    /// or `None` when the request was dropped unanswered.
+    Answer {
+        /// The request answered.
+        id: RequestId,
+        /// The transmission filled, or `None`.
+        filled: Option<ModemTransmission>,
+    },
+    /// The device asked for by [`Output::Open`] was opened (`true`) or
+    /// could not be (`false`).
+    Opened(bool),
+    /// The serial link failed (read or write): why.
+    Disconnected(String),
+    /// The driver stops: what is held is reported now.
+    Stop,
+}
+
+/// What to do, in order.
+#[derive(Debug)]
+pub enum Output {
+    /// Write this sentence to the modem.
+    Write(MmSentence),
+    /// Give this event to the layer above.
+    Event(DriverEvent),
+    /// Ask the layer above to fill `template` (a data request); the answer,
+    /// or its absence, comes back as [`Input::Answer`] with `id`. The
+    /// machine gives up waiting on its own (a deadline): an answer after
+    /// that is ignored.
+    Request {
+        /// Names the request in its answer.
+        id: RequestId,
+        /// What to fill: `max_num_frames` frames of at most
+        /// `max_frame_bytes` bytes.
+        template: ModemTransmission,
+    },
+    /// Open the serial device again (after it was lost), then tell
+    /// [`Input::Opened`].
+    Open,
+}
+
+/// What the machine starts from (checked by [`super::settings`]).
+#[derive(Debug)]
+pub struct Settings {
+    /// This modem's id (1-127).
+    pub modem_id: u32,
+    /// The Micro-Modem's part of the driver configuration.
+    pub mm: MicroModemConfig,
+    /// Between attempts to open the device again.
+    pub reconnect: Duration,
+    /// With `use_application_acks`.
+    pub app_acks: Option<ApplicationAcks>,
+    /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
+    pub deferred_ack: bool,
+    /// Without application acks: strips those a peer sends anyway.
+    pub ack_reader: ApplicationAcks,
+}
+
+/// The serial link as the machine sees it.
+#[derive(Debug)]
+pub(super) struct LinkState {
+    pub connected: bool,
+    pub reconnect: Duration,
+    /// When to try opening the device again, while not connected.
+    pub reconnect_at: Instant,
+    /// Last line heard from the modem.
+    pub last_heard: Instant,
+    pub silence_reported: bool,
+    /// An [`Output::Open`] is out, not yet answered.
+    pub opening: bool,
+}
+
+/// The Micro-Modem driver's logic.
+#[derive(Debug)]
+pub struct Machine {
+    pub(super) modem_id: u32,
+    pub(super) mm: MicroModemConfig,
+    /// The time of the input being handled.
+    pub(super) now: Now,
+    /// Outputs of the input being handled.
+    out: Vec<Output>,
+    pub(super) link: LinkState,
+    pub(super) startup: Startup,
+    pub(super) tx: Transmit,
+    pub(super) requests: Requests,
+    pub(super) rx: Reception,
+    /// With `use_application_acks`.
+    pub(super) app_acks: Option<ApplicationAcks>,
+    pub(super) deferred_ack: bool,
+}
+
+impl Machine {
+    /// A machine whose serial link is open at `now`; its first outputs
+    /// (the start-up commands) come from the first input, e.g. a
+    /// [`Input::Tick`].
+    pub fn new(settings: Settings, now: Now) -> Machine {
+        let Settings {
+            modem_id,
+            mm,
+            reconnect,
+            app_acks,
+            deferred_ack,
+            ack_reader,
+        } = settings;
+        let mut machine = Machine {
+            modem_id,
+            mm,
+            now,
+            out: Vec::new(),
+            link: LinkState {
+                connected: true,
+                reconnect,
+                reconnect_at: now.at,
+                last_heard: now.at,
+                silence_reported: false,
+                opening: false,
+            },
+            startup: Startup::default(),
+            tx: Transmit::default(),
+            requests: Requests::default(),
+            rx: Reception::new(ack_reader),
+            app_acks,
+            deferred_ack,
+        };
+        machine.queue_initialization();
+        machine
+    }
+
+    /// Handles `input`, which happened at `now`; returns what to do, in
+    /// order.
+    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        match input {
+            Input::Line(bytes) => self.line(&bytes),
+            Input::Tick => self.timers(),
+            Input::Command(command) => self.command(command),
+            Input::Answer { id, filled } => self.answered(id, filled),
+            Input::Opened(ok) => self.opened(ok),
+            Input::Disconnected(reason) => self.disconnected(reason),
+            Input::Stop => {
+                // A whole reception waiting for its statistics is reported
+                // without them.
+                self.release_held();
+                return std::mem::take(&mut self.out);
+            }
+        }
+        self.pump();
+        std::mem::take(&mut self.out)
+    }
+
+    /// When the next [`Input::Tick`] is due (`None`: no timer armed).
+    pub fn next_deadline(&self) -> Option<Instant> {
+        let keep_alive = self.keep_alive();
+        [
+            self.startup.next_deadline(),
+            self.tx.next_deadline(),
+            self.requests.next_deadline(),
+            self.rx.next_deadline(),
+            (!self.link.connected && !self.link.opening).then_some(self.link.reconnect_at),
+            (!self.link.silence_reported && self.link.connected)
+                .then_some(self.link.last_heard + keep_alive * 3),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// Whether data request `id` is still awaited (a shell may forget one
+    /// that is not).
+    pub fn awaits(&self, id: RequestId) -> bool {
+        self.requests.awaits(id)
+    }
+
+    pub(super) fn emit(&mut self, event: DriverEvent) {
+        self.out.push(Output::Event(event));
+    }
+
+    pub(super) fn status(&mut self, status: DriverStatus) {
+        self.emit(DriverEvent::Status(status));
+    }
+
+    /// Writes `sentence` when the link is up (a sentence for a link that
+    /// is down is not written: the driver starts again when it is back).
+    pub(super) fn write(&mut self, sentence: MmSentence) -> bool {
+        if !self.link.connected {
+            return false;
+        }
+        self.out.push(Output::Write(sentence));
+        true
+    }
+
+    pub(super) fn request(&mut self, id: RequestId, template: ModemTransmission) {
+        self.out.push(Output::Request { id, template });
+    }
+
+    pub(super) fn response_timeout(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.response_timeout_ms()))
+    }
+
+    pub(super) fn statistics_timeout(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.statistics_timeout_ms()))
+    }
+
+    pub(super) fn receive_timeout(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.receive_timeout_ms()))
+    }
+
+    pub(super) fn config_quiet(&self) -> Duration {
+        Duration::from_millis(u64::from(self.mm.config_echo_quiet_ms()))
+    }
+
+    fn keep_alive(&self) -> Duration {
+        Duration::from_secs(u64::try_from(self.mm.keep_alive_seconds()).unwrap_or(10))
+    }
+
+    /// The serial link failed.
+    pub(super) fn disconnected(&mut self, reason: String) {
+        self.link.connected = false;
+        self.link.opening = false;
+        self.startup.awaiting = None;
+        self.startup.clock_at = None;
+        self.link.reconnect_at = self.now.at + self.link.reconnect;
+        if let Some(active) = &mut self.tx.active {
+            // Not the modem's fault: start the cycle again, same attempt.
+            active.restart();
+        }
+        self.status(DriverStatus::Disconnected { reason });
+    }
+
+    fn opened(&mut self, ok: bool) {
+        self.link.opening = false;
+        if ok {
+            self.link.connected = true;
+            self.link.last_heard = self.now.at;
+            self.status(DriverStatus::Reconnected);
+            self.queue_initialization();
+        } else {
+            self.link.reconnect_at = self.now.at + self.link.reconnect;
+        }
+    }
+
+    /// Deadlines up to now.
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.command_timers();
+        self.cycle_timers();
+        self.request_timers();
+        self.reception_timers();
+        if !self.link.connected && !self.link.opening && self.link.reconnect_at <= now {
+            self.link.opening = true;
+            self.out.push(Output::Open);
+        }
+        let keep_alive = self.keep_alive();
+        if self.link.connected
+            && !self.link.silence_reported
+            && now >= self.link.last_heard + keep_alive * 3
+        {
+            self.link.silence_reported = true;
+            self.status(DriverStatus::ModemSilent {
+                seconds: (now - self.link.last_heard).as_secs_f64(),
+            });
+        }
+    }
+
+    fn heard(&mut self) {
+        self.link.last_heard = self.now.at;
+        self.link.silence_reported = false;
+    }
+
+    /// A line from the modem.
+    fn line(&mut self, bytes: &[u8]) {
+        let sentence = match MmSentence::parse(bytes) {
+            Ok(s) => s,
+            Err(SentenceError::Nmea(NmeaError::ChecksumMismatch { .. })) => {
+                return self.status(DriverStatus::BadChecksum {
+                    line: String::from_utf8_lossy(bytes).into_owned(),
+                });
+            }
+            Err(e) => {
+                self.heard();
+                self.unreadable_answer(bytes);
+                return self.status(DriverStatus::Unparseable {
+                    line: String::from_utf8_lossy(bytes).into_owned(),
+                    reason: e.to_string(),
+                });
+            }
+        };
+        self.heard();
+        self.answer_heard(&sentence);
+        let me = self.modem_id;
+        match sentence {
+            MmSentence::DataRequest {
+                src,
+                dest,
+                ack,
+                max_bytes,
+                frame,
+                ..
+            } => self.data_request(super::cycle::Drq {
+                src,
+                dest,
+                ack,
+                max_bytes,
+                frame,
+            }),
+            MmSentence::Echo { id, fields, .. } if id == "TDP" => self.fdp_echo(&fields),
+            MmSentence::TransmitStart { .. } => self.transmit_start(),
+            MmSentence::TransmitDone { .. } => self.transmit_done(),
+            MmSentence::TransmitStatistics(xst) => self.transmit_statistics(&xst),
+            MmSentence::ReceiveStatistics(cst) => self.receive_statistics(&cst),
+            MmSentence::Config { key, value } => self.config_echo(&key, &value),
+            MmSentence::Cycle {
+                from_modem: true,
+                cycle,
+            } if cycle.src != me => {
+                self.start_incoming(cycle);
+                self.check_incoming_complete();
+            }
+            MmSentence::Cycle {
+                from_modem: true,
+                cycle,
+            } => self.own_cycle_heard(cycle),
+            MmSentence::ReceiveData {
+                src,
+                dest,
+                ack,
+                frame,
+                data,
+            } => self.receive_data(src, dest, ack, frame, data),
+            MmSentence::FdpReceive {
+                src,
+                dest,
+                rate,
+                ack,
+                mini_frames,
+                data_frames,
+                ..
+            } => self.fdp_receive(src, dest, rate, ack, &mini_frames, &data_frames),
+            MmSentence::Ack { src, dest, frame } => self.ack_heard(src, dest, frame),
+            MmSentence::PingReply {
+                src,
+                dest,
+                travel_time,
+            } => self.ping_reply(src, dest, travel_time),
+            MmSentence::TravelTimes { times, time } => self.travel_times(&times, time),
+            MmSentence::MiniPacketReceived { src, dest, value } => {
+                self.mini_packet(src, dest, value)
+            }
+            MmSentence::HardwareControlReply {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            } => self.hardware_reply(src, dest, line, mode, arg),
+            MmSentence::Revision { ident, version, .. } => self.revision(&ident, version),
+            MmSentence::TimingSource {
+                time,
+                clock_source,
+                pps_source,
+            } => tracing::info!(
+                "Micro-Modem timing: {time}, clock source {clock_source}, PPS source {pps_source}"
+            ),
+            MmSentence::Error {
+                module,
+                code,
+                message,
+                ..
+            } => {
+                self.status(DriverStatus::ModemError {
+                    message: format!("$CAERR {module} {code} {message}"),
+                });
+                if module == "NMEA" {
+                    // The modem could not read our last command: send it again.
+                    let now = self.now.at;
+                    if let Some(a) = &mut self.startup.awaiting {
+                        a.deadline = now;
+                    }
+                } else if !self.abandoned_cycle_ended() {
+                    self.interrupt_active(format!("modem error: {module} {code} {message}"));
+                }
+            }
+            MmSentence::Message { kind, value } => {
+                self.status(DriverStatus::ModemError {
+                    message: format!("$CAMSG {kind} {value}"),
+                });
+                if kind == "BAD_CRC" || kind == "Bad CRC" {
+                    self.bad_crc();
+                } else if kind == "PING_TIMEOUT" {
+                    self.ping_timeout();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A command of the layer above.
+    fn command(&mut self, command: DriverCommand) {
+        match command {
+            DriverCommand::Initiate(mut mt) => {
+                if mt.src.is_none() || mt.src() == -1 {
+                    mt.src = Some(self.modem_id as i32);
+                }
+                match mt.r#type() {
+                    TransmissionType::Data => {
+                        let waiting = self
+                            .tx
+                            .pending
+                            .iter()
+                            .filter(|j| matches!(j, Job::Data(_)))
+                            .count();
+                        if waiting >= MAX_PENDING_TRANSMISSIONS {
+                            if let Some(i) = self
+                                .tx
+                                .pending
+                                .iter()
+                                .position(|j| matches!(j, Job::Data(_)))
+                            {
+                                self.tx.pending.remove(i);
+                                self.status(DriverStatus::Skipped {
+                                    reason: format!(
+                                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
+                                    ),
+                                });
+                            }
+                        }
+                        self.tx.pending.push_back(Job::Data(Box::new(mt)));
+                    }
+                    other => self.status(DriverStatus::Unsupported {
+                        message: format!(
+                            "ModemTransmission.type {other:?} (use MicroModemSpecific)"
+                        ),
+                    }),
+                }
+            }
+            DriverCommand::Specific(message) => {
+                let name = message.descriptor().full_name().to_string();
+                let request = (name == MicroModemSpecific::default().descriptor().full_name())
+                    .then(|| message.transcode_to::<MicroModemSpecific>().ok())
+                    .flatten();
+                match request.map(|r| self.specific_job(r)) {
+                    Some(Ok(job)) => self.tx.pending.push_back(job),
+                    Some(Err(message)) => self.status(DriverStatus::Unsupported { message }),
+                    None => self.status(DriverStatus::Unsupported { message: name }),
+                }
+            }
+            // Without application acks the modem acknowledges in
+            // hardware, on reception.
+            DriverCommand::Acknowledge(ack) => {
+                let now = self.now.at.into_std();
+                if let (Some(app), true) = (&mut self.app_acks, self.deferred_ack) {
+                    app.acknowledge(&ack, now);
+                }
+            }
+            // The shell stops the driver (Input::Stop).
+            DriverCommand::Stop(_) => {}
+        }
+    }
+
+    /// Sends what can be sent now: host commands first (start-up), then
+    /// the transmissions queued.
+    fn pump(&mut self) {
+        loop {
+            if !self.link.connected || self.startup.awaiting.is_some() {
+                return;
+            }
+            match self.pump_commands() {
+                Some(true) => continue,
+                Some(false) => return,
+                None => {}
+            }
+            if !self.pump_cycle() {
+                return;
+            }
+        }
+    }
+}

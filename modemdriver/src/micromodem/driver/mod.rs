@@ -1,0 +1,275 @@
+//! The WHOI Micro-Modem driver (Micro-Modem 1 and 2): NMEA-0183 over a
+//! serial port.
+//!
+//! Start-up (and again after a modem reset or a reconnection): the modem's
+//! id and the configured NVRAM values (`$CCCFG`; `CST,1` and `XST,1` too,
+//! for the statistics, unless configured otherwise), then the whole
+//! configuration is queried (`$CCCFQ,ALL`, or `TOP` on a Micro-Modem 2) and
+//! its echo — one `$CACFG` per parameter, dozens on a Micro-Modem 2 — is
+//! awaited until `config_echo_quiet_ms` pass without one; then the clock is
+//! set (`$CCTMS` on a Micro-Modem 2, `$CCCLK` on a Micro-Modem 1) and the
+//! time the modem answers (`$CATMS` / `$CACLK`) is checked against the time
+//! asked for (`allowed_skew_ms`; set again if off). The generation is told
+//! from the firmware version in `$CAREV` (2.x and up: Micro-Modem 2) or from
+//! the configuration echo (dotted parameter names are Micro-Modem 2's).
+//! Only then is the driver [`DriverStatus::Ready`](crate::driver::DriverStatus::Ready).
+//!
+//! A data transmission is a cycle, followed as the modem runs it: the
+//! frames are obtained from the layer above by one data request first (with
+//! none, and without `always_initiate`, nothing is sent); `$CCCYC` announces
+//! as many frames as there are (echoed `$CACYC`); at rate 0 the modem first
+//! sends a cycle-initialization packet (`$CATXP`, `$CATXF`) and only then
+//! asks for data; each `$CADRQ` is answered once with its frame (`$CCTXD`,
+//! never sent again for want of its echo); `$CATXP` tells the packet is on
+//! the water, and the driver waits for its `$CATXF` as long as the packet
+//! takes, never starting the cycle again meanwhile. When the modem sends
+//! transmit statistics (`$CAXST`), the result waits for them (at most
+//! `statistics_timeout_ms`) and carries them in `transmit_stat`.
+//!
+//! A `$CACYC` naming this modem as sender that the driver did not start is
+//! a poll from another node: the modem's data requests are answered with
+//! frames asked for from the layer above, and acks heard after the packet
+//! answer it.
+//!
+//! Received `$CACYC` + `$CARXD` become a received `DATA` transmission, with
+//! the modem's receive statistics (`$CACST`, after the last `$CARXD`) in
+//! `receive_stat`: once the modem has been seen to send them, a whole
+//! reception waits for its `$CACST` at most `statistics_timeout_ms`, so that
+//! none is lost or held for ever. `$CAACK` becomes an `ACK` transmission,
+//! carrying the `unique_id` of the transmission it answers: the last one
+//! whose `$CATXF` was seen, when the ack comes from its destination, to this
+//! modem, for one of its frames, within `receive_timeout_ms` (else none, and
+//! the layer above credits nothing).
+//!
+//! Echoes of host commands are matched by sentence name, whatever fields a
+//! firmware version gives them; an echo that cannot be read is reported
+//! ([`DriverStatus::Unparseable`](crate::driver::DriverStatus::Unparseable)) and still counts as the answer, so it
+//! never makes a command go out again.
+//!
+//! Slots: a transmission carrying its slot (`time`, `slot_seconds`, see
+//! [`crate::slot`]) is started, or attempted again after a fault, only while
+//! the packet fits before the slot ends; at most
+//! [`MAX_PENDING_TRANSMISSIONS`] wait while the modem is busy or away, older
+//! ones are dropped ([`DriverStatus::Skipped`](crate::driver::DriverStatus::Skipped)).
+//!
+//! Micro-Modem specifics go through
+//! [`Driver::initiate_specific`](crate::Driver::initiate_specific) with a
+//! `goby.acomms.protobuf.MicroModemSpecific`: `MICROMODEM_TWO_WAY_PING` →
+//! `$CCMPC`, `MICROMODEM_MINI_DATA` → `$CCMUC`, `MICROMODEM_FLEXIBLE_DATA` →
+//! `$CCTDP` (one frame asked for from the layer above, sized by the FDP rate;
+//! a `$CARDP` received becomes a received `DATA` transmission),
+//! `MICROMODEM_REMUS_LBL_RANGING` → `$CCPDT`,
+//! `MICROMODEM_NARROWBAND_LBL_RANGING` → `$CCPNT`,
+//! `MICROMODEM_HARDWARE_CONTROL` → `$CCMEC`. Results come back as
+//! [`DriverEvent::Specific`] with the same message: ranging reply from
+//! `$CAMPR` or `$SNTTA`, mini-packet from `$CAMUA`, hardware line answer
+//! (`MICROMODEM_HARDWARE_CONTROL_REPLY`) from `$CAMER`.
+//!
+//! Robustness: lines with bad checksums or that cannot be parsed are reported
+//! and ignored; a command without answer is sent again (`max_retries`); a
+//! transmission interrupted by a modem error, a reset (`$CAREV` with ident
+//! `INIT`) or a timeout is attempted again (`max_cycle_attempts`) with the
+//! same frames; when the device vanishes the driver reports it, reopens it
+//! every reconnection interval, configures the modem again and goes on with
+//! the queued transmissions. A transmission that finally fails is reported
+//! with its frames so the layer above can queue them again.
+//!
+//! Slots are kept whatever the load: besides the check before the cycle,
+//! the driver checks again at each `$CADRQ` of its own cycle (the modem
+//! starts the packet once it has its frames) and, when the packet could no
+//! longer end within the slot, writes no `$CCTXD` (the modem gives the cycle
+//! up on its own) and reports the transmission failed; a data request
+//! answered too late for its packet to fit, or not answered by the time the
+//! packet must start, gives the cycle up before its `$CCCYC`.
+//!
+//! # Layout
+//!
+//! The driver is a state machine that does no input or output and reads no
+//! clock ([`machine::Machine`]: inputs in, outputs out, the time of each
+//! input passed in), run by an async shell ([`shell`]) that reads the
+//! serial link, writes the lines asked for, forwards data requests to the
+//! layer above and feeds their answers back, and sleeps until the next
+//! deadline. A data request outstanding never stops lines being read,
+//! commands being taken or timers firing.
+//!
+//! - [`machine`]: the machine's inputs, outputs, state and dispatch.
+//! - [`startup`]: start-up and configuration; host commands and their
+//!   answers.
+//! - [`cycle`]: the transmit cycle and the slot it must end in.
+//! - [`fill`]: data requests to the layer above (answered later, as an
+//!   input).
+//! - [`reception`]: receptions, their statistics, acks heard.
+//! - [`specific`]: Micro-Modem specifics (pings, LBL ranging, mini-packets,
+//!   hardware lines).
+//! - [`shell`]: the async task: serial link, clock, timers.
+
+mod cycle;
+mod fill;
+pub mod machine;
+mod reception;
+pub mod shell;
+mod specific;
+mod startup;
+#[cfg(test)]
+mod tests;
+
+use std::time::Duration;
+
+use protos::goby::acomms::protobuf::{
+    driver_config::ConnectionType, DriverConfig, ModemTransmission,
+};
+
+use super::application_ack::{self, ApplicationAcks};
+use crate::config;
+use crate::driver::{Driver, DriverError};
+use crate::link::fault::{FaultConfig, FaultScript};
+use crate::link::serial;
+use crate::rate;
+
+pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
+
+/// How long the driver waits for the layer above to fill a data request.
+pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// NVRAM settings that make the modem report receive ($CACST) and transmit
+/// ($CAXST) statistics; set to 1 at start unless `nvram_cfg` sets them.
+pub const STATISTICS_SETTINGS: [&str; 2] = ["CST", "XST"];
+
+/// Baud rate when `serial_baud` is not set.
+pub const DEFAULT_BAUD: u32 = 19_200;
+
+/// Data transmissions waiting for the modem at most; beyond, the oldest is
+/// dropped (reported as [`DriverStatus::Skipped`](crate::driver::DriverStatus::Skipped)): while the modem is
+/// unreachable, slot requests must not pile up and then run back to back.
+pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
+
+/// Probe and header time assumed on top of a packet's frames when checking
+/// that a transmission fits in what is left of its slot.
+pub const PACKET_OVERHEAD: Duration = Duration::from_secs(1);
+
+/// Allowed, on top of the packet's estimate, between the driver's last
+/// `$CCTXD` of a cycle and the modem starting the packet (serial line and
+/// the modem's own hand-over), when checking at a `$CADRQ` that the packet
+/// still ends within its slot.
+pub const HAND_OVER: Duration = Duration::from_millis(100);
+
+/// Estimated time on the water of a data transmission.
+fn packet_estimate(mt: &ModemTransmission) -> Duration {
+    let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
+    spec.packet_duration(PACKET_OVERHEAD)
+}
+
+/// The WHOI Micro-Modem driver.
+#[derive(Debug)]
+pub struct MicroModemDriver;
+
+impl MicroModemDriver {
+    /// Opens `serial_port` and starts the driver.
+    pub fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
+        Self::start_with_faults(config, FaultConfig::default(), FaultScript::new())
+    }
+
+    /// Starts the driver with a fault injector on the lines it reads
+    /// (random faults from `faults`, scripted ones from `script`): for
+    /// testing the driver's recovery and for bench work.
+    pub fn start_with_faults(
+        config: &DriverConfig,
+        faults: FaultConfig,
+        script: FaultScript,
+    ) -> Result<Driver, DriverError> {
+        let settings = settings(config)?;
+        let port = shell::Port {
+            path: config.serial_port.clone().unwrap_or_default(),
+            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
+            delimiter: config.line_delimiter().as_bytes().to_vec(),
+            faults,
+            script,
+        };
+        // Opened now so that a wrong path is an error at start.
+        let lines = serial::open(&port.path, port.baud, &port.delimiter)
+            .map_err(|e| DriverError::io("DriverConfig.serial_port", e))?;
+        Ok(Driver::spawn("micromodem", move |ctx| {
+            shell::run(settings, port, lines, ctx)
+        }))
+    }
+}
+
+/// The machine's settings from the driver configuration, checked.
+pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
+    let modem_id = config::modem_id(config)?;
+    let modem_id = u32::try_from(modem_id)
+        .ok()
+        .filter(|id| (1..=127).contains(id))
+        .ok_or_else(|| {
+            DriverError::Config(format!(
+                "DriverConfig.modem_id: {modem_id} is not a Micro-Modem id (1-127)"
+            ))
+        })?;
+    if config.connection_type() != ConnectionType::ConnectionSerial {
+        return Err(DriverError::Config(format!(
+            "DriverConfig.connection_type: {:?} is not supported by the Micro-Modem driver (only CONNECTION_SERIAL)",
+            config.connection_type()
+        )));
+    }
+    if config.serial_port.is_none() {
+        return Err(DriverError::Config(
+            "DriverConfig.serial_port: required for CONNECTION_SERIAL".into(),
+        ));
+    }
+    let mm = config.micromodem.clone().unwrap_or_default();
+    for (i, cfg) in mm.nvram_cfg.iter().enumerate() {
+        if cfg.split_once(',').is_none() {
+            return Err(DriverError::Config(format!(
+                "MicroModemConfig.nvram_cfg[{i}]: {cfg:?} is not KEY,VALUE"
+            )));
+        }
+    }
+    if mm.use_application_acks() && modem_id > application_ack::MAX_MODEM_ID {
+        return Err(DriverError::Config(format!(
+            "MicroModemConfig.use_application_acks: modem_id {modem_id} cannot be named in an application ack (ids 0-{})",
+            application_ack::MAX_MODEM_ID
+        )));
+    }
+    let app_acks = if mm.use_application_acks() {
+        Some(
+            ApplicationAcks::new(
+                modem_id,
+                Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
+                first_frame_number(),
+                std::time::Instant::now(),
+            )
+            .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?,
+        )
+    } else {
+        None
+    };
+    let deferred_ack = config.deferred_ack();
+    let ack_reader = ApplicationAcks::new(
+        modem_id.min(application_ack::MAX_MODEM_ID),
+        Duration::ZERO,
+        0,
+        std::time::Instant::now(),
+    )
+    .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
+    let reconnect = mm.reconnect_interval_ms.map_or(
+        Duration::from_secs(u64::from(config.reconnect_interval())),
+        |ms| Duration::from_millis(u64::from(ms)),
+    );
+    Ok(Settings {
+        modem_id,
+        mm,
+        reconnect,
+        app_acks,
+        deferred_ack,
+        ack_reader,
+    })
+}
+
+/// A frame number drawn at random (from the standard library's randomly
+/// keyed hasher) to start the application-ack numbering at.
+fn first_frame_number() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(crate::time::now_micros());
+    (hasher.finish() % u64::from(application_ack::FRAME_NUMBERS)) as u32
+}

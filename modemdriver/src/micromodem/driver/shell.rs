@@ -1,0 +1,200 @@
+//! The driver task: the [`Machine`]'s inputs and outputs.
+//!
+//! One loop waits for whichever comes first: a command of the layer above,
+//! a line from the serial link, the answer to a data request outstanding,
+//! or the machine's next deadline. It reads the clock once ([`now`])
+//! and hands the input to the machine, then does the outputs in order:
+//! writes lines (a failed write is an input of its own, the link lost),
+//! gives events to the layer above, makes data requests (each answer, or
+//! its sender dropped, comes back as an input; requests the machine gave
+//! up are forgotten), and opens the device again when asked. Nothing else
+//! waits: a data request outstanding leaves the loop reading lines, taking
+//! commands and firing timers.
+
+use std::future::{poll_fn, Future};
+use std::pin::Pin;
+use std::task::Poll;
+
+use protos::goby::acomms::protobuf::ModemTransmission;
+use tokio::sync::oneshot;
+
+use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
+use crate::driver::{DataRequest, DriverCommand, DriverContext, DriverEvent, EventSink};
+use crate::link::fault::{FaultConfig, FaultInjector, FaultScript};
+use crate::link::serial::{self, SerialLineLink};
+use crate::link::trace::Tracer;
+use crate::link::Link;
+use crate::time::sleep_until_opt;
+
+/// The time now, from both clocks (tokio's for timers, the driver's
+/// clock for stamps and slots): the one clock read of the driver.
+pub fn now(clock: &dyn goby_time::Clock) -> Now {
+    Now {
+        at: tokio::time::Instant::now(),
+        micros: u64::try_from(clock.now()).unwrap_or(0),
+    }
+}
+
+type MmLink = Tracer<FaultInjector<SerialLineLink>>;
+
+/// Everything needed to open the serial device (again).
+#[derive(Debug, Clone)]
+pub struct Port {
+    /// The serial device.
+    pub path: String,
+    /// Its baud rate.
+    pub baud: u32,
+    /// What ends a line.
+    pub delimiter: Vec<u8>,
+    /// Random faults injected on the lines read (tests, bench work).
+    pub faults: FaultConfig,
+    /// Scripted faults injected on the lines read.
+    pub script: FaultScript,
+}
+
+impl Port {
+    fn open(&self, sink: &EventSink) -> std::io::Result<MmLink> {
+        let lines = serial::open(&self.path, self.baud, &self.delimiter)?;
+        Ok(self.wrap(lines, sink))
+    }
+
+    fn wrap(&self, lines: SerialLineLink, sink: &EventSink) -> MmLink {
+        Tracer::new(
+            FaultInjector::new(lines, self.faults.clone(), self.script.clone()),
+            sink.clone(),
+        )
+    }
+}
+
+async fn recv_opt(link: &mut Option<MmLink>) -> std::io::Result<Vec<u8>> {
+    match link {
+        Some(link) => link.recv().await.map(|(line, ())| line),
+        None => std::future::pending().await,
+    }
+}
+
+/// Data requests outstanding: their answers to come.
+type Answers = Vec<(RequestId, oneshot::Receiver<ModemTransmission>)>;
+
+/// The first answer to come (`None`: its request was dropped); pending
+/// while there is none outstanding.
+async fn next_answer(answers: &mut Answers) -> (RequestId, Option<ModemTransmission>) {
+    poll_fn(|cx| {
+        for i in 0..answers.len() {
+            if let Poll::Ready(answer) = Pin::new(&mut answers[i].1).poll(cx) {
+                let (id, _) = answers.swap_remove(i);
+                return Poll::Ready((id, answer.ok()));
+            }
+        }
+        Poll::Pending
+    })
+    .await
+}
+
+/// The driver task.
+pub(super) async fn run(
+    settings: Settings,
+    port: Port,
+    lines: SerialLineLink,
+    mut ctx: DriverContext,
+) {
+    let events = ctx.events.clone();
+    let clock = ctx.clock.clone();
+    let now = || now(&*clock);
+    let mut link = Some(port.wrap(lines, &events));
+    let mut machine = Machine::new(settings, now());
+    let mut answers: Answers = Vec::new();
+    let mut input = Input::Tick;
+    loop {
+        let outputs = machine.handle(now(), input);
+        perform(
+            outputs,
+            &mut machine,
+            &mut link,
+            &port,
+            &events,
+            &mut answers,
+            &*clock,
+        )
+        .await;
+        answers.retain(|(id, _)| machine.awaits(*id));
+        let wake = machine.next_deadline();
+        input = tokio::select! {
+            command = ctx.commands.recv() => match command {
+                Some(DriverCommand::Stop(done)) => {
+                    let outputs = machine.handle(now(), Input::Stop);
+                    perform(
+                        outputs,
+                        &mut machine,
+                        &mut link,
+                        &port,
+                        &events,
+                        &mut answers,
+                        &*clock,
+                    )
+                    .await;
+                    let _ = done.send(());
+                    return;
+                }
+                Some(command) => Input::Command(command),
+                None => return,
+            },
+            line = recv_opt(&mut link) => match line {
+                Ok(line) => Input::Line(line),
+                Err(e) => {
+                    link = None;
+                    Input::Disconnected(format!("read failed: {e}"))
+                }
+            },
+            (id, filled) = next_answer(&mut answers), if !answers.is_empty() => {
+                Input::Answer { id, filled }
+            }
+            () = sleep_until_opt(wake) => Input::Tick,
+        };
+    }
+}
+
+/// Does the machine's outputs, in order, and those of the inputs they
+/// cause (a write that fails, the device opened or not).
+async fn perform(
+    outputs: Vec<Output>,
+    machine: &mut Machine,
+    link: &mut Option<MmLink>,
+    port: &Port,
+    events: &EventSink,
+    answers: &mut Answers,
+    clock: &dyn goby_time::Clock,
+) {
+    let now = || now(clock);
+    let mut queue: std::collections::VecDeque<Output> = outputs.into();
+    while let Some(output) = queue.pop_front() {
+        match output {
+            Output::Write(sentence) => {
+                // Lines for a link that failed since are not written.
+                let Some(l) = link.as_mut() else { continue };
+                if let Err(e) = l.send(sentence.to_line().as_bytes(), &()).await {
+                    *link = None;
+                    let more =
+                        machine.handle(now(), Input::Disconnected(format!("write failed: {e}")));
+                    queue.extend(more);
+                }
+            }
+            Output::Event(event) => events.emit(event),
+            Output::Request { id, template } => {
+                let (request, answer) = DataRequest::new(template);
+                answers.push((id, answer));
+                events.emit(DriverEvent::DataRequest(request));
+            }
+            Output::Open => {
+                let opened = match port.open(events) {
+                    Ok(l) => {
+                        *link = Some(l);
+                        true
+                    }
+                    Err(_) => false,
+                };
+                queue.extend(machine.handle(now(), Input::Opened(opened)));
+            }
+        }
+    }
+}

@@ -1,0 +1,532 @@
+//! Tests of the machine on fabricated times: no serial link, no clock, no
+//! task; each input is handed with the time it is said to happen at.
+
+use std::time::Duration;
+
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, MicroModemConfig, ModemTransmission,
+};
+use tokio::time::Instant;
+
+use super::super::application_ack::ApplicationAcks;
+use super::super::sentence::{Cycle, MmSentence};
+use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
+use crate::driver::{DriverCommand, DriverEvent, DriverStatus, TransmitOutcome};
+
+/// 2023-11-14T22:13:20.060Z: inside the clock's send window, so that the
+/// start-up sets the clock at once.
+const START_MICROS: u64 = 1_700_000_000_060_000;
+
+const ME: u32 = 1;
+const PEER: u32 = 2;
+const OTHER: u32 = 3;
+
+struct Bench {
+    machine: Machine,
+    now: Now,
+}
+
+fn settings(mm: MicroModemConfig) -> Settings {
+    Settings {
+        modem_id: ME,
+        mm,
+        reconnect: Duration::from_secs(1),
+        app_acks: None,
+        deferred_ack: false,
+        ack_reader: ApplicationAcks::new(ME, Duration::ZERO, 0, std::time::Instant::now())
+            .expect("ack reader"),
+    }
+}
+
+/// The modem's answer to a host command, as the Micro-Modem 1 gives it.
+fn echo(sentence: &MmSentence) -> Option<MmSentence> {
+    match sentence {
+        MmSentence::SetConfig { key, value } => Some(MmSentence::Config {
+            key: key.clone(),
+            value: value.clone(),
+        }),
+        MmSentence::Clock {
+            from_modem: false,
+            date_time,
+        } => Some(MmSentence::Clock {
+            from_modem: true,
+            date_time: *date_time,
+        }),
+        MmSentence::Cycle {
+            from_modem: false,
+            cycle,
+        } => Some(MmSentence::Cycle {
+            from_modem: true,
+            cycle: *cycle,
+        }),
+        _ => None,
+    }
+}
+
+fn writes(outputs: &[Output]) -> Vec<&MmSentence> {
+    outputs
+        .iter()
+        .filter_map(|o| match o {
+            Output::Write(s) => Some(s),
+            _ => None,
+        })
+        .collect()
+}
+
+fn requests(outputs: &[Output]) -> Vec<(RequestId, &ModemTransmission)> {
+    outputs
+        .iter()
+        .filter_map(|o| match o {
+            Output::Request { id, template } => Some((*id, template)),
+            _ => None,
+        })
+        .collect()
+}
+
+fn events(outputs: &[Output]) -> Vec<&DriverEvent> {
+    outputs
+        .iter()
+        .filter_map(|o| match o {
+            Output::Event(e) => Some(e),
+            _ => None,
+        })
+        .collect()
+}
+
+fn received(outputs: &[Output]) -> Vec<&ModemTransmission> {
+    events(outputs)
+        .into_iter()
+        .filter_map(|e| match e {
+            DriverEvent::Received(t) => Some(t),
+            _ => None,
+        })
+        .collect()
+}
+
+fn results(outputs: &[Output]) -> Vec<(&TransmitOutcome, &ModemTransmission)> {
+    events(outputs)
+        .into_iter()
+        .filter_map(|e| match e {
+            DriverEvent::TransmitResult(r) => Some((&r.outcome, &r.transmission)),
+            _ => None,
+        })
+        .collect()
+}
+
+fn wrote_cycle_or_frame(outputs: &[Output]) -> bool {
+    writes(outputs).iter().any(|s| {
+        matches!(
+            s,
+            MmSentence::Cycle {
+                from_modem: false,
+                ..
+            } | MmSentence::TransmitData { .. }
+        )
+    })
+}
+
+/// A data transmission to [`PEER`] at rate 6 (a packet of about 1.64 s by
+/// the driver's estimate) in a slot opened at `opened` (µs) lasting
+/// `slot_seconds`.
+fn data(opened: u64, slot_seconds: f64) -> ModemTransmission {
+    ModemTransmission {
+        src: Some(ME as i32),
+        dest: Some(PEER as i32),
+        rate: Some(6),
+        r#type: Some(TransmissionType::Data as i32),
+        ack_requested: Some(false),
+        time: Some(opened),
+        slot_seconds: Some(slot_seconds),
+        unique_id: Some(7),
+        ..Default::default()
+    }
+}
+
+fn filled(template: &ModemTransmission) -> ModemTransmission {
+    ModemTransmission {
+        frame: vec![b"hello".to_vec()],
+        ..template.clone()
+    }
+}
+
+impl Bench {
+    /// A machine through its start-up (a Micro-Modem 1 echoing every
+    /// command), `Ready`.
+    fn ready(mm: MicroModemConfig) -> Bench {
+        let now = Now {
+            at: Instant::now(),
+            micros: START_MICROS,
+        };
+        let mut bench = Bench {
+            machine: Machine::new(settings(mm), now),
+            now,
+        };
+        let mut outputs = bench.input(Input::Tick);
+        for _ in 0..200 {
+            if events(&outputs)
+                .iter()
+                .any(|e| matches!(e, DriverEvent::Status(DriverStatus::Ready)))
+            {
+                return bench;
+            }
+            let answers: Vec<MmSentence> = writes(&outputs).into_iter().filter_map(echo).collect();
+            outputs = Vec::new();
+            if answers.is_empty() {
+                let next = bench.machine.next_deadline().expect("a deadline");
+                bench.now = bench
+                    .now
+                    .after(next.saturating_duration_since(bench.now.at));
+                outputs.extend(bench.input(Input::Tick));
+            }
+            for answer in answers {
+                outputs.extend(bench.sentence(&answer));
+            }
+        }
+        panic!("the start-up did not end");
+    }
+
+    fn input(&mut self, input: Input) -> Vec<Output> {
+        self.machine.handle(self.now, input)
+    }
+
+    fn advance(&mut self, d: Duration) {
+        self.now = self.now.after(d);
+    }
+
+    fn sentence(&mut self, sentence: &MmSentence) -> Vec<Output> {
+        let line = sentence.to_line();
+        let line = line.trim_end().as_bytes().to_vec();
+        self.input(Input::Line(line))
+    }
+
+    fn initiate(&mut self, mt: ModemTransmission) -> Vec<Output> {
+        self.input(Input::Command(DriverCommand::Initiate(mt)))
+    }
+
+    /// Initiates `mt` and returns its data request.
+    fn initiate_and_request(&mut self, mt: ModemTransmission) -> (RequestId, ModemTransmission) {
+        let outputs = self.initiate(mt);
+        assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+        let asked = requests(&outputs);
+        assert_eq!(asked.len(), 1, "{outputs:?}");
+        (asked[0].0, asked[0].1.clone())
+    }
+}
+
+fn packet_from(src: u32, frames: u32) -> MmSentence {
+    MmSentence::Cycle {
+        from_modem: true,
+        cycle: Cycle {
+            src,
+            dest: ME,
+            rate: 1,
+            ack: false,
+            frames,
+        },
+    }
+}
+
+fn frame_from(src: u32, frame: u32, data: &[u8]) -> MmSentence {
+    MmSentence::ReceiveData {
+        src,
+        dest: ME,
+        ack: false,
+        frame,
+        data: data.to_vec(),
+    }
+}
+
+fn data_request(frame: u32) -> MmSentence {
+    MmSentence::DataRequest {
+        time: "221320".into(),
+        src: ME,
+        dest: PEER,
+        ack: false,
+        max_bytes: 32,
+        frame,
+    }
+}
+
+/// Lines from the modem are handled while the layer above has not
+/// answered a data request: a packet heard is reported at once, and a
+/// mini-packet too. Fails on the old design, whose driver awaited the
+/// answer (up to a second) before reading another line.
+#[test]
+fn lines_are_handled_while_a_data_request_is_outstanding() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    let opened = bench.now.micros;
+    let (id, template) = bench.initiate_and_request(data(opened, 3.0));
+    bench.advance(Duration::from_millis(100));
+    assert!(bench.sentence(&packet_from(OTHER, 1)).is_empty());
+    let outputs = bench.sentence(&frame_from(OTHER, 1, b"heard"));
+    let got = received(&outputs);
+    assert_eq!(got.len(), 1, "{outputs:?}");
+    assert_eq!(got[0].src(), OTHER as i32);
+    assert_eq!(got[0].frame, vec![b"heard".to_vec()]);
+    let outputs = bench.sentence(&MmSentence::MiniPacketReceived {
+        src: OTHER,
+        dest: ME,
+        value: 42,
+    });
+    assert!(
+        events(&outputs)
+            .iter()
+            .any(|e| matches!(e, DriverEvent::Specific(_))),
+        "{outputs:?}"
+    );
+    assert!(bench.machine.awaits(id));
+    // The answer then starts the cycle.
+    bench.advance(Duration::from_millis(100));
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled(&template)),
+    });
+    assert!(
+        writes(&outputs).iter().any(|s| matches!(
+            s,
+            MmSentence::Cycle {
+                from_modem: false,
+                cycle: Cycle {
+                    src: ME,
+                    dest: PEER,
+                    rate: 6,
+                    frames: 1,
+                    ..
+                }
+            }
+        )),
+        "{outputs:?}"
+    );
+}
+
+/// A command of the layer above is taken while a data request is
+/// outstanding: a transmission of a type the driver does not send is
+/// refused at once, and a further one queued. Fails on the old design,
+/// whose driver took no command while awaiting the answer.
+#[test]
+fn a_command_is_taken_while_a_data_request_is_outstanding() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    let opened = bench.now.micros;
+    let (id, _) = bench.initiate_and_request(data(opened, 3.0));
+    bench.advance(Duration::from_millis(50));
+    let outputs = bench.initiate(ModemTransmission {
+        r#type: Some(TransmissionType::Ack as i32),
+        ..Default::default()
+    });
+    assert!(
+        events(&outputs)
+            .iter()
+            .any(|e| matches!(e, DriverEvent::Status(DriverStatus::Unsupported { .. }))),
+        "{outputs:?}"
+    );
+    assert!(bench.machine.awaits(id));
+    // Queued behind the active one: no second request meanwhile.
+    let outputs = bench.initiate(data(opened, 9.0));
+    assert!(requests(&outputs).is_empty(), "{outputs:?}");
+    assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+}
+
+/// A timer fires while a data request is outstanding: a packet whose last
+/// frame never comes is reported when `receive_timeout_ms` pass, before
+/// the data request is given up. Fails on the old design, whose timers
+/// did not run while the driver awaited the answer.
+#[test]
+fn a_timer_fires_while_a_data_request_is_outstanding() {
+    let mut bench = Bench::ready(MicroModemConfig {
+        receive_timeout_ms: Some(300),
+        ..Default::default()
+    });
+    let opened = bench.now.micros;
+    let (id, _) = bench.initiate_and_request(data(opened, 3.0));
+    bench.sentence(&packet_from(OTHER, 2));
+    let outputs = bench.sentence(&frame_from(OTHER, 1, b"first"));
+    assert!(received(&outputs).is_empty(), "{outputs:?}");
+    let next = bench.machine.next_deadline().expect("a deadline");
+    assert_eq!(next, bench.now.at + Duration::from_millis(300));
+    bench.advance(Duration::from_millis(300));
+    let outputs = bench.input(Input::Tick);
+    let got = received(&outputs);
+    assert_eq!(got.len(), 1, "{outputs:?}");
+    assert_eq!(got[0].frame, vec![b"first".to_vec()]);
+    assert!(
+        bench.machine.awaits(id),
+        "the data request is still awaited"
+    );
+}
+
+/// The answer to a data request comes back too late for the packet to end
+/// within its slot: no `$CCCYC` (nor `$CCTXD`) is written, the
+/// transmission is reported failed with its frames (for the layer above
+/// to queue again), and the next slot's transmission goes on. Checks the
+/// guarantee on the machine: a rate-6 packet (about 1.64 s) in a 2.5 s
+/// slot must start by +0.86 s; the answer comes at +0.9 s.
+#[test]
+fn an_answer_too_late_for_the_slot_gives_the_cycle_up() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    let opened = bench.now.micros;
+    let (id, template) = bench.initiate_and_request(data(opened, 2.5));
+    bench.advance(Duration::from_millis(900));
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled(&template)),
+    });
+    assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+    let done = results(&outputs);
+    assert_eq!(done.len(), 1, "{outputs:?}");
+    assert!(matches!(done[0].0, TransmitOutcome::Failed(_)), "{done:?}");
+    assert_eq!(done[0].1.frame, vec![b"hello".to_vec()]);
+    // The next transmission is asked for as usual.
+    let next = bench.now.micros;
+    let (id2, _) = bench.initiate_and_request(data(next, 3.0));
+    assert_ne!(id, id2);
+}
+
+/// No answer by the time the packet would have to start: the transmission
+/// fails then (the timer of the slot, sooner than the data request
+/// timeout), nothing is written, and an answer coming afterwards is
+/// ignored. A new guarantee: the old driver waited the whole second and
+/// then reported nothing to send.
+#[test]
+fn a_data_request_unanswered_when_the_packet_must_start_fails_then() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    let opened = bench.now.micros;
+    let (id, template) = bench.initiate_and_request(data(opened, 2.5));
+    let due = bench.machine.next_deadline().expect("a deadline");
+    let start_by = Duration::from_millis(860);
+    assert_eq!(due, bench.now.at + start_by + Duration::from_micros(1));
+    bench.advance(start_by);
+    let outputs = bench.input(Input::Tick);
+    assert!(results(&outputs).is_empty(), "{outputs:?}");
+    bench.advance(Duration::from_micros(1));
+    let outputs = bench.input(Input::Tick);
+    assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+    let done = results(&outputs);
+    assert_eq!(done.len(), 1, "{outputs:?}");
+    assert!(matches!(done[0].0, TransmitOutcome::Failed(_)), "{done:?}");
+    assert!(!bench.machine.awaits(id));
+    bench.advance(Duration::from_millis(100));
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled(&template)),
+    });
+    assert!(outputs.is_empty(), "{outputs:?}");
+}
+
+/// The modem asks for the data of our cycle when its packet could no
+/// longer end within the slot (the line came late, e.g. under load): no
+/// `$CCTXD` is written, so the modem sends nothing; the transmission is
+/// reported failed; the modem's later requests for that cycle go
+/// unanswered, and once it gives the cycle up (`$CAERR`) the next
+/// transmission starts. Fails on the old design, which answered every
+/// data request of its cycle whatever the time.
+#[test]
+fn a_data_request_too_late_for_the_slot_gets_no_frame() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    let opened = bench.now.micros;
+    let (id, template) = bench.initiate_and_request(data(opened, 2.5));
+    bench.advance(Duration::from_millis(10));
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled(&template)),
+    });
+    let cycle = writes(&outputs)
+        .into_iter()
+        .find_map(echo)
+        .expect("a $CCCYC");
+    bench.advance(Duration::from_millis(10));
+    bench.sentence(&cycle);
+    // Packet of about 1.64 s, plus the hand-over: must start by +0.76 s.
+    bench.advance(Duration::from_millis(800));
+    let outputs = bench.sentence(&data_request(1));
+    assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+    let done = results(&outputs);
+    assert_eq!(done.len(), 1, "{outputs:?}");
+    assert!(matches!(done[0].0, TransmitOutcome::Failed(_)), "{done:?}");
+    assert_eq!(done[0].1.frame, vec![b"hello".to_vec()]);
+    // Asked again: still nothing, and nothing else starts meanwhile.
+    bench.advance(Duration::from_millis(100));
+    let outputs = bench.sentence(&data_request(1));
+    assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+    let later = bench.now.micros;
+    let outputs = bench.initiate(data(later, 3.0));
+    assert!(requests(&outputs).is_empty(), "{outputs:?}");
+    // The modem gives the cycle up: the queued transmission goes on.
+    bench.advance(Duration::from_millis(100));
+    let outputs = bench.sentence(&MmSentence::Error {
+        time: "221322".into(),
+        module: "CYC".into(),
+        code: "4".into(),
+        message: "DATA_TIMEOUT".into(),
+    });
+    assert_eq!(requests(&outputs).len(), 1, "{outputs:?}");
+}
+
+/// A data request in time is answered with its frame, the slot check
+/// passing (the same cycle as above, the modem asking at once). Checks the
+/// new guarantee's other side: the check at a `$CADRQ` gives up only a
+/// packet that cannot fit.
+#[test]
+fn a_data_request_in_time_gets_its_frame() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    let opened = bench.now.micros;
+    let (id, template) = bench.initiate_and_request(data(opened, 2.5));
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled(&template)),
+    });
+    let cycle = writes(&outputs)
+        .into_iter()
+        .find_map(echo)
+        .expect("a $CCCYC");
+    bench.advance(Duration::from_millis(20));
+    bench.sentence(&cycle);
+    bench.advance(Duration::from_millis(20));
+    let outputs = bench.sentence(&data_request(1));
+    assert!(
+        writes(&outputs)
+            .iter()
+            .any(|s| matches!(s, MmSentence::TransmitData { data, .. } if data == b"hello")),
+        "{outputs:?}"
+    );
+}
+
+/// Another node polls this modem: its data request waits for the layer
+/// above's answer while lines go on being handled, and is answered with
+/// the frame when it comes. Fails on the old design, which read no line
+/// until the answer.
+#[test]
+fn a_polled_frame_is_written_when_its_answer_comes() {
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    bench.sentence(&MmSentence::Cycle {
+        from_modem: true,
+        cycle: Cycle {
+            src: ME,
+            dest: PEER,
+            rate: 6,
+            ack: false,
+            frames: 1,
+        },
+    });
+    let outputs = bench.sentence(&data_request(1));
+    assert!(!wrote_cycle_or_frame(&outputs), "{outputs:?}");
+    let asked = requests(&outputs);
+    assert_eq!(asked.len(), 1, "{outputs:?}");
+    let (id, template) = (asked[0].0, asked[0].1.clone());
+    let outputs = bench.sentence(&MmSentence::MiniPacketReceived {
+        src: OTHER,
+        dest: ME,
+        value: 1,
+    });
+    assert!(!events(&outputs).is_empty(), "{outputs:?}");
+    bench.advance(Duration::from_millis(200));
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled(&template)),
+    });
+    assert!(
+        writes(&outputs)
+            .iter()
+            .any(|s| matches!(s, MmSentence::TransmitData { data, .. } if data == b"hello")),
+        "{outputs:?}"
+    );
+}
