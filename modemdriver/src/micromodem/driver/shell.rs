@@ -18,6 +18,8 @@ use std::task::Poll;
 use protos::goby::acomms::protobuf::ModemTransmission;
 use tokio::sync::oneshot;
 
+use std::sync::Arc;
+
 use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
 use crate::driver::{DataRequest, DriverCommand, DriverContext, DriverEvent, EventSink};
 use crate::link::fault::{FaultConfig, FaultInjector, FaultScript};
@@ -100,53 +102,37 @@ pub(super) async fn run(
 ) {
     let events = ctx.events.clone();
     let clock = ctx.clock.clone();
-    let now = || now(&*clock);
-    let mut link = Some(port.wrap(lines, &events));
-    let mut machine = Machine::new(settings, now());
-    let mut answers: Answers = Vec::new();
+    let machine = Machine::new(settings, now(&*clock));
+    let mut shell = Shell {
+        link: Some(port.wrap(lines, &events)),
+        machine,
+        port,
+        events,
+        answers: Vec::new(),
+        clock,
+    };
     let mut input = Input::Tick;
     loop {
-        let outputs = machine.handle(now(), input);
-        perform(
-            outputs,
-            &mut machine,
-            &mut link,
-            &port,
-            &events,
-            &mut answers,
-            &*clock,
-        )
-        .await;
-        answers.retain(|(id, _)| machine.awaits(*id));
-        let wake = machine.next_deadline();
+        shell.step(input).await;
+        let wake = shell.machine.next_deadline();
         input = tokio::select! {
             command = ctx.commands.recv() => match command {
                 Some(DriverCommand::Stop(done)) => {
-                    let outputs = machine.handle(now(), Input::Stop);
-                    perform(
-                        outputs,
-                        &mut machine,
-                        &mut link,
-                        &port,
-                        &events,
-                        &mut answers,
-                        &*clock,
-                    )
-                    .await;
+                    shell.step(Input::Stop).await;
                     let _ = done.send(());
                     return;
                 }
                 Some(command) => Input::Command(command),
                 None => return,
             },
-            line = recv_opt(&mut link) => match line {
+            line = recv_opt(&mut shell.link) => match line {
                 Ok(line) => Input::Line(line),
                 Err(e) => {
-                    link = None;
+                    shell.link = None;
                     Input::Disconnected(format!("read failed: {e}"))
                 }
             },
-            (id, filled) = next_answer(&mut answers), if !answers.is_empty() => {
+            (id, filled) = next_answer(&mut shell.answers), if !shell.answers.is_empty() => {
                 Input::Answer { id, filled }
             }
             () = sleep_until_opt(wake) => Input::Tick,
@@ -154,47 +140,58 @@ pub(super) async fn run(
     }
 }
 
-/// Does the machine's outputs, in order, and those of the inputs they
-/// cause (a write that fails, the device opened or not).
-async fn perform(
-    outputs: Vec<Output>,
-    machine: &mut Machine,
-    link: &mut Option<MmLink>,
-    port: &Port,
-    events: &EventSink,
-    answers: &mut Answers,
-    clock: &dyn goby_time::Clock,
-) {
-    let now = || now(clock);
-    let mut queue: std::collections::VecDeque<Output> = outputs.into();
-    while let Some(output) = queue.pop_front() {
-        match output {
-            Output::Write(sentence) => {
-                // Lines for a link that failed since are not written.
-                let Some(l) = link.as_mut() else { continue };
-                if let Err(e) = l.send(sentence.to_line().as_bytes(), &()).await {
-                    *link = None;
-                    let more =
-                        machine.handle(now(), Input::Disconnected(format!("write failed: {e}")));
-                    queue.extend(more);
+/// What the driver task holds: the machine and the parts it acts through.
+struct Shell {
+    machine: Machine,
+    link: Option<MmLink>,
+    port: Port,
+    events: EventSink,
+    /// Data requests outstanding, with where their answers come.
+    answers: Answers,
+    clock: Arc<dyn goby_time::Clock>,
+}
+
+impl Shell {
+    /// Hands `input` to the machine, reading the clock once, and does its
+    /// outputs, in order, and those of the inputs they cause (a write that
+    /// fails, the device opened or not); forgets the answers the machine no
+    /// longer waits for.
+    async fn step(&mut self, input: Input) {
+        let outputs = self.machine.handle(now(&*self.clock), input);
+        let mut queue: std::collections::VecDeque<Output> = outputs.into();
+        while let Some(output) = queue.pop_front() {
+            match output {
+                Output::Write(sentence) => {
+                    // Lines for a link that failed since are not written.
+                    let Some(l) = self.link.as_mut() else {
+                        continue;
+                    };
+                    if let Err(e) = l.send(sentence.to_line().as_bytes(), &()).await {
+                        self.link = None;
+                        let failed = Input::Disconnected(format!("write failed: {e}"));
+                        queue.extend(self.machine.handle(now(&*self.clock), failed));
+                    }
+                }
+                Output::Event(event) => self.events.emit(event),
+                Output::Request { id, template } => {
+                    let (request, answer) = DataRequest::new(template);
+                    self.answers.push((id, answer));
+                    self.events.emit(DriverEvent::DataRequest(request));
+                }
+                Output::Open => {
+                    let opened = match self.port.open(&self.events) {
+                        Ok(l) => {
+                            self.link = Some(l);
+                            true
+                        }
+                        Err(_) => false,
+                    };
+                    let input = Input::Opened(opened);
+                    queue.extend(self.machine.handle(now(&*self.clock), input));
                 }
             }
-            Output::Event(event) => events.emit(event),
-            Output::Request { id, template } => {
-                let (request, answer) = DataRequest::new(template);
-                answers.push((id, answer));
-                events.emit(DriverEvent::DataRequest(request));
-            }
-            Output::Open => {
-                let opened = match port.open(events) {
-                    Ok(l) => {
-                        *link = Some(l);
-                        true
-                    }
-                    Err(_) => false,
-                };
-                queue.extend(machine.handle(now(), Input::Opened(opened)));
-            }
         }
+        let machine = &self.machine;
+        self.answers.retain(|(id, _)| machine.awaits(*id));
     }
 }
