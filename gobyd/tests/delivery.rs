@@ -34,11 +34,9 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use gobyd::event::DaemonEvent;
-use gobyd::json_server::Publish;
 use gobyd::modem_event::ModemEvent;
 use gobyd::runtime::Daemon;
 use modemdriver::micromodem::emulator::{Dialect, EmulatorControl, EmulatorFaults};
-use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
 use protos::goby::example::Command;
@@ -105,7 +103,7 @@ impl Link {
 const RUN_LIMIT: Duration = Duration::from_secs(150);
 
 use modemdriver::time::now_micros;
-use support::daemon::scratch;
+use support::daemon::{publish_command, scratch};
 
 /// The faults of one run.
 #[derive(Debug, Clone, Default)]
@@ -351,22 +349,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
             let from = index as i32 + 1;
             let to = 3 - from;
             let note = format!("{from}-{i}");
-            let command = Command {
-                destination: to,
-                action: 1,
-                note: Some(note.clone()),
-                ..Default::default()
-            };
-            let (reply, answer) = oneshot::channel();
-            publisher
-                .send(Publish {
-                    message: command.transcode_to_dynamic(),
-                    reply,
-                })
-                .await
-                .unwrap();
-            let reply = answer.await.unwrap();
-            assert!(reply.is_ok(), "{reply:?}");
+            publish_command(publisher, to, &note).await;
             published.push((from, note));
         }
         tokio::time::sleep(Duration::from_millis(1000)).await;

@@ -17,15 +17,13 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use gobyd::event::DaemonEvent;
-use gobyd::json_server::Publish;
 use gobyd::runtime::Daemon;
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
-use prost_reflect::ReflectMessage;
 use protos::goby::example::Command;
 use queue::{Clock, QueueEvent};
-use support::daemon::scratch;
+use support::daemon::{publish_command, scratch};
 use tokio::sync::oneshot;
 
 fn config(id: i32, data_dir: &std::path::Path) -> String {
@@ -143,21 +141,7 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
                 (format!("{from}-{minute}"), 1)
             };
             for _ in 0..times {
-                let command = Command {
-                    destination: 3 - from,
-                    action: 1,
-                    note: Some(text.clone()),
-                    ..Default::default()
-                };
-                let (reply, answer) = oneshot::channel();
-                publisher
-                    .send(Publish {
-                        message: command.transcode_to_dynamic(),
-                        reply,
-                    })
-                    .await
-                    .unwrap();
-                assert!(answer.await.unwrap().is_ok());
+                publish_command(publisher, 3 - from, &text).await;
                 *expected.entry((from, text.clone())).or_default() += 1;
             }
         }

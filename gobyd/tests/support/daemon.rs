@@ -160,3 +160,31 @@ impl Drop for Gobyd {
         let _ = self.child.wait();
     }
 }
+
+/// Publishes a `goby.example.Command` to `destination` with `note`
+/// through an in-process daemon's publisher
+/// ([`gobyd::runtime::Daemon::publisher`]) and waits for the core's
+/// answer, which must be that it was accepted.
+pub async fn publish_command(
+    publisher: &tokio::sync::mpsc::Sender<gobyd::json_server::Publish>,
+    destination: i32,
+    note: &str,
+) {
+    use prost_reflect::ReflectMessage;
+    let command = protos::goby::example::Command {
+        destination,
+        action: 1,
+        note: Some(note.to_string()),
+        ..Default::default()
+    };
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    publisher
+        .send(gobyd::json_server::Publish {
+            message: command.transcode_to_dynamic(),
+            reply,
+        })
+        .await
+        .expect("the daemon takes publications");
+    let reply = answer.await.expect("the daemon answers");
+    assert!(reply.is_ok(), "{reply:?}");
+}
