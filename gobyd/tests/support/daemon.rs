@@ -61,6 +61,34 @@ impl Gobyd {
         gobyd
     }
 
+    /// [`start`](Self::start) for a daemon armed with a crash point
+    /// (`GOBYD_CRASH_POINT` in `env`): one that reaches it and dies before
+    /// the client connects is returned unconnected ([`request`](Self::request)
+    /// and [`wait_for`](Self::wait_for) then answer `None`,
+    /// [`has_exited`](Self::has_exited) `true`).
+    pub fn start_may_crash(config: &Path, env: &[(&str, &str)]) -> Gobyd {
+        let mut gobyd = Self::start_unconnected(config, env);
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            match TcpStream::connect(&gobyd.addr) {
+                Ok(client) => {
+                    gobyd.attach(client);
+                    return gobyd;
+                }
+                Err(e) => {
+                    if gobyd.has_exited() {
+                        return gobyd;
+                    }
+                    assert!(
+                        Instant::now() < deadline,
+                        "connect to the JSON interface of a running daemon: {e}"
+                    );
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+        }
+    }
+
     /// [`start`](Self::start) without connecting a client.
     pub fn start_unconnected(config: &Path, env: &[(&str, &str)]) -> Gobyd {
         let mut command = Command::new(env!("CARGO_BIN_EXE_gobyd"));
@@ -102,6 +130,11 @@ impl Gobyd {
     /// Connects the test's JSON client.
     pub fn connect(&mut self) {
         let client = TcpStream::connect(&self.addr).expect("connect to the JSON interface");
+        self.attach(client);
+    }
+
+    /// Reads the JSON lines of a connected client.
+    fn attach(&mut self, client: TcpStream) {
         let reader = BufReader::new(client.try_clone().unwrap());
         let (tx, lines) = mpsc::channel();
         std::thread::spawn(move || {
@@ -117,9 +150,10 @@ impl Gobyd {
     }
 
     /// Sends a JSON request line and waits for its reply (a line holding
-    /// `accepted` or `error`); `None` when none comes (the daemon died).
+    /// `accepted` or `error`); `None` when none comes (the daemon died) or
+    /// no client is connected.
     pub fn request(&mut self, line: &str) -> Option<Value> {
-        let (client, lines) = self.client.as_mut().expect("a connected client");
+        let (client, lines) = self.client.as_mut()?;
         client.write_all(format!("{line}\n").as_bytes()).ok()?;
         let deadline = Instant::now() + PATIENCE;
         while let Ok(v) = lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
@@ -130,9 +164,10 @@ impl Gobyd {
         None
     }
 
-    /// The next line from the daemon that `wanted` picks, within `limit`.
+    /// The next line from the daemon that `wanted` picks, within `limit`;
+    /// `None` too when no client is connected.
     pub fn wait_for(&mut self, limit: Duration, wanted: impl Fn(&Value) -> bool) -> Option<Value> {
-        let (_, lines) = self.client.as_ref().expect("a connected client");
+        let (_, lines) = self.client.as_ref()?;
         let deadline = Instant::now() + limit;
         while let Ok(v) = lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
             if wanted(&v) {

@@ -195,7 +195,7 @@ impl Totals {
 /// A node's daemon, started again with a crash point armed or not.
 pub fn start(config: &Path, crash: Option<&str>) -> Gobyd {
     match crash {
-        Some(point) => Gobyd::start(config, &[("GOBYD_CRASH_POINT", point)]),
+        Some(point) => Gobyd::start_may_crash(config, &[("GOBYD_CRASH_POINT", point)]),
         None => Gobyd::start(config, &[]),
     }
 }
