@@ -14,10 +14,10 @@
 //! [`crate::inbox`]. Messages a previous run recorded and did not hand over
 //! are held first, flagged `recovered`.
 //!
-//! The daemon's core calls [`Delivery::record`] for each reception,
-//! [`Delivery::release`] whenever a taker may have come (with the function
-//! that hands a message over to the clients, the bridges and the mission
-//! log), and sends the [`acknowledgement`] it returns to the driver.
+//! The daemon's core calls [`Delivery::receive`] for each reception (with
+//! the function that hands a message over to the clients, the bridges and
+//! the mission log) and sends the acknowledgement it returns to the
+//! driver; and [`Delivery::release`] whenever a taker may have come.
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -136,6 +136,29 @@ impl Delivery {
                 }
             }
         }
+    }
+
+    /// One reception down the whole receive path: its `messages` (those
+    /// the queue decoded from `transmission`, `faults` the frames that did
+    /// not) are [`record`](Self::record)ed, then handed over with
+    /// `hand_over` if `taker_present` ([`release`](Self::release)), and the
+    /// [`acknowledgement`] to send for its frames is returned (`None`: send
+    /// none). `now`: the clock's reading, microseconds since the epoch, and
+    /// the same moment as a timer instant.
+    #[allow(clippy::too_many_arguments)]
+    pub fn receive(
+        &mut self,
+        transmission: ModemTransmission,
+        messages: Vec<ReceivedMessage>,
+        faults: &FrameFaults,
+        reception: &Reception,
+        (now_micros, now): (u64, Instant),
+        taker_present: bool,
+        hand_over: impl FnMut(ReceivedMessage, &Reception),
+    ) -> Option<Acknowledgement> {
+        let on_record = self.record(messages, reception, now_micros, now);
+        self.release(taker_present, now, now_micros, hand_over);
+        acknowledgement(transmission, faults, on_record)
     }
 
     /// Records the messages of one reception (`reception`) in the inbox,

@@ -32,7 +32,7 @@ use super::config::{self, ConfigError};
 use super::control::Control;
 use super::crash_point::CrashPoint;
 use super::data_dir::{DataDir, DataDirError};
-use super::delivery::{self, Delivery, FrameFaults};
+use super::delivery::{Delivery, FrameFaults};
 use super::door::Door;
 use super::event::{
     reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
@@ -825,9 +825,9 @@ impl Daemon {
     }
 
     /// A transmission from the link: its messages go down the receive path
-    /// ([`delivery`]: recorded, held, handed over), then its frames are
-    /// acknowledged (by drivers that ack in software with `deferred_ack`)
-    /// as [`delivery::acknowledgement`] says.
+    /// ([`Delivery::receive`]: recorded, held, handed over), then its
+    /// frames are acknowledged (by drivers that ack in software with
+    /// `deferred_ack`) as it says.
     fn receive(&mut self, transmission: ModemTransmission) {
         if transmission.r#type() == TransmissionType::Data && !transmission.frame.is_empty() {
             CrashPoint::Received.reached();
@@ -856,12 +856,28 @@ impl Daemon {
                 event => self.hand_over(event, entry, &Reception::default()),
             }
         }
-        let now = u64::try_from(self.clock.now()).unwrap_or(0);
-        let on_record =
-            self.delivery
-                .record(messages, &reception, now, tokio::time::Instant::now());
-        self.release_held();
-        if let Some(ack) = delivery::acknowledgement(transmission, &faults, on_record) {
+        let now = self.clock.now();
+        let taker = self.taker_present();
+        let (events, raw_log) = (&self.events, &mut self.raw_log);
+        let ack = self.delivery.receive(
+            transmission,
+            messages,
+            &faults,
+            &reception,
+            (u64::try_from(now).unwrap_or(0), tokio::time::Instant::now()),
+            taker,
+            |received, reception| {
+                hand_over(
+                    events,
+                    raw_log,
+                    now,
+                    QueueEvent::Received(received),
+                    None,
+                    reception,
+                )
+            },
+        );
+        if let Some(ack) = ack {
             if let Err(e) = self.driver.acknowledge(ack) {
                 tracing::error!("cannot acknowledge: {e}");
             }
