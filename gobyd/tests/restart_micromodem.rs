@@ -30,6 +30,9 @@
 //! lost message is printed with what happened to its receiver around the
 //! moment the ack reached its sender.
 //!
+//! Every packet the modems put on the water must also lie within its
+//! node's slot, killed daemons and restarts included.
+//!
 //! `GOBYD_MM_RESTART_APP_ACKS=0` or `=1` writes `use_application_acks:
 //! false` or `true` into the driver's `micromodem { … }` block (unset: the
 //! driver's default, nothing written). `cargo test -p gobyd --test
@@ -133,10 +136,8 @@ fn run(seed: u64, rounds: usize, runtime: &tokio::runtime::Runtime) -> Totals {
             e.stop().await;
         }
     });
-    println!(
-        "micromodem restart seed {seed}: {}",
-        slot_report(&air, SLOT_SECONDS)
-    );
+    let slots = slot_report(&air, SLOT_SECONDS);
+    println!("micromodem restart seed {seed}: {slots}");
     if totals.lost == 0 && totals.duplicates == 0 {
         let _ = std::fs::remove_dir_all(&dir);
     } else {
@@ -145,6 +146,12 @@ fn run(seed: u64, rounds: usize, runtime: &tokio::runtime::Runtime) -> Totals {
             dir.display()
         );
     }
+    // Killed and started again, a daemon still keeps its modem's packets
+    // within its slots.
+    assert!(
+        slots.starts_with("slots: 0 outside"),
+        "micromodem restart seed {seed}: {slots}"
+    );
     totals
 }
 
