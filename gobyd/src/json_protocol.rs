@@ -380,7 +380,7 @@ fn modem_line(event: &ModemEvent) -> Value {
             }
         }
         ModemEvent::Status(status) => {
-            json!({ "event": "driver_status", "driver_status": format!("{status:?}") })
+            json!({ "event": "driver_status", "driver_status": status.kind(), "detail": status.to_string() })
         }
         ModemEvent::Specific(message) => json!({
             "event": "driver_specific",

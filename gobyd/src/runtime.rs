@@ -635,9 +635,13 @@ impl Daemon {
             }
             DriverEvent::Status(status) => match status {
                 DriverStatus::Ready => tracing::info!("driver ready"),
-                other => tracing::warn!("driver: {other:?}"),
+                other => tracing::warn!(status = other.kind(), "driver: {other}"),
             },
-            DriverEvent::Specific(report) => tracing::info!("driver report: {report:?}"),
+            DriverEvent::Specific(report) => tracing::info!(
+                "driver report: {} {}",
+                report.message.descriptor().full_name(),
+                message_json(&report.message)
+            ),
         }
     }
 

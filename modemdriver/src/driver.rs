@@ -292,6 +292,64 @@ pub enum DriverStatus {
     },
 }
 
+impl DriverStatus {
+    /// The status's name in `snake_case` (`"ready"`, `"bad_checksum"`,
+    /// `"skipped"`, ...), as the JSON interface and MQTT carry it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            DriverStatus::Ready => "ready",
+            DriverStatus::BadChecksum { .. } => "bad_checksum",
+            DriverStatus::Unparseable { .. } => "unparseable",
+            DriverStatus::ResponseTimeout { .. } => "response_timeout",
+            DriverStatus::Retrying { .. } => "retrying",
+            DriverStatus::ModemReset => "modem_reset",
+            DriverStatus::ModemSilent { .. } => "modem_silent",
+            DriverStatus::ModemError { .. } => "modem_error",
+            DriverStatus::Disconnected { .. } => "disconnected",
+            DriverStatus::Reconnected => "reconnected",
+            DriverStatus::DataRejected { .. } => "data_rejected",
+            DriverStatus::LinkError { .. } => "link_error",
+            DriverStatus::Skipped { .. } => "skipped",
+            DriverStatus::Degraded { .. } => "degraded",
+            DriverStatus::Unsupported { .. } => "unsupported",
+        }
+    }
+}
+
+/// In words, for logs and operators: e.g. `transmission skipped: its slot
+/// had passed`, `no answer to $CCCFG,SRC,1 (attempt 2)`.
+impl std::fmt::Display for DriverStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DriverStatus::Ready => write!(f, "ready"),
+            DriverStatus::BadChecksum { line } => write!(f, "bad checksum, line ignored: {line}"),
+            DriverStatus::Unparseable { line, reason } => {
+                write!(f, "not understood, ignored ({reason}): {line}")
+            }
+            DriverStatus::ResponseTimeout { command, attempt } => {
+                write!(f, "no answer to {command} (attempt {attempt})")
+            }
+            DriverStatus::Retrying { reason, attempt } => {
+                write!(f, "trying again (attempt {attempt}): {reason}")
+            }
+            DriverStatus::ModemReset => write!(f, "the modem restarted; configuring it again"),
+            DriverStatus::ModemSilent { seconds } => {
+                write!(f, "nothing heard from the modem for {seconds:.1} s")
+            }
+            DriverStatus::ModemError { message } => write!(f, "modem error: {message}"),
+            DriverStatus::Disconnected { reason } => write!(f, "disconnected: {reason}"),
+            DriverStatus::Reconnected => write!(f, "reconnected"),
+            DriverStatus::DataRejected { reason } => write!(f, "data rejected: {reason}"),
+            DriverStatus::LinkError { reason } => write!(f, "link error: {reason}"),
+            DriverStatus::Skipped { reason } => write!(f, "transmission skipped: {reason}"),
+            DriverStatus::Degraded { reason } => write!(f, "degraded: {reason}"),
+            DriverStatus::Unsupported { message } => {
+                write!(f, "driver-specific request not supported: {message}")
+            }
+        }
+    }
+}
+
 /// A driver-specific result: a protobuf message whose type the driver
 /// documents (e.g. `goby.acomms.protobuf.MicroModemSpecific`).
 #[derive(Debug, Clone, PartialEq)]

@@ -151,7 +151,7 @@ impl Formatter {
         Some(match event {
             ModemEvent::Status(status) => Outgoing::new(
                 t.node("driver"),
-                json!({ "status": format!("{status:?}"), "time": seconds(now) }),
+                json!({ "status": status.kind(), "detail": status.to_string(), "time": seconds(now) }),
                 true,
             ),
             ModemEvent::SlotStart {
