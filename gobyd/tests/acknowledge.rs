@@ -21,40 +21,21 @@ use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::example::Command;
 use queue::{TrailerCodec, WireIdentity};
 use support::daemon::{free_udp_port, scratch};
+use support::node::{Entry, Node, Udp};
 use tokio::net::UdpSocket;
 
 const LIMIT: Duration = Duration::from_secs(20);
 
-fn config(port: u16, peer: u16, data_dir: &std::path::Path) -> String {
-    format!(
-        r#"
-modem_id: 1
-driver {{
-  driver_type: DRIVER_UDP
-  udp {{
-    local {{ port: {port} }}
-    remote {{ modem_id: 2 ip: "127.0.0.1" port: {peer} }}
-  }}
-}}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: 1 }}
-  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: 1 }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 600
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "" }}
-data_dir: "{}"
-log {{ raw_log: true }}
-"#,
-        data_dir.display()
-    )
+/// Node 1 on the UDP driver, receiving on `port` and sending to node 2 on
+/// `peer`; TDMA slots of 1 s at rate 6; Command acked.
+fn config(port: u16, peer: u16, data_dir: &std::path::Path) -> Node {
+    Node::new(1)
+        .driver(Udp::new(port).remote(2, peer))
+        .tdma(&[1, 2], 6, 1.0)
+        .queue(Entry::command().ack(true).ttl(600))
+        .json_tcp("")
+        .data_dir(data_dir)
+        .raw_log(true)
 }
 
 /// The next ACK datagram on `socket`.
@@ -78,10 +59,8 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     let dir = scratch("acknowledge", "frames");
     let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let port = free_udp_port();
-    let text = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
-    let daemon = Daemon::start(gobyd::config::parse(&text, "test").unwrap())
-        .await
-        .expect("gobyd starts");
+    let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
+    let daemon = Daemon::start(config.config()).await.expect("gobyd starts");
     let inbox = daemon.data_dir().join("inbox.log");
     let mut events = daemon.subscribe();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();

@@ -41,9 +41,8 @@ use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
 use protos::goby::example::Command;
 use queue::QueueEvent;
-use support::micromodem::{
-    micromodem_driver, modem_path, slot_report, start_emulators, two_node_config,
-};
+use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
+use support::node::{Driver, Entry, Node, Simulator};
 use tokio::sync::oneshot;
 
 /// The link of a run: what each daemon's driver talks to, the rate of the
@@ -148,43 +147,30 @@ struct Tally {
     json_lines_with_stats: usize,
 }
 
+/// Node `id` of two: `driver`, TDMA slots at the link's rate and length,
+/// Command acked (kept for up to 30 min).
 fn daemon_config(
     id: i32,
-    driver: &str,
+    driver: Driver,
     data_dir: &Path,
     link: Link,
 ) -> protos::goby::apps::protobuf::GobydConfig {
-    let Link {
-        rate, slot_seconds, ..
-    } = link;
-    let text = two_node_config(
-        id,
-        driver,
-        rate,
-        slot_seconds,
-        "",
-        &format!(
-            "data_dir: \"{}\"\nlog {{ raw_log: false }}",
-            data_dir.display()
-        ),
-    );
-    gobyd::config::parse(&text, "delivery test").expect("test configuration")
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2], link.rate, link.slot_seconds)
+        .queue(Entry::command().ack(true).ttl(1800))
+        .json_tcp("")
+        .data_dir(data_dir)
+        .raw_log(false)
+        .config()
 }
 
-fn simulator_driver(channel: &str, loss: f64, seed: u64) -> String {
-    format!(
-        r#"driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{
-    node {{ modem_id: 1  x: 0 }}
-    node {{ modem_id: 2  x: 300 }}
-    packet_loss: {loss}
-    seed: {seed}
-    packet_overhead_seconds: 0.3
-    channel: "{channel}"
-  }}
-}}"#
-    )
+fn simulator_driver(channel: &str, loss: f64, seed: u64) -> Simulator {
+    Simulator::pair(300.0)
+        .loss(loss)
+        .seed(seed)
+        .overhead(0.3)
+        .channel(channel)
 }
 
 /// Runs the two daemons while `inject` applies the faults; returns the
@@ -224,18 +210,18 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let mut runs = Vec::new();
     let mut publishers = Vec::new();
     for id in 1..=2 {
-        let driver = if emulated {
-            let acks = if faults.hardware_acks {
-                "use_application_acks: false"
+        let driver: Driver = if emulated {
+            let modem = micromodem_driver(&modem_path(&dir, id as u32));
+            if faults.hardware_acks {
+                modem.use_application_acks(false).into()
             } else {
-                ""
-            };
-            micromodem_driver(&modem_path(&dir, id as u32), acks)
+                modem.into()
+            }
         } else {
-            simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed)
+            simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed).into()
         };
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(id, &driver, &data_dir, link))
+        let daemon = Daemon::start(daemon_config(id, driver, &data_dir, link))
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());

@@ -17,38 +17,32 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch};
+use support::node::{Entry, Node, Simulator};
 
 /// Upper bound of any wait in these tests.
 const PATIENCE: Duration = Duration::from_secs(60);
 
 /// A node that never transmits (no MAC slots): what is accepted stays queued.
+/// `extra_entry` is added to its Command entry, and the JSON interface
+/// also listens on UDP `udp_port` when given.
 fn quiet_config(dir: &Path, extra_entry: &str, udp_port: Option<u16>) -> PathBuf {
-    let udp = udp_port
-        .map(|p| format!("udp_bind: \"127.0.0.1:{p}\""))
-        .unwrap_or_default();
-    let config = format!(
-        r#"
-modem_id: 1
-driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "door-{pid}-{name}" }} }}
-mac {{ type: MAC_NONE }}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    role {{ type: DESTINATION_ID field: "destination" }}
-    {extra_entry}
-  }}
-}}
-json {{ tcp_bind: "127.0.0.1:0" {udp} }}
-data_dir: "{data}"
-log {{ level: "info" raw_log: true }}
-"#,
-        pid = std::process::id(),
-        name = dir.file_name().unwrap().to_string_lossy(),
-        data = dir.join("data").display()
+    let channel = format!(
+        "door-{}-{}",
+        std::process::id(),
+        dir.file_name().unwrap().to_string_lossy()
     );
-    let path = dir.join("node.cfg");
-    std::fs::write(&path, config).unwrap();
-    path
+    let mut node = Node::new(1)
+        .driver(Simulator::alone().channel(&channel))
+        .mac_none()
+        .queue(Entry::command().text(extra_entry))
+        .json_tcp("127.0.0.1:0");
+    if let Some(port) = udp_port {
+        node = node.json_udp(&format!("127.0.0.1:{port}"));
+    }
+    node.data_dir(&dir.join("data"))
+        .log_level("info")
+        .raw_log(true)
+        .write(dir.join("node.cfg"))
 }
 
 /// A running `gobyd`, its log lines, and the address of its JSON interface.
@@ -227,27 +221,14 @@ fn values_the_codec_would_change_are_refused_naming_field_and_bound() {
 fn a_clamping_type_is_sent_changed_and_every_change_is_reported_and_logged() {
     let dir = scratch("door", "clamp");
     let port = free_udp_port();
-    let config = format!(
-        r#"
-modem_id: 1
-driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "door-clamp-{pid}" }} }}
-mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 5 }} }}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: false
-    clamp_out_of_range: true
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "127.0.0.1:0" udp_bind: "127.0.0.1:{port}" }}
-data_dir: "{data}"
-"#,
-        pid = std::process::id(),
-        data = dir.join("data").display()
-    );
-    let path = dir.join("node.cfg");
-    std::fs::write(&path, config).unwrap();
+    let path = Node::new(1)
+        .driver(Simulator::alone().channel(&format!("door-clamp-{}", std::process::id())))
+        .tdma(&[1], 0, 5.0)
+        .queue(Entry::command().ack(false).text("clamp_out_of_range: true"))
+        .json_tcp("127.0.0.1:0")
+        .json_udp(&format!("127.0.0.1:{port}"))
+        .data_dir(&dir.join("data"))
+        .write(dir.join("node.cfg"));
     let daemon = Daemon::start(&path);
     let mut client = daemon.connect();
     let reply = client.request(&command(2, "0", "a note much too long"));

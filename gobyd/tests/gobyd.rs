@@ -14,88 +14,56 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch};
+use support::node::{Driver, Entry, MicroModem, Node as NodeConfig, Simulator, Udp};
 
 /// Upper bound of any wait in these tests.
 const PATIENCE: Duration = Duration::from_secs(40);
 
-/// The driver section of node `id` of a two-node UDP network, one
-/// Command per frame.
-fn udp_driver(id: i32, ports: [u16; 2]) -> String {
-    let me = ports[(id - 1) as usize];
-    let other_id = 3 - id;
-    let other = ports[(other_id - 1) as usize];
-    format!(
-        r#"driver {{
-  driver_type: DRIVER_UDP
-  udp {{
-    local {{ port: {me} }}
-    remote {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
-    max_frame_size: 10
-  }}
-}}"#
-    )
+/// The driver of node `id` of a two-node UDP network, one Command per
+/// frame (frames of up to 10 bytes).
+fn udp_driver(id: i32, ports: [u16; 2]) -> Driver {
+    Udp::pair(id, ports).max_frame_size(10).into()
 }
 
-/// The driver section of node `id` on the acoustic channel simulator, the
-/// two nodes 150 m apart in two processes (packets between them over UDP).
-fn simulator_driver(id: i32, ports: [u16; 2]) -> String {
-    let me = ports[(id - 1) as usize];
-    let other_id = 3 - id;
-    let other = ports[(other_id - 1) as usize];
-    format!(
-        r#"driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{
-    node {{ modem_id: 1 x: 0 y: 0 z: 10 }}
-    node {{ modem_id: 2 x: 150 y: 0 z: 10 }}
-    packet_overhead_seconds: 0.05
-    channel: "node{id}"
-    udp_local {{ modem_id: {id} port: {me} }}
-    udp_peer {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
-  }}
-}}"#
-    )
+/// The driver of node `id` on the acoustic channel simulator, the two
+/// nodes 150 m apart in two processes (packets between them over UDP).
+fn simulator_driver(id: i32, ports: [u16; 2]) -> Driver {
+    Simulator::pair_at(150.0, 10.0)
+        .overhead(0.05)
+        .channel(&format!("node{id}"))
+        .between_processes(id, ports)
+        .into()
 }
 
-/// Configuration of node `id`: TDMA slots of `slot` seconds at rate 6 (on
-/// the simulator: six 32-byte frames at 2400 bit/s, 0.64 s on the water),
-/// Command acked and addressed by its `destination` field.
-fn node_config(id: i32, driver: &str, slot: f64, data_dir: &Path) -> String {
-    format!(
-        r#"
-modem_id: {id}
-{driver}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: {slot} }}
-  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: {slot} }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 600
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "127.0.0.1:0" }}
-data_dir: "{dir}"
-log {{ level: "info" raw_log: true }}
-"#,
-        dir = data_dir.display()
-    )
+/// Configuration of node `id`: TDMA slots of `slot` seconds at `rate` (on
+/// the simulator, rate 6: six 32-byte frames at 2400 bit/s, 0.64 s on the
+/// water), Command acked and addressed by its `destination` field.
+fn node_config(
+    id: i32,
+    driver: impl Into<Driver>,
+    rate: u32,
+    slot: f64,
+    data_dir: &Path,
+) -> NodeConfig {
+    NodeConfig::new(id)
+        .driver(driver)
+        .tdma(&[1, 2], rate, slot)
+        .queue(Entry::command().ack(true).ttl(600))
+        .json_tcp("127.0.0.1:0")
+        .data_dir(data_dir)
+        .log_level("info")
+        .raw_log(true)
 }
 
-/// Writes the configuration files of a two-node network.
-fn network(dir: &Path, driver: fn(i32, [u16; 2]) -> String, slot: f64) -> Vec<PathBuf> {
+/// Writes the configuration files of a two-node network (TDMA at rate 6).
+fn network(dir: &Path, driver: fn(i32, [u16; 2]) -> Driver, slot: f64) -> Vec<PathBuf> {
     let ports = [free_udp_port(), free_udp_port()];
     [1, 2]
         .into_iter()
         .map(|id| {
             let data = dir.join(format!("node{id}"));
-            let path = dir.join(format!("node{id}.cfg"));
-            std::fs::write(&path, node_config(id, &driver(id, ports), slot, &data)).unwrap();
-            path
+            node_config(id, driver(id, ports), 6, slot, &data)
+                .write(dir.join(format!("node{id}.cfg")))
         })
         .collect()
 }
@@ -323,18 +291,6 @@ fn messages_cross_the_simulated_acoustic_channel_with_acks() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// The driver section of node `id` on an emulated WHOI Micro-Modem.
-fn micromodem_driver(path: &Path) -> String {
-    format!(
-        r#"driver {{
-  driver_type: DRIVER_WHOI_MICROMODEM
-  serial_port: "{}"
-  serial_baud: 19200
-}}"#,
-        path.display()
-    )
-}
-
 /// Two emulated WHOI Micro-Modems on the acoustic channel simulator, each on
 /// a pseudo-terminal reached through a symbolic link, run on a thread of
 /// their own until stopped (or for at most a minute).
@@ -451,20 +407,15 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
         .collect();
     // Two emulated modems 150 m apart on the simulated channel, each on a pty.
     let emulator = EmulatedModems::start(&links, 150.0);
-    let mut paths = Vec::new();
-    for id in [1, 2] {
-        let config = node_config(
-            id,
-            &micromodem_driver(&links[(id - 1) as usize]),
-            5.0,
-            &dir.join(format!("node{id}")),
-        )
-        // The Micro-Modem's rate 0: one 32-byte frame.
-        .replace("rate: 6", "rate: 0");
-        let path = dir.join(format!("node{id}.cfg"));
-        std::fs::write(&path, config).unwrap();
-        paths.push(path);
-    }
+    // The Micro-Modem's rate 0: one 32-byte frame.
+    let paths: Vec<PathBuf> = [1, 2]
+        .into_iter()
+        .map(|id| {
+            let modem = MicroModem::new(&links[(id - 1) as usize]).baud(19200);
+            node_config(id, modem, 0, 5.0, &dir.join(format!("node{id}")))
+                .write(dir.join(format!("node{id}.cfg")))
+        })
+        .collect();
     let receiver = Node::start(&paths[1]);
     let mut sender = Node::start(&paths[0]);
     sender.send(r#"{"subscribe": ["ack"]}"#);
@@ -494,19 +445,14 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
 fn json_over_udp_and_a_clean_stop_on_sigterm() {
     let dir = scratch("test", "udp-json");
     let port = free_udp_port();
-    let config = format!(
-        r#"
-modem_id: 1
-driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "udp-json" }} }}
-mac {{ type: MAC_NONE }}
-queue {{ message_entry {{ protobuf_name: "goby.example.Command" role {{ type: DESTINATION_ID field: "destination" }} }} }}
-json {{ tcp_bind: "" udp_bind: "127.0.0.1:{port}" }}
-data_dir: "{}"
-"#,
-        dir.join("data").display()
-    );
-    let path = dir.join("node.cfg");
-    std::fs::write(&path, config).unwrap();
+    let path = NodeConfig::new(1)
+        .driver(Simulator::alone().channel("udp-json"))
+        .mac_none()
+        .queue(Entry::command())
+        .json_tcp("")
+        .json_udp(&format!("127.0.0.1:{port}"))
+        .data_dir(&dir.join("data"))
+        .write(dir.join("node.cfg"));
     let (mut child, log) = spawn_gobyd(&path);
     wait_log(&log, "gobyd started");
 
@@ -578,18 +524,12 @@ data_dir: "{}"
 fn one_daemon_per_data_directory_and_a_crash_releases_it() {
     let dir = scratch("test", "one-per-dir");
     let data = dir.join("data");
-    let config = format!(
-        r#"
-modem_id: 1
-driver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} channel: "one-per-dir" }} }}
-mac {{ type: MAC_NONE }}
-json {{ tcp_bind: "127.0.0.1:0" }}
-data_dir: "{}"
-"#,
-        data.display()
-    );
-    let path = dir.join("node.cfg");
-    std::fs::write(&path, config).unwrap();
+    let path = NodeConfig::new(1)
+        .driver(Simulator::alone().channel("one-per-dir"))
+        .mac_none()
+        .json_tcp("127.0.0.1:0")
+        .data_dir(&data)
+        .write(dir.join("node.cfg"));
     let first = Node::start(&path);
     // A second daemon on the same directory is refused at start.
     let second = Command::new(env!("CARGO_BIN_EXE_gobyd"))
@@ -629,47 +569,20 @@ data_dir: "{}"
 
 /// Configuration of node `id` of a two-node UDP network with frames of up
 /// to 64 bytes: Command acked, NavigationReport not.
-fn repeats_config(id: i32, ports: [u16; 2], data_dir: &Path) -> String {
-    let me = ports[(id - 1) as usize];
-    let other_id = 3 - id;
-    let other = ports[(other_id - 1) as usize];
-    format!(
-        r#"
-modem_id: {id}
-driver {{
-  driver_type: DRIVER_UDP
-  udp {{
-    local {{ port: {me} }}
-    remote {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
-    max_frame_size: 64
-  }}
-}}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 0.5 }}
-  slot {{ src: 2 dest: -1 rate: 0 slot_seconds: 0.5 }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 600
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-  message_entry {{
-    protobuf_name: "goby.example.NavigationReport"
-    ack: false
-    ttl: 600
-    role {{ type: SOURCE_ID field: "source" }}
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "127.0.0.1:0" }}
-data_dir: "{dir}"
-log {{ level: "info" }}
-"#,
-        dir = data_dir.display()
-    )
+fn repeats_config(id: i32, ports: [u16; 2], data_dir: &Path) -> NodeConfig {
+    let report = Entry::new("goby.example.NavigationReport")
+        .ack(false)
+        .ttl(600)
+        .role("SOURCE_ID", "source")
+        .role("DESTINATION_ID", "destination");
+    NodeConfig::new(id)
+        .driver(Udp::pair(id, ports).max_frame_size(64))
+        .tdma(&[1, 2], 0, 0.5)
+        .queue(Entry::command().ack(true).ttl(600))
+        .queue(report)
+        .json_tcp("127.0.0.1:0")
+        .data_dir(data_dir)
+        .log_level("info")
 }
 
 /// The same content published three times is three publications: each is
@@ -682,10 +595,8 @@ fn identical_publications_are_each_delivered_and_acked() {
     let paths: Vec<PathBuf> = [1, 2]
         .into_iter()
         .map(|id| {
-            let path = dir.join(format!("node{id}.cfg"));
-            let config = repeats_config(id, ports, &dir.join(format!("node{id}")));
-            std::fs::write(&path, config).unwrap();
-            path
+            repeats_config(id, ports, &dir.join(format!("node{id}")))
+                .write(dir.join(format!("node{id}.cfg")))
         })
         .collect();
     let receiver = Node::start(&paths[1]);

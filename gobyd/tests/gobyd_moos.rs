@@ -10,44 +10,32 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use gobyd::{config, runtime::Daemon};
+use gobyd::runtime::Daemon;
 use moos::{ClientConfig, MoosClient, Value};
 use support::daemon::{free_tcp_port, scratch};
+use support::node::{Entry, Node, Simulator};
 use tokio::sync::oneshot;
 
 const PATIENCE: Duration = Duration::from_secs(20);
 
-fn daemon_config(port: u16, data_dir: &Path, channel: &str) -> String {
-    format!(
-        r#"
-modem_id: 1
-driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{ node {{ modem_id: 1 }} channel: "{channel}" }}
-}}
-mac {{ type: MAC_NONE }}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "" }}
-moos {{ server: "127.0.0.1" port: {port} name: "gobyd_test" send_var: "ACOMMS_SEND" }}
-data_dir: "{dir}"
-log {{ raw_log: false }}
-"#,
-        dir = data_dir.display()
-    )
+/// Node 1 alone on the simulator channel `channel`, never transmitting,
+/// a client of the MOOSDB at `port`.
+fn daemon_config(port: u16, data_dir: &Path, channel: &str) -> Node {
+    Node::new(1)
+        .driver(Simulator::alone().channel(channel))
+        .mac_none()
+        .queue(Entry::command())
+        .json_tcp("")
+        .moos(port, r#"name: "gobyd_test" send_var: "ACOMMS_SEND""#)
+        .data_dir(data_dir)
+        .raw_log(false)
 }
 
 /// Runs gobyd against the DB at `port` and checks the round trip.
 async fn round_trip_through(port: u16, name: &str) {
     let dir = scratch("moos", name);
-    let text = daemon_config(port, &dir.join("data"), name);
-    let daemon = Daemon::start(config::parse(&text, "test").unwrap())
-        .await
-        .expect("gobyd starts");
+    let config = daemon_config(port, &dir.join("data"), name).config();
+    let daemon = Daemon::start(config).await.expect("gobyd starts");
     let (stop, stopped) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async {
         let _ = stopped.await;

@@ -12,60 +12,35 @@ use std::time::Duration;
 
 use gobyd::event::{DaemonEvent, SharedEvent};
 use gobyd::modem_event::ModemEvent;
-use gobyd::{config, runtime::Daemon};
+use gobyd::runtime::Daemon;
 use modemdriver::DriverStatus;
 use moos::{ClientConfig, MailReceiver, MoosClient, Value};
 use support::daemon::scratch;
+use support::node::{Entry, Node, Simulator};
 use tokio::sync::{broadcast, oneshot};
 
 const PATIENCE: Duration = Duration::from_secs(30);
 
 /// Node `id` of two on the in-process simulator channel `channel`, 150 m
-/// apart, with `mac`; a MOOS client of the DB at `port` when given.
-fn node(id: i32, channel: &str, mac: &str, moos_port: Option<u16>, data: &Path) -> String {
-    let moos = moos_port
-        .map(|port| {
-            format!(
-                r#"moos {{ server: "127.0.0.1" port: {port} name: "gobyd{id}" send_var: "ACOMMS_SEND" }}
-moos_var {{}}"#
+/// apart, Command acked, no MAC yet; a MOOS client of the DB at `port`
+/// (with the pAcommsHandler variables, `moos_var {}`) when given.
+fn node(id: i32, channel: &str, moos_port: Option<u16>, data: &Path) -> Node {
+    let mut node = Node::new(id)
+        .driver(Simulator::pair(150.0).overhead(0.05).channel(channel))
+        .queue(Entry::command().ack(true).ttl(600))
+        .json_tcp("")
+        .data_dir(data)
+        .raw_log(false);
+    if let Some(port) = moos_port {
+        node = node
+            .moos(
+                port,
+                &format!(r#"name: "gobyd{id}" send_var: "ACOMMS_SEND""#),
             )
-        })
-        .unwrap_or_default();
-    format!(
-        r#"
-modem_id: {id}
-driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{
-    node {{ modem_id: 1 x: 0 }}
-    node {{ modem_id: 2 x: 150 }}
-    packet_overhead_seconds: 0.05
-    channel: "{channel}"
-  }}
-}}
-{mac}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 600
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "" }}
-{moos}
-data_dir: "{dir}"
-log {{ raw_log: false }}
-"#,
-        dir = data.display()
-    )
+            .extra("moos_var {}");
+    }
+    node
 }
-
-const TDMA: &str = r#"mac {
-  type: MAC_FIXED_DECENTRALIZED
-  slot { src: 1 dest: -1 rate: 6 slot_seconds: 1 }
-  slot { src: 2 dest: -1 rate: 6 slot_seconds: 1 }
-}"#;
 
 struct Running {
     stop: oneshot::Sender<()>,
@@ -155,21 +130,12 @@ async fn driver_and_mac_variables_then_a_driver_reset() {
         .unwrap();
     let dir = scratch("moosvars", "reset");
     let channel = format!("modemvars-{}", std::process::id());
-    let one = Daemon::start(
-        config::parse(
-            &node(1, &channel, TDMA, Some(db.port()), &dir.join("one")),
-            "one",
-        )
-        .unwrap(),
-    )
-    .await
-    .unwrap();
+    // TDMA slots of 1 s at rate 6.
+    let one = node(1, &channel, Some(db.port()), &dir.join("one")).tdma(&[1, 2], 6, 1.0);
+    let one = Daemon::start(one.config()).await.unwrap();
     let mut events = one.subscribe();
-    let two = Daemon::start(
-        config::parse(&node(2, &channel, TDMA, None, &dir.join("two")), "two").unwrap(),
-    )
-    .await
-    .unwrap();
+    let two = node(2, &channel, None, &dir.join("two")).tdma(&[1, 2], 6, 1.0);
+    let two = Daemon::start(two.config()).await.unwrap();
     let (one, two) = (run(one), run(two));
 
     let vars = [
@@ -283,18 +249,10 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
     let dir = scratch("moosvars", "flush");
     let channel = format!("modemvars-flush-{}", std::process::id());
     // No medium access: messages stay queued.
-    let text = node(
-        1,
-        &channel,
-        "mac { type: MAC_NONE }",
-        Some(db.port()),
-        &dir.join("data"),
-    );
+    let one = node(1, &channel, Some(db.port()), &dir.join("data")).mac_none();
     let (client, mut mail) = client(db.port(), &["ACOMMS_QSIZE"]).await;
 
-    let daemon = run(Daemon::start(config::parse(&text, "one").unwrap())
-        .await
-        .unwrap());
+    let daemon = run(Daemon::start(one.config()).await.unwrap());
     let send = "@PB[goby.example.Command] destination: 2 action: GOTO";
     qsize(&client, &mut mail, Some(send), |s| s.ends_with("size: 1")).await;
     for _ in 0..2 {
@@ -318,9 +276,7 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
 
     // Started again on the same journal: one new message makes a queue of
     // one (the flushed three are gone for good).
-    let daemon = run(Daemon::start(config::parse(&text, "one").unwrap())
-        .await
-        .unwrap());
+    let daemon = run(Daemon::start(one.config()).await.unwrap());
     let size = qsize(&client, &mut mail, Some(send), |s| !s.ends_with("size: 0")).await;
     assert_eq!(
         size,

@@ -15,52 +15,28 @@ use std::process::{Child, Command, Stdio};
 use serde_json::Value;
 use support::broker::{Broker, Watcher};
 use support::daemon::{free_udp_port, scratch};
+use support::node::{Entry, Node, Simulator};
 
 /// Node `id` of two on the acoustic simulator (150 m apart, packets between
 /// the processes over UDP), TDMA slots of 1.2 s, bridged to `broker`.
-fn node_config(id: i32, ports: [u16; 2], broker: &str, data_dir: &Path) -> String {
-    let me = ports[(id - 1) as usize];
-    let other_id = 3 - id;
-    let other = ports[(other_id - 1) as usize];
-    format!(
-        r#"
-modem_id: {id}
-driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{
-    node {{ modem_id: 1 x: 0 y: 0 z: 10 }}
-    node {{ modem_id: 2 x: 150 y: 0 z: 10 }}
-    packet_overhead_seconds: 0.05
-    channel: "node{id}"
-    udp_local {{ modem_id: {id} port: {me} }}
-    udp_peer {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
-  }}
-}}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: 1.2 }}
-  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: 1.2 }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 600
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "" }}
-mqtt {{
-  broker: "{broker}"
-  topic_prefix: "fleet"
-  reconnect_min_seconds: 0.1
-  reconnect_max_seconds: 1
-}}
-data_dir: "{dir}"
-log {{ level: "info" raw_log: false }}
-"#,
-        dir = data_dir.display()
-    )
+fn node_config(id: i32, ports: [u16; 2], broker: &str, data_dir: &Path) -> Node {
+    let driver = Simulator::pair_at(150.0, 10.0)
+        .overhead(0.05)
+        .channel(&format!("node{id}"))
+        .between_processes(id, ports);
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2], 6, 1.2)
+        .queue(Entry::command().ack(true).ttl(600))
+        .json_tcp("")
+        .mqtt(
+            broker,
+            "fleet",
+            "reconnect_min_seconds: 0.1 reconnect_max_seconds: 1",
+        )
+        .data_dir(data_dir)
+        .log_level("info")
+        .raw_log(false)
 }
 
 /// A gobyd process; its log goes to `DIR/nodeN.log`.
@@ -139,8 +115,8 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     };
     let ports = [free_udp_port(), free_udp_port()];
     for id in [1, 2] {
-        let config = node_config(id, ports, &broker.address(), &dir.join(format!("node{id}")));
-        std::fs::write(dir.join(format!("node{id}.cfg")), config).unwrap();
+        node_config(id, ports, &broker.address(), &dir.join(format!("node{id}")))
+            .write(dir.join(format!("node{id}.cfg")));
     }
     let watcher = Watcher::start(&broker.address(), "console", "fleet/#");
     let _node2 = Gobyd::start(&dir, 2);
@@ -368,16 +344,15 @@ fn the_bridge_speaks_tls() {
     let Some(broker) = Broker::start_with(&dir, "the_bridge_speaks_tls", &extra) else {
         return;
     };
-    let config = format!(
-        r#"
-modem_id: 1
-json {{ tcp_bind: "" }}
-mqtt {{ broker: "127.0.0.1:{tls_port}" topic_prefix: "secure" tls {{ ca_file: "{d}/ca.pem" }} }}
-data_dir: "{d}/node1"
-"#,
-        d = dir.display()
-    );
-    std::fs::write(dir.join("node1.cfg"), config).unwrap();
+    Node::new(1)
+        .json_tcp("")
+        .mqtt(
+            &format!("127.0.0.1:{tls_port}"),
+            "secure",
+            &format!("tls {{ ca_file: \"{}/ca.pem\" }}", dir.display()),
+        )
+        .data_dir(&dir.join("node1"))
+        .write(dir.join("node1.cfg"));
     let watcher = Watcher::start(&broker.address(), "console", "secure/#");
     let _node = Gobyd::start(&dir, 1);
     watcher.wait_on("secure/1/status", |v| (v["online"] == true).then_some(()));

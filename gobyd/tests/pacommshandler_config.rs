@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use gobyd::{config, mission_file::MissionFile, translator};
 use moos::Value;
 use support::daemon::free_udp_port;
+use support::node::{Entry, Node, Simulator, Udp};
 
 const MISSION: &str = r#"
 ServerHost = localhost
@@ -221,32 +222,24 @@ async fn a_timed_trigger_makes_messages_from_the_latest_values() {
         .unwrap();
     let dir = std::env::temp_dir().join(format!("gobyd-pacomms-timed-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let text = format!(
-        r#"
-modem_id: 1
-driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{ node {{ modem_id: 1 }} channel: "timed-trigger" }}
-}}
-mac {{ type: MAC_NONE }}
-queue {{ message_entry {{ protobuf_name: "goby.example.Command" ack: false role {{ type: DESTINATION_ID field: "destination" }} }} }}
-json {{ tcp_bind: "" }}
-moos {{ server: "127.0.0.1" port: {port} }}
-data_dir: "{dir}"
-log {{ raw_log: false }}
-translator_entry {{
+    let config = Node::new(1)
+        .driver(Simulator::alone().channel("timed-trigger"))
+        .mac_none()
+        .queue(Entry::command().ack(false))
+        .json_tcp("")
+        .moos(db.port(), "")
+        .data_dir(&dir)
+        .raw_log(false)
+        .extra(
+            r#"translator_entry {
   protobuf_name: "goby.example.Command"
-  trigger {{ type: TRIGGER_TIME period: 1 }}
-  create {{ technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "COMMAND_OUT" }}
-  publish {{ technique: TECHNIQUE_FORMAT moos_var: "COMMAND_IN" format: "ACTION=%2%,NOTE=%4%" }}
-}}
-"#,
-        port = db.port(),
-        dir = dir.display()
-    );
-    let daemon = gobyd::runtime::Daemon::start(config::parse(&text, "test").unwrap())
-        .await
-        .unwrap();
+  trigger { type: TRIGGER_TIME period: 1 }
+  create { technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "COMMAND_OUT" }
+  publish { technique: TECHNIQUE_FORMAT moos_var: "COMMAND_IN" format: "ACTION=%2%,NOTE=%4%" }
+}"#,
+        )
+        .config();
+    let daemon = gobyd::runtime::Daemon::start(config).await.unwrap();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async {
         let _ = stopped.await;
@@ -303,38 +296,24 @@ async fn an_unchanged_timed_value_reaches_the_other_community_every_period() {
         let db = moos::testing::MiniDb::start("127.0.0.1:0", &format!("period{id}"))
             .await
             .unwrap();
-        let (me, other) = (ports[id - 1], ports[2 - id]);
-        let text = format!(
-            r#"
-modem_id: {id}
-driver {{
-  driver_type: DRIVER_UDP
-  udp {{ local {{ port: {me} }} remote {{ modem_id: {peer} ip: "127.0.0.1" port: {other} }} }}
-}}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 0 slot_seconds: 0.25 }}
-  slot {{ src: 2 dest: -1 rate: 0 slot_seconds: 0.25 }}
-}}
-queue {{ message_entry {{ protobuf_name: "goby.example.Command" ack: false ttl: 600 role {{ type: DESTINATION_ID field: "destination" }} }} }}
-json {{ tcp_bind: "" }}
-moos {{ server: "127.0.0.1" port: {port} }}
-data_dir: "{dir}"
-log {{ raw_log: false }}
-translator_entry {{
+        let config = Node::new(id)
+            .driver(Udp::pair(id, ports))
+            .tdma(&[1, 2], 0, 0.25)
+            .queue(Entry::command().ack(false).ttl(600))
+            .json_tcp("")
+            .moos(db.port(), "")
+            .data_dir(&dir.join(format!("node{id}")))
+            .raw_log(false)
+            .extra(
+                r#"translator_entry {
   protobuf_name: "goby.example.Command"
-  trigger {{ type: TRIGGER_TIME period: 1 }}
-  create {{ technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "BATTERY_OUT" }}
-  publish {{ technique: TECHNIQUE_FORMAT moos_var: "BATTERY_IN" format: "NOTE=%4%" }}
-}}
-"#,
-            peer = 3 - id,
-            port = db.port(),
-            dir = dir.join(format!("node{id}")).display()
-        );
-        let daemon = gobyd::runtime::Daemon::start(config::parse(&text, "test").unwrap())
-            .await
-            .unwrap();
+  trigger { type: TRIGGER_TIME period: 1 }
+  create { technique: TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT moos_var: "BATTERY_OUT" }
+  publish { technique: TECHNIQUE_FORMAT moos_var: "BATTERY_IN" format: "NOTE=%4%" }
+}"#,
+            )
+            .config();
+        let daemon = gobyd::runtime::Daemon::start(config).await.unwrap();
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         stops.push(stop);
         running.push(tokio::spawn(daemon.run(async {

@@ -15,6 +15,7 @@ use modemdriver::micromodem::emulator::{
 };
 use modemdriver::sim::reception::Position;
 use serde_json::Value;
+use support::node::{MicroModem, Node as NodeConfig};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
 use tokio::sync::oneshot;
@@ -55,24 +56,13 @@ async fn a_json_client_gets_long_baseline_travel_times() {
     .expect("emulator starts");
     modem.path().await.expect("emulated modem present");
 
-    let config = format!(
-        r#"
-modem_id: 1
-driver {{
-  driver_type: DRIVER_WHOI_MICROMODEM
-  serial_port: "{}"
-  micromodem {{ config_echo_quiet_ms: 300 }}
-}}
-mac {{ type: MAC_FIXED_DECENTRALIZED  slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 8 }} }}
-json {{ tcp_bind: "127.0.0.1:0" }}
-data_dir: "{}"
-"#,
-        link.display(),
-        dir.join("data").display()
-    );
-    let daemon = Daemon::start(gobyd::config::parse(&config, "ranging test").unwrap())
-        .await
-        .expect("gobyd starts");
+    let config = NodeConfig::new(1)
+        .driver(MicroModem::new(&link).setting("config_echo_quiet_ms: 300"))
+        .tdma(&[1], 1, 8.0)
+        .json_tcp("127.0.0.1:0")
+        .data_dir(&dir.join("data"))
+        .config();
+    let daemon = Daemon::start(config).await.expect("gobyd starts");
     let addr = daemon.json_tcp_addr().expect("JSON over TCP");
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async move {

@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch, Gobyd};
+use support::node::{Entry, Node, Simulator};
 use support::restart::{draw_crash_point, env_number, logged, Pace, Totals};
 
 /// How a run goes: three messages from each node per round, a kill 0.1 to
@@ -43,45 +44,24 @@ const PACE: Pace = Pace {
     await_crash_point: Duration::ZERO,
 };
 
-fn config(id: i32, ports: [u16; 2], data_dir: &Path) -> String {
-    let me = ports[(id - 1) as usize];
-    let other_id = 3 - id;
-    let other = ports[(other_id - 1) as usize];
-    format!(
-        r#"
-modem_id: {id}
-driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  simulator {{
-    node {{ modem_id: 1 x: 0 y: 0 z: 10 }}
-    node {{ modem_id: 2 x: 150 y: 0 z: 10 }}
-    packet_overhead_seconds: 0.05
-    packet_loss: 0.2
-    seed: {id}
-    channel: "node{id}"
-    udp_local {{ modem_id: {id} port: {me} }}
-    udp_peer {{ modem_id: {other_id} ip: "127.0.0.1" port: {other} }}
-  }}
-}}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 6 slot_seconds: 1.5 }}
-  slot {{ src: 2 dest: -1 rate: 6 slot_seconds: 1.5 }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 600
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "127.0.0.1:0" }}
-data_dir: "{}"
-log {{ level: "info" raw_log: true }}
-"#,
-        data_dir.display()
-    )
+/// Node `id` of two on the acoustic simulator (150 m apart, 20 % of the
+/// packets lost, packets between the processes over UDP), TDMA slots of
+/// 1.5 s at rate 6, Command acked.
+fn config(id: i32, ports: [u16; 2], data_dir: &Path) -> Node {
+    let driver = Simulator::pair_at(150.0, 10.0)
+        .overhead(0.05)
+        .loss(0.2)
+        .seed(id as u64)
+        .channel(&format!("node{id}"))
+        .between_processes(id, ports);
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2], 6, 1.5)
+        .queue(Entry::command().ack(true).ttl(600))
+        .json_tcp("127.0.0.1:0")
+        .data_dir(data_dir)
+        .log_level("info")
+        .raw_log(true)
 }
 
 fn run(seed: u64, rounds: usize) -> Totals {
@@ -89,9 +69,7 @@ fn run(seed: u64, rounds: usize) -> Totals {
     let ports = [free_udp_port(), free_udp_port()];
     let data: [PathBuf; 2] = [1, 2].map(|id| dir.join(format!("node{id}")));
     let configs: [PathBuf; 2] = [1, 2].map(|id| {
-        let path = dir.join(format!("node{id}.cfg"));
-        std::fs::write(&path, config(id, ports, &data[(id - 1) as usize])).unwrap();
-        path
+        config(id, ports, &data[(id - 1) as usize]).write(dir.join(format!("node{id}.cfg")))
     });
     let totals = support::restart::run("restart", seed, rounds, &configs, &data, &PACE);
     if totals.lost == 0 && totals.duplicates == 0 {
@@ -119,9 +97,8 @@ fn node_configs(dir: &Path) -> Vec<PathBuf> {
     [1, 2]
         .into_iter()
         .map(|id| {
-            let path = dir.join(format!("node{id}.cfg"));
-            std::fs::write(&path, config(id, ports, &dir.join(format!("node{id}")))).unwrap();
-            path
+            config(id, ports, &dir.join(format!("node{id}")))
+                .write(dir.join(format!("node{id}.cfg")))
         })
         .collect()
 }

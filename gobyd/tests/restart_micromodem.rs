@@ -48,9 +48,8 @@ use std::time::Duration;
 
 use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
 use support::daemon::scratch;
-use support::micromodem::{
-    micromodem_driver, modem_path, slot_report, start_emulators, two_node_config,
-};
+use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
+use support::node::{Entry, Node};
 use support::restart::{env_number, every_crash_point_in_turn, Pace, Totals};
 
 /// Rate of the TDMA slots: eight 256-byte frames at 5300 bit/s.
@@ -78,28 +77,32 @@ const PACE: Pace = Pace {
     await_crash_point: Duration::from_secs(25),
 };
 
-/// The `micromodem { … }` fields `GOBYD_MM_RESTART_APP_ACKS` asks for.
-fn application_acks() -> String {
+/// The `use_application_acks` `GOBYD_MM_RESTART_APP_ACKS` asks for (none:
+/// the driver's default).
+fn application_acks() -> Option<bool> {
     match std::env::var("GOBYD_MM_RESTART_APP_ACKS").as_deref() {
-        Err(_) => String::new(),
-        Ok("0") => "use_application_acks: false".into(),
-        Ok("1") => "use_application_acks: true".into(),
+        Err(_) => None,
+        Ok("0") => Some(false),
+        Ok("1") => Some(true),
         Ok(v) => panic!("GOBYD_MM_RESTART_APP_ACKS={v:?}: 0 or 1"),
     }
 }
 
-fn config(id: u32, modem: &Path, data_dir: &Path, extra: &str) -> String {
-    two_node_config(
-        id,
-        &micromodem_driver(modem, extra),
-        RATE,
-        SLOT_SECONDS,
-        "127.0.0.1:0",
-        &format!(
-            "data_dir: \"{}\"\nlog {{ level: \"info\" raw_log: true }}",
-            data_dir.display()
-        ),
-    )
+/// Node `id` of two on the emulated modem at `modem`: TDMA slots of
+/// [`SLOT_SECONDS`] at [`RATE`], Command acked (kept for up to 30 min).
+fn config(id: u32, modem: &Path, data_dir: &Path, acks: Option<bool>) -> Node {
+    let mut driver = micromodem_driver(modem);
+    if let Some(on) = acks {
+        driver = driver.use_application_acks(on);
+    }
+    Node::new(id as i32)
+        .driver(driver)
+        .tdma(&[1, 2], RATE, SLOT_SECONDS)
+        .queue(Entry::command().ack(true).ttl(1800))
+        .json_tcp("127.0.0.1:0")
+        .data_dir(data_dir)
+        .log_level("info")
+        .raw_log(true)
 }
 
 fn run(seed: u64, rounds: usize, runtime: &tokio::runtime::Runtime) -> Totals {
@@ -116,18 +119,14 @@ fn run(seed: u64, rounds: usize, runtime: &tokio::runtime::Runtime) -> Totals {
         }
         e
     });
-    let extra = application_acks();
+    let acks = application_acks();
     let data: [PathBuf; 2] = [1, 2].map(|id| dir.join(format!("node{id}")));
+    // A configuration the daemon would refuse is refused here (by the
+    // builder), naming the field, rather than by a daemon that never opens
+    // its JSON interface.
     let configs: [PathBuf; 2] = [1u32, 2].map(|id| {
-        let path = dir.join(format!("node{id}.cfg"));
-        let text = config(id, &modem_path(&dir, id), &data[(id - 1) as usize], &extra);
-        // Refused here, naming the field, rather than by a daemon that
-        // never opens its JSON interface.
-        if let Err(e) = gobyd::config::parse(&text, "micromodem restart test") {
-            panic!("the test's gobyd configuration is refused: {e}");
-        }
-        std::fs::write(&path, text).unwrap();
-        path
+        config(id, &modem_path(&dir, id), &data[(id - 1) as usize], acks)
+            .write(dir.join(format!("node{id}.cfg")))
     });
     let totals = support::restart::run("micromodem restart", seed, rounds, &configs, &data, &PACE);
     let air: Vec<_> = emulators.iter().map(|e| e.air_log()).collect();
@@ -166,8 +165,8 @@ fn killed_daemons_over_micromodems_lose_nothing_and_deliver_nothing_twice() {
         .build()
         .unwrap();
     let acks = match application_acks() {
-        e if e.is_empty() => "gobyd's default acks (application acks)".to_string(),
-        e => e,
+        None => "gobyd's default acks (application acks)".to_string(),
+        Some(on) => format!("use_application_acks: {on}"),
     };
     let mut all = Totals::default();
     for seed in first..first + runs {

@@ -24,41 +24,24 @@ use modemdriver::time::TokioClock;
 use protos::goby::example::Command;
 use queue::{Clock, QueueEvent};
 use support::daemon::{publish_command, scratch};
+use support::node::{Entry, Node, Simulator};
 use tokio::sync::oneshot;
 
-fn config(id: i32, data_dir: &std::path::Path) -> String {
-    format!(
-        r#"
-modem_id: {id}
-driver {{
-  driver_type: DRIVER_ACOUSTIC_SIMULATOR
-  deferred_ack: true
-  simulator {{
-    node {{ modem_id: 1 x: 0 }}
-    node {{ modem_id: 2 x: 1500 }}
-    packet_loss: 0.25
-    seed: {id}
-    packet_overhead_seconds: 0.5
-  }}
-}}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 10 }}
-  slot {{ src: 2 dest: -1 rate: 1 slot_seconds: 10 }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 7200
-    role {{ type: DESTINATION_ID field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "" }}
-data_dir: "{dir}"
-"#,
-        dir = data_dir.display()
-    )
+/// Node `id` of two on the simulator (1500 m apart, 25 % of the packets
+/// lost, the daemon saying when to ack), TDMA slots of 10 s at rate 1,
+/// Command acked and kept for up to two hours.
+fn config(id: i32, data_dir: &std::path::Path) -> Node {
+    let driver = Simulator::pair(1500.0)
+        .deferred_ack()
+        .loss(0.25)
+        .seed(id as u64)
+        .overhead(0.5);
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2], 1, 10.0)
+        .queue(Entry::command().ack(true).ttl(7200))
+        .json_tcp("")
+        .data_dir(data_dir)
 }
 
 #[derive(Debug, Clone)]
@@ -85,8 +68,7 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
     let mut stops = Vec::new();
     let mut runs = Vec::new();
     for id in [1, 2] {
-        let text = config(id, &dir.join(format!("data{id}")));
-        let config = gobyd::config::parse(&text, "test").unwrap();
+        let config = config(id, &dir.join(format!("data{id}"))).config();
         let mut driver_config = config.driver.clone().unwrap();
         driver_config.modem_id = Some(id);
         let driver =

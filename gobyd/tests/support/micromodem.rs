@@ -1,7 +1,7 @@
 //! Two emulated WHOI Micro-Modems on real pseudo-terminals, their packets
 //! on an in-process acoustic simulator, for the tests that run `gobyd` over
-//! them; the Micro-Modem driver's configuration; the check that each modem
-//! kept its TDMA slot.
+//! them; the Micro-Modem driver's configuration for them; the check that
+//! each modem kept its TDMA slot.
 
 #![allow(dead_code)]
 
@@ -14,6 +14,8 @@ use modemdriver::micromodem::emulator::{
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
 use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+
+use super::node::MicroModem;
 
 /// The path of modem `id`'s pseudo-terminal (a symbolic link kept by its
 /// emulator) in `dir`.
@@ -67,18 +69,15 @@ pub fn start_emulators(
         .collect()
 }
 
-/// The `driver { … }` block of a `gobyd` configuration for the Micro-Modem
-/// at `link`, with `extra` (text format fields, e.g.
-/// `use_application_acks: true`) added inside its `micromodem { … }` block.
-pub fn micromodem_driver(link: &Path, extra: &str) -> String {
-    format!(
-        r#"driver {{
-  driver_type: DRIVER_WHOI_MICROMODEM
-  serial_port: "{}"
-  micromodem {{ reconnect_interval_ms: 300  response_timeout_ms: 600  receive_timeout_ms: 2500 {extra} }}
-}}"#,
-        link.display()
-    )
+/// The Micro-Modem driver of a `gobyd` configuration for an emulated
+/// modem at `link`: reconnected every 300 ms, answers awaited 600 ms,
+/// receptions 2500 ms (`micromodem { reconnect_interval_ms: 300
+/// response_timeout_ms: 600 receive_timeout_ms: 2500 }`).
+pub fn micromodem_driver(link: &Path) -> MicroModem {
+    MicroModem::new(link)
+        .setting("reconnect_interval_ms: 300")
+        .setting("response_timeout_ms: 600")
+        .setting("receive_timeout_ms: 2500")
 }
 
 /// Checks every data packet of modem i (slot i-1) lies in its slot of the
@@ -130,40 +129,4 @@ pub fn slot_report(air: &[Vec<AirTime>], slot_seconds: f64) -> String {
         ));
     }
     format!("slots: {} outside; {}", outside, parts.join("; "))
-}
-
-/// A two-node test configuration: `driver`, fixed TDMA with a slot each
-/// for nodes 1 and 2 (`rate`, `slot_seconds`), acknowledged
-/// `goby.example.Command`s addressed by their `destination`, the JSON
-/// interface on `json_bind` ("" for none) and `rest` (e.g. `data_dir`,
-/// `log`) appended.
-pub fn two_node_config(
-    id: impl std::fmt::Display,
-    driver: &str,
-    rate: impl std::fmt::Display,
-    slot_seconds: f64,
-    json_bind: &str,
-    rest: &str,
-) -> String {
-    format!(
-        r#"
-modem_id: {id}
-{driver}
-mac {{
-  type: MAC_FIXED_DECENTRALIZED
-  slot {{ src: 1  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
-  slot {{ src: 2  dest: -1  rate: {rate}  slot_seconds: {slot_seconds} }}
-}}
-queue {{
-  message_entry {{
-    protobuf_name: "goby.example.Command"
-    ack: true
-    ttl: 1800
-    role {{ type: DESTINATION_ID  field: "destination" }}
-  }}
-}}
-json {{ tcp_bind: "{json_bind}" }}
-{rest}
-"#
-    )
 }

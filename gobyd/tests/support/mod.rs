@@ -5,4 +5,5 @@
 pub mod broker;
 pub mod daemon;
 pub mod micromodem;
+pub mod node;
 pub mod restart;

@@ -1,0 +1,601 @@
+//! One builder for the text of a `gobyd` node configuration (protobuf text
+//! format) as the integration tests write it: the node's id, its driver
+//! (acoustic simulator, UDP or WHOI Micro-Modem), its MAC, its queue
+//! entries, the JSON interface, the MQTT and MOOS sections, the data
+//! directory, the log and any further text. A section not given is left
+//! out of the text (the daemon's default applies).
+//!
+//! The text is checked with [`gobyd::config::parse`] as it is rendered: a
+//! test whose configuration `gobyd` cannot read (an unknown field, a value
+//! of the wrong type) fails at once, with the parser's message (line,
+//! column and field) and the text.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use protos::goby::apps::protobuf::GobydConfig;
+
+/// The configuration of node `modem_id`; see the [module](self) for what
+/// it renders.
+#[derive(Debug, Clone)]
+pub struct Node {
+    id: i32,
+    driver: Option<Driver>,
+    mac: Option<Mac>,
+    entries: Vec<Entry>,
+    json_tcp: Option<String>,
+    json_udp: Option<String>,
+    mqtt: Option<String>,
+    moos: Option<String>,
+    data_dir: Option<PathBuf>,
+    log_level: Option<String>,
+    raw_log: Option<bool>,
+    extra: Vec<String>,
+}
+
+impl Node {
+    /// Node `modem_id: id`, with no other section.
+    pub fn new(id: i32) -> Node {
+        Node {
+            id,
+            driver: None,
+            mac: None,
+            entries: Vec::new(),
+            json_tcp: None,
+            json_udp: None,
+            mqtt: None,
+            moos: None,
+            data_dir: None,
+            log_level: None,
+            raw_log: None,
+            extra: Vec::new(),
+        }
+    }
+
+    /// The `driver { … }` section.
+    pub fn driver(mut self, driver: impl Into<Driver>) -> Node {
+        self.driver = Some(driver.into());
+        self
+    }
+
+    /// `mac { type: MAC_NONE }`: the node never transmits.
+    pub fn mac_none(mut self) -> Node {
+        self.mac = Some(Mac::None);
+        self
+    }
+
+    /// `mac { type: MAC_FIXED_DECENTRALIZED … }` with one slot for each
+    /// source in `srcs`, in that order, each `slot { src: S dest: -1 rate:
+    /// RATE slot_seconds: SLOT }` (`rate` the modem's rate number,
+    /// `slot_seconds` the slot's length in seconds).
+    pub fn tdma(mut self, srcs: &[i32], rate: u32, slot_seconds: f64) -> Node {
+        self.mac = Some(Mac::Tdma {
+            srcs: srcs.to_vec(),
+            rate,
+            slot_seconds,
+        });
+        self
+    }
+
+    /// A `message_entry { … }` of the `queue { … }` section, after those
+    /// given before.
+    pub fn queue(mut self, entry: Entry) -> Node {
+        self.entries.push(entry);
+        self
+    }
+
+    /// `json { tcp_bind: "ADDR" }`: the JSON interface over TCP on `addr`
+    /// (`"127.0.0.1:0"` for a free port the daemon names in its log, `""`
+    /// for none).
+    pub fn json_tcp(mut self, addr: &str) -> Node {
+        self.json_tcp = Some(addr.to_string());
+        self
+    }
+
+    /// `udp_bind: "ADDR"` in the `json { … }` section: the JSON interface
+    /// over UDP on `addr`.
+    pub fn json_udp(mut self, addr: &str) -> Node {
+        self.json_udp = Some(addr.to_string());
+        self
+    }
+
+    /// `mqtt { broker: "BROKER" topic_prefix: "PREFIX" MORE }`: the bridge
+    /// to the MQTT broker at `broker` (host:port), with `more` (text format
+    /// fields of the section, e.g. `reconnect_max_seconds: 1`) added.
+    pub fn mqtt(mut self, broker: &str, topic_prefix: &str, more: &str) -> Node {
+        self.mqtt = Some(format!(
+            "mqtt {{ broker: \"{broker}\" topic_prefix: \"{topic_prefix}\" {more} }}"
+        ));
+        self
+    }
+
+    /// `moos { server: "127.0.0.1" port: PORT MORE }`: a client of the
+    /// MOOSDB on the loopback `port`, with `more` (text format fields of
+    /// the section, e.g. `name: "gobyd1"`) added.
+    pub fn moos(mut self, port: u16, more: &str) -> Node {
+        self.moos = Some(format!(
+            "moos {{ server: \"127.0.0.1\" port: {port} {more} }}"
+        ));
+        self
+    }
+
+    /// `data_dir: "DIR"`: the node's journal, inbox and mission log.
+    pub fn data_dir(mut self, dir: &Path) -> Node {
+        self.data_dir = Some(dir.to_path_buf());
+        self
+    }
+
+    /// `level: "LEVEL"` in the `log { … }` section (e.g. `"info"`).
+    pub fn log_level(mut self, level: &str) -> Node {
+        self.log_level = Some(level.to_string());
+        self
+    }
+
+    /// `raw_log: BOOL` in the `log { … }` section: whether the mission log
+    /// records what the driver sends and receives.
+    pub fn raw_log(mut self, raw: bool) -> Node {
+        self.raw_log = Some(raw);
+        self
+    }
+
+    /// Text format fields added at the end, as they are (e.g. a
+    /// `translator_entry { … }`); after those given before.
+    pub fn extra(mut self, text: &str) -> Node {
+        self.extra.push(text.to_string());
+        self
+    }
+
+    /// The configuration's text, checked: panics with the parser's message
+    /// (line, column and field) and the text when `gobyd` cannot read it.
+    pub fn text(&self) -> String {
+        self.checked().0
+    }
+
+    /// The configuration, parsed (for a daemon started in-process); panics
+    /// as [`text`](Self::text) does.
+    pub fn config(&self) -> GobydConfig {
+        self.checked().1
+    }
+
+    /// Writes the checked [`text`](Self::text) to `path`; returns `path`.
+    pub fn write(&self, path: impl AsRef<Path>) -> PathBuf {
+        let path = path.as_ref();
+        std::fs::write(path, self.text()).unwrap();
+        path.to_path_buf()
+    }
+
+    /// The text and what `gobyd` reads from it; panics when it cannot.
+    fn checked(&self) -> (String, GobydConfig) {
+        let text = self.render();
+        let origin = format!("node {} test configuration", self.id);
+        match gobyd::config::parse(&text, &origin) {
+            Ok(config) => (text, config),
+            Err(e) => panic!("the test's gobyd configuration is refused: {e}\n{text}"),
+        }
+    }
+
+    fn render(&self) -> String {
+        let mut text = format!("modem_id: {}\n", self.id);
+        if let Some(driver) = &self.driver {
+            text += &driver.render();
+        }
+        match &self.mac {
+            None => {}
+            Some(Mac::None) => text += "mac { type: MAC_NONE }\n",
+            Some(Mac::Tdma {
+                srcs,
+                rate,
+                slot_seconds,
+            }) => {
+                text += "mac {\n  type: MAC_FIXED_DECENTRALIZED\n";
+                for src in srcs {
+                    text += &format!(
+                        "  slot {{ src: {src} dest: -1 rate: {rate} slot_seconds: {slot_seconds} }}\n"
+                    );
+                }
+                text += "}\n";
+            }
+        }
+        if !self.entries.is_empty() {
+            text += "queue {\n";
+            for entry in &self.entries {
+                text += &entry.render();
+            }
+            text += "}\n";
+        }
+        if self.json_tcp.is_some() || self.json_udp.is_some() {
+            text += "json {";
+            if let Some(addr) = &self.json_tcp {
+                text += &format!(" tcp_bind: \"{addr}\"");
+            }
+            if let Some(addr) = &self.json_udp {
+                text += &format!(" udp_bind: \"{addr}\"");
+            }
+            text += " }\n";
+        }
+        for section in [&self.mqtt, &self.moos].into_iter().flatten() {
+            text += section;
+            text += "\n";
+        }
+        if let Some(dir) = &self.data_dir {
+            text += &format!("data_dir: \"{}\"\n", dir.display());
+        }
+        if self.log_level.is_some() || self.raw_log.is_some() {
+            text += "log {";
+            if let Some(level) = &self.log_level {
+                text += &format!(" level: \"{level}\"");
+            }
+            if let Some(raw) = self.raw_log {
+                text += &format!(" raw_log: {raw}");
+            }
+            text += " }\n";
+        }
+        for extra in &self.extra {
+            text += extra;
+            text += "\n";
+        }
+        text
+    }
+}
+
+/// The MAC section of a [`Node`].
+#[derive(Debug, Clone)]
+enum Mac {
+    None,
+    Tdma {
+        srcs: Vec<i32>,
+        rate: u32,
+        slot_seconds: f64,
+    },
+}
+
+/// One `message_entry { … }` of the queue section.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    name: String,
+    ack: Option<bool>,
+    ttl: Option<u32>,
+    roles: Vec<(String, String)>,
+    extra: Vec<String>,
+}
+
+impl Entry {
+    /// `message_entry { protobuf_name: "NAME" }`, no other field.
+    pub fn new(protobuf_name: &str) -> Entry {
+        Entry {
+            name: protobuf_name.to_string(),
+            ack: None,
+            ttl: None,
+            roles: Vec::new(),
+            extra: Vec::new(),
+        }
+    }
+
+    /// `goby.example.Command`, addressed by its `destination` field
+    /// (`role { type: DESTINATION_ID field: "destination" }`).
+    pub fn command() -> Entry {
+        Entry::new("goby.example.Command").role("DESTINATION_ID", "destination")
+    }
+
+    /// `ack: BOOL`: whether the receiver acknowledges the message.
+    pub fn ack(mut self, ack: bool) -> Entry {
+        self.ack = Some(ack);
+        self
+    }
+
+    /// `ttl: SECONDS`: how long a queued message waits to be sent.
+    pub fn ttl(mut self, seconds: u32) -> Entry {
+        self.ttl = Some(seconds);
+        self
+    }
+
+    /// `role { type: KIND field: "FIELD" }` (`kind` e.g. `SOURCE_ID`,
+    /// `DESTINATION_ID`), after those given before.
+    pub fn role(mut self, kind: &str, field: &str) -> Entry {
+        self.roles.push((kind.to_string(), field.to_string()));
+        self
+    }
+
+    /// Text format fields of the entry added as they are (e.g.
+    /// `max_queue: 100`).
+    pub fn text(mut self, text: &str) -> Entry {
+        self.extra.push(text.to_string());
+        self
+    }
+
+    fn render(&self) -> String {
+        let mut text = format!("  message_entry {{\n    protobuf_name: \"{}\"\n", self.name);
+        if let Some(ack) = self.ack {
+            text += &format!("    ack: {ack}\n");
+        }
+        if let Some(ttl) = self.ttl {
+            text += &format!("    ttl: {ttl}\n");
+        }
+        for (kind, field) in &self.roles {
+            text += &format!("    role {{ type: {kind} field: \"{field}\" }}\n");
+        }
+        for extra in &self.extra {
+            text += &format!("    {extra}\n");
+        }
+        text += "  }\n";
+        text
+    }
+}
+
+/// The `driver { … }` section of a [`Node`].
+#[derive(Debug, Clone)]
+pub enum Driver {
+    /// `DRIVER_ACOUSTIC_SIMULATOR`.
+    Simulator(Simulator),
+    /// `DRIVER_UDP`.
+    Udp(Udp),
+    /// `DRIVER_WHOI_MICROMODEM`.
+    MicroModem(MicroModem),
+}
+
+impl Driver {
+    fn render(&self) -> String {
+        match self {
+            Driver::Simulator(s) => s.render(),
+            Driver::Udp(u) => u.render(),
+            Driver::MicroModem(m) => m.render(),
+        }
+    }
+}
+
+impl From<Simulator> for Driver {
+    fn from(s: Simulator) -> Driver {
+        Driver::Simulator(s)
+    }
+}
+
+impl From<Udp> for Driver {
+    fn from(u: Udp) -> Driver {
+        Driver::Udp(u)
+    }
+}
+
+impl From<MicroModem> for Driver {
+    fn from(m: MicroModem) -> Driver {
+        Driver::MicroModem(m)
+    }
+}
+
+/// The acoustic channel simulator driver: `driver { driver_type:
+/// DRIVER_ACOUSTIC_SIMULATOR simulator { … } }`. Positions in metres.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    nodes: Vec<String>,
+    deferred_ack: bool,
+    packet_overhead_seconds: Option<f64>,
+    packet_loss: Option<f64>,
+    seed: Option<u64>,
+    channel: Option<String>,
+    udp: Option<(i32, [u16; 2])>,
+}
+
+impl Simulator {
+    fn with_nodes(nodes: Vec<String>) -> Simulator {
+        Simulator {
+            nodes,
+            deferred_ack: false,
+            packet_overhead_seconds: None,
+            packet_loss: None,
+            seed: None,
+            channel: None,
+            udp: None,
+        }
+    }
+
+    /// Node 1 alone, at no given position: `node { modem_id: 1 }`.
+    pub fn alone() -> Simulator {
+        Simulator::with_nodes(vec!["node { modem_id: 1 }".into()])
+    }
+
+    /// Nodes 1 and 2, `spacing` metres apart along x: `node { modem_id: 1
+    /// x: 0 }`, `node { modem_id: 2 x: SPACING }`.
+    pub fn pair(spacing: f64) -> Simulator {
+        Simulator::with_nodes(vec![
+            "node { modem_id: 1 x: 0 }".into(),
+            format!("node {{ modem_id: 2 x: {spacing} }}"),
+        ])
+    }
+
+    /// Nodes 1 and 2, `spacing` metres apart along x, both at `z` metres:
+    /// `node { modem_id: 1 x: 0 y: 0 z: Z }`, `node { modem_id: 2 x:
+    /// SPACING y: 0 z: Z }`.
+    pub fn pair_at(spacing: f64, z: f64) -> Simulator {
+        Simulator::with_nodes(vec![
+            format!("node {{ modem_id: 1 x: 0 y: 0 z: {z} }}"),
+            format!("node {{ modem_id: 2 x: {spacing} y: 0 z: {z} }}"),
+        ])
+    }
+
+    /// `deferred_ack: true` in the driver section: the daemon, not the
+    /// driver, says when a received transmission is acknowledged.
+    pub fn deferred_ack(mut self) -> Simulator {
+        self.deferred_ack = true;
+        self
+    }
+
+    /// `packet_overhead_seconds`: time on the water added to every packet.
+    pub fn overhead(mut self, seconds: f64) -> Simulator {
+        self.packet_overhead_seconds = Some(seconds);
+        self
+    }
+
+    /// `packet_loss`: the chance (0 to 1) that a packet is lost.
+    pub fn loss(mut self, chance: f64) -> Simulator {
+        self.packet_loss = Some(chance);
+        self
+    }
+
+    /// `seed` of the simulator's random losses.
+    pub fn seed(mut self, seed: u64) -> Simulator {
+        self.seed = Some(seed);
+        self
+    }
+
+    /// `channel`: the name of the in-process channel the node is on.
+    pub fn channel(mut self, name: &str) -> Simulator {
+        self.channel = Some(name.to_string());
+        self
+    }
+
+    /// Node `id` of the two (1 or 2) in its own process, the packets to
+    /// the other over UDP on 127.0.0.1: `udp_local { modem_id: ID port:
+    /// PORTS[ID-1] }`, `udp_peer { modem_id: OTHER ip: "127.0.0.1" port:
+    /// PORTS[OTHER-1] }`.
+    pub fn between_processes(mut self, id: i32, ports: [u16; 2]) -> Simulator {
+        self.udp = Some((id, ports));
+        self
+    }
+
+    fn render(&self) -> String {
+        let mut text = "driver {\n  driver_type: DRIVER_ACOUSTIC_SIMULATOR\n".to_string();
+        if self.deferred_ack {
+            text += "  deferred_ack: true\n";
+        }
+        text += "  simulator {\n";
+        for node in &self.nodes {
+            text += &format!("    {node}\n");
+        }
+        if let Some(seconds) = self.packet_overhead_seconds {
+            text += &format!("    packet_overhead_seconds: {seconds}\n");
+        }
+        if let Some(chance) = self.packet_loss {
+            text += &format!("    packet_loss: {chance}\n");
+        }
+        if let Some(seed) = self.seed {
+            text += &format!("    seed: {seed}\n");
+        }
+        if let Some(channel) = &self.channel {
+            text += &format!("    channel: \"{channel}\"\n");
+        }
+        if let Some((id, ports)) = self.udp {
+            let other = 3 - id;
+            text += &format!(
+                "    udp_local {{ modem_id: {id} port: {} }}\n",
+                ports[(id - 1) as usize]
+            );
+            text += &format!(
+                "    udp_peer {{ modem_id: {other} ip: \"127.0.0.1\" port: {} }}\n",
+                ports[(other - 1) as usize]
+            );
+        }
+        text += "  }\n}\n";
+        text
+    }
+}
+
+/// The UDP driver: `driver { driver_type: DRIVER_UDP udp { … } }`, on
+/// 127.0.0.1.
+#[derive(Debug, Clone)]
+pub struct Udp {
+    port: u16,
+    remote: Option<(i32, u16)>,
+    max_frame_size: Option<u32>,
+}
+
+impl Udp {
+    /// `udp { local { port: PORT } }`: datagrams received on `port`.
+    pub fn new(port: u16) -> Udp {
+        Udp {
+            port,
+            remote: None,
+            max_frame_size: None,
+        }
+    }
+
+    /// Node `id` of two (1 or 2): received on `ports[id-1]`, sent to the
+    /// other node on its port.
+    pub fn pair(id: i32, ports: [u16; 2]) -> Udp {
+        let other = 3 - id;
+        Udp::new(ports[(id - 1) as usize]).remote(other, ports[(other - 1) as usize])
+    }
+
+    /// `remote { modem_id: ID ip: "127.0.0.1" port: PORT }`: where node
+    /// `modem_id`'s datagrams go.
+    pub fn remote(mut self, modem_id: i32, port: u16) -> Udp {
+        self.remote = Some((modem_id, port));
+        self
+    }
+
+    /// `max_frame_size`: the largest frame, in bytes.
+    pub fn max_frame_size(mut self, bytes: u32) -> Udp {
+        self.max_frame_size = Some(bytes);
+        self
+    }
+
+    fn render(&self) -> String {
+        let mut text = format!(
+            "driver {{\n  driver_type: DRIVER_UDP\n  udp {{\n    local {{ port: {} }}\n",
+            self.port
+        );
+        if let Some((modem_id, port)) = self.remote {
+            text +=
+                &format!("    remote {{ modem_id: {modem_id} ip: \"127.0.0.1\" port: {port} }}\n");
+        }
+        if let Some(bytes) = self.max_frame_size {
+            text += &format!("    max_frame_size: {bytes}\n");
+        }
+        text += "  }\n}\n";
+        text
+    }
+}
+
+/// The WHOI Micro-Modem driver: `driver { driver_type:
+/// DRIVER_WHOI_MICROMODEM serial_port: "PORT" … }`.
+#[derive(Debug, Clone)]
+pub struct MicroModem {
+    serial_port: PathBuf,
+    serial_baud: Option<u32>,
+    settings: Vec<String>,
+}
+
+impl MicroModem {
+    /// The modem on the serial device (or pseudo-terminal link) at `path`.
+    pub fn new(path: &Path) -> MicroModem {
+        MicroModem {
+            serial_port: path.to_path_buf(),
+            serial_baud: None,
+            settings: Vec::new(),
+        }
+    }
+
+    /// `serial_baud`, in bit/s.
+    pub fn baud(mut self, baud: u32) -> MicroModem {
+        self.serial_baud = Some(baud);
+        self
+    }
+
+    /// A field of the `micromodem { … }` block, in text format (e.g.
+    /// `reconnect_interval_ms: 300`), after those given before.
+    pub fn setting(mut self, field: &str) -> MicroModem {
+        self.settings.push(field.to_string());
+        self
+    }
+
+    /// `use_application_acks: BOOL` in the `micromodem { … }` block: acks
+    /// from the daemon once its inbox holds a message (`true`), or from
+    /// the modem on decode (`false`).
+    pub fn use_application_acks(self, on: bool) -> MicroModem {
+        self.setting(&format!("use_application_acks: {on}"))
+    }
+
+    fn render(&self) -> String {
+        let mut text = format!(
+            "driver {{\n  driver_type: DRIVER_WHOI_MICROMODEM\n  serial_port: \"{}\"\n",
+            self.serial_port.display()
+        );
+        if let Some(baud) = self.serial_baud {
+            text += &format!("  serial_baud: {baud}\n");
+        }
+        if !self.settings.is_empty() {
+            text += &format!("  micromodem {{ {} }}\n", self.settings.join("  "));
+        }
+        text += "}\n";
+        text
+    }
+}
