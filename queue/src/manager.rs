@@ -886,8 +886,14 @@ impl QueueManager {
         Ok(())
     }
 
+    /// Reports a queue's size if it differs from the size last reported
+    /// (a message given in a frame and kept for its ack changes nothing).
     fn emit_size(&mut self, index: usize) {
-        let q = &self.queues[index];
+        let q = &mut self.queues[index];
+        if q.len() == q.reported_size {
+            return;
+        }
+        q.reported_size = q.len();
         let event = QueueEvent::QueueSize {
             dccl_id: q.id,
             size: q.len(),

@@ -126,6 +126,9 @@ pub(crate) struct Queue {
     pub last_send_time: Micros,
     /// A lower bound of the times of the messages held.
     oldest_time: Micros,
+    /// The size last reported in a [`crate::QueueEvent::QueueSize`] (0 at
+    /// configuration).
+    pub reported_size: usize,
 }
 
 impl Queue {
@@ -145,6 +148,7 @@ impl Queue {
             awaiting: 0,
             last_send_time: now,
             oldest_time: Micros::MAX,
+            reported_size: 0,
         }
     }
 

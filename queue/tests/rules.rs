@@ -148,7 +148,25 @@ fn max_queue_drops_the_oldest_and_reports_it() {
         })
         .collect();
     assert_eq!(dropped, vec![(0, ids[0]), (1, ids[1])]);
-    assert_eq!(sizes(&events, 1), vec![1, 2, 3, 3, 3]);
+    // A size is reported when it changes, not again when a push into a
+    // full queue leaves it as it was.
+    assert_eq!(sizes(&events, 1), vec![1, 2, 3]);
+}
+
+#[test]
+fn a_message_sent_and_kept_for_its_ack_reports_no_size() {
+    let mut status = entry("Status");
+    status.ack = Some(true);
+    let mut node = Node::new(1, vec![status]);
+    node.drain();
+    node.push("Status", 1, 2, 0).expect("queued");
+    assert_eq!(sizes(&node.drain(), 1), vec![1]);
+    let codec = node.manager.codec().clone();
+    // Given in every slot while its ack is awaited: still 1, said once.
+    for _ in 0..3 {
+        assert_eq!(contents(&codec, &node.request(64, 1, -1).frame[0]).len(), 1);
+        assert_eq!(sizes(&node.drain(), 1), Vec::<usize>::new());
+    }
 }
 
 #[test]
