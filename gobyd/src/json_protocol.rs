@@ -313,7 +313,7 @@ fn queue_line(
     queue_name: impl Fn(u32) -> String,
 ) -> Option<Value> {
     let name = |m: &DynamicMessage| m.descriptor().full_name().to_string();
-    Some(match event {
+    let mut line = match event {
         QueueEvent::Received(r) => received_line(r, &Reception::default()),
         QueueEvent::Acked {
             message, frame, by, ..
@@ -333,7 +333,15 @@ fn queue_line(
             json!({ "event": "sent", "sent": name(message), "id": entry, "frame": frame, "msg": message_json(message) })
         }
         QueueEvent::OnDemandRejected { .. } => return None,
-    })
+    };
+    // A message never journaled (addressed to this node, delivered at
+    // once) has no id: its lines carry none, rather than `"id": null`.
+    if entry.is_none() {
+        if let Some(fields) = line.as_object_mut() {
+            fields.shift_remove("id");
+        }
+    }
+    Some(line)
 }
 
 /// The line of a modem or medium access event (see
@@ -538,6 +546,28 @@ mod tests {
         }
         let lost: Value = serde_json::from_str(&lost_line(4)).unwrap();
         assert_eq!(lost, json!({"event": "lost", "count": 4}));
+    }
+
+    #[test]
+    fn an_ack_of_a_message_never_journaled_carries_no_id() {
+        let message = protos::goby::example::Command::default().transcode_to_dynamic();
+        let acked = |entry| DaemonEvent::Queue {
+            event: QueueEvent::Acked {
+                message: message.clone(),
+                id: None,
+                dccl_id: 125,
+                frame: 0,
+                by: 1,
+            },
+            entry,
+        };
+        let line = |e: &DaemonEvent| -> Value {
+            serde_json::from_str(&event_line(e, |_| String::new()).unwrap()).unwrap()
+        };
+        assert_eq!(line(&acked(Some(12)))["id"], 12);
+        let own = line(&acked(None));
+        assert!(own.get("id").is_none(), "{own}");
+        assert_eq!(own["ack"], "goby.example.Command");
     }
 
     #[test]
