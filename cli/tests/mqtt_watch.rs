@@ -1,6 +1,6 @@
 //! `goby mqtt watch` against a real Mosquitto broker on loopback: retained
-//! publications of two nodes become the fleet table. Skipped, visibly,
-//! without Mosquitto (`.ci/mosquitto.sh` installs it).
+//! publications of two nodes become the fleet table. Fails without
+//! Mosquitto (`.ci/mosquitto.sh` installs it).
 
 #[path = "../../gobyd/tests/support/broker.rs"]
 mod broker;
@@ -15,9 +15,7 @@ fn watch_once_prints_the_fleet_table() {
     let dir = std::env::temp_dir().join(format!("goby-watch-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let Some(broker) = Broker::start(&dir, "watch_once_prints_the_fleet_table") else {
-        return;
-    };
+    let broker = Broker::start(&dir, "watch_once_prints_the_fleet_table");
     let publisher = Watcher::start(&broker.address(), "gateways", "nothing/#");
     let retained = [
         (
@@ -66,6 +64,27 @@ fn watch_once_prints_the_fleet_table() {
         "{stdout}"
     );
     assert!(rows[2].contains("1@6"), "{stdout}");
+
+    // A prefix nobody publishes under: said, not an empty table.
+    let out = Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args([
+            "mqtt",
+            "watch",
+            "flet",
+            "--once",
+            "--broker",
+            &broker.address(),
+        ])
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(out.stdout.is_empty());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("nothing was published under flet/"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 
     // No broker there: a clear error.
     drop(broker);

@@ -204,8 +204,10 @@ fn main() {
     std::fs::create_dir_all(&dir).unwrap();
     // The broker may queue any number of messages for a console that lags
     // (its default drops beyond 1000).
-    let Some(broker) = broker::Broker::start_with(&dir, "mqtt_scale", "max_queued_messages 0")
-    else {
+    let Some(broker) = broker::Broker::try_start_with(&dir, "max_queued_messages 0") else {
+        eprintln!(
+            "mqtt_scale: nothing measured, Mosquitto is not installed (bash .ci/mosquitto.sh)"
+        );
         return;
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()

@@ -2,7 +2,7 @@
 //! gobyd processes on the acoustic simulator, each bridged to the broker; a
 //! message published on one node's `tx` topic arrives on the other's `rx`
 //! topic with its ack; nothing accepted is lost when the broker (stopped
-//! or killed), or a gobyd, stops and starts again mid-run. Skipped, visibly, without
+//! or killed), or a gobyd, stops and starts again mid-run. Fails without
 //! Mosquitto (`.ci/mosquitto.sh` installs it).
 
 mod support;
@@ -107,12 +107,10 @@ fn wait_status(watcher: &Watcher, node: i32, mut pick: impl FnMut(&Value) -> boo
 #[test]
 fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     let dir = scratch("mqtt", "fleet");
-    let Some(mut broker) = Broker::start(
+    let mut broker = Broker::start(
         &dir,
         "two_gateways_share_a_broker_through_its_restart_and_theirs",
-    ) else {
-        return;
-    };
+    );
     let ports = [free_udp_port(), free_udp_port()];
     for id in [1, 2] {
         node_config(id, ports, &broker.address(), &dir.join(format!("node{id}")))
@@ -328,10 +326,10 @@ fn the_bridge_speaks_tls() {
             ],
         )
     };
-    if !made {
-        eprintln!("SKIPPED the_bridge_speaks_tls: openssl could not make the test certificates");
-        return;
-    }
+    assert!(
+        made,
+        "the_bridge_speaks_tls needs the openssl command to make its test certificates"
+    );
     let tls_port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -341,9 +339,7 @@ fn the_bridge_speaks_tls() {
         "listener {tls_port} 127.0.0.1\ncafile {d}/ca.pem\ncertfile {d}/server.pem\nkeyfile {d}/server.key\n",
         d = dir.display()
     );
-    let Some(broker) = Broker::start_with(&dir, "the_bridge_speaks_tls", &extra) else {
-        return;
-    };
+    let broker = Broker::start_with(&dir, "the_bridge_speaks_tls", &extra);
     Node::new(1)
         .json_tcp("")
         .mqtt(

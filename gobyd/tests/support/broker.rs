@@ -42,19 +42,27 @@ pub struct Broker {
 }
 
 impl Broker {
-    /// Starts a broker with its persistence in `dir`; `None` (and a
-    /// printed notice) when Mosquitto is not installed.
-    pub fn start(dir: &Path, test: &str) -> Option<Broker> {
+    /// Starts a broker with its persistence in `dir`. A test that needs
+    /// one fails (it is not counted as passed) when Mosquitto is not
+    /// installed: the README's test command installs it first.
+    pub fn start(dir: &Path, test: &str) -> Broker {
         Self::start_with(dir, test, "")
     }
 
     /// As [`Broker::start`], with more lines for its configuration file
     /// (e.g. another listener).
-    pub fn start_with(dir: &Path, test: &str, extra: &str) -> Option<Broker> {
-        let Some(exe) = mosquitto() else {
-            eprintln!("SKIPPED {test}: mosquitto not found (install it with .ci/mosquitto.sh)");
-            return None;
-        };
+    pub fn start_with(dir: &Path, test: &str, extra: &str) -> Broker {
+        Self::try_start_with(dir, extra).unwrap_or_else(|| {
+            panic!(
+                "{test} needs a Mosquitto broker, which is not installed: run `bash .ci/mosquitto.sh` (the README's test command does)"
+            )
+        })
+    }
+
+    /// As [`Broker::start_with`]; `None` when Mosquitto is not installed
+    /// (for a benchmark, which then measures nothing and says so).
+    pub fn try_start_with(dir: &Path, extra: &str) -> Option<Broker> {
+        let exe = mosquitto()?;
         let port = TcpListener::bind("127.0.0.1:0")
             .unwrap()
             .local_addr()
