@@ -27,7 +27,7 @@ use crate::passphrase::PassphraseArgs;
 use crate::{CliError, Status};
 
 /// `goby dccl`: a subcommand, or the reference `dccl` tool's flags
-/// (`-e`, `-d`, `-a`, `-p` with `-f`, `-I`, `-m`, `--format`, `-o`, `-H`).
+/// (`-e`, `-d`, `-a`, `-p` with `-f`, `-I`, `-m`, `--format`, `-o`, `-H`, `-w`).
 #[derive(Debug, Args)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct DcclCli {
@@ -43,8 +43,8 @@ pub struct DcclCli {
 #[derive(Debug, Subcommand)]
 pub enum DcclCommand {
     /// Encode messages read from standard input, one per line (protobuf text
-    /// format or proto3 JSON; a line may start with `|full.Name|` to give its
-    /// type); write one encoded message per line (or raw bytes with
+    /// format or proto3 JSON; a line may start with `|full.Name|`, which must
+    /// name the `-m` type); write one encoded message per line (or raw bytes with
     /// `--format bin`).
     Encode(EncodeArgs),
     /// Decode messages read from standard input, one or more per line (or raw
@@ -52,7 +52,8 @@ pub enum DcclCommand {
     /// is found by its DCCL id among the messages of the files, or given
     /// with `-m`.
     Decode(DecodeArgs),
-    /// Print the size in bits of each field of a message type.
+    /// Print the size in bits of each field of message types (every valid
+    /// type of the files without `-m`).
     Analyze(AnalyzeArgs),
     /// Time encoding and decoding of the messages read from standard input.
     Bench(BenchArgs),
@@ -169,13 +170,29 @@ pub struct AnalyzeArgs {
     /// Message definitions.
     #[command(flatten)]
     pub proto: ProtoArgs,
-    /// Full name of the message type to analyze.
+    /// Full name of a message type to analyze (may be repeated); without
+    /// it, every valid DCCL type of the files, sorted by name (as the
+    /// reference tool does).
     #[arg(short = 'm', long = "message", value_name = "FULL.Name")]
-    pub message: String,
-    /// Print only the definition hash.
+    pub message: Vec<String>,
+    /// Print only the definition hash (`name: hash` lines when there are
+    /// several types).
     #[arg(short = 'H', long = "hash-only", visible_alias = "hash_only")]
     pub hash_only: bool,
+    /// Width in characters of the report's guard lines (`==== name ====`),
+    /// 60 by default (the reference tool's `-w`).
+    #[arg(
+        short = 'w',
+        long = "console-width",
+        visible_alias = "console_width",
+        value_name = "N",
+        default_value_t = DEFAULT_CONSOLE_WIDTH
+    )]
+    pub console_width: usize,
 }
+
+/// Width of the guard lines of `analyze` unless `-w` gives another, as in libdccl.
+pub const DEFAULT_CONSOLE_WIDTH: usize = 60;
 
 /// Arguments of `goby dccl bench`.
 #[derive(Debug, Args)]
@@ -227,6 +244,7 @@ pub fn run_command(
                 format: args.format,
                 passphrase: args.passphrase.resolve()?,
                 strict: args.strict,
+                refuse_other_types: true,
             };
             encode(&defs, &job, stdin, stdout, stderr)
         }
@@ -243,13 +261,11 @@ pub fn run_command(
         }
         DcclCommand::Analyze(args) => {
             let defs = Definitions::compile(&args.proto)?;
-            analyze(
-                &defs,
-                std::slice::from_ref(&args.message),
-                args.hash_only,
-                stdout,
-                stderr,
-            )
+            let job = AnalyzeJob {
+                hash_only: args.hash_only,
+                console_width: args.console_width,
+            };
+            analyze(&defs, &args.message, &job, stdout, stderr)
         }
         DcclCommand::Bench(args) => bench(args, stdin, stdout, stderr),
     }
@@ -525,6 +541,10 @@ pub(crate) struct EncodeJob {
     pub passphrase: Option<String>,
     /// Refuse the values the codec would change.
     pub strict: bool,
+    /// Refuse a line whose `|full.Name|` prefix names a type other than
+    /// `message` (`goby dccl encode -m`); otherwise such a line is encoded as
+    /// the type it names, as the reference tool does.
+    pub refuse_other_types: bool,
 }
 
 /// Splits a leading `|full.Name|` (the reference tool's way of giving the
@@ -536,6 +556,87 @@ fn split_type_prefix(line: &str) -> Result<(Option<&str>, &str), String> {
             Some((name, text)) => Ok((Some(name.trim()), text.trim())),
             None => Err("a line starting with '|' must name its type as |full.Name|".into()),
         },
+    }
+}
+
+/// Warnings for the times (fields with the `dccl.time` codec) of `sent` that
+/// decode from `bytes` to another value on this machine: the codec sends
+/// the time of day only, and the receiver puts it within 12 hours of its
+/// own clock, so a time further than that from the clock comes back on
+/// another day.
+fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String> {
+    let name = sent.descriptor().full_name().to_string();
+    let has_time = sent.descriptor().fields().any(|f| {
+        dccl::field::field_options(&f)
+            .ok()
+            .and_then(|o| o.codec)
+            .is_some_and(|c| c.starts_with("dccl.time"))
+            || matches!(f.kind(), prost_reflect::Kind::Message(_))
+    });
+    if !has_time {
+        return Vec::new();
+    }
+    let Ok((back, _)) = codec.decode_as_with_len(&name, bytes) else {
+        return Vec::new();
+    };
+    let mut moved = Vec::new();
+    collect_moved_times("", sent, &back, &mut moved);
+    moved
+        .into_iter()
+        .map(|(path, sent, back)| {
+            format!(
+                "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
+                 the time codec sends the time of day only, and it decodes as {back} \
+                 (that time of day within 12 hours of the receiver's clock)"
+            )
+        })
+        .collect()
+}
+
+/// Adds to `out` (field path, sent, decoded) for each `dccl.time` field of
+/// `sent` (nested messages included, repeated fields not) that `back` has
+/// with another value.
+fn collect_moved_times(
+    prefix: &str,
+    sent: &DynamicMessage,
+    back: &DynamicMessage,
+    out: &mut Vec<(String, String, String)>,
+) {
+    for field in sent.descriptor().fields() {
+        if field.is_list() || !sent.has_field(&field) {
+            continue;
+        }
+        let path = format!("{prefix}{}", field.name());
+        let (a, b) = (sent.get_field(&field), back.get_field(&field));
+        if let (Some(a), Some(b)) = (a.as_message(), b.as_message()) {
+            collect_moved_times(&format!("{path}."), a, b, out);
+            continue;
+        }
+        let is_time = dccl::field::field_options(&field)
+            .ok()
+            .and_then(|o| o.codec)
+            .is_some_and(|c| c.starts_with("dccl.time"));
+        // Seconds (double fields) or microseconds (64-bit integer fields);
+        // a difference under 12 hours is the codec's rounding to its precision.
+        let seconds = |v: &prost_reflect::Value| match v {
+            prost_reflect::Value::F64(x) => Some(*x),
+            prost_reflect::Value::I64(x) => Some(*x as f64 / 1e6),
+            prost_reflect::Value::U64(x) => Some(*x as f64 / 1e6),
+            _ => None,
+        };
+        let moved = match (seconds(&a), seconds(&b)) {
+            (Some(x), Some(y)) => (x - y).abs() >= 43_200.0,
+            _ => false,
+        };
+        if is_time && moved {
+            let text = |v: &prost_reflect::Value| match v {
+                prost_reflect::Value::F64(x) => x.to_string(),
+                prost_reflect::Value::I64(x) => x.to_string(),
+                prost_reflect::Value::U64(x) => x.to_string(),
+                other => format!("{other:?}"),
+            };
+            out.push((path, text(&a), text(&b)));
+        }
     }
 }
 
@@ -554,6 +655,16 @@ pub(crate) fn encode(
     let engine = base64_engine();
     let bad = for_each_line(stdin, stderr, |number, line, stderr| {
         let (named, text) = split_type_prefix(line).map_err(LineError::Bad)?;
+        if let (true, Some(named), Some(given)) =
+            (job.refuse_other_types, named, job.message.as_deref())
+        {
+            if named != given {
+                return Err(LineError::Bad(format!(
+                    "the line is prefixed |{named}| but -m gives {given}: \
+                     remove the prefix, or encode {named} lines with -m {named}"
+                )));
+            }
+        }
         let name = match named.or(job.message.as_deref()) {
             Some(name) => name,
             None => {
@@ -580,6 +691,9 @@ pub(crate) fn encode(
             .map_err(|e| LineError::Bad(e.to_string()))?;
         for change in &changes {
             let warning = format!("{}.{}: {}", change.message, change.field, change.reason);
+            warn(stderr, number, &warning)?;
+        }
+        for warning in moved_times(&codec, &msg, &bytes) {
             warn(stderr, number, &warning)?;
         }
         match job.format {
@@ -703,12 +817,20 @@ pub(crate) fn decode(
     Ok(Status::from_bad_count(bad))
 }
 
+/// How `analyze` reports, however it was asked for.
+pub(crate) struct AnalyzeJob {
+    /// Print only the definition hash of each type.
+    pub hash_only: bool,
+    /// Width of the report's guard lines.
+    pub console_width: usize,
+}
+
 /// `goby dccl analyze` / `goby dccl -a`: the size report of each type, or
 /// with `hash_only` its definition hash (`name: hash` when there are several).
 pub(crate) fn analyze(
     defs: &Definitions,
     names: &[String],
-    hash_only: bool,
+    job: &AnalyzeJob,
     stdout: &mut dyn Write,
     stderr: &mut dyn Write,
 ) -> Result<Status, CliError> {
@@ -725,7 +847,7 @@ pub(crate) fn analyze(
             .collect()
     };
     for name in &names {
-        if hash_only {
+        if job.hash_only {
             let hash = codec
                 .hash(name)
                 .map_err(|e| CliError::setup(e.to_string()))?;
@@ -737,7 +859,7 @@ pub(crate) fn analyze(
             }
         } else {
             let report = codec
-                .analyze(name)
+                .analyze_with_width(name, job.console_width)
                 .map_err(|e| CliError::setup(e.to_string()))?;
             stdout.write_all(report.as_bytes())?;
             if !report.ends_with('\n') {

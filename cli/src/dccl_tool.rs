@@ -7,14 +7,17 @@
 //!   message printed as `|full.Name| field: value ...` (`-o`: without the
 //!   name).
 //! - `-a`/`--analyze`: the size report of each type, or with `-H` only the
-//!   definition hash (`full.Name: 0x...` when there are several types).
+//!   definition hash (`full.Name: 0x...` when there are several types);
+//!   `-w N` sets the width of the report's guard lines (60 by default).
 //! - `-p`/`--display_proto`: the definition of each type as `.proto` source.
 //!
 //! Without `-m`, decode, analyze and display work on every valid DCCL type
 //! of the `-f` files (each invalid one is named on standard error and
 //! skipped) and encode takes the first message of the first file for the
 //! lines that do not name their type with `|full.Name|` (loaded only when
-//! such a line comes).
+//! such a line comes). As in the reference, a line whose `|full.Name|`
+//! names another type than `-m` is encoded as the type it names
+//! (`goby dccl encode -m` refuses such a line).
 //!
 //! Differences, on purpose: a bad input line is reported with its number
 //! and the next lines are still handled (the reference stops at the first);
@@ -27,8 +30,8 @@ use std::io::{BufRead, Write};
 use clap::{ArgGroup, Args};
 
 use crate::dccl_cmd::{
-    analyze, decode, encode, ByteFormat, DecodeJob, Definitions, EncodeJob, InputForm, OutputForm,
-    ProtoArgs,
+    analyze, decode, encode, AnalyzeJob, ByteFormat, DecodeJob, Definitions, EncodeJob, InputForm,
+    OutputForm, ProtoArgs, DEFAULT_CONSOLE_WIDTH,
 };
 use crate::passphrase::PassphraseArgs;
 use crate::{CliError, Status};
@@ -73,6 +76,16 @@ pub struct ToolArgs {
     /// With --analyze, print only the definition hash.
     #[arg(short = 'H', long = "hash_only")]
     pub hash_only: bool,
+    /// With --analyze, the width in characters of the report's guard lines
+    /// (`==== name ====`), 60 by default; accepted and unused otherwise, as
+    /// by the reference tool.
+    #[arg(
+        short = 'w',
+        long = "console_width",
+        value_name = "N",
+        default_value_t = DEFAULT_CONSOLE_WIDTH
+    )]
+    pub console_width: usize,
     /// Accepted for compatibility; prints nothing more.
     #[arg(short = 'v', long = "verbose")]
     pub verbose: bool,
@@ -134,6 +147,9 @@ pub fn run(
             format: args.format,
             passphrase: args.passphrase.resolve()?,
             strict: args.strict,
+            // The reference tool encodes a line as the type its prefix
+            // names, whatever -m gives.
+            refuse_other_types: false,
         };
         encode(&defs, &job, stdin, stdout, stderr)
     } else if args.decode {
@@ -146,7 +162,11 @@ pub fn run(
         };
         decode(&defs, &job, stdin, stdout, stderr)
     } else if args.analyze {
-        analyze(&defs, &args.message, args.hash_only, stdout, stderr)
+        let job = AnalyzeJob {
+            hash_only: args.hash_only,
+            console_width: args.console_width,
+        };
+        analyze(&defs, &args.message, &job, stdout, stderr)
     } else {
         display(&defs, &args.message, stdout, stderr)
     }

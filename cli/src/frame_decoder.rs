@@ -51,6 +51,25 @@ impl FrameError {
 }
 
 impl FrameDecoder<'_> {
+    /// The hint added to an id that names no loaded type: the bytes may be
+    /// a message of a type with `omit_id`, which only `-m` can decode.
+    fn omit_id_hint(&self) -> String {
+        let omitting: Vec<String> = self
+            .codec
+            .loaded()
+            .into_iter()
+            .filter(|n| self.codec.omits_id(n).unwrap_or(false))
+            .collect();
+        let mut hint = String::from(
+            " (a message with omit_id: true carries no id on the wire: name its type with -m",
+        );
+        if !omitting.is_empty() {
+            hint.push_str(&format!("; loaded with omit_id: {}", omitting.join(", ")));
+        }
+        hint.push(')');
+        hint
+    }
+
     /// Decodes every message of `bytes`, handing each to `emit`. The first
     /// message that cannot be decoded ends the string.
     pub(crate) fn decode(
@@ -95,6 +114,12 @@ impl FrameDecoder<'_> {
                         }
                         other => other.to_string(),
                     };
+                    if self.as_type.is_none()
+                        && (matches!(e, dccl::Error::UnknownId(_))
+                            || text.contains("cannot read the DCCL id"))
+                    {
+                        text.push_str(&self.omit_id_hint());
+                    }
                     // The library names a body that does not decode under a
                     // clear header; a message after the first may have started
                     // in the wrong place because the one before was misread.

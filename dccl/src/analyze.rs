@@ -8,12 +8,15 @@ use crate::codecs::identifier;
 use crate::codecs::message::{FieldEntry, MessageCodec};
 use crate::field_codec::FieldCodec;
 
-const CONSOLE_WIDTH: usize = 60;
+/// Width of the guard lines (`==== name ====`) by default, as in libdccl.
+pub const DEFAULT_CONSOLE_WIDTH: usize = 60;
 const NAME_WIDTH: usize = 40;
 const INDENT: usize = 8;
 
-fn guard(title: &str, c: char) -> String {
-    let n = CONSOLE_WIDTH.saturating_sub(title.len()) / 2;
+/// The run of `c` on each side of `title` in a guard line of `width`
+/// characters (none when the title does not fit, as libdccl does).
+fn guard(title: &str, c: char, width: usize) -> String {
+    let n = width.saturating_sub(title.len()) / 2;
     std::iter::repeat_n(c, n).collect()
 }
 
@@ -104,7 +107,7 @@ fn part_lines(out: &mut String, codec: &dyn FieldCodec, full_name: &str) {
 }
 
 /// The report of one loaded message type.
-pub(crate) fn report(l: &LoadedMessage) -> String {
+pub(crate) fn report(l: &LoadedMessage, console_width: usize) -> String {
     let mut out = String::new();
     let full_name = l.descriptor.full_name();
     let head_bits = l.head.max_size();
@@ -117,7 +120,7 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
     } else {
         format!("{}: {full_name} {{{hash}}}", l.id)
     };
-    let g = guard(&title, '=');
+    let g = guard(&title, '=', console_width);
     let _ = writeln!(out, "{g} {title} {g}");
     let _ = writeln!(
         out,
@@ -148,7 +151,7 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
         l.max_bytes,
         l.max_bytes as u64 * 8
     );
-    let g = guard("Header", '-');
+    let g = guard("Header", '-', console_width);
     let _ = writeln!(out, "{g} Header {g}");
     let label = "dccl.id head";
     dotted(
@@ -168,7 +171,7 @@ pub(crate) fn report(l: &LoadedMessage) -> String {
         }
     );
     part_lines(&mut out, l.head.as_ref(), full_name);
-    let g = guard("Body", '-');
+    let g = guard("Body", '-', console_width);
     let _ = writeln!(out, "{g} Body {g}");
     part_lines(&mut out, l.body.as_ref(), full_name);
     out

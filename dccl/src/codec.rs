@@ -387,6 +387,13 @@ impl Codec {
         Ok(self.get(full_name)?.id)
     }
 
+    /// True when the loaded type `full_name` has `omit_id: true`: its
+    /// messages carry no DCCL id and decode only by name
+    /// ([`Codec::decode_as_with_len`]).
+    pub fn omits_id(&self, full_name: &str) -> Result<bool> {
+        Ok(self.get(full_name)?.omit_id)
+    }
+
     pub(crate) fn get(&self, full_name: &str) -> Result<&Arc<LoadedMessage>> {
         self.by_name
             .get(full_name)
@@ -792,7 +799,14 @@ impl Codec {
     /// Field-by-field size report of a loaded type, in the layout of
     /// libdccl's `analyze` output.
     pub fn analyze(&self, full_name: &str) -> Result<String> {
-        Ok(crate::analyze::report(self.get(full_name)?))
+        self.analyze_with_width(full_name, crate::analyze::DEFAULT_CONSOLE_WIDTH)
+    }
+
+    /// As [`Codec::analyze`], with guard lines (`==== name ====`) of
+    /// `console_width` characters rather than 60 (libdccl's
+    /// `set_console_width`); a title longer than that gets no guard.
+    pub fn analyze_with_width(&self, full_name: &str, console_width: usize) -> Result<String> {
+        Ok(crate::analyze::report(self.get(full_name)?, console_width))
     }
 }
 

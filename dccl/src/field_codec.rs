@@ -171,6 +171,29 @@ impl FieldSpec<'_> {
         }
     }
 
+    /// Why a value of the field that cannot be sent (e.g. out of its bounds)
+    /// is sent as the minimum rather than as "not present", when the field's
+    /// codec has no "not present" value: the words after "sent as the
+    /// minimum" in a [`ValueChange`](crate::ValueChange) reason.
+    pub fn no_absent_reason(&self) -> String {
+        match self.field {
+            Some(f) if f.containing_oneof().is_some() => format!(
+                "{} is the member set of oneof {}, which has no \"not present\" value",
+                f.name(),
+                f.containing_oneof()
+                    .map(|o| o.name().to_string())
+                    .unwrap_or_default()
+            ),
+            Some(f) if f.is_list() => {
+                "an element of a repeated field has no \"not present\" value".to_string()
+            }
+            Some(f) if f.cardinality() != prost_reflect::Cardinality::Required => {
+                "its codec has no \"not present\" value".to_string()
+            }
+            _ => "the field is required".to_string(),
+        }
+    }
+
     /// True when the field is a proto2/proto3 `optional` field (not required, not repeated).
     pub fn is_optional(&self) -> bool {
         self.field

@@ -104,7 +104,8 @@ fn every_kind_of_change_is_reported_with_its_path() {
             ("samples", "7 elements over max_repeat 4: truncated"),
             (
                 "samples[1]",
-                "200 is out of range [0, 100]: sent as the minimum (the field is required)"
+                "200 is out of range [0, 100]: sent as the minimum \
+                 (an element of a repeated field has no \"not present\" value)"
             ),
             (
                 "waypoint.x",

@@ -70,7 +70,8 @@ impl EnumCodec {
             name: name.to_string(),
             version: spec.codec_version,
             packed,
-            bounds: NumericBounds::new(WireKind::I32, min, max, 1.0, required),
+            bounds: NumericBounds::new(WireKind::I32, min, max, 1.0, required)
+                .with_absent_reason(spec.no_absent_reason()),
             enum_type,
             numbers,
         }))
@@ -125,10 +126,10 @@ impl FieldCodec for EnumCodec {
                             self.enum_type.full_name()
                         )
                     },
-                    if self.bounds.required {
-                        "sent as the first value (the field is required)"
+                    &if self.bounds.required {
+                        format!("sent as the first value ({})", self.bounds.absent_reason)
                     } else {
-                        "sent as not present"
+                        "sent as not present".to_string()
                     },
                 )?;
             }

@@ -134,6 +134,9 @@ pub struct NumericBounds {
     pub resolution: f64,
     /// No "not present" value.
     pub required: bool,
+    /// With `required`: why, as told when a value is sent as the minimum
+    /// (see [`FieldSpec::no_absent_reason`]).
+    pub absent_reason: String,
     /// Encoded size in bits.
     pub bits: u32,
 }
@@ -175,8 +178,16 @@ impl NumericBounds {
             max,
             resolution,
             required,
+            absent_reason: "the field is required".to_string(),
             bits,
         }
+    }
+
+    /// The same bounds, with `reason` told when a value is sent as the
+    /// minimum of a field with no "not present" value.
+    pub fn with_absent_reason(mut self, reason: String) -> Self {
+        self.absent_reason = reason;
+        self
     }
 
     /// The unsigned integer written for `value`, before the presence offset;
@@ -274,10 +285,10 @@ impl NumericBounds {
                             self.max
                         )
                     },
-                    if self.required {
-                        "sent as the minimum (the field is required)"
+                    &if self.required {
+                        format!("sent as the minimum ({})", self.absent_reason)
                     } else {
-                        "sent as not present"
+                        "sent as not present".to_string()
                     },
                 )?;
                 out.write(0, self.bits);
@@ -418,7 +429,8 @@ impl NumericCodec {
             .max
             .ok_or_else(|| CodecError::new("missing (dccl.field).max"))?;
         let resolution = field_resolution(spec)?;
-        let bounds = NumericBounds::new(kind, min, max, resolution, required);
+        let bounds = NumericBounds::new(kind, min, max, resolution, required)
+            .with_absent_reason(spec.no_absent_reason());
         bounds.validate(o.resolution.is_some())?;
         Ok(NumericCodec {
             name: name.to_string(),

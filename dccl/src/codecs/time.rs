@@ -56,7 +56,8 @@ impl TimeCodec {
             o.resolution()
         };
         let max = o.num_days() as f64 * SECONDS_IN_DAY;
-        let bounds = NumericBounds::new(WireKind::F64, 0.0, max, resolution, spec.use_required);
+        let bounds = NumericBounds::new(WireKind::F64, 0.0, max, resolution, spec.use_required)
+            .with_absent_reason(spec.no_absent_reason());
         bounds.validate(o.resolution.is_some())?;
         Ok(Some(Arc::new(TimeCodec {
             name: name.to_string(),
