@@ -62,6 +62,7 @@ __all__ = [
     "load_proto_file",
     "register",
     "message_class",
+    "proto_include",
 ]
 
 
@@ -80,6 +81,20 @@ class DcclValueChangedWarning(UserWarning):
 
 # The id codec of libdccl 4 (the only one): one byte for ids 0-127, two for 128-32767.
 DEFAULT_ID_CODEC = "dccl.default.id"
+
+
+def proto_include():
+    """The directory of the DCCL option ``.proto`` files this package ships,
+    for ``protoc -I`` when generating ``_pb2`` modules of one's own messages
+    (as ``grpc_tools`` gives its own includes): ``dccl/option_extensions.proto``,
+    the arithmetic codec's ``dccl/arithmetic/protobuf/*.proto`` and
+    ``goby/dccl/delta_extensions.proto``. E.g.::
+
+        python -m grpc_tools.protoc -I. -I"$(python -c 'import dccl; print(dccl.proto_include())')" \
+            --python_out=. my_messages.proto
+
+    Returns an absolute path (str)."""
+    return _os.path.join(_os.path.dirname(_os.path.abspath(__file__)), "include")
 
 
 def addProtoIncludePath(path):

@@ -65,3 +65,49 @@ def test_generated_module_alone_without_the_proto(protos_dir, tmp_path):
     )
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("ok fa")  # id 125 in one byte: 125 << 1, out.stdout
+
+
+def test_protoc_on_a_users_file_with_only_the_package_installed(tmp_path):
+    """A user's own file imports dccl/option_extensions.proto; protoc finds
+    it in ``dccl.proto_include()`` (no source tree of this project), and the
+    generated module encodes through the codec."""
+    import dccl
+
+    grpc_tools = pytest.importorskip(
+        "grpc_tools.protoc", reason="SKIPPED: grpcio-tools (protoc for Python) not installed"
+    )
+    include = dccl.proto_include()
+    assert os.path.isfile(os.path.join(include, "dccl", "option_extensions.proto")), include
+    assert os.path.isfile(os.path.join(include, "dccl", "arithmetic", "protobuf", "arithmetic.proto"))
+    assert os.path.isfile(os.path.join(include, "goby", "dccl", "delta_extensions.proto"))
+    (tmp_path / "usertest").mkdir()
+    (tmp_path / "usertest" / "ping.proto").write_text(
+        'syntax = "proto2";\n'
+        'import "dccl/option_extensions.proto";\n'
+        "package usertest;\n"
+        "message Ping {\n"
+        "  option (dccl.msg) = { id: 77 max_bytes: 16 codec_version: 4 };\n"
+        "  required int32 depth = 1 [(dccl.field) = { min: 0 max: 6000 }];\n"
+        "}\n"
+    )
+    well_known = os.path.join(os.path.dirname(grpc_tools.__file__), "_proto")
+    rc = grpc_tools.main(
+        ["protoc", "-I%s" % tmp_path, "-I%s" % include, "-I%s" % well_known,
+         "--python_out=%s" % tmp_path, "usertest/ping.proto"]
+    )
+    assert rc == 0, "protoc failed"
+    script = (
+        "import dccl\n"
+        "from usertest import ping_pb2\n"
+        "c = dccl.Codec()\n"
+        "c.load(ping_pb2.Ping)\n"
+        "data = c.encode(ping_pb2.Ping(depth=1234))\n"
+        "assert c.decode(data).depth == 1234\n"
+        "print('ok', data.hex())\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True,
+        env=dict(os.environ, PYTHONPATH=str(tmp_path)), cwd=str(tmp_path), timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("ok "), out.stdout
