@@ -56,7 +56,9 @@ pub struct EmulateArgs {
     /// Baud rate of --serial.
     #[arg(long, default_value_t = 19_200)]
     pub baud: u32,
-    /// Metres between consecutive simulated modems (along x).
+    /// Metres between consecutive simulated modems (along x, in the order
+    /// of --modem-id); joined over UDP, modem ID is at (ID - 1) × this in
+    /// every process.
     #[arg(long, default_value_t = 1000.0)]
     pub spacing: f64,
     /// Probability that a simulated packet is lost.
@@ -175,20 +177,30 @@ fn geometry(args: &EmulateArgs) -> Result<Geometry, CliError> {
     if transponders.len() > 4 {
         return Err(CliError::setup("--transponder: at most four (A, B, C, D)"));
     }
-    let nodes = args
-        .modem_ids
-        .iter()
-        .enumerate()
-        .map(|(i, &id)| {
-            (
-                id,
-                Node {
-                    position: Position::new(i as f64 * args.spacing, 0.0, 0.0),
-                    velocity: [0.0; 3],
-                },
-            )
-        })
-        .collect();
+    let at = |x: f64| Node {
+        position: Position::new(x, 0.0, 0.0),
+        velocity: [0.0; 3],
+    };
+    let nodes = if args.udp_local.is_some() {
+        // Joined over UDP, each process places every modem by its id (id 1
+        // at 0 m, id 2 at --spacing, ...), so that all agree on the ranges.
+        let peers = args
+            .udp_peers
+            .iter()
+            .map(|p| parse_peer(p).map(|(id, _)| id))
+            .collect::<Result<Vec<_>, _>>()?;
+        args.modem_ids
+            .iter()
+            .chain(&peers)
+            .map(|&id| (id, at(f64::from(id.saturating_sub(1)) * args.spacing)))
+            .collect()
+    } else {
+        args.modem_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &id)| (id, at(i as f64 * args.spacing)))
+            .collect()
+    };
     Ok(Geometry {
         nodes,
         transponders,
@@ -408,8 +420,12 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
                 },
                 ..base
             };
-            let mut handle = emulator::start(config, port, backend)
-                .map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
+            let mut handle = emulator::start(config, port, backend).map_err(|e| {
+                CliError::setup(match args.links.get(i) {
+                    Some(link) => format!("modem {modem_id} (--link {}): {e}", link.display()),
+                    None => format!("modem {modem_id}: {e}"),
+                })
+            })?;
             let path = handle
                 .path()
                 .await
@@ -514,5 +530,28 @@ mod tests {
         assert!(geometry(&a).is_err(), "transponders are a Micro-Modem 2's");
         assert_eq!(parse_layout("v6").unwrap(), StatsLayout::V6);
         assert!(parse_layout("v7").is_err());
+    }
+
+    #[test]
+    fn processes_joined_over_udp_agree_on_the_ranges() {
+        let one = |me: &str, peer: &str| {
+            let a = args_of(&[
+                "--micromodem",
+                "2",
+                "--modem-id",
+                me,
+                "--udp-local",
+                "4000",
+                "--udp-peer",
+                peer,
+                "--spacing",
+                "800",
+            ])
+            .unwrap();
+            geometry(&a).unwrap()
+        };
+        let (a, b) = (one("1", "3@127.0.0.1:4001"), one("3", "1@127.0.0.1:4000"));
+        assert_eq!(a.range(1, 3), Some(1600.0));
+        assert_eq!(b.range(3, 1), Some(1600.0));
     }
 }
