@@ -14,7 +14,9 @@ use crate::codecs::arithmetic::{ArithmeticModel, ArithmeticSession, ArithmeticSt
 use crate::codecs::identifier;
 use crate::crypto::CryptoKey;
 use crate::error::{CodecError, Error, Result};
-use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart};
+use crate::field_codec::{
+    DateShift, DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart,
+};
 use crate::options::{has_message_options, message_options};
 use crate::registry::CodecRegistry;
 
@@ -535,6 +537,38 @@ impl Codec {
         Ok(log.into_changes(msg.descriptor().full_name()))
     }
 
+    /// The time-coded fields of `msg` (codec `dccl.time`) that a receiver
+    /// would decode on another date, each with its path and why: the time
+    /// codec sends a time modulo its span (`num_days` days, one by default)
+    /// and the receiver restores the date nearest its own clock, so a time
+    /// more than half a span from the receiver's now arrives moved by whole
+    /// spans. Now is this codec's clock ([`Codec::set_clock`]), the one
+    /// its decoding restores dates with.
+    pub fn moved_dates(&self, msg: &DynamicMessage) -> Result<Vec<ValueChange>> {
+        self.moved_dates_at(msg, (self.clock)())
+    }
+
+    /// [`Codec::moved_dates`] for a receiver whose clock reads `now_secs`
+    /// (seconds since the UNIX epoch).
+    pub fn moved_dates_at(&self, msg: &DynamicMessage, now_secs: i64) -> Result<Vec<ValueChange>> {
+        let name = msg.descriptor().full_name().to_string();
+        let loaded = self.get(&name)?;
+        let mut moved = Vec::new();
+        for part in [&loaded.head, &loaded.body] {
+            if let Some(codec) = part.children() {
+                collect_moved_dates(codec, msg, "", now_secs, 0, &mut moved);
+            }
+        }
+        Ok(moved
+            .into_iter()
+            .map(|(field, shift)| ValueChange {
+                message: name.clone(),
+                field,
+                reason: moved_date_reason(&shift, now_secs),
+            })
+            .collect())
+    }
+
     fn encode_with(
         &self,
         msg: &DynamicMessage,
@@ -898,6 +932,79 @@ fn collect_field_sizes(
             collect_field_sizes(children, &path, part, out);
         }
     }
+}
+
+/// The time-coded fields of `msg` (under `prefix`) whose date a receiver
+/// at `now_secs` would move, with their paths (`pos.time`, `times[2]`).
+fn collect_moved_dates(
+    codec: &crate::codecs::message::MessageCodec,
+    msg: &DynamicMessage,
+    prefix: &str,
+    now_secs: i64,
+    depth: usize,
+    out: &mut Vec<(String, DateShift)>,
+) {
+    if depth > crate::codecs::message::MAX_DEPTH {
+        return;
+    }
+    for entry in codec.fields() {
+        let path = if prefix.is_empty() {
+            entry.field.name().to_string()
+        } else {
+            format!("{prefix}.{}", entry.field.name())
+        };
+        let value = msg.get_field(&entry.field);
+        let values: Vec<(String, &Value)> = match value.as_ref() {
+            Value::List(list) if entry.repeat.is_some() => list
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (format!("{path}[{i}]"), v))
+                .collect(),
+            v if entry.repeat.is_none() && msg.has_field(&entry.field) => vec![(path, v)],
+            _ => Vec::new(),
+        };
+        for (path, v) in values {
+            if let Some(shift) = entry.codec.date_shift(v, now_secs) {
+                if shift.moved() {
+                    out.push((path, shift));
+                }
+            } else if let (Some(children), Value::Message(m)) = (entry.codec.children(), v) {
+                collect_moved_dates(children, m, &path, now_secs, depth + 1, out);
+            }
+        }
+    }
+}
+
+/// Why a time is moved: how far from now, and by how much.
+fn moved_date_reason(shift: &DateShift, now_secs: i64) -> String {
+    const DAY: f64 = 86_400.0;
+    let span = |seconds: f64| {
+        if seconds < 2.0 * DAY {
+            format!("{} h", round_to(seconds / 3600.0, 1))
+        } else {
+            format!("{} days", round_to(seconds / DAY, 1))
+        }
+    };
+    let away = shift.sent_secs - now_secs as f64;
+    let moved = shift.restored_secs - shift.sent_secs;
+    let days = (moved.abs() / DAY).round();
+    format!(
+        "{} s since the epoch is {} {} now: the time codec sends a time modulo {} and the receiver \
+         restores the date nearest its own clock, so it would decode it {days} day{} {}; give a time \
+         within {} of now",
+        crate::text_format::double_to_text(shift.sent_secs),
+        span(away.abs()),
+        if away > 0.0 { "after" } else { "before" },
+        span(shift.span_secs),
+        if days == 1.0 { "" } else { "s" },
+        if moved > 0.0 { "later" } else { "earlier" },
+        span(shift.span_secs / 2.0),
+    )
+}
+
+fn round_to(value: f64, decimals: i32) -> f64 {
+    let scale = 10f64.powi(decimals);
+    (value * scale).round() / scale
 }
 
 /// The required fields of a message type and the embedded messages to look

@@ -424,4 +424,34 @@ pub trait FieldCodec: Send + Sync + Debug {
     fn children(&self) -> Option<&crate::codecs::message::MessageCodec> {
         None
     }
+
+    /// For a codec that sends a time modulo a span and lets the receiver
+    /// restore the rest from its own clock (the time codec): how a
+    /// receiver whose clock reads `now_secs` would restore `value`. `None`
+    /// for other codecs, and for values the codec does not send as a time
+    /// (NaN, negative: [`Codec::check`](crate::Codec::check) reports those).
+    fn date_shift(&self, _value: &Value, _now_secs: i64) -> Option<DateShift> {
+        None
+    }
+}
+
+/// How a receiver restores a time sent modulo a span (see
+/// [`FieldCodec::date_shift`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DateShift {
+    /// The time sent, in seconds since the UNIX epoch.
+    pub sent_secs: f64,
+    /// The time the receiver decodes, in seconds since the UNIX epoch.
+    pub restored_secs: f64,
+    /// The span the time is sent modulo, in seconds (`num_days` days).
+    pub span_secs: f64,
+}
+
+impl DateShift {
+    /// Whether the receiver decodes another date than the one sent: the
+    /// time is more than half a span from the receiver's clock, so it is
+    /// moved by whole spans (rounding to the field's resolution aside).
+    pub fn moved(&self) -> bool {
+        (self.restored_secs - self.sent_secs).abs() > self.span_secs / 2.0
+    }
 }

@@ -97,7 +97,7 @@ pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use codecs::arithmetic::{ArithmeticModel, ArithmeticState};
 pub use error::{CodecError, Error, Location, Result};
-pub use field_codec::{FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
+pub use field_codec::{DateShift, FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources, pool_file_name};
 pub use registry::CodecRegistry;
 pub use text_format::{debug_string, double_to_text, float_to_text, short_debug_string};

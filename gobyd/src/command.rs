@@ -4,7 +4,10 @@
 //! Exit status: [`EXIT_OK`] after a clean stop (SIGINT, SIGTERM) or a
 //! successful `--check`, [`EXIT_SETUP`] when the configuration or the
 //! start-up fails (the reason is written on standard error as
-//! `gobyd: error: ...`).
+//! `gobyd: error: ...`; settings that cannot work one a line, each with
+//! its field and, from a configuration file, `FILE:LINE:COLUMN`). The
+//! daemon starts only with a configuration `--check` accepts: both run
+//! [`runtime::validate`].
 
 use std::ffi::OsString;
 use std::io::{IsTerminal, Write};
@@ -66,11 +69,28 @@ pub struct GobydCli {
     pub log_json: bool,
 }
 
-/// The configuration named by the command line, with its overrides applied.
-fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
+/// A configuration file's text and name, to say where a field is written.
+struct Source {
+    origin: String,
+    text: String,
+}
+
+/// The configuration named by the command line, with its overrides
+/// applied, and the text of its file when it is one.
+fn configuration(cli: &GobydCli) -> Result<(GobydConfig, Option<Source>), config::ConfigError> {
     let mission = cli.moos_file.as_ref().or(cli.mission.as_ref());
+    let mut source = None;
     let mut config = match (&cli.config, mission) {
-        (Some(path), _) => config::load(path)?,
+        (Some(path), _) => {
+            let text = std::fs::read_to_string(path).map_err(|e| config::ConfigError::Read {
+                path: path.clone(),
+                source: e,
+            })?;
+            let origin = path.display().to_string();
+            let config = config::parse(&text, &origin)?;
+            source = Some(Source { origin, text });
+            config
+        }
         (None, Some(path)) => {
             crate::mission_file::load(path, cli.process_name.as_deref().unwrap_or("gobyd"))?
         }
@@ -101,7 +121,18 @@ fn configuration(cli: &GobydCli) -> Result<GobydConfig, config::ConfigError> {
     if cli.log_json {
         config.log.get_or_insert_with(Default::default).json = Some(true);
     }
-    Ok(config)
+    Ok((config, source))
+}
+
+/// The error as it is reported: settings that cannot work with where
+/// they are written in the file, when they are.
+fn located(mut e: runtime::DaemonError, source: Option<&Source>) -> runtime::DaemonError {
+    if let (runtime::DaemonError::Config(config::ConfigError::Problems(problems)), Some(source)) =
+        (&mut e, source)
+    {
+        config::locate(problems, &source.text, &source.origin);
+    }
+    e
 }
 
 /// Sets up logging to standard error: human-readable, or JSON objects.
@@ -163,8 +194,8 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             Err(_) => EXIT_SETUP,
         };
     }
-    let config = match configuration(&cli) {
-        Ok(config) => config,
+    let (config, source) = match configuration(&cli) {
+        Ok(loaded) => loaded,
         Err(e) => {
             eprintln!("gobyd: error: {e}");
             return EXIT_SETUP;
@@ -177,17 +208,12 @@ pub fn run_cli(cli: GobydCli) -> u8 {
                 EXIT_OK
             }
             Err(e) => {
-                eprintln!("gobyd: error: {e}");
+                eprintln!("gobyd: error: {}", located(e, source.as_ref()));
                 EXIT_SETUP
             }
         };
     }
     init_logging(&config);
-    if let Ok(completed) = config::complete(config.clone()) {
-        if let Some(problem) = config::mac_slot_problem(&completed) {
-            tracing::warn!("{problem}");
-        }
-    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -204,7 +230,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         let daemon = match runtime::Daemon::start(config).await {
             Ok(d) => d,
             Err(e) => {
-                eprintln!("gobyd: error: {e}");
+                eprintln!("gobyd: error: {}", located(e, source.as_ref()));
                 return EXIT_SETUP;
             }
         };

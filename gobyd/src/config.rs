@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
-    driver_config, simulator_driver_config, DriverConfig, DriverType, MacConfig, MacType,
-    ModemTransmission, QueueManagerConfig, QueuedMessageEntry, SimulatorDriverConfig,
+    driver_config, modem_transmission::TransmissionType, simulator_driver_config, DriverConfig,
+    DriverType, MacConfig, MacType, ModemTransmission, QueueManagerConfig, QueuedMessageEntry,
+    SimulatorDriverConfig,
 };
 use protos::goby::apps::protobuf::GobydConfig;
 
@@ -37,6 +38,58 @@ pub enum ConfigError {
     /// A value is not usable.
     #[error("configuration: {0}")]
     Invalid(String),
+    /// Settings that parse but cannot work, each with its field (see
+    /// [`problems`]).
+    #[error("configuration: {}", list_problems(.0))]
+    Problems(Vec<Problem>),
+}
+
+/// One problem on its line; several, counted, one a line below.
+fn list_problems(problems: &[Problem]) -> String {
+    match problems {
+        [one] => one.to_string(),
+        many => {
+            let mut text = format!("{} settings cannot work:", many.len());
+            for p in many {
+                text.push_str("\n  ");
+                text.push_str(&p.to_string());
+            }
+            text
+        }
+    }
+}
+
+/// A setting that parses but cannot work, found before anything starts.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// The field, as a path from the top of the configuration:
+    /// `mac.slot[0].slot_seconds`, `driver.udp.local.port`, `log.level`.
+    pub field: String,
+    /// What is wrong with its value, and what would work.
+    pub reason: String,
+    /// Where the field is written (`FILE:LINE:COLUMN`), when known (see
+    /// [`locate`]).
+    pub place: Option<String>,
+}
+
+impl Problem {
+    /// A problem of `field` (a path from the top of the configuration).
+    pub fn new(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Problem {
+            field: field.into(),
+            reason: reason.into(),
+            place: None,
+        }
+    }
+}
+
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some(place) = &self.place {
+            write!(f, "{place}: ")?;
+        }
+        write!(f, "{}: {}", self.field, self.reason)
+    }
 }
 
 /// Goby3's extensions of `DriverConfig` and the fields of ours that hold the
@@ -163,6 +216,249 @@ fn goby3_extensions(text: &str) -> String {
     out
 }
 
+/// Fills in where each problem's field is written in `text` (the
+/// configuration as read, named `origin`): `origin:LINE:COLUMN` of the
+/// field, or of the deepest section on its path that the text writes
+/// (`mac.slot[1].slot_seconds` left at its default: the second `slot`).
+/// Problems of sections the text does not write (filled in by
+/// [`complete`]) get no place.
+pub fn locate(problems: &mut [Problem], text: &str, origin: &str) {
+    let rewritten = goby3_extensions(text);
+    let tree = text_tree(&rewritten);
+    for problem in problems.iter_mut() {
+        if let Some(offset) = field_offset(&tree, &problem.field) {
+            let (line, column) = line_and_column(&rewritten, offset);
+            problem.place = Some(format!("{origin}:{line}:{column}"));
+        }
+    }
+}
+
+/// A field as written in text format: its name, where the name starts,
+/// and its fields when its value is a message.
+#[derive(Debug)]
+struct WrittenField {
+    name: String,
+    offset: usize,
+    fields: Vec<WrittenField>,
+}
+
+/// Names a top-level section of ours may also be written with (Goby3's).
+const SECTION_ALIASES: &[(&str, &str)] = &[
+    ("driver", "driver_cfg"),
+    ("mac", "mac_cfg"),
+    ("queue", "queue_cfg"),
+];
+
+/// The byte offset in the text of `tree` of `path` (`mac.slot[1].rate`),
+/// or of the deepest part of it written there.
+fn field_offset(tree: &[WrittenField], path: &str) -> Option<usize> {
+    let mut fields = tree;
+    let mut found = None;
+    for (depth, part) in path.split('.').enumerate() {
+        let (name, index) = match part.split_once('[') {
+            Some((name, rest)) => (name, rest.trim_end_matches(']').parse::<usize>().ok()),
+            None => (part, None),
+        };
+        let alias = SECTION_ALIASES
+            .iter()
+            .find(|(ours, _)| depth == 0 && *ours == name)
+            .map(|(_, goby)| *goby);
+        let Some(field) = fields
+            .iter()
+            .filter(|f| f.name == name || Some(f.name.as_str()) == alias)
+            .nth(index.unwrap_or(0))
+        else {
+            break;
+        };
+        found = Some(field.offset);
+        fields = &field.fields;
+    }
+    found
+}
+
+/// A token of text format: punctuation, a quoted string, or a run of
+/// other characters (a name, a number, an enum value), with its offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Token<'a> {
+    Punct(u8, usize),
+    Str(usize),
+    Word(&'a str, usize),
+}
+
+fn tokens(text: &str) -> Vec<Token<'_>> {
+    let bytes = text.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b if b.is_ascii_whitespace() => i += 1,
+            b'#' => {
+                while i < bytes.len() && bytes[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            quote @ (b'"' | b'\'') => {
+                out.push(Token::Str(i));
+                i += 1;
+                while i < bytes.len() && bytes[i] != quote && bytes[i] != b'\n' {
+                    i += if bytes[i] == b'\\' { 2 } else { 1 };
+                }
+                i += 1;
+            }
+            b @ (b'{' | b'}' | b'<' | b'>' | b'[' | b']' | b':' | b',' | b';') => {
+                out.push(Token::Punct(b, i));
+                i += 1;
+            }
+            _ => {
+                let start = i;
+                while i < bytes.len()
+                    && !bytes[i].is_ascii_whitespace()
+                    && !b"{}<>[]:,;#\"'".contains(&bytes[i])
+                {
+                    i += 1;
+                }
+                // Whole characters only (a run ends at ASCII bytes).
+                out.push(Token::Word(text.get(start..i).unwrap_or(""), start));
+            }
+        }
+    }
+    out
+}
+
+/// The fields written in a text-format message (one already parsed, so
+/// well formed; anything else is skipped, never a panic).
+fn text_tree(text: &str) -> Vec<WrittenField> {
+    let tokens = tokens(text);
+    let mut i = 0;
+    written_fields(&tokens, &mut i, None, 0)
+}
+
+/// Deepest nesting read (deeper sections are not located).
+const MAX_TEXT_DEPTH: usize = 64;
+
+fn written_fields(
+    tokens: &[Token<'_>],
+    i: &mut usize,
+    end: Option<u8>,
+    depth: usize,
+) -> Vec<WrittenField> {
+    let mut fields = Vec::new();
+    while let Some(token) = tokens.get(*i) {
+        *i += 1;
+        let (name, offset) = match *token {
+            Token::Punct(b, _) if Some(b) == end => return fields,
+            Token::Word(word, offset) => (word.to_string(), offset),
+            Token::Punct(b'[', offset) => {
+                // An extension's name: `[full.name]`.
+                let mut name = String::new();
+                while let Some(t) = tokens.get(*i) {
+                    *i += 1;
+                    match t {
+                        Token::Punct(b']', _) => break,
+                        Token::Word(w, _) => name.push_str(w),
+                        _ => {}
+                    }
+                }
+                (name, offset)
+            }
+            _ => continue,
+        };
+        if matches!(tokens.get(*i), Some(Token::Punct(b':', _))) {
+            *i += 1;
+        }
+        match tokens.get(*i) {
+            Some(Token::Punct(open @ (b'{' | b'<'), _)) => {
+                *i += 1;
+                let children = message_fields(tokens, i, *open, depth);
+                fields.push(WrittenField {
+                    name,
+                    offset,
+                    fields: children,
+                });
+            }
+            Some(Token::Punct(b'[', _)) => {
+                // A list: each element is one occurrence of the field.
+                *i += 1;
+                while let Some(t) = tokens.get(*i) {
+                    *i += 1;
+                    match *t {
+                        Token::Punct(b']', _) => break,
+                        Token::Punct(open @ (b'{' | b'<'), at) => {
+                            let children = message_fields(tokens, i, open, depth);
+                            fields.push(WrittenField {
+                                name: name.clone(),
+                                offset: at,
+                                fields: children,
+                            });
+                        }
+                        Token::Word(_, at) | Token::Str(at) => {
+                            fields.push(WrittenField {
+                                name: name.clone(),
+                                offset: at,
+                                fields: Vec::new(),
+                            });
+                            while matches!(tokens.get(*i), Some(Token::Str(_))) {
+                                *i += 1;
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            Some(Token::Str(_)) => {
+                // Adjacent strings are one value.
+                while matches!(tokens.get(*i), Some(Token::Str(_))) {
+                    *i += 1;
+                }
+                fields.push(WrittenField {
+                    name,
+                    offset,
+                    fields: Vec::new(),
+                });
+            }
+            Some(Token::Word(..)) => {
+                *i += 1;
+                fields.push(WrittenField {
+                    name,
+                    offset,
+                    fields: Vec::new(),
+                });
+            }
+            _ => {}
+        }
+    }
+    fields
+}
+
+/// The fields of a message value opened by `open` (`{` or `<`).
+fn message_fields(
+    tokens: &[Token<'_>],
+    i: &mut usize,
+    open: u8,
+    depth: usize,
+) -> Vec<WrittenField> {
+    let close = if open == b'{' { b'}' } else { b'>' };
+    if depth >= MAX_TEXT_DEPTH {
+        // Skip to the matching close, not reading the fields.
+        let mut level = 1usize;
+        while let Some(t) = tokens.get(*i) {
+            *i += 1;
+            match t {
+                Token::Punct(b, _) if *b == open => level += 1,
+                Token::Punct(b, _) if *b == close => {
+                    level -= 1;
+                    if level == 0 {
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        return Vec::new();
+    }
+    written_fields(tokens, i, Some(close), depth + 1)
+}
+
 /// Reads and parses a configuration file.
 pub fn load(path: &Path) -> Result<GobydConfig, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
@@ -250,37 +546,6 @@ fn same_id(field: &str, given: Option<i32>, id: i32) -> Result<(), ConfigError> 
     }
 }
 
-/// Why this node would never transmit under its medium access settings, if
-/// so: with fixed TDMA (`MAC_FIXED_DECENTRALIZED`) a modem id with no slot
-/// of its own (`slot { src: ID ... }`) never initiates a transmission.
-/// Expects a [`complete`]d configuration.
-pub fn mac_slot_problem(config: &GobydConfig) -> Option<String> {
-    let mac = config.mac.as_ref()?;
-    if mac.r#type() != MacType::MacFixedDecentralized {
-        return None;
-    }
-    let id = mac.modem_id();
-    if mac.slot.iter().any(|s| s.src() == id) {
-        return None;
-    }
-    let mut owners: Vec<i32> = mac.slot.iter().map(|s| s.src()).collect();
-    owners.sort_unstable();
-    owners.dedup();
-    Some(format!(
-        "modem_id {id} has no slot in mac (MAC_FIXED_DECENTRALIZED): it would never transmit; \
-         add slot {{ src: {id} ... }} (slots are for modem ids {})",
-        if owners.is_empty() {
-            "none".to_string()
-        } else {
-            owners
-                .iter()
-                .map(i32::to_string)
-                .collect::<Vec<_>>()
-                .join(", ")
-        }
-    ))
-}
-
 /// Levels `log.level` may name.
 const LOG_LEVELS: [&str; 6] = ["trace", "debug", "info", "warn", "error", "off"];
 
@@ -289,11 +554,16 @@ const LOG_LEVELS: [&str; 6] = ["trace", "debug", "info", "warn", "error", "off"]
 /// is not a level would be read by the log filter as a module name and
 /// silence every other line, so it is refused.
 pub fn log_level_problem(level: &str) -> Option<String> {
+    level_problem(level).map(|reason| format!("log.level {reason}"))
+}
+
+/// [`log_level_problem`] without the field's name.
+fn level_problem(level: &str) -> Option<String> {
     for directive in level.split(',').map(str::trim) {
         let word = directive.rsplit_once('=').map_or(directive, |(_, l)| l);
         if !LOG_LEVELS.iter().any(|l| l.eq_ignore_ascii_case(word)) {
             return Some(format!(
-                "log.level {level:?}: {word:?} is not a level (one of {}, or TARGET=LEVEL, comma-separated)",
+                "{level:?}: {word:?} is not a level (one of {}, or TARGET=LEVEL, comma-separated)",
                 LOG_LEVELS.join(", ")
             ));
         }
@@ -301,22 +571,186 @@ pub fn log_level_problem(level: &str) -> Option<String> {
     None
 }
 
-/// A Micro-Modem `nvram_cfg` entry setting the modem's address (`SRC,N`)
-/// to another id than `modem_id`: it is sent after `SRC` from `modem_id`
-/// and would make the modem answer to another address than the one the
-/// MAC and the queues use.
-fn nvram_address_problem(config: &GobydConfig) -> Option<String> {
-    let mm = config.driver.as_ref()?.micromodem.as_ref()?;
-    let id = config.modem_id();
-    if let Some(entry) = mm
-        .nvram_cfg
-        .iter()
-        .find(|e| e.trim_start().starts_with('$') || e.contains('*') || !e.contains(','))
-    {
-        return Some(format!(
-            "driver.micromodem.nvram_cfg {entry:?}: give KEY,VALUE (e.g. \"DQF,1\"); the driver writes the $CCCFG sentence around it"
-        ));
+/// Which driver the settings are checked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DriverSettings {
+    /// The driver of the configuration's `driver` section, which the
+    /// daemon starts: its settings, and the slots against its packets.
+    Configured,
+    /// A driver started by the caller (the `driver` section then gives
+    /// only the modem id): neither is checked.
+    Caller,
+}
+
+/// Every setting of a [`complete`]d configuration that parses but cannot
+/// work, each with its field: the checks `gobyd --check` and the daemon's
+/// start share (see [`crate::runtime::validate`]).
+///
+/// - medium access: a modem id with no slot of its own under fixed TDMA
+///   (the node would never transmit); a slot rate the Micro-Modem (and the
+///   simulator, which models it) does not have; a slot too short for a
+///   packet of its rate on the driver's water (the driver drops every
+///   transmission that would not end within its slot, so nothing would
+///   ever be sent in it);
+/// - the driver: what it refuses at start ([`modemdriver::check`]: UDP
+///   addresses and ports, the simulator's numbers, a Micro-Modem serial
+///   port that does not exist), its Micro-Modem settings, a driver gobyd
+///   does not run;
+/// - interfaces: JSON addresses that are not `HOST:PORT`, a MOOS port out
+///   of range; `log.level`; `duplicate_window_seconds`.
+pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let mut push = |field: String, reason: String| problems.push(Problem::new(field, reason));
+    if let Some(level) = config.log.as_ref().map(|l| l.level()) {
+        if let Some(reason) = level_problem(level) {
+            push("log.level".into(), reason);
+        }
     }
+    let json = config.json.clone().unwrap_or_default();
+    for (name, bind) in [("tcp_bind", json.tcp_bind()), ("udp_bind", json.udp_bind())] {
+        if let Some(reason) = bind_problem(bind) {
+            push(format!("json.{name}"), reason);
+        }
+    }
+    if let Some(moos) = &config.moos {
+        if u16::try_from(moos.port()).map_or(true, |p| p == 0) {
+            push(
+                "moos.port".into(),
+                format!("{} is not the MOOSDB's TCP port (1-65535)", moos.port()),
+            );
+        }
+        if moos.server().trim().is_empty() {
+            push(
+                "moos.server".into(),
+                "empty: give the MOOSDB's host (e.g. \"127.0.0.1\")".into(),
+            );
+        }
+    }
+    if let Some(window) = config.duplicate_window_seconds {
+        if !(window.is_finite() && window >= 0.0) {
+            push(
+                "duplicate_window_seconds".into(),
+                format!("{window} is not a time in seconds (0 or more; leave it out for the longest ttl)"),
+            );
+        }
+    }
+    if let Some((field, reason)) = own_slot_problem(config) {
+        push(field, reason);
+    }
+    if driver == DriverSettings::Configured {
+        problems.extend(driver_problems(config));
+    }
+    problems
+}
+
+/// Why `bind` (a JSON interface address; empty: none) is not an address
+/// to listen on, if it is not.
+fn bind_problem(bind: &str) -> Option<String> {
+    use std::net::ToSocketAddrs;
+    if bind.is_empty() {
+        return None;
+    }
+    bind.to_socket_addrs()
+        .err()
+        .map(|e| format!("{bind:?} is not an address to listen on (HOST:PORT, port 0-65535): {e}"))
+}
+
+/// The modem ids that have a slot, for messages: "1, 2" or "none".
+fn slot_owners(slots: &[ModemTransmission]) -> String {
+    let mut owners: Vec<i32> = slots.iter().map(|s| s.src()).collect();
+    owners.sort_unstable();
+    owners.dedup();
+    if owners.is_empty() {
+        return "none".into();
+    }
+    owners
+        .iter()
+        .map(i32::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// With fixed TDMA (`MAC_FIXED_DECENTRALIZED`) a modem id with no slot of
+/// its own (`slot { src: ID ... }`) never initiates a transmission.
+fn own_slot_problem(config: &GobydConfig) -> Option<(String, String)> {
+    let mac = config.mac.as_ref()?;
+    if mac.r#type() != MacType::MacFixedDecentralized {
+        return None;
+    }
+    let id = mac.modem_id();
+    if mac.slot.iter().any(|s| s.src() == id) {
+        return None;
+    }
+    Some((
+        "mac.slot".into(),
+        format!(
+            "modem_id {id} has no slot in mac (MAC_FIXED_DECENTRALIZED): it would never transmit; \
+             add slot {{ src: {id} ... }} (slots are for modem ids {})",
+            slot_owners(&mac.slot)
+        ),
+    ))
+}
+
+/// The problems of the driver section and of the slots against its
+/// packets.
+fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
+    let Some(driver) = config.driver.as_ref() else {
+        return Vec::new();
+    };
+    let mut problems = Vec::new();
+    let kind = modemdriver::check::driver_type(driver);
+    match kind {
+        Some(
+            DriverType::DriverAcousticSimulator
+            | DriverType::DriverUdp
+            | DriverType::DriverWhoiMicromodem,
+        ) => {}
+        _ => problems.push(Problem::new(
+            match &driver.driver {
+                Some(driver_config::Driver::DriverName(_)) => "driver.driver_name",
+                _ => "driver.driver_type",
+            },
+            match (&driver.driver, kind) {
+                (Some(driver_config::Driver::DriverName(name)), _) => {
+                    format!("no driver named {name:?} is built in")
+                }
+                (_, other) => format!(
+                    "{} is not a driver gobyd runs (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
+                    other.map(|t| t.as_str_name()).unwrap_or("this driver type")
+                ),
+            },
+        )),
+    }
+    problems.extend(
+        modemdriver::check::problems(driver)
+            .into_iter()
+            .map(|p| Problem::new(format!("driver.{}", p.field), p.reason)),
+    );
+    if kind == Some(DriverType::DriverWhoiMicromodem) {
+        problems.extend(micromodem_problems(config));
+    }
+    if matches!(
+        kind,
+        Some(DriverType::DriverWhoiMicromodem | DriverType::DriverAcousticSimulator)
+    ) {
+        problems.extend(slot_problems(config, driver));
+    }
+    problems
+}
+
+/// The Micro-Modem settings gobyd needs besides what the driver checks:
+/// timeouts and counts that must be positive, an `nvram_cfg` entry
+/// setting the modem's address (`SRC,N`) to another id than `modem_id`
+/// (it is sent after `SRC` from `modem_id` and would make the modem answer
+/// to another address than the one the MAC and the queues use), and an
+/// application-ack lifetime shorter than two TDMA cycles.
+fn micromodem_problems(config: &GobydConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let mm = config
+        .driver
+        .as_ref()
+        .and_then(|d| d.micromodem.clone())
+        .unwrap_or_default();
     for (field, zero) in [
         ("keep_alive_seconds", mm.keep_alive_seconds() <= 0),
         ("response_timeout_ms", mm.response_timeout_ms() == 0),
@@ -325,145 +759,151 @@ fn nvram_address_problem(config: &GobydConfig) -> Option<String> {
         ("statistics_timeout_ms", mm.statistics_timeout_ms() == 0),
     ] {
         if zero {
-            return Some(format!(
-                "driver.micromodem.{field}: must be positive (leave it out for the default)"
+            problems.push(Problem::new(
+                format!("driver.micromodem.{field}"),
+                "must be positive (leave it out for the default)",
             ));
         }
     }
-    mm.nvram_cfg.iter().find_map(|entry| {
-        let (key, value) = entry.split_once(',')?;
-        let value = value.trim();
-        (key.trim().eq_ignore_ascii_case("SRC") && value.parse::<i32>().ok() != Some(id)).then(|| {
-            format!(
-                "driver.micromodem.nvram_cfg {entry:?} sets the modem's address to {value} but modem_id is {id}; \
-                 leave SRC out (it is set from modem_id)"
-            )
-        })
-    })
-}
-
-/// Settings that parse but cannot work, found before the daemon runs: a JSON
-/// interface address that is not `HOST:PORT`, and a MAC slot rate that the
-/// Micro-Modem (and the simulator, which models it) does not have. Expects a
-/// [`complete`]d configuration.
-pub fn settings_problem(config: &GobydConfig) -> Option<String> {
-    use std::net::ToSocketAddrs;
-    if let Some(problem) = config
-        .log
-        .as_ref()
-        .and_then(|l| log_level_problem(l.level()))
-    {
-        return Some(problem);
-    }
-    if let Some(problem) = nvram_address_problem(config) {
-        return Some(problem);
-    }
-    let json = config.json.clone().unwrap_or_default();
-    for (name, bind) in [("tcp_bind", json.tcp_bind()), ("udp_bind", json.udp_bind())] {
-        if bind.is_empty() {
+    let id = config.modem_id();
+    for (i, entry) in mm.nvram_cfg.iter().enumerate() {
+        let Some((key, value)) = entry.split_once(',') else {
             continue;
-        }
-        if let Err(e) = bind.to_socket_addrs() {
-            return Some(format!(
-                "json.{name} {bind:?} is not an address to listen on (HOST:PORT): {e}"
+        };
+        let value = value.trim();
+        if key.trim().eq_ignore_ascii_case("SRC") && value.parse::<i32>().ok() != Some(id) {
+            problems.push(Problem::new(
+                format!("driver.micromodem.nvram_cfg[{i}]"),
+                format!(
+                    "{entry:?} sets the modem's address to {value} but modem_id is {id}; \
+                     leave SRC out (it is set from modem_id)"
+                ),
             ));
         }
     }
-    let modem_rates = matches!(
-        config.driver.as_ref().and_then(|d| d.driver.as_ref()),
-        Some(driver_config::Driver::DriverType(t))
-            if *t == DriverType::DriverWhoiMicromodem as i32
-                || *t == DriverType::DriverAcousticSimulator as i32
-    );
-    if modem_rates {
-        if let Some(slot) = config
-            .mac
-            .iter()
-            .flat_map(|m| m.slot.iter())
-            .find(|s| modemdriver::rate::spec(s.rate()).is_none())
-        {
-            return Some(format!(
-                "mac slot {{ src: {} rate: {} }}: not a Micro-Modem rate (0-6); every transmission in that slot would fail",
-                slot.src(),
-                slot.rate()
-            ));
-        }
-    }
-    let micromodem = matches!(
-        config.driver.as_ref().and_then(|d| d.driver.as_ref()),
-        Some(driver_config::Driver::DriverType(t)) if *t == DriverType::DriverWhoiMicromodem as i32
-    );
-    if micromodem {
-        let driver = config.driver.as_ref().expect("a Micro-Modem driver");
-        let most = modemdriver::micromodem::application_ack::MAX_MODEM_ID as i32;
-        if application_acks(config) && driver.modem_id() > most {
-            return Some(format!(
-                "modem_id {}: the Micro-Modem's application acks name nodes 0-{most}; \
-                 use a lower id, or set driver.micromodem.use_application_acks: false",
-                driver.modem_id()
-            ));
-        }
-        let lifetime = driver
-            .micromodem
-            .as_ref()
-            .map_or(300, |m| m.application_ack_lifetime_seconds());
-        let cycle: f64 = config
-            .mac
-            .iter()
-            .flat_map(|m| m.slot.iter())
-            .map(|s| s.slot_seconds())
-            .sum();
-        if application_acks(config) && cycle * 2.0 > f64::from(lifetime) {
-            return Some(format!(
-                "driver.micromodem.application_ack_lifetime_seconds {lifetime}: the TDMA cycle lasts {cycle} s, \
+    let cycle: f64 = config
+        .mac
+        .iter()
+        .flat_map(|m| m.slot.iter())
+        .map(|s| s.slot_seconds())
+        .sum();
+    let lifetime = mm.application_ack_lifetime_seconds();
+    if application_acks(config) && cycle * 2.0 > f64::from(lifetime) {
+        problems.push(Problem::new(
+            "driver.micromodem.application_ack_lifetime_seconds",
+            format!(
+                "{lifetime} s is shorter than two TDMA cycles (the cycle lasts {cycle} s), \
                  so an ack owed could be dropped before this node's slot carries it; make it at least {} \
                  (twice the cycle, the same at every node)",
                 (cycle * 2.0).ceil()
+            ),
+        ));
+    }
+    problems
+}
+
+/// The slots of a driver whose packets take time on the water (the
+/// Micro-Modem, the simulator): their rates must be the Micro-Modem's, and
+/// each must hold a packet of its rate (less the MAC's guard time).
+fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let Some(mac) = config.mac.as_ref() else {
+        return problems;
+    };
+    for (i, slot) in mac.slot.iter().enumerate() {
+        if modemdriver::rate::spec(slot.rate()).is_none() {
+            problems.push(Problem::new(
+                format!("mac.slot[{i}].rate"),
+                format!(
+                    "{} is not a Micro-Modem rate (0-6): every transmission in this slot (src {}) would fail",
+                    slot.rate(),
+                    slot.src()
+                ),
             ));
         }
-        if driver.connection_type()
-            == protos::goby::acomms::protobuf::driver_config::ConnectionType::ConnectionSerial
-            && driver.serial_port().trim().is_empty()
-        {
-            return Some(
-                "driver.serial_port: required for the Micro-Modem (e.g. \"/dev/ttyUSB0\")".into(),
-            );
-        }
-        // The driver drops a transmission that no longer fits what is left
-        // of its slot, judged by this estimate: a slot shorter than it
-        // never sends anything.
-        for slot in config.mac.iter().flat_map(|m| m.slot.iter()) {
-            let Some(spec) = modemdriver::rate::spec(slot.rate()) else {
-                continue;
-            };
-            let needed = spec
-                .packet_duration(modemdriver::micromodem::driver::PACKET_OVERHEAD)
-                .as_secs_f64();
-            if slot.slot_seconds() < needed {
-                return Some(format!(
-                    "mac slot {{ src: {} rate: {} slot_seconds: {} }}: a rate-{} packet needs about {needed:.1} s on the water \
-                     ({} frames of {} bytes at {} bit/s, plus {} s of probe and header), so the Micro-Modem driver would drop \
-                     every transmission in this slot as not fitting; make slot_seconds at least {} plus the travel \
-                     time to the farthest node and, with acks, back (about 1.3 s per km){}",
-                    slot.src(),
-                    slot.rate(),
-                    slot.slot_seconds(),
-                    slot.rate(),
-                    spec.frames,
-                    spec.frame_bytes,
-                    spec.bits_per_second,
-                    modemdriver::micromodem::driver::PACKET_OVERHEAD.as_secs_f64(),
-                    needed.ceil(),
-                    if slot.rate() == 0 {
-                        ", and about 1 s more for the cycle-initialization packet a Micro-Modem 2 sends first at rate 0"
-                    } else {
-                        ""
-                    }
-                ));
-            }
-        }
     }
-    None
+    // Where the slots are: each its own, or one length and rate for all
+    // (auto-discovery). MAC_NONE has none; the MAC refuses lengths that
+    // are not positive numbers itself.
+    let slots: Vec<(String, f64, i32)> = match mac.r#type() {
+        MacType::MacFixedDecentralized | MacType::MacPolled => mac
+            .slot
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.r#type() == TransmissionType::Data)
+            .map(|(i, s)| (format!("mac.slot[{i}]"), s.slot_seconds(), s.rate()))
+            .collect(),
+        MacType::MacAutoDecentralized => vec![("mac".into(), mac.slot_seconds(), mac.rate())],
+        _ => Vec::new(),
+    };
+    let guard = mac.guard_seconds();
+    for (field, seconds, rate) in slots {
+        if !(seconds.is_finite() && seconds > 0.0 && guard.is_finite() && guard >= 0.0) {
+            continue;
+        }
+        let Some(packet) = modemdriver::check::data_packet_time(driver, rate) else {
+            continue;
+        };
+        let least = packet.shortest_slot().as_secs_f64();
+        if seconds - guard >= least {
+            continue;
+        }
+        problems.push(Problem::new(
+            format!("{field}.slot_seconds"),
+            slot_too_short(seconds, guard, rate, &packet),
+        ));
+    }
+    problems
+}
+
+/// Why a slot of `seconds` (less `guard`) cannot hold `packet`, with what
+/// would.
+fn slot_too_short(
+    seconds: f64,
+    guard: f64,
+    rate: i32,
+    packet: &modemdriver::check::PacketTime,
+) -> String {
+    let spec = packet.spec;
+    let frames = |n: u32| format!("{n} frame{}", if n == 1 { "" } else { "s" });
+    let least = packet.shortest_slot().as_secs_f64() + guard;
+    // Rounded up to the tenth of a second above.
+    let least_text = format!("{:.1}", (least * 10.0).ceil() / 10.0);
+    let data = packet.on_water().as_secs_f64() - packet.overhead.as_secs_f64();
+    let mut parts = vec![format!(
+        "{} of {} bytes at {} bit/s take{} {:.2} s",
+        frames(spec.frames),
+        spec.frame_bytes,
+        spec.bits_per_second,
+        if spec.frames == 1 { "s" } else { "" },
+        data
+    )];
+    parts.push(format!(
+        "{} s of probe and header",
+        packet.overhead.as_secs_f64()
+    ));
+    if !packet.hand_over.is_zero() {
+        parts.push(format!(
+            "{} s for the driver to hand the data over",
+            packet.hand_over.as_secs_f64()
+        ));
+    }
+    if guard > 0.0 {
+        parts.push(format!("the MAC's guard_seconds {guard}"));
+    }
+    format!(
+        "{seconds} s is too short for a rate-{rate} packet of {} on {} (needs at least {least_text} s: {}), \
+         so the driver would drop every transmission in this slot as not fitting; make slot_seconds at least {least_text} plus the travel time to the farthest node and, with acks, back \
+         (about 1.3 s per km){}",
+        frames(spec.frames),
+        packet.driver,
+        parts.join(", "),
+        if rate == 0 && packet.driver == "the Micro-Modem" {
+            ", and about 1 s more for the cycle-initialization packet a Micro-Modem 2 sends first at rate 0"
+        } else {
+            ""
+        }
+    )
 }
 
 /// Queue entries for the loaded types that have none, with the defaults;
@@ -885,6 +1325,73 @@ mod tests {
         assert!(lines[3].contains("\"[goby.acomms.udp.protobuf.config]\""));
         let config = parse(text, "x").unwrap();
         assert_eq!(config.driver.unwrap().udp.unwrap().local.port, 1);
+    }
+
+    #[test]
+    fn problems_are_located_where_their_field_is_written() {
+        let text = "modem_id: 1  # mac { slot { } }\n\
+                    driver_cfg {\n  driver_type: DRIVER_UDP\n  [goby.acomms.udp.protobuf.config] {\n    local: < port: 70000 >\n  }\n}\n\
+                    mac {\n  slot: [ { src: 1 }, { src: 2 rate: 9 } ]\n  type: MAC_FIXED_DECENTRALIZED\n}\n\
+                    log { level: \"mac {\" }\n";
+        let mut problems = vec![
+            Problem::new("driver.udp.local.port", "x"),
+            Problem::new("mac.slot[1].rate", "x"),
+            // Not written: the deepest part that is.
+            Problem::new("mac.slot[0].slot_seconds", "x"),
+            Problem::new("mac.slot", "x"),
+            // A section the text does not write: no place.
+            Problem::new("queue.message_identity", "x"),
+            Problem::new("log.level", "x"),
+        ];
+        locate(&mut problems, text, "f.cfg");
+        let places: Vec<Option<&str>> = problems.iter().map(|p| p.place.as_deref()).collect();
+        assert_eq!(
+            places,
+            [
+                Some("f.cfg:5:14"),
+                Some("f.cfg:9:32"),
+                // A list's elements: where each opens.
+                Some("f.cfg:9:11"),
+                Some("f.cfg:9:11"),
+                None,
+                Some("f.cfg:12:7"),
+            ]
+        );
+        assert_eq!(
+            problems[0].to_string(),
+            "f.cfg:5:14: driver.udp.local.port: x"
+        );
+        // Unbalanced or odd text is read without a panic.
+        for odd in [
+            "a { b { c",
+            "}}}] [ : ,",
+            "x: [ 1, \"2\" \"3\", { y: 1 } ]",
+            "[ext",
+        ] {
+            let mut p = vec![Problem::new("a.b.c", "x")];
+            locate(&mut p, odd, "o");
+        }
+    }
+
+    #[test]
+    fn several_problems_are_listed_one_a_line() {
+        let config = complete(
+            parse(
+                "modem_id: 1\nlog { level: \"loud\" }\njson { tcp_bind: \"nowhere\" }\n",
+                "x",
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let problems = problems(&config, DriverSettings::Configured);
+        let fields: Vec<&str> = problems.iter().map(|p| p.field.as_str()).collect();
+        assert_eq!(fields, ["log.level", "json.tcp_bind"]);
+        let text = ConfigError::Problems(problems).to_string();
+        assert!(
+            text.starts_with("configuration: 2 settings cannot work:\n  log.level: \"loud\""),
+            "{text}"
+        );
+        assert!(text.contains("\n  json.tcp_bind: \"nowhere\""), "{text}");
     }
 
     #[test]

@@ -7,6 +7,11 @@
 //!
 //! The message that goes on (into the journal, the queue and the raw log) is
 //! the one the receiver will decode, never the value before it was changed.
+//!
+//! A time coded with `dccl.time` more than half its span (`num_days` days,
+//! one by default: 12 h) from now is refused, clamping or not: the codec
+//! sends the time of day and the receiver restores the date nearest its
+//! own clock, so the message would arrive moved by whole days.
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -66,6 +71,20 @@ impl Door {
     /// bound) or, for a clamping type, passed on as it will be sent.
     pub fn admit(&self, message: DynamicMessage) -> Result<Admitted, String> {
         let name = message.descriptor().full_name().to_string();
+        // A time the receiver would restore on another date is refused
+        // whatever the queue entry says: moving it by whole days is no
+        // clamp to a bound.
+        let moved = self
+            .codec
+            .moved_dates(&message)
+            .map_err(|e| e.to_string())?;
+        if !moved.is_empty() {
+            let fields: Vec<String> = moved
+                .iter()
+                .map(|c| format!("field {}: {}", c.field, c.reason))
+                .collect();
+            return Err(format!("{name} refused: {}", fields.join("; ")));
+        }
         let changes = self.codec.check(&message).map_err(|e| e.to_string())?;
         if changes.is_empty() {
             return Ok(Admitted { message, changes });
@@ -156,6 +175,60 @@ mod tests {
             .unwrap_err();
         assert!(err.contains("field note"), "{err}");
         assert!(err.len() < 2_000, "the error does not repeat the value");
+    }
+
+    #[test]
+    fn a_time_the_receiver_would_move_by_days_is_refused_naming_message_and_field() {
+        use protos::goby::example::NavigationReport;
+        let nav_codec = || {
+            let mut codec = Codec::new();
+            codec.load_type::<NavigationReport>().unwrap();
+            codec
+        };
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_secs() as f64;
+        let report = |time: f64| {
+            NavigationReport {
+                source: 1,
+                destination: 2,
+                time,
+                ..Default::default()
+            }
+            .transcode_to_dynamic()
+        };
+        for clamp in [false, true] {
+            let queue = QueueManagerConfig {
+                message_entry: vec![QueuedMessageEntry {
+                    protobuf_name: "goby.example.NavigationReport".into(),
+                    clamp_out_of_range: Some(clamp),
+                    ..Default::default()
+                }],
+                ..Default::default()
+            };
+            let door = Door::new(Arc::new(nav_codec()), &queue, nav_codec);
+            // Within half a day of now: as sent.
+            for time in [now, now - 11.0 * 3600.0, now + 3600.0] {
+                let admitted = door.admit(report(time)).unwrap();
+                assert!(admitted.changes.is_empty());
+            }
+            // Further: the receiver would restore it a day or more off,
+            // which no clamping makes right.
+            for (time, days) in [
+                (now - 2.25 * 86_400.0, "2 days later"),
+                (now + 13.0 * 3600.0, "1 day earlier"),
+            ] {
+                let err = door.admit(report(time)).unwrap_err();
+                for part in [
+                    "goby.example.NavigationReport refused: field time:",
+                    days,
+                    "give a time within 12 h of now",
+                ] {
+                    assert!(err.contains(part), "{part:?} missing from {err}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -81,20 +81,12 @@ fn io_error(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> Daemon
     move |source| DaemonError::Io { context, source }
 }
 
-/// Starts the driver named by the configuration.
+/// Starts the driver named by the configuration (its settings checked as
+/// [`validate`] does).
 pub async fn start_driver(
     config: &protos::goby::acomms::protobuf::DriverConfig,
 ) -> Result<Driver, DaemonError> {
-    let kind = match &config.driver {
-        Some(driver_config::Driver::DriverType(t)) => DriverType::try_from(*t).ok(),
-        Some(driver_config::Driver::DriverName(name)) => {
-            return Err(DaemonError::Driver(modemdriver::DriverError::Config(
-                format!("no driver named {name:?} is built in"),
-            )))
-        }
-        None => Some(DriverType::DriverNone),
-    };
-    match kind {
+    match modemdriver::check::driver_type(config) {
         Some(DriverType::DriverAcousticSimulator) => {
             Ok(modemdriver::sim::SimulatorDriver::start(config)?)
         }
@@ -103,36 +95,77 @@ pub async fn start_driver(
             Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
         }
         other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
-            format!(
-                "driver {} is not supported by gobyd (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
-                other.map(|t| t.as_str_name()).unwrap_or("unknown")
-            ),
+            match (&config.driver, other) {
+                (Some(driver_config::Driver::DriverName(name)), _) => {
+                    format!("no driver named {name:?} is built in")
+                }
+                (_, other) => format!(
+                    "driver {} is not supported by gobyd (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
+                    other.map(|t| t.as_str_name()).unwrap_or("unknown")
+                ),
+            },
         ))),
     }
 }
 
-/// Checks a configuration without starting anything: the DCCL types load,
-/// and the queue and medium access settings are valid. Returns the DCCL
-/// types. A modem id with no slot of its own under fixed TDMA is an
-/// error here (the daemon itself starts with a warning).
-pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
+/// A configuration that passed [`validate`]: completed, with what the
+/// daemon runs on.
+#[derive(Debug)]
+pub struct Checked {
+    /// The configuration, completed ([`config::complete`]).
+    pub config: GobydConfig,
+    /// The codec with every DCCL type loaded.
+    pub codec: Arc<dccl::Codec>,
+    /// Full names of the DCCL types loaded.
+    pub loaded: Vec<String>,
+    /// The queue settings, with an entry for every type loaded.
+    pub queue: protos::goby::acomms::protobuf::QueueManagerConfig,
+}
+
+/// The one check of a configuration, shared by `gobyd --check` ([`check`])
+/// and the daemon's start ([`Daemon::start`], and with
+/// [`DriverSettings::Caller`](config::DriverSettings::Caller) the starts on
+/// a caller's driver): what it refuses the daemon never runs with, and
+/// what it accepts the daemon starts with unless something only starting
+/// shows (a port taken, a data directory held by another daemon, a serial
+/// device that is not a terminal).
+///
+/// In order: the configuration is completed; every setting that cannot
+/// work is found at once ([`config::problems`]: each named by its field,
+/// including a TDMA slot too short for a packet of its rate on the
+/// driver); then the MQTT settings, the DCCL types, the translator, the
+/// queues and the medium access settings, each refused with its own error.
+pub fn validate(
+    config: GobydConfig,
+    driver: config::DriverSettings,
+) -> Result<Checked, DaemonError> {
     let config = config::complete(config)?;
-    if let Some(problem) = config::mac_slot_problem(&config) {
-        return Err(ConfigError::Invalid(problem).into());
-    }
-    if let Some(problem) = config::settings_problem(&config) {
-        return Err(ConfigError::Invalid(problem).into());
+    let problems = config::problems(&config, driver);
+    if !problems.is_empty() {
+        return Err(ConfigError::Problems(problems).into());
     }
     if let Some(mqtt) = &config.mqtt {
         super::mqtt::settings::settings(mqtt, config.modem_id())?;
     }
     let defs = config::load_definitions(&config)?;
-    let mut queue_config = config.queue.clone().unwrap_or_default();
-    config::default_entries(&mut queue_config, &defs.loaded);
-    crate::translator::from_config(&config, &defs.codec).map_err(config::ConfigError::Invalid)?;
-    QueueManager::new(Arc::new(defs.codec), &queue_config)?;
+    let codec = Arc::new(defs.codec);
+    let mut queue = config.queue.clone().unwrap_or_default();
+    config::default_entries(&mut queue, &defs.loaded);
+    crate::translator::from_config(&config, &codec).map_err(config::ConfigError::Invalid)?;
+    QueueManager::new(codec.clone(), &queue)?;
     MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
-    Ok(defs.loaded)
+    Ok(Checked {
+        config,
+        codec,
+        loaded: defs.loaded,
+        queue,
+    })
+}
+
+/// Checks a configuration without starting anything ([`validate`], the
+/// driver's settings included). Returns the DCCL types.
+pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
+    validate(config, config::DriverSettings::Configured).map(|checked| checked.loaded)
 }
 
 pub use super::delivery::RECOVERY_WAIT;
@@ -195,31 +228,20 @@ impl std::fmt::Debug for Daemon {
 }
 
 impl Daemon {
-    /// Takes the data directory ([`DaemonError::DataDir`] when another
-    /// daemon holds it), loads the DCCL types, replays the journal, starts
-    /// the driver and opens the autonomy interfaces.
-    ///
-    /// Settings that parse but cannot work (see `gobyd --check`) are
-    /// logged as errors and the daemon starts all the same: at sea a node
-    /// that still receives is better than none.
+    /// Checks the configuration ([`validate`]: a configuration
+    /// `gobyd --check` refuses is refused here with the same error), takes
+    /// the data directory ([`DaemonError::DataDir`] when another daemon
+    /// holds it), loads the DCCL types, replays the journal, starts the
+    /// driver and opens the autonomy interfaces.
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
-        let config = config::complete(config)?;
-        for problem in [
-            config::mac_slot_problem(&config),
-            config::settings_problem(&config),
-        ]
-        .into_iter()
-        .flatten()
-        {
-            tracing::error!("configuration: {problem} (gobyd --check refuses it)");
-        }
-        let data_dir = DataDir::open(Path::new(config.data_dir()))?;
-        let mut driver_config = config.driver.clone().expect("completed");
+        let checked = validate(config, config::DriverSettings::Configured)?;
+        let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
+        let mut driver_config = checked.config.driver.clone().expect("completed");
         // Acks (where software sends them) only once the inbox holds the
         // message.
         driver_config.deferred_ack = Some(true);
         let driver = start_driver(&driver_config).await?;
-        let mut daemon = Self::start_in(config, driver, data_dir, Arc::new(SystemClock)).await?;
+        let mut daemon = Self::start_in(checked, driver, data_dir, Arc::new(SystemClock)).await?;
         daemon.driver_config = Some(driver_config);
         Ok(daemon)
     }
@@ -248,21 +270,23 @@ impl Daemon {
         driver: Driver,
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DaemonError> {
-        let config = config::complete(config)?;
-        let data_dir = DataDir::open(Path::new(config.data_dir()))?;
-        Self::start_in(config, driver, data_dir, clock).await
+        let checked = validate(config, config::DriverSettings::Caller)?;
+        let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
+        Self::start_in(checked, driver, data_dir, clock).await
     }
 
     async fn start_in(
-        config: GobydConfig,
+        checked: Checked,
         driver: Driver,
         data_dir: DataDir,
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DaemonError> {
-        let defs = config::load_definitions(&config)?;
-        let codec = Arc::new(defs.codec);
-        let mut queue_config = config.queue.clone().unwrap_or_default();
-        config::default_entries(&mut queue_config, &defs.loaded);
+        let Checked {
+            config,
+            codec,
+            loaded,
+            queue: queue_config,
+        } = checked;
         let queue = QueueManager::with_clock(codec.clone(), &queue_config, clock.clone())?;
         let door = Door::new(codec.clone(), &queue_config, || {
             config::load_definitions(&config)
@@ -295,11 +319,6 @@ impl Daemon {
                 .map(|e| f64::from(e.ttl()))
                 .fold(0.0, f64::max)
         });
-        if !(window_seconds.is_finite() && window_seconds >= 0.0) {
-            return Err(DaemonError::Config(ConfigError::Invalid(format!(
-                "duplicate_window_seconds {window_seconds} is not valid"
-            ))));
-        }
         let delivery = {
             let path = data_dir.path().join("inbox.log");
             let now = u64::try_from(clock.now()).unwrap_or(0);
@@ -329,8 +348,7 @@ impl Daemon {
         let (events, _) = broadcast::channel(1024);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
-        let names: HashMap<u32, String> = defs
-            .loaded
+        let names: HashMap<u32, String> = loaded
             .iter()
             .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
             .collect();
@@ -392,7 +410,7 @@ impl Daemon {
             modem_id = config.modem_id(),
             driver = driver.name(),
             mac = mac.scheme_name(),
-            types = defs.loaded.len(),
+            types = loaded.len(),
             "gobyd started"
         );
         Ok(Self {
@@ -1007,5 +1025,232 @@ fn log_record(event: &QueueEvent, reception: &Reception) -> Option<LogRecord> {
             ))
         }
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scratch directory of this test process.
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("gobyd-validate-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// The error of `gobyd --check` on `text`, after checking that the
+    /// daemon's start refuses it with the same one.
+    async fn refused(text: &str) -> String {
+        let config = config::parse(text, "test").expect("parses");
+        let by_check = check(config.clone()).expect_err(text).to_string();
+        let by_start = Daemon::start(config).await.expect_err(text).to_string();
+        assert_eq!(by_check, by_start, "{text}");
+        by_check
+    }
+
+    fn assert_names(err: &str, parts: &[&str]) {
+        for part in parts {
+            assert!(err.contains(part), "{part:?} missing from {err}");
+        }
+    }
+
+    #[tokio::test]
+    async fn a_micromodem_slot_too_short_for_its_rate_is_refused() {
+        let pty = modemdriver::link::serial::open_pty_pair().unwrap();
+        let text = format!(
+            "modem_id: 1\ndriver {{ driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"{}\" }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 2 slot_seconds: 1 }} slot {{ src: 2 rate: 2 slot_seconds: 5 }} }}\n",
+            pty.path
+        );
+        let err = refused(&text).await;
+        assert_names(
+            &err,
+            &["configuration: mac.slot[0].slot_seconds: 1 s is too short for a rate-2 packet of 3 frames \
+               on the Micro-Modem (needs at least 4.2 s: 3 frames of 64 bytes at 500 bit/s take 3.07 s, \
+               1 s of probe and header, 0.1 s for the driver to hand the data over)"],
+        );
+        // The other slot holds its packet: one problem only.
+        assert!(!err.contains("slot[1]"), "{err}");
+        // The MAC's guard time comes off the slot.
+        let guarded = text.replace(
+            "type: MAC_FIXED_DECENTRALIZED",
+            "type: MAC_FIXED_DECENTRALIZED guard_seconds: 1",
+        );
+        let err = refused(&guarded).await;
+        assert_names(
+            &err,
+            &[
+                "mac.slot[1].slot_seconds: 5 s is too short",
+                "guard_seconds 1",
+                "needs at least 5.2 s",
+            ],
+        );
+    }
+
+    #[tokio::test]
+    async fn a_simulator_slot_shorter_than_its_packet_is_refused() {
+        let text = "modem_id: 1\nmac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 6 slot_seconds: 1 } }\n";
+        let err = refused(text).await;
+        assert_names(
+            &err,
+            &["mac.slot[0].slot_seconds: 1 s is too short for a rate-6 packet of 6 frames on the simulator \
+               (needs at least 1.2 s: 6 frames of 32 bytes at 2400 bit/s take 0.64 s, 0.5 s of probe and header)"],
+        );
+        // With a shorter packet overhead the same slot holds the packet,
+        // and what --check accepts the daemon runs.
+        let dir = scratch("sim-slot");
+        let text = format!(
+            "modem_id: 1\ndriver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} \
+             packet_overhead_seconds: 0.05 channel: \"validate-sim-slot\" }} }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 6 slot_seconds: 1 }} }}\n\
+             json {{ tcp_bind: \"\" }}\ndata_dir: \"{}\"\n",
+            dir.display()
+        );
+        let config = config::parse(&text, "test").unwrap();
+        check(config.clone()).expect("valid");
+        let daemon = Daemon::start(config).await.expect("starts");
+        daemon.run(async {}).await.unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[tokio::test]
+    async fn out_of_range_addresses_and_numbers_are_refused_naming_each_field() {
+        let err = refused(
+            "modem_id: 1\ndriver { driver_type: DRIVER_UDP udp { local { port: 70000 } \
+             remote { modem_id: 2 ip: \"not-an-ip\" port: 50001 } remote { modem_id: 3 port: 0 } } }\n",
+        )
+        .await;
+        assert_names(
+            &err,
+            &[
+                "3 settings cannot work:",
+                "driver.udp.local.port: 70000 is not a UDP port (0-65535)",
+                "driver.udp.remote[0].ip: \"not-an-ip\" is not an IP address",
+                "driver.udp.remote[1].port: 0 is not a port to send to",
+            ],
+        );
+        let err = refused(
+            "modem_id: 1\ndriver { driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator { node { modem_id: 1 } \
+             packet_loss: 1.5 sound_speed: 0 packet_overhead_seconds: -1 udp_local { port: 70000 } \
+             udp_peer { ip: \"not-an-ip\" port: 50002 } } }\n\
+             moos { port: 70000 }\nduplicate_window_seconds: -1\n",
+        )
+        .await;
+        assert_names(
+            &err,
+            &[
+                "moos.port: 70000 is not the MOOSDB's TCP port (1-65535)",
+                "duplicate_window_seconds: -1 is not a time in seconds",
+                "driver.simulator.sound_speed: 0 is not a speed",
+                "driver.simulator.packet_loss: 1.5 is not a probability (0 to 1",
+                "driver.simulator.packet_overhead_seconds: -1 is not a time in seconds",
+                "driver.simulator.udp_local.port: 70000 is not a UDP port",
+                "driver.simulator.udp_peer[0].ip: \"not-an-ip\" is not an IP address",
+            ],
+        );
+    }
+
+    #[tokio::test]
+    async fn a_micromodem_serial_port_that_does_not_exist_is_refused() {
+        let err = refused(
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/no-such-modem\" }\n",
+        )
+        .await;
+        assert_names(
+            &err,
+            &["configuration: driver.serial_port: \"/dev/no-such-modem\" does not exist"],
+        );
+        let dir = scratch("serial-file");
+        let file = dir.join("modem");
+        std::fs::write(&file, "").unwrap();
+        let err = refused(&format!(
+            "modem_id: 1\ndriver {{ driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"{}\" }}\n",
+            file.display()
+        ))
+        .await;
+        assert_names(&err, &["driver.serial_port:", "is not a serial port"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[tokio::test]
+    async fn the_trailer_id_is_refused_only_while_frames_carry_their_identity() {
+        let dir = scratch("trailer-id");
+        let proto = dir.join("clash.proto");
+        std::fs::write(
+            &proto,
+            "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage test;\n\
+             message Clash {\n  option (dccl.msg) = { id: 32001 max_bytes: 8 codec_version: 4 };\n\
+             optional int32 x = 1 [(dccl.field) = { min: 0 max: 7 }];\n}\n",
+        )
+        .unwrap();
+        let text = |queue: &str| {
+            format!(
+                "modem_id: 1\ndccl {{ load_examples: false proto_file: \"{}\" }}\n{queue}\n",
+                proto.display()
+            )
+        };
+        // gobyd turns message identity on unless told otherwise.
+        for queue in ["", "queue { message_identity: true }"] {
+            let err = refused(&text(queue)).await;
+            assert_names(
+                &err,
+                &[
+                    "test.Clash",
+                    "DCCL id 32001 is reserved for the frame identity trailer",
+                    "while message_identity is on",
+                    "receivers read a message with this id as that trailer",
+                    "set message_identity: false",
+                ],
+            );
+        }
+        let types =
+            check(config::parse(&text("queue { message_identity: false }"), "test").unwrap())
+                .expect("accepted without the trailer");
+        assert_eq!(types, ["test.Clash"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[tokio::test]
+    async fn a_start_on_a_callers_driver_leaves_the_driver_section_alone() {
+        // The section names a serial port that does not exist and a slot
+        // too short for the Micro-Modem: neither is the caller's driver's.
+        let dir = scratch("caller");
+        let text = format!(
+            "modem_id: 1\ndriver {{ driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/no-such-modem\" }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 2 slot_seconds: 1 }} }}\n\
+             json {{ tcp_bind: \"\" }}\ndata_dir: \"{}\"\n",
+            dir.display()
+        );
+        let config = config::parse(&text, "test").unwrap();
+        assert!(check(config.clone()).is_err());
+        let driver = modemdriver::sim::SimulatorDriver::start_on(
+            &modemdriver::config::parse_text(
+                "modem_id: 1 simulator { node { modem_id: 1 } } deferred_ack: true",
+            )
+            .unwrap(),
+            modemdriver::sim::medium::Medium::named("validate-caller"),
+        )
+        .unwrap();
+        let daemon = Daemon::start_with_driver(config, driver)
+            .await
+            .expect("starts");
+        daemon.run(async {}).await.unwrap();
+        // The rest is checked all the same.
+        let driver = modemdriver::sim::SimulatorDriver::start_on(
+            &modemdriver::config::parse_text("modem_id: 1 simulator { node { modem_id: 1 } }")
+                .unwrap(),
+            modemdriver::sim::medium::Medium::named("validate-caller"),
+        )
+        .unwrap();
+        let bad = config::parse(&format!("{text}log {{ level: \"loud\" }}\n"), "test").unwrap();
+        let err = Daemon::start_with_driver(bad, driver)
+            .await
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("log.level: \"loud\""), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

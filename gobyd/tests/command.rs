@@ -30,6 +30,35 @@ fn version() {
     );
 }
 
+/// A pseudo-terminal standing for a modem's serial port, open while the
+/// value lives (a configuration naming a port that does not exist is
+/// refused).
+struct SerialPort {
+    _runtime: tokio::runtime::Runtime,
+    pty: modemdriver::link::serial::PtyPair,
+}
+
+impl SerialPort {
+    fn open() -> Self {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let pty = runtime
+            .block_on(async { modemdriver::link::serial::open_pty_pair() })
+            .expect("a pseudo-terminal");
+        SerialPort {
+            _runtime: runtime,
+            pty,
+        }
+    }
+
+    /// `text` with the placeholder port `/dev/ttyUSB0` made this one.
+    fn with_port(&self, text: &str) -> String {
+        text.replace("/dev/ttyUSB0", &self.pty.path)
+    }
+}
+
 fn gobyd(args: &[&str]) -> std::process::Output {
     assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
         .args(args)
@@ -147,17 +176,18 @@ fn check_refuses_a_modem_id_with_no_mac_slot() {
 
 #[test]
 fn check_refuses_settings_that_cannot_work() {
+    let port = SerialPort::open();
     let dir = scratch("command", "gobyd-cannot-work");
     let path = dir.join("bad.pb.txt");
     for (text, expected) in [
         (
             "modem_id: 1\nmac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 9 slot_seconds: 10 } }\n",
-            "rate: 9 }: not a Micro-Modem rate",
+            "mac.slot[0].rate: 9 is not a Micro-Modem rate",
         ),
         (
             "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" }\n\
              mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 1 slot_seconds: 5 } }\n",
-            "a rate-1 packet needs about 7.1 s on the water (3 frames of 64 bytes at 250 bit/s, plus 1 s of probe and header)",
+            "mac.slot[0].slot_seconds: 5 s is too short for a rate-1 packet of 3 frames on the Micro-Modem (needs at least 7.3 s",
         ),
         (
             "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM }\n",
@@ -175,18 +205,18 @@ fn check_refuses_settings_that_cannot_work() {
         ),
         (
             "modem_id: 1\nlog { level: \"warning\" }\n",
-            "log.level \"warning\": \"warning\" is not a level",
+            "log.level: \"warning\": \"warning\" is not a level",
         ),
         (
             "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
              micromodem { nvram_cfg: \"SRC,5\" } }\n",
-            "nvram_cfg \"SRC,5\" sets the modem's address to 5 but modem_id is 1",
+            "driver.micromodem.nvram_cfg[0]: \"SRC,5\" sets the modem's address to 5 but modem_id is 1",
         ),
         (
             "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
              micromodem { application_ack_lifetime_seconds: 30 } }\n\
              mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 1 slot_seconds: 10 } slot { src: 2 rate: 1 slot_seconds: 10 } }\n",
-            "application_ack_lifetime_seconds 30: the TDMA cycle lasts 20 s",
+            "driver.micromodem.application_ack_lifetime_seconds: 30 s is shorter than two TDMA cycles (the cycle lasts 20 s)",
         ),
         (
             "modem_id: 2\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" modem_id: 1 }\n",
@@ -198,18 +228,20 @@ fn check_refuses_settings_that_cannot_work() {
         ),
         (
             "modem_id: 1\njson { tcp_bind: \"127.0.0.1:99999\" }\n",
-            "json.tcp_bind \"127.0.0.1:99999\" is not an address",
+            "json.tcp_bind: \"127.0.0.1:99999\" is not an address",
         ),
         (
             "modem_id: 1\njson { tcp_bind: \"localhost\" }\n",
-            "json.tcp_bind \"localhost\" is not an address",
+            "json.tcp_bind: \"localhost\" is not an address",
         ),
     ] {
-        std::fs::write(&path, text).unwrap();
+        std::fs::write(&path, port.with_port(text)).unwrap();
         let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
         assert_eq!(out.status.code(), Some(2), "{text}");
         let err = stderr_text(&out);
         assert!(err.contains(expected), "{text}: {err}");
+        // Each case has the one problem it is written for.
+        assert!(!err.contains("settings cannot work"), "{text}: {err}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -233,7 +265,8 @@ fn check_refuses_a_dccl_id_the_application_acks_take() {
             proto.display()
         )
     };
-    let mm = "driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\"";
+    let port = SerialPort::open();
+    let mm = &port.with_port("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\"");
     std::fs::write(&path, config(mm)).unwrap();
     let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
@@ -284,9 +317,11 @@ queue_cfg {
     let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr_text(&out));
     let mm = dir.join("mm.pb.txt");
+    let port = SerialPort::open();
     std::fs::write(
         &mm,
-        r#"modem_id: 1
+        port.with_port(
+            r#"modem_id: 1
 driver_cfg {
   driver_type: DRIVER_WHOI_MICROMODEM
   serial_port: "/dev/ttyUSB0"
@@ -297,6 +332,7 @@ driver_cfg {
   }
 }
 "#,
+        ),
     )
     .unwrap();
     let out = gobyd(&["--check", "--config", mm.to_str().unwrap()]);
@@ -439,5 +475,76 @@ fn an_arithmetic_model_defined_twice_is_refused() {
         err.contains("models.txt") && err.contains("\"counts\" is defined twice"),
         "{err}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Settings that parse but cannot work, in files: `--check` refuses each
+/// naming the field and where it is written, and the daemon refuses to
+/// start with the same words.
+#[test]
+fn check_and_start_refuse_what_cannot_work_naming_field_and_place() {
+    let port = SerialPort::open();
+    let dir = scratch("command", "gobyd-limits");
+    let path = dir.join("node.pb.txt");
+    let file = path.display().to_string();
+    for (text, expected) in [
+        (
+            "modem_id: 1\ndriver {\n  driver_type: DRIVER_WHOI_MICROMODEM\n  serial_port: \"/dev/ttyUSB0\"\n}\n\
+             mac {\n  type: MAC_FIXED_DECENTRALIZED\n  slot { src: 1 rate: 2 slot_seconds: 1 }\n}\n",
+            vec![format!(
+                "{file}:8:25: mac.slot[0].slot_seconds: 1 s is too short for a rate-2 packet of 3 frames \
+                 on the Micro-Modem (needs at least 4.2 s"
+            )],
+        ),
+        (
+            "modem_id: 1\nmac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 0 slot_seconds: 3 } }\n",
+            vec![format!(
+                "{file}:2:59: mac.slot[0].slot_seconds: 3 s is too short for a rate-0 packet of 1 frame \
+                 on the simulator (needs at least 3.7 s"
+            )],
+        ),
+        (
+            "modem_id: 1\ndriver_cfg {\n  driver_type: DRIVER_UDP\n  [goby.acomms.udp.protobuf.config] {\n    \
+             local { port: 70000 }\n    remote { modem_id: 2 ip: \"not-an-ip\" port: 50002 }\n  }\n}\n",
+            vec![
+                "2 settings cannot work:".to_string(),
+                format!("{file}:5:13: driver.udp.local.port: 70000 is not a UDP port (0-65535)"),
+                format!("{file}:6:26: driver.udp.remote[0].ip: \"not-an-ip\" is not an IP address"),
+            ],
+        ),
+        (
+            "modem_id: 1\ndriver { driver_type: DRIVER_ACOUSTIC_SIMULATOR\n  simulator { node { modem_id: 1 } packet_loss: 1.5 }\n}\n",
+            vec![format!(
+                "{file}:3:36: driver.simulator.packet_loss: 1.5 is not a probability (0 to 1"
+            )],
+        ),
+        (
+            "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/no-such-modem\" }\n",
+            vec![format!(
+                "{file}:2:46: driver.serial_port: \"/dev/no-such-modem\" does not exist"
+            )],
+        ),
+    ] {
+        std::fs::write(&path, port.with_port(text)).unwrap();
+        let out = gobyd(&["--check", "--config", &file]);
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let checked = stderr_text(&out);
+        assert!(checked.starts_with("gobyd: error: configuration: "), "{checked}");
+        for part in &expected {
+            assert!(checked.contains(part.as_str()), "{part:?} missing from {checked}");
+        }
+        let data = dir.join("data");
+        let out = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .args(["--config", &file, "--json-tcp", "", "--data-dir"])
+            .arg(&data)
+            .env_remove("RUST_BACKTRACE")
+            .env_remove("RUST_LOG")
+            .timeout(std::time::Duration::from_secs(20))
+            .output()
+            .expect("gobyd runs");
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        assert_eq!(stderr_text(&out), checked, "the start refuses it the same");
+        assert!(!data.exists(), "refused before anything is set up");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -218,6 +218,35 @@ fn values_the_codec_would_change_are_refused_naming_field_and_bound() {
 }
 
 #[test]
+fn a_time_the_receiver_would_restore_days_off_is_refused_naming_message_and_field() {
+    let dir = scratch("door", "time");
+    let daemon = Daemon::start(&quiet_config(&dir, "", None));
+    let mut client = daemon.connect();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
+    let report = |time: u64| {
+        format!(
+            r#"{{"publish": "goby.example.NavigationReport", "msg": {{"source": 1, "destination": 2, "time": {time}, "x": 0, "y": 0, "z": 0}}}}"#
+        )
+    };
+    let reply = client.request(&report(now + 3 * 86_400));
+    let error = reply["error"].as_str().unwrap_or_else(|| panic!("{reply}"));
+    for part in [
+        "goby.example.NavigationReport refused: field time:",
+        "3 days after now",
+        "decode it 3 days earlier",
+    ] {
+        assert!(error.contains(part), "{part:?} missing from {error}");
+    }
+    let reply = client.request(&report(now));
+    assert!(reply["id"].as_u64().is_some(), "{reply}");
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn a_clamping_type_is_sent_changed_and_every_change_is_reported_and_logged() {
     let dir = scratch("door", "clamp");
     let port = free_udp_port();

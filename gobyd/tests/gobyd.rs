@@ -602,7 +602,17 @@ fn identical_publications_are_each_delivered_and_acked() {
     let receiver = Node::start(&paths[1]);
     let mut sender = Node::start(&paths[0]);
     sender.send(r#"{"subscribe": ["ack"]}"#);
-    let nav = r#"{"publish": "goby.example.NavigationReport", "msg": {"source": 1, "destination": 2, "time": 1800000000, "x": 10, "y": 20, "z": -5}}"#;
+    // One time for every publication (the same content each time), now:
+    // the time codec carries a time within half a day of the receiver's
+    // clock.
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
+    let nav = format!(
+        r#"{{"publish": "goby.example.NavigationReport", "msg": {{"source": 1, "destination": 2, "time": {now}, "x": 10, "y": 20, "z": -5}}}}"#
+    );
+    let nav = nav.as_str();
     let command = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "same"}}"#;
     // Acks may come in while the later publications wait for their replies.
     let mut acks = 0;

@@ -6,6 +6,7 @@ use std::net::{IpAddr, SocketAddr};
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{udp_driver_config::EndPoint, DriverConfig};
 
+use crate::check::Problem;
 use crate::driver::DriverError;
 
 /// Parses a `DriverConfig` written in protobuf text format, e.g.
@@ -33,17 +34,63 @@ pub fn modem_id(config: &DriverConfig) -> Result<i32, DriverError> {
 }
 
 /// The socket address of a UDP endpoint; `field` names it in errors (e.g.
-/// `UDPDriverConfig.remote[0]`).
+/// `DriverConfig.udp.remote[0]`).
 pub fn endpoint_addr(ep: &EndPoint, field: &str) -> Result<SocketAddr, DriverError> {
+    endpoint(ep, field, Endpoint::Local)
+        .map_err(|p| DriverError::Config(format!("{}: {}", p.field, p.reason)))
+}
+
+/// What a UDP endpoint stands for: a port of this machine to bind (`0`:
+/// any free port), or another node's to send to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Endpoint {
+    /// This node's own endpoint.
+    Local,
+    /// Another node's endpoint.
+    Remote,
+}
+
+/// The socket address of a UDP endpoint, or what is wrong with it (the
+/// first problem; `field` names the endpoint, e.g. `udp.remote[0]`).
+pub fn endpoint(ep: &EndPoint, field: &str, role: Endpoint) -> Result<SocketAddr, Problem> {
     let ip: IpAddr = ep.ip().parse().map_err(|e| {
-        DriverError::Config(format!(
-            "{field}.ip: {:?} is not an IP address ({e})",
-            ep.ip()
-        ))
+        Problem::new(
+            format!("{field}.ip"),
+            format!("{:?} is not an IP address ({e})", ep.ip()),
+        )
     })?;
-    let port = u16::try_from(ep.port)
-        .map_err(|_| DriverError::Config(format!("{field}.port: {} is not a UDP port", ep.port)))?;
+    let port = u16::try_from(ep.port).map_err(|_| {
+        Problem::new(
+            format!("{field}.port"),
+            format!("{} is not a UDP port (0-65535)", ep.port),
+        )
+    })?;
+    if port == 0 && role == Endpoint::Remote {
+        return Err(Problem::new(
+            format!("{field}.port"),
+            "0 is not a port to send to (give the port the other node binds)",
+        ));
+    }
     Ok(SocketAddr::new(ip, port))
+}
+
+/// Every problem of a UDP endpoint (`field` names it, e.g. `udp.local`):
+/// its IP address and its port are checked apart.
+pub fn endpoint_problems(ep: &EndPoint, field: &str, role: Endpoint) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    if let Err(p) = endpoint(ep, field, role) {
+        let ip_problem = p.field.ends_with(".ip");
+        problems.push(p);
+        if ip_problem {
+            // The port too, with an address that parses.
+            let with_ip = EndPoint {
+                ip: Some("127.0.0.1".into()),
+                ..ep.clone()
+            };
+            problems.extend(endpoint(&with_ip, field, role).err());
+        }
+    }
+    problems
 }
 
 #[cfg(test)]

@@ -20,6 +20,10 @@
 //! - [`micromodem::MicroModemDriver`]: the WHOI Micro-Modem, NMEA-0183 over a
 //!   serial port; [`micromodem::emulator`] speaks the modem's side.
 //!
+//! [`check`] finds, without starting a driver, the settings it would
+//! refuse and how long its packets take at each rate (what a TDMA slot
+//! must hold).
+//!
 //! Layers, one concept per module: [`link`] moves lines or datagrams and
 //! composes a fault injector ([`link::fault`]) and a raw tracer
 //! ([`link::trace`]) around any device; [`micromodem::nmea`] and
@@ -28,6 +32,7 @@
 
 #![warn(missing_docs)]
 
+pub mod check;
 pub mod config;
 pub mod driver;
 pub mod link;

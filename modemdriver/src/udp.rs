@@ -22,7 +22,8 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::net::UdpSocket;
 
-use crate::config;
+use crate::check::{self, Problem};
+use crate::config::{self, Endpoint};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, TransmitOutcome, TransmitResult,
@@ -45,11 +46,51 @@ fn udp_config(config: &DriverConfig) -> Result<&UdpDriverConfig, DriverError> {
         .ok_or_else(|| DriverError::Config("DriverConfig.udp: required for the UDP driver".into()))
 }
 
+/// Every problem of a UDP driver configuration that [`UdpDriver::start`]
+/// refuses (see [`crate::check`]); a local port already taken only shows
+/// when it binds.
+pub fn problems(config: &DriverConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    if let Err(DriverError::Config(reason)) = config::modem_id(config) {
+        problems.push(Problem::new(
+            "modem_id",
+            reason.trim_start_matches("DriverConfig.modem_id: "),
+        ));
+    }
+    let Some(udp) = &config.udp else {
+        problems.push(Problem::new("udp", "required for the UDP driver"));
+        return problems;
+    };
+    problems.extend(config::endpoint_problems(
+        &udp.local,
+        "udp.local",
+        Endpoint::Local,
+    ));
+    for (i, ep) in udp.remote.iter().enumerate() {
+        problems.extend(config::endpoint_problems(
+            ep,
+            &format!("udp.remote[{i}]"),
+            Endpoint::Remote,
+        ));
+    }
+    if udp.max_frame_size() <= 0 {
+        problems.push(Problem::new(
+            "udp.max_frame_size",
+            format!(
+                "{} is not a frame size: give the largest frame in bytes (at least 1; leave it out for 1400)",
+                udp.max_frame_size()
+            ),
+        ));
+    }
+    problems
+}
+
 impl UdpDriver {
     /// Binds `udp.local` and starts the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
+        check::refuse(problems(config))?;
         let udp = udp_config(config)?;
-        let local = config::endpoint_addr(&udp.local, "UDPDriverConfig.local")?;
+        let local = config::endpoint_addr(&udp.local, "DriverConfig.udp.local")?;
         let socket = UdpSocket::bind(local)
             .await
             .map_err(|e| DriverError::io(format!("cannot bind UDP {local}"), e))?;
@@ -69,21 +110,19 @@ impl UdpDriver {
         socket: UdpSocket,
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
+        check::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let udp = udp_config(config)?;
         let mut remotes = Vec::new();
         for (i, ep) in udp.remote.iter().enumerate() {
             remotes.push((
                 ep.modem_id(),
-                config::endpoint_addr(ep, &format!("UDPDriverConfig.remote[{i}]"))?,
+                config::endpoint(ep, &format!("udp.remote[{i}]"), Endpoint::Remote)
+                    .map_err(Problem::into_error)?,
             ));
         }
-        let max_frame_size = u32::try_from(udp.max_frame_size()).map_err(|_| {
-            DriverError::Config(format!(
-                "UDPDriverConfig.max_frame_size: {} is negative",
-                udp.max_frame_size()
-            ))
-        })?;
+        let max_frame_size = u32::try_from(udp.max_frame_size())
+            .map_err(|_| Problem::new("udp.max_frame_size", "is negative").into_error())?;
         let mut ack_ids = vec![modem_id];
         ack_ids.extend(
             udp.additional_application_ack_modem_id

@@ -28,8 +28,10 @@ use dccl::Codec;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::FrameIdentity;
 
-/// DCCL id of [`FrameIdentity`] (two header bytes; reserved: a type of
-/// the user's with this id is refused).
+/// DCCL id of [`FrameIdentity`] (two header bytes; reserved while
+/// `message_identity` is on: a type of the user's with this id is then
+/// refused; with it off such a type is carried, and received frames are
+/// not read for trailers).
 pub const DCCL_ID: u32 = 32001;
 
 /// Publication numbers run modulo this (11 bits).

@@ -189,6 +189,18 @@ impl QueueManager {
         Ok(manager)
     }
 
+    /// Whether received frames are read for a [`FrameIdentity`] trailer:
+    /// unless a type of this node has the trailer's DCCL id (which it may
+    /// only with `message_identity` off), whose messages are then decoded
+    /// as that type.
+    ///
+    /// [`FrameIdentity`]: protos::goby::acomms::protobuf::FrameIdentity
+    fn reads_trailers(&self) -> bool {
+        self.queues
+            .binary_search_by_key(&identity::DCCL_ID, |q| q.id)
+            .is_err()
+    }
+
     /// Current time on the manager's clock.
     pub fn now(&self) -> Micros {
         self.clock.now()
@@ -216,11 +228,15 @@ impl QueueManager {
                 reason: "this message type is not loaded in the DCCL codec".into(),
             })?;
         let id = self.codec.id_of(name)?;
-        if id == identity::DCCL_ID {
+        if id == identity::DCCL_ID && self.send_identity {
             return Err(QueueError::Config {
                 message: name.to_string(),
                 reason: format!(
-                    "DCCL id {id} is reserved for the frame trailer goby.acomms.protobuf.FrameIdentity"
+                    "DCCL id {id} is reserved for the frame identity trailer \
+                     (goby.acomms.protobuf.FrameIdentity) that ends every frame sent while \
+                     message_identity is on, and receivers read a message with this id as that \
+                     trailer; give the type another id, or set message_identity: false (plain \
+                     DCCL frames, as Goby3 sends; the nodes receiving this type need it off too)"
                 ),
             });
         }
@@ -605,7 +621,7 @@ impl QueueManager {
                 if !decoded.is_empty() && rest.iter().all(|&b| b == 0) {
                     break;
                 }
-                if self.trailer.starts_trailer(rest) {
+                if self.reads_trailers() && self.trailer.starts_trailer(rest) {
                     // The identities of the messages before it, in order;
                     // nothing follows but padding.
                     match self.trailer.decode(rest) {

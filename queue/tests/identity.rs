@@ -169,7 +169,7 @@ fn a_message_filling_the_frame_goes_alone_without_identity() {
 }
 
 #[test]
-fn a_type_with_the_reserved_id_is_refused() {
+fn the_reserved_id_is_refused_only_while_frames_carry_their_identity() {
     let pool = dccl::compile_sources(&[(
         "reserved.proto",
         r#"syntax = "proto2";
@@ -181,19 +181,57 @@ message Clash {
 }"#,
     )])
     .unwrap();
+    let desc = pool.get_message_by_name("test.reserved.Clash").unwrap();
     let mut codec = dccl::Codec::new();
-    codec
-        .load(&pool.get_message_by_name("test.reserved.Clash").unwrap())
-        .unwrap();
-    let config = QueueManagerConfig {
-        modem_id: Some(1),
+    codec.load(&desc).unwrap();
+    let codec = std::sync::Arc::new(codec);
+    let config = |modem_id: i32, identity: bool| QueueManagerConfig {
+        modem_id: Some(modem_id),
         message_entry: vec![protos::goby::acomms::protobuf::QueuedMessageEntry {
             protobuf_name: "test.reserved.Clash".into(),
+            ack: Some(false),
             ..Default::default()
         }],
+        message_identity: Some(identity),
         ..Default::default()
     };
-    let err = queue::QueueManager::new(std::sync::Arc::new(codec), &config).unwrap_err();
-    assert!(err.to_string().contains("reserved"), "{err}");
-    assert!(err.to_string().contains("test.reserved.Clash"), "{err}");
+    // With message identity on, the id is the trailer's: refused, saying why.
+    let err = queue::QueueManager::new(codec.clone(), &config(1, true))
+        .unwrap_err()
+        .to_string();
+    for part in [
+        "test.reserved.Clash",
+        "reserved for the frame identity trailer",
+        "receivers read a message with this id as that trailer",
+        "message_identity: false",
+    ] {
+        assert!(err.contains(part), "{part} missing from {err}");
+    }
+    // Off: the type is carried, and received as itself (not as a trailer).
+    let mut sender = queue::QueueManager::new(codec.clone(), &config(1, false)).unwrap();
+    let mut receiver = queue::QueueManager::new(codec.clone(), &config(2, false)).unwrap();
+    let events = receiver.subscribe();
+    let mut message = prost_reflect::DynamicMessage::new(desc);
+    message.set_field_by_name("x", prost_reflect::Value::U32(5));
+    sender.push(&message).unwrap();
+    let mut tx = ModemTransmission {
+        max_frame_bytes: Some(32),
+        max_num_frames: Some(1),
+        dest: Some(2),
+        ..Default::default()
+    };
+    sender.handle_modem_data_request(&mut tx).unwrap();
+    tx.src = Some(1);
+    assert_eq!(tx.frame[0], codec.encode(&message).unwrap(), "no trailer");
+    assert!(receiver.handle_modem_receive(&tx).is_empty());
+    let got: Vec<ReceivedMessage> = events
+        .try_iter()
+        .filter_map(|e| match e {
+            QueueEvent::Received(r) => Some(r),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(got[0].message, message);
+    assert!(got[0].identity.is_none());
 }

@@ -10,7 +10,7 @@ use prost_reflect::{Kind, Value};
 use crate::bits::{BitReader, BitWriter};
 use crate::codecs::numeric::{NumericBounds, WireKind, WireValue};
 use crate::error::CodecError;
-use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec};
+use crate::field_codec::{DateShift, DecodeContext, EncodeContext, FieldCodec, FieldSpec};
 use crate::rounding::{pow10, round_f64};
 
 const SECONDS_IN_DAY: f64 = 86400.0;
@@ -175,6 +175,23 @@ impl FieldCodec for TimeCodec {
         Ok(match self.bounds.decode(input)? {
             Some(WireValue::F64(t)) => Some(self.time_of_day_to_value(t, ctx.now_secs)),
             _ => None,
+        })
+    }
+    fn date_shift(&self, value: &Value, now_secs: i64) -> Option<DateShift> {
+        let of_day = self.to_time_of_day(value).ok()?;
+        if !(of_day.is_finite() && of_day >= 0.0) || self.bounds.max <= 0.0 {
+            return None;
+        }
+        let seconds = |v: &Value| match v {
+            Value::F64(x) => Some(*x),
+            Value::I64(x) => Some(*x as f64 / self.conversion),
+            Value::U64(x) => Some(*x as f64 / self.conversion),
+            _ => None,
+        };
+        Some(DateShift {
+            sent_secs: seconds(value)?,
+            restored_secs: seconds(&self.time_of_day_to_value(of_day, now_secs))?,
+            span_secs: self.bounds.max,
         })
     }
 }

@@ -40,7 +40,8 @@ use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
-use crate::config;
+use crate::check::{self, Problem};
+use crate::config::{self, Endpoint};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
@@ -62,12 +63,14 @@ impl SimulatorDriver {
     /// `simulator.channel`, and on UDP when `udp_local` is set.
     /// Must be called within a tokio runtime.
     pub fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
+        check::refuse(problems(config))?;
         let sim = sim_config(config)?;
         let medium = Medium::named(sim.channel());
         let udp = match &sim.udp_local {
             None => None,
             Some(local) => {
-                let addr = config::endpoint_addr(local, "SimulatorDriverConfig.udp_local")?;
+                let addr = config::endpoint(local, "simulator.udp_local", Endpoint::Local)
+                    .map_err(Problem::into_error)?;
                 let bound = std::net::UdpSocket::bind(addr)
                     .and_then(|s| s.set_nonblocking(true).map(|()| s))
                     .and_then(UdpSocket::from_std)
@@ -78,7 +81,8 @@ impl SimulatorDriver {
                     .iter()
                     .enumerate()
                     .map(|(i, p)| {
-                        config::endpoint_addr(p, &format!("SimulatorDriverConfig.udp_peer[{i}]"))
+                        config::endpoint(p, &format!("simulator.udp_peer[{i}]"), Endpoint::Remote)
+                            .map_err(Problem::into_error)
                     })
                     .collect::<Result<Vec<_>, _>>()?;
                 Some(UdpMedium::new(socket, peers))
@@ -110,51 +114,96 @@ impl SimulatorDriver {
         udp: Option<UdpMedium>,
         clock: Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
+        check::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let sim = sim_config(config)?.clone();
-        if !sim.sound_speed().is_finite() || sim.sound_speed() <= 0.0 {
-            return Err(DriverError::Config(format!(
-                "SimulatorDriverConfig.sound_speed: {} is not positive",
-                sim.sound_speed()
-            )));
-        }
-        if !(0.0..=1.0).contains(&sim.packet_loss()) {
-            return Err(DriverError::Config(format!(
-                "SimulatorDriverConfig.packet_loss: {} is not a probability",
-                sim.packet_loss()
-            )));
-        }
-        if !sim.packet_overhead_seconds().is_finite() || sim.packet_overhead_seconds() < 0.0 {
-            return Err(DriverError::Config(format!(
-                "SimulatorDriverConfig.packet_overhead_seconds: {} is negative",
-                sim.packet_overhead_seconds()
-            )));
-        }
-        for (i, n) in sim.node.iter().enumerate() {
-            if ![n.x(), n.y(), n.z()].iter().all(|v| v.is_finite()) {
-                return Err(DriverError::Config(format!(
-                    "SimulatorDriverConfig.node[{i}]: position of modem_id {} is not finite",
-                    n.modem_id
-                )));
-            }
-        }
-        let position = |id: i32| {
-            sim.node
-                .iter()
-                .find(|n| n.modem_id == id)
-                .map(|n| Position::new(n.x(), n.y(), n.z()))
-        };
-        if position(modem_id).is_none() {
-            return Err(DriverError::Config(format!(
-                "SimulatorDriverConfig.node: no position for this node's modem_id {modem_id}"
-            )));
-        }
         let airborne = medium.join(modem_id);
         let deferred_ack = config.deferred_ack();
         Ok(Driver::spawn_with_clock("simulator", clock, move |ctx| {
             run(modem_id, sim, deferred_ack, medium, udp, airborne, ctx)
         }))
     }
+}
+
+/// Every problem of a simulator configuration that the driver refuses at
+/// start (see [`crate::check`]); a UDP port already taken only shows when
+/// it binds.
+pub fn problems(config: &DriverConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let modem_id = match config::modem_id(config) {
+        Ok(id) => Some(id),
+        Err(DriverError::Config(reason)) => {
+            problems.push(Problem::new(
+                "modem_id",
+                reason.trim_start_matches("DriverConfig.modem_id: "),
+            ));
+            None
+        }
+        Err(_) => None,
+    };
+    let Some(sim) = &config.simulator else {
+        problems.push(Problem::new(
+            "simulator",
+            "required for the simulator driver",
+        ));
+        return problems;
+    };
+    let mut problem = |field: &str, reason: String| {
+        problems.push(Problem::new(format!("simulator.{field}"), reason))
+    };
+    if !sim.sound_speed().is_finite() || sim.sound_speed() <= 0.0 {
+        problem(
+            "sound_speed",
+            format!("{} is not a speed (m/s, positive)", sim.sound_speed()),
+        );
+    }
+    if !(0.0..=1.0).contains(&sim.packet_loss()) {
+        problem(
+            "packet_loss",
+            format!(
+                "{} is not a probability (0 to 1: 0 loses nothing, 1 every packet)",
+                sim.packet_loss()
+            ),
+        );
+    }
+    let overhead = sim.packet_overhead_seconds();
+    if !overhead.is_finite() || overhead < 0.0 || Duration::try_from_secs_f64(overhead).is_err() {
+        problem(
+            "packet_overhead_seconds",
+            format!("{overhead} is not a time in seconds (0 or more)"),
+        );
+    }
+    for (i, n) in sim.node.iter().enumerate() {
+        if ![n.x(), n.y(), n.z()].iter().all(|v| v.is_finite()) {
+            problem(
+                &format!("node[{i}]"),
+                format!("position of modem_id {} is not finite", n.modem_id),
+            );
+        }
+    }
+    if let Some(id) = modem_id {
+        if !sim.node.iter().any(|n| n.modem_id == id) {
+            problem(
+                "node",
+                format!("no position for this node's modem_id {id} (add node {{ modem_id: {id} x: ... }})"),
+            );
+        }
+    }
+    if let Some(local) = &sim.udp_local {
+        problems.extend(config::endpoint_problems(
+            local,
+            "simulator.udp_local",
+            Endpoint::Local,
+        ));
+    }
+    for (i, peer) in sim.udp_peer.iter().enumerate() {
+        problems.extend(config::endpoint_problems(
+            peer,
+            &format!("simulator.udp_peer[{i}]"),
+            Endpoint::Remote,
+        ));
+    }
+    problems
 }
 
 fn sim_config(config: &DriverConfig) -> Result<&SimulatorDriverConfig, DriverError> {

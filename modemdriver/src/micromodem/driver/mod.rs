@@ -120,6 +120,7 @@ use protos::goby::acomms::protobuf::{
 };
 
 use super::application_ack::{self, ApplicationAcks};
+use crate::check::{self, Problem};
 use crate::config;
 use crate::driver::{Driver, DriverError};
 use crate::link::fault::{FaultConfig, FaultScript};
@@ -178,6 +179,11 @@ impl MicroModemDriver {
         script: FaultScript,
     ) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
+        check::refuse(
+            check::serial_port_problem(config.serial_port())
+                .into_iter()
+                .collect(),
+        )?;
         let port = shell::Port {
             path: config.serial_port.clone().unwrap_or_default(),
             baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
@@ -194,42 +200,69 @@ impl MicroModemDriver {
     }
 }
 
-/// The machine's settings from the driver configuration, checked.
-pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    let modem_id = config::modem_id(config)?;
-    let modem_id = u32::try_from(modem_id)
-        .ok()
-        .filter(|id| (1..=127).contains(id))
-        .ok_or_else(|| {
-            DriverError::Config(format!(
-                "DriverConfig.modem_id: {modem_id} is not a Micro-Modem id (1-127)"
-            ))
-        })?;
-    if config.connection_type() != ConnectionType::ConnectionSerial {
-        return Err(DriverError::Config(format!(
-            "DriverConfig.connection_type: {:?} is not supported by the Micro-Modem driver (only CONNECTION_SERIAL)",
-            config.connection_type()
-        )));
+/// Every problem of a Micro-Modem configuration that [`settings`] refuses
+/// (see [`crate::check`], which adds a serial port that does not exist).
+pub fn problems(config: &DriverConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let modem_id = match config::modem_id(config) {
+        Ok(id) => u32::try_from(id).ok().filter(|id| (1..=127).contains(id)),
+        Err(_) => None,
+    };
+    if modem_id.is_none() {
+        problems.push(Problem::new(
+            "modem_id",
+            match config.modem_id {
+                Some(id) => format!("{id} is not a Micro-Modem id (1-127)"),
+                None => "required field is not set".into(),
+            },
+        ));
     }
-    if config.serial_port.is_none() {
-        return Err(DriverError::Config(
-            "DriverConfig.serial_port: required for CONNECTION_SERIAL".into(),
+    if config.connection_type() != ConnectionType::ConnectionSerial {
+        problems.push(Problem::new(
+            "connection_type",
+            format!(
+                "{:?} is not supported by the Micro-Modem driver (only CONNECTION_SERIAL)",
+                config.connection_type()
+            ),
+        ));
+    } else if config.serial_port().trim().is_empty() {
+        problems.push(Problem::new(
+            "serial_port",
+            "required for the Micro-Modem (e.g. \"/dev/ttyUSB0\")",
         ));
     }
     let mm = config.micromodem.clone().unwrap_or_default();
-    for (i, cfg) in mm.nvram_cfg.iter().enumerate() {
-        if cfg.split_once(',').is_none() {
-            return Err(DriverError::Config(format!(
-                "MicroModemConfig.nvram_cfg[{i}]: {cfg:?} is not KEY,VALUE"
-            )));
+    for (i, entry) in mm.nvram_cfg.iter().enumerate() {
+        if entry.trim_start().starts_with('$') || entry.contains('*') || !entry.contains(',') {
+            problems.push(Problem::new(
+                format!("micromodem.nvram_cfg[{i}]"),
+                format!(
+                    "{entry:?}: give KEY,VALUE (e.g. \"DQF,1\"); the driver writes the $CCCFG sentence around it"
+                ),
+            ));
         }
     }
-    if mm.use_application_acks() && modem_id > application_ack::MAX_MODEM_ID {
-        return Err(DriverError::Config(format!(
-            "MicroModemConfig.use_application_acks: modem_id {modem_id} cannot be named in an application ack (ids 0-{})",
-            application_ack::MAX_MODEM_ID
-        )));
+    if let Some(id) = modem_id {
+        if mm.use_application_acks() && id > application_ack::MAX_MODEM_ID {
+            problems.push(Problem::new(
+                "micromodem.use_application_acks",
+                format!(
+                    "modem_id {id}: the Micro-Modem's application acks name nodes 0-{}; use a lower id, \
+                     or set use_application_acks: false (acks then come from the modem, on decode)",
+                    application_ack::MAX_MODEM_ID
+                ),
+            ));
+        }
     }
+    problems
+}
+
+/// The machine's settings from the driver configuration, checked.
+pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
+    check::refuse(problems(config))?;
+    let modem_id = u32::try_from(config::modem_id(config)?)
+        .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
+    let mm = config.micromodem.clone().unwrap_or_default();
     let app_acks = if mm.use_application_acks() {
         Some(
             ApplicationAcks::new(

@@ -1,0 +1,303 @@
+//! Checks of a driver configuration without starting the driver: every
+//! setting the driver it names would refuse at start ([`problems`]), and
+//! how long a data packet of each rate takes on its water
+//! ([`data_packet_time`]), which a TDMA slot must hold.
+//!
+//! The drivers refuse these settings at start with the same words (a
+//! [`DriverError::Config`] naming the first problem), so a configuration
+//! that passes here fails at start only for what only starting shows: a
+//! UDP port already taken, a serial device that is not a terminal.
+
+use std::time::Duration;
+
+use protos::goby::acomms::protobuf::{driver_config, DriverConfig, DriverType};
+
+use crate::driver::DriverError;
+use crate::rate::{self, RateSpec};
+
+/// A driver setting that cannot work.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// The field, as a path from `DriverConfig`: `udp.local.port`,
+    /// `simulator.packet_loss`, `serial_port`.
+    pub field: String,
+    /// What is wrong with its value, and what would work.
+    pub reason: String,
+}
+
+impl Problem {
+    /// A problem of `field` (a path from `DriverConfig`).
+    pub fn new(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Problem {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// The error a driver refuses to start with:
+    /// `DriverConfig.FIELD: REASON`.
+    pub fn into_error(self) -> DriverError {
+        DriverError::Config(format!("DriverConfig.{self}"))
+    }
+}
+
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.field, self.reason)
+    }
+}
+
+/// `Err` with the first of `problems`, as a driver refuses to start.
+pub(crate) fn refuse(problems: Vec<Problem>) -> Result<(), DriverError> {
+    match problems.into_iter().next() {
+        Some(problem) => Err(problem.into_error()),
+        None => Ok(()),
+    }
+}
+
+/// The built-in driver a configuration names, if it names one by type.
+pub fn driver_type(config: &DriverConfig) -> Option<DriverType> {
+    match &config.driver {
+        Some(driver_config::Driver::DriverType(t)) => DriverType::try_from(*t).ok(),
+        Some(driver_config::Driver::DriverName(_)) => None,
+        None => Some(DriverType::DriverNone),
+    }
+}
+
+/// Every problem of `config` that the driver it names would refuse at
+/// start (none for drivers that are not built in: their user says which
+/// drivers it runs). For the Micro-Modem this includes a `serial_port`
+/// that does not exist or is not a character device; the port is not
+/// opened (a running driver may hold it).
+pub fn problems(config: &DriverConfig) -> Vec<Problem> {
+    match driver_type(config) {
+        Some(DriverType::DriverAcousticSimulator) => crate::sim::problems(config),
+        Some(DriverType::DriverUdp) => crate::udp::problems(config),
+        Some(DriverType::DriverWhoiMicromodem) => {
+            let mut problems = crate::micromodem::driver::problems(config);
+            if !problems.iter().any(|p| p.field == "serial_port") {
+                problems.extend(serial_port_problem(config.serial_port()));
+            }
+            problems
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// Why the serial port at `path` cannot be opened, if that shows without
+/// opening it: it does not exist, or is not a character device (a serial
+/// port, a USB adapter, a pseudo-terminal).
+pub fn serial_port_problem(path: &str) -> Option<Problem> {
+    let problem = |reason: String| Some(Problem::new("serial_port", reason));
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => problem(format!(
+            "{path:?} does not exist (is the modem's serial adapter plugged in, and is this its path?)"
+        )),
+        Err(e) => problem(format!("{path:?}: {e}")),
+        Ok(meta) if !is_character_device(&meta) => problem(format!(
+            "{path:?} is not a serial port (not a character device such as /dev/ttyUSB0)"
+        )),
+        Ok(_) => None,
+    }
+}
+
+#[cfg(unix)]
+fn is_character_device(meta: &std::fs::Metadata) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    meta.file_type().is_char_device()
+}
+
+#[cfg(not(unix))]
+fn is_character_device(meta: &std::fs::Metadata) -> bool {
+    !meta.is_dir()
+}
+
+/// How long a full data packet of one rate takes on a driver's water, as
+/// the driver judges whether a transmission still fits in its slot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PacketTime {
+    /// What sends it, for messages: "the Micro-Modem", "the simulator".
+    pub driver: &'static str,
+    /// The rate: frames, frame size and bit rate.
+    pub spec: RateSpec,
+    /// Probe and header time on top of the frames.
+    pub overhead: Duration,
+    /// Time the driver allows on top of the packet when it hands the last
+    /// frame over ([`HAND_OVER`](crate::micromodem::driver::HAND_OVER) on
+    /// the Micro-Modem).
+    pub hand_over: Duration,
+}
+
+impl PacketTime {
+    /// Time on the water: the overhead and every frame's bits.
+    pub fn on_water(&self) -> Duration {
+        self.spec.packet_duration(self.overhead)
+    }
+
+    /// The shortest slot that can carry the packet: the driver starts no
+    /// packet that would not end within its slot (the hand-over included),
+    /// and the slot has opened before the driver is asked. Any time to
+    /// the farthest node and back (acks) comes on top.
+    pub fn shortest_slot(&self) -> Duration {
+        self.on_water() + self.hand_over
+    }
+}
+
+/// The time of a full data packet at `rate` with the driver of `config`;
+/// `None` for drivers whose packets take no time to speak of (UDP), for
+/// rates the driver does not have and for settings that are not valid
+/// (see [`problems`]).
+pub fn data_packet_time(config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+    let spec = rate::spec(rate)?;
+    match driver_type(config)? {
+        DriverType::DriverWhoiMicromodem => Some(PacketTime {
+            driver: "the Micro-Modem",
+            spec,
+            overhead: crate::micromodem::driver::PACKET_OVERHEAD,
+            hand_over: crate::micromodem::driver::HAND_OVER,
+        }),
+        DriverType::DriverAcousticSimulator => {
+            let overhead = config
+                .simulator
+                .as_ref()
+                .map_or(0.5, |s| s.packet_overhead_seconds());
+            Some(PacketTime {
+                driver: "the simulator",
+                spec,
+                overhead: Duration::try_from_secs_f64(overhead).ok()?,
+                hand_over: Duration::ZERO,
+            })
+        }
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protos::goby::acomms::protobuf::{udp_driver_config::EndPoint, UdpDriverConfig};
+
+    fn of_type(t: DriverType) -> DriverConfig {
+        DriverConfig {
+            modem_id: Some(1),
+            driver: Some(driver_config::Driver::DriverType(t as i32)),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn packet_times_are_the_drivers_own() {
+        let mm = of_type(DriverType::DriverWhoiMicromodem);
+        let rate2 = data_packet_time(&mm, 2).unwrap();
+        // Three 64-byte frames at 500 bit/s, 1 s of probe and header, the
+        // hand-over on top.
+        assert_eq!(rate2.on_water(), Duration::from_micros(4_072_000));
+        assert_eq!(rate2.shortest_slot(), Duration::from_micros(4_172_000));
+        assert!(data_packet_time(&mm, 7).is_none());
+        let mut sim = of_type(DriverType::DriverAcousticSimulator);
+        assert_eq!(
+            data_packet_time(&sim, 6).unwrap().shortest_slot(),
+            Duration::from_millis(1140),
+            "0.64 s of frames and the default 0.5 s overhead"
+        );
+        sim.simulator = Some(protos::goby::acomms::protobuf::SimulatorDriverConfig {
+            packet_overhead_seconds: Some(0.05),
+            ..Default::default()
+        });
+        assert_eq!(
+            data_packet_time(&sim, 6).unwrap().shortest_slot(),
+            Duration::from_millis(690)
+        );
+        assert!(data_packet_time(&of_type(DriverType::DriverUdp), 2).is_none());
+    }
+
+    #[test]
+    fn every_bad_endpoint_value_is_named() {
+        let mut udp = of_type(DriverType::DriverUdp);
+        udp.udp = Some(UdpDriverConfig {
+            local: EndPoint {
+                port: 70_000,
+                ..Default::default()
+            },
+            remote: vec![EndPoint {
+                modem_id: Some(2),
+                ip: Some("not-an-ip".into()),
+                port: 0,
+            }],
+            ..Default::default()
+        });
+        let fields: Vec<String> = problems(&udp).into_iter().map(|p| p.field).collect();
+        assert_eq!(
+            fields,
+            ["udp.local.port", "udp.remote[0].ip", "udp.remote[0].port"]
+        );
+    }
+
+    #[tokio::test]
+    async fn the_drivers_refuse_at_start_what_the_check_finds() {
+        use protos::goby::acomms::protobuf::{
+            simulator_driver_config::NodePosition, SimulatorDriverConfig,
+        };
+        let refused = |found: &[Problem], err: DriverError| {
+            assert_eq!(found.len(), 1, "{found:?}");
+            let err = err.to_string();
+            assert!(
+                err.ends_with(&format!("DriverConfig.{}", found[0])),
+                "{err} / {found:?}"
+            );
+        };
+        let mut sim = of_type(DriverType::DriverAcousticSimulator);
+        sim.simulator = Some(SimulatorDriverConfig {
+            packet_loss: Some(1.5),
+            node: vec![NodePosition {
+                modem_id: 1,
+                ..Default::default()
+            }],
+            ..Default::default()
+        });
+        let found = problems(&sim);
+        assert_eq!(found[0].field, "simulator.packet_loss");
+        refused(
+            &found,
+            crate::sim::SimulatorDriver::start(&sim).unwrap_err(),
+        );
+
+        let mut udp = of_type(DriverType::DriverUdp);
+        udp.udp = Some(UdpDriverConfig {
+            local: EndPoint {
+                port: 70_000,
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let found = problems(&udp);
+        assert_eq!(found[0].field, "udp.local.port");
+        refused(
+            &found,
+            crate::udp::UdpDriver::start(&udp).await.unwrap_err(),
+        );
+
+        let mut mm = of_type(DriverType::DriverWhoiMicromodem);
+        mm.serial_port = Some("/no/such/tty".into());
+        let found = problems(&mm);
+        assert_eq!(found[0].field, "serial_port");
+        refused(
+            &found,
+            crate::micromodem::MicroModemDriver::start(&mm).unwrap_err(),
+        );
+    }
+
+    #[test]
+    fn a_serial_port_must_exist_and_be_a_device() {
+        let missing = serial_port_problem("/no/such/tty").unwrap();
+        assert_eq!(missing.field, "serial_port");
+        assert!(missing.reason.contains("does not exist"), "{missing}");
+        let file = std::env::temp_dir().join(format!("not-a-tty-{}", std::process::id()));
+        std::fs::write(&file, "").unwrap();
+        let plain = serial_port_problem(file.to_str().unwrap()).unwrap();
+        assert!(plain.reason.contains("not a serial port"), "{plain}");
+        std::fs::remove_file(&file).unwrap();
+        #[cfg(unix)]
+        assert_eq!(serial_port_problem("/dev/null"), None);
+    }
+}
