@@ -25,7 +25,7 @@ pub struct WatchArgs {
     /// The topic prefix the gateways publish under (their `mqtt.topic_prefix`).
     #[arg(value_name = "PREFIX")]
     pub prefix: String,
-    /// The broker, HOST[:PORT] (PORT 1883 when left out, as gobyd's
+    /// The broker, `HOST[:PORT]` (PORT 1883 when left out, as gobyd's
     /// `mqtt.broker`; an IPv6 address in brackets).
     #[arg(long, default_value = "127.0.0.1:1883")]
     pub broker: String,

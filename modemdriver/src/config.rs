@@ -1,4 +1,4 @@
-//! Reading a [`DriverConfig`](protos::goby::acomms::protobuf::DriverConfig)
+//! Reading a [`DriverConfig`]
 //! from protobuf text format, and checks shared by the drivers.
 
 use std::net::{IpAddr, SocketAddr};

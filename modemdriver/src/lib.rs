@@ -2,7 +2,7 @@
 //!
 //! No two acoustic modems speak alike. The rest of the stack talks to a
 //! [`Driver`]: it asks for a transmission with a
-//! [`ModemTransmission`](protos::goby::acomms::protobuf::ModemTransmission)
+//! [`ModemTransmission`]
 //! and reads [`DriverEvent`]s — received transmissions, transmit results, data
 //! requests (the driver asks the layer above to fill frames at the moment of
 //! sending), raw lines or datagrams for logging, and status reports (faults

@@ -9,7 +9,7 @@
 //! runtime (the [`moos_bridge`](crate::moos_bridge) drives it in `gobyd`).
 //!
 //! Modules: [`technique`] (protobuf text and encodings, prefixed or not),
-//! [`key_value`] (`KEY=value,...`), [`format`] (`%N%` format strings),
+//! [`key_value`] (`KEY=value,...`), [`format`](mod@format) (`%N%` format strings),
 //! [`field_text`] (a field's value as text), [`algorithm`] (the
 //! algorithms), [`local_grid`] (the mission's local grid) and
 //! [`modem_id`] (the modem-id lookup file).

@@ -11,10 +11,10 @@
 //! handled as ever.
 //!
 //! The state is split by concept, each in its module:
-//! [`startup`](super::startup) (configuration, host commands and their
-//! answers), [`cycle`](super::cycle) (the transmit cycle and its slot),
-//! [`fill`](super::fill) (data requests outstanding),
-//! [`reception`](super::reception) (receptions, statistics, acks heard);
+//! `startup` (configuration, host commands and their
+//! answers), `cycle` (the transmit cycle and its slot),
+//! `fill` (data requests outstanding),
+//! `reception` (receptions, statistics, acks heard);
 //! this module holds the link's state and routes each input.
 
 use std::time::Duration;

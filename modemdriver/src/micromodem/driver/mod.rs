@@ -61,7 +61,7 @@
 //! `MICROMODEM_REMUS_LBL_RANGING` → `$CCPDT`,
 //! `MICROMODEM_NARROWBAND_LBL_RANGING` → `$CCPNT`,
 //! `MICROMODEM_HARDWARE_CONTROL` → `$CCMEC`. Results come back as
-//! [`DriverEvent::Specific`] with the same message: ranging reply from
+//! [`DriverEvent::Specific`](crate::DriverEvent::Specific) with the same message: ranging reply from
 //! `$CAMPR` or `$SNTTA`, mini-packet from `$CAMUA`, hardware line answer
 //! (`MICROMODEM_HARDWARE_CONTROL_REPLY`) from `$CAMER`.
 //!
@@ -93,13 +93,13 @@
 //! commands being taken or timers firing.
 //!
 //! - [`machine`]: the machine's inputs, outputs, state and dispatch.
-//! - [`startup`]: start-up and configuration; host commands and their
+//! - `startup`: start-up and configuration; host commands and their
 //!   answers.
-//! - [`cycle`]: the transmit cycle and the slot it must end in.
-//! - [`fill`]: data requests to the layer above (answered later, as an
+//! - `cycle`: the transmit cycle and the slot it must end in.
+//! - `fill`: data requests to the layer above (answered later, as an
 //!   input).
-//! - [`reception`]: receptions, their statistics, acks heard.
-//! - [`specific`]: Micro-Modem specifics (pings, LBL ranging, mini-packets,
+//! - `reception`: receptions, their statistics, acks heard.
+//! - `specific`: Micro-Modem specifics (pings, LBL ranging, mini-packets,
 //!   hardware lines).
 //! - [`shell`]: the async task: serial link, clock, timers.
 
