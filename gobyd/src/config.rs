@@ -118,7 +118,7 @@ pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
                 }
                 None => origin.to_string(),
             },
-            reason: e.to_string(),
+            reason: with_goby_hint(e.to_string()),
         })?;
     let mut config = dynamic
         .transcode_to::<GobydConfig>()
@@ -146,6 +146,35 @@ pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
         }
     }
     Ok(config)
+}
+
+/// Goby configuration keys with no field of that name here, and what to
+/// write instead.
+const GOBY_KEYS: &[(&str, &str)] = &[
+    (
+        "load_proto_file",
+        "pAcommsHandler's load_proto_file is written here as dccl { proto_file: \"PATH\" } (repeat proto_file for more files; dccl { include_dir } for imports)",
+    ),
+    (
+        "load_shared_library",
+        "gobyd loads no C++ libraries: give the .proto files the library was generated from, as dccl { proto_file: \"PATH\" }",
+    ),
+    (
+        "driver_type",
+        "the driver type goes in the driver section: driver { driver_type: DRIVER_WHOI_MICROMODEM ... } (Goby3's driver_cfg { ... } is read too)",
+    ),
+];
+
+/// A text-format parser's reason, with a hint when the unknown field is a
+/// Goby key that is written differently here.
+fn with_goby_hint(reason: String) -> String {
+    match GOBY_KEYS
+        .iter()
+        .find(|(key, _)| reason.contains(&format!("field '{key}' not found")))
+    {
+        Some((_, hint)) => format!("{reason}: {hint}"),
+        None => reason,
+    }
 }
 
 /// Byte offset of a text-format error, if the parser gives one.
@@ -1310,6 +1339,29 @@ mod tests {
         config = complete(config).unwrap();
         let err = load_definitions(&config).unwrap_err().to_string();
         assert!(err.contains("/no/such.proto: no such file"), "{err}");
+    }
+
+    #[test]
+    fn goby_keys_written_differently_here_say_how() {
+        for (text, hint) in [
+            (
+                "load_proto_file: \"/x/nav.proto\"",
+                "dccl { proto_file: \"PATH\" }",
+            ),
+            (
+                "load_shared_library: \"/x/libnav.so\"",
+                "loads no C++ libraries",
+            ),
+            ("driver_type: DRIVER_UDP", "driver { driver_type:"),
+        ] {
+            let e = parse(&format!("modem_id: 1\n{text}\n"), "p.cfg")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("p.cfg:2:1"), "{e}");
+            assert!(e.contains(hint), "{text}: {e}");
+        }
+        let e = parse("no_such_key: 1", "p.cfg").unwrap_err().to_string();
+        assert!(!e.contains("pAcommsHandler"), "{e}");
     }
 
     #[test]
