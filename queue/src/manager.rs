@@ -228,6 +228,12 @@ impl QueueManager {
                 reason: "this message type is not loaded in the DCCL codec".into(),
             })?;
         let id = self.codec.id_of(name)?;
+        if self.codec.omits_id(name)? {
+            return Err(QueueError::Config {
+                message: name.to_string(),
+                reason: "its (dccl.msg) has omit_id: true, so its messages carry no DCCL id and a receiver could not tell them apart from the others in a frame; a queued type must carry its id (remove omit_id, or encode it yourself with the codec)".into(),
+            });
+        }
         if id == identity::DCCL_ID && self.send_identity {
             return Err(QueueError::Config {
                 message: name.to_string(),
@@ -605,8 +611,10 @@ impl QueueManager {
     /// messages; DATA frames are split into their DCCL messages, which are
     /// delivered as [`QueueEvent::Received`] when addressed to this node (or
     /// broadcast). A frame that does not decode yields an error for that
-    /// frame; the messages before the fault and the other frames are still
-    /// delivered. Returns the errors.
+    /// frame; the other frames are still delivered, and so are the messages
+    /// before the fault but those of types sent with ack in a transmission
+    /// that asked for one (the frame is not acknowledged, so they come
+    /// again). Returns the errors.
     pub fn handle_modem_receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
         if transmission.r#type() == TransmissionType::Ack {
             self.process_ack(transmission);
@@ -656,13 +664,33 @@ impl QueueManager {
                     }
                 }
             }
+            let faulted = matches!(errors.last(), Some(QueueError::Frame { frame, .. }) if *frame == frame_index);
             for (message, bytes, identity) in decoded {
+                // A frame that did not decode is not acknowledged: what was
+                // sent in it with ack comes again, and is delivered then
+                // (its identity, in the trailer past the fault, is unread
+                // now); delivered now as well, it would reach the client
+                // twice.
+                if faulted && transmission.ack_requested() && self.sent_with_ack(&message) {
+                    continue;
+                }
                 if let Err(e) = self.deliver(message, transmission.src(), bytes, identity) {
                     errors.push(e);
                 }
             }
         }
         errors
+    }
+
+    /// Whether messages of this type are sent with ack (by this node's
+    /// configuration of its queue, which both ends share); `false` for a
+    /// type without a queue here.
+    fn sent_with_ack(&self, message: &DynamicMessage) -> bool {
+        self.codec
+            .id_of(message.descriptor().full_name())
+            .ok()
+            .and_then(|id| self.queues.binary_search_by_key(&id, |q| q.id).ok())
+            .is_some_and(|i| self.queues[i].settings.ack)
     }
 
     /// Removes the messages older than their type's `ttl` (reported as

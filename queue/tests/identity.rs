@@ -235,3 +235,29 @@ message Clash {
     assert_eq!(got[0].message, message);
     assert!(got[0].identity.is_none());
 }
+
+/// A frame whose second message does not decode (a type the receiver has
+/// not loaded): a message before it that was sent with ack is not delivered
+/// now — the frame is not acknowledged, the message comes again and is
+/// delivered then, once — while one sent without ack (never sent again) is.
+#[test]
+fn a_frame_that_does_not_decode_delivers_only_what_will_not_come_again() {
+    for ack in [true, false] {
+        let mut sender = node(1, true, ack);
+        let mut receiver = node(2, true, ack);
+        let message = sender.message("Status", 1, 2, 7);
+        let mut tx = sender.request(64, 1, -1);
+        tx.frame[0] = sender.manager.codec().encode(&message).unwrap();
+        // An id no node here has loaded, then the rest of a message.
+        tx.frame[0].extend_from_slice(&[0x7e, 0x55, 0x55]);
+        tx.ack_requested = Some(true);
+        let errors = receiver.manager.handle_modem_receive(&tx);
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        let delivered = receiver
+            .drain()
+            .into_iter()
+            .filter(|e| matches!(e, QueueEvent::Received(_)))
+            .count();
+        assert_eq!(delivered, usize::from(!ack), "ack {ack}");
+    }
+}

@@ -881,3 +881,23 @@ fn an_ack_is_credited_only_to_the_transmission_and_node_it_answers() {
     assert_eq!(acked_serials(&node.drain()), vec![12]);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 2);
 }
+
+#[test]
+fn a_type_without_its_id_on_the_wire_is_refused_a_queue() {
+    let config = protos::goby::acomms::protobuf::QueueManagerConfig {
+        modem_id: Some(1),
+        message_entry: vec![protos::goby::acomms::protobuf::QueuedMessageEntry {
+            protobuf_name: "test.queue.Bare".into(),
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let e = queue::QueueManager::new(common::codec(), &config)
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("test.queue.Bare") && e.contains("omit_id"),
+        "{e}"
+    );
+}

@@ -10,7 +10,8 @@ use protos::goby::acomms::protobuf::{ModemTransmission, QueueManagerConfig, Queu
 use queue::{ManualClock, MessageId, QueueEvent, QueueManager};
 
 /// Test messages: `Status` (id 1), `Contact` (id 2), `Track` (id 3) carry
-/// source, destination and time fields; `Big` (id 4) is large.
+/// source, destination and time fields; `Big` (id 4) is large; `Bare`
+/// (id 6) has `omit_id`.
 pub const TEST_PROTO: &str = r#"
 syntax = "proto2";
 import "dccl/option_extensions.proto";
@@ -46,6 +47,10 @@ message Unqueued {
   option (dccl.msg) = { id: 5 max_bytes: 32 codec_version: 4 };
   required uint32 serial = 1 [(dccl.field) = { min: 0 max: 65535 }];
 }
+message Bare {
+  option (dccl.msg) = { id: 6 max_bytes: 32 codec_version: 4 omit_id: true };
+  required uint32 serial = 1 [(dccl.field) = { min: 0 max: 65535 }];
+}
 "#;
 
 /// Start of the test clock, seconds since the epoch.
@@ -60,7 +65,7 @@ pub fn codec() -> Arc<dccl::Codec> {
 fn build_codec() -> Arc<dccl::Codec> {
     let pool = dccl::compile_sources(&[("test/queue.proto", TEST_PROTO)]).expect("test proto");
     let mut codec = dccl::Codec::new();
-    for name in ["Status", "Contact", "Track", "Big", "Unqueued"] {
+    for name in ["Status", "Contact", "Track", "Big", "Unqueued", "Bare"] {
         let desc = pool
             .get_message_by_name(&format!("test.queue.{name}"))
             .expect("message");
