@@ -53,7 +53,10 @@ impl Codec {
     /// raise is a value out of its bounds: `DcclOutOfRangeException`.
     fn encode_checked(&self, msg: &DynamicMessage) -> PyResult<(Vec<u8>, Changes)> {
         match self.inner.encode_with_changes(msg) {
-            Ok((bytes, changes)) => Ok((bytes, pairs(changes))),
+            Ok((bytes, mut changes)) => {
+                changes.extend(self.inner.moved_dates(msg).map_err(to_py)?);
+                Ok((bytes, pairs(changes)))
+            }
             Err(e) => {
                 if self.strict && matches!(e, dccl::Error::Encode { .. }) {
                     let mut lenient = self.inner.clone();
@@ -144,18 +147,23 @@ impl Codec {
     }
 
     /// The values encoding the message `name` (protobuf wire bytes) would
-    /// change, as `(field path, reason)` pairs, strict mode or not; adaptive
+    /// change, as `(field path, reason)` pairs, strict mode or not (a
+    /// `dccl.time` value the receiver would decode on another date
+    /// included); adaptive
     /// arithmetic models are left as they are.
     fn check(&self, name: &str, data: &[u8]) -> PyResult<Changes> {
         let msg = self.parse(name, data)?;
-        let changes = if self.strict {
+        let mut changes = if self.strict {
             let mut lenient = self.inner.clone();
             lenient.set_strict(false);
             lenient.check(&msg)
         } else {
             self.inner.check(&msg)
-        };
-        changes.map(pairs).map_err(to_py)
+        }
+        .map_err(to_py)?;
+        // A time the receiver would decode on another date.
+        changes.extend(self.inner.moved_dates(&msg).map_err(to_py)?);
+        Ok(pairs(changes))
     }
 
     /// Encodes a message given as proto3 JSON text (field names as in the

@@ -372,3 +372,22 @@ def test_message_types_built_from_python_descriptors():
     assert len(data) == 3  # 1 byte of id, 10 bits of depth
     back = c.decode(data)
     assert type(back) is cls and back.depth == pytest.approx(12.3)
+
+
+def test_a_time_the_receiver_would_decode_on_another_date_is_warned(protos_dir):
+    import time
+
+    dccl.loadProtoFile(str(protos_dir / "goby" / "example" / "navigation.proto"))
+    codec = dccl.Codec()
+    codec.load("goby.example.NavigationReport")
+    report = dccl.message_class("goby.example.NavigationReport")
+    # 2023: the time codec sends the time of day, the receiver restores today's date.
+    old = report(source=1, destination=2, time=1.7e9, x=450, y=550, z=-100)
+    assert [field for field, _ in codec.check(old)] == ["time"]
+    with pytest.warns(dccl.DcclValueChangedWarning, match="time"):
+        codec.encode(old)
+    now = report(source=1, destination=2, time=time.time(), x=450, y=550, z=-100)
+    assert codec.check(now) == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        codec.encode(now)
