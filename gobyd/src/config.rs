@@ -148,6 +148,28 @@ pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
     Ok(config)
 }
 
+/// Why the data directory `dir` could not be created or used, if it is
+/// plain that it cannot: it, or the nearest part of its path that exists,
+/// is not a directory. (Permissions and a daemon already using it are
+/// found at start.)
+fn data_dir_problem(dir: &str) -> Option<String> {
+    let path = std::path::Path::new(dir);
+    let existing = path
+        .ancestors()
+        .find(|p| p.exists() || p.as_os_str().is_empty())?;
+    if existing.as_os_str().is_empty() || existing.is_dir() {
+        return None;
+    }
+    Some(if existing == path {
+        format!("{dir:?} exists and is not a directory")
+    } else {
+        format!(
+            "{dir:?} cannot be created: {:?} is not a directory",
+            existing.display().to_string()
+        )
+    })
+}
+
 /// Goby configuration keys with no field of that name here, and what to
 /// write instead.
 const GOBY_KEYS: &[(&str, &str)] = &[
@@ -665,6 +687,9 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
     }
     if let Some((field, reason)) = own_slot_problem(config) {
         push(field, reason);
+    }
+    if let Some(reason) = config.data_dir.as_deref().and_then(data_dir_problem) {
+        push("data_dir".into(), reason);
     }
     if driver == DriverSettings::Configured {
         problems.extend(driver_problems(config));
@@ -1339,6 +1364,27 @@ mod tests {
         config = complete(config).unwrap();
         let err = load_definitions(&config).unwrap_err().to_string();
         assert!(err.contains("/no/such.proto: no such file"), "{err}");
+    }
+
+    #[test]
+    fn a_data_dir_that_cannot_be_a_directory_is_a_problem() {
+        let dir = std::env::temp_dir().join(format!("gobyd-datadir-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("plainfile");
+        std::fs::write(&file, "x").unwrap();
+        let under = file.join("sub");
+        let e = data_dir_problem(under.to_str().unwrap()).unwrap();
+        assert!(
+            e.contains("is not a directory") && e.contains("plainfile"),
+            "{e}"
+        );
+        assert!(data_dir_problem(file.to_str().unwrap()).is_some());
+        assert_eq!(
+            data_dir_problem(dir.join("new/deeper").to_str().unwrap()),
+            None
+        );
+        assert_eq!(data_dir_problem("relative/new"), None);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
