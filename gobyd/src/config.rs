@@ -273,15 +273,24 @@ fn goby3_extensions(text: &str) -> String {
 /// (`mac.slot[1].slot_seconds` left at its default: the second `slot`).
 /// Problems of sections the text does not write (filled in by
 /// [`complete`]) get no place.
+/// The problems are then in the order of their places in the text (those
+/// without a place last, in the order found).
 pub fn locate(problems: &mut [Problem], text: &str, origin: &str) {
     let rewritten = goby3_extensions(text);
     let tree = text_tree(&rewritten);
+    let mut offsets = Vec::with_capacity(problems.len());
     for problem in problems.iter_mut() {
-        if let Some(offset) = field_offset(&tree, &problem.field) {
+        let offset = field_offset(&tree, &problem.field);
+        if let Some(offset) = offset {
             let (line, column) = line_and_column(&rewritten, offset);
             problem.place = Some(format!("{origin}:{line}:{column}"));
         }
+        offsets.push(offset.unwrap_or(usize::MAX));
     }
+    let mut order: Vec<usize> = (0..problems.len()).collect();
+    order.sort_by_key(|&i| offsets[i]);
+    let sorted: Vec<Problem> = order.iter().map(|&i| problems[i].clone()).collect();
+    problems.clone_from_slice(&sorted);
 }
 
 /// A field as written in text format: its name, where the name starts,
@@ -613,8 +622,13 @@ fn level_problem(level: &str) -> Option<String> {
     for directive in level.split(',').map(str::trim) {
         let word = directive.rsplit_once('=').map_or(directive, |(_, l)| l);
         if !LOG_LEVELS.iter().any(|l| l.eq_ignore_ascii_case(word)) {
+            let quoted = if word == level {
+                format!("{word:?}")
+            } else {
+                format!("{level:?}: {word:?}")
+            };
             return Some(format!(
-                "{level:?}: {word:?} is not a level (one of {}, or TARGET=LEVEL, comma-separated)",
+                "{quoted} is not a level (one of {}, or TARGET=LEVEL, comma-separated)",
                 LOG_LEVELS.join(", ")
             ));
         }
@@ -1443,18 +1457,20 @@ mod tests {
         ];
         locate(&mut problems, text, "f.cfg");
         let places: Vec<Option<&str>> = problems.iter().map(|p| p.place.as_deref()).collect();
+        // In the order of the text (a list's elements: where each opens),
+        // the unplaced last.
         assert_eq!(
             places,
             [
                 Some("f.cfg:5:14"),
+                Some("f.cfg:9:11"),
+                Some("f.cfg:9:11"),
                 Some("f.cfg:9:32"),
-                // A list's elements: where each opens.
-                Some("f.cfg:9:11"),
-                Some("f.cfg:9:11"),
-                None,
                 Some("f.cfg:12:7"),
+                None,
             ]
         );
+        assert_eq!(problems[3].field, "mac.slot[1].rate");
         assert_eq!(
             problems[0].to_string(),
             "f.cfg:5:14: driver.udp.local.port: x"
