@@ -205,7 +205,7 @@ fn check_refuses_settings_that_cannot_work() {
         ),
         (
             "modem_id: 1\nlog { level: \"warning\" }\n",
-            "log.level: \"warning\": \"warning\" is not a level",
+            "log.level: \"warning\" is not a level",
         ),
         (
             "modem_id: 1\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" \
