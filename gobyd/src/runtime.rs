@@ -140,7 +140,15 @@ pub fn validate(
     driver: config::DriverSettings,
 ) -> Result<Checked, DaemonError> {
     let config = config::complete(config)?;
-    let problems = config::problems(&config, driver);
+    let mut problems = config::problems(&config, driver);
+    // The MAC's own refusals, in the same list (every problem at once).
+    let mac = MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now());
+    if let Err(amac::AmacError::InvalidField { field, reason, .. }) = &mac {
+        let field = format!("mac.{field}");
+        if !problems.iter().any(|p| p.field == field) {
+            problems.push(config::Problem::new(field, reason.clone()));
+        }
+    }
     if !problems.is_empty() {
         return Err(ConfigError::Problems(problems).into());
     }
@@ -153,7 +161,7 @@ pub fn validate(
     config::default_entries(&mut queue, &defs.loaded);
     crate::translator::from_config(&config, &codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(codec.clone(), &queue)?;
-    MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now())?;
+    mac?;
     Ok(Checked {
         config,
         codec,
