@@ -107,7 +107,7 @@ fn gobyd_refuses_bad_configurations_with_their_place() {
         ),
         (
             "mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 slot_seconds: -1 } }",
-            "mac:",
+            "bad.pb.txt:1:51: mac.slot[0].slot_seconds: must be a finite number",
         ),
     ] {
         let path = dir.join("bad.pb.txt");
