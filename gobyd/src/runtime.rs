@@ -23,7 +23,7 @@ use protos::goby::acomms::protobuf::{
     driver_config, modem_transmission::TransmissionType, DriverType,
 };
 use protos::goby::apps::protobuf::GobydConfig;
-use queue::{Clock, QueueEvent, QueueManager, SystemClock};
+use queue::{Clock, QueueEvent, QueueManager, ReceivedMessage, SystemClock};
 use tokio::net::{TcpListener, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinSet;
@@ -896,16 +896,7 @@ impl Daemon {
             &reception,
             (u64::try_from(now).unwrap_or(0), tokio::time::Instant::now()),
             taker,
-            |received, reception| {
-                hand_over(
-                    events,
-                    raw_log,
-                    now,
-                    QueueEvent::Received(received),
-                    None,
-                    reception,
-                )
-            },
+            handing_over(events, raw_log, now),
         );
         if let Some(ack) = ack {
             if let Err(e) = self.driver.acknowledge(ack) {
@@ -933,16 +924,7 @@ impl Daemon {
             taker,
             tokio::time::Instant::now(),
             u64::try_from(now).unwrap_or(0),
-            |received, reception| {
-                hand_over(
-                    events,
-                    raw_log,
-                    now,
-                    QueueEvent::Received(received),
-                    None,
-                    reception,
-                )
-            },
+            handing_over(events, raw_log, now),
         );
     }
 
@@ -989,6 +971,25 @@ fn hand_over(
         if let Err(e) = log.message(now, direction, &name, value, &extra) {
             tracing::error!("raw log: {e}");
         }
+    }
+}
+
+/// The function that hands a received message over with its reception
+/// (see [`hand_over`]), for [`Delivery`].
+fn handing_over<'a>(
+    events: &'a broadcast::Sender<SharedEvent>,
+    raw_log: &'a mut Option<RawLog>,
+    now: i64,
+) -> impl FnMut(ReceivedMessage, &Reception) + 'a {
+    move |received, reception| {
+        hand_over(
+            events,
+            raw_log,
+            now,
+            QueueEvent::Received(received),
+            None,
+            reception,
+        )
     }
 }
 
