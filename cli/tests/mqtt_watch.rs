@@ -10,6 +10,15 @@ use std::process::Command;
 use broker::{Broker, Watcher};
 use rumqttc::QoS;
 
+/// `goby mqtt watch PREFIX --once --broker BROKER`, run to its end.
+fn watch_once(prefix: &str, broker: &str) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(["mqtt", "watch", prefix, "--once", "--broker", broker])
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn watch_once_prints_the_fleet_table() {
     let dir = std::env::temp_dir().join(format!("goby-watch-{}", std::process::id()));
@@ -33,18 +42,7 @@ fn watch_once_prints_the_fleet_table() {
             .unwrap();
     }
     publisher.wait_pubacks(retained.len());
-    let out = Command::new(env!("CARGO_BIN_EXE_goby"))
-        .args([
-            "mqtt",
-            "watch",
-            "fleet",
-            "--once",
-            "--broker",
-            &broker.address(),
-        ])
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .unwrap();
+    let out = watch_once("fleet", &broker.address());
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -66,18 +64,7 @@ fn watch_once_prints_the_fleet_table() {
     assert!(rows[2].contains("1@6"), "{stdout}");
 
     // A prefix nobody publishes under: said, not an empty table.
-    let out = Command::new(env!("CARGO_BIN_EXE_goby"))
-        .args([
-            "mqtt",
-            "watch",
-            "flet",
-            "--once",
-            "--broker",
-            &broker.address(),
-        ])
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .unwrap();
+    let out = watch_once("flet", &broker.address());
     assert_eq!(out.status.code(), Some(2));
     assert!(out.stdout.is_empty());
     assert!(
@@ -88,18 +75,7 @@ fn watch_once_prints_the_fleet_table() {
 
     // No broker there: a clear error.
     drop(broker);
-    let out = Command::new(env!("CARGO_BIN_EXE_goby"))
-        .args([
-            "mqtt",
-            "watch",
-            "fleet",
-            "--once",
-            "--broker",
-            "127.0.0.1:1",
-        ])
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .unwrap();
+    let out = watch_once("fleet", "127.0.0.1:1");
     assert_eq!(out.status.code(), Some(2));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("cannot reach the broker 127.0.0.1:1"),
