@@ -15,205 +15,44 @@ use std::path::Path;
 
 use protos::goby::apps::protobuf::GobydConfig;
 
+pub use moos::mission::MissionFile;
+
 use crate::config::{self, ConfigError};
 
-/// What a mission file holds for `gobyd`.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct MissionFile {
-    /// `ServerHost`.
-    pub server_host: Option<String>,
-    /// `ServerPort`.
-    pub server_port: Option<String>,
-    /// `Community`.
-    pub community: Option<String>,
-    /// `LatOrigin`, degrees.
-    pub lat_origin: Option<String>,
-    /// `LongOrigin`, degrees.
-    pub long_origin: Option<String>,
-    /// The inside of the process's block, placed at its line and column in
-    /// the file (blanks before it), with `//` comments turned into `#`.
-    pub process_config: Option<String>,
-}
-
-/// `line` with a `//` comment outside quotes turned into `#`.
-fn hash_comments(line: &str) -> String {
-    let mut out = String::with_capacity(line.len());
-    let mut quote: Option<char> = None;
-    let mut chars = line.chars().peekable();
-    while let Some(c) = chars.next() {
-        match quote {
-            Some(q) => {
-                out.push(c);
-                if c == '\\' {
-                    if let Some(n) = chars.next() {
-                        out.push(n);
-                    }
-                } else if c == q {
-                    quote = None;
-                }
-            }
-            None if c == '"' || c == '\'' => {
-                quote = Some(c);
-                out.push(c);
-            }
-            None if c == '/' && chars.peek() == Some(&'/') => {
-                // Same width, so that columns stay the file's.
-                out.push('#');
-                out.push(' ');
-                chars.next();
-            }
-            None => out.push(c),
-        }
+/// `gobyd`'s configuration from a parsed mission file: the block of
+/// process `app` (named `origin` in errors) with the globals filled in.
+pub fn configuration(
+    mission: &MissionFile,
+    origin: &str,
+    app: &str,
+) -> Result<GobydConfig, ConfigError> {
+    let block = mission
+        .process_config
+        .as_deref()
+        .ok_or_else(|| ConfigError::Invalid(format!("{origin}: no ProcessConfig = {app} block")))?;
+    let mut config = config::parse(block, origin)?;
+    let invalid = |e: moos::mission::MissionError| ConfigError::Invalid(e.located(origin));
+    let lat = MissionFile::degrees(&mission.lat_origin, "LatOrigin").map_err(invalid)?;
+    let lon = MissionFile::degrees(&mission.long_origin, "LongOrigin").map_err(invalid)?;
+    let port = mission.port().map_err(invalid)?;
+    let moos = config.moos.get_or_insert_with(Default::default);
+    if moos.server.is_none() {
+        moos.server = mission.server_host.as_ref().map(|s| s.value.clone());
     }
-    out
-}
-
-/// The text of `line` before a `//` comment.
-fn strip_comment(line: &str) -> &str {
-    line.find("//").map_or(line, |p| &line[..p])
-}
-
-impl MissionFile {
-    /// Reads the globals and the block of process `app` from the text of
-    /// a mission file.
-    pub fn parse(text: &str, app: &str) -> Result<Self, String> {
-        let mut mission = MissionFile::default();
-        let lines: Vec<&str> = text.lines().collect();
-        let mut i = 0;
-        while i < lines.len() {
-            let line = strip_comment(lines[i]).trim();
-            let Some((key, value)) = line.split_once('=') else {
-                i += 1;
-                continue;
-            };
-            let (key, value) = (key.trim(), value.trim());
-            if key.eq_ignore_ascii_case("ProcessConfig") {
-                // The block: from its "{" to the matching "}".
-                let is_ours = value.eq_ignore_ascii_case(app);
-                let mut depth = 0usize;
-                let mut started = false;
-                let mut block = String::new();
-                let mut j = i;
-                'lines: while j < lines.len() {
-                    let cleaned = hash_comments(lines[j]);
-                    let mut quote: Option<char> = None;
-                    let mut kept = String::new();
-                    for (at, c) in cleaned.char_indices() {
-                        let mut keep = started;
-                        match quote {
-                            Some(q) if c == q => quote = None,
-                            Some(_) => {}
-                            None if c == '#' => {
-                                // The rest of the line is a comment.
-                                kept.push_str(&cleaned[at..]);
-                                break;
-                            }
-                            None if c == '"' || c == '\'' => quote = Some(c),
-                            None if c == '{' => {
-                                if !started {
-                                    started = true;
-                                    keep = false;
-                                }
-                                depth += 1;
-                            }
-                            None if c == '}' => {
-                                depth = depth.saturating_sub(1);
-                                if started && depth == 0 {
-                                    block.push_str(&kept);
-                                    block.push('\n');
-                                    break 'lines;
-                                }
-                            }
-                            None => {}
-                        }
-                        kept.push(if keep { c } else { ' ' });
-                    }
-                    // Keep the line numbering of the file.
-                    if started {
-                        block.push_str(&kept);
-                    }
-                    block.push('\n');
-                    j += 1;
-                }
-                if !started || depth != 0 {
-                    return Err(format!(
-                        "line {}: ProcessConfig = {value} has no {{ ... }} block (or no closing }})",
-                        i + 1
-                    ));
-                }
-                if is_ours {
-                    if mission.process_config.is_some() {
-                        return Err(format!(
-                            "line {}: a second ProcessConfig = {value} block",
-                            i + 1
-                        ));
-                    }
-                    let before = "\n".repeat(i);
-                    mission.process_config = Some(before + &block);
-                }
-                i = j + 1;
-                continue;
-            }
-            let value = Some(value.to_string());
-            match key.to_ascii_lowercase().as_str() {
-                "serverhost" => mission.server_host = value,
-                "serverport" => mission.server_port = value,
-                "community" => mission.community = value,
-                "latorigin" => mission.lat_origin = value,
-                "longorigin" => mission.long_origin = value,
-                _ => {}
-            }
-            i += 1;
-        }
-        Ok(mission)
+    if moos.port.is_none() {
+        moos.port = port.map(u32::from);
     }
-
-    /// `gobyd`'s configuration: the block (named `origin` in errors) with
-    /// the globals filled in.
-    pub fn configuration(&self, origin: &str, app: &str) -> Result<GobydConfig, ConfigError> {
-        let block = self.process_config.as_deref().ok_or_else(|| {
-            ConfigError::Invalid(format!("{origin}: no ProcessConfig = {app} block"))
-        })?;
-        let mut config = config::parse(block, origin)?;
-        let number = |what: &str, v: &Option<String>| -> Result<Option<f64>, ConfigError> {
-            v.as_deref()
-                .map(|t| {
-                    t.parse::<f64>().map_err(|_| {
-                        ConfigError::Invalid(format!("{origin}: {what} = {t} is not a number"))
-                    })
-                })
-                .transpose()
-        };
-        let lat = number("LatOrigin", &self.lat_origin)?;
-        let lon = number("LongOrigin", &self.long_origin)?;
-        let port = self
-            .server_port
-            .as_deref()
-            .map(|p| {
-                p.parse::<u16>().map_err(|_| {
-                    ConfigError::Invalid(format!("{origin}: ServerPort = {p} is not a TCP port"))
-                })
-            })
-            .transpose()?;
-        let moos = config.moos.get_or_insert_with(Default::default);
-        if moos.server.is_none() {
-            moos.server = self.server_host.clone();
-        }
-        if moos.port.is_none() {
-            moos.port = port.map(u32::from);
-        }
-        if moos.name.is_none() {
-            moos.name = Some(app.to_string());
-        }
-        if moos.lat_origin.is_none() {
-            moos.lat_origin = lat;
-        }
-        if moos.lon_origin.is_none() {
-            moos.lon_origin = lon;
-        }
-        config.moos_var.get_or_insert_with(Default::default);
-        Ok(config)
+    if moos.name.is_none() {
+        moos.name = Some(app.to_string());
     }
+    if moos.lat_origin.is_none() {
+        moos.lat_origin = lat;
+    }
+    if moos.lon_origin.is_none() {
+        moos.lon_origin = lon;
+    }
+    config.moos_var.get_or_insert_with(Default::default);
+    Ok(config)
 }
 
 /// Reads `gobyd`'s configuration from the mission file at `path`, from the
@@ -224,9 +63,9 @@ pub fn load(path: &Path, app: &str) -> Result<GobydConfig, ConfigError> {
         source,
     })?;
     let origin = path.display().to_string();
-    let mission = MissionFile::parse(&text, app)
-        .map_err(|e| ConfigError::Invalid(format!("{origin}: {e}")))?;
-    mission.configuration(&origin, app)
+    let mission =
+        MissionFile::parse(&text, app).map_err(|e| ConfigError::Invalid(e.located(&origin)))?;
+    configuration(&mission, &origin, app)
 }
 
 #[cfg(test)]
@@ -262,9 +101,7 @@ ProcessConfig = gobyd   // the acoustic link
     #[test]
     fn globals_and_the_block_make_the_configuration() {
         let mission = MissionFile::parse(MISSION, "gobyd").unwrap();
-        assert_eq!(mission.server_port.as_deref(), Some("9001"));
-        assert_eq!(mission.community.as_deref(), Some("alpha"));
-        let config = mission.configuration("a.moos", "gobyd").unwrap();
+        let config = configuration(&mission, "a.moos", "gobyd").unwrap();
         assert_eq!(config.modem_id(), 1);
         let moos = config.moos.as_ref().unwrap();
         assert_eq!(
@@ -284,35 +121,26 @@ ProcessConfig = gobyd   // the acoustic link
     #[test]
     fn errors_point_into_the_mission_file() {
         let bad = MISSION.replace("modem_id: 1", "modem_id: one");
-        let err = MissionFile::parse(&bad, "gobyd")
-            .unwrap()
-            .configuration("a.moos", "gobyd")
+        let mission = MissionFile::parse(&bad, "gobyd").unwrap();
+        let err = configuration(&mission, "a.moos", "gobyd")
             .unwrap_err()
             .to_string();
-        assert!(err.starts_with("a.moos:") && err.contains("'one'"), "{err}");
-        // The block keeps the file's lines and columns, so that positions
-        // in parse errors are the file's: `modem_id` is at line 16, column 3.
-        let block = MissionFile::parse(MISSION, "gobyd")
-            .unwrap()
-            .process_config
-            .unwrap();
-        let line16 = block.lines().nth(15).unwrap();
-        assert_eq!(line16.find("modem_id"), Some(2), "{line16:?}");
-        let err = MissionFile::parse(MISSION, "other")
-            .unwrap()
-            .configuration("a.moos", "other")
+        // The block keeps the file's lines and columns: `modem_id` is at
+        // line 16, column 3.
+        assert!(
+            err.starts_with("a.moos:16:") && err.contains("'one'"),
+            "{err}"
+        );
+        let mission = MissionFile::parse(MISSION, "other").unwrap();
+        let err = configuration(&mission, "a.moos", "other")
             .unwrap_err()
             .to_string();
         assert!(err.contains("no ProcessConfig = other block"), "{err}");
-        let err =
-            MissionFile::parse("ProcessConfig = gobyd\n{\n modem_id: 1\n", "gobyd").unwrap_err();
-        assert!(err.contains("line 1"), "{err}");
         let bad = MISSION.replace("ServerPort = 9001", "ServerPort = lots");
-        let err = MissionFile::parse(&bad, "gobyd")
-            .unwrap()
-            .configuration("a.moos", "gobyd")
+        let mission = MissionFile::parse(&bad, "gobyd").unwrap();
+        let err = configuration(&mission, "a.moos", "gobyd")
             .unwrap_err()
             .to_string();
-        assert!(err.contains("ServerPort = lots"), "{err}");
+        assert!(err.contains("a.moos:3: ServerPort = lots"), "{err}");
     }
 }

@@ -7,7 +7,7 @@ mod support;
 
 use std::collections::HashMap;
 
-use gobyd::{config, mission_file::MissionFile, translator};
+use gobyd::{config, mission_file, mission_file::MissionFile, translator};
 use moos::Value;
 use support::daemon::free_udp_port;
 use support::node::{Entry, Node, Simulator, Udp};
@@ -103,10 +103,8 @@ fn pacommshandler_translator_entries_load_and_translate() {
     )
     .unwrap();
     let text = MISSION.replace("LOOKUP", &lookup.display().to_string());
-    let config = MissionFile::parse(&text, "gobyd")
-        .unwrap()
-        .configuration("mission.moos", "gobyd")
-        .unwrap();
+    let mission = MissionFile::parse(&text, "gobyd").unwrap();
+    let config = mission_file::configuration(&mission, "mission.moos", "gobyd").unwrap();
     assert_eq!(config.translator_entry.len(), 2);
     let config = config::complete(config).unwrap();
     let defs = config::load_definitions(&config).unwrap();

@@ -4,12 +4,15 @@
 //! - [`client`]: an async tokio client that handshakes with a MOOSDB, registers for
 //!   variables, publishes strings, doubles and bytes, receives mail, keeps the connection
 //!   alive and reconnects.
+//! - [`mission`]: MOOS mission files (`.moos`): the server settings and a process's
+//!   `ProcessConfig` block, each with its line for errors.
 //! - [`testing`]: a minimal in-process DB for tests of programs that use the client.
 //!
 //! The protocol follows the MOOS project's own implementation and documentation; this
 //! crate is an independent implementation.
 
 pub mod client;
+pub mod mission;
 pub mod testing;
 mod transport;
 pub mod wire;
