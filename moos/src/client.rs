@@ -620,11 +620,16 @@ impl Worker {
                 &self.addr,
                 &self.config.name,
             );
+            // The first session has no registrations to replay: the registry
+            // was empty at connect time, and every registration since is
+            // queued as a command (a replay would register twice, and the DB
+            // would send the current value twice).
+            let replay = (self.session > 1).then_some(&*self.registrations);
             let writer = write_loop(
                 &mut wr,
                 &mut self.commands,
                 &mut self.next_id,
-                &self.registrations,
+                replay,
                 &self.config,
                 &self.addr,
                 &delay,
@@ -729,12 +734,13 @@ fn outgoing_delay(seconds: f64) -> Duration {
     }
 }
 
-/// Sends registrations, then heartbeats and queued messages, until closed or failed.
+/// Sends the registrations to replay (after a reconnect), then heartbeats and
+/// queued messages, until closed or failed.
 async fn write_loop(
     wr: &mut OwnedWriteHalf,
     commands: &mut mpsc::UnboundedReceiver<Command>,
     next_id: &mut i32,
-    registrations: &Mutex<BTreeMap<String, f64>>,
+    replay: Option<&Mutex<BTreeMap<String, f64>>>,
     config: &ClientConfig,
     addr: &str,
     delay: &AtomicU64,
@@ -742,11 +748,13 @@ async fn write_loop(
     let now = moos_time();
     // The DB looks for a timing message at the front of a packet only.
     let mut batch = vec![Message::timing(now)];
-    batch.extend(
-        lock(registrations)
-            .iter()
-            .map(|(var, interval)| Message::register(var.as_str(), *interval, now)),
-    );
+    if let Some(registrations) = replay {
+        batch.extend(
+            lock(registrations)
+                .iter()
+                .map(|(var, interval)| Message::register(var.as_str(), *interval, now)),
+        );
+    }
     let period = config.heartbeat_period;
     let mut heartbeat = tokio::time::interval_at(Instant::now() + period, period);
     heartbeat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);

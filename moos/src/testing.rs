@@ -254,7 +254,16 @@ async fn read_client(rd: &mut OwnedReadHalf, name: &str, db: &Mutex<Db>) {
                         peer.subscriptions.remove(&m.key);
                     }
                 }
-                MessageKind::Notify => db.notify(m),
+                MessageKind::Notify => {
+                    // Replies so far go out first, so the client's mail
+                    // keeps the order of its messages.
+                    if !reply.is_empty() {
+                        if let Some(peer) = db.clients.get(name) {
+                            let _ = peer.outbox.send(std::mem::take(&mut reply));
+                        }
+                    }
+                    db.notify(m)
+                }
                 other => debug!(client = %name, kind = ?other, "MiniDb: ignoring message"),
             }
         }

@@ -81,6 +81,42 @@ async fn late_registration_gets_the_current_value_and_unregister_stops_mail() {
 }
 
 #[tokio::test]
+async fn a_registration_right_after_connecting_is_made_once() {
+    let db = mini_db().await;
+    let (b, _b_mail) = connect("once_b", db.port()).await;
+    b.notify_double("ONCE", 1.0).unwrap();
+    timeout(LIMIT, async {
+        while db.value("ONCE").is_none() {
+            sleep(Duration::from_millis(10)).await;
+        }
+    })
+    .await
+    .unwrap();
+    // Registered before the client's task has sent anything: the DB sees
+    // one registration, so the current value comes once.
+    let (a, mut a_mail) = connect("once_a", db.port()).await;
+    a.register("ONCE", Duration::ZERO).unwrap();
+    a.register("ONCE_PROBE", Duration::ZERO).unwrap();
+    a.notify_string("ONCE_PROBE", "sync").unwrap();
+    // Everything up to the probe's return: the DB answered every
+    // registration before it.
+    let mut keys = Vec::new();
+    timeout(LIMIT, async {
+        loop {
+            let mail = a_mail.recv().await.unwrap();
+            if mail.key == "ONCE_PROBE" {
+                break;
+            }
+            keys.push((mail.key, mail.value));
+        }
+    })
+    .await
+    .unwrap();
+    assert_eq!(keys, [("ONCE".to_string(), Value::Double(1.0))]);
+    db.stop().await;
+}
+
+#[tokio::test]
 async fn a_second_client_of_the_same_name_is_refused() {
     let db = mini_db().await;
     let (_a, _mail) = connect("twin", db.port()).await;
