@@ -30,14 +30,21 @@
 //! (bits per delta, as thesis Table 3.2) and computes the cost per sample
 //! under frame loss (Fig. 3.10a) as a table, a CSV file and a PNG plot.
 //!
+//! `goby moos poke` writes MOOS variables and `goby moos spy` prints their
+//! notifications ([`moos_cmd`]), so a MOOS community needs nothing beyond
+//! its MOOSDB.
+//!
 //! Exit status: 0 on success, [`EXIT_BAD_INPUT`] when some input lines could
 //! not be handled (each is reported on standard error as `line N: <error>`;
 //! the other lines are still processed), [`EXIT_SETUP`] for usage errors and
 //! errors that stop a command before it reads its input (a `.proto` file that
-//! cannot be compiled, an unknown message type, ...).
+//! cannot be compiled, an unknown message type, an unreachable server, ...),
+//! [`EXIT_TIMEOUT`] when a command gave up waiting (`goby moos poke` not
+//! confirmed, `goby moos spy` short of `--count`).
 
 #![warn(missing_docs)]
 
+mod address;
 pub mod amac_cmd;
 mod byte_text;
 pub mod dccl_cmd;
@@ -46,6 +53,7 @@ pub mod fleet;
 mod frame_decoder;
 mod lines;
 pub mod modem_cmd;
+pub mod moos_cmd;
 pub mod mqtt_cmd;
 pub mod passphrase;
 pub mod plot;
@@ -66,6 +74,9 @@ pub const EXIT_OK: u8 = 0;
 pub const EXIT_BAD_INPUT: u8 = 1;
 /// Exit status for usage errors and errors found before any input is read.
 pub const EXIT_SETUP: u8 = 2;
+/// Exit status when a command gave up waiting for what it was asked to
+/// wait for.
+pub const EXIT_TIMEOUT: u8 = 3;
 
 /// Command line of `goby`.
 #[derive(Debug, Parser)]
@@ -103,6 +114,9 @@ pub enum GobyCommand {
     /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.
     #[command(subcommand)]
     Mqtt(mqtt_cmd::MqttCommand),
+    /// A MOOS community: write variables (poke) and watch them (spy).
+    #[command(subcommand)]
+    Moos(moos_cmd::MoosCommand),
 }
 
 /// A failure that ends a command.
@@ -115,6 +129,8 @@ pub enum CliError {
     Input(io::Error),
     /// Writing standard output or standard error failed.
     Output(io::Error),
+    /// The command gave up waiting ([`EXIT_TIMEOUT`]).
+    Timeout(String),
 }
 
 impl CliError {
@@ -127,7 +143,7 @@ impl CliError {
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            CliError::Setup(m) => f.write_str(m),
+            CliError::Setup(m) | CliError::Timeout(m) => f.write_str(m),
             CliError::Input(e) => write!(f, "cannot read standard input: {e}"),
             CliError::Output(e) => write!(f, "cannot write the output: {e}"),
         }
@@ -188,6 +204,7 @@ pub fn run_goby(
         GobyCommand::Position(cmd) => position_cmd::run(&cmd, stdout),
         GobyCommand::Modem(cmd) => modem_cmd::run(&cmd, stdout),
         GobyCommand::Mqtt(cmd) => mqtt_cmd::run(&cmd, stdout),
+        GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
     };
     let flushed = stdout.flush().map_err(CliError::from);
     match result.and_then(|status| flushed.map(|()| status)) {
@@ -195,6 +212,10 @@ pub fn run_goby(
         Err(CliError::Output(e)) if e.kind() == io::ErrorKind::BrokenPipe => {
             // The reader went away (e.g. `| head`): stop quietly.
             EXIT_BAD_INPUT
+        }
+        Err(CliError::Timeout(m)) => {
+            let _ = writeln!(stderr, "goby: error: {m}");
+            EXIT_TIMEOUT
         }
         Err(e) => {
             let _ = writeln!(stderr, "goby: error: {e}");

@@ -6,6 +6,7 @@ use std::time::Duration;
 use clap::{Args, Subcommand};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 
+use crate::address::host_port;
 use crate::fleet::Fleet;
 use crate::{CliError, Status};
 
@@ -55,35 +56,8 @@ fn now() -> f64 {
 /// The port of an MQTT broker named without one.
 const MQTT_PORT: u16 = 1883;
 
-/// `HOST`, `HOST:PORT`, `[V6]` or `[V6]:PORT` as host and port (PORT
-/// [`MQTT_PORT`] when left out); `None` when it is none of these.
-fn broker_address(broker: &str) -> Option<(String, u16)> {
-    let broker = broker.trim();
-    let (host, port) = match broker.strip_prefix('[') {
-        Some(rest) => {
-            let (host, tail) = rest.split_once(']')?;
-            match tail {
-                "" => (host, None),
-                tail => (host, Some(tail.strip_prefix(':')?)),
-            }
-        }
-        None => match broker.split_once(':') {
-            Some((host, port)) => (host, Some(port)),
-            None => (broker, None),
-        },
-    };
-    if host.is_empty() || host.contains(char::is_whitespace) {
-        return None;
-    }
-    let port = match port {
-        None => MQTT_PORT,
-        Some(port) => port.parse().ok()?,
-    };
-    Some((host.to_string(), port))
-}
-
 fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    let (host, port) = broker_address(&args.broker).ok_or_else(|| {
+    let (host, port) = host_port(&args.broker, MQTT_PORT).ok_or_else(|| {
         CliError::setup(format!(
             "--broker {:?} is not HOST[:PORT] (e.g. localhost, 10.0.0.1:1884, [::1]:1883)",
             args.broker
@@ -175,30 +149,4 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         write!(stdout, "{}", fleet.table(now()))?;
     }
     Ok(Status::Ok)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_broker_without_a_port_is_on_1883() {
-        let at = |h: &str, p| Some((h.to_string(), p));
-        assert_eq!(broker_address("localhost"), at("localhost", 1883));
-        assert_eq!(broker_address("10.0.0.1:1884"), at("10.0.0.1", 1884));
-        assert_eq!(broker_address("[::1]"), at("::1", 1883));
-        assert_eq!(broker_address("[::1]:1999"), at("::1", 1999));
-        for bad in [
-            "",
-            ":1883",
-            "host:",
-            "host:port",
-            "host:99999",
-            "[::1",
-            "[::1]x",
-            "a b",
-        ] {
-            assert_eq!(broker_address(bad), None, "{bad:?}");
-        }
-    }
 }
