@@ -34,6 +34,9 @@
 //! notifications ([`moos_cmd`]), so a MOOS community needs nothing beyond
 //! its MOOSDB.
 //!
+//! `goby completions SHELL` prints a shell completion script and `goby man
+//! DIR` writes the manual pages ([`generate_cmd`]).
+//!
 //! Exit status: 0 on success, [`EXIT_BAD_INPUT`] when some input lines could
 //! not be handled (each is reported on standard error as `line N: <error>`;
 //! the other lines are still processed), [`EXIT_SETUP`] for usage errors and
@@ -51,6 +54,7 @@ pub mod dccl_cmd;
 pub mod dccl_tool;
 pub mod fleet;
 mod frame_decoder;
+pub mod generate_cmd;
 mod lines;
 pub mod modem_cmd;
 pub mod moos_cmd;
@@ -117,6 +121,10 @@ pub enum GobyCommand {
     /// A MOOS community: write variables (poke) and watch them (spy).
     #[command(subcommand)]
     Moos(moos_cmd::MoosCommand),
+    /// Print a shell completion script for goby.
+    Completions(generate_cmd::CompletionsArgs),
+    /// Write goby's manual pages (goby.1 and one per subcommand) into a directory.
+    Man(generate_cmd::ManArgs),
 }
 
 /// A failure that ends a command.
@@ -205,6 +213,8 @@ pub fn run_goby(
         GobyCommand::Modem(cmd) => modem_cmd::run(&cmd, stdout),
         GobyCommand::Mqtt(cmd) => mqtt_cmd::run(&cmd, stdout),
         GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
+        GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
+        GobyCommand::Man(args) => generate_cmd::man(&args, stdout),
     };
     let flushed = stdout.flush().map_err(CliError::from);
     match result.and_then(|status| flushed.map(|()| status)) {

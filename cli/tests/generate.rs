@@ -1,0 +1,135 @@
+//! `goby completions SHELL` and `goby man DIR` as processes: scripts for
+//! every shell clap knows, manual pages with every subcommand's options.
+
+use std::path::PathBuf;
+use std::process::Output;
+
+fn goby(args: &[&str]) -> Output {
+    assert_cmd::Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(args)
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn completion_scripts_name_the_subcommands_and_their_options() {
+    let out = goby(&["completions", "bash"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let bash = text(&out.stdout);
+    for word in [
+        "dccl",
+        "amac",
+        "queue",
+        "position",
+        "modem",
+        "mqtt",
+        "moos",
+        "poke",
+        "spy",
+        "completions",
+        "man",
+        "--connect-timeout",
+        "--moos-file",
+        "--broker",
+    ] {
+        assert!(bash.contains(word), "{word} missing from the bash script");
+    }
+    assert!(
+        bash.contains("goby__subcmd__moos__subcmd__spy)"),
+        "no case for goby moos spy"
+    );
+    for shell in ["zsh", "fish", "elvish", "powershell"] {
+        let out = goby(&["completions", shell]);
+        assert!(out.status.success(), "{shell}: {}", text(&out.stderr));
+        let script = text(&out.stdout);
+        assert!(
+            script.contains("poke") && script.contains("connect-timeout"),
+            "{shell}: {script}"
+        );
+    }
+}
+
+#[test]
+fn an_unknown_shell_is_refused_with_the_known_ones() {
+    let out = goby(&["completions", "tcsh"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(out.stdout.is_empty());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("invalid value 'tcsh' for '<SHELL>'")
+            && err.contains("[possible values: bash, elvish, fish, powershell, zsh]"),
+        "{err}"
+    );
+}
+
+#[test]
+fn man_writes_a_page_per_subcommand_with_its_options() {
+    let dir = std::env::temp_dir()
+        .join(format!("goby-man-{}", std::process::id()))
+        .join("man1");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = goby(&["man", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let listed: Vec<PathBuf> = text(&out.stdout).lines().map(PathBuf::from).collect();
+    let mut on_disk: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    on_disk.sort();
+    let mut sorted = listed.clone();
+    sorted.sort();
+    assert_eq!(sorted, on_disk, "the pages printed are the pages written");
+    assert_eq!(listed[0], dir.join("goby.1"));
+    for (page, options) in [
+        ("goby.1", &["goby\\-moos(1)", "goby\\-completions(1)"][..]),
+        ("goby-dccl.1", &["encode"]),
+        ("goby-dccl-encode.1", &["\\-\\-message"]),
+        ("goby-mqtt-watch.1", &["\\-\\-broker", "\\-\\-once"]),
+        (
+            "goby-moos-poke.1",
+            &[
+                "\\-\\-string",
+                "\\-\\-moos\\-file",
+                "\\-\\-connect\\-timeout",
+                "uPokeDB",
+            ],
+        ),
+        (
+            "goby-moos-spy.1",
+            &["\\-\\-count", "\\-\\-timeout", "\\-\\-verbose"],
+        ),
+        ("goby-completions.1", &["powershell"]),
+        ("goby-man.1", &["DIR"]),
+    ] {
+        let text =
+            std::fs::read_to_string(dir.join(page)).unwrap_or_else(|e| panic!("{page}: {e}"));
+        assert!(text.contains(".TH "), "{page} is not a man page");
+        for option in options {
+            assert!(
+                text.contains(option),
+                "{option} missing from {page}:\n{text}"
+            );
+        }
+    }
+    for path in &on_disk {
+        assert!(
+            std::fs::metadata(path).unwrap().len() > 0,
+            "{path:?} is empty"
+        );
+    }
+    assert!(!dir.join("goby-help.1").exists());
+    let _ = std::fs::remove_dir_all(dir.parent().unwrap());
+
+    let out = goby(&["man", "/dev/null/man1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("cannot create the directory /dev/null/man1"),
+        "{err}"
+    );
+}
