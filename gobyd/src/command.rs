@@ -13,7 +13,7 @@ use std::ffi::OsString;
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
 
-use clap::{ColorChoice, Parser};
+use clap::{ColorChoice, CommandFactory, Parser};
 
 use protos::goby::apps::protobuf::{gobyd_config::JsonInterface, GobydConfig};
 
@@ -30,7 +30,7 @@ pub const EXIT_SETUP: u8 = 2;
     name = "gobyd",
     version,
     about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.",
-    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.",
+    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.\n\nExamples:\n  gobyd --example-config > gobyd.pb.txt\n  gobyd --check --config gobyd.pb.txt --mqtt-broker 10.0.0.5\n  gobyd --config gobyd.pb.txt --modem-id 2\n  gobyd --moos-file alpha.moos\n  gobyd --completions bash > ~/.local/share/bash-completion/completions/gobyd\n  gobyd --man ~/.local/share/man/man1",
     color = ColorChoice::Auto
 )]
 pub struct GobydCli {
@@ -64,9 +64,79 @@ pub struct GobydCli {
     /// Override the JSON interface's TCP address (empty: none).
     #[arg(long, value_name = "ADDR")]
     pub json_tcp: Option<String>,
+    /// Override the MQTT broker, HOST[:PORT] (PORT 1883 when left out, 8883
+    /// with the configuration's mqtt.tls; an IPv6 address in brackets).
+    #[arg(
+        long,
+        value_name = "HOST[:PORT]",
+        long_help = "Override the MQTT broker, HOST[:PORT] (PORT 1883 when left out, 8883 \
+            with the configuration's mqtt.tls; an IPv6 address in brackets): the mqtt section's \
+            broker. A configuration without an mqtt section gets one, with its defaults \
+            (topic prefix goby, the node named by its modem id, QoS 1), so this option alone \
+            bridges gobyd to a broker; an empty value turns a configured bridge off. --check \
+            prints the broker in use.\n\n\
+            Example: gobyd --config gobyd.pb.txt --mqtt-broker 10.0.0.5:1884"
+    )]
+    pub mqtt_broker: Option<String>,
     /// Log lines as JSON objects.
     #[arg(long)]
     pub log_json: bool,
+    /// Print a completion script for SHELL on standard output and exit.
+    #[arg(
+        long,
+        value_name = "SHELL",
+        long_help = "Print a completion script for SHELL on standard output and exit.\n\n\
+            Examples:\n  \
+            gobyd --completions bash > ~/.local/share/bash-completion/completions/gobyd\n  \
+            gobyd --completions zsh > ~/.zfunc/_gobyd\n  \
+            gobyd --completions fish > ~/.config/fish/completions/gobyd.fish"
+    )]
+    pub completions: Option<clap_complete::Shell>,
+    /// Write the manual page gobyd.1 into DIR (created if missing) and exit.
+    #[arg(
+        long,
+        value_name = "DIR",
+        long_help = "Write the manual page gobyd.1 into DIR (created if missing), print its \
+            path and exit.\n\n\
+            Example: gobyd --man ~/.local/share/man/man1 && man gobyd"
+    )]
+    pub man: Option<std::path::PathBuf>,
+}
+
+/// Why `--mqtt-broker` cannot be used, if it cannot (told as the option's,
+/// not placed at the configuration file's broker line).
+fn mqtt_broker_problem(cli: &GobydCli) -> Option<String> {
+    let broker = cli.mqtt_broker.as_deref()?;
+    if broker.trim().is_empty() || crate::mqtt::settings::split_broker(broker, 1883).is_ok() {
+        return None;
+    }
+    Some(format!(
+        "--mqtt-broker {broker:?} is not HOST[:PORT] (e.g. localhost, 10.0.0.5:1884, [::1]:1883)"
+    ))
+}
+
+/// The MQTT broker in use and where it comes from, for `--check`.
+fn mqtt_broker_note(cli: &GobydCli, config: &GobydConfig) -> Option<String> {
+    let from = if cli.mqtt_broker.is_some() {
+        "from --mqtt-broker"
+    } else {
+        "from the configuration"
+    };
+    let mqtt = config.mqtt.as_ref()?;
+    if mqtt.broker().trim().is_empty() {
+        return cli
+            .mqtt_broker
+            .is_some()
+            .then(|| format!("MQTT bridge: none ({from})"));
+    }
+    let port = if mqtt.tls.is_some() { 8883 } else { 1883 };
+    let (host, port) = crate::mqtt::settings::split_broker(mqtt.broker(), port).ok()?;
+    let host = if host.contains(':') {
+        format!("[{host}]")
+    } else {
+        host
+    };
+    Some(format!("MQTT broker: {host}:{port} ({from})"))
 }
 
 /// A configuration file's text and name, to say where a field is written.
@@ -120,6 +190,9 @@ fn configuration(cli: &GobydCli) -> Result<(GobydConfig, Option<Source>), config
     }
     if cli.log_json {
         config.log.get_or_insert_with(Default::default).json = Some(true);
+    }
+    if let Some(broker) = &cli.mqtt_broker {
+        config.mqtt.get_or_insert_with(Default::default).broker = Some(broker.trim().to_string());
     }
     Ok((config, source))
 }
@@ -187,12 +260,36 @@ fn shutdown_signal() -> impl std::future::Future<Output = ()> {
 
 /// Runs `gobyd` with a parsed command line; returns the exit status.
 pub fn run_cli(cli: GobydCli) -> u8 {
+    if let Some(shell) = cli.completions {
+        let mut script = Vec::new();
+        clap_complete::generate(shell, &mut GobydCli::command(), "gobyd", &mut script);
+        return match std::io::stdout().lock().write_all(&script) {
+            Ok(()) => EXIT_OK,
+            Err(_) => EXIT_SETUP,
+        };
+    }
+    if let Some(dir) = &cli.man {
+        return match write_man_page(dir) {
+            Ok(path) => {
+                println!("{}", path.display());
+                EXIT_OK
+            }
+            Err(e) => {
+                eprintln!("gobyd: error: {e}");
+                EXIT_SETUP
+            }
+        };
+    }
     if cli.example_config {
         let mut out = std::io::stdout().lock();
         return match out.write_all(config::EXAMPLE_CONFIG.as_bytes()) {
             Ok(()) => EXIT_OK,
             Err(_) => EXIT_SETUP,
         };
+    }
+    if let Some(problem) = mqtt_broker_problem(&cli) {
+        eprintln!("gobyd: error: {problem}");
+        return EXIT_SETUP;
     }
     let (config, source) = match configuration(&cli) {
         Ok(loaded) => loaded,
@@ -202,9 +299,13 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         }
     };
     if cli.check {
+        let broker = mqtt_broker_note(&cli, &config);
         return match runtime::check(config) {
             Ok(types) => {
                 println!("configuration is valid; DCCL types: {}", types.join(", "));
+                if let Some(broker) = broker {
+                    println!("{broker}");
+                }
                 EXIT_OK
             }
             Err(e) => {
@@ -245,6 +346,15 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             }
         }
     })
+}
+
+/// Writes gobyd.1 into `dir` (created if missing); returns its path.
+fn write_man_page(dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("cannot create the directory {}: {e}", dir.display()))?;
+    clap_mangen::Man::new(GobydCli::command())
+        .generate_to(dir)
+        .map_err(|e| format!("cannot write the manual page into {}: {e}", dir.display()))
 }
 
 /// Parses the command line; on `--help`, `--version` or a usage error,

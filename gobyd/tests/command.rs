@@ -548,3 +548,107 @@ fn check_and_start_refuse_what_cannot_work_naming_field_and_place() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_mqtt_broker_option_overrides_the_configuration_and_check_says_so() {
+    let dir = scratch("command", "mqtt-broker");
+    let with = dir.join("with-mqtt.pb.txt");
+    std::fs::write(
+        &with,
+        "modem_id: 1\nmqtt { broker: \"10.9.9.9:1999\" topic_prefix: \"fleet\" }\n",
+    )
+    .unwrap();
+    let without = dir.join("without-mqtt.pb.txt");
+    std::fs::write(&without, "modem_id: 1\n").unwrap();
+    let (with, without) = (with.to_str().unwrap(), without.to_str().unwrap());
+    let check = |args: &[&str]| {
+        let mut all = vec!["--check"];
+        all.extend_from_slice(args);
+        let out = gobyd(&all);
+        assert!(out.status.success(), "{args:?}: {}", stderr_text(&out));
+        let stdout = stdout_text(&out);
+        let mut lines = stdout.lines();
+        assert!(
+            lines.next().unwrap().starts_with("configuration is valid;"),
+            "{stdout}"
+        );
+        lines.next().unwrap_or("").to_string()
+    };
+    assert_eq!(
+        check(&["--config", with]),
+        "MQTT broker: 10.9.9.9:1999 (from the configuration)"
+    );
+    assert_eq!(
+        check(&["--config", with, "--mqtt-broker", "127.0.0.1"]),
+        "MQTT broker: 127.0.0.1:1883 (from --mqtt-broker)"
+    );
+    assert_eq!(
+        check(&["--config", with, "--mqtt-broker", "[::1]:1884"]),
+        "MQTT broker: [::1]:1884 (from --mqtt-broker)"
+    );
+    // A configuration without an mqtt section gets one; an empty value
+    // turns the bridge off; no bridge, no line.
+    assert_eq!(
+        check(&["--config", without, "--mqtt-broker", "broker.local:1999"]),
+        "MQTT broker: broker.local:1999 (from --mqtt-broker)"
+    );
+    assert_eq!(
+        check(&["--config", with, "--mqtt-broker", ""]),
+        "MQTT bridge: none (from --mqtt-broker)"
+    );
+    assert_eq!(check(&["--config", without]), "");
+    // A bad value is the option's error, not the file's.
+    let out = gobyd(&["--check", "--config", with, "--mqtt-broker", "broker:port"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("--mqtt-broker \"broker:port\" is not HOST[:PORT]") && !err.contains(with),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gobyd_prints_completions_and_writes_its_man_page() {
+    let out = gobyd(&["--completions", "bash"]);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    let bash = stdout_text(&out);
+    for word in ["gobyd", "--mqtt-broker", "--moos-file", "--check", "--man"] {
+        assert!(bash.contains(word), "{word} missing from the bash script");
+    }
+    for shell in ["zsh", "fish", "elvish", "powershell"] {
+        let out = gobyd(&["--completions", shell]);
+        assert!(out.status.success(), "{shell}: {}", stderr_text(&out));
+        assert!(stdout_text(&out).contains("mqtt-broker"), "{shell}");
+    }
+    let out = gobyd(&["--completions", "tcsh"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("invalid value 'tcsh'") && err.contains("bash, elvish, fish, powershell, zsh"),
+        "{err}"
+    );
+
+    let dir = scratch("command", "man").join("man1");
+    let out = gobyd(&["--man", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    let page = dir.join("gobyd.1");
+    assert_eq!(stdout_text(&out).trim(), page.display().to_string());
+    let text = std::fs::read_to_string(&page).unwrap();
+    assert!(text.contains(".TH gobyd 1"), "{text}");
+    for option in [
+        r"\-\-mqtt\-broker",
+        r"\-\-check",
+        r"\-\-moos\-file",
+        r"\-\-completions",
+    ] {
+        assert!(text.contains(option), "{option} missing from gobyd.1");
+    }
+    let out = gobyd(&["--man", "/dev/null/man1"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr_text(&out).contains("cannot create the directory /dev/null/man1"),
+        "{}",
+        stderr_text(&out)
+    );
+}

@@ -14,7 +14,7 @@ use std::process::{Child, Command, Stdio};
 
 use serde_json::Value;
 use support::broker::{Broker, Watcher};
-use support::daemon::{free_udp_port, scratch};
+use support::daemon::{free_tcp_port, free_udp_port, scratch};
 use support::node::{Entry, Node, Simulator};
 
 /// Node `id` of two on the acoustic simulator (150 m apart, packets between
@@ -46,6 +46,11 @@ struct Gobyd {
 
 impl Gobyd {
     fn start(dir: &Path, id: i32) -> Gobyd {
+        Self::start_with(dir, id, &[])
+    }
+
+    /// As [`Gobyd::start`], with more command-line arguments.
+    fn start_with(dir: &Path, id: i32, args: &[&str]) -> Gobyd {
         let log = File::options()
             .create(true)
             .append(true)
@@ -54,6 +59,7 @@ impl Gobyd {
         let child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
             .arg("--config")
             .arg(dir.join(format!("node{id}.cfg")))
+            .args(args)
             .env_remove("RUST_BACKTRACE")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -355,6 +361,34 @@ fn the_bridge_speaks_tls() {
     watcher.publish("secure/1/tx/goby.example.Command", command("sealed"));
     let accepted = watcher.wait_on("secure/1/accepted", |v| Some(v.clone()));
     assert_eq!(accepted["accepted"], "goby.example.Command", "{accepted}");
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_broker_on_the_command_line_is_the_one_used() {
+    let dir = scratch("mqtt", "broker-option");
+    let broker = Broker::start(&dir, "the_broker_on_the_command_line_is_the_one_used");
+    // The configuration names a broker nobody runs; --mqtt-broker the real one.
+    let nobody = format!("127.0.0.1:{}", free_tcp_port());
+    Node::new(1)
+        .json_tcp("")
+        .mqtt(&nobody, "override", "")
+        .data_dir(&dir.join("node1"))
+        .write(dir.join("node1.cfg"));
+    let watcher = Watcher::start(&broker.address(), "console", "override/#");
+    let node = Gobyd::start_with(&dir, 1, &["--mqtt-broker", &broker.address()]);
+    watcher.wait_on("override/1/status", |v| (v["online"] == true).then_some(()));
+    drop(node);
+    // Without an mqtt section, the option alone bridges node 2 with the
+    // section's defaults: topic prefix goby, the node named by its modem id.
+    let watcher = Watcher::start(&broker.address(), "console2", "goby/#");
+    Node::new(2)
+        .json_tcp("")
+        .data_dir(&dir.join("node2"))
+        .write(dir.join("node2.cfg"));
+    let _node = Gobyd::start_with(&dir, 2, &["--mqtt-broker", &broker.address()]);
+    watcher.wait_on("goby/2/status", |v| (v["online"] == true).then_some(()));
     drop(broker);
     let _ = std::fs::remove_dir_all(&dir);
 }
