@@ -8,7 +8,9 @@ const EXAMPLE: &str = include_str!("../examples/user_codec.rs");
 #[test]
 fn user_codec_section_code_is_the_example_code() {
     let heading = "## Writing your own codec";
-    let start = GUIDE.find(heading).expect("docs/embedding.md has the section");
+    let start = GUIDE
+        .find(heading)
+        .expect("docs/embedding.md has the section");
     let section = &GUIDE[start + heading.len()..];
     let section = &section[..section.find("\n## ").unwrap_or(section.len())];
     let known: Vec<&str> = EXAMPLE.lines().map(str::trim).collect();

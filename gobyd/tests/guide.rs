@@ -62,7 +62,10 @@ fn the_configurations_the_guide_shows_are_committed_files_that_load() {
         "gobyd/examples/goby3-sections.pb.txt",
         "gobyd/examples/moos-client.pb.txt",
     ] {
-        assert!(loaded.iter().any(|l| l == wanted), "{wanted} not shown: {loaded:?}");
+        assert!(
+            loaded.iter().any(|l| l == wanted),
+            "{wanted} not shown: {loaded:?}"
+        );
     }
 }
 
@@ -94,7 +97,11 @@ fn start(config: &Path, dir: &Path, json: &str) -> Daemon {
     let daemon = Daemon(child);
     let deadline = Instant::now() + Duration::from_secs(30);
     while TcpStream::connect(json).is_err() {
-        assert!(Instant::now() < deadline, "gobyd -c {} opens {json}", config.display());
+        assert!(
+            Instant::now() < deadline,
+            "gobyd -c {} opens {json}",
+            config.display()
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     daemon
@@ -116,8 +123,9 @@ fn the_quick_start_runs_as_the_guide_says() {
         .into_iter()
         .find(|g| g.name == "docs/gobyd.md")
         .expect("docs/gobyd.md");
-    let expected = guide_check::block_after(&guide, "output: python3 gobyd/examples/quick_start.py")
-        .expect("the guide shows the quick start's output");
+    let expected =
+        guide_check::block_after(&guide, "output: python3 gobyd/examples/quick_start.py")
+            .expect("the guide shows the quick start's output");
     let dir = scratch("guide", "quick-start");
     let config = root.join("gobyd/config");
     let v1 = start(&config.join("vehicle1.pb.txt"), &dir, "127.0.0.1:11141");
@@ -156,7 +164,10 @@ fn the_quick_start_runs_as_the_guide_says() {
             dir.join(data).join("outbox.journal").is_file(),
             "{data} is not in the directory gobyd was started in"
         );
-        assert!(!config.join(data).exists(), "{data} beside the configuration");
+        assert!(
+            !config.join(data).exists(),
+            "{data} beside the configuration"
+        );
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -94,7 +94,12 @@ pub fn guide_files() -> Vec<Guide> {
     let mut names = vec!["README.md".to_string()];
     let mut docs: Vec<String> = std::fs::read_dir(root.join("docs"))
         .expect("docs/ exists")
-        .map(|e| e.expect("a docs/ entry").file_name().to_string_lossy().into_owned())
+        .map(|e| {
+            e.expect("a docs/ entry")
+                .file_name()
+                .to_string_lossy()
+                .into_owned()
+        })
         .filter(|n| n.ends_with(".md"))
         .map(|n| format!("docs/{n}"))
         .collect();
@@ -197,7 +202,9 @@ impl Guide {
             .iter()
             .map(|(_, p)| p.parent().expect("a program's directory").to_path_buf())
             .collect();
-        path_dirs.extend(std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default()));
+        path_dirs.extend(std::env::split_paths(
+            &std::env::var_os("PATH").unwrap_or_default(),
+        ));
         let path = std::env::join_paths(path_dirs).expect("a PATH");
         // One working directory for the file, as a reader's shell session.
         let sandbox = Sandbox::new().unwrap_or_else(|e| panic!("{}: {e}", self.name));
@@ -347,13 +354,11 @@ fn check_example(
     }
 }
 
-/// Runs `script` with bash in `dir`; exit status (None when killed),
-/// standard output and standard error.
-fn run_bash(
-    script: &str,
-    dir: &Path,
-    path: &std::ffi::OsStr,
-) -> Result<(Option<i32>, Vec<u8>, Vec<u8>), String> {
+/// Exit status (None when killed), standard output and standard error.
+type Outcome = (Option<i32>, Vec<u8>, Vec<u8>);
+
+/// Runs `script` with bash in `dir`.
+fn run_bash(script: &str, dir: &Path, path: &std::ffi::OsStr) -> Result<Outcome, String> {
     use std::os::unix::process::CommandExt;
     let mut child = Command::new("bash")
         .arg("-c")
@@ -476,7 +481,11 @@ pub fn check_shown_files(guides: &[Guide]) -> Vec<PathBuf> {
                     "{}:{}: the block is not {} {}",
                     guide.name,
                     shown.line,
-                    if shown.excerpt { "an excerpt of" } else { "the whole of" },
+                    if shown.excerpt {
+                        "an excerpt of"
+                    } else {
+                        "the whole of"
+                    },
                     shown.path
                 );
             }
@@ -488,7 +497,7 @@ pub fn check_shown_files(guides: &[Guide]) -> Vec<PathBuf> {
 }
 
 /// The text of the fenced block right after the line `<!-- MARKER -->`.
-pub fn block_after<'a>(guide: &'a Guide, marker: &str) -> Option<String> {
+pub fn block_after(guide: &Guide, marker: &str) -> Option<String> {
     let wanted = format!("<!-- {marker} -->");
     fences(&guide.text)
         .into_iter()
@@ -642,8 +651,7 @@ mod tests {
     fn console_blocks_parse_commands_statuses_and_output() {
         let guide = Guide {
             name: "x.md".into(),
-            text: "text\n```console\n$ P=a/b\n$ echo 1 \\\n  2\n1 2\n$ false\n? 1\n```\n"
-                .into(),
+            text: "text\n```console\n$ P=a/b\n$ echo 1 \\\n  2\n1 2\n$ false\n? 1\n```\n".into(),
         };
         let blocks = guide.console_blocks();
         assert_eq!(blocks.len(), 1);
@@ -711,8 +719,7 @@ mod tests {
     fn shown_files_are_marked_blocks() {
         let guide = Guide {
             name: "x.md".into(),
-            text: "<!-- file: Cargo.toml -->\n```toml\n[workspace]\n```\n\n```sh\nno\n```\n"
-                .into(),
+            text: "<!-- file: Cargo.toml -->\n```toml\n[workspace]\n```\n\n```sh\nno\n```\n".into(),
         };
         let shown = guide.shown_files();
         assert_eq!(shown.len(), 1);
