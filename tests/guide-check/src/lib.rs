@@ -23,6 +23,12 @@
 //! left to the test that supplies it ([`Guide::run_console_blocks`] says
 //! which it ran).
 //!
+//! Why not trycmd: trycmd runs each `$` line of a Markdown file as one
+//! program with its arguments, with no shell (no pipes, `<` or `>`, no
+//! variables) and no standard input for Markdown cases, and the guide's
+//! commands are shell lines that read the shipped example files. The
+//! matching of output is trycmd's own engine, snapbox.
+//!
 //! A fenced block right after `<!-- file: PATH -->` must be the whole of
 //! the repository's file `PATH`; after `<!-- excerpt: PATH -->`, lines that
 //! appear in that file in the same order, one after the other.
@@ -105,6 +111,35 @@ pub fn guide_files() -> Vec<Guide> {
         .collect();
     docs.sort();
     names.extend(docs);
+    names
+        .into_iter()
+        .map(|name| Guide {
+            text: std::fs::read_to_string(root.join(&name))
+                .unwrap_or_else(|e| panic!("cannot read {name}: {e}")),
+            name,
+        })
+        .collect()
+}
+
+/// The README.md of each crate of the workspace (`*/README.md`,
+/// `examples/*/README.md`, `tests/*/README.md`), by name.
+pub fn crate_readmes() -> Vec<Guide> {
+    let root = repository_root();
+    let mut names = Vec::new();
+    for dir in ["", "examples/", "tests/"] {
+        let Ok(entries) = std::fs::read_dir(root.join(dir)) else {
+            continue;
+        };
+        for entry in entries.map_while(Result::ok) {
+            let crate_dir = format!("{dir}{}", entry.file_name().to_string_lossy());
+            if root.join(&crate_dir).join("Cargo.toml").is_file()
+                && root.join(&crate_dir).join("README.md").is_file()
+            {
+                names.push(format!("{crate_dir}/README.md"));
+            }
+        }
+    }
+    names.sort();
     names
         .into_iter()
         .map(|name| Guide {
