@@ -40,3 +40,8 @@ pub use manager::{
     MacEvent, MacManager, SlotAction, SlotEvent, BROADCAST_ID, QUERY_DESTINATION_ID,
 };
 pub mod simulation;
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

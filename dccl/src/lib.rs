@@ -103,3 +103,8 @@ pub use registry::CodecRegistry;
 pub use text_format::{debug_string, double_to_text, float_to_text, short_debug_string};
 
 pub use prost_reflect;
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

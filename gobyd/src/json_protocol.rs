@@ -1,44 +1,11 @@
 //! The line protocol of the JSON autonomy interface: one JSON object per
-//! line in each direction.
+//! line in each direction; requests from the client (`publish`,
+//! `subscribe`, `driver_specific`), and from the daemon replies (one per
+//! request, numbered) and events (each with `"event": KIND`).
 //!
-//! Client to daemon:
-//!
-//! ```text
-//! {"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO"}}
-//! {"subscribe": ["ack", "expire", "queue_size"]}
-//! ```
-//!
-//! Daemon to client, two kinds of line that never mix:
-//!
-//! - **Replies**, exactly one per request line, in the order of the
-//!   requests; each has `"reply": N`, the number of its request line on this
-//!   connection (for UDP: from this peer), counted from 1:
-//!   `{"reply": N, "accepted": NAME, "id": ID}` (written to disk before this
-//!   line is sent; `"delivered": true` instead of `"id"` for a message
-//!   addressed to this node), `{"reply": N, "subscribed": [TOPIC, ...]}`,
-//!   or `{"reply": N, "error": TEXT}` for a line that was not accepted. An
-//!   accepted reply also lists the messages its message pushed out of their
-//!   full queue (`"dropped": [{"id": ID, "name": NAME, "msg": {...}}]`) and,
-//!   for a type with `clamp_out_of_range`, the values the codec changed
-//!   (`"changed": [{"field": PATH, "reason": TEXT}]`).
-//! - **Events**, each with `"event": KIND`: `{"event": "received",
-//!   "received": NAME, "src": S, "dest": D, "msg": {...}, "link": {...}}`
-//!   for every message received (to every client; `link` summarizes the
-//!   transmission it came in, with a Micro-Modem's receive statistics in
-//!   `receive_stat`; `"recovered": true` marks one handed over after a
-//!   restart), and when subscribed
-//!   `{"event": "ack", "ack": NAME, "id": ID, "by": B, "msg": {...}}`,
-//!   `{"event": "expire", "expire": NAME, "id": ID, "msg": {...}}`,
-//!   `{"event": "drop", "drop": NAME, "id": ID, "msg": {...}}`,
-//!   `{"event": "queue_size", "queue_size": NAME, "size": N}`,
-//!   `{"event": "sent", "sent": NAME, "frame": F, "msg": {...}}` for a
-//!   message placed in a frame, the
-//!   modem and medium access events of topics `modem` and `mac` (see
-//!   [`crate::modem_event`]), and
-//!   `{"event": "lost", "count": N}` when a client read too slowly and
-//!   missed N events.
-//!
-//! Messages are in proto3 JSON with the field names of the `.proto` file.
+//! The protocol's reference, every kind of line with each of its keys, is
+//! the guide's `docs/json-protocol.md` in the repository; a test of this
+//! module checks that it names every line kind and key rendered here.
 
 use dccl::Codec;
 use modemdriver::{RawDirection, TransmitOutcome};
@@ -652,7 +619,7 @@ mod tests {
 
     /// One event of every kind the core sends, and one reply of every
     /// kind: the exhaustive matches make a new kind fail to compile here
-    /// until it has a sample (and so a check against the README).
+    /// until it has a sample (and so a check against the guide's reference).
     fn one_of_each() -> Vec<Value> {
         let command = protos::goby::example::Command::default().transcode_to_dynamic();
         let transmission = ModemTransmission {
@@ -784,17 +751,17 @@ mod tests {
             .collect()
     }
 
-    /// The README's table of the JSON interface is the protocol's
-    /// reference: every line kind the daemon renders is there, with each of
-    /// its keys.
+    /// The guide's table of the JSON interface (`docs/json-protocol.md`) is
+    /// the protocol's reference: every line kind the daemon renders is
+    /// there, with each of its keys.
     #[test]
-    fn every_line_kind_and_key_is_in_the_readmes_reference() {
-        let readme = include_str!("../../README.md");
-        let start = readme
-            .find("### The JSON interface")
+    fn every_line_kind_and_key_is_in_the_guides_reference() {
+        let guide = include_str!("../../docs/json-protocol.md");
+        let start = guide
+            .find("## The JSON interface")
             .expect("the JSON interface section");
-        let section = &readme[start..];
-        let section = &section[..section.find("\n### ").unwrap_or(section.len())];
+        let section = &guide[start..];
+        let section = &section[..section.find("\n## ").unwrap_or(section.len())];
         for line in one_of_each() {
             let Value::Object(map) = &line else {
                 panic!("{line} is not an object");
@@ -815,13 +782,13 @@ mod tests {
                 .lines()
                 .find(|r| r.starts_with('|') && r.contains(&kind))
                 .unwrap_or_else(|| {
-                    panic!("no row of the README's JSON reference shows {kind}: {line}")
+                    panic!("no row of the guide's JSON reference shows {kind}: {line}")
                 });
             for key in map.keys() {
                 let quoted = format!(r#""{key}""#);
                 assert!(
                     row.contains(&quoted) || section.contains(&format!("`{key}`")),
-                    "the README's JSON reference does not name key {quoted} of {line}"
+                    "the guide's JSON reference does not name key {quoted} of {line}"
                 );
             }
         }

@@ -52,3 +52,8 @@ pub mod outbox;
 pub mod raw_log;
 pub mod runtime;
 pub mod translator;
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

@@ -1,35 +1,13 @@
 //! Events of the modem driver and the medium access control, as the
-//! daemon's core reports them to the autonomy interfaces.
+//! daemon's core reports them to the autonomy interfaces: raw lines,
+//! transmissions heard and sent, the driver's status and driver-specific
+//! results (JSON topic `modem`), slot starts and auto-discovery's cycle
+//! changes (topic `mac`).
 //!
-//! JSON lines (topic `modem`):
-//!
-//! - `{"event": "raw", "raw": "in"|"out", "line": TEXT, "peer": P}`: a line
-//!   read from or written to the device, or a datagram that is not UTF-8
-//!   in hex;
-//! - `{"event": "modem_receive", "modem_receive": TRANSMISSION}`: a
-//!   transmission heard by the modem (data or acknowledgement);
-//! - `{"event": "modem_transmit", "modem_transmit": TRANSMISSION,
-//!   "outcome": "sent"|"nothing_to_send"|"failed", "reason": TEXT}`: the
-//!   outcome of a transmission this node initiated;
-//! - `{"event": "driver_status", "driver_status": TEXT}`: a fault met by
-//!   the driver or a recovery from one;
-//! - `{"event": "driver_specific", "driver_specific": NAME, "msg": {...}}`:
-//!   a driver-specific result, e.g. a `goby.acomms.protobuf.MicroModemSpecific`
-//!   with the travel times of a ping or long-baseline interrogation
-//!   (`ranging_reply.one_way_travel_time`, seconds).
-//!
-//! JSON lines (topic `mac`):
-//!
-//! - `{"event": "mac_slot_start", "mac_slot_start": TRANSMISSION}`: a slot
-//!   started (its `src`, `dest`, `type`, `slot_index`, `slot_seconds`);
-//! - `{"event": "mac_cycle_update", "joined"|"left": MODEM_ID}`: under
-//!   auto-discovery, a node joined or left the cycle.
-//!
-//! Transmissions are `goby.acomms.protobuf.ModemTransmission` in proto3
-//! JSON with the `.proto` field names. The core sends the typed events;
-//! the JSON interface renders these lines
-//! ([`crate::json_protocol::event_line`]), the MOOS and MQTT bridges
-//! their own forms.
+//! The core sends the typed events; the JSON interface renders them as
+//! lines ([`crate::json_protocol::event_line`]; their reference is the
+//! guide's `docs/json-protocol.md`), the MOOS and MQTT bridges in their own
+//! forms.
 
 use amac::MacEvent;
 use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};

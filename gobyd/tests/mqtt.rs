@@ -229,7 +229,8 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// The README's fleet configurations check, and name their nodes.
+/// The guide's fleet configurations (docs/mqtt-fleet.md) check, and name
+/// their nodes.
 #[test]
 fn the_fleet_configurations_check() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");

@@ -24,7 +24,7 @@
 //! the messages the receiving daemon then dies without recording, and the
 //! sender drops them as delivered. With those hardware acks
 //! (`use_application_acks: false`) this test reports such messages as lost
-//! and fails (see "Application acks over the Micro-Modem" in the README);
+//! and fails (see "Application acks over the Micro-Modem" in docs/gobyd.md);
 //! with `gobyd`'s default, application acks (the receiving daemon acks a
 //! frame only after its inbox recorded the messages), it must pass. Each
 //! lost message is printed with what happened to its receiver around the

@@ -49,3 +49,8 @@ pub use driver::{
     TransmitOutcome, TransmitResult,
 };
 pub use protos::goby::acomms::protobuf::{DriverConfig, ModemTransmission};
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

@@ -20,3 +20,8 @@ pub mod wire;
 pub use client::{ClientConfig, ClientError, ConnectionState, Mail, MailReceiver, MoosClient};
 pub use transport::TransportError;
 pub use wire::Value;
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

@@ -51,3 +51,8 @@ pub use config::{ModelKind, ObserverKind, PositionConfig};
 pub use error::PositionError;
 pub use frame::{PositionReceiver, PositionSender};
 pub use sample_coder::{Sample, SampleCoder, Transmission};
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

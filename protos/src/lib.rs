@@ -123,3 +123,8 @@ pub mod goby {
         }
     }
 }
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

@@ -78,3 +78,8 @@ pub const BROADCAST_ID: i32 = 0;
 pub const QUERY_DESTINATION_ID: i32 = -1;
 /// Source of a data request meaning "this node".
 pub const QUERY_SOURCE_ID: i32 = -1;
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

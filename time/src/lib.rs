@@ -161,3 +161,8 @@ mod tests {
         assert_eq!(hhmmss(1_370_090_096_000_000), "123456");
     }
 }
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

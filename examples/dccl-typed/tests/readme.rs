@@ -1,8 +1,9 @@
-//! The README's "Embedding `dccl`" section shows code taken from this crate:
+//! The guide's "Embedding `dccl`" section (`docs/embedding.md`) shows code
+//! taken from this crate:
 //! every code line of its Rust blocks is a line of `build.rs`, `src/` or
 //! `tests/same_bytes.rs`, which compile and run here.
 
-const README: &str = include_str!("../../../README.md");
+const GUIDE: &str = include_str!("../../../docs/embedding.md");
 const SOURCES: &[&str] = &[
     include_str!("../build.rs"),
     include_str!("../src/lib.rs"),
@@ -10,12 +11,12 @@ const SOURCES: &[&str] = &[
     include_str!("same_bytes.rs"),
 ];
 
-/// Rust code blocks of the README section whose heading starts with `heading`.
+/// Rust code blocks of the guide's section whose heading starts with `heading`.
 fn rust_blocks(heading: &str) -> Vec<Vec<&'static str>> {
-    let start = README
+    let start = GUIDE
         .find(heading)
-        .unwrap_or_else(|| panic!("README has no section {heading:?}"));
-    let section = &README[start + heading.len()..];
+        .unwrap_or_else(|| panic!("docs/embedding.md has no section {heading:?}"));
+    let section = &GUIDE[start + heading.len()..];
     let section = &section[..section.find("\n## ").unwrap_or(section.len())];
     let mut blocks = Vec::new();
     let mut current: Option<Vec<&str>> = None;
@@ -48,7 +49,7 @@ fn embedding_section_code_is_compiled_code() {
         }
         assert!(
             known.contains(line),
-            "README line not found in examples/dccl-typed: {line:?}"
+            "docs/embedding.md line not found in examples/dccl-typed: {line:?}"
         );
     }
 }

@@ -1,0 +1,173 @@
+//! The guide's `gobyd` examples: every console block of `README.md` and
+//! `docs/*.md` that calls `gobyd` is run and its output compared with the
+//! guide's (see the `guide-check` crate for the rules); every
+//! configuration the guide shows is a committed file that loads; and the
+//! quick start runs as `docs/gobyd.md` tells it.
+
+mod support;
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use support::daemon::scratch;
+
+/// Longest wait for the quick start's four lines: a few TDMA cycles of
+/// 16 s (the simulator loses 10 % of the packets), with room for a loaded
+/// machine.
+const QUICK_START_PATIENCE: Duration = Duration::from_secs(240);
+
+fn repository_root() -> PathBuf {
+    guide_check::repository_root()
+}
+
+#[test]
+fn the_guides_gobyd_examples_print_what_the_guide_shows() {
+    let gobyd = Path::new(env!("CARGO_BIN_EXE_gobyd"));
+    let mut ran = Vec::new();
+    for guide in guide_check::guide_files() {
+        for line in guide.run_console_blocks(&[("gobyd", gobyd)]) {
+            ran.push(format!("{}:{line}", guide.name));
+        }
+    }
+    for file in ["README.md", "docs/gobyd.md", "docs/moos.md"] {
+        assert!(
+            ran.iter().any(|r| r.starts_with(&format!("{file}:"))),
+            "no console block of {file} ran: {ran:?}"
+        );
+    }
+}
+
+#[test]
+fn the_configurations_the_guide_shows_are_committed_files_that_load() {
+    let files = guide_check::check_shown_files(&guide_check::guide_files());
+    let root = repository_root();
+    let mut loaded = Vec::new();
+    for file in &files {
+        let name = file.strip_prefix(&root).unwrap().display().to_string();
+        if name.ends_with(".pb.txt") {
+            gobyd::config::load(file).unwrap_or_else(|e| panic!("{name}: {e}"));
+            loaded.push(name);
+        } else if name.ends_with(".moos") {
+            gobyd::mission_file::load(file, "gobyd").unwrap_or_else(|e| panic!("{name}: {e}"));
+            loaded.push(name);
+        }
+    }
+    for wanted in [
+        "gobyd/config/vehicle1.pb.txt",
+        "gobyd/config/bench-modem1.pb.txt",
+        "gobyd/config/fleet-vehicle1.pb.txt",
+        "gobyd/examples/goby3-sections.pb.txt",
+        "gobyd/examples/moos-client.pb.txt",
+    ] {
+        assert!(
+            loaded.iter().any(|l| l == wanted),
+            "{wanted} not shown: {loaded:?}"
+        );
+    }
+}
+
+/// A `gobyd` process of the quick start, killed when dropped.
+struct Daemon(Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `gobyd -c CONFIG` in `dir` and waits for its JSON interface.
+fn start(config: &Path, dir: &Path, json: &str) -> Daemon {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .arg("-c")
+        .arg(config)
+        .current_dir(dir)
+        .env_remove("RUST_BACKTRACE")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gobyd starts");
+    // Keep reading the log so that the daemon never blocks on it.
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || for _ in BufReader::new(stderr).lines().map_while(Result::ok) {});
+    let daemon = Daemon(child);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while TcpStream::connect(json).is_err() {
+        assert!(
+            Instant::now() < deadline,
+            "gobyd -c {} opens {json}",
+            config.display()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    daemon
+}
+
+/// The quick start of `docs/gobyd.md` as written: both daemons from the
+/// shipped configurations, started in an empty directory, and the shipped
+/// client script, whose output must match the guide's. Also checks where
+/// the relative `data_dir`s land: in the directory the daemons were
+/// started in.
+#[test]
+fn the_quick_start_runs_as_the_guide_says() {
+    if Command::new("python3").arg("--version").output().is_err() {
+        eprintln!("SKIPPED: the quick start's client needs python3, which is not installed");
+        return;
+    }
+    let root = repository_root();
+    let guide = guide_check::guide_files()
+        .into_iter()
+        .find(|g| g.name == "docs/gobyd.md")
+        .expect("docs/gobyd.md");
+    let expected =
+        guide_check::block_after(&guide, "output: python3 gobyd/examples/quick_start.py")
+            .expect("the guide shows the quick start's output");
+    let dir = scratch("guide", "quick-start");
+    let config = root.join("gobyd/config");
+    let v1 = start(&config.join("vehicle1.pb.txt"), &dir, "127.0.0.1:11141");
+    let v2 = start(&config.join("vehicle2.pb.txt"), &dir, "127.0.0.1:11142");
+    let mut client = Command::new("python3")
+        .arg(root.join("gobyd/examples/quick_start.py"))
+        .current_dir(&dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 runs the client");
+    let deadline = Instant::now() + QUICK_START_PATIENCE;
+    while client.try_wait().unwrap().is_none() {
+        if Instant::now() > deadline {
+            let _ = client.kill();
+            let _ = client.wait();
+            panic!("the quick start's client did not finish within {QUICK_START_PATIENCE:?}");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let out = client.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "the client failed: {}\n{stdout}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        guide_check::output_matches(&stdout, &expected),
+        "the quick start printed\n{stdout}\nthe guide shows\n{expected}"
+    );
+    drop((v1, v2));
+    for data in ["vehicle1-data", "vehicle2-data"] {
+        assert!(
+            dir.join(data).join("outbox.journal").is_file(),
+            "{data} is not in the directory gobyd was started in"
+        );
+        assert!(
+            !config.join(data).exists(),
+            "{data} beside the configuration"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
