@@ -538,23 +538,39 @@ async fn watch(
     let deadline = limit.map(|l| Instant::now() + l);
     let mut state = client.state();
     let mut seen: u64 = 0;
+    // The session the watch started in: "connected again" is said only for
+    // a later one (the state may be seen again without a loss), and even
+    // when the loss itself was not seen (the channel keeps the latest state).
+    let session_of = |state: &ConnectionState| match state {
+        ConnectionState::Connected { session, .. } => Some(*session),
+        _ => None,
+    };
+    let mut session = session_of(&state.borrow_and_update()).unwrap_or(0);
+    let mut lost = false;
     loop {
         let letter = tokio::select! {
             letter = mail.recv() => letter,
             changed = state.changed() => {
                 if changed.is_ok() {
                     let now = state.borrow_and_update().clone();
-                    match now {
-                        ConnectionState::Connecting => eprintln!(
-                            "goby moos spy: the connection to the MOOSDB at {} was lost; \
-                             connecting again",
-                            target.address()
-                        ),
-                        ConnectionState::Connected { .. } => eprintln!(
-                            "goby moos spy: connected again to the MOOSDB at {}",
-                            target.address()
-                        ),
-                        ConnectionState::Closed => {}
+                    match (&now, session_of(&now)) {
+                        (ConnectionState::Connecting, _) if !lost => {
+                            lost = true;
+                            eprintln!(
+                                "goby moos spy: the connection to the MOOSDB at {} was lost; \
+                                 connecting again",
+                                target.address()
+                            );
+                        }
+                        (_, Some(now)) if now > session => {
+                            session = now;
+                            lost = false;
+                            eprintln!(
+                                "goby moos spy: connected again to the MOOSDB at {}",
+                                target.address()
+                            );
+                        }
+                        _ => {}
                     }
                 }
                 continue;
