@@ -45,6 +45,23 @@ pub struct Publish {
     /// Receives the core's answer (the JSON interface renders it as the
     /// `accepted` or `error` line).
     pub reply: oneshot::Sender<PublishReply>,
+    /// The message was given to every gateway at once (MQTT
+    /// `PREFIX/all/tx/TYPE`), so each sends its own copy: one whose
+    /// `SOURCE_ID` role names another node is refused (that node sends it
+    /// itself, would drop this copy as its own broadcast, and the other
+    /// nodes would receive it twice).
+    pub every_gateway: bool,
+}
+
+impl Publish {
+    /// A message for this gateway alone, answered on `reply`.
+    pub fn new(message: DynamicMessage, reply: oneshot::Sender<PublishReply>) -> Self {
+        Publish {
+            message,
+            reply,
+            every_gateway: false,
+        }
+    }
 }
 
 /// Longest request line accepted, bytes (without its newline).
@@ -225,7 +242,12 @@ impl JsonInterface {
             }
             Ok(Request::Publish(message)) => {
                 let (reply, waiting) = oneshot::channel();
-                if self.publish.send(Publish { message, reply }).await.is_err() {
+                if self
+                    .publish
+                    .send(Publish::new(message, reply))
+                    .await
+                    .is_err()
+                {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
                 Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))

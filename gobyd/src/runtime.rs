@@ -542,6 +542,13 @@ impl Daemon {
     /// messages it pushes out of a full queue are named in its reply.
     fn publish(&mut self, publish: Publish) {
         let name = publish.message.descriptor().full_name().to_string();
+        if publish.every_gateway {
+            if let Some(reason) = self.not_for_every_gateway(&publish.message) {
+                tracing::warn!("publish for every gateway refused: {reason}");
+                let _ = publish.reply.send(Err(reason));
+                return;
+            }
+        }
         let admitted = match self.door.admit(publish.message) {
             Ok(admitted) => admitted,
             Err(e) => {
@@ -584,6 +591,27 @@ impl Daemon {
                 let _ = publish.reply.send(Err(e.to_string()));
             }
         }
+    }
+
+    /// Why a message given to every gateway at once must not be sent from
+    /// this one: its `SOURCE_ID` role names another node. Every gateway
+    /// would send a copy in that node's name; the named node drops the
+    /// copies it hears as its own broadcast, and the other nodes receive
+    /// the message once per gateway.
+    fn not_for_every_gateway(&self, message: &DynamicMessage) -> Option<String> {
+        let source = self.outbox.queue().named_source(message).ok()??;
+        if source == i64::from(self.modem_id) {
+            return None;
+        }
+        Some(format!(
+            "{}: its source (the SOURCE_ID role of its queue) is node {source}, not this node ({}): \
+             a message published for every gateway is sent by each of them, so only node {source} \
+             sends this one (a copy from here would reach node {source} as its own broadcast, \
+             which it drops, and the other nodes twice); leave the source unset for every gateway \
+             to send it as its own, or publish it on the tx topic of the one node that should send it",
+            message.descriptor().full_name(),
+            self.modem_id
+        ))
     }
 
     /// Syncs the journal off the core's thread (one sync for every message
@@ -883,6 +911,18 @@ impl Daemon {
         for (event, entry) in events {
             match event {
                 QueueEvent::Received(received) => messages.push(received),
+                QueueEvent::OwnBroadcastHeard {
+                    message,
+                    heard_from,
+                    ..
+                } => tracing::warn!(
+                    src = heard_from,
+                    "received {} from node {heard_from} with this node ({}) as its source, broadcast: \
+                     not delivered (a node's own broadcast is not handed back to it); node \
+                     {heard_from} sent a message in this node's name",
+                    message.descriptor().full_name(),
+                    self.modem_id
+                ),
                 event => self.hand_over(event, entry, &Reception::default()),
             }
         }
