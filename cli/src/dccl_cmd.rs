@@ -593,6 +593,12 @@ fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String
         .collect()
 }
 
+/// `YYYY-MM-DD HH:MM:SS UTC` of seconds since the epoch.
+fn utc_date(secs: u64) -> String {
+    let (y, mo, d, h, mi, s) = goby_time::civil(secs);
+    format!("{y:04}-{mo:02}-{d:02} {h:02}:{mi:02}:{s:02} UTC")
+}
+
 /// Adds to `out` (field path, sent, decoded) for each `dccl.time` field of
 /// `sent` (nested messages included, repeated fields not) that `back` has
 /// with another value.
@@ -629,11 +635,18 @@ fn collect_moved_times(
             _ => false,
         };
         if is_time && moved {
-            let text = |v: &prost_reflect::Value| match v {
-                prost_reflect::Value::F64(x) => x.to_string(),
-                prost_reflect::Value::I64(x) => x.to_string(),
-                prost_reflect::Value::U64(x) => x.to_string(),
-                other => format!("{other:?}"),
+            // The value as given, with its UTC date for the reader.
+            let text = |v: &prost_reflect::Value| {
+                let raw = match v {
+                    prost_reflect::Value::F64(x) => x.to_string(),
+                    prost_reflect::Value::I64(x) => x.to_string(),
+                    prost_reflect::Value::U64(x) => x.to_string(),
+                    other => format!("{other:?}"),
+                };
+                match seconds(v).filter(|s| *s >= 0.0 && s.is_finite()) {
+                    Some(s) => format!("{raw} ({})", utc_date(s as u64)),
+                    None => raw,
+                }
             };
             out.push((path, text(&a), text(&b)));
         }
