@@ -586,8 +586,8 @@ fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String
         .map(|(path, sent, back)| {
             format!(
                 "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
-                 the time codec sends the time of day only, and it decodes as {back} \
-                 (that time of day within 12 hours of the receiver's clock)"
+                 the time codec sends the time of day only, and it decodes as {back}: \
+                 that time of day within 12 hours of the receiver's clock"
             )
         })
         .collect()
