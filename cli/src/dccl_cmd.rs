@@ -245,6 +245,7 @@ pub fn run_command(
                 passphrase: args.passphrase.resolve()?,
                 strict: args.strict,
                 refuse_other_types: true,
+                no_type: None,
             };
             encode(&defs, &job, stdin, stdout, stderr)
         }
@@ -370,11 +371,24 @@ impl Definitions {
         out
     }
 
-    /// The first top-level message of the first `-f` file.
-    pub(crate) fn first_message(&self) -> Option<MessageDescriptor> {
-        let file = self.pool.get_file_by_name(self.file_names.first()?)?;
-        let first = file.messages().next();
-        first
+    /// The `-f` files as given, for messages.
+    pub(crate) fn shown(&self) -> &str {
+        &self.shown
+    }
+
+    /// Full names of the messages of the `-f` files (nested ones included,
+    /// in declaration order) that have a DCCL id (`(dccl.msg) = { id: ... }`):
+    /// the types that can be encoded on their own, helpers left out.
+    pub(crate) fn dccl_types(&self) -> Vec<String> {
+        self.all_messages()
+            .into_iter()
+            .filter(|m| {
+                dccl::field::message_options(m)
+                    .ok()
+                    .is_some_and(|o| o.id.is_some())
+            })
+            .map(|m| m.full_name().to_string())
+            .collect()
     }
 
     /// Descriptor of the message type `name`.
@@ -545,6 +559,9 @@ pub(crate) struct EncodeJob {
     /// `message` (`goby dccl encode -m`); otherwise such a line is encoded as
     /// the type it names, as the reference tool does.
     pub refuse_other_types: bool,
+    /// Why a line without `|full.Name|` has no type when `message` is
+    /// `None` (e.g. the candidates to choose from).
+    pub no_type: Option<String>,
 }
 
 /// Splits a leading `|full.Name|` (the reference tool's way of giving the
@@ -681,9 +698,9 @@ pub(crate) fn encode(
         let name = match named.or(job.message.as_deref()) {
             Some(name) => name,
             None => {
-                return Err(LineError::Bad(
-                    "no message type: give -m NAME or start the line with |full.Name|".into(),
-                ))
+                return Err(LineError::Bad(job.no_type.clone().unwrap_or_else(|| {
+                    "no message type: give -m NAME or start the line with |full.Name|".into()
+                })))
             }
         };
         let desc = match codec.descriptor(name) {
