@@ -90,6 +90,10 @@ pub struct ProtoArgs {
 /// Form of the messages read by `encode` and `bench`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum InputForm {
+    /// Each line as it reads: proto3 JSON when it starts with `{` (a
+    /// text-format message never does: it starts with a field name),
+    /// otherwise protobuf text format.
+    Auto,
     /// Protobuf text format, one message per line.
     Text,
     /// Proto3 JSON, one object per line.
@@ -130,7 +134,7 @@ pub struct EncodeArgs {
     #[arg(short = 'm', long = "message", value_name = "FULL.Name")]
     pub message: String,
     /// Form of the input messages.
-    #[arg(long = "in", value_enum, default_value_t = InputForm::Text)]
+    #[arg(long = "in", value_enum, default_value_t = InputForm::Auto)]
     pub input: InputForm,
     /// Form of the encoded output.
     #[arg(long, value_enum, default_value_t = ByteFormat::Hex)]
@@ -207,7 +211,7 @@ pub struct BenchArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub repeat: u64,
     /// Form of the input messages.
-    #[arg(long = "in", value_enum, default_value_t = InputForm::Text)]
+    #[arg(long = "in", value_enum, default_value_t = InputForm::Auto)]
     pub input: InputForm,
     /// Passphrase for encryption.
     #[command(flatten)]
@@ -489,9 +493,22 @@ fn parse_message(
     form: InputForm,
     line: &str,
 ) -> Result<DynamicMessage, String> {
+    let json_like = line.trim_start().starts_with('{');
+    let form = match form {
+        InputForm::Auto if json_like => InputForm::Json,
+        InputForm::Auto => InputForm::Text,
+        given => given,
+    };
     match form {
-        InputForm::Text => DynamicMessage::parse_text_format(desc.clone(), line)
-            .map_err(|e| format!("cannot parse as text format {}: {e}", desc.full_name())),
+        InputForm::Text | InputForm::Auto => DynamicMessage::parse_text_format(desc.clone(), line)
+            .map_err(|e| {
+                let hint = if json_like {
+                    " (the line starts with '{' as JSON does: leave out --in text, or give --in json)"
+                } else {
+                    ""
+                };
+                format!("cannot parse as text format {}: {e}{hint}", desc.full_name())
+            }),
         InputForm::Json => {
             let mut de = serde_json::Deserializer::from_str(line);
             let msg = DynamicMessage::deserialize(desc.clone(), &mut de)
