@@ -12,7 +12,8 @@
 //!   "outcome": "sent"|"nothing_to_send"|"failed", "reason": TEXT}`: the
 //!   outcome of a transmission this node initiated;
 //! - `{"event": "driver_status", "driver_status": TEXT}`: a fault met by
-//!   the driver or a recovery from one;
+//!   the driver or a recovery from one; a client subscribing to `modem`
+//!   gets the status as it stands once, right after the reply;
 //! - `{"event": "driver_specific", "driver_specific": NAME, "msg": {...}}`:
 //!   a driver-specific result, e.g. a `goby.acomms.protobuf.MicroModemSpecific`
 //!   with the travel times of a ping or long-baseline interrogation

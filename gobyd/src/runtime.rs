@@ -25,7 +25,7 @@ use protos::goby::acomms::protobuf::{
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{Clock, QueueEvent, QueueManager, ReceivedMessage, SystemClock};
 use tokio::net::{TcpListener, UdpSocket};
-use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
@@ -193,6 +193,9 @@ pub struct Daemon {
     names: HashMap<u32, String>,
     /// The core's events, to every interface.
     events: broadcast::Sender<SharedEvent>,
+    /// The driver's last status, for the clients that ask after it was
+    /// reported (a JSON client subscribing to `modem`).
+    driver_status: watch::Sender<Option<DriverStatus>>,
     publish_rx: mpsc::Receiver<Publish>,
     publish_tx: mpsc::Sender<Publish>,
     control_rx: mpsc::Receiver<Control>,
@@ -354,6 +357,7 @@ impl Daemon {
 
         let mac = MacManager::new(config.mac.as_ref().expect("completed"), clock.now())?;
         let (events, _) = broadcast::channel(1024);
+        let (driver_status, driver_status_now) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
         let names: HashMap<u32, String> = loaded
@@ -366,6 +370,7 @@ impl Daemon {
             control: control_tx.clone(),
             events: events.clone(),
             names: Arc::new(names.clone()),
+            driver_status: driver_status_now,
         };
         let mut tasks = JoinSet::new();
         let json = config.json.clone().unwrap_or_default();
@@ -428,6 +433,7 @@ impl Daemon {
             driver,
             names,
             events,
+            driver_status,
             publish_rx,
             publish_tx,
             control_rx,
@@ -687,10 +693,13 @@ impl Daemon {
                     }
                 }
             }
-            DriverEvent::Status(status) => match status {
-                DriverStatus::Ready => tracing::info!("driver ready"),
-                other => tracing::warn!(status = other.kind(), "driver: {other}"),
-            },
+            DriverEvent::Status(status) => {
+                match &status {
+                    DriverStatus::Ready => tracing::info!("driver ready"),
+                    other => tracing::warn!(status = other.kind(), "driver: {other}"),
+                }
+                self.driver_status.send_replace(Some(status));
+            }
             DriverEvent::Specific(report) => tracing::info!(
                 "driver report: {} {}",
                 report.message.descriptor().full_name(),
