@@ -194,17 +194,17 @@ fn values_sent_as_the_minimum_say_why() {
     assert!(out.status.success(), "{}", stderr_text(&out));
     let err = stderr_text(&out);
     for want in [
-        "line 1: warning: t.Choice.a: 30 is out of range [0, 10]: sent as the minimum \
+        "line 1: warning: t.Choice.a: 30 is out of range [0, 10]: sent as the minimum 0 \
          (the field is required)",
-        "line 1: warning: t.Choice.r[0]: 20 is out of range [0, 10]: sent as the minimum \
+        "line 1: warning: t.Choice.r[0]: 20 is out of range [0, 10]: sent as the minimum 0 \
          (an element of a repeated field has no \"not present\" value)",
-        "line 1: warning: t.Choice.code: 300 is out of range [0, 255]: sent as the minimum \
+        "line 1: warning: t.Choice.code: 300 is out of range [0, 255]: sent as the minimum 0 \
          (code is the member set of oneof payload, which has no \"not present\" value)",
     ] {
         assert!(err.contains(want), "{want}\nnot in\n{err}");
     }
     assert!(!err.contains(
-        "code: 300 is out of range [0, 255]: sent as the minimum (the field is required)"
+        "code: 300 is out of range [0, 255]: sent as the minimum 0 (the field is required)"
     ));
 }
 
