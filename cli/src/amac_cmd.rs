@@ -9,7 +9,7 @@ use amac::simulation::{sweep, Case, CaseResult, SweepConfig};
 use amac::DiscoveryRule;
 use clap::{Args, Subcommand};
 
-use crate::plot::{LineChart, Series};
+use crate::plot::{Axis, LineChart, Series};
 use crate::{CliError, Status};
 
 /// Subcommands of `goby amac`.
@@ -329,6 +329,8 @@ fn charts(results: &[CaseResult], coolness: &[u32]) -> Vec<(String, LineChart)> 
                 ),
                 x_label: "coolness C".into(),
                 y_label: "share of transmissions destroyed".into(),
+                x_axis: Axis::Integer,
+                y_axis: Axis::Share,
                 series: THESIS_SIZES
                     .iter()
                     .map(|&n| {
@@ -346,30 +348,34 @@ fn charts(results: &[CaseResult], coolness: &[u32]) -> Vec<(String, LineChart)> 
             },
         ));
     }
-    let thesis_chart = |title: &str, y_label: &str, value: fn(&CaseResult) -> f64| LineChart {
-        title: title.into(),
-        x_label: "coolness C".into(),
-        y_label: y_label.into(),
-        series: THESIS_SIZES
-            .iter()
-            .map(|&n| {
-                series(
-                    results,
-                    format!("{n} nodes"),
-                    coolness,
-                    DiscoveryRule::Thesis,
-                    n,
-                    1.0,
-                    value,
-                )
-            })
-            .collect(),
-    };
+    let thesis_chart =
+        |title: &str, y_label: &str, y_axis: Axis, value: fn(&CaseResult) -> f64| LineChart {
+            title: title.into(),
+            x_label: "coolness C".into(),
+            y_label: y_label.into(),
+            x_axis: Axis::Integer,
+            y_axis,
+            series: THESIS_SIZES
+                .iter()
+                .map(|&n| {
+                    series(
+                        results,
+                        format!("{n} nodes"),
+                        coolness,
+                        DiscoveryRule::Thesis,
+                        n,
+                        1.0,
+                        value,
+                    )
+                })
+                .collect(),
+        };
     charts.push((
         "amac_fig2_12_slots.png".into(),
         thesis_chart(
             "Mean slots to agreement (runs that agree), thesis rule, p_collide = 1",
             "slots",
+            Axis::Real,
             |r| r.mean_slots,
         ),
     ));
@@ -378,6 +384,7 @@ fn charts(results: &[CaseResult], coolness: &[u32]) -> Vec<(String, LineChart)> 
         thesis_chart(
             "Runs never agreeing, thesis rule, p_collide = 1",
             "share of runs",
+            Axis::Share,
             |r| r.failure_share(),
         ),
     ));
@@ -406,6 +413,8 @@ fn charts(results: &[CaseResult], coolness: &[u32]) -> Vec<(String, LineChart)> 
             title: "Runs never agreeing: thesis rule vs thesis+backoff, p_collide = 1".into(),
             x_label: "coolness C".into(),
             y_label: "share of runs".into(),
+            x_axis: Axis::Integer,
+            y_axis: Axis::Share,
             series: side_by_side(|r| r.failure_share()),
         },
     ));
@@ -415,6 +424,8 @@ fn charts(results: &[CaseResult], coolness: &[u32]) -> Vec<(String, LineChart)> 
             title: "Mean slots to agreement: thesis rule vs thesis+backoff, p_collide = 1".into(),
             x_label: "coolness C".into(),
             y_label: "slots".into(),
+            x_axis: Axis::Integer,
+            y_axis: Axis::Real,
             series: side_by_side(|r| r.mean_slots),
         },
     ));

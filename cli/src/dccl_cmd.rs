@@ -90,6 +90,10 @@ pub struct ProtoArgs {
 /// Form of the messages read by `encode` and `bench`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum InputForm {
+    /// Each line as it reads: proto3 JSON when it starts with `{` (a
+    /// text-format message never does: it starts with a field name),
+    /// otherwise protobuf text format.
+    Auto,
     /// Protobuf text format, one message per line.
     Text,
     /// Proto3 JSON, one object per line.
@@ -130,7 +134,7 @@ pub struct EncodeArgs {
     #[arg(short = 'm', long = "message", value_name = "FULL.Name")]
     pub message: String,
     /// Form of the input messages.
-    #[arg(long = "in", value_enum, default_value_t = InputForm::Text)]
+    #[arg(long = "in", value_enum, default_value_t = InputForm::Auto)]
     pub input: InputForm,
     /// Form of the encoded output.
     #[arg(long, value_enum, default_value_t = ByteFormat::Hex)]
@@ -207,7 +211,7 @@ pub struct BenchArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub repeat: u64,
     /// Form of the input messages.
-    #[arg(long = "in", value_enum, default_value_t = InputForm::Text)]
+    #[arg(long = "in", value_enum, default_value_t = InputForm::Auto)]
     pub input: InputForm,
     /// Passphrase for encryption.
     #[command(flatten)]
@@ -245,6 +249,7 @@ pub fn run_command(
                 passphrase: args.passphrase.resolve()?,
                 strict: args.strict,
                 refuse_other_types: true,
+                no_type: None,
             };
             encode(&defs, &job, stdin, stdout, stderr)
         }
@@ -370,11 +375,24 @@ impl Definitions {
         out
     }
 
-    /// The first top-level message of the first `-f` file.
-    pub(crate) fn first_message(&self) -> Option<MessageDescriptor> {
-        let file = self.pool.get_file_by_name(self.file_names.first()?)?;
-        let first = file.messages().next();
-        first
+    /// The `-f` files as given, for messages.
+    pub(crate) fn shown(&self) -> &str {
+        &self.shown
+    }
+
+    /// Full names of the messages of the `-f` files (nested ones included,
+    /// in declaration order) that have a DCCL id (`(dccl.msg) = { id: ... }`):
+    /// the types that can be encoded on their own, helpers left out.
+    pub(crate) fn dccl_types(&self) -> Vec<String> {
+        self.all_messages()
+            .into_iter()
+            .filter(|m| {
+                dccl::field::message_options(m)
+                    .ok()
+                    .is_some_and(|o| o.id.is_some())
+            })
+            .map(|m| m.full_name().to_string())
+            .collect()
     }
 
     /// Descriptor of the message type `name`.
@@ -475,9 +493,22 @@ fn parse_message(
     form: InputForm,
     line: &str,
 ) -> Result<DynamicMessage, String> {
+    let json_like = line.trim_start().starts_with('{');
+    let form = match form {
+        InputForm::Auto if json_like => InputForm::Json,
+        InputForm::Auto => InputForm::Text,
+        given => given,
+    };
     match form {
-        InputForm::Text => DynamicMessage::parse_text_format(desc.clone(), line)
-            .map_err(|e| format!("cannot parse as text format {}: {e}", desc.full_name())),
+        InputForm::Text | InputForm::Auto => DynamicMessage::parse_text_format(desc.clone(), line)
+            .map_err(|e| {
+                let hint = if json_like {
+                    " (the line starts with '{' as JSON does: leave out --in text, or give --in json)"
+                } else {
+                    ""
+                };
+                format!("cannot parse as text format {}: {e}{hint}", desc.full_name())
+            }),
         InputForm::Json => {
             let mut de = serde_json::Deserializer::from_str(line);
             let msg = DynamicMessage::deserialize(desc.clone(), &mut de)
@@ -545,6 +576,9 @@ pub(crate) struct EncodeJob {
     /// `message` (`goby dccl encode -m`); otherwise such a line is encoded as
     /// the type it names, as the reference tool does.
     pub refuse_other_types: bool,
+    /// Why a line without `|full.Name|` has no type when `message` is
+    /// `None` (e.g. the candidates to choose from).
+    pub no_type: Option<String>,
 }
 
 /// Splits a leading `|full.Name|` (the reference tool's way of giving the
@@ -586,11 +620,17 @@ fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String
         .map(|(path, sent, back)| {
             format!(
                 "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
-                 the time codec sends the time of day only, and it decodes as {back} \
-                 (that time of day within 12 hours of the receiver's clock)"
+                 the time codec sends the time of day only, and it decodes as {back}: \
+                 that time of day within 12 hours of the receiver's clock"
             )
         })
         .collect()
+}
+
+/// `YYYY-MM-DD HH:MM:SS UTC` of seconds since the epoch.
+fn utc_date(secs: u64) -> String {
+    let (y, mo, d, h, mi, s) = goby_time::civil(secs);
+    format!("{y:04}-{mo:02}-{d:02} {h:02}:{mi:02}:{s:02} UTC")
 }
 
 /// Adds to `out` (field path, sent, decoded) for each `dccl.time` field of
@@ -629,11 +669,18 @@ fn collect_moved_times(
             _ => false,
         };
         if is_time && moved {
-            let text = |v: &prost_reflect::Value| match v {
-                prost_reflect::Value::F64(x) => x.to_string(),
-                prost_reflect::Value::I64(x) => x.to_string(),
-                prost_reflect::Value::U64(x) => x.to_string(),
-                other => format!("{other:?}"),
+            // The value as given, with its UTC date for the reader.
+            let text = |v: &prost_reflect::Value| {
+                let raw = match v {
+                    prost_reflect::Value::F64(x) => x.to_string(),
+                    prost_reflect::Value::I64(x) => x.to_string(),
+                    prost_reflect::Value::U64(x) => x.to_string(),
+                    other => format!("{other:?}"),
+                };
+                match seconds(v).filter(|s| *s >= 0.0 && s.is_finite()) {
+                    Some(s) => format!("{raw} ({})", utc_date(s as u64)),
+                    None => raw,
+                }
             };
             out.push((path, text(&a), text(&b)));
         }
@@ -668,9 +715,9 @@ pub(crate) fn encode(
         let name = match named.or(job.message.as_deref()) {
             Some(name) => name,
             None => {
-                return Err(LineError::Bad(
-                    "no message type: give -m NAME or start the line with |full.Name|".into(),
-                ))
+                return Err(LineError::Bad(job.no_type.clone().unwrap_or_else(|| {
+                    "no message type: give -m NAME or start the line with |full.Name|".into()
+                })))
             }
         };
         let desc = match codec.descriptor(name) {

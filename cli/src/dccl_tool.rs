@@ -13,13 +13,17 @@
 //!
 //! Without `-m`, decode, analyze and display work on every valid DCCL type
 //! of the `-f` files (each invalid one is named on standard error and
-//! skipped) and encode takes the first message of the first file for the
+//! skipped), and encode takes the files' one type with a DCCL id for the
 //! lines that do not name their type with `|full.Name|` (loaded only when
-//! such a line comes). As in the reference, a line whose `|full.Name|`
-//! names another type than `-m` is encoded as the type it names
-//! (`goby dccl encode -m` refuses such a line).
+//! such a line comes); with several such types, a line without the prefix
+//! is refused, naming them. As in the reference, a line whose
+//! `|full.Name|` names another type than `-m` is encoded as the type it
+//! names (`goby dccl encode -m` refuses such a line).
 //!
-//! Differences, on purpose: a bad input line is reported with its number
+//! Differences, on purpose: encode without `-m` never assumes a type the
+//! files hold several candidates for, nor a helper message without a DCCL
+//! id (the reference assumes the first message of the first file, whatever
+//! it is); a bad input line is reported with its number
 //! and the next lines are still handled (the reference stops at the first);
 //! a file with no valid type is an error; base64 is written one message per
 //! line (the reference's libb64 wraps at 72 characters; both are read); `-l`
@@ -125,15 +129,31 @@ pub fn run(
     }
     let defs = Definitions::compile(&args.proto)?;
     if args.encode {
+        let mut no_type = None;
         let (message, load_first) = match args.message.as_slice() {
-            [] => {
-                let first = defs.first_message().ok_or_else(|| {
-                    CliError::setup("no message to encode: give one with -m NAME")
-                })?;
-                writeln!(stderr, "Encoding assuming message: {}", first.full_name())?;
-                (first.full_name().to_string(), false)
-            }
-            [one] => (one.clone(), true),
+            [] => match defs.dccl_types().as_slice() {
+                [] => {
+                    return Err(CliError::setup(format!(
+                        "no message to encode: {} defines no message with a DCCL id \
+                         ((dccl.msg) = {{ id: ... }}); give one with -m NAME",
+                        defs.shown()
+                    )))
+                }
+                [one] => {
+                    writeln!(stderr, "Encoding assuming message: {one}")?;
+                    (Some(one.clone()), false)
+                }
+                several => {
+                    no_type = Some(format!(
+                        "no message type: without -m a line must name its type with \
+                         |full.Name|, as {} defines several DCCL types: {}",
+                        defs.shown(),
+                        several.join(", ")
+                    ));
+                    (None, false)
+                }
+            },
+            [one] => (Some(one.clone()), true),
             _ => {
                 return Err(CliError::setup(
                     "no more than one message type can be given with -m for encoding",
@@ -141,8 +161,9 @@ pub fn run(
             }
         };
         let job = EncodeJob {
-            message: Some(message),
+            message,
             load_first,
+            no_type,
             input: InputForm::Text,
             format: args.format,
             passphrase: args.passphrase.resolve()?,

@@ -89,6 +89,8 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     let mut fleet = Fleet::new(prefix);
+    // Publications under the prefix, whether or not from a gateway.
+    let mut heard = 0usize;
     runtime.block_on(async {
         let mut options =
             MqttOptions::new(format!("goby-watch-{}", std::process::id()), host, port);
@@ -99,7 +101,7 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             .await
             .map_err(|e| CliError::setup(e.to_string()))?;
         let end = duration.map(|d| tokio::time::Instant::now() + d);
-        let quiet = Duration::from_millis(500);
+        let quiet = ONCE_QUIET;
         let mut connected = false;
         loop {
             let wait = if args.once && connected {
@@ -115,6 +117,7 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             match polled {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => connected = true,
                 Ok(Event::Incoming(Packet::Publish(p))) => {
+                    heard += 1;
                     if let Some(line) = fleet.update(&p.topic, &p.payload) {
                         if redraw {
                             write!(stdout, "\x1b[H\x1b[2J{}", fleet.table(now()))?;
@@ -140,13 +143,61 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         Ok::<(), CliError>(())
     })?;
     if fleet.nodes.is_empty() {
-        return Err(CliError::setup(format!(
-            "nothing was published under {prefix}/ on {}: is {prefix:?} the gateways' mqtt.topic_prefix?",
-            args.broker
+        return Err(CliError::setup(nothing_heard(
+            prefix,
+            &args.broker,
+            duration,
+            heard,
         )));
     }
     if !redraw {
         write!(stdout, "{}", fleet.table(now()))?;
     }
     Ok(Status::Ok)
+}
+
+/// How long `--once` waits after the last publication (the retained
+/// values come at once on subscription).
+const ONCE_QUIET: Duration = Duration::from_millis(500);
+
+/// What `watch` says when no gateway was heard under `prefix` within its
+/// wait (`--once`: the retained values; `--duration`: that long);
+/// `heard` publications under the prefix came, none from a gateway.
+fn nothing_heard(prefix: &str, broker: &str, duration: Option<Duration>, heard: usize) -> String {
+    let wait = match duration {
+        Some(d) => format!("in the {} s watched", d.as_secs_f64()),
+        None => format!(
+            "within {} s of subscribing (--once prints the values the broker holds retained, \
+             and a bridged gobyd keeps its status retained there)",
+            ONCE_QUIET.as_secs_f64()
+        ),
+    };
+    let what = match heard {
+        0 => "nothing".to_string(),
+        n => format!("no gateway ({n} publications on tx topics or not JSON)"),
+    };
+    format!(
+        "{what} heard under {prefix}/ on {broker} {wait}: is {prefix:?} the gateways' \
+         mqtt.topic_prefix, and are they bridged to this broker?"
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nothing_heard_says_where_and_how_long() {
+        let once = nothing_heard("flet", "127.0.0.1:1883", None, 0);
+        assert!(
+            once.starts_with("nothing heard under flet/ on 127.0.0.1:1883 within 0.5 s"),
+            "{once}"
+        );
+        assert!(once.contains("mqtt.topic_prefix"), "{once}");
+        let timed = nothing_heard("flet", "h:1", Some(Duration::from_secs(3)), 2);
+        assert!(
+            timed.starts_with("no gateway (2 publications on tx topics or not JSON) heard under flet/ on h:1 in the 3 s watched"),
+            "{timed}"
+        );
+    }
 }

@@ -11,7 +11,7 @@ use position::synth::{synthesize, SynthKind, SynthOptions};
 use position::trajectory::{parse_csv, to_csv};
 use position::{ModelKind, ObserverKind, PositionConfig};
 
-use crate::plot::{LineChart, Series};
+use crate::plot::{Axis, LineChart, Series};
 use crate::{CliError, Status};
 
 /// Subcommands of `goby position`.
@@ -257,6 +257,8 @@ fn eval_cmd(args: &EvalArgs, out: &mut dyn Write) -> Result<Status, CliError> {
             ),
             x_label: "frame loss (%)".into(),
             y_label: "bits sent per delivered sample".into(),
+            x_axis: Axis::Real,
+            y_axis: Axis::Real,
             series,
         };
         let path = args.out_dir.join("position_loss.png");

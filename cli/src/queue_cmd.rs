@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Subcommand};
 use queue::market::{simulate, MarketConfig, MarketPoint, Scheme};
 
-use crate::plot::{LineChart, Series};
+use crate::plot::{Axis, LineChart, Series};
 use crate::{CliError, Status};
 
 /// Subcommands of `goby queue`.
@@ -139,6 +139,8 @@ fn simulate_cmd(args: &SimulateArgs, out: &mut dyn Write) -> Result<Status, CliE
                 title: format!("Data marketplace, τ_s = {label}"),
                 x_label: "P_empty".into(),
                 y_label: "mean total score of 100 sends".into(),
+                x_axis: Axis::Share,
+                y_axis: Axis::Real,
                 series: Scheme::ALL
                     .iter()
                     .map(|s| Series {

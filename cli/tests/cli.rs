@@ -183,6 +183,52 @@ fn json_input_gives_the_same_bytes_as_text() {
     assert_eq!(stdout_text(&a), stdout_text(&b));
 }
 
+/// Without `--in`, a line starting with `{` is read as JSON (a text-format
+/// message never starts with one) and the others as text, in one input;
+/// `--in text` keeps to text and says why such a line fails.
+#[test]
+fn a_line_starting_with_a_brace_is_json_without_in() {
+    let vs = some_vectors("vec.Wide", 6);
+    let mixed: String = vs
+        .iter()
+        .enumerate()
+        .map(|(i, v)| match i % 2 {
+            0 => format!("  {}\n", v.input_json),
+            _ => format!("{}\n", v.input),
+        })
+        .collect();
+    let proto = vectors_proto();
+    let out = goby(&["dccl", "encode", "-f", &proto, "-m", "vec.Wide"], mixed);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    let want: Vec<&str> = vs.iter().map(|v| v.hex.as_str()).collect();
+    assert_eq!(lines(&stdout_text(&out)), want);
+
+    let json = format!("{}\n", vs[0].input_json);
+    let out = goby(
+        &[
+            "dccl", "encode", "-f", &proto, "-m", "vec.Wide", "--in", "text",
+        ],
+        json.clone(),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("the line starts with '{' as JSON does: leave out --in text"),
+        "{err}"
+    );
+    // A bad JSON line is told as JSON.
+    let out = goby(
+        &["dccl", "encode", "-f", &proto, "-m", "vec.Wide"],
+        "{\"no_such_field\": 1}\n",
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr_text(&out).contains("cannot parse as JSON vec.Wide"),
+        "{}",
+        stderr_text(&out)
+    );
+}
+
 #[test]
 fn base64_round_trip() {
     let vs = some_vectors("vec.Nested", 20);

@@ -96,17 +96,22 @@ fn reference_flags_encode_and_decode_in_every_format() {
 }
 
 #[test]
-fn reference_encode_without_m_takes_the_first_message_and_reads_type_prefixes() {
+fn reference_encode_without_m_needs_the_type_when_the_file_has_several_and_reads_type_prefixes() {
     let input = "destination: 2 action: GOTO waypoint { x: 120 y: -40 }\n";
     let out = goby(&["dccl", "-e", "-f", NAV, "--format", "hex"], input);
-    // The first message of the file is NavigationReport: this line is not one.
+    // The file has two DCCL types (and a helper, Waypoint): a line without
+    // its type is refused, naming them; no type is assumed.
     assert_eq!(out.status.code(), Some(1));
-    assert!(bad_lines(&stderr_text(&out))[&1].contains("action"));
+    let err = stderr_text(&out);
     assert!(
-        stderr_text(&out).contains("Encoding assuming message: goby.example.NavigationReport"),
-        "{}",
-        stderr_text(&out)
+        bad_lines(&err)[&1].contains(
+            "without -m a line must name its type with |full.Name|, as \
+             protos/proto/goby/example/navigation.proto defines several DCCL types: \
+             goby.example.NavigationReport, goby.example.Command"
+        ),
+        "{err}"
     );
+    assert!(!err.contains("Encoding assuming"), "{err}");
     let by_type = goby(
         &["dccl", "encode", "-f", NAV, "-m", "goby.example.Command"],
         input,
@@ -775,9 +780,9 @@ fn base64_wrapped_as_the_reference_writes_it_decodes() {
 }
 
 #[test]
-fn reference_encode_without_m_uses_the_type_named_on_the_line() {
-    // The first message of the file is a helper, not a DCCL type: the lines
-    // that name their type do not need it.
+fn reference_encode_without_m_takes_the_one_dccl_type_not_a_helper() {
+    // The first message of the file is a helper, not a DCCL type: the file's
+    // one type with a DCCL id is assumed, and lines may still name it.
     let dir = scratch("named-lines");
     let proto = dir.join("helper_first.proto");
     std::fs::write(
@@ -795,19 +800,32 @@ fn reference_encode_without_m_uses_the_type_named_on_the_line() {
     assert!(out.status.success(), "{}", stderr_text(&out));
     assert_eq!(stdout_text(&out), "0603\n");
 
-    // A line without the prefix is of the assumed first type, which cannot
-    // be loaded: that line is reported, the named one still encoded.
+    // A line without the prefix is of the one DCCL type, pkg.Name, not of
+    // the helper: a helper's line is reported, the others encoded.
     let out = goby(
         &["dccl", "-e", "-f", path_str(&proto), "--format", "hex"],
-        "a: 1\n|pkg.Name| x: 4\n",
+        "x: 5\na: 1\n|pkg.Name| x: 4\n",
     );
     assert_eq!(out.status.code(), Some(1), "{}", stderr_text(&out));
-    assert_eq!(stdout_text(&out), "0604\n");
+    assert_eq!(stdout_text(&out), "0605\n0604\n");
     let err = stderr_text(&out);
+    assert!(err.contains("Encoding assuming message: pkg.Name"), "{err}");
+    assert!(!err.contains("pkg.Helper"), "{err}");
+    assert!(bad_lines(&err)[&2].contains("a"), "{err}");
+
+    // A file of helpers only has nothing to encode.
+    let helpers = dir.join("helpers.proto");
+    std::fs::write(
+        &helpers,
+        "syntax = \"proto2\";\npackage pkg;\nmessage Helper { optional int32 a = 1; }\n",
+    )
+    .expect("write");
+    let out = goby(&["dccl", "-e", "-f", path_str(&helpers)], "a: 1\n");
+    assert_eq!(out.status.code(), Some(2), "{}", stderr_text(&out));
     assert!(
-        err.contains("Encoding assuming message: pkg.Helper"),
-        "{err}"
+        stderr_text(&out).contains("defines no message with a DCCL id"),
+        "{}",
+        stderr_text(&out)
     );
-    assert!(bad_lines(&err)[&1].contains("pkg.Helper"), "{err}");
     let _ = std::fs::remove_dir_all(dir);
 }

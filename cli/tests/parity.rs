@@ -194,17 +194,17 @@ fn values_sent_as_the_minimum_say_why() {
     assert!(out.status.success(), "{}", stderr_text(&out));
     let err = stderr_text(&out);
     for want in [
-        "line 1: warning: t.Choice.a: 30 is out of range [0, 10]: sent as the minimum \
+        "line 1: warning: t.Choice.a: 30 is out of range [0, 10]: sent as the minimum 0 \
          (the field is required)",
-        "line 1: warning: t.Choice.r[0]: 20 is out of range [0, 10]: sent as the minimum \
+        "line 1: warning: t.Choice.r[0]: 20 is out of range [0, 10]: sent as the minimum 0 \
          (an element of a repeated field has no \"not present\" value)",
-        "line 1: warning: t.Choice.code: 300 is out of range [0, 255]: sent as the minimum \
+        "line 1: warning: t.Choice.code: 300 is out of range [0, 255]: sent as the minimum 0 \
          (code is the member set of oneof payload, which has no \"not present\" value)",
     ] {
         assert!(err.contains(want), "{want}\nnot in\n{err}");
     }
     assert!(!err.contains(
-        "code: 300 is out of range [0, 255]: sent as the minimum (the field is required)"
+        "code: 300 is out of range [0, 255]: sent as the minimum 0 (the field is required)"
     ));
 }
 
@@ -236,13 +236,37 @@ fn the_example_round_trips_and_a_stale_time_is_warned_about() {
     );
     assert!(out.status.success(), "{}", stderr_text(&out));
     let err = stderr_text(&out);
-    assert!(
-        err.contains(
-            "line 1: warning: goby.example.NavigationReport.time: 1795348800 is more than \
-             12 hours from this machine's clock: the time codec sends the time of day only, \
-             and it decodes as "
-        ),
-        "{err}"
+    // The example's times, and whether each is more than 12 hours from the
+    // clock (the example was written on its date: then it is not warned
+    // about, every other day it is).
+    let times: Vec<u64> = input
+        .lines()
+        .map(|l| l.split_whitespace().nth(5).unwrap().parse().unwrap())
+        .collect();
+    let now = now_secs();
+    for (i, time) in times.iter().enumerate() {
+        let date = match i {
+            0 => "2026-11-22 12:00:00 UTC",
+            _ => "2026-11-22 12:01:00 UTC",
+        };
+        let warning = format!(
+            "line {}: warning: goby.example.NavigationReport.time: {time} ({date}) is more \
+             than 12 hours from this machine's clock: the time codec sends the time of day \
+             only, and it decodes as ",
+            i + 1
+        );
+        if time.abs_diff(now) > 12 * 3600 + 60 {
+            assert!(err.contains(&warning), "{err}");
+        } else if time.abs_diff(now) < 12 * 3600 - 60 {
+            assert!(!err.contains(&warning), "{err}");
+        }
+    }
+    assert_eq!(
+        err.lines().count(),
+        err.lines()
+            .filter(|l| l.contains("warning: goby.example.NavigationReport.time: "))
+            .count(),
+        "only the time is warned about: {err}"
     );
     let out = goby(&["dccl", "decode", "-f", NAV], stdout_text(&out));
     assert!(out.status.success(), "{}", stderr_text(&out));

@@ -94,7 +94,7 @@ fn every_kind_of_change_is_reported_with_its_path() {
             ("level", "99 is out of range [0, 31]: sent as not present"),
             (
                 "r",
-                "70 is out of range [5, 10]: sent as the minimum (the field is required)"
+                "70 is out of range [5, 10]: sent as the minimum 5 (the field is required)"
             ),
             ("heading", "NaN: sent as the minimum 0"),
             (
@@ -104,7 +104,7 @@ fn every_kind_of_change_is_reported_with_its_path() {
             ("samples", "7 elements over max_repeat 4: truncated"),
             (
                 "samples[1]",
-                "200 is out of range [0, 100]: sent as the minimum \
+                "200 is out of range [0, 100]: sent as the minimum 0 \
                  (an element of a repeated field has no \"not present\" value)"
             ),
             (

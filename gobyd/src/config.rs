@@ -534,9 +534,10 @@ pub fn load(path: &Path) -> Result<GobydConfig, ConfigError> {
 pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
     let id = config.modem_id();
     if id <= 0 {
-        return Err(ConfigError::Invalid(format!(
-            "modem_id {id} is not valid: modem ids are 1 and up (0 is broadcast)"
-        )));
+        return Err(ConfigError::Problems(vec![Problem::new(
+            "modem_id",
+            format!("{id} is not valid: modem ids are 1 and up (0 is broadcast)"),
+        )]));
     }
     let driver = config.driver.get_or_insert_with(|| DriverConfig {
         driver: Some(driver_config::Driver::DriverType(
@@ -599,9 +600,10 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
 /// A section's own `modem_id`, when given, must be the node's.
 fn same_id(field: &str, given: Option<i32>, id: i32) -> Result<(), ConfigError> {
     match given {
-        Some(other) if other != id => Err(ConfigError::Invalid(format!(
-            "{field} {other} differs from modem_id {id}: leave it out (it is taken from modem_id)"
-        ))),
+        Some(other) if other != id => Err(ConfigError::Problems(vec![Problem::new(
+            field,
+            format!("{other} differs from modem_id {id}: leave it out (it is taken from modem_id)"),
+        )])),
         _ => Ok(()),
     }
 }
@@ -1174,13 +1176,21 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
     if !dccl_config.proto_file.is_empty() {
         let files: Vec<PathBuf> = dccl_config.proto_file.iter().map(PathBuf::from).collect();
         let includes: Vec<PathBuf> = dccl_config.include_dir.iter().map(PathBuf::from).collect();
-        for f in &files {
-            if !f.is_file() {
-                return Err(ConfigError::Invalid(format!(
-                    "dccl.proto_file {}: no such file",
-                    f.display()
-                )));
-            }
+        let missing: Vec<Problem> = files
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| !f.is_file())
+            .map(|(i, f)| {
+                let reason = if f.is_dir() {
+                    format!("{}: a directory, not a .proto file", f.display())
+                } else {
+                    format!("{}: no such file", f.display())
+                };
+                Problem::new(format!("dccl.proto_file[{i}]"), reason)
+            })
+            .collect();
+        if !missing.is_empty() {
+            return Err(ConfigError::Problems(missing));
         }
         let user_pool = dccl::compile_protos(&files, &includes)
             .map_err(|e| ConfigError::Invalid(e.to_string()))?;
@@ -1373,7 +1383,7 @@ mod tests {
         let err = complete(parse("modem_id: 0", "x").unwrap())
             .unwrap_err()
             .to_string();
-        assert!(err.contains("modem_id 0"), "{err}");
+        assert!(err.contains("modem_id: 0 is not valid"), "{err}");
         let mut config = parse("dccl { proto_file: \"/no/such.proto\" }", "x").unwrap();
         config = complete(config).unwrap();
         let err = load_definitions(&config).unwrap_err().to_string();

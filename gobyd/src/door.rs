@@ -92,12 +92,12 @@ impl Door {
         if !self.clamp.contains(&name) {
             let fields: Vec<String> = changes
                 .iter()
-                .map(|c| format!("field {}: {}", c.field, c.reason))
+                .map(|c| format!("field {}: {}", c.field, would(&c.reason)))
                 .collect();
             return Err(format!(
-                "{name} refused: {} (the codec would change {}; set clamp_out_of_range: true in its queue entry to send it changed)",
+                "{name} refused: {} (set clamp_out_of_range: true in its queue entry to send {} so)",
                 fields.join("; "),
-                if changes.len() == 1 { "this value" } else { "these values" }
+                if changes.len() == 1 { "it" } else { "them" }
             ));
         }
         // As the receiver will decode it.
@@ -114,6 +114,31 @@ impl Door {
             message: sent,
             changes,
         })
+    }
+}
+
+/// A change as the codec reports it (`WHAT: ACTION`, the action done:
+/// "sent as the minimum 0 (the field is required)", "truncated") told as
+/// what the codec would do to a message that is refused, so not sent:
+/// `WHAT, which the codec would send as the minimum 0 (...)`; an action
+/// not known here is told as a change (`WHAT: the codec would change it
+/// (ACTION)`).
+fn would(reason: &str) -> String {
+    let Some((what, action)) = reason.rsplit_once(": ") else {
+        return format!("the codec would change it ({reason})");
+    };
+    let verbs = [
+        ("not sent", "not send"),
+        ("sent as", "send as"),
+        ("truncated", "truncate"),
+        ("padded", "pad"),
+    ];
+    match verbs.iter().find(|(done, _)| action.starts_with(done)) {
+        Some((done, doing)) => format!(
+            "{what}, which the codec would {doing}{}",
+            &action[done.len()..]
+        ),
+        None => format!("{what}: the codec would change it ({action})"),
     }
 }
 
@@ -163,8 +188,16 @@ mod tests {
     fn out_of_range_nan_and_long_values_are_refused_naming_field_and_bound() {
         let door = door(false);
         let err = door.admit(command(99, 0.0, "ok")).unwrap_err();
-        assert!(err.contains("field destination"), "{err}");
-        assert!(err.contains("99") && err.contains("31"), "{err}");
+        // Said as what the codec would do to the value, not as if sent.
+        assert!(
+            err.contains(
+                "goby.example.Command refused: field destination: 99 is out of range [0, 31], \
+                 which the codec would send as the minimum 0 (the field is required) \
+                 (set clamp_out_of_range: true in its queue entry to send it so)"
+            ),
+            "{err}"
+        );
+        assert!(!err.contains(": sent as"), "{err}");
         let err = door.admit(command(2, 120_000.0, "ok")).unwrap_err();
         assert!(err.contains("field waypoint[0].x"), "{err}");
         assert!(err.contains("10000"), "{err}");
@@ -173,8 +206,40 @@ mod tests {
         let err = door
             .admit(command(2, 0.0, &"n".repeat(60_000)))
             .unwrap_err();
-        assert!(err.contains("field note"), "{err}");
+        assert!(
+            err.contains(
+                "field note: string of 60000 bytes longer than max_length 10, which the codec \
+                 would truncate"
+            ),
+            "{err}"
+        );
         assert!(err.len() < 2_000, "the error does not repeat the value");
+    }
+
+    #[test]
+    fn every_change_is_told_as_what_the_codec_would_do() {
+        for (reason, told) in [
+            (
+                "99 is out of range [0, 31]: sent as not present",
+                "99 is out of range [0, 31], which the codec would send as not present",
+            ),
+            (
+                "NaN: sent as the minimum -100",
+                "NaN, which the codec would send as the minimum -100",
+            ),
+            (
+                "7 elements over max_repeat 4: truncated",
+                "7 elements over max_repeat 4, which the codec would truncate",
+            ),
+            (
+                "3 is not the static value 4: not sent (received as the static value)",
+                "3 is not the static value 4, which the codec would not send (received as the static value)",
+            ),
+            ("odd: reshaped", "odd: the codec would change it (reshaped)"),
+            ("plain", "the codec would change it (plain)"),
+        ] {
+            assert_eq!(would(reason), told);
+        }
     }
 
     #[test]

@@ -227,7 +227,9 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             QueueEvent::Expired { .. } => Some(Topic::Expire),
             QueueEvent::Dropped { .. } => Some(Topic::Drop),
             QueueEvent::QueueSize { .. } => Some(Topic::QueueSize),
-            QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => Some(Topic::Sent),
+            QueueEvent::Sent { .. }
+            | QueueEvent::OnDemandRejected { .. }
+            | QueueEvent::OwnBroadcastHeard { .. } => Some(Topic::Sent),
         },
         DaemonEvent::Modem(event) => Some(match event {
             ModemEvent::SlotStart { .. } | ModemEvent::CycleUpdate { .. } => Topic::Mac,
@@ -299,7 +301,8 @@ fn queue_line(
         QueueEvent::Sent { message, frame, .. } => {
             json!({ "event": "sent", "sent": name(message), "id": entry, "frame": frame, "msg": message_json(message) })
         }
-        QueueEvent::OnDemandRejected { .. } => return None,
+        // Told in the log (see `runtime`), not a client's event.
+        QueueEvent::OnDemandRejected { .. } | QueueEvent::OwnBroadcastHeard { .. } => return None,
     };
     // A message never journaled (addressed to this node, delivered at
     // once) has no id: its lines carry none, rather than `"id": null`.
@@ -665,7 +668,8 @@ mod tests {
                 | QueueEvent::Expired { .. }
                 | QueueEvent::Dropped { .. }
                 | QueueEvent::QueueSize { .. }
-                | QueueEvent::OnDemandRejected { .. } => {}
+                | QueueEvent::OnDemandRejected { .. }
+                | QueueEvent::OwnBroadcastHeard { .. } => {}
             }
         }
         let modem_events = [

@@ -28,14 +28,15 @@ use dccl::Codec;
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
-use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use tokio::task::JoinSet;
 
-use super::event::{PublishReply, SharedEvent};
+use super::event::{DaemonEvent, PublishReply, SharedEvent};
 use super::json_protocol::{
     error_line, event_line, event_topic, lost_line, numbered_reply, parse_request, reply_line,
     subscribed_line, Request, Topic,
 };
+use super::modem_event::ModemEvent;
 
 /// A message a client wants sent, with where to send the reply.
 #[derive(Debug)]
@@ -45,6 +46,23 @@ pub struct Publish {
     /// Receives the core's answer (the JSON interface renders it as the
     /// `accepted` or `error` line).
     pub reply: oneshot::Sender<PublishReply>,
+    /// The message was given to every gateway at once (MQTT
+    /// `PREFIX/all/tx/TYPE`), so each sends its own copy: one whose
+    /// `SOURCE_ID` role names another node is refused (that node sends it
+    /// itself, would drop this copy as its own broadcast, and the other
+    /// nodes would receive it twice).
+    pub every_gateway: bool,
+}
+
+impl Publish {
+    /// A message for this gateway alone, answered on `reply`.
+    pub fn new(message: DynamicMessage, reply: oneshot::Sender<PublishReply>) -> Self {
+        Publish {
+            message,
+            reply,
+            every_gateway: false,
+        }
+    }
 }
 
 /// Longest request line accepted, bytes (without its newline).
@@ -71,6 +89,9 @@ const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(10), Duratio
 enum Handled {
     /// The reply, at once.
     Reply(String),
+    /// The reply at once, then event lines (the current state a
+    /// subscription asked for).
+    ReplyThen(String, Vec<String>),
     /// The reply line, once the core answers.
     Waiting(Answer),
 }
@@ -196,6 +217,10 @@ pub struct JsonInterface {
     pub events: broadcast::Sender<SharedEvent>,
     /// Type names by DCCL id (for the queue size lines).
     pub names: Arc<HashMap<u32, String>>,
+    /// The driver's last status (`None` before its first): sent once to a
+    /// client as it subscribes to `modem`, so that it need not wait for the
+    /// next change.
+    pub driver_status: watch::Receiver<Option<modemdriver::DriverStatus>>,
 }
 
 impl JsonInterface {
@@ -218,14 +243,31 @@ impl JsonInterface {
         match parse_request(line, &self.codec) {
             Err(e) => Handled::Reply(error_line(&e)),
             Ok(Request::Subscribe(t)) => {
+                let modem_now = !topics.contains(&Topic::Modem) && t.contains(&Topic::Modem);
                 topics.extend(t);
                 let mut all: Vec<Topic> = topics.iter().copied().collect();
                 all.sort_by_key(|t| t.name());
-                Handled::Reply(subscribed_line(&all))
+                let reply = subscribed_line(&all);
+                // The driver's status as it stands, once: later changes
+                // come as events.
+                let status = self.driver_status.borrow().clone();
+                match status.filter(|_| modem_now) {
+                    Some(status) => {
+                        let event = DaemonEvent::Modem(ModemEvent::Status(status));
+                        let line = event_line(&event, |id| format!("dccl id {id}"));
+                        Handled::ReplyThen(reply, line.into_iter().collect())
+                    }
+                    None => Handled::Reply(reply),
+                }
             }
             Ok(Request::Publish(message)) => {
                 let (reply, waiting) = oneshot::channel();
-                if self.publish.send(Publish { message, reply }).await.is_err() {
+                if self
+                    .publish
+                    .send(Publish::new(message, reply))
+                    .await
+                    .is_err()
+                {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
                 Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))
@@ -308,6 +350,14 @@ impl JsonInterface {
                         number += 1;
                         match self.handle_line(&text, &mut topics).await {
                             Handled::Reply(line) => Some(numbered_reply(&line, number)),
+                            Handled::ReplyThen(line, events) => {
+                                let mut out = numbered_reply(&line, number);
+                                for event in events {
+                                    out.push('\n');
+                                    out.push_str(&event);
+                                }
+                                Some(out)
+                            }
                             Handled::Waiting(answer) => {
                                 waiting = Some(answer);
                                 None
@@ -386,6 +436,12 @@ impl JsonInterface {
                         match handled {
                             Handled::Reply(reply) => {
                                 let _ = socket.send_to(numbered_reply(&reply, number).as_bytes(), from).await;
+                            }
+                            Handled::ReplyThen(reply, events) => {
+                                let _ = socket.send_to(numbered_reply(&reply, number).as_bytes(), from).await;
+                                for event in events {
+                                    let _ = socket.send_to(event.as_bytes(), from).await;
+                                }
                             }
                             Handled::Waiting(reply) => {
                                 let socket = socket.clone();

@@ -524,7 +524,7 @@ async fn reset(control: &mpsc::Sender<Control>) {
 /// Queues a message; the reason the core refused it, if it did.
 async fn queue_message(publish: &mpsc::Sender<Publish>, message: DynamicMessage) -> Option<String> {
     let (reply, answer) = oneshot::channel();
-    if publish.send(Publish { message, reply }).await.is_err() {
+    if publish.send(Publish::new(message, reply)).await.is_err() {
         return None;
     }
     match answer.await {

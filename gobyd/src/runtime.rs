@@ -25,7 +25,7 @@ use protos::goby::acomms::protobuf::{
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{Clock, QueueEvent, QueueManager, ReceivedMessage, SystemClock};
 use tokio::net::{TcpListener, UdpSocket};
-use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use tokio::task::JoinSet;
 
 use super::config::{self, ConfigError};
@@ -193,6 +193,9 @@ pub struct Daemon {
     names: HashMap<u32, String>,
     /// The core's events, to every interface.
     events: broadcast::Sender<SharedEvent>,
+    /// The driver's last status, for the clients that ask after it was
+    /// reported (a JSON client subscribing to `modem`).
+    driver_status: watch::Sender<Option<DriverStatus>>,
     publish_rx: mpsc::Receiver<Publish>,
     publish_tx: mpsc::Sender<Publish>,
     control_rx: mpsc::Receiver<Control>,
@@ -354,6 +357,7 @@ impl Daemon {
 
         let mac = MacManager::new(config.mac.as_ref().expect("completed"), clock.now())?;
         let (events, _) = broadcast::channel(1024);
+        let (driver_status, driver_status_now) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
         let names: HashMap<u32, String> = loaded
@@ -366,6 +370,7 @@ impl Daemon {
             control: control_tx.clone(),
             events: events.clone(),
             names: Arc::new(names.clone()),
+            driver_status: driver_status_now,
         };
         let mut tasks = JoinSet::new();
         let json = config.json.clone().unwrap_or_default();
@@ -428,6 +433,7 @@ impl Daemon {
             driver,
             names,
             events,
+            driver_status,
             publish_rx,
             publish_tx,
             control_rx,
@@ -542,6 +548,13 @@ impl Daemon {
     /// messages it pushes out of a full queue are named in its reply.
     fn publish(&mut self, publish: Publish) {
         let name = publish.message.descriptor().full_name().to_string();
+        if publish.every_gateway {
+            if let Some(reason) = self.not_for_every_gateway(&publish.message) {
+                tracing::warn!("publish for every gateway refused: {reason}");
+                let _ = publish.reply.send(Err(reason));
+                return;
+            }
+        }
         let admitted = match self.door.admit(publish.message) {
             Ok(admitted) => admitted,
             Err(e) => {
@@ -584,6 +597,27 @@ impl Daemon {
                 let _ = publish.reply.send(Err(e.to_string()));
             }
         }
+    }
+
+    /// Why a message given to every gateway at once must not be sent from
+    /// this one: its `SOURCE_ID` role names another node. Every gateway
+    /// would send a copy in that node's name; the named node drops the
+    /// copies it hears as its own broadcast, and the other nodes receive
+    /// the message once per gateway.
+    fn not_for_every_gateway(&self, message: &DynamicMessage) -> Option<String> {
+        let source = self.outbox.queue().named_source(message).ok()??;
+        if source == i64::from(self.modem_id) {
+            return None;
+        }
+        Some(format!(
+            "{}: its source (the SOURCE_ID role of its queue) is node {source}, not this node ({}): \
+             a message published for every gateway is sent by each of them, so only node {source} \
+             sends this one (a copy from here would reach node {source} as its own broadcast, \
+             which it drops, and the other nodes twice); leave the source unset for every gateway \
+             to send it as its own, or publish it on the tx topic of the one node that should send it",
+            message.descriptor().full_name(),
+            self.modem_id
+        ))
     }
 
     /// Syncs the journal off the core's thread (one sync for every message
@@ -659,10 +693,13 @@ impl Daemon {
                     }
                 }
             }
-            DriverEvent::Status(status) => match status {
-                DriverStatus::Ready => tracing::info!("driver ready"),
-                other => tracing::warn!(status = other.kind(), "driver: {other}"),
-            },
+            DriverEvent::Status(status) => {
+                match &status {
+                    DriverStatus::Ready => tracing::info!("driver ready"),
+                    other => tracing::warn!(status = other.kind(), "driver: {other}"),
+                }
+                self.driver_status.send_replace(Some(status));
+            }
             DriverEvent::Specific(report) => tracing::info!(
                 "driver report: {} {}",
                 report.message.descriptor().full_name(),
@@ -883,6 +920,18 @@ impl Daemon {
         for (event, entry) in events {
             match event {
                 QueueEvent::Received(received) => messages.push(received),
+                QueueEvent::OwnBroadcastHeard {
+                    message,
+                    heard_from,
+                    ..
+                } => tracing::warn!(
+                    src = heard_from,
+                    "received {} from node {heard_from} with this node ({}) as its source, broadcast: \
+                     not delivered (a node's own broadcast is not handed back to it); node \
+                     {heard_from} sent a message in this node's name",
+                    message.descriptor().full_name(),
+                    self.modem_id
+                ),
                 event => self.hand_over(event, entry, &Reception::default()),
             }
         }

@@ -100,7 +100,7 @@ fn gobyd_refuses_bad_configurations_with_their_place() {
     for (text, expected) in [
         ("modem_id: \"one\"", "bad.pb.txt:"),
         ("no_such_setting: 1", "no_such_setting"),
-        ("modem_id: 0", "modem_id 0 is not valid"),
+        ("modem_id: 0", "bad.pb.txt:1:1: modem_id: 0 is not valid"),
         (
             "queue { message_entry { protobuf_name: \"goby.example.Nope\" } }",
             "goby.example.Nope",
@@ -220,7 +220,7 @@ fn check_refuses_settings_that_cannot_work() {
         ),
         (
             "modem_id: 2\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" modem_id: 1 }\n",
-            "driver.modem_id 1 differs from modem_id 2",
+            "driver.modem_id: 1 differs from modem_id 2",
         ),
         (
             "modem_id: 40\ndriver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/ttyUSB0\" }\n",
@@ -242,6 +242,63 @@ fn check_refuses_settings_that_cannot_work() {
         assert!(err.contains(expected), "{text}: {err}");
         // Each case has the one problem it is written for.
         assert!(!err.contains("settings cannot work"), "{text}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `modem_id: 0`, `.proto` files that are not there and a serial port
+/// that is not a terminal are told with their place in the file, as every
+/// other problem is.
+#[test]
+fn check_places_the_modem_id_the_proto_files_and_the_serial_port() {
+    let dir = scratch("command", "gobyd-places");
+    let path = dir.join("bad.pb.txt");
+    let plain = dir.join("plain-file");
+    std::fs::write(&plain, "").unwrap();
+    let micromodem = |port: &str| {
+        format!(
+            "modem_id: 1\ndriver {{\n  driver_type: DRIVER_WHOI_MICROMODEM\n  serial_port: \"{port}\"\n}}\n"
+        )
+    };
+    for (text, expected) in [
+        (
+            "# node\n  modem_id: 0\n".to_string(),
+            vec!["bad.pb.txt:2:3: modem_id: 0 is not valid: modem ids are 1 and up (0 is broadcast)"],
+        ),
+        (
+            "modem_id: 2\nqueue {\n  modem_id: 3\n}\n".to_string(),
+            vec!["bad.pb.txt:3:3: queue.modem_id: 3 differs from modem_id 2"],
+        ),
+        (
+            format!(
+                "modem_id: 1\ndccl {{\n  proto_file: \"/no/such.proto\"\n  proto_file: \"{}\"\n}}\n",
+                dir.display()
+            ),
+            vec![
+                "bad.pb.txt:3:3: dccl.proto_file[0]: /no/such.proto: no such file",
+                "bad.pb.txt:4:3: dccl.proto_file[1]: ",
+                ": a directory, not a .proto file",
+            ],
+        ),
+        (
+            micromodem("/dev/null"),
+            vec![
+                "bad.pb.txt:4:3: driver.serial_port: \"/dev/null\" is not a serial port: it is a \
+                 character device of class \"mem\", not a terminal (tty)",
+            ],
+        ),
+        (
+            micromodem(plain.to_str().unwrap()),
+            vec!["bad.pb.txt:4:3: driver.serial_port: ", "is not a serial port (not a character device"],
+        ),
+    ] {
+        std::fs::write(&path, &text).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let err = stderr_text(&out);
+        for part in expected {
+            assert!(err.contains(part), "{text}: {err}");
+        }
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

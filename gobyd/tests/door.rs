@@ -533,3 +533,42 @@ fn a_message_to_this_node_is_delivered_here_with_or_without_a_configuration() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A client that subscribes to `modem` after the driver reported itself
+/// ready hears the driver's status at once, once, after the reply (over
+/// TCP and UDP), not only at its next change.
+#[test]
+fn a_late_modem_subscriber_hears_the_driver_status_as_it_stands() {
+    let dir = scratch("door", "late-modem");
+    let port = free_udp_port();
+    let daemon = Daemon::start(&quiet_config(&dir, "", Some(port)));
+    // Reported before any client is there.
+    daemon.wait_log("driver ready");
+    let mut client = daemon.connect();
+    let reply = client.request(r#"{"subscribe": ["modem"]}"#);
+    assert_eq!(reply["subscribed"], serde_json::json!(["modem"]), "{reply}");
+    let status = client.next();
+    assert_eq!(status["event"], "driver_status", "{status}");
+    assert_eq!(status["driver_status"], "ready", "{status}");
+    assert_eq!(status["detail"], "ready", "{status}");
+    // Subscribing again (to more topics) does not repeat it: the next line
+    // is the reply.
+    client.send(r#"{"subscribe": ["modem", "ack"]}"#);
+    let again = client.next();
+    assert_eq!(again["reply"], 2, "{again}");
+
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket.set_read_timeout(Some(PATIENCE)).unwrap();
+    socket
+        .send_to(br#"{"subscribe": ["modem"]}"#, ("127.0.0.1", port))
+        .unwrap();
+    let mut buf = [0u8; 65_536];
+    let n = socket.recv(&mut buf).expect("the reply");
+    let reply: Value = serde_json::from_slice(&buf[..n]).unwrap();
+    assert_eq!(reply["reply"], 1, "{reply}");
+    let n = socket.recv(&mut buf).expect("the driver status");
+    let status: Value = serde_json::from_slice(&buf[..n]).unwrap();
+    assert_eq!(status["driver_status"], "ready", "{status}");
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}

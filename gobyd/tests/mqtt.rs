@@ -229,6 +229,112 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The log of node `id` (in `dir`), once it holds a line with `text`.
+fn wait_log(dir: &Path, id: i32, text: &str) -> String {
+    let path = dir.join(format!("node{id}.log"));
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let log = std::fs::read_to_string(&path).unwrap_or_default();
+        if let Some(line) = log.lines().find(|l| l.contains(text)) {
+            return line.to_string();
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "node {id}'s log has no line with {text:?}:\n{log}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+/// A NavigationReport from node `source` to everyone (destination 0), at
+/// the current time.
+fn report(source: i32, x: f64) -> String {
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
+    format!(r#"{{"source": {source}, "destination": 0, "time": {now}, "x": {x}, "y": 0, "z": -1}}"#)
+}
+
+/// Every gateway takes `PREFIX/all/tx/TYPE`: a message whose source names
+/// one node is sent by that node only; the others refuse it, saying so on
+/// their error topic (naming the topic) and in their log, so the message is
+/// neither heard back by its source nor received twice by the others. A
+/// node that hears its own broadcast sent by another node (here published
+/// on node 2's own topic with node 1 as its source) does not deliver it,
+/// and says so in its log.
+#[test]
+fn a_message_for_every_gateway_is_sent_by_its_source_alone() {
+    let dir = scratch("mqtt", "all");
+    let broker = Broker::start(
+        &dir,
+        "a_message_for_every_gateway_is_sent_by_its_source_alone",
+    );
+    let ports = [free_udp_port(), free_udp_port()];
+    let report_entry = || {
+        Entry::new("goby.example.NavigationReport")
+            .ack(false)
+            .ttl(600)
+            .role("SOURCE_ID", "source")
+            .role("DESTINATION_ID", "destination")
+    };
+    for id in [1, 2] {
+        node_config(id, ports, &broker.address(), &dir.join(format!("node{id}")))
+            .queue(report_entry())
+            .write(dir.join(format!("node{id}.cfg")));
+    }
+    let watcher = Watcher::start(&broker.address(), "console-all", "fleet/#");
+    let _node1 = Gobyd::start(&dir, 1);
+    let _node2 = Gobyd::start(&dir, 2);
+    for node in [1, 2] {
+        wait_status(&watcher, node, |v| v["online"] == true);
+    }
+    const ALL: &str = "fleet/all/tx/goby.example.NavigationReport";
+    watcher.publish(ALL, report(1, 12.5));
+    let accepted = watcher.wait_on("fleet/1/accepted", |v| Some(v.clone()));
+    assert_eq!(accepted["topic"], ALL, "{accepted}");
+    let error = watcher.wait_on("fleet/2/error", |v| Some(v.clone()));
+    assert_eq!(error["topic"], ALL, "{error}");
+    let reason = error["error"].as_str().unwrap();
+    assert!(
+        reason.contains("source (the SOURCE_ID role of its queue) is node 1, not this node (2)")
+            && reason.contains("only node 1 sends this one"),
+        "{error}"
+    );
+    let line = wait_log(&dir, 2, "publish for every gateway refused");
+    assert!(line.contains("WARN"), "{line}");
+    let rx = watcher.wait_on("fleet/2/rx/goby.example.NavigationReport", |v| {
+        (v["msg"]["x"] == 12.5).then(|| v.clone())
+    });
+    assert_eq!(rx["src"], 1, "{rx}");
+
+    // Node 2 sends a broadcast in node 1's name: node 1 hears it and says
+    // why it does not deliver it.
+    watcher.publish("fleet/2/tx/goby.example.NavigationReport", report(1, 7.5));
+    watcher.wait_on("fleet/2/accepted", |v| (v["msg"]["x"] == 7.5).then_some(()));
+    let line = wait_log(&dir, 1, "with this node (1) as its source");
+    assert!(
+        line.contains("WARN")
+            && line.contains("from node 2")
+            && line.contains("goby.example.NavigationReport")
+            && line.contains("not delivered"),
+        "{line}"
+    );
+    // Node 2 itself sent only the second report, and node 1 delivered no
+    // report at all (the first was its own, the second in its name).
+    let node1_log = std::fs::read_to_string(dir.join("node1.log")).unwrap();
+    assert_eq!(
+        node1_log
+            .lines()
+            .filter(|l| l.contains("with this node (1) as its source"))
+            .count(),
+        1,
+        "{node1_log}"
+    );
+    drop(broker);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The guide's fleet configurations (docs/mqtt-fleet.md) check, and name
 /// their nodes.
 #[test]

@@ -85,8 +85,11 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 }
 
 /// Why the serial port at `path` cannot be opened, if that shows without
-/// opening it: it does not exist, or is not a character device (a serial
-/// port, a USB adapter, a pseudo-terminal).
+/// opening it: it does not exist, is not a character device (a serial
+/// port, a USB adapter, a pseudo-terminal), or is a character device of
+/// another kind than a terminal (on Linux, by the kernel's class of the
+/// device: `/dev/null` is of `mem`; a device the kernel lists in no class,
+/// such as a pseudo-terminal, passes).
 pub fn serial_port_problem(path: &str) -> Option<Problem> {
     let problem = |reason: String| Some(Problem::new("serial_port", reason));
     match std::fs::metadata(path) {
@@ -97,7 +100,13 @@ pub fn serial_port_problem(path: &str) -> Option<Problem> {
         Ok(meta) if !is_character_device(&meta) => problem(format!(
             "{path:?} is not a serial port (not a character device such as /dev/ttyUSB0)"
         )),
-        Ok(_) => None,
+        Ok(meta) => match device_class(&meta) {
+            Some(class) if class != "tty" => problem(format!(
+                "{path:?} is not a serial port: it is a character device of class {class:?}, \
+                 not a terminal (tty) such as /dev/ttyUSB0"
+            )),
+            _ => None,
+        },
     }
 }
 
@@ -110,6 +119,25 @@ fn is_character_device(meta: &std::fs::Metadata) -> bool {
 #[cfg(not(unix))]
 fn is_character_device(meta: &std::fs::Metadata) -> bool {
     !meta.is_dir()
+}
+
+/// The kernel's class of a character device (`tty`, `mem`, `misc` …), by
+/// `/sys/dev/char/MAJOR:MINOR/subsystem`; `None` when it is not listed
+/// there (or off Linux).
+#[cfg(target_os = "linux")]
+fn device_class(meta: &std::fs::Metadata) -> Option<String> {
+    use std::os::unix::fs::MetadataExt;
+    let rdev = meta.rdev();
+    // glibc's gnu_dev_major / gnu_dev_minor.
+    let major = ((rdev >> 8) & 0xfff) | ((rdev >> 32) & !0xfff);
+    let minor = (rdev & 0xff) | ((rdev >> 12) & !0xff);
+    let subsystem = std::fs::read_link(format!("/sys/dev/char/{major}:{minor}/subsystem")).ok()?;
+    Some(subsystem.file_name()?.to_string_lossy().into_owned())
+}
+
+#[cfg(not(target_os = "linux"))]
+fn device_class(_meta: &std::fs::Metadata) -> Option<String> {
+    None
 }
 
 /// How long a full data packet of one rate takes on a driver's water, as
@@ -211,6 +239,28 @@ mod tests {
         assert!(data_packet_time(&of_type(DriverType::DriverUdp), 2).is_none());
     }
 
+    /// A character device that is not a terminal is refused before it is
+    /// opened; a regular file too; a pseudo-terminal (as the emulated
+    /// Micro-Modem opens) passes.
+    #[cfg(target_os = "linux")]
+    #[tokio::test]
+    async fn a_serial_port_must_be_a_terminal() {
+        let null = serial_port_problem("/dev/null").expect("/dev/null is refused");
+        assert_eq!(null.field, "serial_port");
+        assert!(
+            null.reason
+                .contains("character device of class \"mem\", not a terminal"),
+            "{null}"
+        );
+        let file = std::env::temp_dir().join(format!("goby-check-plain-{}", std::process::id()));
+        std::fs::write(&file, b"").unwrap();
+        let plain = serial_port_problem(file.to_str().unwrap()).expect("a file is refused");
+        assert!(plain.reason.contains("not a character device"), "{plain}");
+        std::fs::remove_file(&file).unwrap();
+        let pty = crate::link::serial::open_pty_pair().unwrap();
+        assert_eq!(serial_port_problem(&pty.path), None, "{}", pty.path);
+    }
+
     #[test]
     fn every_bad_endpoint_value_is_named() {
         let mut udp = of_type(DriverType::DriverUdp);
@@ -297,7 +347,7 @@ mod tests {
         let plain = serial_port_problem(file.to_str().unwrap()).unwrap();
         assert!(plain.reason.contains("not a serial port"), "{plain}");
         std::fs::remove_file(&file).unwrap();
-        #[cfg(unix)]
-        assert_eq!(serial_port_problem("/dev/null"), None);
+        // A character device that is not a terminal: see
+        // `a_serial_port_must_be_a_terminal`.
     }
 }

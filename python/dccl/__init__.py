@@ -258,6 +258,21 @@ def _warn_changes(name, changes):
         )
 
 
+def _optional_type_name(obj):
+    return None if obj is None else _type_name(obj)
+
+
+def _header_or_type(header_only, type_name):
+    """``decode``'s second argument is the reference binding's
+    ``header_only`` (a bool); a type given there instead (a name, class,
+    message or ``Descriptor``) is the type to decode as."""
+    if isinstance(header_only, (bool, int)) or header_only is None:
+        return bool(header_only), type_name
+    if type_name is not None:
+        raise TypeError("decode() got the type twice: %r and type_name=%r" % (header_only, type_name))
+    return False, header_only
+
+
 def _to_message(name, wire):
     cls = _classes.get(name) or message_class(name)
     return cls.FromString(wire)
@@ -345,14 +360,21 @@ class Codec:
             )
         ]
 
-    def decode(self, data, header_only=False):
+    def decode(self, data, header_only=False, type_name=None):
         """Decodes one message from ``data`` (bytes; extra bytes after the
-        message are ignored); the type is found by its DCCL id. Returns a
-        protobuf message: the generated class when imported, else one built
-        from the descriptor. ``header_only`` is not supported (raises)."""
+        message are ignored); the type is found by its DCCL id, or given:
+        ``decode(data, "pkg.Type")``, ``decode(data, MyType)`` or
+        ``type_name=`` (a full name, generated class, message or
+        ``Descriptor`` of a loaded type). A type with ``omit_id: true`` sends
+        no id and is decoded this way only; for another type the id read
+        must be the type's. Returns a protobuf message: the generated class
+        when imported, else one built from the descriptor. ``header_only``
+        (the reference binding's second argument, a bool) is not supported
+        (raises)."""
+        header_only, type_name = _header_or_type(header_only, type_name)
         if header_only:
             raise DcclException("decode(header_only=True) is not supported")
-        name, wire = self._codec.decode(_as_bytes(data))
+        name, wire = self._codec.decode(_as_bytes(data), _optional_type_name(type_name))
         return _to_message(name, wire)
 
     def decode_all(self, frame):
@@ -378,23 +400,25 @@ class Codec:
         _warn_changes(name, changes)
         return data
 
-    def decode_json(self, data, with_name=False):
+    def decode_json(self, data, with_name=False, type_name=None):
         """Decodes one message to proto3 JSON text (field names as in the
         ``.proto``, 64-bit integers as numbers). With ``with_name``, returns
-        ``(full type name, text)``."""
-        name, text = self._codec.decode_json(_as_bytes(data))
+        ``(full type name, text)``; ``type_name`` as for :meth:`decode`."""
+        name, text = self._codec.decode_json(_as_bytes(data), _optional_type_name(type_name))
         return (name, text) if with_name else text
 
-    def decode_dict(self, data, with_name=False):
+    def decode_dict(self, data, with_name=False, type_name=None):
         """Decodes one message to a dict in the proto3-JSON shape. With
-        ``with_name``, returns ``(full type name, dict)``."""
-        name, text = self._codec.decode_json(_as_bytes(data))
+        ``with_name``, returns ``(full type name, dict)``; ``type_name`` as
+        for :meth:`decode`."""
+        name, text = self._codec.decode_json(_as_bytes(data), _optional_type_name(type_name))
         values = _json.loads(text)
         return (name, values) if with_name else values
 
-    def decode_text(self, data):
-        """Decodes one message to libdccl's one-line text form (``x: 450 y: 550``)."""
-        return self._codec.decode_text(_as_bytes(data))[1]
+    def decode_text(self, data, type_name=None):
+        """Decodes one message to libdccl's one-line text form (``x: 450
+        y: 550``); ``type_name`` as for :meth:`decode`."""
+        return self._codec.decode_text(_as_bytes(data), _optional_type_name(type_name))[1]
 
     def max_size(self, type_name):
         """Largest encoded size in bytes (int) of a loaded type."""

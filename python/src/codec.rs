@@ -70,6 +70,35 @@ impl Codec {
         }
     }
 
+    /// One message from `data`: found by its id, or with `name` decoded
+    /// as that loaded type.
+    fn decode_one(&self, data: &[u8], name: Option<&str>) -> PyResult<DynamicMessage> {
+        match name {
+            None => self.inner.decode(data).map_err(|e| {
+                // Bytes of a type that sends no id read as some other id.
+                let omitting: Vec<String> = self
+                    .inner
+                    .loaded()
+                    .into_iter()
+                    .filter(|n| self.inner.omits_id(n).unwrap_or(false))
+                    .collect();
+                match (&e, omitting.first()) {
+                    (dccl::Error::UnknownId(_), Some(first)) => DcclException::new_err(format!(
+                        "{e}; a type with omit_id: true sends no id ({}): decode its \
+                         messages by their type, e.g. decode(data, \"{first}\")",
+                        omitting.join(", ")
+                    )),
+                    _ => to_py(e),
+                }
+            }),
+            Some(name) => self
+                .inner
+                .decode_as_with_len(name, data)
+                .map(|(msg, _)| msg)
+                .map_err(to_py),
+        }
+    }
+
     fn json_options() -> SerializeOptions {
         SerializeOptions::new()
             .use_proto_field_name(true)
@@ -194,9 +223,18 @@ impl Codec {
         self.inner.size(&msg).map_err(to_py)
     }
 
-    /// Decodes one message; returns `(full name, protobuf wire bytes)`. Bytes after the message are ignored.
-    fn decode<'py>(&self, py: Python<'py>, data: &[u8]) -> PyResult<(String, Bound<'py, PyBytes>)> {
-        let msg = self.inner.decode(data).map_err(to_py)?;
+    /// Decodes one message; returns `(full name, protobuf wire bytes)`.
+    /// Bytes after the message are ignored. With `name`, the message is
+    /// decoded as that loaded type (how an `omit_id` type is decoded; for
+    /// another type the id read must be its id).
+    #[pyo3(signature = (data, name=None))]
+    fn decode<'py>(
+        &self,
+        py: Python<'py>,
+        data: &[u8],
+        name: Option<&str>,
+    ) -> PyResult<(String, Bound<'py, PyBytes>)> {
+        let msg = self.decode_one(data, name)?;
         Ok((
             msg.descriptor().full_name().to_string(),
             PyBytes::new(py, &msg.encode_to_vec()),
@@ -221,9 +259,11 @@ impl Codec {
             .collect())
     }
 
-    /// Decodes one message to `(full name, proto3 JSON text)` (field names as in the `.proto`).
-    fn decode_json(&self, data: &[u8]) -> PyResult<(String, String)> {
-        let msg = self.inner.decode(data).map_err(to_py)?;
+    /// Decodes one message to `(full name, proto3 JSON text)` (field names
+    /// as in the `.proto`); `name` as for `decode`.
+    #[pyo3(signature = (data, name=None))]
+    fn decode_json(&self, data: &[u8], name: Option<&str>) -> PyResult<(String, String)> {
+        let msg = self.decode_one(data, name)?;
         let mut out = serde_json::Serializer::new(Vec::new());
         msg.serialize_with_options(&mut out, &Self::json_options())
             .map_err(|e| {
@@ -233,9 +273,11 @@ impl Codec {
         Ok((msg.descriptor().full_name().to_string(), text))
     }
 
-    /// Decodes one message to the reference one-line text form (`x: 1 y: 2`).
-    fn decode_text(&self, data: &[u8]) -> PyResult<(String, String)> {
-        let msg = self.inner.decode(data).map_err(to_py)?;
+    /// Decodes one message to the reference one-line text form (`x: 1 y:
+    /// 2`); `name` as for `decode`.
+    #[pyo3(signature = (data, name=None))]
+    fn decode_text(&self, data: &[u8], name: Option<&str>) -> PyResult<(String, String)> {
+        let msg = self.decode_one(data, name)?;
         Ok((
             msg.descriptor().full_name().to_string(),
             dccl::short_debug_string(&msg),

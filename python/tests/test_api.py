@@ -391,3 +391,53 @@ def test_a_time_the_receiver_would_decode_on_another_date_is_warned(protos_dir):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         codec.encode(now)
+
+
+OMIT = textwrap.dedent(
+    """
+    syntax = "proto2";
+    import "dccl/option_extensions.proto";
+    package omittest;
+    message Bare {
+      option (dccl.msg) = { id: 40 max_bytes: 8 codec_version: 4 omit_id: true };
+      required int32 x = 1 [(dccl.field) = { min: 0 max: 100 }];
+      optional string tag = 2 [(dccl.field).max_length = 4];
+    }
+    """
+)
+
+
+def test_an_omit_id_type_decodes_by_naming_its_type(tmp_path):
+    path = tmp_path / "omittest_bare.proto"
+    path.write_text(OMIT)
+    assert dccl.loadProtoFile(path) == ["omittest.Bare"]
+    codec = dccl.Codec()
+    codec.load("omittest.Bare")
+    cls = dccl.message_class("omittest.Bare")
+    msg = cls(x=42, tag="ab")
+    data = codec.encode(msg)
+    # The type as the second argument (where the reference binding has
+    # header_only), by keyword, as a class, a message or a Descriptor.
+    assert codec.decode(data, "omittest.Bare") == msg
+    assert codec.decode(data, type_name="omittest.Bare") == msg
+    assert codec.decode(data, cls) == msg
+    assert codec.decode(data, msg) == msg
+    assert codec.decode(data, cls.DESCRIPTOR) == msg
+    assert codec.decode_dict(data, type_name="omittest.Bare") == {"x": 42, "tag": "ab"}
+    assert codec.decode_json(data, True, "omittest.Bare")[0] == "omittest.Bare"
+    assert codec.decode_text(data, "omittest.Bare") == 'x: 42 tag: "ab"'
+    # Without the type the bytes have no id to read: the error says how.
+    with pytest.raises(dccl.DcclException, match=r'omit_id.*decode\(data, "omittest\.Bare"\)'):
+        codec.decode(data)
+    # The reference's header_only is still refused, and the type is given once.
+    with pytest.raises(dccl.DcclException, match="not supported"):
+        codec.decode(data, True)
+    with pytest.raises(TypeError, match="twice"):
+        codec.decode(data, "omittest.Bare", type_name="omittest.Bare")
+
+
+def test_a_type_given_to_decode_must_match_the_id_read(codec):
+    data = codec.encode(ping(src=3))
+    assert codec.decode(data, "apitest.Ping").src == 3
+    with pytest.raises(dccl.DcclException, match="received id 20, expected 21"):
+        codec.decode(data, "apitest.Pong")

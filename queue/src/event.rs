@@ -90,6 +90,20 @@ pub enum QueueEvent {
         /// Messages now held (including those waiting for an ack).
         size: usize,
     },
+    /// A broadcast whose source (by its type's `SOURCE_ID` role) is this
+    /// node was received from another node: it is not delivered (it is
+    /// this node's own message; a node delivers its own broadcasts to
+    /// nobody), and this event tells it. It happens when another node sends
+    /// a message in this node's name, e.g. one published for every gateway
+    /// with this node as its source.
+    OwnBroadcastHeard {
+        /// The message as received.
+        message: DynamicMessage,
+        /// Its DCCL id.
+        dccl_id: u32,
+        /// Modem id of the node whose transmission carried it.
+        heard_from: i32,
+    },
     /// A data-on-demand provider returned a message that could not be queued.
     OnDemandRejected {
         /// DCCL id of the type.

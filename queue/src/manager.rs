@@ -216,6 +216,15 @@ impl QueueManager {
         &self.codec
     }
 
+    /// The source id a message of a configured type names by its queue's
+    /// `SOURCE_ID` role (a field's value, or the role's static value):
+    /// `None` when the type has no such role or the field is not set (the
+    /// message is then sent with this node's id).
+    pub fn named_source(&self, message: &DynamicMessage) -> Result<Option<i64>> {
+        let id = self.id_of_configured(message.descriptor().full_name())?;
+        self.queues[self.index_of(id)].roles.source(message)
+    }
+
     /// Creates the queue of a type, or changes the settings of an existing
     /// one (its messages are kept).
     pub fn configure_queue(&mut self, entry: &QueuedMessageEntry) -> Result<()> {
@@ -910,6 +919,16 @@ impl QueueManager {
             None => (link_src, BROADCAST_ID, None, false, false),
         };
         if dest != BROADCAST_ID && dest != self.modem_id && !promiscuous {
+            return Ok(());
+        }
+        if dest == BROADCAST_ID && src == self.modem_id && link_src != self.modem_id {
+            // This node's own broadcast, sent again by another node: not
+            // delivered (this node has it), but told.
+            self.emit(QueueEvent::OwnBroadcastHeard {
+                message,
+                dccl_id: id,
+                heard_from: link_src,
+            });
             return Ok(());
         }
         if dest == BROADCAST_ID && src == self.modem_id {

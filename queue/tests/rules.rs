@@ -630,7 +630,8 @@ fn a_frame_that_does_not_decode_is_reported_and_the_rest_delivered() {
 }
 
 #[test]
-fn received_messages_for_other_nodes_are_not_delivered_unless_promiscuous() {
+fn received_messages_for_other_nodes_are_not_delivered_unless_promiscuous_and_our_own_broadcast_is_told(
+) {
     let mut node = Node::new(2, vec![entry("Status"), entry("Contact")]);
     let codec = node.manager.codec().clone();
     let mut frame = Vec::new();
@@ -649,8 +650,9 @@ fn received_messages_for_other_nodes_are_not_delivered_unless_promiscuous() {
     };
     node.drain();
     assert!(node.manager.handle_modem_receive(&tx).is_empty());
-    let got = |node: &Node| -> Vec<(u32, i32, i32)> {
-        node.drain()
+    let events = node.drain();
+    let got = |events: &[QueueEvent]| -> Vec<(u32, i32, i32)> {
+        events
             .iter()
             .filter_map(|e| match e {
                 QueueEvent::Received(r) => Some((serial(&r.message), r.src, r.dest)),
@@ -658,7 +660,21 @@ fn received_messages_for_other_nodes_are_not_delivered_unless_promiscuous() {
             })
             .collect()
     };
-    assert_eq!(got(&node), vec![(2, 1, 2), (3, 1, 0)]);
+    assert_eq!(got(&events), vec![(2, 1, 2), (3, 1, 0)]);
+    // Our own broadcast, sent by node 1, is not delivered but told.
+    let told: Vec<(u32, i32)> = events
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::OwnBroadcastHeard {
+                message,
+                heard_from,
+                ..
+            } => Some((serial(message), *heard_from)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(told, vec![(4, 1)]);
+    let got = |node: &Node| got(&node.drain());
 
     let mut promiscuous = entry("Status");
     promiscuous.manipulator = vec![protos::goby::acomms::protobuf::Manipulator::Promiscuous as i32];

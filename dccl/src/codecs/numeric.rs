@@ -286,7 +286,7 @@ impl NumericBounds {
                         )
                     },
                     &if self.required {
-                        format!("sent as the minimum ({})", self.absent_reason)
+                        format!("sent as the minimum {} ({})", self.min, self.absent_reason)
                     } else {
                         "sent as not present".to_string()
                     },

@@ -66,7 +66,11 @@ pub async fn run(
                 Err(reason) => Waiting::Refused(publish, reason),
                 Ok(message) => {
                     let (reply, answer) = oneshot::channel();
-                    if core.send(Publish { message, reply }).await.is_err() {
+                    let publication = Publish {
+                        every_gateway: topics.is_every_gateway(&publish.topic),
+                        ..Publish::new(message, reply)
+                    };
+                    if core.send(publication).await.is_err() {
                         // The core is stopping: leave the message unacknowledged,
                         // the broker delivers it again next time.
                         break;

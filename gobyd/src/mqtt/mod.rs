@@ -10,7 +10,10 @@
 //! in a persistent session with manual acknowledgements: a message is
 //! acknowledged to the broker only once the core has written it to its
 //! journal, so nothing the broker handed over is lost if gobyd or the
-//! broker stops. Topics and payloads: [`payload`].
+//! broker stops. Every gateway takes `PREFIX/all/tx/TYPE`: each sends its
+//! own copy, so one whose `SOURCE_ID` role names another node is refused
+//! there (on `PREFIX/NODE/error`), and only the named node sends it.
+//! Topics and payloads: [`payload`].
 
 pub mod backlog;
 pub mod inbound;

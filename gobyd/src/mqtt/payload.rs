@@ -139,7 +139,9 @@ impl Formatter {
                 let payload = json!({ "type": name, "size": size, "time": time });
                 Outgoing::new(t.node(&format!("queue/{name}")), payload, true)
             }
-            QueueEvent::Sent { .. } | QueueEvent::OnDemandRejected { .. } => return None,
+            QueueEvent::Sent { .. }
+            | QueueEvent::OnDemandRejected { .. }
+            | QueueEvent::OwnBroadcastHeard { .. } => return None,
         })
     }
 

@@ -49,6 +49,15 @@ impl Topics {
         ]
     }
 
+    /// Whether `topic` is a `tx` topic of every gateway
+    /// (`PREFIX/all/tx/TYPE`) rather than of this node alone.
+    pub fn is_every_gateway(&self, topic: &str) -> bool {
+        self.tx_type(topic).is_some()
+            && topic
+                .strip_prefix(&self.prefix)
+                .is_some_and(|rest| rest.starts_with("/all/tx/"))
+    }
+
     /// The message type named by a `tx` topic, if it is one.
     pub fn tx_type<'a>(&self, topic: &'a str) -> Option<&'a str> {
         let rest = topic.strip_prefix(&self.prefix)?.strip_prefix('/')?;
@@ -272,6 +281,8 @@ mod tests {
         assert_eq!(s.qos, QoS::AtLeastOnce);
         assert_eq!(s.topics.tx_type("goby/3/tx/a.B"), Some("a.B"));
         assert_eq!(s.topics.tx_type("goby/all/tx/a.B"), Some("a.B"));
+        assert!(s.topics.is_every_gateway("goby/all/tx/a.B"));
+        assert!(!s.topics.is_every_gateway("goby/3/tx/a.B"));
         assert_eq!(s.topics.tx_type("goby/4/tx/a.B"), None);
         assert_eq!(s.topics.tx_type("goby/3/rx/a.B"), None);
     }

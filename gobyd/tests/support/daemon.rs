@@ -214,10 +214,10 @@ pub async fn publish_command(
     };
     let (reply, answer) = tokio::sync::oneshot::channel();
     publisher
-        .send(gobyd::json_server::Publish {
-            message: command.transcode_to_dynamic(),
+        .send(gobyd::json_server::Publish::new(
+            command.transcode_to_dynamic(),
             reply,
-        })
+        ))
         .await
         .expect("the daemon takes publications");
     let reply = answer.await.expect("the daemon answers");
