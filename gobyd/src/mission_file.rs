@@ -10,12 +10,36 @@
 //! (`moos_var`) are written with their default names unless the block
 //! configures them. The block is parsed where it stands in the file, so
 //! line and column numbers in errors are the mission file's.
+//!
+//! A pAcommsHandler block pastes in as it is: its Goby keys are read as
+//! [`config::goby`] says, and MOOS `KEY = value` lines among the protobuf
+//! text are read too ([`Layout::MissionBlock`]). An initializer reading a
+//! global (`common { initializer { global_cfg_var: "LatOrigin" ... } }`)
+//! takes its value from the file's globals, the global
+//! `modem_id_lookup_path` is read where the block gives none, and the
+//! globals gobyd cannot follow are refused: a `MOOSTimeWarp` other than 1
+//! (gobyd runs on the real clock), `use_binary_protobuf = true` or another
+//! `moos_parser_technique` (gobyd writes `@PB[Name] text format`).
 
 use std::path::Path;
 
 use protos::goby::apps::protobuf::GobydConfig;
 
-use crate::config::{self, ConfigError};
+use protos::goby::apps::protobuf::gobyd_config::moos_interface::initializer::Type as InitializerType;
+
+use crate::config::{self, ConfigError, Layout, Problem};
+
+/// A `KEY = value` line of a mission file outside every `ProcessConfig`
+/// block.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Global {
+    /// The key as written.
+    pub key: String,
+    /// The value, blanks at both ends and a `//` comment removed.
+    pub value: String,
+    /// Its line, from 1.
+    pub line: usize,
+}
 
 /// What a mission file holds for `gobyd`.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -33,6 +57,9 @@ pub struct MissionFile {
     /// The inside of the process's block, placed at its line and column in
     /// the file (blanks before it), with `//` comments turned into `#`.
     pub process_config: Option<String>,
+    /// Every line `KEY = value` outside the blocks (those above included),
+    /// in the order of the file.
+    pub globals: Vec<Global>,
 }
 
 /// `line` with a `//` comment outside quotes turned into `#`.
@@ -154,6 +181,11 @@ impl MissionFile {
                 i = j + 1;
                 continue;
             }
+            mission.globals.push(Global {
+                key: key.to_string(),
+                value: value.to_string(),
+                line: i + 1,
+            });
             let value = Some(value.to_string());
             match key.to_ascii_lowercase().as_str() {
                 "serverhost" => mission.server_host = value,
@@ -169,12 +201,56 @@ impl MissionFile {
     }
 
     /// `gobyd`'s configuration: the block (named `origin` in errors) with
-    /// the globals filled in.
+    /// the globals filled in; its notes ([`config::Read`]) are logged.
     pub fn configuration(&self, origin: &str, app: &str) -> Result<GobydConfig, ConfigError> {
+        let read = self.read(origin, app)?;
+        read.log_notes();
+        Ok(read.config)
+    }
+
+    /// The global `key` (MOOS reads keys in any case).
+    pub fn global(&self, key: &str) -> Option<&Global> {
+        self.globals
+            .iter()
+            .find(|g| g.key.eq_ignore_ascii_case(key))
+    }
+
+    /// `gobyd`'s configuration as [`configuration`](Self::configuration)
+    /// gives it, with its notes and where each field is written.
+    pub fn read(&self, origin: &str, app: &str) -> Result<config::Read, ConfigError> {
         let block = self.process_config.as_deref().ok_or_else(|| {
             ConfigError::Invalid(format!("{origin}: no ProcessConfig = {app} block"))
         })?;
-        let mut config = config::parse(block, origin)?;
+        if let Some(warp) = self.global("MOOSTimeWarp") {
+            if warp.value.parse::<f64>().ok() != Some(1.0) {
+                return Err(ConfigError::Invalid(format!(
+                    "{origin}:{}: MOOSTimeWarp = {}: gobyd runs on the real clock (its slots and timeouts are real seconds): \
+                     remove MOOSTimeWarp or make it 1 to run gobyd in this mission",
+                    warp.line, warp.value
+                )));
+            }
+        }
+        // Globals Goby's MOOS applications read that change what they write.
+        if let Some(binary) = self.global("use_binary_protobuf") {
+            if !binary.value.eq_ignore_ascii_case("false") {
+                return Err(ConfigError::Invalid(format!(
+                    "{origin}:{}: use_binary_protobuf = {}: gobyd writes protobuf messages to MOOS variables \
+                     as \"@PB[Name] text format\" only: remove it or make it false",
+                    binary.line, binary.value
+                )));
+            }
+        }
+        if let Some(technique) = self.global("moos_parser_technique") {
+            if technique.value != "TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT" {
+                return Err(ConfigError::Invalid(format!(
+                    "{origin}:{}: moos_parser_technique = {}: gobyd writes protobuf messages to MOOS variables \
+                     as \"@PB[Name] text format\" (TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT) only: remove it",
+                    technique.line, technique.value
+                )));
+            }
+        }
+        let mut read = config::read(block, origin, Layout::MissionBlock)?;
+        let config = &mut read.config;
         let number = |what: &str, v: &Option<String>| -> Result<Option<f64>, ConfigError> {
             v.as_deref()
                 .map(|t| {
@@ -211,14 +287,58 @@ impl MissionFile {
         if moos.lon_origin.is_none() {
             moos.lon_origin = lon;
         }
+        if config.modem_id_lookup_path.is_none() {
+            config.modem_id_lookup_path =
+                self.global("modem_id_lookup_path").map(|g| g.value.clone());
+        }
+        let mut problems = Vec::new();
+        for (i, ini) in moos.initializer.iter_mut().enumerate() {
+            let Some(key) = ini.global_cfg_var.take() else {
+                continue;
+            };
+            let field = format!("moos.initializer[{i}].global_cfg_var");
+            let Some(global) = self.global(&key) else {
+                problems.push(Problem::new(
+                    field,
+                    format!("{key:?} is not a global of the mission file (a KEY = value line outside the ProcessConfig blocks)"),
+                ));
+                continue;
+            };
+            match ini.r#type() {
+                InitializerType::IniDouble => match global.value.parse::<f64>() {
+                    Ok(value) => ini.dval = Some(value),
+                    Err(_) => problems.push(Problem::new(
+                        field,
+                        format!(
+                            "{key} = {} (line {}) is not a number, and the initializer is INI_DOUBLE (INI_STRING writes it as a string)",
+                            global.value, global.line
+                        ),
+                    )),
+                },
+                InitializerType::IniString => ini.sval = Some(global.value.clone()),
+            }
+        }
         config.moos_var.get_or_insert_with(Default::default);
-        Ok(config)
+        if !problems.is_empty() {
+            read.locate(&mut problems);
+            return Err(ConfigError::Problems(problems));
+        }
+        Ok(read)
     }
 }
 
 /// Reads `gobyd`'s configuration from the mission file at `path`, from the
-/// block of process `app` (`gobyd` unless pAntler gives another name).
+/// block of process `app` (`gobyd` unless pAntler gives another name); its
+/// notes are logged.
 pub fn load(path: &Path, app: &str) -> Result<GobydConfig, ConfigError> {
+    let read = read(path, app)?;
+    read.log_notes();
+    Ok(read.config)
+}
+
+/// [`load`], with the configuration's notes and where each field is
+/// written (to locate the problems the checks find).
+pub fn read(path: &Path, app: &str) -> Result<config::Read, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
         path: path.to_path_buf(),
         source,
@@ -226,7 +346,7 @@ pub fn load(path: &Path, app: &str) -> Result<GobydConfig, ConfigError> {
     let origin = path.display().to_string();
     let mission = MissionFile::parse(&text, app)
         .map_err(|e| ConfigError::Invalid(format!("{origin}: {e}")))?;
-    mission.configuration(&origin, app)
+    mission.read(&origin, app)
 }
 
 #[cfg(test)]
@@ -279,6 +399,43 @@ ProcessConfig = gobyd   // the acoustic link
             config.translator_entry[0].publish[0].format(),
             "NAME=%1%,URL=http://x{y}#z"
         );
+    }
+
+    #[test]
+    fn goby_globals_are_read_or_refused() {
+        let with = |global: &str| MISSION.replace("Community  = alpha", global);
+        let config = MissionFile::parse(&with("modem_id_lookup_path = ids.txt"), "gobyd")
+            .unwrap()
+            .configuration("a.moos", "gobyd")
+            .unwrap();
+        assert_eq!(config.modem_id_lookup_path(), "ids.txt");
+        for (global, says) in [
+            (
+                "MOOSTimeWarp = 5",
+                "a.moos:4: MOOSTimeWarp = 5: gobyd runs on the real clock",
+            ),
+            (
+                "use_binary_protobuf = true",
+                "a.moos:4: use_binary_protobuf = true",
+            ),
+            (
+                "moos_parser_technique = TECHNIQUE_PREFIXED_PROTOBUF_NATIVE_HEX",
+                "a.moos:4: moos_parser_technique = TECHNIQUE_PREFIXED_PROTOBUF_NATIVE_HEX",
+            ),
+        ] {
+            let e = MissionFile::parse(&with(global), "gobyd")
+                .unwrap()
+                .configuration("a.moos", "gobyd")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(says), "{global}: {e}");
+        }
+        for fine in ["MOOSTimeWarp = 1", "use_binary_protobuf = false"] {
+            MissionFile::parse(&with(fine), "gobyd")
+                .unwrap()
+                .configuration("a.moos", "gobyd")
+                .unwrap();
+        }
     }
 
     #[test]
