@@ -31,7 +31,7 @@
 //! | `transitional_cfg` (Goby 2) | refused: DCCL version 1 XML is not read |
 //!
 //! In a mission file's block, MOOS `KEY = value` lines are read too (see
-//! [`moos_lines`]): the MOOS application settings ([`MOOS_APP_KEYS`]) are
+//! `moos_lines`): the MOOS application settings ([`MOOS_APP_KEYS`]) are
 //! noted as not used, a key naming a field of gobyd's configuration (any
 //! case) sets it, any other key is refused.
 
