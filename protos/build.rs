@@ -29,6 +29,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for file in FILES {
         println!("cargo:rerun-if-changed={}", proto_dir.join(file).display());
     }
+    // And the files they import (any file under proto/).
+    println!("cargo:rerun-if-changed={}", proto_dir.display());
 
     let mut compiler = protox::Compiler::new([&proto_dir])?;
     compiler.include_imports(true).include_source_info(false);

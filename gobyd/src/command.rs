@@ -5,7 +5,9 @@
 //! successful `--check`, [`EXIT_SETUP`] when the configuration or the
 //! start-up fails (the reason is written on standard error as
 //! `gobyd: error: ...`; settings that cannot work one a line, each with
-//! its field and, from a configuration file, `FILE:LINE:COLUMN`). The
+//! its field and, from a configuration or mission file,
+//! `FILE:LINE:COLUMN`); settings read and not used are noted (on standard
+//! error with `--check`, in the log otherwise). The
 //! daemon starts only with a configuration `--check` accepts: both run
 //! [`runtime::validate`].
 
@@ -139,33 +141,31 @@ fn mqtt_broker_note(cli: &GobydCli, config: &GobydConfig) -> Option<String> {
     Some(format!("MQTT broker: {host}:{port} ({from})"))
 }
 
-/// A configuration file's text and name, to say where a field is written.
-struct Source {
-    origin: String,
-    text: String,
-}
-
 /// The configuration named by the command line, with its overrides
-/// applied, and the text of its file when it is one.
-fn configuration(cli: &GobydCli) -> Result<(GobydConfig, Option<Source>), config::ConfigError> {
+/// applied, and, when it was read from a file, the reading (its notes, and
+/// where each field is written).
+fn configuration(
+    cli: &GobydCli,
+) -> Result<(GobydConfig, Option<config::Read>), config::ConfigError> {
     let mission = cli.moos_file.as_ref().or(cli.mission.as_ref());
-    let mut source = None;
-    let mut config = match (&cli.config, mission) {
+    let read = match (&cli.config, mission) {
         (Some(path), _) => {
             let text = std::fs::read_to_string(path).map_err(|e| config::ConfigError::Read {
                 path: path.clone(),
                 source: e,
             })?;
             let origin = path.display().to_string();
-            let config = config::parse(&text, &origin)?;
-            source = Some(Source { origin, text });
-            config
+            Some(config::read(&text, &origin, config::Layout::File)?)
         }
-        (None, Some(path)) => {
-            crate::mission_file::load(path, cli.process_name.as_deref().unwrap_or("gobyd"))?
-        }
-        (None, None) => GobydConfig::default(),
+        (None, Some(path)) => Some(crate::mission_file::read(
+            path,
+            cli.process_name.as_deref().unwrap_or("gobyd"),
+        )?),
+        (None, None) => None,
     };
+    let mut config = read
+        .as_ref()
+        .map_or_else(GobydConfig::default, |r| r.config.clone());
     if let Some(id) = cli.modem_id {
         config.modem_id = Some(id);
         for id_field in [
@@ -194,16 +194,16 @@ fn configuration(cli: &GobydCli) -> Result<(GobydConfig, Option<Source>), config
     if let Some(broker) = &cli.mqtt_broker {
         config.mqtt.get_or_insert_with(Default::default).broker = Some(broker.trim().to_string());
     }
-    Ok((config, source))
+    Ok((config, read))
 }
 
 /// The error as it is reported: settings that cannot work with where
 /// they are written in the file, when they are.
-fn located(mut e: runtime::DaemonError, source: Option<&Source>) -> runtime::DaemonError {
-    if let (runtime::DaemonError::Config(config::ConfigError::Problems(problems)), Some(source)) =
-        (&mut e, source)
+fn located(mut e: runtime::DaemonError, read: Option<&config::Read>) -> runtime::DaemonError {
+    if let (runtime::DaemonError::Config(config::ConfigError::Problems(problems)), Some(read)) =
+        (&mut e, read)
     {
-        config::locate(problems, &source.text, &source.origin);
+        read.locate(problems);
     }
     e
 }
@@ -291,14 +291,19 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         eprintln!("gobyd: error: {problem}");
         return EXIT_SETUP;
     }
-    let (config, source) = match configuration(&cli) {
+    let (config, read) = match configuration(&cli) {
         Ok(loaded) => loaded,
         Err(e) => {
             eprintln!("gobyd: error: {e}");
             return EXIT_SETUP;
         }
     };
+    let notes = read.as_ref().map_or(&[][..], |r| &r.notes[..]);
     if cli.check {
+        // Told on standard error: standard output says whether it is valid.
+        for note in notes {
+            eprintln!("gobyd: note: {note}");
+        }
         let broker = mqtt_broker_note(&cli, &config);
         return match runtime::check(config) {
             Ok(types) => {
@@ -309,12 +314,15 @@ pub fn run_cli(cli: GobydCli) -> u8 {
                 EXIT_OK
             }
             Err(e) => {
-                eprintln!("gobyd: error: {}", located(e, source.as_ref()));
+                eprintln!("gobyd: error: {}", located(e, read.as_ref()));
                 EXIT_SETUP
             }
         };
     }
     init_logging(&config);
+    if let Some(read) = &read {
+        read.log_notes();
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -331,7 +339,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         let daemon = match runtime::Daemon::start(config).await {
             Ok(d) => d,
             Err(e) => {
-                eprintln!("gobyd: error: {}", located(e, source.as_ref()));
+                eprintln!("gobyd: error: {}", located(e, read.as_ref()));
                 return EXIT_SETUP;
             }
         };

@@ -1,6 +1,12 @@
 //! `gobyd`'s configuration: one file in protobuf text format
 //! (`goby.apps.protobuf.GobydConfig`), with defaults that run on a machine
 //! with no modem.
+//!
+//! A pAcommsHandler configuration (Goby 3 or Goby 2) pastes in as it is:
+//! [`read`] maps each of its keys to gobyd's setting, notes the ones gobyd
+//! does without, and refuses the ones it cannot do, with what to write
+//! instead (the table is in [`goby`]). In a mission file's block MOOS
+//! `KEY = value` lines are read too ([`Layout::MissionBlock`]).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -12,6 +18,9 @@ use protos::goby::acomms::protobuf::{
     SimulatorDriverConfig,
 };
 use protos::goby::apps::protobuf::GobydConfig;
+
+pub mod goby;
+mod moos_lines;
 
 /// A commented configuration that works as it is: `gobyd --example-config`.
 pub const EXAMPLE_CONFIG: &str = include_str!("example_config.pb.txt");
@@ -99,18 +108,167 @@ const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
 ];
 
+/// How the text of a configuration is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// A configuration file: protobuf text format.
+    File,
+    /// The inside of a mission file's `ProcessConfig` block: protobuf text
+    /// format with MOOS `KEY = value` lines among it (see
+    /// [`goby::MOOS_APP_KEYS`]).
+    MissionBlock,
+}
+
+/// How much a [`Note`] matters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoteLevel {
+    /// Read and of no consequence (a MOOS application's tick).
+    Info,
+    /// Read and not done: the configuration asks for something gobyd does
+    /// not do (Goby's log file).
+    Warn,
+}
+
+/// A setting read and not used, told when gobyd checks or starts.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Note {
+    /// How much it matters.
+    pub level: NoteLevel,
+    /// Where it is written (`FILE:LINE:COLUMN`), when known.
+    pub place: Option<String>,
+    /// What was read and why nothing is done with it.
+    pub text: String,
+}
+
+impl std::fmt::Display for Note {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some(place) = &self.place {
+            write!(f, "{place}: ")?;
+        }
+        f.write_str(&self.text)
+    }
+}
+
+/// A configuration read from its text (see [`read`]).
+#[derive(Debug)]
+pub struct Read {
+    /// The configuration, with every Goby key mapped.
+    pub config: GobydConfig,
+    /// Settings read and not used, in the order of the text.
+    pub notes: Vec<Note>,
+    places: Places,
+    text: String,
+    origin: String,
+}
+
+impl Read {
+    /// Fills in where each problem's field is written (as [`locate`]),
+    /// fields set by MOOS `KEY = value` lines and Goby keys mapped to the
+    /// field included.
+    pub fn locate(&self, problems: &mut [Problem]) {
+        locate_with(problems, &self.places, &self.text, &self.origin);
+    }
+
+    /// Writes the notes to the log (`tracing`): info or warning.
+    pub fn log_notes(&self) {
+        for note in &self.notes {
+            match note.level {
+                NoteLevel::Info => tracing::info!("{note}"),
+                NoteLevel::Warn => tracing::warn!("{note}"),
+            }
+        }
+    }
+}
+
+/// Problems and notes found while reading, each with its offset in the
+/// text.
+struct Findings<'a> {
+    text: &'a str,
+    origin: &'a str,
+    problems: Vec<(usize, Problem)>,
+    notes: Vec<(usize, Note)>,
+}
+
+impl<'a> Findings<'a> {
+    fn new(text: &'a str, origin: &'a str) -> Self {
+        Findings {
+            text,
+            origin,
+            problems: Vec::new(),
+            notes: Vec::new(),
+        }
+    }
+
+    fn line_and_column(&self, offset: usize) -> (usize, usize) {
+        line_and_column(self.text, offset)
+    }
+
+    fn place(&self, offset: Option<usize>) -> Option<String> {
+        offset.map(|o| {
+            let (line, column) = self.line_and_column(o);
+            format!("{}:{line}:{column}", self.origin)
+        })
+    }
+
+    fn problem(&mut self, offset: Option<usize>, field: &str, reason: impl Into<String>) {
+        let mut problem = Problem::new(field, reason);
+        problem.place = self.place(offset);
+        self.problems.push((offset.unwrap_or(usize::MAX), problem));
+    }
+
+    fn note(&mut self, offset: Option<usize>, level: NoteLevel, text: String) {
+        let place = self.place(offset);
+        self.notes
+            .push((offset.unwrap_or(usize::MAX), Note { level, place, text }));
+    }
+
+    /// The notes, or every problem (in the order of the text).
+    fn finish(mut self) -> Result<Vec<Note>, ConfigError> {
+        if !self.problems.is_empty() {
+            self.problems.sort_by_key(|(offset, _)| *offset);
+            return Err(ConfigError::Problems(
+                self.problems.into_iter().map(|(_, p)| p).collect(),
+            ));
+        }
+        self.notes.sort_by_key(|(offset, _)| *offset);
+        Ok(self.notes.into_iter().map(|(_, n)| n).collect())
+    }
+}
+
 /// Parses a configuration in protobuf text format; `origin` names it in
 /// errors, which give the line and column (`origin:LINE:COLUMN: reason`).
-///
-/// Goby3's way of writing the driver, MAC and queue sections is read too:
-/// `driver_cfg`, `mac_cfg` and `queue_cfg`, and its extension syntax for the
-/// driver-specific settings (`[goby.acomms.udp.protobuf.config] { ... }`,
-/// `[goby.acomms.micromodem.protobuf.config] { ... }`).
+/// The notes ([`read`]) are logged.
 pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
+    let read = read(text, origin, Layout::File)?;
+    read.log_notes();
+    Ok(read.config)
+}
+
+/// Reads a configuration written as `layout` says; `origin` names it in
+/// errors and notes, which give the line and column
+/// (`origin:LINE:COLUMN: ...`).
+///
+/// Goby's pAcommsHandler configuration (Goby 3 and Goby 2) is read too:
+/// its section names `driver_cfg`, `mac_cfg` and `queue_cfg`, its driver
+/// extensions (`[goby.acomms.udp.protobuf.config] { ... }`, Goby 2's
+/// `[UDPDriverConfig.local] { ... }`), and its other keys, each mapped to
+/// gobyd's setting, noted as not used, or refused with what to write
+/// instead ([`goby`] has the table). Every refusal and every setting that
+/// cannot be read is reported at once ([`ConfigError::Problems`]), except
+/// text that is not protobuf text format (the parser stops at it).
+pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigError> {
     let desc = GobydConfig::default().descriptor();
-    let rewritten = goby3_extensions(text);
-    let dynamic =
-        DynamicMessage::parse_text_format(desc, &rewritten).map_err(|e| ConfigError::Parse {
+    let mut prepared = goby3_extensions(text);
+    let moos_lines = match layout {
+        Layout::File => Vec::new(),
+        Layout::MissionBlock => {
+            let (blanked, lines) = moos_lines::take(&prepared);
+            prepared = blanked;
+            lines
+        }
+    };
+    let mut dynamic =
+        DynamicMessage::parse_text_format(desc, &prepared).map_err(|e| ConfigError::Parse {
             origin: match error_offset(&e) {
                 Some(offset) => {
                     let (line, column) = line_and_column(text, offset);
@@ -118,34 +276,55 @@ pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
                 }
                 None => origin.to_string(),
             },
-            reason: with_goby_hint(e.to_string()),
+            reason: with_goby_hint(
+                e.to_string(),
+                layout == Layout::File
+                    && error_offset(&e)
+                        .and_then(|o| prepared.get(o..))
+                        .is_some_and(|rest| rest.starts_with('=')),
+            ),
         })?;
+    let mut found = Findings::new(text, origin);
+    let assigned = goby::moos_lines(&mut dynamic, &moos_lines, &mut found);
+    let places = Places::new(&prepared, assigned);
+    goby::goby2_extensions(&mut dynamic, &places, &mut found);
     let mut config = dynamic
         .transcode_to::<GobydConfig>()
         .map_err(|e| ConfigError::Parse {
             origin: origin.to_string(),
             reason: e.to_string(),
         })?;
-    let both = |ours: &str, goby: &str| ConfigError::Parse {
-        origin: origin.to_string(),
-        reason: format!("both {ours} and {goby} are given: they are the same section (give one)"),
+    let both = |found: &mut Findings<'_>, ours: &str, goby: &str| {
+        found.problem(
+            places.offset(goby),
+            goby,
+            format!("both {ours} and {goby} are given: they are the same section (give one)"),
+        );
     };
     if let Some(driver) = config.driver_cfg.take() {
         if config.driver.replace(driver).is_some() {
-            return Err(both("driver", "driver_cfg"));
+            both(&mut found, "driver", "driver_cfg");
         }
     }
     if let Some(mac) = config.mac_cfg.take() {
         if config.mac.replace(mac).is_some() {
-            return Err(both("mac", "mac_cfg"));
+            both(&mut found, "mac", "mac_cfg");
         }
     }
     if let Some(queue) = config.queue_cfg.take() {
         if config.queue.replace(queue).is_some() {
-            return Err(both("queue", "queue_cfg"));
+            both(&mut found, "queue", "queue_cfg");
         }
     }
-    Ok(config)
+    goby::goby_keys(&mut config, &places, &mut found);
+    let notes = found.finish()?;
+    Ok(Read {
+        config,
+        notes,
+        places,
+        text: text.to_string(),
+        origin: origin.to_string(),
+    })
 }
 
 /// Why the data directory `dir` could not be created or used, if it is
@@ -170,33 +349,101 @@ fn data_dir_problem(dir: &str) -> Option<String> {
     })
 }
 
-/// Goby configuration keys with no field of that name here, and what to
-/// write instead.
-const GOBY_KEYS: &[(&str, &str)] = &[
+/// Goby settings inside sections gobyd shares with Goby that gobyd does
+/// not have: (message, field), and what to do.
+const GOBY_NESTED_KEYS: &[(&str, &str, &str)] = &[
     (
-        "load_proto_file",
-        "pAcommsHandler's load_proto_file is written here as dccl { proto_file: \"PATH\" } (repeat proto_file for more files; dccl { include_dir } for imports)",
+        "goby.acomms.protobuf.QueueManagerConfig",
+        "skip_decoding",
+        "gobyd decodes every message it receives (it does not route): remove skip_decoding",
     ),
     (
-        "load_shared_library",
-        "gobyd loads no C++ libraries: give the .proto files the library was generated from, as dccl { proto_file: \"PATH\" }",
+        "goby.acomms.protobuf.QueueManagerConfig",
+        "make_network_ack_for_src_id",
+        "gobyd does not route, so it makes no network acks (acks come from the destination): remove it",
     ),
     (
-        "driver_type",
-        "the driver type goes in the driver section: driver { driver_type: DRIVER_WHOI_MICROMODEM ... } (Goby3's driver_cfg { ... } is read too)",
+        "goby.acomms.protobuf.QueueManagerConfig",
+        "route_for_additional_modem_id",
+        "gobyd does not route for other modem ids: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.QueueManagerConfig",
+        "encrypt_rule",
+        "gobyd encrypts every DCCL id with one passphrase: write dccl { passphrase: \"...\" } (and skip_crypto_for_id: ID for ids sent in the clear)",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "hydroid_gateway_id",
+        "gobyd's Micro-Modem driver does not drive a Hydroid gateway: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "generic_lbl",
+        "gobyd's Micro-Modem driver ranges with remus_lbl and narrowband_lbl only: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "fm_sweep",
+        "gobyd's Micro-Modem driver sends no FM sweeps: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "m_sequence",
+        "gobyd's Micro-Modem driver sends no M-sequences: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "additional_application_ack_modem_id",
+        "gobyd's Micro-Modem driver acknowledges frames for its own modem id only: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "pad_partial_frames",
+        "gobyd's Micro-Modem driver sends frames as they are: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "revision",
+        "gobyd's Micro-Modem driver reads the modem's revision itself: remove it",
+    ),
+    (
+        "goby.acomms.protobuf.MicroModemConfig",
+        "use_base64_fdp",
+        "gobyd's Micro-Modem driver sends no FDP packets: remove it",
     ),
 ];
 
-/// A text-format parser's reason, with a hint when the unknown field is a
-/// Goby key that is written differently here.
-fn with_goby_hint(reason: String) -> String {
-    match GOBY_KEYS
-        .iter()
-        .find(|(key, _)| reason.contains(&format!("field '{key}' not found")))
-    {
-        Some((_, hint)) => format!("{reason}: {hint}"),
-        None => reason,
+/// A text-format parser's reason, with what to do when it is about a Goby
+/// setting gobyd does not have, an extension of a driver gobyd does not
+/// run, or a MOOS `KEY = value` line outside a mission file (`at_equals`:
+/// the parser stopped at an `=`).
+fn with_goby_hint(reason: String, at_equals: bool) -> String {
+    for (message, field, hint) in GOBY_NESTED_KEYS {
+        if reason.contains(&format!(
+            "field '{field}' not found for message '{message}'"
+        )) || (message.ends_with("MicroModemConfig")
+            && reason.contains(&format!("extension 'micromodem.protobuf.Config.{field}'")))
+        {
+            return format!("{reason}: {hint}");
+        }
     }
+    if reason.contains("extension '")
+        && reason.contains("message 'goby.acomms.protobuf.DriverConfig'")
+    {
+        return format!(
+            "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config] and \
+             [goby.acomms.micromodem.protobuf.config], and Goby 2's [UDPDriverConfig.*] and \
+             [micromodem.protobuf.Config.*] (the drivers gobyd runs)"
+        );
+    }
+    if at_equals {
+        return format!(
+            "{reason}: MOOS KEY = value lines are read in a mission file's ProcessConfig block \
+             (--moos-file); here write KEY: value"
+        );
+    }
+    reason
 }
 
 /// Byte offset of a text-format error, if the parser gives one.
@@ -276,13 +523,17 @@ fn goby3_extensions(text: &str) -> String {
 /// The problems are then in the order of their places in the text (those
 /// without a place last, in the order found).
 pub fn locate(problems: &mut [Problem], text: &str, origin: &str) {
-    let rewritten = goby3_extensions(text);
-    let tree = text_tree(&rewritten);
+    let places = Places::new(&goby3_extensions(text), Vec::new());
+    locate_with(problems, &places, text, origin);
+}
+
+/// [`locate`] with the places of the text already found.
+fn locate_with(problems: &mut [Problem], places: &Places, text: &str, origin: &str) {
     let mut offsets = Vec::with_capacity(problems.len());
     for problem in problems.iter_mut() {
-        let offset = field_offset(&tree, &problem.field);
+        let offset = places.offset(&problem.field);
         if let Some(offset) = offset {
-            let (line, column) = line_and_column(&rewritten, offset);
+            let (line, column) = line_and_column(text, offset);
             problem.place = Some(format!("{origin}:{line}:{column}"));
         }
         offsets.push(offset.unwrap_or(usize::MAX));
@@ -291,6 +542,146 @@ pub fn locate(problems: &mut [Problem], text: &str, origin: &str) {
     order.sort_by_key(|&i| offsets[i]);
     let sorted: Vec<Problem> = order.iter().map(|&i| problems[i].clone()).collect();
     problems.clone_from_slice(&sorted);
+}
+
+/// Where the fields of a configuration are written: its protobuf text as
+/// a tree, and the fields set by MOOS `KEY = value` lines.
+#[derive(Debug)]
+struct Places {
+    tree: Vec<WrittenField>,
+    /// Field set by a MOOS line, and the offset of its key.
+    assigned: Vec<(String, usize)>,
+}
+
+/// Paths of gobyd's settings and the Goby keys that may have been written
+/// for them (mapped when read), for the place of a problem of the setting.
+const MAPPED_FROM: &[(&str, &str)] = &[
+    ("driver.driver_type", "driver_type"),
+    (
+        "driver.reconnect_interval",
+        "driver_failure_approach.driver_backoff_sec",
+    ),
+    ("moos.server", "common.server_host"),
+    ("moos.port", "common.server_port"),
+    ("moos.lat_origin", "common.lat_origin"),
+    ("moos.lon_origin", "common.lon_origin"),
+    ("moos.initializer", "common.initializer"),
+    ("log.level", "common.verbosity"),
+    ("dccl.passphrase", "dccl_cfg.crypto_passphrase"),
+];
+
+impl Places {
+    /// The places of `prepared` (the text as parsed: Goby3's extension
+    /// names replaced, MOOS lines blanked) and of the MOOS lines' fields.
+    fn new(prepared: &str, assigned: Vec<(String, usize)>) -> Self {
+        Places {
+            tree: text_tree(prepared),
+            assigned,
+        }
+    }
+
+    /// The byte offset of `path` (`mac.slot[1].rate`,
+    /// `driver_cfg.[UDPDriverConfig.local]`): where it is written, or where
+    /// the Goby key mapped to it is, or else the deepest part of it written.
+    fn offset(&self, path: &str) -> Option<usize> {
+        let own = self.find(path);
+        if let Some((offset, true)) = own {
+            return Some(offset);
+        }
+        let goby2 = goby::GOBY2_EXTENSIONS.iter().map(|(ext, part, field)| {
+            (format!("driver.{part}.{field}"), format!("driver.[{ext}]"))
+        });
+        let mapped = MAPPED_FROM
+            .iter()
+            .map(|(ours, goby)| (ours.to_string(), goby.to_string()))
+            .chain(goby2);
+        for (ours, goby) in mapped {
+            let Some(rest) = path.strip_prefix(ours.as_str()) else {
+                continue;
+            };
+            if !(rest.is_empty() || rest.starts_with('.') || rest.starts_with('[')) {
+                continue;
+            }
+            if let Some((offset, true)) = self.find(&format!("{goby}{rest}")) {
+                return Some(offset);
+            }
+        }
+        own.map(|(offset, _)| offset)
+    }
+
+    /// The offset of `path` or of the deepest part of it written, and
+    /// whether that is the whole path.
+    fn find(&self, path: &str) -> Option<(usize, bool)> {
+        let parts = path_parts(path);
+        let mut fields: &[WrittenField] = &self.tree;
+        let mut found = None;
+        for (depth, (name, index)) in parts.iter().enumerate() {
+            let index = index.unwrap_or(0);
+            let field = if depth == 0 {
+                let alias = SECTION_ALIASES
+                    .iter()
+                    .find(|(ours, _)| ours == name)
+                    .map(|(_, goby)| *goby);
+                let written = fields
+                    .iter()
+                    .filter(|f| &f.name == name || Some(f.name.as_str()) == alias);
+                let count = written.clone().count();
+                match written.clone().nth(index) {
+                    Some(field) => Some(field),
+                    None => {
+                        // Set by a MOOS line (after the text's values).
+                        return match self
+                            .assigned
+                            .iter()
+                            .filter(|(n, _)| n == name)
+                            .nth(index - count.min(index))
+                        {
+                            Some((_, offset)) => Some((*offset, depth + 1 == parts.len())),
+                            None => found.map(|o| (o, false)),
+                        };
+                    }
+                }
+            } else {
+                fields.iter().filter(|f| &f.name == name).nth(index)
+            };
+            let Some(field) = field else {
+                return found.map(|o| (o, false));
+            };
+            found = Some(field.offset);
+            fields = &field.fields;
+        }
+        found.map(|o| (o, true))
+    }
+}
+
+/// The parts of a field path: names with their index, if any
+/// (`mac.slot[1].rate`), an extension's name in brackets
+/// (`driver_cfg.[UDPDriverConfig.remote][0].port`).
+fn path_parts(path: &str) -> Vec<(String, Option<usize>)> {
+    let mut parts = Vec::new();
+    let mut rest = path;
+    while !rest.is_empty() {
+        let (name, after) = match rest.strip_prefix('[') {
+            Some(inner) => match inner.split_once(']') {
+                Some((name, after)) => (name.to_string(), after),
+                None => (inner.to_string(), ""),
+            },
+            None => {
+                let end = rest.find(['.', '[']).unwrap_or(rest.len());
+                (rest[..end].to_string(), &rest[end..])
+            }
+        };
+        let (index, after) = match after.strip_prefix('[') {
+            Some(inner) => match inner.split_once(']') {
+                Some((n, after)) => (n.parse().ok(), after),
+                None => (None, ""),
+            },
+            None => (None, after),
+        };
+        parts.push((name, index));
+        rest = after.strip_prefix('.').unwrap_or(after);
+    }
+    parts
 }
 
 /// A field as written in text format: its name, where the name starts,
@@ -308,33 +699,6 @@ const SECTION_ALIASES: &[(&str, &str)] = &[
     ("mac", "mac_cfg"),
     ("queue", "queue_cfg"),
 ];
-
-/// The byte offset in the text of `tree` of `path` (`mac.slot[1].rate`),
-/// or of the deepest part of it written there.
-fn field_offset(tree: &[WrittenField], path: &str) -> Option<usize> {
-    let mut fields = tree;
-    let mut found = None;
-    for (depth, part) in path.split('.').enumerate() {
-        let (name, index) = match part.split_once('[') {
-            Some((name, rest)) => (name, rest.trim_end_matches(']').parse::<usize>().ok()),
-            None => (part, None),
-        };
-        let alias = SECTION_ALIASES
-            .iter()
-            .find(|(ours, _)| depth == 0 && *ours == name)
-            .map(|(_, goby)| *goby);
-        let Some(field) = fields
-            .iter()
-            .filter(|f| f.name == name || Some(f.name.as_str()) == alias)
-            .nth(index.unwrap_or(0))
-        else {
-            break;
-        };
-        found = Some(field.offset);
-        fields = &field.fields;
-    }
-    found
-}
 
 /// A token of text format: punctuation, a quoted string, or a run of
 /// other characters (a name, a number, an enum value), with its offset.
@@ -664,7 +1028,8 @@ pub enum DriverSettings {
 ///   port that does not exist), its Micro-Modem settings, a driver gobyd
 ///   does not run;
 /// - interfaces: JSON addresses that are not `HOST:PORT`, a MOOS port out
-///   of range; `log.level`; `duplicate_window_seconds`.
+///   of range, a MOOS initializer with no variable or no value;
+///   `log.level`; `duplicate_window_seconds`.
 pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
     let mut problems = Vec::new();
     let mut push = |field: String, reason: String| problems.push(Problem::new(field, reason));
@@ -692,6 +1057,11 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
                 "empty: give the MOOSDB's host (e.g. \"127.0.0.1\")".into(),
             );
         }
+        for (i, ini) in moos.initializer.iter().enumerate() {
+            if let Some(reason) = initializer_problem(ini) {
+                push(format!("moos.initializer[{i}]"), reason);
+            }
+        }
     }
     if let Some(window) = config.duplicate_window_seconds {
         if !(window.is_finite() && window >= 0.0) {
@@ -711,6 +1081,35 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
         problems.extend(driver_problems(config));
     }
     problems
+}
+
+/// Why a MOOS initializer cannot be written, if it cannot.
+fn initializer_problem(
+    ini: &protos::goby::apps::protobuf::gobyd_config::moos_interface::Initializer,
+) -> Option<String> {
+    use protos::goby::apps::protobuf::gobyd_config::moos_interface::initializer::Type;
+    if ini.moos_var().trim().is_empty() {
+        return Some("no moos_var: give the variable to write".into());
+    }
+    let var = ini.moos_var();
+    if ini.global_cfg_var.is_some() {
+        return Some(format!(
+            "{var}: global_cfg_var names a global of a mission file, and this configuration is not read from one \
+             (--moos-file): give dval or sval"
+        ));
+    }
+    match ini.r#type.map(Type::try_from) {
+        None => Some(format!(
+            "{var}: no type: give type: INI_DOUBLE or INI_STRING"
+        )),
+        Some(Ok(Type::IniDouble)) if ini.dval.is_none() => Some(format!(
+            "{var}: INI_DOUBLE with no dval: give dval (or global_cfg_var, from a mission file)"
+        )),
+        Some(Ok(Type::IniString)) if ini.sval.is_none() => Some(format!(
+            "{var}: INI_STRING with no sval: give sval (or global_cfg_var, from a mission file)"
+        )),
+        _ => None,
+    }
 }
 
 /// Why `bind` (a JSON interface address; empty: none) is not an address
@@ -1412,26 +1811,36 @@ mod tests {
     }
 
     #[test]
-    fn goby_keys_written_differently_here_say_how() {
-        for (text, hint) in [
+    fn goby_settings_gobyd_does_not_have_say_what_to_do() {
+        for (text, place, hint) in [
             (
-                "load_proto_file: \"/x/nav.proto\"",
-                "dccl { proto_file: \"PATH\" }",
+                "queue_cfg {\n  skip_decoding: true\n}\n",
+                "p.cfg:2:3",
+                "remove skip_decoding",
             ),
             (
-                "load_shared_library: \"/x/libnav.so\"",
-                "loads no C++ libraries",
+                "queue_cfg { encrypt_rule { id: 3 crypto_passphrase: \"x\" } }\n",
+                "p.cfg:1:13",
+                "dccl { passphrase:",
             ),
-            ("driver_type: DRIVER_UDP", "driver { driver_type:"),
+            (
+                "driver_cfg {\n  [micromodem.protobuf.Config.hydroid_gateway_id]: 2\n}\n",
+                "p.cfg:2:3",
+                "Hydroid gateway",
+            ),
+            (
+                "driver_cfg { [goby.acomms.iridium.protobuf.config] { } }\n",
+                "p.cfg:1:14",
+                "the drivers gobyd runs",
+            ),
+            ("AppTick = 4\n", "p.cfg:1:9", "ProcessConfig block"),
         ] {
-            let e = parse(&format!("modem_id: 1\n{text}\n"), "p.cfg")
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains("p.cfg:2:1"), "{e}");
+            let e = parse(text, "p.cfg").unwrap_err().to_string();
+            assert!(e.starts_with(place), "{text}: {e}");
             assert!(e.contains(hint), "{text}: {e}");
         }
         let e = parse("no_such_key: 1", "p.cfg").unwrap_err().to_string();
-        assert!(!e.contains("pAcommsHandler"), "{e}");
+        assert!(!e.contains("remove"), "{e}");
     }
 
     #[test]
@@ -1516,6 +1925,38 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("\n  json.tcp_bind: \"nowhere\""), "{text}");
+    }
+
+    #[test]
+    fn moos_initializers_need_a_variable_a_type_and_a_value() {
+        let config = complete(
+            parse(
+                "moos {\n\
+                 initializer { type: INI_DOUBLE moos_var: \"A\" dval: 1 }\n\
+                 initializer { type: INI_DOUBLE moos_var: \"B\" }\n\
+                 initializer { type: INI_STRING moos_var: \"C\" }\n\
+                 initializer { moos_var: \"D\" sval: \"x\" }\n\
+                 initializer { type: INI_STRING sval: \"x\" }\n\
+                 initializer { type: INI_STRING moos_var: \"F\" global_cfg_var: \"Community\" }\n}\n",
+                "i.cfg",
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let found: Vec<String> = problems(&config, DriverSettings::Configured)
+            .iter()
+            .map(|p| format!("{}: {}", p.field, p.reason))
+            .collect();
+        assert_eq!(found.len(), 5, "{found:?}");
+        for (problem, says) in found.iter().zip([
+            "moos.initializer[1]: B: INI_DOUBLE with no dval",
+            "moos.initializer[2]: C: INI_STRING with no sval",
+            "moos.initializer[3]: D: no type",
+            "moos.initializer[4]: no moos_var",
+            "moos.initializer[5]: F: global_cfg_var names a global of a mission file",
+        ]) {
+            assert!(problem.starts_with(says), "{problem}");
+        }
     }
 
     #[test]

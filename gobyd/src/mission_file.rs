@@ -10,27 +10,80 @@
 //! (`moos_var`) are written with their default names unless the block
 //! configures them. The block is parsed where it stands in the file, so
 //! line and column numbers in errors are the mission file's.
+//!
+//! A pAcommsHandler block pastes in as it is: its Goby keys are read as
+//! [`config::goby`] says, and MOOS `KEY = value` lines among the protobuf
+//! text are read too ([`Layout::MissionBlock`]). An initializer reading a
+//! global (`common { initializer { global_cfg_var: "LatOrigin" ... } }`)
+//! takes its value from the file's globals, the global
+//! `modem_id_lookup_path` is read where the block gives none, and the
+//! globals gobyd cannot follow are refused: a `MOOSTimeWarp` other than 1
+//! (gobyd runs on the real clock), `use_binary_protobuf = true` or another
+//! `moos_parser_technique` (gobyd writes `@PB[Name] text format`).
 
 use std::path::Path;
 
+use protos::goby::apps::protobuf::gobyd_config::moos_interface::initializer::Type as InitializerType;
 use protos::goby::apps::protobuf::GobydConfig;
 
-pub use moos::mission::MissionFile;
+pub use moos::mission::{Global, MissionFile};
 
-use crate::config::{self, ConfigError};
+use crate::config::{self, ConfigError, Layout, Problem};
 
 /// `gobyd`'s configuration from a parsed mission file: the block of
-/// process `app` (named `origin` in errors) with the globals filled in.
+/// process `app` (named `origin` in errors) with the globals filled in;
+/// its notes ([`config::Read`]) are logged.
 pub fn configuration(
     mission: &MissionFile,
     origin: &str,
     app: &str,
 ) -> Result<GobydConfig, ConfigError> {
+    let read = read_mission(mission, origin, app)?;
+    read.log_notes();
+    Ok(read.config)
+}
+
+/// `gobyd`'s configuration as [`configuration`] gives it, with its notes
+/// and where each field is written.
+pub fn read_mission(
+    mission: &MissionFile,
+    origin: &str,
+    app: &str,
+) -> Result<config::Read, ConfigError> {
     let block = mission
         .process_config
         .as_deref()
         .ok_or_else(|| ConfigError::Invalid(format!("{origin}: no ProcessConfig = {app} block")))?;
-    let mut config = config::parse(block, origin)?;
+    if let Some(warp) = mission.global("MOOSTimeWarp") {
+        if warp.value.parse::<f64>().ok() != Some(1.0) {
+            return Err(ConfigError::Invalid(format!(
+                "{origin}:{}: MOOSTimeWarp = {}: gobyd runs on the real clock (its slots and timeouts are real seconds): \
+                 remove MOOSTimeWarp or make it 1 to run gobyd in this mission",
+                warp.line, warp.value
+            )));
+        }
+    }
+    // Globals Goby's MOOS applications read that change what they write.
+    if let Some(binary) = mission.global("use_binary_protobuf") {
+        if !binary.value.eq_ignore_ascii_case("false") {
+            return Err(ConfigError::Invalid(format!(
+                "{origin}:{}: use_binary_protobuf = {}: gobyd writes protobuf messages to MOOS variables \
+                 as \"@PB[Name] text format\" only: remove it or make it false",
+                binary.line, binary.value
+            )));
+        }
+    }
+    if let Some(technique) = mission.global("moos_parser_technique") {
+        if technique.value != "TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT" {
+            return Err(ConfigError::Invalid(format!(
+                "{origin}:{}: moos_parser_technique = {}: gobyd writes protobuf messages to MOOS variables \
+                 as \"@PB[Name] text format\" (TECHNIQUE_PREFIXED_PROTOBUF_TEXT_FORMAT) only: remove it",
+                technique.line, technique.value
+            )));
+        }
+    }
+    let mut read = config::read(block, origin, Layout::MissionBlock)?;
+    let config = &mut read.config;
     let invalid = |e: moos::mission::MissionError| ConfigError::Invalid(e.located(origin));
     let lat = MissionFile::degrees(&mission.lat_origin, "LatOrigin").map_err(invalid)?;
     let lon = MissionFile::degrees(&mission.long_origin, "LongOrigin").map_err(invalid)?;
@@ -51,13 +104,58 @@ pub fn configuration(
     if moos.lon_origin.is_none() {
         moos.lon_origin = lon;
     }
+    if config.modem_id_lookup_path.is_none() {
+        config.modem_id_lookup_path = mission
+            .global("modem_id_lookup_path")
+            .map(|g| g.value.clone());
+    }
+    let mut problems = Vec::new();
+    for (i, ini) in moos.initializer.iter_mut().enumerate() {
+        let Some(key) = ini.global_cfg_var.take() else {
+            continue;
+        };
+        let field = format!("moos.initializer[{i}].global_cfg_var");
+        let Some(global) = mission.global(&key) else {
+            problems.push(Problem::new(
+                field,
+                format!("{key:?} is not a global of the mission file (a KEY = value line outside the ProcessConfig blocks)"),
+            ));
+            continue;
+        };
+        match ini.r#type() {
+            InitializerType::IniDouble => match global.value.parse::<f64>() {
+                Ok(value) => ini.dval = Some(value),
+                Err(_) => problems.push(Problem::new(
+                    field,
+                    format!(
+                        "{key} = {} (line {}) is not a number, and the initializer is INI_DOUBLE (INI_STRING writes it as a string)",
+                        global.value, global.line
+                    ),
+                )),
+            },
+            InitializerType::IniString => ini.sval = Some(global.value.clone()),
+        }
+    }
     config.moos_var.get_or_insert_with(Default::default);
-    Ok(config)
+    if !problems.is_empty() {
+        read.locate(&mut problems);
+        return Err(ConfigError::Problems(problems));
+    }
+    Ok(read)
 }
 
 /// Reads `gobyd`'s configuration from the mission file at `path`, from the
-/// block of process `app` (`gobyd` unless pAntler gives another name).
+/// block of process `app` (`gobyd` unless pAntler gives another name); its
+/// notes are logged.
 pub fn load(path: &Path, app: &str) -> Result<GobydConfig, ConfigError> {
+    let read = read(path, app)?;
+    read.log_notes();
+    Ok(read.config)
+}
+
+/// [`load`], with the configuration's notes and where each field is
+/// written (to locate the problems the checks find).
+pub fn read(path: &Path, app: &str) -> Result<config::Read, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
         path: path.to_path_buf(),
         source,
@@ -65,12 +163,23 @@ pub fn load(path: &Path, app: &str) -> Result<GobydConfig, ConfigError> {
     let origin = path.display().to_string();
     let mission =
         MissionFile::parse(&text, app).map_err(|e| ConfigError::Invalid(e.located(&origin)))?;
-    configuration(&mission, &origin, app)
+    read_mission(&mission, &origin, app)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Method syntax for the tests: `mission.configuration(origin, app)`.
+    trait Configure {
+        fn configuration(&self, origin: &str, app: &str) -> Result<GobydConfig, ConfigError>;
+    }
+
+    impl Configure for MissionFile {
+        fn configuration(&self, origin: &str, app: &str) -> Result<GobydConfig, ConfigError> {
+            super::configuration(self, origin, app)
+        }
+    }
 
     const MISSION: &str = r#"// Vehicle A
 ServerHost = localhost
@@ -101,7 +210,15 @@ ProcessConfig = gobyd   // the acoustic link
     #[test]
     fn globals_and_the_block_make_the_configuration() {
         let mission = MissionFile::parse(MISSION, "gobyd").unwrap();
-        let config = configuration(&mission, "a.moos", "gobyd").unwrap();
+        assert_eq!(
+            mission.server_port.as_ref().map(|s| &s.value[..]),
+            Some("9001")
+        );
+        assert_eq!(
+            mission.community.as_ref().map(|s| &s.value[..]),
+            Some("alpha")
+        );
+        let config = mission.configuration("a.moos", "gobyd").unwrap();
         assert_eq!(config.modem_id(), 1);
         let moos = config.moos.as_ref().unwrap();
         assert_eq!(
@@ -119,26 +236,72 @@ ProcessConfig = gobyd   // the acoustic link
     }
 
     #[test]
+    fn goby_globals_are_read_or_refused() {
+        let with = |global: &str| MISSION.replace("Community  = alpha", global);
+        let config = MissionFile::parse(&with("modem_id_lookup_path = ids.txt"), "gobyd")
+            .unwrap()
+            .configuration("a.moos", "gobyd")
+            .unwrap();
+        assert_eq!(config.modem_id_lookup_path(), "ids.txt");
+        for (global, says) in [
+            (
+                "MOOSTimeWarp = 5",
+                "a.moos:4: MOOSTimeWarp = 5: gobyd runs on the real clock",
+            ),
+            (
+                "use_binary_protobuf = true",
+                "a.moos:4: use_binary_protobuf = true",
+            ),
+            (
+                "moos_parser_technique = TECHNIQUE_PREFIXED_PROTOBUF_NATIVE_HEX",
+                "a.moos:4: moos_parser_technique = TECHNIQUE_PREFIXED_PROTOBUF_NATIVE_HEX",
+            ),
+        ] {
+            let e = MissionFile::parse(&with(global), "gobyd")
+                .unwrap()
+                .configuration("a.moos", "gobyd")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(says), "{global}: {e}");
+        }
+        for fine in ["MOOSTimeWarp = 1", "use_binary_protobuf = false"] {
+            MissionFile::parse(&with(fine), "gobyd")
+                .unwrap()
+                .configuration("a.moos", "gobyd")
+                .unwrap();
+        }
+    }
+
+    #[test]
     fn errors_point_into_the_mission_file() {
         let bad = MISSION.replace("modem_id: 1", "modem_id: one");
-        let mission = MissionFile::parse(&bad, "gobyd").unwrap();
-        let err = configuration(&mission, "a.moos", "gobyd")
+        let err = MissionFile::parse(&bad, "gobyd")
+            .unwrap()
+            .configuration("a.moos", "gobyd")
             .unwrap_err()
             .to_string();
-        // The block keeps the file's lines and columns: `modem_id` is at
-        // line 16, column 3.
-        assert!(
-            err.starts_with("a.moos:16:") && err.contains("'one'"),
-            "{err}"
-        );
-        let mission = MissionFile::parse(MISSION, "other").unwrap();
-        let err = configuration(&mission, "a.moos", "other")
+        assert!(err.starts_with("a.moos:") && err.contains("'one'"), "{err}");
+        // The block keeps the file's lines and columns, so that positions
+        // in parse errors are the file's: `modem_id` is at line 16, column 3.
+        let block = MissionFile::parse(MISSION, "gobyd")
+            .unwrap()
+            .process_config
+            .unwrap();
+        let line16 = block.lines().nth(15).unwrap();
+        assert_eq!(line16.find("modem_id"), Some(2), "{line16:?}");
+        let err = MissionFile::parse(MISSION, "other")
+            .unwrap()
+            .configuration("a.moos", "other")
             .unwrap_err()
             .to_string();
         assert!(err.contains("no ProcessConfig = other block"), "{err}");
+        let err =
+            MissionFile::parse("ProcessConfig = gobyd\n{\n modem_id: 1\n", "gobyd").unwrap_err();
+        assert!(err.to_string().contains("line 1"), "{err}");
         let bad = MISSION.replace("ServerPort = 9001", "ServerPort = lots");
-        let mission = MissionFile::parse(&bad, "gobyd").unwrap();
-        let err = configuration(&mission, "a.moos", "gobyd")
+        let err = MissionFile::parse(&bad, "gobyd")
+            .unwrap()
+            .configuration("a.moos", "gobyd")
             .unwrap_err()
             .to_string();
         assert!(err.contains("a.moos:3: ServerPort = lots"), "{err}");

@@ -18,6 +18,8 @@
 //!   modem (`MODEM_RECEIVE`, `MODEM_TRANSMIT`) and slot starts
 //!   (`MAC_SLOT_START`). Read: `FLUSH_QUEUE` (empty a queue by DCCL id)
 //!   and `DRIVER_RESET` (restart the driver), see [`crate::control`].
+//! - Initial values (`moos.initializer`, Goby's `common { initializer }`):
+//!   written each time gobyd connects to the MOOSDB.
 //! - The plain interface: string values of the `send_var` variables are
 //!   messages to send, either `@PB[full.MessageName] <text format>` or
 //!   `full.MessageName:<hex of the protobuf encoding>`; received messages
@@ -381,6 +383,9 @@ pub async fn run(
         return;
     };
     let connected_at = unix_seconds();
+    for (var, value) in initial_values(&settings.moos) {
+        notify(&client, &var, &value);
+    }
     let translator = settings.translator.clone();
     let mut registered: Vec<String> = settings.moos.send_var.clone();
     registered.extend(translator.variables());
@@ -455,6 +460,24 @@ pub async fn run(
     }
     tickers.abort_all();
     client.close().await;
+}
+
+/// The values of the `initializer`s, written on connecting (a number for
+/// INI_DOUBLE, a string for INI_STRING, blanks at both ends removed with
+/// `trim`).
+fn initial_values(moos: &MoosInterface) -> Vec<(String, Value)> {
+    use protos::goby::apps::protobuf::gobyd_config::moos_interface::initializer::Type;
+    moos.initializer
+        .iter()
+        .map(|ini| {
+            let value = match ini.r#type() {
+                Type::IniDouble => Value::Double(ini.dval()),
+                Type::IniString if ini.trim() => Value::String(ini.sval().trim().to_string()),
+                Type::IniString => Value::String(ini.sval().to_string()),
+            };
+            (ini.moos_var().to_string(), value)
+        })
+        .collect()
 }
 
 /// Now, seconds since the Unix epoch (MOOS time).
@@ -780,6 +803,23 @@ mod tests {
         assert_eq!(
             publications(&plain, &acked),
             [("ACOMMS_ACK".to_string(), s(text))]
+        );
+    }
+
+    #[test]
+    fn initializers_are_written_as_numbers_or_strings() {
+        let settings = settings(
+            "moos { initializer { type: INI_DOUBLE moos_var: \"DEPTH_MAX\" dval: 120.5 }\n\
+             initializer { type: INI_STRING moos_var: \"NAME\" sval: \" unicorn \" }\n\
+             initializer { type: INI_STRING moos_var: \"PADDED\" sval: \" a \" trim: false } }",
+        );
+        assert_eq!(
+            initial_values(&settings.moos),
+            [
+                ("DEPTH_MAX".to_string(), Value::Double(120.5)),
+                ("NAME".to_string(), s("unicorn")),
+                ("PADDED".to_string(), s(" a ")),
+            ]
         );
     }
 

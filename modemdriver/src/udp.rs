@@ -3,8 +3,10 @@
 //!
 //! Configuration: `DriverConfig.udp` (`local` endpoint, `remote` endpoints
 //! with their modem ids, `max_frame_size`). A transmission to modem id N goes
-//! to every remote endpoint of modem id N; a broadcast (dest 0) to every
-//! remote endpoint. Data addressed to this node with `ack_requested` is
+//! to every remote endpoint of modem id N and to every remote endpoint of
+//! modem id 0 (unset: as Goby's, such an endpoint takes everything, which is
+//! how a Goby 2 configuration's one remote and a Goby 3 remote written
+//! without a modem id work); a broadcast (dest 0) to every remote endpoint. Data addressed to this node with `ack_requested` is
 //! acknowledged (an `ACK` transmission listing the frames, with the data's
 //! `unique_id` so that the sender credits the transmission it answers) to
 //! the endpoint it came from: on reception, or with `deferred_ack` only when
@@ -171,7 +173,7 @@ impl UdpState {
     fn destinations(&self, dest: i32) -> Vec<SocketAddr> {
         self.remotes
             .iter()
-            .filter(|(id, _)| dest == 0 || i64::from(*id) == i64::from(dest))
+            .filter(|(id, _)| dest == 0 || *id == 0 || i64::from(*id) == i64::from(dest))
             .map(|(_, addr)| *addr)
             .collect()
     }

@@ -111,6 +111,37 @@ async fn broadcast_reaches_every_remote_and_is_not_acknowledged() {
 }
 
 #[tokio::test]
+async fn a_remote_without_a_modem_id_takes_every_transmission_as_gobys_does() {
+    // Goby 3's `remote { ip port }` (modem id 0) and Goby 2's one remote.
+    let ((sa, aa), (sb, ab), (sc, ac)) = (bind().await, bind().await, bind().await);
+    let mut a = UdpDriver::start_on(&config(1, aa, &[(0, ab), (3, ac)]), sa).unwrap();
+    let mut b = UdpDriver::start_on(&config(2, ab, &[(0, aa)]), sb).unwrap();
+    let mut c = UdpDriver::start_on(&config(3, ac, &[(1, aa)]), sc).unwrap();
+    a.initiate_transmission(data_to(2, false)).unwrap();
+    let frames = vec![b"to two".to_vec()];
+    wait_for(&mut a, &frames, LIMIT, |e| {
+        matches!(e, DriverEvent::TransmitResult(r) if r.outcome == TransmitOutcome::Sent)
+            .then_some(())
+    })
+    .await;
+    let got = received(&mut b, LIMIT).await;
+    assert_eq!((got.src(), got.dest(), &got.frame), (1, 2, &frames));
+    // The endpoint of modem id 3 is not sent what is for 2.
+    let other = collect_received(&mut c, &[], Duration::from_millis(300)).await;
+    assert!(other.is_empty(), "{other:?}");
+    // And back, to the remote of modem id 0.
+    b.initiate_transmission(data_to(1, false)).unwrap();
+    let back = vec![b"to one".to_vec()];
+    wait_for(&mut b, &back, LIMIT, |e| {
+        matches!(e, DriverEvent::TransmitResult(r) if r.outcome == TransmitOutcome::Sent)
+            .then_some(())
+    })
+    .await;
+    let got = received(&mut a, LIMIT).await;
+    assert_eq!((got.src(), got.dest(), &got.frame), (2, 1, &back));
+}
+
+#[tokio::test]
 async fn datagrams_hold_the_protobuf_encoding() {
     // A bare socket stands for a Goby UDP driver on the far side.
     let ((sa, aa), (peer, pa)) = (bind().await, bind().await);

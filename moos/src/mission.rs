@@ -77,6 +77,21 @@ pub struct MissionFile {
     /// The inside of the process's block, placed at its line and column in
     /// the file (blanks before it), with `//` comments turned into `#`.
     pub process_config: Option<String>,
+    /// Every line `KEY = value` outside the blocks (those above included),
+    /// in the order of the file.
+    pub globals: Vec<Global>,
+}
+
+/// A `KEY = value` line of a mission file outside every `ProcessConfig`
+/// block.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Global {
+    /// The key as written.
+    pub key: String,
+    /// The value, blanks at both ends and a `//` comment removed.
+    pub value: String,
+    /// Its line, from 1.
+    pub line: usize,
 }
 
 /// `line` with a `//` comment outside quotes turned into `#`.
@@ -202,6 +217,11 @@ impl MissionFile {
                 i = j + 1;
                 continue;
             }
+            mission.globals.push(Global {
+                key: key.to_string(),
+                value: value.to_string(),
+                line: i + 1,
+            });
             let setting = Some(Setting {
                 value: value.to_string(),
                 line: i + 1,
@@ -226,6 +246,13 @@ impl MissionFile {
         let text = std::fs::read_to_string(path)
             .map_err(|e| format!("cannot read the mission file {origin}: {e}"))?;
         MissionFile::parse(&text, app).map_err(|e| e.located(&origin))
+    }
+
+    /// The global `key` (MOOS reads keys in any case).
+    pub fn global(&self, key: &str) -> Option<&Global> {
+        self.globals
+            .iter()
+            .find(|g| g.key.eq_ignore_ascii_case(key))
     }
 
     /// `ServerPort` as a TCP port, if set.

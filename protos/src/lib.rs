@@ -94,7 +94,7 @@ pub mod goby {
 
     /// Configurations of the programs (`gobyd`).
     pub mod apps {
-        /// `GobydConfig`.
+        /// `GobydConfig`, and the sections of Goby's pAcommsHandler configuration it reads.
         #[allow(missing_docs, clippy::all)]
         pub mod protobuf {
             include!(concat!(env!("OUT_DIR"), "/goby.apps.protobuf.rs"));

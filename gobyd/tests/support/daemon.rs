@@ -91,10 +91,15 @@ impl Gobyd {
 
     /// [`start`](Self::start) without connecting a client.
     pub fn start_unconnected(config: &Path, env: &[(&str, &str)]) -> Gobyd {
+        Self::start_with_args(&["--config".as_ref(), config.as_os_str()], env)
+    }
+
+    /// `gobyd ARGS` (e.g. `--moos-file FILE`) with extra environment
+    /// variables, as [`start_unconnected`](Self::start_unconnected).
+    pub fn start_with_args(args: &[&std::ffi::OsStr], env: &[(&str, &str)]) -> Gobyd {
         let mut command = Command::new(env!("CARGO_BIN_EXE_gobyd"));
         command
-            .arg("--config")
-            .arg(config)
+            .args(args)
             .env_remove("RUST_BACKTRACE")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
