@@ -254,19 +254,20 @@ impl Modem {
                 ),
             );
         }
-        let until =
-            match minutes {
-                0 => Some(Instant::now() + self.config.boot_time),
-                m if m > 0 => Some(Instant::now() + Duration::from_secs(60 * m.unsigned_abs())),
-                SLEEP_UNTIL_WOKEN => None,
-                m => return self.error(
+        let until = match minutes {
+            0 => Some(Instant::now() + self.config.boot_time),
+            m if m > 0 => Some(Instant::now() + Duration::from_secs(60 * m.unsigned_abs())),
+            SLEEP_UNTIL_WOKEN => None,
+            m => {
+                return self.error(
                     "NMEA",
                     "3",
                     format!(
                         "$CCMSC field 2 (minutes): {m} is neither -1, 0 nor a number of minutes"
                     ),
-                ),
-            };
+                )
+            }
+        };
         self.out.push(NmeaSentence::new(
             "CA",
             "MSC",

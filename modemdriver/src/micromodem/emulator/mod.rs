@@ -89,6 +89,8 @@ mod modem;
 mod modem2;
 pub mod nvram;
 pub mod stats;
+#[cfg(test)]
+mod tests;
 
 use std::path::PathBuf;
 use std::time::Duration;
