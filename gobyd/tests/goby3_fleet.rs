@@ -584,7 +584,8 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
         }
         client.close().await;
     });
-    if !(to_goby3.complete() && from_goby3.complete()) {
+    let complete = to_goby3.complete() && from_goby3.complete();
+    if !complete {
         let mut report = String::new();
         for p in emulators.iter().chain([&pacommshandler, &moosdb]) {
             report += &p.tail();
@@ -600,6 +601,9 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
     drop(pacommshandler);
     drop(emulators);
     drop(moosdb);
+    if complete {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
     (from_goby3, to_goby3)
 }
 

@@ -239,7 +239,7 @@ impl Modem {
                 .map_err(|_| format!("$CCMSC field {i} ({name}): {t:?} is not an integer"))
         };
         let parsed =
-            (|| Ok::<_, String>((field(0, "src")?, field(1, "dest")?, field(2, "minutes")?)))();
+            field(0, "src").and_then(|src| Ok((src, field(1, "dest")?, field(2, "minutes")?)));
         let (src, dest, minutes) = match parsed {
             Ok(v) => v,
             Err(e) => return self.error("NMEA", "3", e),

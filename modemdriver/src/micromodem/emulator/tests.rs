@@ -87,13 +87,13 @@ impl Pair {
         while Instant::now() < end {
             tokio::time::advance(Duration::from_millis(10)).await;
             let now = Instant::now();
-            for i in 0..2 {
-                self.m[i].timers(now);
+            for m in &mut self.m {
+                m.timers(now);
             }
             self.collect();
-            for i in 0..2 {
-                let new: Vec<NmeaSentence> = self.said[i][seen[i]..].to_vec();
-                seen[i] = self.said[i].len();
+            for (i, seen) in seen.iter_mut().enumerate() {
+                let new: Vec<NmeaSentence> = self.said[i][*seen..].to_vec();
+                *seen = self.said[i].len();
                 for s in new {
                     if s.address() == "CADRQ" {
                         let frame: usize = s.field(5).unwrap().parse().unwrap();
