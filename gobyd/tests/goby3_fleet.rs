@@ -468,9 +468,10 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
                     "    driver_type: DRIVER_WHOI_MICROMODEM\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"\n    serial_baud: 19200",
                     pty1.display()
                 ),
-                // Goby3's default: acks from the modem (gobyd's own default
-                // is application acks, which Goby3 reads only when
-                // configured for them too).
+                // Goby3's default: acks from the modem. gobyd's own default
+                // is application acks, which Goby3 3.1.5 strips from
+                // received frames only in Flexible Data Protocol packets
+                // ($CARDP), not in data cycles ($CARXD).
                 micromodem_driver(&pty2)
                     .use_application_acks(false)
                     .into(),
