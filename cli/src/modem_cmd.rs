@@ -6,9 +6,10 @@
 //! for a driver (e.g. `gobyd` with the Micro-Modem driver) to open. Several
 //! modems in one process hear each other through the acoustic channel
 //! simulator; a single modem can join emulators in other processes over UDP.
-//! `--micromodem 2` makes them speak as Micro-Modem 2s (clock, configuration
-//! echo, statistics, Flexible Data Protocol, long-baseline ranging to the
-//! `--transponder`s given).
+//! `--micromodem 2` makes them speak as Micro-Modem 2s (`$CCTMS` clock, paced
+//! configuration echo, Flexible Data Protocol, long-baseline ranging to the
+//! `--transponder`s given). Both send `$CACST` / `$CAXST` statistics in the
+//! layout their firmware writes unless `--stats-layout` says otherwise.
 
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
@@ -97,9 +98,11 @@ pub struct EmulateArgs {
     /// transponders A, B, C, D in order.
     #[arg(long = "transponder", value_name = "X,Y,Z[@HZ]")]
     pub transponders: Vec<String>,
-    /// Micro-Modem 2: layout of $CACST / $CAXST: `current` ($CACST version
-    /// 8, $CAXST version 7), `v6`, or `legacy` (no version field).
-    #[arg(long, default_value = "current", value_name = "LAYOUT")]
+    /// Layout of $CACST / $CAXST: `firmware` (what the emulated firmware
+    /// writes: version 6 for Micro-Modem 1 0.94 and Micro-Modem 2 2.0), `v8`
+    /// ($CACST version 8, $CAXST version 7, as Micro-Modem 2 firmware 3.x),
+    /// `v6`, or `legacy` (no version field, Micro-Modem 1 before 0.93.0.52).
+    #[arg(long, default_value = "firmware", value_name = "LAYOUT")]
     pub stats_layout: String,
 }
 
@@ -153,13 +156,15 @@ fn parse_transponder(text: &str) -> Result<Transponder, CliError> {
     }
 }
 
-fn parse_layout(text: &str) -> Result<StatsLayout, CliError> {
+/// `None`: the firmware's own layout.
+fn parse_layout(text: &str) -> Result<Option<StatsLayout>, CliError> {
     match text {
-        "current" => Ok(StatsLayout::Current),
-        "v6" => Ok(StatsLayout::V6),
-        "legacy" => Ok(StatsLayout::Legacy),
+        "firmware" => Ok(None),
+        "v8" => Ok(Some(StatsLayout::V8)),
+        "v6" => Ok(Some(StatsLayout::V6)),
+        "legacy" => Ok(Some(StatsLayout::Legacy)),
         _ => Err(CliError::setup(format!(
-            "--stats-layout {text:?} is not current, v6 or legacy"
+            "--stats-layout {text:?} is not firmware, v8, v6 or legacy"
         ))),
     }
 }
@@ -355,8 +360,8 @@ fn interrupted() -> impl std::future::Future<Output = ()> {
 }
 
 /// Tells on stderr, as they happen, of host lines an emulated modem ignored
-/// (a Micro-Modem 2 ignores commands during its configuration echo). Never
-/// completes.
+/// (a Micro-Modem 2 ignores commands during its configuration echo; a
+/// sleeping or rebooting modem hears nothing). Never completes.
 async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
     let mut seen = vec![0; emulators.len()];
     let mut tick = tokio::time::interval(Duration::from_millis(200));
@@ -365,7 +370,9 @@ async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
         for ((e, seen), id) in emulators.iter().zip(&mut seen).zip(ids) {
             let ignored = e.ignored();
             for line in ignored.iter().skip(*seen) {
-                eprintln!("modem {id}: ignored {line} (configuration echo under way)");
+                eprintln!(
+                    "modem {id}: ignored {line} (busy: configuration echo under way, or asleep)"
+                );
             }
             *seen = ignored.len();
         }
@@ -405,7 +412,6 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             let base = match args.micromodem {
                 2 => EmulatorConfig {
                     geometry: geometry.clone(),
-                    stats_layout,
                     ..EmulatorConfig::micromodem2(modem_id)
                 },
                 _ => EmulatorConfig::default(),
@@ -414,6 +420,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
                 modem_id,
                 revision_interval,
                 lone_range: args.lone_range,
+                stats_layout,
                 ping_packet: match backend_kind {
                     Backend::Simulator => Duration::from_millis(500),
                     _ => Duration::ZERO,
@@ -528,8 +535,10 @@ mod tests {
         }
         let a = args_of(&["--transponder", "0,0,0"]).unwrap();
         assert!(geometry(&a).is_err(), "transponders are a Micro-Modem 2's");
-        assert_eq!(parse_layout("v6").unwrap(), StatsLayout::V6);
+        assert_eq!(parse_layout("v6").unwrap(), Some(StatsLayout::V6));
+        assert_eq!(parse_layout("firmware").unwrap(), None);
         assert!(parse_layout("v7").is_err());
+        assert!(parse_layout("current").is_err());
     }
 
     #[test]

@@ -407,12 +407,13 @@ fn messages_cross_two_emulated_micro_modems_with_acks() {
         .collect();
     // Two emulated modems 150 m apart on the simulated channel, each on a pty.
     let emulator = EmulatedModems::start(&links, 150.0);
-    // The Micro-Modem's rate 0: one 32-byte frame.
+    // The Micro-Modem's rate 0: one 32-byte frame, after the cycle's
+    // initialization packet and the modem's transmit delays (8 s slots).
     let paths: Vec<PathBuf> = [1, 2]
         .into_iter()
         .map(|id| {
             let modem = MicroModem::new(&links[(id - 1) as usize]).baud(19200);
-            node_config(id, modem, 0, 5.0, &dir.join(format!("node{id}")))
+            node_config(id, modem, 0, 8.0, &dir.join(format!("node{id}")))
                 .write(dir.join(format!("node{id}.cfg")))
         })
         .collect();

@@ -2,11 +2,20 @@
 //! its protobuf encoding, as Goby's UDP driver does, so the two can talk.
 //!
 //! Configuration: `DriverConfig.udp` (`local` endpoint, `remote` endpoints
-//! with their modem ids, `max_frame_size`). A transmission to modem id N goes
-//! to every remote endpoint of modem id N and to every remote endpoint of
-//! modem id 0 (unset: as Goby's, such an endpoint takes everything, which is
-//! how a Goby 2 configuration's one remote and a Goby 3 remote written
-//! without a modem id work); a broadcast (dest 0) to every remote endpoint. Data addressed to this node with `ack_requested` is
+//! with their modem ids, `max_frame_size`). Where a transmission goes
+//! ([`destinations`]), as Goby3's UDP driver sends it whenever that driver
+//! sends broadcasts at all:
+//!
+//! - to modem id N: to every remote endpoint of modem id N, and to every
+//!   remote endpoint of modem id 0 (the default when `modem_id` is left
+//!   out), which hears everything;
+//! - a broadcast (dest 0): to every remote endpoint of modem id 0; with
+//!   none, to every remote endpoint. (Goby3 then sends broadcasts nowhere:
+//!   a configuration naming each remote by its id, the way gobyd's are
+//!   written, still reaches them all.)
+//!
+//! An address listed more than once gets one datagram. Data addressed to
+//! this node with `ack_requested` is
 //! acknowledged (an `ACK` transmission listing the frames, with the data's
 //! `unique_id` so that the sender credits the transmission it answers) to
 //! the endpoint it came from: on reception, or with `deferred_ack` only when
@@ -171,12 +180,27 @@ const AWAITING_ACK_LIMIT: usize = 64;
 
 impl UdpState {
     fn destinations(&self, dest: i32) -> Vec<SocketAddr> {
-        self.remotes
-            .iter()
-            .filter(|(id, _)| dest == 0 || *id == 0 || i64::from(*id) == i64::from(dest))
-            .map(|(_, addr)| *addr)
-            .collect()
+        destinations(&self.remotes, dest)
     }
+}
+
+/// The addresses a transmission to `dest` goes to, of `remotes` (modem id,
+/// address): see the [module](self).
+pub fn destinations(remotes: &[(u32, SocketAddr)], dest: i32) -> Vec<SocketAddr> {
+    let hears_all = |id: u32| id == 0;
+    let any_hears_all = remotes.iter().any(|(id, _)| hears_all(*id));
+    let mut out: Vec<SocketAddr> = Vec::new();
+    for (id, addr) in remotes {
+        let to = if dest == 0 {
+            hears_all(*id) || !any_hears_all
+        } else {
+            hears_all(*id) || i64::from(*id) == i64::from(dest)
+        };
+        if to && !out.contains(addr) {
+            out.push(*addr);
+        }
+    }
+    out
 }
 
 async fn run(mut state: UdpState, socket: UdpSocket, mut ctx: DriverContext) {

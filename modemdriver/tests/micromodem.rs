@@ -416,10 +416,12 @@ async fn partial_line_is_reported_and_survived() {
 
 #[tokio::test]
 async fn lost_data_request_is_retried() {
-    // The $CADRQ (second line after $CCCYC) is dropped: the modem gives up
-    // on the cycle when no data comes ($CAERR DATA_TIMEOUT, before the
-    // driver's own wait for the request ends) and the driver runs it again.
-    let st = survives_line_fault("lost-drq", 1, Fault::Drop).await;
+    // The $CADRQ (after the $CACYC echo and the rate-0 cycle
+    // initialization's $CATXP, $CATXF and $CAXST) is dropped: the modem
+    // gives up on the cycle when no data comes ($CAERR DATA_TIMEOUT, before
+    // the driver's own wait for the request ends) and the driver runs it
+    // again.
+    let st = survives_line_fault("lost-drq", 4, Fault::Drop).await;
     assert!(
         st.iter().any(
             |s| matches!(s, DriverStatus::Retrying { attempt: 2, reason }

@@ -1,5 +1,6 @@
 //! The UDP driver between real sockets on 127.0.0.1: data, broadcast,
-//! acknowledgements, and the datagram format Goby's UDP driver uses.
+//! acknowledgements, where transmissions go (Goby3's rule for remotes of
+//! modem id 0), and the datagram format Goby's UDP driver uses.
 
 mod common;
 
@@ -108,6 +109,49 @@ async fn broadcast_reaches_every_remote_and_is_not_acknowledged() {
     // No acknowledgement of a broadcast: nothing comes back within a short while.
     let back = collect_received(&mut a, &[], Duration::from_millis(300)).await;
     assert!(back.is_empty(), "{back:?}");
+}
+
+#[test]
+fn where_transmissions_go_as_in_goby3() {
+    use modemdriver::udp::destinations;
+    let a: SocketAddr = "127.0.0.1:5001".parse().unwrap();
+    let b: SocketAddr = "127.0.0.1:5002".parse().unwrap();
+    let c: SocketAddr = "127.0.0.1:5003".parse().unwrap();
+    // Each remote named by its id: to its own id, and broadcasts to all.
+    let named = [(2, a), (3, b)];
+    assert_eq!(destinations(&named, 2), [a]);
+    assert_eq!(destinations(&named, 0), [a, b]);
+    assert!(destinations(&named, 4).is_empty());
+    // A remote of modem id 0 (Goby3's default) hears everything, and then
+    // broadcasts go only to such remotes, as Goby3 sends them.
+    let goby3 = [(0, c), (2, a)];
+    assert_eq!(destinations(&goby3, 2), [c, a]);
+    assert_eq!(destinations(&goby3, 7), [c]);
+    assert_eq!(destinations(&goby3, 0), [c]);
+    // One datagram per address.
+    assert_eq!(destinations(&[(0, a), (2, a)], 2), [a]);
+}
+
+#[tokio::test]
+async fn a_remote_without_modem_id_hears_what_is_addressed_to_others() {
+    // Node 1 configured Goby3's way: its one remote has no modem id.
+    let ((sa, aa), (sb, ab)) = (bind().await, bind().await);
+    let mut a = UdpDriver::start_on(&config(1, aa, &[(0, ab)]), sa).unwrap();
+    let mut b = UdpDriver::start_on(&config(2, ab, &[(1, aa)]), sb).unwrap();
+    a.initiate_transmission(data_to(2, true)).unwrap();
+    let frames = vec![b"to two".to_vec()];
+    wait_for(&mut a, &frames, LIMIT, |e| {
+        matches!(e, DriverEvent::TransmitResult(r) if r.outcome == TransmitOutcome::Sent)
+            .then_some(())
+    })
+    .await;
+    let got = received(&mut b, LIMIT).await;
+    assert_eq!((got.src(), got.dest()), (1, 2));
+    assert_eq!(got.frame, frames);
+    let ack = received(&mut a, LIMIT).await;
+    assert_eq!(ack.r#type(), TransmissionType::Ack);
+    a.stop().await.unwrap();
+    b.stop().await.unwrap();
 }
 
 #[tokio::test]

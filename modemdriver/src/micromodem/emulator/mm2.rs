@@ -1,8 +1,8 @@
-//! Sentences only a Micro-Modem 2 speaks, read and written as plain NMEA
-//! sentences: its clock (`$CCTMS` / `$CATMS`, `$CCTMQ` / `$CATMQ`,
-//! `$CATMG`), Flexible Data Protocol packets (`$CCTDP` / `$CATDP`,
-//! `$CARDP`) and long-baseline ranging (`$CCPDT`, `$CCPNT` → `$SNPDT`,
-//! `$SNPNT`, `$SNTTA`).
+//! Sentences read and written as plain NMEA sentences: those only a
+//! Micro-Modem 2 speaks, its clock (`$CCTMS` / `$CATMS`, `$CCTMQ` /
+//! `$CATMQ`, `$CATMG`) and Flexible Data Protocol packets (`$CCTDP` /
+//! `$CATDP`, `$CARDP`), and long-baseline ranging (`$CCPDT`, `$CCPNT` →
+//! `$SNPDT`, `$SNPNT`, `$SNTTA`), which both generations answer.
 //!
 //! Layouts follow the WHOI Micro-Modem 2 software interface guide as Goby's
 //! driver and WHOI's `acomms` host library read it:

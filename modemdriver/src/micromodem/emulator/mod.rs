@@ -9,15 +9,41 @@
 //!
 //! # Both dialects
 //!
-//! It answers: `$CCCFG` / `$CCCFQ` with `$CACFG`; `$CCCLK` with `$CACLK`;
+//! It answers: `$CCCFG` with `$CACFG` (`ALL,0`: factory settings, the modem
+//! id kept) and `$CCCFQ` with one `$CACFG` per parameter asked for (an
+//! unknown one: `$CAERR`); `$CCCLK` with `$CACLK` (the clock is set);
 //! `$CCCYC` with `$CACYC`, then one `$CADRQ` per frame, each answered by the
 //! host's `$CCTXD` (echoed as `$CATXD`), then `$CATXP` and, once the packet
-//! is on the water, `$CATXF`; `$CCMPC` with `$CAMPC` and, when the pinged
-//! modem replies, `$CAMPR`; `$CCMUC` with `$CAMUC`. From the backend it
-//! reports `$CACYC` + `$CARXD` for data, `$CAACK` for acknowledgements,
-//! `$CAMUA` for mini-packets, `$CAMPA` for pings (and replies to them). It
-//! sends `$CAREV` periodically (ident `INIT` when it starts or restarts) and
-//! `$CAERR` for lines it cannot read or a missing `$CCTXD`.
+//! is on the water, `$CATXF`; at rate 0 a cycle-initialization packet goes
+//! on the water first (`$CATXP,0`, `$CATXF,0`) and only then is the data
+//! asked for; packets leave the NVRAM `TXD` milliseconds (200 by default)
+//! after what they wait for. A `$CCCYC` naming another modem as the sender
+//! polls it: a cycle-initialization packet that the polled modem answers
+//! with its own cycle (`$CACYC` to its host, `$CADRQ`...). `$CCMPC` is
+//! answered with `$CAMPC` and, when the pinged modem replies, `$CAMPR`;
+//! `$CCMUC` with `$CAMUC`; `$CCMSC` (sleep; 0 minutes: reboot) with
+//! `$CAMSC`, then silence until it wakes with `$CAREV,…,INIT`; REMUS (`$CCPDT`) and narrowband (`$CCPNT`) long-baseline
+//! interrogations with `$SNPDT` / `$SNPNT` and, after the timeout, `$SNTTA`
+//! with the one-way travel times to the transponders of
+//! [`EmulatorConfig::geometry`]. From the backend it reports `$CACYC` +
+//! `$CARXD` for data, `$CAACK` for acknowledgements, `$CAMUA` for
+//! mini-packets, `$CAMPA` for pings (and replies to them); an
+//! acknowledgement it sends is `$CATXP,0`, `$CATXF,0`. It sends `$CAREV`
+//! periodically while NVRAM `REV` is on (ident `INIT` when it starts or
+//! restarts, always) and `$CAERR` for lines it cannot read or a missing
+//! `$CCTXD`.
+//!
+//! With NVRAM `CST` on (the default, and what Goby's driver sets) it sends
+//! `$CACST` after each packet it heard (bad CRCs included: data, the
+//! cycle-initialization packet, acks, pings and their replies,
+//! mini-packets), with `XST` on `$CAXST` after each packet it sent, with the
+//! link's SNR from the range, Doppler from the nodes' velocities and the
+//! frame counts ([`stats`], [`geometry`]), in the layout its firmware
+//! writes ([`StatsLayout::of_firmware`]: version 6 for the default firmware
+//! of both dialects) unless [`EmulatorConfig::stats_layout`] says otherwise.
+//! A heard rate-0 cycle is reported as `$CACYC` + `$CACST` for its
+//! initialization packet, then `$CARXD` + `$CACST`, as Goby's driver
+//! expects (it hands a reception up only at its last `$CACST`).
 //!
 //! # Micro-Modem 2
 //!
@@ -33,21 +59,8 @@
 //!   parameter, one every [`EmulatorConfig::config_line_interval`]; host
 //!   commands that arrive meanwhile are ignored — not answered, nothing
 //!   sent — and recorded ([`EmulatorHandle::ignored`]);
-//! - at rate 0 puts a cycle-initialization packet on the water first
-//!   (`$CATXP,0`, `$CATXF,0`, `$CAXST`) and only then asks for the data
-//!   with `$CADRQ`; at every rate the packet leaves the NVRAM `TXD`
-//!   milliseconds (200 by default) after the host's last `$CCTXD`;
-//! - sends `$CAXST` after each packet it sent and `$CACST` after each packet
-//!   it heard (bad CRCs included), with the link's SNR from the range,
-//!   Doppler from the nodes' velocities and the frame counts
-//!   ([`stats`], [`geometry`]); a heard rate-0 cycle is reported as `$CACYC`
-//!   + `$CACST` for its initialization packet, then `$CARXD` + `$CACST`;
 //! - sends and receives Flexible Data Protocol packets (`$CCTDP` →
-//!   `$CATDP`; `$CARDP` at the receiver) at rates 1, 3 and 5;
-//! - answers REMUS (`$CCPDT`) and narrowband (`$CCPNT`) long-baseline
-//!   interrogations with `$SNPDT` / `$SNPNT` and, after the timeout,
-//!   `$SNTTA` with the one-way travel times to the transponders of
-//!   [`EmulatorConfig::geometry`].
+//!   `$CATDP`; `$CARDP` at the receiver) at rates 1, 3 and 5.
 //!
 //! # Between emulators
 //!
@@ -69,12 +82,15 @@
 //! returning, frames failing their CRC (`$CAMSG,BAD_CRC` instead of
 //! `$CARXD`, and no acknowledgement), acknowledgements lost on the water.
 
+mod common;
 pub mod geometry;
 pub mod mm2;
 mod modem;
 mod modem2;
 pub mod nvram;
 pub mod stats;
+#[cfg(test)]
+mod tests;
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -136,8 +152,11 @@ pub struct EmulatorConfig {
     pub dialect: Dialect,
     /// Micro-Modem 2: coprocessor firmware version in the second `$CAREV`.
     pub coproc_version: String,
-    /// Micro-Modem 2: layout of `$CACST` / `$CAXST`.
-    pub stats_layout: StatsLayout,
+    /// Layout of `$CACST` / `$CAXST`; `None`: the one the firmware
+    /// `version` writes ([`StatsLayout::of_firmware`]).
+    pub stats_layout: Option<StatsLayout>,
+    /// How long a reboot by `$CCMSC` takes (deaf and mute meanwhile).
+    pub boot_time: Duration,
     /// Micro-Modem 2: time between the lines of a configuration echo.
     pub config_line_interval: Duration,
     /// Where the modems and transponders are (for link statistics and
@@ -218,7 +237,8 @@ impl Default for EmulatorConfig {
             faults: EmulatorFaults::default(),
             dialect: Dialect::MicroModem1,
             coproc_version: MICROMODEM2_COPROC_VERSION.into(),
-            stats_layout: StatsLayout::default(),
+            stats_layout: None,
+            boot_time: Duration::from_millis(500),
             config_line_interval: Duration::from_millis(20),
             geometry: Geometry::default(),
         }
@@ -298,7 +318,8 @@ impl EmulatorHandle {
     }
 
     /// Host lines the modem ignored so far, in order (a Micro-Modem 2
-    /// ignores commands during its configuration echo).
+    /// ignores commands during its configuration echo; a modem asleep or
+    /// rebooting hears nothing).
     pub fn ignored(&self) -> Vec<String> {
         self.ignored.lock().map(|l| l.clone()).unwrap_or_default()
     }
@@ -413,6 +434,7 @@ async fn run(
     (air, ignored): (AirLog, LineLog),
 ) {
     let mut modem = Modem::new(config.clone(), air, ignored);
+    modem.has_backend = backend.is_some();
     let mut device = Some(first);
     modem.revision("INIT");
     let mut next_revision = Instant::now() + config.revision_interval;
@@ -511,7 +533,9 @@ async fn run(
                 let now = Instant::now();
                 modem.timers(now);
                 if now >= next_revision {
-                    modem.revision("AUV");
+                    if modem.revision_enabled() {
+                        modem.revision("AUV");
+                    }
                     next_revision = now + config.revision_interval;
                 }
                 if back_at.is_some_and(|t| t <= now) {

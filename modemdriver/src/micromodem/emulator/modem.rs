@@ -1,6 +1,8 @@
 //! The emulated modem's state: what it answers on the serial line, what it
 //! puts on the water and what it reports of what it hears. Behaviour common
-//! to both generations lives here; what only a Micro-Modem 2 does is in
+//! to both generations lives here (with the timers, the clock, the
+//! statistics, the rate-0 cycle initialization, `$CCMSC` and long-baseline
+//! ranging in [`super::common`]); what only a Micro-Modem 2 does is in
 //! [`super::modem2`].
 
 use std::collections::{BTreeMap, VecDeque};
@@ -15,10 +17,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
+use super::common::{Asleep, Timer};
 use super::mm2::ClockSource;
-use super::modem2::{Mm2State, Timer};
+use super::modem2::Mm2State;
 use super::stats::{PacketType, TransmitStats};
-use super::{AirKind, AirLog, AirTime, Dialect, EmulatorConfig, LineLog};
+use super::{nvram, AirKind, AirLog, AirTime, Dialect, EmulatorConfig, LineLog};
 use crate::driver::{DriverEvent, TransmitOutcome};
 use crate::micromodem::nmea::NmeaSentence;
 use crate::micromodem::sentence::{Cycle, MmSentence, SentenceError};
@@ -48,8 +51,10 @@ pub(super) struct TxCycle {
 pub(super) enum WaterKind {
     /// Data of this modem's cycle.
     Data,
-    /// The cycle-initialization packet of a rate-0 cycle (Micro-Modem 2).
+    /// The cycle-initialization packet of a rate-0 cycle.
     CycleInit,
+    /// A cycle-initialization packet polling another modem.
+    Poll,
     /// An acknowledgement.
     Ack,
     /// A Flexible Data Protocol packet (Micro-Modem 2).
@@ -86,6 +91,17 @@ pub(super) struct Modem {
     pub(super) ping: Option<PendingPing>,
     /// Micro-Modem 2 only.
     pub(super) mm2: Option<Mm2State>,
+    /// Modem clock minus host clock, µs.
+    pub(super) clock_offset: i64,
+    pub(super) clock_source: ClockSource,
+    /// What the modem does later.
+    pub(super) timers: Vec<(Instant, Timer)>,
+    /// Sender of the last rate-0 cycle-initialization packet heard.
+    pub(super) announced_by: Option<u32>,
+    /// Asleep or rebooting (`$CCMSC`): deaf and mute.
+    pub(super) asleep: Option<Asleep>,
+    /// Packets go to a backend (else nowhere).
+    pub(super) has_backend: bool,
     pub(super) out: Vec<NmeaSentence>,
     pub(super) backend_out: Vec<ModemTransmission>,
 }
@@ -95,9 +111,7 @@ impl Modem {
         let mut settings = BTreeMap::new();
         let mm2 = match config.dialect {
             Dialect::MicroModem1 => {
-                settings.insert("SRC".to_string(), config.modem_id.to_string());
-                settings.insert("BND".to_string(), "0".to_string());
-                settings.insert("DTO".to_string(), "5".to_string());
+                settings.extend(nvram::micromodem1(config.modem_id));
                 None
             }
             Dialect::MicroModem2 => {
@@ -123,6 +137,12 @@ impl Modem {
             backend_frames: Vec::new(),
             ping: None,
             mm2,
+            clock_offset: 0,
+            clock_source: ClockSource::Rtc,
+            timers: Vec::new(),
+            announced_by: None,
+            asleep: None,
+            has_backend: false,
             out: Vec::new(),
             backend_out: Vec::new(),
         }
@@ -136,10 +156,9 @@ impl Modem {
     }
 
     /// The modem's clock, microseconds since the epoch (the host's clock
-    /// unless a Micro-Modem 2 was set otherwise).
+    /// unless the host set it otherwise).
     pub(super) fn clock(&self) -> u64 {
-        let offset = self.mm2.as_ref().map_or(0, |m| m.clock_offset);
-        now_micros().saturating_add_signed(offset)
+        now_micros().saturating_add_signed(self.clock_offset)
     }
 
     pub(super) fn now_time(&self) -> String {
@@ -175,10 +194,22 @@ impl Modem {
         });
     }
 
+    /// The modem restarts: what was under way is forgotten (the NVRAM
+    /// stays); the clock runs on but counts as unset. `$CAREV,…,INIT`.
     pub(super) fn reset(&mut self) {
+        self.halt();
+        self.revision("INIT");
+    }
+
+    /// Everything under way stops (a reset, sleep, power loss).
+    pub(super) fn halt(&mut self) {
         self.tx = None;
         self.ping = None;
         self.backend_frames.clear();
+        self.timers.clear();
+        self.announced_by = None;
+        self.asleep = None;
+        self.clock_source = ClockSource::Rtc;
         if let Some(mm2) = &mut self.mm2 {
             mm2.restart();
         }
@@ -195,7 +226,6 @@ impl Modem {
                 },
             });
         }
-        self.revision("INIT");
     }
 
     /// The modem loses power: everything under way stops.
@@ -260,11 +290,19 @@ impl Modem {
     }
 
     pub(super) fn line(&mut self, line: &[u8], has_backend: bool) {
+        self.has_backend = has_backend;
+        if self.asleep.is_some() {
+            self.line_while_asleep(line);
+            return;
+        }
         let nmea = match NmeaSentence::parse(line) {
             Ok(s) => s,
             Err(e) => return self.error("NMEA", "2", format!("bad sentence: {e}")),
         };
         if self.mm2.is_some() && nmea.talker != "CA" && self.mm2_busy(&nmea) {
+            return;
+        }
+        if self.common_line(&nmea) {
             return;
         }
         if self.mm2.is_some() && self.mm2_line(&nmea) {
@@ -276,34 +314,6 @@ impl Modem {
             Err(e) => return self.error("NMEA", "3", e.to_string()),
         };
         match sentence {
-            MmSentence::SetConfig { key, value } => {
-                if key == "ALL" {
-                    self.settings.retain(|k, _| k == "SRC");
-                }
-                self.settings.insert(key.clone(), value.clone());
-                self.say(MmSentence::Config { key, value });
-            }
-            MmSentence::QueryConfig { key } => {
-                let pairs: Vec<(String, String)> = if key == "ALL" {
-                    self.settings
-                        .iter()
-                        .map(|(k, v)| (k.clone(), v.clone()))
-                        .collect()
-                } else {
-                    let v = self.settings.get(&key).cloned().unwrap_or_default();
-                    vec![(key, v)]
-                };
-                for (key, value) in pairs {
-                    self.say(MmSentence::Config { key, value });
-                }
-            }
-            MmSentence::Clock {
-                from_modem: false,
-                date_time,
-            } => self.say(MmSentence::Clock {
-                from_modem: true,
-                date_time,
-            }),
             MmSentence::Cycle {
                 from_modem: false,
                 cycle,
@@ -313,8 +323,9 @@ impl Modem {
                     cycle,
                 });
                 if cycle.src != self.id() {
-                    // A poll of another modem: nothing for us to send.
-                    return;
+                    // A poll of another modem: its cycle-initialization
+                    // packet asks it for its data.
+                    return self.poll(cycle);
                 }
                 let Some(spec) = rate::spec(cycle.rate as i32) else {
                     return self.error("CYC", "1", format!("bad rate {}", cycle.rate));
@@ -325,7 +336,7 @@ impl Modem {
                     frames: Vec::new(),
                     deadline: Instant::now(),
                 });
-                if self.mm2.is_some() && cycle.rate == 0 {
+                if cycle.rate == 0 {
                     // The cycle-initialization packet goes first; the data
                     // is asked for once it is on its way.
                     self.hold_cycle();
@@ -355,11 +366,9 @@ impl Modem {
                 });
                 if !done {
                     self.request_frame(next);
-                } else if self.mm2.is_some() {
+                } else {
                     self.hold_cycle();
                     self.schedule_after_tx_delay(Timer::SendData);
-                } else {
-                    self.send_cycle(has_backend);
                 }
             }
             MmSentence::Ping {
@@ -442,30 +451,35 @@ impl Modem {
             frame: vec![packet.encode_to_vec()],
             ..Default::default()
         };
-        let xst = self.mm2.is_some().then(|| {
-            self.transmit_stats(
-                tx.cycle,
-                frames_sent,
-                if tx.cycle.rate == 0 {
-                    PacketType::Fsk
-                } else {
-                    PacketType::Psk
-                },
-                bytes,
-            )
-        });
+        let xst = self.transmit_stats(
+            tx.cycle,
+            frames_sent,
+            if tx.cycle.rate == 0 {
+                PacketType::Fsk
+            } else {
+                PacketType::Psk
+            },
+            bytes,
+        );
         self.transmit(
             mt,
             spec.packet_duration(self.config.packet_overhead),
             WaterKind::Data,
             bytes,
-            xst,
+            Some(xst),
         );
     }
 
     pub(super) fn timers(&mut self, now: Instant) {
         if self.reset_at.is_some_and(|t| t <= now) {
             self.reset_at = None;
+            self.reset();
+        }
+        if self
+            .asleep
+            .is_some_and(|a| a.until.is_some_and(|t| t <= now))
+        {
+            // Awake again: the modem boots.
             self.reset();
         }
         let (done, going): (Vec<OnWater>, Vec<OnWater>) = std::mem::take(&mut self.on_water)
@@ -479,23 +493,14 @@ impl Modem {
                 kind: match p.kind {
                     WaterKind::Data => AirKind::Data,
                     WaterKind::Ack => AirKind::Ack,
-                    WaterKind::CycleInit => AirKind::CycleInit,
+                    WaterKind::CycleInit | WaterKind::Poll => AirKind::CycleInit,
                     WaterKind::FlexibleData => AirKind::FlexibleData,
                 },
             });
             self.backend_out.push(p.packet);
-            match p.kind {
-                WaterKind::Data | WaterKind::FlexibleData => {
-                    self.say(MmSentence::TransmitDone { bytes: p.bytes })
-                }
-                WaterKind::CycleInit | WaterKind::Ack if self.mm2.is_some() => {
-                    self.say(MmSentence::TransmitDone { bytes: p.bytes })
-                }
-                _ => {}
-            }
+            self.say(MmSentence::TransmitDone { bytes: p.bytes });
             if let Some(xst) = p.xst {
-                let layout = self.config.stats_layout;
-                self.out.push(xst.to_nmea(layout));
+                self.send_transmit_stats(&xst);
             }
             if p.kind == WaterKind::CycleInit {
                 self.request_frame(1);
@@ -523,6 +528,7 @@ impl Modem {
             }
         }
         self.mm2_timers(now);
+        self.run_timers(now);
     }
 
     pub(super) fn next_deadline(&self) -> Option<Instant> {
@@ -536,6 +542,8 @@ impl Modem {
             water,
             self.reset_at,
             self.mm2.as_ref().and_then(Mm2State::next_deadline),
+            self.timers.iter().map(|(t, _)| *t).min(),
+            self.asleep.and_then(|a| a.until),
         ]
         .into_iter()
         .flatten()
@@ -572,10 +580,12 @@ impl Modem {
                         }
                     }
                     if let Some(packet) = packet {
-                        self.mm2_sent_special(mt, &packet);
+                        self.sent_special(mt, &packet);
                     }
                 }
             }
+            // Asleep or booting, the modem hears nothing.
+            DriverEvent::Received(_) if self.asleep.is_some() => {}
             DriverEvent::Received(mt) => {
                 let src = mt.src().max(0) as u32;
                 let dest = mt.dest().max(0) as u32;
@@ -637,12 +647,12 @@ impl Modem {
                     });
                 }
                 let mini = mini_type(packet.rate());
-                self.mm2_receive_stats(src, dest, packet.rate(), mini, 1, 0);
+                self.receive_stats(src, dest, packet.rate(), mini, 1, 0);
             }
             Kind::Ack => {}
             Kind::Ping => {
                 self.say(MmSentence::PingHeard { src, dest });
-                self.mm2_receive_stats(src, dest, 0, PacketType::FskMini, 1, 0);
+                self.receive_stats(src, dest, 0, PacketType::FskMini, 1, 0);
                 self.backend_out
                     .push(special(self.id(), src, Kind::PingReply, 0));
             }
@@ -661,7 +671,7 @@ impl Modem {
                             dest: self.id(),
                             travel_time: rtt.as_secs_f64() / 2.0,
                         });
-                        self.mm2_receive_stats(src, dest, 0, PacketType::FskMini, 1, 0);
+                        self.receive_stats(src, dest, 0, PacketType::FskMini, 1, 0);
                     }
                 }
             }
@@ -671,7 +681,7 @@ impl Modem {
                     dest,
                     value: (packet.mini_data() & 0x1fff) as u16,
                 });
-                self.mm2_receive_stats(src, dest, 0, PacketType::FskMini, 1, 0);
+                self.receive_stats(src, dest, 0, PacketType::FskMini, 1, 0);
             }
             Kind::CycleInit => self.receive_cycle_init(src, dest, packet),
             Kind::Fdp => self.receive_fdp(src, dest, packet),
@@ -680,13 +690,13 @@ impl Modem {
 
     /// A data packet heard: `$CACYC`, then per frame `$CARXD` or, for a
     /// frame failing its CRC, `$CAMSG,BAD_CRC`; frames addressed to this
-    /// modem that passed are acknowledged (unless the ack is lost). A
-    /// Micro-Modem 2 reports the packet's statistics after its frames, and
-    /// after a rate-0 cycle-initialization packet from the same sender does
-    /// not repeat the `$CACYC`.
+    /// modem that passed are acknowledged (unless the ack is lost). The
+    /// packet's statistics follow its frames; after a rate-0
+    /// cycle-initialization packet from the same sender the `$CACYC` is not
+    /// repeated.
     fn receive_data(&mut self, src: u32, dest: u32, packet: &MicroModemEmulatedPacket) {
         let ack = packet.ack_requested();
-        let announced = self.mm2_take_announced(src, packet.rate());
+        let announced = self.take_announced(src, packet.rate());
         if !announced {
             self.say(MmSentence::Cycle {
                 from_modem: true,
@@ -725,7 +735,7 @@ impl Modem {
         } else {
             PacketType::Psk
         };
-        self.mm2_receive_stats(
+        self.receive_stats(
             src,
             dest,
             packet.rate(),
@@ -755,18 +765,22 @@ impl Modem {
             // On the water all the same, but nobody hears it.
             mt.dest = Some(i32::MAX);
         }
-        let xst = self.mm2.is_some().then(|| {
-            self.say(MmSentence::TransmitStart { bytes: 0 });
-            let cycle = Cycle {
-                src: dest,
-                dest: src,
-                rate: packet.rate(),
-                ack: false,
-                frames: 0,
-            };
-            self.transmit_stats(cycle, 0, mini_type(packet.rate()), 0)
-        });
-        self.transmit(mt, self.config.packet_overhead, WaterKind::Ack, 0, xst);
+        self.say(MmSentence::TransmitStart { bytes: 0 });
+        let cycle = Cycle {
+            src: dest,
+            dest: src,
+            rate: packet.rate(),
+            ack: false,
+            frames: 0,
+        };
+        let xst = self.transmit_stats(cycle, 0, mini_type(packet.rate()), 0);
+        self.transmit(
+            mt,
+            self.config.packet_overhead,
+            WaterKind::Ack,
+            0,
+            Some(xst),
+        );
     }
 
     /// Transmit statistics of a packet of `cycle` starting now.
@@ -777,13 +791,9 @@ impl Modem {
         packet_type: PacketType,
         bytes: u32,
     ) -> TransmitStats {
-        let source = self
-            .mm2
-            .as_ref()
-            .map_or(ClockSource::Rtc, |m| m.clock_source);
         TransmitStats {
             time: self.clock(),
-            clock_mode: source.transmit_clock_mode(),
+            clock_mode: self.transmit_clock_mode(),
             mode: 0,
             probe_length: match packet_type {
                 PacketType::Fsk | PacketType::FskMini => 40,

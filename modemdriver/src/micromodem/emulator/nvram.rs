@@ -1,11 +1,13 @@
-//! The NVRAM parameters an emulated Micro-Modem 2 starts with, as its
-//! configuration echo (`$CCCFQ,ALL` / `$CCCFQ,TOP`) lists them.
+//! The NVRAM parameters an emulated Micro-Modem starts with (and returns to
+//! on `$CCCFG,ALL,0`), as its configuration echo (`$CCCFQ,ALL`, and
+//! `$CCCFQ,TOP` on a Micro-Modem 2) lists them.
 //!
 //! Names are the modem's own: the three-letter parameters that both
 //! generations have (the "top level", which `TOP` lists) and a few of the
 //! Micro-Modem 2's dotted group parameters (listed by `ALL` only). Values are
 //! plausible factory settings for band-0 PSK at 25 kHz carrier and 5 kHz
-//! bandwidth; `SRC` is the modem id.
+//! bandwidth, statistics (`CST`, `XST`) and revision messages (`REV`) on;
+//! `SRC` is the modem id.
 
 /// Three-letter parameters and their starting values.
 const TOP_LEVEL: &[(&str, &str)] = &[
@@ -104,6 +106,15 @@ pub fn micromodem2(modem_id: u32) -> Vec<(String, String)> {
             };
             ((*k).to_string(), v)
         })
+        .collect()
+}
+
+/// The parameters of a Micro-Modem 1 with modem id `modem_id`: the
+/// three-letter ones.
+pub fn micromodem1(modem_id: u32) -> Vec<(String, String)> {
+    micromodem2(modem_id)
+        .into_iter()
+        .filter(|(k, _)| is_top_level(k))
         .collect()
 }
 

@@ -1,7 +1,8 @@
-//! Receive and transmit statistics of an emulated Micro-Modem 2: `$CACST`
-//! after each packet heard and `$CAXST` after each packet sent.
+//! Receive and transmit statistics of an emulated Micro-Modem: `$CACST`
+//! after each packet heard (NVRAM `CST` on) and `$CAXST` after each packet
+//! sent (`XST` on).
 //!
-//! Field order as the WHOI Micro-Modem 2 software interface guide gives it
+//! Field order as the WHOI Micro-Modem software interface guides give it
 //! (and as Goby's driver and WHOI's `acomms` host library read it):
 //!
 //! - `$CACST` (version 6 and up): version, mode, time of arrival
@@ -11,29 +12,54 @@
 //!   received signal strength, SNR in and out of the equalizer, symbol SNR,
 //!   equalizer mean squared error, data quality factor, Doppler, noise,
 //!   carrier, bandwidth; version 8 adds sequence number, data rate, data
-//!   frames and bad data frames. The legacy layout (Micro-Modem 1 and early
-//!   Micro-Modem 2 firmware) has no version field and `hhmmss.ssss` for the
-//!   time.
+//!   frames and bad data frames. The legacy layout has no version field and
+//!   `hhmmss.ssss` for the time.
 //! - `$CAXST` (version 6 and up): version, date `YYYYMMDD`, time
 //!   `hhmmss.ffffff`, clock mode, transmit mode, probe length, bandwidth,
 //!   carrier, rate, src, dest, ack, frames expected, frames sent, packet type,
 //!   bytes; version 7 adds the carrier actually used. The legacy layout has no
 //!   version field.
+//!
+//! Which firmware writes which layout ([`StatsLayout::of_firmware`]):
+//!
+//! - legacy: Micro-Modem 1 firmware before 0.93.0.52 (e.g. WHOI's
+//!   `libumutil` example `$CACST,1,153026.0000,0,4105,...`, Goby's
+//!   `ReceiveStatistics` example `$CACST,0,223413.0000,...`);
+//! - version 6 (both sentences): Micro-Modem 1 firmware 0.93.0.52 and later
+//!   (Goby's `ReceiveStatistics`: "new for version 6+, firmware 0.93.0.52+")
+//!   and Micro-Modem 2 firmware 2.0.x, the layout Goby3's driver and WHOI's
+//!   `acomms` library parse;
+//! - `$CACST` version 8 and `$CAXST` version 7: Micro-Modem 2 firmware 3.x
+//!   (public logs of 2025 with that firmware's `$CACMD` / `$CARFP`
+//!   sentences: `$CACST,8,0,20250606230123.348554,...`,
+//!   `$CAXST,7,20250606,230103.000935,...`). Goby3 3.1.5's driver reads these
+//!   one field off: it shifts the fields past the version only for version 6.
 
 use crate::micromodem::nmea::NmeaSentence;
 use crate::time::civil;
 
 /// Which layout of `$CACST` / `$CAXST` the modem writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StatsLayout {
-    /// No version field (Micro-Modem 1, early Micro-Modem 2 firmware).
+    /// No version field (Micro-Modem 1 firmware before 0.93.0.52).
     Legacy,
-    /// Version 6 of both.
+    /// Version 6 of both (Micro-Modem 1 from 0.93.0.52, Micro-Modem 2
+    /// firmware 2.0.x).
     V6,
-    /// What current Micro-Modem 2 firmware writes: `$CACST` version 8,
-    /// `$CAXST` version 7.
-    #[default]
-    Current,
+    /// `$CACST` version 8, `$CAXST` version 7 (Micro-Modem 2 firmware 3.x).
+    V8,
+}
+
+impl StatsLayout {
+    /// The layout the firmware `version` (as in `$CAREV`) writes; for a
+    /// version that cannot be read, version 6.
+    pub fn of_firmware(version: &str) -> StatsLayout {
+        match crate::micromodem::firmware::version_numbers(version) {
+            Some((0, minor, patch)) if (minor, patch) < (93, 52) => StatsLayout::Legacy,
+            Some((major, ..)) if major >= 3 => StatsLayout::V8,
+            _ => StatsLayout::V6,
+        }
+    }
 }
 
 /// Packet types of the statistics (numbers as in the interface guide).
@@ -175,7 +201,7 @@ impl ReceiveStats {
                 f.push(s(self.mode));
                 f.push(time_of_day(self.toa, 4));
             }
-            StatsLayout::V6 | StatsLayout::Current => {
+            StatsLayout::V6 | StatsLayout::V8 => {
                 f.push(s(if layout == StatsLayout::V6 { 6 } else { 8 }));
                 f.push(s(self.mode));
                 f.push(format!("{}{}", date(self.toa), &time_of_day(self.toa, 6)));
@@ -210,7 +236,7 @@ impl ReceiveStats {
             s(self.carrier),
             s(self.bandwidth),
         ]);
-        if layout == StatsLayout::Current {
+        if layout == StatsLayout::V8 {
             // Sequence number, data rate, data frames, bad data frames (-1
             // where the packet has no separate data part).
             f.extend(["0".into(), "-1".into(), "-1".into(), "00".into()]);
@@ -228,7 +254,7 @@ impl TransmitStats {
                 f.push(date(self.time));
                 f.push(time_of_day(self.time, 4));
             }
-            StatsLayout::V6 | StatsLayout::Current => {
+            StatsLayout::V6 | StatsLayout::V8 => {
                 f.push(s(if layout == StatsLayout::V6 { 6 } else { 7 }));
                 f.push(date(self.time));
                 f.push(time_of_day(self.time, 6));
@@ -249,7 +275,7 @@ impl TransmitStats {
             s(self.packet_type as i32),
             s(self.bytes),
         ]);
-        if layout == StatsLayout::Current {
+        if layout == StatsLayout::V8 {
             f.push(s(self.carrier));
         }
         NmeaSentence::new("CA", "XST", f)
@@ -293,7 +319,7 @@ mod tests {
 
     #[test]
     fn receive_statistics_in_each_layout() {
-        let current = rx().to_nmea(StatsLayout::Current);
+        let current = rx().to_nmea(StatsLayout::V8);
         assert_eq!(
             current.fields.join(","),
             "8,0,20250606230123.348554,06,32767,45,0102,0123,07,00,00,00,00,1,001,000,0,5,1,0,\
@@ -305,6 +331,17 @@ mod tests {
         let legacy = rx().to_nmea(StatsLayout::Legacy);
         assert_eq!(legacy.fields.len(), 29);
         assert_eq!(legacy.field(1), Some("230123.3485"));
+    }
+
+    #[test]
+    fn each_firmware_writes_its_layout() {
+        assert_eq!(StatsLayout::of_firmware("0.91.0.30"), StatsLayout::Legacy);
+        assert_eq!(StatsLayout::of_firmware("0.93.0.30"), StatsLayout::Legacy);
+        assert_eq!(StatsLayout::of_firmware("0.93.0.52"), StatsLayout::V6);
+        assert_eq!(StatsLayout::of_firmware("0.94.0.00"), StatsLayout::V6);
+        assert_eq!(StatsLayout::of_firmware("2.0.27087"), StatsLayout::V6);
+        assert_eq!(StatsLayout::of_firmware("3.9.4"), StatsLayout::V8);
+        assert_eq!(StatsLayout::of_firmware("x"), StatsLayout::V6);
     }
 
     #[test]
@@ -326,7 +363,7 @@ mod tests {
             bytes: 2,
         };
         assert_eq!(
-            xst.to_nmea(StatsLayout::Current).fields.join(","),
+            xst.to_nmea(StatsLayout::V8).fields.join(","),
             "7,20250606,230103.000935,3,0,200,5000,25000,1,0,1,0,0,1,5,2,25000"
         );
         assert_eq!(xst.to_nmea(StatsLayout::V6).fields.len(), 16);
