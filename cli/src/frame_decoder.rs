@@ -123,6 +123,16 @@ impl FrameDecoder<'_> {
                     // The library names a body that does not decode under a
                     // clear header; a message after the first may have started
                     // in the wrong place because the one before was misread.
+                    // Without a passphrase, an encrypted body reads as
+                    // garbage: most often too short, or with a bad value.
+                    if !self.encrypted
+                        && matches!(e, dccl::Error::Decode { .. })
+                        && !text.contains("passphrase")
+                    {
+                        text.push_str(
+                            " (if the sender encrypted its messages, give the same --passphrase)",
+                        );
+                    }
                     if self.encrypted && offset > 0 && !text.contains("passphrase") {
                         text.push_str(
                             " (likely a wrong passphrase: the body of the message before \

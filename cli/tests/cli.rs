@@ -739,3 +739,32 @@ fn encode_warns_about_each_value_it_changes() {
     );
     assert!(out.status.success() && out.stderr.is_empty());
 }
+
+#[test]
+fn an_encrypted_message_read_without_its_passphrase_says_to_give_one() {
+    let proto = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../protos/proto/goby/example/navigation.proto")
+        .display()
+        .to_string();
+    let encode = goby(
+        &[
+            "dccl",
+            "encode",
+            "-f",
+            &proto,
+            "-m",
+            "goby.example.Command",
+            "--passphrase",
+            "secret",
+        ],
+        "destination: 2 action: GOTO waypoint { x: 120 y: -40 } note: \"survey A\"\n",
+    );
+    assert!(encode.status.success(), "{}", stderr_text(&encode));
+    let without = goby(&["dccl", "decode", "-f", &proto], stdout_text(&encode));
+    assert!(!without.status.success(), "{}", stdout_text(&without));
+    let err = stderr_text(&without);
+    assert!(
+        err.contains("if the sender encrypted its messages, give the same --passphrase"),
+        "{err}"
+    );
+}

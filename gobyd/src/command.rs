@@ -346,6 +346,9 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         if let Some(addr) = daemon.json_tcp_addr() {
             tracing::info!("JSON interface on tcp://{addr}");
         }
+        if let Some(addr) = daemon.json_udp_addr() {
+            tracing::info!("JSON interface on udp://{addr}");
+        }
         match daemon.run(stop).await {
             Ok(()) => EXIT_OK,
             Err(e) => {

@@ -319,15 +319,21 @@ fn queue_line(
 fn modem_line(event: &ModemEvent) -> Value {
     let t = |t: &ModemTransmission| message_json(&t.transcode_to_dynamic());
     match event {
-        ModemEvent::Raw(raw) => json!({
-            "event": "raw",
-            "raw": match raw.direction {
-                RawDirection::Incoming => "in",
-                RawDirection::Outgoing => "out",
-            },
-            "line": ModemEvent::raw_text(raw),
-            "peer": raw.peer,
-        }),
+        ModemEvent::Raw(raw) => {
+            let mut line = json!({
+                "event": "raw",
+                "raw": match raw.direction {
+                    RawDirection::Incoming => "in",
+                    RawDirection::Outgoing => "out",
+                },
+                "line": ModemEvent::raw_text(raw),
+            });
+            // A key without a value is left out rather than null.
+            if let Some(peer) = &raw.peer {
+                line["peer"] = json!(peer);
+            }
+            line
+        }
         ModemEvent::Received { transmission, .. } => {
             json!({ "event": "modem_receive", "modem_receive": t(transmission) })
         }
@@ -340,12 +346,15 @@ fn modem_line(event: &ModemEvent) -> Value {
                 TransmitOutcome::NothingToSend => ("nothing_to_send", None),
                 TransmitOutcome::Failed(reason) => ("failed", Some(reason.clone())),
             };
-            json!({
+            let mut line = json!({
                 "event": "modem_transmit",
                 "modem_transmit": t(transmission),
                 "outcome": outcome,
-                "reason": reason,
-            })
+            });
+            if let Some(reason) = reason {
+                line["reason"] = json!(reason);
+            }
+            line
         }
         ModemEvent::SlotStart { slot, .. } => {
             json!({ "event": "mac_slot_start", "mac_slot_start": t(slot) })
@@ -555,7 +564,7 @@ mod tests {
         assert_eq!(topic, Some(Topic::Modem));
         assert_eq!(
             raw,
-            r#"{"event":"raw","raw":"in","line":"$CARXD,1,2","peer":null}"#
+            r#"{"event":"raw","raw":"in","line":"$CARXD,1,2"}"#
         );
         let (topic, slot) = line(ModemEvent::SlotStart {
             slot: ModemTransmission {
@@ -573,6 +582,14 @@ mod tests {
             outcome: TransmitOutcome::Failed("busy".into()),
         });
         assert!(failed.contains(r#""outcome":"failed","reason":"busy""#));
+        let (_, sent) = line(ModemEvent::Transmitted {
+            transmission: ModemTransmission::default(),
+            outcome: TransmitOutcome::Sent,
+        });
+        assert!(
+            sent.ends_with(r#""outcome":"sent"}"#) && !sent.contains("null"),
+            "{sent}"
+        );
     }
 
     #[test]

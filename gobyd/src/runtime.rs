@@ -658,6 +658,11 @@ impl Daemon {
     }
 
     fn driver_event(&mut self, event: DriverEvent) {
+        // The status as it stands first, so that a client subscribing once
+        // the status is reported (as an event or in the log) finds it.
+        if let DriverEvent::Status(status) = &event {
+            self.driver_status.send_replace(Some(status.clone()));
+        }
         if let Some(reported) = ModemEvent::of_driver(&event, self.clock.now()) {
             self.report(reported);
         }
@@ -698,7 +703,6 @@ impl Daemon {
                     DriverStatus::Ready => tracing::info!("driver ready"),
                     other => tracing::warn!(status = other.kind(), "driver: {other}"),
                 }
-                self.driver_status.send_replace(Some(status));
             }
             DriverEvent::Specific(report) => tracing::info!(
                 "driver report: {} {}",

@@ -11,6 +11,7 @@ import json
 import pathlib
 import sys
 import time
+import warnings
 
 from google.protobuf import text_format
 
@@ -37,6 +38,9 @@ def main():
     parser.add_argument("--rounds", type=int, default=20)
     parser.add_argument("--message", help="only the vectors of this type (e.g. vec.Basic)")
     args = parser.parse_args()
+    # The vectors include out-of-range and over-long values on purpose: the
+    # codec's warning about each would drown the figures.
+    warnings.simplefilter("ignore", dccl.DcclValueChangedWarning)
     vectors = pathlib.Path(args.vectors)
     if not (vectors / "vectors.jsonl").is_file():
         sys.exit("bench.py: no vectors.jsonl in %s" % vectors)
