@@ -562,10 +562,7 @@ mod tests {
             peer: None,
         }));
         assert_eq!(topic, Some(Topic::Modem));
-        assert_eq!(
-            raw,
-            r#"{"event":"raw","raw":"in","line":"$CARXD,1,2"}"#
-        );
+        assert_eq!(raw, r#"{"event":"raw","raw":"in","line":"$CARXD,1,2"}"#);
         let (topic, slot) = line(ModemEvent::SlotStart {
             slot: ModemTransmission {
                 src: Some(1),

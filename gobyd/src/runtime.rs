@@ -698,12 +698,10 @@ impl Daemon {
                     }
                 }
             }
-            DriverEvent::Status(status) => {
-                match &status {
-                    DriverStatus::Ready => tracing::info!("driver ready"),
-                    other => tracing::warn!(status = other.kind(), "driver: {other}"),
-                }
-            }
+            DriverEvent::Status(status) => match &status {
+                DriverStatus::Ready => tracing::info!("driver ready"),
+                other => tracing::warn!(status = other.kind(), "driver: {other}"),
+            },
             DriverEvent::Specific(report) => tracing::info!(
                 "driver report: {} {}",
                 report.message.descriptor().full_name(),
