@@ -124,9 +124,12 @@ impl FrameDecoder<'_> {
                     // clear header; a message after the first may have started
                     // in the wrong place because the one before was misread.
                     // Without a passphrase, an encrypted body reads as
-                    // garbage: most often too short, or with a bad value.
+                    // garbage: too short, a bad value, or of another
+                    // length, so that the next message starts in the wrong
+                    // place (its id unknown).
                     if !self.encrypted
-                        && matches!(e, dccl::Error::Decode { .. })
+                        && (matches!(e, dccl::Error::Decode { .. })
+                            || (offset > 0 && matches!(e, dccl::Error::UnknownId(_))))
                         && !text.contains("passphrase")
                     {
                         text.push_str(
