@@ -47,12 +47,30 @@ pub fn write_completions(shell: Shell, mut cmd: Command, bin: &str, out: &mut dy
     clap_complete::generate(shell, &mut cmd, bin, out);
 }
 
+/// `roff` with each `code` span of the help texts (Markdown backticks) in
+/// bold, as manual pages show commands; unpaired backticks are kept.
+fn code_in_bold(roff: &str) -> String {
+    if roff.matches('`').count() % 2 == 1 {
+        return roff.to_string();
+    }
+    let parts = roff.split('`').enumerate();
+    parts
+        .map(|(i, part)| match i % 2 {
+            1 => format!("\\fB{part}\\fR"),
+            _ => part.to_string(),
+        })
+        .collect()
+}
+
 /// Writes the manual page of `cmd` and of each of its visible subcommands,
 /// at every level (`goby-moos-poke.1`), into `dir`; returns the paths
 /// written.
 pub fn write_man_pages(cmd: Command, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     fn pages(cmd: Command, dir: &Path, written: &mut Vec<PathBuf>) -> std::io::Result<()> {
-        written.push(clap_mangen::Man::new(cmd.clone()).generate_to(dir)?);
+        let page = clap_mangen::Man::new(cmd.clone()).generate_to(dir)?;
+        let roff = std::fs::read_to_string(&page)?;
+        std::fs::write(&page, code_in_bold(&roff))?;
+        written.push(page);
         for sub in cmd.get_subcommands().filter(|s| !s.is_hide_set()) {
             pages(sub.clone(), dir, written)?;
         }

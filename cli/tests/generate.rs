@@ -122,6 +122,12 @@ fn man_writes_a_page_per_subcommand_with_its_options() {
             "{path:?} is empty"
         );
     }
+    // The help texts' Markdown code spans are shown in bold, not as
+    // backticks.
+    for path in &on_disk {
+        let page = std::fs::read_to_string(path).unwrap();
+        assert!(!page.contains('`'), "{path:?} shows a backtick:\n{page}");
+    }
     assert!(!dir.join("goby-help.1").exists());
     let _ = std::fs::remove_dir_all(dir.parent().unwrap());
 

@@ -113,9 +113,21 @@ pub fn compile_protos(
         compiler.include_imports(true).include_source_info(false);
         for path in &paths {
             compiler.open_file(path).map_err(|e| {
-                Error::Proto(describe(&e, &path.display().to_string(), |name| {
+                let mut text = describe(&e, &path.display().to_string(), |name| {
                     on_disk(&dirs, name)
-                }))
+                });
+                // An import no include directory holds: say where it was
+                // looked for (the tools' -I adds a directory).
+                if e.is_file_not_found() && text.contains("import") {
+                    let looked: Vec<String> =
+                        dirs.iter().map(|d| d.display().to_string()).collect();
+                    text.push_str(&format!(
+                        " (looked in {} and the embedded DCCL and google/protobuf files; \
+                         add the directory that holds it to the include paths, -I DIR)",
+                        looked.join(", ")
+                    ));
+                }
+                Error::Proto(text)
             })?;
         }
         decode_pool(&compiler.encode_file_descriptor_set())

@@ -823,3 +823,23 @@ fn syntax_error_on_disk_names_path_line_and_column() {
     let text = err.to_string();
     assert!(text.contains("broken.proto:6:3: expected ';'"), "{text}");
 }
+
+#[test]
+fn an_import_no_include_directory_holds_says_where_it_looked() {
+    let dir = TempDir::new("import-missing");
+    std::fs::write(
+        dir.0.join("outer.proto"),
+        "syntax = \"proto2\";\nimport \"common.proto\";\npackage val;\n\
+         message Outer { optional int32 x = 1; }\n",
+    )
+    .unwrap();
+    let err = dccl::compile_protos(&[dir.0.join("outer.proto")], &[] as &[PathBuf])
+        .expect_err("common.proto is nowhere");
+    let text = err.to_string();
+    assert!(text.contains("common.proto"), "{text}");
+    assert!(
+        text.contains(&format!("looked in {}", dir.0.display()))
+            && text.contains("add the directory that holds it to the include paths, -I DIR"),
+        "{text}"
+    );
+}

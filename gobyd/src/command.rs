@@ -305,6 +305,9 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             eprintln!("gobyd: note: {note}");
         }
         let broker = mqtt_broker_note(&cli, &config);
+        if let Some(warning) = config::passphrase_file_warning(&config) {
+            eprintln!("gobyd: warning: {warning}");
+        }
         return match runtime::check(config) {
             Ok(types) => {
                 println!("configuration is valid; DCCL types: {}", types.join(", "));
@@ -322,6 +325,9 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     init_logging(&config);
     if let Some(read) = &read {
         read.log_notes();
+    }
+    if let Some(warning) = config::passphrase_file_warning(&config) {
+        tracing::warn!("{warning}");
     }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -363,9 +369,23 @@ pub fn run_cli(cli: GobydCli) -> u8 {
 fn write_man_page(dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
     std::fs::create_dir_all(dir)
         .map_err(|e| format!("cannot create the directory {}: {e}", dir.display()))?;
-    clap_mangen::Man::new(GobydCli::command())
+    let failed = |e: std::io::Error| format!("cannot write the manual page into {}: {e}", dir.display());
+    let page = clap_mangen::Man::new(GobydCli::command())
         .generate_to(dir)
-        .map_err(|e| format!("cannot write the manual page into {}: {e}", dir.display()))
+        .map_err(failed)?;
+    // Markdown code spans of the help texts in bold, as manual pages show
+    // commands (unpaired backticks kept).
+    let roff = std::fs::read_to_string(&page).map_err(failed)?;
+    let roff = match roff.matches('`').count() % 2 {
+        0 => roff
+            .split('`')
+            .enumerate()
+            .map(|(i, part)| if i % 2 == 1 { format!("\\fB{part}\\fR") } else { part.to_string() })
+            .collect(),
+        _ => roff,
+    };
+    std::fs::write(&page, roff).map_err(failed)?;
+    Ok(page)
 }
 
 /// Parses the command line; on `--help`, `--version` or a usage error,

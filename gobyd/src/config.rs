@@ -1412,7 +1412,8 @@ pub const PASSPHRASE_ENV: &str = "GOBYD_PASSPHRASE";
 ///
 /// Errors: both options set, a passphrase file that cannot be read or is
 /// empty, an empty `passphrase`, an environment value that is not UTF-8. A
-/// passphrase file that other users may read is used, with a warning.
+/// passphrase file that other users may read is used (see
+/// [`passphrase_file_warning`]).
 pub fn passphrase(
     dccl: &protos::goby::apps::protobuf::gobyd_config::DcclConfig,
     env: Option<&std::ffi::OsStr>,
@@ -1431,7 +1432,6 @@ pub fn passphrase(
                 path: path.to_path_buf(),
                 source,
             })?;
-            warn_if_readable_by_others(path);
             let p = text
                 .strip_suffix("\r\n")
                 .or_else(|| text.strip_suffix('\n'))
@@ -1454,21 +1454,25 @@ pub fn passphrase(
     }
 }
 
+/// What to tell of the configuration's passphrase file when other users
+/// may read it (`None`: no such file, or only its owner may); `--check`
+/// prints it, the daemon logs it.
 #[cfg(unix)]
-fn warn_if_readable_by_others(path: &Path) {
+pub fn passphrase_file_warning(config: &GobydConfig) -> Option<String> {
     use std::os::unix::fs::PermissionsExt;
-    if let Ok(meta) = std::fs::metadata(path) {
-        if meta.permissions().mode() & 0o077 != 0 {
-            tracing::warn!(
-                "passphrase file {} can be read by other users (chmod 600 it)",
-                path.display()
-            );
-        }
-    }
+    let file = config.dccl.as_ref()?.passphrase_file.as_deref()?;
+    let meta = std::fs::metadata(file).ok()?;
+    (meta.permissions().mode() & 0o077 != 0).then(|| {
+        format!("dccl.passphrase_file {file} can be read by other users (chmod 600 it)")
+    })
 }
 
+/// What to tell of the configuration's passphrase file (nothing here:
+/// permissions are Unix's).
 #[cfg(not(unix))]
-fn warn_if_readable_by_others(_path: &Path) {}
+pub fn passphrase_file_warning(_config: &GobydConfig) -> Option<String> {
+    None
+}
 
 /// The loaded DCCL definitions.
 #[derive(Debug)]

@@ -436,7 +436,7 @@ pub async fn run(
                 None => break,
             },
             Some(name) = timed_rx.recv() => {
-                make_and_queue(&settings, &publish, &client, &latest, &name).await;
+                make_and_queue(&settings, &publish, &client, &latest, &name, None).await;
             }
             event = events.recv() => match event {
                 Ok(event) => {
@@ -556,19 +556,33 @@ async fn queue_message(publish: &mpsc::Sender<Publish>, message: DynamicMessage)
     }
 }
 
-/// Makes a message of type `name` from the latest values and queues it.
+/// Makes a message of type `name` from the latest values and queues it;
+/// `trigger`: the write that triggered it (none for a periodic trigger).
+/// A refusal is written to the error variable as `VAR = "value": TYPE:
+/// not queued: REASON` (without a trigger, `TYPE: not queued: REASON`).
 async fn make_and_queue(
     settings: &BridgeSettings,
     publish: &mpsc::Sender<Publish>,
     client: &MoosClient,
     latest: &HashMap<String, Value>,
     name: &str,
+    trigger: Option<(&str, &Value)>,
 ) {
     match settings.translator.create(name, latest) {
         Ok(message) => {
             if let Some(refused) = queue_message(publish, message).await {
-                tracing::warn!("MOOS translator: {name} not queued: {refused}");
-                let reason = format!("{name} not queued: {refused}");
+                let reason = match trigger {
+                    Some((var, value)) => {
+                        let text = match value {
+                            Value::String(s) => s.clone(),
+                            Value::Double(d) => d.to_string(),
+                            Value::Binary(b) => hex::encode(b),
+                        };
+                        format!("{var} = {text:?}: {name}: not queued: {refused}")
+                    }
+                    None => format!("{name}: not queued: {refused}"),
+                };
+                tracing::warn!("MOOS translator: {reason}");
                 notify(client, &settings.error_var(), &Value::String(reason));
             }
         }
@@ -596,7 +610,15 @@ async fn handle_mail(
             .map(String::from)
             .collect();
         for name in names {
-            make_and_queue(settings, publish, client, latest, &name).await;
+            make_and_queue(
+                settings,
+                publish,
+                client,
+                latest,
+                &name,
+                Some((&mail.key, &mail.value)),
+            )
+            .await;
         }
     }
     if !settings.moos.send_var.contains(&mail.key) {

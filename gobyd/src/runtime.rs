@@ -158,6 +158,12 @@ pub fn validate(
     let defs = config::load_definitions(&config)?;
     let codec = Arc::new(defs.codec);
     let mut queue = config.queue.clone().unwrap_or_default();
+    // Each queue entry of the configuration on its own, so that every
+    // refused entry is told at once, at its place.
+    let problems = entry_problems(&codec, &queue, &defs.loaded);
+    if !problems.is_empty() {
+        return Err(ConfigError::Problems(problems).into());
+    }
     config::default_entries(&mut queue, &defs.loaded);
     crate::translator::from_config(&config, &codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(codec.clone(), &queue)?;
@@ -168,6 +174,46 @@ pub fn validate(
         loaded: defs.loaded,
         queue,
     })
+}
+
+/// The queue entries of `queue` the queue refuses, each as a problem of its
+/// `queue.message_entry[i].protobuf_name` (the DCCL types `loaded` named
+/// when the entry's type is not one of them).
+fn entry_problems(
+    codec: &Arc<dccl::Codec>,
+    queue: &protos::goby::acomms::protobuf::QueueManagerConfig,
+    loaded: &[String],
+) -> Vec<config::Problem> {
+    let mut problems = Vec::new();
+    for (i, entry) in queue.message_entry.iter().enumerate() {
+        let alone = protos::goby::acomms::protobuf::QueueManagerConfig {
+            message_entry: vec![entry.clone()],
+            ..queue.clone()
+        };
+        let Err(e) = QueueManager::new(codec.clone(), &alone) else {
+            continue;
+        };
+        let mut reason = match e {
+            queue::QueueError::Config { reason, .. } => reason,
+            other => other.to_string(),
+        };
+        if codec.descriptor(&entry.protobuf_name).is_none() {
+            reason = format!(
+                "{:?} is not a DCCL type of the loaded .proto files (loaded: {})",
+                entry.protobuf_name,
+                if loaded.is_empty() {
+                    "none".to_string()
+                } else {
+                    loaded.join(", ")
+                }
+            );
+        }
+        problems.push(config::Problem::new(
+            format!("queue.message_entry[{i}].protobuf_name"),
+            reason,
+        ));
+    }
+    problems
 }
 
 /// Checks a configuration without starting anything ([`validate`], the

@@ -709,3 +709,94 @@ fn gobyd_prints_completions_and_writes_its_man_page() {
         stderr_text(&out)
     );
 }
+
+#[test]
+fn check_lists_every_refused_queue_entry_at_its_place() {
+    let dir = scratch("command", "gobyd-queue-entries");
+    let proto = dir.join("kinds.proto");
+    std::fs::write(
+        &proto,
+        "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage test;\n\
+         message Quiet {\n  option (dccl.msg) = { id: 120 max_bytes: 32 codec_version: 4 omit_id: true };\n\
+           required bool on = 1;\n}\n\
+         message Report {\n  option (dccl.msg) = { id: 121 max_bytes: 32 codec_version: 4 };\n\
+           required bool on = 1;\n}\n",
+    )
+    .unwrap();
+    let path = dir.join("node.pb.txt");
+    std::fs::write(
+        &path,
+        format!(
+            "modem_id: 1\ndccl {{ proto_file: \"{}\" load_examples: false }}\nqueue {{\n  \
+             message_entry {{ protobuf_name: \"test.Reprot\" }}\n  \
+             message_entry {{ protobuf_name: \"test.Quiet\" }}\n}}\n",
+            proto.display()
+        ),
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    for part in [
+        "node.pb.txt:4:",
+        "queue.message_entry[0].protobuf_name: \"test.Reprot\" is not a DCCL type of the loaded .proto files (loaded: ",
+        "test.Report",
+        "node.pb.txt:5:",
+        "queue.message_entry[1].protobuf_name: its (dccl.msg) has omit_id: true",
+    ] {
+        assert!(err.contains(part), "{part:?} in {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn check_places_the_mqtt_sections_problems() {
+    let dir = scratch("command", "gobyd-mqtt-places");
+    let path = dir.join("node.pb.txt");
+    std::fs::write(
+        &path,
+        "modem_id: 1\nmqtt {\n  broker: \"127.0.0.1:1883\"\n  qos: 2\n}\n",
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("node.pb.txt:4:3: mqtt.qos: 2 is not supported: use 0 or 1"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[cfg(unix)]
+#[test]
+fn check_warns_of_a_passphrase_file_others_can_read() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = scratch("command", "gobyd-passphrase-mode");
+    let secret = dir.join("pass.txt");
+    std::fs::write(&secret, "secret\n").unwrap();
+    std::fs::set_permissions(&secret, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let path = dir.join("node.pb.txt");
+    std::fs::write(
+        &path,
+        format!(
+            "modem_id: 1\ndccl {{ passphrase_file: \"{}\" }}\n",
+            secret.display()
+        ),
+    )
+    .unwrap();
+    let check = || gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    let out = check();
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    let err = stderr_text(&out);
+    assert_eq!(
+        err.matches("can be read by other users (chmod 600 it)").count(),
+        1,
+        "{err}"
+    );
+    std::fs::set_permissions(&secret, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let out = check();
+    assert!(out.status.success(), "{}", stderr_text(&out));
+    assert!(!stderr_text(&out).contains("other users"), "{}", stderr_text(&out));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

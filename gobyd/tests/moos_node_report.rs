@@ -124,6 +124,34 @@ async fn exchange(ports: (u16, u16), name: &str) -> Duration {
         ) && error.contains("is not a number"),
         "{error}"
     );
+    // One the door refuses (out of range) likewise, with the write that
+    // triggered it.
+    let far = format!(
+        "NAME=alpha,X=99999999,Y=812.26,SPD=1.23,HDG=180.6,DEP=2.04,TYPE=kayak,TIME={}",
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_secs()
+    );
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let error = loop {
+        tokio::select! {
+            _ = retry.tick() => { let _ = vehicle.notify_string("NODE_REPORT_LOCAL", &far); }
+            m = mail_a.recv() => {
+                let m = m.expect("mail");
+                if let Value::String(s) = m.value {
+                    if s.contains("X=99999999") { break s; }
+                }
+            }
+            _ = tokio::time::sleep_until(deadline) => panic!("no refusal of the out-of-range report"),
+        }
+    };
+    assert!(
+        error.starts_with(&format!(
+            "NODE_REPORT_LOCAL = {far:?}: goby.moos.example.NodeReport: not queued:"
+        )) && error.contains("out of range"),
+        "{error}"
+    );
 
     // pNodeReporter's string, with keys the NodeReport does not carry,
     // written once a second as pNodeReporter does; X grows by 1 m with each

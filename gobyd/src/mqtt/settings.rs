@@ -69,8 +69,18 @@ impl Topics {
     }
 }
 
+/// A problem of the field of the `mqtt` section `text` starts with (its
+/// first word), so that it is placed where that field is written.
 fn invalid(text: impl Into<String>) -> ConfigError {
-    ConfigError::Invalid(format!("mqtt.{}", text.into()))
+    let text = text.into();
+    let (field, reason) = match text.find([' ', ':']) {
+        Some(at) => (&text[..at], text[at..].trim_start_matches([' ', ':'])),
+        None => (text.as_str(), ""),
+    };
+    ConfigError::Problems(vec![crate::config::Problem::new(
+        format!("mqtt.{field}"),
+        reason,
+    )])
 }
 
 /// Splits `HOST:PORT` (`[IPV6]:PORT`, or `HOST` alone for the default port).
@@ -162,7 +172,7 @@ pub fn settings(config: &MqttBridge, modem_id: i32) -> Result<Option<Settings>, 
             options.set_credentials(user.clone(), password.clone());
         }
         (None, None) => {}
-        _ => return Err(invalid("username and password go together")),
+        _ => return Err(invalid("username: goes with a password: give both or neither")),
     }
     if let Some(tls) = &config.tls {
         tls_transport(&mut options, tls)?;
