@@ -158,13 +158,14 @@ pub fn validate(
     let defs = config::load_definitions(&config)?;
     let codec = Arc::new(defs.codec);
     let mut queue = config.queue.clone().unwrap_or_default();
-    // Each queue entry of the configuration on its own, so that every
-    // refused entry is told at once, at its place.
-    let problems = entry_problems(&codec, &queue, &defs.loaded);
+    let configured = queue.message_entry.len();
+    config::default_entries(&mut queue, &defs.loaded);
+    // Each queue entry on its own, so that every refused entry is told at
+    // once, at its place.
+    let problems = entry_problems(&codec, &queue, configured, &defs.loaded);
     if !problems.is_empty() {
         return Err(ConfigError::Problems(problems).into());
     }
-    config::default_entries(&mut queue, &defs.loaded);
     crate::translator::from_config(&config, &codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(codec.clone(), &queue)?;
     mac?;
@@ -176,12 +177,15 @@ pub fn validate(
     })
 }
 
-/// The queue entries of `queue` the queue refuses, each as a problem of its
-/// `queue.message_entry[i].protobuf_name` (the DCCL types `loaded` named
-/// when the entry's type is not one of them).
+/// The queue entries of `queue` the queue refuses: each of the first
+/// `configured` (written in the configuration) as a problem of its
+/// `queue.message_entry[i].protobuf_name` (with the DCCL types `loaded`
+/// when the entry's type is not one of them), each of the others (a loaded
+/// type given the default settings) as a problem of `dccl.proto_file`.
 fn entry_problems(
     codec: &Arc<dccl::Codec>,
     queue: &protos::goby::acomms::protobuf::QueueManagerConfig,
+    configured: usize,
     loaded: &[String],
 ) -> Vec<config::Problem> {
     let mut problems = Vec::new();
@@ -208,10 +212,17 @@ fn entry_problems(
                 }
             );
         }
-        problems.push(config::Problem::new(
-            format!("queue.message_entry[{i}].protobuf_name"),
-            reason,
-        ));
+        problems.push(if i < configured {
+            config::Problem::new(format!("queue.message_entry[{i}].protobuf_name"), reason)
+        } else {
+            config::Problem::new(
+                "dccl.proto_file",
+                format!(
+                    "{} (loaded, queued with the default settings as it has no queue entry): {reason}",
+                    entry.protobuf_name
+                ),
+            )
+        });
     }
     problems
 }
