@@ -113,9 +113,8 @@ pub fn compile_protos(
         compiler.include_imports(true).include_source_info(false);
         for path in &paths {
             compiler.open_file(path).map_err(|e| {
-                let mut text = describe(&e, &path.display().to_string(), |name| {
-                    on_disk(&dirs, name)
-                });
+                let mut text =
+                    describe(&e, &path.display().to_string(), |name| on_disk(&dirs, name));
                 // An import no include directory holds: say where it was
                 // looked for (the tools' -I adds a directory).
                 if e.is_file_not_found() && text.contains("import") {

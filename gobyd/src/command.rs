@@ -369,7 +369,8 @@ pub fn run_cli(cli: GobydCli) -> u8 {
 fn write_man_page(dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
     std::fs::create_dir_all(dir)
         .map_err(|e| format!("cannot create the directory {}: {e}", dir.display()))?;
-    let failed = |e: std::io::Error| format!("cannot write the manual page into {}: {e}", dir.display());
+    let failed =
+        |e: std::io::Error| format!("cannot write the manual page into {}: {e}", dir.display());
     let page = clap_mangen::Man::new(GobydCli::command())
         .generate_to(dir)
         .map_err(failed)?;
@@ -380,7 +381,13 @@ fn write_man_page(dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
         0 => roff
             .split('`')
             .enumerate()
-            .map(|(i, part)| if i % 2 == 1 { format!("\\fB{part}\\fR") } else { part.to_string() })
+            .map(|(i, part)| {
+                if i % 2 == 1 {
+                    format!("\\fB{part}\\fR")
+                } else {
+                    part.to_string()
+                }
+            })
             .collect(),
         _ => roff,
     };

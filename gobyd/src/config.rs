@@ -1462,9 +1462,8 @@ pub fn passphrase_file_warning(config: &GobydConfig) -> Option<String> {
     use std::os::unix::fs::PermissionsExt;
     let file = config.dccl.as_ref()?.passphrase_file.as_deref()?;
     let meta = std::fs::metadata(file).ok()?;
-    (meta.permissions().mode() & 0o077 != 0).then(|| {
-        format!("dccl.passphrase_file {file} can be read by other users (chmod 600 it)")
-    })
+    (meta.permissions().mode() & 0o077 != 0)
+        .then(|| format!("dccl.passphrase_file {file} can be read by other users (chmod 600 it)"))
 }
 
 /// What to tell of the configuration's passphrase file (nothing here:

@@ -790,13 +790,18 @@ fn check_warns_of_a_passphrase_file_others_can_read() {
     assert!(out.status.success(), "{}", stderr_text(&out));
     let err = stderr_text(&out);
     assert_eq!(
-        err.matches("can be read by other users (chmod 600 it)").count(),
+        err.matches("can be read by other users (chmod 600 it)")
+            .count(),
         1,
         "{err}"
     );
     std::fs::set_permissions(&secret, std::fs::Permissions::from_mode(0o600)).unwrap();
     let out = check();
     assert!(out.status.success(), "{}", stderr_text(&out));
-    assert!(!stderr_text(&out).contains("other users"), "{}", stderr_text(&out));
+    assert!(
+        !stderr_text(&out).contains("other users"),
+        "{}",
+        stderr_text(&out)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

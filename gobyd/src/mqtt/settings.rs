@@ -172,7 +172,11 @@ pub fn settings(config: &MqttBridge, modem_id: i32) -> Result<Option<Settings>, 
             options.set_credentials(user.clone(), password.clone());
         }
         (None, None) => {}
-        _ => return Err(invalid("username: goes with a password: give both or neither")),
+        _ => {
+            return Err(invalid(
+                "username: goes with a password: give both or neither",
+            ))
+        }
     }
     if let Some(tls) = &config.tls {
         tls_transport(&mut options, tls)?;
