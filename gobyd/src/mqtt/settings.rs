@@ -304,13 +304,16 @@ mod tests {
     #[test]
     fn bad_values_are_named() {
         for (text, expected) in [
-            ("broker: \"h:1\" qos: 2", "mqtt.qos 2"),
+            ("broker: \"h:1\" qos: 2", "mqtt.qos: 2"),
             ("broker: \"h:1\" topic_prefix: \"a/+\"", "mqtt.topic_prefix"),
             ("broker: \"h:1\" node: \"all\"", "mqtt.node"),
-            ("broker: \"h:1\" username: \"u\"", "username and password"),
+            (
+                "broker: \"h:1\" username: \"u\"",
+                "mqtt.username: goes with a password",
+            ),
             (
                 "broker: \"h:1\" reconnect_min_seconds: 0",
-                "reconnect_min_seconds 0",
+                "mqtt.reconnect_min_seconds: 0",
             ),
             (
                 "broker: \"h:1\" reconnect_min_seconds: 9 reconnect_max_seconds: 1",
