@@ -75,7 +75,7 @@ pub struct ServerArgs {
     /// taken as a first argument ending in .moos).
     #[arg(long, value_name = "FILE", conflicts_with = "server")]
     pub moos_file: Option<PathBuf>,
-    /// The MOOSDB, HOST[:PORT] (PORT 9000 when left out; an IPv6 address in
+    /// The MOOSDB, `HOST[:PORT]` (PORT 9000 when left out; an IPv6 address in
     /// brackets). Default: 127.0.0.1:9000.
     #[arg(long, value_name = "HOST:PORT")]
     pub server: Option<String>,

@@ -2,7 +2,7 @@
 //!
 //! Text is drawn with a font embedded in the binary, so plots come out the
 //! same on a machine without any fonts installed. Glyphs are placed by
-//! their own metrics ([`GlyphText`]): plotters' `ab_glyph` renderer draws
+//! their own metrics (`GlyphText`): plotters' `ab_glyph` renderer draws
 //! each glyph's ink at the pen position, dropping its left side bearing,
 //! which evens out letter gaps and spaces alike (a legend's "3 nodes" read
 //! "3nodes").

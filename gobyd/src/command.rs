@@ -66,7 +66,7 @@ pub struct GobydCli {
     /// Override the JSON interface's TCP address (empty: none).
     #[arg(long, value_name = "ADDR")]
     pub json_tcp: Option<String>,
-    /// Override the MQTT broker, HOST[:PORT] (PORT 1883 when left out, 8883
+    /// Override the MQTT broker, `HOST[:PORT]` (PORT 1883 when left out, 8883
     /// with the configuration's mqtt.tls; an IPv6 address in brackets).
     #[arg(
         long,
