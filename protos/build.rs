@@ -16,6 +16,7 @@ const FILES: &[&str] = &[
     "goby/acomms/amac.proto",
     "goby/acomms/driver_base.proto",
     "goby/acomms/udp_driver.proto",
+    "goby/acomms/udp_multicast_driver.proto",
     "goby/acomms/simulator_driver.proto",
     "goby/acomms/micromodem.proto",
     "goby/moos/translator.proto",

@@ -300,15 +300,23 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     };
     let notes = read.as_ref().map_or(&[][..], |r| &r.notes[..]);
     if cli.check {
-        // Told on standard error: standard output says whether it is valid.
+        // Told on standard error, the refusal first: standard output says
+        // whether it is valid.
+        let broker = mqtt_broker_note(&cli, &config);
+        let warning = config::passphrase_file_warning(&config);
+        let checked = runtime::check(config).map_err(|e| located(e, read.as_ref()));
+        if let Err(e) = &checked {
+            // As the start refuses it: the notes wait until it can run.
+            eprintln!("gobyd: error: {e}");
+            return EXIT_SETUP;
+        }
         for note in notes {
             eprintln!("gobyd: note: {note}");
         }
-        let broker = mqtt_broker_note(&cli, &config);
-        if let Some(warning) = config::passphrase_file_warning(&config) {
+        if let Some(warning) = warning {
             eprintln!("gobyd: warning: {warning}");
         }
-        return match runtime::check(config) {
+        return match checked {
             Ok(types) => {
                 println!("configuration is valid; DCCL types: {}", types.join(", "));
                 if let Some(broker) = broker {
@@ -316,19 +324,11 @@ pub fn run_cli(cli: GobydCli) -> u8 {
                 }
                 EXIT_OK
             }
-            Err(e) => {
-                eprintln!("gobyd: error: {}", located(e, read.as_ref()));
-                EXIT_SETUP
-            }
+            Err(_) => EXIT_SETUP,
         };
     }
     init_logging(&config);
-    if let Some(read) = &read {
-        read.log_notes();
-    }
-    if let Some(warning) = config::passphrase_file_warning(&config) {
-        tracing::warn!("{warning}");
-    }
+    let warning = config::passphrase_file_warning(&config);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -349,6 +349,12 @@ pub fn run_cli(cli: GobydCli) -> u8 {
                 return EXIT_SETUP;
             }
         };
+        if let Some(read) = &read {
+            read.log_notes();
+        }
+        if let Some(warning) = warning {
+            tracing::warn!("{warning}");
+        }
         if let Some(addr) = daemon.json_tcp_addr() {
             tracing::info!("JSON interface on tcp://{addr}");
         }

@@ -105,6 +105,7 @@ impl std::fmt::Display for Problem {
 /// same settings.
 const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.udp.protobuf.config", "udp"),
+    ("goby.acomms.udp_multicast.protobuf.config", "udp_multicast"),
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
 ];
 
@@ -317,6 +318,9 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
         }
     }
     goby::goby_keys(&mut config, &places, &mut found);
+    if let Some(text) = mixed_fleet_ack_note(&config) {
+        found.note(places.offset("driver.driver_type"), NoteLevel::Info, text);
+    }
     let notes = found.finish()?;
     Ok(Read {
         config,
@@ -1169,11 +1173,7 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     let mut problems = Vec::new();
     let kind = modemdriver::check::driver_type(driver);
     match kind {
-        Some(
-            DriverType::DriverAcousticSimulator
-            | DriverType::DriverUdp
-            | DriverType::DriverWhoiMicromodem,
-        ) => {}
+        Some(kind) if modemdriver::check::BUILT_IN.contains(&kind) => {}
         _ => problems.push(Problem::new(
             match &driver.driver {
                 Some(driver_config::Driver::DriverName(_)) => "driver.driver_name",
@@ -1184,8 +1184,9 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
                     format!("no driver named {name:?} is built in")
                 }
                 (_, other) => format!(
-                    "{} is not a driver gobyd runs (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
-                    other.map(|t| t.as_str_name()).unwrap_or("this driver type")
+                    "{} is not a driver gobyd runs (use {})",
+                    other.map(|t| t.as_str_name()).unwrap_or("this driver type"),
+                    modemdriver::check::built_in_names()
                 ),
             },
         )),
@@ -1640,6 +1641,28 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
         }
     }
     Ok(Definitions { codec, loaded })
+}
+
+/// For a Micro-Modem whose `use_application_acks` is left to gobyd's
+/// default (application acks): which setting a fleet with Goby3 nodes needs,
+/// since Goby3's pAcommsHandler takes its acks from the modem and reads no
+/// application ack in a data cycle.
+fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
+    let driver = config.driver.as_ref()?;
+    let micromodem = driver.driver
+        == Some(driver_config::Driver::DriverType(
+            DriverType::DriverWhoiMicromodem as i32,
+        ));
+    let unset = driver
+        .micromodem
+        .as_ref()
+        .is_none_or(|m| m.use_application_acks.is_none());
+    (micromodem && unset).then(|| {
+        "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+         which Goby3's pAcommsHandler cannot read in a data cycle (in a fleet with Goby3 nodes, \
+         set it false on every gobyd node)"
+            .to_string()
+    })
 }
 
 /// Whether the driver is a Micro-Modem sending application acks.

@@ -91,6 +91,9 @@ pub async fn start_driver(
             Ok(modemdriver::sim::SimulatorDriver::start(config)?)
         }
         Some(DriverType::DriverUdp) => Ok(modemdriver::udp::UdpDriver::start(config).await?),
+        Some(DriverType::DriverUdpMulticast) => Ok(
+            modemdriver::udp_multicast::UdpMulticastDriver::start(config)?,
+        ),
         Some(DriverType::DriverWhoiMicromodem) => {
             Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
         }
@@ -100,8 +103,9 @@ pub async fn start_driver(
                     format!("no driver named {name:?} is built in")
                 }
                 (_, other) => format!(
-                    "driver {} is not supported by gobyd (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
-                    other.map(|t| t.as_str_name()).unwrap_or("unknown")
+                    "driver {} is not supported by gobyd (use {})",
+                    other.map(|t| t.as_str_name()).unwrap_or("unknown"),
+                    modemdriver::check::built_in_names()
                 ),
             },
         ))),

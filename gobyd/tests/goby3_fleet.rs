@@ -42,7 +42,7 @@ use moos::{ClientConfig, MoosClient, Value as MoosValue};
 use serde_json::Value;
 use support::daemon::{free_tcp_port, free_udp_port, scratch, Gobyd};
 use support::micromodem::micromodem_driver;
-use support::node::{Driver, Entry, Node, Udp};
+use support::node::{Driver, Entry, Multicast, Node, Udp};
 
 /// Messages each way.
 const N: u32 = 5;
@@ -200,17 +200,46 @@ impl Drop for Proc {
     }
 }
 
+/// The group of the multicast scenario.
+const MULTICAST_GROUP: &str = "239.255.44.1";
+
+/// Why the multicast scenario cannot run here, if it cannot: Goby3's
+/// driver joins and sends on the system's default interface for the group,
+/// and these tests use the loopback interface only, so the route to the
+/// group must be on `lo` (as root: `ip route add 239.255.44.0/24 dev lo`).
+fn multicast_not_on_loopback() -> Option<String> {
+    let out = Command::new("ip")
+        .args(["route", "get", MULTICAST_GROUP])
+        .output();
+    match out {
+        Ok(out) if String::from_utf8_lossy(&out.stdout).contains(" dev lo ") => None,
+        Ok(out) => Some(format!(
+            "the route to {MULTICAST_GROUP} is not on the loopback interface ({}); \
+             add one with `ip route add 239.255.44.0/24 dev lo`",
+            String::from_utf8_lossy(&out.stdout).trim()
+        )),
+        Err(e) => Some(format!("cannot run `ip route get`: {e}")),
+    }
+}
+
 /// How the two nodes talk.
 #[derive(Debug, Clone, Copy)]
 enum Link {
     Udp,
-    MicroModem { generation: u8, rate: u32 },
+    /// Goby3's UDP multicast driver, on a group routed through the
+    /// loopback interface.
+    Multicast,
+    MicroModem {
+        generation: u8,
+        rate: u32,
+    },
 }
 
 impl Link {
     fn tag(self) -> String {
         match self {
             Link::Udp => "udp".to_string(),
+            Link::Multicast => "multicast".to_string(),
             Link::MicroModem { generation, rate } => format!("mm{generation}-rate{rate}"),
         }
     }
@@ -218,13 +247,14 @@ impl Link {
     fn name(self) -> String {
         match self {
             Link::Udp => "UDP".into(),
+            Link::Multicast => "UDP multicast".into(),
             Link::MicroModem { generation, .. } => format!("Micro-Modem {generation} (emulated)"),
         }
     }
 
     fn rate(self) -> u32 {
         match self {
-            Link::Udp => 0,
+            Link::Udp | Link::Multicast => 0,
             Link::MicroModem { rate, .. } => rate,
         }
     }
@@ -233,7 +263,7 @@ impl Link {
     /// cycle-initialization packet, the transmit delays and the ack.
     fn slot_seconds(self) -> f64 {
         match self {
-            Link::Udp => 1.0,
+            Link::Udp | Link::Multicast => 1.0,
             Link::MicroModem { rate: 0, .. } => 10.0,
             Link::MicroModem { .. } => 12.0,
         }
@@ -458,6 +488,15 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
                 Udp::new(p2).remote(1, p1).into(),
             )
         }
+        Link::Multicast => {
+            let port = free_udp_port();
+            (
+                format!(
+                    "    driver_type: DRIVER_UDP_MULTICAST\n    [goby.acomms.udp_multicast.protobuf.config] {{\n      multicast_address: \"{MULTICAST_GROUP}\"\n      multicast_port: {port}\n    }}"
+                ),
+                Multicast::new(MULTICAST_GROUP, port).into(),
+            )
+        }
         Link::MicroModem { generation, .. } => {
             let (e1, e2) = (free_udp_port(), free_udp_port());
             let (pty1, pty2) = (dir.join("modem1"), dir.join("modem2"));
@@ -618,6 +657,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
     let goby = goby_bin();
     let links = [
         Link::Udp,
+        Link::Multicast,
         Link::MicroModem {
             generation: 1,
             rate: 0,
@@ -649,6 +689,12 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
     );
     let mut rows = Vec::new();
     for link in chosen {
+        if matches!(link, Link::Multicast) {
+            if let Some(why) = multicast_not_on_loopback() {
+                println!("multicast scenario skipped: {why}");
+                continue;
+            }
+        }
         let (from_goby3, to_goby3) = scenario(&goby3, &goby, link);
         for (direction, t) in [("Goby3 -> gobyd", from_goby3), ("gobyd -> Goby3", to_goby3)] {
             rows.push((link, direction, t));
@@ -664,7 +710,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
             "| {} | {} | {direction} | {} | {} | {} | {} | {} |",
             link.name(),
             match link {
-                Link::Udp => "-".to_string(),
+                Link::Udp | Link::Multicast => "-".to_string(),
                 _ => link.rate().to_string(),
             },
             t.published,

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch};
-use support::node::{Driver, Entry, MicroModem, Node as NodeConfig, Simulator, Udp};
+use support::node::{Driver, Entry, MicroModem, Multicast, Node as NodeConfig, Simulator, Udp};
 
 /// Upper bound of any wait in these tests.
 const PATIENCE: Duration = Duration::from_secs(40);
@@ -286,6 +286,52 @@ fn messages_cross_the_simulated_acoustic_channel_with_acks() {
     for needle in [r#""raw":"out""#, r#""raw":"in""#, r#""msg":"ack""#] {
         assert!(log.contains(needle), "no {needle} in the raw log:\n{log}");
     }
+    drop(sender);
+    drop(receiver);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn messages_cross_a_udp_multicast_group_with_acks() {
+    let dir = scratch("test", "multicast");
+    let port = free_udp_port();
+    let paths: Vec<PathBuf> = [1, 2]
+        .into_iter()
+        .map(|id| {
+            node_config(
+                id,
+                Multicast::new("239.255.43.1", port),
+                6,
+                0.2,
+                &dir.join(format!("node{id}")),
+            )
+            .write(dir.join(format!("node{id}.cfg")))
+        })
+        .collect();
+    let mut receiver = Node::start(&paths[1]);
+    let mut sender = Node::start(&paths[0]);
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    for note in ["m1", "m2"] {
+        sender.publish_command(2, note);
+    }
+    let mut arrived = Vec::new();
+    while arrived.len() < 2 {
+        arrived.push(receiver.wait_for("messages over the group", |v| {
+            v.get("received").and_then(|_| note_of(v))
+        }));
+    }
+    arrived.sort();
+    assert_eq!(arrived, ["m1", "m2"]);
+    let mut acked = BTreeSet::new();
+    while acked.len() < 2 {
+        acked.insert(sender.wait_for("acks over the group", |v| {
+            v.get("ack").and_then(|_| note_of(v))
+        }));
+    }
+    receiver.publish_command(0, "all");
+    sender.wait_for("the broadcast", |v| {
+        (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
+    });
     drop(sender);
     drop(receiver);
     std::fs::remove_dir_all(&dir).unwrap();

@@ -55,6 +55,26 @@ pub(crate) fn refuse(problems: Vec<Problem>) -> Result<(), DriverError> {
     }
 }
 
+/// The drivers built in, in the order they are listed to users.
+pub const BUILT_IN: &[DriverType] = &[
+    DriverType::DriverAcousticSimulator,
+    DriverType::DriverUdp,
+    DriverType::DriverUdpMulticast,
+    DriverType::DriverWhoiMicromodem,
+];
+
+/// The names of the [`BUILT_IN`] drivers as a configuration writes them,
+/// for messages: `DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP … or
+/// DRIVER_WHOI_MICROMODEM`.
+pub fn built_in_names() -> String {
+    let names: Vec<&str> = BUILT_IN.iter().map(|t| t.as_str_name()).collect();
+    match names.split_last() {
+        Some((last, [])) => (*last).to_string(),
+        Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+        None => String::new(),
+    }
+}
+
 /// The built-in driver a configuration names, if it names one by type.
 pub fn driver_type(config: &DriverConfig) -> Option<DriverType> {
     match &config.driver {
@@ -73,6 +93,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     match driver_type(config) {
         Some(DriverType::DriverAcousticSimulator) => crate::sim::problems(config),
         Some(DriverType::DriverUdp) => crate::udp::problems(config),
+        Some(DriverType::DriverUdpMulticast) => crate::udp_multicast::problems(config),
         Some(DriverType::DriverWhoiMicromodem) => {
             let mut problems = crate::micromodem::driver::problems(config);
             if !problems.iter().any(|p| p.field == "serial_port") {

@@ -42,6 +42,7 @@ pub mod sim;
 pub mod slot;
 pub mod time;
 pub mod udp;
+pub mod udp_multicast;
 
 pub use driver::{
     Acknowledgement, DataRequest, Driver, DriverCommand, DriverContext, DriverError, DriverEvent,

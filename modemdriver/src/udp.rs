@@ -142,37 +142,59 @@ impl UdpDriver {
         );
         let state = UdpState {
             modem_id,
-            remotes,
+            peers: Peers::Remotes(remotes),
             max_frame_size,
+            rate_to_bytes: Vec::new(),
             ack_ids,
             last_acked_data: None,
             deferred_ack: config.deferred_ack(),
             awaiting_ack: std::collections::VecDeque::new(),
             clock: clock.clone(),
         };
-        Ok(Driver::spawn_with_clock("udp", clock, move |ctx| {
-            run(state, socket, ctx)
-        }))
+        Ok(spawn("udp", state, socket))
     }
 }
 
-struct UdpState {
+/// Starts the task of a datagram driver (UDP, UDP multicast) on a bound
+/// socket.
+pub(crate) fn spawn(name: &'static str, state: UdpState, socket: UdpSocket) -> Driver {
+    let clock = state.clock.clone();
+    Driver::spawn_with_clock(name, clock, move |ctx| run(state, socket, ctx))
+}
+
+/// Where a datagram driver's transmissions go.
+#[derive(Debug, Clone)]
+pub(crate) enum Peers {
+    /// Remote endpoints with the modem ids they stand for ([`destinations`]);
+    /// acks go back to the endpoint the data came from.
+    Remotes(Vec<(u32, SocketAddr)>),
+    /// One multicast group every node has joined: everything, acks
+    /// included, goes to the group, and this node's own datagrams, which
+    /// the group hands back, are dropped.
+    Group(SocketAddr),
+}
+
+/// A datagram driver's settings and what it remembers between datagrams.
+pub(crate) struct UdpState {
     /// Time for stamps and slots.
-    clock: std::sync::Arc<dyn goby_time::Clock>,
-    modem_id: i32,
-    remotes: Vec<(u32, SocketAddr)>,
-    max_frame_size: u32,
-    ack_ids: Vec<i32>,
+    pub(crate) clock: std::sync::Arc<dyn goby_time::Clock>,
+    pub(crate) modem_id: i32,
+    pub(crate) peers: Peers,
+    /// Largest frame, bytes, at rates not in `rate_to_bytes`.
+    pub(crate) max_frame_size: u32,
+    /// Largest frame, bytes, per rate.
+    pub(crate) rate_to_bytes: Vec<(i32, u32)>,
+    pub(crate) ack_ids: Vec<i32>,
     /// Destination and `unique_id` of the last data sent asking for acks:
     /// an ack from a peer that does not echo `unique_id` (e.g. Goby's UDP
     /// driver) is taken to answer it when it comes from that destination.
-    last_acked_data: Option<(i32, u32)>,
+    pub(crate) last_acked_data: Option<(i32, u32)>,
     /// Acks are sent when the layer above asks, not on reception.
-    deferred_ack: bool,
+    pub(crate) deferred_ack: bool,
     /// With `deferred_ack`: the endpoints recent data to acknowledge came
     /// from, by source and `unique_id` (newest last, at most
     /// [`AWAITING_ACK_LIMIT`]).
-    awaiting_ack: std::collections::VecDeque<((i32, Option<u32>), SocketAddr)>,
+    pub(crate) awaiting_ack: std::collections::VecDeque<((i32, Option<u32>), SocketAddr)>,
 }
 
 /// Received transmissions whose endpoint is remembered for a deferred ack.
@@ -180,7 +202,31 @@ const AWAITING_ACK_LIMIT: usize = 64;
 
 impl UdpState {
     fn destinations(&self, dest: i32) -> Vec<SocketAddr> {
-        destinations(&self.remotes, dest)
+        match &self.peers {
+            Peers::Remotes(remotes) => destinations(remotes, dest),
+            Peers::Group(group) => vec![*group],
+        }
+    }
+
+    /// Where an ack of data that came from `from` goes.
+    fn reply_to(&self, from: SocketAddr) -> SocketAddr {
+        match &self.peers {
+            Peers::Remotes(_) => from,
+            Peers::Group(group) => *group,
+        }
+    }
+
+    /// Whether a datagram is this node's own, handed back by the group.
+    fn is_own(&self, mt: &ModemTransmission) -> bool {
+        matches!(self.peers, Peers::Group(_)) && mt.src() == self.modem_id
+    }
+
+    /// The largest frame at `rate`, bytes.
+    fn frame_limit(&self, rate: i32) -> u32 {
+        self.rate_to_bytes
+            .iter()
+            .find(|(r, _)| *r == rate)
+            .map_or(self.max_frame_size, |(_, bytes)| *bytes)
     }
 }
 
@@ -258,10 +304,8 @@ async fn transmit(
             });
             return;
         }
-        mt.max_frame_bytes = Some(
-            mt.max_frame_bytes
-                .map_or(state.max_frame_size, |m| m.min(state.max_frame_size)),
-        );
+        let limit = state.frame_limit(mt.rate());
+        mt.max_frame_bytes = Some(mt.max_frame_bytes.map_or(limit, |m| m.min(limit)));
         if mt.max_num_frames.is_none() {
             mt.max_num_frames = Some(1);
         }
@@ -324,6 +368,10 @@ async fn receive(
             return;
         }
     };
+    if state.is_own(&mt) {
+        return;
+    }
+    let from = state.reply_to(from);
     let wants_ack = Acknowledgement::wanted(&mt, &state.ack_ids);
     let mut ack = None;
     if wants_ack && state.deferred_ack {

@@ -332,6 +332,8 @@ pub enum Driver {
     Udp(Udp),
     /// `DRIVER_WHOI_MICROMODEM`.
     MicroModem(MicroModem),
+    /// `DRIVER_UDP_MULTICAST`.
+    Multicast(Multicast),
 }
 
 impl Driver {
@@ -340,6 +342,7 @@ impl Driver {
             Driver::Simulator(s) => s.render(),
             Driver::Udp(u) => u.render(),
             Driver::MicroModem(m) => m.render(),
+            Driver::Multicast(m) => m.render(),
         }
     }
 }
@@ -542,6 +545,38 @@ impl Udp {
         }
         text += "  }\n}\n";
         text
+    }
+}
+
+/// The UDP multicast driver on the loopback interface: `driver {
+/// driver_type: DRIVER_UDP_MULTICAST udp_multicast { multicast_address
+/// multicast_port interface_address: "127.0.0.1" } }`.
+#[derive(Debug, Clone)]
+pub struct Multicast {
+    group: String,
+    port: u16,
+}
+
+impl Multicast {
+    /// A member of `group` (e.g. 239.255.1.1) on `port`, on 127.0.0.1.
+    pub fn new(group: &str, port: u16) -> Multicast {
+        Multicast {
+            group: group.to_string(),
+            port,
+        }
+    }
+
+    fn render(&self) -> String {
+        format!(
+            "driver {{\n  driver_type: DRIVER_UDP_MULTICAST\n  udp_multicast {{\n    multicast_address: \"{}\"\n    multicast_port: {}\n    interface_address: \"127.0.0.1\"\n  }}\n}}\n",
+            self.group, self.port
+        )
+    }
+}
+
+impl From<Multicast> for Driver {
+    fn from(m: Multicast) -> Driver {
+        Driver::Multicast(m)
     }
 }
 
