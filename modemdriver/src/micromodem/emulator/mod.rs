@@ -396,8 +396,7 @@ impl Device {
                 } = serial::open_pty_pair()?;
                 let shown = match link {
                     Some(link) => {
-                        let _ = std::fs::remove_file(link);
-                        std::os::unix::fs::symlink(&path, link)?;
+                        serial::replace_symlink(&path, link)?;
                         link.display().to_string()
                     }
                     None => path,
@@ -512,7 +511,7 @@ async fn run(
                 Some(EmulatorControl::LoseAcks(n)) => modem.lose_acks_next += n,
                 Some(EmulatorControl::Disconnect(d)) => {
                     if let EmulatorPort::Pty { link: Some(link) } = &port {
-                        let _ = std::fs::remove_file(link);
+                        serial::remove_symlink(link);
                     }
                     device = None;
                     path.send_replace(None);
@@ -521,7 +520,7 @@ async fn run(
                 }
                 Some(EmulatorControl::Stop) | None => {
                     if let EmulatorPort::Pty { link: Some(link) } = &port {
-                        let _ = std::fs::remove_file(link);
+                        serial::remove_symlink(link);
                     }
                     if let Some(driver) = backend.take() {
                         let _ = driver.stop().await;
