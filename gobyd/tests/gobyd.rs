@@ -73,6 +73,8 @@ struct Node {
     child: Child,
     client: TcpStream,
     lines: mpsc::Receiver<Value>,
+    /// Lines read while waiting for a publish reply, for later waits.
+    held: std::cell::RefCell<std::collections::VecDeque<Value>>,
 }
 
 /// Starts `gobyd` on a configuration file; its log lines (standard error)
@@ -135,6 +137,7 @@ impl Node {
             child,
             client,
             lines,
+            held: Default::default(),
         }
     }
 
@@ -145,6 +148,17 @@ impl Node {
 
     /// The next line for which `pick` returns something, within the patience.
     fn wait_for<T>(&self, what: &str, mut pick: impl FnMut(&Value) -> Option<T>) -> T {
+        {
+            let mut held = self.held.borrow_mut();
+            if let Some((i, t)) = held
+                .iter()
+                .enumerate()
+                .find_map(|(i, v)| pick(v).map(|t| (i, t)))
+            {
+                held.remove(i);
+                return t;
+            }
+        }
         let deadline = Instant::now() + PATIENCE;
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
@@ -162,10 +176,20 @@ impl Node {
         self.send(&format!(
             r#"{{"publish": "goby.example.Command", "msg": {{"destination": {destination}, "action": "GOTO", "note": "{note}"}}}}"#
         ));
-        self.wait_for("the accepted reply", |v| {
+        // Events that come before the reply (an ack can: the message may
+        // leave before the journal sync that the reply waits for) are held
+        // for the waits after it.
+        let mut before = Vec::new();
+        let id = self.wait_for("the accepted reply", |v| {
             assert!(v.get("error").is_none(), "{v}");
-            v.get("accepted").and_then(|_| v["id"].as_u64())
-        })
+            let id = v.get("accepted").and_then(|_| v["id"].as_u64());
+            if id.is_none() {
+                before.push(v.clone());
+            }
+            id
+        });
+        self.held.borrow_mut().extend(before);
+        id
     }
 
     fn kill(mut self) {
@@ -248,6 +272,33 @@ fn messages_cross_with_acks_and_survive_a_killed_sender() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Node 1 sends two Commands to node 2, which receives each once, and both
+/// are acked; then node 2's broadcast reaches node 1.
+fn two_commands_acked_and_a_broadcast(sender: &mut Node, receiver: &mut Node, over: &str) {
+    sender.send(r#"{"subscribe": ["ack"]}"#);
+    for note in ["c1", "c2"] {
+        sender.publish_command(2, note);
+    }
+    let mut arrived = Vec::new();
+    while arrived.len() < 2 {
+        arrived.push(receiver.wait_for(&format!("messages over {over}"), |v| {
+            v.get("received").and_then(|_| note_of(v))
+        }));
+    }
+    arrived.sort();
+    assert_eq!(arrived, ["c1", "c2"], "each delivered once");
+    let mut acked = BTreeSet::new();
+    while acked.len() < 2 {
+        acked.insert(sender.wait_for(&format!("acks over {over}"), |v| {
+            v.get("ack").and_then(|_| note_of(v))
+        }));
+    }
+    receiver.publish_command(0, "all");
+    sender.wait_for("the broadcast", |v| {
+        (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
+    });
+}
+
 #[test]
 fn messages_cross_the_simulated_acoustic_channel_with_acks() {
     let dir = scratch("test", "sim");
@@ -255,31 +306,7 @@ fn messages_cross_the_simulated_acoustic_channel_with_acks() {
     let config_paths = network(&dir, simulator_driver, 1.2);
     let mut receiver = Node::start(&config_paths[1]);
     let mut sender = Node::start(&config_paths[0]);
-    sender.send(r#"{"subscribe": ["ack"]}"#);
-    for note in ["s1", "s2"] {
-        sender.publish_command(2, note);
-    }
-    let mut arrived = BTreeSet::new();
-    while arrived.len() < 2 {
-        arrived.insert(receiver.wait_for("messages over the simulator", |v| {
-            v.get("received").and_then(|_| note_of(v))
-        }));
-    }
-    assert_eq!(
-        arrived,
-        BTreeSet::from(["s1".to_string(), "s2".to_string()])
-    );
-    let mut acked = BTreeSet::new();
-    while acked.len() < 2 {
-        acked.insert(sender.wait_for("acks over the simulator", |v| {
-            v.get("ack").and_then(|_| note_of(v))
-        }));
-    }
-    // Broadcast the other way: a Command to 0 reaches node 1.
-    receiver.publish_command(0, "all");
-    sender.wait_for("the broadcast", |v| {
-        (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
-    });
+    two_commands_acked_and_a_broadcast(&mut sender, &mut receiver, "the simulator");
     // The sender's mission log has what went on and came off the simulated
     // water (its data out, the acks in) and the acks of its messages.
     let log = std::fs::read_to_string(dir.join("node1").join("raw.log")).unwrap();
@@ -310,28 +337,7 @@ fn messages_cross_a_udp_multicast_group_with_acks() {
         .collect();
     let mut receiver = Node::start(&paths[1]);
     let mut sender = Node::start(&paths[0]);
-    sender.send(r#"{"subscribe": ["ack"]}"#);
-    for note in ["m1", "m2"] {
-        sender.publish_command(2, note);
-    }
-    let mut arrived = Vec::new();
-    while arrived.len() < 2 {
-        arrived.push(receiver.wait_for("messages over the group", |v| {
-            v.get("received").and_then(|_| note_of(v))
-        }));
-    }
-    arrived.sort();
-    assert_eq!(arrived, ["m1", "m2"]);
-    let mut acked = BTreeSet::new();
-    while acked.len() < 2 {
-        acked.insert(sender.wait_for("acks over the group", |v| {
-            v.get("ack").and_then(|_| note_of(v))
-        }));
-    }
-    receiver.publish_command(0, "all");
-    sender.wait_for("the broadcast", |v| {
-        (note_of(v).as_deref() == Some("all") && v.get("received").is_some()).then_some(())
-    });
+    two_commands_acked_and_a_broadcast(&mut sender, &mut receiver, "the group");
     drop(sender);
     drop(receiver);
     std::fs::remove_dir_all(&dir).unwrap();

@@ -33,6 +33,18 @@ pub fn modem_id(config: &DriverConfig) -> Result<i32, DriverError> {
     }
 }
 
+/// The problem with the configured `modem_id` ([`modem_id`]), as a
+/// [`Problem`] of the field `modem_id`.
+pub fn modem_id_problem(config: &DriverConfig) -> Option<Problem> {
+    match modem_id(config) {
+        Err(DriverError::Config(reason)) => Some(Problem::new(
+            "modem_id",
+            reason.trim_start_matches("DriverConfig.modem_id: "),
+        )),
+        _ => None,
+    }
+}
+
 /// The socket address of a UDP endpoint; `field` names it in errors (e.g.
 /// `DriverConfig.udp.remote[0]`).
 pub fn endpoint_addr(ep: &EndPoint, field: &str) -> Result<SocketAddr, DriverError> {

@@ -61,13 +61,7 @@ fn udp_config(config: &DriverConfig) -> Result<&UdpDriverConfig, DriverError> {
 /// refuses (see [`crate::check`]); a local port already taken only shows
 /// when it binds.
 pub fn problems(config: &DriverConfig) -> Vec<Problem> {
-    let mut problems = Vec::new();
-    if let Err(DriverError::Config(reason)) = config::modem_id(config) {
-        problems.push(Problem::new(
-            "modem_id",
-            reason.trim_start_matches("DriverConfig.modem_id: "),
-        ));
-    }
+    let mut problems: Vec<Problem> = config::modem_id_problem(config).into_iter().collect();
     let Some(udp) = &config.udp else {
         problems.push(Problem::new("udp", "required for the UDP driver"));
         return problems;

@@ -164,13 +164,7 @@ fn settings(config: &DriverConfig) -> Result<Settings, Vec<Problem>> {
 /// [`UdpMulticastDriver::start`] refuses (see [`crate::check`]); an
 /// interface that cannot join the group only shows when it joins.
 pub fn problems(config: &DriverConfig) -> Vec<Problem> {
-    let mut problems = Vec::new();
-    if let Err(DriverError::Config(reason)) = config::modem_id(config) {
-        problems.push(Problem::new(
-            "modem_id",
-            reason.trim_start_matches("DriverConfig.modem_id: "),
-        ));
-    }
+    let mut problems: Vec<Problem> = config::modem_id_problem(config).into_iter().collect();
     if let Err(found) = settings(config) {
         problems.extend(found);
     }

@@ -62,26 +62,8 @@ async fn data_with_ack_between_two_drivers() {
     let mut a = UdpDriver::start_on(&config(1, aa, &[(2, ab)]), sa).unwrap();
     let mut b = UdpDriver::start_on(&config(2, ab, &[(1, aa)]), sb).unwrap();
 
-    a.initiate_transmission(data_to(2, true)).unwrap();
-    let frames = vec![b"hello".to_vec()];
-    let sent = wait_for(&mut a, &frames, LIMIT, |e| match e {
-        DriverEvent::TransmitResult(r) => Some(r.clone()),
-        _ => None,
-    })
-    .await;
-    assert_eq!(sent.outcome, TransmitOutcome::Sent);
-    assert_eq!(sent.transmission.src(), 1);
+    let sent = data_and_ack(&mut a, &mut b, &[b"hello".to_vec()], LIMIT).await;
     assert_eq!(sent.transmission.max_frame_bytes(), 1400);
-
-    let got = received(&mut b, LIMIT).await;
-    assert_eq!((got.src(), got.dest()), (1, 2));
-    assert_eq!(got.frame, frames);
-    assert_eq!(got.r#type(), TransmissionType::Data);
-
-    let ack = received(&mut a, LIMIT).await;
-    assert_eq!(ack.r#type(), TransmissionType::Ack);
-    assert_eq!((ack.src(), ack.dest()), (2, 1));
-    assert_eq!(ack.acked_frame, vec![0]);
 
     a.stop().await.unwrap();
     b.stop().await.unwrap();

@@ -49,6 +49,10 @@ pub struct Gobyd {
     addr: String,
     /// The test's JSON client, once connected.
     client: Option<(TcpStream, mpsc::Receiver<Value>)>,
+    /// Lines read while waiting for a reply (events can come before it: a
+    /// message may leave, and be acked, before the journal sync its reply
+    /// waits for), for [`wait_for`](Self::wait_for).
+    held: std::collections::VecDeque<Value>,
 }
 
 impl Gobyd {
@@ -129,6 +133,7 @@ impl Gobyd {
             child,
             addr,
             client: None,
+            held: Default::default(),
         }
     }
 
@@ -152,6 +157,7 @@ impl Gobyd {
             }
         });
         self.client = Some((client, lines));
+        self.held.clear();
     }
 
     /// Sends a JSON request line and waits for its reply (a line holding
@@ -165,6 +171,7 @@ impl Gobyd {
             if v.get("accepted").is_some() || v.get("error").is_some() {
                 return Some(v);
             }
+            self.held.push_back(v);
         }
         None
     }
@@ -173,6 +180,9 @@ impl Gobyd {
     /// `None` too when no client is connected.
     pub fn wait_for(&mut self, limit: Duration, wanted: impl Fn(&Value) -> bool) -> Option<Value> {
         let (_, lines) = self.client.as_ref()?;
+        if let Some(i) = self.held.iter().position(&wanted) {
+            return self.held.remove(i);
+        }
         let deadline = Instant::now() + limit;
         while let Ok(v) = lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
             if wanted(&v) {

@@ -3,7 +3,8 @@
 
 use std::time::Duration;
 
-use modemdriver::{Driver, DriverEvent, ModemTransmission};
+use modemdriver::{Driver, DriverEvent, ModemTransmission, TransmitOutcome, TransmitResult};
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 
 /// Reads events until `pick` returns something, answering data requests with
 /// `frames` (as many as the template allows). Panics after `limit`.
@@ -37,6 +38,43 @@ pub async fn wait_for<T>(
             driver.name()
         )
     })
+}
+
+/// Data with an ack asked for from `a` (modem id 1) to `b` (modem id 2)
+/// between two drivers that ack in software: `a` sends `frames`, `b` hears
+/// them, `a` hears the ack of frame 0. Returns what `a` sent.
+pub async fn data_and_ack(
+    a: &mut Driver,
+    b: &mut Driver,
+    frames: &[Vec<u8>],
+    limit: Duration,
+) -> TransmitResult {
+    a.initiate_transmission(ModemTransmission {
+        dest: Some(2),
+        ack_requested: Some(true),
+        r#type: Some(TransmissionType::Data as i32),
+        ..Default::default()
+    })
+    .unwrap();
+    let sent = wait_for(a, frames, limit, |e| match e {
+        DriverEvent::TransmitResult(r) => Some(r.clone()),
+        _ => None,
+    })
+    .await;
+    assert_eq!(sent.outcome, TransmitOutcome::Sent);
+    assert_eq!(sent.transmission.src(), 1);
+
+    let got = received(b, limit).await;
+    assert_eq!((got.src(), got.dest()), (1, 2));
+    assert_eq!(got.frame, frames);
+    assert_eq!(got.r#type(), TransmissionType::Data);
+
+    let ack = received(a, limit).await;
+    assert_eq!(ack.r#type(), TransmissionType::Ack);
+    assert_eq!((ack.src(), ack.dest()), (2, 1));
+    assert_eq!(ack.acked_frame, vec![0]);
+    assert_eq!(ack.unique_id, sent.transmission.unique_id);
+    sent
 }
 
 /// The next received transmission.
