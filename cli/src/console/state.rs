@@ -264,6 +264,9 @@ impl ConsoleState {
     /// a JSON object with `event` and `seq`.
     pub fn apply(&mut self, node: &str, report: &Report, now: f64) -> Vec<Value> {
         let mut events = Vec::new();
+        // The node's summary goes first, so its number comes first: the
+        // page takes the events in the order of their numbers.
+        let summary_seq = self.next_seq();
         let time = report_time(report).filter(|t| *t > 0.0).unwrap_or(now);
         self.fleet.apply(node, report);
         {
@@ -383,9 +386,9 @@ impl ConsoleState {
             }
             Report::Queue { .. } | Report::Mac { .. } => {}
         }
-        let seq = self.next_seq();
         let summary = self.node_json(node, false);
-        events.insert(0, json!({"event": "node", "seq": seq, "node": summary}));
+        events.insert(0, json!({"event": "node", "seq": summary_seq, "node": summary}));
+        debug_assert!(events.windows(2).all(|w| w[0]["seq"].as_u64() < w[1]["seq"].as_u64()));
         events
     }
 
@@ -802,6 +805,21 @@ mod tests {
         assert_eq!(node["acks"], 1);
         assert_eq!(node["errors"], 1);
         assert_eq!(snap["commands"][0]["note"], "by 2");
+    }
+
+    #[test]
+    fn the_events_of_a_report_are_numbered_in_their_order() {
+        let mut s = state();
+        apply(&mut s, "fleet/auv1/status", r#"{"online": true, "modem_id": 1}"#);
+        let events = apply(
+            &mut s,
+            "fleet/auv2/rx/goby.example.NavigationReport",
+            r#"{"src": 1, "dest": 2, "time": 99, "msg": {"x": 1, "y": 2}}"#,
+        );
+        let seqs: Vec<u64> = events.iter().map(|e| e["seq"].as_u64().unwrap()).collect();
+        assert!(seqs.len() > 3, "{events:?}");
+        assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
+        assert_eq!(s.snapshot()["seq"], *seqs.last().unwrap());
     }
 
     #[test]

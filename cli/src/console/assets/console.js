@@ -229,7 +229,9 @@ function fitView(w, h) {
   const spanx = Math.max(maxx - minx, 50), spany = Math.max(maxy - miny, 50);
   view.cx = (minx + maxx) / 2;
   view.cy = (miny + maxy) / 2;
-  view.scale = Math.min((w - 80) / spanx, (h - 60) / spany);
+  // Room for the names and ages written right of each node.
+  view.cx = (minx + maxx) / 2 + 55 / Math.max(1e-9, Math.min((w - 190) / spanx, (h - 70) / spany));
+  view.scale = Math.min((w - 190) / spanx, (h - 70) / spany);
   return true;
 }
 
@@ -262,8 +264,8 @@ function drawMap() {
   ctx.beginPath(); ctx.moveTo(w - 20, 44); ctx.lineTo(w - 26, 60); ctx.lineTo(w - 14, 60); ctx.closePath(); ctx.fill();
   ctx.fillText('N', w - 24, 74);
   const bar = step * view.scale;
-  ctx.fillRect(12, h - 24, bar, 3);
-  ctx.fillText(step >= 1000 ? `${step / 1000} km` : `${step} m`, 12, h - 28);
+  ctx.fillRect(48, h - 28, bar, 3);
+  ctx.fillText(step >= 1000 ? `${step / 1000} km` : `${step} m`, 48, h - 32);
   // Tracks, then the last positions with their names and ages.
   const names = [...S.nodes.keys()].sort();
   for (const name of names) {
@@ -441,15 +443,15 @@ function messageRow(m, fresh) {
   if (m.kind === 'rx') route = `${m.src}→${m.dest}`;
   if (m.kind === 'ack') route = `by ${m.by}`;
   if (m.kind === 'accepted') route = `id ${m.id ?? '—'}`;
-  const fields = m.kind === 'error' ? `${m.error} (${m.topic})` :
-    flatten(m.msg, '', []).map(([k, v]) => `${k}: ${v}`).join('  ');
+  const fields = m.kind === 'error' ? el('span', null, `${m.error} (${m.topic})`) :
+    flatten(m.msg, '', []).map(([k, v]) => el('span', null, el('b', null, `${k}: `), v));
   return el('tr', { 'data-seq': m.seq, class: fresh ? 'fresh' : '' },
     el('td', null, clock(m.time)),
     el('td', null, m.node),
     el('td', { class: `kind-${m.kind}` }, what),
     el('td', { title: m.type || '' }, short(m.type)),
     el('td', null, route),
-    el('td', { class: 'fields' }, fields));
+    el('td', { class: 'fields' }, ...[].concat(fields)));
 }
 
 function shownHere(m) {
@@ -637,6 +639,7 @@ function buildForm() {
 function draft() {
   return { node: $('cmd-node').value, type: $('cmd-type').value, msg: editor ? editor.get() : {} };
 }
+goby.draft = draft;
 
 // Leaf paths where the message as sent and as decoded differ.
 function differences(a, b, path, out) {
@@ -664,6 +667,7 @@ async function check() {
   }
   lastCheck = result;
   goby.lastCheck = result;
+  goby.checkedDraft = JSON.stringify(d);
   for (const e of document.querySelectorAll('#cmd-fields .changed')) e.classList.remove('changed');
   for (const e of document.querySelectorAll('#cmd-fields [data-note]')) e.textContent = '';
   $('cmd-send').disabled = !result.ok;
@@ -707,6 +711,7 @@ async function send(e) {
     goby.lastSend = answer;
   } catch (err) {
     said.textContent = `Not sent: ${err}`;
+    goby.lastSend = { error: String(err) };
   }
 }
 
