@@ -23,9 +23,13 @@ fn main() {
         println!("cargo::rerun-if-changed={path}");
     }
     let given = std::env::var_os("GOBY_CHROMIUM").map(PathBuf::from);
-    let found = given
-        .filter(|p| p.is_file())
-        .or_else(|| KNOWN.iter().map(Path::new).find(|p| p.is_file()).map(Path::to_path_buf));
+    let found = given.filter(|p| p.is_file()).or_else(|| {
+        KNOWN
+            .iter()
+            .map(Path::new)
+            .find(|p| p.is_file())
+            .map(Path::to_path_buf)
+    });
     if let Some(path) = found {
         println!("cargo::rustc-cfg=chromium");
         println!("cargo::rustc-env=GOBY_CHROMIUM_PATH={}", path.display());

@@ -350,7 +350,10 @@ impl Report {
             return None;
         }
         let (kind, type_name) = leaf.split_once('/').unwrap_or((leaf, ""));
-        Some((node.to_string(), Report::from_json(kind, type_name, &value)?))
+        Some((
+            node.to_string(),
+            Report::from_json(kind, type_name, &value)?,
+        ))
     }
 
     /// The report of a payload of topic kind `kind` (`status`, `rx`, ...)

@@ -180,7 +180,10 @@ mod tests {
         let missing = c.check("goby.example.Command", &json!({"destination": 2}));
         assert_eq!(missing["ok"], false, "{missing}");
         let unknown = c.check("goby.example.Nothing", &json!({}));
-        assert!(unknown["error"].as_str().unwrap().contains("not among"), "{unknown}");
+        assert!(
+            unknown["error"].as_str().unwrap().contains("not among"),
+            "{unknown}"
+        );
     }
 
     #[test]
@@ -189,8 +192,8 @@ mod tests {
         let same = c.same_message();
         assert!(same(
             "goby.example.Command",
-            &json!({"destination": 2, "action": "GOTO", "note": ""}),
-            &json!({"action": "GOTO", "destination": 2})
+            &json!({"destination": 2, "action": "GOTO", "waypoint": [{"x": 1, "y": 2}]}),
+            &json!({"action": 1, "waypoint": [{"y": 2.0, "x": 1.0}], "destination": 2})
         ));
         assert!(!same(
             "goby.example.Command",

@@ -109,7 +109,12 @@ impl Hub {
     /// parse as the type; a node the console has not heard is refused),
     /// then shown as published and handed to the source. The command's id,
     /// or why it was not sent.
-    pub async fn send_command(&self, node: &str, type_name: &str, msg: &Value) -> Result<u64, String> {
+    pub async fn send_command(
+        &self,
+        node: &str,
+        type_name: &str,
+        msg: &Value,
+    ) -> Result<u64, String> {
         self.commander.parse(type_name, msg)?;
         let (id, out) = {
             let mut state = self.state();
@@ -117,7 +122,11 @@ impl Hub {
             if !nodes.iter().any(|n| n == node) {
                 return Err(format!(
                     "node {node:?} is not among the gateways heard ({})",
-                    if nodes.is_empty() { "none yet".to_string() } else { nodes.join(", ") }
+                    if nodes.is_empty() {
+                        "none yet".to_string()
+                    } else {
+                        nodes.join(", ")
+                    }
                 ));
             }
             let topic = self.source.topic(node, type_name);

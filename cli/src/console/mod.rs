@@ -93,9 +93,9 @@ fn parse_origin(text: &str) -> Result<(f64, f64), CliError> {
 /// The source the arguments name.
 fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
     if let Some(address) = &args.gobyd {
-        host_port(address, 0).filter(|(_, p)| *p != 0).ok_or_else(|| {
-            CliError::setup(format!("--gobyd {address:?} is not HOST:PORT"))
-        })?;
+        host_port(address, 0)
+            .filter(|(_, p)| *p != 0)
+            .ok_or_else(|| CliError::setup(format!("--gobyd {address:?} is not HOST:PORT")))?;
         return Ok(Source::Json {
             address: address.trim().to_string(),
             node: args.node.clone(),

@@ -37,7 +37,10 @@ const ICON: &str = include_str!("assets/favicon.svg");
 /// The router of the console over `hub`.
 pub fn router(hub: Arc<Hub>) -> Router {
     Router::new()
-        .route("/", get(|| async { asset("text/html; charset=utf-8", INDEX) }))
+        .route(
+            "/",
+            get(|| async { asset("text/html; charset=utf-8", INDEX) }),
+        )
         .route(
             "/console.js",
             get(|| async { asset("text/javascript; charset=utf-8", SCRIPT) }),
@@ -46,7 +49,10 @@ pub fn router(hub: Arc<Hub>) -> Router {
             "/console.css",
             get(|| async { asset("text/css; charset=utf-8", STYLE) }),
         )
-        .route("/favicon.svg", get(|| async { asset("image/svg+xml", ICON) }))
+        .route(
+            "/favicon.svg",
+            get(|| async { asset("image/svg+xml", ICON) }),
+        )
         .route("/api/state", get(state))
         .route("/api/forms", get(forms))
         .route("/api/events", get(events))
@@ -106,9 +112,7 @@ enum Feed {
     Live(tokio::sync::broadcast::Receiver<Arc<str>>),
 }
 
-async fn events(
-    State(hub): State<Arc<Hub>>,
-) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+async fn events(State(hub): State<Arc<Hub>>) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let (snapshot, rx) = hub.subscribe();
     let feed = stream::unfold((Feed::Start(snapshot, rx), hub), |(feed, hub)| async move {
         match feed {
@@ -116,20 +120,18 @@ async fn events(
                 let event = Event::default().data(snapshot.to_string());
                 Some((Ok(event), (Feed::Live(rx), hub)))
             }
-            Feed::Live(mut rx) => loop {
-                match rx.recv().await {
-                    Ok(text) => {
-                        let event = Event::default().data(&*text);
-                        return Some((Ok(event), (Feed::Live(rx), hub)));
-                    }
-                    // Fallen behind: start again from a new snapshot.
-                    Err(RecvError::Lagged(_)) => {
-                        let (snapshot, rx) = hub.subscribe();
-                        let event = Event::default().data(snapshot.to_string());
-                        return Some((Ok(event), (Feed::Live(rx), hub)));
-                    }
-                    Err(RecvError::Closed) => return None,
+            Feed::Live(mut rx) => match rx.recv().await {
+                Ok(text) => {
+                    let event = Event::default().data(&*text);
+                    Some((Ok(event), (Feed::Live(rx), hub)))
                 }
+                // Fallen behind: start again from a new snapshot.
+                Err(RecvError::Lagged(_)) => {
+                    let (snapshot, rx) = hub.subscribe();
+                    let event = Event::default().data(snapshot.to_string());
+                    Some((Ok(event), (Feed::Live(rx), hub)))
+                }
+                Err(RecvError::Closed) => None,
             },
         }
     });

@@ -15,7 +15,9 @@ use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 
 use super::hub::Hub;
-use crate::fleet::{AcceptedReport, BridgeStatus, LinkReport, QueueKind, QueueNotice, Report, RxReport};
+use crate::fleet::{
+    AcceptedReport, BridgeStatus, LinkReport, QueueKind, QueueNotice, Report, RxReport,
+};
 
 /// Where the fleet is read from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -246,7 +248,10 @@ async fn json_interface(
         let stream = match TcpStream::connect(&address).await {
             Ok(s) => s,
             Err(e) => {
-                hub.source_status(false, &format!("cannot connect to {address}: {e}; trying again"));
+                hub.source_status(
+                    false,
+                    &format!("cannot connect to {address}: {e}; trying again"),
+                );
                 // Commands sent meanwhile cannot go.
                 while let Ok(out) = outbound.try_recv() {
                     hub.command_failed(out.command, "the JSON interface is not connected");
@@ -337,9 +342,17 @@ mod tests {
     fn json_lines_become_reports() {
         let mut pending = VecDeque::from([(2, command(1)), (3, command(2))]);
         // The subscription's reply is no command's.
-        assert!(json_line_reports(&json!({"reply": 1, "subscribed": []}), &mut pending, 5.0).is_empty());
-        let r = json_line_reports(&json!({"reply": 2, "accepted": "goby.example.Command", "id": 4}), &mut pending, 5.0);
-        let [Report::Accepted(a)] = r.as_slice() else { panic!("{r:?}") };
+        assert!(
+            json_line_reports(&json!({"reply": 1, "subscribed": []}), &mut pending, 5.0).is_empty()
+        );
+        let r = json_line_reports(
+            &json!({"reply": 2, "accepted": "goby.example.Command", "id": 4}),
+            &mut pending,
+            5.0,
+        );
+        let [Report::Accepted(a)] = r.as_slice() else {
+            panic!("{r:?}")
+        };
         assert_eq!(a.id, json!(4));
         assert_eq!(a.msg, json!({"destination": 2}));
         let r = json_line_reports(&json!({"reply": 3, "error": "no"}), &mut pending, 5.0);
@@ -357,11 +370,25 @@ mod tests {
             &mut pending,
             5.0,
         );
-        let [Report::Link(l)] = r.as_slice() else { panic!("{r:?}") };
+        let [Report::Link(l)] = r.as_slice() else {
+            panic!("{r:?}")
+        };
         assert_eq!((l.src, l.frames, l.time), (1, 2, 2.5));
         assert_eq!(l.stats.as_ref().unwrap().snr_in, Some(7.0));
-        let r = json_line_reports(&json!({"event": "ack", "ack": "T", "by": 2, "frame": 0, "msg": {}}), &mut pending, 5.0);
-        assert!(matches!(r.as_slice(), [Report::Queued(QueueNotice { kind: QueueKind::Ack { by: 2, .. }, .. })]));
-        assert!(json_line_reports(&json!({"event": "raw", "raw": "in"}), &mut pending, 5.0).is_empty());
+        let r = json_line_reports(
+            &json!({"event": "ack", "ack": "T", "by": 2, "frame": 0, "msg": {}}),
+            &mut pending,
+            5.0,
+        );
+        assert!(matches!(
+            r.as_slice(),
+            [Report::Queued(QueueNotice {
+                kind: QueueKind::Ack { by: 2, .. },
+                ..
+            })]
+        ));
+        assert!(
+            json_line_reports(&json!({"event": "raw", "raw": "in"}), &mut pending, 5.0).is_empty()
+        );
     }
 }

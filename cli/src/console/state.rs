@@ -248,9 +248,7 @@ impl ConsoleState {
                 let (lat, lon) = match self.origin {
                     Some((lat0, lon0)) => (
                         Some(lat0 + (y / EARTH_RADIUS).to_degrees()),
-                        Some(
-                            lon0 + (x / (EARTH_RADIUS * lat0.to_radians().cos())).to_degrees(),
-                        ),
+                        Some(lon0 + (x / (EARTH_RADIUS * lat0.to_radians().cos())).to_degrees()),
                     ),
                     None => (None, None),
                 };
@@ -315,7 +313,10 @@ impl ConsoleState {
                     "id": a.id, "topic": a.topic, "msg": a.msg,
                 });
                 self.log(entry, &mut events);
-                let source = a.msg.as_object().and_then(|m| number(m, &["source", "src"]));
+                let source = a
+                    .msg
+                    .as_object()
+                    .and_then(|m| number(m, &["source", "src"]));
                 let sender = match source {
                     Some(id) if Some(id as i64) != self.extra[node].modem_id => {
                         self.node_of_modem(id as i64)
@@ -363,7 +364,15 @@ impl ConsoleState {
                     entry["frame"] = frame.into();
                 }
                 self.log(entry, &mut events);
-                self.settle(node, &notice.type_name, &notice.msg, state, note, time, &mut events);
+                self.settle(
+                    node,
+                    &notice.type_name,
+                    &notice.msg,
+                    state,
+                    note,
+                    time,
+                    &mut events,
+                );
             }
             Report::Error { error, topic } => {
                 self.extra.get_mut(node).expect("entered").errors += 1;
@@ -371,11 +380,9 @@ impl ConsoleState {
                     "kind": "error", "node": node, "time": time, "topic": topic, "error": error,
                 });
                 self.log(entry, &mut events);
-                if let Some(c) = self
-                    .commands
-                    .iter_mut()
-                    .find(|c| c.state == CommandState::Published && c.node == node && &c.topic == topic)
-                {
+                if let Some(c) = self.commands.iter_mut().find(|c| {
+                    c.state == CommandState::Published && c.node == node && &c.topic == topic
+                }) {
                     c.state = CommandState::Refused;
                     c.note = error.clone();
                     c.changed = time;
@@ -387,8 +394,13 @@ impl ConsoleState {
             Report::Queue { .. } | Report::Mac { .. } => {}
         }
         let summary = self.node_json(node, false);
-        events.insert(0, json!({"event": "node", "seq": summary_seq, "node": summary}));
-        debug_assert!(events.windows(2).all(|w| w[0]["seq"].as_u64() < w[1]["seq"].as_u64()));
+        events.insert(
+            0,
+            json!({"event": "node", "seq": summary_seq, "node": summary}),
+        );
+        debug_assert!(events
+            .windows(2)
+            .all(|w| w[0]["seq"].as_u64() < w[1]["seq"].as_u64()));
         events
     }
 
@@ -472,9 +484,8 @@ impl ConsoleState {
             .and_then(|m| number(m, &["time", "t", "timestamp"]))
             .filter(|t| *t > 1e9 && *t < 1e11)
             .unwrap_or(time);
-        let depth = obj.and_then(|m| {
-            number(m, &["depth", "dep"]).or_else(|| number(m, &["z"]).map(|z| -z))
-        });
+        let depth = obj
+            .and_then(|m| number(m, &["depth", "dep"]).or_else(|| number(m, &["z"]).map(|z| -z)));
         let point = TrackPoint {
             time: reported,
             at,
@@ -485,8 +496,7 @@ impl ConsoleState {
         e.last_heard = e.last_heard.max(time);
         // The same report seen twice (queued at its sender, received at
         // another gateway) is one point.
-        if e
-            .track
+        if e.track
             .iter()
             .rev()
             .take(8)
@@ -717,16 +727,32 @@ mod tests {
     #[test]
     fn positions_place_their_senders_once() {
         let mut s = state();
-        apply(&mut s, "fleet/auv1/status", r#"{"online": true, "modem_id": 1, "time": 90}"#);
-        apply(&mut s, "fleet/auv2/status", r#"{"online": true, "modem_id": 2, "time": 90}"#);
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1, "time": 90}"#,
+        );
+        apply(
+            &mut s,
+            "fleet/auv2/status",
+            r#"{"online": true, "modem_id": 2, "time": 90}"#,
+        );
         // auv1 queues its report; auv2 receives it: one point of auv1.
-        let report = r#"{"source": 1, "destination": 2, "time": 95, "x": 10, "y": 20, "z": -4}"#;
+        let report =
+            r#"{"source": 1, "destination": 2, "time": 1796190000, "x": 10, "y": 20, "z": -4}"#;
         let events = apply(
             &mut s,
             "fleet/auv1/accepted",
-            &format!(r#"{{"accepted": "goby.example.NavigationReport", "id": 7, "topic": "fleet/auv1/tx/goby.example.NavigationReport", "msg": {report}}}"#),
+            &format!(
+                r#"{{"accepted": "goby.example.NavigationReport", "id": 7, "topic": "fleet/auv1/tx/goby.example.NavigationReport", "msg": {report}}}"#
+            ),
         );
-        assert!(events.iter().any(|e| e["event"] == "track" && e["node"] == "auv1"), "{events:?}");
+        assert!(
+            events
+                .iter()
+                .any(|e| e["event"] == "track" && e["node"] == "auv1"),
+            "{events:?}"
+        );
         apply(
             &mut s,
             "fleet/auv2/rx/goby.example.NavigationReport",
@@ -744,7 +770,9 @@ mod tests {
         assert_eq!(auv1["track"].as_array().unwrap().len(), 1, "{auv1}");
         assert_eq!(auv1["position"]["x"], 10.0);
         assert_eq!(auv1["position"]["depth"], 4.0);
-        assert_eq!(auv1["last_heard"], 99.0);
+        // The report's own time, not when it was heard.
+        assert_eq!(auv1["position"]["t"], 1796190000.0);
+        assert_eq!(auv1["last_heard"], 100.0);
         let heard = nodes.iter().find(|n| n["name"] == "modem 5").unwrap();
         assert_eq!(heard["bridged"], false);
         assert_eq!(heard["position"]["lat"], 41.5);
@@ -753,12 +781,28 @@ mod tests {
         assert_eq!(heard["position"]["x"], 0.0);
         assert_eq!(snap["messages"].as_array().unwrap().len(), 3);
         // The node that names modem id 5 later takes what was heard of it.
-        let events = apply(&mut s, "fleet/buoy/status", r#"{"online": true, "modem_id": 5}"#);
-        assert!(events.iter().any(|e| e["event"] == "gone" && e["node"] == "modem 5"));
+        let events = apply(
+            &mut s,
+            "fleet/buoy/status",
+            r#"{"online": true, "modem_id": 5}"#,
+        );
+        assert!(events
+            .iter()
+            .any(|e| e["event"] == "gone" && e["node"] == "modem 5"));
         let snap = s.snapshot();
-        let buoy = snap["nodes"].as_array().unwrap().iter().find(|n| n["name"] == "buoy").unwrap().clone();
+        let buoy = snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["name"] == "buoy")
+            .unwrap()
+            .clone();
         assert_eq!(buoy["track"].as_array().unwrap().len(), 1, "{buoy}");
-        assert!(!snap["nodes"].as_array().unwrap().iter().any(|n| n["name"] == "modem 5"));
+        assert!(!snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n["name"] == "modem 5"));
     }
 
     #[test]
@@ -778,27 +822,47 @@ mod tests {
     #[test]
     fn a_command_is_accepted_then_acked() {
         let mut s = state();
-        apply(&mut s, "fleet/auv1/status", r#"{"online": true, "modem_id": 1}"#);
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1}"#,
+        );
         let msg = json!({"destination": 2, "action": "GOTO"});
         let topic = "fleet/auv1/tx/goby.example.Command";
         let (id, _) = s.command_sent("auv1", "goby.example.Command", topic, &msg, 100.0);
-        let (other, _) = s.command_sent("auv1", "goby.example.Command", topic, &json!({"destination": 3}), 100.0);
+        let (other, _) = s.command_sent(
+            "auv1",
+            "goby.example.Command",
+            topic,
+            &json!({"destination": 3}),
+            100.0,
+        );
         assert_eq!(s.command_state(id), Some(CommandState::Published));
         let events = apply(
             &mut s,
             "fleet/auv1/accepted",
-            &format!(r#"{{"accepted": "goby.example.Command", "id": 9, "topic": "{topic}", "msg": {msg}}}"#),
+            &format!(
+                r#"{{"accepted": "goby.example.Command", "id": 9, "topic": "{topic}", "msg": {msg}}}"#
+            ),
         );
-        assert!(events.iter().any(|e| e["event"] == "command" && e["command"]["state"] == "accepted"));
+        assert!(events
+            .iter()
+            .any(|e| e["event"] == "command" && e["command"]["state"] == "accepted"));
         assert_eq!(s.command_state(id), Some(CommandState::Accepted));
         assert_eq!(s.command_state(other), Some(CommandState::Published));
         apply(
             &mut s,
             "fleet/auv1/ack/goby.example.Command",
-            &format!(r#"{{"type": "goby.example.Command", "by": 2, "frame": 0, "time": 120, "msg": {msg}}}"#),
+            &format!(
+                r#"{{"type": "goby.example.Command", "by": 2, "frame": 0, "time": 120, "msg": {msg}}}"#
+            ),
         );
         assert_eq!(s.command_state(id), Some(CommandState::Acked));
-        apply(&mut s, "fleet/auv1/error", &format!(r#"{{"error": "no", "topic": "{topic}"}}"#));
+        apply(
+            &mut s,
+            "fleet/auv1/error",
+            &format!(r#"{{"error": "no", "topic": "{topic}"}}"#),
+        );
         assert_eq!(s.command_state(other), Some(CommandState::Refused));
         let snap = s.snapshot();
         let node = &snap["nodes"][0];
@@ -810,7 +874,11 @@ mod tests {
     #[test]
     fn the_events_of_a_report_are_numbered_in_their_order() {
         let mut s = state();
-        apply(&mut s, "fleet/auv1/status", r#"{"online": true, "modem_id": 1}"#);
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1}"#,
+        );
         let events = apply(
             &mut s,
             "fleet/auv2/rx/goby.example.NavigationReport",
@@ -831,9 +899,19 @@ mod tests {
             r#"{"src": 1, "dest": 2, "rate": 1, "frames": 2, "time": 50,
                 "receive_stat": [{"snr_in": 12, "snr_out": 9, "doppler": -0.4, "number_bad_frames": 1, "number_frames": 2}]}"#,
         );
-        apply(&mut s, "fleet/auv2/link", r#"{"src": 1, "rate": 2, "frames": 1, "time": 60}"#);
+        apply(
+            &mut s,
+            "fleet/auv2/link",
+            r#"{"src": 1, "rate": 2, "frames": 1, "time": 60}"#,
+        );
         let snap = s.snapshot();
-        let auv2 = snap["nodes"].as_array().unwrap().iter().find(|n| n["name"] == "auv2").unwrap().clone();
+        let auv2 = snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["name"] == "auv2")
+            .unwrap()
+            .clone();
         let links = auv2["links"].as_array().unwrap();
         assert_eq!(links.len(), 2);
         assert_eq!(links[0]["snr_in"], 12.0);
@@ -841,6 +919,10 @@ mod tests {
         assert_eq!(links[0]["bad_frames"], 1);
         assert!(links[1].get("snr_in").is_none());
         // The sender, heard over the link.
-        assert!(snap["nodes"].as_array().unwrap().iter().any(|n| n["name"] == "modem 1"));
+        assert!(snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n["name"] == "modem 1"));
     }
 }

@@ -188,8 +188,6 @@ function renderNodes() {
 
 function pick(name) {
   S.picked = name;
-  const sel = $('cmd-node');
-  if ([...sel.options].some((o) => o.value === name)) sel.value = name;
   renderMessages(true);
   schedule();
 }
@@ -728,7 +726,6 @@ async function loadForms() {
 
 mapSetup();
 $('commander').addEventListener('submit', send);
-$('cmd-node').addEventListener('change', () => { if ($('cmd-node').value) pick($('cmd-node').value); });
 $('msg-selected').addEventListener('change', () => renderMessages());
 setInterval(schedule, 1000);   // ages move on
 loadForms().catch((e) => goby.errors.push(String(e)));
