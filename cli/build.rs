@@ -17,11 +17,6 @@ fn main() {
     println!("cargo::rustc-check-cfg=cfg(chromium)");
     println!("cargo::rerun-if-env-changed=GOBY_CHROMIUM");
     println!("cargo::rerun-if-changed=build.rs");
-    for path in KNOWN {
-        // A path that does not exist makes the script run again on the
-        // next build: an install is then noticed.
-        println!("cargo::rerun-if-changed={path}");
-    }
     let given = std::env::var_os("GOBY_CHROMIUM").map(PathBuf::from);
     let found = given.filter(|p| p.is_file()).or_else(|| {
         KNOWN
@@ -30,8 +25,18 @@ fn main() {
             .find(|p| p.is_file())
             .map(Path::to_path_buf)
     });
-    if let Some(path) = found {
-        println!("cargo::rustc-cfg=chromium");
-        println!("cargo::rustc-env=GOBY_CHROMIUM_PATH={}", path.display());
+    match found {
+        Some(path) => {
+            // Run again when it is replaced or removed.
+            println!("cargo::rerun-if-changed={}", path.display());
+            println!("cargo::rustc-cfg=chromium");
+            println!("cargo::rustc-env=GOBY_CHROMIUM_PATH={}", path.display());
+        }
+        None => {
+            // Run again when a program is installed where Debian's package
+            // puts it (a path that does not exist would make the script,
+            // and the crate, build again every time).
+            println!("cargo::rerun-if-changed=/usr/bin");
+        }
     }
 }
