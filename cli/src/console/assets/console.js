@@ -80,6 +80,11 @@ function applySnapshot(snap) {
   S.source = snap.source;
   if (snap.connection) S.connection = snap.connection;
   goby.snapshots += 1;
+  // The first gateway is picked until the operator picks another.
+  if (S.picked === null || !S.nodes.has(S.picked)) {
+    const first = [...S.nodes.values()].filter((n) => n.bridged).map((n) => n.name).sort()[0];
+    S.picked = first ?? null;
+  }
   renderMessages(true);
   renderCommands();
   updateNodeChoices();
@@ -280,9 +285,15 @@ function drawMap() {
     ctx.globalAlpha = 1;
     for (const p of track.slice(0, -1)) { ctx.fillStyle = color; ctx.fillRect(X(p.x) - 1.5, Y(p.y) - 1.5, 3, 3); }
     const last = track[track.length - 1];
-    ctx.fillStyle = color;
-    ctx.beginPath(); ctx.arc(X(last.x), Y(last.y), name === S.picked ? 8 : 6, 0, 2 * Math.PI); ctx.fill();
-    ctx.strokeStyle = '#fff'; ctx.lineWidth = 2; ctx.stroke();
+    // A gateway is a disc; a node heard only over the link, a ring.
+    ctx.beginPath(); ctx.arc(X(last.x), Y(last.y), name === S.picked ? 8 : 6, 0, 2 * Math.PI);
+    if (n.bridged) {
+      ctx.fillStyle = color; ctx.fill();
+      ctx.strokeStyle = '#fff'; ctx.lineWidth = 2; ctx.stroke();
+    } else {
+      ctx.fillStyle = '#fff'; ctx.fill();
+      ctx.strokeStyle = color; ctx.lineWidth = 3; ctx.stroke();
+    }
     ctx.fillStyle = '#10222e';
     ctx.font = '600 12px system-ui, sans-serif';
     ctx.fillText(name, X(last.x) + 10, Y(last.y) - 2);
