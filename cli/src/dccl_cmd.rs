@@ -598,7 +598,7 @@ fn split_type_prefix(line: &str) -> Result<(Option<&str>, &str), String> {
 /// the time of day only, and the receiver puts it within 12 hours of its
 /// own clock, so a time further than that from the clock comes back on
 /// another day.
-fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String> {
+pub(crate) fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String> {
     let name = sent.descriptor().full_name().to_string();
     let has_time = sent.descriptor().fields().any(|f| {
         dccl::field::field_options(&f)

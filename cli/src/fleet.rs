@@ -48,21 +48,21 @@ impl Fleet {
     /// when it concerns a node (`None` for topics outside the picture,
     /// such as `tx` topics or payloads that are not JSON).
     pub fn update(&mut self, topic: &str, payload: &[u8]) -> Option<String> {
-        let rest = topic.strip_prefix(&self.prefix)?.strip_prefix('/')?;
-        let (node, leaf) = rest.split_once('/')?;
-        if node == "all" || leaf.starts_with("tx/") {
-            return None;
-        }
-        let value: Value = serde_json::from_slice(payload).ok()?;
+        let (node, report) = Report::parse(&self.prefix, topic, payload)?;
+        self.apply(&node, &report)
+    }
+
+    /// Takes one typed report of `node` into the picture; the line saying
+    /// what it was (`None` for a status refresh that changes nothing, and
+    /// for the bridge's slot notices, which the table does not show).
+    pub fn apply(&mut self, node: &str, report: &Report) -> Option<String> {
         let view = self.nodes.entry(node.to_string()).or_default();
-        let time = value["time"].as_f64().unwrap_or(0.0);
-        let (kind, type_name) = leaf.split_once('/').unwrap_or((leaf, ""));
-        let note = match kind {
-            "status" => {
+        let note = match report {
+            Report::Status(status) => {
                 let before = (view.online, view.reconnects, view.dropped);
-                view.online = value["online"].as_bool();
-                view.reconnects = value["reconnects"].as_u64().unwrap_or(0);
-                view.dropped = value["dropped"].as_u64().unwrap_or(0);
+                view.online = status.online;
+                view.reconnects = status.reconnects;
+                view.dropped = status.dropped;
                 if before == (view.online, view.reconnects, view.dropped) {
                     // The periodic refresh: nothing new to say.
                     return None;
@@ -75,47 +75,45 @@ impl Fleet {
                     ),
                 }
             }
-            "queue" => {
-                let size = value["size"].as_u64().unwrap_or(0);
-                view.queues.insert(type_name.to_string(), size);
+            Report::Queue { type_name, size } => {
+                view.queues.insert(type_name.clone(), *size);
                 format!("queue {type_name} {size}")
             }
-            "link" => {
-                let src = value["src"].as_i64().unwrap_or(-1);
-                let rate = value["rate"].as_i64().unwrap_or(0);
-                view.link = Some((src, rate, time));
-                format!("heard {src} at rate {rate}")
+            Report::Link(link) => {
+                view.link = Some((link.src, link.rate, link.time));
+                format!("heard {} at rate {}", link.src, link.rate)
             }
-            "driver" => {
-                let status = value["status"].as_str().unwrap_or("?").to_string();
+            Report::Driver { status, .. } => {
                 view.driver = Some(status.clone());
                 format!("driver {status}")
             }
-            "rx" => {
-                let note = format!("from {} to {}", value["src"], value["dest"]);
-                view.last.insert(leaf.to_string(), (time, note.clone()));
-                format!("rx {type_name} {note}")
+            Report::Rx(rx) => {
+                let note = format!("from {} to {}", rx.src, rx.dest);
+                view.last
+                    .insert(format!("rx/{}", rx.type_name), (rx.time, note.clone()));
+                format!("rx {} {note}", rx.type_name)
             }
-            "ack" => {
-                let note = format!("by {}", value["by"]);
-                view.last.insert(leaf.to_string(), (time, note.clone()));
+            Report::Queued(QueueNotice {
+                kind: QueueKind::Ack { by, .. },
+                type_name,
+                time,
+                ..
+            }) => {
+                let note = format!("by {by}");
+                view.last
+                    .insert(format!("ack/{type_name}"), (*time, note.clone()));
                 format!("ack {type_name} {note}")
             }
-            "expire" | "drop" => {
-                view.last.insert(leaf.to_string(), (time, String::new()));
+            Report::Queued(notice) => {
+                let kind = notice.kind.word();
+                let type_name = &notice.type_name;
+                view.last
+                    .insert(format!("{kind}/{type_name}"), (notice.time, String::new()));
                 format!("{kind} {type_name}")
             }
-            "error" => format!(
-                "error {}: {}",
-                value["topic"].as_str().unwrap_or("?"),
-                value["error"].as_str().unwrap_or("?")
-            ),
-            "accepted" => format!(
-                "accepted {} id {}",
-                value["accepted"].as_str().unwrap_or("?"),
-                value["id"]
-            ),
-            _ => return None,
+            Report::Error { error, topic } => format!("error {topic}: {error}"),
+            Report::Accepted(a) => format!("accepted {} id {}", a.type_name, a.id),
+            Report::Mac { .. } => return None,
         };
         Some(format!("{node} {note}"))
     }
@@ -161,6 +159,301 @@ impl Fleet {
             );
         }
         out
+    }
+}
+
+/// One publication of a gateway under `PREFIX/NODE/`, typed (the topics
+/// and payloads of docs/mqtt-fleet.md; times in seconds since the UNIX
+/// epoch, 0 when the payload has none).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Report {
+    /// `status` (retained): the bridge's state.
+    Status(BridgeStatus),
+    /// `queue/TYPE` (retained): messages of the type waiting to be sent.
+    Queue {
+        /// Full name of the message type.
+        type_name: String,
+        /// Messages queued.
+        size: u64,
+    },
+    /// `link` (retained): the last reception.
+    Link(LinkReport),
+    /// `driver` (retained): the driver's last state.
+    Driver {
+        /// Its kind (`ready`, a fault, a recovery: the JSON `driver_status`).
+        status: String,
+        /// In words.
+        detail: String,
+        /// When it was reported.
+        time: f64,
+    },
+    /// `rx/TYPE`: a message received.
+    Rx(RxReport),
+    /// `ack/TYPE`, `expire/TYPE`, `drop/TYPE`: the queue's events.
+    Queued(QueueNotice),
+    /// `accepted`: a message from a `tx` topic queued and on disk.
+    Accepted(AcceptedReport),
+    /// `error`: a `tx` publication that was not queued.
+    Error {
+        /// The reason.
+        error: String,
+        /// The topic it was published on.
+        topic: String,
+    },
+    /// `mac`: a TDMA slot this node transmits in.
+    Mac {
+        /// Its rate.
+        rate: i64,
+        /// Its length, seconds.
+        slot_seconds: f64,
+        /// When it started.
+        time: f64,
+    },
+}
+
+/// The retained `status` of a gateway's bridge.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BridgeStatus {
+    /// Whether its bridge is connected (`false`: the broker's last will).
+    pub online: Option<bool>,
+    /// The gateway's modem id.
+    pub modem_id: Option<i64>,
+    /// Reconnections to the broker.
+    pub reconnects: u64,
+    /// Publications its bridge dropped while the broker was away.
+    pub dropped: u64,
+    /// When it was published.
+    pub time: f64,
+}
+
+/// A reception (`link`, or the `link` of an `rx/TYPE`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkReport {
+    /// Modem id of the sender (-1 when not said).
+    pub src: i64,
+    /// Modem id it was addressed to (-1: broadcast, or not said).
+    pub dest: i64,
+    /// Its rate.
+    pub rate: i64,
+    /// Frames it carried.
+    pub frames: u64,
+    /// When it was received.
+    pub time: f64,
+    /// The WHOI Micro-Modem's receive statistics (`$CACST`) of its last
+    /// packet, when the driver reported them.
+    pub stats: Option<ReceiveStats>,
+}
+
+/// What a WHOI Micro-Modem says of a packet it received (`receive_stat`,
+/// from `$CACST`): each `None` when the modem's layout lacks it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReceiveStats {
+    /// Signal-to-noise ratio at the equalizer's input, dB.
+    pub snr_in: Option<f64>,
+    /// Signal-to-noise ratio at the equalizer's output, dB.
+    pub snr_out: Option<f64>,
+    /// Signal-to-noise ratio of the received signal strength, dB.
+    pub snr_rss: Option<f64>,
+    /// Doppler shift, m/s.
+    pub doppler: Option<f64>,
+    /// Frames that failed their CRC.
+    pub bad_frames: Option<u64>,
+    /// Frames expected.
+    pub frames: Option<u64>,
+    /// Data quality factor (FSK), 0-255.
+    pub data_quality_factor: Option<f64>,
+}
+
+/// A message received (`rx/TYPE`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RxReport {
+    /// Full name of its type.
+    pub type_name: String,
+    /// Its source and destination modem ids.
+    pub src: i64,
+    /// Its destination modem id.
+    pub dest: i64,
+    /// When it was handed over.
+    pub time: f64,
+    /// The message, proto3 JSON.
+    pub msg: Value,
+    /// The reception it came in (none after a restart, or looped back).
+    pub link: Option<LinkReport>,
+}
+
+/// An event of a gateway's queue about one of its messages.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QueueNotice {
+    /// What happened.
+    pub kind: QueueKind,
+    /// Full name of the message's type.
+    pub type_name: String,
+    /// When.
+    pub time: f64,
+    /// The message, proto3 JSON.
+    pub msg: Value,
+}
+
+/// What happened to a queued message.
+#[derive(Debug, Clone, PartialEq)]
+pub enum QueueKind {
+    /// Acknowledged by modem id `by`, in frame `frame`.
+    Ack {
+        /// The acknowledging modem id.
+        by: i64,
+        /// The frame it came in.
+        frame: i64,
+    },
+    /// Its time to live ran out.
+    Expire,
+    /// Pushed out of its full queue.
+    Drop,
+}
+
+impl QueueKind {
+    /// The topic word: `ack`, `expire`, `drop`.
+    pub fn word(&self) -> &'static str {
+        match self {
+            QueueKind::Ack { .. } => "ack",
+            QueueKind::Expire => "expire",
+            QueueKind::Drop => "drop",
+        }
+    }
+}
+
+/// A message from a `tx` topic that a gateway queued (`accepted`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AcceptedReport {
+    /// Full name of its type.
+    pub type_name: String,
+    /// Its journal id (`Null` for a message addressed to the gateway itself).
+    pub id: Value,
+    /// The topic it was published on.
+    pub topic: String,
+    /// The message as published.
+    pub msg: Value,
+}
+
+impl Report {
+    /// The report of a publication on `topic` under `prefix` (without its
+    /// trailing `/`), with the node it concerns; `None` for a topic outside
+    /// the picture (another prefix, `tx` topics, `all/...`, a kind not
+    /// listed) or a payload that is not a JSON object.
+    pub fn parse(prefix: &str, topic: &str, payload: &[u8]) -> Option<(String, Report)> {
+        let rest = topic.strip_prefix(prefix)?.strip_prefix('/')?;
+        let (node, leaf) = rest.split_once('/')?;
+        if node.is_empty() || node == "all" || leaf.starts_with("tx/") {
+            return None;
+        }
+        let value: Value = serde_json::from_slice(payload).ok()?;
+        if !value.is_object() {
+            return None;
+        }
+        let (kind, type_name) = leaf.split_once('/').unwrap_or((leaf, ""));
+        Some((
+            node.to_string(),
+            Report::from_json(kind, type_name, &value)?,
+        ))
+    }
+
+    /// The report of a payload of topic kind `kind` (`status`, `rx`, ...)
+    /// and type `type_name` (for `rx`, `queue`, `ack`, `expire`, `drop`;
+    /// otherwise empty).
+    pub fn from_json(kind: &str, type_name: &str, value: &Value) -> Option<Report> {
+        let time = value["time"].as_f64().unwrap_or(0.0);
+        let typed = |name: &str| -> String {
+            if name.is_empty() {
+                value["type"].as_str().unwrap_or("?").to_string()
+            } else {
+                name.to_string()
+            }
+        };
+        Some(match kind {
+            "status" => Report::Status(BridgeStatus {
+                online: value["online"].as_bool(),
+                modem_id: value["modem_id"].as_i64(),
+                reconnects: value["reconnects"].as_u64().unwrap_or(0),
+                dropped: value["dropped"].as_u64().unwrap_or(0),
+                time,
+            }),
+            "queue" => Report::Queue {
+                type_name: typed(type_name),
+                size: value["size"].as_u64().unwrap_or(0),
+            },
+            "link" => Report::Link(LinkReport::from_json(value)),
+            "driver" => Report::Driver {
+                status: value["status"].as_str().unwrap_or("?").to_string(),
+                detail: value["detail"].as_str().unwrap_or("").to_string(),
+                time,
+            },
+            "rx" => Report::Rx(RxReport {
+                type_name: typed(type_name),
+                src: value["src"].as_i64().unwrap_or(-1),
+                dest: value["dest"].as_i64().unwrap_or(-1),
+                time,
+                msg: value["msg"].clone(),
+                link: value
+                    .get("link")
+                    .filter(|l| l.is_object())
+                    .map(LinkReport::from_json),
+            }),
+            "ack" | "expire" | "drop" => Report::Queued(QueueNotice {
+                kind: match kind {
+                    "ack" => QueueKind::Ack {
+                        by: value["by"].as_i64().unwrap_or(-1),
+                        frame: value["frame"].as_i64().unwrap_or(-1),
+                    },
+                    "expire" => QueueKind::Expire,
+                    _ => QueueKind::Drop,
+                },
+                type_name: typed(type_name),
+                time,
+                msg: value["msg"].clone(),
+            }),
+            "accepted" => Report::Accepted(AcceptedReport {
+                type_name: value["accepted"].as_str().unwrap_or("?").to_string(),
+                id: value["id"].clone(),
+                topic: value["topic"].as_str().unwrap_or("").to_string(),
+                msg: value["msg"].clone(),
+            }),
+            "error" => Report::Error {
+                error: value["error"].as_str().unwrap_or("?").to_string(),
+                topic: value["topic"].as_str().unwrap_or("?").to_string(),
+            },
+            "mac" => Report::Mac {
+                rate: value["rate"].as_i64().unwrap_or(0),
+                slot_seconds: value["slot_seconds"].as_f64().unwrap_or(0.0),
+                time,
+            },
+            _ => return None,
+        })
+    }
+}
+
+impl LinkReport {
+    /// A reception from its JSON form (gobyd's `LinkSummary`: the
+    /// `ModemTransmission` without its frames' bytes, `frames`, `time`).
+    pub fn from_json(value: &Value) -> LinkReport {
+        let stats = value["receive_stat"]
+            .as_array()
+            .and_then(|s| s.last())
+            .map(|s| ReceiveStats {
+                snr_in: s["snr_in"].as_f64(),
+                snr_out: s["snr_out"].as_f64(),
+                snr_rss: s["snr_rss"].as_f64(),
+                doppler: s["doppler"].as_f64(),
+                bad_frames: s["number_bad_frames"].as_u64(),
+                frames: s["number_frames"].as_u64(),
+                data_quality_factor: s["data_quality_factor"].as_f64(),
+            });
+        LinkReport {
+            src: value["src"].as_i64().unwrap_or(-1),
+            dest: value["dest"].as_i64().unwrap_or(-1),
+            rate: value["rate"].as_i64().unwrap_or(0),
+            frames: value["frames"].as_u64().unwrap_or(0),
+            time: value["time"].as_f64().unwrap_or(0.0),
+            stats,
+        }
     }
 }
 

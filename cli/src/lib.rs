@@ -30,6 +30,10 @@
 //! (bits per delta, as thesis Table 3.2) and computes the cost per sample
 //! under frame loss (Fig. 3.10a) as a table, a CSV file and a PNG plot.
 //!
+//! `goby console` serves the fleet as a web page on a local port: a map,
+//! each node's queues, link quality and messages, and a commander whose
+//! forms come from the `.proto` files ([`console`]).
+//!
 //! `goby moos poke` writes MOOS variables and `goby moos spy` prints their
 //! notifications ([`moos_cmd`]), so a MOOS community needs nothing beyond
 //! its MOOSDB.
@@ -50,6 +54,7 @@
 mod address;
 pub mod amac_cmd;
 mod byte_text;
+pub mod console;
 pub mod dccl_cmd;
 pub mod dccl_tool;
 pub mod fleet;
@@ -118,6 +123,10 @@ pub enum GobyCommand {
     /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.
     #[command(subcommand)]
     Mqtt(mqtt_cmd::MqttCommand),
+    /// The fleet in a web browser: a map, the nodes' queues, links and
+    /// messages, and a commander (from the MQTT broker, or one gobyd's JSON
+    /// interface).
+    Console(console::ConsoleArgs),
     /// A MOOS community: write variables (poke) and watch them (spy).
     #[command(subcommand)]
     Moos(moos_cmd::MoosCommand),
@@ -212,6 +221,7 @@ pub fn run_goby(
         GobyCommand::Position(cmd) => position_cmd::run(&cmd, stdout),
         GobyCommand::Modem(cmd) => modem_cmd::run(&cmd, stdout),
         GobyCommand::Mqtt(cmd) => mqtt_cmd::run(&cmd, stdout),
+        GobyCommand::Console(args) => console::run(&args, stdout),
         GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
         GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
         GobyCommand::Man(args) => generate_cmd::man(&args, stdout),

@@ -28,6 +28,8 @@ fn completion_scripts_name_the_subcommands_and_their_options() {
         "position",
         "modem",
         "mqtt",
+        "console",
+        "--origin",
         "moos",
         "poke",
         "spy",
@@ -90,6 +92,10 @@ fn man_writes_a_page_per_subcommand_with_its_options() {
         ("goby-dccl.1", &["encode"]),
         ("goby-dccl-encode.1", &["\\-\\-message"]),
         ("goby-mqtt-watch.1", &["\\-\\-broker", "\\-\\-once"]),
+        (
+            "goby-console.1",
+            &["\\-\\-origin", "\\-\\-gobyd", "\\-\\-listen"],
+        ),
         (
             "goby-moos-poke.1",
             &[

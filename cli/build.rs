@@ -1,0 +1,42 @@
+//! Finds Chromium for the console's browser test (`tests/console.rs`):
+//! with it, `cfg(chromium)` is set and `GOBY_CHROMIUM_PATH` names it; the
+//! test is ignored without it, saying why. `GOBY_CHROMIUM` names another
+//! build. Nothing else of the crate depends on it.
+
+use std::path::{Path, PathBuf};
+
+/// Where Debian's package (`.ci/chromium.sh`) and others put it.
+const KNOWN: [&str; 4] = [
+    "/usr/bin/chromium",
+    "/usr/bin/chromium-browser",
+    "/usr/lib/chromium/chromium",
+    "/snap/bin/chromium",
+];
+
+fn main() {
+    println!("cargo::rustc-check-cfg=cfg(chromium)");
+    println!("cargo::rerun-if-env-changed=GOBY_CHROMIUM");
+    println!("cargo::rerun-if-changed=build.rs");
+    let given = std::env::var_os("GOBY_CHROMIUM").map(PathBuf::from);
+    let found = given.filter(|p| p.is_file()).or_else(|| {
+        KNOWN
+            .iter()
+            .map(Path::new)
+            .find(|p| p.is_file())
+            .map(Path::to_path_buf)
+    });
+    match found {
+        Some(path) => {
+            // Run again when it is replaced or removed.
+            println!("cargo::rerun-if-changed={}", path.display());
+            println!("cargo::rustc-cfg=chromium");
+            println!("cargo::rustc-env=GOBY_CHROMIUM_PATH={}", path.display());
+        }
+        None => {
+            // Run again when a program is installed where Debian's package
+            // puts it (a path that does not exist would make the script,
+            // and the crate, build again every time).
+            println!("cargo::rerun-if-changed=/usr/bin");
+        }
+    }
+}

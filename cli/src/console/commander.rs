@@ -1,0 +1,204 @@
+//! The commander's codec: the DCCL types of the `-f` files, their forms
+//! ([`schema`](super::schema)), and the check of a draft before it is
+//! sent — what the codec would change (values out of range, truncated,
+//! rounded to their precision, times moved to another day), its size, and
+//! the message as its receiver would decode it.
+
+use std::collections::HashMap;
+use std::io::Write;
+
+use dccl::Codec;
+use prost_reflect::{DynamicMessage, MessageDescriptor, SerializeOptions};
+use serde_json::{json, Value};
+
+use super::schema::message_form;
+use super::state::SameMessage;
+use crate::dccl_cmd::{moved_times, Definitions};
+use crate::CliError;
+
+/// The loaded DCCL types and their forms.
+pub struct Commander {
+    codec: Codec,
+    types: Vec<String>,
+    descriptors: HashMap<String, MessageDescriptor>,
+}
+
+/// A message as proto3 JSON with the `.proto` field names, each float in
+/// its shortest form (as gobyd writes messages).
+pub fn message_json(message: &DynamicMessage) -> Value {
+    let options = SerializeOptions::new().use_proto_field_name(true);
+    let mut text = Vec::new();
+    message
+        .serialize_with_options(&mut serde_json::Serializer::new(&mut text), &options)
+        .map_err(|e| e.to_string())
+        .and_then(|()| serde_json::from_slice(&text).map_err(|e| e.to_string()))
+        .unwrap_or_else(|e| json!({ "unserializable": e }))
+}
+
+impl Commander {
+    /// Loads every valid DCCL type of the `-f` files (each skipped one is
+    /// named on `stderr` with its reason).
+    pub(crate) fn load(defs: &Definitions, stderr: &mut dyn Write) -> Result<Self, CliError> {
+        let mut codec = defs.new_codec(None, false)?;
+        let types = defs.load_valid(&mut codec, stderr)?;
+        let descriptors = types
+            .iter()
+            .filter_map(|t| codec.descriptor(t).map(|d| (t.clone(), d)))
+            .collect();
+        Ok(Commander {
+            codec,
+            types,
+            descriptors,
+        })
+    }
+
+    /// The names of the loaded types, sorted.
+    pub fn types(&self) -> &[String] {
+        &self.types
+    }
+
+    /// The forms of every loaded type, in the order of [`Commander::types`].
+    pub fn forms(&self) -> Value {
+        self.types
+            .iter()
+            .filter_map(|t| self.descriptors.get(t))
+            .map(message_form)
+            .collect()
+    }
+
+    /// The message `msg` (proto3 JSON) of type `type_name`, parsed.
+    pub fn parse(&self, type_name: &str, msg: &Value) -> Result<DynamicMessage, String> {
+        let desc = self.descriptors.get(type_name).ok_or_else(|| {
+            format!(
+                "{type_name} is not among the types loaded ({})",
+                self.types.join(", ")
+            )
+        })?;
+        DynamicMessage::deserialize(desc.clone(), msg).map_err(|e| format!("{type_name}: {e}"))
+    }
+
+    /// What sending `msg` of type `type_name` would do: `{"ok": true,
+    /// "bytes": N, "max_bytes": M, "hex", "changes": [{"field", "reason"}],
+    /// "moved": [TEXT], "back": MSG}` (`back`: the message as its receiver
+    /// decodes it, which shows every rounding), or `{"ok": false, "error":
+    /// TEXT}` when it cannot be encoded (a field of the wrong kind, a
+    /// required field missing, ...).
+    pub fn check(&self, type_name: &str, msg: &Value) -> Value {
+        let parsed = match self.parse(type_name, msg) {
+            Ok(m) => m,
+            Err(e) => return json!({"ok": false, "error": e}),
+        };
+        let (bytes, changes) = match self.codec.encode_with_changes(&parsed) {
+            Ok(done) => done,
+            Err(e) => return json!({"ok": false, "error": e.to_string()}),
+        };
+        let back = self
+            .codec
+            .decode_as_with_len(type_name, &bytes)
+            .map(|(m, _)| message_json(&m))
+            .unwrap_or(Value::Null);
+        let max_bytes = self.codec.max_size(type_name).ok();
+        json!({
+            "ok": true,
+            "bytes": bytes.len(),
+            "max_bytes": max_bytes,
+            "hex": hex::encode(&bytes),
+            "changes": changes
+                .iter()
+                .map(|c| json!({"field": c.field, "reason": c.reason}))
+                .collect::<Vec<_>>(),
+            "moved": moved_times(&self.codec, &parsed, &bytes),
+            "sent": message_json(&parsed),
+            "back": back,
+        })
+    }
+
+    /// Whether two JSON forms are the same message of a loaded type (as
+    /// published, and as a gateway's queue writes it back); plain equality
+    /// for other types.
+    pub fn same_message(&self) -> SameMessage {
+        let descriptors = self.descriptors.clone();
+        Box::new(move |type_name: &str, a: &Value, b: &Value| {
+            if a == b {
+                return true;
+            }
+            let Some(desc) = descriptors.get(type_name) else {
+                return false;
+            };
+            match (
+                DynamicMessage::deserialize(desc.clone(), a),
+                DynamicMessage::deserialize(desc.clone(), b),
+            ) {
+                (Ok(a), Ok(b)) => a == b,
+                _ => false,
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dccl_cmd::ProtoArgs;
+
+    fn commander() -> Commander {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../protos/proto");
+        let defs = Definitions::compile(&ProtoArgs {
+            file: vec![dir.join("goby/example/navigation.proto")],
+            include: vec![],
+            arithmetic_models: None,
+        })
+        .unwrap();
+        Commander::load(&defs, &mut Vec::new()).unwrap()
+    }
+
+    #[test]
+    fn a_draft_is_checked_with_what_the_codec_changes() {
+        let c = commander();
+        assert_eq!(
+            c.types(),
+            ["goby.example.Command", "goby.example.NavigationReport"]
+        );
+        let ok = c.check(
+            "goby.example.Command",
+            &json!({"destination": 2, "action": "GOTO", "waypoint": [{"x": 10.4, "y": -3}], "note": "survey A"}),
+        );
+        assert_eq!(ok["ok"], true, "{ok}");
+        assert_eq!(ok["changes"].as_array().unwrap().len(), 0, "{ok}");
+        // Rounded to its precision: the receiver gets 10.
+        assert_eq!(ok["back"]["waypoint"][0]["x"], 10.0, "{ok}");
+        let changed = c.check(
+            "goby.example.Command",
+            &json!({"destination": 2, "action": "HOLD", "note": "a note longer than ten"}),
+        );
+        let changes = changed["changes"].as_array().unwrap();
+        assert_eq!(changes.len(), 1, "{changed}");
+        assert_eq!(changes[0]["field"], "note");
+        assert_eq!(changed["back"]["note"], "a note lon");
+        let bad = c.check("goby.example.Command", &json!({"destination": "two"}));
+        assert_eq!(bad["ok"], false);
+        let missing = c.check("goby.example.Command", &json!({"destination": 2}));
+        assert_eq!(missing["ok"], false, "{missing}");
+        let unknown = c.check("goby.example.Nothing", &json!({}));
+        assert!(
+            unknown["error"].as_str().unwrap().contains("not among"),
+            "{unknown}"
+        );
+    }
+
+    #[test]
+    fn the_same_message_in_two_forms() {
+        let c = commander();
+        let same = c.same_message();
+        assert!(same(
+            "goby.example.Command",
+            &json!({"destination": 2, "action": "GOTO", "waypoint": [{"x": 1, "y": 2}]}),
+            &json!({"action": 1, "waypoint": [{"y": 2.0, "x": 1.0}], "destination": 2})
+        ));
+        assert!(!same(
+            "goby.example.Command",
+            &json!({"destination": 2, "action": "GOTO"}),
+            &json!({"action": "HOLD", "destination": 2})
+        ));
+    }
+}

@@ -1,0 +1,165 @@
+//! What the console's web server and its source share: the picture of the
+//! fleet behind a lock, the live events to every page (a broadcast of
+//! serialized JSON, each with its `seq`), the commander's codec, and the
+//! way to the source for commands.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use serde_json::{json, Value};
+use tokio::sync::{broadcast, mpsc};
+
+use super::commander::Commander;
+use super::source::{Outbound, Source};
+use super::state::ConsoleState;
+use crate::fleet::Report;
+
+/// Live events held for a page that reads slowly; one that falls further
+/// behind is sent a new snapshot.
+pub const EVENTS_HELD: usize = 4096;
+
+/// The console's shared state.
+pub struct Hub {
+    state: Mutex<ConsoleState>,
+    events: broadcast::Sender<Arc<str>>,
+    /// The commander's types and codec.
+    pub commander: Commander,
+    /// Where the fleet is read from.
+    pub source: Source,
+    outbound: mpsc::Sender<Outbound>,
+    /// Whether the source is connected, and what it last said.
+    source_status: Mutex<(bool, String)>,
+}
+
+fn now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}
+
+impl Hub {
+    /// A hub for `source`, with the local grid's `origin` if given; the
+    /// receiver is the source's end of the commands.
+    pub fn new(
+        source: Source,
+        commander: Commander,
+        origin: Option<(f64, f64)>,
+    ) -> (Arc<Hub>, mpsc::Receiver<Outbound>) {
+        let state = ConsoleState::new(&source.describe(), origin, commander.same_message());
+        let (events, _) = broadcast::channel(EVENTS_HELD);
+        let (outbound, to_source) = mpsc::channel(256);
+        let hub = Hub {
+            state: Mutex::new(state),
+            events,
+            commander,
+            source,
+            outbound,
+            source_status: Mutex::new((false, "connecting".into())),
+        };
+        (Arc::new(hub), to_source)
+    }
+
+    fn state(&self) -> MutexGuard<'_, ConsoleState> {
+        // A panic while holding the lock leaves a picture still worth showing.
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn send(&self, events: impl IntoIterator<Item = Value>) {
+        for event in events {
+            // No page listening is no error.
+            let _ = self.events.send(Arc::from(event.to_string()));
+        }
+    }
+
+    /// Takes a report of `node` into the picture and tells the pages.
+    pub fn apply(&self, node: &str, report: &Report) {
+        let mut state = self.state();
+        let events = state.apply(node, report, now());
+        // Sent under the lock, so that the events keep the order of their
+        // `seq` (a snapshot taken meanwhile is before or after them all).
+        self.send(events);
+    }
+
+    /// The source is connected or not, and says `detail`.
+    pub fn source_status(&self, connected: bool, detail: &str) {
+        let mut status = self.source_status.lock().unwrap_or_else(|p| p.into_inner());
+        if *status == (connected, detail.to_string()) {
+            return;
+        }
+        *status = (connected, detail.to_string());
+        drop(status);
+        let _state = self.state();
+        self.send([json!({"event": "source", "connected": connected, "detail": detail})]);
+    }
+
+    fn source_json(&self) -> Value {
+        let status = self.source_status.lock().unwrap_or_else(|p| p.into_inner());
+        json!({"connected": status.0, "detail": status.1})
+    }
+
+    /// A command the source could not send.
+    pub fn command_failed(&self, command: u64, reason: &str) {
+        let mut state = self.state();
+        if let Some(event) = state.command_failed(command, reason, now()) {
+            self.send([event]);
+        }
+    }
+
+    /// Sends `msg` of type `type_name` to `node`: checked first (it must
+    /// parse as the type; a node the console has not heard is refused),
+    /// then shown as published and handed to the source. The command's id,
+    /// or why it was not sent.
+    pub async fn send_command(
+        &self,
+        node: &str,
+        type_name: &str,
+        msg: &Value,
+    ) -> Result<u64, String> {
+        self.commander.parse(type_name, msg)?;
+        let (id, out) = {
+            let mut state = self.state();
+            let nodes = state.bridged_nodes();
+            if !nodes.iter().any(|n| n == node) {
+                return Err(format!(
+                    "node {node:?} is not among the gateways heard ({})",
+                    if nodes.is_empty() {
+                        "none yet".to_string()
+                    } else {
+                        nodes.join(", ")
+                    }
+                ));
+            }
+            let topic = self.source.topic(node, type_name);
+            let (id, event) = state.command_sent(node, type_name, &topic, msg, now());
+            self.send([event]);
+            (
+                id,
+                Outbound {
+                    command: id,
+                    topic,
+                    type_name: type_name.to_string(),
+                    msg: msg.clone(),
+                },
+            )
+        };
+        if self.outbound.send(out).await.is_err() {
+            self.command_failed(id, "the console's source has stopped");
+        }
+        Ok(id)
+    }
+
+    /// The snapshot of everything (with the source's state), and the live
+    /// events that follow it.
+    pub fn subscribe(&self) -> (Value, broadcast::Receiver<Arc<str>>) {
+        let source = self.source_json();
+        let state = self.state();
+        let mut snapshot = state.snapshot();
+        snapshot["connection"] = source;
+        (snapshot, self.events.subscribe())
+    }
+
+    /// The snapshot alone.
+    pub fn snapshot(&self) -> Value {
+        self.subscribe().0
+    }
+}

@@ -1,0 +1,201 @@
+//! `goby console`: the fleet in a web browser. A page served on a local
+//! port shows what the gateways (gobyd with its MQTT bridge) publish on
+//! the broker, or what one gobyd says on its JSON interface: a map of the
+//! nodes from the positions their messages report, with tracks and the
+//! last time heard; per node its queues, acks and expiries, driver state
+//! and link quality over time (SNR, Doppler, bad frames from a WHOI
+//! Micro-Modem's statistics); every message received with its fields; and
+//! a commander that builds a form from the `.proto` definitions, shows
+//! what the codec would change before sending, publishes on the node's
+//! `tx` topic and shows the ack when it comes. The page, its script and
+//! style are in the binary; nothing is fetched from elsewhere.
+//!
+//! Modules: [`state`] is the picture of the fleet (sans-IO), [`schema`]
+//! the commander's forms, [`commander`] its codec, [`source`] the broker
+//! or JSON interface it reads, [`hub`] what the server and the source
+//! share, [`server`] the routes.
+
+pub mod commander;
+pub mod hub;
+pub mod schema;
+pub mod server;
+pub mod source;
+pub mod state;
+
+use std::future::IntoFuture;
+use std::io::Write;
+use std::time::Duration;
+
+use clap::Args;
+
+use crate::address::host_port;
+use crate::dccl_cmd::{Definitions, ProtoArgs};
+use crate::{CliError, Status};
+use commander::Commander;
+use hub::Hub;
+use source::Source;
+
+/// Options of `goby console`.
+#[derive(Debug, Args)]
+pub struct ConsoleArgs {
+    /// The topic prefix the gateways publish under on the broker (their
+    /// `mqtt.topic_prefix`); not with --gobyd.
+    #[arg(value_name = "PREFIX", required_unless_present = "gobyd")]
+    pub prefix: Option<String>,
+    /// The MQTT broker, `HOST[:PORT]` (PORT 1883 when left out).
+    #[arg(long, default_value = "127.0.0.1:1883", conflicts_with = "gobyd")]
+    pub broker: String,
+    /// Read one gobyd's JSON interface (`HOST:PORT`, its `json.tcp_bind`)
+    /// instead of a broker.
+    #[arg(long, value_name = "HOST:PORT", conflicts_with = "prefix")]
+    pub gobyd: Option<String>,
+    /// With --gobyd: the name the node is shown under.
+    #[arg(long, default_value = "gobyd", requires = "gobyd")]
+    pub node: String,
+    /// The message definitions of the commander's forms (and of the
+    /// fleet's messages).
+    #[command(flatten)]
+    pub proto: ProtoArgs,
+    /// Where the page is served, `HOST:PORT` (port 0: any free one; the
+    /// address is printed).
+    #[arg(long, default_value = "127.0.0.1:8140", value_name = "HOST:PORT")]
+    pub listen: String,
+    /// Latitude and longitude (degrees) of the local grid's origin: local
+    /// `x`/`y` positions (metres east and north) are then shown with their
+    /// latitude and longitude. Without it, the first latitude/longitude
+    /// reported becomes the origin of the map.
+    #[arg(long, value_name = "LAT,LON", allow_hyphen_values = true)]
+    pub origin: Option<String>,
+    /// Serve for this many seconds, then exit (default: until interrupted).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+}
+
+/// The port of an MQTT broker named without one.
+const MQTT_PORT: u16 = 1883;
+
+/// `LAT,LON` in degrees.
+fn parse_origin(text: &str) -> Result<(f64, f64), CliError> {
+    let bad = || {
+        CliError::setup(format!(
+            "--origin {text:?} is not LAT,LON in degrees (e.g. 41.52,-70.67)"
+        ))
+    };
+    let (lat, lon) = text.split_once(',').ok_or_else(bad)?;
+    let lat: f64 = lat.trim().parse().map_err(|_| bad())?;
+    let lon: f64 = lon.trim().parse().map_err(|_| bad())?;
+    if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
+        return Err(bad());
+    }
+    Ok((lat, lon))
+}
+
+/// The source the arguments name.
+fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
+    if let Some(address) = &args.gobyd {
+        host_port(address, 0)
+            .filter(|(_, p)| *p != 0)
+            .ok_or_else(|| CliError::setup(format!("--gobyd {address:?} is not HOST:PORT")))?;
+        return Ok(Source::Json {
+            address: address.trim().to_string(),
+            node: args.node.clone(),
+        });
+    }
+    let prefix = args.prefix.as_deref().unwrap_or("").trim_end_matches('/');
+    if prefix.is_empty() || prefix.contains(['+', '#']) {
+        return Err(CliError::setup(format!(
+            "PREFIX {:?} must be a topic prefix without wildcards",
+            args.prefix.as_deref().unwrap_or("")
+        )));
+    }
+    let (host, port) = host_port(&args.broker, MQTT_PORT).ok_or_else(|| {
+        CliError::setup(format!(
+            "--broker {:?} is not HOST[:PORT] (e.g. localhost, 10.0.0.1:1884, [::1]:1883)",
+            args.broker
+        ))
+    })?;
+    Ok(Source::Mqtt {
+        host,
+        port,
+        prefix: prefix.to_string(),
+    })
+}
+
+/// Runs `goby console`: serves the page until interrupted (or for
+/// `--duration`). The first line on `stdout` is the page's address.
+pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    let source = source_of(args)?;
+    let origin = args.origin.as_deref().map(parse_origin).transpose()?;
+    let duration = args
+        .duration
+        .map(|d| {
+            Duration::try_from_secs_f64(d)
+                .ok()
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    CliError::setup(format!(
+                        "--duration must be a positive number of seconds, not {d}"
+                    ))
+                })
+        })
+        .transpose()?;
+    let defs = Definitions::compile(&args.proto)?;
+    let mut warnings = Vec::new();
+    let commander = Commander::load(&defs, &mut warnings)?;
+    let _ = std::io::stderr().write_all(&warnings);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind(&args.listen)
+            .await
+            .map_err(|e| CliError::setup(format!("cannot listen on {}: {e}", args.listen)))?;
+        let address = listener
+            .local_addr()
+            .map_err(|e| CliError::setup(e.to_string()))?;
+        let types = commander.types().join(", ");
+        let described = source.describe();
+        let (hub, outbound) = Hub::new(source.clone(), commander, origin);
+        writeln!(
+            stdout,
+            "goby console: http://{address}/ shows {described} (commander types: {types})"
+        )?;
+        stdout.flush()?;
+        tokio::spawn(source::run(source, hub.clone(), outbound));
+        let app = server::router(hub);
+        let stop = async move {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => {
+                    let _ = tokio::signal::ctrl_c().await;
+                }
+            }
+        };
+        // Not a graceful shutdown: the pages' event streams never end.
+        tokio::select! {
+            served = axum::serve(listener, app).into_future() => {
+                served.map_err(|e| CliError::setup(format!("the web server stopped: {e}")))
+            }
+            () = stop => Ok(()),
+        }
+    })?;
+    // The page's event streams do not end by themselves.
+    runtime.shutdown_timeout(Duration::from_millis(100));
+    Ok(Status::Ok)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn origins_are_latitude_then_longitude() {
+        assert_eq!(parse_origin("41.5, -70.6").unwrap(), (41.5, -70.6));
+        for bad in ["41.5", "a,b", "91,0", "0,181"] {
+            let e = parse_origin(bad).unwrap_err().to_string();
+            assert!(e.contains("LAT,LON"), "{e}");
+        }
+    }
+}

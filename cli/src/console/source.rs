@@ -1,0 +1,394 @@
+//! Where the console reads the fleet from and sends its commands to: an
+//! MQTT broker, with every gateway's publications under `PREFIX/` (the
+//! reports of [`fleet`](crate::fleet)), or one gobyd's JSON interface over
+//! TCP (its events turned into the same reports, for one node). Each
+//! reconnects on its own (1 s apart) and says on the page whether it is
+//! connected.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+use serde_json::{json, Value};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::net::TcpStream;
+use tokio::sync::mpsc;
+
+use super::hub::Hub;
+use crate::fleet::{
+    AcceptedReport, BridgeStatus, LinkReport, QueueKind, QueueNotice, Report, RxReport,
+};
+
+/// Where the fleet is read from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Source {
+    /// An MQTT broker, the gateways publishing under `prefix/`.
+    Mqtt {
+        /// Broker host.
+        host: String,
+        /// Broker port.
+        port: u16,
+        /// The topic prefix, without its trailing `/`.
+        prefix: String,
+    },
+    /// One gobyd's JSON interface over TCP, shown as node `node`.
+    Json {
+        /// `HOST:PORT` of the interface.
+        address: String,
+        /// The name the node is shown under.
+        node: String,
+    },
+}
+
+impl Source {
+    /// Words for the page's header and the start-up line.
+    pub fn describe(&self) -> String {
+        match self {
+            Source::Mqtt { host, port, prefix } => {
+                format!("the fleet under {prefix}/ on the MQTT broker {host}:{port}")
+            }
+            Source::Json { address, node } => {
+                format!("gobyd {node} on its JSON interface {address}")
+            }
+        }
+    }
+
+    /// Where a command of type `type_name` to `node` goes: the node's `tx`
+    /// topic, or the JSON interface.
+    pub fn topic(&self, node: &str, type_name: &str) -> String {
+        match self {
+            Source::Mqtt { prefix, .. } => format!("{prefix}/{node}/tx/{type_name}"),
+            Source::Json { address, .. } => format!("json {address}"),
+        }
+    }
+}
+
+/// A command for the source to send.
+#[derive(Debug, Clone)]
+pub struct Outbound {
+    /// The command's id on the page.
+    pub command: u64,
+    /// Where it goes ([`Source::topic`]).
+    pub topic: String,
+    /// Its type.
+    pub type_name: String,
+    /// The message, proto3 JSON.
+    pub msg: Value,
+}
+
+fn now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}
+
+/// Runs the source for ever: reads what it says into the hub and sends the
+/// commands that come on `outbound`.
+pub async fn run(source: Source, hub: Arc<Hub>, outbound: mpsc::Receiver<Outbound>) {
+    match source {
+        Source::Mqtt { host, port, prefix } => mqtt(host, port, prefix, hub, outbound).await,
+        Source::Json { address, node } => json_interface(address, node, hub, outbound).await,
+    }
+}
+
+async fn mqtt(
+    host: String,
+    port: u16,
+    prefix: String,
+    hub: Arc<Hub>,
+    mut outbound: mpsc::Receiver<Outbound>,
+) {
+    let mut options = MqttOptions::new(format!("goby-console-{}", std::process::id()), host, port);
+    options.set_keep_alive(Duration::from_secs(30));
+    options.set_max_packet_size(1 << 20, 1 << 20);
+    let (client, mut eventloop) = AsyncClient::new(options, 64);
+    // Commands go out from a task of their own: publishing waits for room
+    // in the client's queue, which the loop below empties.
+    let publisher = client.clone();
+    let sender_hub = hub.clone();
+    tokio::spawn(async move {
+        while let Some(out) = outbound.recv().await {
+            let payload = out.msg.to_string();
+            if let Err(e) = publisher
+                .publish(out.topic.clone(), QoS::AtLeastOnce, false, payload)
+                .await
+            {
+                sender_hub.command_failed(out.command, &format!("not published: {e}"));
+            }
+        }
+    });
+    let filter = format!("{prefix}/#");
+    let mut connected = false;
+    loop {
+        match eventloop.poll().await {
+            Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                connected = true;
+                hub.source_status(true, "connected");
+                // QoS 1: the console sees every event, even in a burst.
+                let _ = client.try_subscribe(filter.clone(), QoS::AtLeastOnce);
+            }
+            Ok(Event::Incoming(Packet::Publish(p))) => {
+                if let Some((node, report)) = Report::parse(&prefix, &p.topic, &p.payload) {
+                    hub.apply(&node, &report);
+                }
+            }
+            Ok(_) => {}
+            Err(e) => {
+                if connected {
+                    connected = false;
+                }
+                hub.source_status(false, &format!("{e}; trying again"));
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        }
+    }
+}
+
+/// The reports of one line from gobyd's JSON interface, for its node.
+/// `pending` holds the commands written, by request number (reply lines
+/// answer them in order).
+fn json_line_reports(
+    value: &Value,
+    pending: &mut std::collections::VecDeque<(u64, Outbound)>,
+    now: f64,
+) -> Vec<Report> {
+    if let Some(reply) = value["reply"].as_u64() {
+        // Replies to lines other than publishes (the subscription) are
+        // not commands.
+        while pending.front().is_some_and(|(n, _)| *n < reply) {
+            pending.pop_front();
+        }
+        let Some((_, out)) = pending.front().filter(|(n, _)| *n == reply).cloned() else {
+            return Vec::new();
+        };
+        pending.pop_front();
+        if let Some(error) = value["error"].as_str() {
+            return vec![Report::Error {
+                error: error.to_string(),
+                topic: out.topic,
+            }];
+        }
+        if value.get("accepted").is_some() {
+            return vec![Report::Accepted(AcceptedReport {
+                type_name: out.type_name,
+                id: value.get("id").cloned().unwrap_or(Value::Null),
+                topic: out.topic,
+                msg: out.msg,
+            })];
+        }
+        return Vec::new();
+    }
+    let event = value["event"].as_str().unwrap_or("");
+    let name = |key: &str| value[key].as_str().unwrap_or("?").to_string();
+    let report = match event {
+        "received" => {
+            let link = value
+                .get("link")
+                .filter(|l| l.is_object())
+                .map(LinkReport::from_json);
+            Report::Rx(RxReport {
+                type_name: name("received"),
+                src: value["src"].as_i64().unwrap_or(-1),
+                dest: value["dest"].as_i64().unwrap_or(-1),
+                time: now,
+                msg: value["msg"].clone(),
+                link,
+            })
+        }
+        "ack" | "expire" | "drop" => Report::Queued(QueueNotice {
+            kind: match event {
+                "ack" => QueueKind::Ack {
+                    by: value["by"].as_i64().unwrap_or(-1),
+                    frame: value["frame"].as_i64().unwrap_or(-1),
+                },
+                "expire" => QueueKind::Expire,
+                _ => QueueKind::Drop,
+            },
+            type_name: name(event),
+            time: now,
+            msg: value["msg"].clone(),
+        }),
+        "queue_size" => Report::Queue {
+            type_name: name("queue_size"),
+            size: value["size"].as_u64().unwrap_or(0),
+        },
+        "driver_status" => Report::Driver {
+            status: name("driver_status"),
+            detail: value["detail"].as_str().unwrap_or("").to_string(),
+            time: now,
+        },
+        "modem_receive" => {
+            let t = &value["modem_receive"];
+            // 64-bit integers are strings in proto3 JSON: microseconds.
+            let micros = t["time"]
+                .as_str()
+                .and_then(|s| s.parse::<f64>().ok())
+                .or_else(|| t["time"].as_f64());
+            let mut summary = t.clone();
+            summary["frames"] = t["frame"].as_array().map_or(0, Vec::len).into();
+            summary["time"] = json!(micros.map_or(now, |m| m / 1e6));
+            if summary["src"].is_null() {
+                summary["src"] = json!(-1);
+            }
+            Report::Link(LinkReport::from_json(&summary))
+        }
+        _ => return Vec::new(),
+    };
+    vec![report]
+}
+
+async fn json_interface(
+    address: String,
+    node: String,
+    hub: Arc<Hub>,
+    mut outbound: mpsc::Receiver<Outbound>,
+) {
+    loop {
+        let stream = match TcpStream::connect(&address).await {
+            Ok(s) => s,
+            Err(e) => {
+                hub.source_status(
+                    false,
+                    &format!("cannot connect to {address}: {e}; trying again"),
+                );
+                // Commands sent meanwhile cannot go.
+                while let Ok(out) = outbound.try_recv() {
+                    hub.command_failed(out.command, "the JSON interface is not connected");
+                }
+                tokio::time::sleep(Duration::from_secs(1)).await;
+                continue;
+            }
+        };
+        hub.source_status(true, "connected");
+        hub.apply(
+            &node,
+            &Report::Status(BridgeStatus {
+                online: Some(true),
+                time: now(),
+                ..Default::default()
+            }),
+        );
+        let (read, mut write) = stream.into_split();
+        let mut lines = BufReader::new(read).lines();
+        let subscribe = r#"{"subscribe": ["ack", "expire", "drop", "queue_size", "modem"]}"#;
+        let mut request = 1u64;
+        let mut pending = std::collections::VecDeque::new();
+        let mut broken = write
+            .write_all(format!("{subscribe}\n").as_bytes())
+            .await
+            .err()
+            .map(|e| e.to_string());
+        while broken.is_none() {
+            tokio::select! {
+                line = lines.next_line() => match line {
+                    Ok(Some(line)) => {
+                        let Ok(value) = serde_json::from_str::<Value>(&line) else { continue };
+                        for report in json_line_reports(&value, &mut pending, now()) {
+                            hub.apply(&node, &report);
+                        }
+                    }
+                    Ok(None) => broken = Some("the connection was closed".to_string()),
+                    Err(e) => broken = Some(e.to_string()),
+                },
+                out = outbound.recv() => {
+                    let Some(out) = out else { return };
+                    request += 1;
+                    let line = json!({"publish": out.type_name, "msg": out.msg}).to_string();
+                    match write.write_all(format!("{line}\n").as_bytes()).await {
+                        Ok(()) => pending.push_back((request, out)),
+                        Err(e) => {
+                            hub.command_failed(out.command, &format!("not written: {e}"));
+                            broken = Some(e.to_string());
+                        }
+                    }
+                }
+            }
+        }
+        for (_, out) in pending.drain(..) {
+            hub.command_failed(out.command, "the JSON interface closed before replying");
+        }
+        hub.apply(
+            &node,
+            &Report::Status(BridgeStatus {
+                online: Some(false),
+                time: now(),
+                ..Default::default()
+            }),
+        );
+        hub.source_status(
+            false,
+            &format!("{address}: {}; trying again", broken.unwrap_or_default()),
+        );
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::VecDeque;
+
+    fn command(n: u64) -> Outbound {
+        Outbound {
+            command: n,
+            topic: "json 127.0.0.1:1".into(),
+            type_name: "goby.example.Command".into(),
+            msg: json!({"destination": 2}),
+        }
+    }
+
+    #[test]
+    fn json_lines_become_reports() {
+        let mut pending = VecDeque::from([(2, command(1)), (3, command(2))]);
+        // The subscription's reply is no command's.
+        assert!(
+            json_line_reports(&json!({"reply": 1, "subscribed": []}), &mut pending, 5.0).is_empty()
+        );
+        let r = json_line_reports(
+            &json!({"reply": 2, "accepted": "goby.example.Command", "id": 4}),
+            &mut pending,
+            5.0,
+        );
+        let [Report::Accepted(a)] = r.as_slice() else {
+            panic!("{r:?}")
+        };
+        assert_eq!(a.id, json!(4));
+        assert_eq!(a.msg, json!({"destination": 2}));
+        let r = json_line_reports(&json!({"reply": 3, "error": "no"}), &mut pending, 5.0);
+        assert!(matches!(r.as_slice(), [Report::Error { error, .. }] if error == "no"));
+        assert!(pending.is_empty());
+        let r = json_line_reports(
+            &json!({"event": "received", "received": "T", "src": 1, "dest": 2, "msg": {"x": 1}}),
+            &mut pending,
+            5.0,
+        );
+        assert!(matches!(r.as_slice(), [Report::Rx(rx)] if rx.src == 1 && rx.time == 5.0));
+        let r = json_line_reports(
+            &json!({"event": "modem_receive", "modem_receive": {"src": 1, "rate": 1, "time": "2500000", "frame": ["AA==", "AA=="],
+                "receive_stat": [{"snr_in": 7}]}}),
+            &mut pending,
+            5.0,
+        );
+        let [Report::Link(l)] = r.as_slice() else {
+            panic!("{r:?}")
+        };
+        assert_eq!((l.src, l.frames, l.time), (1, 2, 2.5));
+        assert_eq!(l.stats.as_ref().unwrap().snr_in, Some(7.0));
+        let r = json_line_reports(
+            &json!({"event": "ack", "ack": "T", "by": 2, "frame": 0, "msg": {}}),
+            &mut pending,
+            5.0,
+        );
+        assert!(matches!(
+            r.as_slice(),
+            [Report::Queued(QueueNotice {
+                kind: QueueKind::Ack { by: 2, .. },
+                ..
+            })]
+        ));
+        assert!(
+            json_line_reports(&json!({"event": "raw", "raw": "in"}), &mut pending, 5.0).is_empty()
+        );
+    }
+}

@@ -1,0 +1,928 @@
+//! The console's picture of the fleet: the table of `goby mqtt watch`
+//! ([`Fleet`]) with what a page shows beyond it — each node's track from
+//! the positions it reports, its link quality over time, the counts of its
+//! queue's events, every message received, and the commands sent from the
+//! page with their fate. Sans-IO: typed reports in, JSON events out (the
+//! page's live updates), a snapshot on demand.
+//!
+//! Positions come from the messages themselves: a message with top-level
+//! `lat`/`latitude` and `lon`/`lng`/`longitude` fields (degrees) or `x` and
+//! `y` fields (metres east and north of the origin) places the node that
+//! sent it: for a message received (`rx`), the node with its source's modem
+//! id; for a message a gateway queued (`accepted`), the node named by a
+//! `source`/`src` field, else that gateway. A sender with no bridge of its
+//! own (heard only over the link) appears as `modem N`.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use serde_json::{json, Map, Value};
+
+use crate::fleet::{Fleet, LinkReport, QueueKind, Report};
+
+/// Messages kept in the log (the oldest go first).
+pub const MESSAGES_KEPT: usize = 2000;
+/// Points kept per node for its track and for its link series.
+pub const POINTS_KEPT: usize = 2000;
+/// Commands kept.
+pub const COMMANDS_KEPT: usize = 500;
+
+/// Mean radius of the Earth, metres (the local projection's).
+const EARTH_RADIUS: f64 = 6_371_008.8;
+
+/// A point on the map: metres east (`x`) and north (`y`) of the origin,
+/// with latitude and longitude when the origin is known.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapPoint {
+    /// Metres east of the origin.
+    pub x: f64,
+    /// Metres north of the origin.
+    pub y: f64,
+    /// Degrees north, when known.
+    pub lat: Option<f64>,
+    /// Degrees east, when known.
+    pub lon: Option<f64>,
+}
+
+/// Where a message says its sender is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fix {
+    /// Latitude and longitude, degrees.
+    Geo {
+        /// Degrees north.
+        lat: f64,
+        /// Degrees east.
+        lon: f64,
+    },
+    /// Local grid, metres east and north of the origin.
+    Local {
+        /// Metres east.
+        x: f64,
+        /// Metres north.
+        y: f64,
+    },
+}
+
+/// The number of the first of `names` that `msg` has as a top-level field.
+fn number(msg: &Map<String, Value>, names: &[&str]) -> Option<f64> {
+    msg.iter()
+        .find(|(k, _)| names.iter().any(|n| k.eq_ignore_ascii_case(n)))
+        .and_then(|(_, v)| {
+            v.as_f64()
+                .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
+        })
+        .filter(|v| v.is_finite())
+}
+
+/// The position a message reports, if it has one (see the module's
+/// documentation for the fields read).
+pub fn fix_of(msg: &Value) -> Option<Fix> {
+    let msg = msg.as_object()?;
+    let lat = number(msg, &["lat", "latitude"]);
+    let lon = number(msg, &["lon", "lng", "long", "longitude"]);
+    if let (Some(lat), Some(lon)) = (lat, lon) {
+        if (-90.0..=90.0).contains(&lat) && (-180.0..=180.0).contains(&lon) {
+            return Some(Fix::Geo { lat, lon });
+        }
+    }
+    match (number(msg, &["x"]), number(msg, &["y"])) {
+        (Some(x), Some(y)) => Some(Fix::Local { x, y }),
+        _ => None,
+    }
+}
+
+/// One point of a node's track.
+#[derive(Debug, Clone, PartialEq)]
+struct TrackPoint {
+    time: f64,
+    at: MapPoint,
+    /// Depth (the message's `z` below 0, or `depth`/`dep`), metres.
+    depth: Option<f64>,
+    /// The message type that reported it.
+    via: String,
+}
+
+/// One reception at a node.
+#[derive(Debug, Clone, PartialEq)]
+struct LinkPoint(LinkReport);
+
+/// What the console knows of one node beyond the table.
+#[derive(Debug, Clone, Default)]
+struct NodeExtra {
+    modem_id: Option<i64>,
+    /// Latest time of anything from or about it.
+    last_heard: f64,
+    driver_detail: String,
+    track: VecDeque<TrackPoint>,
+    links: VecDeque<LinkPoint>,
+    received: u64,
+    acks: u64,
+    expires: u64,
+    drops: u64,
+    errors: u64,
+    accepted: u64,
+    /// Whether it has a bridge of its own (not only heard over the link).
+    bridged: bool,
+}
+
+/// The state of a command sent from the page.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CommandState {
+    /// Published on the node's `tx` topic (or written to its JSON interface).
+    Published,
+    /// The gateway queued it and wrote it to disk.
+    Accepted,
+    /// Acknowledged by its receiver.
+    Acked,
+    /// The gateway refused it (its `error` topic, or a JSON `error` reply).
+    Refused,
+    /// Its time to live ran out before an ack.
+    Expired,
+    /// Pushed out of its full queue.
+    Dropped,
+}
+
+impl CommandState {
+    /// Its name on the page.
+    pub fn word(self) -> &'static str {
+        match self {
+            CommandState::Published => "published",
+            CommandState::Accepted => "accepted",
+            CommandState::Acked => "acked",
+            CommandState::Refused => "refused",
+            CommandState::Expired => "expired",
+            CommandState::Dropped => "dropped",
+        }
+    }
+}
+
+/// A command sent from the page.
+#[derive(Debug, Clone)]
+struct CommandView {
+    id: u64,
+    node: String,
+    type_name: String,
+    /// The topic it went to (MQTT) or the node's JSON interface.
+    topic: String,
+    msg: Value,
+    state: CommandState,
+    sent: f64,
+    /// When it reached its present state.
+    changed: f64,
+    /// The gateway's journal id, once accepted.
+    journal_id: Value,
+    /// Who acknowledged it, or why it was refused.
+    note: String,
+}
+
+/// Whether two JSON forms of a message of a type are the same message
+/// (e.g. as published and as the queue gives it back).
+pub type SameMessage = Box<dyn Fn(&str, &Value, &Value) -> bool + Send + Sync>;
+
+/// The console's picture of the fleet.
+pub struct ConsoleState {
+    fleet: Fleet,
+    extra: BTreeMap<String, NodeExtra>,
+    messages: VecDeque<Value>,
+    commands: VecDeque<CommandView>,
+    /// Latitude and longitude of the local grid's origin.
+    origin: Option<(f64, f64)>,
+    /// Whether the origin was given (not taken from the first fix).
+    origin_given: bool,
+    seq: u64,
+    next_command: u64,
+    same_message: SameMessage,
+    /// Where the fleet is read from, for the page's header.
+    source: String,
+}
+
+impl ConsoleState {
+    /// An empty picture of the fleet read from `source` (words for the
+    /// page), with the local grid's origin when given (latitude, longitude;
+    /// otherwise the first latitude/longitude fix becomes the origin).
+    pub fn new(source: &str, origin: Option<(f64, f64)>, same_message: SameMessage) -> Self {
+        ConsoleState {
+            fleet: Fleet::new(""),
+            extra: BTreeMap::new(),
+            messages: VecDeque::new(),
+            commands: VecDeque::new(),
+            origin,
+            origin_given: origin.is_some(),
+            seq: 0,
+            next_command: 1,
+            same_message,
+            source: source.to_string(),
+        }
+    }
+
+    fn next_seq(&mut self) -> u64 {
+        self.seq += 1;
+        self.seq
+    }
+
+    /// The node with modem id `id`: a bridged node that said so in its
+    /// status, else `modem N`.
+    fn node_of_modem(&self, id: i64) -> String {
+        self.extra
+            .iter()
+            .find(|(_, e)| e.bridged && e.modem_id == Some(id))
+            .map(|(name, _)| name.clone())
+            .unwrap_or_else(|| format!("modem {id}"))
+    }
+
+    /// Places `fix` on the map, taking it as the origin when it is the
+    /// first latitude/longitude and none was given.
+    fn map_point(&mut self, fix: Fix) -> MapPoint {
+        match fix {
+            Fix::Geo { lat, lon } => {
+                let (lat0, lon0) = *self.origin.get_or_insert((lat, lon));
+                let x = EARTH_RADIUS * (lon - lon0).to_radians() * lat0.to_radians().cos();
+                let y = EARTH_RADIUS * (lat - lat0).to_radians();
+                MapPoint {
+                    x,
+                    y,
+                    lat: Some(lat),
+                    lon: Some(lon),
+                }
+            }
+            Fix::Local { x, y } => {
+                let (lat, lon) = match self.origin {
+                    Some((lat0, lon0)) => (
+                        Some(lat0 + (y / EARTH_RADIUS).to_degrees()),
+                        Some(lon0 + (x / (EARTH_RADIUS * lat0.to_radians().cos())).to_degrees()),
+                    ),
+                    None => (None, None),
+                };
+                MapPoint { x, y, lat, lon }
+            }
+        }
+    }
+
+    /// Takes one report of `node` (at `now`, seconds since the UNIX epoch,
+    /// for reports without a time); returns the events for the page, each
+    /// a JSON object with `event` and `seq`.
+    pub fn apply(&mut self, node: &str, report: &Report, now: f64) -> Vec<Value> {
+        let mut events = Vec::new();
+        // The node's summary goes first, so its number comes first: the
+        // page takes the events in the order of their numbers.
+        let summary_seq = self.next_seq();
+        let time = report_time(report).filter(|t| *t > 0.0).unwrap_or(now);
+        self.fleet.apply(node, report);
+        {
+            let e = self.extra.entry(node.to_string()).or_default();
+            e.bridged = true;
+            e.last_heard = e.last_heard.max(time);
+        }
+        match report {
+            Report::Status(status) => {
+                if let Some(id) = status.modem_id {
+                    self.extra.get_mut(node).expect("entered").modem_id = Some(id);
+                    self.adopt(node, id, &mut events);
+                }
+            }
+            Report::Driver { detail, .. } => {
+                self.extra.get_mut(node).expect("entered").driver_detail = detail.clone();
+            }
+            Report::Link(link) => {
+                let point = LinkPoint(link.clone());
+                let e = self.extra.get_mut(node).expect("entered");
+                push_capped(&mut e.links, point.clone(), POINTS_KEPT);
+                let seq = self.next_seq();
+                events.push(json!({
+                    "event": "link", "seq": seq, "node": node, "point": link_json(&point.0),
+                }));
+                self.heard_from(link.src, link.time.max(time), &mut events);
+            }
+            Report::Rx(rx) => {
+                self.extra.get_mut(node).expect("entered").received += 1;
+                let entry = json!({
+                    "kind": "rx", "node": node, "time": time, "type": rx.type_name,
+                    "src": rx.src, "dest": rx.dest, "msg": rx.msg,
+                    "link": rx.link.as_ref().map(link_json),
+                });
+                self.log(entry, &mut events);
+                if rx.src >= 0 {
+                    let sender = self.node_of_modem(rx.src);
+                    self.heard_from(rx.src, time, &mut events);
+                    self.place(&sender, &rx.type_name, &rx.msg, time, &mut events);
+                }
+            }
+            Report::Accepted(a) => {
+                self.extra.get_mut(node).expect("entered").accepted += 1;
+                let entry = json!({
+                    "kind": "accepted", "node": node, "time": time, "type": a.type_name,
+                    "id": a.id, "topic": a.topic, "msg": a.msg,
+                });
+                self.log(entry, &mut events);
+                let source = a
+                    .msg
+                    .as_object()
+                    .and_then(|m| number(m, &["source", "src"]));
+                let sender = match source {
+                    Some(id) if Some(id as i64) != self.extra[node].modem_id => {
+                        self.node_of_modem(id as i64)
+                    }
+                    _ => node.to_string(),
+                };
+                self.place(&sender, &a.type_name, &a.msg, time, &mut events);
+                let same = &self.same_message;
+                if let Some(c) = self.commands.iter_mut().find(|c| {
+                    c.state == CommandState::Published
+                        && c.node == node
+                        && c.topic == a.topic
+                        && (c.msg == a.msg || same(&c.type_name, &c.msg, &a.msg))
+                }) {
+                    c.state = CommandState::Accepted;
+                    c.journal_id = a.id.clone();
+                    c.changed = time;
+                    let view = command_json(c);
+                    let seq = self.next_seq();
+                    events.push(json!({"event": "command", "seq": seq, "command": view}));
+                }
+            }
+            Report::Queued(notice) => {
+                let e = self.extra.get_mut(node).expect("entered");
+                let (state, note) = match &notice.kind {
+                    QueueKind::Ack { by, .. } => {
+                        e.acks += 1;
+                        (CommandState::Acked, format!("by {by}"))
+                    }
+                    QueueKind::Expire => {
+                        e.expires += 1;
+                        (CommandState::Expired, String::new())
+                    }
+                    QueueKind::Drop => {
+                        e.drops += 1;
+                        (CommandState::Dropped, String::new())
+                    }
+                };
+                let mut entry = json!({
+                    "kind": notice.kind.word(), "node": node, "time": time,
+                    "type": notice.type_name, "msg": notice.msg,
+                });
+                if let QueueKind::Ack { by, frame } = notice.kind {
+                    entry["by"] = by.into();
+                    entry["frame"] = frame.into();
+                }
+                self.log(entry, &mut events);
+                self.settle(
+                    node,
+                    &notice.type_name,
+                    &notice.msg,
+                    state,
+                    note,
+                    time,
+                    &mut events,
+                );
+            }
+            Report::Error { error, topic } => {
+                self.extra.get_mut(node).expect("entered").errors += 1;
+                let entry = json!({
+                    "kind": "error", "node": node, "time": time, "topic": topic, "error": error,
+                });
+                self.log(entry, &mut events);
+                if let Some(c) = self.commands.iter_mut().find(|c| {
+                    c.state == CommandState::Published && c.node == node && &c.topic == topic
+                }) {
+                    c.state = CommandState::Refused;
+                    c.note = error.clone();
+                    c.changed = time;
+                    let view = command_json(c);
+                    let seq = self.next_seq();
+                    events.push(json!({"event": "command", "seq": seq, "command": view}));
+                }
+            }
+            Report::Queue { .. } | Report::Mac { .. } => {}
+        }
+        let summary = self.node_json(node, false);
+        events.insert(
+            0,
+            json!({"event": "node", "seq": summary_seq, "node": summary}),
+        );
+        debug_assert!(events
+            .windows(2)
+            .all(|w| w[0]["seq"].as_u64() < w[1]["seq"].as_u64()));
+        events
+    }
+
+    /// A queue event of `node` about a message: the oldest accepted command
+    /// of that node and type that is this message reaches `state`.
+    #[allow(clippy::too_many_arguments)]
+    fn settle(
+        &mut self,
+        node: &str,
+        type_name: &str,
+        msg: &Value,
+        state: CommandState,
+        note: String,
+        time: f64,
+        events: &mut Vec<Value>,
+    ) {
+        let same = &self.same_message;
+        let pending = |c: &CommandView| {
+            c.state == CommandState::Accepted && c.node == node && c.type_name == type_name
+        };
+        let index = self
+            .commands
+            .iter()
+            .position(|c| pending(c) && (c.msg == *msg || same(type_name, &c.msg, msg)));
+        let Some(index) = index else { return };
+        let c = &mut self.commands[index];
+        c.state = state;
+        c.note = note;
+        c.changed = time;
+        let view = command_json(c);
+        let seq = self.next_seq();
+        events.push(json!({"event": "command", "seq": seq, "command": view}));
+    }
+
+    /// The bridged `node` said it has modem id `id`: what was heard of
+    /// `modem N` over the link becomes its own.
+    fn adopt(&mut self, node: &str, id: i64, events: &mut Vec<Value>) {
+        let Some(heard) = self.extra.remove(&format!("modem {id}")) else {
+            return;
+        };
+        self.fleet.nodes.remove(&format!("modem {id}"));
+        let e = self.extra.get_mut(node).expect("entered");
+        let mut track: Vec<TrackPoint> = heard.track.into_iter().chain(e.track.drain(..)).collect();
+        track.sort_by(|a, b| a.time.total_cmp(&b.time));
+        e.track = track.into_iter().collect();
+        while e.track.len() > POINTS_KEPT {
+            e.track.pop_front();
+        }
+        e.last_heard = e.last_heard.max(heard.last_heard);
+        let seq = self.next_seq();
+        events.push(json!({"event": "gone", "seq": seq, "node": format!("modem {id}")}));
+        let seq = self.next_seq();
+        let full = self.node_json(node, true);
+        events.push(json!({"event": "node", "seq": seq, "node": full}));
+    }
+
+    /// Something from modem id `id` was heard at `time`.
+    fn heard_from(&mut self, id: i64, time: f64, events: &mut Vec<Value>) {
+        if id < 0 {
+            return;
+        }
+        let name = self.node_of_modem(id);
+        let fresh = !self.extra.contains_key(&name);
+        let e = self.extra.entry(name.clone()).or_default();
+        e.modem_id = Some(id);
+        e.last_heard = e.last_heard.max(time);
+        if fresh {
+            let seq = self.next_seq();
+            let summary = self.node_json(&name, false);
+            events.push(json!({"event": "node", "seq": seq, "node": summary}));
+        }
+    }
+
+    /// `msg` (of type `via`) reports where `node` is.
+    fn place(&mut self, node: &str, via: &str, msg: &Value, time: f64, events: &mut Vec<Value>) {
+        let Some(fix) = fix_of(msg) else { return };
+        let origin_before = self.origin;
+        let at = self.map_point(fix);
+        let obj = msg.as_object();
+        let reported = obj
+            .and_then(|m| number(m, &["time", "t", "timestamp"]))
+            .filter(|t| *t > 1e9 && *t < 1e11)
+            .unwrap_or(time);
+        let depth = obj
+            .and_then(|m| number(m, &["depth", "dep"]).or_else(|| number(m, &["z"]).map(|z| -z)));
+        let point = TrackPoint {
+            time: reported,
+            at,
+            depth,
+            via: via.to_string(),
+        };
+        let e = self.extra.entry(node.to_string()).or_default();
+        e.last_heard = e.last_heard.max(time);
+        // The same report seen twice (queued at its sender, received at
+        // another gateway) is one point.
+        if e.track
+            .iter()
+            .rev()
+            .take(8)
+            .any(|p| p.time == point.time && p.at.x == point.at.x && p.at.y == point.at.y)
+        {
+            return;
+        }
+        push_capped(&mut e.track, point.clone(), POINTS_KEPT);
+        if origin_before != self.origin {
+            let seq = self.next_seq();
+            events.push(json!({"event": "origin", "seq": seq, "origin": self.origin_json()}));
+        }
+        let seq = self.next_seq();
+        events.push(json!({
+            "event": "track", "seq": seq, "node": node, "point": track_json(&point),
+        }));
+        let seq = self.next_seq();
+        let summary = self.node_json(node, false);
+        events.push(json!({"event": "node", "seq": seq, "node": summary}));
+    }
+
+    fn log(&mut self, mut entry: Value, events: &mut Vec<Value>) {
+        let seq = self.next_seq();
+        entry["seq"] = seq.into();
+        push_capped(&mut self.messages, entry.clone(), MESSAGES_KEPT);
+        events.push(json!({"event": "message", "seq": seq, "message": entry}));
+    }
+
+    /// A command about to be sent from the page: its id and the event
+    /// that shows it.
+    pub fn command_sent(
+        &mut self,
+        node: &str,
+        type_name: &str,
+        topic: &str,
+        msg: &Value,
+        now: f64,
+    ) -> (u64, Value) {
+        let id = self.next_command;
+        self.next_command += 1;
+        let c = CommandView {
+            id,
+            node: node.to_string(),
+            type_name: type_name.to_string(),
+            topic: topic.to_string(),
+            msg: msg.clone(),
+            state: CommandState::Published,
+            sent: now,
+            changed: now,
+            journal_id: Value::Null,
+            note: String::new(),
+        };
+        let view = command_json(&c);
+        push_capped(&mut self.commands, c, COMMANDS_KEPT);
+        let seq = self.next_seq();
+        (id, json!({"event": "command", "seq": seq, "command": view}))
+    }
+
+    /// A command could not be sent at all (the broker or the gateway's
+    /// JSON interface is away): it is refused with `reason`.
+    pub fn command_failed(&mut self, id: u64, reason: &str, now: f64) -> Option<Value> {
+        let c = self.commands.iter_mut().find(|c| c.id == id)?;
+        c.state = CommandState::Refused;
+        c.note = reason.to_string();
+        c.changed = now;
+        let view = command_json(c);
+        let seq = self.next_seq();
+        Some(json!({"event": "command", "seq": seq, "command": view}))
+    }
+
+    /// A command's state, by its id (for the tests and the page's state
+    /// endpoint).
+    pub fn command_state(&self, id: u64) -> Option<CommandState> {
+        self.commands.iter().find(|c| c.id == id).map(|c| c.state)
+    }
+
+    /// The names of the bridged nodes (those a command can be sent to).
+    pub fn bridged_nodes(&self) -> Vec<String> {
+        self.extra
+            .iter()
+            .filter(|(_, e)| e.bridged)
+            .map(|(n, _)| n.clone())
+            .collect()
+    }
+
+    fn origin_json(&self) -> Value {
+        match self.origin {
+            Some((lat, lon)) => json!({"lat": lat, "lon": lon, "given": self.origin_given}),
+            None => Value::Null,
+        }
+    }
+
+    /// What the page shows of `node`: the table's columns, its counts and
+    /// last position; with `full`, its whole track and link series.
+    fn node_json(&self, node: &str, full: bool) -> Value {
+        let view = self.fleet.nodes.get(node).cloned().unwrap_or_default();
+        let e = self.extra.get(node).cloned().unwrap_or_default();
+        let mut v = json!({
+            "name": node,
+            "modem_id": e.modem_id,
+            "bridged": e.bridged,
+            "online": view.online,
+            "reconnects": view.reconnects,
+            "dropped": view.dropped,
+            "queues": view.queues,
+            "queued": view.queues.values().sum::<u64>(),
+            "driver": view.driver,
+            "driver_detail": e.driver_detail,
+            "last_heard": e.last_heard,
+            "received": e.received,
+            "acks": e.acks,
+            "expires": e.expires,
+            "drops": e.drops,
+            "errors": e.errors,
+            "accepted": e.accepted,
+            "position": e.track.back().map(track_json),
+            "link": e.links.back().map(|l| link_json(&l.0)),
+        });
+        if full {
+            v["track"] = e.track.iter().map(track_json).collect();
+            v["links"] = e.links.iter().map(|l| link_json(&l.0)).collect();
+        }
+        v
+    }
+
+    /// Everything the page shows, at once: `source`, `origin`, `nodes`
+    /// (each with its track and link series), `messages` (the last
+    /// [`MESSAGES_KEPT`]), `commands`, and `seq`, the number of the last
+    /// event (the live events that follow count on from it).
+    pub fn snapshot(&self) -> Value {
+        json!({
+            "event": "snapshot",
+            "seq": self.seq,
+            "source": self.source,
+            "origin": self.origin_json(),
+            "nodes": self.extra.keys().map(|n| self.node_json(n, true)).collect::<Vec<_>>(),
+            "messages": self.messages,
+            "commands": self.commands.iter().map(command_json).collect::<Vec<_>>(),
+        })
+    }
+}
+
+fn push_capped<T>(queue: &mut VecDeque<T>, item: T, cap: usize) {
+    if queue.len() >= cap {
+        queue.pop_front();
+    }
+    queue.push_back(item);
+}
+
+/// The time a report carries, if any.
+fn report_time(report: &Report) -> Option<f64> {
+    match report {
+        Report::Status(s) => Some(s.time),
+        Report::Link(l) => Some(l.time),
+        Report::Driver { time, .. } | Report::Mac { time, .. } => Some(*time),
+        Report::Rx(rx) => Some(rx.time),
+        Report::Queued(n) => Some(n.time),
+        Report::Queue { .. } | Report::Accepted(_) | Report::Error { .. } => None,
+    }
+}
+
+fn track_json(p: &TrackPoint) -> Value {
+    json!({
+        "t": p.time, "x": p.at.x, "y": p.at.y, "lat": p.at.lat, "lon": p.at.lon,
+        "depth": p.depth, "via": p.via,
+    })
+}
+
+fn link_json(l: &LinkReport) -> Value {
+    let mut v = json!({
+        "t": l.time, "src": l.src, "dest": l.dest, "rate": l.rate, "frames": l.frames,
+    });
+    if let Some(s) = &l.stats {
+        v["snr_in"] = json!(s.snr_in);
+        v["snr_out"] = json!(s.snr_out);
+        v["snr_rss"] = json!(s.snr_rss);
+        v["doppler"] = json!(s.doppler);
+        v["bad_frames"] = json!(s.bad_frames);
+        v["stat_frames"] = json!(s.frames);
+        v["dqf"] = json!(s.data_quality_factor);
+    }
+    v
+}
+
+fn command_json(c: &CommandView) -> Value {
+    json!({
+        "id": c.id, "node": c.node, "type": c.type_name, "topic": c.topic, "msg": c.msg,
+        "state": c.state.word(), "sent": c.sent, "changed": c.changed,
+        "journal_id": c.journal_id, "note": c.note,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state() -> ConsoleState {
+        ConsoleState::new("test", None, Box::new(|_, a, b| a == b))
+    }
+
+    fn report(topic: &str, payload: &str) -> (String, Report) {
+        Report::parse("fleet", topic, payload.as_bytes()).expect("a report")
+    }
+
+    fn apply(s: &mut ConsoleState, topic: &str, payload: &str) -> Vec<Value> {
+        let (node, r) = report(topic, payload);
+        s.apply(&node, &r, 100.0)
+    }
+
+    #[test]
+    fn fixes_from_the_fields_of_a_message() {
+        assert_eq!(
+            fix_of(&json!({"lat": 41.5, "Lon": -70.6})),
+            Some(Fix::Geo {
+                lat: 41.5,
+                lon: -70.6
+            })
+        );
+        assert_eq!(
+            fix_of(&json!({"x": 10, "y": "-3.5", "z": -2})),
+            Some(Fix::Local { x: 10.0, y: -3.5 })
+        );
+        assert_eq!(fix_of(&json!({"x": 10})), None);
+        assert_eq!(fix_of(&json!({"lat": 200, "lon": 0})), None);
+        assert_eq!(fix_of(&json!([1, 2])), None);
+    }
+
+    #[test]
+    fn positions_place_their_senders_once() {
+        let mut s = state();
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1, "time": 90}"#,
+        );
+        apply(
+            &mut s,
+            "fleet/auv2/status",
+            r#"{"online": true, "modem_id": 2, "time": 90}"#,
+        );
+        // auv1 queues its report; auv2 receives it: one point of auv1.
+        let report =
+            r#"{"source": 1, "destination": 2, "time": 1796190000, "x": 10, "y": 20, "z": -4}"#;
+        let events = apply(
+            &mut s,
+            "fleet/auv1/accepted",
+            &format!(
+                r#"{{"accepted": "goby.example.NavigationReport", "id": 7, "topic": "fleet/auv1/tx/goby.example.NavigationReport", "msg": {report}}}"#
+            ),
+        );
+        assert!(
+            events
+                .iter()
+                .any(|e| e["event"] == "track" && e["node"] == "auv1"),
+            "{events:?}"
+        );
+        apply(
+            &mut s,
+            "fleet/auv2/rx/goby.example.NavigationReport",
+            &format!(r#"{{"src": 1, "dest": 2, "time": 99, "msg": {report}}}"#),
+        );
+        // A node heard only over the link.
+        apply(
+            &mut s,
+            "fleet/auv2/rx/goby.example.NavigationReport",
+            r#"{"src": 5, "dest": 2, "time": 99, "msg": {"lat": 41.5, "lon": -70.6}}"#,
+        );
+        let snap = s.snapshot();
+        let nodes = snap["nodes"].as_array().unwrap();
+        let auv1 = nodes.iter().find(|n| n["name"] == "auv1").unwrap();
+        assert_eq!(auv1["track"].as_array().unwrap().len(), 1, "{auv1}");
+        assert_eq!(auv1["position"]["x"], 10.0);
+        assert_eq!(auv1["position"]["depth"], 4.0);
+        // The report's own time, not when it was heard.
+        assert_eq!(auv1["position"]["t"], 1796190000.0);
+        assert_eq!(auv1["last_heard"], 100.0);
+        let heard = nodes.iter().find(|n| n["name"] == "modem 5").unwrap();
+        assert_eq!(heard["bridged"], false);
+        assert_eq!(heard["position"]["lat"], 41.5);
+        // The first lat/lon became the origin.
+        assert_eq!(snap["origin"]["lat"], 41.5);
+        assert_eq!(heard["position"]["x"], 0.0);
+        assert_eq!(snap["messages"].as_array().unwrap().len(), 3);
+        // The node that names modem id 5 later takes what was heard of it.
+        let events = apply(
+            &mut s,
+            "fleet/buoy/status",
+            r#"{"online": true, "modem_id": 5}"#,
+        );
+        assert!(events
+            .iter()
+            .any(|e| e["event"] == "gone" && e["node"] == "modem 5"));
+        let snap = s.snapshot();
+        let buoy = snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["name"] == "buoy")
+            .unwrap()
+            .clone();
+        assert_eq!(buoy["track"].as_array().unwrap().len(), 1, "{buoy}");
+        assert!(!snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n["name"] == "modem 5"));
+    }
+
+    #[test]
+    fn a_local_fix_gets_latitude_with_a_given_origin() {
+        let mut s = ConsoleState::new("test", Some((41.0, -70.0)), Box::new(|_, a, b| a == b));
+        apply(
+            &mut s,
+            "fleet/a/accepted",
+            r#"{"accepted": "T", "id": 1, "topic": "t", "msg": {"x": 0, "y": 1111.95}}"#,
+        );
+        let snap = s.snapshot();
+        let p = &snap["nodes"][0]["position"];
+        assert!((p["lat"].as_f64().unwrap() - 41.01).abs() < 1e-4, "{p}");
+        assert_eq!(p["lon"], -70.0);
+    }
+
+    #[test]
+    fn a_command_is_accepted_then_acked() {
+        let mut s = state();
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1}"#,
+        );
+        let msg = json!({"destination": 2, "action": "GOTO"});
+        let topic = "fleet/auv1/tx/goby.example.Command";
+        let (id, _) = s.command_sent("auv1", "goby.example.Command", topic, &msg, 100.0);
+        let (other, _) = s.command_sent(
+            "auv1",
+            "goby.example.Command",
+            topic,
+            &json!({"destination": 3}),
+            100.0,
+        );
+        assert_eq!(s.command_state(id), Some(CommandState::Published));
+        let events = apply(
+            &mut s,
+            "fleet/auv1/accepted",
+            &format!(
+                r#"{{"accepted": "goby.example.Command", "id": 9, "topic": "{topic}", "msg": {msg}}}"#
+            ),
+        );
+        assert!(events
+            .iter()
+            .any(|e| e["event"] == "command" && e["command"]["state"] == "accepted"));
+        assert_eq!(s.command_state(id), Some(CommandState::Accepted));
+        assert_eq!(s.command_state(other), Some(CommandState::Published));
+        apply(
+            &mut s,
+            "fleet/auv1/ack/goby.example.Command",
+            &format!(
+                r#"{{"type": "goby.example.Command", "by": 2, "frame": 0, "time": 120, "msg": {msg}}}"#
+            ),
+        );
+        assert_eq!(s.command_state(id), Some(CommandState::Acked));
+        apply(
+            &mut s,
+            "fleet/auv1/error",
+            &format!(r#"{{"error": "no", "topic": "{topic}"}}"#),
+        );
+        assert_eq!(s.command_state(other), Some(CommandState::Refused));
+        let snap = s.snapshot();
+        let node = &snap["nodes"][0];
+        assert_eq!(node["acks"], 1);
+        assert_eq!(node["errors"], 1);
+        assert_eq!(snap["commands"][0]["note"], "by 2");
+    }
+
+    #[test]
+    fn the_events_of_a_report_are_numbered_in_their_order() {
+        let mut s = state();
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1}"#,
+        );
+        let events = apply(
+            &mut s,
+            "fleet/auv2/rx/goby.example.NavigationReport",
+            r#"{"src": 1, "dest": 2, "time": 99, "msg": {"x": 1, "y": 2}}"#,
+        );
+        let seqs: Vec<u64> = events.iter().map(|e| e["seq"].as_u64().unwrap()).collect();
+        assert!(seqs.len() > 3, "{events:?}");
+        assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
+        assert_eq!(s.snapshot()["seq"], *seqs.last().unwrap());
+    }
+
+    #[test]
+    fn receptions_make_the_link_series() {
+        let mut s = state();
+        apply(
+            &mut s,
+            "fleet/auv2/link",
+            r#"{"src": 1, "dest": 2, "rate": 1, "frames": 2, "time": 50,
+                "receive_stat": [{"snr_in": 12, "snr_out": 9, "doppler": -0.4, "number_bad_frames": 1, "number_frames": 2}]}"#,
+        );
+        apply(
+            &mut s,
+            "fleet/auv2/link",
+            r#"{"src": 1, "rate": 2, "frames": 1, "time": 60}"#,
+        );
+        let snap = s.snapshot();
+        let auv2 = snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["name"] == "auv2")
+            .unwrap()
+            .clone();
+        let links = auv2["links"].as_array().unwrap();
+        assert_eq!(links.len(), 2);
+        assert_eq!(links[0]["snr_in"], 12.0);
+        assert_eq!(links[0]["doppler"], -0.4);
+        assert_eq!(links[0]["bad_frames"], 1);
+        assert!(links[1].get("snr_in").is_none());
+        // The sender, heard over the link.
+        assert!(snap["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n["name"] == "modem 1"));
+    }
+}

@@ -1,0 +1,936 @@
+//! `goby console` against a real Mosquitto broker on loopback and two
+//! gateways — the fleet quick start's `gobyd/config/fleet-vehicle1.pb.txt`
+//! and `fleet-vehicle2.pb.txt` (ports moved to free ones), each a gobyd
+//! run in-process with its MQTT bridge — and, in the browser test, a
+//! headless Chromium driven over the Chrome DevTools protocol: the map
+//! shows both nodes from the reports they send, a command filled in the
+//! commander's form and sent from it arrives at the other node, and its ack
+//! shows in the page. Screenshots, and the page's load time and update
+//! latency, are kept under the target directory
+//! (`CARGO_TARGET_TMPDIR/console/`). Fails without Mosquitto
+//! (`.ci/mosquitto.sh`); the browser test is ignored without Chromium
+//! (`.ci/chromium.sh`).
+
+#[path = "../../gobyd/tests/support/broker.rs"]
+mod broker;
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpStream, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use broker::{Broker, Seen, Watcher};
+use serde_json::{json, Value};
+
+/// Upper bound of a wait on the acoustic link: the quick start's TDMA
+/// cycle is 16 s, a command and its ack take two or three of them (one
+/// more for a lost packet).
+const LINK_PATIENCE: Duration = Duration::from_secs(150);
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("goby-console-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn now_ms() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64()
+        * 1000.0
+}
+
+/// The quick start's two vehicles, on free ports, bridged to `broker`,
+/// their data directories in `dir`: the configuration files written.
+fn fleet_configs(dir: &Path, broker: &str) -> Vec<PathBuf> {
+    let ports = [free_udp_port(), free_udp_port()];
+    (1..=2)
+        .map(|i| {
+            let text = std::fs::read_to_string(
+                repo().join(format!("gobyd/config/fleet-vehicle{i}.pb.txt")),
+            )
+            .unwrap();
+            let text = text
+                .replace("127.0.0.1:1883", broker)
+                .replace("port: 50111", &format!("port: {}", ports[0]))
+                .replace("port: 50112", &format!("port: {}", ports[1]))
+                .replace(&format!("127.0.0.1:1115{i}"), "127.0.0.1:0")
+                .replace(
+                    &format!("\"fleet-vehicle{i}-data\""),
+                    &format!("\"{}\"", dir.join(format!("vehicle{i}")).display()),
+                );
+            assert!(
+                text.contains(broker) && text.contains("127.0.0.1:0\""),
+                "{text}"
+            );
+            let path = dir.join(format!("fleet-vehicle{i}.pb.txt"));
+            std::fs::write(&path, text).unwrap();
+            path
+        })
+        .collect()
+}
+
+/// The gateways: each a gobyd process on its configuration (this test
+/// binary run again as [`gateway_process`], which runs the `gobyd` library's
+/// command line as the `gobyd` binary does), killed when dropped.
+struct Gateways {
+    children: Vec<Child>,
+    /// Their JSON interfaces.
+    json: Vec<String>,
+}
+
+/// Where gobyd says its JSON interface is, in its log line
+/// `JSON interface on tcp://ADDRESS`.
+fn json_address(log: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(log).ok()?;
+    let at = text.find("JSON interface on tcp://")? + "JSON interface on tcp://".len();
+    Some(text[at..].split_whitespace().next()?.to_string())
+}
+
+impl Gateways {
+    fn start(configs: Vec<PathBuf>) -> Gateways {
+        let mut children = Vec::new();
+        let mut logs = Vec::new();
+        for path in configs {
+            let log_path = path.with_extension("log");
+            let log = std::fs::File::create(&log_path).unwrap();
+            children.push(
+                Command::new(std::env::current_exe().unwrap())
+                    .args([
+                        "gateway_process",
+                        "--exact",
+                        "--ignored",
+                        "--nocapture",
+                        "--test-threads=1",
+                    ])
+                    .env("GOBY_CONSOLE_GATEWAY", &path)
+                    .env_remove("RUST_BACKTRACE")
+                    .stdin(Stdio::null())
+                    .stdout(Stdio::null())
+                    .stderr(log)
+                    .spawn()
+                    .expect("the gateway starts"),
+            );
+            logs.push(log_path);
+        }
+        let deadline = Instant::now() + broker::PATIENCE;
+        let json = logs
+            .iter()
+            .map(|log| loop {
+                if let Some(address) = json_address(log) {
+                    break address;
+                }
+                assert!(
+                    Instant::now() < deadline,
+                    "the gateway did not start: {}",
+                    std::fs::read_to_string(log).unwrap_or_default()
+                );
+                std::thread::sleep(Duration::from_millis(50));
+            })
+            .collect();
+        Gateways { children, json }
+    }
+}
+
+impl Drop for Gateways {
+    fn drop(&mut self) {
+        for child in &mut self.children {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Not a test of its own: the gobyd process that the tests of this file
+/// start, when this binary is run with `GOBY_CONSOLE_GATEWAY` naming its
+/// configuration (`gobyd --config FILE`, until killed).
+#[test]
+#[ignore = "the gateway process of the other tests, run by them"]
+fn gateway_process() {
+    use clap::Parser;
+    let Some(config) = std::env::var_os("GOBY_CONSOLE_GATEWAY") else {
+        panic!(
+            "run by the other tests of this file, with GOBY_CONSOLE_GATEWAY naming a configuration"
+        );
+    };
+    let cli = gobyd::command::GobydCli::parse_from([
+        std::ffi::OsString::from("gobyd"),
+        "--config".into(),
+        config,
+    ]);
+    std::process::exit(i32::from(gobyd::command::run_cli(cli)));
+}
+
+/// `goby console ARGS --listen 127.0.0.1:0`, killed when dropped.
+struct Console {
+    child: Child,
+    /// `http://127.0.0.1:PORT/`.
+    url: String,
+}
+
+impl Console {
+    fn start(args: &[&str]) -> Console {
+        let navigation = repo().join("protos/proto/goby/example/navigation.proto");
+        let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .arg("console")
+            .args(args)
+            .arg("-f")
+            .arg(navigation)
+            .args(["--listen", "127.0.0.1:0"])
+            .env_remove("RUST_BACKTRACE")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("goby console starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let url = line
+            .split_whitespace()
+            .find(|w| w.starts_with("http://"))
+            .unwrap_or_else(|| panic!("no address in {line:?}"))
+            .to_string();
+        Console { child, url }
+    }
+
+    fn port(&self) -> u16 {
+        self.url
+            .trim_start_matches("http://127.0.0.1:")
+            .trim_end_matches('/')
+            .parse()
+            .unwrap()
+    }
+
+    /// An HTTP/1.0 request to the console: status and JSON body.
+    fn request(&self, method: &str, path: &str, body: Option<&Value>) -> (u16, Value) {
+        let (status, text) = http(self.port(), method, path, body.map(Value::to_string));
+        (
+            status,
+            serde_json::from_str(&text).unwrap_or(Value::String(text)),
+        )
+    }
+
+    /// `GET /api/state` until `pick` gives something.
+    fn wait_state<T>(
+        &self,
+        what: &str,
+        patience: Duration,
+        mut pick: impl FnMut(&Value) -> Option<T>,
+    ) -> T {
+        let deadline = Instant::now() + patience;
+        loop {
+            let (_, state) = self.request("GET", "/api/state", None);
+            if let Some(t) = pick(&state) {
+                return t;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting for {what}: {state:#}"
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+}
+
+impl Drop for Console {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A plain HTTP/1.1 request on loopback: status and body.
+fn http(port: u16, method: &str, path: &str, body: Option<String>) -> (u16, String) {
+    try_http(port, method, path, body)
+        .unwrap_or_else(|e| panic!("{method} {path} on port {port}: {e}"))
+}
+
+/// [`http`], with the error when the request could not be made.
+fn try_http(
+    port: u16,
+    method: &str,
+    path: &str,
+    body: Option<String>,
+) -> std::io::Result<(u16, String)> {
+    let mut stream = TcpStream::connect(("127.0.0.1", port))?;
+    stream.set_read_timeout(Some(broker::PATIENCE))?;
+    let body = body.unwrap_or_default();
+    let mut request =
+        format!("{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nConnection: close\r\n");
+    if !body.is_empty() {
+        request += &format!(
+            "Content-Type: application/json\r\nContent-Length: {}\r\n",
+            body.len()
+        );
+    }
+    request += "\r\n";
+    request += &body;
+    stream.write_all(request.as_bytes())?;
+    // The head, then as many bytes as it says (a server may keep the
+    // connection open), or all until it closes.
+    let mut reader = BufReader::new(stream);
+    let mut head = String::new();
+    let mut length = None;
+    loop {
+        let mut line = String::new();
+        if reader.read_line(&mut line)? == 0 || line == "\r\n" {
+            break;
+        }
+        if let Some((name, value)) = line.split_once(':') {
+            if name.eq_ignore_ascii_case("content-length") {
+                length = value.trim().parse::<usize>().ok();
+            }
+        }
+        head += &line;
+    }
+    let mut body = Vec::new();
+    match length {
+        Some(n) => {
+            body.resize(n, 0);
+            reader.read_exact(&mut body)?;
+        }
+        None => {
+            reader.read_to_end(&mut body)?;
+        }
+    }
+    let status = head
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    Ok((status, String::from_utf8_lossy(&body).into_owned()))
+}
+
+fn node<'a>(state: &'a Value, name: &str) -> Option<&'a Value> {
+    state["nodes"]
+        .as_array()?
+        .iter()
+        .find(|n| n["name"] == name)
+}
+
+/// A navigation report of vehicle `source` at `(x, y)`, to the other.
+fn report(source: i64, x: f64, y: f64) -> Value {
+    let time = (now_ms() / 1000.0).floor();
+    json!({
+        "source": source, "destination": 3 - source, "time": time, "x": x, "y": y,
+        "z": -12, "heading": 90, "speed": 1.5, "veh_class": "AUV", "battery_ok": true,
+    })
+}
+
+/// Each vehicle reports three positions on its `tx` topic.
+fn report_positions(commander: &Watcher) {
+    for i in 0..3 {
+        let f = f64::from(i);
+        commander.publish(
+            "fleet/auv1/tx/goby.example.NavigationReport",
+            report(1, 40.0 * f, 25.0 * f).to_string(),
+        );
+        commander.publish(
+            "fleet/auv2/tx/goby.example.NavigationReport",
+            report(2, 1500.0 - 30.0 * f, -35.0 * f).to_string(),
+        );
+    }
+}
+
+#[test]
+fn the_console_serves_the_fleet_and_sends_commands() {
+    let dir = scratch("api");
+    let broker = Broker::start(&dir, "the_console_serves_the_fleet_and_sends_commands");
+    let address = broker.address();
+    let gateways = Gateways::start(fleet_configs(&dir, &address));
+    let console = Console::start(&["fleet", "--broker", &address, "--origin", "41.52,-70.67"]);
+    // The page and its assets are served from the binary.
+    let (status, page) = http(console.port(), "GET", "/", None);
+    assert_eq!(status, 200);
+    assert!(page.contains("<script src=\"/console.js\">"), "{page}");
+    for asset in ["/console.js", "/console.css", "/favicon.svg"] {
+        let (status, body) = http(console.port(), "GET", asset, None);
+        assert_eq!(status, 200, "{asset}");
+        assert!(!body.is_empty(), "{asset}");
+        // Nothing to fetch from elsewhere (the SVG namespace is a name, not a place).
+        let body = body.replace("xmlns=\"http://www.w3.org/2000/svg\"", "");
+        assert!(
+            !body.contains("http://") && !body.contains("https://"),
+            "{asset} names a remote place"
+        );
+    }
+    assert_eq!(http(console.port(), "GET", "/nothing", None).0, 404);
+    // The forms of the types loaded.
+    let (_, forms) = console.request("GET", "/api/forms", None);
+    let command = forms
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["name"] == "goby.example.Command")
+        .expect("the Command form");
+    assert_eq!(command["fields"][2]["max_repeat"], 3, "{command}");
+    // Both gateways, from their retained status.
+    console.wait_state("both gateways", broker::PATIENCE, |s| {
+        let up =
+            |n: &str| node(s, n).is_some_and(|n| n["online"] == true && n["driver"] == "ready");
+        (up("auv1") && up("auv2")).then_some(())
+    });
+    let commander = Watcher::start(&address, "commander", "fleet/#");
+    report_positions(&commander);
+    let state = console.wait_state("both vehicles placed", broker::PATIENCE, |s| {
+        let placed = |n: &str| {
+            node(s, n).is_some_and(|n| n["track"].as_array().is_some_and(|t| t.len() == 3))
+        };
+        (placed("auv1") && placed("auv2")).then(|| s.clone())
+    });
+    let auv2 = node(&state, "auv2").unwrap();
+    assert_eq!(auv2["position"]["x"], 1440.0, "{auv2}");
+    assert!(
+        (auv2["position"]["lat"].as_f64().unwrap() - 41.5197).abs() < 1e-3,
+        "{auv2}"
+    );
+    // The check tells what the codec would change.
+    let (_, checked) = console.request(
+        "POST",
+        "/api/check",
+        Some(&json!({"type": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "more than ten"}})),
+    );
+    assert_eq!(checked["changes"][0]["field"], "note", "{checked}");
+    // Refused before sending: an unknown node, a message of the wrong form.
+    let (status, refused) = console.request(
+        "POST",
+        "/api/send",
+        Some(&json!({"node": "auv9", "type": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO"}})),
+    );
+    assert_eq!(status, 400);
+    assert!(
+        refused["error"].as_str().unwrap().contains("auv1, auv2"),
+        "{refused}"
+    );
+    let (status, _) = console.request(
+        "POST",
+        "/api/send",
+        Some(
+            &json!({"node": "auv1", "type": "goby.example.Command", "msg": {"destination": "two"}}),
+        ),
+    );
+    assert_eq!(status, 400);
+    // Sent: published on auv1's tx topic, received by auv2, acked.
+    let msg = json!({"destination": 2, "action": "GOTO", "waypoint": [{"x": 200, "y": -50}], "note": "survey A"});
+    let (status, sent) = console.request(
+        "POST",
+        "/api/send",
+        Some(&json!({"node": "auv1", "type": "goby.example.Command", "msg": msg})),
+    );
+    assert_eq!(status, 200, "{sent}");
+    let id = sent["command"].as_u64().unwrap();
+    commander.wait_for("the command on auv1's tx topic", |seen| match seen {
+        Seen::Message(t, v)
+            if t == "fleet/auv1/tx/goby.example.Command" && v["note"] == "survey A" =>
+        {
+            Some(())
+        }
+        _ => None,
+    });
+    let state = console.wait_state("the ack", LINK_PATIENCE, |s| {
+        let c = s["commands"].as_array()?.iter().find(|c| c["id"] == id)?;
+        (c["state"] == "acked").then(|| s.clone())
+    });
+    let c = state["commands"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["id"] == id)
+        .unwrap();
+    assert_eq!(c["note"], "by 2", "{c}");
+    assert!(c["journal_id"].is_number(), "{c}");
+    let received = state["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["kind"] == "rx" && m["node"] == "auv2" && m["type"] == "goby.example.Command")
+        .unwrap_or_else(|| panic!("the command received at auv2: {}", state["messages"]));
+    assert_eq!(received["msg"]["note"], "survey A", "{received}");
+    assert_eq!(received["src"], 1);
+    drop(console);
+
+    // The same gateway through its JSON interface.
+    let json = gateways.json[1].clone();
+    let console = Console::start(&["--gobyd", &json, "--node", "auv2"]);
+    console.wait_state("the JSON interface", broker::PATIENCE, |s| {
+        (s["connection"]["connected"] == true && node(s, "auv2").is_some()).then_some(())
+    });
+    let (status, sent) = console.request(
+        "POST",
+        "/api/send",
+        Some(&json!({"node": "auv2", "type": "goby.example.Command", "msg": {"destination": 1, "action": "HOLD"}})),
+    );
+    assert_eq!(status, 200, "{sent}");
+    let id = sent["command"].as_u64().unwrap();
+    console.wait_state("the JSON interface's ack", LINK_PATIENCE, |s| {
+        let c = s["commands"].as_array()?.iter().find(|c| c["id"] == id)?;
+        (c["state"] == "acked").then_some(())
+    });
+    drop(console);
+    drop(gateways);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn the_page_shows_the_fleet_and_commands_it() {
+    #[cfg(chromium)]
+    browser::run();
+}
+
+#[cfg(chromium)]
+mod browser {
+    use super::*;
+
+    /// A Chrome DevTools protocol client of one page: commands by id, their
+    /// results awaited (events in between skipped).
+    mod devtools {
+        use std::net::TcpStream;
+        use std::time::{Duration, Instant};
+
+        use serde_json::{json, Value};
+        use tungstenite::{Message, WebSocket};
+
+        pub struct Page {
+            socket: WebSocket<TcpStream>,
+            next: u64,
+        }
+
+        impl Page {
+            /// Connects to a page's `webSocketDebuggerUrl`.
+            pub fn connect(url: &str) -> Page {
+                let rest = url.trim_start_matches("ws://");
+                let host = rest.split('/').next().unwrap();
+                let stream = TcpStream::connect(host).unwrap();
+                stream
+                    .set_read_timeout(Some(Duration::from_secs(60)))
+                    .unwrap();
+                let (socket, _) = tungstenite::client(url, stream).expect("the DevTools handshake");
+                Page { socket, next: 1 }
+            }
+
+            /// Calls `method` and waits for its result.
+            pub fn call(&mut self, method: &str, params: Value) -> Value {
+                let id = self.next;
+                self.next += 1;
+                let text = json!({"id": id, "method": method, "params": params}).to_string();
+                self.socket.send(Message::text(text)).unwrap();
+                loop {
+                    let message = self.socket.read().expect("a DevTools message");
+                    let Message::Text(text) = message else {
+                        continue;
+                    };
+                    let value: Value = serde_json::from_str(&text).unwrap();
+                    if value["id"] == id {
+                        assert!(value.get("error").is_none(), "{method}: {value}");
+                        return value["result"].clone();
+                    }
+                }
+            }
+
+            /// Evaluates `expression` in the page (promises awaited): its value.
+            pub fn eval(&mut self, expression: &str) -> Value {
+                let result = self.call(
+                    "Runtime.evaluate",
+                    json!({"expression": expression, "returnByValue": true, "awaitPromise": true}),
+                );
+                assert!(
+                    result.get("exceptionDetails").is_none(),
+                    "{expression}: {result}"
+                );
+                result["result"]["value"].clone()
+            }
+
+            /// Evaluates `expression` every 100 ms until it is true.
+            pub fn wait(&mut self, what: &str, expression: &str, patience: Duration) {
+                let deadline = Instant::now() + patience;
+                loop {
+                    if self.eval(expression) == Value::Bool(true) {
+                        return;
+                    }
+                    if Instant::now() > deadline {
+                        let state = self.eval("JSON.stringify({errors: goby.errors, map: goby.map, commands: [...goby.state.commands.values()]})");
+                        panic!("timed out waiting for {what} ({expression}): {state}");
+                    }
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+            }
+
+            /// A PNG of what the window shows, scaled by `scale`.
+            pub fn screenshot_window(&mut self, scale: f64) -> Vec<u8> {
+                use base64::Engine;
+                let size = self.eval("[window.innerWidth, window.innerHeight]");
+                let shot = self.call(
+                "Page.captureScreenshot",
+                json!({"format": "png",
+                       "clip": {"x": 0, "y": 0, "width": size[0], "height": size[1], "scale": scale}}),
+            );
+                base64::engine::general_purpose::STANDARD
+                    .decode(shot["data"].as_str().unwrap())
+                    .unwrap()
+            }
+
+            /// A PNG of the whole page.
+            pub fn screenshot(&mut self) -> Vec<u8> {
+                use base64::Engine;
+                let metrics = self.call("Page.getLayoutMetrics", json!({}));
+                let size = &metrics["cssContentSize"];
+                let shot = self.call(
+                "Page.captureScreenshot",
+                json!({"format": "png", "captureBeyondViewport": true,
+                       "clip": {"x": 0, "y": 0, "width": size["width"], "height": size["height"], "scale": 1}}),
+            );
+                base64::engine::general_purpose::STANDARD
+                    .decode(shot["data"].as_str().unwrap())
+                    .unwrap()
+            }
+        }
+    }
+
+    /// Headless Chromium with a DevTools port, killed when dropped.
+    struct Chromium {
+        child: Child,
+        port: u16,
+    }
+
+    impl Chromium {
+        fn start(profile: &Path) -> Chromium {
+            let mut child = Command::new(env!("GOBY_CHROMIUM_PATH"))
+                .args([
+                    "--headless",
+                    "--no-sandbox",
+                    "--disable-gpu",
+                    "--no-first-run",
+                    "--no-default-browser-check",
+                    "--disable-extensions",
+                    "--disable-background-networking",
+                    "--disable-component-update",
+                    "--disable-sync",
+                    "--hide-scrollbars",
+                    "--remote-debugging-address=127.0.0.1",
+                    "--remote-debugging-port=0",
+                    "--window-size=1366,900",
+                ])
+                .arg(format!("--user-data-dir={}", profile.display()))
+                .arg("about:blank")
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("chromium starts");
+            let stderr = child.stderr.take().unwrap();
+            let (found, port) = std::sync::mpsc::channel();
+            std::thread::spawn(move || {
+                let mut found = Some(found);
+                for line in BufReader::new(stderr).lines() {
+                    let Ok(line) = line else { break };
+                    if let Some(rest) = line.split("DevTools listening on ws://127.0.0.1:").nth(1) {
+                        let port: u16 = rest.split('/').next().unwrap().parse().unwrap();
+                        if let Some(found) = found.take() {
+                            let _ = found.send(port);
+                        }
+                    }
+                    // The rest is read and dropped, so that the pipe never fills.
+                }
+            });
+            let port = port
+                .recv_timeout(broker::PATIENCE)
+                .expect("chromium names its DevTools port");
+            Chromium { child, port }
+        }
+
+        /// The page's DevTools client.
+        fn page(&self) -> devtools::Page {
+            let deadline = Instant::now() + broker::PATIENCE;
+            loop {
+                let list = try_http(self.port, "GET", "/json/list", None)
+                    .ok()
+                    .and_then(|(_, list)| serde_json::from_str::<Value>(&list).ok())
+                    .unwrap_or(Value::Null);
+                if let Some(url) = list
+                    .as_array()
+                    .and_then(|l| l.iter().find(|t| t["type"] == "page"))
+                    .and_then(|t| t["webSocketDebuggerUrl"].as_str())
+                {
+                    return devtools::Page::connect(url);
+                }
+                assert!(Instant::now() < deadline, "no page in {list}");
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    }
+
+    impl Drop for Chromium {
+        fn drop(&mut self) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+
+    /// Where the screenshots and measurements are kept.
+    fn artifacts() -> PathBuf {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("console");
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// Sets an input of the commander's form (by its `data-path`) as typing
+    /// would, and waits for the page's check of the draft.
+    fn fill(page: &mut devtools::Page, path: &str, value: &str) {
+        let expression = format!(
+        "(() => {{ const e = document.querySelector('#cmd-fields [data-path=\"{path}\"]'); \
+         if (!e) return false; e.value = {value}; \
+         e.dispatchEvent(new Event(e.tagName === 'SELECT' ? 'change' : 'input', {{bubbles: true}})); return true; }})()",
+        value = json!(value)
+    );
+        assert_eq!(page.eval(&expression), Value::Bool(true), "no input {path}");
+    }
+
+    /// Waits until the page's last check is of the form as it stands (the
+    /// check runs 150 ms after the last input), and returns it.
+    fn checked(page: &mut devtools::Page) -> Value {
+        page.wait(
+            "the check of the draft",
+            "goby.checkedDraft === JSON.stringify(goby.draft())",
+            broker::PATIENCE,
+        );
+        page.eval("goby.lastCheck")
+    }
+
+    pub fn run() {
+        let dir = scratch("browser");
+        let out = artifacts();
+        let broker = Broker::start(&dir, "the_page_shows_the_fleet_and_commands_it");
+        let address = broker.address();
+        let gateways = Gateways::start(fleet_configs(&dir, &address));
+        let console = Console::start(&["fleet", "--broker", &address, "--origin", "41.52,-70.67"]);
+        console.wait_state("both gateways", broker::PATIENCE, |s| {
+            (node(s, "auv1").is_some() && node(s, "auv2").is_some()).then_some(())
+        });
+        let commander = Watcher::start(&address, "commander", "fleet/#");
+        let chromium = Chromium::start(&dir.join("profile"));
+        let mut page = chromium.page();
+        page.call("Page.enable", json!({}));
+        page.call("Runtime.enable", json!({}));
+
+        // Load time: navigation start to the first snapshot drawn, several
+        // loads (the first warms the browser's own caches).
+        let mut loads = Vec::new();
+        for _ in 0..4 {
+            page.call("Page.navigate", json!({"url": console.url}));
+            page.wait(
+            "the page drawn",
+            "typeof goby === 'object' && goby.readyAt !== null && document.readyState === 'complete'",
+            broker::PATIENCE,
+        );
+            let t = page.eval(
+            "(() => { const n = performance.getEntriesByType('navigation')[0]; \
+             return {ready: goby.readyAt, load: n.loadEventEnd, dom: n.domContentLoadedEventEnd}; })()",
+        );
+            loads.push(t);
+        }
+        page.wait(
+            "both gateways in the table",
+            "document.querySelectorAll('#nodes tbody tr').length === 2",
+            broker::PATIENCE,
+        );
+
+        // The map shows both nodes from the reports they send.
+        report_positions(&commander);
+        page.wait(
+        "both nodes on the map",
+        "goby.map && goby.map.placed === 2 && [...goby.state.nodes.values()].every(n => n.track.length === 3)",
+        broker::PATIENCE,
+    );
+        let rows =
+            page.eval("[...document.querySelectorAll('#nodes tbody tr')].map(r => r.textContent)");
+        let rows = rows.as_array().unwrap();
+        assert!(
+            rows.iter().any(|r| r.as_str().unwrap().contains("auv2")
+                && r.as_str().unwrap().contains("1440.0, -70.0 m")),
+            "{rows:?}"
+        );
+
+        // A reception with a Micro-Modem's statistics, as a gateway on a
+        // Micro-Modem publishes them, for the link plots.
+        for (i, snr) in [(0, 11.0), (1, 8.5), (2, 13.0)] {
+            let time = now_ms() / 1000.0 - 30.0 + f64::from(i) * 10.0;
+            commander.publish(
+            "fleet/auv2/link",
+            json!({"src": 1, "dest": 2, "rate": 1, "frames": 2, "time": time,
+                   "receive_stat": [{"snr_in": snr, "snr_out": snr - 3.0, "snr_rss": snr + 2.0,
+                                     "doppler": -0.3 + 0.2 * f64::from(i), "number_bad_frames": i % 2, "number_frames": 2}]})
+            .to_string(),
+        );
+        }
+        page.wait(
+            "the link series",
+            "goby.state.nodes.get('auv2').links.filter(l => l.snr_in !== undefined).length === 3",
+            broker::PATIENCE,
+        );
+        page.eval("(() => { document.querySelector('#nodes tbody tr[data-node=\"auv2\"]').click(); return true; })()");
+        std::thread::sleep(Duration::from_millis(300));
+        let laptop = page.screenshot();
+        std::fs::write(out.join("laptop-map.png"), &laptop).unwrap();
+
+        // The commander: auv1, a Command, filled in the form.
+        page.eval("(() => { const n = document.getElementById('cmd-node'); n.value = 'auv1'; n.dispatchEvent(new Event('change')); \
+               const t = document.getElementById('cmd-type'); t.value = 'goby.example.Command'; t.dispatchEvent(new Event('change')); return true; })()");
+        fill(&mut page, "destination", "2");
+        fill(&mut page, "action", "GOTO");
+        assert_eq!(
+        page.eval("(() => { document.querySelector('#cmd-fields [data-add=\"waypoint\"]').click(); return true; })()"),
+        Value::Bool(true)
+    );
+        fill(&mut page, "waypoint[0].x", "200.4");
+        fill(&mut page, "waypoint[0].y", "-50");
+        fill(&mut page, "note", "survey A and B");
+        // What the codec would change, before sending: the note truncated,
+        // the waypoint rounded to the metre.
+        let check = checked(&mut page);
+        assert_eq!(check["changes"][0]["field"], "note", "{check}");
+        assert_eq!(check["back"]["waypoint"][0]["x"], 200.0, "{check}");
+        let shown = page.eval("document.getElementById('cmd-check').textContent");
+        assert!(
+            shown
+                .as_str()
+                .unwrap()
+                .contains("note: string of 14 bytes longer than max_length 10"),
+            "{shown}"
+        );
+        assert!(
+            shown
+                .as_str()
+                .unwrap()
+                .contains("waypoint[0].x: 200.4 → 200"),
+            "{shown}"
+        );
+        assert_eq!(
+        page.eval("document.querySelector('#cmd-fields [data-path=\"note\"]').classList.contains('changed')"),
+        Value::Bool(true)
+    );
+        std::fs::write(out.join("commander-check.png"), page.screenshot()).unwrap();
+        fill(&mut page, "note", "survey A");
+        let check = checked(&mut page);
+        assert_eq!(check["changes"], json!([]), "{check}");
+        page.eval("(() => { document.getElementById('cmd-send').click(); return true; })()");
+        page.wait(
+            "the command sent",
+            "goby.lastSend !== undefined && goby.lastSend.command !== undefined",
+            broker::PATIENCE,
+        );
+        let id = page.eval("goby.lastSend.command");
+        // It arrives at the other node ...
+        let arrived = commander.wait_for("the command at auv2", |seen| match seen {
+            Seen::Message(t, v)
+                if t == "fleet/auv2/rx/goby.example.Command" && v["msg"]["note"] == "survey A" =>
+            {
+                Some(v.clone())
+            }
+            _ => None,
+        });
+        assert_eq!(arrived["msg"]["waypoint"][0]["x"], 200.0, "{arrived}");
+        assert_eq!(arrived["src"], 1);
+        // ... and its ack shows in the page.
+        page.wait(
+        "the ack in the page",
+        &format!("(() => {{ const r = document.querySelector('#commands tr[data-command=\"{id}\"] .state-acked'); return r !== null; }})()"),
+        LINK_PATIENCE,
+    );
+        let row = page.eval(&format!(
+            "document.querySelector('#commands tr[data-command=\"{id}\"]').textContent"
+        ));
+        assert!(row.as_str().unwrap().contains("by 2"), "{row}");
+        let fields = page.eval("[...document.querySelectorAll('#messages tbody tr')].map(r => r.textContent).join('\\n')");
+        assert!(
+            fields.as_str().unwrap().contains("note: survey A"),
+            "{fields}"
+        );
+        std::fs::write(out.join("laptop-acked.png"), page.screenshot()).unwrap();
+        // The guide's picture (docs/console.md): a laptop's window, a little
+        // taller so that the commander's acked command shows, auv2 picked.
+        page.call(
+            "Emulation.setDeviceMetricsOverride",
+            json!({"width": 1366, "height": 1230, "deviceScaleFactor": 1, "mobile": false}),
+        );
+        page.eval("(() => { document.querySelector('#nodes tbody tr[data-node=\"auv2\"]').click(); window.scrollTo(0, 0); return true; })()");
+        std::thread::sleep(Duration::from_millis(300));
+        std::fs::write(out.join("guide.png"), page.screenshot_window(0.6)).unwrap();
+
+        // Update latency: a publication on the broker to its row drawn.
+        let mut latencies = Vec::new();
+        for i in 0..20 {
+            let marker = format!("lat-{i:02}");
+            let sent = now_ms();
+            commander.publish(
+                "fleet/auv2/rx/goby.example.Command",
+                json!({"type": "goby.example.Command", "src": 1, "dest": 2, "time": sent / 1000.0,
+                   "msg": {"destination": 2, "action": "HOLD", "note": marker}})
+                .to_string(),
+            );
+            let expression = format!(
+            "(() => {{ const m = goby.state.messages.find(m => m.msg && m.msg.note === '{marker}'); \
+             return m !== undefined && goby.shownAt[m.seq] !== undefined; }})()"
+        );
+            page.wait("the message shown", &expression, broker::PATIENCE);
+            let shown = page.eval(&format!(
+            "goby.shownAt[goby.state.messages.find(m => m.msg && m.msg.note === '{marker}').seq]"
+        ));
+            latencies.push(shown.as_f64().unwrap() - sent);
+            std::thread::sleep(Duration::from_millis(50));
+        }
+
+        // A tablet: one column, nothing wider than the screen.
+        page.call(
+            "Emulation.setDeviceMetricsOverride",
+            json!({"width": 820, "height": 1180, "deviceScaleFactor": 1, "mobile": true}),
+        );
+        std::thread::sleep(Duration::from_millis(500));
+        let overflow = page.eval("document.documentElement.scrollWidth - window.innerWidth");
+        assert!(
+            overflow.as_f64().unwrap() <= 0.0,
+            "wider than a tablet by {overflow} px"
+        );
+        std::fs::write(out.join("tablet.png"), page.screenshot()).unwrap();
+        assert_eq!(page.eval("goby.errors"), json!([]));
+
+        let mut sorted = latencies.clone();
+        sorted.sort_by(f64::total_cmp);
+        let ready: Vec<f64> = loads.iter().map(|l| l["ready"].as_f64().unwrap()).collect();
+        let measured = json!({
+            "load_ms": {"first_snapshot_drawn": ready, "load_event_end": loads.iter().map(|l| l["load"].clone()).collect::<Vec<_>>()},
+            "update_latency_ms": {"median": sorted[sorted.len() / 2], "max": sorted[sorted.len() - 1], "all": latencies},
+        });
+        std::fs::write(out.join("measured.json"), format!("{measured:#}\n")).unwrap();
+        eprintln!("console measurements ({}): {measured}", out.display());
+        assert!(
+            sorted[sorted.len() - 1] < 5000.0,
+            "a publication took over 5 s to show: {latencies:?}"
+        );
+        drop(page);
+        drop(chromium);
+        drop(console);
+        drop(gateways);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
