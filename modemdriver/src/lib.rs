@@ -35,6 +35,7 @@
 pub mod check;
 pub mod config;
 pub mod driver;
+pub mod evologics;
 pub mod link;
 pub mod micromodem;
 pub mod rate;
