@@ -308,9 +308,13 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         if let Some(warning) = config::passphrase_file_warning(&config) {
             eprintln!("gobyd: warning: {warning}");
         }
+        let limits = runtime::driver_limits(&config);
         return match runtime::check(config) {
             Ok(types) => {
                 println!("configuration is valid; DCCL types: {}", types.join(", "));
+                if let Some(limits) = limits {
+                    println!("{limits}");
+                }
                 if let Some(broker) = broker {
                     println!("{broker}");
                 }

@@ -1168,7 +1168,9 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     };
     let mut problems = Vec::new();
     let kind = modemdriver::check::driver_type(driver);
+    let evologics = modemdriver::evologics::driver::is_evologics(driver);
     match kind {
+        _ if evologics => {}
         Some(
             DriverType::DriverAcousticSimulator
             | DriverType::DriverUdp
@@ -1181,10 +1183,13 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
             },
             match (&driver.driver, kind) {
                 (Some(driver_config::Driver::DriverName(name)), _) => {
-                    format!("no driver named {name:?} is built in")
+                    format!(
+                        "no driver named {name:?} is built in (driver_name {:?} is)",
+                        modemdriver::evologics::driver::DRIVER_NAME
+                    )
                 }
                 (_, other) => format!(
-                    "{} is not a driver gobyd runs (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
+                    "{} is not a driver gobyd runs (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP, DRIVER_WHOI_MICROMODEM or driver_name \"EVOLOGICS_S2C\")",
                     other.map(|t| t.as_str_name()).unwrap_or("this driver type")
                 ),
             },
