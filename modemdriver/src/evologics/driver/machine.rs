@@ -679,9 +679,8 @@ impl Machine {
             bitrate: r.bitrate,
             propagation_time_us: r.propagation_time_us,
         };
-        if let Some(us) = r.propagation_time_us {
-            self.range(Some(id_of(r.src)), us);
-        }
+        let ptime = r.propagation_time_us;
+        let src = id_of(r.src);
         let mt = ModemTransmission {
             src: Some(id_of(r.src)),
             dest: Some(id_of(r.dest)),
@@ -695,6 +694,9 @@ impl Machine {
             ..Default::default()
         };
         self.emit(DriverEvent::Received(mt));
+        if let Some(us) = ptime {
+            self.range(Some(src), us);
+        }
     }
 
     fn usbl_long(&mut self, u: &UsblLong) {
