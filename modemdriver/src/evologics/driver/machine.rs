@@ -43,6 +43,40 @@ pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
 /// Attempts of a setting command without an answer.
 pub const SETTING_ATTEMPTS: u32 = 3;
 
+/// With application acks: bytes of the header that starts every payload
+/// (kind, `unique_id` big-endian, frame number).
+pub const APP_HEADER: usize = 6;
+
+/// Header kinds (first byte).
+const APP_DATA: u8 = 0x00;
+const APP_DATA_ACK_WANTED: u8 = 0x02;
+const APP_ACK: u8 = 0x01;
+/// `unique_id` of a transmission without one.
+const NO_UNIQUE_ID: u32 = u32::MAX;
+
+/// The application-ack header of a payload.
+fn app_header(kind: u8, unique_id: Option<u32>, frame: u32) -> Vec<u8> {
+    let mut h = vec![kind];
+    h.extend_from_slice(&unique_id.unwrap_or(NO_UNIQUE_ID).to_be_bytes());
+    h.push(frame.min(255) as u8);
+    h
+}
+
+/// A payload's application-ack header: (kind, `unique_id`, frame) and the
+/// rest.
+fn split_app_header(payload: &[u8]) -> Option<((u8, Option<u32>, u32), &[u8])> {
+    if payload.len() < APP_HEADER || ![APP_DATA, APP_DATA_ACK_WANTED, APP_ACK].contains(&payload[0])
+    {
+        return None;
+    }
+    let uid = u32::from_be_bytes([payload[1], payload[2], payload[3], payload[4]]);
+    let uid = (uid != NO_UNIQUE_ID).then_some(uid);
+    Some((
+        (payload[0], uid, u32::from(payload[5])),
+        &payload[APP_HEADER..],
+    ))
+}
+
 /// What the machine starts from (checked by [`super::settings`]).
 #[derive(Debug, Clone)]
 pub struct Settings {
@@ -60,8 +94,11 @@ pub struct Settings {
     pub im_max: usize,
     /// Largest burst frame (0: instant messages only).
     pub burst_max: usize,
-    /// Which instant messages ask for an acknowledgement.
+    /// Which instant messages ask for an acknowledgement, and who acks.
     pub ack_mode: AckMode,
+    /// With application acks: ack only when the layer above asks
+    /// ([`DriverCommand::Acknowledge`]), else on reception.
+    pub deferred_ack: bool,
     /// Wait for an answer.
     pub response_timeout: Duration,
     /// Wait for a delivery report.
@@ -122,9 +159,13 @@ pub enum Output {
 /// How a message goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum How {
-    Instant { ack: bool },
+    Instant {
+        ack: bool,
+    },
     Burst,
     Piggyback,
+    /// An application ack (an instant message, noack): no result reported.
+    AppAck,
 }
 
 /// A message handed to the modem (or about to be).
@@ -133,6 +174,9 @@ struct Sending {
     mt: ModemTransmission,
     how: How,
     dest: u8,
+    /// What goes on the water (the frame, after its header with
+    /// application acks).
+    payload: Vec<u8>,
     /// BUSY answers so far.
     busy: u32,
 }
@@ -141,6 +185,7 @@ struct Sending {
 #[derive(Debug)]
 enum Job {
     Data(Box<ModemTransmission>),
+    AppAck { dest: u8, payload: Vec<u8> },
     Piggyback { dest: i32 },
     PropagationTime { remote: Option<i32> },
 }
@@ -321,10 +366,12 @@ impl Machine {
         // What was under way is not known to have gone: handed back.
         if let Some(a) = self.awaiting.take() {
             if let Purpose::Send(s) = a.purpose {
-                self.result(
-                    s.mt,
-                    TransmitOutcome::Failed("the link to the modem was lost".into()),
-                );
+                if s.how != How::AppAck {
+                    self.result(
+                        s.mt,
+                        TransmitOutcome::Failed("the link to the modem was lost".into()),
+                    );
+                }
             }
         }
         if let Some(f) = self.in_flight.take() {
@@ -336,10 +383,12 @@ impl Machine {
             );
         }
         if let Some((_, s)) = self.retry.take() {
-            self.result(
-                s.mt,
-                TransmitOutcome::Failed("the link to the modem was lost".into()),
-            );
+            if s.how != How::AppAck {
+                self.result(
+                    s.mt,
+                    TransmitOutcome::Failed("the link to the modem was lost".into()),
+                );
+            }
         }
         self.setup = self.s.setup.iter().cloned().collect();
         self.ready = false;
@@ -453,6 +502,7 @@ impl Machine {
                 s.mt,
                 TransmitOutcome::Failed("the modem's answer was not read".into()),
             ),
+            How::AppAck => {}
         }
     }
 
@@ -537,6 +587,7 @@ impl Machine {
     fn send_answered(&mut self, mut s: Sending, reply: Reply) {
         match reply {
             Reply::Ok | Reply::Value(_) => match s.how {
+                How::AppAck => {}
                 How::Instant { ack: false } | How::Piggyback => {
                     self.result(s.mt, TransmitOutcome::Sent);
                 }
@@ -556,6 +607,14 @@ impl Machine {
                         attempt: s.busy + 1,
                     });
                     self.retry = Some((self.now.at + self.s.busy_backoff, s));
+                } else if s.how == How::AppAck {
+                    self.status(DriverStatus::ModemError {
+                        message: format!(
+                            "{}: BUSY {reason} {} times; not sent",
+                            describe(&s),
+                            s.busy
+                        ),
+                    });
                 } else {
                     self.result(
                         s.mt,
@@ -570,7 +629,9 @@ impl Machine {
                 self.status(DriverStatus::ModemError {
                     message: format!("{}: ERROR {reason}", describe(&s)),
                 });
-                self.result(s.mt, TransmitOutcome::Failed(format!("ERROR {reason}")));
+                if s.how != How::AppAck {
+                    self.result(s.mt, TransmitOutcome::Failed(format!("ERROR {reason}")));
+                }
             }
         }
     }
@@ -649,7 +710,8 @@ impl Machine {
             ..Default::default()
         };
         let remote = mt.dest();
-        let asked = mt.ack_requested();
+        // With application acks the far node's driver acks, not its modem.
+        let asked = mt.ack_requested() && self.s.ack_mode != AckMode::ApplicationAck;
         self.result(mt, TransmitOutcome::Sent);
         if asked {
             self.emit(DriverEvent::Received(ack));
@@ -662,7 +724,37 @@ impl Machine {
         }
     }
 
-    fn received(&mut self, r: Reception) {
+    fn received(&mut self, mut r: Reception) {
+        let mut app = None;
+        if self.s.ack_mode == AckMode::ApplicationAck && r.kind != ReceptionKind::Piggyback {
+            let Some((header, rest)) = split_app_header(&r.data) else {
+                return self.status(DriverStatus::Unparseable {
+                    line: lossy(&r.data, 80),
+                    reason: format!(
+                        "a reception from {} without the application-ack header (ack_mode: APPLICATION_ACK at both ends?)",
+                        id_of(r.src)
+                    ),
+                });
+            };
+            let rest = rest.to_vec();
+            if header.0 == APP_ACK {
+                if id_of(r.dest) == self.s.modem_id {
+                    let ack = ModemTransmission {
+                        src: Some(id_of(r.src)),
+                        dest: Some(self.s.modem_id),
+                        time: Some(self.now.micros),
+                        r#type: Some(TransmissionType::Ack as i32),
+                        acked_frame: vec![header.2 as i32],
+                        unique_id: header.1,
+                        ..Default::default()
+                    };
+                    self.emit(DriverEvent::Received(ack));
+                }
+                return;
+            }
+            r.data = rest;
+            app = Some(header);
+        }
         let (kind, ack) = match r.kind {
             ReceptionKind::Instant(flag) => (StatKind::InstantMessage, flag == AckFlag::Ack),
             ReceptionKind::Burst => (StatKind::Burst, false),
@@ -693,6 +785,18 @@ impl Machine {
             evologics_receive_stat: vec![stat],
             ..Default::default()
         };
+        let mut mt = mt;
+        if let Some((kind, uid, frame)) = app {
+            mt.ack_requested = Some(kind == APP_DATA_ACK_WANTED);
+            mt.unique_id = uid;
+            mt.frame_start = Some(frame);
+        }
+        let ack_now = app.is_some()
+            && !self.s.deferred_ack
+            && crate::driver::Acknowledgement::wanted(&mt, &[self.s.modem_id]);
+        if ack_now {
+            self.app_ack(&crate::driver::Acknowledgement::all(mt.clone()));
+        }
         self.emit(DriverEvent::Received(mt));
         if let Some(us) = ptime {
             self.range(Some(src), us);
@@ -799,8 +903,13 @@ impl Machine {
                     _ => self.status(DriverStatus::Unsupported { message: name }),
                 }
             }
-            // The modem acknowledges instant messages itself, on reception.
-            DriverCommand::Acknowledge(_) => {}
+            // Without application acks the modem acknowledges itself, on
+            // reception.
+            DriverCommand::Acknowledge(ack) => {
+                if self.s.ack_mode == AckMode::ApplicationAck && self.s.deferred_ack {
+                    self.app_ack(&ack);
+                }
+            }
             DriverCommand::Stop(_) => {}
         }
     }
@@ -813,13 +922,41 @@ impl Machine {
         } else {
             self.s.im_max
         };
+        let header = if self.s.ack_mode == AckMode::ApplicationAck {
+            APP_HEADER
+        } else {
+            0
+        };
         ModemTransmission {
             src: Some(self.s.modem_id),
             max_num_frames: Some(1),
-            max_frame_bytes: Some(max as u32),
+            max_frame_bytes: Some(max.saturating_sub(header) as u32),
             frame: Vec::new(),
             ..mt.clone()
         }
+    }
+
+    /// Owes an application ack for the frames of `ack` (sent next, before
+    /// any data).
+    fn app_ack(&mut self, ack: &crate::driver::Acknowledgement) {
+        let received = &ack.received;
+        if !crate::driver::Acknowledgement::wanted(received, &[self.s.modem_id]) {
+            return;
+        }
+        let Some(dest) = address_of(received.src()).filter(|&a| a != BROADCAST) else {
+            return;
+        };
+        if ack.frames.is_empty() {
+            return;
+        }
+        let payload = app_header(APP_ACK, received.unique_id, received.frame_start());
+        // Before other work, after other acks.
+        let at = self
+            .pending
+            .iter()
+            .position(|j| !matches!(j, Job::AppAck { .. }))
+            .unwrap_or(self.pending.len());
+        self.pending.insert(at, Job::AppAck { dest, payload });
     }
 
     fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
@@ -859,9 +996,7 @@ impl Machine {
             How::Piggyback
         } else if data.len() <= self.s.im_max {
             How::Instant {
-                ack: mt.ack_requested()
-                    && dest != BROADCAST
-                    && self.s.ack_mode == AckMode::AckWhenRequested,
+                ack: mt.ack_requested() && dest != BROADCAST && self.s.ack_mode != AckMode::NoAck,
             }
         } else if dest == BROADCAST {
             return self.result(
@@ -874,24 +1009,42 @@ impl Machine {
         } else {
             How::Burst
         };
-        if how == (How::Instant { ack: false }) {
+        if how == (How::Instant { ack: false }) && self.s.ack_mode != AckMode::ApplicationAck {
             mt.ack_requested = Some(false);
         }
+        let payload = if self.s.ack_mode == AckMode::ApplicationAck && how != How::Piggyback {
+            let kind = if mt.ack_requested() && dest != BROADCAST {
+                APP_DATA_ACK_WANTED
+            } else {
+                APP_DATA
+            };
+            let mut p = app_header(kind, mt.unique_id, mt.frame_start());
+            p.extend_from_slice(&data);
+            p
+        } else {
+            data
+        };
         self.offer(Sending {
             mt,
             how,
             dest,
+            payload,
             busy: 0,
         });
     }
 
     /// Writes the send command of `s` and awaits its answer.
     fn offer(&mut self, s: Sending) {
-        let data = s.mt.frame.first().cloned().unwrap_or_default();
+        let data = s.payload.clone();
         let command = match s.how {
             How::Instant { ack } => Command::SendIm {
                 dest: s.dest,
                 flag: if ack { AckFlag::Ack } else { AckFlag::NoAck },
+                data,
+            },
+            How::AppAck => Command::SendIm {
+                dest: s.dest,
+                flag: AckFlag::NoAck,
                 data,
             },
             How::Burst => Command::Send { dest: s.dest, data },
@@ -929,6 +1082,21 @@ impl Machine {
                 return;
             };
             match job {
+                Job::AppAck { dest, payload } => {
+                    let mt = ModemTransmission {
+                        src: Some(self.s.modem_id),
+                        dest: Some(id_of(dest)),
+                        r#type: Some(TransmissionType::Ack as i32),
+                        ..Default::default()
+                    };
+                    self.offer(Sending {
+                        mt,
+                        how: How::AppAck,
+                        dest,
+                        payload,
+                        busy: 0,
+                    });
+                }
                 Job::PropagationTime { remote } => {
                     self.send_awaiting(
                         Command::PropagationTime,
@@ -982,6 +1150,7 @@ fn describe(s: &Sending) -> String {
         How::Instant { ack: false } => "the instant message (noack)",
         How::Burst => "the burst data",
         How::Piggyback => "the piggy-back message",
+        How::AppAck => "the application ack",
     };
     format!("{what} to {}", id_of(s.dest))
 }

@@ -314,6 +314,7 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
         im_max: e.im_max_bytes() as usize,
         burst_max: e.burst_max_bytes() as usize,
         ack_mode: e.ack_mode(),
+        deferred_ack: config.deferred_ack(),
         response_timeout: Duration::from_millis(u64::from(e.response_timeout_ms())),
         delivery_timeout: Duration::from_millis(u64::from(e.delivery_timeout_ms())),
         busy_retries: e.busy_retries(),

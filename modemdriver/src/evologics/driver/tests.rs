@@ -23,6 +23,7 @@ fn settings() -> Settings {
         im_max: 64,
         burst_max: 1024,
         ack_mode: AckMode::AckWhenRequested,
+        deferred_ack: false,
         response_timeout: Duration::from_secs(3),
         delivery_timeout: Duration::from_secs(20),
         busy_retries: 2,
@@ -281,4 +282,84 @@ fn a_garbled_answer_waits_for_the_delivery_report() {
         matches!(&results(&out)[..], [TransmitOutcome::Failed(_)]),
         "{out:?}"
     );
+}
+
+#[test]
+fn application_acks_wait_for_the_layer_above() {
+    let now = Now {
+        at: Instant::now(),
+        micros: 1_700_000_000_000_000,
+    };
+    let mut s = settings();
+    s.ack_mode = AckMode::ApplicationAck;
+    s.deferred_ack = true;
+    s.query_propagation_time = false;
+    let mut b = Bench {
+        m: Machine::new(s, now),
+        now,
+    };
+    b.input(Input::Tick);
+    b.bytes(b"+++AT!AL:2:OK\r\n");
+    // Sending: 6 bytes of header; DELIVEREDIM is no ack for the queue.
+    let out = b.input(Input::Command(DriverCommand::Initiate(ModemTransmission {
+        dest: Some(2),
+        unique_id: Some(0x0102_0304),
+        ..Default::default()
+    })));
+    let (id, template) = request(&out).unwrap();
+    assert_eq!(template.max_frame_bytes, Some(1024 - 6));
+    let mut filled = template;
+    filled.frame = vec![b"hi".to_vec()];
+    filled.ack_requested = Some(true);
+    let out = b.input(Input::Answer {
+        id,
+        filled: Some(filled),
+    });
+    assert_eq!(
+        written(&out),
+        vec![b"+++AT*SENDIM,8,2,ack,\x02\x01\x02\x03\x04\x00hi\n".to_vec()]
+    );
+    b.bytes(b"+++AT*SENDIM:2:OK\r\n");
+    let out = b.bytes(b"+++AT:13:DELIVEREDIM,2\r\n");
+    assert_eq!(results(&out), vec![TransmitOutcome::Sent]);
+    assert!(
+        received(&out).is_empty(),
+        "the modem's ack is not the node's"
+    );
+    // The far driver's ack.
+    let mut ack = b"+++AT:47:RECVIM,6,2,1,noack,139376,-41,178,0.0312,".to_vec();
+    ack.extend_from_slice(b"\x01\x01\x02\x03\x04\x00\r\n");
+    let out = b.bytes(&ack);
+    let r = received(&out);
+    assert_eq!(r.len(), 1, "{out:?}");
+    assert_eq!(r[0].r#type(), TransmissionType::Ack);
+    assert_eq!(r[0].unique_id, Some(0x0102_0304));
+    assert_eq!((r[0].src(), r[0].dest()), (2, 1));
+    // Receiving data: acked only once the layer above asks.
+    let mut data = b"+++AT:47:RECVIM,8,2,1,ack,139376,-41,178,0.0312,".to_vec();
+    data.extend_from_slice(b"\x02\x00\x00\x00\x09\x00yo\r\n");
+    let out = b.bytes(&data);
+    let r = received(&out);
+    assert_eq!(r[0].frame, vec![b"yo".to_vec()]);
+    assert_eq!(r[0].unique_id, Some(9));
+    assert!(r[0].ack_requested());
+    assert!(written(&out).is_empty());
+    let out = b.input(Input::Command(DriverCommand::Acknowledge(
+        crate::driver::Acknowledgement::all(r[0].clone()),
+    )));
+    assert_eq!(
+        written(&out),
+        vec![b"+++AT*SENDIM,6,2,noack,\x01\x00\x00\x00\x09\x00\n".to_vec()]
+    );
+    let out = b.bytes(b"+++AT*SENDIM:2:OK\r\n");
+    assert!(
+        results(&out).is_empty(),
+        "an ack's sending is no transmit result"
+    );
+    // A reception without the header is refused.
+    let out = b.bytes(b"+++AT:33:RECVIM,2,2,1,ack,1,-41,178,0.0,yo\r\n");
+    assert!(received(&out).is_empty());
+    assert!(statuses(&out)
+        .iter()
+        .any(|s| matches!(s, DriverStatus::Unparseable { .. })));
 }
