@@ -25,6 +25,10 @@ use protos::goby::acomms::protobuf::{EvologicsConfig, EvologicsReport};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::mpsc;
 
+/// Frames to answer the next data requests with, and whether they ask
+/// for an ack.
+type Answers = Arc<Mutex<VecDeque<(Vec<u8>, bool)>>>;
+
 /// Longest wait for bytes or an event.
 const LIMIT: Duration = Duration::from_secs(5);
 
@@ -106,7 +110,7 @@ async fn replay(name: &str, command_mode: bool) {
         .await
         .expect("the driver connects")
         .unwrap();
-    let answers: Arc<Mutex<VecDeque<(Vec<u8>, bool)>>> = Arc::default();
+    let answers: Answers = Arc::default();
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let handle = driver.handle();
     let pump_answers = answers.clone();

@@ -159,7 +159,7 @@ impl ModemDecoder {
         // +++AT<request>:<len>:<body>\r\n
         let after = &self.buf[ESCAPE.len()..];
         let Some(colon) = after.iter().position(|&b| b == b':') else {
-            if after.len() > 32 || after.iter().any(|&b| b == b'\n') {
+            if after.len() > 32 || after.contains(&b'\n') {
                 return Some(self.garbled_escape("an escape sequence without its ':'"));
             }
             return None;
@@ -665,10 +665,9 @@ mod tests {
                 );
                 let out = d.push(&[&good[..], &good[..]].concat());
                 assert!(
-                    out.iter().any(|u| *u
-                        == Decoded::Message(ModemMessage::Notification(
-                            Notification::DeliveredIm { dest: 9 }
-                        ))),
+                    out.contains(&Decoded::Message(ModemMessage::Notification(
+                        Notification::DeliveredIm { dest: 9 }
+                    ))),
                     "{framing:?}: {out:?}"
                 );
                 assert!(d.pending() < MAX_MESSAGE);

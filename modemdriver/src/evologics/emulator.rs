@@ -663,13 +663,13 @@ impl Modem {
                 self.count(|c| c.received += 1);
                 self.notify(Notification::Received(r));
             }
-            Kind::InstantAck if to_me => {
-                if self.im.as_ref().is_some_and(|a| a.packet.seq == packet.seq) {
-                    self.im = None;
-                    self.last_propagation_us = self.propagation_us(src);
-                    self.count(|c| c.delivered += 1);
-                    self.notify(Notification::DeliveredIm { dest: src });
-                }
+            Kind::InstantAck
+                if to_me && self.im.as_ref().is_some_and(|a| a.packet.seq == packet.seq) =>
+            {
+                self.im = None;
+                self.last_propagation_us = self.propagation_us(src);
+                self.count(|c| c.delivered += 1);
+                self.notify(Notification::DeliveredIm { dest: src });
             }
             Kind::BurstAck if to_me => {
                 if let Some(a) = self.burst.take_if(|a| a.packet.seq == packet.seq) {

@@ -62,9 +62,11 @@ fn app_header(kind: u8, unique_id: Option<u32>, frame: u32) -> Vec<u8> {
     h
 }
 
-/// A payload's application-ack header: (kind, `unique_id`, frame) and the
-/// rest.
-fn split_app_header(payload: &[u8]) -> Option<((u8, Option<u32>, u32), &[u8])> {
+/// An application-ack header: kind, `unique_id`, frame number.
+type AppHeader = (u8, Option<u32>, u32);
+
+/// A payload's application-ack header and the rest.
+fn split_app_header(payload: &[u8]) -> Option<(AppHeader, &[u8])> {
     if payload.len() < APP_HEADER || ![APP_DATA, APP_DATA_ACK_WANTED, APP_ACK].contains(&payload[0])
     {
         return None;
