@@ -8,7 +8,7 @@
 //! write is an input of its own, the link lost), gives events to the layer
 //! above, makes data requests, opens the link again when asked. Every chunk
 //! read and every command written is reported as a
-//! [`DriverEvent::Raw`](crate::DriverEvent::Raw).
+//! [`DriverEvent::Raw`].
 
 use std::future::{poll_fn, Future};
 use std::pin::Pin;
