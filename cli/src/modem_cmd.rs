@@ -65,7 +65,7 @@ pub struct EmulateArgs {
     #[arg(long, value_enum, default_value = "micromodem")]
     pub kind: Kind,
     /// EvoLogics: TCP port of the first modem's AT interface; the next
-    /// modems listen on the next ports.
+    /// modems listen on the next ports (0: any free port for each).
     #[arg(long, default_value_t = modemdriver::evologics::DEFAULT_TCP_PORT, value_name = "PORT")]
     pub tcp_port: u16,
     /// EvoLogics: address the TCP interfaces listen on.
@@ -564,7 +564,13 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
                     link: args.links.get(i).cloned(),
                 }
             } else {
-                EvoPort::Tcp(SocketAddr::new(args.tcp_ip, args.tcp_port + i as u16))
+                // Port 0: any free port for each.
+                let port = if args.tcp_port == 0 {
+                    0
+                } else {
+                    args.tcp_port + i as u16
+                };
+                EvoPort::Tcp(SocketAddr::new(args.tcp_ip, port))
             };
             let config = EvoConfig {
                 address: modem_id as u8,
