@@ -99,15 +99,28 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 pub fn limits(config: &DriverConfig) -> Option<String> {
     if crate::evologics::driver::is_evologics(config) {
         let (im, burst) = crate::evologics::driver::frame_limits(config);
+        let header = if crate::evologics::driver::application_acks(config) {
+            let h = crate::evologics::driver::machine::APP_HEADER;
+            if burst > 0 {
+                format!(
+                    " ({} and {} less the {h}-byte application-ack header)",
+                    im + h,
+                    burst + h
+                )
+            } else {
+                format!(" ({} less the {h}-byte application-ack header)", im + h)
+            }
+        } else {
+            String::new()
+        };
         return Some(if burst > 0 {
             format!(
                 "driver EVOLOGICS_S2C: one frame per transmission; up to {im} bytes as an instant message (AT*SENDIM), \
-                 up to {} bytes as burst data (AT*SEND) to one node; broadcasts and query destinations up to {im} bytes",
-                burst.max(im)
+                 up to {burst} bytes as burst data (AT*SEND) to one node{header}; broadcasts and query destinations up to {im} bytes"
             )
         } else {
             format!(
-                "driver EVOLOGICS_S2C: one frame per transmission of up to {im} bytes, as an instant message (AT*SENDIM); no burst data"
+                "driver EVOLOGICS_S2C: one frame per transmission of up to {im} bytes{header}, as an instant message (AT*SENDIM); no burst data"
             )
         });
     }

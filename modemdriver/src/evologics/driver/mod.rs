@@ -157,11 +157,34 @@ pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
     })
 }
 
-/// The frame sizes of an EvoLogics configuration: (instant message, burst;
-/// 0: no burst).
+/// The frame sizes the layer above is offered with an EvoLogics
+/// configuration, bytes: (as an instant message, as burst data; 0: no
+/// burst), less the application-ack header
+/// ([`machine::APP_HEADER`]) with `ack_mode: APPLICATION_ACK`.
 pub fn frame_limits(config: &DriverConfig) -> (usize, usize) {
     let e = config.evologics.clone().unwrap_or_default();
-    (e.im_max_bytes() as usize, e.burst_max_bytes() as usize)
+    let header = if e.ack_mode()
+        == protos::goby::acomms::protobuf::evologics_config::AckMode::ApplicationAck
+    {
+        machine::APP_HEADER
+    } else {
+        0
+    };
+    let burst = e.burst_max_bytes() as usize;
+    (
+        (e.im_max_bytes() as usize).saturating_sub(header),
+        if burst == 0 {
+            0
+        } else {
+            burst.max(e.im_max_bytes() as usize).saturating_sub(header)
+        },
+    )
+}
+
+/// Whether an EvoLogics configuration sends application acks.
+pub fn application_acks(config: &DriverConfig) -> bool {
+    config.evologics.clone().unwrap_or_default().ack_mode()
+        == protos::goby::acomms::protobuf::evologics_config::AckMode::ApplicationAck
 }
 
 /// Every problem of an EvoLogics configuration that [`settings`] refuses.
