@@ -84,6 +84,10 @@ pub struct EmulateArgs {
     /// EvoLogics: drop each host connection every this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub drop_every: Option<f64>,
+    /// EvoLogics: emulate USBL heads, reporting a USBLLONG fix of each
+    /// sender heard.
+    #[arg(long)]
+    pub usbl: bool,
     /// Modem id of an emulated modem; repeat for several modems, which then
     /// hear each other through the acoustic channel simulator.
     #[arg(long = "modem-id", default_value = "1", value_name = "ID")]
@@ -580,6 +584,7 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
                     Framing::Data
                 },
                 positions: std::collections::HashMap::clone(&positions),
+                usbl: args.usbl,
                 faults: EvoFaults {
                     busy: args.busy,
                     garble: args.garble,

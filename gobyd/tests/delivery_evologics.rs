@@ -33,6 +33,7 @@ use modemdriver::evologics::emulator::{
     self, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
 };
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
+use modemdriver::DriverStatus;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
 use protos::goby::acomms::protobuf::SimulatorDriverConfig;
@@ -86,6 +87,9 @@ struct Tally {
     acked: usize,
     receptions: usize,
     receptions_with_stats: usize,
+    /// Repeats of a reception (the sender's modem retrying after a lost
+    /// ack) the receiving driver dropped.
+    repeats_dropped: usize,
 }
 
 async fn start_emulators(faults: &Faults) -> Vec<EmulatorHandle> {
@@ -161,6 +165,7 @@ async fn run(faults: Faults) -> Tally {
     let emulators = start_emulators(&faults).await;
     let seen: Arc<Mutex<Vec<(i32, Seen)>>> = Arc::default();
     let receptions: Arc<Mutex<(usize, usize)>> = Arc::default();
+    let repeats: Arc<Mutex<usize>> = Arc::default();
     let mut stops = Vec::new();
     let mut runs = Vec::new();
     let mut publishers = Vec::new();
@@ -174,8 +179,16 @@ async fn run(faults: Faults) -> Tally {
         let mut events = daemon.subscribe();
         let mut link_events = daemon.subscribe();
         let receptions = receptions.clone();
+        let repeats = repeats.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
+                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Skipped { reason })) =
+                    &e.event
+                {
+                    if reason.contains("repeating") {
+                        *repeats.lock().unwrap() += 1;
+                    }
+                }
                 if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
@@ -327,6 +340,7 @@ async fn run(faults: Faults) -> Tally {
     let (heard, with_stats) = *receptions.lock().unwrap();
     tally.receptions = heard;
     tally.receptions_with_stats = with_stats;
+    tally.repeats_dropped = *repeats.lock().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
     tally
 }
@@ -336,9 +350,11 @@ async fn check(faults: Faults) {
     let t = run(faults).await;
     println!(
         "evologics delivery {name}: published {} delivered {} acked {} duplicates {} owed {} lost {} \
-         (acked before delivered {}, acked never delivered {}); receptions {} with statistics {}",
+         (acked before delivered {}, acked never delivered {}); receptions {} with statistics {}; \
+         repeats dropped by the driver {}",
         t.published, t.delivered, t.acked, t.duplicates, t.owed, t.lost,
-        t.acked_before_delivered, t.acked_not_delivered, t.receptions, t.receptions_with_stats
+        t.acked_before_delivered, t.acked_not_delivered, t.receptions, t.receptions_with_stats,
+        t.repeats_dropped
     );
     assert_eq!(
         t.duplicates, 0,

@@ -113,6 +113,10 @@ pub struct Settings {
     pub query_propagation_time: bool,
     /// For ranges, m/s.
     pub sound_speed: f64,
+    /// A reception identical to one heard this recently from the same
+    /// sender is a repeat (its modem tried again after a lost
+    /// acknowledgement) and is dropped; zero keeps every one.
+    pub repeat_window: Duration,
     /// Between reconnection attempts.
     pub reconnect: Duration,
 }
@@ -241,6 +245,9 @@ pub struct Machine {
     next_request: u64,
     /// The far end of the last delivery, for AT?T.
     last_remote: Option<i32>,
+    /// Receptions of the last `repeat_window`: (when, sender, kind,
+    /// destination, payload).
+    recent: VecDeque<(Instant, u8, ReceptionKind, u8, Vec<u8>)>,
 }
 
 /// The S2C address of modem id `id` (0: broadcast).
@@ -283,6 +290,7 @@ impl Machine {
             pending: VecDeque::new(),
             next_request: 0,
             last_remote: None,
+            recent: VecDeque::new(),
             s: settings,
         }
     }
@@ -726,7 +734,43 @@ impl Machine {
         }
     }
 
+    /// Whether `r` repeats a reception of the last `repeat_window`
+    /// (remembered otherwise).
+    fn repeated(&mut self, r: &Reception) -> bool {
+        if self.s.repeat_window.is_zero() {
+            return false;
+        }
+        let now = self.now.at;
+        while self
+            .recent
+            .front()
+            .is_some_and(|(t, ..)| *t + self.s.repeat_window <= now)
+        {
+            self.recent.pop_front();
+        }
+        let seen = self.recent.iter().any(|(_, src, kind, dest, data)| {
+            *src == r.src && *kind == r.kind && *dest == r.dest && *data == r.data
+        });
+        if !seen {
+            if self.recent.len() >= 64 {
+                self.recent.pop_front();
+            }
+            self.recent
+                .push_back((now, r.src, r.kind, r.dest, r.data.clone()));
+        }
+        seen
+    }
+
     fn received(&mut self, mut r: Reception) {
+        if self.repeated(&r) {
+            return self.status(DriverStatus::Skipped {
+                reason: format!(
+                    "a reception from {} repeating one of the last {} ms (its modem tried again after a lost acknowledgement): dropped",
+                    id_of(r.src),
+                    self.s.repeat_window.as_millis()
+                ),
+            });
+        }
         let mut app = None;
         if self.s.ack_mode == AckMode::ApplicationAck && r.kind != ReceptionKind::Piggyback {
             let Some((header, rest)) = split_app_header(&r.data) else {

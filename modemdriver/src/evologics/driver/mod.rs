@@ -344,6 +344,9 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
         busy_backoff: Duration::from_millis(u64::from(e.busy_backoff_ms())),
         query_propagation_time: e.query_propagation_time(),
         sound_speed: e.sound_speed(),
+        repeat_window: Duration::from_millis(u64::from(
+            e.repeat_window_ms.unwrap_or(e.delivery_timeout_ms()),
+        )),
         reconnect: reconnect.max(Duration::from_millis(10)),
     })
 }

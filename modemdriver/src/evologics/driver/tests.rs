@@ -30,6 +30,7 @@ fn settings() -> Settings {
         busy_backoff: Duration::from_secs(1),
         query_propagation_time: true,
         sound_speed: 1500.0,
+        repeat_window: Duration::from_secs(20),
         reconnect: Duration::from_secs(1),
     }
 }
@@ -362,4 +363,22 @@ fn application_acks_wait_for_the_layer_above() {
     assert!(statuses(&out)
         .iter()
         .any(|s| matches!(s, DriverStatus::Unparseable { .. })));
+}
+
+#[test]
+fn a_repeat_of_a_reception_is_dropped_within_the_window() {
+    let mut b = Bench::new();
+    let line = b"+++AT:38:RECVIM,4,2,1,ack,5000,-47,180,0.5,a\r\nb\r\n";
+    assert_eq!(received(&b.bytes(line)).len(), 1);
+    let out = b.bytes(line);
+    assert!(received(&out).is_empty(), "{out:?}");
+    assert!(statuses(&out)
+        .iter()
+        .any(|s| matches!(s, DriverStatus::Skipped { .. })));
+    b.later(Duration::from_secs(21));
+    assert_eq!(
+        received(&b.bytes(line)).len(),
+        1,
+        "after the window: a new message"
+    );
 }
