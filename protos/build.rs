@@ -19,6 +19,7 @@ const FILES: &[&str] = &[
     "goby/acomms/udp_multicast_driver.proto",
     "goby/acomms/simulator_driver.proto",
     "goby/acomms/micromodem.proto",
+    "goby/acomms/evologics.proto",
     "goby/moos/translator.proto",
     "goby/moos/node_report.proto",
     "goby/apps/gobyd_config.proto",

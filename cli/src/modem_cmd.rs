@@ -10,6 +10,14 @@
 //! configuration echo, Flexible Data Protocol, long-baseline ranging to the
 //! `--transponder`s given). Both send `$CACST` / `$CAXST` statistics in the
 //! layout their firmware writes unless `--stats-layout` says otherwise.
+//!
+//! `goby modem emulate --kind evologics` runs emulated EvoLogics S2C modems
+//! instead: each serves the AT interface on TCP (`modem 1: tcp
+//! 127.0.0.1:9200`, the next modem on the next port) or, with `--pty`, on a
+//! pseudo-terminal, for the EvoLogics driver (`driver_name:
+//! "EVOLOGICS_S2C"`); `--busy`, `--garble` and `--drop-every` add the faults
+//! of a bench (BUSY answers, garbled lines, dropped connections) to the
+//! channel's `--loss`.
 
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
@@ -40,9 +48,46 @@ pub enum ModemCommand {
     Emulate(EmulateArgs),
 }
 
+/// Which modem `goby modem emulate` speaks as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Kind {
+    /// WHOI Micro-Modems: NMEA on pseudo-terminals (or --serial).
+    Micromodem,
+    /// EvoLogics S2C modems: the AT interface on TCP (or --pty).
+    Evologics,
+}
+
 /// Options of `goby modem emulate`.
 #[derive(Debug, Args)]
 pub struct EmulateArgs {
+    /// Which modem to emulate: `micromodem` (WHOI, NMEA on a
+    /// pseudo-terminal) or `evologics` (EvoLogics S2C, AT commands on TCP).
+    #[arg(long, value_enum, default_value = "micromodem")]
+    pub kind: Kind,
+    /// EvoLogics: TCP port of the first modem's AT interface; the next
+    /// modems listen on the next ports (0: any free port for each).
+    #[arg(long, default_value_t = modemdriver::evologics::DEFAULT_TCP_PORT, value_name = "PORT")]
+    pub tcp_port: u16,
+    /// EvoLogics: address the TCP interfaces listen on.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub tcp_ip: IpAddr,
+    /// EvoLogics: serve each modem on a pseudo-terminal (the serial
+    /// interface, command mode) instead of TCP.
+    #[arg(long)]
+    pub pty: bool,
+    /// EvoLogics: probability that a send command is answered BUSY.
+    #[arg(long, default_value_t = 0.0, value_name = "P")]
+    pub busy: f64,
+    /// EvoLogics: probability that a line to the host is garbled.
+    #[arg(long, default_value_t = 0.0, value_name = "P")]
+    pub garble: f64,
+    /// EvoLogics: drop each host connection every this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    pub drop_every: Option<f64>,
+    /// EvoLogics: emulate USBL heads, reporting a USBLLONG fix of each
+    /// sender heard.
+    #[arg(long)]
+    pub usbl: bool,
     /// Modem id of an emulated modem; repeat for several modems, which then
     /// hear each other through the acoustic channel simulator.
     #[arg(long = "modem-id", default_value = "1", value_name = "ID")]
@@ -380,6 +425,9 @@ async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
 }
 
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    if args.kind == Kind::Evologics {
+        return emulate_evologics(args, stdout);
+    }
     let backends = plan(args)?;
     let geometry = geometry(args)?;
     let stats_layout = parse_layout(&args.stats_layout)?;
@@ -452,6 +500,137 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             () = report_ignored(&args.modem_ids, &emulators) => {}
         }
         // Each emulator removes its link as it stops.
+        for e in emulators {
+            e.stop().await;
+        }
+        Ok(Status::Ok)
+    })
+}
+
+/// `goby modem emulate --kind evologics`.
+fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    use modemdriver::evologics::codec::Framing;
+    use modemdriver::evologics::emulator::{
+        self as evo, EmulatorConfig as EvoConfig, EmulatorControl as EvoControl,
+        EmulatorFaults as EvoFaults, EmulatorPort as EvoPort,
+    };
+    if args.modem_ids.iter().any(|&id| id == 0 || id > 254) {
+        return Err(CliError::setup(
+            "--modem-id must be an S2C address, 1..=254 (255 is broadcast)",
+        ));
+    }
+    if args.serial.is_some() || args.micromodem != 1 || !args.transponders.is_empty() {
+        return Err(CliError::setup(
+            "--serial, --micromodem and --transponder are the Micro-Modem's (--kind micromodem)",
+        ));
+    }
+    if !args.links.is_empty() && !args.pty {
+        return Err(CliError::setup("--link needs --pty with --kind evologics"));
+    }
+    for (name, p) in [("--busy", args.busy), ("--garble", args.garble)] {
+        if !(0.0..=1.0).contains(&p) {
+            return Err(CliError::setup(format!(
+                "{name} must be in [0, 1], not {p}"
+            )));
+        }
+    }
+    let backends = plan(args)?;
+    let duration = args
+        .duration
+        .map(|d| seconds(d, "--duration"))
+        .transpose()?;
+    let drop_every = args
+        .drop_every
+        .map(|d| seconds(d, "--drop-every"))
+        .transpose()?;
+    if usize::from(args.tcp_port) + args.modem_ids.len() > 65_536 {
+        return Err(CliError::setup("--tcp-port: not enough ports above it"));
+    }
+    let positions = geometry(args)?
+        .nodes
+        .iter()
+        .map(|(&id, n)| (id as u8, [n.position.x, n.position.y, n.position.z]))
+        .collect();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(async {
+        let stop = interrupted();
+        let medium = Medium::new();
+        let mut emulators = Vec::new();
+        for (i, &modem_id) in args.modem_ids.iter().enumerate() {
+            let backend_kind = backends.get(i).unwrap_or(&Backend::None);
+            let backend = backend_driver(args, backend_kind, modem_id, &medium).await?;
+            let port = if args.pty {
+                EvoPort::Pty {
+                    link: args.links.get(i).cloned(),
+                }
+            } else {
+                // Port 0: any free port for each.
+                let port = if args.tcp_port == 0 {
+                    0
+                } else {
+                    args.tcp_port + i as u16
+                };
+                EvoPort::Tcp(SocketAddr::new(args.tcp_ip, port))
+            };
+            let config = EvoConfig {
+                address: modem_id as u8,
+                framing: if args.pty {
+                    Framing::Command
+                } else {
+                    Framing::Data
+                },
+                positions: std::collections::HashMap::clone(&positions),
+                usbl: args.usbl,
+                faults: EvoFaults {
+                    busy: args.busy,
+                    garble: args.garble,
+                    seed: args.seed,
+                    ..EvoFaults::default()
+                },
+                ..EvoConfig::default()
+            };
+            let handle = evo::start(config, port, backend)
+                .await
+                .map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
+            let shown = match (handle.local_addr(), handle.path()) {
+                (Some(addr), _) => format!("tcp {addr}"),
+                (None, Some(path)) => path,
+                (None, None) => "no interface".into(),
+            };
+            writeln!(stdout, "modem {modem_id}: {shown}")?;
+            stdout.flush()?;
+            emulators.push(handle);
+        }
+        let controls: Vec<_> = emulators.iter().map(|e| e.controller()).collect();
+        let dropper = async move {
+            match drop_every {
+                Some(every) => {
+                    let mut tick = tokio::time::interval(every);
+                    tick.tick().await;
+                    loop {
+                        tick.tick().await;
+                        for c in &controls {
+                            c(EvoControl::DropConnection);
+                        }
+                    }
+                }
+                None => std::future::pending::<()>().await,
+            }
+        };
+        let end = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => stop.await,
+            }
+        };
+        tokio::select! {
+            () = end => {}
+            () = dropper => {}
+        }
         for e in emulators {
             e.stop().await;
         }

@@ -380,3 +380,94 @@ fn sigterm_removes_the_links() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `goby modem emulate --kind evologics`: two S2C modems on TCP; two
+/// EvoLogics drivers exchange an acknowledged instant message through them.
+#[test]
+fn two_emulated_evologics_modems_on_tcp() {
+    let emulator = emulate(
+        &[
+            "--kind",
+            "evologics",
+            "--modem-id",
+            "1",
+            "--modem-id",
+            "2",
+            "--tcp-port",
+            "0",
+            "--duration",
+            "30",
+        ],
+        2,
+    );
+    let addrs: Vec<std::net::SocketAddr> = emulator
+        .paths
+        .iter()
+        .map(|p| p.strip_prefix("tcp ").expect("tcp ADDR").parse().unwrap())
+        .collect();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        use modemdriver::evologics::EvologicsDriver;
+        use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Kind};
+        let config = |id: i32, addr: std::net::SocketAddr| DriverConfig {
+            driver: Some(Kind::DriverName("EVOLOGICS_S2C".into())),
+            modem_id: Some(id),
+            connection_type: Some(ConnectionType::ConnectionTcpAsClient as i32),
+            tcp_server: Some(addr.ip().to_string()),
+            tcp_port: Some(u32::from(addr.port())),
+            ..Default::default()
+        };
+        let mut one = EvologicsDriver::start(&config(1, addrs[0])).await.unwrap();
+        let mut two = EvologicsDriver::start(&config(2, addrs[1])).await.unwrap();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+        one.initiate_transmission(ModemTransmission {
+            dest: Some(2),
+            unique_id: Some(5),
+            ..Default::default()
+        })
+        .unwrap();
+        let mut acked = false;
+        while !acked {
+            let event = tokio::time::timeout_at(deadline, one.next_event())
+                .await
+                .expect("an ack in time")
+                .unwrap();
+            match event {
+                DriverEvent::DataRequest(r) => {
+                    let mut filled = r.template().clone();
+                    filled.frame = vec![b"over tcp".to_vec()];
+                    r.respond(filled);
+                }
+                DriverEvent::Received(t) if t.r#type() == TransmissionType::Ack => {
+                    assert_eq!((t.src(), t.dest(), t.unique_id), (2, 1, Some(5)));
+                    acked = true;
+                }
+                _ => {}
+            }
+        }
+        loop {
+            let event = tokio::time::timeout_at(deadline, two.next_event())
+                .await
+                .expect("the message in time")
+                .unwrap();
+            if let DriverEvent::Received(t) = event {
+                assert_eq!(t.frame, vec![b"over tcp".to_vec()]);
+                assert!(!t.evologics_receive_stat.is_empty());
+                break;
+            }
+        }
+    });
+    // Options that cannot work are refused.
+    for bad in [
+        &["--kind", "evologics", "--modem-id", "255"][..],
+        &["--kind", "evologics", "--busy", "2"],
+        &["--kind", "evologics", "--link", "/tmp/x"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .args(["modem", "emulate"])
+            .args(bad)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{bad:?}");
+    }
+}

@@ -304,6 +304,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         // whether it is valid.
         let broker = mqtt_broker_note(&cli, &config);
         let warning = config::passphrase_file_warning(&config);
+        let limits = runtime::driver_limits(&config);
         let checked = runtime::check(config).map_err(|e| located(e, read.as_ref()));
         if let Err(e) = &checked {
             // As the start refuses it: the notes wait until it can run.
@@ -319,6 +320,9 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         return match checked {
             Ok(types) => {
                 println!("configuration is valid; DCCL types: {}", types.join(", "));
+                if let Some(limits) = limits {
+                    println!("{limits}");
+                }
                 if let Some(broker) = broker {
                     println!("{broker}");
                 }

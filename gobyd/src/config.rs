@@ -1172,7 +1172,9 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     };
     let mut problems = Vec::new();
     let kind = modemdriver::check::driver_type(driver);
+    let evologics = modemdriver::evologics::driver::is_evologics(driver);
     match kind {
+        _ if evologics => {}
         Some(kind) if modemdriver::check::BUILT_IN.contains(&kind) => {}
         _ => problems.push(Problem::new(
             match &driver.driver {
@@ -1181,7 +1183,10 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
             },
             match (&driver.driver, kind) {
                 (Some(driver_config::Driver::DriverName(name)), _) => {
-                    format!("no driver named {name:?} is built in")
+                    format!(
+                        "no driver named {name:?} is built in (driver_name {:?} is)",
+                        modemdriver::evologics::driver::DRIVER_NAME
+                    )
                 }
                 (_, other) => format!(
                     "{} is not a driver gobyd runs (use {})",

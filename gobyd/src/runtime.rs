@@ -86,6 +86,9 @@ fn io_error(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> Daemon
 pub async fn start_driver(
     config: &protos::goby::acomms::protobuf::DriverConfig,
 ) -> Result<Driver, DaemonError> {
+    if modemdriver::evologics::driver::is_evologics(config) {
+        return Ok(modemdriver::evologics::EvologicsDriver::start(config).await?);
+    }
     match modemdriver::check::driver_type(config) {
         Some(DriverType::DriverAcousticSimulator) => {
             Ok(modemdriver::sim::SimulatorDriver::start(config)?)
@@ -100,7 +103,10 @@ pub async fn start_driver(
         other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
             match (&config.driver, other) {
                 (Some(driver_config::Driver::DriverName(name)), _) => {
-                    format!("no driver named {name:?} is built in")
+                    format!(
+                        "no driver named {name:?} is built in (driver_name {:?} is)",
+                        modemdriver::evologics::driver::DRIVER_NAME
+                    )
                 }
                 (_, other) => format!(
                     "driver {} is not supported by gobyd (use {})",
@@ -166,7 +172,13 @@ pub fn validate(
     config::default_entries(&mut queue, &defs.loaded);
     // Each queue entry on its own, so that every refused entry is told at
     // once, at its place.
-    let problems = entry_problems(&codec, &queue, configured, &defs.loaded);
+    let mut problems = entry_problems(&codec, &queue, configured, &defs.loaded);
+    problems.extend(frame_problems(
+        &codec,
+        &queue,
+        configured,
+        config.driver.as_ref(),
+    ));
     if !problems.is_empty() {
         return Err(ConfigError::Problems(problems).into());
     }
@@ -229,6 +241,52 @@ fn entry_problems(
         });
     }
     problems
+}
+
+/// The queue entries whose messages can be larger than the largest frame
+/// the driver sends ([`modemdriver::check::largest_frame`]: the EvoLogics
+/// S2C's burst size): such a message would never go.
+fn frame_problems(
+    codec: &Arc<dccl::Codec>,
+    queue: &protos::goby::acomms::protobuf::QueueManagerConfig,
+    configured: usize,
+    driver: Option<&protos::goby::acomms::protobuf::DriverConfig>,
+) -> Vec<config::Problem> {
+    let Some(driver) = driver else {
+        return Vec::new();
+    };
+    let Some(largest) = modemdriver::check::largest_frame(driver) else {
+        return Vec::new();
+    };
+    let mut problems = Vec::new();
+    for (i, entry) in queue.message_entry.iter().enumerate() {
+        let Ok(size) = codec.max_size(&entry.protobuf_name) else {
+            continue;
+        };
+        if size > largest {
+            let field = if i < configured {
+                format!("queue.message_entry[{i}].protobuf_name")
+            } else {
+                "dccl.proto_file".to_string()
+            };
+            problems.push(config::Problem::new(
+                field,
+                format!(
+                    "{} encodes to up to {size} bytes, more than the {largest} bytes of the driver's largest frame \
+                     ({}): it could never be sent",
+                    entry.protobuf_name,
+                    modemdriver::check::limits(driver).unwrap_or_default()
+                ),
+            ));
+        }
+    }
+    problems
+}
+
+/// The frame limits of the configured driver, in words, when it has such
+/// limits (told by `gobyd --check`).
+pub fn driver_limits(config: &GobydConfig) -> Option<String> {
+    config.driver.as_ref().and_then(modemdriver::check::limits)
 }
 
 /// Checks a configuration without starting anything ([`validate`], the
@@ -868,25 +926,36 @@ impl Daemon {
         if let Some(config) = &self.driver_config {
             let micromodem = matches!(config.driver, Some(driver_config::Driver::DriverType(t))
                 if t == DriverType::DriverWhoiMicromodem as i32);
-            if !micromodem {
-                return Err(format!(
-                    "{name}: only the Micro-Modem driver takes driver-specific requests"
-                ));
-            }
-            let takes = MicroModemSpecific::default().descriptor();
-            let request = (message.descriptor() == takes)
-                .then(|| message.transcode_to::<MicroModemSpecific>().ok())
-                .flatten()
-                .ok_or_else(|| {
-                    format!("{name}: the Micro-Modem driver takes {}", takes.full_name())
-                })?;
-            let settings = config.micromodem.clone().unwrap_or_default();
-            if let Some(problem) = modemdriver::micromodem::ranging::request_problem(
-                &request,
-                self.modem_id,
-                &settings,
-            ) {
-                return Err(problem);
+            if modemdriver::evologics::driver::is_evologics(config) {
+                let takes =
+                    protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor();
+                if message.descriptor() != takes {
+                    return Err(format!(
+                        "{name}: the EvoLogics driver takes {}",
+                        takes.full_name()
+                    ));
+                }
+            } else {
+                if !micromodem {
+                    return Err(format!(
+                        "{name}: only the Micro-Modem and EvoLogics drivers take driver-specific requests"
+                    ));
+                }
+                let takes = MicroModemSpecific::default().descriptor();
+                let request = (message.descriptor() == takes)
+                    .then(|| message.transcode_to::<MicroModemSpecific>().ok())
+                    .flatten()
+                    .ok_or_else(|| {
+                        format!("{name}: the Micro-Modem driver takes {}", takes.full_name())
+                    })?;
+                let settings = config.micromodem.clone().unwrap_or_default();
+                if let Some(problem) = modemdriver::micromodem::ranging::request_problem(
+                    &request,
+                    self.modem_id,
+                    &settings,
+                ) {
+                    return Err(problem);
+                }
             }
         }
         if self.specific_requests.len() >= MAX_SPECIFIC_REQUESTS {

@@ -805,3 +805,89 @@ fn check_warns_of_a_passphrase_file_others_can_read() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--check` tells the EvoLogics S2C driver's frame limits, refuses a
+/// message larger than its largest frame and every setting it cannot
+/// work with.
+#[test]
+fn check_knows_the_evologics_limits() {
+    let dir = scratch("command", "gobyd-evologics");
+    let path = dir.join("evologics.pb.txt");
+    let driver = |extra: &str| {
+        let server = if extra.contains("tcp_server") {
+            ""
+        } else {
+            "tcp_server: \"127.0.0.1\""
+        };
+        format!(
+            "modem_id: 1\ndriver {{ driver_name: \"EVOLOGICS_S2C\" connection_type: CONNECTION_TCP_AS_CLIENT \
+             {server} {extra} }}\n"
+        )
+    };
+    std::fs::write(&path, driver("")).unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert_eq!(out.status.code(), Some(0), "{text}{}", stderr_text(&out));
+    assert!(
+        text.contains("driver EVOLOGICS_S2C: one frame per transmission; up to 64 bytes as an instant message (AT*SENDIM), up to 1024 bytes as burst data (AT*SEND) to one node"),
+        "{text}"
+    );
+    std::fs::write(
+        &path,
+        driver("evologics { im_max_bytes: 16 burst_max_bytes: 0 }"),
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    let err = stderr_text(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("more than the 16 bytes of the driver's largest frame"),
+        "{err}"
+    );
+    for (extra, expected) in [
+        (
+            "tcp_server: \"\"",
+            "driver.tcp_server: required for the EvoLogics driver over TCP",
+        ),
+        (
+            "evologics { address: 255 }",
+            "driver.evologics.address: 255 is not an S2C address",
+        ),
+        (
+            "evologics { source_level: 5 }",
+            "driver.evologics.source_level: 5 is not a source level",
+        ),
+        (
+            "evologics { im_max_bytes: 65 }",
+            "driver.evologics.im_max_bytes: 65 is not an instant-message size",
+        ),
+        (
+            "evologics { burst_max_bytes: 5000 }",
+            "driver.evologics.burst_max_bytes: 5000 bytes is more than",
+        ),
+        (
+            "tcp_port: 70000",
+            "driver.tcp_port: 70000 is not a TCP port",
+        ),
+    ] {
+        std::fs::write(&path, driver(extra)).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        let err = stderr_text(&out);
+        assert_eq!(out.status.code(), Some(2), "{extra}: {err}");
+        assert!(err.contains(expected), "{extra}: {err}");
+    }
+    std::fs::write(
+        &path,
+        "modem_id: 1\ndriver { driver_name: \"EVOLOGICS_S3C\" }\n",
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    let err = stderr_text(&out);
+    assert!(
+        err.contains(
+            "no driver named \"EVOLOGICS_S3C\" is built in (driver_name \"EVOLOGICS_S2C\" is)"
+        ),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

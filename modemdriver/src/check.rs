@@ -67,7 +67,12 @@ pub const BUILT_IN: &[DriverType] = &[
 /// for messages: `DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP … or
 /// DRIVER_WHOI_MICROMODEM`.
 pub fn built_in_names() -> String {
-    let names: Vec<&str> = BUILT_IN.iter().map(|t| t.as_str_name()).collect();
+    let named = format!("driver_name {:?}", crate::evologics::driver::DRIVER_NAME);
+    let names: Vec<&str> = BUILT_IN
+        .iter()
+        .map(|t| t.as_str_name())
+        .chain([named.as_str()])
+        .collect();
     match names.split_last() {
         Some((last, [])) => (*last).to_string(),
         Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
@@ -90,6 +95,15 @@ pub fn driver_type(config: &DriverConfig) -> Option<DriverType> {
 /// that does not exist or is not a character device; the port is not
 /// opened (a running driver may hold it).
 pub fn problems(config: &DriverConfig) -> Vec<Problem> {
+    if crate::evologics::driver::is_evologics(config) {
+        let mut problems = crate::evologics::driver::problems(config);
+        if config.connection_type() == driver_config::ConnectionType::ConnectionSerial
+            && !problems.iter().any(|p| p.field == "serial_port")
+        {
+            problems.extend(serial_port_problem(config.serial_port()));
+        }
+        return problems;
+    }
     match driver_type(config) {
         Some(DriverType::DriverAcousticSimulator) => crate::sim::problems(config),
         Some(DriverType::DriverUdp) => crate::udp::problems(config),
@@ -103,6 +117,50 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         }
         _ => Vec::new(),
     }
+}
+
+/// The frame limits of the driver of `config`, in words, for `gobyd
+/// --check` (`None` for drivers whose frames are not limited by the modem
+/// this way): for the EvoLogics S2C, the instant-message and burst sizes.
+pub fn limits(config: &DriverConfig) -> Option<String> {
+    if crate::evologics::driver::is_evologics(config) {
+        let (im, burst) = crate::evologics::driver::frame_limits(config);
+        let header = if crate::evologics::driver::application_acks(config) {
+            let h = crate::evologics::driver::machine::APP_HEADER;
+            if burst > 0 {
+                format!(
+                    " ({} and {} less the {h}-byte application-ack header)",
+                    im + h,
+                    burst + h
+                )
+            } else {
+                format!(" ({} less the {h}-byte application-ack header)", im + h)
+            }
+        } else {
+            String::new()
+        };
+        return Some(if burst > 0 {
+            format!(
+                "driver EVOLOGICS_S2C: one frame per transmission; up to {im} bytes as an instant message (AT*SENDIM), \
+                 up to {burst} bytes as burst data (AT*SEND) to one node{header}; broadcasts and query destinations up to {im} bytes"
+            )
+        } else {
+            format!(
+                "driver EVOLOGICS_S2C: one frame per transmission of up to {im} bytes{header}, as an instant message (AT*SENDIM); no burst data"
+            )
+        });
+    }
+    None
+}
+
+/// The largest frame the driver of `config` sends to one node, bytes
+/// (`None`: not limited this way).
+pub fn largest_frame(config: &DriverConfig) -> Option<usize> {
+    if crate::evologics::driver::is_evologics(config) {
+        let (im, burst) = crate::evologics::driver::frame_limits(config);
+        return Some(im.max(burst));
+    }
+    None
 }
 
 /// Why the serial port at `path` cannot be opened, if that shows without

@@ -19,6 +19,9 @@
 //!   duplex, collisions).
 //! - [`micromodem::MicroModemDriver`]: the WHOI Micro-Modem, NMEA-0183 over a
 //!   serial port; [`micromodem::emulator`] speaks the modem's side.
+//! - [`evologics::EvologicsDriver`]: EvoLogics S2C modems, the AT command
+//!   set over TCP or serial (`driver_name: "EVOLOGICS_S2C"`);
+//!   [`evologics::emulator`] speaks the modem's side.
 //!
 //! [`check`] finds, without starting a driver, the settings it would
 //! refuse and how long its packets take at each rate (what a TDMA slot
@@ -35,6 +38,7 @@
 pub mod check;
 pub mod config;
 pub mod driver;
+pub mod evologics;
 pub mod link;
 pub mod micromodem;
 pub mod rate;

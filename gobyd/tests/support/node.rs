@@ -334,6 +334,8 @@ pub enum Driver {
     MicroModem(MicroModem),
     /// `DRIVER_UDP_MULTICAST`.
     Multicast(Multicast),
+    /// `driver_name: "EVOLOGICS_S2C"`.
+    Evologics(Evologics),
 }
 
 impl Driver {
@@ -343,6 +345,7 @@ impl Driver {
             Driver::Udp(u) => u.render(),
             Driver::MicroModem(m) => m.render(),
             Driver::Multicast(m) => m.render(),
+            Driver::Evologics(e) => e.render(),
         }
     }
 }
@@ -629,6 +632,49 @@ impl MicroModem {
         }
         if !self.settings.is_empty() {
             text += &format!("  micromodem {{ {} }}\n", self.settings.join("  "));
+        }
+        text += "}\n";
+        text
+    }
+}
+
+impl From<Evologics> for Driver {
+    fn from(e: Evologics) -> Driver {
+        Driver::Evologics(e)
+    }
+}
+
+/// The EvoLogics S2C driver of a node, reaching its modem over TCP on
+/// 127.0.0.1.
+#[derive(Debug, Clone)]
+pub struct Evologics {
+    port: u16,
+    settings: Vec<String>,
+}
+
+impl Evologics {
+    /// The modem serving its AT interface on 127.0.0.1:`port`.
+    pub fn tcp(port: u16) -> Evologics {
+        Evologics {
+            port,
+            settings: Vec::new(),
+        }
+    }
+
+    /// A field of the `evologics { … }` block, in text format (e.g.
+    /// `delivery_timeout_ms: 5000`), after those given before.
+    pub fn setting(mut self, field: &str) -> Evologics {
+        self.settings.push(field.to_string());
+        self
+    }
+
+    fn render(&self) -> String {
+        let mut text = format!(
+            "driver {{\n  driver_name: \"EVOLOGICS_S2C\"\n  connection_type: CONNECTION_TCP_AS_CLIENT\n  tcp_server: \"127.0.0.1\"\n  tcp_port: {}\n",
+            self.port
+        );
+        if !self.settings.is_empty() {
+            text += &format!("  evologics {{ {} }}\n", self.settings.join("  "));
         }
         text += "}\n";
         text
