@@ -18,6 +18,7 @@ const FILES: &[&str] = &[
     "goby/acomms/udp_driver.proto",
     "goby/acomms/simulator_driver.proto",
     "goby/acomms/micromodem.proto",
+    "goby/acomms/iridium.proto",
     "goby/moos/translator.proto",
     "goby/moos/node_report.proto",
     "goby/apps/gobyd_config.proto",

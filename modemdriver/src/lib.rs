@@ -35,6 +35,7 @@
 pub mod check;
 pub mod config;
 pub mod driver;
+pub mod iridium;
 pub mod link;
 pub mod micromodem;
 pub mod rate;
