@@ -3,6 +3,16 @@
 //! - [`frame`]: Goby's frames over Iridium (DCCL header, CRC-32), byte for
 //!   byte Goby3's; the message size limits of each transceiver.
 //! - [`rudics`]: Goby's RUDICS packets (a frame as a line on a call).
+//! - [`at`]: the SBD AT commands and the transceiver's answers, typed.
+//! - [`status`]: the session status codes (`+SBDIX`) and their meanings.
+//! - [`reader`]: an AT serial stream split into lines and binary blocks.
+//! - [`driver`]: the vehicle's driver ([`IridiumDriver`]).
 
+pub mod at;
+pub mod driver;
 pub mod frame;
+pub mod reader;
 pub mod rudics;
+pub mod status;
+
+pub use driver::IridiumDriver;
