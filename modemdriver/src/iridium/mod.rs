@@ -7,9 +7,14 @@
 //! - [`status`]: the session status codes (`+SBDIX`) and their meanings.
 //! - [`reader`]: an AT serial stream split into lines and binary blocks.
 //! - [`driver`]: the vehicle's driver ([`IridiumDriver`]).
+//! - [`directip`]: Iridium's DirectIP messages (MO, MT, confirmations).
+//! - [`emulator`]: an emulated 9603 on a pseudo-terminal and an emulated
+//!   gateway with DirectIP.
 
 pub mod at;
+pub mod directip;
 pub mod driver;
+pub mod emulator;
 pub mod frame;
 pub mod reader;
 pub mod rudics;
