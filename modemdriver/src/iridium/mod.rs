@@ -7,6 +7,7 @@
 //! - [`status`]: the session status codes (`+SBDIX`) and their meanings.
 //! - [`reader`]: an AT serial stream split into lines and binary blocks.
 //! - [`driver`]: the vehicle's driver ([`IridiumDriver`]).
+//! - [`shore`]: the shore's driver over DirectIP ([`IridiumShoreDriver`]).
 //! - [`directip`]: Iridium's DirectIP messages (MO, MT, confirmations).
 //! - [`emulator`]: an emulated 9603 on a pseudo-terminal and an emulated
 //!   gateway with DirectIP.
@@ -18,6 +19,8 @@ pub mod emulator;
 pub mod frame;
 pub mod reader;
 pub mod rudics;
+pub mod shore;
 pub mod status;
 
 pub use driver::IridiumDriver;
+pub use shore::IridiumShoreDriver;
