@@ -308,9 +308,19 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         if let Some(warning) = config::passphrase_file_warning(&config) {
             eprintln!("gobyd: warning: {warning}");
         }
-        return match runtime::check(config) {
-            Ok(types) => {
-                println!("configuration is valid; DCCL types: {}", types.join(", "));
+        return match runtime::validate(config, config::DriverSettings::Configured) {
+            Ok(checked) => {
+                let (limits, warnings) = runtime::frame_report(&checked);
+                for w in warnings {
+                    eprintln!("gobyd: warning: {w}");
+                }
+                println!(
+                    "configuration is valid; DCCL types: {}",
+                    checked.loaded.join(", ")
+                );
+                if let Some(limits) = limits {
+                    println!("{limits}");
+                }
                 if let Some(broker) = broker {
                     println!("{broker}");
                 }

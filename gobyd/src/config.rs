@@ -106,6 +106,8 @@ impl std::fmt::Display for Problem {
 const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.udp.protobuf.config", "udp"),
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
+    ("goby.acomms.iridium.protobuf.config", "iridium"),
+    ("goby.acomms.iridium.protobuf.shore_config", "iridium_shore"),
 ];
 
 /// How the text of a configuration is written.
@@ -432,8 +434,9 @@ fn with_goby_hint(reason: String, at_equals: bool) -> String {
         && reason.contains("message 'goby.acomms.protobuf.DriverConfig'")
     {
         return format!(
-            "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config] and \
-             [goby.acomms.micromodem.protobuf.config], and Goby 2's [UDPDriverConfig.*] and \
+            "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config], \
+             [goby.acomms.micromodem.protobuf.config], [goby.acomms.iridium.protobuf.config] and \
+             [goby.acomms.iridium.protobuf.shore_config], and Goby 2's [UDPDriverConfig.*] and \
              [micromodem.protobuf.Config.*] (the drivers gobyd runs)"
         );
     }
@@ -1172,7 +1175,9 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
         Some(
             DriverType::DriverAcousticSimulator
             | DriverType::DriverUdp
-            | DriverType::DriverWhoiMicromodem,
+            | DriverType::DriverWhoiMicromodem
+            | DriverType::DriverIridium
+            | DriverType::DriverIridiumShore,
         ) => {}
         _ => problems.push(Problem::new(
             match &driver.driver {
@@ -1184,7 +1189,7 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
                     format!("no driver named {name:?} is built in")
                 }
                 (_, other) => format!(
-                    "{} is not a driver gobyd runs (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
+                    "{} is not a driver gobyd runs (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP, DRIVER_WHOI_MICROMODEM, DRIVER_IRIDIUM or DRIVER_IRIDIUM_SHORE)",
                     other.map(|t| t.as_str_name()).unwrap_or("this driver type")
                 ),
             },

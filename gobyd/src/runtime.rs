@@ -94,13 +94,17 @@ pub async fn start_driver(
         Some(DriverType::DriverWhoiMicromodem) => {
             Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
         }
+        Some(DriverType::DriverIridium) => Ok(modemdriver::iridium::IridiumDriver::start(config)?),
+        Some(DriverType::DriverIridiumShore) => {
+            Ok(modemdriver::iridium::IridiumShoreDriver::start(config).await?)
+        }
         other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
             match (&config.driver, other) {
                 (Some(driver_config::Driver::DriverName(name)), _) => {
                     format!("no driver named {name:?} is built in")
                 }
                 (_, other) => format!(
-                    "driver {} is not supported by gobyd (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP or DRIVER_WHOI_MICROMODEM)",
+                    "driver {} is not supported by gobyd (use DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP, DRIVER_WHOI_MICROMODEM, DRIVER_IRIDIUM or DRIVER_IRIDIUM_SHORE)",
                     other.map(|t| t.as_str_name()).unwrap_or("unknown")
                 ),
             },
@@ -227,6 +231,34 @@ fn entry_problems(
     problems
 }
 
+/// What `gobyd --check` tells of a driver whose frames have a size limit
+/// of their own (Iridium SBD): the limits, and a warning for each loaded
+/// DCCL type that can be larger than the frames this node sends (it can
+/// never be sent from here; a type only received is fine).
+pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
+    let Some(limits) = checked
+        .config
+        .driver
+        .as_ref()
+        .and_then(modemdriver::check::frame_limits)
+    else {
+        return (None, Vec::new());
+    };
+    let mut warnings = Vec::new();
+    for name in &checked.loaded {
+        if let Ok(size) = checked.codec.max_size(name) {
+            if size > limits.outgoing {
+                warnings.push(format!(
+                    "{name} is up to {size} bytes, more than the {} bytes of the frames this node sends over {}: \
+                     a message of it that large is never sent from here (only received)",
+                    limits.outgoing, limits.link
+                ));
+            }
+        }
+    }
+    (Some(format!("{}: {}", limits.link, limits.text)), warnings)
+}
+
 /// Checks a configuration without starting anything ([`validate`], the
 /// driver's settings included). Returns the DCCL types.
 pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
@@ -303,6 +335,13 @@ impl Daemon {
     /// driver and opens the autonomy interfaces.
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let checked = validate(config, config::DriverSettings::Configured)?;
+        let (limits, warnings) = frame_report(&checked);
+        if let Some(limits) = limits {
+            tracing::info!("{limits}");
+        }
+        for w in warnings {
+            tracing::warn!("{w}");
+        }
         let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
         let mut driver_config = checked.config.driver.clone().expect("completed");
         // Acks (where software sends them) only once the inbox holds the
@@ -757,6 +796,9 @@ impl Daemon {
             }
             DriverEvent::Status(status) => match &status {
                 DriverStatus::Ready => tracing::info!("driver ready"),
+                DriverStatus::Signal { .. } => {
+                    tracing::info!(status = status.kind(), "driver: {status}")
+                }
                 other => tracing::warn!(status = other.kind(), "driver: {other}"),
             },
             DriverEvent::Specific(report) => tracing::info!(
