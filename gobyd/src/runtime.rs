@@ -231,6 +231,10 @@ fn entry_problems(
     problems
 }
 
+/// Below this `minimum_ack_wait_seconds`, `gobyd --check` warns that an
+/// Iridium message is sent again before its ack can come.
+pub const MIN_SBD_ACK_WAIT_SECONDS: f64 = 60.0;
+
 /// What `gobyd --check` tells of a driver whose frames have a size limit
 /// of their own (Iridium SBD): the limits, and a warning for each loaded
 /// DCCL type that can be larger than the frames this node sends (it can
@@ -255,6 +259,16 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
                 ));
             }
         }
+    }
+    let wait = checked.queue.minimum_ack_wait_seconds();
+    if wait < MIN_SBD_ACK_WAIT_SECONDS {
+        warnings.push(format!(
+            "queue.minimum_ack_wait_seconds is {wait}: over {} an acknowledgement takes a session each way \
+             (and a ring alert or a mailbox check), so a message not yet acknowledged is sent again, \
+             and paid for, at each of this node's slots; set it to the time an ack takes \
+             (e.g. {MIN_SBD_ACK_WAIT_SECONDS})",
+            limits.link
+        ));
     }
     (Some(format!("{}: {}", limits.link, limits.text)), warnings)
 }

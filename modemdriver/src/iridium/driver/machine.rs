@@ -105,7 +105,7 @@ pub struct Settings {
 pub(super) enum Purpose {
     /// Step of the start-up sequence.
     Startup,
-    /// `AT+SBDD0` before a mailbox check (or after a message went).
+    /// `AT+SBDD2` before a mailbox check (or after a message went).
     ClearMo,
     /// `AT+SBDWB=n`, waiting for `READY`.
     WriteRequest,
@@ -364,7 +364,7 @@ impl Machine {
         }
         commands.push(AtCommand::IndicatorEvents(vec![1, 1, 1]));
         commands.push(AtCommand::Imei);
-        commands.push(AtCommand::Clear(0));
+        commands.push(AtCommand::Clear(2));
         self.startup = commands.into();
         self.sessions.configuring();
     }
@@ -532,7 +532,7 @@ impl Machine {
                 return;
             }
         }
-        if *command == AtCommand::Clear(0) {
+        if *command == AtCommand::Clear(2) {
             self.sessions.mo_cleared();
         }
         if self.startup.is_empty() && !self.ready {

@@ -5,7 +5,9 @@
 //!
 //! ```text
 //!  MO message:    AT+SBDWB=<n> → READY → <n bytes><checksum> → 0 → AT+SBDIX[A] → +SBDIX: …
-//!  mailbox check: AT+SBDD0 → 0 (the MO buffer emptied, else it would go again) → AT+SBDIX[A]
+//!  mailbox check: AT+SBDD2 → 0 (the MO buffer emptied, else it would go again) → AT+SBDIX[A]
+//!  (`AT+SBDD2` empties the MT buffer too, read already; Goby3 uses it, and
+//!  Goby3's RockBLOCK simulator knows no other)
 //!  then, when the MT status is 1:  AT+SBDRB → <length><message><checksum>
 //! ```
 //!
@@ -148,7 +150,7 @@ impl Sessions {
         self.mo_buffer = MoBuffer::Unknown;
     }
 
-    /// `AT+SBDD0` was answered at start-up.
+    /// `AT+SBDD2` was answered at start-up.
     pub(super) fn mo_cleared(&mut self) {
         self.mo_buffer = MoBuffer::Empty;
     }
@@ -306,7 +308,7 @@ impl Machine {
                         Purpose::Session,
                     );
                 } else {
-                    self.send(AtCommand::Clear(0), Purpose::ClearMo);
+                    self.send(AtCommand::Clear(2), Purpose::ClearMo);
                 }
             }
         }

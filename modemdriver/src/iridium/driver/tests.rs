@@ -81,7 +81,7 @@ impl Rig {
             let Some(last) = w.last() else { break };
             let answer: &[u8] = match last.as_str() {
                 "AT+CGSN\r" => b"300234010753370\r\n\r\nOK\r\n",
-                "AT+SBDD0\r" => b"0\r\n\r\nOK\r\n",
+                "AT+SBDD2\r" => b"0\r\n\r\nOK\r\n",
                 _ => b"OK\r\n",
             };
             out = self.bytes(answer);
@@ -188,7 +188,7 @@ fn start_up_configures_ring_alerts_indicators_and_reads_the_imei() {
         sent.extend(w.clone());
         let answer: &[u8] = match w.last().map(String::as_str) {
             Some("AT+CGSN\r") => b"300234010753370\r\nOK\r\n",
-            Some("AT+SBDD0\r") => b"0\r\nOK\r\n",
+            Some("AT+SBDD2\r") => b"0\r\nOK\r\n",
             Some(_) => b"OK\r\n",
             None => break,
         };
@@ -203,7 +203,7 @@ fn start_up_configures_ring_alerts_indicators_and_reads_the_imei() {
             "AT+SBDAREG=1\r",
             "AT+CIER=1,1,1\r",
             "AT+CGSN\r",
-            "AT+SBDD0\r"
+            "AT+SBDD2\r"
         ]
     );
     assert!(statuses(&out).contains(&DriverStatus::Ready));
@@ -246,7 +246,7 @@ fn a_data_message_goes_in_one_session_with_its_checksum() {
     // The ack from node 2 for frame 10 is credited to transmission 7.
     let out = rig.bytes(b"SBDRING\r\n");
     // The MO buffer still holds the message: emptied before the check.
-    assert_eq!(written(&out), ["AT+SBDD0\r"]);
+    assert_eq!(written(&out), ["AT+SBDD2\r"]);
     let out = rig.bytes(b"0\r\n\r\nOK\r\n");
     assert_eq!(written(&out), ["AT+SBDIXA\r"]);
     let out = rig.bytes(b"+SBDIX: 0, 5, 1, 3, 18, 0\r\n\r\nOK\r\n");
