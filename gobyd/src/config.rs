@@ -1852,6 +1852,30 @@ mod tests {
     }
 
     #[test]
+    fn goby3_iridium_extensions_read_as_our_sections() {
+        let text = "modem_id: 2\ndriver_cfg {\n  driver_type: DRIVER_IRIDIUM_SHORE\n  \
+                    [goby.acomms.iridium.protobuf.config] { max_frame_size: 200 }\n  \
+                    [goby.acomms.iridium.protobuf.shore_config] {\n    mo_sbd_server_port: 40001\n    \
+                    mt_sbd_server_address: \"10.0.0.1\" mt_sbd_server_port: 40002\n    \
+                    modem_id_to_imei { modem_id: 1 imei: \"300234010753370\" }\n    \
+                    device: DEVICE_IRIDIUM_9602_9603\n  }\n}\n";
+        let driver = parse(text, "x").unwrap().driver.unwrap();
+        let shore = driver.iridium_shore.clone().unwrap();
+        assert_eq!(shore.mo_sbd_server_port(), 40001);
+        assert_eq!(shore.modem_id_to_imei[0].imei, "300234010753370");
+        assert_eq!(driver.iridium.clone().unwrap().max_frame_size(), 200);
+        // The MT frame: the 9603's 270 less 11, and max_frame_size below it.
+        assert_eq!(modemdriver::iridium::shore::max_frame_bytes(&driver), 200);
+        let e = parse(
+            "driver { driver_type: DRIVER_IRIDIUM [goby.acomms.iridium.protobuf.bogus] { } }",
+            "p.cfg",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("[goby.acomms.iridium.protobuf.config]"), "{e}");
+    }
+
+    #[test]
     fn goby3_extensions_become_our_fields_in_place() {
         let text = "driver {\n  [goby.acomms.udp.protobuf.config] { local { port: 1 } }\n  # [goby.acomms.udp.protobuf.config]\n  serial_port: \"[goby.acomms.udp.protobuf.config]\"\n}\n";
         let rewritten = goby3_extensions(text);

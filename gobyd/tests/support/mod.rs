@@ -4,6 +4,7 @@
 
 pub mod broker;
 pub mod daemon;
+pub mod iridium;
 pub mod micromodem;
 pub mod node;
 pub mod restart;
