@@ -342,6 +342,41 @@ mod tests {
         assert_eq!(encode_sbd(&mt).unwrap(), sbd);
     }
 
+    /// SBD messages as this module writes them, for transmissions Goby3
+    /// 3.1.5's vehicle driver sent in a run against the emulated 9603
+    /// (checked outside the repository: Goby3 sent these very bytes, and
+    /// its shore driver read ours alike).
+    #[test]
+    fn messages_as_goby3_writes_them() {
+        let ack = ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            rate: Some(0),
+            r#type: Some(TransmissionType::Ack as i32),
+            acked_frame: vec![40_050],
+            ..Default::default()
+        };
+        assert_eq!(hex(&encode_sbd(&ack).unwrap()), "41140000e638012aa0c141");
+        // Two Goby3 DCCL messages in one frame.
+        let two = data(1, 2, 2, &[0xf8, 0x41, 0x30, 0x00, 0xf8, 0x41, 0x2c, 0x00]);
+        assert_eq!(
+            hex(&encode_sbd(&two).unwrap()),
+            "41840300000000f8413000f8412c0042f56bcb"
+        );
+        assert_eq!(decode_sbd(&unhex("41140000e638012aa0c141")).unwrap(), ack);
+    }
+
+    fn hex(bytes: &[u8]) -> String {
+        bytes.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    fn unhex(text: &str) -> Vec<u8> {
+        (0..text.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&text[i..i + 2], 16).unwrap())
+            .collect()
+    }
+
     #[test]
     fn absent_fields_stay_absent() {
         let mt = ModemTransmission {
