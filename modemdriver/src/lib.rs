@@ -19,6 +19,10 @@
 //!   duplex, collisions).
 //! - [`micromodem::MicroModemDriver`]: the WHOI Micro-Modem, NMEA-0183 over a
 //!   serial port; [`micromodem::emulator`] speaks the modem's side.
+//! - [`iridium::IridiumDriver`]: an Iridium 9602/9603 (SBD AT commands) on a
+//!   serial port, and [`iridium::IridiumShoreDriver`]: Iridium's DirectIP on
+//!   shore, both in Goby3's framing; [`iridium::emulator`] emulates a 9603
+//!   and the gateway.
 //!
 //! [`check`] finds, without starting a driver, the settings it would
 //! refuse and how long its packets take at each rate (what a TDMA slot
