@@ -1837,7 +1837,7 @@ mod tests {
                 "Hydroid gateway",
             ),
             (
-                "driver_cfg { [goby.acomms.iridium.protobuf.config] { } }\n",
+                "driver_cfg { [goby.acomms.benthos.protobuf.config] { } }\n",
                 "p.cfg:1:14",
                 "the drivers gobyd runs",
             ),

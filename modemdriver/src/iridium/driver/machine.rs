@@ -7,7 +7,7 @@
 //! the port to open). [`Machine::next_deadline`] tells when the next tick
 //! is due.
 //!
-//! One AT command is outstanding at a time ([`Pending`]); its answer is
+//! One AT command is outstanding at a time (`Pending`); its answer is
 //! collected from the lines (and binary blocks) that follow until its
 //! final result code. Unsolicited lines (`SBDRING`, `+CIEV`) are taken
 //! whenever they come. Sessions (see [`super::session`]) are started only
@@ -363,6 +363,9 @@ impl Machine {
             commands.push(AtCommand::AutoRegistration(1));
         }
         commands.push(AtCommand::IndicatorEvents(vec![1, 1, 1]));
+        // The last signal strength known, at once (`+CSQ` may take seconds
+        // to measure one); the indicators tell every change from now on.
+        commands.push(AtCommand::SignalQuality { fast: true });
         commands.push(AtCommand::Imei);
         commands.push(AtCommand::Clear(2));
         self.startup = commands.into();
@@ -486,7 +489,7 @@ impl Machine {
                 pending.answer = Some(Answer::Session(reply));
                 return;
             }
-            ModemLine::Imei(imei) => {
+            ModemLine::Imei(imei) if pending.command == AtCommand::Imei => {
                 pending.answer = Some(Answer::Imei(imei));
                 return;
             }

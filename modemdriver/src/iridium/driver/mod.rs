@@ -6,7 +6,8 @@
 //! silent): `AT`, `ATE0`, `AT&D2` (with `use_dtr`), the configured
 //! `config` commands, `AT+SBDMTA=1` (ring alerts), `AT+SBDAREG=1` (with
 //! `enable_sbdring_automatic_registration`), `AT+CIER=1,1,1` (signal and
-//! service indicators), `AT+CGSN` (the IMEI) and `AT+SBDD2`; then the
+//! service indicators), `AT+CSQF` (the last signal strength known), `AT+CGSN`
+//! (the IMEI) and `AT+SBDD2`; then the
 //! driver is [`Ready`](crate::DriverStatus::Ready). Each command is written
 //! up to three times when unanswered in `command_timeout_ms`.
 //!

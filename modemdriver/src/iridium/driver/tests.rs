@@ -189,6 +189,7 @@ fn start_up_configures_ring_alerts_indicators_and_reads_the_imei() {
         let answer: &[u8] = match w.last().map(String::as_str) {
             Some("AT+CGSN\r") => b"300234010753370\r\nOK\r\n",
             Some("AT+SBDD2\r") => b"0\r\nOK\r\n",
+            Some("AT+CSQF\r") => b"+CSQF:4\r\n\r\nOK\r\n",
             Some(_) => b"OK\r\n",
             None => break,
         };
@@ -202,11 +203,13 @@ fn start_up_configures_ring_alerts_indicators_and_reads_the_imei() {
             "AT+SBDMTA=1\r",
             "AT+SBDAREG=1\r",
             "AT+CIER=1,1,1\r",
+            "AT+CSQF\r",
             "AT+CGSN\r",
             "AT+SBDD2\r"
         ]
     );
     assert!(statuses(&out).contains(&DriverStatus::Ready));
+    assert_eq!(rig.machine.bars, Some(4));
 }
 
 #[test]
