@@ -20,6 +20,7 @@ const FILES: &[&str] = &[
     "goby/acomms/simulator_driver.proto",
     "goby/acomms/micromodem.proto",
     "goby/acomms/evologics.proto",
+    "goby/acomms/iridium.proto",
     "goby/moos/translator.proto",
     "goby/moos/node_report.proto",
     "goby/apps/gobyd_config.proto",

@@ -60,6 +60,7 @@ pub mod dccl_tool;
 pub mod fleet;
 mod frame_decoder;
 pub mod generate_cmd;
+pub mod iridium_emulate;
 mod lines;
 pub mod modem_cmd;
 pub mod moos_cmd;
@@ -117,7 +118,7 @@ pub enum GobyCommand {
     /// Position telemetry: synthetic trajectories and the observer/model evaluation.
     #[command(subcommand)]
     Position(position_cmd::PositionCommand),
-    /// Modem drivers: emulate WHOI Micro-Modems for bench tests.
+    /// Modem drivers: emulate WHOI Micro-Modems, or Iridium transceivers and their gateway, for bench tests.
     #[command(subcommand)]
     Modem(modem_cmd::ModemCommand),
     /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.

@@ -46,6 +46,13 @@ pub enum ModemCommand {
     /// hardware. Prints one line per modem, `modem ID: PATH`; connect a
     /// Micro-Modem driver to PATH. Runs until interrupted (or --duration).
     Emulate(EmulateArgs),
+    /// Emulate Iridium 9603 transceivers on pseudo-terminals and the Iridium
+    /// gateway they reach, with DirectIP towards the shore. Prints
+    /// `transceiver IMEI: PATH` per transceiver (a vehicle's DRIVER_IRIDIUM
+    /// opens PATH) and the gateway's DirectIP addresses (a shore's
+    /// DRIVER_IRIDIUM_SHORE listens for MO on --mo-directip and sends MT to
+    /// the MT address). Runs until interrupted (or --duration).
+    EmulateIridium(crate::iridium_emulate::EmulateIridiumArgs),
 }
 
 /// Which modem `goby modem emulate` speaks as.
@@ -155,6 +162,7 @@ pub struct EmulateArgs {
 pub fn run(cmd: &ModemCommand, stdout: &mut dyn Write) -> Result<Status, CliError> {
     match cmd {
         ModemCommand::Emulate(args) => emulate(args, stdout),
+        ModemCommand::EmulateIridium(args) => crate::iridium_emulate::emulate_iridium(args, stdout),
     }
 }
 
@@ -378,7 +386,7 @@ async fn backend_driver(
 
 /// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
 /// before announcing anything); the future completes on either.
-fn interrupted() -> impl std::future::Future<Output = ()> {
+pub(crate) fn interrupted() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
@@ -651,7 +659,9 @@ mod tests {
 
     fn plan_of(args: &[&str]) -> Result<Vec<Backend>, CliError> {
         let cli = Cli::try_parse_from(["x", "emulate"].iter().chain(args)).expect("parses");
-        let ModemCommand::Emulate(a) = cli.cmd;
+        let ModemCommand::Emulate(a) = cli.cmd else {
+            panic!("not emulate")
+        };
         plan(&a)
     }
 
@@ -679,7 +689,9 @@ mod tests {
 
     fn args_of(args: &[&str]) -> Result<EmulateArgs, clap::Error> {
         Cli::try_parse_from(["x", "emulate"].iter().chain(args)).map(|c| {
-            let ModemCommand::Emulate(a) = c.cmd;
+            let ModemCommand::Emulate(a) = c.cmd else {
+                panic!("not emulate")
+            };
             a
         })
     }

@@ -305,31 +305,35 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         let broker = mqtt_broker_note(&cli, &config);
         let warning = config::passphrase_file_warning(&config);
         let limits = runtime::driver_limits(&config);
-        let checked = runtime::check(config).map_err(|e| located(e, read.as_ref()));
-        if let Err(e) = &checked {
-            // As the start refuses it: the notes wait until it can run.
-            eprintln!("gobyd: error: {e}");
-            return EXIT_SETUP;
-        }
+        let checked = match runtime::validate(config, config::DriverSettings::Configured) {
+            Ok(checked) => checked,
+            Err(e) => {
+                // As the start refuses it: the notes wait until it can run.
+                eprintln!("gobyd: error: {}", located(e, read.as_ref()));
+                return EXIT_SETUP;
+            }
+        };
         for note in notes {
             eprintln!("gobyd: note: {note}");
         }
         if let Some(warning) = warning {
             eprintln!("gobyd: warning: {warning}");
         }
-        return match checked {
-            Ok(types) => {
-                println!("configuration is valid; DCCL types: {}", types.join(", "));
-                if let Some(limits) = limits {
-                    println!("{limits}");
-                }
-                if let Some(broker) = broker {
-                    println!("{broker}");
-                }
-                EXIT_OK
-            }
-            Err(_) => EXIT_SETUP,
-        };
+        let (frame_limits, warnings) = runtime::frame_report(&checked);
+        for w in warnings {
+            eprintln!("gobyd: warning: {w}");
+        }
+        println!(
+            "configuration is valid; DCCL types: {}",
+            checked.loaded.join(", ")
+        );
+        for limits in [limits, frame_limits].into_iter().flatten() {
+            println!("{limits}");
+        }
+        if let Some(broker) = broker {
+            println!("{broker}");
+        }
+        return EXIT_OK;
     }
     init_logging(&config);
     let warning = config::passphrase_file_warning(&config);

@@ -107,6 +107,8 @@ const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.udp.protobuf.config", "udp"),
     ("goby.acomms.udp_multicast.protobuf.config", "udp_multicast"),
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
+    ("goby.acomms.iridium.protobuf.config", "iridium"),
+    ("goby.acomms.iridium.protobuf.shore_config", "iridium_shore"),
 ];
 
 /// How the text of a configuration is written.
@@ -436,8 +438,9 @@ fn with_goby_hint(reason: String, at_equals: bool) -> String {
         && reason.contains("message 'goby.acomms.protobuf.DriverConfig'")
     {
         return format!(
-            "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config] and \
-             [goby.acomms.micromodem.protobuf.config], and Goby 2's [UDPDriverConfig.*] and \
+            "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config], \
+             [goby.acomms.micromodem.protobuf.config], [goby.acomms.iridium.protobuf.config] and \
+             [goby.acomms.iridium.protobuf.shore_config], and Goby 2's [UDPDriverConfig.*] and \
              [micromodem.protobuf.Config.*] (the drivers gobyd runs)"
         );
     }
@@ -1860,7 +1863,7 @@ mod tests {
                 "Hydroid gateway",
             ),
             (
-                "driver_cfg { [goby.acomms.iridium.protobuf.config] { } }\n",
+                "driver_cfg { [goby.acomms.benthos.protobuf.config] { } }\n",
                 "p.cfg:1:14",
                 "the drivers gobyd runs",
             ),
@@ -1872,6 +1875,30 @@ mod tests {
         }
         let e = parse("no_such_key: 1", "p.cfg").unwrap_err().to_string();
         assert!(!e.contains("remove"), "{e}");
+    }
+
+    #[test]
+    fn goby3_iridium_extensions_read_as_our_sections() {
+        let text = "modem_id: 2\ndriver_cfg {\n  driver_type: DRIVER_IRIDIUM_SHORE\n  \
+                    [goby.acomms.iridium.protobuf.config] { max_frame_size: 200 }\n  \
+                    [goby.acomms.iridium.protobuf.shore_config] {\n    mo_sbd_server_port: 40001\n    \
+                    mt_sbd_server_address: \"10.0.0.1\" mt_sbd_server_port: 40002\n    \
+                    modem_id_to_imei { modem_id: 1 imei: \"300234010753370\" }\n    \
+                    device: DEVICE_IRIDIUM_9602_9603\n  }\n}\n";
+        let driver = parse(text, "x").unwrap().driver.unwrap();
+        let shore = driver.iridium_shore.clone().unwrap();
+        assert_eq!(shore.mo_sbd_server_port(), 40001);
+        assert_eq!(shore.modem_id_to_imei[0].imei, "300234010753370");
+        assert_eq!(driver.iridium.clone().unwrap().max_frame_size(), 200);
+        // The MT frame: the 9603's 270 less 11, and max_frame_size below it.
+        assert_eq!(modemdriver::iridium::shore::max_frame_bytes(&driver), 200);
+        let e = parse(
+            "driver { driver_type: DRIVER_IRIDIUM [goby.acomms.iridium.protobuf.bogus] { } }",
+            "p.cfg",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("[goby.acomms.iridium.protobuf.config]"), "{e}");
     }
 
     #[test]

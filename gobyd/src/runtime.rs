@@ -100,6 +100,10 @@ pub async fn start_driver(
         Some(DriverType::DriverWhoiMicromodem) => {
             Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
         }
+        Some(DriverType::DriverIridium) => Ok(modemdriver::iridium::IridiumDriver::start(config)?),
+        Some(DriverType::DriverIridiumShore) => {
+            Ok(modemdriver::iridium::IridiumShoreDriver::start(config).await?)
+        }
         other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
             match (&config.driver, other) {
                 (Some(driver_config::Driver::DriverName(name)), _) => {
@@ -289,6 +293,48 @@ pub fn driver_limits(config: &GobydConfig) -> Option<String> {
     config.driver.as_ref().and_then(modemdriver::check::limits)
 }
 
+/// Below this `minimum_ack_wait_seconds`, `gobyd --check` warns that an
+/// Iridium message is sent again before its ack can come.
+pub const MIN_SBD_ACK_WAIT_SECONDS: f64 = 60.0;
+
+/// What `gobyd --check` tells of a driver whose frames have a size limit
+/// of their own (Iridium SBD): the limits, and a warning for each loaded
+/// DCCL type that can be larger than the frames this node sends (it can
+/// never be sent from here; a type only received is fine).
+pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
+    let Some(limits) = checked
+        .config
+        .driver
+        .as_ref()
+        .and_then(modemdriver::check::frame_limits)
+    else {
+        return (None, Vec::new());
+    };
+    let mut warnings = Vec::new();
+    for name in &checked.loaded {
+        if let Ok(size) = checked.codec.max_size(name) {
+            if size > limits.outgoing {
+                warnings.push(format!(
+                    "{name} is up to {size} bytes, more than the {} bytes of the frames this node sends over {}: \
+                     a message of it that large is never sent from here (only received)",
+                    limits.outgoing, limits.link
+                ));
+            }
+        }
+    }
+    let wait = checked.queue.minimum_ack_wait_seconds();
+    if wait < MIN_SBD_ACK_WAIT_SECONDS {
+        warnings.push(format!(
+            "queue.minimum_ack_wait_seconds is {wait}: over {} an acknowledgement takes a session each way \
+             (and a ring alert or a mailbox check), so a message not yet acknowledged is sent again, \
+             and paid for, at each of this node's slots; set it to the time an ack takes \
+             (e.g. {MIN_SBD_ACK_WAIT_SECONDS})",
+            limits.link
+        ));
+    }
+    (Some(format!("{}: {}", limits.link, limits.text)), warnings)
+}
+
 /// Checks a configuration without starting anything ([`validate`], the
 /// driver's settings included). Returns the DCCL types.
 pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
@@ -365,6 +411,13 @@ impl Daemon {
     /// driver and opens the autonomy interfaces.
     pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
         let checked = validate(config, config::DriverSettings::Configured)?;
+        let (limits, warnings) = frame_report(&checked);
+        if let Some(limits) = limits {
+            tracing::info!("{limits}");
+        }
+        for w in warnings {
+            tracing::warn!("{w}");
+        }
         let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
         let mut driver_config = checked.config.driver.clone().expect("completed");
         // Acks (where software sends them) only once the inbox holds the
@@ -819,6 +872,9 @@ impl Daemon {
             }
             DriverEvent::Status(status) => match &status {
                 DriverStatus::Ready => tracing::info!("driver ready"),
+                DriverStatus::Signal { .. } => {
+                    tracing::info!(status = status.kind(), "driver: {status}")
+                }
                 other => tracing::warn!(status = other.kind(), "driver: {other}"),
             },
             DriverEvent::Specific(report) => tracing::info!(

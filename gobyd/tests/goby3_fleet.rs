@@ -30,17 +30,15 @@
 
 mod support;
 
-use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader, Write};
-use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use moos::{ClientConfig, MoosClient, Value as MoosValue};
-use serde_json::Value;
 use support::daemon::{free_tcp_port, free_udp_port, scratch, Gobyd};
+use support::goby3::{
+    count_goby3, count_gobyd, goby3, goby_bin, Goby3, Json, Proc, Tally, TICK_PROTO,
+};
 use support::micromodem::micromodem_driver;
 use support::node::{Driver, Entry, Multicast, Node, Udp};
 
@@ -48,157 +46,6 @@ use support::node::{Driver, Entry, Multicast, Node, Udp};
 const N: u32 = 5;
 /// Longest a scenario may take to deliver and acknowledge everything.
 const SCENARIO_LIMIT: Duration = Duration::from_secs(150);
-
-const TICK_PROTO: &str = r#"syntax = "proto2";
-import "dccl/option_extensions.proto";
-package fleet;
-// One numbered message from node `src` to node `dest`.
-message Tick {
-  option (dccl.msg) = { id: 124 max_bytes: 32 codec_version: 3 };
-  required int32 src = 1 [(dccl.field) = { min: 0 max: 31 }];
-  required int32 dest = 2 [(dccl.field) = { min: 0 max: 31 }];
-  required uint32 n = 3 [(dccl.field) = { min: 0 max: 1000 }];
-}
-"#;
-
-/// What this machine has of Goby3.
-struct Goby3 {
-    pacommshandler: PathBuf,
-    moosdb: PathBuf,
-    library_path: String,
-}
-
-/// A `KEY:TYPE=VALUE` entry of a CMake cache.
-fn cmake_cache(build: &Path, key: &str) -> Option<String> {
-    let text = std::fs::read_to_string(build.join("CMakeCache.txt")).ok()?;
-    text.lines().find_map(|l| {
-        let (k, v) = l.split_once('=')?;
-        (k.split(':').next() == Some(key)).then(|| v.trim().to_string())
-    })
-}
-
-fn executable(path: &Path) -> bool {
-    use std::os::unix::fs::PermissionsExt;
-    path.metadata()
-        .map(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
-        .unwrap_or(false)
-}
-
-/// The Goby3 build of `GOBY3_BUILD`; panics saying what is missing.
-fn goby3() -> Goby3 {
-    let build = std::env::var_os("GOBY3_BUILD")
-        .filter(|v| !v.is_empty())
-        .map(PathBuf::from)
-        .expect("GOBY3_BUILD is not set: give the Goby3 build directory (with bin/pAcommsHandler)");
-    let pacommshandler = build.join("bin/pAcommsHandler");
-    assert!(
-        executable(&pacommshandler),
-        "GOBY3_BUILD={}: no executable bin/pAcommsHandler in it",
-        build.display()
-    );
-    let moosdb = std::env::var_os("MOOSDB")
-        .map(PathBuf::from)
-        .or_else(|| cmake_cache(&build, "MOOS_DIR").map(|d| Path::new(&d).join("bin/MOOSDB")))
-        .filter(|p| executable(p))
-        .or_else(|| {
-            let path = std::env::var_os("PATH")?;
-            std::env::split_paths(&path)
-                .map(|d| d.join("MOOSDB"))
-                .find(|p| executable(p))
-        })
-        .expect("no MOOSDB: set MOOSDB, or build Goby3 with MOOS_DIR, or put MOOSDB on PATH");
-    let mut dirs = vec![build.join("lib").display().to_string()];
-    if let Some(dccl) = cmake_cache(&build, "DCCL_DIR") {
-        // <prefix>/lib/cmake/dccl
-        if let Some(lib) = Path::new(&dccl).ancestors().nth(2) {
-            dirs.push(lib.display().to_string());
-        }
-    }
-    if let Some(old) = std::env::var_os("LD_LIBRARY_PATH") {
-        dirs.push(old.to_string_lossy().into_owned());
-    }
-    Goby3 {
-        pacommshandler,
-        moosdb,
-        library_path: dirs.join(":"),
-    }
-}
-
-/// The `goby` tool.
-fn goby_bin() -> PathBuf {
-    if let Some(p) = std::env::var_os("GOBY_BIN") {
-        return PathBuf::from(p);
-    }
-    let sibling = Path::new(env!("CARGO_BIN_EXE_gobyd")).with_file_name("goby");
-    if !executable(&sibling) {
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let status = Command::new(cargo)
-            .args(["build", "-p", "goby-cli", "--bin", "goby"])
-            .status()
-            .expect("run cargo to build the goby tool");
-        assert!(
-            status.success(),
-            "cargo build -p goby-cli --bin goby failed"
-        );
-    }
-    assert!(
-        executable(&sibling),
-        "no goby tool at {}",
-        sibling.display()
-    );
-    sibling
-}
-
-/// A child process of the test, killed when dropped; its output in `log`.
-struct Proc {
-    child: Child,
-    name: String,
-    log: PathBuf,
-}
-
-impl Proc {
-    fn spawn(name: &str, mut command: Command, dir: &Path) -> Proc {
-        let log = dir.join(format!("{name}.log"));
-        let out = std::fs::File::create(&log).unwrap();
-        command
-            .current_dir(dir)
-            .stdin(Stdio::null())
-            .stdout(out.try_clone().unwrap())
-            .stderr(out);
-        let child = command
-            .spawn()
-            .unwrap_or_else(|e| panic!("cannot start {name}: {e}"));
-        Proc {
-            child,
-            name: name.to_string(),
-            log,
-        }
-    }
-
-    fn alive(&mut self) -> bool {
-        matches!(self.child.try_wait(), Ok(None))
-    }
-
-    /// The end of its output, for a failure report.
-    fn tail(&self) -> String {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        let lines: Vec<&str> = text.lines().collect();
-        let start = lines.len().saturating_sub(40);
-        format!(
-            "--- {} ({}), last lines:\n{}",
-            self.name,
-            self.log.display(),
-            lines[start..].join("\n")
-        )
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 /// The group of the multicast scenario.
 const MULTICAST_GROUP: &str = "239.255.44.1";
@@ -268,38 +115,6 @@ impl Link {
             Link::MicroModem { .. } => 12.0,
         }
     }
-}
-
-/// One direction's numbers.
-#[derive(Debug, Default, Clone)]
-struct Tally {
-    published: u32,
-    /// Receptions of each message number.
-    delivered: BTreeMap<u32, u32>,
-    /// Acks of each message number.
-    acked: BTreeMap<u32, u32>,
-    expired: u32,
-}
-
-impl Tally {
-    fn complete(&self) -> bool {
-        (0..self.published).all(|n| self.delivered.contains_key(&n) && self.acked.contains_key(&n))
-    }
-
-    fn duplicates(&self) -> u32 {
-        self.delivered.values().map(|c| c - 1).sum()
-    }
-}
-
-/// The number `n` of a `fleet.Tick` in protobuf text format.
-fn tick_number(text: &str) -> Option<u32> {
-    let rest = text.split("n:").nth(1)?;
-    let digits: String = rest
-        .trim_start()
-        .chars()
-        .take_while(char::is_ascii_digit)
-        .collect();
-    digits.parse().ok()
 }
 
 fn mission_file(dir: &Path, moos_port: u16, link: Link, driver_cfg: &str, proto: &Path) -> PathBuf {
@@ -384,80 +199,6 @@ fn emulator(
         std::thread::sleep(Duration::from_millis(50));
     }
     p
-}
-
-/// The JSON client of node 2: every line it reads, in a channel.
-struct Json {
-    client: TcpStream,
-    lines: mpsc::Receiver<Value>,
-}
-
-impl Json {
-    fn connect(port: u16) -> Json {
-        let deadline = Instant::now() + Duration::from_secs(20);
-        let client = loop {
-            match TcpStream::connect(("127.0.0.1", port)) {
-                Ok(c) => break c,
-                Err(e) => {
-                    assert!(Instant::now() < deadline, "gobyd's JSON interface: {e}");
-                    std::thread::sleep(Duration::from_millis(50));
-                }
-            }
-        };
-        let reader = BufReader::new(client.try_clone().unwrap());
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in reader.lines().map_while(Result::ok) {
-                if let Ok(v) = serde_json::from_str::<Value>(&line) {
-                    if tx.send(v).is_err() {
-                        break;
-                    }
-                }
-            }
-        });
-        Json { client, lines }
-    }
-
-    fn send(&mut self, line: &str) {
-        self.client
-            .write_all(format!("{line}\n").as_bytes())
-            .expect("write to gobyd");
-    }
-}
-
-/// Node 2's events counted: receptions from 1, acks and expiries of its own.
-fn count_gobyd(v: &Value, to_goby3: &mut Tally, from_goby3: &mut Tally) {
-    let n = || v["msg"]["n"].as_u64().map(|n| n as u32);
-    match v["event"].as_str() {
-        Some("received") if v["received"] == "fleet.Tick" => {
-            if let Some(n) = n() {
-                *from_goby3.delivered.entry(n).or_default() += 1;
-            }
-        }
-        Some("ack") if v["ack"] == "fleet.Tick" => {
-            if let Some(n) = n() {
-                *to_goby3.acked.entry(n).or_default() += 1;
-            }
-        }
-        Some("expire") => to_goby3.expired += 1,
-        _ => {}
-    }
-    if let Some(e) = v.get("error") {
-        panic!("gobyd refused a request: {e}");
-    }
-}
-
-/// Node 1's MOOS mail counted.
-fn count_goby3(key: &str, text: &str, to_goby3: &mut Tally, from_goby3: &mut Tally) {
-    let n = tick_number(text);
-    match (key, n) {
-        ("TICK_IN", Some(n)) => *to_goby3.delivered.entry(n).or_default() += 1,
-        ("ACOMMS_ACK_ORIGINAL", Some(n)) if text.contains("fleet.Tick") || !text.contains('[') => {
-            *from_goby3.acked.entry(n).or_default() += 1
-        }
-        ("ACOMMS_EXPIRE", _) => from_goby3.expired += 1,
-        _ => {}
-    }
 }
 
 /// One scenario: both nodes up, `N` messages each way; returns (Goby3 to

@@ -61,6 +61,8 @@ pub const BUILT_IN: &[DriverType] = &[
     DriverType::DriverUdp,
     DriverType::DriverUdpMulticast,
     DriverType::DriverWhoiMicromodem,
+    DriverType::DriverIridium,
+    DriverType::DriverIridiumShore,
 ];
 
 /// The names of the [`BUILT_IN`] drivers as a configuration writes them,
@@ -115,6 +117,14 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             }
             problems
         }
+        Some(DriverType::DriverIridium) => {
+            let mut problems = crate::iridium::driver::problems(config);
+            if !problems.iter().any(|p| p.field == "serial_port") {
+                problems.extend(serial_port_problem(config.serial_port()));
+            }
+            problems
+        }
+        Some(DriverType::DriverIridiumShore) => crate::iridium::shore::problems(config),
         _ => Vec::new(),
     }
 }
@@ -161,6 +171,75 @@ pub fn largest_frame(config: &DriverConfig) -> Option<usize> {
         return Some(im.max(burst));
     }
     None
+}
+
+/// The largest frames a driver carries each way, when it has a limit of
+/// its own that does not depend on a rate (Iridium SBD messages): what
+/// `gobyd --check` tells, and what every message type must fit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FrameLimits {
+    /// What carries them, for messages (e.g. "Iridium SBD (DEVICE_IRIDIUM_9602_9603)").
+    pub link: String,
+    /// Largest frame this node sends, in bytes.
+    pub outgoing: usize,
+    /// Largest frame this node receives, in bytes.
+    pub incoming: usize,
+    /// The limits in words, e.g. "frames up to 329 bytes sent (MO 340 less
+    /// 11 of header and CRC), 259 received (MT 270)".
+    pub text: String,
+}
+
+/// The frame limits of `config`'s driver (`None` for drivers whose frames
+/// are set by the rate, or not limited).
+pub fn frame_limits(config: &DriverConfig) -> Option<FrameLimits> {
+    use crate::iridium::frame::{sbd_message_limit, Direction, OVERHEAD_BYTES};
+    let (device, outgoing_dir, outgoing) = match driver_type(config)? {
+        DriverType::DriverIridium => {
+            let iridium = crate::iridium::driver::iridium_config(config);
+            (
+                iridium.device(),
+                Direction::MobileOriginated,
+                crate::iridium::driver::max_frame_bytes(&iridium) as usize,
+            )
+        }
+        DriverType::DriverIridiumShore => {
+            let shore = crate::iridium::shore::shore_config(config);
+            (
+                shore.device(),
+                Direction::MobileTerminated,
+                crate::iridium::shore::max_frame_bytes(config) as usize,
+            )
+        }
+        _ => return None,
+    };
+    let incoming_dir = match outgoing_dir {
+        Direction::MobileOriginated => Direction::MobileTerminated,
+        Direction::MobileTerminated => Direction::MobileOriginated,
+    };
+    let name = |d: Direction| match d {
+        Direction::MobileOriginated => "MO",
+        Direction::MobileTerminated => "MT",
+    };
+    let incoming = sbd_message_limit(device, incoming_dir) - OVERHEAD_BYTES;
+    let out_limit = sbd_message_limit(device, outgoing_dir);
+    let text = format!(
+        "frames up to {outgoing} bytes sent ({} {out_limit} less {OVERHEAD_BYTES} of header and CRC{}), \
+         {incoming} received ({} {})",
+        name(outgoing_dir),
+        if outgoing < out_limit - OVERHEAD_BYTES {
+            ", max_frame_size"
+        } else {
+            ""
+        },
+        name(incoming_dir),
+        sbd_message_limit(device, incoming_dir),
+    );
+    Some(FrameLimits {
+        link: format!("Iridium SBD ({})", device.as_str_name()),
+        outgoing,
+        incoming,
+        text,
+    })
 }
 
 /// Why the serial port at `path` cannot be opened, if that shows without

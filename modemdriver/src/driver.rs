@@ -285,6 +285,14 @@ pub enum DriverStatus {
         /// What is weaker, and why.
         reason: String,
     },
+    /// The link's signal changed (e.g. an Iridium transceiver's `+CIEV`
+    /// indicators): what is known of it now.
+    Signal {
+        /// Signal strength, 0–5 bars, when reported.
+        bars: Option<u8>,
+        /// Whether the network is available, when reported.
+        service: Option<bool>,
+    },
     /// The driver does not know a driver-specific request.
     Unsupported {
         /// The request's message type.
@@ -311,6 +319,7 @@ impl DriverStatus {
             DriverStatus::LinkError { .. } => "link_error",
             DriverStatus::Skipped { .. } => "skipped",
             DriverStatus::Degraded { .. } => "degraded",
+            DriverStatus::Signal { .. } => "signal",
             DriverStatus::Unsupported { .. } => "unsupported",
         }
     }
@@ -343,6 +352,18 @@ impl std::fmt::Display for DriverStatus {
             DriverStatus::LinkError { reason } => write!(f, "link error: {reason}"),
             DriverStatus::Skipped { reason } => write!(f, "transmission skipped: {reason}"),
             DriverStatus::Degraded { reason } => write!(f, "degraded: {reason}"),
+            DriverStatus::Signal { bars, service } => {
+                write!(f, "signal: ")?;
+                match bars {
+                    Some(b) => write!(f, "{b} bars")?,
+                    None => write!(f, "strength unknown")?,
+                }
+                match service {
+                    Some(true) => write!(f, ", network service available"),
+                    Some(false) => write!(f, ", no network service"),
+                    None => Ok(()),
+                }
+            }
             DriverStatus::Unsupported { message } => {
                 write!(f, "driver-specific request not supported: {message}")
             }

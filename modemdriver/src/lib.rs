@@ -22,6 +22,10 @@
 //! - [`evologics::EvologicsDriver`]: EvoLogics S2C modems, the AT command
 //!   set over TCP or serial (`driver_name: "EVOLOGICS_S2C"`);
 //!   [`evologics::emulator`] speaks the modem's side.
+//! - [`iridium::IridiumDriver`]: an Iridium 9602/9603 (SBD AT commands) on a
+//!   serial port, and [`iridium::IridiumShoreDriver`]: Iridium's DirectIP on
+//!   shore, both in Goby3's framing; [`iridium::emulator`] emulates a 9603
+//!   and the gateway.
 //!
 //! [`check`] finds, without starting a driver, the settings it would
 //! refuse and how long its packets take at each rate (what a TDMA slot
@@ -39,6 +43,7 @@ pub mod check;
 pub mod config;
 pub mod driver;
 pub mod evologics;
+pub mod iridium;
 pub mod link;
 pub mod micromodem;
 pub mod rate;

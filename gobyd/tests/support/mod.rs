@@ -4,6 +4,8 @@
 
 pub mod broker;
 pub mod daemon;
+pub mod goby3;
+pub mod iridium;
 pub mod micromodem;
 pub mod node;
 pub mod restart;

@@ -24,6 +24,7 @@ pub struct Node {
     driver: Option<Driver>,
     mac: Option<Mac>,
     entries: Vec<Entry>,
+    queue_settings: Vec<String>,
     json_tcp: Option<String>,
     json_udp: Option<String>,
     mqtt: Option<String>,
@@ -42,6 +43,7 @@ impl Node {
             driver: None,
             mac: None,
             entries: Vec::new(),
+            queue_settings: Vec::new(),
             json_tcp: None,
             json_udp: None,
             mqtt: None,
@@ -75,6 +77,13 @@ impl Node {
             rate,
             slot_seconds,
         });
+        self
+    }
+
+    /// A field of the `queue { … }` section itself (e.g.
+    /// `minimum_ack_wait_seconds: 30`), before its entries.
+    pub fn queue_setting(mut self, text: &str) -> Node {
+        self.queue_settings.push(text.to_string());
         self
     }
 
@@ -197,8 +206,11 @@ impl Node {
                 text += "}\n";
             }
         }
-        if !self.entries.is_empty() {
+        if !self.entries.is_empty() || !self.queue_settings.is_empty() {
             text += "queue {\n";
+            for setting in &self.queue_settings {
+                text += &format!("  {setting}\n");
+            }
             for entry in &self.entries {
                 text += &entry.render();
             }
@@ -336,6 +348,8 @@ pub enum Driver {
     Multicast(Multicast),
     /// `driver_name: "EVOLOGICS_S2C"`.
     Evologics(Evologics),
+    /// `DRIVER_IRIDIUM` or `DRIVER_IRIDIUM_SHORE`.
+    Iridium(Iridium),
 }
 
 impl Driver {
@@ -346,6 +360,7 @@ impl Driver {
             Driver::MicroModem(m) => m.render(),
             Driver::Multicast(m) => m.render(),
             Driver::Evologics(e) => e.render(),
+            Driver::Iridium(i) => i.render(),
         }
     }
 }
@@ -638,6 +653,12 @@ impl MicroModem {
     }
 }
 
+impl From<Iridium> for Driver {
+    fn from(i: Iridium) -> Driver {
+        Driver::Iridium(i)
+    }
+}
+
 impl From<Evologics> for Driver {
     fn from(e: Evologics) -> Driver {
         Driver::Evologics(e)
@@ -678,5 +699,87 @@ impl Evologics {
         }
         text += "}\n";
         text
+    }
+}
+
+/// An Iridium driver: the vehicle's (`driver { driver_type: DRIVER_IRIDIUM
+/// serial_port: "PORT" iridium { device: DEVICE_IRIDIUM_9602_9603 … } }`)
+/// or the shore's (`DRIVER_IRIDIUM_SHORE`, DirectIP on 127.0.0.1).
+#[derive(Debug, Clone)]
+pub struct Iridium {
+    kind: IridiumKind,
+    settings: Vec<String>,
+}
+
+#[derive(Debug, Clone)]
+enum IridiumKind {
+    Vehicle(PathBuf),
+    Shore {
+        mo_port: u16,
+        mt_port: u16,
+        vehicles: Vec<(i32, String)>,
+    },
+}
+
+impl Iridium {
+    /// The vehicle's driver on the transceiver at `path` (a 9603).
+    pub fn vehicle(path: &Path) -> Iridium {
+        Iridium {
+            kind: IridiumKind::Vehicle(path.to_path_buf()),
+            settings: Vec::new(),
+        }
+    }
+
+    /// The shore's driver: MO listener on `mo_port`, the gateway's MT
+    /// listener on `mt_port`, each vehicle's modem id and IMEI (9603s).
+    pub fn shore(mo_port: u16, mt_port: u16, vehicles: &[(i32, &str)]) -> Iridium {
+        Iridium {
+            kind: IridiumKind::Shore {
+                mo_port,
+                mt_port,
+                vehicles: vehicles
+                    .iter()
+                    .map(|(id, imei)| (*id, imei.to_string()))
+                    .collect(),
+            },
+            settings: Vec::new(),
+        }
+    }
+
+    /// A field of the `iridium { … }` (or `iridium_shore { … }`) block, in
+    /// text format (e.g. `retry_backoff_ms: 200`).
+    pub fn setting(mut self, field: &str) -> Iridium {
+        self.settings.push(field.to_string());
+        self
+    }
+
+    fn render(&self) -> String {
+        let extra = self.settings.join(" ");
+        match &self.kind {
+            IridiumKind::Vehicle(path) => format!(
+                "driver {{\n  driver_type: DRIVER_IRIDIUM\n  serial_port: \"{}\"\n  iridium {{ device: DEVICE_IRIDIUM_9602_9603 {extra} }}\n}}\n",
+                path.display()
+            ),
+            IridiumKind::Shore {
+                mo_port,
+                mt_port,
+                vehicles,
+            } => {
+                let mut text = format!(
+                    "driver {{\n  driver_type: DRIVER_IRIDIUM_SHORE\n  iridium_shore {{\n    \
+                     mo_sbd_server_address: \"127.0.0.1\" mo_sbd_server_port: {mo_port}\n    \
+                     mt_sbd_server_address: \"127.0.0.1\" mt_sbd_server_port: {mt_port}\n    \
+                     device: DEVICE_IRIDIUM_9602_9603\n"
+                );
+                for (id, imei) in vehicles {
+                    text += &format!("    modem_id_to_imei {{ modem_id: {id} imei: \"{imei}\" }}\n");
+                }
+                if !extra.is_empty() {
+                    text += &format!("    {extra}\n");
+                }
+                text += "  }\n}\n";
+                text
+            }
+        }
     }
 }

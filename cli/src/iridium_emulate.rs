@@ -1,0 +1,329 @@
+//! `goby modem emulate-iridium`: emulated Iridium 9603 transceivers on
+//! pseudo-terminals and the emulated gateway they reach, with DirectIP
+//! towards a shore station.
+//!
+//! Prints one line per transceiver, `transceiver IMEI: PATH` (a vehicle's
+//! Iridium driver opens PATH as its serial port), then
+//! `gateway: MO to HOST:PORT, MT on ADDR` (the shore's DirectIP MO
+//! listener it delivers to, and its own DirectIP MT listener). What the
+//! transceivers and the gateway do (sessions and their status, ring
+//! alerts, MO messages waiting for a shore that is down, MT refusals) is
+//! told on standard error as it happens.
+
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use clap::Args;
+use modemdriver::iridium::directip::{self, mt_status};
+use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayLog};
+use modemdriver::iridium::emulator::radio::RadioConfig;
+use modemdriver::iridium::emulator::transceiver::{TransceiverConfig, TransceiverLog};
+use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
+use modemdriver::iridium::status::MoStatus;
+
+use crate::{CliError, Status};
+
+/// Options of `goby modem emulate-iridium`.
+#[derive(Debug, Args)]
+pub struct EmulateIridiumArgs {
+    /// IMEI of an emulated transceiver (15 digits); repeat for several.
+    #[arg(long = "imei", default_value = "300234010753370", value_name = "IMEI")]
+    pub imeis: Vec<String>,
+    /// Keep a symbolic link at PATH to each transceiver's pseudo-terminal
+    /// (in the order of --imei).
+    #[arg(long = "link", value_name = "PATH")]
+    pub links: Vec<PathBuf>,
+    /// The shore's DirectIP MO listener, where the gateway delivers MO
+    /// messages (Goby3's default port is 40001).
+    #[arg(long, default_value = "127.0.0.1:40001", value_name = "HOST:PORT")]
+    pub mo_directip: SocketAddr,
+    /// Where the gateway's DirectIP MT listener binds (port 0: any free).
+    #[arg(long, default_value = "127.0.0.1:40002", value_name = "ADDR:PORT")]
+    pub mt_directip: SocketAddr,
+    /// Seconds a session takes (a real one takes 10 to 30).
+    #[arg(long, default_value_t = 2.0)]
+    pub session_seconds: f64,
+    /// Probability that a session with service fails (MO status 10, 13,
+    /// 17, 18 or 19).
+    #[arg(long, default_value_t = 0.0)]
+    pub session_failure: f64,
+    /// Seconds between changes of the signal strength (0: a steady 5 bars).
+    #[arg(long, default_value_t = 0.0)]
+    pub signal_change_seconds: f64,
+    /// Probability, at each change of the signal, that an outage (no
+    /// signal, no service) begins.
+    #[arg(long, default_value_t = 0.0)]
+    pub outage_probability: f64,
+    /// Shortest and longest outage, in seconds.
+    #[arg(long, default_value = "60,300", value_name = "MIN,MAX")]
+    pub outage_seconds: String,
+    /// Largest MT payload the gateway takes (270 bytes for a 9602/9603).
+    #[arg(long, default_value_t = 270)]
+    pub mt_limit: usize,
+    /// Seconds between ring alerts while MT messages wait.
+    #[arg(long, default_value_t = 20.0)]
+    pub ring_repeat_seconds: f64,
+    /// Seed of the failures and of the sky.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Stop after this many seconds (default: run until interrupted).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+}
+
+fn seconds(value: f64, option: &str, zero_ok: bool) -> Result<Duration, CliError> {
+    Duration::try_from_secs_f64(value)
+        .ok()
+        .filter(|d| zero_ok || !d.is_zero())
+        .ok_or_else(|| {
+            CliError::setup(format!(
+                "{option} must be a {}number of seconds, not {value}",
+                if zero_ok { "" } else { "positive " }
+            ))
+        })
+}
+
+fn probability(value: f64, option: &str) -> Result<f64, CliError> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(value)
+    } else {
+        Err(CliError::setup(format!(
+            "{option} must be a probability from 0 to 1, not {value}"
+        )))
+    }
+}
+
+/// The settings of the transceivers and the gateway, checked.
+fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, GatewayConfig), CliError> {
+    for imei in &args.imeis {
+        if !directip::valid_imei(imei) {
+            return Err(CliError::setup(format!(
+                "--imei {imei:?} is not an IMEI (15 digits)"
+            )));
+        }
+    }
+    if args.links.len() > args.imeis.len() {
+        return Err(CliError::setup(format!(
+            "{} --link for {} --imei: one link per transceiver at most",
+            args.links.len(),
+            args.imeis.len()
+        )));
+    }
+    let (lo, hi) = args
+        .outage_seconds
+        .split_once(',')
+        .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)))
+        .filter(|(a, b)| a <= b)
+        .ok_or_else(|| {
+            CliError::setup(format!(
+                "--outage-seconds {:?} is not MIN,MAX (seconds, MIN at most MAX)",
+                args.outage_seconds
+            ))
+        })?;
+    let radio = RadioConfig {
+        seed: args.seed,
+        change_every: seconds(args.signal_change_seconds, "--signal-change-seconds", true)?,
+        outage_probability: probability(args.outage_probability, "--outage-probability")?,
+        outage: (
+            seconds(lo, "--outage-seconds", true)?,
+            seconds(hi, "--outage-seconds", true)?,
+        ),
+        min_bars: 1,
+    };
+    let session_time = seconds(args.session_seconds, "--session-seconds", false)?;
+    let session_failure = probability(args.session_failure, "--session-failure")?;
+    let transceivers = args
+        .imeis
+        .iter()
+        .enumerate()
+        .map(|(i, imei)| TransceiverConfig {
+            session_time,
+            no_service_time: session_time.min(Duration::from_secs(2)) / 4,
+            radio: RadioConfig {
+                seed: args.seed.wrapping_add(i as u64),
+                ..radio.clone()
+            },
+            session_failure,
+            seed: args.seed.wrapping_add(1000 + i as u64),
+            ..TransceiverConfig::new(imei)
+        })
+        .collect();
+    if args.mt_limit == 0 {
+        return Err(CliError::setup("--mt-limit must be above 0"));
+    }
+    let gateway = GatewayConfig {
+        mo_destination: Some(args.mo_directip),
+        mt_bind: args.mt_directip,
+        mt_limit: args.mt_limit,
+        ring_repeat: seconds(args.ring_repeat_seconds, "--ring-repeat-seconds", false)?,
+        ..GatewayConfig::default()
+    };
+    Ok((transceivers, gateway))
+}
+
+/// Tells on stderr what the transceivers and the gateway did since the
+/// last look. Never completes.
+async fn report(imeis: &[String], transceivers: &[TransceiverHandle], gateway: &Gateway) {
+    let mut seen: Vec<TransceiverLog> = vec![TransceiverLog::default(); transceivers.len()];
+    let mut seen_gateway = GatewayLog::default();
+    let mut shore_down = false;
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    loop {
+        tick.tick().await;
+        for ((t, seen), imei) in transceivers.iter().zip(&mut seen).zip(imeis) {
+            let now = t.log();
+            for code in now.sessions_failed.iter().skip(seen.sessions_failed.len()) {
+                eprintln!("transceiver {imei}: session failed, {}", MoStatus(*code));
+            }
+            if now.sessions_ok > seen.sessions_ok {
+                eprintln!(
+                    "transceiver {imei}: {} session(s) succeeded ({} MO sent, {} MT received in all)",
+                    now.sessions_ok - seen.sessions_ok,
+                    now.mo_sent,
+                    now.mt_received
+                );
+            }
+            if now.rings > seen.rings {
+                eprintln!("transceiver {imei}: ring alert (SBDRING)");
+            }
+            *seen = now;
+        }
+        let now = gateway.log();
+        if now.mo_delivered > seen_gateway.mo_delivered {
+            eprintln!(
+                "gateway: {} MO message(s) delivered over DirectIP",
+                now.mo_delivered - seen_gateway.mo_delivered
+            );
+        }
+        if now.mo_delivered > seen_gateway.mo_delivered {
+            shore_down = false;
+        }
+        if now.mo_delivery_failures > seen_gateway.mo_delivery_failures && !shore_down {
+            shore_down = true;
+            eprintln!(
+                "gateway: the shore's DirectIP MO listener does not answer; {} MO message(s) wait (tried again every second)",
+                gateway.mo_waiting()
+            );
+        }
+        if now.mt_accepted > seen_gateway.mt_accepted {
+            eprintln!(
+                "gateway: {} MT message(s) queued",
+                now.mt_accepted - seen_gateway.mt_accepted
+            );
+        }
+        for status in now.mt_refused.iter().skip(seen_gateway.mt_refused.len()) {
+            eprintln!(
+                "gateway: MT message refused, status {status} ({})",
+                mt_status::meaning(*status)
+            );
+        }
+        seen_gateway = now;
+    }
+}
+
+/// Runs `goby modem emulate-iridium`.
+pub fn emulate_iridium(
+    args: &EmulateIridiumArgs,
+    stdout: &mut dyn Write,
+) -> Result<Status, CliError> {
+    let (transceivers, gateway_config) = configs(args)?;
+    let duration = args
+        .duration
+        .map(|d| seconds(d, "--duration", false))
+        .transpose()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(async {
+        let stop = super::modem_cmd::interrupted();
+        let mo = gateway_config.mo_destination;
+        let gateway = Gateway::start(gateway_config).await.map_err(|e| {
+            CliError::setup(format!(
+                "gateway: cannot bind the DirectIP MT listener {}: {e}",
+                args.mt_directip
+            ))
+        })?;
+        let mut handles = Vec::new();
+        for (i, config) in transceivers.into_iter().enumerate() {
+            let imei = config.imei.clone();
+            let port = TransceiverPort::Pty {
+                link: args.links.get(i).cloned(),
+            };
+            let handle = emulator::start(config, port, gateway.gateway.clone())
+                .map_err(|e| CliError::setup(format!("transceiver {imei}: {e}")))?;
+            writeln!(stdout, "transceiver {imei}: {}", handle.path())?;
+            handles.push(handle);
+        }
+        writeln!(
+            stdout,
+            "gateway: MO to {}, MT on {}",
+            mo.map_or("nowhere".to_string(), |a| a.to_string()),
+            gateway.mt_addr
+        )?;
+        stdout.flush()?;
+        let end = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => stop.await,
+            }
+        };
+        tokio::select! {
+            () = end => {}
+            () = report(&args.imeis, &handles, &gateway.gateway) => {}
+        }
+        for h in handles {
+            h.stop().await;
+        }
+        gateway.stop().await;
+        Ok(Status::Ok)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: EmulateIridiumArgs,
+    }
+
+    fn args_of(args: &[&str]) -> EmulateIridiumArgs {
+        Cli::try_parse_from(["x"].iter().chain(args)).unwrap().args
+    }
+
+    #[test]
+    fn settings_from_the_options_and_their_refusals() {
+        let (t, g) = configs(&args_of(&[
+            "--session-seconds",
+            "0.5",
+            "--imei",
+            "300234010753371",
+        ]))
+        .unwrap();
+        assert_eq!(t.len(), 1);
+        assert_eq!(t[0].imei, "300234010753371");
+        assert_eq!(t[0].session_time, Duration::from_millis(500));
+        assert_eq!(g.mt_limit, 270);
+        assert_eq!(g.mo_destination, Some("127.0.0.1:40001".parse().unwrap()));
+        for (bad, says) in [
+            (&["--imei", "123"][..], "not an IMEI"),
+            (&["--session-failure", "1.5"], "probability"),
+            (&["--outage-seconds", "9,1"], "MIN,MAX"),
+            (&["--session-seconds", "0"], "positive"),
+            (
+                &["--link", "/tmp/a", "--link", "/tmp/b"],
+                "one link per transceiver",
+            ),
+        ] {
+            let e = configs(&args_of(bad)).unwrap_err().to_string();
+            assert!(e.contains(says), "{bad:?}: {e}");
+        }
+    }
+}

@@ -1,0 +1,420 @@
+//! Iridium between Goby3 (its own `pAcommsHandler`, built from source, with
+//! a real MOOSDB) and `gobyd`, each pairing with [`N`] `fleet.Tick`
+//! messages each way, acks asked for; every message must be delivered
+//! once and acknowledged:
+//!
+//! - `goby3-vehicle`: Goby3's DRIVER_IRIDIUM (node 1) on an emulated 9603
+//!   (`goby modem emulate-iridium`, a pseudo-terminal), the emulated
+//!   gateway, DirectIP, gobyd's DRIVER_IRIDIUM_SHORE (node 2);
+//! - `goby3-shore`: gobyd's DRIVER_IRIDIUM (node 1) on the emulated 9603,
+//!   the emulated gateway, DirectIP, Goby3's DRIVER_IRIDIUM_SHORE
+//!   (`SBD_DIRECTIP`, node 2);
+//! - `rockblock`: gobyd's DRIVER_IRIDIUM (node 1) on the pseudo-terminal of
+//!   Goby3's `goby_rockblock_simulator`, which posts MO messages to Goby3's
+//!   DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2, JWT check off) and takes
+//!   its MT messages on its HTTP endpoint.
+//!
+//! Both sides frame with Goby3's Iridium header and CRC-32, so each decodes
+//! the other's frames. Runs when `GOBY3_BUILD` names a Goby3 build
+//! directory (`bin/pAcommsHandler` and `bin/goby_rockblock_simulator` in
+//! it), as `goby3_fleet.rs`; ignored otherwise.
+//! `GOBY3_IRIDIUM_ONLY=goby3-vehicle,...` runs only the pairings named.
+
+#![cfg(unix)]
+
+mod support;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use moos::{ClientConfig, MoosClient, Value as MoosValue};
+use support::daemon::{free_tcp_port, free_udp_port, scratch, Gobyd};
+use support::goby3::{
+    count_goby3, count_gobyd, goby3, goby_bin, Goby3, Json, Proc, Tally, TICK_PROTO,
+};
+use support::iridium::IMEI;
+use support::node::{Entry, Iridium, Node};
+
+/// Messages each way.
+const N: u32 = 3;
+/// Longest a pairing may take to deliver and acknowledge everything.
+const LIMIT: Duration = Duration::from_secs(120);
+/// Each node's TDMA slot: its session (vehicle) or MT message (shore).
+const SLOT_SECONDS: f64 = 2.0;
+/// Seconds a message waits for its ack before it is sent again (both
+/// sides): longer than an ack takes here, so that no copy goes.
+const ACK_WAIT: u32 = 30;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pairing {
+    Goby3Vehicle,
+    Goby3Shore,
+    Rockblock,
+}
+
+impl Pairing {
+    fn tag(self) -> &'static str {
+        match self {
+            Pairing::Goby3Vehicle => "goby3-vehicle",
+            Pairing::Goby3Shore => "goby3-shore",
+            Pairing::Rockblock => "rockblock",
+        }
+    }
+
+    /// Goby3's node id.
+    fn goby3_id(self) -> i32 {
+        match self {
+            Pairing::Goby3Vehicle => 1,
+            _ => 2,
+        }
+    }
+}
+
+/// A pAcommsHandler mission for node `id` with `driver_cfg`.
+fn mission(dir: &Path, moos_port: u16, id: i32, driver_cfg: &str, proto: &Path) -> PathBuf {
+    let text = format!(
+        r#"ServerHost = localhost
+ServerPort = {moos_port}
+Community = goby3node
+
+ProcessConfig = pAcommsHandler
+{{
+  common {{ log: true log_path: "{dir}/" log_verbosity: DEBUG2 }}
+  modem_id: {id}
+  driver_cfg {{
+{driver_cfg}
+  }}
+  mac_cfg {{
+    type: MAC_FIXED_DECENTRALIZED
+    slot {{ src: 1 dest: -1 rate: 0 type: DATA slot_seconds: {SLOT_SECONDS} }}
+    slot {{ src: 2 dest: -1 rate: 0 type: DATA slot_seconds: {SLOT_SECONDS} }}
+  }}
+  queue_cfg {{
+    minimum_ack_wait_seconds: {ACK_WAIT}
+    message_entry {{
+      protobuf_name: "fleet.Tick"
+      ack: true
+      role {{ type: SOURCE_ID field: "src" }}
+      role {{ type: DESTINATION_ID field: "dest" }}
+    }}
+  }}
+  load_proto_file: "{proto}"
+  translator_entry {{
+    protobuf_name: "fleet.Tick"
+    trigger {{ type: TRIGGER_PUBLISH moos_var: "TICK_OUT" }}
+    create {{ technique: TECHNIQUE_PROTOBUF_TEXT_FORMAT moos_var: "TICK_OUT" }}
+    publish {{ technique: TECHNIQUE_PROTOBUF_TEXT_FORMAT moos_var: "TICK_IN" }}
+  }}
+}}
+"#,
+        dir = dir.display(),
+        proto = proto.display(),
+    );
+    let path = dir.join("goby3.moos");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Waits for `path` to appear (a pseudo-terminal's link) while `p` lives.
+fn await_path(path: &Path, p: &mut Proc) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !path.exists() {
+        assert!(p.alive(), "{} exited\n{}", p.name, p.tail());
+        assert!(
+            Instant::now() < deadline,
+            "no {} from {}\n{}",
+            path.display(),
+            p.name,
+            p.tail()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// `goby modem emulate-iridium`: one 9603 at `link`, its gateway
+/// delivering MO to `mo_port` and taking MT on `mt_port`.
+fn emulator(goby: &Path, dir: &Path, link: &Path, mo_port: u16, mt_port: u16) -> Proc {
+    let mut command = Command::new(goby);
+    command
+        .args(["modem", "emulate-iridium", "--imei", IMEI])
+        .arg("--link")
+        .arg(link)
+        .args(["--mo-directip", &format!("127.0.0.1:{mo_port}")])
+        .args(["--mt-directip", &format!("127.0.0.1:{mt_port}")])
+        .args(["--session-seconds", "0.3", "--ring-repeat-seconds", "3"])
+        .env_remove("RUST_BACKTRACE");
+    let mut p = Proc::spawn("emulate-iridium", command, dir);
+    await_path(link, &mut p);
+    p
+}
+
+/// gobyd's vehicle driver settings for these runs.
+fn gobyd_vehicle(link: &Path) -> Iridium {
+    Iridium::vehicle(link)
+        .setting("command_timeout_ms: 2000")
+        .setting("retry_backoff_ms: 500")
+        .setting("reconnect_interval_ms: 300")
+}
+
+fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
+    let dir = scratch("goby3_iridium", which.tag());
+    let proto = dir.join("tick.proto");
+    std::fs::write(&proto, TICK_PROTO).unwrap();
+    let moos_port = free_tcp_port();
+    let mut db = Command::new(&goby3.moosdb);
+    db.arg(format!("--moos_port={moos_port}"))
+        .arg("--moos_community=goby3node")
+        .arg("--moos_suicide_disable")
+        .arg(format!("--audit_port={}", free_udp_port()))
+        .arg("--moos_no_colour");
+    let mut moosdb = Proc::spawn("moosdb", db, &dir);
+
+    let (mo_port, mt_port) = (free_tcp_port(), free_tcp_port());
+    let mut helpers = Vec::new();
+    let (goby3_driver, gobyd_driver) = match which {
+        Pairing::Goby3Vehicle => {
+            let link = dir.join("sbd");
+            helpers.push(emulator(goby, &dir, &link, mo_port, mt_port));
+            (
+                format!(
+                    "    driver_type: DRIVER_IRIDIUM\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"\n    serial_baud: 19200\n    [goby.acomms.iridium.protobuf.config] {{ device: DEVICE_IRIDIUM_9602_9603 use_dtr: false }}",
+                    link.display()
+                ),
+                Iridium::shore(mo_port, mt_port, &[(1, IMEI)]),
+            )
+        }
+        Pairing::Goby3Shore => {
+            let link = dir.join("sbd");
+            helpers.push(emulator(goby, &dir, &link, mo_port, mt_port));
+            (
+                format!(
+                    "    driver_type: DRIVER_IRIDIUM_SHORE\n    [goby.acomms.iridium.protobuf.shore_config] {{\n      sbd_type: SBD_DIRECTIP\n      mo_sbd_server_port: {mo_port}\n      mt_sbd_server_address: \"127.0.0.1\"\n      mt_sbd_server_port: {mt_port}\n      modem_id_to_imei {{ modem_id: 1 imei: \"{IMEI}\" }}\n      device: DEVICE_IRIDIUM_9602_9603\n    }}"
+                ),
+                gobyd_vehicle(&link),
+            )
+        }
+        Pairing::Rockblock => {
+            let link = dir.join("rockblock");
+            let config = dir.join("rockblock_simulator.pb.cfg");
+            std::fs::write(
+                &config,
+                format!(
+                    "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{mo_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
+                    link.display()
+                ),
+            )
+            .unwrap();
+            let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
+            sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
+            let mut sim = Proc::spawn("goby_rockblock_simulator", sim, &dir);
+            await_path(&link, &mut sim);
+            helpers.push(sim);
+            (
+                // No "http://" in a MOOS mission file: MOOS takes "//" for
+                // a comment; cpp-httplib takes a bare HOST:PORT as HTTP.
+                format!(
+                    "    driver_type: DRIVER_IRIDIUM_SHORE\n    [goby.acomms.iridium.protobuf.shore_config] {{\n      sbd_type: SBD_ROCKBLOCK\n      mo_sbd_server_port: {mo_port}\n      modem_id_to_imei {{ modem_id: 1 imei: \"{IMEI}\" }}\n      rockblock {{ username: \"test\" password: \"test\" server: \"127.0.0.1:{mt_port}\" skip_jwt_verification: true }}\n      device: DEVICE_IRIDIUM_9602_9603\n    }}"
+                ),
+                gobyd_vehicle(&link),
+            )
+        }
+    };
+    let goby3_id = which.goby3_id();
+    let gobyd_id = 3 - goby3_id;
+    let mission = mission(&dir, moos_port, goby3_id, &goby3_driver, &proto);
+    let mut pah = Command::new(&goby3.pacommshandler);
+    pah.arg(&mission)
+        .env("LD_LIBRARY_PATH", &goby3.library_path);
+    let mut pacommshandler = Proc::spawn("pAcommsHandler", pah, &dir);
+
+    let json_port = free_tcp_port();
+    let config = Node::new(gobyd_id)
+        .driver(gobyd_driver)
+        .tdma(&[1, 2], 0, SLOT_SECONDS)
+        .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"))
+        .queue(
+            Entry::new("fleet.Tick")
+                .ack(true)
+                .role("SOURCE_ID", "src")
+                .role("DESTINATION_ID", "dest"),
+        )
+        .extra(&format!(
+            "dccl {{ proto_file: \"{}\" load_examples: false }}",
+            proto.display()
+        ))
+        .json_tcp(&format!("127.0.0.1:{json_port}"))
+        .data_dir(&dir.join("gobyd-data"))
+        .raw_log(true)
+        .write(dir.join("gobyd.cfg"));
+    let gobyd = Gobyd::start_unconnected(&config, &[]);
+    let mut json = Json::connect(json_port);
+    json.send(r#"{"subscribe": ["ack", "expire"]}"#);
+
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let (mut to_goby3, mut from_goby3) = (Tally::default(), Tally::default());
+    let started = Instant::now();
+    runtime.block_on(async {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let (client, mut mail) = loop {
+            let cfg = ClientConfig::new("iridium_test").with_address("127.0.0.1", moos_port);
+            match MoosClient::connect(cfg).await {
+                Ok(c) => break c,
+                Err(e) => {
+                    assert!(
+                        Instant::now() < deadline && moosdb.alive(),
+                        "cannot reach MOOSDB: {e}\n{}",
+                        moosdb.tail()
+                    );
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+            }
+        };
+        for var in ["TICK_IN", "ACOMMS_ACK_ORIGINAL", "ACOMMS_EXPIRE"] {
+            client.register(var, Duration::ZERO).unwrap();
+        }
+        // Time for pAcommsHandler to subscribe and its driver to start.
+        let ready = Instant::now() + Duration::from_secs(4);
+        while Instant::now() < ready {
+            assert!(
+                pacommshandler.alive(),
+                "pAcommsHandler exited\n{}",
+                pacommshandler.tail()
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        for n in 0..N {
+            client
+                .notify_string(
+                    "TICK_OUT",
+                    &format!("src: {goby3_id} dest: {gobyd_id} n: {n}"),
+                )
+                .unwrap();
+            from_goby3.published += 1;
+            json.send(&format!(
+                r#"{{"publish": "fleet.Tick", "msg": {{"src": {gobyd_id}, "dest": {goby3_id}, "n": {n}}}}}"#
+            ));
+            to_goby3.published += 1;
+        }
+        let deadline = Instant::now() + LIMIT;
+        let mut done_at: Option<Instant> = None;
+        loop {
+            while let Ok(v) = json.lines.try_recv() {
+                count_gobyd(&v, &mut to_goby3, &mut from_goby3);
+            }
+            while let Ok(m) = mail.try_recv() {
+                if let MoosValue::String(text) = &m.value {
+                    count_goby3(&m.key, text, &mut to_goby3, &mut from_goby3);
+                }
+            }
+            let now = Instant::now();
+            if to_goby3.complete() && from_goby3.complete() {
+                // Two more cycles: a repeat would show by then.
+                match done_at {
+                    None => done_at = Some(now),
+                    Some(t) if now >= t + Duration::from_secs_f64(4.0 * SLOT_SECONDS) => break,
+                    _ => {}
+                }
+            }
+            if now >= deadline {
+                break;
+            }
+            assert!(
+                pacommshandler.alive(),
+                "pAcommsHandler exited\n{}",
+                pacommshandler.tail()
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        client.close().await;
+    });
+    let complete = to_goby3.complete() && from_goby3.complete();
+    println!(
+        "{}: {} in {:.1} s",
+        which.tag(),
+        if complete { "complete" } else { "INCOMPLETE" },
+        started.elapsed().as_secs_f64()
+    );
+    if !complete {
+        let mut report = String::new();
+        for p in helpers.iter().chain([&pacommshandler, &moosdb]) {
+            report += &p.tail();
+            report += "\n";
+        }
+        eprintln!(
+            "{} incomplete; logs in {}:\n{report}",
+            which.tag(),
+            dir.display()
+        );
+    }
+    drop(gobyd);
+    drop(pacommshandler);
+    drop(helpers);
+    drop(moosdb);
+    if complete {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    (from_goby3, to_goby3)
+}
+
+#[test]
+#[cfg_attr(
+    not(goby3_build),
+    ignore = "needs a Goby3 build: GOBY3_BUILD=<goby3 build dir> cargo nextest run -p gobyd --test goby3_iridium --no-capture"
+)]
+fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
+    let goby3 = goby3();
+    let goby = goby_bin();
+    let only = std::env::var("GOBY3_IRIDIUM_ONLY").ok();
+    let chosen: Vec<Pairing> = [
+        Pairing::Goby3Vehicle,
+        Pairing::Goby3Shore,
+        Pairing::Rockblock,
+    ]
+    .into_iter()
+    .filter(|p| {
+        only.as_deref()
+            .is_none_or(|o| o.split(',').any(|t| t.trim() == p.tag()))
+    })
+    .collect();
+    assert!(
+        !chosen.is_empty(),
+        "GOBY3_IRIDIUM_ONLY={only:?} names no pairing"
+    );
+    let mut rows = Vec::new();
+    for which in chosen {
+        let (from_goby3, to_goby3) = pairing(&goby3, &goby, which);
+        rows.push((which, "Goby3 -> gobyd", from_goby3));
+        rows.push((which, "gobyd -> Goby3", to_goby3));
+    }
+    println!();
+    println!("| pairing | direction | published | delivered | acked | duplicates | expired |");
+    println!("|---|---|---|---|---|---|---|");
+    for (which, direction, t) in &rows {
+        println!(
+            "| {} | {direction} | {} | {} | {} | {} | {} |",
+            which.tag(),
+            t.published,
+            t.delivered.len(),
+            t.acked.len(),
+            t.duplicates(),
+            t.expired
+        );
+    }
+    for (which, direction, t) in &rows {
+        let what = format!("{} {direction}", which.tag());
+        assert_eq!(t.published, N, "{what}");
+        assert_eq!(
+            t.delivered.len() as u32,
+            N,
+            "{what}: delivered {:?}",
+            t.delivered
+        );
+        assert_eq!(t.acked.len() as u32, N, "{what}: acked {:?}", t.acked);
+        assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
+        assert_eq!(t.expired, 0, "{what}");
+    }
+}

@@ -1,0 +1,213 @@
+//! A vehicle `gobyd` (DRIVER_IRIDIUM) and a shore `gobyd`
+//! (DRIVER_IRIDIUM_SHORE) as programs, over an emulated 9603 on a real
+//! pseudo-terminal and an emulated gateway (in this test's process) with
+//! real DirectIP TCP connections on 127.0.0.1: Commands both ways, each
+//! acknowledged; sessions failing (25 % of them, the real MO codes) and
+//! retried; no signal for a while; MT messages (data and acks) fetched
+//! after ring alerts. Every message is delivered once and acknowledged.
+
+mod support;
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use modemdriver::iridium::emulator::TransceiverControl;
+use support::daemon::{scratch, Gobyd};
+use support::iridium::{self, SHORE, VEHICLE};
+use support::restart::{delivered, logged};
+
+/// Longest the exchange may take.
+const LIMIT: Duration = Duration::from_secs(90);
+
+fn publish(node: &mut Gobyd, to: i32, note: &str) {
+    let line = format!(
+        r#"{{"publish": "goby.example.Command", "msg": {{"destination": {to}, "action": "GOTO", "note": "{note}"}}}}"#
+    );
+    let reply = node.request(&line).expect("a reply");
+    assert!(reply.get("accepted").is_some(), "{reply}");
+}
+
+/// Waits until every note of `sent` (by sender index) is delivered at
+/// the other node and acknowledged at its sender.
+fn settle(sent: &[(usize, String)], data: &[PathBuf; 2], limit: Duration) -> bool {
+    let deadline = Instant::now() + limit;
+    loop {
+        let got: [HashMap<String, usize>; 2] = [delivered(&data[0]), delivered(&data[1])];
+        let acked = [logged(&data[0], "ack"), logged(&data[1], "ack")];
+        let done = sent.iter().all(|(from, note)| {
+            got[1 - from].contains_key(note) && acked[*from].contains_key(note)
+        });
+        if done {
+            return true;
+        }
+        if Instant::now() > deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Times of the mission log lines `"msg": kind` of `data_dir`, by note
+/// (the first of each).
+fn times(data_dir: &std::path::Path, kind: &str) -> HashMap<String, i64> {
+    let text = std::fs::read_to_string(data_dir.join("raw.log")).unwrap_or_default();
+    let mut out = HashMap::new();
+    for line in text.lines() {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+            continue;
+        };
+        if v["msg"] != kind {
+            continue;
+        }
+        if let (Some(note), Some(t)) = (v["value"]["note"].as_str(), v["t"].as_i64()) {
+            out.entry(note.to_string()).or_insert(t);
+        }
+    }
+    out
+}
+
+/// Each direction's latencies, from the first sending of a message to its
+/// delivery and to its ack at the sender (median and largest, seconds).
+fn latencies(sent: &[(usize, String)], data: &[PathBuf; 2]) -> String {
+    let mut parts = Vec::new();
+    for (from, name) in [
+        (0usize, "vehicle to shore (MO)"),
+        (1, "shore to vehicle (MT)"),
+    ] {
+        let out = times(&data[from], "out");
+        let acked = times(&data[from], "ack");
+        let got = times(&data[1 - from], "in");
+        let mut delivery = Vec::new();
+        let mut ack = Vec::new();
+        for (_, note) in sent.iter().filter(|(f, _)| *f == from) {
+            if let (Some(o), Some(i)) = (out.get(note), got.get(note)) {
+                delivery.push((i - o) as f64 / 1e6);
+            }
+            if let (Some(o), Some(a)) = (out.get(note), acked.get(note)) {
+                ack.push((a - o) as f64 / 1e6);
+            }
+        }
+        let stats = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            match (v.get(v.len() / 2), v.last()) {
+                (Some(m), Some(x)) => format!("median {m:.2} s, max {x:.2} s"),
+                _ => "none".into(),
+            }
+        };
+        parts.push(format!(
+            "{name}: delivered {}, acked {}",
+            stats(&mut delivery),
+            stats(&mut ack)
+        ));
+    }
+    parts.join("; ")
+}
+
+#[test]
+fn vehicle_and_shore_exchange_acked_commands_over_the_emulated_9603_and_gateway() {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let dir = scratch("iridium", "exchange");
+    let emulated = runtime.block_on(iridium::start(&dir, Duration::from_millis(150), 0.25, 7));
+    let data: [PathBuf; 2] = [dir.join("vehicle"), dir.join("shore")];
+    let configs: Vec<PathBuf> = [VEHICLE, SHORE]
+        .iter()
+        .map(|&id| {
+            iridium::node(id, &emulated, &data[(id - 1) as usize], 1.0, 600)
+                .write(dir.join(format!("node{id}.cfg")))
+        })
+        .collect();
+    let mut shore = Gobyd::start(&configs[1], &[]);
+    let mut vehicle = Gobyd::start(&configs[0], &[]);
+    let mut sent: Vec<(usize, String)> = Vec::new();
+    for i in 0..4 {
+        let note = format!("v{i}");
+        publish(&mut vehicle, SHORE, &note);
+        sent.push((0, note));
+        let note = format!("s{i}");
+        publish(&mut shore, VEHICLE, &note);
+        sent.push((1, note));
+    }
+    let started = Instant::now();
+    assert!(settle(&sent, &data, LIMIT), "first exchange incomplete");
+    let first = started.elapsed();
+    let latency = latencies(&sent, &data);
+
+    // No signal for a while: messages published meanwhile wait, and go
+    // once it is back.
+    emulated
+        .transceiver
+        .control(TransceiverControl::Signal(Some((0, false))));
+    let mo_before_outage = emulated.transceiver.log().mo_sent;
+    for i in 0..2 {
+        let note = format!("dark-v{i}");
+        publish(&mut vehicle, SHORE, &note);
+        sent.push((0, note));
+        let note = format!("dark-s{i}");
+        publish(&mut shore, VEHICLE, &note);
+        sent.push((1, note));
+    }
+    std::thread::sleep(Duration::from_secs(4));
+    let got = delivered(&data[1]);
+    assert!(
+        !got.contains_key("dark-v0"),
+        "delivered from the vehicle with no signal"
+    );
+    assert_eq!(
+        emulated.transceiver.log().mo_sent,
+        mo_before_outage,
+        "an MO message went with no signal"
+    );
+    emulated
+        .transceiver
+        .control(TransceiverControl::Signal(None));
+    assert!(
+        settle(&sent, &data, LIMIT),
+        "exchange after the outage incomplete"
+    );
+
+    let log = emulated.transceiver.log();
+    let gateway = emulated.gateway.gateway.log();
+    drop(vehicle);
+    drop(shore);
+    runtime.block_on(async {
+        emulated.transceiver.stop().await;
+        emulated.gateway.stop().await;
+    });
+    // Each message once, none twice.
+    let got = [delivered(&data[0]), delivered(&data[1])];
+    for (from, note) in &sent {
+        assert_eq!(
+            got[1 - from].get(note),
+            Some(&1),
+            "{note} delivered {:?}",
+            got[1 - from].get(note)
+        );
+    }
+    println!("iridium exchange, first 8 messages (session 150 ms, 1 s slots): {latency}");
+    println!(
+        "iridium exchange: first {} messages settled in {:.1} s; transceiver: {} sessions ok, {} failed ({:?}), {} MO, {} MT, {} ring alerts; gateway: {gateway:?}",
+        8,
+        first.as_secs_f64(),
+        log.sessions_ok,
+        log.sessions_failed.len(),
+        log.sessions_failed,
+        log.mo_sent,
+        log.mt_received,
+        log.rings
+    );
+    assert!(
+        !log.sessions_failed.is_empty(),
+        "no session failed: {log:?}"
+    );
+    assert!(log.rings > 0, "no ring alert: {log:?}");
+    assert!(
+        log.commands.iter().any(|c| c == "AT+SBDIXA"),
+        "no ring alert answered"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,712 @@
+//! The vehicle driver as a state machine: no input or output, no clock read.
+//!
+//! Each [`Input`] (bytes read from the transceiver, a tick, a command of
+//! the layer above, the answer to a data request, the serial port opened
+//! or lost) comes with the time it happened ([`Now`]); its handling returns
+//! what to do, in order ([`Output`]: bytes to write, events, data requests,
+//! the port to open). [`Machine::next_deadline`] tells when the next tick
+//! is due.
+//!
+//! One AT command is outstanding at a time (`Pending`); its answer is
+//! collected from the lines (and binary blocks) that follow until its
+//! final result code. Unsolicited lines (`SBDRING`, `+CIEV`) are taken
+//! whenever they come. Sessions (see [`super::session`]) are started only
+//! when no command is outstanding.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, IridiumDriverConfig, ModemTransmission,
+};
+use tokio::time::Instant;
+
+use super::super::at::{self, AtCommand, AtError, ModemLine, SessionReply};
+use super::super::reader::{Reader, Unit};
+use super::session::Sessions;
+use crate::driver::{
+    Acknowledgement, DriverCommand, DriverEvent, DriverStatus, RawDirection, RawMessage,
+};
+
+/// The time of an input, read once by the shell as it comes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Now {
+    /// Monotonic time: what deadlines are kept in.
+    pub at: Instant,
+    /// Wall clock, microseconds since the Unix epoch.
+    pub micros: u64,
+}
+
+/// Names a data request made by the machine; its answer comes back with it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct RequestId(pub u64);
+
+/// What happened.
+#[derive(Debug)]
+pub enum Input {
+    /// Bytes read from the transceiver.
+    Bytes(Vec<u8>),
+    /// Time passed: deadlines up to now fire.
+    Tick,
+    /// A command of the layer above (other than `Stop`).
+    Command(DriverCommand),
+    /// The layer above answered a data request (`None`: dropped unanswered).
+    Answer {
+        /// The request answered.
+        id: RequestId,
+        /// The transmission filled, or `None`.
+        filled: Option<ModemTransmission>,
+    },
+    /// The port asked for by [`Output::Open`] was opened (`true`) or not.
+    Opened(bool),
+    /// The serial link failed: why.
+    Disconnected(String),
+}
+
+/// What to do, in order.
+#[derive(Debug)]
+pub enum Output {
+    /// Write these bytes to the transceiver.
+    Write(Vec<u8>),
+    /// Give this event to the layer above.
+    Event(DriverEvent),
+    /// Ask the layer above to fill `template`; the answer comes back as
+    /// [`Input::Answer`] with `id`.
+    Request {
+        /// Names the request in its answer.
+        id: RequestId,
+        /// What to fill.
+        template: ModemTransmission,
+    },
+    /// Open the serial port again, then tell [`Input::Opened`].
+    Open,
+}
+
+/// What the machine starts from (checked by [`super::settings`]).
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// This vehicle's modem id (0–30).
+    pub modem_id: i32,
+    /// The Iridium part of the driver configuration.
+    pub iridium: IridiumDriverConfig,
+    /// Largest frame offered to the layer above (the device's MO limit less
+    /// the header and CRC, or `max_frame_size` when smaller).
+    pub max_frame_bytes: u32,
+    /// Between attempts to open the port again.
+    pub reconnect: Duration,
+    /// Acks wait for the layer above (`DriverConfig.deferred_ack`).
+    pub deferred_ack: bool,
+    /// Number of the first frame sent (then counting up, modulo 65535).
+    pub first_frame: u32,
+}
+
+/// Why a command is outstanding: what its answer is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Purpose {
+    /// Step of the start-up sequence.
+    Startup,
+    /// `AT+SBDD2` before a mailbox check (or after a message went).
+    ClearMo,
+    /// `AT+SBDWB=n`, waiting for `READY`.
+    WriteRequest,
+    /// The message written, waiting for the result digit.
+    WriteData,
+    /// `AT+SBDIX[A]`.
+    Session,
+    /// `AT+SBDRB`.
+    ReadMt,
+}
+
+/// An answer collected for the outstanding command.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) enum Answer {
+    /// A result digit (`AT+SBDWB`, `AT+SBDD`).
+    Digit(u8),
+    /// `+SBDIX`.
+    Session(SessionReply),
+    /// The MT buffer read, checksum good.
+    Mt(Vec<u8>),
+    /// The MT buffer read, checksum bad.
+    BadMt,
+    /// The IMEI.
+    Imei(String),
+}
+
+/// How a command ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) enum Outcome {
+    /// `OK` (or `READY`, or the final digit), with what came before it.
+    Done(Option<Answer>),
+    /// `ERROR`.
+    Error,
+    /// No answer after every try.
+    NoAnswer,
+}
+
+/// The command outstanding.
+#[derive(Debug)]
+pub(super) struct Pending {
+    pub command: AtCommand,
+    /// Bytes written (the command, or the message after `READY`).
+    pub bytes: Vec<u8>,
+    pub purpose: Purpose,
+    pub sent_at: Instant,
+    pub timeout: Duration,
+    /// Times written.
+    pub tries: u32,
+    /// What came before the final result code.
+    pub answer: Option<Answer>,
+    /// Written again when unanswered (not a session: that could send the
+    /// message twice).
+    pub resend: bool,
+}
+
+/// Times a command is written before the transceiver is taken as silent.
+pub const COMMAND_TRIES: u32 = 3;
+
+/// The serial link as the machine sees it.
+#[derive(Debug)]
+struct LinkState {
+    connected: bool,
+    opening: bool,
+    reconnect_at: Instant,
+}
+
+/// The vehicle driver's logic.
+#[derive(Debug)]
+pub struct Machine {
+    pub(super) settings: Settings,
+    pub(super) now: Now,
+    out: Vec<Output>,
+    link: LinkState,
+    pub(super) reader: Reader,
+    /// Start-up commands not yet written (empty once configured).
+    startup: VecDeque<AtCommand>,
+    /// Configured and ready for sessions.
+    pub(super) ready: bool,
+    pub(super) pending: Option<Pending>,
+    pub(super) sessions: Sessions,
+    /// Signal strength (`+CIEV:0`), 0–5.
+    pub(super) bars: Option<u8>,
+    /// Network service (`+CIEV:1`), and since when it has been lacking.
+    pub(super) service: Option<bool>,
+    pub(super) no_service_since: Option<Instant>,
+    /// The transceiver's IMEI, once read.
+    pub imei: Option<String>,
+    next_request: u64,
+}
+
+impl Machine {
+    /// A machine whose port is open at `now`; its first outputs come from
+    /// the first input (e.g. [`Input::Tick`]).
+    pub fn new(settings: Settings, now: Now) -> Machine {
+        let sessions = Sessions::new(settings.first_frame);
+        let mut machine = Machine {
+            settings,
+            now,
+            out: Vec::new(),
+            link: LinkState {
+                connected: true,
+                opening: false,
+                reconnect_at: now.at,
+            },
+            reader: Reader::new(),
+            startup: VecDeque::new(),
+            ready: false,
+            pending: None,
+            sessions,
+            bars: None,
+            service: None,
+            no_service_since: None,
+            imei: None,
+            next_request: 0,
+        };
+        machine.configure();
+        machine
+    }
+
+    /// Handles `input`, which happened at `now`; returns what to do.
+    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        match input {
+            Input::Bytes(bytes) => {
+                self.reader.push(&bytes);
+                while let Some(unit) = self.reader.next_unit() {
+                    self.unit(unit);
+                }
+            }
+            Input::Tick => self.timers(),
+            Input::Command(command) => self.command(command),
+            Input::Answer { id, filled } => self.answered(id, filled),
+            Input::Opened(ok) => self.opened(ok),
+            Input::Disconnected(reason) => self.disconnected(reason),
+        }
+        self.pump();
+        std::mem::take(&mut self.out)
+    }
+
+    /// When the next [`Input::Tick`] is due (`None`: no timer armed).
+    pub fn next_deadline(&self) -> Option<Instant> {
+        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
+        let reconnect =
+            (!self.link.connected && !self.link.opening).then_some(self.link.reconnect_at);
+        let session = if self.ready && self.pending.is_none() {
+            self.session_deadline()
+        } else {
+            None
+        };
+        [
+            command,
+            reconnect,
+            session,
+            self.sessions.request_deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// Whether data request `id` is still awaited.
+    pub fn awaits(&self, id: RequestId) -> bool {
+        self.sessions.awaits(id)
+    }
+
+    pub(super) fn emit(&mut self, event: DriverEvent) {
+        self.out.push(Output::Event(event));
+    }
+
+    pub(super) fn status(&mut self, status: DriverStatus) {
+        self.emit(DriverEvent::Status(status));
+    }
+
+    pub(super) fn new_request(&mut self, template: ModemTransmission) -> RequestId {
+        self.next_request += 1;
+        let id = RequestId(self.next_request);
+        self.out.push(Output::Request { id, template });
+        id
+    }
+
+    fn write_raw(&mut self, bytes: Vec<u8>) {
+        self.emit(DriverEvent::Raw(RawMessage {
+            direction: RawDirection::Outgoing,
+            bytes: bytes.clone(),
+            peer: None,
+        }));
+        self.out.push(Output::Write(bytes));
+    }
+
+    /// Writes `command` and waits for its answer.
+    pub(super) fn send(&mut self, command: AtCommand, purpose: Purpose) {
+        let timeout = match purpose {
+            Purpose::Session => ms(self.settings.iridium.session_timeout_ms()),
+            _ => ms(self.settings.iridium.command_timeout_ms()),
+        };
+        let bytes = command.to_bytes();
+        self.pending = Some(Pending {
+            command,
+            bytes: bytes.clone(),
+            purpose,
+            sent_at: self.now.at,
+            timeout,
+            tries: 1,
+            answer: None,
+            resend: purpose != Purpose::Session,
+        });
+        if purpose == Purpose::ReadMt {
+            self.reader.expect_mt_message();
+        }
+        self.write_raw(bytes);
+    }
+
+    /// Writes the message (and checksum) after `READY`; waits for the
+    /// result digit (the transceiver's own timeout is 60 s).
+    pub(super) fn send_message(&mut self, message: &[u8]) {
+        let mut bytes = message.to_vec();
+        bytes.extend_from_slice(&at::checksum(message).to_be_bytes());
+        self.pending = Some(Pending {
+            command: AtCommand::WriteBinary(message.len()),
+            bytes: bytes.clone(),
+            purpose: Purpose::WriteData,
+            sent_at: self.now.at,
+            timeout: ms(self.settings.iridium.command_timeout_ms()).max(Duration::from_secs(65)),
+            tries: 1,
+            answer: None,
+            resend: false,
+        });
+        self.write_raw(bytes);
+    }
+
+    /// Queues the start-up commands (again, after a reconnection or a
+    /// transceiver that went silent).
+    fn configure(&mut self) {
+        self.ready = false;
+        self.pending = None;
+        self.reader.expect_lines();
+        let iridium = &self.settings.iridium;
+        let mut commands = vec![AtCommand::Attention, AtCommand::Echo(false)];
+        if iridium.use_dtr() {
+            commands.push(AtCommand::Dtr(2));
+        }
+        for line in &iridium.config {
+            let text = line.trim();
+            let text = text
+                .strip_prefix("AT")
+                .or_else(|| text.strip_prefix("at"))
+                .unwrap_or(text);
+            commands.push(
+                AtCommand::parse(&format!("AT{text}"))
+                    .unwrap_or(AtCommand::Other(text.to_string())),
+            );
+        }
+        commands.push(AtCommand::RingAlerts(1));
+        if iridium.enable_sbdring_automatic_registration() {
+            commands.push(AtCommand::AutoRegistration(1));
+        }
+        commands.push(AtCommand::IndicatorEvents(vec![1, 1, 1]));
+        // The last signal strength known, at once (`+CSQ` may take seconds
+        // to measure one); the indicators tell every change from now on.
+        commands.push(AtCommand::SignalQuality { fast: true });
+        commands.push(AtCommand::Imei);
+        commands.push(AtCommand::Clear(2));
+        self.startup = commands.into();
+        self.sessions.configuring();
+    }
+
+    /// A unit read from the transceiver.
+    fn unit(&mut self, unit: Unit) {
+        match unit {
+            Unit::Line(line) => {
+                self.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Incoming,
+                    bytes: line.clone(),
+                    peer: None,
+                }));
+                match ModemLine::parse(&line) {
+                    Ok(parsed) => self.line(parsed),
+                    Err(e) => self.status(DriverStatus::Unparseable {
+                        line: String::from_utf8_lossy(&line).into_owned(),
+                        reason: match e {
+                            AtError::Unknown => {
+                                "not an answer of the Iridium AT command set".into()
+                            }
+                            other => other.to_string(),
+                        },
+                    }),
+                }
+            }
+            Unit::MtMessage { message, checksum } => {
+                let mut raw = (message.len() as u16).to_be_bytes().to_vec();
+                raw.extend_from_slice(&message);
+                raw.extend_from_slice(&checksum.to_be_bytes());
+                self.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Incoming,
+                    bytes: raw,
+                    peer: None,
+                }));
+                let good = at::checksum(&message) == checksum;
+                if !good {
+                    self.status(DriverStatus::BadChecksum {
+                        line: format!(
+                            "+SBDRB: {} bytes, checksum {checksum:04x} given, {:04x} computed",
+                            message.len(),
+                            at::checksum(&message)
+                        ),
+                    });
+                }
+                match &mut self.pending {
+                    Some(p) if p.purpose == Purpose::ReadMt => {
+                        p.answer = Some(if good {
+                            Answer::Mt(message)
+                        } else {
+                            Answer::BadMt
+                        });
+                    }
+                    _ => self.status(DriverStatus::Unparseable {
+                        line: format!("{} bytes of binary", message.len()),
+                        reason: "an MT message read when none was asked for".into(),
+                    }),
+                }
+            }
+            Unit::Bytes(_) => {}
+        }
+    }
+
+    fn line(&mut self, line: ModemLine) {
+        match line {
+            ModemLine::SbdRing => {
+                self.sessions.ring_alert();
+                return;
+            }
+            ModemLine::Indicator { indicator, value } => {
+                self.indicator(indicator, value);
+                return;
+            }
+            ModemLine::Echo(_) => {
+                // Echo back on (the transceiver was reset?): off again
+                // once the command outstanding is answered.
+                if !self.startup.contains(&AtCommand::Echo(false)) {
+                    self.startup.push_front(AtCommand::Echo(false));
+                }
+                return;
+            }
+            ModemLine::Ring | ModemLine::NoCarrier | ModemLine::Connect => {
+                self.status(DriverStatus::Unparseable {
+                    line: line.to_string(),
+                    reason: "RUDICS calls are not taken by this driver".into(),
+                });
+                return;
+            }
+            _ => {}
+        }
+        let Some(pending) = &mut self.pending else {
+            // An answer with no command outstanding (a late OK): nothing to do.
+            return;
+        };
+        let outcome = match line {
+            ModemLine::Ok => {
+                if pending.purpose == Purpose::Session && pending.answer.is_none() {
+                    // The OK of an earlier command: the session's comes
+                    // after its +SBDIX.
+                    return;
+                }
+                if pending.purpose == Purpose::WriteRequest {
+                    // READY is the answer to wait for.
+                    return;
+                }
+                Outcome::Done(pending.answer.take())
+            }
+            ModemLine::Error => Outcome::Error,
+            ModemLine::Ready if pending.purpose == Purpose::WriteRequest => Outcome::Done(None),
+            ModemLine::Result(d) => match pending.purpose {
+                Purpose::WriteData if d == 1 => Outcome::Done(Some(Answer::Digit(1))),
+                Purpose::WriteData | Purpose::ClearMo | Purpose::Startup => {
+                    pending.answer = Some(Answer::Digit(d));
+                    return;
+                }
+                _ => return,
+            },
+            ModemLine::Session(reply) if pending.purpose == Purpose::Session => {
+                pending.answer = Some(Answer::Session(reply));
+                return;
+            }
+            ModemLine::Imei(imei) if pending.command == AtCommand::Imei => {
+                pending.answer = Some(Answer::Imei(imei));
+                return;
+            }
+            ModemLine::SignalQuality(bars) => {
+                self.signal(Some(bars), self.service);
+                return;
+            }
+            other => {
+                self.status(DriverStatus::Unparseable {
+                    line: other.to_string(),
+                    reason: "not an answer to the command outstanding".into(),
+                });
+                return;
+            }
+        };
+        self.complete(outcome);
+    }
+
+    /// The outstanding command ended.
+    fn complete(&mut self, outcome: Outcome) {
+        let Some(pending) = self.pending.take() else {
+            return;
+        };
+        if self.reader.in_binary() {
+            self.reader.expect_lines();
+        }
+        match pending.purpose {
+            Purpose::Startup => self.startup_done(&pending.command, outcome),
+            _ => self.session_step(pending, outcome),
+        }
+    }
+
+    fn startup_done(&mut self, command: &AtCommand, outcome: Outcome) {
+        match outcome {
+            Outcome::Done(Some(Answer::Imei(imei))) => self.imei = Some(imei),
+            Outcome::Done(_) => {}
+            Outcome::Error => self.status(DriverStatus::ModemError {
+                message: format!("ERROR in answer to {command}"),
+            }),
+            Outcome::NoAnswer => {
+                // Start again from the beginning.
+                self.configure();
+                return;
+            }
+        }
+        if *command == AtCommand::Clear(2) {
+            self.sessions.mo_cleared();
+        }
+        if self.startup.is_empty() && !self.ready {
+            self.ready = true;
+            self.status(DriverStatus::Ready);
+        }
+    }
+
+    fn indicator(&mut self, indicator: u8, value: u8) {
+        match indicator {
+            0 if value <= 5 => self.signal(Some(value), self.service),
+            1 => self.signal(self.bars, Some(value == 1)),
+            0 => self.status(DriverStatus::Unparseable {
+                line: format!("+CIEV:{indicator},{value}"),
+                reason: "signal strength above 5 bars".into(),
+            }),
+            _ => {}
+        }
+    }
+
+    /// Signal strength or service changed.
+    fn signal(&mut self, bars: Option<u8>, service: Option<bool>) {
+        if service == Some(false) && self.service != Some(false) {
+            self.no_service_since = Some(self.now.at);
+        }
+        if service == Some(true) {
+            self.no_service_since = None;
+        }
+        if (bars, service) != (self.bars, self.service) {
+            self.bars = bars;
+            self.service = service;
+            self.status(DriverStatus::Signal { bars, service });
+        }
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        match command {
+            DriverCommand::Initiate(mt) => match mt.r#type() {
+                TransmissionType::Ack => self.queue_ack(mt),
+                _ => self.initiate(mt),
+            },
+            DriverCommand::Acknowledge(ack) => {
+                if self.settings.deferred_ack {
+                    self.acknowledge(ack);
+                }
+            }
+            DriverCommand::Specific(message) => self.status(DriverStatus::Unsupported {
+                message: prost_reflect::ReflectMessage::descriptor(&message)
+                    .full_name()
+                    .to_string(),
+            }),
+            DriverCommand::Stop(_) => {}
+        }
+    }
+
+    /// Sends the ACK of `ack` (when the data asked for one, to this node).
+    pub(super) fn acknowledge(&mut self, ack: Acknowledgement) {
+        if !Acknowledgement::wanted(&ack.received, &[self.settings.modem_id]) {
+            return;
+        }
+        if let Some(mt) = ack.transmission() {
+            self.queue_ack(mt);
+        }
+    }
+
+    fn opened(&mut self, ok: bool) {
+        self.link.opening = false;
+        if ok {
+            self.link.connected = true;
+            self.status(DriverStatus::Reconnected);
+            self.configure();
+        } else {
+            self.link.reconnect_at = self.now.at + self.settings.reconnect;
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        self.link.connected = false;
+        self.link.opening = false;
+        self.link.reconnect_at = self.now.at + self.settings.reconnect;
+        self.ready = false;
+        if let Some(p) = self.pending.take() {
+            self.session_interrupted(p.purpose);
+        }
+        self.reader = Reader::new();
+        self.status(DriverStatus::Disconnected { reason });
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        if !self.link.connected && !self.link.opening && self.link.reconnect_at <= now {
+            self.link.opening = true;
+            self.out.push(Output::Open);
+        }
+        self.request_timers();
+        let Some(pending) = &mut self.pending else {
+            return;
+        };
+        if pending.sent_at + pending.timeout > now {
+            return;
+        }
+        let command = pending.command.to_string();
+        let attempt = pending.tries;
+        self.status(DriverStatus::ResponseTimeout { command, attempt });
+        let pending = self.pending.as_mut().expect("checked");
+        let answered = pending.answer.is_some();
+        if answered {
+            // The result came, not the OK after it: done.
+            let answer = pending.answer.take();
+            self.complete(Outcome::Done(answer));
+        } else if pending.resend && pending.tries < COMMAND_TRIES {
+            pending.tries += 1;
+            pending.sent_at = now;
+            let bytes = pending.bytes.clone();
+            if pending.purpose == Purpose::ReadMt {
+                self.reader.expect_mt_message();
+            }
+            self.write_raw(bytes);
+        } else {
+            let purpose = pending.purpose;
+            self.pending = None;
+            self.reader.expect_lines();
+            if purpose == Purpose::Session {
+                // A session that never answered: failed (taken again with
+                // the others below).
+                self.session_step(
+                    Pending {
+                        command: AtCommand::Session { alert: false },
+                        bytes: Vec::new(),
+                        purpose,
+                        sent_at: now,
+                        timeout: Duration::ZERO,
+                        tries: 0,
+                        answer: None,
+                        resend: false,
+                    },
+                    Outcome::NoAnswer,
+                );
+            } else {
+                self.status(DriverStatus::ModemSilent {
+                    seconds: ms(self.settings.iridium.command_timeout_ms()).as_secs_f64()
+                        * f64::from(COMMAND_TRIES),
+                });
+                self.session_interrupted(purpose);
+                self.configure();
+            }
+        }
+    }
+
+    /// Writes the next command due: a start-up step, or the next step of
+    /// a session.
+    fn pump(&mut self) {
+        loop {
+            if !self.link.connected || self.pending.is_some() {
+                return;
+            }
+            if let Some(command) = self.startup.pop_front() {
+                self.send(command, Purpose::Startup);
+                return;
+            }
+            if !self.ready {
+                return;
+            }
+            if !self.next_session_step() {
+                return;
+            }
+        }
+    }
+}
+
+/// `n` milliseconds.
+pub(super) fn ms(n: u32) -> Duration {
+    Duration::from_millis(u64::from(n))
+}
