@@ -3,6 +3,8 @@
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
+use foldhash::fast::RandomState;
+
 use prost_reflect::{
     Cardinality, DescriptorPool, DynamicMessage, Kind, MessageDescriptor, ReflectMessage, Value,
 };
@@ -85,11 +87,11 @@ type Clock = Arc<dyn Fn() -> i64 + Send + Sync>;
 #[derive(Clone)]
 pub struct Codec {
     registry: Arc<CodecRegistry>,
-    by_id: HashMap<u32, Arc<LoadedMessage>>,
-    by_name: HashMap<String, Arc<LoadedMessage>>,
+    by_id: HashMap<u32, Arc<LoadedMessage>, RandomState>,
+    by_name: HashMap<String, Arc<LoadedMessage>, RandomState>,
     strict: bool,
     key: Option<CryptoKey>,
-    skip_crypto_ids: HashSet<u32>,
+    skip_crypto_ids: HashSet<u32, RandomState>,
     clock: Clock,
     /// The frequencies of the adaptive arithmetic models (a clone copies them).
     arithmetic: SharedState,
@@ -131,11 +133,11 @@ impl Codec {
     pub fn with_registry(registry: CodecRegistry) -> Self {
         Codec {
             registry: Arc::new(registry),
-            by_id: HashMap::new(),
-            by_name: HashMap::new(),
+            by_id: HashMap::default(),
+            by_name: HashMap::default(),
             strict: false,
             key: None,
-            skip_crypto_ids: HashSet::new(),
+            skip_crypto_ids: HashSet::default(),
             clock: Arc::new(system_clock),
             arithmetic: SharedState::default(),
         }
@@ -576,12 +578,13 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
-        let name = msg.descriptor().full_name().to_string();
-        let loaded = self.get(&name)?;
+        let desc = msg.descriptor();
+        let name = desc.full_name();
+        let loaded = self.get(name)?;
         loaded
             .required
             .check(msg)
-            .map_err(|e| e.into_encode(&name))?;
+            .map_err(|e| e.into_encode(name))?;
         let session = ArithmeticSession::new(
             self.registry.arithmetic_models(),
             &self.arithmetic,
@@ -594,13 +597,22 @@ impl Codec {
             changes,
             arithmetic: Some(&session),
         };
-        let parts = Self::encode_parts(loaded, msg, &ctx).map_err(|e| e.into_encode(&name));
-        session.finish(parts.is_ok());
-        let (head, body) = parts?;
+        // Header and body are written straight after what `out` holds (the
+        // writer starts on its byte boundary), then encrypted in place; on
+        // an error `out` is put back as it was.
         let start = out.len();
-        out.extend_from_slice(head.as_bytes());
-        let head_end = out.len();
-        out.extend_from_slice(body.as_bytes());
+        let mut writer = BitWriter::from_bytes(std::mem::take(out));
+        writer.reserve(loaded.head_bytes() + loaded.max_body_bytes());
+        let head_end = Self::encode_parts(loaded, msg, &ctx, &mut writer);
+        session.finish(head_end.is_ok());
+        *out = writer.into_bytes();
+        let head_end = match head_end {
+            Ok(end) => end,
+            Err(e) => {
+                out.truncate(start);
+                return Err(e.into_encode(name));
+            }
+        };
         if let Some(key) = &self.key {
             if !self.skip_crypto_ids.contains(&loaded.id) {
                 let (h, b) = out[start..].split_at_mut(head_end - start);
@@ -610,20 +622,23 @@ impl Codec {
         Ok(())
     }
 
-    /// The header (identifier included) and the body of a message, unencrypted.
+    /// Writes the header (identifier included) and the body of a message,
+    /// unencrypted, after the whole bytes `out` holds; returns where the
+    /// body starts (in bytes from the start of `out`).
     fn encode_parts(
         loaded: &LoadedMessage,
         msg: &DynamicMessage,
         ctx: &EncodeContext,
-    ) -> std::result::Result<(BitWriter, BitWriter), CodecError> {
-        let mut head = BitWriter::with_capacity(loaded.head_bytes());
+        out: &mut BitWriter,
+    ) -> std::result::Result<usize, CodecError> {
         if !loaded.omit_id {
-            identifier::encode(&mut head, loaded.id)?;
+            identifier::encode(out, loaded.id)?;
         }
-        loaded.head.encode_message(&mut head, msg, ctx)?;
-        let mut body = BitWriter::with_capacity(loaded.max_body_bytes());
-        loaded.body.encode_message(&mut body, msg, ctx)?;
-        Ok((head, body))
+        loaded.head.encode_message(out, msg, ctx)?;
+        out.pad_to_byte();
+        let head_end = out.as_bytes().len();
+        loaded.body.encode_message(out, msg, ctx)?;
+        Ok(head_end)
     }
 
     /// Encodes a prost-generated struct (deriving `ReflectMessage`) of a

@@ -40,6 +40,14 @@ pub struct EncodeContext<'a> {
 }
 
 impl EncodeContext<'_> {
+    /// Whether [`EncodeContext::value_changed`] does anything (strict mode,
+    /// or changes being collected): when false, a codec can skip building
+    /// the `action` text it would pass.
+    #[inline]
+    pub fn reports_changes(&self) -> bool {
+        self.strict || self.changes.is_some()
+    }
+
     /// Reports a value the codec changes instead of sending it as given
     /// (out of range, NaN, too long, undefined): in strict mode an error
     /// saying `what`; otherwise, when changes are being collected, the change

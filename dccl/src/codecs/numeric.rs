@@ -11,7 +11,7 @@ use crate::bits::{BitReader, BitWriter};
 use crate::error::CodecError;
 use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, FieldSpec};
 use crate::rounding::{
-    ceil_log2_f64, pow10, quantize_f32, quantize_f64, quantize_int, round_f32, round_f64, IntWire,
+    ceil_log2_f64, pow10, quantize_f32, quantize_f64, quantize_int, round_half_up, IntWire,
 };
 
 /// The wire (arithmetic) type of a numeric field.
@@ -139,32 +139,101 @@ pub struct NumericBounds {
     pub absent_reason: String,
     /// Encoded size in bits.
     pub bits: u32,
+    /// What every value's encoding and decoding computes from the bounds alone.
+    derived: Derived,
 }
 
-fn int_encode<I: IntWire>(value: I, b: &NumericBounds) -> Option<u64> {
-    let res = b.resolution;
-    let q = quantize_int(value, res);
-    if q.to_f64() < b.min || q.to_f64() > b.max {
-        return None;
+/// The parts of the reference's arithmetic that depend on the bounds only,
+/// computed once (the same operations, so the same results to the bit).
+#[derive(Debug, Clone, Copy)]
+struct Derived {
+    /// `1 / resolution`.
+    inverse: f64,
+    /// The minimum quantized, as a double.
+    min_f64: f64,
+    /// The minimum narrowed to a float and quantized.
+    min_f32: f32,
+    /// The minimum in the integer wire type, quantized (its bits, wrapping).
+    min_int: u64,
+    /// The resolution is exactly 1: integers need no quantizing.
+    unit: bool,
+}
+
+impl Derived {
+    fn of(kind: WireKind, min: f64, resolution: f64) -> Derived {
+        fn int_min<I: IntWire>(min: f64, resolution: f64) -> u64 {
+            quantize_int(I::from_f64(min), resolution).to_u64()
+        }
+        Derived {
+            inverse: 1.0 / resolution,
+            min_f64: quantize_f64(min, resolution),
+            min_f32: quantize_f32(min as f32, resolution),
+            min_int: match kind {
+                WireKind::I32 => int_min::<i32>(min, resolution),
+                WireKind::I64 => int_min::<i64>(min, resolution),
+                WireKind::U32 => int_min::<u32>(min, resolution),
+                WireKind::U64 => int_min::<u64>(min, resolution),
+                WireKind::F32 | WireKind::F64 => 0,
+            },
+            unit: resolution == 1.0,
+        }
     }
-    let mut w = q.sub(quantize_int(I::from_f64(b.min), res));
-    w = if res >= 1.0 {
-        I::from_f64(w.to_f64() / res)
-    } else {
-        I::from_f64(w.to_f64() * (1.0 / res))
-    };
-    Some(w.to_u64())
 }
 
-fn int_decode<I: IntWire>(u: u64, b: &NumericBounds) -> I {
-    let res = b.resolution;
-    let mut w = I::from_u64(u);
-    w = if res >= 1.0 {
-        I::from_f64(w.to_f64() * res)
-    } else {
-        I::from_f64(w.to_f64() / (1.0 / res))
-    };
-    quantize_int(w.add(quantize_int(I::from_f64(b.min), res)), res)
+impl NumericBounds {
+    /// `quantize_f64(value, resolution)` with the inverse computed once.
+    #[inline]
+    fn quantize_f64(&self, value: f64) -> f64 {
+        if self.resolution >= 1.0 {
+            round_half_up(value / self.resolution) * self.resolution
+        } else {
+            round_half_up(value * self.derived.inverse) / self.derived.inverse
+        }
+    }
+
+    /// `quantize_f32(value, resolution)` with the inverse computed once.
+    #[inline]
+    fn quantize_f32(&self, value: f32) -> f32 {
+        self.quantize_f64(value as f64) as f32
+    }
+
+    /// `quantize_int(value, resolution)`; the identity for a resolution of 1.
+    #[inline]
+    fn quantize_int<I: IntWire>(&self, value: I) -> I {
+        if self.derived.unit {
+            value
+        } else {
+            quantize_int(value, self.resolution)
+        }
+    }
+
+    #[inline]
+    fn int_encode<I: IntWire>(&self, value: I) -> Option<u64> {
+        let res = self.resolution;
+        let q = self.quantize_int(value);
+        if q.to_f64() < self.min || q.to_f64() > self.max {
+            return None;
+        }
+        let w = q.sub(I::from_u64(self.derived.min_int));
+        let w = if res >= 1.0 {
+            I::from_f64(w.to_f64() / res)
+        } else {
+            I::from_f64(w.to_f64() * self.derived.inverse)
+        };
+        Some(w.to_u64())
+    }
+
+    #[inline]
+    fn int_decode<I: IntWire>(&self, u: u64) -> I {
+        let res = self.resolution;
+        let w = I::from_u64(u);
+        let w = if res >= 1.0 {
+            I::from_f64(w.to_f64() * res)
+        } else {
+            I::from_f64(w.to_f64() / self.derived.inverse)
+        };
+        self.quantize_int(w.add(I::from_u64(self.derived.min_int)))
+    }
 }
 
 impl NumericBounds {
@@ -180,6 +249,7 @@ impl NumericBounds {
             required,
             absent_reason: "the field is required".to_string(),
             bits,
+            derived: Derived::of(kind, min, resolution),
         }
     }
 
@@ -192,58 +262,70 @@ impl NumericBounds {
 
     /// The unsigned integer written for `value`, before the presence offset;
     /// `None` when the value is out of bounds.
+    #[inline]
     fn to_wire_uint(&self, value: WireValue) -> Option<u64> {
         let res = self.resolution;
         match value {
-            WireValue::I32(v) => int_encode(v, self),
-            WireValue::I64(v) => int_encode(v, self),
-            WireValue::U32(v) => int_encode(v, self),
-            WireValue::U64(v) => int_encode(v, self),
+            WireValue::I32(v) => self.int_encode(v),
+            WireValue::I64(v) => self.int_encode(v),
+            WireValue::U32(v) => self.int_encode(v),
+            WireValue::U64(v) => self.int_encode(v),
             WireValue::F64(v) => {
-                let q = quantize_f64(v, res);
+                let q = self.quantize_f64(v);
                 if q < self.min || q > self.max || q.is_nan() {
                     return None;
                 }
-                let mut w = q - quantize_f64(self.min, res);
-                w = if res >= 1.0 { w / res } else { w * (1.0 / res) };
-                Some(round_f64(w, 0) as u64)
+                let w = q - self.derived.min_f64;
+                let w = if res >= 1.0 {
+                    w / res
+                } else {
+                    w * self.derived.inverse
+                };
+                // The reference's round(w, 0): scaling by 10^0 = 1 changes nothing.
+                Some(round_half_up(w) as u64)
             }
             WireValue::F32(v) => {
-                let q = quantize_f32(v, res);
+                let q = self.quantize_f32(v);
                 if (q as f64) < self.min || (q as f64) > self.max || q.is_nan() {
                     return None;
                 }
-                let mut w = q - quantize_f32(self.min as f32, res);
-                w = if res >= 1.0 {
+                let w = q - self.derived.min_f32;
+                let w = if res >= 1.0 {
                     (w as f64 / res) as f32
                 } else {
-                    (w as f64 * (1.0 / res)) as f32
+                    (w as f64 * self.derived.inverse) as f32
                 };
-                Some(round_f32(w, 0) as u64)
+                // Likewise, in single precision.
+                Some((round_half_up(w as f64) as f32) as u64)
             }
         }
     }
 
+    #[inline]
     fn wire_uint_to_value(&self, u: u64) -> WireValue {
         let res = self.resolution;
         match self.kind {
-            WireKind::I32 => WireValue::I32(int_decode(u, self)),
-            WireKind::I64 => WireValue::I64(int_decode(u, self)),
-            WireKind::U32 => WireValue::U32(int_decode(u, self)),
-            WireKind::U64 => WireValue::U64(int_decode(u, self)),
+            WireKind::I32 => WireValue::I32(self.int_decode(u)),
+            WireKind::I64 => WireValue::I64(self.int_decode(u)),
+            WireKind::U32 => WireValue::U32(self.int_decode(u)),
+            WireKind::U64 => WireValue::U64(self.int_decode(u)),
             WireKind::F64 => {
-                let mut w = u as f64;
-                w = if res >= 1.0 { w * res } else { w / (1.0 / res) };
-                WireValue::F64(quantize_f64(w + quantize_f64(self.min, res), res))
+                let w = u as f64;
+                let w = if res >= 1.0 {
+                    w * res
+                } else {
+                    w / self.derived.inverse
+                };
+                WireValue::F64(self.quantize_f64(w + self.derived.min_f64))
             }
             WireKind::F32 => {
-                let mut w = u as f32;
-                w = if res >= 1.0 {
+                let w = u as f32;
+                let w = if res >= 1.0 {
                     (w as f64 * res) as f32
                 } else {
-                    (w as f64 / (1.0 / res)) as f32
+                    (w as f64 / self.derived.inverse) as f32
                 };
-                WireValue::F32(quantize_f32(w + quantize_f32(self.min as f32, res), res))
+                WireValue::F32(self.quantize_f32(w + self.derived.min_f32))
             }
         }
     }
@@ -265,7 +347,9 @@ impl NumericBounds {
         if value.is_nan() {
             // libdccl's bound check lets NaN through (every comparison is
             // false) and the conversion to an integer then yields 0: the minimum.
-            ctx.value_changed(|| "NaN".to_string(), &self.sent_as_minimum())?;
+            if ctx.reports_changes() {
+                ctx.value_changed(|| "NaN".to_string(), &self.sent_as_minimum())?;
+            }
             self.write_minimum(out);
             return Ok(());
         }
@@ -276,25 +360,32 @@ impl NumericBounds {
                 Ok(())
             }
             None => {
-                ctx.value_changed(
-                    || {
-                        format!(
-                            "{} is out of range [{}, {}]",
-                            display(value),
-                            self.min,
-                            self.max
-                        )
-                    },
-                    &if self.required {
-                        format!("sent as the minimum {} ({})", self.min, self.absent_reason)
-                    } else {
-                        "sent as not present".to_string()
-                    },
-                )?;
+                if ctx.reports_changes() {
+                    self.report_out_of_range(value, ctx)?;
+                }
                 out.write(0, self.bits);
                 Ok(())
             }
         }
+    }
+
+    #[cold]
+    fn report_out_of_range(&self, value: WireValue, ctx: &EncodeContext) -> Result<(), CodecError> {
+        ctx.value_changed(
+            || {
+                format!(
+                    "{} is out of range [{}, {}]",
+                    display(value),
+                    self.min,
+                    self.max
+                )
+            },
+            &if self.required {
+                format!("sent as the minimum {} ({})", self.min, self.absent_reason)
+            } else {
+                "sent as not present".to_string()
+            },
+        )
     }
 
     /// Writes the minimum value (as a present value for optional fields).
