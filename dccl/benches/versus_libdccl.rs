@@ -106,7 +106,10 @@ fn build_reference(prefix: &Path) -> PathBuf {
         .args(extra.split_whitespace())
         .status()
         .unwrap_or_else(|e| panic!("cannot run {cxx}: {e}"));
-    assert!(status.success(), "{cxx} failed to compile the libdccl timing program");
+    assert!(
+        status.success(),
+        "{cxx} failed to compile the libdccl timing program"
+    );
     program
 }
 
@@ -182,7 +185,10 @@ fn main() {
         }
     }
     let o = best(&ours);
-    println!("ours (best):    encode {:7.3} µs/message  decode {:7.3} µs/message", o.0, o.1);
+    println!(
+        "ours (best):    encode {:7.3} µs/message  decode {:7.3} µs/message",
+        o.0, o.1
+    );
     if !reference.is_empty() {
         let r = best(&reference);
         println!(

@@ -37,6 +37,8 @@ pub(crate) struct LoadedMessage {
     pub(crate) required: RequiredFields,
     /// The message-definition hash.
     pub(crate) hash: u64,
+    /// Whether decoding reads the clock (a field's codec does).
+    pub(crate) reads_clock: bool,
 }
 
 impl LoadedMessage {
@@ -476,6 +478,7 @@ impl Codec {
         let head = make(MessagePart::Head)?;
         let body = make(MessagePart::Body)?;
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
+        let reads_clock = head.reads_clock() || body.reads_clock();
         let loaded = LoadedMessage {
             descriptor: desc.clone(),
             id,
@@ -486,6 +489,7 @@ impl Codec {
             id_bits,
             required: RequiredFields::of(desc, 0),
             hash: 0,
+            reads_clock,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -547,6 +551,10 @@ impl Codec {
     /// spans. Now is this codec's clock ([`Codec::set_clock`]), the one
     /// its decoding restores dates with.
     pub fn moved_dates(&self, msg: &DynamicMessage) -> Result<Vec<ValueChange>> {
+        if !self.get(msg.descriptor().full_name())?.reads_clock {
+            // No codec of the type restores a date from the clock.
+            return Ok(Vec::new());
+        }
         self.moved_dates_at(msg, (self.clock)())
     }
 
@@ -556,7 +564,12 @@ impl Codec {
         let name = msg.descriptor().full_name().to_string();
         let loaded = self.get(&name)?;
         let mut moved = Vec::new();
-        for part in [&loaded.head, &loaded.body] {
+        let parts: &[&Arc<dyn FieldCodec>] = if loaded.reads_clock {
+            &[&loaded.head, &loaded.body]
+        } else {
+            &[]
+        };
+        for part in parts {
             if let Some(codec) = part.children() {
                 collect_moved_dates(codec, msg, "", now_secs, 0, &mut moved);
             }
@@ -786,7 +799,11 @@ impl Codec {
         let session =
             ArithmeticSession::new(self.registry.arithmetic_models(), &self.arithmetic, true);
         let ctx = DecodeContext {
-            now_secs: (self.clock)(),
+            now_secs: if loaded.reads_clock {
+                (self.clock)()
+            } else {
+                0
+            },
             definition_hash: loaded.hash,
             arithmetic: Some(&session),
         };

@@ -441,6 +441,14 @@ pub trait FieldCodec: Send + Sync + Debug {
     fn date_shift(&self, _value: &Value, _now_secs: i64) -> Option<DateShift> {
         None
     }
+
+    /// Whether decoding reads [`DecodeContext::now_secs`] (the time codec
+    /// does, to restore the date). A [`Codec`](crate::Codec) reads its
+    /// clock only for messages with a field whose codec does; the default,
+    /// true, is right for any codec.
+    fn reads_clock(&self) -> bool {
+        true
+    }
 }
 
 /// How a receiver restores a time sent modulo a span (see

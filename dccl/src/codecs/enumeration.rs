@@ -79,6 +79,9 @@ impl EnumCodec {
 }
 
 impl FieldCodec for EnumCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

@@ -83,6 +83,8 @@ pub struct MessageCodec {
     presence: bool,
     min_bits: u32,
     max_bits: u32,
+    /// Whether a field's codec reads the clock when decoding.
+    reads_clock: bool,
 }
 
 /// The fields of a message in the order they are declared in the `.proto`
@@ -215,7 +217,9 @@ impl MessageCodec {
             presence,
             min_bits: 0,
             max_bits: 0,
+            reads_clock: false,
         };
+        codec.reads_clock = codec.fields.iter().any(|f| f.codec.reads_clock());
         codec.compute_sizes();
         Ok(codec)
     }
@@ -426,10 +430,12 @@ impl MessageCodec {
                         }
                         // Version 2 reads a repeated embedded message in both
                         // parts: the body's elements follow the head's.
-                        if let Value::List(head) = msg.get_field(&f.field).as_ref() {
-                            let mut all = head.clone();
-                            all.append(&mut values);
-                            values = all;
+                        if msg.has_field(&f.field) {
+                            if let Value::List(head) = msg.get_field(&f.field).as_ref() {
+                                let mut all = head.clone();
+                                all.append(&mut values);
+                                values = all;
+                            }
                         }
                         set(msg, &f.field, Value::List(values))
                     })
@@ -451,6 +457,9 @@ impl MessageCodec {
 }
 
 impl FieldCodec for MessageCodec {
+    fn reads_clock(&self) -> bool {
+        self.reads_clock
+    }
     fn name(&self) -> &str {
         &self.name
     }

@@ -532,6 +532,9 @@ impl NumericCodec {
 }
 
 impl FieldCodec for NumericCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }
