@@ -7,7 +7,10 @@
 
 use std::sync::Arc;
 
-use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, MessageDescriptor, Value};
+use std::borrow::Cow;
+use std::mem::Discriminant;
+
+use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
 
 use crate::bits::{BitReader, BitWriter};
 use crate::error::CodecError;
@@ -31,6 +34,12 @@ pub(crate) struct FieldEntry {
     pub repeat: Option<RepeatBounds>,
     /// `(oneof index in the message, member index)` of a version 4 oneof member.
     pub oneof: Option<(usize, usize)>,
+    /// The kind of value (or of list element) the field holds, when it is
+    /// not a message: a decoded value of that kind is stored without
+    /// prost-reflect checking its type again.
+    pub scalar: Option<Discriminant<Value>>,
+    /// A `required` field (proto2).
+    pub required: bool,
 }
 
 impl FieldEntry {
@@ -318,6 +327,8 @@ impl MessageCodec {
             codec,
             repeat,
             oneof,
+            scalar: scalar_discriminant(&field.kind()),
+            required: field.cardinality() == Cardinality::Required,
         })
     }
 
@@ -370,14 +381,22 @@ impl MessageCodec {
         msg: &DynamicMessage,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        for o in &self.oneofs {
-            let case = o
+        let mut cases = [0usize; 8];
+        let mut cases_vec;
+        let cases: &mut [usize] = if self.oneofs.len() <= cases.len() {
+            &mut cases[..self.oneofs.len()]
+        } else {
+            cases_vec = vec![0usize; self.oneofs.len()];
+            &mut cases_vec
+        };
+        for (o, case) in self.oneofs.iter().zip(cases.iter_mut()) {
+            *case = o
                 .members
                 .iter()
                 .position(|m| msg.has_field(m))
                 .map(|i| i + 1)
                 .unwrap_or(0);
-            out.write(case as u64, o.bits);
+            out.write(*case as u64, o.bits);
         }
         for f in &self.fields {
             let mark = ctx.change_mark();
@@ -388,11 +407,24 @@ impl MessageCodec {
                         "expected a list for a repeated field, got {other:?}"
                     ))),
                 }
+            } else if let Some((i, j)) = f.oneof {
+                // At most one member is set: the case written above.
+                if cases[i] == j + 1 {
+                    f.codec
+                        .encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
+                } else {
+                    Ok(())
+                }
+            } else if f.required {
+                // A required field is set (checked before encoding); a value
+                // in the message is what `get_field` borrows.
+                match msg.get_field(&f.field) {
+                    Cow::Borrowed(v) => f.codec.encode(out, Some(v), ctx),
+                    Cow::Owned(_) => f.codec.encode(out, None, ctx),
+                }
             } else if msg.has_field(&f.field) {
                 f.codec
                     .encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
-            } else if f.oneof.is_some() {
-                Ok(())
             } else {
                 f.codec.encode(out, None, ctx)
             };
@@ -437,7 +469,7 @@ impl MessageCodec {
                                 values = all;
                             }
                         }
-                        set(msg, &f.field, Value::List(values))
+                        store(msg, f, Value::List(values))
                     })
             } else {
                 if let Some((i, j)) = f.oneof {
@@ -446,7 +478,8 @@ impl MessageCodec {
                     }
                 }
                 f.codec.decode(input, ctx).and_then(|value| match value {
-                    Some(v) => merge_set(msg, &f.field, v),
+                    Some(v @ Value::Message(_)) => merge_set(msg, &f.field, v),
+                    Some(v) => store(msg, f, v),
                     None => Ok(()),
                 })
             };
@@ -591,6 +624,45 @@ fn merge_set(
         }
     }
     set(msg, field, value)
+}
+
+/// The variant of [`Value`] a field of a non-message kind holds.
+fn scalar_discriminant(kind: &Kind) -> Option<Discriminant<Value>> {
+    let value = match kind {
+        Kind::Message(_) => return None,
+        Kind::Double => Value::F64(0.0),
+        Kind::Float => Value::F32(0.0),
+        Kind::Int32 | Kind::Sint32 | Kind::Sfixed32 => Value::I32(0),
+        Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => Value::I64(0),
+        Kind::Uint32 | Kind::Fixed32 => Value::U32(0),
+        Kind::Uint64 | Kind::Fixed64 => Value::U64(0),
+        Kind::Bool => Value::Bool(false),
+        Kind::String => Value::String(String::new()),
+        Kind::Bytes => Value::Bytes(Default::default()),
+        Kind::Enum(_) => Value::EnumNumber(0),
+    };
+    Some(std::mem::discriminant(&value))
+}
+
+/// Sets a decoded value of the field `f`: a value (or list of values) of
+/// the field's non-message kind directly, anything else through
+/// [`set`]'s type check.
+fn store(msg: &mut DynamicMessage, f: &FieldEntry, value: Value) -> Result<(), CodecError> {
+    if let Some(kind) = f.scalar {
+        let fits = match (&value, f.repeat) {
+            (Value::List(items), Some(_)) => items
+                .iter()
+                .all(|v| std::mem::discriminant(v) == kind),
+            (Value::List(_), None) => false,
+            (v, None) => std::mem::discriminant(v) == kind,
+            (_, Some(_)) => false,
+        };
+        if fits {
+            *msg.get_field_mut(&f.field) = value;
+            return Ok(());
+        }
+    }
+    set(msg, &f.field, value)
 }
 
 /// Sets a decoded value, refusing (rather than panicking on) a value of the
