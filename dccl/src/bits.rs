@@ -79,8 +79,11 @@ impl BitWriter {
             }
             shifted >>= 8;
         }
-        let add = end.div_ceil(8) - self.bytes.len();
-        self.bytes.extend_from_slice(&shifted.to_le_bytes()[..add]);
+        // All 16 bytes are appended (a fixed-size copy), then the length
+        // cut back to the bytes the value reaches.
+        let keep = end.div_ceil(8);
+        self.bytes.extend_from_slice(&shifted.to_le_bytes());
+        self.bytes.truncate(keep);
         self.len = end;
     }
 

@@ -2,6 +2,7 @@
 //! [`FieldSpec`]) and the contexts codecs are called with; public through
 //! [`crate::field`].
 
+use std::any::Any;
 use std::fmt::Debug;
 use std::sync::Arc;
 
@@ -278,7 +279,7 @@ impl RepeatBounds {
 ///
 /// A codec must read on decode exactly the bits it wrote on encode. Values
 /// are `prost_reflect::Value`s of the field's type; `None` means "not set".
-pub trait FieldCodec: Send + Sync + Debug {
+pub trait FieldCodec: Any + Send + Sync + Debug {
     /// The registered name reported by `analyze` (e.g. `dccl.default4`).
     fn name(&self) -> &str;
 

@@ -7,12 +7,14 @@
 
 use std::sync::Arc;
 
+use std::any::Any;
 use std::borrow::Cow;
 use std::mem::Discriminant;
 
 use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
 
 use crate::bits::{BitReader, BitWriter};
+use crate::codecs::numeric::NumericCodec;
 use crate::error::CodecError;
 use crate::field_codec::{
     DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart, RepeatBounds,
@@ -38,11 +40,55 @@ pub(crate) struct FieldEntry {
     /// not a message: a decoded value of that kind is stored without
     /// prost-reflect checking its type again.
     pub scalar: Option<Discriminant<Value>>,
-    /// A `required` field (proto2).
-    pub required: bool,
+    /// A field with presence (not repeated) whose default value costs
+    /// nothing to make: `required` ones (set whenever encoded) and optional
+    /// ones of a scalar kind other than enum.
+    lookup_once: bool,
+    /// How the codec is called: built-in codecs without dynamic dispatch.
+    plan: Plan,
+}
+
+/// The codec of a field when it is one of the built-in codecs called
+/// directly (found by its type when the field's codec is built).
+#[derive(Debug)]
+enum Plan {
+    /// The default numeric codec.
+    Numeric(Arc<NumericCodec>),
+    /// The default message codec: an embedded message is decoded in place.
+    Message(Arc<MessageCodec>),
+    /// Any other codec, through the trait object.
+    Dyn,
+}
+
+impl Plan {
+    fn of(codec: &Arc<dyn FieldCodec>) -> Plan {
+        let any: Arc<dyn Any + Send + Sync> = codec.clone();
+        match any.downcast::<NumericCodec>() {
+            Ok(numeric) => Plan::Numeric(numeric),
+            Err(any) => match any.downcast::<MessageCodec>() {
+                Ok(message) => Plan::Message(message),
+                Err(_) => Plan::Dyn,
+            },
+        }
+    }
 }
 
 impl FieldEntry {
+    /// Writes one value (`None`: not set) with the field's codec.
+    #[inline]
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        match &self.plan {
+            Plan::Numeric(numeric) => numeric.encode(out, value, ctx),
+            Plan::Message(message) => message.encode(out, value, ctx),
+            Plan::Dyn => self.codec.encode(out, value, ctx),
+        }
+    }
+
     /// Fewest bits of this field.
     pub fn min_size(&self) -> u32 {
         match self.repeat {
@@ -324,11 +370,15 @@ impl MessageCodec {
         };
         Ok(FieldEntry {
             field: field.clone(),
-            codec,
             repeat,
             oneof,
             scalar: scalar_discriminant(&field.kind()),
-            required: field.cardinality() == Cardinality::Required,
+            lookup_once: field.supports_presence()
+                && repeat.is_none()
+                && (field.cardinality() == Cardinality::Required
+                    || !matches!(field.kind(), Kind::Message(_) | Kind::Enum(_))),
+            plan: Plan::of(&codec),
+            codec,
         })
     }
 
@@ -410,26 +460,48 @@ impl MessageCodec {
             } else if let Some((i, j)) = f.oneof {
                 // At most one member is set: the case written above.
                 if cases[i] == j + 1 {
-                    f.codec
-                        .encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
+                    f.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
                 } else {
                     Ok(())
                 }
-            } else if f.required {
-                // A required field is set (checked before encoding); a value
-                // in the message is what `get_field` borrows.
+            } else if f.lookup_once {
+                // Set or not, one look-up: a field with presence is set when
+                // `get_field` borrows its value from the message (an unset
+                // one costs a cheap default value).
                 match msg.get_field(&f.field) {
-                    Cow::Borrowed(v) => f.codec.encode(out, Some(v), ctx),
-                    Cow::Owned(_) => f.codec.encode(out, None, ctx),
+                    Cow::Borrowed(v) => f.encode(out, Some(v), ctx),
+                    Cow::Owned(_) => f.encode(out, None, ctx),
                 }
             } else if msg.has_field(&f.field) {
-                f.codec
-                    .encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
+                f.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
             } else {
-                f.codec.encode(out, None, ctx)
+                f.encode(out, None, ctx)
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
             ctx.name_changes(mark, || f.field.name().to_string());
+        }
+        Ok(())
+    }
+
+    /// Reads an embedded message (presence bit included) straight into the
+    /// field `field` of `parent`, which does not hold it yet.
+    fn decode_in_place(
+        &self,
+        input: &mut BitReader<'_>,
+        parent: &mut DynamicMessage,
+        field: &FieldDescriptor,
+        ctx: &DecodeContext,
+    ) -> Result<(), CodecError> {
+        if self.presence && !input.read_bool()? {
+            return Ok(());
+        }
+        let Value::Message(child) = parent.get_field_mut(field) else {
+            return Err(CodecError::new("not a message field"));
+        };
+        self.decode_fields(input, child, ctx)?;
+        if self.version < 3 && child.fields().next().is_none() {
+            // Version 2 has no presence bit: an empty message is not set.
+            parent.clear_field(field);
         }
         Ok(())
     }
@@ -477,11 +549,22 @@ impl MessageCodec {
                         continue;
                     }
                 }
-                f.codec.decode(input, ctx).and_then(|value| match value {
-                    Some(v @ Value::Message(_)) => merge_set(msg, &f.field, v),
-                    Some(v) => store(msg, f, v),
-                    None => Ok(()),
-                })
+                match &f.plan {
+                    Plan::Numeric(numeric) => numeric.decode_value(input).map(|value| {
+                        if let Some(v) = value {
+                            // The numeric codec's values are of the field's kind.
+                            *msg.get_field_mut(&f.field) = v;
+                        }
+                    }),
+                    Plan::Message(message) if !msg.has_field(&f.field) => {
+                        message.decode_in_place(input, msg, &f.field, ctx)
+                    }
+                    _ => f.codec.decode(input, ctx).and_then(|value| match value {
+                        Some(v @ Value::Message(_)) => merge_set(msg, &f.field, v),
+                        Some(v) => store(msg, f, v),
+                        None => Ok(()),
+                    }),
+                }
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
         }
@@ -650,9 +733,9 @@ fn scalar_discriminant(kind: &Kind) -> Option<Discriminant<Value>> {
 fn store(msg: &mut DynamicMessage, f: &FieldEntry, value: Value) -> Result<(), CodecError> {
     if let Some(kind) = f.scalar {
         let fits = match (&value, f.repeat) {
-            (Value::List(items), Some(_)) => items
-                .iter()
-                .all(|v| std::mem::discriminant(v) == kind),
+            (Value::List(items), Some(_)) => {
+                items.iter().all(|v| std::mem::discriminant(v) == kind)
+            }
             (Value::List(_), None) => false,
             (v, None) => std::mem::discriminant(v) == kind,
             (_, Some(_)) => false,
