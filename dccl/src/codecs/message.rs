@@ -14,7 +14,10 @@ use std::mem::Discriminant;
 use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
 
 use crate::bits::{BitReader, BitWriter};
+use crate::codecs::boolean::BoolCodec;
+use crate::codecs::enumeration::EnumCodec;
 use crate::codecs::numeric::NumericCodec;
+use crate::codecs::var_bytes::VarBytesCodec;
 use crate::error::CodecError;
 use crate::field_codec::{
     DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart, RepeatBounds,
@@ -37,8 +40,8 @@ pub(crate) struct FieldEntry {
     /// `(oneof index in the message, member index)` of a version 4 oneof member.
     pub oneof: Option<(usize, usize)>,
     /// The kind of value (or of list element) the field holds, when it is
-    /// not a message: a decoded value of that kind is stored without
-    /// prost-reflect checking its type again.
+    /// not a message: a decoded list of that kind is stored without
+    /// prost-reflect checking its elements again.
     pub scalar: Option<Discriminant<Value>>,
     /// A field with presence (not repeated) whose default value costs
     /// nothing to make: `required` ones (set whenever encoded) and optional
@@ -49,11 +52,19 @@ pub(crate) struct FieldEntry {
 }
 
 /// The codec of a field when it is one of the built-in codecs called
-/// directly (found by its type when the field's codec is built).
+/// directly (found by its type when the field's codec is built): the
+/// compiler then sees the codec's code where it is called, and values come
+/// back without going through a trait object.
 #[derive(Debug)]
 enum Plan {
     /// The default numeric codec.
     Numeric(Arc<NumericCodec>),
+    /// The default bool codec.
+    Bool(Arc<BoolCodec>),
+    /// The default enum codec.
+    Enum(Arc<EnumCodec>),
+    /// The length-prefixed string and bytes codec.
+    VarBytes(Arc<VarBytesCodec>),
     /// The default message codec: an embedded message is decoded in place.
     Message(Arc<MessageCodec>),
     /// Any other codec, through the trait object.
@@ -63,14 +74,54 @@ enum Plan {
 impl Plan {
     fn of(codec: &Arc<dyn FieldCodec>) -> Plan {
         let any: Arc<dyn Any + Send + Sync> = codec.clone();
-        match any.downcast::<NumericCodec>() {
-            Ok(numeric) => Plan::Numeric(numeric),
-            Err(any) => match any.downcast::<MessageCodec>() {
-                Ok(message) => Plan::Message(message),
-                Err(_) => Plan::Dyn,
-            },
+        let any = match any.downcast::<NumericCodec>() {
+            Ok(c) => return Plan::Numeric(c),
+            Err(any) => any,
+        };
+        let any = match any.downcast::<BoolCodec>() {
+            Ok(c) => return Plan::Bool(c),
+            Err(any) => any,
+        };
+        let any = match any.downcast::<EnumCodec>() {
+            Ok(c) => return Plan::Enum(c),
+            Err(any) => any,
+        };
+        let any = match any.downcast::<VarBytesCodec>() {
+            Ok(c) => return Plan::VarBytes(c),
+            Err(any) => any,
+        };
+        match any.downcast::<MessageCodec>() {
+            Ok(c) => Plan::Message(c),
+            Err(_) => Plan::Dyn,
         }
     }
+}
+
+impl Plan {
+    /// Whether a value the codec decodes is of the field's kind (the
+    /// built-in scalar codecs': made for that kind), so it is stored without
+    /// another check (the cheapest insertion for these kinds).
+    fn values_fit(&self) -> bool {
+        matches!(self, Plan::Numeric(_) | Plan::Bool(_) | Plan::VarBytes(_))
+    }
+}
+
+/// Evaluates `$body` with `$c` bound to the field's codec: the concrete
+/// built-in codec of its plan, else the trait object.
+macro_rules! with_codec {
+    ($entry:expr, |$c:ident| $body:expr) => {
+        match &$entry.plan {
+            Plan::Numeric($c) => $body,
+            Plan::Bool($c) => $body,
+            Plan::Enum($c) => $body,
+            Plan::VarBytes($c) => $body,
+            Plan::Message($c) => $body,
+            Plan::Dyn => {
+                let $c = &$entry.codec;
+                $body
+            }
+        }
+    };
 }
 
 impl FieldEntry {
@@ -82,11 +133,7 @@ impl FieldEntry {
         value: Option<&Value>,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        match &self.plan {
-            Plan::Numeric(numeric) => numeric.encode(out, value, ctx),
-            Plan::Message(message) => message.encode(out, value, ctx),
-            Plan::Dyn => self.codec.encode(out, value, ctx),
-        }
+        with_codec!(self, |c| c.encode(out, value, ctx))
     }
 
     /// Fewest bits of this field.
@@ -452,7 +499,9 @@ impl MessageCodec {
             let mark = ctx.change_mark();
             let result = if let Some(bounds) = f.repeat {
                 match msg.get_field(&f.field).as_ref() {
-                    Value::List(values) => f.codec.encode_repeated(out, values, bounds, ctx),
+                    Value::List(values) => {
+                        with_codec!(f, |c| c.encode_repeated(out, values, bounds, ctx))
+                    }
                     other => Err(CodecError::new(format!(
                         "expected a list for a repeated field, got {other:?}"
                     ))),
@@ -526,23 +575,21 @@ impl MessageCodec {
         }
         for f in &self.fields {
             let result = if let Some(bounds) = f.repeat {
-                f.codec
-                    .decode_repeated(input, bounds, ctx)
-                    .and_then(|mut values| {
-                        if values.is_empty() {
-                            return Ok(());
+                with_codec!(f, |c| c.decode_repeated(input, bounds, ctx)).and_then(|mut values| {
+                    if values.is_empty() {
+                        return Ok(());
+                    }
+                    // Version 2 reads a repeated embedded message in both
+                    // parts: the body's elements follow the head's.
+                    if msg.has_field(&f.field) {
+                        if let Value::List(head) = msg.get_field(&f.field).as_ref() {
+                            let mut all = head.clone();
+                            all.append(&mut values);
+                            values = all;
                         }
-                        // Version 2 reads a repeated embedded message in both
-                        // parts: the body's elements follow the head's.
-                        if msg.has_field(&f.field) {
-                            if let Value::List(head) = msg.get_field(&f.field).as_ref() {
-                                let mut all = head.clone();
-                                all.append(&mut values);
-                                values = all;
-                            }
-                        }
-                        store(msg, f, Value::List(values))
-                    })
+                    }
+                    store(msg, f, Value::List(values))
+                })
             } else {
                 if let Some((i, j)) = f.oneof {
                     if cases[i] != j + 1 {
@@ -550,18 +597,21 @@ impl MessageCodec {
                     }
                 }
                 match &f.plan {
-                    Plan::Numeric(numeric) => numeric.decode_value(input).map(|value| {
-                        if let Some(v) = value {
-                            // The numeric codec's values are of the field's kind.
-                            *msg.get_field_mut(&f.field) = v;
-                        }
-                    }),
                     Plan::Message(message) if !msg.has_field(&f.field) => {
                         message.decode_in_place(input, msg, &f.field, ctx)
                     }
-                    _ => f.codec.decode(input, ctx).and_then(|value| match value {
+                    Plan::Numeric(numeric) => numeric.decode_value(input).map(|value| {
+                        if let Some(v) = value {
+                            *msg.get_field_mut(&f.field) = v;
+                        }
+                    }),
+                    _ => with_codec!(f, |c| c.decode(input, ctx)).and_then(|value| match value {
                         Some(v @ Value::Message(_)) => merge_set(msg, &f.field, v),
-                        Some(v) => store(msg, f, v),
+                        Some(v) if f.plan.values_fit() => {
+                            *msg.get_field_mut(&f.field) = v;
+                            Ok(())
+                        }
+                        Some(v) => set(msg, &f.field, v),
                         None => Ok(()),
                     }),
                 }
@@ -731,20 +781,21 @@ fn scalar_discriminant(kind: &Kind) -> Option<Discriminant<Value>> {
 /// the field's non-message kind directly, anything else through
 /// [`set`]'s type check.
 fn store(msg: &mut DynamicMessage, f: &FieldEntry, value: Value) -> Result<(), CodecError> {
-    if let Some(kind) = f.scalar {
-        let fits = match (&value, f.repeat) {
-            (Value::List(items), Some(_)) => {
-                items.iter().all(|v| std::mem::discriminant(v) == kind)
-            }
-            (Value::List(_), None) => false,
-            (v, None) => std::mem::discriminant(v) == kind,
-            (_, Some(_)) => false,
+    if let (Value::List(items), Some(_)) = (&value, f.repeat) {
+        // A list of the field's kind replaces the (new, empty) default list:
+        // no second check of every element, and the cheapest insertion.
+        let fits = match f.scalar {
+            Some(kind) => items.iter().all(|v| std::mem::discriminant(v) == kind),
+            // The message codec's elements are messages of the field's type.
+            None => matches!(f.plan, Plan::Message(_)),
         };
         if fits {
             *msg.get_field_mut(&f.field) = value;
             return Ok(());
         }
     }
+    // One value: prost-reflect's check costs less than making the default
+    // value `get_field_mut` would replace.
     set(msg, &f.field, value)
 }
 
