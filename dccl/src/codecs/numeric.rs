@@ -141,6 +141,34 @@ pub struct NumericBounds {
     pub bits: u32,
     /// What every value's encoding and decoding computes from the bounds alone.
     derived: Derived,
+    /// The words of the changes reported for the field.
+    texts: ChangeTexts,
+}
+
+/// The parts of a value-change report that depend on the bounds only,
+/// written once.
+#[derive(Debug, Clone)]
+struct ChangeTexts {
+    /// `[min, max]`.
+    range: String,
+    /// What is done with an out-of-range value.
+    out_of_range: String,
+    /// What is done with NaN.
+    nan: String,
+}
+
+impl ChangeTexts {
+    fn of(min: f64, max: f64, required: bool, absent_reason: &str) -> ChangeTexts {
+        ChangeTexts {
+            range: format!("[{min}, {max}]"),
+            out_of_range: if required {
+                format!("sent as the minimum {min} ({absent_reason})")
+            } else {
+                "sent as not present".to_string()
+            },
+            nan: format!("sent as the minimum {min}"),
+        }
+    }
 }
 
 /// The parts of the reference's arithmetic that depend on the bounds only,
@@ -290,13 +318,15 @@ impl NumericBounds {
     pub fn new(kind: WireKind, min: f64, max: f64, resolution: f64, required: bool) -> Self {
         let null = if required { 0.0 } else { 1.0 };
         let bits = ceil_log2_f64((max - min) / resolution + 1.0 + null);
+        let absent_reason = "the field is required".to_string();
         NumericBounds {
             kind,
             min,
             max,
             resolution,
             required,
-            absent_reason: "the field is required".to_string(),
+            texts: ChangeTexts::of(min, max, required, &absent_reason),
+            absent_reason,
             bits,
             derived: Derived::of(kind, min, resolution),
         }
@@ -305,6 +335,7 @@ impl NumericBounds {
     /// The same bounds, with `reason` told when a value is sent as the
     /// minimum of a field with no "not present" value.
     pub fn with_absent_reason(mut self, reason: String) -> Self {
+        self.texts = ChangeTexts::of(self.min, self.max, self.required, &reason);
         self.absent_reason = reason;
         self
     }
@@ -400,7 +431,7 @@ impl NumericBounds {
             // libdccl's bound check lets NaN through (every comparison is
             // false) and the conversion to an integer then yields 0: the minimum.
             if ctx.reports_changes() {
-                ctx.value_changed(|| "NaN".to_string(), &self.sent_as_minimum())?;
+                ctx.value_changed(|| "NaN".to_string(), &self.texts.nan)?;
             }
             self.write_minimum(out);
             return Ok(());
@@ -424,29 +455,14 @@ impl NumericBounds {
     #[cold]
     fn report_out_of_range(&self, value: WireValue, ctx: &EncodeContext) -> Result<(), CodecError> {
         ctx.value_changed(
-            || {
-                format!(
-                    "{} is out of range [{}, {}]",
-                    display(value),
-                    self.min,
-                    self.max
-                )
-            },
-            &if self.required {
-                format!("sent as the minimum {} ({})", self.min, self.absent_reason)
-            } else {
-                "sent as not present".to_string()
-            },
+            || format!("{} is out of range {}", display(value), self.texts.range),
+            &self.texts.out_of_range,
         )
     }
 
     /// Writes the minimum value (as a present value for optional fields).
     pub fn write_minimum(&self, out: &mut BitWriter) {
         out.write(u64::from(!self.required), self.bits);
-    }
-
-    fn sent_as_minimum(&self) -> String {
-        format!("sent as the minimum {}", self.min)
     }
 
     /// Reads a value; `None` is "not present".
