@@ -14,6 +14,7 @@ use crate::bits::{BitReader, BitWriter};
 use crate::changes::{ChangeLog, ValueChange};
 use crate::codecs::arithmetic::{ArithmeticModel, ArithmeticSession, ArithmeticState, SharedState};
 use crate::codecs::identifier;
+use crate::codecs::message::MessageCodec;
 use crate::crypto::CryptoKey;
 use crate::error::{CodecError, Error, Result};
 use crate::field_codec::{
@@ -21,6 +22,7 @@ use crate::field_codec::{
 };
 use crate::options::{has_message_options, message_options};
 use crate::registry::CodecRegistry;
+use crate::wire::{Plans, WireMessage};
 
 /// A loaded message type with its codecs and sizes.
 #[derive(Debug)]
@@ -39,6 +41,44 @@ pub(crate) struct LoadedMessage {
     pub(crate) hash: u64,
     /// Whether decoding reads the clock (a field's codec does).
     pub(crate) reads_clock: bool,
+    /// How messages given as protobuf bytes are encoded without a
+    /// `DynamicMessage`, when the type's codecs allow it.
+    pub(crate) wire: Option<WireEncoding>,
+}
+
+/// The wire plans of a loaded type and its header and body codecs (the
+/// default message codec).
+#[derive(Debug)]
+pub(crate) struct WireEncoding {
+    plans: Plans,
+    head: Arc<MessageCodec>,
+    body: Arc<MessageCodec>,
+}
+
+impl WireEncoding {
+    fn of(
+        desc: &MessageDescriptor,
+        head: &Arc<dyn FieldCodec>,
+        body: &Arc<dyn FieldCodec>,
+    ) -> Option<WireEncoding> {
+        let message_codec = |codec: &Arc<dyn FieldCodec>| {
+            let any: Arc<dyn std::any::Any + Send + Sync> = codec.clone();
+            any.downcast::<MessageCodec>().ok().filter(|m| m.wire_ok())
+        };
+        Some(WireEncoding {
+            head: message_codec(head)?,
+            body: message_codec(body)?,
+            plans: Plans::of(desc)?,
+        })
+    }
+}
+
+/// The message a codec encodes: a `DynamicMessage`, or one read from
+/// protobuf bytes.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Dynamic(&'a DynamicMessage),
+    Wire(&'a WireEncoding, WireMessage<'a>),
 }
 
 impl LoadedMessage {
@@ -479,6 +519,7 @@ impl Codec {
         let body = make(MessagePart::Body)?;
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
         let reads_clock = head.reads_clock() || body.reads_clock();
+        let wire = WireEncoding::of(desc, &head, &body);
         let loaded = LoadedMessage {
             descriptor: desc.clone(),
             id,
@@ -490,6 +531,7 @@ impl Codec {
             required: RequiredFields::of(desc, 0),
             hash: 0,
             reads_clock,
+            wire,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -591,13 +633,54 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
-        let desc = msg.descriptor();
-        let name = desc.full_name();
-        let loaded = self.get(name)?;
-        loaded
-            .required
-            .check(msg)
-            .map_err(|e| e.into_encode(name))?;
+        let loaded = self.get(msg.descriptor().full_name())?;
+        self.encode_source(loaded, Source::Dynamic(msg), out, dry_run, changes)
+    }
+
+    /// Encodes a message of the loaded type `full_name` given as protobuf
+    /// wire bytes, appending to `out`.
+    fn encode_protobuf_with(
+        &self,
+        full_name: &str,
+        protobuf: &[u8],
+        out: &mut Vec<u8>,
+        changes: Option<&ChangeLog>,
+    ) -> Result<()> {
+        let loaded = self.get(full_name)?;
+        if let Some(wire) = &loaded.wire {
+            if let Some(flat) = wire.plans.read(protobuf) {
+                let source = Source::Wire(wire, flat.root());
+                return self.encode_source(loaded, source, out, false, changes);
+            }
+        }
+        // Not in the form the plans read (or a type they do not take):
+        // prost-reflect decodes it, or says why it cannot.
+        let msg = DynamicMessage::decode(loaded.descriptor.clone(), protobuf).map_err(|e| {
+            Error::Encode {
+                location: crate::error::Location {
+                    message: full_name.to_string(),
+                    field: String::new(),
+                },
+                reason: format!("not a valid protobuf message of that type: {e}"),
+            }
+        })?;
+        self.encode_source(loaded, Source::Dynamic(&msg), out, false, changes)
+    }
+
+    fn encode_source(
+        &self,
+        loaded: &LoadedMessage,
+        msg: Source<'_>,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+    ) -> Result<()> {
+        let name = loaded.descriptor.full_name();
+        match msg {
+            Source::Dynamic(m) => loaded.required.check(m),
+            Source::Wire(_, m) => loaded.required.check_wire(m),
+        }
+        .map_err(|e| e.into_encode(name))?;
         let session = ArithmeticSession::new(
             self.registry.arithmetic_models(),
             &self.arithmetic,
@@ -640,18 +723,63 @@ impl Codec {
     /// body starts (in bytes from the start of `out`).
     fn encode_parts(
         loaded: &LoadedMessage,
-        msg: &DynamicMessage,
+        msg: Source<'_>,
         ctx: &EncodeContext,
         out: &mut BitWriter,
     ) -> std::result::Result<usize, CodecError> {
         if !loaded.omit_id {
             identifier::encode(out, loaded.id)?;
         }
-        loaded.head.encode_message(out, msg, ctx)?;
+        match msg {
+            Source::Dynamic(m) => loaded.head.encode_message(out, m, ctx)?,
+            Source::Wire(wire, m) => wire.head.encode_fields_wire(out, m, ctx)?,
+        }
         out.pad_to_byte();
         let head_end = out.as_bytes().len();
-        loaded.body.encode_message(out, msg, ctx)?;
+        match msg {
+            Source::Dynamic(m) => loaded.body.encode_message(out, m, ctx)?,
+            Source::Wire(wire, m) => wire.body.encode_fields_wire(out, m, ctx)?,
+        }
         Ok(head_end)
+    }
+
+    /// Encodes a message of the loaded type `full_name` given as protobuf
+    /// wire bytes (its protobuf encoding, as any protobuf library writes
+    /// it), appending the DCCL bytes to `out`: the bytes [`Codec::encode`]
+    /// gives for the message those bytes decode to, without decoding them
+    /// to a `DynamicMessage` first when the type's codecs allow it (every
+    /// message field coded by the default message codec). Unknown fields
+    /// are ignored, as `encode` ignores them. Errors: the type is not
+    /// loaded ([`Error::UnknownType`]); the bytes are not a protobuf
+    /// message of the type ([`Error::Encode`], "not a valid protobuf message
+    /// of that type"); what `encode` refuses.
+    pub fn encode_protobuf_into(
+        &self,
+        full_name: &str,
+        protobuf: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Result<()> {
+        self.encode_protobuf_with(full_name, protobuf, out, None)
+    }
+
+    /// [`Codec::encode_protobuf_into`], also reporting every value the
+    /// codec changed, as [`Codec::encode_with_changes`] does.
+    pub fn encode_protobuf_with_changes(
+        &self,
+        full_name: &str,
+        protobuf: &[u8],
+    ) -> Result<(Vec<u8>, Vec<ValueChange>)> {
+        let log = ChangeLog::new();
+        let mut out = Vec::new();
+        self.encode_protobuf_with(full_name, protobuf, &mut out, Some(&log))?;
+        Ok((out, log.into_changes(full_name)))
+    }
+
+    /// Whether a field of the loaded type `full_name` is coded by a codec
+    /// that restores a date from the receiver's clock (`dccl.time`): only
+    /// such a type's messages can have [`Codec::moved_dates`].
+    pub fn restores_dates(&self, full_name: &str) -> Result<bool> {
+        Ok(self.get(full_name)?.reads_clock)
     }
 
     /// Encodes a prost-generated struct (deriving `ReflectMessage`) of a
@@ -1043,7 +1171,15 @@ fn round_to(value: f64, decimals: i32) -> f64 {
 /// into, computed once at load time.
 #[derive(Debug, Default)]
 pub(crate) struct RequiredFields {
-    fields: Vec<(prost_reflect::FieldDescriptor, bool, Option<RequiredFields>)>,
+    /// Each field to look at: its descriptor, whether it is required, the
+    /// required fields of its messages, its position (see
+    /// [`crate::wire::position`]).
+    fields: Vec<(
+        prost_reflect::FieldDescriptor,
+        bool,
+        Option<RequiredFields>,
+        usize,
+    )>,
 }
 
 impl RequiredFields {
@@ -1058,7 +1194,8 @@ impl RequiredFields {
                 _ => None,
             };
             if required || nested.is_some() {
-                fields.push((field, required, nested));
+                let position = crate::wire::position(desc, &field);
+                fields.push((field, required, nested, position));
             }
         }
         RequiredFields { fields }
@@ -1066,7 +1203,7 @@ impl RequiredFields {
 
     /// Checks that every required field (recursively) is set.
     fn check(&self, msg: &DynamicMessage) -> std::result::Result<(), CodecError> {
-        for (field, required, nested) in &self.fields {
+        for (field, required, nested, _) in &self.fields {
             let set = msg.has_field(field);
             if *required && !set {
                 return Err(CodecError::new(
@@ -1088,6 +1225,33 @@ impl RequiredFields {
                     }
                 }
                 _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// [`RequiredFields::check`] of a message read from protobuf bytes.
+    fn check_wire(&self, msg: WireMessage<'_>) -> std::result::Result<(), CodecError> {
+        for (field, required, nested, position) in &self.fields {
+            let set = msg.is_set(*position);
+            if *required && !set {
+                return Err(CodecError::new(
+                    "message is not properly initialized: required field is not set",
+                )
+                .in_field(field.name()));
+            }
+            let Some(nested) = nested else { continue };
+            if !set {
+                continue;
+            }
+            if field.is_list() {
+                for item in msg.messages(*position) {
+                    nested
+                        .check_wire(item)
+                        .map_err(|e| e.in_field(field.name()))?;
+                }
+            } else if let Some(m) = msg.message(*position) {
+                nested.check_wire(m).map_err(|e| e.in_field(field.name()))?;
             }
         }
         Ok(())

@@ -76,6 +76,12 @@ struct Loaded {
     plan: Option<usize>,
 }
 
+thread_local! {
+    /// Where decoded messages are written before they are copied into
+    /// Python bytes (kept, so that writing one allocates nothing).
+    static SCRATCH: std::cell::RefCell<Vec<u8>> = std::cell::RefCell::new(Vec::with_capacity(256));
+}
+
 /// Numbers the codecs of the process.
 static CODECS: AtomicU64 = AtomicU64::new(0);
 
@@ -185,11 +191,6 @@ impl Codec {
     }
 
     fn parse(&self, name: &str, data: &[u8]) -> PyResult<DynamicMessage> {
-        if let Some(plan) = self.loaded.get(name).and_then(|l| l.plan) {
-            if let Some(msg) = self.wire.decode(plan, data) {
-                return Ok(msg);
-            }
-        }
         let desc = self.descriptor(name)?;
         DynamicMessage::decode(desc, data).map_err(|e| {
             DcclException::new_err(format!(
@@ -260,19 +261,25 @@ impl Codec {
                     Ok((bytes, changes))
                 })
         };
-        match encoded {
-            Ok(encoded) => Ok(encoded),
-            Err(e) => {
-                if self.strict && matches!(e, dccl::Error::Encode { .. }) {
-                    let mut lenient = self.inner.clone();
-                    lenient.set_strict(false);
-                    if lenient.encode(msg).is_ok() {
-                        return Err(DcclOutOfRangeException::new_err(e.to_string()));
-                    }
-                }
-                Err(to_py(e))
+        encoded.map_err(|e| self.strict_error(e, |lenient| lenient.encode(msg).map(drop)))
+    }
+
+    /// The exception of an encoding error: in strict mode, an error that
+    /// the lenient codec (`lenient_ok` tries it) would not raise is a value
+    /// out of its bounds, `DcclOutOfRangeException`; else `DcclException`.
+    fn strict_error(
+        &self,
+        e: dccl::Error,
+        lenient_ok: impl FnOnce(&dccl::Codec) -> dccl::Result<()>,
+    ) -> PyErr {
+        if self.strict && matches!(e, dccl::Error::Encode { .. }) {
+            let mut lenient = self.inner.clone();
+            lenient.set_strict(false);
+            if lenient_ok(&lenient).is_ok() {
+                return DcclOutOfRangeException::new_err(e.to_string());
             }
         }
+        to_py(e)
     }
 
     /// One message from `data`: found by its id, or with `name` decoded
@@ -307,6 +314,16 @@ impl Codec {
     /// `(full name, protobuf wire bytes)` of a decoded message, the name
     /// the one made when its type was loaded.
     fn decoded<'py>(&self, py: Python<'py>, msg: &DynamicMessage) -> PyResult<Bound<'py, PyTuple>> {
+        let (name, wire) = self.decoded_parts(py, msg);
+        PyTuple::new(py, [name.into_any(), wire.into_any()])
+    }
+
+    /// The full name and protobuf wire bytes of a decoded message.
+    fn decoded_parts<'py>(
+        &self,
+        py: Python<'py>,
+        msg: &DynamicMessage,
+    ) -> (Bound<'py, PyString>, Bound<'py, PyBytes>) {
         let desc = msg.descriptor();
         let loaded = self.loaded.get(desc.full_name());
         let name = match loaded {
@@ -314,25 +331,18 @@ impl Codec {
             None => PyString::new(py, desc.full_name()),
         };
         let wire = match loaded.and_then(|l| l.plan) {
-            Some(plan) => {
-                let mut out = Vec::with_capacity(128);
-                self.wire.encode(plan, msg, &mut out);
-                PyBytes::new(py, &out)
-            }
+            Some(plan) => SCRATCH.with_borrow_mut(|out| {
+                out.clear();
+                self.wire.encode(plan, msg, out);
+                PyBytes::new(py, out)
+            }),
             None => PyBytes::new(py, &msg.encode_to_vec()),
         };
-        PyTuple::new(py, [name.into_any(), wire.into_any()])
+        (name, wire)
     }
 
     /// The message of `message_type` encoded in `data` (protobuf wire bytes).
     fn parse_typed(&self, t: &MessageType, data: &[u8]) -> PyResult<DynamicMessage> {
-        if let Some((codec, plan)) = t.plan {
-            if codec == self.id {
-                if let Some(msg) = self.wire.decode(plan, data) {
-                    return Ok(msg);
-                }
-            }
-        }
         DynamicMessage::decode(t.desc.clone(), data).map_err(|e| {
             DcclException::new_err(format!(
                 "cannot encode (message {}): not a valid protobuf message of that type: {e}",
@@ -428,37 +438,51 @@ impl Codec {
         })
     }
 
-    /// Checks the fast wire path against prost-reflect on one message of
-    /// `message_type` (protobuf wire bytes): reading `data` gives the same
-    /// message (or falls back to prost-reflect), and writing that message
-    /// gives the same bytes. Raises `DcclException` saying what differs; a
-    /// test of the package, not for use.
+    /// Checks the package's protobuf paths against prost-reflect on one
+    /// message of `message_type` (protobuf wire bytes): encoding the bytes
+    /// as they are gives what decoding them with prost-reflect and
+    /// encoding that message gives (bytes and changes, or the same error),
+    /// and writing the decoded message gives prost-reflect's bytes. Raises
+    /// `DcclException` saying what differs; a test of the package, not for use.
     fn check_wire(&self, message_type: &Bound<'_, MessageType>, data: &[u8]) -> PyResult<()> {
         let t = message_type.get();
+        let name = t.desc.full_name();
         let Some((_, plan)) = t.plan.filter(|(codec, _)| *codec == self.id) else {
             return Err(DcclException::new_err(format!(
-                "{}: no wire plan in this codec",
-                t.desc.full_name()
+                "{name}: no wire plan in this codec"
             )));
         };
-        let reference = DynamicMessage::decode(t.desc.clone(), data).ok();
-        let fast = self.wire.decode(plan, data);
-        if let Some(fast) = &fast {
-            if reference.as_ref() != Some(fast) {
-                return Err(DcclException::new_err(format!(
-                    "{}: the fast path reads {fast:?}, prost-reflect {reference:?}",
-                    t.desc.full_name()
-                )));
-            }
+        let show = |r: dccl::Result<(Vec<u8>, Vec<dccl::ValueChange>)>| match r {
+            Ok((bytes, changes)) => format!("{bytes:02x?} {changes:?}"),
+            Err(e) => format!("error: {e}"),
+        };
+        let reference = DynamicMessage::decode(t.desc.clone(), data);
+        let direct = show(self.inner.encode_protobuf_with_changes(name, data));
+        let through = show(match &reference {
+            Ok(m) => self.inner.encode_with_changes(m),
+            Err(e) => Err(dccl::Error::Encode {
+                location: dccl::Location {
+                    message: name.to_string(),
+                    field: String::new(),
+                },
+                reason: format!("not a valid protobuf message of that type: {e}"),
+            }),
+        });
+        if direct != through {
+            return Err(DcclException::new_err(format!(
+                "{name}: encoding the bytes gives {direct}, through prost-reflect {through}"
+            )));
         }
         // Written are messages the codec decoded: without unknown fields.
-        if let Some(reference) = reference.filter(|m| m.unknown_fields().next().is_none()) {
+        if let Some(reference) = reference
+            .ok()
+            .filter(|m| m.unknown_fields().next().is_none())
+        {
             let mut out = Vec::new();
             self.wire.encode(plan, &reference, &mut out);
             if out != reference.encode_to_vec() {
                 return Err(DcclException::new_err(format!(
-                    "{}: the fast path writes {out:02x?}, prost-reflect {:02x?}",
-                    t.desc.full_name(),
+                    "{name}: the plan writes {out:02x?}, prost-reflect {:02x?}",
                     reference.encode_to_vec()
                 )));
             }
@@ -502,8 +526,29 @@ impl Codec {
         message_type: &Bound<'py, MessageType>,
         data: &[u8],
     ) -> PyResult<Bound<'py, PyBytes>> {
-        let msg = self.parse_typed(message_type.get(), data)?;
-        let (bytes, changes) = self.encode_checked(py, &msg)?;
+        let t = message_type.get();
+        let name = t.desc.full_name();
+        let ignored = self.changes_ignored(py);
+        let (bytes, changes) = if ignored || !self.inner.restores_dates(name).unwrap_or(true) {
+            // The protobuf bytes encoded as they are (no dynamic message),
+            // unless dates the receiver would move are to be told.
+            let encoded = if ignored {
+                let mut out = Vec::with_capacity(64);
+                self.inner
+                    .encode_protobuf_into(name, data, &mut out)
+                    .map(|()| (out, Vec::new()))
+            } else {
+                self.inner.encode_protobuf_with_changes(name, data)
+            };
+            encoded.map_err(|e| {
+                self.strict_error(e, |lenient| {
+                    lenient.encode_protobuf_into(name, data, &mut Vec::new())
+                })
+            })?
+        } else {
+            let msg = self.parse_typed(t, data)?;
+            self.encode_checked(py, &msg)?
+        };
         let bytes = PyBytes::new(py, &bytes);
         warn_changes(py, self.python.as_ref(), &changes)?;
         Ok(bytes)
@@ -584,13 +629,13 @@ impl Codec {
                 "decode_message: the codec was made without the package's classes",
             )
         })?;
-        let decoded = self.decoded(py, &msg)?;
-        let name = decoded.get_item(0)?;
+        let (name, wire) = self.decoded_parts(py, &msg);
+        drop(msg);
         let class = match side.classes.bind(py).get_item(&name)? {
             Some(class) => class,
             None => side.message_class.bind(py).call1((&name,))?,
         };
-        class.call_method1(intern!(py, "FromString"), (decoded.get_item(1)?,))
+        class.call_method1(intern!(py, "FromString"), (wire,))
     }
 
     /// Decodes every message of a frame of concatenated messages; returns `[(full name, wire bytes)]`.

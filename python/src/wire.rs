@@ -1,23 +1,15 @@
-//! The protobuf wire form of the messages crossing between Python and the
-//! codec, read and written from a plan made once per message type (its
-//! fields in number order, each with its kind and key) instead of through
-//! prost-reflect's descriptor look-ups for every field of every message.
-//!
-//! Writing gives exactly prost-reflect's bytes (fields in number order,
-//! repeated fields packed as the descriptor says). Reading takes the simple
-//! form every protobuf library writes (known fields, each with its own
-//! wire type, packed or not) and gives exactly the message prost-reflect's
-//! decoding does; anything else (an unknown field, a group, a map, a
-//! malformed varint, invalid UTF-8 ...) makes [`Plans::decode`] answer
-//! `None`, and the caller decodes with prost-reflect, which keeps the
-//! unknown fields and words the errors.
+//! The protobuf wire form of the decoded messages handed to Python,
+//! written from a plan made once per message type (its fields in number
+//! order, each with its kind) instead of through prost-reflect's
+//! descriptor look-ups for every field of every message: exactly
+//! prost-reflect's bytes (fields in number order, repeated fields packed as
+//! the descriptor says). Messages going the other way are encoded from
+//! their protobuf bytes by the `dccl` crate (`Codec::encode_protobuf_into`).
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 
 use dccl::prost_reflect::{DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
-
-/// Deepest nesting read (prost's own recursion limit).
-const MAX_DEPTH: usize = 100;
 
 /// The kind of a field as its wire form needs it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -69,11 +61,13 @@ struct FieldPlan {
     kind: WireKind,
     list: bool,
     packed: bool,
+    /// A field with presence whose default value costs nothing to make: it
+    /// is set when `get_field` borrows its value (one look-up, not two).
+    lookup_once: bool,
 }
 
 #[derive(Debug)]
 struct TypePlan {
-    desc: MessageDescriptor,
     /// The fields in number order.
     fields: Vec<FieldPlan>,
 }
@@ -110,10 +104,7 @@ impl Plans {
             return (i != usize::MAX).then_some(i);
         }
         let index = self.types.len();
-        self.types.push(TypePlan {
-            desc: desc.clone(),
-            fields: Vec::new(),
-        });
+        self.types.push(TypePlan { fields: Vec::new() });
         self.by_name.insert(desc.full_name().to_string(), index);
         let mut fields = Vec::new();
         for field in desc.fields() {
@@ -144,6 +135,9 @@ impl Plans {
                 kind,
                 list: field.is_list(),
                 packed: field.is_packed(),
+                lookup_once: field.supports_presence()
+                    && !field.is_list()
+                    && !matches!(kind, WireKind::Message(_) | WireKind::Enum),
                 field,
             });
         }
@@ -156,10 +150,16 @@ impl Plans {
     /// to `out`: the bytes prost-reflect's `encode_to_vec` gives.
     pub fn encode(&self, plan: usize, msg: &DynamicMessage, out: &mut Vec<u8>) {
         for f in &self.types[plan].fields {
-            if !msg.has_field(&f.field) {
+            let value = if f.lookup_once {
+                match msg.get_field(&f.field) {
+                    value @ Cow::Borrowed(_) => value,
+                    Cow::Owned(_) => continue,
+                }
+            } else if msg.has_field(&f.field) {
+                msg.get_field(&f.field)
+            } else {
                 continue;
-            }
-            let value = msg.get_field(&f.field);
+            };
             match (value.as_ref(), f.list) {
                 (Value::List(items), true) if f.packed && f.kind.packable() => {
                     key(out, f.number, 2);
@@ -229,121 +229,6 @@ impl Plans {
             _ => unreachable!("a dynamic message holds a value of its field's kind"),
         }
     }
-
-    /// The message of the type of plan `plan` encoded in `data`, read as
-    /// prost-reflect reads it; `None` when `data` is not in the simple form
-    /// (see the module's documentation).
-    pub fn decode(&self, plan: usize, data: &[u8]) -> Option<DynamicMessage> {
-        let mut msg = DynamicMessage::new(self.types[plan].desc.clone());
-        self.merge(plan, data, &mut msg, 0)?;
-        Some(msg)
-    }
-
-    fn merge(
-        &self,
-        plan: usize,
-        mut data: &[u8],
-        msg: &mut DynamicMessage,
-        depth: usize,
-    ) -> Option<()> {
-        if depth > MAX_DEPTH {
-            return None;
-        }
-        let fields = &self.types[plan].fields;
-        // Elements of repeated fields, in the order read, added at the end.
-        let mut lists: Vec<(usize, Vec<Value>)> = Vec::new();
-        while !data.is_empty() {
-            let k = read_varint(&mut data)?;
-            let (number, wire_type) = (u32::try_from(k >> 3).ok()?, (k & 7) as u8);
-            let i = fields.binary_search_by_key(&number, |f| f.number).ok()?;
-            let f = &fields[i];
-            if f.list {
-                let list = match lists.iter_mut().position(|(j, _)| *j == i) {
-                    Some(at) => &mut lists[at].1,
-                    None => {
-                        lists.push((i, Vec::new()));
-                        &mut lists.last_mut()?.1
-                    }
-                };
-                if wire_type == 2 && f.kind.packable() {
-                    let len = usize::try_from(read_varint(&mut data)?).ok()?;
-                    let mut packed = take(&mut data, len)?;
-                    while !packed.is_empty() {
-                        list.push(self.read(f.kind, &mut packed, depth)?);
-                    }
-                } else if wire_type == f.kind.wire_type() {
-                    list.push(self.read(f.kind, &mut data, depth)?);
-                } else {
-                    return None;
-                }
-            } else if wire_type != f.kind.wire_type() {
-                return None;
-            } else if let WireKind::Message(p) = f.kind {
-                // As prost-reflect: into the message the field holds (a new
-                // one when unset), so a message given twice is merged.
-                let len = usize::try_from(read_varint(&mut data)?).ok()?;
-                let bytes = take(&mut data, len)?;
-                let Value::Message(child) = msg.get_field_mut(&f.field) else {
-                    return None;
-                };
-                self.merge(p, bytes, child, depth + 1)?;
-            } else {
-                let v = self.read(f.kind, &mut data, depth)?;
-                *msg.get_field_mut(&f.field) = v;
-            }
-        }
-        for (i, values) in lists {
-            match msg.get_field_mut(&fields[i].field) {
-                Value::List(existing) => existing.extend(values),
-                _ => return None,
-            }
-        }
-        Some(())
-    }
-
-    /// One value of `kind` (an embedded message read whole). Inlined: a
-    /// value returned through memory is read back before its parts are
-    /// written, which stalls.
-    #[inline(always)]
-    fn read(&self, kind: WireKind, data: &mut &[u8], depth: usize) -> Option<Value> {
-        Some(match kind {
-            WireKind::Double => Value::F64(f64::from_le_bytes(fixed(data)?)),
-            WireKind::Float => Value::F32(f32::from_le_bytes(fixed(data)?)),
-            WireKind::Int32 => Value::I32(read_varint(data)? as i32),
-            WireKind::Int64 => Value::I64(read_varint(data)? as i64),
-            WireKind::Uint32 => Value::U32(read_varint(data)? as u32),
-            WireKind::Uint64 => Value::U64(read_varint(data)?),
-            WireKind::Sint32 => {
-                let u = read_varint(data)? as u32;
-                Value::I32(((u >> 1) as i32) ^ -((u & 1) as i32))
-            }
-            WireKind::Sint64 => {
-                let u = read_varint(data)?;
-                Value::I64(((u >> 1) as i64) ^ -((u & 1) as i64))
-            }
-            WireKind::Fixed32 => Value::U32(u32::from_le_bytes(fixed(data)?)),
-            WireKind::Fixed64 => Value::U64(u64::from_le_bytes(fixed(data)?)),
-            WireKind::Sfixed32 => Value::I32(i32::from_le_bytes(fixed(data)?)),
-            WireKind::Sfixed64 => Value::I64(i64::from_le_bytes(fixed(data)?)),
-            WireKind::Bool => Value::Bool(read_varint(data)? != 0),
-            WireKind::Enum => Value::EnumNumber(read_varint(data)? as i32),
-            WireKind::String => {
-                let len = usize::try_from(read_varint(data)?).ok()?;
-                Value::String(std::str::from_utf8(take(data, len)?).ok()?.to_string())
-            }
-            WireKind::Bytes => {
-                let len = usize::try_from(read_varint(data)?).ok()?;
-                Value::Bytes(take(data, len)?.to_vec().into())
-            }
-            WireKind::Message(plan) => {
-                let len = usize::try_from(read_varint(data)?).ok()?;
-                let bytes = take(data, len)?;
-                let mut m = DynamicMessage::new(self.types[plan].desc.clone());
-                self.merge(plan, bytes, &mut m, depth + 1)?;
-                Value::Message(m)
-            }
-        })
-    }
 }
 
 /// Bytes of one element of a packed list.
@@ -379,35 +264,4 @@ fn varint(out: &mut Vec<u8>, mut v: u64) {
 fn varint_len(v: u64) -> usize {
     // 1 byte per started 7 bits, at least one.
     (64 - (v | 1).leading_zeros() as usize).div_ceil(7)
-}
-
-/// A varint as prost reads one: at most 10 bytes, the tenth at most 1.
-#[inline]
-fn read_varint(data: &mut &[u8]) -> Option<u64> {
-    let mut v = 0u64;
-    for i in 0..10 {
-        let (&b, rest) = data.split_first()?;
-        *data = rest;
-        if i == 9 && b > 1 {
-            return None;
-        }
-        v |= u64::from(b & 0x7f) << (7 * i);
-        if b < 0x80 {
-            return Some(v);
-        }
-    }
-    None
-}
-
-fn take<'a>(data: &mut &'a [u8], len: usize) -> Option<&'a [u8]> {
-    if len > data.len() {
-        return None;
-    }
-    let (head, rest) = data.split_at(len);
-    *data = rest;
-    Some(head)
-}
-
-fn fixed<const N: usize>(data: &mut &[u8]) -> Option<[u8; N]> {
-    take(data, N)?.try_into().ok()
 }

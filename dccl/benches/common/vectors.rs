@@ -3,6 +3,9 @@
 //! copy under `tests/data/dccl-vectors`), as dynamic messages of a codec
 //! that has loaded their types.
 
+// Each benchmark uses some of the fields.
+#![allow(dead_code)]
+
 use std::path::PathBuf;
 
 use dccl::prost_reflect::DynamicMessage;

@@ -24,6 +24,7 @@ use crate::field_codec::{
 };
 use crate::options::field_options;
 use crate::rounding::ceil_log2_u64;
+use crate::wire::WireMessage;
 
 /// Deepest nesting of embedded messages accepted (guards recursive types).
 pub const MAX_DEPTH: usize = 32;
@@ -49,6 +50,8 @@ pub(crate) struct FieldEntry {
     lookup_once: bool,
     /// How the codec is called: built-in codecs without dynamic dispatch.
     plan: Plan,
+    /// The field's position in its message (see [`crate::wire::position`]).
+    position: usize,
 }
 
 /// The codec of a field when it is one of the built-in codecs called
@@ -164,6 +167,8 @@ pub(crate) struct OneofEntry {
     pub bits: u32,
     /// The members, in declaration order.
     pub members: Vec<FieldDescriptor>,
+    /// The members' positions in their message (see [`crate::wire::position`]).
+    pub member_positions: Vec<usize>,
 }
 
 /// The default message codec.
@@ -260,6 +265,10 @@ impl MessageCodec {
                         name: o.name().to_string(),
                         index,
                         bits: ceil_log2_u64(members.len() as u64 + 1),
+                        member_positions: members
+                            .iter()
+                            .map(|m| crate::wire::position(&descriptor, m))
+                            .collect(),
                         members,
                     }
                 })
@@ -426,6 +435,7 @@ impl MessageCodec {
                     || !matches!(field.kind(), Kind::Message(_) | Kind::Enum(_))),
             plan: Plan::of(&codec),
             codec,
+            position: crate::wire::position(field.parent_message(), field),
         })
     }
 
@@ -528,6 +538,114 @@ impl MessageCodec {
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
             ctx.name_changes(mark, || f.field.name().to_string());
+        }
+        Ok(())
+    }
+
+    /// Whether messages given as protobuf bytes can be encoded from their
+    /// wire form ([`crate::wire`]): every message field, here and in the
+    /// messages embedded, is coded by the default message codec (the
+    /// others take a `DynamicMessage`).
+    pub(crate) fn wire_ok(&self) -> bool {
+        self.fields.iter().all(|f| match &f.plan {
+            Plan::Message(m) => m.wire_ok(),
+            _ => !matches!(f.field.kind(), Kind::Message(_)),
+        })
+    }
+
+    /// [`MessageCodec::encode_fields`] of a message read from protobuf bytes.
+    pub(crate) fn encode_fields_wire(
+        &self,
+        out: &mut BitWriter,
+        msg: WireMessage<'_>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        let mut cases = [0usize; 8];
+        let mut cases_vec;
+        let cases: &mut [usize] = if self.oneofs.len() <= cases.len() {
+            &mut cases[..self.oneofs.len()]
+        } else {
+            cases_vec = vec![0usize; self.oneofs.len()];
+            &mut cases_vec
+        };
+        for (o, case) in self.oneofs.iter().zip(cases.iter_mut()) {
+            *case = o
+                .member_positions
+                .iter()
+                .position(|&p| msg.is_set(p))
+                .map(|i| i + 1)
+                .unwrap_or(0);
+            out.write(*case as u64, o.bits);
+        }
+        for f in &self.fields {
+            let mark = ctx.change_mark();
+            let result = match (f.repeat, &f.plan) {
+                (Some(bounds), Plan::Message(message)) => {
+                    message.encode_repeated_wire(out, &msg.messages(f.position), bounds, ctx)
+                }
+                (Some(bounds), _) => {
+                    let values = msg.list(f.position);
+                    with_codec!(f, |c| c.encode_repeated(out, values, bounds, ctx))
+                }
+                (None, _) if f.oneof.is_some_and(|(i, j)| cases[i] != j + 1) => Ok(()),
+                (None, Plan::Message(message)) => {
+                    message.encode_wire(out, msg.message(f.position), ctx)
+                }
+                (None, _) => f.encode(out, msg.value(f.position), ctx),
+            };
+            result.map_err(|e| e.in_field(f.field.name()))?;
+            ctx.name_changes(mark, || f.field.name().to_string());
+        }
+        Ok(())
+    }
+
+    /// [`FieldCodec::encode`] of an embedded message read from protobuf
+    /// bytes (`None`: not set).
+    fn encode_wire(
+        &self,
+        out: &mut BitWriter,
+        msg: Option<WireMessage<'_>>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        match msg {
+            None => {
+                out.write_zeros(self.min_bits as usize);
+                Ok(())
+            }
+            Some(m) => {
+                if self.presence {
+                    out.write_bool(true);
+                }
+                self.encode_fields_wire(out, m, ctx)
+            }
+        }
+    }
+
+    /// [`FieldCodec::encode_repeated`] (the trait's, which this codec
+    /// keeps) of embedded messages read from protobuf bytes.
+    fn encode_repeated_wire(
+        &self,
+        out: &mut BitWriter,
+        values: &[WireMessage<'_>],
+        bounds: RepeatBounds,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        bounds.check_max(values.len(), ctx)?;
+        bounds.check_min(values.len(), self.codec_version(), ctx)?;
+        let count = if self.codec_version() > 2 {
+            let n = values
+                .len()
+                .min(bounds.max as usize)
+                .max(bounds.min as usize);
+            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
+            n
+        } else {
+            bounds.max as usize
+        };
+        for i in 0..count {
+            let mark = ctx.change_mark();
+            self.encode_wire(out, values.get(i).copied(), ctx)?;
+            ctx.name_changes(mark, || format!("[{i}]"));
         }
         Ok(())
     }
