@@ -44,6 +44,10 @@ pub(crate) struct LoadedMessage {
     /// How messages given as protobuf bytes are encoded without a
     /// `DynamicMessage`, when the type's codecs allow it.
     pub(crate) wire: Option<WireEncoding>,
+    /// Every required field is one the header's or the body's message
+    /// codec encodes (and refuses unset): encoding checks them on the way,
+    /// the check running only when encoding fails.
+    pub(crate) required_on_the_way: bool,
 }
 
 /// The wire plans of a loaded type and its header and body codecs (the
@@ -55,19 +59,22 @@ pub(crate) struct WireEncoding {
     body: Arc<MessageCodec>,
 }
 
+/// The default message codec behind a codec, when it is one.
+fn message_codec(codec: &Arc<dyn FieldCodec>) -> Option<Arc<MessageCodec>> {
+    let any: Arc<dyn std::any::Any + Send + Sync> = codec.clone();
+    any.downcast::<MessageCodec>().ok()
+}
+
 impl WireEncoding {
     fn of(
         desc: &MessageDescriptor,
         head: &Arc<dyn FieldCodec>,
         body: &Arc<dyn FieldCodec>,
     ) -> Option<WireEncoding> {
-        let message_codec = |codec: &Arc<dyn FieldCodec>| {
-            let any: Arc<dyn std::any::Any + Send + Sync> = codec.clone();
-            any.downcast::<MessageCodec>().ok().filter(|m| m.wire_ok())
-        };
+        let wire_codec = |codec| message_codec(codec).filter(|m| m.wire_ok());
         Some(WireEncoding {
-            head: message_codec(head)?,
-            body: message_codec(body)?,
+            head: wire_codec(head)?,
+            body: wire_codec(body)?,
             plans: Plans::of(desc)?,
         })
     }
@@ -520,6 +527,11 @@ impl Codec {
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
         let reads_clock = head.reads_clock() || body.reads_clock();
         let wire = WireEncoding::of(desc, &head, &body);
+        let required = RequiredFields::of(desc, 0);
+        let required_on_the_way = match (message_codec(&head), message_codec(&body)) {
+            (Some(h), Some(b)) => required.covered_by(Some(&h), Some(&b)),
+            _ => false,
+        };
         let loaded = LoadedMessage {
             descriptor: desc.clone(),
             id,
@@ -528,10 +540,11 @@ impl Codec {
             head,
             body,
             id_bits,
-            required: RequiredFields::of(desc, 0),
+            required,
             hash: 0,
             reads_clock,
             wire,
+            required_on_the_way,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -676,11 +689,13 @@ impl Codec {
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
         let name = loaded.descriptor.full_name();
-        match msg {
+        let check_required = || match msg {
             Source::Dynamic(m) => loaded.required.check(m),
             Source::Wire(_, m) => loaded.required.check_wire(m),
+        };
+        if !loaded.required_on_the_way {
+            check_required().map_err(|e| e.into_encode(name))?;
         }
-        .map_err(|e| e.into_encode(name))?;
         let session = ArithmeticSession::new(
             self.registry.arithmetic_models(),
             &self.arithmetic,
@@ -692,6 +707,7 @@ impl Codec {
             definition_hash: loaded.hash,
             changes,
             arithmetic: Some(&session),
+            required_unchecked: loaded.required_on_the_way,
         };
         // Header and body are written straight after what `out` holds (the
         // writer starts on its byte boundary), then encrypted in place; on
@@ -706,6 +722,11 @@ impl Codec {
             Ok(end) => end,
             Err(e) => {
                 out.truncate(start);
+                // An unset required field is the error to give, as when
+                // the fields are checked first.
+                if loaded.required_on_the_way {
+                    check_required().map_err(|e| e.into_encode(name))?;
+                }
                 return Err(e.into_encode(name));
             }
         };
@@ -1230,6 +1251,29 @@ impl RequiredFields {
         Ok(())
     }
 
+    /// Whether encoding with these message codecs (of the header and the
+    /// body) visits every required field when its message is set, so that
+    /// it can refuse one unset: each is encoded by one of them (not
+    /// omitted), and those inside embedded messages are reached through
+    /// single (not repeated) fields coded by the default message codec.
+    fn covered_by(&self, head: Option<&MessageCodec>, body: Option<&MessageCodec>) -> bool {
+        self.fields.iter().all(|(field, _, nested, _)| {
+            let h = head.and_then(|c| c.entry(field.number()));
+            let b = body.and_then(|c| c.entry(field.number()));
+            if h.is_none() && b.is_none() {
+                return false;
+            }
+            let Some(nested) = nested else {
+                return true;
+            };
+            let (h, b) = (h.map(|e| e.message_codec()), b.map(|e| e.message_codec()));
+            !field.is_list()
+                && !matches!(h, Some(None))
+                && !matches!(b, Some(None))
+                && nested.covered_by(h.flatten(), b.flatten())
+        })
+    }
+
     /// [`RequiredFields::check`] of a message read from protobuf bytes.
     fn check_wire(&self, msg: WireMessage<'_>) -> std::result::Result<(), CodecError> {
         for (field, required, nested, position) in &self.fields {
@@ -1260,6 +1304,32 @@ impl RequiredFields {
 
 #[cfg(test)]
 mod tests {
+    /// The shared vectors' types take the fast ways: protobuf bytes encoded
+    /// without a dynamic message, required fields checked on the way
+    /// (but for `vec.Nested`, whose repeated `track` holds required fields:
+    /// checked before); the tests of both compare them with the other ways.
+    #[test]
+    fn the_vector_types_take_the_fast_ways() {
+        let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let shared = root.join("../../shared/dccl-vectors");
+        let dir = if shared.is_dir() {
+            shared
+        } else {
+            root.join("tests/data/dccl-vectors")
+        };
+        let pool =
+            crate::compile_protos(&[dir.join("vectors.proto")], &[] as &[std::path::PathBuf])
+                .unwrap();
+        let mut codec = super::Codec::new();
+        let names = codec.load_file_messages(&pool, "vectors.proto").unwrap();
+        assert_eq!(names.len(), 5);
+        for name in names {
+            let loaded = codec.get(&name).unwrap();
+            assert_eq!(loaded.required_on_the_way, name != "vec.Nested", "{name}");
+            assert!(loaded.wire.is_some(), "{name}");
+        }
+    }
+
     #[test]
     fn codec_can_be_shared_between_threads() {
         fn assert_send_sync<T: Send + Sync + Clone>() {}

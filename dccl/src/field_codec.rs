@@ -38,6 +38,10 @@ pub struct EncodeContext<'a> {
     pub(crate) changes: Option<&'a ChangeLog>,
     /// The coding codec's arithmetic models and adaptive state.
     pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
+    /// The message's required fields were not checked before encoding:
+    /// the message codec refuses one it finds unset (the codec then runs
+    /// the check for the error to give).
+    pub(crate) required_unchecked: bool,
 }
 
 impl EncodeContext<'_> {

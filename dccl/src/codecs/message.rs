@@ -48,6 +48,8 @@ pub(crate) struct FieldEntry {
     /// nothing to make: `required` ones (set whenever encoded) and optional
     /// ones of a scalar kind other than enum.
     lookup_once: bool,
+    /// A `required` field.
+    required: bool,
     /// How the codec is called: built-in codecs without dynamic dispatch.
     plan: Plan,
     /// The field's position in its message (see [`crate::wire::position`]).
@@ -137,6 +139,24 @@ impl FieldEntry {
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
         with_codec!(self, |c| c.encode(out, value, ctx))
+    }
+
+    /// Writes the field unset; a required field unset is an error when
+    /// the required fields were not checked before encoding.
+    #[inline]
+    fn encode_unset(&self, out: &mut BitWriter, ctx: &EncodeContext) -> Result<(), CodecError> {
+        if self.required && ctx.required_unchecked {
+            return Err(missing_required());
+        }
+        self.encode(out, None, ctx)
+    }
+
+    /// The default message codec of a message field coded by it.
+    pub(crate) fn message_codec(&self) -> Option<&MessageCodec> {
+        match &self.plan {
+            Plan::Message(m) => Some(m),
+            _ => None,
+        }
     }
 
     /// Fewest bits of this field.
@@ -429,6 +449,7 @@ impl MessageCodec {
             repeat,
             oneof,
             scalar: scalar_discriminant(&field.kind()),
+            required: field.cardinality() == Cardinality::Required,
             lookup_once: field.supports_presence()
                 && repeat.is_none()
                 && (field.cardinality() == Cardinality::Required
@@ -474,6 +495,11 @@ impl MessageCodec {
     /// The fields this codec encodes, in order.
     pub(crate) fn fields(&self) -> &[FieldEntry] {
         &self.fields
+    }
+
+    /// The entry of the field numbered `number`, when this codec encodes it.
+    pub(crate) fn entry(&self, number: u32) -> Option<&FieldEntry> {
+        self.fields.iter().find(|f| f.field.number() == number)
     }
 
     /// The oneofs whose case this codec writes.
@@ -529,12 +555,12 @@ impl MessageCodec {
                 // one costs a cheap default value).
                 match msg.get_field(&f.field) {
                     Cow::Borrowed(v) => f.encode(out, Some(v), ctx),
-                    Cow::Owned(_) => f.encode(out, None, ctx),
+                    Cow::Owned(_) => f.encode_unset(out, ctx),
                 }
             } else if msg.has_field(&f.field) {
                 f.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
             } else {
-                f.encode(out, None, ctx)
+                f.encode_unset(out, ctx)
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
             ctx.name_changes(mark, || f.field.name().to_string());
@@ -588,10 +614,14 @@ impl MessageCodec {
                     with_codec!(f, |c| c.encode_repeated(out, values, bounds, ctx))
                 }
                 (None, _) if f.oneof.is_some_and(|(i, j)| cases[i] != j + 1) => Ok(()),
-                (None, Plan::Message(message)) => {
-                    message.encode_wire(out, msg.message(f.position), ctx)
-                }
-                (None, _) => f.encode(out, msg.value(f.position), ctx),
+                (None, Plan::Message(message)) => match msg.message(f.position) {
+                    None if f.required && ctx.required_unchecked => Err(missing_required()),
+                    m => message.encode_wire(out, m, ctx),
+                },
+                (None, _) => match msg.value(f.position) {
+                    None => f.encode_unset(out, ctx),
+                    v => f.encode(out, v, ctx),
+                },
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
             ctx.name_changes(mark, || f.field.name().to_string());
@@ -875,6 +905,13 @@ fn merge_set(
         }
     }
     set(msg, field, value)
+}
+
+/// The error of a required field found unset while encoding (the codec
+/// then gives the error of its check of the required fields instead).
+#[cold]
+fn missing_required() -> CodecError {
+    CodecError::new("message is not properly initialized: required field is not set")
 }
 
 /// The variant of [`Value`] a field of a non-message kind holds.
