@@ -3,6 +3,8 @@
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
+use foldhash::fast::RandomState;
+
 use prost_reflect::{
     Cardinality, DescriptorPool, DynamicMessage, Kind, MessageDescriptor, ReflectMessage, Value,
 };
@@ -12,6 +14,7 @@ use crate::bits::{BitReader, BitWriter};
 use crate::changes::{ChangeLog, ValueChange};
 use crate::codecs::arithmetic::{ArithmeticModel, ArithmeticSession, ArithmeticState, SharedState};
 use crate::codecs::identifier;
+use crate::codecs::message::MessageCodec;
 use crate::crypto::CryptoKey;
 use crate::error::{CodecError, Error, Result};
 use crate::field_codec::{
@@ -19,6 +22,7 @@ use crate::field_codec::{
 };
 use crate::options::{has_message_options, message_options};
 use crate::registry::CodecRegistry;
+use crate::wire::{Plans, WireMessage};
 
 /// A loaded message type with its codecs and sizes.
 #[derive(Debug)]
@@ -35,6 +39,53 @@ pub(crate) struct LoadedMessage {
     pub(crate) required: RequiredFields,
     /// The message-definition hash.
     pub(crate) hash: u64,
+    /// Whether decoding reads the clock (a field's codec does).
+    pub(crate) reads_clock: bool,
+    /// How messages given as protobuf bytes are encoded without a
+    /// `DynamicMessage`, when the type's codecs allow it.
+    pub(crate) wire: Option<WireEncoding>,
+    /// Every required field is one the header's or the body's message
+    /// codec encodes (and refuses unset): encoding checks them on the way,
+    /// the check running only when encoding fails.
+    pub(crate) required_on_the_way: bool,
+}
+
+/// The wire plans of a loaded type and its header and body codecs (the
+/// default message codec).
+#[derive(Debug)]
+pub(crate) struct WireEncoding {
+    plans: Plans,
+    head: Arc<MessageCodec>,
+    body: Arc<MessageCodec>,
+}
+
+/// The default message codec behind a codec, when it is one.
+fn message_codec(codec: &Arc<dyn FieldCodec>) -> Option<Arc<MessageCodec>> {
+    let any: Arc<dyn std::any::Any + Send + Sync> = codec.clone();
+    any.downcast::<MessageCodec>().ok()
+}
+
+impl WireEncoding {
+    fn of(
+        desc: &MessageDescriptor,
+        head: &Arc<dyn FieldCodec>,
+        body: &Arc<dyn FieldCodec>,
+    ) -> Option<WireEncoding> {
+        let wire_codec = |codec| message_codec(codec).filter(|m| m.wire_ok());
+        Some(WireEncoding {
+            head: wire_codec(head)?,
+            body: wire_codec(body)?,
+            plans: Plans::of(desc)?,
+        })
+    }
+}
+
+/// The message a codec encodes: a `DynamicMessage`, or one read from
+/// protobuf bytes.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Dynamic(&'a DynamicMessage),
+    Wire(&'a WireEncoding, WireMessage<'a>),
 }
 
 impl LoadedMessage {
@@ -85,11 +136,11 @@ type Clock = Arc<dyn Fn() -> i64 + Send + Sync>;
 #[derive(Clone)]
 pub struct Codec {
     registry: Arc<CodecRegistry>,
-    by_id: HashMap<u32, Arc<LoadedMessage>>,
-    by_name: HashMap<String, Arc<LoadedMessage>>,
+    by_id: HashMap<u32, Arc<LoadedMessage>, RandomState>,
+    by_name: HashMap<String, Arc<LoadedMessage>, RandomState>,
     strict: bool,
     key: Option<CryptoKey>,
-    skip_crypto_ids: HashSet<u32>,
+    skip_crypto_ids: HashSet<u32, RandomState>,
     clock: Clock,
     /// The frequencies of the adaptive arithmetic models (a clone copies them).
     arithmetic: SharedState,
@@ -131,11 +182,11 @@ impl Codec {
     pub fn with_registry(registry: CodecRegistry) -> Self {
         Codec {
             registry: Arc::new(registry),
-            by_id: HashMap::new(),
-            by_name: HashMap::new(),
+            by_id: HashMap::default(),
+            by_name: HashMap::default(),
             strict: false,
             key: None,
-            skip_crypto_ids: HashSet::new(),
+            skip_crypto_ids: HashSet::default(),
             clock: Arc::new(system_clock),
             arithmetic: SharedState::default(),
         }
@@ -474,6 +525,13 @@ impl Codec {
         let head = make(MessagePart::Head)?;
         let body = make(MessagePart::Body)?;
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
+        let reads_clock = head.reads_clock() || body.reads_clock();
+        let wire = WireEncoding::of(desc, &head, &body);
+        let required = RequiredFields::of(desc, 0);
+        let required_on_the_way = match (message_codec(&head), message_codec(&body)) {
+            (Some(h), Some(b)) => required.covered_by(Some(&h), Some(&b)),
+            _ => false,
+        };
         let loaded = LoadedMessage {
             descriptor: desc.clone(),
             id,
@@ -482,8 +540,11 @@ impl Codec {
             head,
             body,
             id_bits,
-            required: RequiredFields::of(desc, 0),
+            required,
             hash: 0,
+            reads_clock,
+            wire,
+            required_on_the_way,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -545,6 +606,10 @@ impl Codec {
     /// spans. Now is this codec's clock ([`Codec::set_clock`]), the one
     /// its decoding restores dates with.
     pub fn moved_dates(&self, msg: &DynamicMessage) -> Result<Vec<ValueChange>> {
+        if !self.get(msg.descriptor().full_name())?.reads_clock {
+            // No codec of the type restores a date from the clock.
+            return Ok(Vec::new());
+        }
         self.moved_dates_at(msg, (self.clock)())
     }
 
@@ -554,7 +619,12 @@ impl Codec {
         let name = msg.descriptor().full_name().to_string();
         let loaded = self.get(&name)?;
         let mut moved = Vec::new();
-        for part in [&loaded.head, &loaded.body] {
+        let parts: &[&Arc<dyn FieldCodec>] = if loaded.reads_clock {
+            &[&loaded.head, &loaded.body]
+        } else {
+            &[]
+        };
+        for part in parts {
             if let Some(codec) = part.children() {
                 collect_moved_dates(codec, msg, "", now_secs, 0, &mut moved);
             }
@@ -576,12 +646,56 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
-        let name = msg.descriptor().full_name().to_string();
-        let loaded = self.get(&name)?;
-        loaded
-            .required
-            .check(msg)
-            .map_err(|e| e.into_encode(&name))?;
+        let loaded = self.get(msg.descriptor().full_name())?;
+        self.encode_source(loaded, Source::Dynamic(msg), out, dry_run, changes)
+    }
+
+    /// Encodes a message of the loaded type `full_name` given as protobuf
+    /// wire bytes, appending to `out`.
+    fn encode_protobuf_with(
+        &self,
+        full_name: &str,
+        protobuf: &[u8],
+        out: &mut Vec<u8>,
+        changes: Option<&ChangeLog>,
+    ) -> Result<()> {
+        let loaded = self.get(full_name)?;
+        if let Some(wire) = &loaded.wire {
+            if let Some(flat) = wire.plans.read(protobuf) {
+                let source = Source::Wire(wire, flat.root());
+                return self.encode_source(loaded, source, out, false, changes);
+            }
+        }
+        // Not in the form the plans read (or a type they do not take):
+        // prost-reflect decodes it, or says why it cannot.
+        let msg = DynamicMessage::decode(loaded.descriptor.clone(), protobuf).map_err(|e| {
+            Error::Encode {
+                location: crate::error::Location {
+                    message: full_name.to_string(),
+                    field: String::new(),
+                },
+                reason: format!("not a valid protobuf message of that type: {e}"),
+            }
+        })?;
+        self.encode_source(loaded, Source::Dynamic(&msg), out, false, changes)
+    }
+
+    fn encode_source(
+        &self,
+        loaded: &LoadedMessage,
+        msg: Source<'_>,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+    ) -> Result<()> {
+        let name = loaded.descriptor.full_name();
+        let check_required = || match msg {
+            Source::Dynamic(m) => loaded.required.check(m),
+            Source::Wire(_, m) => loaded.required.check_wire(m),
+        };
+        if !loaded.required_on_the_way {
+            check_required().map_err(|e| e.into_encode(name))?;
+        }
         let session = ArithmeticSession::new(
             self.registry.arithmetic_models(),
             &self.arithmetic,
@@ -593,14 +707,29 @@ impl Codec {
             definition_hash: loaded.hash,
             changes,
             arithmetic: Some(&session),
+            required_unchecked: loaded.required_on_the_way,
         };
-        let parts = Self::encode_parts(loaded, msg, &ctx).map_err(|e| e.into_encode(&name));
-        session.finish(parts.is_ok());
-        let (head, body) = parts?;
+        // Header and body are written straight after what `out` holds (the
+        // writer starts on its byte boundary), then encrypted in place; on
+        // an error `out` is put back as it was.
         let start = out.len();
-        out.extend_from_slice(head.as_bytes());
-        let head_end = out.len();
-        out.extend_from_slice(body.as_bytes());
+        let mut writer = BitWriter::from_bytes(std::mem::take(out));
+        writer.reserve(loaded.head_bytes() + loaded.max_body_bytes());
+        let head_end = Self::encode_parts(loaded, msg, &ctx, &mut writer);
+        session.finish(head_end.is_ok());
+        *out = writer.into_bytes();
+        let head_end = match head_end {
+            Ok(end) => end,
+            Err(e) => {
+                out.truncate(start);
+                // An unset required field is the error to give, as when
+                // the fields are checked first.
+                if loaded.required_on_the_way {
+                    check_required().map_err(|e| e.into_encode(name))?;
+                }
+                return Err(e.into_encode(name));
+            }
+        };
         if let Some(key) = &self.key {
             if !self.skip_crypto_ids.contains(&loaded.id) {
                 let (h, b) = out[start..].split_at_mut(head_end - start);
@@ -610,20 +739,68 @@ impl Codec {
         Ok(())
     }
 
-    /// The header (identifier included) and the body of a message, unencrypted.
+    /// Writes the header (identifier included) and the body of a message,
+    /// unencrypted, after the whole bytes `out` holds; returns where the
+    /// body starts (in bytes from the start of `out`).
     fn encode_parts(
         loaded: &LoadedMessage,
-        msg: &DynamicMessage,
+        msg: Source<'_>,
         ctx: &EncodeContext,
-    ) -> std::result::Result<(BitWriter, BitWriter), CodecError> {
-        let mut head = BitWriter::with_capacity(loaded.head_bytes());
+        out: &mut BitWriter,
+    ) -> std::result::Result<usize, CodecError> {
         if !loaded.omit_id {
-            identifier::encode(&mut head, loaded.id)?;
+            identifier::encode(out, loaded.id)?;
         }
-        loaded.head.encode_message(&mut head, msg, ctx)?;
-        let mut body = BitWriter::with_capacity(loaded.max_body_bytes());
-        loaded.body.encode_message(&mut body, msg, ctx)?;
-        Ok((head, body))
+        match msg {
+            Source::Dynamic(m) => loaded.head.encode_message(out, m, ctx)?,
+            Source::Wire(wire, m) => wire.head.encode_fields_wire(out, m, ctx)?,
+        }
+        out.pad_to_byte();
+        let head_end = out.as_bytes().len();
+        match msg {
+            Source::Dynamic(m) => loaded.body.encode_message(out, m, ctx)?,
+            Source::Wire(wire, m) => wire.body.encode_fields_wire(out, m, ctx)?,
+        }
+        Ok(head_end)
+    }
+
+    /// Encodes a message of the loaded type `full_name` given as protobuf
+    /// wire bytes (its protobuf encoding, as any protobuf library writes
+    /// it), appending the DCCL bytes to `out`: the bytes [`Codec::encode`]
+    /// gives for the message those bytes decode to, without decoding them
+    /// to a `DynamicMessage` first when the type's codecs allow it (every
+    /// message field coded by the default message codec). Unknown fields
+    /// are ignored, as `encode` ignores them. Errors: the type is not
+    /// loaded ([`Error::UnknownType`]); the bytes are not a protobuf
+    /// message of the type ([`Error::Encode`], "not a valid protobuf message
+    /// of that type"); what `encode` refuses.
+    pub fn encode_protobuf_into(
+        &self,
+        full_name: &str,
+        protobuf: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Result<()> {
+        self.encode_protobuf_with(full_name, protobuf, out, None)
+    }
+
+    /// [`Codec::encode_protobuf_into`], also reporting every value the
+    /// codec changed, as [`Codec::encode_with_changes`] does.
+    pub fn encode_protobuf_with_changes(
+        &self,
+        full_name: &str,
+        protobuf: &[u8],
+    ) -> Result<(Vec<u8>, Vec<ValueChange>)> {
+        let log = ChangeLog::new();
+        let mut out = Vec::new();
+        self.encode_protobuf_with(full_name, protobuf, &mut out, Some(&log))?;
+        Ok((out, log.into_changes(full_name)))
+    }
+
+    /// Whether a field of the loaded type `full_name` is coded by a codec
+    /// that restores a date from the receiver's clock (`dccl.time`): only
+    /// such a type's messages can have [`Codec::moved_dates`].
+    pub fn restores_dates(&self, full_name: &str) -> Result<bool> {
+        Ok(self.get(full_name)?.reads_clock)
     }
 
     /// Encodes a prost-generated struct (deriving `ReflectMessage`) of a
@@ -771,7 +948,11 @@ impl Codec {
         let session =
             ArithmeticSession::new(self.registry.arithmetic_models(), &self.arithmetic, true);
         let ctx = DecodeContext {
-            now_secs: (self.clock)(),
+            now_secs: if loaded.reads_clock {
+                (self.clock)()
+            } else {
+                0
+            },
             definition_hash: loaded.hash,
             arithmetic: Some(&session),
         };
@@ -1011,7 +1192,15 @@ fn round_to(value: f64, decimals: i32) -> f64 {
 /// into, computed once at load time.
 #[derive(Debug, Default)]
 pub(crate) struct RequiredFields {
-    fields: Vec<(prost_reflect::FieldDescriptor, bool, Option<RequiredFields>)>,
+    /// Each field to look at: its descriptor, whether it is required, the
+    /// required fields of its messages, its position (see
+    /// [`crate::wire::position`]).
+    fields: Vec<(
+        prost_reflect::FieldDescriptor,
+        bool,
+        Option<RequiredFields>,
+        usize,
+    )>,
 }
 
 impl RequiredFields {
@@ -1026,7 +1215,8 @@ impl RequiredFields {
                 _ => None,
             };
             if required || nested.is_some() {
-                fields.push((field, required, nested));
+                let position = crate::wire::position(desc, &field);
+                fields.push((field, required, nested, position));
             }
         }
         RequiredFields { fields }
@@ -1034,7 +1224,7 @@ impl RequiredFields {
 
     /// Checks that every required field (recursively) is set.
     fn check(&self, msg: &DynamicMessage) -> std::result::Result<(), CodecError> {
-        for (field, required, nested) in &self.fields {
+        for (field, required, nested, _) in &self.fields {
             let set = msg.has_field(field);
             if *required && !set {
                 return Err(CodecError::new(
@@ -1060,10 +1250,86 @@ impl RequiredFields {
         }
         Ok(())
     }
+
+    /// Whether encoding with these message codecs (of the header and the
+    /// body) visits every required field when its message is set, so that
+    /// it can refuse one unset: each is encoded by one of them (not
+    /// omitted), and those inside embedded messages are reached through
+    /// single (not repeated) fields coded by the default message codec.
+    fn covered_by(&self, head: Option<&MessageCodec>, body: Option<&MessageCodec>) -> bool {
+        self.fields.iter().all(|(field, _, nested, _)| {
+            let h = head.and_then(|c| c.entry(field.number()));
+            let b = body.and_then(|c| c.entry(field.number()));
+            if h.is_none() && b.is_none() {
+                return false;
+            }
+            let Some(nested) = nested else {
+                return true;
+            };
+            let (h, b) = (h.map(|e| e.message_codec()), b.map(|e| e.message_codec()));
+            !field.is_list()
+                && !matches!(h, Some(None))
+                && !matches!(b, Some(None))
+                && nested.covered_by(h.flatten(), b.flatten())
+        })
+    }
+
+    /// [`RequiredFields::check`] of a message read from protobuf bytes.
+    fn check_wire(&self, msg: WireMessage<'_>) -> std::result::Result<(), CodecError> {
+        for (field, required, nested, position) in &self.fields {
+            let set = msg.is_set(*position);
+            if *required && !set {
+                return Err(CodecError::new(
+                    "message is not properly initialized: required field is not set",
+                )
+                .in_field(field.name()));
+            }
+            let Some(nested) = nested else { continue };
+            if !set {
+                continue;
+            }
+            if field.is_list() {
+                for item in msg.messages(*position) {
+                    nested
+                        .check_wire(item)
+                        .map_err(|e| e.in_field(field.name()))?;
+                }
+            } else if let Some(m) = msg.message(*position) {
+                nested.check_wire(m).map_err(|e| e.in_field(field.name()))?;
+            }
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
 mod tests {
+    /// The shared vectors' types take the fast ways: protobuf bytes encoded
+    /// without a dynamic message, required fields checked on the way
+    /// (but for `vec.Nested`, whose repeated `track` holds required fields:
+    /// checked before); the tests of both compare them with the other ways.
+    #[test]
+    fn the_vector_types_take_the_fast_ways() {
+        let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let shared = root.join("../../shared/dccl-vectors");
+        let dir = if shared.is_dir() {
+            shared
+        } else {
+            root.join("tests/data/dccl-vectors")
+        };
+        let pool =
+            crate::compile_protos(&[dir.join("vectors.proto")], &[] as &[std::path::PathBuf])
+                .unwrap();
+        let mut codec = super::Codec::new();
+        let names = codec.load_file_messages(&pool, "vectors.proto").unwrap();
+        assert_eq!(names.len(), 5);
+        for name in names {
+            let loaded = codec.get(&name).unwrap();
+            assert_eq!(loaded.required_on_the_way, name != "vec.Nested", "{name}");
+            assert!(loaded.wire.is_some(), "{name}");
+        }
+    }
+
     #[test]
     fn codec_can_be_shared_between_threads() {
         fn assert_send_sync<T: Send + Sync + Clone>() {}

@@ -2,6 +2,7 @@
 //! [`FieldSpec`]) and the contexts codecs are called with; public through
 //! [`crate::field`].
 
+use std::any::Any;
 use std::fmt::Debug;
 use std::sync::Arc;
 
@@ -37,9 +38,21 @@ pub struct EncodeContext<'a> {
     pub(crate) changes: Option<&'a ChangeLog>,
     /// The coding codec's arithmetic models and adaptive state.
     pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
+    /// The message's required fields were not checked before encoding:
+    /// the message codec refuses one it finds unset (the codec then runs
+    /// the check for the error to give).
+    pub(crate) required_unchecked: bool,
 }
 
 impl EncodeContext<'_> {
+    /// Whether [`EncodeContext::value_changed`] does anything (strict mode,
+    /// or changes being collected): when false, a codec can skip building
+    /// the `action` text it would pass.
+    #[inline]
+    pub fn reports_changes(&self) -> bool {
+        self.strict || self.changes.is_some()
+    }
+
     /// Reports a value the codec changes instead of sending it as given
     /// (out of range, NaN, too long, undefined): in strict mode an error
     /// saying `what`; otherwise, when changes are being collected, the change
@@ -270,7 +283,7 @@ impl RepeatBounds {
 ///
 /// A codec must read on decode exactly the bits it wrote on encode. Values
 /// are `prost_reflect::Value`s of the field's type; `None` means "not set".
-pub trait FieldCodec: Send + Sync + Debug {
+pub trait FieldCodec: Any + Send + Sync + Debug {
     /// The registered name reported by `analyze` (e.g. `dccl.default4`).
     fn name(&self) -> &str;
 
@@ -432,6 +445,14 @@ pub trait FieldCodec: Send + Sync + Debug {
     /// (NaN, negative: [`Codec::check`](crate::Codec::check) reports those).
     fn date_shift(&self, _value: &Value, _now_secs: i64) -> Option<DateShift> {
         None
+    }
+
+    /// Whether decoding reads [`DecodeContext::now_secs`] (the time codec
+    /// does, to restore the date). A [`Codec`](crate::Codec) reads its
+    /// clock only for messages with a field whose codec does; the default,
+    /// true, is right for any codec.
+    fn reads_clock(&self) -> bool {
+        true
     }
 }
 

@@ -92,6 +92,7 @@ mod options;
 mod registry;
 mod rounding;
 mod text_format;
+mod wire;
 
 pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};

@@ -70,13 +70,6 @@ pub fn round_f64(value: f64, precision: i32) -> f64 {
     round_half_up(value * scaling) / scaling
 }
 
-/// Rounds a float to `precision` decimal places in single precision.
-pub fn round_f32(value: f32, precision: i32) -> f32 {
-    let scaling = pow10(precision as f64) as f32;
-    let scaled = value * scaling;
-    (round_half_up(scaled as f64) as f32) / scaling
-}
-
 /// Integer arithmetic used by the numeric codec, for each integer wire type.
 pub trait IntWire: Copy + PartialOrd {
     /// Converts to double.

@@ -354,3 +354,72 @@ fn hash_codec_options_are_validated() {
         .to_string();
     assert!(err.contains("power of 2 minus 1"), "{err}");
 }
+
+/// A codec that sends nothing and decodes the receiver's clock
+/// (`DecodeContext::now_secs`): a user codec reads the clock unless it
+/// says otherwise (`FieldCodec::reads_clock`), in an embedded message too.
+#[derive(Debug)]
+struct ClockCodec;
+
+impl FieldCodec for ClockCodec {
+    fn name(&self) -> &str {
+        "test.clock"
+    }
+    fn codec_version(&self) -> i32 {
+        4
+    }
+    fn min_size(&self) -> u32 {
+        0
+    }
+    fn max_size(&self) -> u32 {
+        0
+    }
+    fn encode(
+        &self,
+        _out: &mut BitWriter,
+        _value: Option<&Value>,
+        _ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        Ok(())
+    }
+    fn decode(
+        &self,
+        _input: &mut BitReader<'_>,
+        ctx: &DecodeContext,
+    ) -> Result<Option<Value>, CodecError> {
+        Ok(Some(Value::I64(ctx.now_secs)))
+    }
+}
+
+#[test]
+fn a_user_codec_decodes_with_the_codec_clock() {
+    let mut registry = CodecRegistry::with_builtin();
+    registry.register("test.clock", |spec: &FieldSpec<'_>| {
+        Ok((spec.kind() == Kind::Int64).then(|| Arc::new(ClockCodec) as Arc<dyn FieldCodec>))
+    });
+    let mut codec = Codec::with_registry(registry);
+    codec.set_clock(|| 1_700_000_123);
+    let pool = dccl::compile_sources(&[(
+        "clock.proto",
+        r#"syntax = "proto2";
+           import "dccl/option_extensions.proto";
+           message Inner { optional int64 seen = 1 [(dccl.field).codec = "test.clock"]; }
+           message Stamped {
+             option (dccl.msg) = { id: 21 max_bytes: 8 codec_version: 4 };
+             required int32 n = 1 [(dccl.field) = { min: 0 max: 7 }];
+             optional Inner inner = 2;
+           }"#,
+    )])
+    .unwrap();
+    let desc = pool.get_message_by_name("Stamped").unwrap();
+    codec.load(&desc).unwrap();
+    let msg = DynamicMessage::parse_text_format(desc, "n: 3 inner { }").unwrap();
+    let back = codec.decode(&codec.encode(&msg).unwrap()).unwrap();
+    let inner = back.get_field_by_name("inner").unwrap();
+    let seen = inner
+        .as_message()
+        .unwrap()
+        .get_field_by_name("seen")
+        .unwrap();
+    assert_eq!(seen.as_i64(), Some(1_700_000_123));
+}

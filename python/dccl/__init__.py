@@ -35,7 +35,6 @@ without encoding.
 
 import json as _json
 import os as _os
-import warnings as _warnings
 
 from google.protobuf import descriptor_pool as _descriptor_pool
 from google.protobuf import message as _message
@@ -250,14 +249,6 @@ def _as_bytes(data):
     return bytes(data)
 
 
-def _warn_changes(name, changes):
-    for field, reason in changes:
-        _warnings.warn(
-            DcclValueChangedWarning("message %s, field %s: %s" % (name, field, reason)),
-            stacklevel=3,
-        )
-
-
 def _optional_type_name(obj):
     return None if obj is None else _type_name(obj)
 
@@ -297,7 +288,13 @@ class Codec:
             raise DcclException(
                 "cannot load codec library %s: codecs are built into this package" % library_path
             )
-        self._codec = _dccl.Codec()
+        # The native codec decodes straight to the classes of ``_classes``
+        # (made by ``message_class`` when missing) and warns about changed
+        # values with ``DcclValueChangedWarning``.
+        self._codec = _dccl.Codec(_classes, message_class, DcclValueChangedWarning)
+        # Generated class -> the native type handle encode takes (made once
+        # per class, as the class's full name is).
+        self._types = {}
 
     def load(self, type_name):
         """Validates and loads a message type for encoding and decoding.
@@ -307,10 +304,20 @@ class Codec:
         ``LookupError`` for an unknown name, :class:`DcclException` (naming
         message and field) for an invalid DCCL definition."""
         self._codec.load(_type_name(type_name))
+        self._types.clear()
 
     def unload(self, type_name):
         """Removes a loaded type."""
         self._codec.unload(_type_name(type_name))
+        self._types.clear()
+
+    def _message_type(self, cls):
+        """The native handle of the generated class ``cls``'s type."""
+        handle = self._types.get(cls)
+        if handle is None:
+            handle = self._codec.message_type(_class_name(cls))
+            self._types[cls] = handle
+        return handle
 
     def loaded(self):
         """Full names of the loaded types, sorted (list of str)."""
@@ -341,10 +348,12 @@ class Codec:
         supported (raises)."""
         if header_only:
             raise DcclException("encode(header_only=True) is not supported")
-        name = _class_name(type(message))
-        data, changes = self._codec.encode(name, message.SerializePartialToString())
-        _warn_changes(name, changes)
-        return data
+        handle = self._types.get(type(message))
+        if handle is None:
+            handle = self._message_type(type(message))
+        # Warnings about changed values come from the native side,
+        # attributed to this method's caller.
+        return self._codec.encode(handle, message.SerializePartialToString())
 
     def check(self, message):
         """The values encoding ``message`` (a protobuf message of a loaded
@@ -371,6 +380,9 @@ class Codec:
         when imported, else one built from the descriptor. ``header_only``
         (the reference binding's second argument, a bool) is not supported
         (raises)."""
+        if header_only is False and type_name is None and type(data) is bytes:
+            # The common case, in one native call (class look-up included).
+            return self._codec.decode_message(data)
         header_only, type_name = _header_or_type(header_only, type_name)
         if header_only:
             raise DcclException("decode(header_only=True) is not supported")
@@ -386,19 +398,13 @@ class Codec:
         """Encodes a message of type ``type_name`` given as proto3 JSON text
         (field names as in the ``.proto`` or lowerCamelCase, enums by name,
         bytes base64); returns bytes. Changed values warn as in :meth:`encode`."""
-        name = _type_name(type_name)
-        data, changes = self._codec.encode_json(name, text)
-        _warn_changes(name, changes)
-        return data
+        return self._codec.encode_json(_type_name(type_name), text)
 
     def encode_dict(self, type_name, values):
         """Encodes a message of type ``type_name`` given as a dict in the
         proto3-JSON shape (``{"x": 450.0, "veh_class": "AUV"}``); returns bytes.
         Changed values warn as in :meth:`encode`."""
-        name = _type_name(type_name)
-        data, changes = self._codec.encode_json(name, _json.dumps(values))
-        _warn_changes(name, changes)
-        return data
+        return self._codec.encode_json(_type_name(type_name), _json.dumps(values))
 
     def decode_json(self, data, with_name=False, type_name=None):
         """Decodes one message to proto3 JSON text (field names as in the

@@ -6,6 +6,7 @@
 mod codec;
 mod errors;
 mod pool;
+mod wire;
 
 use std::path::PathBuf;
 
@@ -78,6 +79,7 @@ fn files_for_message<'py>(
 fn _dccl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<codec::Codec>()?;
+    m.add_class::<codec::MessageType>()?;
     m.add("DcclException", py.get_type::<DcclException>())?;
     m.add(
         "DcclOutOfRangeException",

@@ -441,3 +441,37 @@ def test_a_type_given_to_decode_must_match_the_id_read(codec):
     assert codec.decode(data, "apitest.Ping").src == 3
     with pytest.raises(dccl.DcclException, match="received id 20, expected 21"):
         codec.decode(data, "apitest.Pong")
+
+
+def test_value_changed_warnings_point_at_the_caller_and_follow_the_filters(codec):
+    changed = ping(src=1, range=9999)
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        data = codec.encode(changed)
+    assert [w.filename for w in record] == [__file__]
+    assert "field range" in str(record[0].message)
+    # Ignored (the documented way to silence them): the same bytes, no
+    # warning; the changes are not made at all.
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", dccl.DcclValueChangedWarning)
+        assert codec.encode(changed) == data
+        assert record == []
+        # A filter for one module (this one): the changes are made again,
+        # and warned; the same filter for another module lets the ignore
+        # filter decide.
+        warnings.filterwarnings("always", category=dccl.DcclValueChangedWarning, module=__name__)
+        codec.encode(changed)
+        assert len(record) == 1
+        warnings.resetwarnings()
+        warnings.simplefilter("ignore", dccl.DcclValueChangedWarning)
+        warnings.filterwarnings("always", category=dccl.DcclValueChangedWarning, module="elsewhere")
+        codec.encode(changed)
+        assert len(record) == 1
+        warnings.resetwarnings()
+        warnings.simplefilter("error", dccl.DcclValueChangedWarning)
+        with pytest.raises(dccl.DcclValueChangedWarning):
+            codec.encode(changed)
+    # The filters put back: warned again.
+    with pytest.warns(dccl.DcclValueChangedWarning):
+        codec.encode(changed)

@@ -1017,6 +1017,9 @@ impl ArithmeticCodec {
 }
 
 impl FieldCodec for ArithmeticCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

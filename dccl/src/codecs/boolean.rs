@@ -48,6 +48,9 @@ impl BoolCodec {
 }
 
 impl FieldCodec for BoolCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

@@ -42,6 +42,9 @@ impl FixedBytesCodec {
 }
 
 impl FieldCodec for FixedBytesCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

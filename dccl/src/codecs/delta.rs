@@ -186,6 +186,9 @@ impl DeltaCodec {
 }
 
 impl FieldCodec for DeltaCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

@@ -79,6 +79,9 @@ impl EnumCodec {
 }
 
 impl FieldCodec for EnumCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }
@@ -117,7 +120,7 @@ impl FieldCodec for EnumCodec {
                 return Err(CodecError::new(format!("value {other:?} is not an enum")));
             }
         };
-        if wire.is_none() {
+        if wire.is_none() && ctx.reports_changes() {
             if let Some(Value::EnumNumber(n)) = value {
                 ctx.value_changed(
                     || {

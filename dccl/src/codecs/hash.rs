@@ -63,6 +63,9 @@ impl HashCodec {
 }
 
 impl FieldCodec for HashCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

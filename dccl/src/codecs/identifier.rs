@@ -73,6 +73,9 @@ impl IdFieldCodec {
 }
 
 impl FieldCodec for IdFieldCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         NAME
     }

@@ -7,15 +7,24 @@
 
 use std::sync::Arc;
 
-use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, MessageDescriptor, Value};
+use std::any::Any;
+use std::borrow::Cow;
+use std::mem::Discriminant;
+
+use prost_reflect::{Cardinality, DynamicMessage, FieldDescriptor, Kind, MessageDescriptor, Value};
 
 use crate::bits::{BitReader, BitWriter};
+use crate::codecs::boolean::BoolCodec;
+use crate::codecs::enumeration::EnumCodec;
+use crate::codecs::numeric::NumericCodec;
+use crate::codecs::var_bytes::VarBytesCodec;
 use crate::error::CodecError;
 use crate::field_codec::{
     DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart, RepeatBounds,
 };
 use crate::options::field_options;
 use crate::rounding::ceil_log2_u64;
+use crate::wire::WireMessage;
 
 /// Deepest nesting of embedded messages accepted (guards recursive types).
 pub const MAX_DEPTH: usize = 32;
@@ -31,9 +40,125 @@ pub(crate) struct FieldEntry {
     pub repeat: Option<RepeatBounds>,
     /// `(oneof index in the message, member index)` of a version 4 oneof member.
     pub oneof: Option<(usize, usize)>,
+    /// The kind of value (or of list element) the field holds, when it is
+    /// not a message: a decoded list of that kind is stored without
+    /// prost-reflect checking its elements again.
+    pub scalar: Option<Discriminant<Value>>,
+    /// A field with presence (not repeated) whose default value costs
+    /// nothing to make: `required` ones (set whenever encoded) and optional
+    /// ones of a scalar kind other than enum.
+    lookup_once: bool,
+    /// A `required` field.
+    required: bool,
+    /// How the codec is called: built-in codecs without dynamic dispatch.
+    plan: Plan,
+    /// The field's position in its message (see [`crate::wire::position`]).
+    position: usize,
+}
+
+/// The codec of a field when it is one of the built-in codecs called
+/// directly (found by its type when the field's codec is built): the
+/// compiler then sees the codec's code where it is called, and values come
+/// back without going through a trait object.
+#[derive(Debug)]
+enum Plan {
+    /// The default numeric codec.
+    Numeric(Arc<NumericCodec>),
+    /// The default bool codec.
+    Bool(Arc<BoolCodec>),
+    /// The default enum codec.
+    Enum(Arc<EnumCodec>),
+    /// The length-prefixed string and bytes codec.
+    VarBytes(Arc<VarBytesCodec>),
+    /// The default message codec: an embedded message is decoded in place.
+    Message(Arc<MessageCodec>),
+    /// Any other codec, through the trait object.
+    Dyn,
+}
+
+impl Plan {
+    fn of(codec: &Arc<dyn FieldCodec>) -> Plan {
+        let any: Arc<dyn Any + Send + Sync> = codec.clone();
+        let any = match any.downcast::<NumericCodec>() {
+            Ok(c) => return Plan::Numeric(c),
+            Err(any) => any,
+        };
+        let any = match any.downcast::<BoolCodec>() {
+            Ok(c) => return Plan::Bool(c),
+            Err(any) => any,
+        };
+        let any = match any.downcast::<EnumCodec>() {
+            Ok(c) => return Plan::Enum(c),
+            Err(any) => any,
+        };
+        let any = match any.downcast::<VarBytesCodec>() {
+            Ok(c) => return Plan::VarBytes(c),
+            Err(any) => any,
+        };
+        match any.downcast::<MessageCodec>() {
+            Ok(c) => Plan::Message(c),
+            Err(_) => Plan::Dyn,
+        }
+    }
+}
+
+impl Plan {
+    /// Whether a value the codec decodes is of the field's kind (the
+    /// built-in scalar codecs': made for that kind), so it is stored without
+    /// another check (the cheapest insertion for these kinds).
+    fn values_fit(&self) -> bool {
+        matches!(self, Plan::Numeric(_) | Plan::Bool(_) | Plan::VarBytes(_))
+    }
+}
+
+/// Evaluates `$body` with `$c` bound to the field's codec: the concrete
+/// built-in codec of its plan, else the trait object.
+macro_rules! with_codec {
+    ($entry:expr, |$c:ident| $body:expr) => {
+        match &$entry.plan {
+            Plan::Numeric($c) => $body,
+            Plan::Bool($c) => $body,
+            Plan::Enum($c) => $body,
+            Plan::VarBytes($c) => $body,
+            Plan::Message($c) => $body,
+            Plan::Dyn => {
+                let $c = &$entry.codec;
+                $body
+            }
+        }
+    };
 }
 
 impl FieldEntry {
+    /// Writes one value (`None`: not set) with the field's codec.
+    #[inline]
+    fn encode(
+        &self,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        with_codec!(self, |c| c.encode(out, value, ctx))
+    }
+
+    /// Writes the field unset; a required field unset is an error when
+    /// the required fields were not checked before encoding.
+    #[inline]
+    fn encode_unset(&self, out: &mut BitWriter, ctx: &EncodeContext) -> Result<(), CodecError> {
+        if self.required && ctx.required_unchecked {
+            return Err(missing_required());
+        }
+        self.encode(out, None, ctx)
+    }
+
+    /// The default message codec of a message field coded by it.
+    pub(crate) fn message_codec(&self) -> Option<&MessageCodec> {
+        match &self.plan {
+            Plan::Message(m) => Some(m),
+            _ => None,
+        }
+    }
+
     /// Fewest bits of this field.
     pub fn min_size(&self) -> u32 {
         match self.repeat {
@@ -62,6 +187,8 @@ pub(crate) struct OneofEntry {
     pub bits: u32,
     /// The members, in declaration order.
     pub members: Vec<FieldDescriptor>,
+    /// The members' positions in their message (see [`crate::wire::position`]).
+    pub member_positions: Vec<usize>,
 }
 
 /// The default message codec.
@@ -83,6 +210,8 @@ pub struct MessageCodec {
     presence: bool,
     min_bits: u32,
     max_bits: u32,
+    /// Whether a field's codec reads the clock when decoding.
+    reads_clock: bool,
 }
 
 /// The fields of a message in the order they are declared in the `.proto`
@@ -156,6 +285,10 @@ impl MessageCodec {
                         name: o.name().to_string(),
                         index,
                         bits: ceil_log2_u64(members.len() as u64 + 1),
+                        member_positions: members
+                            .iter()
+                            .map(|m| crate::wire::position(&descriptor, m))
+                            .collect(),
                         members,
                     }
                 })
@@ -215,7 +348,9 @@ impl MessageCodec {
             presence,
             min_bits: 0,
             max_bits: 0,
+            reads_clock: false,
         };
+        codec.reads_clock = codec.fields.iter().any(|f| f.codec.reads_clock());
         codec.compute_sizes();
         Ok(codec)
     }
@@ -311,9 +446,17 @@ impl MessageCodec {
         };
         Ok(FieldEntry {
             field: field.clone(),
-            codec,
             repeat,
             oneof,
+            scalar: scalar_discriminant(&field.kind()),
+            required: field.cardinality() == Cardinality::Required,
+            lookup_once: field.supports_presence()
+                && repeat.is_none()
+                && (field.cardinality() == Cardinality::Required
+                    || !matches!(field.kind(), Kind::Message(_) | Kind::Enum(_))),
+            plan: Plan::of(&codec),
+            codec,
+            position: crate::wire::position(field.parent_message(), field),
         })
     }
 
@@ -354,6 +497,11 @@ impl MessageCodec {
         &self.fields
     }
 
+    /// The entry of the field numbered `number`, when this codec encodes it.
+    pub(crate) fn entry(&self, number: u32) -> Option<&FieldEntry> {
+        self.fields.iter().find(|f| f.field.number() == number)
+    }
+
     /// The oneofs whose case this codec writes.
     pub(crate) fn oneofs(&self) -> &[OneofEntry] {
         &self.oneofs
@@ -366,34 +514,191 @@ impl MessageCodec {
         msg: &DynamicMessage,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        for o in &self.oneofs {
-            let case = o
+        let mut cases = [0usize; 8];
+        let mut cases_vec;
+        let cases: &mut [usize] = if self.oneofs.len() <= cases.len() {
+            &mut cases[..self.oneofs.len()]
+        } else {
+            cases_vec = vec![0usize; self.oneofs.len()];
+            &mut cases_vec
+        };
+        for (o, case) in self.oneofs.iter().zip(cases.iter_mut()) {
+            *case = o
                 .members
                 .iter()
                 .position(|m| msg.has_field(m))
                 .map(|i| i + 1)
                 .unwrap_or(0);
-            out.write(case as u64, o.bits);
+            out.write(*case as u64, o.bits);
         }
         for f in &self.fields {
             let mark = ctx.change_mark();
             let result = if let Some(bounds) = f.repeat {
                 match msg.get_field(&f.field).as_ref() {
-                    Value::List(values) => f.codec.encode_repeated(out, values, bounds, ctx),
+                    Value::List(values) => {
+                        with_codec!(f, |c| c.encode_repeated(out, values, bounds, ctx))
+                    }
                     other => Err(CodecError::new(format!(
                         "expected a list for a repeated field, got {other:?}"
                     ))),
                 }
+            } else if let Some((i, j)) = f.oneof {
+                // At most one member is set: the case written above.
+                if cases[i] == j + 1 {
+                    f.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
+                } else {
+                    Ok(())
+                }
+            } else if f.lookup_once {
+                // Set or not, one look-up: a field with presence is set when
+                // `get_field` borrows its value from the message (an unset
+                // one costs a cheap default value).
+                match msg.get_field(&f.field) {
+                    Cow::Borrowed(v) => f.encode(out, Some(v), ctx),
+                    Cow::Owned(_) => f.encode_unset(out, ctx),
+                }
             } else if msg.has_field(&f.field) {
-                f.codec
-                    .encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
-            } else if f.oneof.is_some() {
-                Ok(())
+                f.encode(out, Some(msg.get_field(&f.field).as_ref()), ctx)
             } else {
-                f.codec.encode(out, None, ctx)
+                f.encode_unset(out, ctx)
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
             ctx.name_changes(mark, || f.field.name().to_string());
+        }
+        Ok(())
+    }
+
+    /// Whether messages given as protobuf bytes can be encoded from their
+    /// wire form ([`crate::wire`]): every message field, here and in the
+    /// messages embedded, is coded by the default message codec (the
+    /// others take a `DynamicMessage`).
+    pub(crate) fn wire_ok(&self) -> bool {
+        self.fields.iter().all(|f| match &f.plan {
+            Plan::Message(m) => m.wire_ok(),
+            _ => !matches!(f.field.kind(), Kind::Message(_)),
+        })
+    }
+
+    /// [`MessageCodec::encode_fields`] of a message read from protobuf bytes.
+    pub(crate) fn encode_fields_wire(
+        &self,
+        out: &mut BitWriter,
+        msg: WireMessage<'_>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        let mut cases = [0usize; 8];
+        let mut cases_vec;
+        let cases: &mut [usize] = if self.oneofs.len() <= cases.len() {
+            &mut cases[..self.oneofs.len()]
+        } else {
+            cases_vec = vec![0usize; self.oneofs.len()];
+            &mut cases_vec
+        };
+        for (o, case) in self.oneofs.iter().zip(cases.iter_mut()) {
+            *case = o
+                .member_positions
+                .iter()
+                .position(|&p| msg.is_set(p))
+                .map(|i| i + 1)
+                .unwrap_or(0);
+            out.write(*case as u64, o.bits);
+        }
+        for f in &self.fields {
+            let mark = ctx.change_mark();
+            let result = match (f.repeat, &f.plan) {
+                (Some(bounds), Plan::Message(message)) => {
+                    message.encode_repeated_wire(out, &msg.messages(f.position), bounds, ctx)
+                }
+                (Some(bounds), _) => {
+                    let values = msg.list(f.position);
+                    with_codec!(f, |c| c.encode_repeated(out, values, bounds, ctx))
+                }
+                (None, _) if f.oneof.is_some_and(|(i, j)| cases[i] != j + 1) => Ok(()),
+                (None, Plan::Message(message)) => match msg.message(f.position) {
+                    None if f.required && ctx.required_unchecked => Err(missing_required()),
+                    m => message.encode_wire(out, m, ctx),
+                },
+                (None, _) => match msg.value(f.position) {
+                    None => f.encode_unset(out, ctx),
+                    v => f.encode(out, v, ctx),
+                },
+            };
+            result.map_err(|e| e.in_field(f.field.name()))?;
+            ctx.name_changes(mark, || f.field.name().to_string());
+        }
+        Ok(())
+    }
+
+    /// [`FieldCodec::encode`] of an embedded message read from protobuf
+    /// bytes (`None`: not set).
+    fn encode_wire(
+        &self,
+        out: &mut BitWriter,
+        msg: Option<WireMessage<'_>>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        match msg {
+            None => {
+                out.write_zeros(self.min_bits as usize);
+                Ok(())
+            }
+            Some(m) => {
+                if self.presence {
+                    out.write_bool(true);
+                }
+                self.encode_fields_wire(out, m, ctx)
+            }
+        }
+    }
+
+    /// [`FieldCodec::encode_repeated`] (the trait's, which this codec
+    /// keeps) of embedded messages read from protobuf bytes.
+    fn encode_repeated_wire(
+        &self,
+        out: &mut BitWriter,
+        values: &[WireMessage<'_>],
+        bounds: RepeatBounds,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        bounds.check_max(values.len(), ctx)?;
+        bounds.check_min(values.len(), self.codec_version(), ctx)?;
+        let count = if self.codec_version() > 2 {
+            let n = values
+                .len()
+                .min(bounds.max as usize)
+                .max(bounds.min as usize);
+            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
+            n
+        } else {
+            bounds.max as usize
+        };
+        for i in 0..count {
+            let mark = ctx.change_mark();
+            self.encode_wire(out, values.get(i).copied(), ctx)?;
+            ctx.name_changes(mark, || format!("[{i}]"));
+        }
+        Ok(())
+    }
+
+    /// Reads an embedded message (presence bit included) straight into the
+    /// field `field` of `parent`, which does not hold it yet.
+    fn decode_in_place(
+        &self,
+        input: &mut BitReader<'_>,
+        parent: &mut DynamicMessage,
+        field: &FieldDescriptor,
+        ctx: &DecodeContext,
+    ) -> Result<(), CodecError> {
+        if self.presence && !input.read_bool()? {
+            return Ok(());
+        }
+        let Value::Message(child) = parent.get_field_mut(field) else {
+            return Err(CodecError::new("not a message field"));
+        };
+        self.decode_fields(input, child, ctx)?;
+        if self.version < 3 && child.fields().next().is_none() {
+            // Version 2 has no presence bit: an empty message is not set.
+            parent.clear_field(field);
         }
         Ok(())
     }
@@ -418,31 +723,46 @@ impl MessageCodec {
         }
         for f in &self.fields {
             let result = if let Some(bounds) = f.repeat {
-                f.codec
-                    .decode_repeated(input, bounds, ctx)
-                    .and_then(|mut values| {
-                        if values.is_empty() {
-                            return Ok(());
-                        }
-                        // Version 2 reads a repeated embedded message in both
-                        // parts: the body's elements follow the head's.
+                with_codec!(f, |c| c.decode_repeated(input, bounds, ctx)).and_then(|mut values| {
+                    if values.is_empty() {
+                        return Ok(());
+                    }
+                    // Version 2 reads a repeated embedded message in both
+                    // parts: the body's elements follow the head's.
+                    if msg.has_field(&f.field) {
                         if let Value::List(head) = msg.get_field(&f.field).as_ref() {
                             let mut all = head.clone();
                             all.append(&mut values);
                             values = all;
                         }
-                        set(msg, &f.field, Value::List(values))
-                    })
+                    }
+                    store(msg, f, Value::List(values))
+                })
             } else {
                 if let Some((i, j)) = f.oneof {
                     if cases[i] != j + 1 {
                         continue;
                     }
                 }
-                f.codec.decode(input, ctx).and_then(|value| match value {
-                    Some(v) => merge_set(msg, &f.field, v),
-                    None => Ok(()),
-                })
+                match &f.plan {
+                    Plan::Message(message) if !msg.has_field(&f.field) => {
+                        message.decode_in_place(input, msg, &f.field, ctx)
+                    }
+                    Plan::Numeric(numeric) => numeric.decode_value(input).map(|value| {
+                        if let Some(v) = value {
+                            *msg.get_field_mut(&f.field) = v;
+                        }
+                    }),
+                    _ => with_codec!(f, |c| c.decode(input, ctx)).and_then(|value| match value {
+                        Some(v @ Value::Message(_)) => merge_set(msg, &f.field, v),
+                        Some(v) if f.plan.values_fit() => {
+                            *msg.get_field_mut(&f.field) = v;
+                            Ok(())
+                        }
+                        Some(v) => set(msg, &f.field, v),
+                        None => Ok(()),
+                    }),
+                }
             };
             result.map_err(|e| e.in_field(f.field.name()))?;
         }
@@ -451,6 +771,9 @@ impl MessageCodec {
 }
 
 impl FieldCodec for MessageCodec {
+    fn reads_clock(&self) -> bool {
+        self.reads_clock
+    }
     fn name(&self) -> &str {
         &self.name
     }
@@ -582,6 +905,53 @@ fn merge_set(
         }
     }
     set(msg, field, value)
+}
+
+/// The error of a required field found unset while encoding (the codec
+/// then gives the error of its check of the required fields instead).
+#[cold]
+fn missing_required() -> CodecError {
+    CodecError::new("message is not properly initialized: required field is not set")
+}
+
+/// The variant of [`Value`] a field of a non-message kind holds.
+fn scalar_discriminant(kind: &Kind) -> Option<Discriminant<Value>> {
+    let value = match kind {
+        Kind::Message(_) => return None,
+        Kind::Double => Value::F64(0.0),
+        Kind::Float => Value::F32(0.0),
+        Kind::Int32 | Kind::Sint32 | Kind::Sfixed32 => Value::I32(0),
+        Kind::Int64 | Kind::Sint64 | Kind::Sfixed64 => Value::I64(0),
+        Kind::Uint32 | Kind::Fixed32 => Value::U32(0),
+        Kind::Uint64 | Kind::Fixed64 => Value::U64(0),
+        Kind::Bool => Value::Bool(false),
+        Kind::String => Value::String(String::new()),
+        Kind::Bytes => Value::Bytes(Default::default()),
+        Kind::Enum(_) => Value::EnumNumber(0),
+    };
+    Some(std::mem::discriminant(&value))
+}
+
+/// Sets a decoded value of the field `f`: a value (or list of values) of
+/// the field's non-message kind directly, anything else through
+/// [`set`]'s type check.
+fn store(msg: &mut DynamicMessage, f: &FieldEntry, value: Value) -> Result<(), CodecError> {
+    if let (Value::List(items), Some(_)) = (&value, f.repeat) {
+        // A list of the field's kind replaces the (new, empty) default list:
+        // no second check of every element, and the cheapest insertion.
+        let fits = match f.scalar {
+            Some(kind) => items.iter().all(|v| std::mem::discriminant(v) == kind),
+            // The message codec's elements are messages of the field's type.
+            None => matches!(f.plan, Plan::Message(_)),
+        };
+        if fits {
+            *msg.get_field_mut(&f.field) = value;
+            return Ok(());
+        }
+    }
+    // One value: prost-reflect's check costs less than making the default
+    // value `get_field_mut` would replace.
+    set(msg, &f.field, value)
 }
 
 /// Sets a decoded value, refusing (rather than panicking on) a value of the

@@ -33,6 +33,9 @@ impl PresenceCodec {
 }
 
 impl FieldCodec for PresenceCodec {
+    fn reads_clock(&self) -> bool {
+        self.inner.reads_clock()
+    }
     fn name(&self) -> &str {
         &self.name
     }

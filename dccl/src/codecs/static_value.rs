@@ -62,6 +62,9 @@ impl StaticCodec {
 }
 
 impl FieldCodec for StaticCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

@@ -59,6 +59,9 @@ impl StringCodec {
 }
 
 impl FieldCodec for StringCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

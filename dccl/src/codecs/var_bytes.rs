@@ -64,6 +64,9 @@ impl VarBytesCodec {
 }
 
 impl FieldCodec for VarBytesCodec {
+    fn reads_clock(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }
