@@ -101,12 +101,14 @@ impl std::fmt::Display for Problem {
     }
 }
 
-/// Goby3's extensions of `DriverConfig` and the fields of ours that hold the
-/// same settings.
-const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
+/// Goby3's extensions of `DriverConfig` and of `ModemTransmission` (a MAC
+/// slot's Micro-Modem settings) and the fields of ours that hold the same
+/// settings (of the same numbers).
+const GOBY3_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.udp.protobuf.config", "udp"),
     ("goby.acomms.udp_multicast.protobuf.config", "udp_multicast"),
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
+    ("goby.acomms.micromodem.protobuf.transmission", "micromodem"),
 ];
 
 /// How the text of a configuration is written.
@@ -468,7 +470,8 @@ fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
-/// `text` with each Goby3 driver extension name (`[goby.acomms.udp.protobuf.config]`)
+/// `text` with each Goby3 extension name (`[goby.acomms.udp.protobuf.config]`,
+/// a slot's `[goby.acomms.micromodem.protobuf.transmission]`)
 /// replaced by the name of our field holding those settings, padded with
 /// spaces to the same length so that every line and column stays where it
 /// was. Strings and comments are left alone; other bracketed names are kept
@@ -497,8 +500,7 @@ fn goby3_extensions(text: &str) -> String {
                     break;
                 };
                 let inner = text[i + 1..i + len].trim();
-                if let Some((_, field)) = GOBY3_DRIVER_EXTENSIONS.iter().find(|(n, _)| *n == inner)
-                {
+                if let Some((_, field)) = GOBY3_EXTENSIONS.iter().find(|(n, _)| *n == inner) {
                     out.push_str(&text[copied..i]);
                     out.push_str(field);
                     let span = &text[i..=i + len];
