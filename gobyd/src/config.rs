@@ -416,7 +416,7 @@ const GOBY_NESTED_KEYS: &[(&str, &str, &str)] = &[
     (
         "goby.acomms.protobuf.MicroModemConfig",
         "use_base64_fdp",
-        "gobyd's Micro-Modem driver sends no FDP packets: remove it",
+        "gobyd's Micro-Modem driver sends and reads FDP data in hex (Goby3's default): remove it",
     ),
 ];
 
@@ -1201,6 +1201,7 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     if kind == Some(DriverType::DriverWhoiMicromodem) {
         problems.extend(micromodem_problems(config));
     }
+    problems.extend(driver_specific_slot_problems(config, kind));
     if matches!(
         kind,
         Some(DriverType::DriverWhoiMicromodem | DriverType::DriverAcousticSimulator)
@@ -1274,6 +1275,43 @@ fn micromodem_problems(config: &GobydConfig) -> Vec<Problem> {
     problems
 }
 
+/// The `DRIVER_SPECIFIC` slots (e.g. Goby3's Flexible Data Protocol slot,
+/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`): only the Micro-Modem
+/// driver carries them out, and each must ask for something it does (see
+/// [`modemdriver::micromodem::transmission::request`]), from the slot's
+/// source.
+fn driver_specific_slot_problems(config: &GobydConfig, kind: Option<DriverType>) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let Some(mac) = config.mac.as_ref() else {
+        return problems;
+    };
+    let mm = config
+        .driver
+        .as_ref()
+        .and_then(|d| d.micromodem.clone())
+        .unwrap_or_default();
+    for (i, slot) in mac.slot.iter().enumerate() {
+        if slot.r#type() != TransmissionType::DriverSpecific {
+            continue;
+        }
+        if kind != Some(DriverType::DriverWhoiMicromodem) {
+            problems.push(Problem::new(
+                format!("mac.slot[{i}].type"),
+                format!(
+                    "DRIVER_SPECIFIC slots are the Micro-Modem driver's (micromodem {{ type: ... }}); \
+                     {} sends data in DATA slots: use type: DATA",
+                    kind.map_or("this driver".to_string(), |k| format!("the {} driver", k.as_str_name()))
+                ),
+            ));
+            continue;
+        }
+        if let Err(p) = modemdriver::micromodem::transmission::request(slot, slot.src(), &mm) {
+            problems.push(Problem::new(format!("mac.slot[{i}].{}", p.field), p.reason));
+        }
+    }
+    problems
+}
+
 /// The slots of a driver whose packets take time on the water (the
 /// Micro-Modem, the simulator): their rates must be the Micro-Modem's, and
 /// each must hold a packet of its rate (less the MAC's guard time).
@@ -1283,7 +1321,10 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
         return problems;
     };
     for (i, slot) in mac.slot.iter().enumerate() {
-        if modemdriver::rate::spec(slot.rate()).is_none() {
+        // A driver-specific slot's rate is checked with its kind (an FDP
+        // slot's must be an FDP rate).
+        if slot.r#type() == TransmissionType::Data && modemdriver::rate::spec(slot.rate()).is_none()
+        {
             problems.push(Problem::new(
                 format!("mac.slot[{i}].rate"),
                 format!(
@@ -1302,7 +1343,10 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
             .slot
             .iter()
             .enumerate()
-            .filter(|(_, s)| s.r#type() == TransmissionType::Data)
+            .filter(|(_, s)| {
+                s.r#type() == TransmissionType::Data
+                    || modemdriver::micromodem::transmission::is_fdp(s)
+            })
             .map(|(i, s)| (format!("mac.slot[{i}]"), s.slot_seconds(), s.rate()))
             .collect(),
         MacType::MacAutoDecentralized => vec![("mac".into(), mac.slot_seconds(), mac.rate())],
