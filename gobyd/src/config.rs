@@ -323,6 +323,9 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
     if let Some(text) = mixed_fleet_ack_note(&config) {
         found.note(places.offset("driver.driver_type"), NoteLevel::Info, text);
     }
+    if let Some((field, text)) = fdp_without_acks_note(&config) {
+        found.note(places.offset(&field), NoteLevel::Warn, text);
+    }
     let notes = found.finish()?;
     Ok(Read {
         config,
@@ -1689,10 +1692,26 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
     Ok(Definitions { codec, loaded })
 }
 
+/// Indices of the MAC slots that are Flexible Data Protocol slots, and
+/// whether there are data slots too.
+fn slot_kinds(config: &GobydConfig) -> (Vec<usize>, bool) {
+    let slots = config.mac.iter().flat_map(|m| m.slot.iter());
+    let fdp = slots
+        .clone()
+        .enumerate()
+        .filter(|(_, s)| modemdriver::micromodem::transmission::is_fdp(s))
+        .map(|(i, _)| i)
+        .collect();
+    let data = slots.clone().any(|s| s.r#type() == TransmissionType::Data);
+    (fdp, data)
+}
+
 /// For a Micro-Modem whose `use_application_acks` is left to gobyd's
-/// default (application acks): which setting a fleet with Goby3 nodes needs,
-/// since Goby3's pAcommsHandler takes its acks from the modem and reads no
-/// application ack in a data cycle.
+/// default (application acks): which setting a fleet with Goby3 nodes
+/// needs. Goby3's pAcommsHandler reads application acks in Flexible Data
+/// Protocol packets only: in data cycles it takes its acks from the modem
+/// and cannot decode a frame that starts with the ack message; the modem
+/// acknowledges no FDP packet.
 fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
     let driver = config.driver.as_ref()?;
     let micromodem = driver.driver
@@ -1703,11 +1722,63 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
         .micromodem
         .as_ref()
         .is_none_or(|m| m.use_application_acks.is_none());
-    (micromodem && unset).then(|| {
-        "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
-         which Goby3's pAcommsHandler cannot read in a data cycle (in a fleet with Goby3 nodes, \
-         set it false on every gobyd node)"
-            .to_string()
+    if !(micromodem && unset) {
+        return None;
+    }
+    Some(match slot_kinds(config) {
+        (fdp, _) if fdp.is_empty() => {
+            "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+             which Goby3's pAcommsHandler cannot read in a data cycle (in a fleet with Goby3 nodes, \
+             set it false on every gobyd node)"
+                .to_string()
+        }
+        (_, false) => {
+            "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+             as its Flexible Data Protocol slots need (the modem acknowledges no FDP packet); in a \
+             fleet with Goby3 nodes, set use_application_acks: true in their \
+             [goby.acomms.micromodem.protobuf.config] too"
+                .to_string()
+        }
+        (_, true) => {
+            "driver.micromodem.use_application_acks is not set: gobyd sends application acks in \
+             its data and FDP slots alike; in a fleet with Goby3 nodes no one setting serves both \
+             kinds of slot (Goby3 reads application acks in FDP packets only and cannot decode a \
+             data-cycle frame that starts with one, while without them FDP packets are never \
+             acknowledged): give the fleet FDP slots with use_application_acks: true everywhere, \
+             or data slots with it false everywhere"
+                .to_string()
+        }
+    })
+}
+
+/// For a Micro-Modem with Flexible Data Protocol slots and
+/// `use_application_acks: false`: nothing sent in those slots is ever
+/// acknowledged (the modem acknowledges no FDP packet), as Goby3 warns.
+/// The slot's field and the text.
+fn fdp_without_acks_note(config: &GobydConfig) -> Option<(String, String)> {
+    let driver = config.driver.as_ref()?;
+    let off = driver.driver
+        == Some(driver_config::Driver::DriverType(
+            DriverType::DriverWhoiMicromodem as i32,
+        ))
+        && driver
+            .micromodem
+            .as_ref()
+            .is_some_and(|m| m.use_application_acks == Some(false));
+    let (fdp, _) = slot_kinds(config);
+    let first = *fdp.first()?;
+    off.then(|| {
+        (
+            format!("mac.slot[{first}]"),
+            format!(
+                "mac.slot[{first}] is a Flexible Data Protocol slot and \
+                 driver.micromodem.use_application_acks is false: the modem acknowledges no FDP \
+                 packet, so no message sent in {} is ever acknowledged (those asking for acks are \
+                 sent again until their ttl); set use_application_acks: true, here and at every \
+                 node (Goby3's too)",
+                if fdp.len() == 1 { "it" } else { "these slots" }
+            ),
+        )
     })
 }
 
