@@ -43,8 +43,8 @@ use protos::goby::acomms::protobuf::{
 use tokio::time::Instant;
 
 use super::super::application_ack::Placed;
-use super::super::ranging;
 use super::super::sentence::{Cycle, MmSentence};
+use super::super::{firmware, ranging};
 use super::machine::{Machine, RequestId};
 use super::{packet_estimate, HAND_OVER};
 use crate::driver::{DriverEvent, DriverStatus, TransmitOutcome, TransmitResult};
@@ -364,6 +364,11 @@ impl Machine {
     fn cycle_command(&mut self) -> MmSentence {
         let me = self.modem_id;
         let app_acks = self.app_acks.is_some();
+        let pad_odd_fdp = self
+            .startup
+            .firmware
+            .as_deref()
+            .is_some_and(firmware::pads_odd_fdp);
         let active = self.tx.active.as_mut().expect("active job");
         let (sentence, cycle_frames) = match &active.job {
             Job::Data(mt) => {
@@ -388,20 +393,27 @@ impl Machine {
                     frames,
                 )
             }
-            Job::Fdp(mt) => (
-                MmSentence::FdpTransmit {
-                    dest: mt.dest().max(0) as u32,
-                    rate: mt.rate().max(0) as u32,
-                    ack: false,
-                    reserved: 0,
-                    data: active
-                        .filled
-                        .as_ref()
-                        .and_then(|f| f.frame.first().cloned())
-                        .unwrap_or_default(),
-                },
-                1,
-            ),
+            Job::Fdp(mt) => {
+                let mut data = active
+                    .filled
+                    .as_ref()
+                    .and_then(|f| f.frame.first().cloned())
+                    .unwrap_or_default();
+                if pad_odd_fdp && data.len() % 2 == 1 {
+                    data.push(0);
+                }
+                (
+                    MmSentence::FdpTransmit {
+                        dest: mt.dest().max(0) as u32,
+                        rate: mt.rate().max(0) as u32,
+                        // The modem acknowledges no FDP packet (Goby sends 0).
+                        ack: false,
+                        reserved: 0,
+                        data,
+                    },
+                    1,
+                )
+            }
             Job::Ping { dest } => (
                 MmSentence::Ping {
                     from_modem: false,
