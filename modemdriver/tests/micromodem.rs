@@ -1018,10 +1018,10 @@ fn fdp_slot(unique_id: u32) -> ModemTransmission {
         dest: Some(-1),
         rate: Some(1),
         r#type: Some(TransmissionType::DriverSpecific as i32),
-        micromodem: Some(MicroModemTransmission {
+        micromodem: Some(Box::new(MicroModemTransmission {
             r#type: Some(MicroModemTransmissionType::MicromodemFlexibleData as i32),
             ..Default::default()
-        }),
+        })),
         unique_id: Some(unique_id),
         time: Some(modemdriver::time::now_micros()),
         slot_seconds: Some(10.0),

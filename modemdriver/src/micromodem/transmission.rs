@@ -61,7 +61,7 @@ pub fn request(
     modem_id: i32,
     config: &MicroModemConfig,
 ) -> Result<Request, Problem> {
-    let settings = mt.micromodem.clone().unwrap_or_default();
+    let settings = mt.micromodem.as_deref().cloned().unwrap_or_default();
     let kind = settings.r#type();
     let specific = |dest: Option<i32>| MicroModemSpecific {
         r#type: kind as i32,
@@ -103,11 +103,11 @@ pub fn request(
             }
             T::MicromodemTwoWayPing => specific(dest),
             T::MicromodemHardwareControl => MicroModemSpecific {
-                hw_ctl: settings.hw_ctl.clone(),
+                hw_ctl: settings.hw_ctl,
                 ..specific(dest)
             },
             T::MicromodemRemusLblRanging => MicroModemSpecific {
-                remus_lbl: settings.remus_lbl.clone(),
+                remus_lbl: settings.remus_lbl,
                 ..specific(None)
             },
             T::MicromodemNarrowbandLblRanging => MicroModemSpecific {
@@ -184,10 +184,10 @@ mod tests {
             dest: Some(-1),
             rate: Some(rate),
             r#type: Some(TransmissionType::DriverSpecific as i32),
-            micromodem: Some(MicroModemTransmission {
+            micromodem: Some(Box::new(MicroModemTransmission {
                 r#type: Some(kind as i32),
                 ..Default::default()
-            }),
+            })),
             unique_id: Some(7),
             time: Some(1_000_000),
             slot_seconds: Some(10.0),

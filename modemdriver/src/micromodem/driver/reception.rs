@@ -324,10 +324,10 @@ impl Machine {
                     ack_requested: Some(ack),
                     frame_start: Some(0),
                     frame: vec![bytes],
-                    micromodem: Some(MicroModemTransmission {
+                    micromodem: Some(Box::new(MicroModemTransmission {
                         r#type: Some(MicroModemTransmissionType::MicromodemFlexibleData as i32),
                         ..Default::default()
-                    }),
+                    })),
                     ..Default::default()
                 });
             }

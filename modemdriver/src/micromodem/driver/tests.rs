@@ -547,10 +547,10 @@ fn fdp_slot_after_revision(version: &str) -> (Bench, Vec<Output>) {
         dest: Some(PEER as i32),
         rate: Some(1),
         r#type: Some(TransmissionType::DriverSpecific as i32),
-        micromodem: Some(MicroModemTransmission {
+        micromodem: Some(Box::new(MicroModemTransmission {
             r#type: Some(MicroModemTransmissionType::MicromodemFlexibleData as i32),
             ..Default::default()
-        }),
+        })),
         time: Some(opened),
         slot_seconds: Some(10.0),
         ..Default::default()
