@@ -65,6 +65,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
         }
     }
+    // Boxed: a transmission travels through every layer and event, and
+    // the Micro-Modem settings (LBL parameters and all) would more than
+    // double its size for the few that carry them.
+    config.boxed(".goby.acomms.protobuf.ModemTransmission.micromodem");
     config.out_dir(&out_dir);
     config.compile_fds(fds)?;
     Ok(())

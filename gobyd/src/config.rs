@@ -101,14 +101,16 @@ impl std::fmt::Display for Problem {
     }
 }
 
-/// Goby3's extensions of `DriverConfig` and the fields of ours that hold the
-/// same settings.
-const GOBY3_DRIVER_EXTENSIONS: &[(&str, &str)] = &[
+/// Goby3's extensions of `DriverConfig` and of `ModemTransmission` (a MAC
+/// slot's Micro-Modem settings) and the fields of ours that hold the same
+/// settings (of the same numbers).
+const GOBY3_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.udp.protobuf.config", "udp"),
     ("goby.acomms.udp_multicast.protobuf.config", "udp_multicast"),
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
     ("goby.acomms.iridium.protobuf.config", "iridium"),
     ("goby.acomms.iridium.protobuf.shore_config", "iridium_shore"),
+    ("goby.acomms.micromodem.protobuf.transmission", "micromodem"),
 ];
 
 /// How the text of a configuration is written.
@@ -323,6 +325,9 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
     if let Some(text) = mixed_fleet_ack_note(&config) {
         found.note(places.offset("driver.driver_type"), NoteLevel::Info, text);
     }
+    if let Some((field, text)) = fdp_without_acks_note(&config) {
+        found.note(places.offset(&field), NoteLevel::Warn, text);
+    }
     let notes = found.finish()?;
     Ok(Read {
         config,
@@ -416,7 +421,7 @@ const GOBY_NESTED_KEYS: &[(&str, &str, &str)] = &[
     (
         "goby.acomms.protobuf.MicroModemConfig",
         "use_base64_fdp",
-        "gobyd's Micro-Modem driver sends no FDP packets: remove it",
+        "gobyd's Micro-Modem driver sends and reads FDP data in hex (Goby3's default): remove it",
     ),
 ];
 
@@ -471,7 +476,8 @@ fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
-/// `text` with each Goby3 driver extension name (`[goby.acomms.udp.protobuf.config]`)
+/// `text` with each Goby3 extension name (`[goby.acomms.udp.protobuf.config]`,
+/// a slot's `[goby.acomms.micromodem.protobuf.transmission]`)
 /// replaced by the name of our field holding those settings, padded with
 /// spaces to the same length so that every line and column stays where it
 /// was. Strings and comments are left alone; other bracketed names are kept
@@ -500,8 +506,7 @@ fn goby3_extensions(text: &str) -> String {
                     break;
                 };
                 let inner = text[i + 1..i + len].trim();
-                if let Some((_, field)) = GOBY3_DRIVER_EXTENSIONS.iter().find(|(n, _)| *n == inner)
-                {
+                if let Some((_, field)) = GOBY3_EXTENSIONS.iter().find(|(n, _)| *n == inner) {
                     out.push_str(&text[copied..i]);
                     out.push_str(field);
                     let span = &text[i..=i + len];
@@ -1207,6 +1212,7 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     if kind == Some(DriverType::DriverWhoiMicromodem) {
         problems.extend(micromodem_problems(config));
     }
+    problems.extend(driver_specific_slot_problems(config, kind));
     if matches!(
         kind,
         Some(DriverType::DriverWhoiMicromodem | DriverType::DriverAcousticSimulator)
@@ -1280,6 +1286,43 @@ fn micromodem_problems(config: &GobydConfig) -> Vec<Problem> {
     problems
 }
 
+/// The `DRIVER_SPECIFIC` slots (e.g. Goby3's Flexible Data Protocol slot,
+/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`): only the Micro-Modem
+/// driver carries them out, and each must ask for something it does (see
+/// [`modemdriver::micromodem::transmission::request`]), from the slot's
+/// source.
+fn driver_specific_slot_problems(config: &GobydConfig, kind: Option<DriverType>) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let Some(mac) = config.mac.as_ref() else {
+        return problems;
+    };
+    let mm = config
+        .driver
+        .as_ref()
+        .and_then(|d| d.micromodem.clone())
+        .unwrap_or_default();
+    for (i, slot) in mac.slot.iter().enumerate() {
+        if slot.r#type() != TransmissionType::DriverSpecific {
+            continue;
+        }
+        if kind != Some(DriverType::DriverWhoiMicromodem) {
+            problems.push(Problem::new(
+                format!("mac.slot[{i}].type"),
+                format!(
+                    "DRIVER_SPECIFIC slots are the Micro-Modem driver's (micromodem {{ type: ... }}); \
+                     {} sends data in DATA slots: use type: DATA",
+                    kind.map_or("this driver".to_string(), |k| format!("the {} driver", k.as_str_name()))
+                ),
+            ));
+            continue;
+        }
+        if let Err(p) = modemdriver::micromodem::transmission::request(slot, slot.src(), &mm) {
+            problems.push(Problem::new(format!("mac.slot[{i}].{}", p.field), p.reason));
+        }
+    }
+    problems
+}
+
 /// The slots of a driver whose packets take time on the water (the
 /// Micro-Modem, the simulator): their rates must be the Micro-Modem's, and
 /// each must hold a packet of its rate (less the MAC's guard time).
@@ -1289,7 +1332,10 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
         return problems;
     };
     for (i, slot) in mac.slot.iter().enumerate() {
-        if modemdriver::rate::spec(slot.rate()).is_none() {
+        // A driver-specific slot's rate is checked with its kind (an FDP
+        // slot's must be an FDP rate).
+        if slot.r#type() == TransmissionType::Data && modemdriver::rate::spec(slot.rate()).is_none()
+        {
             problems.push(Problem::new(
                 format!("mac.slot[{i}].rate"),
                 format!(
@@ -1308,7 +1354,10 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
             .slot
             .iter()
             .enumerate()
-            .filter(|(_, s)| s.r#type() == TransmissionType::Data)
+            .filter(|(_, s)| {
+                s.r#type() == TransmissionType::Data
+                    || modemdriver::micromodem::transmission::is_fdp(s)
+            })
             .map(|(i, s)| (format!("mac.slot[{i}]"), s.slot_seconds(), s.rate()))
             .collect(),
         MacType::MacAutoDecentralized => vec![("mac".into(), mac.slot_seconds(), mac.rate())],
@@ -1651,10 +1700,26 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
     Ok(Definitions { codec, loaded })
 }
 
+/// Indices of the MAC slots that are Flexible Data Protocol slots, and
+/// whether there are data slots too.
+fn slot_kinds(config: &GobydConfig) -> (Vec<usize>, bool) {
+    let slots = config.mac.iter().flat_map(|m| m.slot.iter());
+    let fdp = slots
+        .clone()
+        .enumerate()
+        .filter(|(_, s)| modemdriver::micromodem::transmission::is_fdp(s))
+        .map(|(i, _)| i)
+        .collect();
+    let data = slots.clone().any(|s| s.r#type() == TransmissionType::Data);
+    (fdp, data)
+}
+
 /// For a Micro-Modem whose `use_application_acks` is left to gobyd's
-/// default (application acks): which setting a fleet with Goby3 nodes needs,
-/// since Goby3's pAcommsHandler takes its acks from the modem and reads no
-/// application ack in a data cycle.
+/// default (application acks): which setting a fleet with Goby3 nodes
+/// needs. Goby3's pAcommsHandler reads application acks in Flexible Data
+/// Protocol packets only: in data cycles it takes its acks from the modem
+/// and cannot decode a frame that starts with the ack message; the modem
+/// acknowledges no FDP packet.
 fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
     let driver = config.driver.as_ref()?;
     let micromodem = driver.driver
@@ -1665,11 +1730,63 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
         .micromodem
         .as_ref()
         .is_none_or(|m| m.use_application_acks.is_none());
-    (micromodem && unset).then(|| {
-        "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
-         which Goby3's pAcommsHandler cannot read in a data cycle (in a fleet with Goby3 nodes, \
-         set it false on every gobyd node)"
-            .to_string()
+    if !(micromodem && unset) {
+        return None;
+    }
+    Some(match slot_kinds(config) {
+        (fdp, _) if fdp.is_empty() => {
+            "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+             which Goby3's pAcommsHandler cannot read in a data cycle (in a fleet with Goby3 nodes, \
+             set it false on every gobyd node)"
+                .to_string()
+        }
+        (_, false) => {
+            "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+             as its Flexible Data Protocol slots need (the modem acknowledges no FDP packet); in a \
+             fleet with Goby3 nodes, set use_application_acks: true in their \
+             [goby.acomms.micromodem.protobuf.config] too"
+                .to_string()
+        }
+        (_, true) => {
+            "driver.micromodem.use_application_acks is not set: gobyd sends application acks in \
+             its data and FDP slots alike; in a fleet with Goby3 nodes no one setting serves both \
+             kinds of slot (Goby3 reads application acks in FDP packets only and cannot decode a \
+             data-cycle frame that starts with one, while without them FDP packets are never \
+             acknowledged): give the fleet FDP slots with use_application_acks: true everywhere, \
+             or data slots with it false everywhere"
+                .to_string()
+        }
+    })
+}
+
+/// For a Micro-Modem with Flexible Data Protocol slots and
+/// `use_application_acks: false`: nothing sent in those slots is ever
+/// acknowledged (the modem acknowledges no FDP packet), as Goby3 warns.
+/// The slot's field and the text.
+fn fdp_without_acks_note(config: &GobydConfig) -> Option<(String, String)> {
+    let driver = config.driver.as_ref()?;
+    let off = driver.driver
+        == Some(driver_config::Driver::DriverType(
+            DriverType::DriverWhoiMicromodem as i32,
+        ))
+        && driver
+            .micromodem
+            .as_ref()
+            .is_some_and(|m| m.use_application_acks == Some(false));
+    let (fdp, _) = slot_kinds(config);
+    let first = *fdp.first()?;
+    off.then(|| {
+        (
+            format!("mac.slot[{first}]"),
+            format!(
+                "mac.slot[{first}] is a Flexible Data Protocol slot and \
+                 driver.micromodem.use_application_acks is false: the modem acknowledges no FDP \
+                 packet, so no message sent in {} is ever acknowledged (those asking for acks are \
+                 sent again until their ttl); set use_application_acks: true, here and at every \
+                 node (Goby3's too)",
+                if fdp.len() == 1 { "it" } else { "these slots" }
+            ),
+        )
     })
 }
 

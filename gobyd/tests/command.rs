@@ -402,6 +402,98 @@ driver_cfg {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Goby3's Flexible Data Protocol slot, pasted from a pAcommsHandler
+/// configuration (`[goby.acomms.micromodem.protobuf.transmission]`), reads
+/// as gobyd's own (`micromodem { type: ... }`); `--check` says which
+/// `use_application_acks` FDP slots need, and refuses DRIVER_SPECIFIC
+/// slots that cannot work, naming the field and its place.
+#[test]
+fn check_reads_goby3_fdp_slots_and_says_what_they_need() {
+    let port = SerialPort::open();
+    let dir = scratch("command", "gobyd-fdp-slots");
+    let path = dir.join("fdp.pb.txt");
+    let mm =
+        "driver_cfg {\n  driver_type: DRIVER_WHOI_MICROMODEM\n  serial_port: \"/dev/ttyUSB0\"\n";
+    let config = |acks: &str, slot: &str| {
+        port.with_port(&format!(
+            "modem_id: 1\n{mm}{acks}}}\nmac_cfg {{\n  type: MAC_FIXED_DECENTRALIZED\n{slot}}}\n"
+        ))
+    };
+    let goby3_slot = "  slot { src: 1 rate: 1 type: DRIVER_SPECIFIC [goby.acomms.micromodem.protobuf.transmission] { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n  slot { src: 2 rate: 1 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n";
+    let acks_on = "  [goby.acomms.micromodem.protobuf.config] { use_application_acks: true }\n";
+    let acks_off = "  [goby.acomms.micromodem.protobuf.config] { use_application_acks: false }\n";
+    let check = |text: String| {
+        std::fs::write(&path, &text).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        (out.status.code(), stderr_text(&out), text)
+    };
+    // Read, both names; with application acks, nothing to say.
+    let (code, err, text) = check(config(acks_on, goby3_slot));
+    assert_eq!(code, Some(0), "{text}: {err}");
+    assert!(!err.contains("Flexible Data Protocol"), "{err}");
+    // Left to gobyd's default: Goby3 nodes need them too.
+    let (code, err, _) = check(config("", goby3_slot));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("as its Flexible Data Protocol slots need")
+            && err.contains("set use_application_acks: true in their"),
+        "{err}"
+    );
+    // Without them: no ack, ever.
+    let (code, err, _) = check(config(acks_off, goby3_slot));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("fdp.pb.txt:9:3: mac.slot[0] is a Flexible Data Protocol slot and driver.micromodem.use_application_acks is false")
+            && err.contains("no message sent in these slots is ever acknowledged"),
+        "{err}"
+    );
+    // Data and FDP slots in one fleet with Goby3: no one setting serves both.
+    let (code, err, _) = check(config(
+        "",
+        "  slot { src: 1 rate: 1 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n  slot { src: 2 rate: 1 slot_seconds: 10 }\n",
+    ));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("no one setting serves both"), "{err}");
+    for (slot, expected) in [
+        (
+            "  slot { src: 1 rate: 2 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n",
+            "fdp.pb.txt:9:17: mac.slot[0].rate: 2 is not a Flexible Data Protocol rate (1, 3 or 5)",
+        ),
+        (
+            "  slot { src: 1 rate: 1 type: DRIVER_SPECIFIC slot_seconds: 10 }\n",
+            "mac.slot[0].micromodem.type: required for a DRIVER_SPECIFIC transmission",
+        ),
+        (
+            "  slot { src: 1 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_MINI_DATA } slot_seconds: 10 }\n",
+            "mac.slot[0].micromodem.type: MICROMODEM_MINI_DATA is not sent from a slot",
+        ),
+        (
+            "  slot { src: 1 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_TWO_WAY_PING } slot_seconds: 10 }\n",
+            "mac.slot[0].dest: required (the modem to reach, 1-127)",
+        ),
+        (
+            "  slot { src: 1 rate: 5 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 3 }\n",
+            "mac.slot[0].slot_seconds: 3 s is too short for a rate-5 packet of 8 frames",
+        ),
+    ] {
+        let (code, err, text) = check(config(acks_on, slot));
+        assert_eq!(code, Some(2), "{text}: {err}");
+        assert!(err.contains(expected), "{text}: {err}");
+    }
+    // Another driver has no FDP.
+    let (code, err, text) = check(format!(
+        "modem_id: 1\ndriver {{ driver_type: DRIVER_UDP udp {{ local {{ port: 50001 }} }} }}\n\
+         mac {{ type: MAC_FIXED_DECENTRALIZED {goby3_slot} }}\n"
+    ));
+    assert_eq!(code, Some(2), "{text}: {err}");
+    assert!(
+        err.contains("mac.slot[0].type: DRIVER_SPECIFIC slots are the Micro-Modem driver's")
+            && err.contains("mac.slot[1].type"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn check_refuses_options_nested_too_deep_without_crashing() {
     let dir = scratch("command", "gobyd-deep");

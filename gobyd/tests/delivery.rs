@@ -19,9 +19,11 @@
 //! The Micro-Modem runs are made with the emulator speaking as a Micro-Modem
 //! 1 and, again, as a Micro-Modem 2 at rates 1 and 0 (the rate-0 cycle opens
 //! with a cycle-initialization packet; at rate 1 the modem starts
-//! transmitting within half a second of the last frame). Over a Micro-Modem
-//! 2 every reception must also carry the modem's receive statistics
-//! (`$CACST`).
+//! transmitting within half a second of the last frame), and in Flexible
+//! Data Protocol slots (node 1's configuration naming them as Goby3 does,
+//! `[goby.acomms.micromodem.protobuf.transmission]`, node 2's with
+//! gobyd's `micromodem`). Over a Micro-Modem 2 every reception must also
+//! carry the modem's receive statistics (`$CACST`).
 //!
 //! `cargo test -p gobyd --test delivery -- --nocapture` prints one summary
 //! line per run.
@@ -54,6 +56,9 @@ struct Link {
     rate: u32,
     slot_seconds: f64,
     messages: usize,
+    /// Flexible Data Protocol slots (Goby3's `DRIVER_SPECIFIC` slot with
+    /// `MICROMODEM_FLEXIBLE_DATA`) in place of data cycles.
+    fdp: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,6 +75,7 @@ impl Link {
         rate: 6,
         slot_seconds: 3.0,
         messages: 20,
+        fdp: false,
     };
     /// Emulated Micro-Modem 2s at rate 1 (three 64-byte frames, 250 bit/s).
     const MICROMODEM2_RATE1: Link = Link {
@@ -77,6 +83,17 @@ impl Link {
         rate: 1,
         slot_seconds: 8.0,
         messages: 20,
+        fdp: false,
+    };
+    /// Emulated Micro-Modem 2s sending Flexible Data Protocol packets at
+    /// FDP rate 1 from their slots: one frame of at most 100 bytes a slot
+    /// (Goby3's size), acknowledged only by application acks.
+    const MICROMODEM2_FDP: Link = Link {
+        kind: LinkKind::MicroModem2,
+        rate: 1,
+        slot_seconds: 8.0,
+        messages: 20,
+        fdp: true,
     };
     /// Emulated Micro-Modem 2s at rate 0 (one 32-byte frame, 80 bit/s, after
     /// a cycle-initialization packet).
@@ -85,6 +102,7 @@ impl Link {
         rate: 0,
         slot_seconds: 6.0,
         messages: 6,
+        fdp: false,
     };
     /// The acoustic simulator driver alone.
     const SIMULATOR: Link = Link {
@@ -92,6 +110,7 @@ impl Link {
         rate: 6,
         slot_seconds: 3.0,
         messages: 20,
+        fdp: false,
     };
 
     fn emulated(&self) -> bool {
@@ -145,6 +164,10 @@ struct Tally {
     /// link statistics.
     json_lines: usize,
     json_lines_with_stats: usize,
+    /// Packets the modems put on the water, and how many were Flexible
+    /// Data Protocol packets.
+    packets: usize,
+    fdp_packets: usize,
 }
 
 /// Node `id` of two: `driver`, TDMA slots at the link's rate and length,
@@ -155,10 +178,13 @@ fn daemon_config(
     data_dir: &Path,
     link: Link,
 ) -> protos::goby::apps::protobuf::GobydConfig {
-    Node::new(id)
-        .driver(driver)
-        .tdma(&[1, 2], link.rate, link.slot_seconds)
-        .queue(Entry::command().ack(true).ttl(1800))
+    let node = Node::new(id).driver(driver);
+    let node = if link.fdp {
+        node.fdp_tdma(&[1, 2], link.rate, link.slot_seconds, id == 1)
+    } else {
+        node.tdma(&[1, 2], link.rate, link.slot_seconds)
+    };
+    node.queue(Entry::command().ack(true).ttl(1800))
         .json_tcp("")
         .data_dir(data_dir)
         .raw_log(false)
@@ -417,6 +443,12 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
         }
     }
     let slots = slot_report(&air, link.slot_seconds);
+    for packet in air.iter().flatten() {
+        tally.packets += 1;
+        if packet.kind == modemdriver::micromodem::emulator::AirKind::FlexibleData {
+            tally.fdp_packets += 1;
+        }
+    }
     let (heard, with_stats) = *receptions.lock().unwrap();
     tally.receptions = heard;
     tally.receptions_with_stats = with_stats;
@@ -584,4 +616,41 @@ async fn micromodem2_rate0_with_faults() {
         ..Default::default()
     };
     check(faults.name, faults, Link::MICROMODEM2_RATE0).await;
+}
+
+/// Flexible Data Protocol slots with application acks, frames lost to bad
+/// CRCs (the whole FDP packet then), an unplugged modem, a reset in the
+/// middle of a packet and a silent modem.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem2_fdp_with_faults() {
+    let faults = Faults {
+        name: "mm2-fdp",
+        bad_crc: 0.15,
+        unplug: Some((4.0, 12.0)),
+        resets: 1,
+        silences: vec![(30.0, 4.0)],
+        seed: 11,
+        ..Default::default()
+    };
+    check(faults.name, faults, Link::MICROMODEM2_FDP).await;
+}
+
+/// Flexible Data Protocol slots without faults: every message delivered
+/// once and acknowledged.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn micromodem2_fdp_every_message_delivered_once_and_acked() {
+    let name = "mm2-fdp-clean";
+    let (t, slots) = run(name, Faults::default(), Link::MICROMODEM2_FDP).await;
+    println!(
+        "delivery {name}: published {} delivered {} duplicates {} acked {} owed {} lost {}; receptions {} with statistics {}; {slots}",
+        t.published, t.delivered, t.duplicates, t.acked, t.owed, t.lost, t.receptions, t.receptions_with_stats
+    );
+    assert_eq!(t.delivered, t.published, "{name}: {t:?}");
+    assert_eq!(t.acked, t.published, "{name}: {t:?}");
+    assert_eq!(t.duplicates, 0, "{name}: {t:?}");
+    assert_eq!(t.acked_before_delivered, 0, "{name}: {t:?}");
+    assert_eq!(t.receptions_with_stats, t.receptions, "{name}: {t:?}");
+    assert!(t.fdp_packets > 0, "{name}: {t:?}");
+    assert_eq!(t.fdp_packets, t.packets, "{name}: FDP packets only: {t:?}");
+    assert!(slots.starts_with("slots: 0 outside"), "{name}: {slots}");
 }

@@ -76,6 +76,33 @@ impl Node {
             srcs: srcs.to_vec(),
             rate,
             slot_seconds,
+            kind: String::new(),
+        });
+        self
+    }
+
+    /// As [`tdma`](Self::tdma), each slot a Flexible Data Protocol packet of
+    /// the Micro-Modem 2 (`rate` 1, 3 or 5): `slot { src: S dest: -1 rate:
+    /// RATE type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA }
+    /// slot_seconds: SLOT }`, or with Goby3's name for the settings
+    /// (`[goby.acomms.micromodem.protobuf.transmission]`) when `goby3_name`.
+    pub fn fdp_tdma(
+        mut self,
+        srcs: &[i32],
+        rate: u32,
+        slot_seconds: f64,
+        goby3_name: bool,
+    ) -> Node {
+        let name = if goby3_name {
+            "[goby.acomms.micromodem.protobuf.transmission]"
+        } else {
+            "micromodem"
+        };
+        self.mac = Some(Mac::Tdma {
+            srcs: srcs.to_vec(),
+            rate,
+            slot_seconds,
+            kind: format!(" type: DRIVER_SPECIFIC {name} {{ type: MICROMODEM_FLEXIBLE_DATA }}"),
         });
         self
     }
@@ -196,11 +223,12 @@ impl Node {
                 srcs,
                 rate,
                 slot_seconds,
+                kind,
             }) => {
                 text += "mac {\n  type: MAC_FIXED_DECENTRALIZED\n";
                 for src in srcs {
                     text += &format!(
-                        "  slot {{ src: {src} dest: -1 rate: {rate} slot_seconds: {slot_seconds} }}\n"
+                        "  slot {{ src: {src} dest: -1 rate: {rate}{kind} slot_seconds: {slot_seconds} }}\n"
                     );
                 }
                 text += "}\n";
@@ -259,6 +287,8 @@ enum Mac {
         srcs: Vec<i32>,
         rate: u32,
         slot_seconds: f64,
+        /// Text after the rate of each slot (its type and settings).
+        kind: String,
     },
 }
 

@@ -438,7 +438,8 @@ impl ApplicationAcks {
     }
 
     /// Takes the ack message off the start of frame 0, when there is one
-    /// that decodes, and the empty frames left at the end.
+    /// that decodes (with the zero bytes of padding after it, when nothing
+    /// else follows), and the empty frames left at the end.
     fn take(&self, mt: &mut ModemTransmission) -> Taken {
         let Some(first) = mt.frame.first().filter(|f| !f.is_empty()) else {
             return Taken::Nothing;
@@ -461,6 +462,11 @@ impl ApplicationAcks {
         };
         let used = used.min(first.len());
         mt.frame[0].drain(..used);
+        if mt.frame[0].iter().all(|&b| b == 0) {
+            // Zero bytes after a message are padding (e.g. of an FDP
+            // packet to an even length): an ack alone leaves no data.
+            mt.frame[0].clear();
+        }
         while mt.frame.last().is_some_and(|f| f.is_empty()) {
             mt.frame.pop();
         }
@@ -649,6 +655,33 @@ mod tests {
             assert!(mt.frame.is_empty(), "an ack-only frame leaves nothing");
             assert_eq!(mt.frame_start(), frame_start);
             assert_eq!(mt.ack_requested(), ack_requested);
+        }
+    }
+
+    /// An FDP packet padded to an even length (a zero byte after the
+    /// message, as hosts do for early Micro-Modem 2 firmware): an ack alone
+    /// leaves no data; data after the ack keeps its padding for the layer
+    /// above, which reads trailing zeros as padding.
+    #[test]
+    fn padding_after_an_ack_alone_is_no_data() {
+        let app = acks(1);
+        let ack = app.encode(&owed(&[(9, 1)]), false, 3).unwrap();
+        for (after, left) in [
+            (&[0u8][..], None),
+            (&[0, 0][..], None),
+            (&[0xaa, 0][..], Some(vec![0xaa, 0])),
+        ] {
+            let mut frame = ack.clone();
+            frame.extend_from_slice(after);
+            let mut mt = ModemTransmission {
+                src: Some(1),
+                dest: Some(9),
+                frame: vec![frame],
+                ..Default::default()
+            };
+            let heard = acks(9).receive(&mut mt);
+            assert!(heard.error.is_none());
+            assert_eq!(mt.frame.first().cloned(), left, "{after:?}");
         }
     }
 

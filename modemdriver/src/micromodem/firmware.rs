@@ -64,6 +64,14 @@ pub fn toa_mode_is_bitfield(version: &str) -> bool {
         if major > 2 || (major == 2 && (minor > 0 || patch >= 26038)))
 }
 
+/// Micro-Modem 2 firmware before 2.0.35490 mishandles a Flexible Data
+/// Protocol packet of an odd number of bytes: the host pads it with a zero
+/// byte, as Goby's driver does (the layers above read trailing zeros as
+/// padding).
+pub fn pads_odd_fdp(version: &str) -> bool {
+    matches!(version_numbers(version), Some((2, 0, patch)) if patch < 35490)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,5 +96,8 @@ mod tests {
         assert!(swaps_hardware_reply("2.0.16421"));
         assert!(!swaps_hardware_reply("2.0.35490"));
         assert!(!swaps_hardware_reply("0.94.0.52"));
+        assert!(pads_odd_fdp("2.0.27087"));
+        assert!(!pads_odd_fdp("2.0.35490"));
+        assert!(!pads_odd_fdp("3.1.2"));
     }
 }

@@ -9,6 +9,8 @@
 //! - [`ranging`]: LBL pings ($CCPDT, $CCPNT) and their travel times ($SNTTA).
 //! - [`application_ack`]: acks sent in software, after the data is kept
 //!   (`use_application_acks`).
+//! - [`transmission`]: what a `DRIVER_SPECIFIC` transmission (a MAC slot
+//!   such as Goby3's FDP slot) asks of the modem.
 //! - [`driver`]: the driver ([`MicroModemDriver`]).
 //! - [`emulator`]: the modem's side, for tests and bench work.
 
@@ -22,5 +24,6 @@ pub mod nmea;
 pub mod ranging;
 pub mod sentence;
 pub mod statistics;
+pub mod transmission;
 
 pub use driver::MicroModemDriver;

@@ -43,8 +43,8 @@ use protos::goby::acomms::protobuf::{
 use tokio::time::Instant;
 
 use super::super::application_ack::Placed;
-use super::super::ranging;
 use super::super::sentence::{Cycle, MmSentence};
+use super::super::{firmware, ranging};
 use super::machine::{Machine, RequestId};
 use super::{packet_estimate, HAND_OVER};
 use crate::driver::{DriverEvent, DriverStatus, TransmitOutcome, TransmitResult};
@@ -196,6 +196,9 @@ pub(super) struct Transmit {
     pub abandoned: Option<Abandoned>,
     /// The kind of the last LBL ping (for travel times heard later).
     pub last_lbl: MicroModemTransmissionType,
+    /// That FDP packets asking for acks get none without application acks
+    /// was reported.
+    pub fdp_unacked_reported: bool,
 }
 
 impl Default for Transmit {
@@ -206,6 +209,7 @@ impl Default for Transmit {
             polled: None,
             abandoned: None,
             last_lbl: MicroModemTransmissionType::MicromodemRemusLblRanging,
+            fdp_unacked_reported: false,
         }
     }
 }
@@ -280,7 +284,7 @@ impl Machine {
             let Some(job) = self.tx.pending.pop_front() else {
                 return false;
             };
-            if let Job::Data(mt) = &job {
+            if let Some(mt) = job.data() {
                 let estimate = packet_estimate(mt);
                 if self.too_late(mt, estimate) {
                     let reason = skipped_reason(mt, estimate);
@@ -298,7 +302,7 @@ impl Machine {
         }
         // A cycle (first or again after a fault) starts only while the
         // packet fits in what is left of its slot.
-        if let Job::Data(mt) = &active.job {
+        if let Some(mt) = active.job.data() {
             if self.too_late(mt, packet_estimate(mt)) {
                 self.finish(TransmitOutcome::Failed(
                     "its slot passed before the modem could send it".into(),
@@ -314,6 +318,7 @@ impl Machine {
             self.request_fill(None);
             return false;
         }
+        self.report_unacked_fdp();
         let sentence = self.cycle_command();
         let Some(active) = &mut self.tx.active else {
             return false;
@@ -336,11 +341,34 @@ impl Machine {
         true
     }
 
+    /// Reports once that an FDP packet asking for acks gets none: the
+    /// modem acknowledges no FDP packet, and without application acks
+    /// nothing else does (its messages are sent again until their ttl).
+    fn report_unacked_fdp(&mut self) {
+        let asks = self.tx.active.as_ref().is_some_and(|a| {
+            matches!(a.job, Job::Fdp(_)) && a.filled.as_ref().is_some_and(|f| f.ack_requested())
+        });
+        if asks && self.app_acks.is_none() && !self.tx.fdp_unacked_reported {
+            self.tx.fdp_unacked_reported = true;
+            self.status(DriverStatus::Degraded {
+                reason: "an FDP packet asks for acks, and the modem acknowledges none: without \
+                         use_application_acks its messages are never acknowledged (and are sent \
+                         again until their ttl); set use_application_acks: true at every node"
+                    .into(),
+            });
+        }
+    }
+
     /// The command that starts the active job; sets the frames its cycle
     /// announces.
     fn cycle_command(&mut self) -> MmSentence {
         let me = self.modem_id;
         let app_acks = self.app_acks.is_some();
+        let pad_odd_fdp = self
+            .startup
+            .firmware
+            .as_deref()
+            .is_some_and(firmware::pads_odd_fdp);
         let active = self.tx.active.as_mut().expect("active job");
         let (sentence, cycle_frames) = match &active.job {
             Job::Data(mt) => {
@@ -365,20 +393,27 @@ impl Machine {
                     frames,
                 )
             }
-            Job::Fdp(mt) => (
-                MmSentence::FdpTransmit {
-                    dest: mt.dest().max(0) as u32,
-                    rate: mt.rate().max(0) as u32,
-                    ack: false,
-                    reserved: 0,
-                    data: active
-                        .filled
-                        .as_ref()
-                        .and_then(|f| f.frame.first().cloned())
-                        .unwrap_or_default(),
-                },
-                1,
-            ),
+            Job::Fdp(mt) => {
+                let mut data = active
+                    .filled
+                    .as_ref()
+                    .and_then(|f| f.frame.first().cloned())
+                    .unwrap_or_default();
+                if pad_odd_fdp && data.len() % 2 == 1 {
+                    data.push(0);
+                }
+                (
+                    MmSentence::FdpTransmit {
+                        dest: mt.dest().max(0) as u32,
+                        rate: mt.rate().max(0) as u32,
+                        // The modem acknowledges no FDP packet (Goby sends 0).
+                        ack: false,
+                        reserved: 0,
+                        data,
+                    },
+                    1,
+                )
+            }
             Job::Ping { dest } => (
                 MmSentence::Ping {
                     from_modem: false,

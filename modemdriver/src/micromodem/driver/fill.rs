@@ -98,7 +98,7 @@ impl Machine {
         // Given up as soon as the packet could no longer end within its
         // slot (1 µs past the latest start).
         let start_by = match &active.job {
-            Job::Data(mt) => slot_end(mt).map(|end| {
+            Job::Data(mt) | Job::Fdp(mt) => slot_end(mt).map(|end| {
                 let latest = end.saturating_sub(packet_estimate(mt).as_micros() as u64);
                 self.now.at + Duration::from_micros(latest.saturating_sub(self.now.micros) + 1)
             }),
@@ -155,8 +155,13 @@ impl Machine {
         let mut template = mt.clone();
         template.src = Some(self.modem_id as i32);
         if let (Job::Fdp(_), Some(r)) = (job, fdp::rate(mt.rate())) {
+            // What the job says (a slot: Goby3's 100 bytes, or its own),
+            // at most what the rate carries.
             template.max_num_frames = Some(1);
-            template.max_frame_bytes = Some(r.max_bytes());
+            template.max_frame_bytes = Some(
+                mt.max_frame_bytes
+                    .map_or(r.max_bytes(), |b| b.min(r.max_bytes())),
+            );
         } else {
             let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
             template.max_num_frames = Some(
@@ -258,10 +263,10 @@ impl Machine {
             self.finish(TransmitOutcome::NothingToSend);
             return;
         }
-        let late = match &active.job {
-            Job::Data(mt) => crate::slot::too_late_at(mt, packet_estimate(mt), now_micros),
-            _ => false,
-        };
+        let late = active
+            .job
+            .data()
+            .is_some_and(|mt| crate::slot::too_late_at(mt, packet_estimate(mt), now_micros));
         if late {
             self.finish(TransmitOutcome::Failed(
                 "the answer to its data request came too late for the packet to end within its slot"
@@ -284,7 +289,9 @@ impl Machine {
             let slot_lost = purpose == Purpose::Job
                 && self.tx.active.as_ref().is_some_and(|a| {
                     a.fill == Some(id)
-                        && matches!(&a.job, Job::Data(mt) if self.too_late(mt, packet_estimate(mt)))
+                        && a.job
+                            .data()
+                            .is_some_and(|mt| self.too_late(mt, packet_estimate(mt)))
                 });
             if !slot_lost {
                 // As though the layer above had nothing.

@@ -474,30 +474,14 @@ impl Machine {
                     mt.src = Some(self.modem_id as i32);
                 }
                 match mt.r#type() {
-                    TransmissionType::Data => {
-                        let waiting = self
-                            .tx
-                            .pending
-                            .iter()
-                            .filter(|j| matches!(j, Job::Data(_)))
-                            .count();
-                        if waiting >= MAX_PENDING_TRANSMISSIONS {
-                            if let Some(i) = self
-                                .tx
-                                .pending
-                                .iter()
-                                .position(|j| matches!(j, Job::Data(_)))
-                            {
-                                self.tx.pending.remove(i);
-                                self.status(DriverStatus::Skipped {
-                                    reason: format!(
-                                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                                    ),
-                                });
-                            }
-                        }
-                        self.tx.pending.push_back(Job::Data(Box::new(mt)));
-                    }
+                    TransmissionType::Data => self.queue_data_job(Job::Data(Box::new(mt))),
+                    TransmissionType::DriverSpecific => match self.driver_specific_job(&mt) {
+                        Ok(job @ Job::Fdp(_)) => self.queue_data_job(job),
+                        Ok(job) => self.tx.pending.push_back(job),
+                        Err(message) => self.status(DriverStatus::Unsupported {
+                            message: format!("DRIVER_SPECIFIC transmission: {message}"),
+                        }),
+                    },
                     other => self.status(DriverStatus::Unsupported {
                         message: format!(
                             "ModemTransmission.type {other:?} (use MicroModemSpecific)"
@@ -527,6 +511,29 @@ impl Machine {
             // The shell stops the driver (Input::Stop).
             DriverCommand::Stop(_) => {}
         }
+    }
+
+    /// Queues a job filled from the layer above (data, or an FDP packet of
+    /// a slot): at most [`MAX_PENDING_TRANSMISSIONS`] wait, the oldest is
+    /// dropped beyond.
+    fn queue_data_job(&mut self, job: Job) {
+        let waiting = self
+            .tx
+            .pending
+            .iter()
+            .filter(|j| j.data().is_some())
+            .count();
+        if waiting >= MAX_PENDING_TRANSMISSIONS {
+            if let Some(i) = self.tx.pending.iter().position(|j| j.data().is_some()) {
+                self.tx.pending.remove(i);
+                self.status(DriverStatus::Skipped {
+                    reason: format!(
+                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
+                    ),
+                });
+            }
+        }
+        self.tx.pending.push_back(job);
     }
 
     /// Sends what can be sent now: host commands first (start-up), then

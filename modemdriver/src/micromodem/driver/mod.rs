@@ -52,12 +52,28 @@
 //! [`MAX_PENDING_TRANSMISSIONS`] wait while the modem is busy or away, older
 //! ones are dropped ([`DriverStatus::Skipped`](crate::driver::DriverStatus::Skipped)).
 //!
+//! A transmission of type `DRIVER_SPECIFIC` (a MAC slot) says what it is
+//! in its `micromodem` settings (Goby3's
+//! `[goby.acomms.micromodem.protobuf.transmission]`, see
+//! [`transmission`](super::transmission)): `MICROMODEM_FLEXIBLE_DATA` is
+//! an FDP packet filled from the layer above like data — one frame of at
+//! most the slot's `max_frame_bytes`, else 100 bytes (Goby3's), within what
+//! the FDP rate carries; with application acks the ack message first —
+//! sent with `$CCTDP`, kept within its slot as data is; pings, LBL pings
+//! and hardware line commands are carried out as the requests below. A
+//! Micro-Modem 1 (told by its `$CAREV`) has no FDP: such a slot is refused
+//! ([`DriverStatus::Unsupported`](crate::driver::DriverStatus::Unsupported)). The modem acknowledges no FDP packet:
+//! only application acks do (without them the driver says so once,
+//! [`DriverStatus::Degraded`](crate::driver::DriverStatus::Degraded)).
+//!
 //! Micro-Modem specifics go through
 //! [`Driver::initiate_specific`](crate::Driver::initiate_specific) with a
 //! `goby.acomms.protobuf.MicroModemSpecific`: `MICROMODEM_TWO_WAY_PING` →
 //! `$CCMPC`, `MICROMODEM_MINI_DATA` → `$CCMUC`, `MICROMODEM_FLEXIBLE_DATA` →
 //! `$CCTDP` (one frame asked for from the layer above, sized by the FDP rate;
-//! a `$CARDP` received becomes a received `DATA` transmission),
+//! a `$CARDP` received becomes a received `DATA` transmission, with
+//! `micromodem.type` `MICROMODEM_FLEXIBLE_DATA`, its application ack
+//! stripped and its acks reported),
 //! `MICROMODEM_REMUS_LBL_RANGING` → `$CCPDT`,
 //! `MICROMODEM_NARROWBAND_LBL_RANGING` → `$CCPNT`,
 //! `MICROMODEM_HARDWARE_CONTROL` → `$CCMEC`. Results come back as

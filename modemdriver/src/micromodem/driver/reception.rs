@@ -5,7 +5,8 @@
 //! frame announced is accounted for, or when `receive_timeout_ms` pass,
 //! and becomes a received `DATA` transmission (`time`: µs since the epoch
 //! when whole, or the modem's time of arrival from its statistics). A
-//! `$CARDP` (Flexible Data Protocol) is whole at once. Once the modem has
+//! `$CARDP` (Flexible Data Protocol) is whole at once, and is reported as
+//! `DATA` with `micromodem.type` `MICROMODEM_FLEXIBLE_DATA`. Once the modem has
 //! been seen to send receive statistics (`$CACST`, or a Micro-Modem 2
 //! configured `CST,1`), a whole reception waits for its `$CACST` at most
 //! `statistics_timeout_ms` and carries it in `receive_stat`.
@@ -24,7 +25,8 @@ use std::collections::BTreeMap;
 
 use protos::goby::acomms::protobuf::{
     modem_transmission::{TimeSource, TransmissionType},
-    MicroModemReceiveStatistics, ModemTransmission,
+    MicroModemReceiveStatistics, MicroModemTransmission, MicroModemTransmissionType,
+    ModemTransmission,
 };
 use tokio::time::Instant;
 
@@ -322,6 +324,10 @@ impl Machine {
                     ack_requested: Some(ack),
                     frame_start: Some(0),
                     frame: vec![bytes],
+                    micromodem: Some(Box::new(MicroModemTransmission {
+                        r#type: Some(MicroModemTransmissionType::MicromodemFlexibleData as i32),
+                        ..Default::default()
+                    })),
                     ..Default::default()
                 });
             }

@@ -12,6 +12,12 @@
 //!
 //! Reports carry `time`, µs since the epoch when heard (and, for travel
 //! times, the modem's own `modem_time`).
+//!
+//! The same jobs come from a `DRIVER_SPECIFIC` transmission (a MAC slot)
+//! whose `micromodem.type` names them ([`transmission`]); an FDP slot is
+//! filled like data, at most 100 bytes unless the slot says.  A
+//! Micro-Modem 1 has no FDP: FDP requests and slots are refused once its
+//! `$CAREV` has told the generation.
 
 use protos::goby::acomms::protobuf::{
     micro_modem_ranging_reply::OwttAmbiguity, modem_transmission::TransmissionType,
@@ -19,7 +25,8 @@ use protos::goby::acomms::protobuf::{
     MicroModemTransmissionType, ModemTransmission,
 };
 
-use super::super::{fdp, firmware, ranging};
+use super::super::firmware::{self, Generation};
+use super::super::{fdp, ranging, transmission};
 use super::cycle::{Active, Job};
 use super::machine::Machine;
 use crate::driver::{DriverEvent, SpecificReport, TransmitOutcome};
@@ -39,6 +46,7 @@ impl Machine {
                 value: (r.mini_data() & 0x1fff) as u16,
             },
             T::MicromodemFlexibleData => {
+                self.fdp_problem()?;
                 let rate = r.rate.unwrap_or(1);
                 if fdp::rate(rate).is_none() {
                     return Err(format!(
@@ -74,6 +82,33 @@ impl Machine {
             },
             other => return Err(format!("MicroModemSpecific.type {other:?}")),
         })
+    }
+
+    /// The job of a `DRIVER_SPECIFIC` transmission (a MAC slot, see
+    /// [`transmission`]), or why there is none.
+    pub(super) fn driver_specific_job(&self, mt: &ModemTransmission) -> Result<Job, String> {
+        match transmission::request(mt, self.modem_id as i32, &self.mm)
+            .map_err(|p| p.to_string())?
+        {
+            transmission::Request::Fdp(template) => {
+                self.fdp_problem()?;
+                Ok(Job::Fdp(Box::new(template)))
+            }
+            transmission::Request::Specific(request) => self.specific_job(request),
+        }
+    }
+
+    /// Why no FDP packet can be sent: a Micro-Modem 1 (as its `$CAREV`
+    /// told) has no Flexible Data Protocol.
+    fn fdp_problem(&self) -> Result<(), String> {
+        if self.startup.generation == Generation::One {
+            return Err(
+                "MICROMODEM_FLEXIBLE_DATA: this modem is a Micro-Modem 1, which has no Flexible \
+                 Data Protocol (a Micro-Modem 2 has); use DATA slots"
+                    .into(),
+            );
+        }
+        Ok(())
     }
 
     fn specific(&mut self, report: MicroModemSpecific) {

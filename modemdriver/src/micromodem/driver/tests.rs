@@ -530,3 +530,86 @@ fn a_polled_frame_is_written_when_its_answer_comes() {
         "{outputs:?}"
     );
 }
+
+/// A Flexible Data Protocol slot as Goby3 writes it (`DRIVER_SPECIFIC`,
+/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`, rate 1) from a modem
+/// whose `$CAREV` gives `version`.
+fn fdp_slot_after_revision(version: &str) -> (Bench, Vec<Output>) {
+    use protos::goby::acomms::protobuf::{MicroModemTransmission, MicroModemTransmissionType};
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    bench.sentence(&MmSentence::Revision {
+        time: "221320".into(),
+        ident: "AUV".into(),
+        version: version.into(),
+    });
+    let opened = bench.now.micros;
+    let slot = ModemTransmission {
+        dest: Some(PEER as i32),
+        rate: Some(1),
+        r#type: Some(TransmissionType::DriverSpecific as i32),
+        micromodem: Some(Box::new(MicroModemTransmission {
+            r#type: Some(MicroModemTransmissionType::MicromodemFlexibleData as i32),
+            ..Default::default()
+        })),
+        time: Some(opened),
+        slot_seconds: Some(10.0),
+        ..Default::default()
+    };
+    let outputs = bench.initiate(slot);
+    (bench, outputs)
+}
+
+/// The `$CCTDP` written for an FDP slot answered with `data`.
+fn fdp_written(version: &str, data: &[u8]) -> Vec<u8> {
+    let (mut bench, outputs) = fdp_slot_after_revision(version);
+    let asked = requests(&outputs);
+    assert_eq!(asked.len(), 1, "{outputs:?}");
+    let (id, template) = (asked[0].0, asked[0].1.clone());
+    assert_eq!(
+        (template.max_num_frames(), template.max_frame_bytes()),
+        (1, 100)
+    );
+    let filled = ModemTransmission {
+        frame: vec![data.to_vec()],
+        ..template
+    };
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(filled),
+    });
+    match writes(&outputs).as_slice() {
+        [MmSentence::FdpTransmit {
+            dest: PEER,
+            rate: 1,
+            ack: false,
+            data,
+            ..
+        }] => data.clone(),
+        other => panic!("one $CCTDP: {other:?}"),
+    }
+}
+
+/// Micro-Modem 2 firmware before 2.0.35490 gets FDP packets of an even
+/// length (a zero byte after an odd one), as Goby pads them; later
+/// firmware gets them as they are.
+#[test]
+fn fdp_packets_are_padded_to_an_even_length_for_early_micromodem2_firmware() {
+    assert_eq!(fdp_written("2.0.27087", b"odd"), b"odd\0".to_vec());
+    assert_eq!(fdp_written("2.0.27087", b"even"), b"even".to_vec());
+    assert_eq!(fdp_written("2.0.35490", b"odd"), b"odd".to_vec());
+}
+
+/// A Micro-Modem 1 has no Flexible Data Protocol: once its `$CAREV` tells
+/// the generation, an FDP slot is refused, and nothing is asked for or
+/// written.
+#[test]
+fn an_fdp_slot_is_refused_by_a_micromodem1() {
+    let (_, outputs) = fdp_slot_after_revision("0.94.0.52");
+    assert!(requests(&outputs).is_empty(), "{outputs:?}");
+    assert!(writes(&outputs).is_empty(), "{outputs:?}");
+    assert!(
+        events(&outputs).iter().any(|e| matches!(e,
+            DriverEvent::Status(DriverStatus::Unsupported { message }) if message.contains("Micro-Modem 1"))),
+        "{outputs:?}"
+    );
+}
