@@ -329,9 +329,8 @@ fn main() {
                 let started = &started;
                 scope.spawn(move || {
                     let (mut writer, mut reader) = client(addr);
-                    let lines: String = (0..PIPELINED_PER_CLIENT)
-                        .map(|i| load_line(c, i))
-                        .collect();
+                    let lines: String =
+                        (0..PIPELINED_PER_CLIENT).map(|i| load_line(c, i)).collect();
                     started.wait();
                     std::thread::scope(|inner| {
                         inner.spawn(|| writer.write_all(lines.as_bytes()).unwrap());

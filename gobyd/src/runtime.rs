@@ -38,6 +38,7 @@ use super::event::{
     reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
     SharedEvent,
 };
+use super::group_commit::{GroupCommit, Mark};
 use super::json_protocol::message_json;
 use super::json_server::{JsonInterface, Publish};
 use super::modem_event::ModemEvent;
@@ -235,6 +236,16 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
 
 pub use super::delivery::RECOVERY_WAIT;
 
+/// Most messages to publish the core takes in one turn of its loop (then
+/// it serves the driver, the slots and the events again).
+pub const PUBLISH_BATCH: usize = 64;
+
+/// Most journal syncs under way at once (group commit, [`GroupCommit`]):
+/// a message accepted while one runs starts another at once rather than
+/// waiting for it, as the file system serves overlapping syncs of one file
+/// together.
+pub const MAX_SYNCS: usize = 4;
+
 /// Driver-specific requests (pings, interrogations) that may wait for this
 /// node's slot at once; more are refused.
 pub const MAX_SPECIFIC_REQUESTS: usize = 4;
@@ -265,8 +276,12 @@ pub struct Daemon {
     /// Driver-specific requests waiting for this node's next slot.
     specific_requests: std::collections::VecDeque<DynamicMessage>,
     raw_log: Option<RawLog>,
-    /// Replies to send once the journal holding their messages is synced.
-    pending_replies: Vec<(oneshot::Sender<PublishReply>, AcceptedMessage)>,
+    /// Replies to send once the journal holding their messages is synced
+    /// (one sync for every message accepted meanwhile).
+    commit: GroupCommit<(oneshot::Sender<PublishReply>, AcceptedMessage)>,
+    /// The journal syncs under way, off the core's thread, each with its
+    /// mark.
+    syncs: JoinSet<(Mark, std::io::Result<()>)>,
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
@@ -499,7 +514,8 @@ impl Daemon {
             modem_id: config.modem_id(),
             specific_requests: std::collections::VecDeque::new(),
             raw_log,
-            pending_replies: Vec::new(),
+            commit: GroupCommit::new(MAX_SYNCS),
+            syncs: JoinSet::new(),
             tasks,
             json_tcp,
             json_udp,
@@ -567,7 +583,23 @@ impl Daemon {
                 .unwrap_or(Duration::from_secs(3600));
             tokio::select! {
                 () = &mut shutdown => break,
-                Some(publish) = self.publish_rx.recv() => self.publish(publish),
+                Some(publish) = self.publish_rx.recv() => {
+                    self.publish(publish);
+                    // What else waits, in one turn: one sync, one round of
+                    // events for all of them.
+                    for _ in 1..PUBLISH_BATCH {
+                        match self.publish_rx.try_recv() {
+                            Ok(publish) => self.publish(publish),
+                            Err(_) => break,
+                        }
+                    }
+                }
+                Some(done) = self.syncs.join_next(), if !self.syncs.is_empty() => match done {
+                    Ok((mark, synced)) => self.synced(mark, synced),
+                    // Not reached (the sync does not panic); its replies
+                    // go with the next sync's.
+                    Err(e) => tracing::error!("journal sync: {e}"),
+                },
                 Some(control) = self.control_rx.recv() => self.control_request(control).await,
                 event = self.driver.next_event() => match event {
                     Some(event) => self.driver_event(event),
@@ -586,7 +618,7 @@ impl Daemon {
         }
         // Clients still waiting hear back once their messages are on disk.
         let sync = self.outbox.sync();
-        for (reply, accepted) in self.pending_replies.drain(..) {
+        for (reply, accepted) in self.commit.finish_all() {
             let _ = reply.send(match &sync {
                 Ok(()) => Ok(accepted),
                 Err(e) => Err(format!("not saved to disk: {e}")),
@@ -632,7 +664,7 @@ impl Daemon {
                         "{name}: a message was dropped from its full queue (max_queue)"
                     );
                 }
-                self.pending_replies.push((
+                self.commit.wait((
                     publish.reply,
                     AcceptedMessage {
                         name,
@@ -677,41 +709,39 @@ impl Daemon {
         ))
     }
 
-    /// Syncs the journal off the core's thread (one sync for every message
-    /// accepted since the last), then sends the waiting replies: a client
-    /// hears "accepted" only once its message is on disk, while the message
-    /// itself may already be on its way to the modem.
+    /// Starts a sync of the journal off the core's thread when replies wait
+    /// and none is under way (group commit, [`GroupCommit`]): it covers
+    /// every message accepted so far, and the messages accepted while it
+    /// runs wait for the next. A client hears "accepted" only once its
+    /// message is on disk, while the message itself may already be on its
+    /// way to the modem.
     fn commit_replies(&mut self) {
-        if self.pending_replies.is_empty() {
+        let Some(mark) = self.commit.start() else {
             return;
-        }
-        let replies = std::mem::take(&mut self.pending_replies);
-        let handle = match self.outbox.sync_handle() {
-            Ok(handle) => handle,
-            Err(e) => {
-                for (reply, _) in replies {
-                    let _ = reply.send(Err(format!("not saved to disk: {e}")));
-                }
-                return;
-            }
         };
-        tokio::spawn(async move {
-            let synced = tokio::task::spawn_blocking(move || handle.sync_data()).await;
-            let failure = match synced {
-                Ok(Ok(())) => None,
-                Ok(Err(e)) => Some(e.to_string()),
-                Err(e) => Some(e.to_string()),
-            };
-            if let Some(reason) = &failure {
-                tracing::error!("journal sync failed: {reason}");
-            }
-            for (reply, accepted) in replies {
-                let _ = reply.send(match &failure {
-                    None => Ok(accepted),
-                    Some(reason) => Err(format!("not saved to disk: {reason}")),
+        match self.outbox.sync_handle() {
+            Ok(handle) => {
+                self.syncs.spawn_blocking(move || {
+                    CrashPoint::Unsynced.reached();
+                    (mark, handle.sync_data())
                 });
             }
-        });
+            Err(e) => self.synced(mark, Err(std::io::Error::other(e.to_string()))),
+        }
+    }
+
+    /// The sync started at `mark` returned: the replies it covers are
+    /// sent, "accepted" when it succeeded.
+    fn synced(&mut self, mark: Mark, synced: std::io::Result<()>) {
+        if let Err(e) = &synced {
+            tracing::error!("journal sync failed: {e}");
+        }
+        for (reply, accepted) in self.commit.finish(mark) {
+            let _ = reply.send(match &synced {
+                Ok(()) => Ok(accepted),
+                Err(e) => Err(format!("not saved to disk: {e}")),
+            });
+        }
     }
 
     fn driver_event(&mut self, event: DriverEvent) {

@@ -281,7 +281,7 @@ impl Journal {
         }
         let written = self
             .log
-            .append(&accepted_payload(&entry))
+            .append_with(|out| write_accepted(out, &entry))
             .map_err(|e| JournalError::of(self.log.path(), e))?;
         self.next_id = id.checked_add(1);
         self.live_bytes += written;
@@ -315,7 +315,7 @@ impl Journal {
         };
         self.live_bytes -= accepted_size(&entry) as u64;
         self.log
-            .append(&removed_payload(id))
+            .append_with(|out| write_removed(out, id))
             .map_err(|e| JournalError::of(self.log.path(), e))?;
         let len = self.log.file_len();
         if len > COMPACT_MIN_BYTES && self.live_bytes * 2 < len {
@@ -352,20 +352,30 @@ fn accepted_size(entry: &JournalEntry) -> usize {
 
 fn accepted_payload(entry: &JournalEntry) -> Vec<u8> {
     let mut payload = Vec::with_capacity(accepted_size(entry) - FRAMING);
-    payload.push(KIND_ACCEPTED);
-    payload.extend_from_slice(&entry.id.to_le_bytes());
-    payload.extend_from_slice(&entry.time.to_le_bytes());
-    payload.extend_from_slice(&(entry.message_name.len() as u16).to_le_bytes());
-    payload.extend_from_slice(entry.message_name.as_bytes());
-    payload.extend_from_slice(&entry.message);
+    write_accepted(&mut payload, entry);
     payload
+}
+
+/// Appends the payload of an accepted record to `out`.
+fn write_accepted(out: &mut Vec<u8>, entry: &JournalEntry) {
+    out.push(KIND_ACCEPTED);
+    out.extend_from_slice(&entry.id.to_le_bytes());
+    out.extend_from_slice(&entry.time.to_le_bytes());
+    out.extend_from_slice(&(entry.message_name.len() as u16).to_le_bytes());
+    out.extend_from_slice(entry.message_name.as_bytes());
+    out.extend_from_slice(&entry.message);
 }
 
 fn removed_payload(id: EntryId) -> Vec<u8> {
     let mut payload = Vec::with_capacity(9);
-    payload.push(KIND_REMOVED);
-    payload.extend_from_slice(&id.to_le_bytes());
+    write_removed(&mut payload, id);
     payload
+}
+
+/// Appends the payload of a removed record to `out`.
+fn write_removed(out: &mut Vec<u8>, id: EntryId) {
+    out.push(KIND_REMOVED);
+    out.extend_from_slice(&id.to_le_bytes());
 }
 
 /// Little-endian integer of `N` bytes at `at`, if there are that many.
