@@ -246,7 +246,7 @@ impl Journal {
     pub fn accept(
         &mut self,
         message_name: &str,
-        message: &[u8],
+        message: impl Into<Vec<u8>>,
         time: Micros,
     ) -> Result<EntryId, JournalError> {
         let id = self.accept_unsynced(message_name, message, time)?;
@@ -257,11 +257,12 @@ impl Journal {
     /// Appends an accepted message without waiting for the disk; it
     /// survives a crash once a later [`sync`](Self::sync) (or a sync of a
     /// [`sync_handle`](Self::sync_handle)) returns. Lets a caller sync many
-    /// messages at once, off its own thread.
+    /// messages at once, off its own thread. `message` is taken as it is
+    /// when given as a `Vec` (a slice is copied).
     pub fn accept_unsynced(
         &mut self,
         message_name: &str,
-        message: &[u8],
+        message: impl Into<Vec<u8>>,
         time: Micros,
     ) -> Result<EntryId, JournalError> {
         if message_name.len() > usize::from(u16::MAX) {
@@ -274,10 +275,10 @@ impl Journal {
             id,
             time,
             message_name: message_name.to_string(),
-            message: message.to_vec(),
+            message: message.into(),
         };
         if accepted_size(&entry) - FRAMING > MAX_PAYLOAD {
-            return Err(JournalError::MessageTooLarge(message.len()));
+            return Err(JournalError::MessageTooLarge(entry.message.len()));
         }
         let written = self
             .log
@@ -545,7 +546,7 @@ mod tests {
         {
             let (mut j, _) = Journal::open(dir.file()).unwrap();
             for i in 0..40 {
-                let id = j.accept("a.A", &big, i).unwrap();
+                let id = j.accept("a.A", big.as_slice(), i).unwrap();
                 if i % 4 != 0 {
                     j.remove(id).unwrap();
                 }
