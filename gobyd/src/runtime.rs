@@ -278,10 +278,11 @@ pub struct Daemon {
     raw_log: Option<RawLog>,
     /// Replies to send once the journal holding their messages is synced
     /// (one sync for every message accepted meanwhile).
-    commit: GroupCommit<(oneshot::Sender<PublishReply>, AcceptedMessage)>,
-    /// The journal syncs under way, off the core's thread, each with its
-    /// mark.
-    syncs: JoinSet<(Mark, std::io::Result<()>)>,
+    /// Shared with the syncs under way: each sends the replies it covers
+    /// itself as it returns.
+    commit: Arc<std::sync::Mutex<GroupCommit<WaitingReply>>>,
+    /// The journal syncs under way, off the core's thread.
+    syncs: JoinSet<()>,
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
@@ -514,7 +515,7 @@ impl Daemon {
             modem_id: config.modem_id(),
             specific_requests: std::collections::VecDeque::new(),
             raw_log,
-            commit: GroupCommit::new(MAX_SYNCS),
+            commit: Arc::new(std::sync::Mutex::new(GroupCommit::new(MAX_SYNCS))),
             syncs: JoinSet::new(),
             tasks,
             json_tcp,
@@ -594,12 +595,14 @@ impl Daemon {
                         }
                     }
                 }
-                Some(done) = self.syncs.join_next(), if !self.syncs.is_empty() => match done {
-                    Ok((mark, synced)) => self.synced(mark, synced),
-                    // Not reached (the sync does not panic); its replies
-                    // go with the next sync's.
-                    Err(e) => tracing::error!("journal sync: {e}"),
-                },
+                // A sync returned (its replies are sent): another may start.
+                Some(done) = self.syncs.join_next(), if !self.syncs.is_empty() => {
+                    if let Err(e) = done {
+                        // Not reached (the sync does not panic); its
+                        // replies go with the next sync's.
+                        tracing::error!("journal sync: {e}");
+                    }
+                }
                 Some(control) = self.control_rx.recv() => self.control_request(control).await,
                 event = self.driver.next_event() => match event {
                     Some(event) => self.driver_event(event),
@@ -618,7 +621,8 @@ impl Daemon {
         }
         // Clients still waiting hear back once their messages are on disk.
         let sync = self.outbox.sync();
-        for (reply, accepted) in self.commit.finish_all() {
+        let waiting: Vec<WaitingReply> = lock(&self.commit).finish_all().collect();
+        for (reply, accepted) in waiting {
             let _ = reply.send(match &sync {
                 Ok(()) => Ok(accepted),
                 Err(e) => Err(format!("not saved to disk: {e}")),
@@ -664,7 +668,7 @@ impl Daemon {
                         "{name}: a message was dropped from its full queue (max_queue)"
                     );
                 }
-                self.commit.wait((
+                lock(&self.commit).wait((
                     publish.reply,
                     AcceptedMessage {
                         name,
@@ -709,38 +713,31 @@ impl Daemon {
         ))
     }
 
-    /// Starts a sync of the journal off the core's thread when replies wait
-    /// and none is under way (group commit, [`GroupCommit`]): it covers
-    /// every message accepted so far, and the messages accepted while it
-    /// runs wait for the next. A client hears "accepted" only once its
-    /// message is on disk, while the message itself may already be on its
-    /// way to the modem.
+    /// Starts a sync of the journal off the core's thread when a reply
+    /// waits that no sync under way covers, unless [`MAX_SYNCS`] are under
+    /// way (group commit, [`GroupCommit`]): it covers every message
+    /// accepted so far, the messages accepted while it runs wait for a
+    /// later one, and it sends the replies it covers as it returns. A
+    /// client hears "accepted" only once its message is on disk, while the
+    /// message itself may already be on its way to the modem.
     fn commit_replies(&mut self) {
-        let Some(mark) = self.commit.start() else {
+        let Some(mark) = lock(&self.commit).start() else {
             return;
         };
         match self.outbox.sync_handle() {
             Ok(handle) => {
+                let commit = self.commit.clone();
                 self.syncs.spawn_blocking(move || {
                     CrashPoint::Unsynced.reached();
-                    (mark, handle.sync_data())
+                    let synced = handle.sync_data();
+                    send_synced(&commit, mark, synced);
                 });
             }
-            Err(e) => self.synced(mark, Err(std::io::Error::other(e.to_string()))),
-        }
-    }
-
-    /// The sync started at `mark` returned: the replies it covers are
-    /// sent, "accepted" when it succeeded.
-    fn synced(&mut self, mark: Mark, synced: std::io::Result<()>) {
-        if let Err(e) = &synced {
-            tracing::error!("journal sync failed: {e}");
-        }
-        for (reply, accepted) in self.commit.finish(mark) {
-            let _ = reply.send(match &synced {
-                Ok(()) => Ok(accepted),
-                Err(e) => Err(format!("not saved to disk: {e}")),
-            });
+            Err(e) => send_synced(
+                &self.commit,
+                mark,
+                Err(std::io::Error::other(e.to_string())),
+            ),
         }
     }
 
@@ -1081,6 +1078,37 @@ impl Daemon {
             entry,
             reception,
         );
+    }
+}
+
+/// A reply waiting for the journal sync that covers its message.
+type WaitingReply = (oneshot::Sender<PublishReply>, AcceptedMessage);
+
+/// The group commit's state (a sync that panicked holding it left nothing
+/// half done: its bookkeeping is taken as it is).
+fn lock(
+    commit: &std::sync::Mutex<GroupCommit<WaitingReply>>,
+) -> std::sync::MutexGuard<'_, GroupCommit<WaitingReply>> {
+    commit.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The sync started at `mark` returned: the replies it covers are sent,
+/// "accepted" when it succeeded (from the sync's thread: the clients do
+/// not wait for the core's next turn).
+fn send_synced(
+    commit: &std::sync::Mutex<GroupCommit<WaitingReply>>,
+    mark: Mark,
+    synced: std::io::Result<()>,
+) {
+    if let Err(e) = &synced {
+        tracing::error!("journal sync failed: {e}");
+    }
+    let covered: Vec<WaitingReply> = lock(commit).finish(mark).collect();
+    for (reply, accepted) in covered {
+        let _ = reply.send(match &synced {
+            Ok(()) => Ok(accepted),
+            Err(e) => Err(format!("not saved to disk: {e}")),
+        });
     }
 }
 

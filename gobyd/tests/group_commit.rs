@@ -16,7 +16,7 @@ use support::daemon::{scratch, Gobyd, PATIENCE};
 use support::node::{Entry, Node, Simulator};
 
 /// A node that never transmits: what is accepted stays queued (and
-/// journaled).
+/// journaled; the queue holds every message of a test).
 fn quiet_config(dir: &Path) -> PathBuf {
     Node::new(1)
         .driver(Simulator::alone().channel(&format!(
@@ -25,7 +25,7 @@ fn quiet_config(dir: &Path) -> PathBuf {
             dir.file_name().unwrap().to_string_lossy()
         )))
         .mac_none()
-        .queue(Entry::command())
+        .queue(Entry::command().text("max_queue: 10000"))
         .json_tcp("127.0.0.1:0")
         .data_dir(&dir.join("data"))
         .log_level("info")
