@@ -2,19 +2,23 @@
 //! own acoustic simulator, each bridged to one Mosquitto broker on
 //! loopback) and C consoles.
 //!
-//! A console publishes 200 Command messages per gateway (at least 2000)
-//! spread over the gateways' `tx`
-//! topics (QoS 1). Each gateway parses one, queues it, syncs its journal,
-//! acknowledges it to the broker and publishes `accepted` and the new
-//! queue size; every console is subscribed to those. Figures: messages
-//! per second end to end (console publish → journaled → `accepted` back at
-//! the consoles) and publications per second delivered by the broker to
-//! the consoles (fan-out), and the share of one processor the broker used
-//! meanwhile.
+//! A console publishes 200 Command messages per gateway (at least 10 000)
+//! spread over the gateways' `tx` topics (QoS 1). Each gateway parses one,
+//! queues it, syncs its journal, acknowledges it to the broker and
+//! publishes `accepted` and the new queue size (a retained state: sizes
+//! still waiting for the broker give way to the newest); every console is
+//! subscribed to those. Figures: messages per second end to end (console
+//! publish → journaled → `accepted` back at the consoles), publications per
+//! second delivered by the broker to the consoles (fan-out), the share of
+//! one processor the broker used meanwhile and the share this process
+//! (gateways, consoles, commander) used, and the machine's load average.
 //!
 //! `cargo bench -p gobyd --bench mqtt_scale [-- N...]` (default N = 1 10
 //! 50) prints one JSON object per N. Needs Mosquitto (`.ci/mosquitto.sh`);
-//! says so and exits without it. Journals live under `target/`.
+//! says so and exits without it. Journals live under `target/`. The
+//! broker's settings beyond its listener and persistence are
+//! `max_queued_messages 0`, or what `MQTT_SCALE_BROKER` holds (e.g.
+//! `max_queued_messages 0` and `max_inflight_messages 100` on two lines).
 
 #[path = "../tests/support/broker.rs"]
 mod broker;
@@ -31,7 +35,7 @@ use serde_json::json;
 /// Messages per gateway per run (at least [`MIN_TOTAL`] in all).
 const PER_GATEWAY: usize = 200;
 /// Fewest messages in a run.
-const MIN_TOTAL: usize = 2000;
+const MIN_TOTAL: usize = 10_000;
 /// Consoles watching.
 const CONSOLES: usize = 4;
 
@@ -65,6 +69,29 @@ fn console(broker: &str, name: &str) -> (AsyncClient, rumqttc::EventLoop) {
     options.set_keep_alive(Duration::from_secs(30));
     options.set_inflight(1000);
     AsyncClient::new(options, 10_000)
+}
+
+/// Processor seconds this process (gateways, consoles, commander) used so
+/// far, from `/proc/self/stat`.
+fn own_cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = stat.rfind(')').map(|i| &stat[i + 2..]).unwrap_or("");
+    let fields: Vec<f64> = after
+        .split_whitespace()
+        .map(|f| f.parse().unwrap_or(f64::NAN))
+        .collect();
+    match (fields.get(11), fields.get(12)) {
+        (Some(u), Some(s)) => (u + s) / 100.0,
+        _ => f64::NAN,
+    }
+}
+
+/// The machine's load average over the last minute.
+fn load_average() -> f64 {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next()?.parse().ok())
+        .unwrap_or(f64::NAN)
 }
 
 async fn run(n: usize, broker: &broker::Broker, dir: &std::path::Path) -> serde_json::Value {
@@ -127,6 +154,7 @@ async fn run(n: usize, broker: &broker::Broker, dir: &std::path::Path) -> serde_
     });
     let delivered_before = delivered.load(Ordering::Relaxed);
     let cpu_before = broker_cpu();
+    let own_before = own_cpu_seconds();
     let start = Instant::now();
     for i in 0..total {
         let gateway = i % n + 1;
@@ -162,6 +190,7 @@ async fn run(n: usize, broker: &broker::Broker, dir: &std::path::Path) -> serde_
     };
     let seconds = end.duration_since(start).as_secs_f64().max(1e-3);
     let broker_busy = (broker_cpu() - cpu_before) / seconds;
+    let own_busy = (own_cpu_seconds() - own_before) / seconds;
     let got = accepted.load(Ordering::Relaxed);
     let fan_out = delivered.load(Ordering::Relaxed) - delivered_before;
     pumping.abort();
@@ -184,6 +213,8 @@ async fn run(n: usize, broker: &broker::Broker, dir: &std::path::Path) -> serde_
         "console_deliveries": fan_out,
         "fan_out_per_second": (fan_out as f64 / seconds).round(),
         "broker_cpu_share": (broker_busy * 100.0).round() / 100.0,
+        "gateways_and_clients_cpu_share": (own_busy * 100.0).round() / 100.0,
+        "load_average": load_average(),
     })
 }
 
@@ -204,7 +235,9 @@ fn main() {
     std::fs::create_dir_all(&dir).unwrap();
     // The broker may queue any number of messages for a console that lags
     // (its default drops beyond 1000).
-    let Some(broker) = broker::Broker::try_start_with(&dir, "max_queued_messages 0") else {
+    let settings =
+        std::env::var("MQTT_SCALE_BROKER").unwrap_or_else(|_| "max_queued_messages 0".into());
+    let Some(broker) = broker::Broker::try_start_with(&dir, &settings) else {
         eprintln!(
             "mqtt_scale: nothing measured, Mosquitto is not installed (bash .ci/mosquitto.sh)"
         );

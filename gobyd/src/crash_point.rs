@@ -1,6 +1,6 @@
-//! Crash points for restart tests: moments of the receive path where the
-//! daemon can be made to die on purpose, as a `kill -9` landing exactly
-//! there would.
+//! Crash points for restart tests: moments of the receive path and of the
+//! publish path where the daemon can be made to die on purpose, as a
+//! `kill -9` landing exactly there would.
 //!
 //! Built with the `crash-points` feature (the tests build the daemon so;
 //! the shipped daemon has none: a point is then an empty function and the
@@ -8,7 +8,8 @@
 //! environment and it aborts (no clean-up, no flushing) the `N`-th time it
 //! reaches point `NAME` (`N` defaults to 1). Unset, a point costs one
 //! relaxed atomic load.
-//! Points, in the order a received transmission meets them:
+//! Points of the receive path, in the order a received transmission meets
+//! them:
 //!
 //! - `received`: a data transmission from the driver, nothing of it
 //!   recorded, handed over or acknowledged (by `gobyd`: a driver acking on
@@ -17,6 +18,14 @@
 //!   over, nothing acknowledged;
 //! - `handed-over`: they are handed over and marked so; nothing
 //!   acknowledged.
+//!
+//! And of the publish path:
+//!
+//! - `unsynced`: a sync of the outbox journal is about to start (on its
+//!   own thread): the messages it covers are appended and queued, and no
+//!   client has been told they were accepted. The `N`-th sync of the run
+//!   (group commit: each covers every message accepted while the one
+//!   before it ran).
 
 #[cfg(feature = "crash-points")]
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -35,6 +44,9 @@ pub enum CrashPoint {
     Recorded,
     /// Messages handed over and marked, not acked.
     HandedOver,
+    /// Published messages appended to the journal and queued, their sync
+    /// about to start, none confirmed to its client.
+    Unsynced,
 }
 
 impl CrashPoint {
@@ -44,6 +56,7 @@ impl CrashPoint {
             CrashPoint::Received => "received",
             CrashPoint::Recorded => "recorded",
             CrashPoint::HandedOver => "handed-over",
+            CrashPoint::Unsynced => "unsynced",
         }
     }
 
@@ -89,11 +102,12 @@ pub fn parse(text: &str) -> Result<(CrashPoint, u64), String> {
         CrashPoint::Received,
         CrashPoint::Recorded,
         CrashPoint::HandedOver,
+        CrashPoint::Unsynced,
     ]
     .into_iter()
     .find(|p| p.name() == name)
     .ok_or_else(|| {
-        format!("{ENV}: no crash point named {name:?} (received, recorded, handed-over)")
+        format!("{ENV}: no crash point named {name:?} (received, recorded, handed-over, unsynced)")
     })?;
     Ok((point, n))
 }
@@ -122,6 +136,7 @@ mod tests {
         assert_eq!(parse("recorded"), Ok((CrashPoint::Recorded, 1)));
         assert_eq!(parse("received:2"), Ok((CrashPoint::Received, 2)));
         assert_eq!(parse("handed-over:7"), Ok((CrashPoint::HandedOver, 7)));
+        assert_eq!(parse("unsynced:3"), Ok((CrashPoint::Unsynced, 3)));
         assert!(parse("recorded:0").unwrap_err().contains("positive"));
         assert!(parse("nowhere").unwrap_err().contains("no crash point"));
     }

@@ -70,7 +70,8 @@ impl Door {
     /// codec, it is refused (the error names each field, its value and the
     /// bound) or, for a clamping type, passed on as it will be sent.
     pub fn admit(&self, message: DynamicMessage) -> Result<Admitted, String> {
-        let name = message.descriptor().full_name().to_string();
+        let descriptor = message.descriptor();
+        let name = descriptor.full_name();
         // A time the receiver would restore on another date is refused
         // whatever the queue entry says: moving it by whole days is no
         // clamp to a bound.
@@ -89,7 +90,7 @@ impl Door {
         if changes.is_empty() {
             return Ok(Admitted { message, changes });
         }
-        if !self.clamp.contains(&name) {
+        if !self.clamp.contains(name) {
             let fields: Vec<String> = changes
                 .iter()
                 .map(|c| format!("field {}: {}", c.field, would(&c.reason)))

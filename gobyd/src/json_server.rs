@@ -242,7 +242,14 @@ impl JsonInterface {
     async fn handle_line(&self, line: &str, topics: &mut HashSet<Topic>) -> Handled {
         match parse_request(line, &self.codec) {
             Err(e) => Handled::Reply(error_line(&e)),
-            Ok(Request::Subscribe(t)) => {
+            Ok(request) => self.handle_request(request, topics).await,
+        }
+    }
+
+    /// Handles one request: its reply now, or the channel it comes through.
+    async fn handle_request(&self, request: Request, topics: &mut HashSet<Topic>) -> Handled {
+        match request {
+            Request::Subscribe(t) => {
                 let modem_now = !topics.contains(&Topic::Modem) && t.contains(&Topic::Modem);
                 topics.extend(t);
                 let mut all: Vec<Topic> = topics.iter().copied().collect();
@@ -260,7 +267,7 @@ impl JsonInterface {
                     None => Handled::Reply(reply),
                 }
             }
-            Ok(Request::Publish(message)) => {
+            Request::Publish(message) => {
                 let (reply, waiting) = oneshot::channel();
                 if self
                     .publish
@@ -272,7 +279,7 @@ impl JsonInterface {
                 }
                 Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))
             }
-            Ok(Request::DriverSpecific(message)) => {
+            Request::DriverSpecific(message) => {
                 let name = message.descriptor().full_name().to_string();
                 let (reply, outcome) = oneshot::channel();
                 let control = crate::control::Control::DriverSpecific { message, reply };
@@ -330,38 +337,58 @@ impl JsonInterface {
         let mut topics = HashSet::new();
         // Number of the last request line.
         let mut number = 0u64;
-        // The reply being waited for (requests are answered in order).
-        let mut waiting: Option<Answer> = None;
+        // The replies owed, in request order: publishes are pipelined.
+        let mut owed = Pipeline::default();
+        // A request other than a publish, read while replies were owed: it
+        // is handled once they are sent (a subscription changes what this
+        // connection sends only after the replies before it).
+        let mut held: Option<(u64, Request)> = None;
+        // What to write next (replies and event lines, each with its
+        // newline), written in one go.
+        let mut out = String::new();
         loop {
-            let out = tokio::select! {
-                read = lines.next(), if waiting.is_none() => match read {
+            if held.is_some() && owed.is_empty() {
+                let (n, request) = held.take().expect("checked");
+                let handled = self.handle_request(request, &mut topics).await;
+                owed.push(n, handled);
+            }
+            owed.ready_lines(&mut out);
+            if !out.is_empty() {
+                if write.write_all(out.as_bytes()).await.is_err() {
+                    break;
+                }
+                out.clear();
+                if out.capacity() > KEPT_CAPACITY {
+                    out.shrink_to(KEPT_CAPACITY);
+                }
+            }
+            let reading = held.is_none() && owed.len() < MAX_PIPELINED;
+            tokio::select! {
+                read = lines.next(), if reading => match read {
                     Ok(LineRead::End) => break,
                     Ok(LineRead::TooLong) => {
                         number += 1;
-                        Some(numbered_reply(
-                            &error_line(&format!(
-                                "line too long: the limit is {MAX_LINE} bytes; the rest of the line is skipped"
-                            )),
+                        owed.push(
                             number,
-                        ))
+                            Handled::Reply(error_line(&format!(
+                                "line too long: the limit is {MAX_LINE} bytes; the rest of the line is skipped"
+                            ))),
+                        );
                     }
-                    Ok(LineRead::Line(text)) if text.is_empty() => None,
+                    Ok(LineRead::Line(text)) if text.is_empty() => {}
                     Ok(LineRead::Line(text)) => {
                         number += 1;
-                        match self.handle_line(&text, &mut topics).await {
-                            Handled::Reply(line) => Some(numbered_reply(&line, number)),
-                            Handled::ReplyThen(line, events) => {
-                                let mut out = numbered_reply(&line, number);
-                                for event in events {
-                                    out.push('\n');
-                                    out.push_str(&event);
-                                }
-                                Some(out)
+                        match parse_request(&text, &self.codec) {
+                            Err(e) => owed.push(number, Handled::Reply(error_line(&e))),
+                            Ok(request @ Request::Publish(_)) => {
+                                let handled = self.handle_request(request, &mut topics).await;
+                                owed.push(number, handled);
                             }
-                            Handled::Waiting(answer) => {
-                                waiting = Some(answer);
-                                None
+                            Ok(request) if owed.is_empty() => {
+                                let handled = self.handle_request(request, &mut topics).await;
+                                owed.push(number, handled);
                             }
+                            Ok(request) => held = Some((number, request)),
                         }
                     }
                     Err(e) => {
@@ -369,28 +396,24 @@ impl JsonInterface {
                         break;
                     }
                 },
-                line = async { waiting.as_mut().expect("guarded").await }, if waiting.is_some() => {
-                    // The answer is polled in place: a turn of the loop
-                    // that serves an event in between loses nothing.
-                    waiting = None;
-                    Some(numbered_reply(&line, number))
-                }
+                () = owed.first_answered(), if owed.waits() => {}
                 event = events.recv() => match event {
-                    Ok(event) if wanted(&event, &topics) => self.line(&event).map(str::to_string),
-                    Ok(_) => None,
+                    Ok(event) if wanted(&event, &topics) => {
+                        if let Some(line) = self.line(&event) {
+                            out.push_str(line);
+                            out.push('\n');
+                        }
+                    }
+                    Ok(_) => {}
                     Err(broadcast::error::RecvError::Lagged(n)) if topics.is_empty() => {
                         tracing::info!(%peer, "JSON client read too slowly: {n} events not sent");
-                        None
                     }
-                    Err(broadcast::error::RecvError::Lagged(n)) => Some(lost_line(n)),
+                    Err(broadcast::error::RecvError::Lagged(n)) => {
+                        out.push_str(&lost_line(n));
+                        out.push('\n');
+                    }
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
-            };
-            if let Some(mut line) = out {
-                line.push('\n');
-                if write.write_all(line.as_bytes()).await.is_err() {
-                    break;
-                }
             }
         }
         tracing::info!(%peer, "JSON client disconnected");
@@ -477,6 +500,80 @@ impl JsonInterface {
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
             }
+        }
+    }
+}
+
+/// Publishes a TCP connection reads ahead of their replies: up to this
+/// many replies owed at once, then reading waits.
+pub const MAX_PIPELINED: usize = 256;
+
+/// A reply owed to a TCP client: ready, or the core's answer to come.
+enum Owed {
+    Ready(String),
+    Waiting(Answer),
+}
+
+/// The replies a TCP connection owes, in request order, each with its
+/// request's number: a reply is written once every reply before it is.
+#[derive(Default)]
+struct Pipeline {
+    owed: std::collections::VecDeque<(u64, Owed)>,
+}
+
+impl Pipeline {
+    /// The reply of request `number`.
+    fn push(&mut self, number: u64, handled: Handled) {
+        let owed = match handled {
+            Handled::Reply(line) => Owed::Ready(numbered_reply(&line, number)),
+            Handled::ReplyThen(line, events) => {
+                let mut text = numbered_reply(&line, number);
+                for event in events {
+                    text.push('\n');
+                    text.push_str(&event);
+                }
+                Owed::Ready(text)
+            }
+            Handled::Waiting(answer) => Owed::Waiting(answer),
+        };
+        self.owed.push_back((number, owed));
+    }
+
+    fn len(&self) -> usize {
+        self.owed.len()
+    }
+
+    fn is_empty(&self) -> bool {
+        self.owed.is_empty()
+    }
+
+    /// Whether the first reply owed is still to come from the core.
+    fn waits(&self) -> bool {
+        matches!(self.owed.front(), Some((_, Owed::Waiting(_))))
+    }
+
+    /// Waits for the core's answer to the first reply owed (cancel-safe:
+    /// the answer is polled in place and kept once it came).
+    async fn first_answered(&mut self) {
+        let Some((number, owed)) = self.owed.front_mut() else {
+            return std::future::pending().await;
+        };
+        let Owed::Waiting(answer) = owed else {
+            return;
+        };
+        let line = answer.await;
+        *owed = Owed::Ready(numbered_reply(&line, *number));
+    }
+
+    /// Appends the replies ready at the front, each with its newline, to
+    /// `out`.
+    fn ready_lines(&mut self, out: &mut String) {
+        while let Some((_, Owed::Ready(_))) = self.owed.front() {
+            let Some((_, Owed::Ready(line))) = self.owed.pop_front() else {
+                unreachable!("checked");
+            };
+            out.push_str(&line);
+            out.push('\n');
         }
     }
 }

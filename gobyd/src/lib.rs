@@ -17,7 +17,8 @@
 //!
 //! Modules: [`config`] loads and checks the configuration, [`runtime`]
 //! composes and runs the stack, [`door`] checks published values,
-//! [`outbox`] is the queue with its on-disk journal, [`data_dir`] holds the
+//! [`outbox`] is the queue with its on-disk journal, [`group_commit`] lets
+//! one journal sync confirm many messages, [`data_dir`] holds the
 //! data directory (one daemon each, private files), [`inbox`] records what
 //! the link delivers before it is handed over or acknowledged, [`dedup`] is
 //! the receiver's duplicate filter, [`crash_point`] lets restart tests kill
@@ -41,6 +42,7 @@ pub mod dedup;
 pub mod delivery;
 pub mod door;
 pub mod event;
+pub mod group_commit;
 pub mod inbox;
 pub mod json_protocol;
 pub mod json_server;

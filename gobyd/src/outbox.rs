@@ -156,10 +156,12 @@ impl Outbox {
     /// synced: tell the client "accepted" only after a sync of
     /// [`sync_handle`](Self::sync_handle) (or [`sync`](Self::sync)).
     pub fn accept(&mut self, message: &DynamicMessage) -> Result<Accepted, OutboxError> {
-        let name = message.descriptor().full_name().to_string();
-        let entry =
-            self.journal
-                .accept_unsynced(&name, &message.encode_to_vec(), self.queue.now())?;
+        let descriptor = message.descriptor();
+        let entry = self.journal.accept_unsynced(
+            descriptor.full_name(),
+            message.encode_to_vec(),
+            self.queue.now(),
+        )?;
         let options = PushOptions {
             number: Some(entry),
             ..Default::default()

@@ -38,6 +38,7 @@ use super::event::{
     reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
     SharedEvent,
 };
+use super::group_commit::{GroupCommit, Mark};
 use super::json_protocol::message_json;
 use super::json_server::{JsonInterface, Publish};
 use super::modem_event::ModemEvent;
@@ -343,6 +344,16 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
 
 pub use super::delivery::RECOVERY_WAIT;
 
+/// Most messages to publish the core takes in one turn of its loop (then
+/// it serves the driver, the slots and the events again).
+pub const PUBLISH_BATCH: usize = 64;
+
+/// Most journal syncs under way at once (group commit, [`GroupCommit`]):
+/// a message accepted while one runs starts another at once rather than
+/// waiting for it, as the file system serves overlapping syncs of one file
+/// together.
+pub const MAX_SYNCS: usize = 4;
+
 /// Driver-specific requests (pings, interrogations) that may wait for this
 /// node's slot at once; more are refused.
 pub const MAX_SPECIFIC_REQUESTS: usize = 4;
@@ -373,8 +384,13 @@ pub struct Daemon {
     /// Driver-specific requests waiting for this node's next slot.
     specific_requests: std::collections::VecDeque<DynamicMessage>,
     raw_log: Option<RawLog>,
-    /// Replies to send once the journal holding their messages is synced.
-    pending_replies: Vec<(oneshot::Sender<PublishReply>, AcceptedMessage)>,
+    /// Replies to send once the journal holding their messages is synced
+    /// (one sync for every message accepted meanwhile).
+    /// Shared with the syncs under way: each sends the replies it covers
+    /// itself as it returns.
+    commit: Arc<std::sync::Mutex<GroupCommit<WaitingReply>>>,
+    /// The journal syncs under way, off the core's thread.
+    syncs: JoinSet<()>,
     tasks: JoinSet<()>,
     json_tcp: Option<SocketAddr>,
     json_udp: Option<SocketAddr>,
@@ -614,7 +630,8 @@ impl Daemon {
             modem_id: config.modem_id(),
             specific_requests: std::collections::VecDeque::new(),
             raw_log,
-            pending_replies: Vec::new(),
+            commit: Arc::new(std::sync::Mutex::new(GroupCommit::new(MAX_SYNCS))),
+            syncs: JoinSet::new(),
             tasks,
             json_tcp,
             json_udp,
@@ -682,7 +699,25 @@ impl Daemon {
                 .unwrap_or(Duration::from_secs(3600));
             tokio::select! {
                 () = &mut shutdown => break,
-                Some(publish) = self.publish_rx.recv() => self.publish(publish),
+                Some(publish) = self.publish_rx.recv() => {
+                    self.publish(publish);
+                    // What else waits, in one turn: one sync, one round of
+                    // events for all of them.
+                    for _ in 1..PUBLISH_BATCH {
+                        match self.publish_rx.try_recv() {
+                            Ok(publish) => self.publish(publish),
+                            Err(_) => break,
+                        }
+                    }
+                }
+                // A sync returned (its replies are sent): another may start.
+                Some(done) = self.syncs.join_next(), if !self.syncs.is_empty() => {
+                    if let Err(e) = done {
+                        // Not reached (the sync does not panic); its
+                        // replies go with the next sync's.
+                        tracing::error!("journal sync: {e}");
+                    }
+                }
                 Some(control) = self.control_rx.recv() => self.control_request(control).await,
                 event = self.driver.next_event() => match event {
                     Some(event) => self.driver_event(event),
@@ -701,7 +736,8 @@ impl Daemon {
         }
         // Clients still waiting hear back once their messages are on disk.
         let sync = self.outbox.sync();
-        for (reply, accepted) in self.pending_replies.drain(..) {
+        let waiting: Vec<WaitingReply> = lock(&self.commit).finish_all().collect();
+        for (reply, accepted) in waiting {
             let _ = reply.send(match &sync {
                 Ok(()) => Ok(accepted),
                 Err(e) => Err(format!("not saved to disk: {e}")),
@@ -747,7 +783,7 @@ impl Daemon {
                         "{name}: a message was dropped from its full queue (max_queue)"
                     );
                 }
-                self.pending_replies.push((
+                lock(&self.commit).wait((
                     publish.reply,
                     AcceptedMessage {
                         name,
@@ -792,41 +828,32 @@ impl Daemon {
         ))
     }
 
-    /// Syncs the journal off the core's thread (one sync for every message
-    /// accepted since the last), then sends the waiting replies: a client
-    /// hears "accepted" only once its message is on disk, while the message
-    /// itself may already be on its way to the modem.
+    /// Starts a sync of the journal off the core's thread when a reply
+    /// waits that no sync under way covers, unless [`MAX_SYNCS`] are under
+    /// way (group commit, [`GroupCommit`]): it covers every message
+    /// accepted so far, the messages accepted while it runs wait for a
+    /// later one, and it sends the replies it covers as it returns. A
+    /// client hears "accepted" only once its message is on disk, while the
+    /// message itself may already be on its way to the modem.
     fn commit_replies(&mut self) {
-        if self.pending_replies.is_empty() {
+        let Some(mark) = lock(&self.commit).start() else {
             return;
-        }
-        let replies = std::mem::take(&mut self.pending_replies);
-        let handle = match self.outbox.sync_handle() {
-            Ok(handle) => handle,
-            Err(e) => {
-                for (reply, _) in replies {
-                    let _ = reply.send(Err(format!("not saved to disk: {e}")));
-                }
-                return;
-            }
         };
-        tokio::spawn(async move {
-            let synced = tokio::task::spawn_blocking(move || handle.sync_data()).await;
-            let failure = match synced {
-                Ok(Ok(())) => None,
-                Ok(Err(e)) => Some(e.to_string()),
-                Err(e) => Some(e.to_string()),
-            };
-            if let Some(reason) = &failure {
-                tracing::error!("journal sync failed: {reason}");
-            }
-            for (reply, accepted) in replies {
-                let _ = reply.send(match &failure {
-                    None => Ok(accepted),
-                    Some(reason) => Err(format!("not saved to disk: {reason}")),
+        match self.outbox.sync_handle() {
+            Ok(handle) => {
+                let commit = self.commit.clone();
+                self.syncs.spawn_blocking(move || {
+                    CrashPoint::Unsynced.reached();
+                    let synced = handle.sync_data();
+                    send_synced(&commit, mark, synced);
                 });
             }
-        });
+            Err(e) => send_synced(
+                &self.commit,
+                mark,
+                Err(std::io::Error::other(e.to_string())),
+            ),
+        }
     }
 
     fn driver_event(&mut self, event: DriverEvent) {
@@ -1180,6 +1207,37 @@ impl Daemon {
             entry,
             reception,
         );
+    }
+}
+
+/// A reply waiting for the journal sync that covers its message.
+type WaitingReply = (oneshot::Sender<PublishReply>, AcceptedMessage);
+
+/// The group commit's state (a sync that panicked holding it left nothing
+/// half done: its bookkeeping is taken as it is).
+fn lock(
+    commit: &std::sync::Mutex<GroupCommit<WaitingReply>>,
+) -> std::sync::MutexGuard<'_, GroupCommit<WaitingReply>> {
+    commit.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The sync started at `mark` returned: the replies it covers are sent,
+/// "accepted" when it succeeded (from the sync's thread: the clients do
+/// not wait for the core's next turn).
+fn send_synced(
+    commit: &std::sync::Mutex<GroupCommit<WaitingReply>>,
+    mark: Mark,
+    synced: std::io::Result<()>,
+) {
+    if let Err(e) = &synced {
+        tracing::error!("journal sync failed: {e}");
+    }
+    let covered: Vec<WaitingReply> = lock(commit).finish(mark).collect();
+    for (reply, accepted) in covered {
+        let _ = reply.send(match &synced {
+            Ok(()) => Ok(accepted),
+            Err(e) => Err(format!("not saved to disk: {e}")),
+        });
     }
 }
 

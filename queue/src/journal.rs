@@ -246,7 +246,7 @@ impl Journal {
     pub fn accept(
         &mut self,
         message_name: &str,
-        message: &[u8],
+        message: impl Into<Vec<u8>>,
         time: Micros,
     ) -> Result<EntryId, JournalError> {
         let id = self.accept_unsynced(message_name, message, time)?;
@@ -257,11 +257,12 @@ impl Journal {
     /// Appends an accepted message without waiting for the disk; it
     /// survives a crash once a later [`sync`](Self::sync) (or a sync of a
     /// [`sync_handle`](Self::sync_handle)) returns. Lets a caller sync many
-    /// messages at once, off its own thread.
+    /// messages at once, off its own thread. `message` is taken as it is
+    /// when given as a `Vec` (a slice is copied).
     pub fn accept_unsynced(
         &mut self,
         message_name: &str,
-        message: &[u8],
+        message: impl Into<Vec<u8>>,
         time: Micros,
     ) -> Result<EntryId, JournalError> {
         if message_name.len() > usize::from(u16::MAX) {
@@ -274,14 +275,14 @@ impl Journal {
             id,
             time,
             message_name: message_name.to_string(),
-            message: message.to_vec(),
+            message: message.into(),
         };
         if accepted_size(&entry) - FRAMING > MAX_PAYLOAD {
-            return Err(JournalError::MessageTooLarge(message.len()));
+            return Err(JournalError::MessageTooLarge(entry.message.len()));
         }
         let written = self
             .log
-            .append(&accepted_payload(&entry))
+            .append_with(|out| write_accepted(out, &entry))
             .map_err(|e| JournalError::of(self.log.path(), e))?;
         self.next_id = id.checked_add(1);
         self.live_bytes += written;
@@ -315,7 +316,7 @@ impl Journal {
         };
         self.live_bytes -= accepted_size(&entry) as u64;
         self.log
-            .append(&removed_payload(id))
+            .append_with(|out| write_removed(out, id))
             .map_err(|e| JournalError::of(self.log.path(), e))?;
         let len = self.log.file_len();
         if len > COMPACT_MIN_BYTES && self.live_bytes * 2 < len {
@@ -352,20 +353,30 @@ fn accepted_size(entry: &JournalEntry) -> usize {
 
 fn accepted_payload(entry: &JournalEntry) -> Vec<u8> {
     let mut payload = Vec::with_capacity(accepted_size(entry) - FRAMING);
-    payload.push(KIND_ACCEPTED);
-    payload.extend_from_slice(&entry.id.to_le_bytes());
-    payload.extend_from_slice(&entry.time.to_le_bytes());
-    payload.extend_from_slice(&(entry.message_name.len() as u16).to_le_bytes());
-    payload.extend_from_slice(entry.message_name.as_bytes());
-    payload.extend_from_slice(&entry.message);
+    write_accepted(&mut payload, entry);
     payload
+}
+
+/// Appends the payload of an accepted record to `out`.
+fn write_accepted(out: &mut Vec<u8>, entry: &JournalEntry) {
+    out.push(KIND_ACCEPTED);
+    out.extend_from_slice(&entry.id.to_le_bytes());
+    out.extend_from_slice(&entry.time.to_le_bytes());
+    out.extend_from_slice(&(entry.message_name.len() as u16).to_le_bytes());
+    out.extend_from_slice(entry.message_name.as_bytes());
+    out.extend_from_slice(&entry.message);
 }
 
 fn removed_payload(id: EntryId) -> Vec<u8> {
     let mut payload = Vec::with_capacity(9);
-    payload.push(KIND_REMOVED);
-    payload.extend_from_slice(&id.to_le_bytes());
+    write_removed(&mut payload, id);
     payload
+}
+
+/// Appends the payload of a removed record to `out`.
+fn write_removed(out: &mut Vec<u8>, id: EntryId) {
+    out.push(KIND_REMOVED);
+    out.extend_from_slice(&id.to_le_bytes());
 }
 
 /// Little-endian integer of `N` bytes at `at`, if there are that many.
@@ -535,7 +546,7 @@ mod tests {
         {
             let (mut j, _) = Journal::open(dir.file()).unwrap();
             for i in 0..40 {
-                let id = j.accept("a.A", &big, i).unwrap();
+                let id = j.accept("a.A", big.as_slice(), i).unwrap();
                 if i % 4 != 0 {
                     j.remove(id).unwrap();
                 }

@@ -348,8 +348,9 @@ impl QueueManager {
         options: PushOptions,
     ) -> Result<Option<MessageId>> {
         let now = options.created.unwrap_or_else(|| self.clock.now());
-        let name = message.descriptor().full_name().to_string();
-        let id = self.id_of_configured(&name)?;
+        let descriptor = message.descriptor();
+        let name = descriptor.full_name();
+        let id = self.id_of_configured(name)?;
         let index = self.index_of(id);
         let queue = &self.queues[index];
         let loopback = queue.settings.has(Manipulator::Loopback);
@@ -359,7 +360,7 @@ impl QueueManager {
         if let Some(max) = self.max_frame_bytes {
             if encoded.len() > max {
                 return Err(QueueError::TooLarge {
-                    message: name,
+                    message: name.to_string(),
                     size: encoded.len(),
                     max,
                 });
@@ -369,7 +370,7 @@ impl QueueManager {
             match v {
                 None => Ok(default),
                 Some(v) => i32::try_from(v).map_err(|_| QueueError::Role {
-                    message: name.clone(),
+                    message: name.to_string(),
                     role,
                     field: String::new(),
                     reason: format!("{v} is not a modem id"),

@@ -72,6 +72,9 @@ pub const FRAMING: usize = 12;
 /// Largest payload a record may have; a length above it marks damage (see
 /// the [module documentation](self) for why 16 MiB).
 pub const MAX_PAYLOAD: usize = 16 * 1024 * 1024;
+/// Capacity of the append buffer a log keeps between records (a larger
+/// one, for a large record, is let go).
+const KEPT_SCRATCH: usize = 64 * 1024;
 
 /// The parameters of one kind of record log file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -347,8 +350,16 @@ impl LogFile for File {
     }
 
     fn write_at(&mut self, offset: u64, bytes: &[u8]) -> io::Result<()> {
-        self.seek(SeekFrom::Start(offset))?;
-        self.write_all(bytes)
+        // One system call (pwrite) where there is one.
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::FileExt::write_all_at(self, bytes, offset)
+        }
+        #[cfg(not(unix))]
+        {
+            self.seek(SeekFrom::Start(offset))?;
+            self.write_all(bytes)
+        }
     }
 
     fn set_len(&mut self, len: u64) -> io::Result<()> {
@@ -470,6 +481,9 @@ pub struct RecordLog {
     /// A rewrite was renamed over the file but the handle could not be
     /// pointed at it: reopen before the next append.
     stale: bool,
+    /// The record being appended, kept between appends (no allocation per
+    /// record once it is large enough).
+    scratch: Vec<u8>,
 }
 
 impl RecordLog {
@@ -511,6 +525,7 @@ impl RecordLog {
             len: 0,
             dirty: false,
             stale: false,
+            scratch: Vec::new(),
         }
     }
 
@@ -560,9 +575,39 @@ impl RecordLog {
     /// is undone (the file cut back); while that fails too, every append is
     /// refused.
     pub fn append(&mut self, payload: &[u8]) -> Result<u64, LogError> {
-        if payload.len() > MAX_PAYLOAD {
-            return Err(LogError::TooLarge(payload.len()));
+        self.append_with(|out| out.extend_from_slice(payload))
+    }
+
+    /// Appends the record whose payload `fill` writes (to the end of the
+    /// buffer it is given), as [`append`](Self::append) does: the record is
+    /// framed in a buffer the log keeps, without a copy of the payload of
+    /// its own.
+    pub fn append_with(&mut self, fill: impl FnOnce(&mut Vec<u8>)) -> Result<u64, LogError> {
+        let mut record = std::mem::take(&mut self.scratch);
+        record.clear();
+        record.resize(FRAMING, 0);
+        fill(&mut record);
+        let written = self.append_framed(&mut record);
+        if record.capacity() <= KEPT_SCRATCH {
+            self.scratch = record;
         }
+        written
+    }
+
+    /// Frames and appends the record whose payload follows [`FRAMING`]
+    /// bytes of room in `record`.
+    fn append_framed(&mut self, record: &mut [u8]) -> Result<u64, LogError> {
+        let payload_len = record.len() - FRAMING;
+        if payload_len > MAX_PAYLOAD {
+            return Err(LogError::TooLarge(payload_len));
+        }
+        let len = (payload_len as u32).to_le_bytes();
+        let mut digest = CRC32.digest();
+        digest.update(&len);
+        digest.update(&record[FRAMING..]);
+        record[..4].copy_from_slice(&self.format.sync);
+        record[4..8].copy_from_slice(&len);
+        record[8..FRAMING].copy_from_slice(&digest.finalize().to_le_bytes());
         if self.stale {
             self.file.reopen(&self.path)?;
             self.stale = false;
@@ -571,8 +616,7 @@ impl RecordLog {
             self.file.set_len(self.len)?;
             self.dirty = false;
         }
-        let record = self.format.frame(payload);
-        if let Err(e) = self.file.write_at(self.len, &record) {
+        if let Err(e) = self.file.write_at(self.len, record) {
             self.dirty = self.file.set_len(self.len).is_err();
             return Err(e.into());
         }

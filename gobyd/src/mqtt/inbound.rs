@@ -29,6 +29,19 @@ pub fn parse_tx(
     let desc = codec
         .descriptor(name)
         .ok_or_else(|| format!("unknown message type {name}: it is not a loaded DCCL type"))?;
+    // Straight from the bytes (no JSON tree in between); a payload that
+    // does not make a message is read again for the reason.
+    let mut json = serde_json::Deserializer::from_slice(&publish.payload);
+    let direct = publish
+        .payload
+        .iter()
+        .find(|b| !b.is_ascii_whitespace())
+        .filter(|&&b| b == b'{')
+        .and_then(|_| DynamicMessage::deserialize(desc.clone(), &mut json).ok())
+        .filter(|_| json.end().is_ok());
+    if let Some(message) = direct {
+        return Ok(message);
+    }
     let value: Value = serde_json::from_slice(&publish.payload)
         .map_err(|e| format!("{name}: the payload is not JSON: {e}"))?;
     if !value.is_object() {
@@ -111,4 +124,62 @@ pub async fn run(
         }
     };
     tokio::join!(submit, acknowledge);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rumqttc::QoS;
+
+    fn codec() -> Codec {
+        let mut codec = Codec::new();
+        codec.load_type::<protos::goby::example::Command>().unwrap();
+        codec
+    }
+
+    fn topics() -> Topics {
+        Topics {
+            prefix: "fleet".into(),
+            node: "1".into(),
+        }
+    }
+
+    fn parse(payload: &str) -> Result<DynamicMessage, String> {
+        let publish =
+            MqttPublish::new("fleet/1/tx/goby.example.Command", QoS::AtLeastOnce, payload);
+        parse_tx(&topics(), &codec(), &publish)
+    }
+
+    #[test]
+    fn a_payload_is_read_as_the_message_it_holds() {
+        for payload in [
+            r#"{"destination": 2, "action": "GOTO", "note": "hi"}"#,
+            " \n{\"destination\": 2, \"action\": 1, \"note\": \"hi\"}\n",
+        ] {
+            let message = parse(payload).unwrap_or_else(|e| panic!("{payload}: {e}"));
+            let command: protos::goby::example::Command = message.transcode_to().unwrap();
+            assert_eq!(command.destination, 2);
+            assert_eq!(command.action, 1);
+            assert_eq!(command.note.as_deref(), Some("hi"));
+        }
+    }
+
+    #[test]
+    fn a_payload_that_is_no_message_is_refused_with_its_reason() {
+        for (payload, reason) in [
+            ("{\"destination\": 2", "the payload is not JSON"),
+            ("[1, 2]", "must be a JSON object"),
+            ("\"text\"", "must be a JSON object"),
+            (
+                r#"{"destination": 2, "action": "GOTO"} trailing"#,
+                "not JSON",
+            ),
+            (r#"{"destination": 2, "speed": 3}"#, "speed"),
+            (r#"{"destination": "two"}"#, "goby.example.Command: "),
+        ] {
+            let err = parse(payload).expect_err(payload);
+            assert!(err.starts_with("goby.example.Command: "), "{err}");
+            assert!(err.contains(reason), "{payload}: {reason:?} not in {err}");
+        }
+    }
 }

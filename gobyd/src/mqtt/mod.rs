@@ -43,6 +43,9 @@ use settings::Settings;
 /// buffer.
 const CLIENT_CAPACITY: usize = 256;
 
+/// Most core events the bridge takes in one turn of its loop.
+const EVENT_BATCH: usize = 256;
+
 /// How often the retained status is refreshed, seconds.
 const STATUS_PERIOD: Duration = Duration::from_secs(10);
 
@@ -176,16 +179,35 @@ impl Loop {
         loop {
             self.flush();
             tokio::select! {
-                got = events.recv() => match got {
-                    Ok(event) => {
+                got = events.recv() => {
+                    // What else the core sent meanwhile, in one turn: the
+                    // retained states of a batch coalesce in the backlog.
+                    let mut got = Ok(got);
+                    for _ in 0..EVENT_BATCH {
+                        let event = match got {
+                            Ok(Ok(event)) => event,
+                            Ok(Err(broadcast::error::RecvError::Lagged(n)))
+                            | Err(broadcast::error::TryRecvError::Lagged(n)) => {
+                                self.lagged += n;
+                                got = Err(broadcast::error::TryRecvError::Empty);
+                                continue;
+                            }
+                            Ok(Err(broadcast::error::RecvError::Closed))
+                            | Err(broadcast::error::TryRecvError::Closed) => return,
+                            Err(broadcast::error::TryRecvError::Empty) => break,
+                        };
                         if let Some(out) = self.formatter.event(&event.event, self.clock.now()) {
                             self.push(out);
                         }
+                        got = events.try_recv().map(Ok);
                     }
-                    Err(broadcast::error::RecvError::Lagged(n)) => self.lagged += n,
-                    Err(broadcast::error::RecvError::Closed) => break,
-                },
-                Some(notice) = notices.recv() => self.push(notice),
+                }
+                Some(notice) = notices.recv() => {
+                    self.push(notice);
+                    while let Ok(notice) = notices.try_recv() {
+                        self.push(notice);
+                    }
+                }
                 polled = eventloop.poll(), if retry_at.is_none() => match polled {
                     Ok(Event::Incoming(Packet::ConnAck(_))) => {
                         backoff = self.settings.backoff.0;
@@ -275,17 +297,26 @@ impl Loop {
         if !self.connected {
             return;
         }
-        while let Some(out) = self.buffer.front() {
-            match self.client.try_publish(
-                out.topic.clone(),
-                self.settings.qos,
-                out.retain,
-                out.payload.clone(),
-            ) {
-                Ok(()) => {
-                    self.buffer.pop();
+        while let Some(out) = self.buffer.pop() {
+            let retain = out.retain;
+            match self
+                .client
+                .try_publish(out.topic, self.settings.qos, retain, out.payload)
+            {
+                Ok(()) => {}
+                Err(rumqttc::ClientError::TryRequest(rumqttc::Request::Publish(p)))
+                    if rumqttc::valid_topic(&p.topic) =>
+                {
+                    // The client's queue is full: the publication waits at
+                    // the front for the next turn.
+                    self.buffer.push_front(Outgoing {
+                        topic: p.topic,
+                        payload: p.payload.to_vec(),
+                        retain,
+                    });
+                    break;
                 }
-                Err(_) => break,
+                Err(e) => tracing::error!("MQTT: not published: {e}"),
             }
         }
     }

@@ -197,8 +197,24 @@ impl Formatter {
     pub fn accepted(&self, topic: &str, accepted: &AcceptedMessage, published: &[u8]) -> Outgoing {
         let mut payload = accepted_value(accepted);
         payload["topic"] = topic.into();
-        payload["msg"] = serde_json::from_slice(published).unwrap_or(Value::Null);
-        Outgoing::new(self.topics.node("accepted"), payload, false)
+        let topic = self.topics.node("accepted");
+        // The message as published is JSON the bridge read a message from:
+        // it goes in as it came, not parsed and written again.
+        let text = std::str::from_utf8(published)
+            .ok()
+            .map(str::trim)
+            .filter(|t| serde_json::from_str::<serde::de::IgnoredAny>(t).is_ok());
+        match (payload.to_string().strip_suffix('}'), text) {
+            (Some(head), Some(msg)) => Outgoing {
+                topic,
+                payload: format!("{head},\"msg\":{msg}}}").into_bytes(),
+                retain: false,
+            },
+            _ => {
+                payload["msg"] = serde_json::from_slice(published).unwrap_or(Value::Null);
+                Outgoing::new(topic, payload, false)
+            }
+        }
     }
 
     /// The retained status of the bridge.
@@ -283,6 +299,31 @@ mod tests {
 
     fn payload(out: &Outgoing) -> Value {
         serde_json::from_slice(&out.payload).unwrap()
+    }
+
+    #[test]
+    fn an_accepted_notice_carries_the_message_as_published() {
+        let f = formatter();
+        let accepted = AcceptedMessage {
+            name: "goby.example.Command".into(),
+            id: Some(7),
+            dropped: Vec::new(),
+            changes: Vec::new(),
+        };
+        let published = b" {\"destination\": 2,\n \"note\": \"a \\\"b\\\"\"} ";
+        let out = f.accepted("fleet/2/tx/goby.example.Command", &accepted, published);
+        assert_eq!(out.topic, "fleet/2/accepted");
+        assert_eq!(
+            payload(&out),
+            json!({
+                "accepted": "goby.example.Command", "id": 7,
+                "topic": "fleet/2/tx/goby.example.Command",
+                "msg": {"destination": 2, "note": "a \"b\""},
+            })
+        );
+        // Bytes that are not JSON (never handed over by the bridge) give null.
+        let out = f.accepted("t", &accepted, b"{not json");
+        assert_eq!(payload(&out)["msg"], Value::Null);
     }
 
     #[test]

@@ -137,6 +137,12 @@ impl Gobyd {
         }
     }
 
+    /// The address of the JSON interface over TCP, for clients of the
+    /// test's own.
+    pub fn addr(&self) -> &str {
+        &self.addr
+    }
+
     /// Connects the test's JSON client.
     pub fn connect(&mut self) {
         let client = TcpStream::connect(&self.addr).expect("connect to the JSON interface");
