@@ -346,13 +346,17 @@ impl JsonInterface {
         // What to write next (replies and event lines, each with its
         // newline), written in one go.
         let mut out = String::new();
+        // The client closed its side: what it is owed is still sent.
+        let mut ended = false;
         loop {
-            if held.is_some() && owed.is_empty() {
-                let (n, request) = held.take().expect("checked");
-                let handled = self.handle_request(request, &mut topics).await;
-                owed.push(n, handled);
-            }
             owed.ready_lines(&mut out);
+            if owed.is_empty() {
+                if let Some((n, request)) = held.take() {
+                    let handled = self.handle_request(request, &mut topics).await;
+                    owed.push(n, handled);
+                    owed.ready_lines(&mut out);
+                }
+            }
             if !out.is_empty() {
                 if write.write_all(out.as_bytes()).await.is_err() {
                     break;
@@ -362,10 +366,13 @@ impl JsonInterface {
                     out.shrink_to(KEPT_CAPACITY);
                 }
             }
-            let reading = held.is_none() && owed.len() < MAX_PIPELINED;
+            if ended && held.is_none() && owed.is_empty() {
+                break;
+            }
+            let reading = !ended && held.is_none() && owed.len() < MAX_PIPELINED;
             tokio::select! {
                 read = lines.next(), if reading => match read {
-                    Ok(LineRead::End) => break,
+                    Ok(LineRead::End) => ended = true,
                     Ok(LineRead::TooLong) => {
                         number += 1;
                         owed.push(

@@ -2,7 +2,8 @@
 //! only after the journal sync that covers its message. The daemon is
 //! armed to die as its `N`-th journal sync is about to start (crash point
 //! `unsynced`, see `gobyd::crash_point`): whatever it confirmed before
-//! dying was covered by an earlier sync, and is in the journal.
+//! dying was covered by an earlier sync, and is in the journal. And a
+//! connection that pipelines its lines gets every reply, in order.
 
 mod support;
 
@@ -165,6 +166,55 @@ fn a_pipelined_burst_is_confirmed_only_as_far_as_a_sync_covered_it() {
     assert!(owed.len() > ids.len(), "nothing appended without a reply");
     for id in &ids {
         assert!(owed.contains(id), "confirmed {id} is not in the journal");
+    }
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn pipelined_lines_are_answered_in_order_even_after_the_client_closes_its_side() {
+    // 600 lines written at once (more than a connection reads ahead of its
+    // replies), a subscription among them, then the write side closed: every
+    // line is answered, numbered in order, the subscription after the
+    // replies before it.
+    let dir = scratch("group-commit", "pipelined");
+    let daemon = Gobyd::start_unconnected(&quiet_config(&dir), &[]);
+    let stream = TcpStream::connect(daemon.addr()).expect("connect");
+    stream.set_read_timeout(Some(PATIENCE)).unwrap();
+    const LINES: usize = 600;
+    let mut lines = String::new();
+    for i in 1..=LINES {
+        if i == 300 {
+            lines.push_str("{\"subscribe\": [\"queue_size\"]}\n");
+        } else {
+            lines.push_str(&(command(i) + "\n"));
+        }
+    }
+    let mut writer = stream.try_clone().unwrap();
+    let writing = std::thread::spawn(move || {
+        writer.write_all(lines.as_bytes()).unwrap();
+        writer.shutdown(std::net::Shutdown::Write).unwrap();
+    });
+    let mut replies = Vec::new();
+    for line in BufReader::new(stream).lines() {
+        let line = line.unwrap_or_else(|e| panic!("after {} replies: {e}", replies.len()));
+        let value: Value = serde_json::from_str(&line).expect("a JSON line");
+        if let Some(n) = value.get("reply") {
+            replies.push((n.as_u64().unwrap(), value));
+        } else {
+            // Events only once subscribed: after reply 300.
+            assert!(
+                replies.len() >= 300,
+                "an event before its subscription's reply: {value}"
+            );
+        }
+    }
+    writing.join().unwrap();
+    let numbers: Vec<u64> = replies.iter().map(|(n, _)| *n).collect();
+    assert_eq!(numbers, (1..=LINES as u64).collect::<Vec<_>>());
+    for (n, reply) in &replies {
+        let key = if *n == 300 { "subscribed" } else { "accepted" };
+        assert!(reply.get(key).is_some(), "{n}: {reply}");
     }
     drop(daemon);
     let _ = std::fs::remove_dir_all(&dir);

@@ -17,8 +17,14 @@ pub struct Retained {
 impl Retained {
     /// Remembers `out` if it is retained (replacing the topic's older value).
     pub fn remember(&mut self, out: &Outgoing) {
-        if out.retain {
-            self.by_topic.insert(out.topic.clone(), out.clone());
+        if !out.retain {
+            return;
+        }
+        match self.by_topic.get_mut(&out.topic) {
+            Some(kept) => kept.payload.clone_from(&out.payload),
+            None => {
+                self.by_topic.insert(out.topic.clone(), out.clone());
+            }
         }
     }
 
