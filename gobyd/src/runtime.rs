@@ -123,6 +123,23 @@ pub async fn start_driver(
     }
 }
 
+/// A Micro-Modem with application acks keeps its frame numbers in the data
+/// directory (`micromodem.application_ack_state_file`, unless set), so
+/// that after a restart acks are credited at once.
+fn keep_application_acks_in(
+    driver: &mut protos::goby::acomms::protobuf::DriverConfig,
+    data_dir: &Path,
+) {
+    if let Some(mm) = driver
+        .micromodem
+        .as_mut()
+        .filter(|mm| mm.use_application_acks() && mm.application_ack_state_file.is_none())
+    {
+        let path = data_dir.join("micromodem-application-acks");
+        mm.application_ack_state_file = Some(path.to_string_lossy().into_owned());
+    }
+}
+
 /// A configuration that passed [`validate`]: completed, with what the
 /// daemon runs on.
 #[derive(Debug)]
@@ -439,6 +456,7 @@ impl Daemon {
         // Acks (where software sends them) only once the inbox holds the
         // message.
         driver_config.deferred_ack = Some(true);
+        keep_application_acks_in(&mut driver_config, data_dir.path());
         let driver = start_driver(&driver_config).await?;
         let mut daemon = Self::start_in(checked, driver, data_dir, Arc::new(SystemClock)).await?;
         daemon.driver_config = Some(driver_config);

@@ -41,6 +41,14 @@
 //! transmission is credited. A restart costs one round, never a message
 //! taken for acked.
 //!
+//! Unless the numbers survive the restart: [`state`](ApplicationAcks::state)
+//! writes the numbers in use (the driver keeps them in a file,
+//! `application_ack_state_file`, which gobyd puts in its data directory)
+//! and [`resume`](ApplicationAcks::resume) takes them up again. A node that
+//! resumed its numbers, or that has no earlier run (no file), credits acks
+//! at once: the numbers of its earlier run are held, unused, until their
+//! lifetime has passed, and an ack of one of them credits nothing.
+//!
 //! This module keeps that bookkeeping; it does no input or output.
 
 use std::time::{Duration, Instant};
@@ -78,6 +86,9 @@ struct SentFrame {
     unique_id: Option<u32>,
     dest: i32,
     at: Instant,
+    /// Used by an earlier run of this node: held, but its ack credits
+    /// nothing (that transmission is not this run's).
+    earlier: bool,
 }
 
 /// Acks owed to one node.
@@ -134,6 +145,22 @@ pub struct ApplicationAcks {
     started: Instant,
     /// Bit per node heard from since the start (see the module's text).
     heard_from: u32,
+    /// The numbers in use before the start are known ([`Self::resume`]):
+    /// acks are credited from every node at once.
+    resumed: bool,
+}
+
+/// The first line of the state [`ApplicationAcks::state`] writes.
+const STATE_HEADER: &str = "goby micromodem application acks 1";
+
+/// Why the state of an earlier run could not be taken up.
+#[derive(Debug, thiserror::Error)]
+#[error("line {line}: {what}")]
+pub struct StateError {
+    /// The line (1-based) at fault.
+    pub line: usize,
+    /// What is wrong with it.
+    pub what: String,
 }
 
 /// What starts frame 0 of a received transmission.
@@ -184,7 +211,95 @@ impl ApplicationAcks {
             owed: Vec::new(),
             started: now,
             heard_from: 0,
+            resumed: false,
         })
+    }
+
+    /// The frame numbers in use, as text to keep until the next start
+    /// ([`resume`](Self::resume)): a header line, `next N` (the next number),
+    /// and `frame N DEST MICROS` per number whose ack may still come (its
+    /// destination and when it was used, in microseconds on the clock that
+    /// reads `wall_micros` now, e.g. since the UNIX epoch).
+    pub fn state(&self, now: Instant, wall_micros: u64) -> String {
+        use std::fmt::Write;
+        let mut out = format!("{STATE_HEADER}\nnext {}\n", self.next_frame);
+        for (n, sent) in self.sent.iter().enumerate() {
+            let Some(s) = sent else { continue };
+            let age = now.saturating_duration_since(s.at);
+            if age >= self.lifetime {
+                continue;
+            }
+            let at = wall_micros.saturating_sub(age.as_micros() as u64);
+            let _ = writeln!(out, "frame {n} {} {at}", s.dest);
+        }
+        out
+    }
+
+    /// Takes up the numbers in use of this node's earlier run, as
+    /// [`state`](Self::state) wrote them (`None`: there was no earlier run,
+    /// e.g. a new data directory). Either way acks are credited from every
+    /// node at once from then on; the earlier run's numbers younger than
+    /// the lifetime are held, and an ack of one credits nothing.
+    ///
+    /// # Errors
+    /// The text is not such a state (nothing is taken up, and acks are
+    /// credited as after a start without it: once a node is heard from).
+    pub fn resume(
+        &mut self,
+        state: Option<&str>,
+        now: Instant,
+        wall_micros: u64,
+    ) -> Result<(), StateError> {
+        let Some(text) = state else {
+            self.resumed = true;
+            return Ok(());
+        };
+        let bad = |line: usize, what: &str| StateError {
+            line,
+            what: what.to_string(),
+        };
+        let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
+        match lines.next() {
+            Some((_, STATE_HEADER)) => {}
+            Some((l, _)) => return Err(bad(l, &format!("expected {STATE_HEADER:?}"))),
+            None => return Err(bad(1, "empty (the last write may have failed)")),
+        }
+        let mut next = None;
+        let mut sent = [None; FRAME_NUMBERS as usize];
+        for (l, line) in lines {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            match words.as_slice() {
+                [] => {}
+                ["next", n] => {
+                    let n: u32 = n.parse().map_err(|_| bad(l, "next: not a frame number"))?;
+                    next = Some(n % FRAME_NUMBERS);
+                }
+                ["frame", n, dest, at] => {
+                    let n: usize = n
+                        .parse()
+                        .ok()
+                        .filter(|&n| n < FRAME_NUMBERS as usize)
+                        .ok_or_else(|| bad(l, "frame: not a frame number 0-31"))?;
+                    let dest: i32 = dest.parse().map_err(|_| bad(l, "frame: bad destination"))?;
+                    let at: u64 = at.parse().map_err(|_| bad(l, "frame: bad time"))?;
+                    let age = Duration::from_micros(wall_micros.saturating_sub(at));
+                    if age < self.lifetime {
+                        sent[n] = Some(SentFrame {
+                            unique_id: None,
+                            dest,
+                            at: now.checked_sub(age).unwrap_or(now),
+                            earlier: true,
+                        });
+                    }
+                }
+                _ => return Err(bad(l, "expected `next N` or `frame N DEST MICROS`")),
+            }
+        }
+        let next = next.ok_or_else(|| bad(1, "no `next` line"))?;
+        self.next_frame = next;
+        self.sent = sent;
+        self.resumed = true;
+        Ok(())
     }
 
     /// Whether an ack from `node` can be credited: it has been heard from
@@ -194,7 +309,7 @@ impl ApplicationAcks {
             .ok()
             .filter(|&n| n <= MAX_MODEM_ID)
             .is_some_and(|n| self.heard_from & (1 << n) != 0);
-        heard || now.saturating_duration_since(self.started) >= self.lifetime
+        self.resumed || heard || now.saturating_duration_since(self.started) >= self.lifetime
     }
 
     /// Whether acks are owed to anyone.
@@ -348,6 +463,7 @@ impl ApplicationAcks {
                 unique_id: filled.unique_id,
                 dest,
                 at: now,
+                earlier: false,
             });
         }
         self.next_frame = frame_start + frames;
@@ -408,6 +524,10 @@ impl ApplicationAcks {
                     continue;
                 };
                 self.sent[n as usize] = None;
+                if sent.earlier {
+                    // Acks a transmission of the run before the start.
+                    continue;
+                }
                 heard.acks.push(ModemTransmission {
                     src: Some(from),
                     dest: Some(self.modem_id as i32),
@@ -1012,6 +1132,89 @@ mod tests {
         assert_eq!(acks.len(), 1);
         assert_eq!(acks[0].unique_id, Some(78));
         assert_eq!(acks[0].acked_frame, vec![got.frame_start() as i32]);
+    }
+
+    /// An ack naming `frames` of node 1's, from 2 to 1.
+    fn ack_from_2(a: &ApplicationAcks, frames: u32) -> ModemTransmission {
+        ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            frame: vec![a.encode(&owed(&[(1, frames)]), false, 3).unwrap()],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn numbers_kept_across_a_restart_let_acks_be_credited_at_once() {
+        let t0 = base();
+        let t = t0 + Duration::from_secs(1);
+        let wall = 1_764_680_000_000_000u64;
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        a.resume(None, t0, wall).unwrap();
+        // A first start (no earlier run): the first frame to 2 is credited.
+        let mut to_b = template(2, 1, 41);
+        let mut placed = a.prepare(&mut to_b, t).unwrap();
+        let mut sent = fill(to_b, &[0xf8, 0x11], true);
+        a.complete(&mut sent, &mut placed, t).unwrap();
+        let old = sent.frame_start();
+        let state = a.state(t, wall + 1_000_000);
+        // Restarted 10 s later, from the kept state.
+        let t1 = t + Duration::from_secs(10);
+        let wall1 = wall + 11_000_000;
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t1).unwrap();
+        a.resume(Some(&state), t1, wall1).unwrap();
+        // The earlier run's number is held, and its late ack credits nothing.
+        let mut to_b = template(2, 1, 42);
+        let mut placed = a.prepare(&mut to_b, t1).unwrap();
+        let mut sent = fill(to_b, &[0xf8, 0x12], true);
+        a.complete(&mut sent, &mut placed, t1).unwrap();
+        assert_ne!(sent.frame_start(), old, "a held number is not used again");
+        assert!(a.receive(&mut ack_from_2(&a, 1 << old)).acks.is_empty());
+        // The new frame's ack is credited at once (2 was not heard from).
+        let acks = a.receive(&mut ack_from_2(&a, 1 << sent.frame_start())).acks;
+        assert_eq!(acks.len(), 1);
+        assert_eq!(acks[0].unique_id, Some(42));
+    }
+
+    #[test]
+    fn numbers_older_than_the_lifetime_are_not_held_after_a_restart() {
+        let t0 = base();
+        let wall = 1_764_680_000_000_000u64;
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        a.resume(None, t0, wall).unwrap();
+        let mut to_b = template(2, 1, 41);
+        let mut placed = a.prepare(&mut to_b, t0).unwrap();
+        let mut sent = fill(to_b, &[0xf8], true);
+        a.complete(&mut sent, &mut placed, t0).unwrap();
+        let state = a.state(t0, wall);
+        assert!(state.contains(&format!("frame {} 2 {wall}", sent.frame_start())));
+        let later = wall + LIFETIME.as_micros() as u64;
+        let mut b = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        b.resume(Some(&state), t0, later).unwrap();
+        assert!(!b.state(t0, later).contains("frame "));
+    }
+
+    #[test]
+    fn a_state_that_cannot_be_read_leaves_acks_credited_once_heard() {
+        let t0 = base();
+        for (bad, line) in [
+            ("", 1),
+            ("something else\n", 1),
+            ("goby micromodem application acks 1\nnext x\n", 2),
+            ("goby micromodem application acks 1\nnext 3\nframe 40 2 5\n", 3),
+            ("goby micromodem application acks 1\nframe 4 2 5\n", 1),
+        ] {
+            let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+            let e = a.resume(Some(bad), t0, 10).unwrap_err();
+            assert_eq!(e.line, line, "{bad:?}: {e}");
+            // As after a start without state: 2 is not credited yet.
+            let mut to_b = template(2, 1, 9);
+            let mut placed = a.prepare(&mut to_b, t0).unwrap();
+            let mut sent = fill(to_b, &[0xf8], true);
+            a.complete(&mut sent, &mut placed, t0).unwrap();
+            let ack = ack_from_2(&a, 1 << sent.frame_start());
+            assert!(a.receive(&mut ack.clone()).acks.is_empty(), "{bad:?}");
+        }
     }
 
     #[test]

@@ -209,7 +209,11 @@ impl Machine {
                 let placed = match (&mut self.app_acks, o.placed) {
                     (Some(app), Some(mut placed)) => {
                         match app.complete(&mut filled, &mut placed, now) {
-                            Ok(()) => Some(placed),
+                            Ok(()) => {
+                                let state = app.state(now, self.now.micros);
+                                self.keep_ack_state(state);
+                                Some(placed)
+                            }
                             Err(e) => {
                                 self.status(DriverStatus::DataRejected {
                                     reason: e.to_string(),

@@ -109,6 +109,11 @@ pub enum Output {
     /// Open the serial device again (after it was lost), then tell
     /// [`Input::Opened`].
     Open,
+    /// Keep this application-ack state (the frame numbers in use, from
+    /// [`ApplicationAcks::state`]) for the next start, before the
+    /// transmission that uses them goes out (written before the lines that
+    /// follow it).
+    KeepAckState(String),
 }
 
 /// What the machine starts from (checked by [`super::settings`]).
@@ -126,6 +131,9 @@ pub struct Settings {
     pub deferred_ack: bool,
     /// Without application acks: strips those a peer sends anyway.
     pub ack_reader: ApplicationAcks,
+    /// Where the application-ack state is kept across starts
+    /// (`application_ack_state_file`; taken by the driver's shell).
+    pub ack_state_file: Option<std::path::PathBuf>,
 }
 
 /// The serial link as the machine sees it.
@@ -173,6 +181,7 @@ impl Machine {
             app_acks,
             deferred_ack,
             ack_reader,
+            ack_state_file: _,
         } = settings;
         let mut machine = Machine {
             modem_id,
@@ -245,6 +254,11 @@ impl Machine {
 
     pub(super) fn emit(&mut self, event: DriverEvent) {
         self.out.push(Output::Event(event));
+    }
+
+    /// Keeps the application-ack state for the next start.
+    pub(super) fn keep_ack_state(&mut self, state: String) {
+        self.out.push(Output::KeepAckState(state));
     }
 
     pub(super) fn status(&mut self, status: DriverStatus) {

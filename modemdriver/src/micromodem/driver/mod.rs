@@ -279,16 +279,24 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
     let modem_id = u32::try_from(config::modem_id(config)?)
         .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
     let mm = config.micromodem.clone().unwrap_or_default();
+    let ack_state_file = mm
+        .application_ack_state_file
+        .as_deref()
+        .filter(|p| mm.use_application_acks() && !p.is_empty())
+        .map(std::path::PathBuf::from);
     let app_acks = if mm.use_application_acks() {
-        Some(
-            ApplicationAcks::new(
-                modem_id,
-                Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
-                first_frame_number(),
-                std::time::Instant::now(),
-            )
-            .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?,
+        let now = std::time::Instant::now();
+        let mut acks = ApplicationAcks::new(
+            modem_id,
+            Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
+            first_frame_number(),
+            now,
         )
+        .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
+        if let Some(path) = &ack_state_file {
+            resume_ack_state(&mut acks, path, now);
+        }
+        Some(acks)
     } else {
         None
     };
@@ -311,7 +319,29 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
         app_acks,
         deferred_ack,
         ack_reader,
+        ack_state_file,
     })
+}
+
+/// Takes up the application-ack state an earlier start kept in `path`
+/// (none there: no earlier start); one that cannot be read is told, and
+/// acks are then credited from nodes once heard from.
+fn resume_ack_state(acks: &mut ApplicationAcks, path: &std::path::Path, now: std::time::Instant) {
+    let wall = crate::time::now_micros();
+    let result = match std::fs::read_to_string(path) {
+        Ok(text) => acks.resume(Some(&text), now, wall).map_err(|e| e.to_string()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => acks
+            .resume(None, now, wall)
+            .map_err(|e| e.to_string()),
+        Err(e) => Err(e.to_string()),
+    };
+    if let Err(e) = result {
+        tracing::warn!(
+            "application acks: the frame numbers of the last run in {} cannot be taken up ({e}): \
+             acks are credited from each node once heard from",
+            path.display()
+        );
+    }
 }
 
 /// A frame number drawn at random (from the standard library's randomly

@@ -102,6 +102,8 @@ pub(super) async fn run(
 ) {
     let events = ctx.events.clone();
     let clock = ctx.clock.clone();
+    let mut settings = settings;
+    let ack_state_file = settings.ack_state_file.take();
     let machine = Machine::new(settings, now(&*clock));
     let mut shell = Shell {
         link: Some(port.wrap(lines, &events)),
@@ -110,6 +112,7 @@ pub(super) async fn run(
         events,
         answers: Vec::new(),
         clock,
+        ack_state_file,
     };
     let mut input = Input::Tick;
     loop {
@@ -148,6 +151,8 @@ struct Shell {
     events: EventSink,
     /// Data requests outstanding, with where their answers come.
     answers: Answers,
+    /// Where [`Output::KeepAckState`] is written.
+    ack_state_file: Option<std::path::PathBuf>,
     clock: Arc<dyn goby_time::Clock>,
 }
 
@@ -178,6 +183,11 @@ impl Shell {
                     self.answers.push((id, answer));
                     self.events.emit(DriverEvent::DataRequest(request));
                 }
+                Output::KeepAckState(state) => {
+                    if let Some(path) = &self.ack_state_file {
+                        keep_ack_state(path, &state);
+                    }
+                }
                 Output::Open => {
                     let opened = match self.port.open(&self.events) {
                         Ok(l) => {
@@ -193,5 +203,38 @@ impl Shell {
         }
         let machine = &self.machine;
         self.answers.retain(|(id, _)| machine.awaits(*id));
+    }
+}
+
+/// Writes the application-ack state to `path` whole (a file beside it,
+/// synced, then renamed over it). When that fails (e.g. a full disk) the
+/// file is emptied instead, so that the next start, finding no state it can
+/// read, credits acks only from nodes heard from (see
+/// [`ApplicationAcks::resume`](crate::micromodem::application_ack::ApplicationAcks::resume)).
+fn keep_ack_state(path: &std::path::Path, state: &str) {
+    use std::io::Write;
+    let write = || -> std::io::Result<()> {
+        let mut next = path.as_os_str().to_owned();
+        next.push(".next");
+        let next = std::path::PathBuf::from(next);
+        let mut file = std::fs::File::create(&next)?;
+        file.write_all(state.as_bytes())?;
+        file.sync_all()?;
+        std::fs::rename(&next, path)?;
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::File::open(dir)?.sync_all()?;
+        }
+        Ok(())
+    };
+    if let Err(e) = write() {
+        tracing::warn!(
+            "application acks: keeping the frame numbers in {}: {e}; after a restart, acks \
+             are credited only from nodes heard from",
+            path.display()
+        );
+        if let Ok(file) = std::fs::OpenOptions::new().write(true).open(path) {
+            let _ = file.set_len(0);
+            let _ = file.sync_all();
+        }
     }
 }

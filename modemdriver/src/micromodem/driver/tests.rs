@@ -35,6 +35,7 @@ fn settings(mm: MicroModemConfig) -> Settings {
         deferred_ack: false,
         ack_reader: ApplicationAcks::new(ME, Duration::ZERO, 0, std::time::Instant::now())
             .expect("ack reader"),
+        ack_state_file: None,
     }
 }
 
