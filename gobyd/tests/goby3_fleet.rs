@@ -49,6 +49,14 @@ use support::node::{Driver, Entry, Multicast, Node, Udp};
 
 /// Messages each way.
 const N: u32 = 5;
+/// Number of the message each node sends first, alone, in the scenarios
+/// with application acks, before the [`N`] counted: a round that lets both
+/// nodes past their start. Goby3 misses its first slot after it set the
+/// modem's clock (its MAC starts again), so data sent to it before then is
+/// sent again, unacknowledged, in the next slot, and Goby3, which has no
+/// duplicate filter, delivers it twice. The first round's counts are
+/// printed, not asserted.
+const WARM_UP: u32 = 999;
 
 /// Longest a scenario may take to deliver and acknowledge everything.
 const SCENARIO_LIMIT: Duration = Duration::from_secs(150);
@@ -402,6 +410,30 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
                 r#"{{"publish": "fleet.Tick", "msg": {{"src": 2, "dest": 1, "n": {n}}}}}"#
             ));
         };
+        if link.app_acks() {
+            // The first round: one message each way, until delivered and
+            // acked (see [`WARM_UP`]).
+            publish(&mut json, WARM_UP);
+            let deadline = Instant::now() + SCENARIO_LIMIT;
+            let warm =
+                |t: &Tally| t.delivered.contains_key(&WARM_UP) && t.acked.contains_key(&WARM_UP);
+            while !(warm(&to_goby3) && warm(&from_goby3)) && Instant::now() < deadline {
+                while let Ok(v) = json.lines.try_recv() {
+                    count_gobyd(&v, &mut to_goby3, &mut from_goby3);
+                }
+                while let Ok(m) = mail.try_recv() {
+                    if let MoosValue::String(text) = &m.value {
+                        count_goby3(&m.key, text, &mut to_goby3, &mut from_goby3);
+                    }
+                }
+                assert!(
+                    pacommshandler.alive(),
+                    "pAcommsHandler exited\n{}",
+                    pacommshandler.tail()
+                );
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
         for n in 0..N {
             publish(&mut json, n);
             from_goby3.published += 1;
@@ -440,6 +472,18 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
         }
         client.close().await;
     });
+    let (warm_from, warm_to) = (from_goby3.take_round(WARM_UP), to_goby3.take_round(WARM_UP));
+    if link.app_acks() {
+        println!(
+            "{}: first round (one message each way before the {N}): Goby3 -> gobyd delivered {} acked {}, \
+             gobyd -> Goby3 delivered {} acked {}",
+            link.name(),
+            warm_from.delivered.get(&WARM_UP).copied().unwrap_or(0),
+            warm_from.acked.get(&WARM_UP).copied().unwrap_or(0),
+            warm_to.delivered.get(&WARM_UP).copied().unwrap_or(0),
+            warm_to.acked.get(&WARM_UP).copied().unwrap_or(0),
+        );
+    }
     // Kept with its logs unless everything went as it must.
     let clean = |t: &Tally| t.complete() && t.duplicates() == 0 && t.expired == 0;
     let complete = clean(&to_goby3) && clean(&from_goby3);

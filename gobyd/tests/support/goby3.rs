@@ -190,6 +190,19 @@ impl Tally {
     pub fn duplicates(&self) -> u32 {
         self.delivered.values().map(|c| c - 1).sum()
     }
+
+    /// The counts of message number `n` (a first round sent alone), taken
+    /// out.
+    pub fn take_round(&mut self, n: u32) -> Tally {
+        let mut round = Tally::default();
+        if let Some(c) = self.delivered.remove(&n) {
+            round.delivered.insert(n, c);
+        }
+        if let Some(c) = self.acked.remove(&n) {
+            round.acked.insert(n, c);
+        }
+        round
+    }
 }
 
 /// The number `n` of a `fleet.Tick` in protobuf text format.
