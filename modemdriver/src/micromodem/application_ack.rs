@@ -1201,7 +1201,10 @@ mod tests {
             ("", 1),
             ("something else\n", 1),
             ("goby micromodem application acks 1\nnext x\n", 2),
-            ("goby micromodem application acks 1\nnext 3\nframe 40 2 5\n", 3),
+            (
+                "goby micromodem application acks 1\nnext 3\nframe 40 2 5\n",
+                3,
+            ),
             ("goby micromodem application acks 1\nframe 4 2 5\n", 1),
         ] {
             let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();

@@ -329,10 +329,12 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
 fn resume_ack_state(acks: &mut ApplicationAcks, path: &std::path::Path, now: std::time::Instant) {
     let wall = crate::time::now_micros();
     let result = match std::fs::read_to_string(path) {
-        Ok(text) => acks.resume(Some(&text), now, wall).map_err(|e| e.to_string()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => acks
-            .resume(None, now, wall)
+        Ok(text) => acks
+            .resume(Some(&text), now, wall)
             .map_err(|e| e.to_string()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            acks.resume(None, now, wall).map_err(|e| e.to_string())
+        }
         Err(e) => Err(e.to_string()),
     };
     if let Err(e) = result {
