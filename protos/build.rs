@@ -20,6 +20,8 @@ const FILES: &[&str] = &[
     "goby/acomms/simulator_driver.proto",
     "goby/acomms/micromodem.proto",
     "goby/acomms/evologics.proto",
+    "goby/acomms/popoto.proto",
+    "goby/acomms/benthos.proto",
     "goby/acomms/iridium.proto",
     "goby/moos/translator.proto",
     "goby/moos/node_report.proto",

@@ -39,16 +39,20 @@
 
 #![warn(missing_docs)]
 
+pub mod benthos;
 pub mod check;
 pub mod config;
 pub mod driver;
+pub mod emulator_host;
 pub mod evologics;
 pub mod iridium;
 pub mod link;
 pub mod micromodem;
+pub mod popoto;
 pub mod rate;
 pub mod sim;
 pub mod slot;
+pub mod stream_shell;
 pub mod time;
 pub mod udp;
 pub mod udp_multicast;

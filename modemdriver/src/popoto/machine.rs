@@ -1,0 +1,909 @@
+//! The Popoto driver as a state machine: no input or output, no clock
+//! read ([`StreamMachine`]: inputs in, outputs out).
+//!
+//! One transmission is under way at a time — a data packet or an
+//! acknowledgement handed to the modem and awaiting its `TxComplete`, or a
+//! range awaiting its report — with a data request before a data packet;
+//! everything else waits in order, acknowledgements first. Receptions are
+//! read as the modem writes them: a `Header` line, the statistics (`SNRdB`,
+//! `DopplerVelocity`, before or shortly after the data), the `Data` line.
+
+use std::collections::{HashMap, VecDeque};
+use std::time::Duration;
+
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, popoto_report, popoto_transmission::Type as PopotoType,
+    ModemTransmission, PopotoRangingReply, PopotoReceiveStatistics, PopotoReport, PopotoSpecific,
+    PopotoTransmission,
+};
+use tokio::time::Instant;
+
+use super::wire::{
+    mode_of_rate, parse_modem_line, Command, GobyHeader, Interface, LineSplitter, ModemLine,
+    PacketHeader, PacketKind, ParamValue, BROADCAST, MODE_BIT_RATE,
+};
+use crate::driver::{
+    Acknowledgement, DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome,
+    TransmitResult,
+};
+use crate::stream_shell::{lossy, Input, Now, Output, RequestId, StreamMachine};
+
+/// How long the driver waits for the layer above to fill a data request.
+pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// Data transmissions waiting at most; beyond, the oldest is dropped.
+pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
+
+/// The alert that ends a transmission.
+pub const TX_COMPLETE: &str = "TxComplete";
+
+/// The alert of a packet the modem did not send (its channel was busy).
+pub const MAC_DUMPED: &str = "MAC dumped packet";
+
+/// What the machine starts from (checked by [`super::driver::settings`]).
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// This node's modem id (its Popoto `LocalID`).
+    pub modem_id: i32,
+    /// How commands are written.
+    pub interface: Interface,
+    /// Commands written at start (and after each reconnection), in order.
+    pub setup: Vec<Command>,
+    /// Queries written at the end of the setup and, with `poll_status`,
+    /// before each data transmission.
+    pub status_queries: Vec<Command>,
+    /// Ask them before each data transmission.
+    pub poll_status: bool,
+    /// Wait for the modem's first answer after the setup.
+    pub start_timeout: Duration,
+    /// Wait for `TxComplete` beyond the packet's time on the water.
+    pub response_timeout: Duration,
+    /// An ack is credited this long after its data went out.
+    pub ack_timeout: Duration,
+    /// An owed ack older than this is not sent.
+    pub ack_max_age: Duration,
+    /// Rate of acknowledgements (Goby rate 0-5).
+    pub ack_rate: i32,
+    /// Offers of a packet the modem dropped.
+    pub busy_retries: u32,
+    /// Between them.
+    pub busy_backoff: Duration,
+    /// Wait for a reception's statistics after its data.
+    pub statistics_wait: Duration,
+    /// Wait for a range's report.
+    pub range_timeout: Duration,
+    /// Largest frame offered to the layer above, bytes.
+    pub max_frame_bytes: usize,
+    /// Watts for ranging, pings and wake-ups.
+    pub power: f64,
+    /// Acknowledge only when the layer above asks.
+    pub deferred_ack: bool,
+    /// Between reconnection attempts.
+    pub reconnect: Duration,
+}
+
+/// The Popoto id of modem id `id` (0: broadcast).
+pub fn address_of(id: i32) -> Option<u8> {
+    match id {
+        0 => Some(BROADCAST),
+        1..=254 => Some(id as u8),
+        _ => None,
+    }
+}
+
+/// The modem id of Popoto id `a` (255: broadcast, 0).
+pub fn id_of(a: u8) -> i32 {
+    if a == BROADCAST {
+        0
+    } else {
+        i32::from(a)
+    }
+}
+
+/// Time a payload of `bytes` takes on the water at payload mode `mode`,
+/// about (the header's part included), for timeouts.
+pub fn air_time(bytes: usize, mode: u8) -> Duration {
+    let rate = MODE_BIT_RATE
+        .get(usize::from(mode))
+        .copied()
+        .unwrap_or(MODE_BIT_RATE[0]);
+    Duration::from_millis(1000) + Duration::from_secs_f64(bytes as f64 * 8.0 / f64::from(rate))
+}
+
+#[derive(Debug, Clone)]
+struct Sending {
+    /// The data transmission (`None`: an acknowledgement).
+    mt: Option<ModemTransmission>,
+    dest: u8,
+    mode: u8,
+    payload: Vec<u8>,
+    busy: u32,
+}
+
+#[derive(Debug)]
+enum Job {
+    Data(Box<ModemTransmission>),
+    Ack { dest: u8, owed_at: Instant },
+    Range { dest: u8 },
+    Commands(Vec<Command>),
+}
+
+#[derive(Debug)]
+struct Filling {
+    id: RequestId,
+    template: ModemTransmission,
+    deadline: Instant,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Outstanding {
+    unique_id: Option<u32>,
+    frame_start: u32,
+    rate: i32,
+    until: Instant,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct Stats {
+    snr: Option<f64>,
+    doppler: Option<f64>,
+}
+
+/// The Popoto driver's logic.
+#[derive(Debug)]
+pub struct Machine {
+    s: Settings,
+    now: Now,
+    out: Vec<Output>,
+    lines: LineSplitter,
+    connected: bool,
+    opening: bool,
+    reconnect_at: Instant,
+    /// The setup was written; the first answer is awaited until then.
+    starting: Option<Instant>,
+    ready: bool,
+    filling: Option<Filling>,
+    transmitting: Option<(Sending, Instant)>,
+    retry: Option<(Instant, Sending)>,
+    ranging: Option<(u8, Instant)>,
+    outstanding: HashMap<u8, Outstanding>,
+    pending: VecDeque<Job>,
+    /// The header of the packet being received, and its statistics so far.
+    rx: Option<(PacketHeader, Stats)>,
+    /// A reception awaiting its statistics.
+    held: Option<(ModemTransmission, Instant)>,
+    next_request: u64,
+}
+
+impl Machine {
+    /// A machine whose link is open at `now`; its first outputs (the
+    /// setup) come from the first input, e.g. [`Input::Tick`].
+    pub fn new(settings: Settings, now: Now) -> Machine {
+        Machine {
+            now,
+            out: Vec::new(),
+            lines: LineSplitter::new(),
+            connected: true,
+            opening: false,
+            reconnect_at: now.at,
+            starting: None,
+            ready: false,
+            filling: None,
+            transmitting: None,
+            retry: None,
+            ranging: None,
+            outstanding: HashMap::new(),
+            pending: VecDeque::new(),
+            rx: None,
+            held: None,
+            next_request: 0,
+            s: settings,
+        }
+    }
+
+    /// A machine whose link is not open yet: its first output asks to open
+    /// it.
+    pub fn disconnected(settings: Settings, now: Now) -> Machine {
+        let mut m = Machine::new(settings, now);
+        m.connected = false;
+        m
+    }
+
+    fn emit(&mut self, e: DriverEvent) {
+        self.out.push(Output::Event(e));
+    }
+
+    fn status(&mut self, s: DriverStatus) {
+        self.emit(DriverEvent::Status(s));
+    }
+
+    fn write(&mut self, c: &Command) {
+        self.out.push(Output::Write(c.encode(self.s.interface)));
+    }
+
+    fn result(&mut self, mt: ModemTransmission, outcome: TransmitOutcome) {
+        self.emit(DriverEvent::TransmitResult(TransmitResult {
+            transmission: mt,
+            outcome,
+        }));
+    }
+
+    fn report(&mut self, r: PopotoReport) {
+        self.emit(DriverEvent::Specific(SpecificReport::new(&r)));
+    }
+
+    fn disconnected_now(&mut self, reason: String) {
+        if !self.connected {
+            return;
+        }
+        self.connected = false;
+        self.opening = false;
+        self.lines.clear();
+        self.reconnect_at = self.now.at + self.s.reconnect;
+        self.status(DriverStatus::Disconnected { reason });
+        self.flush_held();
+        self.rx = None;
+        let lost = "the link to the modem was lost before TxComplete";
+        if let Some((s, _)) = self.transmitting.take() {
+            if let Some(mt) = s.mt {
+                self.result(mt, TransmitOutcome::Failed(lost.into()));
+            }
+        }
+        if let Some((_, s)) = self.retry.take() {
+            if let Some(mt) = s.mt {
+                self.result(mt, TransmitOutcome::Failed(lost.into()));
+            }
+        }
+        self.ranging = None;
+        self.starting = None;
+        self.ready = false;
+    }
+
+    fn opened(&mut self, ok: bool) {
+        self.opening = false;
+        if ok {
+            self.connected = true;
+            self.lines.clear();
+            self.status(DriverStatus::Reconnected);
+            self.starting = None;
+            self.ready = false;
+        } else {
+            self.reconnect_at = self.now.at + self.s.reconnect;
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        if !self.connected && !self.opening && self.reconnect_at <= now {
+            self.opening = true;
+            self.out.push(Output::Open);
+        }
+        if self.starting.is_some_and(|t| t <= now) {
+            self.starting = None;
+            self.status(DriverStatus::ModemSilent {
+                seconds: self.s.start_timeout.as_secs_f64(),
+            });
+        }
+        if self.filling.as_ref().is_some_and(|f| f.deadline <= now) {
+            let f = self.filling.take().expect("checked");
+            self.status(DriverStatus::DataRejected {
+                reason: format!(
+                    "no answer to the data request within {} ms: nothing sent",
+                    DATA_REQUEST_TIMEOUT.as_millis()
+                ),
+            });
+            self.result(f.template, TransmitOutcome::NothingToSend);
+        }
+        if self.transmitting.as_ref().is_some_and(|t| t.1 <= now) {
+            let (s, _) = self.transmitting.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("{TX_COMPLETE} of the packet to {}", id_of(s.dest)),
+                attempt: 1,
+            });
+            if let Some(mt) = s.mt {
+                self.result(
+                    mt,
+                    TransmitOutcome::Failed(format!("no {TX_COMPLETE} from the modem")),
+                );
+            }
+        }
+        if self.ranging.is_some_and(|r| r.1 <= now) {
+            let (dest, _) = self.ranging.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("the range to {}", id_of(dest)),
+                attempt: 1,
+            });
+        }
+        if self.held.as_ref().is_some_and(|h| h.1 <= now) {
+            self.flush_held();
+        }
+        self.outstanding.retain(|_, o| o.until > now);
+    }
+
+    fn start_setup(&mut self) {
+        for c in self.s.setup.clone() {
+            self.write(&c);
+        }
+        for c in self.s.status_queries.clone() {
+            self.write(&c);
+        }
+        self.starting = Some(self.now.at + self.s.start_timeout);
+    }
+
+    fn line(&mut self, raw: &[u8]) {
+        let text = String::from_utf8_lossy(raw);
+        let parsed = match parse_modem_line(&text) {
+            Ok(Some(l)) => l,
+            Ok(None) => return,
+            Err(reason) => {
+                self.status(DriverStatus::Unparseable {
+                    line: lossy(raw, 120),
+                    reason,
+                });
+                // A reception cut by a bad line: its data is not known to
+                // be its own.
+                if self.rx.take().is_some() {
+                    tracing::debug!("Popoto: reception abandoned after a bad line");
+                }
+                return;
+            }
+        };
+        if self.starting.take().is_some() || !self.ready {
+            self.starting = None;
+            if !self.ready {
+                self.ready = true;
+                self.status(DriverStatus::Ready);
+            }
+        }
+        match parsed {
+            ModemLine::Header(h) => {
+                self.flush_held();
+                match h.kind {
+                    PacketKind::Data if h.length > 0 => self.rx = Some((h, Stats::default())),
+                    kind => {
+                        self.rx = None;
+                        tracing::debug!("Popoto: heard a {kind:?} packet from {}", h.src);
+                    }
+                }
+            }
+            ModemLine::Snr(x) => {
+                if let Some((mt, _)) = &mut self.held {
+                    if let Some(s) = popoto_stat(mt) {
+                        s.snr_db = Some(x);
+                    }
+                } else if let Some((_, s)) = &mut self.rx {
+                    s.snr = Some(x);
+                }
+            }
+            ModemLine::Doppler(x) => {
+                if let Some((mt, _)) = &mut self.held {
+                    if let Some(s) = popoto_stat(mt) {
+                        s.doppler_velocity = Some(x);
+                    }
+                } else if let Some((_, s)) = &mut self.rx {
+                    s.doppler = Some(x);
+                }
+            }
+            ModemLine::Data(data) => self.data(data, raw),
+            ModemLine::Alert(a) => self.alert(a),
+            ModemLine::Range(r) => {
+                let remote = self.ranging.take().map(|(d, _)| id_of(d));
+                self.report(PopotoReport {
+                    range: Some(popoto_report::Range {
+                        src: Some(self.s.modem_id),
+                        remote,
+                        range_m: Some(r.range_m),
+                        roundtrip_delay_ms: Some(r.roundtrip_ms),
+                        sound_speed: Some(r.sound_speed),
+                        ranging_reply: Some(PopotoRangingReply {
+                            one_way_travel_time: r.roundtrip_ms / 2.0 / 1000.0,
+                        }),
+                    }),
+                    ..Default::default()
+                });
+            }
+            ModemLine::Value { name, value } => {
+                let status = match name.as_str() {
+                    "BatteryVoltage" => popoto_report::Status {
+                        battery_voltage: Some(value),
+                        ..Default::default()
+                    },
+                    "Temp_Ambient" => popoto_report::Status {
+                        temperature: Some(value),
+                        ..Default::default()
+                    },
+                    _ => return tracing::debug!("Popoto {name}: {value}"),
+                };
+                self.report(PopotoReport {
+                    status: Some(status),
+                    ..Default::default()
+                });
+            }
+            ModemLine::Info(i) => tracing::debug!("Popoto info: {i}"),
+            ModemLine::Other(o) => tracing::debug!("Popoto: {o}"),
+        }
+    }
+
+    fn alert(&mut self, alert: String) {
+        if alert.contains(TX_COMPLETE) {
+            let Some((s, _)) = self.transmitting.take() else {
+                return;
+            };
+            let Some(mt) = s.mt else {
+                return;
+            };
+            if mt.ack_requested() && s.dest != BROADCAST {
+                self.outstanding.insert(
+                    s.dest,
+                    Outstanding {
+                        unique_id: mt.unique_id,
+                        frame_start: mt.frame_start(),
+                        rate: mt.rate(),
+                        until: self.now.at + self.s.ack_timeout,
+                    },
+                );
+            }
+            self.result(mt, TransmitOutcome::Sent);
+        } else if alert.contains(MAC_DUMPED) {
+            let Some((mut s, _)) = self.transmitting.take() else {
+                return;
+            };
+            s.busy += 1;
+            if s.busy <= self.s.busy_retries {
+                self.status(DriverStatus::Retrying {
+                    reason: format!("the modem said {MAC_DUMPED:?}"),
+                    attempt: s.busy + 1,
+                });
+                self.retry = Some((self.now.at + self.s.busy_backoff, s));
+            } else {
+                self.status(DriverStatus::ModemError {
+                    message: format!(
+                        "{MAC_DUMPED} {} times: the packet to {} is not sent",
+                        s.busy,
+                        id_of(s.dest)
+                    ),
+                });
+                if let Some(mt) = s.mt {
+                    self.result(
+                        mt,
+                        TransmitOutcome::Failed(format!("the modem dropped it {} times", s.busy)),
+                    );
+                }
+            }
+        } else {
+            if alert.contains("CRC") {
+                self.rx = None;
+                self.status(DriverStatus::BadChecksum {
+                    line: format!("Alert {alert}"),
+                });
+            }
+            self.report(PopotoReport {
+                alert: Some(alert),
+                ..Default::default()
+            });
+        }
+    }
+
+    fn data(&mut self, data: Vec<u8>, raw: &[u8]) {
+        let Some((header, stats)) = self.rx.take() else {
+            return self.status(DriverStatus::Unparseable {
+                line: lossy(raw, 120),
+                reason: "data without the header of its packet (lost or garbled)".into(),
+            });
+        };
+        let Some(&first) = data.first() else {
+            return self.status(DriverStatus::Unparseable {
+                line: lossy(raw, 120),
+                reason: "an empty payload (no Goby header byte)".into(),
+            });
+        };
+        let src = id_of(header.src);
+        let dest = id_of(header.dest);
+        let rate = super::wire::rate_of_mode(header.mode);
+        match GobyHeader::of(first) {
+            GobyHeader::Ack => {
+                if dest != self.s.modem_id {
+                    return;
+                }
+                let Some(o) = self.outstanding.remove(&header.src) else {
+                    return self.status(DriverStatus::Skipped {
+                        reason: format!(
+                            "an acknowledgement from {src} for no packet awaiting one (late: after ack_timeout_ms, or a repeat); not credited"
+                        ),
+                    });
+                };
+                let ack = ModemTransmission {
+                    src: Some(src),
+                    dest: Some(self.s.modem_id),
+                    rate: Some(o.rate),
+                    time: Some(self.now.micros),
+                    r#type: Some(TransmissionType::Ack as i32),
+                    acked_frame: vec![o.frame_start as i32],
+                    unique_id: o.unique_id,
+                    ..Default::default()
+                };
+                self.emit(DriverEvent::Received(ack));
+            }
+            GobyHeader::Data { ack_requested } => {
+                let stat = PopotoReceiveStatistics {
+                    source: Some(src),
+                    dest: Some(dest),
+                    snr_db: stats.snr,
+                    doppler_velocity: stats.doppler,
+                    payload_mode: Some(i32::from(header.mode)),
+                    tx_power: Some(i32::from(header.power)),
+                    payload_bytes: Some(u32::from(header.length)),
+                };
+                let mt = ModemTransmission {
+                    src: Some(src),
+                    dest: Some(dest),
+                    rate,
+                    time: Some(self.now.micros),
+                    r#type: Some(TransmissionType::Data as i32),
+                    ack_requested: Some(ack_requested),
+                    frame: vec![data[1..].to_vec()],
+                    frame_start: Some(0),
+                    popoto: Some(PopotoTransmission {
+                        receive_stat: vec![stat],
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                };
+                self.held = Some((mt, self.now.at + self.s.statistics_wait));
+                if self.s.statistics_wait.is_zero() {
+                    self.flush_held();
+                }
+            }
+        }
+    }
+
+    /// Reports the reception held for its statistics.
+    fn flush_held(&mut self) {
+        let Some((mt, _)) = self.held.take() else {
+            return;
+        };
+        if !self.s.deferred_ack && Acknowledgement::wanted(&mt, &[self.s.modem_id]) {
+            self.owe_ack(&Acknowledgement::all(mt.clone()));
+        }
+        self.emit(DriverEvent::Received(mt));
+    }
+
+    /// Owes an acknowledgement of `ack` (sent before other work, after
+    /// other acknowledgements).
+    fn owe_ack(&mut self, ack: &Acknowledgement) {
+        let received = &ack.received;
+        if !Acknowledgement::wanted(received, &[self.s.modem_id]) || ack.frames.is_empty() {
+            return;
+        }
+        let Some(dest) = address_of(received.src()).filter(|&a| a != BROADCAST) else {
+            return;
+        };
+        let at = self
+            .pending
+            .iter()
+            .position(|j| !matches!(j, Job::Ack { .. }))
+            .unwrap_or(self.pending.len());
+        self.pending.insert(
+            at,
+            Job::Ack {
+                dest,
+                owed_at: self.now.at,
+            },
+        );
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        match command {
+            DriverCommand::Initiate(mut mt) => {
+                if mt.src.is_none() || mt.src() == -1 {
+                    mt.src = Some(self.s.modem_id);
+                }
+                match mt.r#type() {
+                    TransmissionType::Data => {}
+                    TransmissionType::DriverSpecific => {
+                        let p = mt.popoto.clone().unwrap_or_default();
+                        let request = PopotoSpecific {
+                            r#type: p.r#type.unwrap_or(0),
+                            dest: mt.dest,
+                            transmit_power: p.transmit_power,
+                            file_location: p.file_location,
+                        };
+                        return self.specific(request);
+                    }
+                    other => {
+                        return self.status(DriverStatus::Unsupported {
+                            message: format!(
+                                "ModemTransmission.type {other:?} (the Popoto driver sends acks itself)"
+                            ),
+                        })
+                    }
+                }
+                let waiting = self
+                    .pending
+                    .iter()
+                    .filter(|j| matches!(j, Job::Data(_)))
+                    .count();
+                if waiting >= MAX_PENDING_TRANSMISSIONS {
+                    if let Some(i) = self.pending.iter().position(|j| matches!(j, Job::Data(_))) {
+                        self.pending.remove(i);
+                        self.status(DriverStatus::Skipped {
+                            reason: format!(
+                                "{waiting} transmissions already wait for the modem; the oldest is dropped"
+                            ),
+                        });
+                    }
+                }
+                self.pending.push_back(Job::Data(Box::new(mt)));
+            }
+            DriverCommand::Specific(message) => {
+                let name = message.descriptor().full_name().to_string();
+                match (name == PopotoSpecific::default().descriptor().full_name())
+                    .then(|| message.transcode_to::<PopotoSpecific>().ok())
+                    .flatten()
+                {
+                    Some(r) => self.specific(r),
+                    None => self.status(DriverStatus::Unsupported { message: name }),
+                }
+            }
+            DriverCommand::Acknowledge(ack) => {
+                if self.s.deferred_ack {
+                    self.owe_ack(&ack);
+                }
+            }
+            DriverCommand::Stop(_) => {}
+        }
+    }
+
+    fn specific(&mut self, r: PopotoSpecific) {
+        let power = r.transmit_power.unwrap_or(self.s.power);
+        let job = match r.r#type() {
+            PopotoType::PopotoTwoWayRange => {
+                match r.dest.and_then(address_of).filter(|&a| a != BROADCAST) {
+                    Some(dest) => Job::Range { dest },
+                    None => {
+                        return self.status(DriverStatus::Unsupported {
+                            message: "POPOTO_TWO_WAY_RANGE needs a dest (modem id 1-254)".into(),
+                        })
+                    }
+                }
+            }
+            PopotoType::PopotoTwoWayPing => Job::Commands(vec![Command::Ping { power }]),
+            PopotoType::PopotoWake => Job::Commands(vec![Command::Ping {
+                power: self.s.power,
+            }]),
+            PopotoType::PopotoDeepSleep => Job::Commands(vec![Command::PowerDown]),
+            PopotoType::PopotoPlayFile => match r.file_location {
+                Some(file) if !file.trim().is_empty() => Job::Commands(vec![
+                    Command::PlayStop,
+                    Command::PlayStart { file, scale: power },
+                ]),
+                _ => {
+                    return self.status(DriverStatus::Unsupported {
+                        message: "POPOTO_PLAY_FILE needs a file_location".into(),
+                    })
+                }
+            },
+            PopotoType::BaseType => {
+                return self.status(DriverStatus::Unsupported {
+                    message: "PopotoSpecific type BASE_TYPE (nothing to do)".into(),
+                })
+            }
+        };
+        self.pending.push_back(job);
+    }
+
+    /// The template of a data request for `mt`.
+    fn template(&self, mt: &ModemTransmission) -> ModemTransmission {
+        let max = mt.max_frame_bytes.map_or(self.s.max_frame_bytes, |m| {
+            (m as usize).min(self.s.max_frame_bytes)
+        });
+        ModemTransmission {
+            src: Some(self.s.modem_id),
+            max_num_frames: Some(1),
+            max_frame_bytes: Some(max as u32),
+            frame: Vec::new(),
+            ..mt.clone()
+        }
+    }
+
+    fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+        let Some(f) = self.filling.take_if(|f| f.id == id) else {
+            return;
+        };
+        let (mut mt, problems) = crate::driver::checked_answer(&f.template, filled);
+        for p in problems {
+            self.status(p);
+        }
+        let Some(frame) = mt.frame.first().filter(|d| !d.is_empty()).cloned() else {
+            return self.result(mt, TransmitOutcome::NothingToSend);
+        };
+        mt.frame.truncate(1);
+        if mt.dest() < 0 {
+            mt.dest = Some(0);
+        }
+        let Some(dest) = address_of(mt.dest()) else {
+            let why = format!(
+                "destination {} is not a Popoto id (0 broadcast, 1-254)",
+                mt.dest()
+            );
+            self.status(DriverStatus::DataRejected {
+                reason: why.clone(),
+            });
+            return self.result(mt, TransmitOutcome::Failed(why));
+        };
+        if !self.connected {
+            return self.result(
+                mt,
+                TransmitOutcome::Failed("the link to the modem is down".into()),
+            );
+        }
+        let mode = match mode_of_rate(mt.rate()) {
+            Some(m) => m,
+            None => {
+                self.status(DriverStatus::Degraded {
+                    reason: format!(
+                        "rate {} is not a Popoto rate (0-5): sent at rate 0, as Goby3 does",
+                        mt.rate()
+                    ),
+                });
+                0
+            }
+        };
+        let ack_requested = mt.ack_requested() && dest != BROADCAST;
+        let mut payload = vec![GobyHeader::Data { ack_requested }.byte()];
+        payload.extend_from_slice(&frame);
+        self.offer(Sending {
+            mt: Some(mt),
+            dest,
+            mode,
+            payload,
+            busy: 0,
+        });
+    }
+
+    /// Hands `s` to the modem: its rate, its destination, the packet.
+    fn offer(&mut self, s: Sending) {
+        self.write(&Command::SetRate { mode: s.mode });
+        self.write(&Command::SetValue {
+            name: "RemoteID".into(),
+            value: ParamValue::Int(i64::from(s.dest)),
+        });
+        self.write(&Command::Transmit(s.payload.clone()));
+        let deadline = self.now.at + self.s.response_timeout + air_time(s.payload.len(), s.mode);
+        self.transmitting = Some((s, deadline));
+    }
+
+    fn pump(&mut self) {
+        loop {
+            if !self.connected || self.opening {
+                return;
+            }
+            if !self.ready {
+                if self.starting.is_none() {
+                    self.start_setup();
+                }
+                return;
+            }
+            if self.filling.is_some() || self.transmitting.is_some() || self.ranging.is_some() {
+                return;
+            }
+            if let Some((at, _)) = &self.retry {
+                if *at <= self.now.at {
+                    let (_, s) = self.retry.take().expect("checked");
+                    self.offer(s);
+                }
+                return;
+            }
+            let Some(job) = self.pending.pop_front() else {
+                return;
+            };
+            match job {
+                Job::Ack { dest, owed_at } => {
+                    if owed_at + self.s.ack_max_age < self.now.at {
+                        self.status(DriverStatus::Skipped {
+                            reason: format!(
+                                "the acknowledgement owed to {} since {} ms is too old to send",
+                                id_of(dest),
+                                (self.now.at - owed_at).as_millis()
+                            ),
+                        });
+                        continue;
+                    }
+                    let mode = mode_of_rate(self.s.ack_rate).unwrap_or(0);
+                    self.offer(Sending {
+                        mt: None,
+                        dest,
+                        mode,
+                        payload: vec![GobyHeader::Ack.byte()],
+                        busy: 0,
+                    });
+                }
+                Job::Range { dest } => {
+                    self.write(&Command::SetValue {
+                        name: "RemoteID".into(),
+                        value: ParamValue::Int(i64::from(dest)),
+                    });
+                    self.write(&Command::Range {
+                        power: self.s.power,
+                    });
+                    self.ranging = Some((dest, self.now.at + self.s.range_timeout));
+                }
+                Job::Commands(commands) => {
+                    for c in &commands {
+                        self.write(c);
+                    }
+                }
+                Job::Data(mt) => {
+                    if crate::slot::too_late_at(&mt, Duration::ZERO, self.now.micros) {
+                        self.status(DriverStatus::Skipped {
+                            reason: "its slot had passed".into(),
+                        });
+                        continue;
+                    }
+                    if self.s.poll_status {
+                        for c in self.s.status_queries.clone() {
+                            self.write(&c);
+                        }
+                    }
+                    let template = self.template(&mt);
+                    self.next_request += 1;
+                    let id = RequestId(self.next_request);
+                    self.out.push(Output::Request {
+                        id,
+                        template: template.clone(),
+                    });
+                    self.filling = Some(Filling {
+                        id,
+                        template,
+                        deadline: self.now.at + DATA_REQUEST_TIMEOUT,
+                    });
+                }
+            }
+        }
+    }
+}
+
+fn popoto_stat(mt: &mut ModemTransmission) -> Option<&mut PopotoReceiveStatistics> {
+    mt.popoto.as_mut()?.receive_stat.first_mut()
+}
+
+impl StreamMachine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        match input {
+            Input::Bytes(bytes) => {
+                for line in self.lines.push(&bytes) {
+                    self.line(&line);
+                }
+            }
+            Input::Tick => self.timers(),
+            Input::Command(c) => self.command(c),
+            Input::Answer { id, filled } => self.answered(id, filled),
+            Input::Opened(ok) => self.opened(ok),
+            Input::Disconnected(reason) => self.disconnected_now(reason),
+        }
+        self.pump();
+        std::mem::take(&mut self.out)
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        [
+            self.starting,
+            self.filling.as_ref().map(|f| f.deadline),
+            self.transmitting.as_ref().map(|t| t.1),
+            self.retry.as_ref().map(|r| r.0),
+            self.ranging.map(|r| r.1),
+            self.held.as_ref().map(|h| h.1),
+            self.outstanding.values().map(|o| o.until).min(),
+            (!self.connected && !self.opening).then_some(self.reconnect_at),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.filling.as_ref().is_some_and(|f| f.id == id)
+    }
+}
