@@ -110,6 +110,10 @@ const GOBY3_EXTENSIONS: &[(&str, &str)] = &[
     ("goby.acomms.micromodem.protobuf.config", "micromodem"),
     ("goby.acomms.iridium.protobuf.config", "iridium"),
     ("goby.acomms.iridium.protobuf.shore_config", "iridium_shore"),
+    ("goby.acomms.popoto.protobuf.config", "popoto"),
+    ("goby.acomms.benthos.protobuf.config", "benthos"),
+    ("goby.acomms.popoto.protobuf.transmission", "popoto"),
+    ("goby.acomms.benthos.protobuf.transmission", "benthos"),
     ("goby.acomms.micromodem.protobuf.transmission", "micromodem"),
 ];
 
@@ -444,8 +448,9 @@ fn with_goby_hint(reason: String, at_equals: bool) -> String {
     {
         return format!(
             "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config], \
-             [goby.acomms.micromodem.protobuf.config], [goby.acomms.iridium.protobuf.config] and \
-             [goby.acomms.iridium.protobuf.shore_config], and Goby 2's [UDPDriverConfig.*] and \
+             [goby.acomms.micromodem.protobuf.config], [goby.acomms.iridium.protobuf.config], \
+             [goby.acomms.iridium.protobuf.shore_config], [goby.acomms.popoto.protobuf.config] and \
+             [goby.acomms.benthos.protobuf.config], and Goby 2's [UDPDriverConfig.*] and \
              [micromodem.protobuf.Config.*] (the drivers gobyd runs)"
         );
     }
@@ -1980,7 +1985,7 @@ mod tests {
                 "Hydroid gateway",
             ),
             (
-                "driver_cfg { [goby.acomms.benthos.protobuf.config] { } }\n",
+                "driver_cfg { [goby.acomms.janus.protobuf.config] { } }\n",
                 "p.cfg:1:14",
                 "the drivers gobyd runs",
             ),

@@ -105,6 +105,12 @@ pub async fn start_driver(
         Some(DriverType::DriverIridiumShore) => {
             Ok(modemdriver::iridium::IridiumShoreDriver::start(config).await?)
         }
+        Some(DriverType::DriverPopoto) => {
+            Ok(modemdriver::popoto::PopotoDriver::start(config).await?)
+        }
+        Some(DriverType::DriverBenthosAtm900) => {
+            Ok(modemdriver::benthos::BenthosDriver::start(config).await?)
+        }
         other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
             match (&config.driver, other) {
                 (Some(driver_config::Driver::DriverName(name)), _) => {
@@ -1027,19 +1033,35 @@ impl Daemon {
         if let Some(config) = &self.driver_config {
             let micromodem = matches!(config.driver, Some(driver_config::Driver::DriverType(t))
                 if t == DriverType::DriverWhoiMicromodem as i32);
-            if modemdriver::evologics::driver::is_evologics(config) {
-                let takes =
-                    protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor();
+            let takes = if modemdriver::evologics::driver::is_evologics(config) {
+                Some((
+                    "EvoLogics",
+                    protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor(),
+                ))
+            } else if modemdriver::popoto::is_popoto(config) {
+                Some((
+                    "Popoto",
+                    protos::goby::acomms::protobuf::PopotoSpecific::default().descriptor(),
+                ))
+            } else if modemdriver::benthos::is_benthos(config) {
+                Some((
+                    "Benthos ATM-900",
+                    protos::goby::acomms::protobuf::BenthosSpecific::default().descriptor(),
+                ))
+            } else {
+                None
+            };
+            if let Some((driver, takes)) = takes {
                 if message.descriptor() != takes {
                     return Err(format!(
-                        "{name}: the EvoLogics driver takes {}",
+                        "{name}: the {driver} driver takes {}",
                         takes.full_name()
                     ));
                 }
             } else {
                 if !micromodem {
                     return Err(format!(
-                        "{name}: only the Micro-Modem and EvoLogics drivers take driver-specific requests"
+                        "{name}: only the Micro-Modem, EvoLogics, Popoto and Benthos ATM-900 drivers take driver-specific requests"
                     ));
                 }
                 let takes = MicroModemSpecific::default().descriptor();

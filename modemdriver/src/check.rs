@@ -63,6 +63,8 @@ pub const BUILT_IN: &[DriverType] = &[
     DriverType::DriverWhoiMicromodem,
     DriverType::DriverIridium,
     DriverType::DriverIridiumShore,
+    DriverType::DriverPopoto,
+    DriverType::DriverBenthosAtm900,
 ];
 
 /// The names of the [`BUILT_IN`] drivers as a configuration writes them,
@@ -125,14 +127,36 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             problems
         }
         Some(DriverType::DriverIridiumShore) => crate::iridium::shore::problems(config),
+        Some(DriverType::DriverPopoto) => with_serial_port(config, crate::popoto::driver::problems(config)),
+        Some(DriverType::DriverBenthosAtm900) => {
+            with_serial_port(config, crate::benthos::driver::problems(config))
+        }
         _ => Vec::new(),
     }
 }
 
+/// `problems` and, over a serial line whose path was given, what is wrong
+/// with that path.
+fn with_serial_port(config: &DriverConfig, mut problems: Vec<Problem>) -> Vec<Problem> {
+    if config.connection_type() == driver_config::ConnectionType::ConnectionSerial
+        && !problems.iter().any(|p| p.field == "serial_port")
+    {
+        problems.extend(serial_port_problem(config.serial_port()));
+    }
+    problems
+}
+
 /// The frame limits of the driver of `config`, in words, for `gobyd
 /// --check` (`None` for drivers whose frames are not limited by the modem
-/// this way): for the EvoLogics S2C, the instant-message and burst sizes.
+/// this way): for the EvoLogics S2C, the instant-message and burst sizes;
+/// for the Popoto and the Benthos ATM-900, the frame and each rate.
 pub fn limits(config: &DriverConfig) -> Option<String> {
+    if crate::popoto::is_popoto(config) {
+        return Some(crate::popoto::driver::limits(config));
+    }
+    if crate::benthos::is_benthos(config) {
+        return Some(crate::benthos::driver::limits(config));
+    }
     if crate::evologics::driver::is_evologics(config) {
         let (im, burst) = crate::evologics::driver::frame_limits(config);
         let header = if crate::evologics::driver::application_acks(config) {
@@ -166,6 +190,12 @@ pub fn limits(config: &DriverConfig) -> Option<String> {
 /// The largest frame the driver of `config` sends to one node, bytes
 /// (`None`: not limited this way).
 pub fn largest_frame(config: &DriverConfig) -> Option<usize> {
+    if crate::popoto::is_popoto(config) {
+        return Some(crate::popoto::driver::max_frame_bytes(config));
+    }
+    if crate::benthos::is_benthos(config) {
+        return Some(crate::benthos::driver::max_frame_bytes(config));
+    }
     if crate::evologics::driver::is_evologics(config) {
         let (im, burst) = crate::evologics::driver::frame_limits(config);
         return Some(im.max(burst));

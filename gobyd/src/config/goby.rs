@@ -7,7 +7,7 @@
 //! |---|---|
 //! | `modem_id`, `moos_var`, `translator_entry`, `modem_id_lookup_path` | the same fields |
 //! | `driver_cfg`, `mac_cfg`, `queue_cfg` | `driver`, `mac`, `queue` (one name of each) |
-//! | `[goby.acomms.udp.protobuf.config]`, `[goby.acomms.udp_multicast.protobuf.config]`, `[goby.acomms.micromodem.protobuf.config]` (Goby 3) | `udp`, `udp_multicast`, `micromodem` of the driver section |
+//! | `[goby.acomms.udp.protobuf.config]`, `[goby.acomms.udp_multicast.protobuf.config]`, `[goby.acomms.micromodem.protobuf.config]`, `[goby.acomms.popoto.protobuf.config]`, `[goby.acomms.benthos.protobuf.config]` (Goby 3) | `udp`, `udp_multicast`, `micromodem`, `popoto`, `benthos` of the driver section |
 //! | `[goby.acomms.micromodem.protobuf.transmission]` in a MAC slot (Goby 3) | the slot's `micromodem` (e.g. `type: MICROMODEM_FLEXIBLE_DATA` for an FDP slot) |
 //! | `[UDPDriverConfig.local]`, `.remote`, `.max_frame_size` (Goby 2) | `udp.local`, `udp.remote`, `udp.max_frame_size` |
 //! | `[micromodem.protobuf.Config.X]` (Goby 2) | `micromodem.X` (reset_nvram, nvram_cfg, keep_alive_seconds, allowed_skew_ms, use_application_acks, remus_lbl, narrowband_lbl) |

@@ -1,0 +1,138 @@
+//! `gobyd --check` of the Popoto and Benthos ATM-900 drivers: their
+//! configuration as Goby3's pAcommsHandler writes it (the driver types and
+//! the `[goby.acomms.popoto.protobuf.config]` /
+//! `[goby.acomms.benthos.protobuf.config]` extensions), the frame limits
+//! per rate it tells, a message type larger than the driver's frame
+//! refused, and bad settings refused naming their field.
+
+mod support;
+
+use std::process::Output;
+
+use support::daemon::scratch;
+
+fn gobyd(args: &[&str]) -> Output {
+    assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .args(args)
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("gobyd runs")
+}
+
+fn stderr_text(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn check(path: &std::path::Path, text: &str) -> (Option<i32>, String, String) {
+    std::fs::write(path, text).unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr_text(&out),
+    )
+}
+
+#[test]
+fn check_knows_the_popoto_limits() {
+    let dir = scratch("check", "popoto");
+    let path = dir.join("popoto.pb.txt");
+    let config = |extra: &str| {
+        format!(
+            "modem_id: 1\ndriver_cfg {{\n  driver_type: DRIVER_POPOTO\n  connection_type: CONNECTION_TCP_AS_CLIENT\n  \
+             tcp_server: \"127.0.0.1\"\n  [goby.acomms.popoto.protobuf.config] {{ payload_mode: 1 modem_power: 10 {extra} }}\n}}\n"
+        )
+    };
+    let (code, out, err) = check(&path, &config(""));
+    assert_eq!(code, Some(0), "{out}{err}");
+    assert!(
+        out.contains(
+            "driver DRIVER_POPOTO: one frame per transmission of up to 255 bytes at every rate"
+        ),
+        "{out}"
+    );
+    for rate in [
+        "rate 0 payload mode 0 80 bit/s",
+        "rate 1 payload mode 4 640 bit/s",
+        "rate 4 payload mode 1 5120 bit/s",
+        "rate 5 payload mode 5 10240 bit/s",
+    ] {
+        assert!(out.contains(rate), "{rate}: {out}");
+    }
+    // A type larger than the frame would never go.
+    let (code, _, err) = check(&path, &config("max_frame_bytes: 8"));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("more than the 8 bytes of the driver's largest frame"),
+        "{err}"
+    );
+    for (extra, expected) in [
+        (
+            "payload_mode: 7",
+            "driver.popoto.payload_mode: 7 is not a payload mode",
+        ),
+        (
+            "max_frame_bytes: 1023",
+            "driver.popoto.max_frame_bytes: 1023 is not a frame size",
+        ),
+        (
+            "setting: \"RNG_TA_DelayMs\"",
+            "driver.popoto.setting[0]: \"RNG_TA_DelayMs\" is not \"Name value\"",
+        ),
+    ] {
+        let text = config(extra).replace("payload_mode: 1 ", "");
+        let (code, _, err) = check(&path, &text);
+        assert_eq!(code, Some(2), "{extra}: {err}");
+        assert!(err.contains(expected), "{extra}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn check_knows_the_benthos_limits() {
+    let dir = scratch("check", "benthos");
+    let path = dir.join("benthos.pb.txt");
+    let config = |extra: &str| {
+        format!(
+            "modem_id: 2\ndriver_cfg {{\n  driver_type: DRIVER_BENTHOS_ATM900\n  connection_type: CONNECTION_TCP_AS_CLIENT\n  \
+             tcp_server: \"127.0.0.1\" tcp_port: 4001\n  [goby.acomms.benthos.protobuf.config] {{\n    \
+             config: \"@AcRspTmOut=10.0\"\n    {extra}\n  }}\n}}\n"
+        )
+    };
+    let (code, out, err) = check(&path, &config(""));
+    assert_eq!(code, Some(0), "{out}{err}");
+    assert!(
+        out.contains("driver DRIVER_BENTHOS_ATM900: up to 8 frames per transmission"),
+        "{out}"
+    );
+    assert!(out.contains("of up to 64 bytes each at every rate"), "{out}");
+    assert!(out.contains("2 140 bit/s"), "{out}");
+    let (code, _, err) = check(&path, &config("max_frame_size: 8"));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("more than the 8 bytes of the driver's largest frame"),
+        "{err}"
+    );
+    for (extra, expected) in [
+        (
+            "max_frame_size: 5000",
+            "driver.benthos.max_frame_size: 5000 is not a frame size",
+        ),
+        (
+            "config: \"@=1\"",
+            "driver.benthos.config[1]: \"@=1\": \"\" is not a setting name",
+        ),
+        ("ack_rate: 14", "driver.benthos.ack_rate: 14 is not an @TxRate"),
+    ] {
+        let (code, _, err) = check(&path, &config(extra));
+        assert_eq!(code, Some(2), "{extra}: {err}");
+        assert!(err.contains(expected), "{extra}: {err}");
+    }
+    let (code, _, err) = check(
+        &path,
+        "modem_id: 2\ndriver { driver_type: DRIVER_BENTHOS_ATM900 connection_type: CONNECTION_TCP_AS_CLIENT tcp_server: \"x\" }\n",
+    );
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("driver.tcp_port: required for the Benthos driver"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
