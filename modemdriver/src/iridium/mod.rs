@@ -7,8 +7,10 @@
 //! - [`status`]: the session status codes (`+SBDIX`) and their meanings.
 //! - [`reader`]: an AT serial stream split into lines and binary blocks.
 //! - [`driver`]: the vehicle's driver ([`IridiumDriver`]).
-//! - [`shore`]: the shore's driver over DirectIP ([`IridiumShoreDriver`]).
+//! - [`shore`]: the shore's driver over DirectIP or RockBLOCK ([`IridiumShoreDriver`]).
 //! - [`directip`]: Iridium's DirectIP messages (MO, MT, confirmations).
+//! - [`rockblock`]: the RockBLOCK web service (MO webhook with its JWT, MT
+//!   POST).
 //! - [`emulator`]: an emulated 9603 on a pseudo-terminal and an emulated
 //!   gateway with DirectIP.
 
@@ -18,6 +20,7 @@ pub mod driver;
 pub mod emulator;
 pub mod frame;
 pub mod reader;
+pub mod rockblock;
 pub mod rudics;
 pub mod shore;
 pub mod status;

@@ -1,19 +1,35 @@
 //! The shore's Iridium driver (`DRIVER_IRIDIUM_SHORE`): Iridium's DirectIP
-//! interface, as Goby3's shore driver uses it.
+//! interface or the RockBLOCK web service, as Goby3's shore driver uses
+//! them (`sbd_type: SBD_DIRECTIP` or `SBD_ROCKBLOCK`).
 //!
-//! - MO: a TCP listener (`mo_sbd_server_address`:`mo_sbd_server_port`,
-//!   Goby3's default port 40001) to which the gateway delivers each MO
-//!   message on a connection of its own; the payload, a Goby frame
-//!   ([`super::frame`]), becomes a [`DriverEvent::Received`].
+//! - MO, DirectIP: a TCP listener (`mo_sbd_server_address`:
+//!   `mo_sbd_server_port`, Goby3's default port 40001) to which the
+//!   gateway delivers each MO message on a connection of its own.
+//! - MO, RockBLOCK: an HTTP endpoint on the same address and port (path
+//!   `rockblock.mo_endpoint`) taking the service's webhook posts, each
+//!   with a JWT verified with the service's public key
+//!   (`rockblock.jwt_public_key_file`); a post without a token, or whose
+//!   token does not verify, is answered 401 or 403 and reported
+//!   ([`DriverStatus::LinkError`]); a post taken is answered 200 once it is
+//!   handed to the layer above ([`super::rockblock::webhook`]).
+//!
+//!   Either way the payload, a Goby frame ([`super::frame`]), becomes a
+//!   [`DriverEvent::Received`].
 //! - MT: a transmission asked for ([`Driver::initiate_transmission`])
 //!   becomes a data request for one frame of at most the device's MT size
 //!   less header and CRC (259 bytes for a 9602/9603; smaller with
 //!   `iridium.max_frame_size`), numbered by the driver; its destination's
 //!   IMEI (`modem_id_to_imei`) gets it as a DirectIP MT message sent to
-//!   the gateway (`mt_sbd_server_address`:`mt_sbd_server_port`). The
-//!   result is `Sent` when the gateway's confirmation queues it, `Failed`
-//!   (its frame handed back) when it refuses it, does not answer within
-//!   `mt_confirmation_timeout_ms`, or cannot be reached.
+//!   the gateway (`mt_sbd_server_address`:`mt_sbd_server_port`), or as a
+//!   POST to RockBLOCK's MT endpoint (`rockblock.server` and
+//!   `rockblock.mt_endpoint`, with the account's `username` and
+//!   `password`). The result is `Sent` when the gateway's confirmation
+//!   (the service's `OK,<id>`) queues it, `Failed` (its frame handed back)
+//!   when it is refused, not answered within `mt_confirmation_timeout_ms`,
+//!   or cannot be reached. A RockBLOCK POST that fails in a way that may
+//!   pass later (no connection, no answer, an HTTP status other than 200,
+//!   `FAILED,99`) is made again after `rockblock.mt_retry_backoff_ms`,
+//!   doubled each time, up to `rockblock.mt_attempts` POSTs.
 //! - Acks: data for this node that asks for one is answered with an ACK
 //!   sent as its own MT message at once (on reception, or with
 //!   `deferred_ack` when the layer above asks); an ACK received is given
@@ -23,25 +39,33 @@
 //! [`MAX_WAITING`] transmissions wait (an older one is dropped,
 //! [`DriverStatus::Skipped`]).
 //!
-//! Differences from Goby3: MT messages are sent without the disposition
-//! flag that flushes the vehicle's MT queue unless `flush_mt_queue` is set
-//! (Goby3 always sets it, dropping MT messages the vehicle has not fetched
-//! yet); the RockBLOCK web service and RUDICS calls are not supported.
+//! Differences from Goby3: MT messages are sent without the flag that
+//! flushes the vehicle's MT queue unless `flush_mt_queue` is set (Goby3
+//! always sets it, dropping MT messages the vehicle has not fetched yet);
+//! Goby3 checks RockBLOCK's token against a key built into it and not that
+//! the token's fields are the post's; RUDICS calls are not supported.
 
 use std::collections::VecDeque;
 use std::net::SocketAddr;
 use std::time::Duration;
 
+use std::sync::Arc;
+
 use protos::goby::acomms::protobuf::{
-    iridium_shore_driver_config::SbdType, modem_transmission::TransmissionType, DriverConfig,
-    IridiumShoreDriverConfig, ModemTransmission,
+    iridium_shore_driver_config::{RockBlock, SbdType},
+    modem_transmission::TransmissionType,
+    DriverConfig, IridiumDeviceType, IridiumShoreDriverConfig, ModemTransmission,
 };
 use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, oneshot};
+use tokio::task::JoinHandle;
 
 use super::directip::{self, disposition, MoMessage, MtConfirmation, MtMessage};
 use super::frame::{self, Direction};
+use super::rockblock::http::{self, HttpUrl};
+use super::rockblock::webhook::{self, WebhookConfig, WebhookEvent};
+use super::rockblock::{JwtVerifier, MtReply, MtRequest};
 use crate::check::{self, Problem};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
@@ -61,9 +85,41 @@ const SENT_KEPT: usize = 1024;
 #[derive(Debug)]
 pub struct IridiumShoreDriver;
 
-/// The shore section, or its defaults.
+/// The shore section, or its defaults; with `SBD_ROCKBLOCK` and no
+/// `device`, a 9602/9603 (a RockBLOCK is one).
 pub fn shore_config(config: &DriverConfig) -> IridiumShoreDriverConfig {
-    config.iridium_shore.clone().unwrap_or_default()
+    let mut shore = config.iridium_shore.clone().unwrap_or_default();
+    if shore.sbd_type() == SbdType::SbdRockblock && shore.device.is_none() {
+        shore.set_device(IridiumDeviceType::DeviceIridium96029603);
+    }
+    shore
+}
+
+/// The RockBLOCK section, when the service is RockBLOCK.
+fn rockblock_config(shore: &IridiumShoreDriverConfig) -> Option<&RockBlock> {
+    (shore.sbd_type() == SbdType::SbdRockblock)
+        .then_some(shore.rockblock.as_ref())
+        .flatten()
+}
+
+/// The MT endpoint's URL of a RockBLOCK section.
+pub fn rockblock_mt_url(rockblock: &RockBlock) -> Result<HttpUrl, String> {
+    HttpUrl::parse(rockblock.server(), rockblock.mt_endpoint())
+}
+
+/// The verifier of the webhook's JWT: `Ok(None)` when verification is off;
+/// `Err` says why the key file cannot be used.
+pub fn rockblock_verifier(rockblock: &RockBlock) -> Result<Option<JwtVerifier>, String> {
+    if rockblock.skip_jwt_verification() {
+        return Ok(None);
+    }
+    let Some(path) = rockblock.jwt_public_key_file.as_deref() else {
+        return Err("required unless skip_jwt_verification: the PEM file of RockBLOCK's public key (published in its web service documentation)".into());
+    };
+    let pem = std::fs::read(path).map_err(|e| format!("{path:?}: {e}"))?;
+    JwtVerifier::from_pem(&pem)
+        .map(Some)
+        .map_err(|e| format!("{path:?}: {e}"))
 }
 
 /// Largest frame the driver offers: the device's MT limit less header and
@@ -96,11 +152,9 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         ));
         return problems;
     };
-    if shore.sbd_type() == SbdType::SbdRockblock {
-        problems.push(Problem::new(
-            "iridium_shore.sbd_type",
-            "SBD_ROCKBLOCK is not supported (use SBD_DIRECTIP)",
-        ));
+    let rockblock = shore.sbd_type() == SbdType::SbdRockblock;
+    if rockblock {
+        problems.extend(rockblock_problems(shore));
     }
     if u16::try_from(shore.mo_sbd_server_port()).is_err() {
         problems.push(Problem::new(
@@ -118,7 +172,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             format!("{:?} is not an IP address", shore.mo_sbd_server_address()),
         ));
     }
-    if shore.mt_sbd_server_address().trim().is_empty() {
+    if !rockblock && shore.mt_sbd_server_address().trim().is_empty() {
         problems.push(Problem::new(
             "iridium_shore.mt_sbd_server_address",
             "required: the gateway's DirectIP MT address",
@@ -130,6 +184,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             "iridium_shore.mt_sbd_server_port",
             format!("{p} is not a TCP port"),
         )),
+        None if rockblock => {}
         None => problems.push(Problem::new(
             "iridium_shore.mt_sbd_server_port",
             "required: the gateway's DirectIP MT port",
@@ -167,8 +222,49 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// The problems of the RockBLOCK settings of an `SBD_ROCKBLOCK` section.
+fn rockblock_problems(shore: &IridiumShoreDriverConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let Some(rb) = &shore.rockblock else {
+        problems.push(Problem::new(
+            "iridium_shore.rockblock",
+            "required with sbd_type: SBD_ROCKBLOCK (username, password, jwt_public_key_file)",
+        ));
+        return problems;
+    };
+    let field = |f: &str| format!("iridium_shore.rockblock.{f}");
+    if rb.username.trim().is_empty() {
+        problems.push(Problem::new(field("username"), "required: the RockBLOCK account's user name"));
+    }
+    match rockblock_mt_url(rb) {
+        Ok(url) if url.tls && !http::HTTPS_SUPPORTED => problems.push(Problem::new(
+            field("server"),
+            format!(
+                "{:?} needs HTTPS, which this build lacks (build gobyd with the feature rockblock-tls)",
+                rb.server()
+            ),
+        )),
+        Ok(_) => {}
+        Err(e) => problems.push(Problem::new(field("server"), e)),
+    }
+    if let Err(e) = rockblock_verifier(rb) {
+        problems.push(Problem::new(field("jwt_public_key_file"), e));
+    }
+    if !rb.mo_endpoint().starts_with('/') {
+        problems.push(Problem::new(
+            field("mo_endpoint"),
+            format!("{:?} is not a path (it starts with /)", rb.mo_endpoint()),
+        ));
+    }
+    if rb.mt_attempts() == 0 {
+        problems.push(Problem::new(field("mt_attempts"), "must be at least 1"));
+    }
+    problems
+}
+
 impl IridiumShoreDriver {
-    /// Binds the MO listener and starts the driver.
+    /// Binds the MO listener (DirectIP, or RockBLOCK's webhook) and starts
+    /// the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         check::refuse(problems(config))?;
         let shore = shore_config(config);
@@ -179,19 +275,57 @@ impl IridiumShoreDriver {
                 .map_err(|e| DriverError::Config(format!("mo_sbd_server_address: {e}")))?,
             shore.mo_sbd_server_port() as u16,
         );
+        let timeout = Duration::from_millis(u64::from(shore.mt_confirmation_timeout_ms()));
+        let (service, what) = match rockblock_config(&shore) {
+            Some(rb) => {
+                let url = rockblock_mt_url(rb).map_err(|e| {
+                    DriverError::Config(format!("DriverConfig.iridium_shore.rockblock.server: {e}"))
+                })?;
+                let verifier = rockblock_verifier(rb).map_err(|e| {
+                    DriverError::Config(format!(
+                        "DriverConfig.iridium_shore.rockblock.jwt_public_key_file: {e}"
+                    ))
+                })?;
+                (
+                    Service::Rockblock {
+                        mt: Arc::new(RockblockMt {
+                            url,
+                            username: rb.username.clone(),
+                            password: rb.password.clone(),
+                            attempts: rb.mt_attempts(),
+                            backoff: Duration::from_millis(u64::from(rb.mt_retry_backoff_ms())),
+                            timeout,
+                        }),
+                        webhook: WebhookConfig {
+                            path: rb.mo_endpoint().to_string(),
+                            verifier: verifier.map(Arc::new),
+                            // RockBLOCK waits 3 s for its answer.
+                            answer_within: Duration::from_millis(2500),
+                        },
+                    },
+                    "RockBLOCK webhook",
+                )
+            }
+            None => (
+                Service::DirectIp {
+                    mt_server: format!(
+                        "{}:{}",
+                        shore.mt_sbd_server_address(),
+                        shore.mt_sbd_server_port()
+                    ),
+                },
+                "DirectIP MO listener",
+            ),
+        };
         let listener = TcpListener::bind(bind)
             .await
-            .map_err(|e| DriverError::io(format!("DirectIP MO listener on {bind}"), e))?;
+            .map_err(|e| DriverError::io(format!("{what} on {bind}"), e))?;
         let shore_task = Shore {
             modem_id: config.modem_id(),
             max_frame_bytes: max_frame_bytes(config),
             deferred_ack: config.deferred_ack(),
-            mt_server: format!(
-                "{}:{}",
-                shore.mt_sbd_server_address(),
-                shore.mt_sbd_server_port()
-            ),
-            timeout: Duration::from_millis(u64::from(shore.mt_confirmation_timeout_ms())),
+            service,
+            timeout,
             flush: shore.flush_mt_queue(),
             shore,
             next_frame: super::driver::first_frame_number(),
@@ -201,6 +335,65 @@ impl IridiumShoreDriver {
         Ok(Driver::spawn("iridium_shore", move |ctx| {
             shore_task.run(listener, ctx)
         }))
+    }
+}
+
+/// How MT messages leave and MO messages come.
+#[derive(Debug, Clone)]
+enum Service {
+    /// Iridium's DirectIP: MT messages to the gateway's listener.
+    DirectIp {
+        /// `HOST:PORT` of the gateway's MT listener.
+        mt_server: String,
+    },
+    /// The RockBLOCK web service.
+    Rockblock {
+        /// Its MT endpoint and account.
+        mt: Arc<RockblockMt>,
+        /// The webhook's settings.
+        webhook: WebhookConfig,
+    },
+}
+
+/// RockBLOCK's MT endpoint, the account, and the retries of a POST.
+#[derive(Debug)]
+struct RockblockMt {
+    url: HttpUrl,
+    username: String,
+    password: String,
+    attempts: u32,
+    backoff: Duration,
+    timeout: Duration,
+}
+
+/// An MO message delivered, by either service.
+#[derive(Debug)]
+struct MoArrival {
+    imei: String,
+    payload: Vec<u8>,
+    /// Unix seconds of the session, when known.
+    time: Option<u64>,
+    /// Who delivered it, for the raw log.
+    peer: String,
+    /// What came on the wire, for the raw log.
+    raw: Vec<u8>,
+    /// Told once the message is handed on (the webhook's 200).
+    taken: Option<oneshot::Sender<()>>,
+}
+
+/// What the MO side tells the driver.
+#[derive(Debug)]
+enum MoInput {
+    Arrival(MoArrival),
+    Problem(DriverStatus),
+}
+
+/// Aborts a task when dropped (the MO listener's, as the driver stops).
+struct AbortOnDrop(JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
     }
 }
 
@@ -223,7 +416,7 @@ struct Shore {
     modem_id: i32,
     max_frame_bytes: u32,
     deferred_ack: bool,
-    mt_server: String,
+    service: Service,
     timeout: Duration,
     flush: bool,
     shore: IridiumShoreDriverConfig,
@@ -232,8 +425,8 @@ struct Shore {
     sent: VecDeque<SentFrame>,
 }
 
-/// The outcome of an MT message sent.
-type MtOutcome = Result<MtConfirmation, String>;
+/// The outcome of an MT message sent: `Err` says why it was not queued.
+type MtOutcome = Result<(), String>;
 
 impl Shore {
     fn imei_of(&self, modem_id: i32) -> Option<&str> {
@@ -254,7 +447,15 @@ impl Shore {
 
     async fn run(mut self, listener: TcpListener, mut ctx: DriverContext) {
         let events = ctx.events.clone();
-        let (mo_tx, mut mo_rx) = mpsc::unbounded_channel::<Result<(Vec<u8>, SocketAddr), String>>();
+        let (mo_tx, mut mo_rx) = mpsc::unbounded_channel::<MoInput>();
+        let _mo_side = AbortOnDrop(match &self.service {
+            Service::DirectIp { .. } => {
+                tokio::spawn(directip_listener(listener, mo_tx, self.timeout))
+            }
+            Service::Rockblock { webhook, .. } => {
+                tokio::spawn(rockblock_webhook(listener, webhook.clone(), mo_tx))
+            }
+        });
         let mut waiting: VecDeque<Work> = VecDeque::new();
         let mut acks: VecDeque<ModemTransmission> = VecDeque::new();
         // The MT message under way: what it carries and where its outcome comes.
@@ -301,31 +502,9 @@ impl Shore {
                         message: prost_reflect::ReflectMessage::descriptor(&m).full_name().to_string(),
                     }),
                 },
-                accepted = listener.accept() => match accepted {
-                    Ok((stream, peer)) => {
-                        let tx = mo_tx.clone();
-                        let timeout = self.timeout;
-                        tokio::spawn(async move {
-                            let read = tokio::time::timeout(timeout, async {
-                                let mut stream = stream;
-                                directip::read_message(&mut stream).await
-                            })
-                            .await;
-                            let _ = tx.send(match read {
-                                Ok(Ok(bytes)) => Ok((bytes, peer)),
-                                Ok(Err(e)) => Err(format!("MO connection from {peer}: {e}")),
-                                Err(_) => Err(format!("MO connection from {peer}: no whole message in {} ms", timeout.as_millis())),
-                            });
-                        });
-                    }
-                    Err(e) => {
-                        events.status(DriverStatus::LinkError { reason: format!("DirectIP MO listener: {e}") });
-                        tokio::time::sleep(Duration::from_millis(100)).await;
-                    }
-                },
                 Some(mo) = mo_rx.recv() => match mo {
-                    Ok((bytes, peer)) => acks.extend(self.mo_message(&bytes, peer, &events)),
-                    Err(reason) => events.status(DriverStatus::LinkError { reason }),
+                    MoInput::Arrival(arrival) => acks.extend(self.mo_message(arrival, &events)),
+                    MoInput::Problem(status) => events.status(status),
                 },
                 outcome = async {
                     match &mut under_way {
@@ -404,37 +583,62 @@ impl Shore {
                 return None;
             }
         };
-        let client_id = self.next_client_id;
-        self.next_client_id = self.next_client_id.wrapping_add(1);
-        let message = MtMessage {
-            client_id,
-            imei,
-            disposition_flags: if self.flush {
-                disposition::FLUSH_MT_QUEUE
-            } else {
-                0
-            },
-            payload: Some(bytes),
-        };
-        let encoded = message.encode();
-        events.emit(DriverEvent::Raw(RawMessage {
-            direction: RawDirection::Outgoing,
-            bytes: encoded.clone(),
-            peer: Some(self.mt_server.clone()),
-        }));
         let (tx, rx) = oneshot::channel();
-        let server = self.mt_server.clone();
-        let timeout = self.timeout;
-        tokio::spawn(async move {
-            let outcome = tokio::time::timeout(timeout, send_mt(&server, &encoded)).await;
-            let _ = tx.send(match outcome {
-                Ok(result) => result,
-                Err(_) => Err(format!(
-                    "no confirmation from the gateway at {server} in {} ms",
-                    timeout.as_millis()
-                )),
-            });
-        });
+        match &self.service {
+            Service::DirectIp { mt_server } => {
+                let client_id = self.next_client_id;
+                self.next_client_id = self.next_client_id.wrapping_add(1);
+                let message = MtMessage {
+                    client_id,
+                    imei,
+                    disposition_flags: if self.flush {
+                        disposition::FLUSH_MT_QUEUE
+                    } else {
+                        0
+                    },
+                    payload: Some(bytes),
+                };
+                let encoded = message.encode();
+                events.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Outgoing,
+                    bytes: encoded.clone(),
+                    peer: Some(mt_server.clone()),
+                }));
+                let server = mt_server.clone();
+                let timeout = self.timeout;
+                tokio::spawn(async move {
+                    let outcome = tokio::time::timeout(timeout, send_mt(&server, &encoded)).await;
+                    let _ = tx.send(match outcome {
+                        Ok(result) => result,
+                        Err(_) => Err(format!(
+                            "no confirmation from the gateway at {server} in {} ms",
+                            timeout.as_millis()
+                        )),
+                    });
+                });
+            }
+            Service::Rockblock { mt: service, .. } => {
+                // The SBD message itself, not the form (which holds the
+                // account's password), goes to the raw log.
+                events.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Outgoing,
+                    bytes: bytes.clone(),
+                    peer: Some(format!("{} IMEI {imei}", service.url)),
+                }));
+                let request = MtRequest {
+                    imei,
+                    username: service.username.clone(),
+                    password: service.password.clone(),
+                    data: bytes,
+                    flush: self.flush,
+                };
+                let service = service.clone();
+                let events = events.clone();
+                tokio::spawn(async move {
+                    let _ = tx.send(post_mt(&service, &request, &events).await);
+                });
+            }
+        }
         let work = if is_ack {
             Work::Ack(mt)
         } else {
@@ -448,12 +652,7 @@ impl Shore {
             Work::Ack(mt) => (mt, true),
             Work::Data(mt) => (mt, false),
         };
-        let result = match outcome {
-            Ok(c) if c.accepted() => Ok(c),
-            Ok(c) => Err(format!("the gateway refused the MT message: {c}")),
-            Err(e) => Err(e),
-        };
-        match (result, is_ack) {
+        match (outcome, is_ack) {
             (Ok(_), true) => {}
             (Ok(_), false) => {
                 self.sent.push_back(SentFrame {
@@ -485,55 +684,49 @@ impl Shore {
     }
 
     /// An MO message delivered; returns the acks to send at once.
-    fn mo_message(
-        &mut self,
-        bytes: &[u8],
-        peer: SocketAddr,
-        events: &EventSink,
-    ) -> Vec<ModemTransmission> {
+    fn mo_message(&mut self, arrival: MoArrival, events: &EventSink) -> Vec<ModemTransmission> {
+        let MoArrival {
+            imei,
+            payload,
+            time,
+            peer,
+            raw,
+            taken,
+        } = arrival;
         events.emit(DriverEvent::Raw(RawMessage {
             direction: RawDirection::Incoming,
-            bytes: bytes.to_vec(),
-            peer: Some(peer.to_string()),
+            bytes: raw,
+            peer: Some(peer.clone()),
         }));
-        let unreadable = |reason: String| {
-            events.status(DriverStatus::Unparseable {
-                line: format!("DirectIP MO message of {} bytes from {peer}", bytes.len()),
-                reason,
-            })
-        };
-        let mo = match MoMessage::decode(bytes) {
-            Ok(mo) => mo,
-            Err(e) => {
-                unreadable(e.to_string());
-                return Vec::new();
-            }
-        };
-        let Some(payload) = &mo.payload else {
+        // Handed on, or reported as not a Goby frame: either way the
+        // service is answered, as delivering it again would change nothing.
+        if let Some(taken) = taken {
+            let _ = taken.send(());
+        }
+        if payload.is_empty() {
             return Vec::new();
-        };
-        let mut mt = match frame::decode_sbd(payload) {
+        }
+        let mut mt = match frame::decode_sbd(&payload) {
             Ok(mt) => mt,
             Err(e) => {
-                unreadable(format!(
-                    "payload from IMEI {} is not a Goby frame: {e}",
-                    mo.header.imei
-                ));
+                events.status(DriverStatus::Unparseable {
+                    line: format!("MO message of {} bytes from {peer}", payload.len()),
+                    reason: format!("payload from IMEI {imei} is not a Goby frame: {e}"),
+                });
                 return Vec::new();
             }
         };
-        if let Some(id) = self.modem_of(&mo.header.imei) {
+        if let Some(id) = self.modem_of(&imei) {
             if id != mt.src() {
                 events.status(DriverStatus::Degraded {
                     reason: format!(
-                        "IMEI {} is modem id {id} (modem_id_to_imei), its frame says {}",
-                        mo.header.imei,
+                        "IMEI {imei} is modem id {id} (modem_id_to_imei), its frame says {}",
                         mt.src()
                     ),
                 });
             }
         }
-        mt.time = Some(u64::from(mo.header.time_of_session) * 1_000_000);
+        mt.time = time.map(|t| t * 1_000_000);
         if mt.r#type() == TransmissionType::Ack {
             let src = mt.src();
             mt.unique_id = mt.acked_frame.first().and_then(|&f| {
@@ -564,6 +757,167 @@ impl Shore {
     }
 }
 
+/// The DirectIP MO listener: each connection's message, read within
+/// `timeout`, goes to `tx`. Never returns (aborted with the driver).
+async fn directip_listener(listener: TcpListener, tx: mpsc::UnboundedSender<MoInput>, timeout: Duration) {
+    loop {
+        let (stream, peer) = match listener.accept().await {
+            Ok(accepted) => accepted,
+            Err(e) => {
+                let _ = tx.send(MoInput::Problem(DriverStatus::LinkError {
+                    reason: format!("DirectIP MO listener: {e}"),
+                }));
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let tx = tx.clone();
+        tokio::spawn(async move {
+            let read = tokio::time::timeout(timeout, async {
+                let mut stream = stream;
+                directip::read_message(&mut stream).await
+            })
+            .await;
+            let bytes = match read {
+                Ok(Ok(bytes)) => bytes,
+                Ok(Err(e)) => {
+                    let _ = tx.send(MoInput::Problem(DriverStatus::LinkError {
+                        reason: format!("MO connection from {peer}: {e}"),
+                    }));
+                    return;
+                }
+                Err(_) => {
+                    let _ = tx.send(MoInput::Problem(DriverStatus::LinkError {
+                        reason: format!(
+                            "MO connection from {peer}: no whole message in {} ms",
+                            timeout.as_millis()
+                        ),
+                    }));
+                    return;
+                }
+            };
+            let input = match MoMessage::decode(&bytes) {
+                Ok(mo) => MoInput::Arrival(MoArrival {
+                    imei: mo.header.imei.clone(),
+                    payload: mo.payload.unwrap_or_default(),
+                    time: Some(u64::from(mo.header.time_of_session)),
+                    peer: peer.to_string(),
+                    raw: bytes,
+                    taken: None,
+                }),
+                Err(e) => MoInput::Problem(DriverStatus::Unparseable {
+                    line: format!("DirectIP MO message of {} bytes from {peer}", bytes.len()),
+                    reason: e.to_string(),
+                }),
+            };
+            let _ = tx.send(input);
+        });
+    }
+}
+
+/// RockBLOCK's webhook: posts taken go to `tx` as arrivals, refusals as
+/// problems (and a warning in the log). Returns only if serving fails.
+async fn rockblock_webhook(
+    listener: TcpListener,
+    config: WebhookConfig,
+    tx: mpsc::UnboundedSender<MoInput>,
+) {
+    let (events_tx, mut events_rx) = mpsc::unbounded_channel();
+    let addr = listener.local_addr().ok();
+    let server = tokio::spawn(webhook::serve(listener, config, events_tx));
+    let _server = AbortOnDrop(tokio::spawn(async move {
+        if let Ok(Err(e)) = server.await {
+            tracing::error!("RockBLOCK webhook on {addr:?}: {e}");
+        }
+    }));
+    while let Some(event) = events_rx.recv().await {
+        let input = match event {
+            WebhookEvent::Arrival {
+                post,
+                body,
+                peer,
+                taken,
+            } => MoInput::Arrival(MoArrival {
+                time: post
+                    .transmit_time
+                    .as_deref()
+                    .and_then(super::rockblock::transmit_time_seconds),
+                imei: post.imei,
+                payload: post.data,
+                peer: format!("RockBLOCK webhook from {peer}"),
+                raw: body,
+                taken: Some(taken),
+            }),
+            WebhookEvent::Refused {
+                peer,
+                status,
+                reason,
+            } => {
+                tracing::warn!("RockBLOCK webhook: post from {peer} refused ({status}): {reason}");
+                MoInput::Problem(DriverStatus::LinkError {
+                    reason: format!("RockBLOCK webhook: post from {peer} refused ({status}): {reason}"),
+                })
+            }
+        };
+        if tx.send(input).is_err() {
+            return;
+        }
+    }
+}
+
+/// POSTs one MT message to RockBLOCK, again after a failure that may pass
+/// (up to `service.attempts` POSTs, reported as [`DriverStatus::Retrying`]).
+async fn post_mt(service: &RockblockMt, request: &MtRequest, events: &EventSink) -> MtOutcome {
+    let form = request.to_form().into_bytes();
+    let mut wait = service.backoff;
+    let mut attempt = 1;
+    loop {
+        let (reason, may_pass) = match http::post(
+            &service.url,
+            "application/x-www-form-urlencoded",
+            form.clone(),
+            service.timeout,
+        )
+        .await
+        {
+            Err(e) => (e, true),
+            Ok(reply) if reply.status != 200 => (
+                format!(
+                    "RockBLOCK MT endpoint {} answered HTTP {}",
+                    service.url, reply.status
+                ),
+                true,
+            ),
+            Ok(reply) => match MtReply::parse(&String::from_utf8_lossy(&reply.body)) {
+                Ok(MtReply::Queued { .. }) => return Ok(()),
+                Ok(failed @ MtReply::Failed { code, .. }) => (
+                    format!("RockBLOCK {failed} for IMEI {}", request.imei),
+                    code.may_pass_later(),
+                ),
+                Err(e) => (
+                    format!("RockBLOCK MT endpoint {}: unexpected answer {e}", service.url),
+                    true,
+                ),
+            },
+        };
+        if !may_pass || attempt >= service.attempts {
+            let tried = if attempt > 1 {
+                format!(" ({attempt} POSTs)")
+            } else {
+                String::new()
+            };
+            return Err(format!("{reason}{tried}"));
+        }
+        attempt += 1;
+        events.status(DriverStatus::Retrying {
+            reason: format!("{reason}; POST again in {} ms", wait.as_millis()),
+            attempt,
+        });
+        tokio::time::sleep(wait).await;
+        wait = wait.saturating_mul(2);
+    }
+}
+
 /// Sends one DirectIP MT message and reads the confirmation.
 async fn send_mt(server: &str, message: &[u8]) -> MtOutcome {
     let mut stream = TcpStream::connect(server)
@@ -576,5 +930,11 @@ async fn send_mt(server: &str, message: &[u8]) -> MtOutcome {
     let bytes = directip::read_message(&mut stream)
         .await
         .map_err(|e| format!("MT confirmation from {server}: {e}"))?;
-    MtConfirmation::decode(&bytes).map_err(|e| format!("MT confirmation from {server}: {e}"))
+    let c = MtConfirmation::decode(&bytes)
+        .map_err(|e| format!("MT confirmation from {server}: {e}"))?;
+    if c.accepted() {
+        Ok(())
+    } else {
+        Err(format!("the gateway refused the MT message: {c}"))
+    }
 }

@@ -5,7 +5,11 @@
 //!   the shore's DirectIP listener (`mo_destination`), one TCP connection
 //!   per message (header, location, payload), in order; while the shore
 //!   does not accept the connection, delivery is tried again every
-//!   `mo_retry` (nothing is dropped).
+//!   `mo_retry` (nothing is dropped). With `mo_webhook` (the emulated
+//!   RockBLOCK service, [`super::rockblock`]) each message is POSTed to
+//!   the shore's webhook instead, with its JWT; a post not answered 200 is
+//!   made again after `mo_retry`, doubled at each failure in a row up to
+//!   `mo_webhook.max_retry`, as RockBLOCK retries.
 //! - MT: the gateway's DirectIP listener takes MT messages (header IE
 //!   0x41, payload 0x42) and answers each with its confirmation (0x44):
 //!   its place in the transceiver's MT queue, or a refusal (unknown IMEI,
@@ -31,6 +35,7 @@ use tokio::time::Instant;
 use super::super::directip::{
     self, disposition, mt_status, MoHeader, MoLocation, MoMessage, MtConfirmation, MtMessage,
 };
+use super::rockblock::WebhookTarget;
 use super::transceiver::GatewaySession;
 
 /// Most MT messages queued for one transceiver.
@@ -44,6 +49,9 @@ pub const CONNECTION_TIMEOUT: Duration = Duration::from_secs(5);
 pub struct GatewayConfig {
     /// The shore's DirectIP MO listener (`None`: MO messages are kept).
     pub mo_destination: Option<SocketAddr>,
+    /// The shore's RockBLOCK webhook: MO messages are posted there rather
+    /// than to `mo_destination`.
+    pub mo_webhook: Option<WebhookTarget>,
     /// Where the gateway's DirectIP MT listener binds (port 0: any free).
     pub mt_bind: SocketAddr,
     /// Largest MT payload taken (270 bytes for a 9602/9603).
@@ -62,6 +70,7 @@ impl Default for GatewayConfig {
     fn default() -> Self {
         GatewayConfig {
             mo_destination: None,
+            mo_webhook: None,
             mt_bind: SocketAddr::from(([127, 0, 0, 1], 0)),
             mt_limit: 270,
             mo_retry: Duration::from_secs(1),
@@ -77,8 +86,12 @@ impl Default for GatewayConfig {
 pub struct GatewayLog {
     /// MO messages taken from transceivers.
     pub mo_received: u64,
-    /// MO messages delivered to the shore.
+    /// MO messages delivered to the shore (over DirectIP, or posted to the
+    /// webhook and answered 200).
     pub mo_delivered: u64,
+    /// Webhook posts the shore refused (an HTTP status other than 200),
+    /// by status; they are posted again.
+    pub mo_refused: Vec<u16>,
     /// Attempts to deliver an MO message that failed (shore down).
     pub mo_delivery_failures: u64,
     /// MT messages taken from the shore.
@@ -156,6 +169,11 @@ impl Gateway {
     /// Starts a gateway: binds its MT listener, starts MO delivery and
     /// ring alerts. Must be called within a Tokio runtime.
     pub async fn start(config: GatewayConfig) -> std::io::Result<GatewayHandle> {
+        if let Some(webhook) = &config.mo_webhook {
+            webhook.signer().map_err(|e| {
+                std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("JWT key: {e}"))
+            })?;
+        }
         let listener = TcpListener::bind(config.mt_bind).await?;
         let mt_addr = listener.local_addr()?;
         let gateway = Gateway {
@@ -191,6 +209,16 @@ impl Gateway {
     /// MO messages waiting for the shore.
     pub fn mo_waiting(&self) -> usize {
         self.state().mo_out.len()
+    }
+
+    /// Whether a transceiver of `imei` has joined.
+    pub fn knows(&self, imei: &str) -> bool {
+        self.state().modems.contains_key(imei)
+    }
+
+    /// The largest MT payload taken.
+    pub fn mt_limit(&self) -> usize {
+        self.shared.config.mt_limit
     }
 
     /// MT messages queued for `imei`.
@@ -356,34 +384,57 @@ impl Gateway {
     }
 
     async fn deliver_mo(self) {
+        let webhook = self.shared.config.mo_webhook.as_ref().map(|w| (w, w.signer()));
+        let mut wait = self.shared.config.mo_retry;
         loop {
             let next = self.state().mo_out.front().cloned();
             let Some(mo) = next else {
                 self.shared.mo_ready.notified().await;
                 continue;
             };
-            let Some(dest) = self.shared.config.mo_destination else {
-                self.shared.mo_ready.notified().await;
-                continue;
+            let outcome = match (&webhook, self.shared.config.mo_destination) {
+                (Some((target, signer)), _) => {
+                    // The key was checked at start.
+                    let signer = signer.as_ref().ok().and_then(Option::as_ref);
+                    target.post(&mo, signer).await
+                }
+                (None, Some(dest)) => {
+                    let delivered = tokio::time::timeout(CONNECTION_TIMEOUT, async {
+                        let mut stream = TcpStream::connect(dest).await?;
+                        stream.write_all(&mo.encode()).await?;
+                        stream.shutdown().await
+                    })
+                    .await;
+                    match delivered {
+                        Ok(Ok(())) => Ok(()),
+                        _ => Err(None),
+                    }
+                }
+                (None, None) => {
+                    self.shared.mo_ready.notified().await;
+                    continue;
+                }
             };
-            let delivered = tokio::time::timeout(CONNECTION_TIMEOUT, async {
-                let mut stream = TcpStream::connect(dest).await?;
-                stream.write_all(&mo.encode()).await?;
-                stream.shutdown().await
-            })
-            .await;
-            let ok = matches!(delivered, Ok(Ok(())));
             {
                 let mut state = self.state();
-                if ok {
-                    state.mo_out.pop_front();
-                    state.log.mo_delivered += 1;
-                } else {
-                    state.log.mo_delivery_failures += 1;
+                match outcome {
+                    Ok(()) => {
+                        state.mo_out.pop_front();
+                        state.log.mo_delivered += 1;
+                    }
+                    Err(status) => {
+                        state.log.mo_delivery_failures += 1;
+                        state.log.mo_refused.extend(status);
+                    }
                 }
             }
-            if !ok {
-                tokio::time::sleep(self.shared.config.mo_retry).await;
+            if matches!(outcome, Ok(())) {
+                wait = self.shared.config.mo_retry;
+            } else {
+                tokio::time::sleep(wait).await;
+                if let Some((target, _)) = &webhook {
+                    wait = (wait * 2).min(target.max_retry.max(self.shared.config.mo_retry));
+                }
             }
         }
     }

@@ -7,13 +7,17 @@
 //!   with the real MO status codes).
 //! - [`radio`]: signal strength and service over time (seeded outages).
 //! - [`gateway`]: MT queues, ring alerts, MO delivery to the shore's
-//!   DirectIP listener and the DirectIP MT listener with confirmations.
+//!   DirectIP listener (or its RockBLOCK webhook) and the DirectIP MT
+//!   listener with confirmations.
+//! - [`rockblock`]: the RockBLOCK web service's MT endpoint in front of
+//!   the gateway, and its signed MO webhook posts.
 //!
 //! [`start`] runs a transceiver on a pseudo-terminal (a driver opens the
 //! path it gives, as it would a serial port) joined to a [`gateway::Gateway`].
 
 pub mod gateway;
 pub mod radio;
+pub mod rockblock;
 pub mod transceiver;
 
 use std::path::PathBuf;
