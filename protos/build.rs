@@ -23,6 +23,7 @@ const FILES: &[&str] = &[
     "goby/acomms/popoto.proto",
     "goby/acomms/benthos.proto",
     "goby/acomms/iridium.proto",
+    "goby/acomms/network.proto",
     "goby/moos/translator.proto",
     "goby/moos/node_report.proto",
     "goby/apps/gobyd_config.proto",

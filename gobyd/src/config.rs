@@ -370,17 +370,17 @@ const GOBY_NESTED_KEYS: &[(&str, &str, &str)] = &[
     (
         "goby.acomms.protobuf.QueueManagerConfig",
         "skip_decoding",
-        "gobyd decodes every message it receives (it does not route): remove skip_decoding",
+        "gobyd decodes every message it receives (its relays read the network header, docs/routing.md): remove skip_decoding",
     ),
     (
         "goby.acomms.protobuf.QueueManagerConfig",
         "make_network_ack_for_src_id",
-        "gobyd does not route, so it makes no network acks (acks come from the destination): remove it",
+        "gobyd makes no Goby3 network acks (its routed messages have end-to-end acks of their own, docs/routing.md): remove it",
     ),
     (
         "goby.acomms.protobuf.QueueManagerConfig",
         "route_for_additional_modem_id",
-        "gobyd does not route for other modem ids: remove it",
+        "gobyd routes what is addressed to its own modem id only: remove it",
     ),
     (
         "goby.acomms.protobuf.QueueManagerConfig",

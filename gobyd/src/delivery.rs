@@ -123,6 +123,7 @@ impl Delivery {
                     reception: Reception {
                         link: None,
                         recovered: true,
+                        route: None,
                     },
                     since,
                 }),

@@ -80,6 +80,10 @@ pub struct Reception {
     pub link: Option<Arc<LinkSummary>>,
     /// Handed over after a restart.
     pub recovered: bool,
+    /// The nodes a routed message went through: its origin, the relays,
+    /// this node (`None`: it came straight from its sender;
+    /// [`crate::network`]).
+    pub route: Option<Arc<[i32]>>,
 }
 
 /// A reception as the interfaces show it with each message it carried

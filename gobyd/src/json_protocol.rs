@@ -273,6 +273,9 @@ fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Value {
     if reception.recovered {
         line["recovered"] = true.into();
     }
+    if let Some(route) = &reception.route {
+        line["route"] = route.to_vec().into();
+    }
     line
 }
 
@@ -612,6 +615,7 @@ mod tests {
             reception: Reception {
                 link: Some(crate::event::reception_summary(&transmission, 1_000_000)),
                 recovered: false,
+                route: None,
             },
         };
         assert_eq!(event_topic(&event), None);
@@ -626,6 +630,7 @@ mod tests {
             reception: Reception {
                 link: None,
                 recovered: true,
+                route: None,
             },
         };
         let v: Value =
@@ -736,6 +741,7 @@ mod tests {
             reception: Reception {
                 link: Some(crate::event::reception_summary(&transmission, 1)),
                 recovered: true,
+                route: None,
             },
         }];
         events.extend(queue_events.into_iter().map(|event| DaemonEvent::Queue {

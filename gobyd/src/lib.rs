@@ -29,7 +29,8 @@
 //! community, [`mqtt`] bridges to an MQTT broker, [`mission_file`] reads the configuration from a MOOS mission
 //! file, [`translator`] turns MOOS variables into DCCL messages and back
 //! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
-//! came from the modem, and [`command`] is the `gobyd` command line.
+//! came from the modem, [`route`] holds Goby3's static routes and
+//! [`network`] carries messages through relays, and [`command`] is the `gobyd` command line.
 
 #![warn(missing_docs)]
 
@@ -50,8 +51,10 @@ pub mod mission_file;
 pub mod modem_event;
 pub mod moos_bridge;
 pub mod mqtt;
+pub mod network;
 pub mod outbox;
 pub mod raw_log;
+pub mod route;
 pub mod runtime;
 pub mod translator;
 

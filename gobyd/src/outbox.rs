@@ -182,6 +182,63 @@ impl Outbox {
         }
     }
 
+    /// Accepts a message as [`accept`](Self::accept) does, its age (for
+    /// its type's `ttl`) counted from `created` (microseconds since the
+    /// epoch; may be in the future, for a message meant to live longer than
+    /// its type's `ttl`), also after a restart. For the network layer
+    /// ([`crate::network`]), whose messages carry their own lifetime.
+    pub fn accept_created(
+        &mut self,
+        message: &DynamicMessage,
+        created: queue::Micros,
+    ) -> Result<Accepted, OutboxError> {
+        let entry = self.journal.accept_unsynced(
+            message.descriptor().full_name(),
+            message.encode_to_vec(),
+            created,
+        )?;
+        let options = PushOptions {
+            created: Some(created),
+            number: Some(entry),
+            ..Default::default()
+        };
+        match self.queue.push_with(message, options) {
+            Ok(Some(id)) => {
+                self.entries.insert(id, entry);
+                Ok(Accepted::Queued(entry))
+            }
+            Ok(None) => {
+                self.journal.remove(entry)?;
+                Ok(Accepted::Delivered)
+            }
+            Err(e) => {
+                self.journal.remove(entry)?;
+                Err(e.into())
+            }
+        }
+    }
+
+    /// The journal id the next accepted message will get.
+    pub fn next_entry(&self) -> Option<EntryId> {
+        self.journal.next_id()
+    }
+
+    /// The messages journaled and still owed, oldest first.
+    pub fn journaled(&self) -> impl Iterator<Item = &queue::JournalEntry> {
+        self.journal.entries()
+    }
+
+    /// Queues a message without journaling it (its owner keeps it on disk
+    /// in its own way, as the network layer keeps its transfers): its
+    /// events carry no journal entry. Returns its id in the queue.
+    pub fn push_unjournaled(
+        &mut self,
+        message: &DynamicMessage,
+        options: PushOptions,
+    ) -> Result<Option<queue::MessageId>, QueueError> {
+        self.queue.push_with(message, options)
+    }
+
     /// Waits until every accepted message is on disk.
     pub fn sync(&mut self) -> Result<(), JournalError> {
         self.journal.sync()

@@ -42,6 +42,7 @@ use super::group_commit::{GroupCommit, Mark};
 use super::json_protocol::message_json;
 use super::json_server::{JsonInterface, Publish};
 use super::modem_event::ModemEvent;
+use super::network::Network;
 use super::outbox::{Accepted, Outbox, OutboxError};
 use super::raw_log::RawLog;
 use modemdriver::time::sleep_until_opt;
@@ -194,7 +195,7 @@ pub fn validate(
         super::mqtt::settings::settings(mqtt, config.modem_id())?;
     }
     let defs = config::load_definitions(&config)?;
-    let codec = Arc::new(defs.codec);
+    let mut codec = Arc::new(defs.codec);
     let mut queue = config.queue.clone().unwrap_or_default();
     let configured = queue.message_entry.len();
     config::default_entries(&mut queue, &defs.loaded);
@@ -210,6 +211,14 @@ pub fn validate(
     if !problems.is_empty() {
         return Err(ConfigError::Problems(problems).into());
     }
+    // The network layer's own types (routing, fragments), when it is on.
+    crate::network::prepare(
+        &config,
+        Arc::get_mut(&mut codec).expect("the codec is not shared yet"),
+        &mut queue,
+        &defs.loaded,
+    )
+    .map_err(ConfigError::Problems)?;
     crate::translator::from_config(&config, &codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(codec.clone(), &queue)?;
     mac?;
@@ -430,6 +439,8 @@ pub struct Daemon {
     /// The core's one clock (microseconds since the epoch): the queue's,
     /// the medium access control's, the inbox's and every stamp.
     clock: Arc<dyn Clock>,
+    /// Routing, fragments and file transfer (`None`: off).
+    network: Option<Network>,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -559,6 +570,16 @@ impl Daemon {
             delivery
         };
 
+        let network = Network::open(
+            &config,
+            &queue_config,
+            codec.clone(),
+            data_dir.path(),
+            &outbox,
+            clock.now(),
+        )
+        .map_err(io_error("network layer"))?;
+
         let log = config.log.clone().unwrap_or_default();
         let raw_log = if log.raw_log() {
             let path = data_dir.path().join("raw.log");
@@ -666,6 +687,7 @@ impl Daemon {
             // not reused soon: start from the clock.
             next_transmission: (clock.now() / 1000) as u32,
             clock,
+            network,
             always_taken: config.moos.is_some()
                 || config.mqtt.is_some()
                 || !json.udp_bind().is_empty(),
@@ -752,7 +774,10 @@ impl Daemon {
                 },
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
                 () = sleep_until_opt(self.delivery.next_due()) => {}
-                _ = expire.tick() => self.outbox.expire(),
+                _ = expire.tick() => {
+                    self.outbox.expire();
+                    self.network_tick();
+                }
             }
             self.release_held();
             let _ = self.forward_queue_events();
@@ -798,7 +823,19 @@ impl Daemon {
         for change in &admitted.changes {
             tracing::warn!("accepted with a value changed by the codec: {change}");
         }
-        match self.outbox.accept(&admitted.message) {
+        let now = self.clock.now();
+        let accepted = match self
+            .network
+            .as_mut()
+            .and_then(|n| n.publish(&admitted.message, &mut self.outbox, now))
+        {
+            Some(taken) => taken,
+            None => self
+                .outbox
+                .accept(&admitted.message)
+                .map_err(|e| e.to_string()),
+        };
+        match accepted {
             Ok(Accepted::Queued(id)) => {
                 let dropped = self.forward_queue_events();
                 for (entry, _) in &dropped {
@@ -826,7 +863,7 @@ impl Daemon {
                 }));
             }
             Err(e) => {
-                let _ = publish.reply.send(Err(e.to_string()));
+                let _ = publish.reply.send(Err(e));
             }
         }
     }
@@ -1138,12 +1175,41 @@ impl Daemon {
             }
         };
         for (event, entry) in events {
+            let Some((event, entry)) = self.network_view(event, entry) else {
+                continue;
+            };
             if let QueueEvent::Dropped { message, .. } = &event {
                 dropped.push((entry, message.clone()));
             }
             self.hand_over(event, entry, &Reception::default());
         }
         dropped
+    }
+
+    /// A queue event as the clients see it: events of the network layer's
+    /// messages are told as the message they carry, or not at all (see
+    /// [`Network::queue_event`]).
+    fn network_view(
+        &mut self,
+        event: QueueEvent,
+        entry: Option<u64>,
+    ) -> Option<(QueueEvent, Option<u64>)> {
+        match &mut self.network {
+            Some(network) => network.queue_event(event, entry),
+            None => Some((event, entry)),
+        }
+    }
+
+    /// The network layer's timers: what expired without an end-to-end ack
+    /// is told.
+    fn network_tick(&mut self) {
+        let now = self.clock.now();
+        let Some(network) = &mut self.network else {
+            return;
+        };
+        for (event, entry) in network.tick(now) {
+            self.hand_over(event, entry, &Reception::default());
+        }
     }
 
     /// A transmission from the link: its messages go down the receive path
@@ -1158,7 +1224,9 @@ impl Daemon {
         let reception = Reception {
             link: Some(reception_summary(&transmission, self.clock.now())),
             recovered: false,
+            route: None,
         };
+        let link = reception.link.clone();
         let mut faults = FrameFaults::default();
         for e in self.outbox.receive(&transmission) {
             tracing::warn!(src = transmission.src(), "received: {e}");
@@ -1187,10 +1255,45 @@ impl Daemon {
                     message.descriptor().full_name(),
                     self.modem_id
                 ),
-                event => self.hand_over(event, entry, &Reception::default()),
+                event => {
+                    if let Some((event, entry)) = self.network_view(event, entry) {
+                        self.hand_over(event, entry, &Reception::default())
+                    }
+                }
             }
         }
         let now = self.clock.now();
+        // The network layer's messages: forwarded (journaled first),
+        // unwrapped for this node, or acks.
+        let receipt = self
+            .network
+            .as_mut()
+            .map(|n| n.receive(messages.split_off(0), &mut self.outbox, now));
+        if let Some(receipt) = &receipt {
+            messages = receipt.plain.clone();
+            if receipt.refuse_ack {
+                faults.unplaced = true;
+            }
+            for (event, entry) in receipt.events.clone() {
+                self.hand_over(event, entry, &Reception::default());
+            }
+            for arrived in &receipt.arrived {
+                let routed = Reception {
+                    link: link.clone(),
+                    recovered: false,
+                    route: Some(arrived.route.clone().into()),
+                };
+                let on_record = self.delivery.record(
+                    vec![arrived.received.clone()],
+                    &routed,
+                    u64::try_from(now).unwrap_or(0),
+                    tokio::time::Instant::now(),
+                );
+                if !on_record {
+                    faults.unplaced = true;
+                }
+            }
+        }
         let taker = self.taker_present();
         let (events, raw_log) = (&self.events, &mut self.raw_log);
         let ack = self.delivery.receive(
@@ -1202,6 +1305,9 @@ impl Daemon {
             taker,
             handing_over(events, raw_log, now),
         );
+        if let (Some(network), Some(receipt)) = (&mut self.network, &receipt) {
+            network.recorded(receipt, &mut self.outbox, now);
+        }
         if let Some(ack) = ack {
             if let Err(e) = self.driver.acknowledge(ack) {
                 tracing::error!("cannot acknowledge: {e}");
@@ -1360,6 +1466,9 @@ fn log_record(event: &QueueEvent, reception: &Reception) -> Option<LogRecord> {
             }
             if let Some(link) = &reception.link {
                 extra.push(("link", link.json()));
+            }
+            if let Some(route) = &reception.route {
+                extra.push(("route", route.to_vec().into()));
             }
             Some((
                 "in",

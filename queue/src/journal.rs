@@ -231,6 +231,12 @@ impl Journal {
         }
     }
 
+    /// The id the next accepted message will get (`None`: every id was
+    /// used).
+    pub fn next_id(&self) -> Option<EntryId> {
+        self.next_id
+    }
+
     /// The message `id`, if still owed.
     pub fn get(&self, id: EntryId) -> Option<&JournalEntry> {
         self.live.get(&id)

@@ -225,6 +225,14 @@ impl QueueManager {
         self.queues[self.index_of(id)].roles.source(message)
     }
 
+    /// The destination id a message of a configured type names by its
+    /// queue's `DESTINATION_ID` role: `None` when the type has no such role
+    /// or the field is not set (the message is then a broadcast).
+    pub fn named_destination(&self, message: &DynamicMessage) -> Result<Option<i64>> {
+        let id = self.id_of_configured(message.descriptor().full_name())?;
+        self.queues[self.index_of(id)].roles.destination(message)
+    }
+
     /// Creates the queue of a type, or changes the settings of an existing
     /// one (its messages are kept).
     pub fn configure_queue(&mut self, entry: &QueuedMessageEntry) -> Result<()> {

@@ -25,7 +25,7 @@
 //! | `common.community`, `.show_gui` | noted as not used |
 //! | `common.time_warp_multiplier` | 1 accepted; another value refused (gobyd runs on the real clock) |
 //! | `common.use_binary_protobuf`, `.moos_parser_technique` | accepted when they say what gobyd writes (`@PB[Name] text format`); otherwise refused |
-//! | `route_cfg` | refused unless empty (gobyd does not route) |
+//! | `route_cfg` | the `network` section's `route`, `subnet_mask` and `default_gateway` (routing through relays, the network layer on) |
 //! | `load_shared_library` | refused: give the `.proto` files (`dccl { proto_file }`) |
 //! | `listen_driver_cfg`, `listen_driver_type` | refused: gobyd runs one driver |
 //! | `multiplex_create_moos_var`, `dccl_frontseat_forward_name` | refused: no equivalent |
@@ -434,19 +434,7 @@ pub(super) fn goby_keys(config: &mut GobydConfig, places: &Places, found: &mut F
         }
     }
     if let Some(route) = config.route_cfg.take() {
-        if route.route.is_some() || route.subnet_mask.is_some() || route.default_gateway.is_some() {
-            refuse(
-                found,
-                "route_cfg".into(),
-                "gobyd does not route messages between subnets: remove route_cfg (each message goes to its destination's modem id)".into(),
-            );
-        } else {
-            found.note(
-                places.offset("route_cfg"),
-                NoteLevel::Info,
-                "route_cfg is empty: ignored".into(),
-            );
-        }
+        route_cfg(config, route, places, found);
     }
     if config.transitional_cfg.take().is_some() {
         refuse(
@@ -460,6 +448,64 @@ pub(super) fn goby_keys(config: &mut GobydConfig, places: &Places, found: &mut F
     if let Some(common) = config.common.take() {
         self::common(config, common, places, found);
     }
+}
+
+/// Goby3's `route_cfg` (`goby.acomms.protobuf.RouteManagerConfig`): its
+/// route, subnet mask and default gateway become the `network` section's
+/// (the network layer is then on). A setting given in both is refused.
+fn route_cfg(
+    config: &mut GobydConfig,
+    route: protos::goby::apps::protobuf::GobyRouteConfig,
+    places: &Places,
+    found: &mut Findings<'_>,
+) {
+    if route.route.as_ref().is_none_or(|r| r.hop.is_empty()) {
+        // pAcommsHandler routes only with hops on its route.
+        let text = if route.subnet_mask.is_some() || route.default_gateway.is_some() {
+            "route_cfg has no hops: ignored, as pAcommsHandler does (it routes only along a route)"
+        } else {
+            "route_cfg is empty: ignored"
+        };
+        found.note(places.offset("route_cfg"), NoteLevel::Info, text.into());
+        return;
+    }
+    let network = config.network.get_or_insert_with(Default::default);
+    let mut both = Vec::new();
+    if let Some(r) = route.route {
+        if network.route.is_some() {
+            both.push("route");
+        } else {
+            network.route =
+                Some(protos::goby::apps::protobuf::network_config::StaticRoute { hop: r.hop });
+        }
+    }
+    if let Some(mask) = route.subnet_mask {
+        if network.subnet_mask.is_some() {
+            both.push("subnet_mask");
+        } else {
+            network.subnet_mask = Some(mask);
+        }
+    }
+    if let Some(gateway) = route.default_gateway {
+        if network.default_gateway.is_some() {
+            both.push("default_gateway");
+        } else {
+            network.default_gateway = Some(gateway);
+        }
+    }
+    for field in both {
+        let path = format!("route_cfg.{field}");
+        found.problem(
+            places.offset(&path),
+            &path,
+            format!("the same setting as network.{field}, which is given too: give one"),
+        );
+    }
+    found.note(
+        places.offset("route_cfg"),
+        NoteLevel::Info,
+        "route_cfg read as the network section (routing through relays, docs/routing.md)".into(),
+    );
 }
 
 /// The identifier codec DCCL uses unless told otherwise.
@@ -795,6 +841,24 @@ route_cfg { }
     }
 
     #[test]
+    fn goby3_route_cfg_becomes_the_network_section() {
+        let text = "modem_id: 2\nroute_cfg { route { hop: 1 hop: 2 hop: 3 } subnet_mask: 4294967040 default_gateway: 3 }\n";
+        let read = read(text, "b.cfg", Layout::File).unwrap();
+        let network = read.config.network.as_ref().unwrap();
+        assert_eq!(network.route.as_ref().unwrap().hop, [1, 2, 3]);
+        assert_eq!(network.subnet_mask(), 0xFFFF_FF00);
+        assert_eq!(network.default_gateway, Some(3));
+        assert!(read.config.route_cfg.is_none());
+        // Given twice: refused.
+        let both =
+            "modem_id: 2\nnetwork { route { hop: 1 } }\nroute_cfg { route { hop: 1 hop: 2 } }\n";
+        assert_eq!(
+            refusals(both, Layout::File),
+            ["b.moos:3:13: route_cfg.route"]
+        );
+    }
+
+    #[test]
     fn keys_gobyd_cannot_map_are_refused_each_at_its_place() {
         let text = r#"modem_id: 1
 load_shared_library: "libnav.so"
@@ -813,7 +877,6 @@ listen_driver_type: DRIVER_UDP
             [
                 "b.moos:2:1: load_shared_library[0]",
                 "b.moos:3:1: listen_driver_cfg[0]",
-                "b.moos:4:1: route_cfg",
                 "b.moos:5:10: common.time_warp_multiplier",
                 "b.moos:5:35: common.use_binary_protobuf",
                 "b.moos:6:1: multiplex_create_moos_var[0]",

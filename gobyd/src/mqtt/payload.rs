@@ -345,6 +345,7 @@ mod tests {
                     reception: Reception {
                         link: Some(crate::event::reception_summary(transmission, *time)),
                         recovered: false,
+                        route: None,
                     },
                 },
                 3_000_000,
@@ -387,6 +388,7 @@ mod tests {
                     reception: Reception {
                         link: Some(its_own),
                         recovered: false,
+                        route: None,
                     },
                 },
                 3_000_000,
@@ -412,6 +414,7 @@ mod tests {
                     reception: Reception {
                         link: None,
                         recovered: true,
+                        route: None,
                     },
                 },
                 2_000_000,

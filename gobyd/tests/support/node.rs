@@ -424,6 +424,8 @@ pub struct Simulator {
     seed: Option<u64>,
     channel: Option<String>,
     udp: Option<(i32, [u16; 2])>,
+    range: Option<f64>,
+    mesh: Option<(i32, Vec<u16>)>,
 }
 
 impl Simulator {
@@ -436,7 +438,34 @@ impl Simulator {
             seed: None,
             channel: None,
             udp: None,
+            range: None,
+            mesh: None,
         }
+    }
+
+    /// Nodes 1 to `n` on a line, `spacing` metres apart along x: `node {
+    /// modem_id: I x: (I-1)*SPACING }`.
+    pub fn line(n: i32, spacing: f64) -> Simulator {
+        Simulator::with_nodes(
+            (1..=n)
+                .map(|i| format!("node {{ modem_id: {i} x: {} }}", f64::from(i - 1) * spacing))
+                .collect(),
+        )
+    }
+
+    /// `range`: the farthest a packet is heard, metres.
+    pub fn range(mut self, metres: f64) -> Simulator {
+        self.range = Some(metres);
+        self
+    }
+
+    /// Node `id` of nodes 1 to `ports.len()`, each in its own process,
+    /// the packets to every other over UDP on 127.0.0.1 (node I on
+    /// `ports[I-1]`; who hears whom is the channel's business, e.g. its
+    /// `range`).
+    pub fn mesh(mut self, id: i32, ports: &[u16]) -> Simulator {
+        self.mesh = Some((id, ports.to_vec()));
+        self
     }
 
     /// Node 1 alone, at no given position: `node { modem_id: 1 }`.
@@ -523,6 +552,21 @@ impl Simulator {
         }
         if let Some(channel) = &self.channel {
             text += &format!("    channel: \"{channel}\"\n");
+        }
+        if let Some(range) = self.range {
+            text += &format!("    range: {range}\n");
+        }
+        if let Some((id, ports)) = &self.mesh {
+            for (i, port) in ports.iter().enumerate() {
+                let node = i as i32 + 1;
+                if node == *id {
+                    text += &format!("    udp_local {{ modem_id: {node} port: {port} }}\n");
+                } else {
+                    text += &format!(
+                        "    udp_peer {{ modem_id: {node} ip: \"127.0.0.1\" port: {port} }}\n"
+                    );
+                }
+            }
         }
         if let Some((id, ports)) = self.udp {
             let other = 3 - id;

@@ -13,6 +13,8 @@
 //! - Half duplex: a node hears nothing while it transmits, and a node sends
 //!   one packet at a time.
 //! - Collisions: receptions that overlap in time at a receiver are all lost.
+//! - Range: with `range` set, a node farther than that from the sender
+//!   does not hear the packet at all (two such nodes need a relay).
 //!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
 //! node with an `ACK` packet, itself subject to the channel: on reception,
@@ -171,6 +173,12 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         problem(
             "packet_overhead_seconds",
             format!("{overhead} is not a time in seconds (0 or more)"),
+        );
+    }
+    if !sim.range().is_finite() || sim.range() < 0.0 {
+        problem(
+            "range",
+            format!("{} is not a distance (metres, 0 for no limit)", sim.range()),
         );
     }
     for (i, n) in sim.node.iter().enumerate() {
@@ -361,6 +369,10 @@ impl Node {
             return;
         };
         let distance = me.distance(&packet.position);
+        if self.sim.range() > 0.0 && distance > self.sim.range() {
+            // Out of range: not heard at all (nor does it collide).
+            return;
+        }
         let Ok(delay) = Duration::try_from_secs_f64(distance / self.sim.sound_speed()) else {
             return;
         };

@@ -1,0 +1,280 @@
+//! Routing through a relay, in virtual time: three `gobyd` in one process
+//! on the acoustic simulator's in-process channel, on a line 1 – 2 – 3
+//! 1500 m apart with a range of 2000 m (1 and 3 cannot hear each other),
+//! each with Goby3's static route `hop: 1 hop: 2 hop: 3`, fixed TDMA with
+//! 8 s slots and 20 % of packets (data and acks) lost. Commands 1 → 3 and
+//! replies 3 → 1 go through node 2.
+//!
+//! Must hold: every publication reaches its destination's clients exactly
+//! once, with the route it took (`[1, 2, 3]` or `[3, 2, 1]`); its origin
+//! hears `ack` once, from the final destination (not from the relay);
+//! node 2's clients hear nothing of the routed traffic; nothing is owed
+//! anywhere at the end.
+
+mod support;
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use gobyd::event::DaemonEvent;
+use gobyd::runtime::Daemon;
+use modemdriver::sim::medium::Medium;
+use modemdriver::sim::SimulatorDriver;
+use modemdriver::time::TokioClock;
+use protos::goby::example::Command;
+use queue::QueueEvent;
+use support::daemon::{publish_command, scratch};
+use support::node::{Entry, Node, Simulator};
+use tokio::sync::oneshot;
+
+const ROUTE: &str = "network { route { hop: 1 hop: 2 hop: 3 } }";
+
+fn config(id: i32, data_dir: &std::path::Path, loss: f64) -> Node {
+    node(id, data_dir, loss).extra(ROUTE)
+}
+
+/// Node `id` of the line, without a route.
+fn node(id: i32, data_dir: &std::path::Path, loss: f64) -> Node {
+    let driver = Simulator::line(3, 1500.0)
+        .range(2000.0)
+        .deferred_ack()
+        .loss(loss)
+        .seed(id as u64 + 40)
+        .overhead(0.5);
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2, 3], 2, 8.0)
+        .queue(Entry::command().ack(true).ttl(7200))
+        .json_tcp("")
+        .data_dir(data_dir)
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Seen {
+    Delivered {
+        node: i32,
+        src: i32,
+        note: String,
+        route: Option<Vec<i32>>,
+    },
+    Acked {
+        node: i32,
+        by: i32,
+        note: String,
+        id: Option<u64>,
+    },
+    Expired {
+        node: i32,
+        note: String,
+    },
+}
+
+fn note(message: &prost_reflect::DynamicMessage) -> String {
+    message
+        .transcode_to::<Command>()
+        .map(|c| c.note().to_string())
+        .unwrap_or_default()
+}
+
+struct Fleet {
+    publishers: Vec<tokio::sync::mpsc::Sender<gobyd::json_server::Publish>>,
+    stops: Vec<oneshot::Sender<()>>,
+    runs: Vec<tokio::task::JoinHandle<Result<(), gobyd::runtime::DaemonError>>>,
+    seen: Arc<Mutex<Vec<Seen>>>,
+}
+
+async fn start(dir: &std::path::Path, loss: f64) -> Fleet {
+    start_with(dir, |id, data| config(id, data, loss)).await
+}
+
+async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) -> Node) -> Fleet {
+    let clock = Arc::new(TokioClock::new());
+    let medium = Medium::new();
+    let seen: Arc<Mutex<Vec<Seen>>> = Arc::default();
+    let mut fleet = Fleet {
+        publishers: Vec::new(),
+        stops: Vec::new(),
+        runs: Vec::new(),
+        seen: seen.clone(),
+    };
+    for id in 1..=3 {
+        let config = node(id, &dir.join(format!("data{id}"))).config();
+        let mut driver_config = config.driver.clone().unwrap();
+        driver_config.modem_id = Some(id);
+        let driver =
+            SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
+                .unwrap();
+        let daemon = Daemon::start_with_driver_and_clock(config, driver, clock.clone())
+            .await
+            .expect("gobyd starts");
+        fleet.publishers.push(daemon.publisher());
+        let mut events = daemon.subscribe();
+        let seen = seen.clone();
+        tokio::spawn(async move {
+            while let Ok(e) = events.recv().await {
+                let s = match &e.event {
+                    DaemonEvent::Received {
+                        received,
+                        reception,
+                    } => Seen::Delivered {
+                        node: id,
+                        src: received.src,
+                        note: note(&received.message),
+                        route: reception.route.as_ref().map(|r| r.to_vec()),
+                    },
+                    DaemonEvent::Queue {
+                        event: QueueEvent::Acked { message, by, .. },
+                        entry,
+                    } => Seen::Acked {
+                        node: id,
+                        by: *by,
+                        note: note(message),
+                        id: *entry,
+                    },
+                    DaemonEvent::Queue {
+                        event: QueueEvent::Expired { message, .. },
+                        ..
+                    } => Seen::Expired {
+                        node: id,
+                        note: note(message),
+                    },
+                    _ => continue,
+                };
+                seen.lock().unwrap().push(s);
+            }
+        });
+        let (stop, stopped) = oneshot::channel::<()>();
+        fleet.stops.push(stop);
+        fleet.runs.push(tokio::spawn(daemon.run(async move {
+            let _ = stopped.await;
+        })));
+    }
+    fleet
+}
+
+impl Fleet {
+    async fn stop(self) {
+        for stop in self.stops {
+            let _ = stop.send(());
+        }
+        for run in self.runs {
+            run.await.unwrap().unwrap();
+        }
+    }
+
+    fn count(&self, f: impl Fn(&Seen) -> bool) -> usize {
+        self.seen.lock().unwrap().iter().filter(|s| f(s)).count()
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn commands_and_replies_cross_the_relay_once_each_acked_end_to_end() {
+    let dir = scratch("routing", "relay");
+    let fleet = start(&dir, 0.2).await;
+    let begun = tokio::time::Instant::now();
+    let mut expected = Vec::new();
+    for round in 0..8 {
+        publish_command(&fleet.publishers[0], 3, &format!("go-{round}")).await;
+        expected.push((1i32, 3i32, format!("go-{round}")));
+        publish_command(&fleet.publishers[2], 1, &format!("re-{round}")).await;
+        expected.push((3, 1, format!("re-{round}")));
+        if round % 4 == 0 {
+            // A neighbour is reached straight, as before.
+            publish_command(&fleet.publishers[0], 2, &format!("nb-{round}")).await;
+            expected.push((1, 2, format!("nb-{round}")));
+        }
+        tokio::time::sleep(Duration::from_secs(30)).await;
+    }
+    let limit = tokio::time::Instant::now() + Duration::from_secs(3 * 3600);
+    while tokio::time::Instant::now() < limit {
+        if fleet.count(|s| matches!(s, Seen::Acked { .. })) >= expected.len() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_secs(30)).await;
+    }
+    // Longer: a late duplicate would show.
+    tokio::time::sleep(Duration::from_secs(300)).await;
+    let seen = fleet.seen.lock().unwrap().clone();
+    for (from, to, text) in &expected {
+        let delivered: Vec<&Seen> = seen
+            .iter()
+            .filter(|s| matches!(s, Seen::Delivered { note, .. } if note == text))
+            .collect();
+        let want_route = ((*from - *to).abs() == 2).then(|| {
+            if from < to {
+                vec![1, 2, 3]
+            } else {
+                vec![3, 2, 1]
+            }
+        });
+        assert_eq!(
+            delivered,
+            [&Seen::Delivered {
+                node: *to,
+                src: *from,
+                note: text.clone(),
+                route: want_route
+            }],
+            "{text}: delivered once, at {to}, with its route"
+        );
+        let acked: Vec<&Seen> = seen
+            .iter()
+            .filter(|s| matches!(s, Seen::Acked { note, .. } if note == text))
+            .collect();
+        assert_eq!(acked.len(), 1, "{text}: acked once ({acked:?})");
+        assert!(
+            matches!(acked[0], Seen::Acked { node, by, id: Some(_), .. } if node == from && by == to),
+            "{text}: acked at its origin by its final destination: {acked:?}"
+        );
+    }
+    assert_eq!(fleet.count(|s| matches!(s, Seen::Expired { .. })), 0);
+    let virtual_seconds = tokio::time::Instant::now().duration_since(begun).as_secs();
+    fleet.stop().await;
+    eprintln!(
+        "routing: {} publications (of them {} through the relay) delivered once and acked end to end in {virtual_seconds} virtual seconds",
+        expected.len(),
+        expected.iter().filter(|(f, t, _)| (f - t).abs() == 2).count()
+    );
+    for id in 1..=3 {
+        let data = dir.join(format!("data{id}"));
+        let (_, replay) = queue::Journal::open(data.join("outbox.journal")).unwrap();
+        assert!(
+            replay.entries.is_empty(),
+            "node {id} still owes {:?}",
+            replay
+                .entries
+                .iter()
+                .map(|e| &e.message_name)
+                .collect::<Vec<_>>()
+        );
+        let origin = gobyd::network::origin::Origin::open(&data.join("routes.log")).unwrap();
+        assert_eq!(origin.pending().count(), 0, "node {id} waits for acks");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[tokio::test(start_paused = true)]
+async fn without_a_route_the_far_node_is_out_of_reach() {
+    let dir = scratch("routing", "no-route");
+    let fleet = start_with(&dir, |id, data| {
+        node(id, data, 0.0).queue(Entry::command().ack(true).ttl(600))
+    })
+    .await;
+    publish_command(&fleet.publishers[0], 3, "far").await;
+    publish_command(&fleet.publishers[0], 2, "near").await;
+    tokio::time::sleep(Duration::from_secs(700)).await;
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Delivered { note, .. } if note == "far")),
+        0
+    );
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Delivered { note, .. } if note == "near")),
+        1
+    );
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Expired { note, node: 1 } if note == "far")),
+        1
+    );
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
