@@ -1,11 +1,14 @@
 //! `goby modem emulate-iridium`: emulated Iridium 9603 transceivers on
 //! pseudo-terminals and the emulated gateway they reach, with DirectIP
-//! towards a shore station.
+//! towards a shore station, or the emulated RockBLOCK web service
+//! (`--rockblock-webhook`).
 //!
 //! Prints one line per transceiver, `transceiver IMEI: PATH` (a vehicle's
 //! Iridium driver opens PATH as its serial port), then
 //! `gateway: MO to HOST:PORT, MT on ADDR` (the shore's DirectIP MO
-//! listener it delivers to, and its own DirectIP MT listener). What the
+//! listener it delivers to, and its own DirectIP MT listener), or with
+//! RockBLOCK `rockblock: MO to URL, MT on URL` (the shore's webhook, and
+//! the service's MT endpoint). What the
 //! transceivers and the gateway do (sessions and their status, ring
 //! alerts, MO messages waiting for a shore that is down, MT refusals) is
 //! told on standard error as it happens.
@@ -19,6 +22,11 @@ use clap::Args;
 use modemdriver::iridium::directip::{self, mt_status};
 use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayLog};
 use modemdriver::iridium::emulator::radio::RadioConfig;
+use modemdriver::iridium::emulator::rockblock::{
+    RockblockLog, RockblockService, RockblockServiceConfig, WebhookTarget,
+};
+use modemdriver::iridium::rockblock::http::HttpUrl;
+use modemdriver::iridium::rockblock::MoFormat;
 use modemdriver::iridium::emulator::transceiver::{TransceiverConfig, TransceiverLog};
 use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
 use modemdriver::iridium::status::MoStatus;
@@ -68,6 +76,34 @@ pub struct EmulateIridiumArgs {
     /// Seed of the failures and of the sky.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Be the RockBLOCK web service: post MO messages to the shore's
+    /// webhook at URL (e.g. http://127.0.0.1:8080/), each with a JWT,
+    /// instead of DirectIP; take MT messages on --rockblock-mt.
+    #[arg(long, value_name = "URL")]
+    pub rockblock_webhook: Option<String>,
+    /// Where the emulated service's MT endpoint (POST /rockblock/MT) binds.
+    #[arg(long, default_value = "127.0.0.1:8081", value_name = "ADDR:PORT")]
+    pub rockblock_mt: SocketAddr,
+    /// The RockBLOCK account's user name the MT endpoint takes.
+    #[arg(long, default_value = "user")]
+    pub rockblock_username: String,
+    /// The account's password.
+    #[arg(long, default_value = "pass")]
+    pub rockblock_password: String,
+    /// The webhook posts' format: json (HTTP_JSON) or form (HTTP_POST).
+    #[arg(long, default_value = "json", value_name = "json|form")]
+    pub rockblock_format: String,
+    /// PEM file of the RSA private key signing the posts' JWT (default:
+    /// the emulator's published TEST-ONLY key, whose public key is
+    /// gobyd/config/rockblock-emulator-TEST-ONLY-public-key.pem).
+    #[arg(long, value_name = "FILE")]
+    pub jwt_private_key: Option<PathBuf>,
+    /// Post without a JWT (as Goby3's simulator does).
+    #[arg(long)]
+    pub rockblock_unsigned: bool,
+    /// Probability that an MT POST is answered FAILED,99 (System Error).
+    #[arg(long, default_value_t = 0.0)]
+    pub rockblock_failure: f64,
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
@@ -155,6 +191,7 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
     }
     let gateway = GatewayConfig {
         mo_destination: Some(args.mo_directip),
+        mo_webhook: webhook(args)?,
         mt_bind: args.mt_directip,
         mt_limit: args.mt_limit,
         ring_repeat: seconds(args.ring_repeat_seconds, "--ring-repeat-seconds", false)?,
@@ -163,11 +200,53 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
     Ok((transceivers, gateway))
 }
 
+/// The shore's webhook, with --rockblock-webhook.
+fn webhook(args: &EmulateIridiumArgs) -> Result<Option<WebhookTarget>, CliError> {
+    let Some(url) = &args.rockblock_webhook else {
+        return Ok(None);
+    };
+    let url = HttpUrl::parse(url, "")
+        .map_err(|e| CliError::setup(format!("--rockblock-webhook: {e}")))?;
+    let mut target = WebhookTarget::new(url);
+    target.format = match args.rockblock_format.as_str() {
+        "json" => MoFormat::Json,
+        "form" => MoFormat::Form,
+        other => {
+            return Err(CliError::setup(format!(
+                "--rockblock-format {other:?}: json or form"
+            )))
+        }
+    };
+    if args.rockblock_unsigned {
+        target.signing_key_pem = None;
+    } else if let Some(path) = &args.jwt_private_key {
+        let pem = std::fs::read_to_string(path).map_err(|e| {
+            CliError::setup(format!("--jwt-private-key {}: {e}", path.display()))
+        })?;
+        target.signing_key_pem = Some(pem);
+    }
+    target
+        .signer()
+        .map_err(|e| CliError::setup(format!("--jwt-private-key: {e}")))?;
+    Ok(Some(target))
+}
+
 /// Tells on stderr what the transceivers and the gateway did since the
 /// last look. Never completes.
-async fn report(imeis: &[String], transceivers: &[TransceiverHandle], gateway: &Gateway) {
+async fn report(
+    imeis: &[String],
+    transceivers: &[TransceiverHandle],
+    gateway: &Gateway,
+    rockblock: Option<&RockblockService>,
+) {
     let mut seen: Vec<TransceiverLog> = vec![TransceiverLog::default(); transceivers.len()];
     let mut seen_gateway = GatewayLog::default();
+    let mut seen_rockblock = RockblockLog::default();
+    let (mo_way, shore_end) = if rockblock.is_some() {
+        ("posted to the RockBLOCK webhook", "the shore's RockBLOCK webhook")
+    } else {
+        ("delivered over DirectIP", "the shore's DirectIP MO listener")
+    };
     let mut shore_down = false;
     let mut tick = tokio::time::interval(Duration::from_millis(200));
     loop {
@@ -193,7 +272,7 @@ async fn report(imeis: &[String], transceivers: &[TransceiverHandle], gateway: &
         let now = gateway.log();
         if now.mo_delivered > seen_gateway.mo_delivered {
             eprintln!(
-                "gateway: {} MO message(s) delivered over DirectIP",
+                "gateway: {} MO message(s) {mo_way}",
                 now.mo_delivered - seen_gateway.mo_delivered
             );
         }
@@ -203,9 +282,23 @@ async fn report(imeis: &[String], transceivers: &[TransceiverHandle], gateway: &
         if now.mo_delivery_failures > seen_gateway.mo_delivery_failures && !shore_down {
             shore_down = true;
             eprintln!(
-                "gateway: the shore's DirectIP MO listener does not answer; {} MO message(s) wait (tried again every second)",
-                gateway.mo_waiting()
+                "gateway: {shore_end} does not answer; {} MO message(s) wait (tried again every second{})",
+                gateway.mo_waiting(),
+                if rockblock.is_some() { ", then less often" } else { "" }
             );
+        }
+        for status in now.mo_refused.iter().skip(seen_gateway.mo_refused.len()) {
+            eprintln!("gateway: the shore's webhook answered HTTP {status}; the post is made again");
+        }
+        if let Some(rb) = rockblock {
+            let log = rb.log();
+            for code in log.mt_refused.iter().skip(seen_rockblock.mt_refused.len()) {
+                eprintln!(
+                    "rockblock: MT POST refused, FAILED,{code} ({})",
+                    modemdriver::iridium::rockblock::ErrorCode::from_code(*code).description()
+                );
+            }
+            seen_rockblock = log;
         }
         if now.mt_accepted > seen_gateway.mt_accepted {
             eprintln!(
@@ -241,12 +334,36 @@ pub fn emulate_iridium(
     runtime.block_on(async {
         let stop = super::modem_cmd::interrupted();
         let mo = gateway_config.mo_destination;
+        let webhook_url = gateway_config.mo_webhook.as_ref().map(|w| w.url.to_string());
         let gateway = Gateway::start(gateway_config).await.map_err(|e| {
             CliError::setup(format!(
                 "gateway: cannot bind the DirectIP MT listener {}: {e}",
                 args.mt_directip
             ))
         })?;
+        let rockblock = if args.rockblock_webhook.is_some() {
+            let service = RockblockService::start(
+                RockblockServiceConfig {
+                    bind: args.rockblock_mt,
+                    username: args.rockblock_username.clone(),
+                    password: args.rockblock_password.clone(),
+                    failure: probability(args.rockblock_failure, "--rockblock-failure")?,
+                    seed: args.seed,
+                    ..Default::default()
+                },
+                gateway.gateway.clone(),
+            )
+            .await
+            .map_err(|e| {
+                CliError::setup(format!(
+                    "rockblock: cannot bind the MT endpoint {}: {e}",
+                    args.rockblock_mt
+                ))
+            })?;
+            Some(service)
+        } else {
+            None
+        };
         let mut handles = Vec::new();
         for (i, config) in transceivers.into_iter().enumerate() {
             let imei = config.imei.clone();
@@ -258,12 +375,19 @@ pub fn emulate_iridium(
             writeln!(stdout, "transceiver {imei}: {}", handle.path())?;
             handles.push(handle);
         }
-        writeln!(
-            stdout,
-            "gateway: MO to {}, MT on {}",
-            mo.map_or("nowhere".to_string(), |a| a.to_string()),
-            gateway.mt_addr
-        )?;
+        match (&rockblock, &webhook_url) {
+            (Some(service), Some(url)) => writeln!(
+                stdout,
+                "rockblock: MO to {url}, MT on {}",
+                service.mt_url()
+            )?,
+            _ => writeln!(
+                stdout,
+                "gateway: MO to {}, MT on {}",
+                mo.map_or("nowhere".to_string(), |a| a.to_string()),
+                gateway.mt_addr
+            )?,
+        }
         stdout.flush()?;
         let end = async {
             match duration {
@@ -273,7 +397,10 @@ pub fn emulate_iridium(
         };
         tokio::select! {
             () = end => {}
-            () = report(&args.imeis, &handles, &gateway.gateway) => {}
+            () = report(&args.imeis, &handles, &gateway.gateway, rockblock.as_ref().map(|r| &r.service)) => {}
+        }
+        if let Some(r) = rockblock {
+            r.stop().await;
         }
         for h in handles {
             h.stop().await;
@@ -312,6 +439,18 @@ mod tests {
         assert_eq!(t[0].session_time, Duration::from_millis(500));
         assert_eq!(g.mt_limit, 270);
         assert_eq!(g.mo_destination, Some("127.0.0.1:40001".parse().unwrap()));
+        assert_eq!(g.mo_webhook, None);
+        let (_, g) = configs(&args_of(&[
+            "--rockblock-webhook",
+            "http://127.0.0.1:8080/rb",
+            "--rockblock-format",
+            "form",
+        ]))
+        .unwrap();
+        let w = g.mo_webhook.unwrap();
+        assert_eq!(w.url.to_string(), "http://127.0.0.1:8080/rb");
+        assert_eq!(w.format, MoFormat::Form);
+        assert!(w.signing_key_pem.is_some());
         for (bad, says) in [
             (&["--imei", "123"][..], "not an IMEI"),
             (&["--session-failure", "1.5"], "probability"),
@@ -320,6 +459,15 @@ mod tests {
             (
                 &["--link", "/tmp/a", "--link", "/tmp/b"],
                 "one link per transceiver",
+            ),
+            (&["--rockblock-webhook", "ftp://x"], "--rockblock-webhook"),
+            (
+                &["--rockblock-webhook", "http://127.0.0.1:8080/", "--rockblock-format", "xml"],
+                "json or form",
+            ),
+            (
+                &["--rockblock-webhook", "http://127.0.0.1:8080/", "--jwt-private-key", "/nonexistent.pem"],
+                "--jwt-private-key",
             ),
         ] {
             let e = configs(&args_of(bad)).unwrap_err().to_string();

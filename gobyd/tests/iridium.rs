@@ -8,101 +8,16 @@
 
 mod support;
 
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use modemdriver::iridium::emulator::TransceiverControl;
 use support::daemon::{scratch, Gobyd};
-use support::iridium::{self, SHORE, VEHICLE};
-use support::restart::{delivered, logged};
+use support::iridium::{self, latencies, publish, settle, SHORE, VEHICLE};
+use support::restart::delivered;
 
 /// Longest the exchange may take.
 const LIMIT: Duration = Duration::from_secs(90);
-
-fn publish(node: &mut Gobyd, to: i32, note: &str) {
-    let line = format!(
-        r#"{{"publish": "goby.example.Command", "msg": {{"destination": {to}, "action": "GOTO", "note": "{note}"}}}}"#
-    );
-    let reply = node.request(&line).expect("a reply");
-    assert!(reply.get("accepted").is_some(), "{reply}");
-}
-
-/// Waits until every note of `sent` (by sender index) is delivered at
-/// the other node and acknowledged at its sender.
-fn settle(sent: &[(usize, String)], data: &[PathBuf; 2], limit: Duration) -> bool {
-    let deadline = Instant::now() + limit;
-    loop {
-        let got: [HashMap<String, usize>; 2] = [delivered(&data[0]), delivered(&data[1])];
-        let acked = [logged(&data[0], "ack"), logged(&data[1], "ack")];
-        let done = sent.iter().all(|(from, note)| {
-            got[1 - from].contains_key(note) && acked[*from].contains_key(note)
-        });
-        if done {
-            return true;
-        }
-        if Instant::now() > deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-}
-
-/// Times of the mission log lines `"msg": kind` of `data_dir`, by note
-/// (the first of each).
-fn times(data_dir: &std::path::Path, kind: &str) -> HashMap<String, i64> {
-    let text = std::fs::read_to_string(data_dir.join("raw.log")).unwrap_or_default();
-    let mut out = HashMap::new();
-    for line in text.lines() {
-        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
-            continue;
-        };
-        if v["msg"] != kind {
-            continue;
-        }
-        if let (Some(note), Some(t)) = (v["value"]["note"].as_str(), v["t"].as_i64()) {
-            out.entry(note.to_string()).or_insert(t);
-        }
-    }
-    out
-}
-
-/// Each direction's latencies, from the first sending of a message to its
-/// delivery and to its ack at the sender (median and largest, seconds).
-fn latencies(sent: &[(usize, String)], data: &[PathBuf; 2]) -> String {
-    let mut parts = Vec::new();
-    for (from, name) in [
-        (0usize, "vehicle to shore (MO)"),
-        (1, "shore to vehicle (MT)"),
-    ] {
-        let out = times(&data[from], "out");
-        let acked = times(&data[from], "ack");
-        let got = times(&data[1 - from], "in");
-        let mut delivery = Vec::new();
-        let mut ack = Vec::new();
-        for (_, note) in sent.iter().filter(|(f, _)| *f == from) {
-            if let (Some(o), Some(i)) = (out.get(note), got.get(note)) {
-                delivery.push((i - o) as f64 / 1e6);
-            }
-            if let (Some(o), Some(a)) = (out.get(note), acked.get(note)) {
-                ack.push((a - o) as f64 / 1e6);
-            }
-        }
-        let stats = |v: &mut Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            match (v.get(v.len() / 2), v.last()) {
-                (Some(m), Some(x)) => format!("median {m:.2} s, max {x:.2} s"),
-                _ => "none".into(),
-            }
-        };
-        parts.push(format!(
-            "{name}: delivered {}, acked {}",
-            stats(&mut delivery),
-            stats(&mut ack)
-        ));
-    }
-    parts.join("; ")
-}
 
 #[test]
 fn vehicle_and_shore_exchange_acked_commands_over_the_emulated_9603_and_gateway() {

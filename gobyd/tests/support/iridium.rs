@@ -5,14 +5,21 @@
 
 #![allow(dead_code)]
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayHandle};
+use modemdriver::iridium::emulator::rockblock::{
+    RockblockHandle, RockblockService, RockblockServiceConfig, WebhookTarget,
+    EMULATOR_TEST_PUBLIC_KEY_PEM,
+};
+use modemdriver::iridium::rockblock::http::HttpUrl;
 use modemdriver::iridium::emulator::transceiver::TransceiverConfig;
 use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
 
-use super::daemon::free_tcp_port;
+use super::daemon::{free_tcp_port, Gobyd};
+use super::restart::{delivered, logged};
 use super::node::{Entry, Iridium, Node};
 
 /// The emulated transceiver's IMEI.
@@ -35,21 +42,87 @@ pub struct Emulated {
     pub mo_port: u16,
     /// The gateway's DirectIP MT port.
     pub mt_port: u16,
+    /// The emulated RockBLOCK service (its MT endpoint), when MO messages
+    /// go to the shore's webhook on `mo_port` rather than over DirectIP.
+    pub rockblock: Option<RockblockHandle>,
+    /// The file of the service's public key (RockBLOCK only).
+    pub key_file: PathBuf,
+}
+
+impl Emulated {
+    /// Stops the emulators.
+    pub async fn stop(self) {
+        self.transceiver.stop().await;
+        if let Some(r) = self.rockblock {
+            r.stop().await;
+        }
+        self.gateway.stop().await;
+    }
 }
 
 /// Starts a gateway delivering MO to a free port (the shore's, to come) and
 /// a 9603 whose sessions take `session` and fail with probability
 /// `failure` (seeded). Must be called within a Tokio runtime.
 pub async fn start(dir: &Path, session: Duration, failure: f64, seed: u64) -> Emulated {
+    start_with(dir, session, failure, seed, None).await
+}
+
+/// As [`start`], with the emulated RockBLOCK service in front of the
+/// gateway: MO messages posted (JSON, signed with the test key) to the
+/// shore's webhook on a free port, MT POSTs taken (account `user`/`pass`),
+/// a share `mt_failure` of them answered `FAILED,99` (seeded).
+pub async fn start_rockblock(
+    dir: &Path,
+    session: Duration,
+    failure: f64,
+    seed: u64,
+    mt_failure: f64,
+) -> Emulated {
+    start_with(dir, session, failure, seed, Some(mt_failure)).await
+}
+
+async fn start_with(
+    dir: &Path,
+    session: Duration,
+    failure: f64,
+    seed: u64,
+    rockblock: Option<f64>,
+) -> Emulated {
     let mo_port = free_tcp_port();
+    let mo_webhook = rockblock.map(|_| {
+        let mut target =
+            WebhookTarget::new(HttpUrl::parse(&format!("http://127.0.0.1:{mo_port}"), "/").unwrap());
+        target.max_retry = Duration::from_secs(1);
+        target
+    });
     let gateway = Gateway::start(GatewayConfig {
         mo_destination: Some(format!("127.0.0.1:{mo_port}").parse().unwrap()),
+        mo_webhook,
         mo_retry: Duration::from_millis(200),
         ring_repeat: Duration::from_secs(2),
         ..Default::default()
     })
     .await
     .expect("gateway starts");
+    let key_file = dir.join("rockblock-public-key.pem");
+    let rockblock = match rockblock {
+        Some(mt_failure) => {
+            std::fs::write(&key_file, EMULATOR_TEST_PUBLIC_KEY_PEM).unwrap();
+            Some(
+                RockblockService::start(
+                    RockblockServiceConfig {
+                        failure: mt_failure,
+                        seed,
+                        ..Default::default()
+                    },
+                    gateway.gateway.clone(),
+                )
+                .await
+                .expect("the RockBLOCK service starts"),
+            )
+        }
+        None => None,
+    };
     let mut config = TransceiverConfig::new(IMEI);
     config.session_time = session;
     config.no_service_time = session / 2;
@@ -71,6 +144,8 @@ pub async fn start(dir: &Path, session: Duration, failure: f64, seed: u64) -> Em
         link,
         mo_port,
         mt_port,
+        rockblock,
+        key_file,
     }
 }
 
@@ -93,6 +168,14 @@ fn vehicle_driver(link: &Path) -> Iridium {
 pub fn node(id: i32, emulated: &Emulated, data_dir: &Path, slot_seconds: f64, ttl: u32) -> Node {
     let driver = if id == VEHICLE {
         vehicle_driver(&emulated.link)
+    } else if let Some(rb) = &emulated.rockblock {
+        Iridium::rockblock_shore(
+            emulated.mo_port,
+            &format!("http://{}", rb.addr),
+            &emulated.key_file,
+            &[(VEHICLE, IMEI)],
+        )
+        .setting("mt_confirmation_timeout_ms: 2000")
     } else {
         Iridium::shore(emulated.mo_port, emulated.mt_port, &[(VEHICLE, IMEI)])
             .setting("mt_confirmation_timeout_ms: 2000")
@@ -107,3 +190,88 @@ pub fn node(id: i32, emulated: &Emulated, data_dir: &Path, slot_seconds: f64, tt
         .log_level("info")
         .raw_log(true)
 }
+
+pub fn publish(node: &mut Gobyd, to: i32, note: &str) {
+    let line = format!(
+        r#"{{"publish": "goby.example.Command", "msg": {{"destination": {to}, "action": "GOTO", "note": "{note}"}}}}"#
+    );
+    let reply = node.request(&line).expect("a reply");
+    assert!(reply.get("accepted").is_some(), "{reply}");
+}
+
+/// Waits until every note of `sent` (by sender index) is delivered at
+/// the other node and acknowledged at its sender.
+pub fn settle(sent: &[(usize, String)], data: &[PathBuf; 2], limit: Duration) -> bool {
+    let deadline = Instant::now() + limit;
+    loop {
+        let got: [HashMap<String, usize>; 2] = [delivered(&data[0]), delivered(&data[1])];
+        let acked = [logged(&data[0], "ack"), logged(&data[1], "ack")];
+        let done = sent.iter().all(|(from, note)| {
+            got[1 - from].contains_key(note) && acked[*from].contains_key(note)
+        });
+        if done {
+            return true;
+        }
+        if Instant::now() > deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Times of the mission log lines `"msg": kind` of `data_dir`, by note
+/// (the first of each).
+pub fn times(data_dir: &std::path::Path, kind: &str) -> HashMap<String, i64> {
+    let text = std::fs::read_to_string(data_dir.join("raw.log")).unwrap_or_default();
+    let mut out = HashMap::new();
+    for line in text.lines() {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+            continue;
+        };
+        if v["msg"] != kind {
+            continue;
+        }
+        if let (Some(note), Some(t)) = (v["value"]["note"].as_str(), v["t"].as_i64()) {
+            out.entry(note.to_string()).or_insert(t);
+        }
+    }
+    out
+}
+
+/// Each direction's latencies, from the first sending of a message to its
+/// delivery and to its ack at the sender (median and largest, seconds).
+pub fn latencies(sent: &[(usize, String)], data: &[PathBuf; 2]) -> String {
+    let mut parts = Vec::new();
+    for (from, name) in [
+        (0usize, "vehicle to shore (MO)"),
+        (1, "shore to vehicle (MT)"),
+    ] {
+        let out = times(&data[from], "out");
+        let acked = times(&data[from], "ack");
+        let got = times(&data[1 - from], "in");
+        let mut delivery = Vec::new();
+        let mut ack = Vec::new();
+        for (_, note) in sent.iter().filter(|(f, _)| *f == from) {
+            if let (Some(o), Some(i)) = (out.get(note), got.get(note)) {
+                delivery.push((i - o) as f64 / 1e6);
+            }
+            if let (Some(o), Some(a)) = (out.get(note), acked.get(note)) {
+                ack.push((a - o) as f64 / 1e6);
+            }
+        }
+        let stats = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            match (v.get(v.len() / 2), v.last()) {
+                (Some(m), Some(x)) => format!("median {m:.2} s, max {x:.2} s"),
+                _ => "none".into(),
+            }
+        };
+        parts.push(format!(
+            "{name}: delivered {}, acked {}",
+            stats(&mut delivery),
+            stats(&mut ack)
+        ));
+    }
+    parts.join("; ")
+}
+

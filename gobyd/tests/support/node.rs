@@ -793,6 +793,12 @@ enum IridiumKind {
         mt_port: u16,
         vehicles: Vec<(i32, String)>,
     },
+    Rockblock {
+        webhook_port: u16,
+        server: String,
+        key_file: PathBuf,
+        vehicles: Vec<(i32, String)>,
+    },
 }
 
 impl Iridium {
@@ -811,6 +817,30 @@ impl Iridium {
             kind: IridiumKind::Shore {
                 mo_port,
                 mt_port,
+                vehicles: vehicles
+                    .iter()
+                    .map(|(id, imei)| (*id, imei.to_string()))
+                    .collect(),
+            },
+            settings: Vec::new(),
+        }
+    }
+
+    /// The shore's driver over the RockBLOCK web service: its webhook on
+    /// `webhook_port` (path `/`), the service's MT endpoint at `server`
+    /// (account `user`/`pass`), the JWT key in `key_file`, each vehicle's
+    /// modem id and IMEI.
+    pub fn rockblock_shore(
+        webhook_port: u16,
+        server: &str,
+        key_file: &Path,
+        vehicles: &[(i32, &str)],
+    ) -> Iridium {
+        Iridium {
+            kind: IridiumKind::Rockblock {
+                webhook_port,
+                server: server.to_string(),
+                key_file: key_file.to_path_buf(),
                 vehicles: vehicles
                     .iter()
                     .map(|(id, imei)| (*id, imei.to_string()))
@@ -844,6 +874,29 @@ impl Iridium {
                      mo_sbd_server_address: \"127.0.0.1\" mo_sbd_server_port: {mo_port}\n    \
                      mt_sbd_server_address: \"127.0.0.1\" mt_sbd_server_port: {mt_port}\n    \
                      device: DEVICE_IRIDIUM_9602_9603\n"
+                );
+                for (id, imei) in vehicles {
+                    text += &format!("    modem_id_to_imei {{ modem_id: {id} imei: \"{imei}\" }}\n");
+                }
+                if !extra.is_empty() {
+                    text += &format!("    {extra}\n");
+                }
+                text += "  }\n}\n";
+                text
+            }
+            IridiumKind::Rockblock {
+                webhook_port,
+                server,
+                key_file,
+                vehicles,
+            } => {
+                let mut text = format!(
+                    "driver {{\n  driver_type: DRIVER_IRIDIUM_SHORE\n  iridium_shore {{\n    \
+                     sbd_type: SBD_ROCKBLOCK\n    \
+                     mo_sbd_server_address: \"127.0.0.1\" mo_sbd_server_port: {webhook_port}\n    \
+                     rockblock {{ username: \"user\" password: \"pass\" server: \"{server}\" \
+                     jwt_public_key_file: \"{}\" mt_retry_backoff_ms: 300 mt_attempts: 5 }}\n",
+                    key_file.display()
                 );
                 for (id, imei) in vehicles {
                     text += &format!("    modem_id_to_imei {{ modem_id: {id} imei: \"{imei}\" }}\n");
