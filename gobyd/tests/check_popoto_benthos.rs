@@ -105,7 +105,10 @@ fn check_knows_the_benthos_limits() {
         out.contains("driver DRIVER_BENTHOS_ATM900: up to 8 frames per transmission"),
         "{out}"
     );
-    assert!(out.contains("of up to 64 bytes each at every rate"), "{out}");
+    assert!(
+        out.contains("of up to 64 bytes each at every rate"),
+        "{out}"
+    );
     assert!(out.contains("2 140 bit/s"), "{out}");
     let (code, _, err) = check(&path, &config("max_frame_size: 8"));
     assert_eq!(code, Some(2), "{err}");
@@ -122,7 +125,10 @@ fn check_knows_the_benthos_limits() {
             "config: \"@=1\"",
             "driver.benthos.config[1]: \"@=1\": \"\" is not a setting name",
         ),
-        ("ack_rate: 14", "driver.benthos.ack_rate: 14 is not an @TxRate"),
+        (
+            "ack_rate: 14",
+            "driver.benthos.ack_rate: 14 is not an @TxRate",
+        ),
     ] {
         let (code, _, err) = check(&path, &config(extra));
         assert_eq!(code, Some(2), "{extra}: {err}");
@@ -133,6 +139,9 @@ fn check_knows_the_benthos_limits() {
         "modem_id: 2\ndriver { driver_type: DRIVER_BENTHOS_ATM900 connection_type: CONNECTION_TCP_AS_CLIENT tcp_server: \"x\" }\n",
     );
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("driver.tcp_port: required for the Benthos driver"), "{err}");
+    assert!(
+        err.contains("driver.tcp_port: required for the Benthos driver"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -127,7 +127,9 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             problems
         }
         Some(DriverType::DriverIridiumShore) => crate::iridium::shore::problems(config),
-        Some(DriverType::DriverPopoto) => with_serial_port(config, crate::popoto::driver::problems(config)),
+        Some(DriverType::DriverPopoto) => {
+            with_serial_port(config, crate::popoto::driver::problems(config))
+        }
         Some(DriverType::DriverBenthosAtm900) => {
             with_serial_port(config, crate::benthos::driver::problems(config))
         }

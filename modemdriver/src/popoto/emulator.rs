@@ -125,8 +125,8 @@ pub async fn start(
 
 #[derive(Debug)]
 enum Timer {
-    /// A transmission ends: TxComplete.
-    TxDone,
+    /// A transmission ends: the packet reaches the water, TxComplete.
+    TxDone(Box<ModemTransmission>),
     /// A held range request is answered to this modem.
     RangeReply(u8),
     /// The range request awaits no more.
@@ -252,11 +252,11 @@ impl Modem {
             return self.say(ModemLine::Alert(MAC_DUMPED.into()));
         }
         let duration = air_time(data.len(), self.mode).mul_f64(self.c.air_time_scale);
+        // On the water once all of it is out (the far modem decodes it
+        // then), with TxComplete.
         let mt = self.packet(kind, self.remote, data);
-        self.water_out.push(mt);
-        self.n.sent += 1;
         self.transmitting = true;
-        self.at(duration, now, Timer::TxDone);
+        self.at(duration, now, Timer::TxDone(Box::new(mt)));
     }
 
     fn command(&mut self, line: &[u8], now: Instant) {
@@ -450,7 +450,9 @@ impl EmulatedModem for Modem {
         };
         for t in due {
             match t {
-                Timer::TxDone => {
+                Timer::TxDone(mt) => {
+                    self.water_out.push(*mt);
+                    self.n.sent += 1;
                     self.transmitting = false;
                     self.say(ModemLine::Alert(TX_COMPLETE.into()));
                 }
