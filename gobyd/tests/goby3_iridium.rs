@@ -12,7 +12,17 @@
 //! - `rockblock`: gobyd's DRIVER_IRIDIUM (node 1) on the pseudo-terminal of
 //!   Goby3's `goby_rockblock_simulator`, which posts MO messages to Goby3's
 //!   DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2, JWT check off) and takes
-//!   its MT messages on its HTTP endpoint.
+//!   its MT messages on its HTTP endpoint;
+//! - `rockblock-service`: gobyd's DRIVER_IRIDIUM (node 1) on the emulated
+//!   9603 of `goby modem emulate-iridium --rockblock-webhook`, whose
+//!   emulated RockBLOCK service posts MO messages (JSON, with a JWT of the
+//!   emulator's key, which Goby3 cannot check: JWT check off) to Goby3's
+//!   DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2) and takes its MT POSTs.
+//!
+//! And with no pAcommsHandler: gobyd's vehicle on the pseudo-terminal of
+//! `goby_rockblock_simulator` and gobyd's shore (`SBD_ROCKBLOCK`, JWT check
+//! off: the simulator signs nothing) on its webhook and MT endpoint
+//! ([`gobyd_shore_over_goby3s_rockblock_simulator`]).
 //!
 //! Both sides frame with Goby3's Iridium header and CRC-32, so each decodes
 //! the other's frames. Runs when `GOBY3_BUILD` names a Goby3 build
@@ -51,6 +61,7 @@ enum Pairing {
     Goby3Vehicle,
     Goby3Shore,
     Rockblock,
+    RockblockService,
 }
 
 impl Pairing {
@@ -59,6 +70,7 @@ impl Pairing {
             Pairing::Goby3Vehicle => "goby3-vehicle",
             Pairing::Goby3Shore => "goby3-shore",
             Pairing::Rockblock => "rockblock",
+            Pairing::RockblockService => "rockblock-service",
         }
     }
 
@@ -219,6 +231,29 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
                 gobyd_vehicle(&link),
             )
         }
+        Pairing::RockblockService => {
+            let link = dir.join("sbd");
+            let mut command = Command::new(goby);
+            command
+                .args(["modem", "emulate-iridium", "--imei", IMEI])
+                .arg("--link")
+                .arg(&link)
+                .args(["--mt-directip", "127.0.0.1:0"])
+                .args(["--rockblock-webhook", &format!("http://127.0.0.1:{mo_port}/")])
+                .args(["--rockblock-mt", &format!("127.0.0.1:{mt_port}")])
+                .args(["--rockblock-username", "test", "--rockblock-password", "test"])
+                .args(["--session-seconds", "0.3", "--ring-repeat-seconds", "3"])
+                .env_remove("RUST_BACKTRACE");
+            let mut p = Proc::spawn("emulate-iridium", command, &dir);
+            await_path(&link, &mut p);
+            helpers.push(p);
+            (
+                format!(
+                    "    driver_type: DRIVER_IRIDIUM_SHORE\n    [goby.acomms.iridium.protobuf.shore_config] {{\n      sbd_type: SBD_ROCKBLOCK\n      mo_sbd_server_port: {mo_port}\n      modem_id_to_imei {{ modem_id: 1 imei: \"{IMEI}\" }}\n      rockblock {{ username: \"test\" password: \"test\" server: \"127.0.0.1:{mt_port}\" skip_jwt_verification: true }}\n      device: DEVICE_IRIDIUM_9602_9603\n    }}"
+                ),
+                gobyd_vehicle(&link),
+            )
+        }
     };
     let goby3_id = which.goby3_id();
     let gobyd_id = 3 - goby3_id;
@@ -373,6 +408,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
         Pairing::Goby3Vehicle,
         Pairing::Goby3Shore,
         Pairing::Rockblock,
+        Pairing::RockblockService,
     ]
     .into_iter()
     .filter(|p| {
@@ -417,4 +453,96 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
         assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
         assert_eq!(t.expired, 0, "{what}");
     }
+}
+
+#[test]
+#[cfg_attr(
+    not(goby3_build),
+    ignore = "needs a Goby3 build: GOBY3_BUILD=<goby3 build dir> cargo nextest run -p gobyd --test goby3_iridium --no-capture"
+)]
+fn gobyd_shore_over_goby3s_rockblock_simulator() {
+    use support::iridium::{publish, settle};
+    use support::restart::{delivered, logged};
+    let goby3 = goby3();
+    let dir = scratch("goby3_iridium", "gobyd-shore-rockblock-simulator");
+    let (webhook_port, mt_port) = (free_tcp_port(), free_tcp_port());
+    let link = dir.join("rockblock");
+    let config = dir.join("rockblock_simulator.pb.cfg");
+    std::fs::write(
+        &config,
+        format!(
+            "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{webhook_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
+    sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
+    let mut sim = Proc::spawn("goby_rockblock_simulator", sim, &dir);
+    await_path(&link, &mut sim);
+    let data: [PathBuf; 2] = [dir.join("vehicle"), dir.join("shore")];
+    let node = |id: i32, driver: Iridium| {
+        Node::new(id)
+            .driver(driver)
+            .tdma(&[1, 2], 0, SLOT_SECONDS)
+            .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"))
+            .queue(Entry::command().ack(true).ttl(600))
+            .json_tcp("127.0.0.1:0")
+            .data_dir(&data[(id - 1) as usize])
+            .raw_log(true)
+            .write(dir.join(format!("node{id}.cfg")))
+    };
+    let shore_driver = Iridium::rockblock_shore(
+        webhook_port,
+        &format!("http://127.0.0.1:{mt_port}"),
+        None,
+        &[(1, IMEI)],
+    );
+    let configs = [node(1, gobyd_vehicle(&link)), node(2, shore_driver)];
+    let mut shore = Gobyd::start(&configs[1], &[]);
+    let mut vehicle = Gobyd::start(&configs[0], &[]);
+    let mut sent = Vec::new();
+    for i in 0..N {
+        let note = format!("v{i}");
+        publish(&mut vehicle, 2, &note);
+        sent.push((0usize, note));
+        let note = format!("s{i}");
+        publish(&mut shore, 1, &note);
+        sent.push((1usize, note));
+    }
+    let started = Instant::now();
+    let complete = settle(&sent, &data, LIMIT);
+    // Two more cycles: a repeat would show by then.
+    std::thread::sleep(Duration::from_secs_f64(4.0 * SLOT_SECONDS));
+    let got = [delivered(&data[0]), delivered(&data[1])];
+    let acked = [logged(&data[0], "ack"), logged(&data[1], "ack")];
+    println!(
+        "gobyd shore over goby_rockblock_simulator: {} in {:.1} s",
+        if complete { "complete" } else { "INCOMPLETE" },
+        started.elapsed().as_secs_f64()
+    );
+    println!("| direction | published | delivered | acked | duplicates |");
+    println!("|---|---|---|---|---|");
+    for (from, name) in [(0usize, "vehicle -> shore"), (1, "shore -> vehicle")] {
+        let notes: Vec<&String> = sent.iter().filter(|(f, _)| *f == from).map(|(_, n)| n).collect();
+        let delivered = notes.iter().filter(|n| got[1 - from].contains_key(**n)).count();
+        let acks = notes.iter().filter(|n| acked[from].contains_key(**n)).count();
+        let dups: usize = notes
+            .iter()
+            .filter_map(|n| got[1 - from].get(*n))
+            .map(|c| c.saturating_sub(1))
+            .sum();
+        println!("| {name} | {} | {delivered} | {acks} | {dups} |", notes.len());
+    }
+    if !complete {
+        eprintln!("logs in {}:\n{}", dir.display(), sim.tail());
+    }
+    drop(vehicle);
+    drop(shore);
+    drop(sim);
+    assert!(complete, "not every message delivered and acked");
+    for (from, note) in &sent {
+        assert_eq!(got[1 - from].get(note), Some(&1), "{note}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

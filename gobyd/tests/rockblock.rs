@@ -244,3 +244,15 @@ fn vehicle_and_shore_exchange_acked_commands_over_the_emulated_rockblock_service
 /// A private key that is not the emulator's: a forger's (test only).
 const FORGER_KEY: &str =
     include_str!("../../modemdriver/tests/data/rockblock-forger-TEST-ONLY-private-key.pem");
+
+#[test]
+fn the_guides_copy_of_the_emulators_public_key_is_the_emulators() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let copy =
+        std::fs::read_to_string(root.join("gobyd/config/rockblock-emulator-TEST-ONLY-public-key.pem"))
+            .unwrap();
+    assert_eq!(
+        copy,
+        modemdriver::iridium::emulator::rockblock::EMULATOR_TEST_PUBLIC_KEY_PEM
+    );
+}

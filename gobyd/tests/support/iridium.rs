@@ -172,7 +172,7 @@ pub fn node(id: i32, emulated: &Emulated, data_dir: &Path, slot_seconds: f64, tt
         Iridium::rockblock_shore(
             emulated.mo_port,
             &format!("http://{}", rb.addr),
-            &emulated.key_file,
+            Some(&emulated.key_file),
             &[(VEHICLE, IMEI)],
         )
         .setting("mt_confirmation_timeout_ms: 2000")

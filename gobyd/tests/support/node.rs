@@ -796,7 +796,7 @@ enum IridiumKind {
     Rockblock {
         webhook_port: u16,
         server: String,
-        key_file: PathBuf,
+        key_file: Option<PathBuf>,
         vehicles: Vec<(i32, String)>,
     },
 }
@@ -828,19 +828,19 @@ impl Iridium {
 
     /// The shore's driver over the RockBLOCK web service: its webhook on
     /// `webhook_port` (path `/`), the service's MT endpoint at `server`
-    /// (account `user`/`pass`), the JWT key in `key_file`, each vehicle's
-    /// modem id and IMEI.
+    /// (account `user`/`pass`), the JWT key in `key_file` (`None`: JWT
+    /// check off), each vehicle's modem id and IMEI.
     pub fn rockblock_shore(
         webhook_port: u16,
         server: &str,
-        key_file: &Path,
+        key_file: Option<&Path>,
         vehicles: &[(i32, &str)],
     ) -> Iridium {
         Iridium {
             kind: IridiumKind::Rockblock {
                 webhook_port,
                 server: server.to_string(),
-                key_file: key_file.to_path_buf(),
+                key_file: key_file.map(Path::to_path_buf),
                 vehicles: vehicles
                     .iter()
                     .map(|(id, imei)| (*id, imei.to_string()))
@@ -895,8 +895,11 @@ impl Iridium {
                      sbd_type: SBD_ROCKBLOCK\n    \
                      mo_sbd_server_address: \"127.0.0.1\" mo_sbd_server_port: {webhook_port}\n    \
                      rockblock {{ username: \"user\" password: \"pass\" server: \"{server}\" \
-                     jwt_public_key_file: \"{}\" mt_retry_backoff_ms: 300 mt_attempts: 5 }}\n",
-                    key_file.display()
+                     {} mt_retry_backoff_ms: 300 mt_attempts: 5 }}\n",
+                    match key_file {
+                        Some(k) => format!("jwt_public_key_file: \"{}\"", k.display()),
+                        None => "skip_jwt_verification: true".into(),
+                    }
                 );
                 for (id, imei) in vehicles {
                     text += &format!("    modem_id_to_imei {{ modem_id: {id} imei: \"{imei}\" }}\n");

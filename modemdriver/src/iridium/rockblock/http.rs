@@ -189,7 +189,11 @@ async fn exchange<IO>(
 where
     IO: AsyncRead + AsyncWrite + Unpin + Send + 'static,
 {
-    let (mut sender, connection) = hyper::client::conn::http1::handshake(TokioIo::new(io))
+    // Header names as written in the RFCs' examples (Content-Length):
+    // Goby3's RockBLOCK webhook reads them case-sensitively.
+    let (mut sender, connection) = hyper::client::conn::http1::Builder::new()
+        .title_case_headers(true)
+        .handshake(TokioIo::new(io))
         .await
         .map_err(|e| format!("HTTP with {url}: {e}"))?;
     let request = Request::post(url.path.as_str())
@@ -333,7 +337,8 @@ mod tests {
         assert_eq!((reply.status, reply.body.as_slice()), (200, &b"OK,123"[..]));
         let request = server.await.unwrap();
         assert!(request.starts_with("POST /rockblock/MT HTTP/1.1\r\n"), "{request}");
-        assert!(request.to_lowercase().contains(&format!("host: 127.0.0.1:{port}")));
+        assert!(request.contains(&format!("Host: 127.0.0.1:{port}\r\n")), "{request}");
+        assert!(request.contains("Content-Length: 3\r\n"), "{request}");
         // Nobody there.
         drop(url);
         let closed = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
