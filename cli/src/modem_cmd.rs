@@ -18,6 +18,15 @@
 //! "EVOLOGICS_S2C"`); `--busy`, `--garble` and `--drop-every` add the faults
 //! of a bench (BUSY answers, garbled lines, dropped connections) to the
 //! channel's `--loss`.
+//!
+//! `goby modem emulate --kind popoto` runs emulated Popoto modems, each
+//! serving its JSON command interface on TCP (`modem 1: tcp
+//! 127.0.0.1:17000`) or, with `--pty`, its shell on a pseudo-terminal, for
+//! the Popoto driver (`driver_type: DRIVER_POPOTO`); `--kind benthos`
+//! emulated Benthos ATM-900s, each on a pseudo-terminal (its serial line)
+//! or, with `--tcp-port`, on TCP (a serial server), for `driver_type:
+//! DRIVER_BENTHOS_ATM900`. `--busy` makes them refuse transmissions (the
+//! Popoto's `MAC dumped packet`, the ATM-900's `BUSY` to `ATO`).
 
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
@@ -62,33 +71,47 @@ pub enum Kind {
     Micromodem,
     /// EvoLogics S2C modems: the AT interface on TCP (or --pty).
     Evologics,
+    /// Popoto modems: the JSON command interface on TCP (or the shell on
+    /// --pty).
+    Popoto,
+    /// Benthos ATM-900 modems: the serial interface on pseudo-terminals
+    /// (or TCP with --tcp-port).
+    Benthos,
 }
 
 /// Options of `goby modem emulate`.
 #[derive(Debug, Args)]
 pub struct EmulateArgs {
     /// Which modem to emulate: `micromodem` (WHOI, NMEA on a
-    /// pseudo-terminal) or `evologics` (EvoLogics S2C, AT commands on TCP).
+    /// pseudo-terminal), `evologics` (EvoLogics S2C, AT commands on TCP),
+    /// `popoto` (Popoto, JSON commands on TCP) or `benthos` (Benthos
+    /// ATM-900, its serial interface on a pseudo-terminal).
     #[arg(long, value_enum, default_value = "micromodem")]
     pub kind: Kind,
-    /// EvoLogics: TCP port of the first modem's AT interface; the next
-    /// modems listen on the next ports (0: any free port for each).
-    #[arg(long, default_value_t = modemdriver::evologics::DEFAULT_TCP_PORT, value_name = "PORT")]
-    pub tcp_port: u16,
-    /// EvoLogics: address the TCP interfaces listen on.
+    /// EvoLogics, Popoto, Benthos: TCP port of the first modem's interface;
+    /// the next modems listen on the next ports (0: any free port for
+    /// each). Default 9200 (EvoLogics), 17000 (Popoto); Benthos modems
+    /// serve TCP only when it is given.
+    #[arg(long, value_name = "PORT")]
+    pub tcp_port: Option<u16>,
+    /// EvoLogics, Popoto, Benthos: address the TCP interfaces listen on.
     #[arg(long, default_value = "127.0.0.1")]
     pub tcp_ip: IpAddr,
-    /// EvoLogics: serve each modem on a pseudo-terminal (the serial
-    /// interface, command mode) instead of TCP.
+    /// EvoLogics, Popoto: serve each modem on a pseudo-terminal (the serial
+    /// interface: EvoLogics command mode, the Popoto shell) instead of TCP.
     #[arg(long)]
     pub pty: bool,
-    /// EvoLogics: probability that a send command is answered BUSY.
+    /// EvoLogics, Popoto, Benthos: probability that a send is refused (an
+    /// S2C's BUSY, a Popoto's `MAC dumped packet`, an ATM-900's BUSY to
+    /// ATO).
     #[arg(long, default_value_t = 0.0, value_name = "P")]
     pub busy: f64,
-    /// EvoLogics: probability that a line to the host is garbled.
+    /// EvoLogics, Popoto, Benthos: probability that a line to the host is
+    /// garbled.
     #[arg(long, default_value_t = 0.0, value_name = "P")]
     pub garble: f64,
-    /// EvoLogics: drop each host connection every this many seconds.
+    /// EvoLogics, Popoto, Benthos (on TCP): drop each host connection every
+    /// this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub drop_every: Option<f64>,
     /// EvoLogics: emulate USBL heads, reporting a USBLLONG fix of each
@@ -433,8 +456,10 @@ async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
 }
 
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    if args.kind == Kind::Evologics {
-        return emulate_evologics(args, stdout);
+    match args.kind {
+        Kind::Evologics => return emulate_evologics(args, stdout),
+        Kind::Popoto | Kind::Benthos => return emulate_popoto_benthos(args, stdout),
+        Kind::Micromodem => {}
     }
     let backends = plan(args)?;
     let geometry = geometry(args)?;
@@ -551,7 +576,10 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
         .drop_every
         .map(|d| seconds(d, "--drop-every"))
         .transpose()?;
-    if usize::from(args.tcp_port) + args.modem_ids.len() > 65_536 {
+    let tcp_port = args
+        .tcp_port
+        .unwrap_or(modemdriver::evologics::DEFAULT_TCP_PORT);
+    if usize::from(tcp_port) + args.modem_ids.len() > 65_536 {
         return Err(CliError::setup("--tcp-port: not enough ports above it"));
     }
     let positions = geometry(args)?
@@ -577,10 +605,10 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
                 }
             } else {
                 // Port 0: any free port for each.
-                let port = if args.tcp_port == 0 {
+                let port = if tcp_port == 0 {
                     0
                 } else {
-                    args.tcp_port + i as u16
+                    tcp_port + i as u16
                 };
                 EvoPort::Tcp(SocketAddr::new(args.tcp_ip, port))
             };
@@ -623,6 +651,194 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
                         tick.tick().await;
                         for c in &controls {
                             c(EvoControl::DropConnection);
+                        }
+                    }
+                }
+                None => std::future::pending::<()>().await,
+            }
+        };
+        let end = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => stop.await,
+            }
+        };
+        tokio::select! {
+            () = end => {}
+            () = dropper => {}
+        }
+        for e in emulators {
+            e.stop().await;
+        }
+        Ok(Status::Ok)
+    })
+}
+
+/// An emulated Popoto or ATM-900, whichever `--kind` says.
+enum StreamEmulator {
+    Popoto(modemdriver::emulator_host::EmulatorHandle<modemdriver::popoto::emulator::Counters>),
+    Benthos(modemdriver::emulator_host::EmulatorHandle<modemdriver::benthos::emulator::Counters>),
+}
+
+impl StreamEmulator {
+    fn shown(&self) -> String {
+        let (addr, path) = match self {
+            StreamEmulator::Popoto(h) => (h.local_addr(), h.path()),
+            StreamEmulator::Benthos(h) => (h.local_addr(), h.path()),
+        };
+        match (addr, path) {
+            (Some(addr), _) => format!("tcp {addr}"),
+            (None, Some(path)) => path,
+            (None, None) => "no interface".into(),
+        }
+    }
+
+    fn drop_connection(&self) {
+        use modemdriver::emulator_host::EmulatorControl;
+        match self {
+            StreamEmulator::Popoto(h) => h.control(EmulatorControl::DropConnection),
+            StreamEmulator::Benthos(h) => h.control(EmulatorControl::DropConnection),
+        }
+    }
+
+    async fn stop(self) {
+        match self {
+            StreamEmulator::Popoto(h) => h.stop().await,
+            StreamEmulator::Benthos(h) => h.stop().await,
+        }
+    }
+}
+
+/// `goby modem emulate --kind popoto` and `--kind benthos`.
+fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    use modemdriver::emulator_host::{EmulatorFaults, EmulatorPort as Port};
+    let popoto = args.kind == Kind::Popoto;
+    let name = if popoto { "Popoto" } else { "ATM-900" };
+    if args.modem_ids.iter().any(|&id| id == 0 || id > 254) {
+        return Err(CliError::setup(format!(
+            "--modem-id must be a {name} address, 1..=254 (255 is broadcast)"
+        )));
+    }
+    if args.serial.is_some() || args.micromodem != 1 || !args.transponders.is_empty() || args.usbl {
+        return Err(CliError::setup(
+            "--serial, --micromodem and --transponder are the Micro-Modem's (--kind micromodem), --usbl the EvoLogics'",
+        ));
+    }
+    // Popoto: TCP unless --pty; ATM-900: a pseudo-terminal unless --tcp-port.
+    let on_tcp = if popoto {
+        !args.pty
+    } else {
+        if args.pty {
+            return Err(CliError::setup(
+                "--kind benthos serves pseudo-terminals already (give --tcp-port for TCP)",
+            ));
+        }
+        args.tcp_port.is_some()
+    };
+    if !args.links.is_empty() && on_tcp {
+        return Err(CliError::setup(
+            "--link names pseudo-terminals: not with a TCP interface",
+        ));
+    }
+    for (option, p) in [("--busy", args.busy), ("--garble", args.garble)] {
+        if !(0.0..=1.0).contains(&p) {
+            return Err(CliError::setup(format!(
+                "{option} must be in [0, 1], not {p}"
+            )));
+        }
+    }
+    let tcp_port = args
+        .tcp_port
+        .unwrap_or(modemdriver::popoto::DEFAULT_TCP_PORT);
+    if on_tcp && usize::from(tcp_port) + args.modem_ids.len() > 65_536 {
+        return Err(CliError::setup("--tcp-port: not enough ports above it"));
+    }
+    let backends = plan(args)?;
+    let duration = args
+        .duration
+        .map(|d| seconds(d, "--duration"))
+        .transpose()?;
+    let drop_every = args
+        .drop_every
+        .map(|d| seconds(d, "--drop-every"))
+        .transpose()?;
+    let positions: std::collections::HashMap<u8, [f64; 3]> = geometry(args)?
+        .nodes
+        .iter()
+        .map(|(&id, n)| (id as u8, [n.position.x, n.position.y, n.position.z]))
+        .collect();
+    let faults = EmulatorFaults {
+        busy: args.busy,
+        garble: args.garble,
+        seed: args.seed,
+        ..EmulatorFaults::default()
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(async {
+        let stop = interrupted();
+        let medium = Medium::new();
+        let mut emulators = Vec::new();
+        for (i, &modem_id) in args.modem_ids.iter().enumerate() {
+            let backend_kind = backends.get(i).unwrap_or(&Backend::None);
+            let backend = backend_driver(args, backend_kind, modem_id, &medium).await?;
+            let port = if on_tcp {
+                let port = if tcp_port == 0 {
+                    0
+                } else {
+                    tcp_port + i as u16
+                };
+                Port::Tcp(SocketAddr::new(args.tcp_ip, port))
+            } else {
+                Port::Pty {
+                    link: args.links.get(i).cloned(),
+                }
+            };
+            let started = if popoto {
+                use modemdriver::popoto::{emulator, wire::Interface};
+                let config = emulator::EmulatorConfig {
+                    address: modem_id as u8,
+                    interface: if on_tcp {
+                        Interface::JsonApi
+                    } else {
+                        Interface::Shell
+                    },
+                    positions: positions.clone(),
+                    faults,
+                    ..Default::default()
+                };
+                emulator::start(config, port, backend)
+                    .await
+                    .map(StreamEmulator::Popoto)
+            } else {
+                use modemdriver::benthos::emulator;
+                let config = emulator::EmulatorConfig {
+                    address: modem_id as u8,
+                    positions: positions.clone(),
+                    faults,
+                    ..Default::default()
+                };
+                emulator::start(config, port, backend)
+                    .await
+                    .map(StreamEmulator::Benthos)
+            };
+            let handle = started.map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
+            writeln!(stdout, "modem {modem_id}: {}", handle.shown())?;
+            stdout.flush()?;
+            emulators.push(handle);
+        }
+        let dropper = async {
+            match drop_every {
+                Some(every) => {
+                    let mut tick = tokio::time::interval(every);
+                    tick.tick().await;
+                    loop {
+                        tick.tick().await;
+                        for e in &emulators {
+                            e.drop_connection();
                         }
                     }
                 }
