@@ -28,6 +28,39 @@ pub enum Control {
         /// Done, or why the driver could not start again.
         reply: oneshot::Sender<Result<(), String>>,
     },
+    /// A file transfer request for the network layer
+    /// ([`crate::network`]).
+    Network {
+        /// What is asked.
+        request: NetworkRequest,
+        /// The answer (the JSON reply's fields), or why not.
+        reply: oneshot::Sender<Result<serde_json::Value, String>>,
+    },
+}
+
+/// What a client asks of the network layer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum NetworkRequest {
+    /// Send the file at `path` (on the daemon's machine) to node `dest`,
+    /// named `name` there (its own name when `None`); joins the transfer
+    /// of the same file to the same node under way.
+    SendFile {
+        /// The receiving node.
+        dest: i32,
+        /// The file.
+        path: std::path::PathBuf,
+        /// Its name at the receiver.
+        name: Option<String>,
+    },
+    /// Ask node `node` for its file `path` (under its `network.serve_dir`).
+    GetFile {
+        /// The node asked.
+        node: i32,
+        /// The path there.
+        path: String,
+    },
+    /// The transfers under way.
+    Transfers,
 }
 
 /// The DCCL id of a flush request as pAcommsHandler takes it:

@@ -37,6 +37,9 @@ pub enum DaemonEvent {
     },
     /// A modem driver or medium access event.
     Modem(ModemEvent),
+    /// A transfer's progress or end (a message larger than a frame, a
+    /// file; [`crate::network`]).
+    Transfer(crate::network::transfers::TransferEvent),
 }
 
 /// One event of the core as the interfaces receive it, shared by all of

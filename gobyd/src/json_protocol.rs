@@ -36,11 +36,13 @@ pub enum Topic {
     Modem,
     /// The medium access control: slot starts and cycle changes.
     Mac,
+    /// Transfers (messages larger than a frame, files): progress and ends.
+    Transfer,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 7] = [
+    pub const ALL: [Topic; 8] = [
         Topic::Ack,
         Topic::Expire,
         Topic::Drop,
@@ -48,6 +50,7 @@ impl Topic {
         Topic::Sent,
         Topic::Modem,
         Topic::Mac,
+        Topic::Transfer,
     ];
 
     /// The topic's name in the protocol.
@@ -60,6 +63,7 @@ impl Topic {
             Topic::Sent => "sent",
             Topic::Modem => "modem",
             Topic::Mac => "mac",
+            Topic::Transfer => "transfer",
         }
     }
 
@@ -79,6 +83,9 @@ pub enum Request {
     /// long-baseline interrogation), for the driver to carry out; its
     /// result comes as a `driver_specific` event on topic `modem`.
     DriverSpecific(DynamicMessage),
+    /// A request of the network layer: send a file, ask for one, list the
+    /// transfers.
+    Network(crate::control::NetworkRequest),
 }
 
 /// Parses one request line; messages may be of any type loaded in
@@ -114,6 +121,42 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
         let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
         return Ok(Request::DriverSpecific(message));
     }
+    if let Some(spec) = object.get("file_send") {
+        let dest = node_field(spec, "dest", "file_send")?;
+        let path = spec
+            .get("path")
+            .and_then(Value::as_str)
+            .filter(|p| !p.is_empty())
+            .ok_or("file_send: \"path\" (the file's path on the daemon's machine) is missing")?;
+        let name = match spec.get("name") {
+            None | Some(Value::Null) => None,
+            Some(v) => Some(
+                v.as_str()
+                    .ok_or("file_send: \"name\" must be a string")?
+                    .to_string(),
+            ),
+        };
+        return Ok(Request::Network(crate::control::NetworkRequest::SendFile {
+            dest,
+            path: path.into(),
+            name,
+        }));
+    }
+    if let Some(spec) = object.get("file_get") {
+        let node = node_field(spec, "node", "file_get")?;
+        let path = spec
+            .get("path")
+            .and_then(Value::as_str)
+            .filter(|p| !p.is_empty())
+            .ok_or("file_get: \"path\" (the file's path under the node's serve_dir) is missing")?;
+        return Ok(Request::Network(crate::control::NetworkRequest::GetFile {
+            node,
+            path: path.to_string(),
+        }));
+    }
+    if object.contains_key("transfers") {
+        return Ok(Request::Network(crate::control::NetworkRequest::Transfers));
+    }
     if let Some(topics) = object.get("subscribe") {
         let topics = topics
             .as_array()
@@ -131,7 +174,15 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
             .collect::<Result<Vec<_>, _>>()
             .map(Request::Subscribe);
     }
-    Err("expected \"publish\", \"subscribe\" or \"driver_specific\"".into())
+    Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\" or \"transfers\"".into())
+}
+
+/// A node's modem id in field `key` of a request's object.
+fn node_field(spec: &Value, key: &str, request: &str) -> Result<i32, String> {
+    spec.get(key)
+        .and_then(Value::as_i64)
+        .and_then(|n| i32::try_from(n).ok())
+        .ok_or_else(|| format!("{request}: \"{key}\" (a modem id) is missing"))
 }
 
 /// A message as proto3 JSON with the `.proto` field names, its fields in
@@ -235,6 +286,7 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             ModemEvent::SlotStart { .. } | ModemEvent::CycleUpdate { .. } => Topic::Mac,
             _ => Topic::Modem,
         }),
+        DaemonEvent::Transfer(_) => Some(Topic::Transfer),
     }
 }
 
@@ -255,8 +307,37 @@ pub fn event_line(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Op
         } => received_line(received, reception),
         DaemonEvent::Queue { event, entry } => queue_line(event, *entry, queue_name)?,
         DaemonEvent::Modem(event) => modem_line(event),
+        DaemonEvent::Transfer(event) => transfer_value(event),
     };
     Some(line.to_string())
+}
+
+/// A transfer as JSON: `{"event": "transfer", "transfer": ID, ...}` (see
+/// [`crate::network::transfers::TransferEvent`]); also the items of the
+/// `transfers` reply.
+pub fn transfer_value(e: &crate::network::transfers::TransferEvent) -> Value {
+    let mut line = json!({
+        "event": "transfer",
+        "transfer": e.id,
+        "direction": if e.outgoing { "out" } else { "in" },
+        "peer": e.peer,
+        "name": e.name,
+        "bytes": e.bytes,
+        "fragments": e.fragments,
+        "held": e.held,
+        "state": e.state,
+        "sha256": e.sha256,
+    });
+    if let Some(reason) = &e.reason {
+        line["reason"] = reason.clone().into();
+    }
+    if let Some(path) = &e.path {
+        line["path"] = path.clone().into();
+    }
+    if let Some(request) = e.request {
+        line["request"] = request.into();
+    }
+    line
 }
 
 fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Value {
@@ -471,8 +552,11 @@ mod tests {
             (r#"{"subscribe": ["ack", "weather"]}"#, "unknown topic"),
             (
                 r#"{"hello": 1}"#,
-                "expected \"publish\", \"subscribe\" or \"driver_specific\"",
+                "expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\"",
             ),
+            (r#"{"file_send": {"path": "/x"}}"#, "file_send: \"dest\""),
+            (r#"{"file_send": {"dest": 3}}"#, "file_send: \"path\""),
+            (r#"{"file_get": {"node": 3}}"#, "file_get: \"path\""),
             (r#"{"driver_specific": 1}"#, "must be a message type name"),
             (
                 r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific"}"#,
@@ -749,11 +833,28 @@ mod tests {
             entry: Some(1),
         }));
         events.extend(modem_events.into_iter().map(DaemonEvent::Modem));
+        events.push(DaemonEvent::Transfer(
+            crate::network::transfers::TransferEvent {
+                outgoing: false,
+                id: 7,
+                peer: 1,
+                name: "sonar.bin".into(),
+                bytes: 20_000,
+                fragments: 400,
+                held: 400,
+                state: "failed",
+                reason: Some("its SHA-256 did not match at the receiver".into()),
+                path: Some("/data/files/sonar.bin".into()),
+                sha256: "00".repeat(32),
+                request: Some(3),
+            },
+        ));
         for e in &events {
             match e {
                 DaemonEvent::Received { .. }
                 | DaemonEvent::Queue { .. }
-                | DaemonEvent::Modem(_) => {}
+                | DaemonEvent::Modem(_)
+                | DaemonEvent::Transfer(_) => {}
             }
         }
         let mut lines: Vec<String> = events

@@ -279,6 +279,17 @@ impl JsonInterface {
                 }
                 Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))
             }
+            Request::Network(request) => {
+                let (reply, outcome) = oneshot::channel();
+                let control = crate::control::Control::Network { request, reply };
+                if self.control.send(control).await.is_err() {
+                    return Handled::Reply(error_line("the daemon is shutting down"));
+                }
+                Handled::Waiting(answer(outcome, |outcome| match outcome {
+                    Ok(value) => value.to_string(),
+                    Err(e) => error_line(&e),
+                }))
+            }
             Request::DriverSpecific(message) => {
                 let name = message.descriptor().full_name().to_string();
                 let (reply, outcome) = oneshot::channel();

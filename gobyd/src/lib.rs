@@ -43,6 +43,7 @@ pub mod dedup;
 pub mod delivery;
 pub mod door;
 pub mod event;
+pub mod fragment;
 pub mod group_commit;
 pub mod inbox;
 pub mod json_protocol;

@@ -446,6 +446,7 @@ pub async fn run(
                         }
                         DaemonEvent::Queue { event, .. } => publications(&settings, event),
                         DaemonEvent::Modem(m) => modem_publications(&settings, m),
+                        DaemonEvent::Transfer(_) => Vec::new(),
                     };
                     for (var, value) in values {
                         notify(&client, &var, &value);

@@ -928,6 +928,9 @@ impl Daemon {
         }
         match event {
             DriverEvent::DataRequest(request) => {
+                if let Some(network) = &mut self.network {
+                    network.data_request(&mut self.outbox, self.clock.now());
+                }
                 let mut filled = request.template().clone();
                 if let Err(e) = self.outbox.data_request(&mut filled) {
                     tracing::warn!("data request: {e}");
@@ -1049,6 +1052,13 @@ impl Daemon {
             Control::ResetDriver { reply } => {
                 let _ = reply.send(self.reset_driver().await);
             }
+            Control::Network { request, reply } => {
+                let outcome = self.network_request(request);
+                if let Err(e) = &outcome {
+                    tracing::warn!("file transfer request: {e}");
+                }
+                let _ = reply.send(outcome);
+            }
             Control::DriverSpecific { message, reply } => {
                 let outcome = self.take_specific_request(message);
                 if let Err(e) = &outcome {
@@ -1056,6 +1066,40 @@ impl Daemon {
                 }
                 let _ = reply.send(outcome);
             }
+        }
+    }
+
+    /// Carries out a client's request of the network layer (file transfer).
+    fn network_request(
+        &mut self,
+        request: crate::control::NetworkRequest,
+    ) -> Result<serde_json::Value, String> {
+        use crate::control::NetworkRequest;
+        use crate::json_protocol::transfer_value;
+        let now = self.clock.now();
+        let Some(network) = &mut self.network else {
+            return Err(
+                "file transfer needs the network layer: add a network { } section to the configuration"
+                    .into(),
+            );
+        };
+        match request {
+            NetworkRequest::SendFile { dest, path, name } => {
+                let (event, joined) = network.send_file(dest, &path, name.as_deref(), now)?;
+                self.report_transfers(vec![event.clone()]);
+                Ok(serde_json::json!({
+                    "file_send": event.id,
+                    "joined": joined,
+                    "transfer": transfer_value(&event),
+                }))
+            }
+            NetworkRequest::GetFile { node, path } => {
+                let request = network.request_file(node, &path, &mut self.outbox, now)?;
+                Ok(serde_json::json!({ "file_get": request, "node": node }))
+            }
+            NetworkRequest::Transfers => Ok(serde_json::json!({
+                "transfers": network.transfers().iter().map(transfer_value).collect::<Vec<_>>(),
+            })),
         }
     }
 
@@ -1207,8 +1251,19 @@ impl Daemon {
         let Some(network) = &mut self.network else {
             return;
         };
-        for (event, entry) in network.tick(now) {
+        let receipt = network.tick(now);
+        for (event, entry) in receipt.events {
             self.hand_over(event, entry, &Reception::default());
+        }
+        self.report_transfers(receipt.transfers);
+    }
+
+    /// Sends transfers' progress to the interfaces.
+    fn report_transfers(&self, events: Vec<crate::network::transfers::TransferEvent>) {
+        for event in events {
+            let _ = self
+                .events
+                .send(Arc::new(CoreEvent::new(DaemonEvent::Transfer(event))));
         }
     }
 
@@ -1277,11 +1332,12 @@ impl Daemon {
             for (event, entry) in receipt.events.clone() {
                 self.hand_over(event, entry, &Reception::default());
             }
+            self.report_transfers(receipt.transfers.clone());
             for arrived in &receipt.arrived {
                 let routed = Reception {
                     link: link.clone(),
                     recovered: false,
-                    route: Some(arrived.route.clone().into()),
+                    route: arrived.route.clone().map(Into::into),
                 };
                 let on_record = self.delivery.record(
                     vec![arrived.received.clone()],

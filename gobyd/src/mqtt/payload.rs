@@ -87,6 +87,8 @@ impl Formatter {
             } => Some(self.received(received, reception, now)),
             DaemonEvent::Queue { event, .. } => self.queue_event(event, now),
             DaemonEvent::Modem(event) => self.modem_event(event, now),
+            // Told to JSON clients (topic `transfer`), not published.
+            DaemonEvent::Transfer(_) => None,
         }
     }
 

@@ -25,6 +25,7 @@
 //! record in the origin's `routes.log` ([`origin`]).
 
 pub mod origin;
+pub mod transfers;
 pub mod wire;
 
 use std::collections::HashMap;
@@ -33,16 +34,18 @@ use std::sync::Arc;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
-    QueueManagerConfig, QueuedMessageEntry, RouteAck, RoutedMessage,
+    FileRequest, QueueManagerConfig, QueuedMessageEntry, RouteAck, RoutedMessage,
 };
 use protos::goby::apps::protobuf::{GobydConfig, NetworkConfig};
 use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
 use sha2::{Digest, Sha256};
 
 use crate::config::Problem;
+use crate::fragment::Content;
 use crate::outbox::{Accepted, Outbox};
 use crate::route::{NextHop, RouteTable, MAX_NETWORK_ID};
 use origin::{Origin, Pending};
+use transfers::{Produced, TransferEvent, Transfers};
 use wire::{Header, NetMessage};
 
 /// The `network` section in force (`None`: the layer is off), Goby3's
@@ -62,7 +65,7 @@ fn default_entry(name: &str, ttl: i32) -> QueuedMessageEntry {
         "goby.acomms.protobuf.RoutedMessage" => (true, 2.0, false),
         "goby.acomms.protobuf.RouteAck" => (true, 3.0, false),
         "goby.acomms.protobuf.Fragment" => (true, 0.5, false),
-        "goby.acomms.protobuf.FragmentAck" => (false, 3.0, true),
+        "goby.acomms.protobuf.FragmentAck" => (true, 3.0, false),
         _ => (true, 2.0, false),
     };
     QueuedMessageEntry {
@@ -141,8 +144,7 @@ struct TypeSettings {
     ttl: u32,
 }
 
-/// How long a relay remembers what it forwarded (to take a repeat for
-/// one), at most.
+/// Most forwarded messages a relay remembers (to take a repeat for one).
 const RECENT_LIMIT: usize = 16_384;
 
 /// The end-to-end identity of a network message a relay forwarded.
@@ -189,8 +191,8 @@ impl Forwarded {
     }
 }
 
-/// A message the network layer unwrapped for this node: to the receive
-/// path ([`crate::delivery`]) with the route it took.
+/// A message the network layer unwrapped (or put together) for this node:
+/// to the receive path ([`crate::delivery`]) with the route it took.
 #[derive(Debug, Clone)]
 pub struct Arrived {
     /// The message as its origin sent it; its identity is the origin's
@@ -198,24 +200,42 @@ pub struct Arrived {
     /// before), so that the receiver's duplicate filter knows it whichever
     /// way it came.
     pub received: ReceivedMessage,
-    /// The nodes it went through: its origin, the relays, this node.
-    pub route: Vec<i32>,
+    /// The nodes it went through: its origin, the relays, this node
+    /// (`None`: not known, for a message put together from fragments).
+    pub route: Option<Vec<i32>>,
 }
 
-/// What the network layer made of one reception's messages.
+/// What the network layer made of one reception's messages (or of the
+/// passing of time).
 #[derive(Debug, Default)]
 pub struct Receipt {
     /// The messages that are not the network layer's, as they came.
     pub plain: Vec<ReceivedMessage>,
-    /// Messages unwrapped for this node.
+    /// Messages unwrapped or put together for this node.
     pub arrived: Vec<Arrived>,
-    /// Events for the clients (end-to-end acks), with journal ids.
+    /// Events for the clients (end-to-end acks, expiries), with journal
+    /// ids (or transfers' client ids).
     pub events: Vec<(QueueEvent, Option<u64>)>,
-    /// Something to forward could not be journaled: the reception must not
-    /// be acknowledged (its sender keeps it and sends it again).
+    /// Transfers' progress and ends.
+    pub transfers: Vec<TransferEvent>,
+    /// Something to forward or to keep could not be recorded (or a relay
+    /// is full): the reception must not be acknowledged (its sender keeps
+    /// what it sent and sends it again).
     pub refuse_ack: bool,
     /// End-to-end acks owed once `arrived` is on record: (origin, number).
     owed_acks: Vec<(i32, u32)>,
+}
+
+/// What became of a message to forward.
+enum Forward {
+    /// Journaled and queued for the next hop (custody taken).
+    Journaled,
+    /// A repeat, or dropped (a loop, the hop limit, no route): nothing to
+    /// keep, the hop may be acknowledged.
+    Skipped,
+    /// The relay holds as many fragments as it may: not taken now (its
+    /// hop must not be acknowledged).
+    Full,
 }
 
 /// The network layer's state.
@@ -231,6 +251,15 @@ pub struct Network {
     origin: Origin,
     /// What this node forwarded lately, with when it may be forgotten.
     recent: HashMap<Forwarded, Micros>,
+    /// Fragments this node holds for forwarding (in its journal).
+    relaying: usize,
+    /// The transfers of this node and to it.
+    transfers: Transfers,
+    /// The next number of a file request of this node's.
+    next_request: u16,
+    /// The time of the last call that gave one (queue events come
+    /// without).
+    now_hint: Micros,
 }
 
 impl std::fmt::Debug for Network {
@@ -238,6 +267,7 @@ impl std::fmt::Debug for Network {
         f.debug_struct("Network")
             .field("me", &self.me)
             .field("route", &self.table.hops())
+            .field("transfers", &self.transfers)
             .finish_non_exhaustive()
     }
 }
@@ -245,10 +275,18 @@ impl std::fmt::Debug for Network {
 /// Microseconds in a second.
 const SECOND: Micros = 1_000_000;
 
+/// The longest lifetime the header carries, seconds.
+const LIFETIME_MAX: u32 = 1_048_575;
+
+/// Bytes a routed message's envelope adds to the message it carries, at
+/// most (its DCCL id and header, the payload's length, up to three relays
+/// listed, the frame's identity trailer).
+const ROUTED_OVERHEAD: usize = 20;
+
 impl Network {
     /// The layer of node `config.modem_id` (`None` when it is off), its
     /// state read from `data_dir`; `outbox` is the node's, its journal
-    /// replayed (the routed messages it still holds are taken up again).
+    /// replayed (the network messages it still holds are taken up again).
     pub fn open(
         config: &GobydConfig,
         queue: &QueueManagerConfig,
@@ -281,7 +319,7 @@ impl Network {
                 )
             })
             .collect();
-        let net_ttl = wire::TYPES
+        let net_ttl: HashMap<&'static str, Micros> = wire::TYPES
             .iter()
             .map(|(name, _)| {
                 let ttl = queue
@@ -294,6 +332,37 @@ impl Network {
             })
             .collect();
         let origin = Origin::open(&data_dir.join("routes.log"))?;
+        let fragment_size = match settings.fragment_bytes() {
+            0 => fragment_data_bytes(&codec, frame_bytes(config))?,
+            n => n as usize,
+        };
+        let receive_dir = {
+            let dir = Path::new(settings.receive_dir());
+            if dir.is_absolute() {
+                dir.to_path_buf()
+            } else {
+                data_dir.join(dir)
+            }
+        };
+        let transfer_settings = transfers::Settings {
+            fragment_size,
+            window: settings.window().max(1) as usize,
+            resend_after: (settings.resend_seconds().max(0.0) * 1e6) as Micros,
+            max_bytes: settings.max_transfer_bytes() as usize,
+            relay_window: settings.relay_window().max(1) as usize,
+            receive_dir,
+            serve_dir: settings.serve_dir.as_ref().map(std::path::PathBuf::from),
+            file_ttl: settings.file_ttl().clamp(1, LIFETIME_MAX),
+            fragment_ttl: ttl_of(&net_ttl, "goby.acomms.protobuf.Fragment"),
+            ack_ttl: ttl_of(&net_ttl, "goby.acomms.protobuf.FragmentAck"),
+            remember: 3600 * SECOND,
+        };
+        let transfers = Transfers::open(
+            config.modem_id(),
+            transfer_settings,
+            &data_dir.join("transfers.log"),
+            now,
+        )?;
         let mut network = Network {
             me: config.modem_id(),
             table,
@@ -303,9 +372,23 @@ impl Network {
             net_ttl,
             origin,
             recent: HashMap::new(),
+            relaying: 0,
+            transfers,
+            next_request: (queue::identity::random_start() % 65_536) as u16,
+            now_hint: now,
         };
         network.take_up(outbox, now);
+        tracing::info!(
+            route = ?network.table.hops(),
+            fragment_bytes = network.transfers.settings().fragment_size,
+            "network layer on"
+        );
         Ok(Some(network))
+    }
+
+    /// Data bytes of each fragment this node sends.
+    pub fn fragment_size(&self) -> usize {
+        self.transfers.settings().fragment_size
     }
 
     /// The journal's network messages after a restart: the routed messages
@@ -327,16 +410,16 @@ impl Network {
                 continue;
             };
             let expires = entry.time + self.net_ttl(net.type_name());
-            match &net {
-                NetMessage::Routed(m) if m.origin == self.me => {
+            if net.header().origin == self.me {
+                if let NetMessage::Routed(m) = &net {
                     if m.ack {
                         originated.push((entry.id, m.clone(), expires));
                     }
                 }
-                _ => {
-                    self.recent.insert(Forwarded::of(&net), expires.max(now));
-                }
+                continue;
             }
+            self.recent.insert(Forwarded::of(&net), expires.max(now));
+            self.relaying += usize::from(matches!(net, NetMessage::Fragment(_)));
         }
         for (entry, m, expires) in originated {
             if let Some(p) = self.pending_of(entry, &m, expires) {
@@ -361,7 +444,7 @@ impl Network {
     }
 
     fn net_ttl(&self, name: &str) -> Micros {
-        self.net_ttl.get(name).copied().unwrap_or(1800 * SECOND)
+        ttl_of(&self.net_ttl, name)
     }
 
     /// The `created` time that makes a message of network type `name`
@@ -370,17 +453,24 @@ impl Network {
         now + i64::from(lifetime) * SECOND - self.net_ttl(name)
     }
 
+    /// The frame a fragment fills, bytes.
+    fn frame_capacity(&self) -> usize {
+        self.transfers.settings().fragment_size + FRAGMENT_HEADER
+    }
+
     /// Takes a publication the network layer must carry: one for a node
-    /// reached through a relay (wrapped in a
-    /// [`RoutedMessage`], journaled, queued for the relay). `None`: not
-    /// the network layer's (it goes as it is); `Some(Err)`: refused (its
-    /// type is the network layer's own, or the route cannot reach it).
+    /// reached through a relay (wrapped in a [`RoutedMessage`], journaled,
+    /// queued for the relay), or one larger than a frame (a transfer of
+    /// fragments). `None`: not the network layer's (it goes as it is);
+    /// `Some(Err)`: refused (its type is the network layer's own, or the
+    /// route cannot reach it).
     pub fn publish(
         &mut self,
         message: &DynamicMessage,
         outbox: &mut Outbox,
         now: Micros,
     ) -> Option<Result<Accepted, String>> {
+        self.now_hint = now;
         let name = message.descriptor().full_name().to_string();
         if wire::is_network_type(&name) {
             return Some(Err(format!(
@@ -391,22 +481,36 @@ impl Network {
             Ok(Some(dest)) => i32::try_from(dest).ok()?,
             _ => return None,
         };
-        let relay = match self.table.next_hop(dest) {
-            NextHop::Direct => return None,
-            NextHop::Unreachable(reason) => {
-                return Some(Err(format!("{name} to node {dest}: {reason}")))
+        if dest == queue::BROADCAST_ID || dest == self.me {
+            return None;
+        }
+        let encoded = self.codec.encode(message).ok()?;
+        match self.table.next_hop(dest) {
+            NextHop::Direct if encoded.len() <= self.frame_capacity() => None,
+            NextHop::Direct => Some(self.send_large(&name, dest, encoded, now)),
+            NextHop::Unreachable(reason) => Some(Err(format!("{name} to node {dest}: {reason}"))),
+            NextHop::Via(relay) if encoded.len() + ROUTED_OVERHEAD <= self.frame_capacity() => {
+                Some(self.send_routed(message, &name, dest, relay, encoded, outbox, now))
             }
-            NextHop::Via(relay) => relay,
-        };
-        Some(self.send_routed(message, &name, dest, relay, outbox, now))
+            NextHop::Via(_) => Some(self.send_large(&name, dest, encoded, now)),
+        }
     }
 
+    fn settings_of(&self, name: &str) -> TypeSettings {
+        self.types.get(name).copied().unwrap_or(TypeSettings {
+            ack: true,
+            ttl: 1800,
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
     fn send_routed(
         &mut self,
         message: &DynamicMessage,
         name: &str,
         dest: i32,
         relay: i32,
+        payload: Vec<u8>,
         outbox: &mut Outbox,
         now: Micros,
     ) -> Result<Accepted, String> {
@@ -415,14 +519,7 @@ impl Network {
                 "{name} to node {dest}: a routed message's destination must be 0-{MAX_NETWORK_ID}"
             ));
         }
-        let settings = self.types.get(name).copied().unwrap_or(TypeSettings {
-            ack: true,
-            ttl: 1800,
-        });
-        let payload = self
-            .codec
-            .encode(message)
-            .map_err(|e| format!("{name}: {e}"))?;
+        let settings = self.settings_of(name);
         let entry = outbox
             .next_entry()
             .ok_or_else(|| "the journal's ids are exhausted".to_string())?;
@@ -431,11 +528,11 @@ impl Network {
             origin: self.me,
             final_dest: dest,
             hop: Vec::new(),
-            lifetime: settings.ttl.min(wire_lifetime_max()),
+            lifetime: settings.ttl.min(LIFETIME_MAX),
             number: (entry % 65_536) as u32,
             ack: settings.ack,
-            payload,
             resent: false,
+            payload,
         };
         let created = self.created_for(wire::TYPES[0].0, routed.lifetime, now);
         let accepted = outbox
@@ -450,15 +547,54 @@ impl Network {
             );
             if settings.ack {
                 let expires = now + i64::from(routed.lifetime) * SECOND;
-                if let Some(p) = self.pending_of(id, &routed, expires) {
-                    self.origin.track(p);
-                }
+                let pending = Pending {
+                    entry: id,
+                    dest,
+                    number: routed.number as u16,
+                    expires,
+                    name: name.to_string(),
+                    message: prost::Message::encode_to_vec(message),
+                    hop_acked: false,
+                };
+                self.origin.track(pending);
             }
         }
         Ok(accepted)
     }
 
-    /// A queue event as the clients are told it: an event of a network
+    /// A message larger than a frame: a transfer to `dest`.
+    fn send_large(
+        &mut self,
+        name: &str,
+        dest: i32,
+        encoded: Vec<u8>,
+        now: Micros,
+    ) -> Result<Accepted, String> {
+        if !(1..=MAX_NETWORK_ID).contains(&dest) {
+            return Err(format!(
+                "{name} to node {dest}: a message larger than a frame goes to one node (1-{MAX_NETWORK_ID})"
+            ));
+        }
+        let settings = self.settings_of(name);
+        let id = self.transfers.start(
+            dest,
+            Content::Message,
+            &encoded,
+            name,
+            settings.ack,
+            settings.ttl.min(LIFETIME_MAX),
+            now,
+        )?;
+        tracing::info!(
+            id,
+            dest,
+            bytes = encoded.len(),
+            "{name} is larger than a frame: sent in fragments"
+        );
+        Ok(Accepted::Queued(id))
+    }
+
+    /// A queue event as the clients are told it: an event of a routed
     /// message this node originated is told as the message it carries (its
     /// first hop's ack is not told: the client hears `ack` at the
     /// end-to-end ack); an event of a message this node forwards or of
@@ -479,6 +615,21 @@ impl Network {
         if !wire::is_network_id(dccl_id) {
             return Some((event, entry));
         }
+        let now = self.now_hint;
+        // The transfers' fragments and acks (never journaled).
+        match (&event, entry) {
+            (QueueEvent::Acked { id: Some(id), .. }, None) if self.transfers.owns(*id) => {
+                self.transfers.left_queue(*id, true, now);
+                return None;
+            }
+            (QueueEvent::Expired { id, .. } | QueueEvent::Dropped { id, .. }, None)
+                if self.transfers.owns(*id) =>
+            {
+                self.transfers.left_queue(*id, false, now);
+                return None;
+            }
+            _ => {}
+        }
         let message = match &event {
             QueueEvent::Sent { message, .. }
             | QueueEvent::Acked { message, .. }
@@ -486,6 +637,13 @@ impl Network {
             | QueueEvent::Dropped { message, .. } => NetMessage::of(message)?,
             _ => return None,
         };
+        let ended = matches!(
+            event,
+            QueueEvent::Acked { .. } | QueueEvent::Expired { .. } | QueueEvent::Dropped { .. }
+        );
+        if ended && entry.is_some() && matches!(message, NetMessage::Fragment(_)) {
+            self.relaying = self.relaying.saturating_sub(1);
+        }
         let originated = match &message {
             NetMessage::Routed(m) if m.origin == self.me => Some(m.clone()),
             _ => None,
@@ -501,7 +659,7 @@ impl Network {
                 QueueEvent::Expired { .. } | QueueEvent::Dropped { .. } => tracing::warn!(
                     origin = message.header().origin,
                     dest = message.header().final_dest,
-                    "{} held for forwarding expired before the next hop took it",
+                    "{} held for the next hop expired before it was taken",
                     message.type_name()
                 ),
                 _ => {}
@@ -544,7 +702,9 @@ impl Network {
             }
             QueueEvent::Expired { id, .. } => {
                 if let Some(entry) = entry {
-                    let _ = self.origin.done(entry);
+                    if let Err(e) = self.origin.done(entry) {
+                        tracing::error!("routes.log: {e}");
+                    }
                 }
                 Some((
                     QueueEvent::Expired {
@@ -557,7 +717,9 @@ impl Network {
             }
             QueueEvent::Dropped { id, .. } => {
                 if let Some(entry) = entry {
-                    let _ = self.origin.done(entry);
+                    if let Err(e) = self.origin.done(entry) {
+                        tracing::error!("routes.log: {e}");
+                    }
                 }
                 Some((
                     QueueEvent::Dropped {
@@ -574,9 +736,9 @@ impl Network {
 
     /// One reception's messages (as the queue decoded them from one
     /// transmission): the network layer's own are forwarded (journaled
-    /// first: custody), unwrapped for this node, or taken as acks; the
-    /// others are returned as they are. Call
-    /// [`recorded`](Self::recorded) once the unwrapped messages are on
+    /// first: custody), unwrapped or put together for this node, or taken
+    /// as acks; the others are returned as they are. Call
+    /// [`recorded`](Self::recorded) once the messages that arrived are on
     /// record.
     pub fn receive(
         &mut self,
@@ -584,8 +746,11 @@ impl Network {
         outbox: &mut Outbox,
         now: Micros,
     ) -> Receipt {
+        self.now_hint = now;
         let mut receipt = Receipt::default();
+        let mut produced = Produced::default();
         let mut journaled = false;
+        let mut recorded = false;
         for received in messages {
             if !wire::is_network_id(received.dccl_id) {
                 receipt.plain.push(received);
@@ -601,17 +766,33 @@ impl Network {
             };
             let hop_resent = received.identity.is_some_and(|w| w.resent);
             let header = message.header();
-            if header.final_dest == self.me {
-                self.arrive(message, hop_resent, &mut receipt);
-            } else {
+            if header.final_dest != self.me {
                 match self.forward(message, hop_resent, outbox, now) {
-                    Ok(true) => journaled = true,
-                    Ok(false) => {}
+                    Ok(Forward::Journaled) => journaled = true,
+                    Ok(Forward::Skipped) => {}
+                    Ok(Forward::Full) => receipt.refuse_ack = true,
                     Err(e) => {
                         tracing::error!("cannot take a message to forward: {e}");
                         receipt.refuse_ack = true;
                     }
                 }
+                continue;
+            }
+            match message {
+                NetMessage::Fragment(f) => {
+                    recorded = true;
+                    self.transfers.fragment(f, now, &mut produced);
+                }
+                NetMessage::FragmentAck(a) => {
+                    recorded = true;
+                    self.transfers
+                        .acknowledged(header.origin, &a, now, &mut produced);
+                }
+                NetMessage::FileRequest(r) => {
+                    self.transfers
+                        .serve(header.origin, r.request as u16, &r.path, now);
+                }
+                other => self.arrive(other, hop_resent, &mut receipt),
             }
         }
         if journaled {
@@ -620,7 +801,69 @@ impl Network {
                 receipt.refuse_ack = true;
             }
         }
+        if recorded {
+            if let Err(e) = self.transfers.sync() {
+                tracing::error!("transfers.log sync: {e}");
+                receipt.refuse_ack = true;
+            }
+        }
+        self.produced(produced, &mut receipt);
         receipt
+    }
+
+    /// What the transfers produced, into `receipt`: messages put together
+    /// (to the receive path), messages settled (`ack` or `expire`), events.
+    fn produced(&mut self, produced: Produced, receipt: &mut Receipt) {
+        receipt.refuse_ack |= produced.refuse_ack;
+        for (origin, number, bytes) in produced.messages {
+            let Ok(message) = self.codec.decode(&bytes) else {
+                tracing::warn!(
+                    "a message put together from fragments of node {origin} does not decode"
+                );
+                continue;
+            };
+            let Ok(dccl_id) = self.codec.id_of(message.descriptor().full_name()) else {
+                continue;
+            };
+            receipt.arrived.push(Arrived {
+                received: ReceivedMessage {
+                    message,
+                    dccl_id,
+                    src: origin,
+                    dest: self.me,
+                    time: None,
+                    bytes,
+                    // A transfer ends once: one put together again (a
+                    // restart between its hand-over and its record) is a
+                    // repeat.
+                    identity: Some(WireIdentity::new(u64::from(number), true)),
+                },
+                route: None,
+            });
+        }
+        for (id, name, bytes, by, acked) in produced.settled {
+            let (Ok(message), Ok(dccl_id)) = (self.codec.decode(&bytes), self.codec.id_of(&name))
+            else {
+                continue;
+            };
+            let event = if acked {
+                QueueEvent::Acked {
+                    message,
+                    id: None,
+                    dccl_id,
+                    frame: 0,
+                    by,
+                }
+            } else {
+                QueueEvent::Expired {
+                    message,
+                    id,
+                    dccl_id,
+                }
+            };
+            receipt.events.push((event, Some(id)));
+        }
+        receipt.transfers.extend(produced.events);
     }
 
     /// A network message for this node.
@@ -661,7 +904,7 @@ impl Network {
                             m.resent || hop_resent,
                         )),
                     },
-                    route,
+                    route: Some(route),
                 });
             }
             NetMessage::RouteAck(m) => {
@@ -681,10 +924,8 @@ impl Network {
                     }
                 }
             }
-            other => tracing::debug!(
-                "{} for this node: not handled by this build",
-                other.type_name()
-            ),
+            // Fragments, their acks and file requests are the transfers'.
+            NetMessage::Fragment(_) | NetMessage::FragmentAck(_) | NetMessage::FileRequest(_) => {}
         }
     }
 
@@ -713,28 +954,43 @@ impl Network {
 
     /// Takes custody of a network message for another node: journaled
     /// (unsynced; [`receive`](Self::receive) syncs) and queued for the next
-    /// hop, or dropped with a warning (a loop, the hop limit, no route).
-    /// `Ok(true)`: journaled.
+    /// hop; or not (a repeat, a loop, the hop limit, no route, this relay
+    /// full).
     fn forward(
         &mut self,
         mut message: NetMessage,
         hop_resent: bool,
         outbox: &mut Outbox,
         now: Micros,
-    ) -> Result<bool, crate::outbox::OutboxError> {
+    ) -> Result<Forward, crate::outbox::OutboxError> {
         let mut header: Header = message.header();
         let resent = hop_resent || matches!(&message, NetMessage::Routed(m) if m.resent);
         let key = Forwarded::of(&message);
-        if resent && self.recent.contains_key(&key) {
+        // A routed message's content is not its identity (the same bytes
+        // may be published again): a repeat is only one marked so. The
+        // others are known by their numbers: any copy is a repeat.
+        let repeat = match message {
+            NetMessage::Routed(_) => resent,
+            _ => true,
+        };
+        let name = message.type_name();
+        if repeat && self.recent.contains_key(&key) {
             tracing::debug!(
                 origin = header.origin,
                 dest = header.final_dest,
-                "a repeat of a {} already forwarded: not forwarded again",
-                message.type_name()
+                "a repeat of a {name} already forwarded: not forwarded again"
             );
-            return Ok(false);
+            return Ok(Forward::Skipped);
         }
-        let name = message.type_name();
+        let fragment = matches!(message, NetMessage::Fragment(_));
+        if fragment && self.relaying >= self.transfers.settings().relay_window {
+            tracing::debug!(
+                origin = header.origin,
+                "{} fragments held for forwarding already: this one is not taken now",
+                self.relaying
+            );
+            return Ok(Forward::Full);
+        }
         if message.lists_hops() && (header.origin == self.me || header.hops.contains(&self.me)) {
             tracing::warn!(
                 origin = header.origin,
@@ -742,7 +998,7 @@ impl Network {
                 route = ?header.hops,
                 "{name} came back to this node (a loop in the routes): dropped"
             );
-            return Ok(false);
+            return Ok(Forward::Skipped);
         }
         if header.hops.len() >= self.hop_limit {
             tracing::warn!(
@@ -751,7 +1007,7 @@ impl Network {
                 "{name} passed {} relays, the hop limit: dropped",
                 header.hops.len()
             );
-            return Ok(false);
+            return Ok(Forward::Skipped);
         }
         let next = match self.table.link_dest(header.final_dest) {
             Ok(next) => next,
@@ -762,7 +1018,7 @@ impl Network {
                     "{name} for node {}: {reason}: dropped",
                     header.final_dest
                 );
-                return Ok(false);
+                return Ok(Forward::Skipped);
             }
         };
         header.next_hop = next;
@@ -775,20 +1031,30 @@ impl Network {
         }
         let created = self.created_for(name, header.lifetime, now);
         outbox.accept_created(&message.to_dynamic(), created)?;
+        self.relaying += usize::from(fragment);
         self.recent
             .insert(key, now + i64::from(header.lifetime) * SECOND);
         if self.recent.len() > RECENT_LIMIT {
             self.forget_recent(now, true);
         }
-        tracing::info!(
-            origin = header.origin,
-            dest = header.final_dest,
-            next,
-            "{name} from node {} for node {} taken, forwarded to node {next}",
-            header.origin,
-            header.final_dest
-        );
-        Ok(true)
+        if fragment {
+            tracing::debug!(
+                origin = header.origin,
+                dest = header.final_dest,
+                next,
+                "fragment taken for forwarding"
+            );
+        } else {
+            tracing::info!(
+                origin = header.origin,
+                dest = header.final_dest,
+                next,
+                "{name} from node {} for node {} taken, forwarded to node {next}",
+                header.origin,
+                header.final_dest
+            );
+        }
+        Ok(Forward::Journaled)
     }
 
     fn forget_recent(&mut self, now: Micros, crowded: bool) {
@@ -802,7 +1068,7 @@ impl Network {
         }
     }
 
-    /// The unwrapped messages of `receipt` are on record (or the record
+    /// The routed messages of `receipt` are on record (or the record
     /// failed and they were handed over all the same): their end-to-end
     /// acks are journaled (synced) and queued back to their origins.
     pub fn recorded(&mut self, receipt: &Receipt, outbox: &mut Outbox, now: Micros) {
@@ -842,18 +1108,136 @@ impl Network {
         }
     }
 
+    /// Tops the queue up before a data request (fragments of this node's
+    /// transfers, selective acks owed).
+    pub fn data_request(&mut self, outbox: &mut Outbox, now: Micros) {
+        self.now_hint = now;
+        self.transfers.top_up(outbox, &self.table, now);
+    }
+
+    /// Starts sending the file at `path` to node `dest` (named `name`
+    /// there, its own name by default), or joins the transfer of the same
+    /// file to the same node under way. Returns the transfer as it stands
+    /// and whether it was under way already.
+    pub fn send_file(
+        &mut self,
+        dest: i32,
+        path: &Path,
+        name: Option<&str>,
+        now: Micros,
+    ) -> Result<(TransferEvent, bool), String> {
+        if !(1..=MAX_NETWORK_ID).contains(&dest) || dest == self.me {
+            return Err(format!(
+                "node {dest}: a file goes to another node (1-{MAX_NETWORK_ID})"
+            ));
+        }
+        if let NextHop::Unreachable(reason) = self.table.next_hop(dest) {
+            return Err(format!("node {dest}: {reason}"));
+        }
+        let name = match name {
+            Some(n) => n.to_string(),
+            None => path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .ok_or_else(|| format!("{}: names no file", path.display()))?
+                .to_string(),
+        };
+        if let Some(problem) = crate::fragment::file_name_problem(&name) {
+            return Err(problem);
+        }
+        let meta = std::fs::metadata(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        if !meta.is_file() {
+            return Err(format!("{}: not a file", path.display()));
+        }
+        let max = self.transfers.settings().max_bytes;
+        if meta.len() as usize > max {
+            return Err(format!(
+                "{}: {} bytes is more than network.max_transfer_bytes ({max})",
+                path.display(),
+                meta.len()
+            ));
+        }
+        let body = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let sha = crate::fragment::sha256(&body);
+        if let Some((_, event)) = self.transfers.find_file(dest, &name, &sha) {
+            return Ok((event, true));
+        }
+        let ttl = self.transfers.settings().file_ttl;
+        let id = self
+            .transfers
+            .start(dest, Content::File { name }, &body, "", false, ttl, now)?;
+        let event = self
+            .transfers
+            .status()
+            .into_iter()
+            .find(|e| e.outgoing && e.id == id)
+            .ok_or("the transfer was not kept")?;
+        Ok((event, false))
+    }
+
+    /// Asks node `node` for its file `path` (under its
+    /// `network.serve_dir`): a [`FileRequest`] journaled (synced) and
+    /// queued. Returns the request's number, which the answer's events
+    /// name.
+    pub fn request_file(
+        &mut self,
+        node: i32,
+        path: &str,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Result<u16, String> {
+        if !(1..=MAX_NETWORK_ID).contains(&node) || node == self.me {
+            return Err(format!(
+                "node {node}: files are asked of another node (1-{MAX_NETWORK_ID})"
+            ));
+        }
+        if path.is_empty() || path.len() > 160 {
+            return Err(format!("{path:?}: give a path of 1-160 bytes"));
+        }
+        let next = self.table.link_dest(node)?;
+        let request = self.next_request;
+        self.next_request = request.wrapping_add(1);
+        let lifetime = self.transfers.settings().file_ttl;
+        let message = NetMessage::FileRequest(FileRequest {
+            next_hop: next,
+            origin: self.me,
+            final_dest: node,
+            hop: Vec::new(),
+            lifetime,
+            request: u32::from(request),
+            path: path.to_string(),
+        });
+        let created = self.created_for(message.type_name(), lifetime, now);
+        outbox
+            .accept_created(&message.to_dynamic(), created)
+            .map_err(|e| e.to_string())?;
+        outbox.sync().map_err(|e| e.to_string())?;
+        tracing::info!(node, request, "file {path:?} asked of node {node}");
+        Ok(request)
+    }
+
+    /// The transfers under way.
+    pub fn transfers(&self) -> Vec<TransferEvent> {
+        self.transfers.status()
+    }
+
     /// The passing of time: routed messages past their first relay whose
-    /// lifetime ended without an end-to-end ack are told expired.
-    pub fn tick(&mut self, now: Micros) -> Vec<(QueueEvent, Option<u64>)> {
+    /// lifetime ended without an end-to-end ack are told expired, as are
+    /// transfers whose lifetime ended.
+    pub fn tick(&mut self, now: Micros) -> Receipt {
+        self.now_hint = now;
         self.forget_recent(now, false);
+        let mut produced = Produced::default();
+        self.transfers.tick(now, &mut produced);
+        let mut receipt = Receipt::default();
+        self.produced(produced, &mut receipt);
         let expired = match self.origin.expired(now) {
             Ok(expired) => expired,
             Err(e) => {
                 tracing::error!("routes.log: {e}");
-                return Vec::new();
+                return receipt;
             }
         };
-        let mut events = Vec::new();
         for p in expired {
             tracing::warn!(
                 id = p.entry,
@@ -870,7 +1254,7 @@ impl Network {
             ) else {
                 continue;
             };
-            events.push((
+            receipt.events.push((
                 QueueEvent::Expired {
                     message,
                     id: p.entry,
@@ -879,11 +1263,79 @@ impl Network {
                 Some(p.entry),
             ));
         }
-        events
+        receipt
     }
 }
 
-/// The longest lifetime the header carries, seconds.
-fn wire_lifetime_max() -> u32 {
-    1_048_575
+/// Bytes of a fragment's header on the water, its DCCL id included: what
+/// a frame holds besides the fragment's data.
+pub const FRAGMENT_HEADER: usize = 14;
+
+/// The data bytes of a fragment that fills a frame of `frame` bytes.
+fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usize> {
+    let probe = |d: usize| {
+        codec
+            .encode(
+                &NetMessage::Fragment(protos::goby::acomms::protobuf::Fragment {
+                    next_hop: 255,
+                    origin: 255,
+                    final_dest: 255,
+                    hop_count: 7,
+                    lifetime: LIFETIME_MAX,
+                    transfer: 65_535,
+                    index: 1_048_575,
+                    data: vec![0xA5; d],
+                })
+                .to_dynamic(),
+            )
+            .map(|b| b.len())
+    };
+    let mut d = frame.min(1023);
+    while d > 0 {
+        match probe(d) {
+            Ok(len) if len <= frame => return Ok(d),
+            _ => d -= 1,
+        }
+    }
+    Err(std::io::Error::other(format!(
+        "a frame of {frame} bytes holds no fragment: set network.fragment_bytes"
+    )))
+}
+
+/// The smallest frame this node sends in its TDMA slots (by their rates),
+/// bytes; the driver's largest frame, or 64, when the slots do not say.
+fn frame_bytes(config: &GobydConfig) -> usize {
+    let me = config.modem_id();
+    let from_driver = config
+        .driver
+        .as_ref()
+        .and_then(modemdriver::check::largest_frame);
+    let from_slots = config.mac.as_ref().and_then(|mac| {
+        mac.slot
+            .iter()
+            .filter(|s| s.src.is_none_or(|src| src == me))
+            .filter_map(|s| modemdriver::rate::spec(s.rate()))
+            .map(|spec| spec.frame_bytes as usize)
+            .min()
+    });
+    from_slots.or(from_driver).unwrap_or(64)
+}
+
+fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {
+    ttls.get(name).copied().unwrap_or(1800 * SECOND)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fragment_fills_its_frame_and_its_header_is_what_the_guide_says() {
+        let mut codec = dccl::Codec::new();
+        wire::load(&mut codec).unwrap();
+        for frame in [32, 64, 256] {
+            let d = fragment_data_bytes(&codec, frame).unwrap();
+            assert_eq!(frame - d, FRAGMENT_HEADER, "frame of {frame} bytes");
+        }
+    }
 }

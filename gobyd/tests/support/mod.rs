@@ -4,6 +4,7 @@
 
 pub mod broker;
 pub mod daemon;
+pub mod fleet;
 pub mod goby3;
 pub mod iridium;
 pub mod micromodem;

@@ -1,0 +1,352 @@
+//! Transfers (messages larger than a frame, files) through a relay, in
+//! virtual time: three `gobyd` in one process on the simulator's
+//! in-process channel, on a line 1 – 2 – 3 1500 m apart with a range of
+//! 2000 m (1 and 3 cannot hear each other), Goby3's static route `hop: 1
+//! hop: 2 hop: 3`, fixed TDMA, 20 % of packets (data and acks) lost.
+//!
+//! - A 1.5 KB message and a 6 KB file from 1 to 3, with commands
+//!   published meanwhile: the message arrives once, whole, and is acked
+//!   end to end; the file is written at 3 with the same bytes; the
+//!   commands (higher priority) overtake the file.
+//! - A 50 KB file from 1 to 3 with the receiver killed (its task aborted)
+//!   a third of the way and the sender two thirds of the way, each started
+//!   again a minute later on its data directory: the transfer resumes and
+//!   completes, the file written once with the same bytes.
+
+mod support;
+
+use std::path::Path;
+use std::time::Duration;
+
+use gobyd::control::NetworkRequest;
+use prost_reflect::{DynamicMessage, ReflectMessage, Value};
+use protos::goby::example::Command;
+use support::daemon::{publish_command, scratch};
+use support::fleet::{data_dir, Fleet, Seen};
+use support::node::{Entry, Node, Simulator};
+
+const BLOB_PROTO: &str = r#"syntax = "proto2";
+import "dccl/option_extensions.proto";
+package test;
+message Blob {
+  option (dccl.msg) = { id: 126 max_bytes: 2100 codec_version: 4 };
+  required int32 destination = 1 [(dccl.field) = { min: 0 max: 31 in_head: true }];
+  required bytes data = 2 [(dccl.field).max_length = 2000];
+}
+"#;
+
+fn config(id: i32, dir: &Path, rate: u32, slot: f64) -> protos::goby::apps::protobuf::GobydConfig {
+    let proto = dir.join("blob.proto");
+    if !proto.exists() {
+        std::fs::write(&proto, BLOB_PROTO).unwrap();
+    }
+    let driver = Simulator::line(3, 1500.0)
+        .range(2000.0)
+        .deferred_ack()
+        .loss(0.2)
+        .seed(id as u64 + 90)
+        .overhead(0.5);
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2, 3], rate, slot)
+        .queue(Entry::command().ack(true).ttl(7200))
+        .queue(
+            Entry::new("test.Blob")
+                .role("DESTINATION_ID", "destination")
+                .ack(true)
+                .ttl(7200),
+        )
+        .json_tcp("")
+        .data_dir(&data_dir(dir, id))
+        .extra(&format!("dccl {{ proto_file: \"{}\" }}", proto.display()))
+        .extra("network { route { hop: 1 hop: 2 hop: 3 } resend_seconds: 600 }")
+        .config()
+}
+
+/// A `test.Blob` to `destination` holding `data`.
+fn blob(dir: &Path, destination: i32, data: Vec<u8>) -> DynamicMessage {
+    let pool = dccl::compile_protos(&[dir.join("blob.proto")], &[] as &[&Path]).unwrap();
+    let mut m = DynamicMessage::new(pool.get_message_by_name("test.Blob").unwrap());
+    m.set_field_by_name("destination", Value::I32(destination));
+    m.set_field_by_name("data", Value::Bytes(data.into()));
+    m
+}
+
+async fn publish(
+    publisher: &tokio::sync::mpsc::Sender<gobyd::json_server::Publish>,
+    message: DynamicMessage,
+) -> serde_json::Value {
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    publisher
+        .send(gobyd::json_server::Publish::new(message, reply))
+        .await
+        .unwrap();
+    let accepted = answer.await.unwrap().expect("accepted");
+    serde_json::json!({ "id": accepted.id })
+}
+
+/// Bytes that do not repeat in any short period.
+fn pattern(len: usize, seed: u64) -> Vec<u8> {
+    let mut x = seed | 1;
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect()
+}
+
+fn note(message: &DynamicMessage) -> String {
+    message
+        .transcode_to::<Command>()
+        .map(|c| c.note().to_string())
+        .unwrap_or_default()
+}
+
+/// Waits (virtual time) until `done` holds, at most `limit`.
+async fn until(fleet: &Fleet, limit: Duration, done: impl Fn(&[Seen]) -> bool) -> bool {
+    let end = tokio::time::Instant::now() + limit;
+    while tokio::time::Instant::now() < end {
+        if done(&fleet.seen()) {
+            return true;
+        }
+        tokio::time::sleep(Duration::from_secs(10)).await;
+    }
+    done(&fleet.seen())
+}
+
+fn transfer_at(
+    seen: &[Seen],
+    node: i32,
+    state: &str,
+) -> Vec<gobyd::network::transfers::TransferEvent> {
+    seen.iter()
+        .filter_map(|s| match s {
+            Seen::Transfer { node: n, event } if *n == node && event.state == state => {
+                Some(event.clone())
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_large_message_and_a_file_cross_the_relay_and_commands_overtake_them() {
+    let dir = scratch("transfer", "relay");
+    let configs = (1..=3).map(|id| config(id, &dir, 2, 8.0)).collect();
+    let fleet = Fleet::start(configs).await;
+    let data = pattern(1500, 7);
+    let accepted = publish(fleet.publisher(1), blob(&dir, 3, data.clone())).await;
+    let message_id = accepted["id"].as_u64().expect("an id");
+    let file = dir.join("survey.bin");
+    let content = pattern(6000, 11);
+    std::fs::write(&file, &content).unwrap();
+    let sent = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file.clone(),
+                name: None,
+            },
+        )
+        .await
+        .expect("the file is taken");
+    let file_id = sent["file_send"].as_u64().unwrap();
+    assert_eq!(sent["joined"], false);
+    // Sending it again joins the transfer.
+    let again = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file.clone(),
+                name: None,
+            },
+        )
+        .await
+        .unwrap();
+    assert_eq!(
+        (again["file_send"].as_u64(), &again["joined"]),
+        (Some(file_id), &true.into())
+    );
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    for i in 0..4 {
+        publish_command(fleet.publisher(1), 3, &format!("cmd{i}")).await;
+    }
+    let done = until(&fleet, Duration::from_secs(4 * 3600), |seen| {
+        let acked = |id: u64| {
+            seen.iter()
+                .any(|s| matches!(s, Seen::Acked { node: 1, id: Some(i), .. } if *i == id))
+        };
+        let commands = seen
+            .iter()
+            .filter(|s| matches!(s, Seen::Acked { node: 1, message, .. } if note(message).starts_with("cmd")))
+            .count();
+        acked(message_id)
+            && transfer_at(seen, 1, "complete").iter().any(|e| e.id == file_id)
+            && commands >= 4
+    })
+    .await;
+    let seen = fleet.seen();
+    assert!(
+        done,
+        "not done in 4 virtual hours: {:?}",
+        transfer_at(&seen, 3, "receiving").last()
+    );
+    // The message: once, whole, at 3; acked once at 1, by 3.
+    let blobs: Vec<&Seen> = seen
+        .iter()
+        .filter(|s| matches!(s, Seen::Delivered { message, .. } if message.descriptor().full_name() == "test.Blob"))
+        .collect();
+    assert_eq!(blobs.len(), 1, "{blobs:?}");
+    let Seen::Delivered {
+        node, src, message, ..
+    } = blobs[0]
+    else {
+        unreachable!()
+    };
+    assert_eq!((*node, *src), (3, 1));
+    assert_eq!(
+        message
+            .get_field_by_name("data")
+            .unwrap()
+            .as_bytes()
+            .unwrap()
+            .as_ref(),
+        data.as_slice()
+    );
+    let acks: Vec<&Seen> = seen
+        .iter()
+        .filter(|s| matches!(s, Seen::Acked { id: Some(id), .. } if *id == message_id))
+        .collect();
+    assert!(
+        matches!(acks.as_slice(), [Seen::Acked { node: 1, by: 3, .. }]),
+        "{acks:?}"
+    );
+    // The file: written once at 3 with the same bytes, complete at 1.
+    let written = transfer_at(&seen, 3, "complete");
+    let file_event = written
+        .iter()
+        .find(|e| e.name == "survey.bin")
+        .expect("the file arrived");
+    let path = file_event.path.clone().expect("its path");
+    assert_eq!(std::fs::read(&path).unwrap(), content);
+    assert!(transfer_at(&seen, 1, "complete")
+        .iter()
+        .any(|e| e.id == file_id));
+    assert_eq!(written.iter().filter(|e| e.name == "survey.bin").count(), 1);
+    // The commands: each once at 3, acked end to end, before the file
+    // was whole.
+    let file_done = seen
+        .iter()
+        .position(|s| matches!(s, Seen::Transfer { node: 3, event } if event.name == "survey.bin" && event.state == "complete"))
+        .unwrap();
+    for i in 0..4 {
+        let text = format!("cmd{i}");
+        let at: Vec<usize> = seen
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| matches!(s, Seen::Delivered { node: 3, message, .. } if note(message) == text))
+            .map(|(k, _)| k)
+            .collect();
+        assert_eq!(at.len(), 1, "{text} delivered {} times", at.len());
+        assert!(at[0] < file_done, "{text} came after the file");
+    }
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_50_kb_file_survives_restarts_of_both_ends() {
+    let dir = scratch("transfer", "restarts");
+    let configs = (1..=3).map(|id| config(id, &dir, 5, 6.0)).collect();
+    let mut fleet = Fleet::start(configs).await;
+    let file = dir.join("mission.log");
+    let content = pattern(50 * 1024, 3);
+    std::fs::write(&file, &content).unwrap();
+    let sent = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file.clone(),
+                name: None,
+            },
+        )
+        .await
+        .unwrap();
+    let id = sent["file_send"].as_u64().unwrap();
+    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
+    let held_at_3 = |seen: &[Seen]| {
+        transfer_at(seen, 3, "receiving")
+            .last()
+            .map_or(0, |e| e.held)
+    };
+    assert!(
+        until(&fleet, Duration::from_secs(3600), |s| held_at_3(s)
+            >= fragments / 3)
+        .await
+    );
+    fleet.kill(3).await;
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    fleet.start_node(3).await;
+    let killed_receiver_at = held_at_3(&fleet.seen());
+    assert!(
+        until(&fleet, Duration::from_secs(3600), |s| held_at_3(s)
+            >= 2 * fragments / 3)
+        .await
+    );
+    fleet.kill(1).await;
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    fleet.start_node(1).await;
+    let killed_sender_at = held_at_3(&fleet.seen());
+    let done = until(&fleet, Duration::from_secs(4 * 3600), |s| {
+        transfer_at(s, 1, "complete").iter().any(|e| e.id == id)
+    })
+    .await;
+    let seen = fleet.seen();
+    assert!(done, "not complete in 4 virtual hours");
+    let written = transfer_at(&seen, 3, "complete");
+    assert_eq!(written.len(), 1, "{written:?}");
+    assert_eq!(
+        std::fs::read(written[0].path.as_ref().unwrap()).unwrap(),
+        content
+    );
+    assert!(transfer_at(&seen, 3, "failed").is_empty());
+    eprintln!(
+        "50 KB in {fragments} fragments: receiver killed at {killed_receiver_at}, sender at {killed_sender_at} held; complete"
+    );
+    fleet.stop().await;
+    // Nothing left under way at either end.
+    for node in [1, 3] {
+        let status = gobyd::network::transfers::Transfers::open(
+            node,
+            settings_for_inspection(&dir, node),
+            &data_dir(&dir, node).join("transfers.log"),
+            0,
+        )
+        .unwrap()
+        .status();
+        assert!(status.is_empty(), "node {node}: {status:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn settings_for_inspection(dir: &Path, node: i32) -> gobyd::network::transfers::Settings {
+    gobyd::network::transfers::Settings {
+        fragment_size: 64,
+        window: 1,
+        resend_after: 0,
+        max_bytes: 1 << 24,
+        relay_window: 1,
+        receive_dir: data_dir(dir, node).join("inspect"),
+        serve_dir: None,
+        file_ttl: 1,
+        fragment_ttl: 0,
+        ack_ttl: 0,
+        remember: 0,
+    }
+}
