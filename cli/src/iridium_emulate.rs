@@ -25,10 +25,10 @@ use modemdriver::iridium::emulator::radio::RadioConfig;
 use modemdriver::iridium::emulator::rockblock::{
     RockblockLog, RockblockService, RockblockServiceConfig, WebhookTarget,
 };
-use modemdriver::iridium::rockblock::http::HttpUrl;
-use modemdriver::iridium::rockblock::MoFormat;
 use modemdriver::iridium::emulator::transceiver::{TransceiverConfig, TransceiverLog};
 use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
+use modemdriver::iridium::rockblock::http::HttpUrl;
+use modemdriver::iridium::rockblock::MoFormat;
 use modemdriver::iridium::status::MoStatus;
 
 use crate::{CliError, Status};
@@ -220,9 +220,8 @@ fn webhook(args: &EmulateIridiumArgs) -> Result<Option<WebhookTarget>, CliError>
     if args.rockblock_unsigned {
         target.signing_key_pem = None;
     } else if let Some(path) = &args.jwt_private_key {
-        let pem = std::fs::read_to_string(path).map_err(|e| {
-            CliError::setup(format!("--jwt-private-key {}: {e}", path.display()))
-        })?;
+        let pem = std::fs::read_to_string(path)
+            .map_err(|e| CliError::setup(format!("--jwt-private-key {}: {e}", path.display())))?;
         target.signing_key_pem = Some(pem);
     }
     target
@@ -243,9 +242,15 @@ async fn report(
     let mut seen_gateway = GatewayLog::default();
     let mut seen_rockblock = RockblockLog::default();
     let (mo_way, shore_end) = if rockblock.is_some() {
-        ("posted to the RockBLOCK webhook", "the shore's RockBLOCK webhook")
+        (
+            "posted to the RockBLOCK webhook",
+            "the shore's RockBLOCK webhook",
+        )
     } else {
-        ("delivered over DirectIP", "the shore's DirectIP MO listener")
+        (
+            "delivered over DirectIP",
+            "the shore's DirectIP MO listener",
+        )
     };
     let mut shore_down = false;
     let mut tick = tokio::time::interval(Duration::from_millis(200));
@@ -288,7 +293,9 @@ async fn report(
             );
         }
         for status in now.mo_refused.iter().skip(seen_gateway.mo_refused.len()) {
-            eprintln!("gateway: the shore's webhook answered HTTP {status}; the post is made again");
+            eprintln!(
+                "gateway: the shore's webhook answered HTTP {status}; the post is made again"
+            );
         }
         if let Some(rb) = rockblock {
             let log = rb.log();
@@ -462,11 +469,21 @@ mod tests {
             ),
             (&["--rockblock-webhook", "ftp://x"], "--rockblock-webhook"),
             (
-                &["--rockblock-webhook", "http://127.0.0.1:8080/", "--rockblock-format", "xml"],
+                &[
+                    "--rockblock-webhook",
+                    "http://127.0.0.1:8080/",
+                    "--rockblock-format",
+                    "xml",
+                ],
                 "json or form",
             ),
             (
-                &["--rockblock-webhook", "http://127.0.0.1:8080/", "--jwt-private-key", "/nonexistent.pem"],
+                &[
+                    "--rockblock-webhook",
+                    "http://127.0.0.1:8080/",
+                    "--jwt-private-key",
+                    "/nonexistent.pem",
+                ],
                 "--jwt-private-key",
             ),
         ] {

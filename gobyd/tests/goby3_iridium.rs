@@ -239,9 +239,17 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
                 .arg("--link")
                 .arg(&link)
                 .args(["--mt-directip", "127.0.0.1:0"])
-                .args(["--rockblock-webhook", &format!("http://127.0.0.1:{mo_port}/")])
+                .args([
+                    "--rockblock-webhook",
+                    &format!("http://127.0.0.1:{mo_port}/"),
+                ])
                 .args(["--rockblock-mt", &format!("127.0.0.1:{mt_port}")])
-                .args(["--rockblock-username", "test", "--rockblock-password", "test"])
+                .args([
+                    "--rockblock-username",
+                    "test",
+                    "--rockblock-password",
+                    "test",
+                ])
                 .args(["--session-seconds", "0.3", "--ring-repeat-seconds", "3"])
                 .env_remove("RUST_BACKTRACE");
             let mut p = Proc::spawn("emulate-iridium", command, &dir);
@@ -524,15 +532,28 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     println!("| direction | published | delivered | acked | duplicates |");
     println!("|---|---|---|---|---|");
     for (from, name) in [(0usize, "vehicle -> shore"), (1, "shore -> vehicle")] {
-        let notes: Vec<&String> = sent.iter().filter(|(f, _)| *f == from).map(|(_, n)| n).collect();
-        let delivered = notes.iter().filter(|n| got[1 - from].contains_key(**n)).count();
-        let acks = notes.iter().filter(|n| acked[from].contains_key(**n)).count();
+        let notes: Vec<&String> = sent
+            .iter()
+            .filter(|(f, _)| *f == from)
+            .map(|(_, n)| n)
+            .collect();
+        let delivered = notes
+            .iter()
+            .filter(|n| got[1 - from].contains_key(**n))
+            .count();
+        let acks = notes
+            .iter()
+            .filter(|n| acked[from].contains_key(**n))
+            .count();
         let dups: usize = notes
             .iter()
             .filter_map(|n| got[1 - from].get(*n))
             .map(|c| c.saturating_sub(1))
             .sum();
-        println!("| {name} | {} | {delivered} | {acks} | {dups} |", notes.len());
+        println!(
+            "| {name} | {} | {delivered} | {acks} | {dups} |",
+            notes.len()
+        );
     }
     if !complete {
         eprintln!("logs in {}:\n{}", dir.display(), sim.tail());

@@ -36,9 +36,11 @@ fn wire_sizes(shore_data: &Path) -> [Vec<usize>; 5] {
         let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
             continue;
         };
-        let (Some(dir), Some(hex_bytes), Some(peer)) =
-            (v["raw"].as_str(), v["bytes_hex"].as_str(), v["peer"].as_str())
-        else {
+        let (Some(dir), Some(hex_bytes), Some(peer)) = (
+            v["raw"].as_str(),
+            v["bytes_hex"].as_str(),
+            v["peer"].as_str(),
+        ) else {
             continue;
         };
         let Ok(bytes) = hex::decode(hex_bytes) else {
@@ -206,7 +208,10 @@ fn vehicle_and_shore_exchange_acked_commands_over_the_emulated_rockblock_service
         );
     }
     assert_eq!(
-        got[1].keys().filter(|k| !k.starts_with('v') && !k.starts_with("refused-v")).count(),
+        got[1]
+            .keys()
+            .filter(|k| !k.starts_with('v') && !k.starts_with("refused-v"))
+            .count(),
         0,
         "the shore delivered something not sent: {:?}",
         got[1]
@@ -248,9 +253,10 @@ const FORGER_KEY: &str =
 #[test]
 fn the_guides_copy_of_the_emulators_public_key_is_the_emulators() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let copy =
-        std::fs::read_to_string(root.join("gobyd/config/rockblock-emulator-TEST-ONLY-public-key.pem"))
-            .unwrap();
+    let copy = std::fs::read_to_string(
+        root.join("gobyd/config/rockblock-emulator-TEST-ONLY-public-key.pem"),
+    )
+    .unwrap();
     assert_eq!(
         copy,
         modemdriver::iridium::emulator::rockblock::EMULATOR_TEST_PUBLIC_KEY_PEM

@@ -14,13 +14,13 @@ use modemdriver::iridium::emulator::rockblock::{
     RockblockHandle, RockblockService, RockblockServiceConfig, WebhookTarget,
     EMULATOR_TEST_PUBLIC_KEY_PEM,
 };
-use modemdriver::iridium::rockblock::http::HttpUrl;
 use modemdriver::iridium::emulator::transceiver::TransceiverConfig;
 use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
+use modemdriver::iridium::rockblock::http::HttpUrl;
 
 use super::daemon::{free_tcp_port, Gobyd};
-use super::restart::{delivered, logged};
 use super::node::{Entry, Iridium, Node};
+use super::restart::{delivered, logged};
 
 /// The emulated transceiver's IMEI.
 pub const IMEI: &str = "300234010753370";
@@ -90,8 +90,9 @@ async fn start_with(
 ) -> Emulated {
     let mo_port = free_tcp_port();
     let mo_webhook = rockblock.map(|_| {
-        let mut target =
-            WebhookTarget::new(HttpUrl::parse(&format!("http://127.0.0.1:{mo_port}"), "/").unwrap());
+        let mut target = WebhookTarget::new(
+            HttpUrl::parse(&format!("http://127.0.0.1:{mo_port}"), "/").unwrap(),
+        );
         target.max_retry = Duration::from_secs(1);
         target
     });
@@ -274,4 +275,3 @@ pub fn latencies(sent: &[(usize, String)], data: &[PathBuf; 2]) -> String {
     }
     parts.join("; ")
 }
-

@@ -234,7 +234,10 @@ fn rockblock_problems(shore: &IridiumShoreDriverConfig) -> Vec<Problem> {
     };
     let field = |f: &str| format!("iridium_shore.rockblock.{f}");
     if rb.username.trim().is_empty() {
-        problems.push(Problem::new(field("username"), "required: the RockBLOCK account's user name"));
+        problems.push(Problem::new(
+            field("username"),
+            "required: the RockBLOCK account's user name",
+        ));
     }
     match rockblock_mt_url(rb) {
         Ok(url) if url.tls && !http::HTTPS_SUPPORTED => problems.push(Problem::new(
@@ -759,7 +762,11 @@ impl Shore {
 
 /// The DirectIP MO listener: each connection's message, read within
 /// `timeout`, goes to `tx`. Never returns (aborted with the driver).
-async fn directip_listener(listener: TcpListener, tx: mpsc::UnboundedSender<MoInput>, timeout: Duration) {
+async fn directip_listener(
+    listener: TcpListener,
+    tx: mpsc::UnboundedSender<MoInput>,
+    timeout: Duration,
+) {
     loop {
         let (stream, peer) = match listener.accept().await {
             Ok(accepted) => accepted,
@@ -855,7 +862,9 @@ async fn rockblock_webhook(
             } => {
                 tracing::warn!("RockBLOCK webhook: post from {peer} refused ({status}): {reason}");
                 MoInput::Problem(DriverStatus::LinkError {
-                    reason: format!("RockBLOCK webhook: post from {peer} refused ({status}): {reason}"),
+                    reason: format!(
+                        "RockBLOCK webhook: post from {peer} refused ({status}): {reason}"
+                    ),
                 })
             }
         };
@@ -895,7 +904,10 @@ async fn post_mt(service: &RockblockMt, request: &MtRequest, events: &EventSink)
                     code.may_pass_later(),
                 ),
                 Err(e) => (
-                    format!("RockBLOCK MT endpoint {}: unexpected answer {e}", service.url),
+                    format!(
+                        "RockBLOCK MT endpoint {}: unexpected answer {e}",
+                        service.url
+                    ),
                     true,
                 ),
             },

@@ -384,7 +384,12 @@ impl Gateway {
     }
 
     async fn deliver_mo(self) {
-        let webhook = self.shared.config.mo_webhook.as_ref().map(|w| (w, w.signer()));
+        let webhook = self
+            .shared
+            .config
+            .mo_webhook
+            .as_ref()
+            .map(|w| (w, w.signer()));
         let mut wait = self.shared.config.mo_retry;
         loop {
             let next = self.state().mo_out.front().cloned();

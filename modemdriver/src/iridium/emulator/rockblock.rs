@@ -115,7 +115,11 @@ impl WebhookTarget {
     /// Posts `mo` once: `Ok` when answered 200; `Err(Some(status))` for
     /// another status, `Err(None)` when the shore cannot be reached or
     /// does not answer.
-    pub async fn post(&self, mo: &MoMessage, signer: Option<&JwtSigner>) -> Result<(), Option<u16>> {
+    pub async fn post(
+        &self,
+        mo: &MoMessage,
+        signer: Option<&JwtSigner>,
+    ) -> Result<(), Option<u16>> {
         let mut post = self.post_of(mo);
         if let Some(signer) = signer {
             let iat = SystemTime::now()
@@ -353,8 +357,7 @@ async fn mt_post(
     RawQuery(query): RawQuery,
     body: Bytes,
 ) -> (StatusCode, String) {
-    let mut fields: Vec<(String, String)> =
-        serde_urlencoded::from_bytes(&body).unwrap_or_default();
+    let mut fields: Vec<(String, String)> = serde_urlencoded::from_bytes(&body).unwrap_or_default();
     if let Some(q) = query {
         fields.extend(serde_urlencoded::from_str::<Vec<(String, String)>>(&q).unwrap_or_default());
     }
@@ -395,9 +398,10 @@ mod tests {
         let gateway = Gateway::start(GatewayConfig::default()).await.unwrap();
         let imei = "300234010753370";
         let _rings = gateway.gateway.register(imei);
-        let service = RockblockService::start(RockblockServiceConfig::default(), gateway.gateway.clone())
-            .await
-            .unwrap();
+        let service =
+            RockblockService::start(RockblockServiceConfig::default(), gateway.gateway.clone())
+                .await
+                .unwrap();
         let url = HttpUrl::parse(&format!("http://{}", service.addr), "/rockblock/MT").unwrap();
         let post = |form: String| {
             let url = url.clone();
@@ -424,14 +428,23 @@ mod tests {
             }
             .to_form()
         };
-        assert!(matches!(post(request(b"one".to_vec(), "pass")).await, MtReply::Queued { .. }));
+        assert!(matches!(
+            post(request(b"one".to_vec(), "pass")).await,
+            MtReply::Queued { .. }
+        ));
         assert_eq!(gateway.gateway.mt_queued(imei), 1);
         let code = |r: MtReply| match r {
             MtReply::Failed { code, .. } => code,
             other => panic!("{other:?}"),
         };
-        assert_eq!(code(post(request(b"x".to_vec(), "wrong")).await), ErrorCode::InvalidCredentials);
-        assert_eq!(code(post(request(vec![0; 271], "pass")).await), ErrorCode::DataTooLong);
+        assert_eq!(
+            code(post(request(b"x".to_vec(), "wrong")).await),
+            ErrorCode::InvalidCredentials
+        );
+        assert_eq!(
+            code(post(request(vec![0; 271], "pass")).await),
+            ErrorCode::DataTooLong
+        );
         assert_eq!(
             code(post("imei=300234010753371&username=user&password=pass&data=00".into()).await),
             ErrorCode::ImeiNotFound
@@ -444,8 +457,13 @@ mod tests {
             code(post("imei=300234010753370&username=user&password=pass".into()).await),
             ErrorCode::NoData
         );
-        service.service.set_refusing(Some(ErrorCode::InsufficientCredit));
-        assert_eq!(code(post(request(b"x".to_vec(), "pass")).await), ErrorCode::InsufficientCredit);
+        service
+            .service
+            .set_refusing(Some(ErrorCode::InsufficientCredit));
+        assert_eq!(
+            code(post(request(b"x".to_vec(), "pass")).await),
+            ErrorCode::InsufficientCredit
+        );
         service.service.set_refusing(None);
         // The fields in the query, as the service's own example sends them.
         let url_q = HttpUrl::parse(

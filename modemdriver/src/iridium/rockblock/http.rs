@@ -152,7 +152,10 @@ pub async fn post(
 ) -> Result<HttpReply, String> {
     match tokio::time::timeout(timeout, post_now(url, content_type, body)).await {
         Ok(r) => r,
-        Err(_) => Err(format!("no answer from {url} in {} ms", timeout.as_millis())),
+        Err(_) => Err(format!(
+            "no answer from {url} in {} ms",
+            timeout.as_millis()
+        )),
     }
 }
 
@@ -199,7 +202,10 @@ where
     let request = Request::post(url.path.as_str())
         .header(HOST, url.host_header())
         .header(CONTENT_TYPE, content_type)
-        .header(USER_AGENT, concat!("goby-modemdriver/", env!("CARGO_PKG_VERSION")))
+        .header(
+            USER_AGENT,
+            concat!("goby-modemdriver/", env!("CARGO_PKG_VERSION")),
+        )
         .header(CONNECTION, "close")
         .body(Full::new(Bytes::from(body)))
         .map_err(|e| format!("HTTP request to {url}: {e}"))?;
@@ -265,7 +271,10 @@ mod tls {
             .clone()
     }
 
-    pub(super) async fn connect(host: &str, tcp: TcpStream) -> Result<TlsStream<TcpStream>, String> {
+    pub(super) async fn connect(
+        host: &str,
+        tcp: TcpStream,
+    ) -> Result<TlsStream<TcpStream>, String> {
         let name = ServerName::try_from(host.to_string()).map_err(|e| format!("{host:?}: {e}"))?;
         TlsConnector::from(config()?)
             .connect(name, tcp)
@@ -290,7 +299,10 @@ mod tests {
         assert_eq!((u.tls, u.port), (false, 8081));
         assert_eq!(u.to_string(), "http://127.0.0.1:8081/rockblock/MT");
         let u = HttpUrl::parse("http://[::1]:9/base/", "mt").unwrap();
-        assert_eq!((u.host.as_str(), u.port, u.path.as_str()), ("::1", 9, "/base/mt"));
+        assert_eq!(
+            (u.host.as_str(), u.port, u.path.as_str()),
+            ("::1", 9, "/base/mt")
+        );
         assert_eq!(u.to_string(), "http://[::1]:9/base/mt");
         assert_eq!(HttpUrl::parse("http://h", "").unwrap().path, "/");
         for (bad, says) in [
@@ -336,8 +348,14 @@ mod tests {
         .unwrap();
         assert_eq!((reply.status, reply.body.as_slice()), (200, &b"OK,123"[..]));
         let request = server.await.unwrap();
-        assert!(request.starts_with("POST /rockblock/MT HTTP/1.1\r\n"), "{request}");
-        assert!(request.contains(&format!("Host: 127.0.0.1:{port}\r\n")), "{request}");
+        assert!(
+            request.starts_with("POST /rockblock/MT HTTP/1.1\r\n"),
+            "{request}"
+        );
+        assert!(
+            request.contains(&format!("Host: 127.0.0.1:{port}\r\n")),
+            "{request}"
+        );
         assert!(request.contains("Content-Length: 3\r\n"), "{request}");
         // Nobody there.
         drop(url);

@@ -208,8 +208,14 @@ impl MoPost {
         opt("momsn", self.momsn.map(|n| n.to_string()));
         opt("serial", self.serial.map(|n| n.to_string()));
         opt("transmit_time", self.transmit_time.clone());
-        opt("iridium_latitude", self.iridium_latitude.map(|n| n.to_string()));
-        opt("iridium_longitude", self.iridium_longitude.map(|n| n.to_string()));
+        opt(
+            "iridium_latitude",
+            self.iridium_latitude.map(|n| n.to_string()),
+        );
+        opt(
+            "iridium_longitude",
+            self.iridium_longitude.map(|n| n.to_string()),
+        );
         opt("iridium_cep", self.iridium_cep.map(|n| n.to_string()));
         opt("device_type", self.device_type.clone());
         out.push(("data", hex::encode(&self.data)));
@@ -297,9 +303,10 @@ impl JwtVerifier {
     /// Takes `post` when its token verifies and says what the post says.
     pub fn verify(&self, post: &MoPost) -> Result<(), MoRefusal> {
         let token = post.jwt.as_deref().ok_or(MoRefusal::NoToken)?;
-        let claims: Map<String, Value> = jsonwebtoken::decode(token.trim(), &self.key, &self.validation)
-            .map_err(|e| MoRefusal::BadToken(e.to_string()))?
-            .claims;
+        let claims: Map<String, Value> =
+            jsonwebtoken::decode(token.trim(), &self.key, &self.validation)
+                .map_err(|e| MoRefusal::BadToken(e.to_string()))?
+                .claims;
         let claim = |name: &str| claims.get(name).and_then(json_text);
         let differs = |what: &str| {
             MoRefusal::BadToken(format!(
@@ -442,7 +449,10 @@ mod tests {
             jwt: Some("not.a.token".into()),
             ..post()
         };
-        assert!(matches!(verifier.verify(&garbage), Err(MoRefusal::BadToken(_))));
+        assert!(matches!(
+            verifier.verify(&garbage),
+            Err(MoRefusal::BadToken(_))
+        ));
         // A valid token on other data.
         let altered = MoPost {
             data: b"other".to_vec(),
@@ -479,7 +489,10 @@ mod tests {
             jwt: Some(none),
             ..post()
         };
-        assert!(matches!(verifier.verify(&unsigned), Err(MoRefusal::BadToken(_))));
+        assert!(matches!(
+            verifier.verify(&unsigned),
+            Err(MoRefusal::BadToken(_))
+        ));
         let hs = jsonwebtoken::encode(
             &Header::new(Algorithm::HS256),
             &serde_json::from_str::<Value>(claims).unwrap(),

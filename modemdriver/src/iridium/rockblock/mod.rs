@@ -32,7 +32,11 @@ pub fn transmit_time_seconds(text: &str) -> Option<u64> {
     if d.next().is_some() || t.next().is_some() {
         return None;
     }
-    let y = if date.split('-').next()?.len() == 2 { 2000 + y } else { y };
+    let y = if date.split('-').next()?.len() == 2 {
+        2000 + y
+    } else {
+        y
+    };
     if !(1..=12).contains(&m) || !(1..=31).contains(&day) || hh > 23 || mm > 59 || ss > 60 {
         return None;
     }
@@ -76,13 +80,30 @@ mod tests {
 
     #[test]
     fn transmit_times_both_ways() {
-        assert_eq!(transmit_time_seconds("23-09-05 04:33:24"), Some(1_693_888_404));
-        assert_eq!(transmit_time_seconds("2023-03-14T09:00:14Z"), Some(1_678_784_414));
+        assert_eq!(
+            transmit_time_seconds("23-09-05 04:33:24"),
+            Some(1_693_888_404)
+        );
+        assert_eq!(
+            transmit_time_seconds("2023-03-14T09:00:14Z"),
+            Some(1_678_784_414)
+        );
         assert_eq!(transmit_time_seconds("1970-01-01 00:00:00"), Some(0));
-        for bad in ["", "23-09-05", "23-13-05 00:00:00", "x-1-1 0:0:0", "23-09-05 04:33:24:1"] {
+        for bad in [
+            "",
+            "23-09-05",
+            "23-13-05 00:00:00",
+            "x-1-1 0:0:0",
+            "23-09-05 04:33:24:1",
+        ] {
             assert_eq!(transmit_time_seconds(bad), None, "{bad}");
         }
-        for t in [946_684_800, 1_693_888_404, 951_782_400 /* 2000-02-29 */, 4_102_444_799] {
+        for t in [
+            946_684_800,
+            1_693_888_404,
+            951_782_400, /* 2000-02-29 */
+            4_102_444_799,
+        ] {
             let text = transmit_time_text(t);
             assert_eq!(transmit_time_seconds(&text), Some(t), "{text}");
         }

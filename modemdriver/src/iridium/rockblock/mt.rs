@@ -222,9 +222,9 @@ impl MtReply {
             }
             Some("FAILED") => {
                 let code = parts.next().map(str::trim).unwrap_or_default();
-                let code: i32 = code
-                    .parse()
-                    .map_err(|_| format!("{:?}: the error code {code:?} is not a number", shown()))?;
+                let code: i32 = code.parse().map_err(|_| {
+                    format!("{:?}: the error code {code:?} is not a number", shown())
+                })?;
                 Ok(MtReply::Failed {
                     code: ErrorCode::from_code(code),
                     text: parts.next().unwrap_or_default().trim().to_string(),
