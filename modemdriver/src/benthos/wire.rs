@@ -288,7 +288,7 @@ pub enum ModemLine {
 /// Decodes hex digits, spaces ignored.
 pub fn hex_decode(text: &str) -> Result<Vec<u8>, String> {
     let digits: Vec<u8> = text.bytes().filter(|b| *b != b' ').collect();
-    if digits.len() % 2 != 0 {
+    if !digits.len().is_multiple_of(2) {
         return Err(bad("an odd number of hex digits"));
     }
     digits
@@ -503,7 +503,7 @@ struct Bits {
 impl Bits {
     fn put(&mut self, value: u32, width: usize) {
         for i in 0..width {
-            if self.len % 8 == 0 {
+            if self.len.is_multiple_of(8) {
                 self.bytes.push(0);
             }
             if value >> i & 1 != 0 {

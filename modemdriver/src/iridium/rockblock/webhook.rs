@@ -106,9 +106,8 @@ async fn take(
 ) -> (StatusCode, &'static str) {
     let content_type = headers.get(CONTENT_TYPE).and_then(|v| v.to_str().ok());
     let checked = MoPost::parse(content_type, &body).and_then(|post| {
-        match &shared.config.verifier {
-            Some(v) => v.verify(&post)?,
-            None => {}
+        if let Some(v) = &shared.config.verifier {
+            v.verify(&post)?;
         }
         Ok(post)
     });
