@@ -72,6 +72,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // the Micro-Modem settings (LBL parameters and all) would more than
     // double its size for the few that carry them.
     config.boxed(".goby.acomms.protobuf.ModemTransmission.micromodem");
+    // The same for the Popoto's and the Benthos ATM-900's.
+    config.boxed(".goby.acomms.protobuf.ModemTransmission.popoto");
+    config.boxed(".goby.acomms.protobuf.ModemTransmission.benthos");
     config.out_dir(&out_dir);
     config.compile_fds(fds)?;
     Ok(())

@@ -22,6 +22,12 @@
 //! - [`evologics::EvologicsDriver`]: EvoLogics S2C modems, the AT command
 //!   set over TCP or serial (`driver_name: "EVOLOGICS_S2C"`);
 //!   [`evologics::emulator`] speaks the modem's side.
+//! - [`popoto::PopotoDriver`]: Popoto modems, the JSON command interface
+//!   over TCP or the shell over serial (`driver_type: DRIVER_POPOTO`), as
+//!   Goby3's driver; [`popoto::emulator`] speaks the modem's side.
+//! - [`benthos::BenthosDriver`]: Teledyne Benthos ATM-900 modems on their
+//!   serial line (`driver_type: DRIVER_BENTHOS_ATM900`), as Goby3's
+//!   driver; [`benthos::emulator`] speaks the modem's side.
 //! - [`iridium::IridiumDriver`]: an Iridium 9602/9603 (SBD AT commands) on a
 //!   serial port, and [`iridium::IridiumShoreDriver`]: Iridium's DirectIP on
 //!   shore, both in Goby3's framing; [`iridium::emulator`] emulates a 9603
@@ -33,7 +39,9 @@
 //!
 //! Layers, one concept per module: [`link`] moves lines or datagrams and
 //! composes a fault injector ([`link::fault`]) and a raw tracer
-//! ([`link::trace`]) around any device; [`micromodem::nmea`] and
+//! ([`link::trace`]) around any device; [`stream_shell`] runs a sans-IO
+//! driver machine on a TCP connection or serial line, and
+//! [`emulator_host`] an emulated modem's logic on TCP or a pty; [`micromodem::nmea`] and
 //! [`micromodem::sentence`] are the wire representations; the drivers sit on
 //! top.
 

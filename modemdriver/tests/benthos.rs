@@ -173,7 +173,7 @@ async fn two_drivers_over_two_emulated_modems() {
     let r = exchange(&mut one, &mut two, 2, 5, &[b"one to two".to_vec()], true).await;
     assert_eq!(r.frame, vec![b"one to two".to_vec()]);
     assert_eq!((r.src(), r.dest()), (1, 2));
-    let s = r.benthos.as_ref().unwrap().receive_stat.clone().unwrap();
+    let s = r.benthos.as_ref().unwrap().receive_stat.unwrap();
     assert_eq!(s.crc(), CrcState::CrcPass);
     assert!(s.snr.is_some() && s.multipath_delay.is_some(), "{s:?}");
 

@@ -85,7 +85,7 @@ fn matches(expect: &str, event: &DriverEvent) -> bool {
                 && t.unique_id.is_some()
         }
         ("received", DriverEvent::Received(t)) if t.r#type() == TransmissionType::Data => {
-            let s = t.benthos.as_ref().unwrap().receive_stat.clone().unwrap();
+            let s = t.benthos.as_ref().unwrap().receive_stat.unwrap();
             let mut ok = t.src().to_string() == words[1]
                 && t.dest().to_string() == words[2]
                 && t.frame == vec![words[3].as_bytes().to_vec()]

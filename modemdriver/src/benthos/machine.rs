@@ -624,7 +624,7 @@ impl Machine {
             time: Some(self.now.micros),
             r#type: Some(TransmissionType::Data as i32),
             frame_start: Some(0),
-            benthos: Some(benthos),
+            benthos: Some(Box::new(benthos)),
             ..Default::default()
         };
         if !stats.crc_pass {
@@ -676,7 +676,7 @@ impl Machine {
                     r#type: Some(TransmissionType::Ack as i32),
                     acked_frame: acked,
                     unique_id: o.unique_id,
-                    benthos: mt.benthos,
+                    benthos: mt.benthos.clone(),
                     ..Default::default()
                 };
                 self.emit(DriverEvent::Received(ack));
@@ -841,7 +841,7 @@ impl Machine {
                 match mt.r#type() {
                     TransmissionType::Data => {}
                     TransmissionType::DriverSpecific => {
-                        let kind = mt.benthos.unwrap_or_default().r#type();
+                        let kind = mt.benthos.as_deref().copied().unwrap_or_default().r#type();
                         if kind == BenthosType::BenthosTwoWayPing {
                             return self.specific(BenthosSpecific {
                                 r#type: SpecificType::BenthosTwoWayPing as i32,

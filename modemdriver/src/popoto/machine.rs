@@ -349,12 +349,11 @@ impl Machine {
                 return;
             }
         };
-        if self.starting.take().is_some() || !self.ready {
+        // The first answer after the setup: the modem is there.
+        if !self.ready {
             self.starting = None;
-            if !self.ready {
-                self.ready = true;
-                self.status(DriverStatus::Ready);
-            }
+            self.ready = true;
+            self.status(DriverStatus::Ready);
         }
         match parsed {
             ModemLine::Header(h) => {
@@ -544,10 +543,10 @@ impl Machine {
                     ack_requested: Some(ack_requested),
                     frame: vec![data[1..].to_vec()],
                     frame_start: Some(0),
-                    popoto: Some(PopotoTransmission {
+                    popoto: Some(Box::new(PopotoTransmission {
                         receive_stat: vec![stat],
                         ..Default::default()
-                    }),
+                    })),
                     ..Default::default()
                 };
                 self.held = Some((mt, self.now.at + self.s.statistics_wait));
@@ -602,7 +601,7 @@ impl Machine {
                 match mt.r#type() {
                     TransmissionType::Data => {}
                     TransmissionType::DriverSpecific => {
-                        let p = mt.popoto.clone().unwrap_or_default();
+                        let p = mt.popoto.as_deref().cloned().unwrap_or_default();
                         let request = PopotoSpecific {
                             r#type: p.r#type.unwrap_or(0),
                             dest: mt.dest,
