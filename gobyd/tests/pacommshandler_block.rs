@@ -390,7 +390,6 @@ fn keys_gobyd_cannot_map_are_refused_at_their_place_in_the_mission_file() {
     let refused = r#"  load_shared_library: "/usr/lib/libmy_dccl_messages.so"
   listen_driver_cfg { driver_type: DRIVER_UDP }
   driver_failure_approach { technique: MOVE_LISTEN_DRIVER_TO_PRIMARY }
-  route_cfg { route { hop: 1 hop: 3 } }
   dccl_cfg { id_codec: "my.id.codec" }
   multiplex_create_moos_var: "LIAISON_COMMANDER_OUT"
   dccl_frontseat_forward_name: "mission.VehicleStatus"
@@ -405,7 +404,7 @@ fn keys_gobyd_cannot_map_are_refused_at_their_place_in_the_mission_file() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(
-        stderr.starts_with("gobyd: error: configuration: 10 settings cannot work:"),
+        stderr.starts_with("gobyd: error: configuration: 9 settings cannot work:"),
         "{stderr}"
     );
     // Each one a line, in the order of the file, with what to do.
@@ -414,7 +413,6 @@ fn keys_gobyd_cannot_map_are_refused_at_their_place_in_the_mission_file() {
         ("load_shared_library", 0, "load_shared_library[0]: gobyd loads no C++ libraries: give the .proto files \"/usr/lib/libmy_dccl_messages.so\" was generated from, as dccl { proto_file: \"PATH\" }"),
         ("listen_driver_cfg", 0, "listen_driver_cfg[0]: gobyd runs one driver"),
         ("technique", 0, "driver_failure_approach.technique: MOVE_LISTEN_DRIVER_TO_PRIMARY needs a listening driver"),
-        ("route_cfg", 0, "route_cfg: gobyd does not route messages between subnets: remove route_cfg"),
         ("id_codec", 0, "dccl_cfg.id_codec: gobyd codes DCCL ids with DCCL's default identifier codec"),
         ("multiplex_create_moos_var", 0, "multiplex_create_moos_var[0]: gobyd has no multiplexed create variable"),
         ("dccl_frontseat_forward_name", 0, "dccl_frontseat_forward_name[0]: gobyd forwards no DCCL messages to iFrontSeat"),
@@ -430,6 +428,33 @@ fn keys_gobyd_cannot_map_are_refused_at_their_place_in_the_mission_file() {
             "expected {at}: {says}\n got {line}"
         );
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_goby3_route_cfg_is_read_as_the_network_section() {
+    let dir = scratch("pacomms-block", "route");
+    let ports = [free_udp_port(), free_udp_port()];
+    let text = goby3_mission(&dir, 9000, ports).replace(
+        "  modem_id: 1\n",
+        "  modem_id: 1\n  route_cfg { route { hop: 1 hop: 2 hop: 3 } subnet_mask: 4294967040 }\n",
+    );
+    let mission = write_mission(&dir, "alpha.moos", &text);
+    let out = check(&mission);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "gobyd: note: {}: route_cfg read as the network section",
+            place(&mission, &text, "route_cfg", 0)
+        )),
+        "{stderr}"
+    );
+    let config = mission_file::read(&mission, "gobyd").unwrap().config;
+    assert!(config.route_cfg.is_none());
+    let network = config.network.as_ref().expect("the network section");
+    assert_eq!(network.route.as_ref().unwrap().hop, [1, 2, 3]);
+    assert_eq!(network.subnet_mask, Some(0xFFFF_FF00));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
