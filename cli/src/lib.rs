@@ -70,6 +70,7 @@ pub mod plot;
 pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
+mod stop;
 
 use std::ffi::OsString;
 use std::fmt;

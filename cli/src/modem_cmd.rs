@@ -407,34 +407,6 @@ async fn backend_driver(
     }
 }
 
-/// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
-/// before announcing anything); the future completes on either.
-pub(crate) fn interrupted() -> impl std::future::Future<Output = ()> {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{signal, SignalKind};
-        let interrupt = signal(SignalKind::interrupt());
-        let terminate = signal(SignalKind::terminate());
-        async move {
-            match (interrupt, terminate) {
-                (Ok(mut interrupt), Ok(mut terminate)) => {
-                    tokio::select! {
-                        _ = interrupt.recv() => {}
-                        _ = terminate.recv() => {}
-                    }
-                }
-                _ => {
-                    let _ = tokio::signal::ctrl_c().await;
-                }
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    async {
-        let _ = tokio::signal::ctrl_c().await;
-    }
-}
-
 /// Tells on stderr, as they happen, of host lines an emulated modem ignored
 /// (a Micro-Modem 2 ignores commands during its configuration echo; a
 /// sleeping or rebooting modem hears nothing). Never completes.
@@ -475,7 +447,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = interrupted();
+        let end = crate::stop::run_ends(duration);
         let medium = Medium::new();
         let mut emulators: Vec<EmulatorHandle> = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -522,12 +494,6 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             stdout.flush()?;
             emulators.push(handle);
         }
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
-            }
-        };
         tokio::select! {
             () = end => {}
             () = report_ignored(&args.modem_ids, &emulators) => {}
@@ -593,7 +559,7 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = interrupted();
+        let end = crate::stop::run_ends(duration);
         let medium = Medium::new();
         let mut emulators = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -655,12 +621,6 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
                     }
                 }
                 None => std::future::pending::<()>().await,
-            }
-        };
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
             }
         };
         tokio::select! {
@@ -779,7 +739,7 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = interrupted();
+        let end = crate::stop::run_ends(duration);
         let medium = Medium::new();
         let mut emulators = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -843,12 +803,6 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
                     }
                 }
                 None => std::future::pending::<()>().await,
-            }
-        };
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
             }
         };
         tokio::select! {
