@@ -677,6 +677,43 @@ mod tests {
     }
 
     #[test]
+    fn set_fields_are_written_at_any_value_and_unset_ones_left_out() {
+        // proto2 (every message of the project): presence, not the value,
+        // decides, as docs/json-protocol.md says.
+        let slot = ModemTransmission {
+            src: Some(1),
+            slot_index: Some(0),
+            frame_start: Some(0),
+            ack_requested: Some(false),
+            ..Default::default()
+        };
+        let line = event_line(
+            &DaemonEvent::Modem(ModemEvent::SlotStart {
+                slot,
+                initiated: None,
+            }),
+            |_| String::new(),
+        )
+        .unwrap();
+        for set in [
+            r#""slot_index":0"#,
+            r#""frame_start":0"#,
+            r#""ack_requested":false"#,
+        ] {
+            assert!(line.contains(set), "{set} missing: {line}");
+        }
+        for unset in ["\"rate\"", "\"dest\"", "\"type\"", "\"max_frame_bytes\""] {
+            assert!(!line.contains(unset), "{unset} written: {line}");
+        }
+        // A required field at its default is written; an unset optional
+        // one is not.
+        let command = protos::goby::example::Command::default().transcode_to_dynamic();
+        let msg = message_json(&command).to_string();
+        assert!(msg.contains(r#""destination":0"#), "{msg}");
+        assert!(!msg.contains("note"), "{msg}");
+    }
+
+    #[test]
     fn received_lines_carry_their_reception() {
         let message = protos::goby::example::Command::default().transcode_to_dynamic();
         let received = queue::ReceivedMessage {
