@@ -545,6 +545,14 @@ fn json_over_udp_and_a_clean_stop_on_sigterm() {
         seen.iter().any(|v| v["ack"] == "goby.example.Command"),
         "{seen:?}"
     );
+    // Never over a link, never journaled (docs/json-protocol.md): the
+    // received line has no `link`, the ack no `id`, by this node, frame 0.
+    let received = seen.iter().find(|v| v["received"].is_string()).unwrap();
+    assert!(received.get("link").is_none(), "{received}");
+    assert_eq!(received["src"], 1, "{received}");
+    let ack = seen.iter().find(|v| v["ack"].is_string()).unwrap();
+    assert!(ack.get("id").is_none(), "{ack}");
+    assert_eq!((&ack["by"], &ack["frame"]), (&1.into(), &0.into()), "{ack}");
     socket.send_to(b"{\"publish\": 7}", &daemon).unwrap();
     let error = receive();
     assert!(
