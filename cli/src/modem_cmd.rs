@@ -51,16 +51,31 @@ use crate::{CliError, Status};
 /// Subcommands of `goby modem`.
 #[derive(Debug, Subcommand)]
 pub enum ModemCommand {
-    /// Emulate WHOI Micro-Modems on pseudo-terminals for bench tests without
-    /// hardware. Prints one line per modem, `modem ID: PATH`; connect a
-    /// Micro-Modem driver to PATH. Runs until interrupted (or --duration).
+    /// Emulate acoustic modems for bench tests without hardware: WHOI
+    /// Micro-Modems (the default), EvoLogics S2C, Popoto or Benthos ATM-900
+    /// (--kind).
+    ///
+    /// Micro-Modems speak NMEA on pseudo-terminals (or --serial), EvoLogics
+    /// S2C modems their AT interface on TCP (or --pty), Popoto modems their
+    /// JSON interface on TCP (or their shell with --pty), Benthos ATM-900s
+    /// their serial interface on pseudo-terminals (or TCP with --tcp-port).
+    /// Prints one line per modem, `modem ID: PATH` or `modem ID: tcp
+    /// ADDR`, where the matching driver connects (gobyd's
+    /// DRIVER_WHOI_MICROMODEM, driver_name "EVOLOGICS_S2C", DRIVER_POPOTO,
+    /// DRIVER_BENTHOS_ATM900). Several modems in one process hear each other
+    /// through the acoustic channel simulator; one modem joins emulators in
+    /// other processes over UDP (--udp-local, --udp-peer). Runs until
+    /// SIGINT or SIGTERM, or for --duration.
     Emulate(EmulateArgs),
-    /// Emulate Iridium 9603 transceivers on pseudo-terminals and the Iridium
-    /// gateway they reach, with DirectIP towards the shore. Prints
+    /// Emulate Iridium 9603 transceivers and the gateway they reach (DirectIP
+    /// towards the shore, or the RockBLOCK web service).
+    ///
+    /// The transceivers speak the SBD AT commands on pseudo-terminals. Prints
     /// `transceiver IMEI: PATH` per transceiver (a vehicle's DRIVER_IRIDIUM
     /// opens PATH) and the gateway's DirectIP addresses (a shore's
     /// DRIVER_IRIDIUM_SHORE listens for MO on --mo-directip and sends MT to
-    /// the MT address). Runs until interrupted (or --duration).
+    /// the MT address); with --rockblock-webhook, the RockBLOCK web service
+    /// instead of DirectIP. Runs until SIGINT or SIGTERM, or for --duration.
     EmulateIridium(crate::iridium_emulate::EmulateIridiumArgs),
 }
 
