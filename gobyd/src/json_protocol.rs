@@ -913,6 +913,79 @@ mod tests {
             .collect()
     }
 
+    /// Every kind of driver status has its row in the guide's table of
+    /// driver status kinds (a new kind fails to compile here until it is
+    /// listed, then fails until it is documented).
+    #[test]
+    fn every_driver_status_kind_is_in_the_guide() {
+        use modemdriver::DriverStatus as S;
+        let guide = include_str!("../../docs/json-protocol.md");
+        let start = guide
+            .find("### Driver status kinds")
+            .expect("the table of driver status kinds");
+        let section = &guide[start..];
+        let section = &section[..section[4..].find("\n#").map_or(section.len(), |i| i + 4)];
+        let text = || String::new();
+        let all = [
+            S::Ready,
+            S::BadChecksum { line: text() },
+            S::Unparseable {
+                line: text(),
+                reason: text(),
+            },
+            S::ResponseTimeout {
+                command: text(),
+                attempt: 1,
+            },
+            S::Retrying {
+                reason: text(),
+                attempt: 2,
+            },
+            S::ModemReset,
+            S::ModemSilent { seconds: 1.0 },
+            S::ModemError { message: text() },
+            S::Disconnected { reason: text() },
+            S::Reconnected,
+            S::DataRejected { reason: text() },
+            S::LinkError { reason: text() },
+            S::Skipped { reason: text() },
+            S::Degraded { reason: text() },
+            S::Signal {
+                bars: Some(3),
+                service: Some(true),
+            },
+            S::Unsupported { message: text() },
+        ];
+        for status in &all {
+            // Exhaustive: a kind added to the driver must be added above.
+            match status {
+                S::Ready
+                | S::BadChecksum { .. }
+                | S::Unparseable { .. }
+                | S::ResponseTimeout { .. }
+                | S::Retrying { .. }
+                | S::ModemReset
+                | S::ModemSilent { .. }
+                | S::ModemError { .. }
+                | S::Disconnected { .. }
+                | S::Reconnected
+                | S::DataRejected { .. }
+                | S::LinkError { .. }
+                | S::Skipped { .. }
+                | S::Degraded { .. }
+                | S::Signal { .. }
+                | S::Unsupported { .. } => {}
+            }
+            let row = format!("| `{}` |", status.kind());
+            assert!(
+                section.lines().any(|l| l.starts_with(&row)),
+                "no row {row} in the guide's table of driver status kinds"
+            );
+        }
+        let rows = section.lines().filter(|l| l.starts_with("| `")).count();
+        assert_eq!(rows, all.len(), "a row for a kind the driver has not");
+    }
+
     /// The guide's table of the JSON interface (`docs/json-protocol.md`) is
     /// the protocol's reference: every line kind the daemon renders is
     /// there, with each of its keys.
