@@ -15,10 +15,12 @@ use crate::{CliError, GobyCli, Status};
 #[derive(Debug, Args)]
 #[command(
     long_about = "Print a shell completion script for goby on standard output.\n\n\
+    The directory the script is written into must exist (mkdir -p).\n\n\
     Examples:\n  \
+    mkdir -p ~/.local/share/bash-completion/completions\n  \
     goby completions bash > ~/.local/share/bash-completion/completions/goby\n  \
-    goby completions zsh > ~/.zfunc/_goby      # with fpath+=~/.zfunc before compinit\n  \
-    goby completions fish > ~/.config/fish/completions/goby.fish\n  \
+    mkdir -p ~/.zfunc && goby completions zsh > ~/.zfunc/_goby      # with fpath+=~/.zfunc before compinit\n  \
+    mkdir -p ~/.config/fish/completions && goby completions fish > ~/.config/fish/completions/goby.fish\n  \
     goby completions powershell >> $PROFILE"
 )]
 pub struct CompletionsArgs {
@@ -33,8 +35,10 @@ pub struct CompletionsArgs {
     long_about = "Write goby's manual pages into DIR (created if missing): goby.1 and \
     one page per subcommand (goby-dccl.1, goby-moos-poke.1, ...). The paths written are \
     printed, one a line.\n\n\
+    ~/.cargo/share/man/man1 is where man finds them for a user with ~/.cargo/bin on \
+    the PATH (man searches ../share/man beside each PATH directory; see manpath).\n\n\
     Example:\n  \
-    goby man ~/.local/share/man/man1 && man goby-moos-spy"
+    goby man ~/.cargo/share/man/man1 && man goby-moos-spy"
 )]
 pub struct ManArgs {
     /// Directory to write the pages into.

@@ -339,7 +339,7 @@ pub fn emulate_iridium(
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = super::modem_cmd::interrupted();
+        let end = crate::stop::run_ends(duration);
         let mo = gateway_config.mo_destination;
         let webhook_url = gateway_config.mo_webhook.as_ref().map(|w| w.url.to_string());
         let gateway = Gateway::start(gateway_config).await.map_err(|e| {
@@ -396,12 +396,6 @@ pub fn emulate_iridium(
             )?,
         }
         stdout.flush()?;
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
-            }
-        };
         tokio::select! {
             () = end => {}
             () = report(&args.imeis, &handles, &gateway.gateway, rockblock.as_ref().map(|r| &r.service)) => {}

@@ -70,6 +70,7 @@ pub mod plot;
 pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
+mod stop;
 
 use std::ffi::OsString;
 use std::fmt;
@@ -118,7 +119,7 @@ pub enum GobyCommand {
     /// Position telemetry: synthetic trajectories and the observer/model evaluation.
     #[command(subcommand)]
     Position(position_cmd::PositionCommand),
-    /// Modem drivers: emulate WHOI Micro-Modems, or Iridium transceivers and their gateway, for bench tests.
+    /// Emulated modems for bench tests without hardware: WHOI Micro-Modems, EvoLogics S2C, Popoto and Benthos ATM-900 (emulate --kind), Iridium 9603 transceivers with their gateway and the RockBLOCK service (emulate-iridium).
     #[command(subcommand)]
     Modem(modem_cmd::ModemCommand),
     /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.

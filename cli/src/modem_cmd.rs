@@ -51,16 +51,31 @@ use crate::{CliError, Status};
 /// Subcommands of `goby modem`.
 #[derive(Debug, Subcommand)]
 pub enum ModemCommand {
-    /// Emulate WHOI Micro-Modems on pseudo-terminals for bench tests without
-    /// hardware. Prints one line per modem, `modem ID: PATH`; connect a
-    /// Micro-Modem driver to PATH. Runs until interrupted (or --duration).
+    /// Emulate acoustic modems for bench tests without hardware: WHOI
+    /// Micro-Modems (the default), EvoLogics S2C, Popoto or Benthos ATM-900
+    /// (--kind).
+    ///
+    /// Micro-Modems speak NMEA on pseudo-terminals (or --serial), EvoLogics
+    /// S2C modems their AT interface on TCP (or --pty), Popoto modems their
+    /// JSON interface on TCP (or their shell with --pty), Benthos ATM-900s
+    /// their serial interface on pseudo-terminals (or TCP with --tcp-port).
+    /// Prints one line per modem, `modem ID: PATH` or `modem ID: tcp
+    /// ADDR`, where the matching driver connects (gobyd's
+    /// DRIVER_WHOI_MICROMODEM, driver_name "EVOLOGICS_S2C", DRIVER_POPOTO,
+    /// DRIVER_BENTHOS_ATM900). Several modems in one process hear each other
+    /// through the acoustic channel simulator; one modem joins emulators in
+    /// other processes over UDP (--udp-local, --udp-peer). Runs until
+    /// SIGINT or SIGTERM, or for --duration.
     Emulate(EmulateArgs),
-    /// Emulate Iridium 9603 transceivers on pseudo-terminals and the Iridium
-    /// gateway they reach, with DirectIP towards the shore. Prints
+    /// Emulate Iridium 9603 transceivers and the gateway they reach (DirectIP
+    /// towards the shore, or the RockBLOCK web service).
+    ///
+    /// The transceivers speak the SBD AT commands on pseudo-terminals. Prints
     /// `transceiver IMEI: PATH` per transceiver (a vehicle's DRIVER_IRIDIUM
     /// opens PATH) and the gateway's DirectIP addresses (a shore's
     /// DRIVER_IRIDIUM_SHORE listens for MO on --mo-directip and sends MT to
-    /// the MT address). Runs until interrupted (or --duration).
+    /// the MT address); with --rockblock-webhook, the RockBLOCK web service
+    /// instead of DirectIP. Runs until SIGINT or SIGTERM, or for --duration.
     EmulateIridium(crate::iridium_emulate::EmulateIridiumArgs),
 }
 
@@ -407,34 +422,6 @@ async fn backend_driver(
     }
 }
 
-/// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
-/// before announcing anything); the future completes on either.
-pub(crate) fn interrupted() -> impl std::future::Future<Output = ()> {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{signal, SignalKind};
-        let interrupt = signal(SignalKind::interrupt());
-        let terminate = signal(SignalKind::terminate());
-        async move {
-            match (interrupt, terminate) {
-                (Ok(mut interrupt), Ok(mut terminate)) => {
-                    tokio::select! {
-                        _ = interrupt.recv() => {}
-                        _ = terminate.recv() => {}
-                    }
-                }
-                _ => {
-                    let _ = tokio::signal::ctrl_c().await;
-                }
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    async {
-        let _ = tokio::signal::ctrl_c().await;
-    }
-}
-
 /// Tells on stderr, as they happen, of host lines an emulated modem ignored
 /// (a Micro-Modem 2 ignores commands during its configuration echo; a
 /// sleeping or rebooting modem hears nothing). Never completes.
@@ -475,7 +462,7 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = interrupted();
+        let end = crate::stop::run_ends(duration);
         let medium = Medium::new();
         let mut emulators: Vec<EmulatorHandle> = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -522,12 +509,6 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             stdout.flush()?;
             emulators.push(handle);
         }
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
-            }
-        };
         tokio::select! {
             () = end => {}
             () = report_ignored(&args.modem_ids, &emulators) => {}
@@ -593,7 +574,7 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = interrupted();
+        let end = crate::stop::run_ends(duration);
         let medium = Medium::new();
         let mut emulators = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -655,12 +636,6 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
                     }
                 }
                 None => std::future::pending::<()>().await,
-            }
-        };
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
             }
         };
         tokio::select! {
@@ -779,7 +754,7 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
-        let stop = interrupted();
+        let end = crate::stop::run_ends(duration);
         let medium = Medium::new();
         let mut emulators = Vec::new();
         for (i, &modem_id) in args.modem_ids.iter().enumerate() {
@@ -843,12 +818,6 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
                     }
                 }
                 None => std::future::pending::<()>().await,
-            }
-        };
-        let end = async {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => stop.await,
             }
         };
         tokio::select! {

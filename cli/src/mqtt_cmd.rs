@@ -16,7 +16,10 @@ pub enum MqttCommand {
     /// Print a live table of the fleet under PREFIX: nodes, bridge state,
     /// queued messages, last reception (link), last messages, driver state.
     /// On a terminal the table is redrawn on every change; otherwise one
-    /// line per publication is printed, and the table at the end.
+    /// line per publication is printed (and flushed: a line at a time
+    /// through a pipe), and the table at the end. Runs until interrupted
+    /// (SIGINT or SIGTERM: the table is printed and it exits 0), or for
+    /// --duration, or --once.
     Watch(WatchArgs),
 }
 
@@ -91,6 +94,7 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let mut fleet = Fleet::new(prefix);
     // Publications under the prefix, whether or not from a gateway.
     let mut heard = 0usize;
+    let started = std::time::Instant::now();
     runtime.block_on(async {
         let mut options =
             MqttOptions::new(format!("goby-watch-{}", std::process::id()), host, port);
@@ -100,7 +104,10 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             .subscribe(format!("{prefix}/#"), QoS::AtMostOnce)
             .await
             .map_err(|e| CliError::setup(e.to_string()))?;
-        let end = duration.map(|d| tokio::time::Instant::now() + d);
+        // SIGINT, SIGTERM or --duration: the table is printed, as at the
+        // end of --duration, and nothing printed is lost.
+        let end = crate::stop::run_ends(duration);
+        tokio::pin!(end);
         let quiet = ONCE_QUIET;
         let mut connected = false;
         loop {
@@ -112,7 +119,7 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             let polled = tokio::select! {
                 polled = eventloop.poll() => polled,
                 () = tokio::time::sleep(wait) => break,
-                () = async { match end { Some(end) => tokio::time::sleep_until(end).await, None => std::future::pending().await } } => break,
+                () = &mut end => break,
             };
             match polled {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => connected = true,
@@ -123,7 +130,9 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
                             write!(stdout, "\x1b[H\x1b[2J{}", fleet.table(now()))?;
                             stdout.flush()?;
                         } else if !args.once {
+                            // A line at a time, piped or not.
                             writeln!(stdout, "{line}")?;
+                            stdout.flush()?;
                         }
                     }
                 }
@@ -143,10 +152,11 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         Ok::<(), CliError>(())
     })?;
     if fleet.nodes.is_empty() {
+        let watched = (!args.once).then(|| started.elapsed());
         return Err(CliError::setup(nothing_heard(
             prefix,
             &args.broker,
-            duration,
+            watched,
             heard,
         )));
     }
@@ -161,11 +171,13 @@ fn watch(args: &WatchArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
 const ONCE_QUIET: Duration = Duration::from_millis(500);
 
 /// What `watch` says when no gateway was heard under `prefix` within its
-/// wait (`--once`: the retained values; `--duration`: that long);
-/// `heard` publications under the prefix came, none from a gateway.
-fn nothing_heard(prefix: &str, broker: &str, duration: Option<Duration>, heard: usize) -> String {
-    let wait = match duration {
-        Some(d) => format!("in the {} s watched", d.as_secs_f64()),
+/// wait (`watched`: `None` with `--once`, which waits for the retained
+/// values; otherwise how long it watched, to the end of `--duration` or to
+/// SIGINT/SIGTERM); `heard` publications under the prefix came, none from a
+/// gateway.
+fn nothing_heard(prefix: &str, broker: &str, watched: Option<Duration>, heard: usize) -> String {
+    let wait = match watched {
+        Some(d) => format!("in the {:.1} s watched", d.as_secs_f64()),
         None => format!(
             "within {} s of subscribing (--once prints the values the broker holds retained, \
              and a bridged gobyd keeps its status retained there)",
@@ -196,7 +208,7 @@ mod tests {
         assert!(once.contains("mqtt.topic_prefix"), "{once}");
         let timed = nothing_heard("flet", "h:1", Some(Duration::from_secs(3)), 2);
         assert!(
-            timed.starts_with("no gateway (2 publications on tx topics or not JSON) heard under flet/ on h:1 in the 3 s watched"),
+            timed.starts_with("no gateway (2 publications on tx topics or not JSON) heard under flet/ on h:1 in the 3.0 s watched"),
             "{timed}"
         );
     }

@@ -934,3 +934,84 @@ mod browser {
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
+
+/// A request written as is (`text`, head and body) to the console: status
+/// and body (HTTP/1.0, so the body ends with the connection).
+fn raw_http(port: u16, text: &str) -> (u16, String) {
+    let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream.set_read_timeout(Some(broker::PATIENCE)).unwrap();
+    stream.write_all(text.as_bytes()).unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).unwrap();
+    let (head, body) = response.split_once("\r\n\r\n").unwrap_or((&response, ""));
+    let status = head
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    (status, body.to_string())
+}
+
+/// What docs/console.md says of the interface: the POST bodies are JSON
+/// with `Content-Type: application/json` (else status 415), with the keys
+/// named (else 422), and each object of the event stream names its kind
+/// in `event`, the snapshot first. Needs no broker: the source is a
+/// gobyd's JSON interface, not there.
+#[test]
+fn the_interface_takes_json_bodies_and_names_each_events_kind() {
+    let console = Console::start(&["--gobyd", "127.0.0.1:9", "--duration", "120"]);
+    let port = console.port();
+    let draft =
+        json!({"type": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO"}})
+            .to_string();
+    let post = |head: &str, body: &str| {
+        raw_http(
+            port,
+            &format!(
+                "POST /api/check HTTP/1.0\r\nHost: 127.0.0.1\r\n{head}Content-Length: {}\r\n\r\n{body}",
+                body.len()
+            ),
+        )
+    };
+    let (status, said) = post("", &draft);
+    assert_eq!(status, 415, "{said}");
+    assert!(said.contains("Content-Type: application/json"), "{said}");
+    let (status, said) = post("Content-Type: text/plain\r\n", &draft);
+    assert_eq!(status, 415, "{said}");
+    let (status, checked) = post("Content-Type: application/json\r\n", &draft);
+    assert_eq!(status, 200, "{checked}");
+    let checked: Value = serde_json::from_str(&checked).unwrap();
+    assert!(
+        checked["bytes"].is_string() || checked["bytes"].is_number(),
+        "{checked}"
+    );
+    let (status, said) = post(
+        "Content-Type: application/json\r\n",
+        r#"{"msg": {"destination": 2}}"#,
+    );
+    assert_eq!(status, 422, "{said}");
+    assert!(said.contains("missing field `type`"), "{said}");
+    let (status, said) = post("Content-Type: application/json\r\n", "{not json");
+    assert_eq!(status, 400, "{said}");
+
+    // The event stream: `data:` lines, one JSON object each; the first is
+    // the snapshot, tagged as such, with the source's connection.
+    let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream.set_read_timeout(Some(broker::PATIENCE)).unwrap();
+    stream
+        .write_all(b"GET /api/events HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n")
+        .unwrap();
+    let mut lines = BufReader::new(stream).lines();
+    let first = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| l.strip_prefix("data:").map(|d| d.trim().to_string()))
+        .expect("a data line");
+    let snapshot: Value = serde_json::from_str(&first).unwrap();
+    assert_eq!(snapshot["event"], "snapshot", "{snapshot}");
+    assert!(
+        snapshot["connection"]["connected"].is_boolean(),
+        "{snapshot}"
+    );
+    assert!(snapshot["seq"].is_u64(), "{snapshot}");
+}

@@ -145,3 +145,69 @@ fn man_writes_a_page_per_subcommand_with_its_options() {
         "{err}"
     );
 }
+
+/// The installing commands of `docs/README.md` (completions and manual
+/// pages), as written, for a user whose `goby` is in `~/.cargo/bin`: they
+/// work in a fresh home, and `man` finds the pages without a MANPATH.
+#[test]
+fn the_documented_installing_commands_work_in_a_fresh_home() {
+    let home = std::env::temp_dir().join(format!("goby-install-home-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&home);
+    let bin = home.join(".cargo/bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    std::os::unix::fs::symlink(env!("CARGO_BIN_EXE_goby"), bin.join("goby")).unwrap();
+    let path = format!("{}:/usr/local/bin:/usr/bin:/bin", bin.display());
+    let script = guide_check::installing_commands("goby");
+    assert!(script.contains("goby man "), "{script}");
+    let out = std::process::Command::new("bash")
+        .args(["-e", "-c", &script])
+        .env_clear()
+        .env("HOME", &home)
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{script}\n{}{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    for written in [
+        ".local/share/bash-completion/completions/goby",
+        ".zfunc/_goby",
+        ".config/fish/completions/goby.fish",
+        ".cargo/share/man/man1/goby.1",
+        ".cargo/share/man/man1/goby-moos-spy.1",
+    ] {
+        let len = std::fs::metadata(home.join(written))
+            .unwrap_or_else(|e| panic!("{written}: {e}"))
+            .len();
+        assert!(len > 0, "{written} is empty");
+    }
+    // man-db looks in ../share/man beside each PATH directory.
+    let have_man = std::process::Command::new("sh")
+        .args(["-c", "command -v man"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if have_man {
+        let out = std::process::Command::new("man")
+            .args(["-w", "goby", "goby-moos-spy"])
+            .env_clear()
+            .env("HOME", &home)
+            .env("PATH", &path)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let found = text(&out.stdout);
+        let pages = home.join(".cargo/share/man/man1");
+        for page in ["goby.1", "goby-moos-spy.1"] {
+            assert!(
+                found.contains(&pages.join(page).display().to_string()),
+                "man -w: {found}"
+            );
+        }
+    } else {
+        eprintln!("man is not installed: where man finds the pages is not checked");
+    }
+    let _ = std::fs::remove_dir_all(&home);
+}

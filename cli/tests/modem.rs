@@ -471,3 +471,38 @@ fn two_emulated_evologics_modems_on_tcp() {
         assert!(!out.status.success(), "{bad:?}");
     }
 }
+
+#[test]
+fn the_help_describes_every_emulator() {
+    let help = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{args:?}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let modem = help(&["modem", "--help"]);
+    let goby = help(&["--help"]);
+    let emulate = help(&["modem", "emulate", "--help"]);
+    for text in [&modem, &goby, &emulate] {
+        for kind in ["Micro-Modem", "EvoLogics", "Popoto", "Benthos ATM-900"] {
+            assert!(text.contains(kind), "{kind} missing from:\n{text}");
+        }
+    }
+    for text in [&modem, &goby] {
+        assert!(text.contains("Iridium"), "{text}");
+    }
+    for driver in [
+        "DRIVER_WHOI_MICROMODEM",
+        "EVOLOGICS_S2C",
+        "DRIVER_POPOTO",
+        "DRIVER_BENTHOS_ATM900",
+        "SIGTERM",
+    ] {
+        assert!(
+            emulate.contains(driver),
+            "{driver} missing from:\n{emulate}"
+        );
+    }
+}

@@ -1,5 +1,7 @@
 //! `goby mqtt watch` against a real Mosquitto broker on loopback: retained
-//! publications of two nodes become the fleet table. Fails without
+//! publications of two nodes become the fleet table; into a pipe, each line
+//! comes as it is printed, and SIGINT/SIGTERM ends the watch with the table
+//! and every line kept. Fails without
 //! Mosquitto (`.ci/mosquitto.sh` installs it).
 
 #[path = "../../gobyd/tests/support/broker.rs"]
@@ -86,5 +88,88 @@ fn watch_once_prints_the_fleet_table() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn watch_prints_a_line_at_a_time_into_a_pipe_and_keeps_it_on_sigint() {
+    use std::io::{BufRead, BufReader};
+    use std::time::{Duration, Instant};
+    let dir = std::env::temp_dir().join(format!("goby-watch-live-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let broker = Broker::start(
+        &dir,
+        "watch_prints_a_line_at_a_time_into_a_pipe_and_keeps_it_on_sigint",
+    );
+    let publisher = Watcher::start(&broker.address(), "live-gateways", "nothing/#");
+    publisher
+        .client
+        .publish(
+            "live/1/status",
+            QoS::AtLeastOnce,
+            true,
+            r#"{"node": "1", "online": true}"#,
+        )
+        .unwrap();
+    publisher.wait_pubacks(1);
+    for signal in ["INT", "TERM"] {
+        // Piped: not a terminal, so one line per publication.
+        let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .args(["mqtt", "watch", "live", "--broker", &broker.address()])
+            .args(["--duration", "600"])
+            .env_remove("RUST_BACKTRACE")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        let stdout = child.stdout.take().unwrap();
+        let reader = std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        let patience = Duration::from_secs(30);
+        // The retained status, on the pipe while the watch runs.
+        let first = lines.recv_timeout(patience).expect("a line while running");
+        assert!(first.starts_with("1 online"), "{first}");
+        assert!(child.try_wait().unwrap().is_none(), "still watching");
+        // A new publication: its line comes as it is printed.
+        let size = if signal == "INT" { 3 } else { 5 };
+        publisher.publish(
+            "live/1/queue/goby.example.Command",
+            format!(r#"{{"size": {size}}}"#),
+        );
+        let second = lines.recv_timeout(patience).expect("the queue's line");
+        assert_eq!(second, format!("1 queue goby.example.Command {size}"));
+        assert!(child.try_wait().unwrap().is_none(), "still watching");
+        // The signal: it stops, prints the table, exits 0.
+        let sent = Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+        let deadline = Instant::now() + patience;
+        let exit = loop {
+            if let Some(exit) = child.try_wait().unwrap() {
+                break exit;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "goby mqtt watch ignored SIG{signal}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        assert!(exit.success(), "SIG{signal}: {exit:?}");
+        reader.join().unwrap();
+        let rest: Vec<String> = lines.try_iter().collect();
+        assert_eq!(rest.len(), 2, "the table after SIG{signal}: {rest:?}");
+        assert!(rest[0].starts_with("NODE"), "{rest:?}");
+        assert!(
+            rest[1].starts_with("1 ") && rest[1].contains(&format!(" {size} ")),
+            "{rest:?}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

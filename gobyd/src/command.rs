@@ -32,7 +32,7 @@ pub const EXIT_SETUP: u8 = 2;
     name = "gobyd",
     version,
     about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.",
-    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.\n\nExamples:\n  gobyd --example-config > gobyd.pb.txt\n  gobyd --check --config gobyd.pb.txt --mqtt-broker 10.0.0.5\n  gobyd --config gobyd.pb.txt --modem-id 2\n  gobyd --moos-file alpha.moos\n  gobyd --completions bash > ~/.local/share/bash-completion/completions/gobyd\n  gobyd --man ~/.local/share/man/man1",
+    long_about = "The goby daemon: queues, medium access and a modem driver between a modem and the vehicle's autonomy software.\n\nWith no configuration it runs node 1 on the acoustic channel simulator with the example messages and the JSON interface on 127.0.0.1:11145.\n\nExamples:\n  gobyd --example-config > gobyd.pb.txt\n  gobyd --check --config gobyd.pb.txt --mqtt-broker 10.0.0.5\n  gobyd --config gobyd.pb.txt --modem-id 2\n  gobyd --moos-file alpha.moos\n  mkdir -p ~/.local/share/bash-completion/completions && gobyd --completions bash > ~/.local/share/bash-completion/completions/gobyd\n  gobyd --man ~/.cargo/share/man/man1",
     color = ColorChoice::Auto
 )]
 pub struct GobydCli {
@@ -87,11 +87,13 @@ pub struct GobydCli {
     #[arg(
         long,
         value_name = "SHELL",
-        long_help = "Print a completion script for SHELL on standard output and exit.\n\n\
+        long_help = "Print a completion script for SHELL on standard output and exit \
+            (the directory it is written into must exist: mkdir -p).\n\n\
             Examples:\n  \
+            mkdir -p ~/.local/share/bash-completion/completions\n  \
             gobyd --completions bash > ~/.local/share/bash-completion/completions/gobyd\n  \
-            gobyd --completions zsh > ~/.zfunc/_gobyd\n  \
-            gobyd --completions fish > ~/.config/fish/completions/gobyd.fish"
+            mkdir -p ~/.zfunc && gobyd --completions zsh > ~/.zfunc/_gobyd\n  \
+            mkdir -p ~/.config/fish/completions && gobyd --completions fish > ~/.config/fish/completions/gobyd.fish"
     )]
     pub completions: Option<clap_complete::Shell>,
     /// Write the manual page gobyd.1 into DIR (created if missing) and exit.
@@ -100,7 +102,9 @@ pub struct GobydCli {
         value_name = "DIR",
         long_help = "Write the manual page gobyd.1 into DIR (created if missing), print its \
             path and exit.\n\n\
-            Example: gobyd --man ~/.local/share/man/man1 && man gobyd"
+            ~/.cargo/share/man/man1 is where man finds it for a user with ~/.cargo/bin on \
+            the PATH (man searches ../share/man beside each PATH directory; see manpath).\n\n\
+            Example: gobyd --man ~/.cargo/share/man/man1 && man gobyd"
     )]
     pub man: Option<std::path::PathBuf>,
 }

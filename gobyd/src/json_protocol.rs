@@ -677,6 +677,43 @@ mod tests {
     }
 
     #[test]
+    fn set_fields_are_written_at_any_value_and_unset_ones_left_out() {
+        // proto2 (every message of the project): presence, not the value,
+        // decides, as docs/json-protocol.md says.
+        let slot = ModemTransmission {
+            src: Some(1),
+            slot_index: Some(0),
+            frame_start: Some(0),
+            ack_requested: Some(false),
+            ..Default::default()
+        };
+        let line = event_line(
+            &DaemonEvent::Modem(ModemEvent::SlotStart {
+                slot,
+                initiated: None,
+            }),
+            |_| String::new(),
+        )
+        .unwrap();
+        for set in [
+            r#""slot_index":0"#,
+            r#""frame_start":0"#,
+            r#""ack_requested":false"#,
+        ] {
+            assert!(line.contains(set), "{set} missing: {line}");
+        }
+        for unset in ["\"rate\"", "\"dest\"", "\"type\"", "\"max_frame_bytes\""] {
+            assert!(!line.contains(unset), "{unset} written: {line}");
+        }
+        // A required field at its default is written; an unset optional
+        // one is not.
+        let command = protos::goby::example::Command::default().transcode_to_dynamic();
+        let msg = message_json(&command).to_string();
+        assert!(msg.contains(r#""destination":0"#), "{msg}");
+        assert!(!msg.contains("note"), "{msg}");
+    }
+
+    #[test]
     fn received_lines_carry_their_reception() {
         let message = protos::goby::example::Command::default().transcode_to_dynamic();
         let received = queue::ReceivedMessage {
@@ -874,6 +911,79 @@ mod tests {
             .iter()
             .map(|l| serde_json::from_str(l).expect("a JSON line"))
             .collect()
+    }
+
+    /// Every kind of driver status has its row in the guide's table of
+    /// driver status kinds (a new kind fails to compile here until it is
+    /// listed, then fails until it is documented).
+    #[test]
+    fn every_driver_status_kind_is_in_the_guide() {
+        use modemdriver::DriverStatus as S;
+        let guide = include_str!("../../docs/json-protocol.md");
+        let start = guide
+            .find("### Driver status kinds")
+            .expect("the table of driver status kinds");
+        let section = &guide[start..];
+        let section = &section[..section[4..].find("\n#").map_or(section.len(), |i| i + 4)];
+        let text = || String::new();
+        let all = [
+            S::Ready,
+            S::BadChecksum { line: text() },
+            S::Unparseable {
+                line: text(),
+                reason: text(),
+            },
+            S::ResponseTimeout {
+                command: text(),
+                attempt: 1,
+            },
+            S::Retrying {
+                reason: text(),
+                attempt: 2,
+            },
+            S::ModemReset,
+            S::ModemSilent { seconds: 1.0 },
+            S::ModemError { message: text() },
+            S::Disconnected { reason: text() },
+            S::Reconnected,
+            S::DataRejected { reason: text() },
+            S::LinkError { reason: text() },
+            S::Skipped { reason: text() },
+            S::Degraded { reason: text() },
+            S::Signal {
+                bars: Some(3),
+                service: Some(true),
+            },
+            S::Unsupported { message: text() },
+        ];
+        for status in &all {
+            // Exhaustive: a kind added to the driver must be added above.
+            match status {
+                S::Ready
+                | S::BadChecksum { .. }
+                | S::Unparseable { .. }
+                | S::ResponseTimeout { .. }
+                | S::Retrying { .. }
+                | S::ModemReset
+                | S::ModemSilent { .. }
+                | S::ModemError { .. }
+                | S::Disconnected { .. }
+                | S::Reconnected
+                | S::DataRejected { .. }
+                | S::LinkError { .. }
+                | S::Skipped { .. }
+                | S::Degraded { .. }
+                | S::Signal { .. }
+                | S::Unsupported { .. } => {}
+            }
+            let row = format!("| `{}` |", status.kind());
+            assert!(
+                section.lines().any(|l| l.starts_with(&row)),
+                "no row {row} in the guide's table of driver status kinds"
+            );
+        }
+        let rows = section.lines().filter(|l| l.starts_with("| `")).count();
+        assert_eq!(rows, all.len(), "a row for a kind the driver has not");
     }
 
     /// The guide's table of the JSON interface (`docs/json-protocol.md`) is

@@ -1,6 +1,7 @@
 //! The JSON autonomy interface over TCP (one connection per client, one line
-//! per request, reply or event) and UDP (one datagram per line; a peer
-//! receives events once it has sent any datagram).
+//! per request, reply or event) and UDP (one line per datagram sent, a
+//! datagram received may hold several request lines; a peer receives events
+//! once it has sent any datagram). Replies go out in request order on both.
 //!
 //! Connections parse their lines themselves and hand messages to publish to
 //! the daemon's core through a channel, with a one-shot channel for the
@@ -79,8 +80,13 @@ pub const MAX_UDP_PEERS: usize = 256;
 pub const UDP_PEER_IDLE: Duration = Duration::from_secs(600);
 
 /// Most UDP publishes waiting for their reply at once; beyond this a
-/// publish is answered with an error at once.
+/// publish is answered with an error (in its turn).
 const MAX_UDP_WAITING: usize = 256;
+
+/// Most UDP replies owed at once (publishes waiting for the core, and the
+/// replies after them, which keep their peer's request order); while this
+/// many are owed, datagrams wait in the socket's buffer.
+const MAX_UDP_OWED: usize = 4096;
 
 /// First and longest pause of the accept loop while descriptors run out.
 const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(10), Duration::from_secs(1));
@@ -439,17 +445,23 @@ impl JsonInterface {
 
     /// Serves UDP peers until the task is dropped. Every datagram gets a
     /// reply for each of its lines (an empty or unreadable datagram gets an
-    /// error); replies to publishes are sent when the core answers, while
-    /// other datagrams are read and answered.
+    /// error), one reply per datagram, sent in the order of the peer's
+    /// requests: a reply waits for those before it. Replies to publishes
+    /// are sent when the core answers, while other datagrams are read (and
+    /// answered in their turn).
     pub async fn serve_udp(self, socket: UdpSocket) {
         let socket = Arc::new(socket);
         let mut events = self.events.subscribe();
         let mut peers = UdpPeers::default();
+        // Replies owed: each sends once the reply before it (its peer's
+        // tail) is sent and its own is ready.
         let mut waiting: JoinSet<()> = JoinSet::new();
+        // Publishes among them still waiting for the core.
+        let publishes = Arc::new(std::sync::atomic::AtomicUsize::new(0));
         let mut buf = vec![0u8; 65_536];
         loop {
             tokio::select! {
-                got = socket.recv_from(&mut buf) => {
+                got = socket.recv_from(&mut buf), if waiting.len() < MAX_UDP_OWED => {
                     let (n, from) = match got {
                         Ok(got) => got,
                         Err(e) => {
@@ -467,28 +479,60 @@ impl JsonInterface {
                     for line in lines {
                         peer.replies += 1;
                         let number = peer.replies;
+                        let busy = publishes.load(std::sync::atomic::Ordering::Relaxed)
+                            >= MAX_UDP_WAITING;
                         let handled = if line.is_empty() {
                             Handled::Reply(error_line("empty datagram: expected a JSON request"))
-                        } else if waiting.len() >= MAX_UDP_WAITING {
+                        } else if busy {
                             Handled::Reply(error_line("busy: too many publishes waiting; send again later"))
                         } else {
                             self.handle_line(line, &mut peer.topics).await
                         };
-                        match handled {
-                            Handled::Reply(reply) => {
-                                let _ = socket.send_to(numbered_reply(&reply, number).as_bytes(), from).await;
-                            }
+                        let ready = match handled {
+                            Handled::Reply(reply) => Ok(vec![numbered_reply(&reply, number)]),
                             Handled::ReplyThen(reply, events) => {
-                                let _ = socket.send_to(numbered_reply(&reply, number).as_bytes(), from).await;
-                                for event in events {
-                                    let _ = socket.send_to(event.as_bytes(), from).await;
+                                let mut datagrams = vec![numbered_reply(&reply, number)];
+                                datagrams.extend(events);
+                                Ok(datagrams)
+                            }
+                            Handled::Waiting(reply) => Err(reply),
+                        };
+                        let tail = peer.tail.take().and_then(|mut tail| (!tail.is_sent()).then_some(tail));
+                        match (ready, tail) {
+                            // Nothing owed before it: sent now.
+                            (Ok(datagrams), None) => {
+                                for datagram in datagrams {
+                                    let _ = socket.send_to(datagram.as_bytes(), from).await;
                                 }
                             }
-                            Handled::Waiting(reply) => {
+                            (ready, tail) => {
+                                let (sent, next_tail) = ReplySent::new();
+                                peer.tail = Some(next_tail);
                                 let socket = socket.clone();
+                                let reply = match ready {
+                                    Ok(datagrams) => Ok(datagrams),
+                                    Err(reply) => {
+                                        publishes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                        let publishes = publishes.clone();
+                                        Err(async move {
+                                            let line = reply.await;
+                                            publishes.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
+                                            numbered_reply(&line, number)
+                                        })
+                                    }
+                                };
                                 waiting.spawn(async move {
-                                    let line = numbered_reply(&reply.await, number);
-                                    let _ = socket.send_to(line.as_bytes(), from).await;
+                                    let datagrams = match reply {
+                                        Ok(datagrams) => datagrams,
+                                        Err(reply) => vec![reply.await],
+                                    };
+                                    if let Some(tail) = tail {
+                                        tail.wait().await;
+                                    }
+                                    for datagram in datagrams {
+                                        let _ = socket.send_to(datagram.as_bytes(), from).await;
+                                    }
+                                    drop(sent);
                                 });
                             }
                         }
@@ -603,6 +647,32 @@ struct UdpPeer {
     /// Number of the last request line.
     replies: u64,
     last_seen: Option<Instant>,
+    /// The last reply owed to it, while it is not sent: the next reply
+    /// waits for it.
+    tail: Option<ReplySent>,
+}
+
+/// Tells when a UDP reply was sent (or given up): the holder of the
+/// sending half drops it then.
+#[derive(Debug)]
+struct ReplySent(oneshot::Receiver<()>);
+
+impl ReplySent {
+    /// The sending half (drop it once the reply is sent) and its watch.
+    fn new() -> (oneshot::Sender<()>, ReplySent) {
+        let (tx, rx) = oneshot::channel();
+        (tx, ReplySent(rx))
+    }
+
+    /// Whether the reply was sent already.
+    fn is_sent(&mut self) -> bool {
+        !matches!(self.0.try_recv(), Err(oneshot::error::TryRecvError::Empty))
+    }
+
+    /// Waits until the reply is sent.
+    async fn wait(self) {
+        let _ = self.0.await;
+    }
 }
 
 /// The UDP peers heard from, at most [`MAX_UDP_PEERS`], none silent for

@@ -757,6 +757,65 @@ fn the_mqtt_broker_option_overrides_the_configuration_and_check_says_so() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The installing commands of `docs/README.md` that call `gobyd`, as
+/// written, for a user whose `gobyd` is in `~/.cargo/bin`: they work in a
+/// fresh home, and `man` finds the page without a MANPATH.
+#[test]
+fn the_documented_installing_commands_work_in_a_fresh_home() {
+    let home = scratch("command", "install-home");
+    let bin = home.join(".cargo/bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    std::os::unix::fs::symlink(env!("CARGO_BIN_EXE_gobyd"), bin.join("gobyd")).unwrap();
+    let path = format!("{}:/usr/local/bin:/usr/bin:/bin", bin.display());
+    let script = guide_check::installing_commands("gobyd");
+    assert!(script.contains("gobyd --man "), "{script}");
+    let out = std::process::Command::new("bash")
+        .args(["-e", "-c", &script])
+        .env_clear()
+        .env("HOME", &home)
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{script}\n{}{}",
+        stdout_text(&out),
+        stderr_text(&out)
+    );
+    for written in [
+        ".local/share/bash-completion/completions/gobyd",
+        ".cargo/share/man/man1/gobyd.1",
+    ] {
+        let len = std::fs::metadata(home.join(written))
+            .unwrap_or_else(|e| panic!("{written}: {e}"))
+            .len();
+        assert!(len > 0, "{written} is empty");
+    }
+    // man-db looks in ../share/man beside each PATH directory.
+    let have_man = std::process::Command::new("sh")
+        .args(["-c", "command -v man"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if have_man {
+        let out = std::process::Command::new("man")
+            .args(["-w", "gobyd"])
+            .env_clear()
+            .env("HOME", &home)
+            .env("PATH", &path)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", stderr_text(&out));
+        let page = home.join(".cargo/share/man/man1/gobyd.1");
+        assert!(
+            stdout_text(&out).contains(&page.display().to_string()),
+            "man -w: {}",
+            stdout_text(&out)
+        );
+    } else {
+        eprintln!("man is not installed: where man finds the page is not checked");
+    }
+}
+
 #[test]
 fn gobyd_prints_completions_and_writes_its_man_page() {
     let out = gobyd(&["--completions", "bash"]);

@@ -545,6 +545,14 @@ fn json_over_udp_and_a_clean_stop_on_sigterm() {
         seen.iter().any(|v| v["ack"] == "goby.example.Command"),
         "{seen:?}"
     );
+    // Never over a link, never journaled (docs/json-protocol.md): the
+    // received line has no `link`, the ack no `id`, by this node, frame 0.
+    let received = seen.iter().find(|v| v["received"].is_string()).unwrap();
+    assert!(received.get("link").is_none(), "{received}");
+    assert_eq!(received["src"], 1, "{received}");
+    let ack = seen.iter().find(|v| v["ack"].is_string()).unwrap();
+    assert!(ack.get("id").is_none(), "{ack}");
+    assert_eq!((&ack["by"], &ack["frame"]), (&1.into(), &0.into()), "{ack}");
     socket.send_to(b"{\"publish\": 7}", &daemon).unwrap();
     let error = receive();
     assert!(
@@ -570,6 +578,96 @@ fn json_over_udp_and_a_clean_stop_on_sigterm() {
         std::thread::sleep(Duration::from_millis(50));
     };
     assert!(exit.success(), "{exit:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn json_over_udp_replies_come_in_request_order() {
+    let dir = scratch("test", "udp-json-order");
+    let port = free_udp_port();
+    let path = NodeConfig::new(1)
+        .driver(Simulator::alone().channel("udp-json-order"))
+        .mac_none()
+        .queue(Entry::command())
+        .json_tcp("")
+        .json_udp(&format!("127.0.0.1:{port}"))
+        .data_dir(&dir.join("data"))
+        .write(dir.join("node.cfg"));
+    let (mut child, log) = spawn_gobyd(&path);
+    wait_log(&log, "gobyd started");
+
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket.set_read_timeout(Some(PATIENCE)).unwrap();
+    let daemon = format!("127.0.0.1:{port}");
+    let publish = |action: &str| {
+        format!(
+            r#"{{"publish": "goby.example.Command", "msg": {{"destination": 2, "action": "{action}"}}}}"#
+        )
+    };
+    // Publishes (answered once on disk) between requests answered at once,
+    // in one datagram, then in two more.
+    let first = [
+        publish("SURFACE"),
+        r#"{"subscribe": ["ack"]}"#.to_string(),
+        "not json".to_string(),
+        publish("GOTO"),
+        r#"{"subscribe": ["nothing"]}"#.to_string(),
+    ]
+    .join("\n");
+    socket.send_to(first.as_bytes(), &daemon).unwrap();
+    socket
+        .send_to(publish("ABORT").as_bytes(), &daemon)
+        .unwrap();
+    socket
+        .send_to(br#"{"subscribe": ["ack", "drop"]}"#, &daemon)
+        .unwrap();
+    let mut replies = Vec::new();
+    while replies.len() < 7 {
+        let mut buf = [0u8; 4096];
+        let n = socket.recv(&mut buf).expect("a datagram from gobyd");
+        let v: Value = serde_json::from_slice(&buf[..n]).expect("one JSON object a datagram");
+        if v.get("reply").is_some() {
+            replies.push(v);
+        }
+    }
+    let numbers: Vec<u64> = replies
+        .iter()
+        .map(|v| v["reply"].as_u64().unwrap())
+        .collect();
+    assert_eq!(numbers, [1, 2, 3, 4, 5, 6, 7], "{replies:?}");
+    let kinds: Vec<&str> = replies
+        .iter()
+        .map(|v| {
+            ["accepted", "subscribed", "error"]
+                .into_iter()
+                .find(|k| v.get(*k).is_some())
+                .unwrap_or("?")
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            "accepted",
+            "subscribed",
+            "error",
+            "accepted",
+            "error",
+            "accepted",
+            "subscribed"
+        ],
+        "{replies:?}"
+    );
+
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let deadline = Instant::now() + PATIENCE;
+    while child.try_wait().unwrap().is_none() {
+        assert!(Instant::now() < deadline, "gobyd did not stop on SIGTERM");
+        std::thread::sleep(Duration::from_millis(50));
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

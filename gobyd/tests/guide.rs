@@ -69,6 +69,43 @@ fn the_configurations_the_guide_shows_are_committed_files_that_load() {
     }
 }
 
+/// The shipped configurations (`gobyd/config/*.pb.txt`) load, and no two
+/// share a JSON address or a data directory, so that any of them run side
+/// by side on one machine.
+#[test]
+fn the_shipped_configurations_use_distinct_json_ports_and_data_directories() {
+    let dir = repository_root().join("gobyd/config");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().ends_with(".pb.txt"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 10, "{names:?}");
+    let mut json: std::collections::BTreeMap<String, String> = Default::default();
+    let mut data: std::collections::BTreeMap<String, String> = Default::default();
+    for path in &names {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let config = gobyd::config::load(path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let addresses = config.json.iter().flat_map(|j| {
+            [j.tcp_bind.clone(), j.udp_bind.clone()]
+                .into_iter()
+                .flatten()
+                .filter(|a| !a.is_empty())
+        });
+        for address in addresses {
+            if let Some(other) = json.insert(address.clone(), name.clone()) {
+                panic!("{name} and {other} both serve JSON on {address}");
+            }
+        }
+        if let Some(d) = config.data_dir.clone() {
+            if let Some(other) = data.insert(d.clone(), name.clone()) {
+                panic!("{name} and {other} both keep their data in {d}");
+            }
+        }
+    }
+}
+
 /// A `gobyd` process of the quick start, killed when dropped.
 struct Daemon(Child);
 

@@ -169,3 +169,101 @@ async fn a_json_client_gets_long_baseline_travel_times() {
     modem.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The replies to `requests`, one line each, from a daemon run from
+/// `config` (stopped afterwards).
+async fn replies_of(
+    config: protos::goby::apps::protobuf::GobydConfig,
+    requests: &[&str],
+) -> Vec<Value> {
+    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let addr = daemon.json_tcp_addr().expect("JSON over TCP");
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let running = tokio::spawn(daemon.run(async move {
+        let _ = stop_rx.await;
+    }));
+    let stream = TcpStream::connect(addr).await.unwrap();
+    let (read, mut write) = stream.into_split();
+    let mut lines = BufReader::new(read).lines();
+    let mut replies = Vec::new();
+    for request in requests {
+        write
+            .write_all(format!("{request}\n").as_bytes())
+            .await
+            .unwrap();
+        let reply = loop {
+            let line = tokio::time::timeout(PATIENCE, lines.next_line())
+                .await
+                .expect("a line in time")
+                .unwrap()
+                .expect("the connection stays open");
+            let v: Value = serde_json::from_str(&line).unwrap();
+            if v.get("reply").is_some() {
+                break v;
+            }
+        };
+        replies.push(reply);
+    }
+    let _ = stop_tx.send(());
+    running.await.unwrap().unwrap();
+    replies
+}
+
+/// What docs/json-protocol.md says of `driver_specific` requests to
+/// drivers other than the Micro-Modem: each driver takes its own request
+/// type and names it when given another; a driver with none says which
+/// drivers take them.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn each_driver_names_the_driver_specific_request_it_takes() {
+    use support::node::{Evologics, Simulator};
+    let dir = support::daemon::scratch("ranging", "drivers");
+    // An S2C's address where nothing answers: the requests are judged
+    // from the configuration, connected or not.
+    let modem = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = modem.local_addr().unwrap().port();
+    let evologics = NodeConfig::new(1)
+        .driver(Evologics::tcp(port))
+        .tdma(&[1], 1, 8.0)
+        .json_tcp("127.0.0.1:0")
+        .data_dir(&dir.join("evologics"))
+        .config();
+    let replies = replies_of(
+        evologics,
+        &[
+            r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_TWO_WAY_PING", "dest": 2}}"#,
+            r#"{"driver_specific": "goby.acomms.protobuf.EvologicsSpecific", "msg": {"type": "EVOLOGICS_PROPAGATION_TIME"}}"#,
+        ],
+    )
+    .await;
+    assert_eq!(
+        replies[0]["error"],
+        "goby.acomms.protobuf.MicroModemSpecific: the EvoLogics driver takes goby.acomms.protobuf.EvologicsSpecific",
+        "{:?}",
+        replies
+    );
+    assert_eq!(
+        replies[1]["driver_specific"], "goby.acomms.protobuf.EvologicsSpecific",
+        "{:?}",
+        replies
+    );
+
+    let simulator = NodeConfig::new(1)
+        .driver(Simulator::alone().channel("ranging-drivers"))
+        .mac_none()
+        .json_tcp("127.0.0.1:0")
+        .data_dir(&dir.join("simulator"))
+        .config();
+    let replies = replies_of(
+        simulator,
+        &[r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "MICROMODEM_TWO_WAY_PING", "dest": 2}}"#],
+    )
+    .await;
+    assert_eq!(
+        replies[0]["error"],
+        "goby.acomms.protobuf.MicroModemSpecific: only the Micro-Modem, EvoLogics, Popoto and Benthos ATM-900 drivers take driver-specific requests",
+        "{:?}",
+        replies
+    );
+    drop(modem);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -149,6 +149,7 @@ pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         .build()
         .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
     runtime.block_on(async {
+        let stop = crate::stop::run_ends(duration);
         let listener = tokio::net::TcpListener::bind(&args.listen)
             .await
             .map_err(|e| CliError::setup(format!("cannot listen on {}: {e}", args.listen)))?;
@@ -165,14 +166,6 @@ pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         stdout.flush()?;
         tokio::spawn(source::run(source, hub.clone(), outbound));
         let app = server::router(hub);
-        let stop = async move {
-            match duration {
-                Some(d) => tokio::time::sleep(d).await,
-                None => {
-                    let _ = tokio::signal::ctrl_c().await;
-                }
-            }
-        };
         // Not a graceful shutdown: the pages' event streams never end.
         tokio::select! {
             served = axum::serve(listener, app).into_future() => {

@@ -8,9 +8,13 @@
 //! | `GET /console.js`, `/console.css`, `/favicon.svg` | its script, style and icon |
 //! | `GET /api/state` | the snapshot: `source`, `connection`, `origin`, `nodes` (tracks and link series), `messages`, `commands`, `seq` |
 //! | `GET /api/forms` | the commander's types: `[{"name", "id", "max_bytes", "fields": [...]}]` |
-//! | `GET /api/events` | server-sent events: a `snapshot` first, then `node`, `track`, `link`, `message`, `command`, `origin`, `source`, `gone` (one JSON object each, with `seq`) |
+//! | `GET /api/events` | server-sent events: a `snapshot` first, then `node`, `track`, `link`, `message`, `command`, `origin`, `source`, `gone` (one JSON object each, its kind in `event`, with `seq` but for `source`) |
 //! | `POST /api/check` | `{"type", "msg"}`: what the codec would do with it ([`Commander::check`](super::commander::Commander::check)) |
 //! | `POST /api/send` | `{"node", "type", "msg"}`: sent; `{"command": ID}`, or `400` with `{"error"}` |
+//!
+//! The `POST` bodies are read as JSON only with `Content-Type:
+//! application/json` (axum's `Json`: 415 without it, 400 for a body that is
+//! not JSON, 422 for one without the keys).
 
 use std::convert::Infallible;
 use std::sync::Arc;

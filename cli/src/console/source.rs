@@ -48,7 +48,7 @@ impl Source {
                 format!("the fleet under {prefix}/ on the MQTT broker {host}:{port}")
             }
             Source::Json { address, node } => {
-                format!("gobyd {node} on its JSON interface {address}")
+                format!("the JSON interface of gobyd at {address} (its node shown as {node:?})")
             }
         }
     }
@@ -336,6 +336,27 @@ mod tests {
             type_name: "goby.example.Command".into(),
             msg: json!({"destination": 2}),
         }
+    }
+
+    #[test]
+    fn the_sources_are_described_without_a_doubled_word() {
+        let json = Source::Json {
+            address: "127.0.0.1:11170".into(),
+            node: "gobyd".into(),
+        };
+        assert_eq!(
+            json.describe(),
+            "the JSON interface of gobyd at 127.0.0.1:11170 (its node shown as \"gobyd\")"
+        );
+        let mqtt = Source::Mqtt {
+            host: "127.0.0.1".into(),
+            port: 1883,
+            prefix: "fleet".into(),
+        };
+        assert_eq!(
+            mqtt.describe(),
+            "the fleet under fleet/ on the MQTT broker 127.0.0.1:1883"
+        );
     }
 
     #[test]

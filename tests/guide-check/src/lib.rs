@@ -544,6 +544,31 @@ pub fn block_after(guide: &Guide, marker: &str) -> Option<String> {
         })
 }
 
+/// The marker of the installing block of `docs/README.md` (shell
+/// completions and manual pages).
+pub const INSTALL_MARKER: &str = "install: completions and manual pages";
+
+/// The lines of `docs/README.md`'s installing block that `program` (`goby`
+/// or `gobyd`) runs, with the `mkdir -p` lines before them, one script; a
+/// test runs it with `HOME` in a scratch directory.
+pub fn installing_commands(program: &str) -> String {
+    let guide = guide_files()
+        .into_iter()
+        .find(|g| g.name == "docs/README.md")
+        .expect("docs/README.md");
+    let block = block_after(&guide, INSTALL_MARKER)
+        .unwrap_or_else(|| panic!("no block after <!-- {INSTALL_MARKER} --> in docs/README.md"));
+    let mut script = String::new();
+    for line in block.lines() {
+        let first = line.split_whitespace().next().unwrap_or("");
+        if first == "mkdir" || first == program {
+            script.push_str(line);
+            script.push('\n');
+        }
+    }
+    script
+}
+
 /// True when `actual` matches `expected`, with `[..]` and `...` as in the
 /// console blocks.
 pub fn output_matches(actual: &str, expected: &str) -> bool {
