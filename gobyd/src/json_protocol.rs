@@ -740,6 +740,7 @@ mod tests {
                 dccl_id: 125,
                 frame: 0,
                 awaiting_ack: true,
+                link: 0,
             },
             QueueEvent::Acked {
                 message: command.clone(),
