@@ -67,6 +67,10 @@ pub struct LinkSpec {
     /// What a message over it costs, in the operator's units (only the
     /// order matters, for [`LinkPolicy::CheapestFirst`]).
     pub cost: f64,
+    /// The largest frame its driver sends, bytes, when it has a limit of
+    /// its own (Iridium SBD): a larger message is never its to carry, and
+    /// the rules pass it on at once.
+    pub largest_frame: Option<usize>,
 }
 
 /// Which links a type may use, and how.
@@ -254,10 +258,12 @@ impl Links {
         self.rule(dccl_id).order.len() > 1
     }
 
-    /// Whether `link` is up and has `len` bytes left in its budget.
+    /// Whether `link` is up, has `len` bytes left in its budget and
+    /// sends frames of `len` bytes.
     pub fn available(&self, link: LinkIndex, len: usize) -> bool {
         let s = self.state(link);
         s.up && s.budget_left.is_none_or(|left| left >= len)
+            && self.specs[link].largest_frame.is_none_or(|max| len <= max)
     }
 
     /// From when `link` may carry a message of type `dccl_id` of `len`
@@ -369,6 +375,7 @@ mod tests {
                 .map(|(i, &cost)| LinkSpec {
                     name: format!("l{i}"),
                     cost,
+                    largest_frame: None,
                 })
                 .collect(),
         )
@@ -413,6 +420,15 @@ mod tests {
         let l = links(&[1.0, 1.0]);
         assert_eq!(l.allowed_from(9, 0, 10 * S, 5), Some(10 * S));
         assert_eq!(l.allowed_from(9, 1, 10 * S, 5), Some(130 * S));
+    }
+
+    #[test]
+    fn a_link_whose_frames_are_too_small_is_skipped_at_once() {
+        let mut l = links(&[1.0, 1.0]);
+        l.specs[0].largest_frame = Some(10);
+        assert_eq!(l.allowed_from(9, 0, 0, 20), None);
+        assert_eq!(l.allowed_from(9, 1, 0, 20), Some(0));
+        assert_eq!(l.allowed_from(9, 1, 0, 10), Some(120 * S));
     }
 
     #[test]

@@ -21,10 +21,12 @@ fn two_links(costs: [f64; 2]) -> Links {
         LinkSpec {
             name: "acoustic".into(),
             cost: costs[0],
+            largest_frame: None,
         },
         LinkSpec {
             name: "iridium".into(),
             cost: costs[1],
+            largest_frame: Some(20),
         },
     ])
     .unwrap()
