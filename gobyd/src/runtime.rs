@@ -1450,7 +1450,9 @@ impl Daemon {
     fn link_slots(&mut self, i: usize) {
         let now = self.clock.now();
         let events = self.links[i].mac.poll(now);
-        let up = self.links[i].is_up();
+        // A driver whose device is away (and that reconnects by itself)
+        // is given its slots as before: it decides what it can do.
+        let up = self.links[i].driver.is_some();
         for event in events {
             let mut reported = ModemEvent::of_mac(&event);
             let amac::MacEvent::Slot(slot) = &event else {
