@@ -7,6 +7,13 @@
 //!
 //! - the preferred link goes silent mid-run: traffic moves to the other
 //!   link within the rule's timeout, and back when it returns;
+//! - the vehicle's acoustic modem dies mid-run (an emulated WHOI
+//!   Micro-Modem on a real pseudo-terminal, the two modems' packets on an
+//!   in-process acoustic channel, stopped and started again): its
+//!   commands move to Iridium at once, the shore's once the rule's timeout
+//!   passed without an ack, and both move back once the modem returns
+//!   and the vehicle's driver is started again; the fail-over and
+//!   fail-back times are measured;
 //! - the preferred link's driver fails (the transceiver goes away): its
 //!   messages move at once, the driver is started again with back-off while
 //!   the other link carries the traffic, and takes it back once up;
@@ -16,7 +23,8 @@
 //!
 //! Every message is delivered once, whichever links carried it, and
 //! acknowledged. The fail-over times are printed (`cargo test -p gobyd
-//! --test links -- --nocapture`).
+//! --test links -- --nocapture`; the modem's death alone: `cargo test -p
+//! gobyd --test links acoustic_modem_dies -- --nocapture`).
 
 mod support;
 
@@ -24,9 +32,12 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+use modemdriver::sim::medium::Medium;
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch, Gobyd};
 use support::iridium::{self, Emulated, SHORE, VEHICLE};
+use support::micromodem::{micromodem_driver, modem_path, start_emulator};
 use support::node::{Entry, Node, Simulator};
 use support::relay::Relay;
 use support::restart::{delivered, logged};
@@ -351,6 +362,350 @@ fn traffic_moves_to_iridium_when_acoustic_goes_silent_and_back_when_it_returns()
     drop(vehicle);
     drop(shore);
     rt.block_on(async {
+        emulated.transceiver.stop().await;
+        emulated.gateway.stop().await;
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The rule timeout of the modem test, seconds: the shore, which cannot
+/// tell that the vehicle's modem died, waits this long for an ack over
+/// acoustic before Iridium may carry a command too.
+const MODEM_TIMEOUT: f64 = 20.0;
+
+/// Seconds between two commands of each node in the modem test.
+const TICK: Duration = Duration::from_secs(2);
+
+/// Node `id` of the modem test: link "acoustic" on its emulated
+/// Micro-Modem 2 (fixed TDMA, a 5 s slot each at rate 5), link "iridium"
+/// on the emulated 9603 (the vehicle) or DirectIP (the shore), a 1 s slot
+/// each; commands acoustic first, Iridium too after [`MODEM_TIMEOUT`]
+/// without an ack, or at once while the acoustic link is down; a command
+/// sent again after one TDMA cycle (10 s) without its ack.
+fn modem_node(id: i32, dir: &Path, emulated: &Emulated) -> PathBuf {
+    let data = dir.join(format!("node{id}"));
+    Node::new(id)
+        .link(
+            "acoustic",
+            micromodem_driver(&modem_path(dir, id as u32)),
+            &[VEHICLE, SHORE],
+            5,
+            5.0,
+            "cost: 1 restart_min_seconds: 0.5 restart_max_seconds: 4",
+        )
+        .link(
+            "iridium",
+            iridium::driver(id, emulated),
+            &[VEHICLE, SHORE],
+            0,
+            1.0,
+            "cost: 10 restart_min_seconds: 0.5 restart_max_seconds: 4",
+        )
+        .queue_setting("minimum_ack_wait_seconds: 10")
+        .queue(Entry::command().ack(true).ttl(600))
+        .extra(&format!(
+            "link_rule {{ protobuf_name: \"goby.example.Command\" link: \"acoustic\" link: \"iridium\" \
+             policy: LINK_POLICY_PRIORITY_TIMEOUT timeout_seconds: {MODEM_TIMEOUT} }}"
+        ))
+        .json_tcp("127.0.0.1:0")
+        .data_dir(&data)
+        .log_level("info")
+        .raw_log(true)
+        .write(dir.join(format!("node{id}.cfg")))
+}
+
+/// A command published: by whom (0 the vehicle, 1 the shore), its note,
+/// when (µs since the epoch).
+#[derive(Debug, Clone)]
+struct Published {
+    from: usize,
+    note: String,
+    at: i64,
+}
+
+/// The (sender, note) pairs of `published` that `pick` keeps.
+fn notes_of(published: &[Published], pick: impl Fn(&Published) -> bool) -> Vec<(usize, String)> {
+    published
+        .iter()
+        .filter(|p| pick(p))
+        .map(|p| (p.from, p.note.clone()))
+        .collect()
+}
+
+/// One command each way (noted `TAG{N}-v` and `TAG{N}-s`), then the
+/// vehicle's link status lines that came meanwhile, into `statuses`; takes
+/// [`TICK`] in all.
+fn tick(
+    vehicle: &mut Gobyd,
+    shore: &mut Gobyd,
+    tag: &str,
+    published: &mut Vec<Published>,
+    statuses: &mut Vec<Value>,
+) {
+    let start = Instant::now();
+    let n = published.len() / 2;
+    for (from, node, to, side) in [
+        (0, &mut *vehicle, SHORE, "v"),
+        (1, &mut *shore, VEHICLE, "s"),
+    ] {
+        let note = format!("{tag}{n}-{side}");
+        let at = now_micros();
+        publish(node, to, &note);
+        published.push(Published { from, note, at });
+    }
+    loop {
+        let left = TICK.saturating_sub(start.elapsed());
+        if left.is_zero() {
+            break;
+        }
+        match vehicle.wait_for(left, |v| v["event"] == "link_status") {
+            Some(v) => statuses.push(v["link_status"].clone()),
+            None => break,
+        }
+    }
+}
+
+/// When (µs since the epoch) the vehicle's link `link` was first told in
+/// a status that `wanted` picks, from `since` on.
+fn told(
+    statuses: &[Value],
+    link: &str,
+    since: i64,
+    wanted: impl Fn(&Value) -> bool,
+) -> Option<i64> {
+    statuses
+        .iter()
+        .filter(|s| s["name"] == link && wanted(s))
+        .filter_map(|s| s["time"].as_f64().map(|t| (t * 1e6) as i64))
+        .find(|t| *t >= since)
+}
+
+/// The link that first delivered `note` sent by `from`, and when.
+fn delivery_of(data: &[PathBuf; 2], from: usize, note: &str) -> Option<(i64, String)> {
+    first_delivery(&data[1 - from]).get(note).cloned()
+}
+
+/// Seconds from `since` to the first delivery over `link`, after `since`,
+/// of a command of `from` among `published`.
+fn first_over_after(
+    data: &[PathBuf; 2],
+    published: &[Published],
+    from: usize,
+    link: &str,
+    since: i64,
+) -> Option<f64> {
+    let firsts = first_delivery(&data[1 - from]);
+    published
+        .iter()
+        .filter(|p| p.from == from)
+        .filter_map(|p| firsts.get(&p.note))
+        .filter(|(t, over)| over == link && *t >= since)
+        .map(|(t, _)| *t)
+        .min()
+        .map(|t| (t - since) as f64 / 1e6)
+}
+
+#[test]
+fn traffic_moves_to_iridium_when_the_acoustic_modem_dies_and_back_when_it_returns() {
+    let rt = runtime();
+    let dir = scratch("links", "modem");
+    let medium = Medium::new();
+    let faults = EmulatorFaults::default();
+    let start_modem = |id: u32| {
+        let _runtime = rt.enter();
+        start_emulator(&dir, id, &medium, Dialect::MicroModem2, faults)
+    };
+    let mut modems = vec![start_modem(1), start_modem(2)];
+    rt.block_on(async {
+        for m in &mut modems {
+            m.path().await.expect("emulated modem present");
+        }
+    });
+    let emulated = rt.block_on(iridium::start(&dir, SESSION, 0.0, 13));
+    let configs: Vec<PathBuf> = [VEHICLE, SHORE]
+        .iter()
+        .map(|&id| modem_node(id, &dir, &emulated))
+        .collect();
+    let data: [PathBuf; 2] = [dir.join("node1"), dir.join("node2")];
+    let mut shore = Gobyd::start(&configs[1], &[]);
+    let mut vehicle = Gobyd::start(&configs[0], &[]);
+    subscribe_links(&mut vehicle);
+    let mut published: Vec<Published> = Vec::new();
+    let mut statuses: Vec<Value> = Vec::new();
+
+    // Both links up: acoustic carries everything.
+    for _ in 0..3 {
+        tick(
+            &mut vehicle,
+            &mut shore,
+            "up",
+            &mut published,
+            &mut statuses,
+        );
+    }
+    let up = notes_of(&published, |_| true);
+    assert!(
+        settle(&up, &data, LIMIT),
+        "exchange over acoustic incomplete"
+    );
+    for (from, note) in &up {
+        let over = delivery_of(&data, *from, note).map(|(_, l)| l);
+        assert_eq!(over.as_deref(), Some("acoustic"), "{note} came over");
+    }
+
+    // The vehicle's modem dies: its emulator stops, its pseudo-terminal
+    // goes away. Commands go on every tick, both ways, until both sides'
+    // went over Iridium, and a while longer (the shore's first ones past
+    // their timeout well before the modem returns).
+    let dead_modem = modems.remove(0);
+    let killed = now_micros();
+    rt.block_on(dead_modem.stop());
+    let deadline = Instant::now() + Duration::from_secs_f64(MODEM_TIMEOUT) + LIMIT;
+    let (fail_over_vehicle, fail_over_shore) = loop {
+        tick(
+            &mut vehicle,
+            &mut shore,
+            "dark",
+            &mut published,
+            &mut statuses,
+        );
+        let over = |from| first_over_after(&data, &published, from, "iridium", killed);
+        let since_kill = (now_micros() - killed) as f64 / 1e6;
+        if let (Some(v), Some(s)) = (over(0), over(1)) {
+            if since_kill > MODEM_TIMEOUT + 16.0 {
+                break (v, s);
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no fail-over to iridium {since_kill:.0} s after the modem died: vehicle {:?}, shore {:?}",
+            over(0),
+            over(1)
+        );
+    };
+    let down = told(&statuses, "acoustic", killed, |s| s["state"] == "LINK_DOWN")
+        .unwrap_or_else(|| panic!("the acoustic link is not reported down: {statuses:?}"));
+    let detected = (down - killed) as f64 / 1e6;
+
+    // The modem returns: a new one on the same channel, at the same path.
+    let returned = now_micros();
+    let mut modem = start_modem(1);
+    rt.block_on(modem.path()).expect("emulated modem present");
+    modems.insert(0, modem);
+    let deadline = Instant::now() + LIMIT;
+    let (up_again, fail_back_vehicle, fail_back_shore) = loop {
+        tick(
+            &mut vehicle,
+            &mut shore,
+            "back",
+            &mut published,
+            &mut statuses,
+        );
+        let up_again = told(&statuses, "acoustic", returned, |s| {
+            s["state"] == "LINK_UP" && number(&s["restarts"]).unwrap_or(0) >= 1
+        });
+        let over = |from| first_over_after(&data, &published, from, "acoustic", returned);
+        // A few commands of each side published once the link is up.
+        let after_up = up_again.map_or(0, |t| published.iter().filter(|p| p.at > t).count());
+        if let (Some(t), Some(v), Some(s), true) = (up_again, over(0), over(1), after_up >= 6) {
+            break (t, v, s);
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no fail-back to acoustic: link up again at {up_again:?}, vehicle {:?}, shore {:?}; statuses {statuses:?}",
+            over(0),
+            over(1)
+        );
+    };
+    let restarted = (up_again - returned) as f64 / 1e6;
+
+    // Everything delivered and acknowledged, each command once.
+    let all = notes_of(&published, |_| true);
+    assert!(
+        settle(&all, &data, LIMIT),
+        "not everything was delivered and acknowledged"
+    );
+    std::thread::sleep(Duration::from_secs(4));
+    let deliveries = each_once(&all, &data);
+    let suppressed = vehicle.log_count("suppressed") + shore.log_count("suppressed");
+
+    // Where each went. While the modem was dead, the vehicle's commands
+    // went over Iridium (its link down, at once); the shore's, which it
+    // sent into the silence, went over Iridium too once the timeout passed
+    // without an ack: their sendings over Iridium no sooner.
+    let vehicle_dark = notes_of(&published, |p| {
+        p.from == 0 && p.at > killed && p.at < returned - 10_000_000
+    });
+    for (from, note) in &vehicle_dark {
+        let over = delivery_of(&data, *from, note).map(|(_, l)| l);
+        assert_eq!(over.as_deref(), Some("iridium"), "{note} came over");
+    }
+    let shore_dark: Vec<&Published> = published
+        .iter()
+        .filter(|p| {
+            p.from == 1 && p.at > killed && p.at < returned - ((MODEM_TIMEOUT + 10.0) * 1e6) as i64
+        })
+        .collect();
+    assert!(!shore_dark.is_empty());
+    for p in &shore_dark {
+        let note = &p.note;
+        let over = delivery_of(&data, p.from, note).map(|(_, l)| l);
+        assert_eq!(over.as_deref(), Some("iridium"), "{note} came over");
+        let outs = lines(&data[p.from], "out");
+        let at = |link: &str| {
+            outs.iter()
+                .filter(|(n, _, l)| n == note && l == link)
+                .map(|(_, t, _)| *t)
+                .min()
+        };
+        let (Some(_), Some(i)) = (at("acoustic"), at("iridium")) else {
+            panic!("{note}: sendings {outs:?}");
+        };
+        // Queued after `p.at`: over Iridium no sooner than the timeout.
+        assert!(
+            (i - p.at) as f64 / 1e6 >= MODEM_TIMEOUT,
+            "{note}: over iridium {} s after it was published",
+            (i - p.at) as f64 / 1e6
+        );
+    }
+    // Once the link was up again, acoustic carried both sides' commands.
+    let after = notes_of(&published, |p| p.at > up_again + 1_000_000);
+    assert!(!after.is_empty());
+    for (from, note) in &after {
+        let over = delivery_of(&data, *from, note).map(|(_, l)| l);
+        assert_eq!(over.as_deref(), Some("acoustic"), "{note} came over");
+    }
+    assert!(
+        fail_over_vehicle < MODEM_TIMEOUT,
+        "{fail_over_vehicle} s: the vehicle's commands waited for the timeout, not for its link"
+    );
+    assert!(
+        fail_over_shore >= MODEM_TIMEOUT - 1.0,
+        "{fail_over_shore} s: the shore's commands went over Iridium before the rule's timeout"
+    );
+    assert!(
+        fail_over_shore < MODEM_TIMEOUT + 40.0,
+        "the shore's fail-over took {fail_over_shore} s"
+    );
+    let over_iridium = all
+        .iter()
+        .filter(|(from, note)| delivery_of(&data, *from, note).is_some_and(|(_, l)| l == "iridium"))
+        .count();
+    eprintln!(
+        "links, acoustic modem died: {} published, {deliveries} delivered once each, all acknowledged, \
+         {over_iridium} first over iridium, {suppressed} copies suppressed; the vehicle's link down \
+         {detected:.3} s after its modem died; fail-over to iridium {fail_over_vehicle:.1} s (vehicle, link down) \
+         and {fail_over_shore:.1} s (shore, rule timeout {MODEM_TIMEOUT} s) after it died; the modem back: \
+         link up again {restarted:.1} s after, fail-back to acoustic {fail_back_vehicle:.1} s (vehicle) \
+         and {fail_back_shore:.1} s (shore) after it returned",
+        all.len()
+    );
+    drop(vehicle);
+    drop(shore);
+    rt.block_on(async {
+        for m in modems {
+            m.stop().await;
+        }
         emulated.transceiver.stop().await;
         emulated.gateway.stop().await;
     });
