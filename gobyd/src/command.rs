@@ -182,6 +182,17 @@ fn configuration(
         {
             *id_field = Some(id);
         }
+        for link in &mut config.link {
+            for id_field in [
+                link.driver.as_mut().map(|d| &mut d.modem_id),
+                link.mac.as_mut().map(|m| &mut m.modem_id),
+            ]
+            .into_iter()
+            .flatten()
+            {
+                *id_field = Some(id);
+            }
+        }
     }
     if let Some(dir) = &cli.data_dir {
         config.data_dir = Some(dir.display().to_string());
@@ -331,6 +342,9 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             "configuration is valid; DCCL types: {}",
             checked.loaded.join(", ")
         );
+        if config::links::has_link_sections(&checked.config) {
+            println!("{}", config::links::summary(&checked.config));
+        }
         for limits in [limits, frame_limits].into_iter().flatten() {
             println!("{limits}");
         }

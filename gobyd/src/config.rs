@@ -20,6 +20,7 @@ use protos::goby::acomms::protobuf::{
 use protos::goby::apps::protobuf::GobydConfig;
 
 pub mod goby;
+pub mod links;
 mod moos_lines;
 
 /// A commented configuration that works as it is: `gobyd --example-config`.
@@ -326,11 +327,23 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
         }
     }
     goby::goby_keys(&mut config, &places, &mut found);
-    if let Some(text) = mixed_fleet_ack_note(&config) {
-        found.note(places.offset("driver.driver_type"), NoteLevel::Info, text);
+    if links::has_link_sections(&config) && (config.driver.is_some() || config.mac.is_some()) {
+        let top = if config.driver.is_some() {
+            "driver"
+        } else {
+            "mac"
+        };
+        found.problem(places.offset(top), top, mixed_forms(top));
     }
-    if let Some((field, text)) = fdp_without_acks_note(&config) {
-        found.note(places.offset(&field), NoteLevel::Warn, text);
+    for view in links::links(&config) {
+        let single = view.single(&config);
+        if let Some(text) = mixed_fleet_ack_note(&single) {
+            let field = view.field("driver.driver_type");
+            found.note(places.offset(&field), NoteLevel::Info, text);
+        }
+        if let Some((field, text)) = fdp_without_acks_note(&single) {
+            found.note(places.offset(&view.field(&field)), NoteLevel::Warn, text);
+        }
     }
     let notes = found.finish()?;
     Ok(Read {
@@ -909,9 +922,19 @@ pub fn load(path: &Path) -> Result<GobydConfig, ConfigError> {
     parse(&text, &path.display().to_string())
 }
 
+/// Why a configuration cannot have both `link` sections and a top-level
+/// `top` (`driver` or `mac`).
+fn mixed_forms(top: &str) -> String {
+    format!(
+        "both link sections and a top-level {top} are given: write every link as link {{ name driver mac }} \
+         (or one top-level driver and mac, without link sections)"
+    )
+}
+
 /// The configuration with every section the daemon needs filled in: the
 /// modem id copied where unset, the simulator driver and a fixed TDMA slot
-/// of this node when none are given.
+/// of this node when none are given (in the `link` form, each link's MAC
+/// when its `mac` is not given; its driver must be).
 pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
     let id = config.modem_id();
     if id <= 0 {
@@ -920,13 +943,72 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
             format!("{id} is not valid: modem ids are 1 and up (0 is broadcast)"),
         )]));
     }
-    let driver = config.driver.get_or_insert_with(|| DriverConfig {
-        driver: Some(driver_config::Driver::DriverType(
-            DriverType::DriverAcousticSimulator as i32,
-        )),
+    if links::has_link_sections(&config) {
+        if let Some(top) = [
+            ("driver", config.driver.is_some()),
+            ("mac", config.mac.is_some()),
+        ]
+        .into_iter()
+        .find_map(|(name, given)| given.then_some(name))
+        {
+            return Err(ConfigError::Problems(vec![Problem::new(
+                top,
+                mixed_forms(top),
+            )]));
+        }
+        let problems = links::link_problems(&config);
+        if !problems.is_empty() {
+            return Err(ConfigError::Problems(problems));
+        }
+        for (i, link) in config.link.iter_mut().enumerate() {
+            let prefix = format!("link[{i}].");
+            complete_driver(link.driver.as_mut().expect("checked"), id, &prefix)?;
+            let mac = link.mac.get_or_insert_with(|| default_mac(id));
+            same_id(&format!("{prefix}mac.modem_id"), mac.modem_id, id)?;
+            mac.modem_id.get_or_insert(id);
+        }
+    } else {
+        let driver = config.driver.get_or_insert_with(|| DriverConfig {
+            driver: Some(driver_config::Driver::DriverType(
+                DriverType::DriverAcousticSimulator as i32,
+            )),
+            ..Default::default()
+        });
+        complete_driver(driver, id, "")?;
+        let mac = config.mac.get_or_insert_with(|| default_mac(id));
+        same_id("mac.modem_id", mac.modem_id, id)?;
+        mac.modem_id.get_or_insert(id);
+    }
+    let queue = config.queue.get_or_insert_with(QueueManagerConfig::default);
+    same_id("queue.modem_id", queue.modem_id, id)?;
+    queue.modem_id.get_or_insert(id);
+    // Receivers tell a retransmission from a repeat on purpose by the
+    // frame's identity trailer (`queue.message_identity: false` sends plain
+    // DCCL frames; their receptions are then all delivered).
+    queue.message_identity.get_or_insert(true);
+    Ok(config)
+}
+
+/// Fixed TDMA, one 10 s slot of node `id`: the MAC of a link that gives
+/// none.
+fn default_mac(id: i32) -> MacConfig {
+    MacConfig {
+        r#type: Some(MacType::MacFixedDecentralized as i32),
+        slot: vec![ModemTransmission {
+            src: Some(id),
+            dest: Some(-1),
+            slot_seconds: Some(10.0),
+            ..Default::default()
+        }],
         ..Default::default()
-    });
-    same_id("driver.modem_id", driver.modem_id, id)?;
+    }
+}
+
+/// A driver section completed for node `id` (`prefix`: where the section
+/// is, `""` or `link[i].`): its modem id, the Micro-Modem's application
+/// acks, the simulator's node.
+fn complete_driver(driver: &mut DriverConfig, id: i32, prefix: &str) -> Result<(), ConfigError> {
+    same_id(&format!("{prefix}driver.modem_id"), driver.modem_id, id)?;
     driver.modem_id.get_or_insert(id);
     if driver.driver
         == Some(driver_config::Driver::DriverType(
@@ -956,26 +1038,7 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
             ..Default::default()
         });
     }
-    let mac = config.mac.get_or_insert_with(|| MacConfig {
-        r#type: Some(MacType::MacFixedDecentralized as i32),
-        slot: vec![ModemTransmission {
-            src: Some(id),
-            dest: Some(-1),
-            slot_seconds: Some(10.0),
-            ..Default::default()
-        }],
-        ..Default::default()
-    });
-    same_id("mac.modem_id", mac.modem_id, id)?;
-    mac.modem_id.get_or_insert(id);
-    let queue = config.queue.get_or_insert_with(QueueManagerConfig::default);
-    same_id("queue.modem_id", queue.modem_id, id)?;
-    queue.modem_id.get_or_insert(id);
-    // Receivers tell a retransmission from a repeat on purpose by the
-    // frame's identity trailer (`queue.message_identity: false` sends plain
-    // DCCL frames; their receptions are then all delivered).
-    queue.message_identity.get_or_insert(true);
-    Ok(config)
+    Ok(())
 }
 
 /// A section's own `modem_id`, when given, must be the node's.
@@ -1088,15 +1151,20 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
             );
         }
     }
-    if let Some((field, reason)) = own_slot_problem(config) {
-        push(field, reason);
-    }
     if let Some(reason) = config.data_dir.as_deref().and_then(data_dir_problem) {
         push("data_dir".into(), reason);
     }
-    if driver == DriverSettings::Configured {
-        problems.extend(driver_problems(config));
+    // Each link's driver and MAC, as if it were the only one.
+    for view in links::links(config) {
+        let single = view.single(config);
+        if let Some((field, reason)) = own_slot_problem(&single) {
+            problems.push(Problem::new(view.field(&field), reason));
+        }
+        if driver == DriverSettings::Configured {
+            problems.extend(links::within(&view, driver_problems(&single)));
+        }
     }
+    problems.extend(links::link_problems(config));
     problems
 }
 
@@ -1795,17 +1863,21 @@ fn fdp_without_acks_note(config: &GobydConfig) -> Option<(String, String)> {
     })
 }
 
-/// Whether the driver is a Micro-Modem sending application acks.
+/// Whether a driver (of any link) is a Micro-Modem sending application
+/// acks.
 pub fn application_acks(config: &GobydConfig) -> bool {
-    config.driver.as_ref().is_some_and(|d| {
-        d.driver
-            == Some(driver_config::Driver::DriverType(
-                DriverType::DriverWhoiMicromodem as i32,
-            ))
-            && d.micromodem
-                .as_ref()
-                .is_some_and(|m| m.use_application_acks())
-    })
+    links::links(config)
+        .iter()
+        .filter_map(|v| v.driver)
+        .any(|d| {
+            d.driver
+                == Some(driver_config::Driver::DriverType(
+                    DriverType::DriverWhoiMicromodem as i32,
+                ))
+                && d.micromodem
+                    .as_ref()
+                    .is_some_and(|m| m.use_application_acks())
+        })
 }
 
 #[cfg(test)]

@@ -40,6 +40,8 @@ pub enum DaemonEvent {
     /// A transfer's progress or end (a message larger than a frame, a
     /// file; [`crate::network`]).
     Transfer(crate::network::transfers::TransferEvent),
+    /// A link's status changed ([`crate::link`]).
+    Link(crate::link::LinkStatus),
 }
 
 /// One event of the core as the interfaces receive it, shared by all of
@@ -101,6 +103,8 @@ pub struct LinkSummary {
     pub frames: usize,
     /// When it was received, microseconds since the UNIX epoch.
     pub time: i64,
+    /// The link it came over, when the node has `link` sections.
+    pub name: Option<String>,
 }
 
 impl LinkSummary {
@@ -113,6 +117,7 @@ impl LinkSummary {
             transmission: stripped,
             frames,
             time,
+            name: None,
         }
     }
 
@@ -121,13 +126,17 @@ impl LinkSummary {
     /// Micro-Modem, `receive_stat` with the modem's `$CACST` statistics:
     /// SNR in and out, Doppler, data quality factor, bad frames ...)
     /// except the frames' bytes, replaced by their count `frames`, and
-    /// `time` in seconds since the UNIX epoch.
+    /// `time` in seconds since the UNIX epoch, and with several links
+    /// `name`, the link's.
     pub fn json(&self) -> Value {
         let mut value = message_json(&self.transmission.transcode_to_dynamic());
         if let Value::Object(map) = &mut value {
             map.remove("frame");
             map.insert("frames".into(), self.frames.into());
             map.insert("time".into(), (self.time as f64 / 1e6).into());
+            if let Some(name) = &self.name {
+                map.insert("name".into(), name.clone().into());
+            }
         }
         value
     }

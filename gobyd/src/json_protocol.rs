@@ -38,11 +38,13 @@ pub enum Topic {
     Mac,
     /// Transfers (messages larger than a frame, files): progress and ends.
     Transfer,
+    /// The links' status (up, down, restarting, budget spent).
+    Link,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 8] = [
+    pub const ALL: [Topic; 9] = [
         Topic::Ack,
         Topic::Expire,
         Topic::Drop,
@@ -51,6 +53,7 @@ impl Topic {
         Topic::Modem,
         Topic::Mac,
         Topic::Transfer,
+        Topic::Link,
     ];
 
     /// The topic's name in the protocol.
@@ -64,6 +67,7 @@ impl Topic {
             Topic::Modem => "modem",
             Topic::Mac => "mac",
             Topic::Transfer => "transfer",
+            Topic::Link => "link",
         }
     }
 
@@ -287,6 +291,7 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             _ => Topic::Modem,
         }),
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
+        DaemonEvent::Link(_) => Some(Topic::Link),
     }
 }
 
@@ -308,6 +313,10 @@ pub fn event_line(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Op
         DaemonEvent::Queue { event, entry } => queue_line(event, *entry, queue_name)?,
         DaemonEvent::Modem(event) => modem_line(event),
         DaemonEvent::Transfer(event) => transfer_value(event),
+        DaemonEvent::Link(status) => json!({
+            "event": "link_status",
+            "link_status": message_json(&status.transcode_to_dynamic()),
+        }),
     };
     Some(line.to_string())
 }
@@ -777,6 +786,7 @@ mod tests {
                 dccl_id: 125,
                 frame: 0,
                 awaiting_ack: true,
+                link: 0,
             },
             QueueEvent::Acked {
                 message: command.clone(),
@@ -886,12 +896,18 @@ mod tests {
                 request: Some(3),
             },
         ));
+        events.push(DaemonEvent::Link(crate::link::LinkStatus {
+            name: Some("iridium".into()),
+            state: Some(protos::goby::apps::protobuf::link_status::State::LinkUp as i32),
+            ..Default::default()
+        }));
         for e in &events {
             match e {
                 DaemonEvent::Received { .. }
                 | DaemonEvent::Queue { .. }
                 | DaemonEvent::Modem(_)
-                | DaemonEvent::Transfer(_) => {}
+                | DaemonEvent::Transfer(_)
+                | DaemonEvent::Link(_) => {}
             }
         }
         let mut lines: Vec<String> = events

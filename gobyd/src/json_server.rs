@@ -227,6 +227,9 @@ pub struct JsonInterface {
     /// client as it subscribes to `modem`, so that it need not wait for the
     /// next change.
     pub driver_status: watch::Receiver<Option<modemdriver::DriverStatus>>,
+    /// Every link's status as it stands: sent once to a client as it
+    /// subscribes to `link`.
+    pub link_status: watch::Receiver<Vec<crate::link::LinkStatus>>,
 }
 
 impl JsonInterface {
@@ -257,20 +260,30 @@ impl JsonInterface {
         match request {
             Request::Subscribe(t) => {
                 let modem_now = !topics.contains(&Topic::Modem) && t.contains(&Topic::Modem);
+                let link_now = !topics.contains(&Topic::Link) && t.contains(&Topic::Link);
                 topics.extend(t);
                 let mut all: Vec<Topic> = topics.iter().copied().collect();
                 all.sort_by_key(|t| t.name());
                 let reply = subscribed_line(&all);
-                // The driver's status as it stands, once: later changes
-                // come as events.
+                // The driver's and the links' status as they stand, once:
+                // later changes come as events.
+                let mut now = Vec::new();
                 let status = self.driver_status.borrow().clone();
-                match status.filter(|_| modem_now) {
-                    Some(status) => {
-                        let event = DaemonEvent::Modem(ModemEvent::Status(status));
-                        let line = event_line(&event, |id| format!("dccl id {id}"));
-                        Handled::ReplyThen(reply, line.into_iter().collect())
-                    }
-                    None => Handled::Reply(reply),
+                if let Some(status) = status.filter(|_| modem_now) {
+                    now.push(DaemonEvent::Modem(ModemEvent::Status(status)));
+                }
+                if link_now {
+                    let links = self.link_status.borrow().clone();
+                    now.extend(links.into_iter().map(DaemonEvent::Link));
+                }
+                let lines: Vec<String> = now
+                    .iter()
+                    .filter_map(|e| event_line(e, |id| format!("dccl id {id}")))
+                    .collect();
+                if lines.is_empty() {
+                    Handled::Reply(reply)
+                } else {
+                    Handled::ReplyThen(reply, lines)
                 }
             }
             Request::Publish(message) => {

@@ -48,6 +48,7 @@ pub mod group_commit;
 pub mod inbox;
 pub mod json_protocol;
 pub mod json_server;
+pub mod link;
 pub mod mission_file;
 pub mod modem_event;
 pub mod moos_bridge;

@@ -447,6 +447,13 @@ pub async fn run(
                         DaemonEvent::Queue { event, .. } => publications(&settings, event),
                         DaemonEvent::Modem(m) => modem_publications(&settings, m),
                         DaemonEvent::Transfer(_) => Vec::new(),
+                        DaemonEvent::Link(status) => settings
+                            .var(|v| v.link_status())
+                            .map(|var| {
+                                (var, Value::String(format_value(&status.transcode_to_dynamic())))
+                            })
+                            .into_iter()
+                            .collect(),
                     };
                     for (var, value) in values {
                         notify(&client, &var, &value);

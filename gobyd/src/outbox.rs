@@ -63,10 +63,10 @@ pub struct Outbox {
     events: Receiver<QueueEvent>,
     /// Journal entry of each queued message.
     entries: HashMap<MessageId, EntryId>,
-    /// Messages without ack placed in frames of the transmission under way:
-    /// they leave the journal once it went out, and are queued again if it
-    /// failed.
-    in_flight: Vec<(EntryId, DynamicMessage)>,
+    /// Messages without ack placed in frames of the transmission under way
+    /// (of each link): they leave the journal once it went out, and are
+    /// queued again if it failed.
+    in_flight: Vec<(queue::LinkIndex, EntryId, DynamicMessage)>,
 }
 
 impl std::fmt::Debug for Outbox {
@@ -255,6 +255,31 @@ impl Outbox {
         self.queue.handle_modem_data_request(request)
     }
 
+    /// Fills the frames of a data request of link `link` (several links:
+    /// [`queue::links`]).
+    pub fn data_request_on(
+        &mut self,
+        request: &mut ModemTransmission,
+        link: queue::LinkIndex,
+    ) -> Result<(), QueueError> {
+        self.queue.handle_link_data_request(request, link)
+    }
+
+    /// Hands a transmission received on link `link` to the queues (see
+    /// [`receive`](Self::receive)).
+    pub fn receive_on(
+        &mut self,
+        link: queue::LinkIndex,
+        transmission: &ModemTransmission,
+    ) -> Vec<QueueError> {
+        self.queue.handle_link_receive(transmission, link)
+    }
+
+    /// The queue's links, to tell their states (`None`: one link).
+    pub fn links_mut(&mut self) -> Option<&mut queue::Links> {
+        self.queue.links_mut()
+    }
+
     /// Hands a received transmission (data or ack) to the queues; returns
     /// the frames that did not decode (the others are still delivered).
     pub fn receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
@@ -312,10 +337,11 @@ impl Outbox {
                     message,
                     id,
                     awaiting_ack: false,
+                    link,
                     ..
                 } => {
                     if let Some(entry) = self.entries.remove(id) {
-                        self.in_flight.push((entry, message.clone()));
+                        self.in_flight.push((*link, entry, message.clone()));
                         ended = Some(entry);
                     }
                 }
@@ -332,9 +358,23 @@ impl Outbox {
     /// to send) they are queued again with their original age. Returns how
     /// many were queued again.
     pub fn transmitted(&mut self, went_out: bool) -> Result<usize, OutboxError> {
-        let in_flight = std::mem::take(&mut self.in_flight);
+        self.transmitted_on(0, went_out)
+    }
+
+    /// Settles the messages sent without ack in the transmission under way
+    /// on link `link`, as [`transmitted`](Self::transmitted) does (those of
+    /// the other links wait for their own outcome).
+    pub fn transmitted_on(
+        &mut self,
+        link: queue::LinkIndex,
+        went_out: bool,
+    ) -> Result<usize, OutboxError> {
+        let (in_flight, others) = std::mem::take(&mut self.in_flight)
+            .into_iter()
+            .partition(|(l, _, _)| *l == link);
+        self.in_flight = others;
         let mut requeued = 0;
-        for (entry, message) in in_flight {
+        for (_, entry, message) in in_flight {
             if went_out {
                 self.journal.remove(entry)?;
                 continue;

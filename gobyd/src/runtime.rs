@@ -35,12 +35,14 @@ use super::data_dir::{DataDir, DataDirError};
 use super::delivery::{Delivery, FrameFaults};
 use super::door::Door;
 use super::event::{
-    reception_summary, AcceptedMessage, CoreEvent, DaemonEvent, PublishReply, Reception,
-    SharedEvent,
+    AcceptedMessage, CoreEvent, DaemonEvent, LinkSummary, PublishReply, Reception, SharedEvent,
 };
 use super::group_commit::{GroupCommit, Mark};
 use super::json_protocol::message_json;
 use super::json_server::{JsonInterface, Publish};
+use super::link::backoff::Backoff;
+use super::link::budget::{Budget, BudgetFile};
+use super::link::{self, Link, LinkStatus};
 use super::modem_event::ModemEvent;
 use super::network::Network;
 use super::outbox::{Accepted, Outbox, OutboxError};
@@ -180,12 +182,18 @@ pub fn validate(
 ) -> Result<Checked, DaemonError> {
     let config = config::complete(config)?;
     let mut problems = config::problems(&config, driver);
-    // The MAC's own refusals, in the same list (every problem at once).
-    let mac = MacManager::new(config.mac.as_ref().expect("completed"), SystemClock.now());
-    if let Err(amac::AmacError::InvalidField { field, reason, .. }) = &mac {
-        let field = format!("mac.{field}");
-        if !problems.iter().any(|p| p.field == field) {
-            problems.push(config::Problem::new(field, reason.clone()));
+    // Each MAC's own refusals, in the same list (every problem at once).
+    let mut mac = Ok(());
+    for view in config::links::links(&config) {
+        let made = MacManager::new(view.mac.expect("completed"), SystemClock.now());
+        if let Err(amac::AmacError::InvalidField { field, reason, .. }) = &made {
+            let field = view.field(&format!("mac.{field}"));
+            if !problems.iter().any(|p| p.field == field) {
+                problems.push(config::Problem::new(field, reason.clone()));
+            }
+        }
+        if let (Err(e), Ok(())) = (made, &mac) {
+            mac = Err(e);
         }
     }
     if !problems.is_empty() {
@@ -202,12 +210,10 @@ pub fn validate(
     // Each queue entry on its own, so that every refused entry is told at
     // once, at its place.
     let mut problems = entry_problems(&codec, &queue, configured, &defs.loaded);
-    problems.extend(frame_problems(
-        &codec,
-        &queue,
-        configured,
-        config.driver.as_ref(),
-    ));
+    problems.extend(config::links::rule_problems(&config, &defs.loaded));
+    if problems.is_empty() {
+        problems.extend(frame_problems(&codec, &queue, configured, &config));
+    }
     if !problems.is_empty() {
         return Err(ConfigError::Problems(problems).into());
     }
@@ -219,6 +225,8 @@ pub fn validate(
         &defs.loaded,
     )
     .map_err(ConfigError::Problems)?;
+    config::links::queue_links(&config, |n| codec.id_of(n).ok())
+        .map_err(config::ConfigError::Invalid)?;
     crate::translator::from_config(&config, &codec).map_err(config::ConfigError::Invalid)?;
     QueueManager::new(codec.clone(), &queue)?;
     mac?;
@@ -282,48 +290,86 @@ fn entry_problems(
 
 /// The queue entries whose messages can be larger than the largest frame
 /// the driver sends ([`modemdriver::check::largest_frame`]: the EvoLogics
-/// S2C's burst size): such a message would never go.
+/// S2C's burst size): such a message would never go. With several links,
+/// larger than the largest frame of every link the type may use
+/// ([`config::links`]).
 fn frame_problems(
     codec: &Arc<dccl::Codec>,
     queue: &protos::goby::acomms::protobuf::QueueManagerConfig,
     configured: usize,
-    driver: Option<&protos::goby::acomms::protobuf::DriverConfig>,
+    config: &GobydConfig,
 ) -> Vec<config::Problem> {
-    let Some(driver) = driver else {
-        return Vec::new();
-    };
-    let Some(largest) = modemdriver::check::largest_frame(driver) else {
-        return Vec::new();
-    };
+    let views = config::links::links(config);
+    let rules = config::links::queue_links(config, |n| codec.id_of(n).ok())
+        .ok()
+        .flatten();
     let mut problems = Vec::new();
     for (i, entry) in queue.message_entry.iter().enumerate() {
         let Ok(size) = codec.max_size(&entry.protobuf_name) else {
             continue;
         };
-        if size > largest {
-            let field = if i < configured {
-                format!("queue.message_entry[{i}].protobuf_name")
-            } else {
-                "dccl.proto_file".to_string()
+        let allowed: Vec<&config::links::LinkView<'_>> =
+            match (&rules, codec.id_of(&entry.protobuf_name).ok()) {
+                (Some(links), Some(id)) => links.order(id).iter().map(|&k| &views[k]).collect(),
+                _ => views.iter().collect(),
             };
-            problems.push(config::Problem::new(
-                field,
-                format!(
-                    "{} encodes to up to {size} bytes, more than the {largest} bytes of the driver's largest frame \
-                     ({}): it could never be sent",
-                    entry.protobuf_name,
-                    modemdriver::check::limits(driver).unwrap_or_default()
-                ),
-            ));
+        // Each link's largest frame; a link without a limit of its own
+        // carries any message the queue takes.
+        let Some(limits) = allowed
+            .iter()
+            .map(|v| {
+                let driver = v.driver?;
+                Some((modemdriver::check::largest_frame(driver)?, *v, driver))
+            })
+            .collect::<Option<Vec<_>>>()
+        else {
+            continue;
+        };
+        if limits.is_empty() || limits.iter().any(|(largest, _, _)| size <= *largest) {
+            continue;
         }
+        let field = if i < configured {
+            format!("queue.message_entry[{i}].protobuf_name")
+        } else {
+            "dccl.proto_file".to_string()
+        };
+        let reason = match limits.as_slice() {
+            [(largest, view, driver)] if view.section.is_none() => format!(
+                "{} encodes to up to {size} bytes, more than the {largest} bytes of the driver's largest frame \
+                 ({}): it could never be sent",
+                entry.protobuf_name,
+                modemdriver::check::limits(driver).unwrap_or_default()
+            ),
+            many => format!(
+                "{} encodes to up to {size} bytes, more than the largest frame of every link it may use \
+                 ({}): it could never be sent",
+                entry.protobuf_name,
+                many.iter()
+                    .map(|(largest, view, _)| format!("{}: {largest} bytes", view.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
+        problems.push(config::Problem::new(field, reason));
     }
     problems
 }
 
-/// The frame limits of the configured driver, in words, when it has such
-/// limits (told by `gobyd --check`).
+/// The frame limits of the configured drivers, in words, when they have
+/// such limits (told by `gobyd --check`): one line, or with `link`
+/// sections one per link that has them (`link NAME: ...`).
 pub fn driver_limits(config: &GobydConfig) -> Option<String> {
-    config.driver.as_ref().and_then(modemdriver::check::limits)
+    let lines: Vec<String> = config::links::links(config)
+        .iter()
+        .filter_map(|v| {
+            let limits = modemdriver::check::limits(v.driver?)?;
+            Some(match v.section {
+                Some(_) => format!("link {}: {limits}", v.name),
+                None => limits,
+            })
+        })
+        .collect();
+    (!lines.is_empty()).then(|| lines.join("\n"))
 }
 
 /// Below this `minimum_ack_wait_seconds`, `gobyd --check` warns that an
@@ -334,27 +380,49 @@ pub const MIN_SBD_ACK_WAIT_SECONDS: f64 = 60.0;
 /// of their own (Iridium SBD): the limits, and a warning for each loaded
 /// DCCL type that can be larger than the frames this node sends (it can
 /// never be sent from here; a type only received is fine).
+///
+/// With `link` sections, for each link with such limits (its lines begin
+/// `link NAME: `), each type warned about only when it may use that link.
 pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
-    let Some(limits) = checked
-        .config
-        .driver
-        .as_ref()
-        .and_then(modemdriver::check::frame_limits)
-    else {
-        return (None, Vec::new());
-    };
+    let config = &checked.config;
+    let rules = config::links::queue_links(config, |n| checked.codec.id_of(n).ok())
+        .ok()
+        .flatten();
+    let mut lines = Vec::new();
     let mut warnings = Vec::new();
-    for name in &checked.loaded {
-        if let Ok(size) = checked.codec.max_size(name) {
-            if size > limits.outgoing {
-                warnings.push(format!(
-                    "{name} is up to {size} bytes, more than the {} bytes of the frames this node sends over {}: \
-                     a message of it that large is never sent from here (only received)",
-                    limits.outgoing, limits.link
-                ));
+    let mut sbd = None;
+    for view in config::links::links(config) {
+        let Some(limits) = view.driver.and_then(modemdriver::check::frame_limits) else {
+            continue;
+        };
+        let named = |text: String| match view.section {
+            Some(_) => format!("link {}: {text}", view.name),
+            None => text,
+        };
+        for name in &checked.loaded {
+            let may_use = match (&rules, checked.codec.id_of(name).ok()) {
+                (Some(links), Some(id)) => links.order(id).contains(&view.index),
+                _ => true,
+            };
+            if !may_use {
+                continue;
+            }
+            if let Ok(size) = checked.codec.max_size(name) {
+                if size > limits.outgoing {
+                    warnings.push(named(format!(
+                        "{name} is up to {size} bytes, more than the {} bytes of the frames this node sends over {}: \
+                         a message of it that large is never sent from here (only received)",
+                        limits.outgoing, limits.link
+                    )));
+                }
             }
         }
+        lines.push(named(format!("{}: {}", limits.link, limits.text)));
+        sbd.get_or_insert(limits);
     }
+    let Some(limits) = sbd else {
+        return (None, Vec::new());
+    };
     let wait = checked.queue.minimum_ack_wait_seconds();
     if wait < MIN_SBD_ACK_WAIT_SECONDS {
         warnings.push(format!(
@@ -365,7 +433,7 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
             limits.link
         ));
     }
-    (Some(format!("{}: {}", limits.link, limits.text)), warnings)
+    (Some(lines.join("\n")), warnings)
 }
 
 /// Checks a configuration without starting anything ([`validate`], the
@@ -395,8 +463,23 @@ pub struct Daemon {
     outbox: Outbox,
     /// Checks published values against their DCCL definitions.
     door: Door,
-    mac: MacManager,
-    driver: Driver,
+    /// The links: each a driver and its medium access control (one, named
+    /// "default", for a configuration with a top-level driver).
+    links: Vec<Link>,
+    /// The configuration has `link` sections: links are supervised
+    /// (restarted after failures, budgets, rules) and receptions and
+    /// sendings name their link.
+    several: bool,
+    /// Every link's status as it stands, for the clients that subscribe
+    /// to `link` after it was reported.
+    link_status: watch::Sender<Vec<LinkStatus>>,
+    /// Where the links' budgets are kept (when one has a budget).
+    budget_file: Option<BudgetFile>,
+    /// Drivers being started again: the link and the outcome.
+    starts: JoinSet<(usize, Result<Driver, String>)>,
+    /// The link whose driver events are read first next time (turns
+    /// round, so that no link starves the others).
+    first_link: usize,
     /// Type names by DCCL id.
     names: HashMap<u32, String>,
     /// The core's events, to every interface.
@@ -408,13 +491,8 @@ pub struct Daemon {
     publish_tx: mpsc::Sender<Publish>,
     control_rx: mpsc::Receiver<Control>,
     control_tx: mpsc::Sender<Control>,
-    /// The driver's configuration, for a reset (`None`: started by the
-    /// caller).
-    driver_config: Option<protos::goby::acomms::protobuf::DriverConfig>,
     /// This node's modem id.
     modem_id: i32,
-    /// Driver-specific requests waiting for this node's next slot.
-    specific_requests: std::collections::VecDeque<DynamicMessage>,
     raw_log: Option<RawLog>,
     /// Replies to send once the journal holding their messages is synced
     /// (one sync for every message accepted meanwhile).
@@ -469,15 +547,24 @@ impl Daemon {
             tracing::warn!("{w}");
         }
         let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
-        let mut driver_config = checked.config.driver.clone().expect("completed");
-        // Acks (where software sends them) only once the inbox holds the
-        // message.
-        driver_config.deferred_ack = Some(true);
-        keep_application_acks_in(&mut driver_config, data_dir.path());
-        let driver = start_driver(&driver_config).await?;
-        let mut daemon = Self::start_in(checked, driver, data_dir, Arc::new(SystemClock)).await?;
-        daemon.driver_config = Some(driver_config);
-        Ok(daemon)
+        let several = config::links::has_link_sections(&checked.config);
+        let mut drivers = Vec::new();
+        for view in config::links::links(&checked.config) {
+            let mut driver_config = view.driver.cloned().expect("completed");
+            // Acks (where software sends them) only once the inbox holds
+            // the message.
+            driver_config.deferred_ack = Some(true);
+            keep_application_acks_in(&mut driver_config, data_dir.path());
+            let started = match start_driver(&driver_config).await {
+                Ok(driver) => Ok(driver),
+                // One link that cannot start does not stop the others: it
+                // is started again after its back-off.
+                Err(e) if several => Err(e.to_string()),
+                Err(e) => return Err(e),
+            };
+            drivers.push((started, Some(driver_config)));
+        }
+        Self::start_in(checked, drivers, data_dir, Arc::new(SystemClock)).await
     }
 
     /// Starts the daemon on a driver started by the caller (the
@@ -505,13 +592,51 @@ impl Daemon {
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DaemonError> {
         let checked = validate(config, config::DriverSettings::Caller)?;
+        if config::links::has_link_sections(&checked.config) {
+            return Err(ConfigError::Invalid(
+                "the configuration has link sections: start it on one driver per link \
+                 (Daemon::start_with_drivers)"
+                    .into(),
+            )
+            .into());
+        }
         let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
-        Self::start_in(checked, driver, data_dir, clock).await
+        Self::start_in(checked, vec![(Ok(driver), None)], data_dir, clock).await
     }
 
+    /// Starts the daemon of a configuration with `link` sections on
+    /// drivers started by the caller, one per link in the order of the
+    /// sections (their driver sections are then only used for the modem
+    /// id; a link whose driver stops is not started again), reading time
+    /// from `clock` as [`start_with_driver_and_clock`](Self::start_with_driver_and_clock)
+    /// does.
+    pub async fn start_with_drivers(
+        config: GobydConfig,
+        drivers: Vec<Driver>,
+        clock: Arc<dyn Clock>,
+    ) -> Result<Self, DaemonError> {
+        let checked = validate(config, config::DriverSettings::Caller)?;
+        let count = config::links::links(&checked.config).len();
+        if drivers.len() != count {
+            return Err(ConfigError::Invalid(format!(
+                "{} drivers for {count} links: give one per link, in order",
+                drivers.len()
+            ))
+            .into());
+        }
+        let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
+        let drivers = drivers.into_iter().map(|d| (Ok(d), None)).collect();
+        Self::start_in(checked, drivers, data_dir, clock).await
+    }
+
+    /// `drivers`: for each link in order, its driver or why it could not
+    /// start, and its configuration for restarts (`None`: the caller's).
     async fn start_in(
         checked: Checked,
-        driver: Driver,
+        drivers: Vec<(
+            Result<Driver, String>,
+            Option<protos::goby::acomms::protobuf::DriverConfig>,
+        )>,
         data_dir: DataDir,
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DaemonError> {
@@ -521,7 +646,12 @@ impl Daemon {
             loaded,
             queue: queue_config,
         } = checked;
-        let queue = QueueManager::with_clock(codec.clone(), &queue_config, clock.clone())?;
+        let mut queue = QueueManager::with_clock(codec.clone(), &queue_config, clock.clone())?;
+        if let Some(links) = config::links::queue_links(&config, |n| codec.id_of(n).ok())
+            .map_err(ConfigError::Invalid)?
+        {
+            queue.set_links(links);
+        }
         let door = Door::new(codec.clone(), &queue_config, || {
             config::load_definitions(&config)
                 .map(|d| d.codec)
@@ -588,7 +718,78 @@ impl Daemon {
             None
         };
 
-        let mac = MacManager::new(config.mac.as_ref().expect("completed"), clock.now())?;
+        let several = config::links::has_link_sections(&config);
+        let views = config::links::links(&config);
+        let budgeted = views.iter().any(|v| v.budget().is_some());
+        let budget_file = budgeted.then(|| BudgetFile::in_dir(data_dir.path()));
+        let kept = match budget_file.as_ref().map(BudgetFile::load) {
+            Some(Err(e)) => {
+                tracing::error!(
+                    "link budgets: {e}; every budget is taken as spent until its next period"
+                );
+                None
+            }
+            Some(Ok(kept)) => Some(kept),
+            None => Some(Default::default()),
+        };
+        let mut links = Vec::new();
+        let restart_now = tokio::time::Instant::now();
+        for (view, (started, driver_config)) in views.iter().zip(drivers) {
+            let (min, max) = view.restart();
+            let mut budget = view
+                .budget()
+                .map(|(bytes, period)| Budget::new(bytes, period, clock.now()));
+            if let Some(b) = &mut budget {
+                match kept.as_ref() {
+                    Some(kept) => {
+                        if let Some(k) = kept.get(&view.name) {
+                            b.restore(k);
+                        }
+                    }
+                    None => b.exhaust(),
+                }
+            }
+            let mut link = Link {
+                name: view.name.clone(),
+                driver: None,
+                driver_name: "",
+                mac: MacManager::new(view.mac.expect("completed"), clock.now())?,
+                config: driver_config,
+                specific_requests: Default::default(),
+                health: link::Health::Up,
+                supervised: several,
+                backoff: Backoff::new(min, max),
+                last_error: None,
+                restarts: 0,
+                budget,
+            };
+            match started {
+                Ok(driver) => {
+                    link.driver_name = driver.name();
+                    link.driver = Some(driver);
+                }
+                Err(e) => {
+                    let wait = link.backoff.failed();
+                    tracing::error!(
+                        link = view.name,
+                        "link {}: the driver could not start: {e}; starting it again in {:.1} s",
+                        view.name,
+                        wait.as_secs_f64()
+                    );
+                    link.last_error = Some(e);
+                    link.health = link::Health::Down {
+                        restart_at: restart_now + wait,
+                    };
+                }
+            }
+            links.push(link);
+        }
+        let (link_status, link_status_now) = watch::channel(
+            links
+                .iter()
+                .map(|l| l.status(clock.now(), restart_now))
+                .collect::<Vec<_>>(),
+        );
         let (events, _) = broadcast::channel(1024);
         let (driver_status, driver_status_now) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
@@ -604,6 +805,7 @@ impl Daemon {
             events: events.clone(),
             names: Arc::new(names.clone()),
             driver_status: driver_status_now,
+            link_status: link_status_now,
         };
         let mut tasks = JoinSet::new();
         let json = config.json.clone().unwrap_or_default();
@@ -654,16 +856,38 @@ impl Daemon {
         }
         tracing::info!(
             modem_id = config.modem_id(),
-            driver = driver.name(),
-            mac = mac.scheme_name(),
+            driver = links
+                .iter()
+                .map(|l| l.driver_name)
+                .collect::<Vec<_>>()
+                .join(","),
+            mac = links
+                .iter()
+                .map(|l| l.mac.scheme_name())
+                .collect::<Vec<_>>()
+                .join(","),
             types = loaded.len(),
             "gobyd started"
         );
+        if several {
+            tracing::info!(
+                "links: {}",
+                links
+                    .iter()
+                    .map(|l| format!("{} ({})", l.name, l.driver_name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
         Ok(Self {
             outbox,
             door,
-            mac,
-            driver,
+            links,
+            several,
+            link_status,
+            budget_file,
+            starts: JoinSet::new(),
+            first_link: 0,
             names,
             events,
             driver_status,
@@ -671,9 +895,7 @@ impl Daemon {
             publish_tx,
             control_rx,
             control_tx,
-            driver_config: None,
             modem_id: config.modem_id(),
-            specific_requests: std::collections::VecDeque::new(),
             raw_log,
             commit: Arc::new(std::sync::Mutex::new(GroupCommit::new(MAX_SYNCS))),
             syncs: JoinSet::new(),
@@ -737,12 +959,21 @@ impl Daemon {
         self.delivery
             .hold_recovered(&self.codec, now, tokio::time::Instant::now());
         let mut expire = tokio::time::interval(Duration::from_secs(1));
+        // Every link's status as it starts.
+        for i in 0..self.links.len() {
+            self.report_link(i);
+        }
         loop {
+            let now = self.clock.now();
             let mac_wait = self
-                .mac
-                .next_event_time()
-                .map(|t| Duration::from_micros((t - self.clock.now()).max(0) as u64))
+                .links
+                .iter()
+                .filter_map(|l| l.mac.next_event_time())
+                .min()
+                .map(|t| Duration::from_micros((t - now).max(0) as u64))
                 .unwrap_or(Duration::from_secs(3600));
+            let restart_at = link::next_restart(&self.links);
+            let first = self.first_link;
             tokio::select! {
                 () = &mut shutdown => break,
                 Some(publish) = self.publish_rx.recv() => {
@@ -765,17 +996,31 @@ impl Daemon {
                     }
                 }
                 Some(control) = self.control_rx.recv() => self.control_request(control).await,
-                event = self.driver.next_event() => match event {
-                    Some(event) => self.driver_event(event),
-                    None => {
-                        tracing::error!("the modem driver stopped");
-                        break;
+                (i, event) = std::future::poll_fn(|cx| link::poll_events(&mut self.links, first, cx)) => {
+                    self.first_link = (i + 1) % self.links.len();
+                    match event {
+                        Some(event) => self.driver_event(i, event),
+                        None if self.links[i].supervised => {
+                            self.link_failed(i, "the driver stopped".into());
+                        }
+                        None => {
+                            tracing::error!("the modem driver stopped");
+                            break;
+                        }
                     }
-                },
+                }
+                () = sleep_until_opt(restart_at) => self.restart_due(),
+                Some(started) = self.starts.join_next(), if !self.starts.is_empty() => {
+                    match started {
+                        Ok((i, started)) => self.restarted(i, started),
+                        Err(e) => tracing::error!("link restart: {e}"),
+                    }
+                }
                 () = tokio::time::sleep(mac_wait) => self.mac_slots(),
                 () = sleep_until_opt(self.delivery.next_due()) => {}
                 _ = expire.tick() => {
                     self.outbox.expire();
+                    self.roll_budgets();
                     self.network_tick();
                 }
             }
@@ -794,7 +1039,12 @@ impl Daemon {
         }
         tracing::info!(owed = self.outbox.owed(), "gobyd stopping");
         self.tasks.shutdown().await;
-        let _ = self.driver.stop().await;
+        self.starts.shutdown().await;
+        for link in &mut self.links {
+            if let Some(driver) = link.driver.take() {
+                let _ = driver.stop().await;
+            }
+        }
         Ok(())
     }
 
@@ -917,7 +1167,7 @@ impl Daemon {
         }
     }
 
-    fn driver_event(&mut self, event: DriverEvent) {
+    fn driver_event(&mut self, i: usize, event: DriverEvent) {
         // The status as it stands first, so that a client subscribing once
         // the status is reported (as an event or in the log) finds it.
         if let DriverEvent::Status(status) = &event {
@@ -926,27 +1176,26 @@ impl Daemon {
         if let Some(reported) = ModemEvent::of_driver(&event, self.clock.now()) {
             self.report(reported);
         }
+        self.link_health(i, &event);
         match event {
             DriverEvent::DataRequest(request) => {
                 if let Some(network) = &mut self.network {
                     network.data_request(&mut self.outbox, self.clock.now());
                 }
                 let mut filled = request.template().clone();
-                if let Err(e) = self.outbox.data_request(&mut filled) {
-                    tracing::warn!("data request: {e}");
-                }
+                self.fill(i, &mut filled);
                 request.respond(filled);
             }
             DriverEvent::Received(transmission) => {
-                self.mac.handle_received(transmission.src());
-                self.receive(transmission);
+                self.links[i].mac.handle_received(transmission.src());
+                self.receive(i, transmission);
             }
             DriverEvent::TransmitResult(result) => {
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
                     tracing::warn!("transmission failed: {reason}");
                 }
-                match self.outbox.transmitted(went_out) {
+                match self.outbox.transmitted_on(i, went_out) {
                     Ok(n) if n > 0 => {
                         tracing::info!("{n} messages queued again after a failed transmission")
                     }
@@ -976,12 +1225,235 @@ impl Daemon {
         }
     }
 
+    /// Fills the frames of a data request of link `i`: the link states
+    /// told to the queue first (which links are up, what their budgets
+    /// have left), the request cut to the bytes its budget has left, and
+    /// what it carries counted against the budget and kept on disk before
+    /// the driver has it.
+    fn fill(&mut self, i: usize, request: &mut ModemTransmission) {
+        let now = self.clock.now();
+        self.tell_link_states(now);
+        let left = self.links[i].budget.as_mut().map(|b| b.left(now));
+        let before: usize = request.frame.iter().map(Vec::len).sum();
+        if let Some(left) = left {
+            let left = usize::try_from(left).unwrap_or(usize::MAX);
+            let bytes = request.max_frame_bytes.map_or(usize::MAX, |b| b as usize);
+            if left < bytes {
+                request.max_frame_bytes = Some(left as u32);
+                request.max_num_frames = Some(request.max_num_frames().min(1));
+            } else {
+                let frames = (left / bytes.max(1)).min(request.max_num_frames() as usize);
+                request.max_num_frames = Some(frames as u32);
+            }
+        }
+        let filled = if left == Some(0) {
+            Ok(())
+        } else if self.several {
+            self.outbox.data_request_on(request, i)
+        } else {
+            self.outbox.data_request(request)
+        };
+        if let Err(e) = filled {
+            tracing::warn!("data request: {e}");
+        }
+        let after: usize = request.frame.iter().map(Vec::len).sum();
+        let spent = after.saturating_sub(before);
+        if let (Some(budget), true) = (self.links[i].budget.as_mut(), spent > 0) {
+            budget.spend(spent as u64, now);
+            self.save_budgets();
+            self.report_link(i);
+        }
+    }
+
+    /// Tells the queue which links are up and what their budgets have
+    /// left (with `link` sections).
+    fn tell_link_states(&mut self, now: i64) {
+        if !self.several {
+            return;
+        }
+        let states: Vec<queue::LinkState> = self
+            .links
+            .iter_mut()
+            .map(|l| queue::LinkState {
+                up: l.is_up(),
+                budget_left: l
+                    .budget
+                    .as_mut()
+                    .map(|b| usize::try_from(b.left(now)).unwrap_or(usize::MAX)),
+            })
+            .collect();
+        if let Some(links) = self.outbox.links_mut() {
+            for (i, state) in states.into_iter().enumerate() {
+                links.set_state(i, state);
+            }
+        }
+    }
+
+    /// Writes what each budgeted link spent to `DATA_DIR/link_budget`,
+    /// durably.
+    fn save_budgets(&self) {
+        let Some(file) = &self.budget_file else {
+            return;
+        };
+        let kept = self
+            .links
+            .iter()
+            .filter_map(|l| Some((l.name.as_str(), l.budget.as_ref()?.kept())));
+        if let Err(e) = file.save(kept) {
+            tracing::error!("link budgets: cannot write {}: {e}", file.path().display());
+        }
+    }
+
+    /// Starts the budgets' new periods that are due, and tells.
+    fn roll_budgets(&mut self) {
+        let now = self.clock.now();
+        for i in 0..self.links.len() {
+            let rolled = self.links[i].budget.as_mut().is_some_and(|b| b.roll(now));
+            if rolled {
+                tracing::info!(link = self.links[i].name, "link budget: a new period");
+                self.save_budgets();
+                self.report_link(i);
+            }
+        }
+    }
+
+    /// Follows link `i`'s health from its driver's events: a supervised
+    /// link whose device is gone fails (and is started again); a link
+    /// not supervised is away until its driver reconnects; one that shows
+    /// life starts its back-off over.
+    fn link_health(&mut self, i: usize, event: &DriverEvent) {
+        let link = &mut self.links[i];
+        if Link::shows_life(event) {
+            link.backoff.worked();
+            if link.health == link::Health::Away {
+                link.health = link::Health::Up;
+                self.report_link(i);
+            }
+            return;
+        }
+        if let DriverEvent::Status(DriverStatus::Disconnected { reason }) = event {
+            if link.supervised {
+                self.link_failed(i, format!("disconnected: {reason}"));
+            } else if link.health != link::Health::Away {
+                link.health = link::Health::Away;
+                link.last_error = Some(format!("disconnected: {reason}"));
+                self.report_link(i);
+            }
+        }
+    }
+
+    /// Link `i`'s driver failed (`reason`): it is stopped, the messages
+    /// it had in hand are queued again, and it is started again after its
+    /// back-off; the other links run on.
+    fn link_failed(&mut self, i: usize, reason: String) {
+        let link = &mut self.links[i];
+        if let Some(driver) = link.driver.take() {
+            tokio::spawn(async move {
+                let _ = driver.stop().await;
+            });
+        }
+        let wait = link.backoff.failed();
+        link.health = link::Health::Down {
+            restart_at: tokio::time::Instant::now() + wait,
+        };
+        tracing::warn!(
+            link = link.name,
+            "link {} is down ({reason}); its driver starts again in {:.1} s (failure {} in a row)",
+            link.name,
+            wait.as_secs_f64(),
+            link.backoff.failures()
+        );
+        link.last_error = Some(reason);
+        match self.outbox.transmitted_on(i, false) {
+            Ok(n) if n > 0 => tracing::info!("{n} messages queued again from the failed link"),
+            Ok(_) => {}
+            Err(e) => tracing::error!("journal: {e}"),
+        }
+        self.report_link(i);
+    }
+
+    /// Starts again the drivers of the links that are due.
+    fn restart_due(&mut self) {
+        let now = tokio::time::Instant::now();
+        for i in 0..self.links.len() {
+            let link::Health::Down { restart_at } = self.links[i].health else {
+                continue;
+            };
+            if restart_at > now {
+                continue;
+            }
+            let Some(config) = self.links[i].config.clone() else {
+                // A caller's driver: nothing to start it from.
+                self.links[i].health = link::Health::Away;
+                self.report_link(i);
+                continue;
+            };
+            self.links[i].health = link::Health::Restarting;
+            tracing::info!(link = self.links[i].name, "starting the driver again");
+            self.starts.spawn(async move {
+                let started = start_driver(&config).await.map_err(|e| e.to_string());
+                (i, started)
+            });
+            self.report_link(i);
+        }
+    }
+
+    /// A driver started again (or could not be).
+    fn restarted(&mut self, i: usize, started: Result<Driver, String>) {
+        match started {
+            Ok(driver) => {
+                let link = &mut self.links[i];
+                link.driver_name = driver.name();
+                link.driver = Some(driver);
+                link.health = link::Health::Up;
+                link.restarts += 1;
+                tracing::info!(
+                    link = link.name,
+                    "link {} is up again (restart {})",
+                    link.name,
+                    link.restarts
+                );
+                self.report_link(i);
+            }
+            Err(e) => self.link_failed(i, format!("the driver could not start: {e}")),
+        }
+    }
+
+    /// Sends link `i`'s status to the interfaces (and keeps it for the
+    /// clients that subscribe later).
+    fn report_link(&self, i: usize) {
+        let now = self.clock.now();
+        let instant = tokio::time::Instant::now();
+        let status = self.links[i].status(now, instant);
+        self.link_status.send_modify(|all| {
+            if let Some(s) = all.get_mut(i) {
+                *s = status.clone();
+            }
+        });
+        let _ = self
+            .events
+            .send(Arc::new(CoreEvent::new(DaemonEvent::Link(status))));
+    }
+
     /// Starts the slots due. Each transmission initiated gets a `unique_id`
     /// (the acks that answer it name it) and, in `time` and `slot_seconds`,
     /// the time left in its slot: the driver drops it rather than run it
     /// after its slot (e.g. when the modem was away).
     fn mac_slots(&mut self) {
-        for event in self.mac.poll(self.clock.now()) {
+        for i in 0..self.links.len() {
+            self.link_slots(i);
+        }
+    }
+
+    /// Starts the slots due of link `i` (see [`mac_slots`](Self::mac_slots));
+    /// a link that is down reports its slots and initiates nothing.
+    fn link_slots(&mut self, i: usize) {
+        let now = self.clock.now();
+        let events = self.links[i].mac.poll(now);
+        // A driver whose device is away (and that reconnects by itself)
+        // is given its slots as before: it decides what it can do.
+        let up = self.links[i].driver.is_some();
+        for event in events {
             let mut reported = ModemEvent::of_mac(&event);
             let amac::MacEvent::Slot(slot) = &event else {
                 self.report(reported);
@@ -991,8 +1463,9 @@ impl Daemon {
             // data.
             let specific = slot
                 .initiate()
-                .and_then(|_| self.specific_requests.pop_front());
-            let initiated = match (slot.initiate(), &specific) {
+                .filter(|_| up)
+                .and_then(|_| self.links[i].specific_requests.pop_front());
+            let initiated = match (slot.initiate().filter(|_| up), &specific) {
                 (Some(transmission), None) => {
                     let mut transmission = transmission.clone();
                     self.next_transmission = self.next_transmission.wrapping_add(1);
@@ -1018,7 +1491,11 @@ impl Daemon {
                     "this node's slot carries a driver-specific request ({})",
                     request.descriptor().full_name()
                 );
-                if let Err(e) = self.driver.initiate_specific(&request) {
+                let outcome = self.links[i]
+                    .driver
+                    .as_ref()
+                    .map(|d| d.initiate_specific(&request));
+                if let Some(Err(e)) = outcome {
                     tracing::error!("cannot start a driver-specific request: {e}");
                 }
             }
@@ -1028,7 +1505,11 @@ impl Daemon {
                     slot = slot.position.index,
                     "initiating a transmission"
                 );
-                if let Err(e) = self.driver.initiate_transmission(transmission) {
+                let outcome = self.links[i]
+                    .driver
+                    .as_ref()
+                    .map(|d| d.initiate_transmission(transmission));
+                if let Some(Err(e)) = outcome {
                     tracing::error!("cannot initiate a transmission: {e}");
                 }
             }
@@ -1050,7 +1531,14 @@ impl Daemon {
                 let _ = reply.send(flushed);
             }
             Control::ResetDriver { reply } => {
-                let _ = reply.send(self.reset_driver().await);
+                let mut outcome = Ok(());
+                for i in 0..self.links.len() {
+                    let reset = self.reset_driver(i).await;
+                    if outcome.is_ok() {
+                        outcome = reset;
+                    }
+                }
+                let _ = reply.send(outcome);
             }
             Control::Network { request, reply } => {
                 let outcome = self.network_request(request);
@@ -1108,10 +1596,38 @@ impl Daemon {
     /// data), or says why not: a request the configured driver cannot carry
     /// out (see [`modemdriver::micromodem::ranging::request_problem`]), or
     /// [`MAX_SPECIFIC_REQUESTS`] waiting already.
+    /// With several links, the request goes to the first link whose
+    /// driver takes it.
     fn take_specific_request(&mut self, message: DynamicMessage) -> Result<(), String> {
+        let mut refusal = None;
+        for i in 0..self.links.len() {
+            match self.specific_request_check(i, &message) {
+                Ok(()) => {
+                    let link = &mut self.links[i];
+                    if link.specific_requests.len() >= MAX_SPECIFIC_REQUESTS {
+                        return Err(format!(
+                            "{}: {MAX_SPECIFIC_REQUESTS} driver-specific requests already wait for this node's slot",
+                            message.descriptor().full_name()
+                        ));
+                    }
+                    link.specific_requests.push_back(message);
+                    return Ok(());
+                }
+                Err(problem) => {
+                    refusal.get_or_insert(problem);
+                }
+            }
+        }
+        Err(refusal.unwrap_or_else(|| "no link takes driver-specific requests".into()))
+    }
+
+    /// Whether link `i`'s driver can carry out `message` (see
+    /// [`take_specific_request`](Self::take_specific_request)), or why
+    /// not. A driver started by the embedding program is not checked.
+    fn specific_request_check(&self, i: usize, message: &DynamicMessage) -> Result<(), String> {
         use protos::goby::acomms::protobuf::MicroModemSpecific;
         let name = message.descriptor().full_name().to_string();
-        if let Some(config) = &self.driver_config {
+        if let Some(config) = &self.links[i].config {
             let micromodem = matches!(config.driver, Some(driver_config::Driver::DriverType(t))
                 if t == DriverType::DriverWhoiMicromodem as i32);
             let takes = if modemdriver::evologics::driver::is_evologics(config) {
@@ -1162,12 +1678,6 @@ impl Daemon {
                 }
             }
         }
-        if self.specific_requests.len() >= MAX_SPECIFIC_REQUESTS {
-            return Err(format!(
-                "{name}: {MAX_SPECIFIC_REQUESTS} driver-specific requests already wait for this node's slot"
-            ));
-        }
-        self.specific_requests.push_back(message);
         Ok(())
     }
 
@@ -1175,28 +1685,42 @@ impl Daemon {
     /// messages of a transmission under way are queued again. When the
     /// driver cannot start again the daemon stops as for a driver that
     /// stopped (its messages stay in the journal).
-    async fn reset_driver(&mut self) -> Result<(), String> {
-        let Some(config) = self.driver_config.clone() else {
+    async fn reset_driver(&mut self, i: usize) -> Result<(), String> {
+        let Some(config) = self.links[i].config.clone() else {
             return Err(
                 "the driver was started by the embedding program: it cannot be reset".into(),
             );
         };
-        tracing::warn!("driver reset requested: stopping {}", self.driver.name());
-        // A stand-in that has stopped already, while the driver restarts.
-        let stand_in = Driver::spawn("stopped", |_| async {});
-        let old = std::mem::replace(&mut self.driver, stand_in);
+        let Some(old) = self.links[i].driver.take() else {
+            // Down: it is being started again already.
+            return Ok(());
+        };
+        tracing::warn!("driver reset requested: stopping {}", old.name());
         if let Err(e) = old.stop().await {
             tracing::warn!("driver stop: {e}");
         }
-        if let Err(e) = self.outbox.transmitted(false) {
+        if let Err(e) = self.outbox.transmitted_on(i, false) {
             tracing::error!("journal: {e}");
         }
-        let driver = start_driver(&config).await.map_err(|e| {
-            tracing::error!("driver reset: {e}");
-            e.to_string()
-        })?;
+        let driver = match start_driver(&config).await {
+            Ok(driver) => driver,
+            Err(e) if self.links[i].supervised => {
+                let e = e.to_string();
+                tracing::error!("driver reset: {e}");
+                self.link_failed(i, e.clone());
+                return Err(e);
+            }
+            Err(e) => {
+                // The stand-in that has stopped already: the daemon stops
+                // as for a driver that stopped.
+                self.links[i].driver = Some(Driver::spawn("stopped", |_| async {}));
+                tracing::error!("driver reset: {e}");
+                return Err(e.to_string());
+            }
+        };
         tracing::info!("driver {} started again", driver.name());
-        self.driver = driver;
+        self.links[i].driver_name = driver.name();
+        self.links[i].driver = Some(driver);
         Ok(())
     }
 
@@ -1271,19 +1795,24 @@ impl Daemon {
     /// ([`Delivery::receive`]: recorded, held, handed over), then its
     /// frames are acknowledged (by drivers that ack in software with
     /// `deferred_ack`) as it says.
-    fn receive(&mut self, transmission: ModemTransmission) {
+    fn receive(&mut self, i: usize, transmission: ModemTransmission) {
         if transmission.r#type() == TransmissionType::Data && !transmission.frame.is_empty() {
             CrashPoint::Received.reached();
         }
-        // Each message handed over carries the reception it came in.
+        // Each message handed over carries the reception it came in (and,
+        // with several links, the link's name).
+        let mut summary = LinkSummary::of(&transmission, self.clock.now());
+        if self.several {
+            summary.name = Some(self.links[i].name.clone());
+        }
         let reception = Reception {
-            link: Some(reception_summary(&transmission, self.clock.now())),
+            link: Some(Arc::new(summary)),
             recovered: false,
             route: None,
         };
         let link = reception.link.clone();
         let mut faults = FrameFaults::default();
-        for e in self.outbox.receive(&transmission) {
+        for e in self.outbox.receive_on(i, &transmission) {
             tracing::warn!(src = transmission.src(), "received: {e}");
             faults.note(&e);
         }
@@ -1365,7 +1894,8 @@ impl Daemon {
             network.recorded(receipt, &mut self.outbox, now);
         }
         if let Some(ack) = ack {
-            if let Err(e) = self.driver.acknowledge(ack) {
+            let outcome = self.links[i].driver.as_ref().map(|d| d.acknowledge(ack));
+            if let Some(Err(e)) = outcome {
                 tracing::error!("cannot acknowledge: {e}");
             }
         }
@@ -1399,15 +1929,23 @@ impl Daemon {
     /// log (the inbox's mark follows that write at once). `reception`: for
     /// a received message, the transmission it came in and whether it is
     /// handed over after a restart.
+    /// With several links, a message's sending names its link in the
+    /// mission log.
     fn hand_over(&mut self, event: QueueEvent, entry: Option<u64>, reception: &Reception) {
         let now = self.clock.now();
+        let over = match &event {
+            QueueEvent::Sent { link, .. } if self.several => {
+                self.links.get(*link).map(|l| l.name.as_str())
+            }
+            _ => None,
+        };
         hand_over(
             &self.events,
             &mut self.raw_log,
             now,
-            event,
-            entry,
+            (event, entry),
             reception,
+            over,
         );
     }
 }
@@ -1445,17 +1983,24 @@ fn send_synced(
 
 /// Hands a queue event over to `events` and the mission log (see
 /// [`Daemon::hand_over`]).
+/// `over`: the link a sending went over, for its line in the mission log.
 fn hand_over(
     events: &broadcast::Sender<SharedEvent>,
     raw_log: &mut Option<RawLog>,
     now: i64,
-    event: QueueEvent,
-    entry: Option<u64>,
+    (event, entry): (QueueEvent, Option<u64>),
     reception: &Reception,
+    over: Option<&str>,
 ) {
     // The mission log's line is written last: the inbox marks a received
     // message handed over right after it.
-    let record = raw_log.as_ref().and_then(|_| log_record(&event, reception));
+    let record = raw_log.as_ref().and_then(|_| {
+        let mut record = log_record(&event, reception)?;
+        if let Some(name) = over {
+            record.3.push(("link", name.into()));
+        }
+        Some(record)
+    });
     let event = match event {
         QueueEvent::Received(received) => DaemonEvent::Received {
             received,
@@ -1483,9 +2028,9 @@ fn handing_over<'a>(
             events,
             raw_log,
             now,
-            QueueEvent::Received(received),
-            None,
+            (QueueEvent::Received(received), None),
             reception,
+            None,
         )
     }
 }

@@ -49,6 +49,9 @@ pub enum QueueEvent {
         frame: u32,
         /// It stays queued until the ack for `frame` arrives.
         awaiting_ack: bool,
+        /// The link whose data request it was placed in (0 with one link;
+        /// see [`crate::links`]).
+        link: crate::links::LinkIndex,
     },
     /// A sent message was acknowledged by `by` and left its queue.
     Acked {

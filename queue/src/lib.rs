@@ -58,6 +58,7 @@ pub mod error;
 pub mod event;
 pub mod identity;
 pub mod journal;
+pub mod links;
 pub mod manager;
 pub mod market;
 pub mod queue;
@@ -69,6 +70,7 @@ pub use error::{QueueError, Result};
 pub use event::{MessageId, QueueEvent, ReceivedMessage};
 pub use identity::{TrailerCodec, WireIdentity};
 pub use journal::{EntryId, Journal, JournalEntry, JournalError, Replay};
+pub use links::{LinkIndex, LinkPolicy, LinkRule, LinkSpec, LinkState, Links};
 pub use manager::{OnDemandProvider, PushOptions, QueueManager};
 pub use queue::QueueSettings;
 

@@ -17,6 +17,7 @@ use crate::clock::{seconds_to_micros, Clock, Micros, SystemClock};
 use crate::error::{QueueError, Result};
 use crate::event::{MessageId, QueueEvent, ReceivedMessage};
 use crate::identity::{self, TrailerCodec, WireIdentity};
+use crate::links::{LinkIndex, Links};
 use crate::queue::{Queue, QueueSettings, QueuedMessage};
 use crate::role::Roles;
 use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
@@ -44,6 +45,8 @@ pub struct PushOptions {
 /// A sent message awaiting its acknowledgement.
 #[derive(Debug, Clone, Copy)]
 struct AwaitingAck {
+    /// The link that carried it (0 with one link).
+    link: LinkIndex,
     frame: u32,
     /// The transmission that carried it (`ModemTransmission.unique_id` of
     /// the data request), when the link layer numbers its transmissions.
@@ -123,6 +126,9 @@ pub struct QueueManager {
     subscribers: Vec<Sender<QueueEvent>>,
     /// Storage of the priority contest, kept between data requests.
     scratch: Vec<Contender>,
+    /// The node's links and the rules of which may carry each type
+    /// (`None`: one link, every message for it).
+    links: Option<Links>,
 }
 
 impl std::fmt::Debug for QueueManager {
@@ -182,6 +188,7 @@ impl QueueManager {
             trailer: TrailerCodec::new(),
             subscribers: Vec::new(),
             scratch: Vec::new(),
+            links: None,
         };
         for entry in &config.message_entry {
             manager.configure_queue(entry)?;
@@ -199,6 +206,25 @@ impl QueueManager {
         self.queues
             .binary_search_by_key(&identity::DCCL_ID, |q| q.id)
             .is_err()
+    }
+
+    /// Serves several links from now on ([`crate::links`]): each asks for
+    /// data with [`handle_link_data_request`](Self::handle_link_data_request)
+    /// and hands over what it receives with
+    /// [`handle_link_receive`](Self::handle_link_receive); which link may
+    /// carry a message when is `links`' rules'.
+    pub fn set_links(&mut self, links: Links) {
+        self.links = Some(links);
+    }
+
+    /// The links, to tell their states (`None`: one link, not set).
+    pub fn links_mut(&mut self) -> Option<&mut Links> {
+        self.links.as_mut()
+    }
+
+    /// The links, if set.
+    pub fn links(&self) -> Option<&Links> {
+        self.links.as_ref()
     }
 
     /// Current time on the manager's clock.
@@ -448,8 +474,9 @@ impl QueueManager {
             dest,
             time,
             ack_requested,
-            awaiting_frame: None,
+            marks: Default::default(),
             last_sent: None,
+            queued_at: now,
         });
         for d in dropped {
             self.emit(QueueEvent::Dropped {
@@ -477,12 +504,35 @@ impl QueueManager {
     /// `ack_requested` is set when any message sent wants an ack. Existing
     /// bytes in `request.frame` are kept and appended to.
     pub fn handle_modem_data_request(&mut self, request: &mut ModemTransmission) -> Result<()> {
+        self.fill(request, 0)
+    }
+
+    /// Fills the frames of a data request of link `link` (see
+    /// [`set_links`](Self::set_links)) as
+    /// [`handle_modem_data_request`](Self::handle_modem_data_request) does,
+    /// with the messages the links' rules let that link carry now. An
+    /// error for a link that does not exist.
+    pub fn handle_link_data_request(
+        &mut self,
+        request: &mut ModemTransmission,
+        link: LinkIndex,
+    ) -> Result<()> {
+        let count = self.links.as_ref().map_or(1, Links::len);
+        if link >= count {
+            return Err(QueueError::Request(format!(
+                "link {link} does not exist (there are {count})"
+            )));
+        }
+        self.fill(request, link)
+    }
+
+    fn fill(&mut self, request: &mut ModemTransmission, link: LinkIndex) -> Result<()> {
         let max_frame_bytes = request
             .max_frame_bytes
             .ok_or_else(|| QueueError::Request("max_frame_bytes is not set".into()))?
             as usize;
         let now = self.clock.now();
-        self.clear_awaiting(request.frame_start(), request.unique_id, now);
+        self.clear_awaiting(request.frame_start(), request.unique_id, now, link);
         self.expire();
         self.run_on_demand(request, now);
 
@@ -497,7 +547,8 @@ impl QueueManager {
         // fixed once chosen).
         let mut contenders = std::mem::take(&mut self.scratch);
         contenders.clear();
-        contenders.extend((0..self.queues.len()).filter_map(|index| self.contender(index, now)));
+        contenders
+            .extend((0..self.queues.len()).filter_map(|index| self.contender(index, now, link)));
         let mut contenders = BinaryHeap::from(contenders);
         let mut aside: Vec<Contender> = Vec::new();
 
@@ -535,19 +586,48 @@ impl QueueManager {
                 let dest = request.dest();
                 let mut winner = None;
                 while let Some(c) = contenders.pop() {
-                    if can_join(&self.queues[c.index], room, dest, ack_forbidden) {
-                        winner = Some(c);
-                        break;
+                    if let Some(next) = self.next_on(c.index, link, now) {
+                        if can_join(&self.queues[c.index], next, room, dest, ack_forbidden) {
+                            winner = Some((c, next));
+                            break;
+                        }
                     }
                     aside.push(c);
                 }
-                let Some(contender) = winner else {
+                let Some((contender, next)) = winner else {
                     break;
                 };
                 let index = contender.index;
+                // Several links: copies may arrive in any order, so every
+                // sending is marked as possibly a repeat; a flooding type
+                // without ack stays for the other links.
+                let (several, stay) = match &self.links {
+                    Some(links) => {
+                        let m = &self.queues[index].messages[next];
+                        (
+                            links.several(contender.dccl_id),
+                            links.others_to_carry(
+                                contender.dccl_id,
+                                link,
+                                m.marks.mask(),
+                                m.encoded.len(),
+                            ),
+                        )
+                    }
+                    None => (false, false),
+                };
                 let queue = &mut self.queues[index];
-                let next = queue.next_index().expect("checked eligible");
-                let sent = queue.give(next, frame_number, now, &mut request.frame[slot]);
+                if several {
+                    queue.messages[next].resent = true;
+                }
+                let sent = queue.give_on(
+                    next,
+                    link,
+                    frame_number,
+                    now,
+                    &mut request.frame[slot],
+                    stay,
+                );
                 if sent.len > remaining {
                     bare = true;
                 } else {
@@ -557,6 +637,7 @@ impl QueueManager {
                 if sent.ack_requested {
                     packet_ack = true;
                     self.awaiting.push(AwaitingAck {
+                        link,
                         frame: frame_number,
                         transmission: request.unique_id,
                         dest: sent.dest,
@@ -590,6 +671,7 @@ impl QueueManager {
                             dccl_id: contender.dccl_id,
                             frame: frame_number,
                             awaiting_ack: !left,
+                            link,
                         });
                     }
                     if let Some(message) = message.filter(|_| loopback_as_sent) {
@@ -606,7 +688,7 @@ impl QueueManager {
                         }));
                     }
                 }
-                if let Some(c) = self.contender(index, now) {
+                if let Some(c) = self.contender(index, now, link) {
                     contenders.push(c);
                 }
             }
@@ -634,8 +716,21 @@ impl QueueManager {
     /// that asked for one (the frame is not acknowledged, so they come
     /// again). Returns the errors.
     pub fn handle_modem_receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
+        self.handle_link_receive(transmission, 0)
+    }
+
+    /// Handles a transmission received on link `link` (see
+    /// [`set_links`](Self::set_links)) as
+    /// [`handle_modem_receive`](Self::handle_modem_receive) does: an ACK
+    /// credits the messages that link carried (and removes them from every
+    /// link).
+    pub fn handle_link_receive(
+        &mut self,
+        transmission: &ModemTransmission,
+        link: LinkIndex,
+    ) -> Vec<QueueError> {
         if transmission.r#type() == TransmissionType::Ack {
-            self.process_ack(transmission);
+            self.process_ack(transmission, link);
             return Vec::new();
         }
         let mut errors = Vec::new();
@@ -784,9 +879,24 @@ impl QueueManager {
             .expect("configured ids have queues")
     }
 
-    fn contender(&self, index: usize, now: Micros) -> Option<Contender> {
+    /// The message of queue `index` to give to `link` now, if any: the
+    /// next not awaiting an ack there that the link rules let it carry.
+    fn next_on(&self, index: usize, link: LinkIndex, now: Micros) -> Option<usize> {
         let q = &self.queues[index];
-        if !q.has_sendable() || q.in_blackout(now) {
+        match &self.links {
+            None => q.next_index_on(link, |_| true),
+            Some(links) => q.next_index_on(link, |m| {
+                links.may_carry(q.id, link, m.queued_at, m.encoded.len(), now)
+            }),
+        }
+    }
+
+    fn contender(&self, index: usize, now: Micros, link: LinkIndex) -> Option<Contender> {
+        let q = &self.queues[index];
+        if !q.has_sendable_on(link) || q.in_blackout(now) {
+            return None;
+        }
+        if self.links.is_some() && self.next_on(index, link, now).is_none() {
             return None;
         }
         Some(Contender {
@@ -803,17 +913,25 @@ impl QueueManager {
     /// `minimum_ack_wait_seconds`. They stay queued. A message sent in a
     /// numbered transmission (`unique_id`) other than `transmission` keeps
     /// waiting up to `minimum_ack_wait_seconds`: its ack names its own
-    /// transmission, so the reuse of frame numbers cannot confuse them.
-    fn clear_awaiting(&mut self, frame_start: u32, transmission: Option<u32>, now: Micros) {
+    /// transmission, so the reuse of frame numbers cannot confuse them; so
+    /// does a message awaiting its ack on another link than `link`.
+    fn clear_awaiting(
+        &mut self,
+        frame_start: u32,
+        transmission: Option<u32>,
+        now: Micros,
+        link: LinkIndex,
+    ) {
         let awaiting = std::mem::take(&mut self.awaiting);
         let sent_before = now.saturating_sub(self.minimum_ack_wait);
         for a in awaiting {
             let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
                 continue;
             };
-            let other_transmission = a.transmission.is_some() && a.transmission != transmission;
+            let other_transmission =
+                a.link != link || (a.transmission.is_some() && a.transmission != transmission);
             let limit = (a.frame < frame_start || other_transmission).then_some(sent_before);
-            if self.queues[index].stop_awaiting(a.seq, a.hint, a.frame, limit) {
+            if self.queues[index].stop_awaiting_on(a.seq, a.hint, a.link, a.frame, limit) {
                 self.awaiting.push(a);
             }
         }
@@ -831,7 +949,7 @@ impl QueueManager {
                 None => true,
                 Some(t) => t.saturating_add(self.on_demand_skew) < now,
             };
-            if q.has_sendable() && !stale {
+            if q.has_sendable_on(0) && !stale {
                 continue;
             }
             let Some(provider) = self.on_demand.get_mut(&id) else {
@@ -865,8 +983,9 @@ impl QueueManager {
     /// (`ack.unique_id` equal to the data request's; both unset for a link
     /// layer that does not number its transmissions). An ack that matches
     /// nothing awaiting (late, for an older transmission, from another node)
-    /// is ignored: the message stays queued and is sent again.
-    fn process_ack(&mut self, ack: &ModemTransmission) {
+    /// is ignored: the message stays queued and is sent again. With several
+    /// links, only the messages `link` carried are credited.
+    fn process_ack(&mut self, ack: &ModemTransmission, link: LinkIndex) {
         if ack.dest() != self.modem_id {
             return;
         }
@@ -876,14 +995,17 @@ impl QueueManager {
             };
             let (hits, rest): (Vec<AwaitingAck>, Vec<AwaitingAck>) =
                 self.awaiting.iter().partition(|a| {
-                    a.frame == frame && a.dest == ack.src() && a.transmission == ack.unique_id
+                    a.link == link
+                        && a.frame == frame
+                        && a.dest == ack.src()
+                        && a.transmission == ack.unique_id
                 });
             self.awaiting = rest;
             for a in hits {
                 let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
                     continue;
                 };
-                if let Some(m) = self.queues[index].take_acked(a.seq, a.hint, frame) {
+                if let Some(m) = self.queues[index].take_acked_on(a.seq, a.hint, a.link, frame) {
                     self.emit(QueueEvent::Acked {
                         message: m.message,
                         id: Some(m.seq),
@@ -981,13 +1103,10 @@ impl QueueManager {
     }
 }
 
-/// Whether the next message of `queue` can join a frame with `remaining`
+/// Whether message `next` of `queue` can join a frame with `remaining`
 /// bytes free, for destination `dest`, in a transmission that may
 /// (`ack_forbidden` false) or may not carry acked messages.
-fn can_join(queue: &Queue, remaining: usize, dest: i32, ack_forbidden: bool) -> bool {
-    let Some(next) = queue.next_index() else {
-        return false;
-    };
+fn can_join(queue: &Queue, next: usize, remaining: usize, dest: i32, ack_forbidden: bool) -> bool {
     let m = &queue.messages[next];
     let wants_ack = m.ack_requested && m.dest != BROADCAST_ID;
     m.encoded.len() <= remaining

@@ -7,6 +7,7 @@ use protos::goby::acomms::protobuf::{Manipulator, QueuedMessageEntry};
 
 use crate::clock::{Micros, MICROS_PER_SECOND};
 use crate::error::{QueueError, Result};
+use crate::links::{LinkIndex, LinkMarks, MAX_LINKS};
 use crate::role::Roles;
 
 /// The settings of one queue, validated.
@@ -86,9 +87,13 @@ pub(crate) struct QueuedMessage {
     pub dest: i32,
     pub time: Micros,
     pub ack_requested: bool,
-    /// Frame it was last sent in while its ack is awaited.
-    pub awaiting_frame: Option<u32>,
+    /// The links it was given to and is not given to again: the frame it
+    /// was last sent in on each while its ack is awaited there (or, without
+    /// ack, that carried it while it stays for other links).
+    pub marks: LinkMarks,
     pub last_sent: Option<Micros>,
+    /// When it was queued (the link rules' timeouts count from then).
+    pub queued_at: Micros,
     /// The sender's number of the publication (see [`crate::identity`]).
     pub number: u64,
     /// It may have gone out before (sent in this run, or queued again).
@@ -121,8 +126,9 @@ pub(crate) struct Queue {
     pub settings: QueueSettings,
     pub roles: Roles,
     pub messages: VecDeque<QueuedMessage>,
-    /// Messages sent and awaiting their ack (not sendable until cleared).
-    awaiting: usize,
+    /// Messages marked on each link (awaiting their ack there: not
+    /// sendable there until cleared).
+    busy: [usize; MAX_LINKS],
     pub last_send_time: Micros,
     /// A lower bound of the times of the messages held.
     oldest_time: Micros,
@@ -145,7 +151,7 @@ impl Queue {
             settings,
             roles,
             messages: VecDeque::new(),
-            awaiting: 0,
+            busy: [0; MAX_LINKS],
             last_send_time: now,
             oldest_time: Micros::MAX,
             reported_size: 0,
@@ -157,9 +163,17 @@ impl Queue {
         self.messages.len()
     }
 
-    /// Whether a message can be given out now (one not awaiting an ack).
-    pub fn has_sendable(&self) -> bool {
-        self.messages.len() > self.awaiting
+    /// Whether a message can be given to `link` now (one not awaiting an
+    /// ack there).
+    pub fn has_sendable_on(&self, link: LinkIndex) -> bool {
+        self.messages.len() > self.busy[link]
+    }
+
+    /// Forgets the marks of a message leaving the queue.
+    fn unmark(&mut self, marks: &LinkMarks) {
+        for l in marks.links() {
+            self.busy[l] -= 1;
+        }
     }
 
     /// `value_base · (now − t_last) / ttl`.
@@ -172,18 +186,24 @@ impl Queue {
             && self.last_send_time.saturating_add(self.settings.blackout) > now
     }
 
-    /// Index of the next message to give: the newest (or oldest) one not
-    /// awaiting an ack.
-    pub fn next_index(&self) -> Option<usize> {
-        if !self.has_sendable() {
+    /// Index of the next message to give to `link`: the newest (or
+    /// oldest) one not awaiting an ack there that `may` lets it carry.
+    pub fn next_index_on(
+        &self,
+        link: LinkIndex,
+        may: impl Fn(&QueuedMessage) -> bool,
+    ) -> Option<usize> {
+        if !self.has_sendable_on(link) {
             return None;
         }
+        let free = |&i: &usize| {
+            let m = &self.messages[i];
+            m.marks.get(link).is_none() && may(m)
+        };
         if self.settings.newest_first {
-            (0..self.messages.len())
-                .rev()
-                .find(|&i| self.messages[i].awaiting_frame.is_none())
+            (0..self.messages.len()).rev().find(free)
         } else {
-            (0..self.messages.len()).find(|&i| self.messages[i].awaiting_frame.is_none())
+            (0..self.messages.len()).find(free)
         }
     }
 
@@ -200,19 +220,27 @@ impl Queue {
         let mut dropped = Vec::new();
         while self.settings.max_queue > 0 && self.messages.len() > self.settings.max_queue {
             if let Some(old) = self.messages.pop_front() {
-                if old.awaiting_frame.is_some() {
-                    self.awaiting -= 1;
-                }
+                self.unmark(&old.marks);
                 dropped.push(old);
             }
         }
         dropped
     }
 
-    /// Gives out the message at `index` for frame `frame`, appending its
-    /// encoding to `out`: it stays queued awaiting its ack, or leaves the
-    /// queue when no ack is wanted.
-    pub fn give(&mut self, index: usize, frame: u32, now: Micros, out: &mut Vec<u8>) -> Given {
+    /// Gives out the message at `index` for frame `frame` of `link`,
+    /// appending its encoding to `out`: it stays queued awaiting its ack
+    /// (marked on `link`), or leaves the queue when no ack is wanted,
+    /// unless `stay` (a flooding type without ack that other links are to
+    /// carry too: it is marked as carried by `link`).
+    pub fn give_on(
+        &mut self,
+        index: usize,
+        link: LinkIndex,
+        frame: u32,
+        now: Micros,
+        out: &mut Vec<u8>,
+        stay: bool,
+    ) -> Given {
         self.last_send_time = now;
         let msg = &mut self.messages[index];
         // A broadcast cannot be acknowledged.
@@ -234,15 +262,17 @@ impl Queue {
             ack_requested: msg.ack_requested,
             removed: None,
         };
-        if msg.ack_requested {
-            msg.awaiting_frame = Some(frame);
-            self.awaiting += 1;
+        if msg.ack_requested || stay {
+            if msg.marks.set(link, frame) {
+                self.busy[link] += 1;
+            }
             given
         } else {
-            Given {
-                removed: self.messages.remove(index),
-                ..given
+            let removed = self.messages.remove(index);
+            if let Some(m) = &removed {
+                self.unmark(&m.marks);
             }
+            Given { removed, ..given }
         }
     }
 
@@ -255,25 +285,34 @@ impl Queue {
         self.messages.binary_search_by_key(&seq, |m| m.seq).ok()
     }
 
-    /// Removes message `seq` if it is awaiting an ack for `frame`; `hint`
-    /// is where it probably is.
-    pub fn take_acked(&mut self, seq: u64, hint: usize, frame: u32) -> Option<QueuedMessage> {
-        let i = self.locate(seq, hint)?;
-        if self.messages[i].awaiting_frame != Some(frame) {
-            return None;
-        }
-        self.awaiting -= 1;
-        self.messages.remove(i)
-    }
-
-    /// Makes message `seq` sendable again if it still awaits an ack for
-    /// `frame` and was sent before `sent_before` (`None`: whenever it was
-    /// sent). `hint` is where the message probably is. Returns whether it
-    /// still awaits that ack.
-    pub fn stop_awaiting(
+    /// Removes message `seq` if it is awaiting an ack for `frame` of
+    /// `link`; `hint` is where it probably is. (Acknowledged on one link,
+    /// it leaves every link.)
+    pub fn take_acked_on(
         &mut self,
         seq: u64,
         hint: usize,
+        link: LinkIndex,
+        frame: u32,
+    ) -> Option<QueuedMessage> {
+        let i = self.locate(seq, hint)?;
+        if self.messages[i].marks.get(link) != Some(frame) {
+            return None;
+        }
+        let m = self.messages.remove(i)?;
+        self.unmark(&m.marks);
+        Some(m)
+    }
+
+    /// Makes message `seq` sendable again on `link` if it still awaits an
+    /// ack for `frame` there and was sent before `sent_before` (`None`:
+    /// whenever it was sent). `hint` is where the message probably is.
+    /// Returns whether it still awaits that ack.
+    pub fn stop_awaiting_on(
+        &mut self,
+        seq: u64,
+        hint: usize,
+        link: LinkIndex,
         frame: u32,
         sent_before: Option<Micros>,
     ) -> bool {
@@ -281,7 +320,7 @@ impl Queue {
             return false;
         };
         let m = &mut self.messages[i];
-        if m.awaiting_frame != Some(frame) {
+        if m.marks.get(link) != Some(frame) {
             return false;
         }
         let old_enough = match (sent_before, m.last_sent) {
@@ -289,8 +328,8 @@ impl Queue {
             _ => true,
         };
         if old_enough {
-            m.awaiting_frame = None;
-            self.awaiting -= 1;
+            m.marks.clear(link);
+            self.busy[link] -= 1;
         }
         !old_enough
     }
@@ -313,8 +352,8 @@ impl Queue {
         let mut kept = VecDeque::with_capacity(self.messages.len());
         for m in self.messages.drain(..) {
             if m.time.saturating_add(ttl) < now {
-                if m.awaiting_frame.is_some() {
-                    self.awaiting -= 1;
+                for l in m.marks.links() {
+                    self.busy[l] -= 1;
                 }
                 expired.push(m);
             } else {
@@ -333,7 +372,7 @@ impl Queue {
 
     /// Empties the queue.
     pub fn flush(&mut self) -> Vec<QueuedMessage> {
-        self.awaiting = 0;
+        self.busy = [0; MAX_LINKS];
         self.oldest_time = Micros::MAX;
         self.messages.drain(..).collect()
     }

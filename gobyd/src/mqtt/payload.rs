@@ -11,6 +11,7 @@
 //! | `driver` | yes | `{"status", "time"}` |
 //! | `link` | yes | the last reception: `{"src", "dest", "rate", "frames", "time", ...}` |
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
+//! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::link::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
 //!
 //! `time` is seconds since the UNIX epoch; messages are proto3 JSON with
@@ -89,6 +90,11 @@ impl Formatter {
             DaemonEvent::Modem(event) => self.modem_event(event, now),
             // Told to JSON clients (topic `transfer`), not published.
             DaemonEvent::Transfer(_) => None,
+            DaemonEvent::Link(status) => Some(Outgoing::new(
+                self.topics.node(&format!("link_status/{}", status.name())),
+                message_json(&status.transcode_to_dynamic()),
+                true,
+            )),
         }
     }
 

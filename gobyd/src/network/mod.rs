@@ -673,6 +673,7 @@ impl Network {
                 id,
                 frame,
                 awaiting_ack,
+                link,
                 ..
             } => Some((
                 QueueEvent::Sent {
@@ -681,6 +682,7 @@ impl Network {
                     dccl_id: inner_id,
                     frame,
                     awaiting_ack,
+                    link,
                 },
                 entry,
             )),
@@ -1304,21 +1306,26 @@ fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usi
 
 /// The smallest frame this node sends in its TDMA slots (by their rates),
 /// bytes; the driver's largest frame, or 64, when the slots do not say.
+/// With several links ([`crate::config::links`]), the smallest of every
+/// link's: a fragment goes over whichever link carries it.
 fn frame_bytes(config: &GobydConfig) -> usize {
     let me = config.modem_id();
-    let from_driver = config
-        .driver
-        .as_ref()
-        .and_then(modemdriver::check::largest_frame);
-    let from_slots = config.mac.as_ref().and_then(|mac| {
-        mac.slot
-            .iter()
-            .filter(|s| s.src.is_none_or(|src| src == me))
-            .filter_map(|s| modemdriver::rate::spec(s.rate()))
-            .map(|spec| spec.frame_bytes as usize)
-            .min()
-    });
-    from_slots.or(from_driver).unwrap_or(64)
+    crate::config::links::links(config)
+        .iter()
+        .map(|view| {
+            let from_driver = view.driver.and_then(modemdriver::check::largest_frame);
+            let from_slots = view.mac.and_then(|mac| {
+                mac.slot
+                    .iter()
+                    .filter(|s| s.src.is_none_or(|src| src == me))
+                    .filter_map(|s| modemdriver::rate::spec(s.rate()))
+                    .map(|spec| spec.frame_bytes as usize)
+                    .min()
+            });
+            from_slots.or(from_driver).unwrap_or(64)
+        })
+        .min()
+        .unwrap_or(64)
 }
 
 fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {

@@ -53,6 +53,8 @@ pub struct Gobyd {
     /// message may leave, and be acked, before the journal sync its reply
     /// waits for), for [`wait_for`](Self::wait_for).
     held: std::collections::VecDeque<Value>,
+    /// Every line the daemon wrote to its log (standard error) so far.
+    log: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
 }
 
 impl Gobyd {
@@ -119,21 +121,29 @@ impl Gobyd {
                 let _ = log_tx.send(line);
             }
         });
+        let kept = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let addr = loop {
             let line = log
                 .recv_timeout(PATIENCE)
                 .expect("gobyd names its JSON address");
+            kept.lock().unwrap().push(line.clone());
             if let Some(a) = line.split("JSON interface on tcp://").nth(1) {
                 break a.trim().to_string();
             }
         };
         // Keep draining the log so that the daemon never blocks on it.
-        std::thread::spawn(move || while log.recv().is_ok() {});
+        let keep = kept.clone();
+        std::thread::spawn(move || {
+            while let Ok(line) = log.recv() {
+                keep.lock().unwrap().push(line);
+            }
+        });
         Gobyd {
             child,
             addr,
             client: None,
             held: Default::default(),
+            log: kept,
         }
     }
 
@@ -182,6 +192,15 @@ impl Gobyd {
         None
     }
 
+    /// Sends a JSON request line without waiting for its reply (read it
+    /// with [`wait_for`](Self::wait_for)); `false` when it could not.
+    pub fn send(&mut self, line: &str) -> bool {
+        let Some((client, _)) = self.client.as_mut() else {
+            return false;
+        };
+        client.write_all(format!("{line}\n").as_bytes()).is_ok()
+    }
+
     /// The next line from the daemon that `wanted` picks, within `limit`;
     /// `None` too when no client is connected.
     pub fn wait_for(&mut self, limit: Duration, wanted: impl Fn(&Value) -> bool) -> Option<Value> {
@@ -196,6 +215,27 @@ impl Gobyd {
             }
         }
         None
+    }
+
+    /// How many lines of the daemon's log so far contain `text`.
+    pub fn log_count(&self, text: &str) -> usize {
+        self.log
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.contains(text))
+            .count()
+    }
+
+    /// The lines of the daemon's log so far that contain `text`.
+    pub fn log_lines(&self, text: &str) -> Vec<String> {
+        self.log
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.contains(text))
+            .cloned()
+            .collect()
     }
 
     /// Whether the process has ended (e.g. at an armed crash point).

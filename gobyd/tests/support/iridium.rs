@@ -124,20 +124,8 @@ async fn start_with(
         }
         None => None,
     };
-    let mut config = TransceiverConfig::new(IMEI);
-    config.session_time = session;
-    config.no_service_time = session / 2;
-    config.session_failure = failure;
-    config.seed = seed;
     let link = dir.join("sbd");
-    let transceiver = emulator::start(
-        config,
-        TransceiverPort::Pty {
-            link: Some(link.clone()),
-        },
-        gateway.gateway.clone(),
-    )
-    .expect("transceiver starts");
+    let transceiver = transceiver(&link, &gateway, session, failure, seed);
     let mt_port = gateway.mt_addr.port();
     Emulated {
         gateway,
@@ -147,6 +135,42 @@ async fn start_with(
         mt_port,
         rockblock,
         key_file,
+    }
+}
+
+/// A 9603 on a new pseudo-terminal whose symbolic link is `link`,
+/// reaching `gateway`, its sessions taking `session` and failing with
+/// probability `failure` (seeded); e.g. to start again one that stopped.
+pub fn transceiver(
+    link: &Path,
+    gateway: &GatewayHandle,
+    session: Duration,
+    failure: f64,
+    seed: u64,
+) -> TransceiverHandle {
+    let mut config = TransceiverConfig::new(IMEI);
+    config.session_time = session;
+    config.no_service_time = session / 2;
+    config.session_failure = failure;
+    config.seed = seed;
+    emulator::start(
+        config,
+        TransceiverPort::Pty {
+            link: Some(link.to_path_buf()),
+        },
+        gateway.gateway.clone(),
+    )
+    .expect("transceiver starts")
+}
+
+/// The Iridium driver of node `id` over `emulated` (the vehicle's 9603,
+/// or the shore's DirectIP), with the settings of [`node`].
+pub fn driver(id: i32, emulated: &Emulated) -> Iridium {
+    if id == VEHICLE {
+        vehicle_driver(&emulated.link)
+    } else {
+        Iridium::shore(emulated.mo_port, emulated.mt_port, &[(VEHICLE, IMEI)])
+            .setting("mt_confirmation_timeout_ms: 2000")
     }
 }
 

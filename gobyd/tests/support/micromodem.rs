@@ -32,6 +32,23 @@ pub fn start_emulators(
     faults: EmulatorFaults,
 ) -> Vec<EmulatorHandle> {
     let medium = Medium::new();
+    (1..=2u32)
+        .map(|id| start_emulator(dir, id, &medium, dialect, faults))
+        .collect()
+}
+
+/// Emulated modem `id` (1 or 2, the two 300 m apart) on `medium`, speaking
+/// `dialect`, on a pseudo-terminal at [`modem_path`]: one of
+/// [`start_emulators`]'s, or one started again on the same channel after
+/// it was stopped (a modem that died and came back). Must be called within
+/// a Tokio runtime.
+pub fn start_emulator(
+    dir: &Path,
+    id: u32,
+    medium: &std::sync::Arc<Medium>,
+    dialect: Dialect,
+    faults: EmulatorFaults,
+) -> EmulatorHandle {
     let node: Vec<NodePosition> = (1..=2)
         .map(|m| NodePosition {
             modem_id: m,
@@ -39,34 +56,30 @@ pub fn start_emulators(
             ..Default::default()
         })
         .collect();
-    (1..=2u32)
-        .map(|id| {
-            let config = modemdriver::DriverConfig {
-                modem_id: Some(id as i32),
-                simulator: Some(SimulatorDriverConfig {
-                    node: node.clone(),
-                    packet_overhead_seconds: Some(0.05),
-                    ..Default::default()
-                }),
-                ..Default::default()
-            };
-            let backend = SimulatorDriver::start_on(&config, medium.clone()).unwrap();
-            let base = match dialect {
-                Dialect::MicroModem2 => EmulatorConfig::micromodem2(id),
-                Dialect::MicroModem1 => EmulatorConfig::default(),
-            };
-            let emulated = EmulatorConfig {
-                modem_id: id,
-                packet_overhead: Duration::from_millis(300),
-                faults,
-                ..base
-            };
-            let port = EmulatorPort::Pty {
-                link: Some(modem_path(dir, id)),
-            };
-            emulator::start(emulated, port, Some(backend)).expect("emulator starts")
-        })
-        .collect()
+    let config = modemdriver::DriverConfig {
+        modem_id: Some(id as i32),
+        simulator: Some(SimulatorDriverConfig {
+            node,
+            packet_overhead_seconds: Some(0.05),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let backend = SimulatorDriver::start_on(&config, medium.clone()).unwrap();
+    let base = match dialect {
+        Dialect::MicroModem2 => EmulatorConfig::micromodem2(id),
+        Dialect::MicroModem1 => EmulatorConfig::default(),
+    };
+    let emulated = EmulatorConfig {
+        modem_id: id,
+        packet_overhead: Duration::from_millis(300),
+        faults,
+        ..base
+    };
+    let port = EmulatorPort::Pty {
+        link: Some(modem_path(dir, id)),
+    };
+    emulator::start(emulated, port, Some(backend)).expect("emulator starts")
 }
 
 /// The Micro-Modem driver of a `gobyd` configuration for an emulated

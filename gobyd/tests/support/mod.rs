@@ -9,4 +9,5 @@ pub mod goby3;
 pub mod iridium;
 pub mod micromodem;
 pub mod node;
+pub mod relay;
 pub mod restart;

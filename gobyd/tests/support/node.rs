@@ -33,6 +33,7 @@ pub struct Node {
     log_level: Option<String>,
     raw_log: Option<bool>,
     extra: Vec<String>,
+    links: Vec<String>,
 }
 
 impl Node {
@@ -52,7 +53,38 @@ impl Node {
             log_level: None,
             raw_log: None,
             extra: Vec::new(),
+            links: Vec::new(),
         }
+    }
+
+    /// A `link { name: "NAME" driver { … } mac { … } MORE }` section (a
+    /// node of several links): its driver, fixed TDMA with one slot for each
+    /// source in `srcs` at `rate` of `slot_seconds`, and `more` (text format
+    /// fields of the section, e.g. `cost: 10 budget { bytes: 100 }`).
+    pub fn link(
+        mut self,
+        name: &str,
+        driver: impl Into<Driver>,
+        srcs: &[i32],
+        rate: u32,
+        slot_seconds: f64,
+        more: &str,
+    ) -> Node {
+        let mut text = format!("link {{\n  name: \"{name}\"\n");
+        text += &driver.into().render();
+        text += &Mac::Tdma {
+            srcs: srcs.to_vec(),
+            rate,
+            slot_seconds,
+            kind: String::new(),
+        }
+        .render();
+        if !more.is_empty() {
+            text += &format!("  {more}\n");
+        }
+        text += "}\n";
+        self.links.push(text);
+        self
     }
 
     /// The `driver { … }` section.
@@ -216,23 +248,11 @@ impl Node {
         if let Some(driver) = &self.driver {
             text += &driver.render();
         }
-        match &self.mac {
-            None => {}
-            Some(Mac::None) => text += "mac { type: MAC_NONE }\n",
-            Some(Mac::Tdma {
-                srcs,
-                rate,
-                slot_seconds,
-                kind,
-            }) => {
-                text += "mac {\n  type: MAC_FIXED_DECENTRALIZED\n";
-                for src in srcs {
-                    text += &format!(
-                        "  slot {{ src: {src} dest: -1 rate: {rate}{kind} slot_seconds: {slot_seconds} }}\n"
-                    );
-                }
-                text += "}\n";
-            }
+        if let Some(mac) = &self.mac {
+            text += &mac.render();
+        }
+        for link in &self.links {
+            text += link;
         }
         if !self.entries.is_empty() || !self.queue_settings.is_empty() {
             text += "queue {\n";
@@ -290,6 +310,29 @@ enum Mac {
         /// Text after the rate of each slot (its type and settings).
         kind: String,
     },
+}
+
+impl Mac {
+    fn render(&self) -> String {
+        match self {
+            Mac::None => "mac { type: MAC_NONE }\n".into(),
+            Mac::Tdma {
+                srcs,
+                rate,
+                slot_seconds,
+                kind,
+            } => {
+                let mut text = "mac {\n  type: MAC_FIXED_DECENTRALIZED\n".to_string();
+                for src in srcs {
+                    text += &format!(
+                        "  slot {{ src: {src} dest: -1 rate: {rate}{kind} slot_seconds: {slot_seconds} }}\n"
+                    );
+                }
+                text += "}\n";
+                text
+            }
+        }
+    }
 }
 
 /// One `message_entry { … }` of the queue section.

@@ -38,6 +38,16 @@ pub fn open_pty_pair() -> io::Result<PtyPair> {
     use tokio_serial::SerialPort;
     let (primary, secondary) = SerialStream::pair()
         .map_err(|e| io::Error::other(format!("cannot open a pseudo-terminal pair: {e}")))?;
+    // Not inherited by child processes: a program started later (a daemon
+    // on the other side) holding the primary open would never see the
+    // device hang up when this side closes it.
+    {
+        use std::os::fd::AsRawFd;
+        // SAFETY: fcntl on a descriptor this function owns, setting a flag.
+        if unsafe { libc::fcntl(primary.as_raw_fd(), libc::F_SETFD, libc::FD_CLOEXEC) } == -1 {
+            return Err(io::Error::last_os_error());
+        }
+    }
     let path = secondary
         .name()
         .ok_or_else(|| io::Error::other("pseudo-terminal has no path"))?;
