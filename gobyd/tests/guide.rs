@@ -208,3 +208,130 @@ fn the_quick_start_runs_as_the_guide_says() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The section of `README.md` whose heading is `## HEADING`, up to the
+/// next `## ` heading.
+fn readme_section(heading: &str) -> String {
+    let text = std::fs::read_to_string(repository_root().join("README.md")).unwrap();
+    let start = text
+        .find(&format!("\n## {heading}\n"))
+        .unwrap_or_else(|| panic!("README.md has no section {heading:?}"))
+        + 1;
+    let end = text[start + 3..]
+        .find("\n## ")
+        .map_or(text.len(), |e| start + 3 + e);
+    text[start..end].to_string()
+}
+
+/// The README's two-link fail-over ("Beyond the horizon"): its two
+/// shipped configurations pass `gobyd --check` with the links and the rule
+/// it tells of, once their serial ports are real pseudo-terminals (emulated
+/// Micro-Modems and an emulated 9603 kept at scratch paths in the place of
+/// `/tmp/two-links-*`), and the README's commands make the paths and the
+/// DirectIP ports the configurations use, and name their JSON ports.
+#[test]
+fn the_readmes_two_link_configurations_check_over_the_emulators() {
+    use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+    use support::micromodem::{modem_path, start_emulators};
+
+    let section = readme_section("Beyond the horizon");
+    for wanted in [
+        "--link /tmp/two-links-modem1 --link /tmp/two-links-modem2",
+        "--link /tmp/two-links-sbd",
+        "--mo-directip 127.0.0.1:40011 --mt-directip 127.0.0.1:40012",
+        "gobyd -c gobyd/config/two-links-shore.pb.txt",
+        "gobyd -c gobyd/config/two-links-vehicle.pb.txt",
+        "(\"127.0.0.1\", 11211)",
+        "(\"127.0.0.1\", 11212)",
+        "(gobyd/config/two-links-vehicle.pb.txt)",
+        "(gobyd/config/two-links-shore.pb.txt)",
+    ] {
+        assert!(
+            section.contains(wanted),
+            "README.md's Beyond the horizon has no {wanted:?}"
+        );
+    }
+
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let dir = scratch("guide", "two-links");
+    let mut modems = {
+        let _runtime = rt.enter();
+        start_emulators(&dir, Dialect::MicroModem2, EmulatorFaults::default())
+    };
+    rt.block_on(async {
+        for m in &mut modems {
+            m.path().await.expect("emulated modem present");
+        }
+    });
+    let sbd = rt.block_on(support::iridium::start(
+        &dir,
+        Duration::from_secs(2),
+        0.0,
+        1,
+    ));
+    let root = repository_root();
+    let summary = "links: acoustic (cost 1), iridium (cost 10); \
+                   goby.example.Command: acoustic, then iridium after 60 s";
+    let nodes = [
+        (
+            "two-links-vehicle.pb.txt",
+            vec![
+                ("\"/tmp/two-links-modem1\"", modem_path(&dir, 1)),
+                ("\"/tmp/two-links-sbd\"", sbd.link.clone()),
+            ],
+            vec!["json { tcp_bind: \"127.0.0.1:11211\" }"],
+        ),
+        (
+            "two-links-shore.pb.txt",
+            vec![("\"/tmp/two-links-modem2\"", modem_path(&dir, 2))],
+            vec![
+                "json { tcp_bind: \"127.0.0.1:11212\" }",
+                "mo_sbd_server_port: 40011",
+                "mt_sbd_server_port: 40012",
+            ],
+        ),
+    ];
+    for (name, ports, settings) in nodes {
+        let mut text = std::fs::read_to_string(root.join("gobyd/config").join(name)).unwrap();
+        for setting in settings {
+            assert!(text.contains(setting), "{name} has no {setting}");
+        }
+        for (shipped, scratch_path) in ports {
+            assert!(
+                text.contains(shipped),
+                "{name} has no serial port {shipped}"
+            );
+            text = text.replace(
+                shipped,
+                &format!("{:?}", scratch_path.display().to_string()),
+            );
+        }
+        let config = dir.join(name);
+        std::fs::write(&config, text).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .arg("--check")
+            .arg("-c")
+            .arg(&config)
+            .env_remove("RUST_BACKTRACE")
+            .output()
+            .expect("gobyd runs");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(stdout.contains(summary), "{name}: {stdout}");
+    }
+    rt.block_on(async {
+        for m in modems {
+            m.stop().await;
+        }
+        sbd.stop().await;
+    });
+    std::fs::remove_dir_all(&dir).unwrap();
+}
