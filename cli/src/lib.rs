@@ -38,6 +38,10 @@
 //! notifications ([`moos_cmd`]), so a MOOS community needs nothing beyond
 //! its MOOSDB.
 //!
+//! `goby file send NODE PATH` and `goby file get NODE PATH` move files
+//! between nodes through `gobyd`'s JSON interface, with their progress;
+//! `goby file list` lists the transfers under way ([`file_cmd`]).
+//!
 //! `goby completions SHELL` prints a shell completion script and `goby man
 //! DIR` writes the manual pages ([`generate_cmd`]).
 //!
@@ -47,7 +51,9 @@
 //! errors that stop a command before it reads its input (a `.proto` file that
 //! cannot be compiled, an unknown message type, an unreachable server, ...),
 //! [`EXIT_TIMEOUT`] when a command gave up waiting (`goby moos poke` not
-//! confirmed, `goby moos spy` short of `--count`).
+//! confirmed, `goby moos spy` short of `--count`), [`EXIT_FAILED`] when
+//! what it was asked to do failed once under way (`goby file send` or
+//! `get`: the transfer failed, or the connection to `gobyd` was lost).
 
 #![warn(missing_docs)]
 
@@ -57,6 +63,7 @@ mod byte_text;
 pub mod console;
 pub mod dccl_cmd;
 pub mod dccl_tool;
+pub mod file_cmd;
 pub mod fleet;
 mod frame_decoder;
 pub mod generate_cmd;
@@ -88,6 +95,10 @@ pub const EXIT_SETUP: u8 = 2;
 /// Exit status when a command gave up waiting for what it was asked to
 /// wait for.
 pub const EXIT_TIMEOUT: u8 = 3;
+/// Exit status when what the command was asked to do failed once under
+/// way (a file transfer refused, expired or corrupted; the connection to
+/// `gobyd` lost).
+pub const EXIT_FAILED: u8 = 4;
 
 /// Command line of `goby`.
 #[derive(Debug, Parser)]
@@ -132,6 +143,9 @@ pub enum GobyCommand {
     /// A MOOS community: write variables (poke) and watch them (spy).
     #[command(subcommand)]
     Moos(moos_cmd::MoosCommand),
+    /// Files between nodes through gobyd: send, get (with their progress), list the transfers.
+    #[command(subcommand)]
+    File(file_cmd::FileCommand),
     /// Print a shell completion script for goby.
     Completions(generate_cmd::CompletionsArgs),
     /// Write goby's manual pages (goby.1 and one per subcommand) into a directory.
@@ -150,6 +164,9 @@ pub enum CliError {
     Output(io::Error),
     /// The command gave up waiting ([`EXIT_TIMEOUT`]).
     Timeout(String),
+    /// What the command was asked to do failed once under way
+    /// ([`EXIT_FAILED`]).
+    Failed(String),
 }
 
 impl CliError {
@@ -162,7 +179,7 @@ impl CliError {
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            CliError::Setup(m) | CliError::Timeout(m) => f.write_str(m),
+            CliError::Setup(m) | CliError::Timeout(m) | CliError::Failed(m) => f.write_str(m),
             CliError::Input(e) => write!(f, "cannot read standard input: {e}"),
             CliError::Output(e) => write!(f, "cannot write the output: {e}"),
         }
@@ -225,6 +242,7 @@ pub fn run_goby(
         GobyCommand::Mqtt(cmd) => mqtt_cmd::run(&cmd, stdout),
         GobyCommand::Console(args) => console::run(&args, stdout),
         GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
+        GobyCommand::File(cmd) => file_cmd::run(&cmd, stdout),
         GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
         GobyCommand::Man(args) => generate_cmd::man(&args, stdout),
     };
@@ -238,6 +256,10 @@ pub fn run_goby(
         Err(CliError::Timeout(m)) => {
             let _ = writeln!(stderr, "goby: error: {m}");
             EXIT_TIMEOUT
+        }
+        Err(CliError::Failed(m)) => {
+            let _ = writeln!(stderr, "goby: error: {m}");
+            EXIT_FAILED
         }
         Err(e) => {
             let _ = writeln!(stderr, "goby: error: {e}");
@@ -266,6 +288,8 @@ pub fn goby_main() -> ExitCode {
     let stdin = io::stdin();
     let mut stdin = stdin.lock();
     let mut stdout = io::BufWriter::new(io::stdout().lock());
-    let mut stderr = io::stderr().lock();
+    // Not locked for the whole run: other threads write to it too (the
+    // progress bar of `goby file`, drawn by its own thread).
+    let mut stderr = io::stderr();
     ExitCode::from(run_goby(cli, &mut stdin, &mut stdout, &mut stderr))
 }

@@ -109,6 +109,11 @@ fn man_writes_a_page_per_subcommand_with_its_options() {
             "goby-moos-spy.1",
             &["\\-\\-count", "\\-\\-timeout", "\\-\\-verbose"],
         ),
+        (
+            "goby-file-send.1",
+            &["\\-\\-gobyd", "\\-\\-timeout", "127.0.0.1:11145"],
+        ),
+        ("goby-file-get.1", &["\\-\\-output", "serve_dir"]),
         ("goby-completions.1", &["powershell"]),
         ("goby-man.1", &["DIR"]),
     ] {

@@ -125,41 +125,10 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
         let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
         return Ok(Request::DriverSpecific(message));
     }
-    if let Some(spec) = object.get("file_send") {
-        let dest = node_field(spec, "dest", "file_send")?;
-        let path = spec
-            .get("path")
-            .and_then(Value::as_str)
-            .filter(|p| !p.is_empty())
-            .ok_or("file_send: \"path\" (the file's path on the daemon's machine) is missing")?;
-        let name = match spec.get("name") {
-            None | Some(Value::Null) => None,
-            Some(v) => Some(
-                v.as_str()
-                    .ok_or("file_send: \"name\" must be a string")?
-                    .to_string(),
-            ),
-        };
-        return Ok(Request::Network(crate::control::NetworkRequest::SendFile {
-            dest,
-            path: path.into(),
-            name,
-        }));
-    }
-    if let Some(spec) = object.get("file_get") {
-        let node = node_field(spec, "node", "file_get")?;
-        let path = spec
-            .get("path")
-            .and_then(Value::as_str)
-            .filter(|p| !p.is_empty())
-            .ok_or("file_get: \"path\" (the file's path under the node's serve_dir) is missing")?;
-        return Ok(Request::Network(crate::control::NetworkRequest::GetFile {
-            node,
-            path: path.to_string(),
-        }));
-    }
-    if object.contains_key("transfers") {
-        return Ok(Request::Network(crate::control::NetworkRequest::Transfers));
+    for kind in ["file_send", "file_get", "transfers"] {
+        if let Some(spec) = object.get(kind) {
+            return network_request(kind, spec).map(Request::Network);
+        }
     }
     if let Some(topics) = object.get("subscribe") {
         let topics = topics
@@ -179,6 +148,57 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
             .map(Request::Subscribe);
     }
     Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\" or \"transfers\"".into())
+}
+
+/// A request of the network layer: `kind` `file_send` (`spec` `{"dest",
+/// "path", "name"}`), `file_get` (`{"node", "path"}`) or `transfers`
+/// (anything). Also what the MQTT and MOOS bridges take. The error says
+/// what is missing or wrong.
+pub fn network_request(kind: &str, spec: &Value) -> Result<crate::control::NetworkRequest, String> {
+    use crate::control::NetworkRequest;
+    match kind {
+        "file_send" => {
+            let dest = node_field(spec, "dest", "file_send")?;
+            let path = spec
+                .get("path")
+                .and_then(Value::as_str)
+                .filter(|p| !p.is_empty())
+                .ok_or(
+                    "file_send: \"path\" (the file's path on the daemon's machine) is missing",
+                )?;
+            let name = match spec.get("name") {
+                None | Some(Value::Null) => None,
+                Some(v) => Some(
+                    v.as_str()
+                        .ok_or("file_send: \"name\" must be a string")?
+                        .to_string(),
+                ),
+            };
+            Ok(NetworkRequest::SendFile {
+                dest,
+                path: path.into(),
+                name,
+            })
+        }
+        "file_get" => {
+            let node = node_field(spec, "node", "file_get")?;
+            let path = spec
+                .get("path")
+                .and_then(Value::as_str)
+                .filter(|p| !p.is_empty())
+                .ok_or(
+                    "file_get: \"path\" (the file's path under the node's serve_dir) is missing",
+                )?;
+            Ok(NetworkRequest::GetFile {
+                node,
+                path: path.to_string(),
+            })
+        }
+        "transfers" => Ok(NetworkRequest::Transfers),
+        other => Err(format!(
+            "{other:?} is not a file request: file_send, file_get or transfers"
+        )),
+    }
 }
 
 /// A node's modem id in field `key` of a request's object.

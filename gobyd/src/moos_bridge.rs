@@ -26,6 +26,14 @@
 //!   of types without a translator entry, acks and expiries are written as
 //!   `@PB[full.MessageName] <text format>` to `receive_var`, `ack_var` and
 //!   `expire_var` (each unless a pAcommsHandler variable has its name).
+//! - File transfers (with the `network` section): a string value of
+//!   `file_send_var` (`GOBYD_FILE_SEND`) sends a file, one of
+//!   `file_get_var` (`GOBYD_FILE_GET`) asks a node for one
+//!   ([`parse_file_value`]), as the JSON interface's `file_send` and
+//!   `file_get`; the answer goes to `file_reply_var` (`GOBYD_FILE_REPLY`)
+//!   and every transfer's progress to `transfer_var` (`GOBYD_TRANSFER`),
+//!   both JSON. A request written before gobyd connected (the MOOSDB hands
+//!   a new client the last value) is not carried out again.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -43,7 +51,7 @@ use tokio::sync::{broadcast, mpsc, oneshot};
 
 use super::event::{DaemonEvent, SharedEvent};
 use super::json_server::Publish;
-use crate::control::{parse_flush, Control};
+use crate::control::{parse_flush, Control, NetworkRequest};
 use crate::modem_event::ModemEvent;
 use crate::translator::{self, TranslateError, Translator};
 
@@ -61,6 +69,9 @@ pub struct BridgeSettings {
     pub translator: Arc<Translator>,
     /// This node's modem id.
     pub modem_id: i32,
+    /// Whether the network layer is on: the file variables are read and
+    /// written.
+    pub files: bool,
 }
 
 impl BridgeSettings {
@@ -75,6 +86,7 @@ impl BridgeSettings {
             variables,
             translator: Arc::new(translator),
             modem_id: config.modem_id(),
+            files: config.network.is_some(),
         })
     }
 
@@ -141,6 +153,51 @@ pub fn parse_value(value: &str, codec: &Codec) -> Result<DynamicMessage, String>
         }
     }
     Err("expected \"@PB[full.MessageName] text format\" or \"full.MessageName:HEX\"".into())
+}
+
+/// Parses the value of a file variable into the network layer's request
+/// `kind` (`file_send` or `file_get`): either the JSON interface's object
+/// (`{"dest": 3, "path": "/data/x.bin"}`), or MOOS's `key=value` pairs
+/// separated by commas (`dest=3,path=/data/x.bin,name=x.bin` for
+/// `file_send`, `node=3,path=logs/mission.log` for `file_get`; a path
+/// holding a comma needs the JSON form). The error says what is wrong.
+pub fn parse_file_value(kind: &str, value: &str) -> Result<NetworkRequest, String> {
+    let value = value.trim();
+    if value.starts_with('{') {
+        let v: serde_json::Value = serde_json::from_str(value)
+            .map_err(|e| format!("{kind}: the value is not JSON: {e}"))?;
+        return crate::json_protocol::network_request(kind, &v);
+    }
+    let (id_key, keys): (&str, &[&str]) = match kind {
+        "file_send" => ("dest", &["dest", "path", "name"]),
+        _ => ("node", &["node", "path"]),
+    };
+    let mut object = serde_json::Map::new();
+    for pair in value.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (key, v) = pair.split_once('=').ok_or_else(|| {
+            format!(
+                "{kind}: {pair:?} is not key=value (keys: {})",
+                keys.join(", ")
+            )
+        })?;
+        let (key, v) = (key.trim(), v.trim());
+        if !keys.contains(&key) {
+            return Err(format!(
+                "{kind}: unknown key {key:?} (keys: {})",
+                keys.join(", ")
+            ));
+        }
+        let v = if key == id_key {
+            let id: i64 = v
+                .parse()
+                .map_err(|_| format!("{kind}: {key}={v} is not a modem id"))?;
+            serde_json::Value::from(id)
+        } else {
+            serde_json::Value::from(v)
+        };
+        object.insert(key.to_string(), v);
+    }
+    crate::json_protocol::network_request(kind, &serde_json::Value::Object(object))
 }
 
 /// Formats a message as a MOOS string value.
@@ -392,6 +449,15 @@ pub async fn run(
     let flush_var = settings.var(|v| v.queue_flush());
     let reset_var = settings.var(|v| v.driver_reset());
     registered.extend(flush_var.iter().chain(&reset_var).cloned());
+    let file_vars = settings.files.then(|| {
+        (
+            settings.moos.file_send_var().to_string(),
+            settings.moos.file_get_var().to_string(),
+        )
+    });
+    if let Some((send, get)) = &file_vars {
+        registered.extend([send.clone(), get.clone()]);
+    }
     registered.sort();
     registered.dedup();
     for var in &registered {
@@ -430,6 +496,15 @@ pub async fn run(
                         reset(&control).await
                     }
                 }
+                Some(m) if file_vars.as_ref().is_some_and(|(s, g)| m.key == *s || m.key == *g) => {
+                    if fresh(&m, connected_at) {
+                        let kind = match &file_vars {
+                            Some((send, _)) if m.key == *send => "file_send",
+                            _ => "file_get",
+                        };
+                        file_request(&settings, &control, &client, kind, &m).await
+                    }
+                }
                 Some(m) => {
                     handle_mail(&settings, &codec, &publish, &client, &mut latest, m).await
                 }
@@ -446,6 +521,16 @@ pub async fn run(
                         }
                         DaemonEvent::Queue { event, .. } => publications(&settings, event),
                         DaemonEvent::Modem(m) => modem_publications(&settings, m),
+                        DaemonEvent::Transfer(e) if settings.files => {
+                            let mut v = crate::json_protocol::transfer_value(e);
+                            if let Some(o) = v.as_object_mut() {
+                                o.remove("event");
+                            }
+                            vec![(
+                                settings.moos.transfer_var().to_string(),
+                                Value::String(v.to_string()),
+                            )]
+                        }
                         DaemonEvent::Transfer(_) => Vec::new(),
                         DaemonEvent::Link(status) => settings
                             .var(|v| v.link_status())
@@ -539,6 +624,57 @@ async fn flush(control: &mpsc::Sender<Control>, mail: &Mail) {
         Ok(Err(e)) => tracing::warn!("MOOS: {} = {text:?}: {e}", mail.key),
         Err(_) => {}
     }
+}
+
+/// Carries out a file request (`kind` `file_send` or `file_get`) written
+/// to a file variable, and writes the answer to `file_reply_var`: the
+/// network layer's reply with `"var"`, or `{"error", "var"}`.
+async fn file_request(
+    settings: &BridgeSettings,
+    control: &mpsc::Sender<Control>,
+    client: &MoosClient,
+    kind: &str,
+    mail: &Mail,
+) {
+    let answer = match &mail.value {
+        Value::String(text) => match parse_file_value(kind, text) {
+            Ok(request) => {
+                let (reply, answer) = oneshot::channel();
+                if control
+                    .send(Control::Network { request, reply })
+                    .await
+                    .is_err()
+                {
+                    return;
+                }
+                match answer.await {
+                    Ok(answer) => answer,
+                    Err(_) => return,
+                }
+            }
+            Err(reason) => Err(reason),
+        },
+        _ => Err(format!(
+            "{kind}: the value must be a string (\"dest=3,path=/data/x.bin\" or JSON)"
+        )),
+    };
+    let reply = match answer {
+        Ok(mut v) => {
+            if let Some(o) = v.as_object_mut() {
+                o.insert("var".into(), mail.key.clone().into());
+            }
+            v
+        }
+        Err(reason) => {
+            tracing::warn!("MOOS: {}: {reason}", mail.key);
+            serde_json::json!({ "error": reason, "var": mail.key })
+        }
+    };
+    notify(
+        client,
+        settings.moos.file_reply_var(),
+        &Value::String(reply.to_string()),
+    );
 }
 
 /// Restarts the modem driver (`DRIVER_RESET`, whatever its value).
@@ -653,6 +789,61 @@ async fn handle_mail(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn file_values_read_as_pairs_or_json() {
+        let send = NetworkRequest::SendFile {
+            dest: 3,
+            path: "/data/x.bin".into(),
+            name: None,
+        };
+        assert_eq!(
+            parse_file_value("file_send", "dest=3,path=/data/x.bin"),
+            Ok(send.clone())
+        );
+        assert_eq!(
+            parse_file_value("file_send", " dest = 3 , path = /data/x.bin "),
+            Ok(send.clone())
+        );
+        assert_eq!(
+            parse_file_value("file_send", r#"{"dest": 3, "path": "/data/x.bin"}"#),
+            Ok(send)
+        );
+        assert_eq!(
+            parse_file_value("file_send", "dest=3,path=/d/x,name=y.bin"),
+            Ok(NetworkRequest::SendFile {
+                dest: 3,
+                path: "/d/x".into(),
+                name: Some("y.bin".into())
+            })
+        );
+        assert_eq!(
+            parse_file_value("file_get", "node=2,path=logs/m.log"),
+            Ok(NetworkRequest::GetFile {
+                node: 2,
+                path: "logs/m.log".into()
+            })
+        );
+        for (kind, value, reason) in [
+            (
+                "file_send",
+                "dest=three,path=/x",
+                "dest=three is not a modem id",
+            ),
+            ("file_send", "dest=3,where=/x", "unknown key \"where\""),
+            ("file_send", "dest=3,/x", "is not key=value"),
+            ("file_send", "path=/x", "\"dest\" (a modem id) is missing"),
+            ("file_get", "node=2", "\"path\""),
+            ("file_get", "dest=2,path=x", "unknown key \"dest\""),
+            ("file_get", "{\"node\": 2", "not JSON"),
+        ] {
+            let err = parse_file_value(kind, value).expect_err(value);
+            assert!(
+                err.starts_with(kind) && err.contains(reason),
+                "{value}: {err}"
+            );
+        }
+    }
     use protos::goby::example::Command;
 
     fn codec() -> Codec {

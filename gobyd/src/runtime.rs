@@ -837,6 +837,7 @@ impl Daemon {
                 config.modem_id(),
                 codec.clone(),
                 publish_tx.clone(),
+                control_tx.clone(),
                 clock.clone(),
             )?;
             if let Some(bridge) = bridge {

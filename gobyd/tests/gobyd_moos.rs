@@ -1,7 +1,10 @@
 //! `gobyd`'s MOOS interface: a message written to a MOOS variable is queued,
 //! delivered (here to the node itself) and published back to MOOS with its
 //! acknowledgement; against the minimal in-process DB always, and against a
-//! real MOOSDB when one is on the PATH.
+//! real MOOSDB when one is on the PATH. Files sent and fetched from the file
+//! variables (`GOBYD_FILE_SEND`, `GOBYD_FILE_GET`) between two `gobyd` on
+//! the simulator's in-process channel arrive whole, answered on
+//! `GOBYD_FILE_REPLY`, their progress on `GOBYD_TRANSFER`.
 
 mod support;
 
@@ -181,4 +184,168 @@ async fn moos_variables_in_and_out_with_a_real_moosdb() {
     );
     round_trip_through(port, "moosdb").await;
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Waits (at most [`PATIENCE`] each) for mail on `var` that `pick` takes.
+async fn wait_mail<T>(
+    mail: &mut moos::MailReceiver,
+    var: &str,
+    mut pick: impl FnMut(&serde_json::Value) -> Option<T>,
+) -> T {
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            let m = mail.recv().await.expect("mail channel open");
+            if m.key != var {
+                continue;
+            }
+            let Value::String(s) = &m.value else { continue };
+            let v: serde_json::Value =
+                serde_json::from_str(s).unwrap_or_else(|e| panic!("{var} = {s:?}: {e}"));
+            if let Some(t) = pick(&v) {
+                return t;
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("nothing on {var} in time"))
+}
+
+/// Bytes that do not repeat in any short period.
+fn pattern(len: usize, seed: u64) -> Vec<u8> {
+    let mut x = seed | 1;
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn files_from_moos_variables_with_the_minimal_db() {
+    let db = moos::testing::MiniDb::start("127.0.0.1:0", "gobytest")
+        .await
+        .unwrap();
+    let dir = scratch("moos", "files");
+    let serve = dir.join("serve2");
+    std::fs::create_dir_all(&serve).unwrap();
+    let channel = format!("moos-files-{}", std::process::id());
+    let node = |id: i32| {
+        Node::new(id)
+            .driver(
+                Simulator::pair_at(150.0, 10.0)
+                    .overhead(0.05)
+                    .channel(&channel),
+            )
+            .tdma(&[1, 2], 6, 1.2)
+            .queue(Entry::command())
+            .json_tcp("")
+            .data_dir(&dir.join(format!("data{id}")))
+            .raw_log(false)
+    };
+    let node1 = node(1)
+        .moos(db.port(), r#"name: "gobyd_files""#)
+        .extra("network { route { hop: 1 hop: 2 } }");
+    let node2 = node(2).extra(&format!(
+        "network {{ route {{ hop: 1 hop: 2 }} serve_dir: \"{}\" }}",
+        serve.display()
+    ));
+    let mut running = Vec::new();
+    for config in [node1.config(), node2.config()] {
+        let daemon = Daemon::start(config).await.expect("gobyd starts");
+        let (stop, stopped) = oneshot::channel::<()>();
+        let task = tokio::spawn(daemon.run(async {
+            let _ = stopped.await;
+        }));
+        running.push((stop, task));
+    }
+    let (client, mut mail) =
+        MoosClient::connect(ClientConfig::new("autonomy").with_address("127.0.0.1", db.port()))
+            .await
+            .expect("the test client connects");
+    client.register("GOBYD_FILE_REPLY", Duration::ZERO).unwrap();
+    client.register("GOBYD_TRANSFER", Duration::ZERO).unwrap();
+
+    // A file sent to node 2, as MOOS's key=value pairs. gobyd registers
+    // once connected: write until it answers.
+    let content = pattern(200, 9);
+    let file = dir.join("survey.bin");
+    std::fs::write(&file, &content).unwrap();
+    let request = format!("dest=2,path={}", file.display());
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let reply = loop {
+        client.notify_string("GOBYD_FILE_SEND", &request).unwrap();
+        let answered = tokio::time::timeout(
+            Duration::from_millis(500),
+            wait_mail(&mut mail, "GOBYD_FILE_REPLY", |v| Some(v.clone())),
+        )
+        .await;
+        if let Ok(reply) = answered {
+            break reply;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no answer on GOBYD_FILE_REPLY"
+        );
+    };
+    assert_eq!(reply["var"], "GOBYD_FILE_SEND", "{reply}");
+    let id = reply["file_send"].as_u64().expect("a transfer id");
+    let done = wait_mail(&mut mail, "GOBYD_TRANSFER", |v| {
+        (v["transfer"].as_u64() == Some(id) && v["state"] == "complete").then(|| v.clone())
+    })
+    .await;
+    assert_eq!(done["direction"], "out", "{done}");
+    assert_eq!(done["peer"], 2, "{done}");
+    assert_eq!(
+        std::fs::read(dir.join("data2/files/survey.bin")).unwrap(),
+        content
+    );
+
+    // A file fetched from node 2, as the JSON interface's object.
+    let served = pattern(150, 4);
+    std::fs::write(serve.join("log.txt"), &served).unwrap();
+    client
+        .notify_string("GOBYD_FILE_GET", r#"{"node": 2, "path": "log.txt"}"#)
+        .unwrap();
+    // (Answers to the repeated sends above, each joining the transfer, may
+    // still come.)
+    let reply = wait_mail(&mut mail, "GOBYD_FILE_REPLY", |v| {
+        (v["var"] == "GOBYD_FILE_GET").then(|| v.clone())
+    })
+    .await;
+    let number = reply["file_get"].as_u64().expect("a request number");
+    let fetched = wait_mail(&mut mail, "GOBYD_TRANSFER", |v| {
+        (v["request"].as_u64() == Some(number) && v["state"] == "complete").then(|| v.clone())
+    })
+    .await;
+    assert_eq!(
+        std::fs::read(fetched["path"].as_str().unwrap()).unwrap(),
+        served
+    );
+
+    // A request that does not read is answered with the reason.
+    client
+        .notify_string("GOBYD_FILE_SEND", "dest=two,path=/x")
+        .unwrap();
+    let refused = wait_mail(&mut mail, "GOBYD_FILE_REPLY", |v| {
+        v.get("error").is_some().then(|| v.clone())
+    })
+    .await;
+    assert_eq!(
+        refused,
+        serde_json::json!({
+            "error": "file_send: dest=two is not a modem id",
+            "var": "GOBYD_FILE_SEND",
+        })
+    );
+
+    client.close().await;
+    for (stop, task) in running {
+        let _ = stop.send(());
+        task.await.unwrap().unwrap();
+    }
+    db.stop().await;
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -2,8 +2,10 @@
 //! gobyd processes on the acoustic simulator, each bridged to the broker; a
 //! message published on one node's `tx` topic arrives on the other's `rx`
 //! topic with its ack; nothing accepted is lost when the broker (stopped
-//! or killed), or a gobyd, stops and starts again mid-run. Fails without
-//! Mosquitto (`.ci/mosquitto.sh` installs it).
+//! or killed), or a gobyd, stops and starts again mid-run; files sent and
+//! fetched from the `file/send` and `file/get` topics arrive whole, their
+//! progress on `transfer`. Fails without Mosquitto (`.ci/mosquitto.sh`
+//! installs it).
 
 mod support;
 
@@ -504,3 +506,104 @@ fn the_broker_on_the_command_line_is_the_one_used() {
 #[test]
 #[ignore = "TLS to the broker needs gobyd built with --features mqtt-tls: cargo test -p gobyd --features mqtt-tls --test mqtt"]
 fn the_bridge_speaks_tls() {}
+
+/// Bytes that do not repeat in any short period.
+fn pattern(len: usize, seed: u64) -> Vec<u8> {
+    let mut x = seed | 1;
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect()
+}
+
+#[test]
+fn files_go_between_gateways_from_the_broker() {
+    let dir = scratch("mqtt", "files");
+    let broker = Broker::start(&dir, "files_go_between_gateways_from_the_broker");
+    let ports = [free_udp_port(), free_udp_port()];
+    let serve = dir.join("serve1");
+    std::fs::create_dir_all(&serve).unwrap();
+    for id in [1, 2] {
+        let network = if id == 1 {
+            format!(
+                "network {{ route {{ hop: 1 hop: 2 }} serve_dir: \"{}\" }}",
+                serve.display()
+            )
+        } else {
+            "network { route { hop: 1 hop: 2 } }".to_string()
+        };
+        node_config(id, ports, &broker.address(), &dir.join(format!("node{id}")))
+            .extra(&network)
+            .write(dir.join(format!("node{id}.cfg")));
+    }
+    let watcher = Watcher::start(&broker.address(), "files", "fleet/#");
+    let _node1 = Gobyd::start(&dir, 1);
+    let _node2 = Gobyd::start(&dir, 2);
+    for node in [1, 2] {
+        wait_status(&watcher, node, |v| v["online"] == true);
+    }
+
+    // A file of node 1's machine sent to node 2 from node 1's file/send.
+    let content = pattern(500, 3);
+    let file = dir.join("survey.bin");
+    std::fs::write(&file, &content).unwrap();
+    watcher.publish(
+        "fleet/1/file/send",
+        serde_json::json!({ "dest": 2, "path": file.display().to_string() }).to_string(),
+    );
+    let reply = watcher.wait_on("fleet/1/file/reply", |v| Some(v.clone()));
+    assert_eq!(reply["topic"], "fleet/1/file/send", "{reply}");
+    assert_eq!(reply["joined"], false, "{reply}");
+    let id = reply["file_send"].as_u64().expect("a transfer id");
+    let arrived = watcher.wait_on("fleet/2/transfer", |v| {
+        (v["state"] == "complete" && v["name"] == "survey.bin").then(|| v.clone())
+    });
+    assert_eq!(arrived["direction"], "in", "{arrived}");
+    assert_eq!(arrived["peer"], 1, "{arrived}");
+    assert_eq!(arrived["bytes"], 500, "{arrived}");
+    assert!(arrived["time"].as_f64().unwrap() > 1.6e9, "{arrived}");
+    let path = arrived["path"].as_str().expect("where it was written");
+    assert_eq!(std::fs::read(path).unwrap(), content);
+    let done = watcher.wait_on("fleet/1/transfer", |v| {
+        (v["transfer"].as_u64() == Some(id) && v["state"] == "complete").then(|| v.clone())
+    });
+    assert_eq!(done["sha256"], arrived["sha256"], "{done}");
+    assert_eq!(done["held"], done["fragments"], "{done}");
+
+    // Node 2 asks node 1 for a file it serves, from node 2's file/get.
+    let served = pattern(300, 5);
+    std::fs::write(serve.join("log.txt"), &served).unwrap();
+    watcher.publish("fleet/2/file/get", r#"{"node": 1, "path": "log.txt"}"#);
+    let reply = watcher.wait_on("fleet/2/file/reply", |v| Some(v.clone()));
+    let request = reply["file_get"].as_u64().expect("a request number");
+    assert_eq!(reply["node"], 1, "{reply}");
+    let fetched = watcher.wait_on("fleet/2/transfer", |v| {
+        (v["request"].as_u64() == Some(request) && v["state"] == "complete").then(|| v.clone())
+    });
+    assert_eq!(
+        std::fs::read(fetched["path"].as_str().unwrap()).unwrap(),
+        served
+    );
+
+    // A request that does not read, the list of transfers.
+    watcher.publish("fleet/1/file/send", r#"{"path": "/x"}"#);
+    let error = watcher.wait_on("fleet/1/error", |v| Some(v.clone()));
+    assert!(
+        error["error"]
+            .as_str()
+            .unwrap()
+            .contains("file_send: \"dest\""),
+        "{error}"
+    );
+    assert_eq!(error["topic"], "fleet/1/file/send");
+    watcher.publish("fleet/1/file/list", "");
+    let list = watcher.wait_on("fleet/1/file/reply", |v| Some(v.clone()));
+    assert!(list["transfers"].is_array(), "{list}");
+    assert_eq!(list["topic"], "fleet/1/file/list");
+    drop(broker);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,8 +1,11 @@
 //! Messages to send arriving from the broker on `tx` topics: parsed,
 //! handed to the core exactly as from the JSON interface, and acknowledged
 //! to the broker only after the core's reply (which, for an accepted
-//! message, comes once it is on disk). Acknowledgements go out in the
-//! order the messages came.
+//! message, comes once it is on disk). File requests (`file/send`,
+//! `file/get`, `file/list`) go to the core's network layer as the JSON
+//! interface's `file_send`, `file_get` and `transfers`, and are
+//! acknowledged after its reply too. Acknowledgements go out in the order
+//! the publications came.
 
 use std::sync::Arc;
 
@@ -14,6 +17,7 @@ use tokio::sync::{mpsc, oneshot};
 
 use super::payload::{Formatter, Outgoing};
 use super::settings::Topics;
+use crate::control::{Control, NetworkRequest};
 use crate::json_server::Publish;
 
 /// Parses the payload of a `tx` topic into a message to send. The error is
@@ -52,21 +56,44 @@ pub fn parse_tx(
     DynamicMessage::deserialize(desc, value).map_err(|e| format!("{name}: {e}"))
 }
 
+/// Parses the payload of a file topic (`kind` the network layer's request
+/// it names, [`Topics::file_request`]): a JSON object with the request's
+/// fields (anything, or nothing, for `transfers`). The error is the reason
+/// published on `PREFIX/NODE/error`.
+pub fn parse_file_request(kind: &str, payload: &[u8]) -> Result<NetworkRequest, String> {
+    if kind == "transfers" {
+        return Ok(NetworkRequest::Transfers);
+    }
+    let value: Value = serde_json::from_slice(payload)
+        .map_err(|e| format!("{kind}: the payload is not JSON: {e}"))?;
+    if !value.is_object() {
+        return Err(match kind {
+            "file_send" => "file_send: the payload must be a JSON object: {\"dest\": N, \"path\": \"…\"} (\"name\" optional)".into(),
+            _ => "file_get: the payload must be a JSON object: {\"node\": N, \"path\": \"…\"}".into(),
+        });
+    }
+    crate::json_protocol::network_request(kind, &value)
+}
+
 /// What the acknowledging task waits for, in arrival order.
 enum Waiting {
     /// Refused before reaching the core.
     Refused(MqttPublish, String),
     /// With the core.
     Core(MqttPublish, oneshot::Receiver<crate::event::PublishReply>),
+    /// A file request, with the core's network layer.
+    Network(MqttPublish, oneshot::Receiver<Result<Value, String>>),
 }
 
 /// Runs the two tasks of inbound messages until `incoming` closes:
 /// submission to the core (in order) and acknowledgement to the broker (in
 /// order, after each reply). Notices (accepted, error) go to `notices`.
+#[allow(clippy::too_many_arguments)]
 pub async fn run(
     topics: Topics,
     codec: Arc<Codec>,
     core: mpsc::Sender<Publish>,
+    control: mpsc::Sender<Control>,
     client: AsyncClient,
     formatter: Arc<Formatter>,
     mut incoming: mpsc::UnboundedReceiver<MqttPublish>,
@@ -75,6 +102,26 @@ pub async fn run(
     let (waiting_tx, mut waiting_rx) = mpsc::unbounded_channel::<Waiting>();
     let submit = async move {
         while let Some(publish) = incoming.recv().await {
+            if let Some(kind) = topics.file_request(&publish.topic) {
+                let waiting = match parse_file_request(kind, &publish.payload) {
+                    Err(reason) => Waiting::Refused(publish, reason),
+                    Ok(request) => {
+                        let (reply, answer) = oneshot::channel();
+                        if control
+                            .send(Control::Network { request, reply })
+                            .await
+                            .is_err()
+                        {
+                            break;
+                        }
+                        Waiting::Network(publish, answer)
+                    }
+                };
+                if waiting_tx.send(waiting).is_err() {
+                    break;
+                }
+                continue;
+            }
             let waiting = match parse_tx(&topics, &codec, &publish) {
                 Err(reason) => Waiting::Refused(publish, reason),
                 Ok(message) => {
@@ -113,6 +160,16 @@ pub async fn run(
                         Ok(accepted) => {
                             formatter.accepted(&publish.topic, &accepted, &publish.payload)
                         }
+                    };
+                    (publish, notice)
+                }
+                Waiting::Network(publish, answer) => {
+                    let Ok(reply) = answer.await else {
+                        break;
+                    };
+                    let notice = match reply {
+                        Err(reason) => formatter.error(&publish.topic, &reason),
+                        Ok(value) => formatter.file_reply(&publish.topic, value),
                     };
                     (publish, notice)
                 }
@@ -161,6 +218,50 @@ mod tests {
             assert_eq!(command.destination, 2);
             assert_eq!(command.action, 1);
             assert_eq!(command.note.as_deref(), Some("hi"));
+        }
+    }
+
+    #[test]
+    fn file_topics_name_their_requests_and_their_payloads_are_checked() {
+        let t = topics();
+        assert_eq!(
+            t.file_filters(),
+            ["fleet/1/file/send", "fleet/1/file/get", "fleet/1/file/list"]
+        );
+        assert_eq!(t.file_request("fleet/1/file/send"), Some("file_send"));
+        assert_eq!(t.file_request("fleet/1/file/get"), Some("file_get"));
+        assert_eq!(t.file_request("fleet/1/file/list"), Some("transfers"));
+        assert_eq!(t.file_request("fleet/2/file/send"), None);
+        assert_eq!(t.file_request("fleet/all/file/send"), None);
+        assert_eq!(t.file_request("fleet/1/file/reply"), None);
+        assert_eq!(t.file_request("fleet/1/tx/file"), None);
+        assert_eq!(
+            parse_file_request("file_send", br#"{"dest": 3, "path": "/d/x.bin"}"#),
+            Ok(NetworkRequest::SendFile {
+                dest: 3,
+                path: "/d/x.bin".into(),
+                name: None
+            })
+        );
+        assert_eq!(
+            parse_file_request("file_get", br#"{"node": 3, "path": "logs/m.log"}"#),
+            Ok(NetworkRequest::GetFile {
+                node: 3,
+                path: "logs/m.log".into()
+            })
+        );
+        assert_eq!(
+            parse_file_request("transfers", b""),
+            Ok(NetworkRequest::Transfers)
+        );
+        for (kind, payload, reason) in [
+            ("file_send", &b"{"[..], "not JSON"),
+            ("file_send", b"[3]", "must be a JSON object"),
+            ("file_send", br#"{"path": "/x"}"#, "\"dest\""),
+            ("file_get", br#"{"node": 3}"#, "\"path\""),
+        ] {
+            let err = parse_file_request(kind, payload).expect_err(reason);
+            assert!(err.starts_with(kind) && err.contains(reason), "{err}");
         }
     }
 

@@ -13,7 +13,13 @@
 //! broker stops. Every gateway takes `PREFIX/all/tx/TYPE`: each sends its
 //! own copy, so one whose `SOURCE_ID` role names another node is refused
 //! there (on `PREFIX/NODE/error`), and only the named node sends it.
-//! Topics and payloads: [`payload`].
+//!
+//! File requests come from `PREFIX/NODE/file/send` (`{"dest", "path",
+//! "name"}`), `PREFIX/NODE/file/get` (`{"node", "path"}`) and
+//! `PREFIX/NODE/file/list` (anything): the JSON interface's `file_send`,
+//! `file_get` and `transfers`, answered on `PREFIX/NODE/file/reply` (or
+//! `PREFIX/NODE/error`); the transfers' progress goes to
+//! `PREFIX/NODE/transfer`. Topics and payloads: [`payload`].
 
 pub mod backlog;
 pub mod inbound;
@@ -32,6 +38,7 @@ use rumqttc::{AsyncClient, Event, EventLoop, Packet};
 use tokio::sync::{broadcast, mpsc};
 
 use crate::config::ConfigError;
+use crate::control::Control;
 use crate::event::SharedEvent;
 use crate::json_server::Publish;
 use backlog::Backlog;
@@ -55,6 +62,7 @@ pub struct Bridge {
     modem_id: i32,
     codec: Arc<Codec>,
     core: mpsc::Sender<Publish>,
+    control: mpsc::Sender<Control>,
     clock: Arc<dyn Clock>,
 }
 
@@ -69,12 +77,15 @@ impl std::fmt::Debug for Bridge {
 
 impl Bridge {
     /// Checks the `mqtt` section; `None` when it names no broker. `core` is
-    /// the daemon's publish channel ([`crate::runtime::Daemon::publisher`]).
+    /// the daemon's publish channel ([`crate::runtime::Daemon::publisher`]),
+    /// `control` its control channel ([`crate::runtime::Daemon::control`]:
+    /// the file requests).
     pub fn new(
         config: MqttBridge,
         modem_id: i32,
         codec: Arc<Codec>,
         core: mpsc::Sender<Publish>,
+        control: mpsc::Sender<Control>,
         clock: Arc<dyn Clock>,
     ) -> Result<Option<Self>, ConfigError> {
         Ok(
@@ -83,6 +94,7 @@ impl Bridge {
                 modem_id,
                 codec,
                 core,
+                control,
                 clock,
             }),
         )
@@ -98,6 +110,7 @@ impl Bridge {
             modem_id,
             codec,
             core,
+            control,
             clock,
         } = self;
         let names: HashMap<u32, String> = codec
@@ -113,6 +126,7 @@ impl Bridge {
             settings.topics.clone(),
             codec,
             core,
+            control,
             client.clone(),
             Arc::new(Formatter::new(settings.topics.clone(), HashMap::new())),
             incoming_rx,
@@ -254,7 +268,9 @@ impl Loop {
             buffered = self.buffer.len(),
             "MQTT: connected to {broker}"
         );
-        for filter in self.settings.topics.tx_filters() {
+        let topics = &self.settings.topics;
+        let filters = topics.tx_filters().into_iter().chain(topics.file_filters());
+        for filter in filters {
             if let Err(e) = self.client.try_subscribe(filter.clone(), self.settings.qos) {
                 tracing::error!("MQTT: cannot subscribe to {filter}: {e}");
             }

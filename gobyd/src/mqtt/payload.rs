@@ -13,6 +13,8 @@
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
 //! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::link::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
+//! | `file/reply` | no | the answer to a file request: the JSON interface's reply (`{"file_send", "joined", "transfer"}`, `{"file_get", "node"}` or `{"transfers"}`) with `"topic"` |
+//! | `transfer` | no | a transfer's progress and end: the JSON interface's `transfer` event (`{"transfer", "direction", "peer", "name", "bytes", "fragments", "held", "state", "sha256", …}`) with `"time"` |
 //!
 //! `time` is seconds since the UNIX epoch; messages are proto3 JSON with
 //! the field names of the `.proto` file.
@@ -25,7 +27,7 @@ use serde_json::{json, Value};
 
 use super::settings::Topics;
 use crate::event::{AcceptedMessage, DaemonEvent, LinkSummary, Reception};
-use crate::json_protocol::{accepted_value, message_json};
+use crate::json_protocol::{accepted_value, message_json, transfer_value};
 use crate::modem_event::ModemEvent;
 
 /// One publication.
@@ -88,8 +90,14 @@ impl Formatter {
             } => Some(self.received(received, reception, now)),
             DaemonEvent::Queue { event, .. } => self.queue_event(event, now),
             DaemonEvent::Modem(event) => self.modem_event(event, now),
-            // Told to JSON clients (topic `transfer`), not published.
-            DaemonEvent::Transfer(_) => None,
+            DaemonEvent::Transfer(e) => {
+                let mut payload = transfer_value(e);
+                if let Some(o) = payload.as_object_mut() {
+                    o.remove("event");
+                }
+                payload["time"] = seconds(now).into();
+                Some(Outgoing::new(self.topics.node("transfer"), payload, false))
+            }
             DaemonEvent::Link(status) => Some(Outgoing::new(
                 self.topics.node(&format!("link_status/{}", status.name())),
                 message_json(&status.transcode_to_dynamic()),
@@ -197,6 +205,16 @@ impl Formatter {
             json!({ "error": reason, "topic": topic }),
             false,
         )
+    }
+
+    /// The answer to a file request (`PREFIX/NODE/file/reply`): the
+    /// network layer's reply as the JSON interface has it, with the topic
+    /// the request came on.
+    pub fn file_reply(&self, topic: &str, mut reply: Value) -> Outgoing {
+        if let Some(o) = reply.as_object_mut() {
+            o.insert("topic".into(), topic.into());
+        }
+        Outgoing::new(self.topics.node("file/reply"), reply, false)
     }
 
     /// The notice that a message to send was queued (and is on disk):

@@ -49,6 +49,27 @@ impl Topics {
         ]
     }
 
+    /// The topics gobyd subscribes to for file requests
+    /// (`PREFIX/NODE/file/send`, `…/get`, `…/list`): this node's alone, and
+    /// not `file/reply`, where it answers.
+    pub fn file_filters(&self) -> [String; 3] {
+        ["send", "get", "list"].map(|leaf| self.node(&format!("file/{leaf}")))
+    }
+
+    /// The network layer's request a file topic of this node names
+    /// (`send`: `file_send`, `get`: `file_get`, `list`: `transfers`), if
+    /// it is one.
+    pub fn file_request(&self, topic: &str) -> Option<&'static str> {
+        let rest = topic.strip_prefix(&self.prefix)?.strip_prefix('/')?;
+        let rest = rest.strip_prefix(&self.node)?.strip_prefix("/file/")?;
+        match rest {
+            "send" => Some("file_send"),
+            "get" => Some("file_get"),
+            "list" => Some("transfers"),
+            _ => None,
+        }
+    }
+
     /// Whether `topic` is a `tx` topic of every gateway
     /// (`PREFIX/all/tx/TYPE`) rather than of this node alone.
     pub fn is_every_gateway(&self, topic: &str) -> bool {

@@ -1273,8 +1273,12 @@ impl Network {
 /// a frame holds besides the fragment's data.
 pub const FRAGMENT_HEADER: usize = 14;
 
-/// The data bytes of a fragment that fills a frame of `frame` bytes.
-fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usize> {
+/// The data bytes of a fragment that fills a frame of `frame` bytes
+/// (`codec` holding the network layer's types, [`wire::load`]): the most
+/// whose fragment, with its header's fields at their widest, encodes to
+/// at most `frame` bytes (data bytes at most 1023). Errors when not even
+/// one data byte fits.
+pub fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usize> {
     let probe = |d: usize| {
         codec
             .encode(
@@ -1305,10 +1309,11 @@ fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usi
 }
 
 /// The smallest frame this node sends in its TDMA slots (by their rates),
-/// bytes; the driver's largest frame, or 64, when the slots do not say.
-/// With several links ([`crate::config::links`]), the smallest of every
-/// link's: a fragment goes over whichever link carries it.
-fn frame_bytes(config: &GobydConfig) -> usize {
+/// bytes; the driver's largest frame, or 64, when the slots do not say
+/// (what a fragment fills when `network.fragment_bytes` is 0). With
+/// several links ([`crate::config::links`]), the smallest of every link's:
+/// a fragment goes over whichever link carries it.
+pub fn frame_bytes(config: &GobydConfig) -> usize {
     let me = config.modem_id();
     crate::config::links::links(config)
         .iter()

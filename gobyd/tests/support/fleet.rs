@@ -64,8 +64,20 @@ pub struct Fleet {
 }
 
 impl Fleet {
-    /// Starts node `i + 1` from `configs[i]` for each configuration.
+    /// Starts node `i + 1` from `configs[i]` for each configuration, the
+    /// clock reading the system's time now.
     pub async fn start(configs: Vec<GobydConfig>) -> Fleet {
+        Fleet::start_with_clock(configs, TokioClock::new()).await
+    }
+
+    /// As [`start`](Self::start), the clock reading `now` (microseconds
+    /// since the epoch) at the start: the TDMA slots (aligned on the clock)
+    /// fall at the same virtual times in every run.
+    pub async fn start_at(configs: Vec<GobydConfig>, now: i64) -> Fleet {
+        Fleet::start_with_clock(configs, TokioClock::at(now)).await
+    }
+
+    async fn start_with_clock(configs: Vec<GobydConfig>, clock: TokioClock) -> Fleet {
         // The daemons' logs, when asked for (e.g. GOBYD_TEST_LOG=info).
         if let Ok(filter) = std::env::var("GOBYD_TEST_LOG") {
             let _ = tracing_subscriber::fmt()
@@ -74,7 +86,7 @@ impl Fleet {
                 .try_init();
         }
         let mut fleet = Fleet {
-            clock: Arc::new(TokioClock::new()),
+            clock: Arc::new(clock),
             medium: Medium::new(),
             nodes: configs.iter().map(|_| None).collect(),
             configs,
