@@ -1360,8 +1360,9 @@ fn micromodem_problems(config: &GobydConfig) -> Vec<Problem> {
 }
 
 /// The `DRIVER_SPECIFIC` slots (e.g. Goby3's Flexible Data Protocol slot,
-/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`): only the Micro-Modem
-/// driver carries them out, and each must ask for something it does (see
+/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`): the Micro-Modem
+/// driver carries them out (and the Benthos ATM-900's, Goby3's
+/// `benthos { type: BENTHOS_TWO_WAY_PING }` slot, a ping of `dest`), and each must ask for something it does (see
 /// [`modemdriver::micromodem::transmission::request`]), from the slot's
 /// source.
 fn driver_specific_slot_problems(config: &GobydConfig, kind: Option<DriverType>) -> Vec<Problem> {
@@ -1376,6 +1377,31 @@ fn driver_specific_slot_problems(config: &GobydConfig, kind: Option<DriverType>)
         .unwrap_or_default();
     for (i, slot) in mac.slot.iter().enumerate() {
         if slot.r#type() != TransmissionType::DriverSpecific {
+            continue;
+        }
+        if kind == Some(DriverType::DriverBenthosAtm900) {
+            // Goby3's Benthos slot: a two-way ping to the slot's dest.
+            let ping = slot
+                .benthos
+                .as_deref()
+                .copied()
+                .unwrap_or_default()
+                .r#type()
+                == protos::goby::acomms::protobuf::benthos_transmission::Type::BenthosTwoWayPing;
+            if !ping {
+                problems.push(Problem::new(
+                    format!("mac.slot[{i}].benthos.type"),
+                    "a DRIVER_SPECIFIC slot of the Benthos ATM-900 driver is a two-way ping: \
+                     give benthos { type: BENTHOS_TWO_WAY_PING } and the node to range in dest"
+                        .to_string(),
+                ));
+            } else if slot.dest.is_none_or(|d| d < 0 || d == slot.src()) {
+                problems.push(Problem::new(
+                    format!("mac.slot[{i}].dest"),
+                    "a two-way ping needs the node to range in dest (not this slot's source, not a broadcast)"
+                        .to_string(),
+                ));
+            }
             continue;
         }
         if kind != Some(DriverType::DriverWhoiMicromodem) {

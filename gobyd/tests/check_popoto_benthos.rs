@@ -145,3 +145,37 @@ fn check_knows_the_benthos_limits() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_benthos_ping_slot_is_checked_as_the_driver_runs_it() {
+    let dir = scratch("check", "benthos-ping");
+    let path = dir.join("benthos-ping.pb.txt");
+    let config = |slot: &str| {
+        format!(
+            "modem_id: 1\ndriver_cfg {{ driver_type: DRIVER_BENTHOS_ATM900 connection_type: CONNECTION_TCP_AS_CLIENT \
+             tcp_server: \"127.0.0.1\" tcp_port: 4001 }}\n\
+             mac_cfg {{ type: MAC_FIXED_DECENTRALIZED\n  slot {{ src: 1 rate: 5 slot_seconds: 8 }}\n  {slot}\n}}\n"
+        )
+    };
+    // Goby3's ranging slot: a two-way ping of node 2.
+    let ping = "slot { src: 1 dest: 2 type: DRIVER_SPECIFIC slot_seconds: 8 \
+                [goby.acomms.benthos.protobuf.transmission] { type: BENTHOS_TWO_WAY_PING } }";
+    let (code, out, err) = check(&path, &config(ping));
+    assert_eq!(code, Some(0), "{out}{err}");
+    for (slot, expected) in [
+        (
+            "slot { src: 1 dest: 2 type: DRIVER_SPECIFIC slot_seconds: 8 }",
+            "mac.slot[1].benthos.type: a DRIVER_SPECIFIC slot of the Benthos ATM-900 driver is a two-way ping",
+        ),
+        (
+            "slot { src: 1 type: DRIVER_SPECIFIC slot_seconds: 8 \
+             [goby.acomms.benthos.protobuf.transmission] { type: BENTHOS_TWO_WAY_PING } }",
+            "mac.slot[1].dest: a two-way ping needs the node to range in dest",
+        ),
+    ] {
+        let (code, _, err) = check(&path, &config(slot));
+        assert_eq!(code, Some(2), "{slot}: {err}");
+        assert!(err.contains(expected), "{slot}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
