@@ -53,9 +53,11 @@ impl BitWriter {
 
     /// Makes room for at least `additional` more bytes.
     pub fn reserve(&mut self, additional: usize) {
-        let have = self.bytes.len() - self.used();
-        self.bytes
-            .reserve((additional + SLACK).saturating_sub(have));
+        // The room is zero bytes already there: writing needs no growing.
+        let end = self.used() + additional + SLACK;
+        if self.bytes.len() < end {
+            self.bytes.resize(end, 0);
+        }
     }
 
     /// Number of bits written so far.
@@ -259,15 +261,29 @@ impl<'a> BitReader<'a> {
         let byte = pos / 8;
         let word = match self.bytes.get(byte..byte + 8) {
             Some(w) => u64::from_le_bytes(w.try_into().expect("an 8-byte slice")),
-            None => {
-                // The last bytes: copied into a zero word.
-                let rest = self.bytes.get(byte..).unwrap_or(&[]);
-                let mut w = [0u8; 8];
-                w[..rest.len()].copy_from_slice(rest);
-                u64::from_le_bytes(w)
-            }
+            None => self.tail_word(byte),
         };
         word >> (pos % 8)
+    }
+
+    /// The bytes from `byte` on, fewer than 8, as a word (zeros after them).
+    #[inline]
+    fn tail_word(&self, byte: usize) -> u64 {
+        let len = self.bytes.len();
+        if byte >= len {
+            return 0;
+        }
+        match self.bytes.get(len.wrapping_sub(8)..) {
+            // The last 8 bytes, shifted down to start at `byte`.
+            Some(last) => {
+                u64::from_le_bytes(last.try_into().expect("an 8-byte slice"))
+                    >> (8 * (byte + 8 - len))
+            }
+            None => self.bytes[byte..]
+                .iter()
+                .rev()
+                .fold(0, |w, b| w << 8 | u64::from(*b)),
+        }
     }
 
     /// Reads `nbits` bits as an unsigned integer. Bits beyond the 64th are

@@ -44,10 +44,16 @@ pub(crate) struct LoadedMessage {
     /// How messages given as protobuf bytes are encoded without a
     /// `DynamicMessage`, when the type's codecs allow it.
     pub(crate) wire: Option<WireEncoding>,
-    /// Every required field is one the header's or the body's message
-    /// codec encodes (and refuses unset): encoding checks them on the way,
-    /// the check running only when encoding fails.
+    /// The header and the body are coded by the default message codec,
+    /// which refuses a required field it finds unset: encoding checks the
+    /// required fields it visits on the way, [`RequiredFields::check`]
+    /// running (for its error) only when encoding fails.
     pub(crate) required_on_the_way: bool,
+    /// The required fields encoding does not visit (all of them without
+    /// `required_on_the_way`), checked before encoding: e.g. those of
+    /// embedded messages in a repeated field, whose elements over
+    /// `max_repeat` are not encoded.
+    pub(crate) required_before: RequiredFields,
 }
 
 /// The wire plans of a loaded type and its header and body codecs (the
@@ -528,10 +534,11 @@ impl Codec {
         let reads_clock = head.reads_clock() || body.reads_clock();
         let wire = WireEncoding::of(desc, &head, &body);
         let required = RequiredFields::of(desc, 0);
-        let required_on_the_way = match (message_codec(&head), message_codec(&body)) {
-            (Some(h), Some(b)) => required.covered_by(Some(&h), Some(&b)),
-            _ => false,
-        };
+        let (required_on_the_way, required_before) =
+            match (message_codec(&head), message_codec(&body)) {
+                (Some(h), Some(b)) => (true, required.not_visited(Some(&h), Some(&b))),
+                _ => (false, required.clone()),
+            };
         let loaded = LoadedMessage {
             descriptor: desc.clone(),
             id,
@@ -545,6 +552,7 @@ impl Codec {
             reads_clock,
             wire,
             required_on_the_way,
+            required_before,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -639,6 +647,15 @@ impl Codec {
             .collect())
     }
 
+    /// The adaptive arithmetic frequencies one message advances (`keep`:
+    /// put back afterwards); `None` when no model is adaptive (none to advance).
+    fn arithmetic_session(&self, keep: bool) -> Option<ArithmeticSession<'_>> {
+        let models = self.registry.arithmetic_models();
+        models
+            .any_adaptive()
+            .then(|| ArithmeticSession::new(models, &self.arithmetic, keep))
+    }
+
     fn encode_with(
         &self,
         msg: &DynamicMessage,
@@ -689,24 +706,23 @@ impl Codec {
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
         let name = loaded.descriptor.full_name();
-        let check_required = || match msg {
-            Source::Dynamic(m) => loaded.required.check(m),
-            Source::Wire(_, m) => loaded.required.check_wire(m),
+        let check = |required: &RequiredFields| match msg {
+            Source::Dynamic(m) => required.check(m),
+            Source::Wire(_, m) => required.check_wire(m),
         };
-        if !loaded.required_on_the_way {
+        let check_required = || check(&loaded.required);
+        if !loaded.required_before.is_empty() && check(&loaded.required_before).is_err() {
+            // The first unset required field in declaration order is the
+            // error to give, wherever it is.
             check_required().map_err(|e| e.into_encode(name))?;
         }
-        let session = ArithmeticSession::new(
-            self.registry.arithmetic_models(),
-            &self.arithmetic,
-            !dry_run,
-        );
+        let session = self.arithmetic_session(!dry_run);
         let ctx = EncodeContext {
             strict: self.strict,
             dry_run,
             definition_hash: loaded.hash,
             changes,
-            arithmetic: Some(&session),
+            arithmetic: session.as_ref(),
             required_unchecked: loaded.required_on_the_way,
         };
         // Header and body are written straight after what `out` holds (the
@@ -716,7 +732,9 @@ impl Codec {
         let mut writer = BitWriter::from_bytes(std::mem::take(out));
         writer.reserve(loaded.head_bytes() + loaded.max_body_bytes());
         let head_end = Self::encode_parts(loaded, msg, &ctx, &mut writer);
-        session.finish(head_end.is_ok());
+        if let Some(session) = session {
+            session.finish(head_end.is_ok());
+        }
         *out = writer.into_bytes();
         let head_end = match head_end {
             Ok(end) => end,
@@ -945,8 +963,7 @@ impl Codec {
             ))
             .into_decode(name));
         }
-        let session =
-            ArithmeticSession::new(self.registry.arithmetic_models(), &self.arithmetic, true);
+        let session = self.arithmetic_session(true);
         let ctx = DecodeContext {
             now_secs: if loaded.reads_clock {
                 (self.clock)()
@@ -954,10 +971,12 @@ impl Codec {
                 0
             },
             definition_hash: loaded.hash,
-            arithmetic: Some(&session),
+            arithmetic: session.as_ref(),
         };
         let decoded = self.decode_parts(loaded, bytes, &ctx);
-        session.finish(decoded.is_ok());
+        if let Some(session) = session {
+            session.finish(decoded.is_ok());
+        }
         decoded
     }
 
@@ -1190,7 +1209,7 @@ fn round_to(value: f64, decimals: i32) -> f64 {
 
 /// The required fields of a message type and the embedded messages to look
 /// into, computed once at load time.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub(crate) struct RequiredFields {
     /// Each field to look at: its descriptor, whether it is required, the
     /// required fields of its messages, its position (see
@@ -1251,27 +1270,45 @@ impl RequiredFields {
         Ok(())
     }
 
-    /// Whether encoding with these message codecs (of the header and the
-    /// body) visits every required field when its message is set, so that
-    /// it can refuse one unset: each is encoded by one of them (not
-    /// omitted), and those inside embedded messages are reached through
-    /// single (not repeated) fields coded by the default message codec.
-    fn covered_by(&self, head: Option<&MessageCodec>, body: Option<&MessageCodec>) -> bool {
-        self.fields.iter().all(|(field, _, nested, _)| {
+    /// Whether there is nothing to check.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.fields.is_empty()
+    }
+
+    /// The part of these required fields that encoding with these message
+    /// codecs (of the header and the body; `None`: not coded there) does
+    /// not visit when their message is set, so cannot refuse unset: fields
+    /// neither codes (omitted), and those inside embedded messages reached
+    /// otherwise than through a single (not repeated) field coded by the
+    /// default message codec. A field required itself is visited whenever
+    /// one of the codecs codes it, whatever its codec.
+    fn not_visited(
+        &self,
+        head: Option<&MessageCodec>,
+        body: Option<&MessageCodec>,
+    ) -> RequiredFields {
+        let mut fields = Vec::new();
+        for (field, required, nested, position) in &self.fields {
             let h = head.and_then(|c| c.entry(field.number()));
             let b = body.and_then(|c| c.entry(field.number()));
             if h.is_none() && b.is_none() {
-                return false;
+                fields.push((field.clone(), *required, nested.clone(), *position));
+                continue;
             }
             let Some(nested) = nested else {
-                return true;
+                continue;
             };
             let (h, b) = (h.map(|e| e.message_codec()), b.map(|e| e.message_codec()));
-            !field.is_list()
-                && !matches!(h, Some(None))
-                && !matches!(b, Some(None))
-                && nested.covered_by(h.flatten(), b.flatten())
-        })
+            let rest = if field.is_list() || matches!(h, Some(None)) || matches!(b, Some(None)) {
+                nested.clone()
+            } else {
+                nested.not_visited(h.flatten(), b.flatten())
+            };
+            if !rest.is_empty() {
+                fields.push((field.clone(), false, Some(rest), *position));
+            }
+        }
+        RequiredFields { fields }
     }
 
     /// [`RequiredFields::check`] of a message read from protobuf bytes.
@@ -1306,7 +1343,7 @@ impl RequiredFields {
 mod tests {
     /// The shared vectors' types take the fast ways: protobuf bytes encoded
     /// without a dynamic message, required fields checked on the way
-    /// (but for `vec.Nested`, whose repeated `track` holds required fields:
+    /// (but for those of the elements of `vec.Nested`'s repeated `track`:
     /// checked before); the tests of both compare them with the other ways.
     #[test]
     fn the_vector_types_take_the_fast_ways() {
@@ -1325,7 +1362,21 @@ mod tests {
         assert_eq!(names.len(), 5);
         for name in names {
             let loaded = codec.get(&name).unwrap();
-            assert_eq!(loaded.required_on_the_way, name != "vec.Nested", "{name}");
+            assert!(loaded.required_on_the_way, "{name}");
+            // What encoding does not visit: the required fields of the
+            // embedded messages of `vec.Nested`'s repeated `track`.
+            let before: Vec<&str> = loaded
+                .required_before
+                .fields
+                .iter()
+                .map(|(f, ..)| f.name())
+                .collect();
+            let expected: &[&str] = if name == "vec.Nested" {
+                &["track"]
+            } else {
+                &[]
+            };
+            assert_eq!(before, expected, "{name}");
             assert!(loaded.wire.is_some(), "{name}");
         }
     }

@@ -502,16 +502,38 @@ impl NumericBounds {
     /// out-of-range value is written as "not present" (the minimum for
     /// required fields) and NaN as the minimum; either is reported through
     /// [`EncodeContext::value_changed`] (refused in strict mode).
+    #[inline]
     pub fn encode(
         &self,
         out: &mut BitWriter,
         value: Option<WireValue>,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        let Some(value) = value else {
-            out.write(0, self.bits);
-            return Ok(());
-        };
+        match value {
+            None => {
+                out.write(0, self.bits);
+                Ok(())
+            }
+            Some(v) => match self.to_wire_uint(v) {
+                Some(u) => {
+                    let u = if self.required { u } else { u.wrapping_add(1) };
+                    out.write(u, self.bits);
+                    Ok(())
+                }
+                None => self.encode_changed(out, v, ctx),
+            },
+        }
+    }
+
+    /// [`NumericBounds::encode`] of a value the codec changes: NaN or out of range.
+    #[cold]
+    #[inline(never)]
+    fn encode_changed(
+        &self,
+        out: &mut BitWriter,
+        value: WireValue,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
         if value.is_nan() {
             // libdccl's bound check lets NaN through (every comparison is
             // false) and the conversion to an integer then yields 0: the minimum.
@@ -521,20 +543,11 @@ impl NumericBounds {
             self.write_minimum(out);
             return Ok(());
         }
-        match self.to_wire_uint(value) {
-            Some(u) => {
-                let u = if self.required { u } else { u.wrapping_add(1) };
-                out.write(u, self.bits);
-                Ok(())
-            }
-            None => {
-                if ctx.reports_changes() {
-                    self.report_out_of_range(value, ctx)?;
-                }
-                out.write(0, self.bits);
-                Ok(())
-            }
+        if ctx.reports_changes() {
+            self.report_out_of_range(value, ctx)?;
         }
+        out.write(0, self.bits);
+        Ok(())
     }
 
     #[cold]
@@ -606,6 +619,13 @@ impl NumericBounds {
         }
         Ok(())
     }
+}
+
+/// The error of a value of another type than the field's.
+#[cold]
+#[inline(never)]
+fn wrong_type(v: &Value) -> CodecError {
+    CodecError::new(format!("value {v:?} does not match the field type"))
 }
 
 fn display(v: WireValue) -> String {
@@ -723,9 +743,10 @@ impl FieldCodec for NumericCodec {
     ) -> Result<(), CodecError> {
         let wire = match value {
             None => None,
-            Some(v) => Some(self.bounds.kind.read_value(v).ok_or_else(|| {
-                CodecError::new(format!("value {v:?} does not match the field type"))
-            })?),
+            Some(v) => match self.bounds.kind.read_value(v) {
+                Some(w) => Some(w),
+                None => return Err(wrong_type(v)),
+            },
         };
         self.bounds.encode(out, wire, ctx)
     }
