@@ -7,11 +7,26 @@
 use crate::error::CodecError;
 
 /// Appends bit fields to a byte buffer, least significant bit first.
+///
+/// Values are OR-ed into the buffer one 64-bit word at a time: the buffer
+/// is kept at least 8 bytes longer than what is written, those bytes zero,
+/// so that a value of up to 57 bits lands with one load and one store
+/// whatever its bit offset. The bytes handed out are those written.
 #[derive(Debug, Default, Clone)]
 pub struct BitWriter {
+    /// The bytes written, then zero bytes (at least [`SLACK`] once anything
+    /// is written).
     bytes: Vec<u8>,
+    /// Bits written.
     len: usize,
 }
+
+/// Zero bytes kept after the last byte written: one word's load and store.
+const SLACK: usize = 8;
+
+/// The widest value written or read with one word (a value of 56 bits at
+/// bit offset 7 of its first byte ends in the word's last byte).
+const WORD_BITS: u32 = 57;
 
 impl BitWriter {
     /// An empty writer.
@@ -22,7 +37,7 @@ impl BitWriter {
     /// An empty writer with room for `bytes` bytes.
     pub fn with_capacity(bytes: usize) -> Self {
         BitWriter {
-            bytes: Vec::with_capacity(bytes),
+            bytes: Vec::with_capacity(bytes + SLACK),
             len: 0,
         }
     }
@@ -38,7 +53,11 @@ impl BitWriter {
 
     /// Makes room for at least `additional` more bytes.
     pub fn reserve(&mut self, additional: usize) {
-        self.bytes.reserve(additional);
+        // The room is zero bytes already there: writing needs no growing.
+        let end = self.used() + additional + SLACK;
+        if self.bytes.len() < end {
+            self.bytes.resize(end, 0);
+        }
     }
 
     /// Number of bits written so far.
@@ -51,70 +70,97 @@ impl BitWriter {
         self.len == 0
     }
 
+    /// Bytes the bits written take (the last one maybe partly).
+    #[inline]
+    fn used(&self) -> usize {
+        self.len.div_ceil(8)
+    }
+
+    /// Makes the buffer hold at least `end` bytes (zeros past those written).
+    #[inline]
+    fn ensure(&mut self, end: usize) {
+        if self.bytes.len() < end {
+            self.grow(end);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn grow(&mut self, end: usize) {
+        let target = end.max(2 * self.bytes.len()).max(64);
+        self.bytes.resize(target, 0);
+    }
+
+    /// ORs `value` (at most [`WORD_BITS`] bits, nothing above them) in at
+    /// the bit `self.len`.
+    #[inline]
+    fn put_word(&mut self, value: u64, nbits: u32) {
+        let byte = self.len / 8;
+        self.ensure(byte + SLACK);
+        let slot: &mut [u8; 8] = (&mut self.bytes[byte..byte + 8])
+            .try_into()
+            .expect("an 8-byte slice");
+        let word = u64::from_le_bytes(*slot) | (value << (self.len % 8));
+        *slot = word.to_le_bytes();
+        self.len += nbits as usize;
+    }
+
     /// Writes the `nbits` low bits of `value` (bits above bit 63 are zero).
     #[inline]
     pub fn write(&mut self, value: u64, nbits: u32) {
-        if nbits == 0 {
-            return;
-        }
-        if nbits > 64 {
-            self.write(value, 64);
-            self.write_zeros(nbits as usize - 64);
-            return;
-        }
-        let value = if nbits == 64 {
-            value
+        if nbits <= WORD_BITS {
+            self.put_word(low_bits(value, nbits), nbits);
         } else {
-            value & ((1u64 << nbits) - 1)
-        };
-        // The bytes hold exactly `len.div_ceil(8)` bytes and the bits of the
-        // last one beyond `len` are zero: the value, shifted to the first
-        // free bit, is OR-ed into that byte and the rest appended.
-        let bit = (self.len % 8) as u32;
-        let mut shifted = (value as u128) << bit;
-        let end = self.len + nbits as usize;
-        if bit != 0 {
-            if let Some(last) = self.bytes.last_mut() {
-                *last |= shifted as u8;
-            }
-            shifted >>= 8;
+            self.write_wide(value, nbits);
         }
-        // All 16 bytes are appended (a fixed-size copy), then the length
-        // cut back to the bytes the value reaches.
-        let keep = end.div_ceil(8);
-        self.bytes.extend_from_slice(&shifted.to_le_bytes());
-        self.bytes.truncate(keep);
-        self.len = end;
+    }
+
+    /// [`BitWriter::write`] of more than [`WORD_BITS`] bits.
+    fn write_wide(&mut self, value: u64, nbits: u32) {
+        self.put_word(value & 0xffff_ffff, 32);
+        let high = nbits.min(64) - 32;
+        self.put_word(low_bits(value >> 32, high), high);
+        if nbits > 64 {
+            self.write_zeros(nbits as usize - 64);
+        }
     }
 
     /// Writes one bit.
+    #[inline]
     pub fn write_bool(&mut self, bit: bool) {
-        self.write(bit as u64, 1);
+        self.put_word(bit as u64, 1);
     }
 
     /// Writes whole bytes, each least significant bit first.
     pub fn write_bytes(&mut self, bytes: &[u8]) {
         if self.len.is_multiple_of(8) {
-            self.bytes.extend_from_slice(bytes);
+            let start = self.len / 8;
+            self.ensure(start + bytes.len() + SLACK);
+            self.bytes[start..start + bytes.len()].copy_from_slice(bytes);
             self.len += bytes.len() * 8;
         } else {
-            let mut chunks = bytes.chunks_exact(8);
+            // Seven bytes at a time: one word each.
+            let mut chunks = bytes.chunks_exact(7);
             for chunk in &mut chunks {
                 let mut word = [0u8; 8];
-                word.copy_from_slice(chunk);
-                self.write(u64::from_le_bytes(word), 64);
+                word[..7].copy_from_slice(chunk);
+                self.put_word(u64::from_le_bytes(word), 56);
             }
-            for b in chunks.remainder() {
-                self.write(*b as u64, 8);
+            let rest = chunks.remainder();
+            if !rest.is_empty() {
+                let mut word = [0u8; 8];
+                word[..rest.len()].copy_from_slice(rest);
+                self.put_word(u64::from_le_bytes(word), 8 * rest.len() as u32);
             }
         }
     }
 
     /// Writes `nbits` zero bits.
+    #[inline]
     pub fn write_zeros(&mut self, nbits: usize) {
-        // Bits beyond `len` are already zero: only whole bytes are added.
+        // Bits beyond `len` are already zero.
         self.len += nbits;
-        self.bytes.resize(self.len.div_ceil(8), 0);
+        self.ensure(self.used());
     }
 
     /// Appends every bit of another writer.
@@ -128,17 +174,19 @@ impl BitWriter {
     }
 
     /// Pads with zero bits up to a whole byte.
+    #[inline]
     pub fn pad_to_byte(&mut self) {
-        self.len = self.bytes.len() * 8;
+        self.len = self.used() * 8;
     }
 
     /// The bytes written (the last one zero-padded).
     pub fn as_bytes(&self) -> &[u8] {
-        &self.bytes
+        &self.bytes[..self.used()]
     }
 
     /// Consumes the writer, returning the bytes (the last one zero-padded).
-    pub fn into_bytes(self) -> Vec<u8> {
+    pub fn into_bytes(mut self) -> Vec<u8> {
+        self.bytes.truncate(self.used());
         self.bytes
     }
 
@@ -206,41 +254,59 @@ impl<'a> BitReader<'a> {
         ))
     }
 
+    /// The 64 bits from bit `pos` on (zeros past the end), of which the
+    /// first [`WORD_BITS`] at least are those of the bytes.
+    #[inline]
+    fn word_at(&self, pos: usize) -> u64 {
+        let byte = pos / 8;
+        let word = match self.bytes.get(byte..byte + 8) {
+            Some(w) => u64::from_le_bytes(w.try_into().expect("an 8-byte slice")),
+            None => self.tail_word(byte),
+        };
+        word >> (pos % 8)
+    }
+
+    /// The bytes from `byte` on, fewer than 8, as a word (zeros after them).
+    #[inline]
+    fn tail_word(&self, byte: usize) -> u64 {
+        let len = self.bytes.len();
+        if byte >= len {
+            return 0;
+        }
+        match self.bytes.get(len.wrapping_sub(8)..) {
+            // The last 8 bytes, shifted down to start at `byte`.
+            Some(last) => {
+                u64::from_le_bytes(last.try_into().expect("an 8-byte slice"))
+                    >> (8 * (byte + 8 - len))
+            }
+            None => self.bytes[byte..]
+                .iter()
+                .rev()
+                .fold(0, |w, b| w << 8 | u64::from(*b)),
+        }
+    }
+
     /// Reads `nbits` bits as an unsigned integer. Bits beyond the 64th are
     /// consumed and must be zero-valued only in the sense that they are dropped.
     #[inline]
     pub fn read(&mut self, nbits: u32) -> Result<u64, CodecError> {
         self.need(nbits as usize)?;
-        let byte = self.pos / 8;
-        let bit = (self.pos % 8) as u32;
-        if nbits + bit <= 64 {
-            if let Some(word) = self.bytes.get(byte..byte + 8) {
-                let mut w = [0u8; 8];
-                w.copy_from_slice(word);
-                self.pos += nbits as usize;
-                return Ok(low_bits(u64::from_le_bytes(w) >> bit, nbits));
-            }
+        if nbits > WORD_BITS {
+            return Ok(self.read_wide(nbits));
         }
-        Ok(self.read_slow(nbits))
+        let value = low_bits(self.word_at(self.pos), nbits);
+        self.pos += nbits as usize;
+        Ok(value)
     }
 
-    /// [`BitReader::read`] near the end of the bytes or over 56 bits (the
-    /// length already checked).
-    fn read_slow(&mut self, nbits: u32) -> u64 {
-        let mut out = 0u64;
-        let mut got = 0u32;
-        while got < nbits {
-            let byte = self.bytes[self.pos / 8];
-            let bit_in_byte = (self.pos % 8) as u32;
-            let take = (8 - bit_in_byte).min(nbits - got);
-            let chunk = ((byte >> bit_in_byte) as u64) & ((1u64 << take) - 1);
-            if got < 64 {
-                out |= chunk << got;
-            }
-            got += take;
-            self.pos += take as usize;
-        }
-        out
+    /// [`BitReader::read`] of more than [`WORD_BITS`] bits (the length
+    /// already checked).
+    fn read_wide(&mut self, nbits: u32) -> u64 {
+        let low = low_bits(self.word_at(self.pos), 32);
+        let high_bits = nbits.min(64) - 32;
+        let high = low_bits(self.word_at(self.pos + 32), high_bits);
+        self.pos += nbits as usize;
+        low | high << 32
     }
 
     /// Reads one bit.
@@ -262,14 +328,14 @@ impl<'a> BitReader<'a> {
             self.pos += n * 8;
             return Ok(self.bytes[start..start + n].to_vec());
         }
+        // Seven bytes at a time: one word each.
         let mut out = Vec::with_capacity(n);
         let mut left = n;
-        while left >= 7 {
-            out.extend_from_slice(&self.read(56)?.to_le_bytes()[..7]);
-            left -= 7;
-        }
-        for _ in 0..left {
-            out.push(self.read(8)? as u8);
+        while left > 0 {
+            let take = left.min(7);
+            out.extend_from_slice(&self.word_at(self.pos).to_le_bytes()[..take]);
+            self.pos += take * 8;
+            left -= take;
         }
         Ok(out)
     }

@@ -44,10 +44,16 @@ pub(crate) struct LoadedMessage {
     /// How messages given as protobuf bytes are encoded without a
     /// `DynamicMessage`, when the type's codecs allow it.
     pub(crate) wire: Option<WireEncoding>,
-    /// Every required field is one the header's or the body's message
-    /// codec encodes (and refuses unset): encoding checks them on the way,
-    /// the check running only when encoding fails.
+    /// The header and the body are coded by the default message codec,
+    /// which refuses a required field it finds unset: encoding checks the
+    /// required fields it visits on the way, [`RequiredFields::check`]
+    /// running (for its error) only when encoding fails.
     pub(crate) required_on_the_way: bool,
+    /// The required fields encoding does not visit (all of them without
+    /// `required_on_the_way`), checked before encoding: e.g. those of
+    /// embedded messages in a repeated field, whose elements over
+    /// `max_repeat` are not encoded.
+    pub(crate) required_before: RequiredFields,
 }
 
 /// The wire plans of a loaded type and its header and body codecs (the
@@ -138,6 +144,9 @@ pub struct Codec {
     registry: Arc<CodecRegistry>,
     by_id: HashMap<u32, Arc<LoadedMessage>, RandomState>,
     by_name: HashMap<String, Arc<LoadedMessage>, RandomState>,
+    /// The loaded types again, by where their descriptor's full name is
+    /// held (see [`descriptor_key`]): found without hashing the name.
+    by_descriptor: HashMap<usize, Arc<LoadedMessage>, RandomState>,
     strict: bool,
     key: Option<CryptoKey>,
     skip_crypto_ids: HashSet<u32, RandomState>,
@@ -184,6 +193,7 @@ impl Codec {
             registry: Arc::new(registry),
             by_id: HashMap::default(),
             by_name: HashMap::default(),
+            by_descriptor: HashMap::default(),
             strict: false,
             key: None,
             skip_crypto_ids: HashSet::default(),
@@ -304,9 +314,8 @@ impl Codec {
         let loaded = self.build(desc)?;
         if let Some(existing) = self.by_name.get(desc.full_name()) {
             if existing.id == loaded.id {
-                self.by_name
-                    .insert(desc.full_name().to_string(), Arc::new(loaded));
-                let l = self.by_name[desc.full_name()].clone();
+                let l = Arc::new(loaded);
+                self.insert_by_name(l.clone());
                 self.by_id.insert(l.id, l);
                 return Ok(());
             }
@@ -326,8 +335,22 @@ impl Codec {
         if !loaded.omit_id {
             self.by_id.insert(loaded.id, loaded.clone());
         }
-        self.by_name.insert(desc.full_name().to_string(), loaded);
+        self.insert_by_name(loaded);
         Ok(())
+    }
+
+    /// Enters a loaded type by its name (and its descriptor), in the place
+    /// of one of that name.
+    fn insert_by_name(&mut self, loaded: Arc<LoadedMessage>) {
+        let key = descriptor_key(&loaded.descriptor);
+        self.by_descriptor.insert(key, loaded.clone());
+        let name = loaded.descriptor.full_name().to_string();
+        if let Some(old) = self.by_name.insert(name, loaded) {
+            // Replaced by a type of another pool.
+            if descriptor_key(&old.descriptor) != key {
+                self.by_descriptor.remove(&descriptor_key(&old.descriptor));
+            }
+        }
     }
 
     /// Loads the type of a prost-generated struct (one deriving `ReflectMessage`).
@@ -406,6 +429,7 @@ impl Codec {
     /// Removes a loaded type.
     pub fn unload(&mut self, full_name: &str) {
         if let Some(l) = self.by_name.remove(full_name) {
+            self.by_descriptor.remove(&descriptor_key(&l.descriptor));
             if self
                 .by_id
                 .get(&l.id)
@@ -445,6 +469,15 @@ impl Codec {
     /// ([`Codec::decode_as_with_len`]).
     pub fn omits_id(&self, full_name: &str) -> Result<bool> {
         Ok(self.get(full_name)?.omit_id)
+    }
+
+    /// The loaded type of the messages of `desc`: the one loaded from that
+    /// descriptor, else the one of its name.
+    fn get_by_descriptor(&self, desc: &MessageDescriptor) -> Result<&Arc<LoadedMessage>> {
+        match self.by_descriptor.get(&descriptor_key(desc)) {
+            Some(loaded) => Ok(loaded),
+            None => self.get(desc.full_name()),
+        }
     }
 
     pub(crate) fn get(&self, full_name: &str) -> Result<&Arc<LoadedMessage>> {
@@ -528,10 +561,11 @@ impl Codec {
         let reads_clock = head.reads_clock() || body.reads_clock();
         let wire = WireEncoding::of(desc, &head, &body);
         let required = RequiredFields::of(desc, 0);
-        let required_on_the_way = match (message_codec(&head), message_codec(&body)) {
-            (Some(h), Some(b)) => required.covered_by(Some(&h), Some(&b)),
-            _ => false,
-        };
+        let (required_on_the_way, required_before) =
+            match (message_codec(&head), message_codec(&body)) {
+                (Some(h), Some(b)) => (true, required.not_visited(Some(&h), Some(&b))),
+                _ => (false, required.clone()),
+            };
         let loaded = LoadedMessage {
             descriptor: desc.clone(),
             id,
@@ -545,6 +579,7 @@ impl Codec {
             reads_clock,
             wire,
             required_on_the_way,
+            required_before,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -639,6 +674,15 @@ impl Codec {
             .collect())
     }
 
+    /// The adaptive arithmetic frequencies one message advances (`keep`:
+    /// put back afterwards); `None` when no model is adaptive (none to advance).
+    fn arithmetic_session(&self, keep: bool) -> Option<ArithmeticSession<'_>> {
+        let models = self.registry.arithmetic_models();
+        models
+            .any_adaptive()
+            .then(|| ArithmeticSession::new(models, &self.arithmetic, keep))
+    }
+
     fn encode_with(
         &self,
         msg: &DynamicMessage,
@@ -646,7 +690,7 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
-        let loaded = self.get(msg.descriptor().full_name())?;
+        let loaded = self.get_by_descriptor(&msg.descriptor())?;
         self.encode_source(loaded, Source::Dynamic(msg), out, dry_run, changes)
     }
 
@@ -689,24 +733,23 @@ impl Codec {
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
         let name = loaded.descriptor.full_name();
-        let check_required = || match msg {
-            Source::Dynamic(m) => loaded.required.check(m),
-            Source::Wire(_, m) => loaded.required.check_wire(m),
+        let check = |required: &RequiredFields| match msg {
+            Source::Dynamic(m) => required.check(m),
+            Source::Wire(_, m) => required.check_wire(m),
         };
-        if !loaded.required_on_the_way {
+        let check_required = || check(&loaded.required);
+        if !loaded.required_before.is_empty() && check(&loaded.required_before).is_err() {
+            // The first unset required field in declaration order is the
+            // error to give, wherever it is.
             check_required().map_err(|e| e.into_encode(name))?;
         }
-        let session = ArithmeticSession::new(
-            self.registry.arithmetic_models(),
-            &self.arithmetic,
-            !dry_run,
-        );
+        let session = self.arithmetic_session(!dry_run);
         let ctx = EncodeContext {
             strict: self.strict,
             dry_run,
             definition_hash: loaded.hash,
             changes,
-            arithmetic: Some(&session),
+            arithmetic: session.as_ref(),
             required_unchecked: loaded.required_on_the_way,
         };
         // Header and body are written straight after what `out` holds (the
@@ -716,7 +759,9 @@ impl Codec {
         let mut writer = BitWriter::from_bytes(std::mem::take(out));
         writer.reserve(loaded.head_bytes() + loaded.max_body_bytes());
         let head_end = Self::encode_parts(loaded, msg, &ctx, &mut writer);
-        session.finish(head_end.is_ok());
+        if let Some(session) = session {
+            session.finish(head_end.is_ok());
+        }
         *out = writer.into_bytes();
         let head_end = match head_end {
             Ok(end) => end,
@@ -945,8 +990,7 @@ impl Codec {
             ))
             .into_decode(name));
         }
-        let session =
-            ArithmeticSession::new(self.registry.arithmetic_models(), &self.arithmetic, true);
+        let session = self.arithmetic_session(true);
         let ctx = DecodeContext {
             now_secs: if loaded.reads_clock {
                 (self.clock)()
@@ -954,10 +998,12 @@ impl Codec {
                 0
             },
             definition_hash: loaded.hash,
-            arithmetic: Some(&session),
+            arithmetic: session.as_ref(),
         };
         let decoded = self.decode_parts(loaded, bytes, &ctx);
-        session.finish(decoded.is_ok());
+        if let Some(session) = session {
+            session.finish(decoded.is_ok());
+        }
         decoded
     }
 
@@ -1023,6 +1069,13 @@ impl Codec {
     pub fn analyze_with_width(&self, full_name: &str, console_width: usize) -> Result<String> {
         Ok(crate::analyze::report(self.get(full_name)?, console_width))
     }
+}
+
+/// Where the full name of a message type is held in its descriptor pool: the
+/// same for two descriptors of one type of one pool, and for no other type
+/// while a descriptor of that pool is held (a loaded type holds its own).
+fn descriptor_key(desc: &MessageDescriptor) -> usize {
+    desc.full_name().as_ptr() as usize
 }
 
 /// Adds to an error of a message after the first of a frame where it starts.
@@ -1190,17 +1243,24 @@ fn round_to(value: f64, decimals: i32) -> f64 {
 
 /// The required fields of a message type and the embedded messages to look
 /// into, computed once at load time.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub(crate) struct RequiredFields {
-    /// Each field to look at: its descriptor, whether it is required, the
-    /// required fields of its messages, its position (see
-    /// [`crate::wire::position`]).
-    fields: Vec<(
-        prost_reflect::FieldDescriptor,
-        bool,
-        Option<RequiredFields>,
-        usize,
-    )>,
+    fields: Vec<RequiredField>,
+}
+
+/// A field [`RequiredFields`] looks at.
+#[derive(Debug, Clone)]
+struct RequiredField {
+    field: prost_reflect::FieldDescriptor,
+    /// The field itself is required.
+    required: bool,
+    /// The required fields of its messages.
+    nested: Option<RequiredFields>,
+    /// Its position (see [`crate::wire::position`]).
+    position: usize,
+    /// Of a repeated field, the elements looked into start here (those
+    /// before are visited by encoding).
+    from: usize,
 }
 
 impl RequiredFields {
@@ -1216,7 +1276,13 @@ impl RequiredFields {
             };
             if required || nested.is_some() {
                 let position = crate::wire::position(desc, &field);
-                fields.push((field, required, nested, position));
+                fields.push(RequiredField {
+                    field,
+                    required,
+                    nested,
+                    position,
+                    from: 0,
+                });
             }
         }
         RequiredFields { fields }
@@ -1224,24 +1290,22 @@ impl RequiredFields {
 
     /// Checks that every required field (recursively) is set.
     fn check(&self, msg: &DynamicMessage) -> std::result::Result<(), CodecError> {
-        for (field, required, nested, _) in &self.fields {
-            let set = msg.has_field(field);
-            if *required && !set {
-                return Err(CodecError::new(
-                    "message is not properly initialized: required field is not set",
-                )
-                .in_field(field.name()));
+        for f in &self.fields {
+            let set = msg.has_field(&f.field);
+            if f.required && !set {
+                return Err(unset_required(&f.field));
             }
-            let Some(nested) = nested else { continue };
+            let Some(nested) = &f.nested else { continue };
             if !set {
                 continue;
             }
-            match msg.get_field(field).as_ref() {
-                Value::Message(m) => nested.check(m).map_err(|e| e.in_field(field.name()))?,
+            let in_field = |e: CodecError| e.in_field(f.field.name());
+            match msg.get_field(&f.field).as_ref() {
+                Value::Message(m) => nested.check(m).map_err(in_field)?,
                 Value::List(items) => {
-                    for item in items {
+                    for item in items.iter().skip(f.from) {
                         if let Value::Message(m) = item {
-                            nested.check(m).map_err(|e| e.in_field(field.name()))?;
+                            nested.check(m).map_err(in_field)?;
                         }
                     }
                 }
@@ -1251,63 +1315,99 @@ impl RequiredFields {
         Ok(())
     }
 
-    /// Whether encoding with these message codecs (of the header and the
-    /// body) visits every required field when its message is set, so that
-    /// it can refuse one unset: each is encoded by one of them (not
-    /// omitted), and those inside embedded messages are reached through
-    /// single (not repeated) fields coded by the default message codec.
-    fn covered_by(&self, head: Option<&MessageCodec>, body: Option<&MessageCodec>) -> bool {
-        self.fields.iter().all(|(field, _, nested, _)| {
-            let h = head.and_then(|c| c.entry(field.number()));
-            let b = body.and_then(|c| c.entry(field.number()));
+    /// Whether there is nothing to check.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.fields.is_empty()
+    }
+
+    /// The part of these required fields that encoding with these message
+    /// codecs (of the header and the body; `None`: not coded there) does
+    /// not visit when their message is set, so cannot refuse unset: fields
+    /// neither codes (omitted), those inside embedded messages reached
+    /// otherwise than through the default message codec, and those of the
+    /// elements of a repeated field past `max_repeat` (not encoded). A
+    /// field required itself is visited whenever one of the codecs codes
+    /// it, whatever its codec.
+    fn not_visited(
+        &self,
+        head: Option<&MessageCodec>,
+        body: Option<&MessageCodec>,
+    ) -> RequiredFields {
+        let mut fields = Vec::new();
+        for f in &self.fields {
+            let h = head.and_then(|c| c.entry(f.field.number()));
+            let b = body.and_then(|c| c.entry(f.field.number()));
             if h.is_none() && b.is_none() {
-                return false;
+                fields.push(f.clone());
+                continue;
             }
-            let Some(nested) = nested else {
-                return true;
+            let Some(nested) = &f.nested else {
+                continue;
             };
+            let max_repeat = h.or(b).and_then(|e| e.repeat).map(|r| r.max as usize);
             let (h, b) = (h.map(|e| e.message_codec()), b.map(|e| e.message_codec()));
-            !field.is_list()
-                && !matches!(h, Some(None))
-                && !matches!(b, Some(None))
-                && nested.covered_by(h.flatten(), b.flatten())
-        })
+            let (rest, from) = if matches!(h, Some(None)) || matches!(b, Some(None)) {
+                (nested.clone(), 0)
+            } else {
+                let rest = nested.not_visited(h.flatten(), b.flatten());
+                match max_repeat {
+                    // Visited but for the elements past max_repeat.
+                    Some(max) if rest.is_empty() => (nested.clone(), max),
+                    Some(_) => (nested.clone(), 0),
+                    None => (rest, 0),
+                }
+            };
+            if !rest.is_empty() {
+                fields.push(RequiredField {
+                    field: f.field.clone(),
+                    required: false,
+                    nested: Some(rest),
+                    position: f.position,
+                    from,
+                });
+            }
+        }
+        RequiredFields { fields }
     }
 
     /// [`RequiredFields::check`] of a message read from protobuf bytes.
     fn check_wire(&self, msg: WireMessage<'_>) -> std::result::Result<(), CodecError> {
-        for (field, required, nested, position) in &self.fields {
-            let set = msg.is_set(*position);
-            if *required && !set {
-                return Err(CodecError::new(
-                    "message is not properly initialized: required field is not set",
-                )
-                .in_field(field.name()));
+        for f in &self.fields {
+            let set = msg.is_set(f.position);
+            if f.required && !set {
+                return Err(unset_required(&f.field));
             }
-            let Some(nested) = nested else { continue };
+            let Some(nested) = &f.nested else { continue };
             if !set {
                 continue;
             }
-            if field.is_list() {
-                for item in msg.messages(*position) {
-                    nested
-                        .check_wire(item)
-                        .map_err(|e| e.in_field(field.name()))?;
+            let in_field = |e: CodecError| e.in_field(f.field.name());
+            if f.field.is_list() {
+                for item in msg.messages(f.position).into_iter().skip(f.from) {
+                    nested.check_wire(item).map_err(in_field)?;
                 }
-            } else if let Some(m) = msg.message(*position) {
-                nested.check_wire(m).map_err(|e| e.in_field(field.name()))?;
+            } else if let Some(m) = msg.message(f.position) {
+                nested.check_wire(m).map_err(in_field)?;
             }
         }
         Ok(())
     }
 }
 
+/// The error of an unset required field.
+#[cold]
+fn unset_required(field: &prost_reflect::FieldDescriptor) -> CodecError {
+    CodecError::new("message is not properly initialized: required field is not set")
+        .in_field(field.name())
+}
+
 #[cfg(test)]
 mod tests {
     /// The shared vectors' types take the fast ways: protobuf bytes encoded
     /// without a dynamic message, required fields checked on the way
-    /// (but for `vec.Nested`, whose repeated `track` holds required fields:
-    /// checked before); the tests of both compare them with the other ways.
+    /// (but for those of the elements of `vec.Nested`'s repeated `track`
+    /// past its `max_repeat` of 3: checked before); the tests of both
+    /// compare them with the other ways.
     #[test]
     fn the_vector_types_take_the_fast_ways() {
         let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -1325,8 +1425,62 @@ mod tests {
         assert_eq!(names.len(), 5);
         for name in names {
             let loaded = codec.get(&name).unwrap();
-            assert_eq!(loaded.required_on_the_way, name != "vec.Nested", "{name}");
+            assert!(loaded.required_on_the_way, "{name}");
+            // What encoding does not visit: the required fields of the
+            // embedded messages of `vec.Nested`'s repeated `track` past
+            // its third.
+            let before: Vec<(&str, usize)> = loaded
+                .required_before
+                .fields
+                .iter()
+                .map(|f| (f.field.name(), f.from))
+                .collect();
+            let expected: &[(&str, usize)] = if name == "vec.Nested" {
+                &[("track", 3)]
+            } else {
+                &[]
+            };
+            assert_eq!(before, expected, "{name}");
             assert!(loaded.wire.is_some(), "{name}");
+        }
+    }
+
+    /// A message is encoded by the type of its name whatever pool its
+    /// descriptor comes from, before and after the type is loaded again
+    /// from another pool; an unloaded type is not found by its descriptor.
+    #[test]
+    fn types_are_found_by_descriptor_and_by_name() {
+        let source = r#"syntax = "proto2";
+            import "dccl/option_extensions.proto";
+            message Ping {
+              option (dccl.msg) = { id: 20 max_bytes: 8 codec_version: 4 };
+              required int32 n = 1 [(dccl.field) = { min: 0 max: 100 }];
+            }"#;
+        let pools: Vec<_> = (0..2)
+            .map(|_| crate::compile_sources(&[("ping.proto", source)]).unwrap())
+            .collect();
+        let ping = |i: usize| pools[i].get_message_by_name("Ping").unwrap();
+        let msg =
+            |i: usize| prost_reflect::DynamicMessage::parse_text_format(ping(i), "n: 42").unwrap();
+        let mut codec = super::Codec::new();
+        codec.load(&ping(0)).unwrap();
+        let bytes = codec.encode(&msg(0)).unwrap();
+        assert_eq!(codec.encode(&msg(1)).unwrap(), bytes);
+        codec.load(&ping(1)).unwrap();
+        assert_eq!(codec.encode(&msg(0)).unwrap(), bytes);
+        assert_eq!(codec.encode(&msg(1)).unwrap(), bytes);
+        assert_eq!(
+            prost_reflect::ReflectMessage::descriptor(&codec.decode(&bytes).unwrap()),
+            ping(1)
+        );
+        codec.load(&ping(1)).unwrap();
+        assert_eq!(codec.encode(&msg(1)).unwrap(), bytes);
+        codec.unload("Ping");
+        for i in 0..2 {
+            assert!(matches!(
+                codec.encode(&msg(i)),
+                Err(crate::Error::UnknownType(_))
+            ));
         }
     }
 

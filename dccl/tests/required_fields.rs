@@ -29,6 +29,12 @@ message Listed {
   option (dccl.msg) = { id: 31 max_bytes: 32 codec_version: 4 };
   repeated Inner many = 1 [(dccl.field).max_repeat = 2];
 }
+message Mixed {
+  option (dccl.msg) = { id: 33 max_bytes: 32 codec_version: 4 };
+  required Inner first = 1;
+  repeated Inner many = 2 [(dccl.field).max_repeat = 2];
+  required int32 last = 3 [(dccl.field) = { min: 0 max: 7 }];
+}
 message Omitted {
   option (dccl.msg) = { id: 32 max_bytes: 32 codec_version: 4 };
   optional int32 a = 1 [(dccl.field) = { min: 0 max: 7 }];
@@ -128,4 +134,46 @@ fn repeated_and_omitted_required_fields_are_checked_too() {
     let m = "req.Omitted";
     assert_eq!(encode(&codec, &pool, m, "a: 1"), unset(m, "gone"));
     assert!(!encode(&codec, &pool, m, "a: 1 gone: 4").starts_with("cannot"));
+}
+
+/// A type with required fields both checked on the way (`first`, `last`)
+/// and before encoding (those of the elements of `many`): the first unset
+/// one in declaration order is named, whichever check finds one.
+#[test]
+fn checks_on_the_way_and_before_name_the_same_first_field() {
+    let (codec, pool) = setup();
+    let m = "req.Mixed";
+    assert!(
+        !encode(&codec, &pool, m, "first { x: 1 } many { x: 2 } last: 3").starts_with("cannot")
+    );
+    assert_eq!(
+        encode(&codec, &pool, m, "first { y: 1 } many { y: 2 } last: 3"),
+        unset(m, "first.x")
+    );
+    assert_eq!(
+        encode(&codec, &pool, m, "many { y: 2 } last: 3"),
+        unset(m, "first")
+    );
+    assert_eq!(
+        encode(&codec, &pool, m, "first { x: 1 } many { x: 2 }"),
+        unset(m, "last")
+    );
+    assert_eq!(
+        encode(
+            &codec,
+            &pool,
+            m,
+            "first { x: 1 } many { x: 2 } many { y: 2 }"
+        ),
+        unset(m, "many.x")
+    );
+    assert_eq!(
+        encode(
+            &codec,
+            &pool,
+            m,
+            "first { x: 1 } many { x: 2 } many { x: 3 } many { y: 4 } last: 3"
+        ),
+        unset(m, "many.x")
+    );
 }

@@ -648,6 +648,8 @@ impl ArithmeticDecoder {
 #[derive(Debug, Clone, Default)]
 pub(crate) struct ArithmeticModels {
     models: HashMap<String, Arc<Model>>,
+    /// Whether one of the models is adaptive.
+    adaptive: bool,
 }
 
 impl ArithmeticModels {
@@ -655,7 +657,14 @@ impl ArithmeticModels {
     pub(crate) fn set(&mut self, model: ArithmeticModel) -> Result<(), CodecError> {
         let model = Model::new(model)?;
         self.models.insert(model.user.name.clone(), Arc::new(model));
+        self.adaptive = self.models.values().any(|m| m.user.is_adaptive());
         Ok(())
+    }
+
+    /// Whether one of the models is adaptive: only then has a message
+    /// frequencies to advance ([`ArithmeticSession`]).
+    pub(crate) fn any_adaptive(&self) -> bool {
+        self.adaptive
     }
 
     /// The model registered under `name`.

@@ -102,15 +102,6 @@ impl Plan {
     }
 }
 
-impl Plan {
-    /// Whether a value the codec decodes is of the field's kind (the
-    /// built-in scalar codecs': made for that kind), so it is stored without
-    /// another check (the cheapest insertion for these kinds).
-    fn values_fit(&self) -> bool {
-        matches!(self, Plan::Numeric(_) | Plan::Bool(_) | Plan::VarBytes(_))
-    }
-}
-
 /// Evaluates `$body` with `$c` bound to the field's codec: the concrete
 /// built-in codec of its plan, else the trait object.
 macro_rules! with_codec {
@@ -748,17 +739,14 @@ impl MessageCodec {
                     Plan::Message(message) if !msg.has_field(&f.field) => {
                         message.decode_in_place(input, msg, &f.field, ctx)
                     }
-                    Plan::Numeric(numeric) => numeric.decode_value(input).map(|value| {
-                        if let Some(v) = value {
-                            *msg.get_field_mut(&f.field) = v;
-                        }
-                    }),
+                    Plan::Numeric(numeric) => {
+                        numeric.decode_value(input).and_then(|value| match value {
+                            Some(v) => set(msg, &f.field, v),
+                            None => Ok(()),
+                        })
+                    }
                     _ => with_codec!(f, |c| c.decode(input, ctx)).and_then(|value| match value {
                         Some(v @ Value::Message(_)) => merge_set(msg, &f.field, v),
-                        Some(v) if f.plan.values_fit() => {
-                            *msg.get_field_mut(&f.field) = v;
-                            Ok(())
-                        }
                         Some(v) => set(msg, &f.field, v),
                         None => Ok(()),
                     }),

@@ -191,6 +191,15 @@ struct Derived {
     resolution_reciprocal: Option<f64>,
     /// `1 / inverse` when `inverse` is a power of two, likewise.
     inverse_reciprocal: Option<f64>,
+    /// Doubles whose every value, and every wire value, is fewer than
+    /// 2^44 steps of the resolution from zero: the minimum in steps (an
+    /// integer). A value `k` steps from zero is then `k - min_steps` on the
+    /// wire and back (see [`NumericBounds::to_wire_uint`]).
+    min_steps: Option<f64>,
+    /// Integers with a resolution of 1 whose wire values convert to a
+    /// double and back unchanged (32-bit kinds, or at most 52 bits): the
+    /// wire value is the value minus the minimum, without the conversions.
+    int_unit: bool,
 }
 
 /// `1 / d` when `d` is a power of two whose reciprocal is a normal number:
@@ -221,7 +230,40 @@ impl Derived {
             unit: resolution == 1.0,
             resolution_reciprocal: exact_reciprocal(resolution),
             inverse_reciprocal: exact_reciprocal(1.0 / resolution),
+            min_steps: None,
+            int_unit: false,
         }
+    }
+
+    /// The shortcuts that hold for these bounds, their size `bits` known.
+    fn with_shortcuts(
+        mut self,
+        kind: WireKind,
+        min: f64,
+        max: f64,
+        resolution: f64,
+        bits: u32,
+    ) -> Derived {
+        const LIMIT: f64 = (1u64 << 43) as f64;
+        let wide = matches!(kind, WireKind::I64 | WireKind::U64);
+        self.int_unit =
+            self.unit && !matches!(kind, WireKind::F32 | WireKind::F64) && (!wide || bits <= 52);
+        if kind == WireKind::F64 && bits <= 43 {
+            // The bounds in steps, as the value's quantization counts them.
+            let steps = |x: f64| {
+                if resolution >= 1.0 {
+                    round_half_up(x / resolution)
+                } else {
+                    round_half_up(x * self.inverse)
+                }
+            };
+            let k0 = steps(min);
+            if k0.abs() < LIMIT && steps(max).abs() < LIMIT && min.abs().max(max.abs()).is_finite()
+            {
+                self.min_steps = Some(k0);
+            }
+        }
+        self
     }
 }
 
@@ -261,10 +303,27 @@ impl NumericBounds {
     /// `quantize_f64(value, resolution)` with the inverse computed once.
     #[inline]
     fn quantize_f64(&self, value: f64) -> f64 {
+        self.steps_value(self.steps(value))
+    }
+
+    /// The whole steps of the resolution nearest `value` (the first half of
+    /// the quantization).
+    #[inline]
+    fn steps(&self, value: f64) -> f64 {
         if self.resolution >= 1.0 {
-            self.mul_resolution(round_half_up(self.div_resolution(value)))
+            round_half_up(self.div_resolution(value))
         } else {
-            self.div_inverse(round_half_up(value * self.derived.inverse))
+            round_half_up(value * self.derived.inverse)
+        }
+    }
+
+    /// `steps` steps of the resolution (the second half).
+    #[inline]
+    fn steps_value(&self, steps: f64) -> f64 {
+        if self.resolution >= 1.0 {
+            self.mul_resolution(steps)
+        } else {
+            self.div_inverse(steps)
         }
     }
 
@@ -292,6 +351,10 @@ impl NumericBounds {
             return None;
         }
         let w = q.sub(I::from_u64(self.derived.min_int));
+        if self.derived.int_unit {
+            // Through a double and back: unchanged.
+            return Some(w.to_u64());
+        }
         let w = if res >= 1.0 {
             I::from_f64(self.div_resolution(w.to_f64()))
         } else {
@@ -304,6 +367,9 @@ impl NumericBounds {
     fn int_decode<I: IntWire>(&self, u: u64) -> I {
         let res = self.resolution;
         let w = I::from_u64(u);
+        if self.derived.int_unit && u >> 52 == 0 {
+            return w.add(I::from_u64(self.derived.min_int));
+        }
         let w = if res >= 1.0 {
             I::from_f64(self.mul_resolution(w.to_f64()))
         } else {
@@ -328,7 +394,8 @@ impl NumericBounds {
             texts: ChangeTexts::of(min, max, required, &absent_reason),
             absent_reason,
             bits,
-            derived: Derived::of(kind, min, resolution),
+            derived: Derived::of(kind, min, resolution)
+                .with_shortcuts(kind, min, max, resolution, bits),
         }
     }
 
@@ -351,6 +418,18 @@ impl NumericBounds {
             WireValue::U32(v) => self.int_encode(v),
             WireValue::U64(v) => self.int_encode(v),
             WireValue::F64(v) => {
+                if let Some(k0) = self.derived.min_steps {
+                    // The value in steps `k`, quantized to `k` steps: the
+                    // reference's `(q - min) / resolution` is within far
+                    // less than half a step of `k - k0`, both below 2^44,
+                    // and rounds to it (to 0 below it, as it saturates).
+                    let k = self.steps(v);
+                    let q = self.steps_value(k);
+                    if q < self.min || q > self.max || q.is_nan() {
+                        return None;
+                    }
+                    return Some((k - k0) as u64);
+                }
                 let q = self.quantize_f64(v);
                 if q < self.min || q > self.max || q.is_nan() {
                     return None;
@@ -393,6 +472,12 @@ impl NumericBounds {
             WireKind::U32 => WireValue::U32(self.int_decode(u)),
             WireKind::U64 => WireValue::U64(self.int_decode(u)),
             WireKind::F64 => {
+                if let (Some(k0), 0) = (self.derived.min_steps, u >> 43) {
+                    // The reference's `quantize(u * resolution + min)`
+                    // counts `u + k0` steps (within far less than half a
+                    // step of it, both below 2^44): that many steps.
+                    return WireValue::F64(self.steps_value(u as f64 + k0));
+                }
                 let w = u as f64;
                 let w = if res >= 1.0 {
                     self.mul_resolution(w)
@@ -417,16 +502,38 @@ impl NumericBounds {
     /// out-of-range value is written as "not present" (the minimum for
     /// required fields) and NaN as the minimum; either is reported through
     /// [`EncodeContext::value_changed`] (refused in strict mode).
+    #[inline]
     pub fn encode(
         &self,
         out: &mut BitWriter,
         value: Option<WireValue>,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        let Some(value) = value else {
-            out.write(0, self.bits);
-            return Ok(());
-        };
+        match value {
+            None => {
+                out.write(0, self.bits);
+                Ok(())
+            }
+            Some(v) => match self.to_wire_uint(v) {
+                Some(u) => {
+                    let u = if self.required { u } else { u.wrapping_add(1) };
+                    out.write(u, self.bits);
+                    Ok(())
+                }
+                None => self.encode_changed(out, v, ctx),
+            },
+        }
+    }
+
+    /// [`NumericBounds::encode`] of a value the codec changes: NaN or out of range.
+    #[cold]
+    #[inline(never)]
+    fn encode_changed(
+        &self,
+        out: &mut BitWriter,
+        value: WireValue,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
         if value.is_nan() {
             // libdccl's bound check lets NaN through (every comparison is
             // false) and the conversion to an integer then yields 0: the minimum.
@@ -436,20 +543,11 @@ impl NumericBounds {
             self.write_minimum(out);
             return Ok(());
         }
-        match self.to_wire_uint(value) {
-            Some(u) => {
-                let u = if self.required { u } else { u.wrapping_add(1) };
-                out.write(u, self.bits);
-                Ok(())
-            }
-            None => {
-                if ctx.reports_changes() {
-                    self.report_out_of_range(value, ctx)?;
-                }
-                out.write(0, self.bits);
-                Ok(())
-            }
+        if ctx.reports_changes() {
+            self.report_out_of_range(value, ctx)?;
         }
+        out.write(0, self.bits);
+        Ok(())
     }
 
     #[cold]
@@ -466,6 +564,7 @@ impl NumericBounds {
     }
 
     /// Reads a value; `None` is "not present".
+    #[inline]
     pub fn decode(&self, input: &mut BitReader<'_>) -> Result<Option<WireValue>, CodecError> {
         let mut u = input.read(self.bits)?;
         if !self.required {
@@ -520,6 +619,13 @@ impl NumericBounds {
         }
         Ok(())
     }
+}
+
+/// The error of a value of another type than the field's.
+#[cold]
+#[inline(never)]
+fn wrong_type(v: &Value) -> CodecError {
+    CodecError::new(format!("value {v:?} does not match the field type"))
 }
 
 fn display(v: WireValue) -> String {
@@ -637,9 +743,10 @@ impl FieldCodec for NumericCodec {
     ) -> Result<(), CodecError> {
         let wire = match value {
             None => None,
-            Some(v) => Some(self.bounds.kind.read_value(v).ok_or_else(|| {
-                CodecError::new(format!("value {v:?} does not match the field type"))
-            })?),
+            Some(v) => match self.bounds.kind.read_value(v) {
+                Some(w) => Some(w),
+                None => return Err(wrong_type(v)),
+            },
         };
         self.bounds.encode(out, wire, ctx)
     }
