@@ -1,5 +1,5 @@
 //! Iridium between Goby3 (its own `pAcommsHandler`, built from source, with
-//! a real MOOSDB) and `gobyd`, each pairing with [`N`] `fleet.Tick`
+//! a real MOOSDB) and `gobyd`, each pairing with [`messages`] `fleet.Tick`
 //! messages each way, acks asked for; every message must be delivered
 //! once and acknowledged:
 //!
@@ -28,7 +28,12 @@
 //! the other's frames. Runs when `GOBY3_BUILD` names a Goby3 build
 //! directory (`bin/pAcommsHandler` and `bin/goby_rockblock_simulator` in
 //! it), as `goby3_fleet.rs`; ignored otherwise.
-//! `GOBY3_IRIDIUM_ONLY=goby3-vehicle,...` runs only the pairings named.
+//! `GOBY3_IRIDIUM_ONLY=goby3-vehicle,...` runs only the pairings named;
+//! `GOBY3_IRIDIUM_KEEP=1` keeps every run's directory (the configurations,
+//! each process's log, gobyd's raw log) and prints where it is;
+//! `GOBY3_IRIDIUM_QUEUE="message_identity: false"` adds a setting to gobyd's
+//! `queue { … }` (here: frames without the identity trailer, as Goby3's);
+//! `GOBY3_IRIDIUM_MESSAGES=1` publishes one message each way instead of 3.
 
 #![cfg(unix)]
 
@@ -46,8 +51,18 @@ use support::goby3::{
 use support::iridium::IMEI;
 use support::node::{Entry, Iridium, Node};
 
-/// Messages each way.
-const N: u32 = 3;
+/// Messages each way: 3, or `GOBY3_IRIDIUM_MESSAGES` (1 to 20; published
+/// together, they go in one frame each way).
+fn messages() -> u32 {
+    match std::env::var("GOBY3_IRIDIUM_MESSAGES") {
+        Ok(v) => v
+            .parse()
+            .ok()
+            .filter(|n| (1..=20).contains(n))
+            .unwrap_or_else(|| panic!("GOBY3_IRIDIUM_MESSAGES={v}: expected 1 to 20")),
+        Err(_) => 3,
+    }
+}
 /// Longest a pairing may take to deliver and acknowledge everything.
 const LIMIT: Duration = Duration::from_secs(120);
 /// Each node's TDMA slot: its session (vehicle) or MT message (shore).
@@ -126,6 +141,16 @@ ProcessConfig = pAcommsHandler
     let path = dir.join("goby3.moos");
     std::fs::write(&path, text).unwrap();
     path
+}
+
+/// Removes a complete run's directory, unless `GOBY3_IRIDIUM_KEEP` is set
+/// (then says where it is); an incomplete run's stays for its logs.
+fn finish(dir: &Path, complete: bool) {
+    if std::env::var_os("GOBY3_IRIDIUM_KEEP").is_some_and(|v| !v.is_empty()) {
+        println!("kept {}", dir.display());
+    } else if complete {
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }
 
 /// Waits for `path` to appear (a pseudo-terminal's link) while `p` lives.
@@ -272,10 +297,17 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
     let mut pacommshandler = Proc::spawn("pAcommsHandler", pah, &dir);
 
     let json_port = free_tcp_port();
-    let config = Node::new(gobyd_id)
+    let mut config = Node::new(gobyd_id)
         .driver(gobyd_driver)
         .tdma(&[1, 2], 0, SLOT_SECONDS)
-        .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"))
+        .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"));
+    if let Some(extra) = std::env::var("GOBY3_IRIDIUM_QUEUE")
+        .ok()
+        .filter(|v| !v.is_empty())
+    {
+        config = config.queue_setting(&extra);
+    }
+    let config = config
         .queue(
             Entry::new("fleet.Tick")
                 .ack(true)
@@ -329,7 +361,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
             );
             tokio::time::sleep(Duration::from_millis(100)).await;
         }
-        for n in 0..N {
+        for n in 0..messages() {
             client
                 .notify_string(
                     "TICK_OUT",
@@ -397,9 +429,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
     drop(pacommshandler);
     drop(helpers);
     drop(moosdb);
-    if complete {
-        let _ = std::fs::remove_dir_all(&dir);
-    }
+    finish(&dir, complete);
     (from_goby3, to_goby3)
 }
 
@@ -450,14 +480,19 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
     }
     for (which, direction, t) in &rows {
         let what = format!("{} {direction}", which.tag());
-        assert_eq!(t.published, N, "{what}");
+        assert_eq!(t.published, messages(), "{what}");
         assert_eq!(
             t.delivered.len() as u32,
-            N,
+            messages(),
             "{what}: delivered {:?}",
             t.delivered
         );
-        assert_eq!(t.acked.len() as u32, N, "{what}: acked {:?}", t.acked);
+        assert_eq!(
+            t.acked.len() as u32,
+            messages(),
+            "{what}: acked {:?}",
+            t.acked
+        );
         assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
         assert_eq!(t.expired, 0, "{what}");
     }
@@ -510,7 +545,7 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     let mut shore = Gobyd::start(&configs[1], &[]);
     let mut vehicle = Gobyd::start(&configs[0], &[]);
     let mut sent = Vec::new();
-    for i in 0..N {
+    for i in 0..messages() {
         let note = format!("v{i}");
         publish(&mut vehicle, 2, &note);
         sent.push((0usize, note));
@@ -565,5 +600,5 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     for (from, note) in &sent {
         assert_eq!(got[1 - from].get(note), Some(&1), "{note}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
+    finish(&dir, true);
 }
