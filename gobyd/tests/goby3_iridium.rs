@@ -13,6 +13,10 @@
 //!   Goby3's `goby_rockblock_simulator`, which posts MO messages to Goby3's
 //!   DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2, JWT check off) and takes
 //!   its MT messages on its HTTP endpoint;
+//! - `goby3-vehicle-rockblock`: Goby3's DRIVER_IRIDIUM (node 1) on the
+//!   pseudo-terminal of `goby_rockblock_simulator`, which posts MO messages
+//!   to gobyd's DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2, JWT check off:
+//!   the simulator signs nothing) and takes its MT POSTs;
 //! - `rockblock-service`: gobyd's DRIVER_IRIDIUM (node 1) on the emulated
 //!   9603 of `goby modem emulate-iridium --rockblock-webhook`, whose
 //!   emulated RockBLOCK service posts MO messages (JSON, with a JWT of the
@@ -77,6 +81,7 @@ enum Pairing {
     Goby3Shore,
     Rockblock,
     RockblockService,
+    Goby3VehicleRockblock,
 }
 
 impl Pairing {
@@ -86,13 +91,14 @@ impl Pairing {
             Pairing::Goby3Shore => "goby3-shore",
             Pairing::Rockblock => "rockblock",
             Pairing::RockblockService => "rockblock-service",
+            Pairing::Goby3VehicleRockblock => "goby3-vehicle-rockblock",
         }
     }
 
     /// Goby3's node id.
     fn goby3_id(self) -> i32 {
         match self {
-            Pairing::Goby3Vehicle => 1,
+            Pairing::Goby3Vehicle | Pairing::Goby3VehicleRockblock => 1,
             _ => 2,
         }
     }
@@ -186,6 +192,25 @@ fn emulator(goby: &Path, dir: &Path, link: &Path, mo_port: u16, mt_port: u16) ->
     p
 }
 
+/// Goby3's `goby_rockblock_simulator`: one RockBLOCK at `link`, posting MO
+/// messages to `http://127.0.0.1:<mo_port>/`, its MT endpoint on `mt_port`.
+fn simulator(goby3: &Goby3, dir: &Path, link: &Path, mo_port: u16, mt_port: u16) -> Proc {
+    let config = dir.join("rockblock_simulator.pb.cfg");
+    std::fs::write(
+        &config,
+        format!(
+            "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{mo_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
+    sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
+    let mut sim = Proc::spawn("goby_rockblock_simulator", sim, dir);
+    await_path(link, &mut sim);
+    sim
+}
+
 /// gobyd's vehicle driver settings for these runs.
 fn gobyd_vehicle(link: &Path) -> Iridium {
     Iridium::vehicle(link)
@@ -233,20 +258,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
         }
         Pairing::Rockblock => {
             let link = dir.join("rockblock");
-            let config = dir.join("rockblock_simulator.pb.cfg");
-            std::fs::write(
-                &config,
-                format!(
-                    "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{mo_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
-                    link.display()
-                ),
-            )
-            .unwrap();
-            let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
-            sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
-            let mut sim = Proc::spawn("goby_rockblock_simulator", sim, &dir);
-            await_path(&link, &mut sim);
-            helpers.push(sim);
+            helpers.push(simulator(goby3, &dir, &link, mo_port, mt_port));
             (
                 // No "http://" in a MOOS mission file: MOOS takes "//" for
                 // a comment; cpp-httplib takes a bare HOST:PORT as HTTP.
@@ -254,6 +266,22 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
                     "    driver_type: DRIVER_IRIDIUM_SHORE\n    [goby.acomms.iridium.protobuf.shore_config] {{\n      sbd_type: SBD_ROCKBLOCK\n      mo_sbd_server_port: {mo_port}\n      modem_id_to_imei {{ modem_id: 1 imei: \"{IMEI}\" }}\n      rockblock {{ username: \"test\" password: \"test\" server: \"127.0.0.1:{mt_port}\" skip_jwt_verification: true }}\n      device: DEVICE_IRIDIUM_9602_9603\n    }}"
                 ),
                 gobyd_vehicle(&link),
+            )
+        }
+        Pairing::Goby3VehicleRockblock => {
+            let link = dir.join("rockblock");
+            helpers.push(simulator(goby3, &dir, &link, mo_port, mt_port));
+            (
+                format!(
+                    "    driver_type: DRIVER_IRIDIUM\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"\n    serial_baud: 19200\n    [goby.acomms.iridium.protobuf.config] {{ device: DEVICE_IRIDIUM_9602_9603 use_dtr: false }}",
+                    link.display()
+                ),
+                Iridium::rockblock_shore(
+                    mo_port,
+                    &format!("http://127.0.0.1:{mt_port}"),
+                    None,
+                    &[(1, IMEI)],
+                ),
             )
         }
         Pairing::RockblockService => {
@@ -447,6 +475,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
         Pairing::Goby3Shore,
         Pairing::Rockblock,
         Pairing::RockblockService,
+        Pairing::Goby3VehicleRockblock,
     ]
     .into_iter()
     .filter(|p| {
@@ -510,19 +539,7 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     let dir = scratch("goby3_iridium", "gobyd-shore-rockblock-simulator");
     let (webhook_port, mt_port) = (free_tcp_port(), free_tcp_port());
     let link = dir.join("rockblock");
-    let config = dir.join("rockblock_simulator.pb.cfg");
-    std::fs::write(
-        &config,
-        format!(
-            "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{webhook_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
-            link.display()
-        ),
-    )
-    .unwrap();
-    let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
-    sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
-    let mut sim = Proc::spawn("goby_rockblock_simulator", sim, &dir);
-    await_path(&link, &mut sim);
+    let sim = simulator(&goby3, &dir, &link, webhook_port, mt_port);
     let data: [PathBuf; 2] = [dir.join("vehicle"), dir.join("shore")];
     let node = |id: i32, driver: Iridium| {
         Node::new(id)
