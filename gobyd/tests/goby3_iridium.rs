@@ -1,5 +1,5 @@
 //! Iridium between Goby3 (its own `pAcommsHandler`, built from source, with
-//! a real MOOSDB) and `gobyd`, each pairing with [`N`] `fleet.Tick`
+//! a real MOOSDB) and `gobyd`, each pairing with [`messages`] `fleet.Tick`
 //! messages each way, acks asked for; every message must be delivered
 //! once and acknowledged:
 //!
@@ -13,6 +13,10 @@
 //!   Goby3's `goby_rockblock_simulator`, which posts MO messages to Goby3's
 //!   DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2, JWT check off) and takes
 //!   its MT messages on its HTTP endpoint;
+//! - `goby3-vehicle-rockblock`: Goby3's DRIVER_IRIDIUM (node 1) on the
+//!   pseudo-terminal of `goby_rockblock_simulator`, which posts MO messages
+//!   to gobyd's DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2, JWT check off:
+//!   the simulator signs nothing) and takes its MT POSTs;
 //! - `rockblock-service`: gobyd's DRIVER_IRIDIUM (node 1) on the emulated
 //!   9603 of `goby modem emulate-iridium --rockblock-webhook`, whose
 //!   emulated RockBLOCK service posts MO messages (JSON, with a JWT of the
@@ -28,7 +32,12 @@
 //! the other's frames. Runs when `GOBY3_BUILD` names a Goby3 build
 //! directory (`bin/pAcommsHandler` and `bin/goby_rockblock_simulator` in
 //! it), as `goby3_fleet.rs`; ignored otherwise.
-//! `GOBY3_IRIDIUM_ONLY=goby3-vehicle,...` runs only the pairings named.
+//! `GOBY3_IRIDIUM_ONLY=goby3-vehicle,...` runs only the pairings named;
+//! `GOBY3_IRIDIUM_KEEP=1` keeps every run's directory (the configurations,
+//! each process's log, gobyd's raw log) and prints where it is;
+//! `GOBY3_IRIDIUM_QUEUE="message_identity: false"` adds a setting to gobyd's
+//! `queue { … }` (here: frames without the identity trailer, as Goby3's);
+//! `GOBY3_IRIDIUM_MESSAGES=1` publishes one message each way instead of 3.
 
 #![cfg(unix)]
 
@@ -46,8 +55,18 @@ use support::goby3::{
 use support::iridium::IMEI;
 use support::node::{Entry, Iridium, Node};
 
-/// Messages each way.
-const N: u32 = 3;
+/// Messages each way: 3, or `GOBY3_IRIDIUM_MESSAGES` (1 to 20; published
+/// together, they go in one frame each way).
+fn messages() -> u32 {
+    match std::env::var("GOBY3_IRIDIUM_MESSAGES") {
+        Ok(v) => v
+            .parse()
+            .ok()
+            .filter(|n| (1..=20).contains(n))
+            .unwrap_or_else(|| panic!("GOBY3_IRIDIUM_MESSAGES={v}: expected 1 to 20")),
+        Err(_) => 3,
+    }
+}
 /// Longest a pairing may take to deliver and acknowledge everything.
 const LIMIT: Duration = Duration::from_secs(120);
 /// Each node's TDMA slot: its session (vehicle) or MT message (shore).
@@ -62,6 +81,7 @@ enum Pairing {
     Goby3Shore,
     Rockblock,
     RockblockService,
+    Goby3VehicleRockblock,
 }
 
 impl Pairing {
@@ -71,13 +91,14 @@ impl Pairing {
             Pairing::Goby3Shore => "goby3-shore",
             Pairing::Rockblock => "rockblock",
             Pairing::RockblockService => "rockblock-service",
+            Pairing::Goby3VehicleRockblock => "goby3-vehicle-rockblock",
         }
     }
 
     /// Goby3's node id.
     fn goby3_id(self) -> i32 {
         match self {
-            Pairing::Goby3Vehicle => 1,
+            Pairing::Goby3Vehicle | Pairing::Goby3VehicleRockblock => 1,
             _ => 2,
         }
     }
@@ -128,6 +149,16 @@ ProcessConfig = pAcommsHandler
     path
 }
 
+/// Removes a complete run's directory, unless `GOBY3_IRIDIUM_KEEP` is set
+/// (then says where it is); an incomplete run's stays for its logs.
+fn finish(dir: &Path, complete: bool) {
+    if std::env::var_os("GOBY3_IRIDIUM_KEEP").is_some_and(|v| !v.is_empty()) {
+        println!("kept {}", dir.display());
+    } else if complete {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
 /// Waits for `path` to appear (a pseudo-terminal's link) while `p` lives.
 fn await_path(path: &Path, p: &mut Proc) {
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -159,6 +190,25 @@ fn emulator(goby: &Path, dir: &Path, link: &Path, mo_port: u16, mt_port: u16) ->
     let mut p = Proc::spawn("emulate-iridium", command, dir);
     await_path(link, &mut p);
     p
+}
+
+/// Goby3's `goby_rockblock_simulator`: one RockBLOCK at `link`, posting MO
+/// messages to `http://127.0.0.1:<mo_port>/`, its MT endpoint on `mt_port`.
+fn simulator(goby3: &Goby3, dir: &Path, link: &Path, mo_port: u16, mt_port: u16) -> Proc {
+    let config = dir.join("rockblock_simulator.pb.cfg");
+    std::fs::write(
+        &config,
+        format!(
+            "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{mo_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
+    sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
+    let mut sim = Proc::spawn("goby_rockblock_simulator", sim, dir);
+    await_path(link, &mut sim);
+    sim
 }
 
 /// gobyd's vehicle driver settings for these runs.
@@ -208,20 +258,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
         }
         Pairing::Rockblock => {
             let link = dir.join("rockblock");
-            let config = dir.join("rockblock_simulator.pb.cfg");
-            std::fs::write(
-                &config,
-                format!(
-                    "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{mo_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
-                    link.display()
-                ),
-            )
-            .unwrap();
-            let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
-            sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
-            let mut sim = Proc::spawn("goby_rockblock_simulator", sim, &dir);
-            await_path(&link, &mut sim);
-            helpers.push(sim);
+            helpers.push(simulator(goby3, &dir, &link, mo_port, mt_port));
             (
                 // No "http://" in a MOOS mission file: MOOS takes "//" for
                 // a comment; cpp-httplib takes a bare HOST:PORT as HTTP.
@@ -229,6 +266,22 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
                     "    driver_type: DRIVER_IRIDIUM_SHORE\n    [goby.acomms.iridium.protobuf.shore_config] {{\n      sbd_type: SBD_ROCKBLOCK\n      mo_sbd_server_port: {mo_port}\n      modem_id_to_imei {{ modem_id: 1 imei: \"{IMEI}\" }}\n      rockblock {{ username: \"test\" password: \"test\" server: \"127.0.0.1:{mt_port}\" skip_jwt_verification: true }}\n      device: DEVICE_IRIDIUM_9602_9603\n    }}"
                 ),
                 gobyd_vehicle(&link),
+            )
+        }
+        Pairing::Goby3VehicleRockblock => {
+            let link = dir.join("rockblock");
+            helpers.push(simulator(goby3, &dir, &link, mo_port, mt_port));
+            (
+                format!(
+                    "    driver_type: DRIVER_IRIDIUM\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"\n    serial_baud: 19200\n    [goby.acomms.iridium.protobuf.config] {{ device: DEVICE_IRIDIUM_9602_9603 use_dtr: false }}",
+                    link.display()
+                ),
+                Iridium::rockblock_shore(
+                    mo_port,
+                    &format!("http://127.0.0.1:{mt_port}"),
+                    None,
+                    &[(1, IMEI)],
+                ),
             )
         }
         Pairing::RockblockService => {
@@ -272,10 +325,17 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
     let mut pacommshandler = Proc::spawn("pAcommsHandler", pah, &dir);
 
     let json_port = free_tcp_port();
-    let config = Node::new(gobyd_id)
+    let mut config = Node::new(gobyd_id)
         .driver(gobyd_driver)
         .tdma(&[1, 2], 0, SLOT_SECONDS)
-        .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"))
+        .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"));
+    if let Some(extra) = std::env::var("GOBY3_IRIDIUM_QUEUE")
+        .ok()
+        .filter(|v| !v.is_empty())
+    {
+        config = config.queue_setting(&extra);
+    }
+    let config = config
         .queue(
             Entry::new("fleet.Tick")
                 .ack(true)
@@ -329,7 +389,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
             );
             tokio::time::sleep(Duration::from_millis(100)).await;
         }
-        for n in 0..N {
+        for n in 0..messages() {
             client
                 .notify_string(
                     "TICK_OUT",
@@ -397,9 +457,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally) {
     drop(pacommshandler);
     drop(helpers);
     drop(moosdb);
-    if complete {
-        let _ = std::fs::remove_dir_all(&dir);
-    }
+    finish(&dir, complete);
     (from_goby3, to_goby3)
 }
 
@@ -417,6 +475,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
         Pairing::Goby3Shore,
         Pairing::Rockblock,
         Pairing::RockblockService,
+        Pairing::Goby3VehicleRockblock,
     ]
     .into_iter()
     .filter(|p| {
@@ -450,14 +509,19 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
     }
     for (which, direction, t) in &rows {
         let what = format!("{} {direction}", which.tag());
-        assert_eq!(t.published, N, "{what}");
+        assert_eq!(t.published, messages(), "{what}");
         assert_eq!(
             t.delivered.len() as u32,
-            N,
+            messages(),
             "{what}: delivered {:?}",
             t.delivered
         );
-        assert_eq!(t.acked.len() as u32, N, "{what}: acked {:?}", t.acked);
+        assert_eq!(
+            t.acked.len() as u32,
+            messages(),
+            "{what}: acked {:?}",
+            t.acked
+        );
         assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
         assert_eq!(t.expired, 0, "{what}");
     }
@@ -475,19 +539,7 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     let dir = scratch("goby3_iridium", "gobyd-shore-rockblock-simulator");
     let (webhook_port, mt_port) = (free_tcp_port(), free_tcp_port());
     let link = dir.join("rockblock");
-    let config = dir.join("rockblock_simulator.pb.cfg");
-    std::fs::write(
-        &config,
-        format!(
-            "imei_to_id {{ imei: \"{IMEI}\" modem_id: 1 pty {{ port: \"{}\" baud: 19200 }} }}\nmo_http_server: \"http://127.0.0.1:{webhook_port}\"\nmo_http_endpoint: \"/\"\nmt_http_server_port: {mt_port}\n",
-            link.display()
-        ),
-    )
-    .unwrap();
-    let mut sim = Command::new(goby3.build.join("bin/goby_rockblock_simulator"));
-    sim.arg(&config).env("LD_LIBRARY_PATH", &goby3.library_path);
-    let mut sim = Proc::spawn("goby_rockblock_simulator", sim, &dir);
-    await_path(&link, &mut sim);
+    let sim = simulator(&goby3, &dir, &link, webhook_port, mt_port);
     let data: [PathBuf; 2] = [dir.join("vehicle"), dir.join("shore")];
     let node = |id: i32, driver: Iridium| {
         Node::new(id)
@@ -510,7 +562,7 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     let mut shore = Gobyd::start(&configs[1], &[]);
     let mut vehicle = Gobyd::start(&configs[0], &[]);
     let mut sent = Vec::new();
-    for i in 0..N {
+    for i in 0..messages() {
         let note = format!("v{i}");
         publish(&mut vehicle, 2, &note);
         sent.push((0usize, note));
@@ -565,5 +617,5 @@ fn gobyd_shore_over_goby3s_rockblock_simulator() {
     for (from, note) in &sent {
         assert_eq!(got[1 - from].get(note), Some(&1), "{note}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
+    finish(&dir, true);
 }
