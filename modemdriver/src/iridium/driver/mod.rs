@@ -32,16 +32,20 @@
 //! ([`DriverStatus::Unparseable`](crate::DriverStatus::Unparseable)) and ignored; nothing the transceiver
 //! sends makes the driver panic.
 //!
-//! Not done: RUDICS calls (`rate: 1`, dialling `remote.iridium_number`):
-//! the RUDICS packet format is in [`super::rudics`], the call itself is
-//! not.
+//! RUDICS calls: with a voice-enabled transceiver (`device:
+//! DEVICE_VOICE_ENABLED_ISU`) and `remote.iridium_number` set, a
+//! transmission asked for at `rate: 1` (and any while a call is up) goes
+//! over a call to the shore (`ATD`, packets of [`super::rudics`], `bye`,
+//! `+++`, `ATH`); see [`call`].
 //!
 //! # Layout
 //!
 //! [`machine`] (inputs, outputs, AT commands and their answers),
-//! [`session`] (what each session carries and what follows it), [`shell`]
+//! [`session`] (what each session carries and what follows it), [`call`]
+//! (RUDICS calls), [`shell`]
 //! (the async task on the serial port).
 
+pub mod call;
 pub mod machine;
 pub mod session;
 pub mod shell;

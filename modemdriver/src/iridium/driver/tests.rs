@@ -499,3 +499,202 @@ proptest! {
         }
     }
 }
+
+mod rudics_calls {
+    //! RUDICS calls, in virtual time.
+
+    use super::*;
+    use crate::iridium::rudics;
+    use protos::goby::acomms::protobuf::iridium_driver_config::Remote;
+
+    const NUMBER: &str = "0088160000519";
+
+    fn rig() -> Rig {
+        let mut s = settings(true);
+        s.iridium.device = Some(IridiumDeviceType::DeviceVoiceEnabledIsu as i32);
+        s.iridium.remote = Some(Remote {
+            iridium_number: NUMBER.into(),
+            modem_id: 2,
+        });
+        s.iridium.hangup_seconds_after_empty = Some(5);
+        s.iridium.handshake_hangup_seconds = Some(2);
+        s.max_frame_bytes = super::super::max_frame_bytes(&s.iridium);
+        let now = Now {
+            at: Instant::now(),
+            micros: 1_700_000_000_000_000,
+        };
+        let mut rig = Rig {
+            machine: Machine::new(s, now),
+            now,
+        };
+        rig.start();
+        rig
+    }
+
+    fn call_slot(unique_id: u32) -> Input {
+        Input::Command(DriverCommand::Initiate(ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            rate: Some(frame::RATE_RUDICS),
+            unique_id: Some(unique_id),
+            ..Default::default()
+        }))
+    }
+
+    /// The transmissions in the packets written.
+    fn packets(out: &[Output]) -> Vec<ModemTransmission> {
+        written_bytes(out)
+            .iter()
+            .filter(|b| b.ends_with(b"\r") && !b.starts_with(b"AT") && b.as_slice() != b"bye\r")
+            .map(|b| frame::decode_message(&rudics::decode(b).expect("a packet")).expect("a frame"))
+            .collect()
+    }
+
+    fn packet(mt: &ModemTransmission) -> Vec<u8> {
+        rudics::encode(&frame::encode_message(mt).unwrap())
+    }
+
+    /// Dials and connects; returns the outputs of CONNECT.
+    fn connect(rig: &mut Rig, unique_id: u32) -> Vec<Output> {
+        let out = rig.input(call_slot(unique_id));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"\r\nCONNECT 19200\r\n");
+        let hello = &packets(&out)[0];
+        assert_eq!((hello.src(), hello.dest(), hello.frame.len()), (1, 2, 0));
+        out
+    }
+
+    #[test]
+    fn a_call_carries_data_both_ways_and_hangs_up_when_empty() {
+        let mut rig = rig();
+        let out = connect(&mut rig, 7);
+        let out = fill(&mut rig, &out, b"up the call");
+        let sent = packets(&out);
+        assert_eq!(sent.len(), 1);
+        assert_eq!(sent[0].frame, vec![b"up the call".to_vec()]);
+        assert_eq!(sent[0].frame_start(), 10);
+        assert_eq!(sent[0].rate(), frame::RATE_RUDICS);
+        assert_eq!(results(&out)[0].outcome, TransmitOutcome::Sent);
+
+        // The shore's ACK, then data that asks for one.
+        let ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Ack as i32),
+            acked_frame: vec![10],
+            ..Default::default()
+        };
+        let out = rig.bytes(&packet(&ack));
+        let got = received(&out);
+        assert_eq!(got[0].unique_id, Some(7));
+        let down = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(40),
+            frame: vec![b"down the call".to_vec()],
+            ..Default::default()
+        };
+        let out = rig.bytes(&packet(&down));
+        assert_eq!(received(&out)[0].frame, down.frame);
+        // Deferred ack: the layer above answers; the ACK goes on the call.
+        let out = rig.input(Input::Command(DriverCommand::Acknowledge(
+            Acknowledgement::all(received(&out)[0].clone()),
+        )));
+        let acks = packets(&out);
+        assert_eq!(acks.len(), 1, "{:?}", written(&out));
+        assert_eq!(acks[0].r#type(), TransmissionType::Ack);
+        assert_eq!(acks[0].acked_frame, vec![40]);
+
+        // Nothing for 5 s: bye, the shore's bye, guard, +++, OK, ATH.
+        let out = rig.advance(Duration::from_millis(4900));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(100));
+        assert_eq!(written(&out), ["bye\r"]);
+        let out = rig.bytes(b"bye\r");
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(999));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(1));
+        assert_eq!(written(&out), ["+++"]);
+        let out = rig.bytes(b"\r\nOK\r\n");
+        assert_eq!(written(&out), ["ATH\r"]);
+        rig.bytes(b"\r\nOK\r\n");
+        assert!(rig.machine.calls.idle());
+        assert_eq!(rig.machine.calls_connected(), 1);
+        // The next transmission at rate 1 dials again.
+        let out = rig.input(call_slot(8));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+    }
+
+    #[test]
+    fn a_dropped_call_writes_its_unacked_frame_again_on_the_next() {
+        let mut rig = rig();
+        let out = connect(&mut rig, 7);
+        let out = fill(&mut rig, &out, b"precious");
+        assert_eq!(results(&out).len(), 1);
+        let out = rig.bytes(b"\r\nNO CARRIER\r\n");
+        assert!(statuses(&out)
+            .iter()
+            .any(|s| matches!(s, DriverStatus::LinkError { .. })));
+        // The back-off (1 s), then a new call with the same frame.
+        let out = rig.advance(Duration::from_millis(900));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(100));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"CONNECT 19200\r\n");
+        let again = packets(&out);
+        assert_eq!(again.len(), 2, "hello and the frame");
+        assert_eq!(again[1].frame, vec![b"precious".to_vec()]);
+        assert_eq!(again[1].frame_start(), 10);
+        assert!(results(&out).is_empty(), "Sent is told once");
+        // Acked now: a third call would not carry it.
+        let ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Ack as i32),
+            acked_frame: vec![10],
+            ..Default::default()
+        };
+        rig.bytes(&packet(&ack));
+        rig.bytes(b"NO CARRIER\r\n");
+        let out = rig.advance(Duration::from_secs(60));
+        assert!(written(&out).is_empty(), "{:?}", written(&out));
+    }
+
+    #[test]
+    fn failed_dials_back_off_then_give_up() {
+        let mut rig = rig();
+        let out = rig.input(call_slot(7));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"BUSY\r\n");
+        assert!(statuses(&out)
+            .iter()
+            .any(|s| matches!(s, DriverStatus::Retrying { attempt: 2, .. })));
+        let out = rig.advance(Duration::from_secs(1));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"NO CARRIER\r\n");
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(1999));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(1));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"ERROR\r\n");
+        let st = statuses(&out);
+        assert!(st
+            .iter()
+            .any(|s| matches!(s, DriverStatus::LinkError { .. })));
+        assert!(st.iter().any(|s| matches!(s, DriverStatus::Skipped { .. })));
+        let out = rig.advance(Duration::from_secs(60));
+        assert!(written(&out).is_empty());
+    }
+
+    #[test]
+    fn a_9603_or_no_number_never_dials() {
+        let mut rig = Rig::new(true);
+        rig.start();
+        let out = rig.input(call_slot(7));
+        assert!(!written(&out).iter().any(|w| w.starts_with("ATD")));
+    }
+}

@@ -351,7 +351,10 @@ impl Transceiver {
             }
             AtCommand::Imei => self.answer(ModemLine::Imei(self.config.imei.clone())),
             AtCommand::Session { .. } => self.start_session(),
-            AtCommand::Other(_) => self.line(ModemLine::Error),
+            // Calls are not emulated: a 9602/9603 answers as it would.
+            AtCommand::Other(_) | AtCommand::Dial(_) | AtCommand::Hangup => {
+                self.line(ModemLine::Error)
+            }
         }
     }
 
