@@ -291,6 +291,11 @@ impl Machine {
         self.sessions.awaits(id) || self.calls.awaits(id)
     }
 
+    /// Configured, and no command outstanding.
+    pub fn ready_for_work(&self) -> bool {
+        self.ready && self.pending.is_none()
+    }
+
     /// RUDICS calls connected so far.
     pub fn calls_connected(&self) -> u64 {
         self.calls.connected

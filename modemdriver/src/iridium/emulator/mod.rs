@@ -199,6 +199,12 @@ async fn run(
                     let reply = gateway.session(&imei, mo, momsn);
                     queue.extend(t.handle(Instant::now(), TxInput::Gateway(reply)));
                 }
+                // Calls are not carried to a shore by this task yet: the
+                // far end does not answer.
+                TxOutput::Dial { .. } => {
+                    queue.extend(t.handle(Instant::now(), TxInput::CallFailed("NO ANSWER".into())))
+                }
+                TxOutput::CallData(_) | TxOutput::HangUp => {}
             }
         }
         if let Ok(mut l) = log.lock() {

@@ -22,7 +22,12 @@
 //! - `AT+SBDDn`, `AT+SBDS`, `AT+CSQ`, `AT+CSQF`, `AT+CGSN`;
 //! - `AT+SBDMTA=1`: ring alerts (`SBDRING`) when the gateway has an MT
 //!   message, once service allows; `AT+CIER=1,1,1`: `+CIEV:0,<bars>` and
-//!   `+CIEV:1,<service>` now and at every change.
+//!   `+CIEV:1,<service>` now and at every change;
+//! - a voice-enabled transceiver: `ATD<number>` asks for a call
+//!   ([`TxOutput::Dial`]), answered `CONNECT 19200` (then data mode: host
+//!   bytes go to the far end, but `+++` between 0.5 s silences, which
+//!   answers `OK` in command mode) or the failure given; `ATH` hangs up;
+//!   the far end going away is `NO CARRIER`.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -89,6 +94,15 @@ pub enum TxInput {
     RingAlert,
     /// The gateway's part of the session asked for by [`TxOutput::Session`].
     Gateway(GatewaySession),
+    /// The call asked for by [`TxOutput::Dial`] is up.
+    CallConnected,
+    /// The call asked for could not be made: the line to give the host
+    /// (`NO CARRIER`, `BUSY`, `NO ANSWER`).
+    CallFailed(String),
+    /// Bytes from the far end of the call.
+    CallData(Vec<u8>),
+    /// The far end hung up, or the call dropped.
+    CallEnded,
 }
 
 /// What to do.
@@ -104,6 +118,32 @@ pub enum TxOutput {
         /// Its sequence number.
         momsn: u16,
     },
+    /// Make a data call to `number`; answer with [`TxInput::CallConnected`]
+    /// or [`TxInput::CallFailed`].
+    Dial {
+        /// The number dialled.
+        number: String,
+    },
+    /// Bytes the host wrote on the call.
+    CallData(Vec<u8>),
+    /// Hang the call up.
+    HangUp,
+}
+
+/// Silence before and after `+++` for the escape to command mode.
+pub const ESCAPE_GUARD: Duration = Duration::from_millis(500);
+
+/// A call, as the transceiver sees it.
+#[derive(Debug, Clone, Copy)]
+struct Call {
+    /// Connected (not dialling).
+    up: bool,
+    /// In data mode: host bytes go to the far end.
+    data: bool,
+    /// Last host bytes in data mode.
+    last_host: Instant,
+    /// `+++` read then: command mode once the guard passes in silence.
+    escape: Option<Instant>,
 }
 
 /// The gateway's part of a session.
@@ -140,6 +180,8 @@ pub struct TransceiverLog {
     pub mt_received: u32,
     /// Ring alerts written.
     pub rings: u32,
+    /// Calls connected.
+    pub calls: u32,
 }
 
 /// The emulated transceiver.
@@ -165,6 +207,7 @@ pub struct Transceiver {
     rng: ChaCha8Rng,
     /// Host bytes held during a session.
     held: VecDeque<u8>,
+    call: Option<Call>,
     out: Vec<TxOutput>,
     /// What it did.
     pub log: TransceiverLog,
@@ -191,6 +234,7 @@ impl Transceiver {
             session: None,
             ring_waiting: false,
             held: VecDeque::new(),
+            call: None,
             out: Vec::new(),
             log: TransceiverLog::default(),
         }
@@ -216,6 +260,7 @@ impl Transceiver {
         self.now = now;
         self.radio.advance(now);
         match input {
+            TxInput::Host(bytes) if self.call.is_some_and(|c| c.data) => self.call_host(bytes),
             TxInput::Host(bytes) => {
                 if self.session.is_some() {
                     self.held.extend(bytes);
@@ -227,6 +272,31 @@ impl Transceiver {
             TxInput::Tick => {}
             TxInput::RingAlert => self.ring_waiting = true,
             TxInput::Gateway(reply) => self.gateway_reply(reply),
+            TxInput::CallConnected => {
+                if let Some(c) = &mut self.call {
+                    c.up = true;
+                    c.data = true;
+                    c.last_host = now;
+                    self.log.calls += 1;
+                    self.write(b"\r\nCONNECT 19200\r\n".to_vec());
+                }
+            }
+            TxInput::CallFailed(line) => {
+                if self.call.take().is_some() {
+                    self.write(format!("\r\n{line}\r\n"));
+                }
+            }
+            TxInput::CallData(bytes) => {
+                if self.call.is_some_and(|c| c.data) {
+                    self.write(bytes);
+                }
+            }
+            TxInput::CallEnded => {
+                if self.call.take().is_some_and(|c| c.up) {
+                    self.reader.expect_lines();
+                    self.write(b"\r\nNO CARRIER\r\n".to_vec());
+                }
+            }
         }
         self.timers();
         self.indications();
@@ -237,6 +307,7 @@ impl Transceiver {
     /// When the next [`TxInput::Tick`] is due.
     pub fn next_deadline(&self) -> Option<Instant> {
         [
+            self.call.and_then(|c| c.escape).map(|t| t + ESCAPE_GUARD),
             self.session.map(|s| s.ends),
             self.writing.map(|(_, d)| d),
             self.radio.next_change(),
@@ -351,10 +422,30 @@ impl Transceiver {
             }
             AtCommand::Imei => self.answer(ModemLine::Imei(self.config.imei.clone())),
             AtCommand::Session { .. } => self.start_session(),
-            // Calls are not emulated: a 9602/9603 answers as it would.
-            AtCommand::Other(_) | AtCommand::Dial(_) | AtCommand::Hangup => {
-                self.line(ModemLine::Error)
+            AtCommand::Dial(number)
+                if self.config.device == IridiumDeviceType::DeviceVoiceEnabledIsu
+                    && self.call.is_none() =>
+            {
+                if !self.radio.now().1 {
+                    self.line(ModemLine::NoCarrier);
+                } else {
+                    self.call = Some(Call {
+                        up: false,
+                        data: false,
+                        last_host: self.now,
+                        escape: None,
+                    });
+                    self.out.push(TxOutput::Dial { number });
+                }
             }
+            AtCommand::Hangup => {
+                if self.call.take().is_some() {
+                    self.out.push(TxOutput::HangUp);
+                }
+                self.line(ModemLine::Ok);
+            }
+            // A 9602/9603 makes no calls.
+            AtCommand::Other(_) | AtCommand::Dial(_) => self.line(ModemLine::Error),
         }
     }
 
@@ -394,7 +485,30 @@ impl Transceiver {
         });
     }
 
+    /// Host bytes in data mode: to the far end, but for the `+++` escape.
+    fn call_host(&mut self, bytes: Vec<u8>) {
+        let Some(mut call) = self.call else { return };
+        if bytes == b"+++" && call.escape.is_none() && self.now >= call.last_host + ESCAPE_GUARD {
+            call.escape = Some(self.now);
+        } else {
+            if call.escape.take().is_some() {
+                // Not an escape after all: the bytes were data.
+                self.out.push(TxOutput::CallData(b"+++".to_vec()));
+            }
+            call.last_host = self.now;
+            self.out.push(TxOutput::CallData(bytes));
+        }
+        self.call = Some(call);
+    }
+
     fn timers(&mut self) {
+        if let Some(call) = &mut self.call {
+            if call.escape.is_some_and(|t| t + ESCAPE_GUARD <= self.now) {
+                call.escape = None;
+                call.data = false;
+                self.write(b"\r\nOK\r\n".to_vec());
+            }
+        }
         if let Some((_, deadline)) = self.writing {
             if deadline <= self.now {
                 self.writing = None;
@@ -535,6 +649,9 @@ mod tests {
             .map(|o| match o {
                 TxOutput::Write(b) => String::from_utf8_lossy(&b).into_owned(),
                 TxOutput::Session { mo, momsn } => format!("<session {momsn} {mo:?}>"),
+                TxOutput::Dial { number } => format!("<dial {number}>"),
+                TxOutput::CallData(b) => format!("<call {}>", String::from_utf8_lossy(&b)),
+                TxOutput::HangUp => "<hang up>".to_string(),
             })
             .collect()
     }
