@@ -40,11 +40,10 @@ use modemdriver::micromodem::emulator::{
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::reception::Position;
 use modemdriver::sim::SimulatorDriver;
-use modemdriver::udp::UdpDriver;
 use modemdriver::{Driver, DriverConfig};
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
 use protos::goby::acomms::protobuf::udp_driver_config::EndPoint;
-use protos::goby::acomms::protobuf::{SimulatorDriverConfig, UdpDriverConfig};
+use protos::goby::acomms::protobuf::SimulatorDriverConfig;
 
 use crate::{CliError, Status};
 
@@ -356,6 +355,10 @@ fn plan(args: &EmulateArgs) -> Result<Vec<Backend>, CliError> {
     Ok((0..n).map(|_| Backend::Simulator).collect())
 }
 
+/// Time on the simulated water of a packet with no data (a ping, an ack):
+/// the simulator's default `packet_overhead_seconds`.
+const SIMULATED_PACKET: Duration = Duration::from_millis(500);
+
 enum Backend {
     None,
     Simulator,
@@ -400,22 +403,38 @@ async fn backend_driver(
                 .map_err(|e| CliError::setup(e.to_string()))
         }
         Backend::Udp { local, peers } => {
+            // The acoustic channel simulator whose water reaches the other
+            // processes over UDP: packets travel (range / sound speed, from
+            // each process's placement by id), take their time on the water
+            // and meet --loss, exactly as between modems of one process.
             let endpoint = |id: u32, addr: &SocketAddr| EndPoint {
                 modem_id: Some(id),
                 ip: Some(addr.ip().to_string()),
                 port: u32::from(addr.port()),
             };
+            let node = geometry(args)?
+                .nodes
+                .iter()
+                .map(|(&m, n)| NodePosition {
+                    modem_id: m as i32,
+                    x: Some(n.position.x),
+                    y: Some(n.position.y),
+                    z: Some(n.position.z),
+                })
+                .collect();
             let config = DriverConfig {
                 modem_id: Some(id),
-                udp: Some(UdpDriverConfig {
-                    local: endpoint(modem_id, local),
-                    remote: peers.iter().map(|(i, a)| endpoint(*i, a)).collect(),
+                simulator: Some(SimulatorDriverConfig {
+                    node,
+                    packet_loss: Some(args.loss),
+                    seed: Some(args.seed ^ u64::from(modem_id)),
+                    udp_local: Some(endpoint(modem_id, local)),
+                    udp_peer: peers.iter().map(|(i, a)| endpoint(*i, a)).collect(),
                     ..Default::default()
                 }),
                 ..Default::default()
             };
-            UdpDriver::start(&config)
-                .await
+            SimulatorDriver::start(&config)
                 .map(Some)
                 .map_err(|e| CliError::setup(e.to_string()))
         }
@@ -490,8 +509,8 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
                 lone_range: args.lone_range,
                 stats_layout,
                 ping_packet: match backend_kind {
-                    Backend::Simulator => Duration::from_millis(500),
-                    _ => Duration::ZERO,
+                    Backend::Simulator | Backend::Udp { .. } => SIMULATED_PACKET,
+                    Backend::None => Duration::ZERO,
                 },
                 ..base
             };

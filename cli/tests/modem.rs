@@ -506,3 +506,71 @@ fn the_help_describes_every_emulator() {
         );
     }
 }
+
+/// A free UDP port on 127.0.0.1 (bound, then released).
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+#[test]
+fn modems_in_two_processes_joined_over_udp_range_by_their_spacing() {
+    let (p1, p2) = (free_udp_port(), free_udp_port());
+    let (l1, l2) = (p1.to_string(), p2.to_string());
+    let (peer1, peer2) = (format!("2@127.0.0.1:{p2}"), format!("1@127.0.0.1:{p1}"));
+    let one = emulate(
+        &[
+            "--modem-id",
+            "1",
+            "--udp-local",
+            &l1,
+            "--udp-peer",
+            &peer1,
+            "--spacing",
+            "1500",
+            "--duration",
+            "40",
+        ],
+        1,
+    );
+    let two = emulate(
+        &[
+            "--modem-id",
+            "2",
+            "--udp-local",
+            &l2,
+            "--udp-peer",
+            &peer2,
+            "--spacing",
+            "1500",
+            "--duration",
+            "40",
+        ],
+        1,
+    );
+    let mut tty1 = Tty::open(&one.paths[0]);
+    let mut tty2 = Tty::open(&two.paths[0]);
+    // Modem 2 sits 1500 m from modem 1: 1 s one way at 1500 m/s.
+    tty1.send(NmeaSentence::new("CC", "MPC", fields(&["1", "2"])));
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let reply = loop {
+        assert!(Instant::now() < deadline, "no $CAMPR within 30 s");
+        let s = tty1.next();
+        if s.address() == "CAMPR" {
+            break s;
+        }
+    };
+    assert_eq!(reply.fields[..2], fields(&["2", "1"]), "{reply}");
+    let owtt: f64 = reply.fields[2].parse().expect("a travel time");
+    assert!((owtt - 1.0).abs() < 0.25, "one-way travel time {owtt} s");
+    // The other process heard the ping.
+    let heard = loop {
+        let s = tty2.next();
+        if s.address() == "CAMPA" {
+            break s;
+        }
+    };
+    assert_eq!(heard.fields[..2], fields(&["1", "2"]), "{heard}");
+}

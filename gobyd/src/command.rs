@@ -40,7 +40,8 @@ pub struct GobydCli {
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<std::path::PathBuf>,
     /// MOOS mission file: the configuration is its `ProcessConfig = gobyd`
-    /// block, with ServerHost, ServerPort, LatOrigin and LongOrigin.
+    /// block (with none, its `ProcessConfig = pAcommsHandler` block), with
+    /// ServerHost, ServerPort, LatOrigin and LongOrigin.
     #[arg(long, value_name = "FILE", conflicts_with = "config")]
     pub moos_file: Option<std::path::PathBuf>,
     /// Mission file and process name as pAntler passes them
@@ -161,10 +162,10 @@ fn configuration(
             let origin = path.display().to_string();
             Some(config::read(&text, &origin, config::Layout::File)?)
         }
-        (None, Some(path)) => Some(crate::mission_file::read(
-            path,
-            cli.process_name.as_deref().unwrap_or("gobyd"),
-        )?),
+        (None, Some(path)) => Some(match cli.process_name.as_deref() {
+            Some(app) => crate::mission_file::read(path, app)?,
+            None => crate::mission_file::read_default(path)?,
+        }),
         (None, None) => None,
     };
     let mut config = read

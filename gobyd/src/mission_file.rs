@@ -166,6 +166,51 @@ pub fn read(path: &Path, app: &str) -> Result<config::Read, ConfigError> {
     read_mission(&mission, &origin, app)
 }
 
+/// The process whose block is read when the command line names none.
+pub const DEFAULT_APP: &str = "gobyd";
+
+/// The block read instead when the mission file has no
+/// `ProcessConfig = gobyd`: pAcommsHandler's, which gobyd replaces.
+pub const PACOMMS_APP: &str = "pAcommsHandler";
+
+/// Reads `gobyd`'s configuration from the mission file at `path` when no
+/// process name is given (`--moos-file FILE`, `gobyd FILE`): the block
+/// `ProcessConfig = gobyd`, or, with none, `ProcessConfig = pAcommsHandler`
+/// (a note then says which block was read; the MOOS name stays `gobyd`).
+/// With neither, the error names both.
+pub fn read_default(path: &Path) -> Result<config::Read, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let origin = path.display().to_string();
+    let parse = |app: &str| {
+        MissionFile::parse(&text, app).map_err(|e| ConfigError::Invalid(e.located(&origin)))
+    };
+    let mission = parse(DEFAULT_APP)?;
+    if mission.process_config.is_some() {
+        return read_mission(&mission, &origin, DEFAULT_APP);
+    }
+    let mission = parse(PACOMMS_APP)?;
+    if mission.process_config.is_none() {
+        return Err(ConfigError::Invalid(format!(
+            "{origin}: no ProcessConfig = {DEFAULT_APP} block, nor a ProcessConfig = {PACOMMS_APP} block to read instead"
+        )));
+    }
+    let mut read = read_mission(&mission, &origin, DEFAULT_APP)?;
+    read.notes.insert(
+        0,
+        config::Note {
+            level: config::NoteLevel::Info,
+            place: Some(origin),
+            text: format!(
+                "no ProcessConfig = {DEFAULT_APP} block: read the ProcessConfig = {PACOMMS_APP} block"
+            ),
+        },
+    );
+    Ok(read)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

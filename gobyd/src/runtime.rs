@@ -1089,8 +1089,10 @@ impl Daemon {
         match accepted {
             Ok(Accepted::Queued(id)) => {
                 let dropped = self.forward_queue_events();
+                // What the queue's max_queue asks for: normal operation
+                // (the JSON and MQTT replies name each dropped message).
                 for (entry, _) in &dropped {
-                    tracing::warn!(
+                    tracing::info!(
                         id = entry,
                         "{name}: a message was dropped from its full queue (max_queue)"
                     );

@@ -348,6 +348,25 @@ fn a_burst_is_either_kept_or_told_and_replies_never_mix_with_events() {
 }
 
 #[test]
+fn a_drop_from_a_queue_full_as_configured_is_told_and_logged_at_info() {
+    let dir = scratch("door", "maxqueue");
+    let daemon = Daemon::start(&quiet_config(&dir, "max_queue: 1 newest_first: true", None));
+    let mut client = daemon.connect();
+    let first = client.request(&command(2, "0", "one"));
+    let first_id = first["id"].as_u64().unwrap_or_else(|| panic!("{first}"));
+    let second = client.request(&command(2, "0", "two"));
+    assert_eq!(
+        second["dropped"][0]["id"].as_u64(),
+        Some(first_id),
+        "{second}"
+    );
+    let line = daemon.wait_log("dropped from its full queue (max_queue)");
+    assert!(line.contains("INFO") && !line.contains("WARN"), "{line}");
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn unterminated_lines_are_cut_off_as_they_arrive() {
     const PER_CLIENT: usize = 64 * 1024 * 1024;
     let dir = scratch("door", "longline");

@@ -125,6 +125,10 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
             .write(dir.join(format!("node{id}.cfg")));
     }
     let watcher = Watcher::start(&broker.address(), "console", "fleet/#");
+    // Subscribed before the gateways start: every publication of theirs is
+    // seen as it goes out (none only as a retained value).
+    watcher.publish("fleet/probe", "{}");
+    watcher.wait_on("fleet/probe", |_| Some(()));
     let _node2 = Gobyd::start(&dir, 2);
     let mut node1 = Gobyd::start(&dir, 1);
     for node in [1, 2] {
@@ -149,6 +153,13 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     assert!(rx["time"].as_f64().unwrap() > 1.6e9, "{rx}");
     let acked = watcher.wait_on("fleet/1/ack/goby.example.Command", note_of);
     assert_eq!(acked, "first");
+    // The driver's and the link's states went out once each at start (a
+    // state waiting for the first connection is not published again with
+    // the retained values on that connection).
+    for topic in ["fleet/1/driver", "fleet/1/link_status/default"] {
+        let states = watcher.seen_on(topic);
+        assert_eq!(states.len(), 1, "{topic}: {states:?}");
+    }
     let size = watcher.wait_on("fleet/1/queue/goby.example.Command", |v| v["size"].as_u64());
     assert!(size <= 1);
 

@@ -509,3 +509,67 @@ fn settings_found_wrong_later_are_placed_on_the_goby_key_written() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_block_under_pacommshandlers_name_is_read_when_there_is_no_gobyd_block() {
+    let dir = scratch("pacomms-block", "named");
+    let ports = [free_udp_port(), free_udp_port()];
+    let text = goby3_mission(&dir, 9000, ports).replace(
+        "ProcessConfig = gobyd\n",
+        "ProcessConfig = pAcommsHandler\n",
+    );
+    assert!(text.contains("ProcessConfig = pAcommsHandler\n"));
+    let mission = write_mission(&dir, "alpha.moos", &text);
+    let out = check(&mission);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout).trim(),
+        "configuration is valid; DCCL types: mission.VehicleStatus"
+    );
+    assert!(
+        stderr.contains(&format!(
+            "gobyd: note: {}: no ProcessConfig = gobyd block: read the ProcessConfig = pAcommsHandler block",
+            mission.display()
+        )),
+        "{stderr}"
+    );
+    // The same settings as under gobyd's name, and gobyd's MOOS name.
+    let config = mission_file::read_default(&mission).unwrap().config;
+    assert_eq!(config.modem_id(), 1);
+    assert_eq!(config.moos.as_ref().unwrap().name(), "gobyd");
+    assert_eq!(
+        config
+            .driver
+            .as_ref()
+            .unwrap()
+            .udp
+            .as_ref()
+            .unwrap()
+            .local
+            .port,
+        u32::from(ports[0])
+    );
+    // A gobyd block, when there is one, is the one read.
+    let both = format!("{text}\nProcessConfig = gobyd\n{{\n  modem_id: 7\n}}\n");
+    let mission = write_mission(&dir, "both.moos", &both);
+    let config = mission_file::read_default(&mission).unwrap().config;
+    assert_eq!(config.modem_id(), 7);
+    // With neither, the error names both.
+    let neither = text.replace(
+        "ProcessConfig = pAcommsHandler\n",
+        "ProcessConfig = pOther\n",
+    );
+    let mission = write_mission(&dir, "neither.moos", &neither);
+    let out = check(&mission);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{}: no ProcessConfig = gobyd block, nor a ProcessConfig = pAcommsHandler block to read instead",
+            mission.display()
+        )),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

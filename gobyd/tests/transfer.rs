@@ -234,6 +234,16 @@ async fn a_large_message_and_a_file_cross_the_relay_and_commands_overtake_them()
         .expect("the file arrived");
     let path = file_event.path.clone().expect("its path");
     assert_eq!(std::fs::read(&path).unwrap(), content);
+    // Private, as every file of the data directory: the file 0600 in a
+    // directory created 0700.
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        let path = std::path::Path::new(&path);
+        assert_eq!(mode(path), 0o600, "{}", path.display());
+        let parent = path.parent().unwrap();
+        assert_eq!(mode(parent), 0o700, "{}", parent.display());
+    }
     assert!(transfer_at(&seen, 1, "complete")
         .iter()
         .any(|e| e.id == file_id));

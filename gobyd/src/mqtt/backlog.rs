@@ -70,6 +70,12 @@ impl Backlog {
         }
     }
 
+    /// Whether a retained publication of `topic` waits (anywhere in the
+    /// backlog): a newer state than any sent, which goes out in its turn.
+    pub fn holds_state(&self, topic: &str) -> bool {
+        self.items.iter().any(|o| o.retain && o.topic == topic)
+    }
+
     /// The next publication to send.
     pub fn front(&self) -> Option<&Outgoing> {
         self.items.front()
@@ -165,6 +171,18 @@ mod tests {
             .map(|(_, p)| p)
             .collect();
         assert_eq!(states, ["old", "new"]);
+    }
+
+    #[test]
+    fn a_waiting_state_is_found_by_its_topic() {
+        let mut backlog = Backlog::new(10);
+        backlog.push(state("f/1/driver", "ready"));
+        backlog.push(out("f/1/accepted"));
+        assert!(backlog.holds_state("f/1/driver"));
+        assert!(!backlog.holds_state("f/1/accepted"), "not a state");
+        assert!(!backlog.holds_state("f/1/link"));
+        drain(&mut backlog);
+        assert!(!backlog.holds_state("f/1/driver"), "sent");
     }
 
     #[test]

@@ -277,9 +277,16 @@ impl Loop {
         }
         // The broker may have lost its retained values (restarted without
         // persistence): publish the newest of each again, ahead of the
-        // backlog (which may hold newer ones, then published after).
+        // backlog. A state still waiting in the backlog (at start: the
+        // driver's first status, queued before the first connection) goes
+        // out in its turn, and only then: it is the newest of its topic.
         // Never at the cost of what waits: only while the backlog has room.
-        let again: Vec<Outgoing> = self.retained.all().cloned().collect();
+        let again: Vec<Outgoing> = self
+            .retained
+            .all()
+            .filter(|out| !self.buffer.holds_state(&out.topic))
+            .cloned()
+            .collect();
         if self.buffer.len() + again.len() < self.settings.buffer {
             for out in again.into_iter().rev() {
                 self.buffer.push_front(out);

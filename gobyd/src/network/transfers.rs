@@ -962,13 +962,15 @@ impl Transfers {
     }
 
     /// Writes a received file into the receive directory (a new name when
-    /// the name is taken), synced; returns its path.
+    /// the name is taken), synced; returns its path. A missing directory is
+    /// created with mode 0700 and the file with mode 0600 (on Unix), as
+    /// every file of the data directory.
     fn write_file(&self, name: &str, body: &[u8]) -> io::Result<PathBuf> {
         if let Some(problem) = file_name_problem(name) {
             return Err(io::Error::new(io::ErrorKind::InvalidInput, problem));
         }
         let dir = &self.settings.receive_dir;
-        std::fs::create_dir_all(dir)?;
+        crate::data_dir::create_private_dir(dir)?;
         let mut path = dir.join(name);
         let mut n = 1;
         while path.exists() {
@@ -977,7 +979,11 @@ impl Transfers {
         }
         let part = dir.join(format!(".{name}.part"));
         {
-            let mut f = std::fs::File::create(&part)?;
+            let mut f = crate::data_dir::private_file_options()
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .open(&part)?;
             f.write_all(body)?;
             f.sync_all()?;
         }

@@ -281,6 +281,21 @@ impl Watcher {
         })
     }
 
+    /// Every publication on `topic` seen so far (taken by a wait or not).
+    pub fn seen_on(&self, topic: &str) -> Vec<Value> {
+        let mut history = self.history.borrow_mut();
+        while let Ok(seen) = self.seen.try_recv() {
+            history.push((false, seen));
+        }
+        history
+            .iter()
+            .filter_map(|(_, seen)| match seen {
+                Seen::Message(t, v) if t == topic => Some(v.clone()),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Waits for the broker's acks of `n` publications.
     pub fn wait_pubacks(&self, n: usize) {
         for _ in 0..n {
