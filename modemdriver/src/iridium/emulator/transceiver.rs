@@ -27,7 +27,10 @@
 //!   ([`TxOutput::Dial`]), answered `CONNECT 19200` (then data mode: host
 //!   bytes go to the far end, but `+++` between 0.5 s silences, which
 //!   answers `OK` in command mode) or the failure given; `ATH` hangs up;
-//!   the far end going away is `NO CARRIER`.
+//!   the far end going away is `NO CARRIER`, and so is a call dropped by
+//!   the emulator's faults (`call_drop_after`, `call_drop_bytes`, service
+//!   lost, [`TxInput::DropCall`]): the far end is hung up on
+//!   ([`TxOutput::HangUp`]) and the host told `NO CARRIER`.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -66,6 +69,12 @@ pub struct TransceiverConfig {
     pub session_failure: f64,
     /// Seed of the session failures.
     pub seed: u64,
+    /// A voice-enabled transceiver's calls are dropped this long after
+    /// they connect (`None`: never).
+    pub call_drop_after: Option<Duration>,
+    /// Calls are dropped once they have carried this many bytes, both
+    /// ways together; the bytes past it are lost (`None`: never).
+    pub call_drop_bytes: Option<u64>,
 }
 
 impl TransceiverConfig {
@@ -79,6 +88,8 @@ impl TransceiverConfig {
             radio: RadioConfig::default(),
             session_failure: 0.0,
             seed: 1,
+            call_drop_after: None,
+            call_drop_bytes: None,
         }
     }
 }
@@ -103,6 +114,9 @@ pub enum TxInput {
     CallData(Vec<u8>),
     /// The far end hung up, or the call dropped.
     CallEnded,
+    /// Drop the call now (a fault): the far end is hung up on and the
+    /// host told `NO CARRIER`.
+    DropCall,
 }
 
 /// What to do.
@@ -144,6 +158,10 @@ struct Call {
     last_host: Instant,
     /// `+++` read then: command mode once the guard passes in silence.
     escape: Option<Instant>,
+    /// Connected then.
+    since: Instant,
+    /// Bytes carried both ways.
+    bytes: u64,
 }
 
 /// The gateway's part of a session.
@@ -182,6 +200,11 @@ pub struct TransceiverLog {
     pub rings: u32,
     /// Calls connected.
     pub calls: u32,
+    /// Calls dropped by a fault (`NO CARRIER` while connected, not by the
+    /// far end or `ATH`).
+    pub calls_dropped: u32,
+    /// Bytes carried on calls: from the host to the far end, and back.
+    pub call_bytes: (u64, u64),
 }
 
 /// The emulated transceiver.
@@ -277,6 +300,7 @@ impl Transceiver {
                     c.up = true;
                     c.data = true;
                     c.last_host = now;
+                    c.since = now;
                     self.log.calls += 1;
                     self.write(b"\r\nCONNECT 19200\r\n".to_vec());
                 }
@@ -288,13 +312,23 @@ impl Transceiver {
             }
             TxInput::CallData(bytes) => {
                 if self.call.is_some_and(|c| c.data) {
+                    let (bytes, cut) = self.carry(bytes);
+                    self.log.call_bytes.1 += bytes.len() as u64;
                     self.write(bytes);
+                    if cut {
+                        self.drop_call();
+                    }
                 }
             }
             TxInput::CallEnded => {
                 if self.call.take().is_some_and(|c| c.up) {
                     self.reader.expect_lines();
                     self.write(b"\r\nNO CARRIER\r\n".to_vec());
+                }
+            }
+            TxInput::DropCall => {
+                if self.call.is_some_and(|c| c.up) {
+                    self.drop_call();
                 }
             }
         }
@@ -304,10 +338,43 @@ impl Transceiver {
         std::mem::take(&mut self.out)
     }
 
+    /// The share of `bytes` a call carries before `call_drop_bytes`, and
+    /// whether the call is to drop after them.
+    fn carry(&mut self, mut bytes: Vec<u8>) -> (Vec<u8>, bool) {
+        let Some(call) = &mut self.call else {
+            return (Vec::new(), false);
+        };
+        let Some(limit) = self.config.call_drop_bytes else {
+            call.bytes += bytes.len() as u64;
+            return (bytes, false);
+        };
+        let room = limit.saturating_sub(call.bytes);
+        if (bytes.len() as u64) < room {
+            call.bytes += bytes.len() as u64;
+            return (bytes, false);
+        }
+        bytes.truncate(room as usize);
+        call.bytes = limit;
+        (bytes, true)
+    }
+
+    /// A fault ends the call: the far end is hung up on, the host told.
+    fn drop_call(&mut self) {
+        if self.call.take().is_some() {
+            self.log.calls_dropped += 1;
+            self.out.push(TxOutput::HangUp);
+            self.reader.expect_lines();
+            self.write(b"\r\nNO CARRIER\r\n".to_vec());
+        }
+    }
+
     /// When the next [`TxInput::Tick`] is due.
     pub fn next_deadline(&self) -> Option<Instant> {
         [
             self.call.and_then(|c| c.escape).map(|t| t + ESCAPE_GUARD),
+            self.call
+                .filter(|c| c.up)
+                .and_then(|c| self.config.call_drop_after.map(|d| c.since + d)),
             self.session.map(|s| s.ends),
             self.writing.map(|(_, d)| d),
             self.radio.next_change(),
@@ -434,6 +501,8 @@ impl Transceiver {
                         data: false,
                         last_host: self.now,
                         escape: None,
+                        since: self.now,
+                        bytes: 0,
                     });
                     self.out.push(TxOutput::Dial { number });
                 }
@@ -496,12 +565,31 @@ impl Transceiver {
                 self.out.push(TxOutput::CallData(b"+++".to_vec()));
             }
             call.last_host = self.now;
-            self.out.push(TxOutput::CallData(bytes));
+            self.call = Some(call);
+            let (bytes, cut) = self.carry(bytes);
+            self.log.call_bytes.0 += bytes.len() as u64;
+            if !bytes.is_empty() {
+                self.out.push(TxOutput::CallData(bytes));
+            }
+            if cut {
+                self.drop_call();
+            }
+            return;
         }
         self.call = Some(call);
     }
 
     fn timers(&mut self) {
+        let dropped = self.call.is_some_and(|c| {
+            c.up && (self
+                .config
+                .call_drop_after
+                .is_some_and(|d| c.since + d <= self.now)
+                || !self.radio.now().1)
+        });
+        if dropped {
+            self.drop_call();
+        }
         if let Some(call) = &mut self.call {
             if call.escape.is_some_and(|t| t + ESCAPE_GUARD <= self.now) {
                 call.escape = None;
