@@ -55,7 +55,7 @@ mod tests;
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, DriverConfig, IridiumDriverConfig,
+    driver_config::ConnectionType, DriverConfig, IridiumDeviceType, IridiumDriverConfig,
 };
 
 use super::frame::{self, Direction};
@@ -156,6 +156,52 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     ] {
         if zero {
             problems.push(Problem::new(format!("iridium.{field}"), "must be above 0"));
+        }
+    }
+    if let Some(remote) = &iridium.remote {
+        let number = remote.iridium_number.trim();
+        if number.is_empty()
+            || !number
+                .chars()
+                .all(|c| c.is_ascii_digit() || matches!(c, '+' | '*' | '#'))
+        {
+            problems.push(Problem::new(
+                "iridium.remote.iridium_number",
+                format!(
+                    "{:?} is not a number to dial (digits, with + * # at most; e.g. \"00881600005xxx\")",
+                    remote.iridium_number
+                ),
+            ));
+        }
+        if !(0..=frame::MAX_MODEM_ID).contains(&remote.modem_id) {
+            problems.push(Problem::new(
+                "iridium.remote.modem_id",
+                format!(
+                    "{} does not fit the Iridium header (modem ids 0-30)",
+                    remote.modem_id
+                ),
+            ));
+        }
+        if iridium.device() != IridiumDeviceType::DeviceVoiceEnabledIsu {
+            problems.push(Problem::new(
+                "iridium.remote",
+                format!(
+                    "RUDICS calls need a voice-enabled transceiver (device: DEVICE_VOICE_ENABLED_ISU), not {}; leave remote out for SBD only",
+                    iridium.device().as_str_name()
+                ),
+            ));
+        }
+        for (field, value) in [
+            ("dial_attempts", iridium.dial_attempts()),
+            ("hangup_seconds_after_empty", iridium.hangup_seconds_after_empty()),
+            ("handshake_hangup_seconds", iridium.handshake_hangup_seconds()),
+        ] {
+            if value < 1 {
+                problems.push(Problem::new(
+                    format!("iridium.{field}"),
+                    format!("{value}: must be at least 1 for RUDICS calls"),
+                ));
+            }
         }
     }
     for (i, line) in iridium.config.iter().enumerate() {

@@ -205,6 +205,8 @@ pub struct TransceiverLog {
     pub calls_dropped: u32,
     /// Bytes carried on calls: from the host to the far end, and back.
     pub call_bytes: (u64, u64),
+    /// Bytes of the SBD messages sent (MO) and received (MT).
+    pub sbd_bytes: (u64, u64),
 }
 
 /// The emulated transceiver.
@@ -651,14 +653,16 @@ impl Transceiver {
             return;
         }
         let momsn = self.momsn;
-        if self.mo.is_some() {
+        if let Some(mo) = &self.mo {
             self.momsn = self.momsn.wrapping_add(1);
             self.log.mo_sent += 1;
+            self.log.sbd_bytes.0 += mo.len() as u64;
         }
         self.log.sessions_ok += 1;
         let (mt_status, mtmsn, length) = match reply.mt {
             Some((message, mtmsn)) => {
                 let length = message.len() as u16;
+                self.log.sbd_bytes.1 += message.len() as u64;
                 self.mt = Some(message);
                 self.mtmsn = i32::from(mtmsn);
                 self.log.mt_received += 1;
