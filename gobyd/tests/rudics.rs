@@ -19,7 +19,9 @@ use std::time::{Duration, Instant};
 
 use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayHandle};
 use modemdriver::iridium::emulator::transceiver::{TransceiverConfig, TransceiverLog};
-use modemdriver::iridium::emulator::{self, TransceiverControl, TransceiverHandle, TransceiverPort};
+use modemdriver::iridium::emulator::{
+    self, TransceiverControl, TransceiverHandle, TransceiverPort,
+};
 use protos::goby::acomms::protobuf::IridiumDeviceType;
 use support::daemon::{free_tcp_port, scratch, Gobyd};
 use support::iridium::{publish, settle, times, IMEI, SHORE, VEHICLE};
@@ -137,6 +139,14 @@ fn node(id: i32, rig: &Rig, data_dir: &Path, rudics: bool) -> Node {
         .raw_log(true)
 }
 
+/// What [`exchange`] publishes.
+struct Plan {
+    rounds: usize,
+    per_round: usize,
+    spacing: Duration,
+    drop_call: bool,
+}
+
 struct Run {
     latency: String,
     log: TransceiverLog,
@@ -144,17 +154,21 @@ struct Run {
 }
 
 /// Both daemons over `rig`; `rounds` batches of `per_round` Commands each
-/// way, each batch settled (delivered and acked) before the next; with
+/// way (published `spacing` apart), each batch settled (delivered and acked) before the next; with
 /// `drop_call`, the call is dropped once in the second batch.
 fn exchange(
     runtime: &tokio::runtime::Runtime,
     rig: Rig,
     dir: &Path,
     rudics: bool,
-    rounds: usize,
-    per_round: usize,
-    drop_call: bool,
+    plan: Plan,
 ) -> Run {
+    let Plan {
+        rounds,
+        per_round,
+        spacing,
+        drop_call,
+    } = plan;
     let data: [PathBuf; 2] = [dir.join("vehicle"), dir.join("shore")];
     let configs: Vec<PathBuf> = [VEHICLE, SHORE]
         .iter()
@@ -179,7 +193,7 @@ fn exchange(
             publish(&mut shore, VEHICLE, &note);
             sent.push((1, note));
             // Messages published apart, as a mission's would be.
-            std::thread::sleep(Duration::from_millis(300));
+            std::thread::sleep(spacing);
         }
         if drop_call && round == 1 {
             // Wait for a call carrying this batch, then drop it.
@@ -229,7 +243,11 @@ fn micros_now() -> i64 {
 
 /// Each direction's median time from publication to delivery and to the
 /// ack at the sender, seconds.
-fn latency(sent: &[(usize, String)], published: &HashMap<String, i64>, data: &[PathBuf; 2]) -> String {
+fn latency(
+    sent: &[(usize, String)],
+    published: &HashMap<String, i64>,
+    data: &[PathBuf; 2],
+) -> String {
     let mut parts = Vec::new();
     for (from, name) in [(0usize, "vehicle to shore"), (1, "shore to vehicle")] {
         let got = times(&data[1 - from], "in");
@@ -247,7 +265,8 @@ fn latency(sent: &[(usize, String)], published: &HashMap<String, i64>, data: &[P
         }
         let median = |v: &mut Vec<f64>| {
             v.sort_by(f64::total_cmp);
-            v.get(v.len() / 2).map_or("none".into(), |m| format!("{m:.2} s"))
+            v.get(v.len() / 2)
+                .map_or("none".into(), |m| format!("{m:.2} s"))
         };
         parts.push(format!(
             "{name}: delivered median {}, acked median {}",
@@ -272,7 +291,18 @@ fn vehicle_and_shore_exchange_acked_commands_on_rudics_calls_that_drop() {
     let dir = scratch("rudics", "exchange");
     // Every call drops after 250 bytes (mid-packet), and one on demand.
     let rig = runtime.block_on(emulators(&dir, Some(250)));
-    let run = exchange(&runtime, rig, &dir, true, 3, 4, true);
+    let run = exchange(
+        &runtime,
+        rig,
+        &dir,
+        true,
+        Plan {
+            rounds: 3,
+            per_round: 4,
+            spacing: Duration::from_millis(300),
+            drop_call: true,
+        },
+    );
     println!(
         "rudics exchange: {} messages; {}; transceiver: {} calls, {} dropped, {:?} bytes on calls (up, down), {} SBD sessions",
         run.messages,
@@ -297,7 +327,18 @@ fn rudics_against_sbd() {
         let name = if rudics { "rudics" } else { "sbd" };
         let dir = scratch("rudics", &format!("against-{name}"));
         let rig = runtime.block_on(emulators(&dir, None));
-        let run = exchange(&runtime, rig, &dir, rudics, 1, 8, false);
+        let run = exchange(
+            &runtime,
+            rig,
+            &dir,
+            rudics,
+            Plan {
+                rounds: 1,
+                per_round: 8,
+                spacing: Duration::from_millis(1500),
+                drop_call: false,
+            },
+        );
         let each = run.messages as f64 / 2.0;
         let (up, down) = if rudics {
             run.log.call_bytes
@@ -312,7 +353,10 @@ fn rudics_against_sbd() {
         ));
         let _ = std::fs::remove_dir_all(&dir);
     }
-    println!("| link | latency (8 Commands each way) | bytes up per message | bytes down per message |");
+    // Bytes: all the transceiver carried each way (calls: the hello, the
+    // packets, acks and bye; SBD: the MO and MT messages, acks included),
+    // per message sent each way.
+    println!("| link | latency, publication to delivery and to ack (8 Commands each way, 1.5 s apart) | bytes up per message | bytes down per message |");
     println!("|---|---|---|---|");
     for row in rows {
         println!("{row}");

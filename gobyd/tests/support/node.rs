@@ -926,7 +926,10 @@ impl Iridium {
         let close = if self.shore_iridium.is_empty() {
             "  }\n}\n".to_string()
         } else {
-            format!("  }}\n  iridium {{ {} }}\n}}\n", self.shore_iridium.join(" "))
+            format!(
+                "  }}\n  iridium {{ {} }}\n}}\n",
+                self.shore_iridium.join(" ")
+            )
         };
         match &self.kind {
             IridiumKind::Vehicle(path) => format!(

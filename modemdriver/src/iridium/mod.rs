@@ -23,8 +23,8 @@ pub mod frame;
 pub mod reader;
 pub mod rockblock;
 pub mod rudics;
-pub mod shore_rudics;
 pub mod shore;
+pub mod shore_rudics;
 pub mod status;
 
 pub use driver::IridiumDriver;

@@ -73,11 +73,11 @@ use tokio::task::JoinHandle;
 
 use super::directip::{self, disposition, MoMessage, MtConfirmation, MtMessage};
 use super::frame::{self, Direction};
-use super::rudics;
-use super::shore_rudics::{CallId, CallOutput, CallSettings, RudicsCalls};
 use super::rockblock::http::{self, HttpUrl};
 use super::rockblock::webhook::{self, WebhookConfig, WebhookEvent};
 use super::rockblock::{JwtVerifier, MtReply, MtRequest};
+use super::rudics;
+use super::shore_rudics::{CallId, CallOutput, CallSettings, RudicsCalls};
 use crate::check::{self, Problem};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
@@ -241,7 +241,9 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         } else if port == shore.mo_sbd_server_port() {
             problems.push(Problem::new(
                 "iridium_shore.rudics_server_port",
-                format!("{port} is also mo_sbd_server_port: the RUDICS server needs a port of its own"),
+                format!(
+                    "{port} is also mo_sbd_server_port: the RUDICS server needs a port of its own"
+                ),
             ));
         }
         if device != IridiumDeviceType::DeviceVoiceEnabledIsu {
@@ -252,8 +254,16 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         }
         let iridium = config.iridium.clone().unwrap_or_default();
         for (field, value, min) in [
-            ("hangup_seconds_after_empty", iridium.hangup_seconds_after_empty(), 1),
-            ("handshake_hangup_seconds", iridium.handshake_hangup_seconds(), 1),
+            (
+                "hangup_seconds_after_empty",
+                iridium.hangup_seconds_after_empty(),
+                1,
+            ),
+            (
+                "handshake_hangup_seconds",
+                iridium.handshake_hangup_seconds(),
+                1,
+            ),
             ("target_bit_rate", iridium.target_bit_rate(), 1),
         ] {
             if value < min {
@@ -543,7 +553,10 @@ async fn rudics_server(listener: TcpListener, tx: mpsc::UnboundedSender<CallEven
                 match reader.read(&mut buf).await {
                     Ok(0) | Err(_) => break,
                     Ok(n) => {
-                        if read_tx.send(CallEvent::Bytes(id, buf[..n].to_vec())).is_err() {
+                        if read_tx
+                            .send(CallEvent::Bytes(id, buf[..n].to_vec()))
+                            .is_err()
+                        {
                             return;
                         }
                     }
@@ -771,8 +784,8 @@ impl Shore {
                             mt.src()
                         ),
                     });
-                    let acked = !self.deferred_ack
-                        || self.acked.contains(&(mt.src(), mt.frame_start()));
+                    let acked =
+                        !self.deferred_ack || self.acked.contains(&(mt.src(), mt.frame_start()));
                     if acked && Acknowledgement::wanted(&mt, &[self.modem_id]) {
                         acks.extend(self.ack_of(Acknowledgement::all(mt)));
                     }

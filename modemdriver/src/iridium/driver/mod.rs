@@ -168,7 +168,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             problems.push(Problem::new(
                 "iridium.remote.iridium_number",
                 format!(
-                    "{:?} is not a number to dial (digits, with + * # at most; e.g. \"00881600005xxx\")",
+                    "{:?} is not a number to dial (digits, with + * # at most; e.g. \"0088160000500\")",
                     remote.iridium_number
                 ),
             ));
@@ -193,8 +193,14 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         }
         for (field, value) in [
             ("dial_attempts", iridium.dial_attempts()),
-            ("hangup_seconds_after_empty", iridium.hangup_seconds_after_empty()),
-            ("handshake_hangup_seconds", iridium.handshake_hangup_seconds()),
+            (
+                "hangup_seconds_after_empty",
+                iridium.hangup_seconds_after_empty(),
+            ),
+            (
+                "handshake_hangup_seconds",
+                iridium.handshake_hangup_seconds(),
+            ),
         ] {
             if value < 1 {
                 problems.push(Problem::new(
