@@ -872,6 +872,53 @@ mod tests {
             .all(|c| FAILURE_CODES.contains(c)));
     }
 
+    #[test]
+    fn calls_drop_after_a_byte_budget_a_time_or_on_demand() {
+        let t0 = Instant::now();
+        let mut config = TransceiverConfig::new("300234010753370");
+        config.device = IridiumDeviceType::DeviceVoiceEnabledIsu;
+        config.call_drop_bytes = Some(10);
+        config.call_drop_after = Some(Duration::from_secs(60));
+        let mut t = Transceiver::new(config, t0);
+        host(&mut t, t0, "ATE0\r");
+        assert_eq!(host(&mut t, t0, "ATD123\r"), "<dial 123>");
+        assert_eq!(
+            written(t.handle(t0, TxInput::CallConnected)),
+            "\r\nCONNECT 19200\r\n"
+        );
+        assert_eq!(host(&mut t, t0, "abcdef"), "<call abcdef>");
+        // Six bytes up, then six down: the last two are past the budget.
+        assert_eq!(
+            written(t.handle(t0, TxInput::CallData(b"ghijkl".to_vec()))),
+            "ghij<hang up>\r\nNO CARRIER\r\n"
+        );
+        assert_eq!((t.log.calls, t.log.calls_dropped), (1, 1));
+        assert_eq!(t.log.call_bytes, (6, 4));
+        // Back in command mode; the next call drops after a minute.
+        assert_eq!(host(&mut t, t0, "AT\r"), "OK\r\n");
+        host(&mut t, t0, "ATD123\r");
+        t.handle(t0, TxInput::CallConnected);
+        assert_eq!(t.next_deadline(), Some(t0 + Duration::from_secs(60)));
+        assert_eq!(
+            written(t.handle(t0 + Duration::from_secs(60), TxInput::Tick)),
+            "<hang up>\r\nNO CARRIER\r\n"
+        );
+        // On demand; the far end hanging up is not a drop.
+        host(&mut t, t0, "ATD123\r");
+        t.handle(t0, TxInput::CallConnected);
+        assert_eq!(
+            written(t.handle(t0, TxInput::DropCall)),
+            "<hang up>\r\nNO CARRIER\r\n"
+        );
+        host(&mut t, t0, "ATD123\r");
+        t.handle(t0, TxInput::CallConnected);
+        assert_eq!(
+            written(t.handle(t0, TxInput::CallEnded)),
+            "\r\nNO CARRIER\r\n"
+        );
+        assert_eq!((t.log.calls, t.log.calls_dropped), (4, 3));
+    }
+
     proptest! {
         #[test]
         fn any_host_bytes_never_panic(chunks in proptest::collection::vec(
