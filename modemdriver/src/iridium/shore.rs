@@ -656,7 +656,9 @@ impl Shore {
                     .map(Work::Ack)
                     .or_else(|| waiting.pop_front());
                 if let Some(work) = next {
-                    under_way = self.begin(work, &events).await;
+                    under_way = self
+                        .begin(work, calls.as_mut(), &mut writers, &events)
+                        .await;
                     continue;
                 }
             }
@@ -844,9 +846,12 @@ impl Shore {
     }
 
     /// Fills (for data) and sends an MT message; `None` when nothing goes.
+    /// A frame for a vehicle on a call goes on the call (as Goby3's).
     async fn begin(
         &mut self,
         work: Work,
+        calls: Option<&mut RudicsCalls>,
+        writers: &mut HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>>,
         events: &EventSink,
     ) -> Option<(Work, oneshot::Receiver<MtOutcome>)> {
         let mt = match work {
@@ -879,6 +884,23 @@ impl Shore {
             }
         };
         let is_ack = mt.r#type() == TransmissionType::Ack;
+        if let Some(c) = calls {
+            if c.call_of(mt.dest()).is_some() {
+                let mut on_call = mt.clone();
+                on_call.rate = Some(frame::RATE_RUDICS);
+                if let Ok(bytes) = frame::encode_message(&on_call) {
+                    let now = tokio::time::Instant::now();
+                    if let Some(out) = c.send(mt.dest(), rudics::encode(&bytes), now) {
+                        let mut none = VecDeque::new();
+                        self.call_outputs(vec![out], writers, c, &mut none, events);
+                        if !is_ack {
+                            self.finished(Work::Data(on_call), Ok(()), events);
+                        }
+                        return None;
+                    }
+                }
+            }
+        }
         let fail = |mt: ModemTransmission, reason: String| {
             if is_ack {
                 events.status(DriverStatus::LinkError {
