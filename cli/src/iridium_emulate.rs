@@ -104,6 +104,24 @@ pub struct EmulateIridiumArgs {
     /// Probability that an MT POST is answered FAILED,99 (System Error).
     #[arg(long, default_value_t = 0.0)]
     pub rockblock_failure: f64,
+    /// Emulate voice-enabled transceivers (a 9523: SBD limits of 1960/1890
+    /// bytes, and RUDICS calls with ATD) rather than 9603s.
+    #[arg(long)]
+    pub voice: bool,
+    /// The shore's RUDICS server (its rudics_server_port), where the
+    /// gateway connects every call a voice-enabled transceiver dials
+    /// (default: calls are answered NO ANSWER).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub rudics_shore: Option<SocketAddr>,
+    /// Seconds a call takes to connect (a real one: 10 to 20).
+    #[arg(long, default_value_t = 1.0)]
+    pub dial_seconds: f64,
+    /// Drop every call this many seconds after it connects (NO CARRIER).
+    #[arg(long, value_name = "SECONDS")]
+    pub call_drop_seconds: Option<f64>,
+    /// Drop every call once it has carried this many bytes (both ways).
+    #[arg(long, value_name = "BYTES")]
+    pub call_drop_bytes: Option<u64>,
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
@@ -170,6 +188,18 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
     };
     let session_time = seconds(args.session_seconds, "--session-seconds", false)?;
     let session_failure = probability(args.session_failure, "--session-failure")?;
+    let call_drop_after = args
+        .call_drop_seconds
+        .map(|d| seconds(d, "--call-drop-seconds", false))
+        .transpose()?;
+    if args.call_drop_bytes == Some(0) {
+        return Err(CliError::setup("--call-drop-bytes must be above 0"));
+    }
+    let device = if args.voice {
+        protos::goby::acomms::protobuf::IridiumDeviceType::DeviceVoiceEnabledIsu
+    } else {
+        protos::goby::acomms::protobuf::IridiumDeviceType::DeviceIridium96029603
+    };
     let transceivers = args
         .imeis
         .iter()
@@ -183,6 +213,9 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
             },
             session_failure,
             seed: args.seed.wrapping_add(1000 + i as u64),
+            device,
+            call_drop_after,
+            call_drop_bytes: args.call_drop_bytes,
             ..TransceiverConfig::new(imei)
         })
         .collect();
@@ -195,6 +228,8 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
         mt_bind: args.mt_directip,
         mt_limit: args.mt_limit,
         ring_repeat: seconds(args.ring_repeat_seconds, "--ring-repeat-seconds", false)?,
+        rudics_shore: args.rudics_shore,
+        dial_time: seconds(args.dial_seconds, "--dial-seconds", true)?,
         ..GatewayConfig::default()
     };
     Ok((transceivers, gateway))
@@ -271,6 +306,15 @@ async fn report(
             }
             if now.rings > seen.rings {
                 eprintln!("transceiver {imei}: ring alert (SBDRING)");
+            }
+            if now.calls > seen.calls {
+                eprintln!("transceiver {imei}: call connected ({} in all)", now.calls);
+            }
+            if now.calls_dropped > seen.calls_dropped {
+                eprintln!(
+                    "transceiver {imei}: call dropped (NO CARRIER; {} dropped in all)",
+                    now.calls_dropped
+                );
             }
             *seen = now;
         }
@@ -394,6 +438,9 @@ pub fn emulate_iridium(
                 mo.map_or("nowhere".to_string(), |a| a.to_string()),
                 gateway.mt_addr
             )?,
+        }
+        if let Some(shore) = args.rudics_shore {
+            writeln!(stdout, "rudics: calls to {shore}")?;
         }
         stdout.flush()?;
         tokio::select! {

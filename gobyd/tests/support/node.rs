@@ -826,6 +826,8 @@ impl Evologics {
 pub struct Iridium {
     kind: IridiumKind,
     settings: Vec<String>,
+    device: String,
+    shore_iridium: Vec<String>,
 }
 
 #[derive(Debug, Clone)]
@@ -850,6 +852,8 @@ impl Iridium {
         Iridium {
             kind: IridiumKind::Vehicle(path.to_path_buf()),
             settings: Vec::new(),
+            device: "DEVICE_IRIDIUM_9602_9603".into(),
+            shore_iridium: Vec::new(),
         }
     }
 
@@ -866,6 +870,8 @@ impl Iridium {
                     .collect(),
             },
             settings: Vec::new(),
+            device: "DEVICE_IRIDIUM_9602_9603".into(),
+            shore_iridium: Vec::new(),
         }
     }
 
@@ -890,6 +896,8 @@ impl Iridium {
                     .collect(),
             },
             settings: Vec::new(),
+            device: "DEVICE_IRIDIUM_9602_9603".into(),
+            shore_iridium: Vec::new(),
         }
     }
 
@@ -900,12 +908,34 @@ impl Iridium {
         self
     }
 
+    /// The transceivers' kind (`device: …`), a 9602/9603 unless told.
+    pub fn device(mut self, device: &str) -> Iridium {
+        self.device = device.to_string();
+        self
+    }
+
+    /// A field of the shore driver's `iridium { … }` block (its call
+    /// timers), in text format.
+    pub fn shore_iridium(mut self, field: &str) -> Iridium {
+        self.shore_iridium.push(field.to_string());
+        self
+    }
+
     fn render(&self) -> String {
         let extra = self.settings.join(" ");
+        let close = if self.shore_iridium.is_empty() {
+            "  }\n}\n".to_string()
+        } else {
+            format!(
+                "  }}\n  iridium {{ {} }}\n}}\n",
+                self.shore_iridium.join(" ")
+            )
+        };
         match &self.kind {
             IridiumKind::Vehicle(path) => format!(
-                "driver {{\n  driver_type: DRIVER_IRIDIUM\n  serial_port: \"{}\"\n  iridium {{ device: DEVICE_IRIDIUM_9602_9603 {extra} }}\n}}\n",
-                path.display()
+                "driver {{\n  driver_type: DRIVER_IRIDIUM\n  serial_port: \"{}\"\n  iridium {{ device: {} {extra} }}\n}}\n",
+                path.display(),
+                self.device
             ),
             IridiumKind::Shore {
                 mo_port,
@@ -916,7 +946,8 @@ impl Iridium {
                     "driver {{\n  driver_type: DRIVER_IRIDIUM_SHORE\n  iridium_shore {{\n    \
                      mo_sbd_server_address: \"127.0.0.1\" mo_sbd_server_port: {mo_port}\n    \
                      mt_sbd_server_address: \"127.0.0.1\" mt_sbd_server_port: {mt_port}\n    \
-                     device: DEVICE_IRIDIUM_9602_9603\n"
+                     device: {}\n",
+                    self.device
                 );
                 for (id, imei) in vehicles {
                     text += &format!("    modem_id_to_imei {{ modem_id: {id} imei: \"{imei}\" }}\n");
@@ -924,7 +955,7 @@ impl Iridium {
                 if !extra.is_empty() {
                     text += &format!("    {extra}\n");
                 }
-                text += "  }\n}\n";
+                text += &close;
                 text
             }
             IridiumKind::Rockblock {
@@ -950,7 +981,7 @@ impl Iridium {
                 if !extra.is_empty() {
                     text += &format!("    {extra}\n");
                 }
-                text += "  }\n}\n";
+                text += &close;
                 text
             }
         }

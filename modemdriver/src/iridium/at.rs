@@ -61,6 +61,11 @@ pub enum AtCommand {
     Imei,
     /// `AT+SBDS`: the buffers' status.
     BufferStatus,
+    /// `ATD<number>`: dial a data (RUDICS) call; answered `CONNECT <rate>`,
+    /// or `NO CARRIER`, `BUSY`, `NO ANSWER`, `ERROR`.
+    Dial(String),
+    /// `ATH`: hang up (after the `+++` escape back to command mode).
+    Hangup,
     /// Another command: its text after `AT`.
     Other(String),
 }
@@ -87,6 +92,8 @@ impl fmt::Display for AtCommand {
             AtCommand::AutoRegistration(n) => write!(f, "AT+SBDAREG={n}"),
             AtCommand::Imei => write!(f, "AT+CGSN"),
             AtCommand::BufferStatus => write!(f, "AT+SBDS"),
+            AtCommand::Dial(number) => write!(f, "ATD{number}"),
+            AtCommand::Hangup => write!(f, "ATH"),
             AtCommand::Other(text) => write!(f, "AT{text}"),
         }
     }
@@ -165,6 +172,17 @@ impl AtCommand {
             AtCommand::Imei
         } else if upper == "+SBDS" {
             AtCommand::BufferStatus
+        } else if upper == "H" || upper == "H0" {
+            AtCommand::Hangup
+        } else if let Some(v) = arg("D") {
+            let number = v.trim_start_matches(['T', 'P']).trim();
+            if number.is_empty() {
+                return Err(AtError::Malformed {
+                    what: "ATD",
+                    reason: "no number to dial".into(),
+                });
+            }
+            AtCommand::Dial(number.to_string())
         } else {
             AtCommand::Other(rest.to_string())
         })

@@ -8,6 +8,7 @@
 //! - [`reader`]: an AT serial stream split into lines and binary blocks.
 //! - [`driver`]: the vehicle's driver ([`IridiumDriver`]).
 //! - [`shore`]: the shore's driver over DirectIP or RockBLOCK ([`IridiumShoreDriver`]).
+//! - [`shore_rudics`]: the shore's RUDICS server (calls from vehicles), sans-IO.
 //! - [`directip`]: Iridium's DirectIP messages (MO, MT, confirmations).
 //! - [`rockblock`]: the RockBLOCK web service (MO webhook with its JWT, MT
 //!   POST).
@@ -23,6 +24,7 @@ pub mod reader;
 pub mod rockblock;
 pub mod rudics;
 pub mod shore;
+pub mod shore_rudics;
 pub mod status;
 
 pub use driver::IridiumDriver;

@@ -43,9 +43,19 @@
 //! flushes the vehicle's MT queue unless `flush_mt_queue` is set (Goby3
 //! always sets it, dropping MT messages the vehicle has not fetched yet);
 //! Goby3 checks RockBLOCK's token against a key built into it and not that
-//! the token's fields are the post's; RUDICS calls are not supported.
+//! the token's fields are the post's.
+//!
+//! RUDICS: with `device: DEVICE_VOICE_ENABLED_ISU` and `rudics_server_port`
+//! (Goby3's condition), calls are taken on a TCP listener at
+//! `mo_sbd_server_address`:`rudics_server_port` ([`super::shore_rudics`]):
+//! each vehicle's call is named by its first packet; frames read on it are
+//! handed up (once: a frame written again after a dropped call is acked
+//! again, not delivered again); acks to a vehicle on a call, and MT data
+//! for it, go on the call; while the call is up the driver asks the layer
+//! above for frames for that vehicle (`rate: 1`, at most
+//! `iridium.max_frame_size` bytes) at `iridium.target_bit_rate`.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
@@ -66,6 +76,8 @@ use super::frame::{self, Direction};
 use super::rockblock::http::{self, HttpUrl};
 use super::rockblock::webhook::{self, WebhookConfig, WebhookEvent};
 use super::rockblock::{JwtVerifier, MtReply, MtRequest};
+use super::rudics;
+use super::shore_rudics::{CallId, CallOutput, CallSettings, RudicsCalls};
 use crate::check::{self, Problem};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
@@ -219,7 +231,62 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             "must be above 0",
         ));
     }
+    if let Some(port) = shore.rudics_server_port {
+        let device = shore_config(config).device();
+        if !(1..=65535).contains(&port) {
+            problems.push(Problem::new(
+                "iridium_shore.rudics_server_port",
+                format!("{port} is not a TCP port"),
+            ));
+        } else if port == shore.mo_sbd_server_port() {
+            problems.push(Problem::new(
+                "iridium_shore.rudics_server_port",
+                format!(
+                    "{port} is also mo_sbd_server_port: the RUDICS server needs a port of its own"
+                ),
+            ));
+        }
+        if device != IridiumDeviceType::DeviceVoiceEnabledIsu {
+            problems.push(Problem::new(
+                "iridium_shore.rudics_server_port",
+                format!("calls come from voice-enabled transceivers: set device: DEVICE_VOICE_ENABLED_ISU (not {}), or leave rudics_server_port out", device.as_str_name()),
+            ));
+        }
+        let iridium = config.iridium.clone().unwrap_or_default();
+        for (field, value, min) in [
+            (
+                "hangup_seconds_after_empty",
+                iridium.hangup_seconds_after_empty(),
+                1,
+            ),
+            (
+                "handshake_hangup_seconds",
+                iridium.handshake_hangup_seconds(),
+                1,
+            ),
+            ("target_bit_rate", iridium.target_bit_rate(), 1),
+        ] {
+            if value < min {
+                problems.push(Problem::new(
+                    format!("iridium.{field}"),
+                    format!("{value}: must be at least {min} for RUDICS calls"),
+                ));
+            }
+        }
+    }
     problems
+}
+
+/// Whether the shore takes RUDICS calls (Goby3's condition: a
+/// voice-enabled device and `rudics_server_port`).
+pub fn rudics_enabled(config: &DriverConfig) -> bool {
+    let shore = shore_config(config);
+    shore.device() == IridiumDeviceType::DeviceVoiceEnabledIsu && shore.rudics_server_port.is_some()
+}
+
+/// Largest frame sent on a call: `iridium.max_frame_size` (1500, Goby3's).
+pub fn rudics_frame_bytes(config: &DriverConfig) -> u32 {
+    config.iridium.clone().unwrap_or_default().max_frame_size()
 }
 
 /// The problems of the RockBLOCK settings of an `SBD_ROCKBLOCK` section.
@@ -323,6 +390,23 @@ impl IridiumShoreDriver {
         let listener = TcpListener::bind(bind)
             .await
             .map_err(|e| DriverError::io(format!("{what} on {bind}"), e))?;
+        let rudics = if rudics_enabled(config) {
+            let at = SocketAddr::new(bind.ip(), shore.rudics_server_port() as u16);
+            let l = TcpListener::bind(at)
+                .await
+                .map_err(|e| DriverError::io(format!("RUDICS server on {at}"), e))?;
+            let iridium = config.iridium.clone().unwrap_or_default();
+            Some((
+                l,
+                CallSettings {
+                    handshake_hangup_seconds: iridium.handshake_hangup_seconds().max(1) as u32,
+                    hangup_seconds_after_empty: iridium.hangup_seconds_after_empty().max(1) as u32,
+                    target_bit_rate: iridium.target_bit_rate().max(1) as u32,
+                },
+            ))
+        } else {
+            None
+        };
         let shore_task = Shore {
             modem_id: config.modem_id(),
             max_frame_bytes: max_frame_bytes(config),
@@ -334,9 +418,11 @@ impl IridiumShoreDriver {
             next_frame: super::driver::first_frame_number(),
             next_client_id: 1,
             sent: VecDeque::new(),
+            rudics_frame_bytes: rudics_frame_bytes(config),
+            acked: VecDeque::new(),
         };
         Ok(Driver::spawn("iridium_shore", move |ctx| {
-            shore_task.run(listener, ctx)
+            shore_task.run(listener, rudics, ctx)
         }))
     }
 }
@@ -426,6 +512,69 @@ struct Shore {
     next_frame: u32,
     next_client_id: u32,
     sent: VecDeque<SentFrame>,
+    rudics_frame_bytes: u32,
+    /// Frames acked by the layer above (deferred acks): (src, frame).
+    acked: VecDeque<(i32, u32)>,
+}
+
+/// What the RUDICS server's tasks tell the driver.
+#[derive(Debug)]
+enum CallEvent {
+    Connected(CallId, String, mpsc::UnboundedSender<Vec<u8>>),
+    Bytes(CallId, Vec<u8>),
+    Closed(CallId),
+}
+
+/// Accepts calls; each connection's bytes go to `tx`, and what is sent to
+/// its writer goes on it (dropping the writer closes it).
+async fn rudics_server(listener: TcpListener, tx: mpsc::UnboundedSender<CallEvent>) {
+    let mut next: CallId = 0;
+    loop {
+        let Ok((stream, peer)) = listener.accept().await else {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            continue;
+        };
+        next += 1;
+        let id = next;
+        let _ = stream.set_nodelay(true);
+        let (mut reader, mut writer) = stream.into_split();
+        let (wtx, mut wrx) = mpsc::unbounded_channel::<Vec<u8>>();
+        if tx
+            .send(CallEvent::Connected(id, peer.to_string(), wtx))
+            .is_err()
+        {
+            return;
+        }
+        let read_tx = tx.clone();
+        let reading = tokio::spawn(async move {
+            use tokio::io::AsyncReadExt;
+            let mut buf = vec![0u8; 2048];
+            loop {
+                match reader.read(&mut buf).await {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => {
+                        if read_tx
+                            .send(CallEvent::Bytes(id, buf[..n].to_vec()))
+                            .is_err()
+                        {
+                            return;
+                        }
+                    }
+                }
+            }
+            let _ = read_tx.send(CallEvent::Closed(id));
+        });
+        tokio::spawn(async move {
+            while let Some(bytes) = wrx.recv().await {
+                if writer.write_all(&bytes).await.is_err() {
+                    break;
+                }
+            }
+            // Closed by the driver: the far end is hung up on.
+            let _ = writer.shutdown().await;
+            reading.abort();
+        });
+    }
 }
 
 /// The outcome of an MT message sent: `Err` says why it was not queued.
@@ -448,8 +597,20 @@ impl Shore {
             .map(|p| p.modem_id)
     }
 
-    async fn run(mut self, listener: TcpListener, mut ctx: DriverContext) {
+    async fn run(
+        mut self,
+        listener: TcpListener,
+        rudics: Option<(TcpListener, CallSettings)>,
+        mut ctx: DriverContext,
+    ) {
         let events = ctx.events.clone();
+        let (call_tx, mut call_rx) = mpsc::unbounded_channel::<CallEvent>();
+        let mut calls: Option<RudicsCalls> = None;
+        let mut writers: HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>> = HashMap::new();
+        let _rudics_side = rudics.map(|(l, settings)| {
+            calls = Some(RudicsCalls::new(settings));
+            AbortOnDrop(tokio::spawn(rudics_server(l, call_tx)))
+        });
         let (mo_tx, mut mo_rx) = mpsc::unbounded_channel::<MoInput>();
         let _mo_side = AbortOnDrop(match &self.service {
             Service::DirectIp { .. } => {
@@ -465,6 +626,29 @@ impl Shore {
         let mut under_way: Option<(Work, oneshot::Receiver<MtOutcome>)> = None;
         events.status(DriverStatus::Ready);
         loop {
+            if let Some(c) = calls.as_mut() {
+                // Acks to vehicles on a call go on it.
+                let now = tokio::time::Instant::now();
+                let mut kept = VecDeque::new();
+                while let Some(mut ack) = acks.pop_front() {
+                    if c.call_of(ack.dest()).is_none() {
+                        kept.push_back(ack);
+                        continue;
+                    }
+                    ack.rate = Some(frame::RATE_RUDICS);
+                    if let Ok(bytes) = frame::encode_message(&ack) {
+                        if let Some(out) = c.send(ack.dest(), rudics::encode(&bytes), now) {
+                            self.call_outputs(vec![out], &mut writers, c, &mut kept, &events);
+                        }
+                    }
+                }
+                acks = kept;
+                // Frames for vehicles on a call.
+                for modem in c.data_wanted(now) {
+                    let found = self.call_data(modem, c, &mut writers, &events).await;
+                    c.answered(modem, found, tokio::time::Instant::now());
+                }
+            }
             // Start the next MT message when the link is free.
             if under_way.is_none() {
                 let next = acks
@@ -472,7 +656,9 @@ impl Shore {
                     .map(Work::Ack)
                     .or_else(|| waiting.pop_front());
                 if let Some(work) = next {
-                    under_way = self.begin(work, &events).await;
+                    under_way = self
+                        .begin(work, calls.as_mut(), &mut writers, &events)
+                        .await;
                     continue;
                 }
             }
@@ -486,6 +672,9 @@ impl Shore {
                     Some(DriverCommand::Initiate(mt)) => {
                         if mt.r#type() == TransmissionType::Ack {
                             acks.push_back(mt);
+                        } else if mt.rate == Some(frame::RATE_RUDICS) && calls.is_some() {
+                            // As Goby3's: data at the RUDICS rate goes on
+                            // calls only, which ask for it themselves.
                         } else {
                             waiting.push_back(Work::Data(mt));
                             if waiting.len() > MAX_WAITING {
@@ -498,6 +687,10 @@ impl Shore {
                     }
                     Some(DriverCommand::Acknowledge(ack)) => {
                         if self.deferred_ack {
+                            self.acked.push_back((ack.received.src(), ack.received.frame_start()));
+                            while self.acked.len() > SENT_KEPT {
+                                self.acked.pop_front();
+                            }
                             acks.extend(self.ack_of(ack));
                         }
                     }
@@ -508,6 +701,40 @@ impl Shore {
                 Some(mo) = mo_rx.recv() => match mo {
                     MoInput::Arrival(arrival) => acks.extend(self.mo_message(arrival, &events)),
                     MoInput::Problem(status) => events.status(status),
+                },
+                Some(event) = call_rx.recv() => {
+                    if let Some(c) = calls.as_mut() {
+                        let now = tokio::time::Instant::now();
+                        let outs = match event {
+                            CallEvent::Connected(id, peer, writer) => {
+                                tracing::info!("RUDICS call {id} from {peer}");
+                                writers.insert(id, writer);
+                                c.connected(id, peer, now);
+                                Vec::new()
+                            }
+                            CallEvent::Bytes(id, bytes) => {
+                                events.emit(DriverEvent::Raw(RawMessage {
+                                    direction: RawDirection::Incoming,
+                                    bytes: bytes.clone(),
+                                    peer: Some(format!("RUDICS call {id}")),
+                                }));
+                                c.bytes(id, &bytes, now)
+                            }
+                            CallEvent::Closed(id) => {
+                                tracing::info!("RUDICS call {id} ended");
+                                writers.remove(&id);
+                                c.closed(id);
+                                Vec::new()
+                            }
+                        };
+                        self.call_outputs(outs, &mut writers, c, &mut acks, &events);
+                    }
+                },
+                () = crate::time::sleep_until_opt(calls.as_ref().and_then(RudicsCalls::next_deadline)) => {
+                    if let Some(c) = calls.as_mut() {
+                        let outs = c.tick(tokio::time::Instant::now());
+                        self.call_outputs(outs, &mut writers, c, &mut acks, &events);
+                    }
                 },
                 outcome = async {
                     match &mut under_way {
@@ -523,10 +750,108 @@ impl Shore {
         }
     }
 
+    /// Does what the calls ask.
+    fn call_outputs(
+        &mut self,
+        outs: Vec<CallOutput>,
+        writers: &mut HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>>,
+        calls: &mut RudicsCalls,
+        acks: &mut VecDeque<ModemTransmission>,
+        events: &EventSink,
+    ) {
+        for out in outs {
+            match out {
+                CallOutput::Write(id, bytes) => {
+                    events.emit(DriverEvent::Raw(RawMessage {
+                        direction: RawDirection::Outgoing,
+                        bytes: bytes.clone(),
+                        peer: Some(format!("RUDICS call {id}")),
+                    }));
+                    if let Some(w) = writers.get(&id) {
+                        let _ = w.send(bytes);
+                    }
+                }
+                CallOutput::Close(id) => {
+                    // Dropping the writer closes the connection once what
+                    // was written has gone.
+                    writers.remove(&id);
+                    calls.closed(id);
+                }
+                CallOutput::Received(mt) => acks.extend(self.deliver(mt, events)),
+                CallOutput::Duplicate(mt) => {
+                    events.status(DriverStatus::Skipped {
+                        reason: format!(
+                            "frame {} from modem {} taken already on an earlier call: not delivered again",
+                            mt.frame_start(),
+                            mt.src()
+                        ),
+                    });
+                    let acked =
+                        !self.deferred_ack || self.acked.contains(&(mt.src(), mt.frame_start()));
+                    if acked && Acknowledgement::wanted(&mt, &[self.modem_id]) {
+                        acks.extend(self.ack_of(Acknowledgement::all(mt)));
+                    }
+                }
+                CallOutput::Status(status) => events.status(status),
+            }
+        }
+    }
+
+    /// Asks the layer above for a frame for vehicle `modem` on its call and
+    /// writes it; whether there was one.
+    async fn call_data(
+        &mut self,
+        modem: i32,
+        calls: &mut RudicsCalls,
+        writers: &mut HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>>,
+        events: &EventSink,
+    ) -> bool {
+        let template = ModemTransmission {
+            src: Some(self.modem_id),
+            dest: Some(modem),
+            rate: Some(frame::RATE_RUDICS),
+            r#type: Some(TransmissionType::Data as i32),
+            max_num_frames: Some(1),
+            max_frame_bytes: Some(self.rudics_frame_bytes),
+            frame_start: Some(self.next_frame),
+            ..Default::default()
+        };
+        let filled = events.request_data(template, DATA_REQUEST_TIMEOUT).await;
+        if filled.frame.first().is_none_or(|f| f.is_empty()) {
+            return false;
+        }
+        self.next_frame = frame::next_frame_number(self.next_frame);
+        let bytes = match frame::encode_message(&filled) {
+            Ok(b) => b,
+            Err(e) => {
+                events.emit(DriverEvent::TransmitResult(TransmitResult {
+                    transmission: filled,
+                    outcome: TransmitOutcome::Failed(e.to_string()),
+                }));
+                return false;
+            }
+        };
+        match calls.send(modem, rudics::encode(&bytes), tokio::time::Instant::now()) {
+            Some(out) => {
+                let mut none = VecDeque::new();
+                self.call_outputs(vec![out], writers, calls, &mut none, events);
+                self.finished(Work::Data(filled), Ok(()), events);
+            }
+            None => events.emit(DriverEvent::TransmitResult(TransmitResult {
+                transmission: filled,
+                outcome: TransmitOutcome::Failed(format!("the call of modem {modem} ended")),
+            })),
+        }
+        true
+    }
+
     /// Fills (for data) and sends an MT message; `None` when nothing goes.
+    /// A frame for a vehicle on a call goes on the call (as Goby3's).
     async fn begin(
         &mut self,
         work: Work,
+        calls: Option<&mut RudicsCalls>,
+        writers: &mut HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>>,
         events: &EventSink,
     ) -> Option<(Work, oneshot::Receiver<MtOutcome>)> {
         let mt = match work {
@@ -559,6 +884,23 @@ impl Shore {
             }
         };
         let is_ack = mt.r#type() == TransmissionType::Ack;
+        if let Some(c) = calls {
+            if c.call_of(mt.dest()).is_some() {
+                let mut on_call = mt.clone();
+                on_call.rate = Some(frame::RATE_RUDICS);
+                if let Ok(bytes) = frame::encode_message(&on_call) {
+                    let now = tokio::time::Instant::now();
+                    if let Some(out) = c.send(mt.dest(), rudics::encode(&bytes), now) {
+                        let mut none = VecDeque::new();
+                        self.call_outputs(vec![out], writers, c, &mut none, events);
+                        if !is_ack {
+                            self.finished(Work::Data(on_call), Ok(()), events);
+                        }
+                        return None;
+                    }
+                }
+            }
+        }
         let fail = |mt: ModemTransmission, reason: String| {
             if is_ack {
                 events.status(DriverStatus::LinkError {
@@ -730,6 +1072,12 @@ impl Shore {
             }
         }
         mt.time = time.map(|t| t * 1_000_000);
+        self.deliver(mt, events)
+    }
+
+    /// A transmission read (MO message or call): an ack is credited, data
+    /// handed up; returns the acks to send at once.
+    fn deliver(&mut self, mut mt: ModemTransmission, events: &EventSink) -> Vec<ModemTransmission> {
         if mt.r#type() == TransmissionType::Ack {
             let src = mt.src();
             mt.unique_id = mt.acked_frame.first().and_then(|&f| {

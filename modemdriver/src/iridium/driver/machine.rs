@@ -23,6 +23,7 @@ use tokio::time::Instant;
 
 use super::super::at::{self, AtCommand, AtError, ModemLine, SessionReply};
 use super::super::reader::{Reader, Unit};
+use super::call::Calls;
 use super::session::Sessions;
 use crate::driver::{
     Acknowledgement, DriverCommand, DriverEvent, DriverStatus, RawDirection, RawMessage,
@@ -115,6 +116,10 @@ pub(super) enum Purpose {
     Session,
     /// `AT+SBDRB`.
     ReadMt,
+    /// `ATD<number>`, waiting for `CONNECT`.
+    Dial,
+    /// `ATH` after the escape.
+    Hangup,
 }
 
 /// An answer collected for the outstanding command.
@@ -186,6 +191,8 @@ pub struct Machine {
     pub(super) ready: bool,
     pub(super) pending: Option<Pending>,
     pub(super) sessions: Sessions,
+    /// RUDICS calls.
+    pub(super) calls: Calls,
     /// Signal strength (`+CIEV:0`), 0–5.
     pub(super) bars: Option<u8>,
     /// Network service (`+CIEV:1`), and since when it has been lacking.
@@ -215,6 +222,7 @@ impl Machine {
             ready: false,
             pending: None,
             sessions,
+            calls: Calls::new(),
             bars: None,
             service: None,
             no_service_since: None,
@@ -237,7 +245,13 @@ impl Machine {
             }
             Input::Tick => self.timers(),
             Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => self.answered(id, filled),
+            Input::Answer { id, filled } => {
+                if self.calls.awaits(id) {
+                    self.call_answered(id, filled)
+                } else {
+                    self.answered(id, filled)
+                }
+            }
             Input::Opened(ok) => self.opened(ok),
             Input::Disconnected(reason) => self.disconnected(reason),
         }
@@ -255,10 +269,16 @@ impl Machine {
         } else {
             None
         };
+        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
+            self.call_deadline()
+        } else {
+            None
+        };
         [
             command,
             reconnect,
             session,
+            call,
             self.sessions.request_deadline(),
         ]
         .into_iter()
@@ -268,7 +288,17 @@ impl Machine {
 
     /// Whether data request `id` is still awaited.
     pub fn awaits(&self, id: RequestId) -> bool {
-        self.sessions.awaits(id)
+        self.sessions.awaits(id) || self.calls.awaits(id)
+    }
+
+    /// Configured, and no command outstanding.
+    pub fn ready_for_work(&self) -> bool {
+        self.ready && self.pending.is_none()
+    }
+
+    /// RUDICS calls connected so far.
+    pub fn calls_connected(&self) -> u64 {
+        self.calls.connected
     }
 
     pub(super) fn emit(&mut self, event: DriverEvent) {
@@ -286,7 +316,7 @@ impl Machine {
         id
     }
 
-    fn write_raw(&mut self, bytes: Vec<u8>) {
+    pub(super) fn write_raw(&mut self, bytes: Vec<u8>) {
         self.emit(DriverEvent::Raw(RawMessage {
             direction: RawDirection::Outgoing,
             bytes: bytes.clone(),
@@ -298,7 +328,7 @@ impl Machine {
     /// Writes `command` and waits for its answer.
     pub(super) fn send(&mut self, command: AtCommand, purpose: Purpose) {
         let timeout = match purpose {
-            Purpose::Session => ms(self.settings.iridium.session_timeout_ms()),
+            Purpose::Session | Purpose::Dial => ms(self.settings.iridium.session_timeout_ms()),
             _ => ms(self.settings.iridium.command_timeout_ms()),
         };
         let bytes = command.to_bytes();
@@ -310,7 +340,7 @@ impl Machine {
             timeout,
             tries: 1,
             answer: None,
-            resend: purpose != Purpose::Session,
+            resend: purpose != Purpose::Session && purpose != Purpose::Dial,
         });
         if purpose == Purpose::ReadMt {
             self.reader.expect_mt_message();
@@ -338,7 +368,12 @@ impl Machine {
 
     /// Queues the start-up commands (again, after a reconnection or a
     /// transceiver that went silent).
+    pub(super) fn restart(&mut self) {
+        self.configure();
+    }
+
     fn configure(&mut self) {
+        self.calls.reset();
         self.ready = false;
         self.pending = None;
         self.reader.expect_lines();
@@ -374,6 +409,17 @@ impl Machine {
 
     /// A unit read from the transceiver.
     fn unit(&mut self, unit: Unit) {
+        if self.calls.data_mode() {
+            if let Unit::Line(line) = unit {
+                self.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Incoming,
+                    bytes: line.clone(),
+                    peer: None,
+                }));
+                self.call_line(line);
+                return;
+            }
+        }
         match unit {
             Unit::Line(line) => {
                 self.emit(DriverEvent::Raw(RawMessage {
@@ -449,6 +495,11 @@ impl Machine {
                 }
                 return;
             }
+            ModemLine::NoCarrier | ModemLine::Connect
+                if self.call_command_line(&line, &line.to_string()) =>
+            {
+                return;
+            }
             ModemLine::Ring | ModemLine::NoCarrier | ModemLine::Connect => {
                 self.status(DriverStatus::Unparseable {
                     line: line.to_string(),
@@ -518,6 +569,7 @@ impl Machine {
         }
         match pending.purpose {
             Purpose::Startup => self.startup_done(&pending.command, outcome),
+            Purpose::Dial | Purpose::Hangup => self.call_step(pending.purpose, outcome),
             _ => self.session_step(pending, outcome),
         }
     }
@@ -631,6 +683,9 @@ impl Machine {
             self.out.push(Output::Open);
         }
         self.request_timers();
+        if self.ready {
+            self.call_timers();
+        }
         let Some(pending) = &mut self.pending else {
             return;
         };
@@ -658,7 +713,9 @@ impl Machine {
             let purpose = pending.purpose;
             self.pending = None;
             self.reader.expect_lines();
-            if purpose == Purpose::Session {
+            if purpose == Purpose::Dial || purpose == Purpose::Hangup {
+                self.call_step(purpose, Outcome::NoAnswer);
+            } else if purpose == Purpose::Session {
                 // A session that never answered: failed (taken again with
                 // the others below).
                 self.session_step(
@@ -697,6 +754,12 @@ impl Machine {
                 return;
             }
             if !self.ready {
+                return;
+            }
+            if self.rudics_enabled() && self.next_call_step() {
+                continue;
+            }
+            if !self.calls.idle() {
                 return;
             }
             if !self.next_session_step() {

@@ -32,16 +32,20 @@
 //! ([`DriverStatus::Unparseable`](crate::DriverStatus::Unparseable)) and ignored; nothing the transceiver
 //! sends makes the driver panic.
 //!
-//! Not done: RUDICS calls (`rate: 1`, dialling `remote.iridium_number`):
-//! the RUDICS packet format is in [`super::rudics`], the call itself is
-//! not.
+//! RUDICS calls: with a voice-enabled transceiver (`device:
+//! DEVICE_VOICE_ENABLED_ISU`) and `remote.iridium_number` set, a
+//! transmission asked for at `rate: 1` (and any while a call is up) goes
+//! over a call to the shore (`ATD`, packets of [`super::rudics`], `bye`,
+//! `+++`, `ATH`); see [`call`].
 //!
 //! # Layout
 //!
 //! [`machine`] (inputs, outputs, AT commands and their answers),
-//! [`session`] (what each session carries and what follows it), [`shell`]
+//! [`session`] (what each session carries and what follows it), [`call`]
+//! (RUDICS calls), [`shell`]
 //! (the async task on the serial port).
 
+pub mod call;
 pub mod machine;
 pub mod session;
 pub mod shell;
@@ -51,7 +55,7 @@ mod tests;
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, DriverConfig, IridiumDriverConfig,
+    driver_config::ConnectionType, DriverConfig, IridiumDeviceType, IridiumDriverConfig,
 };
 
 use super::frame::{self, Direction};
@@ -152,6 +156,58 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     ] {
         if zero {
             problems.push(Problem::new(format!("iridium.{field}"), "must be above 0"));
+        }
+    }
+    if let Some(remote) = &iridium.remote {
+        let number = remote.iridium_number.trim();
+        if number.is_empty()
+            || !number
+                .chars()
+                .all(|c| c.is_ascii_digit() || matches!(c, '+' | '*' | '#'))
+        {
+            problems.push(Problem::new(
+                "iridium.remote.iridium_number",
+                format!(
+                    "{:?} is not a number to dial (digits, with + * # at most; e.g. \"0088160000500\")",
+                    remote.iridium_number
+                ),
+            ));
+        }
+        if !(0..=frame::MAX_MODEM_ID).contains(&remote.modem_id) {
+            problems.push(Problem::new(
+                "iridium.remote.modem_id",
+                format!(
+                    "{} does not fit the Iridium header (modem ids 0-30)",
+                    remote.modem_id
+                ),
+            ));
+        }
+        if iridium.device() != IridiumDeviceType::DeviceVoiceEnabledIsu {
+            problems.push(Problem::new(
+                "iridium.remote",
+                format!(
+                    "RUDICS calls need a voice-enabled transceiver (device: DEVICE_VOICE_ENABLED_ISU), not {}; leave remote out for SBD only",
+                    iridium.device().as_str_name()
+                ),
+            ));
+        }
+        for (field, value) in [
+            ("dial_attempts", iridium.dial_attempts()),
+            (
+                "hangup_seconds_after_empty",
+                iridium.hangup_seconds_after_empty(),
+            ),
+            (
+                "handshake_hangup_seconds",
+                iridium.handshake_hangup_seconds(),
+            ),
+        ] {
+            if value < 1 {
+                problems.push(Problem::new(
+                    format!("iridium.{field}"),
+                    format!("{value}: must be at least 1 for RUDICS calls"),
+                ));
+            }
         }
     }
     for (i, line) in iridium.config.iter().enumerate() {

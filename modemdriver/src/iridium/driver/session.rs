@@ -119,7 +119,7 @@ pub(super) struct Sessions {
     next_mo: u64,
     backoff_until: Option<Instant>,
     failures: u32,
-    next_frame: u32,
+    pub(super) next_frame: u32,
     sent: VecDeque<SentFrame>,
     active: Option<Active>,
 }
@@ -160,6 +160,11 @@ impl Sessions {
         self.ring = true;
     }
 
+    /// Whether a session (or its data request) is under way.
+    pub(super) fn busy(&self) -> bool {
+        self.active.is_some() || self.filling.is_some()
+    }
+
     pub(super) fn awaits(&self, id: RequestId) -> bool {
         self.filling.as_ref().is_some_and(|(i, _, _)| *i == id)
     }
@@ -193,6 +198,10 @@ impl Machine {
     /// A transmission asked for by the layer above (data, or nothing with
     /// a mailbox check).
     pub(super) fn initiate(&mut self, mt: ModemTransmission) {
+        if self.call_wanted(&mt) {
+            self.call_initiate(mt);
+            return;
+        }
         let s = &mut self.sessions;
         s.waiting.push_back(mt);
         if s.waiting.len() > MAX_WAITING {
@@ -205,6 +214,10 @@ impl Machine {
 
     /// An ACK transmission to send as its own MO message.
     pub(super) fn queue_ack(&mut self, mut mt: ModemTransmission) {
+        if self.call_carries() {
+            self.call_send_ack(mt);
+            return;
+        }
         mt.rate = Some(frame::RATE_SBD);
         mt.frame.clear();
         match frame::encode_sbd(&mt) {
@@ -408,6 +421,7 @@ impl Machine {
                 // OK with no message: the buffer was empty after all.
                 self.sessions.active = None;
             }
+            (Purpose::Dial | Purpose::Hangup, _) => {}
             (Purpose::ReadMt, _) => {
                 active.tries += 1;
                 if active.tries >= BUFFER_TRIES {
@@ -545,7 +559,7 @@ impl Machine {
         self.sessions.mo_buffer = MoBuffer::Unknown;
     }
 
-    fn remember_sent(&mut self, mt: &ModemTransmission) {
+    pub(super) fn remember_sent(&mut self, mt: &ModemTransmission) {
         let s = &mut self.sessions;
         s.sent.push_back(SentFrame {
             dest: mt.dest(),
@@ -559,7 +573,7 @@ impl Machine {
 
     /// An MT message read from the buffer.
     fn mt_received(&mut self, bytes: &[u8]) {
-        let mut mt = match frame::decode_sbd(bytes) {
+        let mt = match frame::decode_sbd(bytes) {
             Ok(mt) => mt,
             Err(e) => {
                 let status = match e {
@@ -575,7 +589,16 @@ impl Machine {
                 return;
             }
         };
+        self.transmission_received(mt);
+    }
+
+    /// A transmission received (from an MT message or on a call): ACKs
+    /// given the `unique_id` of the frame they answer, data acknowledged.
+    pub(super) fn transmission_received(&mut self, mut mt: ModemTransmission) {
         mt.time = Some(self.now.micros);
+        if mt.r#type() == TransmissionType::Ack {
+            self.call_acked(&mt);
+        }
         if mt.r#type() == TransmissionType::Ack {
             let src = mt.src();
             let answered = mt.acked_frame.first().and_then(|&f| {

@@ -499,3 +499,355 @@ proptest! {
         }
     }
 }
+
+mod rudics_calls {
+    //! RUDICS calls, in virtual time.
+
+    use super::*;
+    use crate::iridium::rudics;
+    use protos::goby::acomms::protobuf::iridium_driver_config::Remote;
+
+    const NUMBER: &str = "0088160000519";
+
+    fn rig() -> Rig {
+        rig_with(|_| {}, None)
+    }
+
+    /// A rig for a voice-enabled transceiver; started against `tx` when
+    /// given, else by [`Rig::start`].
+    fn rig_with(
+        change: impl FnOnce(&mut Settings),
+        tx: Option<&mut crate::iridium::emulator::transceiver::Transceiver>,
+    ) -> Rig {
+        let mut s = settings(true);
+        change(&mut s);
+        s.iridium.device = Some(IridiumDeviceType::DeviceVoiceEnabledIsu as i32);
+        s.iridium.remote = Some(Remote {
+            iridium_number: NUMBER.into(),
+            modem_id: 2,
+        });
+        s.iridium.hangup_seconds_after_empty = Some(5);
+        s.iridium.handshake_hangup_seconds = Some(2);
+        s.max_frame_bytes = super::super::max_frame_bytes(&s.iridium);
+        let now = Now {
+            at: Instant::now(),
+            micros: 1_700_000_000_000_000,
+        };
+        let mut rig = Rig {
+            machine: Machine::new(s, now),
+            now,
+        };
+        match tx {
+            None => rig.start(),
+            Some(tx) => {
+                use crate::iridium::emulator::transceiver::{TxInput, TxOutput};
+                let mut out = rig.input(Input::Tick);
+                for _ in 0..40 {
+                    let host: Vec<u8> = written_bytes(&out).concat();
+                    let back: Vec<u8> = tx
+                        .handle(rig.now.at, TxInput::Host(host))
+                        .into_iter()
+                        .filter_map(|o| match o {
+                            TxOutput::Write(b) => Some(b),
+                            _ => None,
+                        })
+                        .flatten()
+                        .collect();
+                    out = rig.bytes(&back);
+                    if rig.machine.ready_for_work() {
+                        break;
+                    }
+                }
+                assert!(rig.machine.ready_for_work(), "configured");
+            }
+        }
+        rig
+    }
+
+    fn call_slot(unique_id: u32) -> Input {
+        Input::Command(DriverCommand::Initiate(ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            rate: Some(frame::RATE_RUDICS),
+            unique_id: Some(unique_id),
+            ..Default::default()
+        }))
+    }
+
+    /// The transmissions in the packets written.
+    fn packets(out: &[Output]) -> Vec<ModemTransmission> {
+        written_bytes(out)
+            .iter()
+            .filter(|b| b.ends_with(b"\r") && !b.starts_with(b"AT") && b.as_slice() != b"bye\r")
+            .map(|b| frame::decode_message(&rudics::decode(b).expect("a packet")).expect("a frame"))
+            .collect()
+    }
+
+    fn packet(mt: &ModemTransmission) -> Vec<u8> {
+        rudics::encode(&frame::encode_message(mt).unwrap())
+    }
+
+    /// Dials and connects; returns the outputs of CONNECT.
+    fn connect(rig: &mut Rig, unique_id: u32) -> Vec<Output> {
+        let out = rig.input(call_slot(unique_id));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"\r\nCONNECT 19200\r\n");
+        let hello = &packets(&out)[0];
+        assert_eq!((hello.src(), hello.dest(), hello.frame.len()), (1, 2, 0));
+        out
+    }
+
+    #[test]
+    fn a_call_carries_data_both_ways_and_hangs_up_when_empty() {
+        let mut rig = rig();
+        let out = connect(&mut rig, 7);
+        let out = fill(&mut rig, &out, b"up the call");
+        let sent = packets(&out);
+        assert_eq!(sent.len(), 1);
+        assert_eq!(sent[0].frame, vec![b"up the call".to_vec()]);
+        assert_eq!(sent[0].frame_start(), 10);
+        assert_eq!(sent[0].rate(), frame::RATE_RUDICS);
+        assert_eq!(results(&out)[0].outcome, TransmitOutcome::Sent);
+
+        // The shore's ACK, then data that asks for one.
+        let ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Ack as i32),
+            acked_frame: vec![10],
+            ..Default::default()
+        };
+        let out = rig.bytes(&packet(&ack));
+        let got = received(&out);
+        assert_eq!(got[0].unique_id, Some(7));
+        let down = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(40),
+            frame: vec![b"down the call".to_vec()],
+            ..Default::default()
+        };
+        let out = rig.bytes(&packet(&down));
+        assert_eq!(received(&out)[0].frame, down.frame);
+        // Deferred ack: the layer above answers; the ACK goes on the call.
+        let out = rig.input(Input::Command(DriverCommand::Acknowledge(
+            Acknowledgement::all(received(&out)[0].clone()),
+        )));
+        let acks = packets(&out);
+        assert_eq!(acks.len(), 1, "{:?}", written(&out));
+        assert_eq!(acks[0].r#type(), TransmissionType::Ack);
+        assert_eq!(acks[0].acked_frame, vec![40]);
+
+        // Nothing for 5 s: bye, the shore's bye, guard, +++, OK, ATH.
+        let out = rig.advance(Duration::from_millis(4900));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(100));
+        assert_eq!(written(&out), ["bye\r"]);
+        let out = rig.bytes(b"bye\r");
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(999));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(1));
+        assert_eq!(written(&out), ["+++"]);
+        let out = rig.bytes(b"\r\nOK\r\n");
+        assert_eq!(written(&out), ["ATH\r"]);
+        rig.bytes(b"\r\nOK\r\n");
+        assert!(rig.machine.calls.idle());
+        assert_eq!(rig.machine.calls_connected(), 1);
+        // The next transmission at rate 1 dials again.
+        let out = rig.input(call_slot(8));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+    }
+
+    #[test]
+    fn a_dropped_call_writes_its_unacked_frame_again_on_the_next() {
+        let mut rig = rig();
+        let out = connect(&mut rig, 7);
+        let out = fill(&mut rig, &out, b"precious");
+        assert_eq!(results(&out).len(), 1);
+        let out = rig.bytes(b"\r\nNO CARRIER\r\n");
+        assert!(statuses(&out)
+            .iter()
+            .any(|s| matches!(s, DriverStatus::LinkError { .. })));
+        // The back-off (1 s), then a new call with the same frame.
+        let out = rig.advance(Duration::from_millis(900));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(100));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"CONNECT 19200\r\n");
+        let again = packets(&out);
+        assert_eq!(again.len(), 2, "hello and the frame");
+        assert_eq!(again[1].frame, vec![b"precious".to_vec()]);
+        assert_eq!(again[1].frame_start(), 10);
+        assert!(results(&out).is_empty(), "Sent is told once");
+        // Acked now: a third call would not carry it.
+        let ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Ack as i32),
+            acked_frame: vec![10],
+            ..Default::default()
+        };
+        rig.bytes(&packet(&ack));
+        rig.bytes(b"NO CARRIER\r\n");
+        let out = rig.advance(Duration::from_secs(60));
+        assert!(written(&out).is_empty(), "{:?}", written(&out));
+    }
+
+    #[test]
+    fn failed_dials_back_off_then_give_up() {
+        let mut rig = rig();
+        let out = rig.input(call_slot(7));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"BUSY\r\n");
+        assert!(statuses(&out)
+            .iter()
+            .any(|s| matches!(s, DriverStatus::Retrying { attempt: 2, .. })));
+        let out = rig.advance(Duration::from_secs(1));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"NO CARRIER\r\n");
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(1999));
+        assert!(written(&out).is_empty());
+        let out = rig.advance(Duration::from_millis(1));
+        assert_eq!(written(&out), [format!("ATD{NUMBER}\r")]);
+        let out = rig.bytes(b"ERROR\r\n");
+        let st = statuses(&out);
+        assert!(st
+            .iter()
+            .any(|s| matches!(s, DriverStatus::LinkError { .. })));
+        assert!(st.iter().any(|s| matches!(s, DriverStatus::Skipped { .. })));
+        let out = rig.advance(Duration::from_secs(60));
+        assert!(written(&out).is_empty());
+    }
+
+    #[test]
+    fn a_9603_or_no_number_never_dials() {
+        let mut rig = Rig::new(true);
+        rig.start();
+        let out = rig.input(call_slot(7));
+        assert!(!written(&out).iter().any(|w| w.starts_with("ATD")));
+    }
+
+    /// The vehicle machine against the emulated transceiver, in virtual
+    /// time; the test is the far end of the call (it answers every frame
+    /// with an ACK and `bye` with `bye`).
+    #[test]
+    fn over_the_emulated_transceiver_a_call_carries_a_frame_and_hangs_up() {
+        use crate::iridium::emulator::transceiver::{
+            Transceiver, TransceiverConfig, TxInput, TxOutput,
+        };
+        let mut config = TransceiverConfig::new("300234010753370");
+        config.device = IridiumDeviceType::DeviceVoiceEnabledIsu;
+        let start = Instant::now();
+        let mut tx = Transceiver::new(config, start);
+        let mut rig = rig_with(|_| {}, Some(&mut tx));
+        let mut to_tx: Vec<u8> = Vec::new();
+        let mut shore_lines: Vec<Vec<u8>> = Vec::new();
+        let mut shore_buf: Vec<u8> = Vec::new();
+        let mut hung_up = false;
+        let mut sent = 0;
+        let mut pending = vec![call_slot(7)];
+        for _ in 0..400 {
+            let mut outs = Vec::new();
+            for input in pending.drain(..) {
+                outs.extend(rig.input(input));
+            }
+            for o in &outs {
+                if let Output::Write(b) = o {
+                    to_tx.extend_from_slice(b);
+                }
+            }
+            if let Some((id, template)) = request(&outs) {
+                let mut filled = template;
+                filled.ack_requested = Some(true);
+                filled.frame = vec![b"over the emulator".to_vec()];
+                pending.push(Input::Answer {
+                    id,
+                    filled: Some(filled),
+                });
+                continue;
+            }
+            sent += results(&outs).len();
+            let mut txq: Vec<TxInput> = Vec::new();
+            if !to_tx.is_empty() {
+                txq.push(TxInput::Host(std::mem::take(&mut to_tx)));
+            }
+            txq.push(TxInput::Tick);
+            let mut back: Vec<u8> = Vec::new();
+            while let Some(i) = txq.pop() {
+                for o in tx.handle(rig.now.at, i) {
+                    match o {
+                        TxOutput::Write(b) => back.extend(b),
+                        TxOutput::Dial { .. } => txq.push(TxInput::CallConnected),
+                        TxOutput::CallData(b) => shore_buf.extend(b),
+                        TxOutput::HangUp => hung_up = true,
+                        TxOutput::Session { .. } => panic!("no SBD session expected"),
+                    }
+                }
+            }
+            while let Some(end) = shore_buf.iter().position(|&b| b == b'\r') {
+                let line: Vec<u8> = shore_buf.drain(..=end).collect();
+                if line == b"bye\r" {
+                    back.extend(
+                        tx.handle(rig.now.at, TxInput::CallData(b"bye\r".to_vec()))
+                            .into_iter()
+                            .filter_map(|o| match o {
+                                TxOutput::Write(b) => Some(b),
+                                _ => None,
+                            })
+                            .flatten(),
+                    );
+                } else {
+                    let mt = frame::decode_message(&rudics::decode(&line).unwrap()).unwrap();
+                    if !mt.frame.is_empty() {
+                        let ack = ModemTransmission {
+                            src: Some(2),
+                            dest: Some(1),
+                            r#type: Some(TransmissionType::Ack as i32),
+                            acked_frame: vec![mt.frame_start() as i32],
+                            ..Default::default()
+                        };
+                        back.extend(
+                            tx.handle(rig.now.at, TxInput::CallData(packet(&ack)))
+                                .into_iter()
+                                .filter_map(|o| match o {
+                                    TxOutput::Write(b) => Some(b),
+                                    _ => None,
+                                })
+                                .flatten(),
+                        );
+                    }
+                    shore_lines.push(line);
+                }
+            }
+            if !back.is_empty() {
+                pending.push(Input::Bytes(back));
+                continue;
+            }
+            if hung_up && rig.machine.calls.idle() {
+                break;
+            }
+            let next = [rig.machine.next_deadline(), tx.next_deadline()]
+                .into_iter()
+                .flatten()
+                .min()
+                .expect("a timer");
+            let d = next.saturating_duration_since(rig.now.at);
+            rig.now = Now {
+                at: next,
+                micros: rig.now.micros + d.as_micros() as u64,
+            };
+            pending.push(Input::Tick);
+        }
+        assert!(hung_up, "ATH reached the transceiver");
+        assert!(rig.machine.calls.idle());
+        assert_eq!(shore_lines.len(), 2, "hello and the frame");
+        assert_eq!(sent, 1);
+        assert_eq!(tx.log.calls, 1);
+        assert!(tx.log.commands.iter().any(|c| c.starts_with("ATD")));
+        assert!(tx.log.commands.iter().any(|c| c == "ATH"));
+    }
+}

@@ -20,6 +20,9 @@
 //!   alert when a message comes, and again every `ring_repeat` up to
 //!   `ring_count` times while the queue is not empty.
 //! - A session takes the MO message and gives the first MT message queued.
+//! - RUDICS: a call dialled by a voice-enabled transceiver, whatever the
+//!   number, is connected to the shore's RUDICS server (`rudics_shore`)
+//!   after `dial_time` (see [`super::start`]).
 
 use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
@@ -64,6 +67,11 @@ pub struct GatewayConfig {
     pub ring_count: u32,
     /// The location given with every MO message (degrees; CEP radius km).
     pub location: Option<MoLocation>,
+    /// The shore's RUDICS server, where calls are connected (`None`: a
+    /// call is answered `NO ANSWER`).
+    pub rudics_shore: Option<SocketAddr>,
+    /// How long a call takes to connect (a real one: 10 to 20 s).
+    pub dial_time: Duration,
 }
 
 impl Default for GatewayConfig {
@@ -77,6 +85,8 @@ impl Default for GatewayConfig {
             ring_repeat: Duration::from_secs(20),
             ring_count: 5,
             location: None,
+            rudics_shore: None,
+            dial_time: Duration::from_secs(1),
         }
     }
 }
@@ -219,6 +229,17 @@ impl Gateway {
     /// The largest MT payload taken.
     pub fn mt_limit(&self) -> usize {
         self.shared.config.mt_limit
+    }
+
+    /// Where a call to `number` is connected: the shore's RUDICS server
+    /// (every number reaches it), or `None`.
+    pub fn rudics_destination(&self, _number: &str) -> Option<SocketAddr> {
+        self.shared.config.rudics_shore
+    }
+
+    /// How long a call takes to connect.
+    pub fn dial_time(&self) -> Duration {
+        self.shared.config.dial_time
     }
 
     /// MT messages queued for `imei`.

@@ -24,6 +24,8 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::tcp::OwnedWriteHalf;
+use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
@@ -58,6 +60,9 @@ pub enum TransceiverControl {
     /// Sets the signal by hand: bars and service (`None`: back to the
     /// configured sky).
     Signal(Option<(u8, bool)>),
+    /// Drops the call under way, if any (`NO CARRIER`; the shore's end
+    /// of the call is closed).
+    DropCall,
     /// Stops the emulator.
     Stop,
 }
@@ -173,6 +178,74 @@ pub fn start(
     })
 }
 
+/// What the task carrying a call tells the transceiver's task; each names
+/// its call, so that news of a call hung up since is dropped.
+enum CallNews {
+    Connected(u64, OwnedWriteHalf),
+    Failed(u64, String),
+    Data(u64, Vec<u8>),
+    Ended(u64),
+}
+
+/// The call carried to the shore: its number and the shore's end.
+struct CarriedCall {
+    id: u64,
+    writer: Option<OwnedWriteHalf>,
+    task: JoinHandle<()>,
+}
+
+impl Drop for CarriedCall {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+/// Connects a call to `shore` (after `dial_time`), then reads the
+/// shore's bytes until it closes.
+async fn carry_call(
+    id: u64,
+    shore: Option<std::net::SocketAddr>,
+    dial_time: std::time::Duration,
+    news: mpsc::UnboundedSender<CallNews>,
+) {
+    tokio::time::sleep(dial_time).await;
+    let Some(shore) = shore else {
+        let _ = news.send(CallNews::Failed(id, "NO ANSWER".into()));
+        return;
+    };
+    let connect = tokio::time::timeout(
+        std::time::Duration::from_secs(10),
+        TcpStream::connect(shore),
+    )
+    .await;
+    let stream = match connect {
+        Ok(Ok(stream)) => stream,
+        _ => {
+            let _ = news.send(CallNews::Failed(id, "NO CARRIER".into()));
+            return;
+        }
+    };
+    let _ = stream.set_nodelay(true);
+    let (mut reader, writer) = stream.into_split();
+    if news.send(CallNews::Connected(id, writer)).is_err() {
+        return;
+    }
+    let mut buf = vec![0u8; 2048];
+    loop {
+        match reader.read(&mut buf).await {
+            Ok(0) | Err(_) => {
+                let _ = news.send(CallNews::Ended(id));
+                return;
+            }
+            Ok(n) => {
+                if news.send(CallNews::Data(id, buf[..n].to_vec())).is_err() {
+                    return;
+                }
+            }
+        }
+    }
+}
+
 async fn run(
     config: TransceiverConfig,
     mut device: Device,
@@ -185,6 +258,9 @@ async fn run(
     let mut t = Transceiver::new(config, Instant::now());
     let mut buf = vec![0u8; 1024];
     let mut input = TxInput::Tick;
+    let (news_tx, mut news_rx) = mpsc::unbounded_channel::<CallNews>();
+    let mut call: Option<CarriedCall> = None;
+    let mut calls = 0u64;
     loop {
         let mut queue: std::collections::VecDeque<TxOutput> =
             t.handle(Instant::now(), input).into();
@@ -199,6 +275,38 @@ async fn run(
                     let reply = gateway.session(&imei, mo, momsn);
                     queue.extend(t.handle(Instant::now(), TxInput::Gateway(reply)));
                 }
+                TxOutput::Dial { number } => {
+                    calls += 1;
+                    let shore = gateway.rudics_destination(&number);
+                    let task = tokio::spawn(carry_call(
+                        calls,
+                        shore,
+                        gateway.dial_time(),
+                        news_tx.clone(),
+                    ));
+                    call = Some(CarriedCall {
+                        id: calls,
+                        writer: None,
+                        task,
+                    });
+                }
+                TxOutput::CallData(bytes) => {
+                    let failed = match call.as_mut().and_then(|c| c.writer.as_mut()) {
+                        Some(w) => w.write_all(&bytes).await.is_err(),
+                        None => false,
+                    };
+                    if failed {
+                        call = None;
+                        queue.extend(t.handle(Instant::now(), TxInput::CallEnded));
+                    }
+                }
+                TxOutput::HangUp => {
+                    if let Some(mut c) = call.take() {
+                        if let Some(mut w) = c.writer.take() {
+                            let _ = w.shutdown().await;
+                        }
+                    }
+                }
             }
         }
         if let Ok(mut l) = log.lock() {
@@ -211,6 +319,7 @@ async fn run(
                     t.force_signal(s);
                     TxInput::Tick
                 }
+                Some(TransceiverControl::DropCall) => TxInput::DropCall,
                 Some(TransceiverControl::Stop) | None => return,
             },
             read = device.stream.read(&mut buf) => match read {
@@ -228,6 +337,28 @@ async fn run(
                     // Another transceiver took this IMEI at the gateway.
                     rings = None;
                     TxInput::Tick
+                }
+            },
+            Some(news) = news_rx.recv() => {
+                let current = |id: u64| call.as_ref().is_some_and(|c| c.id == id);
+                match news {
+                    CallNews::Connected(id, writer) if current(id) => {
+                        if let Some(c) = call.as_mut() {
+                            c.writer = Some(writer);
+                        }
+                        TxInput::CallConnected
+                    }
+                    CallNews::Failed(id, line) if current(id) => {
+                        call = None;
+                        TxInput::CallFailed(line)
+                    }
+                    CallNews::Data(id, bytes) if current(id) => TxInput::CallData(bytes),
+                    CallNews::Ended(id) if current(id) => {
+                        call = None;
+                        TxInput::CallEnded
+                    }
+                    // News of a call hung up since.
+                    _ => TxInput::Tick,
                 }
             },
             () = sleep_until_opt(wake) => TxInput::Tick,

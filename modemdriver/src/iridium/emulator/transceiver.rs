@@ -22,7 +22,15 @@
 //! - `AT+SBDDn`, `AT+SBDS`, `AT+CSQ`, `AT+CSQF`, `AT+CGSN`;
 //! - `AT+SBDMTA=1`: ring alerts (`SBDRING`) when the gateway has an MT
 //!   message, once service allows; `AT+CIER=1,1,1`: `+CIEV:0,<bars>` and
-//!   `+CIEV:1,<service>` now and at every change.
+//!   `+CIEV:1,<service>` now and at every change;
+//! - a voice-enabled transceiver: `ATD<number>` asks for a call
+//!   ([`TxOutput::Dial`]), answered `CONNECT 19200` (then data mode: host
+//!   bytes go to the far end, but `+++` between 0.5 s silences, which
+//!   answers `OK` in command mode) or the failure given; `ATH` hangs up;
+//!   the far end going away is `NO CARRIER`, and so is a call dropped by
+//!   the emulator's faults (`call_drop_after`, `call_drop_bytes`, service
+//!   lost, [`TxInput::DropCall`]): the far end is hung up on
+//!   ([`TxOutput::HangUp`]) and the host told `NO CARRIER`.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -61,6 +69,12 @@ pub struct TransceiverConfig {
     pub session_failure: f64,
     /// Seed of the session failures.
     pub seed: u64,
+    /// A voice-enabled transceiver's calls are dropped this long after
+    /// they connect (`None`: never).
+    pub call_drop_after: Option<Duration>,
+    /// Calls are dropped once they have carried this many bytes, both
+    /// ways together; the bytes past it are lost (`None`: never).
+    pub call_drop_bytes: Option<u64>,
 }
 
 impl TransceiverConfig {
@@ -74,6 +88,8 @@ impl TransceiverConfig {
             radio: RadioConfig::default(),
             session_failure: 0.0,
             seed: 1,
+            call_drop_after: None,
+            call_drop_bytes: None,
         }
     }
 }
@@ -89,6 +105,18 @@ pub enum TxInput {
     RingAlert,
     /// The gateway's part of the session asked for by [`TxOutput::Session`].
     Gateway(GatewaySession),
+    /// The call asked for by [`TxOutput::Dial`] is up.
+    CallConnected,
+    /// The call asked for could not be made: the line to give the host
+    /// (`NO CARRIER`, `BUSY`, `NO ANSWER`).
+    CallFailed(String),
+    /// Bytes from the far end of the call.
+    CallData(Vec<u8>),
+    /// The far end hung up, or the call dropped.
+    CallEnded,
+    /// Drop the call now (a fault): the far end is hung up on and the
+    /// host told `NO CARRIER`.
+    DropCall,
 }
 
 /// What to do.
@@ -104,6 +132,36 @@ pub enum TxOutput {
         /// Its sequence number.
         momsn: u16,
     },
+    /// Make a data call to `number`; answer with [`TxInput::CallConnected`]
+    /// or [`TxInput::CallFailed`].
+    Dial {
+        /// The number dialled.
+        number: String,
+    },
+    /// Bytes the host wrote on the call.
+    CallData(Vec<u8>),
+    /// Hang the call up.
+    HangUp,
+}
+
+/// Silence before and after `+++` for the escape to command mode.
+pub const ESCAPE_GUARD: Duration = Duration::from_millis(500);
+
+/// A call, as the transceiver sees it.
+#[derive(Debug, Clone, Copy)]
+struct Call {
+    /// Connected (not dialling).
+    up: bool,
+    /// In data mode: host bytes go to the far end.
+    data: bool,
+    /// Last host bytes in data mode.
+    last_host: Instant,
+    /// `+++` read then: command mode once the guard passes in silence.
+    escape: Option<Instant>,
+    /// Connected then.
+    since: Instant,
+    /// Bytes carried both ways.
+    bytes: u64,
 }
 
 /// The gateway's part of a session.
@@ -140,6 +198,15 @@ pub struct TransceiverLog {
     pub mt_received: u32,
     /// Ring alerts written.
     pub rings: u32,
+    /// Calls connected.
+    pub calls: u32,
+    /// Calls dropped by a fault (`NO CARRIER` while connected, not by the
+    /// far end or `ATH`).
+    pub calls_dropped: u32,
+    /// Bytes carried on calls: from the host to the far end, and back.
+    pub call_bytes: (u64, u64),
+    /// Bytes of the SBD messages sent (MO) and received (MT).
+    pub sbd_bytes: (u64, u64),
 }
 
 /// The emulated transceiver.
@@ -165,6 +232,7 @@ pub struct Transceiver {
     rng: ChaCha8Rng,
     /// Host bytes held during a session.
     held: VecDeque<u8>,
+    call: Option<Call>,
     out: Vec<TxOutput>,
     /// What it did.
     pub log: TransceiverLog,
@@ -191,6 +259,7 @@ impl Transceiver {
             session: None,
             ring_waiting: false,
             held: VecDeque::new(),
+            call: None,
             out: Vec::new(),
             log: TransceiverLog::default(),
         }
@@ -216,6 +285,7 @@ impl Transceiver {
         self.now = now;
         self.radio.advance(now);
         match input {
+            TxInput::Host(bytes) if self.call.is_some_and(|c| c.data) => self.call_host(bytes),
             TxInput::Host(bytes) => {
                 if self.session.is_some() {
                     self.held.extend(bytes);
@@ -227,6 +297,42 @@ impl Transceiver {
             TxInput::Tick => {}
             TxInput::RingAlert => self.ring_waiting = true,
             TxInput::Gateway(reply) => self.gateway_reply(reply),
+            TxInput::CallConnected => {
+                if let Some(c) = &mut self.call {
+                    c.up = true;
+                    c.data = true;
+                    c.last_host = now;
+                    c.since = now;
+                    self.log.calls += 1;
+                    self.write(b"\r\nCONNECT 19200\r\n".to_vec());
+                }
+            }
+            TxInput::CallFailed(line) => {
+                if self.call.take().is_some() {
+                    self.write(format!("\r\n{line}\r\n"));
+                }
+            }
+            TxInput::CallData(bytes) => {
+                if self.call.is_some_and(|c| c.data) {
+                    let (bytes, cut) = self.carry(bytes);
+                    self.log.call_bytes.1 += bytes.len() as u64;
+                    self.write(bytes);
+                    if cut {
+                        self.drop_call();
+                    }
+                }
+            }
+            TxInput::CallEnded => {
+                if self.call.take().is_some_and(|c| c.up) {
+                    self.reader.expect_lines();
+                    self.write(b"\r\nNO CARRIER\r\n".to_vec());
+                }
+            }
+            TxInput::DropCall => {
+                if self.call.is_some_and(|c| c.up) {
+                    self.drop_call();
+                }
+            }
         }
         self.timers();
         self.indications();
@@ -234,9 +340,43 @@ impl Transceiver {
         std::mem::take(&mut self.out)
     }
 
+    /// The share of `bytes` a call carries before `call_drop_bytes`, and
+    /// whether the call is to drop after them.
+    fn carry(&mut self, mut bytes: Vec<u8>) -> (Vec<u8>, bool) {
+        let Some(call) = &mut self.call else {
+            return (Vec::new(), false);
+        };
+        let Some(limit) = self.config.call_drop_bytes else {
+            call.bytes += bytes.len() as u64;
+            return (bytes, false);
+        };
+        let room = limit.saturating_sub(call.bytes);
+        if (bytes.len() as u64) < room {
+            call.bytes += bytes.len() as u64;
+            return (bytes, false);
+        }
+        bytes.truncate(room as usize);
+        call.bytes = limit;
+        (bytes, true)
+    }
+
+    /// A fault ends the call: the far end is hung up on, the host told.
+    fn drop_call(&mut self) {
+        if self.call.take().is_some() {
+            self.log.calls_dropped += 1;
+            self.out.push(TxOutput::HangUp);
+            self.reader.expect_lines();
+            self.write(b"\r\nNO CARRIER\r\n".to_vec());
+        }
+    }
+
     /// When the next [`TxInput::Tick`] is due.
     pub fn next_deadline(&self) -> Option<Instant> {
         [
+            self.call.and_then(|c| c.escape).map(|t| t + ESCAPE_GUARD),
+            self.call
+                .filter(|c| c.up)
+                .and_then(|c| self.config.call_drop_after.map(|d| c.since + d)),
             self.session.map(|s| s.ends),
             self.writing.map(|(_, d)| d),
             self.radio.next_change(),
@@ -351,7 +491,32 @@ impl Transceiver {
             }
             AtCommand::Imei => self.answer(ModemLine::Imei(self.config.imei.clone())),
             AtCommand::Session { .. } => self.start_session(),
-            AtCommand::Other(_) => self.line(ModemLine::Error),
+            AtCommand::Dial(number)
+                if self.config.device == IridiumDeviceType::DeviceVoiceEnabledIsu
+                    && self.call.is_none() =>
+            {
+                if !self.radio.now().1 {
+                    self.line(ModemLine::NoCarrier);
+                } else {
+                    self.call = Some(Call {
+                        up: false,
+                        data: false,
+                        last_host: self.now,
+                        escape: None,
+                        since: self.now,
+                        bytes: 0,
+                    });
+                    self.out.push(TxOutput::Dial { number });
+                }
+            }
+            AtCommand::Hangup => {
+                if self.call.take().is_some() {
+                    self.out.push(TxOutput::HangUp);
+                }
+                self.line(ModemLine::Ok);
+            }
+            // A 9602/9603 makes no calls.
+            AtCommand::Other(_) | AtCommand::Dial(_) => self.line(ModemLine::Error),
         }
     }
 
@@ -391,7 +556,49 @@ impl Transceiver {
         });
     }
 
+    /// Host bytes in data mode: to the far end, but for the `+++` escape.
+    fn call_host(&mut self, bytes: Vec<u8>) {
+        let Some(mut call) = self.call else { return };
+        if bytes == b"+++" && call.escape.is_none() && self.now >= call.last_host + ESCAPE_GUARD {
+            call.escape = Some(self.now);
+        } else {
+            if call.escape.take().is_some() {
+                // Not an escape after all: the bytes were data.
+                self.out.push(TxOutput::CallData(b"+++".to_vec()));
+            }
+            call.last_host = self.now;
+            self.call = Some(call);
+            let (bytes, cut) = self.carry(bytes);
+            self.log.call_bytes.0 += bytes.len() as u64;
+            if !bytes.is_empty() {
+                self.out.push(TxOutput::CallData(bytes));
+            }
+            if cut {
+                self.drop_call();
+            }
+            return;
+        }
+        self.call = Some(call);
+    }
+
     fn timers(&mut self) {
+        let dropped = self.call.is_some_and(|c| {
+            c.up && (self
+                .config
+                .call_drop_after
+                .is_some_and(|d| c.since + d <= self.now)
+                || !self.radio.now().1)
+        });
+        if dropped {
+            self.drop_call();
+        }
+        if let Some(call) = &mut self.call {
+            if call.escape.is_some_and(|t| t + ESCAPE_GUARD <= self.now) {
+                call.escape = None;
+                call.data = false;
+                self.write(b"\r\nOK\r\n".to_vec());
+            }
+        }
         if let Some((_, deadline)) = self.writing {
             if deadline <= self.now {
                 self.writing = None;
@@ -446,14 +653,16 @@ impl Transceiver {
             return;
         }
         let momsn = self.momsn;
-        if self.mo.is_some() {
+        if let Some(mo) = &self.mo {
             self.momsn = self.momsn.wrapping_add(1);
             self.log.mo_sent += 1;
+            self.log.sbd_bytes.0 += mo.len() as u64;
         }
         self.log.sessions_ok += 1;
         let (mt_status, mtmsn, length) = match reply.mt {
             Some((message, mtmsn)) => {
                 let length = message.len() as u16;
+                self.log.sbd_bytes.1 += message.len() as u64;
                 self.mt = Some(message);
                 self.mtmsn = i32::from(mtmsn);
                 self.log.mt_received += 1;
@@ -532,6 +741,9 @@ mod tests {
             .map(|o| match o {
                 TxOutput::Write(b) => String::from_utf8_lossy(&b).into_owned(),
                 TxOutput::Session { mo, momsn } => format!("<session {momsn} {mo:?}>"),
+                TxOutput::Dial { number } => format!("<dial {number}>"),
+                TxOutput::CallData(b) => format!("<call {}>", String::from_utf8_lossy(&b)),
+                TxOutput::HangUp => "<hang up>".to_string(),
             })
             .collect()
     }
@@ -658,6 +870,53 @@ mod tests {
             .sessions_failed
             .iter()
             .all(|c| FAILURE_CODES.contains(c)));
+    }
+
+    #[test]
+    fn calls_drop_after_a_byte_budget_a_time_or_on_demand() {
+        let t0 = Instant::now();
+        let mut config = TransceiverConfig::new("300234010753370");
+        config.device = IridiumDeviceType::DeviceVoiceEnabledIsu;
+        config.call_drop_bytes = Some(10);
+        config.call_drop_after = Some(Duration::from_secs(60));
+        let mut t = Transceiver::new(config, t0);
+        host(&mut t, t0, "ATE0\r");
+        assert_eq!(host(&mut t, t0, "ATD123\r"), "<dial 123>");
+        assert_eq!(
+            written(t.handle(t0, TxInput::CallConnected)),
+            "\r\nCONNECT 19200\r\n"
+        );
+        assert_eq!(host(&mut t, t0, "abcdef"), "<call abcdef>");
+        // Six bytes up, then six down: the last two are past the budget.
+        assert_eq!(
+            written(t.handle(t0, TxInput::CallData(b"ghijkl".to_vec()))),
+            "ghij<hang up>\r\nNO CARRIER\r\n"
+        );
+        assert_eq!((t.log.calls, t.log.calls_dropped), (1, 1));
+        assert_eq!(t.log.call_bytes, (6, 4));
+        // Back in command mode; the next call drops after a minute.
+        assert_eq!(host(&mut t, t0, "AT\r"), "OK\r\n");
+        host(&mut t, t0, "ATD123\r");
+        t.handle(t0, TxInput::CallConnected);
+        assert_eq!(t.next_deadline(), Some(t0 + Duration::from_secs(60)));
+        assert_eq!(
+            written(t.handle(t0 + Duration::from_secs(60), TxInput::Tick)),
+            "<hang up>\r\nNO CARRIER\r\n"
+        );
+        // On demand; the far end hanging up is not a drop.
+        host(&mut t, t0, "ATD123\r");
+        t.handle(t0, TxInput::CallConnected);
+        assert_eq!(
+            written(t.handle(t0, TxInput::DropCall)),
+            "<hang up>\r\nNO CARRIER\r\n"
+        );
+        host(&mut t, t0, "ATD123\r");
+        t.handle(t0, TxInput::CallConnected);
+        assert_eq!(
+            written(t.handle(t0, TxInput::CallEnded)),
+            "\r\nNO CARRIER\r\n"
+        );
+        assert_eq!((t.log.calls, t.log.calls_dropped), (4, 3));
     }
 
     proptest! {
