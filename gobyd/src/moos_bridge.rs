@@ -33,7 +33,9 @@
 //!   `file_get`; the answer goes to `file_reply_var` (`GOBYD_FILE_REPLY`)
 //!   and every transfer's progress to `transfer_var` (`GOBYD_TRANSFER`),
 //!   both JSON. A request written before gobyd connected (the MOOSDB hands
-//!   a new client the last value) is not carried out again.
+//!   a new client the last value) is not carried out again. Without the
+//!   `network` section a request is answered on `file_reply_var` with
+//!   `{"error": "file transfer needs the network layer: …", "var": …}`.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -69,8 +71,9 @@ pub struct BridgeSettings {
     pub translator: Arc<Translator>,
     /// This node's modem id.
     pub modem_id: i32,
-    /// Whether the network layer is on: the file variables are read and
-    /// written.
+    /// Whether the network layer is on: transfers are written to
+    /// `transfer_var`. The request variables are read either way;
+    /// without the network layer each request is answered with an error.
     pub files: bool,
 }
 
@@ -449,15 +452,11 @@ pub async fn run(
     let flush_var = settings.var(|v| v.queue_flush());
     let reset_var = settings.var(|v| v.driver_reset());
     registered.extend(flush_var.iter().chain(&reset_var).cloned());
-    let file_vars = settings.files.then(|| {
-        (
-            settings.moos.file_send_var().to_string(),
-            settings.moos.file_get_var().to_string(),
-        )
-    });
-    if let Some((send, get)) = &file_vars {
-        registered.extend([send.clone(), get.clone()]);
-    }
+    // Registered with or without the network layer: without it a request
+    // is answered on `file_reply_var` with the reason, never ignored.
+    let file_send_var = settings.moos.file_send_var().to_string();
+    let file_get_var = settings.moos.file_get_var().to_string();
+    registered.extend([file_send_var.clone(), file_get_var.clone()]);
     registered.sort();
     registered.dedup();
     for var in &registered {
@@ -496,11 +495,12 @@ pub async fn run(
                         reset(&control).await
                     }
                 }
-                Some(m) if file_vars.as_ref().is_some_and(|(s, g)| m.key == *s || m.key == *g) => {
+                Some(m) if m.key == file_send_var || m.key == file_get_var => {
                     if fresh(&m, connected_at) {
-                        let kind = match &file_vars {
-                            Some((send, _)) if m.key == *send => "file_send",
-                            _ => "file_get",
+                        let kind = if m.key == file_send_var {
+                            "file_send"
+                        } else {
+                            "file_get"
                         };
                         file_request(&settings, &control, &client, kind, &m).await
                     }

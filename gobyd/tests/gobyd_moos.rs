@@ -349,3 +349,57 @@ async fn files_from_moos_variables_with_the_minimal_db() {
     db.stop().await;
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Without a `network` section a file request written to MOOS is answered
+/// with the reason, not ignored.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_file_request_without_the_network_layer_is_answered() {
+    let db = moos::testing::MiniDb::start("127.0.0.1:0", "gobytest")
+        .await
+        .unwrap();
+    let dir = scratch("moos", "files-no-network");
+    let name = format!("moos-no-network-{}", std::process::id());
+    let config = daemon_config(db.port(), &dir.join("data"), &name).config();
+    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let (stop, stopped) = oneshot::channel::<()>();
+    let running = tokio::spawn(daemon.run(async {
+        let _ = stopped.await;
+    }));
+    let (client, mut mail) =
+        MoosClient::connect(ClientConfig::new("autonomy").with_address("127.0.0.1", db.port()))
+            .await
+            .expect("the test client connects");
+    client.register("GOBYD_FILE_REPLY", Duration::ZERO).unwrap();
+
+    // gobyd registers once connected: write until it answers.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let reply = loop {
+        client
+            .notify_string("GOBYD_FILE_SEND", "dest=2,path=/data/survey.bin")
+            .unwrap();
+        let answered = tokio::time::timeout(
+            Duration::from_millis(500),
+            wait_mail(&mut mail, "GOBYD_FILE_REPLY", |v| Some(v.clone())),
+        )
+        .await;
+        if let Ok(reply) = answered {
+            break reply;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no answer on GOBYD_FILE_REPLY"
+        );
+    };
+    assert_eq!(reply["var"], "GOBYD_FILE_SEND", "{reply}");
+    let reason = reply["error"].as_str().unwrap_or_default();
+    assert!(
+        reason.starts_with("file transfer needs the network layer"),
+        "{reply}"
+    );
+
+    client.close().await;
+    let _ = stop.send(());
+    running.await.unwrap().unwrap();
+    db.stop().await;
+    std::fs::remove_dir_all(&dir).unwrap();
+}
