@@ -175,15 +175,55 @@ struct Loop {
     clock: Arc<dyn Clock>,
 }
 
+/// Polls `eventloop` until `events` is closed, sending on every result;
+/// after an error waits `backoff.0`, doubling up to `backoff.1` while the
+/// errors go on, before polling (and so connecting) again.
+async fn poll(
+    mut eventloop: EventLoop,
+    backoff: (Duration, Duration),
+    events: mpsc::UnboundedSender<Result<Event, rumqttc::ConnectionError>>,
+) {
+    let mut wait = backoff.0;
+    loop {
+        let polled = eventloop.poll().await;
+        let failed = polled.is_err();
+        if matches!(polled, Ok(Event::Incoming(Packet::ConnAck(_)))) {
+            wait = backoff.0;
+        }
+        if events.send(polled).is_err() {
+            return;
+        }
+        if failed {
+            tokio::time::sleep(wait).await;
+            wait = (wait * 2).min(backoff.1);
+        }
+    }
+}
+
+/// Aborts the task when dropped (the bridge's loop ended).
+struct AbortOnDrop(tokio::task::JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
 impl Loop {
     async fn run(
         &mut self,
-        mut eventloop: EventLoop,
+        eventloop: EventLoop,
         mut events: broadcast::Receiver<SharedEvent>,
         mut notices: mpsc::UnboundedReceiver<Outgoing>,
     ) {
-        let mut backoff = self.settings.backoff.0;
-        let mut retry_at: Option<tokio::time::Instant> = None;
+        // The event loop is polled in a task of its own: a poll cancelled by
+        // another branch of the select below while it was connecting would
+        // leave that connection half made and start a second one (the
+        // broker then closes the first, and its last will tells every
+        // console this node went offline).
+        let (polled_tx, mut polled_rx) = mpsc::unbounded_channel();
+        let poller = tokio::spawn(poll(eventloop, self.settings.backoff, polled_tx));
+        let _poller = AbortOnDrop(poller);
         let mut status_tick = tokio::time::interval(STATUS_PERIOD);
         let broker = format!(
             "{}:{}",
@@ -222,9 +262,8 @@ impl Loop {
                         self.push(notice);
                     }
                 }
-                polled = eventloop.poll(), if retry_at.is_none() => match polled {
+                Some(polled) = polled_rx.recv() => match polled {
                     Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                        backoff = self.settings.backoff.0;
                         self.connected(&broker);
                     }
                     Ok(Event::Incoming(Packet::Publish(publish))) => {
@@ -237,11 +276,8 @@ impl Loop {
                             self.lost_at = Some(Instant::now());
                         }
                         self.connected = false;
-                        retry_at = Some(tokio::time::Instant::now() + backoff);
-                        backoff = (backoff * 2).min(self.settings.backoff.1);
                     }
                 },
-                () = sleep_until(retry_at), if retry_at.is_some() => retry_at = None,
                 _ = status_tick.tick() => {
                     if self.connected {
                         self.push_status();
@@ -342,12 +378,5 @@ impl Loop {
                 Err(e) => tracing::error!("MQTT: not published: {e}"),
             }
         }
-    }
-}
-
-async fn sleep_until(at: Option<tokio::time::Instant>) {
-    match at {
-        Some(at) => tokio::time::sleep_until(at).await,
-        None => std::future::pending().await,
     }
 }
