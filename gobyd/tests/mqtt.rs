@@ -134,6 +134,15 @@ fn two_gateways_share_a_broker_through_its_restart_and_theirs() {
     for node in [1, 2] {
         wait_status(&watcher, node, |v| v["online"] == true);
     }
+    // One connection each at start: no last will (offline) from a first
+    // connection given up for a second.
+    for node in [1, 2] {
+        let statuses = watcher.seen_on(&format!("fleet/{node}/status"));
+        assert!(
+            statuses.iter().all(|v| v["online"] == true),
+            "node {node} was reported offline while starting: {statuses:?}"
+        );
+    }
 
     // A message on node 1's tx topic is queued (and said so), crosses the
     // simulated water, appears on node 2's rx topic with its source and the
