@@ -71,7 +71,8 @@ fn the_configurations_the_guide_shows_are_committed_files_that_load() {
 
 /// The shipped configurations (`gobyd/config/*.pb.txt`) load, and no two
 /// share a JSON address or a data directory, so that any of them run side
-/// by side on one machine.
+/// by side on one machine; the data directory each makes when run from the
+/// repository root is ignored by git (`.gitignore`).
 #[test]
 fn the_shipped_configurations_use_distinct_json_ports_and_data_directories() {
     let dir = repository_root().join("gobyd/config");
@@ -84,6 +85,12 @@ fn the_shipped_configurations_use_distinct_json_ports_and_data_directories() {
     assert!(names.len() >= 10, "{names:?}");
     let mut json: std::collections::BTreeMap<String, String> = Default::default();
     let mut data: std::collections::BTreeMap<String, String> = Default::default();
+    // The directories the repository's .gitignore names at its root.
+    let gitignore = std::fs::read_to_string(repository_root().join(".gitignore")).unwrap();
+    let ignored: Vec<&str> = gitignore
+        .lines()
+        .filter_map(|l| l.strip_prefix('/')?.strip_suffix('/'))
+        .collect();
     for path in &names {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let config = gobyd::config::load(path).unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -103,7 +110,27 @@ fn the_shipped_configurations_use_distinct_json_ports_and_data_directories() {
                 panic!("{name} and {other} both keep their data in {d}");
             }
         }
+        let d = config.data_dir();
+        assert!(
+            ignored.iter().any(|pattern| matches_pattern(pattern, d)),
+            "{name}: its data directory {d} is not in .gitignore"
+        );
     }
+}
+
+/// Whether `name` (a directory at the repository root) matches `pattern`,
+/// a `.gitignore` name with `*` (any run of characters) and `?` (one).
+fn matches_pattern(pattern: &str, name: &str) -> bool {
+    fn go(p: &[u8], n: &[u8]) -> bool {
+        match (p.first(), n.first()) {
+            (None, None) => true,
+            (Some(b'*'), _) => go(&p[1..], n) || (!n.is_empty() && go(p, &n[1..])),
+            (Some(b'?'), Some(_)) => go(&p[1..], &n[1..]),
+            (Some(a), Some(b)) if a == b => go(&p[1..], &n[1..]),
+            _ => false,
+        }
+    }
+    go(pattern.as_bytes(), name.as_bytes())
 }
 
 /// A `gobyd` process of the quick start, killed when dropped.
