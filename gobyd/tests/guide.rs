@@ -300,7 +300,6 @@ fn the_readmes_two_link_configurations_check_over_the_emulators() {
         0.0,
         1,
     ));
-    let root = repository_root();
     let summary = "links: acoustic (cost 1), iridium (cost 10); \
                    goby.example.Command: acoustic, then iridium after 60 s";
     let nodes = [
@@ -323,35 +322,10 @@ fn the_readmes_two_link_configurations_check_over_the_emulators() {
         ),
     ];
     for (name, ports, settings) in nodes {
-        let mut text = std::fs::read_to_string(root.join("gobyd/config").join(name)).unwrap();
+        let (text, stdout) = check_shipped(&dir, name, &ports);
         for setting in settings {
             assert!(text.contains(setting), "{name} has no {setting}");
         }
-        for (shipped, scratch_path) in ports {
-            assert!(
-                text.contains(shipped),
-                "{name} has no serial port {shipped}"
-            );
-            text = text.replace(
-                shipped,
-                &format!("{:?}", scratch_path.display().to_string()),
-            );
-        }
-        let config = dir.join(name);
-        std::fs::write(&config, text).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_gobyd"))
-            .arg("--check")
-            .arg("-c")
-            .arg(&config)
-            .env_remove("RUST_BACKTRACE")
-            .output()
-            .expect("gobyd runs");
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "{name}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
         assert!(stdout.contains(summary), "{name}: {stdout}");
     }
     rt.block_on(async {
@@ -395,31 +369,10 @@ fn the_links_chapters_example_checks_as_the_guide_shows() {
         0.0,
         1,
     ));
-    let shipped = "\"/tmp/links-sbd\"";
-    let text = std::fs::read_to_string(repository_root().join("gobyd/config/links-example.pb.txt"))
-        .unwrap();
-    assert!(
-        text.contains(shipped),
-        "links-example.pb.txt has no {shipped}"
-    );
-    let config = dir.join("links-example.pb.txt");
-    std::fs::write(
-        &config,
-        text.replace(shipped, &format!("{:?}", sbd.link.display().to_string())),
-    )
-    .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_gobyd"))
-        .arg("--check")
-        .arg("-c")
-        .arg(&config)
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .expect("gobyd runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let (_, stdout) = check_shipped(
+        &dir,
+        "links-example.pb.txt",
+        &[("\"/tmp/links-sbd\"", sbd.link.clone())],
     );
     assert!(
         guide_check::output_matches(&stdout, &expected),
@@ -427,4 +380,33 @@ fn the_links_chapters_example_checks_as_the_guide_shows() {
     );
     rt.block_on(sbd.stop());
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `gobyd --check` on the shipped configuration `gobyd/config/NAME`, each
+/// serial port `(shipped, scratch)` of `ports` (a quoted path the file must
+/// hold) replaced by its scratch path, the file written in `dir`; the
+/// shipped text and what the check printed, once it passed.
+fn check_shipped(dir: &Path, name: &str, ports: &[(&str, PathBuf)]) -> (String, String) {
+    let shipped =
+        std::fs::read_to_string(repository_root().join("gobyd/config").join(name)).unwrap();
+    let mut text = shipped.clone();
+    for (port, scratch_path) in ports {
+        assert!(text.contains(port), "{name} has no serial port {port}");
+        text = text.replace(port, &format!("{:?}", scratch_path.display().to_string()));
+    }
+    let config = dir.join(name);
+    std::fs::write(&config, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_gobyd"))
+        .arg("--check")
+        .arg("-c")
+        .arg(&config)
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("gobyd runs");
+    assert!(
+        out.status.success(),
+        "{name}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (shipped, String::from_utf8_lossy(&out.stdout).into_owned())
 }
