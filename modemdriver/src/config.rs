@@ -6,8 +6,8 @@ use std::net::{IpAddr, SocketAddr};
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{udp_driver_config::EndPoint, DriverConfig};
 
-use crate::check::Problem;
 use crate::driver::DriverError;
+use crate::problem::Problem;
 
 /// Parses a `DriverConfig` written in protobuf text format, e.g.
 /// `modem_id: 1 udp { local { port: 50001 } remote { modem_id: 2 port: 50002 } }`.

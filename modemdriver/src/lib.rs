@@ -33,8 +33,11 @@
 //!   shore, both in Goby3's framing; [`iridium::emulator`] emulates a 9603
 //!   and the gateway.
 //!
-//! [`check`] finds, without starting a driver, the settings it would
-//! refuse and how long its packets take at each rate (what a TDMA slot
+//! Each driver is one [`kind::DriverKind`] and one row of
+//! [`built_in::KINDS`], the list that starts the driver a configuration
+//! names ([`built_in::start`]); [`check`] finds, without starting a driver,
+//! the settings it would refuse ([`problem::Problem`]), the largest frames
+//! it carries and how long its packets take at each rate (what a TDMA slot
 //! must hold).
 //!
 //! Layers, one concept per module: [`link`] moves lines or datagrams and
@@ -48,15 +51,18 @@
 #![warn(missing_docs)]
 
 pub mod benthos;
+pub mod built_in;
 pub mod check;
 pub mod config;
 pub mod driver;
 pub mod emulator_host;
 pub mod evologics;
 pub mod iridium;
+pub mod kind;
 pub mod link;
 pub mod micromodem;
 pub mod popoto;
+pub mod problem;
 pub mod rate;
 pub mod sim;
 pub mod slot;

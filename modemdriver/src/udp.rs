@@ -33,15 +33,16 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::net::UdpSocket;
 
-use crate::check::{self, Problem};
 use crate::config::{self, Endpoint};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, TransmitOutcome, TransmitResult,
 };
+use crate::kind::{DriverKind, Named, Starting};
 use crate::link::datagram::DatagramLink;
 use crate::link::trace::Tracer;
 use crate::link::Link;
+use crate::problem::{self, Problem};
 
 /// How long the driver waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
@@ -90,10 +91,40 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
+impl DriverKind for UdpDriver {
+    fn named(&self) -> Named {
+        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdp)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "udp"
+    }
+
+    fn title(&self) -> &'static str {
+        "UDP"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("udp")
+    }
+
+    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
+        &[("goby.acomms.udp.protobuf.config", "udp")]
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problems(config)
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(UdpDriver::start(config))
+    }
+}
+
 impl UdpDriver {
     /// Binds `udp.local` and starts the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let udp = udp_config(config)?;
         let local = config::endpoint_addr(&udp.local, "DriverConfig.udp.local")?;
         let socket = UdpSocket::bind(local)
@@ -115,7 +146,7 @@ impl UdpDriver {
         socket: UdpSocket,
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let udp = udp_config(config)?;
         let mut remotes = Vec::new();

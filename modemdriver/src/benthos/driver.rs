@@ -45,28 +45,100 @@
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::{ConnectionType, Driver as DriverKind},
-    BenthosConfig, DriverConfig, DriverType,
+    driver_config::ConnectionType, BenthosConfig, DriverConfig, DriverType,
 };
 
 use super::machine::{Machine, Settings};
 use super::wire::{bit_rate, Command, ABSOLUTE_MAX_FRAME, RATE_MAX, RATE_MIN};
-use crate::check::{self, Problem};
 use crate::config;
 use crate::driver::{Driver, DriverError};
+use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::problem::{self, Problem};
 use crate::stream_shell::{self, BoxStream, Endpoint};
 
 /// Baud rate when `serial_baud` is not set.
 pub const DEFAULT_BAUD: u32 = 9600;
 
-/// Whether `config` names the Benthos ATM-900 driver.
-pub fn is_benthos(config: &DriverConfig) -> bool {
-    matches!(&config.driver, Some(DriverKind::DriverType(t)) if *t == DriverType::DriverBenthosAtm900 as i32)
-}
-
 /// The Benthos ATM-900 driver.
 #[derive(Debug)]
 pub struct BenthosDriver;
+
+impl DriverKind for BenthosDriver {
+    fn named(&self) -> Named {
+        Named::Type(DriverType::DriverBenthosAtm900)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "benthos"
+    }
+
+    fn title(&self) -> &'static str {
+        "Benthos ATM-900"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("benthos")
+    }
+
+    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
+        &[
+            ("goby.acomms.benthos.protobuf.config", "benthos"),
+            ("goby.acomms.benthos.protobuf.transmission", "benthos"),
+        ]
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        Some(frame_limits(config))
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        use prost_reflect::ReflectMessage;
+        Some(protos::goby::acomms::protobuf::BenthosSpecific::default().descriptor())
+    }
+
+    /// Goby3's Benthos slot: a two-way ping of the slot's `dest`.
+    fn specific_slot_problem(
+        &self,
+        _config: &DriverConfig,
+        slot: &protos::goby::acomms::protobuf::ModemTransmission,
+    ) -> Option<Problem> {
+        use protos::goby::acomms::protobuf::{
+            benthos_transmission::Type, modem_transmission::TransmissionType,
+        };
+        if slot.r#type() != TransmissionType::DriverSpecific {
+            return None;
+        }
+        let ping = slot
+            .benthos
+            .as_deref()
+            .copied()
+            .unwrap_or_default()
+            .r#type()
+            == Type::BenthosTwoWayPing;
+        if !ping {
+            Some(Problem::new(
+                "benthos.type",
+                "a DRIVER_SPECIFIC slot of the Benthos ATM-900 driver is a two-way ping: \
+                 give benthos { type: BENTHOS_TWO_WAY_PING } and the node to range in dest",
+            ))
+        } else if slot.dest.is_none_or(|d| d < 0 || d == slot.src()) {
+            Some(Problem::new(
+                "dest",
+                "a two-way ping needs the node to range in dest (not this slot's source, not a broadcast)",
+            ))
+        } else {
+            None
+        }
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(BenthosDriver::start(config))
+    }
+}
 
 impl BenthosDriver {
     /// Opens the modem's line and starts the driver. A modem that cannot
@@ -116,7 +188,7 @@ fn benthos_config(config: &DriverConfig) -> BenthosConfig {
 
 /// Where the modem is, from `config` (checked by [`problems`]).
 pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     Ok(match config.connection_type() {
         ConnectionType::ConnectionSerial => Endpoint::Serial {
             path: config.serial_port().to_string(),
@@ -131,19 +203,24 @@ pub fn max_frame_bytes(config: &DriverConfig) -> usize {
     benthos_config(config).max_frame_size() as usize
 }
 
-/// The frame limits of a Benthos configuration in words, for `gobyd
-/// --check`.
-pub fn limits(config: &DriverConfig) -> String {
+/// The frame limits of a Benthos configuration, for `gobyd --check`.
+pub fn frame_limits(config: &DriverConfig) -> FrameLimits {
     let max = max_frame_bytes(config);
     let rates: Vec<String> = (RATE_MIN..=RATE_MAX)
         .map(|r| format!("{r} {} bit/s", bit_rate(r)))
         .collect();
-    format!(
-        "driver DRIVER_BENTHOS_ATM900: up to 8 frames per transmission (the slot's max_num_frames, 1 unless set) \
-         of up to {max} bytes each at every rate (max_frame_size); @TxRate {} (approximate bit rates); \
-         other rates go at 2, as Goby3 sends them",
-        rates.join(", ")
-    )
+    FrameLimits {
+        link: "driver DRIVER_BENTHOS_ATM900".into(),
+        outgoing: max,
+        incoming: max,
+        text: format!(
+            "up to 8 frames per transmission (the slot's max_num_frames, 1 unless set) \
+             of up to {max} bytes each at every rate (max_frame_size); @TxRate {} (approximate bit rates); \
+             other rates go at 2, as Goby3 sends them",
+            rates.join(", ")
+        ),
+        each_way: false,
+    }
 }
 
 /// Every problem of a Benthos configuration that [`settings`] refuses.
@@ -245,7 +322,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let b = benthos_config(config);
     let modem_id = config::modem_id(config)?;
     let mut setup = vec![
@@ -367,7 +444,7 @@ mod tests {
 
     #[test]
     fn limits_tell_the_rates() {
-        let l = limits(&config("benthos { max_frame_size: 128 }"));
+        let l = frame_limits(&config("benthos { max_frame_size: 128 }")).text;
         assert!(l.contains("up to 128 bytes"), "{l}");
         assert!(l.contains("2 140 bit/s"), "{l}");
         assert!(l.contains("13 15360 bit/s"), "{l}");

@@ -12,4 +12,4 @@ pub mod emulator;
 pub mod machine;
 pub mod wire;
 
-pub use driver::{is_benthos, BenthosDriver, DEFAULT_BAUD};
+pub use driver::{BenthosDriver, DEFAULT_BAUD};

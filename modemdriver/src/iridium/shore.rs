@@ -78,11 +78,12 @@ use super::rockblock::webhook::{self, WebhookConfig, WebhookEvent};
 use super::rockblock::{JwtVerifier, MtReply, MtRequest};
 use super::rudics;
 use super::shore_rudics::{CallId, CallOutput, CallSettings, RudicsCalls};
-use crate::check::{self, Problem};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
+use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::problem::{self, Problem};
 
 /// Transmissions asked for that wait while an MT message is being sent.
 pub const MAX_WAITING: usize = 2;
@@ -332,11 +333,50 @@ fn rockblock_problems(shore: &IridiumShoreDriverConfig) -> Vec<Problem> {
     problems
 }
 
+impl DriverKind for IridiumShoreDriver {
+    fn named(&self) -> Named {
+        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverIridiumShore)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "iridium_shore"
+    }
+
+    fn title(&self) -> &'static str {
+        "Iridium shore"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("iridium_shore")
+    }
+
+    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
+        &[("goby.acomms.iridium.protobuf.shore_config", "iridium_shore")]
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problems(config)
+    }
+
+    /// The device's MT messages out, its MO messages in.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        Some(frame::frame_limits(
+            shore_config(config).device(),
+            Direction::MobileTerminated,
+            max_frame_bytes(config) as usize,
+        ))
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(IridiumShoreDriver::start(config))
+    }
+}
+
 impl IridiumShoreDriver {
     /// Binds the MO listener (DirectIP, or RockBLOCK's webhook) and starts
     /// the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let shore = shore_config(config);
         let bind = SocketAddr::new(
             shore

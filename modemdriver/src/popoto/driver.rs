@@ -46,16 +46,16 @@
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::{ConnectionType, Driver as DriverKind},
-    popoto_config::Interface as ConfigInterface,
-    DriverConfig, DriverType, PopotoConfig,
+    driver_config::ConnectionType, popoto_config::Interface as ConfigInterface, DriverConfig,
+    DriverType, PopotoConfig,
 };
 
 use super::machine::{Machine, Settings};
 use super::wire::{Command, Interface, ParamValue, MAX_PAYLOAD, MODE_BIT_RATE, RATE_TO_MODE};
-use crate::check::{self, Problem};
 use crate::config;
 use crate::driver::{Driver, DriverError};
+use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::problem::{self, Problem};
 use crate::stream_shell::{self, BoxStream, Endpoint};
 
 /// The JSON command port of a Popoto modem when none is configured.
@@ -68,14 +68,51 @@ pub const DEFAULT_BAUD: u32 = 115_200;
 /// less Goby3's header byte).
 pub const FRAME_LIMIT: usize = MAX_PAYLOAD - 1;
 
-/// Whether `config` names the Popoto driver.
-pub fn is_popoto(config: &DriverConfig) -> bool {
-    matches!(&config.driver, Some(DriverKind::DriverType(t)) if *t == DriverType::DriverPopoto as i32)
-}
-
 /// The Popoto driver.
 #[derive(Debug)]
 pub struct PopotoDriver;
+
+impl DriverKind for PopotoDriver {
+    fn named(&self) -> Named {
+        Named::Type(DriverType::DriverPopoto)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "popoto"
+    }
+
+    fn title(&self) -> &'static str {
+        "Popoto"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("popoto")
+    }
+
+    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
+        &[
+            ("goby.acomms.popoto.protobuf.config", "popoto"),
+            ("goby.acomms.popoto.protobuf.transmission", "popoto"),
+        ]
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        Some(frame_limits(config))
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        use prost_reflect::ReflectMessage;
+        Some(protos::goby::acomms::protobuf::PopotoSpecific::default().descriptor())
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(PopotoDriver::start(config))
+    }
+}
 
 impl PopotoDriver {
     /// Connects to the modem and starts the driver. A modem that cannot be
@@ -125,7 +162,7 @@ fn popoto_config(config: &DriverConfig) -> PopotoConfig {
 
 /// Where the modem is, from `config` (checked by [`problems`]).
 pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     Ok(match config.connection_type() {
         ConnectionType::ConnectionSerial => Endpoint::Serial {
             path: config.serial_port().to_string(),
@@ -144,10 +181,10 @@ pub fn max_frame_bytes(config: &DriverConfig) -> usize {
     popoto_config(config).max_frame_bytes() as usize
 }
 
-/// The frame limits of a Popoto configuration in words, for `gobyd
-/// --check`: the frame and, for each rate, the payload mode, its bit rate
-/// and the time a full frame takes.
-pub fn limits(config: &DriverConfig) -> String {
+/// The frame limits of a Popoto configuration, for `gobyd --check`: the
+/// frame and, for each rate, the payload mode, its bit rate and the time a
+/// full frame takes.
+pub fn frame_limits(config: &DriverConfig) -> FrameLimits {
     let max = max_frame_bytes(config);
     let rates: Vec<String> = RATE_TO_MODE
         .iter()
@@ -158,11 +195,17 @@ pub fn limits(config: &DriverConfig) -> String {
             format!("rate {rate} payload mode {mode} {bps} bit/s ({seconds:.1} s)")
         })
         .collect();
-    format!(
-        "driver DRIVER_POPOTO: one frame per transmission of up to {max} bytes at every rate (after Goby3's \
-         1-byte header); a full frame takes about: {}",
-        rates.join(", ")
-    )
+    FrameLimits {
+        link: "driver DRIVER_POPOTO".into(),
+        outgoing: max,
+        incoming: max,
+        text: format!(
+            "one frame per transmission of up to {max} bytes at every rate (after Goby3's \
+             1-byte header); a full frame takes about: {}",
+            rates.join(", ")
+        ),
+        each_way: false,
+    }
 }
 
 /// Every problem of a Popoto configuration that [`settings`] refuses.
@@ -286,7 +329,7 @@ fn setting_command(line: &str) -> Result<Command, String> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let p = popoto_config(config);
     let modem_id = config::modem_id(config)?;
     let serial = config.connection_type() == ConnectionType::ConnectionSerial;
@@ -411,7 +454,7 @@ mod tests {
 
     #[test]
     fn limits_tell_each_rate() {
-        let l = limits(&config("popoto { max_frame_bytes: 100 }"));
+        let l = frame_limits(&config("popoto { max_frame_bytes: 100 }")).text;
         assert!(l.contains("up to 100 bytes"), "{l}");
         assert!(l.contains("rate 1 payload mode 4 640 bit/s"), "{l}");
         assert!(l.contains("rate 5 payload mode 5 10240 bit/s"), "{l}");

@@ -12,4 +12,4 @@ pub mod emulator;
 pub mod machine;
 pub mod wire;
 
-pub use driver::{is_popoto, PopotoDriver, DEFAULT_BAUD, DEFAULT_TCP_PORT};
+pub use driver::{PopotoDriver, DEFAULT_BAUD, DEFAULT_TCP_PORT};

@@ -62,16 +62,16 @@ mod tests;
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::{ConnectionType, Driver as DriverKind},
-    evologics_config::Framing as ConfigFraming,
-    DriverConfig, EvologicsConfig,
+    driver_config::ConnectionType, evologics_config::Framing as ConfigFraming, DriverConfig,
+    EvologicsConfig,
 };
 
 use super::codec::Framing;
 use super::message::{Command, IM_MAX_BYTES};
-use crate::check::{self, Problem};
 use crate::config;
 use crate::driver::{Driver, DriverError};
+use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::problem::{self, Problem};
 
 pub use machine::{Input, Machine, Output, Settings};
 pub use shell::Endpoint;
@@ -85,14 +85,77 @@ pub const DEFAULT_BAUD: u32 = 19_200;
 /// Largest burst frame `burst_max_bytes` may give.
 pub const BURST_LIMIT: usize = super::message::BURST_MAX_BYTES;
 
-/// Whether `config` names the EvoLogics S2C driver.
-pub fn is_evologics(config: &DriverConfig) -> bool {
-    matches!(&config.driver, Some(DriverKind::DriverName(n)) if n == DRIVER_NAME)
-}
-
 /// The EvoLogics S2C driver.
 #[derive(Debug)]
 pub struct EvologicsDriver;
+
+impl DriverKind for EvologicsDriver {
+    fn named(&self) -> Named {
+        Named::Name(DRIVER_NAME)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "evologics"
+    }
+
+    fn title(&self) -> &'static str {
+        "EvoLogics"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("evologics")
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    /// The instant-message and burst sizes, less the application-ack
+    /// header when there is one.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        let (im, burst) = frame_limits(config);
+        let header = if application_acks(config) {
+            let h = machine::APP_HEADER;
+            if burst > 0 {
+                format!(
+                    " ({} and {} less the {h}-byte application-ack header)",
+                    im + h,
+                    burst + h
+                )
+            } else {
+                format!(" ({} less the {h}-byte application-ack header)", im + h)
+            }
+        } else {
+            String::new()
+        };
+        let text = if burst > 0 {
+            format!(
+                "one frame per transmission; up to {im} bytes as an instant message (AT*SENDIM), \
+                 up to {burst} bytes as burst data (AT*SEND) to one node{header}; broadcasts and query destinations up to {im} bytes"
+            )
+        } else {
+            format!(
+                "one frame per transmission of up to {im} bytes{header}, as an instant message (AT*SENDIM); no burst data"
+            )
+        };
+        Some(FrameLimits {
+            link: format!("driver {DRIVER_NAME}"),
+            outgoing: im.max(burst),
+            incoming: im.max(burst),
+            text,
+            each_way: false,
+        })
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        use prost_reflect::ReflectMessage;
+        Some(protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor())
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(EvologicsDriver::start(config))
+    }
+}
 
 impl EvologicsDriver {
     /// Connects to the modem and starts the driver. A modem that cannot be
@@ -141,7 +204,7 @@ impl EvologicsDriver {
 
 /// Where the modem is, from `config` (checked by [`problems`]).
 pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     Ok(match config.connection_type() {
         ConnectionType::ConnectionSerial => Endpoint::Serial {
             path: config.serial_port().to_string(),
@@ -298,7 +361,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let e: EvologicsConfig = config.evologics.clone().unwrap_or_default();
     let modem_id = config::modem_id(config)?;
     let address = e.address.map_or(modem_id as u32, |a| a) as u8;

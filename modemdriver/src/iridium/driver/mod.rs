@@ -59,8 +59,9 @@ use protos::goby::acomms::protobuf::{
 };
 
 use super::frame::{self, Direction};
-use crate::check::{self, Problem};
 use crate::driver::{Driver, DriverError};
+use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::problem::{self, Problem};
 
 pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
 
@@ -70,6 +71,46 @@ pub const DEFAULT_BAUD: u32 = 19_200;
 /// The vehicle's Iridium driver.
 #[derive(Debug)]
 pub struct IridiumDriver;
+
+impl DriverKind for IridiumDriver {
+    fn named(&self) -> Named {
+        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverIridium)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "iridium"
+    }
+
+    fn title(&self) -> &'static str {
+        "Iridium"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("iridium")
+    }
+
+    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
+        &[("goby.acomms.iridium.protobuf.config", "iridium")]
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    /// The device's MO messages out, its MT messages in.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        let iridium = iridium_config(config);
+        Some(frame::frame_limits(
+            iridium.device(),
+            Direction::MobileOriginated,
+            max_frame_bytes(&iridium) as usize,
+        ))
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(async move { IridiumDriver::start(config) })
+    }
+}
 
 impl IridiumDriver {
     /// Opens `serial_port` and starts the driver.
@@ -84,8 +125,8 @@ impl IridiumDriver {
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        check::refuse(
-            check::serial_port_problem(config.serial_port())
+        problem::refuse(
+            problem::serial_port_problem(config.serial_port())
                 .into_iter()
                 .collect(),
         )?;
@@ -223,7 +264,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let iridium = iridium_config(config);
     let reconnect = iridium.reconnect_interval_ms.map_or(
         Duration::from_secs(u64::from(config.reconnect_interval())),

@@ -135,12 +135,17 @@ use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, DriverConfig, ModemTransmission,
 };
 
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, MicroModemSpecific};
+
 use super::application_ack::{self, ApplicationAcks};
-use crate::check::{self, Problem};
+use super::{ranging, transmission};
 use crate::config;
 use crate::driver::{Driver, DriverError};
+use crate::kind::{DriverKind, Named, PacketTime, Starting};
 use crate::link::fault::{FaultConfig, FaultScript};
 use crate::link::serial;
+use crate::problem::{self, Problem};
 use crate::rate;
 
 pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
@@ -195,8 +200,8 @@ impl MicroModemDriver {
         script: FaultScript,
     ) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        check::refuse(
-            check::serial_port_problem(config.serial_port())
+        problem::refuse(
+            problem::serial_port_problem(config.serial_port())
                 .into_iter()
                 .collect(),
         )?;
@@ -213,6 +218,80 @@ impl MicroModemDriver {
         Ok(Driver::spawn("micromodem", move |ctx| {
             shell::run(settings, port, lines, ctx)
         }))
+    }
+}
+
+impl DriverKind for MicroModemDriver {
+    fn named(&self) -> Named {
+        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverWhoiMicromodem)
+    }
+
+    fn short_name(&self) -> &'static str {
+        "micromodem"
+    }
+
+    fn title(&self) -> &'static str {
+        "Micro-Modem"
+    }
+
+    fn section(&self) -> Option<&'static str> {
+        Some("micromodem")
+    }
+
+    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
+        &[
+            ("goby.acomms.micromodem.protobuf.config", "micromodem"),
+            ("goby.acomms.micromodem.protobuf.transmission", "micromodem"),
+        ]
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    /// The rate's frames at its bit rate after [`PACKET_OVERHEAD`], and
+    /// [`HAND_OVER`].
+    fn packet_time(&self, _config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+        Some(PacketTime {
+            driver: "the Micro-Modem",
+            spec: rate::spec(rate)?,
+            overhead: PACKET_OVERHEAD,
+            hand_over: HAND_OVER,
+        })
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        Some(MicroModemSpecific::default().descriptor())
+    }
+
+    /// What the modem could not do (see [`ranging::request_problem`]).
+    fn specific_problem(
+        &self,
+        config: &DriverConfig,
+        request: &prost_reflect::DynamicMessage,
+        modem_id: i32,
+    ) -> Option<String> {
+        let request = request.transcode_to::<MicroModemSpecific>().ok()?;
+        let settings = config.micromodem.clone().unwrap_or_default();
+        ranging::request_problem(&request, modem_id, &settings)
+    }
+
+    /// What the slot asks of the modem, when it cannot be carried out (see
+    /// [`transmission::request`]).
+    fn specific_slot_problem(
+        &self,
+        config: &DriverConfig,
+        slot: &ModemTransmission,
+    ) -> Option<Problem> {
+        if slot.r#type() != TransmissionType::DriverSpecific {
+            return None;
+        }
+        let mm = config.micromodem.clone().unwrap_or_default();
+        transmission::request(slot, slot.src(), &mm).err()
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(async move { MicroModemDriver::start(config) })
     }
 }
 
@@ -275,7 +354,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let modem_id = u32::try_from(config::modem_id(config)?)
         .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
     let mm = config.micromodem.clone().unwrap_or_default();
