@@ -18,7 +18,7 @@ use tokio::time::Instant;
 
 use crate::driver::{Driver, DriverEvent};
 pub use crate::evologics::emulator::{EmulatorControl, EmulatorFaults, EmulatorPort};
-use crate::stream_shell::BoxStream;
+use crate::link::stream::BoxStream;
 use crate::time::sleep_until_opt;
 
 /// An emulated modem's logic.

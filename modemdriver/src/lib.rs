@@ -50,6 +50,7 @@
 
 #![warn(missing_docs)]
 
+pub mod address;
 pub mod benthos;
 pub mod built_in;
 pub mod check;
@@ -57,16 +58,18 @@ pub mod config;
 pub mod driver;
 pub mod emulator_host;
 pub mod evologics;
+pub mod file;
 pub mod iridium;
 pub mod kind;
 pub mod link;
+pub mod machine;
 pub mod micromodem;
 pub mod popoto;
 pub mod problem;
 pub mod rate;
+pub mod shell;
 pub mod sim;
 pub mod slot;
-pub mod stream_shell;
 pub mod time;
 pub mod udp;
 pub mod udp_multicast;

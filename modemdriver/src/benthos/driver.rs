@@ -44,17 +44,17 @@
 
 use std::time::Duration;
 
-use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, BenthosConfig, DriverConfig, DriverType,
-};
+use protos::goby::acomms::protobuf::{BenthosConfig, DriverConfig, DriverType};
 
 use super::machine::{Machine, Settings};
 use super::wire::{bit_rate, Command, ABSOLUTE_MAX_FRAME, RATE_MAX, RATE_MIN};
 use crate::config;
+use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
 use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::Units;
 use crate::problem::{self, Problem};
-use crate::stream_shell::{self, BoxStream, Endpoint};
+use crate::shell::{self, Device};
 
 /// Baud rate when `serial_baud` is not set.
 pub const DEFAULT_BAUD: u32 = 9600;
@@ -148,54 +148,24 @@ impl BenthosDriver {
     /// ([`DriverError::Config`], as [`problems`] finds them).
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        let endpoint = endpoint(config)?;
-        let link = match endpoint.open().await {
-            Ok(link) => Some(link),
-            Err(e) => {
-                tracing::warn!("Benthos modem at {}: {e}", endpoint.describe());
-                None
-            }
-        };
-        Ok(Self::start_on(
-            settings,
-            endpoint,
-            link,
-            std::sync::Arc::new(goby_time::SystemClock),
-        ))
-    }
-
-    /// Starts the driver on a link already open (`None`: not yet; the
-    /// driver opens `endpoint` itself), reading time from `clock`.
-    pub fn start_on(
-        settings: Settings,
-        endpoint: Endpoint,
-        link: Option<BoxStream>,
-        clock: std::sync::Arc<dyn goby_time::Clock>,
-    ) -> Driver {
-        let now = crate::micromodem::driver::shell::now(&*clock);
-        let machine = if link.is_some() {
-            Machine::new(settings, now)
-        } else {
-            Machine::disconnected(settings, now)
-        };
-        stream_shell::spawn("benthos", machine, endpoint, link, clock)
+        let device = Device::new(config::stream_endpoint(config, REACH), Units::Bytes);
+        Ok(
+            shell::start_reconnecting("benthos", device, |now, up| Machine::new(settings, now, up))
+                .await,
+        )
     }
 }
+
+/// How the driver reaches the modem: its serial line, or a serial server.
+const REACH: Reach<'static> = Reach {
+    driver: "the Benthos driver",
+    server: "the serial server's address",
+    port: None,
+    baud: DEFAULT_BAUD,
+};
 
 fn benthos_config(config: &DriverConfig) -> BenthosConfig {
     config.benthos.clone().unwrap_or_default()
-}
-
-/// Where the modem is, from `config` (checked by [`problems`]).
-pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    problem::refuse(problems(config))?;
-    Ok(match config.connection_type() {
-        ConnectionType::ConnectionSerial => Endpoint::Serial {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-        },
-        _ => Endpoint::Tcp(format!("{}:{}", config.tcp_server(), config.tcp_port())),
-    })
 }
 
 /// The largest frame, bytes (at every rate).
@@ -235,40 +205,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         )),
         Err(_) => problems.push(Problem::new("modem_id", "required field is not set")),
     }
-    match config.connection_type() {
-        ConnectionType::ConnectionSerial => {
-            if config.serial_port().trim().is_empty() {
-                problems.push(Problem::new(
-                    "serial_port",
-                    "required for the Benthos driver (e.g. \"/dev/ttyUSB0\"), or use \
-                     connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server and tcp_port (a serial server)",
-                ));
-            }
-        }
-        ConnectionType::ConnectionTcpAsClient => {
-            if config.tcp_server().trim().is_empty() {
-                problems.push(Problem::new(
-                    "tcp_server",
-                    "required for the Benthos driver over TCP (the serial server's address)",
-                ));
-            }
-            match config.tcp_port {
-                Some(p) if (1..=65_535).contains(&p) => {}
-                Some(p) => problems.push(Problem::new(
-                    "tcp_port",
-                    format!("{p} is not a TCP port (1-65535)"),
-                )),
-                None => problems.push(Problem::new(
-                    "tcp_port",
-                    "required for the Benthos driver over TCP (the serial server's port)",
-                )),
-            }
-        }
-        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
-            "connection_type",
-            "CONNECTION_TCP_AS_SERVER is not supported by the Benthos driver (use CONNECTION_SERIAL or CONNECTION_TCP_AS_CLIENT)",
-        )),
-    }
+    problems.extend(config::stream_problems(config, REACH));
     let max = b.max_frame_size() as usize;
     if max == 0 || max > ABSOLUTE_MAX_FRAME {
         problems.push(Problem::new(
@@ -417,7 +354,10 @@ mod tests {
             ]
         );
         assert_eq!(s.max_frame_bytes, 64);
-        assert_eq!(endpoint(&config("")).unwrap().describe(), "/dev/null");
+        assert_eq!(
+            config::stream_endpoint(&config(""), REACH).describe(),
+            "/dev/null"
+        );
     }
 
     #[test]

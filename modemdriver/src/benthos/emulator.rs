@@ -49,12 +49,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use super::machine::id_of;
 use super::wire::{bit_rate, hex_encode, Command, BROADCAST};
+use crate::address::id_of;
 use crate::driver::Driver;
 use crate::emulator_host::{distance, draw, EmulatedModem};
 pub use crate::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
-use crate::popoto::wire::LineSplitter;
+use crate::link::line::LineSplitter;
 
 /// The prompt after each answer.
 pub const PROMPT: &str = "user:1>";
@@ -173,7 +173,7 @@ impl Modem {
             settings: HashMap::new(),
             echo: true,
             mode: Mode::Command,
-            lines: LineSplitter::new(),
+            lines: LineSplitter::new(super::wire::MAX_LINE),
             online: Vec::new(),
             last_host_byte: Instant::now(),
             forward_at: None,

@@ -20,6 +20,10 @@
 /// The ATM-900 broadcast address.
 pub const BROADCAST: u8 = 255;
 
+/// Longest line read from the modem; a longer run of bytes without an end
+/// is given as a line (the parser refuses it).
+pub const MAX_LINE: usize = 16 * 1024;
+
 /// What ends a host command.
 pub const COMMAND_END: &[u8] = b"\r";
 

@@ -67,7 +67,7 @@ use super::message::{
     AckFlag, Command, Notification, Reception, ReceptionKind, Reply, UsblLong, BROADCAST,
 };
 use crate::driver::{Driver, DriverEvent};
-use crate::evologics::driver::shell::BoxStream;
+use crate::link::stream::BoxStream;
 use crate::time::sleep_until_opt;
 
 /// Settings of an emulated modem.
@@ -371,7 +371,7 @@ impl Modem {
     fn put_on_water(&mut self, packet: &EvologicsEmulatedPacket) {
         self.water_out.push(ModemTransmission {
             src: Some(i32::from(self.address)),
-            dest: Some(crate::evologics::driver::machine::id_of(packet.dest as u8)),
+            dest: Some(crate::address::id_of(packet.dest as u8)),
             r#type: Some(TransmissionType::DriverSpecific as i32),
             frame: vec![packet.encode_to_vec()],
             ..Default::default()

@@ -53,10 +53,12 @@ use protos::goby::acomms::protobuf::{
 use super::machine::{Machine, Settings};
 use super::wire::{Command, Interface, ParamValue, MAX_PAYLOAD, MODE_BIT_RATE, RATE_TO_MODE};
 use crate::config;
+use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
 use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::Units;
 use crate::problem::{self, Problem};
-use crate::stream_shell::{self, BoxStream, Endpoint};
+use crate::shell::{self, Device};
 
 /// The JSON command port of a Popoto modem when none is configured.
 pub const DEFAULT_TCP_PORT: u16 = 17000;
@@ -122,58 +124,24 @@ impl PopotoDriver {
     /// ([`DriverError::Config`], as [`problems`] finds them).
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        let endpoint = endpoint(config)?;
-        let link = match endpoint.open().await {
-            Ok(link) => Some(link),
-            Err(e) => {
-                tracing::warn!("Popoto modem at {}: {e}", endpoint.describe());
-                None
-            }
-        };
-        Ok(Self::start_on(
-            settings,
-            endpoint,
-            link,
-            std::sync::Arc::new(goby_time::SystemClock),
-        ))
-    }
-
-    /// Starts the driver on a link already open (`None`: not yet; the
-    /// driver opens `endpoint` itself), reading time from `clock`.
-    pub fn start_on(
-        settings: Settings,
-        endpoint: Endpoint,
-        link: Option<BoxStream>,
-        clock: std::sync::Arc<dyn goby_time::Clock>,
-    ) -> Driver {
-        let now = crate::micromodem::driver::shell::now(&*clock);
-        let machine = if link.is_some() {
-            Machine::new(settings, now)
-        } else {
-            Machine::disconnected(settings, now)
-        };
-        stream_shell::spawn("popoto", machine, endpoint, link, clock)
+        let device = Device::new(config::stream_endpoint(config, REACH), Units::Bytes);
+        Ok(
+            shell::start_reconnecting("popoto", device, |now, up| Machine::new(settings, now, up))
+                .await,
+        )
     }
 }
+
+/// How the driver reaches the modem.
+const REACH: Reach<'static> = Reach {
+    driver: "the Popoto driver",
+    server: "the modem's address",
+    port: Some(DEFAULT_TCP_PORT),
+    baud: DEFAULT_BAUD,
+};
 
 fn popoto_config(config: &DriverConfig) -> PopotoConfig {
     config.popoto.clone().unwrap_or_default()
-}
-
-/// Where the modem is, from `config` (checked by [`problems`]).
-pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    problem::refuse(problems(config))?;
-    Ok(match config.connection_type() {
-        ConnectionType::ConnectionSerial => Endpoint::Serial {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-        },
-        _ => Endpoint::Tcp(format!(
-            "{}:{}",
-            config.tcp_server(),
-            config.tcp_port.unwrap_or(u32::from(DEFAULT_TCP_PORT))
-        )),
-    })
 }
 
 /// The largest frame the layer above is offered, bytes (at every rate).
@@ -220,37 +188,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         )),
         Err(_) => problems.push(Problem::new("modem_id", "required field is not set")),
     }
-    match config.connection_type() {
-        ConnectionType::ConnectionSerial => {
-            if config.serial_port().trim().is_empty() {
-                problems.push(Problem::new(
-                    "serial_port",
-                    "required for the Popoto driver over serial (e.g. \"/dev/ttyUSB0\"), \
-                     or use connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server",
-                ));
-            }
-        }
-        ConnectionType::ConnectionTcpAsClient => {
-            if config.tcp_server().trim().is_empty() {
-                problems.push(Problem::new(
-                    "tcp_server",
-                    "required for the Popoto driver over TCP (the modem's address)",
-                ));
-            }
-            if let Some(port) = config.tcp_port {
-                if port == 0 || port > 65_535 {
-                    problems.push(Problem::new(
-                        "tcp_port",
-                        format!("{port} is not a TCP port (1-65535; the modem's JSON port is 17000)"),
-                    ));
-                }
-            }
-        }
-        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
-            "connection_type",
-            "CONNECTION_TCP_AS_SERVER is not supported by the Popoto driver (the modem is the server: use CONNECTION_TCP_AS_CLIENT)",
-        )),
-    }
+    problems.extend(config::stream_problems(config, REACH));
     if !(0..=5).contains(&p.payload_mode()) {
         problems.push(Problem::new(
             "popoto.payload_mode",
@@ -425,7 +363,7 @@ mod tests {
             ]
         );
         assert_eq!(
-            endpoint(&config("")).unwrap().describe(),
+            config::stream_endpoint(&config(""), REACH).describe(),
             "tcp 127.0.0.1:17000"
         );
     }

@@ -44,14 +44,16 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use super::machine::{air_time, id_of, MAC_DUMPED, TX_COMPLETE};
+use super::machine::{air_time, MAC_DUMPED, TX_COMPLETE};
 use super::wire::{
-    parse_host_line, Command, HostLine, Interface, LineSplitter, ModemLine, PacketHeader,
-    PacketKind, ParamValue, RangeReport, BROADCAST,
+    parse_host_line, Command, HostLine, Interface, ModemLine, PacketHeader, PacketKind, ParamValue,
+    RangeReport, BROADCAST,
 };
+use crate::address::id_of;
 use crate::driver::Driver;
 use crate::emulator_host::{distance, draw, EmulatedModem};
 pub use crate::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
+use crate::link::line::LineSplitter;
 
 /// The test message of a ping.
 pub const PING_TEXT: &str = "Popoto Test Message";
@@ -166,7 +168,7 @@ impl Modem {
             power: 1.0,
             params: HashMap::new(),
             rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32)),
-            lines: LineSplitter::new(),
+            lines: LineSplitter::new(super::wire::MAX_LINE),
             transmitting: false,
             ranging: None,
             asleep: false,

@@ -676,43 +676,6 @@ pub fn clean(line: &str) -> String {
     out.replace("Popoto->", "").trim().to_string()
 }
 
-/// Splits the modem's byte stream into lines (ended by CR or LF; empty
-/// lines skipped); a line longer than [`MAX_LINE`] is given cut there.
-#[derive(Debug, Default)]
-pub struct LineSplitter {
-    buf: Vec<u8>,
-}
-
-impl LineSplitter {
-    /// A splitter with nothing buffered.
-    pub fn new() -> Self {
-        LineSplitter::default()
-    }
-
-    /// Forgets what is buffered (the link was lost).
-    pub fn clear(&mut self) {
-        self.buf.clear();
-    }
-
-    /// The complete lines in `bytes` and what came before.
-    pub fn push(&mut self, bytes: &[u8]) -> Vec<Vec<u8>> {
-        let mut out = Vec::new();
-        for &b in bytes {
-            if b == b'\r' || b == b'\n' {
-                if !self.buf.is_empty() {
-                    out.push(std::mem::take(&mut self.buf));
-                }
-            } else {
-                self.buf.push(b);
-                if self.buf.len() >= MAX_LINE {
-                    out.push(std::mem::take(&mut self.buf));
-                }
-            }
-        }
-        out
-    }
-}
-
 /// Goby3's header byte before each frame of a Popoto payload.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GobyHeader {
@@ -914,7 +877,7 @@ mod tests {
     proptest::proptest! {
         #[test]
         fn parsers_never_panic(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..400)) {
-            let mut s = LineSplitter::new();
+            let mut s = crate::link::line::LineSplitter::new(MAX_LINE);
             for line in s.push(&bytes) {
                 let text = String::from_utf8_lossy(&line);
                 let _ = parse_modem_line(&text);

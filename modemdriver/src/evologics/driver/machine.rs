@@ -15,7 +15,6 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
     evologics_config::AckMode, evologics_receive_statistics::Kind as StatKind, evologics_report,
     evologics_specific::Type as SpecificType, modem_transmission::TransmissionType,
@@ -23,22 +22,18 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
-use crate::driver::{
-    DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome, TransmitResult,
-};
-pub use crate::micromodem::driver::machine::{Now, RequestId};
+use crate::address::{address_of, id_of};
+use crate::driver::{DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome};
+use crate::machine::fill::Fill;
+use crate::machine::reconnect::Reconnect;
+use crate::machine::work::{asked, queue_data, queue_first, Asked};
+use crate::machine::{self, Input, Now, Output, Outputs, RequestId};
 
 use super::super::codec::{encode_command, Decoded, Framing, ModemDecoder, ModemMessage};
 use super::super::message::{
     lossy, AckFlag, Command, Notification, Reception, ReceptionKind, Reply, UsblAngles, UsblLong,
     BROADCAST,
 };
-
-/// How long the driver waits for the layer above to fill a data request.
-pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// Data transmissions waiting at most; beyond, the oldest is dropped.
-pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
 
 /// Attempts of a setting command without an answer.
 pub const SETTING_ATTEMPTS: u32 = 3;
@@ -121,47 +116,6 @@ pub struct Settings {
     pub reconnect: Duration,
 }
 
-/// What happened.
-#[derive(Debug)]
-pub enum Input {
-    /// Bytes read from the modem.
-    Bytes(Vec<u8>),
-    /// Time passed: deadlines up to now fire.
-    Tick,
-    /// A command of the layer above (other than `Stop`).
-    Command(DriverCommand),
-    /// The layer above answered a data request (`None`: dropped).
-    Answer {
-        /// The request answered.
-        id: RequestId,
-        /// The transmission filled, or `None`.
-        filled: Option<ModemTransmission>,
-    },
-    /// The link asked for by [`Output::Open`] was opened (`true`) or not.
-    Opened(bool),
-    /// The link failed: why.
-    Disconnected(String),
-}
-
-/// What to do, in order.
-#[derive(Debug)]
-pub enum Output {
-    /// Write these bytes to the modem.
-    Write(Vec<u8>),
-    /// Give this event to the layer above.
-    Event(DriverEvent),
-    /// Ask the layer above to fill `template`; the answer comes back as
-    /// [`Input::Answer`] with `id`.
-    Request {
-        /// Names the request.
-        id: RequestId,
-        /// What to fill.
-        template: ModemTransmission,
-    },
-    /// Open the link again, then tell [`Input::Opened`].
-    Open,
-}
-
 /// How a message goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum How {
@@ -212,14 +166,6 @@ struct Awaiting {
 }
 
 #[derive(Debug)]
-struct Filling {
-    id: RequestId,
-    template: ModemTransmission,
-    piggyback: bool,
-    deadline: Instant,
-}
-
-#[derive(Debug)]
 struct InFlight {
     sending: Sending,
     deadline: Instant,
@@ -230,19 +176,18 @@ struct InFlight {
 pub struct Machine {
     s: Settings,
     now: Now,
-    out: Vec<Output>,
+    out: Outputs,
     decoder: ModemDecoder,
-    connected: bool,
-    opening: bool,
-    reconnect_at: Instant,
+    link: Reconnect,
     setup: VecDeque<Command>,
     ready: bool,
     awaiting: Option<Awaiting>,
-    filling: Option<Filling>,
+    fill: Fill,
+    /// The data request outstanding is for a piggy-back message.
+    piggyback: bool,
     in_flight: Option<InFlight>,
     retry: Option<(Instant, Sending)>,
     pending: VecDeque<Job>,
-    next_request: u64,
     /// The far end of the last delivery, for AT?T.
     last_remote: Option<i32>,
     /// Receptions of the last `repeat_window`: (when, sender, kind,
@@ -250,128 +195,54 @@ pub struct Machine {
     recent: VecDeque<(Instant, u8, ReceptionKind, u8, Vec<u8>)>,
 }
 
-/// The S2C address of modem id `id` (0: broadcast).
-pub fn address_of(id: i32) -> Option<u8> {
-    match id {
-        0 => Some(BROADCAST),
-        1..=254 => Some(id as u8),
-        _ => None,
-    }
-}
-
-/// The modem id of S2C address `a` (255: broadcast, 0).
-pub fn id_of(a: u8) -> i32 {
-    if a == BROADCAST {
-        0
-    } else {
-        i32::from(a)
-    }
-}
-
 impl Machine {
-    /// A machine whose link is open at `now`; its first outputs (the
+    /// A machine at `now` whose link is open (`connected`), or not yet
+    /// (its first output asks to open it); its first outputs (the
     /// settings) come from the first input, e.g. [`Input::Tick`].
-    pub fn new(settings: Settings, now: Now) -> Machine {
+    pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         let framing = settings.framing;
         let setup = settings.setup.iter().cloned().collect();
         Machine {
             now,
-            out: Vec::new(),
+            out: Outputs::default(),
             decoder: ModemDecoder::new(framing),
-            connected: true,
-            opening: false,
-            reconnect_at: now.at,
+            link: Reconnect::new(connected, now.at, settings.reconnect),
             setup,
             ready: false,
             awaiting: None,
-            filling: None,
+            fill: Fill::default(),
+            piggyback: false,
             in_flight: None,
             retry: None,
             pending: VecDeque::new(),
-            next_request: 0,
             last_remote: None,
             recent: VecDeque::new(),
             s: settings,
         }
     }
 
-    /// A machine whose link is not open yet: its first output asks to open
-    /// it.
-    pub fn disconnected(settings: Settings, now: Now) -> Machine {
-        let mut m = Machine::new(settings, now);
-        m.connected = false;
-        m
-    }
-
-    /// Handles `input`, which happened at `now`; returns what to do.
-    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Bytes(bytes) => {
-                for unit in self.decoder.push(&bytes) {
-                    self.unit(unit);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    /// When the next [`Input::Tick`] is due.
-    pub fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.awaiting.as_ref().map(|a| a.deadline),
-            self.filling.as_ref().map(|f| f.deadline),
-            self.in_flight.as_ref().map(|f| f.deadline),
-            self.retry.as_ref().map(|r| r.0),
-            (!self.connected && !self.opening).then_some(self.reconnect_at),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    /// Whether data request `id` is still awaited.
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.filling.as_ref().is_some_and(|f| f.id == id)
-    }
-
     fn emit(&mut self, e: DriverEvent) {
-        self.out.push(Output::Event(e));
+        self.out.event(e);
     }
 
     fn status(&mut self, s: DriverStatus) {
-        self.emit(DriverEvent::Status(s));
+        self.out.status(s);
     }
 
     fn write(&mut self, command: &Command) {
-        self.out.push(Output::Write(encode_command(
-            command,
-            self.s.framing,
-            &self.s.command_end,
-        )));
+        self.out
+            .write(encode_command(command, self.s.framing, &self.s.command_end));
     }
 
     fn result(&mut self, mt: ModemTransmission, outcome: TransmitOutcome) {
-        self.emit(DriverEvent::TransmitResult(TransmitResult {
-            transmission: mt,
-            outcome,
-        }));
+        self.out.result(mt, outcome);
     }
 
     fn disconnected_now(&mut self, reason: String) {
-        if !self.connected {
+        if !self.link.lost(self.now.at) {
             return;
         }
-        self.connected = false;
-        self.opening = false;
         self.decoder.clear();
-        self.reconnect_at = self.now.at + self.s.reconnect;
         self.status(DriverStatus::Disconnected { reason });
         // What was under way is not known to have gone: handed back.
         if let Some(a) = self.awaiting.take() {
@@ -405,38 +276,24 @@ impl Machine {
     }
 
     fn opened(&mut self, ok: bool) {
-        self.opening = false;
-        if ok {
-            self.connected = true;
+        if self.link.opened(ok, self.now.at) {
             self.decoder.clear();
             self.status(DriverStatus::Reconnected);
             self.setup = self.s.setup.iter().cloned().collect();
             self.ready = false;
-        } else {
-            self.reconnect_at = self.now.at + self.s.reconnect;
         }
     }
 
     fn timers(&mut self) {
         let now = self.now.at;
-        if !self.connected && !self.opening && self.reconnect_at <= now {
-            self.opening = true;
-            self.out.push(Output::Open);
-        }
+        self.link.tick(now, &mut self.out);
         if self.awaiting.as_ref().is_some_and(|a| a.deadline <= now) {
             let a = self.awaiting.take().expect("checked");
             self.no_answer(a);
         }
-        if self.filling.as_ref().is_some_and(|f| f.deadline <= now) {
-            let f = self.filling.take().expect("checked");
-            self.status(DriverStatus::DataRejected {
-                reason: format!(
-                    "no answer to the data request within {} ms: nothing sent",
-                    DATA_REQUEST_TIMEOUT.as_millis()
-                ),
-            });
-            if !f.piggyback {
-                self.result(f.template, TransmitOutcome::NothingToSend);
+        if let Some(template) = self.fill.expire(now, &mut self.out) {
+            if !self.piggyback {
+                self.result(template, TransmitOutcome::NothingToSend);
             }
         }
         if self.in_flight.as_ref().is_some_and(|f| f.deadline <= now) {
@@ -897,66 +754,40 @@ impl Machine {
     }
 
     fn command(&mut self, command: DriverCommand) {
-        match command {
-            DriverCommand::Initiate(mut mt) => {
-                if mt.src.is_none() || mt.src() == -1 {
-                    mt.src = Some(self.s.modem_id);
+        let acks = "the S2C acknowledges in the modem; use EvologicsSpecific";
+        match asked::<EvologicsSpecific>(command, self.s.modem_id, acks, &mut self.out) {
+            Asked::Data(mt) => queue_data(
+                &mut self.pending,
+                Job::Data(Box::new(mt)),
+                |j| matches!(j, Job::Data(_)),
+                &mut self.out,
+            ),
+            Asked::Slot(mt) => self.status(DriverStatus::Unsupported {
+                message: format!("ModemTransmission.type {:?} ({acks})", mt.r#type()),
+            }),
+            Asked::Specific(r) => match r.r#type() {
+                SpecificType::EvologicsPropagationTime => {
+                    self.pending.push_back(Job::PropagationTime {
+                        remote: self.last_remote,
+                    })
                 }
-                if mt.r#type() != TransmissionType::Data {
-                    return self.status(DriverStatus::Unsupported {
-                        message: format!(
-                            "ModemTransmission.type {:?} (the S2C acknowledges in the modem; use EvologicsSpecific)",
-                            mt.r#type()
-                        ),
-                    });
-                }
-                let waiting = self
-                    .pending
-                    .iter()
-                    .filter(|j| matches!(j, Job::Data(_)))
-                    .count();
-                if waiting >= MAX_PENDING_TRANSMISSIONS {
-                    if let Some(i) = self.pending.iter().position(|j| matches!(j, Job::Data(_))) {
-                        self.pending.remove(i);
-                        self.status(DriverStatus::Skipped {
-                            reason: format!(
-                                "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                            ),
-                        });
+                SpecificType::EvologicsPiggyback => {
+                    match r.dest.filter(|&d| address_of(d).is_some_and(|a| a != BROADCAST)) {
+                        Some(dest) => self.pending.push_back(Job::Piggyback { dest }),
+                        None => self.status(DriverStatus::Unsupported {
+                            message: "EvologicsSpecific EVOLOGICS_PIGGYBACK needs a dest (modem id 1-254)".into(),
+                        }),
                     }
                 }
-                self.pending.push_back(Job::Data(Box::new(mt)));
-            }
-            DriverCommand::Specific(message) => {
-                let name = message.descriptor().full_name().to_string();
-                let request = (name == EvologicsSpecific::default().descriptor().full_name())
-                    .then(|| message.transcode_to::<EvologicsSpecific>().ok())
-                    .flatten();
-                match request {
-                    Some(r) if r.r#type() == SpecificType::EvologicsPropagationTime => {
-                        self.pending.push_back(Job::PropagationTime {
-                            remote: self.last_remote,
-                        })
-                    }
-                    Some(r) if r.r#type() == SpecificType::EvologicsPiggyback => {
-                        match r.dest.filter(|&d| address_of(d).is_some_and(|a| a != BROADCAST)) {
-                            Some(dest) => self.pending.push_back(Job::Piggyback { dest }),
-                            None => self.status(DriverStatus::Unsupported {
-                                message: "EvologicsSpecific EVOLOGICS_PIGGYBACK needs a dest (modem id 1-254)".into(),
-                            }),
-                        }
-                    }
-                    _ => self.status(DriverStatus::Unsupported { message: name }),
-                }
-            }
+            },
             // Without application acks the modem acknowledges itself, on
             // reception.
-            DriverCommand::Acknowledge(ack) => {
+            Asked::Acknowledge(ack) => {
                 if self.s.ack_mode == AckMode::ApplicationAck && self.s.deferred_ack {
                     self.app_ack(&ack);
                 }
             }
-            DriverCommand::Stop(_) => {}
+            Asked::Nothing => {}
         }
     }
 
@@ -996,31 +827,24 @@ impl Machine {
             return;
         }
         let payload = app_header(APP_ACK, received.unique_id, received.frame_start());
-        // Before other work, after other acks.
-        let at = self
-            .pending
-            .iter()
-            .position(|j| !matches!(j, Job::AppAck { .. }))
-            .unwrap_or(self.pending.len());
-        self.pending.insert(at, Job::AppAck { dest, payload });
+        queue_first(&mut self.pending, Job::AppAck { dest, payload }, |j| {
+            matches!(j, Job::AppAck { .. })
+        });
     }
 
     fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
-        let Some(f) = self.filling.take_if(|f| f.id == id) else {
+        let Some(mt) = self.fill.answered(id, filled, &mut self.out) else {
             return;
         };
-        let (mt, problems) = crate::driver::checked_answer(&f.template, filled);
-        for p in problems {
-            self.status(p);
-        }
+        let piggyback = self.piggyback;
         let Some(data) = mt.frame.first().filter(|d| !d.is_empty()).cloned() else {
-            if !f.piggyback {
+            if !piggyback {
                 self.result(mt, TransmitOutcome::NothingToSend);
             }
             return;
         };
-        let dest_id = if f.piggyback {
-            f.template.dest()
+        let dest_id = if piggyback {
+            mt.dest()
         } else if mt.dest() < 0 {
             0
         } else {
@@ -1038,7 +862,7 @@ impl Machine {
         let mut mt = mt;
         mt.dest = Some(dest_id);
         mt.frame.truncate(1);
-        let how = if f.piggyback {
+        let how = if piggyback {
             How::Piggyback
         } else if data.len() <= self.s.im_max {
             How::Instant {
@@ -1102,9 +926,9 @@ impl Machine {
     /// Starts what can start now.
     fn pump(&mut self) {
         loop {
-            if !self.connected
+            if !self.link.is_up()
                 || self.awaiting.is_some()
-                || self.filling.is_some()
+                || self.fill.is_waiting()
                 || self.in_flight.is_some()
             {
                 return;
@@ -1175,18 +999,8 @@ impl Machine {
     }
 
     fn request(&mut self, template: ModemTransmission, piggyback: bool) {
-        self.next_request += 1;
-        let id = RequestId(self.next_request);
-        self.out.push(Output::Request {
-            id,
-            template: template.clone(),
-        });
-        self.filling = Some(Filling {
-            id,
-            template,
-            piggyback,
-            deadline: self.now.at + DATA_REQUEST_TIMEOUT,
-        });
+        self.piggyback = piggyback;
+        self.fill.ask(template, self.now.at, &mut self.out);
     }
 }
 
@@ -1199,4 +1013,42 @@ fn describe(s: &Sending) -> String {
         How::AppAck => "the application ack",
     };
     format!("{what} to {}", id_of(s.dest))
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        match input {
+            Input::Read(bytes) => {
+                for unit in self.decoder.push(&bytes) {
+                    self.unit(unit);
+                }
+            }
+            Input::Tick => self.timers(),
+            Input::Command(c) => self.command(c),
+            Input::Answer { id, filled } => self.answered(id, filled),
+            Input::Opened(ok) => self.opened(ok),
+            Input::Disconnected(reason) => self.disconnected_now(reason),
+            Input::Stop => return self.out.take(),
+        }
+        self.pump();
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        [
+            self.awaiting.as_ref().map(|a| a.deadline),
+            self.fill.deadline(),
+            self.in_flight.as_ref().map(|f| f.deadline),
+            self.retry.as_ref().map(|r| r.0),
+            self.link.deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
 }

@@ -55,7 +55,6 @@
 //! is address 255.
 
 pub mod machine;
-pub mod shell;
 #[cfg(test)]
 mod tests;
 
@@ -68,13 +67,14 @@ use protos::goby::acomms::protobuf::{
 
 use super::codec::Framing;
 use super::message::{Command, IM_MAX_BYTES};
-use crate::config;
+use crate::config::{self, Reach};
 use crate::driver::{Driver, DriverError};
 use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::Units;
 use crate::problem::{self, Problem};
+use crate::shell::{self, Device};
 
-pub use machine::{Input, Machine, Output, Settings};
-pub use shell::Endpoint;
+pub use machine::{Machine, Settings};
 
 /// The `driver_name` of the EvoLogics S2C driver.
 pub const DRIVER_NAME: &str = "EVOLOGICS_S2C";
@@ -165,60 +165,21 @@ impl EvologicsDriver {
     /// ([`DriverError::Config`], as [`problems`] finds them).
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        let endpoint = endpoint(config)?;
-        let link = match endpoint.open().await {
-            Ok(link) => Some(link),
-            Err(e) => {
-                tracing::warn!("EvoLogics modem at {}: {e}", endpoint.describe());
-                None
-            }
-        };
-        let clock: std::sync::Arc<dyn goby_time::Clock> =
-            std::sync::Arc::new(goby_time::SystemClock);
-        Ok(Self::start_on(settings, endpoint, link, clock))
-    }
-
-    /// Starts the driver on a link already open (`None`: not yet; the
-    /// driver opens `endpoint` itself), reading time from `clock`.
-    pub fn start_on(
-        settings: Settings,
-        endpoint: Endpoint,
-        link: Option<shell::BoxStream>,
-        clock: std::sync::Arc<dyn goby_time::Clock>,
-    ) -> Driver {
-        Driver::spawn_with_clock("evologics", clock, move |ctx| {
-            let now = crate::micromodem::driver::shell::now(&*ctx.clock);
-            let machine = if link.is_some() {
-                Machine::new(settings, now)
-            } else {
-                let m = Machine::disconnected(settings, now);
-                ctx.events.status(crate::DriverStatus::Disconnected {
-                    reason: format!("no connection to {} yet", endpoint.describe()),
-                });
-                m
-            };
-            shell::run(machine, endpoint, link, ctx)
+        let device = Device::new(config::stream_endpoint(config, REACH), Units::Bytes);
+        Ok(shell::start_reconnecting("evologics", device, |now, up| {
+            Machine::new(settings, now, up)
         })
+        .await)
     }
 }
 
-/// Where the modem is, from `config` (checked by [`problems`]).
-pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    problem::refuse(problems(config))?;
-    Ok(match config.connection_type() {
-        ConnectionType::ConnectionSerial => Endpoint::Serial {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-        },
-        _ => Endpoint::Tcp(format!(
-            "{}:{}",
-            config.tcp_server(),
-            config
-                .tcp_port
-                .unwrap_or(u32::from(super::DEFAULT_TCP_PORT))
-        )),
-    })
-}
+/// How the driver reaches the modem.
+const REACH: Reach<'static> = Reach {
+    driver: "the EvoLogics driver",
+    server: "the modem's address, e.g. \"192.168.0.209\"",
+    port: Some(super::DEFAULT_TCP_PORT),
+    baud: DEFAULT_BAUD,
+};
 
 /// The frame sizes the layer above is offered with an EvoLogics
 /// configuration, bytes: (as an instant message, as burst data; 0: no
@@ -271,37 +232,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             ));
         }
     }
-    match config.connection_type() {
-        ConnectionType::ConnectionSerial => {
-            if config.serial_port().trim().is_empty() {
-                problems.push(Problem::new(
-                    "serial_port",
-                    "required for the EvoLogics driver over serial (e.g. \"/dev/ttyUSB0\"), \
-                     or use connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server",
-                ));
-            }
-        }
-        ConnectionType::ConnectionTcpAsClient => {
-            if config.tcp_server().trim().is_empty() {
-                problems.push(Problem::new(
-                    "tcp_server",
-                    "required for the EvoLogics driver over TCP (the modem's address, e.g. \"192.168.0.209\")",
-                ));
-            }
-            if let Some(p) = config.tcp_port {
-                if p == 0 || p > 65_535 {
-                    problems.push(Problem::new(
-                        "tcp_port",
-                        format!("{p} is not a TCP port (1-65535; the S2C listens on 9200)"),
-                    ));
-                }
-            }
-        }
-        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
-            "connection_type",
-            "CONNECTION_TCP_AS_SERVER is not supported by the EvoLogics driver (the modem is the server: use CONNECTION_TCP_AS_CLIENT)",
-        )),
-    }
+    problems.extend(config::stream_problems(config, REACH));
     if e.im_max_bytes() == 0 || e.im_max_bytes() as usize > IM_MAX_BYTES {
         problems.push(Problem::new(
             "evologics.im_max_bytes",

@@ -39,9 +39,10 @@ use tokio::time::Instant;
 use super::super::at::{AtCommand, ModemLine};
 use super::super::frame::{self, next_frame_number};
 use super::super::rudics;
-use super::machine::{ms, Machine, Outcome, Purpose, RequestId};
+use super::machine::{ms, Machine, Outcome, Purpose};
 use super::session::{DATA_REQUEST_TIMEOUT, MAX_WAITING};
 use crate::driver::{checked_answer, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult};
+use crate::machine::RequestId;
 
 /// Silence kept before and after the `+++` escape.
 pub const GUARD_TIME: Duration = Duration::from_secs(1);

@@ -25,63 +25,9 @@ use super::super::at::{self, AtCommand, AtError, ModemLine, SessionReply};
 use super::super::reader::{Reader, Unit};
 use super::call::Calls;
 use super::session::Sessions;
-use crate::driver::{
-    Acknowledgement, DriverCommand, DriverEvent, DriverStatus, RawDirection, RawMessage,
-};
-
-/// The time of an input, read once by the shell as it comes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Now {
-    /// Monotonic time: what deadlines are kept in.
-    pub at: Instant,
-    /// Wall clock, microseconds since the Unix epoch.
-    pub micros: u64,
-}
-
-/// Names a data request made by the machine; its answer comes back with it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct RequestId(pub u64);
-
-/// What happened.
-#[derive(Debug)]
-pub enum Input {
-    /// Bytes read from the transceiver.
-    Bytes(Vec<u8>),
-    /// Time passed: deadlines up to now fire.
-    Tick,
-    /// A command of the layer above (other than `Stop`).
-    Command(DriverCommand),
-    /// The layer above answered a data request (`None`: dropped unanswered).
-    Answer {
-        /// The request answered.
-        id: RequestId,
-        /// The transmission filled, or `None`.
-        filled: Option<ModemTransmission>,
-    },
-    /// The port asked for by [`Output::Open`] was opened (`true`) or not.
-    Opened(bool),
-    /// The serial link failed: why.
-    Disconnected(String),
-}
-
-/// What to do, in order.
-#[derive(Debug)]
-pub enum Output {
-    /// Write these bytes to the transceiver.
-    Write(Vec<u8>),
-    /// Give this event to the layer above.
-    Event(DriverEvent),
-    /// Ask the layer above to fill `template`; the answer comes back as
-    /// [`Input::Answer`] with `id`.
-    Request {
-        /// Names the request in its answer.
-        id: RequestId,
-        /// What to fill.
-        template: ModemTransmission,
-    },
-    /// Open the serial port again, then tell [`Input::Opened`].
-    Open,
-}
+use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
+use crate::machine::reconnect::Reconnect;
+use crate::machine::{self, Input, Now, Output, Outputs, RequestId};
 
 /// What the machine starts from (checked by [`super::settings`]).
 #[derive(Debug, Clone)]
@@ -169,21 +115,13 @@ pub(super) struct Pending {
 /// Times a command is written before the transceiver is taken as silent.
 pub const COMMAND_TRIES: u32 = 3;
 
-/// The serial link as the machine sees it.
-#[derive(Debug)]
-struct LinkState {
-    connected: bool,
-    opening: bool,
-    reconnect_at: Instant,
-}
-
 /// The vehicle driver's logic.
 #[derive(Debug)]
 pub struct Machine {
     pub(super) settings: Settings,
     pub(super) now: Now,
-    out: Vec<Output>,
-    link: LinkState,
+    out: Outputs,
+    link: Reconnect,
     pub(super) reader: Reader,
     /// Start-up commands not yet written (empty once configured).
     startup: VecDeque<AtCommand>,
@@ -208,15 +146,12 @@ impl Machine {
     /// the first input (e.g. [`Input::Tick`]).
     pub fn new(settings: Settings, now: Now) -> Machine {
         let sessions = Sessions::new(settings.first_frame);
+        let link = Reconnect::new(true, now.at, settings.reconnect);
         let mut machine = Machine {
             settings,
             now,
-            out: Vec::new(),
-            link: LinkState {
-                connected: true,
-                opening: false,
-                reconnect_at: now.at,
-            },
+            out: Outputs::default(),
+            link,
             reader: Reader::new(),
             startup: VecDeque::new(),
             ready: false,
@@ -233,64 +168,6 @@ impl Machine {
         machine
     }
 
-    /// Handles `input`, which happened at `now`; returns what to do.
-    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Bytes(bytes) => {
-                self.reader.push(&bytes);
-                while let Some(unit) = self.reader.next_unit() {
-                    self.unit(unit);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => {
-                if self.calls.awaits(id) {
-                    self.call_answered(id, filled)
-                } else {
-                    self.answered(id, filled)
-                }
-            }
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected(reason),
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    /// When the next [`Input::Tick`] is due (`None`: no timer armed).
-    pub fn next_deadline(&self) -> Option<Instant> {
-        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
-        let reconnect =
-            (!self.link.connected && !self.link.opening).then_some(self.link.reconnect_at);
-        let session = if self.ready && self.pending.is_none() {
-            self.session_deadline()
-        } else {
-            None
-        };
-        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
-            self.call_deadline()
-        } else {
-            None
-        };
-        [
-            command,
-            reconnect,
-            session,
-            call,
-            self.sessions.request_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    /// Whether data request `id` is still awaited.
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.sessions.awaits(id) || self.calls.awaits(id)
-    }
-
     /// Configured, and no command outstanding.
     pub fn ready_for_work(&self) -> bool {
         self.ready && self.pending.is_none()
@@ -302,11 +179,11 @@ impl Machine {
     }
 
     pub(super) fn emit(&mut self, event: DriverEvent) {
-        self.out.push(Output::Event(event));
+        self.out.event(event);
     }
 
     pub(super) fn status(&mut self, status: DriverStatus) {
-        self.emit(DriverEvent::Status(status));
+        self.out.status(status);
     }
 
     pub(super) fn new_request(&mut self, template: ModemTransmission) -> RequestId {
@@ -317,12 +194,7 @@ impl Machine {
     }
 
     pub(super) fn write_raw(&mut self, bytes: Vec<u8>) {
-        self.emit(DriverEvent::Raw(RawMessage {
-            direction: RawDirection::Outgoing,
-            bytes: bytes.clone(),
-            peer: None,
-        }));
-        self.out.push(Output::Write(bytes));
+        self.out.write(bytes);
     }
 
     /// Writes `command` and waits for its answer.
@@ -411,44 +283,22 @@ impl Machine {
     fn unit(&mut self, unit: Unit) {
         if self.calls.data_mode() {
             if let Unit::Line(line) = unit {
-                self.emit(DriverEvent::Raw(RawMessage {
-                    direction: RawDirection::Incoming,
-                    bytes: line.clone(),
-                    peer: None,
-                }));
                 self.call_line(line);
                 return;
             }
         }
         match unit {
-            Unit::Line(line) => {
-                self.emit(DriverEvent::Raw(RawMessage {
-                    direction: RawDirection::Incoming,
-                    bytes: line.clone(),
-                    peer: None,
-                }));
-                match ModemLine::parse(&line) {
-                    Ok(parsed) => self.line(parsed),
-                    Err(e) => self.status(DriverStatus::Unparseable {
-                        line: String::from_utf8_lossy(&line).into_owned(),
-                        reason: match e {
-                            AtError::Unknown => {
-                                "not an answer of the Iridium AT command set".into()
-                            }
-                            other => other.to_string(),
-                        },
-                    }),
-                }
-            }
+            Unit::Line(line) => match ModemLine::parse(&line) {
+                Ok(parsed) => self.line(parsed),
+                Err(e) => self.status(DriverStatus::Unparseable {
+                    line: String::from_utf8_lossy(&line).into_owned(),
+                    reason: match e {
+                        AtError::Unknown => "not an answer of the Iridium AT command set".into(),
+                        other => other.to_string(),
+                    },
+                }),
+            },
             Unit::MtMessage { message, checksum } => {
-                let mut raw = (message.len() as u16).to_be_bytes().to_vec();
-                raw.extend_from_slice(&message);
-                raw.extend_from_slice(&checksum.to_be_bytes());
-                self.emit(DriverEvent::Raw(RawMessage {
-                    direction: RawDirection::Incoming,
-                    bytes: raw,
-                    peer: None,
-                }));
                 let good = at::checksum(&message) == checksum;
                 if !good {
                     self.status(DriverStatus::BadChecksum {
@@ -654,20 +504,16 @@ impl Machine {
     }
 
     fn opened(&mut self, ok: bool) {
-        self.link.opening = false;
-        if ok {
-            self.link.connected = true;
+        if self.link.opened(ok, self.now.at) {
             self.status(DriverStatus::Reconnected);
             self.configure();
-        } else {
-            self.link.reconnect_at = self.now.at + self.settings.reconnect;
         }
     }
 
     fn disconnected(&mut self, reason: String) {
-        self.link.connected = false;
-        self.link.opening = false;
-        self.link.reconnect_at = self.now.at + self.settings.reconnect;
+        if !self.link.lost(self.now.at) {
+            return;
+        }
         self.ready = false;
         if let Some(p) = self.pending.take() {
             self.session_interrupted(p.purpose);
@@ -678,10 +524,7 @@ impl Machine {
 
     fn timers(&mut self) {
         let now = self.now.at;
-        if !self.link.connected && !self.link.opening && self.link.reconnect_at <= now {
-            self.link.opening = true;
-            self.out.push(Output::Open);
-        }
+        self.link.tick(now, &mut self.out);
         self.request_timers();
         if self.ready {
             self.call_timers();
@@ -746,7 +589,7 @@ impl Machine {
     /// a session.
     fn pump(&mut self) {
         loop {
-            if !self.link.connected || self.pending.is_some() {
+            if !self.link.is_up() || self.pending.is_some() {
                 return;
             }
             if let Some(command) = self.startup.pop_front() {
@@ -772,4 +615,60 @@ impl Machine {
 /// `n` milliseconds.
 pub(super) fn ms(n: u32) -> Duration {
     Duration::from_millis(u64::from(n))
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        match input {
+            Input::Read(bytes) => {
+                self.reader.push(&bytes);
+                while let Some(unit) = self.reader.next_unit() {
+                    self.unit(unit);
+                }
+            }
+            Input::Tick => self.timers(),
+            Input::Command(command) => self.command(command),
+            Input::Answer { id, filled } => {
+                if self.calls.awaits(id) {
+                    self.call_answered(id, filled)
+                } else {
+                    self.answered(id, filled)
+                }
+            }
+            Input::Opened(ok) => self.opened(ok),
+            Input::Disconnected(reason) => self.disconnected(reason),
+            Input::Stop => return self.out.take(),
+        }
+        self.pump();
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
+        let session = if self.ready && self.pending.is_none() {
+            self.session_deadline()
+        } else {
+            None
+        };
+        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
+            self.call_deadline()
+        } else {
+            None
+        };
+        [
+            command,
+            self.link.deadline(),
+            session,
+            call,
+            self.sessions.request_deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.sessions.awaits(id) || self.calls.awaits(id)
+    }
 }

@@ -48,7 +48,6 @@
 pub mod call;
 pub mod machine;
 pub mod session;
-pub mod shell;
 #[cfg(test)]
 mod tests;
 
@@ -61,9 +60,11 @@ use protos::goby::acomms::protobuf::{
 use super::frame::{self, Direction};
 use crate::driver::{Driver, DriverError};
 use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::{Endpoint, Units};
 use crate::problem::{self, Problem};
+use crate::shell::{self, Device};
 
-pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
+pub use machine::{Machine, Settings};
 
 /// Baud rate when `serial_baud` is not set (the 9602/9603's default).
 pub const DEFAULT_BAUD: u32 = 19_200;
@@ -118,8 +119,8 @@ impl IridiumDriver {
         Self::start_with_clock(config, std::sync::Arc::new(goby_time::SystemClock))
     }
 
-    /// Starts the driver reading time from `clock` (e.g. virtual time in
-    /// tests).
+    /// Starts the driver reading time from `clock` (a
+    /// [`TokioClock`](crate::time::TokioClock) runs it in virtual time).
     pub fn start_with_clock(
         config: &DriverConfig,
         clock: std::sync::Arc<dyn goby_time::Clock>,
@@ -130,17 +131,21 @@ impl IridiumDriver {
                 .into_iter()
                 .collect(),
         )?;
-        let port = shell::Port {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-            dtr: settings.iridium.use_dtr(),
-        };
-        let stream = port
-            .open()
-            .map_err(|e| DriverError::io("DriverConfig.serial_port", e))?;
-        Ok(Driver::spawn_with_clock("iridium", clock, move |ctx| {
-            shell::run(settings, port, stream, ctx)
-        }))
+        let device = Device::new(
+            Endpoint::Serial {
+                path: config.serial_port().to_string(),
+                baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
+                dtr: settings.iridium.use_dtr(),
+            },
+            Units::Bytes,
+        );
+        shell::start_on_serial(
+            "iridium",
+            device,
+            |now| Machine::new(settings, now),
+            None,
+            clock,
+        )
     }
 }
 

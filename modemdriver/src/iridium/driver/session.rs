@@ -38,10 +38,11 @@ use tokio::time::Instant;
 use super::super::at::AtCommand;
 use super::super::frame::{self, next_frame_number, FrameError};
 use super::super::status::{MoStatus, MtStatus};
-use super::machine::{ms, Answer, Machine, Outcome, Pending, Purpose, RequestId};
+use super::machine::{ms, Answer, Machine, Outcome, Pending, Purpose};
 use crate::driver::{
     checked_answer, Acknowledgement, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult,
 };
+use crate::machine::RequestId;
 
 /// Transmissions asked for that wait (for their data request) while a
 /// session is under way; a further one replaces the oldest.

@@ -8,12 +8,13 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
-use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
+use super::machine::{Machine, Settings};
 use crate::driver::{
     Acknowledgement, DriverCommand, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult,
 };
 use crate::iridium::at;
 use crate::iridium::frame;
+use crate::machine::{Input, Machine as _, Now, Output, RequestId};
 
 struct Rig {
     machine: Machine,
@@ -56,7 +57,7 @@ impl Rig {
     }
 
     fn bytes(&mut self, bytes: &[u8]) -> Vec<Output> {
-        self.input(Input::Bytes(bytes.to_vec()))
+        self.input(Input::Read(bytes.to_vec()))
     }
 
     fn advance(&mut self, d: Duration) -> Vec<Output> {
@@ -824,7 +825,7 @@ mod rudics_calls {
                 }
             }
             if !back.is_empty() {
-                pending.push(Input::Bytes(back));
+                pending.push(Input::Read(back));
                 continue;
             }
             if hung_up && rig.machine.calls.idle() {

@@ -45,9 +45,10 @@ use tokio::time::Instant;
 use super::super::application_ack::Placed;
 use super::super::sentence::{Cycle, MmSentence};
 use super::super::{firmware, ranging};
-use super::machine::{Machine, RequestId};
+use super::machine::Machine;
 use super::{packet_estimate, HAND_OVER};
 use crate::driver::{DriverEvent, DriverStatus, TransmitOutcome, TransmitResult};
+use crate::machine::RequestId;
 use crate::rate;
 
 /// What the layer above asked for.

@@ -27,10 +27,11 @@ use tokio::time::Instant;
 use super::super::application_ack::Placed;
 use super::super::fdp;
 use super::cycle::{Job, PolledFrame};
-use super::machine::{Machine, RequestId};
+use super::machine::Machine;
 use super::reception::SentData;
 use super::{packet_estimate, DATA_REQUEST_TIMEOUT};
 use crate::driver::{checked_answer, DriverStatus, TransmitOutcome};
+use crate::machine::RequestId;
 use crate::rate;
 use crate::slot::slot_end;
 

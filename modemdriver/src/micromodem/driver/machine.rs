@@ -34,87 +34,8 @@ use super::reception::Reception;
 use super::startup::Startup;
 use super::MAX_PENDING_TRANSMISSIONS;
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus};
-
-/// The time of an input, read once by the shell as the input comes
-/// ([`shell::now`](super::shell::now)), or made up by a test.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Now {
-    /// Monotonic time: what deadlines are kept in.
-    pub at: Instant,
-    /// Wall clock (UTC), microseconds since the Unix epoch: the unit of
-    /// `ModemTransmission.time` and of slots, and what the modem's clock is
-    /// set to.
-    pub micros: u64,
-}
-
-impl Now {
-    /// `d` later, on both clocks.
-    pub fn after(self, d: Duration) -> Now {
-        Now {
-            at: self.at + d,
-            micros: self.micros.saturating_add(d.as_micros() as u64),
-        }
-    }
-}
-
-/// Names a data request made by the machine ([`Output::Request`]); its
-/// answer comes back with it ([`Input::Answer`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct RequestId(pub u64);
-
-/// What happened.
-#[derive(Debug)]
-pub enum Input {
-    /// A line read from the modem (without its delimiter).
-    Line(Vec<u8>),
-    /// Time passed: deadlines up to now fire.
-    Tick,
-    /// A command of the layer above (other than `Stop`).
-    Command(DriverCommand),
-    /// The layer above answered a data request: the filled transmission,
-    /// or `None` when the request was dropped unanswered.
-    Answer {
-        /// The request answered.
-        id: RequestId,
-        /// The transmission filled, or `None`.
-        filled: Option<ModemTransmission>,
-    },
-    /// The device asked for by [`Output::Open`] was opened (`true`) or
-    /// could not be (`false`).
-    Opened(bool),
-    /// The serial link failed (read or write): why.
-    Disconnected(String),
-    /// The driver stops: what is held is reported now.
-    Stop,
-}
-
-/// What to do, in order.
-#[derive(Debug)]
-pub enum Output {
-    /// Write this sentence to the modem.
-    Write(MmSentence),
-    /// Give this event to the layer above.
-    Event(DriverEvent),
-    /// Ask the layer above to fill `template` (a data request); the answer,
-    /// or its absence, comes back as [`Input::Answer`] with `id`. The
-    /// machine gives up waiting on its own (a deadline): an answer after
-    /// that is ignored.
-    Request {
-        /// Names the request in its answer.
-        id: RequestId,
-        /// What to fill: `max_num_frames` frames of at most
-        /// `max_frame_bytes` bytes.
-        template: ModemTransmission,
-    },
-    /// Open the serial device again (after it was lost), then tell
-    /// [`Input::Opened`].
-    Open,
-    /// Keep this application-ack state (the frame numbers in use, from
-    /// [`ApplicationAcks::state`]) for the next start, before the
-    /// transmission that uses them goes out (written before the lines that
-    /// follow it).
-    KeepAckState(String),
-}
+use crate::machine::reconnect::Reconnect;
+use crate::machine::{self, Input, Now, Output, Outputs, RequestId};
 
 /// What the machine starts from (checked by [`super::settings`]).
 #[derive(Debug)]
@@ -139,15 +60,11 @@ pub struct Settings {
 /// The serial link as the machine sees it.
 #[derive(Debug)]
 pub(super) struct LinkState {
-    pub connected: bool,
-    pub reconnect: Duration,
-    /// When to try opening the device again, while not connected.
-    pub reconnect_at: Instant,
+    /// Up, or opened again every reconnection interval.
+    pub up: Reconnect,
     /// Last line heard from the modem.
     pub last_heard: Instant,
     pub silence_reported: bool,
-    /// An [`Output::Open`] is out, not yet answered.
-    pub opening: bool,
 }
 
 /// The Micro-Modem driver's logic.
@@ -158,7 +75,7 @@ pub struct Machine {
     /// The time of the input being handled.
     pub(super) now: Now,
     /// Outputs of the input being handled.
-    out: Vec<Output>,
+    out: Outputs,
     pub(super) link: LinkState,
     pub(super) startup: Startup,
     pub(super) tx: Transmit,
@@ -187,14 +104,11 @@ impl Machine {
             modem_id,
             mm,
             now,
-            out: Vec::new(),
+            out: Outputs::default(),
             link: LinkState {
-                connected: true,
-                reconnect,
-                reconnect_at: now.at,
+                up: Reconnect::new(true, now.at, reconnect),
                 last_heard: now.at,
                 silence_reported: false,
-                opening: false,
             },
             startup: Startup::default(),
             tx: Transmit::default(),
@@ -207,71 +121,26 @@ impl Machine {
         machine
     }
 
-    /// Handles `input`, which happened at `now`; returns what to do, in
-    /// order.
-    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Line(bytes) => self.line(&bytes),
-            Input::Tick => self.timers(),
-            Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected(reason),
-            Input::Stop => {
-                // A whole reception waiting for its statistics is reported
-                // without them.
-                self.release_held();
-                return std::mem::take(&mut self.out);
-            }
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    /// When the next [`Input::Tick`] is due (`None`: no timer armed).
-    pub fn next_deadline(&self) -> Option<Instant> {
-        let keep_alive = self.keep_alive();
-        [
-            self.startup.next_deadline(),
-            self.tx.next_deadline(),
-            self.requests.next_deadline(),
-            self.rx.next_deadline(),
-            (!self.link.connected && !self.link.opening).then_some(self.link.reconnect_at),
-            (!self.link.silence_reported && self.link.connected)
-                .then_some(self.link.last_heard + keep_alive * 3),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    /// Whether data request `id` is still awaited (a shell may forget one
-    /// that is not).
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.requests.awaits(id)
-    }
-
     pub(super) fn emit(&mut self, event: DriverEvent) {
-        self.out.push(Output::Event(event));
+        self.out.event(event);
     }
 
     /// Keeps the application-ack state for the next start.
     pub(super) fn keep_ack_state(&mut self, state: String) {
-        self.out.push(Output::KeepAckState(state));
+        self.out.push(Output::Keep(state));
     }
 
     pub(super) fn status(&mut self, status: DriverStatus) {
-        self.emit(DriverEvent::Status(status));
+        self.out.status(status);
     }
 
     /// Writes `sentence` when the link is up (a sentence for a link that
     /// is down is not written: the driver starts again when it is back).
     pub(super) fn write(&mut self, sentence: MmSentence) -> bool {
-        if !self.link.connected {
+        if !self.link.up.is_up() {
             return false;
         }
-        self.out.push(Output::Write(sentence));
+        self.out.write(sentence.to_line().into_bytes());
         true
     }
 
@@ -301,11 +170,11 @@ impl Machine {
 
     /// The serial link failed.
     pub(super) fn disconnected(&mut self, reason: String) {
-        self.link.connected = false;
-        self.link.opening = false;
+        if !self.link.up.lost(self.now.at) {
+            return;
+        }
         self.startup.awaiting = None;
         self.startup.clock_at = None;
-        self.link.reconnect_at = self.now.at + self.link.reconnect;
         if let Some(active) = &mut self.tx.active {
             // Not the modem's fault: start the cycle again, same attempt.
             active.restart();
@@ -314,14 +183,10 @@ impl Machine {
     }
 
     fn opened(&mut self, ok: bool) {
-        self.link.opening = false;
-        if ok {
-            self.link.connected = true;
+        if self.link.up.opened(ok, self.now.at) {
             self.link.last_heard = self.now.at;
             self.status(DriverStatus::Reconnected);
             self.queue_initialization();
-        } else {
-            self.link.reconnect_at = self.now.at + self.link.reconnect;
         }
     }
 
@@ -332,12 +197,9 @@ impl Machine {
         self.cycle_timers();
         self.request_timers();
         self.reception_timers();
-        if !self.link.connected && !self.link.opening && self.link.reconnect_at <= now {
-            self.link.opening = true;
-            self.out.push(Output::Open);
-        }
+        self.link.up.tick(now, &mut self.out);
         let keep_alive = self.keep_alive();
-        if self.link.connected
+        if self.link.up.is_up()
             && !self.link.silence_reported
             && now >= self.link.last_heard + keep_alive * 3
         {
@@ -554,7 +416,7 @@ impl Machine {
     /// the transmissions queued.
     fn pump(&mut self) {
         loop {
-            if !self.link.connected || self.startup.awaiting.is_some() {
+            if !self.link.up.is_up() || self.startup.awaiting.is_some() {
                 return;
             }
             match self.pump_commands() {
@@ -566,5 +428,47 @@ impl Machine {
                 return;
             }
         }
+    }
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        match input {
+            Input::Read(bytes) => self.line(&bytes),
+            Input::Tick => self.timers(),
+            Input::Command(command) => self.command(command),
+            Input::Answer { id, filled } => self.answered(id, filled),
+            Input::Opened(ok) => self.opened(ok),
+            Input::Disconnected(reason) => self.disconnected(reason),
+            Input::Stop => {
+                // A whole reception waiting for its statistics is reported
+                // without them.
+                self.release_held();
+                return self.out.take();
+            }
+        }
+        self.pump();
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        let keep_alive = self.keep_alive();
+        [
+            self.startup.next_deadline(),
+            self.tx.next_deadline(),
+            self.requests.next_deadline(),
+            self.rx.next_deadline(),
+            self.link.up.deadline(),
+            (!self.link.silence_reported && self.link.up.is_up())
+                .then_some(self.link.last_heard + keep_alive * 3),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.requests.awaits(id)
     }
 }

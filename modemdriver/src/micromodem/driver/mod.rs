@@ -123,7 +123,6 @@ mod cycle;
 mod fill;
 pub mod machine;
 mod reception;
-pub mod shell;
 mod specific;
 mod startup;
 #[cfg(test)]
@@ -144,11 +143,12 @@ use crate::config;
 use crate::driver::{Driver, DriverError};
 use crate::kind::{DriverKind, Named, PacketTime, Starting};
 use crate::link::fault::{FaultConfig, FaultScript};
-use crate::link::serial;
+use crate::link::stream::{Endpoint, Units};
 use crate::problem::{self, Problem};
 use crate::rate;
+use crate::shell::{self, Device};
 
-pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
+pub use machine::{Machine, Settings};
 
 /// How long the driver waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
@@ -199,25 +199,30 @@ impl MicroModemDriver {
         faults: FaultConfig,
         script: FaultScript,
     ) -> Result<Driver, DriverError> {
-        let settings = settings(config)?;
+        let mut settings = settings(config)?;
         problem::refuse(
             problem::serial_port_problem(config.serial_port())
                 .into_iter()
                 .collect(),
         )?;
-        let port = shell::Port {
-            path: config.serial_port.clone().unwrap_or_default(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-            delimiter: config.line_delimiter().as_bytes().to_vec(),
+        let device = Device {
+            endpoint: Endpoint::serial(
+                config.serial_port(),
+                config.serial_baud.unwrap_or(DEFAULT_BAUD),
+            ),
+            units: Units::Lines(config.line_delimiter().as_bytes().to_vec()),
             faults,
             script,
         };
+        let keep = settings.ack_state_file.take();
         // Opened now so that a wrong path is an error at start.
-        let lines = serial::open(&port.path, port.baud, &port.delimiter)
-            .map_err(|e| DriverError::io("DriverConfig.serial_port", e))?;
-        Ok(Driver::spawn("micromodem", move |ctx| {
-            shell::run(settings, port, lines, ctx)
-        }))
+        shell::start_on_serial(
+            "micromodem",
+            device,
+            |now| Machine::new(settings, now),
+            keep,
+            std::sync::Arc::new(goby_time::SystemClock),
+        )
     }
 }
 
