@@ -1252,7 +1252,7 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     let Ok(kind) = modemdriver::built_in::of(driver) else {
         return problems;
     };
-    if kind.named() == modemdriver::kind::Named::Type(DriverType::DriverWhoiMicromodem) {
+    if kind.about().named == modemdriver::kind::Named::Type(DriverType::DriverWhoiMicromodem) {
         problems.extend(micromodem_problems(config));
     }
     problems.extend(driver_specific_slot_problems(config, kind));

@@ -30,7 +30,7 @@ pub static KINDS: &[&dyn DriverKind] = &[
 /// The kind `config` names, or the problem of a configuration that names
 /// none built in (its field `driver_type` or `driver_name`).
 pub fn of(config: &DriverConfig) -> Result<&'static dyn DriverKind, Problem> {
-    if let Some(kind) = KINDS.iter().find(|k| k.named().claims(config)) {
+    if let Some(kind) = KINDS.iter().find(|k| k.about().named.claims(config)) {
         return Ok(*kind);
     }
     Err(match &config.driver {
@@ -55,9 +55,9 @@ pub fn of(config: &DriverConfig) -> Result<&'static dyn DriverKind, Problem> {
     })
 }
 
-/// The kind whose [`short_name`](DriverKind::short_name) is `name`.
+/// The kind whose [`short_name`](crate::kind::About::short_name) is `name`.
 pub fn by_short_name(name: &str) -> Option<&'static dyn DriverKind> {
-    KINDS.iter().find(|k| k.short_name() == name).copied()
+    KINDS.iter().find(|k| k.about().short_name == name).copied()
 }
 
 /// Starts the driver `config` names.
@@ -75,7 +75,7 @@ pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
 /// `DRIVER_ACOUSTIC_SIMULATOR, DRIVER_UDP … or driver_name
 /// "EVOLOGICS_S2C"`.
 pub fn names() -> String {
-    let names: Vec<String> = KINDS.iter().map(|k| k.named().written()).collect();
+    let names: Vec<String> = KINDS.iter().map(|k| k.about().named.written()).collect();
     match names.split_last() {
         Some((last, [])) => last.clone(),
         Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
@@ -88,7 +88,7 @@ pub fn names() -> String {
 fn named_ones() -> String {
     let named: Vec<String> = KINDS
         .iter()
-        .filter_map(|k| match k.named() {
+        .filter_map(|k| match k.about().named {
             crate::kind::Named::Name(name) => Some(format!("{name:?}")),
             crate::kind::Named::Type(_) => None,
         })
@@ -102,11 +102,11 @@ fn named_ones() -> String {
 
 /// Goby3's extension names of driver settings, each with the field of
 /// ours that holds the same settings (see
-/// [`DriverKind::goby3_extensions`]).
+/// [`About::goby3_extensions`](crate::kind::About::goby3_extensions)).
 pub fn goby3_extensions() -> impl Iterator<Item = (&'static str, &'static str)> {
     KINDS
         .iter()
-        .flat_map(|k| k.goby3_extensions().iter().copied())
+        .flat_map(|k| k.about().goby3_extensions.iter().copied())
 }
 
 /// Whether the driver of `config` can carry out the driver-specific
@@ -123,13 +123,13 @@ pub fn specific_problem(
     let Some(takes) = kind.specific() else {
         return Err(format!(
             "{name}: the {} driver takes no driver-specific requests",
-            kind.named().name()
+            kind.about().named.name()
         ));
     };
     if message.descriptor() != takes {
         return Err(format!(
             "{name}: the {} driver takes {}",
-            kind.title(),
+            kind.about().title,
             takes.full_name()
         ));
     }
@@ -148,7 +148,7 @@ mod tests {
     #[test]
     fn every_kind_is_named_once() {
         for (i, a) in KINDS.iter().enumerate() {
-            let config = match a.named() {
+            let config = match a.about().named {
                 crate::kind::Named::Type(t) => DriverConfig {
                     driver: Some(driver_config::Driver::DriverType(t as i32)),
                     ..Default::default()
@@ -158,13 +158,19 @@ mod tests {
                     ..Default::default()
                 },
             };
-            assert_eq!(of(&config).unwrap().short_name(), a.short_name());
+            assert_eq!(
+                of(&config).unwrap().about().short_name,
+                a.about().short_name
+            );
             for b in &KINDS[i + 1..] {
-                assert_ne!(a.named(), b.named());
-                assert_ne!(a.short_name(), b.short_name());
-                assert!(a.section().is_none() || a.section() != b.section());
+                assert_ne!(a.about().named, b.about().named);
+                assert_ne!(a.about().short_name, b.about().short_name);
+                assert!(a.about().section.is_none() || a.about().section != b.about().section);
             }
-            assert_eq!(by_short_name(a.short_name()).unwrap().named(), a.named());
+            assert_eq!(
+                by_short_name(a.about().short_name).unwrap().about().named,
+                a.about().named
+            );
         }
     }
 

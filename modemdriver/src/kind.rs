@@ -60,6 +60,26 @@ impl Named {
     }
 }
 
+/// What a driver kind is called, and where its settings are.
+#[derive(Debug, Clone, Copy)]
+pub struct About {
+    /// How a configuration names it.
+    pub named: Named,
+    /// A short name in lower case, for `goby modem emulate --kind` and
+    /// file names: `micromodem`, `evologics`.
+    pub short_name: &'static str,
+    /// The modem (or link) as its users name it, for messages:
+    /// `Micro-Modem`, `EvoLogics`, `Benthos ATM-900`.
+    pub title: &'static str,
+    /// The field of `DriverConfig` holding its settings (`micromodem`),
+    /// when it has some.
+    pub section: Option<&'static str>,
+    /// Goby3's extension names of its settings (of `DriverConfig` or of a
+    /// MAC slot's `ModemTransmission`) and the field of ours holding the
+    /// same settings: `("goby.acomms.popoto.protobuf.config", "popoto")`.
+    pub goby3_extensions: &'static [(&'static str, &'static str)],
+}
+
 /// The boxed start of a driver ([`DriverKind::start`]).
 pub type Starting<'a> = Pin<Box<dyn Future<Output = Result<Driver, DriverError>> + Send + 'a>>;
 
@@ -69,27 +89,8 @@ pub type Starting<'a> = Pin<Box<dyn Future<Output = Result<Driver, DriverError>>
 /// Every answer is about a `DriverConfig` this kind [claims](Named::claims)
 /// (the callers see to that); none opens a device.
 pub trait DriverKind: Send + Sync + 'static {
-    /// How a configuration names it.
-    fn named(&self) -> Named;
-
-    /// A short name in lower case, for `goby modem emulate --kind` and
-    /// file names: `micromodem`, `evologics`.
-    fn short_name(&self) -> &'static str;
-
-    /// The modem (or link) as its users name it, for messages:
-    /// `Micro-Modem`, `EvoLogics`, `Benthos ATM-900`.
-    fn title(&self) -> &'static str;
-
-    /// The field of `DriverConfig` holding its settings (`micromodem`),
-    /// when it has some.
-    fn section(&self) -> Option<&'static str>;
-
-    /// Goby3's extension names of its settings (of `DriverConfig` or of a
-    /// MAC slot's `ModemTransmission`) and the field of ours holding the
-    /// same settings: `("goby.acomms.popoto.protobuf.config", "popoto")`.
-    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
-        &[]
-    }
+    /// What it is called, and where its settings are.
+    fn about(&self) -> &'static About;
 
     /// Every setting of `config` it would refuse at start, and what only a
     /// look at the machine shows without opening anything (a serial port
@@ -143,7 +144,7 @@ pub trait DriverKind: Send + Sync + 'static {
                 format!(
                     "DRIVER_SPECIFIC slots are the Micro-Modem driver's (micromodem {{ type: ... }}); \
                      the {} driver sends data in DATA slots: use type: DATA",
-                    self.named().name()
+                    self.about().named.name()
                 ),
             )
         })

@@ -42,15 +42,16 @@
 //!
 //! Layers, one concept per module: [`link`] moves lines or datagrams and
 //! composes a fault injector ([`link::fault`]) and a raw tracer
-//! ([`link::trace`]) around any device; [`stream_shell`] runs a sans-IO
-//! driver machine on a TCP connection or serial line, and
-//! [`emulator_host`] an emulated modem's logic on TCP or a pty; [`micromodem::nmea`] and
-//! [`micromodem::sentence`] are the wire representations; the drivers sit on
-//! top.
+//! ([`link::trace`]) around any device; a driver's logic is a sans-IO
+//! [`machine::Machine`], and one task, [`shell`], runs any machine on a
+//! modem's stream (TCP, serial, pty); [`micromodem::nmea`] and
+//! [`micromodem::sentence`] are the wire representations; the drivers sit
+//! on top.
 
 #![warn(missing_docs)]
 
 pub mod address;
+pub mod base_convert;
 pub mod benthos;
 pub mod built_in;
 pub mod check;

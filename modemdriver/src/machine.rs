@@ -136,6 +136,42 @@ pub trait Machine: Send + 'static {
     fn awaits(&self, id: RequestId) -> bool;
 }
 
+/// A machine written as most are: a handler for each input, then the
+/// work that can start ([`route`] hands an input to its handler).
+pub trait Handlers {
+    /// What was read from the modem.
+    fn read(&mut self, unit: Vec<u8>);
+    /// Deadlines up to now fire.
+    fn timers(&mut self);
+    /// A command of the layer above.
+    fn command(&mut self, command: DriverCommand);
+    /// The answer to data request `id` (`None`: dropped unanswered).
+    fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>);
+    /// The link asked for was opened, or not.
+    fn opened(&mut self, ok: bool);
+    /// The link was lost: why.
+    fn disconnected(&mut self, reason: String);
+    /// The driver stops: what is held is reported (nothing, unless said).
+    fn stop(&mut self) {}
+    /// Starts the work that can start now.
+    fn pump(&mut self);
+}
+
+/// Hands `input` to its handler, then, unless the driver stops, starts
+/// the work that can start.
+pub fn route(machine: &mut impl Handlers, input: Input) {
+    match input {
+        Input::Read(unit) => machine.read(unit),
+        Input::Tick => machine.timers(),
+        Input::Command(command) => machine.command(command),
+        Input::Answer { id, filled } => machine.answered(id, filled),
+        Input::Opened(ok) => machine.opened(ok),
+        Input::Disconnected(reason) => machine.disconnected(reason),
+        Input::Stop => return machine.stop(),
+    }
+    machine.pump();
+}
+
 /// The outputs of the input being handled, with the words a machine says
 /// most.
 #[derive(Debug, Default)]

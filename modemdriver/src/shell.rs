@@ -15,7 +15,7 @@
 //! The link is wrapped as every driver's is: faults injected on what is
 //! read ([`crate::link::fault`], none unless asked for: tests and bench
 //! work), and every read and write reported as a
-//! [`DriverEvent::Raw`](crate::DriverEvent::Raw) ([`crate::link::trace`]).
+//! [`crate::DriverEvent::Raw`] ([`crate::link::trace`]).
 
 use std::future::{poll_fn, Future};
 use std::path::PathBuf;

@@ -38,7 +38,7 @@ use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, TransmitOutcome, TransmitResult,
 };
-use crate::kind::{DriverKind, Named, Starting};
+use crate::kind::{About, DriverKind, Named, Starting};
 use crate::link::datagram::DatagramLink;
 use crate::link::trace::Tracer;
 use crate::link::Link;
@@ -91,25 +91,18 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdp),
+    short_name: "udp",
+    title: "UDP",
+    section: Some("udp"),
+    goby3_extensions: &[("goby.acomms.udp.protobuf.config", "udp")],
+};
+
 impl DriverKind for UdpDriver {
-    fn named(&self) -> Named {
-        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdp)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "udp"
-    }
-
-    fn title(&self) -> &'static str {
-        "UDP"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("udp")
-    }
-
-    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
-        &[("goby.acomms.udp.protobuf.config", "udp")]
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

@@ -34,7 +34,7 @@ use tokio::net::UdpSocket;
 
 use crate::config;
 use crate::driver::{Driver, DriverError};
-use crate::kind::{DriverKind, Named, Starting};
+use crate::kind::{About, DriverKind, Named, Starting};
 use crate::problem::{self, Problem};
 use crate::udp::{Peers, UdpState};
 
@@ -193,25 +193,18 @@ fn open(settings: &Settings) -> std::io::Result<std::net::UdpSocket> {
     Ok(socket.into())
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdpMulticast),
+    short_name: "udp_multicast",
+    title: "UDP multicast",
+    section: Some("udp_multicast"),
+    goby3_extensions: &[("goby.acomms.udp_multicast.protobuf.config", "udp_multicast")],
+};
+
 impl DriverKind for UdpMulticastDriver {
-    fn named(&self) -> Named {
-        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdpMulticast)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "udp_multicast"
-    }
-
-    fn title(&self) -> &'static str {
-        "UDP multicast"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("udp_multicast")
-    }
-
-    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
-        &[("goby.acomms.udp_multicast.protobuf.config", "udp_multicast")]
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

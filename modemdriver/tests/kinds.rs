@@ -36,8 +36,8 @@ fn the_guide_lists_every_driver_built_in() {
         .iter()
         .map(|k| {
             (
-                k.named().name().to_string(),
-                k.section().unwrap_or("").to_string(),
+                k.about().named.name().to_string(),
+                k.about().section.unwrap_or("").to_string(),
             )
         })
         .collect();

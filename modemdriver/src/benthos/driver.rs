@@ -51,7 +51,7 @@ use super::wire::{bit_rate, Command, ABSOLUTE_MAX_FRAME, RATE_MAX, RATE_MIN};
 use crate::config;
 use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
-use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
 use crate::link::stream::Units;
 use crate::problem::{self, Problem};
 use crate::shell::{self, Device};
@@ -63,28 +63,21 @@ pub const DEFAULT_BAUD: u32 = 9600;
 #[derive(Debug)]
 pub struct BenthosDriver;
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(DriverType::DriverBenthosAtm900),
+    short_name: "benthos",
+    title: "Benthos ATM-900",
+    section: Some("benthos"),
+    goby3_extensions: &[
+        ("goby.acomms.benthos.protobuf.config", "benthos"),
+        ("goby.acomms.benthos.protobuf.transmission", "benthos"),
+    ],
+};
+
 impl DriverKind for BenthosDriver {
-    fn named(&self) -> Named {
-        Named::Type(DriverType::DriverBenthosAtm900)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "benthos"
-    }
-
-    fn title(&self) -> &'static str {
-        "Benthos ATM-900"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("benthos")
-    }
-
-    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
-        &[
-            ("goby.acomms.benthos.protobuf.config", "benthos"),
-            ("goby.acomms.benthos.protobuf.transmission", "benthos"),
-        ]
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

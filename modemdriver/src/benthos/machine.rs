@@ -32,7 +32,7 @@ use crate::machine::acks::AwaitedAcks;
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, lossy, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{self, lossy, Handlers, Input, Now, Output, Outputs, RequestId};
 
 /// One knot, m/s.
 const KNOT: f64 = 1852.0 / 3600.0;
@@ -241,24 +241,6 @@ impl Machine {
         self.setup_started = None;
     }
 
-    fn disconnected_now(&mut self, reason: String) {
-        if !self.link.lost(self.now.at) {
-            return;
-        }
-        self.lines.clear();
-        self.rx = None;
-        self.status(DriverStatus::Disconnected { reason });
-        self.restart("the link to the modem was lost");
-    }
-
-    fn opened(&mut self, ok: bool) {
-        if self.link.opened(ok, self.now.at) {
-            self.lines.clear();
-            self.status(DriverStatus::Reconnected);
-            self.restart("the link to the modem was lost");
-        }
-    }
-
     fn start_setup(&mut self) {
         self.purpose = Some(Purpose::Setup);
         self.setup_started = Some(self.now.at);
@@ -413,32 +395,6 @@ impl Machine {
             ),
         });
         self.restart(&format!("the modem did not answer {what}"));
-    }
-
-    fn timers(&mut self) {
-        let now = self.now.at;
-        self.link.tick(now, &mut self.out);
-        if self.step_deadline().is_some_and(|d| d <= now) {
-            self.step_timeout();
-        }
-        if self
-            .setup_started
-            .is_some_and(|t| t + self.s.start_timeout <= now)
-        {
-            self.status(DriverStatus::ModemSilent {
-                seconds: self.s.start_timeout.as_secs_f64(),
-            });
-            self.restart("the modem was not set up in time");
-        }
-        self.fill.expire_data(now, &mut self.out);
-        if self.rx.as_ref().is_some_and(|r| r.deadline <= now) {
-            self.rx = None;
-            self.status(DriverStatus::Unparseable {
-                line: String::new(),
-                reason: "a reception without its <EOP>: dropped".into(),
-            });
-        }
-        self.acks.expire(now);
     }
 
     fn line(&mut self, raw: &[u8]) {
@@ -727,6 +683,136 @@ impl Machine {
         queue_first(&mut self.pending, job, |j| matches!(j, Job::Ack { .. }));
     }
 
+    fn specific(&mut self, r: BenthosSpecific) {
+        match r.r#type() {
+            SpecificType::BenthosTwoWayPing => {
+                match r.dest.and_then(address_of).filter(|&a| a != BROADCAST) {
+                    Some(d) => self.pending.push_back(Job::Range(d)),
+                    None => self.status(DriverStatus::Unsupported {
+                        message: "BENTHOS_TWO_WAY_PING needs a dest (modem id 1-254)".into(),
+                    }),
+                }
+            }
+            SpecificType::BenthosLowpower => self.pending.push_back(Job::LowPower),
+        }
+    }
+
+    fn template(&self, mt: &ModemTransmission) -> ModemTransmission {
+        let max = mt.max_frame_bytes.map_or(self.s.max_frame_bytes, |m| {
+            (m as usize).min(self.s.max_frame_bytes)
+        });
+        ModemTransmission {
+            src: Some(self.s.modem_id),
+            max_num_frames: Some(mt.max_num_frames().clamp(1, MAX_FRAMES as u32)),
+            max_frame_bytes: Some(max as u32),
+            frame: Vec::new(),
+            ..mt.clone()
+        }
+    }
+
+    fn start_tx(&mut self, tx: Tx) {
+        self.purpose = Some(Purpose::Transmit);
+        self.script
+            .push_back(Step::Command(Command::set("RemoteAddr", tx.dest)));
+        self.script
+            .push_back(Step::Command(Command::set("TxRate", tx.rate)));
+        self.script.push_back(Step::Online);
+        self.script.push_back(Step::Send(tx.bytes.clone()));
+        self.script.push_back(Step::Escape);
+        self.tx = Some(tx);
+    }
+}
+
+/// Whether `line` answers `command` (as Goby3 takes the ATM-900's answers).
+pub fn accepts(command: &Command, line: &ModemLine) -> bool {
+    match command {
+        Command::Escape => matches!(line, ModemLine::Ok | ModemLine::NotFound(_)),
+        Command::Attention | Command::HangUp => matches!(line, ModemLine::Ok),
+        Command::Online => matches!(line, ModemLine::Connect(_)),
+        Command::LowPower => match line {
+            ModemLine::Prompt(t) | ModemLine::Text(t) => t.contains("Lowpower"),
+            _ => false,
+        },
+        Command::Range(_) => matches!(line, ModemLine::TxTime(_) | ModemLine::Ok),
+        Command::Set { name, .. } => match line {
+            ModemLine::Setting { name: n, .. } => n.eq_ignore_ascii_case(name),
+            ModemLine::Ok => true,
+            _ => false,
+        },
+        Command::Date {
+            time: (h, m, s), ..
+        } => match line {
+            ModemLine::Text(t) => t.contains(&format!("{h:02}:{m:02}:{s:02}")),
+            _ => false,
+        },
+        Command::ConfigLoad(_) | Command::FactoryReset | Command::Other(_) => match line {
+            ModemLine::Ok | ModemLine::Setting { .. } => true,
+            ModemLine::Text(t) => t.starts_with("Configuration"),
+            _ => false,
+        },
+    }
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        machine::route(self, input);
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        [
+            self.step_deadline(),
+            self.setup_started.map(|t| t + self.s.start_timeout),
+            self.fill.deadline(),
+            self.busy_retry.as_ref().map(|r| r.0),
+            self.rx.as_ref().map(|r| r.deadline),
+            self.acks.deadline(),
+            self.link.deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
+}
+
+impl Handlers for Machine {
+    fn read(&mut self, bytes: Vec<u8>) {
+        for line in self.lines.push(&bytes) {
+            self.line(&line);
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.link.tick(now, &mut self.out);
+        if self.step_deadline().is_some_and(|d| d <= now) {
+            self.step_timeout();
+        }
+        if self
+            .setup_started
+            .is_some_and(|t| t + self.s.start_timeout <= now)
+        {
+            self.status(DriverStatus::ModemSilent {
+                seconds: self.s.start_timeout.as_secs_f64(),
+            });
+            self.restart("the modem was not set up in time");
+        }
+        self.fill.expire_data(now, &mut self.out);
+        if self.rx.as_ref().is_some_and(|r| r.deadline <= now) {
+            self.rx = None;
+            self.status(DriverStatus::Unparseable {
+                line: String::new(),
+                reason: "a reception without its <EOP>: dropped".into(),
+            });
+        }
+        self.acks.expire(now);
+    }
+
     fn command(&mut self, command: DriverCommand) {
         let acks = "the Benthos driver sends acks itself";
         match asked::<BenthosSpecific>(command, self.s.modem_id, acks, &mut self.out) {
@@ -755,33 +841,6 @@ impl Machine {
                 }
             }
             Asked::Nothing => {}
-        }
-    }
-
-    fn specific(&mut self, r: BenthosSpecific) {
-        match r.r#type() {
-            SpecificType::BenthosTwoWayPing => {
-                match r.dest.and_then(address_of).filter(|&a| a != BROADCAST) {
-                    Some(d) => self.pending.push_back(Job::Range(d)),
-                    None => self.status(DriverStatus::Unsupported {
-                        message: "BENTHOS_TWO_WAY_PING needs a dest (modem id 1-254)".into(),
-                    }),
-                }
-            }
-            SpecificType::BenthosLowpower => self.pending.push_back(Job::LowPower),
-        }
-    }
-
-    fn template(&self, mt: &ModemTransmission) -> ModemTransmission {
-        let max = mt.max_frame_bytes.map_or(self.s.max_frame_bytes, |m| {
-            (m as usize).min(self.s.max_frame_bytes)
-        });
-        ModemTransmission {
-            src: Some(self.s.modem_id),
-            max_num_frames: Some(mt.max_num_frames().clamp(1, MAX_FRAMES as u32)),
-            max_frame_bytes: Some(max as u32),
-            frame: Vec::new(),
-            ..mt.clone()
         }
     }
 
@@ -840,16 +899,22 @@ impl Machine {
         self.start_tx(tx);
     }
 
-    fn start_tx(&mut self, tx: Tx) {
-        self.purpose = Some(Purpose::Transmit);
-        self.script
-            .push_back(Step::Command(Command::set("RemoteAddr", tx.dest)));
-        self.script
-            .push_back(Step::Command(Command::set("TxRate", tx.rate)));
-        self.script.push_back(Step::Online);
-        self.script.push_back(Step::Send(tx.bytes.clone()));
-        self.script.push_back(Step::Escape);
-        self.tx = Some(tx);
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.lines.clear();
+            self.status(DriverStatus::Reconnected);
+            self.restart("the link to the modem was lost");
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.lines.clear();
+        self.rx = None;
+        self.status(DriverStatus::Disconnected { reason });
+        self.restart("the link to the modem was lost");
     }
 
     fn pump(&mut self) {
@@ -933,75 +998,5 @@ impl Machine {
                 }
             }
         }
-    }
-}
-
-/// Whether `line` answers `command` (as Goby3 takes the ATM-900's answers).
-pub fn accepts(command: &Command, line: &ModemLine) -> bool {
-    match command {
-        Command::Escape => matches!(line, ModemLine::Ok | ModemLine::NotFound(_)),
-        Command::Attention | Command::HangUp => matches!(line, ModemLine::Ok),
-        Command::Online => matches!(line, ModemLine::Connect(_)),
-        Command::LowPower => match line {
-            ModemLine::Prompt(t) | ModemLine::Text(t) => t.contains("Lowpower"),
-            _ => false,
-        },
-        Command::Range(_) => matches!(line, ModemLine::TxTime(_) | ModemLine::Ok),
-        Command::Set { name, .. } => match line {
-            ModemLine::Setting { name: n, .. } => n.eq_ignore_ascii_case(name),
-            ModemLine::Ok => true,
-            _ => false,
-        },
-        Command::Date {
-            time: (h, m, s), ..
-        } => match line {
-            ModemLine::Text(t) => t.contains(&format!("{h:02}:{m:02}:{s:02}")),
-            _ => false,
-        },
-        Command::ConfigLoad(_) | Command::FactoryReset | Command::Other(_) => match line {
-            ModemLine::Ok | ModemLine::Setting { .. } => true,
-            ModemLine::Text(t) => t.starts_with("Configuration"),
-            _ => false,
-        },
-    }
-}
-
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Read(bytes) => {
-                for line in self.lines.push(&bytes) {
-                    self.line(&line);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-            Input::Stop => return self.out.take(),
-        }
-        self.pump();
-        self.out.take()
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.step_deadline(),
-            self.setup_started.map(|t| t + self.s.start_timeout),
-            self.fill.deadline(),
-            self.busy_retry.as_ref().map(|r| r.0),
-            self.rx.as_ref().map(|r| r.deadline),
-            self.acks.deadline(),
-            self.link.deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.fill.awaits(id)
     }
 }

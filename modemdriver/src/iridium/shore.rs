@@ -82,7 +82,7 @@ use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
-use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
 use crate::problem::{self, Problem};
 
 /// Transmissions asked for that wait while an MT message is being sent.
@@ -333,25 +333,18 @@ fn rockblock_problems(shore: &IridiumShoreDriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverIridiumShore),
+    short_name: "iridium_shore",
+    title: "Iridium shore",
+    section: Some("iridium_shore"),
+    goby3_extensions: &[("goby.acomms.iridium.protobuf.shore_config", "iridium_shore")],
+};
+
 impl DriverKind for IridiumShoreDriver {
-    fn named(&self) -> Named {
-        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverIridiumShore)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "iridium_shore"
-    }
-
-    fn title(&self) -> &'static str {
-        "Iridium shore"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("iridium_shore")
-    }
-
-    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
-        &[("goby.acomms.iridium.protobuf.shore_config", "iridium_shore")]
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

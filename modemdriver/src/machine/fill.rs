@@ -54,8 +54,8 @@ impl Fill {
     }
 
     /// The answer to request `id` (`None`: not the one outstanding),
-    /// checked against its template ([`checked_answer`]: what broke its
-    /// limits is dropped and reported).
+    /// checked against its template (what broke its limits is dropped and
+    /// reported).
     pub fn answered(
         &mut self,
         id: RequestId,

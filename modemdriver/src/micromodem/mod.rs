@@ -19,6 +19,7 @@ pub mod clock;
 pub mod driver;
 pub mod emulator;
 pub mod fdp;
+mod fields;
 pub mod firmware;
 pub mod nmea;
 pub mod ranging;

@@ -55,7 +55,7 @@ use super::wire::{Command, Interface, ParamValue, MAX_PAYLOAD, MODE_BIT_RATE, RA
 use crate::config;
 use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
-use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
 use crate::link::stream::Units;
 use crate::problem::{self, Problem};
 use crate::shell::{self, Device};
@@ -74,28 +74,21 @@ pub const FRAME_LIMIT: usize = MAX_PAYLOAD - 1;
 #[derive(Debug)]
 pub struct PopotoDriver;
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(DriverType::DriverPopoto),
+    short_name: "popoto",
+    title: "Popoto",
+    section: Some("popoto"),
+    goby3_extensions: &[
+        ("goby.acomms.popoto.protobuf.config", "popoto"),
+        ("goby.acomms.popoto.protobuf.transmission", "popoto"),
+    ],
+};
+
 impl DriverKind for PopotoDriver {
-    fn named(&self) -> Named {
-        Named::Type(DriverType::DriverPopoto)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "popoto"
-    }
-
-    fn title(&self) -> &'static str {
-        "Popoto"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("popoto")
-    }
-
-    fn goby3_extensions(&self) -> &'static [(&'static str, &'static str)] {
-        &[
-            ("goby.acomms.popoto.protobuf.config", "popoto"),
-            ("goby.acomms.popoto.protobuf.transmission", "popoto"),
-        ]
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

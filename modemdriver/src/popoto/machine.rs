@@ -29,7 +29,7 @@ use crate::machine::acks::AwaitedAcks;
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, lossy, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{self, lossy, Handlers, Input, Now, Output, Outputs, RequestId};
 
 /// The alert that ends a transmission.
 pub const TX_COMPLETE: &str = "TxComplete";
@@ -178,75 +178,6 @@ impl Machine {
 
     fn report(&mut self, r: PopotoReport) {
         self.out.specific(&r);
-    }
-
-    fn disconnected_now(&mut self, reason: String) {
-        if !self.link.lost(self.now.at) {
-            return;
-        }
-        self.lines.clear();
-        self.status(DriverStatus::Disconnected { reason });
-        self.flush_held();
-        self.rx = None;
-        let lost = "the link to the modem was lost before TxComplete";
-        if let Some((s, _)) = self.transmitting.take() {
-            if let Some(mt) = s.mt {
-                self.result(mt, TransmitOutcome::Failed(lost.into()));
-            }
-        }
-        if let Some((_, s)) = self.retry.take() {
-            if let Some(mt) = s.mt {
-                self.result(mt, TransmitOutcome::Failed(lost.into()));
-            }
-        }
-        self.ranging = None;
-        self.starting = None;
-        self.ready = false;
-    }
-
-    fn opened(&mut self, ok: bool) {
-        if self.link.opened(ok, self.now.at) {
-            self.lines.clear();
-            self.status(DriverStatus::Reconnected);
-            self.starting = None;
-            self.ready = false;
-        }
-    }
-
-    fn timers(&mut self) {
-        let now = self.now.at;
-        self.link.tick(now, &mut self.out);
-        if self.starting.is_some_and(|t| t <= now) {
-            self.starting = None;
-            self.status(DriverStatus::ModemSilent {
-                seconds: self.s.start_timeout.as_secs_f64(),
-            });
-        }
-        self.fill.expire_data(now, &mut self.out);
-        if self.transmitting.as_ref().is_some_and(|t| t.1 <= now) {
-            let (s, _) = self.transmitting.take().expect("checked");
-            self.status(DriverStatus::ResponseTimeout {
-                command: format!("{TX_COMPLETE} of the packet to {}", id_of(s.dest)),
-                attempt: 1,
-            });
-            if let Some(mt) = s.mt {
-                self.result(
-                    mt,
-                    TransmitOutcome::Failed(format!("no {TX_COMPLETE} from the modem")),
-                );
-            }
-        }
-        if self.ranging.is_some_and(|r| r.1 <= now) {
-            let (dest, _) = self.ranging.take().expect("checked");
-            self.status(DriverStatus::ResponseTimeout {
-                command: format!("the range to {}", id_of(dest)),
-                attempt: 1,
-            });
-        }
-        if self.held.as_ref().is_some_and(|h| h.1 <= now) {
-            self.flush_held();
-        }
-        self.acks.expire(now);
     }
 
     fn start_setup(&mut self) {
@@ -495,34 +426,6 @@ impl Machine {
         queue_first(&mut self.pending, job, |j| matches!(j, Job::Ack { .. }));
     }
 
-    fn command(&mut self, command: DriverCommand) {
-        let acks = "the Popoto driver sends acks itself";
-        match asked::<PopotoSpecific>(command, self.s.modem_id, acks, &mut self.out) {
-            Asked::Data(mt) => queue_data(
-                &mut self.pending,
-                Job::Data(Box::new(mt)),
-                |j| matches!(j, Job::Data(_)),
-                &mut self.out,
-            ),
-            Asked::Slot(mt) => {
-                let p = mt.popoto.as_deref().cloned().unwrap_or_default();
-                self.specific(PopotoSpecific {
-                    r#type: p.r#type.unwrap_or(0),
-                    dest: mt.dest,
-                    transmit_power: p.transmit_power,
-                    file_location: p.file_location,
-                });
-            }
-            Asked::Specific(r) => self.specific(r),
-            Asked::Acknowledge(ack) => {
-                if self.s.deferred_ack {
-                    self.owe_ack(&ack);
-                }
-            }
-            Asked::Nothing => {}
-        }
-    }
-
     fn specific(&mut self, r: PopotoSpecific) {
         let power = r.transmit_power.unwrap_or(self.s.power);
         let job = match r.r#type() {
@@ -572,6 +475,122 @@ impl Machine {
             max_frame_bytes: Some(max as u32),
             frame: Vec::new(),
             ..mt.clone()
+        }
+    }
+
+    /// Hands `s` to the modem: its rate, its destination, the packet.
+    fn offer(&mut self, s: Sending) {
+        self.write(&Command::SetRate { mode: s.mode });
+        self.write(&Command::SetValue {
+            name: "RemoteID".into(),
+            value: ParamValue::Int(i64::from(s.dest)),
+        });
+        self.write(&Command::Transmit(s.payload.clone()));
+        let deadline = self.now.at + self.s.response_timeout + air_time(s.payload.len(), s.mode);
+        self.transmitting = Some((s, deadline));
+    }
+}
+
+fn popoto_stat(mt: &mut ModemTransmission) -> Option<&mut PopotoReceiveStatistics> {
+    mt.popoto.as_mut()?.receive_stat.first_mut()
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        machine::route(self, input);
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        [
+            self.starting,
+            self.fill.deadline(),
+            self.transmitting.as_ref().map(|t| t.1),
+            self.retry.as_ref().map(|r| r.0),
+            self.ranging.map(|r| r.1),
+            self.held.as_ref().map(|h| h.1),
+            self.acks.deadline(),
+            self.link.deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
+}
+
+impl Handlers for Machine {
+    fn read(&mut self, bytes: Vec<u8>) {
+        for line in self.lines.push(&bytes) {
+            self.line(&line);
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.link.tick(now, &mut self.out);
+        if self.starting.is_some_and(|t| t <= now) {
+            self.starting = None;
+            self.status(DriverStatus::ModemSilent {
+                seconds: self.s.start_timeout.as_secs_f64(),
+            });
+        }
+        self.fill.expire_data(now, &mut self.out);
+        if self.transmitting.as_ref().is_some_and(|t| t.1 <= now) {
+            let (s, _) = self.transmitting.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("{TX_COMPLETE} of the packet to {}", id_of(s.dest)),
+                attempt: 1,
+            });
+            if let Some(mt) = s.mt {
+                self.result(
+                    mt,
+                    TransmitOutcome::Failed(format!("no {TX_COMPLETE} from the modem")),
+                );
+            }
+        }
+        if self.ranging.is_some_and(|r| r.1 <= now) {
+            let (dest, _) = self.ranging.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("the range to {}", id_of(dest)),
+                attempt: 1,
+            });
+        }
+        if self.held.as_ref().is_some_and(|h| h.1 <= now) {
+            self.flush_held();
+        }
+        self.acks.expire(now);
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        let acks = "the Popoto driver sends acks itself";
+        match asked::<PopotoSpecific>(command, self.s.modem_id, acks, &mut self.out) {
+            Asked::Data(mt) => queue_data(
+                &mut self.pending,
+                Job::Data(Box::new(mt)),
+                |j| matches!(j, Job::Data(_)),
+                &mut self.out,
+            ),
+            Asked::Slot(mt) => {
+                let p = mt.popoto.as_deref().cloned().unwrap_or_default();
+                self.specific(PopotoSpecific {
+                    r#type: p.r#type.unwrap_or(0),
+                    dest: mt.dest,
+                    transmit_power: p.transmit_power,
+                    file_location: p.file_location,
+                });
+            }
+            Asked::Specific(r) => self.specific(r),
+            Asked::Acknowledge(ack) => {
+                if self.s.deferred_ack {
+                    self.owe_ack(&ack);
+                }
+            }
+            Asked::Nothing => {}
         }
     }
 
@@ -626,16 +645,37 @@ impl Machine {
         });
     }
 
-    /// Hands `s` to the modem: its rate, its destination, the packet.
-    fn offer(&mut self, s: Sending) {
-        self.write(&Command::SetRate { mode: s.mode });
-        self.write(&Command::SetValue {
-            name: "RemoteID".into(),
-            value: ParamValue::Int(i64::from(s.dest)),
-        });
-        self.write(&Command::Transmit(s.payload.clone()));
-        let deadline = self.now.at + self.s.response_timeout + air_time(s.payload.len(), s.mode);
-        self.transmitting = Some((s, deadline));
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.lines.clear();
+            self.status(DriverStatus::Reconnected);
+            self.starting = None;
+            self.ready = false;
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.lines.clear();
+        self.status(DriverStatus::Disconnected { reason });
+        self.flush_held();
+        self.rx = None;
+        let lost = "the link to the modem was lost before TxComplete";
+        if let Some((s, _)) = self.transmitting.take() {
+            if let Some(mt) = s.mt {
+                self.result(mt, TransmitOutcome::Failed(lost.into()));
+            }
+        }
+        if let Some((_, s)) = self.retry.take() {
+            if let Some(mt) = s.mt {
+                self.result(mt, TransmitOutcome::Failed(lost.into()));
+            }
+        }
+        self.ranging = None;
+        self.starting = None;
+        self.ready = false;
     }
 
     fn pump(&mut self) {
@@ -715,50 +755,5 @@ impl Machine {
                 }
             }
         }
-    }
-}
-
-fn popoto_stat(mt: &mut ModemTransmission) -> Option<&mut PopotoReceiveStatistics> {
-    mt.popoto.as_mut()?.receive_stat.first_mut()
-}
-
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Read(bytes) => {
-                for line in self.lines.push(&bytes) {
-                    self.line(&line);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-            Input::Stop => return self.out.take(),
-        }
-        self.pump();
-        self.out.take()
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.starting,
-            self.fill.deadline(),
-            self.transmitting.as_ref().map(|t| t.1),
-            self.retry.as_ref().map(|r| r.0),
-            self.ranging.map(|r| r.1),
-            self.held.as_ref().map(|h| h.1),
-            self.acks.deadline(),
-            self.link.deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.fill.awaits(id)
     }
 }

@@ -1,7 +1,6 @@
 //! The Popoto modem's host interface, typed: the commands a host writes
 //! ([`Command`], on either [`Interface`]), the JSON lines the modem writes
-//! back ([`ModemLine`]), the line splitter that finds them among the
-//! shell's prompts and colours ([`LineSplitter`]), and Goby3's one-byte
+//! back ([`ModemLine`]) among the shell's prompts and colours, and Goby3's one-byte
 //! header that starts every payload ([`GobyHeader`]).
 //!
 //! Sources: Popoto's public API (the `popoto` Python class and `pshell`
@@ -563,8 +562,9 @@ fn number_of(v: &Json, what: &str) -> Result<f64, String> {
         .ok_or_else(|| bad(format!("{what}: {v} is not a number")))
 }
 
-/// Reads one line of the modem (prompt and colours already removed by
-/// [`LineSplitter`], or not): the JSON object in it, if any. `Ok(None)`:
+/// Reads one line of the modem (split by a
+/// [`LineSplitter`](crate::link::line::LineSplitter); prompt and colours
+/// there or not): the JSON object in it, if any. `Ok(None)`:
 /// no JSON object on the line (a banner, an echo, a prompt alone).
 pub fn parse_modem_line(line: &str) -> Result<Option<ModemLine>, String> {
     let line = clean(line);

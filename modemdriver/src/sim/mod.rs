@@ -47,7 +47,7 @@ use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
-use crate::kind::{DriverKind, Named, PacketTime, Starting};
+use crate::kind::{About, DriverKind, Named, PacketTime, Starting};
 use crate::problem::{self, Problem};
 use crate::rate;
 use medium::{Airborne, Medium};
@@ -128,21 +128,18 @@ impl SimulatorDriver {
     }
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverAcousticSimulator),
+    short_name: "simulator",
+    title: "acoustic channel simulator",
+    section: Some("simulator"),
+    goby3_extensions: &[],
+};
+
 impl DriverKind for SimulatorDriver {
-    fn named(&self) -> Named {
-        Named::Type(protos::goby::acomms::protobuf::DriverType::DriverAcousticSimulator)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "simulator"
-    }
-
-    fn title(&self) -> &'static str {
-        "acoustic channel simulator"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("simulator")
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

@@ -1,12 +1,6 @@
-//! The EvoLogics driver as a state machine: no input or output, no clock
-//! read.
-//!
-//! Each [`Input`] (bytes read from the modem, a tick, a command of the
-//! layer above, the answer to a data request, the link opened or lost)
-//! comes with the time it happened ([`Now`]); its handling returns, in
-//! order, what to do ([`Output`]: bytes to write, events, data requests,
-//! the link to open). [`Machine::next_deadline`] tells when the next
-//! [`Input::Tick`] is due.
+//! The EvoLogics driver as a state machine ([`machine::Machine`]): the
+//! bytes read from the modem decoded as its answers and notifications,
+//! the AT commands to write, in data mode or command mode.
 //!
 //! One thing is under way at a time: a setting at start, a data request,
 //! a message the modem has not answered yet, or one it took and whose
@@ -27,7 +21,7 @@ use crate::driver::{DriverCommand, DriverEvent, DriverStatus, SpecificReport, Tr
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{self, Handlers, Input, Now, Output, Outputs, RequestId};
 
 use super::super::codec::{encode_command, Decoded, Framing, ModemDecoder, ModemMessage};
 use super::super::message::{
@@ -236,80 +230,6 @@ impl Machine {
 
     fn result(&mut self, mt: ModemTransmission, outcome: TransmitOutcome) {
         self.out.result(mt, outcome);
-    }
-
-    fn disconnected_now(&mut self, reason: String) {
-        if !self.link.lost(self.now.at) {
-            return;
-        }
-        self.decoder.clear();
-        self.status(DriverStatus::Disconnected { reason });
-        // What was under way is not known to have gone: handed back.
-        if let Some(a) = self.awaiting.take() {
-            if let Purpose::Send(s) = a.purpose {
-                if s.how != How::AppAck {
-                    self.result(
-                        s.mt,
-                        TransmitOutcome::Failed("the link to the modem was lost".into()),
-                    );
-                }
-            }
-        }
-        if let Some(f) = self.in_flight.take() {
-            self.result(
-                f.sending.mt,
-                TransmitOutcome::Failed(
-                    "the link to the modem was lost before the delivery report".into(),
-                ),
-            );
-        }
-        if let Some((_, s)) = self.retry.take() {
-            if s.how != How::AppAck {
-                self.result(
-                    s.mt,
-                    TransmitOutcome::Failed("the link to the modem was lost".into()),
-                );
-            }
-        }
-        self.setup = self.s.setup.iter().cloned().collect();
-        self.ready = false;
-    }
-
-    fn opened(&mut self, ok: bool) {
-        if self.link.opened(ok, self.now.at) {
-            self.decoder.clear();
-            self.status(DriverStatus::Reconnected);
-            self.setup = self.s.setup.iter().cloned().collect();
-            self.ready = false;
-        }
-    }
-
-    fn timers(&mut self) {
-        let now = self.now.at;
-        self.link.tick(now, &mut self.out);
-        if self.awaiting.as_ref().is_some_and(|a| a.deadline <= now) {
-            let a = self.awaiting.take().expect("checked");
-            self.no_answer(a);
-        }
-        if let Some(template) = self.fill.expire(now, &mut self.out) {
-            if !self.piggyback {
-                self.result(template, TransmitOutcome::NothingToSend);
-            }
-        }
-        if self.in_flight.as_ref().is_some_and(|f| f.deadline <= now) {
-            let f = self.in_flight.take().expect("checked");
-            self.status(DriverStatus::ResponseTimeout {
-                command: format!("the delivery report of {}", describe(&f.sending)),
-                attempt: 1,
-            });
-            self.result(
-                f.sending.mt,
-                TransmitOutcome::Failed(format!(
-                    "no delivery report within {} ms",
-                    self.s.delivery_timeout.as_millis()
-                )),
-            );
-        }
     }
 
     /// A command got no answer in time.
@@ -753,44 +673,6 @@ impl Machine {
         self.emit(DriverEvent::Specific(SpecificReport::new(&report)));
     }
 
-    fn command(&mut self, command: DriverCommand) {
-        let acks = "the S2C acknowledges in the modem; use EvologicsSpecific";
-        match asked::<EvologicsSpecific>(command, self.s.modem_id, acks, &mut self.out) {
-            Asked::Data(mt) => queue_data(
-                &mut self.pending,
-                Job::Data(Box::new(mt)),
-                |j| matches!(j, Job::Data(_)),
-                &mut self.out,
-            ),
-            Asked::Slot(mt) => self.status(DriverStatus::Unsupported {
-                message: format!("ModemTransmission.type {:?} ({acks})", mt.r#type()),
-            }),
-            Asked::Specific(r) => match r.r#type() {
-                SpecificType::EvologicsPropagationTime => {
-                    self.pending.push_back(Job::PropagationTime {
-                        remote: self.last_remote,
-                    })
-                }
-                SpecificType::EvologicsPiggyback => {
-                    match r.dest.filter(|&d| address_of(d).is_some_and(|a| a != BROADCAST)) {
-                        Some(dest) => self.pending.push_back(Job::Piggyback { dest }),
-                        None => self.status(DriverStatus::Unsupported {
-                            message: "EvologicsSpecific EVOLOGICS_PIGGYBACK needs a dest (modem id 1-254)".into(),
-                        }),
-                    }
-                }
-            },
-            // Without application acks the modem acknowledges itself, on
-            // reception.
-            Asked::Acknowledge(ack) => {
-                if self.s.ack_mode == AckMode::ApplicationAck && self.s.deferred_ack {
-                    self.app_ack(&ack);
-                }
-            }
-            Asked::Nothing => {}
-        }
-    }
-
     /// The template of a data request for `mt`.
     fn template(&self, mt: &ModemTransmission) -> ModemTransmission {
         let to_one = mt.dest() > 0;
@@ -830,6 +712,141 @@ impl Machine {
         queue_first(&mut self.pending, Job::AppAck { dest, payload }, |j| {
             matches!(j, Job::AppAck { .. })
         });
+    }
+
+    /// Writes the send command of `s` and awaits its answer.
+    fn offer(&mut self, s: Sending) {
+        let data = s.payload.clone();
+        let command = match s.how {
+            How::Instant { ack } => Command::SendIm {
+                dest: s.dest,
+                flag: if ack { AckFlag::Ack } else { AckFlag::NoAck },
+                data,
+            },
+            How::AppAck => Command::SendIm {
+                dest: s.dest,
+                flag: AckFlag::NoAck,
+                data,
+            },
+            How::Burst => Command::Send { dest: s.dest, data },
+            How::Piggyback => Command::SendPbm { dest: s.dest, data },
+        };
+        self.send_awaiting(command, Purpose::Send(Box::new(s)));
+    }
+
+    fn request(&mut self, template: ModemTransmission, piggyback: bool) {
+        self.piggyback = piggyback;
+        self.fill.ask(template, self.now.at, &mut self.out);
+    }
+}
+
+fn describe(s: &Sending) -> String {
+    let what = match s.how {
+        How::Instant { ack: true } => "the instant message (ack)",
+        How::Instant { ack: false } => "the instant message (noack)",
+        How::Burst => "the burst data",
+        How::Piggyback => "the piggy-back message",
+        How::AppAck => "the application ack",
+    };
+    format!("{what} to {}", id_of(s.dest))
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        machine::route(self, input);
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        [
+            self.awaiting.as_ref().map(|a| a.deadline),
+            self.fill.deadline(),
+            self.in_flight.as_ref().map(|f| f.deadline),
+            self.retry.as_ref().map(|r| r.0),
+            self.link.deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
+}
+
+impl Handlers for Machine {
+    fn read(&mut self, bytes: Vec<u8>) {
+        for unit in self.decoder.push(&bytes) {
+            self.unit(unit);
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.link.tick(now, &mut self.out);
+        if self.awaiting.as_ref().is_some_and(|a| a.deadline <= now) {
+            let a = self.awaiting.take().expect("checked");
+            self.no_answer(a);
+        }
+        if let Some(template) = self.fill.expire(now, &mut self.out) {
+            if !self.piggyback {
+                self.result(template, TransmitOutcome::NothingToSend);
+            }
+        }
+        if self.in_flight.as_ref().is_some_and(|f| f.deadline <= now) {
+            let f = self.in_flight.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("the delivery report of {}", describe(&f.sending)),
+                attempt: 1,
+            });
+            self.result(
+                f.sending.mt,
+                TransmitOutcome::Failed(format!(
+                    "no delivery report within {} ms",
+                    self.s.delivery_timeout.as_millis()
+                )),
+            );
+        }
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        let acks = "the S2C acknowledges in the modem; use EvologicsSpecific";
+        match asked::<EvologicsSpecific>(command, self.s.modem_id, acks, &mut self.out) {
+            Asked::Data(mt) => queue_data(
+                &mut self.pending,
+                Job::Data(Box::new(mt)),
+                |j| matches!(j, Job::Data(_)),
+                &mut self.out,
+            ),
+            Asked::Slot(mt) => self.status(DriverStatus::Unsupported {
+                message: format!("ModemTransmission.type {:?} ({acks})", mt.r#type()),
+            }),
+            Asked::Specific(r) => match r.r#type() {
+                SpecificType::EvologicsPropagationTime => {
+                    self.pending.push_back(Job::PropagationTime {
+                        remote: self.last_remote,
+                    })
+                }
+                SpecificType::EvologicsPiggyback => {
+                    match r.dest.filter(|&d| address_of(d).is_some_and(|a| a != BROADCAST)) {
+                        Some(dest) => self.pending.push_back(Job::Piggyback { dest }),
+                        None => self.status(DriverStatus::Unsupported {
+                            message: "EvologicsSpecific EVOLOGICS_PIGGYBACK needs a dest (modem id 1-254)".into(),
+                        }),
+                    }
+                }
+            },
+            // Without application acks the modem acknowledges itself, on
+            // reception.
+            Asked::Acknowledge(ack) => {
+                if self.s.ack_mode == AckMode::ApplicationAck && self.s.deferred_ack {
+                    self.app_ack(&ack);
+                }
+            }
+            Asked::Nothing => {}
+        }
     }
 
     fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
@@ -903,24 +920,50 @@ impl Machine {
         });
     }
 
-    /// Writes the send command of `s` and awaits its answer.
-    fn offer(&mut self, s: Sending) {
-        let data = s.payload.clone();
-        let command = match s.how {
-            How::Instant { ack } => Command::SendIm {
-                dest: s.dest,
-                flag: if ack { AckFlag::Ack } else { AckFlag::NoAck },
-                data,
-            },
-            How::AppAck => Command::SendIm {
-                dest: s.dest,
-                flag: AckFlag::NoAck,
-                data,
-            },
-            How::Burst => Command::Send { dest: s.dest, data },
-            How::Piggyback => Command::SendPbm { dest: s.dest, data },
-        };
-        self.send_awaiting(command, Purpose::Send(Box::new(s)));
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.decoder.clear();
+            self.status(DriverStatus::Reconnected);
+            self.setup = self.s.setup.iter().cloned().collect();
+            self.ready = false;
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.decoder.clear();
+        self.status(DriverStatus::Disconnected { reason });
+        // What was under way is not known to have gone: handed back.
+        if let Some(a) = self.awaiting.take() {
+            if let Purpose::Send(s) = a.purpose {
+                if s.how != How::AppAck {
+                    self.result(
+                        s.mt,
+                        TransmitOutcome::Failed("the link to the modem was lost".into()),
+                    );
+                }
+            }
+        }
+        if let Some(f) = self.in_flight.take() {
+            self.result(
+                f.sending.mt,
+                TransmitOutcome::Failed(
+                    "the link to the modem was lost before the delivery report".into(),
+                ),
+            );
+        }
+        if let Some((_, s)) = self.retry.take() {
+            if s.how != How::AppAck {
+                self.result(
+                    s.mt,
+                    TransmitOutcome::Failed("the link to the modem was lost".into()),
+                );
+            }
+        }
+        self.setup = self.s.setup.iter().cloned().collect();
+        self.ready = false;
     }
 
     /// Starts what can start now.
@@ -996,59 +1039,5 @@ impl Machine {
                 }
             }
         }
-    }
-
-    fn request(&mut self, template: ModemTransmission, piggyback: bool) {
-        self.piggyback = piggyback;
-        self.fill.ask(template, self.now.at, &mut self.out);
-    }
-}
-
-fn describe(s: &Sending) -> String {
-    let what = match s.how {
-        How::Instant { ack: true } => "the instant message (ack)",
-        How::Instant { ack: false } => "the instant message (noack)",
-        How::Burst => "the burst data",
-        How::Piggyback => "the piggy-back message",
-        How::AppAck => "the application ack",
-    };
-    format!("{what} to {}", id_of(s.dest))
-}
-
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Read(bytes) => {
-                for unit in self.decoder.push(&bytes) {
-                    self.unit(unit);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-            Input::Stop => return self.out.take(),
-        }
-        self.pump();
-        self.out.take()
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.awaiting.as_ref().map(|a| a.deadline),
-            self.fill.deadline(),
-            self.in_flight.as_ref().map(|f| f.deadline),
-            self.retry.as_ref().map(|r| r.0),
-            self.link.deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.fill.awaits(id)
     }
 }

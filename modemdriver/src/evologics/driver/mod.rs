@@ -69,7 +69,7 @@ use super::codec::Framing;
 use super::message::{Command, IM_MAX_BYTES};
 use crate::config::{self, Reach};
 use crate::driver::{Driver, DriverError};
-use crate::kind::{DriverKind, FrameLimits, Named, Starting};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
 use crate::link::stream::Units;
 use crate::problem::{self, Problem};
 use crate::shell::{self, Device};
@@ -89,21 +89,18 @@ pub const BURST_LIMIT: usize = super::message::BURST_MAX_BYTES;
 #[derive(Debug)]
 pub struct EvologicsDriver;
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Name(DRIVER_NAME),
+    short_name: "evologics",
+    title: "EvoLogics",
+    section: Some("evologics"),
+    goby3_extensions: &[],
+};
+
 impl DriverKind for EvologicsDriver {
-    fn named(&self) -> Named {
-        Named::Name(DRIVER_NAME)
-    }
-
-    fn short_name(&self) -> &'static str {
-        "evologics"
-    }
-
-    fn title(&self) -> &'static str {
-        "EvoLogics"
-    }
-
-    fn section(&self) -> Option<&'static str> {
-        Some("evologics")
+    fn about(&self) -> &'static About {
+        &ABOUT
     }
 
     fn problems(&self, config: &DriverConfig) -> Vec<Problem> {

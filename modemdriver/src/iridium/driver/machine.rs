@@ -1,11 +1,6 @@
-//! The vehicle driver as a state machine: no input or output, no clock read.
-//!
-//! Each [`Input`] (bytes read from the transceiver, a tick, a command of
-//! the layer above, the answer to a data request, the serial port opened
-//! or lost) comes with the time it happened ([`Now`]); its handling returns
-//! what to do, in order ([`Output`]: bytes to write, events, data requests,
-//! the port to open). [`Machine::next_deadline`] tells when the next tick
-//! is due.
+//! The vehicle driver as a state machine ([`machine::Machine`]): the
+//! transceiver's bytes read as lines and binary blocks, the SBD AT
+//! commands to write.
 //!
 //! One AT command is outstanding at a time (`Pending`); its answer is
 //! collected from the lines (and binary blocks) that follow until its
@@ -16,104 +11,16 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, IridiumDriverConfig, ModemTransmission,
-};
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::time::Instant;
 
-use super::super::at::{self, AtCommand, AtError, ModemLine, SessionReply};
+use super::super::at::{self, AtCommand, AtError, ModemLine};
 use super::super::reader::{Reader, Unit};
-use super::call::Calls;
-use super::session::Sessions;
+use super::settings::Settings;
+use super::state::{ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES};
 use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
 use crate::machine::reconnect::Reconnect;
-use crate::machine::{self, Input, Now, Output, Outputs, RequestId};
-
-/// What the machine starts from (checked by [`super::settings`]).
-#[derive(Debug, Clone)]
-pub struct Settings {
-    /// This vehicle's modem id (0–30).
-    pub modem_id: i32,
-    /// The Iridium part of the driver configuration.
-    pub iridium: IridiumDriverConfig,
-    /// Largest frame offered to the layer above (the device's MO limit less
-    /// the header and CRC, or `max_frame_size` when smaller).
-    pub max_frame_bytes: u32,
-    /// Between attempts to open the port again.
-    pub reconnect: Duration,
-    /// Acks wait for the layer above (`DriverConfig.deferred_ack`).
-    pub deferred_ack: bool,
-    /// Number of the first frame sent (then counting up, modulo 65535).
-    pub first_frame: u32,
-}
-
-/// Why a command is outstanding: what its answer is for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Purpose {
-    /// Step of the start-up sequence.
-    Startup,
-    /// `AT+SBDD2` before a mailbox check (or after a message went).
-    ClearMo,
-    /// `AT+SBDWB=n`, waiting for `READY`.
-    WriteRequest,
-    /// The message written, waiting for the result digit.
-    WriteData,
-    /// `AT+SBDIX[A]`.
-    Session,
-    /// `AT+SBDRB`.
-    ReadMt,
-    /// `ATD<number>`, waiting for `CONNECT`.
-    Dial,
-    /// `ATH` after the escape.
-    Hangup,
-}
-
-/// An answer collected for the outstanding command.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(super) enum Answer {
-    /// A result digit (`AT+SBDWB`, `AT+SBDD`).
-    Digit(u8),
-    /// `+SBDIX`.
-    Session(SessionReply),
-    /// The MT buffer read, checksum good.
-    Mt(Vec<u8>),
-    /// The MT buffer read, checksum bad.
-    BadMt,
-    /// The IMEI.
-    Imei(String),
-}
-
-/// How a command ended.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(super) enum Outcome {
-    /// `OK` (or `READY`, or the final digit), with what came before it.
-    Done(Option<Answer>),
-    /// `ERROR`.
-    Error,
-    /// No answer after every try.
-    NoAnswer,
-}
-
-/// The command outstanding.
-#[derive(Debug)]
-pub(super) struct Pending {
-    pub command: AtCommand,
-    /// Bytes written (the command, or the message after `READY`).
-    pub bytes: Vec<u8>,
-    pub purpose: Purpose,
-    pub sent_at: Instant,
-    pub timeout: Duration,
-    /// Times written.
-    pub tries: u32,
-    /// What came before the final result code.
-    pub answer: Option<Answer>,
-    /// Written again when unanswered (not a session: that could send the
-    /// message twice).
-    pub resend: bool,
-}
-
-/// Times a command is written before the transceiver is taken as silent.
-pub const COMMAND_TRIES: u32 = 3;
+use crate::machine::{self, Handlers, Input, Now, Output, Outputs, RequestId};
 
 /// The vehicle driver's logic.
 #[derive(Debug)]
@@ -473,26 +380,6 @@ impl Machine {
         }
     }
 
-    fn command(&mut self, command: DriverCommand) {
-        match command {
-            DriverCommand::Initiate(mt) => match mt.r#type() {
-                TransmissionType::Ack => self.queue_ack(mt),
-                _ => self.initiate(mt),
-            },
-            DriverCommand::Acknowledge(ack) => {
-                if self.settings.deferred_ack {
-                    self.acknowledge(ack);
-                }
-            }
-            DriverCommand::Specific(message) => self.status(DriverStatus::Unsupported {
-                message: prost_reflect::ReflectMessage::descriptor(&message)
-                    .full_name()
-                    .to_string(),
-            }),
-            DriverCommand::Stop(_) => {}
-        }
-    }
-
     /// Sends the ACK of `ack` (when the data asked for one, to this node).
     pub(super) fn acknowledge(&mut self, ack: Acknowledgement) {
         if !Acknowledgement::wanted(&ack.received, &[self.settings.modem_id]) {
@@ -502,24 +389,58 @@ impl Machine {
             self.queue_ack(mt);
         }
     }
+}
 
-    fn opened(&mut self, ok: bool) {
-        if self.link.opened(ok, self.now.at) {
-            self.status(DriverStatus::Reconnected);
-            self.configure();
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        machine::route(self, input);
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
+        let session = if self.ready && self.pending.is_none() {
+            self.session_deadline()
+        } else {
+            None
+        };
+        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
+            self.call_deadline()
+        } else {
+            None
+        };
+        [
+            command,
+            self.link.deadline(),
+            session,
+            call,
+            self.sessions.request_deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.sessions.awaits(id) || self.calls.awaits(id)
+    }
+}
+
+impl Handlers for Machine {
+    fn read(&mut self, bytes: Vec<u8>) {
+        self.reader.push(&bytes);
+        while let Some(unit) = self.reader.next_unit() {
+            self.unit(unit);
         }
     }
 
-    fn disconnected(&mut self, reason: String) {
-        if !self.link.lost(self.now.at) {
-            return;
+    fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+        if self.calls.awaits(id) {
+            self.call_answered(id, filled)
+        } else {
+            self.mo_filled(id, filled)
         }
-        self.ready = false;
-        if let Some(p) = self.pending.take() {
-            self.session_interrupted(p.purpose);
-        }
-        self.reader = Reader::new();
-        self.status(DriverStatus::Disconnected { reason });
     }
 
     fn timers(&mut self) {
@@ -585,6 +506,45 @@ impl Machine {
         }
     }
 
+    fn command(&mut self, command: DriverCommand) {
+        match command {
+            DriverCommand::Initiate(mt) => match mt.r#type() {
+                TransmissionType::Ack => self.queue_ack(mt),
+                _ => self.initiate(mt),
+            },
+            DriverCommand::Acknowledge(ack) => {
+                if self.settings.deferred_ack {
+                    self.acknowledge(ack);
+                }
+            }
+            DriverCommand::Specific(message) => self.status(DriverStatus::Unsupported {
+                message: prost_reflect::ReflectMessage::descriptor(&message)
+                    .full_name()
+                    .to_string(),
+            }),
+            DriverCommand::Stop(_) => {}
+        }
+    }
+
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.status(DriverStatus::Reconnected);
+            self.configure();
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.ready = false;
+        if let Some(p) = self.pending.take() {
+            self.session_interrupted(p.purpose);
+        }
+        self.reader = Reader::new();
+        self.status(DriverStatus::Disconnected { reason });
+    }
+
     /// Writes the next command due: a start-up step, or the next step of
     /// a session.
     fn pump(&mut self) {
@@ -609,66 +569,5 @@ impl Machine {
                 return;
             }
         }
-    }
-}
-
-/// `n` milliseconds.
-pub(super) fn ms(n: u32) -> Duration {
-    Duration::from_millis(u64::from(n))
-}
-
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Read(bytes) => {
-                self.reader.push(&bytes);
-                while let Some(unit) = self.reader.next_unit() {
-                    self.unit(unit);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => {
-                if self.calls.awaits(id) {
-                    self.call_answered(id, filled)
-                } else {
-                    self.answered(id, filled)
-                }
-            }
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected(reason),
-            Input::Stop => return self.out.take(),
-        }
-        self.pump();
-        self.out.take()
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
-        let session = if self.ready && self.pending.is_none() {
-            self.session_deadline()
-        } else {
-            None
-        };
-        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
-            self.call_deadline()
-        } else {
-            None
-        };
-        [
-            command,
-            self.link.deadline(),
-            session,
-            call,
-            self.sessions.request_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.sessions.awaits(id) || self.calls.awaits(id)
     }
 }

@@ -8,7 +8,8 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
-use super::machine::{Machine, Settings};
+use super::machine::Machine;
+use super::settings::Settings;
 use crate::driver::{
     Acknowledgement, DriverCommand, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult,
 };

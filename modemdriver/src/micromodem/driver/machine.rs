@@ -1,21 +1,12 @@
-//! The driver as a state machine: no input or output, no clock read.
+//! The Micro-Modem driver as a state machine ([`machine::Machine`]): the
+//! modem's NMEA lines in, the host's sentences out.
 //!
-//! Each input ([`Input`]: a line read from the modem, a tick, a command of
-//! the layer above, the answer to a data request, the serial device opened
-//! or lost) comes with the time it happened ([`Now`]), and its handling
-//! returns, in order, what to do ([`Output`]: lines to write, events for the
-//! layer above, data requests to make, the device to open).
-//! [`Machine::next_deadline`] tells when the next tick is due (`None`: no
-//! timer armed). Nothing in the machine waits: a data request is an output
-//! and its answer a later input, and meanwhile lines, commands and ticks are
-//! handled as ever.
-//!
-//! The state is split by concept, each in its module:
-//! `startup` (configuration, host commands and their
-//! answers), `cycle` (the transmit cycle and its slot),
-//! `fill` (data requests outstanding),
-//! `reception` (receptions, statistics, acks heard);
-//! this module holds the link's state and routes each input.
+//! What it holds is in `state`; what it does is split by concept, each in
+//! its module: `startup` (configuration, host commands and their
+//! answers), `cycle` (the transmit cycle and its slot), `fill` (data
+//! requests outstanding), `reception` (receptions, statistics, acks
+//! heard), `specific` (pings, LBL ranging, mini-packets, hardware lines);
+//! this module holds the link and routes each input.
 
 use std::time::Duration;
 
@@ -28,44 +19,11 @@ use tokio::time::Instant;
 use super::super::application_ack::ApplicationAcks;
 use super::super::nmea::NmeaError;
 use super::super::sentence::{MmSentence, SentenceError};
-use super::cycle::{Job, Transmit};
-use super::fill::Requests;
-use super::reception::Reception;
-use super::startup::Startup;
-use super::MAX_PENDING_TRANSMISSIONS;
+use super::settings::{Settings, MAX_PENDING_TRANSMISSIONS};
+use super::state::{Job, LinkState, Reception, Requests, Startup, Transmit};
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus};
 use crate::machine::reconnect::Reconnect;
-use crate::machine::{self, Input, Now, Output, Outputs, RequestId};
-
-/// What the machine starts from (checked by [`super::settings`]).
-#[derive(Debug)]
-pub struct Settings {
-    /// This modem's id (1-127).
-    pub modem_id: u32,
-    /// The Micro-Modem's part of the driver configuration.
-    pub mm: MicroModemConfig,
-    /// Between attempts to open the device again.
-    pub reconnect: Duration,
-    /// With `use_application_acks`.
-    pub app_acks: Option<ApplicationAcks>,
-    /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
-    pub deferred_ack: bool,
-    /// Without application acks: strips those a peer sends anyway.
-    pub ack_reader: ApplicationAcks,
-    /// Where the application-ack state is kept across starts
-    /// (`application_ack_state_file`; taken by the driver's shell).
-    pub ack_state_file: Option<std::path::PathBuf>,
-}
-
-/// The serial link as the machine sees it.
-#[derive(Debug)]
-pub(super) struct LinkState {
-    /// Up, or opened again every reconnection interval.
-    pub up: Reconnect,
-    /// Last line heard from the modem.
-    pub last_heard: Instant,
-    pub silence_reported: bool,
-}
+use crate::machine::{self, Handlers, Input, Now, Output, Outputs, RequestId};
 
 /// The Micro-Modem driver's logic.
 #[derive(Debug)]
@@ -168,48 +126,6 @@ impl Machine {
         Duration::from_secs(u64::try_from(self.mm.keep_alive_seconds()).unwrap_or(10))
     }
 
-    /// The serial link failed.
-    pub(super) fn disconnected(&mut self, reason: String) {
-        if !self.link.up.lost(self.now.at) {
-            return;
-        }
-        self.startup.awaiting = None;
-        self.startup.clock_at = None;
-        if let Some(active) = &mut self.tx.active {
-            // Not the modem's fault: start the cycle again, same attempt.
-            active.restart();
-        }
-        self.status(DriverStatus::Disconnected { reason });
-    }
-
-    fn opened(&mut self, ok: bool) {
-        if self.link.up.opened(ok, self.now.at) {
-            self.link.last_heard = self.now.at;
-            self.status(DriverStatus::Reconnected);
-            self.queue_initialization();
-        }
-    }
-
-    /// Deadlines up to now.
-    fn timers(&mut self) {
-        let now = self.now.at;
-        self.command_timers();
-        self.cycle_timers();
-        self.request_timers();
-        self.reception_timers();
-        self.link.up.tick(now, &mut self.out);
-        let keep_alive = self.keep_alive();
-        if self.link.up.is_up()
-            && !self.link.silence_reported
-            && now >= self.link.last_heard + keep_alive * 3
-        {
-            self.link.silence_reported = true;
-            self.status(DriverStatus::ModemSilent {
-                seconds: (now - self.link.last_heard).as_secs_f64(),
-            });
-        }
-    }
-
     fn heard(&mut self) {
         self.link.last_heard = self.now.at;
         self.link.silence_reported = false;
@@ -244,7 +160,7 @@ impl Machine {
                 max_bytes,
                 frame,
                 ..
-            } => self.data_request(super::cycle::Drq {
+            } => self.data_request(super::state::Drq {
                 src,
                 dest,
                 ack,
@@ -342,6 +258,93 @@ impl Machine {
         }
     }
 
+    /// Queues a job filled from the layer above (data, or an FDP packet of
+    /// a slot): at most [`MAX_PENDING_TRANSMISSIONS`] wait, the oldest is
+    /// dropped beyond.
+    fn queue_data_job(&mut self, job: Job) {
+        let waiting = self
+            .tx
+            .pending
+            .iter()
+            .filter(|j| j.data().is_some())
+            .count();
+        if waiting >= MAX_PENDING_TRANSMISSIONS {
+            if let Some(i) = self.tx.pending.iter().position(|j| j.data().is_some()) {
+                self.tx.pending.remove(i);
+                self.status(DriverStatus::Skipped {
+                    reason: format!(
+                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
+                    ),
+                });
+            }
+        }
+        self.tx.pending.push_back(job);
+    }
+}
+
+impl machine::Machine for Machine {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.now = now;
+        machine::route(self, input);
+        self.out.take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        let keep_alive = self.keep_alive();
+        [
+            self.startup.next_deadline(),
+            self.tx.next_deadline(),
+            self.requests.next_deadline(),
+            self.rx.next_deadline(),
+            self.link.up.deadline(),
+            (!self.link.silence_reported && self.link.up.is_up())
+                .then_some(self.link.last_heard + keep_alive * 3),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.requests.awaits(id)
+    }
+}
+
+impl Handlers for Machine {
+    fn read(&mut self, line: Vec<u8>) {
+        self.line(&line);
+    }
+
+    fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+        self.filled(id, filled);
+    }
+
+    /// A whole reception waiting for its statistics is reported without
+    /// them.
+    fn stop(&mut self) {
+        self.release_held();
+    }
+
+    /// Deadlines up to now.
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.command_timers();
+        self.cycle_timers();
+        self.request_timers();
+        self.reception_timers();
+        self.link.up.tick(now, &mut self.out);
+        let keep_alive = self.keep_alive();
+        if self.link.up.is_up()
+            && !self.link.silence_reported
+            && now >= self.link.last_heard + keep_alive * 3
+        {
+            self.link.silence_reported = true;
+            self.status(DriverStatus::ModemSilent {
+                seconds: (now - self.link.last_heard).as_secs_f64(),
+            });
+        }
+    }
+
     /// A command of the layer above.
     fn command(&mut self, command: DriverCommand) {
         match command {
@@ -389,27 +392,26 @@ impl Machine {
         }
     }
 
-    /// Queues a job filled from the layer above (data, or an FDP packet of
-    /// a slot): at most [`MAX_PENDING_TRANSMISSIONS`] wait, the oldest is
-    /// dropped beyond.
-    fn queue_data_job(&mut self, job: Job) {
-        let waiting = self
-            .tx
-            .pending
-            .iter()
-            .filter(|j| j.data().is_some())
-            .count();
-        if waiting >= MAX_PENDING_TRANSMISSIONS {
-            if let Some(i) = self.tx.pending.iter().position(|j| j.data().is_some()) {
-                self.tx.pending.remove(i);
-                self.status(DriverStatus::Skipped {
-                    reason: format!(
-                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                    ),
-                });
-            }
+    fn opened(&mut self, ok: bool) {
+        if self.link.up.opened(ok, self.now.at) {
+            self.link.last_heard = self.now.at;
+            self.status(DriverStatus::Reconnected);
+            self.queue_initialization();
         }
-        self.tx.pending.push_back(job);
+    }
+
+    /// The serial link failed.
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.up.lost(self.now.at) {
+            return;
+        }
+        self.startup.awaiting = None;
+        self.startup.clock_at = None;
+        if let Some(active) = &mut self.tx.active {
+            // Not the modem's fault: start the cycle again, same attempt.
+            active.restart();
+        }
+        self.status(DriverStatus::Disconnected { reason });
     }
 
     /// Sends what can be sent now: host commands first (start-up), then
@@ -428,47 +430,5 @@ impl Machine {
                 return;
             }
         }
-    }
-}
-
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Read(bytes) => self.line(&bytes),
-            Input::Tick => self.timers(),
-            Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected(reason),
-            Input::Stop => {
-                // A whole reception waiting for its statistics is reported
-                // without them.
-                self.release_held();
-                return self.out.take();
-            }
-        }
-        self.pump();
-        self.out.take()
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        let keep_alive = self.keep_alive();
-        [
-            self.startup.next_deadline(),
-            self.tx.next_deadline(),
-            self.requests.next_deadline(),
-            self.rx.next_deadline(),
-            self.link.up.deadline(),
-            (!self.link.silence_reported && self.link.up.is_up())
-                .then_some(self.link.last_heard + keep_alive * 3),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.requests.awaits(id)
     }
 }

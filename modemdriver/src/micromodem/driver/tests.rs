@@ -10,7 +10,8 @@ use tokio::time::Instant;
 
 use super::super::application_ack::ApplicationAcks;
 use super::super::sentence::{Cycle, MmSentence};
-use super::machine::{Machine, Settings};
+use super::machine::Machine;
+use super::settings::Settings;
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus, TransmitOutcome};
 use crate::machine::{Input, Machine as _, Now, Output, RequestId};
 
