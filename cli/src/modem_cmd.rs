@@ -34,8 +34,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, Subcommand};
-use modemdriver::micromodem::emulator::{
-    self, EmulatorConfig, EmulatorHandle, EmulatorPort, Geometry, Node, StatsLayout, Transponder,
+use emulators::micromodem::{
+    self as emulator, EmulatorConfig, EmulatorHandle, EmulatorPort, Geometry, Node, StatsLayout,
+    Transponder,
 };
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::reception::Position;
@@ -542,11 +543,11 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
 
 /// `goby modem emulate --kind evologics`.
 fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    use modemdriver::evologics::codec::Framing;
-    use modemdriver::evologics::emulator::{
+    use emulators::evologics::{
         self as evo, EmulatorConfig as EvoConfig, EmulatorControl as EvoControl,
         EmulatorFaults as EvoFaults, EmulatorPort as EvoPort,
     };
+    use modemdriver::evologics::codec::Framing;
     if args.modem_ids.iter().any(|&id| id == 0 || id > 254) {
         return Err(CliError::setup(
             "--modem-id must be an S2C address, 1..=254 (255 is broadcast)",
@@ -670,8 +671,8 @@ fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Statu
 
 /// An emulated Popoto or ATM-900, whichever `--kind` says.
 enum StreamEmulator {
-    Popoto(modemdriver::emulator_host::EmulatorHandle<modemdriver::popoto::emulator::Counters>),
-    Benthos(modemdriver::emulator_host::EmulatorHandle<modemdriver::benthos::emulator::Counters>),
+    Popoto(emulators::host::EmulatorHandle<emulators::popoto::Counters>),
+    Benthos(emulators::host::EmulatorHandle<emulators::benthos::Counters>),
 }
 
 impl StreamEmulator {
@@ -688,7 +689,7 @@ impl StreamEmulator {
     }
 
     fn drop_connection(&self) {
-        use modemdriver::emulator_host::EmulatorControl;
+        use emulators::host::EmulatorControl;
         match self {
             StreamEmulator::Popoto(h) => h.control(EmulatorControl::DropConnection),
             StreamEmulator::Benthos(h) => h.control(EmulatorControl::DropConnection),
@@ -705,7 +706,7 @@ impl StreamEmulator {
 
 /// `goby modem emulate --kind popoto` and `--kind benthos`.
 fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    use modemdriver::emulator_host::{EmulatorFaults, EmulatorPort as Port};
+    use emulators::host::{EmulatorFaults, EmulatorPort as Port};
     let popoto = args.kind == Kind::Popoto;
     let name = if popoto { "Popoto" } else { "ATM-900" };
     if args.modem_ids.iter().any(|&id| id == 0 || id > 254) {
@@ -792,7 +793,8 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
                 }
             };
             let started = if popoto {
-                use modemdriver::popoto::{emulator, wire::Interface};
+                use emulators::popoto as emulator;
+                use modemdriver::popoto::wire::Interface;
                 let config = emulator::EmulatorConfig {
                     address: modem_id as u8,
                     interface: if on_tcp {
@@ -808,7 +810,7 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
                     .await
                     .map(StreamEmulator::Popoto)
             } else {
-                use modemdriver::benthos::emulator;
+                use emulators::benthos as emulator;
                 let config = emulator::EmulatorConfig {
                     address: modem_id as u8,
                     positions: positions.clone(),

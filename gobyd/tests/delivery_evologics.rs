@@ -26,12 +26,12 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use emulators::evologics::{
+    self as emulator, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
+};
 use gobyd::event::DaemonEvent;
 use gobyd::modem_event::ModemEvent;
 use gobyd::runtime::Daemon;
-use modemdriver::evologics::emulator::{
-    self, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
-};
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use modemdriver::DriverStatus;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;

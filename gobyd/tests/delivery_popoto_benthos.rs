@@ -27,10 +27,10 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use emulators::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use gobyd::event::DaemonEvent;
 use gobyd::modem_event::ModemEvent;
 use gobyd::runtime::Daemon;
-use modemdriver::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Kind};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
@@ -140,8 +140,8 @@ struct Tally {
 
 /// The emulated modems of a run.
 enum Emulators {
-    Popoto(Vec<EmulatorHandle<modemdriver::popoto::emulator::Counters>>),
-    Benthos(Vec<EmulatorHandle<modemdriver::benthos::emulator::Counters>>),
+    Popoto(Vec<EmulatorHandle<emulators::popoto::Counters>>),
+    Benthos(Vec<EmulatorHandle<emulators::benthos::Counters>>),
 }
 
 impl Emulators {
@@ -177,9 +177,7 @@ impl Emulators {
                 for h in e {
                     h.stop().await;
                 }
-                let sum = |f: fn(&modemdriver::popoto::emulator::Counters) -> u64| {
-                    c.iter().map(f).sum::<u64>()
-                };
+                let sum = |f: fn(&emulators::popoto::Counters) -> u64| c.iter().map(f).sum::<u64>();
                 let faults = [
                     sum(|c| c.lost),
                     sum(|c| c.busy),
@@ -193,9 +191,8 @@ impl Emulators {
                 for h in e {
                     h.stop().await;
                 }
-                let sum = |f: fn(&modemdriver::benthos::emulator::Counters) -> u64| {
-                    c.iter().map(f).sum::<u64>()
-                };
+                let sum =
+                    |f: fn(&emulators::benthos::Counters) -> u64| c.iter().map(f).sum::<u64>();
                 let faults = [
                     sum(|c| c.lost),
                     sum(|c| c.busy),
@@ -240,7 +237,7 @@ async fn start_emulators(faults: &Faults) -> Emulators {
         let port = EmulatorPort::Tcp("127.0.0.1:0".parse().unwrap());
         match faults.modem {
             Modem::Popoto => {
-                use modemdriver::popoto::emulator::{self, EmulatorConfig};
+                use emulators::popoto::{self as emulator, EmulatorConfig};
                 let emulated = EmulatorConfig {
                     address: id,
                     positions: positions.clone(),
@@ -254,7 +251,7 @@ async fn start_emulators(faults: &Faults) -> Emulators {
                 );
             }
             Modem::Benthos => {
-                use modemdriver::benthos::emulator::{self, EmulatorConfig};
+                use emulators::benthos::{self as emulator, EmulatorConfig};
                 let emulated = EmulatorConfig {
                     address: id,
                     positions: positions.clone(),

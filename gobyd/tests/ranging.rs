@@ -9,10 +9,10 @@ mod support;
 
 use std::time::Duration;
 
-use gobyd::runtime::Daemon;
-use modemdriver::micromodem::emulator::{
-    self, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
+use emulators::micromodem::{
+    self as emulator, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
 };
+use gobyd::runtime::Daemon;
 use modemdriver::sim::reception::Position;
 use serde_json::Value;
 use support::node::{MicroModem, Node as NodeConfig};

@@ -24,6 +24,7 @@ pub static KINDS: &[&dyn DriverKind] = &[
     &crate::popoto::PopotoDriver,
     &crate::benthos::BenthosDriver,
     &crate::iridium::IridiumDriver,
+    #[cfg(feature = "iridium-shore")]
     &crate::iridium::IridiumShoreDriver,
 ];
 

@@ -9,8 +9,8 @@ mod common;
 
 use std::time::Duration;
 
-use modemdriver::benthos::emulator::{
-    self, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
+use emulators::benthos::{
+    self as emulator, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
 };
 use modemdriver::benthos::BenthosDriver;
 use modemdriver::sim::{medium::Medium, SimulatorDriver};

@@ -8,10 +8,10 @@ mod common;
 
 use std::time::Duration;
 
-use modemdriver::evologics::codec::Framing;
-use modemdriver::evologics::emulator::{
-    self, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
+use emulators::evologics::{
+    self as emulator, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
 };
+use modemdriver::evologics::codec::Framing;
 use modemdriver::evologics::EvologicsDriver;
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use modemdriver::{Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission};

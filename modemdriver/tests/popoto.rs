@@ -9,8 +9,8 @@ mod common;
 
 use std::time::Duration;
 
-use modemdriver::popoto::emulator::{
-    self, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
+use emulators::popoto::{
+    self as emulator, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
 };
 use modemdriver::popoto::wire::Interface;
 use modemdriver::popoto::PopotoDriver;

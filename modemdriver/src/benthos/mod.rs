@@ -5,10 +5,8 @@
 //! - [`wire`]: the commands, the modem's lines and Goby3's packet.
 //! - [`machine`]: the driver's logic, sans I/O.
 //! - [`driver`]: its configuration and start ([`BenthosDriver`]).
-//! - [`emulator`]: the modem's side, for tests and bench work.
 
 pub mod driver;
-pub mod emulator;
 pub mod machine;
 pub mod wire;
 

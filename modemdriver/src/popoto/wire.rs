@@ -285,73 +285,93 @@ fn data_bytes(v: &Json) -> Result<Vec<u8>, String> {
     }
 }
 
-/// Reads a command line written by a host (see [`HostLine`]).
-pub fn parse_host_line(line: &str) -> Result<HostLine, String> {
+/// Reads a command line written by a host on `interface` (see
+/// [`HostLine`]): a JSON command (`{"Command": "SetValue", "Arguments":
+/// "..."}`) on the command port, a shell command (`setvaluei ...`) on the
+/// shell; each interface refuses the other's, as the modem does.
+pub fn parse_host_line(line: &str, interface: Interface) -> Result<HostLine, String> {
     let line = line.trim();
-    if line.starts_with('{') {
-        let v: Json = serde_json::from_str(line).map_err(|e| bad(format!("not JSON: {e}")))?;
-        let command = v
-            .get("Command")
-            .and_then(Json::as_str)
-            .ok_or_else(|| bad("no \"Command\""))?;
-        let args = v.get("Arguments").cloned().unwrap_or(Json::Null);
-        let args_text = args.as_str().unwrap_or("").trim().to_string();
-        let mut words = args_text.split_whitespace();
-        return Ok(HostLine::Command(match command {
-            "SetValue" => {
-                let name = words.next().ok_or_else(|| bad("SetValue: no name"))?;
-                let value = words
-                    .next()
-                    .ok_or_else(|| bad("SetValue: no value"))?
-                    .to_string();
-                if name == "PayloadMode" {
-                    let mode = value
-                        .parse::<u8>()
-                        .ok()
-                        .filter(|&m| m <= 5)
-                        .ok_or_else(|| bad(format!("PayloadMode {value} (0-5)")))?;
-                    Command::SetRate { mode }
-                } else {
-                    Command::SetValue {
-                        value: parse_value(name, &value, None)?,
-                        name: name.to_string(),
-                    }
-                }
-            }
-            "GetValue" => Command::GetValue {
-                name: words
-                    .next()
-                    .ok_or_else(|| bad("GetValue: no name"))?
-                    .to_string(),
-                float: true,
-            },
-            "TransmitJSON" => {
-                let data = args
-                    .get("Payload")
-                    .and_then(|p| p.get("Data"))
-                    .ok_or_else(|| bad("TransmitJSON without Payload.Data"))?;
-                if let Json::String(text) = data {
-                    return Ok(HostLine::TransmitText(text.clone()));
-                }
-                Command::Transmit(data_bytes(data)?)
-            }
-            "Event_sendRanging" => return Ok(HostLine::SendRanging),
-            "StartPlaying" => {
-                let file = words
-                    .next()
-                    .ok_or_else(|| bad("StartPlaying: no file"))?
-                    .to_string();
-                let scale = words.next().unwrap_or("1");
-                let ParamValue::Float(scale) = parse_value("scale", scale, Some(true))? else {
-                    unreachable!("a float was asked for")
-                };
-                Command::PlayStart { file, scale }
-            }
-            "StopPlaying" => Command::PlayStop,
-            "Event_powerDown" => Command::PowerDown,
-            other => return Err(bad(format!("unknown command {other:?}"))),
-        }));
+    match (interface, line.starts_with('{')) {
+        (Interface::JsonApi, true) => parse_json_command(line),
+        (Interface::Shell, false) => parse_shell_command(line),
+        (Interface::JsonApi, false) => Err(bad(format!(
+            "{:?} is not a JSON command: the command port takes {{\"Command\": ..., \"Arguments\": ...}} (shell commands are the shell's)",
+            line.split_whitespace().next().unwrap_or("")
+        ))),
+        (Interface::Shell, true) => Err(bad(
+            "a JSON command on the shell: the shell takes its own commands (setvaluei, transmitJSON ...)",
+        )),
     }
+}
+
+/// A JSON command of the command port.
+fn parse_json_command(line: &str) -> Result<HostLine, String> {
+    let v: Json = serde_json::from_str(line).map_err(|e| bad(format!("not JSON: {e}")))?;
+    let command = v
+        .get("Command")
+        .and_then(Json::as_str)
+        .ok_or_else(|| bad("no \"Command\""))?;
+    let args = v.get("Arguments").cloned().unwrap_or(Json::Null);
+    let args_text = args.as_str().unwrap_or("").trim().to_string();
+    let mut words = args_text.split_whitespace();
+    Ok(HostLine::Command(match command {
+        "SetValue" => {
+            let name = words.next().ok_or_else(|| bad("SetValue: no name"))?;
+            let value = words
+                .next()
+                .ok_or_else(|| bad("SetValue: no value"))?
+                .to_string();
+            if name == "PayloadMode" {
+                let mode = value
+                    .parse::<u8>()
+                    .ok()
+                    .filter(|&m| m <= 5)
+                    .ok_or_else(|| bad(format!("PayloadMode {value} (0-5)")))?;
+                Command::SetRate { mode }
+            } else {
+                Command::SetValue {
+                    value: parse_value(name, &value, None)?,
+                    name: name.to_string(),
+                }
+            }
+        }
+        "GetValue" => Command::GetValue {
+            name: words
+                .next()
+                .ok_or_else(|| bad("GetValue: no name"))?
+                .to_string(),
+            float: true,
+        },
+        "TransmitJSON" => {
+            let data = args
+                .get("Payload")
+                .and_then(|p| p.get("Data"))
+                .ok_or_else(|| bad("TransmitJSON without Payload.Data"))?;
+            if let Json::String(text) = data {
+                return Ok(HostLine::TransmitText(text.clone()));
+            }
+            Command::Transmit(data_bytes(data)?)
+        }
+        "Event_sendRanging" => return Ok(HostLine::SendRanging),
+        "StartPlaying" => {
+            let file = words
+                .next()
+                .ok_or_else(|| bad("StartPlaying: no file"))?
+                .to_string();
+            let scale = words.next().unwrap_or("1");
+            let ParamValue::Float(scale) = parse_value("scale", scale, Some(true))? else {
+                unreachable!("a float was asked for")
+            };
+            Command::PlayStart { file, scale }
+        }
+        "StopPlaying" => Command::PlayStop,
+        "Event_powerDown" => Command::PowerDown,
+        other => return Err(bad(format!("unknown command {other:?}"))),
+    }))
+}
+
+/// A command of the shell.
+fn parse_shell_command(line: &str) -> Result<HostLine, String> {
     let (word, rest) = line.split_once(' ').unwrap_or((line, ""));
     let rest = rest.trim();
     let mut words = rest.split_whitespace();
@@ -787,17 +807,30 @@ mod tests {
             ] {
                 let text = String::from_utf8(c.encode(interface)).unwrap();
                 assert_eq!(
-                    parse_host_line(text.trim_end()),
+                    parse_host_line(text.trim_end(), interface),
                     Ok(HostLine::Command(c.clone())),
                     "{text}"
                 );
             }
         }
         assert_eq!(
-            parse_host_line("ping 5"),
+            parse_host_line("ping 5", Interface::Shell),
             Ok(HostLine::Command(Command::Ping { power: 5.0 }))
         );
-        assert!(parse_host_line("frobnicate").is_err());
+        assert!(parse_host_line("frobnicate", Interface::Shell).is_err());
+    }
+
+    /// The command port takes JSON commands only, the shell its own: a
+    /// set-up written for the one fails on the other, as on the modem.
+    #[test]
+    fn each_interface_refuses_the_others_commands() {
+        let shell = "setvaluei LocalID 1";
+        let json = r#"{"Command": "SetValue", "Arguments": "LocalID 1"}"#;
+        let e = parse_host_line(shell, Interface::JsonApi).unwrap_err();
+        assert!(e.contains("\"setvaluei\" is not a JSON command"), "{e}");
+        assert!(parse_host_line(json, Interface::Shell).is_err());
+        assert!(parse_host_line(shell, Interface::Shell).is_ok());
+        assert!(parse_host_line(json, Interface::JsonApi).is_ok());
     }
 
     #[test]
@@ -881,7 +914,8 @@ mod tests {
             for line in s.push(&bytes) {
                 let text = String::from_utf8_lossy(&line);
                 let _ = parse_modem_line(&text);
-                let _ = parse_host_line(&text);
+                let _ = parse_host_line(&text, Interface::Shell);
+                let _ = parse_host_line(&text, Interface::JsonApi);
             }
         }
 
@@ -897,8 +931,8 @@ mod tests {
             let _ = parse_modem_line(&line[..cut]);
             let _ = parse_modem_line(&line);
             let host = format!("{{\"Command\":\"{key}\",\"Arguments\":\"{}\"}}", v.join(" "));
-            let _ = parse_host_line(&host[..cut.min(host.len())]);
-            let _ = parse_host_line(&host);
+            let _ = parse_host_line(&host[..cut.min(host.len())], Interface::JsonApi);
+            let _ = parse_host_line(&host, Interface::JsonApi);
         }
     }
 }

@@ -16,10 +16,10 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use crate::driver::{Driver, DriverEvent};
-pub use crate::evologics::emulator::{EmulatorControl, EmulatorFaults, EmulatorPort};
-use crate::link::stream::BoxStream;
-use crate::time::sleep_until_opt;
+pub use crate::evologics::{EmulatorControl, EmulatorFaults, EmulatorPort};
+use modemdriver::driver::{Driver, DriverEvent};
+use modemdriver::link::stream::BoxStream;
+use modemdriver::time::sleep_until_opt;
 
 /// An emulated modem's logic.
 pub trait EmulatedModem: Send + 'static {
@@ -110,7 +110,7 @@ pub async fn serve<M: EmulatedModem>(
             (Some(l), None, Some(a))
         }
         EmulatorPort::Pty { link } => {
-            let pair = crate::link::serial::open_pty_pair()?;
+            let pair = modemdriver::link::serial::open_pty_pair()?;
             let shown = match link {
                 Some(link) => {
                     let _ = std::fs::remove_file(link);
@@ -167,7 +167,7 @@ async fn read_opt(host: &mut Option<BoxStream>, buf: &mut [u8]) -> std::io::Resu
 async fn run<M: EmulatedModem>(
     mut modem: M,
     listener: Option<tokio::net::TcpListener>,
-    pty: Option<crate::link::serial::PtyPair>,
+    pty: Option<modemdriver::link::serial::PtyPair>,
     port: EmulatorPort,
     mut backend: Option<Driver>,
     mut control: mpsc::UnboundedReceiver<EmulatorControl>,

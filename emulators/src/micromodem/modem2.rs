@@ -17,10 +17,10 @@ use super::mm2::{self, FdpRequest};
 use super::modem::{wrap, Echo, Modem, WaterKind};
 use super::nvram;
 use super::stats::PacketType;
-use crate::micromodem::nmea::NmeaSentence;
-use crate::micromodem::sentence::{Cycle, MmSentence};
-use crate::rate;
-use crate::time::now_micros;
+use modemdriver::micromodem::nmea::NmeaSentence;
+use modemdriver::micromodem::sentence::{Cycle, MmSentence};
+use modemdriver::rate;
+use modemdriver::time::now_micros;
 
 /// How long an external-pulse clock setting waits before it gives up.
 const EXTERNAL_PULSE_TIMEOUT: Duration = Duration::from_secs(3);

@@ -26,8 +26,8 @@
 //!   round trip, the transponder's turn-around time taken out (as Goby's
 //!   driver and WHOI's `acomms` host library read them).
 
-use crate::micromodem::nmea::NmeaSentence;
-use crate::time::civil;
+use modemdriver::micromodem::nmea::NmeaSentence;
+use modemdriver::time::civil;
 
 fn text(v: impl ToString) -> String {
     v.to_string()
@@ -383,7 +383,7 @@ mod tests {
 
     fn nmea(line: &str) -> NmeaSentence {
         let body = line.trim_start_matches('$');
-        let sum = crate::micromodem::nmea::checksum(body.as_bytes());
+        let sum = modemdriver::micromodem::nmea::checksum(body.as_bytes());
         NmeaSentence::parse(format!("${body}*{sum:02X}").as_bytes()).unwrap()
     }
 

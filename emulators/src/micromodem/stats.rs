@@ -35,8 +35,8 @@
 //!   `$CAXST,7,20250606,230103.000935,...`). Goby3 3.1.5's driver reads these
 //!   one field off: it shifts the fields past the version only for version 6.
 
-use crate::micromodem::nmea::NmeaSentence;
-use crate::time::civil;
+use modemdriver::micromodem::nmea::NmeaSentence;
+use modemdriver::time::civil;
 
 /// Which layout of `$CACST` / `$CAXST` the modem writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,7 +54,7 @@ impl StatsLayout {
     /// The layout the firmware `version` (as in `$CAREV`) writes; for a
     /// version that cannot be read, version 6.
     pub fn of_firmware(version: &str) -> StatsLayout {
-        match crate::micromodem::firmware::version_numbers(version) {
+        match modemdriver::micromodem::firmware::version_numbers(version) {
             Some((0, minor, patch)) if (minor, patch) < (93, 52) => StatsLayout::Legacy,
             Some((major, ..)) if major >= 3 => StatsLayout::V8,
             _ => StatsLayout::V6,

@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::sim::reception::Position;
+use modemdriver::sim::reception::Position;
 
 /// Source level of a Micro-Modem transmitter, dB re 1 µPa at 1 m.
 pub const SOURCE_LEVEL_DB: f64 = 185.0;

@@ -28,11 +28,11 @@ use super::modem::{wrap, Modem, TxCycle, WaterKind};
 use super::nvram;
 use super::stats::{PacketType, ReceiveStats, StatsLayout, TransmitStats};
 use super::Dialect;
-use crate::micromodem::firmware;
-use crate::micromodem::nmea::NmeaSentence;
-use crate::micromodem::sentence::{Cycle, MmSentence};
-use crate::rate;
-use crate::time::now_micros;
+use modemdriver::micromodem::firmware;
+use modemdriver::micromodem::nmea::NmeaSentence;
+use modemdriver::micromodem::sentence::{Cycle, MmSentence};
+use modemdriver::rate;
+use modemdriver::time::now_micros;
 
 /// Something the modem does later.
 #[derive(Debug, Clone)]

@@ -35,11 +35,11 @@ use tokio::sync::{mpsc, Notify};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::super::directip::{
-    self, disposition, mt_status, MoHeader, MoLocation, MoMessage, MtConfirmation, MtMessage,
-};
 use super::rockblock::WebhookTarget;
 use super::transceiver::GatewaySession;
+use modemdriver::iridium::directip::{
+    self, disposition, mt_status, MoHeader, MoLocation, MoMessage, MtConfirmation, MtMessage,
+};
 
 /// Most MT messages queued for one transceiver.
 pub const MT_QUEUE_LIMIT: usize = 50;

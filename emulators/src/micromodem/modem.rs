@@ -22,11 +22,11 @@ use super::mm2::ClockSource;
 use super::modem2::Mm2State;
 use super::stats::{PacketType, TransmitStats};
 use super::{nvram, AirKind, AirLog, AirTime, Dialect, EmulatorConfig, LineLog};
-use crate::driver::{DriverEvent, TransmitOutcome};
-use crate::micromodem::nmea::NmeaSentence;
-use crate::micromodem::sentence::{Cycle, MmSentence, SentenceError};
-use crate::rate;
-use crate::time::{hhmmss, now_micros};
+use modemdriver::driver::{DriverEvent, TransmitOutcome};
+use modemdriver::micromodem::nmea::NmeaSentence;
+use modemdriver::micromodem::sentence::{Cycle, MmSentence, SentenceError};
+use modemdriver::rate;
+use modemdriver::time::{hhmmss, now_micros};
 
 /// A two-way ping waiting for its reply.
 #[derive(Debug, Clone, Copy)]

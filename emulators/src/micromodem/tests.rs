@@ -14,8 +14,8 @@ use tokio::time::Instant;
 use super::modem::Modem;
 use super::stats::StatsLayout;
 use super::{Dialect, EmulatorConfig};
-use crate::driver::DriverEvent;
-use crate::micromodem::nmea::{checksum, NmeaSentence};
+use modemdriver::driver::DriverEvent;
+use modemdriver::micromodem::nmea::{checksum, NmeaSentence};
 
 fn config(dialect: Dialect, id: u32) -> EmulatorConfig {
     let base = match dialect {

@@ -62,13 +62,15 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::codec::{encode_modem, Framing, HostDecoded, HostDecoder, ModemMessage};
-use super::message::{
+use modemdriver::driver::{Driver, DriverEvent};
+use modemdriver::evologics::codec::{
+    encode_modem, Framing, HostDecoded, HostDecoder, ModemMessage,
+};
+use modemdriver::evologics::message::{
     AckFlag, Command, Notification, Reception, ReceptionKind, Reply, UsblLong, BROADCAST,
 };
-use crate::driver::{Driver, DriverEvent};
-use crate::link::stream::BoxStream;
-use crate::time::sleep_until_opt;
+use modemdriver::link::stream::BoxStream;
+use modemdriver::time::sleep_until_opt;
 
 /// Settings of an emulated modem.
 #[derive(Debug, Clone)]
@@ -257,7 +259,7 @@ pub async fn start(
             (Some(l), None, Some(a))
         }
         EmulatorPort::Pty { link } => {
-            let pair = crate::link::serial::open_pty_pair()?;
+            let pair = modemdriver::link::serial::open_pty_pair()?;
             let shown = match link {
                 Some(link) => {
                     let _ = std::fs::remove_file(link);
@@ -371,7 +373,7 @@ impl Modem {
     fn put_on_water(&mut self, packet: &EvologicsEmulatedPacket) {
         self.water_out.push(ModemTransmission {
             src: Some(i32::from(self.address)),
-            dest: Some(crate::address::id_of(packet.dest as u8)),
+            dest: Some(modemdriver::address::id_of(packet.dest as u8)),
             r#type: Some(TransmissionType::DriverSpecific as i32),
             frame: vec![packet.encode_to_vec()],
             ..Default::default()
@@ -691,7 +693,7 @@ impl Modem {
             return;
         };
         let rel = [them[0] - me[0], them[1] - me[1], them[2] - me[2]];
-        let t = crate::time::now_micros() as f64 / 1e6;
+        let t = modemdriver::time::now_micros() as f64 / 1e6;
         self.notify(Notification::UsblLong(UsblLong {
             current_time: t,
             measurement_time: t,
@@ -770,7 +772,7 @@ async fn read_opt(host: &mut Option<BoxStream>, buf: &mut [u8]) -> std::io::Resu
 async fn run(
     mut modem: Modem,
     listener: Option<tokio::net::TcpListener>,
-    pty: Option<crate::link::serial::PtyPair>,
+    pty: Option<modemdriver::link::serial::PtyPair>,
     port: EmulatorPort,
     mut backend: Option<Driver>,
     mut control: mpsc::UnboundedReceiver<EmulatorControl>,
@@ -868,7 +870,7 @@ async fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::evologics::codec::{encode_command, Decoded, ModemDecoder};
+    use modemdriver::evologics::codec::{encode_command, Decoded, ModemDecoder};
 
     async fn exchange(
         stream: &mut tokio::net::TcpStream,

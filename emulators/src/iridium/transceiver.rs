@@ -40,11 +40,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use super::super::at::{self, AtCommand, BufferStatus, ModemLine, SessionReply};
-use super::super::frame::{sbd_message_limit, Direction};
-use super::super::reader::{Reader, Unit};
-use super::super::status::{MoStatus, MtStatus};
 use super::radio::{Radio, RadioConfig};
+use modemdriver::iridium::at::{self, AtCommand, BufferStatus, ModemLine, SessionReply};
+use modemdriver::iridium::frame::{sbd_message_limit, Direction};
+use modemdriver::iridium::reader::{Reader, Unit};
+use modemdriver::iridium::status::{MoStatus, MtStatus};
 
 /// Seconds the transceiver waits for the message after `READY`.
 pub const WRITE_TIMEOUT: Duration = Duration::from_secs(60);

@@ -9,7 +9,7 @@
 //! `DRIVER_SPECIFIC` transmissions whose frame holds a
 //! `goby.acomms.protobuf.PopotoEmulatedPacket`.
 //!
-//! It takes, on either interface (see [`super::wire`]): `SetValue` /
+//! It takes, on either interface (see [`modemdriver::popoto::wire`]): `SetValue` /
 //! `setvaluei` / `setvaluef` (answered `{"Info": "<name> set to <value>"}`;
 //! `LocalID`, `RemoteID`, `PayloadMode`, `TxPowerWatts` used), the rate
 //! commands, `GetValue` (`{"BatteryVoltage": 24.000000}`,
@@ -44,16 +44,16 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use super::machine::{air_time, MAC_DUMPED, TX_COMPLETE};
-use super::wire::{
+use crate::host::{distance, draw, EmulatedModem};
+pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
+use modemdriver::address::id_of;
+use modemdriver::driver::Driver;
+use modemdriver::link::line::LineSplitter;
+use modemdriver::popoto::machine::{air_time, MAC_DUMPED, TX_COMPLETE};
+use modemdriver::popoto::wire::{
     parse_host_line, Command, HostLine, Interface, ModemLine, PacketHeader, PacketKind, ParamValue,
     RangeReport, BROADCAST,
 };
-use crate::address::id_of;
-use crate::driver::Driver;
-use crate::emulator_host::{distance, draw, EmulatedModem};
-pub use crate::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
-use crate::link::line::LineSplitter;
 
 /// The test message of a ping.
 pub const PING_TEXT: &str = "Popoto Test Message";
@@ -122,7 +122,7 @@ pub async fn start(
     port: EmulatorPort,
     backend: Option<Driver>,
 ) -> std::io::Result<EmulatorHandle<Counters>> {
-    crate::emulator_host::serve(Modem::new(config), port, backend).await
+    crate::host::serve(Modem::new(config), port, backend).await
 }
 
 #[derive(Debug)]
@@ -168,7 +168,7 @@ impl Modem {
             power: 1.0,
             params: HashMap::new(),
             rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32)),
-            lines: LineSplitter::new(super::wire::MAX_LINE),
+            lines: LineSplitter::new(modemdriver::popoto::wire::MAX_LINE),
             transmitting: false,
             ranging: None,
             asleep: false,
@@ -267,7 +267,7 @@ impl Modem {
             return;
         }
         self.asleep = false;
-        let parsed = match parse_host_line(&text) {
+        let parsed = match parse_host_line(&text, self.c.interface) {
             Ok(p) => p,
             Err(e) => {
                 self.info(format!("Invalid command: {e}"));

@@ -31,9 +31,9 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_serial::SerialStream;
 
-use crate::link::serial::{self, PtyPair};
-use crate::time::sleep_until_opt;
 use gateway::Gateway;
+use modemdriver::link::serial::{self, PtyPair};
+use modemdriver::time::sleep_until_opt;
 use transceiver::{Transceiver, TransceiverConfig, TransceiverLog, TxInput, TxOutput};
 
 /// Where an emulated transceiver speaks.

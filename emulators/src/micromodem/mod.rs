@@ -99,13 +99,13 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use crate::driver::{Driver, DriverEvent};
-use crate::link::line::LineLink;
-use crate::link::serial::{self, PtyPair};
-use crate::link::Link;
-use crate::time::sleep_until_opt;
 pub use geometry::{Geometry, Node, Transponder};
 use modem::Modem;
+use modemdriver::driver::{Driver, DriverEvent};
+use modemdriver::link::line::LineLink;
+use modemdriver::link::serial::{self, PtyPair};
+use modemdriver::link::Link;
+use modemdriver::time::sleep_until_opt;
 pub use stats::StatsLayout;
 
 /// Firmware version a Micro-Modem 2 reports in `$CAREV` (ident `AUV`).

@@ -9,7 +9,7 @@
 //! other processes) as `DRIVER_SPECIFIC` transmissions whose frame holds a
 //! `goby.acomms.protobuf.BenthosEmulatedPacket`.
 //!
-//! In command mode it answers (see [`super::wire`]): `AT`, `ATH` with
+//! In command mode it answers (see [`modemdriver::benthos::wire`]): `AT`, `ATH` with
 //! `OK`; `@Name=Value` with its echo `Name | Value` (`LocalAddr`,
 //! `RemoteAddr`, `TxRate`, `FwdDelay`, `P1EchoChar`, `RcvAll` are used; it
 //! echoes the host's lines until `@P1EchoChar=Dis`); `factory_reset`,
@@ -49,12 +49,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use super::wire::{bit_rate, hex_encode, Command, BROADCAST};
-use crate::address::id_of;
-use crate::driver::Driver;
-use crate::emulator_host::{distance, draw, EmulatedModem};
-pub use crate::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
-use crate::link::line::LineSplitter;
+use crate::host::{distance, draw, EmulatedModem};
+pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
+use modemdriver::address::id_of;
+use modemdriver::benthos::wire::{bit_rate, hex_encode, Command, BROADCAST};
+use modemdriver::driver::Driver;
+use modemdriver::link::line::LineSplitter;
 
 /// The prompt after each answer.
 pub const PROMPT: &str = "user:1>";
@@ -126,7 +126,7 @@ pub async fn start(
     port: EmulatorPort,
     backend: Option<Driver>,
 ) -> std::io::Result<EmulatorHandle<Counters>> {
-    crate::emulator_host::serve(Modem::new(config), port, backend).await
+    crate::host::serve(Modem::new(config), port, backend).await
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -173,7 +173,7 @@ impl Modem {
             settings: HashMap::new(),
             echo: true,
             mode: Mode::Command,
-            lines: LineSplitter::new(super::wire::MAX_LINE),
+            lines: LineSplitter::new(modemdriver::benthos::wire::MAX_LINE),
             online: Vec::new(),
             last_host_byte: Instant::now(),
             forward_at: None,

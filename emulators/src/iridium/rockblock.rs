@@ -31,12 +31,12 @@ use rand_chacha::ChaCha8Rng;
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
 
-use super::super::directip::{mt_status, MoMessage, MtMessage};
-use super::super::rockblock::http::{self, HttpUrl};
-use super::super::rockblock::{
+use super::gateway::Gateway;
+use modemdriver::iridium::directip::{mt_status, MoMessage, MtMessage};
+use modemdriver::iridium::rockblock::http::{self, HttpUrl};
+use modemdriver::iridium::rockblock::{
     transmit_time_text, ErrorCode, JwtSigner, MoFormat, MoPost, MtReply, MtRequest,
 };
-use super::gateway::Gateway;
 
 /// The emulator's RSA private key (PKCS#8 PEM), published: FOR TESTS ONLY.
 pub const EMULATOR_TEST_PRIVATE_KEY_PEM: &str =
@@ -329,7 +329,7 @@ impl RockblockService {
             client_id: 0,
             imei: request.imei.clone(),
             disposition_flags: if request.flush {
-                super::super::directip::disposition::FLUSH_MT_QUEUE
+                modemdriver::iridium::directip::disposition::FLUSH_MT_QUEUE
             } else {
                 0
             },
@@ -367,8 +367,8 @@ async fn mt_post(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::iridium::emulator::gateway::GatewayConfig;
-    use crate::iridium::rockblock::JwtVerifier;
+    use crate::iridium::gateway::GatewayConfig;
+    use modemdriver::iridium::rockblock::JwtVerifier;
 
     #[test]
     fn the_committed_public_key_verifies_the_emulators_tokens() {
@@ -376,7 +376,7 @@ mod tests {
         let verifier = JwtVerifier::from_pem(EMULATOR_TEST_PUBLIC_KEY_PEM.as_bytes()).unwrap();
         let target = WebhookTarget::new(HttpUrl::parse("127.0.0.1:1", "/").unwrap());
         let mo = MoMessage {
-            header: crate::iridium::directip::MoHeader {
+            header: modemdriver::iridium::directip::MoHeader {
                 cdr_reference: 1,
                 imei: "300234010753370".into(),
                 session_status: 0,

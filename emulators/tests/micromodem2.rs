@@ -7,12 +7,12 @@
 
 use std::time::Duration;
 
+use emulators::micromodem::{
+    self as emulator, geometry, mm2, nvram, EmulatorConfig, EmulatorControl, EmulatorHandle,
+    EmulatorPort, Geometry, Node, Transponder,
+};
 use modemdriver::link::serial::{self, SerialLineLink};
 use modemdriver::link::Link;
-use modemdriver::micromodem::emulator::{
-    self, geometry, mm2, nvram, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
-    Geometry, Node, Transponder,
-};
 use modemdriver::micromodem::nmea::{checksum, NmeaSentence};
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::reception::Position;
