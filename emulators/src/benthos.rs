@@ -49,7 +49,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use crate::host::{distance, draw, EmulatedModem};
+use crate::host::{distance, draw, EmulatedModem, Shared};
 pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::address::id_of;
 use modemdriver::benthos::wire::{bit_rate, hex_encode, Command, BROADCAST};
@@ -120,6 +120,28 @@ pub struct Counters {
     pub escapes: u64,
 }
 
+/// The ATM-900 as `goby modem emulate --kind benthos` starts it: its
+/// serial interface on a pseudo-terminal, or on TCP (a serial server).
+pub const EMULATION: crate::host::Emulation = crate::host::Emulation {
+    kind: "benthos",
+    serves:
+        "Benthos ATM-900 modems: the serial interface on pseudo-terminals (or TCP with --tcp-port)",
+    host: crate::host::Host::Serial,
+    addresses: (1, 254),
+    usbl: false,
+    start: |setup, port, backend| {
+        Box::pin(async move {
+            let config = EmulatorConfig {
+                address: setup.address,
+                positions: setup.positions,
+                faults: setup.faults,
+                ..EmulatorConfig::default()
+            };
+            start(config, port, backend).await.map(|h| h.running())
+        })
+    },
+};
+
 /// Starts an emulated modem on `port`, sending on `backend` (if any).
 pub async fn start(
     config: EmulatorConfig,
@@ -145,6 +167,8 @@ enum Timer {
 /// The modem's logic.
 #[derive(Debug)]
 pub struct Modem {
+    /// What it shares with its host.
+    io: Shared,
     c: EmulatorConfig,
     address: u8,
     settings: HashMap<String, String>,
@@ -157,11 +181,6 @@ pub struct Modem {
     ranging: Option<(u8, Instant)>,
     timers: VecDeque<(Instant, Timer)>,
     rng: ChaCha8Rng,
-    busy_next: u32,
-    lose_next: u32,
-    garble_next: u32,
-    host_out: Vec<Vec<u8>>,
-    water_out: Vec<ModemTransmission>,
     n: Counters,
 }
 
@@ -169,6 +188,7 @@ impl Modem {
     /// A modem as `config` says, in command mode.
     pub fn new(c: EmulatorConfig) -> Modem {
         Modem {
+            io: Shared::default(),
             address: c.address,
             settings: HashMap::new(),
             echo: true,
@@ -180,11 +200,6 @@ impl Modem {
             ranging: None,
             timers: VecDeque::new(),
             rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 40)),
-            busy_next: 0,
-            lose_next: 0,
-            garble_next: 0,
-            host_out: Vec::new(),
-            water_out: Vec::new(),
             n: Counters::default(),
             c,
         }
@@ -192,8 +207,7 @@ impl Modem {
 
     fn say(&mut self, line: &str) {
         let mut text = line.as_bytes().to_vec();
-        let garble = if self.garble_next > 0 {
-            self.garble_next -= 1;
+        let garble = if Shared::take(&mut self.io.garble_next) {
             true
         } else {
             draw(&mut self.rng, self.c.faults.garble)
@@ -203,7 +217,7 @@ impl Modem {
             self.n.garbled += 1;
         }
         text.extend_from_slice(b"\r\n");
-        self.host_out.push(text);
+        self.io.host_out.push(text);
     }
 
     fn setting(&self, name: &str) -> Option<&str> {
@@ -284,8 +298,7 @@ impl Modem {
                 date: (mo, d, y),
             }) => format!("Date set: {mo:02}/{d:02}/{y:04} {h:02}:{m:02}:{s:02}"),
             Ok(Command::Online) => {
-                let busy = if self.busy_next > 0 {
-                    self.busy_next -= 1;
+                let busy = if Shared::take(&mut self.io.busy_next) {
                     true
                 } else {
                     draw(&mut self.rng, self.c.faults.busy)
@@ -305,7 +318,7 @@ impl Modem {
             }
             Ok(Command::Range(dest)) => {
                 let mt = self.packet(Kind::RangeRequest, dest, Vec::new());
-                self.water_out.push(mt);
+                self.io.water_out.push(mt);
                 self.n.sent += 1;
                 self.ranging = Some((dest, now));
                 self.timers
@@ -350,7 +363,7 @@ impl Modem {
         let data = std::mem::take(&mut self.online);
         self.say("Forwarding Delay Up");
         let mt = self.packet(Kind::Data, self.remote(), data);
-        self.water_out.push(mt);
+        self.io.water_out.push(mt);
         self.n.sent += 1;
     }
 
@@ -383,8 +396,7 @@ impl Modem {
         if !(mine || all && p.kind() == Kind::Data) {
             return;
         }
-        let lose = if self.lose_next > 0 {
-            self.lose_next -= 1;
+        let lose = if Shared::take(&mut self.io.lose_next) {
             true
         } else {
             draw(&mut self.rng, self.c.faults.lost)
@@ -497,7 +509,7 @@ impl EmulatedModem for Modem {
             match t {
                 Timer::RangeReply(to) => {
                     let mt = self.packet(Kind::RangeReply, to, Vec::new());
-                    self.water_out.push(mt);
+                    self.io.water_out.push(mt);
                     self.n.sent += 1;
                 }
                 Timer::RangeTimeout => {
@@ -521,36 +533,19 @@ impl EmulatedModem for Modem {
             .min()
     }
 
-    fn take_host_out(&mut self) -> Vec<Vec<u8>> {
-        std::mem::take(&mut self.host_out)
-    }
-
-    fn take_water_out(&mut self) -> Vec<ModemTransmission> {
-        std::mem::take(&mut self.water_out)
-    }
-
     fn connected(&mut self) {
         self.lines.clear();
     }
 
-    fn control(&mut self, control: EmulatorControl) {
-        match control {
-            EmulatorControl::Busy(n) => self.busy_next += n,
-            EmulatorControl::Lose(n) => self.lose_next += n,
-            EmulatorControl::Garble(n) => self.garble_next += n,
-            EmulatorControl::DropConnection | EmulatorControl::Stop => {}
-        }
+    fn shared(&mut self) -> &mut Shared {
+        &mut self.io
     }
 
     fn counters(&self) -> Counters {
-        self.n
-    }
-
-    fn count_connection(&mut self, accepted: bool) {
-        if accepted {
-            self.n.connections += 1;
-        } else {
-            self.n.dropped += 1;
+        Counters {
+            connections: self.io.connections,
+            dropped: self.io.dropped,
+            ..self.n
         }
     }
 }

@@ -45,9 +45,6 @@
 //! dropped.
 
 use std::collections::HashMap;
-use std::net::SocketAddr;
-use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use prost::Message;
@@ -57,20 +54,17 @@ use protos::goby::acomms::protobuf::{
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::sync::{mpsc, watch};
-use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use modemdriver::driver::{Driver, DriverEvent};
+use crate::host::{EmulatedModem, Shared};
+pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorPort};
+use modemdriver::driver::Driver;
 use modemdriver::evologics::codec::{
     encode_modem, Framing, HostDecoded, HostDecoder, ModemMessage,
 };
 use modemdriver::evologics::message::{
     AckFlag, Command, Notification, Reception, ReceptionKind, Reply, UsblLong, BROADCAST,
 };
-use modemdriver::link::stream::BoxStream;
-use modemdriver::time::sleep_until_opt;
 
 /// Settings of an emulated modem.
 #[derive(Debug, Clone)]
@@ -119,60 +113,6 @@ impl Default for EmulatorConfig {
     }
 }
 
-/// Random faults of an emulated modem.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct EmulatorFaults {
-    /// Probability that a packet heard from the water (message or
-    /// acknowledgement) is lost.
-    pub lost: f64,
-    /// Probability that a send command is answered `BUSY BACKOFF STATE`.
-    pub busy: f64,
-    /// Probability that a line to the host is garbled (cut short).
-    pub garble: f64,
-    /// Seed of the draws (mixed with the address).
-    pub seed: u64,
-}
-
-impl Default for EmulatorFaults {
-    fn default() -> Self {
-        EmulatorFaults {
-            lost: 0.0,
-            busy: 0.0,
-            garble: 0.0,
-            seed: 1,
-        }
-    }
-}
-
-/// Where the emulator serves the AT interface.
-#[derive(Debug, Clone)]
-pub enum EmulatorPort {
-    /// A TCP server on this address (port 0: any free port; see
-    /// [`EmulatorHandle::local_addr`]).
-    Tcp(SocketAddr),
-    /// A pseudo-terminal; when `link` is given, a symbolic link at that
-    /// path points at it.
-    Pty {
-        /// Path of the symbolic link to keep.
-        link: Option<PathBuf>,
-    },
-}
-
-/// Faults on demand.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EmulatorControl {
-    /// Close the host's connection now (TCP; the host may connect again).
-    DropConnection,
-    /// Answer the next this many send commands `BUSY BACKOFF STATE`.
-    Busy(u32),
-    /// Lose the next this many packets heard from the water.
-    Lose(u32),
-    /// Garble the next this many lines to the host.
-    Garble(u32),
-    /// Stop the emulator.
-    Stop,
-}
-
 /// What an emulated modem did, counted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counters {
@@ -197,51 +137,8 @@ pub struct Counters {
     pub connections: u64,
 }
 
-/// A running emulator.
-#[derive(Debug)]
-pub struct EmulatorHandle {
-    control: mpsc::UnboundedSender<EmulatorControl>,
-    local_addr: Option<SocketAddr>,
-    path: watch::Receiver<Option<String>>,
-    counters: Arc<Mutex<Counters>>,
-    task: JoinHandle<()>,
-}
-
-impl EmulatorHandle {
-    /// The TCP address served (with [`EmulatorPort::Tcp`]).
-    pub fn local_addr(&self) -> Option<SocketAddr> {
-        self.local_addr
-    }
-
-    /// The path a driver opens (with [`EmulatorPort::Pty`]).
-    pub fn path(&self) -> Option<String> {
-        self.path.borrow().clone()
-    }
-
-    /// What the modem did so far.
-    pub fn counters(&self) -> Counters {
-        *self.counters.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// Sends a control.
-    pub fn control(&self, control: EmulatorControl) {
-        let _ = self.control.send(control);
-    }
-
-    /// A function that sends controls, for another task.
-    pub fn controller(&self) -> impl Fn(EmulatorControl) + Send + Sync + 'static {
-        let control = self.control.clone();
-        move |c| {
-            let _ = control.send(c);
-        }
-    }
-
-    /// Stops the emulator and waits for it.
-    pub async fn stop(self) {
-        let _ = self.control.send(EmulatorControl::Stop);
-        let _ = self.task.await;
-    }
-}
+/// A running emulated S2C.
+pub type EmulatorHandle = crate::host::EmulatorHandle<Counters>;
 
 /// Starts an emulated modem on `port`, sending on `backend` (if any).
 pub async fn start(
@@ -249,39 +146,35 @@ pub async fn start(
     port: EmulatorPort,
     backend: Option<Driver>,
 ) -> std::io::Result<EmulatorHandle> {
-    let (control_tx, control_rx) = mpsc::unbounded_channel();
-    let (path_tx, path_rx) = watch::channel(None);
-    let counters = Arc::new(Mutex::new(Counters::default()));
-    let (listener, pty, local_addr) = match &port {
-        EmulatorPort::Tcp(addr) => {
-            let l = tokio::net::TcpListener::bind(addr).await?;
-            let a = l.local_addr()?;
-            (Some(l), None, Some(a))
-        }
-        EmulatorPort::Pty { link } => {
-            let pair = modemdriver::link::serial::open_pty_pair()?;
-            let shown = match link {
-                Some(link) => {
-                    let _ = std::fs::remove_file(link);
-                    std::os::unix::fs::symlink(&pair.path, link)?;
-                    link.display().to_string()
-                }
-                None => pair.path.clone(),
-            };
-            path_tx.send_replace(Some(shown));
-            (None, Some(pair), None)
-        }
-    };
-    let modem = Modem::new(config, counters.clone());
-    let task = tokio::spawn(run(modem, listener, pty, port, backend, control_rx));
-    Ok(EmulatorHandle {
-        control: control_tx,
-        local_addr,
-        path: path_rx,
-        counters,
-        task,
-    })
+    crate::host::serve(Modem::new(config), port, backend).await
 }
+
+/// The S2C as `goby modem emulate --kind evologics` starts it: its AT
+/// interface on TCP in data mode, or on a pseudo-terminal in command mode.
+pub const EMULATION: crate::host::Emulation = crate::host::Emulation {
+    kind: "evologics",
+    serves: "EvoLogics S2C modems: the AT interface on TCP (or --pty), USBL fixes with --usbl",
+    host: crate::host::Host::Tcp(modemdriver::evologics::DEFAULT_TCP_PORT),
+    addresses: (1, 254),
+    usbl: true,
+    start: |setup, port, backend| {
+        Box::pin(async move {
+            let framing = match port {
+                EmulatorPort::Tcp(_) => Framing::Data,
+                EmulatorPort::Pty { .. } => Framing::Command,
+            };
+            let config = EmulatorConfig {
+                address: setup.address,
+                framing,
+                positions: setup.positions,
+                usbl: setup.usbl,
+                faults: setup.faults,
+                ..EmulatorConfig::default()
+            };
+            start(config, port, backend).await.map(|h| h.running())
+        })
+    },
+};
 
 /// A message of this modem awaiting its acknowledgement.
 #[derive(Debug)]
@@ -293,6 +186,8 @@ struct Awaiting {
 
 /// The modem's logic: what it says to the host and puts on the water.
 struct Modem {
+    /// What it shares with its host.
+    io: Shared,
     c: EmulatorConfig,
     address: u8,
     im_retries: u8,
@@ -302,21 +197,17 @@ struct Modem {
     im: Option<Awaiting>,
     burst: Option<Awaiting>,
     last_propagation_us: u64,
-    busy_next: u32,
-    lose_next: u32,
-    garble_next: u32,
-    /// Bytes for the host, in order.
-    host_out: Vec<Vec<u8>>,
-    /// Packets for the water.
-    water_out: Vec<ModemTransmission>,
     framing: Framing,
-    counters: Arc<Mutex<Counters>>,
+    /// The host's bytes, read as commands.
+    decoder: HostDecoder,
+    n: Counters,
 }
 
 impl Modem {
-    fn new(c: EmulatorConfig, counters: Arc<Mutex<Counters>>) -> Modem {
+    fn new(c: EmulatorConfig) -> Modem {
         let rng = ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32));
         Modem {
+            io: Shared::default(),
             address: c.address,
             im_retries: c.im_retries,
             connection_retries: c.connection_retries,
@@ -325,19 +216,15 @@ impl Modem {
             im: None,
             burst: None,
             last_propagation_us: 0,
-            busy_next: 0,
-            lose_next: 0,
-            garble_next: 0,
-            host_out: Vec::new(),
-            water_out: Vec::new(),
             framing: c.framing,
-            counters,
+            decoder: HostDecoder::new(c.framing),
+            n: Counters::default(),
             c,
         }
     }
 
-    fn count(&self, f: impl FnOnce(&mut Counters)) {
-        f(&mut self.counters.lock().unwrap_or_else(|e| e.into_inner()));
+    fn count(&mut self, f: impl FnOnce(&mut Counters)) {
+        f(&mut self.n);
     }
 
     fn draw(&mut self, p: f64) -> bool {
@@ -346,8 +233,7 @@ impl Modem {
 
     fn say(&mut self, message: ModemMessage) {
         let mut bytes = encode_modem(&message, self.framing);
-        let garble = if self.garble_next > 0 {
-            self.garble_next -= 1;
+        let garble = if Shared::take(&mut self.io.garble_next) {
             true
         } else {
             self.draw(self.c.faults.garble)
@@ -358,7 +244,7 @@ impl Modem {
             bytes.drain(keep..bytes.len() - 2);
             self.count(|c| c.garbled += 1);
         }
-        self.host_out.push(bytes);
+        self.io.host_out.push(bytes);
     }
 
     fn reply(&mut self, command: &Command, reply: Reply) {
@@ -371,7 +257,7 @@ impl Modem {
     }
 
     fn put_on_water(&mut self, packet: &EvologicsEmulatedPacket) {
-        self.water_out.push(ModemTransmission {
+        self.io.water_out.push(ModemTransmission {
             src: Some(i32::from(self.address)),
             dest: Some(modemdriver::address::id_of(packet.dest as u8)),
             r#type: Some(TransmissionType::DriverSpecific as i32),
@@ -381,8 +267,7 @@ impl Modem {
     }
 
     fn busy(&mut self) -> bool {
-        let busy = if self.busy_next > 0 {
-            self.busy_next -= 1;
+        let busy = if Shared::take(&mut self.io.busy_next) {
             true
         } else {
             self.draw(self.c.faults.busy)
@@ -394,7 +279,7 @@ impl Modem {
     }
 
     /// A command from the host.
-    fn host(&mut self, unit: HostDecoded, decoder: &mut HostDecoder) {
+    fn command(&mut self, unit: HostDecoded) {
         let command = match unit {
             HostDecoded::Command(c) => c,
             HostDecoded::Raw(_) => return,
@@ -516,12 +401,12 @@ impl Modem {
                     "C" => {
                         self.reply(&command, Reply::Ok);
                         self.framing = Framing::Command;
-                        decoder.set_framing(Framing::Command);
+                        self.decoder.set_framing(Framing::Command);
                     }
                     "O" => {
                         self.reply(&command, Reply::Ok);
                         self.framing = Framing::Data;
-                        decoder.set_framing(Framing::Data);
+                        self.decoder.set_framing(Framing::Data);
                     }
                     t if t.starts_with('!')
                         || t.starts_with('@')
@@ -566,7 +451,7 @@ impl Modem {
     }
 
     /// A packet heard from the water.
-    fn water(&mut self, mt: &ModemTransmission) {
+    fn heard(&mut self, mt: &ModemTransmission) {
         if mt.r#type() != TransmissionType::DriverSpecific {
             return;
         }
@@ -582,8 +467,7 @@ impl Modem {
         if !(to_me || broadcast) || packet.src == u32::from(self.address) {
             return;
         }
-        let lose = if self.lose_next > 0 {
-            self.lose_next -= 1;
+        let lose = if Shared::take(&mut self.io.lose_next) {
             true
         } else {
             self.draw(self.c.faults.lost)
@@ -708,7 +592,7 @@ impl Modem {
         }));
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn deadline(&self) -> Option<Instant> {
         [
             self.im.as_ref().map(|a| a.deadline),
             self.burst.as_ref().map(|a| a.deadline),
@@ -718,7 +602,7 @@ impl Modem {
         .min()
     }
 
-    fn timers(&mut self, now: Instant) {
+    fn due(&mut self, now: Instant) {
         for burst in [false, true] {
             let slot = if burst { &mut self.burst } else { &mut self.im };
             let Some(a) = slot.take_if(|a| a.deadline <= now) else {
@@ -746,123 +630,42 @@ impl Modem {
     }
 }
 
-async fn next_backend_event(backend: &mut Option<Driver>) -> Option<DriverEvent> {
-    match backend {
-        Some(driver) => driver.next_event().await,
-        None => std::future::pending().await,
-    }
-}
+impl EmulatedModem for Modem {
+    type Counters = Counters;
 
-async fn accept_opt(
-    listener: &Option<tokio::net::TcpListener>,
-) -> std::io::Result<tokio::net::TcpStream> {
-    match listener {
-        Some(l) => l.accept().await.map(|(s, _)| s),
-        None => std::future::pending().await,
-    }
-}
-
-async fn read_opt(host: &mut Option<BoxStream>, buf: &mut [u8]) -> std::io::Result<usize> {
-    match host {
-        Some(h) => h.read(buf).await,
-        None => std::future::pending().await,
-    }
-}
-
-async fn run(
-    mut modem: Modem,
-    listener: Option<tokio::net::TcpListener>,
-    pty: Option<modemdriver::link::serial::PtyPair>,
-    port: EmulatorPort,
-    mut backend: Option<Driver>,
-    mut control: mpsc::UnboundedReceiver<EmulatorControl>,
-) {
-    let mut decoder = HostDecoder::new(modem.c.framing);
-    let mut host: Option<BoxStream> = None;
-    let mut _hold = None;
-    if let Some(pair) = pty {
-        host = Some(Box::new(pair.primary));
-        _hold = Some(pair.hold);
-    }
-    let mut buf = vec![0u8; 2048];
-    loop {
-        if let Some(h) = &mut host {
-            let mut failed = false;
-            for bytes in std::mem::take(&mut modem.host_out) {
-                if h.write_all(&bytes).await.is_err() || h.flush().await.is_err() {
-                    failed = true;
-                    break;
-                }
-            }
-            if failed && listener.is_some() {
-                host = None;
-            }
-        } else {
-            modem.host_out.clear();
+    fn host(&mut self, bytes: &[u8], _now: Instant) {
+        for unit in self.decoder.push(bytes) {
+            self.command(unit);
         }
-        match &backend {
-            Some(driver) => {
-                for mt in std::mem::take(&mut modem.water_out) {
-                    let _ = driver.initiate_transmission(mt);
-                }
-            }
-            None => modem.water_out.clear(),
-        }
-        let wake = modem.next_deadline();
-        tokio::select! {
-            accepted = accept_opt(&listener) => {
-                if let Ok(stream) = accepted {
-                    let _ = stream.set_nodelay(true);
-                    host = Some(Box::new(stream));
-                    decoder = HostDecoder::new(modem.c.framing);
-                    modem.framing = modem.c.framing;
-                    modem.count(|c| c.connections += 1);
-                }
-            }
-            read = read_opt(&mut host, &mut buf) => match read {
-                Ok(0) | Err(_) => {
-                    if listener.is_some() {
-                        host = None;
-                    } else {
-                        // A pty whose other end closed: it works again
-                        // once reopened.
-                        tokio::time::sleep(Duration::from_millis(20)).await;
-                    }
-                }
-                Ok(n) => {
-                    for unit in decoder.push(&buf[..n]) {
-                        modem.host(unit, &mut decoder);
-                    }
-                }
-            },
-            Some(event) = next_backend_event(&mut backend) => match event {
-                DriverEvent::Received(mt) => modem.water(&mt),
-                DriverEvent::DataRequest(request) => {
-                    let filled = request.template().clone();
-                    request.respond(filled);
-                }
-                _ => {}
-            },
-            c = control.recv() => match c {
-                Some(EmulatorControl::DropConnection) => {
-                    if listener.is_some() && host.take().is_some() {
-                        modem.count(|c| c.dropped += 1);
-                    }
-                }
-                Some(EmulatorControl::Busy(n)) => modem.busy_next += n,
-                Some(EmulatorControl::Lose(n)) => modem.lose_next += n,
-                Some(EmulatorControl::Garble(n)) => modem.garble_next += n,
-                Some(EmulatorControl::Stop) | None => {
-                    if let EmulatorPort::Pty { link: Some(link) } = &port {
-                        let _ = std::fs::remove_file(link);
-                    }
-                    if let Some(driver) = backend.take() {
-                        let _ = driver.stop().await;
-                    }
-                    return;
-                }
-            },
-            () = sleep_until_opt(wake) => modem.timers(Instant::now()),
+    }
+
+    fn water(&mut self, mt: &ModemTransmission, _now: Instant) {
+        self.heard(mt);
+    }
+
+    fn timers(&mut self, now: Instant) {
+        self.due(now);
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        self.deadline()
+    }
+
+    /// A new host connection starts in the configured framing.
+    fn connected(&mut self) {
+        self.framing = self.c.framing;
+        self.decoder = HostDecoder::new(self.c.framing);
+    }
+
+    fn shared(&mut self) -> &mut Shared {
+        &mut self.io
+    }
+
+    fn counters(&self) -> Counters {
+        Counters {
+            connections: self.io.connections,
+            dropped: self.io.dropped,
+            ..self.n
         }
     }
 }
@@ -871,6 +674,7 @@ async fn run(
 mod tests {
     use super::*;
     use modemdriver::evologics::codec::{encode_command, Decoded, ModemDecoder};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
     async fn exchange(
         stream: &mut tokio::net::TcpStream,

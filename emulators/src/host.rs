@@ -6,7 +6,12 @@
 //! Benthos ATM-900 emulators run in it; the modem's own logic is an
 //! [`EmulatedModem`], with no input or output of its own.
 
+use std::collections::HashMap;
+use std::future::Future;
+use std::io;
 use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -16,10 +21,102 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-pub use crate::evologics::{EmulatorControl, EmulatorFaults, EmulatorPort};
 use modemdriver::driver::{Driver, DriverEvent};
 use modemdriver::link::stream::BoxStream;
 use modemdriver::time::sleep_until_opt;
+
+/// Random faults of an emulated modem.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmulatorFaults {
+    /// Probability that a packet heard from the water (message or
+    /// acknowledgement) is lost.
+    pub lost: f64,
+    /// Probability that a send command is answered `BUSY BACKOFF STATE`.
+    pub busy: f64,
+    /// Probability that a line to the host is garbled (cut short).
+    pub garble: f64,
+    /// Seed of the draws (mixed with the address).
+    pub seed: u64,
+}
+
+impl Default for EmulatorFaults {
+    fn default() -> Self {
+        EmulatorFaults {
+            lost: 0.0,
+            busy: 0.0,
+            garble: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+/// Where the emulator serves the AT interface.
+#[derive(Debug, Clone)]
+pub enum EmulatorPort {
+    /// A TCP server on this address (port 0: any free port; see
+    /// [`EmulatorHandle::local_addr`]).
+    Tcp(SocketAddr),
+    /// A pseudo-terminal; when `link` is given, a symbolic link at that
+    /// path points at it.
+    Pty {
+        /// Path of the symbolic link to keep.
+        link: Option<PathBuf>,
+    },
+}
+
+/// Faults on demand.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EmulatorControl {
+    /// Close the host's connection now (TCP; the host may connect again).
+    DropConnection,
+    /// Answer the next this many send commands `BUSY BACKOFF STATE`.
+    Busy(u32),
+    /// Lose the next this many packets heard from the water.
+    Lose(u32),
+    /// Garble the next this many lines to the host.
+    Garble(u32),
+    /// Stop the emulator.
+    Stop,
+}
+
+/// What an emulated modem shares with the host that serves it: what it
+/// says to its host and puts on the water, the faults asked for on demand
+/// ([`EmulatorControl`]) and its host connections, counted.
+#[derive(Debug, Default)]
+pub struct Shared {
+    /// Bytes for the host, in order (dropped when no host is connected).
+    pub host_out: Vec<Vec<u8>>,
+    /// Packets for the water, in order.
+    pub water_out: Vec<ModemTransmission>,
+    /// Sends still to refuse ([`EmulatorControl::Busy`]).
+    pub busy_next: u32,
+    /// Packets heard still to lose ([`EmulatorControl::Lose`]).
+    pub lose_next: u32,
+    /// Lines to the host still to garble ([`EmulatorControl::Garble`]).
+    pub garble_next: u32,
+    /// Host connections accepted.
+    pub connections: u64,
+    /// Host connections dropped.
+    pub dropped: u64,
+}
+
+impl Shared {
+    /// Takes one of the faults `count` asks for: `true` while any are left.
+    pub fn take(count: &mut u32) -> bool {
+        let left = *count > 0;
+        *count = count.saturating_sub(1);
+        left
+    }
+
+    fn control(&mut self, control: EmulatorControl) {
+        match control {
+            EmulatorControl::Busy(n) => self.busy_next += n,
+            EmulatorControl::Lose(n) => self.lose_next += n,
+            EmulatorControl::Garble(n) => self.garble_next += n,
+            EmulatorControl::DropConnection | EmulatorControl::Stop => {}
+        }
+    }
+}
 
 /// An emulated modem's logic.
 pub trait EmulatedModem: Send + 'static {
@@ -33,19 +130,58 @@ pub trait EmulatedModem: Send + 'static {
     fn timers(&mut self, now: Instant);
     /// When [`timers`](Self::timers) is next due.
     fn next_deadline(&self) -> Option<Instant>;
-    /// Bytes for the host, in order (dropped when no host is connected).
-    fn take_host_out(&mut self) -> Vec<Vec<u8>>;
-    /// Packets for the water, in order.
-    fn take_water_out(&mut self) -> Vec<ModemTransmission>;
+    /// What it shares with its host.
+    fn shared(&mut self) -> &mut Shared;
     /// A host connected (the per-connection state starts again).
     fn connected(&mut self);
-    /// A fault on demand (Busy, Lose, Garble; the host's connection and
-    /// stopping are the host's).
-    fn control(&mut self, control: EmulatorControl);
     /// The counters so far.
     fn counters(&self) -> Self::Counters;
-    /// Counts a dropped connection or an accepted one.
-    fn count_connection(&mut self, accepted: bool);
+}
+
+/// What every emulated modem of [`crate::kinds::STREAM`] is set up with.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// The modem's address (its driver's modem id).
+    pub address: u8,
+    /// Where each modem is, by address (m).
+    pub positions: HashMap<u8, [f64; 3]>,
+    /// Random faults.
+    pub faults: EmulatorFaults,
+    /// Emulate USBL heads (of a modem that has them: [`Emulation::usbl`]).
+    pub usbl: bool,
+}
+
+/// Where a modem serves its host when not told otherwise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Host {
+    /// TCP (the modem's Ethernet interface) on this port; a
+    /// pseudo-terminal (its serial interface) when asked.
+    Tcp(u16),
+    /// A pseudo-terminal (its serial line); TCP (a serial server) when a
+    /// port is given.
+    Serial,
+}
+
+/// The start of one emulated modem.
+pub type Starting = Pin<Box<dyn Future<Output = io::Result<Running>> + Send>>;
+
+/// A kind of emulated modem.
+#[derive(Debug, Clone, Copy)]
+pub struct Emulation {
+    /// The driver kind whose modem it is
+    /// (`modemdriver::built_in::by_short_name`).
+    pub kind: &'static str,
+    /// What it serves, in words (for `--help`).
+    pub serves: &'static str,
+    /// Where it serves its host unless told otherwise.
+    pub host: Host,
+    /// Its addresses (modem ids), inclusive.
+    pub addresses: (u8, u8),
+    /// It has USBL heads (reports where a sender is).
+    pub usbl: bool,
+    /// Starts one modem set up as `setup` on `port`, sending its packets
+    /// on `backend`.
+    pub start: fn(Setup, EmulatorPort, Option<Driver>) -> Starting,
 }
 
 /// A running emulator.
@@ -85,6 +221,50 @@ impl<C: Copy> EmulatorHandle<C> {
         move |c| {
             let _ = control.send(c);
         }
+    }
+
+    /// Stops the emulator and waits for it.
+    pub async fn stop(self) {
+        let _ = self.control.send(EmulatorControl::Stop);
+        let _ = self.task.await;
+    }
+}
+
+impl<C> EmulatorHandle<C> {
+    /// The emulator without its counters: any kind's alike.
+    pub fn running(self) -> Running {
+        Running {
+            control: self.control,
+            local_addr: self.local_addr,
+            path: self.path,
+            task: self.task,
+        }
+    }
+}
+
+/// A running emulator of any kind ([`EmulatorHandle::running`]).
+#[derive(Debug)]
+pub struct Running {
+    control: mpsc::UnboundedSender<EmulatorControl>,
+    local_addr: Option<SocketAddr>,
+    path: watch::Receiver<Option<String>>,
+    task: JoinHandle<()>,
+}
+
+impl Running {
+    /// Where a driver finds it, in words: `tcp 127.0.0.1:9200`, or the
+    /// path of its pseudo-terminal.
+    pub fn shown(&self) -> String {
+        match (self.local_addr, self.path.borrow().clone()) {
+            (Some(addr), _) => format!("tcp {addr}"),
+            (None, Some(path)) => path,
+            (None, None) => "no interface".into(),
+        }
+    }
+
+    /// Sends a control.
+    pub fn control(&self, control: EmulatorControl) {
+        let _ = self.control.send(control);
     }
 
     /// Stops the emulator and waits for it.
@@ -182,7 +362,7 @@ async fn run<M: EmulatedModem>(
     }
     let mut buf = vec![0u8; 4096];
     loop {
-        let out = modem.take_host_out();
+        let out = std::mem::take(&mut modem.shared().host_out);
         if let Some(h) = &mut host {
             let mut failed = false;
             for bytes in out {
@@ -195,7 +375,7 @@ async fn run<M: EmulatedModem>(
                 host = None;
             }
         }
-        let water = modem.take_water_out();
+        let water = std::mem::take(&mut modem.shared().water_out);
         if let Some(driver) = &backend {
             for mt in water {
                 let _ = driver.initiate_transmission(mt);
@@ -209,7 +389,7 @@ async fn run<M: EmulatedModem>(
                     let _ = stream.set_nodelay(true);
                     host = Some(Box::new(stream));
                     modem.connected();
-                    modem.count_connection(true);
+                    modem.shared().connections += 1;
                 }
             }
             read = read_opt(&mut host, &mut buf) => match read {
@@ -235,7 +415,7 @@ async fn run<M: EmulatedModem>(
             c = control.recv() => match c {
                 Some(EmulatorControl::DropConnection) => {
                     if listener.is_some() && host.take().is_some() {
-                        modem.count_connection(false);
+                        modem.shared().dropped += 1;
                     }
                 }
                 Some(EmulatorControl::Stop) | None => {
@@ -248,7 +428,7 @@ async fn run<M: EmulatedModem>(
                     *counters.lock().unwrap_or_else(|e| e.into_inner()) = modem.counters();
                     return;
                 }
-                Some(other) => modem.control(other),
+                Some(other) => modem.shared().control(other),
             },
             () = sleep_until_opt(wake) => modem.timers(Instant::now()),
         }

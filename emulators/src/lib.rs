@@ -13,7 +13,8 @@
 //! - [`iridium`]: an Iridium 9603 on a pseudo-terminal and the gateway it
 //!   reaches (DirectIP), or the RockBLOCK web service.
 //!
-//! [`host`] serves an emulated modem's logic on TCP or a pseudo-terminal.
+//! [`host`] serves an emulated modem's logic on TCP or a pseudo-terminal;
+//! [`kinds`] lists those that `goby modem emulate --kind` starts alike.
 //! The modems' packets travel on any driver (the acoustic channel
 //! simulator of `modemdriver::sim`, or UDP to emulators in other
 //! processes).
@@ -24,5 +25,6 @@ pub mod benthos;
 pub mod evologics;
 pub mod host;
 pub mod iridium;
+pub mod kinds;
 pub mod micromodem;
 pub mod popoto;

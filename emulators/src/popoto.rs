@@ -44,7 +44,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tokio::time::Instant;
 
-use crate::host::{distance, draw, EmulatedModem};
+use crate::host::{distance, draw, EmulatedModem, Shared};
 pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::address::id_of;
 use modemdriver::driver::Driver;
@@ -125,6 +125,32 @@ pub async fn start(
     crate::host::serve(Modem::new(config), port, backend).await
 }
 
+/// The Popoto as `goby modem emulate --kind popoto` starts it: its JSON
+/// command port on TCP, or its shell on a pseudo-terminal.
+pub const EMULATION: crate::host::Emulation = crate::host::Emulation {
+    kind: "popoto",
+    serves: "Popoto modems: the JSON command interface on TCP (or the shell on --pty)",
+    host: crate::host::Host::Tcp(modemdriver::popoto::DEFAULT_TCP_PORT),
+    addresses: (1, 254),
+    usbl: false,
+    start: |setup, port, backend| {
+        Box::pin(async move {
+            let interface = match port {
+                EmulatorPort::Tcp(_) => Interface::JsonApi,
+                EmulatorPort::Pty { .. } => Interface::Shell,
+            };
+            let config = EmulatorConfig {
+                address: setup.address,
+                interface,
+                positions: setup.positions,
+                faults: setup.faults,
+                ..EmulatorConfig::default()
+            };
+            start(config, port, backend).await.map(|h| h.running())
+        })
+    },
+};
+
 #[derive(Debug)]
 enum Timer {
     /// A transmission ends: the packet reaches the water, TxComplete.
@@ -138,6 +164,8 @@ enum Timer {
 /// The modem's logic.
 #[derive(Debug)]
 pub struct Modem {
+    /// What it shares with its host.
+    io: Shared,
     c: EmulatorConfig,
     address: u8,
     remote: u8,
@@ -150,11 +178,6 @@ pub struct Modem {
     ranging: Option<Instant>,
     asleep: bool,
     timers: VecDeque<(Instant, Timer)>,
-    busy_next: u32,
-    lose_next: u32,
-    garble_next: u32,
-    host_out: Vec<Vec<u8>>,
-    water_out: Vec<ModemTransmission>,
     n: Counters,
 }
 
@@ -162,6 +185,7 @@ impl Modem {
     /// A modem as `config` says.
     pub fn new(c: EmulatorConfig) -> Modem {
         Modem {
+            io: Shared::default(),
             address: c.address,
             remote: BROADCAST,
             mode: 0,
@@ -173,11 +197,6 @@ impl Modem {
             ranging: None,
             asleep: false,
             timers: VecDeque::new(),
-            busy_next: 0,
-            lose_next: 0,
-            garble_next: 0,
-            host_out: Vec::new(),
-            water_out: Vec::new(),
             n: Counters::default(),
             c,
         }
@@ -185,8 +204,7 @@ impl Modem {
 
     fn say(&mut self, line: ModemLine) {
         let mut text = line.encode().into_bytes();
-        let garble = if self.garble_next > 0 {
-            self.garble_next -= 1;
+        let garble = if Shared::take(&mut self.io.garble_next) {
             true
         } else {
             draw(&mut self.rng, self.c.faults.garble)
@@ -207,12 +225,12 @@ impl Modem {
                 b
             }
         };
-        self.host_out.push(bytes);
+        self.io.host_out.push(bytes);
     }
 
     fn prompt(&mut self) {
         if self.c.interface == Interface::Shell {
-            self.host_out.push(b"Popoto-> ".to_vec());
+            self.io.host_out.push(b"Popoto-> ".to_vec());
         }
     }
 
@@ -243,8 +261,7 @@ impl Modem {
     }
 
     fn transmit(&mut self, kind: Kind, data: Vec<u8>, now: Instant) {
-        let busy = if self.busy_next > 0 {
-            self.busy_next -= 1;
+        let busy = if Shared::take(&mut self.io.busy_next) {
             true
         } else {
             draw(&mut self.rng, self.c.faults.busy)
@@ -339,7 +356,7 @@ impl Modem {
 
     fn range(&mut self, now: Instant) {
         let mt = self.packet(Kind::RangeRequest, self.remote, Vec::new());
-        self.water_out.push(mt);
+        self.io.water_out.push(mt);
         self.n.sent += 1;
         self.ranging = Some(now);
         self.at(self.c.range_timeout, now, Timer::RangeTimeout);
@@ -367,8 +384,7 @@ impl Modem {
         if src == self.address || !(dest == self.address || dest == BROADCAST) {
             return;
         }
-        let lose = if self.lose_next > 0 {
-            self.lose_next -= 1;
+        let lose = if Shared::take(&mut self.io.lose_next) {
             true
         } else {
             draw(&mut self.rng, self.c.faults.lost)
@@ -453,14 +469,14 @@ impl EmulatedModem for Modem {
         for t in due {
             match t {
                 Timer::TxDone(mt) => {
-                    self.water_out.push(*mt);
+                    self.io.water_out.push(*mt);
                     self.n.sent += 1;
                     self.transmitting = false;
                     self.say(ModemLine::Alert(TX_COMPLETE.into()));
                 }
                 Timer::RangeReply(to) => {
                     let mt = self.packet(Kind::RangeResponse, to, Vec::new());
-                    self.water_out.push(mt);
+                    self.io.water_out.push(mt);
                     self.n.sent += 1;
                 }
                 Timer::RangeTimeout => {
@@ -480,36 +496,19 @@ impl EmulatedModem for Modem {
         self.timers.iter().map(|(t, _)| *t).min()
     }
 
-    fn take_host_out(&mut self) -> Vec<Vec<u8>> {
-        std::mem::take(&mut self.host_out)
-    }
-
-    fn take_water_out(&mut self) -> Vec<ModemTransmission> {
-        std::mem::take(&mut self.water_out)
-    }
-
     fn connected(&mut self) {
         self.lines.clear();
     }
 
-    fn control(&mut self, control: EmulatorControl) {
-        match control {
-            EmulatorControl::Busy(n) => self.busy_next += n,
-            EmulatorControl::Lose(n) => self.lose_next += n,
-            EmulatorControl::Garble(n) => self.garble_next += n,
-            EmulatorControl::DropConnection | EmulatorControl::Stop => {}
-        }
+    fn shared(&mut self) -> &mut Shared {
+        &mut self.io
     }
 
     fn counters(&self) -> Counters {
-        self.n
-    }
-
-    fn count_connection(&mut self, accepted: bool) {
-        if accepted {
-            self.n.connections += 1;
-        } else {
-            self.n.dropped += 1;
+        Counters {
+            connections: self.io.connections,
+            dropped: self.io.dropped,
+            ..self.n
         }
     }
 }
