@@ -184,8 +184,9 @@ struct Awaiting {
     deadline: Instant,
 }
 
-/// The modem's logic: what it says to the host and puts on the water.
-struct Modem {
+/// The modem's logic: what it says to the host and puts on the water
+/// (served by [`start`], or driven by hand in virtual time).
+pub struct Modem {
     /// What it shares with its host.
     io: Shared,
     c: EmulatorConfig,
@@ -204,7 +205,8 @@ struct Modem {
 }
 
 impl Modem {
-    fn new(c: EmulatorConfig) -> Modem {
+    /// A modem set up as `c`.
+    pub fn new(c: EmulatorConfig) -> Modem {
         let rng = ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32));
         Modem {
             io: Shared::default(),

@@ -12,6 +12,7 @@ use std::io;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -108,7 +109,9 @@ impl Shared {
         left
     }
 
-    fn control(&mut self, control: EmulatorControl) {
+    /// Takes a fault on demand (the connection and stopping are the
+    /// host's).
+    pub fn control(&mut self, control: EmulatorControl) {
         match control {
             EmulatorControl::Busy(n) => self.busy_next += n,
             EmulatorControl::Lose(n) => self.lose_next += n,
@@ -191,6 +194,7 @@ pub struct EmulatorHandle<C> {
     local_addr: Option<SocketAddr>,
     path: watch::Receiver<Option<String>>,
     counters: Arc<Mutex<C>>,
+    connections: Arc<AtomicU64>,
     task: JoinHandle<()>,
 }
 
@@ -237,6 +241,7 @@ impl<C> EmulatorHandle<C> {
             control: self.control,
             local_addr: self.local_addr,
             path: self.path,
+            connections: self.connections,
             task: self.task,
         }
     }
@@ -248,6 +253,7 @@ pub struct Running {
     control: mpsc::UnboundedSender<EmulatorControl>,
     local_addr: Option<SocketAddr>,
     path: watch::Receiver<Option<String>>,
+    connections: Arc<AtomicU64>,
     task: JoinHandle<()>,
 }
 
@@ -267,6 +273,11 @@ impl Running {
         let _ = self.control.send(control);
     }
 
+    /// Host connections accepted so far (a modem on TCP).
+    pub fn connections(&self) -> u64 {
+        self.connections.load(Ordering::Relaxed)
+    }
+
     /// Stops the emulator and waits for it.
     pub async fn stop(self) {
         let _ = self.control.send(EmulatorControl::Stop);
@@ -283,6 +294,7 @@ pub async fn serve<M: EmulatedModem>(
     let (control_tx, control_rx) = mpsc::unbounded_channel();
     let (path_tx, path_rx) = watch::channel(None);
     let counters = Arc::new(Mutex::new(M::Counters::default()));
+    let connections = Arc::new(AtomicU64::new(0));
     let (listener, pty, local_addr) = match &port {
         EmulatorPort::Tcp(addr) => {
             let l = tokio::net::TcpListener::bind(addr).await?;
@@ -310,13 +322,14 @@ pub async fn serve<M: EmulatedModem>(
         port,
         backend,
         control_rx,
-        counters.clone(),
+        (counters.clone(), connections.clone()),
     ));
     Ok(EmulatorHandle {
         control: control_tx,
         local_addr,
         path: path_rx,
         counters,
+        connections,
         task,
     })
 }
@@ -351,7 +364,7 @@ async fn run<M: EmulatedModem>(
     port: EmulatorPort,
     mut backend: Option<Driver>,
     mut control: mpsc::UnboundedReceiver<EmulatorControl>,
-    counters: Arc<Mutex<M::Counters>>,
+    (counters, connections): (Arc<Mutex<M::Counters>>, Arc<AtomicU64>),
 ) {
     let mut host: Option<BoxStream> = None;
     let mut _hold = None;
@@ -382,6 +395,7 @@ async fn run<M: EmulatedModem>(
             }
         }
         *counters.lock().unwrap_or_else(|e| e.into_inner()) = modem.counters();
+        connections.store(modem.shared().connections, Ordering::Relaxed);
         let wake = modem.next_deadline();
         tokio::select! {
             accepted = accept_opt(&listener) => {
