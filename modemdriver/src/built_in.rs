@@ -197,10 +197,24 @@ mod tests {
             driver: Some(driver_config::Driver::DriverName("EVOLOGICS_S3C".into())),
             ..Default::default()
         };
-        let p = of(&named).err().unwrap();
-        assert_eq!(
-            p.to_string(),
-            "driver_name: no driver named \"EVOLOGICS_S3C\" is built in (driver_name \"EVOLOGICS_S2C\" is)"
+        let p = of(&named).err().unwrap().to_string();
+        assert!(
+            p.starts_with("driver_name: no driver named \"EVOLOGICS_S3C\" is built in (driver_name "),
+            "{p}"
+        );
+        for kind in KINDS {
+            if let crate::kind::Named::Name(name) = kind.about().named {
+                assert!(p.contains(&format!("{name:?}")), "{p}");
+            }
+        }
+        let named = KINDS
+            .iter()
+            .filter(|k| matches!(k.about().named, crate::kind::Named::Name(_)))
+            .count();
+        assert!(
+            named_ones().ends_with(if named > 1 { " are" } else { " is" }),
+            "{}",
+            named_ones()
         );
         assert_eq!(
             of(&DriverConfig::default()).err().unwrap().field,
