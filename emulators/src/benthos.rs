@@ -120,6 +120,17 @@ pub struct Counters {
     pub escapes: u64,
 }
 
+impl crate::host::Counted for Counters {
+    fn made(&self) -> crate::host::Made {
+        crate::host::Made {
+            lost: self.lost,
+            refused: self.busy,
+            garbled: self.garbled,
+            dropped: self.dropped,
+        }
+    }
+}
+
 /// The ATM-900 as `goby modem emulate --kind benthos` starts it: its
 /// serial interface on a pseudo-terminal, or on TCP (a serial server).
 pub const EMULATION: crate::host::Emulation = crate::host::Emulation {

@@ -137,6 +137,17 @@ pub struct Counters {
     pub connections: u64,
 }
 
+impl crate::host::Counted for Counters {
+    fn made(&self) -> crate::host::Made {
+        crate::host::Made {
+            lost: self.lost,
+            refused: self.busy,
+            garbled: self.garbled,
+            dropped: self.dropped,
+        }
+    }
+}
+
 /// A running emulated S2C.
 pub type EmulatorHandle = crate::host::EmulatorHandle<Counters>;
 

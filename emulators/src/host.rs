@@ -121,10 +121,30 @@ impl Shared {
     }
 }
 
+/// The faults an emulated modem made, counted alike for every kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Made {
+    /// Packets heard and lost.
+    pub lost: u64,
+    /// Sends refused (the busy modem).
+    pub refused: u64,
+    /// Lines to the host garbled.
+    pub garbled: u64,
+    /// Host connections dropped.
+    pub dropped: u64,
+}
+
+/// What an emulated modem counts: its own counters, and the faults it
+/// made among them.
+pub trait Counted: Copy + Default + Send + Sync + std::fmt::Debug + 'static {
+    /// The faults made.
+    fn made(&self) -> Made;
+}
+
 /// An emulated modem's logic.
 pub trait EmulatedModem: Send + 'static {
     /// What it counts.
-    type Counters: Copy + Default + Send + std::fmt::Debug + 'static;
+    type Counters: Counted;
     /// Bytes from the host.
     fn host(&mut self, bytes: &[u8], now: Instant);
     /// A packet heard from the backend.
@@ -234,27 +254,47 @@ impl<C: Copy> EmulatorHandle<C> {
     }
 }
 
-impl<C> EmulatorHandle<C> {
-    /// The emulator without its counters: any kind's alike.
+impl<C: Counted> EmulatorHandle<C> {
+    /// The emulator as any kind's: its counters read as the faults made
+    /// and in words.
     pub fn running(self) -> Running {
+        let counters = self.counters.clone();
+        let read = move || {
+            let c = *counters.lock().unwrap_or_else(|e| e.into_inner());
+            (c.made(), format!("{c:?}"))
+        };
         Running {
             control: self.control,
             local_addr: self.local_addr,
             path: self.path,
             connections: self.connections,
+            counters: Arc::new(read),
             task: self.task,
         }
     }
 }
 
+/// Reads a running emulator's counters: the faults made, and all of them
+/// in words.
+type ReadCounters = Arc<dyn Fn() -> (Made, String) + Send + Sync>;
+
 /// A running emulator of any kind ([`EmulatorHandle::running`]).
-#[derive(Debug)]
 pub struct Running {
     control: mpsc::UnboundedSender<EmulatorControl>,
     local_addr: Option<SocketAddr>,
     path: watch::Receiver<Option<String>>,
     connections: Arc<AtomicU64>,
+    counters: ReadCounters,
     task: JoinHandle<()>,
+}
+
+impl std::fmt::Debug for Running {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Running")
+            .field("shown", &self.shown())
+            .field("counters", &(self.counters)().1)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Running {
@@ -273,9 +313,27 @@ impl Running {
         let _ = self.control.send(control);
     }
 
+    /// A function that sends controls, for another task.
+    pub fn controller(&self) -> impl Fn(EmulatorControl) + Send + Sync + 'static {
+        let control = self.control.clone();
+        move |c| {
+            let _ = control.send(c);
+        }
+    }
+
     /// Host connections accepted so far (a modem on TCP).
     pub fn connections(&self) -> u64 {
         self.connections.load(Ordering::Relaxed)
+    }
+
+    /// The faults it made so far.
+    pub fn made(&self) -> Made {
+        (self.counters)().0
+    }
+
+    /// Its counters so far, in words.
+    pub fn counted(&self) -> String {
+        (self.counters)().1
     }
 
     /// Stops the emulator and waits for it.

@@ -116,6 +116,17 @@ pub struct Counters {
     pub ranges: u64,
 }
 
+impl crate::host::Counted for Counters {
+    fn made(&self) -> crate::host::Made {
+        crate::host::Made {
+            lost: self.lost,
+            refused: self.busy,
+            garbled: self.garbled,
+            dropped: self.dropped,
+        }
+    }
+}
+
 /// Starts an emulated modem on `port`, sending on `backend` (if any).
 pub async fn start(
     config: EmulatorConfig,
