@@ -65,7 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         original.insert(file.name().to_string(), bytes);
         fds.file.push(file);
     }
-    let changed = fold_extensions(&mut fds)?;
+    let (changed, folded) = fold_extensions(&mut fds)?;
     let files = Files {
         file: fds
             .file
@@ -108,6 +108,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The same for the Popoto's and the Benthos ATM-900's.
     config.boxed(".goby.acomms.protobuf.ModemTransmission.popoto");
     config.boxed(".goby.acomms.protobuf.ModemTransmission.benthos");
+    // And every driver's section folded in: the message carrying it stays
+    // the size it was for the others.
+    for field in &folded {
+        config.boxed(field);
+    }
     config.out_dir(&out_dir);
     config.compile_fds(fds)?;
     Ok(())
@@ -140,8 +145,9 @@ fn acomms_files(proto_dir: &Path) -> std::io::Result<Vec<String>> {
 /// file, and the extending file no longer imports the message's file when
 /// it used it only to extend it. The files are then put in the order of
 /// their imports. Returns the names of the files changed, none of which
-/// may import custom options (they would be lost).
-fn fold_extensions(fds: &mut FileDescriptorSet) -> Result<BTreeSet<String>, String> {
+/// may import custom options (they would be lost), and the fields folded
+/// in that hold a message (`.package.Message.field`).
+fn fold_extensions(fds: &mut FileDescriptorSet) -> Result<(BTreeSet<String>, Vec<String>), String> {
     // Taken out of `extensions`, and of every message's.
     fn take(extensions: &mut Vec<FieldDescriptorProto>) -> Vec<FieldDescriptorProto> {
         let (folded, kept) = std::mem::take(extensions)
@@ -166,6 +172,7 @@ fn fold_extensions(fds: &mut FileDescriptorSet) -> Result<BTreeSet<String>, Stri
     }
     let defined: Vec<BTreeSet<String>> = fds.file.iter().map(defined_types).collect();
     let mut changed = BTreeSet::new();
+    let mut folded = Vec::new();
     for (from, mut field) in moved {
         let extendee = field.extendee.take().unwrap_or_default();
         let to = defined
@@ -190,6 +197,9 @@ fn fold_extensions(fds: &mut FileDescriptorSet) -> Result<BTreeSet<String>, Stri
             ));
         }
         carve(&mut message.extension_range, field.number());
+        if field.r#type() == prost_types::field_descriptor_proto::Type::Message {
+            folded.push(format!("{extendee}.{}", field.name()));
+        }
         message.field.push(field);
         changed.insert(from_name.clone());
         changed.insert(to_name.clone());
@@ -234,7 +244,7 @@ fn fold_extensions(fds: &mut FileDescriptorSet) -> Result<BTreeSet<String>, Stri
         }
     }
     sort_by_imports(fds)?;
-    Ok(changed)
+    Ok((changed, folded))
 }
 
 /// Removes `number` from the extension ranges (start inclusive, end
