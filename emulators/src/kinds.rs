@@ -11,6 +11,7 @@ pub static STREAM: &[Emulation] = &[
     crate::evologics::EMULATION,
     crate::popoto::EMULATION,
     crate::benthos::EMULATION,
+    crate::seatrac::EMULATION,
 ];
 
 /// The emulation of driver kind `kind`.

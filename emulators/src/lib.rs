@@ -10,6 +10,8 @@
 //!   a pseudo-terminal.
 //! - [`benthos`]: the Benthos ATM-900, its serial interface on a
 //!   pseudo-terminal or TCP.
+//! - [`seatrac`]: Blueprint Subsea SeaTrac beacons (X150 with USBL, or
+//!   X110), their serial interface on a pseudo-terminal or TCP.
 //! - [`iridium`]: an Iridium 9603 on a pseudo-terminal and the gateway it
 //!   reaches (DirectIP), or the RockBLOCK web service.
 //!
@@ -28,3 +30,4 @@ pub mod iridium;
 pub mod kinds;
 pub mod micromodem;
 pub mod popoto;
+pub mod seatrac;

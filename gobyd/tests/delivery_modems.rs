@@ -1,6 +1,6 @@
 //! Delivery under modem faults over the modems whose emulators serve a
 //! byte stream (`emulators::kinds`; one row of [`runs!`] each: the Popoto,
-//! the Benthos ATM-900): two `gobyd` (in-process, through the library)
+//! the Benthos ATM-900, the SeaTrac): two `gobyd` (in-process, through the library)
 //! exchange acknowledged messages over two emulated modems serving their
 //! interface on real TCP sockets (the Popoto's JSON command port; a serial
 //! line through a serial server), the emulators' packets on the
@@ -38,7 +38,8 @@ use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Ki
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
 use protos::goby::acomms::protobuf::{
-    BenthosConfig, DriverConfig, DriverType, ModemTransmission, PopotoConfig, SimulatorDriverConfig,
+    BenthosConfig, DriverConfig, DriverType, ModemTransmission, PopotoConfig, SeatracConfig,
+    SimulatorDriverConfig,
 };
 use protos::goby::example::Command;
 use queue::QueueEvent;
@@ -138,6 +139,33 @@ const BENTHOS: Modem = Modem {
     signal_garbled: true,
 };
 
+/// A SeaTrac DAT packet of 31 bytes takes about 3 s at 100 bit/s, its ack
+/// about 0.6 s.
+const SEATRAC: Modem = Modem {
+    name: "seatrac",
+    slot_seconds: 6.0,
+    rate: 0,
+    driver: |id| DriverConfig {
+        modem_id: Some(id),
+        driver: Some(Kind::DriverName("BLUEPRINT_SEATRAC".into())),
+        seatrac: Some(Box::new(SeatracConfig {
+            response_timeout_ms: Some(1000),
+            ack_timeout_ms: Some(5000),
+            busy_backoff_ms: Some(300),
+            reconnect_interval_ms: Some(300),
+            ..Default::default()
+        })),
+        ..Default::default()
+    },
+    stats: |t, from| {
+        let fix = t.seatrac.as_ref().and_then(|s| s.receive_fix.as_ref());
+        fix.map_or((false, false), |f| {
+            (f.src == Some(from), f.rssi_db.is_some())
+        })
+    },
+    signal_garbled: false,
+};
+
 /// Run `check` over each fault for the modem `$modem`, one test each.
 macro_rules! runs {
     ($($module:ident: $modem:expr, $seed:literal;)*) => {$(
@@ -180,6 +208,7 @@ macro_rules! runs {
 runs! {
     popoto: POPOTO, 1;
     benthos: BENTHOS, 11;
+    seatrac: SEATRAC, 21;
 }
 
 /// The faults of one run.

@@ -23,6 +23,7 @@ pub static KINDS: &[&dyn DriverKind] = &[
     &crate::evologics::EvologicsDriver,
     &crate::popoto::PopotoDriver,
     &crate::benthos::BenthosDriver,
+    &crate::seatrac::SeatracDriver,
     &crate::iridium::IridiumDriver,
     #[cfg(feature = "iridium-shore")]
     &crate::iridium::IridiumShoreDriver,
@@ -199,7 +200,9 @@ mod tests {
         };
         let p = of(&named).err().unwrap().to_string();
         assert!(
-            p.starts_with("driver_name: no driver named \"EVOLOGICS_S3C\" is built in (driver_name "),
+            p.starts_with(
+                "driver_name: no driver named \"EVOLOGICS_S3C\" is built in (driver_name "
+            ),
             "{p}"
         );
         for kind in KINDS {

@@ -27,6 +27,8 @@
 //! - [`benthos::BenthosDriver`]: Teledyne Benthos ATM-900 modems on their
 //!   serial line (`driver_type: DRIVER_BENTHOS_ATM900`), as Goby3's
 //!   driver.
+//! - [`seatrac::SeatracDriver`]: Blueprint Subsea SeaTrac beacons (X110,
+//!   X150 USBL) on their serial line (`driver_name: "BLUEPRINT_SEATRAC"`).
 //! - [`iridium::IridiumDriver`]: an Iridium 9602/9603 (SBD AT commands) on a
 //!   serial port, and `iridium::IridiumShoreDriver` (feature
 //!   `iridium-shore`, on by default): Iridium's DirectIP or the RockBLOCK
@@ -69,6 +71,7 @@ pub mod micromodem;
 pub mod popoto;
 pub mod problem;
 pub mod rate;
+pub mod seatrac;
 pub mod shell;
 pub mod sim;
 pub mod slot;

@@ -1,7 +1,9 @@
 //! What one modem does and the others do not, on the suite's virtual
 //! water: the S2C's propagation times, USBL fixes, burst data in command
 //! mode and piggy-back messages; the Popoto's rates, payload modes and
-//! ranges; the ATM-900's packets of several frames, ranges and low power.
+//! ranges; the ATM-900's packets of several frames, ranges and low power;
+//! the SeaTrac's pings and requests with their fixes, its status, its
+//! beacon id set at start.
 
 use std::time::Duration;
 
@@ -12,9 +14,10 @@ use protos::goby::acomms::protobuf::{
     benthos_specific::Type as BenthosType, evologics_specific::Type as EvologicsType,
     modem_transmission::TransmissionType, popoto_transmission::Type as PopotoType, BenthosReport,
     BenthosSpecific, EvologicsReport, EvologicsSpecific, PopotoReport, PopotoSpecific,
+    SeatracMessageType, SeatracReport, SeatracRequestType, SeatracSpecific,
 };
 
-use super::kinds::{self, Reach, BENTHOS, EVOLOGICS, POPOTO, SPACING};
+use super::kinds::{self, Reach, BENTHOS, EVOLOGICS, POPOTO, SEATRAC, SPACING};
 use super::water::{received, Water};
 use super::{exchange_from, heard, ready, PATIENCE};
 
@@ -223,4 +226,140 @@ fn benthos_packets_of_frames_ranges_and_low_power() {
         .and_then(|r| r.lowpower)
         .expect("low power told");
     exchange_from(&mut w, &BENTHOS, 0, b"awake");
+}
+
+/// Two SeaTrac nodes whose configurations `tweak` changes, their beacons
+/// at start with ids `ids`.
+fn seatrac_pair(
+    ids: [u8; 2],
+    tweak: impl Fn(&mut protos::goby::acomms::protobuf::SeatracConfig),
+) -> Water {
+    use emulators::seatrac::{EmulatorConfig, Modem};
+    let now = Now {
+        at: tokio::time::Instant::now(),
+        micros: 1_700_000_000_000_000,
+    };
+    let node = |id: u8| {
+        let mut config = (SEATRAC.config)(i32::from(id), &Reach::Serial("/dev/null".into()));
+        tweak(config.seatrac.as_deref_mut().expect("a seatrac section"));
+        let mut positions = kinds::positions();
+        positions.insert(ids[usize::from(id) - 1], positions[&id]);
+        let modem = Modem::new(EmulatorConfig {
+            address: ids[usize::from(id) - 1],
+            positions,
+            ..Default::default()
+        });
+        ((SEATRAC.machine)(&config, now), Box::new(modem) as Box<_>)
+    };
+    let travel = Duration::from_secs_f64(SPACING / 1500.0);
+    Water::new(now, [node(1), node(2)], travel)
+}
+
+fn seatrac_ask(w: &mut Water, at: usize, request: SeatracSpecific) {
+    for n in &mut w.nodes {
+        n.events.clear();
+    }
+    w.command(at, DriverCommand::Specific(request.transcode_to_dynamic()));
+}
+
+/// A ping (MSG_REQU) is reported as the Micro-Modem's are, with the USBL
+/// fix of the far beacon; a ping of a beacon not there is reported as
+/// unanswered; the beacon's status is reported.
+#[test]
+fn seatrac_pings_report_ranges_and_usbl_fixes() {
+    let mut w = ready(&SEATRAC);
+    let ping = |dest| SeatracSpecific {
+        r#type: SeatracRequestType::SeatracPing as i32,
+        dest: Some(dest),
+        msg_type: None,
+    };
+    seatrac_ask(&mut w, 0, ping(2));
+    let r = report::<SeatracReport>(&mut w, 0).expect("the ping's report");
+    assert_eq!((r.src, r.dest), (Some(1), Some(2)));
+    let owtt = &r
+        .ranging_reply
+        .expect("a ranging reply")
+        .one_way_travel_time;
+    assert_eq!(owtt.len(), 1);
+    assert!((owtt[0] - SPACING / 1500.0).abs() < 1e-6, "{owtt:?}");
+    let fix = r.fix.expect("the fix");
+    assert_eq!(fix.range_m, Some(SPACING));
+    assert_eq!(fix.azimuth, Some(90.0), "beacon 2 is east of beacon 1");
+    assert_eq!(fix.easting, Some(SPACING));
+
+    seatrac_ask(&mut w, 0, ping(5));
+    let r = report::<SeatracReport>(&mut w, 0).expect("the ping's report");
+    assert_eq!(r.error.as_deref(), Some("CST_XCVR_RESP_TIMEOUT"));
+    assert!(r.ranging_reply.is_none());
+    assert!(super::water::told(&w.nodes[0].events, |s| matches!(
+        s,
+        modemdriver::DriverStatus::ResponseTimeout { .. }
+    )));
+
+    seatrac_ask(
+        &mut w,
+        1,
+        SeatracSpecific {
+            r#type: SeatracRequestType::SeatracStatus as i32,
+            ..Default::default()
+        },
+    );
+    let r = report::<SeatracReport>(&mut w, 1).expect("the status");
+    assert_eq!(r.status.and_then(|s| s.supply_voltage), Some(12.0));
+}
+
+/// Data sent as a request (MSG_REQX) is delivered and acked as ever; the
+/// far beacon's answer gives the sender its range and position (its own
+/// depth, enhanced), and the receiver's fix names the request.
+#[test]
+fn seatrac_data_as_requests_reports_the_far_beacon() {
+    let mut w = seatrac_pair([1, 2], |s| {
+        s.data_type = Some(SeatracMessageType::MsgReqx as i32)
+    });
+    let up = w.run_until(PATIENCE, |n| {
+        n.iter()
+            .all(|n| super::water::told(&n.events, |s| *s == modemdriver::DriverStatus::Ready))
+    });
+    assert!(up);
+    exchange_from(&mut w, &SEATRAC, 0, b"one to two");
+    let got = received(&w.nodes[1].events)
+        .into_iter()
+        .find(|t| t.r#type() == TransmissionType::Data)
+        .cloned()
+        .unwrap();
+    let fix = got.seatrac.and_then(|s| s.receive_fix).unwrap();
+    assert_eq!(fix.msg_type, Some(SeatracMessageType::MsgReqx as i32));
+    let answer = w.nodes[0]
+        .events
+        .iter()
+        .find_map(|e| match e {
+            DriverEvent::Specific(r) => r.to::<SeatracReport>().and_then(|r| r.fix),
+            _ => None,
+        })
+        .expect("the answer's fix");
+    assert_eq!(answer.range_m, Some(SPACING));
+    assert_eq!(answer.position_enhanced, Some(true));
+}
+
+/// A beacon whose id is not the node's is given it at start (and the
+/// exchange goes); told not to, the driver says so and is not ready.
+#[test]
+fn seatrac_beacon_ids_are_set_at_start() {
+    let mut w = seatrac_pair([9, 2], |_| {});
+    let up = w.run_until(PATIENCE, |n| {
+        n.iter()
+            .all(|n| super::water::told(&n.events, |s| *s == modemdriver::DriverStatus::Ready))
+    });
+    assert!(up);
+    exchange_from(&mut w, &SEATRAC, 0, b"one to two");
+
+    let mut w = seatrac_pair([9, 2], |s| s.set_beacon_id = Some(false));
+    let up = w.run_until(Duration::from_secs(30), |n| {
+        super::water::told(&n[0].events, |s| *s == modemdriver::DriverStatus::Ready)
+    });
+    assert!(!up, "a beacon of another id is not used");
+    assert!(super::water::told(&w.nodes[0].events, |s| matches!(
+        s,
+        modemdriver::DriverStatus::ModemError { message } if message.contains("not modem_id 1")
+    )));
 }

@@ -11,6 +11,7 @@ use modemdriver::{DriverConfig, ModemTransmission};
 use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Named};
 use protos::goby::acomms::protobuf::{
     benthos_receive_statistics::CrcState, BenthosConfig, DriverType, EvologicsConfig, PopotoConfig,
+    SeatracConfig,
 };
 
 use super::water::Emulated;
@@ -200,5 +201,46 @@ pub const BENTHOS: Kind = Kind {
             .is_some_and(|s| {
                 s.crc() == CrcState::CrcPass && s.snr.is_some() && s.multipath_delay.is_some()
             })
+    },
+};
+
+pub const SEATRAC: Kind = Kind {
+    name: "seatrac",
+    config: |id, reach| {
+        reaching(
+            DriverConfig {
+                driver: Some(Named::DriverName("BLUEPRINT_SEATRAC".into())),
+                modem_id: Some(id),
+                deferred_ack: Some(false),
+                seatrac: Some(Box::new(SeatracConfig {
+                    reconnect_interval_ms: Some(200),
+                    busy_backoff_ms: Some(200),
+                    ..Default::default()
+                })),
+                ..Default::default()
+            },
+            reach,
+        )
+    },
+    machine: |config, now| {
+        let settings = modemdriver::seatrac::driver::settings(config).expect("settings");
+        Box::new(modemdriver::seatrac::machine::Machine::new(
+            settings, now, true,
+        ))
+    },
+    modem: |id| {
+        use emulators::seatrac::{EmulatorConfig, Modem};
+        Box::new(Modem::new(EmulatorConfig {
+            address: id,
+            positions: positions(),
+            ..Default::default()
+        }))
+    },
+    rate: 0,
+    stats: |mt| {
+        mt.seatrac
+            .as_ref()
+            .and_then(|s| s.receive_fix.as_ref())
+            .is_some_and(|f| f.rssi_db.is_some() && f.src == mt.src)
     },
 };

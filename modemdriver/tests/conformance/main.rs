@@ -272,4 +272,5 @@ suite! {
     evologics: crate::kinds::EVOLOGICS,
     popoto: crate::kinds::POPOTO,
     benthos: crate::kinds::BENTHOS,
+    seatrac: crate::kinds::SEATRAC,
 }
