@@ -137,8 +137,19 @@ pub trait Machine: Send + 'static {
 }
 
 /// A machine written as most are: a handler for each input, then the
-/// work that can start ([`route`] hands an input to its handler).
-pub trait Handlers {
+/// work that can start ([`route`] hands an input to its handler). Every
+/// such machine is a [`Machine`]: the time is set, the input routed, the
+/// outputs gathered taken; the next tick is its earliest deadline.
+pub trait Handlers: Send + 'static {
+    /// The time of the input about to be handled.
+    fn set_now(&mut self, now: Now);
+    /// Where the outputs of the input being handled gather.
+    fn out(&mut self) -> &mut Outputs;
+    /// Its deadlines, each when armed: the earliest is when the next
+    /// [`Input::Tick`] is due.
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>>;
+    /// Whether data request `id` is still awaited.
+    fn awaited(&self, id: RequestId) -> bool;
     /// What was read from the modem.
     fn read(&mut self, unit: Vec<u8>);
     /// Deadlines up to now fire.
@@ -155,6 +166,22 @@ pub trait Handlers {
     fn stop(&mut self) {}
     /// Starts the work that can start now.
     fn pump(&mut self);
+}
+
+impl<H: Handlers> Machine for H {
+    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+        self.set_now(now);
+        route(self, input);
+        self.out().take()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        self.deadlines().into_iter().flatten().min()
+    }
+
+    fn awaits(&self, id: RequestId) -> bool {
+        self.awaited(id)
+    }
 }
 
 /// Hands `input` to its handler, then, unless the driver stops, starts

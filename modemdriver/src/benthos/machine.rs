@@ -32,7 +32,7 @@ use crate::machine::acks::AwaitedAcks;
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, lossy, Handlers, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{lossy, Handlers, Now, Outputs, RequestId};
 
 /// One knot, m/s.
 const KNOT: f64 = 1852.0 / 3600.0;
@@ -753,14 +753,16 @@ pub fn accepts(command: &Command, line: &ModemLine) -> bool {
     }
 }
 
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
         self.now = now;
-        machine::route(self, input);
-        self.out.take()
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
         [
             self.step_deadline(),
             self.setup_started.map(|t| t + self.s.start_timeout),
@@ -770,17 +772,12 @@ impl machine::Machine for Machine {
             self.acks.deadline(),
             self.link.deadline(),
         ]
-        .into_iter()
-        .flatten()
-        .min()
     }
 
-    fn awaits(&self, id: RequestId) -> bool {
+    fn awaited(&self, id: RequestId) -> bool {
         self.fill.awaits(id)
     }
-}
 
-impl Handlers for Machine {
     fn read(&mut self, bytes: Vec<u8>) {
         for line in self.lines.push(&bytes) {
             self.line(&line);

@@ -29,7 +29,7 @@ use crate::machine::acks::AwaitedAcks;
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, lossy, Handlers, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{lossy, Handlers, Now, Outputs, RequestId};
 
 /// The alert that ends a transmission.
 pub const TX_COMPLETE: &str = "TxComplete";
@@ -495,14 +495,16 @@ fn popoto_stat(mt: &mut ModemTransmission) -> Option<&mut PopotoReceiveStatistic
     mt.popoto.as_mut()?.receive_stat.first_mut()
 }
 
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
         self.now = now;
-        machine::route(self, input);
-        self.out.take()
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
         [
             self.starting,
             self.fill.deadline(),
@@ -513,17 +515,12 @@ impl machine::Machine for Machine {
             self.acks.deadline(),
             self.link.deadline(),
         ]
-        .into_iter()
-        .flatten()
-        .min()
     }
 
-    fn awaits(&self, id: RequestId) -> bool {
+    fn awaited(&self, id: RequestId) -> bool {
         self.fill.awaits(id)
     }
-}
 
-impl Handlers for Machine {
     fn read(&mut self, bytes: Vec<u8>) {
         for line in self.lines.push(&bytes) {
             self.line(&line);

@@ -38,7 +38,7 @@ use crate::machine::acks::AwaitedAcks;
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, lossy, Handlers, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{lossy, Handlers, Now, Outputs, RequestId};
 
 /// What the machine starts from (checked by [`super::driver::settings`]).
 #[derive(Debug, Clone)]
@@ -756,14 +756,16 @@ pub fn beacon_of(id: i32) -> Option<u8> {
     u8::try_from(id).ok().filter(|&b| b <= 15)
 }
 
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
         self.now = now;
-        machine::route(self, input);
-        self.out.take()
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
         let water = self.on_water.map(|w| w.answer.map_or(w.until, |a| a.2));
         let start =
             (!self.ready && self.asking.is_none() && self.link.is_up()).then_some(self.start_at);
@@ -776,17 +778,12 @@ impl machine::Machine for Machine {
             self.acks.deadline(),
             self.link.deadline(),
         ]
-        .into_iter()
-        .flatten()
-        .min()
     }
 
-    fn awaits(&self, id: RequestId) -> bool {
+    fn awaited(&self, id: RequestId) -> bool {
         self.fill.awaits(id)
     }
-}
 
-impl Handlers for Machine {
     fn read(&mut self, bytes: Vec<u8>) {
         for line in self.lines.push(&bytes) {
             self.line(&line);
@@ -903,7 +900,7 @@ impl Handlers for Machine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::Machine as _;
+    use crate::machine::{Input, Machine as _, Output};
 
     fn settings() -> Settings {
         Settings {

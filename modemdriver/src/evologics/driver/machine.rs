@@ -21,7 +21,7 @@ use crate::driver::{DriverCommand, DriverEvent, DriverStatus, SpecificReport, Tr
 use crate::machine::fill::Fill;
 use crate::machine::reconnect::Reconnect;
 use crate::machine::work::{asked, queue_data, queue_first, Asked};
-use crate::machine::{self, Handlers, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{Handlers, Now, Outputs, RequestId};
 
 use super::super::codec::{encode_command, Decoded, Framing, ModemDecoder, ModemMessage};
 use super::super::message::{
@@ -751,14 +751,16 @@ fn describe(s: &Sending) -> String {
     format!("{what} to {}", id_of(s.dest))
 }
 
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
         self.now = now;
-        machine::route(self, input);
-        self.out.take()
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
         [
             self.awaiting.as_ref().map(|a| a.deadline),
             self.fill.deadline(),
@@ -766,17 +768,12 @@ impl machine::Machine for Machine {
             self.retry.as_ref().map(|r| r.0),
             self.link.deadline(),
         ]
-        .into_iter()
-        .flatten()
-        .min()
     }
 
-    fn awaits(&self, id: RequestId) -> bool {
+    fn awaited(&self, id: RequestId) -> bool {
         self.fill.awaits(id)
     }
-}
 
-impl Handlers for Machine {
     fn read(&mut self, bytes: Vec<u8>) {
         for unit in self.decoder.push(&bytes) {
             self.unit(unit);

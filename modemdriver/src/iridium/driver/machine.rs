@@ -20,7 +20,7 @@ use super::settings::Settings;
 use super::state::{ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES};
 use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
 use crate::machine::reconnect::Reconnect;
-use crate::machine::{self, Handlers, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{Handlers, Now, Output, Outputs, RequestId};
 
 /// The vehicle driver's logic.
 #[derive(Debug)]
@@ -391,14 +391,16 @@ impl Machine {
     }
 }
 
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
         self.now = now;
-        machine::route(self, input);
-        self.out.take()
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
         let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
         let session = if self.ready && self.pending.is_none() {
             self.session_deadline()
@@ -417,17 +419,12 @@ impl machine::Machine for Machine {
             call,
             self.sessions.request_deadline(),
         ]
-        .into_iter()
-        .flatten()
-        .min()
     }
 
-    fn awaits(&self, id: RequestId) -> bool {
+    fn awaited(&self, id: RequestId) -> bool {
         self.sessions.awaits(id) || self.calls.awaits(id)
     }
-}
 
-impl Handlers for Machine {
     fn read(&mut self, bytes: Vec<u8>) {
         self.reader.push(&bytes);
         while let Some(unit) = self.reader.next_unit() {

@@ -23,7 +23,7 @@ use super::settings::{Settings, MAX_PENDING_TRANSMISSIONS};
 use super::state::{Job, LinkState, Reception, Requests, Startup, Transmit};
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus};
 use crate::machine::reconnect::Reconnect;
-use crate::machine::{self, Handlers, Input, Now, Output, Outputs, RequestId};
+use crate::machine::{Handlers, Now, Output, Outputs, RequestId};
 
 /// The Micro-Modem driver's logic.
 #[derive(Debug)]
@@ -282,14 +282,16 @@ impl Machine {
     }
 }
 
-impl machine::Machine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
         self.now = now;
-        machine::route(self, input);
-        self.out.take()
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
         let keep_alive = self.keep_alive();
         [
             self.startup.next_deadline(),
@@ -300,17 +302,12 @@ impl machine::Machine for Machine {
             (!self.link.silence_reported && self.link.up.is_up())
                 .then_some(self.link.last_heard + keep_alive * 3),
         ]
-        .into_iter()
-        .flatten()
-        .min()
     }
 
-    fn awaits(&self, id: RequestId) -> bool {
+    fn awaited(&self, id: RequestId) -> bool {
         self.requests.awaits(id)
     }
-}
 
-impl Handlers for Machine {
     fn read(&mut self, line: Vec<u8>) {
         self.line(&line);
     }
