@@ -737,30 +737,7 @@ impl Shore {
                 },
                 Some(event) = call_rx.recv() => {
                     if let Some(c) = calls.as_mut() {
-                        let now = tokio::time::Instant::now();
-                        let outs = match event {
-                            CallEvent::Connected(id, peer, writer) => {
-                                tracing::info!("RUDICS call {id} from {peer}");
-                                writers.insert(id, writer);
-                                c.connected(id, peer, now);
-                                Vec::new()
-                            }
-                            CallEvent::Bytes(id, bytes) => {
-                                events.emit(DriverEvent::Raw(RawMessage {
-                                    direction: RawDirection::Incoming,
-                                    bytes: bytes.clone(),
-                                    peer: Some(format!("RUDICS call {id}")),
-                                }));
-                                c.bytes(id, &bytes, now)
-                            }
-                            CallEvent::Closed(id) => {
-                                tracing::info!("RUDICS call {id} ended");
-                                writers.remove(&id);
-                                c.closed(id);
-                                Vec::new()
-                            }
-                        };
-                        self.call_outputs(outs, &mut writers, c, &mut acks, &events);
+                        self.call_event(event, c, &mut writers, &mut acks, &events);
                     }
                 },
                 () = crate::time::sleep_until_opt(calls.as_ref().and_then(RudicsCalls::next_deadline)) => {
@@ -781,6 +758,41 @@ impl Shore {
                 },
             }
         }
+    }
+
+    /// What a RUDICS call brought: a call connected, bytes, a call ended.
+    fn call_event(
+        &mut self,
+        event: CallEvent,
+        c: &mut RudicsCalls,
+        writers: &mut HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>>,
+        acks: &mut VecDeque<ModemTransmission>,
+        events: &EventSink,
+    ) {
+        let now = tokio::time::Instant::now();
+        let outs = match event {
+            CallEvent::Connected(id, peer, writer) => {
+                tracing::info!("RUDICS call {id} from {peer}");
+                writers.insert(id, writer);
+                c.connected(id, peer, now);
+                Vec::new()
+            }
+            CallEvent::Bytes(id, bytes) => {
+                events.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Incoming,
+                    bytes: bytes.clone(),
+                    peer: Some(format!("RUDICS call {id}")),
+                }));
+                c.bytes(id, &bytes, now)
+            }
+            CallEvent::Closed(id) => {
+                tracing::info!("RUDICS call {id} ended");
+                writers.remove(&id);
+                c.closed(id);
+                Vec::new()
+            }
+        };
+        self.call_outputs(outs, writers, c, acks, events);
     }
 
     /// Does what the calls ask.
