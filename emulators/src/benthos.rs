@@ -45,11 +45,10 @@ use protos::goby::acomms::protobuf::{
     benthos_emulated_packet::Kind, modem_transmission::TransmissionType, BenthosEmulatedPacket,
     ModemTransmission,
 };
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use tokio::time::Instant;
 
-use crate::host::{distance, draw, EmulatedModem, Shared};
+use crate::host::{distance, draw, EmulatedModem, Fault, Shared};
 pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::address::id_of;
 use modemdriver::benthos::wire::{bit_rate, hex_encode, Command, BROADCAST};
@@ -191,7 +190,6 @@ pub struct Modem {
     forward_at: Option<Instant>,
     ranging: Option<(u8, Instant)>,
     timers: VecDeque<(Instant, Timer)>,
-    rng: ChaCha8Rng,
     n: Counters,
 }
 
@@ -199,7 +197,7 @@ impl Modem {
     /// A modem as `config` says, in command mode.
     pub fn new(c: EmulatorConfig) -> Modem {
         Modem {
-            io: Shared::default(),
+            io: Shared::new(&c.faults, c.address),
             address: c.address,
             settings: HashMap::new(),
             echo: true,
@@ -210,7 +208,6 @@ impl Modem {
             forward_at: None,
             ranging: None,
             timers: VecDeque::new(),
-            rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 40)),
             n: Counters::default(),
             c,
         }
@@ -218,11 +215,7 @@ impl Modem {
 
     fn say(&mut self, line: &str) {
         let mut text = line.as_bytes().to_vec();
-        let garble = if Shared::take(&mut self.io.garble_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.garble)
-        };
+        let garble = self.io.fault(Fault::Garbled);
         if garble {
             text.truncate(text.len() / 2);
             self.n.garbled += 1;
@@ -309,11 +302,7 @@ impl Modem {
                 date: (mo, d, y),
             }) => format!("Date set: {mo:02}/{d:02}/{y:04} {h:02}:{m:02}:{s:02}"),
             Ok(Command::Online) => {
-                let busy = if Shared::take(&mut self.io.busy_next) {
-                    true
-                } else {
-                    draw(&mut self.rng, self.c.faults.busy)
-                };
+                let busy = self.io.fault(Fault::Busy);
                 if busy {
                     self.n.busy += 1;
                     "BUSY".into()
@@ -407,11 +396,7 @@ impl Modem {
         if !(mine || all && p.kind() == Kind::Data) {
             return;
         }
-        let lose = if Shared::take(&mut self.io.lose_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.lost)
-        };
+        let lose = self.io.fault(Fault::Lost);
         if lose {
             self.n.lost += 1;
             return;
@@ -432,18 +417,19 @@ impl Modem {
                     self.say(&line);
                 }
                 let d = self.distance_to(src).unwrap_or(500.0).max(1.0);
-                let snr = (35.0 - 20.0 * (d / 10.0).log10() + self.rng.random_range(-1.0..1.0))
-                    .clamp(0.0, 40.0);
-                let mpd = self.rng.random_range(0.5..4.0);
-                let pass = !draw(&mut self.rng, self.c.crc_fail);
+                let snr = (35.0 - 20.0 * (d / 10.0).log10()
+                    + self.io.draws.signal().random_range(-1.0..1.0))
+                .clamp(0.0, 40.0);
+                let mpd = self.io.draws.signal().random_range(0.5..4.0);
+                let pass = !draw(self.io.draws.signal(), self.c.crc_fail);
                 if !pass {
                     self.n.crc_failed += 1;
                 }
                 let line = format!(
                     "CRC:{} MPD:{mpd:04.1} SNR:{snr:04.1} AGC:{} SPD:+00.0 CCERR:{:03}",
                     if pass { "Pass" } else { "Fail" },
-                    self.rng.random_range(60..99),
-                    self.rng.random_range(0..20)
+                    self.io.draws.signal().random_range(60..99),
+                    self.io.draws.signal().random_range(0..20)
                 );
                 self.say(&line);
                 self.say(&format!("Source:{src:03}  Destination:{dest:03}"));

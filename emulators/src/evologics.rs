@@ -52,11 +52,10 @@ use protos::goby::acomms::protobuf::{
     evologics_emulated_packet::Kind, modem_transmission::TransmissionType, EvologicsEmulatedPacket,
     ModemTransmission,
 };
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use tokio::time::Instant;
 
-use crate::host::{EmulatedModem, Shared};
+use crate::host::{EmulatedModem, Fault, Shared};
 pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorPort};
 use modemdriver::driver::Driver;
 use modemdriver::evologics::codec::{
@@ -204,7 +203,6 @@ pub struct Modem {
     address: u8,
     im_retries: u8,
     connection_retries: u8,
-    rng: ChaCha8Rng,
     seq: u32,
     im: Option<Awaiting>,
     burst: Option<Awaiting>,
@@ -218,13 +216,11 @@ pub struct Modem {
 impl Modem {
     /// A modem set up as `c`.
     pub fn new(c: EmulatorConfig) -> Modem {
-        let rng = ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32));
         Modem {
-            io: Shared::default(),
+            io: Shared::new(&c.faults, c.address),
             address: c.address,
             im_retries: c.im_retries,
             connection_retries: c.connection_retries,
-            rng,
             seq: 0,
             im: None,
             burst: None,
@@ -240,17 +236,9 @@ impl Modem {
         f(&mut self.n);
     }
 
-    fn draw(&mut self, p: f64) -> bool {
-        p > 0.0 && self.rng.random_bool(p.min(1.0))
-    }
-
     fn say(&mut self, message: ModemMessage) {
         let mut bytes = encode_modem(&message, self.framing);
-        let garble = if Shared::take(&mut self.io.garble_next) {
-            true
-        } else {
-            self.draw(self.c.faults.garble)
-        };
+        let garble = self.io.fault(Fault::Garbled);
         if garble {
             // Cut short, its line end kept: what a noisy line delivers.
             let keep = (bytes.len() - 2) / 2;
@@ -280,11 +268,7 @@ impl Modem {
     }
 
     fn busy(&mut self) -> bool {
-        let busy = if Shared::take(&mut self.io.busy_next) {
-            true
-        } else {
-            self.draw(self.c.faults.busy)
-        };
+        let busy = self.io.fault(Fault::Busy);
         if busy {
             self.count(|c| c.busy += 1);
         }
@@ -458,7 +442,7 @@ impl Modem {
     /// range.
     fn link_quality(&mut self, src: u8) -> (f64, u32) {
         let d = self.distance_to(src).unwrap_or(500.0).max(1.0);
-        let rssi = -20.0 - 20.0 * d.log10() + self.rng.random_range(-2.0..2.0);
+        let rssi = -20.0 - 20.0 * d.log10() + self.io.draws.signal().random_range(-2.0..2.0);
         let integrity = (250.0 - d / 20.0).clamp(60.0, 250.0) as u32;
         (rssi.round(), integrity)
     }
@@ -480,11 +464,7 @@ impl Modem {
         if !(to_me || broadcast) || packet.src == u32::from(self.address) {
             return;
         }
-        let lose = if Shared::take(&mut self.io.lose_next) {
-            true
-        } else {
-            self.draw(self.c.faults.lost)
-        };
+        let lose = self.io.fault(Fault::Lost);
         if lose {
             self.count(|c| c.lost += 1);
             return;

@@ -2,8 +2,9 @@
 //! served on TCP (one host at a time, a new connection replacing the old)
 //! or on a pseudo-terminal, its acoustic backend (any [`Driver`]: the
 //! acoustic channel simulator, or UDP to emulators in other processes),
-//! its controls (faults on demand) and its counters. The Popoto and
-//! Benthos ATM-900 emulators run in it; the modem's own logic is an
+//! its controls (faults on demand), its seeded draws of random faults
+//! ([`Draws`]: a stream for each fault) and its counters. The emulators of
+//! [`crate::kinds::STREAM`] run in it; the modem's own logic is an
 //! [`EmulatedModem`], with no input or output of its own.
 
 use std::collections::HashMap;
@@ -17,6 +18,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::ModemTransmission;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
@@ -38,6 +41,26 @@ pub struct EmulatorFaults {
     pub garble: f64,
     /// Seed of the draws (mixed with the address).
     pub seed: u64,
+}
+
+impl EmulatorFaults {
+    /// Whether the modem at `address` makes every fault these ask for
+    /// within the first `within` draws of it ([`Draws`]); else the first
+    /// fault that it does not. A run asking for faults checks its seed
+    /// with it: the draws of each fault are a fixed sequence, so a seed
+    /// that makes them early makes them in every run, however its timing
+    /// falls.
+    ///
+    /// # Errors
+    /// The first fault asked for (with a probability above 0) that none
+    /// of its first `within` draws makes.
+    pub fn made_within(&self, address: u8, within: usize) -> Result<(), Fault> {
+        Fault::ALL
+            .into_iter()
+            .filter(|f| f.probability(self) > 0.0)
+            .find(|f| Draws::first_made(self, address, *f, within).is_none())
+            .map_or(Ok(()), Err)
+    }
 }
 
 impl Default for EmulatorFaults {
@@ -80,9 +103,117 @@ pub enum EmulatorControl {
     Stop,
 }
 
+/// A fault an emulated modem makes at random ([`EmulatorFaults`]) or on
+/// demand ([`EmulatorControl`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// A packet heard from the water is lost.
+    Lost,
+    /// A send command is refused (the busy modem).
+    Busy,
+    /// A line to the host is garbled.
+    Garbled,
+}
+
+impl Fault {
+    /// Every fault drawn at random.
+    pub const ALL: [Fault; 3] = [Fault::Lost, Fault::Busy, Fault::Garbled];
+
+    /// Its probability in `faults`.
+    pub fn probability(self, faults: &EmulatorFaults) -> f64 {
+        match self {
+            Fault::Lost => faults.lost,
+            Fault::Busy => faults.busy,
+            Fault::Garbled => faults.garble,
+        }
+    }
+
+    /// The ChaCha stream of its draws (stream 0 is the signal's).
+    fn stream(self) -> u64 {
+        match self {
+            Fault::Lost => 1,
+            Fault::Busy => 2,
+            Fault::Garbled => 3,
+        }
+    }
+}
+
+/// The seeded draws of one emulated modem: one stream for each
+/// [`Fault`] and one for its signal measures (SNR, Doppler, bit errors),
+/// all from [`EmulatorFaults::seed`] mixed with the modem's address. The
+/// `n`-th draw of a fault is the same whatever else the modem drew
+/// before it (how many lines it wrote, packets it heard, sends it was
+/// asked for): a run that asks for a fault meets the same sequence of it
+/// however its timing falls.
+#[derive(Debug, Clone)]
+pub struct Draws {
+    faults: EmulatorFaults,
+    lost: ChaCha8Rng,
+    busy: ChaCha8Rng,
+    garbled: ChaCha8Rng,
+    signal: ChaCha8Rng,
+}
+
+impl Draws {
+    /// The draws of the modem at `address` under `faults`.
+    pub fn new(faults: &EmulatorFaults, address: u8) -> Draws {
+        let stream = |n: u64| {
+            let mut rng = ChaCha8Rng::seed_from_u64(faults.seed ^ (u64::from(address) << 32));
+            rng.set_stream(n);
+            rng
+        };
+        Draws {
+            faults: *faults,
+            lost: stream(Fault::Lost.stream()),
+            busy: stream(Fault::Busy.stream()),
+            garbled: stream(Fault::Garbled.stream()),
+            signal: stream(0),
+        }
+    }
+
+    /// The next draw of `fault`: whether it is made (never at
+    /// probability 0).
+    pub fn fault(&mut self, fault: Fault) -> bool {
+        let p = fault.probability(&self.faults);
+        let rng = match fault {
+            Fault::Lost => &mut self.lost,
+            Fault::Busy => &mut self.busy,
+            Fault::Garbled => &mut self.garbled,
+        };
+        draw(rng, p)
+    }
+
+    /// The draws of the signal's measures (and anything else not a
+    /// fault).
+    pub fn signal(&mut self) -> &mut ChaCha8Rng {
+        &mut self.signal
+    }
+
+    /// Which of the first `within` draws of `fault` (counted from 1) is
+    /// the first to make it, for the modem at `address` under `faults`;
+    /// `None` if none does. A test asking for a fault checks with it that
+    /// its seed makes the fault early.
+    pub fn first_made(
+        faults: &EmulatorFaults,
+        address: u8,
+        fault: Fault,
+        within: usize,
+    ) -> Option<usize> {
+        let mut draws = Draws::new(faults, address);
+        (1..=within).find(|_| draws.fault(fault))
+    }
+}
+
+impl Default for Draws {
+    fn default() -> Self {
+        Draws::new(&EmulatorFaults::default(), 0)
+    }
+}
+
 /// What an emulated modem shares with the host that serves it: what it
 /// says to its host and puts on the water, the faults asked for on demand
-/// ([`EmulatorControl`]) and its host connections, counted.
+/// ([`EmulatorControl`]) or drawn ([`Draws`]) and its host connections,
+/// counted.
 #[derive(Debug, Default)]
 pub struct Shared {
     /// Bytes for the host, in order (dropped when no host is connected).
@@ -99,11 +230,33 @@ pub struct Shared {
     pub connections: u64,
     /// Host connections dropped.
     pub dropped: u64,
+    /// The random faults' and the signal's draws.
+    pub draws: Draws,
 }
 
 impl Shared {
+    /// What the modem at `address` shares with its host, its random
+    /// faults drawn as `faults` says.
+    pub fn new(faults: &EmulatorFaults, address: u8) -> Shared {
+        Shared {
+            draws: Draws::new(faults, address),
+            ..Shared::default()
+        }
+    }
+
+    /// Whether to make `fault` now: one asked for on demand if any is
+    /// left, else the next draw of its own stream.
+    pub fn fault(&mut self, fault: Fault) -> bool {
+        let asked = match fault {
+            Fault::Lost => &mut self.lose_next,
+            Fault::Busy => &mut self.busy_next,
+            Fault::Garbled => &mut self.garble_next,
+        };
+        Shared::take(asked) || self.draws.fault(fault)
+    }
+
     /// Takes one of the faults `count` asks for: `true` while any are left.
-    pub fn take(count: &mut u32) -> bool {
+    fn take(count: &mut u32) -> bool {
         let left = *count > 0;
         *count = count.saturating_sub(1);
         left
@@ -508,12 +661,132 @@ async fn run<M: EmulatedModem>(
 }
 
 /// A seeded draw with probability `p` (none at 0).
-pub fn draw(rng: &mut rand_chacha::ChaCha8Rng, p: f64) -> bool {
-    use rand::Rng;
+pub fn draw(rng: &mut ChaCha8Rng, p: f64) -> bool {
     p > 0.0 && rng.random_bool(p.min(1.0))
 }
 
 /// Distance between two positions, m.
 pub fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FAULTS: EmulatorFaults = EmulatorFaults {
+        lost: 0.3,
+        busy: 0.4,
+        garble: 0.1,
+        seed: 7,
+    };
+
+    fn sequence(draws: &mut Draws, fault: Fault, n: usize) -> Vec<bool> {
+        (0..n).map(|_| draws.fault(fault)).collect()
+    }
+
+    #[test]
+    fn a_faults_draws_do_not_depend_on_the_others() {
+        for fault in Fault::ALL {
+            let alone = sequence(&mut Draws::new(&FAULTS, 2), fault, 200);
+            let mut mixed = Draws::new(&FAULTS, 2);
+            let among: Vec<bool> = (0..200)
+                .map(|i| {
+                    for other in Fault::ALL.iter().filter(|f| **f != fault) {
+                        for _ in 0..(i % 3) {
+                            mixed.fault(*other);
+                        }
+                    }
+                    let _: f64 = mixed.signal().random_range(-1.0..1.0);
+                    mixed.fault(fault)
+                })
+                .collect();
+            assert_eq!(alone, among, "{fault:?}");
+            assert!(alone.contains(&true) && alone.contains(&false), "{fault:?}");
+        }
+    }
+
+    #[test]
+    fn each_modem_and_each_fault_draws_its_own_sequence() {
+        // Alike but for the fault drawn or the address.
+        let even = EmulatorFaults {
+            lost: 0.5,
+            busy: 0.5,
+            garble: 0.5,
+            seed: 7,
+        };
+        let a = sequence(&mut Draws::new(&even, 1), Fault::Lost, 64);
+        let b = sequence(&mut Draws::new(&even, 2), Fault::Lost, 64);
+        let c = sequence(&mut Draws::new(&even, 1), Fault::Busy, 64);
+        let d = sequence(&mut Draws::new(&even, 1), Fault::Garbled, 64);
+        assert_ne!(a, b);
+        assert_ne!(a, c);
+        assert_ne!(a, d);
+        assert_ne!(c, d);
+    }
+
+    #[test]
+    fn faults_on_demand_come_first_and_leave_the_draws_as_they_were() {
+        let none = EmulatorFaults {
+            lost: 0.0,
+            ..FAULTS
+        };
+        let mut shared = Shared::new(&none, 1);
+        shared.control(EmulatorControl::Lose(2));
+        assert_eq!(
+            (0..4)
+                .map(|_| shared.fault(Fault::Lost))
+                .collect::<Vec<_>>(),
+            [true, true, false, false]
+        );
+        let mut shared = Shared::new(&FAULTS, 1);
+        shared.control(EmulatorControl::Busy(1));
+        assert!(shared.fault(Fault::Busy));
+        let after = sequence(&mut shared.draws, Fault::Busy, 32);
+        assert_eq!(
+            after,
+            sequence(&mut Draws::new(&FAULTS, 1), Fault::Busy, 32)
+        );
+    }
+
+    #[test]
+    fn the_first_fault_made_is_found_and_never_at_probability_zero() {
+        let first = Draws::first_made(&FAULTS, 1, Fault::Lost, 100).expect("made");
+        let seq = sequence(&mut Draws::new(&FAULTS, 1), Fault::Lost, first);
+        assert!(seq[..first - 1].iter().all(|m| !m) && seq[first - 1]);
+        let none = EmulatorFaults {
+            garble: 0.0,
+            ..FAULTS
+        };
+        assert_eq!(Draws::first_made(&none, 1, Fault::Garbled, 1000), None);
+    }
+
+    #[test]
+    fn a_seed_is_told_whether_it_makes_every_fault_early() {
+        let late = |seed: u64, address: u8| {
+            EmulatorFaults { seed, ..FAULTS }
+                .made_within(address, 3)
+                .err()
+        };
+        let early = (0..500).find(|s| late(*s, 1).is_none()).expect("a seed");
+        for fault in Fault::ALL {
+            let first = Draws::first_made(
+                &EmulatorFaults {
+                    seed: early,
+                    ..FAULTS
+                },
+                1,
+                fault,
+                3,
+            );
+            assert!(first.is_some(), "{fault:?}");
+        }
+        let seed = (0..500).find(|s| late(*s, 1).is_some()).expect("a seed");
+        let fault = late(seed, 1).unwrap();
+        assert_eq!(
+            Draws::first_made(&EmulatorFaults { seed, ..FAULTS }, 1, fault, 3),
+            None
+        );
+        assert_eq!(EmulatorFaults::default().made_within(1, 1), Ok(()));
+    }
 }

@@ -40,11 +40,10 @@ use protos::goby::acomms::protobuf::{
     modem_transmission::TransmissionType, popoto_emulated_packet::Kind, ModemTransmission,
     PopotoEmulatedPacket,
 };
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use tokio::time::Instant;
 
-use crate::host::{distance, draw, EmulatedModem, Shared};
+use crate::host::{distance, EmulatedModem, Fault, Shared};
 pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::address::id_of;
 use modemdriver::driver::Driver;
@@ -183,7 +182,6 @@ pub struct Modem {
     mode: u8,
     power: f64,
     params: HashMap<String, ParamValue>,
-    rng: ChaCha8Rng,
     lines: LineSplitter,
     transmitting: bool,
     ranging: Option<Instant>,
@@ -196,13 +194,12 @@ impl Modem {
     /// A modem as `config` says.
     pub fn new(c: EmulatorConfig) -> Modem {
         Modem {
-            io: Shared::default(),
+            io: Shared::new(&c.faults, c.address),
             address: c.address,
             remote: BROADCAST,
             mode: 0,
             power: 1.0,
             params: HashMap::new(),
-            rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32)),
             lines: LineSplitter::new(modemdriver::popoto::wire::MAX_LINE),
             transmitting: false,
             ranging: None,
@@ -215,11 +212,7 @@ impl Modem {
 
     fn say(&mut self, line: ModemLine) {
         let mut text = line.encode().into_bytes();
-        let garble = if Shared::take(&mut self.io.garble_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.garble)
-        };
+        let garble = self.io.fault(Fault::Garbled);
         if garble {
             text.truncate(text.len() / 2);
             self.n.garbled += 1;
@@ -272,11 +265,7 @@ impl Modem {
     }
 
     fn transmit(&mut self, kind: Kind, data: Vec<u8>, now: Instant) {
-        let busy = if Shared::take(&mut self.io.busy_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.busy)
-        };
+        let busy = self.io.fault(Fault::Busy);
         if busy || self.transmitting {
             self.n.busy += 1;
             return self.say(ModemLine::Alert(MAC_DUMPED.into()));
@@ -395,11 +384,7 @@ impl Modem {
         if src == self.address || !(dest == self.address || dest == BROADCAST) {
             return;
         }
-        let lose = if Shared::take(&mut self.io.lose_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.lost)
-        };
+        let lose = self.io.fault(Fault::Lost);
         if lose || self.asleep {
             if self.asleep {
                 self.asleep = false;
@@ -424,9 +409,10 @@ impl Modem {
                 self.say(ModemLine::Header(header(PacketKind::Data, data.len())));
                 self.say(ModemLine::Data(data));
                 let d = self.distance_to(src).unwrap_or(500.0).max(1.0);
-                let snr = (40.0 - 20.0 * (d / 10.0).log10() + self.rng.random_range(-1.0..1.0))
-                    .clamp(-5.0, 40.0);
-                let doppler: f64 = self.rng.random_range(-0.05..0.05);
+                let snr = (40.0 - 20.0 * (d / 10.0).log10()
+                    + self.io.draws.signal().random_range(-1.0..1.0))
+                .clamp(-5.0, 40.0);
+                let doppler: f64 = self.io.draws.signal().random_range(-0.05..0.05);
                 self.say(ModemLine::Snr((snr * 100.0).round() / 100.0));
                 self.say(ModemLine::Doppler((doppler * 1000.0).round() / 1000.0));
             }

@@ -45,11 +45,10 @@ use protos::goby::acomms::protobuf::{
     modem_transmission::TransmissionType, seatrac_emulated_packet::Kind, ModemTransmission,
     SeatracEmulatedPacket, SeatracMessageType,
 };
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use tokio::time::Instant;
 
-use crate::host::{distance, draw, EmulatedModem, Shared};
+use crate::host::{distance, EmulatedModem, Fault, Shared};
 pub use crate::host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::address::id_of;
 use modemdriver::driver::Driver;
@@ -187,7 +186,6 @@ pub struct Modem {
     io: Shared,
     c: EmulatorConfig,
     settings: BeaconSettings,
-    rng: ChaCha8Rng,
     lines: LineSplitter,
     /// The transceiver is sending, awaiting or answering until then.
     busy_until: Option<Instant>,
@@ -201,9 +199,8 @@ impl Modem {
     /// A beacon as `config` says.
     pub fn new(c: EmulatorConfig) -> Modem {
         Modem {
-            io: Shared::default(),
+            io: Shared::new(&c.faults, c.address),
             settings: BeaconSettings::defaults(c.address),
-            rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32)),
             lines: LineSplitter::new(MAX_LINE),
             busy_until: None,
             awaiting: None,
@@ -220,11 +217,7 @@ impl Modem {
 
     fn say(&mut self, reply: &Reply) {
         let mut line = reply.encode();
-        let garble = if Shared::take(&mut self.io.garble_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.garble)
-        };
+        let garble = self.io.fault(Fault::Garbled);
         if garble {
             line.truncate(line.len() / 2);
             self.n.garbled += 1;
@@ -329,11 +322,7 @@ impl Modem {
         } else {
             cid::DAT_SEND
         };
-        let refused = if Shared::take(&mut self.io.busy_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.busy)
-        };
+        let refused = self.io.fault(Fault::Busy);
         if refused || self.busy_until.is_some_and(|t| t > now) {
             self.n.busy += 1;
             return Reply::Sending {
@@ -408,7 +397,8 @@ impl Modem {
             (Some(a), Some(b)) => distance(a, b),
             _ => 500.0,
         };
-        let rssi = -40.0 - 20.0 * d.max(1.0).log10() + self.rng.random_range(-1.0..1.0);
+        let rssi =
+            -40.0 - 20.0 * d.max(1.0).log10() + self.io.draws.signal().random_range(-1.0..1.0);
         fix.rssi = (rssi * 10.0).round() as i16;
         if ranged {
             let time = d / self.c.sound_speed;
@@ -462,11 +452,7 @@ impl Modem {
         if src == self.id() || !(dest == self.id() || dest == BEACON_ALL) {
             return;
         }
-        let lose = if Shared::take(&mut self.io.lose_next) {
-            true
-        } else {
-            draw(&mut self.rng, self.c.faults.lost)
-        };
+        let lose = self.io.fault(Fault::Lost);
         if lose {
             self.n.lost += 1;
             return;
