@@ -166,50 +166,59 @@ const SEATRAC: Modem = Modem {
     signal_garbled: false,
 };
 
-/// Run `check` over each fault for the modem `$modem`, one test each.
+/// Run `check` over each fault for the modem `$modem`, one test each, with
+/// the seed of each run: clean, lost, busy, garbled, dropped, combined
+/// (each makes every fault its run asks for within the first [`EARLY`]
+/// draws of each modem).
 macro_rules! runs {
-    ($($module:ident: $modem:expr, $seed:literal;)*) => {$(
+    ($($module:ident: $modem:expr, [$clean:literal, $lost:literal, $busy:literal, $garbled:literal, $dropped:literal, $combined:literal];)*) => {$(
         mod $module {
             use super::*;
 
             #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn clean() {
-                check(Faults::new($modem, "clean", $seed)).await;
+                check(Faults::new($modem, "clean", $clean)).await;
             }
 
             #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn lost_messages() {
-                check(super::lost($modem, $seed + 1)).await;
+                check(super::lost($modem, $lost)).await;
             }
 
             #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn busy_modem() {
-                check(super::busy($modem, $seed + 2)).await;
+                check(super::busy($modem, $busy)).await;
             }
 
             #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn garbled_lines() {
-                check(super::garbled($modem, $seed + 3)).await;
+                check(super::garbled($modem, $garbled)).await;
             }
 
             #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn dropped_connections() {
-                check(super::dropped($modem, $seed + 4)).await;
+                check(super::dropped($modem, $dropped)).await;
             }
 
             #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn combined() {
-                check(super::combined($modem, $seed + 5)).await;
+                check(super::combined($modem, $combined)).await;
             }
         }
     )*};
 }
 
 runs! {
-    popoto: POPOTO, 1;
-    benthos: BENTHOS, 11;
-    seatrac: SEATRAC, 21;
+    popoto: POPOTO, [1, 2, 3, 23, 5, 790];
+    benthos: BENTHOS, [11, 7, 4, 27, 15, 1890];
+    seatrac: SEATRAC, [21, 9, 5, 59, 25, 2427];
 }
+
+/// Each modem makes every fault its run asks for within this many draws
+/// of it: the draws of each fault are a sequence of their own
+/// (`emulators::host::Draws`), so the run exercises every fault whatever
+/// its timing.
+const EARLY: usize = 3;
 
 /// The faults of one run.
 #[derive(Debug, Clone)]
@@ -228,6 +237,16 @@ struct Faults {
 }
 
 impl Faults {
+    /// The random faults of each emulated modem.
+    fn emulated(&self) -> EmulatorFaults {
+        EmulatorFaults {
+            lost: self.lost,
+            busy: self.busy,
+            garble: self.garble,
+            seed: self.seed,
+        }
+    }
+
     fn new(modem: Modem, name: &'static str, seed: u64) -> Faults {
         Faults {
             name,
@@ -294,12 +313,7 @@ async fn start_emulators(faults: &Faults) -> Vec<Running> {
         let setup = Setup {
             address: id,
             positions: positions.clone(),
-            faults: EmulatorFaults {
-                lost: faults.lost,
-                busy: faults.busy,
-                garble: faults.garble,
-                seed: faults.seed,
-            },
+            faults: faults.emulated(),
             usbl: false,
         };
         let port = EmulatorPort::Tcp("127.0.0.1:0".parse().unwrap());
@@ -533,6 +547,15 @@ async fn run(faults: Faults) -> Tally {
 
 async fn check(faults: Faults) {
     let name = format!("{} {}", faults.modem.name, faults.name);
+    for address in 1..=2 {
+        if let Err(fault) = faults.emulated().made_within(address, EARLY) {
+            panic!(
+                "{name}: seed {} makes no {fault:?} within the first {EARLY} draws of modem {address}: \
+                 give the run a seed that does",
+                faults.seed
+            );
+        }
+    }
     let signal_garbled = faults.modem.signal_garbled;
     let garbled = faults.garble > 0.0;
     let wanted = [
