@@ -33,6 +33,11 @@ mod channel;
 mod environment;
 mod error;
 pub mod field;
+pub mod forecast;
+pub mod link;
+pub mod noise;
+pub mod profile;
+pub mod soundspeed;
 pub(crate) mod trace;
 
 pub use arrivals::{Arrival, ArrivalField};
@@ -44,3 +49,8 @@ pub use environment::{
 };
 pub use error::{ChannelError, ParseError};
 pub use field::TlField;
+pub use forecast::{DepthForecast, ForecastConfig, Forecaster, LinkForecast, Position};
+pub use link::{FerCurve, MicroModemBand, Modem, RateForecast, RateModel};
+pub use noise::NoiseModel;
+pub use profile::{EstimatorConfig, ProfileEstimator};
+pub use soundspeed::{CtdSample, Formula};

@@ -180,7 +180,7 @@ pub fn write_shd(title: &str, frequency: f64, fields: &[TlField]) -> Vec<u8> {
         return Vec::new();
     };
     let (nrz, nrr, nsz) = (first.depths.len(), first.ranges.len(), fields.len());
-    let recl = 41.max(2).max(nsz).max(nrz).max(2 * nrr);
+    let recl = 41usize.max(nsz).max(nrz).max(2 * nrr);
     let records = 10 + nsz * nrz;
     let mut out = vec![0u8; records * recl * 4];
     let mut put = |rec: usize, word: usize, bytes: [u8; 4]| {

@@ -54,7 +54,6 @@ pub(crate) struct BoundaryModel {
 }
 
 fn half_space_c(env: &Environment, h: &HalfSpace, frequency: f64) -> HalfSpaceC {
-    let none = crate::environment::VolumeAttenuation::None;
     // BELLHOP adds the volume attenuation to half-spaces too, except for
     // the range-dependent (long format) ones.
     HalfSpaceC {
@@ -74,7 +73,6 @@ fn half_space_c(env: &Environment, h: &HalfSpace, frequency: f64) -> HalfSpaceC 
                 &env.volume_attenuation,
             )
         } else {
-            let _ = none;
             Complex64::new(0.0, 0.0)
         },
         rho: h.density,
