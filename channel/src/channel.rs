@@ -376,7 +376,7 @@ impl Channel {
                         delay: h.delay.re,
                         delay_imag: h.delay.im,
                         source_angle: angle,
-                        receiver_angle: h.angle,
+                        receiver_angle: h.tangent[1].atan2(h.tangent[0]).to_degrees(),
                         top_bounces: h.top_bounces,
                         bottom_bounces: h.bottom_bounces,
                     };

@@ -56,6 +56,9 @@ pub enum Format {
     Text,
     /// JSON on standard output.
     Json,
+    /// Only the BELLHOP .shd file of a TL run (to `--shd`, else FILE.shd
+    /// beside the .env), as bellhop.exe writes it.
+    Shd,
 }
 
 /// Options of `goby channel tl`.
@@ -266,7 +269,12 @@ fn tl_cmd(args: &TlArgs, out: &mut dyn Write) -> Result<Status, CliError> {
     match file.run {
         RunKind::Coherent | RunKind::SemiCoherent | RunKind::Incoherent => {
             let fields = compute_tl(&file, threads)?;
-            if let Some(shd) = &args.shd {
+            let shd_path = match (&args.shd, args.format) {
+                (Some(p), _) => Some(p.clone()),
+                (None, Format::Shd) => Some(args.env.with_extension("shd")),
+                (None, _) => None,
+            };
+            if let Some(shd) = &shd_path {
                 std::fs::write(
                     shd,
                     bellhop::write_shd(&file.title, file.frequency, &fields),
@@ -277,7 +285,7 @@ fn tl_cmd(args: &TlArgs, out: &mut dyn Write) -> Result<Status, CliError> {
                 let v: Vec<_> = fields.iter().map(tl_json).collect();
                 let v = if v.len() == 1 { v[0].clone() } else { json!(v) };
                 writeln!(out, "{v}")?;
-            } else {
+            } else if args.format == Format::Text {
                 draw_tl(&png, &[(&fields[0], title.as_str())], &file)?;
                 writeln!(out, "{}", png.display())?;
             }

@@ -25,8 +25,8 @@ pub(crate) struct Hit {
     pub w: f64,
     pub delay: Complex64,
     pub phase: f64,
-    /// Angle of the ray at the receiver (degrees, positive down).
-    pub angle: f64,
+    /// Unit tangent of the ray at the receiver (its angle, for arrivals).
+    pub tangent: [f64; 2],
     pub top_bounces: u32,
     pub bottom_bounces: u32,
     /// Index of the ray point ending the segment.
@@ -83,13 +83,12 @@ pub(crate) fn influence(
         let rb = b.x[0];
         let x_ray = a.x;
         let d = [b.x[0] - a.x[0], b.x[1] - a.x[1]];
-        let rlen = d[0].hypot(d[1]);
+        let rlen = (d[0] * d[0] + d[1] * d[1]).sqrt();
         if rlen < 1.0e3 * spacing(b.x[0]) {
             continue;
         }
         let rayt = [d[0] / rlen, d[1] / rlen];
         let rayn = [-rayt[1], rayt[0]];
-        let angle = rayt[1].atan2(rayt[0]).to_degrees();
         let dqds = b.q[0] - a.q[0];
         let dtauds = b.tau - a.tau;
         let q_start = a.q[0];
@@ -155,7 +154,7 @@ pub(crate) fn influence(
                         w,
                         delay,
                         phase: phase_int,
-                        angle,
+                        tangent: rayt,
                         top_bounces: b.top_bounces,
                         bottom_bounces: b.bottom_bounces,
                         step: is,
