@@ -25,12 +25,12 @@ for case in pekeris munk summer wedge munk-fine; do
     "$exe" "$name" > /dev/null
     echo "== $case, run type $run"
     # Plots of the coherent fields, and of the summer case's incoherent one.
-    if [ "$run" = C ] || [ "$case" = summer ]; then
+    if { [ "$run" = C ] && [ "$case" != munk ]; } || [ "$case-$run" = summer-I ]; then
       "$goby" channel compare "$name.env" "$name.shd" -o "$root/docs/channel-$name.png" | sed '$d'
     else
       "$goby" channel compare "$name.env" "$name.shd"
     fi
   done
 done
-sed -e "s/^'C'\t/'R'\t/" -e "s/^1201\t/61\t/" summer.env > summer-rays.env
+sed -e "s/^'C'\t/'R'\t/" -e "s/^1201\t/31\t/" -e "s/^-45.0 45.0 \//-12.0 12.0 \//" summer.env > summer-rays.env
 "$goby" channel tl summer-rays.env -o "$root/docs/channel-summer-rays.png" > /dev/null

@@ -29,7 +29,9 @@ fn vector(s: &mut String, values: &[f64], scale: f64) {
 fn boundary_file(b: &BoundaryProfile) -> String {
     let mut s = String::new();
     let kind = if b.curvilinear { 'C' } else { 'L' };
-    let long = if b.half_spaces.is_some() { 'L' } else { 'S' };
+    // The short format is the letter alone: BELLHOP blends normals only
+    // for a bare 'C'.
+    let long = if b.half_spaces.is_some() { "L" } else { "" };
     let _ = writeln!(s, "'{kind}{long}'\n{}", b.points.len());
     for (i, (r, z)) in b.points.iter().enumerate() {
         let _ = write!(s, "{} {}", r / 1000.0, z);

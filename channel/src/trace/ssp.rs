@@ -306,49 +306,107 @@ fn spline_not_a_knot(z: &[f64], c: &[Complex64]) -> Vec<[Complex64; 4]> {
         .collect()
 }
 
-/// Monotone piecewise cubic Hermite coefficients (Fritsch–Carlson slopes
-/// with the three-point end formula), in the same form as the spline's.
+/// First derivatives of the cubic spline through `(z, c)` with the end
+/// derivatives `d0` and `dn` given (the clamped spline).
+fn clamped_spline_slopes(
+    z: &[f64],
+    c: &[Complex64],
+    d0: Complex64,
+    dn: Complex64,
+) -> Vec<Complex64> {
+    let n = z.len();
+    let h: Vec<f64> = (1..n).map(|i| z[i] - z[i - 1]).collect();
+    let del: Vec<Complex64> = (1..n).map(|i| (c[i] - c[i - 1]) / h[i - 1]).collect();
+    let mut m = vec![d0; n];
+    m[n - 1] = dn;
+    if n < 3 {
+        return m;
+    }
+    // Rows i = 1..n-2: h[i] m[i-1] + 2 (h[i-1] + h[i]) m[i] + h[i-1] m[i+1]
+    // = 3 (h[i] del[i-1] + h[i-1] del[i]).
+    let k = n - 2;
+    let mut diag = vec![0.0; k];
+    let mut rhs = vec![Complex64::new(0.0, 0.0); k];
+    for j in 0..k {
+        let i = j + 1;
+        diag[j] = 2.0 * (h[i - 1] + h[i]);
+        rhs[j] = 3.0 * (h[i] * del[i - 1] + h[i - 1] * del[i]);
+    }
+    rhs[0] -= h[1] * d0;
+    rhs[k - 1] -= h[n - 3] * dn;
+    // Thomas algorithm: sub-diagonal h[i], super-diagonal h[i-1].
+    for j in 1..k {
+        let f = h[j + 1] / diag[j - 1];
+        diag[j] -= f * h[j - 1];
+        let prev = rhs[j - 1];
+        rhs[j] -= f * prev;
+    }
+    m[k] = rhs[k - 1] / diag[k - 1];
+    for j in (0..k - 1).rev() {
+        m[j + 1] = (rhs[j] - h[j] * m[j + 2]) / diag[j];
+    }
+    m
+}
+
+/// The Acoustics Toolbox's monotone piecewise cubic Hermite slopes at an
+/// end: the three-point estimate `f`, zeroed or limited to keep the shape.
+fn end_slope(near: f64, far: f64, f: f64) -> f64 {
+    if near * f <= 0.0 {
+        0.0
+    } else if near * far <= 0.0 && f.abs() > (3.0 * near).abs() {
+        3.0 * near
+    } else {
+        f
+    }
+}
+
+/// An interior slope: the spline's `f`, limited to keep monotone data
+/// monotone (zero at an extremum).
+fn interior_slope(del1: f64, del2: f64, f: f64) -> f64 {
+    if del1 * del2 > 0.0 {
+        if del1 > 0.0 {
+            f.max(0.0).min(3.0 * del1.min(del2))
+        } else {
+            f.min(0.0).max(3.0 * del1.max(del2))
+        }
+    } else {
+        0.0
+    }
+}
+
+/// Applies `f` to the real and imaginary parts apart.
+fn per_part(a: Complex64, b: Complex64, c: Complex64, f: fn(f64, f64, f64) -> f64) -> Complex64 {
+    Complex64::new(f(a.re, b.re, c.re), f(a.im, b.im, c.im))
+}
+
+/// Monotone piecewise cubic Hermite coefficients (the Acoustics Toolbox's
+/// PCHIP: the clamped spline's slopes, limited for monotonicity), in the
+/// same form as the spline's.
 fn pchip(z: &[f64], c: &[Complex64]) -> Vec<[Complex64; 4]> {
     let n = z.len();
     let h: Vec<f64> = (1..n).map(|i| z[i] - z[i - 1]).collect();
-    let del: Vec<f64> = (1..n).map(|i| (c[i].re - c[i - 1].re) / h[i - 1]).collect();
-    let mut d = vec![0.0; n];
+    let del: Vec<Complex64> = (1..n).map(|i| (c[i] - c[i - 1]) / h[i - 1]).collect();
+    let zero = Complex64::new(0.0, 0.0);
     if n == 2 {
-        d = vec![del[0]; 2];
-    } else {
-        for i in 1..n - 1 {
-            if del[i - 1] * del[i] > 0.0 {
-                let w1 = 2.0 * h[i] + h[i - 1];
-                let w2 = h[i] + 2.0 * h[i - 1];
-                d[i] = (w1 + w2) / (w1 / del[i - 1] + w2 / del[i]);
-            }
-        }
-        let end = |h0: f64, h1: f64, d0: f64, d1: f64| {
-            let mut e = ((2.0 * h0 + h1) * d0 - h0 * d1) / (h0 + h1);
-            if e.signum() != d0.signum() {
-                e = 0.0;
-            } else if d0.signum() != d1.signum() && e.abs() > (3.0 * d0).abs() {
-                e = 3.0 * d0;
-            }
-            e
-        };
-        d[0] = end(h[0], h[1], del[0], del[1]);
-        d[n - 1] = end(h[n - 2], h[n - 3], del[n - 2], del[n - 3]);
+        return vec![[c[0], del[0], zero, zero]];
+    }
+    let (h1, h2) = (h[0], h[1]);
+    let t = ((2.0 * h1 + h2) * del[0] - h1 * del[1]) / (h1 + h2);
+    let d0 = per_part(del[0], del[1], t, end_slope);
+    let (h1, h2) = (h[n - 3], h[n - 2]);
+    let t = (-h2 * del[n - 3] + (h1 + 2.0 * h2) * del[n - 2]) / (h1 + h2);
+    let dn = per_part(del[n - 2], del[n - 3], t, end_slope);
+    let spline = clamped_spline_slopes(z, c, d0, dn);
+    let mut d = spline.clone();
+    for i in 1..n - 1 {
+        d[i] = per_part(del[i - 1], del[i], spline[i], interior_slope);
     }
     (0..n - 1)
         .map(|i| {
-            // Hermite cubic on [0, h]: c + d0 x + a2 x² + a3 x³.
-            let (hi, d0, d1) = (h[i], d[i], d[i + 1]);
-            let a2 = (3.0 * del[i] - 2.0 * d0 - d1) / hi;
-            let a3 = (d0 + d1 - 2.0 * del[i]) / (hi * hi);
-            // Attenuation (imaginary part) linearly.
-            let im_slope = (c[i + 1].im - c[i].im) / hi;
-            [
-                c[i],
-                Complex64::new(d0, im_slope),
-                Complex64::new(2.0 * a2, 0.0),
-                Complex64::new(6.0 * a3, 0.0),
-            ]
+            let (hi, f1, f2) = (h[i], c[i], c[i + 1]);
+            let c3 = (3.0 * (f2 - f1) - hi * (2.0 * d[i] + d[i + 1])) / (hi * hi);
+            let c4 = (hi * (d[i] + d[i + 1]) - 2.0 * (f2 - f1)) / (hi * hi * hi);
+            [f1, d[i], 2.0 * c3, 6.0 * c4]
         })
         .collect()
 }
