@@ -39,38 +39,34 @@ fn a_profile_with_one_point_is_refused() {
     assert!(e.to_string().contains("at least two points"), "{e}");
 }
 
+/// The field a two-point profile is refused for.
+fn refused_field(top: (f64, f64), bottom: (f64, f64)) -> String {
+    let points = vec![
+        SspPoint::new(top.0, top.1),
+        SspPoint::new(bottom.0, bottom.1),
+    ];
+    field_of(Channel::new(env(points), 1000.0).err().unwrap())
+}
+
 #[test]
 fn negative_and_nan_depths_are_refused() {
-    let e = Channel::new(
-        env(vec![
-            SspPoint::new(-5.0, 1500.0),
-            SspPoint::new(100.0, 1500.0),
-        ]),
-        1000.0,
-    )
-    .err()
-    .unwrap();
-    assert_eq!(field_of(e), "profile.points[0].depth");
-    let e = Channel::new(
-        env(vec![
-            SspPoint::new(0.0, 1500.0),
-            SspPoint::new(f64::NAN, 1500.0),
-        ]),
-        1000.0,
-    )
-    .err()
-    .unwrap();
-    assert_eq!(field_of(e), "profile.points[1].depth");
-    let e = Channel::new(
-        env(vec![
-            SspPoint::new(0.0, f64::NAN),
-            SspPoint::new(100.0, 1500.0),
-        ]),
-        1000.0,
-    )
-    .err()
-    .unwrap();
-    assert_eq!(field_of(e), "profile.points[0].speed");
+    let c = 1500.0;
+    assert_eq!(
+        refused_field((-5.0, c), (100.0, c)),
+        "profile.points[0].depth"
+    );
+    assert_eq!(
+        refused_field((0.0, c), (f64::NAN, c)),
+        "profile.points[1].depth"
+    );
+    assert_eq!(
+        refused_field((0.0, f64::NAN), (100.0, c)),
+        "profile.points[0].speed"
+    );
+    assert_eq!(
+        refused_field((50.0, c), (20.0, c)),
+        "profile.points[1].depth"
+    );
 }
 
 #[test]

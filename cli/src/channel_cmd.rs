@@ -438,6 +438,9 @@ fn read_ctd(path: &Path) -> Result<Vec<CtdSample>, CliError> {
 
 fn ssp_cmd(args: &SspArgs, out: &mut dyn Write) -> Result<Status, CliError> {
     let samples = read_ctd(&args.ctd)?;
+    if samples.is_empty() {
+        return Err(setup(format!("{}: no CTD sample", args.ctd.display())));
+    }
     let formula = match args.formula {
         FormulaArg::Unesco => Formula::ChenMillero,
         FormulaArg::Mackenzie => Formula::Mackenzie,
@@ -519,18 +522,21 @@ fn link_text(f: &LinkForecast, nl: f64, out: &mut dyn Write) -> Result<(), CliEr
     Ok(())
 }
 
+/// A position `range` m east of the origin at `depth` m.
+fn at(range: f64, depth: f64) -> Position {
+    Position {
+        x: range,
+        y: 0.0,
+        depth,
+    }
+}
+
 fn link_cmd(args: &LinkArgs, out: &mut dyn Write) -> Result<Status, CliError> {
     let f = forecaster(&args.env, &args.forecast)?;
-    let from = Position {
-        x: 0.0,
-        y: 0.0,
-        depth: args.source_depth,
-    };
-    let to = Position {
-        x: args.range,
-        y: 0.0,
-        depth: args.receiver_depth,
-    };
+    let (from, to) = (
+        at(0.0, args.source_depth),
+        at(args.range, args.receiver_depth),
+    );
     let link = f.link(&from, &to, None).map_err(setup)?;
     if args.forecast.format == Format::Json {
         writeln!(
@@ -575,16 +581,7 @@ fn best_depth_text(d: &DepthForecast, out: &mut dyn Write) -> Result<(), CliErro
 
 fn best_depth_cmd(args: &BestDepthArgs, out: &mut dyn Write) -> Result<Status, CliError> {
     let f = forecaster(&args.env, &args.forecast)?;
-    let peer = Position {
-        x: 0.0,
-        y: 0.0,
-        depth: args.peer_depth,
-    };
-    let own = Position {
-        x: args.range,
-        y: 0.0,
-        depth: args.shallow,
-    };
+    let (peer, own) = (at(0.0, args.peer_depth), at(args.range, args.shallow));
     let d = f
         .best_depth(&own, &peer, (args.shallow, args.deep), args.step, None)
         .map_err(setup)?;
@@ -700,21 +697,25 @@ fn draw_tl(path: &Path, panels: &[(&TlField, &str)], file: &EnvFile) -> Result<(
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 
-fn draw_tl_panel(
-    area: &Area,
-    f: &TlField,
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A range (km) by depth (m, down) chart over `r` and `z` (m) with its axes.
+fn depth_chart<'a, 'b>(
+    area: &'a Area<'b>,
     title: &str,
-    file: &EnvFile,
-    (lo, hi): (f64, f64),
-) -> Result<(), CliError> {
-    let (r0, r1) = (f.ranges[0], f.ranges[f.ranges.len() - 1]);
-    let (z0, z1) = (f.depths[0], f.depths[f.depths.len() - 1]);
+    r: (f64, f64),
+    z: (f64, f64),
+) -> Result<Chart<'a, 'b>, CliError> {
     let mut chart = ChartBuilder::on(area)
         .caption(title, (FONT, 18))
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(55)
-        .build_cartesian_2d(r0 / 1000.0..r1 / 1000.0, -z1..-z0)
+        .build_cartesian_2d(r.0 / 1000.0..r.1 / 1000.0, -z.1..-z.0)
         .map_err(draw_error)?;
     chart
         .configure_mesh()
@@ -726,6 +727,19 @@ fn draw_tl_panel(
         .axis_desc_style((FONT, 14))
         .draw()
         .map_err(draw_error)?;
+    Ok(chart)
+}
+
+fn draw_tl_panel(
+    area: &Area,
+    f: &TlField,
+    title: &str,
+    file: &EnvFile,
+    (lo, hi): (f64, f64),
+) -> Result<(), CliError> {
+    let (r0, r1) = (f.ranges[0], f.ranges[f.ranges.len() - 1]);
+    let (z0, z1) = (f.depths[0], f.depths[f.depths.len() - 1]);
+    let mut chart = depth_chart(area, title, (r0, r1), (z0, z1))?;
     let (xs, ys) = chart.plotting_area().get_pixel_range();
     let spec = chart.as_coord_spec().clone();
     for px in xs.clone() {
@@ -792,23 +806,7 @@ fn draw_rays(path: &Path, rays: &[RayPath], file: &EnvFile, title: &str) -> Resu
         .fold(0.0, f64::min);
     let z1 = file.environment.profile_bottom();
     let z0 = file.environment.surface_depth();
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FONT, 18))
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(55)
-        .build_cartesian_2d(r0 / 1000.0..r1 / 1000.0, -z1..-z0)
-        .map_err(draw_error)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .x_desc("Range (km)")
-        .y_desc("Depth (m)")
-        .y_label_formatter(&depth_label)
-        .label_style((FONT, 13))
-        .axis_desc_style((FONT, 14))
-        .draw()
-        .map_err(draw_error)?;
+    let mut chart = depth_chart(&root, title, (r0, r1), (z0, z1))?;
     for ray in rays {
         let colour = match (ray.top_bounces > 0, ray.bottom_bounces > 0) {
             (true, true) => BLACK,

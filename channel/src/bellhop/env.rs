@@ -445,7 +445,7 @@ pub(super) fn read_env(
         _ => VolumeAttenuation::None,
     };
     let mut layer = Layer::default();
-    let mut surface = read_half_space(&mut r, top.bc, &mut layer, "top half-space")?;
+    let surface = read_half_space(&mut r, top.bc, &mut layer, "top half-space")?;
     let head = r.read_numbers(3, "number of SSP points, roughness, bottom depth")?;
     if head.len() < 3 {
         return Err(r.error(
@@ -485,7 +485,7 @@ pub(super) fn read_env(
             ))
         }
     };
-    let mut bottom = read_half_space(&mut r, bot_bc, &mut layer, "bottom half-space")?;
+    let bottom = read_half_space(&mut r, bot_bc, &mut layer, "bottom half-space")?;
     let (zmin, zmax) = (profile[0].depth as f32, depth as f32);
     let clamp =
         |v: Vec<f32>| -> Vec<f64> { v.into_iter().map(|x| x.clamp(zmin, zmax) as f64).collect() };
@@ -521,31 +521,14 @@ pub(super) fn read_env(
         volume_attenuation,
     };
     let root = name.strip_suffix(".env").unwrap_or(name).to_string();
-    if top.range_dependent {
-        environment.ssp_grid = Some(read_ssp_grid(&root, companions, environment.profile.len())?);
-    }
-    if top.altimetry {
-        environment.altimetry = Some(read_boundary_file(&root, "ati", companions, |z| {
-            (z < zmin as f64).then(|| {
-                format!("the surface at {z} m rises above the profile's first depth {zmin} m")
-            })
-        })?);
-    }
-    if bathymetry_file {
-        environment.bathymetry = Some(read_boundary_file(&root, "bty", companions, |z| {
-            (z > zmax as f64).then(|| {
-                format!("the bottom at {z} m drops below the profile's last depth {zmax} m")
-            })
-        })?);
-    }
-    if let Boundary::Table(t) = &mut surface {
-        *t = read_reflection_file(&root, "trc", companions)?;
-    }
-    if let Boundary::Table(t) = &mut bottom {
-        *t = read_reflection_file(&root, "brc", companions)?;
-    }
-    environment.surface = surface;
-    environment.bottom = bottom;
+    let files = CompanionNeeds {
+        range_dependent: top.range_dependent,
+        altimetry: top.altimetry,
+        bathymetry: bathymetry_file,
+        zmin: zmin as f64,
+        zmax: zmax as f64,
+    };
+    attach_companions(&mut environment, surface, bottom, &root, &files, companions)?;
     let pattern = if run.pattern {
         Some(read_pattern_file(&root, companions)?)
     } else {
@@ -569,6 +552,54 @@ pub(super) fn read_env(
         run: run.kind,
         beams,
     })
+}
+
+/// Which companion files the `.env` asks for, and the water column.
+struct CompanionNeeds {
+    range_dependent: bool,
+    altimetry: bool,
+    bathymetry: bool,
+    zmin: f64,
+    zmax: f64,
+}
+
+/// Reads the companions `needs` names into `environment`, with its
+/// boundaries (`.trc`/`.brc` filling reflection tables).
+fn attach_companions(
+    environment: &mut Environment,
+    mut surface: Boundary,
+    mut bottom: Boundary,
+    root: &str,
+    needs: &CompanionNeeds,
+    companions: &mut Companions<'_>,
+) -> Result<(), ParseError> {
+    let (zmin, zmax) = (needs.zmin, needs.zmax);
+    if needs.range_dependent {
+        environment.ssp_grid = Some(read_ssp_grid(root, companions, environment.profile.len())?);
+    }
+    if needs.altimetry {
+        environment.altimetry = Some(read_boundary_file(root, "ati", companions, |z| {
+            (z < zmin).then(|| {
+                format!("the surface at {z} m rises above the profile's first depth {zmin} m")
+            })
+        })?);
+    }
+    if needs.bathymetry {
+        environment.bathymetry = Some(read_boundary_file(root, "bty", companions, |z| {
+            (z > zmax).then(|| {
+                format!("the bottom at {z} m drops below the profile's last depth {zmax} m")
+            })
+        })?);
+    }
+    if let Boundary::Table(t) = &mut surface {
+        *t = read_reflection_file(root, "trc", companions)?;
+    }
+    if let Boundary::Table(t) = &mut bottom {
+        *t = read_reflection_file(root, "brc", companions)?;
+    }
+    environment.surface = surface;
+    environment.bottom = bottom;
+    Ok(())
 }
 
 /// Opens companion `root.ext` through the caller.

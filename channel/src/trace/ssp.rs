@@ -115,35 +115,10 @@ impl Ssp {
         Ssp { z, c, rho, kind }
     }
 
-    /// Number of depth segments.
-    fn segments(&self) -> usize {
-        self.z.len() - 1
-    }
-
     /// Moves `seg.iz` to the segment holding depth `z`, the ray heading
-    /// down (`tz >= 0`) or up: a point on a node belongs to the segment the
-    /// ray is about to cross.
+    /// down (`tz >= 0`) or up.
     fn update_depth(&self, seg: &mut Segments, z: f64, tz: f64) {
-        let n = self.segments();
-        let zs = &self.z;
-        if seg.iz >= n {
-            seg.iz = n - 1;
-        }
-        if tz >= 0.0 {
-            while z < zs[seg.iz] && seg.iz > 0 {
-                seg.iz -= 1;
-            }
-            while z >= zs[seg.iz + 1] && seg.iz < n - 1 {
-                seg.iz += 1;
-            }
-        } else {
-            while z > zs[seg.iz + 1] && seg.iz < n - 1 {
-                seg.iz += 1;
-            }
-            while z <= zs[seg.iz] && seg.iz > 0 {
-                seg.iz -= 1;
-            }
-        }
+        update_segment(&self.z, &mut seg.iz, z, tz);
     }
 
     /// The range segment bounds for a range-dependent field (for the
@@ -152,28 +127,6 @@ impl Ssp {
         match &self.kind {
             Kind::Quad { ranges, .. } => Some((ranges[seg.ir], ranges[seg.ir + 1])),
             _ => None,
-        }
-    }
-
-    fn update_range(ranges: &[f64], seg: &mut Segments, r: f64, tr: f64) {
-        let n = ranges.len() - 1;
-        if seg.ir >= n {
-            seg.ir = n - 1;
-        }
-        if tr >= 0.0 {
-            while r < ranges[seg.ir] && seg.ir > 0 {
-                seg.ir -= 1;
-            }
-            while r >= ranges[seg.ir + 1] && seg.ir < n - 1 {
-                seg.ir += 1;
-            }
-        } else {
-            while r > ranges[seg.ir + 1] && seg.ir < n - 1 {
-                seg.ir += 1;
-            }
-            while r <= ranges[seg.ir] && seg.ir > 0 {
-                seg.ir -= 1;
-            }
         }
     }
 
@@ -215,7 +168,7 @@ impl Ssp {
                 v.czz = czz.re;
             }
             Kind::Quad { ranges, c, cz } => {
-                Self::update_range(ranges, seg, x[0], t[0]);
+                update_segment(ranges, &mut seg.ir, x[0], t[0]);
                 let j = seg.ir;
                 let (cz1, cz2) = (cz[j][i], cz[j + 1][i]);
                 let s2 = x[1] - self.z[i];
@@ -239,6 +192,30 @@ impl Ssp {
         let mut seg = Segments::default();
         let z = z.clamp(self.z[0], self.z[self.z.len() - 1]);
         self.eval([r, z], [1.0, 0.0], &mut seg).c
+    }
+}
+
+/// Moves `i` to the interval of `nodes` holding `x` (interval `i` is
+/// `nodes[i]..nodes[i + 1]`), for a ray heading up the nodes (`t >= 0`) or
+/// down them: a point on a node belongs to the interval the ray is about
+/// to cross.
+fn update_segment(nodes: &[f64], i: &mut usize, x: f64, t: f64) {
+    let n = nodes.len() - 1;
+    *i = (*i).min(n - 1);
+    if t >= 0.0 {
+        while x < nodes[*i] && *i > 0 {
+            *i -= 1;
+        }
+        while x >= nodes[*i + 1] && *i < n - 1 {
+            *i += 1;
+        }
+    } else {
+        while x > nodes[*i + 1] && *i < n - 1 {
+            *i += 1;
+        }
+        while x <= nodes[*i] && *i > 0 {
+            *i -= 1;
+        }
     }
 }
 
