@@ -25,6 +25,11 @@
 
 #![warn(missing_docs)]
 
+/// The crate's README.md, whose example runs as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
+
 pub mod absorption;
 pub mod arrivals;
 pub mod beams;
