@@ -258,3 +258,146 @@ fn a_rough_surface_loses_more_than_a_flat_one() {
         Boundary::Vacuum
     ));
 }
+
+/// Every prefix of every case's .env, and each with one byte replaced,
+/// reads to a value or an error, never a panic; so do cut and corrupted
+/// .shd and .arr files.
+#[test]
+fn truncated_and_garbled_files_never_panic() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bellhop");
+    let bty = "'L'\n2\n0.0 200.0\n4.0 20.0\n";
+    let companions = |ext: &str| -> Result<String, String> {
+        if ext == "bty" {
+            Ok(bty.to_string())
+        } else {
+            Err("none".into())
+        }
+    };
+    for case in ["pekeris", "munk", "summer", "wedge"] {
+        let text = std::fs::read_to_string(dir.join(format!("{case}.env"))).unwrap();
+        let bytes = text.as_bytes();
+        for cut in (0..bytes.len()).step_by(3) {
+            let t = String::from_utf8_lossy(&bytes[..cut]);
+            let _ = bellhop::read_env("cut.env", &t, &mut |e| companions(e));
+        }
+        for (i, junk) in (0..bytes.len())
+            .step_by(5)
+            .zip([b'/', b'x', b'\'', b'-', b'9', b' ', b'\n'].iter().cycle())
+        {
+            let mut b = bytes.to_vec();
+            b[i] = *junk;
+            let t = String::from_utf8_lossy(&b);
+            if let Ok(file) = bellhop::read_env("junk.env", &t, &mut |e| companions(e)) {
+                // What reads must run or be refused with an error.
+                if let (Some(mode), Ok(ch)) = (
+                    file.run.mode(),
+                    Channel::new(file.environment.clone(), file.frequency),
+                ) {
+                    let mut beams = file.beams.clone();
+                    beams.angles = Beams::fan(5, -10.0, 10.0);
+                    let _ = ch.tl_field(
+                        file.source_depths[0],
+                        &file.grid,
+                        mode,
+                        &beams,
+                        Threads::One,
+                        None,
+                    );
+                }
+            }
+        }
+    }
+    let field = {
+        let ch = Channel::new(
+            env(vec![
+                SspPoint::new(0.0, 1500.0),
+                SspPoint::new(100.0, 1500.0),
+            ]),
+            1000.0,
+        )
+        .unwrap();
+        let grid = Grid {
+            depths: vec![10.0, 20.0],
+            ranges: vec![100.0, 200.0, 300.0],
+        };
+        let beams = Beams::new(21, -20.0, 20.0, 100.0, 300.0);
+        ch.tl_field(50.0, &grid, RunMode::Coherent, &beams, Threads::One, None)
+            .unwrap()
+    };
+    let shd = bellhop::write_shd("t", 1000.0, std::slice::from_ref(&field));
+    assert_eq!(
+        bellhop::read_shd("t.shd", &shd)
+            .unwrap()
+            .field(0)
+            .unwrap()
+            .depths,
+        field.depths
+    );
+    for cut in (0..shd.len()).step_by(13) {
+        // The last record's padding may go; anything shorter is an error.
+        let last_data = shd.len() - 41 * 4 + 2 * 3 * 4;
+        let read = bellhop::read_shd("t.shd", &shd[..cut]);
+        assert_eq!(read.is_err(), cut < last_data, "cut at {cut}");
+    }
+    for i in (0..200).step_by(3) {
+        let mut b = shd.clone();
+        b[i] ^= 0x5a;
+        let _ = bellhop::read_shd("t.shd", &b);
+    }
+}
+
+#[test]
+fn arrivals_round_trip_through_the_arr_file_and_cut_files_are_errors() {
+    let ch = Channel::new(
+        env(vec![
+            SspPoint::new(0.0, 1500.0),
+            SspPoint::new(100.0, 1500.0),
+        ]),
+        1000.0,
+    )
+    .unwrap();
+    let grid = Grid {
+        depths: vec![10.0, 60.0],
+        ranges: vec![500.0, 1500.0],
+    };
+    let beams = Beams::new(101, -30.0, 30.0, 100.0, 1500.0);
+    let field = ch
+        .arrivals(50.0, &grid, &beams, Threads::One, None)
+        .unwrap();
+    assert!(
+        field.at(0, 0).len() >= 2,
+        "direct and surface-reflected paths"
+    );
+    let text = bellhop::write_arr(1000.0, std::slice::from_ref(&field));
+    let back = bellhop::read_arr("t.arr", &text).unwrap();
+    let a = &back.fields[0];
+    assert_eq!(
+        (a.depths.clone(), a.ranges.clone()),
+        (grid.depths.clone(), grid.ranges.clone())
+    );
+    for (x, y) in a
+        .arrivals
+        .iter()
+        .flatten()
+        .zip(field.arrivals.iter().flatten())
+    {
+        assert!(
+            (x.delay - y.delay).abs() < 1e-9
+                && (x.amplitude - y.amplitude).abs() < 1e-9 * y.amplitude.max(1.0)
+        );
+    }
+    // The direct path at 500 m from 50 m to 10 m: 501.6 m at 1500 m/s.
+    let direct = field.first_delay(0, 0).unwrap();
+    assert!(
+        (direct - (500f64.powi(2) + 40f64.powi(2)).sqrt() / 1500.0).abs() < 1e-4,
+        "{direct}"
+    );
+    let lines: Vec<&str> = text.lines().collect();
+    for n in 0..lines.len() - 1 {
+        let cut = lines[..n].join("\n");
+        assert!(
+            bellhop::read_arr("t.arr", &cut).is_err(),
+            "cut after {n} lines"
+        );
+    }
+}
