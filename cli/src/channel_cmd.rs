@@ -158,7 +158,8 @@ pub struct ForecastArgs {
 /// Options of `goby channel link`.
 #[derive(Debug, Args)]
 pub struct LinkArgs {
-    /// The environment (a BELLHOP .env file; its receivers are ignored).
+    /// The environment (a BELLHOP .env file; its receivers and frequency
+    /// are ignored: the modem's carrier is used).
     pub env: PathBuf,
     /// Source depth (m).
     #[arg(long)]
@@ -177,7 +178,8 @@ pub struct LinkArgs {
 /// Options of `goby channel best-depth`.
 #[derive(Debug, Args)]
 pub struct BestDepthArgs {
-    /// The environment (a BELLHOP .env file).
+    /// The environment (a BELLHOP .env file; its receivers and frequency
+    /// are ignored: the modem's carrier is used).
     pub env: PathBuf,
     /// The peer's depth (m).
     #[arg(long)]
