@@ -305,9 +305,10 @@ impl Channel {
                     let cell = &mut u[h.iz * nr + h.ir];
                     match mode {
                         RunMode::Coherent => {
-                            *cell += h.amp
-                                * Complex64::new(0.0, -(omega * h.delay.re - h.phase)).exp()
-                                * (omega * h.delay.im).exp();
+                            *cell += Complex64::from_polar(
+                                h.amp * (omega * h.delay.im).exp(),
+                                h.phase - omega * h.delay.re,
+                            );
                         }
                         _ => {
                             let a = h.cnst * (omega * h.delay.im).exp();
