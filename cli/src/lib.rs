@@ -60,6 +60,7 @@
 mod address;
 pub mod amac_cmd;
 mod byte_text;
+pub mod channel_cmd;
 pub mod console;
 pub mod dccl_cmd;
 pub mod dccl_tool;
@@ -146,6 +147,9 @@ pub enum GobyCommand {
     /// Files between nodes through gobyd: send, get (with their progress), list the transfers.
     #[command(subcommand)]
     File(file_cmd::FileCommand),
+    /// The acoustic channel: BELLHOP environments (TL, rays, arrivals), sound speed from CTD casts, link forecasts and the best depth.
+    #[command(subcommand)]
+    Channel(channel_cmd::ChannelCommand),
     /// Print a shell completion script for goby.
     Completions(generate_cmd::CompletionsArgs),
     /// Write goby's manual pages (goby.1 and one per subcommand) into a directory.
@@ -243,6 +247,7 @@ pub fn run_goby(
         GobyCommand::Console(args) => console::run(&args, stdout),
         GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
         GobyCommand::File(cmd) => file_cmd::run(&cmd, stdout),
+        GobyCommand::Channel(cmd) => channel_cmd::run(&cmd, stdout),
         GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
         GobyCommand::Man(args) => generate_cmd::man(&args, stdout),
     };

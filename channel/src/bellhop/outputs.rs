@@ -1,0 +1,351 @@
+//! BELLHOP's outputs: the `.shd` pressure field (Fortran direct-access
+//! records of 4-byte words) and the ASCII `.arr` arrivals file.
+
+use num_complex::Complex64;
+
+use super::records::Records;
+use crate::arrivals::{Arrival, ArrivalField};
+use crate::error::ParseError;
+use crate::field::TlField;
+
+/// A `.shd` file: the complex pressure for each source depth on the
+/// receiver grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShdFile {
+    /// Title (trimmed).
+    pub title: String,
+    /// Plot type (`rectilin`, `irregular`).
+    pub plot_type: String,
+    /// Frequency (Hz).
+    pub frequency: f64,
+    /// Source depths (m).
+    pub source_depths: Vec<f64>,
+    /// Receiver depths (m).
+    pub depths: Vec<f64>,
+    /// Receiver ranges (m).
+    pub ranges: Vec<f64>,
+    /// One field per source depth: `pressure[source][iz * ranges + ir]`.
+    pub pressure: Vec<Vec<Complex64>>,
+}
+
+impl ShdFile {
+    /// The field of source index `is` as a [`TlField`].
+    pub fn field(&self, is: usize) -> Option<TlField> {
+        Some(TlField {
+            source_depth: *self.source_depths.get(is)?,
+            depths: self.depths.clone(),
+            ranges: self.ranges.clone(),
+            pressure: self.pressure.get(is)?.clone(),
+        })
+    }
+}
+
+fn shd_error(name: &str, field: &str, message: impl Into<String>) -> ParseError {
+    ParseError {
+        file: name.to_string(),
+        line: 0,
+        field: field.to_string(),
+        message: message.into(),
+    }
+}
+
+struct Words<'a> {
+    name: &'a str,
+    bytes: &'a [u8],
+    recl: usize,
+}
+
+impl Words<'_> {
+    /// Word `w` (0-based) of record `rec` (0-based).
+    fn word(&self, rec: usize, w: usize, field: &str) -> Result<[u8; 4], ParseError> {
+        let at = (rec * self.recl + w) * 4;
+        self.bytes
+            .get(at..at + 4)
+            .and_then(|b| b.try_into().ok())
+            .ok_or_else(|| {
+                shd_error(
+                    self.name,
+                    field,
+                    format!(
+                        "the file ends at byte {} (record {})",
+                        self.bytes.len(),
+                        rec + 1
+                    ),
+                )
+            })
+    }
+
+    fn i32(&self, rec: usize, w: usize, field: &str) -> Result<i32, ParseError> {
+        Ok(i32::from_le_bytes(self.word(rec, w, field)?))
+    }
+
+    fn f32(&self, rec: usize, w: usize, field: &str) -> Result<f32, ParseError> {
+        Ok(f32::from_le_bytes(self.word(rec, w, field)?))
+    }
+
+    fn count(&self, rec: usize, w: usize, field: &str) -> Result<usize, ParseError> {
+        let n = self.i32(rec, w, field)?;
+        if n < 0 || n as usize > self.recl.max(1) * 2 + 1_000_000 {
+            return Err(shd_error(
+                self.name,
+                field,
+                format!("{n} is not a plausible count"),
+            ));
+        }
+        Ok(n as usize)
+    }
+
+    fn text(&self, rec: usize, from: usize, len: usize, field: &str) -> Result<String, ParseError> {
+        let at = rec * self.recl * 4 + from;
+        let b = self
+            .bytes
+            .get(at..at + len)
+            .ok_or_else(|| shd_error(self.name, field, "the file ends in the header"))?;
+        Ok(String::from_utf8_lossy(b).trim().to_string())
+    }
+
+    fn floats(&self, rec: usize, n: usize, field: &str) -> Result<Vec<f64>, ParseError> {
+        (0..n)
+            .map(|i| self.f32(rec, i, field).map(f64::from))
+            .collect()
+    }
+}
+
+/// Reads a `.shd` file's bytes (`name` for errors).
+pub fn read_shd(name: &str, bytes: &[u8]) -> Result<ShdFile, ParseError> {
+    let first = bytes
+        .get(0..4)
+        .ok_or_else(|| shd_error(name, "record length", "the file is shorter than 4 bytes"))?;
+    let recl = i32::from_le_bytes([first[0], first[1], first[2], first[3]]);
+    if !(41..=100_000_000).contains(&recl) {
+        return Err(shd_error(
+            name,
+            "record length",
+            format!("{recl} words is not a .shd record length"),
+        ));
+    }
+    let w = Words {
+        name,
+        bytes,
+        recl: recl as usize,
+    };
+    let title = w.text(0, 4, 80, "title")?;
+    let plot_type = w.text(1, 0, 10, "plot type")?;
+    let nfreq = w.count(2, 0, "number of frequencies")?;
+    let ntheta = w.count(2, 1, "number of bearings")?;
+    let nsz = w.count(2, 4, "number of source depths")?;
+    let nrz = w.count(2, 5, "number of receiver depths")?;
+    let nrr = w.count(2, 6, "number of receiver ranges")?;
+    if 2 * nrr > w.recl || nrz > w.recl || nsz > w.recl {
+        return Err(shd_error(
+            name,
+            "sizes",
+            "the grid does not fit the record length",
+        ));
+    }
+    let frequency = f64::from(w.f32(2, 7, "frequency")?);
+    let source_depths = w.floats(7, nsz, "source depths")?;
+    let depths = w.floats(8, nrz, "receiver depths")?;
+    let ranges = w.floats(9, nrr, "receiver ranges")?;
+    let mut pressure = Vec::with_capacity(nsz);
+    let per_source = nrz;
+    let _ = (nfreq, ntheta);
+    for is in 0..nsz {
+        let mut p = Vec::with_capacity(nrz * nrr);
+        for iz in 0..nrz {
+            let rec = 10 + is * per_source + iz;
+            for ir in 0..nrr {
+                let re = w.f32(rec, 2 * ir, "pressure")?;
+                let im = w.f32(rec, 2 * ir + 1, "pressure")?;
+                p.push(Complex64::new(re.into(), im.into()));
+            }
+        }
+        pressure.push(p);
+    }
+    Ok(ShdFile {
+        title,
+        plot_type,
+        frequency,
+        source_depths,
+        depths,
+        ranges,
+        pressure,
+    })
+}
+
+/// Writes TL fields (one per source depth, on the same grid) as a `.shd`
+/// file BELLHOP's plotting tools read.
+pub fn write_shd(title: &str, frequency: f64, fields: &[TlField]) -> Vec<u8> {
+    let Some(first) = fields.first() else {
+        return Vec::new();
+    };
+    let (nrz, nrr, nsz) = (first.depths.len(), first.ranges.len(), fields.len());
+    let recl = 41usize.max(nsz).max(nrz).max(2 * nrr);
+    let records = 10 + nsz * nrz;
+    let mut out = vec![0u8; records * recl * 4];
+    let mut put = |rec: usize, word: usize, bytes: [u8; 4]| {
+        let at = (rec * recl + word) * 4;
+        out[at..at + 4].copy_from_slice(&bytes);
+    };
+    put(0, 0, (recl as i32).to_le_bytes());
+    let mut t = [b' '; 80];
+    for (d, s) in t.iter_mut().zip(title.bytes()) {
+        *d = s;
+    }
+    for (k, chunk) in t.chunks(4).enumerate() {
+        put(0, 1 + k, [chunk[0], chunk[1], chunk[2], chunk[3]]);
+    }
+    let plot = *b"rectilin    ";
+    for k in 0..3 {
+        put(
+            1,
+            k,
+            [
+                plot[4 * k],
+                plot[4 * k + 1],
+                plot[4 * k + 2],
+                plot[4 * k + 3],
+            ],
+        );
+    }
+    for (k, v) in [1, 1, 1, 1, nsz, nrz, nrr].iter().enumerate() {
+        put(2, k, (*v as i32).to_le_bytes());
+    }
+    put(2, 7, (frequency as f32).to_le_bytes());
+    put(2, 8, 0f32.to_le_bytes());
+    let f = frequency.to_le_bytes();
+    put(3, 0, [f[0], f[1], f[2], f[3]]);
+    put(3, 1, [f[4], f[5], f[6], f[7]]);
+    for (rec, values) in [
+        (
+            7usize,
+            fields.iter().map(|f| f.source_depth).collect::<Vec<_>>(),
+        ),
+        (8, first.depths.clone()),
+        (9, first.ranges.clone()),
+    ] {
+        for (k, v) in values.iter().enumerate() {
+            put(rec, k, (*v as f32).to_le_bytes());
+        }
+    }
+    for (is, field) in fields.iter().enumerate() {
+        for iz in 0..nrz {
+            for ir in 0..nrr {
+                let p = field.pressure_at(iz, ir);
+                put(10 + is * nrz + iz, 2 * ir, (p.re as f32).to_le_bytes());
+                put(10 + is * nrz + iz, 2 * ir + 1, (p.im as f32).to_le_bytes());
+            }
+        }
+    }
+    out
+}
+
+/// An ASCII `.arr` file: the arrivals for each source depth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrFile {
+    /// Frequency (Hz).
+    pub frequency: f64,
+    /// One field per source depth.
+    pub fields: Vec<ArrivalField>,
+}
+
+/// Reads an ASCII `.arr` file (`name` for errors).
+pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
+    let mut r = Records::new(name, text);
+    let kind = r.read_one("dimension")?;
+    if kind.text.trim() != "2D" {
+        return Err(r.error(
+            kind.line,
+            "dimension",
+            format!("'{}' files are not read (2D only)", kind.text),
+        ));
+    }
+    let frequency = r.read_number("frequency")?;
+    let mut axes = Vec::new();
+    for field in ["source depths", "receiver depths", "receiver ranges"] {
+        axes.push(r.read_counted(field)?);
+    }
+    let (sources, depths, ranges) = (axes[0].clone(), axes[1].clone(), axes[2].clone());
+    let mut fields = Vec::with_capacity(sources.len());
+    for &sd in &sources {
+        r.read_count("maximum number of arrivals", 0, 100_000_000)?;
+        let mut arrivals = Vec::with_capacity(depths.len() * ranges.len());
+        for _ in 0..depths.len() * ranges.len() {
+            let n = r.read_count("number of arrivals", 0, 100_000_000)?;
+            let mut list = Vec::with_capacity(n);
+            for k in 0..n {
+                let field = format!("arrival {}", k + 1);
+                let line = r.line();
+                let v = r.read_numbers(8, &field)?;
+                if v.len() < 8 {
+                    return Err(r.error(line, &field, "8 values expected"));
+                }
+                list.push(Arrival {
+                    amplitude: v[0].0,
+                    phase: v[1].0.to_radians(),
+                    delay: v[2].0,
+                    delay_imag: v[3].0,
+                    source_angle: v[4].0,
+                    receiver_angle: v[5].0,
+                    top_bounces: v[6].0.max(0.0) as u32,
+                    bottom_bounces: v[7].0.max(0.0) as u32,
+                });
+            }
+            arrivals.push(list);
+        }
+        fields.push(ArrivalField {
+            source_depth: sd,
+            depths: depths.clone(),
+            ranges: ranges.clone(),
+            arrivals,
+        });
+    }
+    Ok(ArrFile { frequency, fields })
+}
+
+/// Writes arrival fields (one per source depth, same grid) as an ASCII
+/// `.arr` file.
+pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let Some(first) = fields.first() else {
+        return s;
+    };
+    let list = |v: &[f64]| {
+        let mut l = format!("{}", v.len());
+        for x in v {
+            let _ = write!(l, " {x}");
+        }
+        l
+    };
+    let sd: Vec<f64> = fields.iter().map(|f| f.source_depth).collect();
+    let _ = writeln!(
+        s,
+        "'2D'\n{frequency}\n{}\n{}\n{}",
+        list(&sd),
+        list(&first.depths),
+        list(&first.ranges)
+    );
+    for f in fields {
+        let max = f.arrivals.iter().map(Vec::len).max().unwrap_or(0);
+        let _ = writeln!(s, "{max}");
+        for a in &f.arrivals {
+            let _ = writeln!(s, "{}", a.len());
+            for x in a {
+                let _ = writeln!(
+                    s,
+                    "{:e} {} {:e} {:e} {} {} {} {}",
+                    x.amplitude,
+                    x.phase.to_degrees(),
+                    x.delay,
+                    x.delay_imag,
+                    x.source_angle,
+                    x.receiver_angle,
+                    x.top_bounces,
+                    x.bottom_bounces
+                );
+            }
+        }
+    }
+    s
+}

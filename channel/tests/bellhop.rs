@@ -1,0 +1,420 @@
+//! Our channel model against BELLHOP on four cases (Pekeris waveguide,
+//! Munk deep water, a GLINT10-like summer profile, an upslope wedge):
+//! incoherent TL within 3 dB at ≥ 90 % of the grid points where BELLHOP's
+//! TL is under 100 dB, coherent within 6 dB at ≥ 80 %, first-arrival
+//! delays within 1 ms.
+//!
+//! `committed_references` compares with the references under
+//! `tests/data/bellhop/` (BELLHOP's outputs in compact form, made by
+//! `regenerate_references`). `live_bellhop` runs `bellhop.exe` itself when
+//! it is found (`BELLHOP_EXE`, or `/opt/bellhop/bellhop.exe`) and says that
+//! it skipped otherwise.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use goby_channel::bellhop::{self, EnvFile, RunKind};
+use goby_channel::{ArrivalField, Channel, Grid, RunMode, Threads, TlField};
+
+const CASES: [&str; 4] = ["pekeris", "munk", "summer", "wedge"];
+
+fn data_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bellhop")
+}
+
+fn load(dir: &Path, case: &str) -> EnvFile {
+    let name = format!("{case}.env");
+    let text = std::fs::read_to_string(dir.join(&name)).unwrap();
+    bellhop::read_env(&name, &text, &mut |ext| {
+        std::fs::read_to_string(dir.join(format!("{case}.{ext}"))).map_err(|e| e.to_string())
+    })
+    .unwrap()
+}
+
+/// The arrivals grid: 11 depths and 20 ranges over the TL grid's extent.
+fn arrivals_grid(env: &EnvFile) -> Grid {
+    let d = &env.grid.depths;
+    let r = &env.grid.ranges;
+    let (d0, d1) = (d[0], d[d.len() - 1]);
+    let r1 = r[r.len() - 1];
+    Grid {
+        depths: (0..11)
+            .map(|i| d0 + (d1 - d0) * (0.05 + 0.9 * i as f64 / 10.0))
+            .collect(),
+        ranges: (1..=20).map(|i| r1 * i as f64 / 20.0).collect(),
+    }
+}
+
+fn variant(env: &EnvFile, run: RunKind) -> EnvFile {
+    let mut v = env.clone();
+    v.run = run;
+    if matches!(run, RunKind::Arrivals) {
+        v.grid = arrivals_grid(env);
+    }
+    v
+}
+
+fn ours_tl(env: &EnvFile, mode: RunMode) -> TlField {
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    ch.tl_field(
+        env.source_depths[0],
+        &env.grid,
+        mode,
+        &env.beams,
+        Threads::All,
+        None,
+    )
+    .unwrap()
+}
+
+fn ours_arrivals(env: &EnvFile) -> ArrivalField {
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let grid = arrivals_grid(env);
+    ch.arrivals(env.source_depths[0], &grid, &env.beams, Threads::All, None)
+        .unwrap()
+}
+
+/// Compact text form of a TL field: depths, ranges, then one row of dB
+/// (one decimal, `-` where nothing arrives) per depth.
+fn tl_text(f: &TlField) -> String {
+    let mut s = String::new();
+    let join = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let _ = writeln!(s, "{}\n{}", join(&f.depths), join(&f.ranges));
+    for row in f.tl_rows() {
+        let cells: Vec<String> = row
+            .iter()
+            .map(|v| v.map_or("-".to_string(), |x| format!("{x:.1}")))
+            .collect();
+        let _ = writeln!(s, "{}", cells.join(" "));
+    }
+    s
+}
+
+fn parse_tl_text(text: &str) -> Vec<Vec<Option<f64>>> {
+    text.lines()
+        .skip(2)
+        .map(|l| l.split(' ').map(|c| c.parse::<f64>().ok()).collect())
+        .collect()
+}
+
+/// Compact text form of first-arrival delays: one row per depth, seconds.
+fn delays_text(a: &ArrivalField) -> String {
+    let mut s = String::new();
+    for iz in 0..a.depths.len() {
+        let row: Vec<String> = (0..a.ranges.len())
+            .map(|ir| {
+                a.first_delay(iz, ir)
+                    .map_or("-".into(), |d| format!("{d:.7}"))
+            })
+            .collect();
+        let _ = writeln!(s, "{}", row.join(" "));
+    }
+    s
+}
+
+fn parse_delays(text: &str) -> Vec<Vec<Option<f64>>> {
+    text.lines()
+        .map(|l| l.split(' ').map(|c| c.parse::<f64>().ok()).collect())
+        .collect()
+}
+
+/// Share of the points where the reference is under 100 dB at which ours
+/// is within `tol` dB (a point ours misses counts as outside).
+fn tl_agreement(ours: &TlField, reference: &[Vec<Option<f64>>], tol: f64) -> (f64, usize, f64) {
+    let mut diffs = Vec::new();
+    for (iz, row) in reference.iter().enumerate() {
+        for (ir, r) in row.iter().enumerate() {
+            let Some(r) = r.filter(|r| *r < 100.0) else {
+                continue;
+            };
+            diffs.push(ours.tl(iz, ir).map_or(f64::INFINITY, |o| (o - r).abs()));
+        }
+    }
+    let n = diffs.len();
+    let ok = diffs.iter().filter(|d| **d <= tol).count();
+    diffs.sort_by(f64::total_cmp);
+    let p95 = diffs.get(n * 95 / 100).copied().unwrap_or(0.0);
+    (ok as f64 / n.max(1) as f64, n, p95)
+}
+
+/// Largest first-arrival delay difference (s) and receivers where one side
+/// has arrivals and the other not.
+fn delay_agreement(ours: &ArrivalField, reference: &[Vec<Option<f64>>]) -> (f64, usize, usize) {
+    let mut worst: f64 = 0.0;
+    let mut mismatched = 0;
+    let mut n = 0;
+    for (iz, row) in reference.iter().enumerate() {
+        for (ir, r) in row.iter().enumerate() {
+            match (ours.first_delay(iz, ir), r) {
+                (Some(o), Some(r)) => {
+                    n += 1;
+                    worst = worst.max((o - r).abs());
+                }
+                (None, None) => {}
+                _ => mismatched += 1,
+            }
+        }
+    }
+    (worst, n, mismatched)
+}
+
+struct Verdict {
+    line: String,
+    pass: bool,
+}
+
+fn judge(case: &str, ours: [(&TlField, &str); 2], arrivals: (&ArrivalField, &str)) -> Verdict {
+    let (inc, inc_n, inc_p95) = tl_agreement(ours[0].0, &parse_tl_text(ours[0].1), 3.0);
+    let (coh, coh_n, coh_p95) = tl_agreement(ours[1].0, &parse_tl_text(ours[1].1), 6.0);
+    let (worst, n, mismatched) = delay_agreement(arrivals.0, &parse_delays(arrivals.1));
+    let pass = inc >= 0.9 && coh >= 0.8 && worst <= 1e-3 && mismatched * 20 <= n.max(1);
+    Verdict {
+        line: format!(
+            "{case:8} incoherent within 3 dB: {:5.1} % of {inc_n} points (95th percentile |diff| {inc_p95:.2} dB); coherent within 6 dB: {:5.1} % of {coh_n} ({coh_p95:.2} dB); first arrivals: worst {:.3} ms over {n} receivers, {mismatched} found by one side only",
+            100.0 * inc,
+            100.0 * coh,
+            1e3 * worst
+        ),
+        pass,
+    }
+}
+
+fn run_case_against(case: &str, refs: &dyn Fn(&str) -> [String; 3]) -> Verdict {
+    let env = load(&data_dir(), case);
+    let inc = ours_tl(&env, RunMode::Incoherent);
+    let coh = ours_tl(&env, RunMode::Coherent);
+    let arr = ours_arrivals(&env);
+    let [inc_ref, coh_ref, arr_ref] = refs(case);
+    judge(case, [(&inc, &inc_ref), (&coh, &coh_ref)], (&arr, &arr_ref))
+}
+
+fn report(verdicts: Vec<Verdict>) {
+    for v in &verdicts {
+        println!("{} {}", if v.pass { "PASS" } else { "FAIL" }, v.line);
+    }
+    assert!(
+        verdicts.iter().all(|v| v.pass),
+        "some cases are outside the bar"
+    );
+}
+
+#[test]
+fn committed_references() {
+    let dir = data_dir();
+    let refs = |case: &str| {
+        ["inc.tl", "coh.tl", "first-arrivals"].map(|ext| {
+            std::fs::read_to_string(dir.join(format!("{case}.{ext}")))
+                .unwrap_or_else(|e| panic!("{case}.{ext}: {e} (run regenerate_references)"))
+        })
+    };
+    report(CASES.iter().map(|c| run_case_against(c, &refs)).collect());
+}
+
+fn bellhop_exe() -> Option<PathBuf> {
+    std::env::var_os("BELLHOP_EXE")
+        .map(PathBuf::from)
+        .or_else(|| Some(PathBuf::from("/opt/bellhop/bellhop.exe")))
+        .filter(|p| p.is_file())
+}
+
+/// Runs bellhop.exe on `env` in a scratch folder; returns its `.shd` or
+/// `.arr` bytes.
+fn run_bellhop(exe: &Path, env: &EnvFile, tag: &str) -> Vec<u8> {
+    static RUNS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!(
+        "goby-channel-bellhop-{}-{n}-{tag}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (text, companions) = bellhop::write_env(env);
+    std::fs::write(dir.join("case.env"), text).unwrap();
+    for (ext, t) in companions {
+        std::fs::write(dir.join(format!("case.{ext}")), t).unwrap();
+    }
+    let status = std::process::Command::new(exe)
+        .arg("case")
+        .current_dir(&dir)
+        .status()
+        .unwrap();
+    assert!(status.success(), "bellhop.exe failed on {tag}");
+    let ext = if matches!(env.run, RunKind::Arrivals) {
+        "arr"
+    } else {
+        "shd"
+    };
+    let out = std::fs::read(dir.join(format!("case.{ext}"))).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    out
+}
+
+/// BELLHOP's outputs for a case in the committed compact forms.
+fn bellhop_refs(exe: &Path, case: &str) -> [String; 3] {
+    let env = load(&data_dir(), case);
+    let tl = |run: RunKind, tag: &str| {
+        let bytes = run_bellhop(exe, &variant(&env, run), &format!("{case}-{tag}"));
+        let shd = bellhop::read_shd("case.shd", &bytes).unwrap();
+        tl_text(&shd.field(0).unwrap())
+    };
+    let arr_bytes = run_bellhop(
+        exe,
+        &variant(&env, RunKind::Arrivals),
+        &format!("{case}-arr"),
+    );
+    let arr = bellhop::read_arr("case.arr", &String::from_utf8_lossy(&arr_bytes)).unwrap();
+    [
+        tl(RunKind::Incoherent, "inc"),
+        tl(RunKind::Coherent, "coh"),
+        delays_text(&arr.fields[0]),
+    ]
+}
+
+#[test]
+fn live_bellhop() {
+    let Some(exe) = bellhop_exe() else {
+        println!("SKIPPED live_bellhop: bellhop.exe not found (set BELLHOP_EXE or install it under /opt/bellhop)");
+        return;
+    };
+    report(
+        CASES
+            .iter()
+            .map(|c| run_case_against(c, &|c| bellhop_refs(&exe, c)))
+            .collect(),
+    );
+}
+
+#[test]
+#[ignore = "regenerates tests/data/bellhop/*.{inc.tl,coh.tl,first-arrivals} with bellhop.exe"]
+fn regenerate_references() {
+    let exe = bellhop_exe().expect("bellhop.exe (BELLHOP_EXE or /opt/bellhop/bellhop.exe)");
+    for case in CASES {
+        let [inc, coh, arr] = bellhop_refs(&exe, case);
+        let dir = data_dir();
+        std::fs::write(dir.join(format!("{case}.inc.tl")), inc).unwrap();
+        std::fs::write(dir.join(format!("{case}.coh.tl")), coh).unwrap();
+        std::fs::write(dir.join(format!("{case}.first-arrivals")), arr).unwrap();
+    }
+}
+
+/// One option variant: a base case, text substitutions in its .env, and
+/// companion files.
+struct Variant {
+    name: &'static str,
+    base: &'static str,
+    edits: &'static [(&'static str, &'static str)],
+    companions: &'static [(&'static str, &'static str)],
+}
+
+const VARIANTS: &[Variant] = &[
+    Variant { name: "N2-linear", base: "summer", edits: &[("'CVWT'", "'NVWT'")], companions: &[] },
+    Variant { name: "PCHIP", base: "summer", edits: &[("'CVWT'", "'PVWT'")], companions: &[] },
+    Variant { name: "Gaussian beams", base: "summer", edits: &[("'C'\t", "'CB'\t")], companions: &[] },
+    Variant { name: "semi-coherent", base: "summer", edits: &[("'C'\t", "'S'\t")], companions: &[] },
+    Variant { name: "line source", base: "summer", edits: &[("'C'\t", "'C  X'\t")], companions: &[] },
+    Variant {
+        name: "rigid bottom",
+        base: "wedge",
+        edits: &[("'A*' 0.0", "'R*' 0.0"), ("  200.0  1700.0 0.0 1.5 0.5 /\n", "")],
+        companions: &[("bty", "'L'\n2\n0.0 200.0\n4.0 20.0\n")],
+    },
+    Variant {
+        name: "curvilinear bathymetry",
+        base: "wedge",
+        edits: &[],
+        companions: &[("bty", "'C'\n5\n0 200\n1 180\n2 120\n3 60\n4 20\n")],
+    },
+    Variant {
+        name: "reflection table",
+        base: "wedge",
+        edits: &[("'A*' 0.0", "'F*' 0.0"), ("  200.0  1700.0 0.0 1.5 0.5 /\n", "")],
+        companions: &[
+            ("bty", "'L'\n2\n0.0 200.0\n4.0 20.0\n"),
+            ("brc", "4\n0 0.95 180\n20 0.9 170\n45 0.5 120\n90 0.3 100\n"),
+        ],
+    },
+    Variant {
+        name: "range-dependent SSP",
+        base: "pekeris",
+        edits: &[("'CVW'", "'QVW'")],
+        companions: &[("ssp", "3\n-1.0 2.5 6.0\n1500 1520 1490\n1500 1480 1510\n")],
+    },
+    Variant {
+        name: "altimetry",
+        base: "pekeris",
+        edits: &[("'CVW'", "'CVW *'")],
+        companions: &[("ati", "'L'\n4\n0 0\n1 5\n3 0\n5 8\n")],
+    },
+    Variant {
+        name: "elastic bottom",
+        base: "pekeris",
+        edits: &[("  100.0  1600.0 0.0 1.5 0.5 /", "  100.0  1800.0 400.0 2.0 0.2 0.5 /")],
+        companions: &[],
+    },
+    Variant {
+        name: "long-format bathymetry",
+        base: "pekeris",
+        edits: &[("'A' 0.0", "'A~' 0.0")],
+        companions: &[("bty", "'LL'\n3\n0 100 1700 0.0 1.2 0.5 0\n2.5 100 1550 0.0 1.2 0.5 0\n5 100 1550 0.0 1.2 0.5 0\n")],
+    },
+];
+
+fn load_variant(v: &Variant) -> EnvFile {
+    let dir = data_dir();
+    let mut text = std::fs::read_to_string(dir.join(format!("{}.env", v.base))).unwrap();
+    for (from, to) in v.edits {
+        assert!(text.contains(from), "{}: no '{from}'", v.name);
+        text = text.replace(from, to);
+    }
+    bellhop::read_env("variant.env", &text, &mut |ext| {
+        v.companions
+            .iter()
+            .find(|(e, _)| *e == ext)
+            .map(|(_, t)| t.to_string())
+            .ok_or(())
+            .or_else(|_| {
+                std::fs::read_to_string(dir.join(format!("{}.{ext}", v.base)))
+                    .map_err(|e| e.to_string())
+            })
+    })
+    .unwrap_or_else(|e| panic!("{}: {e}", v.name))
+}
+
+/// The options beyond the four cases (interpolations, beam types, run
+/// types, boundaries, range dependence), each against bellhop.exe.
+#[test]
+fn live_bellhop_options() {
+    let Some(exe) = bellhop_exe() else {
+        println!("SKIPPED live_bellhop_options: bellhop.exe not found (set BELLHOP_EXE or install it under /opt/bellhop)");
+        return;
+    };
+    let mut failed = Vec::new();
+    for v in VARIANTS {
+        let env = load_variant(v);
+        let mode = env.run.mode().unwrap();
+        let bytes = run_bellhop(&exe, &env, "option");
+        let theirs = bellhop::read_shd("case.shd", &bytes)
+            .unwrap()
+            .field(0)
+            .unwrap();
+        let ours = ours_tl(&env, mode);
+        let reference = parse_tl_text(&tl_text(&theirs));
+        let (share, n, p95) = tl_agreement(&ours, &reference, 1.0);
+        println!(
+            "{:24} within 1 dB: {:5.1} % of {n} points (95th percentile {p95:.2} dB)",
+            v.name,
+            100.0 * share
+        );
+        if share < 0.95 {
+            failed.push(v.name);
+        }
+    }
+    assert!(
+        failed.is_empty(),
+        "outside 1 dB at more than 5 % of points: {failed:?}"
+    );
+}
