@@ -16,6 +16,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::plot::GlyphText;
 use channel::bellhop::{self, EnvFile, RunKind};
 use channel::{
     Channel, CtdSample, DepthForecast, EstimatorConfig, ForecastConfig, Forecaster, Formula,
@@ -24,7 +25,6 @@ use channel::{
 };
 use clap::{Args, Subcommand, ValueEnum};
 use plotters::prelude::*;
-use plotters::style::{register_font, FontStyle};
 use serde_json::json;
 
 use crate::{CliError, Status};
@@ -601,18 +601,12 @@ fn best_depth_cmd(args: &BestDepthArgs, out: &mut dyn Write) -> Result<Status, C
 
 // ---- plots ------------------------------------------------------------
 
-const FONT: &str = "sans-serif";
+const FONT: &str = crate::plot::FONT_FAMILY;
 
-fn font() -> Result<(), CliError> {
-    static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    let ok = *DONE.get_or_init(|| {
-        register_font(FONT, FontStyle::Normal, epaint_default_fonts::UBUNTU_LIGHT).is_ok()
-    });
-    if ok {
-        Ok(())
-    } else {
-        Err(setup("the embedded chart font could not be loaded"))
-    }
+/// The bitmap at `path` (`w` by `h` pixels), its text drawn with the chart
+/// font's own glyph metrics as every chart of `goby` is.
+fn bitmap(path: &Path, (w, h): (u32, u32)) -> Result<GlyphText<'_>, CliError> {
+    crate::plot::glyph_backend(BitMapBackend::new(path, (w, h))).map_err(setup)
 }
 
 /// The jet colour map at `t` in 0..1 (blue to red).
@@ -657,7 +651,8 @@ fn nearest(v: &[f64], x: f64) -> usize {
 
 /// A depth axis label: the depth of the (negated) coordinate, no "-0".
 fn depth_label(v: &f64) -> String {
-    format!("{:.0}", (-v).max(0.0))
+    // `+ 0.0` turns the negative zero of the flipped axis into 0.
+    format!("{:.0}", (-v).max(0.0) + 0.0)
 }
 
 fn draw_error(e: impl std::fmt::Display) -> CliError {
@@ -683,9 +678,8 @@ fn boundary_lines(file: &EnvFile, r0: f64, r1: f64) -> Vec<Vec<(f64, f64)>> {
 
 /// Draws TL fields side by side (one panel each) into `path`.
 fn draw_tl(path: &Path, panels: &[(&TlField, &str)], file: &EnvFile) -> Result<(), CliError> {
-    font()?;
     let (w, h) = (760 * panels.len() as u32, 520);
-    let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
+    let root = bitmap(path, (w, h))?.into_drawing_area();
     root.fill(&WHITE).map_err(draw_error)?;
     let (lo, hi) = tl_limits(panels[0].0);
     for (k, (field, title)) in panels.iter().enumerate() {
@@ -697,11 +691,11 @@ fn draw_tl(path: &Path, panels: &[(&TlField, &str)], file: &EnvFile) -> Result<(
     root.present().map_err(draw_error)
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+type Area<'a> = DrawingArea<GlyphText<'a>, plotters::coord::Shift>;
 
 type Chart<'a, 'b> = ChartContext<
     'a,
-    BitMapBackend<'b>,
+    GlyphText<'b>,
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
 >;
 
@@ -794,8 +788,7 @@ fn draw_colour_bar(area: &Area, lo: f64, hi: f64) -> Result<(), CliError> {
 /// Draws rays as BELLHOP's plotray does: red without bounces, green with
 /// surface bounces only, blue with bottom bounces, black with both.
 fn draw_rays(path: &Path, rays: &[RayPath], file: &EnvFile, title: &str) -> Result<(), CliError> {
-    font()?;
-    let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
+    let root = bitmap(path, (900, 520))?.into_drawing_area();
     root.fill(&WHITE).map_err(draw_error)?;
     let r1 = rays
         .iter()
