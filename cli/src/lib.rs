@@ -78,6 +78,7 @@ pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
 mod stop;
+pub mod wireshark;
 
 use std::ffi::OsString;
 use std::fmt;
