@@ -76,11 +76,17 @@ fn log_dir_writes_json_lines_to_gobyd_log_as_well_as_standard_error() {
     for line in text.lines() {
         let v: serde_json::Value =
             serde_json::from_str(line).unwrap_or_else(|e| panic!("{line:?} is not JSON: {e}"));
-        assert!(v["timestamp"].is_string() && v["level"].is_string(), "{line}");
+        assert!(
+            v["timestamp"].is_string() && v["level"].is_string(),
+            "{line}"
+        );
         assert!(v["fields"]["message"].is_string(), "{line}");
     }
     // Standard error has the same lines.
-    let stderr: Vec<String> = BufReader::new(stderr).lines().map_while(Result::ok).collect();
+    let stderr: Vec<String> = BufReader::new(stderr)
+        .lines()
+        .map_while(Result::ok)
+        .collect();
     assert_eq!(stderr.len(), text.lines().count(), "{stderr:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -103,12 +109,15 @@ fn under_the_journal_lines_carry_their_priority_and_no_time() {
     let text = wait_for(&stderr_path, "signal received: shutting down");
     for line in text.lines() {
         assert!(
-            ["<3>", "<4>", "<6>", "<7>"].iter().any(|p| line.starts_with(p)),
+            ["<3>", "<4>", "<6>", "<7>"]
+                .iter()
+                .any(|p| line.starts_with(p)),
             "{line:?} has no priority"
         );
         // No time: the level follows the priority.
         assert!(
-            line[3..].trim_start().starts_with("INFO") || line[3..].trim_start().starts_with("WARN"),
+            line[3..].trim_start().starts_with("INFO")
+                || line[3..].trim_start().starts_with("WARN"),
             "{line:?}"
         );
     }
