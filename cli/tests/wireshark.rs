@@ -469,6 +469,51 @@ log {{ raw_log: false }}
             "a frame trailer: {all:?}"
         );
         assert!(expected.values().any(Vec::is_empty), "an ack: {expected:?}");
+
+        // The same frames, one a packet of link type USER0, as raw frames.
+        let frames: Vec<Vec<u8>> = payloads
+            .values()
+            .flat_map(|p| ModemTransmission::decode(p.as_slice()).unwrap().frame)
+            .collect();
+        let raw = dir.join("frames.pcap");
+        let mut pcap = Vec::new();
+        for word in [0xa1b2_c3d4u32, 0x0004_0002, 0, 0, 65535, 147] {
+            pcap.extend_from_slice(&word.to_le_bytes());
+        }
+        for frame in &frames {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_secs() as u32;
+            for word in [now, 0, frame.len() as u32, frame.len() as u32] {
+                pcap.extend_from_slice(&word.to_le_bytes());
+            }
+            pcap.extend_from_slice(frame);
+        }
+        std::fs::write(&raw, pcap).unwrap();
+        let user_lua = dir.join("dccl-user0.lua");
+        let proto = messages_proto();
+        let out = goby(&[
+            "dccl",
+            "wireshark",
+            "-f",
+            proto.to_str().unwrap(),
+            "--user-dlt",
+            "0",
+            "-o",
+            user_lua.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let shown: Vec<String> = dissected(&raw, &user_lua).into_values().flatten().collect();
+        let wanted: Vec<String> = expected.into_values().flatten().collect();
+        assert_eq!(
+            shown, wanted,
+            "the raw frames' messages are goby dccl decode's"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
