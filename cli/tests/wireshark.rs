@@ -169,6 +169,8 @@ log {{ raw_log: false }}
                 .spawn()
                 .expect("tshark starts");
             let stderr = child.stderr.take().unwrap();
+            // Stopped when dropped, should it never say it captures.
+            let capture = Capture(child);
             let (tx, rx) = std::sync::mpsc::channel();
             std::thread::spawn(move || {
                 for line in BufReader::new(stderr).lines().map_while(Result::ok) {
@@ -180,7 +182,7 @@ log {{ raw_log: false }}
                     .recv_timeout(Duration::from_secs(60))
                     .expect("tshark says it captures on lo (capturing needs root)");
                 if line.contains("Capturing on") {
-                    return Capture(child);
+                    return capture;
                 }
             }
         }
