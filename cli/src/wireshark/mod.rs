@@ -8,7 +8,7 @@
 //!
 //! The dissector is a schema written from the loaded types (each field's
 //! codec and its parameters, as DCCL's default codecs derive them from the
-//! `(dccl.field)` options: [`schema`]) followed by a fixed decoder
+//! `(dccl.field)` options: the module `schema`) followed by a fixed decoder
 //! (`dissector.lua`) implementing DCCL's bit-packed decoding: the default
 //! numeric codec with bounds and precision or resolution, bools, enums
 //! (packed or not), strings and bytes (versions 2 and 3 with their length
@@ -57,7 +57,7 @@ pub struct WiresharkArgs {
     /// "Decode As...": goby_udp).
     #[arg(long = "udp-port", value_name = "PORT")]
     pub udp_port: Vec<u16>,
-    /// Dissect packets of link type USER<N> (0-15; DLT 147+N) as raw DCCL
+    /// Dissect packets of link type USER N (0-15; DLT 147 + N) as raw DCCL
     /// frames, one frame a packet.
     #[arg(long = "user-dlt", value_name = "N", value_parser = clap::value_parser!(u8).range(0..=15))]
     pub user_dlt: Option<u8>,
