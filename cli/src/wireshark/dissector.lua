@@ -376,8 +376,9 @@ decode_part = function(part, r, value, ctx)
   end
 end
 
--- A decoded message as `goby dccl decode` prints it: fields in number order.
-local function render(type_name, value)
+-- The fields of a decoded message as `goby dccl decode` prints them, in
+-- number order, one "name: value" or "name { ... }" each.
+local function field_texts(type_name, value)
   local parts = {}
   for _, f in ipairs(SCHEMA.types[type_name]) do
     local v = value[f.n]
@@ -386,7 +387,7 @@ local function render(type_name, value)
       if not f.list then items = { v } end
       for _, item in ipairs(items) do
         if f.msg then
-          local inner = render(f.msg, item)
+          local inner = table.concat(field_texts(f.msg, item), " ")
           if inner ~= "" then inner = " " .. inner end
           parts[#parts + 1] = f.name .. " {" .. inner .. " }"
         else
@@ -395,7 +396,7 @@ local function render(type_name, value)
       end
     end
   end
-  return table.concat(parts, " ")
+  return parts
 end
 
 local dccl = Proto("dccl", "DCCL (goby-rs)")
@@ -408,24 +409,6 @@ local pf = {
   padding = ProtoField.bytes("dccl.padding", "Padding"),
 }
 dccl.fields = { pf.message, pf.type, pf.id, pf.field, pf.error, pf.padding }
-
--- The top-level fields of a decoded message, one tree item each.
-local function add_fields(tree, type_name, value)
-  for _, f in ipairs(SCHEMA.types[type_name]) do
-    local v = value[f.n]
-    if v ~= nil then
-      local items = v
-      if not f.list then items = { v } end
-      for _, item in ipairs(items) do
-        if f.msg then
-          tree:add(pf.field, f.name .. " { " .. render(f.msg, item) .. " }")
-        else
-          tree:add(pf.field, f.name .. ": " .. item)
-        end
-      end
-    end
-  end
-end
 
 -- The DCCL id at the start of bytes[at ..]: (id, bytes it takes).
 local function read_id(bytes, at, last)
@@ -484,12 +467,15 @@ local function dissect_frame(tvb, tree, ctx)
       tree:add(pf.error, tvb(at, last - at), len)
       break
     end
-    local text = render(m.name, value)
+    local fields = field_texts(m.name, value)
+    local text = table.concat(fields, " ")
     local sub = tree:add(dccl, tvb(at, len), m.name .. ": " .. text)
     sub:add(pf.type, tvb(at, len), m.name)
     sub:add(pf.id, tvb(at, len), id)
     sub:add(pf.message, tvb(at, len), text)
-    add_fields(sub, m.name, value)
+    for _, field in ipairs(fields) do
+      sub:add(pf.field, tvb(at, len), field)
+    end
     count = count + 1
     at = at + len
   end

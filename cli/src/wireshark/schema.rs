@@ -501,7 +501,7 @@ fn static_codec(field: &FieldDescriptor, opts: &DcclFieldOptions) -> Result<Code
             .find_map(|n| ok(&token[..n]))
     };
     let shown = match field.kind() {
-        Kind::String => Some(c_escape(token.as_bytes())),
+        Kind::String => Some(crate::byte_text::escape(token.as_bytes())),
         Kind::Double => prefix(&|s| s.parse::<f64>().ok().map(dccl::double_to_text)),
         Kind::Float => prefix(&|s| s.parse::<f32>().ok().map(dccl::float_to_text)),
         Kind::Int32
@@ -724,27 +724,6 @@ fn numeric(kind: &Kind, opts: &DcclFieldOptions, required: bool) -> Result<Numer
         None => opts.resolution(),
     };
     Numeric::new(kind.clone(), min, max, resolution, required)
-}
-
-/// `bytes` as protobuf's C escaping writes them, quoted.
-fn c_escape(bytes: &[u8]) -> String {
-    let mut out = String::from("\"");
-    for &b in bytes {
-        match b {
-            b'\n' => out.push_str("\\n"),
-            b'\r' => out.push_str("\\r"),
-            b'\t' => out.push_str("\\t"),
-            b'"' => out.push_str("\\\""),
-            b'\'' => out.push_str("\\'"),
-            b'\\' => out.push_str("\\\\"),
-            0x20..=0x7e => out.push(b as char),
-            _ => {
-                let _ = write!(out, "\\{b:03o}");
-            }
-        }
-    }
-    out.push('"');
-    out
 }
 
 /// A Lua string literal of `s` (any bytes).
