@@ -102,6 +102,9 @@ pub struct GobydCli {
     )]
     pub completions: Option<clap_complete::Shell>,
     /// Write the manual page gobyd.1 into DIR (created if missing) and exit.
+    ///
+    /// Called by another name (the Debian package's gobyd-rs), the page and
+    /// the completion scripts are for that name.
     #[arg(
         long,
         value_name = "DIR",
@@ -263,7 +266,13 @@ fn shutdown_signal() -> impl std::future::Future<Output = ()> {
 pub fn run_cli(cli: GobydCli) -> u8 {
     if let Some(shell) = cli.completions {
         let mut script = Vec::new();
-        clap_complete::generate(shell, &mut GobydCli::command(), "gobyd", &mut script);
+        let name = called_name();
+        clap_complete::generate(
+            shell,
+            &mut GobydCli::command().name(name),
+            name,
+            &mut script,
+        );
         return match std::io::stdout().lock().write_all(&script) {
             Ok(()) => EXIT_OK,
             Err(_) => EXIT_SETUP,
@@ -403,13 +412,27 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     })
 }
 
-/// Writes gobyd.1 into `dir` (created if missing); returns its path.
+/// The name the program was called by: `gobyd`, or `gobyd-rs` through the
+/// Debian package's link (see docs/vehicle.md), so that its completions
+/// and manual page are for the command the user types.
+fn called_name() -> &'static str {
+    let called = std::env::args_os()
+        .next()
+        .and_then(|a| Some(std::path::Path::new(&a).file_name()?.to_str()?.to_owned()));
+    match called {
+        Some(name) if !name.is_empty() => Box::leak(name.into_boxed_str()),
+        _ => "gobyd",
+    }
+}
+
+/// Writes the manual page (gobyd.1, or NAME.1 when called by another name)
+/// into `dir` (created if missing); returns its path.
 fn write_man_page(dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
     std::fs::create_dir_all(dir)
         .map_err(|e| format!("cannot create the directory {}: {e}", dir.display()))?;
     let failed =
         |e: std::io::Error| format!("cannot write the manual page into {}: {e}", dir.display());
-    let page = clap_mangen::Man::new(GobydCli::command())
+    let page = clap_mangen::Man::new(GobydCli::command().name(called_name()))
         .generate_to(dir)
         .map_err(failed)?;
     // Markdown code spans of the help texts in bold, as manual pages show
