@@ -146,7 +146,8 @@ else
         -m python/Cargo.toml -o "$work/wheels" > "$work/wheel.log" 2>&1; then
         wheel=$(ls "$work"/wheels/dccl-*.whl)
         case $(basename "$wheel") in
-            *-cp39-abi3-manylinux_2_17_aarch64.manylinux2014_aarch64.whl)
+            # Both tags, in the order maturin writes them.
+            *-cp39-abi3-*manylinux_2_17_aarch64*.whl)
                 pass "arm64 wheel built in $(( $(date +%s) - start )) s: $(basename "$wheel")" ;;
             *) fail "arm64 wheel tag: $(basename "$wheel")" ;;
         esac
