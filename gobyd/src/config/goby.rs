@@ -888,6 +888,30 @@ route_cfg { }
     }
 
     #[test]
+    fn gobys_text_log_becomes_the_log_file() {
+        for (common, dir, level) in [
+            ("log: true", Some("./"), None),
+            ("log: false log_path: \"/x\"", None, None),
+            (
+                "log_path: \"/x\" log_verbosity: DEBUG3",
+                Some("/x"),
+                Some("trace"),
+            ),
+        ] {
+            let text = format!("common {{ {common} }}\n");
+            let config = read(&text, "b.cfg", Layout::File).unwrap().config;
+            let log = config.log.unwrap_or_default();
+            assert_eq!(log.dir.as_deref(), dir, "{common}");
+            assert_eq!(log.file_level.as_deref(), level, "{common}");
+        }
+        let both = "log { dir: \"/y\" }\ncommon { log_path: \"/x\" }\n";
+        assert_eq!(
+            refusals(both, Layout::File),
+            ["b.moos:2:10: common.log_path"]
+        );
+    }
+
+    #[test]
     fn goby3_route_cfg_becomes_the_network_section() {
         let text = "modem_id: 2\nroute_cfg { route { hop: 1 hop: 2 hop: 3 } subnet_mask: 4294967040 default_gateway: 3 }\n";
         let read = read(text, "b.cfg", Layout::File).unwrap();
