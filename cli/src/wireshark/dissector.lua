@@ -555,7 +555,9 @@ function goby_udp.dissector(tvb, pinfo, tree)
         local len
         len, _, at = varint(bytes, at, last)
         if at + len > last then error("field " .. number .. " runs past the datagram", 0) end
-        if number == 14 then
+        if number == 14 and len == 0 then
+          root:add(uf.other, tvb(start, at - start), "an empty frame")
+        elseif number == 14 then
           local frame = tvb(at, len)
           local sub = root:add(uf.frame, frame)
           frames = frames + dissect_frame(frame:tvb(), sub, ctx)
