@@ -80,6 +80,18 @@ fn tshark_shows_every_captured_message_as_goby_dccl_decode_prints_it() {
     capture::run();
 }
 
+/// Datagrams that are not whole ModemTransmissions, and frames that are not
+/// DCCL, are shown as not decoded, with why; the dissector never fails.
+#[test]
+#[cfg_attr(
+    not(tshark),
+    ignore = "tshark is not installed: `bash .ci/tshark.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn garbage_is_shown_as_not_decoded() {
+    #[cfg(tshark)]
+    capture::garbage();
+}
+
 #[cfg(tshark)]
 mod capture {
     use super::*;
@@ -420,6 +432,88 @@ log {{ raw_log: false }}
             shown.insert(number, list);
         }
         shown
+    }
+
+    /// A pcap file of UDP datagrams (Ethernet, loopback) to `port`.
+    fn udp_pcap(payloads: &[&[u8]], port: u16) -> Vec<u8> {
+        let mut pcap = Vec::new();
+        for word in [0xa1b2_c3d4u32, 0x0004_0002, 0, 0, 65535, 1] {
+            pcap.extend_from_slice(&word.to_le_bytes());
+        }
+        for payload in payloads {
+            let mut packet = vec![0u8; 12];
+            packet.extend_from_slice(&[0x08, 0x00]);
+            let total = (28 + payload.len()) as u16;
+            packet.extend_from_slice(&[0x45, 0]);
+            packet.extend_from_slice(&total.to_be_bytes());
+            packet.extend_from_slice(&[0, 0, 0, 0, 64, 17, 0, 0, 127, 0, 0, 1, 127, 0, 0, 1]);
+            packet.extend_from_slice(&50000u16.to_be_bytes());
+            packet.extend_from_slice(&port.to_be_bytes());
+            packet.extend_from_slice(&(8 + payload.len() as u16).to_be_bytes());
+            packet.extend_from_slice(&[0, 0]);
+            packet.extend_from_slice(payload);
+            for word in [
+                1_800_000_000u32,
+                0,
+                packet.len() as u32,
+                packet.len() as u32,
+            ] {
+                pcap.extend_from_slice(&word.to_le_bytes());
+            }
+            pcap.extend_from_slice(&packet);
+        }
+        pcap
+    }
+
+    pub fn garbage() {
+        let dir = scratch("garbage");
+        let payloads: [&[u8]; 6] = [
+            b"\x08\x03\x72\x00",         // an empty frame
+            b"\x08",                     // a varint cut short
+            b"\x72\x05\x82\x01\x00",     // a frame longer than the datagram
+            b"\x72\x02\x2a\x01",         // a message cut short
+            b"\x72\x02\x7e\x00",         // an id of no message
+            b"\xff\xff\xff\xff\xff\xff", // not protobuf
+        ];
+        let pcap = dir.join("garbage.pcap");
+        std::fs::write(&pcap, udp_pcap(&payloads, 50001)).unwrap();
+        let lua = dir.join("dccl.lua");
+        let proto = messages_proto();
+        let out = goby(&[
+            "dccl",
+            "wireshark",
+            "-f",
+            proto.to_str().unwrap(),
+            "--udp-port",
+            "50001",
+            "-o",
+            lua.to_str().unwrap(),
+        ]);
+        assert!(out.status.success());
+        let out = Command::new(env!("GOBY_TSHARK_PATH"))
+            .arg("-X")
+            .arg(format!("lua_script:{}", lua.display()))
+            .arg("-r")
+            .arg(&pcap)
+            .arg("-V")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && !text.contains("Lua Error"),
+            "{text}"
+        );
+        for says in [
+            "an empty frame",
+            "a varint runs past the datagram",
+            "field 14 runs past the datagram",
+            "the message ends before its last field",
+            "DCCL id 63 is not one of the dissector's messages",
+        ] {
+            assert!(text.contains(says), "{says}: {text}");
+        }
+        assert_eq!(text.matches("Goby UDP driver").count(), 6, "{text}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     pub fn run() {
