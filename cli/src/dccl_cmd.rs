@@ -57,6 +57,8 @@ pub enum DcclCommand {
     Analyze(AnalyzeArgs),
     /// Time encoding and decoding of the messages read from standard input.
     Bench(BenchArgs),
+    /// Write a Wireshark dissector (Lua) of the messages of the files.
+    Wireshark(crate::wireshark::WiresharkArgs),
 }
 
 /// Where the message definitions come from.
@@ -273,6 +275,7 @@ pub fn run_command(
             analyze(&defs, &args.message, &job, stdout, stderr)
         }
         DcclCommand::Bench(args) => bench(args, stdin, stdout, stderr),
+        DcclCommand::Wireshark(args) => crate::wireshark::run(args, stdout, stderr),
     }
 }
 

@@ -14,6 +14,8 @@
 //! - `goby dccl analyze -f FILE.proto -m NAME` prints the size of each field;
 //! - `goby dccl bench -f FILE.proto -m NAME --repeat N` times encoding and
 //!   decoding in-process;
+//! - `goby dccl wireshark -f FILE.proto` writes a Wireshark dissector (Lua)
+//!   of the messages ([`wireshark`]);
 //! - `goby dccl -e|-d|-a|-p -f FILE.proto ...` takes the reference `dccl`
 //!   tool's flags and prints its output forms ([`dccl_tool`]).
 //!
@@ -79,6 +81,7 @@ pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
 mod stop;
+pub mod wireshark;
 
 use std::ffi::OsString;
 use std::fmt;
