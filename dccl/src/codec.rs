@@ -54,6 +54,9 @@ pub(crate) struct LoadedMessage {
     /// embedded messages in a repeated field, whose elements over
     /// `max_repeat` are not encoded.
     pub(crate) required_before: RequiredFields,
+    /// Whether a field has dynamic conditions (then the codecs get the
+    /// root message, and the wire form is not used).
+    pub(crate) has_conditions: bool,
 }
 
 /// The wire plans of a loaded type and its header and body codecs (the
@@ -560,9 +563,14 @@ impl Codec {
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
         let reads_clock = head.reads_clock() || body.reads_clock();
         let wire = WireEncoding::of(desc, &head, &body);
+        let has_conditions = [&head, &body]
+            .into_iter()
+            .any(|c| message_codec(c).is_some_and(|m| m.has_conditions()));
         let required = RequiredFields::of(desc, 0);
         let (required_on_the_way, required_before) =
             match (message_codec(&head), message_codec(&body)) {
+                // Conditions may leave fields out: all are checked first.
+                _ if has_conditions => (false, required.clone()),
                 (Some(h), Some(b)) => (true, required.not_visited(Some(&h), Some(&b))),
                 _ => (false, required.clone()),
             };
@@ -580,6 +588,7 @@ impl Codec {
             wire,
             required_on_the_way,
             required_before,
+            has_conditions,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -744,6 +753,16 @@ impl Codec {
             check_required().map_err(|e| e.into_encode(name))?;
         }
         let session = self.arithmetic_session(!dry_run);
+        let index = std::cell::Cell::new(0);
+        let dynamic = match msg {
+            Source::Dynamic(root) if loaded.has_conditions => {
+                Some(crate::conditions::EncodeScope {
+                    root,
+                    index: &index,
+                })
+            }
+            _ => None,
+        };
         let ctx = EncodeContext {
             strict: self.strict,
             dry_run,
@@ -751,6 +770,7 @@ impl Codec {
             changes,
             arithmetic: session.as_ref(),
             required_unchecked: loaded.required_on_the_way,
+            dynamic,
         };
         // Header and body are written straight after what `out` holds (the
         // writer starts on its byte boundary), then encrypted in place; on
@@ -991,6 +1011,7 @@ impl Codec {
             .into_decode(name));
         }
         let session = self.arithmetic_session(true);
+        let index = std::cell::Cell::new(0);
         let ctx = DecodeContext {
             now_secs: if loaded.reads_clock {
                 (self.clock)()
@@ -999,6 +1020,14 @@ impl Codec {
             },
             definition_hash: loaded.hash,
             arithmetic: session.as_ref(),
+            dynamic: loaded
+                .has_conditions
+                .then_some(crate::conditions::DecodeScope {
+                    parent: None,
+                    slot: None,
+                    depth: 0,
+                    index: &index,
+                }),
         };
         let decoded = self.decode_parts(loaded, bytes, &ctx);
         if let Some(session) = session {

@@ -42,6 +42,9 @@ pub struct EncodeContext<'a> {
     /// the message codec refuses one it finds unset (the codec then runs
     /// the check for the error to give).
     pub(crate) required_unchecked: bool,
+    /// For a message whose fields have dynamic conditions: the root
+    /// message and the index of the last repeated element coded.
+    pub(crate) dynamic: Option<crate::conditions::EncodeScope<'a>>,
 }
 
 impl EncodeContext<'_> {
@@ -112,6 +115,10 @@ pub struct DecodeContext<'a> {
     pub definition_hash: u64,
     /// The decoding codec's arithmetic models and adaptive state.
     pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
+    /// For a message whose fields have dynamic conditions: where the
+    /// message being decoded sits in the root, and the index of the last
+    /// repeated element decoded.
+    pub(crate) dynamic: Option<crate::conditions::DecodeScope<'a>>,
 }
 
 /// What a factory is told about the field whose codec it creates.

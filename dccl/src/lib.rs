@@ -81,6 +81,7 @@ mod bits;
 mod changes;
 mod codec;
 mod codecs;
+mod conditions;
 mod crypto;
 mod definition_hash;
 mod error;
