@@ -741,6 +741,18 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
+        self.encode_observed(loaded, msg, out, dry_run, changes, None)
+    }
+
+    fn encode_observed(
+        &self,
+        loaded: &LoadedMessage,
+        msg: Source<'_>,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+        outcomes: Option<&std::cell::RefCell<Vec<crate::ConditionOutcome>>>,
+    ) -> Result<()> {
         let name = loaded.descriptor.full_name();
         let check = |required: &RequiredFields| match msg {
             Source::Dynamic(m) => required.check(m),
@@ -759,6 +771,7 @@ impl Codec {
                 Some(crate::conditions::EncodeScope {
                     root,
                     index: &index,
+                    outcomes,
                 })
             }
             _ => None,
@@ -827,6 +840,28 @@ impl Codec {
             Source::Wire(wire, m) => wire.body.encode_fields_wire(out, m, ctx)?,
         }
         Ok(head_end)
+    }
+
+    /// The dynamic conditions (`(dccl.field).dynamic_conditions`) that
+    /// encoding `msg` evaluates, in the order it evaluates them, with what
+    /// each gives: whether a field is left out (`omit`), coded without its
+    /// "not present" value (`required`), and the bounds in force (`bounds`).
+    /// Empty for a type without conditions. Errors: those of
+    /// [`Codec::encode`] (a condition that fails names the message, the
+    /// field and the script).
+    pub fn condition_outcomes(&self, msg: &DynamicMessage) -> Result<Vec<crate::ConditionOutcome>> {
+        let loaded = self.get_by_descriptor(&msg.descriptor())?;
+        let log = std::cell::RefCell::new(Vec::new());
+        let mut out = Vec::new();
+        self.encode_observed(
+            loaded,
+            Source::Dynamic(msg),
+            &mut out,
+            true,
+            None,
+            Some(&log),
+        )?;
+        Ok(log.into_inner())
     }
 
     /// Encodes a message of the loaded type `full_name` given as protobuf

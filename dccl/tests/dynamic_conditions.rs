@@ -324,6 +324,147 @@ fn committed_reference_outputs_agree() {
     }
     tally.report("dynamic conditions, committed libdccl 4.2 outputs");
     assert!(tally.counts["encodings byte-identical"] >= 2000);
+    coverage(&ours, &inputs, &expected);
+}
+
+/// Every condition of the definitions, evaluated while encoding the inputs
+/// that libdccl encodes, gives both answers: a field left out and not,
+/// required and not, a value inside and outside its dynamic bounds.
+fn coverage(ours: &Ours, inputs: &[(String, String)], expected: &[String]) {
+    let mut seen: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    for ((ty, text), reply) in inputs.iter().zip(expected) {
+        if !reply.starts_with("ok ") {
+            continue;
+        }
+        let desc = ours.pool.get_message_by_name(ty).expect("type");
+        let msg = DynamicMessage::parse_text_format(desc, text).expect("parses");
+        for o in ours.plain.condition_outcomes(&msg).expect("evaluates") {
+            let answer = match o.condition {
+                "bounds" => o.result.rsplit(' ').next().unwrap_or("").to_string(),
+                _ => o.result.clone(),
+            };
+            let key = format!("{}.{} {}", o.message, o.field, o.condition);
+            *seen.entry(key).or_default().entry(answer).or_default() += 1;
+        }
+    }
+    println!("conditions evaluated while encoding, by answer:");
+    let both = |answers: &BTreeMap<String, usize>, a: &str, b: &str| {
+        answers.contains_key(a) && answers.contains_key(b)
+    };
+    let mut one_way = Vec::new();
+    for (key, answers) in &seen {
+        println!("  {key}: {answers:?}");
+        let field = key.rsplit_once(' ').map_or("", |(f, _)| f);
+        let both = match key.rsplit(' ').next() {
+            Some("bounds") => both(answers, "inside", "outside"),
+            // `only_if` (or `required_if` the opposite of `omit_if`) is
+            // asked "required?" only when the field is not left out: its
+            // two ways are those of "omit".
+            Some("required") if !answers.contains_key("false") => seen
+                .get(&format!("{field} omit"))
+                .is_some_and(|o| both(o, "true", "false")),
+            _ => both(answers, "true", "false"),
+        };
+        if !both {
+            one_way.push(key.clone());
+        }
+    }
+    assert!(seen.len() >= 25, "only {} conditions evaluated", seen.len());
+    assert!(
+        one_way.is_empty(),
+        "conditions seen one way only: {one_way:?}"
+    );
+}
+
+/// A definition with a condition written `script` on `a`, loaded.
+fn with_condition(kind: &str, script: &str) -> Result<Codec, dccl::Error> {
+    let source = format!(
+        r#"syntax = "proto2";
+           import "dccl/option_extensions.proto";
+           package probe;
+           message Probe {{
+             option (dccl.msg) = {{ id: 30 max_bytes: 32 codec_version: 4 }};
+             required int32 k = 1 [(dccl.field) = {{ min: 0 max: 20 }}];
+             optional int32 a = 2 [(dccl.field) = {{ min: 0 max: 200
+                 dynamic_conditions {{ {kind}: "{script}" }} }}];
+           }}"#
+    );
+    let pool = dccl::compile_sources(&[("probe.proto", source.as_str())]).expect("compiles");
+    let mut codec = Codec::new();
+    codec.load(&pool.get_message_by_name("probe.Probe").expect("type"))?;
+    Ok(codec)
+}
+
+#[test]
+fn a_condition_that_fails_is_an_error_naming_message_field_and_script() {
+    let codec = with_condition("omit_if", "this.missing + 1 > 2").expect("loads");
+    let desc = codec.descriptor("probe.Probe").expect("loaded");
+    let msg = DynamicMessage::parse_text_format(desc, "k: 1 a: 3").expect("parses");
+    let err = codec.encode(&msg).expect_err("fails").to_string();
+    for part in [
+        "probe.Probe",
+        "field a",
+        "omit_if",
+        "this.missing + 1 > 2",
+        "nil value",
+    ] {
+        assert!(err.contains(part), "{err}");
+    }
+    let err = codec.decode(&[60, 2]).expect_err("fails").to_string();
+    assert!(
+        err.contains("field a") && err.contains("this.missing"),
+        "{err}"
+    );
+    let codec = with_condition("max", "'many'").expect("loads");
+    let desc = codec.descriptor("probe.Probe").expect("loaded");
+    let msg = DynamicMessage::parse_text_format(desc, "k: 1 a: 3").expect("parses");
+    let err = codec.encode(&msg).expect_err("fails").to_string();
+    assert!(
+        err.contains("not a number") && err.contains("field a"),
+        "{err}"
+    );
+}
+
+#[test]
+fn scripts_outside_the_supported_language_are_refused_at_load_by_name() {
+    for (script, why) in [
+        ("for i=1,2 do end return true", "no loops"),
+        ("os.time() > 0", "'os' is not supported"),
+        ("x = 1 return x", "global 'x'"),
+        ("math.sin(this.k) > 0", "'math.sin' is not supported"),
+    ] {
+        let err = with_condition("only_if", script)
+            .expect_err(script)
+            .to_string();
+        assert!(
+            err.contains("probe.Probe") && err.contains("field a") && err.contains(why),
+            "{script}: {err}"
+        );
+    }
+}
+
+#[test]
+fn conditions_change_what_is_coded() {
+    let codec = with_condition("only_if", "this.k == 1").expect("loads");
+    let desc = codec.descriptor("probe.Probe").expect("loaded");
+    let encode = |text: &str| {
+        let msg = DynamicMessage::parse_text_format(desc.clone(), text).expect("parses");
+        codec.encode(&msg).expect("encodes")
+    };
+    // Left out (k != 1): `a` takes no bits; required (k == 1): no presence
+    // bit (both as libdccl 4.2 with Lua encodes them).
+    assert_eq!(encode("k: 2 a: 3"), vec![0x3c, 0x02]);
+    assert_eq!(encode("k: 1 a: 3"), vec![0x3c, 0x61, 0x00]);
+    let back = codec.decode(&encode("k: 2 a: 3")).expect("decodes");
+    assert_eq!(dccl::short_debug_string(&back), "k: 2");
+    let outcomes = codec
+        .condition_outcomes(&DynamicMessage::parse_text_format(desc.clone(), "k: 2 a: 3").unwrap())
+        .expect("evaluates");
+    assert_eq!(outcomes.len(), 1);
+    assert_eq!(
+        (outcomes[0].condition, outcomes[0].result.as_str()),
+        ("omit", "true")
+    );
 }
 
 // ----- the live comparison -----

@@ -33,7 +33,7 @@ pub(crate) use view::{Frame, Node, Slot};
 
 use std::cell::Cell;
 
-use prost_reflect::DynamicMessage;
+use prost_reflect::{DynamicMessage, FieldDescriptor};
 use protos::dccl::DcclFieldOptions;
 
 use crate::error::CodecError;
@@ -46,6 +46,44 @@ use crate::error::CodecError;
 pub(crate) struct EncodeScope<'a> {
     pub root: &'a DynamicMessage,
     pub index: &'a Cell<i64>,
+    /// Where each evaluation is recorded, when asked
+    /// ([`crate::Codec::condition_outcomes`]).
+    pub outcomes: Option<&'a std::cell::RefCell<Vec<ConditionOutcome>>>,
+}
+
+impl EncodeScope<'_> {
+    /// Records what a condition of `field` gave, when outcomes are collected.
+    pub fn record(
+        &self,
+        field: &FieldDescriptor,
+        condition: &'static str,
+        result: impl FnOnce() -> String,
+    ) {
+        if let Some(log) = self.outcomes {
+            log.borrow_mut().push(ConditionOutcome {
+                message: field.parent_message().full_name().to_string(),
+                field: field.name().to_string(),
+                condition,
+                result: result(),
+            });
+        }
+    }
+}
+
+/// What one evaluation of a field's dynamic conditions gave while a message
+/// was encoded (see [`crate::Codec::condition_outcomes`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConditionOutcome {
+    /// Full name of the message type holding the field.
+    pub message: String,
+    /// The field's name.
+    pub field: String,
+    /// `"omit"` (`omit_if`, or `only_if` false), `"required"` (`required_if`,
+    /// or `only_if` true) or `"bounds"` (`min`, `max`).
+    pub condition: &'static str,
+    /// `"true"` or `"false"`; for bounds, `[min, max]` in force and whether
+    /// the value is inside them (`inside`, `outside`, `unset`).
+    pub result: String,
 }
 
 /// What the conditions of a message being decoded see: the chain of the

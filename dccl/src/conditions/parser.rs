@@ -264,7 +264,13 @@ impl Parser {
                 self.next();
                 Ok(n)
             }
-            _ => Err(format!("<name> expected near {}", self.describe())),
+            Tok::Name(n) if matches!(&*n, "while" | "for" | "repeat" | "goto" | "break") => Err(
+                format!("'{n}' is not supported in DCCL conditions (no loops)"),
+            ),
+            Tok::Name(n) if &*n == "function" => {
+                Err("function definitions are not supported in DCCL conditions".into())
+            }
+            _ => Err(format!("unexpected symbol near {}", self.describe())),
         }
     }
 
@@ -655,7 +661,8 @@ mod tests {
             ("math.sin(1)", "'math.sin'"),
             ("function f() end", "function"),
             ("#{1,2}", "table constructors"),
-            ("this.a +", "expected"),
+            ("this.a +", "unexpected symbol"),
+            ("for i=1,2 do end", "no loops"),
             ("'abc", "unfinished string"),
             ("this.s:rep(2)", "'rep'"),
             ("return 1 2", "'<eof>' expected"),

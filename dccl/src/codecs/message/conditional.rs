@@ -114,12 +114,57 @@ impl DynamicField {
 fn chosen<'e, 'v>(
     f: &'e FieldEntry,
     d: Option<&'e DynamicField>,
+    scope: &EncodeScope<'_>,
+    env: impl FnOnce() -> Env<'v>,
+) -> Result<&'e FieldEntry, CodecError> {
+    let required = chosen_for_decode(f, d, env)?;
+    if d.is_some_and(|d| d.required.is_some()) {
+        let r = std::ptr::eq(required, f);
+        scope.record(&f.field, "required", || (!r).to_string());
+    }
+    Ok(required)
+}
+
+/// [`chosen`] while decoding (nothing recorded).
+fn chosen_for_decode<'e, 'v>(
+    f: &'e FieldEntry,
+    d: Option<&'e DynamicField>,
     env: impl FnOnce() -> Env<'v>,
 ) -> Result<&'e FieldEntry, CodecError> {
     match d.and_then(|d| d.required.as_ref().map(|r| (d, r))) {
         Some((d, r)) if d.conditions.required(&env())? => Ok(r),
         _ => Ok(f),
     }
+}
+
+/// Records the bounds in force and where the value falls.
+fn record_bounds(
+    scope: &EncodeScope<'_>,
+    f: &FieldEntry,
+    min: f64,
+    max: f64,
+    value: Option<&Value>,
+) {
+    scope.record(&f.field, "bounds", || {
+        let at = match value.and_then(number_of) {
+            None => "unset",
+            Some(v) if v >= min && v <= max => "inside",
+            Some(_) => "outside",
+        };
+        format!("[{min}, {max}] {at}")
+    });
+}
+
+fn number_of(v: &Value) -> Option<f64> {
+    Some(match v {
+        Value::I32(x) => f64::from(*x),
+        Value::I64(x) => *x as f64,
+        Value::U32(x) => f64::from(*x),
+        Value::U64(x) => *x as f64,
+        Value::F32(x) => f64::from(*x),
+        Value::F64(x) => *x,
+        _ => return None,
+    })
 }
 
 fn encode_env<'a>(scope: &EncodeScope<'a>, this: &'a DynamicMessage) -> Env<'a> {
@@ -167,7 +212,9 @@ impl MessageCodec {
         }
         let set = msg.has_field(&f.field);
         if let Some(d) = d.filter(|d| d.omit_singular && d.conditions.has_omit()) {
-            if d.conditions.omit(&encode_env(&scope, msg))? {
+            let omit = d.conditions.omit(&encode_env(&scope, msg))?;
+            scope.record(&f.field, "omit", || omit.to_string());
+            if omit {
                 if set {
                     note_left_out(ctx, d);
                 }
@@ -181,7 +228,7 @@ impl MessageCodec {
         }
         let value = set.then(|| msg.get_field(&f.field));
         let value = value.as_deref();
-        let entry = chosen(f, d, || {
+        let entry = chosen(f, d, &scope, || {
             let this = match (
                 d.is_some_and(|d| d.required_sees_child),
                 value,
@@ -201,6 +248,7 @@ impl MessageCodec {
             if d.bounds {
                 let (lo, hi) = numeric.static_bounds();
                 let (min, max) = d.conditions.bounds(&encode_env(&scope, msg), lo, hi)?;
+                record_bounds(&scope, f, min, max, value);
                 return numeric.encode_bounded(&numeric.with_bounds(min, max), out, value, ctx);
             }
         }
@@ -300,7 +348,9 @@ impl MessageCodec {
                     Some(Value::Message(element)) => element,
                     _ => msg,
                 };
-                if d.conditions.omit(&encode_env(&scope, this))? {
+                let omit = d.conditions.omit(&encode_env(&scope, this))?;
+                scope.record(&f.field, "omit", || omit.to_string());
+                if omit {
                     if value.is_some() {
                         note_left_out(ctx, d);
                     }
@@ -312,6 +362,7 @@ impl MessageCodec {
                 (Some(d), Plan::Numeric(numeric), _) => {
                     let (lo, hi) = numeric.static_bounds();
                     let (min, max) = d.conditions.bounds(&encode_env(&scope, msg), lo, hi)?;
+                    record_bounds(&scope, f, min, max, value);
                     numeric.encode_bounded(&numeric.with_bounds(min, max), out, value, ctx)?;
                 }
                 (_, Plan::Message(m), None) if !m.presence => {
@@ -357,7 +408,7 @@ impl MessageCodec {
                     return Ok(());
                 }
             }
-            let entry = chosen(f, d, env)?;
+            let entry = chosen_for_decode(f, d, env)?;
             let bounded = match (d.filter(|d| d.bounds), &entry.plan) {
                 (Some(d), Plan::Numeric(numeric)) => {
                     let (lo, hi) = numeric.static_bounds();
@@ -508,7 +559,7 @@ fn decode_child_dynamic(
             let entry = {
                 let probe: DecodeScope<'_> = below;
                 let child_frame = probe.frame(&child);
-                chosen(f, d, || frame_env(&child_frame, scope.index.get()))?
+                chosen_for_decode(f, d, || frame_env(&child_frame, scope.index.get()))?
             };
             let Plan::Message(codec) = &entry.plan else {
                 return Err(CodecError::new("not a message codec"));
