@@ -175,19 +175,38 @@ fn encode_env<'a>(scope: &EncodeScope<'a>, this: &'a DynamicMessage) -> Env<'a> 
     }
 }
 
-/// Records (never refuses) a value a condition leaves out.
+/// Records (never refuses) a value a condition leaves out: a change the
+/// receiver sees (the field arrives unset).
 fn note_left_out(ctx: &EncodeContext, d: &DynamicField) {
     ctx.note_change(
         || {
-            let (kind, script) = d
-                .conditions
-                .describe()
-                .into_iter()
-                .find(|(k, _)| *k == "omit_if" || *k == "only_if")
-                .unwrap_or(("omit_if", ""));
-            format!("{kind} \"{script}\"")
+            let scripts = d.conditions.describe();
+            match scripts.iter().find(|(k, _)| *k == "omit_if") {
+                Some((k, s)) => format!("{k} \"{s}\" is true"),
+                None => scripts
+                    .iter()
+                    .find(|(k, _)| *k == "only_if")
+                    .map(|(k, s)| format!("{k} \"{s}\" is false"))
+                    .unwrap_or_default(),
+            }
         },
-        "the value is left out",
+        "not sent (the condition leaves the field out)",
+    );
+}
+
+/// Records (never refuses) an unset field a condition makes required: the
+/// receiver decodes a value the sender did not give.
+fn note_required_unset(ctx: &EncodeContext, d: &DynamicField) {
+    ctx.note_change(
+        || {
+            let scripts = d.conditions.describe();
+            scripts
+                .iter()
+                .find(|(k, _)| *k == "required_if" || *k == "only_if")
+                .map(|(k, s)| format!("{k} \"{s}\" is true but the field is not set"))
+                .unwrap_or_default()
+        },
+        "sent as zeros, which the receiver decodes as a value (the field is required)",
     );
 }
 
@@ -244,6 +263,11 @@ impl MessageCodec {
                 index: scope.index.get() + 1,
             }
         })?;
+        if value.is_none() && !std::ptr::eq(entry, f) {
+            if let Some(d) = d {
+                note_required_unset(ctx, d);
+            }
+        }
         if let (Some(d), Plan::Numeric(numeric)) = (d, &entry.plan) {
             if d.bounds {
                 let (lo, hi) = numeric.static_bounds();
