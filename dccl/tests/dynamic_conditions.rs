@@ -22,6 +22,8 @@
 
 #[path = "differential/generator.rs"]
 mod generator;
+#[path = "../benches/common/reference.rs"]
+mod reference;
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -471,34 +473,11 @@ fn conditions_change_what_is_coded() {
 
 /// Compiles the driver against the libdccl at `prefix`.
 fn build_driver(prefix: &Path) -> PathBuf {
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/libdccl/conditions_driver.cpp");
-    let program = Path::new(env!("CARGO_TARGET_TMPDIR")).join("libdccl-conditions-driver");
-    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
-    if modified(&program).is_some() && modified(&program) >= modified(&source) {
-        return program;
-    }
-    let protobuf = Command::new("pkg-config")
-        .args(["--cflags", "--libs", "protobuf"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
-        .unwrap_or_else(|| "-lprotobuf".to_string());
-    let cxx = std::env::var("CXX").unwrap_or_else(|_| "c++".to_string());
-    let lib = prefix.join("lib");
-    let status = Command::new(&cxx)
-        .args(["-O1", "-std=c++17", "-o"])
-        .arg(&program)
-        .arg(&source)
-        .arg(format!("-I{}", prefix.join("include").display()))
-        .arg(format!("-L{}", lib.display()))
-        .arg(format!("-Wl,-rpath,{}", lib.display()))
-        .arg("-ldccl")
-        .args(protobuf.split_whitespace())
-        .status()
-        .unwrap_or_else(|e| panic!("cannot run {cxx}: {e}"));
-    assert!(status.success(), "{cxx} failed to compile the driver");
-    program
+    reference::build(
+        prefix,
+        "tests/libdccl/conditions_driver.cpp",
+        "libdccl-conditions-driver",
+    )
 }
 
 /// Runs the driver on `requests` (one a line); its answers, one a line.

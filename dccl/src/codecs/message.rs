@@ -704,18 +704,7 @@ impl MessageCodec {
         bounds: RepeatBounds,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        bounds.check_max(values.len(), ctx)?;
-        bounds.check_min(values.len(), self.codec_version(), ctx)?;
-        let count = if self.codec_version() > 2 {
-            let n = values
-                .len()
-                .min(bounds.max as usize)
-                .max(bounds.min as usize);
-            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
-            n
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.write_count(out, values.len(), self.codec_version(), ctx)?;
         for i in 0..count {
             let mark = ctx.change_mark();
             self.encode_wire(out, values.get(i).copied(), ctx)?;
@@ -875,11 +864,7 @@ impl FieldCodec for MessageCodec {
         bounds: RepeatBounds,
         ctx: &DecodeContext,
     ) -> Result<Vec<Value>, CodecError> {
-        let count = if self.codec_version() > 2 {
-            input.read(bounds.prefix_bits())? as usize + bounds.min as usize
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.read_count(input, self.codec_version())?;
         let mut out = Vec::with_capacity(count);
         let mut empties = 0;
         for _ in 0..count {

@@ -33,7 +33,8 @@ pub(crate) enum Val<'a> {
 }
 
 impl Val<'_> {
-    fn type_name(&self) -> &'static str {
+    /// Lua's `type` of the value.
+    pub fn type_name(&self) -> &'static str {
         match self {
             Val::Nil => "nil",
             Val::Bool(_) => "boolean",

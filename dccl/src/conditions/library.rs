@@ -41,14 +41,7 @@ fn arg_error(n: usize, name: &str, expected: &str, got: Option<&Val<'_>>) -> Str
 }
 
 fn type_of(v: &Val<'_>) -> &'static str {
-    match v {
-        Val::Nil => "nil",
-        Val::Bool(_) => "boolean",
-        Val::Int(_) | Val::Num(_) => "number",
-        Val::Str(_) => "string",
-        Val::Msg(_) | Val::List(_) | Val::Lib(_) => "table",
-        Val::Func(_) => "function",
-    }
+    v.type_name()
 }
 
 /// Argument `n` (from 1) as a number.

@@ -351,19 +351,7 @@ impl MessageCodec {
         if d.is_some_and(|d| d.whole_arrays) || (d.is_none() && whole_arrays(f)) {
             return f.codec.encode_repeated(out, values, bounds, ctx);
         }
-        bounds.check_max(values.len(), ctx)?;
-        let version = f.codec.codec_version();
-        bounds.check_min(values.len(), version, ctx)?;
-        let count = if version > 2 {
-            let n = values
-                .len()
-                .min(bounds.max as usize)
-                .max(bounds.min as usize);
-            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
-            n
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.write_count(out, values.len(), f.codec.codec_version(), ctx)?;
         for i in 0..count {
             scope.index.set(i as i64);
             let value = values.get(i);
@@ -474,11 +462,7 @@ impl MessageCodec {
             return store(msg, f, Value::List(values));
         }
         let version = f.codec.codec_version();
-        let count = if version > 2 {
-            input.read(bounds.prefix_bits())? as usize + bounds.min as usize
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.read_count(input, version)?;
         let mut values = Vec::with_capacity(count);
         let mut empties = 0;
         for i in 0..count {
