@@ -13,9 +13,10 @@
 //! (`benches/libdccl/conditions_timing.cpp`) is compiled on the first run
 //! against it (see `common/reference.rs`). Without it only our figures are
 //! printed. Each figure is microseconds per message of the fastest of
-//! `DCCL_COMPARE_PASSES` passes (default 50) in each of
-//! `DCCL_COMPARE_ROUNDS` rounds (default 4); the summary gives the best of
-//! every round, side by side, and the ratio. Both sides check their
+//! `DCCL_COMPARE_PASSES` passes (default 3: libdccl takes milliseconds a
+//! message, a pass about half a minute) in each of `DCCL_COMPARE_ROUNDS`
+//! rounds (default 3); the summary gives the best of every round, side by
+//! side, and the ratio. Both sides check their
 //! encodings against libdccl's committed bytes.
 
 use std::path::PathBuf;
@@ -29,8 +30,8 @@ use reference::{best, env_count};
 
 fn main() {
     let s = conditions::load();
-    let passes = env_count("DCCL_COMPARE_PASSES", 50);
-    let rounds = env_count("DCCL_COMPARE_ROUNDS", 4);
+    let passes = env_count("DCCL_COMPARE_PASSES", 3);
+    let rounds = env_count("DCCL_COMPARE_ROUNDS", 3);
     let prefix = std::env::var_os("DCCL_LUA_PREFIX").map(PathBuf::from);
     let program = prefix.as_deref().map(|p| {
         reference::build(

@@ -6,12 +6,13 @@
 //
 // Usage: conditions_timing INCLUDE_DIR DATA_DIR PASSES
 //   INCLUDE_DIR  the libdccl prefix's include/ (holds dccl/option_extensions.proto)
-//   DATA_DIR     holds conditions.proto, input.txt and expected.txt
-//                (dccl/tests/data/dynamic-conditions)
+//   DATA_DIR     holds conditions.proto, input.txt and expected.txt (as
+//                dccl/tests/data/dynamic-conditions)
 //   PASSES       passes over the messages for each figure (the best pass counts)
 //
 // The messages are the inputs that libdccl both encodes and decodes
-// (`ok` in expected.txt, a decoded text not starting with `!`). Prints one
+// (`ok` in expected.txt, a decoded text not starting with `!`; the Rust
+// side passes a copy of the directory holding the inputs it times). Prints one
 // line (on the standard output it had when started: a condition's Lua
 // `print` writes to the standard output, which is sent to /dev/null):
 //   libdccl VERSION messages N mismatches M encode_us E decode_us D
