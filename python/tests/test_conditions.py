@@ -19,8 +19,8 @@ def codec():
     names = dccl.loadProtoFile(str(CONDITIONS / "conditions.proto"))
     assert "goby.test.conditions.Survey" in names
     c = dccl.Codec()
-    for name in names:
-        c.load(name)
+    for name in ("Survey", "Status", "Log", "Legacy"):
+        c.load("goby.test.conditions." + name)
     return c
 
 
