@@ -70,7 +70,7 @@ impl Val<'_> {
     }
 
     /// As an integer with the same value (Lua's integer conversion).
-    fn to_int(&self) -> Option<i64> {
+    pub fn to_int(&self) -> Option<i64> {
         match self.to_number()? {
             Val::Int(i) => Some(i),
             Val::Num(f) => float_to_int(f),
@@ -350,7 +350,8 @@ fn unary<'a>(op: UnOp, v: &Val<'a>) -> Result<Val<'a>, String> {
     Ok(match op {
         UnOp::Not => Val::Bool(!v.truthy()),
         UnOp::Neg => match v.to_number() {
-            Some(Val::Int(i)) => Val::Int(i.wrapping_neg()),
+            Some(Val::Int(i)) if !matches!(v, Val::Str(_)) => Val::Int(i.wrapping_neg()),
+            Some(Val::Int(i)) => Val::Num(-(i as f64)),
             Some(Val::Num(f)) => Val::Num(-f),
             _ => {
                 return Err(format!(
@@ -387,7 +388,7 @@ fn bit_operand(v: &Val<'_>) -> Result<i64, String> {
 }
 
 /// Lua's comparison `a < b` (`le`: `a <= b`).
-fn less<'a>(a: &Val<'a>, b: &Val<'a>, le: bool) -> Result<bool, String> {
+pub(crate) fn less<'a>(a: &Val<'a>, b: &Val<'a>, le: bool) -> Result<bool, String> {
     Ok(match (a, b) {
         (Val::Int(x), Val::Int(y)) => {
             if le {
@@ -498,9 +499,22 @@ fn binary<'a>(op: BinOp, a: &Val<'a>, b: &Val<'a>) -> Result<Val<'a>, String> {
             let (Some(x), Some(y)) = (a.to_number(), b.to_number()) else {
                 return Err(arith_error(a, b));
             };
-            arith(op, &x, &y)?
+            // Lua 5.3 converts a string operand to a float.
+            if matches!(a, Val::Str(_)) || matches!(b, Val::Str(_)) {
+                arith(op, &Val::Num(as_float(&x)), &Val::Num(as_float(&y)))?
+            } else {
+                arith(op, &x, &y)?
+            }
         }
     })
+}
+
+fn as_float(v: &Val<'_>) -> f64 {
+    match v {
+        Val::Int(i) => *i as f64,
+        Val::Num(f) => *f,
+        _ => f64::NAN,
+    }
 }
 
 /// Lua's logical shift (negative counts shift the other way).

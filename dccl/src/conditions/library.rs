@@ -50,9 +50,10 @@ fn number<'a>(args: &[Val<'a>], n: usize, name: &str) -> Result<Val<'a>, String>
     match v {
         Some(Val::Int(i)) => Ok(Val::Int(*i)),
         Some(Val::Num(f)) => Ok(Val::Num(*f)),
+        // A string argument is read as a float (Lua's `lua_tonumber`).
         Some(Val::Str(s)) => string_to_number(s)
             .map(|v| match v {
-                Val::Int(i) => Val::Int(i),
+                Val::Int(i) => Val::Num(i as f64),
                 Val::Num(f) => Val::Num(f),
                 _ => Val::Nil,
             })
@@ -145,11 +146,10 @@ pub(crate) fn call<'a>(name: &str, args: &[Val<'a>]) -> Result<Option<Val<'a>>, 
             v => one(int_if_fits(as_f64(&v).ceil())),
         },
         "math.sqrt" => one(Val::Num(as_f64(&number(args, 1, name)?).sqrt())),
-        "math.tointeger" => one(match args.first() {
-            Some(Val::Int(i)) => Val::Int(*i),
-            Some(Val::Num(f)) => float_to_int(*f).map_or(Val::Nil, Val::Int),
-            _ => Val::Nil,
-        }),
+        "math.tointeger" => match args.first() {
+            None => Err("bad argument #1 to 'tointeger' (value expected)".to_string()),
+            Some(v) => one(v.to_int().map_or(Val::Nil, Val::Int)),
+        },
         "math.type" => match args.first() {
             None => Err("bad argument #1 to 'type' (value expected)".to_string()),
             Some(Val::Int(_)) => one(Val::Str(b"integer"[..].into())),
@@ -169,31 +169,24 @@ pub(crate) fn call<'a>(name: &str, args: &[Val<'a>]) -> Result<Option<Val<'a>>, 
             (a, b) => one(Val::Num(as_f64(&a) % as_f64(&b))),
         },
         "math.max" | "math.min" => {
-            let mut best = number(args, 1, name)?;
-            for i in 2..=args.len() {
-                let v = number(args, i, name)?;
-                let (x, y) = (as_f64(&v), as_f64(&best));
-                let better = match (&v, &best) {
-                    (Val::Int(a), Val::Int(b)) => {
-                        if name == "math.max" {
-                            a > b
-                        } else {
-                            a < b
-                        }
-                    }
-                    _ => {
-                        if name == "math.max" {
-                            x > y
-                        } else {
-                            x < y
-                        }
-                    }
+            // As Lua 5.3: the arguments are compared as they are (strings
+            // as strings, a string with a number an error) and the one
+            // chosen returned.
+            let Some(mut best) = args.first() else {
+                let short = &name[5..];
+                return Err(format!("bad argument #1 to '{short}' (value expected)"));
+            };
+            for v in &args[1..] {
+                let better = if name == "math.max" {
+                    super::eval::less(best, v, false)?
+                } else {
+                    super::eval::less(v, best, false)?
                 };
                 if better {
                     best = v;
                 }
             }
-            one(best)
+            one(best.clone())
         }
         "string.len" => one(Val::Int(string(args, 1, name)?.len() as i64)),
         "string.upper" => one(Val::Str(string(args, 1, name)?.to_ascii_uppercase().into())),

@@ -24,6 +24,8 @@
 mod eval;
 mod lexer;
 mod library;
+#[cfg(test)]
+mod lua_differential;
 mod number;
 mod parser;
 mod view;
