@@ -54,6 +54,9 @@ pub(crate) struct LoadedMessage {
     /// embedded messages in a repeated field, whose elements over
     /// `max_repeat` are not encoded.
     pub(crate) required_before: RequiredFields,
+    /// Whether a field has dynamic conditions (then the codecs get the
+    /// root message, and the wire form is not used).
+    pub(crate) has_conditions: bool,
 }
 
 /// The wire plans of a loaded type and its header and body codecs (the
@@ -560,9 +563,14 @@ impl Codec {
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
         let reads_clock = head.reads_clock() || body.reads_clock();
         let wire = WireEncoding::of(desc, &head, &body);
+        let has_conditions = [&head, &body]
+            .into_iter()
+            .any(|c| message_codec(c).is_some_and(|m| m.has_conditions()));
         let required = RequiredFields::of(desc, 0);
         let (required_on_the_way, required_before) =
             match (message_codec(&head), message_codec(&body)) {
+                // Conditions may leave fields out: all are checked first.
+                _ if has_conditions => (false, required.clone()),
                 (Some(h), Some(b)) => (true, required.not_visited(Some(&h), Some(&b))),
                 _ => (false, required.clone()),
             };
@@ -580,6 +588,7 @@ impl Codec {
             wire,
             required_on_the_way,
             required_before,
+            has_conditions,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -732,6 +741,18 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
+        self.encode_observed(loaded, msg, out, dry_run, changes, None)
+    }
+
+    fn encode_observed(
+        &self,
+        loaded: &LoadedMessage,
+        msg: Source<'_>,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+        outcomes: Option<&std::cell::RefCell<Vec<crate::ConditionOutcome>>>,
+    ) -> Result<()> {
         let name = loaded.descriptor.full_name();
         let check = |required: &RequiredFields| match msg {
             Source::Dynamic(m) => required.check(m),
@@ -744,6 +765,17 @@ impl Codec {
             check_required().map_err(|e| e.into_encode(name))?;
         }
         let session = self.arithmetic_session(!dry_run);
+        let index = std::cell::Cell::new(0);
+        let dynamic = match msg {
+            Source::Dynamic(root) if loaded.has_conditions => {
+                Some(crate::conditions::EncodeScope {
+                    root,
+                    index: &index,
+                    outcomes,
+                })
+            }
+            _ => None,
+        };
         let ctx = EncodeContext {
             strict: self.strict,
             dry_run,
@@ -751,6 +783,7 @@ impl Codec {
             changes,
             arithmetic: session.as_ref(),
             required_unchecked: loaded.required_on_the_way,
+            dynamic,
         };
         // Header and body are written straight after what `out` holds (the
         // writer starts on its byte boundary), then encrypted in place; on
@@ -807,6 +840,28 @@ impl Codec {
             Source::Wire(wire, m) => wire.body.encode_fields_wire(out, m, ctx)?,
         }
         Ok(head_end)
+    }
+
+    /// The dynamic conditions (`(dccl.field).dynamic_conditions`) that
+    /// encoding `msg` evaluates, in the order it evaluates them, with what
+    /// each gives: whether a field is left out (`omit`), coded without its
+    /// "not present" value (`required`), and the bounds in force (`bounds`).
+    /// Empty for a type without conditions. Errors: those of
+    /// [`Codec::encode`] (a condition that fails names the message, the
+    /// field and the script).
+    pub fn condition_outcomes(&self, msg: &DynamicMessage) -> Result<Vec<crate::ConditionOutcome>> {
+        let loaded = self.get_by_descriptor(&msg.descriptor())?;
+        let log = std::cell::RefCell::new(Vec::new());
+        let mut out = Vec::new();
+        self.encode_observed(
+            loaded,
+            Source::Dynamic(msg),
+            &mut out,
+            true,
+            None,
+            Some(&log),
+        )?;
+        Ok(log.into_inner())
     }
 
     /// Encodes a message of the loaded type `full_name` given as protobuf
@@ -991,6 +1046,7 @@ impl Codec {
             .into_decode(name));
         }
         let session = self.arithmetic_session(true);
+        let index = std::cell::Cell::new(0);
         let ctx = DecodeContext {
             now_secs: if loaded.reads_clock {
                 (self.clock)()
@@ -999,6 +1055,14 @@ impl Codec {
             },
             definition_hash: loaded.hash,
             arithmetic: session.as_ref(),
+            dynamic: loaded
+                .has_conditions
+                .then_some(crate::conditions::DecodeScope {
+                    parent: None,
+                    slot: None,
+                    depth: 0,
+                    index: &index,
+                }),
         };
         let decoded = self.decode_parts(loaded, bytes, &ctx);
         if let Some(session) = session {
