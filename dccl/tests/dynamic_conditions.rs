@@ -428,6 +428,27 @@ fn a_condition_that_fails_is_an_error_naming_message_field_and_script() {
 }
 
 #[test]
+fn a_bound_that_is_not_a_number_is_told_as_the_lua_value_it_is() {
+    for (script, told) in [
+        ("'five'", "gave \"five\" (a string), not a number"),
+        ("true", "gave true (a boolean), not a number"),
+        ("this.missing", "gave nil, not a number"),
+        ("root", "gave a table, not a number"),
+    ] {
+        let codec = with_condition("max", script).expect("loads");
+        let desc = codec.descriptor("probe.Probe").expect("loaded");
+        let msg = DynamicMessage::parse_text_format(desc, "k: 1 a: 3").expect("parses");
+        let err = codec.encode(&msg).expect_err(script).to_string();
+        assert!(
+            err.contains(&format!(
+                "dynamic_conditions.max \"{script}\" failed: {told}"
+            )),
+            "{script}: {err}"
+        );
+    }
+}
+
+#[test]
 fn scripts_outside_the_supported_language_are_refused_at_load_by_name() {
     for (script, why) in [
         ("for i=1,2 do end return true", "no loops"),

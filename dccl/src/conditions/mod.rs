@@ -175,7 +175,7 @@ impl Script {
         match values.first() {
             Some(v) => v
                 .to_f64()
-                .ok_or_else(|| self.failed(&format!("gave {v:?}, not a number"))),
+                .ok_or_else(|| self.failed(&format!("gave {}, not a number", v.lua_text()))),
             None => Err(self.failed("gave no value")),
         }
     }
