@@ -49,8 +49,8 @@ pub use arrivals::{Arrival, ArrivalField};
 pub use beams::{BeamShape, Beams, RunMode, SourceType, Threads};
 pub use channel::{Channel, Grid, RayPath};
 pub use environment::{
-    AttenuationUnit, Boundary, BoundaryProfile, Environment, HalfSpace, Interpolation,
-    ReflectionPoint, SspGrid, SspPoint, VolumeAttenuation,
+    grain_size_half_space, AttenuationUnit, Boundary, BoundaryProfile, Environment, HalfSpace,
+    Interpolation, ReflectionPoint, SspGrid, SspPoint, VolumeAttenuation,
 };
 pub use error::{ChannelError, ParseError};
 pub use field::TlField;

@@ -289,7 +289,7 @@ fn live_bellhop() {
 }
 
 #[test]
-#[ignore = "regenerates tests/data/bellhop/*.{inc.tl,coh.tl,first-arrivals} with bellhop.exe"]
+#[ignore = "regenerates tests/data/bellhop/*.{inc.tl,coh.tl,first-arrivals} and options/*.tl with bellhop.exe"]
 fn regenerate_references() {
     let exe = bellhop_exe().expect("bellhop.exe (BELLHOP_EXE or /opt/bellhop/bellhop.exe)");
     for case in CASES {
@@ -299,6 +299,81 @@ fn regenerate_references() {
         std::fs::write(dir.join(format!("{case}.coh.tl")), coh).unwrap();
         std::fs::write(dir.join(format!("{case}.first-arrivals")), arr).unwrap();
     }
+    for case in OPTION_CASES {
+        let tl = option_reference(&exe, case);
+        std::fs::write(option_dir().join(format!("{case}.tl")), tl).unwrap();
+    }
+}
+
+/// Options with a committed reference: `tests/data/bellhop/options/NAME.env`
+/// and BELLHOP's field of its run type, compact, in `NAME.tl`; ours is
+/// within 1 dB at 95 % of the points where BELLHOP's TL is under 100 dB.
+const OPTION_CASES: [&str; 2] = [
+    // Grain-size bottom ('G'): its loss parameter in unit 'L' whatever the
+    // file's unit, no volume attenuation in the half-space.
+    "grain", // The same in dB/(m kHz) with Thorp's volume attenuation, incoherent.
+    "grain-f",
+];
+
+fn option_dir() -> PathBuf {
+    data_dir().join("options")
+}
+
+/// BELLHOP's field for option case `case`, in the committed compact form.
+fn option_reference(exe: &Path, case: &str) -> String {
+    let env = load(&option_dir(), case);
+    let bytes = run_bellhop(exe, &env, case);
+    tl_text(
+        &bellhop::read_shd("case.shd", &bytes)
+            .unwrap()
+            .field(0)
+            .unwrap(),
+    )
+}
+
+/// Ours against `reference` for option case `case`: the verdict line and
+/// whether it passes.
+fn judge_option(case: &str, reference: &str) -> Verdict {
+    let env = load(&option_dir(), case);
+    let ours = ours_tl(&env, env.run.mode().unwrap());
+    let (share, n, p95) = tl_agreement(&ours, &parse_tl_text(reference), 1.0);
+    Verdict {
+        line: format!(
+            "{case:8} within 1 dB: {:5.1} % of {n} points (95th percentile |diff| {p95:.2} dB)",
+            100.0 * share
+        ),
+        pass: share >= 0.95 && n > 0,
+    }
+}
+
+#[test]
+fn committed_option_references() {
+    report(
+        OPTION_CASES
+            .iter()
+            .map(|case| {
+                let path = option_dir().join(format!("{case}.tl"));
+                let reference = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+                    panic!("{}: {e} (run regenerate_references)", path.display())
+                });
+                judge_option(case, &reference)
+            })
+            .collect(),
+    );
+}
+
+#[test]
+fn live_bellhop_option_cases() {
+    let Some(exe) = bellhop_exe() else {
+        println!("SKIPPED live_bellhop_option_cases: bellhop.exe not found (set BELLHOP_EXE or install it under /opt/bellhop)");
+        return;
+    };
+    report(
+        OPTION_CASES
+            .iter()
+            .map(|case| judge_option(case, &option_reference(&exe, case)))
+            .collect(),
+    );
 }
 
 /// One option variant: a base case, text substitutions in its .env, and

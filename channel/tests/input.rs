@@ -208,7 +208,7 @@ fn env_errors_name_line_and_field() {
 #[test]
 fn every_case_round_trips_through_the_writer() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bellhop");
-    for case in ["pekeris", "munk", "summer", "wedge"] {
+    for case in ["pekeris", "munk", "summer", "wedge", "options/grain"] {
         let text = std::fs::read_to_string(dir.join(format!("{case}.env"))).unwrap();
         let comp = |ext: &str| {
             std::fs::read_to_string(dir.join(format!("{case}.{ext}"))).map_err(|e| e.to_string())
@@ -273,7 +273,7 @@ fn truncated_and_garbled_files_never_panic() {
             Err("none".into())
         }
     };
-    for case in ["pekeris", "munk", "summer", "wedge"] {
+    for case in ["pekeris", "munk", "summer", "wedge", "options/grain"] {
         let text = std::fs::read_to_string(dir.join(format!("{case}.env"))).unwrap();
         let bytes = text.as_bytes();
         for cut in (0..bytes.len()).step_by(3) {

@@ -153,48 +153,6 @@ fn half_space_of(layer: &Layer) -> HalfSpace {
     }
 }
 
-/// Sediment properties from a grain size (UW-APL high-frequency handbook).
-fn grain_size_half_space(mz: f64) -> (HalfSpace, AttenuationUnit) {
-    let (vr, rho) = if (-1.0..1.0).contains(&mz) {
-        (
-            0.002709 * mz * mz - 0.056452 * mz + 1.2778,
-            0.007797 * mz * mz - 0.17057 * mz + 2.3139,
-        )
-    } else if (1.0..5.3).contains(&mz) {
-        (
-            -0.0014881 * mz.powi(3) + 0.0213937 * mz * mz - 0.1382798 * mz + 1.3425,
-            -0.0165406 * mz.powi(3) + 0.2290201 * mz * mz - 1.1069031 * mz + 3.0455,
-        )
-    } else {
-        (-0.0024324 * mz + 1.0019, -0.0012973 * mz + 1.1565)
-    };
-    let a2f = if (-1.0..0.0).contains(&mz) {
-        0.4556
-    } else if (0.0..2.6).contains(&mz) {
-        0.4556 + 0.0245 * mz
-    } else if (2.6..4.5).contains(&mz) {
-        0.1978 + 0.1245 * mz
-    } else if (4.5..6.0).contains(&mz) {
-        8.0399 - 2.5228 * mz + 0.20098 * mz * mz
-    } else if (6.0..9.5).contains(&mz) {
-        0.9431 - 0.2041 * mz + 0.0117 * mz * mz
-    } else {
-        0.0601
-    };
-    let speed = vr * 1500.0;
-    let loss = a2f * (vr / 1000.0) * 1500.0 * 10f64.ln() / (40.0 * std::f64::consts::PI);
-    (
-        HalfSpace {
-            speed,
-            shear_speed: 0.0,
-            density: rho,
-            attenuation: loss,
-            shear_attenuation: 0.0,
-        },
-        AttenuationUnit::LossParameter,
-    )
-}
-
 /// Reads a boundary's half-space line (conditions `A` and `G`).
 fn read_half_space(
     r: &mut Records,
@@ -216,8 +174,7 @@ fn read_half_space(
             let Some(&(mz, _)) = values.get(1) else {
                 return Err(r.error(r.line(), field, "expected a depth and a grain size"));
             };
-            let (hs, _) = grain_size_half_space(mz);
-            Ok(Boundary::HalfSpace(hs))
+            Ok(Boundary::GrainSize { phi: mz })
         }
     }
 }
