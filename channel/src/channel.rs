@@ -7,7 +7,7 @@ use num_complex::Complex64;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::arrivals::{merge_arrival, Arrival, ArrivalField};
+use crate::arrivals::{add_arrival, Arrival, ArrivalField, HeldArrival};
 use crate::beams::{BeamShape, Beams, RunMode, SourceType, Threads};
 use crate::environment::Environment;
 use crate::error::{finite, non_negative, positive, ChannelError};
@@ -198,6 +198,30 @@ impl Channel {
         }
     }
 
+    /// How many threads `threads` stands for.
+    fn workers(threads: Threads) -> usize {
+        match threads {
+            Threads::One => 1,
+            Threads::All => rayon::current_num_threads(),
+            Threads::Count(n) => n.max(1),
+        }
+    }
+
+    /// Runs `work` in the thread pool `threads` asks for.
+    fn in_pool<R: Send>(
+        threads: Threads,
+        work: impl FnOnce() -> Result<R, ChannelError> + Send,
+    ) -> Result<R, ChannelError> {
+        match threads {
+            Threads::Count(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| ChannelError::invalid("threads", e.to_string()))?
+                .install(work),
+            _ => work(),
+        }
+    }
+
     /// Runs `per_beam` on every beam in chunks (in parallel as `threads`
     /// allows), each chunk with its own accumulator from `init`; returns
     /// the chunks' accumulators in beam order.
@@ -221,11 +245,7 @@ impl Channel {
             }
             Ok(acc)
         };
-        let workers = match threads {
-            Threads::One => 1,
-            Threads::All => rayon::current_num_threads(),
-            Threads::Count(n) => n.max(1),
-        };
+        let workers = Self::workers(threads);
         if workers == 1 || count < 2 {
             return Ok(vec![chunk(0..count)?]);
         }
@@ -233,20 +253,50 @@ impl Channel {
         let ranges: Vec<_> = (0..pieces)
             .map(|k| (k * count / pieces)..((k + 1) * count / pieces))
             .collect();
-        let run = || {
+        Self::in_pool(threads, || {
             ranges
                 .into_par_iter()
                 .map(chunk)
                 .collect::<Result<Vec<_>, _>>()
-        };
-        match threads {
-            Threads::Count(n) => rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .map_err(|e| ChannelError::invalid("threads", e.to_string()))?
-                .install(run),
-            _ => run(),
+        })
+    }
+
+    /// Runs `per_beam` on every beam (batches in parallel as `threads`
+    /// allows) and hands each beam's result to `consume` in launch order,
+    /// whatever the number of threads.
+    fn run_beams_in_order<T: Send>(
+        count: usize,
+        threads: Threads,
+        cancel: Option<&AtomicBool>,
+        per_beam: impl Fn(usize, &mut Vec<RayPoint>) -> T + Sync,
+        mut consume: impl FnMut(T) + Send,
+    ) -> Result<(), ChannelError> {
+        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
+        let workers = Self::workers(threads);
+        if workers == 1 {
+            let mut ray = Vec::with_capacity(1024);
+            for i in 0..count {
+                if cancelled() {
+                    return Err(ChannelError::Cancelled);
+                }
+                consume(per_beam(i, &mut ray));
+            }
+            return Ok(());
         }
+        let batch = workers * 16;
+        Self::in_pool(threads, || {
+            for start in (0..count).step_by(batch) {
+                if cancelled() {
+                    return Err(ChannelError::Cancelled);
+                }
+                let results: Vec<T> = (start..(start + batch).min(count))
+                    .into_par_iter()
+                    .map_init(|| Vec::with_capacity(1024), |ray, i| per_beam(i, ray))
+                    .collect();
+                results.into_iter().for_each(&mut consume);
+            }
+            Ok(())
+        })
     }
 
     /// Amplitude at launch of beam `alpha` (radians): the source pattern,
@@ -340,7 +390,11 @@ impl Channel {
 
     /// The arrivals (delay, amplitude, phase, angles, bounces) at every
     /// receiver of `grid` from a source at `source_depth` (m), merged as
-    /// BELLHOP merges them (same delay and phase within 0.05 rad).
+    /// BELLHOP merges them (a beam's next step within 0.05 rad of delay and
+    /// phase of the receiver's last arrival is one arrival with it; at
+    /// most max(2·10⁸ / receivers, 10) arrivals per receiver, the weakest
+    /// replaced). Beams are merged in launch order whatever `threads` is,
+    /// so the result does not depend on it.
     pub fn arrivals(
         &self,
         source_depth: f64,
@@ -356,17 +410,18 @@ impl Channel {
         let omega = self.model.omega;
         let max_per_receiver = (200_000_000 / (nz * nr)).max(10);
         let xs = [0.0, source_depth];
-        let parts = self.run_beams(
+        let mut lists = vec![Vec::<HeldArrival>::new(); nz * nr];
+        Self::run_beams_in_order(
             fan.alphas.len(),
             threads,
             cancel,
-            || vec![Vec::<Arrival>::new(); nz * nr],
-            |i, lists, ray| {
+            |i, ray| {
+                let mut hits = Vec::new();
                 let alpha = fan.alphas[i];
                 let amp0 =
                     self.launch_amplitude(beams, RunMode::Coherent, &fan, source_depth, alpha);
                 if !tracer.trace(xs, alpha, amp0, ray) {
-                    return;
+                    return hits;
                 }
                 let beam = self.beam(beams, &fan, alpha, ray[0].c);
                 let angle = alpha.to_degrees();
@@ -381,24 +436,22 @@ impl Channel {
                         top_bounces: h.top_bounces,
                         bottom_bounces: h.bottom_bounces,
                     };
-                    merge_arrival(
-                        &mut lists[h.iz * nr + h.ir],
-                        arrival,
-                        omega,
-                        max_per_receiver,
-                    );
+                    hits.push((h.iz * nr + h.ir, arrival));
                 });
+                hits
+            },
+            |hits| {
+                for (cell, arrival) in &hits {
+                    add_arrival(&mut lists[*cell], arrival, omega, max_per_receiver);
+                }
             },
         )?;
-        let mut lists = vec![Vec::<Arrival>::new(); nz * nr];
-        for part in parts {
-            for (all, piece) in lists.iter_mut().zip(part) {
-                for a in piece {
-                    merge_arrival(all, a, omega, max_per_receiver);
-                }
-            }
-        }
-        Ok(ArrivalField::from_lists(source_depth, grid, lists))
+        Ok(ArrivalField::from_held(
+            source_depth,
+            grid,
+            lists,
+            beams.source,
+        ))
     }
 
     /// The rays of `beams` from a source at `source_depth` (m), for plots.

@@ -300,41 +300,79 @@ fn regenerate_references() {
         std::fs::write(dir.join(format!("{case}.first-arrivals")), arr).unwrap();
     }
     for case in OPTION_CASES {
-        let tl = option_reference(&exe, case);
-        std::fs::write(option_dir().join(format!("{case}.tl")), tl).unwrap();
+        std::fs::write(option_reference_path(case), option_reference(&exe, case)).unwrap();
     }
 }
 
 /// Options with a committed reference: `tests/data/bellhop/options/NAME.env`
-/// and BELLHOP's field of its run type, compact, in `NAME.tl`; ours is
-/// within 1 dB at 95 % of the points where BELLHOP's TL is under 100 dB.
-const OPTION_CASES: [&str; 2] = [
+/// and BELLHOP's result of its run type, compact: `NAME.tl` for a TL field
+/// (ours within 1 dB at 95 % of the points where BELLHOP's TL is under
+/// 100 dB), `NAME.arrivals` for arrivals (see [`judge_option_arrivals`]).
+const OPTION_CASES: [&str; 3] = [
     // Grain-size bottom ('G'): its loss parameter in unit 'L' whatever the
     // file's unit, no volume attenuation in the half-space.
-    "grain", // The same in dB/(m kHz) with Thorp's volume attenuation, incoherent.
+    "grain",
+    // The same in dB/(m kHz) with Thorp's volume attenuation, incoherent.
     "grain-f",
+    // Arrivals at 25 kHz, many merged at the edge of BELLHOP's tolerance.
+    "summer-arrivals",
 ];
 
 fn option_dir() -> PathBuf {
     data_dir().join("options")
 }
 
-/// BELLHOP's field for option case `case`, in the committed compact form.
+/// The committed reference of option case `case`.
+fn option_reference_path(case: &str) -> PathBuf {
+    let env = load(&option_dir(), case);
+    let ext = if env.run == RunKind::Arrivals {
+        "arrivals"
+    } else {
+        "tl"
+    };
+    option_dir().join(format!("{case}.{ext}"))
+}
+
+/// BELLHOP's result for option case `case`, in the committed compact form.
 fn option_reference(exe: &Path, case: &str) -> String {
     let env = load(&option_dir(), case);
     let bytes = run_bellhop(exe, &env, case);
-    tl_text(
-        &bellhop::read_shd("case.shd", &bytes)
-            .unwrap()
-            .field(0)
-            .unwrap(),
-    )
+    if env.run == RunKind::Arrivals {
+        let arr = bellhop::read_arr("case.arr", &String::from_utf8_lossy(&bytes)).unwrap();
+        return arrivals_text(&arr.fields[0]);
+    }
+    let shd = bellhop::read_shd("case.shd", &bytes).unwrap();
+    tl_text(&shd.field(0).unwrap())
+}
+
+/// Compact text form of arrivals: per receiver (depth-major) the number of
+/// arrivals, their incoherent TL (dB, two decimals) and the first delay
+/// (s, 0.1 µs).
+fn arrivals_text(a: &ArrivalField) -> String {
+    let mut s = String::new();
+    for iz in 0..a.depths.len() {
+        for ir in 0..a.ranges.len() {
+            let list = a.at(iz, ir);
+            let power: f64 = list.iter().map(|x| x.amplitude * x.amplitude).sum();
+            let tl = if power > 0.0 {
+                -10.0 * power.log10()
+            } else {
+                f64::NAN
+            };
+            let first = a.first_delay(iz, ir).unwrap_or(f64::NAN);
+            let _ = writeln!(s, "{} {tl:.2} {first:.7}", list.len());
+        }
+    }
+    s
 }
 
 /// Ours against `reference` for option case `case`: the verdict line and
 /// whether it passes.
 fn judge_option(case: &str, reference: &str) -> Verdict {
     let env = load(&option_dir(), case);
+    if env.run == RunKind::Arrivals {
+        return judge_option_arrivals(case, &env, reference);
+    }
     let ours = ours_tl(&env, env.run.mode().unwrap());
     let (share, n, p95) = tl_agreement(&ours, &parse_tl_text(reference), 1.0);
     Verdict {
@@ -346,13 +384,51 @@ fn judge_option(case: &str, reference: &str) -> Verdict {
     }
 }
 
+/// Arrivals against the reference: the same number of arrivals at every
+/// receiver, their incoherent TL within 0.02 dB and the first delay within
+/// 0.2 µs (the references' rounding).
+fn judge_option_arrivals(case: &str, env: &EnvFile, reference: &str) -> Verdict {
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let ours = ch
+        .arrivals(
+            env.source_depths[0],
+            &env.grid,
+            &env.beams,
+            Threads::All,
+            None,
+        )
+        .unwrap();
+    let parse = |l: &str| -> Vec<f64> { l.split(' ').map(|x| x.parse().unwrap()).collect() };
+    let (mut counts, mut worst_tl, mut worst_delay, mut n) = (0, 0f64, 0f64, 0);
+    for (o, t) in arrivals_text(&ours).lines().zip(reference.lines()) {
+        let (o, t) = (parse(o), parse(t));
+        n += 1;
+        counts += usize::from(o[0] != t[0]);
+        if t[0] > 0.0 {
+            worst_tl = worst_tl.max((o[1] - t[1]).abs());
+            worst_delay = worst_delay.max((o[2] - t[2]).abs());
+        }
+    }
+    Verdict {
+        line: format!(
+            "{case:8} {n} receivers: arrival counts differ at {counts}, incoherent TL worst {worst_tl:.2} dB, first delay worst {:.1} µs",
+            1e6 * worst_delay
+        ),
+        pass: n > 0
+            && n == reference.lines().count()
+            && counts == 0
+            && worst_tl <= 0.02
+            && worst_delay <= 2e-7,
+    }
+}
+
 #[test]
 fn committed_option_references() {
     report(
         OPTION_CASES
             .iter()
             .map(|case| {
-                let path = option_dir().join(format!("{case}.tl"));
+                let path = option_reference_path(case);
                 let reference = std::fs::read_to_string(&path).unwrap_or_else(|e| {
                     panic!("{}: {e} (run regenerate_references)", path.display())
                 });
@@ -492,4 +568,20 @@ fn live_bellhop_options() {
         failed.is_empty(),
         "outside 1 dB at more than 5 % of points: {failed:?}"
     );
+}
+
+/// Arrivals are merged in launch order whatever the number of threads:
+/// one thread and several give the same lists.
+#[test]
+fn arrivals_do_not_depend_on_the_number_of_threads() {
+    let env = load(&option_dir(), "summer-arrivals");
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let run = |threads| {
+        ch.arrivals(env.source_depths[0], &env.grid, &env.beams, threads, None)
+            .unwrap()
+    };
+    let one = run(Threads::One);
+    for n in [2, 3, 5, 8] {
+        assert!(one == run(Threads::Count(n)), "{n} threads differ");
+    }
 }

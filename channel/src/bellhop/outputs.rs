@@ -280,13 +280,15 @@ pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
                 if v.len() < 8 {
                     return Err(r.error(line, &field, "8 values expected"));
                 }
+                // Single precision values, as BELLHOP writes them.
+                let single = |k: usize| f64::from(v[k].0 as f32);
                 list.push(Arrival {
-                    amplitude: v[0].0,
-                    phase: v[1].0.to_radians(),
-                    delay: v[2].0,
-                    delay_imag: v[3].0,
-                    source_angle: v[4].0,
-                    receiver_angle: v[5].0,
+                    amplitude: single(0),
+                    phase: single(1).to_radians(),
+                    delay: single(2),
+                    delay_imag: single(3),
+                    source_angle: single(4),
+                    receiver_angle: single(5),
                     top_bounces: v[6].0.max(0.0) as u32,
                     bottom_bounces: v[7].0.max(0.0) as u32,
                 });
@@ -304,7 +306,9 @@ pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
 }
 
 /// Writes arrival fields (one per source depth, same grid) as an ASCII
-/// `.arr` file.
+/// `.arr` file, values in single precision as BELLHOP writes them
+/// (amplitude, phase in degrees, delay and its imaginary part in s, source
+/// and receiver angles in degrees, surface and bottom bounces).
 pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
     use std::fmt::Write;
     let mut s = String::new();
@@ -314,7 +318,7 @@ pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
     let list = |v: &[f64]| {
         let mut l = format!("{}", v.len());
         for x in v {
-            let _ = write!(l, " {x}");
+            let _ = write!(l, " {}", *x as f32);
         }
         l
     };
@@ -335,12 +339,12 @@ pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
                 let _ = writeln!(
                     s,
                     "{:e} {} {:e} {:e} {} {} {} {}",
-                    x.amplitude,
-                    x.phase.to_degrees(),
-                    x.delay,
-                    x.delay_imag,
-                    x.source_angle,
-                    x.receiver_angle,
+                    x.amplitude as f32,
+                    x.phase.to_degrees() as f32,
+                    x.delay as f32,
+                    x.delay_imag as f32,
+                    x.source_angle as f32,
+                    x.receiver_angle as f32,
                     x.top_bounces,
                     x.bottom_bounces
                 );
