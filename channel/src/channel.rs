@@ -19,12 +19,26 @@ use crate::trace::Model;
 /// Most points one ray may have (BELLHOP's limit).
 const MAX_RAY_POINTS: usize = 100_000;
 
+/// Most receivers a grid may have (depths × ranges): a field of them is
+/// 160 MB of complex pressure per accumulator.
+pub const MAX_RECEIVERS: usize = 10_000_000;
+
+/// Most ray points [`Channel::rays`] and [`Channel::eigenrays`] return
+/// together (320 MB).
+pub const MAX_RAY_OUTPUT_POINTS: usize = 20_000_000;
+
+/// Complex cells the accumulators of a TL field may hold together (512 MB):
+/// a large grid is summed in fewer pieces.
+const ACCUMULATOR_BUDGET: usize = 1 << 25;
+
 /// Receivers on a rectilinear grid: every depth at every range.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Grid {
-    /// Receiver depths (m), increasing, none negative.
+    /// Receiver depths (m), none negative, none smaller than the one
+    /// before (equal ones are allowed: BELLHOP moves receivers above the
+    /// surface to it).
     pub depths: Vec<f64>,
-    /// Receiver ranges (m), increasing.
+    /// Receiver ranges (m), none smaller than the one before.
     pub ranges: Vec<f64>,
 }
 
@@ -37,7 +51,8 @@ impl Grid {
         }
     }
 
-    /// Checks the grid; the error names the first bad value.
+    /// Checks the grid; the error names the first bad value, or `grid`
+    /// when it has more than [`MAX_RECEIVERS`] receivers.
     pub fn validate(&self) -> Result<(), ChannelError> {
         for (name, values, nonneg) in [
             ("grid.depths", &self.depths, true),
@@ -53,10 +68,23 @@ impl Grid {
                 } else {
                     finite(&field, *v)?;
                 }
-                if i > 0 && *v <= values[i - 1] {
-                    return Err(ChannelError::invalid(field, "values must increase"));
+                if i > 0 && *v < values[i - 1] {
+                    return Err(ChannelError::invalid(
+                        field,
+                        format!("{v} is below the value before ({})", values[i - 1]),
+                    ));
                 }
             }
+        }
+        let (nz, nr) = (self.depths.len(), self.ranges.len());
+        if nz.saturating_mul(nr) > MAX_RECEIVERS {
+            return Err(ChannelError::invalid(
+                "grid",
+                format!(
+                    "{nz} depths × {nr} ranges is {} receivers, more than the {MAX_RECEIVERS} a field holds",
+                    nz as u128 * nr as u128
+                ),
+            ));
         }
         Ok(())
     }
@@ -125,24 +153,42 @@ impl Channel {
     }
 
     /// Checks a source depth: finite, not negative, in the water at range
-    /// 0.
+    /// 0 and not on its surface or bottom (no ray leaves a source on a
+    /// boundary: its field would be empty).
     pub fn check_source(&self, depth: f64) -> Result<(), ChannelError> {
-        non_negative("source.depth", depth)?;
-        let top = self.surface_depth_at(0.0);
-        let bottom = self.bottom_depth_at(0.0);
-        if depth < top {
-            return Err(ChannelError::invalid(
-                "source.depth",
-                format!("{depth} m is above the surface ({top} m at the source)"),
-            ));
-        }
-        if depth > bottom {
-            return Err(ChannelError::invalid(
-                "source.depth",
-                format!("{depth} m is below the bottom ({bottom} m at the source)"),
-            ));
-        }
-        Ok(())
+        self.check_in_water("source.depth", 0.0, depth)
+    }
+
+    /// Checks that `depth` (m) at `range` (m) is inside the water, naming
+    /// `field` otherwise.
+    pub(crate) fn check_in_water(
+        &self,
+        field: &str,
+        range: f64,
+        depth: f64,
+    ) -> Result<(), ChannelError> {
+        non_negative(field, depth)?;
+        let top = self.surface_depth_at(range);
+        let bottom = self.bottom_depth_at(range);
+        let at = if range == 0.0 {
+            "at the source".to_string()
+        } else {
+            format!("at {range} m")
+        };
+        let problem = if depth < top {
+            format!("{depth} m is above the surface ({top} m {at})")
+        } else if depth == top {
+            format!(
+                "{depth} m is on the surface ({top} m {at}): no ray leaves a source on a boundary"
+            )
+        } else if depth > bottom {
+            format!("{depth} m is below the bottom ({bottom} m {at})")
+        } else if depth == bottom {
+            format!("{depth} m is on the bottom ({bottom} m {at}): no ray leaves a source on a boundary")
+        } else {
+            return Ok(());
+        };
+        Err(ChannelError::invalid(field, problem))
     }
 
     fn fan(&self, source_depth: f64, beams: &Beams) -> Result<Fan, ChannelError> {
@@ -223,11 +269,13 @@ impl Channel {
     }
 
     /// Runs `per_beam` on every beam in chunks (in parallel as `threads`
-    /// allows), each chunk with its own accumulator from `init`; returns
-    /// the chunks' accumulators in beam order.
+    /// allows), each chunk with its own accumulator from `init` (of `cells`
+    /// values: fewer chunks for a large one); returns the chunks'
+    /// accumulators in beam order.
     fn run_beams<A: Send>(
         &self,
         count: usize,
+        cells: usize,
         threads: Threads,
         cancel: Option<&AtomicBool>,
         init: impl Fn() -> A + Sync,
@@ -246,10 +294,12 @@ impl Channel {
             Ok(acc)
         };
         let workers = Self::workers(threads);
-        if workers == 1 || count < 2 {
+        let pieces = (workers * 4)
+            .min(count)
+            .min((ACCUMULATOR_BUDGET / cells.max(1)).max(1));
+        if workers == 1 || pieces < 2 {
             return Ok(vec![chunk(0..count)?]);
         }
-        let pieces = (workers * 4).min(count);
         let ranges: Vec<_> = (0..pieces)
             .map(|k| (k * count / pieces)..((k + 1) * count / pieces))
             .collect();
@@ -341,6 +391,7 @@ impl Channel {
         let xs = [0.0, source_depth];
         let parts = self.run_beams(
             fan.alphas.len(),
+            nz * nr,
             threads,
             cancel,
             || vec![Complex64::new(0.0, 0.0); nz * nr],
@@ -455,18 +506,21 @@ impl Channel {
     }
 
     /// The rays of `beams` from a source at `source_depth` (m), for plots.
+    /// At most [`MAX_RAY_OUTPUT_POINTS`] points in all: more is an error
+    /// naming `rays`.
     pub fn rays(&self, source_depth: f64, beams: &Beams) -> Result<Vec<RayPath>, ChannelError> {
         let fan = self.fan(source_depth, beams)?;
         let tracer = self.tracer(beams, fan.deltas);
         let mut ray = Vec::new();
-        Ok(fan
-            .alphas
-            .iter()
-            .map(|&alpha| {
-                tracer.trace([0.0, source_depth], alpha, 1.0, &mut ray);
-                path(alpha, &ray, ray.len())
-            })
-            .collect())
+        let mut out = Vec::with_capacity(fan.alphas.len());
+        let mut points = 0;
+        for (i, &alpha) in fan.alphas.iter().enumerate() {
+            tracer.trace([0.0, source_depth], alpha, 1.0, &mut ray);
+            points += ray.len();
+            check_ray_points(points, i + 1, fan.alphas.len())?;
+            out.push(path(alpha, &ray, ray.len()));
+        }
+        Ok(out)
     }
 
     /// The eigenrays: each beam whose influence reaches a receiver of
@@ -482,7 +536,8 @@ impl Channel {
         let tracer = self.tracer(beams, fan.deltas);
         let mut ray = Vec::new();
         let mut out = Vec::new();
-        for &alpha in &fan.alphas {
+        let mut points = 0;
+        for (i, &alpha) in fan.alphas.iter().enumerate() {
             if !tracer.trace([0.0, source_depth], alpha, 1.0, &mut ray) {
                 continue;
             }
@@ -492,11 +547,27 @@ impl Channel {
                 steps.push(h.step)
             });
             for step in steps {
+                points += step + 1;
+                check_ray_points(points, i + 1, fan.alphas.len())?;
                 out.push(path(alpha, &ray, step + 1));
             }
         }
         Ok(out)
     }
+}
+
+/// An error when `points` ray points (after `traced` of `count` beams) are
+/// more than [`MAX_RAY_OUTPUT_POINTS`].
+fn check_ray_points(points: usize, traced: usize, count: usize) -> Result<(), ChannelError> {
+    if points > MAX_RAY_OUTPUT_POINTS {
+        return Err(ChannelError::invalid(
+            "rays",
+            format!(
+                "more than {MAX_RAY_OUTPUT_POINTS} ray points after {traced} of {count} beams: trace fewer beams, or a smaller box"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn path(alpha: f64, ray: &[RayPoint], n: usize) -> RayPath {
@@ -506,5 +577,18 @@ fn path(alpha: f64, ray: &[RayPoint], n: usize) -> RayPath {
         points: ray[..n].iter().map(|p| (p.x[0], p.x[1])).collect(),
         top_bounces: last.top_bounces,
         bottom_bounces: last.bottom_bounces,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ray_output_is_bounded() {
+        assert!(check_ray_points(MAX_RAY_OUTPUT_POINTS, 10, 20).is_ok());
+        let e = check_ray_points(MAX_RAY_OUTPUT_POINTS + 1, 10, 20).unwrap_err();
+        assert!(e.to_string().starts_with("rays: more than"), "{e}");
+        assert!(e.to_string().contains("after 10 of 20 beams"), "{e}");
     }
 }

@@ -218,8 +218,10 @@ impl Forecaster {
     }
 
     /// The forecast of the link from `from` to each of `peers` (one
-    /// computation for them all; a peer below the modelled bottom is taken
-    /// at the bottom).
+    /// computation for them all). `from` must be in the water (an error
+    /// names `own.depth` when it is on or beyond the surface or the
+    /// bottom: no ray would leave it); a peer below the modelled bottom
+    /// (or above the surface) is taken at it, as BELLHOP takes receivers.
     pub fn links(
         &self,
         from: &Position,
@@ -227,6 +229,7 @@ impl Forecaster {
         cancel: Option<&AtomicBool>,
     ) -> Result<Vec<LinkForecast>, ChannelError> {
         from.validate("own")?;
+        self.channel.check_in_water("own.depth", 0.0, from.depth)?;
         for (i, p) in peers.iter().enumerate() {
             p.validate(&format!("peers[{i}]"))?;
         }
@@ -247,7 +250,7 @@ impl Forecaster {
         let grid = Grid { depths, ranges };
         let max_depth = self.channel.environment().profile_bottom();
         let beams = self.beams(max_depth, grid.ranges[grid.ranges.len() - 1]);
-        let source = self.in_water(0.0, from.depth);
+        let source = from.depth;
         let threads = self.config.threads;
         let field =
             self.channel
@@ -301,7 +304,9 @@ impl Forecaster {
     /// The forecast over one's own depths `band` (m, `(shallow, deep)`,
     /// every `step` m) for the link with `peer`, by reciprocity a source
     /// at the peer's depth heard across the band (as the thesis' buoy and
-    /// AUV), TL averaged over the range window.
+    /// AUV), TL averaged over the range window. The peer must be in the
+    /// water (`peer.depth`); the band is cut to the water column at the
+    /// range ([`DepthForecast::depths`] says where it went).
     pub fn best_depth(
         &self,
         own: &Position,
@@ -312,6 +317,7 @@ impl Forecaster {
     ) -> Result<DepthForecast, ChannelError> {
         own.validate("own")?;
         peer.validate("peer")?;
+        self.channel.check_in_water("peer.depth", 0.0, peer.depth)?;
         non_negative("band.shallow", band.0)?;
         non_negative("band.deep", band.1)?;
         crate::error::positive("step", step)?;
@@ -345,7 +351,7 @@ impl Forecaster {
             self.channel.environment().profile_bottom(),
             ranges[ranges.len() - 1],
         );
-        let source = self.in_water(0.0, peer.depth);
+        let source = peer.depth;
         let field = self.channel.tl_field(
             source,
             &grid,

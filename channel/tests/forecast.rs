@@ -163,3 +163,29 @@ fn a_forecast_can_be_cancelled_and_bad_positions_are_named() {
         .to_string();
     assert!(e.starts_with("peer.depth"), "{e}");
 }
+
+#[test]
+fn a_source_outside_the_water_is_named_not_an_empty_forecast() {
+    let f = forecaster();
+    let at = |x: f64, depth: f64| Position { x, y: 0.0, depth };
+    for (depth, want) in [
+        (
+            150.0,
+            "own.depth: 150 m is below the bottom (111 m at the source)",
+        ),
+        (111.0, "own.depth: 111 m is on the bottom"),
+        (0.0, "own.depth: 0 m is on the surface"),
+    ] {
+        let e = f
+            .link(&at(0.0, depth), &at(3000.0, 50.0), None)
+            .unwrap_err();
+        assert!(e.to_string().starts_with(want), "{e}");
+    }
+    let e = f
+        .best_depth(&at(3000.0, 20.0), &at(0.0, 150.0), (0.0, 50.0), 1.0, None)
+        .unwrap_err();
+    assert!(
+        e.to_string().starts_with("peer.depth: 150 m is below"),
+        "{e}"
+    );
+}

@@ -401,3 +401,154 @@ fn arrivals_round_trip_through_the_arr_file_and_cut_files_are_errors() {
         );
     }
 }
+
+const PEKERIS: &str = include_str!("data/bellhop/pekeris.env");
+
+/// The error reading `PEKERIS` with `from` replaced by `to`.
+fn pekeris_error(from: &str, to: &str) -> goby_channel::ParseError {
+    assert!(PEKERIS.contains(from), "no '{from}'");
+    read("p.env", &PEKERIS.replace(from, to), &[]).unwrap_err()
+}
+
+#[test]
+fn a_source_on_or_beyond_the_surface_or_the_bottom_names_its_line() {
+    for (depth, want) in [
+        ("150.0", "150 m is below the bottom (100 m at the source)"),
+        ("100.0", "100 m is on the bottom"),
+        ("-5.0", "-5 m is above the surface (0 m at the source)"),
+        ("0.0", "0 m is on the surface"),
+    ] {
+        let e = pekeris_error("50.0 /\n", &format!("{depth} /\n"));
+        assert_eq!((e.line, e.field.as_str()), (11, "source depths"), "{e}");
+        assert!(e.message.contains(want), "{e}");
+    }
+    // The library says the same of a source on the bottom.
+    let file = read("p.env", PEKERIS, &[]).unwrap();
+    let ch = Channel::new(file.environment, file.frequency).unwrap();
+    let e = ch
+        .tl_field(
+            100.0,
+            &file.grid,
+            RunMode::Coherent,
+            &file.beams,
+            Threads::One,
+            None,
+        )
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("source.depth: 100 m is on the bottom"),
+        "{e}"
+    );
+}
+
+#[test]
+fn receivers_beyond_the_water_are_moved_as_bellhop_moves_them_and_said() {
+    let file = read(
+        "p.env",
+        &PEKERIS.replace("0.0 100.0 /", "-20.0 120.0 /"),
+        &[],
+    )
+    .unwrap();
+    let d = &file.grid.depths;
+    assert_eq!((d[0], d[7], d[50]), (0.0, 0.0, 100.0), "{d:?}");
+    assert!(d[8] > 0.0, "{d:?}");
+    let w: Vec<String> = file.warnings.iter().map(|w| w.to_string()).collect();
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].starts_with("p.env:13: receiver depths: 8 of 51 above the surface"),
+        "{w:?}"
+    );
+    assert!(
+        w[1].contains("below the bottom (100 m) are taken at the bottom"),
+        "{w:?}"
+    );
+    // The grid with its repeated depths is computed.
+    let ch = Channel::new(file.environment.clone(), file.frequency).unwrap();
+    ch.tl_field(
+        50.0,
+        &file.grid,
+        RunMode::Coherent,
+        &file.beams,
+        Threads::One,
+        None,
+    )
+    .unwrap();
+    assert!(read("p.env", PEKERIS, &[]).unwrap().warnings.is_empty());
+}
+
+#[test]
+fn a_profile_short_of_the_bottom_or_a_line_without_its_slash_is_named() {
+    // One point, or a last point above the bottom depth: the bottom
+    // option comes where a depth is expected.
+    for (from, to, line, point) in [
+        ("  100.0  1500.0 /\n", "", 7, 2),
+        ("  100.0  1500.0 /\n", "   60.0  1500.0 /\n", 8, 3),
+    ] {
+        let e = pekeris_error(from, to);
+        assert_eq!(e.line, line, "{e}");
+        assert!(e.field.starts_with(&format!("SSP point {point}")), "{e}");
+        assert!(
+            e.message
+                .contains("without reaching the bottom depth 100 m given on line 5"),
+            "{e}"
+        );
+    }
+    let e = pekeris_error("    0.0  1500.0 /", "    0.0  1500.0");
+    assert_eq!(e.line, 6, "{e}");
+    assert!(e.message.contains("without '/'"), "{e}");
+}
+
+#[test]
+fn box_step_and_unsupported_options_name_their_line() {
+    let e = pekeris_error("0.0  101.0  5.1", "0.0  101.0  0.0");
+    assert_eq!(
+        (e.line, e.field.as_str()),
+        (19, "step, box depth, box range"),
+        "{e}"
+    );
+    assert!(
+        e.message.contains("box range 0 km is not above zero"),
+        "{e}"
+    );
+    let e = pekeris_error("0.0  101.0  5.1", "-2.0  101.0  5.1");
+    assert!(e.message.contains("step -2 m is negative"), "{e}");
+    for (option, want) in [
+        ("'CVWB'", "biological attenuation"),
+        ("'CVW  B'", "broadband run"),
+        ("'CVm'", "power law"),
+    ] {
+        let e = pekeris_error("'CVW'", option);
+        assert_eq!((e.line, e.field.as_str()), (4, "top option"), "{e}");
+        assert!(
+            e.message.contains(want) && e.message.contains("not supported"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn a_grid_too_large_for_memory_is_an_error_not_an_abort() {
+    let e = pekeris_error("51\t", "100000\t");
+    assert!(e.message.contains("10100000 receivers"), "{e}");
+    let e2 = read(
+        "p.env",
+        &PEKERIS
+            .replace("51\t", "100000\t")
+            .replace("101\t", "100000\t"),
+        &[],
+    )
+    .unwrap_err();
+    assert_eq!(
+        (e2.line, e2.field.as_str()),
+        (15, "receiver ranges (km)"),
+        "{e2}"
+    );
+    assert!(e2.message.contains("10000000000 receivers"), "{e2}");
+    let grid = Grid {
+        depths: (0..100_000).map(f64::from).collect(),
+        ranges: (0..100_000).map(f64::from).collect(),
+    };
+    let e = grid.validate().unwrap_err();
+    assert_eq!(field_of(e), "grid");
+}

@@ -81,14 +81,21 @@ pub struct EnvFile {
     pub frequency: f64,
     /// The environment.
     pub environment: Environment,
-    /// Source depths (m), clamped into the water column.
+    /// Source depths (m), each in the water at range 0 (a source on or
+    /// beyond the surface or the bottom is an error: BELLHOP moves it onto
+    /// the boundary, where no ray leaves it).
     pub source_depths: Vec<f64>,
-    /// The receiver grid (m), depths clamped into the water column.
+    /// The receiver grid (m), depths moved into the water column as
+    /// BELLHOP moves them (see `warnings`).
     pub grid: Grid,
     /// What to compute.
     pub run: RunKind,
     /// The fan of beams.
     pub beams: Beams,
+    /// What the file asks for that BELLHOP changes without stopping,
+    /// with the line and field (receivers above the surface or below the
+    /// bottom moved onto it): for the user to see, not errors.
+    pub warnings: Vec<ParseError>,
 }
 
 /// How the `.env` reader gets a companion file: called with its extension
