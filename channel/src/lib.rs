@@ -57,5 +57,5 @@ pub use field::TlField;
 pub use forecast::{DepthForecast, ForecastConfig, Forecaster, LinkForecast, Position};
 pub use link::{FerCurve, MicroModemBand, Modem, RateForecast, RateModel};
 pub use noise::NoiseModel;
-pub use profile::{EstimatorConfig, ProfileEstimator};
+pub use profile::{EstimatorConfig, ProfileEstimate, ProfileEstimator};
 pub use soundspeed::{CtdSample, Formula};
