@@ -47,11 +47,18 @@ pub struct ForecastConfig {
     pub range_samples: usize,
     /// Threads a computation may use.
     pub threads: Threads,
+    /// The fan of beams and the ray box to trace instead of `beams` over
+    /// ±`max_angle` with a box just past the farthest receiver: e.g. a
+    /// BELLHOP file's (its launch angles, beam shape, step and box).
+    /// Receivers beyond its box get no TL.
+    #[serde(default)]
+    pub fan: Option<Beams>,
 }
 
 impl ForecastConfig {
     /// The Micro-Modem in `modem`'s band with the thesis' choices: 600
-    /// incoherent beams over ±60°, no range window, one thread.
+    /// incoherent beams over ±60°, no range window, one thread, no fan of
+    /// its own.
     pub fn new(modem: Modem, noise: NoiseModel) -> Self {
         ForecastConfig {
             modem,
@@ -62,6 +69,7 @@ impl ForecastConfig {
             range_window: 0.0,
             range_samples: 9,
             threads: Threads::One,
+            fan: None,
         }
     }
 }
@@ -159,8 +167,12 @@ impl Forecaster {
     pub fn new(env: Environment, config: ForecastConfig) -> Result<Self, ChannelError> {
         config.modem.validate()?;
         config.noise.validate()?;
-        if config.beams < 2 {
-            return Err(ChannelError::invalid("beams", "at least two beams"));
+        match &config.fan {
+            Some(fan) => fan.validate()?,
+            None if config.beams < 2 => {
+                return Err(ChannelError::invalid("beams", "at least two beams"))
+            }
+            None => {}
         }
         if !(config.max_angle > 0.0 && config.max_angle < 90.0) {
             return Err(ChannelError::invalid(
@@ -193,7 +205,12 @@ impl Forecaster {
         self.noise_level
     }
 
-    fn beams(&self, max_depth: f64, max_range: f64) -> Beams {
+    /// The fan traced for receivers down to `max_depth` and out to
+    /// `max_range` (m): [`ForecastConfig::fan`] when given.
+    pub fn beams(&self, max_depth: f64, max_range: f64) -> Beams {
+        if let Some(fan) = &self.config.fan {
+            return fan.clone();
+        }
         let a = self.config.max_angle;
         Beams::new(self.config.beams, -a, a, max_depth, max_range)
     }

@@ -222,8 +222,8 @@ fn bellhop_exe() -> Option<PathBuf> {
         .filter(|p| p.is_file())
 }
 
-/// Runs bellhop.exe on `env` in a scratch folder; returns its `.shd` or
-/// `.arr` bytes.
+/// Runs bellhop.exe on `env` in a scratch folder; returns its `.shd`,
+/// `.arr` or `.ray` bytes.
 fn run_bellhop(exe: &Path, env: &EnvFile, tag: &str) -> Vec<u8> {
     static RUNS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let n = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -243,10 +243,10 @@ fn run_bellhop(exe: &Path, env: &EnvFile, tag: &str) -> Vec<u8> {
         .status()
         .unwrap();
     assert!(status.success(), "bellhop.exe failed on {tag}");
-    let ext = if matches!(env.run, RunKind::Arrivals) {
-        "arr"
-    } else {
-        "shd"
+    let ext = match env.run {
+        RunKind::Arrivals | RunKind::ArrivalsBinary => "arr",
+        RunKind::Rays | RunKind::Eigenrays => "ray",
+        _ => "shd",
     };
     let out = std::fs::read(dir.join(format!("case.{ext}"))).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
@@ -584,4 +584,102 @@ fn arrivals_do_not_depend_on_the_number_of_threads() {
     for n in [2, 3, 5, 8] {
         assert!(one == run(Threads::Count(n)), "{n} threads differ");
     }
+}
+
+/// One ray of a `.ray` file: launch angle, surface and bottom bounces,
+/// points.
+type ParsedRay = (f64, u32, u32, Vec<(f64, f64)>);
+
+/// A `.ray` file's rays, read as plotray reads them.
+fn parse_ray(text: &str) -> Vec<ParsedRay> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut rays = Vec::new();
+    let mut i = 7;
+    while i < lines.len() && !lines[i].trim().is_empty() {
+        let angle: f64 = lines[i].trim().parse().unwrap();
+        let head: Vec<u32> = lines[i + 1]
+            .split_whitespace()
+            .map(|x| x.parse().unwrap())
+            .collect();
+        let points = (0..head[0] as usize)
+            .map(|k| {
+                let v: Vec<f64> = lines[i + 2 + k]
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
+                (v[0], v[1])
+            })
+            .collect();
+        rays.push((angle, head[1], head[2], points));
+        i += 2 + head[0] as usize;
+    }
+    rays
+}
+
+/// BELLHOP's other output formats against ours: the binary `.arr` of run
+/// type `a` (same arrivals as the ASCII one) and the `.ray` file of a ray
+/// run with two sources (every ray of both, the same points).
+#[test]
+fn live_bellhop_binary_arrivals_and_ray_files() {
+    let Some(exe) = bellhop_exe() else {
+        println!("SKIPPED live_bellhop_binary_arrivals_and_ray_files: bellhop.exe not found (set BELLHOP_EXE or install it under /opt/bellhop)");
+        return;
+    };
+    let mut env = load(&option_dir(), "summer-arrivals");
+    env.run = RunKind::ArrivalsBinary;
+    let theirs = bellhop::read_arr_binary("case.arr", &run_bellhop(&exe, &env, "binary")).unwrap();
+    let verdict = judge_option_arrivals("binary", &env, &arrivals_text(&theirs.fields[0]));
+    println!("{}", verdict.line);
+    assert!(verdict.pass);
+    // Our binary file read back is what we computed.
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let ours = ch
+        .arrivals(30.0, &env.grid, &env.beams, Threads::All, None)
+        .unwrap();
+    let bytes = bellhop::write_arr_binary(env.frequency, std::slice::from_ref(&ours));
+    let back = bellhop::read_arr_binary("ours.arr", &bytes).unwrap();
+    assert_eq!(arrivals_text(&back.fields[0]), arrivals_text(&ours));
+    assert_eq!(
+        (
+            theirs.fields[0].depths.clone(),
+            theirs.fields[0].ranges.clone()
+        ),
+        (back.fields[0].depths.clone(), back.fields[0].ranges.clone())
+    );
+
+    let mut env = load(&data_dir(), "summer");
+    env.run = RunKind::Rays;
+    env.source_depths = vec![30.0, 60.0];
+    env.beams.angles = goby_channel::Beams::fan(21, -20.0, 20.0);
+    let theirs = parse_ray(&String::from_utf8_lossy(&run_bellhop(&exe, &env, "rays")));
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let rays: Vec<Vec<goby_channel::RayPath>> = env
+        .source_depths
+        .iter()
+        .map(|&sd| ch.rays(sd, &env.beams).unwrap())
+        .collect();
+    let sets: Vec<bellhop::RaySet> = env
+        .source_depths
+        .iter()
+        .zip(&rays)
+        .map(|(&source_depth, rays)| bellhop::RaySet { source_depth, rays })
+        .collect();
+    let ours = parse_ray(&bellhop::write_ray(
+        &env.title,
+        env.frequency,
+        21,
+        (0.0, 111.0),
+        &sets,
+    ));
+    assert_eq!(theirs.len(), 42);
+    assert_eq!(ours.len(), theirs.len());
+    let mut worst: f64 = 0.0;
+    for (o, t) in ours.iter().zip(&theirs) {
+        assert_eq!((o.0, o.1, o.2, o.3.len()), (t.0, t.1, t.2, t.3.len()));
+        for (p, q) in o.3.iter().zip(&t.3) {
+            worst = worst.max((p.0 - q.0).hypot(p.1 - q.1));
+        }
+    }
+    println!("rays: 42 of 42, the same points within {worst:.2e} m");
+    assert!(worst < 1e-3, "{worst} m");
 }

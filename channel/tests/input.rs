@@ -552,3 +552,43 @@ fn a_grid_too_large_for_memory_is_an_error_not_an_abort() {
     let e = grid.validate().unwrap_err();
     assert_eq!(field_of(e), "grid");
 }
+
+#[test]
+fn binary_arrivals_round_trip_and_cut_or_garbled_files_are_errors() {
+    let file = read("p.env", PEKERIS, &[]).unwrap();
+    let ch = Channel::new(file.environment, file.frequency).unwrap();
+    let grid = Grid {
+        depths: vec![10.0, 60.0],
+        ranges: vec![500.0, 1500.0],
+    };
+    let field = ch
+        .arrivals(50.0, &grid, &file.beams, Threads::One, None)
+        .unwrap();
+    let bytes = bellhop::write_arr_binary(250.0, std::slice::from_ref(&field));
+    let back = bellhop::read_arr_binary("t.arr", &bytes).unwrap();
+    assert_eq!(back.frequency, 250.0);
+    assert_eq!(back.fields[0].depths, grid.depths);
+    for (x, y) in back.fields[0]
+        .arrivals
+        .iter()
+        .flatten()
+        .zip(field.arrivals.iter().flatten())
+    {
+        assert_eq!(
+            (x.delay, x.amplitude, x.top_bounces),
+            (y.delay, y.amplitude, y.top_bounces)
+        );
+    }
+    for n in 0..bytes.len() {
+        assert!(
+            bellhop::read_arr_binary("t.arr", &bytes[..n]).is_err(),
+            "cut at {n}"
+        );
+    }
+    let mut garbled = bytes.clone();
+    garbled[bytes.len() - 3] ^= 0x40;
+    assert!(bellhop::read_arr_binary("t.arr", &garbled).is_err());
+    let mut huge = bytes;
+    huge[0..4].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(bellhop::read_arr_binary("t.arr", &huge).is_err());
+}

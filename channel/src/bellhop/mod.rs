@@ -1,8 +1,8 @@
 //! BELLHOP's own files: the `.env` environment file with its companions
 //! (`.bty` bathymetry, `.ati` altimetry, `.ssp` range-dependent sound
 //! speed, `.brc`/`.trc` reflection coefficients, `.sbp` source beam
-//! pattern), and the outputs: `.shd` (the pressure field) and `.arr`
-//! (arrivals, ASCII).
+//! pattern), and the outputs: `.shd` (the pressure field), `.arr`
+//! (arrivals, ASCII or binary) and `.ray` (rays and eigenrays).
 //!
 //! Readers take the text (or bytes) and the file's name, never panic, and
 //! name the file, line and field of the first problem. The `.env` reader
@@ -20,7 +20,10 @@ mod outputs;
 mod records;
 mod write;
 
-pub use outputs::{read_arr, read_shd, write_arr, write_shd, ArrFile, ShdFile};
+pub use outputs::{
+    read_arr, read_arr_binary, read_shd, write_arr, write_arr_binary, write_ray, write_shd,
+    ArrFile, RaySet, ShdFile,
+};
 pub use write::write_env;
 
 use crate::beams::Beams;
