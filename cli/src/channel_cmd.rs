@@ -424,15 +424,18 @@ fn tl_json(f: &TlField) -> serde_json::Value {
     json!({ "sd": f.source_depth, "rd": f.depths, "rr": f.ranges, "tl": f.tl_rows() })
 }
 
-/// One arrival as JSON, in the units of BELLHOP's .arr.
+/// One arrival as JSON, in the units and single precision of BELLHOP's
+/// .arr.
 fn arrival_json(a: &Arrival) -> serde_json::Value {
+    // The shortest decimal of the single-precision value, as the .arr.
+    let single = |x: f64| -> f64 { (x as f32).to_string().parse().unwrap_or(x) };
     json!({
-        "amplitude": a.amplitude,
-        "phase": a.phase.to_degrees(),
-        "delay": a.delay,
-        "delay_imag": a.delay_imag,
-        "source_angle": a.source_angle,
-        "receiver_angle": a.receiver_angle,
+        "amplitude": single(a.amplitude),
+        "phase": single(a.phase.to_degrees()),
+        "delay": single(a.delay),
+        "delay_imag": single(a.delay_imag),
+        "source_angle": single(a.source_angle),
+        "receiver_angle": single(a.receiver_angle),
         "top_bounces": a.top_bounces,
         "bottom_bounces": a.bottom_bounces,
     })
