@@ -592,3 +592,43 @@ fn binary_arrivals_round_trip_and_cut_or_garbled_files_are_errors() {
     huge[0..4].copy_from_slice(&u32::MAX.to_le_bytes());
     assert!(bellhop::read_arr_binary("t.arr", &huge).is_err());
 }
+
+#[test]
+fn bad_profile_half_space_and_angle_values_name_their_line() {
+    for (from, to, line, want) in [
+        (
+            "  100.0  1500.0 /",
+            "  100.0  -1500.0 /",
+            7,
+            "sound speed (m/s) -1500 is not above zero",
+        ),
+        (
+            "  100.0  1600.0 0.0 1.5 0.5 /",
+            "  100.0  1600.0 0.0 0.0 0.5 /",
+            9,
+            "density (g/cm³) 0 is not above zero",
+        ),
+        (
+            "  100.0  1600.0 0.0 1.5 0.5 /",
+            "  100.0  1600.0 0.0 1.5 -0.5 /",
+            9,
+            "attenuation -0.5 is negative",
+        ),
+        (
+            "-60.0 60.0 /",
+            "-60.0 190.0 /",
+            18,
+            "° is not within ±180°",
+        ),
+    ] {
+        let e = pekeris_error(from, to);
+        assert_eq!(e.line, line, "{e}");
+        assert!(e.message.contains(want), "{e}");
+    }
+    let twice = PEKERIS
+        .replace("601\t", "3\t")
+        .replace("-60.0 60.0 /", "-10.0 0.0 0.0 /");
+    let e = read("p.env", &twice, &[]).unwrap_err();
+    assert_eq!(e.line, 18, "{e}");
+    assert!(e.message.contains("0° is given twice"), "{e}");
+}

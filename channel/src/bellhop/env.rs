@@ -174,6 +174,26 @@ fn read_layer(r: &mut Records, layer: &mut Layer, field: &str) -> Result<(f64, u
     Ok((z, line))
 }
 
+/// Checks the values a layer line set: speeds and density above zero
+/// (a shear speed may be zero), attenuations not negative.
+fn check_layer(r: &Records, layer: &Layer, line: usize, field: &str) -> Result<(), ParseError> {
+    let bad =
+        |what: &str, v: f64, rule: &str| Err(r.error(line, field, format!("{what} {v} is {rule}")));
+    if layer.alpha_r <= 0.0 {
+        return bad("sound speed (m/s)", layer.alpha_r, "not above zero");
+    }
+    if layer.rho <= 0.0 {
+        return bad("density (g/cm³)", layer.rho, "not above zero");
+    }
+    if layer.beta_r < 0.0 {
+        return bad("shear speed (m/s)", layer.beta_r, "negative");
+    }
+    if layer.alpha_i < 0.0 || layer.beta_i < 0.0 {
+        return bad("attenuation", layer.alpha_i.min(layer.beta_i), "negative");
+    }
+    Ok(())
+}
+
 fn half_space_of(layer: &Layer) -> HalfSpace {
     HalfSpace {
         speed: layer.alpha_r,
@@ -196,7 +216,8 @@ fn read_half_space(
         'R' => Ok(Boundary::Rigid),
         'F' => Ok(Boundary::Table(Vec::new())),
         'A' => {
-            read_layer(r, layer, field)?;
+            let (_, line) = read_layer(r, layer, field)?;
+            check_layer(r, layer, line, field)?;
             Ok(Boundary::HalfSpace(half_space_of(layer)))
         }
         _ => {
@@ -275,6 +296,12 @@ fn read_angles(
     }
     if a.len() > 1 && a[a.len() - 1] == a[0] {
         return Err(r.error(line, field, "the first and last launch angles are the same"));
+    }
+    if let Some(x) = a.iter().find(|x| x.abs() >= 180.0) {
+        return Err(r.error(line, field, format!("{x}° is not within ±180°")));
+    }
+    if let Some(w) = a.windows(2).find(|w| w[0] == w[1]) {
+        return Err(r.error(line, field, format!("{}° is given twice", w[0])));
     }
     Ok(a)
 }
@@ -377,6 +404,7 @@ fn read_profile(
                 ));
             }
         }
+        check_layer(r, layer, line, &field)?;
         points.push(SspPoint {
             depth: z,
             speed: layer.alpha_r,
