@@ -614,12 +614,7 @@ fn bad_profile_half_space_and_angle_values_name_their_line() {
             9,
             "attenuation -0.5 is negative",
         ),
-        (
-            "-60.0 60.0 /",
-            "-60.0 190.0 /",
-            18,
-            "° is not within ±180°",
-        ),
+        ("-60.0 60.0 /", "-60.0 190.0 /", 18, "° is not within ±180°"),
     ] {
         let e = pekeris_error(from, to);
         assert_eq!(e.line, line, "{e}");
@@ -631,4 +626,21 @@ fn bad_profile_half_space_and_angle_values_name_their_line() {
     let e = read("p.env", &twice, &[]).unwrap_err();
     assert_eq!(e.line, 18, "{e}");
     assert!(e.message.contains("0° is given twice"), "{e}");
+}
+
+#[test]
+fn a_profile_past_the_bottom_or_above_the_surface_names_its_line() {
+    let e = pekeris_error(
+        "  100.0  1500.0 /\n",
+        "  100.0  1500.0 /\n  150.0  1500.0 /\n",
+    );
+    assert_eq!((e.line, e.field.as_str()), (8, "bottom option"), "{e}");
+    assert!(
+        e.message
+            .contains("the profile ended at the bottom depth 100 m (line 5)"),
+        "{e}"
+    );
+    let e = pekeris_error("    0.0  1500.0 /", "  -10.0  1500.0 /");
+    assert_eq!(e.line, 6, "{e}");
+    assert!(e.message.contains("depth -10 m is negative"), "{e}");
 }

@@ -405,6 +405,13 @@ fn read_profile(
             }
         }
         check_layer(r, layer, line, &field)?;
+        if z < 0.0 {
+            return Err(r.error(
+                line,
+                &field,
+                format!("depth {z} m is negative: depths go down from the sea surface at 0 m"),
+            ));
+        }
         points.push(SspPoint {
             depth: z,
             speed: layer.alpha_r,
@@ -488,11 +495,21 @@ pub(super) fn read_env(
     let (surface_roughness, depth) = (head[1].0, head[2].0);
     let profile = read_profile(&mut r, (depth, head[2].1), &mut layer)?;
     let v = r.read(2, "bottom option")?;
-    let bottom_option = v
+    let first = v
         .first()
-        .map(value_text)
-        .ok_or_else(|| r.error(r.line() - 1, "bottom option", "missing"))?
-        .to_string();
+        .ok_or_else(|| r.error(r.line() - 1, "bottom option", "missing"))?;
+    if !first.quoted && super::records::parse_number(&first.text).is_some() {
+        let last = profile[profile.len() - 1].depth;
+        return Err(r.error(
+            first.line,
+            "bottom option",
+            format!(
+                "a number where the bottom option (a quoted string) is expected: the profile ended at the bottom depth {last} m (line {}), so this SSP line is below the bottom",
+                head[2].1
+            ),
+        ));
+    }
+    let bottom_option = value_text(first).to_string();
     let bottom_roughness = match v.get(1) {
         Some(s) => r.number(s, "bottom roughness")?,
         None => 0.0,
