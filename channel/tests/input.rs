@@ -410,6 +410,14 @@ fn pekeris_error(from: &str, to: &str) -> goby_channel::ParseError {
     read("p.env", &PEKERIS.replace(from, to), &[]).unwrap_err()
 }
 
+/// [`pekeris_error`], checked: at `line`, its message holding `want`.
+fn refused_at(from: &str, to: &str, line: usize, want: &str) -> goby_channel::ParseError {
+    let e = pekeris_error(from, to);
+    assert_eq!(e.line, line, "{e}");
+    assert!(e.message.contains(want), "{e}");
+    e
+}
+
 #[test]
 fn a_source_on_or_beyond_the_surface_or_the_bottom_names_its_line() {
     for (depth, want) in [
@@ -485,18 +493,11 @@ fn a_profile_short_of_the_bottom_or_a_line_without_its_slash_is_named() {
         ("  100.0  1500.0 /\n", "", 7, 2),
         ("  100.0  1500.0 /\n", "   60.0  1500.0 /\n", 8, 3),
     ] {
-        let e = pekeris_error(from, to);
-        assert_eq!(e.line, line, "{e}");
+        let want = "without reaching the bottom depth 100 m given on line 5";
+        let e = refused_at(from, to, line, want);
         assert!(e.field.starts_with(&format!("SSP point {point}")), "{e}");
-        assert!(
-            e.message
-                .contains("without reaching the bottom depth 100 m given on line 5"),
-            "{e}"
-        );
     }
-    let e = pekeris_error("    0.0  1500.0 /", "    0.0  1500.0");
-    assert_eq!(e.line, 6, "{e}");
-    assert!(e.message.contains("without '/'"), "{e}");
+    refused_at("    0.0  1500.0 /", "    0.0  1500.0", 6, "without '/'");
 }
 
 #[test]
@@ -616,9 +617,7 @@ fn bad_profile_half_space_and_angle_values_name_their_line() {
         ),
         ("-60.0 60.0 /", "-60.0 190.0 /", 18, "° is not within ±180°"),
     ] {
-        let e = pekeris_error(from, to);
-        assert_eq!(e.line, line, "{e}");
-        assert!(e.message.contains(want), "{e}");
+        refused_at(from, to, line, want);
     }
     let twice = PEKERIS
         .replace("601\t", "3\t")
@@ -630,17 +629,17 @@ fn bad_profile_half_space_and_angle_values_name_their_line() {
 
 #[test]
 fn a_profile_past_the_bottom_or_above_the_surface_names_its_line() {
-    let e = pekeris_error(
+    let e = refused_at(
         "  100.0  1500.0 /\n",
         "  100.0  1500.0 /\n  150.0  1500.0 /\n",
+        8,
+        "the profile ended at the bottom depth 100 m (line 5)",
     );
-    assert_eq!((e.line, e.field.as_str()), (8, "bottom option"), "{e}");
-    assert!(
-        e.message
-            .contains("the profile ended at the bottom depth 100 m (line 5)"),
-        "{e}"
+    assert_eq!(e.field, "bottom option");
+    refused_at(
+        "    0.0  1500.0 /",
+        "  -10.0  1500.0 /",
+        6,
+        "depth -10 m is negative",
     );
-    let e = pekeris_error("    0.0  1500.0 /", "  -10.0  1500.0 /");
-    assert_eq!(e.line, 6, "{e}");
-    assert!(e.message.contains("depth -10 m is negative"), "{e}");
 }

@@ -141,6 +141,19 @@ fn a_bathymetry_file_that_does_not_parse_is_named() {
     assert!(err.contains("'twenty' is not a finite number"), "{err}");
 }
 
+/// The `depth speed` lines `goby channel ssp` printed (it succeeded).
+fn ssp_lines(out: &std::process::Output) -> Vec<Vec<f64>> {
+    assert!(out.status.success(), "{}", stderr_text(out));
+    stdout_text(out)
+        .lines()
+        .map(|l| {
+            l.split_whitespace()
+                .filter_map(|x| x.parse().ok())
+                .collect()
+        })
+        .collect()
+}
+
 #[test]
 fn ssp_from_a_ctd_cast() {
     let dir = scratch("ssp", &[]);
@@ -158,15 +171,7 @@ fn ssp_from_a_ctd_cast() {
         ],
         "",
     );
-    assert!(out.status.success(), "{}", stderr_text(&out));
-    let lines: Vec<Vec<f64>> = stdout_text(&out)
-        .lines()
-        .map(|l| {
-            l.split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect()
-        })
-        .collect();
+    let lines = ssp_lines(&out);
     assert_eq!(lines[0][0], 0.0);
     assert_eq!(lines[lines.len() - 1][0], 100.0);
     // Warm water is fast, the thermocline slows it: ~1533 m/s over ~1508.
@@ -174,11 +179,7 @@ fn ssp_from_a_ctd_cast() {
     std::fs::write(dir.join("bad.txt"), "0 1.0 20.0 38\n1 2.0 nan 38\n").unwrap();
     let out = goby_in(&dir, &["channel", "ssp", "bad.txt"], "");
     assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr_text(&out).contains("bad.txt:2: sample.temperature"),
-        "{}",
-        stderr_text(&out)
-    );
+    says(&out, "bad.txt:2: sample.temperature");
 }
 
 #[test]
@@ -262,6 +263,12 @@ fn two_sources(run: &str) -> Vec<(&'static str, String)> {
     ]
 }
 
+/// Asserts that `out`'s standard error holds `want`.
+fn says(out: &std::process::Output, want: &str) {
+    let err = stderr_text(out);
+    assert!(err.contains(want), "wanted '{want}' in: {err}");
+}
+
 fn json_of(out: &std::process::Output) -> serde_json::Value {
     assert!(out.status.success(), "{}", stderr_text(out));
     serde_json::from_str(&stdout_text(out)).unwrap()
@@ -325,11 +332,7 @@ fn every_output_carries_every_source_and_says_its_depth() {
     // The PNG shows one source and says which.
     let out = goby_in(&dir, &["channel", "tl", "C.env"], "");
     assert!(out.status.success(), "{}", stderr_text(&out));
-    assert!(
-        stderr_text(&out).contains("the plot shows source 1 (30 m); --source N chooses"),
-        "{}",
-        stderr_text(&out)
-    );
+    says(&out, "the plot shows source 1 (30 m); --source N chooses");
     // compare: every source of a .shd with both.
     let out = goby_in(&dir, &["channel", "tl", "C.env", "--format", "shd"], "");
     assert!(out.status.success(), "{}", stderr_text(&out));
@@ -342,10 +345,9 @@ fn every_output_carries_every_source_and_says_its_depth() {
     assert_eq!(text.matches("within 3 dB: 100.0 %").count(), 2, "{text}");
     let out = goby_in(&dir, &["channel", "tl", "C.env", "--source", "3"], "");
     assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr_text(&out).contains("--source 3: the file has 2 source(s) (1: 30 m, 2: 60 m)"),
-        "{}",
-        stderr_text(&out)
+    says(
+        &out,
+        "--source 3: the file has 2 source(s) (1: 30 m, 2: 60 m)",
     );
 }
 
@@ -409,11 +411,7 @@ fn bellhops_own_files_are_written_where_asked_and_others_refused() {
         all.extend_from_slice(args);
         let out = goby_in(&dir, &all, "");
         assert_eq!(out.status.code(), Some(2), "{args:?}");
-        assert!(
-            stderr_text(&out).contains(want),
-            "{args:?}: {}",
-            stderr_text(&out)
-        );
+        says(&out, want);
         assert!(stdout_text(&out).is_empty(), "{args:?}");
     }
     assert!(!dir.join("r.shd").exists());
@@ -497,11 +495,7 @@ fn link_and_best_depth_name_what_the_user_typed() {
     ] {
         let out = link(extra);
         assert_eq!(out.status.code(), Some(2), "{extra:?}");
-        assert!(
-            stderr_text(&out).contains(want),
-            "{extra:?}: {}",
-            stderr_text(&out)
-        );
+        says(&out, want);
     }
     // The file's own beams and box by default, said; --beams a fan.
     let out = link(&["--source-depth", "30", "--receiver-depth", "50"]);
@@ -534,13 +528,9 @@ fn link_and_best_depth_name_what_the_user_typed() {
         ],
         "",
     );
-    assert!(
-        stderr_text(&out).contains("--range: 5000 m is beyond the ray box"),
-        "{}",
-        stderr_text(&out)
-    );
-    let out = goby(
-        &[
+    says(&out, "--range: 5000 m is beyond the ray box");
+    let best_depth = |deep: &str, step: &str| {
+        let args = [
             "channel",
             "best-depth",
             env,
@@ -549,41 +539,19 @@ fn link_and_best_depth_name_what_the_user_typed() {
             "--range",
             "3000",
             "--deep",
-            "200",
+            deep,
             "--step",
-            "10",
-        ],
-        "",
-    );
+            step,
+        ];
+        goby(&args, "")
+    };
+    let out = best_depth("200", "10");
     assert!(out.status.success(), "{}", stderr_text(&out));
-    assert!(
-        stderr_text(&out).contains("--deep 200 m is below the bottom (111 m at 3000 m)"),
-        "{}",
-        stderr_text(&out)
-    );
+    says(&out, "--deep 200 m is below the bottom (111 m at 3000 m)");
     let last = stdout_text(&out).lines().last().unwrap().to_string();
     assert!(last.starts_with("110.0"), "{last}");
-    let out = goby(
-        &[
-            "channel",
-            "best-depth",
-            env,
-            "--peer-depth",
-            "30",
-            "--range",
-            "3000",
-            "--deep",
-            "20",
-            "--step",
-            "0",
-        ],
-        "",
-    );
-    assert!(
-        stderr_text(&out).contains("--step: 0 is not above zero"),
-        "{}",
-        stderr_text(&out)
-    );
+    let out = best_depth("20", "0");
+    says(&out, "--step: 0 is not above zero");
 }
 
 #[test]
@@ -594,15 +562,7 @@ fn ssp_from_the_sample_cast_says_what_it_measured_and_extended() {
         &["channel", "ssp", cast, "--bin", "5", "--bottom", "111"],
         "",
     );
-    assert!(out.status.success(), "{}", stderr_text(&out));
-    let lines: Vec<Vec<f64>> = stdout_text(&out)
-        .lines()
-        .map(|l| {
-            l.split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect()
-        })
-        .collect();
+    let lines = ssp_lines(&out);
     let (deepest, bottom) = (&lines[lines.len() - 2], &lines[lines.len() - 1]);
     assert_eq!(bottom[0], 111.0);
     // The water below 80 m is the deepest bin's, at its pressure.
@@ -617,10 +577,9 @@ fn ssp_from_the_sample_cast_says_what_it_measured_and_extended() {
     // A window shorter than a yo-yo (624 s) leaves depths out, said.
     let out = goby(&["channel", "ssp", cast, "--window", "200"], "");
     assert!(out.status.success(), "{}", stderr_text(&out));
-    assert!(
-        stderr_text(&out).contains("a window shorter than a yo-yo leaves those depths out"),
-        "{}",
-        stderr_text(&out)
+    says(
+        &out,
+        "a window shorter than a yo-yo leaves those depths out",
     );
     for (extra, want) in [
         (
@@ -637,11 +596,7 @@ fn ssp_from_the_sample_cast_says_what_it_measured_and_extended() {
         args.extend_from_slice(extra);
         let out = goby(&args, "");
         assert_eq!(out.status.code(), Some(2), "{extra:?}");
-        assert!(
-            stderr_text(&out).contains(want),
-            "{extra:?}: {}",
-            stderr_text(&out)
-        );
+        says(&out, want);
     }
 }
 

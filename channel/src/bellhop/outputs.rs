@@ -251,6 +251,34 @@ pub struct ArrFile {
     pub fields: Vec<ArrivalField>,
 }
 
+/// An arrival from the eight values of a `.arr` line (`value(k)`, k from
+/// 0), rounded to single precision as BELLHOP writes them: amplitude,
+/// phase (degrees), delay and its imaginary part (s), source and receiver
+/// angles (degrees), surface and bottom bounces.
+fn arrival_of(value: impl Fn(usize) -> f64) -> Arrival {
+    let single = |k: usize| f64::from(value(k) as f32);
+    Arrival {
+        amplitude: single(0),
+        phase: single(1).to_radians(),
+        delay: single(2),
+        delay_imag: single(3),
+        source_angle: single(4),
+        receiver_angle: single(5),
+        top_bounces: value(6).max(0.0) as u32,
+        bottom_bounces: value(7).max(0.0) as u32,
+    }
+}
+
+/// One source's arrivals on the receiver grid of a `.arr` file.
+fn field_of(sd: f64, depths: &[f64], ranges: &[f64], arrivals: Vec<Vec<Arrival>>) -> ArrivalField {
+    ArrivalField {
+        source_depth: sd,
+        depths: depths.to_vec(),
+        ranges: ranges.to_vec(),
+        arrivals,
+    }
+}
+
 /// Reads an ASCII `.arr` file (`name` for errors).
 pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
     let mut r = Records::new(name, text);
@@ -282,27 +310,11 @@ pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
                 if v.len() < 8 {
                     return Err(r.error(line, &field, "8 values expected"));
                 }
-                // Single precision values, as BELLHOP writes them.
-                let single = |k: usize| f64::from(v[k].0 as f32);
-                list.push(Arrival {
-                    amplitude: single(0),
-                    phase: single(1).to_radians(),
-                    delay: single(2),
-                    delay_imag: single(3),
-                    source_angle: single(4),
-                    receiver_angle: single(5),
-                    top_bounces: v[6].0.max(0.0) as u32,
-                    bottom_bounces: v[7].0.max(0.0) as u32,
-                });
+                list.push(arrival_of(|k| v[k].0));
             }
             arrivals.push(list);
         }
-        fields.push(ArrivalField {
-            source_depth: sd,
-            depths: depths.clone(),
-            ranges: ranges.clone(),
-            arrivals,
-        });
+        fields.push(field_of(sd, &depths, &ranges, arrivals));
     }
     Ok(ArrFile { frequency, fields })
 }
@@ -527,26 +539,11 @@ pub fn read_arr_binary(name: &str, bytes: &[u8]) -> Result<ArrFile, ParseError> 
             let mut list = Vec::with_capacity(n);
             for k in 0..n {
                 let w = r.words(8, &format!("arrival {}", k + 1))?;
-                let v = |i: usize| f64::from(f32::from_le_bytes(w[i]));
-                list.push(Arrival {
-                    amplitude: v(0),
-                    phase: v(1).to_radians(),
-                    delay: v(2),
-                    delay_imag: v(3),
-                    source_angle: v(4),
-                    receiver_angle: v(5),
-                    top_bounces: v(6).max(0.0) as u32,
-                    bottom_bounces: v(7).max(0.0) as u32,
-                });
+                list.push(arrival_of(|i| f64::from(f32::from_le_bytes(w[i]))));
             }
             arrivals.push(list);
         }
-        fields.push(ArrivalField {
-            source_depth: sd,
-            depths: depths.clone(),
-            ranges: ranges.clone(),
-            arrivals,
-        });
+        fields.push(field_of(sd, &depths, &ranges, arrivals));
     }
     Ok(ArrFile { frequency, fields })
 }
