@@ -27,6 +27,9 @@ pub const MAX_RECEIVERS: usize = 10_000_000;
 /// together (320 MB).
 pub const MAX_RAY_OUTPUT_POINTS: usize = 20_000_000;
 
+/// Most arrivals [`Channel::arrivals`] holds in all (1.6 GB).
+pub const MAX_HELD_ARRIVALS: usize = 50_000_000;
+
 /// Complex cells the accumulators of a TL field may hold together (512 MB):
 /// a large grid is summed in fewer pieces.
 const ACCUMULATOR_BUDGET: usize = 1 << 25;
@@ -312,14 +315,16 @@ impl Channel {
     }
 
     /// Runs `per_beam` on every beam (batches in parallel as `threads`
-    /// allows) and hands each beam's result to `consume` in launch order,
-    /// whatever the number of threads.
+    /// allows, fewer beams at a time on a grid of many `cells`) and hands
+    /// each beam's result to `consume` in launch order, whatever the number
+    /// of threads; an error of `consume` stops the run.
     fn run_beams_in_order<T: Send>(
         count: usize,
+        cells: usize,
         threads: Threads,
         cancel: Option<&AtomicBool>,
         per_beam: impl Fn(usize, &mut Vec<RayPoint>) -> T + Sync,
-        mut consume: impl FnMut(T) + Send,
+        mut consume: impl FnMut(T) -> Result<(), ChannelError> + Send,
     ) -> Result<(), ChannelError> {
         let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
         let workers = Self::workers(threads);
@@ -329,11 +334,11 @@ impl Channel {
                 if cancelled() {
                     return Err(ChannelError::Cancelled);
                 }
-                consume(per_beam(i, &mut ray));
+                consume(per_beam(i, &mut ray))?;
             }
             return Ok(());
         }
-        let batch = workers * 16;
+        let batch = (workers * 16).min((ACCUMULATOR_BUDGET / cells.max(1)).max(workers));
         Self::in_pool(threads, || {
             for start in (0..count).step_by(batch) {
                 if cancelled() {
@@ -343,7 +348,7 @@ impl Channel {
                     .into_par_iter()
                     .map_init(|| Vec::with_capacity(1024), |ray, i| per_beam(i, ray))
                     .collect();
-                results.into_iter().for_each(&mut consume);
+                results.into_iter().try_for_each(&mut consume)?;
             }
             Ok(())
         })
@@ -445,7 +450,8 @@ impl Channel {
     /// phase of the receiver's last arrival is one arrival with it; at
     /// most max(2·10⁸ / receivers, 10) arrivals per receiver, the weakest
     /// replaced). Beams are merged in launch order whatever `threads` is,
-    /// so the result does not depend on it.
+    /// so the result does not depend on it. More than
+    /// [`MAX_HELD_ARRIVALS`] in all is an error naming `arrivals`.
     pub fn arrivals(
         &self,
         source_depth: f64,
@@ -462,8 +468,12 @@ impl Channel {
         let max_per_receiver = (200_000_000 / (nz * nr)).max(10);
         let xs = [0.0, source_depth];
         let mut lists = vec![Vec::<HeldArrival>::new(); nz * nr];
+        let mut held = 0usize;
+        let count = fan.alphas.len();
+        let mut traced = 0usize;
         Self::run_beams_in_order(
-            fan.alphas.len(),
+            count,
+            nz * nr,
             threads,
             cancel,
             |i, ray| {
@@ -492,9 +502,14 @@ impl Channel {
                 hits
             },
             |hits| {
+                traced += 1;
                 for (cell, arrival) in &hits {
-                    add_arrival(&mut lists[*cell], arrival, omega, max_per_receiver);
+                    let list = &mut lists[*cell];
+                    let before = list.len();
+                    add_arrival(list, arrival, omega, max_per_receiver);
+                    held += list.len() - before;
                 }
+                check_held_arrivals(held, traced, count)
             },
         )?;
         Ok(ArrivalField::from_held(
@@ -556,6 +571,20 @@ impl Channel {
     }
 }
 
+/// An error when `held` arrivals (after `traced` of `count` beams) are more
+/// than [`MAX_HELD_ARRIVALS`].
+fn check_held_arrivals(held: usize, traced: usize, count: usize) -> Result<(), ChannelError> {
+    if held > MAX_HELD_ARRIVALS {
+        return Err(ChannelError::invalid(
+            "arrivals",
+            format!(
+                "more than {MAX_HELD_ARRIVALS} arrivals after {traced} of {count} beams: ask for fewer receivers"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// An error when `points` ray points (after `traced` of `count` beams) are
 /// more than [`MAX_RAY_OUTPUT_POINTS`].
 fn check_ray_points(points: usize, traced: usize, count: usize) -> Result<(), ChannelError> {
@@ -585,10 +614,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn ray_output_is_bounded() {
+    fn ray_and_arrival_output_is_bounded() {
         assert!(check_ray_points(MAX_RAY_OUTPUT_POINTS, 10, 20).is_ok());
         let e = check_ray_points(MAX_RAY_OUTPUT_POINTS + 1, 10, 20).unwrap_err();
         assert!(e.to_string().starts_with("rays: more than"), "{e}");
         assert!(e.to_string().contains("after 10 of 20 beams"), "{e}");
+        assert!(check_held_arrivals(MAX_HELD_ARRIVALS, 3, 9).is_ok());
+        let e = check_held_arrivals(MAX_HELD_ARRIVALS + 1, 3, 9).unwrap_err();
+        assert!(e.to_string().starts_with("arrivals: more than"), "{e}");
     }
 }

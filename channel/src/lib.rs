@@ -47,7 +47,9 @@ pub(crate) mod trace;
 
 pub use arrivals::{Arrival, ArrivalField};
 pub use beams::{BeamShape, Beams, RunMode, SourceType, Threads};
-pub use channel::{Channel, Grid, RayPath, MAX_RAY_OUTPUT_POINTS, MAX_RECEIVERS};
+pub use channel::{
+    Channel, Grid, RayPath, MAX_HELD_ARRIVALS, MAX_RAY_OUTPUT_POINTS, MAX_RECEIVERS,
+};
 pub use environment::{
     grain_size_half_space, AttenuationUnit, Boundary, BoundaryProfile, Environment, HalfSpace,
     Interpolation, ReflectionPoint, SspGrid, SspPoint, VolumeAttenuation,
