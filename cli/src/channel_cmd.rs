@@ -58,8 +58,8 @@ pub enum ChannelCommand {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum TlFormat {
     /// A PNG plot of a TL field or rays (FILE.png beside the .env, or
-    /// -o); an arrivals run prints its ASCII .arr ('A') or writes its
-    /// binary .arr ('a').
+    /// -o); an arrivals run prints its ASCII .arr ('A'; to -o when given)
+    /// or writes its binary .arr ('a').
     #[value(alias = "png")]
     Text,
     /// JSON on standard output (units in docs/channel.md).
@@ -668,7 +668,7 @@ impl TlRun<'_> {
                 let v = by_source(fields.iter().map(arrivals_json).collect());
                 writeln!(out, "{v}")?;
             }
-            TlFormat::Text if !binary => {
+            TlFormat::Text if !binary && self.args.output.is_none() => {
                 write!(out, "{}", bellhop::write_arr(self.file.frequency, &fields))?;
             }
             _ if binary => {

@@ -385,6 +385,11 @@ fn bellhops_own_files_are_written_where_asked_and_others_refused() {
     assert!(std::fs::read_to_string(dir.join("x.arr"))
         .unwrap()
         .starts_with("'2D'"));
+    let out = goby_in(&dir, &["channel", "tl", "asc.env", "-o", "y.arr"], "");
+    assert_eq!(stdout_text(&out).trim(), "y.arr", "{}", stderr_text(&out));
+    assert!(std::fs::read_to_string(dir.join("y.arr"))
+        .unwrap()
+        .starts_with("'2D'"));
     for (args, want) in [
         (
             &["asc.env", "--format", "shd"][..],
