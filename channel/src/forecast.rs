@@ -47,11 +47,18 @@ pub struct ForecastConfig {
     pub range_samples: usize,
     /// Threads a computation may use.
     pub threads: Threads,
+    /// The fan of beams and the ray box to trace instead of `beams` over
+    /// ±`max_angle` with a box just past the farthest receiver: e.g. a
+    /// BELLHOP file's (its launch angles, beam shape, step and box).
+    /// Receivers beyond its box get no TL.
+    #[serde(default)]
+    pub fan: Option<Beams>,
 }
 
 impl ForecastConfig {
     /// The Micro-Modem in `modem`'s band with the thesis' choices: 600
-    /// incoherent beams over ±60°, no range window, one thread.
+    /// incoherent beams over ±60°, no range window, one thread, no fan of
+    /// its own.
     pub fn new(modem: Modem, noise: NoiseModel) -> Self {
         ForecastConfig {
             modem,
@@ -62,6 +69,7 @@ impl ForecastConfig {
             range_window: 0.0,
             range_samples: 9,
             threads: Threads::One,
+            fan: None,
         }
     }
 }
@@ -159,8 +167,12 @@ impl Forecaster {
     pub fn new(env: Environment, config: ForecastConfig) -> Result<Self, ChannelError> {
         config.modem.validate()?;
         config.noise.validate()?;
-        if config.beams < 2 {
-            return Err(ChannelError::invalid("beams", "at least two beams"));
+        match &config.fan {
+            Some(fan) => fan.validate()?,
+            None if config.beams < 2 => {
+                return Err(ChannelError::invalid("beams", "at least two beams"))
+            }
+            None => {}
         }
         if !(config.max_angle > 0.0 && config.max_angle < 90.0) {
             return Err(ChannelError::invalid(
@@ -193,7 +205,12 @@ impl Forecaster {
         self.noise_level
     }
 
-    fn beams(&self, max_depth: f64, max_range: f64) -> Beams {
+    /// The fan traced for receivers down to `max_depth` and out to
+    /// `max_range` (m): [`ForecastConfig::fan`] when given.
+    pub fn beams(&self, max_depth: f64, max_range: f64) -> Beams {
+        if let Some(fan) = &self.config.fan {
+            return fan.clone();
+        }
         let a = self.config.max_angle;
         Beams::new(self.config.beams, -a, a, max_depth, max_range)
     }
@@ -218,8 +235,10 @@ impl Forecaster {
     }
 
     /// The forecast of the link from `from` to each of `peers` (one
-    /// computation for them all; a peer below the modelled bottom is taken
-    /// at the bottom).
+    /// computation for them all). `from` must be in the water (an error
+    /// names `own.depth` when it is on or beyond the surface or the
+    /// bottom: no ray would leave it); a peer below the modelled bottom
+    /// (or above the surface) is taken at it, as BELLHOP takes receivers.
     pub fn links(
         &self,
         from: &Position,
@@ -227,6 +246,7 @@ impl Forecaster {
         cancel: Option<&AtomicBool>,
     ) -> Result<Vec<LinkForecast>, ChannelError> {
         from.validate("own")?;
+        self.channel.check_in_water("own.depth", 0.0, from.depth)?;
         for (i, p) in peers.iter().enumerate() {
             p.validate(&format!("peers[{i}]"))?;
         }
@@ -247,7 +267,7 @@ impl Forecaster {
         let grid = Grid { depths, ranges };
         let max_depth = self.channel.environment().profile_bottom();
         let beams = self.beams(max_depth, grid.ranges[grid.ranges.len() - 1]);
-        let source = self.in_water(0.0, from.depth);
+        let source = from.depth;
         let threads = self.config.threads;
         let field =
             self.channel
@@ -301,7 +321,9 @@ impl Forecaster {
     /// The forecast over one's own depths `band` (m, `(shallow, deep)`,
     /// every `step` m) for the link with `peer`, by reciprocity a source
     /// at the peer's depth heard across the band (as the thesis' buoy and
-    /// AUV), TL averaged over the range window.
+    /// AUV), TL averaged over the range window. The peer must be in the
+    /// water (`peer.depth`); the band is cut to the water column at the
+    /// range ([`DepthForecast::depths`] says where it went).
     pub fn best_depth(
         &self,
         own: &Position,
@@ -312,6 +334,7 @@ impl Forecaster {
     ) -> Result<DepthForecast, ChannelError> {
         own.validate("own")?;
         peer.validate("peer")?;
+        self.channel.check_in_water("peer.depth", 0.0, peer.depth)?;
         non_negative("band.shallow", band.0)?;
         non_negative("band.deep", band.1)?;
         crate::error::positive("step", step)?;
@@ -345,7 +368,7 @@ impl Forecaster {
             self.channel.environment().profile_bottom(),
             ranges[ranges.len() - 1],
         );
-        let source = self.in_water(0.0, peer.depth);
+        let source = peer.depth;
         let field = self.channel.tl_field(
             source,
             &grid,

@@ -47,15 +47,17 @@ pub(crate) mod trace;
 
 pub use arrivals::{Arrival, ArrivalField};
 pub use beams::{BeamShape, Beams, RunMode, SourceType, Threads};
-pub use channel::{Channel, Grid, RayPath};
+pub use channel::{
+    Channel, Grid, RayPath, MAX_HELD_ARRIVALS, MAX_RAY_OUTPUT_POINTS, MAX_RECEIVERS,
+};
 pub use environment::{
-    AttenuationUnit, Boundary, BoundaryProfile, Environment, HalfSpace, Interpolation,
-    ReflectionPoint, SspGrid, SspPoint, VolumeAttenuation,
+    grain_size_half_space, AttenuationUnit, Boundary, BoundaryProfile, Environment, HalfSpace,
+    Interpolation, ReflectionPoint, SspGrid, SspPoint, VolumeAttenuation,
 };
 pub use error::{ChannelError, ParseError};
 pub use field::TlField;
 pub use forecast::{DepthForecast, ForecastConfig, Forecaster, LinkForecast, Position};
 pub use link::{FerCurve, MicroModemBand, Modem, RateForecast, RateModel};
 pub use noise::NoiseModel;
-pub use profile::{EstimatorConfig, ProfileEstimator};
+pub use profile::{EstimatorConfig, ProfileEstimate, ProfileEstimator};
 pub use soundspeed::{CtdSample, Formula};

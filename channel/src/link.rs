@@ -9,7 +9,12 @@
 //!   transport over underwater acoustic links with ros_acomms", IEEE/OES
 //!   AUV Symposium 2022), from Micro-Modem 2 measurements: rate 1 goes from
 //!   every frame lost at −8.0 dB to none at −6.0 dB, rate 3 from −2.9 dB to
-//!   2.5 % at 0.0 dB, rate 5 from 3.1 dB to none at 6.0 dB;
+//!   2.5 % at 0.0 dB, rate 5 from 3.1 dB to none at 6.0 dB. Rate 3's
+//!   measurements stop at 2.5 %: held beyond its last point, that would be
+//!   a floor of 2.5 % lost frames at any SNR, which no modem has (rates 1
+//!   and 5 reach none within a dB of their last percent). The curve goes on
+//!   at its last segment's slope (−0.108 per dB) to none at +0.24 dB: one
+//!   point of ours, beyond the measurements;
 //! - FH-FSK rate 0: a logistic through the thesis' GLINT10 statistics
 //!   (§4.3.3, N = 3350 transmissions, SL 190 dB, 25 kHz band C): fewer than
 //!   1 % of frames got through above H = 108 dB, and H = 94 dB is the
@@ -160,12 +165,14 @@ const RATE1: [(f64, f64); 6] = [
     (-6.444, 0.02),
     (-6.012, 0.0),
 ];
-const RATE3: [(f64, f64); 5] = [
+const RATE3: [(f64, f64); 6] = [
     (-2.9215, 1.0),
     (-2.2806, 0.91),
     (-1.5853, 0.57),
     (-0.8275, 0.115),
     (0.0044, 0.025),
+    // Not measured: the last segment's slope continued to zero.
+    (0.2355, 0.0),
 ];
 const RATE5: [(f64, f64); 3] = [(3.097, 1.0), (4.443, 0.135), (6.015, 0.0)];
 
@@ -295,6 +302,19 @@ mod tests {
         let r5 = &m.rates[3];
         assert!(r5.packet_error(4.443) > r5.fer.fer(4.443));
         assert!(m.validate().is_ok());
+    }
+
+    #[test]
+    fn every_psk_rate_loses_no_frame_at_a_high_snr() {
+        let m = Modem::micromodem(MicroModemBand::C);
+        for r in &m.rates[1..] {
+            assert_eq!(r.fer.fer(10.0), 0.0, "rate {}", r.rate);
+            assert_eq!(r.packet_error(10.0), 0.0, "rate {}", r.rate);
+        }
+        // Rate 3 at its last measured point, and half-way to zero past it.
+        let r3 = &m.rates[2].fer;
+        assert!((r3.fer(0.0044) - 0.025).abs() < 1e-12);
+        assert!((r3.fer(0.12) - 0.0125).abs() < 0.001, "{}", r3.fer(0.12));
     }
 
     #[test]

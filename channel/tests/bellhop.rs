@@ -222,8 +222,8 @@ fn bellhop_exe() -> Option<PathBuf> {
         .filter(|p| p.is_file())
 }
 
-/// Runs bellhop.exe on `env` in a scratch folder; returns its `.shd` or
-/// `.arr` bytes.
+/// Runs bellhop.exe on `env` in a scratch folder; returns its `.shd`,
+/// `.arr` or `.ray` bytes.
 fn run_bellhop(exe: &Path, env: &EnvFile, tag: &str) -> Vec<u8> {
     static RUNS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let n = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -243,10 +243,10 @@ fn run_bellhop(exe: &Path, env: &EnvFile, tag: &str) -> Vec<u8> {
         .status()
         .unwrap();
     assert!(status.success(), "bellhop.exe failed on {tag}");
-    let ext = if matches!(env.run, RunKind::Arrivals) {
-        "arr"
-    } else {
-        "shd"
+    let ext = match env.run {
+        RunKind::Arrivals | RunKind::ArrivalsBinary => "arr",
+        RunKind::Rays | RunKind::Eigenrays => "ray",
+        _ => "shd",
     };
     let out = std::fs::read(dir.join(format!("case.{ext}"))).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
@@ -289,7 +289,7 @@ fn live_bellhop() {
 }
 
 #[test]
-#[ignore = "regenerates tests/data/bellhop/*.{inc.tl,coh.tl,first-arrivals} with bellhop.exe"]
+#[ignore = "regenerates tests/data/bellhop/*.{inc.tl,coh.tl,first-arrivals} and options/*.tl with bellhop.exe"]
 fn regenerate_references() {
     let exe = bellhop_exe().expect("bellhop.exe (BELLHOP_EXE or /opt/bellhop/bellhop.exe)");
     for case in CASES {
@@ -299,6 +299,157 @@ fn regenerate_references() {
         std::fs::write(dir.join(format!("{case}.coh.tl")), coh).unwrap();
         std::fs::write(dir.join(format!("{case}.first-arrivals")), arr).unwrap();
     }
+    for case in OPTION_CASES {
+        std::fs::write(option_reference_path(case), option_reference(&exe, case)).unwrap();
+    }
+}
+
+/// Options with a committed reference: `tests/data/bellhop/options/NAME.env`
+/// and BELLHOP's result of its run type, compact: `NAME.tl` for a TL field
+/// (ours within 1 dB at 95 % of the points where BELLHOP's TL is under
+/// 100 dB), `NAME.arrivals` for arrivals (see [`judge_option_arrivals`]).
+const OPTION_CASES: [&str; 3] = [
+    // Grain-size bottom ('G'): its loss parameter in unit 'L' whatever the
+    // file's unit, no volume attenuation in the half-space.
+    "grain",
+    // The same in dB/(m kHz) with Thorp's volume attenuation, incoherent.
+    "grain-f",
+    // Arrivals at 25 kHz, many merged at the edge of BELLHOP's tolerance.
+    "summer-arrivals",
+];
+
+fn option_dir() -> PathBuf {
+    data_dir().join("options")
+}
+
+/// The committed reference of option case `case`.
+fn option_reference_path(case: &str) -> PathBuf {
+    let env = load(&option_dir(), case);
+    let ext = if env.run == RunKind::Arrivals {
+        "arrivals"
+    } else {
+        "tl"
+    };
+    option_dir().join(format!("{case}.{ext}"))
+}
+
+/// BELLHOP's result for option case `case`, in the committed compact form.
+fn option_reference(exe: &Path, case: &str) -> String {
+    let env = load(&option_dir(), case);
+    let bytes = run_bellhop(exe, &env, case);
+    if env.run == RunKind::Arrivals {
+        let arr = bellhop::read_arr("case.arr", &String::from_utf8_lossy(&bytes)).unwrap();
+        return arrivals_text(&arr.fields[0]);
+    }
+    let shd = bellhop::read_shd("case.shd", &bytes).unwrap();
+    tl_text(&shd.field(0).unwrap())
+}
+
+/// Compact text form of arrivals: per receiver (depth-major) the number of
+/// arrivals, their incoherent TL (dB, two decimals) and the first delay
+/// (s, 0.1 µs).
+fn arrivals_text(a: &ArrivalField) -> String {
+    let mut s = String::new();
+    for iz in 0..a.depths.len() {
+        for ir in 0..a.ranges.len() {
+            let list = a.at(iz, ir);
+            let power: f64 = list.iter().map(|x| x.amplitude * x.amplitude).sum();
+            let tl = if power > 0.0 {
+                -10.0 * power.log10()
+            } else {
+                f64::NAN
+            };
+            let first = a.first_delay(iz, ir).unwrap_or(f64::NAN);
+            let _ = writeln!(s, "{} {tl:.2} {first:.7}", list.len());
+        }
+    }
+    s
+}
+
+/// Ours against `reference` for option case `case`: the verdict line and
+/// whether it passes.
+fn judge_option(case: &str, reference: &str) -> Verdict {
+    let env = load(&option_dir(), case);
+    if env.run == RunKind::Arrivals {
+        return judge_option_arrivals(case, &env, reference);
+    }
+    let ours = ours_tl(&env, env.run.mode().unwrap());
+    let (share, n, p95) = tl_agreement(&ours, &parse_tl_text(reference), 1.0);
+    Verdict {
+        line: format!(
+            "{case:8} within 1 dB: {:5.1} % of {n} points (95th percentile |diff| {p95:.2} dB)",
+            100.0 * share
+        ),
+        pass: share >= 0.95 && n > 0,
+    }
+}
+
+/// Arrivals against the reference: the same number of arrivals at every
+/// receiver, their incoherent TL within 0.02 dB and the first delay within
+/// 0.2 µs (the references' rounding).
+fn judge_option_arrivals(case: &str, env: &EnvFile, reference: &str) -> Verdict {
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let ours = ch
+        .arrivals(
+            env.source_depths[0],
+            &env.grid,
+            &env.beams,
+            Threads::All,
+            None,
+        )
+        .unwrap();
+    let parse = |l: &str| -> Vec<f64> { l.split(' ').map(|x| x.parse().unwrap()).collect() };
+    let (mut counts, mut worst_tl, mut worst_delay, mut n) = (0, 0f64, 0f64, 0);
+    for (o, t) in arrivals_text(&ours).lines().zip(reference.lines()) {
+        let (o, t) = (parse(o), parse(t));
+        n += 1;
+        counts += usize::from(o[0] != t[0]);
+        if t[0] > 0.0 {
+            worst_tl = worst_tl.max((o[1] - t[1]).abs());
+            worst_delay = worst_delay.max((o[2] - t[2]).abs());
+        }
+    }
+    Verdict {
+        line: format!(
+            "{case:8} {n} receivers: arrival counts differ at {counts}, incoherent TL worst {worst_tl:.2} dB, first delay worst {:.1} µs",
+            1e6 * worst_delay
+        ),
+        pass: n > 0
+            && n == reference.lines().count()
+            && counts == 0
+            && worst_tl <= 0.02
+            && worst_delay <= 2e-7,
+    }
+}
+
+#[test]
+fn committed_option_references() {
+    report(
+        OPTION_CASES
+            .iter()
+            .map(|case| {
+                let path = option_reference_path(case);
+                let reference = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+                    panic!("{}: {e} (run regenerate_references)", path.display())
+                });
+                judge_option(case, &reference)
+            })
+            .collect(),
+    );
+}
+
+#[test]
+fn live_bellhop_option_cases() {
+    let Some(exe) = bellhop_exe() else {
+        println!("SKIPPED live_bellhop_option_cases: bellhop.exe not found (set BELLHOP_EXE or install it under /opt/bellhop)");
+        return;
+    };
+    report(
+        OPTION_CASES
+            .iter()
+            .map(|case| judge_option(case, &option_reference(&exe, case)))
+            .collect(),
+    );
 }
 
 /// One option variant: a base case, text substitutions in its .env, and
@@ -417,4 +568,118 @@ fn live_bellhop_options() {
         failed.is_empty(),
         "outside 1 dB at more than 5 % of points: {failed:?}"
     );
+}
+
+/// Arrivals are merged in launch order whatever the number of threads:
+/// one thread and several give the same lists.
+#[test]
+fn arrivals_do_not_depend_on_the_number_of_threads() {
+    let env = load(&option_dir(), "summer-arrivals");
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let run = |threads| {
+        ch.arrivals(env.source_depths[0], &env.grid, &env.beams, threads, None)
+            .unwrap()
+    };
+    let one = run(Threads::One);
+    for n in [2, 3, 5, 8] {
+        assert!(one == run(Threads::Count(n)), "{n} threads differ");
+    }
+}
+
+/// One ray of a `.ray` file: launch angle, surface and bottom bounces,
+/// points.
+type ParsedRay = (f64, u32, u32, Vec<(f64, f64)>);
+
+/// A `.ray` file's rays, read as plotray reads them.
+fn parse_ray(text: &str) -> Vec<ParsedRay> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut rays = Vec::new();
+    let mut i = 7;
+    while i < lines.len() && !lines[i].trim().is_empty() {
+        let angle: f64 = lines[i].trim().parse().unwrap();
+        let head: Vec<u32> = lines[i + 1]
+            .split_whitespace()
+            .map(|x| x.parse().unwrap())
+            .collect();
+        let points = (0..head[0] as usize)
+            .map(|k| {
+                let v: Vec<f64> = lines[i + 2 + k]
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
+                (v[0], v[1])
+            })
+            .collect();
+        rays.push((angle, head[1], head[2], points));
+        i += 2 + head[0] as usize;
+    }
+    rays
+}
+
+/// BELLHOP's other output formats against ours: the binary `.arr` of run
+/// type `a` (same arrivals as the ASCII one) and the `.ray` file of a ray
+/// run with two sources (every ray of both, the same points).
+#[test]
+fn live_bellhop_binary_arrivals_and_ray_files() {
+    let Some(exe) = bellhop_exe() else {
+        println!("SKIPPED live_bellhop_binary_arrivals_and_ray_files: bellhop.exe not found (set BELLHOP_EXE or install it under /opt/bellhop)");
+        return;
+    };
+    let mut env = load(&option_dir(), "summer-arrivals");
+    env.run = RunKind::ArrivalsBinary;
+    let theirs = bellhop::read_arr_binary("case.arr", &run_bellhop(&exe, &env, "binary")).unwrap();
+    let verdict = judge_option_arrivals("binary", &env, &arrivals_text(&theirs.fields[0]));
+    println!("{}", verdict.line);
+    assert!(verdict.pass);
+    // Our binary file read back is what we computed.
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let ours = ch
+        .arrivals(30.0, &env.grid, &env.beams, Threads::All, None)
+        .unwrap();
+    let bytes = bellhop::write_arr_binary(env.frequency, std::slice::from_ref(&ours));
+    let back = bellhop::read_arr_binary("ours.arr", &bytes).unwrap();
+    assert_eq!(arrivals_text(&back.fields[0]), arrivals_text(&ours));
+    assert_eq!(
+        (
+            theirs.fields[0].depths.clone(),
+            theirs.fields[0].ranges.clone()
+        ),
+        (back.fields[0].depths.clone(), back.fields[0].ranges.clone())
+    );
+
+    let mut env = load(&data_dir(), "summer");
+    env.run = RunKind::Rays;
+    env.source_depths = vec![30.0, 60.0];
+    env.beams.angles = goby_channel::Beams::fan(21, -20.0, 20.0);
+    let theirs = parse_ray(&String::from_utf8_lossy(&run_bellhop(&exe, &env, "rays")));
+    let ch = Channel::new(env.environment.clone(), env.frequency).unwrap();
+    let rays: Vec<Vec<goby_channel::RayPath>> = env
+        .source_depths
+        .iter()
+        .map(|&sd| ch.rays(sd, &env.beams).unwrap())
+        .collect();
+    let sets: Vec<bellhop::RaySet> = env
+        .source_depths
+        .iter()
+        .zip(&rays)
+        .map(|(&source_depth, rays)| bellhop::RaySet { source_depth, rays })
+        .collect();
+    let ours = parse_ray(&bellhop::write_ray(
+        &env.title,
+        env.frequency,
+        21,
+        (0.0, 111.0),
+        &sets,
+    ));
+    assert_eq!(theirs.len(), 42);
+    assert_eq!(ours.len(), theirs.len());
+    let mut worst: f64 = 0.0;
+    for (o, t) in ours.iter().zip(&theirs) {
+        assert_eq!((o.0, o.1, o.2, o.3.len()), (t.0, t.1, t.2, t.3.len()));
+        for (p, q) in o.3.iter().zip(&t.3) {
+            worst = worst.max((p.0 - q.0).hypot(p.1 - q.1));
+        }
+    }
+    println!("rays: 42 of 42, the same points within {worst:.2e} m");
+    assert!(worst < 1e-3, "{worst} m");
 }

@@ -163,3 +163,48 @@ fn a_forecast_can_be_cancelled_and_bad_positions_are_named() {
         .to_string();
     assert!(e.starts_with("peer.depth"), "{e}");
 }
+
+#[test]
+fn a_source_outside_the_water_is_named_not_an_empty_forecast() {
+    let f = forecaster();
+    let at = |x: f64, depth: f64| Position { x, y: 0.0, depth };
+    for (depth, want) in [
+        (
+            150.0,
+            "own.depth: 150 m is below the bottom (111 m at the source)",
+        ),
+        (111.0, "own.depth: 111 m is on the bottom"),
+        (0.0, "own.depth: 0 m is on the surface"),
+    ] {
+        let e = f
+            .link(&at(0.0, depth), &at(3000.0, 50.0), None)
+            .unwrap_err();
+        assert!(e.to_string().starts_with(want), "{e}");
+    }
+    let e = f
+        .best_depth(&at(3000.0, 20.0), &at(0.0, 150.0), (0.0, 50.0), 1.0, None)
+        .unwrap_err();
+    assert!(
+        e.to_string().starts_with("peer.depth: 150 m is below"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_fan_of_ones_own_is_traced_as_given() {
+    let mut config = ForecastConfig::new(
+        Modem::micromodem(MicroModemBand::C),
+        NoiseModel::beaufort(2, 0.5),
+    );
+    // A file's fan: 301 beams over ±30°, its box out to 2 km only.
+    let fan = goby_channel::Beams::new(301, -30.0, 30.0, 111.0, 2000.0);
+    config.fan = Some(fan.clone());
+    let f = Forecaster::new(summer(), config).unwrap();
+    assert_eq!(f.beams(111.0, 3000.0), fan);
+    let at = |x: f64, depth: f64| Position { x, y: 0.0, depth };
+    let links = f
+        .links(&at(0.0, 30.0), &[at(1000.0, 50.0), at(3000.0, 50.0)], None)
+        .unwrap();
+    assert!(links[0].tl.is_some());
+    assert_eq!(links[1].tl, None, "beyond the fan's box");
+}

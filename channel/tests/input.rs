@@ -208,7 +208,7 @@ fn env_errors_name_line_and_field() {
 #[test]
 fn every_case_round_trips_through_the_writer() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bellhop");
-    for case in ["pekeris", "munk", "summer", "wedge"] {
+    for case in ["pekeris", "munk", "summer", "wedge", "options/grain"] {
         let text = std::fs::read_to_string(dir.join(format!("{case}.env"))).unwrap();
         let comp = |ext: &str| {
             std::fs::read_to_string(dir.join(format!("{case}.{ext}"))).map_err(|e| e.to_string())
@@ -273,7 +273,7 @@ fn truncated_and_garbled_files_never_panic() {
             Err("none".into())
         }
     };
-    for case in ["pekeris", "munk", "summer", "wedge"] {
+    for case in ["pekeris", "munk", "summer", "wedge", "options/grain"] {
         let text = std::fs::read_to_string(dir.join(format!("{case}.env"))).unwrap();
         let bytes = text.as_bytes();
         for cut in (0..bytes.len()).step_by(3) {
@@ -400,4 +400,246 @@ fn arrivals_round_trip_through_the_arr_file_and_cut_files_are_errors() {
             "cut after {n} lines"
         );
     }
+}
+
+const PEKERIS: &str = include_str!("data/bellhop/pekeris.env");
+
+/// The error reading `PEKERIS` with `from` replaced by `to`.
+fn pekeris_error(from: &str, to: &str) -> goby_channel::ParseError {
+    assert!(PEKERIS.contains(from), "no '{from}'");
+    read("p.env", &PEKERIS.replace(from, to), &[]).unwrap_err()
+}
+
+/// [`pekeris_error`], checked: at `line`, its message holding `want`.
+fn refused_at(from: &str, to: &str, line: usize, want: &str) -> goby_channel::ParseError {
+    let e = pekeris_error(from, to);
+    assert_eq!(e.line, line, "{e}");
+    assert!(e.message.contains(want), "{e}");
+    e
+}
+
+#[test]
+fn a_source_on_or_beyond_the_surface_or_the_bottom_names_its_line() {
+    for (depth, want) in [
+        ("150.0", "150 m is below the bottom (100 m at the source)"),
+        ("100.0", "100 m is on the bottom"),
+        ("-5.0", "-5 m is above the surface (0 m at the source)"),
+        ("0.0", "0 m is on the surface"),
+    ] {
+        let e = pekeris_error("50.0 /\n", &format!("{depth} /\n"));
+        assert_eq!((e.line, e.field.as_str()), (11, "source depths"), "{e}");
+        assert!(e.message.contains(want), "{e}");
+    }
+    // The library says the same of a source on the bottom.
+    let file = read("p.env", PEKERIS, &[]).unwrap();
+    let ch = Channel::new(file.environment, file.frequency).unwrap();
+    let e = ch
+        .tl_field(
+            100.0,
+            &file.grid,
+            RunMode::Coherent,
+            &file.beams,
+            Threads::One,
+            None,
+        )
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("source.depth: 100 m is on the bottom"),
+        "{e}"
+    );
+}
+
+#[test]
+fn receivers_beyond_the_water_are_moved_as_bellhop_moves_them_and_said() {
+    let file = read(
+        "p.env",
+        &PEKERIS.replace("0.0 100.0 /", "-20.0 120.0 /"),
+        &[],
+    )
+    .unwrap();
+    let d = &file.grid.depths;
+    assert_eq!((d[0], d[7], d[50]), (0.0, 0.0, 100.0), "{d:?}");
+    assert!(d[8] > 0.0, "{d:?}");
+    let w: Vec<String> = file.warnings.iter().map(|w| w.to_string()).collect();
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].starts_with("p.env:13: receiver depths: 8 of 51 above the surface"),
+        "{w:?}"
+    );
+    assert!(
+        w[1].contains("below the bottom (100 m) are taken at the bottom"),
+        "{w:?}"
+    );
+    // The grid with its repeated depths is computed.
+    let ch = Channel::new(file.environment.clone(), file.frequency).unwrap();
+    ch.tl_field(
+        50.0,
+        &file.grid,
+        RunMode::Coherent,
+        &file.beams,
+        Threads::One,
+        None,
+    )
+    .unwrap();
+    assert!(read("p.env", PEKERIS, &[]).unwrap().warnings.is_empty());
+}
+
+#[test]
+fn a_profile_short_of_the_bottom_or_a_line_without_its_slash_is_named() {
+    // One point, or a last point above the bottom depth: the bottom
+    // option comes where a depth is expected.
+    for (from, to, line, point) in [
+        ("  100.0  1500.0 /\n", "", 7, 2),
+        ("  100.0  1500.0 /\n", "   60.0  1500.0 /\n", 8, 3),
+    ] {
+        let want = "without reaching the bottom depth 100 m given on line 5";
+        let e = refused_at(from, to, line, want);
+        assert!(e.field.starts_with(&format!("SSP point {point}")), "{e}");
+    }
+    refused_at("    0.0  1500.0 /", "    0.0  1500.0", 6, "without '/'");
+}
+
+#[test]
+fn box_step_and_unsupported_options_name_their_line() {
+    let e = pekeris_error("0.0  101.0  5.1", "0.0  101.0  0.0");
+    assert_eq!(
+        (e.line, e.field.as_str()),
+        (19, "step, box depth, box range"),
+        "{e}"
+    );
+    assert!(
+        e.message.contains("box range 0 km is not above zero"),
+        "{e}"
+    );
+    let e = pekeris_error("0.0  101.0  5.1", "-2.0  101.0  5.1");
+    assert!(e.message.contains("step -2 m is negative"), "{e}");
+    for (option, want) in [
+        ("'CVWB'", "biological attenuation"),
+        ("'CVW  B'", "broadband run"),
+        ("'CVm'", "power law"),
+    ] {
+        let e = pekeris_error("'CVW'", option);
+        assert_eq!((e.line, e.field.as_str()), (4, "top option"), "{e}");
+        assert!(
+            e.message.contains(want) && e.message.contains("not supported"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn a_grid_too_large_for_memory_is_an_error_not_an_abort() {
+    let e = pekeris_error("51\t", "100000\t");
+    assert!(e.message.contains("10100000 receivers"), "{e}");
+    let e2 = read(
+        "p.env",
+        &PEKERIS
+            .replace("51\t", "100000\t")
+            .replace("101\t", "100000\t"),
+        &[],
+    )
+    .unwrap_err();
+    assert_eq!(
+        (e2.line, e2.field.as_str()),
+        (15, "receiver ranges (km)"),
+        "{e2}"
+    );
+    assert!(e2.message.contains("10000000000 receivers"), "{e2}");
+    let grid = Grid {
+        depths: (0..100_000).map(f64::from).collect(),
+        ranges: (0..100_000).map(f64::from).collect(),
+    };
+    let e = grid.validate().unwrap_err();
+    assert_eq!(field_of(e), "grid");
+}
+
+#[test]
+fn binary_arrivals_round_trip_and_cut_or_garbled_files_are_errors() {
+    let file = read("p.env", PEKERIS, &[]).unwrap();
+    let ch = Channel::new(file.environment, file.frequency).unwrap();
+    let grid = Grid {
+        depths: vec![10.0, 60.0],
+        ranges: vec![500.0, 1500.0],
+    };
+    let field = ch
+        .arrivals(50.0, &grid, &file.beams, Threads::One, None)
+        .unwrap();
+    let bytes = bellhop::write_arr_binary(250.0, std::slice::from_ref(&field));
+    let back = bellhop::read_arr_binary("t.arr", &bytes).unwrap();
+    assert_eq!(back.frequency, 250.0);
+    assert_eq!(back.fields[0].depths, grid.depths);
+    for (x, y) in back.fields[0]
+        .arrivals
+        .iter()
+        .flatten()
+        .zip(field.arrivals.iter().flatten())
+    {
+        assert_eq!(
+            (x.delay, x.amplitude, x.top_bounces),
+            (y.delay, y.amplitude, y.top_bounces)
+        );
+    }
+    for n in 0..bytes.len() {
+        assert!(
+            bellhop::read_arr_binary("t.arr", &bytes[..n]).is_err(),
+            "cut at {n}"
+        );
+    }
+    let mut garbled = bytes.clone();
+    garbled[bytes.len() - 3] ^= 0x40;
+    assert!(bellhop::read_arr_binary("t.arr", &garbled).is_err());
+    let mut huge = bytes;
+    huge[0..4].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(bellhop::read_arr_binary("t.arr", &huge).is_err());
+}
+
+#[test]
+fn bad_profile_half_space_and_angle_values_name_their_line() {
+    for (from, to, line, want) in [
+        (
+            "  100.0  1500.0 /",
+            "  100.0  -1500.0 /",
+            7,
+            "sound speed (m/s) -1500 is not above zero",
+        ),
+        (
+            "  100.0  1600.0 0.0 1.5 0.5 /",
+            "  100.0  1600.0 0.0 0.0 0.5 /",
+            9,
+            "density (g/cm³) 0 is not above zero",
+        ),
+        (
+            "  100.0  1600.0 0.0 1.5 0.5 /",
+            "  100.0  1600.0 0.0 1.5 -0.5 /",
+            9,
+            "attenuation -0.5 is negative",
+        ),
+        ("-60.0 60.0 /", "-60.0 190.0 /", 18, "° is not within ±180°"),
+    ] {
+        refused_at(from, to, line, want);
+    }
+    let twice = PEKERIS
+        .replace("601\t", "3\t")
+        .replace("-60.0 60.0 /", "-10.0 0.0 0.0 /");
+    let e = read("p.env", &twice, &[]).unwrap_err();
+    assert_eq!(e.line, 18, "{e}");
+    assert!(e.message.contains("0° is given twice"), "{e}");
+}
+
+#[test]
+fn a_profile_past_the_bottom_or_above_the_surface_names_its_line() {
+    let e = refused_at(
+        "  100.0  1500.0 /\n",
+        "  100.0  1500.0 /\n  150.0  1500.0 /\n",
+        8,
+        "the profile ended at the bottom depth 100 m (line 5)",
+    );
+    assert_eq!(e.field, "bottom option");
+    refused_at(
+        "    0.0  1500.0 /",
+        "  -10.0  1500.0 /",
+        6,
+        "depth -10 m is negative",
+    );
 }

@@ -30,7 +30,9 @@ use std::time::Duration;
 use gobyd::event::DaemonEvent;
 use gobyd::modem_event::ModemEvent;
 use gobyd::runtime::Daemon;
-use modemdriver::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
+use modemdriver::emulator_host::{
+    EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort, FaultDraws,
+};
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Kind};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
@@ -530,6 +532,7 @@ async fn check(faults: Faults) {
         garbled,
         !faults.drops.is_empty(),
     ];
+    seed_exercises_the_faults(&name, &faults);
     let t = run(faults).await;
     println!(
         "{name} delivery: published {} delivered {} acked {} duplicates {} owed {} lost {} \
@@ -594,6 +597,39 @@ async fn check(faults: Faults) {
             );
         }
     }
+}
+
+/// Each fault kind a run asks for is drawn from a stream of its own that
+/// depends on the seed alone (`FaultDraws`): the run's seed must make one of
+/// the two modems lose one of the first packets it hears, refuse one of its
+/// first sends and garble one of its first lines (a packet sent or heard
+/// takes several), so that every run exercises its faults however its
+/// timing goes.
+fn seed_exercises_the_faults(name: &str, faults: &Faults) {
+    const EARLY: usize = 3;
+    const EARLY_LINES: usize = 10;
+    let early = |p: f64, pick: fn(&mut FaultDraws, f64) -> bool, first: usize| {
+        p == 0.0
+            || (1..=2u8).any(|id| {
+                let mut draws = FaultDraws::new(faults.seed, id);
+                (0..first).any(|_| pick(&mut draws, p))
+            })
+    };
+    assert!(
+        early(faults.lost, FaultDraws::lost, EARLY),
+        "{name}: seed {} loses none of the first {EARLY} packets heard: choose another",
+        faults.seed
+    );
+    assert!(
+        early(faults.busy, FaultDraws::busy, EARLY),
+        "{name}: seed {} refuses none of the first {EARLY} sends: choose another",
+        faults.seed
+    );
+    assert!(
+        early(faults.garble, FaultDraws::garble, EARLY_LINES),
+        "{name}: seed {} garbles none of the first {EARLY_LINES} lines: choose another",
+        faults.seed
+    );
 }
 
 fn lost(modem: Modem, seed: u64) -> Faults {
@@ -661,7 +697,7 @@ async fn popoto_dropped_connections() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn popoto_combined() {
-    check(combined(Modem::Popoto, 6)).await;
+    check(combined(Modem::Popoto, 17)).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

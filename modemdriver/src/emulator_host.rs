@@ -261,6 +261,49 @@ pub fn draw(rng: &mut rand_chacha::ChaCha8Rng, p: f64) -> bool {
     p > 0.0 && rng.random_bool(p.min(1.0))
 }
 
+/// The fault draws of one emulated modem: one seeded stream per fault kind,
+/// so that the n-th packet heard is lost (or the n-th send refused, the n-th
+/// line garbled) by the seed alone, however many draws of the other kinds
+/// came before it — a run's faults do not depend on its timing.
+#[derive(Debug, Clone)]
+pub struct FaultDraws {
+    lost: rand_chacha::ChaCha8Rng,
+    busy: rand_chacha::ChaCha8Rng,
+    garble: rand_chacha::ChaCha8Rng,
+}
+
+impl FaultDraws {
+    /// The streams of the modem at `address` under the faults' `seed`.
+    pub fn new(seed: u64, address: u8) -> FaultDraws {
+        use rand::SeedableRng;
+        let stream = |kind: u64| {
+            rand_chacha::ChaCha8Rng::seed_from_u64(
+                seed ^ (u64::from(address) << 32) ^ kind.wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            )
+        };
+        FaultDraws {
+            lost: stream(1),
+            busy: stream(2),
+            garble: stream(3),
+        }
+    }
+
+    /// Whether the next packet heard from the water is lost (probability `p`).
+    pub fn lost(&mut self, p: f64) -> bool {
+        draw(&mut self.lost, p)
+    }
+
+    /// Whether the next send is refused as busy (probability `p`).
+    pub fn busy(&mut self, p: f64) -> bool {
+        draw(&mut self.busy, p)
+    }
+
+    /// Whether the next line to the host is garbled (probability `p`).
+    pub fn garble(&mut self, p: f64) -> bool {
+        draw(&mut self.garble, p)
+    }
+}
+
 /// Distance between two positions, m.
 pub fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()

@@ -16,6 +16,8 @@ const MAX_SSP: usize = 100_001;
 /// Most receivers or sources along one axis.
 const MAX_VECTOR: i64 = 10_000_000;
 
+use crate::channel::MAX_RECEIVERS;
+
 /// The values an SSP or half-space line sets; BELLHOP keeps them from one
 /// line to the next, so `z c /` inherits the rest.
 #[derive(Clone, Copy)]
@@ -92,9 +94,26 @@ fn read_top_options(r: &mut Records) -> Result<(TopOptions, usize), ParseError> 
         'W' | ' ' => AttenuationUnit::DbPerWavelength,
         'Q' => AttenuationUnit::Q,
         'L' => AttenuationUnit::LossParameter,
+        'm' => {
+            return Err(r.error(
+                v.line,
+                "top option",
+                format!("attenuation unit 'm' (dB/m with a power law) is not supported (in '{s}')"),
+            ))
+        }
         c => return Err(bad("attenuation unit", c)),
     };
     let volume = option_char(&s, 3);
+    let unsupported = |what: &str| {
+        r.error(
+            v.line,
+            "top option",
+            format!("{what} is not supported (in '{s}')"),
+        )
+    };
+    if volume == 'B' {
+        return Err(unsupported("biological attenuation ('B', fourth letter)"));
+    }
     if !matches!(volume, 'T' | 'F' | ' ') {
         return Err(bad("volume attenuation", volume));
     }
@@ -103,8 +122,10 @@ fn read_top_options(r: &mut Records) -> Result<(TopOptions, usize), ParseError> 
         '-' | '_' | ' ' => false,
         c => return Err(bad("altimetry letter", c)),
     };
-    if !matches!(option_char(&s, 5), ' ') {
-        return Err(bad("sixth letter", option_char(&s, 5)));
+    match option_char(&s, 5) {
+        ' ' => {}
+        'B' => return Err(unsupported("a broadband run ('B', sixth letter)")),
+        c => return Err(bad("sixth letter", c)),
     }
     Ok((
         TopOptions {
@@ -130,6 +151,16 @@ fn read_layer(r: &mut Records, layer: &mut Layer, field: &str) -> Result<(f64, u
             "no depth before the '/'",
         ));
     };
+    if let Some(&(_, next)) = values.iter().find(|v| v.1 != line) {
+        let on_line = values.iter().filter(|v| v.1 == line).count();
+        return Err(r.error(
+            line,
+            field,
+            format!(
+                "the line ends after {on_line} value(s) without '/', so the read went on to line {next} for the rest (BELLHOP reads up to six values here): end line {line} with '/'"
+            ),
+        ));
+    }
     let slots = [
         &mut layer.alpha_r,
         &mut layer.beta_r,
@@ -143,6 +174,26 @@ fn read_layer(r: &mut Records, layer: &mut Layer, field: &str) -> Result<(f64, u
     Ok((z, line))
 }
 
+/// Checks the values a layer line set: speeds and density above zero
+/// (a shear speed may be zero), attenuations not negative.
+fn check_layer(r: &Records, layer: &Layer, line: usize, field: &str) -> Result<(), ParseError> {
+    let bad =
+        |what: &str, v: f64, rule: &str| Err(r.error(line, field, format!("{what} {v} is {rule}")));
+    if layer.alpha_r <= 0.0 {
+        return bad("sound speed (m/s)", layer.alpha_r, "not above zero");
+    }
+    if layer.rho <= 0.0 {
+        return bad("density (g/cm³)", layer.rho, "not above zero");
+    }
+    if layer.beta_r < 0.0 {
+        return bad("shear speed (m/s)", layer.beta_r, "negative");
+    }
+    if layer.alpha_i < 0.0 || layer.beta_i < 0.0 {
+        return bad("attenuation", layer.alpha_i.min(layer.beta_i), "negative");
+    }
+    Ok(())
+}
+
 fn half_space_of(layer: &Layer) -> HalfSpace {
     HalfSpace {
         speed: layer.alpha_r,
@@ -151,48 +202,6 @@ fn half_space_of(layer: &Layer) -> HalfSpace {
         attenuation: layer.alpha_i,
         shear_attenuation: layer.beta_i,
     }
-}
-
-/// Sediment properties from a grain size (UW-APL high-frequency handbook).
-fn grain_size_half_space(mz: f64) -> (HalfSpace, AttenuationUnit) {
-    let (vr, rho) = if (-1.0..1.0).contains(&mz) {
-        (
-            0.002709 * mz * mz - 0.056452 * mz + 1.2778,
-            0.007797 * mz * mz - 0.17057 * mz + 2.3139,
-        )
-    } else if (1.0..5.3).contains(&mz) {
-        (
-            -0.0014881 * mz.powi(3) + 0.0213937 * mz * mz - 0.1382798 * mz + 1.3425,
-            -0.0165406 * mz.powi(3) + 0.2290201 * mz * mz - 1.1069031 * mz + 3.0455,
-        )
-    } else {
-        (-0.0024324 * mz + 1.0019, -0.0012973 * mz + 1.1565)
-    };
-    let a2f = if (-1.0..0.0).contains(&mz) {
-        0.4556
-    } else if (0.0..2.6).contains(&mz) {
-        0.4556 + 0.0245 * mz
-    } else if (2.6..4.5).contains(&mz) {
-        0.1978 + 0.1245 * mz
-    } else if (4.5..6.0).contains(&mz) {
-        8.0399 - 2.5228 * mz + 0.20098 * mz * mz
-    } else if (6.0..9.5).contains(&mz) {
-        0.9431 - 0.2041 * mz + 0.0117 * mz * mz
-    } else {
-        0.0601
-    };
-    let speed = vr * 1500.0;
-    let loss = a2f * (vr / 1000.0) * 1500.0 * 10f64.ln() / (40.0 * std::f64::consts::PI);
-    (
-        HalfSpace {
-            speed,
-            shear_speed: 0.0,
-            density: rho,
-            attenuation: loss,
-            shear_attenuation: 0.0,
-        },
-        AttenuationUnit::LossParameter,
-    )
 }
 
 /// Reads a boundary's half-space line (conditions `A` and `G`).
@@ -207,7 +216,8 @@ fn read_half_space(
         'R' => Ok(Boundary::Rigid),
         'F' => Ok(Boundary::Table(Vec::new())),
         'A' => {
-            read_layer(r, layer, field)?;
+            let (_, line) = read_layer(r, layer, field)?;
+            check_layer(r, layer, line, field)?;
             Ok(Boundary::HalfSpace(half_space_of(layer)))
         }
         _ => {
@@ -216,15 +226,14 @@ fn read_half_space(
             let Some(&(mz, _)) = values.get(1) else {
                 return Err(r.error(r.line(), field, "expected a depth and a grain size"));
             };
-            let (hs, _) = grain_size_half_space(mz);
-            Ok(Boundary::HalfSpace(hs))
+            Ok(Boundary::GrainSize { phi: mz })
         }
     }
 }
 
 /// Reads `count` then the values of a vector, with BELLHOP's shorthand:
 /// for three or more, `a b /` fills evenly from a to b. Sorted.
-fn read_vector(r: &mut Records, field: &str) -> Result<Vec<f32>, ParseError> {
+fn read_vector(r: &mut Records, field: &str) -> Result<(Vec<f32>, usize), ParseError> {
     let n = r.read_count(&format!("number of {field}"), 1, MAX_VECTOR)?;
     let line = r.line();
     let values = r.read_numbers(n, field)?;
@@ -244,7 +253,7 @@ fn read_vector(r: &mut Records, field: &str) -> Result<Vec<f32>, ParseError> {
         ));
     }
     x.sort_by(f32::total_cmp);
-    Ok(x)
+    Ok((x, line))
 }
 
 /// Reads the beam launch angles (degrees), automatic when the count is 0.
@@ -287,6 +296,12 @@ fn read_angles(
     }
     if a.len() > 1 && a[a.len() - 1] == a[0] {
         return Err(r.error(line, field, "the first and last launch angles are the same"));
+    }
+    if let Some(x) = a.iter().find(|x| x.abs() >= 180.0) {
+        return Err(r.error(line, field, format!("{x}° is not within ±180°")));
+    }
+    if let Some(w) = a.windows(2).find(|w| w[0] == w[1]) {
+        return Err(r.error(line, field, format!("{}° is given twice", w[0])));
     }
     Ok(a)
 }
@@ -354,12 +369,27 @@ fn read_run_type(r: &mut Records) -> Result<RunOptions, ParseError> {
 /// Reads the profile lines down to `depth`.
 fn read_profile(
     r: &mut Records,
-    depth: f64,
+    (depth, depth_line): (f64, usize),
     layer: &mut Layer,
 ) -> Result<Vec<SspPoint>, ParseError> {
     let mut points = Vec::new();
     loop {
         let field = format!("SSP point {} (depth, speed, ...)", points.len() + 1);
+        if let Some((text, line)) = r.next_quoted() {
+            // The bottom option: the profile stopped short of the bottom.
+            let last = points
+                .last()
+                .map_or("no point".to_string(), |p: &SspPoint| {
+                    format!("{} m", p.depth)
+                });
+            return Err(r.error(
+                line,
+                &field,
+                format!(
+                    "'{text}' where a depth is expected: the profile stops at {last} without reaching the bottom depth {depth} m given on line {depth_line} (its last point must be at that depth, at least two points)"
+                ),
+            ));
+        }
         let (z, line) = read_layer(r, layer, &field)?;
         if let Some(last) = points.last() {
             let last: &SspPoint = last;
@@ -373,6 +403,14 @@ fn read_profile(
                     ),
                 ));
             }
+        }
+        check_layer(r, layer, line, &field)?;
+        if z < 0.0 {
+            return Err(r.error(
+                line,
+                &field,
+                format!("depth {z} m is negative: depths go down from the sea surface at 0 m"),
+            ));
         }
         points.push(SspPoint {
             depth: z,
@@ -455,13 +493,23 @@ pub(super) fn read_env(
         ));
     }
     let (surface_roughness, depth) = (head[1].0, head[2].0);
-    let profile = read_profile(&mut r, depth, &mut layer)?;
+    let profile = read_profile(&mut r, (depth, head[2].1), &mut layer)?;
     let v = r.read(2, "bottom option")?;
-    let bottom_option = v
+    let first = v
         .first()
-        .map(value_text)
-        .ok_or_else(|| r.error(r.line() - 1, "bottom option", "missing"))?
-        .to_string();
+        .ok_or_else(|| r.error(r.line() - 1, "bottom option", "missing"))?;
+    if !first.quoted && super::records::parse_number(&first.text).is_some() {
+        let last = profile[profile.len() - 1].depth;
+        return Err(r.error(
+            first.line,
+            "bottom option",
+            format!(
+                "a number where the bottom option (a quoted string) is expected: the profile ended at the bottom depth {last} m (line {}), so this SSP line is below the bottom",
+                head[2].1
+            ),
+        ));
+    }
+    let bottom_option = value_text(first).to_string();
     let bottom_roughness = match v.get(1) {
         Some(s) => r.number(s, "bottom roughness")?,
         None => 0.0,
@@ -487,25 +535,28 @@ pub(super) fn read_env(
     };
     let bottom = read_half_space(&mut r, bot_bc, &mut layer, "bottom half-space")?;
     let (zmin, zmax) = (profile[0].depth as f32, depth as f32);
-    let clamp =
-        |v: Vec<f32>| -> Vec<f64> { v.into_iter().map(|x| x.clamp(zmin, zmax) as f64).collect() };
-    let source_depths = clamp(read_vector(&mut r, "source depths")?);
-    let depths = clamp(read_vector(&mut r, "receiver depths")?);
-    let ranges: Vec<f64> = read_vector(&mut r, "receiver ranges (km)")?
-        .into_iter()
-        .map(|x| (1000.0f32 * x) as f64)
-        .collect();
+    let (sources, source_line) = read_vector(&mut r, "source depths")?;
+    let (depths, depth_line) = read_vector(&mut r, "receiver depths")?;
+    let mut warnings = Vec::new();
+    let depths = into_water(&r, depths, (zmin, zmax), depth_line, &mut warnings);
+    let (ranges, range_line) = read_vector(&mut r, "receiver ranges (km)")?;
+    let ranges: Vec<f64> = ranges.into_iter().map(|x| (1000.0f32 * x) as f64).collect();
+    if depths.len().saturating_mul(ranges.len()) > MAX_RECEIVERS {
+        return Err(r.error(
+            range_line,
+            "receiver ranges (km)",
+            format!(
+                "{} depths × {} ranges is {} receivers, more than the {MAX_RECEIVERS} a field holds",
+                depths.len(),
+                ranges.len(),
+                depths.len() as u128 * ranges.len() as u128
+            ),
+        ));
+    }
     let run = read_run_type(&mut r)?;
     let water = (zmax - zmin) as f64;
     let angles = read_angles(&mut r, run.kind, frequency, water, ranges[ranges.len() - 1])?;
-    let limits = r.read_numbers(3, "step, box depth, box range")?;
-    if limits.len() < 3 {
-        return Err(r.error(
-            r.line() - 1,
-            "step, box depth, box range",
-            "three values expected",
-        ));
-    }
+    let limits = read_limits(&mut r)?;
     let interpolation = top.interpolation.unwrap_or_default();
     let mut environment = Environment {
         profile,
@@ -538,11 +589,12 @@ pub(super) fn read_env(
         shape: run.shape,
         source: run.source,
         angles,
-        step: limits[0].0,
-        box_depth: limits[1].0,
-        box_range: 1000.0 * limits[2].0,
+        step: limits[0],
+        box_depth: limits[1],
+        box_range: 1000.0 * limits[2],
         pattern,
     };
+    let source_depths = sources_in_water(&r, &environment, &sources, source_line)?;
     Ok(EnvFile {
         title,
         frequency,
@@ -551,7 +603,111 @@ pub(super) fn read_env(
         grid: Grid { depths, ranges },
         run: run.kind,
         beams,
+        warnings,
     })
+}
+
+/// Receiver depths moved into the water column `[zmin, zmax]` as BELLHOP
+/// moves them, each move said in `warnings`.
+fn into_water(
+    r: &Records,
+    depths: Vec<f32>,
+    (zmin, zmax): (f32, f32),
+    line: usize,
+    warnings: &mut Vec<ParseError>,
+) -> Vec<f64> {
+    let above = depths.iter().filter(|z| **z < zmin).count();
+    let below = depths.iter().filter(|z| **z > zmax).count();
+    let field = "receiver depths";
+    if above > 0 {
+        warnings.push(r.error(
+            line,
+            field,
+            format!(
+                "{above} of {} above the surface ({zmin} m) are taken at the surface, as BELLHOP takes them",
+                depths.len()
+            ),
+        ));
+    }
+    if below > 0 {
+        warnings.push(r.error(
+            line,
+            field,
+            format!(
+                "{below} of {} below the bottom ({zmax} m) are taken at the bottom, as BELLHOP takes them",
+                depths.len()
+            ),
+        ));
+    }
+    depths
+        .into_iter()
+        .map(|z| z.clamp(zmin, zmax) as f64)
+        .collect()
+}
+
+/// The source depths, each inside the water at range 0: one on or beyond
+/// the surface or the bottom is an error at `line` (BELLHOP moves one
+/// beyond the flat surface or bottom onto it, where no ray leaves it: an
+/// empty field without a word).
+fn sources_in_water(
+    r: &Records,
+    env: &Environment,
+    sources: &[f32],
+    line: usize,
+) -> Result<Vec<f64>, ParseError> {
+    let (top, bottom) = (env.surface_depth_at(0.0), env.bottom_depth_at(0.0));
+    let mut out = Vec::with_capacity(sources.len());
+    for &z in sources {
+        let z = z as f64;
+        let problem = if z < top {
+            format!(
+                "{z} m is above the surface ({top} m at the source): a source must be in the water"
+            )
+        } else if z > bottom {
+            format!("{z} m is below the bottom ({bottom} m at the source): a source must be in the water")
+        } else if z == top || z == bottom {
+            let (what, at) = if z == top {
+                ("surface", top)
+            } else {
+                ("bottom", bottom)
+            };
+            format!(
+                "{z} m is on the {what} ({at} m at the source): no ray leaves a source on a boundary, its field would be empty"
+            )
+        } else {
+            out.push(z);
+            continue;
+        };
+        return Err(r.error(line, "source depths", problem));
+    }
+    Ok(out)
+}
+
+/// Reads the step (m), box depth (m) and box range (km), each checked.
+fn read_limits(r: &mut Records) -> Result<[f64; 3], ParseError> {
+    let field = "step, box depth, box range";
+    let line = r.line();
+    let limits = r.read_numbers(3, field)?;
+    if limits.len() < 3 {
+        return Err(r.error(line, field, "three values expected"));
+    }
+    let [step, depth, range] = [limits[0], limits[1], limits[2]];
+    if step.0 < 0.0 {
+        return Err(r.error(step.1, field, format!("step {} m is negative", step.0)));
+    }
+    for (what, unit, v) in [("box depth", "m", depth), ("box range", "km", range)] {
+        if v.0 <= 0.0 {
+            return Err(r.error(
+                v.1,
+                field,
+                format!(
+                    "{what} {} {unit} is not above zero: no ray would be traced",
+                    v.0
+                ),
+            ));
+        }
+    }
+    Ok([step.0, depth.0, range.0])
 }
 
 /// Which companion files the `.env` asks for, and the water column.

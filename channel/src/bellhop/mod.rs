@@ -1,8 +1,8 @@
 //! BELLHOP's own files: the `.env` environment file with its companions
 //! (`.bty` bathymetry, `.ati` altimetry, `.ssp` range-dependent sound
 //! speed, `.brc`/`.trc` reflection coefficients, `.sbp` source beam
-//! pattern), and the outputs: `.shd` (the pressure field) and `.arr`
-//! (arrivals, ASCII).
+//! pattern), and the outputs: `.shd` (the pressure field), `.arr`
+//! (arrivals, ASCII or binary) and `.ray` (rays and eigenrays).
 //!
 //! Readers take the text (or bytes) and the file's name, never panic, and
 //! name the file, line and field of the first problem. The `.env` reader
@@ -20,7 +20,10 @@ mod outputs;
 mod records;
 mod write;
 
-pub use outputs::{read_arr, read_shd, write_arr, write_shd, ArrFile, ShdFile};
+pub use outputs::{
+    read_arr, read_arr_binary, read_shd, write_arr, write_arr_binary, write_ray, write_shd,
+    ArrFile, RaySet, ShdFile,
+};
 pub use write::write_env;
 
 use crate::beams::Beams;
@@ -81,14 +84,21 @@ pub struct EnvFile {
     pub frequency: f64,
     /// The environment.
     pub environment: Environment,
-    /// Source depths (m), clamped into the water column.
+    /// Source depths (m), each in the water at range 0 (a source on or
+    /// beyond the surface or the bottom is an error: BELLHOP moves it onto
+    /// the boundary, where no ray leaves it).
     pub source_depths: Vec<f64>,
-    /// The receiver grid (m), depths clamped into the water column.
+    /// The receiver grid (m), depths moved into the water column as
+    /// BELLHOP moves them (see `warnings`).
     pub grid: Grid,
     /// What to compute.
     pub run: RunKind,
     /// The fan of beams.
     pub beams: Beams,
+    /// What the file asks for that BELLHOP changes without stopping,
+    /// with the line and field (receivers above the surface or below the
+    /// bottom moved onto it): for the user to see, not errors.
+    pub warnings: Vec<ParseError>,
 }
 
 /// How the `.env` reader gets a companion file: called with its extension

@@ -1,5 +1,7 @@
 //! BELLHOP's outputs: the `.shd` pressure field (Fortran direct-access
-//! records of 4-byte words) and the ASCII `.arr` arrivals file.
+//! records of 4-byte words), the `.arr` arrivals file (ASCII for run type
+//! `A`, Fortran unformatted records for `a`) and the `.ray` file of a ray
+//! or eigenray run (`R`, `E`).
 
 use num_complex::Complex64;
 
@@ -249,6 +251,34 @@ pub struct ArrFile {
     pub fields: Vec<ArrivalField>,
 }
 
+/// An arrival from the eight values of a `.arr` line (`value(k)`, k from
+/// 0), rounded to single precision as BELLHOP writes them: amplitude,
+/// phase (degrees), delay and its imaginary part (s), source and receiver
+/// angles (degrees), surface and bottom bounces.
+fn arrival_of(value: impl Fn(usize) -> f64) -> Arrival {
+    let single = |k: usize| f64::from(value(k) as f32);
+    Arrival {
+        amplitude: single(0),
+        phase: single(1).to_radians(),
+        delay: single(2),
+        delay_imag: single(3),
+        source_angle: single(4),
+        receiver_angle: single(5),
+        top_bounces: value(6).max(0.0) as u32,
+        bottom_bounces: value(7).max(0.0) as u32,
+    }
+}
+
+/// One source's arrivals on the receiver grid of a `.arr` file.
+fn field_of(sd: f64, depths: &[f64], ranges: &[f64], arrivals: Vec<Vec<Arrival>>) -> ArrivalField {
+    ArrivalField {
+        source_depth: sd,
+        depths: depths.to_vec(),
+        ranges: ranges.to_vec(),
+        arrivals,
+    }
+}
+
 /// Reads an ASCII `.arr` file (`name` for errors).
 pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
     let mut r = Records::new(name, text);
@@ -280,31 +310,19 @@ pub fn read_arr(name: &str, text: &str) -> Result<ArrFile, ParseError> {
                 if v.len() < 8 {
                     return Err(r.error(line, &field, "8 values expected"));
                 }
-                list.push(Arrival {
-                    amplitude: v[0].0,
-                    phase: v[1].0.to_radians(),
-                    delay: v[2].0,
-                    delay_imag: v[3].0,
-                    source_angle: v[4].0,
-                    receiver_angle: v[5].0,
-                    top_bounces: v[6].0.max(0.0) as u32,
-                    bottom_bounces: v[7].0.max(0.0) as u32,
-                });
+                list.push(arrival_of(|k| v[k].0));
             }
             arrivals.push(list);
         }
-        fields.push(ArrivalField {
-            source_depth: sd,
-            depths: depths.clone(),
-            ranges: ranges.clone(),
-            arrivals,
-        });
+        fields.push(field_of(sd, &depths, &ranges, arrivals));
     }
     Ok(ArrFile { frequency, fields })
 }
 
 /// Writes arrival fields (one per source depth, same grid) as an ASCII
-/// `.arr` file.
+/// `.arr` file, values in single precision as BELLHOP writes them
+/// (amplitude, phase in degrees, delay and its imaginary part in s, source
+/// and receiver angles in degrees, surface and bottom bounces).
 pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
     use std::fmt::Write;
     let mut s = String::new();
@@ -314,7 +332,7 @@ pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
     let list = |v: &[f64]| {
         let mut l = format!("{}", v.len());
         for x in v {
-            let _ = write!(l, " {x}");
+            let _ = write!(l, " {}", *x as f32);
         }
         l
     };
@@ -335,15 +353,242 @@ pub fn write_arr(frequency: f64, fields: &[ArrivalField]) -> String {
                 let _ = writeln!(
                     s,
                     "{:e} {} {:e} {:e} {} {} {} {}",
-                    x.amplitude,
-                    x.phase.to_degrees(),
-                    x.delay,
-                    x.delay_imag,
-                    x.source_angle,
-                    x.receiver_angle,
+                    x.amplitude as f32,
+                    x.phase.to_degrees() as f32,
+                    x.delay as f32,
+                    x.delay_imag as f32,
+                    x.source_angle as f32,
+                    x.receiver_angle as f32,
                     x.top_bounces,
                     x.bottom_bounces
                 );
+            }
+        }
+    }
+    s
+}
+
+/// Writes arrival fields (one per source depth, same grid) as the binary
+/// `.arr` file of run type `a`: Fortran unformatted sequential records
+/// (each framed by its length in bytes, little-endian) holding `'2D'`,
+/// the frequency, the source depths, receiver depths and ranges (count
+/// then single-precision values), then per source the most arrivals at a
+/// receiver and per receiver its count and one record per arrival:
+/// amplitude, phase (degrees), delay and its imaginary part (s), source
+/// and receiver angles (degrees), surface and bottom bounces, all single
+/// precision.
+pub fn write_arr_binary(frequency: f64, fields: &[ArrivalField]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let Some(first) = fields.first() else {
+        return out;
+    };
+    let mut record = |words: &[[u8; 4]]| {
+        let len = (4 * words.len()) as u32;
+        out.extend_from_slice(&len.to_le_bytes());
+        for w in words {
+            out.extend_from_slice(w);
+        }
+        out.extend_from_slice(&len.to_le_bytes());
+    };
+    let single = |x: f64| (x as f32).to_le_bytes();
+    let counted = |v: &[f64]| -> Vec<[u8; 4]> {
+        std::iter::once((v.len() as i32).to_le_bytes())
+            .chain(v.iter().map(|x| single(*x)))
+            .collect()
+    };
+    record(&[*b"'2D'"]);
+    record(&[single(frequency)]);
+    let sd: Vec<f64> = fields.iter().map(|f| f.source_depth).collect();
+    record(&counted(&sd));
+    record(&counted(&first.depths));
+    record(&counted(&first.ranges));
+    for f in fields {
+        let max = f.arrivals.iter().map(Vec::len).max().unwrap_or(0);
+        record(&[(max as i32).to_le_bytes()]);
+        for list in &f.arrivals {
+            record(&[(list.len() as i32).to_le_bytes()]);
+            for a in list {
+                record(&[
+                    single(a.amplitude),
+                    single(a.phase.to_degrees()),
+                    single(a.delay),
+                    single(a.delay_imag),
+                    single(a.source_angle),
+                    single(a.receiver_angle),
+                    single(f64::from(a.top_bounces)),
+                    single(f64::from(a.bottom_bounces)),
+                ]);
+            }
+        }
+    }
+    out
+}
+
+/// Fortran unformatted sequential records, read without panics.
+struct Unformatted<'a> {
+    name: &'a str,
+    bytes: &'a [u8],
+    at: usize,
+    index: usize,
+}
+
+impl<'a> Unformatted<'a> {
+    /// The next record's bytes (its length checked at both ends).
+    fn record(&mut self, field: &str) -> Result<&'a [u8], ParseError> {
+        self.index += 1;
+        let fail = |m: String| shd_error(self.name, field, format!("record {}: {m}", self.index));
+        let head = self
+            .bytes
+            .get(self.at..self.at + 4)
+            .ok_or_else(|| fail(format!("the file ends at byte {}", self.bytes.len())))?;
+        let len = u32::from_le_bytes([head[0], head[1], head[2], head[3]]) as usize;
+        let body = self
+            .bytes
+            .get(self.at + 4..self.at + 4 + len)
+            .ok_or_else(|| fail(format!("{len} bytes announced past the end of the file")))?;
+        let tail = self
+            .bytes
+            .get(self.at + 4 + len..self.at + 8 + len)
+            .ok_or_else(|| fail("the file ends before the record's end mark".into()))?;
+        if u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]) as usize != len {
+            return Err(fail("its end mark is not its length".into()));
+        }
+        self.at += 8 + len;
+        Ok(body)
+    }
+
+    /// The next record as 4-byte words (at least `min`).
+    fn words(&mut self, min: usize, field: &str) -> Result<Vec<[u8; 4]>, ParseError> {
+        let body = self.record(field)?;
+        if body.len() % 4 != 0 || body.len() < 4 * min {
+            return Err(shd_error(
+                self.name,
+                field,
+                format!(
+                    "record {}: {} bytes, not {min} words",
+                    self.index,
+                    body.len()
+                ),
+            ));
+        }
+        Ok(body.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
+    }
+
+    /// A count record (`max` at most).
+    fn count(&mut self, max: usize, field: &str) -> Result<usize, ParseError> {
+        let w = self.words(1, field)?;
+        let n = i32::from_le_bytes(w[0]);
+        if n < 0 || n as usize > max {
+            return Err(shd_error(
+                self.name,
+                field,
+                format!("{n} is not a plausible count"),
+            ));
+        }
+        Ok(n as usize)
+    }
+
+    /// A count followed by that many single-precision values.
+    fn counted(&mut self, field: &str) -> Result<Vec<f64>, ParseError> {
+        let w = self.words(1, field)?;
+        let n = i32::from_le_bytes(w[0]);
+        if n < 0 || n as usize != w.len() - 1 {
+            return Err(shd_error(
+                self.name,
+                field,
+                format!("{n} values announced, {} given", w.len() - 1),
+            ));
+        }
+        Ok(w[1..]
+            .iter()
+            .map(|b| f64::from(f32::from_le_bytes(*b)))
+            .collect())
+    }
+}
+
+/// Reads a binary `.arr` file (run type `a`; `name` for errors).
+pub fn read_arr_binary(name: &str, bytes: &[u8]) -> Result<ArrFile, ParseError> {
+    let mut r = Unformatted {
+        name,
+        bytes,
+        at: 0,
+        index: 0,
+    };
+    let kind = r.record("dimension")?;
+    if kind != b"'2D'" {
+        return Err(shd_error(
+            name,
+            "dimension",
+            format!(
+                "'{}' files are not read (2D only)",
+                String::from_utf8_lossy(kind)
+            ),
+        ));
+    }
+    let frequency = f64::from(f32::from_le_bytes(r.words(1, "frequency")?[0]));
+    let sources = r.counted("source depths")?;
+    let depths = r.counted("receiver depths")?;
+    let ranges = r.counted("receiver ranges")?;
+    let limit = bytes.len() / 40;
+    let mut fields = Vec::with_capacity(sources.len());
+    for &sd in &sources {
+        r.count(limit, "maximum number of arrivals")?;
+        let mut arrivals = Vec::with_capacity((depths.len() * ranges.len()).min(limit));
+        for _ in 0..depths.len() * ranges.len() {
+            let n = r.count(limit, "number of arrivals")?;
+            let mut list = Vec::with_capacity(n);
+            for k in 0..n {
+                let w = r.words(8, &format!("arrival {}", k + 1))?;
+                list.push(arrival_of(|i| f64::from(f32::from_le_bytes(w[i]))));
+            }
+            arrivals.push(list);
+        }
+        fields.push(field_of(sd, &depths, &ranges, arrivals));
+    }
+    Ok(ArrFile { frequency, fields })
+}
+
+/// The rays of one source, for a `.ray` file.
+#[derive(Debug, Clone, Copy)]
+pub struct RaySet<'a> {
+    /// Source depth (m).
+    pub source_depth: f64,
+    /// Its rays (or eigenrays), in launch order.
+    pub rays: &'a [crate::RayPath],
+}
+
+/// Writes rays as BELLHOP's ASCII `.ray` file, which `plotray` draws: the
+/// title, frequency, source counts (1, 1, sources), beams per source and
+/// 1, the surface and bottom depths (m), `'rz'`, then per ray its launch
+/// angle (degrees), its point count with its surface and bottom bounces,
+/// and its points `range depth` (m), sources one after the other.
+pub fn write_ray(
+    title: &str,
+    frequency: f64,
+    beams: usize,
+    (top, bottom): (f64, f64),
+    sources: &[RaySet<'_>],
+) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "'{}'\n{frequency}\n1 1 {}\n{beams} 1\n{top}\n{bottom}\n'rz'",
+        title.replace('\'', "''"),
+        sources.len()
+    );
+    for set in sources {
+        for ray in set.rays {
+            let _ = writeln!(
+                s,
+                "{}\n{} {} {}",
+                ray.angle,
+                ray.points.len(),
+                ray.top_bounces,
+                ray.bottom_bounces
+            );
+            for (r, z) in &ray.points {
+                let _ = writeln!(s, "{r} {z}");
             }
         }
     }

@@ -80,6 +80,20 @@ impl<'a> Records<'a> {
         Ok(values)
     }
 
+    /// The quoted string the next read would start with, and its line
+    /// (1-based), when it starts with one.
+    pub fn next_quoted(&self) -> Option<(String, usize)> {
+        for (i, line) in self.lines.iter().enumerate().skip(self.next) {
+            let mut values = Vec::new();
+            match split_line(line, i + 1, 1, &mut values) {
+                Ok(_) if values.is_empty() => continue,
+                Ok(_) => return values.pop().filter(|v| v.quoted).map(|v| (v.text, v.line)),
+                Err(_) => return None,
+            }
+        }
+        None
+    }
+
     /// Reads exactly one value.
     pub fn read_one(&mut self, field: &str) -> Result<Value, ParseError> {
         let line = self.line();

@@ -15,6 +15,7 @@ fn boundary_letter(b: &Boundary) -> char {
         Boundary::Rigid => 'R',
         Boundary::HalfSpace(_) => 'A',
         Boundary::Table(_) => 'F',
+        Boundary::GrainSize { .. } => 'G',
     }
 }
 
@@ -94,14 +95,18 @@ pub fn write_env(file: &EnvFile) -> (String, Vec<(&'static str, String)>) {
     {
         let _ = writeln!(s, "{temperature} {salinity} {ph} {depth}");
     }
-    let half_space_line = |s: &mut String, z: f64, b: &Boundary| {
-        if let Boundary::HalfSpace(h) = b {
+    let half_space_line = |s: &mut String, z: f64, b: &Boundary| match b {
+        Boundary::HalfSpace(h) => {
             let _ = writeln!(
                 s,
                 "{z} {} {} {} {} {} /",
                 h.speed, h.shear_speed, h.density, h.attenuation, h.shear_attenuation
             );
         }
+        Boundary::GrainSize { phi } => {
+            let _ = writeln!(s, "{z} {phi} /");
+        }
+        _ => {}
     };
     half_space_line(&mut s, env.surface_depth(), &env.surface);
     let _ = writeln!(

@@ -5,7 +5,10 @@
 use num_complex::Complex64;
 
 use crate::absorption::complex_speed;
-use crate::environment::{Boundary, BoundaryProfile, Environment, HalfSpace, ReflectionPoint};
+use crate::environment::{
+    grain_size_half_space, AttenuationUnit, Boundary, BoundaryProfile, Environment, HalfSpace,
+    ReflectionPoint, VolumeAttenuation,
+};
 
 /// Where the boundaries are extended to on both sides (m).
 const FAR: f64 = 1.0e10;
@@ -99,6 +102,22 @@ impl BoundaryModel {
         };
         let default_hs = match boundary {
             Boundary::HalfSpace(h) => half_space_c(env, h, frequency),
+            Boundary::GrainSize { phi } => {
+                // A loss parameter, without volume attenuation, whatever
+                // the environment's units (as BELLHOP's 'G').
+                let h = grain_size_half_space(*phi);
+                HalfSpaceC {
+                    cp: complex_speed(
+                        h.speed,
+                        h.attenuation,
+                        frequency,
+                        AttenuationUnit::LossParameter,
+                        &VolumeAttenuation::None,
+                    ),
+                    cs: Complex64::new(0.0, 0.0),
+                    rho: h.density,
+                }
+            }
             _ => HalfSpaceC {
                 cp: Complex64::new(0.0, 0.0),
                 cs: Complex64::new(0.0, 0.0),
@@ -108,7 +127,7 @@ impl BoundaryModel {
         let condition = match boundary {
             Boundary::Vacuum => Condition::Vacuum,
             Boundary::Rigid => Condition::Rigid,
-            Boundary::HalfSpace(_) => Condition::HalfSpace,
+            Boundary::HalfSpace(_) | Boundary::GrainSize { .. } => Condition::HalfSpace,
             Boundary::Table(t) => Condition::Table(t.clone()),
         };
         let (points, curvilinear, per_point): (Vec<(f64, f64)>, bool, Option<Vec<HalfSpaceC>>) =

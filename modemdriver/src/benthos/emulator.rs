@@ -52,7 +52,7 @@ use tokio::time::Instant;
 use super::machine::id_of;
 use super::wire::{bit_rate, hex_encode, Command, BROADCAST};
 use crate::driver::Driver;
-use crate::emulator_host::{distance, draw, EmulatedModem};
+use crate::emulator_host::{distance, draw, EmulatedModem, FaultDraws};
 pub use crate::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use crate::popoto::wire::LineSplitter;
 
@@ -157,6 +157,7 @@ pub struct Modem {
     ranging: Option<(u8, Instant)>,
     timers: VecDeque<(Instant, Timer)>,
     rng: ChaCha8Rng,
+    faults: FaultDraws,
     busy_next: u32,
     lose_next: u32,
     garble_next: u32,
@@ -180,6 +181,7 @@ impl Modem {
             ranging: None,
             timers: VecDeque::new(),
             rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 40)),
+            faults: FaultDraws::new(c.faults.seed, c.address),
             busy_next: 0,
             lose_next: 0,
             garble_next: 0,
@@ -196,7 +198,7 @@ impl Modem {
             self.garble_next -= 1;
             true
         } else {
-            draw(&mut self.rng, self.c.faults.garble)
+            self.faults.garble(self.c.faults.garble)
         };
         if garble {
             text.truncate(text.len() / 2);
@@ -288,7 +290,7 @@ impl Modem {
                     self.busy_next -= 1;
                     true
                 } else {
-                    draw(&mut self.rng, self.c.faults.busy)
+                    self.faults.busy(self.c.faults.busy)
                 };
                 if busy {
                     self.n.busy += 1;
@@ -387,7 +389,7 @@ impl Modem {
             self.lose_next -= 1;
             true
         } else {
-            draw(&mut self.rng, self.c.faults.lost)
+            self.faults.lost(self.c.faults.lost)
         };
         if lose {
             self.n.lost += 1;

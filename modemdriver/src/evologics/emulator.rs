@@ -67,6 +67,7 @@ use super::message::{
     AckFlag, Command, Notification, Reception, ReceptionKind, Reply, UsblLong, BROADCAST,
 };
 use crate::driver::{Driver, DriverEvent};
+use crate::emulator_host::FaultDraws;
 use crate::evologics::driver::shell::BoxStream;
 use crate::time::sleep_until_opt;
 
@@ -296,6 +297,7 @@ struct Modem {
     im_retries: u8,
     connection_retries: u8,
     rng: ChaCha8Rng,
+    faults: FaultDraws,
     seq: u32,
     im: Option<Awaiting>,
     burst: Option<Awaiting>,
@@ -319,6 +321,7 @@ impl Modem {
             im_retries: c.im_retries,
             connection_retries: c.connection_retries,
             rng,
+            faults: FaultDraws::new(c.faults.seed, c.address),
             seq: 0,
             im: None,
             burst: None,
@@ -338,17 +341,13 @@ impl Modem {
         f(&mut self.counters.lock().unwrap_or_else(|e| e.into_inner()));
     }
 
-    fn draw(&mut self, p: f64) -> bool {
-        p > 0.0 && self.rng.random_bool(p.min(1.0))
-    }
-
     fn say(&mut self, message: ModemMessage) {
         let mut bytes = encode_modem(&message, self.framing);
         let garble = if self.garble_next > 0 {
             self.garble_next -= 1;
             true
         } else {
-            self.draw(self.c.faults.garble)
+            self.faults.garble(self.c.faults.garble)
         };
         if garble {
             // Cut short, its line end kept: what a noisy line delivers.
@@ -383,7 +382,7 @@ impl Modem {
             self.busy_next -= 1;
             true
         } else {
-            self.draw(self.c.faults.busy)
+            self.faults.busy(self.c.faults.busy)
         };
         if busy {
             self.count(|c| c.busy += 1);
@@ -584,7 +583,7 @@ impl Modem {
             self.lose_next -= 1;
             true
         } else {
-            self.draw(self.c.faults.lost)
+            self.faults.lost(self.c.faults.lost)
         };
         if lose {
             self.count(|c| c.lost += 1);

@@ -50,7 +50,7 @@ use super::wire::{
     PacketKind, ParamValue, RangeReport, BROADCAST,
 };
 use crate::driver::Driver;
-use crate::emulator_host::{distance, draw, EmulatedModem};
+use crate::emulator_host::{distance, EmulatedModem, FaultDraws};
 pub use crate::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 
 /// The test message of a ping.
@@ -143,6 +143,7 @@ pub struct Modem {
     power: f64,
     params: HashMap<String, ParamValue>,
     rng: ChaCha8Rng,
+    faults: FaultDraws,
     lines: LineSplitter,
     transmitting: bool,
     ranging: Option<Instant>,
@@ -166,6 +167,7 @@ impl Modem {
             power: 1.0,
             params: HashMap::new(),
             rng: ChaCha8Rng::seed_from_u64(c.faults.seed ^ (u64::from(c.address) << 32)),
+            faults: FaultDraws::new(c.faults.seed, c.address),
             lines: LineSplitter::new(),
             transmitting: false,
             ranging: None,
@@ -187,7 +189,7 @@ impl Modem {
             self.garble_next -= 1;
             true
         } else {
-            draw(&mut self.rng, self.c.faults.garble)
+            self.faults.garble(self.c.faults.garble)
         };
         if garble {
             text.truncate(text.len() / 2);
@@ -245,7 +247,7 @@ impl Modem {
             self.busy_next -= 1;
             true
         } else {
-            draw(&mut self.rng, self.c.faults.busy)
+            self.faults.busy(self.c.faults.busy)
         };
         if busy || self.transmitting {
             self.n.busy += 1;
@@ -369,7 +371,7 @@ impl Modem {
             self.lose_next -= 1;
             true
         } else {
-            draw(&mut self.rng, self.c.faults.lost)
+            self.faults.lost(self.c.faults.lost)
         };
         if lose || self.asleep {
             if self.asleep {
