@@ -1,10 +1,13 @@
 //! `goby dccl wireshark`: tshark, with the dissector it writes, shows every
 //! DCCL message of a real capture (two gobyd exchanging the messages of
 //! `tests/wireshark/messages.proto`, every field codec the dissector
-//! decodes, over the UDP driver on loopback, acks and frame trailers
-//! included) as `goby dccl decode` prints it; types it cannot decode are
-//! refused by name. The capture test is ignored without tshark, saying why
-//! (`.ci/tshark.sh` installs Debian's package); it captures on loopback, as
+//! decodes and dynamic conditions, over the UDP driver on loopback, acks
+//! and frame trailers included) as `goby dccl decode` prints it, and every
+//! frame of the committed dynamic-conditions instances (libdccl's
+//! encodings and random frames, `dccl/tests/data/dynamic-conditions`) as
+//! the codec decodes it; types it cannot decode are refused by name. The
+//! tshark tests are ignored without tshark, saying why (`.ci/tshark.sh`
+//! installs Debian's package); the capture test captures on loopback, as
 //! root.
 
 use std::path::{Path, PathBuf};
@@ -48,6 +51,18 @@ message Plain {
   option (dccl.msg) = { id: 41 max_bytes: 16 codec_version: 4 };
   required uint32 n = 1 [(dccl.field) = { min: 0 max: 7 }];
 }
+message PresenceIf {
+  option (dccl.msg) = { id: 42 max_bytes: 16 codec_version: 4 };
+  required uint32 mode = 1 [(dccl.field) = { min: 0 max: 7 }];
+  optional uint32 a = 2 [(dccl.field) = { codec: "dccl.presence" min: 0 max: 7
+      dynamic_conditions { omit_if: "this.mode == 1" } }];
+}
+message WideBound {
+  option (dccl.msg) = { id: 43 max_bytes: 32 codec_version: 4 };
+  required uint32 mode = 1 [(dccl.field) = { min: 0 max: 7 }];
+  optional int64 b = 2 [(dccl.field) = { min: 0 max: 9007199254740000
+      dynamic_conditions { max: "this.mode * 1000" } }];
+}
 "#,
     )
     .unwrap();
@@ -67,6 +82,28 @@ message Plain {
         lua.contains("[41] = { name = \"refusal.Plain\", id_bits = 8"),
         "{lua}"
     );
+    // Dynamic conditions the dissector cannot evaluate as the codec does.
+    for (id, name, why) in [
+        (
+            42,
+            "refusal.PresenceIf",
+            "refusal.PresenceIf.a: dynamic conditions on a field coded by dccl.presence are not dissected",
+        ),
+        (
+            43,
+            "refusal.WideBound",
+            "refusal.WideBound.b: dynamic bounds on a 64-bit field wider than 52 bits are not dissected",
+        ),
+    ] {
+        assert!(
+            stderr.contains(&format!("goby: warning: not dissected: {name}: {why}")),
+            "{stderr}"
+        );
+        assert!(
+            lua.contains(&format!("[{id}] = {{ name = \"{name}\", refused = ")),
+            "{lua}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -78,6 +115,18 @@ message Plain {
 fn tshark_shows_every_captured_message_as_goby_dccl_decode_prints_it() {
     #[cfg(tshark)]
     capture::run();
+}
+
+/// Dynamic conditions are dissected as the codec decodes them: the same
+/// messages, or not decoded where the codec does not decode.
+#[test]
+#[cfg_attr(
+    not(tshark),
+    ignore = "tshark is not installed: `bash .ci/tshark.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn dynamic_conditions_are_dissected_as_the_codec_decodes_them() {
+    #[cfg(tshark)]
+    capture::conditions();
 }
 
 /// Datagrams that are not whole ModemTransmissions, and frames that are not
@@ -122,6 +171,18 @@ mod capture {
             r#"{"src": 1, "label": "old", "values": [-3, 7], "pos": {"lat": 3, "lon": 4, "depth": 5.5}, "x": -12.34, "mode": "IDLE"}"#,
         ),
         ("wiretest.Legacy2", r#"{"src": 1}"#),
+        (
+            "wiretest.Mission4",
+            r#"{"state": "SURVEY", "maxDepth": 100, "depth": 42.5, "speedCms": 150, "nWpt": 0, "pingRanges": [50, 500, 700], "note": "line 3"}"#,
+        ),
+        (
+            "wiretest.Mission4",
+            r#"{"state": "TRANSIT", "maxDepth": 250, "speedCms": 150, "nWpt": 2, "wpt": [{"x": 100, "y": -200, "loiterS": 30}, {"x": 300, "y": 400, "loiterS": 60}], "note": "leg 2"}"#,
+        ),
+        (
+            "wiretest.Mission4",
+            r#"{"state": "ABORT", "maxDepth": 300, "abortCode": 7, "battery": {"pct": 15, "minutesLeft": 12}}"#,
+        ),
     ];
 
     /// The message node 2 publishes to node 1 (its ack crosses too).
@@ -146,6 +207,7 @@ queue {{
   message_entry {{ protobuf_name: "wiretest.Status4" ack: true role {{ type: DESTINATION_ID field: "dest" }} }}
   message_entry {{ protobuf_name: "wiretest.Ping3" ack: false }}
   message_entry {{ protobuf_name: "wiretest.Legacy2" ack: false }}
+  message_entry {{ protobuf_name: "wiretest.Mission4" ack: false }}
 }}
 dccl {{ proto_file: "{proto}" }}
 json {{ tcp_bind: "127.0.0.1:0" }}
@@ -385,8 +447,10 @@ log {{ raw_log: false }}
         out
     }
 
-    /// What tshark shows with the dissector, by packet number.
-    fn dissected(capture: &Path, lua: &Path) -> BTreeMap<usize, Vec<String>> {
+    /// What tshark shows with the dissector, by packet number: the
+    /// messages, and why the rest of the packet is not decoded (empty when
+    /// it all is).
+    fn dissected_all(capture: &Path, lua: &Path) -> BTreeMap<usize, (Vec<String>, String)> {
         // One character (tshark takes one): a control character, which
         // the messages never hold unescaped.
         const SEP: &str = "\u{1e}";
@@ -414,24 +478,269 @@ log {{ raw_log: false }}
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
+        assert!(!stdout.contains("Lua Error"), "{stdout}");
         let mut shown = BTreeMap::new();
-        for line in stdout.lines() {
+        for line in stdout.split('\n').filter(|l| !l.is_empty()) {
             let mut columns = line.split('\t');
             let number: usize = columns.next().unwrap().parse().unwrap();
             let messages = columns.next().unwrap_or("");
             let errors = columns.next().unwrap_or("");
-            assert!(
-                errors.is_empty(),
-                "packet {number}: the dissector says {errors}"
-            );
             let list: Vec<String> = if messages.is_empty() {
                 Vec::new()
             } else {
                 messages.split(SEP).map(String::from).collect()
             };
-            shown.insert(number, list);
+            shown.insert(number, (list, errors.to_string()));
         }
         shown
+    }
+
+    /// What tshark shows with the dissector, by packet number, every
+    /// packet decoded.
+    fn dissected(capture: &Path, lua: &Path) -> BTreeMap<usize, Vec<String>> {
+        dissected_all(capture, lua)
+            .into_iter()
+            .map(|(number, (list, errors))| {
+                assert!(
+                    errors.is_empty(),
+                    "packet {number}: the dissector says {errors}"
+                );
+                (number, list)
+            })
+            .collect()
+    }
+
+    /// A pcap file of raw frames, one a packet of link type USER0.
+    fn user0_pcap(frames: &[Vec<u8>], time: u32) -> Vec<u8> {
+        let mut pcap = Vec::new();
+        for word in [0xa1b2_c3d4u32, 0x0004_0002, 0, 0, 65535, 147] {
+            pcap.extend_from_slice(&word.to_le_bytes());
+        }
+        for frame in frames {
+            for word in [time, 0, frame.len() as u32, frame.len() as u32] {
+                pcap.extend_from_slice(&word.to_le_bytes());
+            }
+            pcap.extend_from_slice(frame);
+        }
+        pcap
+    }
+
+    /// The messages `codec` decodes from a frame (back to back, zero
+    /// padding after the first), as `goby dccl decode` prints them, and
+    /// why it stops at bytes it does not decode (`None`: it does not).
+    fn codec_decodes(codec: &dccl::Codec, frame: &[u8]) -> (Vec<String>, Option<String>) {
+        let mut at = 0;
+        let mut messages = Vec::new();
+        while at < frame.len() {
+            if !messages.is_empty() && frame[at..].iter().all(|&b| b == 0) {
+                break;
+            }
+            match codec.decode_with_len(&frame[at..]) {
+                Ok((msg, len)) => {
+                    messages.push(dccl::short_debug_string(&msg));
+                    at += len;
+                }
+                Err(e) => return (messages, Some(e.to_string())),
+            }
+        }
+        (messages, None)
+    }
+
+    /// A condition that fails as the codec decodes, as the dissector names
+    /// it ("field F: dynamic_conditions.KIND \"SCRIPT\""), from the codec's
+    /// error ("... field F): dynamic_conditions.KIND \"SCRIPT\" failed...").
+    fn failed_condition(codec_error: &str) -> Option<String> {
+        let at = codec_error.find("): dynamic_conditions.")?;
+        let field = codec_error[..at].rsplit("field ").next()?;
+        let rest = &codec_error[at + 3..];
+        let script = &rest[..rest.find("\" failed")? + 1];
+        Some(format!("field {field}: {script}"))
+    }
+
+    /// The dissector of `proto`'s messages, written as `dir/name` by `goby
+    /// dccl wireshark` with the options `link` (ports, link type).
+    fn dissector(dir: &Path, name: &str, proto: &Path, link: &[&str]) -> PathBuf {
+        let lua = dir.join(name);
+        let mut args = vec!["dccl", "wireshark", "-f", proto.to_str().unwrap()];
+        args.extend_from_slice(link);
+        args.extend_from_slice(&["-o", lua.to_str().unwrap()]);
+        let out = goby(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        lua
+    }
+
+    /// The dissector of `proto`'s messages for USER0 frames.
+    fn user0_dissector(dir: &Path, proto: &Path) -> PathBuf {
+        dissector(dir, "dccl-user0.lua", proto, &["--user-dlt", "0"])
+    }
+
+    /// Frames of `types` (of `proto`, in `include`) dissected and decoded
+    /// by the codec: how many messages, refusals and failed conditions
+    /// agree; panics on the first frame where they do not.
+    fn agree(
+        dir: &Path,
+        proto: &Path,
+        include: &Path,
+        types: &[&str],
+        frames: &[Vec<u8>],
+    ) -> (usize, usize, usize) {
+        let pool = dccl::compile_protos(&[proto], &[include]).expect("compiles");
+        let mut codec = dccl::Codec::new();
+        for ty in types {
+            codec
+                .load(&pool.get_message_by_name(ty).expect("type"))
+                .expect("loads");
+        }
+        let pcap = dir.join("frames.pcap");
+        std::fs::write(&pcap, user0_pcap(frames, 1_800_000_000)).unwrap();
+        let shown = dissected_all(&pcap, &user0_dissector(dir, proto));
+        assert_eq!(shown.len(), frames.len(), "one packet a frame");
+        let (mut messages, mut refused, mut failed) = (0, 0, 0);
+        for ((number, (list, error)), frame) in shown.iter().zip(frames) {
+            let (decoded, why) = codec_decodes(&codec, frame);
+            assert_eq!(
+                (list, !error.is_empty()),
+                (&decoded, why.is_some()),
+                "frame {number} ({}): the dissector (then its error: {error}) and the codec ({why:?})",
+                hex::encode(frame)
+            );
+            // A condition that fails is named alike, with its field.
+            if let Some(condition) = why.as_deref().and_then(failed_condition) {
+                assert!(
+                    error.contains(&condition),
+                    "frame {number}: {error:?} does not name {condition:?}"
+                );
+                failed += 1;
+            }
+            messages += decoded.len();
+            refused += usize::from(why.is_some());
+        }
+        (messages, refused, failed)
+    }
+
+    /// `dir/package.proto` holding `messages` (DCCL version 4) in
+    /// `package`, and the frames of its first type's `instances` (text
+    /// format).
+    fn write_and_encode(
+        dir: &Path,
+        package: &str,
+        messages: &str,
+        instances: &[&str],
+    ) -> (PathBuf, Vec<Vec<u8>>) {
+        let proto = dir.join(format!("{package}.proto"));
+        let text = format!(
+            "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage {package};\n{messages}\n"
+        );
+        std::fs::write(&proto, text).unwrap();
+        let pool = dccl::compile_protos(&[&proto], &[dir]).expect("compiles");
+        let desc = pool
+            .all_messages()
+            .find(|m| m.package_name() == package)
+            .expect("a message");
+        let mut codec = dccl::Codec::new();
+        codec.load(&desc).unwrap();
+        let frames = instances
+            .iter()
+            .map(|text| {
+                let msg =
+                    dccl::prost_reflect::DynamicMessage::parse_text_format(desc.clone(), text)
+                        .unwrap();
+                codec.encode(&msg).unwrap()
+            })
+            .collect();
+        (proto, frames)
+    }
+
+    pub fn conditions() {
+        let dir = scratch("conditions");
+        let data =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../dccl/tests/data/dynamic-conditions");
+        let read = |name: &str| std::fs::read_to_string(data.join(name)).unwrap();
+        // libdccl's encodings of the committed instances, and random frames.
+        let mut frames: Vec<Vec<u8>> = read("expected.txt")
+            .lines()
+            .filter_map(|l| l.strip_prefix("ok ")?.split('\t').next().map(String::from))
+            .map(|h| hex::decode(h).unwrap())
+            .collect();
+        let encoded = frames.len();
+        frames.extend(
+            read("decode-input.txt")
+                .lines()
+                .map(|h| hex::decode(h.trim()).unwrap()),
+        );
+        let types = [
+            "goby.test.conditions.Survey",
+            "goby.test.conditions.Status",
+            "goby.test.conditions.Log",
+            "goby.test.conditions.Legacy",
+        ];
+        let (messages, refused, _) =
+            agree(&dir, &data.join("conditions.proto"), &data, &types, &frames);
+        assert!(
+            encoded > 2000 && messages > 2000 && refused > 200,
+            "{encoded} {messages} {refused}"
+        );
+
+        // Conditions reading fields decoded after them: they fail as the
+        // receiver decodes (nil in a comparison, in arithmetic), named alike.
+        let (proto, frames) = write_and_encode(
+            &dir,
+            "later",
+            r#"message Later {
+  option (dccl.msg) = { id: 34 max_bytes: 16 codec_version: 4 };
+  repeated int32 p = 1 [(dccl.field) = { min: 0 max: 7 max_repeat: 3
+      dynamic_conditions { omit_if: "this_index > root.n" } }];
+  required int32 n = 2 [(dccl.field) = { min: 0 max: 3 }];
+  optional int32 b = 3 [(dccl.field) = { min: 0 max: 100
+      dynamic_conditions { max: "this.k * 10" } }];
+  optional int32 k = 4 [(dccl.field) = { min: 0 max: 10 }];
+}"#,
+            &["p: 1 p: 2 n: 2 k: 1", "n: 0 b: 5 k: 1"],
+        );
+        let (messages, refused, failed) = agree(&dir, &proto, &dir, &["later.Later"], &frames);
+        assert_eq!((messages, refused, failed), (0, 2, 2));
+
+        // A script Lua 5.2 runs otherwise than Lua 5.3 (libdccl's): with
+        // Lua 5.2, its messages are shown as not decoded, saying why.
+        let (proto, frames) = write_and_encode(
+            &dir,
+            "l53",
+            r#"message M {
+  option (dccl.msg) = { id: 33 max_bytes: 16 codec_version: 4 };
+  required double d = 1 [(dccl.field) = { min: 0 max: 10 resolution: 0.5 }];
+  optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { omit_if: "tostring(this.d) == '1.0'" } }];
+}"#,
+            &["d: 1 a: 3"],
+        );
+        let frame = frames[0].clone();
+        let version = Command::new(env!("GOBY_TSHARK_PATH"))
+            .arg("-v")
+            .output()
+            .unwrap();
+        // The version text is wrapped at any space ("with Lua\n5.2.4").
+        let version = String::from_utf8_lossy(&version.stdout)
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ");
+        if version.contains("with Lua 5.2") {
+            let pcap = dir.join("lua53.pcap");
+            std::fs::write(&pcap, user0_pcap(&[frame], 1_800_000_000)).unwrap();
+            let shown = dissected_all(&pcap, &user0_dissector(&dir, &proto));
+            let (list, error) = &shown[&1];
+            assert!(list.is_empty(), "{list:?}");
+            assert!(
+                error.contains("l53.M: field a: dynamic_conditions.omit_if \"tostring(this.d) == '1.0'\" needs Lua 5.3 (tostring of a number that may be a float"),
+                "{error}"
+            );
+        } else {
+            agree(&dir, &proto, &dir, &["l53.M"], &[frame]);
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// A pcap file of UDP datagrams (Ethernet, loopback) to `port`.
@@ -477,19 +786,12 @@ log {{ raw_log: false }}
         ];
         let pcap = dir.join("garbage.pcap");
         std::fs::write(&pcap, udp_pcap(&payloads, 50001)).unwrap();
-        let lua = dir.join("dccl.lua");
-        let proto = messages_proto();
-        let out = goby(&[
-            "dccl",
-            "wireshark",
-            "-f",
-            proto.to_str().unwrap(),
-            "--udp-port",
-            "50001",
-            "-o",
-            lua.to_str().unwrap(),
-        ]);
-        assert!(out.status.success());
+        let lua = dissector(
+            &dir,
+            "dccl.lua",
+            &messages_proto(),
+            &["--udp-port", "50001"],
+        );
         let out = Command::new(env!("GOBY_TSHARK_PATH"))
             .arg("-X")
             .arg(format!("lua_script:{}", lua.display()))
@@ -521,23 +823,12 @@ log {{ raw_log: false }}
         let ports = [free_udp_port(), free_udp_port()];
         let capture = dir.join("udp.pcap");
         exchange(&dir, &capture, ports);
-        let lua = dir.join("dccl.lua");
-        let out = goby(&[
-            "dccl",
-            "wireshark",
-            "-f",
-            messages_proto().to_str().unwrap(),
-            "--udp-port",
-            &ports[0].to_string(),
-            "--udp-port",
-            &ports[1].to_string(),
-            "-o",
-            lua.to_str().unwrap(),
-        ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let (port0, port1) = (ports[0].to_string(), ports[1].to_string());
+        let lua = dissector(
+            &dir,
+            "dccl.lua",
+            &messages_proto(),
+            &["--udp-port", &port0, "--udp-port", &port1],
         );
         let payloads = udp_payloads(&std::fs::read(&capture).unwrap());
         let expected = decoded(&payloads);
@@ -564,6 +855,14 @@ log {{ raw_log: false }}
             all.iter().any(|m| m.starts_with("entry: ")),
             "a frame trailer: {all:?}"
         );
+        // Messages with dynamic conditions, as goby dccl decode prints them.
+        for mission in [
+            "state: SURVEY max_depth: 100 depth: 42.5 speed_cms: 150 n_wpt: 0 ping_ranges: 50 ping_ranges: 500 ping_ranges: 700 note: \"line 3\"",
+            "state: TRANSIT max_depth: 250 speed_cms: 150 n_wpt: 2 wpt { x: 100 y: -200 loiter_s: 30 } wpt { x: 300 y: 400 loiter_s: 60 } note: \"leg 2\"",
+            "state: ABORT max_depth: 300 abort_code: 7 battery { pct: 15 minutes_left: 12 }",
+        ] {
+            assert!(all.iter().any(|m| m == &mission), "{mission}: {all:?}");
+        }
         assert!(expected.values().any(Vec::is_empty), "an ack: {expected:?}");
 
         // The same frames, one a packet of link type USER0, as raw frames.
@@ -572,38 +871,12 @@ log {{ raw_log: false }}
             .flat_map(|p| ModemTransmission::decode(p.as_slice()).unwrap().frame)
             .collect();
         let raw = dir.join("frames.pcap");
-        let mut pcap = Vec::new();
-        for word in [0xa1b2_c3d4u32, 0x0004_0002, 0, 0, 65535, 147] {
-            pcap.extend_from_slice(&word.to_le_bytes());
-        }
-        for frame in &frames {
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap()
-                .as_secs() as u32;
-            for word in [now, 0, frame.len() as u32, frame.len() as u32] {
-                pcap.extend_from_slice(&word.to_le_bytes());
-            }
-            pcap.extend_from_slice(frame);
-        }
-        std::fs::write(&raw, pcap).unwrap();
-        let user_lua = dir.join("dccl-user0.lua");
-        let proto = messages_proto();
-        let out = goby(&[
-            "dccl",
-            "wireshark",
-            "-f",
-            proto.to_str().unwrap(),
-            "--user-dlt",
-            "0",
-            "-o",
-            user_lua.to_str().unwrap(),
-        ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_secs() as u32;
+        std::fs::write(&raw, user0_pcap(&frames, now)).unwrap();
+        let user_lua = user0_dissector(&dir, &messages_proto());
         let shown: Vec<String> = dissected(&raw, &user_lua).into_values().flatten().collect();
         let wanted: Vec<String> = expected.into_values().flatten().collect();
         assert_eq!(

@@ -108,7 +108,7 @@ mod wire;
 pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use codecs::arithmetic::{ArithmeticModel, ArithmeticState};
-pub use conditions::ConditionOutcome;
+pub use conditions::{lua52_difference, ConditionOutcome, DefinitionWarning};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{DateShift, FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources, pool_file_name};

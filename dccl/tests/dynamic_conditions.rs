@@ -428,6 +428,217 @@ fn a_condition_that_fails_is_an_error_naming_message_field_and_script() {
 }
 
 #[test]
+fn a_bound_that_is_not_a_number_is_told_as_the_lua_value_it_is() {
+    for (script, told) in [
+        ("'five'", "gave \"five\" (a string), not a number"),
+        ("true", "gave true (a boolean), not a number"),
+        ("this.missing", "gave nil, not a number"),
+        ("root", "gave a table, not a number"),
+    ] {
+        let codec = with_condition("max", script).expect("loads");
+        let desc = codec.descriptor("probe.Probe").expect("loaded");
+        let msg = DynamicMessage::parse_text_format(desc, "k: 1 a: 3").expect("parses");
+        let err = codec.encode(&msg).expect_err(script).to_string();
+        assert!(
+            err.contains(&format!(
+                "dynamic_conditions.max \"{script}\" failed: {told}"
+            )),
+            "{script}: {err}"
+        );
+    }
+}
+
+/// The load warnings of the type `probe.M` defined by `body` (codec version `version`).
+fn warnings_of(version: u32, body: &str) -> Vec<String> {
+    let source = format!(
+        r#"syntax = "proto2";
+           import "dccl/option_extensions.proto";
+           package probe;
+           message M {{
+             option (dccl.msg) = {{ id: 31 max_bytes: 64 codec_version: {version} }};
+             {body}
+           }}"#
+    );
+    let pool = dccl::compile_sources(&[("probe.proto", source.as_str())]).expect("compiles");
+    let mut codec = Codec::new();
+    codec
+        .load(&pool.get_message_by_name("probe.M").expect("type"))
+        .expect("libdccl loads it too");
+    codec
+        .load_warnings("probe.M")
+        .expect("loaded")
+        .iter()
+        .map(ToString::to_string)
+        .collect()
+}
+
+#[test]
+fn conditions_a_receiver_cannot_evaluate_as_the_sender_did_are_warned_about_at_load() {
+    // A later field (libdccl encodes it; no decoder reads it back).
+    let w = warnings_of(
+        4,
+        r#"message P { required int32 x = 1 [(dccl.field) = { min: 0 max: 9 }]; }
+           repeated P p = 1 [(dccl.field) = { max_repeat: 4
+               dynamic_conditions { omit_if: "this_index > root.n" } }];
+           optional uint32 n = 2 [(dccl.field) = { min: 0 max: 4 }];"#,
+    );
+    assert_eq!(
+        w,
+        [
+            "probe.M.p: dynamic_conditions.omit_if \"this_index > root.n\" reads root.n, which is \
+          decoded after p: a receiver evaluates the condition on the message decoded so far, \
+          where it is unset, so the message may not decode as it was encoded"
+        ]
+    );
+    // The field itself, as a bound and as an array.
+    let w = warnings_of(
+        4,
+        r##"optional int32 a = 1 [(dccl.field) = { min: 0 max: 10 dynamic_conditions { max: "this.a" } }];
+           repeated int32 r = 2 [(dccl.field) = { min: 0 max: 10 max_repeat: 4
+               dynamic_conditions { omit_if: "#root.r > 2 and this_index > 2" } }];"##,
+    );
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].starts_with(
+            "probe.M.a: dynamic_conditions.max \"this.a\" reads this.a, the field itself"
+        ),
+        "{w:?}"
+    );
+    assert!(w[1].contains("reads root.r, the field itself"), "{w:?}");
+    // A field of the embedded message whose presence the condition decides.
+    let w = warnings_of(
+        4,
+        r#"message B { required uint32 pct = 1 [(dccl.field) = { min: 0 max: 100 }]; }
+           optional B b = 1 [(dccl.field) = { dynamic_conditions { required_if: "this.pct < 20" } }];"#,
+    );
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(w[0].contains("reads this.pct, a part of b itself"), "{w:?}");
+    // Earlier fields, the root of an element's field, a oneof's name: fine.
+    let w = warnings_of(
+        4,
+        r#"required int32 k = 1 [(dccl.field) = { min: 0 max: 3 }];
+           message L { required int32 kind = 1 [(dccl.field) = { min: 0 max: 3 }];
+             optional int32 climb = 2 [(dccl.field) = { min: 0 max: 9
+               dynamic_conditions { only_if: "root.l[this_index].kind == 1 and root.k > 0" } }]; }
+           repeated L l = 2 [(dccl.field) = { max_repeat: 3 }];
+           oneof o { int32 p = 3 [(dccl.field) = { min: 0 max: 3 }]; int32 q = 4 [(dccl.field) = { min: 0 max: 3 }]; }
+           optional bool f = 5 [(dccl.field) = { dynamic_conditions { required_if: "this.o == 'p'" } }];"#,
+    );
+    assert!(w.is_empty(), "{w:?}");
+}
+
+#[test]
+fn names_of_no_field_and_conditions_that_change_nothing_are_warned_about_at_load() {
+    let w = warnings_of(
+        4,
+        r#"required int32 mode = 1 [(dccl.field) = { min: 0 max: 200 }];
+           optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+               dynamic_conditions { omit_if: "this.moode == 1" } }];
+           optional bool b = 3 [(dccl.field) = { dynamic_conditions { max: "3" } }];
+           required int32 c = 4 [(dccl.field) = { min: 0 max: 10
+               dynamic_conditions { required_if: "this.mode == 1" } }];"#,
+    );
+    assert_eq!(
+        w,
+        [
+            "probe.M.a: dynamic_conditions.omit_if \"this.moode == 1\" reads this.moode: \
+             probe.M has no field moode (the script sees nil)",
+            "probe.M.b: dynamic_conditions.max \"3\" is ignored: only a number coded by the \
+             default numeric codec has dynamic bounds (this field: dccl.default4)",
+            "probe.M.c: dynamic_conditions.required_if \"this.mode == 1\" is ignored: the field \
+             is required",
+        ]
+    );
+    let w = warnings_of(
+        2,
+        r#"required int32 mode = 1 [(dccl.field) = { min: 0 max: 200 }];
+           optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+               dynamic_conditions { only_if: "this.mode == 1" } }];
+           repeated int32 r = 3 [(dccl.field) = { min: 0 max: 10 max_repeat: 2
+               dynamic_conditions { only_if: "this.mode == 1" } }];"#,
+    );
+    assert_eq!(
+        w,
+        [
+            "probe.M.a: dynamic_conditions.only_if \"this.mode == 1\" is ignored: codec version 2 \
+          applies it to elements of repeated fields only (libdccl ignores it too)"
+        ]
+    );
+}
+
+#[test]
+fn the_committed_definitions_are_reviewed_without_a_false_warning() {
+    let dir = data_dir();
+    let types: Vec<String> = TYPES.iter().map(|t| t.to_string()).collect();
+    let ours = ours(&dir, "conditions.proto", &types);
+    for ty in &types[..3] {
+        let w = ours.plain.load_warnings(ty).expect("loaded");
+        assert!(w.is_empty(), "{ty}: {w:?}");
+    }
+    let w: Vec<String> = ours
+        .plain
+        .load_warnings("goby.test.conditions.Legacy")
+        .expect("loaded")
+        .iter()
+        .map(|w| format!("{} {}", w.field, w.condition))
+        .collect();
+    assert_eq!(w, ["ignored required_if", "ignored omit_if"]);
+}
+
+#[test]
+fn a_message_sent_as_given_decodes_as_it_was_encoded_and_one_that_does_not_is_told() {
+    let dir = data_dir();
+    let types: Vec<String> = TYPES.iter().map(|t| t.to_string()).collect();
+    let ours = ours(&dir, "conditions.proto", &types);
+    let inputs = parse_inputs(&read_lines(&dir.join("input.txt")));
+    let (mut as_given, mut told) = (0, 0);
+    let mut messages: Vec<(String, DynamicMessage)> = Vec::new();
+    for (ty, text) in &inputs {
+        let desc = ours.pool.get_message_by_name(ty).expect("type");
+        let Ok(msg) = DynamicMessage::parse_text_format(desc, text) else {
+            continue;
+        };
+        // And the message a receiver decodes (its values in range).
+        if let Some(back) = ours
+            .plain
+            .encode(&msg)
+            .ok()
+            .and_then(|b| ours.plain.decode(&b).ok())
+        {
+            messages.push((ty.clone(), back));
+        }
+        messages.push((ty.clone(), msg));
+    }
+    for (ty, msg) in &messages {
+        let text = dccl::short_debug_string(msg);
+        let (Ok(changes), Ok(verdict)) = (ours.plain.check(msg), ours.plain.round_trip(msg)) else {
+            continue;
+        };
+        if changes.is_empty() {
+            // No value changed, left out or made up: the receiver has
+            // what the sender's conditions read, and takes its path.
+            assert_eq!(verdict, None, "{ty} {text}");
+            as_given += 1;
+        } else if let Some(why) = verdict {
+            // libdccl decodes these to other values, or not at all.
+            let bytes = ours.plain.encode(msg).expect("encodes");
+            match ours.plain.decode_as_with_len(ty, &bytes) {
+                Ok((_, len)) if len == bytes.len() => {
+                    assert!(why.contains("not as it was encoded: the sender"), "{why}");
+                }
+                Ok(_) => assert!(why.contains("and the rest as another message"), "{why}"),
+                Err(_) => assert!(why.starts_with("a receiver cannot decode it"), "{why}"),
+            }
+            told += 1;
+        }
+    }
+    assert!(
+        as_given > 1000 && told > 500,
+        "{as_given} sent as given, {told} told"
+    );
+}
+
+#[test]
 fn scripts_outside_the_supported_language_are_refused_at_load_by_name() {
     for (script, why) in [
         ("for i=1,2 do end return true", "no loops"),

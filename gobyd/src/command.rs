@@ -340,7 +340,10 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             eprintln!("gobyd: warning: {warning}");
         }
         let (frame_limits, warnings) = runtime::frame_report(&checked);
-        for w in warnings {
+        for w in runtime::definition_warnings(&checked)
+            .into_iter()
+            .chain(warnings)
+        {
             eprintln!("gobyd: warning: {w}");
         }
         println!(

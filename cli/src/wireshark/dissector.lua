@@ -5,7 +5,8 @@
 -- it) and shows each message as `goby dccl decode` prints it. Written for
 -- the Lua of Wireshark 3.x and 4.x (5.2 to 5.4): numbers are doubles or
 -- integers, no bitwise operator is used, 64-bit values go through Int64
--- and UInt64.
+-- and UInt64. Dynamic conditions run in this Lua, on the message decoded
+-- so far, as `goby dccl decode` evaluates them.
 
 local TWO32 = 4294967296
 
@@ -204,7 +205,23 @@ local function quantize_int(c, v)
   return q
 end
 
--- The value of wire number u (presence already taken off), as text.
+-- An integer of Lua 5.3 (and later) when it has one of that value.
+local toint = math.tointeger or function(x) return x end
+
+-- The integer written `text`, as a Lua integer in Lua 5.3 and later
+-- (wrapping past 2^63, as a 64-bit field's value converts), else a double.
+local function int_of_text(text)
+  if math.tointeger == nil then return tonumber(text) end
+  local v, neg = 0, text:sub(1, 1) == "-"
+  for i = neg and 2 or 1, #text do
+    v = v * 10 + (text:byte(i) - 48)
+  end
+  if neg then v = -v end
+  return v
+end
+
+-- The value of wire number u (presence already taken off): its text and
+-- its Lua value (an integer, or a float).
 local function numeric_text(c, low, high)
   local t = c.t
   if c.wide then
@@ -217,32 +234,45 @@ local function numeric_text(c, low, high)
     else
       u = high * TWO32 + low
     end
+    local text
     if t == "i64" then
       if high < 2 ^ 20 then
-        return tostring(Int64.new(low, high) + Int64.new(c.min))
+        text = tostring(Int64.new(low, high) + Int64.new(c.min))
+      else
+        text = tostring(Int64.new(u) + Int64.new(c.min))
       end
-      return tostring(Int64.new(u) + Int64.new(c.min))
+    elseif high < 2 ^ 20 then
+      text = tostring(UInt64.new(low, high) + UInt64.new(c.min))
+    else
+      text = tostring(UInt64.new(u) + UInt64.new(c.min))
     end
-    if high < 2 ^ 20 then
-      return tostring(UInt64.new(low, high) + UInt64.new(c.min))
-    end
-    return tostring(UInt64.new(u) + UInt64.new(c.min))
+    return text, int_of_text(text)
   end
   local u = low
+  local v
   if t == "f64" then
-    if c.k0 and u < 2 ^ 43 then return double_text(steps_value(c, u + c.k0)) end
-    local w
-    if c.res >= 1 then w = mul_res(c, u) else w = div_inv(c, u) end
-    return double_text(quantize_f64(c, w + c.min))
+    if c.k0 and u < 2 ^ 43 then
+      v = steps_value(c, u + c.k0)
+    else
+      local w
+      if c.res >= 1 then w = mul_res(c, u) else w = div_inv(c, u) end
+      v = quantize_f64(c, w + c.min)
+    end
+    return double_text(v), v + 0.0
   elseif t == "f32" then
     local w = to_f32(u)
     if c.res >= 1 then w = to_f32(mul_res(c, w)) else w = to_f32(div_inv(c, w)) end
-    return float_text(to_f32(quantize_f64(c, to_f32(w + c.min))))
+    v = to_f32(quantize_f64(c, to_f32(w + c.min)))
+    return float_text(v), v + 0.0
   end
-  if c.unit then return int_text(u + c.min) end
-  local w
-  if c.res >= 1 then w = trunc(mul_res(c, u)) else w = trunc(div_inv(c, u)) end
-  return int_text(quantize_int(c, w + c.min))
+  if c.unit then
+    v = u + c.min
+  else
+    local w
+    if c.res >= 1 then w = trunc(mul_res(c, u)) else w = trunc(div_inv(c, u)) end
+    v = quantize_int(c, w + c.min)
+  end
+  return int_text(v), toint(v)
 end
 
 -- Reads a numeric wire value: nil when "not present".
@@ -270,7 +300,8 @@ local function time_text(c, tod, now)
   local round_to = c.round_to
   if c.tt == "s" then
     local scaling = 10 ^ round_to
-    return double_text(round_half_up(scaled * scaling) / scaling)
+    local v = round_half_up(scaled * scaling) / scaling
+    return double_text(v), v + 0.0
   end
   local v = trunc(scaled)
   if round_to < 0 then
@@ -280,12 +311,13 @@ local function time_text(c, tod, now)
     if rem >= scaling / 2 then v = v + scaling end
   end
   if c.tt == "u64" and v < 0 then v = 0 end
-  return int_text(v)
+  return int_text(v), toint(v)
 end
 
 local decode_part
 
--- One value of codec c: its text, a message table, or nil when not present.
+-- One value of codec c: its text (a message table for a message), or nil
+-- when not present; then its value as dynamic conditions see it.
 local function decode_value(c, r, ctx, existing)
   if c.pbit and not r:bit() then return nil end
   local k = c.k
@@ -296,15 +328,18 @@ local function decode_value(c, r, ctx, existing)
   elseif k == "time" then
     local low = read_numeric(c, r)
     if low == nil then return nil end
-    local tod = tonumber(numeric_text(c, low, 0))
+    local tod = tonumber((numeric_text(c, low, 0)))
     return time_text(c, tod, ctx.now)
   elseif k == "bool" then
+    local v
     if c.req then
-      return r:small(1) == 1 and "true" or "false"
+      v = r:small(1) == 1
+    else
+      local w = r:small(2)
+      if w == 0 then return nil end
+      v = w - 1 ~= 0
     end
-    local v = r:small(2)
-    if v == 0 then return nil end
-    return (v - 1 ~= 0) and "true" or "false"
+    return v and "true" or "false", v
   elseif k == "enum" then
     local low = read_numeric(c, r)
     if low == nil then return nil end
@@ -312,24 +347,28 @@ local function decode_value(c, r, ctx, existing)
     local number = w
     if c.packed then number = c.numbers[w + 1] end
     if number == nil then return nil end
-    return c.names[number]
+    local name = c.names[number]
+    return name, name
   elseif k == "str2" then
     local len = r:small(c.prefix)
     if len == 0 then return nil end
-    return c_escape(utf8_lossy(r:bytes_n(len)))
+    local s = utf8_lossy(r:bytes_n(len))
+    return c_escape(s), s
   elseif k == "fixb" then
     if not c.req and not r:bit() then return nil end
-    return c_escape(r:bytes_n(c.maxlen))
+    local s = r:bytes_n(c.maxlen)
+    return c_escape(s), s
   elseif k == "varb" then
     if not c.req and not r:bit() then return nil end
     local s = r:bytes_n(r:small(c.prefix))
     if c.str then s = utf8_lossy(s) end
-    return c_escape(s)
+    return c_escape(s), s
   elseif k == "static" then
-    return c.text
+    return c.text, c.val
   elseif k == "id" then
-    if r:small(1) == 1 then return int_text(r:small(15)) end
-    return int_text(r:small(7))
+    local v
+    if r:small(1) == 1 then v = r:small(15) else v = r:small(7) end
+    return int_text(v), toint(v)
   elseif k == "msg" then
     if c.presence and not r:bit() then return existing end
     local value = existing or {}
@@ -372,6 +411,360 @@ decode_part = function(part, r, value, ctx)
     else
       local v = decode_value(e.c, r, ctx, value[e.n])
       if v ~= nil then value[e.n] = v end
+    end
+  end
+end
+
+-- Dynamic conditions (`(dccl.field).dynamic_conditions`): each script of
+-- SCHEMA.scripts is compiled once, in an environment holding what DCCL
+-- conditions may use, and run with `this`, `root` and `this_index` as the
+-- decoder of `goby dccl decode` gives them: the messages as decoded so far
+-- (a message being decoded seen in its place; in a repeated field of
+-- messages, as many elements as max_repeat, empty past the one being
+-- decoded), unset fields as their default or nil, enums as names, repeated
+-- fields as arrays (nil when empty), a oneof's name as the name of its
+-- member set, and `this_index` the index, from 1, of the element of the
+-- last repeated field decoded.
+
+-- Side tables of each decoded message table (whose number keys hold the
+-- fields' texts): its type, the values conditions see, the field being
+-- decoded in it.
+local TYPE_OF = setmetatable({}, { __mode = "k" })
+local VALUES_OF = setmetatable({}, { __mode = "k" })
+local HOLE_OF = setmetatable({}, { __mode = "k" })
+local VIEW_OF = setmetatable({}, { __mode = "k" })
+
+local function new_message(type_name)
+  local t = {}
+  TYPE_OF[t] = type_name
+  VALUES_OF[t] = {}
+  return t
+end
+
+-- Each type's fields by name, and its oneofs by name.
+local FIELDS_BY_NAME = {}
+for type_name, fields in pairs(SCHEMA.types) do
+  local by_name = {}
+  for _, f in ipairs(fields) do by_name[f.name] = f end
+  FIELDS_BY_NAME[type_name] = by_name
+end
+
+local view
+
+local function element_view(f, item, value)
+  if f.msg then return view(item, f.msg) end
+  return value
+end
+
+-- A repeated field as an array.
+local function list_view(f, get, len)
+  return setmetatable({}, {
+    __index = function(_, k)
+      if type(k) ~= "number" or k ~= math.floor(k) or k < 1 or k > len then return nil end
+      return get(k)
+    end,
+    __len = function() return len end,
+    __newindex = function() error("a message is read only in DCCL conditions", 2) end,
+  })
+end
+
+-- The value of the field named `key` of message table `msg`.
+local function field_value(msg, key)
+  local type_name = TYPE_OF[msg]
+  if type(key) ~= "string" then return nil end
+  local f = FIELDS_BY_NAME[type_name][key]
+  local hole = HOLE_OF[msg]
+  if f == nil then
+    local members = SCHEMA.oneofs[type_name] and SCHEMA.oneofs[type_name][key]
+    if members == nil then return nil end
+    for _, m in ipairs(members) do
+      if (hole and hole.n == m.n) or msg[m.n] ~= nil then return m.name end
+    end
+    return nil
+  end
+  if hole and hole.n == f.n then
+    if not hole.list then return view(hole.child, f.msg) end
+    local before = hole.list
+    return list_view(f, function(i)
+      if i <= #before then return view(before[i], f.msg) end
+      if i == hole.index + 1 then return view(hole.child, f.msg) end
+      return view(new_message(f.msg), f.msg)
+    end, hole.shown)
+  end
+  local values = VALUES_OF[msg]
+  if f.list then
+    local items = msg[f.n]
+    if items == nil or #items == 0 then return nil end
+    local vals = values[f.n]
+    return list_view(f, function(i) return element_view(f, items[i], vals and vals[i]) end, #items)
+  end
+  if f.msg then
+    if msg[f.n] == nil then return nil end
+    return view(msg[f.n], f.msg)
+  end
+  local v = values[f.n]
+  if v == nil then return f.def end
+  return v
+end
+
+-- A message table as conditions see it (the same table each time).
+view = function(msg, type_name)
+  local v = VIEW_OF[msg]
+  if v ~= nil then return v end
+  TYPE_OF[msg] = TYPE_OF[msg] or type_name
+  VALUES_OF[msg] = VALUES_OF[msg] or {}
+  v = setmetatable({}, {
+    __index = function(_, key) return field_value(msg, key) end,
+    __newindex = function() error("a message is read only in DCCL conditions", 2) end,
+  })
+  VIEW_OF[msg] = v
+  return v
+end
+
+-- What the scripts may use, as in DCCL conditions (print writes nothing).
+local ENV = {
+  print = function() end,
+  type = type,
+  tonumber = function(v, base)
+    if base ~= nil then error("tonumber with a base is not supported in DCCL conditions", 2) end
+    return tonumber(v)
+  end,
+  tostring = function(v)
+    local t = type(v)
+    if t == "table" or t == "function" then
+      error("tostring of a table or function is not supported in DCCL conditions", 2)
+    end
+    return tostring(v)
+  end,
+  math = {},
+  string = {},
+}
+for _, k in ipairs({ "abs", "ceil", "floor", "fmod", "huge", "max", "min", "maxinteger",
+                     "mininteger", "pi", "sqrt", "tointeger", "type" }) do
+  ENV.math[k] = math[k]
+end
+for _, k in ipairs({ "len", "lower", "sub", "upper" }) do ENV.string[k] = string[k] end
+
+-- Lua 5.2 (no integer subtype) runs a script as Lua 5.3 does unless the
+-- schema says why not (`v53`).
+local LUA52 = math.type == nil
+
+for _, s in ipairs(SCHEMA.scripts) do
+  local fn, err = load(s.code, "=" .. s.kind, "t", ENV)
+  s.fn, s.load_error = fn, err
+end
+
+local function script_error(s, why)
+  return 'field ' .. s.field .. ': dynamic_conditions.' .. s.kind .. ' "' .. s.src .. '" ' .. why
+end
+
+-- The first value script `i` returns, with `this` the message table
+-- `this_msg` (of type `this_type`).
+local function run(i, this_msg, this_type, ctx)
+  local s = SCHEMA.scripts[i]
+  if LUA52 and s.v53 then
+    error(script_error(s, "needs Lua 5.3 (" .. s.v53 .. "); this Wireshark's Lua is 5.2"), 0)
+  end
+  if s.fn == nil then
+    error(script_error(s, "cannot be run by this Wireshark's Lua: " .. tostring(s.load_error)), 0)
+  end
+  ENV.this = view(this_msg, this_type)
+  ENV.root = view(ctx.root, ctx.root_type)
+  ENV.this_index = toint(ctx.index + 1)
+  local ok, v = pcall(s.fn)
+  if not ok then
+    -- Without Lua's "kind:line:" before the reason, as the codec tells it.
+    local why = tostring(v):gsub("^" .. s.kind .. ":%d+: ", "")
+    error(script_error(s, "failed: " .. why), 0)
+  end
+  return v
+end
+
+local function truth(i, this_msg, this_type, ctx)
+  local v = run(i, this_msg, this_type, ctx)
+  return v ~= nil and v ~= false
+end
+
+-- A bound script's number (numeric strings converted).
+local function bound(i, this_msg, this_type, ctx)
+  local v = run(i, this_msg, this_type, ctx)
+  local n = v
+  if type(v) == "string" then n = tonumber(v) end
+  local s = SCHEMA.scripts[i]
+  if type(n) ~= "number" then
+    local shown = tostring(v)
+    if type(v) == "string" then shown = '"' .. v .. '" (a string)'
+    elseif type(v) == "boolean" then shown = shown .. " (a boolean)"
+    elseif type(v) == "table" then shown = "a table" end
+    error(script_error(s, "failed: gave " .. shown .. ", not a number"), 0)
+  end
+  if n ~= n then error(script_error(s, "failed: gave NaN"), 0) end
+  return n
+end
+
+-- ceil(log2(v)) of a whole number v >= 0.
+local function ceil_log2(v)
+  local bits = 0
+  while 2 ^ bits < v do bits = bits + 1 end
+  return bits
+end
+
+-- The numeric codec c with the bounds [min, max] in force (what dccl's
+-- NumericBounds derives from them: size, minimum, steps of the minimum).
+local function with_bounds(c, min, max)
+  local n = {}
+  for k, v in pairs(c) do n[k] = v end
+  local null = c.req and 0 or 1
+  n.bits = ceil_log2(math.ceil((max - min) / c.res + 1 + null))
+  n.k0 = nil
+  local t = c.t
+  if t == "f64" then
+    n.min = quantize_f64(c, min)
+    local steps = function(x)
+      if c.res >= 1 then return round_half_up(div_res(c, x)) end
+      return round_half_up(x * c.inv)
+    end
+    local k0, k1 = steps(min), steps(max)
+    if n.bits <= 43 and math.abs(k0) < 2 ^ 43 and math.abs(k1) < 2 ^ 43
+        and math.max(math.abs(min), math.abs(max)) < math.huge then
+      n.k0 = k0
+    end
+  elseif t == "f32" then
+    n.min = to_f32(quantize_f64(c, to_f32(min)))
+  else
+    n.min = quantize_int(c, trunc(min))
+  end
+  return n
+end
+
+-- The codec of field entry e with its bounds in force.
+local function bounded(e, c, this_msg, this_type, ctx)
+  local d = e.dyn
+  local min, max = d.smin, d.smax
+  if d.min then min = math.min(d.smax, math.max(bound(d.min, this_msg, this_type, ctx), d.smin)) end
+  if d.max then max = math.max(d.smin, math.min(bound(d.max, this_msg, this_type, ctx), d.smax)) end
+  if min > max then
+    error("field " .. SCHEMA.scripts[d.min or d.max].field .. ": dynamic_conditions give the bounds [" .. min .. ", " .. max .. "]: the minimum is over the maximum", 0)
+  end
+  return with_bounds(c, min, max)
+end
+
+-- Whether the conditions of entry e leave it (or an element) out.
+local function omitted(e, this_msg, this_type, ctx)
+  local d = e.dyn
+  if d == nil or d.omit == nil then return false end
+  local v = truth(d.omit, this_msg, this_type, ctx)
+  if d.neg then return not v end
+  return v
+end
+
+-- The codec of entry e: its required one when a condition says so.
+local function chosen(e, this_msg, this_type, ctx)
+  local d = e.dyn
+  if d and d.req and truth(d.req, this_msg, this_type, ctx) then return d.rc end
+  return e.c
+end
+
+local function has_fields(t)
+  for k in pairs(t) do
+    if type(k) == "number" then return true end
+  end
+  return false
+end
+
+local decode_part_dyn
+
+-- A singular embedded message under its conditions.
+local function decode_child_dyn(e, r, value, type_name, ctx)
+  local child = value[e.n] or new_message(e.c.t)
+  value[e.n] = nil
+  if omitted(e, value, type_name, ctx) then
+    if has_fields(child) then value[e.n] = child end
+    return
+  end
+  HOLE_OF[value] = { n = e.n, child = child }
+  local c = e.c
+  if e.dyn and e.dyn.req then
+    c = chosen(e, child, e.c.t, ctx)
+  end
+  if c.presence and not r:bit() then
+    HOLE_OF[value] = nil
+    return
+  end
+  decode_part_dyn(c, r, child, ctx)
+  HOLE_OF[value] = nil
+  if c.v > 2 or has_fields(child) then value[e.n] = child end
+end
+
+-- A repeated field, element by element under its conditions.
+local function decode_repeated_dyn(e, r, value, type_name, ctx)
+  local count = e.rep.max
+  if e.rep.counted then count = r:small(e.rep.bits) + e.rep.min end
+  local list, vals, empties = {}, {}, 0
+  for i = 0, count - 1 do
+    ctx.index = i
+    if e.c.k == "msg" then
+      if i >= e.rep.max then
+        -- One more decodes only when its conditions leave it out.
+        HOLE_OF[value] = nil
+        if not omitted(e, value, type_name, ctx) then
+          error(count .. " elements, over max_repeat " .. e.rep.max, 0)
+        end
+      else
+        local element = new_message(e.c.t)
+        HOLE_OF[value] = { n = e.n, list = list, index = i, shown = e.rep.max, child = element }
+        if not omitted(e, element, e.c.t, ctx) then
+          decode_part_dyn(e.c, r, element, ctx)
+        end
+        if e.c.v < 3 and not has_fields(element) then empties = empties + 1 end
+        list[#list + 1] = element
+      end
+    elseif not omitted(e, value, type_name, ctx) then
+      local c = e.c
+      if e.dyn and e.dyn.smin then c = bounded(e, c, value, type_name, ctx) end
+      local text, v = decode_value(c, r, ctx, nil)
+      if text ~= nil then
+        list[#list + 1] = text
+        vals[#list] = v
+      end
+    end
+  end
+  HOLE_OF[value] = nil
+  for i = #list, #list - empties + 1, -1 do
+    list[i] = nil
+    vals[i] = nil
+  end
+  if #list > 0 then
+    value[e.n] = list
+    VALUES_OF[value][e.n] = vals
+  end
+end
+
+-- The fields of one part of a message of a type with conditions into the
+-- message table `value` (as decode_part, each field under its conditions).
+decode_part_dyn = function(part, r, value, ctx)
+  local type_name = part.t
+  TYPE_OF[value] = TYPE_OF[value] or type_name
+  VALUES_OF[value] = VALUES_OF[value] or {}
+  local cases = {}
+  for i, bits in ipairs(part.oneofs or {}) do
+    cases[i] = r:small(bits)
+  end
+  for _, e in ipairs(part.fields) do
+    if e.rep then
+      decode_repeated_dyn(e, r, value, type_name, ctx)
+    elseif e.oneof and cases[e.oneof[1]] ~= e.oneof[2] then
+      -- another member of the oneof is set
+    elseif e.c.k == "msg" then
+      decode_child_dyn(e, r, value, type_name, ctx)
+    elseif not omitted(e, value, type_name, ctx) then
+      local c = chosen(e, value, type_name, ctx)
+      if e.dyn and e.dyn.smin then c = bounded(e, c, value, type_name, ctx) end
+      local text, v = decode_value(c, r, ctx, nil)
+      if text ~= nil then
+        value[e.n] = text
+        VALUES_OF[value][e.n] = v
+      end
     end
   end
 end
@@ -434,12 +827,19 @@ local function decode_message(bytes, at, last, ctx)
   if last - at < m.head_bytes then
     error(m.name .. ": the message ends inside its header (" .. (last - at) .. " of " .. m.head_bytes .. " bytes)", 0)
   end
-  local value = {}
+  local value = new_message(m.name)
+  local decode = decode_part
+  if m.dyn then
+    -- Conditions see the message from its root, this_index from 1.
+    decode = decode_part_dyn
+    ctx.root, ctx.root_type, ctx.index = value, m.name, 0
+  end
   local head = reader(bytes, at, at + m.head_bytes)
   head.pos = m.id_bits
-  decode_part(m.head, head, value, ctx)
+  local ok, err = pcall(decode, m.head, head, value, ctx)
+  if not ok then error(m.name .. ": " .. err, 0) end
   local body = reader(bytes, at + m.head_bytes, last)
-  local ok, err = pcall(decode_part, m.body, body, value, ctx)
+  ok, err = pcall(decode, m.body, body, value, ctx)
   if not ok then error(m.name .. ": " .. err, 0) end
   return m.head_bytes + math.ceil(body.pos / 8), m, id, value
 end

@@ -15,14 +15,19 @@
 //! prefix or fixed size, version 4's variable length), embedded messages
 //! (presence bits from version 3), repeated fields (the count prefix from
 //! version 3), version 4's oneofs, and the time, static, presence,
-//! var_bytes and id codecs. Each message shows as `goby dccl decode`
-//! prints it. A type using another codec (hash, arithmetic, delta, a
-//! codec of the user's), an `omit_id` type (it cannot be found by id) or a
-//! 64-bit field of more than 52 bits with a resolution other than 1 is
-//! refused: named on standard error with the field and the reason, and
-//! shown in Wireshark as "not dissected" with that reason. Encrypted bodies
-//! are not decrypted.
+//! var_bytes and id codecs. Dynamic conditions (`omit_if`, `required_if`,
+//! `only_if`, `min`, `max`; the module `conditions`) run in Wireshark's Lua
+//! on the message decoded so far, as the codec evaluates them. Each
+//! message shows as `goby dccl decode` prints it. A type using another
+//! codec (hash, arithmetic, delta, a codec of the user's), an `omit_id`
+//! type (it cannot be found by id), a 64-bit field of more than 52 bits
+//! with a resolution other than 1 or with dynamic bounds, or dynamic
+//! conditions on a field of a codec other than the default, time and
+//! var_bytes ones is refused: named on standard error with the field and
+//! the reason, and shown in Wireshark as "not dissected" with that reason.
+//! Encrypted bodies are not decrypted.
 
+mod conditions;
 mod schema;
 
 use std::io::Write;

@@ -8,7 +8,26 @@ use std::fmt::Write;
 
 use dccl::field::{field_options, message_options, DcclFieldOptions};
 use dccl::Codec;
-use prost_reflect::{Cardinality, FieldDescriptor, Kind, MessageDescriptor};
+
+use super::conditions;
+use prost_reflect::{Cardinality, FieldDescriptor, Kind, MessageDescriptor, Value};
+
+/// What writing the schema gathers besides the messages' entries.
+#[derive(Default)]
+pub(super) struct Acc {
+    /// Each type's fields, in number order: for rendering messages, and for
+    /// the messages dynamic conditions see (names, defaults).
+    types: BTreeMap<String, String>,
+    /// Each type's oneofs and their members (a oneof's name in a condition
+    /// reads as the name of its member set).
+    oneofs: BTreeMap<String, String>,
+    /// The dynamic-condition scripts, as Lua entries (indexed from 1).
+    pub(super) scripts: Vec<String>,
+    /// Whether a field of the type being written has dynamic conditions.
+    pub(super) has_conditions: bool,
+    /// The type being written (the `root` of its conditions).
+    pub(super) root: Option<MessageDescriptor>,
+}
 
 /// The schema written, and the types refused (each "Type.field: reason").
 pub struct Written {
@@ -25,13 +44,13 @@ pub fn write(
     udp_ports: &[u16],
     user_dlt: Option<u8>,
 ) -> Written {
-    let mut names = BTreeMap::new();
+    let mut acc = Acc::default();
     let mut messages = String::new();
     let mut refused = Vec::new();
     for desc in types {
         let name = desc.full_name();
         let id = codec.id_of(name).unwrap_or(0);
-        match message_entry(codec, desc, &mut names) {
+        match message_entry(codec, desc, &mut acc) {
             Ok(entry) => {
                 let _ = writeln!(messages, "    [{id}] = {entry},");
             }
@@ -60,8 +79,16 @@ pub fn write(
     lua.push_str("  messages = {\n");
     lua.push_str(&messages);
     lua.push_str("  },\n  types = {\n");
-    for (name, fields) in &names {
+    for (name, fields) in &acc.types {
         let _ = writeln!(lua, "    [{}] = {fields},", lua_str(name));
+    }
+    lua.push_str("  },\n  oneofs = {\n");
+    for (name, oneofs) in &acc.oneofs {
+        let _ = writeln!(lua, "    [{}] = {oneofs},", lua_str(name));
+    }
+    lua.push_str("  },\n  scripts = {\n");
+    for script in &acc.scripts {
+        let _ = writeln!(lua, "    {script},");
     }
     lua.push_str("  },\n}\n");
     Written { lua, refused }
@@ -69,16 +96,16 @@ pub fn write(
 
 /// Header or body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Part {
+pub(super) enum Part {
     Head,
     Body,
 }
 
 /// What the codecs of a field are built with (dccl's `FieldSpec`).
 #[derive(Debug, Clone)]
-struct Spec {
+pub(super) struct Spec {
     /// `codec_version` of the root message.
-    root_version: i32,
+    pub(super) root_version: i32,
     /// The root's codec group (`dccl.default4`, ...).
     group: String,
     part: Part,
@@ -89,8 +116,8 @@ struct Spec {
 }
 
 /// A codec in the schema: its Lua table and its largest size in bits.
-struct Coded {
-    lua: String,
+pub(super) struct Coded {
+    pub(super) lua: String,
     max_bits: u64,
 }
 
@@ -103,11 +130,7 @@ fn ceil_log2(v: u64) -> u32 {
 }
 
 /// The Lua entry of one type: its id size, header size and parts.
-fn message_entry(
-    codec: &Codec,
-    desc: &MessageDescriptor,
-    names: &mut BTreeMap<String, String>,
-) -> Result<String, String> {
+fn message_entry(codec: &Codec, desc: &MessageDescriptor, acc: &mut Acc) -> Result<String, String> {
     let name = desc.full_name();
     let opts = message_options(desc).map_err(|e| e.to_string())?;
     if opts.omit_id() {
@@ -128,6 +151,8 @@ fn message_entry(
             ))
         }
     };
+    acc.root = Some(desc.clone());
+    acc.has_conditions = false;
     let spec = |part| Spec {
         root_version: version,
         group: group.clone(),
@@ -135,8 +160,8 @@ fn message_entry(
         follow: false,
         depth: 0,
     };
-    let head = message_part(desc, named, &spec(Part::Head), names)?;
-    let body = message_part(desc, named, &spec(Part::Body), names)?;
+    let head = message_part(desc, named, &spec(Part::Head), acc)?;
+    let body = message_part(desc, named, &spec(Part::Body), acc)?;
     let id_bits = if id <= 127 { 8 } else { 16 };
     let head_bytes = (id_bits + head.max_bits).div_ceil(8);
     let expected = codec.max_size(name).map_err(|e| e.to_string())? as u64;
@@ -147,10 +172,11 @@ fn message_entry(
             body.max_bits.div_ceil(8)
         ));
     }
-    add_type(desc, names);
+    add_type(desc, acc);
     Ok(format!(
-        "{{ name = {}, id_bits = {id_bits}, head_bytes = {head_bytes},\n      head = {},\n      body = {} }}",
+        "{{ name = {}, id_bits = {id_bits}, head_bytes = {head_bytes}, dyn = {},\n      head = {},\n      body = {} }}",
         lua_str(name),
+        acc.has_conditions,
         head.lua,
         body.lua
     ))
@@ -158,11 +184,12 @@ fn message_entry(
 
 /// Adds the field list of `desc` (and of the types it embeds) for
 /// rendering: fields in number order.
-fn add_type(desc: &MessageDescriptor, names: &mut BTreeMap<String, String>) {
-    if names.contains_key(desc.full_name()) {
+fn add_type(desc: &MessageDescriptor, acc: &mut Acc) {
+    if acc.types.contains_key(desc.full_name()) {
         return;
     }
-    names.insert(desc.full_name().to_string(), String::new());
+    acc.types
+        .insert(desc.full_name().to_string(), String::new());
     let mut fields: Vec<FieldDescriptor> = desc.fields().collect();
     fields.sort_by_key(FieldDescriptor::number);
     let mut items = Vec::new();
@@ -173,12 +200,32 @@ fn add_type(desc: &MessageDescriptor, names: &mut BTreeMap<String, String>) {
         }
         if let Kind::Message(m) = f.kind() {
             let _ = write!(item, ", msg = {}", lua_str(m.full_name()));
-            add_type(&m, names);
+            add_type(&m, acc);
+        }
+        if let Some(default) = conditions::default_literal(&f) {
+            let _ = write!(item, ", def = {default}");
         }
         item.push_str(" }");
         items.push(item);
     }
-    names.insert(
+    let oneofs: Vec<String> = desc
+        .oneofs()
+        .filter(|o| !o.is_synthetic())
+        .map(|o| {
+            let members: Vec<String> = o
+                .fields()
+                .map(|m| format!("{{ n = {}, name = {} }}", m.number(), lua_str(m.name())))
+                .collect();
+            format!("[{}] = {{ {} }}", lua_str(o.name()), members.join(", "))
+        })
+        .collect();
+    if !oneofs.is_empty() {
+        acc.oneofs.insert(
+            desc.full_name().to_string(),
+            format!("{{ {} }}", oneofs.join(", ")),
+        );
+    }
+    acc.types.insert(
         desc.full_name().to_string(),
         format!("{{ {} }}", items.join(", ")),
     );
@@ -186,7 +233,7 @@ fn add_type(desc: &MessageDescriptor, names: &mut BTreeMap<String, String>) {
 
 /// A codec name as the registry resolves it (the root's version appended
 /// to a name without one).
-enum Resolved {
+pub(super) enum Resolved {
     Default(i32),
     Time,
     Static,
@@ -195,7 +242,7 @@ enum Resolved {
     Id,
 }
 
-fn resolve(name: &str, root_version: i32) -> Option<Resolved> {
+pub(super) fn resolve(name: &str, root_version: i32) -> Option<Resolved> {
     let mut candidates = Vec::new();
     if !name.ends_with(|c: char| c.is_ascii_digit()) {
         candidates.push(format!("{name}{root_version}"));
@@ -237,7 +284,7 @@ fn message_part(
     desc: &MessageDescriptor,
     named: i32,
     spec: &Spec,
-    names: &mut BTreeMap<String, String>,
+    acc: &mut Acc,
 ) -> Result<Coded, String> {
     if spec.depth > 32 {
         return Err(format!(
@@ -284,12 +331,17 @@ fn message_part(
             depth: spec.depth + 1,
             ..spec.clone()
         };
-        let (coded, is_default_message) = field_codec(&field, &opts, &child, names)
+        let (coded, is_default_message) = field_codec(&field, &opts, &child, false, acc)
             .map_err(|e| format!("{}.{}: {e}", desc.full_name(), field.name()))?;
         if v2_expanded && !is_default_message {
             continue;
         }
         let mut entry = format!("{{ n = {}, c = {}", field.number(), coded.lua);
+        if let Some(dynamic) = conditions::entry(desc, &field, &opts, &child, acc)
+            .map_err(|e| format!("{}.{}: {e}", desc.full_name(), field.name()))?
+        {
+            let _ = write!(entry, ", dyn = {dynamic}");
+        }
         let mut bits = coded.max_bits;
         if field.is_list() {
             let max = u64::from(opts.max_repeat.unwrap_or(1));
@@ -324,7 +376,8 @@ fn message_part(
     let bits: Vec<String> = oneof_bits.iter().map(u32::to_string).collect();
     Ok(Coded {
         lua: format!(
-            "{{ v = {named}, fields = {{\n        {} }}, oneofs = {{ {} }} }}",
+            "{{ v = {named}, t = {}, fields = {{\n        {} }}, oneofs = {{ {} }} }}",
+            lua_str(desc.full_name()),
             fields.join(",\n        "),
             bits.join(", ")
         ),
@@ -334,32 +387,26 @@ fn message_part(
 
 /// The codec of a field, and whether it is the default message codec (v2
 /// expands only those in both parts).
-fn field_codec(
+pub(super) fn field_codec(
     field: &FieldDescriptor,
     opts: &DcclFieldOptions,
     spec: &Spec,
-    names: &mut BTreeMap<String, String>,
+    force_required: bool,
+    acc: &mut Acc,
 ) -> Result<(Coded, bool), String> {
-    let name = match (&opts.codec, field.kind()) {
-        (Some(c), _) => c.clone(),
-        (None, Kind::Message(m)) => message_options(&m)
-            .ok()
-            .and_then(|o| o.codec)
-            .unwrap_or_else(|| spec.group.clone()),
-        (None, _) => spec.group.clone(),
-    };
-    let required = use_required(field, spec.root_version);
+    let name = codec_name(field, opts, spec);
+    let required = force_required || use_required(field, spec.root_version);
     let optional = field.cardinality() == Cardinality::Optional;
     match resolve(&name, spec.root_version) {
         Some(Resolved::Default(v)) => {
-            let coded = default_codec(field, opts, spec, v, required, optional, names)?;
+            let coded = default_codec(field, opts, spec, v, required, optional, acc)?;
             Ok((coded, v == 2 && matches!(field.kind(), Kind::Message(_))))
         }
         Some(Resolved::Presence(v)) => {
             if matches!(field.kind(), Kind::Message(_)) {
-                return Ok((default_codec(field, opts, spec, v, required, optional, names)?, false));
+                return Ok((default_codec(field, opts, spec, v, required, optional, acc)?, false));
             }
-            let inner = default_codec(field, opts, spec, v, true, optional, names)?;
+            let inner = default_codec(field, opts, spec, v, true, optional, acc)?;
             let wrapped = if required {
                 inner
             } else {
@@ -386,6 +433,18 @@ fn field_codec(
     }
 }
 
+/// The name of the codec DCCL chooses for a field (before resolving).
+pub(super) fn codec_name(field: &FieldDescriptor, opts: &DcclFieldOptions, spec: &Spec) -> String {
+    match (&opts.codec, field.kind()) {
+        (Some(c), _) => c.clone(),
+        (None, Kind::Message(m)) => message_options(&m)
+            .ok()
+            .and_then(|o| o.codec)
+            .unwrap_or_else(|| spec.group.clone()),
+        (None, _) => spec.group.clone(),
+    }
+}
+
 /// DCCL's default codec of version `v` for the field's type.
 fn default_codec(
     field: &FieldDescriptor,
@@ -394,7 +453,7 @@ fn default_codec(
     v: i32,
     required: bool,
     optional: bool,
-    names: &mut BTreeMap<String, String>,
+    acc: &mut Acc,
 ) -> Result<Coded, String> {
     match field.kind() {
         Kind::Bool => Ok(Coded {
@@ -440,8 +499,8 @@ fn default_codec(
                 3 => optional,
                 _ => false,
             };
-            let part = message_part(&m, v, spec, names)?;
-            add_type(&m, names);
+            let part = message_part(&m, v, spec, acc)?;
+            add_type(&m, acc);
             Ok(Coded {
                 lua: part.lua.replacen(
                     "{ ",
@@ -494,30 +553,50 @@ fn static_codec(field: &FieldDescriptor, opts: &DcclFieldOptions) -> Result<Code
     let text = opts.static_value.as_deref().ok_or("missing static_value")?;
     let token = text.split_whitespace().next().unwrap_or("");
     // The longest prefix that reads as the field's type (a C++ stream's).
-    let prefix = |ok: &dyn Fn(&str) -> Option<String>| {
+    let prefix = |ok: &dyn Fn(&str) -> Option<(String, String)>| {
         (1..=token.len())
             .rev()
             .filter(|&n| token.is_char_boundary(n))
             .find_map(|n| ok(&token[..n]))
     };
-    let shown = match field.kind() {
-        Kind::String => Some(crate::byte_text::escape(token.as_bytes())),
-        Kind::Double => prefix(&|s| s.parse::<f64>().ok().map(dccl::double_to_text)),
-        Kind::Float => prefix(&|s| s.parse::<f32>().ok().map(dccl::float_to_text)),
+    // The text shown, and the value as a Lua literal (what conditions see).
+    let (shown, value) = match field.kind() {
+        Kind::String => Some((crate::byte_text::escape(token.as_bytes()), lua_str(token))),
+        Kind::Double => prefix(&|s| {
+            let v = s.parse::<f64>().ok()?;
+            Some((
+                dccl::double_to_text(v),
+                conditions::value_literal(&Value::F64(v)),
+            ))
+        }),
+        Kind::Float => prefix(&|s| {
+            let v = s.parse::<f32>().ok()?;
+            Some((
+                dccl::float_to_text(v),
+                conditions::value_literal(&Value::F32(v)),
+            ))
+        }),
         Kind::Int32
         | Kind::Sint32
         | Kind::Sfixed32
         | Kind::Int64
         | Kind::Sint64
-        | Kind::Sfixed64 => prefix(&|s| s.parse::<i64>().ok().map(|v| v.to_string())),
-        Kind::Uint32 | Kind::Fixed32 | Kind::Uint64 | Kind::Fixed64 => {
-            prefix(&|s| s.parse::<u64>().ok().map(|v| v.to_string()))
-        }
+        | Kind::Sfixed64 => prefix(&|s| {
+            let v = s.parse::<i64>().ok()?;
+            Some((v.to_string(), conditions::value_literal(&Value::I64(v))))
+        }),
+        Kind::Uint32 | Kind::Fixed32 | Kind::Uint64 | Kind::Fixed64 => prefix(&|s| {
+            let v = s.parse::<u64>().ok()?;
+            Some((v.to_string(), conditions::value_literal(&Value::U64(v))))
+        }),
         _ => None,
     }
     .ok_or_else(|| format!("static_value {text:?} does not read as the field's type"))?;
     Ok(Coded {
-        lua: format!("{{ k = \"static\", text = {} }}", lua_str(&shown)),
+        lua: format!(
+            "{{ k = \"static\", text = {}, val = {value} }}",
+            lua_str(&shown)
+        ),
         max_bits: 0,
     })
 }
@@ -559,7 +638,7 @@ fn time_codec(
 
 /// DCCL's default numeric codec of a field: its bounds and the derived
 /// values its decoding uses (dccl's `NumericBounds`).
-struct Numeric {
+pub(super) struct Numeric {
     t: &'static str,
     bits: u32,
     required: bool,
@@ -570,7 +649,7 @@ struct Numeric {
     min_int: i128,
     k0: Option<f64>,
     /// A 64-bit integer decoded with Int64 / UInt64.
-    wide: bool,
+    pub(super) wide: bool,
 }
 
 fn round_half_up(d: f64) -> f64 {
@@ -716,7 +795,11 @@ impl Numeric {
     }
 }
 
-fn numeric(kind: &Kind, opts: &DcclFieldOptions, required: bool) -> Result<Numeric, String> {
+pub(super) fn numeric(
+    kind: &Kind,
+    opts: &DcclFieldOptions,
+    required: bool,
+) -> Result<Numeric, String> {
     let min = opts.min.ok_or("missing min")?;
     let max = opts.max.ok_or("missing max")?;
     let resolution = match opts.precision {
@@ -727,7 +810,7 @@ fn numeric(kind: &Kind, opts: &DcclFieldOptions, required: bool) -> Result<Numer
 }
 
 /// A Lua string literal of `s` (any bytes).
-fn lua_str(s: &str) -> String {
+pub(super) fn lua_str(s: &str) -> String {
     let mut out = String::from("\"");
     for b in s.bytes() {
         match b {

@@ -18,6 +18,7 @@ use crate::codecs::boolean::BoolCodec;
 use crate::codecs::enumeration::EnumCodec;
 use crate::codecs::numeric::NumericCodec;
 use crate::codecs::var_bytes::VarBytesCodec;
+use crate::conditions::{step, Step};
 use crate::error::CodecError;
 use crate::field_codec::{
     DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart, RepeatBounds,
@@ -566,12 +567,18 @@ impl MessageCodec {
             out.write(*case as u64, o.bits);
         }
         if let Some(scope) = ctx.dynamic {
+            step(scope.trace, || Step::Enter);
             for f in &self.fields {
                 let mark = ctx.change_mark();
+                let start = out.len();
                 self.encode_field_dynamic(f, out, msg, cases, ctx, scope)
                     .map_err(|e| e.in_field(f.field.name()))?;
+                step(scope.trace, || {
+                    Step::Field(f.field.clone(), out.len() - start)
+                });
                 ctx.name_changes(mark, || f.field.name().to_string());
             }
+            step(scope.trace, || Step::Leave);
             return Ok(());
         }
         for f in &self.fields {
@@ -755,10 +762,16 @@ impl MessageCodec {
             cases[i] = input.read(o.bits).map_err(|e| e.in_field(&o.name))? as usize;
         }
         if let Some(scope) = ctx.dynamic {
+            step(scope.trace, || Step::Enter);
             for f in &self.fields {
+                let start = input.position();
                 self.decode_field_dynamic(f, input, msg, cases, ctx, scope)
                     .map_err(|e| e.in_field(f.field.name()))?;
+                step(scope.trace, || {
+                    Step::Field(f.field.clone(), input.position() - start)
+                });
             }
+            step(scope.trace, || Step::Leave);
             return Ok(());
         }
         for f in &self.fields {

@@ -78,6 +78,34 @@ impl Val<'_> {
         }
     }
 
+    /// The value as a Lua programmer writes or reads it, for error
+    /// messages: `nil`, `true (a boolean)`, `3`, `2.5`, `"five" (a
+    /// string)`, `a table`, `a function`.
+    pub fn lua_text(&self) -> String {
+        match self {
+            Val::Nil => "nil".to_string(),
+            Val::Bool(b) => format!("{b} (a boolean)"),
+            Val::Int(i) => i.to_string(),
+            Val::Num(f) => float_to_string(*f),
+            Val::Str(s) => {
+                let mut out = String::from("\"");
+                for &b in s.iter() {
+                    match b {
+                        b'"' => out.push_str("\\\""),
+                        b'\\' => out.push_str("\\\\"),
+                        b'\n' => out.push_str("\\n"),
+                        0x20..=0x7e => out.push(char::from(b)),
+                        _ => out.push_str(&format!("\\{b}")),
+                    }
+                }
+                out.push_str("\" (a string)");
+                out
+            }
+            Val::Msg(_) | Val::List(_) | Val::Lib(_) => "a table".to_string(),
+            Val::Func(_) => "a function".to_string(),
+        }
+    }
+
     /// `tostring` of a number or string.
     fn to_text(&self) -> Option<Vec<u8>> {
         match self {

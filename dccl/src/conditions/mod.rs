@@ -21,6 +21,7 @@
 //! the last repeated field coded; while decoding, both see the message as
 //! decoded so far.
 
+mod analysis;
 mod eval;
 mod lexer;
 mod library;
@@ -28,9 +29,13 @@ mod library;
 mod lua_differential;
 mod number;
 mod parser;
+mod review;
+mod trace;
 mod view;
 
 pub(crate) use eval::Env;
+pub(crate) use review::review;
+pub(crate) use trace::{first_difference, step, Step, Trace};
 pub(crate) use view::{Frame, Node, Slot};
 
 use std::cell::Cell;
@@ -51,6 +56,8 @@ pub(crate) struct EncodeScope<'a> {
     /// Where each evaluation is recorded, when asked
     /// ([`crate::Codec::condition_outcomes`]).
     pub outcomes: Option<&'a std::cell::RefCell<Vec<ConditionOutcome>>>,
+    /// Where the path taken is recorded, when asked ([`crate::Codec::round_trip`]).
+    pub trace: Option<&'a Trace>,
 }
 
 impl EncodeScope<'_> {
@@ -88,6 +95,61 @@ pub struct ConditionOutcome {
     pub result: String,
 }
 
+/// A dynamic condition of a loaded type that may not do what its writer
+/// meant, found when the type is loaded (see [`crate::Codec::load_warnings`]):
+/// a condition that changes nothing for its field (`only_if` of a codec
+/// version 2 field, `min` of a bool...), a script naming no field of its
+/// message (it sees nil, as libdccl's Lua does), or a script reading a
+/// field a receiver has not decoded yet when it evaluates the condition (a
+/// later field, the field itself or a part of it: such a message may
+/// encode, as libdccl encodes it, and then not decode as it was encoded).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DefinitionWarning {
+    /// Full name of the message type holding the field.
+    pub message: String,
+    /// The field's name.
+    pub field: String,
+    /// `required_if`, `omit_if`, `only_if`, `min` or `max`.
+    pub condition: &'static str,
+    /// The script as written.
+    pub script: String,
+    /// What is wrong: `is ignored: ...` or `reads ...`.
+    pub reason: String,
+}
+
+impl std::fmt::Display for DefinitionWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}.{}: dynamic_conditions.{} \"{}\" {}",
+            self.message, self.field, self.condition, self.script, self.reason
+        )
+    }
+}
+
+/// Why Lua 5.2 may give another result than Lua 5.3 for the condition
+/// `script` run with `this` a message of type `this` and `root` one of type
+/// `root` (`Ok(None)`: it gives the same result for every message). Lua
+/// 5.2 has no integer subtype (it writes the float `3.0` as `3`), no `//`,
+/// no bitwise operators, no `math.tointeger`, `math.type`, `math.maxinteger`
+/// or `math.mininteger`, and gives NaN for an integer `% 0`; a script using
+/// none of these, nor `math.max`/`math.min` of strings, a fractional index
+/// to `string.sub` or integers beyond 2^53, gives what it gives in Lua 5.3,
+/// libdccl's. Errors when the script is not one DCCL conditions accept.
+pub fn lua52_difference(
+    script: &str,
+    this: &prost_reflect::MessageDescriptor,
+    root: &prost_reflect::MessageDescriptor,
+) -> Result<Option<String>, CodecError> {
+    let chunk = parser::parse_script(script)
+        .map_err(|e| CodecError::new(format!("\"{script}\" cannot be used: {e}")))?;
+    let this = analysis::Place {
+        desc: this.clone(),
+        path: Vec::new(),
+    };
+    Ok(analysis::facts(&chunk, &this, root).lua52)
+}
+
 /// What the conditions of a message being decoded see: the chain of the
 /// messages above it (`parent`), where it goes in its parent (`slot`), its
 /// depth below the root, and the index of the last repeated element decoded.
@@ -97,6 +159,8 @@ pub(crate) struct DecodeScope<'a> {
     pub slot: Option<Slot<'a>>,
     pub depth: usize,
     pub index: &'a Cell<i64>,
+    /// Where the path taken is recorded, when asked ([`crate::Codec::round_trip`]).
+    pub trace: Option<&'a Trace>,
 }
 
 impl<'a> DecodeScope<'a> {
@@ -117,6 +181,7 @@ impl<'a> DecodeScope<'a> {
             slot: Some(slot),
             depth: frame.depth + 1,
             index: self.index,
+            trace: self.trace,
         }
     }
 }
@@ -175,7 +240,7 @@ impl Script {
         match values.first() {
             Some(v) => v
                 .to_f64()
-                .ok_or_else(|| self.failed(&format!("gave {v:?}, not a number"))),
+                .ok_or_else(|| self.failed(&format!("gave {}, not a number", v.lua_text()))),
             None => Err(self.failed("gave no value")),
         }
     }
@@ -280,8 +345,8 @@ impl Conditions {
         Ok((min, max))
     }
 
-    /// The scripts, for error messages and reports: `name "script"` each.
-    pub fn describe(&self) -> Vec<(&'static str, &str)> {
+    /// The scripts given.
+    pub(crate) fn scripts(&self) -> Vec<&Script> {
         [
             &self.required_if,
             &self.omit_if,
@@ -291,8 +356,15 @@ impl Conditions {
         ]
         .into_iter()
         .flatten()
-        .map(|s| (s.kind, s.source()))
         .collect()
+    }
+
+    /// The scripts, for error messages and reports: `name "script"` each.
+    pub fn describe(&self) -> Vec<(&'static str, &str)> {
+        self.scripts()
+            .into_iter()
+            .map(|s| (s.kind, s.source()))
+            .collect()
     }
 
     fn scripts_text(&self) -> String {

@@ -23,7 +23,9 @@ use prost_reflect::{Cardinality, DynamicMessage, Kind, Value};
 
 use super::{missing_required, set, store, FieldEntry, MessageCodec, Plan};
 use crate::bits::{BitReader, BitWriter};
-use crate::conditions::{frame_env, Conditions, DecodeScope, EncodeScope, Env, Node, Slot};
+use crate::conditions::{
+    frame_env, step, Conditions, DecodeScope, EncodeScope, Env, Node, Slot, Step, Trace,
+};
 use crate::error::CodecError;
 use crate::field_codec::{DecodeContext, EncodeContext, FieldCodec, RepeatBounds};
 
@@ -44,6 +46,9 @@ pub(crate) struct DynamicField {
     /// The field's codec codes a whole array at once (arithmetic, delta):
     /// its elements are not coded one by one.
     whole_arrays: bool,
+    /// The conditions given that change nothing here, each with why
+    /// (`omit_if` of a version 2 field, `min` of a bool...).
+    ignored: Vec<(&'static str, String)>,
 }
 
 impl DynamicField {
@@ -87,14 +92,110 @@ impl DynamicField {
         } else {
             None
         };
-        Ok(Some(DynamicField {
-            omit_singular: version > 2 && entry.repeat.is_none(),
+        let omit_singular = version > 2 && entry.repeat.is_none();
+        let bounds = conditions.has_bounds() && matches!(entry.plan, Plan::Numeric(_));
+        let mut d = DynamicField {
+            omit_singular,
             required,
             required_sees_child: sees_child,
-            bounds: conditions.has_bounds() && matches!(entry.plan, Plan::Numeric(_)),
+            bounds,
             whole_arrays,
             conditions,
-        }))
+            ignored: Vec::new(),
+        };
+        d.ignored = d.find_ignored(entry, version, required_applies);
+        Ok(Some(d))
+    }
+
+    /// The conditions that change nothing for this field, each with why.
+    fn find_ignored(
+        &self,
+        entry: &FieldEntry,
+        version: i32,
+        required_applies: bool,
+    ) -> Vec<(&'static str, String)> {
+        let field = &entry.field;
+        let name = entry.codec.name();
+        let repeated = entry.repeat.is_some();
+        let omit_why = if repeated && self.whole_arrays {
+            Some(format!("its codec {name} codes the whole array"))
+        } else if !repeated && version < 3 {
+            Some(
+                "codec version 2 leaves out elements of repeated fields only \
+                 (libdccl ignores it too)"
+                    .to_string(),
+            )
+        } else {
+            None
+        };
+        let required_why = if self.required.is_some() {
+            None
+        } else if version < 3 {
+            Some("codec version 2 has no required_if (libdccl ignores it too)".to_string())
+        } else if field.cardinality() != Cardinality::Optional {
+            Some(format!(
+                "the field is {}",
+                if repeated { "repeated" } else { "required" }
+            ))
+        } else if version > 3 && field.containing_oneof().is_some() {
+            Some("a oneof member has no \"not present\" value".to_string())
+        } else if !required_applies {
+            Some(format!(
+                "an embedded message coded by {name} keeps its presence (only \
+                 dccl.default4 drops it)"
+            ))
+        } else {
+            None
+        };
+        let bounds_why = if self.bounds && !(repeated && self.whole_arrays) {
+            None
+        } else if self.bounds {
+            Some(format!("its codec {name} codes the whole array"))
+        } else {
+            Some(format!(
+                "only a number coded by the default numeric codec has dynamic bounds \
+                 (this field: {name})"
+            ))
+        };
+        let mut out = Vec::new();
+        for (kind, _) in self.conditions.describe() {
+            let why = match kind {
+                "omit_if" => omit_why.clone(),
+                "required_if" => required_why.clone(),
+                "only_if" => match (&omit_why, &required_why) {
+                    (Some(_), Some(_)) if version < 3 => Some(
+                        "codec version 2 applies it to elements of repeated fields only \
+                         (libdccl ignores it too)"
+                            .to_string(),
+                    ),
+                    (Some(o), Some(r)) => Some(format!("{o}; {r}")),
+                    _ => None,
+                },
+                _ => bounds_why.clone(),
+            };
+            if let Some(why) = why {
+                out.push((kind, why));
+            }
+        }
+        out
+    }
+
+    /// The conditions given that change nothing for this field, each with why.
+    pub(crate) fn ignored(&self) -> &[(&'static str, String)] {
+        &self.ignored
+    }
+
+    /// Whether `omit_if` (and `only_if` false) leave the field, or an
+    /// element of it, out.
+    pub(crate) fn omit_applies(&self, repeated: bool) -> bool {
+        self.conditions.has_omit() && (self.omit_singular || (repeated && !self.whole_arrays))
+    }
+
+    /// Whether `required_if` (and `only_if` true) code the field without
+    /// its "not present" value, and whether its `this` is then the
+    /// embedded message itself.
+    pub(crate) fn required_applies(&self) -> Option<bool> {
+        self.required.as_ref().map(|_| self.required_sees_child)
     }
 
     /// Whether libdccl's minimum size of the message restarts from 0 at
@@ -121,8 +222,31 @@ fn chosen<'e, 'v>(
     if d.is_some_and(|d| d.required.is_some()) {
         let r = std::ptr::eq(required, f);
         scope.record(&f.field, "required", || (!r).to_string());
+        step(scope.trace, || Step::Required(f.field.clone(), !r));
     }
     Ok(required)
+}
+
+/// Records in `trace` whether `chosen` is the required entry of `f`, when
+/// the field has one.
+fn step_required(
+    trace: Option<&Trace>,
+    f: &FieldEntry,
+    d: Option<&DynamicField>,
+    chosen: &FieldEntry,
+) {
+    if d.is_some_and(|d| d.required.is_some()) {
+        step(trace, || {
+            Step::Required(f.field.clone(), !std::ptr::eq(chosen, f))
+        });
+    }
+}
+
+/// Records in `trace` the bounds in force for `f`.
+fn step_bounds(trace: Option<&Trace>, f: &FieldEntry, min: f64, max: f64) {
+    step(trace, || {
+        Step::Bounds(f.field.clone(), min.to_bits(), max.to_bits())
+    });
 }
 
 /// [`chosen`] while decoding (nothing recorded).
@@ -194,9 +318,21 @@ fn note_left_out(ctx: &EncodeContext, d: &DynamicField) {
     );
 }
 
-/// Records (never refuses) an unset field a condition makes required: the
-/// receiver decodes a value the sender did not give.
-fn note_required_unset(ctx: &EncodeContext, d: &DynamicField) {
+/// Records (never refuses) an unset field a condition makes required: a
+/// value (`zeros` `None`), which the receiver decodes as a value the sender
+/// did not give, or an embedded message, sent as `zeros` zero bits, from
+/// which a receiver reads a message (and, when its fields take more bits
+/// than that, the bits of the fields after it).
+fn note_required_unset(ctx: &EncodeContext, d: &DynamicField, zeros: Option<u32>) {
+    let action = match zeros {
+        None => "sent as zeros, which the receiver decodes as a value (the field is required)"
+            .to_string(),
+        Some(bits) => format!(
+            "sent as {bits} zero bit(s) (the message's least size; it is required, without \
+             its presence bit), from which a receiver reads a message, in more bits when its \
+             fields take more"
+        ),
+    };
     ctx.note_change(
         || {
             let scripts = d.conditions.describe();
@@ -206,7 +342,7 @@ fn note_required_unset(ctx: &EncodeContext, d: &DynamicField) {
                 .map(|(k, s)| format!("{k} \"{s}\" is true but the field is not set"))
                 .unwrap_or_default()
         },
-        "sent as zeros, which the receiver decodes as a value (the field is required)",
+        &action,
     );
 }
 
@@ -230,9 +366,13 @@ impl MessageCodec {
             return self.encode_repeated_dynamic(f, d, out, values, bounds, msg, ctx, scope);
         }
         let set = msg.has_field(&f.field);
+        let other_member = f.oneof.is_some_and(|(i, j)| cases[i] != j + 1);
         if let Some(d) = d.filter(|d| d.omit_singular && d.conditions.has_omit()) {
             let omit = d.conditions.omit(&encode_env(&scope, msg))?;
             scope.record(&f.field, "omit", || omit.to_string());
+            if !other_member {
+                step(scope.trace, || Step::Omit(f.field.clone(), omit));
+            }
             if omit {
                 if set {
                     note_left_out(ctx, d);
@@ -240,10 +380,8 @@ impl MessageCodec {
                 return Ok(());
             }
         }
-        if let Some((i, j)) = f.oneof {
-            if cases[i] != j + 1 {
-                return Ok(());
-            }
+        if other_member {
+            return Ok(());
         }
         let value = set.then(|| msg.get_field(&f.field));
         let value = value.as_deref();
@@ -263,16 +401,17 @@ impl MessageCodec {
                 index: scope.index.get() + 1,
             }
         })?;
-        if value.is_none() && !std::ptr::eq(entry, f) {
-            if let Some(d) = d {
-                note_required_unset(ctx, d);
-            }
+        let required_unset = value.is_none() && !std::ptr::eq(entry, f);
+        if let (true, Some(d), false) = (required_unset, d, matches!(entry.plan, Plan::Message(_)))
+        {
+            note_required_unset(ctx, d, None);
         }
         if let (Some(d), Plan::Numeric(numeric)) = (d, &entry.plan) {
             if d.bounds {
                 let (lo, hi) = numeric.static_bounds();
                 let (min, max) = d.conditions.bounds(&encode_env(&scope, msg), lo, hi)?;
                 record_bounds(&scope, f, min, max, value);
+                step_bounds(scope.trace, f, min, max);
                 return numeric.encode_bounded(&numeric.with_bounds(min, max), out, value, ctx);
             }
         }
@@ -283,6 +422,10 @@ impl MessageCodec {
                 // libdccl writes the message's minimum size in zeros, sized
                 // with the embedded (empty) message's conditions.
                 let bits = m.dynamic_min_bits(&scope, Node::Empty(m.descriptor.clone()))?;
+                if let (true, Some(d)) = (required_unset, d) {
+                    note_required_unset(ctx, d, Some(bits));
+                }
+                step(scope.trace, || Step::Zeros(f.field.clone()));
                 out.write_zeros(bits as usize);
                 Ok(())
             }
@@ -362,6 +505,7 @@ impl MessageCodec {
                 };
                 let omit = d.conditions.omit(&encode_env(&scope, this))?;
                 scope.record(&f.field, "omit", || omit.to_string());
+                step(scope.trace, || Step::Omit(f.field.clone(), omit));
                 if omit {
                     if value.is_some() {
                         note_left_out(ctx, d);
@@ -375,12 +519,14 @@ impl MessageCodec {
                     let (lo, hi) = numeric.static_bounds();
                     let (min, max) = d.conditions.bounds(&encode_env(&scope, msg), lo, hi)?;
                     record_bounds(&scope, f, min, max, value);
+                    step_bounds(scope.trace, f, min, max);
                     numeric.encode_bounded(&numeric.with_bounds(min, max), out, value, ctx)?;
                 }
                 (_, Plan::Message(m), None) if !m.presence => {
                     // Padding to min_repeat: the minimum size in zeros, the
                     // holding message being `this`.
                     let bits = m.dynamic_min_bits(&scope, Node::Plain(msg))?;
+                    step(scope.trace, || Step::Zeros(f.field.clone()));
                     out.write_zeros(bits as usize);
                 }
                 _ => f.encode(out, value, ctx)?,
@@ -416,15 +562,19 @@ impl MessageCodec {
             let frame = scope.frame(msg);
             let env = || frame_env(&frame, scope.index.get());
             if let Some(d) = d.filter(|d| d.omit_singular && d.conditions.has_omit()) {
-                if d.conditions.omit(&env())? {
+                let omit = d.conditions.omit(&env())?;
+                step(scope.trace, || Step::Omit(f.field.clone(), omit));
+                if omit {
                     return Ok(());
                 }
             }
             let entry = chosen_for_decode(f, d, env)?;
+            step_required(scope.trace, f, d, entry);
             let bounded = match (d.filter(|d| d.bounds), &entry.plan) {
                 (Some(d), Plan::Numeric(numeric)) => {
                     let (lo, hi) = numeric.static_bounds();
                     let (min, max) = d.conditions.bounds(&env(), lo, hi)?;
+                    step_bounds(scope.trace, f, min, max);
                     Some(numeric.with_bounds(min, max))
                 }
                 _ => None,
@@ -476,6 +626,7 @@ impl MessageCodec {
                         Some(d) => d.conditions.omit(&frame_env(&frame, scope.index.get()))?,
                         None => false,
                     };
+                    step(scope.trace, || Step::Omit(f.field.clone(), omitted));
                     if omitted {
                         continue;
                     }
@@ -497,7 +648,9 @@ impl MessageCodec {
                     let frame = scope.frame(msg);
                     let env = || frame_env(&frame, scope.index.get());
                     if let Some(d) = d.filter(|d| d.conditions.has_omit()) {
-                        if d.conditions.omit(&env())? {
+                        let omit = d.conditions.omit(&env())?;
+                        step(scope.trace, || Step::Omit(f.field.clone(), omit));
+                        if omit {
                             continue;
                         }
                     }
@@ -505,6 +658,7 @@ impl MessageCodec {
                         (Some(d), Plan::Numeric(numeric)) => {
                             let (lo, hi) = numeric.static_bounds();
                             let (min, max) = d.conditions.bounds(&env(), lo, hi)?;
+                            step_bounds(scope.trace, f, min, max);
                             numeric
                                 .with_bounds(min, max)
                                 .decode(input)?
@@ -550,7 +704,9 @@ fn decode_child_dynamic(
     let kept = {
         let frame = scope.frame(msg);
         if let Some(d) = d.filter(|d| d.omit_singular && d.conditions.has_omit()) {
-            if d.conditions.omit(&frame_env(&frame, scope.index.get()))? {
+            let omit = d.conditions.omit(&frame_env(&frame, scope.index.get()))?;
+            step(scope.trace, || Step::Omit(f.field.clone(), omit));
+            if omit {
                 None
             } else {
                 Some(())
@@ -569,6 +725,7 @@ fn decode_child_dynamic(
                 let child_frame = probe.frame(&child);
                 chosen_for_decode(f, d, || frame_env(&child_frame, scope.index.get()))?
             };
+            step_required(scope.trace, f, d, entry);
             let Plan::Message(codec) = &entry.plan else {
                 return Err(CodecError::new("not a message codec"));
             };
@@ -616,9 +773,11 @@ fn decode_element(
     let below = scope.below(&frame, slot);
     if let Some(d) = d.filter(|d| d.conditions.has_omit()) {
         let element_frame = below.frame(&element);
-        if d.conditions
-            .omit(&frame_env(&element_frame, scope.index.get()))?
-        {
+        let omit = d
+            .conditions
+            .omit(&frame_env(&element_frame, scope.index.get()))?;
+        step(scope.trace, || Step::Omit(f.field.clone(), omit));
+        if omit {
             return Ok(element);
         }
     }
