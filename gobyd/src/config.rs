@@ -426,11 +426,45 @@ const GOBY_NESTED_KEYS: &[(&str, &str, &str)] = &[
     ),
 ];
 
+/// The top-level keys of Goby3's own `gobyd`, its middleware daemon
+/// (`goby.apps.zeromq.protobuf.GobyDaemonConfig`; `app` and `interprocess`
+/// open every Goby3 middleware application's configuration), none of them
+/// this gobyd's.
+const GOBY3_DAEMON_KEYS: &[&str] = &[
+    "app",
+    "interprocess",
+    "router_threads",
+    "intervehicle",
+    "hold",
+];
+
+/// What this gobyd is and which Goby3 blocks it takes, told when it is given
+/// a configuration of Goby3's `gobyd`.
+const GOBY3_DAEMON_HINT: &str = "this is a configuration of Goby3's gobyd, its middleware daemon \
+    (interprocess, router_threads, intervehicle). This gobyd is another program of the same name: \
+    goby-rs's daemon for acoustic modems and other slow links, which does the work of Goby3's pAcommsHandler (a DCCL \
+    queue, medium access and a modem driver, served to the autonomy software over JSON, MOOS or \
+    MQTT) and has no interprocess or router settings. Give it a pAcommsHandler block instead \
+    (modem_id, driver_cfg, mac_cfg, queue_cfg, load_proto_file, pasted as they are), or, from \
+    Goby3's intervehicle portal, each intervehicle link's driver and mac as \
+    link { name: \"acoustic\" driver { ... } mac { ... } } with the link's modem_id as the \
+    top-level modem_id, and the queue settings Goby3 takes from each publication (ack, ttl, \
+    value_base, max_queue) as queue { message_entry { protobuf_name: \"...\" ... } } \
+    (docs/goby3.md)";
+
 /// A text-format parser's reason, with what to do when it is about a Goby
-/// setting gobyd does not have, an extension of a driver gobyd does not
+/// setting gobyd does not have (a key of Goby3's own `gobyd`: what this
+/// daemon is instead), an extension of a driver gobyd does not
 /// run, or a MOOS `KEY = value` line outside a mission file (`at_equals`:
 /// the parser stopped at an `=`).
 fn with_goby_hint(reason: String, at_equals: bool) -> String {
+    if GOBY3_DAEMON_KEYS.iter().any(|key| {
+        reason.contains(&format!(
+            "field '{key}' not found for message 'goby.apps.protobuf.GobydConfig'"
+        ))
+    }) {
+        return format!("{reason}: {GOBY3_DAEMON_HINT}");
+    }
     for (message, field, hint) in GOBY_NESTED_KEYS {
         if reason.contains(&format!(
             "field '{field}' not found for message '{message}'"

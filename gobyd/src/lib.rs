@@ -29,7 +29,8 @@
 //! community, [`mqtt`] bridges to an MQTT broker, [`mission_file`] reads the configuration from a MOOS mission
 //! file, [`translator`] turns MOOS variables into DCCL messages and back
 //! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
-//! came from the modem, [`route`] holds Goby3's static routes and
+//! came from the modem, [`logging`] sets up the daemon's log (standard error
+//! or the journal, and a file rotated by size), [`route`] holds Goby3's static routes and
 //! [`network`] carries messages through relays, and [`command`] is the `gobyd` command line.
 
 #![warn(missing_docs)]
@@ -49,6 +50,7 @@ pub mod inbox;
 pub mod json_protocol;
 pub mod json_server;
 pub mod link;
+pub mod logging;
 pub mod mission_file;
 pub mod modem_event;
 pub mod moos_bridge;

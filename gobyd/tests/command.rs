@@ -1042,3 +1042,56 @@ fn check_knows_the_evologics_limits() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--check` tells what a type's dynamic conditions cannot do as written,
+/// naming the message, the field and the script: a name that is no field
+/// of the message (the script sees nil, as libdccl's Lua), a condition
+/// codec version 2 ignores, a condition reading a field decoded after it.
+#[test]
+fn check_warns_about_conditions_that_cannot_do_what_they_say() {
+    let dir = scratch("command", "gobyd-conditions");
+    let proto = dir.join("cond.proto");
+    std::fs::write(
+        &proto,
+        r#"syntax = "proto2";
+import "dccl/option_extensions.proto";
+package cond;
+message Typo {
+  option (dccl.msg) = { id: 5 max_bytes: 32 codec_version: 4 };
+  required int32 mode = 1 [(dccl.field) = { min: 0 max: 200 }];
+  optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { omit_if: "this.moode == 1" } }];
+  optional int32 b = 3 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { max: "this.c" } }];
+  optional int32 c = 4 [(dccl.field) = { min: 0 max: 10 }];
+}
+message Old {
+  option (dccl.msg) = { id: 6 max_bytes: 32 codec_version: 2 };
+  required int32 mode = 1 [(dccl.field) = { min: 0 max: 200 }];
+  optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { only_if: "this.mode == 1" } }];
+}
+"#,
+    )
+    .unwrap();
+    let config = dir.join("cond.pb.txt");
+    std::fs::write(
+        &config,
+        format!(
+            "modem_id: 1\ndccl {{ proto_file: \"{}\" }}\n",
+            proto.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    let err = stderr_text(&out);
+    assert!(out.status.success(), "{err}");
+    for warning in [
+        "gobyd: warning: cond.Typo.a: dynamic_conditions.omit_if \"this.moode == 1\" reads this.moode: cond.Typo has no field moode (the script sees nil)",
+        "gobyd: warning: cond.Typo.b: dynamic_conditions.max \"this.c\" reads this.c, which is decoded after b:",
+        "gobyd: warning: cond.Old.a: dynamic_conditions.only_if \"this.mode == 1\" is ignored: codec version 2",
+    ] {
+        assert!(err.contains(warning), "{warning}\n{err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

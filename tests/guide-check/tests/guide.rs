@@ -25,6 +25,7 @@ fn every_crate_has_a_readme_whose_links_resolve() {
         "amac",
         "modemdriver",
         "position",
+        "channel",
         "moos",
         "gobyd",
         "cli",
