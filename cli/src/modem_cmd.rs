@@ -44,7 +44,7 @@ use crate::{CliError, Status};
 #[derive(Debug, Subcommand)]
 pub enum ModemCommand {
     /// Emulate acoustic modems for bench tests without hardware (the kinds:
-    /// [`emulate_about`]).
+    /// the Micro-Modem and those of [`emulators::kinds::STREAM`]).
     #[command(about = emulate_about(), long_about = emulate_long_about())]
     Emulate(EmulateArgs),
     /// Emulate Iridium 9603 transceivers and the gateway they reach (DirectIP

@@ -1,5 +1,5 @@
 //! The Benthos ATM-900 driver as a state machine: no input or output, no
-//! clock read ([`machine::Machine`]: inputs in, outputs out).
+//! clock read ([`crate::machine::Machine`]: inputs in, outputs out).
 //!
 //! The modem is driven one command at a time, each written and its answer
 //! awaited (written again after `response_timeout_ms`, at most
@@ -172,7 +172,7 @@ pub struct Machine {
 impl Machine {
     /// A machine at `now` whose link is open (`connected`), or not yet
     /// (its first output asks to open it); its first outputs (the setup)
-    /// come from the first input, e.g. [`Input::Tick`].
+    /// come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
     pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         Machine {
             now,

@@ -1,5 +1,5 @@
 //! The Popoto driver as a state machine: no input or output, no clock
-//! read ([`machine::Machine`]: inputs in, outputs out).
+//! read ([`crate::machine::Machine`]: inputs in, outputs out).
 //!
 //! One transmission is under way at a time — a data packet or an
 //! acknowledgement handed to the modem and awaiting its `TxComplete`, or a
@@ -139,7 +139,7 @@ pub struct Machine {
 impl Machine {
     /// A machine at `now` whose link is open (`connected`), or not yet
     /// (its first output asks to open it); its first outputs (the setup)
-    /// come from the first input, e.g. [`Input::Tick`].
+    /// come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
     pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         Machine {
             now,

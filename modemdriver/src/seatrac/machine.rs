@@ -1,5 +1,5 @@
 //! The SeaTrac driver as a state machine: no input or output, no clock
-//! read ([`machine::Machine`]: inputs in, outputs out).
+//! read ([`crate::machine::Machine`]: inputs in, outputs out).
 //!
 //! Start-up (and again after each reconnection) is one command at a time:
 //! `CID_SYS_INFO` (the beacon's model, reported), `CID_SETTINGS_GET` (its
@@ -197,7 +197,7 @@ pub struct Machine {
 impl Machine {
     /// A machine at `now` whose link is open (`connected`), or not yet
     /// (its first output asks to open it); its first outputs (the
-    /// start-up) come from the first input, e.g. [`Input::Tick`].
+    /// start-up) come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
     pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         Machine {
             now,

@@ -1,4 +1,4 @@
-//! The EvoLogics driver as a state machine ([`machine::Machine`]): the
+//! The EvoLogics driver as a state machine ([`crate::machine::Machine`]): the
 //! bytes read from the modem decoded as its answers and notifications,
 //! the AT commands to write, in data mode or command mode.
 //!
@@ -192,7 +192,7 @@ pub struct Machine {
 impl Machine {
     /// A machine at `now` whose link is open (`connected`), or not yet
     /// (its first output asks to open it); its first outputs (the
-    /// settings) come from the first input, e.g. [`Input::Tick`].
+    /// settings) come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
     pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         let framing = settings.framing;
         let setup = settings.setup.iter().cloned().collect();

@@ -1,4 +1,4 @@
-//! The vehicle driver as a state machine ([`machine::Machine`]): the
+//! The vehicle driver as a state machine ([`crate::machine::Machine`]): the
 //! transceiver's bytes read as lines and binary blocks, the SBD AT
 //! commands to write.
 //!
@@ -50,7 +50,7 @@ pub struct Machine {
 
 impl Machine {
     /// A machine whose port is open at `now`; its first outputs come from
-    /// the first input (e.g. [`Input::Tick`]).
+    /// the first input (e.g. [`Input::Tick`](crate::machine::Input::Tick)).
     pub fn new(settings: Settings, now: Now) -> Machine {
         let sessions = Sessions::new(settings.first_frame);
         let link = Reconnect::new(true, now.at, settings.reconnect);

@@ -1,4 +1,4 @@
-//! The Micro-Modem driver as a state machine ([`machine::Machine`]): the
+//! The Micro-Modem driver as a state machine ([`crate::machine::Machine`]): the
 //! modem's NMEA lines in, the host's sentences out.
 //!
 //! What it holds is in `state`; what it does is split by concept, each in
@@ -47,7 +47,7 @@ pub struct Machine {
 impl Machine {
     /// A machine whose serial link is open at `now`; its first outputs
     /// (the start-up commands) come from the first input, e.g. a
-    /// [`Input::Tick`].
+    /// [`Input::Tick`](crate::machine::Input::Tick).
     pub fn new(settings: Settings, now: Now) -> Machine {
         let Settings {
             modem_id,
