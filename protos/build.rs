@@ -139,7 +139,8 @@ fn acomms_files(proto_dir: &Path) -> std::io::Result<Vec<String>> {
     Ok(files)
 }
 
-/// Folds the extensions of the [`FOLDED`] messages into fields of them:
+/// Folds the extensions of the [`FOLDED`] messages declared in
+/// `goby/acomms/` into fields of them:
 /// the field takes the extension's name and number (carved out of the
 /// message's extension ranges), the message's file imports the extending
 /// file, and the extending file no longer imports the message's file when
@@ -164,6 +165,12 @@ fn fold_extensions(fds: &mut FileDescriptorSet) -> Result<(BTreeSet<String>, Vec
     }
     let mut moved = Vec::new();
     for (i, file) in fds.file.iter_mut().enumerate() {
+        // Only the drivers' own files are folded: another file's extension
+        // (Goby 2's `[UDPDriverConfig.local]` read by gobyd's configuration)
+        // stays the extension it is declared as.
+        if !file.name().starts_with("goby/acomms/") {
+            continue;
+        }
         let mut folded = take(&mut file.extension);
         for msg in &mut file.message_type {
             take_nested(msg, &mut folded);
