@@ -134,8 +134,10 @@ pub enum GobyCommand {
     /// Position telemetry: synthetic trajectories and the observer/model evaluation.
     #[command(subcommand)]
     Position(position_cmd::PositionCommand),
-    /// Emulated modems for bench tests without hardware: WHOI Micro-Modems, EvoLogics S2C, Popoto and Benthos ATM-900 (emulate --kind), Iridium 9603 transceivers with their gateway and the RockBLOCK service (emulate-iridium).
-    #[command(subcommand)]
+    /// Emulated modems for bench tests without hardware (emulate --kind),
+    /// Iridium 9603 transceivers with their gateway and the RockBLOCK
+    /// service (emulate-iridium).
+    #[command(subcommand, about = modem_cmd::modem_about())]
     Modem(modem_cmd::ModemCommand),
     /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.
     #[command(subcommand)]

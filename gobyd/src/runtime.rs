@@ -19,9 +19,7 @@ use std::time::Duration;
 use amac::MacManager;
 use modemdriver::{Driver, DriverEvent, DriverStatus, ModemTransmission, TransmitOutcome};
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::acomms::protobuf::{
-    driver_config, modem_transmission::TransmissionType, DriverType,
-};
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{Clock, QueueEvent, QueueManager, ReceivedMessage, SystemClock};
 use tokio::net::{TcpListener, UdpSocket};
@@ -90,46 +88,7 @@ fn io_error(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> Daemon
 pub async fn start_driver(
     config: &protos::goby::acomms::protobuf::DriverConfig,
 ) -> Result<Driver, DaemonError> {
-    if modemdriver::evologics::driver::is_evologics(config) {
-        return Ok(modemdriver::evologics::EvologicsDriver::start(config).await?);
-    }
-    match modemdriver::check::driver_type(config) {
-        Some(DriverType::DriverAcousticSimulator) => {
-            Ok(modemdriver::sim::SimulatorDriver::start(config)?)
-        }
-        Some(DriverType::DriverUdp) => Ok(modemdriver::udp::UdpDriver::start(config).await?),
-        Some(DriverType::DriverUdpMulticast) => Ok(
-            modemdriver::udp_multicast::UdpMulticastDriver::start(config)?,
-        ),
-        Some(DriverType::DriverWhoiMicromodem) => {
-            Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
-        }
-        Some(DriverType::DriverIridium) => Ok(modemdriver::iridium::IridiumDriver::start(config)?),
-        Some(DriverType::DriverIridiumShore) => {
-            Ok(modemdriver::iridium::IridiumShoreDriver::start(config).await?)
-        }
-        Some(DriverType::DriverPopoto) => {
-            Ok(modemdriver::popoto::PopotoDriver::start(config).await?)
-        }
-        Some(DriverType::DriverBenthosAtm900) => {
-            Ok(modemdriver::benthos::BenthosDriver::start(config).await?)
-        }
-        other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
-            match (&config.driver, other) {
-                (Some(driver_config::Driver::DriverName(name)), _) => {
-                    format!(
-                        "no driver named {name:?} is built in (driver_name {:?} is)",
-                        modemdriver::evologics::driver::DRIVER_NAME
-                    )
-                }
-                (_, other) => format!(
-                    "driver {} is not supported by gobyd (use {})",
-                    other.map(|t| t.as_str_name()).unwrap_or("unknown"),
-                    modemdriver::check::built_in_names()
-                ),
-            },
-        ))),
-    }
+    Ok(modemdriver::built_in::start(config).await?)
 }
 
 /// A Micro-Modem with application acks keeps its frame numbers in the data
@@ -1642,60 +1601,10 @@ impl Daemon {
     /// [`take_specific_request`](Self::take_specific_request)), or why
     /// not. A driver started by the embedding program is not checked.
     fn specific_request_check(&self, i: usize, message: &DynamicMessage) -> Result<(), String> {
-        use protos::goby::acomms::protobuf::MicroModemSpecific;
-        let name = message.descriptor().full_name().to_string();
-        if let Some(config) = &self.links[i].config {
-            let micromodem = matches!(config.driver, Some(driver_config::Driver::DriverType(t))
-                if t == DriverType::DriverWhoiMicromodem as i32);
-            let takes = if modemdriver::evologics::driver::is_evologics(config) {
-                Some((
-                    "EvoLogics",
-                    protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor(),
-                ))
-            } else if modemdriver::popoto::is_popoto(config) {
-                Some((
-                    "Popoto",
-                    protos::goby::acomms::protobuf::PopotoSpecific::default().descriptor(),
-                ))
-            } else if modemdriver::benthos::is_benthos(config) {
-                Some((
-                    "Benthos ATM-900",
-                    protos::goby::acomms::protobuf::BenthosSpecific::default().descriptor(),
-                ))
-            } else {
-                None
-            };
-            if let Some((driver, takes)) = takes {
-                if message.descriptor() != takes {
-                    return Err(format!(
-                        "{name}: the {driver} driver takes {}",
-                        takes.full_name()
-                    ));
-                }
-            } else {
-                if !micromodem {
-                    return Err(format!(
-                        "{name}: only the Micro-Modem, EvoLogics, Popoto and Benthos ATM-900 drivers take driver-specific requests"
-                    ));
-                }
-                let takes = MicroModemSpecific::default().descriptor();
-                let request = (message.descriptor() == takes)
-                    .then(|| message.transcode_to::<MicroModemSpecific>().ok())
-                    .flatten()
-                    .ok_or_else(|| {
-                        format!("{name}: the Micro-Modem driver takes {}", takes.full_name())
-                    })?;
-                let settings = config.micromodem.clone().unwrap_or_default();
-                if let Some(problem) = modemdriver::micromodem::ranging::request_problem(
-                    &request,
-                    self.modem_id,
-                    &settings,
-                ) {
-                    return Err(problem);
-                }
-            }
+        match &self.links[i].config {
+            Some(config) => modemdriver::built_in::specific_problem(config, message, self.modem_id),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// Stops the driver and starts it again from its configuration;

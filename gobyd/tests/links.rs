@@ -32,7 +32,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+use emulators::micromodem::{Dialect, EmulatorFaults};
 use modemdriver::sim::medium::Medium;
 use serde_json::Value;
 use support::daemon::{free_udp_port, scratch, Gobyd};

@@ -9,10 +9,10 @@ mod support;
 
 use std::time::Duration;
 
-use gobyd::runtime::Daemon;
-use modemdriver::micromodem::emulator::{
-    self, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
+use emulators::micromodem::{
+    self as emulator, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
 };
+use gobyd::runtime::Daemon;
 use modemdriver::sim::reception::Position;
 use serde_json::Value;
 use support::node::{MicroModem, Node as NodeConfig};
@@ -211,8 +211,7 @@ async fn replies_of(
 
 /// What docs/json-protocol.md says of `driver_specific` requests to
 /// drivers other than the Micro-Modem: each driver takes its own request
-/// type and names it when given another; a driver with none says which
-/// drivers take them.
+/// type and names it when given another; a driver with none says so.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn each_driver_names_the_driver_specific_request_it_takes() {
     use support::node::{Evologics, Simulator};
@@ -260,7 +259,7 @@ async fn each_driver_names_the_driver_specific_request_it_takes() {
     .await;
     assert_eq!(
         replies[0]["error"],
-        "goby.acomms.protobuf.MicroModemSpecific: only the Micro-Modem, EvoLogics, Popoto and Benthos ATM-900 drivers take driver-specific requests",
+        "goby.acomms.protobuf.MicroModemSpecific: the DRIVER_ACOUSTIC_SIMULATOR driver takes no driver-specific requests",
         "{:?}",
         replies
     );
