@@ -498,6 +498,21 @@ fn the_page_shows_the_fleet_and_commands_it() {
     browser::run();
 }
 
+/// The commander as the page opens, before anything was typed: the form of
+/// the first type is drawn and its check has run, but no error is shown
+/// (the empty form of a type with required fields cannot be encoded, which
+/// is no news to a user who has typed nothing); once a field was typed, the
+/// error shows.
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn the_commander_opens_without_an_error() {
+    #[cfg(chromium)]
+    browser::opens_without_an_error();
+}
+
 #[cfg(chromium)]
 mod browser {
     use super::*;
@@ -715,6 +730,58 @@ mod browser {
             broker::PATIENCE,
         );
         page.eval("goby.lastCheck")
+    }
+
+    pub fn opens_without_an_error() {
+        let dir = scratch("browser-quiet");
+        let broker = Broker::start(&dir, "the_commander_opens_without_an_error");
+        let console = Console::start(&["fleet", "--broker", &broker.address()]);
+        let chromium = Chromium::start(&dir.join("profile"));
+        let mut page = chromium.page();
+        page.call("Page.enable", json!({}));
+        page.call("Page.navigate", json!({"url": console.url}));
+        page.wait(
+            "the commander's form and its first check",
+            "typeof goby === 'object' && document.querySelector('#cmd-fields [data-path]') !== null \
+             && goby.checkedDraft === JSON.stringify(goby.draft())",
+            broker::PATIENCE,
+        );
+        // The first type's empty form cannot be encoded ...
+        assert_eq!(page.eval("goby.lastCheck.ok"), Value::Bool(false));
+        // ... but nothing typed, nothing is said against it.
+        let shown = page.eval(
+            "(() => { const b = document.getElementById('cmd-check'); \
+             return {bad: b.classList.contains('bad'), text: b.textContent}; })()",
+        );
+        assert_eq!(shown["bad"], Value::Bool(false), "{shown}");
+        assert!(
+            !shown["text"]
+                .as_str()
+                .unwrap()
+                .contains("Cannot be encoded"),
+            "{shown}"
+        );
+        assert_eq!(
+            page.eval("document.getElementById('cmd-send').disabled"),
+            Value::Bool(true)
+        );
+        // Typed into (the note, with the destination still unset), the
+        // form says what is wrong.
+        assert_eq!(
+            page.eval("goby.draft().type"),
+            json!("goby.example.Command")
+        );
+        fill(&mut page, "note", "survey");
+        let check = checked(&mut page);
+        assert_eq!(check["ok"], Value::Bool(false), "{check}");
+        let shown = page.eval("document.getElementById('cmd-check').className");
+        assert_eq!(shown, json!("check bad"));
+        assert_eq!(page.eval("goby.errors"), json!([]));
+        drop(page);
+        drop(chromium);
+        drop(console);
+        drop(broker);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     pub fn run() {

@@ -633,14 +633,18 @@ function fieldEditor(f, path, onChange) {
 let editor = null;
 let checkTimer = null;
 let lastCheck = null;
+// Whether the user has changed the form since it was drawn: until then a
+// check that fails (an empty form's required fields) is not shown as an error.
+let touched = false;
 
 function buildForm() {
   const form = S.forms.find((f) => f.name === $('cmd-type').value);
   const box = $('cmd-fields');
   box.replaceChildren();
   editor = null;
+  touched = false;
   if (!form) return;
-  editor = messageEditor(form, '', () => { clearTimeout(checkTimer); checkTimer = setTimeout(check, 150); });
+  editor = messageEditor(form, '', () => { touched = true; clearTimeout(checkTimer); checkTimer = setTimeout(check, 150); });
   box.append(editor.el);
   check();
 }
@@ -680,6 +684,11 @@ async function check() {
   for (const e of document.querySelectorAll('#cmd-fields .changed')) e.classList.remove('changed');
   for (const e of document.querySelectorAll('#cmd-fields [data-note]')) e.textContent = '';
   $('cmd-send').disabled = !result.ok;
+  if (!result.ok && !touched) {
+    box.className = 'check';
+    box.replaceChildren(el('span', { class: 'muted' }, 'Fill in the fields: what the codec makes of them shows here.'));
+    return;
+  }
   if (!result.ok) {
     box.className = 'check bad';
     box.textContent = `Cannot be encoded: ${result.error}`;
