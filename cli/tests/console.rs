@@ -513,6 +513,22 @@ fn the_commander_opens_without_an_error() {
     browser::opens_without_an_error();
 }
 
+/// A screenshot taken by headless Chromium on its command line with a
+/// virtual time budget, as `docs/console.md` gives it: the page at
+/// `?static` draws one snapshot and opens no event stream, so the browser
+/// finds the network quiet, spends its budget and returns (with the stream
+/// open it waits forever). The page's text at the end of the same budget
+/// shows the snapshot drawn.
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn a_headless_screenshot_with_a_virtual_time_budget_returns() {
+    #[cfg(chromium)]
+    browser::screenshot_returns();
+}
+
 #[cfg(chromium)]
 mod browser {
     use super::*;
@@ -730,6 +746,77 @@ mod browser {
             broker::PATIENCE,
         );
         page.eval("goby.lastCheck")
+    }
+
+    /// Runs headless Chromium on its command line with `args` and the
+    /// page at `url`: its standard output, or a panic if it has not
+    /// returned within [`broker::PATIENCE`].
+    fn headless(profile: &Path, args: &[String], url: &str) -> String {
+        let mut child = Command::new(env!("GOBY_CHROMIUM_PATH"))
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--no-first-run",
+                "--hide-scrollbars",
+                "--window-size=1366,900",
+            ])
+            .arg(format!("--user-data-dir={}", profile.display()))
+            .args(args)
+            .arg(url)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("chromium starts");
+        let mut stdout = child.stdout.take().unwrap();
+        let reader = std::thread::spawn(move || {
+            let mut text = String::new();
+            let _ = stdout.read_to_string(&mut text);
+            text
+        });
+        let started = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                assert!(status.success(), "chromium {args:?} {url}: {status}");
+                return reader.join().unwrap();
+            }
+            if started.elapsed() > broker::PATIENCE {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!(
+                    "chromium {args:?} {url} had not returned after {:?}",
+                    broker::PATIENCE
+                );
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    pub fn screenshot_returns() {
+        let dir = scratch("browser-screenshot");
+        let broker = Broker::start(&dir, "a_headless_screenshot_returns");
+        let console = Console::start(&["fleet", "--broker", &broker.address()]);
+        let url = format!("{}?static", console.url);
+        let shot = dir.join("console.png");
+        let budget = "--virtual-time-budget=5000".to_string();
+        headless(
+            &dir.join("profile"),
+            &[format!("--screenshot={}", shot.display()), budget.clone()],
+            &url,
+        );
+        let png = std::fs::read(&shot).expect("the screenshot is written");
+        assert!(png.starts_with(b"\x89PNG"), "not a PNG");
+        std::fs::write(artifacts().join("static.png"), &png).unwrap();
+        let dom = headless(&dir.join("profile"), &["--dump-dom".into(), budget], &url);
+        assert!(
+            dom.contains("fleet/ on the MQTT broker") && dom.contains("a still picture"),
+            "the snapshot is not drawn: {dom}"
+        );
+        assert!(dom.contains("goby.example.Command"), "no commander: {dom}");
+        drop(console);
+        drop(broker);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     pub fn opens_without_an_error() {

@@ -133,7 +133,25 @@ function applyEvent(ev) {
   schedule();
 }
 
+// With `?static` in the page's address, one snapshot (`/api/state`) and no
+// event stream: a still picture, for a headless browser's screenshot (an
+// open stream is a request that never ends, so a browser that waits for the
+// network to be quiet, as `--virtual-time-budget` does, would wait forever).
+const still = new URLSearchParams(window.location.search).has('static');
+goby.still = still;
+
+async function loadOnce() {
+  const r = await fetch('/api/state');
+  applySnapshot(await r.json());
+  S.source = `${S.source} (a still picture: reload to update)`;
+  schedule();
+}
+
 function connect() {
+  if (still) {
+    loadOnce().catch((e) => goby.errors.push(String(e)));
+    return;
+  }
   const events = new EventSource('/api/events');
   events.onmessage = (m) => {
     try { applyEvent(JSON.parse(m.data)); } catch (e) { goby.errors.push(String(e)); }
