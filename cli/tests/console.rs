@@ -644,23 +644,29 @@ mod browser {
         port: u16,
     }
 
+    /// The flags of every headless Chromium of these tests: no sandbox (a
+    /// container's root), no GPU, no first-run pages, a laptop's window.
+    const HEADLESS: [&str; 6] = [
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--no-first-run",
+        "--hide-scrollbars",
+        "--window-size=1366,900",
+    ];
+
     impl Chromium {
         fn start(profile: &Path) -> Chromium {
             let mut child = Command::new(env!("GOBY_CHROMIUM_PATH"))
+                .args(HEADLESS)
                 .args([
-                    "--headless",
-                    "--no-sandbox",
-                    "--disable-gpu",
-                    "--no-first-run",
                     "--no-default-browser-check",
                     "--disable-extensions",
                     "--disable-background-networking",
                     "--disable-component-update",
                     "--disable-sync",
-                    "--hide-scrollbars",
                     "--remote-debugging-address=127.0.0.1",
                     "--remote-debugging-port=0",
-                    "--window-size=1366,900",
                 ])
                 .arg(format!("--user-data-dir={}", profile.display()))
                 .arg("about:blank")
@@ -753,14 +759,7 @@ mod browser {
     /// returned within [`broker::PATIENCE`].
     fn headless(profile: &Path, args: &[String], url: &str) -> String {
         let mut child = Command::new(env!("GOBY_CHROMIUM_PATH"))
-            .args([
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--no-first-run",
-                "--hide-scrollbars",
-                "--window-size=1366,900",
-            ])
+            .args(HEADLESS)
             .arg(format!("--user-data-dir={}", profile.display()))
             .args(args)
             .arg(url)

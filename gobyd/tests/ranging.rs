@@ -42,34 +42,16 @@ async fn a_json_client_gets_long_baseline_travel_times() {
             frequency: None,
         })
         .to_vec();
-    let link = dir.join("modem1");
-    let mut modem = emulator::start(
+    let bench = Bench::start(
+        &dir,
         EmulatorConfig {
             geometry,
             ..EmulatorConfig::micromodem2(1)
         },
-        EmulatorPort::Pty {
-            link: Some(link.clone()),
-        },
-        None,
     )
-    .expect("emulator starts");
-    modem.path().await.expect("emulated modem present");
+    .await;
 
-    let config = NodeConfig::new(1)
-        .driver(MicroModem::new(&link).setting("config_echo_quiet_ms: 300"))
-        .tdma(&[1], 1, 8.0)
-        .json_tcp("127.0.0.1:0")
-        .data_dir(&dir.join("data"))
-        .config();
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
-    let addr = daemon.json_tcp_addr().expect("JSON over TCP");
-    let (stop_tx, stop_rx) = oneshot::channel::<()>();
-    let running = tokio::spawn(daemon.run(async move {
-        let _ = stop_rx.await;
-    }));
-
-    let stream = TcpStream::connect(addr).await.unwrap();
+    let stream = TcpStream::connect(bench.addr).await.unwrap();
     let (read, mut write) = stream.into_split();
     let mut lines = BufReader::new(read).lines();
     let mut next = async || -> Value {
@@ -164,10 +146,56 @@ async fn a_json_client_gets_long_baseline_travel_times() {
     assert!((times[1] - 0.8).abs() < 1e-3, "{times:?}");
     assert!(times[2].is_nan() && times[3].is_nan(), "{times:?}");
 
-    let _ = stop_tx.send(());
-    running.await.unwrap().unwrap();
-    modem.stop().await;
+    bench.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `gobyd` (node 1, one 8 s TDMA slot, JSON on a free port) on an emulated
+/// Micro-Modem 1 on a pseudo-terminal, running until [`Bench::stop`].
+struct Bench {
+    modem: emulator::EmulatorHandle,
+    addr: std::net::SocketAddr,
+    stop: oneshot::Sender<()>,
+    running: tokio::task::JoinHandle<Result<(), gobyd::runtime::DaemonError>>,
+}
+
+impl Bench {
+    async fn start(dir: &std::path::Path, modem: EmulatorConfig) -> Bench {
+        let link = dir.join("modem1");
+        let mut modem = emulator::start(
+            modem,
+            EmulatorPort::Pty {
+                link: Some(link.clone()),
+            },
+            None,
+        )
+        .expect("emulator starts");
+        modem.path().await.expect("emulated modem present");
+        let config = NodeConfig::new(1)
+            .driver(MicroModem::new(&link).setting("config_echo_quiet_ms: 300"))
+            .tdma(&[1], 1, 8.0)
+            .json_tcp("127.0.0.1:0")
+            .data_dir(&dir.join("data"))
+            .config();
+        let daemon = Daemon::start(config).await.expect("gobyd starts");
+        let addr = daemon.json_tcp_addr().expect("JSON over TCP");
+        let (stop, stop_rx) = oneshot::channel::<()>();
+        let running = tokio::spawn(daemon.run(async move {
+            let _ = stop_rx.await;
+        }));
+        Bench {
+            modem,
+            addr,
+            stop,
+            running,
+        }
+    }
+
+    async fn stop(self) {
+        let _ = self.stop.send(());
+        self.running.await.unwrap().unwrap();
+        self.modem.stop().await;
+    }
 }
 
 /// The replies to `requests`, one line each, from a daemon run from
@@ -298,31 +326,15 @@ async fn guide_ping(lone_range: Option<f64>) -> Value {
         .expect("the two-way ping block in docs/modems.md");
     assert!(snippet.contains("11161"), "{snippet}");
     let dir = support::daemon::scratch("ranging", "guide-ping");
-    let link = dir.join("modem1");
-    let mut modem = emulator::start(
+    let bench = Bench::start(
+        &dir,
         EmulatorConfig {
             lone_range,
             ..EmulatorConfig::micromodem2(1)
         },
-        EmulatorPort::Pty {
-            link: Some(link.clone()),
-        },
-        None,
     )
-    .expect("emulator starts");
-    modem.path().await.expect("emulated modem present");
-    let config = NodeConfig::new(1)
-        .driver(MicroModem::new(&link).setting("config_echo_quiet_ms: 300"))
-        .tdma(&[1], 1, 8.0)
-        .json_tcp("127.0.0.1:0")
-        .data_dir(&dir.join("data"))
-        .config();
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
-    let port = daemon.json_tcp_addr().expect("JSON over TCP").port();
-    let (stop_tx, stop_rx) = oneshot::channel::<()>();
-    let running = tokio::spawn(daemon.run(async move {
-        let _ = stop_rx.await;
-    }));
+    .await;
+    let port = bench.addr.port();
 
     // `exec`: the shell becomes the snippet's process, so that a kill
     // reaches it.
@@ -350,9 +362,7 @@ async fn guide_ping(lone_range: Option<f64>) -> Value {
     })
     .await
     .unwrap();
-    let _ = stop_tx.send(());
-    running.await.unwrap().unwrap();
-    modem.stop().await;
+    bench.stop().await;
     let output = ran.unwrap_or_else(|printed| {
         panic!("the guide's ping snippet was still waiting after 90 s; it printed:\n{printed}")
     });
