@@ -633,6 +633,27 @@ fn split_type_prefix(line: &str) -> Result<(Option<&str>, &str), String> {
 /// own clock, so a time further than that from the clock comes back on
 /// another day.
 pub(crate) fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String> {
+    let descriptor = sent.descriptor();
+    let name = descriptor.full_name();
+    moved_time_fields(codec, sent, bytes)
+        .into_iter()
+        .map(|(path, sent, back)| {
+            format!(
+                "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
+                 the time codec sends the time of day only, and it decodes as {back}: \
+                 that time of day within 12 hours of the receiver's clock"
+            )
+        })
+        .collect()
+}
+
+/// The times of `sent` that [`moved_times`] warns of: (field path, value
+/// sent, value decoded), each value with its UTC date.
+pub(crate) fn moved_time_fields(
+    codec: &Codec,
+    sent: &DynamicMessage,
+    bytes: &[u8],
+) -> Vec<(String, String, String)> {
     let name = sent.descriptor().full_name().to_string();
     let has_time = sent.descriptor().fields().any(|f| {
         dccl::field::field_options(&f)
@@ -650,15 +671,6 @@ pub(crate) fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) ->
     let mut moved = Vec::new();
     collect_moved_times("", sent, &back, &mut moved);
     moved
-        .into_iter()
-        .map(|(path, sent, back)| {
-            format!(
-                "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
-                 the time codec sends the time of day only, and it decodes as {back}: \
-                 that time of day within 12 hours of the receiver's clock"
-            )
-        })
-        .collect()
 }
 
 /// `YYYY-MM-DD HH:MM:SS UTC` of seconds since the epoch.

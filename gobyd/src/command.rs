@@ -37,6 +37,8 @@ pub const EXIT_SETUP: u8 = 2;
 )]
 pub struct GobydCli {
     /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
+    /// A file that configures nothing (empty, or comments only) is refused:
+    /// the defaults are for gobyd run without --config.
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<std::path::PathBuf>,
     /// MOOS mission file: the configuration is its `ProcessConfig = gobyd`
@@ -166,6 +168,9 @@ fn configuration(
                 path: path.clone(),
                 source: e,
             })?;
+            if let Some(refused) = config::nothing_configured(path, &text) {
+                return Err(refused);
+            }
             let origin = path.display().to_string();
             Some(config::read(&text, &origin, config::Layout::File)?)
         }

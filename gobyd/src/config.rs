@@ -238,6 +238,37 @@ pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
     Ok(read.config)
 }
 
+/// The refusal of a configuration file `path` whose `text` configures
+/// nothing (empty, or blank lines and `#` comments only), or `None`.
+///
+/// Such a file is most likely a mistake (the wrong file, a copy that
+/// failed, a disk that filled), and started on it `gobyd` would run on its
+/// defaults (node 1 alone on the in-process acoustic simulator), which on a
+/// vehicle is not what anyone meant. The error names the defaults and
+/// says how to run on them on purpose (no `--config`).
+pub fn nothing_configured(path: &Path, text: &str) -> Option<ConfigError> {
+    let configures = text.lines().any(|line| {
+        let line = line.trim();
+        !line.is_empty() && !line.starts_with('#')
+    });
+    if configures {
+        return None;
+    }
+    let defaults = GobydConfig::default();
+    let json = protos::goby::apps::protobuf::gobyd_config::JsonInterface::default();
+    Some(ConfigError::Invalid(format!(
+        "{} configures nothing (it is empty, or comments only): started on it, gobyd would run \
+         on its defaults, node {} alone on the in-process acoustic simulator with the example \
+         messages, its data directory ./{} and its JSON interface on {}; write the settings \
+         (gobyd --example-config prints a commented configuration), or run gobyd without \
+         --config to run on these defaults",
+        path.display(),
+        defaults.modem_id(),
+        defaults.data_dir(),
+        json.tcp_bind(),
+    )))
+}
+
 /// Reads a configuration written as `layout` says; `origin` names it in
 /// errors and notes, which give the line and column
 /// (`origin:LINE:COLUMN: ...`).

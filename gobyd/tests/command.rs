@@ -1095,3 +1095,51 @@ message Old {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A configuration file that configures nothing (empty, or blank lines
+/// and comments only: a copy that failed, the wrong file) is refused by
+/// `--check` and by the start, the error naming the file and the defaults
+/// it would have run on, and how to run on them on purpose.
+#[test]
+fn an_empty_configuration_file_is_refused_naming_the_defaults() {
+    let dir = scratch("command", "gobyd-empty");
+    for (name, text) in [
+        ("empty.pb.txt", ""),
+        (
+            "comments.pb.txt",
+            "\n  # all of it commented out\n# modem_id: 2\n\n",
+        ),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let path = path.to_str().unwrap();
+        let check = gobyd(&["--check", "--config", path]);
+        // The start is bounded: before this refusal it ran until stopped.
+        let data = dir.join("data");
+        let start = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .args(["--config", path, "--json-tcp", "127.0.0.1:0", "--data-dir"])
+            .arg(&data)
+            .env_remove("RUST_BACKTRACE")
+            .timeout(std::time::Duration::from_secs(30))
+            .output()
+            .expect("gobyd runs");
+        for (what, out) in [("--check", &check), ("start", &start)] {
+            let err = stderr_text(out);
+            assert_eq!(out.status.code(), Some(2), "{what} {name}: {err}");
+            assert!(stdout_text(out).is_empty(), "{what} {name}");
+            for part in [
+                &format!("gobyd: error: configuration: {path} configures nothing"),
+                "node 1",
+                "the in-process acoustic simulator",
+                "data directory ./gobyd-data",
+                "JSON interface on 127.0.0.1:11145",
+                "without --config",
+                "gobyd --example-config",
+            ] {
+                assert!(err.contains(part), "{what} {name}: {part:?} in {err}");
+            }
+        }
+        assert!(!data.exists(), "the start made its data directory");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
