@@ -249,7 +249,10 @@ async fn a_driver_with_a_bad_env_does_not_start() {
         ..Default::default()
     };
     let e = SimulatorDriver::start_on(&config(1, 1000.0, 20.0, &water, 1), Medium::new());
-    let e = e.err().expect("refused").to_string();
+    let Err(e) = e else {
+        panic!("a driver with a missing .env started")
+    };
+    let e = e.to_string();
     assert!(
         e.contains("simulator.acoustic_channel.env") && e.contains("no/such/summer.env"),
         "{e}"
