@@ -267,7 +267,8 @@ async fn delivery_table() {
     let water = summer_600();
     println!("range (m)  rate 1  rate 5   (of 100 packets, receiver at 30 m, sender at 30 m)");
     for range in [
-        1000.0, 2000.0, 4000.0, 6000.0, 7000.0, 8000.0, 8500.0, 9000.0, 10000.0,
+        1000.0, 4000.0, 7000.0, 7250.0, 7500.0, 7750.0, 8000.0, 9000.0, 9250.0, 9500.0, 9750.0,
+        10000.0,
     ] {
         let r1 = delivered(&water, 1, range, 30.0, 100, 1).await.len();
         let r5 = delivered(&water, 5, range, 30.0, 100, 1).await.len();

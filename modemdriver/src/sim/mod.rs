@@ -15,6 +15,10 @@
 //! - Collisions: receptions that overlap in time at a receiver are all lost.
 //! - Range: with `range` set, a node farther than that from the sender
 //!   does not hear the packet at all (two such nodes need a relay).
+//! - Modelled water: with `acoustic_channel` set ([`water`]), the delay
+//!   is the first arrival's travel time and the loss the frame-error rate
+//!   of the packet's rate at the SNR a ray trace gives (goby-channel),
+//!   instead of `sound_speed` and `packet_loss`.
 //!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
 //! node with an `ACK` packet, itself subject to the channel: on reception,
