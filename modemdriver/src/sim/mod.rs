@@ -15,6 +15,10 @@
 //! - Collisions: receptions that overlap in time at a receiver are all lost.
 //! - Range: with `range` set, a node farther than that from the sender
 //!   does not hear the packet at all (two such nodes need a relay).
+//! - Modelled water: with `acoustic_channel` set ([`water`]), the delay
+//!   is the first arrival's travel time and the loss the frame-error rate
+//!   of the packet's rate at the SNR a ray trace gives (goby-channel),
+//!   instead of `sound_speed` and `packet_loss`.
 //!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
 //! node with an `ACK` packet, itself subject to the channel: on reception,
@@ -28,8 +32,9 @@
 pub mod medium;
 pub mod reception;
 pub mod udp_medium;
+pub mod water;
 
-use std::collections::VecDeque;
+use std::collections::{HashSet, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -53,6 +58,7 @@ use crate::rate;
 use medium::{Airborne, Medium};
 use reception::{Position, Receiver};
 use udp_medium::UdpMedium;
+use water::{LinkKey, Water};
 
 /// How long the simulator waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
@@ -120,10 +126,27 @@ impl SimulatorDriver {
         problem::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let sim = sim_config(config)?.clone();
+        let water = sim
+            .acoustic_channel
+            .as_ref()
+            .map(Water::load)
+            .transpose()
+            .map_err(Problem::into_error)?;
         let airborne = medium.join(modem_id);
         let deferred_ack = config.deferred_ack();
         Ok(Driver::spawn_with_clock("simulator", clock, move |ctx| {
-            run(modem_id, sim, deferred_ack, medium, udp, airborne, ctx)
+            run(
+                Start {
+                    modem_id,
+                    sim,
+                    deferred_ack,
+                    water,
+                },
+                medium,
+                udp,
+                airborne,
+                ctx,
+            )
         }))
     }
 }
@@ -249,7 +272,31 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             Endpoint::Remote,
         ));
     }
+    problems.extend(acoustic_problems(sim));
     problems
+}
+
+/// What is wrong with the modelled water: its settings, its files, and
+/// nodes that cannot send in it.
+fn acoustic_problems(sim: &SimulatorDriverConfig) -> Vec<Problem> {
+    let Some(acoustic) = &sim.acoustic_channel else {
+        return Vec::new();
+    };
+    let water = match Water::load(acoustic) {
+        Ok(water) => water,
+        Err(p) => return vec![p],
+    };
+    sim.node
+        .iter()
+        .enumerate()
+        .filter_map(|(i, n)| {
+            let reason = water.position_problem(&Position::new(n.x(), n.y(), n.z()))?;
+            Some(Problem::new(
+                format!("simulator.node[{i}].z"),
+                format!("modem_id {}: {reason}", n.modem_id),
+            ))
+        })
+        .collect()
 }
 
 fn sim_config(config: &DriverConfig) -> Result<&SimulatorDriverConfig, DriverError> {
@@ -273,6 +320,14 @@ struct Node {
     busy_until: Instant,
     seq: u64,
     results: Vec<(Instant, TransmitResult)>,
+    /// The modelled water, when `acoustic_channel` is set.
+    water: Option<Water>,
+    /// Packets heard before their link was computed.
+    pending: Vec<Arc<Airborne>>,
+    /// Links being computed.
+    computing: HashSet<LinkKey>,
+    /// Computed links come back here.
+    computed: mpsc::UnboundedSender<(LinkKey, Result<water::Link, String>)>,
 }
 
 impl Node {
@@ -402,7 +457,7 @@ impl Node {
         }
     }
 
-    fn hear(&mut self, packet: &Airborne) {
+    fn hear(&mut self, packet: Arc<Airborne>) {
         let Some(me) = self.position_of(self.modem_id) else {
             return;
         };
@@ -411,21 +466,110 @@ impl Node {
             // Out of range: not heard at all (nor does it collide).
             return;
         }
-        let Ok(delay) = Duration::try_from_secs_f64(distance / self.sim.sound_speed()) else {
-            return;
+        let (delay, loss) = match &self.water {
+            None => match Duration::try_from_secs_f64(distance / self.sim.sound_speed()) {
+                Ok(delay) => (delay, self.sim.packet_loss()),
+                Err(_) => return,
+            },
+            Some(water) => {
+                let key = water.key(&packet.position, &me);
+                let Some(link) = water.link(&key) else {
+                    self.compute_link(key, packet.position, me);
+                    self.pending.push(packet);
+                    return;
+                };
+                // No ray reaches: not heard at all.
+                let Some(delay) = link.delay else {
+                    return;
+                };
+                let mt = &packet.transmission;
+                let loss = match mt.r#type() {
+                    TransmissionType::Data => link.packet_error(mt.rate(), mt.frame.len()),
+                    // Acks and the like: one frame at the packet's rate.
+                    _ => link.packet_error(mt.rate(), 1),
+                };
+                (delay, loss)
+            }
         };
-        let lost = reception::draw_loss(
-            self.sim.seed(),
-            packet.src,
-            packet.seq,
-            self.sim.packet_loss(),
-        );
+        let lost = reception::draw_loss(self.sim.seed(), packet.src, packet.seq, loss);
         self.receiver.arrive(
             packet.start + delay,
             packet.start + delay + packet.duration,
             packet.transmission.clone(),
             lost,
         );
+    }
+
+    /// Computes the link of `key` on a blocking thread; it comes back on
+    /// `computed`.
+    fn compute_link(&mut self, key: LinkKey, from: Position, to: Position) {
+        let Some(water) = &self.water else {
+            return;
+        };
+        if !self.computing.insert(key) {
+            return;
+        }
+        let forecaster = water.forecaster();
+        let computed = self.computed.clone();
+        tokio::spawn(async move {
+            let link = tokio::task::spawn_blocking(move || water::compute(&forecaster, &from, &to))
+                .await
+                .unwrap_or_else(|e| Err(format!("the link computation failed: {e}")));
+            let _ = computed.send((key, link));
+        });
+    }
+
+    /// A link computed: keeps it and hears the packets that waited for it.
+    fn link_computed(
+        &mut self,
+        key: LinkKey,
+        link: Result<water::Link, String>,
+        events: &EventSink,
+    ) {
+        self.computing.remove(&key);
+        let Some(water) = &mut self.water else {
+            return;
+        };
+        let link = link.unwrap_or_else(|reason| {
+            events.status(DriverStatus::LinkError { reason });
+            water::Link {
+                delay: None,
+                snr: None,
+                fer: Vec::new(),
+            }
+        });
+        water.insert(key, link);
+        for packet in std::mem::take(&mut self.pending) {
+            self.hear(packet);
+        }
+    }
+
+    /// Computes the links from every other configured node to this one
+    /// before the node is ready, off the driver's task.
+    async fn prepare_links(&mut self, events: &EventSink) {
+        let (Some(water), Some(me)) = (&self.water, self.position_of(self.modem_id)) else {
+            return;
+        };
+        let pairs: Vec<(LinkKey, Position)> = self
+            .sim
+            .node
+            .iter()
+            .filter(|n| n.modem_id != self.modem_id)
+            .map(|n| Position::new(n.x(), n.y(), n.z()))
+            .map(|p| (water.key(&p, &me), p))
+            .collect();
+        let forecaster = water.forecaster();
+        let links = tokio::task::spawn_blocking(move || {
+            pairs
+                .into_iter()
+                .map(|(key, from)| (key, water::compute(&forecaster, &from, &me)))
+                .collect::<Vec<_>>()
+        })
+        .await
+        .unwrap_or_default();
+        for (key, link) in links {
+            self.link_computed(key, link, events);
+        }
     }
 
     fn deliver_due(&mut self, now: Instant, events: &EventSink) {
@@ -465,17 +609,30 @@ fn raw(direction: RawDirection, mt: &ModemTransmission) -> RawMessage {
     }
 }
 
-async fn run(
+/// What a node starts with.
+struct Start {
     modem_id: i32,
     sim: SimulatorDriverConfig,
     deferred_ack: bool,
+    water: Option<Water>,
+}
+
+async fn run(
+    start: Start,
     medium: Arc<Medium>,
     udp: Option<UdpMedium>,
     mut airborne: mpsc::UnboundedReceiver<Arc<Airborne>>,
     mut ctx: DriverContext,
 ) {
+    let Start {
+        modem_id,
+        sim,
+        deferred_ack,
+        water,
+    } = start;
     let events = ctx.events.clone();
     let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
+    let (computed, mut links) = mpsc::unbounded_channel();
     let mut node = Node {
         clock: ctx.clock.clone(),
         modem_id,
@@ -489,7 +646,12 @@ async fn run(
         busy_until: Instant::now(),
         seq: 0,
         results: Vec::new(),
+        water,
+        pending: Vec::new(),
+        computing: HashSet::new(),
+        computed,
     };
+    node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);
     loop {
         let now = Instant::now();
@@ -516,9 +678,10 @@ async fn run(
                     return;
                 }
             },
-            Some(packet) = airborne.recv() => node.hear(&packet),
+            Some(packet) = airborne.recv() => node.hear(packet),
+            Some((key, link)) = links.recv() => node.link_computed(key, link, &events),
             packet = recv_udp(&node.udp) => match packet {
-                Ok(packet) => node.hear(&packet),
+                Ok(packet) => node.hear(Arc::new(packet)),
                 Err(reason) => events.status(DriverStatus::Unparseable {
                     line: String::new(),
                     reason,
