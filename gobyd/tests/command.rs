@@ -1143,3 +1143,63 @@ fn an_empty_configuration_file_is_refused_naming_the_defaults() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A configuration of the acoustic simulator over modelled water with
+/// `summer_env` as its BELLHOP environment.
+fn modelled_water_config(dir: &std::path::Path, summer_env: &std::path::Path) -> PathBuf {
+    let path = dir.join("water.pb.txt");
+    std::fs::write(
+        &path,
+        format!(
+            r#"modem_id: 1
+driver {{
+  driver_type: DRIVER_ACOUSTIC_SIMULATOR
+  simulator {{
+    node {{ modem_id: 1 x: 0 z: -30 }}
+    node {{ modem_id: 2 x: 3000 z: -45 }}
+    acoustic_channel {{ env: "{}" source_level_db: 190 }}
+  }}
+}}
+mac {{
+  type: MAC_FIXED_DECENTRALIZED
+  slot {{ src: 1 slot_seconds: 10 }}
+  slot {{ src: 2 slot_seconds: 10 }}
+}}
+"#,
+            summer_env.display()
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn check_accepts_the_simulator_over_modelled_water_and_names_a_bad_env_by_line() {
+    let dir = scratch("command", "gobyd-water");
+    let shipped = workspace_dir().join("channel/tests/data/bellhop/summer.env");
+    let good = modelled_water_config(&dir, &shipped);
+    let out = gobyd(&["--check", "--config", good.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr_text(&out));
+
+    // The same file with its sound speeds cut off: refused by file and line.
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    let cut: Vec<&str> = text.lines().take(9).collect();
+    let bad_env = dir.join("bad.env");
+    std::fs::write(&bad_env, cut.join("\n") + "\n").unwrap();
+    let bad = modelled_water_config(&dir, &bad_env);
+    let out = gobyd(&["--check", "--config", bad.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stdout_text(&out));
+    let err = stderr_text(&out);
+    assert!(
+        err.contains("simulator.acoustic_channel.env") && err.contains("bad.env:"),
+        "{err}"
+    );
+
+    // A file that is not there.
+    let missing = modelled_water_config(&dir, &dir.join("none.env"));
+    let out = gobyd(&["--check", "--config", missing.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr_text(&out);
+    assert!(err.contains("none.env"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
