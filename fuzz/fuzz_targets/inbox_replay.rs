@@ -6,8 +6,8 @@
 
 use std::path::Path;
 
-use gobyd::dedup::Identity;
-use gobyd::inbox::{Inbox, InboxEntry};
+use gobyd::core::dedup::Identity;
+use gobyd::core::inbox::{Inbox, InboxEntry};
 use libfuzzer_sys::fuzz_target;
 use queue::record_log::MemoryFile;
 

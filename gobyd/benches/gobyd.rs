@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use gobyd::{config, runtime::Daemon};
+use gobyd::{config, daemon::Daemon};
 use modemdriver::{Driver, DriverCommand};
 use protos::goby::acomms::protobuf::ModemTransmission;
 use tokio::sync::{mpsc, oneshot};

@@ -1,5 +1,5 @@
 //! The `gobyd` command line: options, logging, signals and exit statuses
-//! around [`Daemon`](crate::runtime::Daemon).
+//! around [`Daemon`](crate::daemon::Daemon).
 //!
 //! Exit status: [`EXIT_OK`] after a clean stop (SIGINT, SIGTERM) or a
 //! successful `--check`, [`EXIT_SETUP`] when the configuration or the
@@ -9,7 +9,7 @@
 //! `FILE:LINE:COLUMN`); settings read and not used are noted (on standard
 //! error with `--check`, in the log otherwise). The
 //! daemon starts only with a configuration `--check` accepts: both run
-//! [`runtime::validate`].
+//! [`check::validate`].
 
 use std::ffi::OsString;
 use std::io::{IsTerminal, Write};
@@ -19,7 +19,9 @@ use clap::{ColorChoice, CommandFactory, Parser};
 
 use protos::goby::apps::protobuf::{gobyd_config::JsonInterface, GobydConfig};
 
-use crate::{config, runtime};
+use crate::daemon::Daemon;
+use crate::error::DaemonError;
+use crate::{check, config};
 
 /// Exit status after a clean stop or a successful check.
 pub const EXIT_OK: u8 = 0;
@@ -114,7 +116,7 @@ pub struct GobydCli {
 /// not placed at the configuration file's broker line).
 fn mqtt_broker_problem(cli: &GobydCli) -> Option<String> {
     let broker = cli.mqtt_broker.as_deref()?;
-    if broker.trim().is_empty() || crate::mqtt::settings::split_broker(broker, 1883).is_ok() {
+    if broker.trim().is_empty() || crate::edge::mqtt::settings::split_broker(broker, 1883).is_ok() {
         return None;
     }
     Some(format!(
@@ -137,7 +139,7 @@ fn mqtt_broker_note(cli: &GobydCli, config: &GobydConfig) -> Option<String> {
             .then(|| format!("MQTT bridge: none ({from})"));
     }
     let port = if mqtt.tls.is_some() { 8883 } else { 1883 };
-    let (host, port) = crate::mqtt::settings::split_broker(mqtt.broker(), port).ok()?;
+    let (host, port) = crate::edge::mqtt::settings::split_broker(mqtt.broker(), port).ok()?;
     let host = if host.contains(':') {
         format!("[{host}]")
     } else {
@@ -215,8 +217,8 @@ fn configuration(
 
 /// The error as it is reported: settings that cannot work with where
 /// they are written in the file, when they are.
-fn located(mut e: runtime::DaemonError, read: Option<&config::Read>) -> runtime::DaemonError {
-    if let (runtime::DaemonError::Config(config::ConfigError::Problems(problems)), Some(read)) =
+fn located(mut e: DaemonError, read: Option<&config::Read>) -> DaemonError {
+    if let (DaemonError::Config(config::ConfigError::Problems(problems)), Some(read)) =
         (&mut e, read)
     {
         read.locate(problems);
@@ -320,8 +322,8 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         // whether it is valid.
         let broker = mqtt_broker_note(&cli, &config);
         let warning = config::passphrase_file_warning(&config);
-        let limits = runtime::driver_limits(&config);
-        let checked = match runtime::validate(config, config::DriverSettings::Configured) {
+        let limits = check::driver_limits(&config);
+        let checked = match check::validate(config, config::DriverSettings::Configured) {
             Ok(checked) => checked,
             Err(e) => {
                 // As the start refuses it: the notes wait until it can run.
@@ -335,7 +337,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         if let Some(warning) = warning {
             eprintln!("gobyd: warning: {warning}");
         }
-        let (frame_limits, warnings) = runtime::frame_report(&checked);
+        let (frame_limits, warnings) = check::frame_report(&checked);
         for w in warnings {
             eprintln!("gobyd: warning: {w}");
         }
@@ -369,7 +371,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     };
     runtime.block_on(async {
         let stop = shutdown_signal();
-        let daemon = match runtime::Daemon::start(config).await {
+        let daemon = match Daemon::start(config).await {
             Ok(d) => d,
             Err(e) => {
                 eprintln!("gobyd: error: {}", located(e, read.as_ref()));

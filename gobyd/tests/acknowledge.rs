@@ -12,8 +12,8 @@ mod support;
 
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::runtime::Daemon;
 use modemdriver::ModemTransmission;
 use prost::Message;
 use prost_reflect::ReflectMessage;
@@ -135,7 +135,7 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     run.await.unwrap().unwrap();
     let mut handed = 0;
     while let Ok(e) = events.try_recv() {
-        if let DaemonEvent::Received { received: r, .. } = &e.event {
+        if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
             assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
             handed += 1;
         }

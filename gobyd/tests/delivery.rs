@@ -35,9 +35,9 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::ModemEvent;
 use modemdriver::micromodem::emulator::{Dialect, EmulatorControl, EmulatorFaults};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
@@ -256,7 +256,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
         let receptions = receptions.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
+                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {
@@ -280,9 +280,9 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
         let json_lines = json_lines.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                if let DaemonEvent::Received { .. } = &e.event {
-                    let line =
-                        gobyd::json_protocol::event_line(&e.event, |_| String::new()).unwrap();
+                if let DaemonEvent::Received { .. } = e.as_ref() {
+                    let line = gobyd::edge::json::lines::event_line(e.as_ref(), |_| String::new())
+                        .unwrap();
                     let line: serde_json::Value = serde_json::from_str(&line).unwrap();
                     let stats = &line["link"]["receive_stat"];
                     let mut j = json_lines.lock().unwrap();
@@ -294,7 +294,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
                         j.1 += 1;
                     }
                 }
-                let (note, delivered) = match &e.event {
+                let (note, delivered) = match e.as_ref() {
                     DaemonEvent::Received { received: r, .. } => (r.message.clone(), true),
                     DaemonEvent::Queue {
                         event: QueueEvent::Acked { message, .. },

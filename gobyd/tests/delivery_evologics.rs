@@ -26,9 +26,9 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::ModemEvent;
 use modemdriver::evologics::emulator::{
     self, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
 };
@@ -183,13 +183,13 @@ async fn run(faults: Faults) -> Tally {
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
                 if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Skipped { reason })) =
-                    &e.event
+                    e.as_ref()
                 {
                     if reason.contains("repeating") {
                         *repeats.lock().unwrap() += 1;
                     }
                 }
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
+                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {
@@ -210,7 +210,7 @@ async fn run(faults: Faults) -> Tally {
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let (note, delivered) = match &e.event {
+                let (note, delivered) = match e.as_ref() {
                     DaemonEvent::Received { received: r, .. } => (r.message.clone(), true),
                     DaemonEvent::Queue {
                         event: QueueEvent::Acked { message, .. },

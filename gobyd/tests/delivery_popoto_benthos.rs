@@ -27,9 +27,9 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::ModemEvent;
 use modemdriver::emulator_host::{EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort};
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Kind};
@@ -372,7 +372,7 @@ async fn run(faults: Faults) -> Tally {
         let receptions = receptions.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
+                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {
@@ -388,7 +388,7 @@ async fn run(faults: Faults) -> Tally {
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let (note, delivered) = match &e.event {
+                let (note, delivered) = match e.as_ref() {
                     DaemonEvent::Received { received: r, .. } => (r.message.clone(), true),
                     DaemonEvent::Queue {
                         event: QueueEvent::Acked { message, .. },

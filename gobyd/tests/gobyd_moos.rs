@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use gobyd::runtime::Daemon;
+use gobyd::daemon::Daemon;
 use moos::{ClientConfig, MoosClient, Value};
 use support::daemon::{free_tcp_port, scratch};
 use support::node::{Entry, Node, Simulator};

@@ -10,9 +10,9 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
+use gobyd::event::ModemEvent;
 use gobyd::event::{DaemonEvent, SharedEvent};
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
 use modemdriver::DriverStatus;
 use moos::{ClientConfig, MailReceiver, MoosClient, Value};
 use support::daemon::scratch;
@@ -44,7 +44,7 @@ fn node(id: i32, channel: &str, moos_port: Option<u16>, data: &Path) -> Node {
 
 struct Running {
     stop: oneshot::Sender<()>,
-    task: tokio::task::JoinHandle<Result<(), gobyd::runtime::DaemonError>>,
+    task: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
 }
 
 impl Running {
@@ -110,8 +110,8 @@ fn readies(events: &mut broadcast::Receiver<SharedEvent>) -> usize {
     loop {
         match events.try_recv() {
             Ok(e) => {
-                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = &e.event {
-                    let line = gobyd::json_protocol::event_line(&e.event, |_| String::new())
+                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = e.as_ref() {
+                    let line = gobyd::edge::json::lines::event_line(e.as_ref(), |_| String::new())
                         .expect("a line");
                     assert!(line.contains(r#""event":"driver_status""#), "{line}");
                     n += 1;

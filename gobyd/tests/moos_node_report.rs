@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use gobyd::{mission_file, runtime::Daemon};
+use gobyd::{daemon::Daemon, mission_file};
 use moos::{ClientConfig, MoosClient, Value};
 use protos::goby::apps::protobuf::GobydConfig;
 use support::daemon::{free_tcp_port, scratch};

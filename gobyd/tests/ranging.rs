@@ -9,7 +9,7 @@ mod support;
 
 use std::time::Duration;
 
-use gobyd::runtime::Daemon;
+use gobyd::daemon::Daemon;
 use modemdriver::micromodem::emulator::{
     self, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
 };

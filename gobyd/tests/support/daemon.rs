@@ -259,10 +259,10 @@ impl Drop for Gobyd {
 
 /// Publishes a `goby.example.Command` to `destination` with `note`
 /// through an in-process daemon's publisher
-/// ([`gobyd::runtime::Daemon::publisher`]) and waits for the core's
+/// ([`gobyd::daemon::Daemon::publisher`]) and waits for the core's
 /// answer, which must be that it was accepted.
 pub async fn publish_command(
-    publisher: &tokio::sync::mpsc::Sender<gobyd::json_server::Publish>,
+    publisher: &tokio::sync::mpsc::Sender<gobyd::event::Publish>,
     destination: i32,
     note: &str,
 ) {
@@ -275,7 +275,7 @@ pub async fn publish_command(
     };
     let (reply, answer) = tokio::sync::oneshot::channel();
     publisher
-        .send(gobyd::json_server::Publish::new(
+        .send(gobyd::event::Publish::new(
             command.transcode_to_dynamic(),
             reply,
         ))

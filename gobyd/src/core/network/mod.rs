@@ -1,8 +1,8 @@
 //! gobyd's network layer: messages for nodes beyond this one's neighbours
-//! go through relays (Goby3's static route, [`crate::route`]), with
+//! go through relays (Goby3's static route, [`crate::core::route`]), with
 //! custody at each relay and an end-to-end ack; messages larger than a
 //! frame and files go as transfers of fragments with selective acks
-//! ([`crate::fragment`]). The guide is `docs/routing.md`.
+//! ([`crate::core::fragment`]). The guide is `docs/routing.md`.
 //!
 //! The layer sits between the daemon's core and its outbox: the core hands
 //! it each publication ([`Network::publish`]: it takes those it must carry),
@@ -41,9 +41,9 @@ use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
 use sha2::{Digest, Sha256};
 
 use crate::config::Problem;
-use crate::fragment::Content;
-use crate::outbox::{Accepted, Outbox};
-use crate::route::{NextHop, RouteTable, MAX_NETWORK_ID};
+use crate::core::fragment::Content;
+use crate::core::outbox::{Accepted, Outbox};
+use crate::core::route::{NextHop, RouteTable, MAX_NETWORK_ID};
 use origin::{Origin, Pending};
 use transfers::{Produced, TransferEvent, Transfers};
 use wire::{Header, NetMessage};
@@ -88,7 +88,7 @@ fn default_entry(name: &str, ttl: i32) -> QueuedMessageEntry {
 /// With the layer on: loads its types into `codec` and gives them queue
 /// entries (those the configuration does not give), or says why it cannot
 /// be on (a loaded type with one of its DCCL ids, a bad route). Called by
-/// [`crate::runtime::validate`], so that `gobyd --check` and the daemon's
+/// [`crate::check::validate`], so that `gobyd --check` and the daemon's
 /// start refuse the same.
 pub fn prepare(
     config: &GobydConfig,
@@ -192,7 +192,7 @@ impl Forwarded {
 }
 
 /// A message the network layer unwrapped (or put together) for this node:
-/// to the receive path ([`crate::delivery`]) with the route it took.
+/// to the receive path ([`crate::core::delivery`]) with the route it took.
 #[derive(Debug, Clone)]
 pub struct Arrived {
     /// The message as its origin sent it; its identity is the origin's
@@ -964,7 +964,7 @@ impl Network {
         hop_resent: bool,
         outbox: &mut Outbox,
         now: Micros,
-    ) -> Result<Forward, crate::outbox::OutboxError> {
+    ) -> Result<Forward, crate::core::outbox::OutboxError> {
         let mut header: Header = message.header();
         let resent = hop_resent || matches!(&message, NetMessage::Routed(m) if m.resent);
         let key = Forwarded::of(&message);
@@ -1144,7 +1144,7 @@ impl Network {
                 .ok_or_else(|| format!("{}: names no file", path.display()))?
                 .to_string(),
         };
-        if let Some(problem) = crate::fragment::file_name_problem(&name) {
+        if let Some(problem) = crate::core::fragment::file_name_problem(&name) {
             return Err(problem);
         }
         let meta = std::fs::metadata(path).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -1160,7 +1160,7 @@ impl Network {
             ));
         }
         let body = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let sha = crate::fragment::sha256(&body);
+        let sha = crate::core::fragment::sha256(&body);
         if let Some((_, event)) = self.transfers.find_file(dest, &name, &sha) {
             return Ok((event, true));
         }

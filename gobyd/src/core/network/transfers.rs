@@ -1,4 +1,4 @@
-//! The network layer's transfers ([`crate::fragment`]) on disk and in the
+//! The network layer's transfers ([`crate::core::fragment`]) on disk and in the
 //! queue: this node's outgoing transfers (messages larger than a frame,
 //! files), the transfers it receives, their selective acks, and the files
 //! it serves.
@@ -32,13 +32,14 @@ use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
 use queue::record_log::{Format, RecordLog};
 use queue::{MessageId, Micros, PushOptions};
 
-use crate::fragment::{
+use crate::core::fragment::{
     self, file_name_problem, Content, Holding, Incoming, Outcome, Outgoing, Sending,
 };
-use crate::outbox::Outbox;
-use crate::route::RouteTable;
+use crate::core::outbox::Outbox;
+use crate::core::route::RouteTable;
 
 use super::wire::NetMessage;
+pub use crate::event::TransferEvent;
 
 /// The file format of `transfers.log`.
 pub const TRANSFERS: Format = Format {
@@ -87,36 +88,6 @@ pub struct Settings {
     /// How long a received transfer is remembered once ended (fragments
     /// of it coming late are acknowledged, not taken again).
     pub remember: Micros,
-}
-
-/// A transfer's progress or end, for the clients.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TransferEvent {
-    /// `out` (this node sends) or `in`.
-    pub outgoing: bool,
-    /// The transfer's client id (outgoing) or its origin's number of it
-    /// (incoming).
-    pub id: u64,
-    /// The other end.
-    pub peer: i32,
-    /// What it carries: a file's name, or a message's type.
-    pub name: String,
-    /// Bytes of its body.
-    pub bytes: u64,
-    /// Fragments, and those the receiver holds.
-    pub fragments: u32,
-    /// Fragments held by the receiver.
-    pub held: u32,
-    /// `sending`, `receiving`, `complete` or `failed`.
-    pub state: &'static str,
-    /// Why it failed.
-    pub reason: Option<String>,
-    /// Where a received file was written.
-    pub path: Option<String>,
-    /// SHA-256 of its body, hex.
-    pub sha256: String,
-    /// The file request it answers (`goby file get`).
-    pub request: Option<u16>,
 }
 
 /// One of this node's transfers.
@@ -970,7 +941,7 @@ impl Transfers {
             return Err(io::Error::new(io::ErrorKind::InvalidInput, problem));
         }
         let dir = &self.settings.receive_dir;
-        crate::data_dir::create_private_dir(dir)?;
+        crate::core::data_dir::create_private_dir(dir)?;
         let mut path = dir.join(name);
         let mut n = 1;
         while path.exists() {
@@ -979,7 +950,7 @@ impl Transfers {
         }
         let part = dir.join(format!(".{name}.part"));
         {
-            let mut f = crate::data_dir::private_file_options()
+            let mut f = crate::core::data_dir::private_file_options()
                 .write(true)
                 .create(true)
                 .truncate(true)

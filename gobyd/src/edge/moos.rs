@@ -17,7 +17,7 @@
 //!   `RAW_INCOMING`, `RAW_OUTGOING`), transmissions heard and sent by the
 //!   modem (`MODEM_RECEIVE`, `MODEM_TRANSMIT`) and slot starts
 //!   (`MAC_SLOT_START`). Read: `FLUSH_QUEUE` (empty a queue by DCCL id)
-//!   and `DRIVER_RESET` (restart the driver), see [`crate::control`].
+//!   and `DRIVER_RESET` (restart the driver), see [`Control`].
 //! - Initial values (`moos.initializer`, Goby's `common { initializer }`):
 //!   written each time gobyd connects to the MOOSDB.
 //! - The plain interface: string values of the `send_var` variables are
@@ -51,10 +51,10 @@ use protos::goby::apps::protobuf::GobydConfig;
 use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, oneshot};
 
-use super::event::{DaemonEvent, SharedEvent};
-use super::json_server::Publish;
-use crate::control::{parse_flush, Control, NetworkRequest};
-use crate::modem_event::ModemEvent;
+use crate::edge::json::lines::{network_reply_value, network_request, transfer_value};
+use crate::event::{
+    Control, CoreHandle, DaemonEvent, ModemEvent, NetworkRequest, Publish, SharedEvent,
+};
 use crate::translator::{self, TranslateError, Translator};
 
 /// Longest wait between two attempts to reach an absent MOOSDB.
@@ -169,7 +169,7 @@ pub fn parse_file_value(kind: &str, value: &str) -> Result<NetworkRequest, Strin
     if value.starts_with('{') {
         let v: serde_json::Value = serde_json::from_str(value)
             .map_err(|e| format!("{kind}: the value is not JSON: {e}"))?;
-        return crate::json_protocol::network_request(kind, &v);
+        return network_request(kind, &v);
     }
     let (id_key, keys): (&str, &[&str]) = match kind {
         "file_send" => ("dest", &["dest", "path", "name"]),
@@ -200,7 +200,7 @@ pub fn parse_file_value(kind: &str, value: &str) -> Result<NetworkRequest, Strin
         };
         object.insert(key.to_string(), v);
     }
-    crate::json_protocol::network_request(kind, &serde_json::Value::Object(object))
+    network_request(kind, &serde_json::Value::Object(object))
 }
 
 /// Formats a message as a MOOS string value.
@@ -430,9 +430,20 @@ async fn connect(settings: &BridgeSettings) -> Option<(MoosClient, moos::MailRec
     }
 }
 
-/// Connects to the MOOSDB (trying until it answers) and bridges until the
-/// task is dropped.
-pub async fn run(
+/// The bridge to the core behind `core`: connects to the MOOSDB (trying
+/// until it answers) and bridges until the task is dropped. It takes the
+/// core's events from the moment it is called.
+pub fn run(settings: BridgeSettings, core: &CoreHandle) -> impl std::future::Future<Output = ()> {
+    bridge(
+        settings,
+        core.codec.clone(),
+        core.publish.clone(),
+        core.control.clone(),
+        core.events.subscribe(),
+    )
+}
+
+async fn bridge(
     settings: BridgeSettings,
     codec: Arc<Codec>,
     publish: mpsc::Sender<Publish>,
@@ -515,14 +526,14 @@ pub async fn run(
             }
             event = events.recv() => match event {
                 Ok(event) => {
-                    let values = match &event.event {
+                    let values = match &*event {
                         DaemonEvent::Received { received, .. } => {
                             received_publications(&settings, received)
                         }
                         DaemonEvent::Queue { event, .. } => publications(&settings, event),
                         DaemonEvent::Modem(m) => modem_publications(&settings, m),
                         DaemonEvent::Transfer(e) if settings.files => {
-                            let mut v = crate::json_protocol::transfer_value(e);
+                            let mut v = transfer_value(e);
                             if let Some(o) = v.as_object_mut() {
                                 o.remove("event");
                             }
@@ -597,6 +608,32 @@ fn fresh(mail: &Mail, connected_at: f64) -> bool {
     fresh
 }
 
+/// The DCCL id of a flush request as pAcommsHandler takes it:
+/// `@PB[goby.acomms.protobuf.QueueFlush] dccl_id: N`, the text format alone
+/// (`dccl_id: N`), or the id as a number.
+fn parse_flush(value: &str) -> Result<u32, String> {
+    let mut text = value.trim();
+    if let Some(rest) = text.strip_prefix("@PB[") {
+        let (name, body) = rest
+            .split_once(']')
+            .ok_or("\"@PB[\" without its closing \"]\"")?;
+        if name.trim() != "goby.acomms.protobuf.QueueFlush" {
+            return Err(format!(
+                "expected goby.acomms.protobuf.QueueFlush, not {}",
+                name.trim()
+            ));
+        }
+        text = body.trim();
+    }
+    let number = match text.strip_prefix("dccl_id") {
+        Some(rest) => rest.trim_start().strip_prefix(':').unwrap_or(rest).trim(),
+        None => text,
+    };
+    number
+        .parse::<u32>()
+        .map_err(|_| format!("{value:?}: expected \"dccl_id: N\" with N a DCCL id"))
+}
+
 /// Flushes the queue named by a flush request (`FLUSH_QUEUE`).
 async fn flush(control: &mpsc::Sender<Control>, mail: &Mail) {
     let text = match &mail.value {
@@ -658,7 +695,7 @@ async fn file_request(
             "{kind}: the value must be a string (\"dest=3,path=/data/x.bin\" or JSON)"
         )),
     };
-    let reply = match answer {
+    let reply = match answer.map(|reply| network_reply_value(&reply)) {
         Ok(mut v) => {
             if let Some(o) = v.as_object_mut() {
                 o.insert("var".into(), mail.key.clone().into());
@@ -789,6 +826,21 @@ async fn handle_mail(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn flush_requests_name_their_dccl_id() {
+        for value in [
+            "@PB[goby.acomms.protobuf.QueueFlush] dccl_id: 125",
+            "dccl_id: 125",
+            " 125 ",
+        ] {
+            assert_eq!(parse_flush(value), Ok(125), "{value}");
+        }
+        assert!(parse_flush("@PB[goby.example.Command] dccl_id: 1")
+            .unwrap_err()
+            .contains("QueueFlush"));
+        assert!(parse_flush("dccl_id: x").unwrap_err().contains("DCCL id"));
+    }
 
     #[test]
     fn file_values_read_as_pairs_or_json() {

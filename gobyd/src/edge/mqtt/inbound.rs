@@ -17,8 +17,8 @@ use tokio::sync::{mpsc, oneshot};
 
 use super::payload::{Formatter, Outgoing};
 use super::settings::Topics;
-use crate::control::{Control, NetworkRequest};
-use crate::json_server::Publish;
+use crate::edge::json::lines::network_request;
+use crate::event::{Control, NetworkReply, NetworkRequest, Publish, PublishReply};
 
 /// Parses the payload of a `tx` topic into a message to send. The error is
 /// the reason published on `PREFIX/NODE/error`.
@@ -72,7 +72,7 @@ pub fn parse_file_request(kind: &str, payload: &[u8]) -> Result<NetworkRequest, 
             _ => "file_get: the payload must be a JSON object: {\"node\": N, \"path\": \"…\"}".into(),
         });
     }
-    crate::json_protocol::network_request(kind, &value)
+    network_request(kind, &value)
 }
 
 /// What the acknowledging task waits for, in arrival order.
@@ -80,9 +80,9 @@ enum Waiting {
     /// Refused before reaching the core.
     Refused(MqttPublish, String),
     /// With the core.
-    Core(MqttPublish, oneshot::Receiver<crate::event::PublishReply>),
+    Core(MqttPublish, oneshot::Receiver<PublishReply>),
     /// A file request, with the core's network layer.
-    Network(MqttPublish, oneshot::Receiver<Result<Value, String>>),
+    Network(MqttPublish, oneshot::Receiver<Result<NetworkReply, String>>),
 }
 
 /// Runs the two tasks of inbound messages until `incoming` closes:
@@ -169,7 +169,7 @@ pub async fn run(
                     };
                     let notice = match reply {
                         Err(reason) => formatter.error(&publish.topic, &reason),
-                        Ok(value) => formatter.file_reply(&publish.topic, value),
+                        Ok(reply) => formatter.file_reply(&publish.topic, &reply),
                     };
                     (publish, notice)
                 }

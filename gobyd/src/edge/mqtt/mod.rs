@@ -38,9 +38,7 @@ use rumqttc::{AsyncClient, Event, EventLoop, Packet};
 use tokio::sync::{broadcast, mpsc};
 
 use crate::config::ConfigError;
-use crate::control::Control;
-use crate::event::SharedEvent;
-use crate::json_server::Publish;
+use crate::event::{Control, CoreHandle, Publish, SharedEvent};
 use backlog::Backlog;
 use payload::{BridgeStatus, Formatter, Outgoing};
 use retained::Retained;
@@ -63,6 +61,7 @@ pub struct Bridge {
     codec: Arc<Codec>,
     core: mpsc::Sender<Publish>,
     control: mpsc::Sender<Control>,
+    events: broadcast::Sender<SharedEvent>,
     clock: Arc<dyn Clock>,
 }
 
@@ -76,41 +75,46 @@ impl std::fmt::Debug for Bridge {
 }
 
 impl Bridge {
-    /// Checks the `mqtt` section; `None` when it names no broker. `core` is
-    /// the daemon's publish channel ([`crate::runtime::Daemon::publisher`]),
-    /// `control` its control channel ([`crate::runtime::Daemon::control`]:
-    /// the file requests).
+    /// Checks the `mqtt` section; `None` when it names no broker. The
+    /// bridge hands messages and file requests to the core behind `core`,
+    /// and takes its events from the moment [`run`](Bridge::run) is
+    /// called; the times of its payloads are read from `clock`.
     pub fn new(
         config: MqttBridge,
         modem_id: i32,
-        codec: Arc<Codec>,
-        core: mpsc::Sender<Publish>,
-        control: mpsc::Sender<Control>,
+        core: &CoreHandle,
         clock: Arc<dyn Clock>,
     ) -> Result<Option<Self>, ConfigError> {
         Ok(
             settings::settings(&config, modem_id)?.map(|settings| Bridge {
                 settings,
                 modem_id,
-                codec,
-                core,
-                control,
+                codec: core.codec.clone(),
+                core: core.publish.clone(),
+                control: core.control.clone(),
+                events: core.events.clone(),
                 clock,
             }),
         )
     }
 
-    /// Bridges until the task is dropped: publishes the core's `events`
-    /// (queue events, received messages with their receptions, the
+    /// The bridge's run, taking the core's events from now on: publishes
+    /// them (queue events, received messages with their receptions, the
     /// driver's status, this node's slots, every reception), and hands
-    /// messages from `tx` topics to the core.
-    pub async fn run(self, events: broadcast::Receiver<SharedEvent>) {
+    /// messages from `tx` topics to the core, until the task is dropped.
+    pub fn run(self) -> impl std::future::Future<Output = ()> {
+        let events = self.events.subscribe();
+        self.bridge(events)
+    }
+
+    async fn bridge(self, events: broadcast::Receiver<SharedEvent>) {
         let Bridge {
             settings,
             modem_id,
             codec,
             core,
             control,
+            events: _,
             clock,
         } = self;
         let names: HashMap<u32, String> = codec
@@ -250,7 +254,7 @@ impl Loop {
                             | Err(broadcast::error::TryRecvError::Closed) => return,
                             Err(broadcast::error::TryRecvError::Empty) => break,
                         };
-                        if let Some(out) = self.formatter.event(&event.event, self.clock.now()) {
+                        if let Some(out) = self.formatter.event(&event, self.clock.now()) {
                             self.push(out);
                         }
                         got = events.try_recv().map(Ok);

@@ -14,7 +14,7 @@
 //!   synced) hands the message over again at the next start, flagged
 //!   `recovered` in the mission log.
 //!
-//! The inbox also holds what the duplicate filter ([`crate::dedup`])
+//! The inbox also holds what the duplicate filter ([`crate::core::dedup`])
 //! remembers: the identity of every message recorded within the window
 //! (`duplicate_window_seconds`), so a repeat is recognised across restarts.
 //!
@@ -43,7 +43,7 @@ use std::path::Path;
 
 use queue::record_log::{LogError, LogFile, RecordLog, CRC32 as CRC, INBOX};
 
-use crate::dedup::Identity;
+use crate::core::dedup::Identity;
 
 const KIND_RECEIVED: u8 = 1;
 const KIND_HANDED: u8 = 2;

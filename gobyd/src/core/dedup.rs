@@ -25,7 +25,7 @@
 //!   alone), as Goby3 does: a retransmission of such a message may then
 //!   reach the clients twice, never a publication not at all.
 //!
-//! The identities live in the receiver's inbox ([`crate::inbox`],
+//! The identities live in the receiver's inbox ([`crate::core::inbox`],
 //! `DATA_DIR/inbox.log`), recorded and synced with the message *before* it
 //! is handed to clients or acknowledged, so a receiver restarted after a
 //! crash still knows what it received; the sender keeps its numbers with

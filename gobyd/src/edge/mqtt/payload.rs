@@ -11,7 +11,7 @@
 //! | `driver` | yes | `{"status", "time"}` |
 //! | `link` | yes | the last reception: `{"src", "dest", "rate", "frames", "time", ...}` |
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
-//! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::link::LinkStatus`]) |
+//! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::event::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
 //! | `file/reply` | no | the answer to a file request: the JSON interface's reply (`{"file_send", "joined", "transfer"}`, `{"file_get", "node"}` or `{"transfers"}`) with `"topic"` |
 //! | `transfer` | no | a transfer's progress and end: the JSON interface's `transfer` event (`{"transfer", "direction", "peer", "name", "bytes", "fragments", "held", "state", "sha256", …}`) with `"time"` |
@@ -26,9 +26,12 @@ use queue::{QueueEvent, ReceivedMessage};
 use serde_json::{json, Value};
 
 use super::settings::Topics;
-use crate::event::{AcceptedMessage, DaemonEvent, LinkSummary, Reception};
-use crate::json_protocol::{accepted_value, message_json, transfer_value};
-use crate::modem_event::ModemEvent;
+use crate::edge::json::lines::{
+    accepted_value, link_json, message_json, network_reply_value, transfer_value,
+};
+use crate::event::{
+    AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, Reception,
+};
 
 /// One publication.
 #[derive(Debug, Clone, PartialEq)]
@@ -115,7 +118,7 @@ impl Formatter {
             "msg": message_json(&r.message),
         });
         if let Some(link) = &reception.link {
-            payload["link"] = link.json();
+            payload["link"] = link_json(link);
         }
         Outgoing::new(self.topics.node(&format!("rx/{name}")), payload, false)
     }
@@ -185,7 +188,7 @@ impl Formatter {
             ),
             ModemEvent::Received { transmission, time } => Outgoing::new(
                 t.node("link"),
-                LinkSummary::of(transmission, *time).json(),
+                link_json(&LinkSummary::of(transmission, *time)),
                 true,
             ),
             ModemEvent::SlotStart {
@@ -210,7 +213,8 @@ impl Formatter {
     /// The answer to a file request (`PREFIX/NODE/file/reply`): the
     /// network layer's reply as the JSON interface has it, with the topic
     /// the request came on.
-    pub fn file_reply(&self, topic: &str, mut reply: Value) -> Outgoing {
+    pub fn file_reply(&self, topic: &str, reply: &NetworkReply) -> Outgoing {
+        let mut reply = network_reply_value(reply);
         if let Some(o) = reply.as_object_mut() {
             o.insert("topic".into(), topic.into());
         }
@@ -369,7 +373,7 @@ mod tests {
                 &DaemonEvent::Received {
                     received: command(1),
                     reception: Reception {
-                        link: Some(crate::event::reception_summary(transmission, *time)),
+                        link: Some(LinkSummary::shared(transmission, *time)),
                         recovered: false,
                         route: None,
                     },
@@ -396,7 +400,7 @@ mod tests {
         let ModemEvent::Received { transmission, time } = &first else {
             unreachable!()
         };
-        let its_own = crate::event::reception_summary(transmission, *time);
+        let its_own = LinkSummary::shared(transmission, *time);
         let link = f
             .event(&DaemonEvent::Modem(first.clone()), 1_000_000)
             .unwrap();

@@ -2,7 +2,7 @@
 //! fragments, and put together again at the other end, with selective
 //! acks. Sans-IO: the state of one transfer at each end, fed with what
 //! happens and asked what to do; the network layer
-//! ([`crate::network::transfers`]) keeps them on disk and talks to the
+//! ([`crate::core::network::transfers`]) keeps them on disk and talks to the
 //! queue.
 //!
 //! # The stream

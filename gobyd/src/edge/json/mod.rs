@@ -5,11 +5,11 @@
 //!
 //! Connections parse their lines themselves and hand messages to publish to
 //! the daemon's core through a channel, with a one-shot channel for the
-//! reply line; the core's typed events come back through a broadcast
-//! channel, each client keeps those it subscribed to, and an event's line
-//! is rendered once, by the first client that sends it. Every request line gets exactly one reply,
-//! numbered (see [`json_protocol`](super::json_protocol)); a malformed line
-//! gets an `error` reply; the connection and the daemon stay up.
+//! core's typed reply, rendered here; the core's typed events come back
+//! through a broadcast channel, each client keeps those it subscribed to
+//! and renders their lines ([`lines`]). Every request line gets exactly
+//! one reply, numbered; a malformed line gets an `error` reply; the
+//! connection and the daemon stay up.
 //!
 //! Resources are bounded: a line is cut off at [`MAX_LINE`] bytes as it
 //! arrives (the rest of it is skipped), the line buffer shrinks back after a
@@ -26,45 +26,21 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use dccl::Codec;
-use prost_reflect::{DynamicMessage, ReflectMessage};
+use prost_reflect::ReflectMessage;
 use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use tokio::task::JoinSet;
 
-use super::event::{DaemonEvent, PublishReply, SharedEvent};
-use super::json_protocol::{
-    error_line, event_line, event_topic, lost_line, numbered_reply, parse_request, reply_line,
-    subscribed_line, Request, Topic,
+pub mod lines;
+
+use crate::event::{
+    Control, CoreHandle, DaemonEvent, LinkStatus, ModemEvent, Publish, SharedEvent,
 };
-use super::modem_event::ModemEvent;
-
-/// A message a client wants sent, with where to send the reply.
-#[derive(Debug)]
-pub struct Publish {
-    /// The message.
-    pub message: DynamicMessage,
-    /// Receives the core's answer (the JSON interface renders it as the
-    /// `accepted` or `error` line).
-    pub reply: oneshot::Sender<PublishReply>,
-    /// The message was given to every gateway at once (MQTT
-    /// `PREFIX/all/tx/TYPE`), so each sends its own copy: one whose
-    /// `SOURCE_ID` role names another node is refused (that node sends it
-    /// itself, would drop this copy as its own broadcast, and the other
-    /// nodes would receive it twice).
-    pub every_gateway: bool,
-}
-
-impl Publish {
-    /// A message for this gateway alone, answered on `reply`.
-    pub fn new(message: DynamicMessage, reply: oneshot::Sender<PublishReply>) -> Self {
-        Publish {
-            message,
-            reply,
-            every_gateway: false,
-        }
-    }
-}
+use lines::{
+    error_line, event_line, event_topic, lost_line, network_reply_value, numbered_reply,
+    parse_request, reply_line, subscribed_line, Request, Topic,
+};
 
 /// Longest request line accepted, bytes (without its newline).
 pub const MAX_LINE: usize = 1024 * 1024;
@@ -214,35 +190,45 @@ impl<R: AsyncRead + Unpin> LineReader<R> {
 #[derive(Debug, Clone)]
 pub struct JsonInterface {
     /// The codec: clients may publish the types loaded in it.
-    pub codec: Arc<Codec>,
+    codec: Arc<Codec>,
     /// Where publish requests go.
-    pub publish: mpsc::Sender<Publish>,
-    /// Where driver-specific requests go.
-    pub control: mpsc::Sender<crate::control::Control>,
+    publish: mpsc::Sender<Publish>,
+    /// Where driver-specific and file requests go.
+    control: mpsc::Sender<Control>,
     /// Where the core's events come from.
-    pub events: broadcast::Sender<SharedEvent>,
+    events: broadcast::Sender<SharedEvent>,
     /// Type names by DCCL id (for the queue size lines).
-    pub names: Arc<HashMap<u32, String>>,
+    names: Arc<HashMap<u32, String>>,
     /// The driver's last status (`None` before its first): sent once to a
     /// client as it subscribes to `modem`, so that it need not wait for the
     /// next change.
-    pub driver_status: watch::Receiver<Option<modemdriver::DriverStatus>>,
+    driver_status: watch::Receiver<Option<modemdriver::DriverStatus>>,
     /// Every link's status as it stands: sent once to a client as it
     /// subscribes to `link`.
-    pub link_status: watch::Receiver<Vec<crate::link::LinkStatus>>,
+    link_status: watch::Receiver<Vec<LinkStatus>>,
 }
 
 impl JsonInterface {
-    /// An event's line, rendered by the first client that sends it and
-    /// shared with the others (`None`: clients do not see the event).
-    fn line<'a>(&self, event: &'a SharedEvent) -> Option<&'a str> {
-        event.json_line(|e| {
-            event_line(e, |id| {
-                self.names
-                    .get(&id)
-                    .cloned()
-                    .unwrap_or_else(|| format!("dccl id {id}"))
-            })
+    /// The interface to the core behind `core`.
+    pub fn new(core: &CoreHandle) -> Self {
+        JsonInterface {
+            codec: core.codec.clone(),
+            publish: core.publish.clone(),
+            control: core.control.clone(),
+            events: core.events.clone(),
+            names: core.names.clone(),
+            driver_status: core.driver_status.clone(),
+            link_status: core.link_status.clone(),
+        }
+    }
+
+    /// An event's line (`None`: clients do not see the event).
+    fn line(&self, event: &DaemonEvent) -> Option<String> {
+        event_line(event, |id| {
+            self.names
+                .get(&id)
+                .cloned()
+                .unwrap_or_else(|| format!("dccl id {id}"))
         })
     }
 
@@ -300,19 +286,19 @@ impl JsonInterface {
             }
             Request::Network(request) => {
                 let (reply, outcome) = oneshot::channel();
-                let control = crate::control::Control::Network { request, reply };
+                let control = Control::Network { request, reply };
                 if self.control.send(control).await.is_err() {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
                 Handled::Waiting(answer(outcome, |outcome| match outcome {
-                    Ok(value) => value.to_string(),
+                    Ok(value) => network_reply_value(&value).to_string(),
                     Err(e) => error_line(&e),
                 }))
             }
             Request::DriverSpecific(message) => {
                 let name = message.descriptor().full_name().to_string();
                 let (reply, outcome) = oneshot::channel();
-                let control = crate::control::Control::DriverSpecific { message, reply };
+                let control = Control::DriverSpecific { message, reply };
                 if self.control.send(control).await.is_err() {
                     return Handled::Reply(error_line("the daemon is shutting down"));
                 }
@@ -437,7 +423,7 @@ impl JsonInterface {
                 event = events.recv() => match event {
                     Ok(event) if wanted(&event, &topics) => {
                         if let Some(line) = self.line(&event) {
-                            out.push_str(line);
+                            out.push_str(&line);
                             out.push('\n');
                         }
                     }
@@ -554,11 +540,13 @@ impl JsonInterface {
                 Some(_) = waiting.join_next(), if !waiting.is_empty() => {}
                 event = events.recv() => match event {
                     Ok(event) => {
+                        // Rendered once, for every peer that wants it.
+                        let mut line = None;
                         for (addr, peer) in &peers.peers {
                             if !wanted(&event, &peer.topics) {
                                 continue;
                             }
-                            if let Some(line) = self.line(&event) {
+                            if let Some(line) = line.get_or_insert_with(|| self.line(&event)) {
                                 let _ = socket.send_to(line.as_bytes(), addr).await;
                             }
                         }
@@ -728,8 +716,8 @@ fn out_of_descriptors(e: &io::Error) -> bool {
     matches!(e.raw_os_error(), Some(EMFILE | ENFILE))
 }
 
-fn wanted(event: &SharedEvent, topics: &HashSet<Topic>) -> bool {
-    match event_topic(&event.event) {
+fn wanted(event: &DaemonEvent, topics: &HashSet<Topic>) -> bool {
+    match event_topic(event) {
         None => true,
         Some(topic) => topics.contains(&topic),
     }

@@ -10,8 +10,8 @@
 //!
 //! and its frame is acknowledged only once every message in it is recorded
 //! (or is a retransmission already on record). Which receptions are the
-//! same publication is [`crate::dedup`]'s rule; the file is
-//! [`crate::inbox`]. Messages a previous run recorded and did not hand over
+//! same publication is [`crate::core::dedup`]'s rule; the file is
+//! [`crate::core::inbox`]. Messages a previous run recorded and did not hand over
 //! are held first, flagged `recovered`.
 //!
 //! The daemon's core calls [`Delivery::receive`] for each reception (with
@@ -28,10 +28,10 @@ use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, Modem
 use queue::{QueueError, ReceivedMessage};
 use tokio::time::Instant;
 
-use crate::crash_point::CrashPoint;
-use crate::dedup::Identity;
+use crate::core::crash_point::CrashPoint;
+use crate::core::dedup::Identity;
+use crate::core::inbox::{Inbox, Incoming, Replay};
 use crate::event::Reception;
-use crate::inbox::{Inbox, Incoming, Replay};
 
 /// Longest a message received before a restart, and not handed over then,
 /// waits at the next start for a JSON client to connect before it is

@@ -4,10 +4,9 @@
 //! results (JSON topic `modem`), slot starts and auto-discovery's cycle
 //! changes (topic `mac`).
 //!
-//! The core sends the typed events; the JSON interface renders them as
-//! lines ([`crate::json_protocol::event_line`]; their reference is the
-//! guide's `docs/json-protocol.md`), the MOOS and MQTT bridges in their own
-//! forms.
+//! The core sends the typed events; each interface renders them in its
+//! own form (the JSON interface's lines are in the guide's
+//! `docs/json-protocol.md`).
 
 use amac::MacEvent;
 use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};

@@ -186,7 +186,7 @@ impl Outbox {
     /// its type's `ttl`) counted from `created` (microseconds since the
     /// epoch; may be in the future, for a message meant to live longer than
     /// its type's `ttl`), also after a restart. For the network layer
-    /// ([`crate::network`]), whose messages carry their own lifetime.
+    /// ([`crate::core::network`]), whose messages carry their own lifetime.
     pub fn accept_created(
         &mut self,
         message: &DynamicMessage,

@@ -14,8 +14,10 @@ use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::QueueEvent;
 use serde_json::{json, Value};
 
-use crate::event::{AcceptedMessage, DaemonEvent, PublishReply, Reception};
-use crate::modem_event::ModemEvent;
+use crate::event::{
+    AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, NetworkRequest,
+    PublishReply, Reception, TransferEvent,
+};
 
 /// Event kinds a client may subscribe to (received messages always reach
 /// every client).
@@ -32,7 +34,7 @@ pub enum Topic {
     /// Messages placed in a frame for sending.
     Sent,
     /// The modem driver: raw lines, transmissions received and sent, and
-    /// its status ([`crate::modem_event`]).
+    /// its status ([`ModemEvent`]).
     Modem,
     /// The medium access control: slot starts and cycle changes.
     Mac,
@@ -89,7 +91,7 @@ pub enum Request {
     DriverSpecific(DynamicMessage),
     /// A request of the network layer: send a file, ask for one, list the
     /// transfers.
-    Network(crate::control::NetworkRequest),
+    Network(NetworkRequest),
 }
 
 /// Parses one request line; messages may be of any type loaded in
@@ -154,8 +156,7 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
 /// "path", "name"}`), `file_get` (`{"node", "path"}`) or `transfers`
 /// (anything). Also what the MQTT and MOOS bridges take. The error says
 /// what is missing or wrong.
-pub fn network_request(kind: &str, spec: &Value) -> Result<crate::control::NetworkRequest, String> {
-    use crate::control::NetworkRequest;
+pub fn network_request(kind: &str, spec: &Value) -> Result<NetworkRequest, String> {
     match kind {
         "file_send" => {
             let dest = node_field(spec, "dest", "file_send")?;
@@ -320,7 +321,7 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
 /// its DCCL id.
 ///
 /// A received message's line carries its reception: `"link"` (the
-/// summary of the transmission it came in, [`crate::event::LinkSummary::json`], with
+/// summary of the transmission it came in, [`link_json`], with
 /// the modem's link statistics when the driver gives them) and
 /// `"recovered": true` when it is handed over after a restart (it was
 /// received before; a client that may have seen it then can tell).
@@ -342,9 +343,9 @@ pub fn event_line(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Op
 }
 
 /// A transfer as JSON: `{"event": "transfer", "transfer": ID, ...}` (see
-/// [`crate::network::transfers::TransferEvent`]); also the items of the
+/// [`TransferEvent`]); also the items of the
 /// `transfers` reply.
-pub fn transfer_value(e: &crate::network::transfers::TransferEvent) -> Value {
+pub fn transfer_value(e: &TransferEvent) -> Value {
     let mut line = json!({
         "event": "transfer",
         "transfer": e.id,
@@ -369,6 +370,51 @@ pub fn transfer_value(e: &crate::network::transfers::TransferEvent) -> Value {
     line
 }
 
+/// The answer to a request of the network layer as JSON: `{"file_send":
+/// ID, "joined": B, "transfer": {…}}`, `{"file_get": R, "node": N}` or
+/// `{"transfers": [{…}, …]}` (each transfer as [`transfer_value`]). The
+/// JSON reply's fields, also the MQTT bridge's `file/reply` and the MOOS
+/// bridge's `file_reply_var`.
+pub fn network_reply_value(reply: &NetworkReply) -> Value {
+    match reply {
+        NetworkReply::FileSent {
+            id,
+            joined,
+            transfer,
+        } => json!({
+            "file_send": id,
+            "joined": joined,
+            "transfer": transfer_value(transfer),
+        }),
+        NetworkReply::FileAsked { request, node } => {
+            json!({ "file_get": request, "node": node })
+        }
+        NetworkReply::Transfers(transfers) => json!({
+            "transfers": transfers.iter().map(transfer_value).collect::<Vec<_>>(),
+        }),
+    }
+}
+
+/// A reception's summary as JSON: every field of the transmission in
+/// proto JSON form (source, destination, rate, ack wanted, and, from a
+/// WHOI Micro-Modem, `receive_stat` with the modem's `$CACST` statistics:
+/// SNR in and out, Doppler, data quality factor, bad frames ...) except
+/// the frames' bytes, replaced by their count `frames`, and `time` in
+/// seconds since the UNIX epoch, and with several links `name`, the
+/// link's.
+pub fn link_json(summary: &LinkSummary) -> Value {
+    let mut value = message_json(&summary.transmission.transcode_to_dynamic());
+    if let Value::Object(map) = &mut value {
+        map.remove("frame");
+        map.insert("frames".into(), summary.frames.into());
+        map.insert("time".into(), (summary.time as f64 / 1e6).into());
+        if let Some(name) = &summary.name {
+            map.insert("name".into(), name.clone().into());
+        }
+    }
+    value
+}
+
 fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Value {
     let mut line = json!({
         "event": "received",
@@ -378,7 +424,7 @@ fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Value {
         "msg": message_json(&r.message),
     });
     if let Some(link) = &reception.link {
-        line["link"] = link.json();
+        line["link"] = link_json(link);
     }
     if reception.recovered {
         line["recovered"] = true.into();
@@ -428,7 +474,7 @@ fn queue_line(
 }
 
 /// The line of a modem or medium access event (see
-/// [`crate::modem_event`]).
+/// [`ModemEvent`]).
 fn modem_line(event: &ModemEvent) -> Value {
     let t = |t: &ModemTransmission| message_json(&t.transcode_to_dynamic());
     match event {
@@ -500,6 +546,23 @@ mod tests {
             .load_type::<protos::goby::example::Command>()
             .expect("example loads");
         codec
+    }
+
+    #[test]
+    fn a_reception_counts_the_frames_without_their_bytes() {
+        let t = ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            rate: Some(3),
+            frame: vec![vec![1, 2, 3], vec![]],
+            ..Default::default()
+        };
+        let v = link_json(&LinkSummary::of(&t, 2_500_000));
+        assert_eq!(v["src"], 1);
+        assert_eq!(v["rate"], 3);
+        assert_eq!(v["frames"], 2);
+        assert_eq!(v["time"], 2.5);
+        assert!(v.get("frame").is_none(), "{v}");
     }
 
     #[test]
@@ -763,7 +826,7 @@ mod tests {
         let event = DaemonEvent::Received {
             received: received.clone(),
             reception: Reception {
-                link: Some(crate::event::reception_summary(&transmission, 1_000_000)),
+                link: Some(LinkSummary::shared(&transmission, 1_000_000)),
                 recovered: false,
                 route: None,
             },
@@ -890,7 +953,7 @@ mod tests {
         let mut events = vec![DaemonEvent::Received {
             received,
             reception: Reception {
-                link: Some(crate::event::reception_summary(&transmission, 1)),
+                link: Some(LinkSummary::shared(&transmission, 1)),
                 recovered: true,
                 route: None,
             },
@@ -900,23 +963,21 @@ mod tests {
             entry: Some(1),
         }));
         events.extend(modem_events.into_iter().map(DaemonEvent::Modem));
-        events.push(DaemonEvent::Transfer(
-            crate::network::transfers::TransferEvent {
-                outgoing: false,
-                id: 7,
-                peer: 1,
-                name: "sonar.bin".into(),
-                bytes: 20_000,
-                fragments: 400,
-                held: 400,
-                state: "failed",
-                reason: Some("its SHA-256 did not match at the receiver".into()),
-                path: Some("/data/files/sonar.bin".into()),
-                sha256: "00".repeat(32),
-                request: Some(3),
-            },
-        ));
-        events.push(DaemonEvent::Link(crate::link::LinkStatus {
+        events.push(DaemonEvent::Transfer(TransferEvent {
+            outgoing: false,
+            id: 7,
+            peer: 1,
+            name: "sonar.bin".into(),
+            bytes: 20_000,
+            fragments: 400,
+            held: 400,
+            state: "failed",
+            reason: Some("its SHA-256 did not match at the receiver".into()),
+            path: Some("/data/files/sonar.bin".into()),
+            sha256: "00".repeat(32),
+            request: Some(3),
+        }));
+        events.push(DaemonEvent::Link(crate::event::LinkStatus {
             name: Some("iridium".into()),
             state: Some(protos::goby::apps::protobuf::link_status::State::LinkUp as i32),
             ..Default::default()
@@ -955,7 +1016,7 @@ mod tests {
     #[test]
     fn every_driver_status_kind_is_in_the_guide() {
         use modemdriver::DriverStatus as S;
-        let guide = include_str!("../../docs/json-protocol.md");
+        let guide = include_str!("../../../../docs/json-protocol.md");
         let start = guide
             .find("### Driver status kinds")
             .expect("the table of driver status kinds");
@@ -1027,7 +1088,7 @@ mod tests {
     /// there, with each of its keys.
     #[test]
     fn every_line_kind_and_key_is_in_the_guides_reference() {
-        let guide = include_str!("../../docs/json-protocol.md");
+        let guide = include_str!("../../../../docs/json-protocol.md");
         let start = guide
             .find("## The JSON interface")
             .expect("the JSON interface section");
