@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde_json::Value;
-use support::daemon::{scratch, Gobyd, PATIENCE};
+use support::daemon::{command_line, scratch, Gobyd, PATIENCE};
 use support::node::{Entry, Node, Simulator};
 
 /// A node that never transmits: what is accepted stays queued (and
@@ -34,9 +34,7 @@ fn quiet_config(dir: &Path) -> PathBuf {
 }
 
 fn command(i: usize) -> String {
-    format!(
-        r#"{{"publish": "goby.example.Command", "msg": {{"destination": 2, "action": "GOTO", "note": "c{i}"}}}}"#
-    )
+    command_line(2, &format!("c{i}"))
 }
 
 /// The journal ids of the messages the journal of `dir` owes.

@@ -21,7 +21,7 @@ use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::RoutedMessage;
 use protos::goby::example::Command;
 use serde_json::Value;
-use support::daemon::{free_udp_port, scratch, Gobyd};
+use support::daemon::{command_line, free_udp_port, scratch, Gobyd};
 use support::node::{Entry, Node, Simulator};
 
 fn config(id: i32, dir: &Path, ports: &[u16]) -> PathBuf {
@@ -112,9 +112,7 @@ fn a_relay_killed_holding_messages_in_custody_loses_none_and_repeats_none() {
                    from: i32,
                    to: i32,
                    note: String| {
-        let line = format!(
-            r#"{{"publish":"goby.example.Command","msg":{{"destination":{to},"action":"GOTO","note":"{note}"}}}}"#
-        );
+        let line = command_line(to, &note);
         let reply = nodes[(from - 1) as usize]
             .as_mut()
             .unwrap()

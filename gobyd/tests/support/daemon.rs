@@ -257,6 +257,16 @@ impl Drop for Gobyd {
     }
 }
 
+/// The `publish` line of a `goby.example.Command` to `destination`, action
+/// `GOTO`, with `note`.
+pub fn command_line(destination: i32, note: &str) -> String {
+    gobyd_protocol::Request::publish(
+        "goby.example.Command",
+        serde_json::json!({"destination": destination, "action": "GOTO", "note": note}),
+    )
+    .line()
+}
+
 /// Publishes a `goby.example.Command` to `destination` with `note`
 /// through an in-process daemon's publisher
 /// ([`gobyd::daemon::Daemon::publisher`]) and waits for the core's

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde_json::Value;
 
-use super::daemon::Gobyd;
+use super::daemon::{command_line, Gobyd};
 
 /// A small seeded generator (xorshift64*), so that a failing run replays.
 pub struct Draw(pub u64);
@@ -338,10 +338,7 @@ pub fn run(
                 revive(&mut nodes, &mut armed, &mut totals, &mut history);
                 let note = format!("{from}r{round}m{i}");
                 let node = nodes[(from - 1) as usize].as_mut().unwrap();
-                let line = format!(
-                    r#"{{"publish": "goby.example.Command", "msg": {{"destination": {}, "action": "GOTO", "note": "{note}"}}}}"#,
-                    3 - from
-                );
+                let line = command_line(3 - from, &note);
                 if node
                     .request(&line)
                     .is_some_and(|v| v.get("accepted").is_some())

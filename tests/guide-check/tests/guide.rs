@@ -22,6 +22,7 @@ fn every_crate_has_a_readme_whose_links_resolve() {
         "protos",
         "dccl",
         "queue",
+        "protocol",
         "amac",
         "modemdriver",
         "position",

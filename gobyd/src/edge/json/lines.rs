@@ -1,86 +1,31 @@
-//! The line protocol of the JSON autonomy interface: one JSON object per
-//! line in each direction; requests from the client (`publish`,
-//! `subscribe`, `driver_specific`), and from the daemon replies (one per
-//! request, numbered) and events (each with `"event": KIND`).
-//!
-//! The protocol's reference, every kind of line with each of its keys, is
-//! the guide's `docs/json-protocol.md` in the repository; a test of this
-//! module checks that it names every line kind and key rendered here.
+//! The JSON interface's lines ([`gobyd_protocol`], whose reference is the
+//! guide's `docs/json-protocol.md`): request lines read into what the core
+//! takes, and the core's typed events and replies rendered as lines. The
+//! MQTT and MOOS bridges render transfers, file replies and accepted
+//! messages as these do.
 
 use dccl::Codec;
+use gobyd_protocol::event::{
+    self as line, Ack, Direction, DriverSpecific, DriverStatus, Expire, Lost, MacCycleUpdate,
+    MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw, Received, Sent,
+    TransferDirection,
+};
+use gobyd_protocol::{Accepted, Changed, Dropped, Event, Reply, Request, Topic};
 use modemdriver::{RawDirection, TransmitOutcome};
-use prost_reflect::{DynamicMessage, ReflectMessage, SerializeOptions};
-use protos::goby::acomms::protobuf::ModemTransmission;
+use prost_reflect::{DynamicMessage, ReflectMessage};
 use queue::QueueEvent;
-use serde_json::{json, Value};
+use serde_json::Value;
+
+pub use gobyd_protocol::message_json;
 
 use crate::event::{
     AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, NetworkRequest,
     PublishReply, Reception, TransferEvent,
 };
 
-/// Event kinds a client may subscribe to (received messages always reach
-/// every client).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Topic {
-    /// Acknowledgements of sent messages.
-    Ack,
-    /// Messages that expired unsent or unacknowledged.
-    Expire,
-    /// Messages dropped from a full queue.
-    Drop,
-    /// Queue size changes.
-    QueueSize,
-    /// Messages placed in a frame for sending.
-    Sent,
-    /// The modem driver: raw lines, transmissions received and sent, and
-    /// its status ([`ModemEvent`]).
-    Modem,
-    /// The medium access control: slot starts and cycle changes.
-    Mac,
-    /// Transfers (messages larger than a frame, files): progress and ends.
-    Transfer,
-    /// The links' status (up, down, restarting, budget spent).
-    Link,
-}
-
-impl Topic {
-    /// Every topic.
-    pub const ALL: [Topic; 9] = [
-        Topic::Ack,
-        Topic::Expire,
-        Topic::Drop,
-        Topic::QueueSize,
-        Topic::Sent,
-        Topic::Modem,
-        Topic::Mac,
-        Topic::Transfer,
-        Topic::Link,
-    ];
-
-    /// The topic's name in the protocol.
-    pub fn name(self) -> &'static str {
-        match self {
-            Topic::Ack => "ack",
-            Topic::Expire => "expire",
-            Topic::Drop => "drop",
-            Topic::QueueSize => "queue_size",
-            Topic::Sent => "sent",
-            Topic::Modem => "modem",
-            Topic::Mac => "mac",
-            Topic::Transfer => "transfer",
-            Topic::Link => "link",
-        }
-    }
-
-    fn from_name(name: &str) -> Option<Topic> {
-        Topic::ALL.into_iter().find(|t| t.name() == name)
-    }
-}
-
-/// A request line from a client.
+/// A request line as the core takes it.
 #[derive(Debug, Clone)]
-pub enum Request {
+pub enum Input {
     /// Queue this message for sending.
     Publish(DynamicMessage),
     /// Also send these events.
@@ -94,62 +39,61 @@ pub enum Request {
     Network(NetworkRequest),
 }
 
-/// Parses one request line; messages may be of any type loaded in
+/// Reads one request line; messages may be of any type loaded in
 /// `codec`. The error is the text of the `error` reply.
-pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
-    let value: Value = serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
-    let Value::Object(object) = value else {
-        return Err("not a JSON object".into());
-    };
-    if let Some(name) = object.get("publish") {
-        let name = name
-            .as_str()
-            .ok_or("\"publish\" must be a message type name")?;
-        let desc = codec
-            .descriptor(name)
-            .ok_or_else(|| format!("unknown message type {name}: it is not a loaded DCCL type"))?;
-        let msg = object
-            .get("msg")
-            .ok_or_else(|| format!("{name}: \"msg\" is missing"))?;
-        let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
-        return Ok(Request::Publish(message));
-    }
-    if let Some(name) = object.get("driver_specific") {
-        let name = name
-            .as_str()
-            .ok_or("\"driver_specific\" must be a message type name (e.g. goby.acomms.protobuf.MicroModemSpecific)")?;
-        let desc = protos::DESCRIPTOR_POOL
-            .get_message_by_name(name)
-            .ok_or_else(|| format!("unknown driver request type {name} (e.g. goby.acomms.protobuf.MicroModemSpecific)"))?;
-        let msg = object
-            .get("msg")
-            .ok_or_else(|| format!("{name}: \"msg\" is missing"))?;
-        let message = DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{name}: {e}"))?;
-        return Ok(Request::DriverSpecific(message));
-    }
-    for kind in ["file_send", "file_get", "transfers"] {
-        if let Some(spec) = object.get(kind) {
-            return network_request(kind, spec).map(Request::Network);
+pub fn parse_request(line: &str, codec: &Codec) -> Result<Input, String> {
+    input(Request::parse(line)?, codec)
+}
+
+/// What the core takes of `request`: its message read against the types
+/// loaded in `codec` (a driver-specific request against the driver
+/// requests' types). The error is the text of the `error` reply.
+pub fn input(request: Request, codec: &Codec) -> Result<Input, String> {
+    match request {
+        Request::Publish { type_name, msg } => {
+            let desc = codec.descriptor(&type_name).ok_or_else(|| {
+                format!("unknown message type {type_name}: it is not a loaded DCCL type")
+            })?;
+            message(type_name, desc, msg).map(Input::Publish)
+        }
+        Request::DriverSpecific { type_name, msg } => {
+            let desc = protos::DESCRIPTOR_POOL
+                .get_message_by_name(&type_name)
+                .ok_or_else(|| format!("unknown driver request type {type_name} (e.g. goby.acomms.protobuf.MicroModemSpecific)"))?;
+            message(type_name, desc, msg).map(Input::DriverSpecific)
+        }
+        Request::Subscribe(topics) => Ok(Input::Subscribe(topics)),
+        Request::FileSend(_) | Request::FileGet(_) | Request::Transfers => {
+            Ok(Input::Network(network_of(request)))
         }
     }
-    if let Some(topics) = object.get("subscribe") {
-        let topics = topics
-            .as_array()
-            .ok_or("\"subscribe\" must be a list of topics")?;
-        return topics
-            .iter()
-            .map(|t| {
-                t.as_str().and_then(Topic::from_name).ok_or_else(|| {
-                    format!(
-                        "unknown topic {t}; topics are {}",
-                        Topic::ALL.map(Topic::name).join(", ")
-                    )
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()
-            .map(Request::Subscribe);
+}
+
+/// The message `msg` of type `desc`, named `type_name` in errors.
+fn message(
+    type_name: String,
+    desc: prost_reflect::MessageDescriptor,
+    msg: Option<Value>,
+) -> Result<DynamicMessage, String> {
+    let msg = msg.ok_or_else(|| format!("{type_name}: \"msg\" is missing"))?;
+    DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{type_name}: {e}"))
+}
+
+/// The network layer's request of a file request (`Transfers` for any
+/// other request).
+fn network_of(request: Request) -> NetworkRequest {
+    match request {
+        Request::FileSend(spec) => NetworkRequest::SendFile {
+            dest: spec.dest,
+            path: spec.path.into(),
+            name: spec.name,
+        },
+        Request::FileGet(spec) => NetworkRequest::GetFile {
+            node: spec.node,
+            path: spec.path,
+        },
+        _ => NetworkRequest::Transfers,
     }
-    Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\" or \"transfers\"".into())
 }
 
 /// A request of the network layer: `kind` `file_send` (`spec` `{"dest",
@@ -157,139 +101,132 @@ pub fn parse_request(line: &str, codec: &Codec) -> Result<Request, String> {
 /// (anything). Also what the MQTT and MOOS bridges take. The error says
 /// what is missing or wrong.
 pub fn network_request(kind: &str, spec: &Value) -> Result<NetworkRequest, String> {
-    match kind {
-        "file_send" => {
-            let dest = node_field(spec, "dest", "file_send")?;
-            let path = spec
-                .get("path")
-                .and_then(Value::as_str)
-                .filter(|p| !p.is_empty())
-                .ok_or(
-                    "file_send: \"path\" (the file's path on the daemon's machine) is missing",
-                )?;
-            let name = match spec.get("name") {
-                None | Some(Value::Null) => None,
-                Some(v) => Some(
-                    v.as_str()
-                        .ok_or("file_send: \"name\" must be a string")?
-                        .to_string(),
-                ),
-            };
-            Ok(NetworkRequest::SendFile {
-                dest,
-                path: path.into(),
-                name,
-            })
-        }
-        "file_get" => {
-            let node = node_field(spec, "node", "file_get")?;
-            let path = spec
-                .get("path")
-                .and_then(Value::as_str)
-                .filter(|p| !p.is_empty())
-                .ok_or(
-                    "file_get: \"path\" (the file's path under the node's serve_dir) is missing",
-                )?;
-            Ok(NetworkRequest::GetFile {
-                node,
-                path: path.to_string(),
-            })
-        }
-        "transfers" => Ok(NetworkRequest::Transfers),
-        other => Err(format!(
-            "{other:?} is not a file request: file_send, file_get or transfers"
-        )),
-    }
+    gobyd_protocol::request::file_request(kind, spec).map(network_of)
 }
 
-/// A node's modem id in field `key` of a request's object.
-fn node_field(spec: &Value, key: &str, request: &str) -> Result<i32, String> {
-    spec.get(key)
-        .and_then(Value::as_i64)
-        .and_then(|n| i32::try_from(n).ok())
-        .ok_or_else(|| format!("{request}: \"{key}\" (a modem id) is missing"))
-}
-
-/// A message as proto3 JSON with the `.proto` field names, its fields in
-/// the order the `.proto` declares them, and each floating-point value in
-/// the shortest form that reads back as the same value of its type (a
-/// `float` 28.7 is `28.7`, not the `28.700000762939453` of the same bits
-/// widened to a `double`).
-pub fn message_json(message: &DynamicMessage) -> Value {
-    let options = SerializeOptions::new().use_proto_field_name(true);
-    // Written as text first: serde_json writes an f32 as an f32 (a value
-    // serializer widens it), and the text is read back in order.
-    let mut text = Vec::new();
-    message
-        .serialize_with_options(&mut serde_json::Serializer::new(&mut text), &options)
-        .map_err(|e| e.to_string())
-        .and_then(|()| serde_json::from_slice(&text).map_err(|e| e.to_string()))
-        .unwrap_or_else(|e| json!({ "unserializable": e }))
-}
-
-/// The reply to a publish (without its reply number): `accepted` or
-/// `error`.
-pub fn reply_line(reply: &PublishReply) -> String {
+/// The reply to a publish: `accepted` or `error`.
+pub fn publish_reply(reply: &PublishReply) -> Reply {
     match reply {
-        Ok(accepted) => accepted_value(accepted).to_string(),
-        Err(reason) => error_line(reason),
+        Ok(accepted) => Reply::Accepted(accepted_reply(accepted)),
+        Err(reason) => Reply::error(reason.as_str()),
     }
 }
 
-/// The `accepted` reply as a JSON object, with the messages its message
-/// pushed out of a full queue and the values the codec changed.
-pub fn accepted_value(accepted: &AcceptedMessage) -> Value {
-    let AcceptedMessage {
-        name,
-        id,
-        dropped,
-        changes,
-    } = accepted;
-    let mut reply = match id {
-        Some(id) => json!({ "accepted": name, "id": id }),
-        None => json!({ "accepted": name, "delivered": true }),
-    };
-    if !dropped.is_empty() {
-        reply["dropped"] = dropped
+/// The `accepted` reply, with the messages its message pushed out of a
+/// full queue and the values the codec changed.
+pub fn accepted_reply(accepted: &AcceptedMessage) -> Accepted {
+    Accepted {
+        accepted: accepted.name.clone(),
+        id: accepted.id,
+        delivered: accepted.id.is_none(),
+        dropped: accepted
+            .dropped
             .iter()
-            .map(|(id, m)| {
-                json!({ "id": id, "name": m.descriptor().full_name(), "msg": message_json(m) })
+            .map(|(id, m)| Dropped {
+                id: *id,
+                name: m.descriptor().full_name().to_string(),
+                msg: message_json(m),
             })
-            .collect();
-    }
-    if !changes.is_empty() {
-        reply["changed"] = changes
+            .collect(),
+        changed: accepted
+            .changes
             .iter()
-            .map(|c| json!({ "field": c.field, "reason": c.reason }))
-            .collect();
+            .map(|c| Changed {
+                field: c.field.clone(),
+                reason: c.reason.clone(),
+            })
+            .collect(),
     }
-    reply
 }
 
-/// The `subscribed` reply: every topic the client now receives.
-pub fn subscribed_line(topics: &[Topic]) -> String {
-    json!({ "subscribed": topics.iter().map(|t| t.name()).collect::<Vec<_>>() }).to_string()
+/// The `accepted` reply as a JSON object (the MQTT bridge's `accepted`
+/// payload starts from it).
+pub fn accepted_value(accepted: &AcceptedMessage) -> Value {
+    serde_json::to_value(accepted_reply(accepted)).unwrap_or_default()
 }
 
-/// The `error` reply (without its reply number).
-pub fn error_line(text: &str) -> String {
-    json!({ "error": text }).to_string()
+/// The reply to a request of the network layer: `file_send`, `file_get`
+/// or `transfers`.
+pub fn network_reply(reply: &NetworkReply) -> Reply {
+    match reply {
+        NetworkReply::FileSent {
+            id,
+            joined,
+            transfer: t,
+        } => Reply::FileSend {
+            file_send: *id,
+            joined: *joined,
+            transfer: transfer(t),
+        },
+        NetworkReply::FileAsked { request, node } => Reply::FileGet {
+            file_get: *request,
+            node: *node,
+        },
+        NetworkReply::Transfers(transfers) => Reply::Transfers {
+            transfers: transfers.iter().map(transfer).collect(),
+        },
+    }
 }
 
-/// A reply line numbered `number`: `"reply": number` added to the object.
-pub fn numbered_reply(line: &str, number: u64) -> String {
-    match serde_json::from_str::<Value>(line) {
-        Ok(Value::Object(mut object)) => {
-            object.insert("reply".into(), number.into());
-            Value::Object(object).to_string()
+/// The reply to a request of the network layer as a JSON object: the MQTT
+/// bridge's `file/reply` and the MOOS bridge's `file_reply_var` start
+/// from it.
+pub fn network_reply_value(reply: &NetworkReply) -> Value {
+    serde_json::to_value(network_reply(reply)).unwrap_or_default()
+}
+
+/// A transfer as the `transfer` event shows it (also the items of the
+/// `file_send` and `transfers` replies).
+pub fn transfer(e: &TransferEvent) -> line::Transfer {
+    line::Transfer {
+        transfer: e.id,
+        direction: if e.outgoing {
+            TransferDirection::Out
+        } else {
+            TransferDirection::In
+        },
+        peer: e.peer,
+        name: e.name.clone(),
+        bytes: e.bytes,
+        fragments: e.fragments,
+        held: e.held,
+        state: e.state.to_string(),
+        sha256: e.sha256.clone(),
+        reason: e.reason.clone(),
+        path: e.path.clone(),
+        request: e.request,
+    }
+}
+
+/// A transfer as a JSON object, `"event": "transfer"` first (the MQTT and
+/// MOOS bridges' transfer payloads start from it).
+pub fn transfer_value(e: &TransferEvent) -> Value {
+    serde_json::to_value(transfer(e)).unwrap_or_default()
+}
+
+/// A reception's summary as JSON: every field of the transmission in
+/// proto JSON form (source, destination, rate, ack wanted, and, from a
+/// WHOI Micro-Modem, `receive_stat` with the modem's `$CACST` statistics:
+/// SNR in and out, Doppler, data quality factor, bad frames ...) except
+/// the frames' bytes, replaced by their count `frames`, and `time` in
+/// seconds since the UNIX epoch, and with several links `name`, the
+/// link's.
+pub fn link_json(summary: &LinkSummary) -> Value {
+    let mut value = message_json(&summary.transmission.transcode_to_dynamic());
+    if let Value::Object(map) = &mut value {
+        map.remove("frame");
+        map.insert("frames".into(), summary.frames.into());
+        map.insert("time".into(), (summary.time as f64 / 1e6).into());
+        if let Some(name) = &summary.name {
+            map.insert("name".into(), name.clone().into());
         }
-        _ => json!({ "reply": number, "error": line }).to_string(),
     }
+    value
 }
 
 /// The event telling a client that it missed `count` events.
-pub fn lost_line(count: u64) -> String {
-    json!({ "event": "lost", "count": count }).to_string()
+pub fn lost(count: u64) -> Event {
+    Event::Lost(Lost { count })
 }
 
 /// The topic an event belongs to (`None`: received messages, sent to
@@ -321,217 +258,132 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
 /// its DCCL id.
 ///
 /// A received message's line carries its reception: `"link"` (the
-/// summary of the transmission it came in, [`link_json`], with
-/// the modem's link statistics when the driver gives them) and
+/// summary of the transmission it came in, [`link_json`], with the
+/// modem's link statistics when the driver gives them) and
 /// `"recovered": true` when it is handed over after a restart (it was
 /// received before; a client that may have seen it then can tell).
-pub fn event_line(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<String> {
-    let line = match event {
+pub fn event(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<Event> {
+    Some(match event {
         DaemonEvent::Received {
             received,
             reception,
-        } => received_line(received, reception),
+        } => Event::Received(received_line(received, reception)),
         DaemonEvent::Queue { event, entry } => queue_line(event, *entry, queue_name)?,
         DaemonEvent::Modem(event) => modem_line(event),
-        DaemonEvent::Transfer(event) => transfer_value(event),
-        DaemonEvent::Link(status) => json!({
-            "event": "link_status",
-            "link_status": message_json(&status.transcode_to_dynamic()),
+        DaemonEvent::Transfer(e) => Event::Transfer(transfer(e)),
+        DaemonEvent::Link(status) => Event::LinkStatus(line::LinkStatus {
+            link_status: message_json(&status.transcode_to_dynamic()),
         }),
-    };
-    Some(line.to_string())
+    })
 }
 
-/// A transfer as JSON: `{"event": "transfer", "transfer": ID, ...}` (see
-/// [`TransferEvent`]); also the items of the
-/// `transfers` reply.
-pub fn transfer_value(e: &TransferEvent) -> Value {
-    let mut line = json!({
-        "event": "transfer",
-        "transfer": e.id,
-        "direction": if e.outgoing { "out" } else { "in" },
-        "peer": e.peer,
-        "name": e.name,
-        "bytes": e.bytes,
-        "fragments": e.fragments,
-        "held": e.held,
-        "state": e.state,
-        "sha256": e.sha256,
-    });
-    if let Some(reason) = &e.reason {
-        line["reason"] = reason.clone().into();
-    }
-    if let Some(path) = &e.path {
-        line["path"] = path.clone().into();
-    }
-    if let Some(request) = e.request {
-        line["request"] = request.into();
-    }
-    line
+/// [`event`]'s line, without its newline.
+pub fn event_line(e: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<String> {
+    event(e, queue_name).map(|e| e.line())
 }
 
-/// The answer to a request of the network layer as JSON: `{"file_send":
-/// ID, "joined": B, "transfer": {…}}`, `{"file_get": R, "node": N}` or
-/// `{"transfers": [{…}, …]}` (each transfer as [`transfer_value`]). The
-/// JSON reply's fields, also the MQTT bridge's `file/reply` and the MOOS
-/// bridge's `file_reply_var`.
-pub fn network_reply_value(reply: &NetworkReply) -> Value {
-    match reply {
-        NetworkReply::FileSent {
-            id,
-            joined,
-            transfer,
-        } => json!({
-            "file_send": id,
-            "joined": joined,
-            "transfer": transfer_value(transfer),
-        }),
-        NetworkReply::FileAsked { request, node } => {
-            json!({ "file_get": request, "node": node })
-        }
-        NetworkReply::Transfers(transfers) => json!({
-            "transfers": transfers.iter().map(transfer_value).collect::<Vec<_>>(),
-        }),
+fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Received {
+    Received {
+        received: r.message.descriptor().full_name().to_string(),
+        src: r.src,
+        dest: r.dest,
+        msg: message_json(&r.message),
+        link: reception.link.as_deref().map(link_json),
+        recovered: reception.recovered,
+        route: reception.route.as_deref().map(<[i32]>::to_vec),
     }
 }
 
-/// A reception's summary as JSON: every field of the transmission in
-/// proto JSON form (source, destination, rate, ack wanted, and, from a
-/// WHOI Micro-Modem, `receive_stat` with the modem's `$CACST` statistics:
-/// SNR in and out, Doppler, data quality factor, bad frames ...) except
-/// the frames' bytes, replaced by their count `frames`, and `time` in
-/// seconds since the UNIX epoch, and with several links `name`, the
-/// link's.
-pub fn link_json(summary: &LinkSummary) -> Value {
-    let mut value = message_json(&summary.transmission.transcode_to_dynamic());
-    if let Value::Object(map) = &mut value {
-        map.remove("frame");
-        map.insert("frames".into(), summary.frames.into());
-        map.insert("time".into(), (summary.time as f64 / 1e6).into());
-        if let Some(name) = &summary.name {
-            map.insert("name".into(), name.clone().into());
-        }
-    }
-    value
-}
-
-fn received_line(r: &queue::ReceivedMessage, reception: &Reception) -> Value {
-    let mut line = json!({
-        "event": "received",
-        "received": r.message.descriptor().full_name(),
-        "src": r.src,
-        "dest": r.dest,
-        "msg": message_json(&r.message),
-    });
-    if let Some(link) = &reception.link {
-        line["link"] = link_json(link);
-    }
-    if reception.recovered {
-        line["recovered"] = true.into();
-    }
-    if let Some(route) = &reception.route {
-        line["route"] = route.to_vec().into();
-    }
-    line
-}
-
+/// The line of a queue event. A message never journaled (addressed to
+/// this node, delivered at once) has no `entry`: its lines carry no `id`.
 fn queue_line(
     event: &QueueEvent,
     entry: Option<u64>,
     queue_name: impl Fn(u32) -> String,
-) -> Option<Value> {
+) -> Option<Event> {
     let name = |m: &DynamicMessage| m.descriptor().full_name().to_string();
-    let mut line = match event {
-        QueueEvent::Received(r) => received_line(r, &Reception::default()),
+    Some(match event {
+        QueueEvent::Received(r) => Event::Received(received_line(r, &Reception::default())),
         QueueEvent::Acked {
             message, frame, by, ..
-        } => {
-            json!({ "event": "ack", "ack": name(message), "id": entry, "by": by, "frame": frame, "msg": message_json(message) })
-        }
-        QueueEvent::Expired { message, .. } => {
-            json!({ "event": "expire", "expire": name(message), "id": entry, "msg": message_json(message) })
-        }
-        QueueEvent::Dropped { message, .. } => {
-            json!({ "event": "drop", "drop": name(message), "id": entry, "msg": message_json(message) })
-        }
-        QueueEvent::QueueSize { dccl_id, size } => {
-            json!({ "event": "queue_size", "queue_size": queue_name(*dccl_id), "size": size })
-        }
-        QueueEvent::Sent { message, frame, .. } => {
-            json!({ "event": "sent", "sent": name(message), "id": entry, "frame": frame, "msg": message_json(message) })
-        }
-        // Told in the log (see `runtime`), not a client's event.
+        } => Event::Ack(Ack {
+            ack: name(message),
+            id: entry,
+            by: *by,
+            frame: *frame,
+            msg: message_json(message),
+        }),
+        QueueEvent::Expired { message, .. } => Event::Expire(Expire {
+            expire: name(message),
+            id: entry,
+            msg: message_json(message),
+        }),
+        QueueEvent::Dropped { message, .. } => Event::Drop(line::Dropped {
+            drop: name(message),
+            id: entry,
+            msg: message_json(message),
+        }),
+        QueueEvent::QueueSize { dccl_id, size } => Event::QueueSize(QueueSize {
+            queue_size: queue_name(*dccl_id),
+            size: *size as u64,
+        }),
+        QueueEvent::Sent { message, frame, .. } => Event::Sent(Sent {
+            sent: name(message),
+            id: entry,
+            frame: *frame,
+            msg: message_json(message),
+        }),
+        // Told in the log (see the core), not a client's event.
         QueueEvent::OnDemandRejected { .. } | QueueEvent::OwnBroadcastHeard { .. } => return None,
-    };
-    // A message never journaled (addressed to this node, delivered at
-    // once) has no id: its lines carry none, rather than `"id": null`.
-    if entry.is_none() {
-        if let Some(fields) = line.as_object_mut() {
-            fields.shift_remove("id");
-        }
-    }
-    Some(line)
+    })
 }
 
-/// The line of a modem or medium access event (see
-/// [`ModemEvent`]).
-fn modem_line(event: &ModemEvent) -> Value {
-    let t = |t: &ModemTransmission| message_json(&t.transcode_to_dynamic());
+/// The line of a modem or medium access event (see [`ModemEvent`]).
+fn modem_line(event: &ModemEvent) -> Event {
+    let t = |t: &protos::goby::acomms::protobuf::ModemTransmission| {
+        message_json(&t.transcode_to_dynamic())
+    };
     match event {
-        ModemEvent::Raw(raw) => {
-            let mut line = json!({
-                "event": "raw",
-                "raw": match raw.direction {
-                    RawDirection::Incoming => "in",
-                    RawDirection::Outgoing => "out",
-                },
-                "line": ModemEvent::raw_text(raw),
-            });
-            // A key without a value is left out rather than null.
-            if let Some(peer) = &raw.peer {
-                line["peer"] = json!(peer);
-            }
-            line
-        }
-        ModemEvent::Received { transmission, .. } => {
-            json!({ "event": "modem_receive", "modem_receive": t(transmission) })
-        }
+        ModemEvent::Raw(raw) => Event::Raw(Raw {
+            raw: match raw.direction {
+                RawDirection::Incoming => Direction::In,
+                RawDirection::Outgoing => Direction::Out,
+            },
+            line: ModemEvent::raw_text(raw),
+            peer: raw.peer.clone(),
+        }),
+        ModemEvent::Received { transmission, .. } => Event::ModemReceive(ModemReceive {
+            modem_receive: t(transmission),
+        }),
         ModemEvent::Transmitted {
             transmission,
             outcome,
         } => {
             let (outcome, reason) = match outcome {
-                TransmitOutcome::Sent => ("sent", None),
-                TransmitOutcome::NothingToSend => ("nothing_to_send", None),
-                TransmitOutcome::Failed(reason) => ("failed", Some(reason.clone())),
+                TransmitOutcome::Sent => (Outcome::Sent, None),
+                TransmitOutcome::NothingToSend => (Outcome::NothingToSend, None),
+                TransmitOutcome::Failed(reason) => (Outcome::Failed, Some(reason.clone())),
             };
-            let mut line = json!({
-                "event": "modem_transmit",
-                "modem_transmit": t(transmission),
-                "outcome": outcome,
-            });
-            if let Some(reason) = reason {
-                line["reason"] = json!(reason);
-            }
-            line
+            Event::ModemTransmit(ModemTransmit {
+                modem_transmit: t(transmission),
+                outcome,
+                reason,
+            })
         }
-        ModemEvent::SlotStart { slot, .. } => {
-            json!({ "event": "mac_slot_start", "mac_slot_start": t(slot) })
-        }
-        ModemEvent::CycleUpdate { modem_id, joined } => {
-            if *joined {
-                json!({ "event": "mac_cycle_update", "joined": modem_id })
-            } else {
-                json!({ "event": "mac_cycle_update", "left": modem_id })
-            }
-        }
-        ModemEvent::Status(status) => {
-            json!({ "event": "driver_status", "driver_status": status.kind(), "detail": status.to_string() })
-        }
-        ModemEvent::Specific(message) => json!({
-            "event": "driver_specific",
-            "driver_specific": message.descriptor().full_name(),
-            "msg": message_json(message),
+        ModemEvent::SlotStart { slot, .. } => Event::MacSlotStart(MacSlotStart {
+            mac_slot_start: t(slot),
+        }),
+        ModemEvent::CycleUpdate { modem_id, joined } => Event::MacCycleUpdate(MacCycleUpdate {
+            joined: joined.then_some(*modem_id),
+            left: (!joined).then_some(*modem_id),
+        }),
+        ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
+            driver_status: status.kind().to_string(),
+            detail: status.to_string(),
+        }),
+        ModemEvent::Specific(message) => Event::DriverSpecific(DriverSpecific {
+            driver_specific: message.descriptor().full_name().to_string(),
+            msg: message_json(message),
         }),
     }
 }
@@ -539,6 +391,8 @@ fn modem_line(event: &ModemEvent) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protos::goby::acomms::protobuf::ModemTransmission;
+    use serde_json::json;
 
     fn pool() -> Codec {
         let mut codec = Codec::new();
@@ -568,61 +422,13 @@ mod tests {
     #[test]
     fn publish_lines_become_messages() {
         let line = r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "note": "survey A"}}"#;
-        let Request::Publish(m) = parse_request(line, &pool()).unwrap() else {
+        let Input::Publish(m) = parse_request(line, &pool()).unwrap() else {
             panic!("not a publish");
         };
         assert_eq!(m.descriptor().full_name(), "goby.example.Command");
         assert_eq!(
             message_json(&m),
             json!({"destination": 2, "action": "GOTO", "note": "survey A"})
-        );
-    }
-
-    /// A message `t.Reading` with a `float` declared before a `double`
-    /// and fields whose names are not in alphabetical order.
-    fn reading() -> DynamicMessage {
-        use prost_reflect::prost_types::{
-            field_descriptor_proto::Type, DescriptorProto, FieldDescriptorProto,
-            FileDescriptorProto,
-        };
-        let field = |name: &str, number, kind: Type| FieldDescriptorProto {
-            name: Some(name.into()),
-            number: Some(number),
-            r#type: Some(kind as i32),
-            ..Default::default()
-        };
-        let file = FileDescriptorProto {
-            name: Some("reading.proto".into()),
-            package: Some("t".into()),
-            syntax: Some("proto3".into()),
-            message_type: vec![DescriptorProto {
-                name: Some("Reading".into()),
-                field: vec![
-                    field("voltage", 1, Type::Float),
-                    field("depth", 2, Type::Double),
-                    field("battery", 3, Type::Float),
-                ],
-                ..Default::default()
-            }],
-            ..Default::default()
-        };
-        let pool = prost_reflect::DescriptorPool::from_file_descriptor_set(
-            prost_reflect::prost_types::FileDescriptorSet { file: vec![file] },
-        )
-        .unwrap();
-        let mut m = DynamicMessage::new(pool.get_message_by_name("t.Reading").unwrap());
-        m.set_field_by_name("voltage", prost_reflect::Value::F32(28.7));
-        m.set_field_by_name("depth", prost_reflect::Value::F64(0.1 + 0.2));
-        m.set_field_by_name("battery", prost_reflect::Value::F32(0.3));
-        m
-    }
-
-    #[test]
-    fn floats_are_printed_for_their_type_and_fields_in_declaration_order() {
-        let json = message_json(&reading()).to_string();
-        assert_eq!(
-            json,
-            r#"{"voltage":28.7,"depth":0.30000000000000004,"battery":0.3}"#
         );
     }
 
@@ -666,44 +472,12 @@ mod tests {
 
     #[test]
     fn subscriptions_name_their_topics() {
-        let Request::Subscribe(t) =
+        let Input::Subscribe(t) =
             parse_request(r#"{"subscribe": ["ack", "queue_size"]}"#, &pool()).unwrap()
         else {
             panic!("not a subscribe");
         };
         assert_eq!(t, [Topic::Ack, Topic::QueueSize]);
-    }
-
-    #[test]
-    fn replies_are_numbered_and_events_are_tagged() {
-        let v: Value = serde_json::from_str(&numbered_reply(&error_line("no"), 7)).unwrap();
-        assert_eq!(v, json!({"reply": 7, "error": "no"}));
-        let message = protos::goby::example::Command::default().transcode_to_dynamic();
-        let events = [
-            QueueEvent::Dropped {
-                message: message.clone(),
-                id: 3,
-                dccl_id: 125,
-            },
-            QueueEvent::QueueSize {
-                dccl_id: 125,
-                size: 2,
-            },
-        ];
-        for event in events {
-            let event = DaemonEvent::Queue {
-                event,
-                entry: Some(9),
-            };
-            let line = event_line(&event, |_| "goby.example.Command".into()).unwrap();
-            let v: Value = serde_json::from_str(&line).unwrap();
-            assert!(v["event"].is_string(), "{v}");
-            for reply_key in ["reply", "error", "accepted"] {
-                assert!(v.get(reply_key).is_none(), "{v}");
-            }
-        }
-        let lost: Value = serde_json::from_str(&lost_line(4)).unwrap();
-        assert_eq!(lost, json!({"event": "lost", "count": 4}));
     }
 
     #[test]
@@ -852,164 +626,6 @@ mod tests {
         assert_eq!(v["recovered"], true);
     }
 
-    /// One event of every kind the core sends, and one reply of every
-    /// kind: the exhaustive matches make a new kind fail to compile here
-    /// until it has a sample (and so a check against the guide's reference).
-    fn one_of_each() -> Vec<Value> {
-        let command = protos::goby::example::Command::default().transcode_to_dynamic();
-        let transmission = ModemTransmission {
-            src: Some(1),
-            frame: vec![vec![1]],
-            ..Default::default()
-        };
-        let queue_events = [
-            QueueEvent::Sent {
-                message: command.clone(),
-                id: 1,
-                dccl_id: 125,
-                frame: 0,
-                awaiting_ack: true,
-                link: 0,
-            },
-            QueueEvent::Acked {
-                message: command.clone(),
-                id: Some(1),
-                dccl_id: 125,
-                frame: 0,
-                by: 2,
-            },
-            QueueEvent::Expired {
-                message: command.clone(),
-                id: 1,
-                dccl_id: 125,
-            },
-            QueueEvent::Dropped {
-                message: command.clone(),
-                id: 1,
-                dccl_id: 125,
-            },
-            QueueEvent::QueueSize {
-                dccl_id: 125,
-                size: 3,
-            },
-        ];
-        for e in &queue_events {
-            match e {
-                QueueEvent::Received(_)
-                | QueueEvent::Sent { .. }
-                | QueueEvent::Acked { .. }
-                | QueueEvent::Expired { .. }
-                | QueueEvent::Dropped { .. }
-                | QueueEvent::QueueSize { .. }
-                | QueueEvent::OnDemandRejected { .. }
-                | QueueEvent::OwnBroadcastHeard { .. } => {}
-            }
-        }
-        let modem_events = [
-            ModemEvent::Raw(modemdriver::RawMessage {
-                direction: RawDirection::Incoming,
-                bytes: b"$CARXD".to_vec(),
-                peer: None,
-            }),
-            ModemEvent::Received {
-                transmission: transmission.clone(),
-                time: 1,
-            },
-            ModemEvent::Transmitted {
-                transmission: transmission.clone(),
-                outcome: TransmitOutcome::Failed("x".into()),
-            },
-            ModemEvent::SlotStart {
-                slot: transmission.clone(),
-                initiated: None,
-            },
-            ModemEvent::CycleUpdate {
-                modem_id: 3,
-                joined: true,
-            },
-            ModemEvent::Status(modemdriver::DriverStatus::Ready),
-            ModemEvent::Specific(command.clone()),
-        ];
-        for e in &modem_events {
-            match e {
-                ModemEvent::Raw(_)
-                | ModemEvent::Received { .. }
-                | ModemEvent::Transmitted { .. }
-                | ModemEvent::SlotStart { .. }
-                | ModemEvent::CycleUpdate { .. }
-                | ModemEvent::Status(_)
-                | ModemEvent::Specific(_) => {}
-            }
-        }
-        let received = queue::ReceivedMessage {
-            message: command.clone(),
-            dccl_id: 125,
-            src: 1,
-            dest: 2,
-            time: None,
-            bytes: Vec::new(),
-            identity: None,
-        };
-        let mut events = vec![DaemonEvent::Received {
-            received,
-            reception: Reception {
-                link: Some(LinkSummary::shared(&transmission, 1)),
-                recovered: true,
-                route: None,
-            },
-        }];
-        events.extend(queue_events.into_iter().map(|event| DaemonEvent::Queue {
-            event,
-            entry: Some(1),
-        }));
-        events.extend(modem_events.into_iter().map(DaemonEvent::Modem));
-        events.push(DaemonEvent::Transfer(TransferEvent {
-            outgoing: false,
-            id: 7,
-            peer: 1,
-            name: "sonar.bin".into(),
-            bytes: 20_000,
-            fragments: 400,
-            held: 400,
-            state: "failed",
-            reason: Some("its SHA-256 did not match at the receiver".into()),
-            path: Some("/data/files/sonar.bin".into()),
-            sha256: "00".repeat(32),
-            request: Some(3),
-        }));
-        events.push(DaemonEvent::Link(crate::event::LinkStatus {
-            name: Some("iridium".into()),
-            state: Some(protos::goby::apps::protobuf::link_status::State::LinkUp as i32),
-            ..Default::default()
-        }));
-        for e in &events {
-            match e {
-                DaemonEvent::Received { .. }
-                | DaemonEvent::Queue { .. }
-                | DaemonEvent::Modem(_)
-                | DaemonEvent::Transfer(_)
-                | DaemonEvent::Link(_) => {}
-            }
-        }
-        let mut lines: Vec<String> = events
-            .iter()
-            .filter_map(|e| event_line(e, |_| "goby.example.Command".into()))
-            .collect();
-        lines.push(reply_line(&Ok(AcceptedMessage {
-            name: "goby.example.Command".into(),
-            id: Some(1),
-            dropped: vec![(Some(0), command)],
-            changes: Vec::new(),
-        })));
-        lines.push(subscribed_line(&[Topic::Ack]));
-        lines.push(error_line("bad"));
-        lines.push(lost_line(2));
-        lines
-            .iter()
-            .map(|l| serde_json::from_str(l).expect("a JSON line"))
-            .collect()
-    }
-
     /// Every kind of driver status has its row in the guide's table of
     /// driver status kinds (a new kind fails to compile here until it is
     /// listed, then fails until it is documented).
@@ -1081,48 +697,5 @@ mod tests {
         }
         let rows = section.lines().filter(|l| l.starts_with("| `")).count();
         assert_eq!(rows, all.len(), "a row for a kind the driver has not");
-    }
-
-    /// The guide's table of the JSON interface (`docs/json-protocol.md`) is
-    /// the protocol's reference: every line kind the daemon renders is
-    /// there, with each of its keys.
-    #[test]
-    fn every_line_kind_and_key_is_in_the_guides_reference() {
-        let guide = include_str!("../../../../docs/json-protocol.md");
-        let start = guide
-            .find("## The JSON interface")
-            .expect("the JSON interface section");
-        let section = &guide[start..];
-        let section = &section[..section.find("\n## ").unwrap_or(section.len())];
-        for line in one_of_each() {
-            let Value::Object(map) = &line else {
-                panic!("{line} is not an object");
-            };
-            // The row of the table documenting this kind of line: the
-            // event kind, or a reply's distinguishing key.
-            let kind = match map.get("event").and_then(Value::as_str) {
-                Some(kind) => format!(r#""event": "{kind}""#),
-                None => {
-                    let key = ["accepted", "subscribed", "error"]
-                        .into_iter()
-                        .find(|k| map.contains_key(*k))
-                        .unwrap_or_else(|| panic!("{line}: neither an event nor a known reply"));
-                    format!(r#""{key}""#)
-                }
-            };
-            let row = section
-                .lines()
-                .find(|r| r.starts_with('|') && r.contains(&kind))
-                .unwrap_or_else(|| {
-                    panic!("no row of the guide's JSON reference shows {kind}: {line}")
-                });
-            for key in map.keys() {
-                let quoted = format!(r#""{key}""#);
-                assert!(
-                    row.contains(&quoted) || section.contains(&format!("`{key}`")),
-                    "the guide's JSON reference does not name key {quoted} of {line}"
-                );
-            }
-        }
     }
 }

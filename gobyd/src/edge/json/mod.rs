@@ -34,16 +34,16 @@ use tokio::task::JoinSet;
 
 pub mod lines;
 
+#[cfg(test)]
+mod golden;
+
 use crate::event::{
     Control, CoreHandle, DaemonEvent, LinkStatus, ModemEvent, Publish, SharedEvent,
 };
-use lines::{
-    error_line, event_line, event_topic, lost_line, network_reply_value, numbered_reply,
-    parse_request, reply_line, subscribed_line, Request, Topic,
-};
+use gobyd_protocol::{Reply, Topic};
+use lines::{event_line, event_topic, lost, network_reply, parse_request, publish_reply, Input};
 
-/// Longest request line accepted, bytes (without its newline).
-pub const MAX_LINE: usize = 1024 * 1024;
+pub use gobyd_protocol::MAX_LINE;
 
 /// Capacity a connection's line buffer shrinks back to after a long line.
 const KEPT_CAPACITY: usize = 64 * 1024;
@@ -70,30 +70,35 @@ const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(10), Duratio
 /// What a request line leads to.
 enum Handled {
     /// The reply, at once.
-    Reply(String),
+    Reply(Reply),
     /// The reply at once, then event lines (the current state a
     /// subscription asked for).
-    ReplyThen(String, Vec<String>),
+    ReplyThen(Reply, Vec<String>),
     /// The reply line, once the core answers.
     Waiting(Answer),
 }
 
 /// A reply line still to come: the core's typed answer, rendered when it
 /// arrives.
-type Answer = Pin<Box<dyn Future<Output = String> + Send>>;
+type Answer = Pin<Box<dyn Future<Output = Reply> + Send>>;
 
 /// The line of the core's answer when it comes: `render` for an answer,
 /// an error when the core stopped first.
 fn answer<T: Send + 'static>(
     waiting: oneshot::Receiver<T>,
-    render: impl FnOnce(T) -> String + Send + 'static,
+    render: impl FnOnce(T) -> Reply + Send + 'static,
 ) -> Answer {
     Box::pin(async move {
         match waiting.await {
             Ok(reply) => render(reply),
-            Err(_) => error_line("the daemon is shutting down"),
+            Err(_) => shutting_down(),
         }
     })
+}
+
+/// The reply to a request the core can no longer take.
+fn shutting_down() -> Reply {
+    Reply::error("the daemon is shutting down")
 }
 
 /// What the next read of a [`LineReader`] found.
@@ -236,21 +241,21 @@ impl JsonInterface {
     /// through.
     async fn handle_line(&self, line: &str, topics: &mut HashSet<Topic>) -> Handled {
         match parse_request(line, &self.codec) {
-            Err(e) => Handled::Reply(error_line(&e)),
+            Err(e) => Handled::Reply(Reply::error(e)),
             Ok(request) => self.handle_request(request, topics).await,
         }
     }
 
     /// Handles one request: its reply now, or the channel it comes through.
-    async fn handle_request(&self, request: Request, topics: &mut HashSet<Topic>) -> Handled {
+    async fn handle_request(&self, request: Input, topics: &mut HashSet<Topic>) -> Handled {
         match request {
-            Request::Subscribe(t) => {
+            Input::Subscribe(t) => {
                 let modem_now = !topics.contains(&Topic::Modem) && t.contains(&Topic::Modem);
                 let link_now = !topics.contains(&Topic::Link) && t.contains(&Topic::Link);
                 topics.extend(t);
                 let mut all: Vec<Topic> = topics.iter().copied().collect();
                 all.sort_by_key(|t| t.name());
-                let reply = subscribed_line(&all);
+                let reply = Reply::Subscribed { subscribed: all };
                 // The driver's and the links' status as they stand, once:
                 // later changes come as events.
                 let mut now = Vec::new();
@@ -272,7 +277,7 @@ impl JsonInterface {
                     Handled::ReplyThen(reply, lines)
                 }
             }
-            Request::Publish(message) => {
+            Input::Publish(message) => {
                 let (reply, waiting) = oneshot::channel();
                 if self
                     .publish
@@ -280,31 +285,33 @@ impl JsonInterface {
                     .await
                     .is_err()
                 {
-                    return Handled::Reply(error_line("the daemon is shutting down"));
+                    return Handled::Reply(shutting_down());
                 }
-                Handled::Waiting(answer(waiting, |reply| reply_line(&reply)))
+                Handled::Waiting(answer(waiting, |reply| publish_reply(&reply)))
             }
-            Request::Network(request) => {
+            Input::Network(request) => {
                 let (reply, outcome) = oneshot::channel();
                 let control = Control::Network { request, reply };
                 if self.control.send(control).await.is_err() {
-                    return Handled::Reply(error_line("the daemon is shutting down"));
+                    return Handled::Reply(shutting_down());
                 }
                 Handled::Waiting(answer(outcome, |outcome| match outcome {
-                    Ok(value) => network_reply_value(&value).to_string(),
-                    Err(e) => error_line(&e),
+                    Ok(reply) => network_reply(&reply),
+                    Err(e) => Reply::error(e),
                 }))
             }
-            Request::DriverSpecific(message) => {
+            Input::DriverSpecific(message) => {
                 let name = message.descriptor().full_name().to_string();
                 let (reply, outcome) = oneshot::channel();
                 let control = Control::DriverSpecific { message, reply };
                 if self.control.send(control).await.is_err() {
-                    return Handled::Reply(error_line("the daemon is shutting down"));
+                    return Handled::Reply(shutting_down());
                 }
                 Handled::Waiting(answer(outcome, move |outcome| match outcome {
-                    Ok(()) => serde_json::json!({ "driver_specific": name }).to_string(),
-                    Err(e) => error_line(&e),
+                    Ok(()) => Reply::DriverSpecific {
+                        driver_specific: name,
+                    },
+                    Err(e) => Reply::error(e),
                 }))
             }
         }
@@ -358,7 +365,7 @@ impl JsonInterface {
         // A request other than a publish, read while replies were owed: it
         // is handled once they are sent (a subscription changes what this
         // connection sends only after the replies before it).
-        let mut held: Option<(u64, Request)> = None;
+        let mut held: Option<(u64, Input)> = None;
         // What to write next (replies and event lines, each with its
         // newline), written in one go.
         let mut out = String::new();
@@ -393,7 +400,7 @@ impl JsonInterface {
                         number += 1;
                         owed.push(
                             number,
-                            Handled::Reply(error_line(&format!(
+                            Handled::Reply(Reply::error(format!(
                                 "line too long: the limit is {MAX_LINE} bytes; the rest of the line is skipped"
                             ))),
                         );
@@ -402,8 +409,8 @@ impl JsonInterface {
                     Ok(LineRead::Line(text)) => {
                         number += 1;
                         match parse_request(&text, &self.codec) {
-                            Err(e) => owed.push(number, Handled::Reply(error_line(&e))),
-                            Ok(request @ Request::Publish(_)) => {
+                            Err(e) => owed.push(number, Handled::Reply(Reply::error(e))),
+                            Ok(request @ Input::Publish(_)) => {
                                 let handled = self.handle_request(request, &mut topics).await;
                                 owed.push(number, handled);
                             }
@@ -432,7 +439,7 @@ impl JsonInterface {
                         tracing::info!(%peer, "JSON client read too slowly: {n} events not sent");
                     }
                     Err(broadcast::error::RecvError::Lagged(n)) => {
-                        out.push_str(&lost_line(n));
+                        out.push_str(&lost(n).line());
                         out.push('\n');
                     }
                     Err(broadcast::error::RecvError::Closed) => break,
@@ -481,16 +488,16 @@ impl JsonInterface {
                         let busy = publishes.load(std::sync::atomic::Ordering::Relaxed)
                             >= MAX_UDP_WAITING;
                         let handled = if line.is_empty() {
-                            Handled::Reply(error_line("empty datagram: expected a JSON request"))
+                            Handled::Reply(Reply::error("empty datagram: expected a JSON request"))
                         } else if busy {
-                            Handled::Reply(error_line("busy: too many publishes waiting; send again later"))
+                            Handled::Reply(Reply::error("busy: too many publishes waiting; send again later"))
                         } else {
                             self.handle_line(line, &mut peer.topics).await
                         };
                         let ready = match handled {
-                            Handled::Reply(reply) => Ok(vec![numbered_reply(&reply, number)]),
+                            Handled::Reply(reply) => Ok(vec![reply.numbered(number).line()]),
                             Handled::ReplyThen(reply, events) => {
-                                let mut datagrams = vec![numbered_reply(&reply, number)];
+                                let mut datagrams = vec![reply.numbered(number).line()];
                                 datagrams.extend(events);
                                 Ok(datagrams)
                             }
@@ -516,7 +523,7 @@ impl JsonInterface {
                                         Err(async move {
                                             let line = reply.await;
                                             publishes.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
-                                            numbered_reply(&line, number)
+                                            line.numbered(number).line()
                                         })
                                     }
                                 };
@@ -553,7 +560,7 @@ impl JsonInterface {
                     }
                     Err(broadcast::error::RecvError::Lagged(n)) => {
                         tracing::warn!("JSON UDP interface lost {n} events");
-                        let line = lost_line(n);
+                        let line = lost(n).line();
                         for (addr, peer) in &peers.peers {
                             if !peer.topics.is_empty() {
                                 let _ = socket.send_to(line.as_bytes(), addr).await;
@@ -588,9 +595,9 @@ impl Pipeline {
     /// The reply of request `number`.
     fn push(&mut self, number: u64, handled: Handled) {
         let owed = match handled {
-            Handled::Reply(line) => Owed::Ready(numbered_reply(&line, number)),
-            Handled::ReplyThen(line, events) => {
-                let mut text = numbered_reply(&line, number);
+            Handled::Reply(reply) => Owed::Ready(reply.numbered(number).line()),
+            Handled::ReplyThen(reply, events) => {
+                let mut text = reply.numbered(number).line();
                 for event in events {
                     text.push('\n');
                     text.push_str(&event);
@@ -624,8 +631,8 @@ impl Pipeline {
         let Owed::Waiting(answer) = owed else {
             return;
         };
-        let line = answer.await;
-        *owed = Owed::Ready(numbered_reply(&line, *number));
+        let reply = answer.await;
+        *owed = Owed::Ready(reply.numbered(*number).line());
     }
 
     /// Appends the replies ready at the front, each with its newline, to
