@@ -398,8 +398,10 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     for id in 1..=2 {
         let path = dir.join(format!("data{id}")).join("outbox.journal");
         let (journal, _) = queue::Journal::open(&path).unwrap();
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<Command>().unwrap();
         for entry in journal.entries() {
-            let command: Command = prost::Message::decode(entry.message.as_slice()).unwrap();
+            let command: Command = codec.decode_typed(&entry.message).unwrap();
             *owed.entry(command.note().to_string()).or_default() += 1;
         }
     }

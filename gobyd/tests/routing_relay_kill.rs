@@ -42,11 +42,19 @@ fn config(id: i32, dir: &Path, ports: &[u16]) -> PathBuf {
         .write(dir.join(format!("node{id}.pb.txt")))
 }
 
+/// A codec of the commands and of the routed messages that carry them (the
+/// journal holds their DCCL encodings).
+fn codec() -> dccl::Codec {
+    let mut codec = dccl::Codec::new();
+    codec.load(&Command::default().descriptor()).unwrap();
+    codec.load(&RoutedMessage::default().descriptor()).unwrap();
+    codec
+}
+
 /// The notes of the routed commands in a node's journal, by the node's
 /// journal id: (origin, final destination, note).
 fn custody(data: &Path) -> Vec<(i32, i32, String)> {
-    let mut codec = dccl::Codec::new();
-    codec.load(&Command::default().descriptor()).unwrap();
+    let codec = codec();
     let Ok(bytes) = std::fs::read(data.join("outbox.journal")) else {
         return Vec::new();
     };
@@ -58,7 +66,7 @@ fn custody(data: &Path) -> Vec<(i32, i32, String)> {
         .iter()
         .filter(|e| e.message_name == "goby.acomms.protobuf.RoutedMessage")
         .filter_map(|e| {
-            let m: RoutedMessage = prost::Message::decode(e.message.as_slice()).ok()?;
+            let m: RoutedMessage = codec.decode_typed(&e.message).ok()?;
             let c: Command = codec.decode_typed(&m.payload).ok()?;
             Some((m.origin, m.final_dest, c.note().to_string()))
         })
@@ -78,7 +86,7 @@ fn owed_notes(data: &Path) -> Vec<String> {
             .iter()
             .filter(|e| e.message_name == "goby.example.Command")
         {
-            let c: Command = prost::Message::decode(e.message.as_slice()).unwrap();
+            let c: Command = codec().decode_typed(&e.message).unwrap();
             notes.push(c.note().to_string());
         }
     }

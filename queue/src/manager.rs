@@ -26,9 +26,9 @@ use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
 /// request (`None`: nothing to send this time).
 pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
 
-/// What the caller knows of a message it queues
-/// ([`QueueManager::push_with`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// What the caller knows of a message it queues ([`QueueManager::push`]);
+/// `PushOptions::default()` when it knows nothing more.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct PushOptions {
     /// Its age (for `ttl`) counts from this time instead of now, when its
     /// type has no timestamp role: for messages accepted earlier.
@@ -40,6 +40,11 @@ pub struct PushOptions {
     /// It may have been sent already (queued again after a restart or a
     /// failed transmission): its first sending is marked `resent`.
     pub resent: bool,
+    /// Its DCCL encoding, when the caller made it already with the
+    /// manager's codec (checking the message at the door, say): the
+    /// message is then not encoded again. Bytes whose DCCL id is not the
+    /// message's type's are refused.
+    pub encoded: Option<Vec<u8>>,
 }
 
 /// A sent message awaiting its acknowledgement.
@@ -343,42 +348,21 @@ impl QueueManager {
         Ok(())
     }
 
-    /// Queues a message of a configured type. It is encoded now: a message
-    /// that cannot be encoded is refused with the DCCL error (naming the
-    /// field), and nothing else changes.
+    /// Queues a message of a configured type, with what the caller knows
+    /// of it ([`PushOptions`]: when it was accepted, its publication
+    /// number, whether it may have been sent already, its encoding). It is
+    /// encoded now unless its encoding is given: a message that cannot be
+    /// encoded is refused with the DCCL error (naming the field), and
+    /// nothing else changes.
     ///
     /// Returns the id the message has in its queue (carried by the
     /// [`QueueEvent::Acked`], [`QueueEvent::Expired`] and
     /// [`QueueEvent::Dropped`] events that end its stay), or `None` when it
     /// was not queued: addressed to this node (delivered at once) or of a
     /// `NO_QUEUE` type.
-    pub fn push(&mut self, message: &DynamicMessage) -> Result<Option<MessageId>> {
-        self.push_created_at(message, None)
-    }
-
-    /// Queues a message as [`push`](Self::push) does, its age (for `ttl`)
-    /// counted from `created` instead of now when its type has no timestamp
-    /// role: for messages accepted earlier and queued again after a restart.
-    pub fn push_created_at(
+    pub fn push(
         &mut self,
-        message: &DynamicMessage,
-        created: Option<Micros>,
-    ) -> Result<Option<MessageId>> {
-        self.push_with(
-            message,
-            PushOptions {
-                created,
-                ..Default::default()
-            },
-        )
-    }
-
-    /// Queues a message as [`push`](Self::push) does, with what the caller
-    /// knows of it: when it was accepted, its publication number, whether
-    /// it may have been sent already.
-    pub fn push_with(
-        &mut self,
-        message: &DynamicMessage,
+        message: DynamicMessage,
         options: PushOptions,
     ) -> Result<Option<MessageId>> {
         let now = options.created.unwrap_or_else(|| self.clock.now());
@@ -390,7 +374,18 @@ impl QueueManager {
         let loopback = queue.settings.has(Manipulator::Loopback);
         let no_queue = queue.settings.has(Manipulator::NoQueue);
 
-        let encoded = self.codec.encode(message)?;
+        let encoded = match options.encoded {
+            Some(encoded) => {
+                let given = self.codec.read_id(&encoded)?;
+                if given != id {
+                    return Err(QueueError::Request(format!(
+                        "{name}: the encoding given is of DCCL id {given}, not of the message's {id}"
+                    )));
+                }
+                encoded
+            }
+            None => self.codec.encode(&message)?,
+        };
         if let Some(max) = self.max_frame_bytes {
             if encoded.len() > max {
                 return Err(QueueError::TooLarge {
@@ -411,13 +406,13 @@ impl QueueManager {
                 }),
             }
         };
-        let src = role_id(queue.roles.source(message)?, "SOURCE_ID", self.modem_id)?;
+        let src = role_id(queue.roles.source(&message)?, "SOURCE_ID", self.modem_id)?;
         let dest = role_id(
-            queue.roles.destination(message)?,
+            queue.roles.destination(&message)?,
             "DESTINATION_ID",
             BROADCAST_ID,
         )?;
-        let time = queue.roles.timestamp(message)?.unwrap_or(now);
+        let time = queue.roles.timestamp(&message)?.unwrap_or(now);
         let ack_requested = queue.settings.ack;
 
         if loopback {
@@ -436,8 +431,9 @@ impl QueueManager {
         }
         if dest == self.modem_id {
             // Addressed to ourselves: delivered here, never sent.
+            let acked = ack_requested.then(|| message.clone());
             self.emit(QueueEvent::Received(ReceivedMessage {
-                message: message.clone(),
+                message,
                 dccl_id: id,
                 src,
                 dest,
@@ -445,9 +441,9 @@ impl QueueManager {
                 bytes: encoded,
                 identity: None,
             }));
-            if ack_requested {
+            if let Some(message) = acked {
                 self.emit(QueueEvent::Acked {
-                    message: message.clone(),
+                    message,
                     id: None,
                     dccl_id: id,
                     frame: 0,
@@ -468,7 +464,7 @@ impl QueueManager {
             number,
             resent: options.resent,
             seq,
-            message: message.clone(),
+            message,
             encoded,
             src,
             dest,
@@ -487,11 +483,6 @@ impl QueueManager {
         }
         self.emit_size(index);
         Ok(Some(seq))
-    }
-
-    /// Queues a prost-generated message (see [`push`](Self::push)).
-    pub fn push_message<T: ReflectMessage>(&mut self, message: &T) -> Result<Option<MessageId>> {
-        self.push(&message.transcode_to_dynamic())
     }
 
     /// Fills the frames of a data request.
@@ -965,7 +956,7 @@ impl QueueManager {
                     message.descriptor().full_name()
                 )))
             } else {
-                self.push(&message)
+                self.push(message, PushOptions::default())
             };
             if let Err(e) = outcome {
                 self.emit(QueueEvent::OnDemandRejected {

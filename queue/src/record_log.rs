@@ -10,10 +10,10 @@
 //! record = sync (4 bytes) | length: u32 LE (of the payload) | crc32: u32 LE (of length and payload) | payload
 //! ```
 //!
-//! | file kind | [`Format`] | magic      | sync word     |
-//! |-----------|------------|------------|---------------|
-//! | journal   | [`JOURNAL`]| `GOBYJNL2` | `A7 47 4A 52` |
-//! | inbox     | [`INBOX`]  | `GOBYINB1` | `A7 49 4E 42` |
+//! | file kind | [`Format`] | magic      | sync word     | older magics read |
+//! |-----------|------------|------------|---------------|-------------------|
+//! | journal   | [`JOURNAL`]| `GOBYJNLD` | `A7 47 4A 52` | `GOBYJNL2`        |
+//! | inbox     | [`INBOX`]  | `GOBYINB1` | `A7 49 4E 42` |                   |
 //!
 //! The CRC-32 is ISO-HDLC (the zlib and Ethernet one, [`CRC32`]). A payload
 //! holds at most [`MAX_PAYLOAD`] bytes (16 MiB); a length above it marks
@@ -40,6 +40,11 @@
 //!   counted in [`Replayed::discarded_bytes`]; damage left between good
 //!   records sets [`Replayed::rewrite_advised`] (each owner decides whether
 //!   to rewrite);
+//! - a header that is one of the format's older magics (the same framing,
+//!   payloads its owner still reads, and a kind of payload an earlier
+//!   version could not read: [`Format::older`]) is good: it is rewritten
+//!   with the current magic before anything is appended, so that the
+//!   earlier version refuses the file rather than drops what it cannot read;
 //! - a header within two bits of the magic, on a file that holds nothing
 //!   after it or at least one good record, is damage: it is rewritten in
 //!   place and its 8 bytes counted as discarded. Any other header is not
@@ -85,13 +90,20 @@ pub struct Format {
     pub magic: &'static [u8; 8],
     /// First bytes of every record.
     pub sync: [u8; 4],
+    /// Magics of earlier versions of the format: their files are read as
+    /// they are and take the current magic. Each is more than two bits
+    /// from the current one, so that a version that knows only it does
+    /// not take the current magic for a damaged header of its own.
+    pub older: &'static [&'static [u8; 8]],
 }
 
-/// The outbox journal ([`crate::journal`]).
+/// The outbox journal ([`crate::journal`]). `GOBYJNL2` journals hold no
+/// DCCL records; `D` is five bits from `2`.
 pub const JOURNAL: Format = Format {
     name: "journal",
-    magic: b"GOBYJNL2",
+    magic: b"GOBYJNLD",
     sync: [0xA7, 0x47, 0x4A, 0x52],
+    older: &[b"GOBYJNL2"],
 };
 
 /// The receiver's inbox (`gobyd::inbox`).
@@ -99,6 +111,7 @@ pub const INBOX: Format = Format {
     name: "inbox",
     magic: b"GOBYINB1",
     sync: [0xA7, 0x49, 0x4E, 0x42],
+    older: &[],
 };
 
 impl Format {
@@ -157,6 +170,8 @@ impl Format {
         }
         let header = if bytes.starts_with(magic) {
             Header::Good
+        } else if self.older.iter().any(|m| bytes.starts_with(*m)) {
+            Header::Older
         } else if magic
             .iter()
             .zip(bytes)
@@ -247,6 +262,8 @@ enum Header {
     Good,
     /// Within two bits of the magic: to be put right.
     Damaged,
+    /// An older magic of the format: good, to take the current one.
+    Older,
 }
 
 /// What a replay found, before any repair.
@@ -555,14 +572,14 @@ impl RecordLog {
                 self.file.sync()?;
                 self.file.sync_dir(&self.path)?;
             }
-            Header::Damaged => self.file.write_at(0, self.format.magic)?,
+            Header::Damaged | Header::Older => self.file.write_at(0, self.format.magic)?,
             Header::Good => {}
         }
         let cut = scan.header != Header::New && scan.end < bytes.len();
         if cut {
             self.file.set_len(scan.end as u64)?;
         }
-        if cut || scan.header == Header::Damaged {
+        if cut || matches!(scan.header, Header::Damaged | Header::Older) {
             self.file.sync()?;
         }
         self.len = scan.end as u64;
@@ -738,8 +755,37 @@ mod tests {
             expected.extend_from_slice(&payload);
             assert_eq!(format.frame(&payload), expected, "{}", format.name);
         }
-        assert_eq!(JOURNAL.magic, b"GOBYJNL2");
+        assert_eq!(JOURNAL.magic, b"GOBYJNLD");
         assert_eq!(INBOX.magic, b"GOBYINB1");
+    }
+
+    #[test]
+    fn a_file_of_an_older_magic_is_read_and_takes_the_current_one() {
+        const OLD: Format = Format {
+            magic: b"GOBYJNL2",
+            older: &[],
+            ..JOURNAL
+        };
+        let bytes = written(OLD, &[b"one".to_vec(), b"two".to_vec()]);
+        let (file, opened) = replay_memory(JOURNAL, bytes.clone());
+        let (_, replayed) = opened.unwrap();
+        assert_eq!(replayed.records, [b"one".to_vec(), b"two".to_vec()]);
+        assert_eq!(replayed.discarded_bytes, 0);
+        assert!(file.contents().starts_with(JOURNAL.magic));
+        assert_eq!(file.contents()[8..], bytes[8..]);
+        // A version that knows only the older magic does not take the
+        // current one for a damaged header of its own: it leaves the file.
+        let (_, opened) = replay_memory(OLD, file.contents());
+        assert!(matches!(opened, Err(LogError::NotOurs(_))));
+        for older in JOURNAL.older {
+            let bits: u32 = JOURNAL
+                .magic
+                .iter()
+                .zip(*older)
+                .map(|(a, b)| (a ^ b).count_ones())
+                .sum();
+            assert!(bits > 2, "{bits} bits");
+        }
     }
 
     #[test]

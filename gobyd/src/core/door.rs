@@ -6,7 +6,9 @@
 //! the changes are handed back to be reported to the client and logged.
 //!
 //! The message that goes on (into the journal, the queue and the raw log) is
-//! the one the receiver will decode, never the value before it was changed.
+//! the one the receiver will decode, never the value before it was changed,
+//! and it goes on with its DCCL encoding, made here: the journal keeps those
+//! bytes and the queue sends them, without encoding the message again.
 //!
 //! A time coded with `dccl.time` more than half its span (`num_days` days,
 //! one by default: 12 h) from now is refused, clamping or not: the codec
@@ -25,6 +27,8 @@ use protos::goby::acomms::protobuf::QueueManagerConfig;
 pub struct Admitted {
     /// The message as it will be sent (changed when `changes` is not empty).
     pub message: DynamicMessage,
+    /// Its DCCL encoding: the bytes that will be sent.
+    pub encoded: Vec<u8>,
     /// The values the codec changed (empty: sent as published).
     pub changes: Vec<ValueChange>,
 }
@@ -66,9 +70,10 @@ impl Door {
         self.clamp.contains(name)
     }
 
-    /// Checks `message`: unchanged, it passes as it is; changed by the
-    /// codec, it is refused (the error names each field, its value and the
-    /// bound) or, for a clamping type, passed on as it will be sent.
+    /// Checks `message` by encoding it: unchanged, it passes as it is (with
+    /// its encoding); changed by the codec, it is refused (the error names
+    /// each field, its value and the bound) or, for a clamping type, passed
+    /// on as it will be sent.
     pub fn admit(&self, message: DynamicMessage) -> Result<Admitted, String> {
         let descriptor = message.descriptor();
         let name = descriptor.full_name();
@@ -86,9 +91,19 @@ impl Door {
                 .collect();
             return Err(format!("{name} refused: {}", fields.join("; ")));
         }
-        let changes = self.codec.check(&message).map_err(|e| e.to_string())?;
+        // The one encoding of the message (the daemon's codec has no
+        // adaptive model that encoding would advance: the configuration
+        // check refuses them).
+        let (encoded, changes) = self
+            .codec
+            .encode_with_changes(&message)
+            .map_err(|e| e.to_string())?;
         if changes.is_empty() {
-            return Ok(Admitted { message, changes });
+            return Ok(Admitted {
+                message,
+                encoded,
+                changes,
+            });
         }
         if !self.clamp.contains(name) {
             let fields: Vec<String> = changes
@@ -113,6 +128,7 @@ impl Door {
             .map_err(|e| format!("{name}: the clamped message does not decode: {e}"))?;
         Ok(Admitted {
             message: sent,
+            encoded: bytes,
             changes,
         })
     }
@@ -179,10 +195,14 @@ mod tests {
     }
 
     #[test]
-    fn values_the_codec_keeps_pass_as_they_are() {
+    fn values_the_codec_keeps_pass_as_they_are_with_their_encoding() {
         let admitted = door(false).admit(command(2, 100.0, "ok")).unwrap();
         assert!(admitted.changes.is_empty());
         assert_eq!(admitted.message, command(2, 100.0, "ok"));
+        assert_eq!(
+            admitted.encoded,
+            codec().encode(&command(2, 100.0, "ok")).unwrap()
+        );
     }
 
     #[test]
@@ -308,5 +328,7 @@ mod tests {
             admitted.message.get_field_by_name("note").unwrap().as_str(),
             Some("a note muc")
         );
+        // The encoding sent is the clamped message's.
+        assert_eq!(admitted.encoded, codec().encode(&admitted.message).unwrap());
     }
 }

@@ -441,17 +441,16 @@ impl Core {
             tracing::warn!("accepted with a value changed by the codec: {change}");
         }
         let now = self.clock.now();
-        let accepted = match self
-            .network
-            .as_mut()
-            .and_then(|n| n.publish(&admitted.message, &mut self.outbox, now))
-        {
-            Some(taken) => taken,
-            None => self
-                .outbox
-                .accept(&admitted.message)
-                .map_err(|e| e.to_string()),
-        };
+        let accepted =
+            match self.network.as_mut().and_then(|n| {
+                n.publish(&admitted.message, &admitted.encoded, &mut self.outbox, now)
+            }) {
+                Some(taken) => taken,
+                None => self
+                    .outbox
+                    .accept(admitted.message, Some(admitted.encoded), None)
+                    .map_err(|e| e.to_string()),
+            };
         match accepted {
             Ok(Accepted::Queued(id)) => {
                 let dropped = self.forward_queue_events();

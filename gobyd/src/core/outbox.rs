@@ -1,16 +1,17 @@
 //! The daemon's outbox: the queue manager with every accepted message in a
 //! journal on disk until it is acknowledged, expires or is dropped, so that
-//! a crash or restart of `gobyd` loses nothing.
+//! a crash or restart of `gobyd` loses nothing. A message is encoded once:
+//! the journal keeps its DCCL encoding and the queue sends those bytes.
 
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::mpsc::Receiver;
 
-use prost::Message as _;
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::{
-    EntryId, Journal, JournalError, MessageId, PushOptions, QueueError, QueueEvent, QueueManager,
+    Encoding, EntryId, Journal, JournalEntry, JournalError, MessageId, PushOptions, QueueError,
+    QueueEvent, QueueManager,
 };
 
 /// Why a message was not accepted.
@@ -102,27 +103,19 @@ impl Outbox {
             ..Default::default()
         };
         for entry in replay.entries {
-            let queued = outbox
-                .queue
-                .codec()
-                .descriptor(&entry.message_name)
-                .ok_or_else(|| "the type is not loaded".to_string())
-                .and_then(|desc| {
-                    DynamicMessage::decode(desc, entry.message.as_slice())
-                        .map_err(|e| format!("the journaled bytes do not parse: {e}"))
-                })
-                .and_then(|message| {
-                    // It may have gone out before the restart.
-                    let options = PushOptions {
-                        created: Some(entry.time),
-                        number: Some(entry.id),
-                        resent: true,
-                    };
-                    outbox
-                        .queue
-                        .push_with(&message, options)
-                        .map_err(|e| e.to_string())
-                });
+            // It may have gone out before the restart.
+            let options = PushOptions {
+                created: Some(entry.time),
+                number: Some(entry.id),
+                resent: true,
+                encoded: (entry.encoding == Encoding::Dccl).then(|| entry.message.clone()),
+            };
+            let queued = journaled_message(outbox.queue.codec(), &entry).and_then(|message| {
+                outbox
+                    .queue
+                    .push(message, options)
+                    .map_err(|e| e.to_string())
+            });
             match queued {
                 Ok(Some(id)) => {
                     outbox.entries.insert(id, entry.id);
@@ -152,57 +145,43 @@ impl Outbox {
     }
 
     /// Accepts a message for sending: appended to the journal, then queued
-    /// (it may go out at once). It survives a crash once the journal is
-    /// synced: tell the client "accepted" only after a sync of
-    /// [`sync_handle`](Self::sync_handle) (or [`sync`](Self::sync)).
-    pub fn accept(&mut self, message: &DynamicMessage) -> Result<Accepted, OutboxError> {
-        let descriptor = message.descriptor();
-        let entry = self.journal.accept_unsynced(
-            descriptor.full_name(),
-            message.encode_to_vec(),
-            self.queue.now(),
-        )?;
-        let options = PushOptions {
-            number: Some(entry),
-            ..Default::default()
-        };
-        match self.queue.push_with(message, options) {
-            Ok(Some(id)) => {
-                self.entries.insert(id, entry);
-                Ok(Accepted::Queued(entry))
-            }
-            Ok(None) => {
-                self.journal.remove(entry)?;
-                Ok(Accepted::Delivered)
-            }
-            Err(e) => {
-                self.journal.remove(entry)?;
-                Err(e.into())
-            }
-        }
-    }
-
-    /// Accepts a message as [`accept`](Self::accept) does, its age (for
-    /// its type's `ttl`) counted from `created` (microseconds since the
-    /// epoch; may be in the future, for a message meant to live longer than
-    /// its type's `ttl`), also after a restart. For the network layer
-    /// ([`crate::core::network`]), whose messages carry their own lifetime.
-    pub fn accept_created(
+    /// (it may go out at once). `encoded`: its DCCL encoding with the
+    /// queue's codec, when the caller made it already (it is made here
+    /// otherwise); the journal keeps those bytes and the queue sends them.
+    /// `created`: when its age (for its type's `ttl`) counts from
+    /// (microseconds since the epoch; may be in the future, for a message
+    /// meant to live longer than its type's `ttl`, as the network layer's
+    /// carry their own lifetime), also after a restart; now when `None`.
+    ///
+    /// It survives a crash once the journal is synced: tell the client
+    /// "accepted" only after a sync of [`sync_handle`](Self::sync_handle)
+    /// (or [`sync`](Self::sync)).
+    pub fn accept(
         &mut self,
-        message: &DynamicMessage,
-        created: queue::Micros,
+        message: DynamicMessage,
+        encoded: Option<Vec<u8>>,
+        created: Option<queue::Micros>,
     ) -> Result<Accepted, OutboxError> {
+        let encoded = match encoded {
+            Some(encoded) => encoded,
+            None => self
+                .queue
+                .codec()
+                .encode(&message)
+                .map_err(QueueError::from)?,
+        };
         let entry = self.journal.accept_unsynced(
             message.descriptor().full_name(),
-            message.encode_to_vec(),
-            created,
+            encoded.as_slice(),
+            created.unwrap_or_else(|| self.queue.now()),
         )?;
         let options = PushOptions {
-            created: Some(created),
+            created,
             number: Some(entry),
-            ..Default::default()
+            resent: false,
+            encoded: Some(encoded),
         };
-        match self.queue.push_with(message, options) {
+        match self.queue.push(message, options) {
             Ok(Some(id)) => {
                 self.entries.insert(id, entry);
                 Ok(Accepted::Queued(entry))
@@ -233,10 +212,10 @@ impl Outbox {
     /// events carry no journal entry. Returns its id in the queue.
     pub fn push_unjournaled(
         &mut self,
-        message: &DynamicMessage,
+        message: DynamicMessage,
         options: PushOptions,
     ) -> Result<Option<queue::MessageId>, QueueError> {
-        self.queue.push_with(message, options)
+        self.queue.push(message, options)
     }
 
     /// Waits until every accepted message is on disk.
@@ -379,12 +358,18 @@ impl Outbox {
                 self.journal.remove(entry)?;
                 continue;
             }
+            // The bytes the journal keeps: the message is not encoded
+            // again.
+            let journaled = self.journal.get(entry);
             let options = PushOptions {
-                created: self.journal.get(entry).map(|e| e.time),
+                created: journaled.map(|e| e.time),
                 number: Some(entry),
                 resent: true,
+                encoded: journaled
+                    .filter(|e| e.encoding == Encoding::Dccl)
+                    .map(|e| e.message.clone()),
             };
-            match self.queue.push_with(&message, options) {
+            match self.queue.push(message, options) {
                 Ok(Some(id)) => {
                     self.entries.insert(id, entry);
                     requeued += 1;
@@ -393,6 +378,36 @@ impl Outbox {
             }
         }
         Ok(requeued)
+    }
+}
+
+/// The message a journal entry holds, read with `codec` (its DCCL
+/// encoding, or the protobuf encoding journals of earlier versions hold), or
+/// why it cannot be read.
+pub fn journaled_message(
+    codec: &dccl::Codec,
+    entry: &JournalEntry,
+) -> Result<DynamicMessage, String> {
+    match entry.encoding {
+        Encoding::Dccl => {
+            let message = codec
+                .decode(&entry.message)
+                .map_err(|e| format!("the journaled bytes do not decode: {e}"))?;
+            let name = message.descriptor().full_name().to_string();
+            if name != entry.message_name {
+                return Err(format!(
+                    "the journaled bytes decode as {name}: its DCCL id is now another type's"
+                ));
+            }
+            Ok(message)
+        }
+        Encoding::Protobuf => {
+            let desc = codec
+                .descriptor(&entry.message_name)
+                .ok_or_else(|| "the type is not loaded".to_string())?;
+            DynamicMessage::decode(desc, entry.message.as_slice())
+                .map_err(|e| format!("the journaled bytes do not parse: {e}"))
+        }
     }
 }
 
@@ -499,13 +514,13 @@ mod tests {
             assert_eq!(replay, OutboxReplay::default());
             for note in ["a", "b"] {
                 assert!(matches!(
-                    outbox.accept(&command(2, note)).unwrap(),
+                    outbox.accept(command(2, note), None, None).unwrap(),
                     Accepted::Queued(_)
                 ));
             }
             // To ourselves: delivered, not kept.
             assert_eq!(
-                outbox.accept(&command(1, "me")).unwrap(),
+                outbox.accept(command(1, "me"), None, None).unwrap(),
                 Accepted::Delivered
             );
             clock.advance_seconds(1.0);
@@ -522,8 +537,8 @@ mod tests {
             outbox.events().unwrap();
             assert_eq!(outbox.owed(), 0);
             // Two more, sent but never acknowledged.
-            outbox.accept(&command(2, "c")).unwrap();
-            outbox.accept(&command(2, "d")).unwrap();
+            outbox.accept(command(2, "c"), None, None).unwrap();
+            outbox.accept(command(2, "d"), None, None).unwrap();
             clock.advance_seconds(1.0);
             let tx = request(&mut outbox);
             assert_eq!(notes(&outbox, &tx.frame[0]).len(), 2);
@@ -541,7 +556,7 @@ mod tests {
         let dir = Scratch::new("failed");
         let clock = ManualClock::at_seconds(1_000.0);
         let (mut outbox, _) = Outbox::open(queue(false, &clock), &dir.journal()).unwrap();
-        outbox.accept(&command(2, "x")).unwrap();
+        outbox.accept(command(2, "x"), None, None).unwrap();
         clock.advance_seconds(1.0);
         let tx = request(&mut outbox);
         assert_eq!(notes(&outbox, &tx.frame[0]), ["x"]);
@@ -563,8 +578,11 @@ mod tests {
         let clock = ManualClock::at_seconds(1_000.0);
         let (mut outbox, _) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
         let nav = protos::goby::example::NavigationReport::default().transcode_to_dynamic();
-        assert!(matches!(outbox.accept(&nav), Err(OutboxError::Queue(_))));
-        outbox.accept(&command(2, "old")).unwrap();
+        assert!(matches!(
+            outbox.accept(nav, None, None),
+            Err(OutboxError::Queue(_))
+        ));
+        outbox.accept(command(2, "old"), None, None).unwrap();
         assert_eq!(outbox.owed(), 1);
         clock.advance_seconds(101.0);
         outbox.expire();
@@ -579,12 +597,75 @@ mod tests {
     }
 
     #[test]
+    fn a_message_is_encoded_once_and_its_bytes_are_journaled_and_sent() {
+        let dir = Scratch::new("encoded-once");
+        let clock = ManualClock::at_seconds(1_000.0);
+        let (mut outbox, _) = Outbox::open(queue(false, &clock), &dir.journal()).unwrap();
+        // Bytes given with the message are what the journal keeps and the
+        // queue sends: those of another note show it is not encoded again.
+        let given = outbox.queue().codec().encode(&command(2, "given")).unwrap();
+        let Accepted::Queued(entry) = outbox
+            .accept(command(2, "other"), Some(given.clone()), None)
+            .unwrap()
+        else {
+            panic!("not queued");
+        };
+        let journaled = outbox.journaled().find(|e| e.id == entry).unwrap();
+        assert_eq!(
+            (journaled.encoding, &journaled.message),
+            (queue::Encoding::Dccl, &given)
+        );
+        clock.advance_seconds(1.0);
+        let tx = request(&mut outbox);
+        assert_eq!(notes(&outbox, &tx.frame[0]), ["given"]);
+        // Bytes of another type are refused, and nothing is kept.
+        let nav = protos::goby::example::NavigationReport::default().transcode_to_dynamic();
+        assert!(outbox
+            .accept(command(2, "x"), Some(vec![0xFF; 4]), None)
+            .is_err());
+        assert!(outbox.accept(nav, Some(given), None).is_err());
+        assert_eq!(outbox.owed(), 1);
+    }
+
+    #[test]
+    fn a_journal_of_protobuf_records_is_queued_again() {
+        use prost::Message as _;
+        let dir = Scratch::new("protobuf-journal");
+        let clock = ManualClock::at_seconds(1_000.0);
+        // A journal as earlier versions wrote it: magic GOBYJNL2, the
+        // message's protobuf encoding in an accepted record (kind 1).
+        let name = "goby.example.Command";
+        let protobuf = Command {
+            destination: 2,
+            action: 1,
+            note: Some("kept".into()),
+            ..Default::default()
+        }
+        .encode_to_vec();
+        let mut payload = vec![1u8];
+        payload.extend_from_slice(&7u64.to_le_bytes());
+        payload.extend_from_slice(&999_000_000i64.to_le_bytes());
+        payload.extend_from_slice(&(name.len() as u16).to_le_bytes());
+        payload.extend_from_slice(name.as_bytes());
+        payload.extend_from_slice(&protobuf);
+        let mut bytes = b"GOBYJNL2".to_vec();
+        queue::record_log::JOURNAL.frame_into(&mut bytes, &payload);
+        std::fs::write(dir.journal(), &bytes).unwrap();
+        let (mut outbox, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
+        assert_eq!(replay.requeued, 1, "{replay:?}");
+        clock.advance_seconds(1.0);
+        let tx = request(&mut outbox);
+        assert_eq!(notes(&outbox, &tx.frame[0]), ["kept"]);
+    }
+
+    #[test]
     fn a_sending_names_the_journal_id_the_client_was_given() {
         for ack in [true, false] {
             let dir = Scratch::new(&format!("sent-id-{ack}"));
             let clock = ManualClock::at_seconds(1_000.0);
             let (mut outbox, _) = Outbox::open(queue(ack, &clock), &dir.journal()).unwrap();
-            let Accepted::Queued(entry) = outbox.accept(&command(2, "s")).unwrap() else {
+            let Accepted::Queued(entry) = outbox.accept(command(2, "s"), None, None).unwrap()
+            else {
                 panic!("not queued");
             };
             outbox.events().unwrap();

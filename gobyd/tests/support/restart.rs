@@ -88,9 +88,10 @@ fn log_lines(data_dir: &Path, kind: &str) -> Vec<(Value, String)> {
 pub fn owed(data_dir: &Path) -> HashMap<String, usize> {
     let mut count = HashMap::new();
     let (journal, _) = queue::Journal::open(data_dir.join("outbox.journal")).unwrap();
+    let mut codec = dccl::Codec::new();
+    codec.load_type::<protos::goby::example::Command>().unwrap();
     for entry in journal.entries() {
-        let c: protos::goby::example::Command =
-            prost::Message::decode(entry.message.as_slice()).unwrap();
+        let c: protos::goby::example::Command = codec.decode_typed(&entry.message).unwrap();
         *count.entry(c.note().to_string()).or_default() += 1;
     }
     count

@@ -42,7 +42,7 @@ use sha2::{Digest, Sha256};
 
 use crate::config::Problem;
 use crate::core::fragment::Content;
-use crate::core::outbox::{Accepted, Outbox};
+use crate::core::outbox::{journaled_message, Accepted, Outbox};
 use crate::core::route::{NextHop, RouteTable, MAX_NETWORK_ID};
 use origin::{Origin, Pending};
 use transfers::{Produced, TransferEvent, Transfers};
@@ -400,10 +400,7 @@ impl Network {
             if !wire::is_network_type(&entry.message_name) {
                 continue;
             }
-            let Some(desc) = self.codec.descriptor(&entry.message_name) else {
-                continue;
-            };
-            let Ok(message) = DynamicMessage::decode(desc, entry.message.as_slice()) else {
+            let Ok(message) = journaled_message(&self.codec, entry) else {
                 continue;
             };
             let Some(net) = NetMessage::of(&message) else {
@@ -464,9 +461,12 @@ impl Network {
     /// fragments). `None`: not the network layer's (it goes as it is);
     /// `Some(Err)`: refused (its type is the network layer's own, or the
     /// route cannot reach it).
+    /// `encoded`: the message's DCCL encoding (the payload of a routed
+    /// message, the body of a transfer).
     pub fn publish(
         &mut self,
         message: &DynamicMessage,
+        encoded: &[u8],
         outbox: &mut Outbox,
         now: Micros,
     ) -> Option<Result<Accepted, String>> {
@@ -484,15 +484,15 @@ impl Network {
         if dest == queue::BROADCAST_ID || dest == self.me {
             return None;
         }
-        let encoded = self.codec.encode(message).ok()?;
         match self.table.next_hop(dest) {
             NextHop::Direct if encoded.len() <= self.frame_capacity() => None,
-            NextHop::Direct => Some(self.send_large(&name, dest, encoded, now)),
+            NextHop::Direct => Some(self.send_large(&name, dest, encoded.to_vec(), now)),
             NextHop::Unreachable(reason) => Some(Err(format!("{name} to node {dest}: {reason}"))),
             NextHop::Via(relay) if encoded.len() + ROUTED_OVERHEAD <= self.frame_capacity() => {
-                Some(self.send_routed(message, &name, dest, relay, encoded, outbox, now))
+                let payload = encoded.to_vec();
+                Some(self.send_routed(message, &name, dest, relay, payload, outbox, now))
             }
-            NextHop::Via(_) => Some(self.send_large(&name, dest, encoded, now)),
+            NextHop::Via(_) => Some(self.send_large(&name, dest, encoded.to_vec(), now)),
         }
     }
 
@@ -536,7 +536,11 @@ impl Network {
         };
         let created = self.created_for(wire::TYPES[0].0, routed.lifetime, now);
         let accepted = outbox
-            .accept_created(&NetMessage::Routed(routed.clone()).to_dynamic(), created)
+            .accept(
+                NetMessage::Routed(routed.clone()).to_dynamic(),
+                None,
+                Some(created),
+            )
             .map_err(|e| format!("{name} (routed through {relay}): {e}"))?;
         if let Accepted::Queued(id) = accepted {
             tracing::info!(
@@ -1032,7 +1036,7 @@ impl Network {
             m.resent = resent;
         }
         let created = self.created_for(name, header.lifetime, now);
-        outbox.accept_created(&message.to_dynamic(), created)?;
+        outbox.accept(message.to_dynamic(), None, Some(created))?;
         self.relaying += usize::from(fragment);
         self.recent
             .insert(key, now + i64::from(header.lifetime) * SECOND);
@@ -1100,7 +1104,7 @@ impl Network {
                     number: chunk.to_vec(),
                 });
                 let created = self.created_for(ack.type_name(), lifetime, now);
-                if let Err(e) = outbox.accept_created(&ack.to_dynamic(), created) {
+                if let Err(e) = outbox.accept(ack.to_dynamic(), None, Some(created)) {
                     tracing::error!("end-to-end ack for node {origin}: {e}");
                 }
             }
@@ -1211,7 +1215,7 @@ impl Network {
         });
         let created = self.created_for(message.type_name(), lifetime, now);
         outbox
-            .accept_created(&message.to_dynamic(), created)
+            .accept(message.to_dynamic(), None, Some(created))
             .map_err(|e| e.to_string())?;
         outbox.sync().map_err(|e| e.to_string())?;
         tracing::info!(node, request, "file {path:?} asked of node {node}");

@@ -28,6 +28,7 @@ pub const ROUTES: Format = Format {
     name: "routes",
     magic: b"GOBYRTE1",
     sync: [0xA7, 0x52, 0x54, 0x45],
+    older: &[],
 };
 
 const KIND_AWAITING: u8 = 1;

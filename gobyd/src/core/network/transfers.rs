@@ -46,6 +46,7 @@ pub const TRANSFERS: Format = Format {
     name: "transfers",
     magic: b"GOBYXFR1",
     sync: [0xA7, 0x58, 0x46, 0x52],
+    older: &[],
 };
 
 const K_OUT: u8 = 1;
@@ -670,7 +671,7 @@ impl Transfers {
                     created: Some(now + i64::from(lifetime) * SECOND - self.settings.fragment_ttl),
                     ..Default::default()
                 };
-                match outbox.push_unjournaled(&fragment.to_dynamic(), options) {
+                match outbox.push_unjournaled(fragment.to_dynamic(), options) {
                     Ok(Some(id)) => {
                         self.queued.insert(id, Queued::Fragment { number, index });
                         in_queue += 1;
@@ -779,7 +780,7 @@ impl Transfers {
             created: Some(now + i64::from(lifetime) * SECOND - self.settings.ack_ttl),
             ..Default::default()
         };
-        match outbox.push_unjournaled(&ack.to_dynamic(), options) {
+        match outbox.push_unjournaled(ack.to_dynamic(), options) {
             Ok(id) => id,
             Err(e) => {
                 tracing::error!("selective ack to node {origin}: {e}");
