@@ -473,7 +473,7 @@ fn get(args: &GetArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let bytes = check_file(Path::new(written), &done.sha256).map_err(CliError::Failed)?;
     let at = match &args.output {
         Some(output) => {
-            write_copy(output, &bytes).map_err(|e| {
+            goby_store::file::write_atomically(output, &bytes).map_err(|e| {
                 CliError::Failed(format!(
                     "{} came (at {written}) but cannot be copied to {}: {e}",
                     args.path,
@@ -490,21 +490,6 @@ fn get(args: &GetArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         done.name, args.node, done.bytes, done.sha256
     )?;
     Ok(Status::Ok)
-}
-
-/// Writes `bytes` to `path` through a temporary file beside it, so that a
-/// reader never sees half of it.
-fn write_copy(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| std::io::Error::other("not a file name"))?;
-    let part = path.with_file_name(format!(".{}.part", name.to_string_lossy()));
-    {
-        let mut f = std::fs::File::create(&part)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&part, path)
 }
 
 fn list(args: &ListArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {

@@ -9,7 +9,7 @@ use std::path::Path;
 use gobyd::core::dedup::Identity;
 use gobyd::core::inbox::{Inbox, InboxEntry};
 use libfuzzer_sys::fuzz_target;
-use queue::record_log::MemoryFile;
+use goby_store::record_log::MemoryFile;
 
 /// Identities are remembered for 10 s from 1000 s after the epoch.
 const WINDOW: u64 = 10_000_000;

@@ -9,7 +9,7 @@
 //!
 //! The file is a record log of the [`JOURNAL`] format (magic `GOBYJNLD`):
 //! framing, CRC, replay and its faults, appends, rewrites and the payload
-//! limit are described in [`crate::record_log`]. A payload is
+//! limit are described in [`goby_store::record_log`]. A payload is
 //!
 //! ```text
 //! kind: u8 | id: u64 LE | (accepted only) time: i64 LE µs | name length: u16 LE | name | message bytes
@@ -44,9 +44,21 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use crate::clock::Micros;
-use crate::record_log::{self, LogError, MemoryFile, RecordLog, FRAMING, JOURNAL, MAX_PAYLOAD};
+use goby_store::record_log::{self, Format, LogError, MemoryFile, RecordLog, FRAMING, MAX_PAYLOAD};
 
-pub use crate::record_log::LogFile as JournalFile;
+pub use goby_store::record_log::LogFile as JournalFile;
+
+/// The journal's file format: a record log ([`goby_store::record_log`])
+/// of magic `GOBYJNLD`. `GOBYJNL2` journals, which hold no DCCL records,
+/// are read and take it (`D` is five bits from `2`: a version that reads
+/// only `GOBYJNL2` refuses the file rather than take its magic for a
+/// damaged header of its own).
+pub const JOURNAL: Format = Format {
+    name: "journal",
+    magic: b"GOBYJNLD",
+    sync: [0xA7, 0x47, 0x4A, 0x52],
+    older: &[b"GOBYJNL2"],
+};
 
 /// First bytes of a journal of the first format (no sync words).
 const MAGIC_V1: &[u8; 8] = b"GOBYJNL1";

@@ -64,7 +64,6 @@ pub mod links;
 pub mod manager;
 pub mod market;
 pub mod queue;
-pub mod record_log;
 mod role;
 
 pub use clock::{Clock, ManualClock, Micros, SystemClock};

@@ -8,7 +8,9 @@
 //! included), so a crashed daemon never blocks its successor; the lock file
 //! holds the process id of its holder, for the error message.
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
+
+use goby_store::file::{create_private_dir, private_file_options};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
@@ -93,25 +95,6 @@ impl DataDir {
     pub fn path(&self) -> &Path {
         &self.path
     }
-}
-
-/// Creates `path` and its missing parents with mode 0700 (on Unix). An
-/// existing directory is left as it is.
-pub fn create_private_dir(path: &Path) -> std::io::Result<()> {
-    let mut builder = std::fs::DirBuilder::new();
-    builder.recursive(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::DirBuilderExt;
-        builder.mode(0o700);
-    }
-    builder.create(path)
-}
-
-/// Options that create files with mode 0600 (on Unix), as the record logs
-/// (journal, inbox) are created.
-pub fn private_file_options() -> OpenOptions {
-    queue::record_log::private_file_options()
 }
 
 #[cfg(test)]

@@ -20,7 +20,7 @@
 //!
 //! The file (`DATA_DIR/inbox.log`) is a record log of the [`INBOX`] format
 //! (magic `GOBYINB1`): framing, CRC, replay and its faults, appends,
-//! rewrites and the payload limit are described in [`queue::record_log`].
+//! rewrites and the payload limit are described in [`goby_store::record_log`].
 //! A payload is
 //!
 //! ```text
@@ -41,7 +41,16 @@ use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::Path;
 
-use queue::record_log::{LogError, LogFile, RecordLog, CRC32 as CRC, INBOX};
+use goby_store::record_log::{Format, LogError, LogFile, RecordLog, CRC32 as CRC};
+
+/// The inbox's file format: a record log ([`goby_store::record_log`]) of
+/// magic `GOBYINB1`.
+pub const INBOX: Format = Format {
+    name: "inbox",
+    magic: b"GOBYINB1",
+    sync: [0xA7, 0x49, 0x4E, 0x42],
+    older: &[],
+};
 
 use crate::core::dedup::Identity;
 
@@ -204,7 +213,7 @@ impl Inbox {
 
     /// Opens the inbox held by `file` (named `path`, where rewrites go), as
     /// [`open`](Self::open) does: for fault injection, and for replaying
-    /// bytes in memory ([`queue::record_log::MemoryFile`]).
+    /// bytes in memory ([`goby_store::record_log::MemoryFile`]).
     pub fn open_with(
         path: &Path,
         file: impl LogFile + 'static,
@@ -424,7 +433,7 @@ impl Inbox {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use queue::record_log::FRAMING;
+    use goby_store::record_log::FRAMING;
     use std::path::PathBuf;
 
     const MAGIC: &[u8; 8] = INBOX.magic;
@@ -657,7 +666,7 @@ mod tests {
         let d = dir("limit");
         let path = d.join("inbox.log");
         let (mut inbox, _) = Inbox::open(&path, WINDOW, 1_000).unwrap();
-        let big = vec![0; queue::record_log::MAX_PAYLOAD];
+        let big = vec![0; goby_store::record_log::MAX_PAYLOAD];
         let err = inbox.record(incoming(2, &big), 1_000).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::InvalidInput, "{err}");
         assert!(inbox.pending().is_empty());
@@ -676,7 +685,7 @@ mod tests {
     /// Opens `bytes` in memory; if an inbox, opens what it left again and
     /// checks it holds the same (as the inbox_replay fuzz target does).
     fn replays_stably(bytes: &[u8]) -> Option<Replay> {
-        use queue::record_log::MemoryFile;
+        use goby_store::record_log::MemoryFile;
         let file = MemoryFile::new(bytes.to_vec());
         let memory = Path::new("(memory)");
         let (inbox, replay) = Inbox::open_with(memory, file.clone(), WINDOW, 5_000).ok()?;

@@ -649,7 +649,7 @@ mod tests {
         payload.extend_from_slice(name.as_bytes());
         payload.extend_from_slice(&protobuf);
         let mut bytes = b"GOBYJNL2".to_vec();
-        queue::record_log::JOURNAL.frame_into(&mut bytes, &payload);
+        queue::journal::JOURNAL.frame_into(&mut bytes, &payload);
         std::fs::write(dir.journal(), &bytes).unwrap();
         let (mut outbox, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
         assert_eq!(replay.requeued, 1, "{replay:?}");

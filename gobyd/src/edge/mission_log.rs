@@ -35,7 +35,7 @@ pub struct RawLog {
 impl RawLog {
     /// Opens `path` for appending (created if needed, mode 0600).
     pub fn open(path: &Path) -> io::Result<Self> {
-        let file = crate::core::data_dir::private_file_options()
+        let file = goby_store::file::private_file_options()
             .create(true)
             .append(true)
             .open(path)?;

@@ -14,7 +14,6 @@
 //! for the next period only time.
 
 use std::collections::HashMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde_json::{json, Value};
@@ -201,22 +200,8 @@ impl BudgetFile {
                 }),
             );
         }
-        let text = json!({ "links": links }).to_string();
-        let tmp = self.path.with_extension("new");
-        {
-            let mut options = std::fs::OpenOptions::new();
-            options.write(true).create(true).truncate(true);
-            #[cfg(unix)]
-            std::os::unix::fs::OpenOptionsExt::mode(&mut options, 0o600);
-            let mut file = options.open(&tmp)?;
-            file.write_all(text.as_bytes())?;
-            file.write_all(b"\n")?;
-            file.sync_all()?;
-        }
-        std::fs::rename(&tmp, &self.path)?;
-        if let Some(dir) = self.path.parent() {
-            std::fs::File::open(dir)?.sync_all()?;
-        }
+        let text = json!({ "links": links }).to_string() + "\n";
+        goby_store::file::write_atomically(&self.path, text.as_bytes())?;
         Ok(())
     }
 }

@@ -6,7 +6,7 @@
 //! from that ack until the final destination's ack comes back (or the
 //! message's lifetime runs out) it lives here, in `DATA_DIR/routes.log`, so
 //! that a restart of the origin still tells its client. The file is a
-//! record log ([`queue::record_log`], magic `GOBYRTE1`); a payload is
+//! record log ([`goby_store::record_log`], magic `GOBYRTE1`); a payload is
 //!
 //! ```text
 //! kind 1, awaiting: entry u64 | dest i32 | number u16 | expires i64 µs | name length u16 | name | message (protobuf)
@@ -21,7 +21,7 @@ use std::collections::BTreeMap;
 use std::io;
 use std::path::Path;
 
-use queue::record_log::{Format, RecordLog};
+use goby_store::record_log::{Format, RecordLog};
 
 /// The file format of `routes.log`.
 pub const ROUTES: Format = Format {

@@ -3,7 +3,7 @@
 //! files), the transfers it receives, their selective acks, and the files
 //! it serves.
 //!
-//! `DATA_DIR/transfers.log` is a record log ([`queue::record_log`], magic
+//! `DATA_DIR/transfers.log` is a record log ([`goby_store::record_log`], magic
 //! `GOBYXFR1`); a payload is
 //!
 //! ```text
@@ -25,11 +25,11 @@
 //! duplicate filter).
 
 use std::collections::{BTreeMap, HashMap};
-use std::io::{self, Write};
+use std::io;
 use std::path::{Path, PathBuf};
 
+use goby_store::record_log::{Format, RecordLog};
 use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
-use queue::record_log::{Format, RecordLog};
 use queue::{MessageId, Micros, PushOptions};
 
 use crate::core::fragment::{
@@ -942,25 +942,14 @@ impl Transfers {
             return Err(io::Error::new(io::ErrorKind::InvalidInput, problem));
         }
         let dir = &self.settings.receive_dir;
-        crate::core::data_dir::create_private_dir(dir)?;
+        goby_store::file::create_private_dir(dir)?;
         let mut path = dir.join(name);
         let mut n = 1;
         while path.exists() {
             path = dir.join(format!("{name}.{n}"));
             n += 1;
         }
-        let part = dir.join(format!(".{name}.part"));
-        {
-            let mut f = crate::core::data_dir::private_file_options()
-                .write(true)
-                .create(true)
-                .truncate(true)
-                .open(&part)?;
-            f.write_all(body)?;
-            f.sync_all()?;
-        }
-        std::fs::rename(&part, &path)?;
-        queue::record_log::sync_parent(&path)?;
+        goby_store::file::write_atomically(&path, body)?;
         Ok(path)
     }
 

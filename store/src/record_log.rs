@@ -1,7 +1,8 @@
-//! Record logs: the one file format under the outbox journal
-//! ([`crate::journal`]) and the receiver's inbox (`gobyd::inbox`), and the
-//! code that reads, appends to and rewrites such files. Each user decides
-//! what its payloads hold; this module owns everything around them.
+//! Record logs: the one file format under the outbox journal (the queue's
+//! `journal`), the receiver's inbox and the network layer's logs (`gobyd`),
+//! and the code that reads, appends to and rewrites such files. Each owner
+//! defines its [`Format`] and what its payloads hold, next to itself; this
+//! module owns everything around them.
 //!
 //! # Format
 //!
@@ -10,10 +11,10 @@
 //! record = sync (4 bytes) | length: u32 LE (of the payload) | crc32: u32 LE (of length and payload) | payload
 //! ```
 //!
-//! | file kind | [`Format`] | magic      | sync word     | older magics read |
-//! |-----------|------------|------------|---------------|-------------------|
-//! | journal   | [`JOURNAL`]| `GOBYJNLD` | `A7 47 4A 52` | `GOBYJNL2`        |
-//! | inbox     | [`INBOX`]  | `GOBYINB1` | `A7 49 4E 42` |                   |
+//! Each kind of file has its magic and its sync word ([`Format`]): the
+//! outbox journal `GOBYJNLD` (reading `GOBYJNL2`), the inbox `GOBYINB1`,
+//! the routes `GOBYRTE1` and the transfers `GOBYXFR1`; each sync word starts
+//! with `A7`.
 //!
 //! The CRC-32 is ISO-HDLC (the zlib and Ethernet one, [`CRC32`]). A payload
 //! holds at most [`MAX_PAYLOAD`] bytes (16 MiB); a length above it marks
@@ -56,19 +57,22 @@
 //!   append is refused (nothing is appended behind a partial record); once
 //!   the cut succeeds, appending resumes. Should the process die first, the
 //!   partial record is skipped at the next start;
-//! - a rewrite (compaction) writes a temporary file (`PATH.tmp`), syncs it,
-//!   renames it over the file and syncs the directory; any failure, the
+//! - a rewrite (compaction) writes a hidden file beside the file
+//!   (`.NAME.part`), syncs it, renames it over the file and syncs the
+//!   directory ([`crate::file::write_atomically`]); any failure, the
 //!   directory sync included, is reported.
 //!
 //! Files are created with mode 0600 (on Unix): they hold the mission's
-//! messages.
+//! messages ([`crate::file`]).
 
 use std::fs::{File, OpenOptions};
-use std::io::{self, Read, Seek, SeekFrom, Write};
+use std::io::{self, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use crc::{Crc, CRC_32_ISO_HDLC};
+
+use crate::file::{private_file_options, replace, sync_parent};
 
 /// The CRC of every record (ISO-HDLC).
 pub const CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
@@ -96,23 +100,6 @@ pub struct Format {
     /// not take the current magic for a damaged header of its own.
     pub older: &'static [&'static [u8; 8]],
 }
-
-/// The outbox journal ([`crate::journal`]). `GOBYJNL2` journals hold no
-/// DCCL records; `D` is five bits from `2`.
-pub const JOURNAL: Format = Format {
-    name: "journal",
-    magic: b"GOBYJNLD",
-    sync: [0xA7, 0x47, 0x4A, 0x52],
-    older: &[b"GOBYJNL2"],
-};
-
-/// The receiver's inbox (`gobyd::inbox`).
-pub const INBOX: Format = Format {
-    name: "inbox",
-    magic: b"GOBYINB1",
-    sync: [0xA7, 0x49, 0x4E, 0x42],
-    older: &[],
-};
 
 impl Format {
     /// The record holding `payload`: sync word, length, CRC, payload.
@@ -331,25 +318,12 @@ pub trait LogFile: Send + std::fmt::Debug {
     /// Points at the file now at `path` (after a rewrite was renamed over
     /// it).
     fn reopen(&mut self, path: &Path) -> io::Result<()>;
-    /// Puts a file holding `bytes` at `path`, whole or not at all: written
-    /// to `PATH.tmp` (mode 0600), synced, renamed over `path`. The handle
-    /// still points at the old file until [`reopen`](Self::reopen).
+    /// Puts a file holding `bytes` at `path`, whole or not at all
+    /// ([`crate::file::replace`]: written beside it, synced, renamed over
+    /// it). The handle still points at the old file until
+    /// [`reopen`](Self::reopen).
     fn replace(&mut self, path: &Path, bytes: &[u8]) -> io::Result<()> {
-        let tmp = temp_path(path);
-        let written = private_file_options()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&tmp)
-            .and_then(|mut out| {
-                out.write_all(bytes)?;
-                out.sync_all()
-            })
-            .and_then(|()| std::fs::rename(&tmp, path));
-        if written.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        written
+        replace(path, bytes)
     }
     /// Syncs the directory holding `path`, so that a file created or
     /// renamed there survives power loss.
@@ -453,34 +427,6 @@ impl LogFile for MemoryFile {
     fn sync_dir(&self, _: &Path) -> io::Result<()> {
         Ok(())
     }
-}
-
-/// Options that create files with mode 0600 (on Unix).
-pub fn private_file_options() -> OpenOptions {
-    #[allow(unused_mut)]
-    let mut options = OpenOptions::new();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        options.mode(0o600);
-    }
-    options
-}
-
-/// Syncs the directory holding `path`, so that a created or renamed file
-/// survives power loss.
-pub fn sync_parent(path: &Path) -> io::Result<()> {
-    match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => File::open(dir)?.sync_all(),
-        _ => File::open(".")?.sync_all(),
-    }
-}
-
-/// Where a rewrite of `path` is written before it is renamed over it.
-fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path.as_os_str().to_owned();
-    name.push(".tmp");
-    PathBuf::from(name)
 }
 
 /// An open record log: a file of one [`Format`], appended to after its last
@@ -700,6 +646,20 @@ impl RecordLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two formats as the journal and the inbox have them.
+    const JOURNAL: Format = Format {
+        name: "journal",
+        magic: b"GOBYJNLD",
+        sync: [0xA7, 0x47, 0x4A, 0x52],
+        older: &[b"GOBYJNL2"],
+    };
+    const INBOX: Format = Format {
+        name: "inbox",
+        magic: b"GOBYINB1",
+        sync: [0xA7, 0x49, 0x4E, 0x42],
+        older: &[],
+    };
     use proptest::prelude::*;
 
     fn own(payload: &[u8]) -> Option<Vec<u8>> {
@@ -755,8 +715,6 @@ mod tests {
             expected.extend_from_slice(&payload);
             assert_eq!(format.frame(&payload), expected, "{}", format.name);
         }
-        assert_eq!(JOURNAL.magic, b"GOBYJNLD");
-        assert_eq!(INBOX.magic, b"GOBYINB1");
     }
 
     #[test]
@@ -881,7 +839,7 @@ mod tests {
             let mode = std::fs::metadata(&path).unwrap().permissions().mode();
             assert_eq!(mode & 0o777, 0o600);
         }
-        assert!(!temp_path(&path).exists());
+        assert!(!crate::file::part_path(&path).exists());
         let (_, replayed) = RecordLog::open(&path, INBOX, own).unwrap();
         assert_eq!(replayed.records, [b"kept".to_vec(), b"after".to_vec()]);
         let _ = std::fs::remove_dir_all(&dir);
