@@ -6,8 +6,8 @@
 
 use std::path::Path;
 
-use gobyd::core::dedup::Identity;
-use gobyd::core::inbox::{Inbox, InboxEntry};
+use gobyd::internals::dedup::Identity;
+use gobyd::internals::inbox::{Inbox, InboxEntry};
 use libfuzzer_sys::fuzz_target;
 use goby_store::record_log::MemoryFile;
 

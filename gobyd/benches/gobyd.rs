@@ -211,7 +211,9 @@ fn main() {
     let (addr, handle, stop, running) = runtime.block_on(async {
         let driver = bench_driver(frames_tx);
         let handle = driver.handle();
-        let daemon = Daemon::start_with_driver(config::parse(&text, "bench").unwrap(), driver)
+        let daemon = Daemon::builder(config::parse(&text, "bench").unwrap())
+            .driver(driver)
+            .start()
             .await
             .expect("gobyd starts");
         let addr = daemon.json_tcp_addr().expect("JSON interface");

@@ -13,9 +13,9 @@ pub use crate::core::Checked;
 use crate::error::DaemonError;
 
 /// The one check of a configuration, shared by `gobyd --check` ([`check`])
-/// and the daemon's start ([`Daemon::start`](crate::daemon::Daemon::start), and with
-/// [`DriverSettings::Caller`](config::DriverSettings::Caller) the starts on
-/// a caller's driver): what it refuses the daemon never runs with, and
+/// and the daemon's start ([`Builder::start`](crate::daemon::Builder::start),
+/// with [`DriverSettings::Caller`](config::DriverSettings::Caller) when the
+/// caller gives the drivers): what it refuses the daemon never runs with, and
 /// what it accepts the daemon starts with unless something only starting
 /// shows (a port taken, a data directory held by another daemon, a serial
 /// device that is not a terminal).
@@ -310,7 +310,11 @@ mod tests {
     async fn refused(text: &str) -> String {
         let config = config::parse(text, "test").expect("parses");
         let by_check = check(config.clone()).expect_err(text).to_string();
-        let by_start = Daemon::start(config).await.expect_err(text).to_string();
+        let by_start = Daemon::builder(config)
+            .start()
+            .await
+            .expect_err(text)
+            .to_string();
         assert_eq!(by_check, by_start, "{text}");
         by_check
     }
@@ -375,7 +379,7 @@ mod tests {
         );
         let config = config::parse(&text, "test").unwrap();
         check(config.clone()).expect("valid");
-        let daemon = Daemon::start(config).await.expect("starts");
+        let daemon = Daemon::builder(config).start().await.expect("starts");
         daemon.run(async {}).await.unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -498,7 +502,9 @@ mod tests {
             modemdriver::sim::medium::Medium::named("validate-caller"),
         )
         .unwrap();
-        let daemon = Daemon::start_with_driver(config, driver)
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .start()
             .await
             .expect("starts");
         daemon.run(async {}).await.unwrap();
@@ -510,7 +516,9 @@ mod tests {
         )
         .unwrap();
         let bad = config::parse(&format!("{text}log {{ level: \"loud\" }}\n"), "test").unwrap();
-        let err = Daemon::start_with_driver(bad, driver)
+        let err = Daemon::builder(bad)
+            .driver(driver)
+            .start()
             .await
             .unwrap_err()
             .to_string();

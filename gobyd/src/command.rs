@@ -1,5 +1,5 @@
 //! The `gobyd` command line: options, logging, signals and exit statuses
-//! around [`Daemon`](crate::daemon::Daemon).
+//! around [`crate::daemon::Daemon`].
 //!
 //! Exit status: [`EXIT_OK`] after a clean stop (SIGINT, SIGTERM) or a
 //! successful `--check`, [`EXIT_SETUP`] when the configuration or the
@@ -371,7 +371,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     };
     runtime.block_on(async {
         let stop = shutdown_signal();
-        let daemon = match Daemon::start(config).await {
+        let daemon = match Daemon::builder(config).start().await {
             Ok(d) => d,
             Err(e) => {
                 eprintln!("gobyd: error: {}", located(e, read.as_ref()));

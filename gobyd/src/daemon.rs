@@ -1,5 +1,6 @@
-//! The composition root: a running daemon is its core ([`crate::core`])
-//! and the interfaces started on it ([`crate::edge`]): the JSON interface
+//! The composition root: a running daemon is its core (the outbox and its
+//! journal, the receive path, the links, the network layer) and the
+//! interfaces started on it: the JSON interface
 //! over TCP and UDP, the MQTT and MOOS bridges and the mission log, each
 //! rendering the core's typed events in its own form.
 
@@ -45,106 +46,136 @@ impl std::fmt::Debug for Daemon {
     }
 }
 
-impl Daemon {
-    /// Checks the configuration ([`validate`]: a configuration
-    /// `gobyd --check` refuses is refused here with the same error), takes
-    /// the data directory ([`DaemonError::DataDir`] when another daemon
-    /// holds it), loads the DCCL types, replays the journal, starts the
-    /// driver and opens the autonomy interfaces.
-    pub async fn start(config: GobydConfig) -> Result<Self, DaemonError> {
-        let checked = validate(config, config::DriverSettings::Configured)?;
-        let (limits, warnings) = frame_report(&checked);
-        if let Some(limits) = limits {
-            tracing::info!("{limits}");
-        }
-        for w in warnings {
-            tracing::warn!("{w}");
-        }
-        let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
-        let several = config::links::has_link_sections(&checked.config);
-        let mut drivers = Vec::new();
-        for view in config::links::links(&checked.config) {
-            let mut driver_config = view.driver.cloned().expect("completed");
-            // Acks (where software sends them) only once the inbox holds
-            // the message.
-            driver_config.deferred_ack = Some(true);
-            keep_application_acks_in(&mut driver_config, data_dir.path());
-            let started = match start_driver(&driver_config).await {
-                Ok(driver) => Ok(driver),
-                // One link that cannot start does not stop the others: it
-                // is started again after its back-off.
-                Err(e) if several => Err(e.to_string()),
-                Err(e) => return Err(e),
-            };
-            drivers.push((started, Some(driver_config)));
-        }
-        Self::start_in(checked, drivers, data_dir, Arc::new(SystemClock)).await
+/// How a daemon is to start: its configuration, and what the caller gives
+/// it in place of what the configuration says ([`Daemon::builder`]).
+///
+/// ```no_run
+/// # async fn demo(config: protos::goby::apps::protobuf::GobydConfig) -> Result<(), gobyd::error::DaemonError> {
+/// let daemon = gobyd::daemon::Daemon::builder(config).start().await?;
+/// daemon.run(std::future::pending::<()>()).await
+/// # }
+/// ```
+pub struct Builder {
+    config: GobydConfig,
+    drivers: Vec<Driver>,
+    clock: Arc<dyn Clock>,
+}
+
+impl std::fmt::Debug for Builder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Builder")
+            .field("drivers", &self.drivers.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Builder {
+    /// Runs the daemon on `driver`, started by the caller, in place of the
+    /// configuration's: the driver of the next link, in the order of the
+    /// configuration's `link` sections (the one link of a configuration
+    /// with a top-level `driver`). Give one for every link or none. The
+    /// configuration's driver sections are then only used for the modem id,
+    /// and a link whose driver stops is not started again. Start a UDP or
+    /// simulator driver with `deferred_ack: true`, so that it acknowledges
+    /// received data only once the daemon has recorded it (the daemon asks
+    /// for every ack); without it the driver acks on reception.
+    pub fn driver(mut self, driver: Driver) -> Self {
+        self.drivers.push(driver);
+        self
     }
 
-    /// Starts the daemon on a driver started by the caller (the
-    /// configuration's driver section is then only used for the modem id).
-    /// Start a UDP or simulator driver with `deferred_ack: true`, so that it
-    /// acknowledges received data only once the daemon has recorded it (the
-    /// daemon asks for every ack); without it the driver acks on reception.
-    pub async fn start_with_driver(
-        config: GobydConfig,
-        driver: Driver,
-    ) -> Result<Self, DaemonError> {
-        Self::start_with_driver_and_clock(config, driver, Arc::new(SystemClock)).await
-    }
-
-    /// Starts the daemon on a driver started by the caller, as
-    /// [`start_with_driver`](Self::start_with_driver), reading time from
-    /// `clock`: the queue, the medium access slots, the inbox and every
-    /// stamp of the core. Give the driver the same clock. With
+    /// Reads time from `clock` (microseconds since the epoch; the system's
+    /// clock unless given): the queue, the medium access slots, the inbox
+    /// and every stamp of the core. Give the drivers the same clock. With
     /// [`modemdriver::time::TokioClock`] under tokio's paused clock the
     /// whole node runs in virtual time (tests of the daemon's logic that do
     /// not depend on the machine's speed or load).
-    pub async fn start_with_driver_and_clock(
-        config: GobydConfig,
-        driver: Driver,
-        clock: Arc<dyn Clock>,
-    ) -> Result<Self, DaemonError> {
-        let checked = validate(config, config::DriverSettings::Caller)?;
-        if config::links::has_link_sections(&checked.config) {
-            return Err(ConfigError::Invalid(
-                "the configuration has link sections: start it on one driver per link \
-                 (Daemon::start_with_drivers)"
-                    .into(),
-            )
-            .into());
-        }
-        let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
-        Self::start_in(checked, vec![(Ok(driver), None)], data_dir, clock).await
+    pub fn clock(mut self, clock: Arc<dyn Clock>) -> Self {
+        self.clock = clock;
+        self
     }
 
-    /// Starts the daemon of a configuration with `link` sections on
-    /// drivers started by the caller, one per link in the order of the
-    /// sections (their driver sections are then only used for the modem
-    /// id; a link whose driver stops is not started again), reading time
-    /// from `clock` as [`start_with_driver_and_clock`](Self::start_with_driver_and_clock)
-    /// does.
-    pub async fn start_with_drivers(
-        config: GobydConfig,
-        drivers: Vec<Driver>,
-        clock: Arc<dyn Clock>,
-    ) -> Result<Self, DaemonError> {
+    /// Checks the configuration ([`validate`]: a configuration
+    /// `gobyd --check` refuses is refused here with the same error; with
+    /// drivers given, their sections are not checked), takes the data
+    /// directory ([`DaemonError::DataDir`] when another daemon holds it),
+    /// loads the DCCL types, replays the journal and the inbox, starts the
+    /// drivers the configuration names (unless given) and opens the
+    /// interfaces it asks for.
+    pub async fn start(self) -> Result<Daemon, DaemonError> {
+        let Builder {
+            config,
+            drivers,
+            clock,
+        } = self;
+        if drivers.is_empty() {
+            return start_configured(config, clock).await;
+        }
         let checked = validate(config, config::DriverSettings::Caller)?;
         let count = config::links::links(&checked.config).len();
         if drivers.len() != count {
             return Err(ConfigError::Invalid(format!(
-                "{} drivers for {count} links: give one per link, in order",
+                "{} drivers given for the {count} links of the configuration: give one per link, \
+                 in the order of its link sections",
                 drivers.len()
             ))
             .into());
         }
         let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
         let drivers = drivers.into_iter().map(|d| (Ok(d), None)).collect();
-        Self::start_in(checked, drivers, data_dir, clock).await
+        Daemon::start_in(checked, drivers, data_dir, clock).await
+    }
+}
+
+/// Starts the daemon on the drivers its configuration names (checked with
+/// them): one link that cannot start does not stop a daemon with `link`
+/// sections (it is started again after its back-off), but stops one with
+/// a top-level driver.
+async fn start_configured(
+    config: GobydConfig,
+    clock: Arc<dyn Clock>,
+) -> Result<Daemon, DaemonError> {
+    let checked = validate(config, config::DriverSettings::Configured)?;
+    let (limits, warnings) = frame_report(&checked);
+    if let Some(limits) = limits {
+        tracing::info!("{limits}");
+    }
+    for w in warnings {
+        tracing::warn!("{w}");
+    }
+    let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;
+    let several = config::links::has_link_sections(&checked.config);
+    let mut drivers = Vec::new();
+    for view in config::links::links(&checked.config) {
+        let mut driver_config = view.driver.cloned().expect("completed");
+        // Acks (where software sends them) only once the inbox holds
+        // the message.
+        driver_config.deferred_ack = Some(true);
+        keep_application_acks_in(&mut driver_config, data_dir.path());
+        let started = match start_driver(&driver_config).await {
+            Ok(driver) => Ok(driver),
+            // One link that cannot start does not stop the others: it
+            // is started again after its back-off.
+            Err(e) if several => Err(e.to_string()),
+            Err(e) => return Err(e),
+        };
+        drivers.push((started, Some(driver_config)));
+    }
+    Daemon::start_in(checked, drivers, data_dir, clock).await
+}
+
+impl Daemon {
+    /// A daemon of `config` to start ([`Builder::start`]), on the drivers
+    /// the configuration names and the system's clock unless the builder is
+    /// given others.
+    pub fn builder(config: GobydConfig) -> Builder {
+        Builder {
+            config,
+            drivers: Vec::new(),
+            clock: Arc::new(SystemClock),
+        }
     }
 
-    /// `drivers`: for each link in order, its driver or why it could not
-    /// start, and its configuration for restarts (`None`: the caller's).
     /// The core on its links (`drivers`, for each link in order: its
     /// driver or why it could not start, and its configuration for
     /// restarts), with the mission log when the configuration keeps one,

@@ -1,8 +1,8 @@
 //! Why the daemon could not start or had to stop.
 
-use crate::config::ConfigError;
-use crate::core::data_dir::DataDirError;
-use crate::core::outbox::OutboxError;
+pub use crate::config::ConfigError;
+pub use crate::core::data_dir::DataDirError;
+pub use crate::core::outbox::OutboxError;
 
 /// Why the daemon could not start or had to stop.
 #[derive(Debug, thiserror::Error)]

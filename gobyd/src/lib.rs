@@ -9,7 +9,7 @@
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
 //! let config = gobyd::config::load(std::path::Path::new("gobyd.pb.txt"))?;
-//! let daemon = gobyd::daemon::Daemon::start(config).await?;
+//! let daemon = gobyd::daemon::Daemon::builder(config).start().await?;
 //! daemon.run(std::future::pending::<()>()).await?;
 //! # Ok(())
 //! # }
@@ -17,25 +17,48 @@
 //!
 //! Modules: [`config`] loads the configuration ([`mission_file`] from a
 //! MOOS mission file) and [`check`] checks it as `gobyd --check` does;
-//! [`daemon`] composes the daemon: its [`core`] (the outbox and its
-//! journal, the receive path, the links, the network layer) and the
-//! interfaces at its [`edge`] (JSON, MOOS, MQTT, the mission log), which
-//! meet at the typed values of [`event`]; [`translator`] turns MOOS
-//! variables into DCCL messages and back (pAcommsHandler's
-//! `translator_entry`), and [`command`] is the `gobyd` command line.
+//! [`daemon`] starts the daemon ([`daemon::Daemon::builder`]) and runs it;
+//! [`event`] holds what goes into its core and comes out of it, as typed
+//! values (messages to publish, control requests, the events every
+//! interface renders); [`json`] renders those as the JSON interface's lines;
+//! [`translator`] turns MOOS variables into DCCL messages and back
+//! (pAcommsHandler's `translator_entry`); [`error`] says why the daemon
+//! could not start; [`command`] is the `gobyd` command line. The core (the
+//! outbox and its journal, the receive path, the links, the network layer)
+//! and the interfaces (JSON, MOOS, MQTT, the mission log) are the crate's
+//! own.
 
 #![warn(missing_docs)]
 
 pub mod check;
 pub mod command;
 pub mod config;
-pub mod core;
+pub(crate) mod core;
 pub mod daemon;
-pub mod edge;
+pub(crate) mod edge;
 pub mod error;
 pub mod event;
 pub mod mission_file;
 pub mod translator;
+
+/// The JSON interface's lines of the core's events and replies (the types
+/// of [`gobyd_protocol`]), for a program that embeds the daemon and serves
+/// them in its own way.
+pub mod json {
+    pub use crate::edge::json::lines::{
+        event, event_line, event_topic, link_json, lost, message_json, network_reply, publish_reply,
+    };
+}
+
+/// The daemon's internals, for its own tests, benchmarks and fuzz targets
+/// (feature `internals`): no interface of the crate.
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod internals {
+    pub use crate::core::{crash_point, dedup, fragment, inbox, network};
+    pub use crate::edge::json::lines::parse_request;
+    pub use crate::edge::mqtt::settings as mqtt_settings;
+}
 
 /// The crate's README.md, whose examples run as doctests.
 #[cfg(doctest)]

@@ -60,7 +60,10 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let port = free_udp_port();
     let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
-    let daemon = Daemon::start(config.config()).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config.config())
+        .start()
+        .await
+        .expect("gobyd starts");
     let inbox = daemon.data_dir().join("inbox.log");
     let mut events = daemon.subscribe();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();

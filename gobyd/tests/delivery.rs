@@ -247,7 +247,8 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
             simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed).into()
         };
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(id, driver, &data_dir, link))
+        let daemon = Daemon::builder(daemon_config(id, driver, &data_dir, link))
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());
@@ -281,8 +282,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
                 if let DaemonEvent::Received { .. } = e.as_ref() {
-                    let line = gobyd::edge::json::lines::event_line(e.as_ref(), |_| String::new())
-                        .unwrap();
+                    let line = gobyd::json::event_line(e.as_ref(), |_| String::new()).unwrap();
                     let line: serde_json::Value = serde_json::from_str(&line).unwrap();
                     let stats = &line["link"]["receive_stat"];
                     let mut j = json_lines.lock().unwrap();

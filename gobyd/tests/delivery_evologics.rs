@@ -172,7 +172,8 @@ async fn run(faults: Faults) -> Tally {
     for id in 1..=2 {
         let port = emulators[id as usize - 1].local_addr().unwrap().port();
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(id, port, &data_dir, faults.ack_mode))
+        let daemon = Daemon::builder(daemon_config(id, port, &data_dir, faults.ack_mode))
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());

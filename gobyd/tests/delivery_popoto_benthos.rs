@@ -363,7 +363,8 @@ async fn run(faults: Faults) -> Tally {
     for id in 1..=2 {
         let port = emulators.port(id as usize - 1);
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(&faults, id, port, &data_dir))
+        let daemon = Daemon::builder(daemon_config(&faults, id, port, &data_dir))
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());

@@ -1,7 +1,7 @@
 //! Group commit, as a real process on loopback: a client hears `accepted`
 //! only after the journal sync that covers its message. The daemon is
 //! armed to die as its `N`-th journal sync is about to start (crash point
-//! `unsynced`, see `gobyd::core::crash_point`): whatever it confirmed before
+//! `unsynced`, see `gobyd::internals::crash_point`): whatever it confirmed before
 //! dying was covered by an earlier sync, and is in the journal. And a
 //! connection that pipelines its lines gets every reply, in order.
 

@@ -111,8 +111,8 @@ fn readies(events: &mut broadcast::Receiver<SharedEvent>) -> usize {
         match events.try_recv() {
             Ok(e) => {
                 if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = e.as_ref() {
-                    let line = gobyd::edge::json::lines::event_line(e.as_ref(), |_| String::new())
-                        .expect("a line");
+                    let line =
+                        gobyd::json::event_line(e.as_ref(), |_| String::new()).expect("a line");
                     assert!(line.contains(r#""event":"driver_status""#), "{line}");
                     n += 1;
                 }
@@ -132,10 +132,10 @@ async fn driver_and_mac_variables_then_a_driver_reset() {
     let channel = format!("modemvars-{}", std::process::id());
     // TDMA slots of 1 s at rate 6.
     let one = node(1, &channel, Some(db.port()), &dir.join("one")).tdma(&[1, 2], 6, 1.0);
-    let one = Daemon::start(one.config()).await.unwrap();
+    let one = Daemon::builder(one.config()).start().await.unwrap();
     let mut events = one.subscribe();
     let two = node(2, &channel, None, &dir.join("two")).tdma(&[1, 2], 6, 1.0);
-    let two = Daemon::start(two.config()).await.unwrap();
+    let two = Daemon::builder(two.config()).start().await.unwrap();
     let (one, two) = (run(one), run(two));
 
     let vars = [
@@ -252,7 +252,7 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
     let one = node(1, &channel, Some(db.port()), &dir.join("data")).mac_none();
     let (client, mut mail) = client(db.port(), &["ACOMMS_QSIZE"]).await;
 
-    let daemon = run(Daemon::start(one.config()).await.unwrap());
+    let daemon = run(Daemon::builder(one.config()).start().await.unwrap());
     let send = "@PB[goby.example.Command] destination: 2 action: GOTO";
     qsize(&client, &mut mail, Some(send), |s| s.ends_with("size: 1")).await;
     for _ in 0..2 {
@@ -276,7 +276,7 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
 
     // Started again on the same journal: one new message makes a queue of
     // one (the flushed three are gone for good).
-    let daemon = run(Daemon::start(one.config()).await.unwrap());
+    let daemon = run(Daemon::builder(one.config()).start().await.unwrap());
     let size = qsize(&client, &mut mail, Some(send), |s| !s.ends_with("size: 0")).await;
     assert_eq!(
         size,

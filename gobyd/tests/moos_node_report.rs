@@ -85,7 +85,7 @@ async fn exchange(ports: (u16, u16), name: &str) -> Duration {
     let mut stops = Vec::new();
     let mut running = Vec::new();
     for config in [alpha, bravo] {
-        let daemon = Daemon::start(config).await.expect("gobyd starts");
+        let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
         let (stop, stopped) = oneshot::channel::<()>();
         stops.push(stop);
         running.push(tokio::spawn(daemon.run(async {

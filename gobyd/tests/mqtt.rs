@@ -365,7 +365,7 @@ fn the_fleet_configurations_check() {
     for (i, node) in [(1, "auv1"), (2, "auv2")] {
         let config = gobyd::config::load(&dir.join(format!("fleet-vehicle{i}.pb.txt"))).unwrap();
         gobyd::check::check(config.clone()).unwrap();
-        let settings = gobyd::edge::mqtt::settings::settings(config.mqtt.as_ref().unwrap(), i)
+        let settings = gobyd::internals::mqtt_settings::settings(config.mqtt.as_ref().unwrap(), i)
             .unwrap()
             .unwrap();
         assert_eq!(settings.topics.node("tx/x"), format!("fleet/{node}/tx/x"));

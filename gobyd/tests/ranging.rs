@@ -62,7 +62,7 @@ async fn a_json_client_gets_long_baseline_travel_times() {
         .json_tcp("127.0.0.1:0")
         .data_dir(&dir.join("data"))
         .config();
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
     let addr = daemon.json_tcp_addr().expect("JSON over TCP");
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async move {
@@ -176,7 +176,7 @@ async fn replies_of(
     config: protos::goby::apps::protobuf::GobydConfig,
     requests: &[&str],
 ) -> Vec<Value> {
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
     let addr = daemon.json_tcp_addr().expect("JSON over TCP");
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async move {

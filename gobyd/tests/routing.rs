@@ -104,7 +104,10 @@ async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) 
         let driver =
             SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
                 .unwrap();
-        let daemon = Daemon::start_with_driver_and_clock(config, driver, clock.clone())
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .clock(clock.clone())
+            .start()
             .await
             .expect("gobyd starts");
         fleet.publishers.push(daemon.publisher());
@@ -247,7 +250,8 @@ async fn commands_and_replies_cross_the_relay_once_each_acked_end_to_end() {
                 .map(|e| &e.message_name)
                 .collect::<Vec<_>>()
         );
-        let origin = gobyd::core::network::origin::Origin::open(&data.join("routes.log")).unwrap();
+        let origin =
+            gobyd::internals::network::origin::Origin::open(&data.join("routes.log")).unwrap();
         assert_eq!(origin.pending().count(), 0, "node {id} waits for acks");
     }
     let _ = std::fs::remove_dir_all(&dir);

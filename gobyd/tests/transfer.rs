@@ -117,11 +117,7 @@ async fn until(fleet: &Fleet, limit: Duration, done: impl Fn(&[Seen]) -> bool) -
     done(&fleet.seen())
 }
 
-fn transfer_at(
-    seen: &[Seen],
-    node: i32,
-    state: &str,
-) -> Vec<gobyd::core::network::transfers::TransferEvent> {
+fn transfer_at(seen: &[Seen], node: i32, state: &str) -> Vec<gobyd::event::TransferEvent> {
     seen.iter()
         .filter_map(|s| match s {
             Seen::Transfer { node: n, event } if *n == node && event.state == state => {
@@ -332,7 +328,7 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     fleet.stop().await;
     // Nothing left under way at either end.
     for node in [1, 3] {
-        let status = gobyd::core::network::transfers::Transfers::open(
+        let status = gobyd::internals::network::transfers::Transfers::open(
             node,
             settings_for_inspection(&dir, node),
             &data_dir(&dir, node).join("transfers.log"),
@@ -345,8 +341,11 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-fn settings_for_inspection(dir: &Path, node: i32) -> gobyd::core::network::transfers::Settings {
-    gobyd::core::network::transfers::Settings {
+fn settings_for_inspection(
+    dir: &Path,
+    node: i32,
+) -> gobyd::internals::network::transfers::Settings {
+    gobyd::internals::network::transfers::Settings {
         fragment_size: 64,
         window: 1,
         resend_after: 0,

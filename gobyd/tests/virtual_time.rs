@@ -74,7 +74,10 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
         let driver =
             SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
                 .unwrap();
-        let daemon = Daemon::start_with_driver_and_clock(config, driver, clock.clone())
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .clock(clock.clone())
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());

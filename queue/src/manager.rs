@@ -64,6 +64,17 @@ struct AwaitingAck {
     hint: usize,
 }
 
+/// What filling one data request keeps from frame to frame.
+#[derive(Debug)]
+struct Filling {
+    /// Some message placed wants an ack.
+    packet_ack: bool,
+    /// No message was placed yet.
+    first_message: bool,
+    /// The queues whose size changed, by index.
+    changed: Vec<bool>,
+}
+
 /// A queue taking part in the priority contest of one data request.
 #[derive(Debug, Clone, Copy)]
 struct Contender {
@@ -528,9 +539,11 @@ impl QueueManager {
         self.run_on_demand(request, now);
 
         let ack_forbidden = request.ack_requested == Some(false);
-        let mut packet_ack = request.ack_requested.unwrap_or(false);
-        let mut first_message = true;
-        let mut changed = vec![false; self.queues.len()];
+        let mut filling = Filling {
+            packet_ack: request.ack_requested.unwrap_or(false),
+            first_message: true,
+            changed: vec![false; self.queues.len()],
+        };
 
         // The strongest contender on top; those that cannot join the current
         // frame wait aside until the next frame (within a frame a queue only
@@ -589,95 +602,17 @@ impl QueueManager {
                     break;
                 };
                 let index = contender.index;
-                // Several links: copies may arrive in any order, so every
-                // sending is marked as possibly a repeat; a flooding type
-                // without ack stays for the other links.
-                let (several, stay) = match &self.links {
-                    Some(links) => {
-                        let m = &self.queues[index].messages[next];
-                        (
-                            links.several(contender.dccl_id),
-                            links.others_to_carry(
-                                contender.dccl_id,
-                                link,
-                                m.marks.mask(),
-                                m.encoded.len(),
-                            ),
-                        )
-                    }
-                    None => (false, false),
-                };
-                let queue = &mut self.queues[index];
-                if several {
-                    queue.messages[next].resent = true;
-                }
-                let sent = queue.give_on(
-                    next,
-                    link,
-                    frame_number,
-                    now,
-                    &mut request.frame[slot],
-                    stay,
+                let (len, identity) = self.place(
+                    request,
+                    (slot, frame_number),
+                    (contender, next),
+                    (link, now),
+                    &mut filling,
                 );
-                if sent.len > remaining {
+                if len > remaining {
                     bare = true;
                 } else {
-                    ids.push(sent.identity);
-                }
-                let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
-                if sent.ack_requested {
-                    packet_ack = true;
-                    self.awaiting.push(AwaitingAck {
-                        link,
-                        frame: frame_number,
-                        transmission: request.unique_id,
-                        dest: sent.dest,
-                        dccl_id: contender.dccl_id,
-                        seq: sent.seq,
-                        hint: sent.index,
-                    });
-                }
-                if first_message {
-                    first_message = false;
-                    if request.dest() == QUERY_DESTINATION_ID {
-                        request.dest = Some(sent.dest);
-                    }
-                    if request.src() == QUERY_SOURCE_ID {
-                        request.src = Some(self.modem_id);
-                    }
-                }
-                let left = sent.removed.is_some();
-                if left {
-                    changed[index] = true;
-                }
-                if loopback_as_sent || !self.subscribers.is_empty() {
-                    let message = match sent.removed {
-                        Some(m) => Some(m.message),
-                        None => self.queues[index].get(sent.seq).map(|m| m.message.clone()),
-                    };
-                    if let Some(message) = &message {
-                        self.emit(QueueEvent::Sent {
-                            message: message.clone(),
-                            id: sent.seq,
-                            dccl_id: contender.dccl_id,
-                            frame: frame_number,
-                            awaiting_ack: !left,
-                            link,
-                        });
-                    }
-                    if let Some(message) = message.filter(|_| loopback_as_sent) {
-                        let frame = &request.frame[slot];
-                        let bytes = frame[frame.len() - sent.len..].to_vec();
-                        self.emit(QueueEvent::Received(ReceivedMessage {
-                            message,
-                            dccl_id: contender.dccl_id,
-                            src: sent.src,
-                            dest: sent.dest,
-                            time: Some(sent.time),
-                            bytes,
-                            identity: None,
-                        }));
-                    }
+                    ids.push(identity);
                 }
                 if let Some(c) = self.contender(index, now, link) {
                     contenders.push(c);
@@ -688,14 +623,111 @@ impl QueueManager {
                 request.frame[slot].extend_from_slice(&trailer);
             }
         }
-        request.ack_requested = Some(packet_ack);
+        request.ack_requested = Some(filling.packet_ack);
         self.scratch = contenders.into_vec();
-        for (index, changed) in changed.into_iter().enumerate() {
+        for (index, changed) in filling.changed.into_iter().enumerate() {
             if changed {
                 self.emit_size(index);
             }
         }
         Ok(())
+    }
+
+    /// Places message `next` of the queue of `contender` in frame `slot`
+    /// (numbered `frame_number`) of `request` for link `link` at `now`:
+    /// marks it sent (or removes it), awaits its ack, takes the request's
+    /// destination and source from the first message, and tells the
+    /// sending. Returns the bytes it took and its identity.
+    fn place(
+        &mut self,
+        request: &mut ModemTransmission,
+        (slot, frame_number): (usize, u32),
+        (contender, next): (Contender, usize),
+        (link, now): (LinkIndex, Micros),
+        filling: &mut Filling,
+    ) -> (usize, WireIdentity) {
+        let index = contender.index;
+        // Several links: copies may arrive in any order, so every
+        // sending is marked as possibly a repeat; a flooding type
+        // without ack stays for the other links.
+        let (several, stay) = match &self.links {
+            Some(links) => {
+                let m = &self.queues[index].messages[next];
+                (
+                    links.several(contender.dccl_id),
+                    links.others_to_carry(contender.dccl_id, link, m.marks.mask(), m.encoded.len()),
+                )
+            }
+            None => (false, false),
+        };
+        let queue = &mut self.queues[index];
+        if several {
+            queue.messages[next].resent = true;
+        }
+        let sent = queue.give_on(
+            next,
+            link,
+            frame_number,
+            now,
+            &mut request.frame[slot],
+            stay,
+        );
+        let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
+        if sent.ack_requested {
+            filling.packet_ack = true;
+            self.awaiting.push(AwaitingAck {
+                link,
+                frame: frame_number,
+                transmission: request.unique_id,
+                dest: sent.dest,
+                dccl_id: contender.dccl_id,
+                seq: sent.seq,
+                hint: sent.index,
+            });
+        }
+        if filling.first_message {
+            filling.first_message = false;
+            if request.dest() == QUERY_DESTINATION_ID {
+                request.dest = Some(sent.dest);
+            }
+            if request.src() == QUERY_SOURCE_ID {
+                request.src = Some(self.modem_id);
+            }
+        }
+        let left = sent.removed.is_some();
+        if left {
+            filling.changed[index] = true;
+        }
+        if loopback_as_sent || !self.subscribers.is_empty() {
+            let message = match sent.removed {
+                Some(m) => Some(m.message),
+                None => self.queues[index].get(sent.seq).map(|m| m.message.clone()),
+            };
+            if let Some(message) = &message {
+                self.emit(QueueEvent::Sent {
+                    message: message.clone(),
+                    id: sent.seq,
+                    dccl_id: contender.dccl_id,
+                    frame: frame_number,
+                    awaiting_ack: !left,
+                    link,
+                });
+            }
+            if let Some(message) = message.filter(|_| loopback_as_sent) {
+                let frame = &request.frame[slot];
+                let bytes = frame[frame.len() - sent.len..].to_vec();
+                self.emit(QueueEvent::Received(ReceivedMessage {
+                    message,
+                    dccl_id: contender.dccl_id,
+                    src: sent.src,
+                    dest: sent.dest,
+                    time: Some(sent.time),
+                    bytes,
+                    identity: None,
+                }));
+            }
+        }
+        (sent.len, sent.identity)
     }
 
     /// Handles a received transmission: an ACK removes the acknowledged

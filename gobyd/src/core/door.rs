@@ -65,11 +65,6 @@ impl Door {
         }
     }
 
-    /// True when values of type `name` out of range are clamped (not refused).
-    pub fn clamps(&self, name: &str) -> bool {
-        self.clamp.contains(name)
-    }
-
     /// Checks `message` by encoding it: unchanged, it passes as it is (with
     /// its encoding); changed by the codec, it is refused (the error names
     /// each field, its value and the bound) or, for a clamping type, passed

@@ -307,6 +307,7 @@ impl Outgoing {
     }
 
     /// Bytes of the stream the receiver holds.
+    #[cfg(test)]
     pub fn held_bytes(&self) -> usize {
         (0..self.count())
             .filter(|&i| self.states[i as usize] == Sending::Held)
@@ -324,14 +325,6 @@ impl Outgoing {
         let start = index as usize * self.fragment_size;
         let end = (start + self.fragment_size).min(self.stream.len());
         &self.stream[start.min(end)..end]
-    }
-
-    /// Fragments in the queue now.
-    pub fn queued(&self) -> usize {
-        self.states
-            .iter()
-            .filter(|s| **s == Sending::Queued)
-            .count()
     }
 
     /// The next fragment to give the queue at `now`: the lowest never sent,
@@ -402,6 +395,7 @@ impl Outgoing {
     }
 
     /// Whether the receiver holds every fragment.
+    #[cfg(test)]
     pub fn all_held(&self) -> bool {
         self.held == self.count()
     }
@@ -502,6 +496,7 @@ impl Incoming {
     }
 
     /// Bytes held.
+    #[cfg(test)]
     pub fn held_bytes(&self) -> usize {
         self.fragments.values().map(Vec::len).sum()
     }

@@ -87,11 +87,13 @@ impl<T> GroupCommit<T> {
     }
 
     /// Syncs under way.
+    #[cfg(test)]
     pub fn syncing(&self) -> usize {
         self.syncing.len()
     }
 
     /// Waiters not yet released.
+    #[cfg(test)]
     pub fn waiting(&self) -> usize {
         self.waiting.len()
     }

@@ -41,7 +41,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::Path;
 
-use goby_store::record_log::{Format, LogError, LogFile, RecordLog, CRC32 as CRC};
+use goby_store::record_log::{Format, LogError, RecordLog, CRC32 as CRC};
 
 /// The inbox's file format: a record log ([`goby_store::record_log`]) of
 /// magic `GOBYINB1`.
@@ -214,9 +214,10 @@ impl Inbox {
     /// Opens the inbox held by `file` (named `path`, where rewrites go), as
     /// [`open`](Self::open) does: for fault injection, and for replaying
     /// bytes in memory ([`goby_store::record_log::MemoryFile`]).
+    #[cfg(any(test, feature = "internals"))]
     pub fn open_with(
         path: &Path,
-        file: impl LogFile + 'static,
+        file: impl goby_store::record_log::LogFile + 'static,
         window_micros: u64,
         now: u64,
     ) -> io::Result<(Self, Replay)> {
@@ -288,6 +289,7 @@ impl Inbox {
     /// The identities remembered (within the window when the inbox was
     /// opened or last marked a hand-over) and when each was recorded, in no
     /// particular order.
+    #[cfg(any(test, feature = "internals"))]
     pub fn remembered(&self) -> impl Iterator<Item = (&Identity, u64)> {
         self.seen.iter().map(|(id, t)| (id, *t))
     }

@@ -189,10 +189,8 @@ impl Core {
         }
         let filled = if left == Some(0) {
             Ok(())
-        } else if self.several {
-            self.outbox.data_request_on(request, i)
         } else {
-            self.outbox.data_request(request)
+            self.outbox.data_request(request, i)
         };
         if let Err(e) = filled {
             tracing::warn!("data request: {e}");
@@ -305,7 +303,7 @@ impl Core {
             link.backoff.failures()
         );
         link.last_error = Some(reason);
-        match self.outbox.transmitted_on(i, false) {
+        match self.outbox.transmitted(i, false) {
             Ok(n) if n > 0 => tracing::info!("{n} messages queued again from the failed link"),
             Ok(_) => {}
             Err(e) => tracing::error!("journal: {e}"),
@@ -473,7 +471,7 @@ impl Core {
         if let Err(e) = old.stop().await {
             tracing::warn!("driver stop: {e}");
         }
-        if let Err(e) = self.outbox.transmitted_on(i, false) {
+        if let Err(e) = self.outbox.transmitted(i, false) {
             tracing::error!("journal: {e}");
         }
         let driver = match start_driver(&config).await {

@@ -69,8 +69,6 @@ use modemdriver::time::sleep_until_opt;
 use network::Network;
 use outbox::{Accepted, Outbox};
 
-pub use delivery::RECOVERY_WAIT;
-
 /// Most messages to publish the core takes in one turn of its loop (then
 /// it serves the driver, the slots and the events again).
 pub const PUBLISH_BATCH: usize = 64;
@@ -563,7 +561,7 @@ impl Core {
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
                     tracing::warn!("transmission failed: {reason}");
                 }
-                match self.outbox.transmitted_on(i, went_out) {
+                match self.outbox.transmitted(i, went_out) {
                     Ok(n) if n > 0 => {
                         tracing::info!("{n} messages queued again after a failed transmission")
                     }

@@ -229,14 +229,10 @@ impl Outbox {
         self.journal.sync_handle()
     }
 
-    /// Fills the frames of a data request from the queues.
-    pub fn data_request(&mut self, request: &mut ModemTransmission) -> Result<(), QueueError> {
-        self.queue.handle_modem_data_request(request)
-    }
-
-    /// Fills the frames of a data request of link `link` (several links:
-    /// [`queue::links`]).
-    pub fn data_request_on(
+    /// Fills the frames of a data request of link `link` from the queues
+    /// (0, the only one, when the configuration has no `link` sections;
+    /// otherwise with the messages [`queue::links`]' rules let it carry).
+    pub fn data_request(
         &mut self,
         request: &mut ModemTransmission,
         link: queue::LinkIndex,
@@ -244,12 +240,13 @@ impl Outbox {
         self.queue.handle_link_data_request(request, link)
     }
 
-    /// Hands a transmission received on link `link` to the queues (see
-    /// [`receive`](Self::receive)).
-    pub fn receive_on(
+    /// Hands a transmission (data or ack) received on link `link` to the
+    /// queues; returns the frames that did not decode (the others are still
+    /// delivered).
+    pub fn receive(
         &mut self,
-        link: queue::LinkIndex,
         transmission: &ModemTransmission,
+        link: queue::LinkIndex,
     ) -> Vec<QueueError> {
         self.queue.handle_link_receive(transmission, link)
     }
@@ -257,12 +254,6 @@ impl Outbox {
     /// The queue's links, to tell their states (`None`: one link).
     pub fn links_mut(&mut self) -> Option<&mut queue::Links> {
         self.queue.links_mut()
-    }
-
-    /// Hands a received transmission (data or ack) to the queues; returns
-    /// the frames that did not decode (the others are still delivered).
-    pub fn receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
-        self.queue.handle_modem_receive(transmission)
     }
 
     /// Empties the queue of a type and removes its messages from the
@@ -282,23 +273,12 @@ impl Outbox {
         self.queue.expire();
     }
 
-    /// The queue events since the last call. Messages that left their queue
+    /// The queue events since the last call, each with the journal entry
+    /// id (the id clients were given) of the message it is about: for
+    /// sendings, acks, expiries and drops. Messages that left their queue
     /// for good are removed from the journal first; messages sent without
     /// ack wait for [`transmitted`](Self::transmitted).
-    pub fn events(&mut self) -> Result<Vec<QueueEvent>, JournalError> {
-        Ok(self
-            .events_with_entries()?
-            .into_iter()
-            .map(|(event, _)| event)
-            .collect())
-    }
-
-    /// The queue events since the last call, as [`events`](Self::events),
-    /// each with the journal entry id (the id clients were given) of the
-    /// message it is about: for sendings, acks, expiries and drops.
-    pub fn events_with_entries(
-        &mut self,
-    ) -> Result<Vec<(QueueEvent, Option<EntryId>)>, JournalError> {
+    pub fn events(&mut self) -> Result<Vec<(QueueEvent, Option<EntryId>)>, JournalError> {
         let events: Vec<QueueEvent> = self.events.try_iter().collect();
         let mut out = Vec::with_capacity(events.len());
         for event in events {
@@ -332,18 +312,12 @@ impl Outbox {
         Ok(out)
     }
 
-    /// Settles the messages sent without ack in the transmission under way:
-    /// `went_out` removes them from the journal; otherwise (the driver failed
-    /// to send) they are queued again with their original age. Returns how
-    /// many were queued again.
-    pub fn transmitted(&mut self, went_out: bool) -> Result<usize, OutboxError> {
-        self.transmitted_on(0, went_out)
-    }
-
     /// Settles the messages sent without ack in the transmission under way
-    /// on link `link`, as [`transmitted`](Self::transmitted) does (those of
-    /// the other links wait for their own outcome).
-    pub fn transmitted_on(
+    /// on link `link` (those of the other links wait for their own
+    /// outcome): `went_out` removes them from the journal; otherwise (the
+    /// driver failed to send) they are queued again with their original age.
+    /// Returns how many were queued again.
+    pub fn transmitted(
         &mut self,
         link: queue::LinkIndex,
         went_out: bool,
@@ -483,7 +457,7 @@ mod tests {
             max_num_frames: Some(1),
             ..Default::default()
         };
-        outbox.data_request(&mut tx).unwrap();
+        outbox.data_request(&mut tx, 0).unwrap();
         outbox.events().unwrap();
         tx
     }
@@ -527,13 +501,14 @@ mod tests {
             let tx = request(&mut outbox);
             assert_eq!(notes(&outbox, &tx.frame[0]), ["b", "a"]);
             // The ack for that frame arrives: both leave the journal.
-            outbox.receive(&ModemTransmission {
+            let ack = ModemTransmission {
                 src: Some(2),
                 dest: Some(1),
                 r#type: Some(2),
                 acked_frame: vec![0],
                 ..Default::default()
-            });
+            };
+            outbox.receive(&ack, 0);
             outbox.events().unwrap();
             assert_eq!(outbox.owed(), 0);
             // Two more, sent but never acknowledged.
@@ -563,12 +538,12 @@ mod tests {
         assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 0);
         // Still owed until the driver says it went out.
         assert_eq!(outbox.owed(), 1);
-        assert_eq!(outbox.transmitted(false).unwrap(), 1);
+        assert_eq!(outbox.transmitted(0, false).unwrap(), 1);
         assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 1);
         clock.advance_seconds(1.0);
         let tx = request(&mut outbox);
         assert_eq!(notes(&outbox, &tx.frame[0]), ["x"]);
-        assert_eq!(outbox.transmitted(true).unwrap(), 0);
+        assert_eq!(outbox.transmitted(0, true).unwrap(), 0);
         assert_eq!(outbox.owed(), 0);
     }
 
@@ -589,7 +564,7 @@ mod tests {
         let events = outbox.events().unwrap();
         assert!(events
             .iter()
-            .any(|e| matches!(e, QueueEvent::Expired { .. })));
+            .any(|(e, _)| matches!(e, QueueEvent::Expired { .. })));
         assert_eq!(outbox.owed(), 0);
         drop(outbox);
         let (_, replay) = Outbox::open(queue(true, &clock), &dir.journal()).unwrap();
@@ -675,9 +650,9 @@ mod tests {
                 max_num_frames: Some(1),
                 ..Default::default()
             };
-            outbox.data_request(&mut tx).unwrap();
+            outbox.data_request(&mut tx, 0).unwrap();
             let sent: Vec<_> = outbox
-                .events_with_entries()
+                .events()
                 .unwrap()
                 .into_iter()
                 .filter(|(e, _)| matches!(e, QueueEvent::Sent { .. }))

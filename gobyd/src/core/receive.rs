@@ -23,7 +23,7 @@ impl Core {
         &mut self,
     ) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
         let mut dropped = Vec::new();
-        let events = match self.outbox.events_with_entries() {
+        let events = match self.outbox.events() {
             Ok(events) => events,
             Err(e) => {
                 tracing::error!("journal: {e}");
@@ -98,11 +98,11 @@ impl Core {
         };
         let link = reception.link.clone();
         let mut faults = FrameFaults::default();
-        for e in self.outbox.receive_on(i, &transmission) {
+        for e in self.outbox.receive(&transmission, i) {
             tracing::warn!(src = transmission.src(), "received: {e}");
             faults.note(&e);
         }
-        let events = match self.outbox.events_with_entries() {
+        let events = match self.outbox.events() {
             Ok(events) => events,
             Err(e) => {
                 tracing::error!("journal: {e}");

@@ -68,11 +68,6 @@ impl RouteTable {
         }
     }
 
-    /// This node's modem id.
-    pub fn me(&self) -> i32 {
-        self.me
-    }
-
     /// The route's hops, in order.
     pub fn hops(&self) -> &[i32] {
         &self.hops

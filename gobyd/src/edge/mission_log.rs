@@ -45,11 +45,6 @@ impl RawLog {
         })
     }
 
-    /// Path of the log file.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
     /// Logs a raw line or datagram.
     pub fn raw(&mut self, time: i64, raw: &RawMessage) -> io::Result<()> {
         let direction = match raw.direction {

@@ -9,9 +9,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use gobyd::core::network::transfers::TransferEvent;
 use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
+use gobyd::event::TransferEvent;
 use gobyd::event::{Control, NetworkRequest};
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::SimulatorDriver;
@@ -109,7 +109,10 @@ impl Fleet {
             self.clock.clone(),
         )
         .unwrap();
-        let daemon = Daemon::start_with_driver_and_clock(config, driver, self.clock.clone())
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .clock(self.clock.clone())
+            .start()
             .await
             .expect("gobyd starts");
         let publisher = daemon.publisher();
@@ -204,7 +207,7 @@ impl Fleet {
         answer
             .await
             .expect("the daemon answers")
-            .map(|reply| gobyd::edge::json::lines::network_reply_value(&reply))
+            .map(|reply| serde_json::to_value(gobyd::json::network_reply(&reply)).unwrap())
     }
 
     /// Stops every node.

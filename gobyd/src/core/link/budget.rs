@@ -98,6 +98,7 @@ impl Budget {
     }
 
     /// When the next period starts, microseconds since the epoch.
+    #[cfg(test)]
     pub fn next_period(&self) -> i64 {
         self.period_start.saturating_add(self.period)
     }

@@ -386,11 +386,6 @@ impl Network {
         Ok(Some(network))
     }
 
-    /// Data bytes of each fragment this node sends.
-    pub fn fragment_size(&self) -> usize {
-        self.transfers.settings().fragment_size
-    }
-
     /// The journal's network messages after a restart: the routed messages
     /// this node originated are waited for again; those it was forwarding
     /// are remembered (a repeat of one is not forwarded twice).

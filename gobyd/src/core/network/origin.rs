@@ -138,6 +138,7 @@ impl Origin {
     }
 
     /// Messages waiting, by journal id.
+    #[cfg(any(test, feature = "internals"))]
     pub fn pending(&self) -> impl Iterator<Item = &Pending> {
         self.pending.values()
     }

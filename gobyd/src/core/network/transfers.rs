@@ -1204,6 +1204,7 @@ impl Transfers {
     }
 
     /// Fragments this node holds for forwarding (counted by the caller).
+    #[cfg(any(test, feature = "internals"))]
     pub fn relay_window(&self) -> usize {
         self.settings.relay_window
     }

@@ -137,6 +137,7 @@ impl<R: AsyncRead + Unpin> LineReader<R> {
     }
 
     /// Bytes held for the line being read (its capacity).
+    #[cfg(test)]
     pub fn held(&self) -> usize {
         self.line.capacity()
     }

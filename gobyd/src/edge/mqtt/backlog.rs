@@ -76,11 +76,6 @@ impl Backlog {
         self.items.iter().any(|o| o.retain && o.topic == topic)
     }
 
-    /// The next publication to send.
-    pub fn front(&self) -> Option<&Outgoing> {
-        self.items.front()
-    }
-
     /// Removes the next publication (once the client took it).
     pub fn pop(&mut self) -> Option<Outgoing> {
         self.items.pop_front()
@@ -92,6 +87,7 @@ impl Backlog {
     }
 
     /// Whether nothing waits.
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.items.is_empty()
     }

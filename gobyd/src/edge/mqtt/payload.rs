@@ -59,13 +59,6 @@ pub fn seconds(micros: i64) -> f64 {
     micros as f64 / 1e6
 }
 
-/// The last will: the retained status when gobyd vanishes.
-pub fn offline(topics: &Topics) -> Vec<u8> {
-    json!({ "node": topics.node, "online": false })
-        .to_string()
-        .into_bytes()
-}
-
 /// Turns the core's events into publications.
 #[derive(Debug)]
 pub struct Formatter {

@@ -34,13 +34,9 @@ impl Retained {
     }
 
     /// How many topics hold a retained value.
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.by_topic.len()
-    }
-
-    /// Whether no retained value was published yet.
-    pub fn is_empty(&self) -> bool {
-        self.by_topic.is_empty()
     }
 }
 

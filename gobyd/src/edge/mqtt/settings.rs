@@ -184,7 +184,7 @@ pub fn settings(config: &MqttBridge, modem_id: i32) -> Result<Option<Settings>, 
         .set_inflight(100)
         .set_last_will(LastWill::new(
             topics.node("status"),
-            super::payload::offline(&topics),
+            offline(&topics),
             qos,
             true,
         ));
@@ -272,6 +272,14 @@ fn tls_transport(
     Err(invalid(
         "tls: this gobyd was built without TLS; build it with `--features mqtt-tls`",
     ))
+}
+
+/// The last will: the retained status (`PREFIX/NODE/status`) when gobyd
+/// vanishes.
+pub fn offline(topics: &Topics) -> Vec<u8> {
+    serde_json::json!({ "node": topics.node, "online": false })
+        .to_string()
+        .into_bytes()
 }
 
 #[cfg(test)]
