@@ -1,7 +1,7 @@
 //! How the goby crates keep state on disk: [`record_log`], the record log
 //! under the outbox journal, the receiver's inbox and the network layer's
 //! logs (records framed by a sync word, their length and a CRC-32, replayed
-//! so that damage costs only the records it touches), and [`file`], files
+//! so that damage costs only the records it touches), and [`file`](mod@file), files
 //! rewritten whole so that a crash leaves the old or the new one, private to
 //! their owner.
 //!
