@@ -1,7 +1,9 @@
 //! Finds Chromium for the console's browser test (`tests/console.rs`):
 //! with it, `cfg(chromium)` is set and `GOBY_CHROMIUM_PATH` names it; the
 //! test is ignored without it, saying why. `GOBY_CHROMIUM` names another
-//! build. Nothing else of the crate depends on it.
+//! build. Likewise tshark for the Wireshark dissector's test
+//! (`tests/wireshark.rs`): `cfg(tshark)` and `GOBY_TSHARK_PATH`. Nothing
+//! else of the crate depends on them.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +15,16 @@ const KNOWN: [&str; 4] = [
     "/snap/bin/chromium",
 ];
 
+/// Where Debian's tshark package (`.ci/tshark.sh`) puts it.
+const TSHARK: &str = "/usr/bin/tshark";
+
 fn main() {
+    println!("cargo::rustc-check-cfg=cfg(tshark)");
+    if Path::new(TSHARK).is_file() {
+        println!("cargo::rerun-if-changed={TSHARK}");
+        println!("cargo::rustc-cfg=tshark");
+        println!("cargo::rustc-env=GOBY_TSHARK_PATH={TSHARK}");
+    }
     println!("cargo::rustc-check-cfg=cfg(chromium)");
     println!("cargo::rerun-if-env-changed=GOBY_CHROMIUM");
     println!("cargo::rerun-if-changed=build.rs");

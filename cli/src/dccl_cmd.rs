@@ -57,6 +57,8 @@ pub enum DcclCommand {
     Analyze(AnalyzeArgs),
     /// Time encoding and decoding of the messages read from standard input.
     Bench(BenchArgs),
+    /// Write a Wireshark dissector (Lua) of the messages of the files.
+    Wireshark(crate::wireshark::WiresharkArgs),
 }
 
 /// Where the message definitions come from.
@@ -273,6 +275,7 @@ pub fn run_command(
             analyze(&defs, &args.message, &job, stdout, stderr)
         }
         DcclCommand::Bench(args) => bench(args, stdin, stdout, stderr),
+        DcclCommand::Wireshark(args) => crate::wireshark::run(args, stdout, stderr),
     }
 }
 
@@ -427,6 +430,19 @@ impl Definitions {
         Ok(())
     }
 
+    /// [`Definitions::load_named`], then the load warnings of the types on
+    /// `stderr` (see [`write_load_warnings`]).
+    pub(crate) fn load_named_warning(
+        &self,
+        codec: &mut Codec,
+        names: &[String],
+        stderr: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        self.load_named(codec, names)?;
+        write_load_warnings(codec, names, stderr)?;
+        Ok(())
+    }
+
     /// Loads every valid DCCL message of the files into `codec`, one type at
     /// a time (as the reference tool does: each top-level message and each
     /// nested one with a `(dccl.msg)` option); each type with a `(dccl.msg)`
@@ -474,8 +490,26 @@ impl Definitions {
             )));
         }
         names.sort();
+        write_load_warnings(codec, &names, stderr)?;
         Ok(names)
     }
+}
+
+/// Writes on `stderr` what the review of the loaded types `names` found
+/// (`goby: warning: TYPE.FIELD: dynamic_conditions.KIND "SCRIPT" ...`):
+/// conditions that change nothing, scripts naming no field, scripts reading
+/// a field a receiver has not decoded yet.
+pub(crate) fn write_load_warnings(
+    codec: &Codec,
+    names: &[String],
+    stderr: &mut dyn Write,
+) -> std::io::Result<()> {
+    for name in names {
+        for warning in codec.load_warnings(name).unwrap_or_default() {
+            writeln!(stderr, "goby: warning: {warning}")?;
+        }
+    }
+    Ok(())
 }
 
 fn new_codec(passphrase: Option<&str>, strict: bool) -> Codec {
@@ -599,6 +633,27 @@ fn split_type_prefix(line: &str) -> Result<(Option<&str>, &str), String> {
 /// own clock, so a time further than that from the clock comes back on
 /// another day.
 pub(crate) fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) -> Vec<String> {
+    let descriptor = sent.descriptor();
+    let name = descriptor.full_name();
+    moved_time_fields(codec, sent, bytes)
+        .into_iter()
+        .map(|(path, sent, back)| {
+            format!(
+                "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
+                 the time codec sends the time of day only, and it decodes as {back}: \
+                 that time of day within 12 hours of the receiver's clock"
+            )
+        })
+        .collect()
+}
+
+/// The times of `sent` that [`moved_times`] warns of: (field path, value
+/// sent, value decoded), each value with its UTC date.
+pub(crate) fn moved_time_fields(
+    codec: &Codec,
+    sent: &DynamicMessage,
+    bytes: &[u8],
+) -> Vec<(String, String, String)> {
     let name = sent.descriptor().full_name().to_string();
     let has_time = sent.descriptor().fields().any(|f| {
         dccl::field::field_options(&f)
@@ -616,15 +671,6 @@ pub(crate) fn moved_times(codec: &Codec, sent: &DynamicMessage, bytes: &[u8]) ->
     let mut moved = Vec::new();
     collect_moved_times("", sent, &back, &mut moved);
     moved
-        .into_iter()
-        .map(|(path, sent, back)| {
-            format!(
-                "{name}.{path}: {sent} is more than 12 hours from this machine's clock: \
-                 the time codec sends the time of day only, and it decodes as {back}: \
-                 that time of day within 12 hours of the receiver's clock"
-            )
-        })
-        .collect()
 }
 
 /// `YYYY-MM-DD HH:MM:SS UTC` of seconds since the epoch.
@@ -697,7 +743,7 @@ pub(crate) fn encode(
 ) -> Result<Status, CliError> {
     let mut codec = defs.new_codec(job.passphrase.as_deref(), job.strict)?;
     if let (Some(name), true) = (&job.message, job.load_first) {
-        defs.load_named(&mut codec, std::slice::from_ref(name))?;
+        defs.load_named_warning(&mut codec, std::slice::from_ref(name), stderr)?;
     }
     let engine = base64_engine();
     let bad = for_each_line(stdin, stderr, |number, line, stderr| {
@@ -729,16 +775,31 @@ pub(crate) fn encode(
                 codec
                     .load(&desc)
                     .map_err(|e| LineError::Bad(format!("cannot load {name}: {e}")))?;
+                write_load_warnings(&codec, &[name.to_string()], stderr)?;
                 desc
             }
         };
         let msg = parse_message(&desc, job.input, text).map_err(LineError::Bad)?;
+        // As gobyd checks what it sends: does a receiver decode the frame
+        // as it is encoded? (libdccl writes the same bytes either way.) A
+        // message the codec refuses is refused by the encoding below.
+        let not_as_encoded = codec
+            .round_trip(&msg)
+            .ok()
+            .flatten()
+            .map(|why| format!("{name}: the frame does not decode as it was encoded: {why}"));
+        if let (true, Some(why)) = (job.strict, &not_as_encoded) {
+            return Err(LineError::Bad(format!("cannot encode: {why}")));
+        }
         let (bytes, changes) = codec
             .encode_with_changes(&msg)
             .map_err(|e| LineError::Bad(e.to_string()))?;
         for change in &changes {
             let warning = format!("{}.{}: {}", change.message, change.field, change.reason);
             warn(stderr, number, &warning)?;
+        }
+        if let Some(why) = &not_as_encoded {
+            warn(stderr, number, why)?;
         }
         for warning in moved_times(&codec, &msg, &bytes) {
             warn(stderr, number, &warning)?;
@@ -782,7 +843,7 @@ pub(crate) fn decode(
     if job.messages.is_empty() {
         defs.load_valid(&mut codec, stderr)?;
     } else {
-        defs.load_named(&mut codec, &job.messages)?;
+        defs.load_named_warning(&mut codec, &job.messages, stderr)?;
     }
     let decoder = FrameDecoder {
         codec: &codec,
@@ -885,7 +946,7 @@ pub(crate) fn analyze(
     let names: Vec<String> = if names.is_empty() {
         defs.load_valid(&mut codec, stderr)?
     } else {
-        defs.load_named(&mut codec, names)?;
+        defs.load_named_warning(&mut codec, names, stderr)?;
         names
             .iter()
             .cloned()
@@ -927,7 +988,7 @@ fn bench(
     let defs = Definitions::compile(&args.proto)?;
     let passphrase = args.passphrase.resolve()?;
     let mut codec = defs.new_codec(passphrase.as_deref(), false)?;
-    defs.load_named(&mut codec, std::slice::from_ref(&args.message))?;
+    defs.load_named_warning(&mut codec, std::slice::from_ref(&args.message), stderr)?;
     let desc = defs.message(&args.message)?;
 
     let mut messages = Vec::new();

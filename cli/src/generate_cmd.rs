@@ -34,7 +34,8 @@ pub struct CompletionsArgs {
 #[command(
     long_about = "Write goby's manual pages into DIR (created if missing): goby.1 and \
     one page per subcommand (goby-dccl.1, goby-moos-poke.1, ...). The paths written are \
-    printed, one a line.\n\n\
+    printed, one a line. Called by another name (the Debian package's goby-rs), the \
+    pages, and the completion scripts, are for that name (goby-rs.1, goby-rs-dccl.1, ...).\n\n\
     ~/.cargo/share/man/man1 is where man finds them for a user with ~/.cargo/bin on \
     the PATH (man searches ../share/man beside each PATH directory; see manpath).\n\n\
     Example:\n  \
@@ -88,10 +89,24 @@ pub fn write_man_pages(cmd: Command, dir: &Path) -> std::io::Result<Vec<PathBuf>
     Ok(written)
 }
 
+/// The name the tool was called by: `goby`, or `goby-rs` through the Debian
+/// package's link (docs/vehicle.md), so that its completions and manual
+/// pages are for the command the user types.
+pub fn called_name() -> &'static str {
+    let called = std::env::args_os()
+        .next()
+        .and_then(|a| Some(Path::new(&a).file_name()?.to_str()?.to_owned()));
+    match called {
+        Some(name) if !name.is_empty() => Box::leak(name.into_boxed_str()),
+        _ => "goby",
+    }
+}
+
 /// Runs `goby completions`.
 pub fn completions(args: &CompletionsArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let mut script = Vec::new();
-    write_completions(args.shell, GobyCli::command(), "goby", &mut script);
+    let name = called_name();
+    write_completions(args.shell, GobyCli::command().name(name), name, &mut script);
     stdout.write_all(&script)?;
     Ok(Status::Ok)
 }
@@ -105,7 +120,7 @@ pub fn man(args: &ManArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             dir.display()
         ))
     })?;
-    let written = write_man_pages(GobyCli::command(), dir).map_err(|e| {
+    let written = write_man_pages(GobyCli::command().name(called_name()), dir).map_err(|e| {
         CliError::setup(format!(
             "cannot write the manual pages into {}: {e}",
             dir.display()

@@ -19,14 +19,14 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
-use modemdriver::iridium::directip::{self, mt_status};
-use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayLog};
-use modemdriver::iridium::emulator::radio::RadioConfig;
-use modemdriver::iridium::emulator::rockblock::{
+use emulators::iridium::gateway::{Gateway, GatewayConfig, GatewayLog};
+use emulators::iridium::radio::RadioConfig;
+use emulators::iridium::rockblock::{
     RockblockLog, RockblockService, RockblockServiceConfig, WebhookTarget,
 };
-use modemdriver::iridium::emulator::transceiver::{TransceiverConfig, TransceiverLog};
-use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
+use emulators::iridium::transceiver::{TransceiverConfig, TransceiverLog};
+use emulators::iridium::{self as emulator, TransceiverHandle, TransceiverPort};
+use modemdriver::iridium::directip::{self, mt_status};
 use modemdriver::iridium::rockblock::http::HttpUrl;
 use modemdriver::iridium::rockblock::MoFormat;
 use modemdriver::iridium::status::MoStatus;

@@ -14,6 +14,8 @@
 //! - `goby dccl analyze -f FILE.proto -m NAME` prints the size of each field;
 //! - `goby dccl bench -f FILE.proto -m NAME --repeat N` times encoding and
 //!   decoding in-process;
+//! - `goby dccl wireshark -f FILE.proto` writes a Wireshark dissector (Lua)
+//!   of the messages ([`wireshark`]);
 //! - `goby dccl -e|-d|-a|-p -f FILE.proto ...` takes the reference `dccl`
 //!   tool's flags and prints its output forms ([`dccl_tool`]).
 //!
@@ -60,6 +62,7 @@
 mod address;
 pub mod amac_cmd;
 mod byte_text;
+pub mod channel_cmd;
 pub mod console;
 pub mod dccl_cmd;
 pub mod dccl_tool;
@@ -78,6 +81,7 @@ pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
 mod stop;
+pub mod wireshark;
 
 use std::ffi::OsString;
 use std::fmt;
@@ -130,8 +134,10 @@ pub enum GobyCommand {
     /// Position telemetry: synthetic trajectories and the observer/model evaluation.
     #[command(subcommand)]
     Position(position_cmd::PositionCommand),
-    /// Emulated modems for bench tests without hardware: WHOI Micro-Modems, EvoLogics S2C, Popoto and Benthos ATM-900 (emulate --kind), Iridium 9603 transceivers with their gateway and the RockBLOCK service (emulate-iridium).
-    #[command(subcommand)]
+    /// Emulated modems for bench tests without hardware (emulate --kind),
+    /// Iridium 9603 transceivers with their gateway and the RockBLOCK
+    /// service (emulate-iridium).
+    #[command(subcommand, about = modem_cmd::modem_about())]
     Modem(modem_cmd::ModemCommand),
     /// The fleet on an MQTT broker, as the gateways (gobyd) publish it.
     #[command(subcommand)]
@@ -146,6 +152,9 @@ pub enum GobyCommand {
     /// Files between nodes through gobyd: send, get (with their progress), list the transfers.
     #[command(subcommand)]
     File(file_cmd::FileCommand),
+    /// The acoustic channel: BELLHOP environments (TL, rays, arrivals), sound speed from CTD casts, link forecasts and the best depth.
+    #[command(subcommand)]
+    Channel(channel_cmd::ChannelCommand),
     /// Print a shell completion script for goby.
     Completions(generate_cmd::CompletionsArgs),
     /// Write goby's manual pages (goby.1 and one per subcommand) into a directory.
@@ -243,6 +252,7 @@ pub fn run_goby(
         GobyCommand::Console(args) => console::run(&args, stdout),
         GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
         GobyCommand::File(cmd) => file_cmd::run(&cmd, stdout),
+        GobyCommand::Channel(cmd) => channel_cmd::run(&cmd, stdout),
         GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
         GobyCommand::Man(args) => generate_cmd::man(&args, stdout),
     };

@@ -11,22 +11,14 @@
 //! `--transponder`s given). Both send `$CACST` / `$CAXST` statistics in the
 //! layout their firmware writes unless `--stats-layout` says otherwise.
 //!
-//! `goby modem emulate --kind evologics` runs emulated EvoLogics S2C modems
-//! instead: each serves the AT interface on TCP (`modem 1: tcp
-//! 127.0.0.1:9200`, the next modem on the next port) or, with `--pty`, on a
-//! pseudo-terminal, for the EvoLogics driver (`driver_name:
-//! "EVOLOGICS_S2C"`); `--busy`, `--garble` and `--drop-every` add the faults
-//! of a bench (BUSY answers, garbled lines, dropped connections) to the
-//! channel's `--loss`.
-//!
-//! `goby modem emulate --kind popoto` runs emulated Popoto modems, each
-//! serving its JSON command interface on TCP (`modem 1: tcp
-//! 127.0.0.1:17000`) or, with `--pty`, its shell on a pseudo-terminal, for
-//! the Popoto driver (`driver_type: DRIVER_POPOTO`); `--kind benthos`
-//! emulated Benthos ATM-900s, each on a pseudo-terminal (its serial line)
-//! or, with `--tcp-port`, on TCP (a serial server), for `driver_type:
-//! DRIVER_BENTHOS_ATM900`. `--busy` makes them refuse transmissions (the
-//! Popoto's `MAC dumped packet`, the ATM-900's `BUSY` to `ATO`).
+//! `goby modem emulate --kind KIND` runs another modem instead, any of
+//! the emulated modems whose host interface is a byte stream
+//! (`emulators::kinds::STREAM`: the EvoLogics S2C, the Popoto, the Benthos
+//! ATM-900 ...): each serves its interface on TCP (`modem 1: tcp
+//! 127.0.0.1:9200`, the next modem on the next port) or on a
+//! pseudo-terminal, where its driver connects; `--busy`, `--garble` and
+//! `--drop-every` add the faults of a bench (refused sends, garbled lines,
+//! dropped connections) to the channel's `--loss`.
 
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
@@ -34,8 +26,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, Subcommand};
-use modemdriver::micromodem::emulator::{
-    self, EmulatorConfig, EmulatorHandle, EmulatorPort, Geometry, Node, StatsLayout, Transponder,
+use emulators::micromodem::{
+    self as emulator, EmulatorConfig, EmulatorHandle, EmulatorPort, Geometry, Node, StatsLayout,
+    Transponder,
 };
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::reception::Position;
@@ -50,21 +43,9 @@ use crate::{CliError, Status};
 /// Subcommands of `goby modem`.
 #[derive(Debug, Subcommand)]
 pub enum ModemCommand {
-    /// Emulate acoustic modems for bench tests without hardware: WHOI
-    /// Micro-Modems (the default), EvoLogics S2C, Popoto or Benthos ATM-900
-    /// (--kind).
-    ///
-    /// Micro-Modems speak NMEA on pseudo-terminals (or --serial), EvoLogics
-    /// S2C modems their AT interface on TCP (or --pty), Popoto modems their
-    /// JSON interface on TCP (or their shell with --pty), Benthos ATM-900s
-    /// their serial interface on pseudo-terminals (or TCP with --tcp-port).
-    /// Prints one line per modem, `modem ID: PATH` or `modem ID: tcp
-    /// ADDR`, where the matching driver connects (gobyd's
-    /// DRIVER_WHOI_MICROMODEM, driver_name "EVOLOGICS_S2C", DRIVER_POPOTO,
-    /// DRIVER_BENTHOS_ATM900). Several modems in one process hear each other
-    /// through the acoustic channel simulator; one modem joins emulators in
-    /// other processes over UDP (--udp-local, --udp-peer). Runs until
-    /// SIGINT or SIGTERM, or for --duration.
+    /// Emulate acoustic modems for bench tests without hardware (the kinds:
+    /// the Micro-Modem and those of [`emulators::kinds::STREAM`]).
+    #[command(about = emulate_about(), long_about = emulate_long_about())]
     Emulate(EmulateArgs),
     /// Emulate Iridium 9603 transceivers and the gateway they reach (DirectIP
     /// towards the shore, or the RockBLOCK web service).
@@ -78,58 +59,107 @@ pub enum ModemCommand {
     EmulateIridium(crate::iridium_emulate::EmulateIridiumArgs),
 }
 
-/// Which modem `goby modem emulate` speaks as.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Kind {
-    /// WHOI Micro-Modems: NMEA on pseudo-terminals (or --serial).
-    Micromodem,
-    /// EvoLogics S2C modems: the AT interface on TCP (or --pty).
-    Evologics,
-    /// Popoto modems: the JSON command interface on TCP (or the shell on
-    /// --pty).
-    Popoto,
-    /// Benthos ATM-900 modems: the serial interface on pseudo-terminals
-    /// (or TCP with --tcp-port).
-    Benthos,
+/// The emulated acoustic modems in words, as `or` (or `and`) joins the
+/// last: `WHOI Micro-Modems, EvoLogics, Popoto or Benthos ATM-900`.
+pub fn emulated_modems(last: &str) -> String {
+    let mut names = vec!["WHOI Micro-Modems".to_string()];
+    names.extend(emulators::kinds::STREAM.iter().map(|e| title_of(e.kind)));
+    match names.split_last() {
+        Some((end, rest)) if !rest.is_empty() => format!("{} {last} {end}", rest.join(", ")),
+        _ => names.concat(),
+    }
 }
+
+/// The modem of driver kind `kind`, as its users name it.
+fn title_of(kind: &str) -> String {
+    modemdriver::built_in::by_short_name(kind)
+        .map_or(kind, |k| k.about().title)
+        .to_string()
+}
+
+/// What `goby modem` holds, for `goby --help`.
+pub fn modem_about() -> String {
+    format!(
+        "Emulated modems for bench tests without hardware: {} (emulate --kind), Iridium 9603 \
+         transceivers with their gateway and the RockBLOCK service (emulate-iridium).",
+        emulated_modems("and")
+    )
+}
+
+fn emulate_about() -> String {
+    format!(
+        "Emulate acoustic modems for bench tests without hardware: {} (--kind; Micro-Modems by default)",
+        emulated_modems("or")
+    )
+}
+
+fn emulate_long_about() -> String {
+    let drivers: Vec<String> = std::iter::once(MICROMODEM)
+        .chain(emulators::kinds::STREAM.iter().map(|e| e.kind))
+        .filter_map(modemdriver::built_in::by_short_name)
+        .map(|k| k.about().named.written())
+        .collect();
+    format!(
+        "{}.\n\nMicro-Modems speak NMEA on pseudo-terminals (or --serial); the other kinds \
+         their host interface on TCP or pseudo-terminals (see --kind). Prints one line per modem, \
+         `modem ID: PATH` or `modem ID: tcp ADDR`, where the matching driver connects (gobyd's {}). \
+         Several modems in one process hear each other through the acoustic channel simulator; \
+         one modem joins emulators in other processes over UDP (--udp-local, --udp-peer). Runs \
+         until SIGINT or SIGTERM, or for --duration.",
+        emulate_about(),
+        drivers.join(", ")
+    )
+}
+
+/// The modems `goby modem emulate --kind` speaks as: the Micro-Modem, and
+/// every emulated modem of `emulators::kinds::STREAM`.
+fn kinds() -> clap::builder::PossibleValuesParser {
+    let micromodem = clap::builder::PossibleValue::new(MICROMODEM)
+        .help("WHOI Micro-Modems: NMEA on pseudo-terminals (or --serial)");
+    let stream = emulators::kinds::STREAM
+        .iter()
+        .map(|e| clap::builder::PossibleValue::new(e.kind).help(e.serves));
+    clap::builder::PossibleValuesParser::new(std::iter::once(micromodem).chain(stream))
+}
+
+/// `--kind` of the Micro-Modem, whose emulator has options of its own.
+const MICROMODEM: &str = "micromodem";
 
 /// Options of `goby modem emulate`.
 #[derive(Debug, Args)]
 pub struct EmulateArgs {
-    /// Which modem to emulate: `micromodem` (WHOI, NMEA on a
-    /// pseudo-terminal), `evologics` (EvoLogics S2C, AT commands on TCP),
-    /// `popoto` (Popoto, JSON commands on TCP) or `benthos` (Benthos
-    /// ATM-900, its serial interface on a pseudo-terminal).
-    #[arg(long, value_enum, default_value = "micromodem")]
-    pub kind: Kind,
-    /// EvoLogics, Popoto, Benthos: TCP port of the first modem's interface;
-    /// the next modems listen on the next ports (0: any free port for
-    /// each). Default 9200 (EvoLogics), 17000 (Popoto); Benthos modems
-    /// serve TCP only when it is given.
+    /// Which modem to emulate (the list: `--help`).
+    #[arg(long, value_parser = kinds(), default_value = MICROMODEM)]
+    pub kind: String,
+    /// Not the Micro-Modem: TCP port of the first modem's interface; the
+    /// next modems listen on the next ports (0: any free port for each).
+    /// Default the modem's own (9200 for the EvoLogics S2C, 17000 for the
+    /// Popoto); a modem on a serial line (the ATM-900) serves TCP, as a
+    /// serial server would, only when it is given.
     #[arg(long, value_name = "PORT")]
     pub tcp_port: Option<u16>,
-    /// EvoLogics, Popoto, Benthos: address the TCP interfaces listen on.
+    /// Not the Micro-Modem: address the TCP interfaces listen on.
     #[arg(long, default_value = "127.0.0.1")]
     pub tcp_ip: IpAddr,
-    /// EvoLogics, Popoto: serve each modem on a pseudo-terminal (the serial
-    /// interface: EvoLogics command mode, the Popoto shell) instead of TCP.
+    /// A modem with a TCP interface: serve each on a pseudo-terminal (its
+    /// serial interface: the S2C's command mode, the Popoto shell)
+    /// instead.
     #[arg(long)]
     pub pty: bool,
-    /// EvoLogics, Popoto, Benthos: probability that a send is refused (an
-    /// S2C's BUSY, a Popoto's `MAC dumped packet`, an ATM-900's BUSY to
-    /// ATO).
+    /// Not the Micro-Modem: probability that a send is refused (an S2C's
+    /// BUSY, a Popoto's `MAC dumped packet`, an ATM-900's BUSY to ATO).
     #[arg(long, default_value_t = 0.0, value_name = "P")]
     pub busy: f64,
-    /// EvoLogics, Popoto, Benthos: probability that a line to the host is
+    /// Not the Micro-Modem: probability that a line to the host is
     /// garbled.
     #[arg(long, default_value_t = 0.0, value_name = "P")]
     pub garble: f64,
-    /// EvoLogics, Popoto, Benthos (on TCP): drop each host connection every
-    /// this many seconds.
+    /// Not the Micro-Modem (on TCP): drop each host connection every this
+    /// many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub drop_every: Option<f64>,
-    /// EvoLogics: emulate USBL heads, reporting a USBLLONG fix of each
-    /// sender heard.
+    /// A modem with USBL heads (the S2C): report where each sender heard
+    /// is (the S2C's USBLLONG).
     #[arg(long)]
     pub usbl: bool,
     /// Modem id of an emulated modem; repeat for several modems, which then
@@ -462,10 +492,8 @@ async fn report_ignored(ids: &[u32], emulators: &[EmulatorHandle]) {
 }
 
 fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    match args.kind {
-        Kind::Evologics => return emulate_evologics(args, stdout),
-        Kind::Popoto | Kind::Benthos => return emulate_popoto_benthos(args, stdout),
-        Kind::Micromodem => {}
+    if let Some(emulation) = emulators::kinds::of(&args.kind) {
+        return emulate_stream(args, emulation, stdout);
     }
     let backends = plan(args)?;
     let geometry = geometry(args)?;
@@ -540,198 +568,51 @@ fn emulate(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
     })
 }
 
-/// `goby modem emulate --kind evologics`.
-fn emulate_evologics(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    use modemdriver::evologics::codec::Framing;
-    use modemdriver::evologics::emulator::{
-        self as evo, EmulatorConfig as EvoConfig, EmulatorControl as EvoControl,
-        EmulatorFaults as EvoFaults, EmulatorPort as EvoPort,
-    };
-    if args.modem_ids.iter().any(|&id| id == 0 || id > 254) {
-        return Err(CliError::setup(
-            "--modem-id must be an S2C address, 1..=254 (255 is broadcast)",
-        ));
+/// `goby modem emulate --kind KIND` of a modem whose host interface is a
+/// byte stream (`emulators::kinds::STREAM`): each on TCP or a
+/// pseudo-terminal, its packets on the acoustic channel simulator.
+fn emulate_stream(
+    args: &EmulateArgs,
+    emulation: &emulators::kinds::Emulation,
+    stdout: &mut dyn Write,
+) -> Result<Status, CliError> {
+    use emulators::host::{EmulatorControl, EmulatorFaults, EmulatorPort as Port};
+    use emulators::kinds::{Host, Setup};
+    let kind = emulation.kind;
+    let (low, high) = emulation.addresses;
+    if args
+        .modem_ids
+        .iter()
+        .any(|&id| id < u32::from(low) || id > u32::from(high))
+    {
+        return Err(CliError::setup(format!(
+            "--modem-id must be a {kind} address, {low}..={high}"
+        )));
     }
     if args.serial.is_some() || args.micromodem != 1 || !args.transponders.is_empty() {
         return Err(CliError::setup(
             "--serial, --micromodem and --transponder are the Micro-Modem's (--kind micromodem)",
         ));
     }
-    if !args.links.is_empty() && !args.pty {
-        return Err(CliError::setup("--link needs --pty with --kind evologics"));
-    }
-    for (name, p) in [("--busy", args.busy), ("--garble", args.garble)] {
-        if !(0.0..=1.0).contains(&p) {
-            return Err(CliError::setup(format!(
-                "{name} must be in [0, 1], not {p}"
-            )));
-        }
-    }
-    let backends = plan(args)?;
-    let duration = args
-        .duration
-        .map(|d| seconds(d, "--duration"))
-        .transpose()?;
-    let drop_every = args
-        .drop_every
-        .map(|d| seconds(d, "--drop-every"))
-        .transpose()?;
-    let tcp_port = args
-        .tcp_port
-        .unwrap_or(modemdriver::evologics::DEFAULT_TCP_PORT);
-    if usize::from(tcp_port) + args.modem_ids.len() > 65_536 {
-        return Err(CliError::setup("--tcp-port: not enough ports above it"));
-    }
-    let positions = geometry(args)?
-        .nodes
-        .iter()
-        .map(|(&id, n)| (id as u8, [n.position.x, n.position.y, n.position.z]))
-        .collect();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .map_err(|e| CliError::setup(format!("cannot start the runtime: {e}")))?;
-    runtime.block_on(async {
-        let end = crate::stop::run_ends(duration);
-        let medium = Medium::new();
-        let mut emulators = Vec::new();
-        for (i, &modem_id) in args.modem_ids.iter().enumerate() {
-            let backend_kind = backends.get(i).unwrap_or(&Backend::None);
-            let backend = backend_driver(args, backend_kind, modem_id, &medium).await?;
-            let port = if args.pty {
-                EvoPort::Pty {
-                    link: args.links.get(i).cloned(),
-                }
-            } else {
-                // Port 0: any free port for each.
-                let port = if tcp_port == 0 {
-                    0
-                } else {
-                    tcp_port + i as u16
-                };
-                EvoPort::Tcp(SocketAddr::new(args.tcp_ip, port))
-            };
-            let config = EvoConfig {
-                address: modem_id as u8,
-                framing: if args.pty {
-                    Framing::Command
-                } else {
-                    Framing::Data
-                },
-                positions: std::collections::HashMap::clone(&positions),
-                usbl: args.usbl,
-                faults: EvoFaults {
-                    busy: args.busy,
-                    garble: args.garble,
-                    seed: args.seed,
-                    ..EvoFaults::default()
-                },
-                ..EvoConfig::default()
-            };
-            let handle = evo::start(config, port, backend)
-                .await
-                .map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
-            let shown = match (handle.local_addr(), handle.path()) {
-                (Some(addr), _) => format!("tcp {addr}"),
-                (None, Some(path)) => path,
-                (None, None) => "no interface".into(),
-            };
-            writeln!(stdout, "modem {modem_id}: {shown}")?;
-            stdout.flush()?;
-            emulators.push(handle);
-        }
-        let controls: Vec<_> = emulators.iter().map(|e| e.controller()).collect();
-        let dropper = async move {
-            match drop_every {
-                Some(every) => {
-                    let mut tick = tokio::time::interval(every);
-                    tick.tick().await;
-                    loop {
-                        tick.tick().await;
-                        for c in &controls {
-                            c(EvoControl::DropConnection);
-                        }
-                    }
-                }
-                None => std::future::pending::<()>().await,
-            }
-        };
-        tokio::select! {
-            () = end => {}
-            () = dropper => {}
-        }
-        for e in emulators {
-            e.stop().await;
-        }
-        Ok(Status::Ok)
-    })
-}
-
-/// An emulated Popoto or ATM-900, whichever `--kind` says.
-enum StreamEmulator {
-    Popoto(modemdriver::emulator_host::EmulatorHandle<modemdriver::popoto::emulator::Counters>),
-    Benthos(modemdriver::emulator_host::EmulatorHandle<modemdriver::benthos::emulator::Counters>),
-}
-
-impl StreamEmulator {
-    fn shown(&self) -> String {
-        let (addr, path) = match self {
-            StreamEmulator::Popoto(h) => (h.local_addr(), h.path()),
-            StreamEmulator::Benthos(h) => (h.local_addr(), h.path()),
-        };
-        match (addr, path) {
-            (Some(addr), _) => format!("tcp {addr}"),
-            (None, Some(path)) => path,
-            (None, None) => "no interface".into(),
-        }
-    }
-
-    fn drop_connection(&self) {
-        use modemdriver::emulator_host::EmulatorControl;
-        match self {
-            StreamEmulator::Popoto(h) => h.control(EmulatorControl::DropConnection),
-            StreamEmulator::Benthos(h) => h.control(EmulatorControl::DropConnection),
-        }
-    }
-
-    async fn stop(self) {
-        match self {
-            StreamEmulator::Popoto(h) => h.stop().await,
-            StreamEmulator::Benthos(h) => h.stop().await,
-        }
-    }
-}
-
-/// `goby modem emulate --kind popoto` and `--kind benthos`.
-fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    use modemdriver::emulator_host::{EmulatorFaults, EmulatorPort as Port};
-    let popoto = args.kind == Kind::Popoto;
-    let name = if popoto { "Popoto" } else { "ATM-900" };
-    if args.modem_ids.iter().any(|&id| id == 0 || id > 254) {
+    if args.usbl && !emulation.usbl {
         return Err(CliError::setup(format!(
-            "--modem-id must be a {name} address, 1..=254 (255 is broadcast)"
+            "--usbl: the {kind} modem has no USBL heads"
         )));
     }
-    if args.serial.is_some() || args.micromodem != 1 || !args.transponders.is_empty() || args.usbl {
-        return Err(CliError::setup(
-            "--serial, --micromodem and --transponder are the Micro-Modem's (--kind micromodem), --usbl the EvoLogics'",
-        ));
-    }
-    // Popoto: TCP unless --pty; ATM-900: a pseudo-terminal unless --tcp-port.
-    let on_tcp = if popoto {
-        !args.pty
-    } else {
-        if args.pty {
-            return Err(CliError::setup(
-                "--kind benthos serves pseudo-terminals already (give --tcp-port for TCP)",
-            ));
+    // On TCP unless --pty (an Ethernet interface); on a pseudo-terminal
+    // unless --tcp-port (a serial line, TCP through a serial server).
+    let (on_tcp, tcp_port) = match emulation.host {
+        Host::Tcp(port) => (!args.pty, args.tcp_port.unwrap_or(port)),
+        Host::Serial if args.pty => {
+            return Err(CliError::setup(format!(
+                "--kind {kind} serves pseudo-terminals already (give --tcp-port for TCP)"
+            )))
         }
-        args.tcp_port.is_some()
+        Host::Serial => (args.tcp_port.is_some(), args.tcp_port.unwrap_or(0)),
     };
     if !args.links.is_empty() && on_tcp {
         return Err(CliError::setup(
-            "--link names pseudo-terminals: not with a TCP interface",
+            "--link names pseudo-terminals: not with a TCP interface (give --pty)",
         ));
     }
     for (option, p) in [("--busy", args.busy), ("--garble", args.garble)] {
@@ -741,9 +622,6 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
             )));
         }
     }
-    let tcp_port = args
-        .tcp_port
-        .unwrap_or(modemdriver::popoto::DEFAULT_TCP_PORT);
     if on_tcp && usize::from(tcp_port) + args.modem_ids.len() > 65_536 {
         return Err(CliError::setup("--tcp-port: not enough ports above it"));
     }
@@ -780,6 +658,7 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
             let backend_kind = backends.get(i).unwrap_or(&Backend::None);
             let backend = backend_driver(args, backend_kind, modem_id, &medium).await?;
             let port = if on_tcp {
+                // Port 0: any free port for each.
                 let port = if tcp_port == 0 {
                     0
                 } else {
@@ -791,35 +670,15 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
                     link: args.links.get(i).cloned(),
                 }
             };
-            let started = if popoto {
-                use modemdriver::popoto::{emulator, wire::Interface};
-                let config = emulator::EmulatorConfig {
-                    address: modem_id as u8,
-                    interface: if on_tcp {
-                        Interface::JsonApi
-                    } else {
-                        Interface::Shell
-                    },
-                    positions: positions.clone(),
-                    faults,
-                    ..Default::default()
-                };
-                emulator::start(config, port, backend)
-                    .await
-                    .map(StreamEmulator::Popoto)
-            } else {
-                use modemdriver::benthos::emulator;
-                let config = emulator::EmulatorConfig {
-                    address: modem_id as u8,
-                    positions: positions.clone(),
-                    faults,
-                    ..Default::default()
-                };
-                emulator::start(config, port, backend)
-                    .await
-                    .map(StreamEmulator::Benthos)
+            let setup = Setup {
+                address: modem_id as u8,
+                positions: positions.clone(),
+                faults,
+                usbl: args.usbl,
             };
-            let handle = started.map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
+            let handle = (emulation.start)(setup, port, backend)
+                .await
+                .map_err(|e| CliError::setup(format!("modem {modem_id}: {e}")))?;
             writeln!(stdout, "modem {modem_id}: {}", handle.shown())?;
             stdout.flush()?;
             emulators.push(handle);
@@ -832,7 +691,7 @@ fn emulate_popoto_benthos(args: &EmulateArgs, stdout: &mut dyn Write) -> Result<
                     loop {
                         tick.tick().await;
                         for e in &emulators {
-                            e.drop_connection();
+                            e.control(EmulatorControl::DropConnection);
                         }
                     }
                 }

@@ -24,7 +24,7 @@ use plotters_backend::{
 };
 
 /// Font family name the charts draw their text with.
-const FONT_FAMILY: &str = "sans-serif";
+pub(crate) const FONT_FAMILY: &str = "sans-serif";
 
 /// One named line of a chart.
 #[derive(Debug, Clone, PartialEq)]
@@ -132,9 +132,22 @@ fn glyph_pixels(font: &FontRef<'_>, size: f32, text: &str, mut pixel: impl FnMut
 
 /// The bitmap backend with text drawn by [`glyph_pixels`] (everything else
 /// as the bitmap backend draws it).
-struct GlyphText<'a> {
+pub(crate) struct GlyphText<'a> {
     inner: BitMapBackend<'a>,
     font: &'static FontRef<'static>,
+}
+
+/// `inner` with its text drawn by the chart font's own glyph metrics (see
+/// [`GlyphText`]), the font registered under [`FONT_FAMILY`].
+///
+/// # Errors
+/// When the embedded font cannot be loaded.
+pub(crate) fn glyph_backend(inner: BitMapBackend<'_>) -> Result<GlyphText<'_>, PlotError> {
+    ensure_font()?;
+    Ok(GlyphText {
+        inner,
+        font: chart_font()?,
+    })
 }
 
 type BackendResult =

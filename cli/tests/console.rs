@@ -498,6 +498,37 @@ fn the_page_shows_the_fleet_and_commands_it() {
     browser::run();
 }
 
+/// The commander as the page opens, before anything was typed: the form of
+/// the first type is drawn and its check has run, but no error is shown
+/// (the empty form of a type with required fields cannot be encoded, which
+/// is no news to a user who has typed nothing); once a field was typed, the
+/// error shows.
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn the_commander_opens_without_an_error() {
+    #[cfg(chromium)]
+    browser::opens_without_an_error();
+}
+
+/// A screenshot taken by headless Chromium on its command line with a
+/// virtual time budget, as `docs/console.md` gives it: the page at
+/// `?static` draws one snapshot and opens no event stream, so the browser
+/// finds the network quiet, spends its budget and returns (with the stream
+/// open it waits forever). The page's text at the end of the same budget
+/// shows the snapshot drawn.
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn a_headless_screenshot_with_a_virtual_time_budget_returns() {
+    #[cfg(chromium)]
+    browser::screenshot_returns();
+}
+
 #[cfg(chromium)]
 mod browser {
     use super::*;
@@ -613,23 +644,29 @@ mod browser {
         port: u16,
     }
 
+    /// The flags of every headless Chromium of these tests: no sandbox (a
+    /// container's root), no GPU, no first-run pages, a laptop's window.
+    const HEADLESS: [&str; 6] = [
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--no-first-run",
+        "--hide-scrollbars",
+        "--window-size=1366,900",
+    ];
+
     impl Chromium {
         fn start(profile: &Path) -> Chromium {
             let mut child = Command::new(env!("GOBY_CHROMIUM_PATH"))
+                .args(HEADLESS)
                 .args([
-                    "--headless",
-                    "--no-sandbox",
-                    "--disable-gpu",
-                    "--no-first-run",
                     "--no-default-browser-check",
                     "--disable-extensions",
                     "--disable-background-networking",
                     "--disable-component-update",
                     "--disable-sync",
-                    "--hide-scrollbars",
                     "--remote-debugging-address=127.0.0.1",
                     "--remote-debugging-port=0",
-                    "--window-size=1366,900",
                 ])
                 .arg(format!("--user-data-dir={}", profile.display()))
                 .arg("about:blank")
@@ -715,6 +752,122 @@ mod browser {
             broker::PATIENCE,
         );
         page.eval("goby.lastCheck")
+    }
+
+    /// Runs headless Chromium on its command line with `args` and the
+    /// page at `url`: its standard output, or a panic if it has not
+    /// returned within [`broker::PATIENCE`].
+    fn headless(profile: &Path, args: &[String], url: &str) -> String {
+        let mut child = Command::new(env!("GOBY_CHROMIUM_PATH"))
+            .args(HEADLESS)
+            .arg(format!("--user-data-dir={}", profile.display()))
+            .args(args)
+            .arg(url)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("chromium starts");
+        let mut stdout = child.stdout.take().unwrap();
+        let reader = std::thread::spawn(move || {
+            let mut text = String::new();
+            let _ = stdout.read_to_string(&mut text);
+            text
+        });
+        let started = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                assert!(status.success(), "chromium {args:?} {url}: {status}");
+                return reader.join().unwrap();
+            }
+            if started.elapsed() > broker::PATIENCE {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!(
+                    "chromium {args:?} {url} had not returned after {:?}",
+                    broker::PATIENCE
+                );
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    pub fn screenshot_returns() {
+        let dir = scratch("browser-screenshot");
+        let broker = Broker::start(&dir, "a_headless_screenshot_returns");
+        let console = Console::start(&["fleet", "--broker", &broker.address()]);
+        let url = format!("{}?static", console.url);
+        let shot = dir.join("console.png");
+        let budget = "--virtual-time-budget=5000".to_string();
+        headless(
+            &dir.join("profile"),
+            &[format!("--screenshot={}", shot.display()), budget.clone()],
+            &url,
+        );
+        let png = std::fs::read(&shot).expect("the screenshot is written");
+        assert!(png.starts_with(b"\x89PNG"), "not a PNG");
+        std::fs::write(artifacts().join("static.png"), &png).unwrap();
+        let dom = headless(&dir.join("profile"), &["--dump-dom".into(), budget], &url);
+        assert!(
+            dom.contains("fleet/ on the MQTT broker") && dom.contains("a still picture"),
+            "the snapshot is not drawn: {dom}"
+        );
+        assert!(dom.contains("goby.example.Command"), "no commander: {dom}");
+        drop(console);
+        drop(broker);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    pub fn opens_without_an_error() {
+        let dir = scratch("browser-quiet");
+        let broker = Broker::start(&dir, "the_commander_opens_without_an_error");
+        let console = Console::start(&["fleet", "--broker", &broker.address()]);
+        let chromium = Chromium::start(&dir.join("profile"));
+        let mut page = chromium.page();
+        page.call("Page.enable", json!({}));
+        page.call("Page.navigate", json!({"url": console.url}));
+        page.wait(
+            "the commander's form and its first check",
+            "typeof goby === 'object' && document.querySelector('#cmd-fields [data-path]') !== null \
+             && goby.checkedDraft === JSON.stringify(goby.draft())",
+            broker::PATIENCE,
+        );
+        // The first type's empty form cannot be encoded ...
+        assert_eq!(page.eval("goby.lastCheck.ok"), Value::Bool(false));
+        // ... but nothing typed, nothing is said against it.
+        let shown = page.eval(
+            "(() => { const b = document.getElementById('cmd-check'); \
+             return {bad: b.classList.contains('bad'), text: b.textContent}; })()",
+        );
+        assert_eq!(shown["bad"], Value::Bool(false), "{shown}");
+        assert!(
+            !shown["text"]
+                .as_str()
+                .unwrap()
+                .contains("Cannot be encoded"),
+            "{shown}"
+        );
+        assert_eq!(
+            page.eval("document.getElementById('cmd-send').disabled"),
+            Value::Bool(true)
+        );
+        // Typed into (the note, with the destination still unset), the
+        // form says what is wrong.
+        assert_eq!(
+            page.eval("goby.draft().type"),
+            json!("goby.example.Command")
+        );
+        fill(&mut page, "note", "survey");
+        let check = checked(&mut page);
+        assert_eq!(check["ok"], Value::Bool(false), "{check}");
+        let shown = page.eval("document.getElementById('cmd-check').className");
+        assert_eq!(shown, json!("check bad"));
+        assert_eq!(page.eval("goby.errors"), json!([]));
+        drop(page);
+        drop(chromium);
+        drop(console);
+        drop(broker);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     pub fn run() {

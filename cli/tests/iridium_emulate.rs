@@ -209,7 +209,7 @@ fn mt_post(addr: &str, path: &str, form: &str) -> String {
 
 #[test]
 fn the_emulated_rockblock_service_takes_mt_posts_and_posts_signed_mo_messages() {
-    use modemdriver::iridium::emulator::rockblock::EMULATOR_TEST_PUBLIC_KEY_PEM;
+    use emulators::iridium::rockblock::EMULATOR_TEST_PUBLIC_KEY_PEM;
     use modemdriver::iridium::rockblock::{JwtVerifier, MoPost};
     let webhook = TcpListener::bind("127.0.0.1:0").unwrap();
     let webhook_addr = webhook.local_addr().unwrap();

@@ -485,21 +485,30 @@ fn the_help_describes_every_emulator() {
     let modem = help(&["modem", "--help"]);
     let goby = help(&["--help"]);
     let emulate = help(&["modem", "emulate", "--help"]);
+    // Every emulated modem of the emulators' table, by its driver's title
+    // and name.
+    let kinds: Vec<&'static dyn modemdriver::kind::DriverKind> = std::iter::once("micromodem")
+        .chain(emulators::kinds::STREAM.iter().map(|e| e.kind))
+        .map(|k| modemdriver::built_in::by_short_name(k).expect("a driver built in"))
+        .collect();
+    assert!(
+        kinds.len() >= 4,
+        "the Micro-Modem, EvoLogics, Popoto, ATM-900 at least"
+    );
     for text in [&modem, &goby, &emulate] {
-        for kind in ["Micro-Modem", "EvoLogics", "Popoto", "Benthos ATM-900"] {
-            assert!(text.contains(kind), "{kind} missing from:\n{text}");
+        for kind in &kinds {
+            let title = kind.about().title;
+            assert!(text.contains(title), "{title} missing from:\n{text}");
         }
     }
     for text in [&modem, &goby] {
         assert!(text.contains("Iridium"), "{text}");
     }
-    for driver in [
-        "DRIVER_WHOI_MICROMODEM",
-        "EVOLOGICS_S2C",
-        "DRIVER_POPOTO",
-        "DRIVER_BENTHOS_ATM900",
-        "SIGTERM",
-    ] {
+    let names: Vec<String> = kinds
+        .iter()
+        .map(|k| k.about().named.name().to_string())
+        .collect();
+    for driver in names.iter().map(String::as_str).chain(["SIGTERM"]) {
         assert!(
             emulate.contains(driver),
             "{driver} missing from:\n{emulate}"

@@ -174,5 +174,32 @@ pub(crate) fn report(l: &LoadedMessage, console_width: usize) -> String {
     let g = guard("Body", '-', console_width);
     let _ = writeln!(out, "{g} Body {g}");
     part_lines(&mut out, l.body.as_ref(), full_name);
+    if l.has_conditions {
+        let g = guard("Dynamic conditions", '-', console_width);
+        let _ = writeln!(out, "{g} Dynamic conditions {g}");
+        for part in [&l.head, &l.body] {
+            if let Some(codec) = part.children() {
+                condition_lines(&mut out, codec, "");
+            }
+        }
+    }
     out
+}
+
+/// Writes `path kind: script` for each condition of the fields of a
+/// message codec and of the messages embedded in it (sizes above are
+/// without them: a field a condition leaves out takes no bits, one it makes
+/// required no presence bit, and dynamic bounds change a field's size).
+fn condition_lines(out: &mut String, codec: &MessageCodec, prefix: &str) {
+    for entry in codec.fields() {
+        let path = format!("{prefix}{}", entry.field.name());
+        if let Some(d) = entry.dynamic() {
+            for (kind, script) in d.conditions().describe() {
+                let _ = writeln!(out, "{path} {kind}: {script}");
+            }
+        }
+        if let Some(children) = entry.codec.children() {
+            condition_lines(out, children, &format!("{path}."));
+        }
+    }
 }

@@ -54,6 +54,11 @@ pub(crate) struct LoadedMessage {
     /// embedded messages in a repeated field, whose elements over
     /// `max_repeat` are not encoded.
     pub(crate) required_before: RequiredFields,
+    /// Whether a field has dynamic conditions (then the codecs get the
+    /// root message, and the wire form is not used).
+    pub(crate) has_conditions: bool,
+    /// What the review of its dynamic conditions found.
+    pub(crate) warnings: Vec<crate::DefinitionWarning>,
 }
 
 /// The wire plans of a loaded type and its header and body codecs (the
@@ -109,6 +114,15 @@ impl LoadedMessage {
 }
 
 type Clock = Arc<dyn Fn() -> i64 + Send + Sync>;
+
+/// What an encoding of a message with dynamic conditions records besides
+/// its bytes: what each condition gave ([`Codec::condition_outcomes`]),
+/// the path taken ([`Codec::round_trip`]).
+#[derive(Default, Clone, Copy)]
+struct Observers<'a> {
+    outcomes: Option<&'a std::cell::RefCell<Vec<crate::ConditionOutcome>>>,
+    trace: Option<&'a crate::conditions::Trace>,
+}
 
 /// Encodes and decodes DCCL messages, byte for byte as libdccl 4 does.
 ///
@@ -426,6 +440,16 @@ impl Codec {
         Ok(report)
     }
 
+    /// What the review of the loaded type's dynamic conditions found: each
+    /// condition that changes nothing for its field, each script naming no
+    /// field of its message, each script reading a field a receiver has not
+    /// decoded yet when it evaluates the condition (see
+    /// [`DefinitionWarning`](crate::DefinitionWarning)). The type is loaded
+    /// and codes as libdccl does all the same.
+    pub fn load_warnings(&self, full_name: &str) -> Result<Vec<crate::DefinitionWarning>> {
+        Ok(self.get(full_name)?.warnings.clone())
+    }
+
     /// Removes a loaded type.
     pub fn unload(&mut self, full_name: &str) {
         if let Some(l) = self.by_name.remove(full_name) {
@@ -560,13 +584,29 @@ impl Codec {
         let id_bits = if omit_id { 0 } else { identifier::size(id) };
         let reads_clock = head.reads_clock() || body.reads_clock();
         let wire = WireEncoding::of(desc, &head, &body);
+        let has_conditions = [&head, &body]
+            .into_iter()
+            .any(|c| message_codec(c).is_some_and(|m| m.has_conditions()));
         let required = RequiredFields::of(desc, 0);
         let (required_on_the_way, required_before) =
             match (message_codec(&head), message_codec(&body)) {
+                // Conditions may leave fields out: all are checked first.
+                _ if has_conditions => (false, required.clone()),
                 (Some(h), Some(b)) => (true, required.not_visited(Some(&h), Some(&b))),
                 _ => (false, required.clone()),
             };
+        let warnings = if has_conditions {
+            let parts: Vec<Arc<MessageCodec>> = [&head, &body]
+                .into_iter()
+                .filter_map(message_codec)
+                .collect();
+            let parts: Vec<&MessageCodec> = parts.iter().map(|p| p.as_ref()).collect();
+            crate::conditions::review(desc, &parts)
+        } else {
+            Vec::new()
+        };
         let loaded = LoadedMessage {
+            warnings,
             descriptor: desc.clone(),
             id,
             omit_id,
@@ -580,6 +620,7 @@ impl Codec {
             wire,
             required_on_the_way,
             required_before,
+            has_conditions,
         };
         let mut loaded = loaded;
         loaded.hash = definition_hash(desc, &[loaded.head.as_ref(), loaded.body.as_ref()]);
@@ -732,6 +773,18 @@ impl Codec {
         dry_run: bool,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
+        self.encode_observed(loaded, msg, out, dry_run, changes, Observers::default())
+    }
+
+    fn encode_observed(
+        &self,
+        loaded: &LoadedMessage,
+        msg: Source<'_>,
+        out: &mut Vec<u8>,
+        dry_run: bool,
+        changes: Option<&ChangeLog>,
+        observers: Observers<'_>,
+    ) -> Result<()> {
         let name = loaded.descriptor.full_name();
         let check = |required: &RequiredFields| match msg {
             Source::Dynamic(m) => required.check(m),
@@ -744,6 +797,18 @@ impl Codec {
             check_required().map_err(|e| e.into_encode(name))?;
         }
         let session = self.arithmetic_session(!dry_run);
+        let index = std::cell::Cell::new(0);
+        let dynamic = match msg {
+            Source::Dynamic(root) if loaded.has_conditions => {
+                Some(crate::conditions::EncodeScope {
+                    root,
+                    index: &index,
+                    outcomes: observers.outcomes,
+                    trace: observers.trace,
+                })
+            }
+            _ => None,
+        };
         let ctx = EncodeContext {
             strict: self.strict,
             dry_run,
@@ -751,6 +816,7 @@ impl Codec {
             changes,
             arithmetic: session.as_ref(),
             required_unchecked: loaded.required_on_the_way,
+            dynamic,
         };
         // Header and body are written straight after what `out` holds (the
         // writer starts on its byte boundary), then encrypted in place; on
@@ -807,6 +873,80 @@ impl Codec {
             Source::Wire(wire, m) => wire.body.encode_fields_wire(out, m, ctx)?,
         }
         Ok(head_end)
+    }
+
+    /// The dynamic conditions (`(dccl.field).dynamic_conditions`) that
+    /// encoding `msg` evaluates, in the order it evaluates them, with what
+    /// each gives: whether a field is left out (`omit`), coded without its
+    /// "not present" value (`required`), and the bounds in force (`bounds`).
+    /// Empty for a type without conditions. Errors: those of
+    /// [`Codec::encode`] (a condition that fails names the message, the
+    /// field and the script).
+    pub fn condition_outcomes(&self, msg: &DynamicMessage) -> Result<Vec<crate::ConditionOutcome>> {
+        let loaded = self.get_by_descriptor(&msg.descriptor())?;
+        let log = std::cell::RefCell::new(Vec::new());
+        let mut out = Vec::new();
+        self.encode_observed(
+            loaded,
+            Source::Dynamic(msg),
+            &mut out,
+            true,
+            None,
+            Observers {
+                outcomes: Some(&log),
+                trace: None,
+            },
+        )?;
+        Ok(log.into_inner())
+    }
+
+    /// Whether a receiver decodes the encoding of `msg` as it was encoded:
+    /// `Ok(None)` when it does; otherwise why, as one sentence: it cannot
+    /// decode it, it stops before the end of the bytes (the rest would be
+    /// read as another message), or, for a type with dynamic conditions,
+    /// it takes another path through the conditions (a field left out,
+    /// made required or bounded otherwise, or of another size), named at
+    /// the first field where it does. libdccl writes the same bytes; such
+    /// a message comes from a condition reading a value the receiver does
+    /// not have as the sender had it (a value the codec changes, an unset
+    /// field a condition makes required, a field decoded after the
+    /// condition: see [`Codec::load_warnings`]). Adaptive arithmetic
+    /// models are left as they are. Errors: those of [`Codec::check`].
+    pub fn round_trip(&self, msg: &DynamicMessage) -> Result<Option<String>> {
+        let loaded = self.get_by_descriptor(&msg.descriptor())?;
+        let sent = crate::conditions::Trace::default();
+        let mut bytes = Vec::new();
+        self.encode_observed(
+            loaded,
+            Source::Dynamic(msg),
+            &mut bytes,
+            true,
+            None,
+            Observers {
+                outcomes: None,
+                trace: Some(&sent),
+            },
+        )?;
+        let received = crate::conditions::Trace::default();
+        let (back, len) = match self.decode_loaded_with(loaded, &bytes, false, Some(&received)) {
+            Ok(decoded) => decoded,
+            Err(e) => return Ok(Some(format!("a receiver cannot decode it ({e})"))),
+        };
+        let text = || crate::short_debug_string(&back);
+        if len != bytes.len() {
+            return Ok(Some(format!(
+                "a receiver reads {len} of its {} bytes, as {}, and the rest as another message",
+                bytes.len(),
+                text()
+            )));
+        }
+        let difference = crate::conditions::first_difference(&sent.borrow(), &received.borrow());
+        Ok(difference.map(|d| {
+            format!(
+                "a receiver decodes it as {}, not as it was encoded: {d}",
+                text()
+            )
+        }))
     }
 
     /// Encodes a message of the loaded type `full_name` given as protobuf
@@ -981,6 +1121,18 @@ impl Codec {
         loaded: &LoadedMessage,
         bytes: &[u8],
     ) -> Result<(DynamicMessage, usize)> {
+        self.decode_loaded_with(loaded, bytes, true, None)
+    }
+
+    /// [`Codec::decode_loaded`], the adaptive arithmetic models updated
+    /// (`keep`) or not, the path through the conditions recorded in `trace`.
+    fn decode_loaded_with(
+        &self,
+        loaded: &LoadedMessage,
+        bytes: &[u8],
+        keep: bool,
+        trace: Option<&crate::conditions::Trace>,
+    ) -> Result<(DynamicMessage, usize)> {
         let name = loaded.descriptor.full_name();
         let head_len = loaded.head_bytes();
         if bytes.len() < head_len {
@@ -990,7 +1142,8 @@ impl Codec {
             ))
             .into_decode(name));
         }
-        let session = self.arithmetic_session(true);
+        let session = self.arithmetic_session(keep);
+        let index = std::cell::Cell::new(0);
         let ctx = DecodeContext {
             now_secs: if loaded.reads_clock {
                 (self.clock)()
@@ -999,6 +1152,15 @@ impl Codec {
             },
             definition_hash: loaded.hash,
             arithmetic: session.as_ref(),
+            dynamic: loaded
+                .has_conditions
+                .then_some(crate::conditions::DecodeScope {
+                    parent: None,
+                    slot: None,
+                    depth: 0,
+                    index: &index,
+                    trace,
+                }),
         };
         let decoded = self.decode_parts(loaded, bytes, &ctx);
         if let Some(session) = session {

@@ -42,6 +42,9 @@ pub struct EncodeContext<'a> {
     /// the message codec refuses one it finds unset (the codec then runs
     /// the check for the error to give).
     pub(crate) required_unchecked: bool,
+    /// For a message whose fields have dynamic conditions: the root
+    /// message and the index of the last repeated element coded.
+    pub(crate) dynamic: Option<crate::conditions::EncodeScope<'a>>,
 }
 
 impl EncodeContext<'_> {
@@ -112,6 +115,10 @@ pub struct DecodeContext<'a> {
     pub definition_hash: u64,
     /// The decoding codec's arithmetic models and adaptive state.
     pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,
+    /// For a message whose fields have dynamic conditions: where the
+    /// message being decoded sits in the root, and the index of the last
+    /// repeated element decoded.
+    pub(crate) dynamic: Option<crate::conditions::DecodeScope<'a>>,
 }
 
 /// What a factory is told about the field whose codec it creates.
@@ -247,6 +254,41 @@ impl RepeatBounds {
         crate::rounding::ceil_log2_u64((self.max - self.min) as u64 + 1)
     }
 
+    /// Checks `len` values against the bounds (see [`RepeatBounds::check_max`],
+    /// [`RepeatBounds::check_min`]), writes DCCL's element-count prefix
+    /// (version 3 and later) and returns how many elements follow: `len`
+    /// within `[min_repeat, max_repeat]` (version 2: always `max_repeat`).
+    pub fn write_count(
+        &self,
+        out: &mut BitWriter,
+        len: usize,
+        codec_version: i32,
+        ctx: &EncodeContext,
+    ) -> Result<usize, CodecError> {
+        self.check_max(len, ctx)?;
+        self.check_min(len, codec_version, ctx)?;
+        if codec_version > 2 {
+            let n = len.min(self.max as usize).max(self.min as usize);
+            out.write((n - self.min as usize) as u64, self.prefix_bits());
+            Ok(n)
+        } else {
+            Ok(self.max as usize)
+        }
+    }
+
+    /// Reads the element count written by [`RepeatBounds::write_count`].
+    pub fn read_count(
+        &self,
+        input: &mut BitReader<'_>,
+        codec_version: i32,
+    ) -> Result<usize, CodecError> {
+        if codec_version > 2 {
+            Ok(input.read(self.prefix_bits())? as usize + self.min as usize)
+        } else {
+            Ok(self.max as usize)
+        }
+    }
+
     /// Reports `len` values beyond `max_repeat` (an error in strict mode;
     /// otherwise the encoder drops the extra values) and, in strict mode,
     /// fewer than `min_repeat`.
@@ -333,18 +375,7 @@ pub trait FieldCodec: Any + Send + Sync + Debug {
         bounds: RepeatBounds,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        bounds.check_max(values.len(), ctx)?;
-        bounds.check_min(values.len(), self.codec_version(), ctx)?;
-        let count = if self.codec_version() > 2 {
-            let n = values
-                .len()
-                .min(bounds.max as usize)
-                .max(bounds.min as usize);
-            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
-            n
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.write_count(out, values.len(), self.codec_version(), ctx)?;
         for i in 0..count {
             let mark = ctx.change_mark();
             self.encode(out, values.get(i), ctx)?;
@@ -361,11 +392,7 @@ pub trait FieldCodec: Any + Send + Sync + Debug {
         bounds: RepeatBounds,
         ctx: &DecodeContext,
     ) -> Result<Vec<Value>, CodecError> {
-        let count = if self.codec_version() > 2 {
-            input.read(bounds.prefix_bits())? as usize + bounds.min as usize
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.read_count(input, self.codec_version())?;
         let mut out = Vec::with_capacity(count);
         for _ in 0..count {
             if let Some(v) = self.decode(input, ctx)? {

@@ -63,6 +63,16 @@
 //! `.proto` sources with brackets nested deeper than 100 levels are refused
 //! before parsing.
 //!
+//! ## Dynamic conditions
+//!
+//! `(dccl.field).dynamic_conditions` (`required_if`, `omit_if`, `only_if`,
+//! `min`, `max`), scripts in Lua over the message being coded, are
+//! evaluated as libdccl 4.2 built with Lua evaluates them, by an evaluator
+//! of this crate for the part of Lua 5.3 conditions are written in (no C
+//! compiler, no Lua); a script outside it is refused when its message is
+//! loaded, one that fails is an error naming the message, the field and the
+//! script. [`Codec::condition_outcomes`] tells what each gave.
+//!
 //! ## What is public
 //!
 //! The crate root holds what a program embedding DCCL uses: [`Codec`] and
@@ -81,6 +91,7 @@ mod bits;
 mod changes;
 mod codec;
 mod codecs;
+mod conditions;
 mod crypto;
 mod definition_hash;
 mod error;
@@ -97,6 +108,7 @@ mod wire;
 pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use codecs::arithmetic::{ArithmeticModel, ArithmeticState};
+pub use conditions::{lua52_difference, ConditionOutcome, DefinitionWarning};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{DateShift, FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources, pool_file_name};

@@ -225,6 +225,20 @@ pub fn driver_limits(config: &GobydConfig) -> Option<String> {
 /// Iridium message is sent again before its ack can come.
 pub const MIN_SBD_ACK_WAIT_SECONDS: f64 = 60.0;
 
+/// What the DCCL types loaded define that cannot do what its writer meant
+/// ([`dccl::Codec::load_warnings`]): a dynamic condition libdccl ignores,
+/// a script naming no field of its message, a script reading a field a
+/// receiver decodes after it. Each "Type.field: dynamic_conditions.KIND
+/// \"SCRIPT\" why", in the order the types were loaded.
+pub fn definition_warnings(checked: &Checked) -> Vec<String> {
+    checked
+        .loaded
+        .iter()
+        .flat_map(|name| checked.codec.load_warnings(name).unwrap_or_default())
+        .map(|w| w.to_string())
+        .collect()
+}
+
 /// What `gobyd --check` tells of a driver whose frames have a size limit
 /// of their own (Iridium SBD): the limits, and a warning for each loaded
 /// DCCL type that can be larger than the frames this node sends (it can

@@ -12,7 +12,7 @@
 //! [`check::validate`].
 
 use std::ffi::OsString;
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::process::ExitCode;
 
 use clap::{ColorChoice, CommandFactory, Parser};
@@ -39,6 +39,8 @@ pub const EXIT_SETUP: u8 = 2;
 )]
 pub struct GobydCli {
     /// Configuration file (protobuf text format, goby.apps.protobuf.GobydConfig).
+    /// A file that configures nothing (empty, or comments only) is refused:
+    /// the defaults are for gobyd run without --config.
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<std::path::PathBuf>,
     /// MOOS mission file: the configuration is its `ProcessConfig = gobyd`
@@ -86,6 +88,10 @@ pub struct GobydCli {
     /// Log lines as JSON objects.
     #[arg(long)]
     pub log_json: bool,
+    /// Override the configuration's log.dir: also write the log to
+    /// DIR/gobyd.log, rotated by size (empty: standard error only).
+    #[arg(long, value_name = "DIR")]
+    pub log_dir: Option<std::path::PathBuf>,
     /// Print a completion script for SHELL on standard output and exit.
     #[arg(
         long,
@@ -100,6 +106,9 @@ pub struct GobydCli {
     )]
     pub completions: Option<clap_complete::Shell>,
     /// Write the manual page gobyd.1 into DIR (created if missing) and exit.
+    ///
+    /// Called by another name (the Debian package's gobyd-rs), the page and
+    /// the completion scripts are for that name.
     #[arg(
         long,
         value_name = "DIR",
@@ -161,6 +170,9 @@ fn configuration(
                 path: path.clone(),
                 source: e,
             })?;
+            if let Some(refused) = config::nothing_configured(path, &text) {
+                return Err(refused);
+            }
             let origin = path.display().to_string();
             Some(config::read(&text, &origin, config::Layout::File)?)
         }
@@ -209,6 +221,10 @@ fn configuration(
     if cli.log_json {
         config.log.get_or_insert_with(Default::default).json = Some(true);
     }
+    if let Some(dir) = &cli.log_dir {
+        config.log.get_or_insert_with(Default::default).dir =
+            Some(dir.display().to_string()).filter(|d| !d.is_empty());
+    }
     if let Some(broker) = &cli.mqtt_broker {
         config.mqtt.get_or_insert_with(Default::default).broker = Some(broker.trim().to_string());
     }
@@ -224,29 +240,6 @@ fn located(mut e: DaemonError, read: Option<&config::Read>) -> DaemonError {
         read.locate(problems);
     }
     e
-}
-
-/// Sets up logging to standard error: human-readable, or JSON objects.
-fn init_logging(config: &GobydConfig) {
-    let log = config.log.clone().unwrap_or_default();
-    let level = match crate::config::log_level_problem(log.level()) {
-        Some(problem) => {
-            eprintln!("gobyd: {problem}; logging at info");
-            "info"
-        }
-        None => log.level(),
-    };
-    let filter = tracing_subscriber::EnvFilter::try_new(level)
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal());
-    let _ = if log.json() {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
-    };
 }
 
 /// Listens for SIGINT and SIGTERM from now on (call it inside the runtime,
@@ -276,11 +269,73 @@ fn shutdown_signal() -> impl std::future::Future<Output = ()> {
     }
 }
 
+/// `gobyd --check`: the configuration checked as the start checks it. What
+/// is wrong or doubtful is told on standard error, the refusal first;
+/// standard output says whether it is valid, the types it loads and its
+/// limits.
+fn check_cmd(cli: &GobydCli, config: GobydConfig, read: Option<&config::Read>) -> u8 {
+    let notes = read.map_or(&[][..], |r| &r.notes[..]);
+    let broker = mqtt_broker_note(cli, &config);
+    let warning = config::passphrase_file_warning(&config);
+    let limits = check::driver_limits(&config);
+    let log_problems = crate::logging::problems(&config);
+    let checked = match check::validate(config, config::DriverSettings::Configured) {
+        Ok(checked) => checked,
+        Err(e) => {
+            // As the start refuses it: the notes wait until it can run.
+            eprintln!("gobyd: error: {}", located(e, read));
+            for problem in log_problems {
+                eprintln!("gobyd: error: configuration: {problem}");
+            }
+            return EXIT_SETUP;
+        }
+    };
+    if !log_problems.is_empty() {
+        for problem in log_problems {
+            eprintln!("gobyd: error: configuration: {problem}");
+        }
+        return EXIT_SETUP;
+    }
+    for note in notes {
+        eprintln!("gobyd: note: {note}");
+    }
+    if let Some(warning) = warning {
+        eprintln!("gobyd: warning: {warning}");
+    }
+    let (frame_limits, warnings) = check::frame_report(&checked);
+    for w in check::definition_warnings(&checked)
+        .into_iter()
+        .chain(warnings)
+    {
+        eprintln!("gobyd: warning: {w}");
+    }
+    println!(
+        "configuration is valid; DCCL types: {}",
+        checked.loaded.join(", ")
+    );
+    if config::links::has_link_sections(&checked.config) {
+        println!("{}", config::links::summary(&checked.config));
+    }
+    for limits in [limits, frame_limits].into_iter().flatten() {
+        println!("{limits}");
+    }
+    if let Some(broker) = broker {
+        println!("{broker}");
+    }
+    EXIT_OK
+}
+
 /// Runs `gobyd` with a parsed command line; returns the exit status.
 pub fn run_cli(cli: GobydCli) -> u8 {
     if let Some(shell) = cli.completions {
         let mut script = Vec::new();
-        clap_complete::generate(shell, &mut GobydCli::command(), "gobyd", &mut script);
+        let name = called_name();
+        clap_complete::generate(
+            shell,
+            &mut GobydCli::command().name(name),
+            name,
+            &mut script,
+        );
         return match std::io::stdout().lock().write_all(&script) {
             Ok(()) => EXIT_OK,
             Err(_) => EXIT_SETUP,
@@ -316,47 +371,20 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             return EXIT_SETUP;
         }
     };
-    let notes = read.as_ref().map_or(&[][..], |r| &r.notes[..]);
     if cli.check {
-        // Told on standard error, the refusal first: standard output says
-        // whether it is valid.
-        let broker = mqtt_broker_note(&cli, &config);
-        let warning = config::passphrase_file_warning(&config);
-        let limits = check::driver_limits(&config);
-        let checked = match check::validate(config, config::DriverSettings::Configured) {
-            Ok(checked) => checked,
-            Err(e) => {
-                // As the start refuses it: the notes wait until it can run.
-                eprintln!("gobyd: error: {}", located(e, read.as_ref()));
-                return EXIT_SETUP;
-            }
-        };
-        for note in notes {
-            eprintln!("gobyd: note: {note}");
-        }
-        if let Some(warning) = warning {
-            eprintln!("gobyd: warning: {warning}");
-        }
-        let (frame_limits, warnings) = check::frame_report(&checked);
-        for w in warnings {
-            eprintln!("gobyd: warning: {w}");
-        }
-        println!(
-            "configuration is valid; DCCL types: {}",
-            checked.loaded.join(", ")
-        );
-        if config::links::has_link_sections(&checked.config) {
-            println!("{}", config::links::summary(&checked.config));
-        }
-        for limits in [limits, frame_limits].into_iter().flatten() {
-            println!("{limits}");
-        }
-        if let Some(broker) = broker {
-            println!("{broker}");
-        }
-        return EXIT_OK;
+        return check_cmd(&cli, config, read.as_ref());
     }
-    init_logging(&config);
+    let log_problems = crate::logging::problems(&config);
+    if !log_problems.is_empty() {
+        for problem in log_problems {
+            eprintln!("gobyd: error: configuration: {problem}");
+        }
+        return EXIT_SETUP;
+    }
+    if let Err(e) = crate::logging::init(&config) {
+        eprintln!("gobyd: error: {e}");
+        return EXIT_SETUP;
+    }
     let warning = config::passphrase_file_warning(&config);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -400,13 +428,27 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     })
 }
 
-/// Writes gobyd.1 into `dir` (created if missing); returns its path.
+/// The name the program was called by: `gobyd`, or `gobyd-rs` through the
+/// Debian package's link (see docs/vehicle.md), so that its completions
+/// and manual page are for the command the user types.
+fn called_name() -> &'static str {
+    let called = std::env::args_os()
+        .next()
+        .and_then(|a| Some(std::path::Path::new(&a).file_name()?.to_str()?.to_owned()));
+    match called {
+        Some(name) if !name.is_empty() => Box::leak(name.into_boxed_str()),
+        _ => "gobyd",
+    }
+}
+
+/// Writes the manual page (gobyd.1, or NAME.1 when called by another name)
+/// into `dir` (created if missing); returns its path.
 fn write_man_page(dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
     std::fs::create_dir_all(dir)
         .map_err(|e| format!("cannot create the directory {}: {e}", dir.display()))?;
     let failed =
         |e: std::io::Error| format!("cannot write the manual page into {}: {e}", dir.display());
-    let page = clap_mangen::Man::new(GobydCli::command())
+    let page = clap_mangen::Man::new(GobydCli::command().name(called_name()))
         .generate_to(dir)
         .map_err(failed)?;
     // Markdown code spans of the help texts in bold, as manual pages show

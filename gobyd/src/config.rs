@@ -102,22 +102,6 @@ impl std::fmt::Display for Problem {
     }
 }
 
-/// Goby3's extensions of `DriverConfig` and of `ModemTransmission` (a MAC
-/// slot's Micro-Modem settings) and the fields of ours that hold the same
-/// settings (of the same numbers).
-const GOBY3_EXTENSIONS: &[(&str, &str)] = &[
-    ("goby.acomms.udp.protobuf.config", "udp"),
-    ("goby.acomms.udp_multicast.protobuf.config", "udp_multicast"),
-    ("goby.acomms.micromodem.protobuf.config", "micromodem"),
-    ("goby.acomms.iridium.protobuf.config", "iridium"),
-    ("goby.acomms.iridium.protobuf.shore_config", "iridium_shore"),
-    ("goby.acomms.popoto.protobuf.config", "popoto"),
-    ("goby.acomms.benthos.protobuf.config", "benthos"),
-    ("goby.acomms.popoto.protobuf.transmission", "popoto"),
-    ("goby.acomms.benthos.protobuf.transmission", "benthos"),
-    ("goby.acomms.micromodem.protobuf.transmission", "micromodem"),
-];
-
 /// How the text of a configuration is written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Layout {
@@ -252,6 +236,37 @@ pub fn parse(text: &str, origin: &str) -> Result<GobydConfig, ConfigError> {
     let read = read(text, origin, Layout::File)?;
     read.log_notes();
     Ok(read.config)
+}
+
+/// The refusal of a configuration file `path` whose `text` configures
+/// nothing (empty, or blank lines and `#` comments only), or `None`.
+///
+/// Such a file is most likely a mistake (the wrong file, a copy that
+/// failed, a disk that filled), and started on it `gobyd` would run on its
+/// defaults (node 1 alone on the in-process acoustic simulator), which on a
+/// vehicle is not what anyone meant. The error names the defaults and
+/// says how to run on them on purpose (no `--config`).
+pub fn nothing_configured(path: &Path, text: &str) -> Option<ConfigError> {
+    let configures = text.lines().any(|line| {
+        let line = line.trim();
+        !line.is_empty() && !line.starts_with('#')
+    });
+    if configures {
+        return None;
+    }
+    let defaults = GobydConfig::default();
+    let json = protos::goby::apps::protobuf::gobyd_config::JsonInterface::default();
+    Some(ConfigError::Invalid(format!(
+        "{} configures nothing (it is empty, or comments only): started on it, gobyd would run \
+         on its defaults, node {} alone on the in-process acoustic simulator with the example \
+         messages, its data directory ./{} and its JSON interface on {}; write the settings \
+         (gobyd --example-config prints a commented configuration), or run gobyd without \
+         --config to run on these defaults",
+        path.display(),
+        defaults.modem_id(),
+        defaults.data_dir(),
+        json.tcp_bind(),
+    )))
 }
 
 /// Reads a configuration written as `layout` says; `origin` names it in
@@ -442,11 +457,45 @@ const GOBY_NESTED_KEYS: &[(&str, &str, &str)] = &[
     ),
 ];
 
+/// The top-level keys of Goby3's own `gobyd`, its middleware daemon
+/// (`goby.apps.zeromq.protobuf.GobyDaemonConfig`; `app` and `interprocess`
+/// open every Goby3 middleware application's configuration), none of them
+/// this gobyd's.
+const GOBY3_DAEMON_KEYS: &[&str] = &[
+    "app",
+    "interprocess",
+    "router_threads",
+    "intervehicle",
+    "hold",
+];
+
+/// What this gobyd is and which Goby3 blocks it takes, told when it is given
+/// a configuration of Goby3's `gobyd`.
+const GOBY3_DAEMON_HINT: &str = "this is a configuration of Goby3's gobyd, its middleware daemon \
+    (interprocess, router_threads, intervehicle). This gobyd is another program of the same name: \
+    goby-rs's daemon for acoustic modems and other slow links, which does the work of Goby3's pAcommsHandler (a DCCL \
+    queue, medium access and a modem driver, served to the autonomy software over JSON, MOOS or \
+    MQTT) and has no interprocess or router settings. Give it a pAcommsHandler block instead \
+    (modem_id, driver_cfg, mac_cfg, queue_cfg, load_proto_file, pasted as they are), or, from \
+    Goby3's intervehicle portal, each intervehicle link's driver and mac as \
+    link { name: \"acoustic\" driver { ... } mac { ... } } with the link's modem_id as the \
+    top-level modem_id, and the queue settings Goby3 takes from each publication (ack, ttl, \
+    value_base, max_queue) as queue { message_entry { protobuf_name: \"...\" ... } } \
+    (docs/goby3.md)";
+
 /// A text-format parser's reason, with what to do when it is about a Goby
-/// setting gobyd does not have, an extension of a driver gobyd does not
+/// setting gobyd does not have (a key of Goby3's own `gobyd`: what this
+/// daemon is instead), an extension of a driver gobyd does not
 /// run, or a MOOS `KEY = value` line outside a mission file (`at_equals`:
 /// the parser stopped at an `=`).
 fn with_goby_hint(reason: String, at_equals: bool) -> String {
+    if GOBY3_DAEMON_KEYS.iter().any(|key| {
+        reason.contains(&format!(
+            "field '{key}' not found for message 'goby.apps.protobuf.GobydConfig'"
+        ))
+    }) {
+        return format!("{reason}: {GOBY3_DAEMON_HINT}");
+    }
     for (message, field, hint) in GOBY_NESTED_KEYS {
         if reason.contains(&format!(
             "field '{field}' not found for message '{message}'"
@@ -459,12 +508,17 @@ fn with_goby_hint(reason: String, at_equals: bool) -> String {
     if reason.contains("extension '")
         && reason.contains("message 'goby.acomms.protobuf.DriverConfig'")
     {
+        // Goby3's extensions of DriverConfig (of a MAC slot's
+        // ModemTransmission: `...protobuf.transmission`, left out).
+        let goby3: Vec<String> = modemdriver::built_in::goby3_extensions()
+            .map(|(name, _)| name)
+            .filter(|name| !name.ends_with(".transmission"))
+            .map(|name| format!("[{name}]"))
+            .collect();
         return format!(
-            "{reason}: gobyd reads Goby 3's [goby.acomms.udp.protobuf.config], \
-             [goby.acomms.micromodem.protobuf.config], [goby.acomms.iridium.protobuf.config], \
-             [goby.acomms.iridium.protobuf.shore_config], [goby.acomms.popoto.protobuf.config] and \
-             [goby.acomms.benthos.protobuf.config], and Goby 2's [UDPDriverConfig.*] and \
-             [micromodem.protobuf.Config.*] (the drivers gobyd runs)"
+            "{reason}: gobyd reads Goby 3's {}, and Goby 2's [UDPDriverConfig.*] and \
+             [micromodem.protobuf.Config.*] (the drivers gobyd runs)",
+            goby3.join(", ")
         );
     }
     if at_equals {
@@ -524,7 +578,9 @@ fn goby3_extensions(text: &str) -> String {
                     break;
                 };
                 let inner = text[i + 1..i + len].trim();
-                if let Some((_, field)) = GOBY3_EXTENSIONS.iter().find(|(n, _)| *n == inner) {
+                if let Some((_, field)) =
+                    modemdriver::built_in::goby3_extensions().find(|(n, _)| *n == inner)
+                {
                     out.push_str(&text[copied..i]);
                     out.push_str(field);
                     let span = &text[i..=i + len];
@@ -1246,50 +1302,27 @@ fn own_slot_problem(config: &GobydConfig) -> Option<(String, String)> {
 }
 
 /// The problems of the driver section and of the slots against its
-/// packets.
+/// packets: what its kind refuses ([`modemdriver::check::problems`], a
+/// driver not built in among them), the Micro-Modem's settings gobyd
+/// needs, its `DRIVER_SPECIFIC` slots, and, for a driver whose packets
+/// take their rate's time on the water, the slots' rates and lengths.
 fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     let Some(driver) = config.driver.as_ref() else {
         return Vec::new();
     };
-    let mut problems = Vec::new();
-    let kind = modemdriver::check::driver_type(driver);
-    let evologics = modemdriver::evologics::driver::is_evologics(driver);
-    match kind {
-        _ if evologics => {}
-        Some(kind) if modemdriver::check::BUILT_IN.contains(&kind) => {}
-        _ => problems.push(Problem::new(
-            match &driver.driver {
-                Some(driver_config::Driver::DriverName(_)) => "driver.driver_name",
-                _ => "driver.driver_type",
-            },
-            match (&driver.driver, kind) {
-                (Some(driver_config::Driver::DriverName(name)), _) => {
-                    format!(
-                        "no driver named {name:?} is built in (driver_name {:?} is)",
-                        modemdriver::evologics::driver::DRIVER_NAME
-                    )
-                }
-                (_, other) => format!(
-                    "{} is not a driver gobyd runs (use {})",
-                    other.map(|t| t.as_str_name()).unwrap_or("this driver type"),
-                    modemdriver::check::built_in_names()
-                ),
-            },
-        )),
-    }
-    problems.extend(
-        modemdriver::check::problems(driver)
-            .into_iter()
-            .map(|p| Problem::new(format!("driver.{}", p.field), p.reason)),
-    );
-    if kind == Some(DriverType::DriverWhoiMicromodem) {
+    let mut problems: Vec<Problem> = modemdriver::check::problems(driver)
+        .into_iter()
+        .map(|p| Problem::new(format!("driver.{}", p.field), p.reason))
+        .collect();
+    let Ok(kind) = modemdriver::built_in::of(driver) else {
+        return problems;
+    };
+    if kind.about().named == modemdriver::kind::Named::Type(DriverType::DriverWhoiMicromodem) {
         problems.extend(micromodem_problems(config));
     }
     problems.extend(driver_specific_slot_problems(config, kind));
-    if matches!(
-        kind,
-        Some(DriverType::DriverWhoiMicromodem | DriverType::DriverAcousticSimulator)
-    ) {
+    // The Micro-Modem's and the simulator's: their rates are the Micro-Modem's.
+    if modemdriver::check::data_packet_time(driver, 0).is_some() {
         problems.extend(slot_problems(config, driver));
     }
     problems
@@ -1360,66 +1393,25 @@ fn micromodem_problems(config: &GobydConfig) -> Vec<Problem> {
 }
 
 /// The `DRIVER_SPECIFIC` slots (e.g. Goby3's Flexible Data Protocol slot,
-/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`): the Micro-Modem
-/// driver carries them out (and the Benthos ATM-900's, Goby3's
-/// `benthos { type: BENTHOS_TWO_WAY_PING }` slot, a ping of `dest`), and each must ask for something it does (see
-/// [`modemdriver::micromodem::transmission::request`]), from the slot's
-/// source.
-fn driver_specific_slot_problems(config: &GobydConfig, kind: Option<DriverType>) -> Vec<Problem> {
-    let mut problems = Vec::new();
-    let Some(mac) = config.mac.as_ref() else {
-        return problems;
+/// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`, or the Benthos
+/// ATM-900's `benthos { type: BENTHOS_TWO_WAY_PING }`): what the driver's
+/// kind cannot carry out (see
+/// [`DriverKind::specific_slot_problem`](modemdriver::kind::DriverKind::specific_slot_problem)).
+fn driver_specific_slot_problems(
+    config: &GobydConfig,
+    kind: &dyn modemdriver::kind::DriverKind,
+) -> Vec<Problem> {
+    let (Some(mac), Some(driver)) = (config.mac.as_ref(), config.driver.as_ref()) else {
+        return Vec::new();
     };
-    let mm = config
-        .driver
-        .as_ref()
-        .and_then(|d| d.micromodem.clone())
-        .unwrap_or_default();
-    for (i, slot) in mac.slot.iter().enumerate() {
-        if slot.r#type() != TransmissionType::DriverSpecific {
-            continue;
-        }
-        if kind == Some(DriverType::DriverBenthosAtm900) {
-            // Goby3's Benthos slot: a two-way ping to the slot's dest.
-            let ping = slot
-                .benthos
-                .as_deref()
-                .copied()
-                .unwrap_or_default()
-                .r#type()
-                == protos::goby::acomms::protobuf::benthos_transmission::Type::BenthosTwoWayPing;
-            if !ping {
-                problems.push(Problem::new(
-                    format!("mac.slot[{i}].benthos.type"),
-                    "a DRIVER_SPECIFIC slot of the Benthos ATM-900 driver is a two-way ping: \
-                     give benthos { type: BENTHOS_TWO_WAY_PING } and the node to range in dest"
-                        .to_string(),
-                ));
-            } else if slot.dest.is_none_or(|d| d < 0 || d == slot.src()) {
-                problems.push(Problem::new(
-                    format!("mac.slot[{i}].dest"),
-                    "a two-way ping needs the node to range in dest (not this slot's source, not a broadcast)"
-                        .to_string(),
-                ));
-            }
-            continue;
-        }
-        if kind != Some(DriverType::DriverWhoiMicromodem) {
-            problems.push(Problem::new(
-                format!("mac.slot[{i}].type"),
-                format!(
-                    "DRIVER_SPECIFIC slots are the Micro-Modem driver's (micromodem {{ type: ... }}); \
-                     {} sends data in DATA slots: use type: DATA",
-                    kind.map_or("this driver".to_string(), |k| format!("the {} driver", k.as_str_name()))
-                ),
-            ));
-            continue;
-        }
-        if let Err(p) = modemdriver::micromodem::transmission::request(slot, slot.src(), &mm) {
-            problems.push(Problem::new(format!("mac.slot[{i}].{}", p.field), p.reason));
-        }
-    }
-    problems
+    mac.slot
+        .iter()
+        .enumerate()
+        .filter_map(|(i, slot)| {
+            let p = kind.specific_slot_problem(driver, slot)?;
+            Some(Problem::new(format!("mac.slot[{i}].{}", p.field), p.reason))
+        })
+        .collect()
 }
 
 /// The slots of a driver whose packets take time on the water (the

@@ -16,7 +16,7 @@ use tokio::net::{TcpListener, UdpSocket};
 use tokio::sync::{broadcast, mpsc};
 use tokio::task::JoinSet;
 
-use crate::check::{frame_report, validate, Checked};
+use crate::check::{definition_warnings, frame_report, validate, Checked};
 use crate::config::{self, ConfigError};
 use crate::core::data_dir::DataDir;
 use crate::core::links::{keep_application_acks_in, start_driver};
@@ -140,7 +140,7 @@ async fn start_configured(
     if let Some(limits) = limits {
         tracing::info!("{limits}");
     }
-    for w in warnings {
+    for w in definition_warnings(&checked).into_iter().chain(warnings) {
         tracing::warn!("{w}");
     }
     let data_dir = DataDir::open(Path::new(checked.config.data_dir()))?;

@@ -23,7 +23,8 @@
 //! interface renders); [`json`] renders those as the JSON interface's lines;
 //! [`translator`] turns MOOS variables into DCCL messages and back
 //! (pAcommsHandler's `translator_entry`); [`error`] says why the daemon
-//! could not start; [`command`] is the `gobyd` command line. The core (the
+//! could not start; [`command`] is the `gobyd` command line (with its log:
+//! standard error or the journal, and a file rotated by size). The core (the
 //! outbox and its journal, the receive path, the links, the network layer)
 //! and the interfaces (JSON, MOOS, MQTT, the mission log) are the crate's
 //! own.
@@ -38,6 +39,7 @@ pub mod daemon;
 pub(crate) mod edge;
 pub mod error;
 pub mod event;
+pub(crate) mod logging;
 pub mod mission_file;
 pub mod translator;
 

@@ -1034,11 +1034,112 @@ fn check_knows_the_evologics_limits() {
     .unwrap();
     let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
     let err = stderr_text(&out);
+    // The drivers named by driver_name are listed; EVOLOGICS_S2C among them.
     assert!(
-        err.contains(
-            "no driver named \"EVOLOGICS_S3C\" is built in (driver_name \"EVOLOGICS_S2C\" is)"
-        ),
+        err.contains("no driver named \"EVOLOGICS_S3C\" is built in (driver_name ")
+            && err.contains("\"EVOLOGICS_S2C\""),
         "{err}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `--check` tells what a type's dynamic conditions cannot do as written,
+/// naming the message, the field and the script: a name that is no field
+/// of the message (the script sees nil, as libdccl's Lua), a condition
+/// codec version 2 ignores, a condition reading a field decoded after it.
+#[test]
+fn check_warns_about_conditions_that_cannot_do_what_they_say() {
+    let dir = scratch("command", "gobyd-conditions");
+    let proto = dir.join("cond.proto");
+    std::fs::write(
+        &proto,
+        r#"syntax = "proto2";
+import "dccl/option_extensions.proto";
+package cond;
+message Typo {
+  option (dccl.msg) = { id: 5 max_bytes: 32 codec_version: 4 };
+  required int32 mode = 1 [(dccl.field) = { min: 0 max: 200 }];
+  optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { omit_if: "this.moode == 1" } }];
+  optional int32 b = 3 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { max: "this.c" } }];
+  optional int32 c = 4 [(dccl.field) = { min: 0 max: 10 }];
+}
+message Old {
+  option (dccl.msg) = { id: 6 max_bytes: 32 codec_version: 2 };
+  required int32 mode = 1 [(dccl.field) = { min: 0 max: 200 }];
+  optional int32 a = 2 [(dccl.field) = { min: 0 max: 10
+      dynamic_conditions { only_if: "this.mode == 1" } }];
+}
+"#,
+    )
+    .unwrap();
+    let config = dir.join("cond.pb.txt");
+    std::fs::write(
+        &config,
+        format!(
+            "modem_id: 1\ndccl {{ proto_file: \"{}\" }}\n",
+            proto.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", config.to_str().unwrap()]);
+    let err = stderr_text(&out);
+    assert!(out.status.success(), "{err}");
+    for warning in [
+        "gobyd: warning: cond.Typo.a: dynamic_conditions.omit_if \"this.moode == 1\" reads this.moode: cond.Typo has no field moode (the script sees nil)",
+        "gobyd: warning: cond.Typo.b: dynamic_conditions.max \"this.c\" reads this.c, which is decoded after b:",
+        "gobyd: warning: cond.Old.a: dynamic_conditions.only_if \"this.mode == 1\" is ignored: codec version 2",
+    ] {
+        assert!(err.contains(warning), "{warning}\n{err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A configuration file that configures nothing (empty, or blank lines
+/// and comments only: a copy that failed, the wrong file) is refused by
+/// `--check` and by the start, the error naming the file and the defaults
+/// it would have run on, and how to run on them on purpose.
+#[test]
+fn an_empty_configuration_file_is_refused_naming_the_defaults() {
+    let dir = scratch("command", "gobyd-empty");
+    for (name, text) in [
+        ("empty.pb.txt", ""),
+        (
+            "comments.pb.txt",
+            "\n  # all of it commented out\n# modem_id: 2\n\n",
+        ),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let path = path.to_str().unwrap();
+        let check = gobyd(&["--check", "--config", path]);
+        // The start is bounded: before this refusal it ran until stopped.
+        let data = dir.join("data");
+        let start = assert_cmd::Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .args(["--config", path, "--json-tcp", "127.0.0.1:0", "--data-dir"])
+            .arg(&data)
+            .env_remove("RUST_BACKTRACE")
+            .timeout(std::time::Duration::from_secs(30))
+            .output()
+            .expect("gobyd runs");
+        for (what, out) in [("--check", &check), ("start", &start)] {
+            let err = stderr_text(out);
+            assert_eq!(out.status.code(), Some(2), "{what} {name}: {err}");
+            assert!(stdout_text(out).is_empty(), "{what} {name}");
+            for part in [
+                &format!("gobyd: error: configuration: {path} configures nothing"),
+                "node 1",
+                "the in-process acoustic simulator",
+                "data directory ./gobyd-data",
+                "JSON interface on 127.0.0.1:11145",
+                "without --config",
+                "gobyd --example-config",
+            ] {
+                assert!(err.contains(part), "{what} {name}: {part:?} in {err}");
+            }
+        }
+        assert!(!data.exists(), "the start made its data directory");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -35,10 +35,10 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use emulators::micromodem::{Dialect, EmulatorControl, EmulatorFaults};
 use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
 use gobyd::event::ModemEvent;
-use modemdriver::micromodem::emulator::{Dialect, EmulatorControl, EmulatorFaults};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
 use protos::goby::example::Command;
@@ -447,7 +447,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     let slots = slot_report(&air, link.slot_seconds);
     for packet in air.iter().flatten() {
         tally.packets += 1;
-        if packet.kind == modemdriver::micromodem::emulator::AirKind::FlexibleData {
+        if packet.kind == emulators::micromodem::AirKind::FlexibleData {
             tally.fdp_packets += 1;
         }
     }

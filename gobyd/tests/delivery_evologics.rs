@@ -26,12 +26,13 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use emulators::evologics::{
+    self as emulator, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
+};
+use emulators::host::Counted;
 use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
 use gobyd::event::ModemEvent;
-use modemdriver::evologics::emulator::{
-    self, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
-};
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use modemdriver::DriverStatus;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
@@ -90,6 +91,27 @@ struct Tally {
     /// Repeats of a reception (the sender's modem retrying after a lost
     /// ack) the receiving driver dropped.
     repeats_dropped: usize,
+    /// Packets lost, transmissions refused, lines garbled, connections
+    /// dropped by the emulators.
+    faults: [u64; 4],
+}
+
+/// Each modem makes every fault its run asks for within this many draws
+/// of it: the draws of each fault are a sequence of their own
+/// (`emulators::host::Draws`), so the run exercises every fault whatever
+/// its timing.
+const EARLY: usize = 3;
+
+impl Faults {
+    /// The random faults of each emulated modem.
+    fn emulated(&self) -> EmulatorFaults {
+        EmulatorFaults {
+            lost: self.lost,
+            busy: self.busy,
+            garble: self.garble,
+            seed: self.seed,
+        }
+    }
 }
 
 async fn start_emulators(faults: &Faults) -> Vec<EmulatorHandle> {
@@ -119,12 +141,7 @@ async fn start_emulators(faults: &Faults) -> Vec<EmulatorHandle> {
             ack_timeout: Duration::from_millis(1500),
             im_retries: 1,
             positions: positions.clone(),
-            faults: EmulatorFaults {
-                lost: faults.lost,
-                busy: faults.busy,
-                garble: faults.garble,
-                seed: faults.seed,
-            },
+            faults: faults.emulated(),
             ..EmulatorConfig::default()
         };
         let port = EmulatorPort::Tcp("127.0.0.1:0".parse().unwrap());
@@ -283,6 +300,15 @@ async fn run(faults: Faults) -> Tally {
         r.await.unwrap().unwrap();
     }
     let counters: Vec<_> = emulators.iter().map(|e| e.counters()).collect();
+    let made = counters.iter().fold([0; 4], |sum, c| {
+        let m = c.made();
+        [
+            sum[0] + m.lost,
+            sum[1] + m.refused,
+            sum[2] + m.garbled,
+            sum[3] + m.dropped,
+        ]
+    });
     for e in emulators {
         e.stop().await;
     }
@@ -302,6 +328,7 @@ async fn run(faults: Faults) -> Tally {
     let seen = seen.lock().unwrap().clone();
     let mut tally = Tally {
         published: total,
+        faults: made,
         ..Default::default()
     };
     for (from, note) in &published {
@@ -350,14 +377,29 @@ async fn run(faults: Faults) -> Tally {
 
 async fn check(faults: Faults) {
     let name = faults.name;
+    for address in 1..=2 {
+        if let Err(fault) = faults.emulated().made_within(address, EARLY) {
+            panic!(
+                "{name}: seed {} makes no {fault:?} within the first {EARLY} draws of modem {address}: \
+                 give the run a seed that does",
+                faults.seed
+            );
+        }
+    }
+    let wanted = [
+        faults.lost > 0.0,
+        faults.busy > 0.0,
+        faults.garble > 0.0,
+        !faults.drops.is_empty(),
+    ];
     let t = run(faults).await;
     println!(
         "evologics delivery {name}: published {} delivered {} acked {} duplicates {} owed {} lost {} \
          (acked before delivered {}, acked never delivered {}); receptions {} with statistics {}; \
-         repeats dropped by the driver {}",
+         repeats dropped by the driver {}; faults made: lost {} refused {} garbled {} dropped {}",
         t.published, t.delivered, t.acked, t.duplicates, t.owed, t.lost,
         t.acked_before_delivered, t.acked_not_delivered, t.receptions, t.receptions_with_stats,
-        t.repeats_dropped
+        t.repeats_dropped, t.faults[0], t.faults[1], t.faults[2], t.faults[3]
     );
     assert_eq!(
         t.duplicates, 0,
@@ -376,6 +418,22 @@ async fn check(faults: Faults) {
         "{name}: a reception without the modem's statistics"
     );
     assert!(t.delivered > 0, "{name}: nothing got through");
+    for (i, kind) in [
+        "packets lost",
+        "transmissions refused",
+        "lines garbled",
+        "connections dropped",
+    ]
+    .iter()
+    .enumerate()
+    {
+        if wanted[i] {
+            assert!(
+                t.faults[i] > 0,
+                "{name}: no {kind}: the fault was not exercised"
+            );
+        }
+    }
 }
 
 const MODEM_ACKS: &str = "ACK_WHEN_REQUESTED";
@@ -421,7 +479,7 @@ async fn evologics_garbled_lines() {
     check(Faults {
         name: "garbled",
         garble: 0.15,
-        seed: 4,
+        seed: 3,
         ack_mode: APPLICATION_ACKS,
         ..Default::default()
     })
@@ -448,7 +506,7 @@ async fn evologics_combined() {
         busy: 0.2,
         garble: 0.1,
         drops: vec![4.0, 11.0, 18.0],
-        seed: 6,
+        seed: 613,
         ack_mode: APPLICATION_ACKS,
     })
     .await;

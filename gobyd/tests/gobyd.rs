@@ -351,7 +351,7 @@ struct EmulatedModems {
 
 impl EmulatedModems {
     fn start(links: &[PathBuf], spacing: f64) -> Self {
-        use modemdriver::micromodem::emulator::{self, EmulatorConfig, EmulatorPort};
+        use emulators::micromodem::{self as emulator, EmulatorConfig, EmulatorPort};
         use modemdriver::sim::{medium::Medium, SimulatorDriver};
         use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
         use protos::goby::acomms::protobuf::SimulatorDriverConfig;

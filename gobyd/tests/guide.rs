@@ -258,7 +258,7 @@ fn readme_section(heading: &str) -> String {
 /// DirectIP ports the configurations use, and name their JSON ports.
 #[test]
 fn the_readmes_two_link_configurations_check_over_the_emulators() {
-    use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+    use emulators::micromodem::{Dialect, EmulatorFaults};
     use support::micromodem::{modem_path, start_emulators};
 
     let section = readme_section("Beyond the horizon");

@@ -11,7 +11,7 @@ mod support;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use modemdriver::iridium::emulator::TransceiverControl;
+use emulators::iridium::TransceiverControl;
 use support::daemon::{scratch, Gobyd};
 use support::iridium::{self, latencies, publish, settle, SHORE, VEHICLE};
 use support::restart::delivered;

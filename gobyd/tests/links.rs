@@ -32,7 +32,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+use emulators::micromodem::{Dialect, EmulatorFaults};
 use modemdriver::sim::medium::Medium;
 use serde_json::Value;
 use support::daemon::{command_line, free_udp_port, scratch, Gobyd};
@@ -47,6 +47,9 @@ const LIMIT: Duration = Duration::from_secs(120);
 
 /// An emulated Iridium session's length.
 const SESSION: Duration = Duration::from_millis(150);
+/// The emulated SBD session of the flood-all run: longer than the acoustic
+/// TDMA cycle.
+const FLOOD_SESSION: Duration = Duration::from_secs(5);
 
 /// Seconds since the epoch, as the mission log stamps (microseconds).
 fn now_micros() -> i64 {
@@ -948,7 +951,12 @@ fn a_spent_budget_stops_the_link_and_is_kept_across_a_restart() {
 fn flooded_messages_cross_both_links_and_are_delivered_once() {
     let rt = runtime();
     let dir = scratch("links", "flood");
-    let emulated = rt.block_on(iridium::start(&dir, SESSION, 0.0, 11));
+    // Iridium sessions longer than the acoustic cycle (two 1.5 s slots):
+    // a message's first acoustic slot comes while its first Iridium
+    // session is still under way, so that both links carry it whatever the
+    // slots' phase (with 150 ms sessions the Iridium ack could cancel every
+    // acoustic copy before its slot came).
+    let emulated = rt.block_on(iridium::start(&dir, FLOOD_SESSION, 0.0, 11));
     let local = [free_udp_port(), free_udp_port()];
     let relay = Relay::start(local);
     let rule = "link: \"acoustic\" link: \"iridium\" policy: LINK_POLICY_FLOOD_ALL";

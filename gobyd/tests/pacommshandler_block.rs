@@ -98,7 +98,7 @@ ProcessConfig = gobyd
 
   common {
     log: true
-    log_path: "/tmp"
+    log_path: "LOG_DIR"
     verbosity: VERBOSE
     show_gui: false
     initializer { type: INI_STRING  moos_var: "VEHICLE_NAME"  global_cfg_var: "Community" }
@@ -131,6 +131,7 @@ SHARED
             &dir.join("status.proto").display().to_string(),
         )
         .replace("DATA_DIR", &dir.join("alpha-data").display().to_string())
+        .replace("LOG_DIR", &dir.join("alpha-log").display().to_string())
 }
 
 /// Vehicle bravo's mission: a Goby 2 pAcommsHandler block (the driver type
@@ -229,7 +230,7 @@ fn a_goby3_block_pasted_whole_is_checked_and_read_as_the_same_settings() {
     );
     assert!(
         stderr.contains(&format!(
-            "gobyd: note: {}: common: ignored: log, log_path (gobyd writes no log file: it logs to standard error); show_gui (gobyd has no terminal display)",
+            "gobyd: note: {}: common: ignored: show_gui (gobyd has no terminal display)",
             place(&mission, &text, "common", 0)
         )),
         "{stderr}"
@@ -370,6 +371,9 @@ async fn daemons_started_from_pasted_blocks_exchange_a_message() {
     .await
     .expect("STATUS_IN on bravo's MOOSDB within 60 s");
     assert_eq!(got, "X=12.5,Y=-3.5,FROM=1");
+    // common { log: true log_path }: alpha's log is in log_path too.
+    let log = std::fs::read_to_string(dir.join("alpha-log/gobyd.log")).expect("alpha's gobyd.log");
+    assert!(log.contains("JSON interface on tcp://"), "{log}");
     assert_eq!(
         alpha_db.value("VEHICLE_NAME"),
         Some(Value::String("alpha".into()))

@@ -46,7 +46,7 @@ mod support;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use modemdriver::micromodem::emulator::{Dialect, EmulatorFaults};
+use emulators::micromodem::{Dialect, EmulatorFaults};
 use support::daemon::scratch;
 use support::micromodem::{micromodem_driver, modem_path, slot_report, start_emulators};
 use support::node::{Entry, Node};

@@ -259,6 +259,6 @@ fn the_guides_copy_of_the_emulators_public_key_is_the_emulators() {
     .unwrap();
     assert_eq!(
         copy,
-        modemdriver::iridium::emulator::rockblock::EMULATOR_TEST_PUBLIC_KEY_PEM
+        emulators::iridium::rockblock::EMULATOR_TEST_PUBLIC_KEY_PEM
     );
 }

@@ -17,10 +17,10 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayHandle};
-use modemdriver::iridium::emulator::transceiver::{TransceiverConfig, TransceiverLog};
-use modemdriver::iridium::emulator::{
-    self, TransceiverControl, TransceiverHandle, TransceiverPort,
+use emulators::iridium::gateway::{Gateway, GatewayConfig, GatewayHandle};
+use emulators::iridium::transceiver::{TransceiverConfig, TransceiverLog};
+use emulators::iridium::{
+    self as emulator, TransceiverControl, TransceiverHandle, TransceiverPort,
 };
 use protos::goby::acomms::protobuf::IridiumDeviceType;
 use support::daemon::{free_tcp_port, scratch, Gobyd};

@@ -6,8 +6,9 @@ use std::net::{IpAddr, SocketAddr};
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{udp_driver_config::EndPoint, DriverConfig};
 
-use crate::check::Problem;
 use crate::driver::DriverError;
+use crate::link::stream::Endpoint as StreamEndpoint;
+use crate::problem::Problem;
 
 /// Parses a `DriverConfig` written in protobuf text format, e.g.
 /// `modem_id: 1 udp { local { port: 50001 } remote { modem_id: 2 port: 50002 } }`.
@@ -103,6 +104,96 @@ pub fn endpoint_problems(ep: &EndPoint, field: &str, role: Endpoint) -> Vec<Prob
         }
     }
     problems
+}
+
+/// How a driver on a modem's byte stream reaches it, for
+/// [`stream_problems`] and [`stream_endpoint`].
+#[derive(Debug, Clone, Copy)]
+pub struct Reach<'a> {
+    /// The driver, in messages: `the Popoto driver`.
+    pub driver: &'a str,
+    /// What `tcp_server` names: `the modem's address`, `the serial
+    /// server's address`.
+    pub server: &'a str,
+    /// The modem's TCP port when `tcp_port` is not given (`None`: it must
+    /// be given).
+    pub port: Option<u16>,
+    /// The serial line's baud rate when `serial_baud` is not given.
+    pub baud: u32,
+}
+
+/// The problems of how `config` reaches a modem on a byte stream: a serial
+/// line needs `serial_port`; TCP as a client needs `tcp_server` and a
+/// port; the modem is never a TCP client of ours.
+pub fn stream_problems(config: &DriverConfig, reach: Reach<'_>) -> Vec<Problem> {
+    use protos::goby::acomms::protobuf::driver_config::ConnectionType;
+    let Reach {
+        driver,
+        server,
+        port,
+        ..
+    } = reach;
+    let mut problems = Vec::new();
+    match config.connection_type() {
+        ConnectionType::ConnectionSerial => {
+            if config.serial_port().trim().is_empty() {
+                problems.push(Problem::new(
+                    "serial_port",
+                    format!(
+                        "required for {driver} over serial (e.g. \"/dev/ttyUSB0\"), or use \
+                         connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server{}",
+                        if port.is_none() { " and tcp_port" } else { "" }
+                    ),
+                ));
+            }
+        }
+        ConnectionType::ConnectionTcpAsClient => {
+            if config.tcp_server().trim().is_empty() {
+                problems.push(Problem::new(
+                    "tcp_server",
+                    format!("required for {driver} over TCP ({server})"),
+                ));
+            }
+            let listens = port.map_or(String::new(), |p| format!("; the modem listens on {p}"));
+            match (config.tcp_port, port) {
+                (Some(p), _) if !(1..=65_535).contains(&p) => problems.push(Problem::new(
+                    "tcp_port",
+                    format!("{p} is not a TCP port (1-65535{listens})"),
+                )),
+                (None, None) => problems.push(Problem::new(
+                    "tcp_port",
+                    format!("required for {driver} over TCP (the port {server} serves)"),
+                )),
+                _ => {}
+            }
+        }
+        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
+            "connection_type",
+            format!(
+                "CONNECTION_TCP_AS_SERVER is not supported by {driver} (the modem serves: \
+                 use CONNECTION_SERIAL or CONNECTION_TCP_AS_CLIENT)"
+            ),
+        )),
+    }
+    problems
+}
+
+/// Where `config` reaches its modem (as [`stream_problems`] checks it).
+pub fn stream_endpoint(config: &DriverConfig, reach: Reach<'_>) -> StreamEndpoint {
+    use protos::goby::acomms::protobuf::driver_config::ConnectionType;
+    match config.connection_type() {
+        ConnectionType::ConnectionSerial => StreamEndpoint::serial(
+            config.serial_port(),
+            config.serial_baud.unwrap_or(reach.baud),
+        ),
+        _ => StreamEndpoint::Tcp(format!(
+            "{}:{}",
+            config.tcp_server(),
+            config
+                .tcp_port
+                .unwrap_or(u32::from(reach.port.unwrap_or_default()))
+        )),
+    }
 }
 
 #[cfg(test)]

@@ -11,56 +11,70 @@
 //! [`Driver::initiate_specific`] and [`DriverEvent::Specific`], so the common
 //! interface stays the same for every driver.
 //!
-//! Drivers:
+//! Drivers (the list: [`built_in::KINDS`]):
 //! - [`udp::UdpDriver`]: one datagram per transmission, holding its protobuf
-//!   encoding (as Goby's UDP driver does).
+//!   encoding (as Goby's UDP driver does); [`udp_multicast`] to a group.
 //! - [`sim::SimulatorDriver`]: a multi-node acoustic channel on one machine
 //!   (propagation delay, Micro-Modem rates and bit rates, seeded loss, half
 //!   duplex, collisions).
 //! - [`micromodem::MicroModemDriver`]: the WHOI Micro-Modem, NMEA-0183 over a
-//!   serial port; [`micromodem::emulator`] speaks the modem's side.
+//!   serial port.
 //! - [`evologics::EvologicsDriver`]: EvoLogics S2C modems, the AT command
-//!   set over TCP or serial (`driver_name: "EVOLOGICS_S2C"`);
-//!   [`evologics::emulator`] speaks the modem's side.
+//!   set over TCP or serial (`driver_name: "EVOLOGICS_S2C"`).
 //! - [`popoto::PopotoDriver`]: Popoto modems, the JSON command interface
 //!   over TCP or the shell over serial (`driver_type: DRIVER_POPOTO`), as
-//!   Goby3's driver; [`popoto::emulator`] speaks the modem's side.
+//!   Goby3's driver.
 //! - [`benthos::BenthosDriver`]: Teledyne Benthos ATM-900 modems on their
 //!   serial line (`driver_type: DRIVER_BENTHOS_ATM900`), as Goby3's
-//!   driver; [`benthos::emulator`] speaks the modem's side.
+//!   driver.
+//! - [`seatrac::SeatracDriver`]: Blueprint Subsea SeaTrac beacons (X110,
+//!   X150 USBL) on their serial line (`driver_name: "BLUEPRINT_SEATRAC"`).
 //! - [`iridium::IridiumDriver`]: an Iridium 9602/9603 (SBD AT commands) on a
-//!   serial port, and [`iridium::IridiumShoreDriver`]: Iridium's DirectIP on
-//!   shore, both in Goby3's framing; [`iridium::emulator`] emulates a 9603
-//!   and the gateway.
+//!   serial port, and `iridium::IridiumShoreDriver` (feature
+//!   `iridium-shore`, on by default): Iridium's DirectIP or the RockBLOCK
+//!   web service on shore, both in Goby3's framing.
 //!
-//! [`check`] finds, without starting a driver, the settings it would
-//! refuse and how long its packets take at each rate (what a TDMA slot
+//! The modems' side of each, for tests and bench work, is emulated by the
+//! `goby-emulators` crate, which the product does not link.
+//!
+//! Each driver is one [`kind::DriverKind`] and one row of
+//! [`built_in::KINDS`], the list that starts the driver a configuration
+//! names ([`built_in::start`]); [`check`] finds, without starting a driver,
+//! the settings it would refuse ([`problem::Problem`]), the largest frames
+//! it carries and how long its packets take at each rate (what a TDMA slot
 //! must hold).
 //!
 //! Layers, one concept per module: [`link`] moves lines or datagrams and
 //! composes a fault injector ([`link::fault`]) and a raw tracer
-//! ([`link::trace`]) around any device; [`stream_shell`] runs a sans-IO
-//! driver machine on a TCP connection or serial line, and
-//! [`emulator_host`] an emulated modem's logic on TCP or a pty; [`micromodem::nmea`] and
-//! [`micromodem::sentence`] are the wire representations; the drivers sit on
-//! top.
+//! ([`link::trace`]) around any device; a driver's logic is a sans-IO
+//! [`machine::Machine`], and one task, [`shell`], runs any machine on a
+//! modem's stream (TCP, serial, pty); [`micromodem::nmea`] and
+//! [`micromodem::sentence`] are the wire representations; the drivers sit
+//! on top.
 
 #![warn(missing_docs)]
 
+pub mod address;
+pub mod base_convert;
 pub mod benthos;
+pub mod built_in;
 pub mod check;
 pub mod config;
 pub mod driver;
-pub mod emulator_host;
 pub mod evologics;
+pub mod file;
 pub mod iridium;
+pub mod kind;
 pub mod link;
+pub mod machine;
 pub mod micromodem;
 pub mod popoto;
+pub mod problem;
 pub mod rate;
+pub mod seatrac;
+pub mod shell;
 pub mod sim;
 pub mod slot;
-pub mod stream_shell;
 pub mod time;
 pub mod udp;
 pub mod udp_multicast;

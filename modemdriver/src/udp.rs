@@ -33,15 +33,16 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::net::UdpSocket;
 
-use crate::check::{self, Problem};
 use crate::config::{self, Endpoint};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, TransmitOutcome, TransmitResult,
 };
+use crate::kind::{About, DriverKind, Named, Starting};
 use crate::link::datagram::DatagramLink;
 use crate::link::trace::Tracer;
 use crate::link::Link;
+use crate::problem::{self, Problem};
 
 /// How long the driver waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
@@ -90,10 +91,33 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdp),
+    short_name: "udp",
+    title: "UDP",
+    section: Some("udp"),
+    goby3_extensions: &[("goby.acomms.udp.protobuf.config", "udp")],
+};
+
+impl DriverKind for UdpDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problems(config)
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(UdpDriver::start(config))
+    }
+}
+
 impl UdpDriver {
     /// Binds `udp.local` and starts the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let udp = udp_config(config)?;
         let local = config::endpoint_addr(&udp.local, "DriverConfig.udp.local")?;
         let socket = UdpSocket::bind(local)
@@ -115,7 +139,7 @@ impl UdpDriver {
         socket: UdpSocket,
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let udp = udp_config(config)?;
         let mut remotes = Vec::new();

@@ -32,9 +32,10 @@ use std::net::{IpAddr, Ipv4Addr, SocketAddr, SocketAddrV4};
 use protos::goby::acomms::protobuf::{DriverConfig, UdpMulticastDriverConfig};
 use tokio::net::UdpSocket;
 
-use crate::check::{self, Problem};
 use crate::config;
 use crate::driver::{Driver, DriverError};
+use crate::kind::{About, DriverKind, Named, Starting};
+use crate::problem::{self, Problem};
 use crate::udp::{Peers, UdpState};
 
 /// The UDP multicast driver.
@@ -192,6 +193,29 @@ fn open(settings: &Settings) -> std::io::Result<std::net::UdpSocket> {
     Ok(socket.into())
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverUdpMulticast),
+    short_name: "udp_multicast",
+    title: "UDP multicast",
+    section: Some("udp_multicast"),
+    goby3_extensions: &[("goby.acomms.udp_multicast.protobuf.config", "udp_multicast")],
+};
+
+impl DriverKind for UdpMulticastDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problems(config)
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(async move { UdpMulticastDriver::start(config) })
+    }
+}
+
 impl UdpMulticastDriver {
     /// Joins the group and starts the driver.
     ///
@@ -209,9 +233,9 @@ impl UdpMulticastDriver {
         config: &DriverConfig,
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
-        let settings = settings(config).map_err(|p| check::refuse(p).unwrap_err())?;
+        let settings = settings(config).map_err(|p| problem::refuse(p).unwrap_err())?;
         let socket = open(&settings).map_err(|e| {
             DriverError::io(
                 format!(

@@ -7,10 +7,10 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayHandle};
-use modemdriver::iridium::emulator::transceiver::TransceiverConfig;
-use modemdriver::iridium::emulator::{
-    self, TransceiverControl, TransceiverHandle, TransceiverPort,
+use emulators::iridium::gateway::{Gateway, GatewayConfig, GatewayHandle};
+use emulators::iridium::transceiver::TransceiverConfig;
+use emulators::iridium::{
+    self as emulator, TransceiverControl, TransceiverHandle, TransceiverPort,
 };
 use modemdriver::iridium::{IridiumDriver, IridiumShoreDriver};
 use modemdriver::{

@@ -11,10 +11,10 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use common::*;
-use modemdriver::link::fault::{Fault, FaultConfig, FaultScript};
-use modemdriver::micromodem::emulator::{
-    self, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
+use emulators::micromodem::{
+    self as emulator, EmulatorConfig, EmulatorControl, EmulatorHandle, EmulatorPort,
 };
+use modemdriver::link::fault::{Fault, FaultConfig, FaultScript};
 use modemdriver::micromodem::MicroModemDriver;
 use modemdriver::udp::UdpDriver;
 use modemdriver::{
@@ -832,7 +832,7 @@ async fn micromodem2_flexible_data_packet_arrives_with_statistics() {
 
 #[tokio::test]
 async fn micromodem2_lbl_ping_reports_the_travel_times_the_modem_gives() {
-    use modemdriver::micromodem::emulator::{Geometry, Node, Transponder};
+    use emulators::micromodem::{Geometry, Node, Transponder};
     use modemdriver::sim::reception::Position;
     let at = |x: f64| Position::new(x, 0.0, 0.0);
     let mut g = Geometry::default();

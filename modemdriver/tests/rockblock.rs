@@ -10,13 +10,13 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayHandle};
-use modemdriver::iridium::emulator::rockblock::{
+use emulators::iridium::gateway::{Gateway, GatewayConfig, GatewayHandle};
+use emulators::iridium::rockblock::{
     RockblockHandle, RockblockService, RockblockServiceConfig, WebhookTarget,
     EMULATOR_TEST_PUBLIC_KEY_PEM,
 };
-use modemdriver::iridium::emulator::transceiver::TransceiverConfig;
-use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
+use emulators::iridium::transceiver::TransceiverConfig;
+use emulators::iridium::{self as emulator, TransceiverHandle, TransceiverPort};
 use modemdriver::iridium::rockblock::http::{self, HttpUrl};
 use modemdriver::iridium::rockblock::{ErrorCode, JwtSigner, MoFormat, MoPost};
 use modemdriver::iridium::{IridiumDriver, IridiumShoreDriver};

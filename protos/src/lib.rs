@@ -124,6 +124,54 @@ pub mod goby {
     }
 }
 
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prost_reflect::ReflectMessage;
+
+    /// A driver's extensions of the driver configuration and of a
+    /// transmission are fields of them: none is left as an extension, and
+    /// no field lies in an extension range; the custom options of the
+    /// files not folded are kept.
+    #[test]
+    fn driver_sections_are_folded_into_fields() {
+        use goby::acomms::protobuf::{DriverConfig, ModemTransmission};
+        for message in [
+            DriverConfig::default().descriptor(),
+            ModemTransmission::default().descriptor(),
+        ] {
+            // What remains an extension is another file's (Goby 2's
+            // names for the UDP driver's settings), never a driver's own.
+            for extension in message.extensions() {
+                let file = extension.parent_file();
+                assert!(
+                    !file.name().starts_with("goby/acomms/"),
+                    "{} of {} is still an extension",
+                    extension.full_name(),
+                    file.name()
+                );
+            }
+            for field in message.fields() {
+                assert!(
+                    !message
+                        .extension_ranges()
+                        .any(|r| r.contains(&field.number())),
+                    "{}",
+                    field.full_name()
+                );
+            }
+        }
+        let command = goby::example::Command::default().descriptor();
+        let options = command.options();
+        assert!(
+            options
+                .extensions()
+                .any(|(e, _)| e.full_name() == "dccl.msg"),
+            "the DCCL options kept: {options:?}"
+        );
+    }
+}
+
 /// The crate's README.md, whose examples run as doctests.
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]

@@ -13,7 +13,7 @@ use serde_json::{json, Value};
 
 use super::schema::message_form;
 use super::state::SameMessage;
-use crate::dccl_cmd::{moved_times, Definitions};
+use crate::dccl_cmd::{moved_time_fields, moved_times, Definitions};
 use crate::CliError;
 
 /// The loaded DCCL types and their forms.
@@ -69,10 +69,18 @@ impl Commander {
 
     /// What sending `msg` of type `type_name` would do: `{"ok": true,
     /// "bytes": N, "max_bytes": M, "hex", "changes": [{"field", "reason"}],
-    /// "moved": [TEXT], "back": MSG}` (`back`: the message as its receiver
-    /// decodes it, which shows every rounding), or `{"ok": false, "error":
-    /// TEXT}` when it cannot be encoded (a field of the wrong kind, a
-    /// required field missing, ...).
+    /// "moved": [TEXT], "rounded": [{"field", "given", "sent"}], "sent":
+    /// MSG, "back": MSG}`, or `{"ok": false, "error": TEXT}` when it cannot
+    /// be encoded (a field of the wrong kind, a required field missing, ...).
+    ///
+    /// `changes`: values out of range, strings and arrays truncated, ...
+    /// (the codec's changes, by field path such as `waypoint[1].x`);
+    /// `moved`: times more than 12 hours from this machine's clock, which
+    /// decode on another day; `rounded`: every other number the receiver
+    /// decodes differently, rounded to its field's precision, with the value
+    /// given and the value sent (JSON numbers, 64-bit integers as strings
+    /// as in proto3 JSON); `sent`: the message as given; `back`: as its
+    /// receiver decodes it.
     pub fn check(&self, type_name: &str, msg: &Value) -> Value {
         let parsed = match self.parse(type_name, msg) {
             Ok(m) => m,
@@ -87,6 +95,15 @@ impl Commander {
             .decode_as_with_len(type_name, &bytes)
             .map(|(m, _)| message_json(&m))
             .unwrap_or(Value::Null);
+        let sent = message_json(&parsed);
+        let mut said: Vec<String> = changes.iter().map(|c| c.field.clone()).collect();
+        said.extend(
+            moved_time_fields(&self.codec, &parsed, &bytes)
+                .into_iter()
+                .map(|(path, _, _)| path),
+        );
+        let mut rounded = Vec::new();
+        collect_rounded("", &sent, &back, &said, &mut rounded);
         let max_bytes = self.codec.max_size(type_name).ok();
         json!({
             "ok": true,
@@ -98,7 +115,8 @@ impl Commander {
                 .map(|c| json!({"field": c.field, "reason": c.reason}))
                 .collect::<Vec<_>>(),
             "moved": moved_times(&self.codec, &parsed, &bytes),
-            "sent": message_json(&parsed),
+            "rounded": rounded,
+            "sent": sent,
             "back": back,
         })
     }
@@ -123,6 +141,52 @@ impl Commander {
                 _ => false,
             }
         })
+    }
+}
+
+/// A number of a message's proto3 JSON: a JSON number, or a 64-bit
+/// integer written as a string.
+fn number(value: &Value) -> Option<f64> {
+    match value {
+        Value::Number(n) => n.as_f64(),
+        Value::String(s) => s.parse::<i128>().ok().map(|i| i as f64),
+        _ => None,
+    }
+}
+
+/// Adds to `out` `{"field", "given", "sent"}` for each number of `given`
+/// (a message's proto3 JSON; nested messages and repeated fields
+/// included, paths as `waypoint[0].x`) that `back` (as decoded) has with
+/// another value, but for the paths in `said` (changes already reported).
+fn collect_rounded(path: &str, given: &Value, back: &Value, said: &[String], out: &mut Vec<Value>) {
+    match (given, back) {
+        (Value::Object(a), Value::Object(b)) => {
+            for (key, a) in a {
+                let p = if path.is_empty() {
+                    key.clone()
+                } else {
+                    format!("{path}.{key}")
+                };
+                if let Some(b) = b.get(key) {
+                    collect_rounded(&p, a, b, said, out);
+                }
+            }
+        }
+        (Value::Array(a), Value::Array(b)) => {
+            for (i, (a, b)) in a.iter().zip(b).enumerate() {
+                collect_rounded(&format!("{path}[{i}]"), a, b, said, out);
+            }
+        }
+        _ => {
+            let (Some(x), Some(y)) = (number(given), number(back)) else {
+                return;
+            };
+            // Not the last bits of a double's decimal form.
+            let rounded = (x - y).abs() > 1e-9 * x.abs().max(1.0);
+            if rounded && !said.iter().any(|s| s == path) {
+                out.push(json!({"field": path, "given": given, "sent": back}));
+            }
+        }
     }
 }
 
@@ -174,6 +238,48 @@ mod tests {
             unknown["error"].as_str().unwrap().contains("not among"),
             "{unknown}"
         );
+    }
+
+    #[test]
+    fn a_draft_is_checked_with_the_values_rounded_to_their_precision() {
+        let c = commander();
+        let rounded = c.check(
+            "goby.example.Command",
+            &json!({"destination": 2, "action": "GOTO", "note": "a note longer than ten",
+                    "waypoint": [{"x": 10.4, "y": -3}, {"x": 99999, "y": 7.5}]}),
+        );
+        assert_eq!(rounded["ok"], true, "{rounded}");
+        // Rounded: named with what was given and what is sent. Out of
+        // range or truncated: in `changes` only.
+        assert_eq!(
+            rounded["rounded"],
+            json!([
+                {"field": "waypoint[0].x", "given": 10.4, "sent": 10.0},
+                {"field": "waypoint[1].y", "given": 7.5, "sent": 8.0},
+            ]),
+            "{rounded}"
+        );
+        let fields: Vec<&str> = rounded["changes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["field"].as_str().unwrap())
+            .collect();
+        assert_eq!(fields, ["waypoint[1].x", "note"], "{rounded}");
+        let report = c.check(
+            "goby.example.NavigationReport",
+            &json!({"source": 1, "destination": 2, "time": 1.0e9, "x": 12.34, "y": 5.6, "z": -1}),
+        );
+        assert_eq!(
+            report["rounded"],
+            json!([{"field": "x", "given": 12.34, "sent": 12.3}]),
+            "{report}"
+        );
+        let exact = c.check(
+            "goby.example.Command",
+            &json!({"destination": 2, "action": "GOTO", "waypoint": [{"x": 10, "y": -3}]}),
+        );
+        assert_eq!(exact["rounded"], json!([]), "{exact}");
     }
 
     #[test]

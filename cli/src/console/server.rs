@@ -4,7 +4,7 @@
 //!
 //! | route | what |
 //! | --- | --- |
-//! | `GET /` | the page (`index.html`) |
+//! | `GET /` | the page (`index.html`); at `/?static` it draws one snapshot and opens no event stream (a still picture, for headless screenshots) |
 //! | `GET /console.js`, `/console.css`, `/favicon.svg` | its script, style and icon |
 //! | `GET /api/state` | the snapshot: `source`, `connection`, `origin`, `nodes` (tracks and link series), `messages`, `commands`, `seq` |
 //! | `GET /api/forms` | the commander's types: `[{"name", "id", "max_bytes", "fields": [...]}]` |

@@ -18,6 +18,7 @@ use crate::codecs::boolean::BoolCodec;
 use crate::codecs::enumeration::EnumCodec;
 use crate::codecs::numeric::NumericCodec;
 use crate::codecs::var_bytes::VarBytesCodec;
+use crate::conditions::{step, Step};
 use crate::error::CodecError;
 use crate::field_codec::{
     DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart, RepeatBounds,
@@ -54,6 +55,8 @@ pub(crate) struct FieldEntry {
     plan: Plan,
     /// The field's position in its message (see [`crate::wire::position`]).
     position: usize,
+    /// The field's dynamic conditions, when it has some.
+    dynamic: Option<Box<conditional::DynamicField>>,
 }
 
 /// The codec of a field when it is one of the built-in codecs called
@@ -142,6 +145,11 @@ impl FieldEntry {
         self.encode(out, None, ctx)
     }
 
+    /// The field's dynamic conditions, when it has some.
+    pub(crate) fn dynamic(&self) -> Option<&conditional::DynamicField> {
+        self.dynamic.as_deref()
+    }
+
     /// The default message codec of a message field coded by it.
     pub(crate) fn message_codec(&self) -> Option<&MessageCodec> {
         match &self.plan {
@@ -203,6 +211,8 @@ pub struct MessageCodec {
     max_bits: u32,
     /// Whether a field's codec reads the clock when decoding.
     reads_clock: bool,
+    /// Whether a field here or in an embedded message has dynamic conditions.
+    has_conditions: bool,
 }
 
 /// The fields of a message in the order they are declared in the `.proto`
@@ -340,8 +350,13 @@ impl MessageCodec {
             min_bits: 0,
             max_bits: 0,
             reads_clock: false,
+            has_conditions: false,
         };
         codec.reads_clock = codec.fields.iter().any(|f| f.codec.reads_clock());
+        codec.has_conditions = codec
+            .fields
+            .iter()
+            .any(|f| f.dynamic.is_some() || f.message_codec().is_some_and(|m| m.has_conditions));
         codec.compute_sizes();
         Ok(codec)
     }
@@ -353,13 +368,27 @@ impl MessageCodec {
         with_oneofs: bool,
         oneofs: &[OneofEntry],
     ) -> Result<FieldEntry, CodecError> {
+        let mut entry =
+            Self::build_plain_entry(parent, field, options, with_oneofs, oneofs, false)?;
+        entry.dynamic = conditional::DynamicField::build(&entry, |required| {
+            Self::build_plain_entry(parent, field, options, with_oneofs, oneofs, required)
+        })?
+        .map(Box::new);
+        Ok(entry)
+    }
+
+    /// The entry of a field without its dynamic conditions; `required`:
+    /// with the codec of a field that has no "not present" value.
+    fn build_plain_entry(
+        parent: &FieldSpec<'_>,
+        field: &FieldDescriptor,
+        options: &protos::dccl::DcclFieldOptions,
+        with_oneofs: bool,
+        oneofs: &[OneofEntry],
+        required: bool,
+    ) -> Result<FieldEntry, CodecError> {
         if field.is_map() {
             return Err(CodecError::new("map fields are not supported by DCCL"));
-        }
-        if options.dynamic_conditions.is_some() {
-            return Err(CodecError::new(
-                "(dccl.field).dynamic_conditions are not supported",
-            ));
         }
         let in_head = options.in_head();
         if in_head && field.containing_oneof().is_some() {
@@ -392,7 +421,7 @@ impl MessageCodec {
             options,
             codec_version: parent.codec_version,
             codec_group: parent.codec_group,
-            use_required: use_required(field, parent.codec_version),
+            use_required: required || use_required(field, parent.codec_version),
             part: parent.part,
             children_follow_parent: parent.children_follow_parent || options.in_head.is_some(),
             depth: parent.depth + 1,
@@ -448,6 +477,7 @@ impl MessageCodec {
             plan: Plan::of(&codec),
             codec,
             position: crate::wire::position(field.parent_message(), field),
+            dynamic: None,
         })
     }
 
@@ -460,10 +490,19 @@ impl MessageCodec {
             max = max.saturating_add(o.bits);
         }
         for f in &self.fields {
+            // As libdccl (version 3 and later): a field that a condition may
+            // leave out or make required sets the minimum found so far to 0.
+            if self.version > 2 && f.dynamic.as_ref().is_some_and(|d| d.resets_min_size()) {
+                min = 0;
+            }
             match f.oneof {
                 Some((i, _)) => oneof_max[i] = oneof_max[i].max(f.max_size()),
                 None => {
-                    min = min.saturating_add(f.min_size());
+                    if !(self.version > 2
+                        && f.dynamic.as_ref().is_some_and(|d| d.resets_min_size()))
+                    {
+                        min = min.saturating_add(f.min_size());
+                    }
                     max = max.saturating_add(f.max_size());
                 }
             }
@@ -481,6 +520,11 @@ impl MessageCodec {
     /// The message type.
     pub fn descriptor(&self) -> &MessageDescriptor {
         &self.descriptor
+    }
+
+    /// Whether a field here or in an embedded message has dynamic conditions.
+    pub(crate) fn has_conditions(&self) -> bool {
+        self.has_conditions
     }
 
     /// The fields this codec encodes, in order.
@@ -521,6 +565,21 @@ impl MessageCodec {
                 .map(|i| i + 1)
                 .unwrap_or(0);
             out.write(*case as u64, o.bits);
+        }
+        if let Some(scope) = ctx.dynamic {
+            step(scope.trace, || Step::Enter);
+            for f in &self.fields {
+                let mark = ctx.change_mark();
+                let start = out.len();
+                self.encode_field_dynamic(f, out, msg, cases, ctx, scope)
+                    .map_err(|e| e.in_field(f.field.name()))?;
+                step(scope.trace, || {
+                    Step::Field(f.field.clone(), out.len() - start)
+                });
+                ctx.name_changes(mark, || f.field.name().to_string());
+            }
+            step(scope.trace, || Step::Leave);
+            return Ok(());
         }
         for f in &self.fields {
             let mark = ctx.change_mark();
@@ -564,10 +623,11 @@ impl MessageCodec {
     /// messages embedded, is coded by the default message codec (the
     /// others take a `DynamicMessage`).
     pub(crate) fn wire_ok(&self) -> bool {
-        self.fields.iter().all(|f| match &f.plan {
-            Plan::Message(m) => m.wire_ok(),
-            _ => !matches!(f.field.kind(), Kind::Message(_)),
-        })
+        !self.has_conditions
+            && self.fields.iter().all(|f| match &f.plan {
+                Plan::Message(m) => m.wire_ok(),
+                _ => !matches!(f.field.kind(), Kind::Message(_)),
+            })
     }
 
     /// [`MessageCodec::encode_fields`] of a message read from protobuf bytes.
@@ -651,18 +711,7 @@ impl MessageCodec {
         bounds: RepeatBounds,
         ctx: &EncodeContext,
     ) -> Result<(), CodecError> {
-        bounds.check_max(values.len(), ctx)?;
-        bounds.check_min(values.len(), self.codec_version(), ctx)?;
-        let count = if self.codec_version() > 2 {
-            let n = values
-                .len()
-                .min(bounds.max as usize)
-                .max(bounds.min as usize);
-            out.write((n - bounds.min as usize) as u64, bounds.prefix_bits());
-            n
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.write_count(out, values.len(), self.codec_version(), ctx)?;
         for i in 0..count {
             let mark = ctx.change_mark();
             self.encode_wire(out, values.get(i).copied(), ctx)?;
@@ -711,6 +760,19 @@ impl MessageCodec {
         };
         for (i, o) in self.oneofs.iter().enumerate() {
             cases[i] = input.read(o.bits).map_err(|e| e.in_field(&o.name))? as usize;
+        }
+        if let Some(scope) = ctx.dynamic {
+            step(scope.trace, || Step::Enter);
+            for f in &self.fields {
+                let start = input.position();
+                self.decode_field_dynamic(f, input, msg, cases, ctx, scope)
+                    .map_err(|e| e.in_field(f.field.name()))?;
+                step(scope.trace, || {
+                    Step::Field(f.field.clone(), input.position() - start)
+                });
+            }
+            step(scope.trace, || Step::Leave);
+            return Ok(());
         }
         for f in &self.fields {
             let result = if let Some(bounds) = f.repeat {
@@ -815,11 +877,7 @@ impl FieldCodec for MessageCodec {
         bounds: RepeatBounds,
         ctx: &DecodeContext,
     ) -> Result<Vec<Value>, CodecError> {
-        let count = if self.codec_version() > 2 {
-            input.read(bounds.prefix_bits())? as usize + bounds.min as usize
-        } else {
-            bounds.max as usize
-        };
+        let count = bounds.read_count(input, self.codec_version())?;
         let mut out = Vec::with_capacity(count);
         let mut empties = 0;
         for _ in 0..count {
@@ -952,3 +1010,5 @@ pub(crate) fn set(
     msg.try_set_field(field, value)
         .map_err(|e| CodecError::new(format!("codec produced a value of the wrong type: {e}")))
 }
+
+mod conditional;

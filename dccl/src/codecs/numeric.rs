@@ -706,6 +706,42 @@ impl NumericCodec {
 }
 
 impl NumericCodec {
+    /// The static bounds `(min, max)` of the field.
+    pub(crate) fn static_bounds(&self) -> (f64, f64) {
+        (self.bounds.min, self.bounds.max)
+    }
+
+    /// The field's coding with the bounds `[min, max]` in force (dynamic
+    /// conditions), its resolution and presence rule unchanged.
+    pub(crate) fn with_bounds(&self, min: f64, max: f64) -> NumericBounds {
+        NumericBounds::new(
+            self.bounds.kind,
+            min,
+            max,
+            self.bounds.resolution,
+            self.bounds.required,
+        )
+        .with_absent_reason(self.bounds.absent_reason.clone())
+    }
+
+    /// Writes one value with the bounds `bounds` in force.
+    pub(crate) fn encode_bounded(
+        &self,
+        bounds: &NumericBounds,
+        out: &mut BitWriter,
+        value: Option<&Value>,
+        ctx: &EncodeContext,
+    ) -> Result<(), CodecError> {
+        let wire = match value {
+            None => None,
+            Some(v) => match bounds.kind.read_value(v) {
+                Some(w) => Some(w),
+                None => return Err(wrong_type(v)),
+            },
+        };
+        bounds.encode(out, wire, ctx)
+    }
+
     /// Reads one value (`None`: not present) as a protobuf value.
     #[inline]
     pub(crate) fn decode_value(

@@ -20,7 +20,8 @@
 //! | `common.lat_origin`, `.lon_origin`, `.server_host`, `.server_port` | `moos.lat_origin`, `.lon_origin`, `.server`, `.port` (the MOOS interface is then on) |
 //! | `common.verbosity` | `log.level`: QUIET off, WARN warn, VERBOSE info, DEBUG1 and DEBUG2 debug, DEBUG3 trace |
 //! | `common.initializer` | `moos.initializer` (written to the MOOSDB on connecting) |
-//! | `common.log`, `.log_path`, `.log_verbosity`, `.log_omit_file_timestamp`, `.log_omit_latest_symlink` | noted as not used: gobyd writes no log file, it logs to standard error |
+//! | `common.log`, `.log_path`, `.log_verbosity` | `log.dir` (`log_path`, or Goby's "./" for `log: true` alone; none with `log: false`), `log.file_level` (as `verbosity`): gobyd's log file, `gobyd.log` rotated by size |
+//! | `common.log_omit_file_timestamp`, `.log_omit_latest_symlink` | noted as not used: the file is always `gobyd.log` |
 //! | `common.app_tick`, `.comm_tick` | noted as not used: gobyd is driven by events, not by a tick |
 //! | `common.community`, `.show_gui` | noted as not used |
 //! | `common.time_warp_multiplier` | 1 accepted; another value refused (gobyd runs on the real clock) |
@@ -659,6 +660,58 @@ fn common_moos(
     }
 }
 
+/// The log level of a Goby verbosity.
+fn level_of(verbosity: i32) -> &'static str {
+    match GobyVerbosity::try_from(verbosity) {
+        Ok(GobyVerbosity::Quiet) => "off",
+        Ok(GobyVerbosity::Warn) => "warn",
+        Ok(GobyVerbosity::Debug1 | GobyVerbosity::Debug2) => "debug",
+        Ok(GobyVerbosity::Debug3) => "trace",
+        _ => "info",
+    }
+}
+
+/// `common { log log_path log_verbosity }`: Goby's text log of a MOOS
+/// application, as gobyd's log file (`log.dir`, `log.file_level`). Goby
+/// writes it unless `log: false`; here it is written when `log: true` or a
+/// `log_path` is given (Goby's default path "./" for `log: true` alone).
+fn log_file(
+    config: &mut GobydConfig,
+    common: &protos::goby::apps::protobuf::GobyMoosAppConfig,
+    at: &dyn Fn(&str) -> Option<usize>,
+    found: &mut Findings<'_>,
+) {
+    let dir = match (common.log, &common.log_path) {
+        (Some(false), _) | (None, None) => return,
+        (_, Some(path)) => path.clone(),
+        (Some(true), None) => "./".to_string(),
+    };
+    let log = config.log.get_or_insert_with(Default::default);
+    let written = if common.log_path.is_some() {
+        "log_path"
+    } else {
+        "log"
+    };
+    match &log.dir {
+        Some(given) if *given != dir => found.problem(
+            at(written),
+            &format!("common.{written}"),
+            "the same setting as log.dir, which is given too: give one",
+        ),
+        _ => log.dir = Some(dir),
+    }
+    if let Some(verbosity) = common.log_verbosity {
+        match &log.file_level {
+            Some(_) => found.problem(
+                at("log_verbosity"),
+                "common.log_verbosity",
+                "the same setting as log.file_level, which is given too: give one",
+            ),
+            None => log.file_level = Some(level_of(verbosity).into()),
+        }
+    }
+}
+
 /// `common`: Goby's settings of every MOOS application.
 fn common(
     config: &mut GobydConfig,
@@ -680,9 +733,6 @@ fn common(
     };
     ignore(
         &[
-            ("log", common.log.is_some()),
-            ("log_path", common.log_path.is_some()),
-            ("log_verbosity", common.log_verbosity.is_some()),
             (
                 "log_omit_file_timestamp",
                 common.log_omit_file_timestamp.is_some(),
@@ -692,8 +742,9 @@ fn common(
                 common.log_omit_latest_symlink.is_some(),
             ),
         ],
-        "gobyd writes no log file: it logs to standard error",
+        "gobyd writes its log file as gobyd.log in log_path, rotated by size",
     );
+    log_file(config, &common, &at, found);
     ignore(
         &[
             ("app_tick", common.app_tick.is_some()),
@@ -751,13 +802,7 @@ fn common(
         }
     }
     if let Some(verbosity) = common.verbosity {
-        let level = match GobyVerbosity::try_from(verbosity) {
-            Ok(GobyVerbosity::Quiet) => "off",
-            Ok(GobyVerbosity::Warn) => "warn",
-            Ok(GobyVerbosity::Debug1 | GobyVerbosity::Debug2) => "debug",
-            Ok(GobyVerbosity::Debug3) => "trace",
-            _ => "info",
-        };
+        let level = level_of(verbosity);
         let log = config.log.get_or_insert_with(Default::default);
         if log.level.is_some() {
             found.problem(
@@ -828,6 +873,7 @@ route_cfg { }
         );
         assert_eq!(moos.initializer[0].sval(), " unicorn ");
         assert_eq!(config.log.as_ref().unwrap().level(), "debug");
+        assert_eq!(config.log.as_ref().unwrap().dir.as_deref(), Some("/tmp"));
         assert_eq!(config.driver.as_ref().unwrap().reconnect_interval, Some(20));
         // None of Goby's keys is left.
         assert!(config.common.is_none() && config.dccl_cfg.is_none());
@@ -842,7 +888,8 @@ route_cfg { }
         assert!(
             common
                 .text
-                .contains("log, log_path (gobyd writes no log file")
+                .contains("app_tick, comm_tick (gobyd is driven by events")
+                && !common.text.contains("log_path")
                 && common
                     .text
                     .contains("app_tick, comm_tick (gobyd is driven by events"),
@@ -850,6 +897,30 @@ route_cfg { }
             common.text
         );
         assert!(read.notes[1].text.contains("route_cfg is empty"));
+    }
+
+    #[test]
+    fn gobys_text_log_becomes_the_log_file() {
+        for (common, dir, level) in [
+            ("log: true", Some("./"), None),
+            ("log: false log_path: \"/x\"", None, None),
+            (
+                "log_path: \"/x\" log_verbosity: DEBUG3",
+                Some("/x"),
+                Some("trace"),
+            ),
+        ] {
+            let text = format!("common {{ {common} }}\n");
+            let config = read(&text, "b.cfg", Layout::File).unwrap().config;
+            let log = config.log.unwrap_or_default();
+            assert_eq!(log.dir.as_deref(), dir, "{common}");
+            assert_eq!(log.file_level.as_deref(), level, "{common}");
+        }
+        let both = "log { dir: \"/y\" }\ncommon { log_path: \"/x\" }\n";
+        assert_eq!(
+            refusals(both, Layout::File),
+            ["b.moos:2:10: common.log_path"]
+        );
     }
 
     #[test]

@@ -3,7 +3,6 @@
 //! request of the network layer.
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::acomms::protobuf::{driver_config, DriverType};
 
 use super::{Core, MAX_SPECIFIC_REQUESTS};
 use crate::event::{Control, NetworkReply, NetworkRequest};
@@ -118,59 +117,9 @@ impl Core {
         i: usize,
         message: &DynamicMessage,
     ) -> Result<(), String> {
-        use protos::goby::acomms::protobuf::MicroModemSpecific;
-        let name = message.descriptor().full_name().to_string();
-        if let Some(config) = &self.links[i].config {
-            let micromodem = matches!(config.driver, Some(driver_config::Driver::DriverType(t))
-                if t == DriverType::DriverWhoiMicromodem as i32);
-            let takes = if modemdriver::evologics::driver::is_evologics(config) {
-                Some((
-                    "EvoLogics",
-                    protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor(),
-                ))
-            } else if modemdriver::popoto::is_popoto(config) {
-                Some((
-                    "Popoto",
-                    protos::goby::acomms::protobuf::PopotoSpecific::default().descriptor(),
-                ))
-            } else if modemdriver::benthos::is_benthos(config) {
-                Some((
-                    "Benthos ATM-900",
-                    protos::goby::acomms::protobuf::BenthosSpecific::default().descriptor(),
-                ))
-            } else {
-                None
-            };
-            if let Some((driver, takes)) = takes {
-                if message.descriptor() != takes {
-                    return Err(format!(
-                        "{name}: the {driver} driver takes {}",
-                        takes.full_name()
-                    ));
-                }
-            } else {
-                if !micromodem {
-                    return Err(format!(
-                        "{name}: only the Micro-Modem, EvoLogics, Popoto and Benthos ATM-900 drivers take driver-specific requests"
-                    ));
-                }
-                let takes = MicroModemSpecific::default().descriptor();
-                let request = (message.descriptor() == takes)
-                    .then(|| message.transcode_to::<MicroModemSpecific>().ok())
-                    .flatten()
-                    .ok_or_else(|| {
-                        format!("{name}: the Micro-Modem driver takes {}", takes.full_name())
-                    })?;
-                let settings = config.micromodem.clone().unwrap_or_default();
-                if let Some(problem) = modemdriver::micromodem::ranging::request_problem(
-                    &request,
-                    self.modem_id,
-                    &settings,
-                ) {
-                    return Err(problem);
-                }
-            }
+        match &self.links[i].config {
+            Some(config) => modemdriver::built_in::specific_problem(config, message, self.modem_id),
+            None => Ok(()),
         }
-        Ok(())
     }
 }

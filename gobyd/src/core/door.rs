@@ -1,9 +1,14 @@
 //! Values checked at the door: a published message that the DCCL codec would
 //! change on the way out (a number out of its field's range, NaN, a string,
-//! bytes or an array over its limit, an undefined enum value) is refused with
-//! an error naming the field and the bound, unless its queue entry sets
+//! bytes or an array over its limit, an undefined enum value, a value its
+//! dynamic conditions leave out or bound more tightly, an unset field they
+//! make required) is refused with an error naming the field and the bound
+//! or the condition, unless its queue entry sets
 //! `clamp_out_of_range: true`. Then it is accepted as libdccl sends it, and
 //! the changes are handed back to be reported to the client and logged.
+//!
+//! A dynamic condition that cannot be evaluated refuses the message
+//! whatever the queue entry says, naming the field and the script.
 //!
 //! The message that goes on (into the journal, the queue and the raw log) is
 //! the one the receiver will decode, never the value before it was changed,
@@ -325,5 +330,66 @@ mod tests {
         );
         // The encoding sent is the clamped message's.
         assert_eq!(admitted.encoded, codec().encode(&admitted.message).unwrap());
+    }
+
+    #[test]
+    fn a_publish_that_breaks_a_dynamic_condition_is_refused_with_the_reason() {
+        let pool = dccl::compile_sources(&[(
+            "survey.proto",
+            r#"syntax = "proto2";
+               import "dccl/option_extensions.proto";
+               package survey;
+               message Leg {
+                 option (dccl.msg) = { id: 40 max_bytes: 16 codec_version: 4 };
+                 enum Mode { IDLE = 1; LINE = 2; }
+                 required Mode mode = 1;
+                 optional int32 heading = 2 [(dccl.field) = { min: 0 max: 359
+                     dynamic_conditions { only_if: "this.mode == 'LINE'" } }];
+                 optional int32 depth = 3 [(dccl.field) = { min: 0 max: 100
+                     dynamic_conditions { max: "this.mode == 'LINE' and 10 or 100" } }];
+                 optional int32 speed = 4 [(dccl.field) = { min: 0 max: 10
+                     dynamic_conditions { omit_if: "this.depth > 50" } }];
+               }"#,
+        )])
+        .unwrap();
+        let desc = pool.get_message_by_name("survey.Leg").unwrap();
+        let codec = || {
+            let mut codec = Codec::new();
+            codec.load(&desc).unwrap();
+            codec
+        };
+        let door = Door::new(Arc::new(codec()), &QueueManagerConfig::default(), codec);
+        let leg = |text: &str| DynamicMessage::parse_text_format(desc.clone(), text).unwrap();
+        // A field its condition leaves out.
+        let err = door
+            .admit(leg("mode: IDLE heading: 90 depth: 5"))
+            .unwrap_err();
+        assert!(
+            err.contains(
+                "survey.Leg refused: field heading: only_if \"this.mode == 'LINE'\" is false, \
+                 which the codec would not send (the condition leaves the field out)"
+            ),
+            "{err}"
+        );
+        // A value outside its dynamic bounds.
+        let err = door
+            .admit(leg("mode: LINE heading: 90 depth: 50"))
+            .unwrap_err();
+        assert!(
+            err.contains("field depth: 50 is out of range [0, 10]"),
+            "{err}"
+        );
+        // A condition that cannot be evaluated (no depth to compare): the
+        // script and why.
+        let err = door
+            .admit(leg("mode: LINE heading: 90 speed: 3"))
+            .unwrap_err();
+        assert!(
+            err.contains("field speed") && err.contains("this.depth > 50") && err.contains("nil"),
+            "{err}"
+        );
+        // Within its conditions: as published.
+        let admitted = door.admit(leg("mode: LINE heading: 90 depth: 5")).unwrap();
+        assert!(admitted.changes.is_empty());
     }
 }

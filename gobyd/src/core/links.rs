@@ -9,7 +9,6 @@ use std::sync::Arc;
 use amac::MacManager;
 use modemdriver::{Driver, DriverEvent, DriverStatus, ModemTransmission};
 use prost_reflect::ReflectMessage;
-use protos::goby::acomms::protobuf::{driver_config, DriverType};
 use protos::goby::apps::protobuf::GobydConfig;
 
 use super::link::backoff::Backoff;
@@ -25,46 +24,7 @@ use crate::event::{DaemonEvent, ModemEvent};
 pub async fn start_driver(
     config: &protos::goby::acomms::protobuf::DriverConfig,
 ) -> Result<Driver, DaemonError> {
-    if modemdriver::evologics::driver::is_evologics(config) {
-        return Ok(modemdriver::evologics::EvologicsDriver::start(config).await?);
-    }
-    match modemdriver::check::driver_type(config) {
-        Some(DriverType::DriverAcousticSimulator) => {
-            Ok(modemdriver::sim::SimulatorDriver::start(config)?)
-        }
-        Some(DriverType::DriverUdp) => Ok(modemdriver::udp::UdpDriver::start(config).await?),
-        Some(DriverType::DriverUdpMulticast) => Ok(
-            modemdriver::udp_multicast::UdpMulticastDriver::start(config)?,
-        ),
-        Some(DriverType::DriverWhoiMicromodem) => {
-            Ok(modemdriver::micromodem::MicroModemDriver::start(config)?)
-        }
-        Some(DriverType::DriverIridium) => Ok(modemdriver::iridium::IridiumDriver::start(config)?),
-        Some(DriverType::DriverIridiumShore) => {
-            Ok(modemdriver::iridium::IridiumShoreDriver::start(config).await?)
-        }
-        Some(DriverType::DriverPopoto) => {
-            Ok(modemdriver::popoto::PopotoDriver::start(config).await?)
-        }
-        Some(DriverType::DriverBenthosAtm900) => {
-            Ok(modemdriver::benthos::BenthosDriver::start(config).await?)
-        }
-        other => Err(DaemonError::Driver(modemdriver::DriverError::Config(
-            match (&config.driver, other) {
-                (Some(driver_config::Driver::DriverName(name)), _) => {
-                    format!(
-                        "no driver named {name:?} is built in (driver_name {:?} is)",
-                        modemdriver::evologics::driver::DRIVER_NAME
-                    )
-                }
-                (_, other) => format!(
-                    "driver {} is not supported by gobyd (use {})",
-                    other.map(|t| t.as_str_name()).unwrap_or("unknown"),
-                    modemdriver::check::built_in_names()
-                ),
-            },
-        ))),
-    }
+    Ok(modemdriver::built_in::start(config).await?)
 }
 
 /// A Micro-Modem with application acks keeps its frame numbers in the data

@@ -9,13 +9,13 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use modemdriver::iridium::emulator::gateway::{Gateway, GatewayConfig, GatewayHandle};
-use modemdriver::iridium::emulator::rockblock::{
+use emulators::iridium::gateway::{Gateway, GatewayConfig, GatewayHandle};
+use emulators::iridium::rockblock::{
     RockblockHandle, RockblockService, RockblockServiceConfig, WebhookTarget,
     EMULATOR_TEST_PUBLIC_KEY_PEM,
 };
-use modemdriver::iridium::emulator::transceiver::TransceiverConfig;
-use modemdriver::iridium::emulator::{self, TransceiverHandle, TransceiverPort};
+use emulators::iridium::transceiver::TransceiverConfig;
+use emulators::iridium::{self as emulator, TransceiverHandle, TransceiverPort};
 use modemdriver::iridium::rockblock::http::HttpUrl;
 
 use super::daemon::{command_line, free_tcp_port, Gobyd};

@@ -8,8 +8,9 @@
 use std::path::Path;
 use std::time::Duration;
 
-use modemdriver::micromodem::emulator::{
-    self, AirKind, AirTime, Dialect, EmulatorConfig, EmulatorFaults, EmulatorHandle, EmulatorPort,
+use emulators::micromodem::{
+    self as emulator, AirKind, AirTime, Dialect, EmulatorConfig, EmulatorFaults, EmulatorHandle,
+    EmulatorPort,
 };
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;

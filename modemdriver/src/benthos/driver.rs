@@ -44,29 +44,94 @@
 
 use std::time::Duration;
 
-use protos::goby::acomms::protobuf::{
-    driver_config::{ConnectionType, Driver as DriverKind},
-    BenthosConfig, DriverConfig, DriverType,
-};
+use protos::goby::acomms::protobuf::{BenthosConfig, DriverConfig, DriverType};
 
 use super::machine::{Machine, Settings};
 use super::wire::{bit_rate, Command, ABSOLUTE_MAX_FRAME, RATE_MAX, RATE_MIN};
-use crate::check::{self, Problem};
 use crate::config;
+use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
-use crate::stream_shell::{self, BoxStream, Endpoint};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::Units;
+use crate::problem::{self, Problem};
+use crate::shell::{self, Device};
 
 /// Baud rate when `serial_baud` is not set.
 pub const DEFAULT_BAUD: u32 = 9600;
 
-/// Whether `config` names the Benthos ATM-900 driver.
-pub fn is_benthos(config: &DriverConfig) -> bool {
-    matches!(&config.driver, Some(DriverKind::DriverType(t)) if *t == DriverType::DriverBenthosAtm900 as i32)
-}
-
 /// The Benthos ATM-900 driver.
 #[derive(Debug)]
 pub struct BenthosDriver;
+
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(DriverType::DriverBenthosAtm900),
+    short_name: "benthos",
+    title: "Benthos ATM-900",
+    section: Some("benthos"),
+    goby3_extensions: &[
+        ("goby.acomms.benthos.protobuf.config", "benthos"),
+        ("goby.acomms.benthos.protobuf.transmission", "benthos"),
+    ],
+};
+
+impl DriverKind for BenthosDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        Some(frame_limits(config))
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        use prost_reflect::ReflectMessage;
+        Some(protos::goby::acomms::protobuf::BenthosSpecific::default().descriptor())
+    }
+
+    /// Goby3's Benthos slot: a two-way ping of the slot's `dest`.
+    fn specific_slot_problem(
+        &self,
+        _config: &DriverConfig,
+        slot: &protos::goby::acomms::protobuf::ModemTransmission,
+    ) -> Option<Problem> {
+        use protos::goby::acomms::protobuf::{
+            benthos_transmission::Type, modem_transmission::TransmissionType,
+        };
+        if slot.r#type() != TransmissionType::DriverSpecific {
+            return None;
+        }
+        let ping = slot
+            .benthos
+            .as_deref()
+            .copied()
+            .unwrap_or_default()
+            .r#type()
+            == Type::BenthosTwoWayPing;
+        if !ping {
+            Some(Problem::new(
+                "benthos.type",
+                "a DRIVER_SPECIFIC slot of the Benthos ATM-900 driver is a two-way ping: \
+                 give benthos { type: BENTHOS_TWO_WAY_PING } and the node to range in dest",
+            ))
+        } else if slot.dest.is_none_or(|d| d < 0 || d == slot.src()) {
+            Some(Problem::new(
+                "dest",
+                "a two-way ping needs the node to range in dest (not this slot's source, not a broadcast)",
+            ))
+        } else {
+            None
+        }
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(BenthosDriver::start(config))
+    }
+}
 
 impl BenthosDriver {
     /// Opens the modem's line and starts the driver. A modem that cannot
@@ -76,54 +141,24 @@ impl BenthosDriver {
     /// ([`DriverError::Config`], as [`problems`] finds them).
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        let endpoint = endpoint(config)?;
-        let link = match endpoint.open().await {
-            Ok(link) => Some(link),
-            Err(e) => {
-                tracing::warn!("Benthos modem at {}: {e}", endpoint.describe());
-                None
-            }
-        };
-        Ok(Self::start_on(
-            settings,
-            endpoint,
-            link,
-            std::sync::Arc::new(goby_time::SystemClock),
-        ))
-    }
-
-    /// Starts the driver on a link already open (`None`: not yet; the
-    /// driver opens `endpoint` itself), reading time from `clock`.
-    pub fn start_on(
-        settings: Settings,
-        endpoint: Endpoint,
-        link: Option<BoxStream>,
-        clock: std::sync::Arc<dyn goby_time::Clock>,
-    ) -> Driver {
-        let now = crate::micromodem::driver::shell::now(&*clock);
-        let machine = if link.is_some() {
-            Machine::new(settings, now)
-        } else {
-            Machine::disconnected(settings, now)
-        };
-        stream_shell::spawn("benthos", machine, endpoint, link, clock)
+        let device = Device::new(config::stream_endpoint(config, REACH), Units::Bytes);
+        Ok(
+            shell::start_reconnecting("benthos", device, |now, up| Machine::new(settings, now, up))
+                .await,
+        )
     }
 }
+
+/// How the driver reaches the modem: its serial line, or a serial server.
+const REACH: Reach<'static> = Reach {
+    driver: "the Benthos driver",
+    server: "the serial server's address",
+    port: None,
+    baud: DEFAULT_BAUD,
+};
 
 fn benthos_config(config: &DriverConfig) -> BenthosConfig {
     config.benthos.clone().unwrap_or_default()
-}
-
-/// Where the modem is, from `config` (checked by [`problems`]).
-pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    check::refuse(problems(config))?;
-    Ok(match config.connection_type() {
-        ConnectionType::ConnectionSerial => Endpoint::Serial {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-        },
-        _ => Endpoint::Tcp(format!("{}:{}", config.tcp_server(), config.tcp_port())),
-    })
 }
 
 /// The largest frame, bytes (at every rate).
@@ -131,19 +166,24 @@ pub fn max_frame_bytes(config: &DriverConfig) -> usize {
     benthos_config(config).max_frame_size() as usize
 }
 
-/// The frame limits of a Benthos configuration in words, for `gobyd
-/// --check`.
-pub fn limits(config: &DriverConfig) -> String {
+/// The frame limits of a Benthos configuration, for `gobyd --check`.
+pub fn frame_limits(config: &DriverConfig) -> FrameLimits {
     let max = max_frame_bytes(config);
     let rates: Vec<String> = (RATE_MIN..=RATE_MAX)
         .map(|r| format!("{r} {} bit/s", bit_rate(r)))
         .collect();
-    format!(
-        "driver DRIVER_BENTHOS_ATM900: up to 8 frames per transmission (the slot's max_num_frames, 1 unless set) \
-         of up to {max} bytes each at every rate (max_frame_size); @TxRate {} (approximate bit rates); \
-         other rates go at 2, as Goby3 sends them",
-        rates.join(", ")
-    )
+    FrameLimits {
+        link: "driver DRIVER_BENTHOS_ATM900".into(),
+        outgoing: max,
+        incoming: max,
+        text: format!(
+            "up to 8 frames per transmission (the slot's max_num_frames, 1 unless set) \
+             of up to {max} bytes each at every rate (max_frame_size); @TxRate {} (approximate bit rates); \
+             other rates go at 2, as Goby3 sends them",
+            rates.join(", ")
+        ),
+        each_way: false,
+    }
 }
 
 /// Every problem of a Benthos configuration that [`settings`] refuses.
@@ -158,40 +198,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         )),
         Err(_) => problems.push(Problem::new("modem_id", "required field is not set")),
     }
-    match config.connection_type() {
-        ConnectionType::ConnectionSerial => {
-            if config.serial_port().trim().is_empty() {
-                problems.push(Problem::new(
-                    "serial_port",
-                    "required for the Benthos driver (e.g. \"/dev/ttyUSB0\"), or use \
-                     connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server and tcp_port (a serial server)",
-                ));
-            }
-        }
-        ConnectionType::ConnectionTcpAsClient => {
-            if config.tcp_server().trim().is_empty() {
-                problems.push(Problem::new(
-                    "tcp_server",
-                    "required for the Benthos driver over TCP (the serial server's address)",
-                ));
-            }
-            match config.tcp_port {
-                Some(p) if (1..=65_535).contains(&p) => {}
-                Some(p) => problems.push(Problem::new(
-                    "tcp_port",
-                    format!("{p} is not a TCP port (1-65535)"),
-                )),
-                None => problems.push(Problem::new(
-                    "tcp_port",
-                    "required for the Benthos driver over TCP (the serial server's port)",
-                )),
-            }
-        }
-        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
-            "connection_type",
-            "CONNECTION_TCP_AS_SERVER is not supported by the Benthos driver (use CONNECTION_SERIAL or CONNECTION_TCP_AS_CLIENT)",
-        )),
-    }
+    problems.extend(config::stream_problems(config, REACH));
     let max = b.max_frame_size() as usize;
     if max == 0 || max > ABSOLUTE_MAX_FRAME {
         problems.push(Problem::new(
@@ -245,7 +252,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let b = benthos_config(config);
     let modem_id = config::modem_id(config)?;
     let mut setup = vec![
@@ -340,7 +347,10 @@ mod tests {
             ]
         );
         assert_eq!(s.max_frame_bytes, 64);
-        assert_eq!(endpoint(&config("")).unwrap().describe(), "/dev/null");
+        assert_eq!(
+            config::stream_endpoint(&config(""), REACH).describe(),
+            "/dev/null"
+        );
     }
 
     #[test]
@@ -367,7 +377,7 @@ mod tests {
 
     #[test]
     fn limits_tell_the_rates() {
-        let l = limits(&config("benthos { max_frame_size: 128 }"));
+        let l = frame_limits(&config("benthos { max_frame_size: 128 }")).text;
         assert!(l.contains("up to 128 bytes"), "{l}");
         assert!(l.contains("2 140 bit/s"), "{l}");
         assert!(l.contains("13 15360 bit/s"), "{l}");

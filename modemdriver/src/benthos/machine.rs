@@ -1,5 +1,5 @@
 //! The Benthos ATM-900 driver as a state machine: no input or output, no
-//! clock read ([`StreamMachine`]: inputs in, outputs out).
+//! clock read ([`crate::machine::Machine`]: inputs in, outputs out).
 //!
 //! The modem is driven one command at a time, each written and its answer
 //! awaited (written again after `response_timeout_ms`, at most
@@ -10,10 +10,9 @@
 //! guard time, back in command mode. Receptions (`DATA(…)` … `<EOP>`) are
 //! read whenever they come, between or during the steps.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 use std::time::Duration;
 
-use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
     benthos_receive_statistics::CrcState, benthos_report, benthos_specific::Type as SpecificType,
     benthos_transmission::Type as BenthosType, modem_transmission::TransmissionType,
@@ -23,20 +22,17 @@ use protos::goby::acomms::protobuf::{
 use tokio::time::Instant;
 
 use super::wire::{
-    parse_modem_line, tx_rate, Command, ModemLine, Packet, PacketKind, Stats, BROADCAST, MAX_FRAMES,
+    parse_modem_line, tx_rate, Command, ModemLine, Packet, PacketKind, Stats, BROADCAST,
+    MAX_FRAMES, MAX_LINE,
 };
-use crate::driver::{
-    Acknowledgement, DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome,
-    TransmitResult,
-};
-use crate::popoto::wire::LineSplitter;
-use crate::stream_shell::{lossy, Input, Now, Output, RequestId, StreamMachine};
-
-/// How long the driver waits for the layer above to fill a data request.
-pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// Data transmissions waiting at most; beyond, the oldest is dropped.
-pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
+use crate::address::{address_of, id_of};
+use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus, TransmitOutcome};
+use crate::link::line::LineSplitter;
+use crate::machine::acks::AwaitedAcks;
+use crate::machine::fill::Fill;
+use crate::machine::reconnect::Reconnect;
+use crate::machine::work::{asked, queue_data, queue_first, Asked};
+use crate::machine::{lossy, Handlers, Now, Outputs, RequestId};
 
 /// One knot, m/s.
 const KNOT: f64 = 1852.0 / 3600.0;
@@ -79,24 +75,6 @@ pub struct Settings {
     pub deferred_ack: bool,
     /// Between reconnection attempts.
     pub reconnect: Duration,
-}
-
-/// The ATM-900 address of modem id `id` (0: broadcast).
-pub fn address_of(id: i32) -> Option<u8> {
-    match id {
-        0 => Some(BROADCAST),
-        1..=254 => Some(id as u8),
-        _ => None,
-    }
-}
-
-/// The modem id of address `a` (255: broadcast, 0).
-pub fn id_of(a: u8) -> i32 {
-    if a == BROADCAST {
-        0
-    } else {
-        i32::from(a)
-    }
 }
 
 /// A step of a script.
@@ -160,22 +138,6 @@ enum Job {
 }
 
 #[derive(Debug)]
-struct Filling {
-    id: RequestId,
-    template: ModemTransmission,
-    deadline: Instant,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Outstanding {
-    unique_id: Option<u32>,
-    frame_start: u32,
-    frames: u32,
-    rate: i32,
-    until: Instant,
-}
-
-#[derive(Debug)]
 struct Rx {
     size: usize,
     bytes: Vec<u8>,
@@ -189,11 +151,9 @@ struct Rx {
 pub struct Machine {
     s: Settings,
     now: Now,
-    out: Vec<Output>,
+    out: Outputs,
     lines: LineSplitter,
-    connected: bool,
-    opening: bool,
-    reconnect_at: Instant,
+    link: Reconnect,
     ready: bool,
     setup_started: Option<Instant>,
     last_write: Instant,
@@ -202,25 +162,23 @@ pub struct Machine {
     current: Option<Current>,
     tx: Option<Tx>,
     busy_retry: Option<(Instant, Tx)>,
-    filling: Option<Filling>,
-    outstanding: HashMap<u8, Outstanding>,
+    fill: Fill,
+    acks: AwaitedAcks,
     pending: VecDeque<Job>,
     rx: Option<Rx>,
     lowpower: bool,
-    next_request: u64,
 }
 
 impl Machine {
-    /// A machine whose link is open at `now`; its first outputs (the
-    /// setup) come from the first input, e.g. [`Input::Tick`].
-    pub fn new(settings: Settings, now: Now) -> Machine {
+    /// A machine at `now` whose link is open (`connected`), or not yet
+    /// (its first output asks to open it); its first outputs (the setup)
+    /// come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
+    pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         Machine {
             now,
-            out: Vec::new(),
-            lines: LineSplitter::new(),
-            connected: true,
-            opening: false,
-            reconnect_at: now.at,
+            out: Outputs::default(),
+            lines: LineSplitter::new(MAX_LINE),
+            link: Reconnect::new(connected, now.at, settings.reconnect),
             ready: false,
             setup_started: None,
             last_write: now.at,
@@ -229,46 +187,34 @@ impl Machine {
             current: None,
             tx: None,
             busy_retry: None,
-            filling: None,
-            outstanding: HashMap::new(),
+            fill: Fill::default(),
+            acks: AwaitedAcks::default(),
             pending: VecDeque::new(),
             rx: None,
             lowpower: false,
-            next_request: 0,
             s: settings,
         }
     }
 
-    /// A machine whose link is not open yet: its first output asks to open
-    /// it.
-    pub fn disconnected(settings: Settings, now: Now) -> Machine {
-        let mut m = Machine::new(settings, now);
-        m.connected = false;
-        m
-    }
-
     fn emit(&mut self, e: DriverEvent) {
-        self.out.push(Output::Event(e));
+        self.out.event(e);
     }
 
     fn status(&mut self, s: DriverStatus) {
-        self.emit(DriverEvent::Status(s));
+        self.out.status(s);
     }
 
     fn write_bytes(&mut self, bytes: Vec<u8>) {
         self.last_write = self.now.at;
-        self.out.push(Output::Write(bytes));
+        self.out.write(bytes);
     }
 
     fn result(&mut self, mt: ModemTransmission, outcome: TransmitOutcome) {
-        self.emit(DriverEvent::TransmitResult(TransmitResult {
-            transmission: mt,
-            outcome,
-        }));
+        self.out.result(mt, outcome);
     }
 
     fn report(&mut self, r: BenthosReport) {
-        self.emit(DriverEvent::Specific(SpecificReport::new(&r)));
+        self.out.specific(&r);
     }
 
     /// Fails the transmission under way (if any) with `why`.
@@ -293,31 +239,6 @@ impl Machine {
         self.purpose = None;
         self.ready = false;
         self.setup_started = None;
-    }
-
-    fn disconnected_now(&mut self, reason: String) {
-        if !self.connected {
-            return;
-        }
-        self.connected = false;
-        self.opening = false;
-        self.lines.clear();
-        self.rx = None;
-        self.reconnect_at = self.now.at + self.s.reconnect;
-        self.status(DriverStatus::Disconnected { reason });
-        self.restart("the link to the modem was lost");
-    }
-
-    fn opened(&mut self, ok: bool) {
-        self.opening = false;
-        if ok {
-            self.connected = true;
-            self.lines.clear();
-            self.status(DriverStatus::Reconnected);
-            self.restart("the link to the modem was lost");
-        } else {
-            self.reconnect_at = self.now.at + self.s.reconnect;
-        }
     }
 
     fn start_setup(&mut self) {
@@ -476,44 +397,6 @@ impl Machine {
         self.restart(&format!("the modem did not answer {what}"));
     }
 
-    fn timers(&mut self) {
-        let now = self.now.at;
-        if !self.connected && !self.opening && self.reconnect_at <= now {
-            self.opening = true;
-            self.out.push(Output::Open);
-        }
-        if self.step_deadline().is_some_and(|d| d <= now) {
-            self.step_timeout();
-        }
-        if self
-            .setup_started
-            .is_some_and(|t| t + self.s.start_timeout <= now)
-        {
-            self.status(DriverStatus::ModemSilent {
-                seconds: self.s.start_timeout.as_secs_f64(),
-            });
-            self.restart("the modem was not set up in time");
-        }
-        if self.filling.as_ref().is_some_and(|f| f.deadline <= now) {
-            let f = self.filling.take().expect("checked");
-            self.status(DriverStatus::DataRejected {
-                reason: format!(
-                    "no answer to the data request within {} ms: nothing sent",
-                    DATA_REQUEST_TIMEOUT.as_millis()
-                ),
-            });
-            self.result(f.template, TransmitOutcome::NothingToSend);
-        }
-        if self.rx.as_ref().is_some_and(|r| r.deadline <= now) {
-            self.rx = None;
-            self.status(DriverStatus::Unparseable {
-                line: String::new(),
-                reason: "a reception without its <EOP>: dropped".into(),
-            });
-        }
-        self.outstanding.retain(|_, o| o.until > now);
-    }
-
     fn line(&mut self, raw: &[u8]) {
         let text = String::from_utf8_lossy(raw);
         let line = match parse_modem_line(&text) {
@@ -656,30 +539,14 @@ impl Machine {
                 if dest != self.s.modem_id {
                     return;
                 }
-                let Some(o) = self.outstanding.remove(&src_a) else {
-                    return self.status(DriverStatus::Skipped {
-                        reason: format!(
-                            "an acknowledgement from {src} for no packet awaiting one (late: after ack_timeout_ms, or a repeat); not credited"
-                        ),
-                    });
-                };
-                let acked: Vec<i32> = frames
-                    .iter()
-                    .filter(|&&f| f < o.frames)
-                    .map(|&f| (o.frame_start + f) as i32)
-                    .collect();
-                let ack = ModemTransmission {
-                    src: Some(src),
-                    dest: Some(self.s.modem_id),
-                    rate: Some(o.rate),
-                    time: Some(self.now.micros),
-                    r#type: Some(TransmissionType::Ack as i32),
-                    acked_frame: acked,
-                    unique_id: o.unique_id,
-                    benthos: mt.benthos.clone(),
-                    ..Default::default()
-                };
-                self.emit(DriverEvent::Received(ack));
+                let me = self.s.modem_id;
+                if let Some(mut ack) =
+                    self.acks
+                        .heard(src_a, src, me, &frames, self.now, &mut self.out)
+                {
+                    ack.benthos = mt.benthos.clone();
+                    self.emit(DriverEvent::Received(ack));
+                }
             }
             PacketKind::DriverSpecific => {
                 tracing::debug!("Benthos: a driver-specific packet from {src}");
@@ -745,16 +612,8 @@ impl Machine {
                 if let Some(tx) = &mut self.tx {
                     if let Some(mt) = tx.mt.take() {
                         if mt.ack_requested() && tx.dest != BROADCAST {
-                            self.outstanding.insert(
-                                tx.dest,
-                                Outstanding {
-                                    unique_id: mt.unique_id,
-                                    frame_start: mt.frame_start(),
-                                    frames: tx.frames,
-                                    rate: mt.rate(),
-                                    until: self.now.at + self.s.ack_timeout,
-                                },
-                            );
+                            self.acks
+                                .expect(tx.dest, &mt, tx.frames, self.now, self.s.ack_timeout);
                         }
                         self.result(mt, TransmitOutcome::Sent);
                     }
@@ -816,84 +675,12 @@ impl Machine {
         let Some(dest) = address_of(received.src()).filter(|&a| a != BROADCAST) else {
             return;
         };
-        let frames = received.frame.len().min(MAX_FRAMES) as u32;
-        let at = self
-            .pending
-            .iter()
-            .position(|j| !matches!(j, Job::Ack { .. }))
-            .unwrap_or(self.pending.len());
-        self.pending.insert(
-            at,
-            Job::Ack {
-                dest,
-                frames,
-                owed_at: self.now.at,
-            },
-        );
-    }
-
-    fn command(&mut self, command: DriverCommand) {
-        match command {
-            DriverCommand::Initiate(mut mt) => {
-                if mt.src.is_none() || mt.src() == -1 {
-                    mt.src = Some(self.s.modem_id);
-                }
-                match mt.r#type() {
-                    TransmissionType::Data => {}
-                    TransmissionType::DriverSpecific => {
-                        let kind = mt.benthos.as_deref().copied().unwrap_or_default().r#type();
-                        if kind == BenthosType::BenthosTwoWayPing {
-                            return self.specific(BenthosSpecific {
-                                r#type: SpecificType::BenthosTwoWayPing as i32,
-                                dest: mt.dest,
-                            });
-                        }
-                        return self.status(DriverStatus::Unsupported {
-                            message: format!("DRIVER_SPECIFIC benthos.type {kind:?}"),
-                        });
-                    }
-                    other => {
-                        return self.status(DriverStatus::Unsupported {
-                            message: format!(
-                                "ModemTransmission.type {other:?} (the Benthos driver sends acks itself)"
-                            ),
-                        })
-                    }
-                }
-                let waiting = self
-                    .pending
-                    .iter()
-                    .filter(|j| matches!(j, Job::Data(_)))
-                    .count();
-                if waiting >= MAX_PENDING_TRANSMISSIONS {
-                    if let Some(i) = self.pending.iter().position(|j| matches!(j, Job::Data(_))) {
-                        self.pending.remove(i);
-                        self.status(DriverStatus::Skipped {
-                            reason: format!(
-                                "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                            ),
-                        });
-                    }
-                }
-                self.pending.push_back(Job::Data(Box::new(mt)));
-            }
-            DriverCommand::Specific(message) => {
-                let name = message.descriptor().full_name().to_string();
-                match (name == BenthosSpecific::default().descriptor().full_name())
-                    .then(|| message.transcode_to::<BenthosSpecific>().ok())
-                    .flatten()
-                {
-                    Some(r) => self.specific(r),
-                    None => self.status(DriverStatus::Unsupported { message: name }),
-                }
-            }
-            DriverCommand::Acknowledge(ack) => {
-                if self.s.deferred_ack {
-                    self.owe_ack(&ack);
-                }
-            }
-            DriverCommand::Stop(_) => {}
-        }
+        let job = Job::Ack {
+            dest,
+            frames: received.frame.len().min(MAX_FRAMES) as u32,
+            owed_at: self.now.at,
+        };
+        queue_first(&mut self.pending, job, |j| matches!(j, Job::Ack { .. }));
     }
 
     fn specific(&mut self, r: BenthosSpecific) {
@@ -923,14 +710,141 @@ impl Machine {
         }
     }
 
+    fn start_tx(&mut self, tx: Tx) {
+        self.purpose = Some(Purpose::Transmit);
+        self.script
+            .push_back(Step::Command(Command::set("RemoteAddr", tx.dest)));
+        self.script
+            .push_back(Step::Command(Command::set("TxRate", tx.rate)));
+        self.script.push_back(Step::Online);
+        self.script.push_back(Step::Send(tx.bytes.clone()));
+        self.script.push_back(Step::Escape);
+        self.tx = Some(tx);
+    }
+}
+
+/// Whether `line` answers `command` (as Goby3 takes the ATM-900's answers).
+pub fn accepts(command: &Command, line: &ModemLine) -> bool {
+    match command {
+        Command::Escape => matches!(line, ModemLine::Ok | ModemLine::NotFound(_)),
+        Command::Attention | Command::HangUp => matches!(line, ModemLine::Ok),
+        Command::Online => matches!(line, ModemLine::Connect(_)),
+        Command::LowPower => match line {
+            ModemLine::Prompt(t) | ModemLine::Text(t) => t.contains("Lowpower"),
+            _ => false,
+        },
+        Command::Range(_) => matches!(line, ModemLine::TxTime(_) | ModemLine::Ok),
+        Command::Set { name, .. } => match line {
+            ModemLine::Setting { name: n, .. } => n.eq_ignore_ascii_case(name),
+            ModemLine::Ok => true,
+            _ => false,
+        },
+        Command::Date {
+            time: (h, m, s), ..
+        } => match line {
+            ModemLine::Text(t) => t.contains(&format!("{h:02}:{m:02}:{s:02}")),
+            _ => false,
+        },
+        Command::ConfigLoad(_) | Command::FactoryReset | Command::Other(_) => match line {
+            ModemLine::Ok | ModemLine::Setting { .. } => true,
+            ModemLine::Text(t) => t.starts_with("Configuration"),
+            _ => false,
+        },
+    }
+}
+
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
+        self.now = now;
+    }
+
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
+        [
+            self.step_deadline(),
+            self.setup_started.map(|t| t + self.s.start_timeout),
+            self.fill.deadline(),
+            self.busy_retry.as_ref().map(|r| r.0),
+            self.rx.as_ref().map(|r| r.deadline),
+            self.acks.deadline(),
+            self.link.deadline(),
+        ]
+    }
+
+    fn awaited(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
+
+    fn read(&mut self, bytes: Vec<u8>) {
+        for line in self.lines.push(&bytes) {
+            self.line(&line);
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.link.tick(now, &mut self.out);
+        if self.step_deadline().is_some_and(|d| d <= now) {
+            self.step_timeout();
+        }
+        if self
+            .setup_started
+            .is_some_and(|t| t + self.s.start_timeout <= now)
+        {
+            self.status(DriverStatus::ModemSilent {
+                seconds: self.s.start_timeout.as_secs_f64(),
+            });
+            self.restart("the modem was not set up in time");
+        }
+        self.fill.expire_data(now, &mut self.out);
+        if self.rx.as_ref().is_some_and(|r| r.deadline <= now) {
+            self.rx = None;
+            self.status(DriverStatus::Unparseable {
+                line: String::new(),
+                reason: "a reception without its <EOP>: dropped".into(),
+            });
+        }
+        self.acks.expire(now);
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        let acks = "the Benthos driver sends acks itself";
+        match asked::<BenthosSpecific>(command, self.s.modem_id, acks, &mut self.out) {
+            Asked::Data(mt) => queue_data(
+                &mut self.pending,
+                Job::Data(Box::new(mt)),
+                |j| matches!(j, Job::Data(_)),
+                &mut self.out,
+            ),
+            Asked::Slot(mt) => {
+                let kind = mt.benthos.as_deref().copied().unwrap_or_default().r#type();
+                if kind == BenthosType::BenthosTwoWayPing {
+                    return self.specific(BenthosSpecific {
+                        r#type: SpecificType::BenthosTwoWayPing as i32,
+                        dest: mt.dest,
+                    });
+                }
+                self.status(DriverStatus::Unsupported {
+                    message: format!("DRIVER_SPECIFIC benthos.type {kind:?}"),
+                });
+            }
+            Asked::Specific(r) => self.specific(r),
+            Asked::Acknowledge(ack) => {
+                if self.s.deferred_ack {
+                    self.owe_ack(&ack);
+                }
+            }
+            Asked::Nothing => {}
+        }
+    }
+
     fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
-        let Some(f) = self.filling.take_if(|f| f.id == id) else {
+        let Some(mut mt) = self.fill.answered(id, filled, &mut self.out) else {
             return;
         };
-        let (mut mt, problems) = crate::driver::checked_answer(&f.template, filled);
-        for p in problems {
-            self.status(p);
-        }
         if let Some(i) = mt.frame.iter().position(Vec::is_empty) {
             mt.frame.truncate(i);
         }
@@ -950,7 +864,7 @@ impl Machine {
             });
             return self.result(mt, TransmitOutcome::Failed(why));
         };
-        if !self.connected || !self.ready {
+        if !self.link.is_up() || !self.ready {
             return self.result(
                 mt,
                 TransmitOutcome::Failed("the modem is not reachable".into()),
@@ -982,21 +896,27 @@ impl Machine {
         self.start_tx(tx);
     }
 
-    fn start_tx(&mut self, tx: Tx) {
-        self.purpose = Some(Purpose::Transmit);
-        self.script
-            .push_back(Step::Command(Command::set("RemoteAddr", tx.dest)));
-        self.script
-            .push_back(Step::Command(Command::set("TxRate", tx.rate)));
-        self.script.push_back(Step::Online);
-        self.script.push_back(Step::Send(tx.bytes.clone()));
-        self.script.push_back(Step::Escape);
-        self.tx = Some(tx);
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.lines.clear();
+            self.status(DriverStatus::Reconnected);
+            self.restart("the link to the modem was lost");
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.lines.clear();
+        self.rx = None;
+        self.status(DriverStatus::Disconnected { reason });
+        self.restart("the link to the modem was lost");
     }
 
     fn pump(&mut self) {
         loop {
-            if !self.connected || self.opening {
+            if !self.link.is_up() {
                 return;
             }
             if self.current.is_some() || !self.script.is_empty() || self.purpose.is_some() {
@@ -1010,7 +930,7 @@ impl Machine {
                 self.start_setup();
                 continue;
             }
-            if self.filling.is_some() {
+            if self.fill.is_waiting() {
                 return;
             }
             if let Some((at, _)) = &self.busy_retry {
@@ -1070,89 +990,10 @@ impl Machine {
                         continue;
                     }
                     let template = self.template(&mt);
-                    self.next_request += 1;
-                    let id = RequestId(self.next_request);
-                    self.out.push(Output::Request {
-                        id,
-                        template: template.clone(),
-                    });
-                    self.filling = Some(Filling {
-                        id,
-                        template,
-                        deadline: self.now.at + DATA_REQUEST_TIMEOUT,
-                    });
+                    self.fill.ask(template, self.now.at, &mut self.out);
                     return;
                 }
             }
         }
-    }
-}
-
-/// Whether `line` answers `command` (as Goby3 takes the ATM-900's answers).
-pub fn accepts(command: &Command, line: &ModemLine) -> bool {
-    match command {
-        Command::Escape => matches!(line, ModemLine::Ok | ModemLine::NotFound(_)),
-        Command::Attention | Command::HangUp => matches!(line, ModemLine::Ok),
-        Command::Online => matches!(line, ModemLine::Connect(_)),
-        Command::LowPower => match line {
-            ModemLine::Prompt(t) | ModemLine::Text(t) => t.contains("Lowpower"),
-            _ => false,
-        },
-        Command::Range(_) => matches!(line, ModemLine::TxTime(_) | ModemLine::Ok),
-        Command::Set { name, .. } => match line {
-            ModemLine::Setting { name: n, .. } => n.eq_ignore_ascii_case(name),
-            ModemLine::Ok => true,
-            _ => false,
-        },
-        Command::Date {
-            time: (h, m, s), ..
-        } => match line {
-            ModemLine::Text(t) => t.contains(&format!("{h:02}:{m:02}:{s:02}")),
-            _ => false,
-        },
-        Command::ConfigLoad(_) | Command::FactoryReset | Command::Other(_) => match line {
-            ModemLine::Ok | ModemLine::Setting { .. } => true,
-            ModemLine::Text(t) => t.starts_with("Configuration"),
-            _ => false,
-        },
-    }
-}
-
-impl StreamMachine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Bytes(bytes) => {
-                for line in self.lines.push(&bytes) {
-                    self.line(&line);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.step_deadline(),
-            self.setup_started.map(|t| t + self.s.start_timeout),
-            self.filling.as_ref().map(|f| f.deadline),
-            self.busy_retry.as_ref().map(|r| r.0),
-            self.rx.as_ref().map(|r| r.deadline),
-            self.outstanding.values().map(|o| o.until).min(),
-            (!self.connected && !self.opening).then_some(self.reconnect_at),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.filling.as_ref().is_some_and(|f| f.id == id)
     }
 }

@@ -5,11 +5,9 @@
 //! - [`wire`]: the commands, the modem's lines and Goby3's packet.
 //! - [`machine`]: the driver's logic, sans I/O.
 //! - [`driver`]: its configuration and start ([`BenthosDriver`]).
-//! - [`emulator`]: the modem's side, for tests and bench work.
 
 pub mod driver;
-pub mod emulator;
 pub mod machine;
 pub mod wire;
 
-pub use driver::{is_benthos, BenthosDriver, DEFAULT_BAUD};
+pub use driver::{BenthosDriver, DEFAULT_BAUD};

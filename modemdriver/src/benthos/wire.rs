@@ -17,8 +17,14 @@
 //!
 //! Every parser returns an error on bad input, never panics.
 
+use crate::base_convert::base_convert;
+
 /// The ATM-900 broadcast address.
 pub const BROADCAST: u8 = 255;
+
+/// Longest line read from the modem; a longer run of bytes without an end
+/// is given as a line (the parser refuses it).
+pub const MAX_LINE: usize = 16 * 1024;
 
 /// What ends a host command.
 pub const COMMAND_END: &[u8] = b"\r";
@@ -597,39 +603,6 @@ pub fn decode_header(bytes: &[u8]) -> Result<(PacketKind, usize), String> {
         _ => return Err(bad("a packet header's type out of range")),
     };
     Ok((kind, r.pos.div_ceil(8)))
-}
-
-/// The little-endian digits of `source` (base `from`) in base `to`, its
-/// most significant zero digits kept by count (Goby3's `base_convert`).
-fn base_convert(source: &[u8], from: u32, to: u32) -> Vec<u8> {
-    let mut number: Vec<u32> = Vec::new();
-    for &digit in source.iter().rev() {
-        let mut carry = u64::from(digit);
-        for limb in number.iter_mut() {
-            let v = u64::from(*limb) * u64::from(from) + carry;
-            *limb = v as u32;
-            carry = v >> 32;
-        }
-        if carry > 0 {
-            number.push(carry as u32);
-        }
-    }
-    let zeros = source.iter().rev().take_while(|&&b| b == 0).count();
-    let mut out = Vec::new();
-    while number.iter().any(|&l| l != 0) {
-        let mut remainder = 0u64;
-        for limb in number.iter_mut().rev() {
-            let v = (remainder << 32) | u64::from(*limb);
-            *limb = (v / u64::from(to)) as u32;
-            remainder = v % u64::from(to);
-        }
-        while number.last() == Some(&0) {
-            number.pop();
-        }
-        out.push(remainder as u8);
-    }
-    out.extend(std::iter::repeat_n(0u8, zeros));
-    out
 }
 
 /// A frame in base 255 with no CR but its final one (digit 13 written

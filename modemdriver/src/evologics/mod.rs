@@ -6,11 +6,9 @@
 //! - [`codec`]: their framing on the byte stream (data mode's `+++AT`
 //!   escape sequences with their length prefix, or plain command mode).
 //! - [`driver`]: the driver ([`EvologicsDriver`]).
-//! - [`emulator`]: the modem's side, for tests and bench work.
 
 pub mod codec;
 pub mod driver;
-pub mod emulator;
 pub mod message;
 
 pub use codec::{Decoded, Framing, HostDecoded, HostDecoder, ModemDecoder, ModemMessage};

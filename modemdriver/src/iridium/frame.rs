@@ -76,6 +76,47 @@ pub fn sbd_frame_limit(device: IridiumDeviceType, direction: Direction) -> usize
     sbd_message_limit(device, direction) - OVERHEAD_BYTES
 }
 
+/// The frame limits of a node on `device` whose frames go
+/// `outgoing_dir` (the vehicle's MO, the shore's MT), at most `outgoing`
+/// bytes (its `max_frame_size`, or the device's limit), for `gobyd
+/// --check`: e.g. `frames up to 329 bytes sent (MO 340 less 11 of header
+/// and CRC), 259 received (MT 270)`.
+pub fn frame_limits(
+    device: IridiumDeviceType,
+    outgoing_dir: Direction,
+    outgoing: usize,
+) -> crate::kind::FrameLimits {
+    let incoming_dir = match outgoing_dir {
+        Direction::MobileOriginated => Direction::MobileTerminated,
+        Direction::MobileTerminated => Direction::MobileOriginated,
+    };
+    let name = |d: Direction| match d {
+        Direction::MobileOriginated => "MO",
+        Direction::MobileTerminated => "MT",
+    };
+    let incoming = sbd_message_limit(device, incoming_dir) - OVERHEAD_BYTES;
+    let out_limit = sbd_message_limit(device, outgoing_dir);
+    let text = format!(
+        "frames up to {outgoing} bytes sent ({} {out_limit} less {OVERHEAD_BYTES} of header and CRC{}), \
+         {incoming} received ({} {})",
+        name(outgoing_dir),
+        if outgoing < out_limit - OVERHEAD_BYTES {
+            ", max_frame_size"
+        } else {
+            ""
+        },
+        name(incoming_dir),
+        sbd_message_limit(device, incoming_dir),
+    );
+    crate::kind::FrameLimits {
+        link: format!("Iridium SBD ({})", device.as_str_name()),
+        outgoing,
+        incoming,
+        text,
+        each_way: true,
+    }
+}
+
 /// Why bytes are not a Goby Iridium message, or a transmission cannot be
 /// made into one.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -7,25 +7,28 @@
 //! - [`status`]: the session status codes (`+SBDIX`) and their meanings.
 //! - [`reader`]: an AT serial stream split into lines and binary blocks.
 //! - [`driver`]: the vehicle's driver ([`IridiumDriver`]).
-//! - [`shore`]: the shore's driver over DirectIP or RockBLOCK ([`IridiumShoreDriver`]).
-//! - [`shore_rudics`]: the shore's RUDICS server (calls from vehicles), sans-IO.
+//! - `shore`: the shore's driver over DirectIP or RockBLOCK
+//!   (`IridiumShoreDriver`; with the `iridium-shore` feature, on by
+//!   default).
+//! - `shore_rudics`: the shore's RUDICS server (calls from vehicles), sans-IO.
 //! - [`directip`]: Iridium's DirectIP messages (MO, MT, confirmations).
-//! - [`rockblock`]: the RockBLOCK web service (MO webhook with its JWT, MT
+//! - `rockblock`: the RockBLOCK web service (MO webhook with its JWT, MT
 //!   POST).
-//! - [`emulator`]: an emulated 9603 on a pseudo-terminal and an emulated
-//!   gateway with DirectIP.
 
 pub mod at;
 pub mod directip;
 pub mod driver;
-pub mod emulator;
 pub mod frame;
 pub mod reader;
+#[cfg(feature = "iridium-shore")]
 pub mod rockblock;
 pub mod rudics;
+#[cfg(feature = "iridium-shore")]
 pub mod shore;
+#[cfg(feature = "iridium-shore")]
 pub mod shore_rudics;
 pub mod status;
 
 pub use driver::IridiumDriver;
+#[cfg(feature = "iridium-shore")]
 pub use shore::IridiumShoreDriver;

@@ -78,11 +78,12 @@ use super::rockblock::webhook::{self, WebhookConfig, WebhookEvent};
 use super::rockblock::{JwtVerifier, MtReply, MtRequest};
 use super::rudics;
 use super::shore_rudics::{CallId, CallOutput, CallSettings, RudicsCalls};
-use crate::check::{self, Problem};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::problem::{self, Problem};
 
 /// Transmissions asked for that wait while an MT message is being sent.
 pub const MAX_WAITING: usize = 2;
@@ -332,11 +333,43 @@ fn rockblock_problems(shore: &IridiumShoreDriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverIridiumShore),
+    short_name: "iridium_shore",
+    title: "Iridium shore",
+    section: Some("iridium_shore"),
+    goby3_extensions: &[("goby.acomms.iridium.protobuf.shore_config", "iridium_shore")],
+};
+
+impl DriverKind for IridiumShoreDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problems(config)
+    }
+
+    /// The device's MT messages out, its MO messages in.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        Some(frame::frame_limits(
+            shore_config(config).device(),
+            Direction::MobileTerminated,
+            max_frame_bytes(config) as usize,
+        ))
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(IridiumShoreDriver::start(config))
+    }
+}
+
 impl IridiumShoreDriver {
     /// Binds the MO listener (DirectIP, or RockBLOCK's webhook) and starts
     /// the driver.
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let shore = shore_config(config);
         let bind = SocketAddr::new(
             shore
@@ -704,30 +737,7 @@ impl Shore {
                 },
                 Some(event) = call_rx.recv() => {
                     if let Some(c) = calls.as_mut() {
-                        let now = tokio::time::Instant::now();
-                        let outs = match event {
-                            CallEvent::Connected(id, peer, writer) => {
-                                tracing::info!("RUDICS call {id} from {peer}");
-                                writers.insert(id, writer);
-                                c.connected(id, peer, now);
-                                Vec::new()
-                            }
-                            CallEvent::Bytes(id, bytes) => {
-                                events.emit(DriverEvent::Raw(RawMessage {
-                                    direction: RawDirection::Incoming,
-                                    bytes: bytes.clone(),
-                                    peer: Some(format!("RUDICS call {id}")),
-                                }));
-                                c.bytes(id, &bytes, now)
-                            }
-                            CallEvent::Closed(id) => {
-                                tracing::info!("RUDICS call {id} ended");
-                                writers.remove(&id);
-                                c.closed(id);
-                                Vec::new()
-                            }
-                        };
-                        self.call_outputs(outs, &mut writers, c, &mut acks, &events);
+                        self.call_event(event, c, &mut writers, &mut acks, &events);
                     }
                 },
                 () = crate::time::sleep_until_opt(calls.as_ref().and_then(RudicsCalls::next_deadline)) => {
@@ -748,6 +758,41 @@ impl Shore {
                 },
             }
         }
+    }
+
+    /// What a RUDICS call brought: a call connected, bytes, a call ended.
+    fn call_event(
+        &mut self,
+        event: CallEvent,
+        c: &mut RudicsCalls,
+        writers: &mut HashMap<CallId, mpsc::UnboundedSender<Vec<u8>>>,
+        acks: &mut VecDeque<ModemTransmission>,
+        events: &EventSink,
+    ) {
+        let now = tokio::time::Instant::now();
+        let outs = match event {
+            CallEvent::Connected(id, peer, writer) => {
+                tracing::info!("RUDICS call {id} from {peer}");
+                writers.insert(id, writer);
+                c.connected(id, peer, now);
+                Vec::new()
+            }
+            CallEvent::Bytes(id, bytes) => {
+                events.emit(DriverEvent::Raw(RawMessage {
+                    direction: RawDirection::Incoming,
+                    bytes: bytes.clone(),
+                    peer: Some(format!("RUDICS call {id}")),
+                }));
+                c.bytes(id, &bytes, now)
+            }
+            CallEvent::Closed(id) => {
+                tracing::info!("RUDICS call {id} ended");
+                writers.remove(&id);
+                c.closed(id);
+                Vec::new()
+            }
+        };
+        self.call_outputs(outs, writers, c, acks, events);
     }
 
     /// Does what the calls ask.

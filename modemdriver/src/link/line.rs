@@ -1,4 +1,6 @@
-//! Lines over a byte stream (serial port, TCP, pseudo-terminal).
+//! Lines over a byte stream (serial port, TCP, pseudo-terminal): read from
+//! the stream ([`LineLink`]), or split out of the bytes a driver reads
+//! itself ([`LineSplitter`]).
 
 use std::io;
 
@@ -90,6 +92,49 @@ impl<S: AsyncRead + AsyncWrite + Unpin + Send> Link for LineLink<S> {
     }
 }
 
+/// Splits bytes into lines ended by CR or LF, for a driver that reads its
+/// modem's stream as bytes (its writes are not all lines); empty lines are
+/// skipped, and a run of `max` bytes without an end is given as a line.
+#[derive(Debug)]
+pub struct LineSplitter {
+    buf: Vec<u8>,
+    max: usize,
+}
+
+impl LineSplitter {
+    /// A splitter with nothing buffered, giving lines of at most `max`
+    /// bytes.
+    pub fn new(max: usize) -> Self {
+        LineSplitter {
+            buf: Vec::new(),
+            max: max.max(1),
+        }
+    }
+
+    /// Forgets what is buffered (the link was lost).
+    pub fn clear(&mut self) {
+        self.buf.clear();
+    }
+
+    /// The lines `bytes` complete, in order.
+    pub fn push(&mut self, bytes: &[u8]) -> Vec<Vec<u8>> {
+        let mut out = Vec::new();
+        for &b in bytes {
+            if b == b'\r' || b == b'\n' {
+                if !self.buf.is_empty() {
+                    out.push(std::mem::take(&mut self.buf));
+                }
+            } else {
+                self.buf.push(b);
+                if self.buf.len() >= self.max {
+                    out.push(std::mem::take(&mut self.buf));
+                }
+            }
+        }
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -112,6 +157,16 @@ mod tests {
             link.recv().await.unwrap_err().kind(),
             io::ErrorKind::UnexpectedEof
         );
+    }
+
+    #[test]
+    fn a_splitter_takes_cr_or_lf_skips_empty_lines_and_bounds_them() {
+        let mut lines = LineSplitter::new(8);
+        assert_eq!(lines.push(b"one\r\ntw"), vec![b"one".to_vec()]);
+        assert_eq!(lines.push(b"o\n\n\rthree"), vec![b"two".to_vec()]);
+        assert_eq!(lines.push(b"3456789"), vec![b"three345".to_vec()]);
+        lines.clear();
+        assert!(lines.push(b"\r\n").is_empty());
     }
 
     #[tokio::test]

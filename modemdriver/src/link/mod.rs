@@ -10,6 +10,7 @@ pub mod datagram;
 pub mod fault;
 pub mod line;
 pub mod serial;
+pub mod stream;
 pub mod trace;
 
 use std::fmt::Debug;

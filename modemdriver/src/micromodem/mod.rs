@@ -12,13 +12,12 @@
 //! - [`transmission`]: what a `DRIVER_SPECIFIC` transmission (a MAC slot
 //!   such as Goby3's FDP slot) asks of the modem.
 //! - [`driver`]: the driver ([`MicroModemDriver`]).
-//! - [`emulator`]: the modem's side, for tests and bench work.
 
 pub mod application_ack;
 pub mod clock;
 pub mod driver;
-pub mod emulator;
 pub mod fdp;
+mod fields;
 pub mod firmware;
 pub mod nmea;
 pub mod ranging;

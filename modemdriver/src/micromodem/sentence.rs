@@ -10,7 +10,9 @@
 //! upper-case hex. [`MmSentence::parse`] never panics; its errors name the
 //! sentence and field.
 
-use super::nmea::{NmeaError, NmeaSentence};
+pub use super::fields::SentenceError;
+use super::fields::{hex_decode, Fields};
+use super::nmea::NmeaSentence;
 use super::statistics::{ReceiveStatisticsSentence, TransmitStatisticsSentence};
 
 /// A Micro-Modem cycle: who sends to whom, at which rate, how many frames.
@@ -380,29 +382,6 @@ pub enum MmSentence {
     },
 }
 
-/// Why a line is not a Micro-Modem sentence.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum SentenceError {
-    /// Not NMEA (including a checksum mismatch).
-    #[error(transparent)]
-    Nmea(#[from] NmeaError),
-    /// An address this implementation does not know.
-    #[error("unknown sentence ${0}")]
-    Unknown(String),
-    /// A field missing or malformed.
-    #[error("${sentence} field {field} ({name}): {problem}")]
-    Field {
-        /// The sentence address.
-        sentence: String,
-        /// Field index (1 is the first after the address).
-        field: usize,
-        /// Field name.
-        name: &'static str,
-        /// What is wrong.
-        problem: String,
-    },
-}
-
 /// Mask of a mini-packet's 13 bits.
 pub const MINI_PACKET_MASK: u16 = 0x1fff;
 
@@ -410,67 +389,7 @@ fn hex_encode(data: &[u8]) -> String {
     data.iter().map(|b| format!("{b:02X}")).collect()
 }
 
-fn hex_decode(text: &str) -> Option<Vec<u8>> {
-    if !text.len().is_multiple_of(2) {
-        return None;
-    }
-    text.as_bytes()
-        .chunks(2)
-        .map(|pair| {
-            let s = std::str::from_utf8(pair).ok()?;
-            u8::from_str_radix(s, 16).ok()
-        })
-        .collect()
-}
-
-/// Typed access to a sentence's fields; errors name the sentence and field.
-pub(super) struct Fields<'a> {
-    pub(super) sentence: &'a NmeaSentence,
-}
-
 impl Fields<'_> {
-    pub(super) fn err(
-        &self,
-        i: usize,
-        name: &'static str,
-        problem: impl Into<String>,
-    ) -> SentenceError {
-        SentenceError::Field {
-            sentence: self.sentence.address(),
-            field: i + 1,
-            name,
-            problem: problem.into(),
-        }
-    }
-
-    pub(super) fn text(&self, i: usize, name: &'static str) -> Result<String, SentenceError> {
-        self.sentence
-            .field(i)
-            .map(str::to_string)
-            .ok_or_else(|| self.err(i, name, "missing"))
-    }
-
-    pub(super) fn uint(&self, i: usize, name: &'static str) -> Result<u32, SentenceError> {
-        let t = self.text(i, name)?;
-        t.trim()
-            .parse()
-            .map_err(|_| self.err(i, name, format!("{t:?} is not an unsigned integer")))
-    }
-
-    pub(super) fn int(&self, i: usize, name: &'static str) -> Result<i32, SentenceError> {
-        let t = self.text(i, name)?;
-        t.trim()
-            .parse()
-            .map_err(|_| self.err(i, name, format!("{t:?} is not an integer")))
-    }
-
-    fn opt_float(&self, i: usize, name: &'static str) -> Result<Option<f64>, SentenceError> {
-        match self.sentence.field(i).map(str::trim) {
-            None | Some("") => Ok(None),
-            Some(_) => self.float(i, name).map(Some),
-        }
-    }
-
     fn fdp_frames(&self, i: usize, name: &'static str) -> Result<Vec<FdpFrame>, SentenceError> {
         let t = match self.sentence.field(i) {
             None | Some("") => return Ok(Vec::new()),
@@ -522,27 +441,6 @@ impl Fields<'_> {
             .collect()
     }
 
-    fn flag(&self, i: usize, name: &'static str) -> Result<bool, SentenceError> {
-        match self.uint(i, name)? {
-            0 => Ok(false),
-            1 => Ok(true),
-            v => Err(self.err(i, name, format!("{v} is neither 0 nor 1"))),
-        }
-    }
-
-    fn float(&self, i: usize, name: &'static str) -> Result<f64, SentenceError> {
-        let t = self.text(i, name)?;
-        match t.trim().parse::<f64>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(self.err(i, name, format!("{t:?} is not a number"))),
-        }
-    }
-
-    fn hex(&self, i: usize, name: &'static str) -> Result<Vec<u8>, SentenceError> {
-        let t = self.text(i, name)?;
-        hex_decode(&t).ok_or_else(|| self.err(i, name, format!("{t:?} is not hex bytes")))
-    }
-
     fn mini(&self, i: usize, name: &'static str) -> Result<u16, SentenceError> {
         let t = self.text(i, name)?;
         match u16::from_str_radix(&t, 16) {
@@ -556,6 +454,64 @@ fn b(v: bool) -> String {
     u8::from(v).to_string()
 }
 
+/// A value as a field of a sentence: a number in decimal, a flag as 0 or
+/// 1, bytes in hexadecimal, text as it is.
+trait Field {
+    fn field(&self) -> String;
+}
+
+impl Field for u32 {
+    fn field(&self) -> String {
+        self.to_string()
+    }
+}
+
+impl Field for bool {
+    fn field(&self) -> String {
+        b(*self)
+    }
+}
+
+impl Field for str {
+    fn field(&self) -> String {
+        self.to_string()
+    }
+}
+
+impl Field for String {
+    fn field(&self) -> String {
+        self.clone()
+    }
+}
+
+impl Field for Vec<u8> {
+    fn field(&self) -> String {
+        hex_encode(self)
+    }
+}
+
+/// The fields of a sentence, each written as a [`Field`].
+macro_rules! fields {
+    ($($value:expr),* $(,)?) => {
+        vec![$(Field::field($value)),*]
+    };
+}
+
+/// `$CCCLK` / `$CACLK` fields: the year, then two digits each.
+fn clock_fields(date_time: &[u32; 6]) -> Vec<String> {
+    date_time
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            if i == 0 {
+                v.to_string()
+            } else {
+                format!("{v:02}")
+            }
+        })
+        .collect()
+}
+
 impl MmSentence {
     /// Parses a line.
     pub fn parse(line: &[u8]) -> Result<MmSentence, SentenceError> {
@@ -566,19 +522,35 @@ impl MmSentence {
     /// Reads a parsed NMEA sentence.
     pub fn from_nmea(s: &NmeaSentence) -> Result<MmSentence, SentenceError> {
         let f = Fields { sentence: s };
+        if let Some(sentence) = Self::from_host_nmea(&f)? {
+            return Ok(sentence);
+        }
+        if let Some(sentence) = Self::from_modem_nmea(&f)? {
+            return Ok(sentence);
+        }
+        match (s.talker.as_str(), s.id.as_str()) {
+            ("CA", id) | ("SN", id @ ("PDT" | "PNT")) if LOOSE_ECHOES.contains(&id) => {
+                Ok(MmSentence::Echo {
+                    talker: s.talker.clone(),
+                    id: id.to_string(),
+                    fields: s.fields.clone(),
+                })
+            }
+            _ => Err(SentenceError::Unknown(s.address())),
+        }
+    }
+
+    /// A sentence a host writes (`$CC…`), or one the host and the modem both write; `None` for any other.
+    fn from_host_nmea(f: &Fields<'_>) -> Result<Option<MmSentence>, SentenceError> {
+        let s = f.sentence;
         let modem = s.talker == "CA";
-        Ok(match (s.talker.as_str(), s.id.as_str()) {
+        Ok(Some(match (s.talker.as_str(), s.id.as_str()) {
             ("CC", "CFG") => MmSentence::SetConfig {
                 key: f.text(0, "key")?,
                 value: f.text(1, "value")?,
             },
             ("CC", "CFQ") => MmSentence::QueryConfig {
                 key: f.text(0, "key")?,
-            },
-            // Micro-Modem 2 parameters may carry commas or no value at all.
-            ("CA", "CFG") => MmSentence::Config {
-                key: f.text(0, "key")?,
-                value: s.fields.get(1..).map(|m| m.join(",")).unwrap_or_default(),
             },
             ("CC" | "CA", "CLK") => {
                 let names = ["year", "month", "day", "hour", "minute", "second"];
@@ -601,6 +573,83 @@ impl MmSentence {
                     frames: f.uint(5, "frames")?,
                 },
             },
+            ("CC", "TXD") => MmSentence::TransmitData {
+                src: f.uint(0, "src")?,
+                dest: f.uint(1, "dest")?,
+                ack: f.flag(2, "ack")?,
+                data: f.hex(3, "data")?,
+            },
+            ("CC" | "CA", "MPC") => MmSentence::Ping {
+                from_modem: modem,
+                src: f.uint(0, "src")?,
+                dest: f.uint(1, "dest")?,
+            },
+            ("CC" | "CA", "MUC") => MmSentence::MiniPacket {
+                from_modem: modem,
+                src: f.uint(0, "src")?,
+                dest: f.uint(1, "dest")?,
+                value: f.mini(2, "value")?,
+            },
+            ("CC", "TMS") => MmSentence::TimeSet {
+                time: f.text(0, "time")?,
+                mode: f.uint(1, "mode")?,
+            },
+            ("CC", "TMQ") => MmSentence::TimeQuery {
+                mode: f.uint(0, "mode")?,
+            },
+            ("CC", "TDP") => MmSentence::FdpTransmit {
+                dest: f.uint(0, "dest")?,
+                rate: f.uint(1, "rate")?,
+                ack: f.flag(2, "ack")?,
+                reserved: f.uint(3, "reserved")?,
+                data: f.hex(4, "data")?,
+            },
+            ("CC", "PDT") => MmSentence::RemusLblPing {
+                group: f.uint(0, "group")?,
+                channel: f.uint(1, "channel")?,
+                sf: f.uint(2, "sf")?,
+                sto: f.uint(3, "sto")?,
+                timeout_ms: f.uint(4, "timeout")?,
+                beacons: [
+                    f.flag(5, "beacon_a")?,
+                    f.flag(6, "beacon_b")?,
+                    f.flag(7, "beacon_c")?,
+                    f.flag(8, "beacon_d")?,
+                ],
+            },
+            ("CC", "PNT") => MmSentence::NarrowbandLblPing {
+                transmit_freq: f.uint(0, "transmit_freq")?,
+                transmit_ping_ms: f.uint(1, "transmit_ping_ms")?,
+                receive_ping_ms: f.uint(2, "receive_ping_ms")?,
+                timeout_ms: f.uint(3, "timeout")?,
+                receive_freq: [
+                    f.uint(4, "freq_a")?,
+                    f.uint(5, "freq_b")?,
+                    f.uint(6, "freq_c")?,
+                    f.uint(7, "freq_d")?,
+                ],
+                transmit_flag: f.flag(8, "transmit_flag")?,
+            },
+            ("CC", "MEC") => MmSentence::HardwareControl {
+                src: f.uint(0, "src")?,
+                dest: f.uint(1, "dest")?,
+                line: f.uint(2, "line")?,
+                mode: f.uint(3, "mode")?,
+                arg: f.uint(4, "arg")?,
+            },
+            _ => return Ok(None),
+        }))
+    }
+
+    /// A sentence only the modem writes (`$CA…`, `$SN…`); `None` for any other.
+    fn from_modem_nmea(f: &Fields<'_>) -> Result<Option<MmSentence>, SentenceError> {
+        let s = f.sentence;
+        Ok(Some(match (s.talker.as_str(), s.id.as_str()) {
+            // Micro-Modem 2 parameters may carry commas or no value at all.
+            ("CA", "CFG") => MmSentence::Config {
+                key: f.text(0, "key")?,
+                value: s.fields.get(1..).map(|m| m.join(",")).unwrap_or_default(),
+            },
             ("CA", "DRQ") => MmSentence::DataRequest {
                 time: f.text(0, "time")?,
                 src: f.uint(1, "src")?,
@@ -608,12 +657,6 @@ impl MmSentence {
                 ack: f.flag(3, "ack")?,
                 max_bytes: f.uint(4, "max_bytes")?,
                 frame: f.uint(5, "frame")?,
-            },
-            ("CC", "TXD") => MmSentence::TransmitData {
-                src: f.uint(0, "src")?,
-                dest: f.uint(1, "dest")?,
-                ack: f.flag(2, "ack")?,
-                data: f.hex(3, "data")?,
             },
             ("CA", "TXD") => MmSentence::TransmitDataEcho {
                 src: f.uint(0, "src")?,
@@ -654,11 +697,6 @@ impl MmSentence {
                 kind: f.text(0, "kind")?,
                 value: s.fields.get(1..).map(|m| m.join(",")).unwrap_or_default(),
             },
-            ("CC" | "CA", "MPC") => MmSentence::Ping {
-                from_modem: modem,
-                src: f.uint(0, "src")?,
-                dest: f.uint(1, "dest")?,
-            },
             ("CA", "MPA") => MmSentence::PingHeard {
                 src: f.uint(0, "src")?,
                 dest: f.uint(1, "dest")?,
@@ -668,20 +706,10 @@ impl MmSentence {
                 dest: f.uint(1, "dest")?,
                 travel_time: f.float(2, "travel_time")?,
             },
-            ("CC" | "CA", "MUC") => MmSentence::MiniPacket {
-                from_modem: modem,
-                src: f.uint(0, "src")?,
-                dest: f.uint(1, "dest")?,
-                value: f.mini(2, "value")?,
-            },
             ("CA", "MUA") => MmSentence::MiniPacketReceived {
                 src: f.uint(0, "src")?,
                 dest: f.uint(1, "dest")?,
                 value: f.mini(2, "value")?,
-            },
-            ("CC", "TMS") => MmSentence::TimeSet {
-                time: f.text(0, "time")?,
-                mode: f.uint(1, "mode")?,
             },
             ("CA", "TMS") => MmSentence::TimeSetReply {
                 timed_out: f.uint(0, "timed_out")?,
@@ -692,22 +720,12 @@ impl MmSentence {
                 clock_source: f.text(1, "clock_source")?,
                 pps_source: f.text(2, "pps_source")?,
             },
-            ("CC", "TMQ") => MmSentence::TimeQuery {
-                mode: f.uint(0, "mode")?,
-            },
             ("CA", "CST") => {
-                MmSentence::ReceiveStatistics(Box::new(ReceiveStatisticsSentence::from_fields(&f)?))
+                MmSentence::ReceiveStatistics(Box::new(ReceiveStatisticsSentence::from_fields(f)?))
             }
             ("CA", "XST") => MmSentence::TransmitStatistics(Box::new(
-                TransmitStatisticsSentence::from_fields(&f)?,
+                TransmitStatisticsSentence::from_fields(f)?,
             )),
-            ("CC", "TDP") => MmSentence::FdpTransmit {
-                dest: f.uint(0, "dest")?,
-                rate: f.uint(1, "rate")?,
-                ack: f.flag(2, "ack")?,
-                reserved: f.uint(3, "reserved")?,
-                data: f.hex(4, "data")?,
-            },
             ("CA", "RDP") => MmSentence::FdpReceive {
                 src: f.uint(0, "src")?,
                 dest: f.uint(1, "dest")?,
@@ -716,32 +734,6 @@ impl MmSentence {
                 reserved: f.uint(4, "reserved")?,
                 mini_frames: f.fdp_frames(5, "mini_frames")?,
                 data_frames: f.fdp_frames(6, "data_frames")?,
-            },
-            ("CC", "PDT") => MmSentence::RemusLblPing {
-                group: f.uint(0, "group")?,
-                channel: f.uint(1, "channel")?,
-                sf: f.uint(2, "sf")?,
-                sto: f.uint(3, "sto")?,
-                timeout_ms: f.uint(4, "timeout")?,
-                beacons: [
-                    f.flag(5, "beacon_a")?,
-                    f.flag(6, "beacon_b")?,
-                    f.flag(7, "beacon_c")?,
-                    f.flag(8, "beacon_d")?,
-                ],
-            },
-            ("CC", "PNT") => MmSentence::NarrowbandLblPing {
-                transmit_freq: f.uint(0, "transmit_freq")?,
-                transmit_ping_ms: f.uint(1, "transmit_ping_ms")?,
-                receive_ping_ms: f.uint(2, "receive_ping_ms")?,
-                timeout_ms: f.uint(3, "timeout")?,
-                receive_freq: [
-                    f.uint(4, "freq_a")?,
-                    f.uint(5, "freq_b")?,
-                    f.uint(6, "freq_c")?,
-                    f.uint(7, "freq_d")?,
-                ],
-                transmit_flag: f.flag(8, "transmit_flag")?,
             },
             ("SN", "TTA") => MmSentence::TravelTimes {
                 times: [
@@ -752,13 +744,6 @@ impl MmSentence {
                 ],
                 time: f.text(4, "time")?,
             },
-            ("CC", "MEC") => MmSentence::HardwareControl {
-                src: f.uint(0, "src")?,
-                dest: f.uint(1, "dest")?,
-                line: f.uint(2, "line")?,
-                mode: f.uint(3, "mode")?,
-                arg: f.uint(4, "arg")?,
-            },
             ("CA", "MER") => MmSentence::HardwareControlReply {
                 src: f.uint(0, "src")?,
                 dest: f.uint(1, "dest")?,
@@ -766,57 +751,70 @@ impl MmSentence {
                 mode: f.uint(3, "mode")?,
                 arg: f.uint(4, "arg")?,
             },
-            ("CA", id) | ("SN", id @ ("PDT" | "PNT")) if LOOSE_ECHOES.contains(&id) => {
-                MmSentence::Echo {
-                    talker: s.talker.clone(),
-                    id: id.to_string(),
-                    fields: s.fields.clone(),
-                }
-            }
-            _ => return Err(SentenceError::Unknown(s.address())),
-        })
+            _ => return Ok(None),
+        }))
     }
 
     /// The NMEA sentence.
     pub fn to_nmea(&self) -> NmeaSentence {
-        let talker = |from_modem: bool| if from_modem { "CA" } else { "CC" };
-        let n = |t: &str, id: &str, fields: Vec<String>| NmeaSentence::new(t, id, fields);
+        let (talker, id) = self.address();
+        NmeaSentence::new(talker, id, self.fields())
+    }
+
+    /// Its talker and sentence id: `("CA", "RXD")`.
+    fn address(&self) -> (&str, &str) {
+        let by = |from_modem: bool| if from_modem { "CA" } else { "CC" };
         match self {
-            MmSentence::SetConfig { key, value } => {
-                n("CC", "CFG", vec![key.clone(), value.clone()])
+            MmSentence::SetConfig { .. } => ("CC", "CFG"),
+            MmSentence::QueryConfig { .. } => ("CC", "CFQ"),
+            MmSentence::Config { .. } => ("CA", "CFG"),
+            MmSentence::Clock { from_modem, .. } => (by(*from_modem), "CLK"),
+            MmSentence::Cycle { from_modem, .. } => (by(*from_modem), "CYC"),
+            MmSentence::DataRequest { .. } => ("CA", "DRQ"),
+            MmSentence::TransmitData { .. } => ("CC", "TXD"),
+            MmSentence::TransmitDataEcho { .. } => ("CA", "TXD"),
+            MmSentence::TransmitStart { .. } => ("CA", "TXP"),
+            MmSentence::TransmitDone { .. } => ("CA", "TXF"),
+            MmSentence::ReceiveData { .. } => ("CA", "RXD"),
+            MmSentence::Ack { .. } => ("CA", "ACK"),
+            MmSentence::Revision { .. } => ("CA", "REV"),
+            MmSentence::Error { .. } => ("CA", "ERR"),
+            MmSentence::Message { .. } => ("CA", "MSG"),
+            MmSentence::Ping { from_modem, .. } => (by(*from_modem), "MPC"),
+            MmSentence::PingHeard { .. } => ("CA", "MPA"),
+            MmSentence::PingReply { .. } => ("CA", "MPR"),
+            MmSentence::MiniPacket { from_modem, .. } => (by(*from_modem), "MUC"),
+            MmSentence::MiniPacketReceived { .. } => ("CA", "MUA"),
+            MmSentence::TimeSet { .. } => ("CC", "TMS"),
+            MmSentence::TimeSetReply { .. } => ("CA", "TMS"),
+            MmSentence::TimingSource { .. } => ("CA", "TMG"),
+            MmSentence::TimeQuery { .. } => ("CC", "TMQ"),
+            MmSentence::ReceiveStatistics(_) => ("CA", "CST"),
+            MmSentence::TransmitStatistics(_) => ("CA", "XST"),
+            MmSentence::FdpTransmit { .. } => ("CC", "TDP"),
+            MmSentence::FdpReceive { .. } => ("CA", "RDP"),
+            MmSentence::RemusLblPing { .. } => ("CC", "PDT"),
+            MmSentence::NarrowbandLblPing { .. } => ("CC", "PNT"),
+            MmSentence::TravelTimes { .. } => ("SN", "TTA"),
+            MmSentence::HardwareControl { .. } => ("CC", "MEC"),
+            MmSentence::HardwareControlReply { .. } => ("CA", "MER"),
+            MmSentence::Echo { talker, id, .. } => (talker, id),
+        }
+    }
+
+    /// Its fields, as written.
+    fn fields(&self) -> Vec<String> {
+        let mini = |value: &u16| format!("{:04X}", value & MINI_PACKET_MASK);
+        match self {
+            MmSentence::SetConfig { key, value } | MmSentence::Config { key, value } => {
+                fields![key, value]
             }
-            MmSentence::QueryConfig { key } => n("CC", "CFQ", vec![key.clone()]),
-            MmSentence::Config { key, value } => n("CA", "CFG", vec![key.clone(), value.clone()]),
-            MmSentence::Clock {
-                from_modem,
-                date_time,
-            } => n(
-                talker(*from_modem),
-                "CLK",
-                date_time
-                    .iter()
-                    .enumerate()
-                    .map(|(i, v)| {
-                        if i == 0 {
-                            v.to_string()
-                        } else {
-                            format!("{v:02}")
-                        }
-                    })
-                    .collect(),
-            ),
-            MmSentence::Cycle { from_modem, cycle } => n(
-                talker(*from_modem),
-                "CYC",
-                vec![
-                    "0".into(),
-                    cycle.src.to_string(),
-                    cycle.dest.to_string(),
-                    cycle.rate.to_string(),
-                    b(cycle.ack),
-                    cycle.frames.to_string(),
-                ],
-            ),
+            MmSentence::QueryConfig { key } => fields![key],
+            MmSentence::Message { kind, value } => fields![kind, value],
+            MmSentence::Clock { date_time, .. } => clock_fields(date_time),
+            MmSentence::Cycle { cycle: c, .. } => {
+                fields!["0", &c.src, &c.dest, &c.rate, &c.ack, &c.frames]
+            }
             MmSentence::DataRequest {
                 time,
                 src,
@@ -824,177 +822,120 @@ impl MmSentence {
                 ack,
                 max_bytes,
                 frame,
-            } => n(
-                "CA",
-                "DRQ",
-                vec![
-                    time.clone(),
-                    src.to_string(),
-                    dest.to_string(),
-                    b(*ack),
-                    max_bytes.to_string(),
-                    frame.to_string(),
-                ],
-            ),
+            } => {
+                fields![time, src, dest, ack, max_bytes, frame]
+            }
             MmSentence::TransmitData {
                 src,
                 dest,
                 ack,
                 data,
-            } => n(
-                "CC",
-                "TXD",
-                vec![src.to_string(), dest.to_string(), b(*ack), hex_encode(data)],
-            ),
+            } => fields![src, dest, ack, data],
             MmSentence::TransmitDataEcho {
                 src,
                 dest,
                 ack,
                 bytes,
-            } => n(
-                "CA",
-                "TXD",
-                vec![
-                    src.to_string(),
-                    dest.to_string(),
-                    b(*ack),
-                    bytes.to_string(),
-                ],
-            ),
-            MmSentence::TransmitStart { bytes } => n("CA", "TXP", vec![bytes.to_string()]),
-            MmSentence::TransmitDone { bytes } => n("CA", "TXF", vec![bytes.to_string()]),
+            } => {
+                fields![src, dest, ack, bytes]
+            }
+            MmSentence::TransmitStart { bytes } | MmSentence::TransmitDone { bytes } => {
+                fields![bytes]
+            }
             MmSentence::ReceiveData {
                 src,
                 dest,
                 ack,
                 frame,
                 data,
-            } => n(
-                "CA",
-                "RXD",
-                vec![
-                    src.to_string(),
-                    dest.to_string(),
-                    b(*ack),
-                    frame.to_string(),
-                    hex_encode(data),
-                ],
-            ),
-            MmSentence::Ack { src, dest, frame } => n(
-                "CA",
-                "ACK",
-                vec![
-                    src.to_string(),
-                    dest.to_string(),
-                    frame.to_string(),
-                    "0".into(),
-                ],
-            ),
+            } => {
+                fields![src, dest, ack, frame, data]
+            }
+            MmSentence::Ack { src, dest, frame } => fields![src, dest, frame, "0"],
             MmSentence::Revision {
                 time,
                 ident,
                 version,
-            } => n(
-                "CA",
-                "REV",
-                vec![time.clone(), ident.clone(), version.clone()],
-            ),
+            } => fields![time, ident, version],
             MmSentence::Error {
                 time,
                 module,
                 code,
                 message,
-            } => n(
-                "CA",
-                "ERR",
-                vec![time.clone(), module.clone(), code.clone(), message.clone()],
-            ),
-            MmSentence::Message { kind, value } => {
-                n("CA", "MSG", vec![kind.clone(), value.clone()])
+            } => {
+                fields![time, module, code, message]
             }
-            MmSentence::Ping {
-                from_modem,
-                src,
-                dest,
-            } => n(
-                talker(*from_modem),
-                "MPC",
-                vec![src.to_string(), dest.to_string()],
-            ),
-            MmSentence::PingHeard { src, dest } => {
-                n("CA", "MPA", vec![src.to_string(), dest.to_string()])
+            MmSentence::Ping { src, dest, .. } | MmSentence::PingHeard { src, dest } => {
+                fields![src, dest]
             }
             MmSentence::PingReply {
                 src,
                 dest,
                 travel_time,
-            } => n(
-                "CA",
-                "MPR",
-                vec![
-                    src.to_string(),
-                    dest.to_string(),
-                    format!("{travel_time:.4}"),
-                ],
-            ),
+            } => {
+                fields![src, dest, &format!("{travel_time:.4}")]
+            }
             MmSentence::MiniPacket {
-                from_modem,
-                src,
-                dest,
-                value,
-            } => n(
-                talker(*from_modem),
-                "MUC",
-                vec![
-                    src.to_string(),
-                    dest.to_string(),
-                    format!("{:04X}", value & MINI_PACKET_MASK),
-                ],
-            ),
-            MmSentence::MiniPacketReceived { src, dest, value } => n(
-                "CA",
-                "MUA",
-                vec![
-                    src.to_string(),
-                    dest.to_string(),
-                    format!("{:04X}", value & MINI_PACKET_MASK),
-                ],
-            ),
-            MmSentence::TimeSet { time, mode } => {
-                n("CC", "TMS", vec![time.clone(), mode.to_string()])
+                src, dest, value, ..
             }
-            MmSentence::TimeSetReply { timed_out, time } => {
-                n("CA", "TMS", vec![timed_out.to_string(), time.clone()])
+            | MmSentence::MiniPacketReceived { src, dest, value } => {
+                fields![src, dest, &mini(value)]
             }
+            MmSentence::TimeSet { time, mode } => fields![time, mode],
+            MmSentence::TimeSetReply { timed_out, time } => fields![timed_out, time],
             MmSentence::TimingSource {
                 time,
                 clock_source,
                 pps_source,
-            } => n(
-                "CA",
-                "TMG",
-                vec![time.clone(), clock_source.clone(), pps_source.clone()],
-            ),
-            MmSentence::TimeQuery { mode } => n("CC", "TMQ", vec![mode.to_string()]),
-            MmSentence::ReceiveStatistics(cst) => n("CA", "CST", cst.to_fields()),
-            MmSentence::TransmitStatistics(xst) => n("CA", "XST", xst.to_fields()),
+            } => {
+                fields![time, clock_source, pps_source]
+            }
+            MmSentence::TimeQuery { mode } => fields![mode],
+            MmSentence::ReceiveStatistics(cst) => cst.to_fields(),
+            MmSentence::TransmitStatistics(xst) => xst.to_fields(),
             MmSentence::FdpTransmit {
                 dest,
                 rate,
                 ack,
                 reserved,
                 data,
-            } => n(
-                "CC",
-                "TDP",
-                vec![
-                    dest.to_string(),
-                    rate.to_string(),
-                    b(*ack),
-                    reserved.to_string(),
-                    hex_encode(data),
-                ],
-            ),
+            } => {
+                fields![dest, rate, ack, reserved, data]
+            }
+            MmSentence::FdpReceive { .. }
+            | MmSentence::RemusLblPing { .. }
+            | MmSentence::NarrowbandLblPing { .. }
+            | MmSentence::TravelTimes { .. } => self.long_fields().unwrap_or_default(),
+            MmSentence::HardwareControl {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            }
+            | MmSentence::HardwareControlReply {
+                src,
+                dest,
+                line,
+                mode,
+                arg,
+            } => {
+                fields![src, dest, line, mode, arg]
+            }
+            MmSentence::Echo { fields, .. } => fields.clone(),
+        }
+    }
+
+    /// The fields of an FDP reception, a long-baseline ping and its
+    /// travel times (the sentences of many fields); `None` for any other.
+    fn long_fields(&self) -> Option<Vec<String>> {
+        let fdp = |fs: &[FdpFrame]| {
+            fs.iter()
+                .map(|f| format!("{};{};{}", b(f.crc_ok), f.bytes, hex_encode(&f.data)))
+                .collect::<Vec<_>>()
+                .join(";")
+        };
+        Some(match self {
             MmSentence::FdpReceive {
                 src,
                 dest,
@@ -1004,25 +945,8 @@ impl MmSentence {
                 mini_frames,
                 data_frames,
             } => {
-                let frames = |fs: &[FdpFrame]| {
-                    fs.iter()
-                        .map(|f| format!("{};{};{}", b(f.crc_ok), f.bytes, hex_encode(&f.data)))
-                        .collect::<Vec<_>>()
-                        .join(";")
-                };
-                n(
-                    "CA",
-                    "RDP",
-                    vec![
-                        src.to_string(),
-                        dest.to_string(),
-                        rate.to_string(),
-                        b(*ack),
-                        reserved.to_string(),
-                        frames(mini_frames),
-                        frames(data_frames),
-                    ],
-                )
+                let (mini, data) = (fdp(mini_frames), fdp(data_frames));
+                fields![src, dest, rate, ack, reserved, &mini, &data]
             }
             MmSentence::RemusLblPing {
                 group,
@@ -1032,33 +956,22 @@ impl MmSentence {
                 timeout_ms,
                 beacons,
             } => {
-                let mut fields = vec![
-                    group.to_string(),
-                    channel.to_string(),
-                    sf.to_string(),
-                    sto.to_string(),
-                    timeout_ms.to_string(),
-                ];
+                let mut fields = fields![group, channel, sf, sto, timeout_ms];
                 fields.extend(beacons.iter().map(|on| b(*on)));
-                n("CC", "PDT", fields)
+                fields
             }
             MmSentence::NarrowbandLblPing {
-                transmit_freq,
-                transmit_ping_ms,
-                receive_ping_ms,
+                transmit_freq: tx,
+                transmit_ping_ms: tx_ms,
+                receive_ping_ms: rx_ms,
                 timeout_ms,
                 receive_freq,
                 transmit_flag,
             } => {
-                let mut fields = vec![
-                    transmit_freq.to_string(),
-                    transmit_ping_ms.to_string(),
-                    receive_ping_ms.to_string(),
-                    timeout_ms.to_string(),
-                ];
+                let mut fields = fields![tx, tx_ms, rx_ms, timeout_ms];
                 fields.extend(receive_freq.iter().map(u32::to_string));
                 fields.push(b(*transmit_flag));
-                n("CC", "PNT", fields)
+                fields
             }
             MmSentence::TravelTimes { times, time } => {
                 let mut fields: Vec<String> = times
@@ -1066,38 +979,10 @@ impl MmSentence {
                     .map(|t| t.map(|t| format!("{t:.4}")).unwrap_or_default())
                     .collect();
                 fields.push(time.clone());
-                n("SN", "TTA", fields)
+                fields
             }
-            MmSentence::HardwareControl {
-                src,
-                dest,
-                line,
-                mode,
-                arg,
-            } => n(
-                "CC",
-                "MEC",
-                [src, dest, line, mode, arg]
-                    .iter()
-                    .map(|v| v.to_string())
-                    .collect(),
-            ),
-            MmSentence::HardwareControlReply {
-                src,
-                dest,
-                line,
-                mode,
-                arg,
-            } => n(
-                "CA",
-                "MER",
-                [src, dest, line, mode, arg]
-                    .iter()
-                    .map(|v| v.to_string())
-                    .collect(),
-            ),
-            MmSentence::Echo { talker, id, fields } => n(talker, id, fields.clone()),
-        }
+            _ => return None,
+        })
     }
 
     /// The line, without delimiter.

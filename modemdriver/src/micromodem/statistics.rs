@@ -11,7 +11,7 @@
 //! (`hhmmss.ffff`). Fields a firmware leaves out at the end are `None`;
 //! fields beyond those known are kept in `extra`, so that newer layouts parse.
 
-use super::sentence::{Fields, SentenceError};
+use super::fields::{Fields, SentenceError};
 use protos::goby::acomms::protobuf::{
     MicroModemClockMode, MicroModemPacketType, MicroModemPskErrorCode, MicroModemReceiveMode,
     MicroModemReceiveStatistics, MicroModemTransmitMode, MicroModemTransmitStatistics,

@@ -33,7 +33,7 @@ use protos::goby::acomms::protobuf::{
 };
 
 use super::{fdp, ranging};
-use crate::check::Problem;
+use crate::problem::Problem;
 
 /// Largest FDP packet from a slot that does not give `max_frame_bytes`,
 /// bytes (Goby3's FDP packet size).

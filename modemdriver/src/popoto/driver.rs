@@ -46,17 +46,19 @@
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::{ConnectionType, Driver as DriverKind},
-    popoto_config::Interface as ConfigInterface,
-    DriverConfig, DriverType, PopotoConfig,
+    driver_config::ConnectionType, popoto_config::Interface as ConfigInterface, DriverConfig,
+    DriverType, PopotoConfig,
 };
 
 use super::machine::{Machine, Settings};
 use super::wire::{Command, Interface, ParamValue, MAX_PAYLOAD, MODE_BIT_RATE, RATE_TO_MODE};
-use crate::check::{self, Problem};
 use crate::config;
+use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
-use crate::stream_shell::{self, BoxStream, Endpoint};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::Units;
+use crate::problem::{self, Problem};
+use crate::shell::{self, Device};
 
 /// The JSON command port of a Popoto modem when none is configured.
 pub const DEFAULT_TCP_PORT: u16 = 17000;
@@ -68,14 +70,44 @@ pub const DEFAULT_BAUD: u32 = 115_200;
 /// less Goby3's header byte).
 pub const FRAME_LIMIT: usize = MAX_PAYLOAD - 1;
 
-/// Whether `config` names the Popoto driver.
-pub fn is_popoto(config: &DriverConfig) -> bool {
-    matches!(&config.driver, Some(DriverKind::DriverType(t)) if *t == DriverType::DriverPopoto as i32)
-}
-
 /// The Popoto driver.
 #[derive(Debug)]
 pub struct PopotoDriver;
+
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(DriverType::DriverPopoto),
+    short_name: "popoto",
+    title: "Popoto",
+    section: Some("popoto"),
+    goby3_extensions: &[
+        ("goby.acomms.popoto.protobuf.config", "popoto"),
+        ("goby.acomms.popoto.protobuf.transmission", "popoto"),
+    ],
+};
+
+impl DriverKind for PopotoDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        Some(frame_limits(config))
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        use prost_reflect::ReflectMessage;
+        Some(protos::goby::acomms::protobuf::PopotoSpecific::default().descriptor())
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(PopotoDriver::start(config))
+    }
+}
 
 impl PopotoDriver {
     /// Connects to the modem and starts the driver. A modem that cannot be
@@ -85,58 +117,24 @@ impl PopotoDriver {
     /// ([`DriverError::Config`], as [`problems`] finds them).
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        let endpoint = endpoint(config)?;
-        let link = match endpoint.open().await {
-            Ok(link) => Some(link),
-            Err(e) => {
-                tracing::warn!("Popoto modem at {}: {e}", endpoint.describe());
-                None
-            }
-        };
-        Ok(Self::start_on(
-            settings,
-            endpoint,
-            link,
-            std::sync::Arc::new(goby_time::SystemClock),
-        ))
-    }
-
-    /// Starts the driver on a link already open (`None`: not yet; the
-    /// driver opens `endpoint` itself), reading time from `clock`.
-    pub fn start_on(
-        settings: Settings,
-        endpoint: Endpoint,
-        link: Option<BoxStream>,
-        clock: std::sync::Arc<dyn goby_time::Clock>,
-    ) -> Driver {
-        let now = crate::micromodem::driver::shell::now(&*clock);
-        let machine = if link.is_some() {
-            Machine::new(settings, now)
-        } else {
-            Machine::disconnected(settings, now)
-        };
-        stream_shell::spawn("popoto", machine, endpoint, link, clock)
+        let device = Device::new(config::stream_endpoint(config, REACH), Units::Bytes);
+        Ok(
+            shell::start_reconnecting("popoto", device, |now, up| Machine::new(settings, now, up))
+                .await,
+        )
     }
 }
+
+/// How the driver reaches the modem.
+const REACH: Reach<'static> = Reach {
+    driver: "the Popoto driver",
+    server: "the modem's address",
+    port: Some(DEFAULT_TCP_PORT),
+    baud: DEFAULT_BAUD,
+};
 
 fn popoto_config(config: &DriverConfig) -> PopotoConfig {
     config.popoto.clone().unwrap_or_default()
-}
-
-/// Where the modem is, from `config` (checked by [`problems`]).
-pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    check::refuse(problems(config))?;
-    Ok(match config.connection_type() {
-        ConnectionType::ConnectionSerial => Endpoint::Serial {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-        },
-        _ => Endpoint::Tcp(format!(
-            "{}:{}",
-            config.tcp_server(),
-            config.tcp_port.unwrap_or(u32::from(DEFAULT_TCP_PORT))
-        )),
-    })
 }
 
 /// The largest frame the layer above is offered, bytes (at every rate).
@@ -144,10 +142,10 @@ pub fn max_frame_bytes(config: &DriverConfig) -> usize {
     popoto_config(config).max_frame_bytes() as usize
 }
 
-/// The frame limits of a Popoto configuration in words, for `gobyd
-/// --check`: the frame and, for each rate, the payload mode, its bit rate
-/// and the time a full frame takes.
-pub fn limits(config: &DriverConfig) -> String {
+/// The frame limits of a Popoto configuration, for `gobyd --check`: the
+/// frame and, for each rate, the payload mode, its bit rate and the time a
+/// full frame takes.
+pub fn frame_limits(config: &DriverConfig) -> FrameLimits {
     let max = max_frame_bytes(config);
     let rates: Vec<String> = RATE_TO_MODE
         .iter()
@@ -158,11 +156,17 @@ pub fn limits(config: &DriverConfig) -> String {
             format!("rate {rate} payload mode {mode} {bps} bit/s ({seconds:.1} s)")
         })
         .collect();
-    format!(
-        "driver DRIVER_POPOTO: one frame per transmission of up to {max} bytes at every rate (after Goby3's \
-         1-byte header); a full frame takes about: {}",
-        rates.join(", ")
-    )
+    FrameLimits {
+        link: "driver DRIVER_POPOTO".into(),
+        outgoing: max,
+        incoming: max,
+        text: format!(
+            "one frame per transmission of up to {max} bytes at every rate (after Goby3's \
+             1-byte header); a full frame takes about: {}",
+            rates.join(", ")
+        ),
+        each_way: false,
+    }
 }
 
 /// Every problem of a Popoto configuration that [`settings`] refuses.
@@ -177,37 +181,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         )),
         Err(_) => problems.push(Problem::new("modem_id", "required field is not set")),
     }
-    match config.connection_type() {
-        ConnectionType::ConnectionSerial => {
-            if config.serial_port().trim().is_empty() {
-                problems.push(Problem::new(
-                    "serial_port",
-                    "required for the Popoto driver over serial (e.g. \"/dev/ttyUSB0\"), \
-                     or use connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server",
-                ));
-            }
-        }
-        ConnectionType::ConnectionTcpAsClient => {
-            if config.tcp_server().trim().is_empty() {
-                problems.push(Problem::new(
-                    "tcp_server",
-                    "required for the Popoto driver over TCP (the modem's address)",
-                ));
-            }
-            if let Some(port) = config.tcp_port {
-                if port == 0 || port > 65_535 {
-                    problems.push(Problem::new(
-                        "tcp_port",
-                        format!("{port} is not a TCP port (1-65535; the modem's JSON port is 17000)"),
-                    ));
-                }
-            }
-        }
-        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
-            "connection_type",
-            "CONNECTION_TCP_AS_SERVER is not supported by the Popoto driver (the modem is the server: use CONNECTION_TCP_AS_CLIENT)",
-        )),
-    }
+    problems.extend(config::stream_problems(config, REACH));
     if !(0..=5).contains(&p.payload_mode()) {
         problems.push(Problem::new(
             "popoto.payload_mode",
@@ -286,7 +260,7 @@ fn setting_command(line: &str) -> Result<Command, String> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let p = popoto_config(config);
     let modem_id = config::modem_id(config)?;
     let serial = config.connection_type() == ConnectionType::ConnectionSerial;
@@ -382,7 +356,7 @@ mod tests {
             ]
         );
         assert_eq!(
-            endpoint(&config("")).unwrap().describe(),
+            config::stream_endpoint(&config(""), REACH).describe(),
             "tcp 127.0.0.1:17000"
         );
     }
@@ -411,7 +385,7 @@ mod tests {
 
     #[test]
     fn limits_tell_each_rate() {
-        let l = limits(&config("popoto { max_frame_bytes: 100 }"));
+        let l = frame_limits(&config("popoto { max_frame_bytes: 100 }")).text;
         assert!(l.contains("up to 100 bytes"), "{l}");
         assert!(l.contains("rate 1 payload mode 4 640 bit/s"), "{l}");
         assert!(l.contains("rate 5 payload mode 5 10240 bit/s"), "{l}");

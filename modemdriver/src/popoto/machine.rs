@@ -1,5 +1,5 @@
 //! The Popoto driver as a state machine: no input or output, no clock
-//! read ([`StreamMachine`]: inputs in, outputs out).
+//! read ([`crate::machine::Machine`]: inputs in, outputs out).
 //!
 //! One transmission is under way at a time — a data packet or an
 //! acknowledgement handed to the modem and awaiting its `TxComplete`, or a
@@ -8,10 +8,9 @@
 //! read as the modem writes them: a `Header` line, the statistics (`SNRdB`,
 //! `DopplerVelocity`, before or shortly after the data), the `Data` line.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 use std::time::Duration;
 
-use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
     modem_transmission::TransmissionType, popoto_report, popoto_transmission::Type as PopotoType,
     ModemTransmission, PopotoRangingReply, PopotoReceiveStatistics, PopotoReport, PopotoSpecific,
@@ -20,20 +19,17 @@ use protos::goby::acomms::protobuf::{
 use tokio::time::Instant;
 
 use super::wire::{
-    mode_of_rate, parse_modem_line, Command, GobyHeader, Interface, LineSplitter, ModemLine,
-    PacketHeader, PacketKind, ParamValue, BROADCAST, MODE_BIT_RATE,
+    mode_of_rate, parse_modem_line, Command, GobyHeader, Interface, ModemLine, PacketHeader,
+    PacketKind, ParamValue, MAX_LINE, MODE_BIT_RATE,
 };
-use crate::driver::{
-    Acknowledgement, DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome,
-    TransmitResult,
-};
-use crate::stream_shell::{lossy, Input, Now, Output, RequestId, StreamMachine};
-
-/// How long the driver waits for the layer above to fill a data request.
-pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// Data transmissions waiting at most; beyond, the oldest is dropped.
-pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
+use crate::address::{address_of, id_of, BROADCAST};
+use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus, TransmitOutcome};
+use crate::link::line::LineSplitter;
+use crate::machine::acks::AwaitedAcks;
+use crate::machine::fill::Fill;
+use crate::machine::reconnect::Reconnect;
+use crate::machine::work::{asked, queue_data, queue_first, Asked};
+use crate::machine::{lossy, Handlers, Now, Outputs, RequestId};
 
 /// The alert that ends a transmission.
 pub const TX_COMPLETE: &str = "TxComplete";
@@ -83,24 +79,6 @@ pub struct Settings {
     pub reconnect: Duration,
 }
 
-/// The Popoto id of modem id `id` (0: broadcast).
-pub fn address_of(id: i32) -> Option<u8> {
-    match id {
-        0 => Some(BROADCAST),
-        1..=254 => Some(id as u8),
-        _ => None,
-    }
-}
-
-/// The modem id of Popoto id `a` (255: broadcast, 0).
-pub fn id_of(a: u8) -> i32 {
-    if a == BROADCAST {
-        0
-    } else {
-        i32::from(a)
-    }
-}
-
 /// Time a payload of `bytes` takes on the water at payload mode `mode`,
 /// about (the header's part included), for timeouts.
 pub fn air_time(bytes: usize, mode: u8) -> Duration {
@@ -129,21 +107,6 @@ enum Job {
     Commands(Vec<Command>),
 }
 
-#[derive(Debug)]
-struct Filling {
-    id: RequestId,
-    template: ModemTransmission,
-    deadline: Instant,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Outstanding {
-    unique_id: Option<u32>,
-    frame_start: u32,
-    rate: i32,
-    until: Instant,
-}
-
 #[derive(Debug, Default, Clone, Copy)]
 struct Stats {
     snr: Option<f64>,
@@ -155,170 +118,66 @@ struct Stats {
 pub struct Machine {
     s: Settings,
     now: Now,
-    out: Vec<Output>,
+    out: Outputs,
     lines: LineSplitter,
-    connected: bool,
-    opening: bool,
-    reconnect_at: Instant,
+    link: Reconnect,
     /// The setup was written; the first answer is awaited until then.
     starting: Option<Instant>,
     ready: bool,
-    filling: Option<Filling>,
+    fill: Fill,
     transmitting: Option<(Sending, Instant)>,
     retry: Option<(Instant, Sending)>,
     ranging: Option<(u8, Instant)>,
-    outstanding: HashMap<u8, Outstanding>,
+    acks: AwaitedAcks,
     pending: VecDeque<Job>,
     /// The header of the packet being received, and its statistics so far.
     rx: Option<(PacketHeader, Stats)>,
     /// A reception awaiting its statistics.
     held: Option<(ModemTransmission, Instant)>,
-    next_request: u64,
 }
 
 impl Machine {
-    /// A machine whose link is open at `now`; its first outputs (the
-    /// setup) come from the first input, e.g. [`Input::Tick`].
-    pub fn new(settings: Settings, now: Now) -> Machine {
+    /// A machine at `now` whose link is open (`connected`), or not yet
+    /// (its first output asks to open it); its first outputs (the setup)
+    /// come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
+    pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         Machine {
             now,
-            out: Vec::new(),
-            lines: LineSplitter::new(),
-            connected: true,
-            opening: false,
-            reconnect_at: now.at,
+            out: Outputs::default(),
+            lines: LineSplitter::new(MAX_LINE),
+            link: Reconnect::new(connected, now.at, settings.reconnect),
             starting: None,
             ready: false,
-            filling: None,
+            fill: Fill::default(),
             transmitting: None,
             retry: None,
             ranging: None,
-            outstanding: HashMap::new(),
+            acks: AwaitedAcks::default(),
             pending: VecDeque::new(),
             rx: None,
             held: None,
-            next_request: 0,
             s: settings,
         }
     }
 
-    /// A machine whose link is not open yet: its first output asks to open
-    /// it.
-    pub fn disconnected(settings: Settings, now: Now) -> Machine {
-        let mut m = Machine::new(settings, now);
-        m.connected = false;
-        m
-    }
-
     fn emit(&mut self, e: DriverEvent) {
-        self.out.push(Output::Event(e));
+        self.out.event(e);
     }
 
     fn status(&mut self, s: DriverStatus) {
-        self.emit(DriverEvent::Status(s));
+        self.out.status(s);
     }
 
     fn write(&mut self, c: &Command) {
-        self.out.push(Output::Write(c.encode(self.s.interface)));
+        self.out.write(c.encode(self.s.interface));
     }
 
     fn result(&mut self, mt: ModemTransmission, outcome: TransmitOutcome) {
-        self.emit(DriverEvent::TransmitResult(TransmitResult {
-            transmission: mt,
-            outcome,
-        }));
+        self.out.result(mt, outcome);
     }
 
     fn report(&mut self, r: PopotoReport) {
-        self.emit(DriverEvent::Specific(SpecificReport::new(&r)));
-    }
-
-    fn disconnected_now(&mut self, reason: String) {
-        if !self.connected {
-            return;
-        }
-        self.connected = false;
-        self.opening = false;
-        self.lines.clear();
-        self.reconnect_at = self.now.at + self.s.reconnect;
-        self.status(DriverStatus::Disconnected { reason });
-        self.flush_held();
-        self.rx = None;
-        let lost = "the link to the modem was lost before TxComplete";
-        if let Some((s, _)) = self.transmitting.take() {
-            if let Some(mt) = s.mt {
-                self.result(mt, TransmitOutcome::Failed(lost.into()));
-            }
-        }
-        if let Some((_, s)) = self.retry.take() {
-            if let Some(mt) = s.mt {
-                self.result(mt, TransmitOutcome::Failed(lost.into()));
-            }
-        }
-        self.ranging = None;
-        self.starting = None;
-        self.ready = false;
-    }
-
-    fn opened(&mut self, ok: bool) {
-        self.opening = false;
-        if ok {
-            self.connected = true;
-            self.lines.clear();
-            self.status(DriverStatus::Reconnected);
-            self.starting = None;
-            self.ready = false;
-        } else {
-            self.reconnect_at = self.now.at + self.s.reconnect;
-        }
-    }
-
-    fn timers(&mut self) {
-        let now = self.now.at;
-        if !self.connected && !self.opening && self.reconnect_at <= now {
-            self.opening = true;
-            self.out.push(Output::Open);
-        }
-        if self.starting.is_some_and(|t| t <= now) {
-            self.starting = None;
-            self.status(DriverStatus::ModemSilent {
-                seconds: self.s.start_timeout.as_secs_f64(),
-            });
-        }
-        if self.filling.as_ref().is_some_and(|f| f.deadline <= now) {
-            let f = self.filling.take().expect("checked");
-            self.status(DriverStatus::DataRejected {
-                reason: format!(
-                    "no answer to the data request within {} ms: nothing sent",
-                    DATA_REQUEST_TIMEOUT.as_millis()
-                ),
-            });
-            self.result(f.template, TransmitOutcome::NothingToSend);
-        }
-        if self.transmitting.as_ref().is_some_and(|t| t.1 <= now) {
-            let (s, _) = self.transmitting.take().expect("checked");
-            self.status(DriverStatus::ResponseTimeout {
-                command: format!("{TX_COMPLETE} of the packet to {}", id_of(s.dest)),
-                attempt: 1,
-            });
-            if let Some(mt) = s.mt {
-                self.result(
-                    mt,
-                    TransmitOutcome::Failed(format!("no {TX_COMPLETE} from the modem")),
-                );
-            }
-        }
-        if self.ranging.is_some_and(|r| r.1 <= now) {
-            let (dest, _) = self.ranging.take().expect("checked");
-            self.status(DriverStatus::ResponseTimeout {
-                command: format!("the range to {}", id_of(dest)),
-                attempt: 1,
-            });
-        }
-        if self.held.as_ref().is_some_and(|h| h.1 <= now) {
-            self.flush_held();
-        }
-        self.outstanding.retain(|_, o| o.until > now);
+        self.out.specific(&r);
     }
 
     fn start_setup(&mut self) {
@@ -433,15 +292,8 @@ impl Machine {
                 return;
             };
             if mt.ack_requested() && s.dest != BROADCAST {
-                self.outstanding.insert(
-                    s.dest,
-                    Outstanding {
-                        unique_id: mt.unique_id,
-                        frame_start: mt.frame_start(),
-                        rate: mt.rate(),
-                        until: self.now.at + self.s.ack_timeout,
-                    },
-                );
+                self.acks
+                    .expect(s.dest, &mt, 1, self.now, self.s.ack_timeout);
             }
             self.result(mt, TransmitOutcome::Sent);
         } else if alert.contains(MAC_DUMPED) {
@@ -505,24 +357,13 @@ impl Machine {
                 if dest != self.s.modem_id {
                     return;
                 }
-                let Some(o) = self.outstanding.remove(&header.src) else {
-                    return self.status(DriverStatus::Skipped {
-                        reason: format!(
-                            "an acknowledgement from {src} for no packet awaiting one (late: after ack_timeout_ms, or a repeat); not credited"
-                        ),
-                    });
-                };
-                let ack = ModemTransmission {
-                    src: Some(src),
-                    dest: Some(self.s.modem_id),
-                    rate: Some(o.rate),
-                    time: Some(self.now.micros),
-                    r#type: Some(TransmissionType::Ack as i32),
-                    acked_frame: vec![o.frame_start as i32],
-                    unique_id: o.unique_id,
-                    ..Default::default()
-                };
-                self.emit(DriverEvent::Received(ack));
+                let me = self.s.modem_id;
+                if let Some(ack) =
+                    self.acks
+                        .heard(header.src, src, me, &[0], self.now, &mut self.out)
+                {
+                    self.emit(DriverEvent::Received(ack));
+                }
             }
             GobyHeader::Data { ack_requested } => {
                 let stat = PopotoReceiveStatistics {
@@ -578,80 +419,11 @@ impl Machine {
         let Some(dest) = address_of(received.src()).filter(|&a| a != BROADCAST) else {
             return;
         };
-        let at = self
-            .pending
-            .iter()
-            .position(|j| !matches!(j, Job::Ack { .. }))
-            .unwrap_or(self.pending.len());
-        self.pending.insert(
-            at,
-            Job::Ack {
-                dest,
-                owed_at: self.now.at,
-            },
-        );
-    }
-
-    fn command(&mut self, command: DriverCommand) {
-        match command {
-            DriverCommand::Initiate(mut mt) => {
-                if mt.src.is_none() || mt.src() == -1 {
-                    mt.src = Some(self.s.modem_id);
-                }
-                match mt.r#type() {
-                    TransmissionType::Data => {}
-                    TransmissionType::DriverSpecific => {
-                        let p = mt.popoto.as_deref().cloned().unwrap_or_default();
-                        let request = PopotoSpecific {
-                            r#type: p.r#type.unwrap_or(0),
-                            dest: mt.dest,
-                            transmit_power: p.transmit_power,
-                            file_location: p.file_location,
-                        };
-                        return self.specific(request);
-                    }
-                    other => {
-                        return self.status(DriverStatus::Unsupported {
-                            message: format!(
-                                "ModemTransmission.type {other:?} (the Popoto driver sends acks itself)"
-                            ),
-                        })
-                    }
-                }
-                let waiting = self
-                    .pending
-                    .iter()
-                    .filter(|j| matches!(j, Job::Data(_)))
-                    .count();
-                if waiting >= MAX_PENDING_TRANSMISSIONS {
-                    if let Some(i) = self.pending.iter().position(|j| matches!(j, Job::Data(_))) {
-                        self.pending.remove(i);
-                        self.status(DriverStatus::Skipped {
-                            reason: format!(
-                                "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                            ),
-                        });
-                    }
-                }
-                self.pending.push_back(Job::Data(Box::new(mt)));
-            }
-            DriverCommand::Specific(message) => {
-                let name = message.descriptor().full_name().to_string();
-                match (name == PopotoSpecific::default().descriptor().full_name())
-                    .then(|| message.transcode_to::<PopotoSpecific>().ok())
-                    .flatten()
-                {
-                    Some(r) => self.specific(r),
-                    None => self.status(DriverStatus::Unsupported { message: name }),
-                }
-            }
-            DriverCommand::Acknowledge(ack) => {
-                if self.s.deferred_ack {
-                    self.owe_ack(&ack);
-                }
-            }
-            DriverCommand::Stop(_) => {}
-        }
+        let job = Job::Ack {
+            dest,
+            owed_at: self.now.at,
+        };
+        queue_first(&mut self.pending, job, |j| matches!(j, Job::Ack { .. }));
     }
 
     fn specific(&mut self, r: PopotoSpecific) {
@@ -706,14 +478,123 @@ impl Machine {
         }
     }
 
+    /// Hands `s` to the modem: its rate, its destination, the packet.
+    fn offer(&mut self, s: Sending) {
+        self.write(&Command::SetRate { mode: s.mode });
+        self.write(&Command::SetValue {
+            name: "RemoteID".into(),
+            value: ParamValue::Int(i64::from(s.dest)),
+        });
+        self.write(&Command::Transmit(s.payload.clone()));
+        let deadline = self.now.at + self.s.response_timeout + air_time(s.payload.len(), s.mode);
+        self.transmitting = Some((s, deadline));
+    }
+}
+
+fn popoto_stat(mt: &mut ModemTransmission) -> Option<&mut PopotoReceiveStatistics> {
+    mt.popoto.as_mut()?.receive_stat.first_mut()
+}
+
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
+        self.now = now;
+    }
+
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
+        [
+            self.starting,
+            self.fill.deadline(),
+            self.transmitting.as_ref().map(|t| t.1),
+            self.retry.as_ref().map(|r| r.0),
+            self.ranging.map(|r| r.1),
+            self.held.as_ref().map(|h| h.1),
+            self.acks.deadline(),
+            self.link.deadline(),
+        ]
+    }
+
+    fn awaited(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
+
+    fn read(&mut self, bytes: Vec<u8>) {
+        for line in self.lines.push(&bytes) {
+            self.line(&line);
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.link.tick(now, &mut self.out);
+        if self.starting.is_some_and(|t| t <= now) {
+            self.starting = None;
+            self.status(DriverStatus::ModemSilent {
+                seconds: self.s.start_timeout.as_secs_f64(),
+            });
+        }
+        self.fill.expire_data(now, &mut self.out);
+        if self.transmitting.as_ref().is_some_and(|t| t.1 <= now) {
+            let (s, _) = self.transmitting.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("{TX_COMPLETE} of the packet to {}", id_of(s.dest)),
+                attempt: 1,
+            });
+            if let Some(mt) = s.mt {
+                self.result(
+                    mt,
+                    TransmitOutcome::Failed(format!("no {TX_COMPLETE} from the modem")),
+                );
+            }
+        }
+        if self.ranging.is_some_and(|r| r.1 <= now) {
+            let (dest, _) = self.ranging.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("the range to {}", id_of(dest)),
+                attempt: 1,
+            });
+        }
+        if self.held.as_ref().is_some_and(|h| h.1 <= now) {
+            self.flush_held();
+        }
+        self.acks.expire(now);
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        let acks = "the Popoto driver sends acks itself";
+        match asked::<PopotoSpecific>(command, self.s.modem_id, acks, &mut self.out) {
+            Asked::Data(mt) => queue_data(
+                &mut self.pending,
+                Job::Data(Box::new(mt)),
+                |j| matches!(j, Job::Data(_)),
+                &mut self.out,
+            ),
+            Asked::Slot(mt) => {
+                let p = mt.popoto.as_deref().cloned().unwrap_or_default();
+                self.specific(PopotoSpecific {
+                    r#type: p.r#type.unwrap_or(0),
+                    dest: mt.dest,
+                    transmit_power: p.transmit_power,
+                    file_location: p.file_location,
+                });
+            }
+            Asked::Specific(r) => self.specific(r),
+            Asked::Acknowledge(ack) => {
+                if self.s.deferred_ack {
+                    self.owe_ack(&ack);
+                }
+            }
+            Asked::Nothing => {}
+        }
+    }
+
     fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
-        let Some(f) = self.filling.take_if(|f| f.id == id) else {
+        let Some(mut mt) = self.fill.answered(id, filled, &mut self.out) else {
             return;
         };
-        let (mut mt, problems) = crate::driver::checked_answer(&f.template, filled);
-        for p in problems {
-            self.status(p);
-        }
         let Some(frame) = mt.frame.first().filter(|d| !d.is_empty()).cloned() else {
             return self.result(mt, TransmitOutcome::NothingToSend);
         };
@@ -731,7 +612,7 @@ impl Machine {
             });
             return self.result(mt, TransmitOutcome::Failed(why));
         };
-        if !self.connected {
+        if !self.link.is_up() {
             return self.result(
                 mt,
                 TransmitOutcome::Failed("the link to the modem is down".into()),
@@ -761,21 +642,42 @@ impl Machine {
         });
     }
 
-    /// Hands `s` to the modem: its rate, its destination, the packet.
-    fn offer(&mut self, s: Sending) {
-        self.write(&Command::SetRate { mode: s.mode });
-        self.write(&Command::SetValue {
-            name: "RemoteID".into(),
-            value: ParamValue::Int(i64::from(s.dest)),
-        });
-        self.write(&Command::Transmit(s.payload.clone()));
-        let deadline = self.now.at + self.s.response_timeout + air_time(s.payload.len(), s.mode);
-        self.transmitting = Some((s, deadline));
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.lines.clear();
+            self.status(DriverStatus::Reconnected);
+            self.starting = None;
+            self.ready = false;
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.lines.clear();
+        self.status(DriverStatus::Disconnected { reason });
+        self.flush_held();
+        self.rx = None;
+        let lost = "the link to the modem was lost before TxComplete";
+        if let Some((s, _)) = self.transmitting.take() {
+            if let Some(mt) = s.mt {
+                self.result(mt, TransmitOutcome::Failed(lost.into()));
+            }
+        }
+        if let Some((_, s)) = self.retry.take() {
+            if let Some(mt) = s.mt {
+                self.result(mt, TransmitOutcome::Failed(lost.into()));
+            }
+        }
+        self.ranging = None;
+        self.starting = None;
+        self.ready = false;
     }
 
     fn pump(&mut self) {
         loop {
-            if !self.connected || self.opening {
+            if !self.link.is_up() {
                 return;
             }
             if !self.ready {
@@ -784,7 +686,7 @@ impl Machine {
                 }
                 return;
             }
-            if self.filling.is_some() || self.transmitting.is_some() || self.ranging.is_some() {
+            if self.fill.is_waiting() || self.transmitting.is_some() || self.ranging.is_some() {
                 return;
             }
             if let Some((at, _)) = &self.retry {
@@ -846,63 +748,9 @@ impl Machine {
                         }
                     }
                     let template = self.template(&mt);
-                    self.next_request += 1;
-                    let id = RequestId(self.next_request);
-                    self.out.push(Output::Request {
-                        id,
-                        template: template.clone(),
-                    });
-                    self.filling = Some(Filling {
-                        id,
-                        template,
-                        deadline: self.now.at + DATA_REQUEST_TIMEOUT,
-                    });
+                    self.fill.ask(template, self.now.at, &mut self.out);
                 }
             }
         }
-    }
-}
-
-fn popoto_stat(mt: &mut ModemTransmission) -> Option<&mut PopotoReceiveStatistics> {
-    mt.popoto.as_mut()?.receive_stat.first_mut()
-}
-
-impl StreamMachine for Machine {
-    fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Bytes(bytes) => {
-                for line in self.lines.push(&bytes) {
-                    self.line(&line);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.starting,
-            self.filling.as_ref().map(|f| f.deadline),
-            self.transmitting.as_ref().map(|t| t.1),
-            self.retry.as_ref().map(|r| r.0),
-            self.ranging.map(|r| r.1),
-            self.held.as_ref().map(|h| h.1),
-            self.outstanding.values().map(|o| o.until).min(),
-            (!self.connected && !self.opening).then_some(self.reconnect_at),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    fn awaits(&self, id: RequestId) -> bool {
-        self.filling.as_ref().is_some_and(|f| f.id == id)
     }
 }

@@ -5,11 +5,9 @@
 //! - [`wire`]: the commands, the modem's JSON lines and Goby3's header byte.
 //! - [`machine`]: the driver's logic, sans I/O.
 //! - [`driver`]: its configuration and start ([`PopotoDriver`]).
-//! - [`emulator`]: the modem's side, for tests and bench work.
 
 pub mod driver;
-pub mod emulator;
 pub mod machine;
 pub mod wire;
 
-pub use driver::{is_popoto, PopotoDriver, DEFAULT_BAUD, DEFAULT_TCP_PORT};
+pub use driver::{PopotoDriver, DEFAULT_BAUD, DEFAULT_TCP_PORT};

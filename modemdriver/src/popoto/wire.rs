@@ -1,7 +1,6 @@
 //! The Popoto modem's host interface, typed: the commands a host writes
 //! ([`Command`], on either [`Interface`]), the JSON lines the modem writes
-//! back ([`ModemLine`]), the line splitter that finds them among the
-//! shell's prompts and colours ([`LineSplitter`]), and Goby3's one-byte
+//! back ([`ModemLine`]) among the shell's prompts and colours, and Goby3's one-byte
 //! header that starts every payload ([`GobyHeader`]).
 //!
 //! Sources: Popoto's public API (the `popoto` Python class and `pshell`
@@ -286,73 +285,93 @@ fn data_bytes(v: &Json) -> Result<Vec<u8>, String> {
     }
 }
 
-/// Reads a command line written by a host (see [`HostLine`]).
-pub fn parse_host_line(line: &str) -> Result<HostLine, String> {
+/// Reads a command line written by a host on `interface` (see
+/// [`HostLine`]): a JSON command (`{"Command": "SetValue", "Arguments":
+/// "..."}`) on the command port, a shell command (`setvaluei ...`) on the
+/// shell; each interface refuses the other's, as the modem does.
+pub fn parse_host_line(line: &str, interface: Interface) -> Result<HostLine, String> {
     let line = line.trim();
-    if line.starts_with('{') {
-        let v: Json = serde_json::from_str(line).map_err(|e| bad(format!("not JSON: {e}")))?;
-        let command = v
-            .get("Command")
-            .and_then(Json::as_str)
-            .ok_or_else(|| bad("no \"Command\""))?;
-        let args = v.get("Arguments").cloned().unwrap_or(Json::Null);
-        let args_text = args.as_str().unwrap_or("").trim().to_string();
-        let mut words = args_text.split_whitespace();
-        return Ok(HostLine::Command(match command {
-            "SetValue" => {
-                let name = words.next().ok_or_else(|| bad("SetValue: no name"))?;
-                let value = words
-                    .next()
-                    .ok_or_else(|| bad("SetValue: no value"))?
-                    .to_string();
-                if name == "PayloadMode" {
-                    let mode = value
-                        .parse::<u8>()
-                        .ok()
-                        .filter(|&m| m <= 5)
-                        .ok_or_else(|| bad(format!("PayloadMode {value} (0-5)")))?;
-                    Command::SetRate { mode }
-                } else {
-                    Command::SetValue {
-                        value: parse_value(name, &value, None)?,
-                        name: name.to_string(),
-                    }
-                }
-            }
-            "GetValue" => Command::GetValue {
-                name: words
-                    .next()
-                    .ok_or_else(|| bad("GetValue: no name"))?
-                    .to_string(),
-                float: true,
-            },
-            "TransmitJSON" => {
-                let data = args
-                    .get("Payload")
-                    .and_then(|p| p.get("Data"))
-                    .ok_or_else(|| bad("TransmitJSON without Payload.Data"))?;
-                if let Json::String(text) = data {
-                    return Ok(HostLine::TransmitText(text.clone()));
-                }
-                Command::Transmit(data_bytes(data)?)
-            }
-            "Event_sendRanging" => return Ok(HostLine::SendRanging),
-            "StartPlaying" => {
-                let file = words
-                    .next()
-                    .ok_or_else(|| bad("StartPlaying: no file"))?
-                    .to_string();
-                let scale = words.next().unwrap_or("1");
-                let ParamValue::Float(scale) = parse_value("scale", scale, Some(true))? else {
-                    unreachable!("a float was asked for")
-                };
-                Command::PlayStart { file, scale }
-            }
-            "StopPlaying" => Command::PlayStop,
-            "Event_powerDown" => Command::PowerDown,
-            other => return Err(bad(format!("unknown command {other:?}"))),
-        }));
+    match (interface, line.starts_with('{')) {
+        (Interface::JsonApi, true) => parse_json_command(line),
+        (Interface::Shell, false) => parse_shell_command(line),
+        (Interface::JsonApi, false) => Err(bad(format!(
+            "{:?} is not a JSON command: the command port takes {{\"Command\": ..., \"Arguments\": ...}} (shell commands are the shell's)",
+            line.split_whitespace().next().unwrap_or("")
+        ))),
+        (Interface::Shell, true) => Err(bad(
+            "a JSON command on the shell: the shell takes its own commands (setvaluei, transmitJSON ...)",
+        )),
     }
+}
+
+/// A JSON command of the command port.
+fn parse_json_command(line: &str) -> Result<HostLine, String> {
+    let v: Json = serde_json::from_str(line).map_err(|e| bad(format!("not JSON: {e}")))?;
+    let command = v
+        .get("Command")
+        .and_then(Json::as_str)
+        .ok_or_else(|| bad("no \"Command\""))?;
+    let args = v.get("Arguments").cloned().unwrap_or(Json::Null);
+    let args_text = args.as_str().unwrap_or("").trim().to_string();
+    let mut words = args_text.split_whitespace();
+    Ok(HostLine::Command(match command {
+        "SetValue" => {
+            let name = words.next().ok_or_else(|| bad("SetValue: no name"))?;
+            let value = words
+                .next()
+                .ok_or_else(|| bad("SetValue: no value"))?
+                .to_string();
+            if name == "PayloadMode" {
+                let mode = value
+                    .parse::<u8>()
+                    .ok()
+                    .filter(|&m| m <= 5)
+                    .ok_or_else(|| bad(format!("PayloadMode {value} (0-5)")))?;
+                Command::SetRate { mode }
+            } else {
+                Command::SetValue {
+                    value: parse_value(name, &value, None)?,
+                    name: name.to_string(),
+                }
+            }
+        }
+        "GetValue" => Command::GetValue {
+            name: words
+                .next()
+                .ok_or_else(|| bad("GetValue: no name"))?
+                .to_string(),
+            float: true,
+        },
+        "TransmitJSON" => {
+            let data = args
+                .get("Payload")
+                .and_then(|p| p.get("Data"))
+                .ok_or_else(|| bad("TransmitJSON without Payload.Data"))?;
+            if let Json::String(text) = data {
+                return Ok(HostLine::TransmitText(text.clone()));
+            }
+            Command::Transmit(data_bytes(data)?)
+        }
+        "Event_sendRanging" => return Ok(HostLine::SendRanging),
+        "StartPlaying" => {
+            let file = words
+                .next()
+                .ok_or_else(|| bad("StartPlaying: no file"))?
+                .to_string();
+            let scale = words.next().unwrap_or("1");
+            let ParamValue::Float(scale) = parse_value("scale", scale, Some(true))? else {
+                unreachable!("a float was asked for")
+            };
+            Command::PlayStart { file, scale }
+        }
+        "StopPlaying" => Command::PlayStop,
+        "Event_powerDown" => Command::PowerDown,
+        other => return Err(bad(format!("unknown command {other:?}"))),
+    }))
+}
+
+/// A command of the shell.
+fn parse_shell_command(line: &str) -> Result<HostLine, String> {
     let (word, rest) = line.split_once(' ').unwrap_or((line, ""));
     let rest = rest.trim();
     let mut words = rest.split_whitespace();
@@ -563,8 +582,9 @@ fn number_of(v: &Json, what: &str) -> Result<f64, String> {
         .ok_or_else(|| bad(format!("{what}: {v} is not a number")))
 }
 
-/// Reads one line of the modem (prompt and colours already removed by
-/// [`LineSplitter`], or not): the JSON object in it, if any. `Ok(None)`:
+/// Reads one line of the modem (split by a
+/// [`LineSplitter`](crate::link::line::LineSplitter); prompt and colours
+/// there or not): the JSON object in it, if any. `Ok(None)`:
 /// no JSON object on the line (a banner, an echo, a prompt alone).
 pub fn parse_modem_line(line: &str) -> Result<Option<ModemLine>, String> {
     let line = clean(line);
@@ -674,43 +694,6 @@ pub fn clean(line: &str) -> String {
         out.push(c);
     }
     out.replace("Popoto->", "").trim().to_string()
-}
-
-/// Splits the modem's byte stream into lines (ended by CR or LF; empty
-/// lines skipped); a line longer than [`MAX_LINE`] is given cut there.
-#[derive(Debug, Default)]
-pub struct LineSplitter {
-    buf: Vec<u8>,
-}
-
-impl LineSplitter {
-    /// A splitter with nothing buffered.
-    pub fn new() -> Self {
-        LineSplitter::default()
-    }
-
-    /// Forgets what is buffered (the link was lost).
-    pub fn clear(&mut self) {
-        self.buf.clear();
-    }
-
-    /// The complete lines in `bytes` and what came before.
-    pub fn push(&mut self, bytes: &[u8]) -> Vec<Vec<u8>> {
-        let mut out = Vec::new();
-        for &b in bytes {
-            if b == b'\r' || b == b'\n' {
-                if !self.buf.is_empty() {
-                    out.push(std::mem::take(&mut self.buf));
-                }
-            } else {
-                self.buf.push(b);
-                if self.buf.len() >= MAX_LINE {
-                    out.push(std::mem::take(&mut self.buf));
-                }
-            }
-        }
-        out
-    }
 }
 
 /// Goby3's header byte before each frame of a Popoto payload.
@@ -824,17 +807,30 @@ mod tests {
             ] {
                 let text = String::from_utf8(c.encode(interface)).unwrap();
                 assert_eq!(
-                    parse_host_line(text.trim_end()),
+                    parse_host_line(text.trim_end(), interface),
                     Ok(HostLine::Command(c.clone())),
                     "{text}"
                 );
             }
         }
         assert_eq!(
-            parse_host_line("ping 5"),
+            parse_host_line("ping 5", Interface::Shell),
             Ok(HostLine::Command(Command::Ping { power: 5.0 }))
         );
-        assert!(parse_host_line("frobnicate").is_err());
+        assert!(parse_host_line("frobnicate", Interface::Shell).is_err());
+    }
+
+    /// The command port takes JSON commands only, the shell its own: a
+    /// set-up written for the one fails on the other, as on the modem.
+    #[test]
+    fn each_interface_refuses_the_others_commands() {
+        let shell = "setvaluei LocalID 1";
+        let json = r#"{"Command": "SetValue", "Arguments": "LocalID 1"}"#;
+        let e = parse_host_line(shell, Interface::JsonApi).unwrap_err();
+        assert!(e.contains("\"setvaluei\" is not a JSON command"), "{e}");
+        assert!(parse_host_line(json, Interface::Shell).is_err());
+        assert!(parse_host_line(shell, Interface::Shell).is_ok());
+        assert!(parse_host_line(json, Interface::JsonApi).is_ok());
     }
 
     #[test]
@@ -914,11 +910,12 @@ mod tests {
     proptest::proptest! {
         #[test]
         fn parsers_never_panic(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..400)) {
-            let mut s = LineSplitter::new();
+            let mut s = crate::link::line::LineSplitter::new(MAX_LINE);
             for line in s.push(&bytes) {
                 let text = String::from_utf8_lossy(&line);
                 let _ = parse_modem_line(&text);
-                let _ = parse_host_line(&text);
+                let _ = parse_host_line(&text, Interface::Shell);
+                let _ = parse_host_line(&text, Interface::JsonApi);
             }
         }
 
@@ -934,8 +931,8 @@ mod tests {
             let _ = parse_modem_line(&line[..cut]);
             let _ = parse_modem_line(&line);
             let host = format!("{{\"Command\":\"{key}\",\"Arguments\":\"{}\"}}", v.join(" "));
-            let _ = parse_host_line(&host[..cut.min(host.len())]);
-            let _ = parse_host_line(&host);
+            let _ = parse_host_line(&host[..cut.min(host.len())], Interface::JsonApi);
+            let _ = parse_host_line(&host, Interface::JsonApi);
         }
     }
 }

@@ -42,12 +42,13 @@ use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
-use crate::check::{self, Problem};
 use crate::config::{self, Endpoint};
 use crate::driver::{
     Acknowledgement, Driver, DriverCommand, DriverContext, DriverError, DriverEvent, DriverStatus,
     EventSink, RawDirection, RawMessage, TransmitOutcome, TransmitResult,
 };
+use crate::kind::{About, DriverKind, Named, PacketTime, Starting};
+use crate::problem::{self, Problem};
 use crate::rate;
 use medium::{Airborne, Medium};
 use reception::{Position, Receiver};
@@ -65,7 +66,7 @@ impl SimulatorDriver {
     /// `simulator.channel`, and on UDP when `udp_local` is set.
     /// Must be called within a tokio runtime.
     pub fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let sim = sim_config(config)?;
         let medium = Medium::named(sim.channel());
         let udp = match &sim.udp_local {
@@ -116,7 +117,7 @@ impl SimulatorDriver {
         udp: Option<UdpMedium>,
         clock: Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
-        check::refuse(problems(config))?;
+        problem::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let sim = sim_config(config)?.clone();
         let airborne = medium.join(modem_id);
@@ -124,6 +125,43 @@ impl SimulatorDriver {
         Ok(Driver::spawn_with_clock("simulator", clock, move |ctx| {
             run(modem_id, sim, deferred_ack, medium, udp, airborne, ctx)
         }))
+    }
+}
+
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverAcousticSimulator),
+    short_name: "simulator",
+    title: "acoustic channel simulator",
+    section: Some("simulator"),
+    goby3_extensions: &[],
+};
+
+impl DriverKind for SimulatorDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problems(config)
+    }
+
+    /// The rate's frames at its bit rate after `packet_overhead_seconds`.
+    fn packet_time(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+        let overhead = config
+            .simulator
+            .as_ref()
+            .map_or(0.5, |s| s.packet_overhead_seconds());
+        Some(PacketTime {
+            driver: "the simulator",
+            spec: rate::spec(rate)?,
+            overhead: Duration::try_from_secs_f64(overhead).ok()?,
+            hand_over: Duration::ZERO,
+        })
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(async move { SimulatorDriver::start(config) })
     }
 }
 

@@ -27,6 +27,7 @@ fn every_crate_has_a_readme_whose_links_resolve() {
         "amac",
         "modemdriver",
         "position",
+        "channel",
         "moos",
         "gobyd",
         "cli",
@@ -39,4 +40,52 @@ fn every_crate_has_a_readme_whose_links_resolve() {
         );
     }
     guide_check::check_links(&readmes);
+}
+
+/// `docs/goby3.md`, the chapter on mixed fleets, links every page's account
+/// of what interoperates with Goby3 (a heading naming Goby3 and
+/// interoperation), and says "not yet tried" of none of those pages'
+/// subjects (the page's file name: `docs/iridium.md` is Iridium).
+#[test]
+fn the_mixed_fleet_chapter_links_every_account_of_interoperating_with_goby3() {
+    let guides = guide_check::guide_files();
+    let chapter = guides
+        .iter()
+        .find(|g| g.name == "docs/goby3.md")
+        .expect("docs/goby3.md exists");
+    let untried: Vec<String> = chapter
+        .text
+        .lines()
+        .filter(|l| l.to_lowercase().contains("not yet tried"))
+        .map(str::to_lowercase)
+        .collect();
+    let mut accounts = Vec::new();
+    let mut failures = String::new();
+    for guide in guides.iter().filter(|g| g.name != chapter.name) {
+        let Some(file) = guide.name.strip_prefix("docs/") else {
+            continue;
+        };
+        for anchor in guide_check::anchors(&guide.text) {
+            if !(anchor.contains("goby3") && anchor.contains("interoperat")) {
+                continue;
+            }
+            let link = format!("({file}#{anchor})");
+            if !chapter.text.contains(&link) {
+                failures.push_str(&format!("docs/goby3.md does not link {link}\n"));
+            }
+            let subject = file.trim_end_matches(".md");
+            for line in untried.iter().filter(|l| l.contains(subject)) {
+                failures.push_str(&format!(
+                    "docs/goby3.md says `{line}` while {} tells what interoperates\n",
+                    guide.name
+                ));
+            }
+            accounts.push(link);
+        }
+    }
+    assert!(failures.is_empty(), "{failures}");
+    assert!(
+        accounts.iter().any(|a| a.contains("iridium.md")),
+        "no account found: {accounts:?}"
+    );
 }

@@ -133,7 +133,25 @@ function applyEvent(ev) {
   schedule();
 }
 
+// With `?static` in the page's address, one snapshot (`/api/state`) and no
+// event stream: a still picture, for a headless browser's screenshot (an
+// open stream is a request that never ends, so a browser that waits for the
+// network to be quiet, as `--virtual-time-budget` does, would wait forever).
+const still = new URLSearchParams(window.location.search).has('static');
+goby.still = still;
+
+async function loadOnce() {
+  const r = await fetch('/api/state');
+  applySnapshot(await r.json());
+  S.source = `${S.source} (a still picture: reload to update)`;
+  schedule();
+}
+
 function connect() {
+  if (still) {
+    loadOnce().catch((e) => goby.errors.push(String(e)));
+    return;
+  }
   const events = new EventSource('/api/events');
   events.onmessage = (m) => {
     try { applyEvent(JSON.parse(m.data)); } catch (e) { goby.errors.push(String(e)); }
@@ -633,14 +651,18 @@ function fieldEditor(f, path, onChange) {
 let editor = null;
 let checkTimer = null;
 let lastCheck = null;
+// Whether the user has changed the form since it was drawn: until then a
+// check that fails (an empty form's required fields) is not shown as an error.
+let touched = false;
 
 function buildForm() {
   const form = S.forms.find((f) => f.name === $('cmd-type').value);
   const box = $('cmd-fields');
   box.replaceChildren();
   editor = null;
+  touched = false;
   if (!form) return;
-  editor = messageEditor(form, '', () => { clearTimeout(checkTimer); checkTimer = setTimeout(check, 150); });
+  editor = messageEditor(form, '', () => { touched = true; clearTimeout(checkTimer); checkTimer = setTimeout(check, 150); });
   box.append(editor.el);
   check();
 }
@@ -680,6 +702,11 @@ async function check() {
   for (const e of document.querySelectorAll('#cmd-fields .changed')) e.classList.remove('changed');
   for (const e of document.querySelectorAll('#cmd-fields [data-note]')) e.textContent = '';
   $('cmd-send').disabled = !result.ok;
+  if (!result.ok && !touched) {
+    box.className = 'check';
+    box.replaceChildren(el('span', { class: 'muted' }, 'Fill in the fields: what the codec makes of them shows here.'));
+    return;
+  }
   if (!result.ok) {
     box.className = 'check bad';
     box.textContent = `Cannot be encoded: ${result.error}`;

@@ -1,12 +1,6 @@
-//! The EvoLogics driver as a state machine: no input or output, no clock
-//! read.
-//!
-//! Each [`Input`] (bytes read from the modem, a tick, a command of the
-//! layer above, the answer to a data request, the link opened or lost)
-//! comes with the time it happened ([`Now`]); its handling returns, in
-//! order, what to do ([`Output`]: bytes to write, events, data requests,
-//! the link to open). [`Machine::next_deadline`] tells when the next
-//! [`Input::Tick`] is due.
+//! The EvoLogics driver as a state machine ([`crate::machine::Machine`]): the
+//! bytes read from the modem decoded as its answers and notifications,
+//! the AT commands to write, in data mode or command mode.
 //!
 //! One thing is under way at a time: a setting at start, a data request,
 //! a message the modem has not answered yet, or one it took and whose
@@ -15,7 +9,6 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
     evologics_config::AckMode, evologics_receive_statistics::Kind as StatKind, evologics_report,
     evologics_specific::Type as SpecificType, modem_transmission::TransmissionType,
@@ -23,22 +16,18 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
-use crate::driver::{
-    DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome, TransmitResult,
-};
-pub use crate::micromodem::driver::machine::{Now, RequestId};
+use crate::address::{address_of, id_of};
+use crate::driver::{DriverCommand, DriverEvent, DriverStatus, SpecificReport, TransmitOutcome};
+use crate::machine::fill::Fill;
+use crate::machine::reconnect::Reconnect;
+use crate::machine::work::{asked, queue_data, queue_first, Asked};
+use crate::machine::{Handlers, Now, Outputs, RequestId};
 
 use super::super::codec::{encode_command, Decoded, Framing, ModemDecoder, ModemMessage};
 use super::super::message::{
     lossy, AckFlag, Command, Notification, Reception, ReceptionKind, Reply, UsblAngles, UsblLong,
     BROADCAST,
 };
-
-/// How long the driver waits for the layer above to fill a data request.
-pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// Data transmissions waiting at most; beyond, the oldest is dropped.
-pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
 
 /// Attempts of a setting command without an answer.
 pub const SETTING_ATTEMPTS: u32 = 3;
@@ -121,47 +110,6 @@ pub struct Settings {
     pub reconnect: Duration,
 }
 
-/// What happened.
-#[derive(Debug)]
-pub enum Input {
-    /// Bytes read from the modem.
-    Bytes(Vec<u8>),
-    /// Time passed: deadlines up to now fire.
-    Tick,
-    /// A command of the layer above (other than `Stop`).
-    Command(DriverCommand),
-    /// The layer above answered a data request (`None`: dropped).
-    Answer {
-        /// The request answered.
-        id: RequestId,
-        /// The transmission filled, or `None`.
-        filled: Option<ModemTransmission>,
-    },
-    /// The link asked for by [`Output::Open`] was opened (`true`) or not.
-    Opened(bool),
-    /// The link failed: why.
-    Disconnected(String),
-}
-
-/// What to do, in order.
-#[derive(Debug)]
-pub enum Output {
-    /// Write these bytes to the modem.
-    Write(Vec<u8>),
-    /// Give this event to the layer above.
-    Event(DriverEvent),
-    /// Ask the layer above to fill `template`; the answer comes back as
-    /// [`Input::Answer`] with `id`.
-    Request {
-        /// Names the request.
-        id: RequestId,
-        /// What to fill.
-        template: ModemTransmission,
-    },
-    /// Open the link again, then tell [`Input::Opened`].
-    Open,
-}
-
 /// How a message goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum How {
@@ -212,14 +160,6 @@ struct Awaiting {
 }
 
 #[derive(Debug)]
-struct Filling {
-    id: RequestId,
-    template: ModemTransmission,
-    piggyback: bool,
-    deadline: Instant,
-}
-
-#[derive(Debug)]
 struct InFlight {
     sending: Sending,
     deadline: Instant,
@@ -230,19 +170,18 @@ struct InFlight {
 pub struct Machine {
     s: Settings,
     now: Now,
-    out: Vec<Output>,
+    out: Outputs,
     decoder: ModemDecoder,
-    connected: bool,
-    opening: bool,
-    reconnect_at: Instant,
+    link: Reconnect,
     setup: VecDeque<Command>,
     ready: bool,
     awaiting: Option<Awaiting>,
-    filling: Option<Filling>,
+    fill: Fill,
+    /// The data request outstanding is for a piggy-back message.
+    piggyback: bool,
     in_flight: Option<InFlight>,
     retry: Option<(Instant, Sending)>,
     pending: VecDeque<Job>,
-    next_request: u64,
     /// The far end of the last delivery, for AT?T.
     last_remote: Option<i32>,
     /// Receptions of the last `repeat_window`: (when, sender, kind,
@@ -250,209 +189,47 @@ pub struct Machine {
     recent: VecDeque<(Instant, u8, ReceptionKind, u8, Vec<u8>)>,
 }
 
-/// The S2C address of modem id `id` (0: broadcast).
-pub fn address_of(id: i32) -> Option<u8> {
-    match id {
-        0 => Some(BROADCAST),
-        1..=254 => Some(id as u8),
-        _ => None,
-    }
-}
-
-/// The modem id of S2C address `a` (255: broadcast, 0).
-pub fn id_of(a: u8) -> i32 {
-    if a == BROADCAST {
-        0
-    } else {
-        i32::from(a)
-    }
-}
-
 impl Machine {
-    /// A machine whose link is open at `now`; its first outputs (the
-    /// settings) come from the first input, e.g. [`Input::Tick`].
-    pub fn new(settings: Settings, now: Now) -> Machine {
+    /// A machine at `now` whose link is open (`connected`), or not yet
+    /// (its first output asks to open it); its first outputs (the
+    /// settings) come from the first input, e.g. [`Input::Tick`](crate::machine::Input::Tick).
+    pub fn new(settings: Settings, now: Now, connected: bool) -> Machine {
         let framing = settings.framing;
         let setup = settings.setup.iter().cloned().collect();
         Machine {
             now,
-            out: Vec::new(),
+            out: Outputs::default(),
             decoder: ModemDecoder::new(framing),
-            connected: true,
-            opening: false,
-            reconnect_at: now.at,
+            link: Reconnect::new(connected, now.at, settings.reconnect),
             setup,
             ready: false,
             awaiting: None,
-            filling: None,
+            fill: Fill::default(),
+            piggyback: false,
             in_flight: None,
             retry: None,
             pending: VecDeque::new(),
-            next_request: 0,
             last_remote: None,
             recent: VecDeque::new(),
             s: settings,
         }
     }
 
-    /// A machine whose link is not open yet: its first output asks to open
-    /// it.
-    pub fn disconnected(settings: Settings, now: Now) -> Machine {
-        let mut m = Machine::new(settings, now);
-        m.connected = false;
-        m
-    }
-
-    /// Handles `input`, which happened at `now`; returns what to do.
-    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Bytes(bytes) => {
-                for unit in self.decoder.push(&bytes) {
-                    self.unit(unit);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(c) => self.command(c),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected_now(reason),
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    /// When the next [`Input::Tick`] is due.
-    pub fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.awaiting.as_ref().map(|a| a.deadline),
-            self.filling.as_ref().map(|f| f.deadline),
-            self.in_flight.as_ref().map(|f| f.deadline),
-            self.retry.as_ref().map(|r| r.0),
-            (!self.connected && !self.opening).then_some(self.reconnect_at),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    /// Whether data request `id` is still awaited.
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.filling.as_ref().is_some_and(|f| f.id == id)
-    }
-
     fn emit(&mut self, e: DriverEvent) {
-        self.out.push(Output::Event(e));
+        self.out.event(e);
     }
 
     fn status(&mut self, s: DriverStatus) {
-        self.emit(DriverEvent::Status(s));
+        self.out.status(s);
     }
 
     fn write(&mut self, command: &Command) {
-        self.out.push(Output::Write(encode_command(
-            command,
-            self.s.framing,
-            &self.s.command_end,
-        )));
+        self.out
+            .write(encode_command(command, self.s.framing, &self.s.command_end));
     }
 
     fn result(&mut self, mt: ModemTransmission, outcome: TransmitOutcome) {
-        self.emit(DriverEvent::TransmitResult(TransmitResult {
-            transmission: mt,
-            outcome,
-        }));
-    }
-
-    fn disconnected_now(&mut self, reason: String) {
-        if !self.connected {
-            return;
-        }
-        self.connected = false;
-        self.opening = false;
-        self.decoder.clear();
-        self.reconnect_at = self.now.at + self.s.reconnect;
-        self.status(DriverStatus::Disconnected { reason });
-        // What was under way is not known to have gone: handed back.
-        if let Some(a) = self.awaiting.take() {
-            if let Purpose::Send(s) = a.purpose {
-                if s.how != How::AppAck {
-                    self.result(
-                        s.mt,
-                        TransmitOutcome::Failed("the link to the modem was lost".into()),
-                    );
-                }
-            }
-        }
-        if let Some(f) = self.in_flight.take() {
-            self.result(
-                f.sending.mt,
-                TransmitOutcome::Failed(
-                    "the link to the modem was lost before the delivery report".into(),
-                ),
-            );
-        }
-        if let Some((_, s)) = self.retry.take() {
-            if s.how != How::AppAck {
-                self.result(
-                    s.mt,
-                    TransmitOutcome::Failed("the link to the modem was lost".into()),
-                );
-            }
-        }
-        self.setup = self.s.setup.iter().cloned().collect();
-        self.ready = false;
-    }
-
-    fn opened(&mut self, ok: bool) {
-        self.opening = false;
-        if ok {
-            self.connected = true;
-            self.decoder.clear();
-            self.status(DriverStatus::Reconnected);
-            self.setup = self.s.setup.iter().cloned().collect();
-            self.ready = false;
-        } else {
-            self.reconnect_at = self.now.at + self.s.reconnect;
-        }
-    }
-
-    fn timers(&mut self) {
-        let now = self.now.at;
-        if !self.connected && !self.opening && self.reconnect_at <= now {
-            self.opening = true;
-            self.out.push(Output::Open);
-        }
-        if self.awaiting.as_ref().is_some_and(|a| a.deadline <= now) {
-            let a = self.awaiting.take().expect("checked");
-            self.no_answer(a);
-        }
-        if self.filling.as_ref().is_some_and(|f| f.deadline <= now) {
-            let f = self.filling.take().expect("checked");
-            self.status(DriverStatus::DataRejected {
-                reason: format!(
-                    "no answer to the data request within {} ms: nothing sent",
-                    DATA_REQUEST_TIMEOUT.as_millis()
-                ),
-            });
-            if !f.piggyback {
-                self.result(f.template, TransmitOutcome::NothingToSend);
-            }
-        }
-        if self.in_flight.as_ref().is_some_and(|f| f.deadline <= now) {
-            let f = self.in_flight.take().expect("checked");
-            self.status(DriverStatus::ResponseTimeout {
-                command: format!("the delivery report of {}", describe(&f.sending)),
-                attempt: 1,
-            });
-            self.result(
-                f.sending.mt,
-                TransmitOutcome::Failed(format!(
-                    "no delivery report within {} ms",
-                    self.s.delivery_timeout.as_millis()
-                )),
-            );
-        }
+        self.out.result(mt, outcome);
     }
 
     /// A command got no answer in time.
@@ -896,70 +673,6 @@ impl Machine {
         self.emit(DriverEvent::Specific(SpecificReport::new(&report)));
     }
 
-    fn command(&mut self, command: DriverCommand) {
-        match command {
-            DriverCommand::Initiate(mut mt) => {
-                if mt.src.is_none() || mt.src() == -1 {
-                    mt.src = Some(self.s.modem_id);
-                }
-                if mt.r#type() != TransmissionType::Data {
-                    return self.status(DriverStatus::Unsupported {
-                        message: format!(
-                            "ModemTransmission.type {:?} (the S2C acknowledges in the modem; use EvologicsSpecific)",
-                            mt.r#type()
-                        ),
-                    });
-                }
-                let waiting = self
-                    .pending
-                    .iter()
-                    .filter(|j| matches!(j, Job::Data(_)))
-                    .count();
-                if waiting >= MAX_PENDING_TRANSMISSIONS {
-                    if let Some(i) = self.pending.iter().position(|j| matches!(j, Job::Data(_))) {
-                        self.pending.remove(i);
-                        self.status(DriverStatus::Skipped {
-                            reason: format!(
-                                "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                            ),
-                        });
-                    }
-                }
-                self.pending.push_back(Job::Data(Box::new(mt)));
-            }
-            DriverCommand::Specific(message) => {
-                let name = message.descriptor().full_name().to_string();
-                let request = (name == EvologicsSpecific::default().descriptor().full_name())
-                    .then(|| message.transcode_to::<EvologicsSpecific>().ok())
-                    .flatten();
-                match request {
-                    Some(r) if r.r#type() == SpecificType::EvologicsPropagationTime => {
-                        self.pending.push_back(Job::PropagationTime {
-                            remote: self.last_remote,
-                        })
-                    }
-                    Some(r) if r.r#type() == SpecificType::EvologicsPiggyback => {
-                        match r.dest.filter(|&d| address_of(d).is_some_and(|a| a != BROADCAST)) {
-                            Some(dest) => self.pending.push_back(Job::Piggyback { dest }),
-                            None => self.status(DriverStatus::Unsupported {
-                                message: "EvologicsSpecific EVOLOGICS_PIGGYBACK needs a dest (modem id 1-254)".into(),
-                            }),
-                        }
-                    }
-                    _ => self.status(DriverStatus::Unsupported { message: name }),
-                }
-            }
-            // Without application acks the modem acknowledges itself, on
-            // reception.
-            DriverCommand::Acknowledge(ack) => {
-                if self.s.ack_mode == AckMode::ApplicationAck && self.s.deferred_ack {
-                    self.app_ack(&ack);
-                }
-            }
-            DriverCommand::Stop(_) => {}
-        }
-    }
-
     /// The template of a data request for `mt`.
     fn template(&self, mt: &ModemTransmission) -> ModemTransmission {
         let to_one = mt.dest() > 0;
@@ -996,31 +709,156 @@ impl Machine {
             return;
         }
         let payload = app_header(APP_ACK, received.unique_id, received.frame_start());
-        // Before other work, after other acks.
-        let at = self
-            .pending
-            .iter()
-            .position(|j| !matches!(j, Job::AppAck { .. }))
-            .unwrap_or(self.pending.len());
-        self.pending.insert(at, Job::AppAck { dest, payload });
+        queue_first(&mut self.pending, Job::AppAck { dest, payload }, |j| {
+            matches!(j, Job::AppAck { .. })
+        });
+    }
+
+    /// Writes the send command of `s` and awaits its answer.
+    fn offer(&mut self, s: Sending) {
+        let data = s.payload.clone();
+        let command = match s.how {
+            How::Instant { ack } => Command::SendIm {
+                dest: s.dest,
+                flag: if ack { AckFlag::Ack } else { AckFlag::NoAck },
+                data,
+            },
+            How::AppAck => Command::SendIm {
+                dest: s.dest,
+                flag: AckFlag::NoAck,
+                data,
+            },
+            How::Burst => Command::Send { dest: s.dest, data },
+            How::Piggyback => Command::SendPbm { dest: s.dest, data },
+        };
+        self.send_awaiting(command, Purpose::Send(Box::new(s)));
+    }
+
+    fn request(&mut self, template: ModemTransmission, piggyback: bool) {
+        self.piggyback = piggyback;
+        self.fill.ask(template, self.now.at, &mut self.out);
+    }
+}
+
+fn describe(s: &Sending) -> String {
+    let what = match s.how {
+        How::Instant { ack: true } => "the instant message (ack)",
+        How::Instant { ack: false } => "the instant message (noack)",
+        How::Burst => "the burst data",
+        How::Piggyback => "the piggy-back message",
+        How::AppAck => "the application ack",
+    };
+    format!("{what} to {}", id_of(s.dest))
+}
+
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
+        self.now = now;
+    }
+
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
+        [
+            self.awaiting.as_ref().map(|a| a.deadline),
+            self.fill.deadline(),
+            self.in_flight.as_ref().map(|f| f.deadline),
+            self.retry.as_ref().map(|r| r.0),
+            self.link.deadline(),
+        ]
+    }
+
+    fn awaited(&self, id: RequestId) -> bool {
+        self.fill.awaits(id)
+    }
+
+    fn read(&mut self, bytes: Vec<u8>) {
+        for unit in self.decoder.push(&bytes) {
+            self.unit(unit);
+        }
+    }
+
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.link.tick(now, &mut self.out);
+        if self.awaiting.as_ref().is_some_and(|a| a.deadline <= now) {
+            let a = self.awaiting.take().expect("checked");
+            self.no_answer(a);
+        }
+        if let Some(template) = self.fill.expire(now, &mut self.out) {
+            if !self.piggyback {
+                self.result(template, TransmitOutcome::NothingToSend);
+            }
+        }
+        if self.in_flight.as_ref().is_some_and(|f| f.deadline <= now) {
+            let f = self.in_flight.take().expect("checked");
+            self.status(DriverStatus::ResponseTimeout {
+                command: format!("the delivery report of {}", describe(&f.sending)),
+                attempt: 1,
+            });
+            self.result(
+                f.sending.mt,
+                TransmitOutcome::Failed(format!(
+                    "no delivery report within {} ms",
+                    self.s.delivery_timeout.as_millis()
+                )),
+            );
+        }
+    }
+
+    fn command(&mut self, command: DriverCommand) {
+        let acks = "the S2C acknowledges in the modem; use EvologicsSpecific";
+        match asked::<EvologicsSpecific>(command, self.s.modem_id, acks, &mut self.out) {
+            Asked::Data(mt) => queue_data(
+                &mut self.pending,
+                Job::Data(Box::new(mt)),
+                |j| matches!(j, Job::Data(_)),
+                &mut self.out,
+            ),
+            Asked::Slot(mt) => self.status(DriverStatus::Unsupported {
+                message: format!("ModemTransmission.type {:?} ({acks})", mt.r#type()),
+            }),
+            Asked::Specific(r) => match r.r#type() {
+                SpecificType::EvologicsPropagationTime => {
+                    self.pending.push_back(Job::PropagationTime {
+                        remote: self.last_remote,
+                    })
+                }
+                SpecificType::EvologicsPiggyback => {
+                    match r.dest.filter(|&d| address_of(d).is_some_and(|a| a != BROADCAST)) {
+                        Some(dest) => self.pending.push_back(Job::Piggyback { dest }),
+                        None => self.status(DriverStatus::Unsupported {
+                            message: "EvologicsSpecific EVOLOGICS_PIGGYBACK needs a dest (modem id 1-254)".into(),
+                        }),
+                    }
+                }
+            },
+            // Without application acks the modem acknowledges itself, on
+            // reception.
+            Asked::Acknowledge(ack) => {
+                if self.s.ack_mode == AckMode::ApplicationAck && self.s.deferred_ack {
+                    self.app_ack(&ack);
+                }
+            }
+            Asked::Nothing => {}
+        }
     }
 
     fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
-        let Some(f) = self.filling.take_if(|f| f.id == id) else {
+        let Some(mt) = self.fill.answered(id, filled, &mut self.out) else {
             return;
         };
-        let (mt, problems) = crate::driver::checked_answer(&f.template, filled);
-        for p in problems {
-            self.status(p);
-        }
+        let piggyback = self.piggyback;
         let Some(data) = mt.frame.first().filter(|d| !d.is_empty()).cloned() else {
-            if !f.piggyback {
+            if !piggyback {
                 self.result(mt, TransmitOutcome::NothingToSend);
             }
             return;
         };
-        let dest_id = if f.piggyback {
-            f.template.dest()
+        let dest_id = if piggyback {
+            mt.dest()
         } else if mt.dest() < 0 {
             0
         } else {
@@ -1038,7 +876,7 @@ impl Machine {
         let mut mt = mt;
         mt.dest = Some(dest_id);
         mt.frame.truncate(1);
-        let how = if f.piggyback {
+        let how = if piggyback {
             How::Piggyback
         } else if data.len() <= self.s.im_max {
             How::Instant {
@@ -1079,32 +917,58 @@ impl Machine {
         });
     }
 
-    /// Writes the send command of `s` and awaits its answer.
-    fn offer(&mut self, s: Sending) {
-        let data = s.payload.clone();
-        let command = match s.how {
-            How::Instant { ack } => Command::SendIm {
-                dest: s.dest,
-                flag: if ack { AckFlag::Ack } else { AckFlag::NoAck },
-                data,
-            },
-            How::AppAck => Command::SendIm {
-                dest: s.dest,
-                flag: AckFlag::NoAck,
-                data,
-            },
-            How::Burst => Command::Send { dest: s.dest, data },
-            How::Piggyback => Command::SendPbm { dest: s.dest, data },
-        };
-        self.send_awaiting(command, Purpose::Send(Box::new(s)));
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.decoder.clear();
+            self.status(DriverStatus::Reconnected);
+            self.setup = self.s.setup.iter().cloned().collect();
+            self.ready = false;
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.decoder.clear();
+        self.status(DriverStatus::Disconnected { reason });
+        // What was under way is not known to have gone: handed back.
+        if let Some(a) = self.awaiting.take() {
+            if let Purpose::Send(s) = a.purpose {
+                if s.how != How::AppAck {
+                    self.result(
+                        s.mt,
+                        TransmitOutcome::Failed("the link to the modem was lost".into()),
+                    );
+                }
+            }
+        }
+        if let Some(f) = self.in_flight.take() {
+            self.result(
+                f.sending.mt,
+                TransmitOutcome::Failed(
+                    "the link to the modem was lost before the delivery report".into(),
+                ),
+            );
+        }
+        if let Some((_, s)) = self.retry.take() {
+            if s.how != How::AppAck {
+                self.result(
+                    s.mt,
+                    TransmitOutcome::Failed("the link to the modem was lost".into()),
+                );
+            }
+        }
+        self.setup = self.s.setup.iter().cloned().collect();
+        self.ready = false;
     }
 
     /// Starts what can start now.
     fn pump(&mut self) {
         loop {
-            if !self.connected
+            if !self.link.is_up()
                 || self.awaiting.is_some()
-                || self.filling.is_some()
+                || self.fill.is_waiting()
                 || self.in_flight.is_some()
             {
                 return;
@@ -1173,30 +1037,4 @@ impl Machine {
             }
         }
     }
-
-    fn request(&mut self, template: ModemTransmission, piggyback: bool) {
-        self.next_request += 1;
-        let id = RequestId(self.next_request);
-        self.out.push(Output::Request {
-            id,
-            template: template.clone(),
-        });
-        self.filling = Some(Filling {
-            id,
-            template,
-            piggyback,
-            deadline: self.now.at + DATA_REQUEST_TIMEOUT,
-        });
-    }
-}
-
-fn describe(s: &Sending) -> String {
-    let what = match s.how {
-        How::Instant { ack: true } => "the instant message (ack)",
-        How::Instant { ack: false } => "the instant message (noack)",
-        How::Burst => "the burst data",
-        How::Piggyback => "the piggy-back message",
-        How::AppAck => "the application ack",
-    };
-    format!("{what} to {}", id_of(s.dest))
 }

@@ -55,26 +55,26 @@
 //! is address 255.
 
 pub mod machine;
-pub mod shell;
 #[cfg(test)]
 mod tests;
 
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    driver_config::{ConnectionType, Driver as DriverKind},
-    evologics_config::Framing as ConfigFraming,
-    DriverConfig, EvologicsConfig,
+    driver_config::ConnectionType, evologics_config::Framing as ConfigFraming, DriverConfig,
+    EvologicsConfig,
 };
 
 use super::codec::Framing;
 use super::message::{Command, IM_MAX_BYTES};
-use crate::check::{self, Problem};
-use crate::config;
+use crate::config::{self, Reach};
 use crate::driver::{Driver, DriverError};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::Units;
+use crate::problem::{self, Problem};
+use crate::shell::{self, Device};
 
-pub use machine::{Input, Machine, Output, Settings};
-pub use shell::Endpoint;
+pub use machine::{Machine, Settings};
 
 /// The `driver_name` of the EvoLogics S2C driver.
 pub const DRIVER_NAME: &str = "EVOLOGICS_S2C";
@@ -85,14 +85,74 @@ pub const DEFAULT_BAUD: u32 = 19_200;
 /// Largest burst frame `burst_max_bytes` may give.
 pub const BURST_LIMIT: usize = super::message::BURST_MAX_BYTES;
 
-/// Whether `config` names the EvoLogics S2C driver.
-pub fn is_evologics(config: &DriverConfig) -> bool {
-    matches!(&config.driver, Some(DriverKind::DriverName(n)) if n == DRIVER_NAME)
-}
-
 /// The EvoLogics S2C driver.
 #[derive(Debug)]
 pub struct EvologicsDriver;
+
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Name(DRIVER_NAME),
+    short_name: "evologics",
+    title: "EvoLogics",
+    section: Some("evologics"),
+    goby3_extensions: &[],
+};
+
+impl DriverKind for EvologicsDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    /// The instant-message and burst sizes, less the application-ack
+    /// header when there is one.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        let (im, burst) = frame_limits(config);
+        let header = if application_acks(config) {
+            let h = machine::APP_HEADER;
+            if burst > 0 {
+                format!(
+                    " ({} and {} less the {h}-byte application-ack header)",
+                    im + h,
+                    burst + h
+                )
+            } else {
+                format!(" ({} less the {h}-byte application-ack header)", im + h)
+            }
+        } else {
+            String::new()
+        };
+        let text = if burst > 0 {
+            format!(
+                "one frame per transmission; up to {im} bytes as an instant message (AT*SENDIM), \
+                 up to {burst} bytes as burst data (AT*SEND) to one node{header}; broadcasts and query destinations up to {im} bytes"
+            )
+        } else {
+            format!(
+                "one frame per transmission of up to {im} bytes{header}, as an instant message (AT*SENDIM); no burst data"
+            )
+        };
+        Some(FrameLimits {
+            link: format!("driver {DRIVER_NAME}"),
+            outgoing: im.max(burst),
+            incoming: im.max(burst),
+            text,
+            each_way: false,
+        })
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        use prost_reflect::ReflectMessage;
+        Some(protos::goby::acomms::protobuf::EvologicsSpecific::default().descriptor())
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(EvologicsDriver::start(config))
+    }
+}
 
 impl EvologicsDriver {
     /// Connects to the modem and starts the driver. A modem that cannot be
@@ -102,60 +162,21 @@ impl EvologicsDriver {
     /// ([`DriverError::Config`], as [`problems`] finds them).
     pub async fn start(config: &DriverConfig) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        let endpoint = endpoint(config)?;
-        let link = match endpoint.open().await {
-            Ok(link) => Some(link),
-            Err(e) => {
-                tracing::warn!("EvoLogics modem at {}: {e}", endpoint.describe());
-                None
-            }
-        };
-        let clock: std::sync::Arc<dyn goby_time::Clock> =
-            std::sync::Arc::new(goby_time::SystemClock);
-        Ok(Self::start_on(settings, endpoint, link, clock))
-    }
-
-    /// Starts the driver on a link already open (`None`: not yet; the
-    /// driver opens `endpoint` itself), reading time from `clock`.
-    pub fn start_on(
-        settings: Settings,
-        endpoint: Endpoint,
-        link: Option<shell::BoxStream>,
-        clock: std::sync::Arc<dyn goby_time::Clock>,
-    ) -> Driver {
-        Driver::spawn_with_clock("evologics", clock, move |ctx| {
-            let now = crate::micromodem::driver::shell::now(&*ctx.clock);
-            let machine = if link.is_some() {
-                Machine::new(settings, now)
-            } else {
-                let m = Machine::disconnected(settings, now);
-                ctx.events.status(crate::DriverStatus::Disconnected {
-                    reason: format!("no connection to {} yet", endpoint.describe()),
-                });
-                m
-            };
-            shell::run(machine, endpoint, link, ctx)
+        let device = Device::new(config::stream_endpoint(config, REACH), Units::Bytes);
+        Ok(shell::start_reconnecting("evologics", device, |now, up| {
+            Machine::new(settings, now, up)
         })
+        .await)
     }
 }
 
-/// Where the modem is, from `config` (checked by [`problems`]).
-pub fn endpoint(config: &DriverConfig) -> Result<Endpoint, DriverError> {
-    check::refuse(problems(config))?;
-    Ok(match config.connection_type() {
-        ConnectionType::ConnectionSerial => Endpoint::Serial {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-        },
-        _ => Endpoint::Tcp(format!(
-            "{}:{}",
-            config.tcp_server(),
-            config
-                .tcp_port
-                .unwrap_or(u32::from(super::DEFAULT_TCP_PORT))
-        )),
-    })
-}
+/// How the driver reaches the modem.
+const REACH: Reach<'static> = Reach {
+    driver: "the EvoLogics driver",
+    server: "the modem's address, e.g. \"192.168.0.209\"",
+    port: Some(super::DEFAULT_TCP_PORT),
+    baud: DEFAULT_BAUD,
+};
 
 /// The frame sizes the layer above is offered with an EvoLogics
 /// configuration, bytes: (as an instant message, as burst data; 0: no
@@ -208,37 +229,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             ));
         }
     }
-    match config.connection_type() {
-        ConnectionType::ConnectionSerial => {
-            if config.serial_port().trim().is_empty() {
-                problems.push(Problem::new(
-                    "serial_port",
-                    "required for the EvoLogics driver over serial (e.g. \"/dev/ttyUSB0\"), \
-                     or use connection_type: CONNECTION_TCP_AS_CLIENT with tcp_server",
-                ));
-            }
-        }
-        ConnectionType::ConnectionTcpAsClient => {
-            if config.tcp_server().trim().is_empty() {
-                problems.push(Problem::new(
-                    "tcp_server",
-                    "required for the EvoLogics driver over TCP (the modem's address, e.g. \"192.168.0.209\")",
-                ));
-            }
-            if let Some(p) = config.tcp_port {
-                if p == 0 || p > 65_535 {
-                    problems.push(Problem::new(
-                        "tcp_port",
-                        format!("{p} is not a TCP port (1-65535; the S2C listens on 9200)"),
-                    ));
-                }
-            }
-        }
-        ConnectionType::ConnectionTcpAsServer => problems.push(Problem::new(
-            "connection_type",
-            "CONNECTION_TCP_AS_SERVER is not supported by the EvoLogics driver (the modem is the server: use CONNECTION_TCP_AS_CLIENT)",
-        )),
-    }
+    problems.extend(config::stream_problems(config, REACH));
     if e.im_max_bytes() == 0 || e.im_max_bytes() as usize > IM_MAX_BYTES {
         problems.push(Problem::new(
             "evologics.im_max_bytes",
@@ -298,7 +289,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
 
 /// The machine's settings from the driver configuration, checked.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
+    problem::refuse(problems(config))?;
     let e: EvologicsConfig = config.evologics.clone().unwrap_or_default();
     let modem_id = config::modem_id(config)?;
     let address = e.address.map_or(modem_id as u32, |a| a) as u8;

@@ -8,10 +8,11 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
-use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
+use super::machine::{Machine, Settings};
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus, TransmitOutcome};
 use crate::evologics::codec::Framing;
 use crate::evologics::message::Command;
+use crate::machine::{Input, Machine as _, Now, Output, RequestId};
 
 fn settings() -> Settings {
     Settings {
@@ -47,7 +48,7 @@ impl Bench {
             micros: 1_700_000_000_000_000,
         };
         let mut b = Bench {
-            m: Machine::new(settings(), now),
+            m: Machine::new(settings(), now, true),
             now,
         };
         let out = b.input(Input::Tick);
@@ -62,7 +63,7 @@ impl Bench {
     }
 
     fn bytes(&mut self, b: &[u8]) -> Vec<Output> {
-        self.input(Input::Bytes(b.to_vec()))
+        self.input(Input::Read(b.to_vec()))
     }
 
     fn later(&mut self, d: Duration) -> Vec<Output> {
@@ -296,7 +297,7 @@ fn application_acks_wait_for_the_layer_above() {
     s.deferred_ack = true;
     s.query_propagation_time = false;
     let mut b = Bench {
-        m: Machine::new(s, now),
+        m: Machine::new(s, now, true),
         now,
     };
     b.input(Input::Tick);

@@ -28,7 +28,6 @@
 //! vehicle. `TransmitResult::Sent` is given once, when a frame is first
 //! written.
 
-use std::collections::VecDeque;
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
@@ -39,117 +38,13 @@ use tokio::time::Instant;
 use super::super::at::{AtCommand, ModemLine};
 use super::super::frame::{self, next_frame_number};
 use super::super::rudics;
-use super::machine::{ms, Machine, Outcome, Purpose, RequestId};
-use super::session::{DATA_REQUEST_TIMEOUT, MAX_WAITING};
+use super::machine::Machine;
+use super::state::{
+    ms, secs, CallState, Outcome, Outgoing, Purpose, BYE, DATA_REQUEST_TIMEOUT, ESCAPE_TRIES,
+    GUARD_TIME, MAX_WAITING,
+};
 use crate::driver::{checked_answer, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult};
-
-/// Silence kept before and after the `+++` escape.
-pub const GUARD_TIME: Duration = Duration::from_secs(1);
-
-/// The line either side sends to end a call.
-pub const BYE: &[u8] = b"bye";
-
-/// Times `+++` is tried before the transceiver is configured again.
-const ESCAPE_TRIES: u32 = 3;
-
-/// Where the call is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum CallState {
-    /// No call.
-    Idle,
-    /// `ATD` written, waiting for `CONNECT`.
-    Dialing,
-    /// Data flows; `last` is the last packet written or read.
-    Online { last: Instant },
-    /// `bye` written at `since`, waiting for the shore's.
-    Bye { since: Instant },
-    /// Keeping silence from `since` before the escape.
-    Guard { since: Instant, tries: u32 },
-    /// `+++` written at `since`, waiting for `OK`.
-    Escaped { since: Instant, tries: u32 },
-    /// `ATH` written.
-    HangingUp,
-}
-
-/// A frame for the call.
-#[derive(Debug, Clone)]
-pub(super) struct Outgoing {
-    transmission: ModemTransmission,
-    /// The packet (final CR included).
-    packet: Vec<u8>,
-    /// `TransmitResult` given already.
-    reported: bool,
-}
-
-/// The calls' state.
-#[derive(Debug)]
-pub(super) struct Calls {
-    pub state: CallState,
-    /// Transmissions asked for, waiting for a call (or their data request).
-    waiting: VecDeque<ModemTransmission>,
-    filling: Option<(RequestId, ModemTransmission, Instant)>,
-    /// Frames to write once a call is up.
-    outbox: VecDeque<Outgoing>,
-    /// Frames written on this call, waiting for their ACK.
-    unacked: VecDeque<Outgoing>,
-    /// Failed dials in a row.
-    failures: u32,
-    backoff_until: Option<Instant>,
-    /// Calls made (connected), for the record.
-    pub connected: u64,
-}
-
-impl Calls {
-    pub(super) fn new() -> Calls {
-        Calls {
-            state: CallState::Idle,
-            waiting: VecDeque::new(),
-            filling: None,
-            outbox: VecDeque::new(),
-            unacked: VecDeque::new(),
-            failures: 0,
-            backoff_until: None,
-            connected: 0,
-        }
-    }
-
-    /// The transceiver is in data mode (lines are packets).
-    pub(super) fn data_mode(&self) -> bool {
-        matches!(
-            self.state,
-            CallState::Online { .. }
-                | CallState::Bye { .. }
-                | CallState::Guard { .. }
-                | CallState::Escaped { .. }
-        )
-    }
-
-    pub(super) fn idle(&self) -> bool {
-        self.state == CallState::Idle
-    }
-
-    pub(super) fn awaits(&self, id: RequestId) -> bool {
-        self.filling.as_ref().is_some_and(|(i, _, _)| *i == id)
-    }
-
-    /// Whether a call is wanted.
-    fn work(&self) -> bool {
-        !self.waiting.is_empty() || !self.outbox.is_empty() || !self.unacked.is_empty()
-    }
-
-    /// The link went, or the transceiver is configured again: no call.
-    pub(super) fn reset(&mut self) {
-        self.state = CallState::Idle;
-        self.requeue();
-    }
-
-    /// Frames written on a call that ended are written again on the next.
-    fn requeue(&mut self) {
-        while let Some(o) = self.unacked.pop_back() {
-            self.outbox.push_front(o);
-        }
-    }
-}
+use crate::machine::RequestId;
 
 impl Machine {
     /// Whether calls are made: a voice-enabled transceiver and the shore's
@@ -623,8 +518,4 @@ impl Machine {
             }
         }
     }
-}
-
-fn secs(n: i32) -> Duration {
-    Duration::from_secs(u64::try_from(n).unwrap_or(0))
 }

@@ -1,11 +1,6 @@
-//! The vehicle driver as a state machine: no input or output, no clock read.
-//!
-//! Each [`Input`] (bytes read from the transceiver, a tick, a command of
-//! the layer above, the answer to a data request, the serial port opened
-//! or lost) comes with the time it happened ([`Now`]); its handling returns
-//! what to do, in order ([`Output`]: bytes to write, events, data requests,
-//! the port to open). [`Machine::next_deadline`] tells when the next tick
-//! is due.
+//! The vehicle driver as a state machine ([`crate::machine::Machine`]): the
+//! transceiver's bytes read as lines and binary blocks, the SBD AT
+//! commands to write.
 //!
 //! One AT command is outstanding at a time (`Pending`); its answer is
 //! collected from the lines (and binary blocks) that follow until its
@@ -16,174 +11,24 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, IridiumDriverConfig, ModemTransmission,
-};
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::time::Instant;
 
-use super::super::at::{self, AtCommand, AtError, ModemLine, SessionReply};
+use super::super::at::{self, AtCommand, AtError, ModemLine};
 use super::super::reader::{Reader, Unit};
-use super::call::Calls;
-use super::session::Sessions;
-use crate::driver::{
-    Acknowledgement, DriverCommand, DriverEvent, DriverStatus, RawDirection, RawMessage,
-};
-
-/// The time of an input, read once by the shell as it comes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Now {
-    /// Monotonic time: what deadlines are kept in.
-    pub at: Instant,
-    /// Wall clock, microseconds since the Unix epoch.
-    pub micros: u64,
-}
-
-/// Names a data request made by the machine; its answer comes back with it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct RequestId(pub u64);
-
-/// What happened.
-#[derive(Debug)]
-pub enum Input {
-    /// Bytes read from the transceiver.
-    Bytes(Vec<u8>),
-    /// Time passed: deadlines up to now fire.
-    Tick,
-    /// A command of the layer above (other than `Stop`).
-    Command(DriverCommand),
-    /// The layer above answered a data request (`None`: dropped unanswered).
-    Answer {
-        /// The request answered.
-        id: RequestId,
-        /// The transmission filled, or `None`.
-        filled: Option<ModemTransmission>,
-    },
-    /// The port asked for by [`Output::Open`] was opened (`true`) or not.
-    Opened(bool),
-    /// The serial link failed: why.
-    Disconnected(String),
-}
-
-/// What to do, in order.
-#[derive(Debug)]
-pub enum Output {
-    /// Write these bytes to the transceiver.
-    Write(Vec<u8>),
-    /// Give this event to the layer above.
-    Event(DriverEvent),
-    /// Ask the layer above to fill `template`; the answer comes back as
-    /// [`Input::Answer`] with `id`.
-    Request {
-        /// Names the request in its answer.
-        id: RequestId,
-        /// What to fill.
-        template: ModemTransmission,
-    },
-    /// Open the serial port again, then tell [`Input::Opened`].
-    Open,
-}
-
-/// What the machine starts from (checked by [`super::settings`]).
-#[derive(Debug, Clone)]
-pub struct Settings {
-    /// This vehicle's modem id (0–30).
-    pub modem_id: i32,
-    /// The Iridium part of the driver configuration.
-    pub iridium: IridiumDriverConfig,
-    /// Largest frame offered to the layer above (the device's MO limit less
-    /// the header and CRC, or `max_frame_size` when smaller).
-    pub max_frame_bytes: u32,
-    /// Between attempts to open the port again.
-    pub reconnect: Duration,
-    /// Acks wait for the layer above (`DriverConfig.deferred_ack`).
-    pub deferred_ack: bool,
-    /// Number of the first frame sent (then counting up, modulo 65535).
-    pub first_frame: u32,
-}
-
-/// Why a command is outstanding: what its answer is for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Purpose {
-    /// Step of the start-up sequence.
-    Startup,
-    /// `AT+SBDD2` before a mailbox check (or after a message went).
-    ClearMo,
-    /// `AT+SBDWB=n`, waiting for `READY`.
-    WriteRequest,
-    /// The message written, waiting for the result digit.
-    WriteData,
-    /// `AT+SBDIX[A]`.
-    Session,
-    /// `AT+SBDRB`.
-    ReadMt,
-    /// `ATD<number>`, waiting for `CONNECT`.
-    Dial,
-    /// `ATH` after the escape.
-    Hangup,
-}
-
-/// An answer collected for the outstanding command.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(super) enum Answer {
-    /// A result digit (`AT+SBDWB`, `AT+SBDD`).
-    Digit(u8),
-    /// `+SBDIX`.
-    Session(SessionReply),
-    /// The MT buffer read, checksum good.
-    Mt(Vec<u8>),
-    /// The MT buffer read, checksum bad.
-    BadMt,
-    /// The IMEI.
-    Imei(String),
-}
-
-/// How a command ended.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(super) enum Outcome {
-    /// `OK` (or `READY`, or the final digit), with what came before it.
-    Done(Option<Answer>),
-    /// `ERROR`.
-    Error,
-    /// No answer after every try.
-    NoAnswer,
-}
-
-/// The command outstanding.
-#[derive(Debug)]
-pub(super) struct Pending {
-    pub command: AtCommand,
-    /// Bytes written (the command, or the message after `READY`).
-    pub bytes: Vec<u8>,
-    pub purpose: Purpose,
-    pub sent_at: Instant,
-    pub timeout: Duration,
-    /// Times written.
-    pub tries: u32,
-    /// What came before the final result code.
-    pub answer: Option<Answer>,
-    /// Written again when unanswered (not a session: that could send the
-    /// message twice).
-    pub resend: bool,
-}
-
-/// Times a command is written before the transceiver is taken as silent.
-pub const COMMAND_TRIES: u32 = 3;
-
-/// The serial link as the machine sees it.
-#[derive(Debug)]
-struct LinkState {
-    connected: bool,
-    opening: bool,
-    reconnect_at: Instant,
-}
+use super::settings::Settings;
+use super::state::{ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES};
+use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
+use crate::machine::reconnect::Reconnect;
+use crate::machine::{Handlers, Now, Output, Outputs, RequestId};
 
 /// The vehicle driver's logic.
 #[derive(Debug)]
 pub struct Machine {
     pub(super) settings: Settings,
     pub(super) now: Now,
-    out: Vec<Output>,
-    link: LinkState,
+    out: Outputs,
+    link: Reconnect,
     pub(super) reader: Reader,
     /// Start-up commands not yet written (empty once configured).
     startup: VecDeque<AtCommand>,
@@ -205,18 +50,15 @@ pub struct Machine {
 
 impl Machine {
     /// A machine whose port is open at `now`; its first outputs come from
-    /// the first input (e.g. [`Input::Tick`]).
+    /// the first input (e.g. [`Input::Tick`](crate::machine::Input::Tick)).
     pub fn new(settings: Settings, now: Now) -> Machine {
         let sessions = Sessions::new(settings.first_frame);
+        let link = Reconnect::new(true, now.at, settings.reconnect);
         let mut machine = Machine {
             settings,
             now,
-            out: Vec::new(),
-            link: LinkState {
-                connected: true,
-                opening: false,
-                reconnect_at: now.at,
-            },
+            out: Outputs::default(),
+            link,
             reader: Reader::new(),
             startup: VecDeque::new(),
             ready: false,
@@ -233,64 +75,6 @@ impl Machine {
         machine
     }
 
-    /// Handles `input`, which happened at `now`; returns what to do.
-    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Bytes(bytes) => {
-                self.reader.push(&bytes);
-                while let Some(unit) = self.reader.next_unit() {
-                    self.unit(unit);
-                }
-            }
-            Input::Tick => self.timers(),
-            Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => {
-                if self.calls.awaits(id) {
-                    self.call_answered(id, filled)
-                } else {
-                    self.answered(id, filled)
-                }
-            }
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected(reason),
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    /// When the next [`Input::Tick`] is due (`None`: no timer armed).
-    pub fn next_deadline(&self) -> Option<Instant> {
-        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
-        let reconnect =
-            (!self.link.connected && !self.link.opening).then_some(self.link.reconnect_at);
-        let session = if self.ready && self.pending.is_none() {
-            self.session_deadline()
-        } else {
-            None
-        };
-        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
-            self.call_deadline()
-        } else {
-            None
-        };
-        [
-            command,
-            reconnect,
-            session,
-            call,
-            self.sessions.request_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    /// Whether data request `id` is still awaited.
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.sessions.awaits(id) || self.calls.awaits(id)
-    }
-
     /// Configured, and no command outstanding.
     pub fn ready_for_work(&self) -> bool {
         self.ready && self.pending.is_none()
@@ -302,11 +86,11 @@ impl Machine {
     }
 
     pub(super) fn emit(&mut self, event: DriverEvent) {
-        self.out.push(Output::Event(event));
+        self.out.event(event);
     }
 
     pub(super) fn status(&mut self, status: DriverStatus) {
-        self.emit(DriverEvent::Status(status));
+        self.out.status(status);
     }
 
     pub(super) fn new_request(&mut self, template: ModemTransmission) -> RequestId {
@@ -317,12 +101,7 @@ impl Machine {
     }
 
     pub(super) fn write_raw(&mut self, bytes: Vec<u8>) {
-        self.emit(DriverEvent::Raw(RawMessage {
-            direction: RawDirection::Outgoing,
-            bytes: bytes.clone(),
-            peer: None,
-        }));
-        self.out.push(Output::Write(bytes));
+        self.out.write(bytes);
     }
 
     /// Writes `command` and waits for its answer.
@@ -411,44 +190,22 @@ impl Machine {
     fn unit(&mut self, unit: Unit) {
         if self.calls.data_mode() {
             if let Unit::Line(line) = unit {
-                self.emit(DriverEvent::Raw(RawMessage {
-                    direction: RawDirection::Incoming,
-                    bytes: line.clone(),
-                    peer: None,
-                }));
                 self.call_line(line);
                 return;
             }
         }
         match unit {
-            Unit::Line(line) => {
-                self.emit(DriverEvent::Raw(RawMessage {
-                    direction: RawDirection::Incoming,
-                    bytes: line.clone(),
-                    peer: None,
-                }));
-                match ModemLine::parse(&line) {
-                    Ok(parsed) => self.line(parsed),
-                    Err(e) => self.status(DriverStatus::Unparseable {
-                        line: String::from_utf8_lossy(&line).into_owned(),
-                        reason: match e {
-                            AtError::Unknown => {
-                                "not an answer of the Iridium AT command set".into()
-                            }
-                            other => other.to_string(),
-                        },
-                    }),
-                }
-            }
+            Unit::Line(line) => match ModemLine::parse(&line) {
+                Ok(parsed) => self.line(parsed),
+                Err(e) => self.status(DriverStatus::Unparseable {
+                    line: String::from_utf8_lossy(&line).into_owned(),
+                    reason: match e {
+                        AtError::Unknown => "not an answer of the Iridium AT command set".into(),
+                        other => other.to_string(),
+                    },
+                }),
+            },
             Unit::MtMessage { message, checksum } => {
-                let mut raw = (message.len() as u16).to_be_bytes().to_vec();
-                raw.extend_from_slice(&message);
-                raw.extend_from_slice(&checksum.to_be_bytes());
-                self.emit(DriverEvent::Raw(RawMessage {
-                    direction: RawDirection::Incoming,
-                    bytes: raw,
-                    peer: None,
-                }));
                 let good = at::checksum(&message) == checksum;
                 if !good {
                     self.status(DriverStatus::BadChecksum {
@@ -623,26 +380,6 @@ impl Machine {
         }
     }
 
-    fn command(&mut self, command: DriverCommand) {
-        match command {
-            DriverCommand::Initiate(mt) => match mt.r#type() {
-                TransmissionType::Ack => self.queue_ack(mt),
-                _ => self.initiate(mt),
-            },
-            DriverCommand::Acknowledge(ack) => {
-                if self.settings.deferred_ack {
-                    self.acknowledge(ack);
-                }
-            }
-            DriverCommand::Specific(message) => self.status(DriverStatus::Unsupported {
-                message: prost_reflect::ReflectMessage::descriptor(&message)
-                    .full_name()
-                    .to_string(),
-            }),
-            DriverCommand::Stop(_) => {}
-        }
-    }
-
     /// Sends the ACK of `ack` (when the data asked for one, to this node).
     pub(super) fn acknowledge(&mut self, ack: Acknowledgement) {
         if !Acknowledgement::wanted(&ack.received, &[self.settings.modem_id]) {
@@ -652,36 +389,60 @@ impl Machine {
             self.queue_ack(mt);
         }
     }
+}
 
-    fn opened(&mut self, ok: bool) {
-        self.link.opening = false;
-        if ok {
-            self.link.connected = true;
-            self.status(DriverStatus::Reconnected);
-            self.configure();
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
+        self.now = now;
+    }
+
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
+        let command = self.pending.as_ref().map(|p| p.sent_at + p.timeout);
+        let session = if self.ready && self.pending.is_none() {
+            self.session_deadline()
         } else {
-            self.link.reconnect_at = self.now.at + self.settings.reconnect;
+            None
+        };
+        let call = if self.ready && (self.pending.is_none() || !self.calls.idle()) {
+            self.call_deadline()
+        } else {
+            None
+        };
+        [
+            command,
+            self.link.deadline(),
+            session,
+            call,
+            self.sessions.request_deadline(),
+        ]
+    }
+
+    fn awaited(&self, id: RequestId) -> bool {
+        self.sessions.awaits(id) || self.calls.awaits(id)
+    }
+
+    fn read(&mut self, bytes: Vec<u8>) {
+        self.reader.push(&bytes);
+        while let Some(unit) = self.reader.next_unit() {
+            self.unit(unit);
         }
     }
 
-    fn disconnected(&mut self, reason: String) {
-        self.link.connected = false;
-        self.link.opening = false;
-        self.link.reconnect_at = self.now.at + self.settings.reconnect;
-        self.ready = false;
-        if let Some(p) = self.pending.take() {
-            self.session_interrupted(p.purpose);
+    fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+        if self.calls.awaits(id) {
+            self.call_answered(id, filled)
+        } else {
+            self.mo_filled(id, filled)
         }
-        self.reader = Reader::new();
-        self.status(DriverStatus::Disconnected { reason });
     }
 
     fn timers(&mut self) {
         let now = self.now.at;
-        if !self.link.connected && !self.link.opening && self.link.reconnect_at <= now {
-            self.link.opening = true;
-            self.out.push(Output::Open);
-        }
+        self.link.tick(now, &mut self.out);
         self.request_timers();
         if self.ready {
             self.call_timers();
@@ -742,11 +503,50 @@ impl Machine {
         }
     }
 
+    fn command(&mut self, command: DriverCommand) {
+        match command {
+            DriverCommand::Initiate(mt) => match mt.r#type() {
+                TransmissionType::Ack => self.queue_ack(mt),
+                _ => self.initiate(mt),
+            },
+            DriverCommand::Acknowledge(ack) => {
+                if self.settings.deferred_ack {
+                    self.acknowledge(ack);
+                }
+            }
+            DriverCommand::Specific(message) => self.status(DriverStatus::Unsupported {
+                message: prost_reflect::ReflectMessage::descriptor(&message)
+                    .full_name()
+                    .to_string(),
+            }),
+            DriverCommand::Stop(_) => {}
+        }
+    }
+
+    fn opened(&mut self, ok: bool) {
+        if self.link.opened(ok, self.now.at) {
+            self.status(DriverStatus::Reconnected);
+            self.configure();
+        }
+    }
+
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.lost(self.now.at) {
+            return;
+        }
+        self.ready = false;
+        if let Some(p) = self.pending.take() {
+            self.session_interrupted(p.purpose);
+        }
+        self.reader = Reader::new();
+        self.status(DriverStatus::Disconnected { reason });
+    }
+
     /// Writes the next command due: a start-up step, or the next step of
     /// a session.
     fn pump(&mut self) {
         loop {
-            if !self.link.connected || self.pending.is_some() {
+            if !self.link.is_up() || self.pending.is_some() {
                 return;
             }
             if let Some(command) = self.startup.pop_front() {
@@ -767,9 +567,4 @@ impl Machine {
             }
         }
     }
-}
-
-/// `n` milliseconds.
-pub(super) fn ms(n: u32) -> Duration {
-    Duration::from_millis(u64::from(n))
 }

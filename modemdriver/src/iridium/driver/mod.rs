@@ -48,28 +48,62 @@
 pub mod call;
 pub mod machine;
 pub mod session;
-pub mod shell;
+mod settings;
+mod state;
 #[cfg(test)]
 mod tests;
 
-use std::time::Duration;
-
-use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, DriverConfig, IridiumDeviceType, IridiumDriverConfig,
-};
+use protos::goby::acomms::protobuf::DriverConfig;
 
 use super::frame::{self, Direction};
-use crate::check::{self, Problem};
 use crate::driver::{Driver, DriverError};
+use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::link::stream::{Endpoint, Units};
+use crate::problem::{self, Problem};
+use crate::shell::{self, Device};
 
-pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
-
-/// Baud rate when `serial_baud` is not set (the 9602/9603's default).
-pub const DEFAULT_BAUD: u32 = 19_200;
+pub use machine::Machine;
+pub use settings::{
+    first_frame_number, iridium_config, max_frame_bytes, problems, settings, Settings, DEFAULT_BAUD,
+};
+pub use state::{DATA_REQUEST_TIMEOUT, MAX_WAITING};
 
 /// The vehicle's Iridium driver.
 #[derive(Debug)]
 pub struct IridiumDriver;
+
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverIridium),
+    short_name: "iridium",
+    title: "Iridium",
+    section: Some("iridium"),
+    goby3_extensions: &[("goby.acomms.iridium.protobuf.config", "iridium")],
+};
+
+impl DriverKind for IridiumDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    /// The device's MO messages out, its MT messages in.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
+        let iridium = iridium_config(config);
+        Some(frame::frame_limits(
+            iridium.device(),
+            Direction::MobileOriginated,
+            max_frame_bytes(&iridium) as usize,
+        ))
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(async move { IridiumDriver::start(config) })
+    }
+}
 
 impl IridiumDriver {
     /// Opens `serial_port` and starts the driver.
@@ -77,174 +111,32 @@ impl IridiumDriver {
         Self::start_with_clock(config, std::sync::Arc::new(goby_time::SystemClock))
     }
 
-    /// Starts the driver reading time from `clock` (e.g. virtual time in
-    /// tests).
+    /// Starts the driver reading time from `clock` (a
+    /// [`TokioClock`](crate::time::TokioClock) runs it in virtual time).
     pub fn start_with_clock(
         config: &DriverConfig,
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        check::refuse(
-            check::serial_port_problem(config.serial_port())
+        problem::refuse(
+            problem::serial_port_problem(config.serial_port())
                 .into_iter()
                 .collect(),
         )?;
-        let port = shell::Port {
-            path: config.serial_port().to_string(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-            dtr: settings.iridium.use_dtr(),
-        };
-        let stream = port
-            .open()
-            .map_err(|e| DriverError::io("DriverConfig.serial_port", e))?;
-        Ok(Driver::spawn_with_clock("iridium", clock, move |ctx| {
-            shell::run(settings, port, stream, ctx)
-        }))
+        let device = Device::new(
+            Endpoint::Serial {
+                path: config.serial_port().to_string(),
+                baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
+                dtr: settings.iridium.use_dtr(),
+            },
+            Units::Bytes,
+        );
+        shell::start_on_serial(
+            "iridium",
+            device,
+            |now| Machine::new(settings, now),
+            None,
+            clock,
+        )
     }
-}
-
-/// The Iridium section, or its defaults.
-pub fn iridium_config(config: &DriverConfig) -> IridiumDriverConfig {
-    config.iridium.clone().unwrap_or_default()
-}
-
-/// Largest frame the driver offers to the layer above: the device's MO
-/// limit less header and CRC, or `max_frame_size` when smaller.
-pub fn max_frame_bytes(iridium: &IridiumDriverConfig) -> u32 {
-    let limit = frame::sbd_frame_limit(iridium.device(), Direction::MobileOriginated) as u32;
-    limit.min(iridium.max_frame_size())
-}
-
-/// Every problem of a vehicle Iridium configuration that [`settings`]
-/// refuses (see [`crate::check`], which adds a serial port that does not
-/// exist).
-pub fn problems(config: &DriverConfig) -> Vec<Problem> {
-    let mut problems = Vec::new();
-    match config.modem_id {
-        Some(id) if (0..=frame::MAX_MODEM_ID).contains(&id) => {}
-        Some(id) => problems.push(Problem::new(
-            "modem_id",
-            format!("{id} does not fit the Iridium header (modem ids 0-30, as Goby3's)"),
-        )),
-        None => problems.push(Problem::new("modem_id", "required field is not set")),
-    }
-    if config.connection_type() != ConnectionType::ConnectionSerial {
-        problems.push(Problem::new(
-            "connection_type",
-            format!(
-                "{:?} is not supported by the Iridium driver (only CONNECTION_SERIAL)",
-                config.connection_type()
-            ),
-        ));
-    } else if config.serial_port().trim().is_empty() {
-        problems.push(Problem::new(
-            "serial_port",
-            "required for the Iridium driver (e.g. \"/dev/ttyUSB0\")",
-        ));
-    }
-    let iridium = iridium_config(config);
-    if iridium.max_frame_size() == 0 {
-        problems.push(Problem::new(
-            "iridium.max_frame_size",
-            "0 leaves no room for data",
-        ));
-    }
-    for (field, zero) in [
-        ("command_timeout_ms", iridium.command_timeout_ms() == 0),
-        ("session_timeout_ms", iridium.session_timeout_ms() == 0),
-        ("session_attempts", iridium.session_attempts() == 0),
-    ] {
-        if zero {
-            problems.push(Problem::new(format!("iridium.{field}"), "must be above 0"));
-        }
-    }
-    if let Some(remote) = &iridium.remote {
-        let number = remote.iridium_number.trim();
-        if number.is_empty()
-            || !number
-                .chars()
-                .all(|c| c.is_ascii_digit() || matches!(c, '+' | '*' | '#'))
-        {
-            problems.push(Problem::new(
-                "iridium.remote.iridium_number",
-                format!(
-                    "{:?} is not a number to dial (digits, with + * # at most; e.g. \"0088160000500\")",
-                    remote.iridium_number
-                ),
-            ));
-        }
-        if !(0..=frame::MAX_MODEM_ID).contains(&remote.modem_id) {
-            problems.push(Problem::new(
-                "iridium.remote.modem_id",
-                format!(
-                    "{} does not fit the Iridium header (modem ids 0-30)",
-                    remote.modem_id
-                ),
-            ));
-        }
-        if iridium.device() != IridiumDeviceType::DeviceVoiceEnabledIsu {
-            problems.push(Problem::new(
-                "iridium.remote",
-                format!(
-                    "RUDICS calls need a voice-enabled transceiver (device: DEVICE_VOICE_ENABLED_ISU), not {}; leave remote out for SBD only",
-                    iridium.device().as_str_name()
-                ),
-            ));
-        }
-        for (field, value) in [
-            ("dial_attempts", iridium.dial_attempts()),
-            (
-                "hangup_seconds_after_empty",
-                iridium.hangup_seconds_after_empty(),
-            ),
-            (
-                "handshake_hangup_seconds",
-                iridium.handshake_hangup_seconds(),
-            ),
-        ] {
-            if value < 1 {
-                problems.push(Problem::new(
-                    format!("iridium.{field}"),
-                    format!("{value}: must be at least 1 for RUDICS calls"),
-                ));
-            }
-        }
-    }
-    for (i, line) in iridium.config.iter().enumerate() {
-        if line.contains(['\r', '\n']) {
-            problems.push(Problem::new(
-                format!("iridium.config[{i}]"),
-                format!("{line:?}: one AT command per entry, without line ends"),
-            ));
-        }
-    }
-    problems
-}
-
-/// The machine's settings from the driver configuration, checked.
-pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
-    let iridium = iridium_config(config);
-    let reconnect = iridium.reconnect_interval_ms.map_or(
-        Duration::from_secs(u64::from(config.reconnect_interval())),
-        |ms| Duration::from_millis(u64::from(ms)),
-    );
-    Ok(Settings {
-        modem_id: config.modem_id(),
-        max_frame_bytes: max_frame_bytes(&iridium),
-        iridium,
-        reconnect,
-        deferred_ack: config.deferred_ack(),
-        first_frame: first_frame_number(),
-    })
-}
-
-/// A frame number drawn at random, so that a driver started again does not
-/// number its frames as before (an ack still on its way for a frame of the
-/// last run would otherwise credit a new frame of that number).
-pub fn first_frame_number() -> u32 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(crate::time::now_micros());
-    (hasher.finish() % u64::from(frame::FRAME_NUMBERS)) as u32
 }

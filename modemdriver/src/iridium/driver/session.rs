@@ -29,170 +29,21 @@
 //! the message already (a retry after a failed session goes straight to
 //! `AT+SBDIX`).
 
-use std::collections::VecDeque;
-use std::time::Duration;
-
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::time::Instant;
 
 use super::super::at::AtCommand;
 use super::super::frame::{self, next_frame_number, FrameError};
 use super::super::status::{MoStatus, MtStatus};
-use super::machine::{ms, Answer, Machine, Outcome, Pending, Purpose, RequestId};
+use super::machine::Machine;
+use super::state::{
+    ms, Active, Answer, Job, Mo, MoBuffer, Outcome, Pending, Purpose, SentFrame, BUFFER_TRIES,
+    DATA_REQUEST_TIMEOUT, MAX_WAITING, SENT_KEPT,
+};
 use crate::driver::{
     checked_answer, Acknowledgement, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult,
 };
-
-/// Transmissions asked for that wait (for their data request) while a
-/// session is under way; a further one replaces the oldest.
-pub const MAX_WAITING: usize = 1;
-
-/// How long the layer above has to answer a data request.
-pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// Frames sent and remembered, so that the acks that answer them are
-/// given the `unique_id` of their transmission.
-const SENT_KEPT: usize = 256;
-
-/// Times the MO buffer write or the MT buffer read are tried in one job.
-const BUFFER_TRIES: u32 = 3;
-
-/// An MO message to send.
-#[derive(Debug)]
-pub(super) struct Mo {
-    /// The transmission (data with its frame, or an ack).
-    pub transmission: ModemTransmission,
-    /// The SBD message.
-    pub bytes: Vec<u8>,
-    /// Sessions tried.
-    pub attempts: u32,
-    /// Names the message in the MO buffer.
-    pub id: u64,
-}
-
-/// What the MO buffer holds, as far as the driver knows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum MoBuffer {
-    Unknown,
-    Empty,
-    Holds(u64),
-}
-
-/// The job of the session under way.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Job {
-    Ack,
-    Data,
-    Mailbox,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Active {
-    job: Job,
-    alert: bool,
-    /// Tries of the buffer write (or read) of this job.
-    tries: u32,
-}
-
-/// A frame sent, for the ack that answers it.
-#[derive(Debug, Clone, Copy)]
-struct SentFrame {
-    dest: i32,
-    frame: u32,
-    unique_id: Option<u32>,
-}
-
-/// The sessions' state.
-#[derive(Debug)]
-pub(super) struct Sessions {
-    acks: VecDeque<Mo>,
-    data: Option<Mo>,
-    waiting: VecDeque<ModemTransmission>,
-    filling: Option<(RequestId, ModemTransmission, Instant)>,
-    /// A mailbox check is wanted (a transmission with nothing to send).
-    mailbox: bool,
-    /// A ring alert waits for its answer.
-    ring: bool,
-    /// MT messages queued at the gateway (last session's word).
-    mt_queued: u16,
-    mo_buffer: MoBuffer,
-    next_mo: u64,
-    backoff_until: Option<Instant>,
-    failures: u32,
-    pub(super) next_frame: u32,
-    sent: VecDeque<SentFrame>,
-    active: Option<Active>,
-}
-
-impl Sessions {
-    pub(super) fn new(first_frame: u32) -> Sessions {
-        Sessions {
-            acks: VecDeque::new(),
-            data: None,
-            waiting: VecDeque::new(),
-            filling: None,
-            mailbox: false,
-            ring: false,
-            mt_queued: 0,
-            mo_buffer: MoBuffer::Unknown,
-            next_mo: 0,
-            backoff_until: None,
-            failures: 0,
-            next_frame: first_frame % frame::FRAME_NUMBERS,
-            sent: VecDeque::new(),
-            active: None,
-        }
-    }
-
-    /// The transceiver is configured again: what it holds is not known.
-    pub(super) fn configuring(&mut self) {
-        self.active = None;
-        self.mo_buffer = MoBuffer::Unknown;
-    }
-
-    /// `AT+SBDD2` was answered at start-up.
-    pub(super) fn mo_cleared(&mut self) {
-        self.mo_buffer = MoBuffer::Empty;
-    }
-
-    /// `SBDRING`.
-    pub(super) fn ring_alert(&mut self) {
-        self.ring = true;
-    }
-
-    /// Whether a session (or its data request) is under way.
-    pub(super) fn busy(&self) -> bool {
-        self.active.is_some() || self.filling.is_some()
-    }
-
-    pub(super) fn awaits(&self, id: RequestId) -> bool {
-        self.filling.as_ref().is_some_and(|(i, _, _)| *i == id)
-    }
-
-    pub(super) fn request_deadline(&self) -> Option<Instant> {
-        self.filling.as_ref().map(|(_, _, d)| *d)
-    }
-
-    /// Whether any session is wanted.
-    fn work(&self) -> bool {
-        !self.acks.is_empty()
-            || self.data.is_some()
-            || (!self.waiting.is_empty() && self.filling.is_none())
-            || self.mailbox
-            || self.ring
-            || self.mt_queued > 0
-    }
-
-    fn mo(&mut self, transmission: ModemTransmission, bytes: Vec<u8>) -> Mo {
-        self.next_mo += 1;
-        Mo {
-            transmission,
-            bytes,
-            attempts: 0,
-            id: self.next_mo,
-        }
-    }
-}
+use crate::machine::RequestId;
 
 impl Machine {
     /// A transmission asked for by the layer above (data, or nothing with
@@ -639,7 +490,7 @@ impl Machine {
     }
 
     /// The answer to a data request.
-    pub(super) fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+    pub(super) fn mo_filled(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
         if !self.sessions.awaits(id) {
             return;
         }

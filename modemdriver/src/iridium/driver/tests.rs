@@ -8,12 +8,14 @@ use protos::goby::acomms::protobuf::{
 };
 use tokio::time::Instant;
 
-use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
+use super::machine::Machine;
+use super::settings::Settings;
 use crate::driver::{
     Acknowledgement, DriverCommand, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult,
 };
 use crate::iridium::at;
 use crate::iridium::frame;
+use crate::machine::{Input, Machine as _, Now, Output, RequestId};
 
 struct Rig {
     machine: Machine,
@@ -56,7 +58,7 @@ impl Rig {
     }
 
     fn bytes(&mut self, bytes: &[u8]) -> Vec<Output> {
-        self.input(Input::Bytes(bytes.to_vec()))
+        self.input(Input::Read(bytes.to_vec()))
     }
 
     fn advance(&mut self, d: Duration) -> Vec<Output> {
@@ -510,15 +512,11 @@ mod rudics_calls {
     const NUMBER: &str = "0088160000519";
 
     fn rig() -> Rig {
-        rig_with(|_| {}, None)
+        rig_with(|_| {})
     }
 
-    /// A rig for a voice-enabled transceiver; started against `tx` when
-    /// given, else by [`Rig::start`].
-    fn rig_with(
-        change: impl FnOnce(&mut Settings),
-        tx: Option<&mut crate::iridium::emulator::transceiver::Transceiver>,
-    ) -> Rig {
+    /// A rig for a voice-enabled transceiver, started.
+    fn rig_with(change: impl FnOnce(&mut Settings)) -> Rig {
         let mut s = settings(true);
         change(&mut s);
         s.iridium.device = Some(IridiumDeviceType::DeviceVoiceEnabledIsu as i32);
@@ -537,30 +535,7 @@ mod rudics_calls {
             machine: Machine::new(s, now),
             now,
         };
-        match tx {
-            None => rig.start(),
-            Some(tx) => {
-                use crate::iridium::emulator::transceiver::{TxInput, TxOutput};
-                let mut out = rig.input(Input::Tick);
-                for _ in 0..40 {
-                    let host: Vec<u8> = written_bytes(&out).concat();
-                    let back: Vec<u8> = tx
-                        .handle(rig.now.at, TxInput::Host(host))
-                        .into_iter()
-                        .filter_map(|o| match o {
-                            TxOutput::Write(b) => Some(b),
-                            _ => None,
-                        })
-                        .flatten()
-                        .collect();
-                    out = rig.bytes(&back);
-                    if rig.machine.ready_for_work() {
-                        break;
-                    }
-                }
-                assert!(rig.machine.ready_for_work(), "configured");
-            }
-        }
+        rig.start();
         rig
     }
 
@@ -729,125 +704,5 @@ mod rudics_calls {
         rig.start();
         let out = rig.input(call_slot(7));
         assert!(!written(&out).iter().any(|w| w.starts_with("ATD")));
-    }
-
-    /// The vehicle machine against the emulated transceiver, in virtual
-    /// time; the test is the far end of the call (it answers every frame
-    /// with an ACK and `bye` with `bye`).
-    #[test]
-    fn over_the_emulated_transceiver_a_call_carries_a_frame_and_hangs_up() {
-        use crate::iridium::emulator::transceiver::{
-            Transceiver, TransceiverConfig, TxInput, TxOutput,
-        };
-        let mut config = TransceiverConfig::new("300234010753370");
-        config.device = IridiumDeviceType::DeviceVoiceEnabledIsu;
-        let start = Instant::now();
-        let mut tx = Transceiver::new(config, start);
-        let mut rig = rig_with(|_| {}, Some(&mut tx));
-        let mut to_tx: Vec<u8> = Vec::new();
-        let mut shore_lines: Vec<Vec<u8>> = Vec::new();
-        let mut shore_buf: Vec<u8> = Vec::new();
-        let mut hung_up = false;
-        let mut sent = 0;
-        let mut pending = vec![call_slot(7)];
-        for _ in 0..400 {
-            let mut outs = Vec::new();
-            for input in pending.drain(..) {
-                outs.extend(rig.input(input));
-            }
-            for o in &outs {
-                if let Output::Write(b) = o {
-                    to_tx.extend_from_slice(b);
-                }
-            }
-            if let Some((id, template)) = request(&outs) {
-                let mut filled = template;
-                filled.ack_requested = Some(true);
-                filled.frame = vec![b"over the emulator".to_vec()];
-                pending.push(Input::Answer {
-                    id,
-                    filled: Some(filled),
-                });
-                continue;
-            }
-            sent += results(&outs).len();
-            let mut txq: Vec<TxInput> = Vec::new();
-            if !to_tx.is_empty() {
-                txq.push(TxInput::Host(std::mem::take(&mut to_tx)));
-            }
-            txq.push(TxInput::Tick);
-            let mut back: Vec<u8> = Vec::new();
-            while let Some(i) = txq.pop() {
-                for o in tx.handle(rig.now.at, i) {
-                    match o {
-                        TxOutput::Write(b) => back.extend(b),
-                        TxOutput::Dial { .. } => txq.push(TxInput::CallConnected),
-                        TxOutput::CallData(b) => shore_buf.extend(b),
-                        TxOutput::HangUp => hung_up = true,
-                        TxOutput::Session { .. } => panic!("no SBD session expected"),
-                    }
-                }
-            }
-            while let Some(end) = shore_buf.iter().position(|&b| b == b'\r') {
-                let line: Vec<u8> = shore_buf.drain(..=end).collect();
-                if line == b"bye\r" {
-                    back.extend(
-                        tx.handle(rig.now.at, TxInput::CallData(b"bye\r".to_vec()))
-                            .into_iter()
-                            .filter_map(|o| match o {
-                                TxOutput::Write(b) => Some(b),
-                                _ => None,
-                            })
-                            .flatten(),
-                    );
-                } else {
-                    let mt = frame::decode_message(&rudics::decode(&line).unwrap()).unwrap();
-                    if !mt.frame.is_empty() {
-                        let ack = ModemTransmission {
-                            src: Some(2),
-                            dest: Some(1),
-                            r#type: Some(TransmissionType::Ack as i32),
-                            acked_frame: vec![mt.frame_start() as i32],
-                            ..Default::default()
-                        };
-                        back.extend(
-                            tx.handle(rig.now.at, TxInput::CallData(packet(&ack)))
-                                .into_iter()
-                                .filter_map(|o| match o {
-                                    TxOutput::Write(b) => Some(b),
-                                    _ => None,
-                                })
-                                .flatten(),
-                        );
-                    }
-                    shore_lines.push(line);
-                }
-            }
-            if !back.is_empty() {
-                pending.push(Input::Bytes(back));
-                continue;
-            }
-            if hung_up && rig.machine.calls.idle() {
-                break;
-            }
-            let next = [rig.machine.next_deadline(), tx.next_deadline()]
-                .into_iter()
-                .flatten()
-                .min()
-                .expect("a timer");
-            let d = next.saturating_duration_since(rig.now.at);
-            rig.now = Now {
-                at: next,
-                micros: rig.now.micros + d.as_micros() as u64,
-            };
-            pending.push(Input::Tick);
-        }
-        assert!(hung_up, "ATH reached the transceiver");
-        assert!(rig.machine.calls.idle());
-        assert_eq!(shore_lines.len(), 2, "hello and the frame");
-        assert_eq!(sent, 1);
-        assert_eq!(tx.log.calls, 1);
-        assert!(tx.log.commands.iter().any(|c| c.starts_with("ATD")));
-        assert!(tx.log.commands.iter().any(|c| c == "ATH"));
     }
 }

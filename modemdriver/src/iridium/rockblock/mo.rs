@@ -382,10 +382,15 @@ impl JwtSigner {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::iridium::emulator::rockblock::{
-        EMULATOR_TEST_PRIVATE_KEY_PEM as TEST_PRIVATE_KEY_PEM,
-        EMULATOR_TEST_PUBLIC_KEY_PEM as TEST_PUBLIC_KEY_PEM,
-    };
+
+    /// The emulated service's key pair, for tests only (kept with the
+    /// emulator).
+    const TEST_PRIVATE_KEY_PEM: &str = include_str!(
+        "../../../../emulators/src/iridium/test-key/rockblock-emulator-TEST-ONLY-private-key.pem"
+    );
+    const TEST_PUBLIC_KEY_PEM: &str = include_str!(
+        "../../../../emulators/src/iridium/test-key/rockblock-emulator-TEST-ONLY-public-key.pem"
+    );
 
     fn post() -> MoPost {
         MoPost {

@@ -33,198 +33,17 @@
 //! A failed job is reported with its frames (the layer above queues their
 //! messages again).
 
-use std::collections::VecDeque;
 use std::time::Duration;
 
-use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, MicroModemHardwareControl, MicroModemTransmissionType,
-    MicroModemTransmitStatistics, ModemTransmission,
-};
-use tokio::time::Instant;
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 
-use super::super::application_ack::Placed;
 use super::super::sentence::{Cycle, MmSentence};
 use super::super::{firmware, ranging};
-use super::machine::{Machine, RequestId};
-use super::{packet_estimate, HAND_OVER};
+use super::machine::Machine;
+use super::settings::{packet_estimate, HAND_OVER};
+use super::state::{Abandoned, Active, Drq, Job, Poll, PolledFrame, Stage};
 use crate::driver::{DriverEvent, DriverStatus, TransmitOutcome, TransmitResult};
 use crate::rate;
-
-/// What the layer above asked for.
-#[derive(Debug, Clone)]
-pub(super) enum Job {
-    /// A data cycle ($CCCYC).
-    Data(Box<ModemTransmission>),
-    /// A Flexible Data Protocol packet ($CCTDP); the transmission carries
-    /// the FDP rate.
-    Fdp(Box<ModemTransmission>),
-    Ping {
-        dest: u32,
-    },
-    Mini {
-        dest: u32,
-        value: u16,
-    },
-    /// An LBL ping ($CCPDT or $CCPNT).
-    Lbl {
-        ping: MmSentence,
-        kind: MicroModemTransmissionType,
-    },
-    /// A hardware line command ($CCMEC).
-    HardwareControl {
-        dest: u32,
-        ctl: MicroModemHardwareControl,
-    },
-}
-
-impl Job {
-    /// A job whose frames are asked for from the layer above.
-    pub fn data(&self) -> Option<&ModemTransmission> {
-        match self {
-            Job::Data(mt) | Job::Fdp(mt) => Some(mt),
-            _ => None,
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Stage {
-    /// The first command is yet to be sent (its frames may be being asked
-    /// for).
-    NeedStart,
-    /// The command is out; for data, the modem runs the cycle: the
-    /// cycle-initialization packet (rate 0), data requests, the packet.
-    Running,
-    /// `$CATXP` seen: the packet is on the water until `$CATXF`.
-    Transmitting,
-    /// The packet went out; waiting for its `$CAXST`.
-    AwaitStats,
-    /// Waiting for a reply (`$CAMPR` to a ping, `$SNTTA` to an LBL ping).
-    AwaitReply,
-}
-
-/// A `$CADRQ`: the modem asks for frame `frame` (from 1) of the cycle
-/// from `src` to `dest`, at most `max_bytes`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) struct Drq {
-    pub src: u32,
-    pub dest: u32,
-    pub ack: bool,
-    pub max_bytes: u32,
-    pub frame: u32,
-}
-
-/// The job under way.
-#[derive(Debug)]
-pub(super) struct Active {
-    pub job: Job,
-    /// Frames from the data request, kept across attempts.
-    pub filled: Option<ModemTransmission>,
-    /// The data request asking for them, while outstanding.
-    pub fill: Option<RequestId>,
-    /// `$CADRQ`s heard while the frames were being asked for, answered
-    /// when they come.
-    pub drqs: Vec<Drq>,
-    pub attempt: u32,
-    pub stage: Stage,
-    pub deadline: Option<Instant>,
-    /// What is missing when `deadline` passes.
-    pub waiting_for: &'static str,
-    /// Frames announced in the `$CCCYC`.
-    pub cycle_frames: u32,
-    /// Data requests of this cycle answered.
-    pub requested: u32,
-    /// `$CAXST` of this transmission (two at rate 0: the cycle
-    /// initialization and the data packet).
-    pub transmit_stats: Vec<MicroModemTransmitStatistics>,
-    /// Application acks placed in its frame 0.
-    pub placed: Option<Placed>,
-}
-
-impl Active {
-    fn new(job: Job) -> Active {
-        Active {
-            job,
-            filled: None,
-            fill: None,
-            drqs: Vec::new(),
-            attempt: 1,
-            stage: Stage::NeedStart,
-            deadline: None,
-            waiting_for: "",
-            cycle_frames: 0,
-            requested: 0,
-            transmit_stats: Vec::new(),
-            placed: None,
-        }
-    }
-
-    /// Back to the start of the cycle (same attempt, same frames).
-    pub fn restart(&mut self) {
-        self.stage = Stage::NeedStart;
-        self.deadline = None;
-    }
-}
-
-/// A cycle another node asked this modem to send (a poll).
-#[derive(Debug)]
-pub(super) struct Poll {
-    pub cycle: Cycle,
-    pub filled: Option<ModemTransmission>,
-    /// The data request asking for its frames, while outstanding.
-    pub fill: Option<RequestId>,
-    /// `$CADRQ`s waiting for them.
-    pub drqs: Vec<Drq>,
-}
-
-/// A cycle of ours given up on the modem (at a `$CADRQ`, too late for its
-/// slot): its data requests get no answer, and no other job starts, until
-/// the modem gives it up too or `until`.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Abandoned {
-    pub dest: u32,
-    pub until: Instant,
-}
-
-/// The transmit side.
-#[derive(Debug)]
-pub(super) struct Transmit {
-    /// Jobs waiting for the modem.
-    pub pending: VecDeque<Job>,
-    pub active: Option<Active>,
-    pub polled: Option<Poll>,
-    pub abandoned: Option<Abandoned>,
-    /// The kind of the last LBL ping (for travel times heard later).
-    pub last_lbl: MicroModemTransmissionType,
-    /// That FDP packets asking for acks get none without application acks
-    /// was reported.
-    pub fdp_unacked_reported: bool,
-}
-
-impl Default for Transmit {
-    fn default() -> Self {
-        Transmit {
-            pending: VecDeque::new(),
-            active: None,
-            polled: None,
-            abandoned: None,
-            last_lbl: MicroModemTransmissionType::MicromodemRemusLblRanging,
-            fdp_unacked_reported: false,
-        }
-    }
-}
-
-impl Transmit {
-    pub fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.active.as_ref().and_then(|a| a.deadline),
-            self.abandoned.map(|a| a.until),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-}
 
 /// The transmission reported for a job (the frames filled, when any).
 pub(super) fn job_transmission(
@@ -764,7 +583,7 @@ impl Machine {
         let dto = self
             .startup
             .data_timeout_s
-            .unwrap_or(super::startup::DEFAULT_DATA_TIMEOUT_S);
+            .unwrap_or(super::state::DEFAULT_DATA_TIMEOUT_S);
         self.tx.abandoned = Some(Abandoned {
             dest,
             until: self.now.at + Duration::from_secs(dto) + self.response_timeout(),
@@ -801,15 +620,4 @@ impl Machine {
             _ => self.fail_active(reason.into()),
         }
     }
-}
-
-/// A frame of a polled cycle.
-pub(super) enum PolledFrame {
-    /// No poll for this request.
-    NotPolled,
-    /// The poll's frames are being asked for; the request is answered
-    /// when they come.
-    Waiting,
-    /// The frame (none: an empty one).
-    Frame(Option<Vec<u8>>),
 }

@@ -22,65 +22,16 @@
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
-use tokio::time::Instant;
 
 use super::super::application_ack::Placed;
 use super::super::fdp;
-use super::cycle::{Job, PolledFrame};
-use super::machine::{Machine, RequestId};
-use super::reception::SentData;
-use super::{packet_estimate, DATA_REQUEST_TIMEOUT};
+use super::machine::Machine;
+use super::settings::{packet_estimate, DATA_REQUEST_TIMEOUT};
+use super::state::{Job, Outstanding, PolledFrame, Purpose, SentData};
 use crate::driver::{checked_answer, DriverStatus, TransmitOutcome};
+use crate::machine::RequestId;
 use crate::rate;
 use crate::slot::slot_end;
-
-/// Who asked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Purpose {
-    /// The active job's frames.
-    Job,
-    /// The frames of a polled cycle.
-    Poll,
-}
-
-/// A data request outstanding.
-#[derive(Debug)]
-pub(super) struct Outstanding {
-    pub id: RequestId,
-    pub purpose: Purpose,
-    pub template: ModemTransmission,
-    /// Application acks placed in the template's frame 0.
-    pub placed: Option<Placed>,
-    /// When it is given up.
-    pub deadline: Instant,
-}
-
-/// The data requests outstanding.
-#[derive(Debug, Default)]
-pub(super) struct Requests {
-    next_id: u64,
-    pub outstanding: Vec<Outstanding>,
-}
-
-impl Requests {
-    pub fn next_deadline(&self) -> Option<Instant> {
-        self.outstanding.iter().map(|o| o.deadline).min()
-    }
-
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.outstanding.iter().any(|o| o.id == id)
-    }
-
-    fn take(&mut self, id: RequestId) -> Option<Outstanding> {
-        let i = self.outstanding.iter().position(|o| o.id == id)?;
-        Some(self.outstanding.remove(i))
-    }
-
-    fn new_id(&mut self) -> RequestId {
-        self.next_id += 1;
-        RequestId(self.next_id)
-    }
-}
 
 impl Machine {
     /// Asks the layer above for the frames of the active data or FDP job
@@ -187,7 +138,7 @@ impl Machine {
     }
 
     /// The layer above answered data request `id` (`None`: it dropped it).
-    pub(super) fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+    pub(super) fn filled(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
         let Some(o) = self.requests.take(id) else {
             tracing::debug!("answer to a data request no longer awaited: ignored");
             return;
@@ -299,7 +250,7 @@ impl Machine {
                 });
             if !slot_lost {
                 // As though the layer above had nothing.
-                self.answered(id, None);
+                self.filled(id, None);
                 continue;
             }
             let in_cycle = self
@@ -323,7 +274,7 @@ impl Machine {
     /// start), asked for from the layer above at the first request. Acks
     /// heard afterwards answer it (with no `unique_id`, as nothing of ours
     /// numbered it).
-    pub(super) fn polled_frame(&mut self, drq: super::cycle::Drq) -> PolledFrame {
+    pub(super) fn polled_frame(&mut self, drq: super::state::Drq) -> PolledFrame {
         let modem_id = self.modem_id;
         let now = self.now;
         let Some(poll) = self.tx.polled.as_mut().filter(|p| p.cycle.dest == drq.dest) else {
@@ -363,7 +314,7 @@ impl Machine {
     }
 
     /// Frame `drq.frame` of the polled cycle, its frames filled.
-    fn polled_frame_filled(&mut self, drq: super::cycle::Drq) -> Option<Vec<u8>> {
+    fn polled_frame_filled(&mut self, drq: super::state::Drq) -> Option<Vec<u8>> {
         let until = self.now.at + self.receive_timeout();
         let poll = self.tx.polled.as_ref()?;
         let filled = poll.filled.as_ref()?;

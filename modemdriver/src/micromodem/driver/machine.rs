@@ -1,21 +1,12 @@
-//! The driver as a state machine: no input or output, no clock read.
+//! The Micro-Modem driver as a state machine ([`crate::machine::Machine`]): the
+//! modem's NMEA lines in, the host's sentences out.
 //!
-//! Each input ([`Input`]: a line read from the modem, a tick, a command of
-//! the layer above, the answer to a data request, the serial device opened
-//! or lost) comes with the time it happened ([`Now`]), and its handling
-//! returns, in order, what to do ([`Output`]: lines to write, events for the
-//! layer above, data requests to make, the device to open).
-//! [`Machine::next_deadline`] tells when the next tick is due (`None`: no
-//! timer armed). Nothing in the machine waits: a data request is an output
-//! and its answer a later input, and meanwhile lines, commands and ticks are
-//! handled as ever.
-//!
-//! The state is split by concept, each in its module:
-//! `startup` (configuration, host commands and their
-//! answers), `cycle` (the transmit cycle and its slot),
-//! `fill` (data requests outstanding),
-//! `reception` (receptions, statistics, acks heard);
-//! this module holds the link's state and routes each input.
+//! What it holds is in `state`; what it does is split by concept, each in
+//! its module: `startup` (configuration, host commands and their
+//! answers), `cycle` (the transmit cycle and its slot), `fill` (data
+//! requests outstanding), `reception` (receptions, statistics, acks
+//! heard), `specific` (pings, LBL ranging, mini-packets, hardware lines);
+//! this module holds the link and routes each input.
 
 use std::time::Duration;
 
@@ -28,127 +19,11 @@ use tokio::time::Instant;
 use super::super::application_ack::ApplicationAcks;
 use super::super::nmea::NmeaError;
 use super::super::sentence::{MmSentence, SentenceError};
-use super::cycle::{Job, Transmit};
-use super::fill::Requests;
-use super::reception::Reception;
-use super::startup::Startup;
-use super::MAX_PENDING_TRANSMISSIONS;
+use super::settings::{Settings, MAX_PENDING_TRANSMISSIONS};
+use super::state::{Job, LinkState, Reception, Requests, Startup, Transmit};
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus};
-
-/// The time of an input, read once by the shell as the input comes
-/// ([`shell::now`](super::shell::now)), or made up by a test.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Now {
-    /// Monotonic time: what deadlines are kept in.
-    pub at: Instant,
-    /// Wall clock (UTC), microseconds since the Unix epoch: the unit of
-    /// `ModemTransmission.time` and of slots, and what the modem's clock is
-    /// set to.
-    pub micros: u64,
-}
-
-impl Now {
-    /// `d` later, on both clocks.
-    pub fn after(self, d: Duration) -> Now {
-        Now {
-            at: self.at + d,
-            micros: self.micros.saturating_add(d.as_micros() as u64),
-        }
-    }
-}
-
-/// Names a data request made by the machine ([`Output::Request`]); its
-/// answer comes back with it ([`Input::Answer`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct RequestId(pub u64);
-
-/// What happened.
-#[derive(Debug)]
-pub enum Input {
-    /// A line read from the modem (without its delimiter).
-    Line(Vec<u8>),
-    /// Time passed: deadlines up to now fire.
-    Tick,
-    /// A command of the layer above (other than `Stop`).
-    Command(DriverCommand),
-    /// The layer above answered a data request: the filled transmission,
-    /// or `None` when the request was dropped unanswered.
-    Answer {
-        /// The request answered.
-        id: RequestId,
-        /// The transmission filled, or `None`.
-        filled: Option<ModemTransmission>,
-    },
-    /// The device asked for by [`Output::Open`] was opened (`true`) or
-    /// could not be (`false`).
-    Opened(bool),
-    /// The serial link failed (read or write): why.
-    Disconnected(String),
-    /// The driver stops: what is held is reported now.
-    Stop,
-}
-
-/// What to do, in order.
-#[derive(Debug)]
-pub enum Output {
-    /// Write this sentence to the modem.
-    Write(MmSentence),
-    /// Give this event to the layer above.
-    Event(DriverEvent),
-    /// Ask the layer above to fill `template` (a data request); the answer,
-    /// or its absence, comes back as [`Input::Answer`] with `id`. The
-    /// machine gives up waiting on its own (a deadline): an answer after
-    /// that is ignored.
-    Request {
-        /// Names the request in its answer.
-        id: RequestId,
-        /// What to fill: `max_num_frames` frames of at most
-        /// `max_frame_bytes` bytes.
-        template: ModemTransmission,
-    },
-    /// Open the serial device again (after it was lost), then tell
-    /// [`Input::Opened`].
-    Open,
-    /// Keep this application-ack state (the frame numbers in use, from
-    /// [`ApplicationAcks::state`]) for the next start, before the
-    /// transmission that uses them goes out (written before the lines that
-    /// follow it).
-    KeepAckState(String),
-}
-
-/// What the machine starts from (checked by [`super::settings`]).
-#[derive(Debug)]
-pub struct Settings {
-    /// This modem's id (1-127).
-    pub modem_id: u32,
-    /// The Micro-Modem's part of the driver configuration.
-    pub mm: MicroModemConfig,
-    /// Between attempts to open the device again.
-    pub reconnect: Duration,
-    /// With `use_application_acks`.
-    pub app_acks: Option<ApplicationAcks>,
-    /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
-    pub deferred_ack: bool,
-    /// Without application acks: strips those a peer sends anyway.
-    pub ack_reader: ApplicationAcks,
-    /// Where the application-ack state is kept across starts
-    /// (`application_ack_state_file`; taken by the driver's shell).
-    pub ack_state_file: Option<std::path::PathBuf>,
-}
-
-/// The serial link as the machine sees it.
-#[derive(Debug)]
-pub(super) struct LinkState {
-    pub connected: bool,
-    pub reconnect: Duration,
-    /// When to try opening the device again, while not connected.
-    pub reconnect_at: Instant,
-    /// Last line heard from the modem.
-    pub last_heard: Instant,
-    pub silence_reported: bool,
-    /// An [`Output::Open`] is out, not yet answered.
-    pub opening: bool,
-}
+use crate::machine::reconnect::Reconnect;
+use crate::machine::{Handlers, Now, Output, Outputs, RequestId};
 
 /// The Micro-Modem driver's logic.
 #[derive(Debug)]
@@ -158,7 +33,7 @@ pub struct Machine {
     /// The time of the input being handled.
     pub(super) now: Now,
     /// Outputs of the input being handled.
-    out: Vec<Output>,
+    out: Outputs,
     pub(super) link: LinkState,
     pub(super) startup: Startup,
     pub(super) tx: Transmit,
@@ -172,7 +47,7 @@ pub struct Machine {
 impl Machine {
     /// A machine whose serial link is open at `now`; its first outputs
     /// (the start-up commands) come from the first input, e.g. a
-    /// [`Input::Tick`].
+    /// [`Input::Tick`](crate::machine::Input::Tick).
     pub fn new(settings: Settings, now: Now) -> Machine {
         let Settings {
             modem_id,
@@ -187,14 +62,11 @@ impl Machine {
             modem_id,
             mm,
             now,
-            out: Vec::new(),
+            out: Outputs::default(),
             link: LinkState {
-                connected: true,
-                reconnect,
-                reconnect_at: now.at,
+                up: Reconnect::new(true, now.at, reconnect),
                 last_heard: now.at,
                 silence_reported: false,
-                opening: false,
             },
             startup: Startup::default(),
             tx: Transmit::default(),
@@ -207,71 +79,26 @@ impl Machine {
         machine
     }
 
-    /// Handles `input`, which happened at `now`; returns what to do, in
-    /// order.
-    pub fn handle(&mut self, now: Now, input: Input) -> Vec<Output> {
-        self.now = now;
-        match input {
-            Input::Line(bytes) => self.line(&bytes),
-            Input::Tick => self.timers(),
-            Input::Command(command) => self.command(command),
-            Input::Answer { id, filled } => self.answered(id, filled),
-            Input::Opened(ok) => self.opened(ok),
-            Input::Disconnected(reason) => self.disconnected(reason),
-            Input::Stop => {
-                // A whole reception waiting for its statistics is reported
-                // without them.
-                self.release_held();
-                return std::mem::take(&mut self.out);
-            }
-        }
-        self.pump();
-        std::mem::take(&mut self.out)
-    }
-
-    /// When the next [`Input::Tick`] is due (`None`: no timer armed).
-    pub fn next_deadline(&self) -> Option<Instant> {
-        let keep_alive = self.keep_alive();
-        [
-            self.startup.next_deadline(),
-            self.tx.next_deadline(),
-            self.requests.next_deadline(),
-            self.rx.next_deadline(),
-            (!self.link.connected && !self.link.opening).then_some(self.link.reconnect_at),
-            (!self.link.silence_reported && self.link.connected)
-                .then_some(self.link.last_heard + keep_alive * 3),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-
-    /// Whether data request `id` is still awaited (a shell may forget one
-    /// that is not).
-    pub fn awaits(&self, id: RequestId) -> bool {
-        self.requests.awaits(id)
-    }
-
     pub(super) fn emit(&mut self, event: DriverEvent) {
-        self.out.push(Output::Event(event));
+        self.out.event(event);
     }
 
     /// Keeps the application-ack state for the next start.
     pub(super) fn keep_ack_state(&mut self, state: String) {
-        self.out.push(Output::KeepAckState(state));
+        self.out.push(Output::Keep(state));
     }
 
     pub(super) fn status(&mut self, status: DriverStatus) {
-        self.emit(DriverEvent::Status(status));
+        self.out.status(status);
     }
 
     /// Writes `sentence` when the link is up (a sentence for a link that
     /// is down is not written: the driver starts again when it is back).
     pub(super) fn write(&mut self, sentence: MmSentence) -> bool {
-        if !self.link.connected {
+        if !self.link.up.is_up() {
             return false;
         }
-        self.out.push(Output::Write(sentence));
+        self.out.write(sentence.to_line().into_bytes());
         true
     }
 
@@ -297,55 +124,6 @@ impl Machine {
 
     fn keep_alive(&self) -> Duration {
         Duration::from_secs(u64::try_from(self.mm.keep_alive_seconds()).unwrap_or(10))
-    }
-
-    /// The serial link failed.
-    pub(super) fn disconnected(&mut self, reason: String) {
-        self.link.connected = false;
-        self.link.opening = false;
-        self.startup.awaiting = None;
-        self.startup.clock_at = None;
-        self.link.reconnect_at = self.now.at + self.link.reconnect;
-        if let Some(active) = &mut self.tx.active {
-            // Not the modem's fault: start the cycle again, same attempt.
-            active.restart();
-        }
-        self.status(DriverStatus::Disconnected { reason });
-    }
-
-    fn opened(&mut self, ok: bool) {
-        self.link.opening = false;
-        if ok {
-            self.link.connected = true;
-            self.link.last_heard = self.now.at;
-            self.status(DriverStatus::Reconnected);
-            self.queue_initialization();
-        } else {
-            self.link.reconnect_at = self.now.at + self.link.reconnect;
-        }
-    }
-
-    /// Deadlines up to now.
-    fn timers(&mut self) {
-        let now = self.now.at;
-        self.command_timers();
-        self.cycle_timers();
-        self.request_timers();
-        self.reception_timers();
-        if !self.link.connected && !self.link.opening && self.link.reconnect_at <= now {
-            self.link.opening = true;
-            self.out.push(Output::Open);
-        }
-        let keep_alive = self.keep_alive();
-        if self.link.connected
-            && !self.link.silence_reported
-            && now >= self.link.last_heard + keep_alive * 3
-        {
-            self.link.silence_reported = true;
-            self.status(DriverStatus::ModemSilent {
-                seconds: (now - self.link.last_heard).as_secs_f64(),
-            });
-        }
     }
 
     fn heard(&mut self) {
@@ -382,7 +160,7 @@ impl Machine {
                 max_bytes,
                 frame,
                 ..
-            } => self.data_request(super::cycle::Drq {
+            } => self.data_request(super::state::Drq {
                 src,
                 dest,
                 ack,
@@ -480,6 +258,90 @@ impl Machine {
         }
     }
 
+    /// Queues a job filled from the layer above (data, or an FDP packet of
+    /// a slot): at most [`MAX_PENDING_TRANSMISSIONS`] wait, the oldest is
+    /// dropped beyond.
+    fn queue_data_job(&mut self, job: Job) {
+        let waiting = self
+            .tx
+            .pending
+            .iter()
+            .filter(|j| j.data().is_some())
+            .count();
+        if waiting >= MAX_PENDING_TRANSMISSIONS {
+            if let Some(i) = self.tx.pending.iter().position(|j| j.data().is_some()) {
+                self.tx.pending.remove(i);
+                self.status(DriverStatus::Skipped {
+                    reason: format!(
+                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
+                    ),
+                });
+            }
+        }
+        self.tx.pending.push_back(job);
+    }
+}
+
+impl Handlers for Machine {
+    fn set_now(&mut self, now: Now) {
+        self.now = now;
+    }
+
+    fn out(&mut self) -> &mut Outputs {
+        &mut self.out
+    }
+
+    fn deadlines(&self) -> impl IntoIterator<Item = Option<Instant>> {
+        let keep_alive = self.keep_alive();
+        [
+            self.startup.next_deadline(),
+            self.tx.next_deadline(),
+            self.requests.next_deadline(),
+            self.rx.next_deadline(),
+            self.link.up.deadline(),
+            (!self.link.silence_reported && self.link.up.is_up())
+                .then_some(self.link.last_heard + keep_alive * 3),
+        ]
+    }
+
+    fn awaited(&self, id: RequestId) -> bool {
+        self.requests.awaits(id)
+    }
+
+    fn read(&mut self, line: Vec<u8>) {
+        self.line(&line);
+    }
+
+    fn answered(&mut self, id: RequestId, filled: Option<ModemTransmission>) {
+        self.filled(id, filled);
+    }
+
+    /// A whole reception waiting for its statistics is reported without
+    /// them.
+    fn stop(&mut self) {
+        self.release_held();
+    }
+
+    /// Deadlines up to now.
+    fn timers(&mut self) {
+        let now = self.now.at;
+        self.command_timers();
+        self.cycle_timers();
+        self.request_timers();
+        self.reception_timers();
+        self.link.up.tick(now, &mut self.out);
+        let keep_alive = self.keep_alive();
+        if self.link.up.is_up()
+            && !self.link.silence_reported
+            && now >= self.link.last_heard + keep_alive * 3
+        {
+            self.link.silence_reported = true;
+            self.status(DriverStatus::ModemSilent {
+                seconds: (now - self.link.last_heard).as_secs_f64(),
+            });
+        }
+    }
+
     /// A command of the layer above.
     fn command(&mut self, command: DriverCommand) {
         match command {
@@ -527,34 +389,33 @@ impl Machine {
         }
     }
 
-    /// Queues a job filled from the layer above (data, or an FDP packet of
-    /// a slot): at most [`MAX_PENDING_TRANSMISSIONS`] wait, the oldest is
-    /// dropped beyond.
-    fn queue_data_job(&mut self, job: Job) {
-        let waiting = self
-            .tx
-            .pending
-            .iter()
-            .filter(|j| j.data().is_some())
-            .count();
-        if waiting >= MAX_PENDING_TRANSMISSIONS {
-            if let Some(i) = self.tx.pending.iter().position(|j| j.data().is_some()) {
-                self.tx.pending.remove(i);
-                self.status(DriverStatus::Skipped {
-                    reason: format!(
-                        "{waiting} transmissions already wait for the modem; the oldest is dropped"
-                    ),
-                });
-            }
+    fn opened(&mut self, ok: bool) {
+        if self.link.up.opened(ok, self.now.at) {
+            self.link.last_heard = self.now.at;
+            self.status(DriverStatus::Reconnected);
+            self.queue_initialization();
         }
-        self.tx.pending.push_back(job);
+    }
+
+    /// The serial link failed.
+    fn disconnected(&mut self, reason: String) {
+        if !self.link.up.lost(self.now.at) {
+            return;
+        }
+        self.startup.awaiting = None;
+        self.startup.clock_at = None;
+        if let Some(active) = &mut self.tx.active {
+            // Not the modem's fault: start the cycle again, same attempt.
+            active.restart();
+        }
+        self.status(DriverStatus::Disconnected { reason });
     }
 
     /// Sends what can be sent now: host commands first (start-up), then
     /// the transmissions queued.
     fn pump(&mut self) {
         loop {
-            if !self.link.connected || self.startup.awaiting.is_some() {
+            if !self.link.up.is_up() || self.startup.awaiting.is_some() {
                 return;
             }
             match self.pump_commands() {

@@ -55,7 +55,7 @@
 //! A transmission of type `DRIVER_SPECIFIC` (a MAC slot) says what it is
 //! in its `micromodem` settings (Goby3's
 //! `[goby.acomms.micromodem.protobuf.transmission]`, see
-//! [`transmission`](super::transmission)): `MICROMODEM_FLEXIBLE_DATA` is
+//! [`super::transmission`]): `MICROMODEM_FLEXIBLE_DATA` is
 //! an FDP packet filled from the layer above like data — one frame of at
 //! most the slot's `max_frame_bytes`, else 100 bytes (Goby3's), within what
 //! the FDP rate carries; with application acks the ack message first —
@@ -102,13 +102,13 @@
 //!
 //! The driver is a state machine that does no input or output and reads no
 //! clock ([`machine::Machine`]: inputs in, outputs out, the time of each
-//! input passed in), run by an async shell ([`shell`]) that reads the
-//! serial link, writes the lines asked for, forwards data requests to the
-//! layer above and feeds their answers back, and sleeps until the next
-//! deadline. A data request outstanding never stops lines being read,
+//! input passed in), run by the one driver task ([`crate::shell`]) on the
+//! serial line. A data request outstanding never stops lines being read,
 //! commands being taken or timers firing.
 //!
-//! - [`machine`]: the machine's inputs, outputs, state and dispatch.
+//! - `settings`: the configuration check ([`problems`], [`Settings`]).
+//! - [`machine`]: the machine, and how it routes each input.
+//! - `state`: what the machine holds.
 //! - `startup`: start-up and configuration; host commands and their
 //!   answers.
 //! - `cycle`: the transmit cycle and the slot it must end in.
@@ -117,64 +117,37 @@
 //! - `reception`: receptions, their statistics, acks heard.
 //! - `specific`: Micro-Modem specifics (pings, LBL ranging, mini-packets,
 //!   hardware lines).
-//! - [`shell`]: the async task: serial link, clock, timers.
 
 mod cycle;
 mod fill;
 pub mod machine;
 mod reception;
-pub mod shell;
+mod settings;
 mod specific;
 mod startup;
+mod state;
 #[cfg(test)]
 mod tests;
 
-use std::time::Duration;
+use protos::goby::acomms::protobuf::{DriverConfig, ModemTransmission};
 
-use protos::goby::acomms::protobuf::{
-    driver_config::ConnectionType, DriverConfig, ModemTransmission,
-};
+use prost_reflect::ReflectMessage;
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, MicroModemSpecific};
 
-use super::application_ack::{self, ApplicationAcks};
-use crate::check::{self, Problem};
-use crate::config;
+use super::{ranging, transmission};
 use crate::driver::{Driver, DriverError};
+use crate::kind::{About, DriverKind, Named, PacketTime, Starting};
 use crate::link::fault::{FaultConfig, FaultScript};
-use crate::link::serial;
+use crate::link::stream::{Endpoint, Units};
+use crate::problem::{self, Problem};
 use crate::rate;
+use crate::shell::{self, Device};
 
-pub use machine::{Input, Machine, Now, Output, RequestId, Settings};
-
-/// How long the driver waits for the layer above to fill a data request.
-pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// NVRAM settings that make the modem report receive ($CACST) and transmit
-/// ($CAXST) statistics; set to 1 at start unless `nvram_cfg` sets them.
-pub const STATISTICS_SETTINGS: [&str; 2] = ["CST", "XST"];
-
-/// Baud rate when `serial_baud` is not set.
-pub const DEFAULT_BAUD: u32 = 19_200;
-
-/// Data transmissions waiting for the modem at most; beyond, the oldest is
-/// dropped (reported as [`DriverStatus::Skipped`](crate::driver::DriverStatus::Skipped)): while the modem is
-/// unreachable, slot requests must not pile up and then run back to back.
-pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
-
-/// Probe and header time assumed on top of a packet's frames when checking
-/// that a transmission fits in what is left of its slot.
-pub const PACKET_OVERHEAD: Duration = Duration::from_secs(1);
-
-/// Allowed, on top of the packet's estimate, between the driver's last
-/// `$CCTXD` of a cycle and the modem starting the packet (serial line and
-/// the modem's own hand-over), when checking at a `$CADRQ` that the packet
-/// still ends within its slot.
-pub const HAND_OVER: Duration = Duration::from_millis(100);
-
-/// Estimated time on the water of a data transmission.
-fn packet_estimate(mt: &ModemTransmission) -> Duration {
-    let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
-    spec.packet_duration(PACKET_OVERHEAD)
-}
+pub use machine::Machine;
+pub use settings::{
+    problems, settings, Settings, DATA_REQUEST_TIMEOUT, DEFAULT_BAUD, HAND_OVER,
+    MAX_PENDING_TRANSMISSIONS, PACKET_OVERHEAD, STATISTICS_SETTINGS,
+};
 
 /// The WHOI Micro-Modem driver.
 #[derive(Debug)]
@@ -194,163 +167,96 @@ impl MicroModemDriver {
         faults: FaultConfig,
         script: FaultScript,
     ) -> Result<Driver, DriverError> {
-        let settings = settings(config)?;
-        check::refuse(
-            check::serial_port_problem(config.serial_port())
+        let mut settings = settings(config)?;
+        problem::refuse(
+            problem::serial_port_problem(config.serial_port())
                 .into_iter()
                 .collect(),
         )?;
-        let port = shell::Port {
-            path: config.serial_port.clone().unwrap_or_default(),
-            baud: config.serial_baud.unwrap_or(DEFAULT_BAUD),
-            delimiter: config.line_delimiter().as_bytes().to_vec(),
+        let device = Device {
+            endpoint: Endpoint::serial(
+                config.serial_port(),
+                config.serial_baud.unwrap_or(DEFAULT_BAUD),
+            ),
+            units: Units::Lines(config.line_delimiter().as_bytes().to_vec()),
             faults,
             script,
         };
+        let keep = settings.ack_state_file.take();
         // Opened now so that a wrong path is an error at start.
-        let lines = serial::open(&port.path, port.baud, &port.delimiter)
-            .map_err(|e| DriverError::io("DriverConfig.serial_port", e))?;
-        Ok(Driver::spawn("micromodem", move |ctx| {
-            shell::run(settings, port, lines, ctx)
-        }))
-    }
-}
-
-/// Every problem of a Micro-Modem configuration that [`settings`] refuses
-/// (see [`crate::check`], which adds a serial port that does not exist).
-pub fn problems(config: &DriverConfig) -> Vec<Problem> {
-    let mut problems = Vec::new();
-    let modem_id = match config::modem_id(config) {
-        Ok(id) => u32::try_from(id).ok().filter(|id| (1..=127).contains(id)),
-        Err(_) => None,
-    };
-    if modem_id.is_none() {
-        problems.push(Problem::new(
-            "modem_id",
-            match config.modem_id {
-                Some(id) => format!("{id} is not a Micro-Modem id (1-127)"),
-                None => "required field is not set".into(),
-            },
-        ));
-    }
-    if config.connection_type() != ConnectionType::ConnectionSerial {
-        problems.push(Problem::new(
-            "connection_type",
-            format!(
-                "{:?} is not supported by the Micro-Modem driver (only CONNECTION_SERIAL)",
-                config.connection_type()
-            ),
-        ));
-    } else if config.serial_port().trim().is_empty() {
-        problems.push(Problem::new(
-            "serial_port",
-            "required for the Micro-Modem (e.g. \"/dev/ttyUSB0\")",
-        ));
-    }
-    let mm = config.micromodem.clone().unwrap_or_default();
-    for (i, entry) in mm.nvram_cfg.iter().enumerate() {
-        if entry.trim_start().starts_with('$') || entry.contains('*') || !entry.contains(',') {
-            problems.push(Problem::new(
-                format!("micromodem.nvram_cfg[{i}]"),
-                format!(
-                    "{entry:?}: give KEY,VALUE (e.g. \"DQF,1\"); the driver writes the $CCCFG sentence around it"
-                ),
-            ));
-        }
-    }
-    if let Some(id) = modem_id {
-        if mm.use_application_acks() && id > application_ack::MAX_MODEM_ID {
-            problems.push(Problem::new(
-                "micromodem.use_application_acks",
-                format!(
-                    "modem_id {id}: the Micro-Modem's application acks name nodes 0-{}; use a lower id, \
-                     or set use_application_acks: false (acks then come from the modem, on decode)",
-                    application_ack::MAX_MODEM_ID
-                ),
-            ));
-        }
-    }
-    problems
-}
-
-/// The machine's settings from the driver configuration, checked.
-pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
-    check::refuse(problems(config))?;
-    let modem_id = u32::try_from(config::modem_id(config)?)
-        .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
-    let mm = config.micromodem.clone().unwrap_or_default();
-    let ack_state_file = mm
-        .application_ack_state_file
-        .as_deref()
-        .filter(|p| mm.use_application_acks() && !p.is_empty())
-        .map(std::path::PathBuf::from);
-    let app_acks = if mm.use_application_acks() {
-        let now = std::time::Instant::now();
-        let mut acks = ApplicationAcks::new(
-            modem_id,
-            Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
-            first_frame_number(),
-            now,
+        shell::start_on_serial(
+            "micromodem",
+            device,
+            |now| Machine::new(settings, now),
+            keep,
+            std::sync::Arc::new(goby_time::SystemClock),
         )
-        .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
-        if let Some(path) = &ack_state_file {
-            resume_ack_state(&mut acks, path, now);
-        }
-        Some(acks)
-    } else {
-        None
-    };
-    let deferred_ack = config.deferred_ack();
-    let ack_reader = ApplicationAcks::new(
-        modem_id.min(application_ack::MAX_MODEM_ID),
-        Duration::ZERO,
-        0,
-        std::time::Instant::now(),
-    )
-    .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
-    let reconnect = mm.reconnect_interval_ms.map_or(
-        Duration::from_secs(u64::from(config.reconnect_interval())),
-        |ms| Duration::from_millis(u64::from(ms)),
-    );
-    Ok(Settings {
-        modem_id,
-        mm,
-        reconnect,
-        app_acks,
-        deferred_ack,
-        ack_reader,
-        ack_state_file,
-    })
-}
-
-/// Takes up the application-ack state an earlier start kept in `path`
-/// (none there: no earlier start); one that cannot be read is told, and
-/// acks are then credited from nodes once heard from.
-fn resume_ack_state(acks: &mut ApplicationAcks, path: &std::path::Path, now: std::time::Instant) {
-    let wall = crate::time::now_micros();
-    let result = match std::fs::read_to_string(path) {
-        Ok(text) => acks
-            .resume(Some(&text), now, wall)
-            .map_err(|e| e.to_string()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            acks.resume(None, now, wall).map_err(|e| e.to_string())
-        }
-        Err(e) => Err(e.to_string()),
-    };
-    if let Err(e) = result {
-        tracing::warn!(
-            "application acks: the frame numbers of the last run in {} cannot be taken up ({e}): \
-             acks are credited from each node once heard from",
-            path.display()
-        );
     }
 }
 
-/// A frame number drawn at random (from the standard library's randomly
-/// keyed hasher) to start the application-ack numbering at.
-fn first_frame_number() -> u32 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(crate::time::now_micros());
-    (hasher.finish() % u64::from(application_ack::FRAME_NUMBERS)) as u32
+/// What the driver is called, and where its settings are.
+const ABOUT: About = About {
+    named: Named::Type(protos::goby::acomms::protobuf::DriverType::DriverWhoiMicromodem),
+    short_name: "micromodem",
+    title: "Micro-Modem",
+    section: Some("micromodem"),
+    goby3_extensions: &[
+        ("goby.acomms.micromodem.protobuf.config", "micromodem"),
+        ("goby.acomms.micromodem.protobuf.transmission", "micromodem"),
+    ],
+};
+
+impl DriverKind for MicroModemDriver {
+    fn about(&self) -> &'static About {
+        &ABOUT
+    }
+
+    fn problems(&self, config: &DriverConfig) -> Vec<Problem> {
+        problem::with_serial_port(config, problems(config))
+    }
+
+    /// The rate's frames at its bit rate after [`PACKET_OVERHEAD`], and
+    /// [`HAND_OVER`].
+    fn packet_time(&self, _config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+        Some(PacketTime {
+            driver: "the Micro-Modem",
+            spec: rate::spec(rate)?,
+            overhead: PACKET_OVERHEAD,
+            hand_over: HAND_OVER,
+        })
+    }
+
+    fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {
+        Some(MicroModemSpecific::default().descriptor())
+    }
+
+    /// What the modem could not do (see [`ranging::request_problem`]).
+    fn specific_problem(
+        &self,
+        config: &DriverConfig,
+        request: &prost_reflect::DynamicMessage,
+        modem_id: i32,
+    ) -> Option<String> {
+        let request = request.transcode_to::<MicroModemSpecific>().ok()?;
+        let settings = config.micromodem.clone().unwrap_or_default();
+        ranging::request_problem(&request, modem_id, &settings)
+    }
+
+    /// What the slot asks of the modem, when it cannot be carried out (see
+    /// [`transmission::request`]).
+    fn specific_slot_problem(
+        &self,
+        config: &DriverConfig,
+        slot: &ModemTransmission,
+    ) -> Option<Problem> {
+        if slot.r#type() != TransmissionType::DriverSpecific {
+            return None;
+        }
+        let mm = config.micromodem.clone().unwrap_or_default();
+        transmission::request(slot, slot.src(), &mm).err()
+    }
+
+    fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
+        Box::pin(async move { MicroModemDriver::start(config) })
+    }
 }

@@ -25,83 +25,16 @@ use std::collections::BTreeMap;
 
 use protos::goby::acomms::protobuf::{
     modem_transmission::{TimeSource, TransmissionType},
-    MicroModemReceiveStatistics, MicroModemTransmission, MicroModemTransmissionType,
-    ModemTransmission,
+    MicroModemTransmission, MicroModemTransmissionType, ModemTransmission,
 };
-use tokio::time::Instant;
 
-use super::super::application_ack::ApplicationAcks;
 use super::super::fdp;
 use super::super::firmware;
 use super::super::sentence::{Cycle, FdpFrame};
 use super::super::statistics::{ReceiveStatisticsSentence, TransmitStatisticsSentence};
-use super::cycle::{Active, Job, Stage};
 use super::machine::Machine;
+use super::state::{Active, Held, Incoming, Job, SentData, Stage};
 use crate::driver::{Acknowledgement, DriverEvent, DriverStatus, TransmitOutcome};
-
-/// The last data transmission that went out asking for acks: the acks
-/// (`$CAACK`) heard afterwards are matched to it.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct SentData {
-    pub unique_id: Option<u32>,
-    pub dest: u32,
-    pub frames: u32,
-    /// Acks heard later belong to no transmission of ours.
-    pub until: Instant,
-}
-
-/// A packet being received ($CACYC / $CARXD lines).
-#[derive(Debug)]
-pub(super) struct Incoming {
-    pub cycle: Cycle,
-    /// By frame number, from 1.
-    pub frames: BTreeMap<u32, Vec<u8>>,
-    /// Frames that failed their CRC.
-    pub bad: u32,
-    pub deadline: Instant,
-    pub stats: Vec<MicroModemReceiveStatistics>,
-}
-
-/// A whole reception waiting for its `$CACST`.
-#[derive(Debug)]
-pub(super) struct Held {
-    pub transmission: ModemTransmission,
-    pub deadline: Instant,
-}
-
-/// The receive side.
-#[derive(Debug)]
-pub(super) struct Reception {
-    pub incoming: Option<Incoming>,
-    pub held: Option<Held>,
-    pub last_sent: Option<SentData>,
-    /// Without application acks: strips those a peer sends anyway.
-    pub ack_reader: ApplicationAcks,
-    /// Nodes found to disagree on application acks (bit per id), reported.
-    pub ack_mismatch_reported: u64,
-}
-
-impl Reception {
-    pub fn new(ack_reader: ApplicationAcks) -> Reception {
-        Reception {
-            incoming: None,
-            held: None,
-            last_sent: None,
-            ack_reader,
-            ack_mismatch_reported: 0,
-        }
-    }
-
-    pub fn next_deadline(&self) -> Option<Instant> {
-        [
-            self.incoming.as_ref().map(|i| i.deadline),
-            self.held.as_ref().map(|h| h.deadline),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-    }
-}
 
 /// `YYYYMMDD` (UTC) of `micros` since the epoch, to date the original
 /// `$CACST` layout.

@@ -27,8 +27,8 @@ use protos::goby::acomms::protobuf::{
 
 use super::super::firmware::{self, Generation};
 use super::super::{fdp, ranging, transmission};
-use super::cycle::{Active, Job};
 use super::machine::Machine;
+use super::state::{Active, Job};
 use crate::driver::{DriverEvent, SpecificReport, TransmitOutcome};
 
 impl Machine {

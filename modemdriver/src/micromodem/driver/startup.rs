@@ -18,86 +18,13 @@
 //! ([`Generation`]); whether the modem sends statistics by the echo of `CST`
 //! and `XST` and by the statistics heard.
 
-use std::collections::VecDeque;
-
-use tokio::time::Instant;
-
 use super::super::clock;
 use super::super::firmware::Generation;
 use super::super::sentence::MmSentence;
 use super::machine::Machine;
-use super::STATISTICS_SETTINGS;
+use super::settings::STATISTICS_SETTINGS;
+use super::state::{Awaiting, Command};
 use crate::driver::DriverStatus;
-
-/// What the driver sends outside of transmissions.
-#[derive(Debug, Clone)]
-pub(super) enum Command {
-    Send(MmSentence),
-    /// `$CCCFQ,ALL` (or TOP on a Micro-Modem 2), answered by many lines.
-    QueryConfig,
-    /// `$CCCLK` or `$CCTMS`, chosen when sent.
-    SetClock,
-}
-
-/// A host command out, awaiting the modem's answer.
-#[derive(Debug)]
-pub(super) struct Awaiting {
-    pub sentence: MmSentence,
-    /// From 1.
-    pub attempt: u32,
-    /// When it is given up (and sent again, or failed).
-    pub deadline: Instant,
-    /// The command of the active job (a `$CCCYC`, `$CCMPC`, ...).
-    pub for_job: bool,
-    /// Answered by many lines: done when they stop.
-    pub multi: bool,
-    /// A line of a multi-line answer arrived.
-    pub heard: bool,
-    /// For a clock command: the time asked for, µs since the epoch.
-    pub clock_asked: Option<u64>,
-}
-
-/// Start-up, configuration and host commands.
-#[derive(Debug, Default)]
-pub(super) struct Startup {
-    /// Commands to send, in order, one at a time.
-    pub queue: VecDeque<Command>,
-    pub awaiting: Option<Awaiting>,
-    /// The start-up commands are under way: `Ready` when they are done.
-    pub initializing: bool,
-    /// Clock commands sent since the start-up began.
-    pub clock_attempts: u32,
-    /// The clock command waits until then (the send window of a second).
-    pub clock_at: Option<Instant>,
-    pub generation: Generation,
-    /// Firmware version of the last `$CAREV`.
-    pub firmware: Option<String>,
-    /// The modem has sent `$CACST` / `$CAXST`.
-    pub sends_cst: bool,
-    pub sends_xst: bool,
-    /// Its configuration echo has CST / XST on.
-    pub cst_configured: bool,
-    pub xst_configured: bool,
-    /// `TXD` from its configuration echo: ms between the last `$CCTXD` and
-    /// the packet on a Micro-Modem 2 (0 when not heard).
-    pub tx_delay_ms: u64,
-    /// `DTO` from its configuration echo: seconds the modem waits for the
-    /// data of a cycle before giving it up (`None` when not heard: the
-    /// Micro-Modem's default, [`DEFAULT_DATA_TIMEOUT_S`]).
-    pub data_timeout_s: Option<u64>,
-}
-
-/// The Micro-Modem's data timeout (`DTO`) when its echo was not heard, s.
-pub(super) const DEFAULT_DATA_TIMEOUT_S: u64 = 5;
-
-impl Startup {
-    pub fn next_deadline(&self) -> Option<Instant> {
-        [self.awaiting.as_ref().map(|a| a.deadline), self.clock_at]
-            .into_iter()
-            .flatten()
-            .min()
-    }
-}
 
 /// The sentence id of the modem's answer to a host command.
 fn answer_id(command: &MmSentence) -> Option<&'static str> {

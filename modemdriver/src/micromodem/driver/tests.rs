@@ -10,8 +10,10 @@ use tokio::time::Instant;
 
 use super::super::application_ack::ApplicationAcks;
 use super::super::sentence::{Cycle, MmSentence};
-use super::machine::{Input, Machine, Now, Output, RequestId, Settings};
+use super::machine::Machine;
+use super::settings::Settings;
 use crate::driver::{DriverCommand, DriverEvent, DriverStatus, TransmitOutcome};
+use crate::machine::{Input, Machine as _, Now, Output, RequestId};
 
 /// 2023-11-14T22:13:20.060Z: inside the clock's send window, so that the
 /// start-up sets the clock at once.
@@ -64,11 +66,12 @@ fn echo(sentence: &MmSentence) -> Option<MmSentence> {
     }
 }
 
-fn writes(outputs: &[Output]) -> Vec<&MmSentence> {
+/// The sentences written, read back.
+fn writes(outputs: &[Output]) -> Vec<MmSentence> {
     outputs
         .iter()
         .filter_map(|o| match o {
-            Output::Write(s) => Some(s),
+            Output::Write(line) => Some(MmSentence::parse(line).expect("a sentence written")),
             _ => None,
         })
         .collect()
@@ -170,7 +173,10 @@ impl Bench {
             {
                 return bench;
             }
-            let answers: Vec<MmSentence> = writes(&outputs).into_iter().filter_map(echo).collect();
+            let answers: Vec<MmSentence> = writes(&outputs)
+                .into_iter()
+                .filter_map(|s| echo(&s))
+                .collect();
             outputs = Vec::new();
             if answers.is_empty() {
                 let next = bench.machine.next_deadline().expect("a deadline");
@@ -197,7 +203,7 @@ impl Bench {
     fn sentence(&mut self, sentence: &MmSentence) -> Vec<Output> {
         let line = sentence.to_line();
         let line = line.trim_end().as_bytes().to_vec();
-        self.input(Input::Line(line))
+        self.input(Input::Read(line))
     }
 
     fn initiate(&mut self, mt: ModemTransmission) -> Vec<Output> {
@@ -432,7 +438,7 @@ fn a_data_request_too_late_for_the_slot_gets_no_frame() {
     });
     let cycle = writes(&outputs)
         .into_iter()
-        .find_map(echo)
+        .find_map(|s| echo(&s))
         .expect("a $CCCYC");
     bench.advance(Duration::from_millis(10));
     bench.sentence(&cycle);
@@ -477,7 +483,7 @@ fn a_data_request_in_time_gets_its_frame() {
     });
     let cycle = writes(&outputs)
         .into_iter()
-        .find_map(echo)
+        .find_map(|s| echo(&s))
         .expect("a $CCCYC");
     bench.advance(Duration::from_millis(20));
     bench.sentence(&cycle);

@@ -1,0 +1,205 @@
+//! The Micro-Modem driver's configuration check: what the machine starts
+//! from ([`Settings`]), every setting it refuses ([`problems`]), and the
+//! times and counts it keeps to.
+
+use std::time::Duration;
+
+use protos::goby::acomms::protobuf::{
+    driver_config::ConnectionType, DriverConfig, MicroModemConfig, ModemTransmission,
+};
+
+use super::super::application_ack::{self, ApplicationAcks};
+use crate::config;
+use crate::driver::DriverError;
+use crate::problem::{self, Problem};
+use crate::rate;
+
+/// What the machine starts from (checked by [`super::settings`]).
+#[derive(Debug)]
+pub struct Settings {
+    /// This modem's id (1-127).
+    pub modem_id: u32,
+    /// The Micro-Modem's part of the driver configuration.
+    pub mm: MicroModemConfig,
+    /// Between attempts to open the device again.
+    pub reconnect: Duration,
+    /// With `use_application_acks`.
+    pub app_acks: Option<ApplicationAcks>,
+    /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
+    pub deferred_ack: bool,
+    /// Without application acks: strips those a peer sends anyway.
+    pub ack_reader: ApplicationAcks,
+    /// Where the application-ack state is kept across starts
+    /// (`application_ack_state_file`; taken by the driver's shell).
+    pub ack_state_file: Option<std::path::PathBuf>,
+}
+
+/// How long the driver waits for the layer above to fill a data request.
+pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// NVRAM settings that make the modem report receive ($CACST) and transmit
+/// ($CAXST) statistics; set to 1 at start unless `nvram_cfg` sets them.
+pub const STATISTICS_SETTINGS: [&str; 2] = ["CST", "XST"];
+
+/// Baud rate when `serial_baud` is not set.
+pub const DEFAULT_BAUD: u32 = 19_200;
+
+/// Data transmissions waiting for the modem at most; beyond, the oldest is
+/// dropped (reported as [`DriverStatus::Skipped`](crate::driver::DriverStatus::Skipped)): while the modem is
+/// unreachable, slot requests must not pile up and then run back to back.
+pub const MAX_PENDING_TRANSMISSIONS: usize = 2;
+
+/// Probe and header time assumed on top of a packet's frames when checking
+/// that a transmission fits in what is left of its slot.
+pub const PACKET_OVERHEAD: Duration = Duration::from_secs(1);
+
+/// Allowed, on top of the packet's estimate, between the driver's last
+/// `$CCTXD` of a cycle and the modem starting the packet (serial line and
+/// the modem's own hand-over), when checking at a `$CADRQ` that the packet
+/// still ends within its slot.
+pub const HAND_OVER: Duration = Duration::from_millis(100);
+
+/// Estimated time on the water of a data transmission.
+pub(super) fn packet_estimate(mt: &ModemTransmission) -> Duration {
+    let spec = rate::spec(mt.rate()).unwrap_or(rate::spec(0).expect("rate 0"));
+    spec.packet_duration(PACKET_OVERHEAD)
+}
+
+/// Every problem of a Micro-Modem configuration that [`settings`] refuses
+/// (see [`crate::check`], which adds a serial port that does not exist).
+pub fn problems(config: &DriverConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let modem_id = match config::modem_id(config) {
+        Ok(id) => u32::try_from(id).ok().filter(|id| (1..=127).contains(id)),
+        Err(_) => None,
+    };
+    if modem_id.is_none() {
+        problems.push(Problem::new(
+            "modem_id",
+            match config.modem_id {
+                Some(id) => format!("{id} is not a Micro-Modem id (1-127)"),
+                None => "required field is not set".into(),
+            },
+        ));
+    }
+    if config.connection_type() != ConnectionType::ConnectionSerial {
+        problems.push(Problem::new(
+            "connection_type",
+            format!(
+                "{:?} is not supported by the Micro-Modem driver (only CONNECTION_SERIAL)",
+                config.connection_type()
+            ),
+        ));
+    } else if config.serial_port().trim().is_empty() {
+        problems.push(Problem::new(
+            "serial_port",
+            "required for the Micro-Modem (e.g. \"/dev/ttyUSB0\")",
+        ));
+    }
+    let mm = config.micromodem.clone().unwrap_or_default();
+    for (i, entry) in mm.nvram_cfg.iter().enumerate() {
+        if entry.trim_start().starts_with('$') || entry.contains('*') || !entry.contains(',') {
+            problems.push(Problem::new(
+                format!("micromodem.nvram_cfg[{i}]"),
+                format!(
+                    "{entry:?}: give KEY,VALUE (e.g. \"DQF,1\"); the driver writes the $CCCFG sentence around it"
+                ),
+            ));
+        }
+    }
+    if let Some(id) = modem_id {
+        if mm.use_application_acks() && id > application_ack::MAX_MODEM_ID {
+            problems.push(Problem::new(
+                "micromodem.use_application_acks",
+                format!(
+                    "modem_id {id}: the Micro-Modem's application acks name nodes 0-{}; use a lower id, \
+                     or set use_application_acks: false (acks then come from the modem, on decode)",
+                    application_ack::MAX_MODEM_ID
+                ),
+            ));
+        }
+    }
+    problems
+}
+
+/// The machine's settings from the driver configuration, checked.
+pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
+    problem::refuse(problems(config))?;
+    let modem_id = u32::try_from(config::modem_id(config)?)
+        .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
+    let mm = config.micromodem.clone().unwrap_or_default();
+    let ack_state_file = mm
+        .application_ack_state_file
+        .as_deref()
+        .filter(|p| mm.use_application_acks() && !p.is_empty())
+        .map(std::path::PathBuf::from);
+    let app_acks = if mm.use_application_acks() {
+        let now = std::time::Instant::now();
+        let mut acks = ApplicationAcks::new(
+            modem_id,
+            Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
+            first_frame_number(),
+            now,
+        )
+        .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
+        if let Some(path) = &ack_state_file {
+            resume_ack_state(&mut acks, path, now);
+        }
+        Some(acks)
+    } else {
+        None
+    };
+    let deferred_ack = config.deferred_ack();
+    let ack_reader = ApplicationAcks::new(
+        modem_id.min(application_ack::MAX_MODEM_ID),
+        Duration::ZERO,
+        0,
+        std::time::Instant::now(),
+    )
+    .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
+    let reconnect = mm.reconnect_interval_ms.map_or(
+        Duration::from_secs(u64::from(config.reconnect_interval())),
+        |ms| Duration::from_millis(u64::from(ms)),
+    );
+    Ok(Settings {
+        modem_id,
+        mm,
+        reconnect,
+        app_acks,
+        deferred_ack,
+        ack_reader,
+        ack_state_file,
+    })
+}
+
+/// Takes up the application-ack state an earlier start kept in `path`
+/// (none there: no earlier start); one that cannot be read is told, and
+/// acks are then credited from nodes once heard from.
+fn resume_ack_state(acks: &mut ApplicationAcks, path: &std::path::Path, now: std::time::Instant) {
+    let wall = crate::time::now_micros();
+    let result = match std::fs::read_to_string(path) {
+        Ok(text) => acks
+            .resume(Some(&text), now, wall)
+            .map_err(|e| e.to_string()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            acks.resume(None, now, wall).map_err(|e| e.to_string())
+        }
+        Err(e) => Err(e.to_string()),
+    };
+    if let Err(e) = result {
+        tracing::warn!(
+            "application acks: the frame numbers of the last run in {} cannot be taken up ({e}): \
+             acks are credited from each node once heard from",
+            path.display()
+        );
+    }
+}
+
+/// A frame number drawn at random (from the standard library's randomly
+/// keyed hasher) to start the application-ack numbering at.
+fn first_frame_number() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(crate::time::now_micros());
+    (hasher.finish() % u64::from(application_ack::FRAME_NUMBERS)) as u32
+}
