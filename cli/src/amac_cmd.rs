@@ -125,6 +125,155 @@ fn discovery_cell(r: &CaseResult) -> String {
     format!("{mean} ({:.0}%)", 100.0 * r.failure_share())
 }
 
+/// Fig. 2.11: the share of transmissions destroyed while the nodes learn
+/// the cycle, by coolness (rows) and network size (columns), for each
+/// collision probability.
+fn collision_table(
+    results: &[CaseResult],
+    coolness: &[u32],
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    for &p in &P_COLLIDE {
+        writeln!(out)?;
+        writeln!(
+            out,
+            "Fig. 2.11 (p_collide = {p}): share of transmissions destroyed during learning, thesis rule [thesis+backoff]"
+        )?;
+        write!(out, "{:>3}", "C")?;
+        for n in THESIS_SIZES {
+            write!(out, "  {:>15}", format!("n = {n}"))?;
+        }
+        writeln!(out)?;
+        for &c in coolness {
+            write!(out, "{c:>3}")?;
+            for n in THESIS_SIZES {
+                let t = find(results, DiscoveryRule::Thesis, n, c, p);
+                let b = find(results, DiscoveryRule::ThesisWithBackoff, n, c, p);
+                write!(
+                    out,
+                    "  {:>15}",
+                    format!(
+                        "{:.3} [{:.3}]",
+                        t.collision_probability, b.collision_probability
+                    )
+                )?;
+            }
+            writeln!(out)?;
+        }
+    }
+    Ok(())
+}
+
+/// Fig. 2.12: the mean slots to agreement (and the share of runs never
+/// agreeing) by coolness and network size, one table per rule.
+fn discovery_tables(
+    results: &[CaseResult],
+    coolness: &[u32],
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    for rule in DiscoveryRule::ALL {
+        writeln!(out)?;
+        writeln!(
+            out,
+            "Fig. 2.12 (p_collide = 1), rule {}: mean slots to agreement (share of runs never agreeing)",
+            rule.name()
+        )?;
+        write!(out, "{:>3}", "C")?;
+        for n in COMPARE_SIZES {
+            write!(out, "  {:>11}", format!("n = {n}"))?;
+        }
+        writeln!(out)?;
+        for &c in coolness {
+            write!(out, "{c:>3}")?;
+            for n in COMPARE_SIZES {
+                write!(
+                    out,
+                    "  {:>11}",
+                    discovery_cell(find(results, rule, n, c, 1.0))
+                )?;
+            }
+            writeln!(out)?;
+        }
+    }
+    Ok(())
+}
+
+/// The best coolness per network size for each rule, beside the thesis'
+/// advice C = n + 1 (at most `max_coolness`).
+fn best_coolness_table(
+    results: &[CaseResult],
+    coolness: &[u32],
+    max_coolness: u32,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    writeln!(out)?;
+    writeln!(
+        out,
+        "Best C per network size at p_collide = 1 (fewest failures, then fewest slots), against the thesis' advice C = n + 1:"
+    )?;
+    writeln!(
+        out,
+        "{:>3}  {:>28}  {:>28}  {:>28}",
+        "n", "thesis", "last-or-penultimate", "thesis+backoff"
+    )?;
+    for n in COMPARE_SIZES {
+        write!(out, "{n:>3}")?;
+        for rule in DiscoveryRule::ALL {
+            let best = coolness
+                .iter()
+                .map(|&c| find(results, rule, n, c, 1.0))
+                .min_by(|a, b| {
+                    a.failure_share()
+                        .total_cmp(&b.failure_share())
+                        .then(a.mean_slots.total_cmp(&b.mean_slots))
+                })
+                .expect("at least one coolness");
+            let advised = max_coolness.min(n as u32 + 1);
+            let at_advice = find(results, rule, n, advised, 1.0);
+            write!(
+                out,
+                "  {:>28}",
+                format!(
+                    "C={} {} | C={advised} {}",
+                    best.case.coolness,
+                    discovery_cell(best),
+                    discovery_cell(at_advice)
+                )
+            )?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
+}
+
+/// One line per simulated case, with its header.
+fn csv_of(results: &[CaseResult]) -> String {
+    let mut csv = String::from(
+        "rule,nodes,coolness,p_collide,trials,converged,failure_share,mean_slots,max_slots_seen,collision_probability\n",
+    );
+    for r in results {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{:.6},{},{},{:.6}",
+            r.case.rule.name(),
+            r.case.nodes,
+            r.case.coolness,
+            r.case.p_collide,
+            r.trials,
+            r.converged,
+            r.failure_share(),
+            if r.mean_slots.is_nan() {
+                String::new()
+            } else {
+                format!("{:.3}", r.mean_slots)
+            },
+            r.max_slots_seen,
+            r.collision_probability
+        );
+    }
+    csv
+}
+
 fn simulate_cmd(args: &SimulateArgs, out: &mut dyn Write) -> Result<Status, CliError> {
     if args.max_coolness == 0 {
         return Err(CliError::setup("--max-coolness must be at least 1"));
@@ -155,123 +304,12 @@ fn simulate_cmd(args: &SimulateArgs, out: &mut dyn Write) -> Result<Status, CliE
         "Rules: thesis = Eqs. 2.6/2.7; last-or-penultimate = placement of Fig. 2.10 / Table 2.7; thesis+backoff = thesis placement, quiet in some own slots while the last cycle contradicted the node's view."
     )?;
 
-    for &p in &P_COLLIDE {
-        writeln!(out)?;
-        writeln!(
-            out,
-            "Fig. 2.11 (p_collide = {p}): share of transmissions destroyed during learning, thesis rule [thesis+backoff]"
-        )?;
-        write!(out, "{:>3}", "C")?;
-        for n in THESIS_SIZES {
-            write!(out, "  {:>15}", format!("n = {n}"))?;
-        }
-        writeln!(out)?;
-        for &c in &coolness {
-            write!(out, "{c:>3}")?;
-            for n in THESIS_SIZES {
-                let t = find(&results, DiscoveryRule::Thesis, n, c, p);
-                let b = find(&results, DiscoveryRule::ThesisWithBackoff, n, c, p);
-                write!(
-                    out,
-                    "  {:>15}",
-                    format!(
-                        "{:.3} [{:.3}]",
-                        t.collision_probability, b.collision_probability
-                    )
-                )?;
-            }
-            writeln!(out)?;
-        }
-    }
+    collision_table(&results, &coolness, out)?;
+    discovery_tables(&results, &coolness, out)?;
+    best_coolness_table(&results, &coolness, args.max_coolness, out)?;
 
-    for rule in DiscoveryRule::ALL {
-        writeln!(out)?;
-        writeln!(
-            out,
-            "Fig. 2.12 (p_collide = 1), rule {}: mean slots to agreement (share of runs never agreeing)",
-            rule.name()
-        )?;
-        write!(out, "{:>3}", "C")?;
-        for n in COMPARE_SIZES {
-            write!(out, "  {:>11}", format!("n = {n}"))?;
-        }
-        writeln!(out)?;
-        for &c in &coolness {
-            write!(out, "{c:>3}")?;
-            for n in COMPARE_SIZES {
-                write!(
-                    out,
-                    "  {:>11}",
-                    discovery_cell(find(&results, rule, n, c, 1.0))
-                )?;
-            }
-            writeln!(out)?;
-        }
-    }
-
-    writeln!(out)?;
-    writeln!(
-        out,
-        "Best C per network size at p_collide = 1 (fewest failures, then fewest slots), against the thesis' advice C = n + 1:"
-    )?;
-    writeln!(
-        out,
-        "{:>3}  {:>28}  {:>28}  {:>28}",
-        "n", "thesis", "last-or-penultimate", "thesis+backoff"
-    )?;
-    for n in COMPARE_SIZES {
-        write!(out, "{n:>3}")?;
-        for rule in DiscoveryRule::ALL {
-            let best = coolness
-                .iter()
-                .map(|&c| find(&results, rule, n, c, 1.0))
-                .min_by(|a, b| {
-                    a.failure_share()
-                        .total_cmp(&b.failure_share())
-                        .then(a.mean_slots.total_cmp(&b.mean_slots))
-                })
-                .expect("at least one coolness");
-            let advised = args.max_coolness.min(n as u32 + 1);
-            let at_advice = find(&results, rule, n, advised, 1.0);
-            write!(
-                out,
-                "  {:>28}",
-                format!(
-                    "C={} {} | C={advised} {}",
-                    best.case.coolness,
-                    discovery_cell(best),
-                    discovery_cell(at_advice)
-                )
-            )?;
-        }
-        writeln!(out)?;
-    }
-
-    let mut csv = String::from(
-        "rule,nodes,coolness,p_collide,trials,converged,failure_share,mean_slots,max_slots_seen,collision_probability\n",
-    );
-    for r in &results {
-        let _ = writeln!(
-            csv,
-            "{},{},{},{},{},{},{:.6},{},{},{:.6}",
-            r.case.rule.name(),
-            r.case.nodes,
-            r.case.coolness,
-            r.case.p_collide,
-            r.trials,
-            r.converged,
-            r.failure_share(),
-            if r.mean_slots.is_nan() {
-                String::new()
-            } else {
-                format!("{:.3}", r.mean_slots)
-            },
-            r.max_slots_seen,
-            r.collision_probability
-        );
-    }
     let csv_path = args.out_dir.join("amac_discovery.csv");
-    write_file(&csv_path, &csv)?;
+    write_file(&csv_path, &csv_of(&results))?;
     writeln!(out)?;
     writeln!(out, "csv: {}", csv_path.display())?;
 

@@ -32,7 +32,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use clap::{Args, Subcommand};
-use serde_json::{json, Value};
+use gobyd_protocol::event::TransferDirection;
+use gobyd_protocol::{Event, FileGet, FileSend, Numbered, Reply, Request, Topic};
 use sha2::{Digest, Sha256};
 
 use crate::address::host_port;
@@ -143,62 +144,11 @@ pub struct ListArgs {
     pub gobyd: GobydArgs,
 }
 
-/// A transfer's state, from a `transfer` event (or an item of the
-/// `transfers` reply).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Transfer {
-    /// Its id: the client id of an outgoing one, the origin's number of an
-    /// incoming one.
-    pub id: u64,
-    /// `true`: this node sends it.
-    pub outgoing: bool,
-    /// The other end.
-    pub peer: i64,
-    /// The file's name (or a message's type).
-    pub name: String,
-    /// Bytes of the body.
-    pub bytes: u64,
-    /// Fragments in all.
-    pub fragments: u64,
-    /// Fragments the receiver holds.
-    pub held: u64,
-    /// `sending`, `receiving`, `complete` or `failed`.
-    pub state: String,
-    /// Why it failed.
-    pub reason: Option<String>,
-    /// Where a received file was written.
-    pub path: Option<String>,
-    /// SHA-256 of the body, hex.
-    pub sha256: String,
-    /// The `file_get` it answers.
-    pub request: Option<u64>,
-}
+pub use gobyd_protocol::event::Transfer;
 
-impl Transfer {
-    /// The transfer a `transfer` event (or a `transfers` item) describes;
-    /// `None` when it lacks its id, direction or state.
-    pub fn of(v: &Value) -> Option<Transfer> {
-        let text = |k: &str| v.get(k).and_then(Value::as_str).map(str::to_string);
-        let number = |k: &str| v.get(k).and_then(Value::as_u64);
-        Some(Transfer {
-            id: number("transfer")?,
-            outgoing: match v.get("direction")?.as_str()? {
-                "out" => true,
-                "in" => false,
-                _ => return None,
-            },
-            peer: v.get("peer").and_then(Value::as_i64).unwrap_or(0),
-            name: text("name").unwrap_or_default(),
-            bytes: number("bytes").unwrap_or(0),
-            fragments: number("fragments").unwrap_or(0),
-            held: number("held").unwrap_or(0),
-            state: text("state")?,
-            reason: text("reason"),
-            path: text("path"),
-            sha256: text("sha256").unwrap_or_default(),
-            request: number("request"),
-        })
-    }
+/// Whether this node sends transfer `t`.
+fn outgoing(t: &Transfer) -> bool {
+    t.direction == TransferDirection::Out
 }
 
 /// What the watched transfer is.
@@ -212,7 +162,7 @@ pub enum Asked {
     /// `file_get` from `node`.
     Get {
         /// The node asked.
-        node: i64,
+        node: i32,
     },
 }
 
@@ -242,7 +192,7 @@ pub enum Step {
 #[derive(Debug, Clone)]
 pub struct Watch {
     asked: Asked,
-    request: Value,
+    request: Request,
     /// Replies seen so far.
     replies: u64,
     /// The transfer's id (`send`) or the request's number (`get`), once
@@ -252,7 +202,7 @@ pub struct Watch {
     /// event of the new transfer before its reply).
     early: Vec<Transfer>,
     /// The last progress told.
-    last_held: Option<(u64, u64)>,
+    last_held: Option<(u32, u32)>,
     /// Whether the transfer ended.
     ended: bool,
 }
@@ -261,24 +211,24 @@ impl Watch {
     /// `file_send` of the file at `path` (absolute, on gobyd's machine),
     /// SHA-256 `sha256` (hex), to `dest`, named `name` there.
     pub fn send(dest: i32, path: &Path, name: Option<&str>, sha256: String) -> Watch {
-        let mut spec = json!({ "dest": dest, "path": path.display().to_string() });
-        if let Some(name) = name {
-            spec["name"] = name.into();
-        }
-        Watch::new(Asked::Send { sha256 }, json!({ "file_send": spec }))
+        let spec = FileSend {
+            dest,
+            path: path.display().to_string(),
+            name: name.map(str::to_string),
+        };
+        Watch::new(Asked::Send { sha256 }, Request::FileSend(spec))
     }
 
     /// `file_get` of `path` from `node`.
     pub fn get(node: i32, path: &str) -> Watch {
-        Watch::new(
-            Asked::Get {
-                node: i64::from(node),
-            },
-            json!({ "file_get": { "node": node, "path": path } }),
-        )
+        let spec = FileGet {
+            node,
+            path: path.to_string(),
+        };
+        Watch::new(Asked::Get { node }, Request::FileGet(spec))
     }
 
-    fn new(asked: Asked, request: Value) -> Watch {
+    fn new(asked: Asked, request: Request) -> Watch {
         Watch {
             asked,
             request,
@@ -294,79 +244,75 @@ impl Watch {
     /// subscription to `transfer` events, then the request.
     pub fn request_lines(&self) -> [String; 2] {
         [
-            json!({ "subscribe": ["transfer"] }).to_string(),
-            self.request.to_string(),
+            Request::Subscribe(vec![Topic::Transfer]).line(),
+            self.request.line(),
         ]
     }
 
     /// The line asking for the transfers under way (after [`Step::Lost`]).
     pub fn status_line() -> String {
-        json!({ "transfers": {} }).to_string()
+        Request::Transfers.line()
     }
 
     /// Takes one line `gobyd` wrote.
     pub fn line(&mut self, line: &str) -> Step {
-        let Ok(v) = serde_json::from_str::<Value>(line) else {
-            return Step::Nothing;
-        };
-        if v.get("reply").is_some() {
+        if let Ok(numbered) = serde_json::from_str::<Numbered>(line) {
             self.replies += 1;
-            return self.reply(&v);
+            return self.reply(numbered.reply, line);
         }
-        match v.get("event").and_then(Value::as_str) {
-            Some("transfer") => match Transfer::of(&v) {
-                Some(t) if self.key.is_none() => {
-                    self.early.push(t);
-                    Step::Nothing
-                }
-                Some(t) => self.transfer(t),
-                None => Step::Nothing,
-            },
-            Some("lost") => Step::Lost,
+        match serde_json::from_str::<Event>(line) {
+            Ok(Event::Transfer(t)) if self.key.is_none() => {
+                self.early.push(t);
+                Step::Nothing
+            }
+            Ok(Event::Transfer(t)) => self.transfer(t),
+            Ok(Event::Lost(_)) => Step::Lost,
             _ => Step::Nothing,
         }
     }
 
-    fn reply(&mut self, v: &Value) -> Step {
-        if let Some(error) = v.get("error").and_then(Value::as_str) {
+    fn reply(&mut self, reply: Reply, line: &str) -> Step {
+        if let Reply::Error { error } = &reply {
             return Step::Failed(match self.replies {
                 1 => format!("gobyd refused the subscription: {error}"),
                 _ => format!("gobyd refused the request: {error}"),
             });
         }
-        if let Some(list) = v.get("transfers").and_then(Value::as_array) {
-            return self.status(list);
+        if let Reply::Transfers { transfers } = reply {
+            return self.status(transfers);
         }
         if self.replies != 2 {
             return Step::Nothing;
         }
-        let started = match &self.asked {
-            Asked::Send { sha256 } => {
-                let Some(id) = v.get("file_send").and_then(Value::as_u64) else {
-                    return Step::Failed(format!("gobyd's reply names no transfer: {v}"));
-                };
-                self.key = Some(id);
-                let transfer = v.get("transfer").and_then(Transfer::of);
-                if let Some(t) = &transfer {
-                    if !t.sha256.is_empty() && t.sha256 != *sha256 {
-                        self.ended = true;
-                        return Step::Failed(format!(
-                            "gobyd read the file with SHA-256 {}, not the file's {sha256}: it changed while it was read",
-                            t.sha256
-                        ));
-                    }
+        let started = match (&self.asked, reply) {
+            (
+                Asked::Send { sha256 },
+                Reply::FileSend {
+                    file_send,
+                    transfer: t,
+                    ..
+                },
+            ) => {
+                self.key = Some(file_send);
+                if !t.sha256.is_empty() && t.sha256 != *sha256 {
+                    self.ended = true;
+                    return Step::Failed(format!(
+                        "gobyd read the file with SHA-256 {}, not the file's {sha256}: it changed while it was read",
+                        t.sha256
+                    ));
                 }
-                if let Some(t) = &transfer {
-                    self.last_held = Some((t.held, t.fragments));
-                }
-                Step::Started(transfer)
+                self.last_held = Some((t.held, t.fragments));
+                Step::Started(Some(t))
             }
-            Asked::Get { .. } => {
-                let Some(request) = v.get("file_get").and_then(Value::as_u64) else {
-                    return Step::Failed(format!("gobyd's reply names no request: {v}"));
-                };
-                self.key = Some(request);
+            (Asked::Send { .. }, _) => {
+                return Step::Failed(format!("gobyd's reply names no transfer: {}", line.trim()));
+            }
+            (Asked::Get { .. }, Reply::FileGet { file_get, .. }) => {
+                self.key = Some(u64::from(file_get));
                 Step::Started(None)
+            }
+            (Asked::Get { .. }, _) => {
+                return Step::Failed(format!("gobyd's reply names no request: {}", line.trim()));
             }
         };
         // Events that came before the reply, now that it says which is
@@ -384,9 +330,9 @@ impl Watch {
     /// Whether transfer `t` is the one watched.
     fn ours(&self, t: &Transfer) -> bool {
         match (&self.asked, self.key) {
-            (Asked::Send { .. }, Some(id)) => t.outgoing && t.id == id,
+            (Asked::Send { .. }, Some(id)) => outgoing(t) && t.transfer == id,
             (Asked::Get { node }, Some(request)) => {
-                !t.outgoing && t.peer == *node && t.request == Some(request)
+                !outgoing(t) && t.peer == *node && t.request.map(u64::from) == Some(request)
             }
             _ => false,
         }
@@ -430,11 +376,11 @@ impl Watch {
     /// The `transfers` reply after lost events: the watched transfer as
     /// it stands, or, when it is no longer under way, that its outcome
     /// passed by.
-    fn status(&mut self, list: &[Value]) -> Step {
+    fn status(&mut self, list: Vec<Transfer>) -> Step {
         if self.ended {
             return Step::Nothing;
         }
-        let ours = list.iter().filter_map(Transfer::of).find(|t| self.ours(t));
+        let ours = list.into_iter().find(|t| self.ours(t));
         match ours {
             Some(t) => {
                 self.last_held = Some((t.held, t.fragments));
@@ -527,7 +473,7 @@ fn get(args: &GetArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let bytes = check_file(Path::new(written), &done.sha256).map_err(CliError::Failed)?;
     let at = match &args.output {
         Some(output) => {
-            write_copy(output, &bytes).map_err(|e| {
+            goby_store::file::write_atomically(output, &bytes).map_err(|e| {
                 CliError::Failed(format!(
                     "{} came (at {written}) but cannot be copied to {}: {e}",
                     args.path,
@@ -546,21 +492,6 @@ fn get(args: &GetArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     Ok(Status::Ok)
 }
 
-/// Writes `bytes` to `path` through a temporary file beside it, so that a
-/// reader never sees half of it.
-fn write_copy(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| std::io::Error::other("not a file name"))?;
-    let part = path.with_file_name(format!(".{}.part", name.to_string_lossy()));
-    {
-        let mut f = std::fs::File::create(&part)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&part, path)
-}
-
 fn list(args: &ListArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let mut connection = Connection::open(&args.gobyd.gobyd)?;
     connection.write_line(&Watch::status_line())?;
@@ -576,21 +507,17 @@ fn list(args: &ListArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             }
             Next::Closed(why) => return Err(CliError::Failed(why)),
         };
-        let Ok(v) = serde_json::from_str::<Value>(&line) else {
-            continue;
-        };
-        if v.get("reply").is_some() {
-            break v;
+        if let Ok(numbered) = serde_json::from_str::<Numbered>(&line) {
+            break numbered.reply;
         }
     };
-    if let Some(error) = reply.get("error").and_then(Value::as_str) {
-        return Err(CliError::setup(format!("gobyd refused: {error}")));
-    }
-    let transfers: Vec<Transfer> = reply
-        .get("transfers")
-        .and_then(Value::as_array)
-        .map(|l| l.iter().filter_map(Transfer::of).collect())
-        .unwrap_or_default();
+    let transfers = match reply {
+        Reply::Error { error } => {
+            return Err(CliError::setup(format!("gobyd refused: {error}")));
+        }
+        Reply::Transfers { transfers } => transfers,
+        _ => Vec::new(),
+    };
     if transfers.is_empty() {
         writeln!(stdout, "no transfers under way")?;
         return Ok(Status::Ok);
@@ -608,8 +535,8 @@ fn list(args: &ListArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         writeln!(
             stdout,
             "{:<14} {:<4} {:>5} {:>10} {:>13}  {}",
-            t.id,
-            if t.outgoing { "out" } else { "in" },
+            t.transfer,
+            if outgoing(&t) { "out" } else { "in" },
             t.peer,
             t.bytes,
             format!("{}/{}", t.held, t.fragments),
@@ -740,11 +667,13 @@ impl Progress {
         match self {
             Progress::Quiet => {}
             Progress::Bar(bar) => {
-                bar.set_length(t.fragments);
-                bar.set_position(t.held);
+                bar.set_length(u64::from(t.fragments));
+                bar.set_position(u64::from(t.held));
             }
             Progress::Lines => {
-                let percent = (100 * t.held).checked_div(t.fragments).unwrap_or(0);
+                let percent = (100 * u64::from(t.held))
+                    .checked_div(u64::from(t.fragments))
+                    .unwrap_or(0);
                 // A closed standard error stops the progress, not the
                 // transfer's follow-up.
                 let _ = writeln!(
@@ -822,7 +751,7 @@ fn follow(
             Step::Started(Some(t)) => {
                 progress.note(&format!(
                     "{what}: {} bytes in {} fragments (transfer {})",
-                    t.bytes, t.fragments, t.id
+                    t.bytes, t.fragments, t.transfer
                 ));
                 progress.show(what, &t);
             }
@@ -852,6 +781,7 @@ fn follow(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use serde_json::{json, Value};
 
     fn event(id: u64, dir: &str, peer: i64, state: &str, held: u64, extra: Value) -> String {
         let mut v = json!({
@@ -885,7 +815,7 @@ mod tests {
         );
         let reply = json!({"reply": 2, "file_send": 7, "joined": false,
             "transfer": serde_json::from_str::<Value>(&event(7, "out", 3, "sending", 0, json!({}))).unwrap()});
-        assert!(matches!(w.line(&reply.to_string()), Step::Started(Some(t)) if t.id == 7));
+        assert!(matches!(w.line(&reply.to_string()), Step::Started(Some(t)) if t.transfer == 7));
         // Another transfer, a received message: nothing.
         assert_eq!(
             w.line(&event(8, "out", 3, "sending", 2, json!({}))),
@@ -922,7 +852,10 @@ mod tests {
         );
         let mut w = Watch::send(3, Path::new("/d/f.bin"), None, "ab".into());
         w.line(r#"{"reply":1,"subscribed":["transfer"]}"#);
-        w.line(r#"{"reply":2,"file_send":7}"#);
+        w.line(&format!(
+            r#"{{"reply":2,"file_send":7,"joined":false,"transfer":{}}}"#,
+            event(7, "out", 3, "sending", 0, json!({}))
+        ));
         assert_eq!(
             w.line(&event(
                 7,
@@ -934,13 +867,31 @@ mod tests {
             )),
             Step::Failed("expired".into())
         );
+        // Read as the file was, completed as another.
         let mut w = Watch::send(3, Path::new("/d/f.bin"), None, "cd".into());
         w.line(r#"{"reply":1,"subscribed":["transfer"]}"#);
-        w.line(r#"{"reply":2,"file_send":7}"#);
+        w.line(&format!(
+            r#"{{"reply":2,"file_send":7,"joined":false,"transfer":{}}}"#,
+            event(7, "out", 3, "sending", 0, json!({"sha256": "cd"}))
+        ));
         assert!(matches!(
             w.line(&event(7, "out", 3, "complete", 4, json!({}))),
             Step::Failed(why) if why.contains("not the file's cd")
         ));
+    }
+
+    #[test]
+    fn a_send_fails_when_gobyd_read_another_file() {
+        let mut w = Watch::send(3, Path::new("/d/f.bin"), None, "cd".into());
+        w.line(r#"{"reply":1,"subscribed":["transfer"]}"#);
+        let step = w.line(&format!(
+            r#"{{"reply":2,"file_send":7,"joined":false,"transfer":{}}}"#,
+            event(7, "out", 3, "sending", 0, json!({}))
+        ));
+        assert!(
+            matches!(&step, Step::Failed(why) if why.contains("SHA-256 ab, not the file's cd")),
+            "{step:?}"
+        );
     }
 
     #[test]
@@ -993,7 +944,10 @@ mod tests {
     fn lost_events_are_made_up_for_by_the_transfers_under_way() {
         let mut w = Watch::send(3, Path::new("/d/f.bin"), None, "ab".into());
         w.line(r#"{"reply":1,"subscribed":["transfer"]}"#);
-        w.line(r#"{"reply":2,"file_send":7}"#);
+        w.line(&format!(
+            r#"{{"reply":2,"file_send":7,"joined":false,"transfer":{}}}"#,
+            event(7, "out", 3, "sending", 0, json!({}))
+        ));
         assert_eq!(w.line(r#"{"event":"lost","count":3}"#), Step::Lost);
         let under_way = json!({"reply": 3, "transfers": [
             serde_json::from_str::<Value>(&event(7, "out", 3, "sending", 3, json!({}))).unwrap()

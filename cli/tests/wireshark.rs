@@ -336,7 +336,8 @@ log {{ raw_log: false }}
                 let path = dir.join(format!("node{id}.pb.txt"));
                 std::fs::write(&path, config(dir, id, ports)).unwrap();
                 let config = gobyd::config::load(&path).expect("the test's configuration");
-                let daemon = gobyd::runtime::Daemon::start(config)
+                let daemon = gobyd::daemon::Daemon::builder(config)
+                    .start()
                     .await
                     .expect("gobyd starts");
                 let mut client = Client::connect(daemon.json_tcp_addr().unwrap()).await;

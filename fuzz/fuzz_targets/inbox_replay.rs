@@ -6,10 +6,10 @@
 
 use std::path::Path;
 
-use gobyd::dedup::Identity;
-use gobyd::inbox::{Inbox, InboxEntry};
+use gobyd::internals::dedup::Identity;
+use gobyd::internals::inbox::{Inbox, InboxEntry};
 use libfuzzer_sys::fuzz_target;
-use queue::record_log::MemoryFile;
+use goby_store::record_log::MemoryFile;
 
 /// Identities are remembered for 10 s from 1000 s after the epoch.
 const WINDOW: u64 = 10_000_000;

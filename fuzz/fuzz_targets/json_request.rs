@@ -19,6 +19,6 @@ static CODEC: LazyLock<dccl::Codec> = LazyLock::new(|| {
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(line) = std::str::from_utf8(data) {
-        let _ = gobyd::json_protocol::parse_request(line, &CODEC);
+        let _ = gobyd::internals::parse_request(line, &CODEC);
     }
 });

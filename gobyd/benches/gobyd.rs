@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use gobyd::{config, runtime::Daemon};
+use gobyd::{config, daemon::Daemon};
 use modemdriver::{Driver, DriverCommand};
 use protos::goby::acomms::protobuf::ModemTransmission;
 use tokio::sync::{mpsc, oneshot};
@@ -211,7 +211,9 @@ fn main() {
     let (addr, handle, stop, running) = runtime.block_on(async {
         let driver = bench_driver(frames_tx);
         let handle = driver.handle();
-        let daemon = Daemon::start_with_driver(config::parse(&text, "bench").unwrap(), driver)
+        let daemon = Daemon::builder(config::parse(&text, "bench").unwrap())
+            .driver(driver)
+            .start()
             .await
             .expect("gobyd starts");
         let addr = daemon.json_tcp_addr().expect("JSON interface");

@@ -28,7 +28,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use gobyd::{config, runtime::Daemon};
+use gobyd::{config, daemon::Daemon};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use serde_json::json;
 
@@ -103,7 +103,10 @@ async fn run(n: usize, broker: &broker::Broker, dir: &std::path::Path) -> serde_
     for id in 1..=n {
         let text = gateway_config(id, broker, dir);
         let config = config::parse(&text, "bench").unwrap();
-        let daemon = Daemon::start(config).await.expect("gateway starts");
+        let daemon = Daemon::builder(config)
+            .start()
+            .await
+            .expect("gateway starts");
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         stops.push(stop);
         daemons.push(tokio::spawn(daemon.run(async {

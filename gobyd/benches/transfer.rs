@@ -26,9 +26,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use fleet::{data_dir, Fleet, Seen};
-use gobyd::control::NetworkRequest;
-use gobyd::fragment::{self, Content};
-use gobyd::network::wire::{self, NetMessage};
+use gobyd::event::NetworkRequest;
+use gobyd::internals::fragment::{self, Content};
+use gobyd::internals::network::wire::{self, NetMessage};
 use node::{Entry, Node, Simulator};
 use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
 
@@ -201,11 +201,11 @@ struct Sizes {
 fn sizes(link: Link) -> Sizes {
     let spec = modemdriver::rate::spec(link.rate as i32).expect("a Micro-Modem rate");
     let config = config(link, 1, 2, 0.0, Path::new("/nonexistent"));
-    let frame = gobyd::network::frame_bytes(&config);
+    let frame = gobyd::internals::network::frame_bytes(&config);
     let mut codec = dccl::Codec::new();
     wire::load(&mut codec).expect("the network types load");
-    let fragment_data =
-        gobyd::network::fragment_data_bytes(&codec, frame).expect("a fragment fits a frame");
+    let fragment_data = gobyd::internals::network::fragment_data_bytes(&codec, frame)
+        .expect("a fragment fits a frame");
     // A fragment as the sender writes it, near the end of a 100 KiB
     // transfer: its header's fields are of fixed width, so any would do.
     let data = vec![0x5A; fragment_data];

@@ -1,5 +1,5 @@
-//! The `gobyd` command line: options, logging ([`logging`](crate::logging)), signals and exit statuses
-//! around [`Daemon`](crate::runtime::Daemon).
+//! The `gobyd` command line: options, logging, signals and exit statuses
+//! around [`crate::daemon::Daemon`].
 //!
 //! Exit status: [`EXIT_OK`] after a clean stop (SIGINT, SIGTERM) or a
 //! successful `--check`, [`EXIT_SETUP`] when the configuration or the
@@ -9,7 +9,7 @@
 //! `FILE:LINE:COLUMN`); settings read and not used are noted (on standard
 //! error with `--check`, in the log otherwise). The
 //! daemon starts only with a configuration `--check` accepts: both run
-//! [`runtime::validate`].
+//! [`check::validate`].
 
 use std::ffi::OsString;
 use std::io::Write;
@@ -19,7 +19,9 @@ use clap::{ColorChoice, CommandFactory, Parser};
 
 use protos::goby::apps::protobuf::{gobyd_config::JsonInterface, GobydConfig};
 
-use crate::{config, runtime};
+use crate::daemon::Daemon;
+use crate::error::DaemonError;
+use crate::{check, config};
 
 /// Exit status after a clean stop or a successful check.
 pub const EXIT_OK: u8 = 0;
@@ -123,7 +125,7 @@ pub struct GobydCli {
 /// not placed at the configuration file's broker line).
 fn mqtt_broker_problem(cli: &GobydCli) -> Option<String> {
     let broker = cli.mqtt_broker.as_deref()?;
-    if broker.trim().is_empty() || crate::mqtt::settings::split_broker(broker, 1883).is_ok() {
+    if broker.trim().is_empty() || crate::edge::mqtt::settings::split_broker(broker, 1883).is_ok() {
         return None;
     }
     Some(format!(
@@ -146,7 +148,7 @@ fn mqtt_broker_note(cli: &GobydCli, config: &GobydConfig) -> Option<String> {
             .then(|| format!("MQTT bridge: none ({from})"));
     }
     let port = if mqtt.tls.is_some() { 8883 } else { 1883 };
-    let (host, port) = crate::mqtt::settings::split_broker(mqtt.broker(), port).ok()?;
+    let (host, port) = crate::edge::mqtt::settings::split_broker(mqtt.broker(), port).ok()?;
     let host = if host.contains(':') {
         format!("[{host}]")
     } else {
@@ -231,8 +233,8 @@ fn configuration(
 
 /// The error as it is reported: settings that cannot work with where
 /// they are written in the file, when they are.
-fn located(mut e: runtime::DaemonError, read: Option<&config::Read>) -> runtime::DaemonError {
-    if let (runtime::DaemonError::Config(config::ConfigError::Problems(problems)), Some(read)) =
+fn located(mut e: DaemonError, read: Option<&config::Read>) -> DaemonError {
+    if let (DaemonError::Config(config::ConfigError::Problems(problems)), Some(read)) =
         (&mut e, read)
     {
         read.locate(problems);
@@ -265,6 +267,62 @@ fn shutdown_signal() -> impl std::future::Future<Output = ()> {
         let _ = tokio::signal::ctrl_c().await;
         tracing::info!("signal received: shutting down");
     }
+}
+
+/// `gobyd --check`: the configuration checked as the start checks it. What
+/// is wrong or doubtful is told on standard error, the refusal first;
+/// standard output says whether it is valid, the types it loads and its
+/// limits.
+fn check_cmd(cli: &GobydCli, config: GobydConfig, read: Option<&config::Read>) -> u8 {
+    let notes = read.map_or(&[][..], |r| &r.notes[..]);
+    let broker = mqtt_broker_note(cli, &config);
+    let warning = config::passphrase_file_warning(&config);
+    let limits = check::driver_limits(&config);
+    let log_problems = crate::logging::problems(&config);
+    let checked = match check::validate(config, config::DriverSettings::Configured) {
+        Ok(checked) => checked,
+        Err(e) => {
+            // As the start refuses it: the notes wait until it can run.
+            eprintln!("gobyd: error: {}", located(e, read));
+            for problem in log_problems {
+                eprintln!("gobyd: error: configuration: {problem}");
+            }
+            return EXIT_SETUP;
+        }
+    };
+    if !log_problems.is_empty() {
+        for problem in log_problems {
+            eprintln!("gobyd: error: configuration: {problem}");
+        }
+        return EXIT_SETUP;
+    }
+    for note in notes {
+        eprintln!("gobyd: note: {note}");
+    }
+    if let Some(warning) = warning {
+        eprintln!("gobyd: warning: {warning}");
+    }
+    let (frame_limits, warnings) = check::frame_report(&checked);
+    for w in check::definition_warnings(&checked)
+        .into_iter()
+        .chain(warnings)
+    {
+        eprintln!("gobyd: warning: {w}");
+    }
+    println!(
+        "configuration is valid; DCCL types: {}",
+        checked.loaded.join(", ")
+    );
+    if config::links::has_link_sections(&checked.config) {
+        println!("{}", config::links::summary(&checked.config));
+    }
+    for limits in [limits, frame_limits].into_iter().flatten() {
+        println!("{limits}");
+    }
+    if let Some(broker) = broker {
+        println!("{broker}");
+    }
+    EXIT_OK
 }
 
 /// Runs `gobyd` with a parsed command line; returns the exit status.
@@ -313,58 +371,8 @@ pub fn run_cli(cli: GobydCli) -> u8 {
             return EXIT_SETUP;
         }
     };
-    let notes = read.as_ref().map_or(&[][..], |r| &r.notes[..]);
     if cli.check {
-        // Told on standard error, the refusal first: standard output says
-        // whether it is valid.
-        let broker = mqtt_broker_note(&cli, &config);
-        let warning = config::passphrase_file_warning(&config);
-        let limits = runtime::driver_limits(&config);
-        let log_problems = crate::logging::problems(&config);
-        let checked = match runtime::validate(config, config::DriverSettings::Configured) {
-            Ok(checked) => checked,
-            Err(e) => {
-                // As the start refuses it: the notes wait until it can run.
-                eprintln!("gobyd: error: {}", located(e, read.as_ref()));
-                for problem in log_problems {
-                    eprintln!("gobyd: error: configuration: {problem}");
-                }
-                return EXIT_SETUP;
-            }
-        };
-        if !log_problems.is_empty() {
-            for problem in log_problems {
-                eprintln!("gobyd: error: configuration: {problem}");
-            }
-            return EXIT_SETUP;
-        }
-        for note in notes {
-            eprintln!("gobyd: note: {note}");
-        }
-        if let Some(warning) = warning {
-            eprintln!("gobyd: warning: {warning}");
-        }
-        let (frame_limits, warnings) = runtime::frame_report(&checked);
-        for w in runtime::definition_warnings(&checked)
-            .into_iter()
-            .chain(warnings)
-        {
-            eprintln!("gobyd: warning: {w}");
-        }
-        println!(
-            "configuration is valid; DCCL types: {}",
-            checked.loaded.join(", ")
-        );
-        if config::links::has_link_sections(&checked.config) {
-            println!("{}", config::links::summary(&checked.config));
-        }
-        for limits in [limits, frame_limits].into_iter().flatten() {
-            println!("{limits}");
-        }
-        if let Some(broker) = broker {
-            println!("{broker}");
-        }
-        return EXIT_OK;
+        return check_cmd(&cli, config, read.as_ref());
     }
     let log_problems = crate::logging::problems(&config);
     if !log_problems.is_empty() {
@@ -391,7 +399,7 @@ pub fn run_cli(cli: GobydCli) -> u8 {
     };
     runtime.block_on(async {
         let stop = shutdown_signal();
-        let daemon = match runtime::Daemon::start(config).await {
+        let daemon = match Daemon::builder(config).start().await {
             Ok(d) => d,
             Err(e) => {
                 eprintln!("gobyd: error: {}", located(e, read.as_ref()));

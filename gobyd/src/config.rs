@@ -1151,7 +1151,7 @@ pub enum DriverSettings {
 
 /// Every setting of a [`complete`]d configuration that parses but cannot
 /// work, each with its field: the checks `gobyd --check` and the daemon's
-/// start share (see [`crate::runtime::validate`]).
+/// start share (see [`crate::check::validate`]).
 ///
 /// - medium access: a modem id with no slot of its own under fixed TDMA
 ///   (the node would never transmit); a slot rate the Micro-Modem (and the

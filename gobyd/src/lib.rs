@@ -1,7 +1,7 @@
 //! `gobyd`, the daemon between a modem and an autonomy process, as a
 //! library: it composes DCCL, the queue, medium access and a modem driver
 //! from one configuration and connects them to the vehicle's autonomy
-//! software over JSON (TCP, UDP) and MOOS.
+//! software over JSON (TCP, UDP), MOOS and MQTT.
 //!
 //! The `gobyd` binary is a thin wrapper around [`command::main`]; a Rust
 //! program can run the whole stack in-process instead:
@@ -9,58 +9,58 @@
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
 //! let config = gobyd::config::load(std::path::Path::new("gobyd.pb.txt"))?;
-//! let daemon = gobyd::runtime::Daemon::start(config).await?;
+//! let daemon = gobyd::daemon::Daemon::builder(config).start().await?;
 //! daemon.run(std::future::pending::<()>()).await?;
 //! # Ok(())
 //! # }
 //! ```
 //!
-//! Modules: [`config`] loads and checks the configuration, [`runtime`]
-//! composes and runs the stack, [`door`] checks published values,
-//! [`outbox`] is the queue with its on-disk journal, [`group_commit`] lets
-//! one journal sync confirm many messages, [`data_dir`] holds the
-//! data directory (one daemon each, private files), [`inbox`] records what
-//! the link delivers before it is handed over or acknowledged, [`dedup`] is
-//! the receiver's duplicate filter, [`crash_point`] lets restart tests kill
-//! the daemon at chosen moments, [`json_protocol`] and
-//! [`json_server`] serve JSON clients, [`event`] is the one stream of
-//! typed events out of the core (with [`modem_event`] the driver's and
-//! medium access control's), [`moos_bridge`] joins a MOOS
-//! community, [`mqtt`] bridges to an MQTT broker, [`mission_file`] reads the configuration from a MOOS mission
-//! file, [`translator`] turns MOOS variables into DCCL messages and back
-//! (pAcommsHandler's `translator_entry`), [`raw_log`] writes what went to and
-//! came from the modem, [`logging`] sets up the daemon's log (standard error
-//! or the journal, and a file rotated by size), [`route`] holds Goby3's static routes and
-//! [`network`] carries messages through relays, and [`command`] is the `gobyd` command line.
+//! Modules: [`config`] loads the configuration ([`mission_file`] from a
+//! MOOS mission file) and [`check`] checks it as `gobyd --check` does;
+//! [`daemon`] starts the daemon ([`daemon::Daemon::builder`]) and runs it;
+//! [`event`] holds what goes into its core and comes out of it, as typed
+//! values (messages to publish, control requests, the events every
+//! interface renders); [`json`] renders those as the JSON interface's lines;
+//! [`translator`] turns MOOS variables into DCCL messages and back
+//! (pAcommsHandler's `translator_entry`); [`error`] says why the daemon
+//! could not start; [`command`] is the `gobyd` command line (with its log:
+//! standard error or the journal, and a file rotated by size). The core (the
+//! outbox and its journal, the receive path, the links, the network layer)
+//! and the interfaces (JSON, MOOS, MQTT, the mission log) are the crate's
+//! own.
 
 #![warn(missing_docs)]
 
+pub mod check;
 pub mod command;
 pub mod config;
-pub mod control;
-pub mod crash_point;
-pub mod data_dir;
-pub mod dedup;
-pub mod delivery;
-pub mod door;
+pub(crate) mod core;
+pub mod daemon;
+pub(crate) mod edge;
+pub mod error;
 pub mod event;
-pub mod fragment;
-pub mod group_commit;
-pub mod inbox;
-pub mod json_protocol;
-pub mod json_server;
-pub mod link;
-pub mod logging;
+pub(crate) mod logging;
 pub mod mission_file;
-pub mod modem_event;
-pub mod moos_bridge;
-pub mod mqtt;
-pub mod network;
-pub mod outbox;
-pub mod raw_log;
-pub mod route;
-pub mod runtime;
 pub mod translator;
+
+/// The JSON interface's lines of the core's events and replies (the types
+/// of [`gobyd_protocol`]), for a program that embeds the daemon and serves
+/// them in its own way.
+pub mod json {
+    pub use crate::edge::json::lines::{
+        event, event_line, event_topic, link_json, lost, message_json, network_reply, publish_reply,
+    };
+}
+
+/// The daemon's internals, for its own tests, benchmarks and fuzz targets
+/// (feature `internals`): no interface of the crate.
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod internals {
+    pub use crate::core::{crash_point, dedup, fragment, inbox, network};
+    pub use crate::edge::json::lines::parse_request;
+    pub use crate::edge::mqtt::settings as mqtt_settings;
+}
 
 /// The crate's README.md, whose examples run as doctests.
 #[cfg(doctest)]

@@ -12,8 +12,8 @@ mod support;
 
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::runtime::Daemon;
 use modemdriver::ModemTransmission;
 use prost::Message;
 use prost_reflect::ReflectMessage;
@@ -60,7 +60,10 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let port = free_udp_port();
     let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
-    let daemon = Daemon::start(config.config()).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config.config())
+        .start()
+        .await
+        .expect("gobyd starts");
     let inbox = daemon.data_dir().join("inbox.log");
     let mut events = daemon.subscribe();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
@@ -135,7 +138,7 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     run.await.unwrap().unwrap();
     let mut handed = 0;
     while let Ok(e) = events.try_recv() {
-        if let DaemonEvent::Received { received: r, .. } = &e.event {
+        if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
             assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
             handed += 1;
         }

@@ -36,9 +36,9 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use emulators::micromodem::{Dialect, EmulatorControl, EmulatorFaults};
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::ModemEvent;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::MicroModemClockMode;
 use protos::goby::example::Command;
@@ -247,7 +247,8 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
             simulator_driver(&format!("delivery-{name}"), 0.3, faults.seed).into()
         };
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(id, driver, &data_dir, link))
+        let daemon = Daemon::builder(daemon_config(id, driver, &data_dir, link))
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());
@@ -256,7 +257,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
         let receptions = receptions.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
+                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {
@@ -280,9 +281,8 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
         let json_lines = json_lines.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                if let DaemonEvent::Received { .. } = &e.event {
-                    let line =
-                        gobyd::json_protocol::event_line(&e.event, |_| String::new()).unwrap();
+                if let DaemonEvent::Received { .. } = e.as_ref() {
+                    let line = gobyd::json::event_line(e.as_ref(), |_| String::new()).unwrap();
                     let line: serde_json::Value = serde_json::from_str(&line).unwrap();
                     let stats = &line["link"]["receive_stat"];
                     let mut j = json_lines.lock().unwrap();
@@ -294,7 +294,7 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
                         j.1 += 1;
                     }
                 }
-                let (note, delivered) = match &e.event {
+                let (note, delivered) = match e.as_ref() {
                     DaemonEvent::Received { received: r, .. } => (r.message.clone(), true),
                     DaemonEvent::Queue {
                         event: QueueEvent::Acked { message, .. },
@@ -398,8 +398,10 @@ async fn run(name: &str, faults: Faults, link: Link) -> (Tally, String) {
     for id in 1..=2 {
         let path = dir.join(format!("data{id}")).join("outbox.journal");
         let (journal, _) = queue::Journal::open(&path).unwrap();
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<Command>().unwrap();
         for entry in journal.entries() {
-            let command: Command = prost::Message::decode(entry.message.as_slice()).unwrap();
+            let command: Command = codec.decode_typed(&entry.message).unwrap();
             *owed.entry(command.note().to_string()).or_default() += 1;
         }
     }

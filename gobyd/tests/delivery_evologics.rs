@@ -30,9 +30,9 @@ use emulators::evologics::{
     self as emulator, EmulatorConfig, EmulatorControl, EmulatorFaults, EmulatorHandle, EmulatorPort,
 };
 use emulators::host::Counted;
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::ModemEvent;
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use modemdriver::DriverStatus;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
@@ -189,7 +189,8 @@ async fn run(faults: Faults) -> Tally {
     for id in 1..=2 {
         let port = emulators[id as usize - 1].local_addr().unwrap().port();
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(id, port, &data_dir, faults.ack_mode))
+        let daemon = Daemon::builder(daemon_config(id, port, &data_dir, faults.ack_mode))
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());
@@ -200,13 +201,13 @@ async fn run(faults: Faults) -> Tally {
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
                 if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Skipped { reason })) =
-                    &e.event
+                    e.as_ref()
                 {
                     if reason.contains("repeating") {
                         *repeats.lock().unwrap() += 1;
                     }
                 }
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
+                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {
@@ -227,7 +228,7 @@ async fn run(faults: Faults) -> Tally {
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let (note, delivered) = match &e.event {
+                let (note, delivered) = match e.as_ref() {
                     DaemonEvent::Received { received: r, .. } => (r.message.clone(), true),
                     DaemonEvent::Queue {
                         event: QueueEvent::Acked { message, .. },
@@ -317,8 +318,10 @@ async fn run(faults: Faults) -> Tally {
     for id in 1..=2 {
         let path = dir.join(format!("data{id}")).join("outbox.journal");
         let (journal, _) = queue::Journal::open(&path).unwrap();
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<Command>().unwrap();
         for entry in journal.entries() {
-            let command: Command = prost::Message::decode(entry.message.as_slice()).unwrap();
+            let command: Command = codec.decode_typed(&entry.message).unwrap();
             *owed.entry(command.note().to_string()).or_default() += 1;
         }
     }

@@ -30,9 +30,9 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use emulators::host::{EmulatorControl, EmulatorFaults, EmulatorPort, Running, Setup};
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::ModemEvent;
 use modemdriver::sim::{medium::Medium, SimulatorDriver};
 use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver as Kind};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
@@ -375,7 +375,8 @@ async fn run(faults: Faults) -> Tally {
     for id in 1..=2 {
         let port = port(&emulators[id as usize - 1]);
         let data_dir = dir.join(format!("data{id}"));
-        let daemon = Daemon::start(daemon_config(&faults, id, port, &data_dir))
+        let daemon = Daemon::builder(daemon_config(&faults, id, port, &data_dir))
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());
@@ -384,7 +385,7 @@ async fn run(faults: Faults) -> Tally {
         let receptions = receptions.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = &e.event {
+                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {
@@ -400,7 +401,7 @@ async fn run(faults: Faults) -> Tally {
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let (note, delivered) = match &e.event {
+                let (note, delivered) = match e.as_ref() {
                     DaemonEvent::Received { received: r, .. } => (r.message.clone(), true),
                     DaemonEvent::Queue {
                         event: QueueEvent::Acked { message, .. },
@@ -490,8 +491,10 @@ async fn run(faults: Faults) -> Tally {
     for id in 1..=2 {
         let path = dir.join(format!("data{id}")).join("outbox.journal");
         let (journal, _) = queue::Journal::open(&path).unwrap();
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<Command>().unwrap();
         for entry in journal.entries() {
-            let command: Command = prost::Message::decode(entry.message.as_slice()).unwrap();
+            let command: Command = codec.decode_typed(&entry.message).unwrap();
             *owed.entry(command.note().to_string()).or_default() += 1;
         }
     }

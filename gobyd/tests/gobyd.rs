@@ -13,7 +13,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use support::daemon::{free_udp_port, scratch};
+use support::daemon::{command_line, free_udp_port, scratch};
 use support::node::{Driver, Entry, MicroModem, Multicast, Node as NodeConfig, Simulator, Udp};
 
 /// Upper bound of any wait in these tests.
@@ -173,9 +173,7 @@ impl Node {
     }
 
     fn publish_command(&mut self, destination: i32, note: &str) -> u64 {
-        self.send(&format!(
-            r#"{{"publish": "goby.example.Command", "msg": {{"destination": {destination}, "action": "GOTO", "note": "{note}"}}}}"#
-        ));
+        self.send(&command_line(destination, note));
         // Events that come before the reply (an ack can: the message may
         // leave before the journal sync that the reply waits for) are held
         // for the waits after it.

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use gobyd::runtime::Daemon;
+use gobyd::daemon::Daemon;
 use moos::{ClientConfig, MoosClient, Value};
 use support::daemon::{free_tcp_port, scratch};
 use support::node::{Entry, Node, Simulator};
@@ -38,7 +38,7 @@ fn daemon_config(port: u16, data_dir: &Path, channel: &str) -> Node {
 async fn round_trip_through(port: u16, name: &str) {
     let dir = scratch("moos", name);
     let config = daemon_config(port, &dir.join("data"), name).config();
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
     let (stop, stopped) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async {
         let _ = stopped.await;
@@ -254,7 +254,7 @@ async fn files_from_moos_variables_with_the_minimal_db() {
     ));
     let mut running = Vec::new();
     for config in [node1.config(), node2.config()] {
-        let daemon = Daemon::start(config).await.expect("gobyd starts");
+        let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
         let (stop, stopped) = oneshot::channel::<()>();
         let task = tokio::spawn(daemon.run(async {
             let _ = stopped.await;
@@ -360,7 +360,7 @@ async fn a_file_request_without_the_network_layer_is_answered() {
     let dir = scratch("moos", "files-no-network");
     let name = format!("moos-no-network-{}", std::process::id());
     let config = daemon_config(db.port(), &dir.join("data"), &name).config();
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
     let (stop, stopped) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async {
         let _ = stopped.await;

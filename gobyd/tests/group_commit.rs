@@ -1,7 +1,7 @@
 //! Group commit, as a real process on loopback: a client hears `accepted`
 //! only after the journal sync that covers its message. The daemon is
 //! armed to die as its `N`-th journal sync is about to start (crash point
-//! `unsynced`, see `gobyd::crash_point`): whatever it confirmed before
+//! `unsynced`, see `gobyd::internals::crash_point`): whatever it confirmed before
 //! dying was covered by an earlier sync, and is in the journal. And a
 //! connection that pipelines its lines gets every reply, in order.
 
@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde_json::Value;
-use support::daemon::{scratch, Gobyd, PATIENCE};
+use support::daemon::{command_line, scratch, Gobyd, PATIENCE};
 use support::node::{Entry, Node, Simulator};
 
 /// A node that never transmits: what is accepted stays queued (and
@@ -34,9 +34,7 @@ fn quiet_config(dir: &Path) -> PathBuf {
 }
 
 fn command(i: usize) -> String {
-    format!(
-        r#"{{"publish": "goby.example.Command", "msg": {{"destination": 2, "action": "GOTO", "note": "c{i}"}}}}"#
-    )
+    command_line(2, &format!("c{i}"))
 }
 
 /// The journal ids of the messages the journal of `dir` owes.

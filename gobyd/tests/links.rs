@@ -35,7 +35,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use emulators::micromodem::{Dialect, EmulatorFaults};
 use modemdriver::sim::medium::Medium;
 use serde_json::Value;
-use support::daemon::{free_udp_port, scratch, Gobyd};
+use support::daemon::{command_line, free_udp_port, scratch, Gobyd};
 use support::iridium::{self, Emulated, SHORE, VEHICLE};
 use support::micromodem::{micromodem_driver, modem_path, start_emulator};
 use support::node::{Entry, Node, Simulator};
@@ -113,10 +113,7 @@ fn node(
 }
 
 fn publish(node: &mut Gobyd, to: i32, note: &str) {
-    let line = format!(
-        r#"{{"publish": "goby.example.Command", "msg": {{"destination": {to}, "action": "GOTO", "note": "{note}"}}}}"#
-    );
-    let reply = node.request(&line).expect("a reply");
+    let reply = node.request(&command_line(to, note)).expect("a reply");
     assert!(reply.get("accepted").is_some(), "{reply}");
 }
 

@@ -10,9 +10,9 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
+use gobyd::event::ModemEvent;
 use gobyd::event::{DaemonEvent, SharedEvent};
-use gobyd::modem_event::ModemEvent;
-use gobyd::runtime::Daemon;
 use modemdriver::DriverStatus;
 use moos::{ClientConfig, MailReceiver, MoosClient, Value};
 use support::daemon::scratch;
@@ -44,7 +44,7 @@ fn node(id: i32, channel: &str, moos_port: Option<u16>, data: &Path) -> Node {
 
 struct Running {
     stop: oneshot::Sender<()>,
-    task: tokio::task::JoinHandle<Result<(), gobyd::runtime::DaemonError>>,
+    task: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
 }
 
 impl Running {
@@ -110,9 +110,9 @@ fn readies(events: &mut broadcast::Receiver<SharedEvent>) -> usize {
     loop {
         match events.try_recv() {
             Ok(e) => {
-                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = &e.event {
-                    let line = gobyd::json_protocol::event_line(&e.event, |_| String::new())
-                        .expect("a line");
+                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = e.as_ref() {
+                    let line =
+                        gobyd::json::event_line(e.as_ref(), |_| String::new()).expect("a line");
                     assert!(line.contains(r#""event":"driver_status""#), "{line}");
                     n += 1;
                 }
@@ -132,10 +132,10 @@ async fn driver_and_mac_variables_then_a_driver_reset() {
     let channel = format!("modemvars-{}", std::process::id());
     // TDMA slots of 1 s at rate 6.
     let one = node(1, &channel, Some(db.port()), &dir.join("one")).tdma(&[1, 2], 6, 1.0);
-    let one = Daemon::start(one.config()).await.unwrap();
+    let one = Daemon::builder(one.config()).start().await.unwrap();
     let mut events = one.subscribe();
     let two = node(2, &channel, None, &dir.join("two")).tdma(&[1, 2], 6, 1.0);
-    let two = Daemon::start(two.config()).await.unwrap();
+    let two = Daemon::builder(two.config()).start().await.unwrap();
     let (one, two) = (run(one), run(two));
 
     let vars = [
@@ -252,7 +252,7 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
     let one = node(1, &channel, Some(db.port()), &dir.join("data")).mac_none();
     let (client, mut mail) = client(db.port(), &["ACOMMS_QSIZE"]).await;
 
-    let daemon = run(Daemon::start(one.config()).await.unwrap());
+    let daemon = run(Daemon::builder(one.config()).start().await.unwrap());
     let send = "@PB[goby.example.Command] destination: 2 action: GOTO";
     qsize(&client, &mut mail, Some(send), |s| s.ends_with("size: 1")).await;
     for _ in 0..2 {
@@ -276,7 +276,7 @@ async fn a_flushed_queue_is_not_sent_after_a_restart() {
 
     // Started again on the same journal: one new message makes a queue of
     // one (the flushed three are gone for good).
-    let daemon = run(Daemon::start(one.config()).await.unwrap());
+    let daemon = run(Daemon::builder(one.config()).start().await.unwrap());
     let size = qsize(&client, &mut mail, Some(send), |s| !s.ends_with("size: 0")).await;
     assert_eq!(
         size,

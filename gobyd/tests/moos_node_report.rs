@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use gobyd::{mission_file, runtime::Daemon};
+use gobyd::{daemon::Daemon, mission_file};
 use moos::{ClientConfig, MoosClient, Value};
 use protos::goby::apps::protobuf::GobydConfig;
 use support::daemon::{free_tcp_port, scratch};
@@ -85,7 +85,7 @@ async fn exchange(ports: (u16, u16), name: &str) -> Duration {
     let mut stops = Vec::new();
     let mut running = Vec::new();
     for config in [alpha, bravo] {
-        let daemon = Daemon::start(config).await.expect("gobyd starts");
+        let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
         let (stop, stopped) = oneshot::channel::<()>();
         stops.push(stop);
         running.push(tokio::spawn(daemon.run(async {

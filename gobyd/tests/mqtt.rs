@@ -364,15 +364,15 @@ fn the_fleet_configurations_check() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
     for (i, node) in [(1, "auv1"), (2, "auv2")] {
         let config = gobyd::config::load(&dir.join(format!("fleet-vehicle{i}.pb.txt"))).unwrap();
-        gobyd::runtime::check(config.clone()).unwrap();
-        let settings = gobyd::mqtt::settings::settings(config.mqtt.as_ref().unwrap(), i)
+        gobyd::check::check(config.clone()).unwrap();
+        let settings = gobyd::internals::mqtt_settings::settings(config.mqtt.as_ref().unwrap(), i)
             .unwrap()
             .unwrap();
         assert_eq!(settings.topics.node("tx/x"), format!("fleet/{node}/tx/x"));
     }
     // `gobyd --check` looks at the mqtt section too.
     let config = gobyd::config::parse("mqtt { broker: \"h:1\" qos: 2 }", "x").unwrap();
-    let e = gobyd::runtime::check(config).unwrap_err().to_string();
+    let e = gobyd::check::check(config).unwrap_err().to_string();
     assert!(e.contains("mqtt.qos: 2 is not supported"), "{e}");
 }
 

@@ -237,7 +237,10 @@ async fn a_timed_trigger_makes_messages_from_the_latest_values() {
 }"#,
         )
         .config();
-    let daemon = gobyd::runtime::Daemon::start(config).await.unwrap();
+    let daemon = gobyd::daemon::Daemon::builder(config)
+        .start()
+        .await
+        .unwrap();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async {
         let _ = stopped.await;
@@ -311,7 +314,10 @@ async fn an_unchanged_timed_value_reaches_the_other_community_every_period() {
 }"#,
             )
             .config();
-        let daemon = gobyd::runtime::Daemon::start(config).await.unwrap();
+        let daemon = gobyd::daemon::Daemon::builder(config)
+            .start()
+            .await
+            .unwrap();
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         stops.push(stop);
         running.push(tokio::spawn(daemon.run(async {

@@ -12,7 +12,7 @@ use std::time::Duration;
 use emulators::micromodem::{
     self as emulator, EmulatorConfig, EmulatorPort, Geometry, Node, Transponder,
 };
-use gobyd::runtime::Daemon;
+use gobyd::daemon::Daemon;
 use modemdriver::sim::reception::Position;
 use serde_json::Value;
 use support::node::{MicroModem, Node as NodeConfig};
@@ -156,7 +156,7 @@ struct Bench {
     modem: emulator::EmulatorHandle,
     addr: std::net::SocketAddr,
     stop: oneshot::Sender<()>,
-    running: tokio::task::JoinHandle<Result<(), gobyd::runtime::DaemonError>>,
+    running: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
 }
 
 impl Bench {
@@ -177,7 +177,7 @@ impl Bench {
             .json_tcp("127.0.0.1:0")
             .data_dir(&dir.join("data"))
             .config();
-        let daemon = Daemon::start(config).await.expect("gobyd starts");
+        let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
         let addr = daemon.json_tcp_addr().expect("JSON over TCP");
         let (stop, stop_rx) = oneshot::channel::<()>();
         let running = tokio::spawn(daemon.run(async move {
@@ -204,7 +204,7 @@ async fn replies_of(
     config: protos::goby::apps::protobuf::GobydConfig,
     requests: &[&str],
 ) -> Vec<Value> {
-    let daemon = Daemon::start(config).await.expect("gobyd starts");
+    let daemon = Daemon::builder(config).start().await.expect("gobyd starts");
     let addr = daemon.json_tcp_addr().expect("JSON over TCP");
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let running = tokio::spawn(daemon.run(async move {

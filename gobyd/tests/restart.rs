@@ -5,7 +5,7 @@
 //!
 //! - killed with SIGKILL at moments drawn from a seeded generator, or
 //! - aborting on its own at a crash point of the receive path
-//!   (`GOBYD_CRASH_POINT`, see `gobyd::crash_point`): as a data
+//!   (`GOBYD_CRASH_POINT`, see `gobyd::internals::crash_point`): as a data
 //!   transmission arrives (nothing recorded), right after its inbox recorded
 //!   the transmission's messages (nothing handed over, nothing
 //!   acknowledged), or right after handing them over (nothing acknowledged).

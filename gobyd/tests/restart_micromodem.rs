@@ -8,7 +8,7 @@
 //!
 //! - killed with SIGKILL at moments drawn from a seeded generator, or
 //! - aborting on its own at a crash point of the receive path
-//!   (`GOBYD_CRASH_POINT`, see `gobyd::crash_point`), armed at every
+//!   (`GOBYD_CRASH_POINT`, see `gobyd::internals::crash_point`), armed at every
 //!   restart, the points taken in turn: `received` (the driver has reported
 //!   a data transmission its modem decoded, nothing recorded yet),
 //!   `recorded` and `handed-over`, each at the first data transmission the

@@ -16,8 +16,8 @@ mod support;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::runtime::Daemon;
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
@@ -77,9 +77,9 @@ fn note(message: &prost_reflect::DynamicMessage) -> String {
 }
 
 struct Fleet {
-    publishers: Vec<tokio::sync::mpsc::Sender<gobyd::json_server::Publish>>,
+    publishers: Vec<tokio::sync::mpsc::Sender<gobyd::event::Publish>>,
     stops: Vec<oneshot::Sender<()>>,
-    runs: Vec<tokio::task::JoinHandle<Result<(), gobyd::runtime::DaemonError>>>,
+    runs: Vec<tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>>,
     seen: Arc<Mutex<Vec<Seen>>>,
 }
 
@@ -104,7 +104,10 @@ async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) 
         let driver =
             SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
                 .unwrap();
-        let daemon = Daemon::start_with_driver_and_clock(config, driver, clock.clone())
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .clock(clock.clone())
+            .start()
             .await
             .expect("gobyd starts");
         fleet.publishers.push(daemon.publisher());
@@ -112,7 +115,7 @@ async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) 
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let s = match &e.event {
+                let s = match e.as_ref() {
                     DaemonEvent::Received {
                         received,
                         reception,
@@ -247,7 +250,8 @@ async fn commands_and_replies_cross_the_relay_once_each_acked_end_to_end() {
                 .map(|e| &e.message_name)
                 .collect::<Vec<_>>()
         );
-        let origin = gobyd::network::origin::Origin::open(&data.join("routes.log")).unwrap();
+        let origin =
+            gobyd::internals::network::origin::Origin::open(&data.join("routes.log")).unwrap();
         assert_eq!(origin.pending().count(), 0, "node {id} waits for acks");
     }
     let _ = std::fs::remove_dir_all(&dir);

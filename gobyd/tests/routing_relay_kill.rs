@@ -21,7 +21,7 @@ use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::RoutedMessage;
 use protos::goby::example::Command;
 use serde_json::Value;
-use support::daemon::{free_udp_port, scratch, Gobyd};
+use support::daemon::{command_line, free_udp_port, scratch, Gobyd};
 use support::node::{Entry, Node, Simulator};
 
 fn config(id: i32, dir: &Path, ports: &[u16]) -> PathBuf {
@@ -42,11 +42,19 @@ fn config(id: i32, dir: &Path, ports: &[u16]) -> PathBuf {
         .write(dir.join(format!("node{id}.pb.txt")))
 }
 
+/// A codec of the commands and of the routed messages that carry them (the
+/// journal holds their DCCL encodings).
+fn codec() -> dccl::Codec {
+    let mut codec = dccl::Codec::new();
+    codec.load(&Command::default().descriptor()).unwrap();
+    codec.load(&RoutedMessage::default().descriptor()).unwrap();
+    codec
+}
+
 /// The notes of the routed commands in a node's journal, by the node's
 /// journal id: (origin, final destination, note).
 fn custody(data: &Path) -> Vec<(i32, i32, String)> {
-    let mut codec = dccl::Codec::new();
-    codec.load(&Command::default().descriptor()).unwrap();
+    let codec = codec();
     let Ok(bytes) = std::fs::read(data.join("outbox.journal")) else {
         return Vec::new();
     };
@@ -58,7 +66,7 @@ fn custody(data: &Path) -> Vec<(i32, i32, String)> {
         .iter()
         .filter(|e| e.message_name == "goby.acomms.protobuf.RoutedMessage")
         .filter_map(|e| {
-            let m: RoutedMessage = prost::Message::decode(e.message.as_slice()).ok()?;
+            let m: RoutedMessage = codec.decode_typed(&e.message).ok()?;
             let c: Command = codec.decode_typed(&m.payload).ok()?;
             Some((m.origin, m.final_dest, c.note().to_string()))
         })
@@ -78,7 +86,7 @@ fn owed_notes(data: &Path) -> Vec<String> {
             .iter()
             .filter(|e| e.message_name == "goby.example.Command")
         {
-            let c: Command = prost::Message::decode(e.message.as_slice()).unwrap();
+            let c: Command = codec().decode_typed(&e.message).unwrap();
             notes.push(c.note().to_string());
         }
     }
@@ -112,9 +120,7 @@ fn a_relay_killed_holding_messages_in_custody_loses_none_and_repeats_none() {
                    from: i32,
                    to: i32,
                    note: String| {
-        let line = format!(
-            r#"{{"publish":"goby.example.Command","msg":{{"destination":{to},"action":"GOTO","note":"{note}"}}}}"#
-        );
+        let line = command_line(to, &note);
         let reply = nodes[(from - 1) as usize]
             .as_mut()
             .unwrap()

@@ -18,7 +18,7 @@ mod support;
 use std::path::Path;
 use std::time::Duration;
 
-use gobyd::control::NetworkRequest;
+use gobyd::event::NetworkRequest;
 use prost_reflect::{DynamicMessage, ReflectMessage, Value};
 use protos::goby::example::Command;
 use support::daemon::{publish_command, scratch};
@@ -73,12 +73,12 @@ fn blob(dir: &Path, destination: i32, data: Vec<u8>) -> DynamicMessage {
 }
 
 async fn publish(
-    publisher: &tokio::sync::mpsc::Sender<gobyd::json_server::Publish>,
+    publisher: &tokio::sync::mpsc::Sender<gobyd::event::Publish>,
     message: DynamicMessage,
 ) -> serde_json::Value {
     let (reply, answer) = tokio::sync::oneshot::channel();
     publisher
-        .send(gobyd::json_server::Publish::new(message, reply))
+        .send(gobyd::event::Publish::new(message, reply))
         .await
         .unwrap();
     let accepted = answer.await.unwrap().expect("accepted");
@@ -117,11 +117,7 @@ async fn until(fleet: &Fleet, limit: Duration, done: impl Fn(&[Seen]) -> bool) -
     done(&fleet.seen())
 }
 
-fn transfer_at(
-    seen: &[Seen],
-    node: i32,
-    state: &str,
-) -> Vec<gobyd::network::transfers::TransferEvent> {
+fn transfer_at(seen: &[Seen], node: i32, state: &str) -> Vec<gobyd::event::TransferEvent> {
     seen.iter()
         .filter_map(|s| match s {
             Seen::Transfer { node: n, event } if *n == node && event.state == state => {
@@ -332,7 +328,7 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     fleet.stop().await;
     // Nothing left under way at either end.
     for node in [1, 3] {
-        let status = gobyd::network::transfers::Transfers::open(
+        let status = gobyd::internals::network::transfers::Transfers::open(
             node,
             settings_for_inspection(&dir, node),
             &data_dir(&dir, node).join("transfers.log"),
@@ -345,8 +341,11 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-fn settings_for_inspection(dir: &Path, node: i32) -> gobyd::network::transfers::Settings {
-    gobyd::network::transfers::Settings {
+fn settings_for_inspection(
+    dir: &Path,
+    node: i32,
+) -> gobyd::internals::network::transfers::Settings {
+    gobyd::internals::network::transfers::Settings {
         fragment_size: 64,
         window: 1,
         resend_after: 0,

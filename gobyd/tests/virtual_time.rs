@@ -16,8 +16,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::runtime::Daemon;
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
@@ -74,7 +74,10 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
         let driver =
             SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
                 .unwrap();
-        let daemon = Daemon::start_with_driver_and_clock(config, driver, clock.clone())
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .clock(clock.clone())
+            .start()
             .await
             .expect("gobyd starts");
         publishers.push(daemon.publisher());
@@ -82,7 +85,7 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
         let seen = seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let s = match &e.event {
+                let s = match e.as_ref() {
                     DaemonEvent::Received { received, .. } => Seen::Delivered {
                         node: id,
                         note: note(&received.message),

@@ -69,7 +69,9 @@ fn setup() -> (QueueManager, ManualClock) {
             m.set_field_by_name("serial", Value::U32(serial));
             m.set_field_by_name("depth", Value::F64(f64::from(serial % 6000)));
             m.set_field_by_name("temperature", Value::F64(4.5));
-            manager.push(&m).expect("push");
+            manager
+                .push(m, queue::PushOptions::default())
+                .expect("push");
         }
     }
     (manager, clock)

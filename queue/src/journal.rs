@@ -7,15 +7,21 @@
 //! On opening, the records are replayed: the accepted messages without a
 //! removed record are the ones still owed.
 //!
-//! The file is a record log of the [`JOURNAL`] format (magic `GOBYJNL2`):
+//! The file is a record log of the [`JOURNAL`] format (magic `GOBYJNLD`):
 //! framing, CRC, replay and its faults, appends, rewrites and the payload
-//! limit are described in [`crate::record_log`]. A payload is
+//! limit are described in [`goby_store::record_log`]. A payload is
 //!
 //! ```text
 //! kind: u8 | id: u64 LE | (accepted only) time: i64 LE µs | name length: u16 LE | name | message bytes
 //! ```
 //!
-//! with kind 1 for *accepted* and 2 for *removed*. What the journal adds:
+//! with kind 3 for *accepted* (the message's DCCL encoding, the bytes the
+//! queue sends: a message is encoded once, when it is accepted) and 2 for
+//! *removed*. Kind 1, *accepted* with the message's protobuf encoding, is
+//! what journals of the `GOBYJNL2` magic hold: such a journal is read as it
+//! is and takes the current magic, so that a version that reads only kind 1
+//! refuses it instead of dropping its kind-3 records. What the journal
+//! adds:
 //!
 //! - a write that fails (full disk, I/O error) is undone and reported:
 //!   nothing is accepted that is not in the file; while the undo itself
@@ -38,22 +44,47 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use crate::clock::Micros;
-use crate::record_log::{self, LogError, MemoryFile, RecordLog, FRAMING, JOURNAL, MAX_PAYLOAD};
+use goby_store::record_log::{self, Format, LogError, MemoryFile, RecordLog, FRAMING, MAX_PAYLOAD};
 
-pub use crate::record_log::LogFile as JournalFile;
+pub use goby_store::record_log::LogFile as JournalFile;
+
+/// The journal's file format: a record log ([`goby_store::record_log`])
+/// of magic `GOBYJNLD`. `GOBYJNL2` journals, which hold no DCCL records,
+/// are read and take it (`D` is five bits from `2`: a version that reads
+/// only `GOBYJNL2` refuses the file rather than take its magic for a
+/// damaged header of its own).
+pub const JOURNAL: Format = Format {
+    name: "journal",
+    magic: b"GOBYJNLD",
+    sync: [0xA7, 0x47, 0x4A, 0x52],
+    older: &[b"GOBYJNL2"],
+};
 
 /// First bytes of a journal of the first format (no sync words).
 const MAGIC_V1: &[u8; 8] = b"GOBYJNL1";
-/// Kind byte of an accepted record.
-const KIND_ACCEPTED: u8 = 1;
+/// Kind byte of an accepted record holding a protobuf encoding (journals
+/// of the `GOBYJNL2` magic).
+const KIND_ACCEPTED_PROTOBUF: u8 = 1;
 /// Kind byte of a removed record.
 const KIND_REMOVED: u8 = 2;
+/// Kind byte of an accepted record holding a DCCL encoding.
+const KIND_ACCEPTED_DCCL: u8 = 3;
 /// The journal is compacted when it is larger than this and at least half
 /// of it is dead.
 const COMPACT_MIN_BYTES: u64 = 1024 * 1024;
 
 /// Identifier of a journaled message, unique within its journal.
 pub type EntryId = u64;
+
+/// How a journaled message's bytes are encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encoding {
+    /// DCCL, with the codec of the queue that sends it: the bytes the queue
+    /// sends (what the journal writes).
+    Dccl,
+    /// Protobuf (what journals of earlier versions hold).
+    Protobuf,
+}
 
 /// A message accepted for sending and not yet removed.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -64,8 +95,10 @@ pub struct JournalEntry {
     pub time: Micros,
     /// Full name of its protobuf type.
     pub message_name: String,
-    /// Its protobuf encoding.
+    /// Its encoding, as [`encoding`](Self::encoding) says.
     pub message: Vec<u8>,
+    /// How `message` is encoded.
+    pub encoding: Encoding,
 }
 
 /// What opening a journal found.
@@ -247,8 +280,9 @@ impl Journal {
         self.live.values()
     }
 
-    /// Appends an accepted message and syncs it to disk; returns its id.
-    /// When this returns `Ok`, the message survives a crash.
+    /// Appends an accepted message (`message`: its DCCL encoding) and
+    /// syncs it to disk; returns its id. When this returns `Ok`, the
+    /// message survives a crash.
     pub fn accept(
         &mut self,
         message_name: &str,
@@ -260,7 +294,8 @@ impl Journal {
         Ok(id)
     }
 
-    /// Appends an accepted message without waiting for the disk; it
+    /// Appends an accepted message (`message`: its DCCL encoding) without
+    /// waiting for the disk; it
     /// survives a crash once a later [`sync`](Self::sync) (or a sync of a
     /// [`sync_handle`](Self::sync_handle)) returns. Lets a caller sync many
     /// messages at once, off its own thread. `message` is taken as it is
@@ -282,6 +317,7 @@ impl Journal {
             time,
             message_name: message_name.to_string(),
             message: message.into(),
+            encoding: Encoding::Dccl,
         };
         if accepted_size(&entry) - FRAMING > MAX_PAYLOAD {
             return Err(JournalError::MessageTooLarge(entry.message.len()));
@@ -365,7 +401,10 @@ fn accepted_payload(entry: &JournalEntry) -> Vec<u8> {
 
 /// Appends the payload of an accepted record to `out`.
 fn write_accepted(out: &mut Vec<u8>, entry: &JournalEntry) {
-    out.push(KIND_ACCEPTED);
+    out.push(match entry.encoding {
+        Encoding::Dccl => KIND_ACCEPTED_DCCL,
+        Encoding::Protobuf => KIND_ACCEPTED_PROTOBUF,
+    });
     out.extend_from_slice(&entry.id.to_le_bytes());
     out.extend_from_slice(&entry.time.to_le_bytes());
     out.extend_from_slice(&(entry.message_name.len() as u16).to_le_bytes());
@@ -397,7 +436,7 @@ fn parse_record(payload: &[u8]) -> Option<Record> {
     let id = u64::from_le_bytes(le::<8>(rest, 0)?);
     match kind {
         KIND_REMOVED if rest.len() == 8 => Some(Record::Removed(id)),
-        KIND_ACCEPTED => {
+        KIND_ACCEPTED_DCCL | KIND_ACCEPTED_PROTOBUF => {
             let time = i64::from_le_bytes(le::<8>(rest, 8)?);
             let name_len = u16::from_le_bytes(le::<2>(rest, 16)?) as usize;
             let name = rest.get(18..18 + name_len)?;
@@ -408,6 +447,11 @@ fn parse_record(payload: &[u8]) -> Option<Record> {
                 time,
                 message_name,
                 message,
+                encoding: if kind == KIND_ACCEPTED_DCCL {
+                    Encoding::Dccl
+                } else {
+                    Encoding::Protobuf
+                },
             }))
         }
         _ => None,
@@ -569,6 +613,50 @@ mod tests {
         assert_eq!(j.accept("a.A", b"next", 100).unwrap(), 41);
     }
 
+    #[test]
+    fn a_journal_of_protobuf_records_is_read_and_its_records_kept_as_they_are() {
+        let dir = TempDir::new("protobuf");
+        // A journal of the earlier magic: two messages in protobuf
+        // (kind 1), one of them removed.
+        let old = |id: EntryId, message: &[u8]| JournalEntry {
+            id,
+            time: 10 + id as i64,
+            message_name: "a.A".into(),
+            message: message.to_vec(),
+            encoding: Encoding::Protobuf,
+        };
+        let mut bytes = b"GOBYJNL2".to_vec();
+        bytes.extend(encode_accepted(&old(0, b"pb-0")));
+        bytes.extend(encode_accepted(&old(1, b"pb-1")));
+        bytes.extend(encode_removed(0));
+        assert_eq!(bytes[8 + FRAMING], 1, "kind 1");
+        std::fs::write(dir.file(), &bytes).unwrap();
+        {
+            let (mut j, replay) = Journal::open(dir.file()).unwrap();
+            assert_eq!(replay.entries, [old(1, b"pb-1")]);
+            assert_eq!(replay.discarded_bytes, 0);
+            // New messages are journaled in DCCL.
+            assert_eq!(j.accept("a.A", b"dccl-2", 20).unwrap(), 2);
+            assert_eq!(j.get(2).unwrap().encoding, Encoding::Dccl);
+            j.compact().unwrap();
+        }
+        let file = std::fs::read(dir.file()).unwrap();
+        assert!(file.starts_with(JOURNAL.magic), "the current magic");
+        let (_, replay) = Journal::open(dir.file()).unwrap();
+        let encodings: Vec<_> = replay
+            .entries
+            .iter()
+            .map(|e| (e.id, e.encoding, e.message.clone()))
+            .collect();
+        assert_eq!(
+            encodings,
+            [
+                (1, Encoding::Protobuf, b"pb-1".to_vec()),
+                (2, Encoding::Dccl, b"dccl-2".to_vec())
+            ]
+        );
+    }
+
     /// The records of a small journal, written by hand: the file's bytes
     /// and the byte range of each record.
     fn small_journal() -> (Vec<u8>, Vec<(std::ops::Range<usize>, Record)>) {
@@ -577,6 +665,7 @@ mod tests {
             time: 100 + id as i64,
             message_name: "a.A".into(),
             message: message.to_vec(),
+            encoding: Encoding::Dccl,
         };
         let records = vec![
             Record::Accepted(entry(0, b"one")),

@@ -15,7 +15,8 @@
 //!
 //! ```
 //! use std::sync::Arc;
-//! use queue::{ManualClock, QueueManager, QueueEvent};
+//! use prost_reflect::ReflectMessage;
+//! use queue::{ManualClock, PushOptions, QueueManager, QueueEvent};
 //! use protos::goby::acomms::protobuf::{ModemTransmission, QueueManagerConfig, QueuedMessageEntry};
 //! use protos::goby::example::Command;
 //!
@@ -32,7 +33,8 @@
 //! };
 //! let clock = ManualClock::at_seconds(1_000.0);
 //! let mut sender = QueueManager::with_clock(Arc::new(codec), &config, Arc::new(clock.clone())).unwrap();
-//! sender.push_message(&Command { destination: 2, action: 1, ..Default::default() }).unwrap();
+//! let command = Command { destination: 2, action: 1, ..Default::default() };
+//! sender.push(command.transcode_to_dynamic(), PushOptions::default()).unwrap();
 //!
 //! clock.advance_seconds(10.0);
 //! let mut request = ModemTransmission { max_frame_bytes: Some(32), ..Default::default() };
@@ -62,14 +64,13 @@ pub mod links;
 pub mod manager;
 pub mod market;
 pub mod queue;
-pub mod record_log;
 mod role;
 
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
 pub use error::{QueueError, Result};
 pub use event::{MessageId, QueueEvent, ReceivedMessage};
 pub use identity::{TrailerCodec, WireIdentity};
-pub use journal::{EntryId, Journal, JournalEntry, JournalError, Replay};
+pub use journal::{Encoding, EntryId, Journal, JournalEntry, JournalError, Replay};
 pub use links::{LinkIndex, LinkPolicy, LinkRule, LinkSpec, LinkState, Links};
 pub use manager::{OnDemandProvider, PushOptions, QueueManager};
 pub use queue::QueueSettings;

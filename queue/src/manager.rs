@@ -26,9 +26,9 @@ use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
 /// request (`None`: nothing to send this time).
 pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
 
-/// What the caller knows of a message it queues
-/// ([`QueueManager::push_with`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// What the caller knows of a message it queues ([`QueueManager::push`]);
+/// `PushOptions::default()` when it knows nothing more.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct PushOptions {
     /// Its age (for `ttl`) counts from this time instead of now, when its
     /// type has no timestamp role: for messages accepted earlier.
@@ -40,6 +40,11 @@ pub struct PushOptions {
     /// It may have been sent already (queued again after a restart or a
     /// failed transmission): its first sending is marked `resent`.
     pub resent: bool,
+    /// Its DCCL encoding, when the caller made it already with the
+    /// manager's codec (checking the message at the door, say): the
+    /// message is then not encoded again. Bytes whose DCCL id is not the
+    /// message's type's are refused.
+    pub encoded: Option<Vec<u8>>,
 }
 
 /// A sent message awaiting its acknowledgement.
@@ -57,6 +62,17 @@ struct AwaitingAck {
     seq: u64,
     /// Where the message was in its queue when sent.
     hint: usize,
+}
+
+/// What filling one data request keeps from frame to frame.
+#[derive(Debug)]
+struct Filling {
+    /// Some message placed wants an ack.
+    packet_ack: bool,
+    /// No message was placed yet.
+    first_message: bool,
+    /// The queues whose size changed, by index.
+    changed: Vec<bool>,
 }
 
 /// A queue taking part in the priority contest of one data request.
@@ -343,42 +359,21 @@ impl QueueManager {
         Ok(())
     }
 
-    /// Queues a message of a configured type. It is encoded now: a message
-    /// that cannot be encoded is refused with the DCCL error (naming the
-    /// field), and nothing else changes.
+    /// Queues a message of a configured type, with what the caller knows
+    /// of it ([`PushOptions`]: when it was accepted, its publication
+    /// number, whether it may have been sent already, its encoding). It is
+    /// encoded now unless its encoding is given: a message that cannot be
+    /// encoded is refused with the DCCL error (naming the field), and
+    /// nothing else changes.
     ///
     /// Returns the id the message has in its queue (carried by the
     /// [`QueueEvent::Acked`], [`QueueEvent::Expired`] and
     /// [`QueueEvent::Dropped`] events that end its stay), or `None` when it
     /// was not queued: addressed to this node (delivered at once) or of a
     /// `NO_QUEUE` type.
-    pub fn push(&mut self, message: &DynamicMessage) -> Result<Option<MessageId>> {
-        self.push_created_at(message, None)
-    }
-
-    /// Queues a message as [`push`](Self::push) does, its age (for `ttl`)
-    /// counted from `created` instead of now when its type has no timestamp
-    /// role: for messages accepted earlier and queued again after a restart.
-    pub fn push_created_at(
+    pub fn push(
         &mut self,
-        message: &DynamicMessage,
-        created: Option<Micros>,
-    ) -> Result<Option<MessageId>> {
-        self.push_with(
-            message,
-            PushOptions {
-                created,
-                ..Default::default()
-            },
-        )
-    }
-
-    /// Queues a message as [`push`](Self::push) does, with what the caller
-    /// knows of it: when it was accepted, its publication number, whether
-    /// it may have been sent already.
-    pub fn push_with(
-        &mut self,
-        message: &DynamicMessage,
+        message: DynamicMessage,
         options: PushOptions,
     ) -> Result<Option<MessageId>> {
         let now = options.created.unwrap_or_else(|| self.clock.now());
@@ -390,7 +385,18 @@ impl QueueManager {
         let loopback = queue.settings.has(Manipulator::Loopback);
         let no_queue = queue.settings.has(Manipulator::NoQueue);
 
-        let encoded = self.codec.encode(message)?;
+        let encoded = match options.encoded {
+            Some(encoded) => {
+                let given = self.codec.read_id(&encoded)?;
+                if given != id {
+                    return Err(QueueError::Request(format!(
+                        "{name}: the encoding given is of DCCL id {given}, not of the message's {id}"
+                    )));
+                }
+                encoded
+            }
+            None => self.codec.encode(&message)?,
+        };
         if let Some(max) = self.max_frame_bytes {
             if encoded.len() > max {
                 return Err(QueueError::TooLarge {
@@ -411,13 +417,13 @@ impl QueueManager {
                 }),
             }
         };
-        let src = role_id(queue.roles.source(message)?, "SOURCE_ID", self.modem_id)?;
+        let src = role_id(queue.roles.source(&message)?, "SOURCE_ID", self.modem_id)?;
         let dest = role_id(
-            queue.roles.destination(message)?,
+            queue.roles.destination(&message)?,
             "DESTINATION_ID",
             BROADCAST_ID,
         )?;
-        let time = queue.roles.timestamp(message)?.unwrap_or(now);
+        let time = queue.roles.timestamp(&message)?.unwrap_or(now);
         let ack_requested = queue.settings.ack;
 
         if loopback {
@@ -436,8 +442,9 @@ impl QueueManager {
         }
         if dest == self.modem_id {
             // Addressed to ourselves: delivered here, never sent.
+            let acked = ack_requested.then(|| message.clone());
             self.emit(QueueEvent::Received(ReceivedMessage {
-                message: message.clone(),
+                message,
                 dccl_id: id,
                 src,
                 dest,
@@ -445,9 +452,9 @@ impl QueueManager {
                 bytes: encoded,
                 identity: None,
             }));
-            if ack_requested {
+            if let Some(message) = acked {
                 self.emit(QueueEvent::Acked {
-                    message: message.clone(),
+                    message,
                     id: None,
                     dccl_id: id,
                     frame: 0,
@@ -468,7 +475,7 @@ impl QueueManager {
             number,
             resent: options.resent,
             seq,
-            message: message.clone(),
+            message,
             encoded,
             src,
             dest,
@@ -487,11 +494,6 @@ impl QueueManager {
         }
         self.emit_size(index);
         Ok(Some(seq))
-    }
-
-    /// Queues a prost-generated message (see [`push`](Self::push)).
-    pub fn push_message<T: ReflectMessage>(&mut self, message: &T) -> Result<Option<MessageId>> {
-        self.push(&message.transcode_to_dynamic())
     }
 
     /// Fills the frames of a data request.
@@ -537,9 +539,11 @@ impl QueueManager {
         self.run_on_demand(request, now);
 
         let ack_forbidden = request.ack_requested == Some(false);
-        let mut packet_ack = request.ack_requested.unwrap_or(false);
-        let mut first_message = true;
-        let mut changed = vec![false; self.queues.len()];
+        let mut filling = Filling {
+            packet_ack: request.ack_requested.unwrap_or(false),
+            first_message: true,
+            changed: vec![false; self.queues.len()],
+        };
 
         // The strongest contender on top; those that cannot join the current
         // frame wait aside until the next frame (within a frame a queue only
@@ -598,95 +602,17 @@ impl QueueManager {
                     break;
                 };
                 let index = contender.index;
-                // Several links: copies may arrive in any order, so every
-                // sending is marked as possibly a repeat; a flooding type
-                // without ack stays for the other links.
-                let (several, stay) = match &self.links {
-                    Some(links) => {
-                        let m = &self.queues[index].messages[next];
-                        (
-                            links.several(contender.dccl_id),
-                            links.others_to_carry(
-                                contender.dccl_id,
-                                link,
-                                m.marks.mask(),
-                                m.encoded.len(),
-                            ),
-                        )
-                    }
-                    None => (false, false),
-                };
-                let queue = &mut self.queues[index];
-                if several {
-                    queue.messages[next].resent = true;
-                }
-                let sent = queue.give_on(
-                    next,
-                    link,
-                    frame_number,
-                    now,
-                    &mut request.frame[slot],
-                    stay,
+                let (len, identity) = self.place(
+                    request,
+                    (slot, frame_number),
+                    (contender, next),
+                    (link, now),
+                    &mut filling,
                 );
-                if sent.len > remaining {
+                if len > remaining {
                     bare = true;
                 } else {
-                    ids.push(sent.identity);
-                }
-                let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
-                if sent.ack_requested {
-                    packet_ack = true;
-                    self.awaiting.push(AwaitingAck {
-                        link,
-                        frame: frame_number,
-                        transmission: request.unique_id,
-                        dest: sent.dest,
-                        dccl_id: contender.dccl_id,
-                        seq: sent.seq,
-                        hint: sent.index,
-                    });
-                }
-                if first_message {
-                    first_message = false;
-                    if request.dest() == QUERY_DESTINATION_ID {
-                        request.dest = Some(sent.dest);
-                    }
-                    if request.src() == QUERY_SOURCE_ID {
-                        request.src = Some(self.modem_id);
-                    }
-                }
-                let left = sent.removed.is_some();
-                if left {
-                    changed[index] = true;
-                }
-                if loopback_as_sent || !self.subscribers.is_empty() {
-                    let message = match sent.removed {
-                        Some(m) => Some(m.message),
-                        None => self.queues[index].get(sent.seq).map(|m| m.message.clone()),
-                    };
-                    if let Some(message) = &message {
-                        self.emit(QueueEvent::Sent {
-                            message: message.clone(),
-                            id: sent.seq,
-                            dccl_id: contender.dccl_id,
-                            frame: frame_number,
-                            awaiting_ack: !left,
-                            link,
-                        });
-                    }
-                    if let Some(message) = message.filter(|_| loopback_as_sent) {
-                        let frame = &request.frame[slot];
-                        let bytes = frame[frame.len() - sent.len..].to_vec();
-                        self.emit(QueueEvent::Received(ReceivedMessage {
-                            message,
-                            dccl_id: contender.dccl_id,
-                            src: sent.src,
-                            dest: sent.dest,
-                            time: Some(sent.time),
-                            bytes,
-                            identity: None,
-                        }));
-                    }
+                    ids.push(identity);
                 }
                 if let Some(c) = self.contender(index, now, link) {
                     contenders.push(c);
@@ -697,14 +623,111 @@ impl QueueManager {
                 request.frame[slot].extend_from_slice(&trailer);
             }
         }
-        request.ack_requested = Some(packet_ack);
+        request.ack_requested = Some(filling.packet_ack);
         self.scratch = contenders.into_vec();
-        for (index, changed) in changed.into_iter().enumerate() {
+        for (index, changed) in filling.changed.into_iter().enumerate() {
             if changed {
                 self.emit_size(index);
             }
         }
         Ok(())
+    }
+
+    /// Places message `next` of the queue of `contender` in frame `slot`
+    /// (numbered `frame_number`) of `request` for link `link` at `now`:
+    /// marks it sent (or removes it), awaits its ack, takes the request's
+    /// destination and source from the first message, and tells the
+    /// sending. Returns the bytes it took and its identity.
+    fn place(
+        &mut self,
+        request: &mut ModemTransmission,
+        (slot, frame_number): (usize, u32),
+        (contender, next): (Contender, usize),
+        (link, now): (LinkIndex, Micros),
+        filling: &mut Filling,
+    ) -> (usize, WireIdentity) {
+        let index = contender.index;
+        // Several links: copies may arrive in any order, so every
+        // sending is marked as possibly a repeat; a flooding type
+        // without ack stays for the other links.
+        let (several, stay) = match &self.links {
+            Some(links) => {
+                let m = &self.queues[index].messages[next];
+                (
+                    links.several(contender.dccl_id),
+                    links.others_to_carry(contender.dccl_id, link, m.marks.mask(), m.encoded.len()),
+                )
+            }
+            None => (false, false),
+        };
+        let queue = &mut self.queues[index];
+        if several {
+            queue.messages[next].resent = true;
+        }
+        let sent = queue.give_on(
+            next,
+            link,
+            frame_number,
+            now,
+            &mut request.frame[slot],
+            stay,
+        );
+        let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
+        if sent.ack_requested {
+            filling.packet_ack = true;
+            self.awaiting.push(AwaitingAck {
+                link,
+                frame: frame_number,
+                transmission: request.unique_id,
+                dest: sent.dest,
+                dccl_id: contender.dccl_id,
+                seq: sent.seq,
+                hint: sent.index,
+            });
+        }
+        if filling.first_message {
+            filling.first_message = false;
+            if request.dest() == QUERY_DESTINATION_ID {
+                request.dest = Some(sent.dest);
+            }
+            if request.src() == QUERY_SOURCE_ID {
+                request.src = Some(self.modem_id);
+            }
+        }
+        let left = sent.removed.is_some();
+        if left {
+            filling.changed[index] = true;
+        }
+        if loopback_as_sent || !self.subscribers.is_empty() {
+            let message = match sent.removed {
+                Some(m) => Some(m.message),
+                None => self.queues[index].get(sent.seq).map(|m| m.message.clone()),
+            };
+            if let Some(message) = &message {
+                self.emit(QueueEvent::Sent {
+                    message: message.clone(),
+                    id: sent.seq,
+                    dccl_id: contender.dccl_id,
+                    frame: frame_number,
+                    awaiting_ack: !left,
+                    link,
+                });
+            }
+            if let Some(message) = message.filter(|_| loopback_as_sent) {
+                let frame = &request.frame[slot];
+                let bytes = frame[frame.len() - sent.len..].to_vec();
+                self.emit(QueueEvent::Received(ReceivedMessage {
+                    message,
+                    dccl_id: contender.dccl_id,
+                    src: sent.src,
+                    dest: sent.dest,
+                    time: Some(sent.time),
+                    bytes,
+                    identity: None,
+                }));
+            }
+        }
+        (sent.len, sent.identity)
     }
 
     /// Handles a received transmission: an ACK removes the acknowledged
@@ -965,7 +988,7 @@ impl QueueManager {
                     message.descriptor().full_name()
                 )))
             } else {
-                self.push(&message)
+                self.push(message, PushOptions::default())
             };
             if let Err(e) = outcome {
                 self.emit(QueueEvent::OnDemandRejected {

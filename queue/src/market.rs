@@ -24,7 +24,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::clock::{seconds_to_micros, ManualClock};
 use crate::error::{QueueError, Result};
-use crate::manager::QueueManager;
+use crate::manager::{PushOptions, QueueManager};
 
 /// One message type of the market.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -326,7 +326,7 @@ impl DynamicQueueRunner {
                         .ok_or_else(|| QueueError::NotConfigured(name.clone()))?;
                     let mut m = DynamicMessage::new(desc);
                     m.set_field_by_name("created", Value::F64(now));
-                    manager.push(&m)?;
+                    manager.push(m, PushOptions::default())?;
                 }
             }
             let mut request = ModemTransmission {

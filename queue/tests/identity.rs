@@ -41,7 +41,10 @@ fn identical_messages_are_numbered_apart_and_carry_their_bytes() {
     let mut receiver = node(2, true, false);
     let message = sender.message("Status", 1, 2, 7);
     for _ in 0..3 {
-        sender.manager.push(&message).unwrap();
+        sender
+            .manager
+            .push(message.clone(), PushOptions::default())
+            .unwrap();
     }
     sender.clock.advance_seconds(10.0);
     let tx = sender.request(64, 1, -1);
@@ -86,8 +89,8 @@ fn numbers_given_by_the_caller_are_kept_and_a_message_queued_again_is_resent() {
     let m = sender.message("Status", 1, 2, 3);
     sender
         .manager
-        .push_with(
-            &m,
+        .push(
+            m,
             PushOptions {
                 number: Some(2048 * 5 + 77),
                 resent: true,
@@ -153,7 +156,7 @@ fn a_message_filling_the_frame_goes_alone_without_identity() {
     big.set_field_by_name("serial", prost_reflect::Value::U32(9));
     big.set_field_by_name("blob", prost_reflect::Value::Bytes(vec![0xAB; 60].into()));
     let len = codec.encode(&big).unwrap().len() as u32;
-    sender.manager.push(&big).unwrap();
+    sender.manager.push(big, PushOptions::default()).unwrap();
     sender.push("Status", 1, 2, 8);
     sender.clock.advance_seconds(10.0);
     // Room for the message but not for its trailer: it goes bare.
@@ -213,7 +216,9 @@ message Clash {
     let events = receiver.subscribe();
     let mut message = prost_reflect::DynamicMessage::new(desc);
     message.set_field_by_name("x", prost_reflect::Value::U32(5));
-    sender.push(&message).unwrap();
+    sender
+        .push(message.clone(), PushOptions::default())
+        .unwrap();
     let mut tx = ModemTransmission {
         max_frame_bytes: Some(32),
         max_num_frames: Some(1),

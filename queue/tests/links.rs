@@ -7,7 +7,7 @@ use common::{contents, entry, serial, Node};
 use protos::goby::acomms::protobuf::{
     modem_transmission::TransmissionType, ModemTransmission, QueueManagerConfig,
 };
-use queue::{LinkPolicy, LinkRule, LinkSpec, LinkState, Links, QueueEvent};
+use queue::{LinkPolicy, LinkRule, LinkSpec, LinkState, Links, PushOptions, QueueEvent};
 
 /// Link 0 ("acoustic") and link 1 ("iridium").
 const ACOUSTIC: usize = 0;
@@ -243,7 +243,7 @@ fn flood_all_sends_on_every_link_at_once_and_one_ack_ends_it() {
 fn a_flooding_type_without_ack_stays_until_every_available_link_carried_it() {
     let mut n = node(priority(60.0), [1.0, 10.0]);
     let track = n.message("Track", 1, 2, 9);
-    n.manager.push(&track).unwrap();
+    n.manager.push(track, PushOptions::default()).unwrap();
     assert_eq!(request(&mut n, ACOUSTIC, 1).1, vec![9]);
     // Not twice on the same link.
     assert!(request(&mut n, ACOUSTIC, 2).1.is_empty());
@@ -278,7 +278,8 @@ fn a_flooding_type_without_ack_stays_until_every_available_link_carried_it() {
             budget_left: None,
         },
     );
-    n.manager.push(&n.message("Track", 1, 2, 10)).unwrap();
+    let track = n.message("Track", 1, 2, 10);
+    n.manager.push(track, PushOptions::default()).unwrap();
     assert_eq!(request(&mut n, ACOUSTIC, 4).1, vec![10]);
     assert_eq!(n.manager.size("test.queue.Track").unwrap(), 0);
 }

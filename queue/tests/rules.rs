@@ -6,7 +6,7 @@ use common::{contents, entry, serial, short_name, Node, T0};
 use protos::goby::acomms::protobuf::{
     modem_transmission::TransmissionType, ModemTransmission, QueueManagerConfig,
 };
-use queue::{MessageId, QueueError, QueueEvent};
+use queue::{MessageId, PushOptions, QueueError, QueueEvent};
 
 fn ack_for(frames: &[i32], from: i32, to: i32) -> ModemTransmission {
     ModemTransmission {
@@ -430,7 +430,7 @@ fn messages_expire_after_ttl_from_their_own_time() {
     let mut node = Node::new(1, vec![status]);
     // Time role: a message stamped 50 s ago lives 50 s more.
     let old = common::make("Status", 1, 2, T0 - 50.0, 1);
-    node.manager.push(&old).unwrap();
+    node.manager.push(old, PushOptions::default()).unwrap();
     node.push("Status", 1, 2, 2);
     node.drain();
     node.clock.advance_seconds(50.0);
@@ -522,7 +522,10 @@ fn unconfigured_and_unloaded_types_are_refused() {
     let codec = node.manager.codec().clone();
     let desc = codec.descriptor("test.queue.Unqueued").unwrap();
     let msg = prost_reflect::DynamicMessage::new(desc);
-    let err = node.manager.push(&msg).unwrap_err();
+    let err = node
+        .manager
+        .push(msg.clone(), PushOptions::default())
+        .unwrap_err();
     assert!(
         matches!(err, QueueError::NotConfigured(ref n) if n == "test.queue.Unqueued"),
         "{err}"
@@ -542,7 +545,10 @@ fn a_message_that_cannot_be_encoded_is_refused_and_nothing_else_changes() {
     node.push("Status", 1, 2, 1);
     let mut msg = node.message("Status", 1, 2, 2);
     msg.clear_field_by_name("serial");
-    let err = node.manager.push(&msg).unwrap_err();
+    let err = node
+        .manager
+        .push(msg.clone(), PushOptions::default())
+        .unwrap_err();
     let text = err.to_string();
     assert!(
         text.contains("test.queue.Status") && text.contains("serial"),
@@ -566,13 +572,16 @@ fn a_message_larger_than_any_frame_is_refused() {
     let mut msg = prost_reflect::DynamicMessage::new(desc);
     msg.set_field_by_name("serial", prost_reflect::Value::U32(1));
     msg.set_field_by_name("blob", prost_reflect::Value::Bytes(vec![7u8; 100].into()));
-    let err = node.manager.push(&msg).unwrap_err();
+    let err = node
+        .manager
+        .push(msg.clone(), PushOptions::default())
+        .unwrap_err();
     assert!(
         matches!(err, QueueError::TooLarge { ref message, max: 64, .. } if message == "test.queue.Big"),
         "{err}"
     );
     msg.set_field_by_name("blob", prost_reflect::Value::Bytes(vec![7u8; 10].into()));
-    node.manager.push(&msg).unwrap();
+    node.manager.push(msg, PushOptions::default()).unwrap();
     node.push("Status", 1, 2, 1);
     assert_eq!(node.manager.size("test.queue.Big").unwrap(), 1);
 }
@@ -778,7 +787,13 @@ fn a_message_queued_again_keeps_its_creation_time_and_reports_its_id() {
     let replayed = node.message("Status", 1, 2, 7);
     let old_id = node
         .manager
-        .push_created_at(&replayed, Some(queue::clock::seconds_to_micros(T0 - 90.0)))
+        .push(
+            replayed,
+            PushOptions {
+                created: Some(queue::clock::seconds_to_micros(T0 - 90.0)),
+                ..Default::default()
+            },
+        )
         .unwrap()
         .expect("queued");
     let new_id = node.push("Status", 1, 2, 8).expect("queued");

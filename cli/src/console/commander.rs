@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::io::Write;
 
 use dccl::Codec;
-use prost_reflect::{DynamicMessage, MessageDescriptor, SerializeOptions};
+use prost_reflect::{DynamicMessage, MessageDescriptor};
 use serde_json::{json, Value};
 
 use super::schema::message_form;
@@ -23,17 +23,7 @@ pub struct Commander {
     descriptors: HashMap<String, MessageDescriptor>,
 }
 
-/// A message as proto3 JSON with the `.proto` field names, each float in
-/// its shortest form (as gobyd writes messages).
-pub fn message_json(message: &DynamicMessage) -> Value {
-    let options = SerializeOptions::new().use_proto_field_name(true);
-    let mut text = Vec::new();
-    message
-        .serialize_with_options(&mut serde_json::Serializer::new(&mut text), &options)
-        .map_err(|e| e.to_string())
-        .and_then(|()| serde_json::from_slice(&text).map_err(|e| e.to_string()))
-        .unwrap_or_else(|e| json!({ "unserializable": e }))
-}
+pub use gobyd_protocol::message_json;
 
 impl Commander {
     /// Loads every valid DCCL type of the `-f` files (each skipped one is

@@ -8,7 +8,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+use gobyd_protocol::{Event, Numbered, Reply, Request, Topic};
+use rumqttc::{AsyncClient, Event as MqttEvent, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
@@ -122,13 +123,13 @@ async fn mqtt(
     let mut connected = false;
     loop {
         match eventloop.poll().await {
-            Ok(Event::Incoming(Packet::ConnAck(_))) => {
+            Ok(MqttEvent::Incoming(Packet::ConnAck(_))) => {
                 connected = true;
                 hub.source_status(true, "connected");
                 // QoS 1: the console sees every event, even in a burst.
                 let _ = client.try_subscribe(filter.clone(), QoS::AtLeastOnce);
             }
-            Ok(Event::Incoming(Packet::Publish(p))) => {
+            Ok(MqttEvent::Incoming(Packet::Publish(p))) => {
                 if let Some((node, report)) = Report::parse(&prefix, &p.topic, &p.payload) {
                     hub.apply(&node, &report);
                 }
@@ -149,77 +150,78 @@ async fn mqtt(
 /// `pending` holds the commands written, by request number (reply lines
 /// answer them in order).
 fn json_line_reports(
-    value: &Value,
+    line: &str,
     pending: &mut std::collections::VecDeque<(u64, Outbound)>,
     now: f64,
 ) -> Vec<Report> {
-    if let Some(reply) = value["reply"].as_u64() {
+    if let Ok(Numbered { reply, number }) = serde_json::from_str::<Numbered>(line) {
         // Replies to lines other than publishes (the subscription) are
         // not commands.
-        while pending.front().is_some_and(|(n, _)| *n < reply) {
+        while pending.front().is_some_and(|(n, _)| *n < number) {
             pending.pop_front();
         }
-        let Some((_, out)) = pending.front().filter(|(n, _)| *n == reply).cloned() else {
+        let Some((_, out)) = pending.front().filter(|(n, _)| *n == number).cloned() else {
             return Vec::new();
         };
         pending.pop_front();
-        if let Some(error) = value["error"].as_str() {
-            return vec![Report::Error {
-                error: error.to_string(),
+        return match reply {
+            Reply::Error { error } => vec![Report::Error {
+                error,
                 topic: out.topic,
-            }];
-        }
-        if value.get("accepted").is_some() {
-            return vec![Report::Accepted(AcceptedReport {
+            }],
+            Reply::Accepted(accepted) => vec![Report::Accepted(AcceptedReport {
                 type_name: out.type_name,
-                id: value.get("id").cloned().unwrap_or(Value::Null),
+                id: accepted.id.map_or(Value::Null, Value::from),
                 topic: out.topic,
                 msg: out.msg,
-            })];
-        }
-        return Vec::new();
+            })],
+            _ => Vec::new(),
+        };
     }
-    let event = value["event"].as_str().unwrap_or("");
-    let name = |key: &str| value[key].as_str().unwrap_or("?").to_string();
+    let Ok(event) = serde_json::from_str::<Event>(line) else {
+        return Vec::new();
+    };
+    let queued = |kind, type_name, msg| {
+        Report::Queued(QueueNotice {
+            kind,
+            type_name,
+            time: now,
+            msg,
+        })
+    };
     let report = match event {
-        "received" => {
-            let link = value
-                .get("link")
-                .filter(|l| l.is_object())
-                .map(LinkReport::from_json);
-            Report::Rx(RxReport {
-                type_name: name("received"),
-                src: value["src"].as_i64().unwrap_or(-1),
-                dest: value["dest"].as_i64().unwrap_or(-1),
-                time: now,
-                msg: value["msg"].clone(),
-                link,
-            })
-        }
-        "ack" | "expire" | "drop" => Report::Queued(QueueNotice {
-            kind: match event {
-                "ack" => QueueKind::Ack {
-                    by: value["by"].as_i64().unwrap_or(-1),
-                    frame: value["frame"].as_i64().unwrap_or(-1),
-                },
-                "expire" => QueueKind::Expire,
-                _ => QueueKind::Drop,
-            },
-            type_name: name(event),
+        Event::Received(r) => Report::Rx(RxReport {
+            type_name: r.received,
+            src: i64::from(r.src),
+            dest: i64::from(r.dest),
             time: now,
-            msg: value["msg"].clone(),
+            msg: r.msg,
+            link: r
+                .link
+                .filter(Value::is_object)
+                .map(|l| LinkReport::from_json(&l)),
         }),
-        "queue_size" => Report::Queue {
-            type_name: name("queue_size"),
-            size: value["size"].as_u64().unwrap_or(0),
+        Event::Ack(a) => queued(
+            QueueKind::Ack {
+                by: i64::from(a.by),
+                frame: i64::from(a.frame),
+            },
+            a.ack,
+            a.msg,
+        ),
+        Event::Expire(e) => queued(QueueKind::Expire, e.expire, e.msg),
+        Event::Drop(d) => queued(QueueKind::Drop, d.drop, d.msg),
+        Event::QueueSize(q) => Report::Queue {
+            type_name: q.queue_size,
+            size: q.size,
         },
-        "driver_status" => Report::Driver {
-            status: name("driver_status"),
-            detail: value["detail"].as_str().unwrap_or("").to_string(),
+        Event::DriverStatus(d) => Report::Driver {
+            status: d.driver_status,
+            detail: d.detail,
             time: now,
         },
-        "modem_receive" => {
-            let t = &value["modem_receive"];
+        Event::ModemReceive(m) => {
+            let t = &m.modem_receive;
             // 64-bit integers are strings in proto3 JSON: microseconds.
             let micros = t["time"]
                 .as_str()
@@ -271,7 +273,14 @@ async fn json_interface(
         );
         let (read, mut write) = stream.into_split();
         let mut lines = BufReader::new(read).lines();
-        let subscribe = r#"{"subscribe": ["ack", "expire", "drop", "queue_size", "modem"]}"#;
+        let subscribe = Request::Subscribe(vec![
+            Topic::Ack,
+            Topic::Expire,
+            Topic::Drop,
+            Topic::QueueSize,
+            Topic::Modem,
+        ])
+        .line();
         let mut request = 1u64;
         let mut pending = std::collections::VecDeque::new();
         let mut broken = write
@@ -283,8 +292,7 @@ async fn json_interface(
             tokio::select! {
                 line = lines.next_line() => match line {
                     Ok(Some(line)) => {
-                        let Ok(value) = serde_json::from_str::<Value>(&line) else { continue };
-                        for report in json_line_reports(&value, &mut pending, now()) {
+                        for report in json_line_reports(&line, &mut pending, now()) {
                             hub.apply(&node, &report);
                         }
                     }
@@ -294,7 +302,7 @@ async fn json_interface(
                 out = outbound.recv() => {
                     let Some(out) = out else { return };
                     request += 1;
-                    let line = json!({"publish": out.type_name, "msg": out.msg}).to_string();
+                    let line = Request::publish(out.type_name.clone(), out.msg.clone()).line();
                     match write.write_all(format!("{line}\n").as_bytes()).await {
                         Ok(()) => pending.push_back((request, out)),
                         Err(e) => {
@@ -328,6 +336,10 @@ async fn json_interface(
 mod tests {
     use super::*;
     use std::collections::VecDeque;
+
+    fn reports(value: &Value, pending: &mut VecDeque<(u64, Outbound)>, now: f64) -> Vec<Report> {
+        json_line_reports(&value.to_string(), pending, now)
+    }
 
     fn command(n: u64) -> Outbound {
         Outbound {
@@ -363,10 +375,8 @@ mod tests {
     fn json_lines_become_reports() {
         let mut pending = VecDeque::from([(2, command(1)), (3, command(2))]);
         // The subscription's reply is no command's.
-        assert!(
-            json_line_reports(&json!({"reply": 1, "subscribed": []}), &mut pending, 5.0).is_empty()
-        );
-        let r = json_line_reports(
+        assert!(reports(&json!({"reply": 1, "subscribed": []}), &mut pending, 5.0).is_empty());
+        let r = reports(
             &json!({"reply": 2, "accepted": "goby.example.Command", "id": 4}),
             &mut pending,
             5.0,
@@ -376,16 +386,16 @@ mod tests {
         };
         assert_eq!(a.id, json!(4));
         assert_eq!(a.msg, json!({"destination": 2}));
-        let r = json_line_reports(&json!({"reply": 3, "error": "no"}), &mut pending, 5.0);
+        let r = reports(&json!({"reply": 3, "error": "no"}), &mut pending, 5.0);
         assert!(matches!(r.as_slice(), [Report::Error { error, .. }] if error == "no"));
         assert!(pending.is_empty());
-        let r = json_line_reports(
+        let r = reports(
             &json!({"event": "received", "received": "T", "src": 1, "dest": 2, "msg": {"x": 1}}),
             &mut pending,
             5.0,
         );
         assert!(matches!(r.as_slice(), [Report::Rx(rx)] if rx.src == 1 && rx.time == 5.0));
-        let r = json_line_reports(
+        let r = reports(
             &json!({"event": "modem_receive", "modem_receive": {"src": 1, "rate": 1, "time": "2500000", "frame": ["AA==", "AA=="],
                 "receive_stat": [{"snr_in": 7}]}}),
             &mut pending,
@@ -396,7 +406,7 @@ mod tests {
         };
         assert_eq!((l.src, l.frames, l.time), (1, 2, 2.5));
         assert_eq!(l.stats.as_ref().unwrap().snr_in, Some(7.0));
-        let r = json_line_reports(
+        let r = reports(
             &json!({"event": "ack", "ack": "T", "by": 2, "frame": 0, "msg": {}}),
             &mut pending,
             5.0,
@@ -408,8 +418,6 @@ mod tests {
                 ..
             })]
         ));
-        assert!(
-            json_line_reports(&json!({"event": "raw", "raw": "in"}), &mut pending, 5.0).is_empty()
-        );
+        assert!(reports(&json!({"event": "raw", "raw": "in"}), &mut pending, 5.0).is_empty());
     }
 }

@@ -582,6 +582,84 @@ fn driver_failure_approach(
     }
 }
 
+/// `common { server_host server_port lat_origin lon_origin initializer }`:
+/// the MOOS interface's settings (`moos`; the interface is then on), each
+/// refused where `moos` gives another value too.
+fn common_moos(
+    config: &mut GobydConfig,
+    common: protos::goby::apps::protobuf::GobyMoosAppConfig,
+    at: &dyn Fn(&str) -> Option<usize>,
+    found: &mut Findings<'_>,
+) {
+    let moos_settings = common.server_host.is_some()
+        || common.server_port.is_some()
+        || common.lat_origin.is_some()
+        || common.lon_origin.is_some()
+        || !common.initializer.is_empty();
+    if !moos_settings {
+        return;
+    }
+    let moos = config.moos.get_or_insert_with(Default::default);
+    let both = |found: &mut Findings<'_>, goby: &str, ours: &str| {
+        found.problem(
+            at(goby),
+            &format!("common.{goby}"),
+            format!("the same setting as moos.{ours}, which is given too: give one"),
+        );
+    };
+    if let Some(host) = common.server_host {
+        match &moos.server {
+            Some(given) if *given != host => both(found, "server_host", "server"),
+            _ => moos.server = Some(host),
+        }
+    }
+    if let Some(port) = common.server_port {
+        match u32::try_from(port) {
+            Err(_) => found.problem(
+                at("server_port"),
+                "common.server_port",
+                format!("{port} is not the MOOSDB's TCP port (1-65535)"),
+            ),
+            Ok(port) => match moos.port {
+                Some(given) if given != port => both(found, "server_port", "port"),
+                _ => moos.port = Some(port),
+            },
+        }
+    }
+    for (goby, ours, value, slot) in [
+        (
+            "lat_origin",
+            "lat_origin",
+            common.lat_origin,
+            &mut moos.lat_origin,
+        ),
+        (
+            "lon_origin",
+            "lon_origin",
+            common.lon_origin,
+            &mut moos.lon_origin,
+        ),
+    ] {
+        if let Some(value) = value {
+            match slot {
+                Some(given) if *given != value => both(found, goby, ours),
+                _ => *slot = Some(value),
+            }
+        }
+    }
+    for ini in common.initializer {
+        moos.initializer.push(Initializer {
+            // The same numbers: INI_DOUBLE 1, INI_STRING 2.
+            r#type: ini.r#type,
+            moos_var: ini.moos_var,
+            global_cfg_var: ini.global_cfg_var,
+            dval: ini.dval,
+            sval: ini.sval,
+            trim: ini.trim,
+        });
+    }
+}
+
 /// The log level of a Goby verbosity.
 fn level_of(verbosity: i32) -> &'static str {
     match GobyVerbosity::try_from(verbosity) {
@@ -736,73 +814,7 @@ fn common(
             log.level = Some(level.into());
         }
     }
-    let moos_settings = common.server_host.is_some()
-        || common.server_port.is_some()
-        || common.lat_origin.is_some()
-        || common.lon_origin.is_some()
-        || !common.initializer.is_empty();
-    if !moos_settings {
-        return;
-    }
-    let moos = config.moos.get_or_insert_with(Default::default);
-    let both = |found: &mut Findings<'_>, goby: &str, ours: &str| {
-        found.problem(
-            at(goby),
-            &format!("common.{goby}"),
-            format!("the same setting as moos.{ours}, which is given too: give one"),
-        );
-    };
-    if let Some(host) = common.server_host {
-        match &moos.server {
-            Some(given) if *given != host => both(found, "server_host", "server"),
-            _ => moos.server = Some(host),
-        }
-    }
-    if let Some(port) = common.server_port {
-        match u32::try_from(port) {
-            Err(_) => found.problem(
-                at("server_port"),
-                "common.server_port",
-                format!("{port} is not the MOOSDB's TCP port (1-65535)"),
-            ),
-            Ok(port) => match moos.port {
-                Some(given) if given != port => both(found, "server_port", "port"),
-                _ => moos.port = Some(port),
-            },
-        }
-    }
-    for (goby, ours, value, slot) in [
-        (
-            "lat_origin",
-            "lat_origin",
-            common.lat_origin,
-            &mut moos.lat_origin,
-        ),
-        (
-            "lon_origin",
-            "lon_origin",
-            common.lon_origin,
-            &mut moos.lon_origin,
-        ),
-    ] {
-        if let Some(value) = value {
-            match slot {
-                Some(given) if *given != value => both(found, goby, ours),
-                _ => *slot = Some(value),
-            }
-        }
-    }
-    for ini in common.initializer {
-        moos.initializer.push(Initializer {
-            // The same numbers: INI_DOUBLE 1, INI_STRING 2.
-            r#type: ini.r#type,
-            moos_var: ini.moos_var,
-            global_cfg_var: ini.global_cfg_var,
-            dval: ini.dval,
-            sval: ini.sval,
-            trim: ini.trim,
-        });
-    }
+    common_moos(config, common, &at, found);
 }
 
 #[cfg(test)]

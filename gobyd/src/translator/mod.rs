@@ -6,7 +6,7 @@
 //! The translator works on values, not connections: [`Translator::create`]
 //! takes the latest value of each variable, [`Translator::publish`] returns
 //! the variables and values to write, so it is usable without `gobyd`'s
-//! runtime (the [`moos_bridge`](crate::moos_bridge) drives it in `gobyd`).
+//! runtime (the daemon's MOOS bridge drives it in `gobyd`).
 //!
 //! Modules: [`technique`] (protobuf text and encodings, prefixed or not),
 //! [`key_value`] (`KEY=value,...`), [`format`](mod@format) (`%N%` format strings),

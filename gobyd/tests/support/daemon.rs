@@ -257,12 +257,22 @@ impl Drop for Gobyd {
     }
 }
 
+/// The `publish` line of a `goby.example.Command` to `destination`, action
+/// `GOTO`, with `note`.
+pub fn command_line(destination: i32, note: &str) -> String {
+    gobyd_protocol::Request::publish(
+        "goby.example.Command",
+        serde_json::json!({"destination": destination, "action": "GOTO", "note": note}),
+    )
+    .line()
+}
+
 /// Publishes a `goby.example.Command` to `destination` with `note`
 /// through an in-process daemon's publisher
-/// ([`gobyd::runtime::Daemon::publisher`]) and waits for the core's
+/// ([`gobyd::daemon::Daemon::publisher`]) and waits for the core's
 /// answer, which must be that it was accepted.
 pub async fn publish_command(
-    publisher: &tokio::sync::mpsc::Sender<gobyd::json_server::Publish>,
+    publisher: &tokio::sync::mpsc::Sender<gobyd::event::Publish>,
     destination: i32,
     note: &str,
 ) {
@@ -275,7 +285,7 @@ pub async fn publish_command(
     };
     let (reply, answer) = tokio::sync::oneshot::channel();
     publisher
-        .send(gobyd::json_server::Publish::new(
+        .send(gobyd::event::Publish::new(
             command.transcode_to_dynamic(),
             reply,
         ))

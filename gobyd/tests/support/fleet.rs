@@ -9,10 +9,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use gobyd::control::{Control, NetworkRequest};
+use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
-use gobyd::network::transfers::TransferEvent;
-use gobyd::runtime::Daemon;
+use gobyd::event::TransferEvent;
+use gobyd::event::{Control, NetworkRequest};
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
@@ -47,7 +47,7 @@ pub enum Seen {
 }
 
 struct Running {
-    publisher: mpsc::Sender<gobyd::json_server::Publish>,
+    publisher: mpsc::Sender<gobyd::event::Publish>,
     control: mpsc::Sender<Control>,
     task: tokio::task::JoinHandle<()>,
     stop: Option<oneshot::Sender<()>>,
@@ -109,7 +109,10 @@ impl Fleet {
             self.clock.clone(),
         )
         .unwrap();
-        let daemon = Daemon::start_with_driver_and_clock(config, driver, self.clock.clone())
+        let daemon = Daemon::builder(config)
+            .driver(driver)
+            .clock(self.clock.clone())
+            .start()
             .await
             .expect("gobyd starts");
         let publisher = daemon.publisher();
@@ -118,7 +121,7 @@ impl Fleet {
         let seen = self.seen.clone();
         tokio::spawn(async move {
             while let Ok(e) = events.recv().await {
-                let s = match &e.event {
+                let s = match e.as_ref() {
                     DaemonEvent::Received {
                         received,
                         reception,
@@ -180,7 +183,7 @@ impl Fleet {
     }
 
     /// Node `id`'s publisher.
-    pub fn publisher(&self, id: i32) -> &mpsc::Sender<gobyd::json_server::Publish> {
+    pub fn publisher(&self, id: i32) -> &mpsc::Sender<gobyd::event::Publish> {
         &self.nodes[(id - 1) as usize]
             .as_ref()
             .expect("the node runs")
@@ -201,7 +204,10 @@ impl Fleet {
             .send(Control::Network { request, reply })
             .await
             .expect("the daemon takes requests");
-        answer.await.expect("the daemon answers")
+        answer
+            .await
+            .expect("the daemon answers")
+            .map(|reply| serde_json::to_value(gobyd::json::network_reply(&reply)).unwrap())
     }
 
     /// Stops every node.

@@ -18,7 +18,7 @@ use emulators::iridium::transceiver::TransceiverConfig;
 use emulators::iridium::{self as emulator, TransceiverHandle, TransceiverPort};
 use modemdriver::iridium::rockblock::http::HttpUrl;
 
-use super::daemon::{free_tcp_port, Gobyd};
+use super::daemon::{command_line, free_tcp_port, Gobyd};
 use super::node::{Entry, Iridium, Node};
 use super::restart::{delivered, logged};
 
@@ -217,10 +217,7 @@ pub fn node(id: i32, emulated: &Emulated, data_dir: &Path, slot_seconds: f64, tt
 }
 
 pub fn publish(node: &mut Gobyd, to: i32, note: &str) {
-    let line = format!(
-        r#"{{"publish": "goby.example.Command", "msg": {{"destination": {to}, "action": "GOTO", "note": "{note}"}}}}"#
-    );
-    let reply = node.request(&line).expect("a reply");
+    let reply = node.request(&command_line(to, note)).expect("a reply");
     assert!(reply.get("accepted").is_some(), "{reply}");
 }
 

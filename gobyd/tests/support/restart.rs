@@ -16,7 +16,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde_json::Value;
 
-use super::daemon::Gobyd;
+use super::daemon::{command_line, Gobyd};
 
 /// A small seeded generator (xorshift64*), so that a failing run replays.
 pub struct Draw(pub u64);
@@ -88,9 +88,10 @@ fn log_lines(data_dir: &Path, kind: &str) -> Vec<(Value, String)> {
 pub fn owed(data_dir: &Path) -> HashMap<String, usize> {
     let mut count = HashMap::new();
     let (journal, _) = queue::Journal::open(data_dir.join("outbox.journal")).unwrap();
+    let mut codec = dccl::Codec::new();
+    codec.load_type::<protos::goby::example::Command>().unwrap();
     for entry in journal.entries() {
-        let c: protos::goby::example::Command =
-            prost::Message::decode(entry.message.as_slice()).unwrap();
+        let c: protos::goby::example::Command = codec.decode_typed(&entry.message).unwrap();
         *count.entry(c.note().to_string()).or_default() += 1;
     }
     count
@@ -338,10 +339,7 @@ pub fn run(
                 revive(&mut nodes, &mut armed, &mut totals, &mut history);
                 let note = format!("{from}r{round}m{i}");
                 let node = nodes[(from - 1) as usize].as_mut().unwrap();
-                let line = format!(
-                    r#"{{"publish": "goby.example.Command", "msg": {{"destination": {}, "action": "GOTO", "note": "{note}"}}}}"#,
-                    3 - from
-                );
+                let line = command_line(3 - from, &note);
                 if node
                     .request(&line)
                     .is_some_and(|v| v.get("accepted").is_some())

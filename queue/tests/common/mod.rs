@@ -142,7 +142,9 @@ impl Node {
     /// Pushes a message; returns its id in the queue.
     pub fn push(&mut self, name: &str, src: i32, dest: i32, serial: u32) -> Option<MessageId> {
         let m = self.message(name, src, dest, serial);
-        self.manager.push(&m).expect("push")
+        self.manager
+            .push(m, queue::PushOptions::default())
+            .expect("push")
     }
 
     /// Asks for one transmission and returns it.

@@ -94,10 +94,11 @@ pub struct Guide {
     pub text: String,
 }
 
-/// Every file of the guide: `README.md` and `docs/*.md`, by name.
+/// Every file of the guide: `README.md`, `CONTRIBUTING.md` and
+/// `docs/*.md`, by name.
 pub fn guide_files() -> Vec<Guide> {
     let root = repository_root();
-    let mut names = vec!["README.md".to_string()];
+    let mut names = vec!["README.md".to_string(), "CONTRIBUTING.md".to_string()];
     let mut docs: Vec<String> = std::fs::read_dir(root.join("docs"))
         .expect("docs/ exists")
         .map(|e| {

@@ -19,9 +19,11 @@ fn every_crate_has_a_readme_whose_links_resolve() {
     let readmes = guide_check::crate_readmes();
     for name in [
         "time",
+        "store",
         "protos",
         "dccl",
         "queue",
+        "protocol",
         "amac",
         "modemdriver",
         "position",

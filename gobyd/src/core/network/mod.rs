@@ -1,0 +1,1352 @@
+//! gobyd's network layer: messages for nodes beyond this one's neighbours
+//! go through relays (Goby3's static route, [`crate::core::route`]), with
+//! custody at each relay and an end-to-end ack; messages larger than a
+//! frame and files go as transfers of fragments with selective acks
+//! ([`crate::core::fragment`]). The guide is `docs/routing.md`.
+//!
+//! The layer sits between the daemon's core and its outbox: the core hands
+//! it each publication ([`Network::publish`]: it takes those it must carry),
+//! each queue event ([`Network::queue_event`]: those of its own messages are
+//! told as the message they carry, or not at all), each reception
+//! ([`Network::receive`]: forwarding, unwrapping, acks), each data request
+//! ([`Network::data_request`]: it tops up the queue with fragments and
+//! selective acks) and the passing of time ([`Network::tick`]). Its own
+//! messages are ordinary DCCL messages to the queue
+//! ([`wire`]): each addressed (its `next_hop`, the queue's
+//! `DESTINATION_ID` role) to the next node, acknowledged by that node, and
+//! scheduled by the dynamic priority queue among the rest of the traffic.
+//!
+//! **Custody.** A relay journals what it forwards (its outbox journal)
+//! and syncs the journal before it acknowledges the hop: from that ack on
+//! the relay owns the message, and its sender forgets it. The origin tells
+//! its client `ack` only when the final destination's end-to-end ack
+//! ([`protos::goby::acomms::protobuf::RouteAck`]) comes back, and `expire`
+//! when the message's lifetime ends first; in between the message is on
+//! record in the origin's `routes.log` ([`origin`]).
+
+pub mod origin;
+pub mod transfers;
+pub mod wire;
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::{
+    FileRequest, QueueManagerConfig, QueuedMessageEntry, RouteAck, RoutedMessage,
+};
+use protos::goby::apps::protobuf::{GobydConfig, NetworkConfig};
+use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
+use sha2::{Digest, Sha256};
+
+use crate::config::Problem;
+use crate::core::fragment::Content;
+use crate::core::outbox::{journaled_message, Accepted, Outbox};
+use crate::core::route::{NextHop, RouteTable, MAX_NETWORK_ID};
+use origin::{Origin, Pending};
+use transfers::{Produced, TransferEvent, Transfers};
+use wire::{Header, NetMessage};
+
+/// The `network` section in force (`None`: the layer is off), Goby3's
+/// `route_cfg` having been read into it.
+pub fn settings(config: &GobydConfig) -> Option<&NetworkConfig> {
+    config.network.as_ref()
+}
+
+/// The queue settings of the network layer's own types unless the
+/// configuration gives them (`queue.message_entry` for the type's name):
+/// acknowledged hop by hop, never dropped from a full queue, each message's
+/// lifetime its own (`ttl` only sets the priority's pace). Routed messages
+/// and end-to-end acks go before ordinary traffic of the same age; fragments
+/// after it, so that a command overtakes a long transfer.
+fn default_entry(name: &str, ttl: i32) -> QueuedMessageEntry {
+    let (ack, value_base, newest_first) = match name {
+        "goby.acomms.protobuf.RoutedMessage" => (true, 2.0, false),
+        "goby.acomms.protobuf.RouteAck" => (true, 3.0, false),
+        "goby.acomms.protobuf.Fragment" => (true, 0.5, false),
+        "goby.acomms.protobuf.FragmentAck" => (true, 3.0, false),
+        _ => (true, 2.0, false),
+    };
+    QueuedMessageEntry {
+        protobuf_name: name.to_string(),
+        ack: Some(ack),
+        ttl: Some(ttl),
+        value_base: Some(value_base),
+        newest_first: Some(newest_first),
+        max_queue: Some(0),
+        role: vec![protos::goby::acomms::protobuf::queued_message_entry::Role {
+            r#type: protos::goby::acomms::protobuf::queued_message_entry::RoleType::DestinationId
+                as i32,
+            field: Some("next_hop".into()),
+            ..Default::default()
+        }],
+        ..Default::default()
+    }
+}
+
+/// With the layer on: loads its types into `codec` and gives them queue
+/// entries (those the configuration does not give), or says why it cannot
+/// be on (a loaded type with one of its DCCL ids, a bad route). Called by
+/// [`crate::check::validate`], so that `gobyd --check` and the daemon's
+/// start refuse the same.
+pub fn prepare(
+    config: &GobydConfig,
+    codec: &mut dccl::Codec,
+    queue: &mut QueueManagerConfig,
+    loaded: &[String],
+) -> Result<(), Vec<Problem>> {
+    let Some(network) = settings(config) else {
+        return Ok(());
+    };
+    let mut problems = match RouteTable::from_config(network, config.modem_id()) {
+        Ok(_) => Vec::new(),
+        Err(problems) => problems,
+    };
+    for name in loaded {
+        if let Ok(id) = codec.id_of(name) {
+            if wire::is_network_id(id) {
+                problems.push(Problem::new(
+                    "dccl.proto_file",
+                    format!(
+                        "{name} has DCCL id {id}, which the network layer's own messages take \
+                         (ids 32002-32006, while the network section is set): give it another id"
+                    ),
+                ));
+            }
+        }
+    }
+    if !problems.is_empty() {
+        return Err(problems);
+    }
+    wire::load(codec).map_err(|e| vec![Problem::new("network", e.to_string())])?;
+    // The pace of the network types' priority: that of the longest-lived
+    // ordinary type, so that their value_base compares with the others'.
+    let ttl = queue
+        .message_entry
+        .iter()
+        .map(|e| e.ttl())
+        .max()
+        .unwrap_or(1800)
+        .max(1);
+    for (name, _) in wire::TYPES {
+        if !queue.message_entry.iter().any(|e| e.protobuf_name == name) {
+            queue.message_entry.push(default_entry(name, ttl));
+        }
+    }
+    Ok(())
+}
+
+/// What a publication's type says of its sending.
+#[derive(Debug, Clone, Copy)]
+struct TypeSettings {
+    ack: bool,
+    ttl: u32,
+}
+
+/// Most forwarded messages a relay remembers (to take a repeat for one).
+const RECENT_LIMIT: usize = 16_384;
+
+/// The end-to-end identity of a network message a relay forwarded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+struct Forwarded {
+    origin: i32,
+    type_id: u8,
+    digest: u64,
+}
+
+fn digest(parts: &[&[u8]]) -> u64 {
+    let mut h = Sha256::new();
+    for p in parts {
+        h.update((p.len() as u64).to_le_bytes());
+        h.update(p);
+    }
+    u64::from_le_bytes(h.finalize()[..8].try_into().expect("8 bytes"))
+}
+
+impl Forwarded {
+    /// Its identity: what stays the same from hop to hop.
+    fn of(message: &NetMessage) -> Self {
+        let h = message.header();
+        let (type_id, digest) = match message {
+            NetMessage::Routed(m) => (1, digest(&[&m.number.to_le_bytes(), &m.payload])),
+            NetMessage::RouteAck(m) => {
+                let numbers: Vec<u8> = m.number.iter().flat_map(|n| n.to_le_bytes()).collect();
+                (2, digest(&[&numbers]))
+            }
+            NetMessage::Fragment(m) => (
+                3,
+                digest(&[&m.transfer.to_le_bytes(), &m.index.to_le_bytes()]),
+            ),
+            NetMessage::FragmentAck(m) => (4, digest(&[&prost::Message::encode_to_vec(m)])),
+            NetMessage::FileRequest(m) => {
+                (5, digest(&[&m.request.to_le_bytes(), m.path.as_bytes()]))
+            }
+        };
+        Forwarded {
+            origin: h.origin,
+            type_id,
+            digest,
+        }
+    }
+}
+
+/// A message the network layer unwrapped (or put together) for this node:
+/// to the receive path ([`crate::core::delivery`]) with the route it took.
+#[derive(Debug, Clone)]
+pub struct Arrived {
+    /// The message as its origin sent it; its identity is the origin's
+    /// number of the publication (`resent` when any hop may have sent it
+    /// before), so that the receiver's duplicate filter knows it whichever
+    /// way it came.
+    pub received: ReceivedMessage,
+    /// The nodes it went through: its origin, the relays, this node
+    /// (`None`: not known, for a message put together from fragments).
+    pub route: Option<Vec<i32>>,
+}
+
+/// What the network layer made of one reception's messages (or of the
+/// passing of time).
+#[derive(Debug, Default)]
+pub struct Receipt {
+    /// The messages that are not the network layer's, as they came.
+    pub plain: Vec<ReceivedMessage>,
+    /// Messages unwrapped or put together for this node.
+    pub arrived: Vec<Arrived>,
+    /// Events for the clients (end-to-end acks, expiries), with journal
+    /// ids (or transfers' client ids).
+    pub events: Vec<(QueueEvent, Option<u64>)>,
+    /// Transfers' progress and ends.
+    pub transfers: Vec<TransferEvent>,
+    /// Something to forward or to keep could not be recorded (or a relay
+    /// is full): the reception must not be acknowledged (its sender keeps
+    /// what it sent and sends it again).
+    pub refuse_ack: bool,
+    /// End-to-end acks owed once `arrived` is on record: (origin, number).
+    owed_acks: Vec<(i32, u32)>,
+}
+
+/// What became of a message to forward.
+enum Forward {
+    /// Journaled and queued for the next hop (custody taken).
+    Journaled,
+    /// A repeat, or dropped (a loop, the hop limit, no route): nothing to
+    /// keep, the hop may be acknowledged.
+    Skipped,
+    /// The relay holds as many fragments as it may: not taken now (its
+    /// hop must not be acknowledged).
+    Full,
+}
+
+/// The network layer's state.
+pub struct Network {
+    me: i32,
+    table: RouteTable,
+    hop_limit: usize,
+    codec: Arc<dccl::Codec>,
+    types: HashMap<String, TypeSettings>,
+    /// The queue `ttl` of each network type, microseconds (a message's
+    /// lifetime is set by pushing it as if created `ttl - lifetime` ago).
+    net_ttl: HashMap<&'static str, Micros>,
+    origin: Origin,
+    /// What this node forwarded lately, with when it may be forgotten.
+    recent: HashMap<Forwarded, Micros>,
+    /// Fragments this node holds for forwarding (in its journal).
+    relaying: usize,
+    /// The transfers of this node and to it.
+    transfers: Transfers,
+    /// The next number of a file request of this node's.
+    next_request: u16,
+    /// The time of the last call that gave one (queue events come
+    /// without).
+    now_hint: Micros,
+}
+
+impl std::fmt::Debug for Network {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Network")
+            .field("me", &self.me)
+            .field("route", &self.table.hops())
+            .field("transfers", &self.transfers)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Microseconds in a second.
+const SECOND: Micros = 1_000_000;
+
+/// The longest lifetime the header carries, seconds.
+const LIFETIME_MAX: u32 = 1_048_575;
+
+/// Bytes a routed message's envelope adds to the message it carries, at
+/// most (its DCCL id and header, the payload's length, up to three relays
+/// listed, the frame's identity trailer).
+const ROUTED_OVERHEAD: usize = 20;
+
+impl Network {
+    /// The layer of node `config.modem_id` (`None` when it is off), its
+    /// state read from `data_dir`; `outbox` is the node's, its journal
+    /// replayed (the network messages it still holds are taken up again).
+    pub fn open(
+        config: &GobydConfig,
+        queue: &QueueManagerConfig,
+        codec: Arc<dccl::Codec>,
+        data_dir: &Path,
+        outbox: &Outbox,
+        now: Micros,
+    ) -> std::io::Result<Option<Network>> {
+        let Some(settings) = settings(config) else {
+            return Ok(None);
+        };
+        let table = RouteTable::from_config(settings, config.modem_id()).map_err(|p| {
+            std::io::Error::other(
+                p.iter()
+                    .map(|p| p.to_string())
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            )
+        })?;
+        let types = queue
+            .message_entry
+            .iter()
+            .map(|e| {
+                (
+                    e.protobuf_name.clone(),
+                    TypeSettings {
+                        ack: e.ack(),
+                        ttl: e.ttl().max(1) as u32,
+                    },
+                )
+            })
+            .collect();
+        let net_ttl: HashMap<&'static str, Micros> = wire::TYPES
+            .iter()
+            .map(|(name, _)| {
+                let ttl = queue
+                    .message_entry
+                    .iter()
+                    .find(|e| e.protobuf_name == *name)
+                    .map(|e| e.ttl())
+                    .unwrap_or(1800);
+                (*name, i64::from(ttl) * SECOND)
+            })
+            .collect();
+        let origin = Origin::open(&data_dir.join("routes.log"))?;
+        let fragment_size = match settings.fragment_bytes() {
+            0 => fragment_data_bytes(&codec, frame_bytes(config))?,
+            n => n as usize,
+        };
+        let receive_dir = {
+            let dir = Path::new(settings.receive_dir());
+            if dir.is_absolute() {
+                dir.to_path_buf()
+            } else {
+                data_dir.join(dir)
+            }
+        };
+        let transfer_settings = transfers::Settings {
+            fragment_size,
+            window: settings.window().max(1) as usize,
+            resend_after: (settings.resend_seconds().max(0.0) * 1e6) as Micros,
+            max_bytes: settings.max_transfer_bytes() as usize,
+            relay_window: settings.relay_window().max(1) as usize,
+            receive_dir,
+            serve_dir: settings.serve_dir.as_ref().map(std::path::PathBuf::from),
+            file_ttl: settings.file_ttl().clamp(1, LIFETIME_MAX),
+            fragment_ttl: ttl_of(&net_ttl, "goby.acomms.protobuf.Fragment"),
+            ack_ttl: ttl_of(&net_ttl, "goby.acomms.protobuf.FragmentAck"),
+            remember: 3600 * SECOND,
+        };
+        let transfers = Transfers::open(
+            config.modem_id(),
+            transfer_settings,
+            &data_dir.join("transfers.log"),
+            now,
+        )?;
+        let mut network = Network {
+            me: config.modem_id(),
+            table,
+            hop_limit: settings.hop_limit() as usize,
+            codec,
+            types,
+            net_ttl,
+            origin,
+            recent: HashMap::new(),
+            relaying: 0,
+            transfers,
+            next_request: (queue::identity::random_start() % 65_536) as u16,
+            now_hint: now,
+        };
+        network.take_up(outbox, now);
+        tracing::info!(
+            route = ?network.table.hops(),
+            fragment_bytes = network.transfers.settings().fragment_size,
+            "network layer on"
+        );
+        Ok(Some(network))
+    }
+
+    /// The journal's network messages after a restart: the routed messages
+    /// this node originated are waited for again; those it was forwarding
+    /// are remembered (a repeat of one is not forwarded twice).
+    fn take_up(&mut self, outbox: &Outbox, now: Micros) {
+        let mut originated = Vec::new();
+        for entry in outbox.journaled() {
+            if !wire::is_network_type(&entry.message_name) {
+                continue;
+            }
+            let Ok(message) = journaled_message(&self.codec, entry) else {
+                continue;
+            };
+            let Some(net) = NetMessage::of(&message) else {
+                continue;
+            };
+            let expires = entry.time + self.net_ttl(net.type_name());
+            if net.header().origin == self.me {
+                if let NetMessage::Routed(m) = &net {
+                    if m.ack {
+                        originated.push((entry.id, m.clone(), expires));
+                    }
+                }
+                continue;
+            }
+            self.recent.insert(Forwarded::of(&net), expires.max(now));
+            self.relaying += usize::from(matches!(net, NetMessage::Fragment(_)));
+        }
+        for (entry, m, expires) in originated {
+            if let Some(p) = self.pending_of(entry, &m, expires) {
+                self.origin.track(p);
+            }
+        }
+    }
+
+    /// The record of routed message `m` (journal id `entry`) while it waits
+    /// for its end-to-end ack.
+    fn pending_of(&self, entry: u64, m: &RoutedMessage, expires: Micros) -> Option<Pending> {
+        let inner = self.codec.decode(&m.payload).ok()?;
+        Some(Pending {
+            entry,
+            dest: m.final_dest,
+            number: m.number as u16,
+            expires,
+            name: inner.descriptor().full_name().to_string(),
+            message: prost::Message::encode_to_vec(&inner),
+            hop_acked: false,
+        })
+    }
+
+    fn net_ttl(&self, name: &str) -> Micros {
+        ttl_of(&self.net_ttl, name)
+    }
+
+    /// The `created` time that makes a message of network type `name`
+    /// expire `lifetime` seconds after `now`.
+    fn created_for(&self, name: &str, lifetime: u32, now: Micros) -> Micros {
+        now + i64::from(lifetime) * SECOND - self.net_ttl(name)
+    }
+
+    /// The frame a fragment fills, bytes.
+    fn frame_capacity(&self) -> usize {
+        self.transfers.settings().fragment_size + FRAGMENT_HEADER
+    }
+
+    /// Takes a publication the network layer must carry: one for a node
+    /// reached through a relay (wrapped in a [`RoutedMessage`], journaled,
+    /// queued for the relay), or one larger than a frame (a transfer of
+    /// fragments). `None`: not the network layer's (it goes as it is);
+    /// `Some(Err)`: refused (its type is the network layer's own, or the
+    /// route cannot reach it).
+    /// `encoded`: the message's DCCL encoding (the payload of a routed
+    /// message, the body of a transfer).
+    pub fn publish(
+        &mut self,
+        message: &DynamicMessage,
+        encoded: &[u8],
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Option<Result<Accepted, String>> {
+        self.now_hint = now;
+        let name = message.descriptor().full_name().to_string();
+        if wire::is_network_type(&name) {
+            return Some(Err(format!(
+                "{name} is a message of the network layer, sent by gobyd itself: it cannot be published"
+            )));
+        }
+        let dest = match outbox.queue().named_destination(message) {
+            Ok(Some(dest)) => i32::try_from(dest).ok()?,
+            _ => return None,
+        };
+        if dest == queue::BROADCAST_ID || dest == self.me {
+            return None;
+        }
+        match self.table.next_hop(dest) {
+            NextHop::Direct if encoded.len() <= self.frame_capacity() => None,
+            NextHop::Direct => Some(self.send_large(&name, dest, encoded.to_vec(), now)),
+            NextHop::Unreachable(reason) => Some(Err(format!("{name} to node {dest}: {reason}"))),
+            NextHop::Via(relay) if encoded.len() + ROUTED_OVERHEAD <= self.frame_capacity() => {
+                let payload = encoded.to_vec();
+                Some(self.send_routed(message, &name, dest, relay, payload, outbox, now))
+            }
+            NextHop::Via(_) => Some(self.send_large(&name, dest, encoded.to_vec(), now)),
+        }
+    }
+
+    fn settings_of(&self, name: &str) -> TypeSettings {
+        self.types.get(name).copied().unwrap_or(TypeSettings {
+            ack: true,
+            ttl: 1800,
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn send_routed(
+        &mut self,
+        message: &DynamicMessage,
+        name: &str,
+        dest: i32,
+        relay: i32,
+        payload: Vec<u8>,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Result<Accepted, String> {
+        if !(0..=MAX_NETWORK_ID).contains(&dest) {
+            return Err(format!(
+                "{name} to node {dest}: a routed message's destination must be 0-{MAX_NETWORK_ID}"
+            ));
+        }
+        let settings = self.settings_of(name);
+        let entry = outbox
+            .next_entry()
+            .ok_or_else(|| "the journal's ids are exhausted".to_string())?;
+        let routed = RoutedMessage {
+            next_hop: relay,
+            origin: self.me,
+            final_dest: dest,
+            hop: Vec::new(),
+            lifetime: settings.ttl.min(LIFETIME_MAX),
+            number: (entry % 65_536) as u32,
+            ack: settings.ack,
+            resent: false,
+            payload,
+        };
+        let created = self.created_for(wire::TYPES[0].0, routed.lifetime, now);
+        let accepted = outbox
+            .accept(
+                NetMessage::Routed(routed.clone()).to_dynamic(),
+                None,
+                Some(created),
+            )
+            .map_err(|e| format!("{name} (routed through {relay}): {e}"))?;
+        if let Accepted::Queued(id) = accepted {
+            tracing::info!(
+                id,
+                dest,
+                relay,
+                "{name} to node {dest} goes through node {relay}"
+            );
+            if settings.ack {
+                let expires = now + i64::from(routed.lifetime) * SECOND;
+                let pending = Pending {
+                    entry: id,
+                    dest,
+                    number: routed.number as u16,
+                    expires,
+                    name: name.to_string(),
+                    message: prost::Message::encode_to_vec(message),
+                    hop_acked: false,
+                };
+                self.origin.track(pending);
+            }
+        }
+        Ok(accepted)
+    }
+
+    /// A message larger than a frame: a transfer to `dest`.
+    fn send_large(
+        &mut self,
+        name: &str,
+        dest: i32,
+        encoded: Vec<u8>,
+        now: Micros,
+    ) -> Result<Accepted, String> {
+        if !(1..=MAX_NETWORK_ID).contains(&dest) {
+            return Err(format!(
+                "{name} to node {dest}: a message larger than a frame goes to one node (1-{MAX_NETWORK_ID})"
+            ));
+        }
+        let settings = self.settings_of(name);
+        let id = self.transfers.start(
+            dest,
+            Content::Message,
+            &encoded,
+            name,
+            settings.ack,
+            settings.ttl.min(LIFETIME_MAX),
+            now,
+        )?;
+        tracing::info!(
+            id,
+            dest,
+            bytes = encoded.len(),
+            "{name} is larger than a frame: sent in fragments"
+        );
+        Ok(Accepted::Queued(id))
+    }
+
+    /// A queue event as the clients are told it: an event of a routed
+    /// message this node originated is told as the message it carries (its
+    /// first hop's ack is not told: the client hears `ack` at the
+    /// end-to-end ack); an event of a message this node forwards or of
+    /// the layer's own is logged, not told (`None`).
+    pub fn queue_event(
+        &mut self,
+        event: QueueEvent,
+        entry: Option<u64>,
+    ) -> Option<(QueueEvent, Option<u64>)> {
+        let dccl_id = match &event {
+            QueueEvent::Sent { dccl_id, .. }
+            | QueueEvent::Acked { dccl_id, .. }
+            | QueueEvent::Expired { dccl_id, .. }
+            | QueueEvent::Dropped { dccl_id, .. }
+            | QueueEvent::QueueSize { dccl_id, .. } => *dccl_id,
+            _ => return Some((event, entry)),
+        };
+        if !wire::is_network_id(dccl_id) {
+            return Some((event, entry));
+        }
+        let now = self.now_hint;
+        // The transfers' fragments and acks (never journaled).
+        match (&event, entry) {
+            (QueueEvent::Acked { id: Some(id), .. }, None) if self.transfers.owns(*id) => {
+                self.transfers.left_queue(*id, true, now);
+                return None;
+            }
+            (QueueEvent::Expired { id, .. } | QueueEvent::Dropped { id, .. }, None)
+                if self.transfers.owns(*id) =>
+            {
+                self.transfers.left_queue(*id, false, now);
+                return None;
+            }
+            _ => {}
+        }
+        let message = match &event {
+            QueueEvent::Sent { message, .. }
+            | QueueEvent::Acked { message, .. }
+            | QueueEvent::Expired { message, .. }
+            | QueueEvent::Dropped { message, .. } => NetMessage::of(message)?,
+            _ => return None,
+        };
+        let ended = matches!(
+            event,
+            QueueEvent::Acked { .. } | QueueEvent::Expired { .. } | QueueEvent::Dropped { .. }
+        );
+        if ended && entry.is_some() && matches!(message, NetMessage::Fragment(_)) {
+            self.relaying = self.relaying.saturating_sub(1);
+        }
+        let originated = match &message {
+            NetMessage::Routed(m) if m.origin == self.me => Some(m.clone()),
+            _ => None,
+        };
+        let Some(routed) = originated else {
+            match &event {
+                QueueEvent::Acked { by, .. } => tracing::debug!(
+                    by,
+                    "{} for node {}: node {by} has it",
+                    message.type_name(),
+                    message.header().final_dest
+                ),
+                QueueEvent::Expired { .. } | QueueEvent::Dropped { .. } => tracing::warn!(
+                    origin = message.header().origin,
+                    dest = message.header().final_dest,
+                    "{} held for the next hop expired before it was taken",
+                    message.type_name()
+                ),
+                _ => {}
+            }
+            return None;
+        };
+        let inner = self.codec.decode(&routed.payload).ok()?;
+        let inner_id = self.codec.id_of(inner.descriptor().full_name()).ok()?;
+        match event {
+            QueueEvent::Sent {
+                id,
+                frame,
+                awaiting_ack,
+                link,
+                ..
+            } => Some((
+                QueueEvent::Sent {
+                    message: inner,
+                    id,
+                    dccl_id: inner_id,
+                    frame,
+                    awaiting_ack,
+                    link,
+                },
+                entry,
+            )),
+            QueueEvent::Acked { by, .. } => {
+                if let Some(entry) = entry {
+                    match self.origin.hop_acked(entry) {
+                        Ok(true) => tracing::info!(
+                            id = entry,
+                            by,
+                            "routed {} to node {}: node {by} has it, waiting for the end-to-end ack",
+                            inner.descriptor().full_name(),
+                            routed.final_dest
+                        ),
+                        Ok(false) => {}
+                        Err(e) => tracing::error!("routes.log: {e}"),
+                    }
+                }
+                None
+            }
+            QueueEvent::Expired { id, .. } => {
+                if let Some(entry) = entry {
+                    if let Err(e) = self.origin.done(entry) {
+                        tracing::error!("routes.log: {e}");
+                    }
+                }
+                Some((
+                    QueueEvent::Expired {
+                        message: inner,
+                        id,
+                        dccl_id: inner_id,
+                    },
+                    entry,
+                ))
+            }
+            QueueEvent::Dropped { id, .. } => {
+                if let Some(entry) = entry {
+                    if let Err(e) = self.origin.done(entry) {
+                        tracing::error!("routes.log: {e}");
+                    }
+                }
+                Some((
+                    QueueEvent::Dropped {
+                        message: inner,
+                        id,
+                        dccl_id: inner_id,
+                    },
+                    entry,
+                ))
+            }
+            _ => None,
+        }
+    }
+
+    /// One reception's messages (as the queue decoded them from one
+    /// transmission): the network layer's own are forwarded (journaled
+    /// first: custody), unwrapped or put together for this node, or taken
+    /// as acks; the others are returned as they are. Call
+    /// [`recorded`](Self::recorded) once the messages that arrived are on
+    /// record.
+    pub fn receive(
+        &mut self,
+        messages: Vec<ReceivedMessage>,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Receipt {
+        self.now_hint = now;
+        let mut receipt = Receipt::default();
+        let mut produced = Produced::default();
+        let mut journaled = false;
+        let mut recorded = false;
+        for received in messages {
+            if !wire::is_network_id(received.dccl_id) {
+                receipt.plain.push(received);
+                continue;
+            }
+            let Some(message) = NetMessage::of(&received.message) else {
+                tracing::warn!(
+                    src = received.src,
+                    "a {} that does not read: dropped",
+                    received.message.descriptor().full_name()
+                );
+                continue;
+            };
+            let hop_resent = received.identity.is_some_and(|w| w.resent);
+            let header = message.header();
+            if header.final_dest != self.me {
+                match self.forward(message, hop_resent, outbox, now) {
+                    Ok(Forward::Journaled) => journaled = true,
+                    Ok(Forward::Skipped) => {}
+                    Ok(Forward::Full) => receipt.refuse_ack = true,
+                    Err(e) => {
+                        tracing::error!("cannot take a message to forward: {e}");
+                        receipt.refuse_ack = true;
+                    }
+                }
+                continue;
+            }
+            match message {
+                NetMessage::Fragment(f) => {
+                    recorded = true;
+                    self.transfers.fragment(f, now, &mut produced);
+                }
+                NetMessage::FragmentAck(a) => {
+                    recorded = true;
+                    self.transfers
+                        .acknowledged(header.origin, &a, now, &mut produced);
+                }
+                NetMessage::FileRequest(r) => {
+                    self.transfers
+                        .serve(header.origin, r.request as u16, &r.path, now);
+                }
+                other => self.arrive(other, hop_resent, &mut receipt),
+            }
+        }
+        if journaled {
+            if let Err(e) = outbox.sync() {
+                tracing::error!("journal sync of messages to forward: {e}");
+                receipt.refuse_ack = true;
+            }
+        }
+        if recorded {
+            if let Err(e) = self.transfers.sync() {
+                tracing::error!("transfers.log sync: {e}");
+                receipt.refuse_ack = true;
+            }
+        }
+        self.produced(produced, &mut receipt);
+        receipt
+    }
+
+    /// What the transfers produced, into `receipt`: messages put together
+    /// (to the receive path), messages settled (`ack` or `expire`), events.
+    fn produced(&mut self, produced: Produced, receipt: &mut Receipt) {
+        receipt.refuse_ack |= produced.refuse_ack;
+        for (origin, number, bytes) in produced.messages {
+            let Ok(message) = self.codec.decode(&bytes) else {
+                tracing::warn!(
+                    "a message put together from fragments of node {origin} does not decode"
+                );
+                continue;
+            };
+            let Ok(dccl_id) = self.codec.id_of(message.descriptor().full_name()) else {
+                continue;
+            };
+            receipt.arrived.push(Arrived {
+                received: ReceivedMessage {
+                    message,
+                    dccl_id,
+                    src: origin,
+                    dest: self.me,
+                    time: None,
+                    bytes,
+                    // A transfer ends once: one put together again (a
+                    // restart between its hand-over and its record) is a
+                    // repeat.
+                    identity: Some(WireIdentity::new(u64::from(number), true)),
+                },
+                route: None,
+            });
+        }
+        for (id, name, bytes, by, acked) in produced.settled {
+            let (Ok(message), Ok(dccl_id)) = (self.codec.decode(&bytes), self.codec.id_of(&name))
+            else {
+                continue;
+            };
+            let event = if acked {
+                QueueEvent::Acked {
+                    message,
+                    id: None,
+                    dccl_id,
+                    frame: 0,
+                    by,
+                }
+            } else {
+                QueueEvent::Expired {
+                    message,
+                    id,
+                    dccl_id,
+                }
+            };
+            receipt.events.push((event, Some(id)));
+        }
+        receipt.transfers.extend(produced.events);
+    }
+
+    /// A network message for this node.
+    fn arrive(&mut self, message: NetMessage, hop_resent: bool, receipt: &mut Receipt) {
+        let header = message.header();
+        match message {
+            NetMessage::Routed(m) => {
+                let inner = match self.codec.decode(&m.payload) {
+                    Ok(inner) => inner,
+                    Err(e) => {
+                        tracing::warn!(
+                            origin = m.origin,
+                            "a routed message from node {} does not decode: {e}",
+                            m.origin
+                        );
+                        return;
+                    }
+                };
+                let Ok(inner_id) = self.codec.id_of(inner.descriptor().full_name()) else {
+                    return;
+                };
+                let mut route = vec![m.origin];
+                route.extend(&m.hop);
+                route.push(self.me);
+                if m.ack {
+                    receipt.owed_acks.push((m.origin, m.number));
+                }
+                receipt.arrived.push(Arrived {
+                    received: ReceivedMessage {
+                        message: inner,
+                        dccl_id: inner_id,
+                        src: m.origin,
+                        dest: self.me,
+                        time: None,
+                        bytes: m.payload,
+                        identity: Some(WireIdentity::new(
+                            u64::from(m.number),
+                            m.resent || hop_resent,
+                        )),
+                    },
+                    route: Some(route),
+                });
+            }
+            NetMessage::RouteAck(m) => {
+                for number in m.number {
+                    match self.origin.acked(header.origin, number as u16) {
+                        Ok(Some(p)) => {
+                            if let Some(event) = self.ack_event(&p, header.origin) {
+                                receipt.events.push(event);
+                            }
+                        }
+                        Ok(None) => tracing::debug!(
+                            from = header.origin,
+                            number,
+                            "an end-to-end ack of a message not waited for (acked before, or expired)"
+                        ),
+                        Err(e) => tracing::error!("routes.log: {e}"),
+                    }
+                }
+            }
+            // Fragments, their acks and file requests are the transfers'.
+            NetMessage::Fragment(_) | NetMessage::FragmentAck(_) | NetMessage::FileRequest(_) => {}
+        }
+    }
+
+    /// The client's `ack` of a routed message acknowledged by `by`.
+    fn ack_event(&self, p: &Pending, by: i32) -> Option<(QueueEvent, Option<u64>)> {
+        let desc = self.codec.descriptor(&p.name)?;
+        let message = DynamicMessage::decode(desc, p.message.as_slice()).ok()?;
+        let dccl_id = self.codec.id_of(&p.name).ok()?;
+        tracing::info!(
+            id = p.entry,
+            by,
+            "routed {}: acknowledged end to end",
+            p.name
+        );
+        Some((
+            QueueEvent::Acked {
+                message,
+                id: None,
+                dccl_id,
+                frame: 0,
+                by,
+            },
+            Some(p.entry),
+        ))
+    }
+
+    /// Takes custody of a network message for another node: journaled
+    /// (unsynced; [`receive`](Self::receive) syncs) and queued for the next
+    /// hop; or not (a repeat, a loop, the hop limit, no route, this relay
+    /// full).
+    fn forward(
+        &mut self,
+        mut message: NetMessage,
+        hop_resent: bool,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Result<Forward, crate::core::outbox::OutboxError> {
+        let mut header: Header = message.header();
+        let resent = hop_resent || matches!(&message, NetMessage::Routed(m) if m.resent);
+        let key = Forwarded::of(&message);
+        // A routed message's content is not its identity (the same bytes
+        // may be published again): a repeat is only one marked so. The
+        // others are known by their numbers: any copy is a repeat.
+        let repeat = match message {
+            NetMessage::Routed(_) => resent,
+            _ => true,
+        };
+        let name = message.type_name();
+        if repeat && self.recent.contains_key(&key) {
+            tracing::debug!(
+                origin = header.origin,
+                dest = header.final_dest,
+                "a repeat of a {name} already forwarded: not forwarded again"
+            );
+            return Ok(Forward::Skipped);
+        }
+        let fragment = matches!(message, NetMessage::Fragment(_));
+        if fragment && self.relaying >= self.transfers.settings().relay_window {
+            tracing::debug!(
+                origin = header.origin,
+                "{} fragments held for forwarding already: this one is not taken now",
+                self.relaying
+            );
+            return Ok(Forward::Full);
+        }
+        if message.lists_hops() && (header.origin == self.me || header.hops.contains(&self.me)) {
+            tracing::warn!(
+                origin = header.origin,
+                dest = header.final_dest,
+                route = ?header.hops,
+                "{name} came back to this node (a loop in the routes): dropped"
+            );
+            return Ok(Forward::Skipped);
+        }
+        if header.hops.len() >= self.hop_limit {
+            tracing::warn!(
+                origin = header.origin,
+                dest = header.final_dest,
+                "{name} passed {} relays, the hop limit: dropped",
+                header.hops.len()
+            );
+            return Ok(Forward::Skipped);
+        }
+        let next = match self.table.link_dest(header.final_dest) {
+            Ok(next) => next,
+            Err(reason) => {
+                tracing::warn!(
+                    origin = header.origin,
+                    dest = header.final_dest,
+                    "{name} for node {}: {reason}: dropped",
+                    header.final_dest
+                );
+                return Ok(Forward::Skipped);
+            }
+        };
+        header.next_hop = next;
+        header
+            .hops
+            .push(if message.lists_hops() { self.me } else { 0 });
+        message.set_header(&header);
+        if let NetMessage::Routed(m) = &mut message {
+            m.resent = resent;
+        }
+        let created = self.created_for(name, header.lifetime, now);
+        outbox.accept(message.to_dynamic(), None, Some(created))?;
+        self.relaying += usize::from(fragment);
+        self.recent
+            .insert(key, now + i64::from(header.lifetime) * SECOND);
+        if self.recent.len() > RECENT_LIMIT {
+            self.forget_recent(now, true);
+        }
+        if fragment {
+            tracing::debug!(
+                origin = header.origin,
+                dest = header.final_dest,
+                next,
+                "fragment taken for forwarding"
+            );
+        } else {
+            tracing::info!(
+                origin = header.origin,
+                dest = header.final_dest,
+                next,
+                "{name} from node {} for node {} taken, forwarded to node {next}",
+                header.origin,
+                header.final_dest
+            );
+        }
+        Ok(Forward::Journaled)
+    }
+
+    fn forget_recent(&mut self, now: Micros, crowded: bool) {
+        self.recent.retain(|_, until| *until > now);
+        if crowded && self.recent.len() > RECENT_LIMIT {
+            // Keep the half that is remembered longest.
+            let mut untils: Vec<Micros> = self.recent.values().copied().collect();
+            untils.sort_unstable();
+            let cut = untils[untils.len() / 2];
+            self.recent.retain(|_, until| *until > cut);
+        }
+    }
+
+    /// The routed messages of `receipt` are on record (or the record
+    /// failed and they were handed over all the same): their end-to-end
+    /// acks are journaled (synced) and queued back to their origins.
+    pub fn recorded(&mut self, receipt: &Receipt, outbox: &mut Outbox, now: Micros) {
+        if receipt.owed_acks.is_empty() {
+            return;
+        }
+        let mut by_origin: HashMap<i32, Vec<u32>> = HashMap::new();
+        for (origin, number) in &receipt.owed_acks {
+            by_origin.entry(*origin).or_default().push(*number);
+        }
+        let lifetime = (self.net_ttl("goby.acomms.protobuf.RouteAck") / SECOND) as u32;
+        for (origin, numbers) in by_origin {
+            let next = match self.table.link_dest(origin) {
+                Ok(next) => next,
+                Err(reason) => {
+                    tracing::warn!("end-to-end ack for node {origin}: {reason}");
+                    continue;
+                }
+            };
+            for chunk in numbers.chunks(8) {
+                let ack = NetMessage::RouteAck(RouteAck {
+                    next_hop: next,
+                    origin: self.me,
+                    final_dest: origin,
+                    hop: Vec::new(),
+                    lifetime,
+                    number: chunk.to_vec(),
+                });
+                let created = self.created_for(ack.type_name(), lifetime, now);
+                if let Err(e) = outbox.accept(ack.to_dynamic(), None, Some(created)) {
+                    tracing::error!("end-to-end ack for node {origin}: {e}");
+                }
+            }
+        }
+        if let Err(e) = outbox.sync() {
+            tracing::error!("journal sync of end-to-end acks: {e}");
+        }
+    }
+
+    /// Tops the queue up before a data request (fragments of this node's
+    /// transfers, selective acks owed).
+    pub fn data_request(&mut self, outbox: &mut Outbox, now: Micros) {
+        self.now_hint = now;
+        self.transfers.top_up(outbox, &self.table, now);
+    }
+
+    /// Starts sending the file at `path` to node `dest` (named `name`
+    /// there, its own name by default), or joins the transfer of the same
+    /// file to the same node under way. Returns the transfer as it stands
+    /// and whether it was under way already.
+    pub fn send_file(
+        &mut self,
+        dest: i32,
+        path: &Path,
+        name: Option<&str>,
+        now: Micros,
+    ) -> Result<(TransferEvent, bool), String> {
+        if !(1..=MAX_NETWORK_ID).contains(&dest) || dest == self.me {
+            return Err(format!(
+                "node {dest}: a file goes to another node (1-{MAX_NETWORK_ID})"
+            ));
+        }
+        if let NextHop::Unreachable(reason) = self.table.next_hop(dest) {
+            return Err(format!("node {dest}: {reason}"));
+        }
+        let name = match name {
+            Some(n) => n.to_string(),
+            None => path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .ok_or_else(|| format!("{}: names no file", path.display()))?
+                .to_string(),
+        };
+        if let Some(problem) = crate::core::fragment::file_name_problem(&name) {
+            return Err(problem);
+        }
+        let meta = std::fs::metadata(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        if !meta.is_file() {
+            return Err(format!("{}: not a file", path.display()));
+        }
+        let max = self.transfers.settings().max_bytes;
+        if meta.len() as usize > max {
+            return Err(format!(
+                "{}: {} bytes is more than network.max_transfer_bytes ({max})",
+                path.display(),
+                meta.len()
+            ));
+        }
+        let body = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let sha = crate::core::fragment::sha256(&body);
+        if let Some((_, event)) = self.transfers.find_file(dest, &name, &sha) {
+            return Ok((event, true));
+        }
+        let ttl = self.transfers.settings().file_ttl;
+        let id = self
+            .transfers
+            .start(dest, Content::File { name }, &body, "", false, ttl, now)?;
+        let event = self
+            .transfers
+            .status()
+            .into_iter()
+            .find(|e| e.outgoing && e.id == id)
+            .ok_or("the transfer was not kept")?;
+        Ok((event, false))
+    }
+
+    /// Asks node `node` for its file `path` (under its
+    /// `network.serve_dir`): a [`FileRequest`] journaled (synced) and
+    /// queued. Returns the request's number, which the answer's events
+    /// name.
+    pub fn request_file(
+        &mut self,
+        node: i32,
+        path: &str,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Result<u16, String> {
+        if !(1..=MAX_NETWORK_ID).contains(&node) || node == self.me {
+            return Err(format!(
+                "node {node}: files are asked of another node (1-{MAX_NETWORK_ID})"
+            ));
+        }
+        if path.is_empty() || path.len() > 160 {
+            return Err(format!("{path:?}: give a path of 1-160 bytes"));
+        }
+        let next = self.table.link_dest(node)?;
+        let request = self.next_request;
+        self.next_request = request.wrapping_add(1);
+        let lifetime = self.transfers.settings().file_ttl;
+        let message = NetMessage::FileRequest(FileRequest {
+            next_hop: next,
+            origin: self.me,
+            final_dest: node,
+            hop: Vec::new(),
+            lifetime,
+            request: u32::from(request),
+            path: path.to_string(),
+        });
+        let created = self.created_for(message.type_name(), lifetime, now);
+        outbox
+            .accept(message.to_dynamic(), None, Some(created))
+            .map_err(|e| e.to_string())?;
+        outbox.sync().map_err(|e| e.to_string())?;
+        tracing::info!(node, request, "file {path:?} asked of node {node}");
+        Ok(request)
+    }
+
+    /// The transfers under way.
+    pub fn transfers(&self) -> Vec<TransferEvent> {
+        self.transfers.status()
+    }
+
+    /// The passing of time: routed messages past their first relay whose
+    /// lifetime ended without an end-to-end ack are told expired, as are
+    /// transfers whose lifetime ended.
+    pub fn tick(&mut self, now: Micros) -> Receipt {
+        self.now_hint = now;
+        self.forget_recent(now, false);
+        let mut produced = Produced::default();
+        self.transfers.tick(now, &mut produced);
+        let mut receipt = Receipt::default();
+        self.produced(produced, &mut receipt);
+        let expired = match self.origin.expired(now) {
+            Ok(expired) => expired,
+            Err(e) => {
+                tracing::error!("routes.log: {e}");
+                return receipt;
+            }
+        };
+        for p in expired {
+            tracing::warn!(
+                id = p.entry,
+                dest = p.dest,
+                "routed {}: no end-to-end ack within its lifetime",
+                p.name
+            );
+            let Some(desc) = self.codec.descriptor(&p.name) else {
+                continue;
+            };
+            let (Ok(message), Ok(dccl_id)) = (
+                DynamicMessage::decode(desc, p.message.as_slice()),
+                self.codec.id_of(&p.name),
+            ) else {
+                continue;
+            };
+            receipt.events.push((
+                QueueEvent::Expired {
+                    message,
+                    id: p.entry,
+                    dccl_id,
+                },
+                Some(p.entry),
+            ));
+        }
+        receipt
+    }
+}
+
+/// Bytes of a fragment's header on the water, its DCCL id included: what
+/// a frame holds besides the fragment's data.
+pub const FRAGMENT_HEADER: usize = 14;
+
+/// The data bytes of a fragment that fills a frame of `frame` bytes
+/// (`codec` holding the network layer's types, [`wire::load`]): the most
+/// whose fragment, with its header's fields at their widest, encodes to
+/// at most `frame` bytes (data bytes at most 1023). Errors when not even
+/// one data byte fits.
+pub fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usize> {
+    let probe = |d: usize| {
+        codec
+            .encode(
+                &NetMessage::Fragment(protos::goby::acomms::protobuf::Fragment {
+                    next_hop: 255,
+                    origin: 255,
+                    final_dest: 255,
+                    hop_count: 7,
+                    lifetime: LIFETIME_MAX,
+                    transfer: 65_535,
+                    index: 1_048_575,
+                    data: vec![0xA5; d],
+                })
+                .to_dynamic(),
+            )
+            .map(|b| b.len())
+    };
+    let mut d = frame.min(1023);
+    while d > 0 {
+        match probe(d) {
+            Ok(len) if len <= frame => return Ok(d),
+            _ => d -= 1,
+        }
+    }
+    Err(std::io::Error::other(format!(
+        "a frame of {frame} bytes holds no fragment: set network.fragment_bytes"
+    )))
+}
+
+/// The smallest frame this node sends in its TDMA slots (by their rates),
+/// bytes; the driver's largest frame, or 64, when the slots do not say
+/// (what a fragment fills when `network.fragment_bytes` is 0). With
+/// several links ([`crate::config::links`]), the smallest of every link's:
+/// a fragment goes over whichever link carries it.
+pub fn frame_bytes(config: &GobydConfig) -> usize {
+    let me = config.modem_id();
+    crate::config::links::links(config)
+        .iter()
+        .map(|view| {
+            let from_driver = view.driver.and_then(modemdriver::check::largest_frame);
+            let from_slots = view.mac.and_then(|mac| {
+                mac.slot
+                    .iter()
+                    .filter(|s| s.src.is_none_or(|src| src == me))
+                    .filter_map(|s| modemdriver::rate::spec(s.rate()))
+                    .map(|spec| spec.frame_bytes as usize)
+                    .min()
+            });
+            from_slots.or(from_driver).unwrap_or(64)
+        })
+        .min()
+        .unwrap_or(64)
+}
+
+fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {
+    ttls.get(name).copied().unwrap_or(1800 * SECOND)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fragment_fills_its_frame_and_its_header_is_what_the_guide_says() {
+        let mut codec = dccl::Codec::new();
+        wire::load(&mut codec).unwrap();
+        for frame in [32, 64, 256] {
+            let d = fragment_data_bytes(&codec, frame).unwrap();
+            assert_eq!(frame - d, FRAGMENT_HEADER, "frame of {frame} bytes");
+        }
+    }
+}

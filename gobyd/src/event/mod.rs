@@ -1,0 +1,196 @@
+//! The daemon's seam: what goes into its core and what comes out of it, as
+//! typed values. In go messages to publish ([`Publish`]) and requests that
+//! are not messages ([`Control`]), each with a one-shot channel for its
+//! typed reply; out come events ([`DaemonEvent`]: queue events, received
+//! messages with the reception that carried them, the modem driver's and
+//! medium access control's events, transfers' progress, links' status),
+//! broadcast to every interface, and what the mission log records
+//! ([`MissionLog`]).
+//!
+//! The core never renders: each interface (the JSON interface, the MOOS
+//! and MQTT bridges, the mission log, an embedding program) takes these
+//! values and renders them in its own form.
+
+pub mod modem;
+pub mod request;
+
+use std::sync::Arc;
+
+use std::collections::HashMap;
+
+use modemdriver::{DriverStatus, RawMessage};
+use protos::goby::acomms::protobuf::ModemTransmission;
+use queue::{QueueEvent, ReceivedMessage};
+use tokio::sync::{broadcast, mpsc, watch};
+
+pub use modem::ModemEvent;
+pub use protos::goby::apps::protobuf::LinkStatus;
+pub use request::{AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply};
+
+/// What the core reports.
+#[derive(Debug, Clone)]
+pub enum DaemonEvent {
+    /// A message received from the link (or addressed to this node and
+    /// looped back), with the reception that carried it.
+    Received {
+        /// The message, its source and destination.
+        received: ReceivedMessage,
+        /// How it came.
+        reception: Reception,
+    },
+    /// A queue event other than a received message.
+    Queue {
+        /// The event.
+        event: QueueEvent,
+        /// The journal id of the message it is about, if any.
+        entry: Option<u64>,
+    },
+    /// A modem driver or medium access event.
+    Modem(ModemEvent),
+    /// A transfer's progress or end (a message larger than a frame, a
+    /// file; the network layer's).
+    Transfer(TransferEvent),
+    /// A link's status changed (at start, and at each change).
+    Link(LinkStatus),
+}
+
+/// A [`DaemonEvent`] as the broadcast channel carries it, shared by every
+/// interface.
+pub type SharedEvent = Arc<DaemonEvent>;
+
+/// How a received message came: the reception that carried it, and
+/// whether it is handed over after a restart.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Reception {
+    /// The transmission it came in (`None`: not known, e.g. a message
+    /// looped back locally or recovered after a restart).
+    pub link: Option<Arc<LinkSummary>>,
+    /// Handed over after a restart.
+    pub recovered: bool,
+    /// The nodes a routed message went through: its origin, the relays,
+    /// this node (`None`: it came straight from its sender).
+    pub route: Option<Arc<[i32]>>,
+}
+
+/// A reception as the interfaces show it with each message it carried
+/// (JSON `"link"`, MQTT `link` and `rx/TYPE`): the transmission without
+/// its frames' bytes, their count, and when it was received.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkSummary {
+    /// The transmission as the driver reported it (source, destination,
+    /// rate, ack wanted, driver statistics ...), frames removed.
+    pub transmission: ModemTransmission,
+    /// How many frames it had.
+    pub frames: usize,
+    /// When it was received, microseconds since the UNIX epoch.
+    pub time: i64,
+    /// The link it came over, when the node has `link` sections.
+    pub name: Option<String>,
+}
+
+impl LinkSummary {
+    /// The summary of `transmission`, received at `time` (microseconds
+    /// since the UNIX epoch).
+    pub fn of(transmission: &ModemTransmission, time: i64) -> Self {
+        let mut stripped = transmission.clone();
+        let frames = std::mem::take(&mut stripped.frame).len();
+        LinkSummary {
+            transmission: stripped,
+            frames,
+            time,
+            name: None,
+        }
+    }
+
+    /// The shared summary of `transmission`, received at `time`.
+    pub fn shared(transmission: &ModemTransmission, time: i64) -> Arc<Self> {
+        Arc::new(Self::of(transmission, time))
+    }
+}
+
+/// A transfer's progress or end, for the clients.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransferEvent {
+    /// `out` (this node sends) or `in`.
+    pub outgoing: bool,
+    /// The transfer's client id (outgoing) or its origin's number of it
+    /// (incoming).
+    pub id: u64,
+    /// The other end.
+    pub peer: i32,
+    /// What it carries: a file's name, or a message's type.
+    pub name: String,
+    /// Bytes of its body.
+    pub bytes: u64,
+    /// Fragments, and those the receiver holds.
+    pub fragments: u32,
+    /// Fragments held by the receiver.
+    pub held: u32,
+    /// `sending`, `receiving`, `complete` or `failed`.
+    pub state: &'static str,
+    /// Why it failed.
+    pub reason: Option<String>,
+    /// Where a received file was written.
+    pub path: Option<String>,
+    /// SHA-256 of its body, hex.
+    pub sha256: String,
+    /// The file request it answers (`goby file get`).
+    pub request: Option<u16>,
+}
+
+/// What the interfaces reach the core by: where messages to publish and
+/// control requests go, the broadcast of its events, and the states a
+/// client subscribing late is told at once.
+#[derive(Debug, Clone)]
+pub struct CoreHandle {
+    /// Where messages to publish go.
+    pub publish: mpsc::Sender<Publish>,
+    /// Where control requests go.
+    pub control: mpsc::Sender<Control>,
+    /// Where the core's events come from.
+    pub events: broadcast::Sender<SharedEvent>,
+    /// The driver's last status (`None` before its first).
+    pub driver_status: watch::Receiver<Option<DriverStatus>>,
+    /// Every link's status as it stands.
+    pub link_status: watch::Receiver<Vec<LinkStatus>>,
+    /// The codec: the types that may be published.
+    pub codec: Arc<dccl::Codec>,
+    /// Type names by DCCL id.
+    pub names: Arc<HashMap<u32, String>>,
+}
+
+/// What the core writes down as it goes, in order: the mission log (what
+/// went to and came from the modem, every message in and out). Called on
+/// the core's own turn, so that a received message's record is written
+/// before its inbox mark says it was handed over. The log renders and
+/// writes, and reports its own failures.
+pub trait MissionLog: Send {
+    /// A raw line or datagram read from or written to the device at
+    /// `time` (microseconds since the UNIX epoch).
+    fn raw(&mut self, time: i64, raw: &RawMessage);
+
+    /// An event handed over to the interfaces at `time`; `link`: with
+    /// several links, the name of the link a sending went over.
+    fn event(&mut self, time: i64, event: &DaemonEvent, link: Option<&str>);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_summary_counts_the_frames_without_their_bytes() {
+        let t = ModemTransmission {
+            src: Some(1),
+            dest: Some(2),
+            rate: Some(3),
+            frame: vec![vec![1, 2, 3], vec![]],
+            ..Default::default()
+        };
+        let summary = LinkSummary::of(&t, 2_500_000);
+        assert_eq!(summary.transmission.src, Some(1));
+        assert_eq!(summary.frames, 2);
+        assert_eq!(summary.time, 2_500_000);
+        assert!(summary.transmission.frame.is_empty());
+    }
+}

@@ -1,0 +1,105 @@
+//! Events of the modem driver and the medium access control, as the
+//! daemon's core reports them to the autonomy interfaces: raw lines,
+//! transmissions heard and sent, the driver's status and driver-specific
+//! results (JSON topic `modem`), slot starts and auto-discovery's cycle
+//! changes (topic `mac`).
+//!
+//! The core sends the typed events; each interface renders them in its
+//! own form (the JSON interface's lines are in the guide's
+//! `docs/json-protocol.md`).
+
+use amac::MacEvent;
+use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};
+use prost_reflect::DynamicMessage;
+use protos::goby::acomms::protobuf::ModemTransmission;
+
+/// A modem driver or medium access event.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ModemEvent {
+    /// A raw line or datagram read from or written to the device.
+    Raw(RawMessage),
+    /// A transmission heard by the modem.
+    Received {
+        /// The transmission (frames included).
+        transmission: ModemTransmission,
+        /// When it was received, microseconds since the UNIX epoch.
+        time: i64,
+    },
+    /// A transmission this node initiated, as sent or attempted.
+    Transmitted {
+        /// The transmission (frames included).
+        transmission: ModemTransmission,
+        /// What happened to it.
+        outcome: TransmitOutcome,
+    },
+    /// A slot of the medium access control started.
+    SlotStart {
+        /// The slot as the medium access control has it.
+        slot: ModemTransmission,
+        /// The transmission this node initiates in it, as handed to the
+        /// driver (its `unique_id`, and in `time` and `slot_seconds` the
+        /// time left in the slot); `None`: the slot belongs to another
+        /// node, or a driver-specific request takes it.
+        initiated: Option<Box<ModemTransmission>>,
+    },
+    /// Auto-discovery changed the cycle.
+    CycleUpdate {
+        /// The node's modem id.
+        modem_id: i32,
+        /// Joined (`true`) or left (`false`).
+        joined: bool,
+    },
+    /// A driver status report.
+    Status(DriverStatus),
+    /// A driver-specific result (ranging, mini-packets ...).
+    Specific(DynamicMessage),
+}
+
+impl ModemEvent {
+    /// The event a driver event is reported as (`None`: data requests);
+    /// `now`: microseconds since the UNIX epoch.
+    pub fn of_driver(event: &DriverEvent, now: i64) -> Option<Self> {
+        Some(match event {
+            DriverEvent::Raw(raw) => ModemEvent::Raw(raw.clone()),
+            DriverEvent::Received(t) => ModemEvent::Received {
+                transmission: t.clone(),
+                time: now,
+            },
+            DriverEvent::TransmitResult(r) => ModemEvent::Transmitted {
+                transmission: r.transmission.clone(),
+                outcome: r.outcome.clone(),
+            },
+            DriverEvent::Status(status) => ModemEvent::Status(status.clone()),
+            DriverEvent::Specific(report) => ModemEvent::Specific(report.message.clone()),
+            DriverEvent::DataRequest(_) => return None,
+        })
+    }
+
+    /// The event a medium access event is reported as (a slot without
+    /// the transmission initiated in it).
+    pub fn of_mac(event: &MacEvent) -> Self {
+        match event {
+            MacEvent::Slot(slot) => ModemEvent::SlotStart {
+                slot: slot.transmission.clone(),
+                initiated: None,
+            },
+            MacEvent::Discovered { modem_id, .. } => ModemEvent::CycleUpdate {
+                modem_id: *modem_id,
+                joined: true,
+            },
+            MacEvent::Expired { modem_id, .. } => ModemEvent::CycleUpdate {
+                modem_id: *modem_id,
+                joined: false,
+            },
+        }
+    }
+
+    /// The raw bytes as text: a line as it is (line end removed), bytes
+    /// that are not UTF-8 (datagrams) in hex.
+    pub fn raw_text(raw: &RawMessage) -> String {
+        match std::str::from_utf8(&raw.bytes) {
+            Ok(line) => line.trim_end_matches(['\r', '\n']).to_string(),
+            Err(_) => hex::encode(&raw.bytes),
+        }
+    }
+}

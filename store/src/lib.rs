@@ -1,0 +1,15 @@
+//! How the goby crates keep state on disk: [`record_log`], the record log
+//! under the outbox journal, the receiver's inbox and the network layer's
+//! logs (records framed by a sync word, their length and a CRC-32, replayed
+//! so that damage costs only the records it touches), and [`file`](mod@file), files
+//! rewritten whole so that a crash leaves the old or the new one, private to
+//! their owner.
+//!
+//! Each owner of a file defines its format next to itself; this crate owns
+//! what every file shares. It depends on no other goby crate, so that the
+//! queue, the daemon and the modem drivers can all use it.
+
+#![warn(missing_docs)]
+
+pub mod file;
+pub mod record_log;
