@@ -454,8 +454,8 @@ const EX0: &str = r#"{"event":"received","received":"goby.example.Command","src"
 const EX1: &str = r#"{"event":"ack","ack":"goby.example.Command","by":2,"frame":0,"msg":{"destination":2,"action":"GOTO","note":"x"}}"#;
 const EX2: &str = r#"{"event":"sent","sent":"goby.example.Command","frame":2,"msg":{"destination":2,"action":"GOTO","note":"x"}}"#;
 const EX3: &str = r#"{"event":"raw","raw":"out","line":"ff00","peer":"127.0.0.1:9"}"#;
-const EX4: &str = r#"{"event":"modem_transmit","modem_transmit":{"src":1,"dest":2,"time":"1700000000123456","rate":1,"frame":["AQI="]},"outcome":"sent"}"#;
-const EX5: &str = r#"{"event":"modem_transmit","modem_transmit":{"src":1,"dest":2,"time":"1700000000123456","rate":1,"frame":["AQI="]},"outcome":"nothing_to_send"}"#;
+const EX4: &str = r#"{"event":"modem_transmit","modem_transmit":{"src":1,"dest":2,"time":1700000000.123456,"rate":1,"frame":["AQI="]},"outcome":"sent"}"#;
+const EX5: &str = r#"{"event":"modem_transmit","modem_transmit":{"src":1,"dest":2,"time":1700000000.123456,"rate":1,"frame":["AQI="]},"outcome":"nothing_to_send"}"#;
 const EX6: &str = r#"{"event":"mac_cycle_update","left":4}"#;
 const EX7: &str = r#"{"event":"driver_status","driver_status":"modem_silent","detail":"nothing heard from the modem for 2.5 s"}"#;
 const EX8: &str = r#"{"event":"transfer","transfer":7,"direction":"out","peer":1,"name":"sonar.bin","bytes":20000,"fragments":400,"held":3,"state":"sending","sha256":"abababababababababababababababababababababababababababababababab"}"#;

@@ -216,10 +216,31 @@ pub fn link_json(summary: &LinkSummary) -> Value {
     if let Value::Object(map) = &mut value {
         map.remove("frame");
         map.insert("frames".into(), summary.frames.into());
-        map.insert("time".into(), (summary.time as f64 / 1e6).into());
+        map.insert("time".into(), seconds(summary.time).into());
         if let Some(name) = &summary.name {
             map.insert("name".into(), name.clone().into());
         }
+    }
+    value
+}
+
+/// Microseconds since the UNIX epoch as the seconds (a float) every time of
+/// the JSON interface is given in.
+fn seconds(micros: i64) -> f64 {
+    micros as f64 / 1e6
+}
+
+/// A modem transmission as JSON: its fields in proto JSON form, but `time`
+/// (microseconds since the epoch in the `.proto`, a string in proto JSON)
+/// in seconds since the epoch as a float, as every other time of the
+/// interface.
+fn transmission_json(transmission: &protos::goby::acomms::protobuf::ModemTransmission) -> Value {
+    let mut value = message_json(&transmission.transcode_to_dynamic());
+    if let (Value::Object(map), Some(time)) = (&mut value, transmission.time) {
+        map.insert(
+            "time".into(),
+            seconds(i64::try_from(time).unwrap_or(i64::MAX)).into(),
+        );
     }
     value
 }
@@ -340,9 +361,7 @@ fn queue_line(
 
 /// The line of a modem or medium access event (see [`ModemEvent`]).
 fn modem_line(event: &ModemEvent) -> Event {
-    let t = |t: &protos::goby::acomms::protobuf::ModemTransmission| {
-        message_json(&t.transcode_to_dynamic())
-    };
+    let t = transmission_json;
     match event {
         ModemEvent::Raw(raw) => Event::Raw(Raw {
             raw: match raw.direction {
