@@ -14,8 +14,9 @@ use std::time::Duration;
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::time::Instant;
 
-use super::super::at::{self, AtCommand, AtError, ModemLine};
+use super::super::at::{self, AtCommand, AtError, AutoRegistration, ModemLine};
 use super::super::reader::{Reader, Unit};
+use super::super::status::MoStatus;
 use super::settings::Settings;
 use super::state::{ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES};
 use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
@@ -244,6 +245,10 @@ impl Machine {
                 self.indicator(indicator, value);
                 return;
             }
+            ModemLine::AutoRegistration(r) => {
+                self.auto_registration(r);
+                return;
+            }
             ModemLine::Echo(_) => {
                 // Echo back on (the transceiver was reset?): off again
                 // once the command outstanding is answered.
@@ -350,6 +355,36 @@ impl Machine {
         if self.startup.is_empty() && !self.ready {
             self.ready = true;
             self.status(DriverStatus::Ready);
+        }
+    }
+
+    /// `+AREG`: a registration the transceiver made (nothing to do), one
+    /// that failed (reported; the transceiver tries again by itself), or
+    /// one it suggests (mode 2: a mailbox check registers, as `+SBDIX`
+    /// always does).
+    fn auto_registration(&mut self, r: AutoRegistration) {
+        match r.event {
+            AutoRegistration::REGISTERED if r.error == 0 => {}
+            AutoRegistration::SUGGESTED => self.sessions.mailbox = true,
+            AutoRegistration::FAILED | AutoRegistration::REGISTERED => {
+                self.status(DriverStatus::LinkError {
+                    reason: format!(
+                        "automatic registration (+AREG:{},{}): {} ({}); the transceiver tries again",
+                        r.event,
+                        r.error,
+                        if r.event == AutoRegistration::FAILED {
+                            "failed"
+                        } else {
+                            "location update not accepted"
+                        },
+                        MoStatus(r.error).meaning()
+                    ),
+                });
+            }
+            other => self.status(DriverStatus::Unparseable {
+                line: format!("+AREG:{other},{}", r.error),
+                reason: "automatic registration event not 0, 1 or 2".into(),
+            }),
         }
     }
 

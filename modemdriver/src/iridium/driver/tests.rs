@@ -706,3 +706,32 @@ mod rudics_calls {
         assert!(!written(&out).iter().any(|w| w.starts_with("ATD")));
     }
 }
+
+#[test]
+fn automatic_registration_reports_are_understood() {
+    let mut rig = Rig::new(true);
+    rig.start();
+    // Registered by itself (what AT+SBDAREG=1 turns on): nothing to say.
+    let out = rig.bytes(b"+AREG:1,0\r\n");
+    assert!(statuses(&out).is_empty(), "{out:?}");
+    assert!(written(&out).is_empty());
+    // Failed, tried again by the transceiver: told with the reason.
+    let out = rig.bytes(b"+AREG:2,18\r\n");
+    let s = statuses(&out);
+    assert!(
+        matches!(&s[..], [DriverStatus::LinkError { reason }] if reason.contains("RF drop")),
+        "{s:?}"
+    );
+    // Suggested (mode 2): a mailbox check registers.
+    let out = rig.bytes(b"+AREG:0,0\r\n");
+    assert_eq!(written(&out), ["AT+SBDIX\r"]);
+    let out = rig.bytes(b"+SBDIX: 0, 0, 0, 0, 0, 0\r\n\r\nOK\r\n");
+    assert!(written(&out).is_empty());
+    // A report in the middle of a command's answer does not disturb it.
+    let out = rig.input(slot(2));
+    let out = fill(&mut rig, &out, b"x");
+    assert_eq!(written(&out), ["AT+SBDWB=12\r"]);
+    let out = rig.bytes(b"+AREG:1,0\r\nREADY\r\n");
+    assert_eq!(written_bytes(&out).len(), 1);
+    assert!(statuses(&out).is_empty(), "{out:?}");
+}
