@@ -18,7 +18,9 @@ use super::super::at::{self, AtCommand, AtError, AutoRegistration, ModemLine};
 use super::super::reader::{Reader, Unit};
 use super::super::status::MoStatus;
 use super::settings::Settings;
-use super::state::{ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES};
+use super::state::{
+    ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES, RECOVERY_QUIET,
+};
 use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
 use crate::machine::reconnect::Reconnect;
 use crate::machine::{Handlers, Now, Output, Outputs, RequestId};
@@ -46,6 +48,8 @@ pub struct Machine {
     pub(super) no_service_since: Option<Instant>,
     /// The transceiver's IMEI, once read.
     pub imei: Option<String>,
+    /// Nothing is written before then (see [`RECOVERY_QUIET`]).
+    pub(super) quiet_until: Option<Instant>,
     next_request: u64,
 }
 
@@ -70,6 +74,7 @@ impl Machine {
             service: None,
             no_service_since: None,
             imei: None,
+            quiet_until: None,
             next_request: 0,
         };
         machine.configure();
@@ -272,7 +277,11 @@ impl Machine {
             _ => {}
         }
         let Some(pending) = &mut self.pending else {
-            // An answer with no command outstanding (a late OK): nothing to do.
+            if let ModemLine::Session(reply) = line {
+                self.session_recovered(reply);
+            }
+            // Else an answer with no command outstanding (a late OK):
+            // nothing to do.
             return;
         };
         let outcome = match line {
@@ -300,6 +309,10 @@ impl Machine {
             },
             ModemLine::Session(reply) if pending.purpose == Purpose::Session => {
                 pending.answer = Some(Answer::Session(reply));
+                return;
+            }
+            ModemLine::Session(reply) => {
+                self.session_recovered(reply);
                 return;
             }
             ModemLine::Imei(imei) if pending.command == AtCommand::Imei => {
@@ -449,6 +462,7 @@ impl Handlers for Machine {
         };
         [
             command,
+            self.quiet_until,
             self.link.deadline(),
             session,
             call,
@@ -461,6 +475,9 @@ impl Handlers for Machine {
     }
 
     fn read(&mut self, bytes: Vec<u8>) {
+        if self.quiet_until.is_some_and(|t| t > self.now.at) {
+            self.quiet_until = Some(self.now.at + RECOVERY_QUIET);
+        }
         self.reader.push(&bytes);
         while let Some(unit) = self.reader.next_unit() {
             self.unit(unit);
@@ -580,8 +597,15 @@ impl Handlers for Machine {
     /// Writes the next command due: a start-up step, or the next step of
     /// a session.
     fn pump(&mut self) {
+        if self.quiet_until.is_some_and(|t| t > self.now.at) {
+            return;
+        }
+        self.quiet_until = None;
         loop {
             if !self.link.is_up() || self.pending.is_some() {
+                return;
+            }
+            if self.startup.front() == Some(&AtCommand::Clear(2)) && self.read_unread_mt() {
                 return;
             }
             if let Some(command) = self.startup.pop_front() {
