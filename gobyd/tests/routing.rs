@@ -67,6 +67,11 @@ enum Seen {
         node: i32,
         note: String,
     },
+    QueueSize {
+        node: i32,
+        dccl_id: u32,
+        size: usize,
+    },
 }
 
 fn note(message: &prost_reflect::DynamicMessage) -> String {
@@ -140,6 +145,14 @@ async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) 
                     } => Seen::Expired {
                         node: id,
                         note: note(message),
+                    },
+                    DaemonEvent::Queue {
+                        event: QueueEvent::QueueSize { dccl_id, size },
+                        ..
+                    } => Seen::QueueSize {
+                        node: id,
+                        dccl_id: *dccl_id,
+                        size: *size,
                     },
                     _ => continue,
                 };
@@ -340,6 +353,40 @@ async fn a_destination_with_no_route_is_refused_at_the_door_with_the_reason() {
     }
     // Nothing was queued for node 20: no expire comes for it.
     assert_eq!(fleet.count(|s| matches!(s, Seen::Expired { .. })), 0);
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The DCCL id of the network layer's `RoutedMessage`.
+const ROUTED_MESSAGE: u32 = 32002;
+
+#[tokio::test(start_paused = true)]
+async fn custody_at_the_relay_shows_on_its_queue_size() {
+    let dir = scratch("routing", "custody");
+    let fleet = start(&dir, 0.0).await;
+    publish_command(&fleet.publishers[0], 3, "held by 2").await;
+    tokio::time::sleep(Duration::from_secs(300)).await;
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Delivered { note, node: 3, .. } if note == "held by 2")),
+        1
+    );
+    let relay: Vec<usize> = fleet
+        .seen
+        .lock()
+        .unwrap()
+        .iter()
+        .filter_map(|s| match s {
+            Seen::QueueSize {
+                node: 2,
+                dccl_id: ROUTED_MESSAGE,
+                size,
+            } => Some(*size),
+            _ => None,
+        })
+        .collect();
+    // Taken into the relay's custody, then handed on to node 3.
+    assert_eq!(relay.first(), Some(&1), "{relay:?}");
+    assert_eq!(relay.last(), Some(&0), "{relay:?}");
     fleet.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -596,8 +596,10 @@ impl Network {
     /// A queue event as the clients are told it: an event of a routed
     /// message this node originated is told as the message it carries (its
     /// first hop's ack is not told: the client hears `ack` at the
-    /// end-to-end ack); an event of a message this node forwards or of
-    /// the layer's own is logged, not told (`None`).
+    /// end-to-end ack); the size of the layer's queues is told as it is
+    /// (at a relay: what it holds in custody); another event of a message
+    /// this node forwards or of the layer's own is logged, not told
+    /// (`None`).
     pub fn queue_event(
         &mut self,
         event: QueueEvent,
@@ -612,6 +614,11 @@ impl Network {
             _ => return Some((event, entry)),
         };
         if !wire::is_network_id(dccl_id) {
+            return Some((event, entry));
+        }
+        if matches!(event, QueueEvent::QueueSize { .. }) {
+            // The layer's queues as they are: at a relay, the messages in
+            // its custody.
             return Some((event, entry));
         }
         let now = self.now_hint;
