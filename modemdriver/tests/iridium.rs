@@ -314,12 +314,18 @@ async fn no_service_for_a_while_then_the_message_goes() {
     r.gateway.stop().await;
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn failing_sessions_are_retried_until_the_message_goes() {
-    let mut r = rig(0.6).await;
-    for i in 0..3u32 {
-        r.vehicle.1.send(format!("try {i}").into_bytes()).unwrap();
-        r.vehicle.0.initiate_transmission(slot(1, 100 + i)).unwrap();
+/// The vehicle sends `count` frames (`"{text} {i}"`), one at a time, each
+/// reported sent (transmission `first_id + i`).
+async fn send_each(r: &mut Rig, text: &str, count: u32, first_id: u32) {
+    for i in 0..count {
+        r.vehicle
+            .1
+            .send(format!("{text} {i}").into_bytes())
+            .unwrap();
+        r.vehicle
+            .0
+            .initiate_transmission(slot(1, first_id + i))
+            .unwrap();
         let outcome = until(&mut r.vehicle.2, "a result", |s| match s {
             Seen::Result(o @ (TransmitOutcome::Sent | TransmitOutcome::Failed(_)), _) => {
                 Some(o.clone())
@@ -329,6 +335,12 @@ async fn failing_sessions_are_retried_until_the_message_goes() {
         .await;
         assert_eq!(outcome, TransmitOutcome::Sent, "message {i}");
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn failing_sessions_are_retried_until_the_message_goes() {
+    let mut r = rig(0.6).await;
+    send_each(&mut r, "try", 3, 100).await;
     let log = r.modem.log();
     assert!(!log.sessions_failed.is_empty(), "{log:?}");
     let mut got = Vec::new();
@@ -356,18 +368,7 @@ async fn an_mo_message_delivered_again_under_its_momsn_is_received_once() {
     })
     .await;
     const MESSAGES: u32 = 4;
-    for i in 0..MESSAGES {
-        r.vehicle.1.send(format!("once {i}").into_bytes()).unwrap();
-        r.vehicle.0.initiate_transmission(slot(1, 200 + i)).unwrap();
-        let outcome = until(&mut r.vehicle.2, "a result", |s| match s {
-            Seen::Result(o @ (TransmitOutcome::Sent | TransmitOutcome::Failed(_)), _) => {
-                Some(o.clone())
-            }
-            _ => None,
-        })
-        .await;
-        assert_eq!(outcome, TransmitOutcome::Sent, "message {i}");
-    }
+    send_each(&mut r, "once", MESSAGES, 200).await;
     let lost = r.modem.log().answers_lost;
     assert!(lost >= 1, "the fault never happened: {:?}", r.modem.log());
     // Every MO message the gateway took (the repeats too) delivered.
