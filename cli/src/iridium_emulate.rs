@@ -57,6 +57,12 @@ pub struct EmulateIridiumArgs {
     /// 17, 18 or 19).
     #[arg(long, default_value_t = 0.0)]
     pub session_failure: f64,
+    /// Probability that a session whose MO message the gateway took is
+    /// reported failed all the same (MO status 18), as Iridium sometimes
+    /// does: the host sends the same message again under the same MOMSN,
+    /// and the gateway delivers it again.
+    #[arg(long, default_value_t = 0.0)]
+    pub answer_lost: f64,
     /// Seconds between changes of the signal strength (0: a steady 5 bars).
     #[arg(long, default_value_t = 0.0)]
     pub signal_change_seconds: f64,
@@ -188,6 +194,7 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
     };
     let session_time = seconds(args.session_seconds, "--session-seconds", false)?;
     let session_failure = probability(args.session_failure, "--session-failure")?;
+    let answer_lost = probability(args.answer_lost, "--answer-lost")?;
     let call_drop_after = args
         .call_drop_seconds
         .map(|d| seconds(d, "--call-drop-seconds", false))
@@ -212,6 +219,7 @@ fn configs(args: &EmulateIridiumArgs) -> Result<(Vec<TransceiverConfig>, Gateway
                 ..radio.clone()
             },
             session_failure,
+            answer_lost,
             seed: args.seed.wrapping_add(1000 + i as u64),
             device,
             call_drop_after,

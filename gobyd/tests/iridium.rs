@@ -126,3 +126,71 @@ fn vehicle_and_shore_exchange_acked_commands_over_the_emulated_9603_and_gateway(
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Sessions reported failed (MO status 18) after the gateway took their
+/// MO message, as Iridium does: the vehicle sends the same bytes again
+/// under the same MOMSN and the gateway delivers them twice; the shore's
+/// client has each message once.
+#[test]
+fn a_message_whose_session_was_reported_failed_after_delivery_reaches_the_shore_once() {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let dir = scratch("iridium", "answer-lost");
+    let session = Duration::from_millis(150);
+    let mut emulated = runtime.block_on(iridium::start(&dir, session, 0.0, 5));
+    runtime.block_on(async {
+        let plain = std::mem::replace(
+            &mut emulated.transceiver,
+            iridium::transceiver_with(
+                &dir.join("sbd-lossy"),
+                &emulated.gateway,
+                session,
+                0.0,
+                5,
+                |c| c.answer_lost = 0.5,
+            ),
+        );
+        plain.stop().await;
+    });
+    emulated.link = dir.join("sbd-lossy");
+    let data: [PathBuf; 2] = [dir.join("vehicle"), dir.join("shore")];
+    let configs: Vec<PathBuf> = [VEHICLE, SHORE]
+        .iter()
+        .map(|&id| {
+            iridium::node(id, &emulated, &data[(id - 1) as usize], 1.0, 600)
+                .write(dir.join(format!("node{id}.cfg")))
+        })
+        .collect();
+    let shore = Gobyd::start(&configs[1], &[]);
+    let mut vehicle = Gobyd::start(&configs[0], &[]);
+    let mut sent: Vec<(usize, String)> = Vec::new();
+    for i in 0..4 {
+        let note = format!("once-{i}");
+        publish(&mut vehicle, SHORE, &note);
+        sent.push((0, note));
+    }
+    assert!(settle(&sent, &data, LIMIT), "exchange incomplete");
+    // A repeat comes right after its first delivery: give it time.
+    std::thread::sleep(Duration::from_secs(2));
+    let log = emulated.transceiver.log();
+    drop(vehicle);
+    drop(shore);
+    runtime.block_on(async {
+        emulated.transceiver.stop().await;
+        emulated.gateway.stop().await;
+    });
+    assert!(log.answers_lost >= 1, "the fault never happened: {log:?}");
+    let got = delivered(&data[1]);
+    for (_, note) in &sent {
+        assert_eq!(
+            got.get(note),
+            Some(&1),
+            "{note} delivered {:?}",
+            got.get(note)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

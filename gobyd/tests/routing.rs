@@ -23,7 +23,7 @@ use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
 use protos::goby::example::Command;
 use queue::QueueEvent;
-use support::daemon::{publish_command, scratch};
+use support::daemon::{publish_command, publish_command_reply, scratch};
 use support::node::{Entry, Node, Simulator};
 use tokio::sync::oneshot;
 
@@ -67,6 +67,17 @@ enum Seen {
         node: i32,
         note: String,
     },
+    QueueSize {
+        node: i32,
+        dccl_id: u32,
+        size: usize,
+    },
+    RouteDropped {
+        node: i32,
+        note: String,
+        relay: i32,
+        hop_limit: u32,
+    },
 }
 
 fn note(message: &prost_reflect::DynamicMessage) -> String {
@@ -88,6 +99,15 @@ async fn start(dir: &std::path::Path, loss: f64) -> Fleet {
 }
 
 async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) -> Node) -> Fleet {
+    start_nodes(dir, 3, node).await
+}
+
+/// Nodes 1 to `count`, each configured by `node`.
+async fn start_nodes(
+    dir: &std::path::Path,
+    count: i32,
+    node: impl Fn(i32, &std::path::Path) -> Node,
+) -> Fleet {
     let clock = Arc::new(TokioClock::new());
     let medium = Medium::new();
     let seen: Arc<Mutex<Vec<Seen>>> = Arc::default();
@@ -97,7 +117,7 @@ async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) 
         runs: Vec::new(),
         seen: seen.clone(),
     };
-    for id in 1..=3 {
+    for id in 1..=count {
         let config = node(id, &dir.join(format!("data{id}"))).config();
         let mut driver_config = config.driver.clone().unwrap();
         driver_config.modem_id = Some(id);
@@ -140,6 +160,23 @@ async fn start_with(dir: &std::path::Path, node: impl Fn(i32, &std::path::Path) 
                     } => Seen::Expired {
                         node: id,
                         note: note(message),
+                    },
+                    DaemonEvent::RouteDropped(d) => Seen::RouteDropped {
+                        node: id,
+                        note: match &d.expired {
+                            QueueEvent::Expired { message, .. } => note(message),
+                            _ => String::new(),
+                        },
+                        relay: d.relay,
+                        hop_limit: d.hop_limit,
+                    },
+                    DaemonEvent::Queue {
+                        event: QueueEvent::QueueSize { dccl_id, size },
+                        ..
+                    } => Seen::QueueSize {
+                        node: id,
+                        dccl_id: *dccl_id,
+                        size: *size,
                     },
                     _ => continue,
                 };
@@ -277,6 +314,146 @@ async fn without_a_route_the_far_node_is_out_of_reach() {
     );
     assert_eq!(
         fleet.count(|s| matches!(s, Seen::Expired { note, node: 1 } if note == "far")),
+        1
+    );
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_destination_with_no_route_is_refused_at_the_door_with_the_reason() {
+    let dir = scratch("routing", "no-route-subnet");
+    let fleet = start_with(&dir, |id, data| {
+        node(id, data, 0.0)
+            .queue(Entry::command().ack(true).ttl(600))
+            .extra("network { route { hop: 1 hop: 2 hop: 3 } subnet_mask: 0xFFFFFFF0 }")
+    })
+    .await;
+    // Node 20 is on subnet 0x10, this node on 0x0, and nothing leads there.
+    let refused = publish_command_reply(&fleet.publishers[0], 20, "nowhere").await;
+    let reason = refused.expect_err("refused at once");
+    assert!(
+        reason.contains("no route to 20") && reason.contains("0x10"),
+        "{reason}"
+    );
+    // Nodes on the subnet are reached as before, through the relay or not.
+    publish_command(&fleet.publishers[0], 3, "far").await;
+    publish_command(&fleet.publishers[0], 2, "near").await;
+    tokio::time::sleep(Duration::from_secs(400)).await;
+    for text in ["far", "near"] {
+        assert_eq!(
+            fleet.count(|s| matches!(s, Seen::Delivered { note, .. } if note == text)),
+            1,
+            "{text}"
+        );
+    }
+    // Nothing was queued for node 20: no expire comes for it.
+    assert_eq!(fleet.count(|s| matches!(s, Seen::Expired { .. })), 0);
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The DCCL id of the network layer's `RoutedMessage`.
+const ROUTED_MESSAGE: u32 = 32002;
+
+#[tokio::test(start_paused = true)]
+async fn custody_at_the_relay_shows_on_its_queue_size() {
+    let dir = scratch("routing", "custody");
+    let fleet = start(&dir, 0.0).await;
+    publish_command(&fleet.publishers[0], 3, "held by 2").await;
+    tokio::time::sleep(Duration::from_secs(300)).await;
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Delivered { note, node: 3, .. } if note == "held by 2")),
+        1
+    );
+    let relay: Vec<usize> = fleet
+        .seen
+        .lock()
+        .unwrap()
+        .iter()
+        .filter_map(|s| match s {
+            Seen::QueueSize {
+                node: 2,
+                dccl_id: ROUTED_MESSAGE,
+                size,
+            } => Some(*size),
+            _ => None,
+        })
+        .collect();
+    // Taken into the relay's custody, then handed on to node 3.
+    assert_eq!(relay.first(), Some(&1), "{relay:?}");
+    assert_eq!(relay.last(), Some(&0), "{relay:?}");
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Node `id` of a line 1 – 2 – 3 – 4 whose route lets a message pass one
+/// relay only (`hop_limit: 1`).
+fn line_of_four(id: i32, data_dir: &std::path::Path) -> Node {
+    let driver = Simulator::line(4, 1500.0)
+        .range(2000.0)
+        .deferred_ack()
+        .seed(id as u64 + 60)
+        .overhead(0.5);
+    Node::new(id)
+        .driver(driver)
+        .tdma(&[1, 2, 3, 4], 2, 8.0)
+        .queue(Entry::command().ack(true).ttl(1800))
+        .json_tcp("")
+        .data_dir(data_dir)
+        .extra("network { route { hop: 1 hop: 2 hop: 3 hop: 4 } hop_limit: 1 }")
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_hop_limit_drop_is_told_to_the_origin_at_once_naming_the_relay_and_the_limit() {
+    let dir = scratch("routing", "hop-limit");
+    let fleet = start_nodes(&dir, 4, line_of_four).await;
+    let begun = tokio::time::Instant::now();
+    // 1 → 4 passes 2 and 3: node 3 finds the one relay allowed passed.
+    publish_command(&fleet.publishers[0], 4, "too far").await;
+    publish_command(&fleet.publishers[0], 3, "one relay").await;
+    let limit = begun + Duration::from_secs(600);
+    while tokio::time::Instant::now() < limit
+        && fleet.count(|s| matches!(s, Seen::RouteDropped { .. })) == 0
+    {
+        tokio::time::sleep(Duration::from_secs(5)).await;
+    }
+    let told = begun.elapsed();
+    let drops: Vec<Seen> = fleet
+        .seen
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|s| matches!(s, Seen::RouteDropped { .. }))
+        .cloned()
+        .collect();
+    assert_eq!(
+        drops,
+        [Seen::RouteDropped {
+            node: 1,
+            note: "too far".into(),
+            relay: 3,
+            hop_limit: 1
+        }],
+        "told at the origin, naming the relay and its limit"
+    );
+    // At once: a few slots, not the message's 1800 s lifetime.
+    assert!(told < Duration::from_secs(300), "told after {told:?}");
+    // Past the lifetime: no second word of it, never delivered; the
+    // message within the limit delivered and acked end to end.
+    tokio::time::sleep(Duration::from_secs(1900)).await;
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Delivered { note, .. } if note == "too far")),
+        0
+    );
+    assert_eq!(
+        fleet.count(|s| matches!(s, Seen::Expired { note, .. } if note == "too far")),
+        0
+    );
+    assert_eq!(
+        fleet.count(
+            |s| matches!(s, Seen::Acked { note, node: 1, by: 3, .. } if note == "one relay")
+        ),
         1
     );
     fleet.stop().await;

@@ -119,6 +119,10 @@ struct Rig {
 }
 
 async fn rig(session_failure: f64) -> Rig {
+    rig_with(|tc| tc.session_failure = session_failure).await
+}
+
+async fn rig_with(transceiver: impl FnOnce(&mut TransceiverConfig)) -> Rig {
     let mo_port = free_port();
     let gateway = Gateway::start(GatewayConfig {
         mo_destination: Some(format!("127.0.0.1:{mo_port}").parse().unwrap()),
@@ -130,7 +134,7 @@ async fn rig(session_failure: f64) -> Rig {
     .unwrap();
     let mut tc = TransceiverConfig::new(IMEI);
     tc.session_time = Duration::from_millis(150);
-    tc.session_failure = session_failure;
+    transceiver(&mut tc);
     let modem = emulator::start(
         tc,
         TransceiverPort::Pty { link: None },
@@ -310,12 +314,18 @@ async fn no_service_for_a_while_then_the_message_goes() {
     r.gateway.stop().await;
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn failing_sessions_are_retried_until_the_message_goes() {
-    let mut r = rig(0.6).await;
-    for i in 0..3u32 {
-        r.vehicle.1.send(format!("try {i}").into_bytes()).unwrap();
-        r.vehicle.0.initiate_transmission(slot(1, 100 + i)).unwrap();
+/// The vehicle sends `count` frames (`"{text} {i}"`), one at a time, each
+/// reported sent (transmission `first_id + i`).
+async fn send_each(r: &mut Rig, text: &str, count: u32, first_id: u32) {
+    for i in 0..count {
+        r.vehicle
+            .1
+            .send(format!("{text} {i}").into_bytes())
+            .unwrap();
+        r.vehicle
+            .0
+            .initiate_transmission(slot(1, first_id + i))
+            .unwrap();
         let outcome = until(&mut r.vehicle.2, "a result", |s| match s {
             Seen::Result(o @ (TransmitOutcome::Sent | TransmitOutcome::Failed(_)), _) => {
                 Some(o.clone())
@@ -325,6 +335,12 @@ async fn failing_sessions_are_retried_until_the_message_goes() {
         .await;
         assert_eq!(outcome, TransmitOutcome::Sent, "message {i}");
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn failing_sessions_are_retried_until_the_message_goes() {
+    let mut r = rig(0.6).await;
+    send_each(&mut r, "try", 3, 100).await;
     let log = r.modem.log();
     assert!(!log.sessions_failed.is_empty(), "{log:?}");
     let mut got = Vec::new();
@@ -337,6 +353,56 @@ async fn failing_sessions_are_retried_until_the_message_goes() {
         got.push(String::from_utf8(mt.frame[0].clone()).unwrap());
     }
     assert_eq!(got, ["try 0", "try 1", "try 2"]);
+    r.modem.stop().await;
+    r.gateway.stop().await;
+}
+
+/// A session reported failed (MO status 18) after the gateway took its MO
+/// message: the vehicle sends the same message again under the same
+/// MOMSN, the gateway delivers it twice, and the shore hands it up once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_mo_message_delivered_again_under_its_momsn_is_received_once() {
+    let mut r = rig_with(|tc| {
+        tc.answer_lost = 0.5;
+        tc.seed = 3;
+    })
+    .await;
+    const MESSAGES: u32 = 4;
+    send_each(&mut r, "once", MESSAGES, 200).await;
+    let lost = r.modem.log().answers_lost;
+    assert!(lost >= 1, "the fault never happened: {:?}", r.modem.log());
+    // Every MO message the gateway took (the repeats too) delivered.
+    let log = tokio::time::timeout(LIMIT, async {
+        loop {
+            let log = r.gateway.gateway.log();
+            if log.mo_delivered >= u64::from(MESSAGES + lost) {
+                return log;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await
+    .expect("every MO message delivered");
+    assert_eq!(log.mo_received, u64::from(MESSAGES + lost), "{log:?}");
+    let mut got = Vec::new();
+    while got.len() < MESSAGES as usize {
+        let mt = until(&mut r.shore.2, "shore received", |s| match s {
+            Seen::Received(mt) if mt.r#type() == TransmissionType::Data => Some(mt.clone()),
+            _ => None,
+        })
+        .await;
+        got.push(String::from_utf8(mt.frame[0].clone()).unwrap());
+    }
+    // A repeat would follow its first delivery at once: none comes.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    while let Ok(s) = r.shore.2.try_recv() {
+        if let Seen::Received(mt) = s {
+            if mt.r#type() == TransmissionType::Data {
+                got.push(String::from_utf8(mt.frame[0].clone()).unwrap());
+            }
+        }
+    }
+    assert_eq!(got, ["once 0", "once 1", "once 2", "once 3"]);
     r.modem.stop().await;
     r.gateway.stop().await;
 }

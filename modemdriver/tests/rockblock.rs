@@ -130,6 +130,11 @@ struct Rig {
 /// The emulators and the vehicle's driver; the shore's webhook is to be
 /// on `webhook_port` (started by [`shore`]).
 async fn rig(format: MoFormat) -> Rig {
+    rig_with(format, |_| {}).await
+}
+
+/// As [`rig`], the transceiver's configuration changed by `transceiver`.
+async fn rig_with(format: MoFormat, transceiver: impl FnOnce(&mut TransceiverConfig)) -> Rig {
     let webhook_port = free_port();
     let mut target = WebhookTarget::new(
         HttpUrl::parse(&format!("http://127.0.0.1:{webhook_port}"), "/rockblock").unwrap(),
@@ -156,6 +161,7 @@ async fn rig(format: MoFormat) -> Rig {
     .unwrap();
     let mut tc = TransceiverConfig::new(IMEI);
     tc.session_time = Duration::from_millis(150);
+    transceiver(&mut tc);
     let modem = emulator::start(
         tc,
         TransceiverPort::Pty { link: None },
@@ -564,3 +570,52 @@ async fn a_shore_configuration_without_its_key_is_refused_with_the_field() {
 
 /// The private key of a pair that is not the emulator's (a forger's).
 const OTHER_PRIVATE_KEY: &str = include_str!("data/rockblock-forger-TEST-ONLY-private-key.pem");
+
+/// A session reported failed (MO status 18) after the gateway took its MO
+/// message: RockBLOCK posts the message again with the same `momsn`, and
+/// the shore hands it up once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_post_repeating_a_momsn_is_received_once() {
+    let mut r = rig_with(MoFormat::Json, |tc| {
+        tc.answer_lost = 0.5;
+        tc.seed = 3;
+    })
+    .await;
+    let mut shore = shore(&r).await;
+    for i in 0..4u32 {
+        r.vehicle.1.send(format!("post {i}").into_bytes()).unwrap();
+        r.vehicle.0.initiate_transmission(slot(1, 300 + i)).unwrap();
+        until(&mut r.vehicle.2, "vehicle sent", |s| {
+            matches!(s, Seen::Result(TransmitOutcome::Sent, _)).then_some(())
+        })
+        .await;
+    }
+    let lost = u64::from(r.modem.log().answers_lost);
+    assert!(lost >= 1, "the fault never happened");
+    tokio::time::timeout(LIMIT, async {
+        while r.gateway.gateway.log().mo_delivered < 4 + lost {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await
+    .expect("every post answered 200, the repeats too");
+    let mut got = Vec::new();
+    while got.len() < 4 {
+        let mt = until(&mut shore.2, "shore received", |s| match s {
+            Seen::Received(mt) if mt.r#type() == TransmissionType::Data => Some(mt.clone()),
+            _ => None,
+        })
+        .await;
+        got.push(String::from_utf8(mt.frame[0].clone()).unwrap());
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    while let Ok(s) = shore.2.try_recv() {
+        if let Seen::Received(mt) = s {
+            if mt.r#type() == TransmissionType::Data {
+                got.push(String::from_utf8(mt.frame[0].clone()).unwrap());
+            }
+        }
+    }
+    assert_eq!(got, ["post 0", "post 1", "post 2", "post 3"]);
+    stop(r).await;
+}

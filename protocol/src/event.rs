@@ -151,7 +151,9 @@ pub struct Ack {
     pub msg: Value,
 }
 
-/// `{"event": "expire", "expire": TYPE, "id", "msg"}`.
+/// `{"event": "expire", "expire": TYPE, "id", "msg"}`, and `"relay"` and
+/// `"hop_limit"` when a relay dropped it (a routed message past the relay's
+/// hop limit, told at once).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 #[serde(tag = "event", rename = "expire")]
 pub struct Expire {
@@ -162,6 +164,12 @@ pub struct Expire {
     pub id: Option<u64>,
     /// The message.
     pub msg: Value,
+    /// The relay that dropped it, when one did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relay: Option<i32>,
+    /// The hop limit it reached at that relay.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hop_limit: Option<u32>,
 }
 
 /// `{"event": "drop", "drop": TYPE, "id", "msg"}`.

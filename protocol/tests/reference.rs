@@ -154,6 +154,15 @@ fn events() -> Vec<Event> {
             expire: "goby.example.Command".into(),
             id: Some(1),
             msg: json!({}),
+            relay: None,
+            hop_limit: None,
+        }),
+        Event::Expire(Expire {
+            expire: "goby.example.Command".into(),
+            id: Some(2),
+            msg: json!({}),
+            relay: Some(3),
+            hop_limit: Some(1),
         }),
         Event::Drop(DropEvent {
             drop: "goby.example.Command".into(),

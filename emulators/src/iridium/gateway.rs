@@ -281,10 +281,32 @@ impl Gateway {
     /// The gateway's part of a session of `imei`: takes `mo` (queued for
     /// the shore), gives the first MT message queued.
     pub fn session(&self, imei: &str, mo: Option<Vec<u8>>, momsn: u16) -> GatewaySession {
+        self.session_with(imei, mo, momsn, true)
+    }
+
+    /// A session whose answer will not reach the transceiver (it tells its
+    /// host MO status 18): `mo` is taken and delivered all the same, no MT
+    /// message is given.
+    pub fn session_answer_lost(
+        &self,
+        imei: &str,
+        mo: Option<Vec<u8>>,
+        momsn: u16,
+    ) -> GatewaySession {
+        self.session_with(imei, mo, momsn, false)
+    }
+
+    fn session_with(
+        &self,
+        imei: &str,
+        mo: Option<Vec<u8>>,
+        momsn: u16,
+        give_mt: bool,
+    ) -> GatewaySession {
         let mut state = self.state();
         let (mt, queued) = match state.modems.get_mut(imei) {
             Some(m) => {
-                let mt = m.queue.pop_front();
+                let mt = if give_mt { m.queue.pop_front() } else { None };
                 if m.queue.is_empty() {
                     m.rings_left = 0;
                     m.next_ring = None;

@@ -271,8 +271,16 @@ async fn run(
                     // of the transceiver's.
                     let _ = device.stream.write_all(&bytes).await;
                 }
-                TxOutput::Session { mo, momsn } => {
-                    let reply = gateway.session(&imei, mo, momsn);
+                TxOutput::Session {
+                    mo,
+                    momsn,
+                    answer_lost,
+                } => {
+                    let reply = if answer_lost {
+                        gateway.session_answer_lost(&imei, mo, momsn)
+                    } else {
+                        gateway.session(&imei, mo, momsn)
+                    };
                     queue.extend(t.handle(Instant::now(), TxInput::Gateway(reply)));
                 }
                 TxOutput::Dial { number } => {

@@ -17,6 +17,11 @@
 //!   still does after the session: only `AT+SBDD0` empties it) to the
 //!   gateway, the next MT message (if any) into the MT buffer, and
 //!   `+SBDIX: 0, <MOMSN>, <MT status>, <MTMSN>, <MT length>, <MT queued>`;
+//!   with `answer_lost`, a share of the sessions carrying an MO message
+//!   hand it to the gateway and yet answer `+SBDIX: 18, …` (RF drop), as
+//!   the constellation sometimes does: the MOMSN is not advanced and the
+//!   MO buffer kept, so the host's next session sends the same message
+//!   again under the same MOMSN (no MT message is given in such a session);
 //! - `AT+SBDRB`: the MT buffer as length, message and checksum, then `OK`
 //!   (an empty buffer: length 0);
 //! - `AT+SBDDn`, `AT+SBDS`, `AT+CSQ`, `AT+CSQF`, `AT+CGSN`;
@@ -67,6 +72,9 @@ pub struct TransceiverConfig {
     pub radio: RadioConfig,
     /// Probability that a session with service fails.
     pub session_failure: f64,
+    /// Probability that a session whose MO message reached the gateway is
+    /// reported failed to the host (MO status 18), the MOMSN not advanced.
+    pub answer_lost: f64,
     /// Seed of the session failures.
     pub seed: u64,
     /// A voice-enabled transceiver's calls are dropped this long after
@@ -87,6 +95,7 @@ impl TransceiverConfig {
             no_service_time: Duration::from_millis(200),
             radio: RadioConfig::default(),
             session_failure: 0.0,
+            answer_lost: 0.0,
             seed: 1,
             call_drop_after: None,
             call_drop_bytes: None,
@@ -131,6 +140,9 @@ pub enum TxOutput {
         mo: Option<Vec<u8>>,
         /// Its sequence number.
         momsn: u16,
+        /// The gateway takes the MO message but its answer will not reach
+        /// the host: no MT message is to be given ([`crate::iridium::gateway::Gateway::session_answer_lost`]).
+        answer_lost: bool,
     },
     /// Make a data call to `number`; answer with [`TxInput::CallConnected`]
     /// or [`TxInput::CallFailed`].
@@ -181,6 +193,8 @@ struct Session {
     fails: Option<u8>,
     /// Service at its start (lost since: RF drop).
     had_service: bool,
+    /// The gateway takes the MO message, the host is told 18.
+    answer_lost: bool,
 }
 
 /// What the transceiver did, for tests and reports.
@@ -192,6 +206,9 @@ pub struct TransceiverLog {
     pub sessions_ok: u32,
     /// Sessions that failed, by MO status.
     pub sessions_failed: Vec<u8>,
+    /// Sessions reported failed (18) although the gateway took their MO
+    /// message (`answer_lost`).
+    pub answers_lost: u32,
     /// MO messages handed to the gateway.
     pub mo_sent: u32,
     /// MT messages received.
@@ -543,16 +560,21 @@ impl Transceiver {
                 ends: self.now + self.config.no_service_time,
                 fails: Some(MoStatus::NO_SERVICE.0),
                 had_service: false,
+                answer_lost: false,
             });
             return;
         }
         let p = self.config.session_failure.clamp(0.0, 1.0);
         let fails = (p > 0.0 && self.rng.random_bool(p))
             .then(|| FAILURE_CODES[self.rng.random_range(0..FAILURE_CODES.len())]);
+        let lost = self.config.answer_lost.clamp(0.0, 1.0);
+        let answer_lost =
+            fails.is_none() && self.mo.is_some() && lost > 0.0 && self.rng.random_bool(lost);
         self.session = Some(Session {
             ends: self.now + self.config.session_time,
             fails,
             had_service: true,
+            answer_lost,
         });
     }
 
@@ -643,16 +665,32 @@ impl Transceiver {
                 self.out.push(TxOutput::Session {
                     mo: self.mo.clone(),
                     momsn: self.momsn,
+                    answer_lost: session.answer_lost,
                 });
             }
         }
     }
 
     fn gateway_reply(&mut self, reply: GatewaySession) {
-        if self.session.take().is_none() {
+        let Some(session) = self.session.take() else {
+            return;
+        };
+        let momsn = self.momsn;
+        if session.answer_lost {
+            // The gateway has the message; the host hears of a failure.
+            self.log.answers_lost += 1;
+            self.log.sessions_failed.push(MoStatus::RF_DROP.0);
+            self.answer(ModemLine::Session(SessionReply {
+                mo_status: MoStatus::RF_DROP,
+                momsn,
+                mt_status: MtStatus::Error,
+                mtmsn: 0,
+                mt_length: 0,
+                mt_queued: reply.queued,
+            }));
+            self.after_session();
             return;
         }
-        let momsn = self.momsn;
         if let Some(mo) = &self.mo {
             self.momsn = self.momsn.wrapping_add(1);
             self.log.mo_sent += 1;
@@ -740,7 +778,7 @@ mod tests {
         out.into_iter()
             .map(|o| match o {
                 TxOutput::Write(b) => String::from_utf8_lossy(&b).into_owned(),
-                TxOutput::Session { mo, momsn } => format!("<session {momsn} {mo:?}>"),
+                TxOutput::Session { mo, momsn, .. } => format!("<session {momsn} {mo:?}>"),
                 TxOutput::Dial { number } => format!("<dial {number}>"),
                 TxOutput::CallData(b) => format!("<call {}>", String::from_utf8_lossy(&b)),
                 TxOutput::HangUp => "<hang up>".to_string(),
@@ -845,6 +883,54 @@ mod tests {
         let out = written(t.handle(end + Duration::from_secs(1), TxInput::Tick));
         assert!(out.starts_with("+SBDIX: 18, "), "{out}");
         assert_eq!(t.log.sessions_failed, vec![32, 18]);
+    }
+
+    #[test]
+    fn a_lost_answer_sends_the_same_message_again_under_the_same_momsn() {
+        let t0 = Instant::now();
+        let mut config = TransceiverConfig::new("300234010753370");
+        config.answer_lost = 0.5;
+        config.seed = 7;
+        config.session_time = Duration::from_millis(10);
+        let mut t = Transceiver::new(config, t0);
+        host(&mut t, t0, "ATE0\r");
+        host(&mut t, t0, "AT+SBDWB=2\r");
+        let mut block = b"hi".to_vec();
+        block.extend_from_slice(&at::checksum(b"hi").to_be_bytes());
+        t.handle(t0, TxInput::Host(block));
+        let mut at = t0;
+        let mut handed = Vec::new();
+        let mut answers = Vec::new();
+        for _ in 0..40 {
+            host(&mut t, at, "AT+SBDIX\r");
+            at += Duration::from_millis(10);
+            for o in t.handle(at, TxInput::Tick) {
+                if let TxOutput::Session {
+                    momsn, answer_lost, ..
+                } = o
+                {
+                    handed.push((momsn, answer_lost));
+                    answers.push(written(
+                        t.handle(at, TxInput::Gateway(GatewaySession::default())),
+                    ));
+                }
+            }
+        }
+        let lost = handed.iter().filter(|(_, l)| *l).count();
+        assert!(lost > 5 && lost < 35, "{handed:?}");
+        assert_eq!(t.log.answers_lost as usize, lost);
+        for (i, (momsn, l)) in handed.iter().enumerate() {
+            // A lost answer: 18, and the next session hands the gateway the
+            // same MOMSN again.
+            if *l {
+                assert!(answers[i].starts_with(&format!("+SBDIX: 18, {momsn}, 2")));
+                if let Some((next, _)) = handed.get(i + 1) {
+                    assert_eq!(next, momsn);
+                }
+            } else {
+                assert!(answers[i].starts_with(&format!("+SBDIX: 0, {momsn}, 0")));
+            }
+        }
     }
 
     #[test]

@@ -147,6 +147,13 @@ impl Core {
             for (event, entry) in receipt.events.clone() {
                 self.hand_over(event, entry, &Reception::default());
             }
+            for dropped in receipt.route_drops.clone() {
+                let event = Arc::new(DaemonEvent::RouteDropped(dropped));
+                let _ = self.events.send(event.clone());
+                if let Some(log) = &mut self.mission_log {
+                    log.event(now, &event, None);
+                }
+            }
             self.report_transfers(receipt.transfers.clone());
             for arrived in &receipt.arrived {
                 let routed = Reception {

@@ -13,7 +13,9 @@
 //!
 //! And Goby3's subnet rule: a next hop is reachable only on this node's
 //! subnet (`id & subnet_mask`, by default `0xFFFFFF00`: modem ids 0-255 are
-//! one subnet), the one its link reaches.
+//! one subnet), the one its link reaches. That holds for a destination
+//! reached straight too: one off this node's subnet that neither the route
+//! nor a default gateway leads to has no route ([`NextHop::Unreachable`]).
 
 use protos::goby::apps::protobuf::NetworkConfig;
 
@@ -33,7 +35,8 @@ pub enum NextHop {
     Direct,
     /// To this relay first.
     Via(i32),
-    /// Nowhere: the next hop the route gives is off this node's subnet.
+    /// Nowhere: the next hop the route gives, or the destination itself
+    /// when nothing leads there, is off this node's subnet.
     Unreachable(String),
 }
 
@@ -182,15 +185,31 @@ impl RouteTable {
         if dest == queue::BROADCAST_ID || dest == self.me {
             return NextHop::Direct;
         }
-        match self.goby3_next_hop(dest) {
-            None => NextHop::Direct,
-            Some(next) if next == dest || next == self.me => NextHop::Direct,
-            Some(next) if !self.same_subnet(next) => NextHop::Unreachable(format!(
-                "the route's next hop towards {dest} is {next}, on subnet {:#x}, not this node's ({:#x})",
+        let next = match self.goby3_next_hop(dest) {
+            Some(next) if next != self.me => next,
+            _ => dest,
+        };
+        if !self.same_subnet(next) {
+            let (subnet, mine) = (
                 next as u32 & self.subnet_mask,
-                self.me as u32 & self.subnet_mask
-            )),
-            Some(next) => NextHop::Via(next),
+                self.me as u32 & self.subnet_mask,
+            );
+            return NextHop::Unreachable(if next == dest {
+                format!(
+                    "no route to {dest}: it is on subnet {subnet:#x}, not this node's ({mine:#x}, \
+                     subnet_mask {:#x}), and neither the route nor a default gateway leads there",
+                    self.subnet_mask
+                )
+            } else {
+                format!(
+                    "the route's next hop towards {dest} is {next}, on subnet {subnet:#x}, not this node's ({mine:#x})"
+                )
+            });
+        }
+        if next == dest {
+            NextHop::Direct
+        } else {
+            NextHop::Via(next)
         }
     }
 
@@ -246,6 +265,29 @@ mod tests {
         assert_eq!(t.next_hop(3), NextHop::Via(2));
         assert_eq!(t.next_hop(2), NextHop::Direct);
         assert_eq!(t.next_hop(0), NextHop::Direct);
+    }
+
+    #[test]
+    fn a_destination_off_the_subnet_that_nothing_leads_to_has_no_route() {
+        let config = |gateway: Option<u32>| NetworkConfig {
+            route: Some(StaticRoute { hop: vec![1, 2, 3] }),
+            subnet_mask: Some(0xFFFF_FFF0),
+            default_gateway: gateway,
+            ..Default::default()
+        };
+        let t = RouteTable::from_config(&config(None), 1).unwrap();
+        assert!(
+            matches!(t.next_hop(20), NextHop::Unreachable(ref r) if r.contains("no route to 20") && r.contains("0x10")),
+            "{:?}",
+            t.next_hop(20)
+        );
+        assert!(t.link_dest(20).is_err());
+        // On this node's subnet: straight there, as before; the route as before.
+        assert_eq!(t.next_hop(9), NextHop::Direct);
+        assert_eq!(t.next_hop(3), NextHop::Via(2));
+        // A default gateway on the subnet leads there.
+        let t = RouteTable::from_config(&config(Some(2)), 1).unwrap();
+        assert_eq!(t.next_hop(20), NextHop::Via(2));
     }
 
     #[test]

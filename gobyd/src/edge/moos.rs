@@ -531,6 +531,7 @@ async fn bridge(
                             received_publications(&settings, received)
                         }
                         DaemonEvent::Queue { event, .. } => publications(&settings, event),
+                        DaemonEvent::RouteDropped(d) => publications(&settings, &d.expired),
                         DaemonEvent::Modem(m) => modem_publications(&settings, m),
                         DaemonEvent::Transfer(e) if settings.files => {
                             let mut v = transfer_value(e);

@@ -52,6 +52,23 @@ pub enum DaemonEvent {
     Transfer(TransferEvent),
     /// A link's status changed (at start, and at each change).
     Link(LinkStatus),
+    /// A routed message this node originated was dropped by a relay, which
+    /// told this node: its client hears `expire` at once, naming the relay
+    /// and the limit.
+    RouteDropped(RouteDropped),
+}
+
+/// A routed message dropped on its way (the network layer's hop limit).
+#[derive(Debug, Clone)]
+pub struct RouteDropped {
+    /// The message's expiry ([`QueueEvent::Expired`]), as the clients hear it.
+    pub expired: QueueEvent,
+    /// Its journal id (the id its client was given).
+    pub entry: u64,
+    /// The relay that dropped it.
+    pub relay: i32,
+    /// The relays it had passed there, that relay's hop limit.
+    pub hop_limit: u32,
 }
 
 /// A [`DaemonEvent`] as the broadcast channel carries it, shared by every

@@ -276,6 +276,17 @@ pub async fn publish_command(
     destination: i32,
     note: &str,
 ) {
+    let reply = publish_command_reply(publisher, destination, note).await;
+    assert!(reply.is_ok(), "{reply:?}");
+}
+
+/// Publishes a `Command` for `destination` (with `note`) on `publisher`;
+/// the daemon's reply, accepted or refused.
+pub async fn publish_command_reply(
+    publisher: &tokio::sync::mpsc::Sender<gobyd::event::Publish>,
+    destination: i32,
+    note: &str,
+) -> gobyd::event::PublishReply {
     use prost_reflect::ReflectMessage;
     let command = protos::goby::example::Command {
         destination,
@@ -291,6 +302,5 @@ pub async fn publish_command(
         ))
         .await
         .expect("the daemon takes publications");
-    let reply = answer.await.expect("the daemon answers");
-    assert!(reply.is_ok(), "{reply:?}");
+    answer.await.expect("the daemon answers")
 }

@@ -148,11 +148,25 @@ pub fn transceiver(
     failure: f64,
     seed: u64,
 ) -> TransceiverHandle {
+    transceiver_with(link, gateway, session, failure, seed, |_| {})
+}
+
+/// As [`transceiver`], its configuration changed by `change` (e.g. a
+/// fault of its own) before it starts.
+pub fn transceiver_with(
+    link: &Path,
+    gateway: &GatewayHandle,
+    session: Duration,
+    failure: f64,
+    seed: u64,
+    change: impl FnOnce(&mut TransceiverConfig),
+) -> TransceiverHandle {
     let mut config = TransceiverConfig::new(IMEI);
     config.session_time = session;
     config.no_service_time = session / 2;
     config.session_failure = failure;
     config.seed = seed;
+    change(&mut config);
     emulator::start(
         config,
         TransceiverPort::Pty {

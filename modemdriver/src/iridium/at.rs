@@ -254,6 +254,30 @@ impl fmt::Display for BufferStatus {
     }
 }
 
+/// An automatic registration event, `+AREG:<event>,<reg error>` (ISU AT
+/// Command Reference, `+SBDAREG`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AutoRegistration {
+    /// 0: the transceiver suggests a registration (mode 2, "ask"); 1: it
+    /// registered by itself (mode 1); 2: its registration failed and is
+    /// tried again after a delay (mode 1).
+    pub event: u8,
+    /// The registration error: 0 none; 2–15 reported by the gateway (15
+    /// access denied); 16–36 by the transceiver (17 gateway not
+    /// responding, 18 RF drop, 32 no network service, 36 wait 3 minutes
+    /// since the last registration), as the MO status codes of a session.
+    pub error: u8,
+}
+
+impl AutoRegistration {
+    /// The transceiver asks the host to register (mode 2).
+    pub const SUGGESTED: u8 = 0;
+    /// The transceiver registered by itself.
+    pub const REGISTERED: u8 = 1;
+    /// The transceiver's registration failed; it tries again later.
+    pub const FAILED: u8 = 2;
+}
+
 /// A line from the transceiver (CR LF removed).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ModemLine {
@@ -288,6 +312,9 @@ pub enum ModemLine {
     },
     /// `+SBDS:`: the buffers' status.
     Buffers(BufferStatus),
+    /// `+AREG:<event>,<reg error>`: an automatic registration event
+    /// (unsolicited, with `AT+SBDAREG=1` or `2`).
+    AutoRegistration(AutoRegistration),
     /// 15 digits: the IMEI (answer to `AT+CGSN`).
     Imei(String),
     /// A command echoed back (echo on).
@@ -309,6 +336,7 @@ impl fmt::Display for ModemLine {
             ModemLine::SignalQuality(n) => write!(f, "+CSQ:{n}"),
             ModemLine::Indicator { indicator, value } => write!(f, "+CIEV:{indicator},{value}"),
             ModemLine::Buffers(status) => write!(f, "{status}"),
+            ModemLine::AutoRegistration(r) => write!(f, "+AREG:{},{}", r.event, r.error),
             ModemLine::Imei(imei) => write!(f, "{imei}"),
             ModemLine::Echo(text) => write!(f, "{text}"),
         }
@@ -396,6 +424,13 @@ impl ModemLine {
                         indicator: in_range("+CIEV", "indicator", v[0])?,
                         value: in_range("+CIEV", "value", v[1])?,
                     }
+                } else if let Some(rest) = after("+AREG") {
+                    const WHAT: &str = "+AREG";
+                    let v = fields(WHAT, rest, 2)?;
+                    ModemLine::AutoRegistration(AutoRegistration {
+                        event: in_range(WHAT, "event", v[0])?,
+                        error: in_range(WHAT, "reg error", v[1])?,
+                    })
                 } else if let Some(rest) = after("+SBDS") {
                     const WHAT: &str = "+SBDS";
                     let v = fields(WHAT, rest, 4)?;
@@ -512,6 +547,14 @@ mod tests {
             })
         );
         assert_eq!(
+            ModemLine::parse(b"+AREG:1,0").unwrap(),
+            ModemLine::AutoRegistration(AutoRegistration { event: 1, error: 0 })
+        );
+        assert_eq!(
+            ModemLine::parse(b"+AREG: 2, 18").unwrap().to_string(),
+            "+AREG:2,18"
+        );
+        assert_eq!(
             ModemLine::parse(b"AT+SBDIX").unwrap(),
             ModemLine::Echo("AT+SBDIX".into())
         );
@@ -526,6 +569,8 @@ mod tests {
             b"+SBDIX: 0, 70000, 0, 0, 0, 0",
             b"+CSQ:9",
             b"+CIEV:x,1",
+            b"+AREG:1",
+            b"+AREG:1,300",
             b"\xff\xfe",
             b"OKAY",
         ] {

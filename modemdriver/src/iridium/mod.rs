@@ -11,6 +11,8 @@
 //!   (`IridiumShoreDriver`; with the `iridium-shore` feature, on by
 //!   default).
 //! - `shore_rudics`: the shore's RUDICS server (calls from vehicles), sans-IO.
+//! - `mo_repeats`: an MO message delivered again (same IMEI and MOMSN)
+//!   told apart from a new one.
 //! - [`directip`]: Iridium's DirectIP messages (MO, MT, confirmations).
 //! - `rockblock`: the RockBLOCK web service (MO webhook with its JWT, MT
 //!   POST).
@@ -19,6 +21,8 @@ pub mod at;
 pub mod directip;
 pub mod driver;
 pub mod frame;
+#[cfg(feature = "iridium-shore")]
+pub mod mo_repeats;
 pub mod reader;
 #[cfg(feature = "iridium-shore")]
 pub mod rockblock;

@@ -73,6 +73,7 @@ use tokio::task::JoinHandle;
 
 use super::directip::{self, disposition, MoMessage, MtConfirmation, MtMessage};
 use super::frame::{self, Direction};
+use super::mo_repeats::MoRepeats;
 use super::rockblock::http::{self, HttpUrl};
 use super::rockblock::webhook::{self, WebhookConfig, WebhookEvent};
 use super::rockblock::{JwtVerifier, MtReply, MtRequest};
@@ -453,6 +454,7 @@ impl IridiumShoreDriver {
             sent: VecDeque::new(),
             rudics_frame_bytes: rudics_frame_bytes(config),
             acked: VecDeque::new(),
+            mo_repeats: MoRepeats::new(),
         };
         Ok(Driver::spawn("iridium_shore", move |ctx| {
             shore_task.run(listener, rudics, ctx)
@@ -492,6 +494,8 @@ struct RockblockMt {
 #[derive(Debug)]
 struct MoArrival {
     imei: String,
+    /// The transceiver's MO message sequence number, when delivered.
+    momsn: Option<u64>,
     payload: Vec<u8>,
     /// Unix seconds of the session, when known.
     time: Option<u64>,
@@ -548,6 +552,8 @@ struct Shore {
     rudics_frame_bytes: u32,
     /// Frames acked by the layer above (deferred acks): (src, frame).
     acked: VecDeque<(i32, u32)>,
+    /// MO messages seen lately, for their repeated deliveries.
+    mo_repeats: MoRepeats,
 }
 
 /// What the RUDICS server's tasks tell the driver.
@@ -1077,6 +1083,7 @@ impl Shore {
     fn mo_message(&mut self, arrival: MoArrival, events: &EventSink) -> Vec<ModemTransmission> {
         let MoArrival {
             imei,
+            momsn,
             payload,
             time,
             peer,
@@ -1094,6 +1101,13 @@ impl Shore {
             let _ = taken.send(());
         }
         if payload.is_empty() {
+            return Vec::new();
+        }
+        if !self.mo_repeats.first(&imei, momsn, &payload) {
+            tracing::info!(
+                "MO message {} of IMEI {imei} delivered again (its session was reported failed after the gateway took it): taken once",
+                momsn.unwrap_or_default()
+            );
             return Vec::new();
         }
         let mut mt = match frame::decode_sbd(&payload) {
@@ -1199,6 +1213,7 @@ async fn directip_listener(
             let input = match MoMessage::decode(&bytes) {
                 Ok(mo) => MoInput::Arrival(MoArrival {
                     imei: mo.header.imei.clone(),
+                    momsn: Some(u64::from(mo.header.momsn)),
                     payload: mo.payload.unwrap_or_default(),
                     time: Some(u64::from(mo.header.time_of_session)),
                     peer: peer.to_string(),
@@ -1243,6 +1258,7 @@ async fn rockblock_webhook(
                     .as_deref()
                     .and_then(super::rockblock::transmit_time_seconds),
                 imei: post.imei,
+                momsn: post.momsn,
                 payload: post.data,
                 peer: format!("RockBLOCK webhook from {peer}"),
                 raw: body,

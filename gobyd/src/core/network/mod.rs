@@ -44,6 +44,7 @@ use crate::config::Problem;
 use crate::core::fragment::Content;
 use crate::core::outbox::{journaled_message, Accepted, Outbox};
 use crate::core::route::{NextHop, RouteTable, MAX_NETWORK_ID};
+use crate::event::RouteDropped;
 use origin::{Origin, Pending};
 use transfers::{Produced, TransferEvent, Transfers};
 use wire::{Header, NetMessage};
@@ -224,11 +225,14 @@ pub struct Receipt {
     pub refuse_ack: bool,
     /// End-to-end acks owed once `arrived` is on record: (origin, number).
     owed_acks: Vec<(i32, u32)>,
+    /// Routed messages of this node's a relay dropped, told at once.
+    pub route_drops: Vec<RouteDropped>,
 }
 
 /// What became of a message to forward.
 enum Forward {
-    /// Journaled and queued for the next hop (custody taken).
+    /// Journaled and queued for the next hop (custody taken), or dropped
+    /// with a notice to its origin journaled and queued.
     Journaled,
     /// A repeat, or dropped (a loop, the hop limit, no route): nothing to
     /// keep, the hop may be acknowledged.
@@ -596,8 +600,10 @@ impl Network {
     /// A queue event as the clients are told it: an event of a routed
     /// message this node originated is told as the message it carries (its
     /// first hop's ack is not told: the client hears `ack` at the
-    /// end-to-end ack); an event of a message this node forwards or of
-    /// the layer's own is logged, not told (`None`).
+    /// end-to-end ack); the size of the layer's queues is told as it is
+    /// (at a relay: what it holds in custody); another event of a message
+    /// this node forwards or of the layer's own is logged, not told
+    /// (`None`).
     pub fn queue_event(
         &mut self,
         event: QueueEvent,
@@ -612,6 +618,11 @@ impl Network {
             _ => return Some((event, entry)),
         };
         if !wire::is_network_id(dccl_id) {
+            return Some((event, entry));
+        }
+        if matches!(event, QueueEvent::QueueSize { .. }) {
+            // The layer's queues as they are: at a relay, the messages in
+            // its custody.
             return Some((event, entry));
         }
         let now = self.now_hint;
@@ -908,6 +919,28 @@ impl Network {
                     route: Some(route),
                 });
             }
+            NetMessage::RouteAck(m) if m.hop_limit.is_some() => {
+                let limit = m.hop_limit.unwrap_or_default();
+                for number in m.number {
+                    match self.origin.dropped(number as u16) {
+                        Ok(Some(p)) => {
+                            tracing::warn!(
+                                id = p.entry,
+                                relay = header.origin,
+                                "routed {} to node {}: dropped by node {} at its hop limit ({limit})",
+                                p.name,
+                                p.dest,
+                                header.origin
+                            );
+                            if let Some(d) = self.drop_event(&p, header.origin, limit) {
+                                receipt.route_drops.push(d);
+                            }
+                        }
+                        Ok(None) => {}
+                        Err(e) => tracing::error!("routes.log: {e}"),
+                    }
+                }
+            }
             NetMessage::RouteAck(m) => {
                 for number in m.number {
                     match self.origin.acked(header.origin, number as u16) {
@@ -928,6 +961,24 @@ impl Network {
             // Fragments, their acks and file requests are the transfers'.
             NetMessage::Fragment(_) | NetMessage::FragmentAck(_) | NetMessage::FileRequest(_) => {}
         }
+    }
+
+    /// The client's `expire` of a routed message `relay` dropped at its
+    /// hop limit `limit`.
+    fn drop_event(&self, p: &Pending, relay: i32, limit: u32) -> Option<RouteDropped> {
+        let desc = self.codec.descriptor(&p.name)?;
+        let message = DynamicMessage::decode(desc, p.message.as_slice()).ok()?;
+        let dccl_id = self.codec.id_of(&p.name).ok()?;
+        Some(RouteDropped {
+            expired: QueueEvent::Expired {
+                message,
+                id: p.entry,
+                dccl_id,
+            },
+            entry: p.entry,
+            relay,
+            hop_limit: limit,
+        })
     }
 
     /// The client's `ack` of a routed message acknowledged by `by`.
@@ -1008,7 +1059,12 @@ impl Network {
                 "{name} passed {} relays, the hop limit: dropped",
                 header.hops.len()
             );
-            return Ok(Forward::Skipped);
+            return Ok(match &message {
+                NetMessage::Routed(m) if m.ack => {
+                    self.tell_dropped(header.origin, m.number, outbox, now)?
+                }
+                _ => Forward::Skipped,
+            });
         }
         let next = match self.table.link_dest(header.final_dest) {
             Ok(next) => next,
@@ -1069,6 +1125,38 @@ impl Network {
         }
     }
 
+    /// Tells `origin` that its routed message `number` was dropped here for
+    /// the hop limit: a [`RouteAck`] with `hop_limit`, journaled (synced by
+    /// [`receive`](Self::receive)) and routed back to it.
+    fn tell_dropped(
+        &mut self,
+        origin: i32,
+        number: u32,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Result<Forward, crate::core::outbox::OutboxError> {
+        let next = match self.table.link_dest(origin) {
+            Ok(next) => next,
+            Err(reason) => {
+                tracing::warn!("the hop-limit drop cannot be told to node {origin}: {reason}");
+                return Ok(Forward::Skipped);
+            }
+        };
+        let lifetime = (self.net_ttl("goby.acomms.protobuf.RouteAck") / SECOND) as u32;
+        let notice = NetMessage::RouteAck(RouteAck {
+            next_hop: next,
+            origin: self.me,
+            final_dest: origin,
+            hop: Vec::new(),
+            lifetime,
+            number: vec![number],
+            hop_limit: Some(self.hop_limit as u32),
+        });
+        let created = self.created_for(notice.type_name(), lifetime, now);
+        outbox.accept(notice.to_dynamic(), None, Some(created))?;
+        Ok(Forward::Journaled)
+    }
+
     /// The routed messages of `receipt` are on record (or the record
     /// failed and they were handed over all the same): their end-to-end
     /// acks are journaled (synced) and queued back to their origins.
@@ -1097,6 +1185,7 @@ impl Network {
                     hop: Vec::new(),
                     lifetime,
                     number: chunk.to_vec(),
+                    hop_limit: None,
                 });
                 let created = self.created_for(ack.type_name(), lifetime, now);
                 if let Err(e) = outbox.accept(ack.to_dynamic(), None, Some(created)) {

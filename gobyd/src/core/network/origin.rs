@@ -180,6 +180,22 @@ impl Origin {
         self.done(entry)
     }
 
+    /// A relay dropped publication `number` (the hop limit): the message,
+    /// no longer waited for. The relay does not say the final destination:
+    /// the number alone names it (numbers repeat only every 65536
+    /// publications).
+    pub fn dropped(&mut self, number: u16) -> io::Result<Option<Pending>> {
+        let Some(entry) = self
+            .pending
+            .values()
+            .find(|p| p.number == number)
+            .map(|p| p.entry)
+        else {
+            return Ok(None);
+        };
+        self.done(entry)
+    }
+
     /// Message `entry` is no longer waited for (acked, expired, or gone
     /// from the queue before its first hop): returns it.
     pub fn done(&mut self, entry: u64) -> io::Result<Option<Pending>> {

@@ -275,6 +275,19 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             EX7,
         ),
         (DaemonEvent::Transfer(transfer(true)), EX8),
+        (
+            DaemonEvent::RouteDropped(crate::event::RouteDropped {
+                expired: QueueEvent::Expired {
+                    message: command(true),
+                    id: 9,
+                    dccl_id: 125,
+                },
+                entry: 9,
+                relay: 3,
+                hop_limit: 1,
+            }),
+            EX9,
+        ),
     ]
 }
 
@@ -458,6 +471,7 @@ const EX4: &str = r#"{"event":"modem_transmit","modem_transmit":{"src":1,"dest":
 const EX5: &str = r#"{"event":"modem_transmit","modem_transmit":{"src":1,"dest":2,"time":1700000000.123456,"rate":1,"frame":["AQI="]},"outcome":"nothing_to_send"}"#;
 const EX6: &str = r#"{"event":"mac_cycle_update","left":4}"#;
 const EX7: &str = r#"{"event":"driver_status","driver_status":"modem_silent","detail":"nothing heard from the modem for 2.5 s"}"#;
+const EX9: &str = r#"{"event":"expire","expire":"goby.example.Command","id":9,"msg":{"destination":2,"action":"GOTO","note":"x"},"relay":3,"hop_limit":1}"#;
 const EX8: &str = r#"{"event":"transfer","transfer":7,"direction":"out","peer":1,"name":"sonar.bin","bytes":20000,"fragments":400,"held":3,"state":"sending","sha256":"abababababababababababababababababababababababababababababababab"}"#;
 const R0: &str = r#"{"accepted":"goby.example.Command","id":1,"dropped":[{"id":0,"name":"goby.example.Command","msg":{"destination":0,"action":"HOLD"}}]}"#;
 const R1: &str = r#"{"subscribed":["ack"]}"#;
@@ -472,11 +486,12 @@ const E0: &str = r#"{"error":"nope \"x\"","reply":8}"#;
 const S0: &str = r#"{"subscribed":["ack","link"],"reply":9}"#;
 const D0: &str = r#"{"driver_specific":"goby.acomms.protobuf.MicroModemSpecific","reply":10}"#;
 const LOST12: &str = r#"{"event":"lost","count":12}"#;
-const MQTT: [&str; 7] = [
+const MQTT: [&str; 8] = [
     r#"fleet/2/rx/goby.example.Command {"type":"goby.example.Command","src":3,"dest":2,"time":1700000002.0,"msg":{"destination":2,"action":"GOTO","note":"x"},"link":{"src":1,"dest":2,"time":1700000001.5,"rate":1,"frames":1}}"#,
     r#"fleet/2/ack/goby.example.Command {"type":"goby.example.Command","by":2,"frame":0,"time":1700000002.0,"msg":{"destination":2,"action":"GOTO","note":"x"}}"#,
     r#"fleet/2/driver {"status":"modem_silent","detail":"nothing heard from the modem for 2.5 s","time":1700000002.0}"#,
     r#"fleet/2/transfer {"sha256":"abababababababababababababababababababababababababababababababab","transfer":7,"direction":"out","peer":1,"name":"sonar.bin","bytes":20000,"fragments":400,"held":3,"state":"sending","time":1700000002.0}"#,
+    r#"fleet/2/expire/goby.example.Command {"type":"goby.example.Command","time":1700000002.0,"msg":{"destination":2,"action":"GOTO","note":"x"},"relay":3,"hop_limit":1}"#,
     r#"fleet/2/accepted {"accepted":"goby.example.Command","id":9,"dropped":[{"id":3,"name":"goby.example.Command","msg":{"destination":2,"action":"GOTO","note":"x"}}],"topic":"fleet/2/tx/goby.example.Command","msg":{"destination": 2}}"#,
     r#"fleet/2/file/reply {"file_send":7,"joined":true,"transfer":{"event":"transfer","transfer":7,"direction":"out","peer":1,"name":"sonar.bin","bytes":20000,"fragments":400,"held":3,"state":"sending","sha256":"abababababababababababababababababababababababababababababababab"},"topic":"fleet/2/file/send"}"#,
     r#"fleet/2/file/reply {"transfers":[{"event":"transfer","transfer":7,"direction":"out","peer":1,"name":"sonar.bin","bytes":20000,"fragments":400,"held":3,"state":"sending","sha256":"abababababababababababababababababababababababababababababababab"}],"topic":"fleet/2/file/send"}"#,

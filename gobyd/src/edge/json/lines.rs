@@ -271,6 +271,7 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
         }),
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
         DaemonEvent::Link(_) => Some(Topic::Link),
+        DaemonEvent::RouteDropped(_) => Some(Topic::Expire),
     }
 }
 
@@ -295,6 +296,14 @@ pub fn event(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<
         DaemonEvent::Link(status) => Event::LinkStatus(line::LinkStatus {
             link_status: message_json(&status.transcode_to_dynamic()),
         }),
+        DaemonEvent::RouteDropped(d) => match queue_line(&d.expired, Some(d.entry), queue_name)? {
+            Event::Expire(e) => Event::Expire(Expire {
+                relay: Some(d.relay),
+                hop_limit: Some(d.hop_limit),
+                ..e
+            }),
+            other => other,
+        },
     })
 }
 
@@ -338,6 +347,8 @@ fn queue_line(
             expire: name(message),
             id: entry,
             msg: message_json(message),
+            relay: None,
+            hop_limit: None,
         }),
         QueueEvent::Dropped { message, .. } => Event::Drop(line::Dropped {
             drop: name(message),

@@ -99,6 +99,14 @@ impl Formatter {
                 message_json(&status.transcode_to_dynamic()),
                 true,
             )),
+            DaemonEvent::RouteDropped(d) => {
+                let mut out = self.queue_event(&d.expired, now)?;
+                let mut payload: Value = serde_json::from_slice(&out.payload).ok()?;
+                payload["relay"] = d.relay.into();
+                payload["hop_limit"] = d.hop_limit.into();
+                out.payload = serde_json::to_vec(&payload).ok()?;
+                Some(out)
+            }
         }
     }
 

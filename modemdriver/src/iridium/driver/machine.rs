@@ -14,10 +14,13 @@ use std::time::Duration;
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::time::Instant;
 
-use super::super::at::{self, AtCommand, AtError, ModemLine};
+use super::super::at::{self, AtCommand, AtError, AutoRegistration, ModemLine};
 use super::super::reader::{Reader, Unit};
+use super::super::status::MoStatus;
 use super::settings::Settings;
-use super::state::{ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES};
+use super::state::{
+    ms, Answer, Calls, Outcome, Pending, Purpose, Sessions, COMMAND_TRIES, RECOVERY_QUIET,
+};
 use crate::driver::{Acknowledgement, DriverCommand, DriverEvent, DriverStatus};
 use crate::machine::reconnect::Reconnect;
 use crate::machine::{Handlers, Now, Output, Outputs, RequestId};
@@ -45,6 +48,8 @@ pub struct Machine {
     pub(super) no_service_since: Option<Instant>,
     /// The transceiver's IMEI, once read.
     pub imei: Option<String>,
+    /// Nothing is written before then (see [`RECOVERY_QUIET`]).
+    pub(super) quiet_until: Option<Instant>,
     next_request: u64,
 }
 
@@ -69,6 +74,7 @@ impl Machine {
             service: None,
             no_service_since: None,
             imei: None,
+            quiet_until: None,
             next_request: 0,
         };
         machine.configure();
@@ -244,6 +250,10 @@ impl Machine {
                 self.indicator(indicator, value);
                 return;
             }
+            ModemLine::AutoRegistration(r) => {
+                self.auto_registration(r);
+                return;
+            }
             ModemLine::Echo(_) => {
                 // Echo back on (the transceiver was reset?): off again
                 // once the command outstanding is answered.
@@ -267,7 +277,11 @@ impl Machine {
             _ => {}
         }
         let Some(pending) = &mut self.pending else {
-            // An answer with no command outstanding (a late OK): nothing to do.
+            if let ModemLine::Session(reply) = line {
+                self.session_recovered(reply);
+            }
+            // Else an answer with no command outstanding (a late OK):
+            // nothing to do.
             return;
         };
         let outcome = match line {
@@ -295,6 +309,10 @@ impl Machine {
             },
             ModemLine::Session(reply) if pending.purpose == Purpose::Session => {
                 pending.answer = Some(Answer::Session(reply));
+                return;
+            }
+            ModemLine::Session(reply) => {
+                self.session_recovered(reply);
                 return;
             }
             ModemLine::Imei(imei) if pending.command == AtCommand::Imei => {
@@ -350,6 +368,36 @@ impl Machine {
         if self.startup.is_empty() && !self.ready {
             self.ready = true;
             self.status(DriverStatus::Ready);
+        }
+    }
+
+    /// `+AREG`: a registration the transceiver made (nothing to do), one
+    /// that failed (reported; the transceiver tries again by itself), or
+    /// one it suggests (mode 2: a mailbox check registers, as `+SBDIX`
+    /// always does).
+    fn auto_registration(&mut self, r: AutoRegistration) {
+        match r.event {
+            AutoRegistration::REGISTERED if r.error == 0 => {}
+            AutoRegistration::SUGGESTED => self.sessions.mailbox = true,
+            AutoRegistration::FAILED | AutoRegistration::REGISTERED => {
+                self.status(DriverStatus::LinkError {
+                    reason: format!(
+                        "automatic registration (+AREG:{},{}): {} ({}); the transceiver tries again",
+                        r.event,
+                        r.error,
+                        if r.event == AutoRegistration::FAILED {
+                            "failed"
+                        } else {
+                            "location update not accepted"
+                        },
+                        MoStatus(r.error).meaning()
+                    ),
+                });
+            }
+            other => self.status(DriverStatus::Unparseable {
+                line: format!("+AREG:{other},{}", r.error),
+                reason: "automatic registration event not 0, 1 or 2".into(),
+            }),
         }
     }
 
@@ -414,6 +462,7 @@ impl Handlers for Machine {
         };
         [
             command,
+            self.quiet_until,
             self.link.deadline(),
             session,
             call,
@@ -426,6 +475,9 @@ impl Handlers for Machine {
     }
 
     fn read(&mut self, bytes: Vec<u8>) {
+        if self.quiet_until.is_some_and(|t| t > self.now.at) {
+            self.quiet_until = Some(self.now.at + RECOVERY_QUIET);
+        }
         self.reader.push(&bytes);
         while let Some(unit) = self.reader.next_unit() {
             self.unit(unit);
@@ -545,8 +597,15 @@ impl Handlers for Machine {
     /// Writes the next command due: a start-up step, or the next step of
     /// a session.
     fn pump(&mut self) {
+        if self.quiet_until.is_some_and(|t| t > self.now.at) {
+            return;
+        }
+        self.quiet_until = None;
         loop {
             if !self.link.is_up() || self.pending.is_some() {
+                return;
+            }
+            if self.startup.front() == Some(&AtCommand::Clear(2)) && self.read_unread_mt() {
                 return;
             }
             if let Some(command) = self.startup.pop_front() {

@@ -28,7 +28,11 @@
 //! above asks ([`Driver::acknowledge`]).
 //!
 //! Signal strength and service (`+CIEV`) are reported as
-//! [`DriverStatus::Signal`](crate::DriverStatus::Signal). Lines that cannot be read are reported
+//! [`DriverStatus::Signal`](crate::DriverStatus::Signal). Automatic
+//! registration reports (`+AREG:<event>,<reg error>`, on with
+//! `AT+SBDAREG=1`) are understood: a registration made says nothing, a
+//! failed one is reported ([`DriverStatus::LinkError`](crate::DriverStatus::LinkError)),
+//! a suggested one (mode 2) becomes a mailbox check. Lines that cannot be read are reported
 //! ([`DriverStatus::Unparseable`](crate::DriverStatus::Unparseable)) and ignored; nothing the transceiver
 //! sends makes the driver panic.
 //!

@@ -28,6 +28,11 @@
 //! `service_wait_ms`. The MO buffer is written only when it does not hold
 //! the message already (a retry after a failed session goes straight to
 //! `AT+SBDIX`).
+//!
+//! A `+SBDIX` that answers no session of this driver's (the driver was
+//! started again, or configured the transceiver again, while a session ran)
+//! is recovered (`Machine::session_recovered`): an MT message it brought is
+//! read before the next `AT+SBDD2` or session.
 
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use tokio::time::Instant;
@@ -111,6 +116,9 @@ impl Machine {
         let now = self.now.at;
         if self.sessions.active.is_some() || self.sessions.filling.is_some() {
             return false;
+        }
+        if self.read_unread_mt() {
+            return true;
         }
         if self.sessions.backoff_until.is_some_and(|t| t > now)
             || self.service_gate().is_some_and(|t| t > now)
@@ -405,9 +413,50 @@ impl Machine {
     }
 
     /// The link was lost, or the transceiver went silent, during a step.
-    pub(super) fn session_interrupted(&mut self, _purpose: Purpose) {
+    pub(super) fn session_interrupted(&mut self, purpose: Purpose) {
         self.sessions.active = None;
         self.sessions.mo_buffer = MoBuffer::Unknown;
+        if purpose == Purpose::ReadMt {
+            // Not read after all: read before anything clears it.
+            self.sessions.mt_unread = true;
+        }
+    }
+
+    /// The answer of a session this driver did not start, or whose command
+    /// it no longer awaits (it was started again, or configured the
+    /// transceiver again, while the session ran: a real session takes 10
+    /// to 30 s). What it says is kept: the MT queue, and an MT message
+    /// received, read before any `AT+SBDD2` or session. The commands
+    /// written meanwhile were held by the transceiver and are answered
+    /// now: the transceiver is configured again once it has been silent
+    /// for [`RECOVERY_QUIET`](super::state::RECOVERY_QUIET).
+    pub(super) fn session_recovered(&mut self, reply: super::super::at::SessionReply) {
+        self.sessions.mt_queued = reply.mt_queued;
+        if reply.mt_status == MtStatus::Received {
+            self.sessions.mt_unread = true;
+        }
+        if let Some(p) = self.pending.take() {
+            self.session_interrupted(p.purpose);
+        }
+        self.sessions.active = None;
+        self.restart();
+        self.quiet_until = Some(self.now.at + super::state::RECOVERY_QUIET);
+    }
+
+    /// Reads the MT buffer when it holds a message not read yet; whether
+    /// the read was started.
+    pub(super) fn read_unread_mt(&mut self) -> bool {
+        if !self.sessions.mt_unread || self.pending.is_some() {
+            return false;
+        }
+        self.sessions.mt_unread = false;
+        self.sessions.active = Some(Active {
+            job: Job::Mailbox,
+            alert: false,
+            tries: 0,
+        });
+        self.send(AtCommand::ReadBinary, Purpose::ReadMt);
+        true
     }
 
     pub(super) fn remember_sent(&mut self, mt: &ModemTransmission) {

@@ -78,6 +78,12 @@ pub(super) struct Pending {
     pub resend: bool,
 }
 
+/// Silence awaited after the answer of a session this driver did not
+/// start (`+SBDIX` while configuring, say after a restart during a
+/// session): the answers of the commands the transceiver held meanwhile
+/// come first, and are not taken for the answers of new ones.
+pub const RECOVERY_QUIET: Duration = Duration::from_secs(1);
+
 /// Times a command is written before the transceiver is taken as silent.
 pub const COMMAND_TRIES: u32 = 3;
 
@@ -158,6 +164,10 @@ pub(super) struct Sessions {
     pub(super) ring: bool,
     /// MT messages queued at the gateway (last session's word).
     pub(super) mt_queued: u16,
+    /// The MT buffer holds a message not read yet (the answer of a session
+    /// started before this driver said one came): it is read before the
+    /// next `AT+SBDD2` or session, which would lose it.
+    pub(super) mt_unread: bool,
     pub(super) mo_buffer: MoBuffer,
     pub(super) next_mo: u64,
     pub(super) backoff_until: Option<Instant>,
@@ -177,6 +187,7 @@ impl Sessions {
             mailbox: false,
             ring: false,
             mt_queued: 0,
+            mt_unread: false,
             mo_buffer: MoBuffer::Unknown,
             next_mo: 0,
             backoff_until: None,

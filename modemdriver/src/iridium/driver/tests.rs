@@ -10,6 +10,7 @@ use tokio::time::Instant;
 
 use super::machine::Machine;
 use super::settings::Settings;
+use super::state::RECOVERY_QUIET;
 use crate::driver::{
     Acknowledgement, DriverCommand, DriverEvent, DriverStatus, TransmitOutcome, TransmitResult,
 };
@@ -705,4 +706,136 @@ mod rudics_calls {
         let out = rig.input(call_slot(7));
         assert!(!written(&out).iter().any(|w| w.starts_with("ATD")));
     }
+}
+
+#[test]
+fn automatic_registration_reports_are_understood() {
+    let mut rig = Rig::new(true);
+    rig.start();
+    // Registered by itself (what AT+SBDAREG=1 turns on): nothing to say.
+    let out = rig.bytes(b"+AREG:1,0\r\n");
+    assert!(statuses(&out).is_empty(), "{out:?}");
+    assert!(written(&out).is_empty());
+    // Failed, tried again by the transceiver: told with the reason.
+    let out = rig.bytes(b"+AREG:2,18\r\n");
+    let s = statuses(&out);
+    assert!(
+        matches!(&s[..], [DriverStatus::LinkError { reason }] if reason.contains("RF drop")),
+        "{s:?}"
+    );
+    // Suggested (mode 2): a mailbox check registers.
+    let out = rig.bytes(b"+AREG:0,0\r\n");
+    assert_eq!(written(&out), ["AT+SBDIX\r"]);
+    let out = rig.bytes(b"+SBDIX: 0, 0, 0, 0, 0, 0\r\n\r\nOK\r\n");
+    assert!(written(&out).is_empty());
+    // A report in the middle of a command's answer does not disturb it.
+    let out = rig.input(slot(2));
+    let out = fill(&mut rig, &out, b"x");
+    assert_eq!(written(&out), ["AT+SBDWB=12\r"]);
+    let out = rig.bytes(b"+AREG:1,0\r\nREADY\r\n");
+    assert_eq!(written_bytes(&out).len(), 1);
+    assert!(statuses(&out).is_empty(), "{out:?}");
+}
+
+/// Answers what the driver writes as a content transceiver would, with
+/// `mt` in its MT buffer, until it is ready; returns the commands written
+/// and the transmissions received.
+fn answer_until_ready(
+    rig: &mut Rig,
+    mut out: Vec<Output>,
+    mt: &[u8],
+) -> (Vec<String>, Vec<ModemTransmission>) {
+    let mut sent = Vec::new();
+    let mut got = Vec::new();
+    for _ in 0..40 {
+        got.extend(received(&out));
+        if statuses(&out).contains(&DriverStatus::Ready) {
+            return (sent, got);
+        }
+        let w = written(&out);
+        sent.extend(w.clone());
+        let answer = match w.last().map(String::as_str) {
+            Some("AT+CGSN\r") => b"300234010753370\r\n\r\nOK\r\n".to_vec(),
+            Some("AT+SBDD2\r") => b"0\r\n\r\nOK\r\n".to_vec(),
+            Some("AT+SBDRB\r") => sbdrb(mt),
+            Some(_) => b"OK\r\n".to_vec(),
+            None => {
+                out = rig.advance(Duration::from_millis(500));
+                continue;
+            }
+        };
+        out = rig.bytes(&answer);
+    }
+    panic!("not ready; written {sent:?}");
+}
+
+fn data_from_shore() -> ModemTransmission {
+    ModemTransmission {
+        src: Some(2),
+        dest: Some(1),
+        rate: Some(0),
+        r#type: Some(TransmissionType::Data as i32),
+        ack_requested: Some(true),
+        frame_start: Some(21),
+        frame: vec![b"from the shore".to_vec()],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_session_still_running_at_start_up_is_recovered_and_its_mt_message_read_before_any_clear() {
+    // The driver starts while the transceiver is in a session its earlier
+    // run began (a real one lasts 10 to 30 s): the transceiver holds the
+    // commands written meanwhile and answers nothing for 20 s.
+    let mut rig = Rig::new(true);
+    let mut sent = written(&rig.input(Input::Tick));
+    for _ in 0..4 {
+        sent.extend(written(&rig.advance(Duration::from_secs(5))));
+    }
+    assert!(sent.iter().all(|c| c == "AT\r"), "{sent:?}");
+    // The session ends with an MT message; then the held ATs' answers.
+    let mt = frame::encode_sbd(&data_from_shore()).unwrap();
+    let mut answer = format!("+SBDIX: 0, 7, 1, 3, {}, 0\r\n\r\nOK\r\n", mt.len()).into_bytes();
+    for _ in &sent {
+        answer.extend_from_slice(b"OK\r\n");
+    }
+    let out = rig.bytes(&answer);
+    assert!(
+        !statuses(&out)
+            .iter()
+            .any(|s| matches!(s, DriverStatus::Unparseable { .. })),
+        "{out:?}"
+    );
+    let (sent, got) = answer_until_ready(&mut rig, out, &mt);
+    let read = sent.iter().position(|c| c == "AT+SBDRB\r");
+    let clear = sent.iter().position(|c| c == "AT+SBDD2\r");
+    assert!(
+        read.is_some() && clear.is_some() && read < clear,
+        "the MT buffer read before it is cleared: {sent:?}"
+    );
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(got[0].frame, data_from_shore().frame);
+    assert_eq!(rig.machine.imei.as_deref(), Some("300234010753370"));
+}
+
+#[test]
+fn a_session_answer_nobody_awaits_is_recovered_while_ready() {
+    // A transceiver that answered the start-up during a session it was
+    // running: its +SBDIX comes once the driver is ready.
+    let mut rig = Rig::new(true);
+    rig.start();
+    let mt = frame::encode_sbd(&data_from_shore()).unwrap();
+    let out = rig.bytes(format!("+SBDIX: 0, 7, 1, 3, {}, 0\r\n\r\nOK\r\n", mt.len()).as_bytes());
+    assert!(statuses(&out).is_empty(), "{out:?}");
+    assert!(written(&out).is_empty());
+    // Quiet first (answers of held commands may follow), then configured
+    // again, the MT message read before the buffers are cleared.
+    let out = rig.advance(RECOVERY_QUIET);
+    let (sent, got) = answer_until_ready(&mut rig, out, &mt);
+    let read = sent.iter().position(|c| c == "AT+SBDRB\r");
+    let clear = sent.iter().position(|c| c == "AT+SBDD2\r");
+    assert!(read.is_some() && read < clear, "{sent:?}");
+    assert_eq!(got.len(), 1);
+    // And a ring alert now goes to a session as usual.
+    assert_eq!(written(&rig.bytes(b"SBDRING\r\n")), ["AT+SBDIXA\r"]);
 }
