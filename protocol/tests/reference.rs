@@ -358,7 +358,9 @@ fn every_event_kind_and_key_is_in_the_guides_reference() {
             .unwrap();
         let to = match event.topic() {
             None if kind == "received" => "event, to every client".to_string(),
-            Some(t @ (Topic::Modem | Topic::Mac | Topic::Transfer | Topic::Link | Topic::Forecast)) => {
+            Some(
+                t @ (Topic::Modem | Topic::Mac | Topic::Transfer | Topic::Link | Topic::Forecast),
+            ) => {
                 format!("event, to `{}` subscribers", t.name())
             }
             _ => "event, to subscribers".to_string(),

@@ -1,0 +1,323 @@
+//! The link forecast (GRAM): a daemon keeping an environment — the summer
+//! (GLINT10-like) water of a BELLHOP .env, a profile from CTD samples —
+//! answers a JSON `forecast` request with the SNR and frame-error rates to
+//! its peer and the recommended depth in its band; bad samples are refused
+//! by name and the last good environment kept; a bad `forecast` section is
+//! refused by `--check` naming the field or the file and line; on MOOS the
+//! forecast arrives as the variables an IvP Helm behaviour takes (with the
+//! minimal in-process DB always, with a real MOOSDB when on the PATH).
+
+mod support;
+
+use std::path::Path;
+use std::time::Duration;
+
+use gobyd::daemon::Daemon;
+use serde_json::{json, Value};
+use support::daemon::scratch;
+use support::node::{Node, Simulator};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::net::TcpStream;
+use tokio::sync::oneshot;
+
+const PATIENCE: Duration = Duration::from_secs(60);
+
+/// A file of the channel crate's test data.
+fn data(file: &str) -> String {
+    format!(
+        "{}/../channel/tests/data/{file}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+/// A `forecast` section in the summer water: this vehicle at 3 km from
+/// the buoy (node 2, moored at 30 m), in the surface layer (6 m).
+fn forecast_section(more: &str) -> String {
+    format!(
+        r#"forecast {{
+  water {{ env: "{}" beams: 300 }}
+  own {{ x: 3000 y: 0 depth: 6 }}
+  peer {{ modem_id: 2 position {{ x: 0 y: 0 depth: 30 }} }}
+  band_shallow: 2 band_deep: 100 depth_step: 4 rate: 1
+  min_interval_seconds: 0.5
+  {more}
+}}"#,
+        data("bellhop/summer.env")
+    )
+}
+
+fn node(dir: &Path, name: &str, forecast: &str) -> Node {
+    Node::new(1)
+        .driver(Simulator::alone().channel(name))
+        .mac_none()
+        .json_tcp("127.0.0.1:0")
+        .data_dir(&dir.join("data"))
+        .raw_log(false)
+        .extra(forecast)
+}
+
+/// A running daemon and a JSON client of it.
+struct Running {
+    lines: tokio::io::Lines<BufReader<tokio::net::tcp::OwnedReadHalf>>,
+    write: tokio::net::tcp::OwnedWriteHalf,
+    stop: oneshot::Sender<()>,
+    running: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
+}
+
+impl Running {
+    async fn start(node: Node) -> Running {
+        let daemon = Daemon::builder(node.config())
+            .start()
+            .await
+            .expect("gobyd starts");
+        let addr = daemon.json_tcp_addr().expect("JSON on TCP");
+        let (stop, stopped) = oneshot::channel::<()>();
+        let running = tokio::spawn(daemon.run(async {
+            let _ = stopped.await;
+        }));
+        let (read, write) = TcpStream::connect(addr).await.unwrap().into_split();
+        let mut r = Running {
+            lines: BufReader::new(read).lines(),
+            write,
+            stop,
+            running,
+        };
+        r.request(&json!({"subscribe": ["forecast"]})).await;
+        r
+    }
+
+    /// Writes `line`; returns its reply (events before it are skipped).
+    async fn request(&mut self, line: &Value) -> Value {
+        self.write
+            .write_all(format!("{line}\n").as_bytes())
+            .await
+            .unwrap();
+        self.next(|v| v.get("reply").is_some()).await
+    }
+
+    /// The next line `wanted` takes.
+    async fn next(&mut self, wanted: impl Fn(&Value) -> bool) -> Value {
+        tokio::time::timeout(PATIENCE, async {
+            loop {
+                let line = self.lines.next_line().await.unwrap().expect("open");
+                let v: Value = serde_json::from_str(&line).unwrap();
+                if wanted(&v) {
+                    return v;
+                }
+            }
+        })
+        .await
+        .expect("in time")
+    }
+
+    /// The next event of kind `kind`.
+    async fn event(&mut self, kind: &str) -> Value {
+        self.next(|v| v["event"] == kind).await
+    }
+
+    async fn stop(self) {
+        let _ = self.stop.send(());
+        self.running.await.unwrap().unwrap();
+    }
+}
+
+/// The CTD samples of the summer yo-yo record (time, depth, temperature,
+/// salinity), as `ctd` request samples.
+fn yoyo() -> Vec<Value> {
+    std::fs::read_to_string(data("ctd/summer-yoyo.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|w| w.parse().unwrap()).collect();
+            json!({"time": v[0], "depth": v[1], "temperature": v[2], "salinity": v[3]})
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_json_request_gives_snr_and_frame_errors_per_peer_and_a_recommended_depth() {
+    let dir = scratch("forecast", "json");
+    let mut d = Running::start(node(&dir, "forecast-json", &forecast_section(""))).await;
+    let reply = d.request(&json!({"forecast": {}})).await;
+    assert!(reply["forecast"].as_f64().is_some(), "{reply}");
+    let f = d.event("forecast").await;
+    assert_eq!(f["environment"], "configuration", "{f}");
+    assert_eq!(f["own"], json!({"x": 3000.0, "y": 0.0, "depth": 6.0}));
+    let peer = &f["peers"][0];
+    assert_eq!(peer["node"], 2, "{f}");
+    assert!((peer["range"].as_f64().unwrap() - 3000.0).abs() < 1e-6);
+    let snr = peer["snr"].as_f64().expect("an SNR");
+    assert!(snr > 0.0 && snr < 80.0, "{snr}");
+    let rates: Vec<u64> = peer["rates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["rate"].as_u64().unwrap())
+        .collect();
+    assert_eq!(rates, [0, 1, 3, 5]);
+    let band = &f["band"];
+    assert_eq!(band["peer"], 2);
+    assert_eq!(band["rate"], 1);
+    assert_eq!(band["depths"].as_array().unwrap().len(), 25, "{band}");
+    let best = band["recommended"].as_f64().expect("a recommended depth");
+    // The least TL of the band is where the forecast recommends.
+    let tl: Vec<f64> = band["tl"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_f64().unwrap_or(f64::INFINITY))
+        .collect();
+    let i = band["depths"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|d| d.as_f64() == Some(best))
+        .unwrap();
+    assert!(tl.iter().all(|t| *t >= tl[i]), "{best} m: {tl:?}");
+    assert!(f.get("error").is_none(), "{f}");
+
+    // A new position moves the forecast.
+    let reply = d
+        .request(&json!({"nav": {"x": 2000.0, "y": 0.0, "depth": 40.0}}))
+        .await;
+    assert_eq!(reply["nav"]["depth"], 40.0);
+    d.request(&json!({"forecast": {}})).await;
+    let f = d
+        .next(|v| v["event"] == "forecast" && v["own"]["depth"] == 40.0)
+        .await;
+    assert!((f["peers"][0]["range"].as_f64().unwrap() - 2000.0).abs() < 1e-6);
+    d.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ctd_samples_build_the_profile_and_bad_ones_are_refused_keeping_the_last_good() {
+    let dir = scratch("forecast", "ctd");
+    let section = forecast_section("ctd { bin: 2 window_seconds: 1800 latitude: 42.5 }");
+    let mut d = Running::start(node(&dir, "forecast-ctd", &section)).await;
+    let samples = yoyo();
+    let reply = d.request(&json!({ "ctd": samples })).await;
+    assert_eq!(reply["ctd"], samples.len(), "{reply}");
+    let env = d.event("environment").await;
+    assert_eq!(env["environment"], "ctd", "{env}");
+    let profile: Vec<[f64; 2]> = serde_json::from_value(env["profile"].clone()).unwrap();
+    assert_eq!(profile[0][0], 0.0);
+    assert_eq!(profile.last().unwrap()[0], 111.0);
+    // Warm over cold: faster above the thermocline than below it.
+    let at = |z: f64| profile.iter().find(|p| p[0] >= z).unwrap()[1];
+    assert!(at(5.0) - at(40.0) > 15.0, "{profile:?}");
+
+    // A batch with one bad sample is refused whole, naming it; the profile
+    // stays the last good one.
+    let bad = json!({"ctd": [
+        {"time": 3700.0, "depth": 10.0, "temperature": 22.0, "salinity": 38.0},
+        {"time": 3705.0, "depth": 12.0, "temperature": 99.0, "salinity": 38.0},
+    ]});
+    let reply = d.request(&bad).await;
+    let error = reply["error"].as_str().expect("refused");
+    assert!(error.starts_with("ctd[1].temperature: 99"), "{error}");
+    let refused = d.event("environment").await;
+    assert!(refused["refused"]
+        .as_str()
+        .unwrap()
+        .contains("ctd[1].temperature"));
+    assert_eq!(refused["profile"], env["profile"]);
+    let below =
+        json!({"ctd": {"time": 3700.0, "depth": 500.0, "temperature": 15.0, "salinity": 38.0}});
+    let error = d.request(&below).await["error"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.starts_with("ctd[0].depth: 500 m is on or below the bottom"),
+        "{error}"
+    );
+
+    // The forecast goes on in the last good environment.
+    d.request(&json!({"forecast": {}})).await;
+    let f = d.event("forecast").await;
+    assert_eq!(f["environment"], "ctd", "{f}");
+    assert!(f["samples"].as_u64().unwrap() > 300, "{f}");
+    assert!(f["band"]["recommended"].as_f64().is_some(), "{f}");
+    d.stop().await;
+}
+
+/// The error `--check` (and the start) gives for the `forecast` section
+/// `section`.
+fn refused(dir: &Path, section: &str) -> String {
+    let config = node(dir, "forecast-check", section).config();
+    gobyd::check::check(config).expect_err(section).to_string()
+}
+
+#[test]
+fn check_refuses_a_bad_forecast_section_naming_the_field_or_the_file_and_line() {
+    let dir = scratch("forecast", "check");
+    let inline = |profile: &str, more: &str| {
+        format!(r#"forecast {{ water {{ {profile} }} own {{ x: 100 depth: 10 }} {more} }}"#)
+    };
+    let two = "profile { depth: 0 speed: 1520 } profile { depth: 100 speed: 1500 }";
+    let cases: Vec<(String, &str)> = vec![
+        (
+            inline("profile { depth: 0 speed: 1520 }", ""),
+            "forecast.water.profile: a sound speed profile needs at least two points",
+        ),
+        (
+            inline(
+                "profile { depth: -5 speed: 1520 } profile { depth: 100 speed: 1500 }",
+                "",
+            ),
+            "forecast.water.profile[0].depth",
+        ),
+        (
+            inline(
+                "profile { depth: 0 speed: nan } profile { depth: 100 speed: 1500 }",
+                "",
+            ),
+            "forecast.water.profile[0].speed",
+        ),
+        (
+            inline(two, "peer { modem_id: 2 position { x: 0 depth: 140 } }"),
+            "forecast.peer[0].position.depth: 140 m is on or below the bottom (100 m there)",
+        ),
+        (
+            format!(r#"forecast {{ water {{ {two} }} own {{ x: 100 depth: 120 }} }}"#),
+            "forecast.own.depth: 120 m is on or below the bottom",
+        ),
+        (
+            inline(two, "band_shallow: 20 band_deep: 10"),
+            "forecast.band_deep",
+        ),
+        (inline(two, "rate: 2"), "forecast.rate"),
+        (
+            inline(
+                two,
+                "peer_position { protobuf_name: \"goby.example.NavigationReport\" }",
+            ),
+            "forecast.peer_position[0]: give depth_field",
+        ),
+    ];
+    for (section, expected) in &cases {
+        let err = refused(&dir, section);
+        assert!(err.contains(expected), "{section}\n{err}");
+    }
+    let bathy = dir.join("bay.xyz");
+    std::fs::write(&bathy, "0 0 100\n500 0 9O\n").unwrap();
+    let section = inline(two, &format!(r#"bathymetry_file: "{}""#, bathy.display()));
+    let err = refused(&dir, &section);
+    assert!(
+        err.contains(&format!(
+            "forecast.bathymetry_file: {}:2: depth \"9O\" is not a number",
+            bathy.display()
+        )),
+        "{err}"
+    );
+    let section = forecast_section("").replace("summer.env", "no-such.env");
+    let err = refused(&dir, &section);
+    assert!(
+        err.contains("forecast.water.env") && err.contains("no-such.env"),
+        "{err}"
+    );
+    // And a good one passes.
+    gobyd::check::check(node(&dir, "forecast-check", &forecast_section("")).config())
+        .expect("a good forecast section");
+}
