@@ -9,12 +9,14 @@
 
 mod support;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use gobyd::daemon::Daemon;
+use moos::{ClientConfig, MoosClient, Value as MoosValue};
 use serde_json::{json, Value};
-use support::daemon::scratch;
+use support::daemon::{free_tcp_port, scratch};
 use support::node::{Node, Simulator};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
@@ -59,6 +61,8 @@ fn node(dir: &Path, name: &str, forecast: &str) -> Node {
 /// A running daemon and a JSON client of it.
 struct Running {
     lines: tokio::io::Lines<BufReader<tokio::net::tcp::OwnedReadHalf>>,
+    /// Lines read past while waiting for another (events before a reply).
+    held: std::collections::VecDeque<Value>,
     write: tokio::net::tcp::OwnedWriteHalf,
     stop: oneshot::Sender<()>,
     running: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
@@ -78,6 +82,7 @@ impl Running {
         let (read, write) = TcpStream::connect(addr).await.unwrap().into_split();
         let mut r = Running {
             lines: BufReader::new(read).lines(),
+            held: Default::default(),
             write,
             stop,
             running,
@@ -86,17 +91,34 @@ impl Running {
         r
     }
 
-    /// Writes `line`; returns its reply (events before it are skipped).
+    /// Writes `line`; returns its reply (events before it are held for
+    /// [`next`](Self::next)).
     async fn request(&mut self, line: &Value) -> Value {
         self.write
             .write_all(format!("{line}\n").as_bytes())
             .await
             .unwrap();
-        self.next(|v| v.get("reply").is_some()).await
+        tokio::time::timeout(PATIENCE, async {
+            loop {
+                let line = self.lines.next_line().await.unwrap().expect("open");
+                let v: Value = serde_json::from_str(&line).unwrap();
+                if v.get("reply").is_some() {
+                    return v;
+                }
+                self.held.push_back(v);
+            }
+        })
+        .await
+        .expect("a reply in time")
     }
 
-    /// The next line `wanted` takes.
+    /// The next line `wanted` takes (held lines first; others skipped).
     async fn next(&mut self, wanted: impl Fn(&Value) -> bool) -> Value {
+        while let Some(v) = self.held.pop_front() {
+            if wanted(&v) {
+                return v;
+            }
+        }
         tokio::time::timeout(PATIENCE, async {
             loop {
                 let line = self.lines.next_line().await.unwrap().expect("open");
@@ -233,9 +255,12 @@ async fn ctd_samples_build_the_profile_and_bad_ones_are_refused_keeping_the_last
         "{error}"
     );
 
-    // The forecast goes on in the last good environment.
+    // The forecast goes on in the last good environment (the one made at
+    // the start, before the samples, is skipped).
     d.request(&json!({"forecast": {}})).await;
-    let f = d.event("forecast").await;
+    let f = d
+        .next(|v| v["event"] == "forecast" && v["environment"] != "configuration")
+        .await;
     assert_eq!(f["environment"], "ctd", "{f}");
     assert!(f["samples"].as_u64().unwrap() > 300, "{f}");
     assert!(f["band"]["recommended"].as_f64().is_some(), "{f}");
@@ -320,4 +345,128 @@ fn check_refuses_a_bad_forecast_section_naming_the_field_or_the_file_and_line() 
     // And a good one passes.
     gobyd::check::check(node(&dir, "forecast-check", &forecast_section("")).config())
         .expect("a good forecast section");
+}
+
+/// The forecast over MOOS through the DB at `port`: the navigation moves
+/// this vehicle, a request asks for a forecast, and the variables an IvP
+/// Helm behaviour takes arrive; a NaN CTD sample is refused by name.
+async fn forecast_over_moos(port: u16, name: &str) {
+    let dir = scratch("forecast", name);
+    let section = forecast_section("ctd { }");
+    let node = node(&dir, name, &section).moos(port, r#"name: "gobyd_forecast""#);
+    let d = Running::start(node).await;
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let (client, mut mail) = loop {
+        let config = ClientConfig::new("helm").with_address("127.0.0.1", port);
+        match MoosClient::connect(config).await {
+            Ok(connected) => break connected,
+            Err(e) if tokio::time::Instant::now() > deadline => panic!("cannot connect: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
+        }
+    };
+    for var in ["ACOMMS_DEPTH_UPDATES", "ACOMMS_FORECAST_PEERS", "ACOMMS_FORECAST"] {
+        client.register(var, Duration::ZERO).unwrap();
+    }
+    let mut updates = None;
+    let mut peers = None;
+    let mut refused = None;
+    let mut tick = tokio::time::interval(Duration::from_millis(300));
+    let limit = tokio::time::sleep(PATIENCE);
+    tokio::pin!(limit);
+    while updates.is_none() || peers.is_none() || refused.is_none() {
+        tokio::select! {
+            _ = tick.tick() => {
+                // gobyd registers once connected: keep writing.
+                client.notify_double("NAV_X", 2500.0).unwrap();
+                client.notify_double("NAV_DEPTH", 10.0).unwrap();
+                client.notify_string("GOBYD_FORECAST_REQUEST", "now").unwrap();
+                client
+                    .notify_string("GOBYD_CTD", "depth=5,temperature=nan,salinity=38")
+                    .unwrap();
+            }
+            m = mail.recv() => {
+                let m = m.expect("mail open");
+                let MoosValue::String(s) = m.value else { continue };
+                match m.key.as_str() {
+                    "ACOMMS_FORECAST_PEERS" if s.contains("range=2500") => peers = Some(s),
+                    "ACOMMS_DEPTH_UPDATES" if peers.is_some() => updates = Some(s),
+                    "ACOMMS_FORECAST" if s.contains("refused") => refused = Some(s),
+                    _ => {}
+                }
+            }
+            () = &mut limit => {
+                panic!("timed out: updates {updates:?}, peers {peers:?}, refused {refused:?}")
+            }
+        }
+    }
+    let updates = updates.unwrap();
+    let depth: f64 = updates
+        .strip_prefix("depth=")
+        .and_then(|d| d.parse().ok())
+        .unwrap_or_else(|| panic!("not depth=D: {updates}"));
+    assert!((2.0..=100.0).contains(&depth), "{updates}");
+    let peers = peers.unwrap();
+    assert!(
+        peers.starts_with("node=2,range=2500,snr=") && peers.contains(",fer="),
+        "{peers}"
+    );
+    let refused: Value = serde_json::from_str(&refused.unwrap()).unwrap();
+    assert_eq!(refused["event"], "environment");
+    assert!(
+        refused["refused"]
+            .as_str()
+            .unwrap()
+            .starts_with("ctd[0].temperature"),
+        "{refused}"
+    );
+    assert_eq!(refused["environment"], "configuration");
+    client.close().await;
+    d.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_forecast_variables_arrive_through_the_minimal_db() {
+    let db = moos::testing::MiniDb::start("127.0.0.1:0", "gobytest")
+        .await
+        .unwrap();
+    forecast_over_moos(db.port(), "forecast-minidb").await;
+    db.stop().await;
+}
+
+/// MOOSDB on the PATH (put the MOOS core's `bin` directory there).
+fn moosdb() -> Option<PathBuf> {
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    std::env::split_paths(&path)
+        .map(|dir| dir.join("MOOSDB"))
+        .find(|p| p.is_file())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_forecast_variables_arrive_through_a_real_moosdb() {
+    let Some(exe) = moosdb() else {
+        eprintln!("SKIPPED: no MOOSDB on PATH (put the MOOS core's bin directory there)");
+        return;
+    };
+    let dir = scratch("forecast", "moosdb-run");
+    let port = free_tcp_port();
+    let audit = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut db = Command::new(&exe)
+        .arg(format!("--moos_port={port}"))
+        .arg("--moos_community=gobytest")
+        .arg("--moos_suicide_disable")
+        .arg(format!("--audit_port={audit}"))
+        .arg("--moos_no_colour")
+        .current_dir(&dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("MOOSDB starts");
+    forecast_over_moos(port, "forecast-moosdb").await;
+    let _ = db.kill();
+    let _ = db.wait();
 }
