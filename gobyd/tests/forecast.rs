@@ -364,7 +364,11 @@ async fn forecast_over_moos(port: u16, name: &str) {
             Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
         }
     };
-    for var in ["ACOMMS_DEPTH_UPDATES", "ACOMMS_FORECAST_PEERS", "ACOMMS_FORECAST"] {
+    for var in [
+        "ACOMMS_DEPTH_UPDATES",
+        "ACOMMS_FORECAST_PEERS",
+        "ACOMMS_FORECAST",
+    ] {
         client.register(var, Duration::ZERO).unwrap();
     }
     let mut updates = None;
