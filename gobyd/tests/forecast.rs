@@ -5,7 +5,8 @@
 //! by name and the last good environment kept; a bad `forecast` section is
 //! refused by `--check` naming the field or the file and line; on MOOS the
 //! forecast arrives as the variables an IvP Helm behaviour takes (with the
-//! minimal in-process DB always, with a real MOOSDB when on the PATH).
+//! minimal in-process DB always, with a real MOOSDB when on the PATH); on
+//! MQTT it is retained for the console.
 
 mod support;
 
@@ -16,6 +17,7 @@ use std::time::Duration;
 use gobyd::daemon::Daemon;
 use moos::{ClientConfig, MoosClient, Value as MoosValue};
 use serde_json::{json, Value};
+use support::broker::{Broker, Watcher};
 use support::daemon::{free_tcp_port, scratch};
 use support::node::{Node, Simulator};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
@@ -244,6 +246,8 @@ async fn ctd_samples_build_the_profile_and_bad_ones_are_refused_keeping_the_last
         .unwrap()
         .contains("ctd[1].temperature"));
     assert_eq!(refused["profile"], env["profile"]);
+    // None of the batch is held: its good first sample neither.
+    assert_eq!(refused["samples"], env["samples"], "{refused}");
     let below =
         json!({"ctd": {"time": 3700.0, "depth": 500.0, "temperature": 15.0, "salinity": 38.0}});
     let error = d.request(&below).await["error"]
@@ -473,4 +477,40 @@ async fn the_forecast_variables_arrive_through_a_real_moosdb() {
     forecast_over_moos(port, "forecast-moosdb").await;
     let _ = db.kill();
     let _ = db.wait();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_forecast_is_retained_on_its_mqtt_topic_for_the_console() {
+    let dir = scratch("forecast", "mqtt");
+    let broker = Broker::start(
+        &dir,
+        "the_forecast_is_retained_on_its_mqtt_topic_for_the_console",
+    );
+    let node = node(&dir, "forecast-mqtt", &forecast_section("ctd { }")).mqtt(
+        &broker.address(),
+        "fleet",
+        "",
+    );
+    let mut d = Running::start(node).await;
+    let bad = json!({"ctd": {"time": 1.0, "depth": -2.0, "temperature": 15.0, "salinity": 38.0}});
+    assert!(d.request(&bad).await["error"]
+        .as_str()
+        .unwrap()
+        .starts_with("ctd[0].depth"));
+    // Retained: a console subscribing later gets the last one.
+    let watcher = Watcher::start(&broker.address(), "console", "fleet/#");
+    let (forecast, environment) = tokio::task::block_in_place(|| {
+        let f = watcher.wait_on("fleet/1/forecast", |v| {
+            v["band"]["recommended"].as_f64().map(|_| v.clone())
+        });
+        let e = watcher.wait_on("fleet/1/environment", |v| Some(v.clone()));
+        (f, e)
+    });
+    assert_eq!(forecast["event"], "forecast");
+    assert_eq!(forecast["peers"][0]["node"], 2, "{forecast}");
+    assert!(environment["refused"]
+        .as_str()
+        .unwrap()
+        .starts_with("ctd[0].depth"));
+    d.stop().await;
 }
