@@ -10,15 +10,15 @@
 
 mod support;
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::path::Path;
 use std::time::Duration;
 
 use gobyd::daemon::Daemon;
 use moos::{ClientConfig, MoosClient, Value as MoosValue};
 use serde_json::{json, Value};
 use support::broker::{Broker, Watcher};
-use support::daemon::{free_tcp_port, scratch};
+use support::daemon::scratch;
+use support::moosdb::{moosdb_on_path, RealMoosDb};
 use support::node::{Node, Simulator};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
@@ -441,42 +441,15 @@ async fn the_forecast_variables_arrive_through_the_minimal_db() {
     db.stop().await;
 }
 
-/// MOOSDB on the PATH (put the MOOS core's `bin` directory there).
-fn moosdb() -> Option<PathBuf> {
-    let path = std::env::var_os("PATH").unwrap_or_default();
-    std::env::split_paths(&path)
-        .map(|dir| dir.join("MOOSDB"))
-        .find(|p| p.is_file())
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_forecast_variables_arrive_through_a_real_moosdb() {
-    let Some(exe) = moosdb() else {
+    let Some(exe) = moosdb_on_path() else {
         eprintln!("SKIPPED: no MOOSDB on PATH (put the MOOS core's bin directory there)");
         return;
     };
     let dir = scratch("forecast", "moosdb-run");
-    let port = free_tcp_port();
-    let audit = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let mut db = Command::new(&exe)
-        .arg(format!("--moos_port={port}"))
-        .arg("--moos_community=gobytest")
-        .arg("--moos_suicide_disable")
-        .arg(format!("--audit_port={audit}"))
-        .arg("--moos_no_colour")
-        .current_dir(&dir)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("MOOSDB starts");
-    forecast_over_moos(port, "forecast-moosdb").await;
-    let _ = db.kill();
-    let _ = db.wait();
+    let db = RealMoosDb::start(&exe, &dir);
+    forecast_over_moos(db.port, "forecast-moosdb").await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
