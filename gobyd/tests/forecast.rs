@@ -19,7 +19,7 @@ use serde_json::{json, Value};
 use support::broker::{Broker, Watcher};
 use support::daemon::scratch;
 use support::moosdb::{moosdb_on_path, RealMoosDb};
-use support::node::{Node, Simulator};
+use support::node::{Entry, Node, Simulator};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
 use tokio::sync::oneshot;
@@ -485,5 +485,57 @@ async fn the_forecast_is_retained_on_its_mqtt_topic_for_the_console() {
         .as_str()
         .unwrap()
         .starts_with("ctd[0].depth"));
+    d.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_received_message_carrying_its_senders_position_places_the_peer() {
+    let dir = scratch("forecast", "peer");
+    let section = forecast_section(
+        r#"peer_position { protobuf_name: "goby.example.NavigationReport" z_field: "z" }"#,
+    );
+    let node = node(&dir, "forecast-peer", &section).queue(
+        Entry::new("goby.example.NavigationReport")
+            .role("SOURCE_ID", "source")
+            .role("DESTINATION_ID", "destination"),
+    );
+    let mut d = Running::start(node).await;
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
+    // Node 3's report, addressed to this node (delivered at once, as a
+    // received message is).
+    let report = json!({"publish": "goby.example.NavigationReport", "msg": {
+        "source": 3, "destination": 1, "time": now, "x": 1500.0, "y": 0.0, "z": -20.0,
+    }});
+    let reply = d.request(&report).await;
+    assert_eq!(reply["delivered"], true, "{reply}");
+    d.request(&json!({"forecast": {}})).await;
+    let f = d
+        .next(|v| {
+            v["event"] == "forecast"
+                && v["peers"]
+                    .as_array()
+                    .is_some_and(|p| p.iter().any(|p| p["node"] == 3))
+        })
+        .await;
+    let peer = f["peers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["node"] == 3)
+        .unwrap();
+    assert_eq!(
+        peer["position"],
+        json!({"x": 1500.0, "y": 0.0, "depth": 20.0})
+    );
+    assert!(
+        (peer["range"].as_f64().unwrap() - 1500.0).abs() < 1e-6,
+        "{peer}"
+    );
+    assert!(peer["snr"].as_f64().is_some(), "{peer}");
+    // The band is for the nearest peer: node 3 now.
+    assert_eq!(f["band"]["peer"], 3, "{f}");
     d.stop().await;
 }
