@@ -32,7 +32,10 @@ pub fn validate(
     let config = config::complete(config)?;
     let mut problems = config::problems(&config, driver);
     if let Some(forecast) = &config.forecast {
-        if let Err(p) = crate::forecast::settings::Settings::load(forecast) {
+        if let Err(p) = crate::forecast::settings::Settings::load(
+            forecast,
+            crate::forecast::moos_origin(&config),
+        ) {
             problems.extend(p);
         }
     }

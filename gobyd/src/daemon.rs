@@ -207,8 +207,11 @@ impl Daemon {
         let mut handle = core.handle();
         let mut interfaces = JoinSet::new();
         if let Some(forecast) = &config.forecast {
-            let settings = crate::forecast::settings::Settings::load(forecast)
-                .map_err(ConfigError::Problems)?;
+            let settings = crate::forecast::settings::Settings::load(
+                forecast,
+                crate::forecast::moos_origin(&config),
+            )
+            .map_err(ConfigError::Problems)?;
             let inputs = crate::forecast::start(settings, &handle, clock.clone(), &mut interfaces);
             handle.forecast = Some(inputs);
         }

@@ -324,6 +324,13 @@ fn check_refuses_a_bad_forecast_section_naming_the_field_or_the_file_and_line() 
             ),
             "forecast.peer_position[0]: give depth_field",
         ),
+        (
+            inline(
+                two,
+                r#"peer_position { protobuf_name: "a.B" z_field: "z" lat_field: "lat" lon_field: "lon" }"#,
+            ),
+            "forecast.peer_position[0].lat_field: no origin",
+        ),
     ];
     for (section, expected) in &cases {
         let err = refused(&dir, section);
@@ -356,7 +363,7 @@ fn check_refuses_a_bad_forecast_section_naming_the_field_or_the_file_and_line() 
 /// Helm behaviour takes arrive; a NaN CTD sample is refused by name.
 async fn forecast_over_moos(port: u16, name: &str) {
     let dir = scratch("forecast", name);
-    let section = forecast_section("ctd { }");
+    let section = forecast_section("ctd { } lat_origin: 42.5 lon_origin: 10.8");
     let node = node(&dir, name, &section).moos(port, r#"name: "gobyd_forecast""#);
     let d = Running::start(node).await;
     let deadline = tokio::time::Instant::now() + PATIENCE;
@@ -428,6 +435,34 @@ async fn forecast_over_moos(port: u16, name: &str) {
         "{refused}"
     );
     assert_eq!(refused["environment"], "configuration");
+
+    // Latitude and longitude place the vehicle on the local grid: 2 km
+    // north of the origin, 2 km from the buoy.
+    let grid = gobyd::translator::local_grid::LocalGrid::new(42.5, 10.8).unwrap();
+    let (lat, lon) = grid.to_geo(0.0, 2000.0).unwrap();
+    let placed = tokio::time::timeout(PATIENCE, async {
+        let mut tick = tokio::time::interval(Duration::from_millis(300));
+        loop {
+            tokio::select! {
+                _ = tick.tick() => {
+                    client.notify_double("NAV_LAT", lat).unwrap();
+                    client.notify_double("NAV_LONG", lon).unwrap();
+                    client.notify_string("GOBYD_FORECAST_REQUEST", "now").unwrap();
+                }
+                m = mail.recv() => {
+                    let m = m.expect("mail open");
+                    if let (true, MoosValue::String(s)) = (m.key == "ACOMMS_FORECAST_PEERS", m.value) {
+                        if s.contains("range=2000,") {
+                            return s;
+                        }
+                    }
+                }
+            }
+        }
+    })
+    .await
+    .expect("placed by latitude and longitude in time");
+    assert!(placed.starts_with("node=2,range=2000,"), "{placed}");
     client.close().await;
     d.stop().await;
 }

@@ -18,6 +18,8 @@ pub struct ForecastVars {
     nav_x: String,
     nav_y: String,
     nav_depth: String,
+    nav_lat: String,
+    nav_lon: String,
     request: String,
     depth_updates: String,
     peers: String,
@@ -32,6 +34,8 @@ impl ForecastVars {
             nav_x: config.nav_x_var().into(),
             nav_y: config.nav_y_var().into(),
             nav_depth: config.nav_depth_var().into(),
+            nav_lat: config.nav_lat_var().into(),
+            nav_lon: config.nav_lon_var().into(),
             request: config.request_var().into(),
             depth_updates: config.depth_updates_var().into(),
             peers: config.peers_var().into(),
@@ -46,6 +50,8 @@ impl ForecastVars {
             &self.nav_x,
             &self.nav_y,
             &self.nav_depth,
+            &self.nav_lat,
+            &self.nav_lon,
             &self.request,
         ]
         .into_iter()
@@ -66,7 +72,20 @@ impl ForecastVars {
                 .map_err(|_| format!("{key}: {s:?} is not a number")),
             Value::Binary(_) => Err(format!("{key}: binary, not a number")),
         };
-        let nav = |x, y, depth| ForecastInput::Nav { x, y, depth };
+        let nav = |x, y, depth| ForecastInput::Nav {
+            x,
+            y,
+            depth,
+            lat: None,
+            lon: None,
+        };
+        let geo = |lat, lon| ForecastInput::Nav {
+            x: None,
+            y: None,
+            depth: None,
+            lat,
+            lon,
+        };
         let input = if key == self.ctd {
             ctd_sample(&mail.value, mail.time).map(|s| ForecastInput::Ctd {
                 samples: vec![s],
@@ -78,6 +97,10 @@ impl ForecastVars {
             number().map(|v| nav(None, Some(v), None))
         } else if key == self.nav_depth {
             number().map(|v| nav(None, None, Some(v)))
+        } else if key == self.nav_lat {
+            number().map(|v| geo(Some(v), None))
+        } else if key == self.nav_lon {
+            number().map(|v| geo(None, Some(v)))
         } else if key == self.request {
             Ok(ForecastInput::Request { reply: None })
         } else {

@@ -28,6 +28,10 @@ pub enum ForecastInput {
         y: Option<f64>,
         /// Depth, m.
         depth: Option<f64>,
+        /// Latitude, degrees (with `lon`, placed on the local grid).
+        lat: Option<f64>,
+        /// Longitude, degrees.
+        lon: Option<f64>,
     },
     /// Make a forecast as soon as the minimum interval allows; the reply
     /// is the wait, seconds.

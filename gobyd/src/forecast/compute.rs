@@ -1,6 +1,8 @@
 //! One forecast, computed (blocking: a ray trace per link and one over the
 //! depth band; run it off the async tasks).
 
+use std::sync::atomic::AtomicBool;
+
 use channel::{Forecaster, LinkForecast, Position, SspPoint};
 use gobyd_protocol::forecast::{BandForecast, Forecast, PeerForecast, Point, RateFer};
 
@@ -25,8 +27,9 @@ pub struct Question {
 }
 
 /// The forecast of `question`. What cannot be computed is said in its
-/// `error`; the rest is still given.
-pub fn answer(settings: &Settings, question: &Question) -> Forecast {
+/// `error`; the rest is still given. Setting `cancel` stops the ray traces
+/// between beams (the daemon stopping).
+pub fn answer(settings: &Settings, question: &Question, cancel: &AtomicBool) -> Forecast {
     let mut errors = Vec::new();
     let own = question.own;
     if let Some(why) = settings.position_problem(&own) {
@@ -36,7 +39,7 @@ pub fn answer(settings: &Settings, question: &Question) -> Forecast {
     if errors.is_empty() {
         for (node, p) in &question.peers {
             match forecaster(settings, question, &own, p)
-                .and_then(|f| f.link(&own, p, None).map_err(|e| e.to_string()))
+                .and_then(|f| f.link(&own, p, Some(cancel)).map_err(|e| e.to_string()))
             {
                 Ok(link) => peers.push(peer_line(*node, p, &link)),
                 Err(e) => errors.push(format!("peer {node}: {e}")),
@@ -55,7 +58,7 @@ pub fn answer(settings: &Settings, question: &Question) -> Forecast {
             ));
             None
         }
-        Some((node, peer)) => match band(settings, question, node, &peer) {
+        Some((node, peer)) => match band(settings, question, node, &peer, cancel) {
             Ok(b) => Some(b),
             Err(e) => {
                 errors.push(format!("band: {e}"));
@@ -109,6 +112,7 @@ fn band(
     question: &Question,
     node: i32,
     peer: &Position,
+    cancel: &AtomicBool,
 ) -> Result<BandForecast, String> {
     let f = forecaster(settings, question, peer, &question.own)?;
     let d = f
@@ -117,7 +121,7 @@ fn band(
             peer,
             settings.band,
             settings.depth_step,
-            None,
+            Some(cancel),
         )
         .map_err(|e| e.to_string())?;
     let fer = d

@@ -25,6 +25,7 @@ pub mod schedule;
 pub mod settings;
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use channel::Position;
@@ -38,6 +39,13 @@ use crate::event::{CoreHandle, DaemonEvent, ForecastEvent, ForecastInput, Shared
 use environment::Keeper;
 use schedule::Schedule;
 use settings::Settings;
+
+/// The mission's origin (the moos section's `lat_origin`, `lon_origin`),
+/// for a forecast section without its own.
+pub fn moos_origin(config: &protos::goby::apps::protobuf::GobydConfig) -> Option<(f64, f64)> {
+    let moos = config.moos.as_ref()?;
+    Some((moos.lat_origin?, moos.lon_origin?))
+}
 
 /// Inputs held before the forecast takes them.
 const INPUTS: usize = 256;
@@ -55,10 +63,12 @@ pub fn start(
         keeper: Keeper::new(&settings),
         own: settings.own,
         peers: settings.peers.iter().copied().collect(),
+        geo: (None, None),
         schedule: Schedule::new(settings.interval, settings.min_interval),
         settings: Arc::new(settings),
         events: core.events.clone(),
         clock,
+        cancel: Arc::new(AtomicBool::new(false)),
     };
     let received = core.events.subscribe();
     tasks.spawn(service.run(rx, received));
@@ -70,10 +80,20 @@ struct Service {
     settings: Arc<Settings>,
     keeper: Keeper,
     own: Option<Position>,
+    /// The last latitude and longitude given for this node (degrees).
+    geo: (Option<f64>, Option<f64>),
     peers: BTreeMap<i32, Position>,
     schedule: Schedule,
     events: broadcast::Sender<SharedEvent>,
     clock: Arc<dyn Clock>,
+    /// Set when the service stops: a forecast running stops between beams.
+    cancel: Arc<AtomicBool>,
+}
+
+impl Drop for Service {
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
 }
 
 impl Service {
@@ -122,7 +142,8 @@ impl Service {
             samples: self.keeper.samples(),
         };
         let settings = self.settings.clone();
-        tokio::task::spawn_blocking(move || compute::answer(&settings, &question))
+        let cancel = self.cancel.clone();
+        tokio::task::spawn_blocking(move || compute::answer(&settings, &question, &cancel))
     }
 
     fn now(&self) -> f64 {
@@ -145,7 +166,13 @@ impl Service {
                     let _ = reply.send(taken);
                 }
             }
-            ForecastInput::Nav { x, y, depth } => {
+            ForecastInput::Nav {
+                x,
+                y,
+                depth,
+                lat,
+                lon,
+            } => {
                 let mut own = self.own.unwrap_or(Position {
                     x: 0.0,
                     y: 0.0,
@@ -154,6 +181,15 @@ impl Service {
                 own.x = x.unwrap_or(own.x);
                 own.y = y.unwrap_or(own.y);
                 own.depth = depth.unwrap_or(own.depth);
+                self.geo = (lat.or(self.geo.0), lon.or(self.geo.1));
+                if let (true, (Some(lat), Some(lon))) = (lat.is_some() || lon.is_some(), self.geo) {
+                    match self.local(lat, lon) {
+                        Some((x, y)) => (own.x, own.y) = (x, y),
+                        None => tracing::warn!(
+                            "forecast: {lat}, {lon} not placed (no origin, or not a position)"
+                        ),
+                    }
+                }
                 if own.x.is_finite() && own.y.is_finite() && own.depth.is_finite() {
                     self.own = Some(own);
                 } else {
@@ -185,16 +221,23 @@ impl Service {
                 (None, Some(z)) => number(message, z).map(|z| -z),
                 (None, None) => None,
             };
-            let (Some(x), Some(y), Some(depth)) = (
-                number(message, fields.x_field()),
-                number(message, fields.y_field()),
-                depth,
-            ) else {
+            let xy = match (&fields.lat_field, &fields.lon_field) {
+                (Some(lat), Some(lon)) => number(message, lat)
+                    .zip(number(message, lon))
+                    .and_then(|(lat, lon)| self.local(lat, lon)),
+                _ => number(message, fields.x_field()).zip(number(message, fields.y_field())),
+            };
+            let (Some((x, y)), Some(depth)) = (xy, depth) else {
                 tracing::debug!("forecast: {name} from {} without a position", received.src);
                 continue;
             };
             self.peers.insert(received.src, Position { x, y, depth });
         }
+    }
+
+    /// `lat`, `lon` (degrees) on the local grid, if there is one.
+    fn local(&self, lat: f64, lon: f64) -> Option<(f64, f64)> {
+        self.settings.grid.as_ref()?.to_local(lat, lon).ok()
     }
 
     fn tell(&self, event: ForecastEvent) {

@@ -4,6 +4,7 @@
 //! daemon never runs with.
 
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Duration;
 
 use channel::{EstimatorConfig, ForecastConfig, Forecaster, Formula, Position, SspPoint};
@@ -12,6 +13,7 @@ use protos::goby::apps::protobuf::LinkForecastConfig;
 
 use super::bathymetry::Soundings;
 use crate::config::Problem;
+use crate::translator::local_grid::LocalGrid;
 
 /// Where the section is in the configuration.
 const FIELD: &str = "forecast";
@@ -49,12 +51,31 @@ pub struct Settings {
     pub interval: Duration,
     /// And never sooner than this after the last.
     pub min_interval: Duration,
+    /// The local grid latitudes and longitudes are placed on.
+    pub grid: Option<Arc<LocalGrid>>,
 }
 
 impl Settings {
     /// Reads `config`; every problem at once, each naming its field.
-    pub fn load(config: &LinkForecastConfig) -> Result<Settings, Vec<Problem>> {
+    /// `origin`: the mission's (the moos section's), for a section without
+    /// its own.
+    pub fn load(
+        config: &LinkForecastConfig,
+        origin: Option<(f64, f64)>,
+    ) -> Result<Settings, Vec<Problem>> {
         let mut problems = Vec::new();
+        let origin = match (config.lat_origin, config.lon_origin) {
+            (Some(lat), Some(lon)) => Some((lat, lon)),
+            _ => origin,
+        };
+        let grid = match origin.map(|(lat, lon)| LocalGrid::new(lat, lon)) {
+            Some(Ok(g)) => Some(Arc::new(g)),
+            Some(Err(e)) => {
+                problems.push(Problem::new(format!("{FIELD}.lat_origin"), e));
+                None
+            }
+            None => None,
+        };
         let mut push = |field: &str, reason: String| {
             problems.push(Problem::new(format!("{FIELD}.{field}"), reason))
         };
@@ -146,6 +167,17 @@ impl Settings {
                     "missing: the type carrying the position".into(),
                 );
             }
+            if f.lat_field.is_some() != f.lon_field.is_some() {
+                push(
+                    &format!("peer_position[{i}]"),
+                    "give both lat_field and lon_field, or neither".into(),
+                );
+            } else if f.lat_field.is_some() && grid.is_none() {
+                push(
+                    &format!("peer_position[{i}].lat_field"),
+                    "no origin to place latitudes on: set lat_origin and lon_origin (here or in the moos section)".into(),
+                );
+            }
             if f.depth_field.is_some() == f.z_field.is_some() {
                 push(
                     &format!("peer_position[{i}]"),
@@ -197,6 +229,7 @@ impl Settings {
             rate: config.rate(),
             interval,
             min_interval,
+            grid,
         };
         if problems.is_empty() {
             problems.extend(settings.environment_problems());

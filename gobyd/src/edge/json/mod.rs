@@ -350,6 +350,8 @@ impl JsonInterface {
                     x: Some(nav.x),
                     y: Some(nav.y),
                     depth: Some(nav.depth),
+                    lat: None,
+                    lon: None,
                 };
                 (input, Handled::Reply(Reply::Nav { nav }))
             }
