@@ -483,7 +483,7 @@ async fn the_forecast_variables_arrive_through_a_real_moosdb() {
         return;
     };
     let dir = scratch("forecast", "moosdb-run");
-    let db = RealMoosDb::start(&exe, &dir);
+    let db = RealMoosDb::start(&exe, &dir, "gobytest");
     forecast_over_moos(db.port, "forecast-moosdb").await;
 }
 

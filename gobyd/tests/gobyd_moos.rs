@@ -145,7 +145,7 @@ async fn moos_variables_in_and_out_with_a_real_moosdb() {
         panic!("no MOOSDB on PATH");
     };
     let dir = scratch("moos", "moosdb-run");
-    let db = RealMoosDb::start(&exe, &dir);
+    let db = RealMoosDb::start(&exe, &dir, "gobytest");
     let port = db.port;
     round_trip_through(port, "moosdb").await;
     let _ = std::fs::remove_dir_all(&dir);

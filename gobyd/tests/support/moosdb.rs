@@ -15,7 +15,7 @@ pub fn moosdb_on_path() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
-/// A running MOOSDB of community `gobytest`.
+/// A running MOOSDB.
 pub struct RealMoosDb {
     child: Child,
     /// Its port on 127.0.0.1.
@@ -23,8 +23,8 @@ pub struct RealMoosDb {
 }
 
 impl RealMoosDb {
-    /// Starts `exe` in `dir` on a free port.
-    pub fn start(exe: &Path, dir: &Path) -> RealMoosDb {
+    /// Starts `exe` in `dir` on a free port, for `community`.
+    pub fn start(exe: &Path, dir: &Path, community: &str) -> RealMoosDb {
         let port = free_tcp_port();
         let audit = UdpSocket::bind("127.0.0.1:0")
             .unwrap()
@@ -33,7 +33,7 @@ impl RealMoosDb {
             .port();
         let child = Command::new(exe)
             .arg(format!("--moos_port={port}"))
-            .arg("--moos_community=gobytest")
+            .arg(format!("--moos_community={community}"))
             .arg("--moos_suicide_disable")
             .arg(format!("--audit_port={audit}"))
             .arg("--moos_no_colour")
