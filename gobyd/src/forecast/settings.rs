@@ -64,38 +64,10 @@ impl Settings {
         origin: Option<(f64, f64)>,
     ) -> Result<Settings, Vec<Problem>> {
         let mut problems = Vec::new();
-        let origin = match (config.lat_origin, config.lon_origin) {
-            (Some(lat), Some(lon)) => Some((lat, lon)),
-            _ => origin,
-        };
-        let grid = match origin.map(|(lat, lon)| LocalGrid::new(lat, lon)) {
-            Some(Ok(g)) => Some(Arc::new(g)),
-            Some(Err(e)) => {
-                problems.push(Problem::new(format!("{FIELD}.lat_origin"), e));
-                None
-            }
-            None => None,
-        };
-        let mut push = |field: &str, reason: String| {
-            problems.push(Problem::new(format!("{FIELD}.{field}"), reason))
-        };
-        let water_field = format!("{FIELD}.water");
-        let loaded = match &config.water {
-            None => {
-                push(
-                    "water",
-                    "missing: give the water (env, a BELLHOP .env file, or profile)".into(),
-                );
-                None
-            }
-            Some(water) => match modemdriver::sim::water::settings(water, &water_field) {
-                Ok(parts) => Some(parts),
-                Err(p) => {
-                    problems.push(Problem::new(p.field, p.reason));
-                    None
-                }
-            },
-        };
+        let grid = grid_of(config, origin)
+            .map_err(|p| problems.push(p))
+            .unwrap_or(None);
+        let loaded = water_of(config).map_err(|p| problems.push(p)).ok();
         let mut push = |field: &str, reason: String| {
             problems.push(Problem::new(format!("{FIELD}.{field}"), reason))
         };
@@ -152,55 +124,13 @@ impl Settings {
                 )
             })
             .collect();
-        for (i, p) in config.peer.iter().enumerate() {
-            if p.modem_id.is_none() {
-                push(&format!("peer[{i}].modem_id"), "missing".into());
-            }
-            if p.position.is_none() {
-                push(&format!("peer[{i}].position"), "missing".into());
-            }
-        }
-        for (i, f) in config.peer_position.iter().enumerate() {
-            if f.protobuf_name().is_empty() {
-                push(
-                    &format!("peer_position[{i}].protobuf_name"),
-                    "missing: the type carrying the position".into(),
-                );
-            }
-            if f.lat_field.is_some() != f.lon_field.is_some() {
-                push(
-                    &format!("peer_position[{i}]"),
-                    "give both lat_field and lon_field, or neither".into(),
-                );
-            } else if f.lat_field.is_some() && grid.is_none() {
-                push(
-                    &format!("peer_position[{i}].lat_field"),
-                    "no origin to place latitudes on: set lat_origin and lon_origin (here or in the moos section)".into(),
-                );
-            }
-            if f.depth_field.is_some() == f.z_field.is_some() {
-                push(
-                    &format!("peer_position[{i}]"),
-                    "give depth_field (metres down) or z_field (metres up), one of them".into(),
-                );
-            }
+        for (field, reason) in peer_problems(config, grid.is_some())
+            .into_iter()
+            .chain(band_problems(config))
+        {
+            push(&field, reason);
         }
         let band = (config.band_shallow(), config.band_deep());
-        if !(band.0.is_finite() && band.0 >= 0.0) {
-            push("band_shallow", format!("{} m is not a depth", band.0));
-        }
-        if !(band.1.is_finite() && band.1 >= band.0) {
-            push(
-                "band_deep",
-                format!("{} m is not below band_shallow ({} m)", band.1, band.0),
-            );
-        }
-        if !(config.depth_step().is_finite() && config.depth_step() > 0.0) {
-            push(
-                "depth_step",
-                format!("{} m is not a step (above 0)", config.depth_step()),
-            );
-        }
         let mut seconds = |field: &str, s: f64| match Duration::try_from_secs_f64(s) {
             Ok(d) if s > 0.0 => d,
             _ => {
@@ -344,6 +274,101 @@ impl Settings {
         (p.depth >= bottom)
             .then(|| format!("{} m is on or below the bottom ({bottom} m there)", p.depth))
     }
+}
+
+/// The local grid of the section's origin, else of `origin` (the moos
+/// section's); `None` without either.
+fn grid_of(
+    config: &LinkForecastConfig,
+    origin: Option<(f64, f64)>,
+) -> Result<Option<Arc<LocalGrid>>, Problem> {
+    let origin = match (config.lat_origin, config.lon_origin) {
+        (Some(lat), Some(lon)) => Some((lat, lon)),
+        _ => origin,
+    };
+    origin
+        .map(|(lat, lon)| LocalGrid::new(lat, lon).map(Arc::new))
+        .transpose()
+        .map_err(|e| Problem::new(format!("{FIELD}.lat_origin"), e))
+}
+
+/// The water of the section: its environment and forecast settings.
+fn water_of(
+    config: &LinkForecastConfig,
+) -> Result<(channel::Environment, ForecastConfig), Problem> {
+    let water_field = format!("{FIELD}.water");
+    let water = config.water.as_ref().ok_or_else(|| {
+        Problem::new(
+            &water_field,
+            "missing: give the water (env, a BELLHOP .env file, or profile)",
+        )
+    })?;
+    modemdriver::sim::water::settings(water, &water_field)
+        .map_err(|p| Problem::new(p.field, p.reason))
+}
+
+/// The problems of the `peer` and `peer_position` sections: (field under
+/// `forecast.`, reason). `has_origin`: latitudes can be placed.
+fn peer_problems(config: &LinkForecastConfig, has_origin: bool) -> Vec<(String, String)> {
+    let mut problems = Vec::new();
+    let mut push = |field: &str, reason: String| problems.push((field.to_string(), reason));
+    for (i, p) in config.peer.iter().enumerate() {
+        if p.modem_id.is_none() {
+            push(&format!("peer[{i}].modem_id"), "missing".into());
+        }
+        if p.position.is_none() {
+            push(&format!("peer[{i}].position"), "missing".into());
+        }
+    }
+    for (i, f) in config.peer_position.iter().enumerate() {
+        if f.protobuf_name().is_empty() {
+            push(
+                &format!("peer_position[{i}].protobuf_name"),
+                "missing: the type carrying the position".into(),
+            );
+        }
+        if f.lat_field.is_some() != f.lon_field.is_some() {
+            push(
+                &format!("peer_position[{i}]"),
+                "give both lat_field and lon_field, or neither".into(),
+            );
+        } else if f.lat_field.is_some() && !has_origin {
+            push(
+                &format!("peer_position[{i}].lat_field"),
+                "no origin to place latitudes on: set lat_origin and lon_origin (here or in the moos section)".into(),
+            );
+        }
+        if f.depth_field.is_some() == f.z_field.is_some() {
+            push(
+                &format!("peer_position[{i}]"),
+                "give depth_field (metres down) or z_field (metres up), one of them".into(),
+            );
+        }
+    }
+    problems
+}
+
+/// The problems of the depth band: (field under `forecast.`, reason).
+fn band_problems(config: &LinkForecastConfig) -> Vec<(String, String)> {
+    let mut problems = Vec::new();
+    let mut push = |field: &str, reason: String| problems.push((field.to_string(), reason));
+    let band = (config.band_shallow(), config.band_deep());
+    if !(band.0.is_finite() && band.0 >= 0.0) {
+        push("band_shallow", format!("{} m is not a depth", band.0));
+    }
+    if !(band.1.is_finite() && band.1 >= band.0) {
+        push(
+            "band_deep",
+            format!("{} m is not below band_shallow ({} m)", band.1, band.0),
+        );
+    }
+    if !(config.depth_step().is_finite() && config.depth_step() > 0.0) {
+        push(
+            "depth_step",
+            format!("{} m is not a step (above 0)", config.depth_step()),
+        );
+    }
+    problems
 }
 
 /// A configured position.
