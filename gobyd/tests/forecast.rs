@@ -574,3 +574,21 @@ async fn a_received_message_carrying_its_senders_position_places_the_peer() {
     assert_eq!(f["band"]["peer"], 3, "{f}");
     d.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn without_a_forecast_section_the_requests_are_answered_with_why() {
+    let dir = scratch("forecast", "none");
+    let mut d = Running::start(node(&dir, "forecast-none", "")).await;
+    for line in [
+        json!({"forecast": {}}),
+        json!({"nav": {"x": 1.0, "y": 2.0, "depth": 3.0}}),
+        json!({"ctd": []}),
+    ] {
+        let reply = d.request(&line).await;
+        assert_eq!(
+            reply["error"], "no link forecast: the configuration has no forecast section",
+            "{line}"
+        );
+    }
+    d.stop().await;
+}
