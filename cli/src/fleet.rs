@@ -113,6 +113,12 @@ impl Fleet {
             }
             Report::Error { error, topic } => format!("error {topic}: {error}"),
             Report::Accepted(a) => format!("accepted {} id {}", a.type_name, a.id),
+            Report::Forecast(f) => {
+                let note = forecast_note(f);
+                let time = f["forecast"].as_f64().unwrap_or(0.0);
+                view.last.insert("forecast".into(), (time, note.clone()));
+                format!("forecast {note}")
+            }
             Report::Mac { .. } => return None,
         };
         Some(format!("{node} {note}"))
@@ -200,6 +206,9 @@ pub enum Report {
         /// The topic it was published on.
         topic: String,
     },
+    /// `forecast` (retained): the node's last link forecast, as gobyd's
+    /// JSON `forecast` event (`own`, `peers`, `band` with `recommended`).
+    Forecast(Value),
     /// `mac`: a TDMA slot this node transmits in.
     Mac {
         /// Its rate.
@@ -420,6 +429,7 @@ impl Report {
                 error: value["error"].as_str().unwrap_or("?").to_string(),
                 topic: value["topic"].as_str().unwrap_or("?").to_string(),
             },
+            "forecast" => Report::Forecast(value.clone()),
             "mac" => Report::Mac {
                 rate: value["rate"].as_i64().unwrap_or(0),
                 slot_seconds: value["slot_seconds"].as_f64().unwrap_or(0.0),
@@ -427,6 +437,30 @@ impl Report {
             },
             _ => return None,
         })
+    }
+}
+
+/// A link forecast in a few words: the recommended depth and each peer's
+/// SNR (`depth 56 m; 2: 38.8 dB`).
+pub fn forecast_note(f: &Value) -> String {
+    let depth = f["band"]["recommended"]
+        .as_f64()
+        .map_or("no depth".to_string(), |d| format!("depth {d} m"));
+    let peers: Vec<String> = f["peers"]
+        .as_array()
+        .map(|p| {
+            p.iter()
+                .map(|p| match p["snr"].as_f64() {
+                    Some(snr) => format!("{}: {snr:.1} dB", p["node"]),
+                    None => format!("{}: not reached", p["node"]),
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    if peers.is_empty() {
+        depth
+    } else {
+        format!("{depth}; {}", peers.join(", "))
     }
 }
 

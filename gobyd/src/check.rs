@@ -31,6 +31,14 @@ pub fn validate(
 ) -> Result<Checked, DaemonError> {
     let config = config::complete(config)?;
     let mut problems = config::problems(&config, driver);
+    if let Some(forecast) = &config.forecast {
+        if let Err(p) = crate::forecast::settings::Settings::load(
+            forecast,
+            crate::forecast::moos_origin(&config),
+        ) {
+            problems.extend(p);
+        }
+    }
     // Each MAC's own refusals, in the same list (every problem at once).
     let mut mac = Ok(());
     for view in config::links::links(&config) {

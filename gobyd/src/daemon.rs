@@ -204,8 +204,17 @@ impl Daemon {
                 || !json.udp_bind().is_empty(),
         };
         let core = Core::open(checked, drivers, data_dir, clock.clone(), around)?;
-        let handle = core.handle();
+        let mut handle = core.handle();
         let mut interfaces = JoinSet::new();
+        if let Some(forecast) = &config.forecast {
+            let settings = crate::forecast::settings::Settings::load(
+                forecast,
+                crate::forecast::moos_origin(&config),
+            )
+            .map_err(ConfigError::Problems)?;
+            let inputs = crate::forecast::start(settings, &handle, clock.clone(), &mut interfaces);
+            handle.forecast = Some(inputs);
+        }
         let (json_tcp, json_udp) = start_json(&json, &handle, &mut interfaces).await?;
         start_bridges(&config, &handle, clock, &mut interfaces)?;
         core.log_start();

@@ -39,6 +39,7 @@ pub mod daemon;
 pub(crate) mod edge;
 pub mod error;
 pub mod event;
+pub(crate) mod forecast;
 pub(crate) mod logging;
 pub mod mission_file;
 pub mod translator;

@@ -8,14 +8,13 @@
 
 mod support;
 
-use std::net::UdpSocket;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
 use std::time::Duration;
 
 use gobyd::daemon::Daemon;
 use moos::{ClientConfig, MoosClient, Value};
-use support::daemon::{free_tcp_port, scratch};
+use support::daemon::scratch;
+use support::moosdb::{moosdb_on_path, RealMoosDb};
 use support::node::{Entry, Node, Simulator};
 use tokio::sync::oneshot;
 
@@ -139,22 +138,6 @@ async fn moos_variables_in_and_out_with_the_minimal_db() {
     db.stop().await;
 }
 
-fn moosdb_on_path() -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .map(|dir| dir.join("MOOSDB"))
-        .find(|p| p.is_file())
-}
-
-struct KillOnDrop(Child);
-
-impl Drop for KillOnDrop {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs a real MOOSDB on PATH: cargo test -p gobyd --test gobyd_moos -- --ignored"]
 async fn moos_variables_in_and_out_with_a_real_moosdb() {
@@ -162,26 +145,8 @@ async fn moos_variables_in_and_out_with_a_real_moosdb() {
         panic!("no MOOSDB on PATH");
     };
     let dir = scratch("moos", "moosdb-run");
-    let port = free_tcp_port();
-    let audit = UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let _db = KillOnDrop(
-        Command::new(&exe)
-            .arg(format!("--moos_port={port}"))
-            .arg("--moos_community=gobytest")
-            .arg("--moos_suicide_disable")
-            .arg(format!("--audit_port={audit}"))
-            .arg("--moos_no_colour")
-            .current_dir(&dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("MOOSDB starts"),
-    );
+    let db = RealMoosDb::start(&exe, &dir, "gobytest");
+    let port = db.port;
     round_trip_through(port, "moosdb").await;
     let _ = std::fs::remove_dir_all(&dir);
 }

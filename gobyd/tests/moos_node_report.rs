@@ -11,13 +11,13 @@ mod support;
 
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use gobyd::{daemon::Daemon, mission_file};
 use moos::{ClientConfig, MoosClient, Value};
 use protos::goby::apps::protobuf::GobydConfig;
-use support::daemon::{free_tcp_port, scratch};
+use support::daemon::scratch;
+use support::moosdb::{moosdb_on_path, RealMoosDb};
 use tokio::sync::oneshot;
 
 /// Longest wait for the report: two 5 s TDMA slots and the time on the
@@ -236,40 +236,6 @@ async fn node_reports_cross_between_two_communities_with_the_minimal_db() {
     b.stop().await;
 }
 
-fn moosdb_on_path() -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .map(|dir| dir.join("MOOSDB"))
-        .find(|p| p.is_file())
-}
-
-struct KillOnDrop(Child);
-
-impl Drop for KillOnDrop {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn start_moosdb(exe: &Path, port: u16, community: &str, dir: &Path) -> KillOnDrop {
-    let audit = free_udp_port();
-    KillOnDrop(
-        Command::new(exe)
-            .arg(format!("--moos_port={port}"))
-            .arg(format!("--moos_community={community}"))
-            .arg("--moos_suicide_disable")
-            .arg(format!("--audit_port={audit}"))
-            .arg("--moos_no_colour")
-            .current_dir(dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("MOOSDB starts"),
-    )
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs a real MOOSDB on PATH: cargo test -p gobyd --test moos_node_report -- --ignored"]
 async fn node_reports_cross_between_two_communities_with_real_moosdbs() {
@@ -277,9 +243,8 @@ async fn node_reports_cross_between_two_communities_with_real_moosdbs() {
         panic!("no MOOSDB on PATH (the exchange between two real MOOS communities)");
     };
     let dir = scratch("nodereport", "moosdb-run");
-    let ports = (free_tcp_port(), free_tcp_port());
-    let _a = start_moosdb(&exe, ports.0, "alpha", &dir);
-    let _b = start_moosdb(&exe, ports.1, "bravo", &dir);
-    exchange(ports, "moosdb").await;
+    let a = RealMoosDb::start(&exe, &dir, "alpha");
+    let b = RealMoosDb::start(&exe, &dir, "bravo");
+    exchange((a.port, b.port), "moosdb").await;
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -42,6 +42,11 @@ pub enum Event {
     Transfer(Transfer),
     /// `link_status`: a link's status.
     LinkStatus(LinkStatus),
+    /// `forecast`: a link forecast made.
+    Forecast(crate::forecast::Forecast),
+    /// `environment`: the forecast's environment changed, or samples were
+    /// refused.
+    Environment(crate::forecast::Environment),
     /// `lost`: events passed the client by (it read too slowly).
     Lost(Lost),
 }
@@ -65,6 +70,7 @@ impl Event {
             Event::MacSlotStart(_) | Event::MacCycleUpdate(_) => Topic::Mac,
             Event::Transfer(_) => Topic::Transfer,
             Event::LinkStatus(_) => Topic::Link,
+            Event::Forecast(_) | Event::Environment(_) => Topic::Forecast,
         })
     }
 
@@ -101,6 +107,8 @@ impl<'de> Deserialize<'de> for Event {
             "driver_specific" => Event::DriverSpecific(read(value)?),
             "transfer" => Event::Transfer(read(value)?),
             "link_status" => Event::LinkStatus(read(value)?),
+            "forecast" => Event::Forecast(read(value)?),
+            "environment" => Event::Environment(read(value)?),
             "lost" => Event::Lost(read(value)?),
             other => return Err(D::Error::custom(format!("unknown event kind {other:?}"))),
         })

@@ -30,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod event;
+pub mod forecast;
 pub mod message;
 pub mod reply;
 pub mod request;

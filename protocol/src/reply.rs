@@ -48,6 +48,23 @@ pub enum Reply {
         /// Each transfer as it stands.
         transfers: Vec<Transfer>,
     },
+    /// To `ctd`: the samples taken (all of them; a bad one refuses the
+    /// line, naming it).
+    Ctd {
+        /// How many.
+        ctd: usize,
+    },
+    /// To `nav`: the position taken.
+    Nav {
+        /// The position.
+        nav: crate::forecast::Point,
+    },
+    /// To `forecast`: seconds until the forecast is made (0: now; later
+    /// when the last was made less than the minimum interval ago).
+    Forecast {
+        /// Seconds.
+        forecast: f64,
+    },
     /// To a line that was not taken: why (bad JSON, unknown type, a value
     /// the codec would change, a line over 1 MiB, ...).
     Error {

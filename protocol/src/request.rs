@@ -7,6 +7,9 @@
 //! {"file_send": {"dest": 3, "path": "/data/sonar.bin", "name": "sonar.bin"}}
 //! {"file_get": {"node": 3, "path": "logs/mission.log"}}
 //! {"transfers": {}}
+//! {"ctd": [{"time": 1700000000, "depth": 12.5, "temperature": 21.3, "salinity": 38.1}]}
+//! {"nav": {"x": 120.0, "y": -40.0, "depth": 30.0}}
+//! {"forecast": {}}
 //! ```
 
 use serde::de::{Deserialize, Deserializer};
@@ -39,11 +42,13 @@ pub enum Topic {
     Transfer,
     /// The links' status (up, down, restarting, budget spent).
     Link,
+    /// The link forecast and its environment.
+    Forecast,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 9] = [
+    pub const ALL: [Topic; 10] = [
         Topic::Ack,
         Topic::Expire,
         Topic::Drop,
@@ -53,6 +58,7 @@ impl Topic {
         Topic::Mac,
         Topic::Transfer,
         Topic::Link,
+        Topic::Forecast,
     ];
 
     /// The topic's name in the protocol.
@@ -67,6 +73,7 @@ impl Topic {
             Topic::Mac => "mac",
             Topic::Transfer => "transfer",
             Topic::Link => "link",
+            Topic::Forecast => "forecast",
         }
     }
 
@@ -125,6 +132,14 @@ pub enum Request {
     FileGet(FileGet),
     /// `transfers`: the transfers under way.
     Transfers,
+    /// `ctd`: CTD samples for the forecast's sound speed profile (all
+    /// taken, or none when one is bad).
+    Ctd(Vec<crate::forecast::CtdSample>),
+    /// `nav`: this node's position, for the forecast.
+    Nav(crate::forecast::Point),
+    /// `forecast`: make a forecast (as soon as the minimum interval
+    /// allows); it comes as a `forecast` event on topic `forecast`.
+    Forecast,
 }
 
 impl Request {
@@ -173,6 +188,31 @@ impl Request {
                 return file_request(kind, spec);
             }
         }
+        if let Some(samples) = object.remove("ctd") {
+            let samples = match samples {
+                Value::Array(list) => list,
+                one @ Value::Object(_) => vec![one],
+                _ => return Err("\"ctd\" must be a sample or a list of samples".into()),
+            };
+            return samples
+                .into_iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    serde_json::from_value(s).map_err(|e| {
+                        format!("ctd[{i}]: {e} (a sample is {{\"time\", \"depth\", \"temperature\", \"salinity\"}})")
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()
+                .map(Request::Ctd);
+        }
+        if let Some(nav) = object.remove("nav") {
+            return serde_json::from_value(nav)
+                .map(Request::Nav)
+                .map_err(|e| format!("nav: {e} (a position is {{\"x\", \"y\", \"depth\"}})"));
+        }
+        if object.contains_key("forecast") {
+            return Ok(Request::Forecast);
+        }
         if let Some(topics) = object.get("subscribe") {
             let topics = topics
                 .as_array()
@@ -190,7 +230,7 @@ impl Request {
                 .collect::<Result<Vec<_>, _>>()
                 .map(Request::Subscribe);
         }
-        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\" or \"transfers\"".into())
+        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\", \"transfers\", \"ctd\", \"nav\" or \"forecast\"".into())
     }
 
     /// Its line, without the newline.
@@ -270,6 +310,9 @@ impl Serialize for Request {
             Request::FileSend(spec) => map.serialize_entry("file_send", spec)?,
             Request::FileGet(spec) => map.serialize_entry("file_get", spec)?,
             Request::Transfers => map.serialize_entry("transfers", &Map::new())?,
+            Request::Ctd(samples) => map.serialize_entry("ctd", samples)?,
+            Request::Nav(point) => map.serialize_entry("nav", point)?,
+            Request::Forecast => map.serialize_entry("forecast", &Map::new())?,
         }
         map.end()
     }
@@ -305,6 +348,18 @@ mod tests {
                 path: "logs/mission.log".into(),
             }),
             Request::Transfers,
+            Request::Ctd(vec![crate::forecast::CtdSample {
+                time: Some(1.7e9),
+                depth: 12.5,
+                temperature: 21.3,
+                salinity: 38.1,
+            }]),
+            Request::Nav(crate::forecast::Point {
+                x: 1.0,
+                y: -2.0,
+                depth: 30.0,
+            }),
+            Request::Forecast,
         ];
         for request in requests {
             let line = request.line();
@@ -325,7 +380,7 @@ mod tests {
             (r#"{"publish": 3}"#, "\"publish\" must be a message type name"),
             (
                 r#"{"subscribe": ["ack", "nope"]}"#,
-                "unknown topic \"nope\"; topics are ack, expire, drop, queue_size, sent, modem, mac, transfer, link",
+                "unknown topic \"nope\"; topics are ack, expire, drop, queue_size, sent, modem, mac, transfer, link, forecast",
             ),
             (r#"{"subscribe": "ack"}"#, "\"subscribe\" must be a list of topics"),
             (
@@ -337,6 +392,9 @@ mod tests {
                 "file_get: \"path\" (the file's path under the node's serve_dir) is missing",
             ),
             (r#"{"hello": 1}"#, "expected \"publish\""),
+            (r#"{"ctd": [{"depth": 3}]}"#, "ctd[0]: missing field `temperature`"),
+            (r#"{"ctd": 3}"#, "\"ctd\" must be a sample or a list"),
+            (r#"{"nav": {"x": 1}}"#, "nav: missing field `y`"),
         ] {
             let got = Request::parse(line).expect_err(line);
             assert!(got.starts_with(error), "{line}: {got}");

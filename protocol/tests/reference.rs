@@ -7,6 +7,9 @@ use gobyd_protocol::event::{
     MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw, Received,
     Sent, Transfer, TransferDirection,
 };
+use gobyd_protocol::forecast::{
+    BandForecast, CtdSample, Environment, Forecast, PeerForecast, Point, RateFer,
+};
 use gobyd_protocol::{Accepted, Changed, Dropped, Event, FileGet, FileSend, Reply, Request, Topic};
 use serde_json::{json, Value};
 
@@ -38,6 +41,38 @@ fn transfer() -> Transfer {
     }
 }
 
+fn forecast() -> Forecast {
+    let point = Point {
+        x: 3000.0,
+        y: 0.0,
+        depth: 30.0,
+    };
+    Forecast {
+        forecast: 1.7e9,
+        own: point,
+        environment: "ctd".into(),
+        samples: 40,
+        peers: vec![PeerForecast {
+            node: 2,
+            position: point,
+            range: 3000.0,
+            tl: Some(80.0),
+            snr: Some(12.0),
+            delay: Some(2.0),
+            rates: vec![RateFer { rate: 0, fer: 0.1 }],
+        }],
+        band: Some(BandForecast {
+            peer: 2,
+            rate: 0,
+            depths: vec![2.0, 4.0],
+            tl: vec![Some(90.0), None],
+            fer: vec![0.5, 1.0],
+            recommended: Some(2.0),
+        }),
+        error: Some("peer 3: no position".into()),
+    }
+}
+
 /// One request of every kind (the match makes a new kind fail to compile
 /// here until it has a sample).
 fn requests() -> Vec<Request> {
@@ -58,6 +93,18 @@ fn requests() -> Vec<Request> {
             path: "logs/mission.log".into(),
         }),
         Request::Transfers,
+        Request::Ctd(vec![CtdSample {
+            time: Some(1.7e9),
+            depth: 12.5,
+            temperature: 21.3,
+            salinity: 38.1,
+        }]),
+        Request::Nav(Point {
+            x: 120.0,
+            y: -40.0,
+            depth: 30.0,
+        }),
+        Request::Forecast,
     ];
     for r in &all {
         match r {
@@ -66,7 +113,10 @@ fn requests() -> Vec<Request> {
             | Request::DriverSpecific { .. }
             | Request::FileSend(_)
             | Request::FileGet(_)
-            | Request::Transfers => {}
+            | Request::Transfers
+            | Request::Ctd(_)
+            | Request::Nav(_)
+            | Request::Forecast => {}
         }
     }
     all
@@ -114,6 +164,15 @@ fn replies() -> Vec<Reply> {
         Reply::Transfers {
             transfers: vec![transfer()],
         },
+        Reply::Ctd { ctd: 3 },
+        Reply::Nav {
+            nav: Point {
+                x: 1.0,
+                y: 2.0,
+                depth: 3.0,
+            },
+        },
+        Reply::Forecast { forecast: 4.5 },
         Reply::error("bad"),
     ];
     for r in &all {
@@ -124,6 +183,9 @@ fn replies() -> Vec<Reply> {
             | Reply::FileSend { .. }
             | Reply::FileGet { .. }
             | Reply::Transfers { .. }
+            | Reply::Ctd { .. }
+            | Reply::Nav { .. }
+            | Reply::Forecast { .. }
             | Reply::Error { .. } => {}
         }
     }
@@ -213,6 +275,13 @@ fn events() -> Vec<Event> {
         Event::LinkStatus(LinkStatus {
             link_status: json!({"name": "iridium", "state": "LINK_UP"}),
         }),
+        Event::Forecast(forecast()),
+        Event::Environment(Environment {
+            environment: "ctd".into(),
+            samples: 40,
+            profile: vec![[0.0, 1520.0], [100.0, 1505.0]],
+            refused: Some("ctd[3].temperature: NaN".into()),
+        }),
         Event::Lost(Lost { count: 2 }),
     ];
     for e in &all {
@@ -232,6 +301,8 @@ fn events() -> Vec<Event> {
             | Event::DriverSpecific(_)
             | Event::Transfer(_)
             | Event::LinkStatus(_)
+            | Event::Forecast(_)
+            | Event::Environment(_)
             | Event::Lost(_) => {}
         }
     }
@@ -296,7 +367,9 @@ fn every_event_kind_and_key_is_in_the_guides_reference() {
             .unwrap();
         let to = match event.topic() {
             None if kind == "received" => "event, to every client".to_string(),
-            Some(t @ (Topic::Modem | Topic::Mac | Topic::Transfer | Topic::Link)) => {
+            Some(
+                t @ (Topic::Modem | Topic::Mac | Topic::Transfer | Topic::Link | Topic::Forecast),
+            ) => {
                 format!("event, to `{}` subscribers", t.name())
             }
             _ => "event, to subscribers".to_string(),

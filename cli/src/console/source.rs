@@ -220,6 +220,7 @@ fn json_line_reports(
             detail: d.detail,
             time: now,
         },
+        Event::Forecast(f) => Report::Forecast(serde_json::to_value(&f).unwrap_or_default()),
         Event::ModemReceive(m) => {
             let t = &m.modem_receive;
             // 64-bit integers are strings in proto3 JSON: microseconds.
@@ -279,6 +280,7 @@ async fn json_interface(
             Topic::Drop,
             Topic::QueueSize,
             Topic::Modem,
+            Topic::Forecast,
         ])
         .line();
         let mut request = 1u64;

@@ -122,6 +122,8 @@ struct NodeExtra {
     accepted: u64,
     /// Whether it has a bridge of its own (not only heard over the link).
     bridged: bool,
+    /// Its last link forecast (gobyd's `forecast` event).
+    forecast: Option<Value>,
 }
 
 /// The state of a command sent from the page.
@@ -391,6 +393,13 @@ impl ConsoleState {
                     events.push(json!({"event": "command", "seq": seq, "command": view}));
                 }
             }
+            Report::Forecast(f) => {
+                self.extra.get_mut(node).expect("entered").forecast = Some(f.clone());
+                let seq = self.next_seq();
+                events.push(json!({
+                    "event": "forecast", "seq": seq, "node": node, "forecast": f,
+                }));
+            }
             Report::Queue { .. } | Report::Mac { .. } => {}
         }
         let summary = self.node_json(node, false);
@@ -614,6 +623,7 @@ impl ConsoleState {
             "accepted": e.accepted,
             "position": e.track.back().map(track_json),
             "link": e.links.back().map(|l| link_json(&l.0)),
+            "forecast": e.forecast,
         });
         if full {
             v["track"] = e.track.iter().map(track_json).collect();
@@ -654,6 +664,7 @@ fn report_time(report: &Report) -> Option<f64> {
         Report::Driver { time, .. } | Report::Mac { time, .. } => Some(*time),
         Report::Rx(rx) => Some(rx.time),
         Report::Queued(n) => Some(n.time),
+        Report::Forecast(f) => f["forecast"].as_f64(),
         Report::Queue { .. } | Report::Accepted(_) | Report::Error { .. } => None,
     }
 }
@@ -704,6 +715,30 @@ mod tests {
     fn apply(s: &mut ConsoleState, topic: &str, payload: &str) -> Vec<Value> {
         let (node, r) = report(topic, payload);
         s.apply(&node, &r, 100.0)
+    }
+
+    #[test]
+    fn a_forecast_reaches_the_page_and_the_snapshot() {
+        let mut s = state();
+        let forecast = r#"{"event": "forecast", "forecast": 95.0, "own": {"x": 3000, "y": 0, "depth": 6},
+            "environment": "ctd", "samples": 12,
+            "peers": [{"node": 2, "position": {"x": 0, "y": 0, "depth": 30}, "range": 3000, "tl": 81.5,
+                       "snr": 38.8, "delay": 1.99, "rates": [{"rate": 0, "fer": 0.016}]}],
+            "band": {"peer": 2, "rate": 0, "depths": [6, 56], "tl": [81.1, 75.5], "fer": [0.4, 0.1], "recommended": 56}}"#;
+        let events = apply(&mut s, "fleet/auv1/forecast", forecast);
+        let event = events
+            .iter()
+            .find(|e| e["event"] == "forecast")
+            .expect("a forecast event");
+        assert_eq!(event["node"], "auv1");
+        assert_eq!(event["forecast"]["band"]["recommended"], 56);
+        let snapshot = s.snapshot();
+        let node = &snapshot["nodes"][0];
+        assert_eq!(node["forecast"]["peers"][0]["snr"], 38.8);
+        assert_eq!(
+            crate::fleet::forecast_note(&node["forecast"]),
+            "depth 56 m; 2: 38.8 dB"
+        );
     }
 
     #[test]

@@ -275,6 +275,7 @@ impl Core {
             link_status: self.link_status.subscribe(),
             codec: self.codec.clone(),
             names: self.names.clone(),
+            forecast: None,
         }
     }
 

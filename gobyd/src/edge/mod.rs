@@ -10,4 +10,5 @@
 pub mod json;
 pub mod mission_log;
 pub mod moos;
+pub mod moos_forecast;
 pub mod mqtt;

@@ -52,8 +52,10 @@ use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, oneshot};
 
 use crate::edge::json::lines::{network_reply_value, network_request, transfer_value};
+use crate::edge::moos_forecast::ForecastVars;
 use crate::event::{
-    Control, CoreHandle, DaemonEvent, ModemEvent, NetworkRequest, Publish, SharedEvent,
+    Control, CoreHandle, DaemonEvent, ForecastInput, ModemEvent, NetworkRequest, Publish,
+    SharedEvent,
 };
 use crate::translator::{self, TranslateError, Translator};
 
@@ -75,6 +77,8 @@ pub struct BridgeSettings {
     /// `transfer_var`. The request variables are read either way;
     /// without the network layer each request is answered with an error.
     pub files: bool,
+    /// The link forecast's variables, when it is configured.
+    pub forecast: Option<ForecastVars>,
 }
 
 impl BridgeSettings {
@@ -90,6 +94,7 @@ impl BridgeSettings {
             translator: Arc::new(translator),
             modem_id: config.modem_id(),
             files: config.network.is_some(),
+            forecast: config.forecast.as_ref().map(ForecastVars::of),
         })
     }
 
@@ -440,6 +445,7 @@ pub fn run(settings: BridgeSettings, core: &CoreHandle) -> impl std::future::Fut
         core.publish.clone(),
         core.control.clone(),
         core.events.subscribe(),
+        core.forecast.clone(),
     )
 }
 
@@ -449,6 +455,7 @@ async fn bridge(
     publish: mpsc::Sender<Publish>,
     control: mpsc::Sender<Control>,
     mut events: broadcast::Receiver<SharedEvent>,
+    forecast: Option<mpsc::Sender<ForecastInput>>,
 ) {
     let Some((client, mut mail)) = connect(&settings).await else {
         return;
@@ -468,6 +475,9 @@ async fn bridge(
     let file_send_var = settings.moos.file_send_var().to_string();
     let file_get_var = settings.moos.file_get_var().to_string();
     registered.extend([file_send_var.clone(), file_get_var.clone()]);
+    if let Some(vars) = &settings.forecast {
+        registered.extend(vars.registered());
+    }
     registered.sort();
     registered.dedup();
     for var in &registered {
@@ -517,7 +527,18 @@ async fn bridge(
                     }
                 }
                 Some(m) => {
-                    handle_mail(&settings, &codec, &publish, &client, &mut latest, m).await
+                    let given = settings.forecast.as_ref().and_then(|v| v.input(&m));
+                    match (given, &forecast) {
+                        (Some(Ok(input)), Some(forecast)) => {
+                            let _ = forecast.send(input).await;
+                        }
+                        (Some(Err(e)), _) => tracing::warn!("MOOS: {e}"),
+                        (Some(Ok(_)), None) => {}
+                        (None, _) => {
+                            handle_mail(&settings, &codec, &publish, &client, &mut latest, m)
+                                .await
+                        }
+                    }
                 }
                 None => break,
             },
@@ -551,6 +572,11 @@ async fn bridge(
                             })
                             .into_iter()
                             .collect(),
+                        DaemonEvent::Forecast(e) => settings
+                            .forecast
+                            .as_ref()
+                            .map(|v| v.publications(e))
+                            .unwrap_or_default(),
                     };
                     for (var, value) in values {
                         notify(&client, &var, &value);

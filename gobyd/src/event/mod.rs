@@ -11,6 +11,7 @@
 //! and MQTT bridges, the mission log, an embedding program) takes these
 //! values and renders them in its own form.
 
+pub mod forecast;
 pub mod modem;
 pub mod request;
 
@@ -23,6 +24,7 @@ use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, watch};
 
+pub use forecast::{ForecastEvent, ForecastInput};
 pub use modem::ModemEvent;
 pub use protos::goby::apps::protobuf::LinkStatus;
 pub use request::{AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply};
@@ -56,6 +58,9 @@ pub enum DaemonEvent {
     /// told this node: its client hears `expire` at once, naming the relay
     /// and the limit.
     RouteDropped(RouteDropped),
+    /// The link forecast (`forecast` in the configuration): a forecast
+    /// made, or its environment changed.
+    Forecast(ForecastEvent),
 }
 
 /// A routed message dropped on its way (the network layer's hop limit).
@@ -174,6 +179,9 @@ pub struct CoreHandle {
     pub codec: Arc<dccl::Codec>,
     /// Type names by DCCL id.
     pub names: Arc<HashMap<u32, String>>,
+    /// Where the link forecast's inputs go (`None`: no forecast
+    /// configured).
+    pub forecast: Option<mpsc::Sender<ForecastInput>>,
 }
 
 /// What the core writes down as it goes, in order: the mission log (what

@@ -8,6 +8,7 @@ pub mod fleet;
 pub mod goby3;
 pub mod iridium;
 pub mod micromodem;
+pub mod moosdb;
 pub mod node;
 pub mod relay;
 pub mod restart;

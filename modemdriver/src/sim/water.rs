@@ -113,41 +113,7 @@ impl Water {
     /// beside it) when it names one. The problem names the field, and for a
     /// file that does not parse the file and line.
     pub fn load(config: &AcousticChannel) -> Result<Water, Problem> {
-        let (environment, file_fan) = match (&config.env, config.profile.is_empty()) {
-            (Some(_), false) => {
-                return Err(Problem::new(
-                    FIELD,
-                    "give either env (a BELLHOP .env file) or profile, not both",
-                ))
-            }
-            (None, true) => {
-                return Err(Problem::new(
-                    FIELD,
-                    "no environment: give env (a BELLHOP .env file) or profile",
-                ))
-            }
-            (Some(path), true) => {
-                let file = read_env(Path::new(path))?;
-                (file.environment, Some(file.beams))
-            }
-            (None, false) => (inline_environment(config), None),
-        };
-        let band = match config.modem() {
-            acoustic_channel::Modem::MicromodemBandA => MicroModemBand::A,
-            acoustic_channel::Modem::MicromodemBandC => MicroModemBand::C,
-        };
-        let mut modem = Modem::micromodem(band);
-        modem.source_level = config.source_level_db();
-        let noise = NoiseModel::beaufort(config.wind_beaufort(), config.shipping());
-        if config.wind_beaufort() > 12 {
-            return Err(Problem::new(
-                format!("{FIELD}.wind_beaufort"),
-                format!(
-                    "{} is not a Beaufort force (0 to 12)",
-                    config.wind_beaufort()
-                ),
-            ));
-        }
+        let (environment, forecast) = settings(config, FIELD)?;
         let tolerance = config.position_tolerance();
         if !tolerance.is_finite() || tolerance <= 0.0 {
             return Err(Problem::new(
@@ -155,13 +121,8 @@ impl Water {
                 format!("{tolerance} is not a distance (metres, above 0)"),
             ));
         }
-        let mut forecast = ForecastConfig::new(modem, noise);
-        match config.beams {
-            Some(beams) => forecast.beams = usize::try_from(beams).unwrap_or(usize::MAX),
-            None => forecast.fan = file_fan,
-        }
-        forecast.max_angle = config.max_angle();
-        let forecaster = Forecaster::new(environment, forecast).map_err(channel_problem)?;
+        let forecaster =
+            Forecaster::new(environment, forecast).map_err(|e| channel_problem(FIELD, e))?;
         Ok(Water {
             forecaster: std::sync::Arc::new(forecaster),
             tolerance,
@@ -229,18 +190,75 @@ pub fn compute(forecaster: &Forecaster, from: &Position, to: &Position) -> Resul
         .map_err(|e| format!("no acoustic link from {from:?} to {to:?}: {e}"))
 }
 
-fn channel_problem(e: ChannelError) -> Problem {
-    match e {
-        ChannelError::Invalid { field, message } => {
-            Problem::new(format!("{FIELD}.{field}"), message)
+/// The environment and the forecast settings of an `AcousticChannel`
+/// section found at `field` (a path naming it in its configuration, e.g.
+/// `simulator.acoustic_channel`): its `.env` (and the files beside it) read
+/// when it names one, else its inline profile over a flat bottom; the
+/// modem, noise and beams. The problem names the field, and for a file
+/// that does not parse the file and line. The environment itself is not
+/// checked here: [`Forecaster::new`] does it.
+pub fn settings(
+    config: &AcousticChannel,
+    field: &str,
+) -> Result<(channel::Environment, ForecastConfig), Problem> {
+    let (environment, file_fan) = match (&config.env, config.profile.is_empty()) {
+        (Some(_), false) => {
+            return Err(Problem::new(
+                field,
+                "give either env (a BELLHOP .env file) or profile, not both",
+            ))
         }
-        e => Problem::new(FIELD, e.to_string()),
+        (None, true) => {
+            return Err(Problem::new(
+                field,
+                "no environment: give env (a BELLHOP .env file) or profile",
+            ))
+        }
+        (Some(path), true) => {
+            let file = read_env(Path::new(path), field)?;
+            (file.environment, Some(file.beams))
+        }
+        (None, false) => (inline_environment(config), None),
+    };
+    let band = match config.modem() {
+        acoustic_channel::Modem::MicromodemBandA => MicroModemBand::A,
+        acoustic_channel::Modem::MicromodemBandC => MicroModemBand::C,
+    };
+    let mut modem = Modem::micromodem(band);
+    modem.source_level = config.source_level_db();
+    let noise = NoiseModel::beaufort(config.wind_beaufort(), config.shipping());
+    if config.wind_beaufort() > 12 {
+        return Err(Problem::new(
+            format!("{field}.wind_beaufort"),
+            format!(
+                "{} is not a Beaufort force (0 to 12)",
+                config.wind_beaufort()
+            ),
+        ));
+    }
+    let mut forecast = ForecastConfig::new(modem, noise);
+    match config.beams {
+        Some(beams) => forecast.beams = usize::try_from(beams).unwrap_or(usize::MAX),
+        None => forecast.fan = file_fan,
+    }
+    forecast.max_angle = config.max_angle();
+    Ok((environment, forecast))
+}
+
+/// A channel model's error as a problem of the section at `field`.
+pub fn channel_problem(field: &str, e: ChannelError) -> Problem {
+    match e {
+        ChannelError::Invalid {
+            field: inner,
+            message,
+        } => Problem::new(format!("{field}.{inner}"), message),
+        e => Problem::new(field, e.to_string()),
     }
 }
 
 /// A BELLHOP `.env` file and its companions.
-fn read_env(path: &Path) -> Result<bellhop::EnvFile, Problem> {
-    let problem = |reason: String| Problem::new(format!("{FIELD}.env"), reason);
+fn read_env(path: &Path, field: &str) -> Result<bellhop::EnvFile, Problem> {
+    let problem = |reason: String| Problem::new(format!("{field}.env"), reason);
     let text = std::fs::read_to_string(path)
         .map_err(|e| problem(format!("cannot read {}: {e}", path.display())))?;
     let name = path.display().to_string();

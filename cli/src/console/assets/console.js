@@ -119,6 +119,7 @@ function applyEvent(ev) {
     }
     case 'track': nodeOf(ev.node).track.push(ev.point); break;
     case 'link': nodeOf(ev.node).links.push(ev.point); break;
+    case 'forecast': nodeOf(ev.node).forecast = ev.forecast; break;
     case 'gone': S.nodes.delete(ev.node); updateNodeChoices(); break;
     case 'origin': S.origin = ev.origin; break;
     case 'message':
@@ -410,6 +411,21 @@ function series(links, key) {
   return links.filter((l) => l[key] !== undefined && l[key] !== null).map((l) => [l.t, l[key]]);
 }
 
+// The node's last link forecast (gobyd's `forecast` section): the depth it
+// recommends in its band, and per peer the range, SNR and frame-error rate.
+function forecastText(f) {
+  if (!f) return '—';
+  const b = f.band;
+  const depth = b && b.recommended !== null && b.recommended !== undefined
+    ? `go to ${fmt(b.recommended)} m (rate ${b.rate}, to ${b.peer})` : 'no depth';
+  const peers = (f.peers || []).map((p) => {
+    const fer = (p.rates || []).map((r) => `r${r.rate} ${r.fer.toFixed(2)}`).join(' ');
+    const snr = p.snr === null || p.snr === undefined ? 'not reached' : `SNR ${p.snr.toFixed(1)} dB`;
+    return `${p.node}: ${fmt(p.range)} m, ${snr}, FER ${fer}`;
+  });
+  return [depth, ...peers].join('; ') + ` (${age(f.forecast)} ago${f.error ? '; ' + f.error : ''})`;
+}
+
 function renderDetail() {
   const n = S.picked && S.nodes.get(S.picked);
   $('detail-name').textContent = n ? n.name : '—';
@@ -435,6 +451,7 @@ function renderDetail() {
   row('messages', `${n.received || 0} received, ${n.accepted || 0} queued from tx, ${n.acks || 0} acked, ${n.expires || 0} expired, ${n.drops || 0} dropped, ${n.errors || 0} refused`);
   const queues = Object.entries(n.queues || {});
   row('queues', queues.length ? queues.map(([t, s]) => `${short(t)}: ${s}`).join(', ') : '—');
+  row('link forecast', forecastText(n.forecast));
   box.replaceChildren(kv);
   const links = n.links || [];
   const none = 'no Micro-Modem statistics in this node\'s receptions';

@@ -19,8 +19,8 @@ use serde_json::Value;
 pub use gobyd_protocol::message_json;
 
 use crate::event::{
-    AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, NetworkRequest,
-    PublishReply, Reception, TransferEvent,
+    AcceptedMessage, DaemonEvent, ForecastEvent, LinkSummary, ModemEvent, NetworkReply,
+    NetworkRequest, PublishReply, Reception, TransferEvent,
 };
 
 /// A request line as the core takes it.
@@ -37,6 +37,19 @@ pub enum Input {
     /// A request of the network layer: send a file, ask for one, list the
     /// transfers.
     Network(NetworkRequest),
+    /// A request of the link forecast.
+    Forecast(ForecastRequest),
+}
+
+/// What a client gives or asks of the link forecast.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ForecastRequest {
+    /// CTD samples.
+    Ctd(Vec<gobyd_protocol::forecast::CtdSample>),
+    /// This node's position.
+    Nav(gobyd_protocol::forecast::Point),
+    /// Make a forecast.
+    Forecast,
 }
 
 /// Reads one request line; messages may be of any type loaded in
@@ -66,6 +79,9 @@ pub fn input(request: Request, codec: &Codec) -> Result<Input, String> {
         Request::FileSend(_) | Request::FileGet(_) | Request::Transfers => {
             Ok(Input::Network(network_of(request)))
         }
+        Request::Ctd(samples) => Ok(Input::Forecast(ForecastRequest::Ctd(samples))),
+        Request::Nav(point) => Ok(Input::Forecast(ForecastRequest::Nav(point))),
+        Request::Forecast => Ok(Input::Forecast(ForecastRequest::Forecast)),
     }
 }
 
@@ -272,6 +288,7 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
         DaemonEvent::Link(_) => Some(Topic::Link),
         DaemonEvent::RouteDropped(_) => Some(Topic::Expire),
+        DaemonEvent::Forecast(_) => Some(Topic::Forecast),
     }
 }
 
@@ -304,7 +321,17 @@ pub fn event(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<
             }),
             other => other,
         },
+        DaemonEvent::Forecast(e) => forecast_line(e),
     })
+}
+
+/// The line of a forecast event (also what the MQTT and MOOS bridges
+/// publish).
+pub fn forecast_line(event: &ForecastEvent) -> Event {
+    match event {
+        ForecastEvent::Forecast(f) => Event::Forecast(f.clone()),
+        ForecastEvent::Environment(e) => Event::Environment(e.clone()),
+    }
 }
 
 /// [`event`]'s line, without its newline.

@@ -38,10 +38,13 @@ pub mod lines;
 mod golden;
 
 use crate::event::{
-    Control, CoreHandle, DaemonEvent, LinkStatus, ModemEvent, Publish, SharedEvent,
+    Control, CoreHandle, DaemonEvent, ForecastInput, LinkStatus, ModemEvent, Publish, SharedEvent,
 };
 use gobyd_protocol::{Reply, Topic};
-use lines::{event_line, event_topic, lost, network_reply, parse_request, publish_reply, Input};
+use lines::{
+    event_line, event_topic, lost, network_reply, parse_request, publish_reply, ForecastRequest,
+    Input,
+};
 
 pub use gobyd_protocol::MAX_LINE;
 
@@ -212,6 +215,8 @@ pub struct JsonInterface {
     /// Every link's status as it stands: sent once to a client as it
     /// subscribes to `link`.
     link_status: watch::Receiver<Vec<LinkStatus>>,
+    /// Where the link forecast's inputs go (`None`: none configured).
+    forecast: Option<mpsc::Sender<ForecastInput>>,
 }
 
 impl JsonInterface {
@@ -225,6 +230,7 @@ impl JsonInterface {
             names: core.names.clone(),
             driver_status: core.driver_status.clone(),
             link_status: core.link_status.clone(),
+            forecast: core.forecast.clone(),
         }
     }
 
@@ -301,6 +307,7 @@ impl JsonInterface {
                     Err(e) => Reply::error(e),
                 }))
             }
+            Input::Forecast(request) => self.forecast_request(request).await,
             Input::DriverSpecific(message) => {
                 let name = message.descriptor().full_name().to_string();
                 let (reply, outcome) = oneshot::channel();
@@ -316,6 +323,50 @@ impl JsonInterface {
                 }))
             }
         }
+    }
+
+    /// Hands a request of the link forecast to it.
+    async fn forecast_request(&self, request: ForecastRequest) -> Handled {
+        let Some(forecast) = &self.forecast else {
+            return Handled::Reply(Reply::error(
+                "no link forecast: the configuration has no forecast section",
+            ));
+        };
+        let (input, handled) = match request {
+            ForecastRequest::Ctd(samples) => {
+                let (reply, waiting) = oneshot::channel();
+                let input = ForecastInput::Ctd {
+                    samples,
+                    reply: Some(reply),
+                };
+                let handled = Handled::Waiting(answer(waiting, |taken| match taken {
+                    Ok(n) => Reply::Ctd { ctd: n },
+                    Err(e) => Reply::error(e),
+                }));
+                (input, handled)
+            }
+            ForecastRequest::Nav(nav) => {
+                let input = ForecastInput::Nav {
+                    x: Some(nav.x),
+                    y: Some(nav.y),
+                    depth: Some(nav.depth),
+                    lat: None,
+                    lon: None,
+                };
+                (input, Handled::Reply(Reply::Nav { nav }))
+            }
+            ForecastRequest::Forecast => {
+                let (reply, waiting) = oneshot::channel();
+                let input = ForecastInput::Request { reply: Some(reply) };
+                let handled =
+                    Handled::Waiting(answer(waiting, |wait| Reply::Forecast { forecast: wait }));
+                (input, handled)
+            }
+        };
+        if forecast.send(input).await.is_err() {
+            return Handled::Reply(shutting_down());
+        }
+        handled
     }
 
     /// Accepts TCP clients until the task is dropped. While file

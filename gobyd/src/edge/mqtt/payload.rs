@@ -107,6 +107,18 @@ impl Formatter {
                 out.payload = serde_json::to_vec(&payload).ok()?;
                 Some(out)
             }
+            // The link forecast, retained for the console: PREFIX/NODE/forecast
+            // (the last forecast) and PREFIX/NODE/environment, as the JSON
+            // interface's events.
+            DaemonEvent::Forecast(e) => {
+                let topic = match e {
+                    crate::event::ForecastEvent::Forecast(_) => "forecast",
+                    crate::event::ForecastEvent::Environment(_) => "environment",
+                };
+                let line = crate::edge::json::lines::forecast_line(e);
+                let payload = serde_json::to_value(&line).unwrap_or_default();
+                Some(Outgoing::new(self.topics.node(topic), payload, true))
+            }
         }
     }
 
