@@ -124,6 +124,8 @@ pub struct MacManager {
     scheme: Scheme,
     /// Start of the last slot reported.
     last_start: Option<Micros>,
+    /// Whether the cycle runs (a `MACUpdate` may stop it).
+    running: bool,
 }
 
 fn check_seconds(field: String, value: f64, minimum_exclusive: f64) -> Result<Micros, AmacError> {
@@ -185,6 +187,7 @@ impl MacManager {
             start_cycle_in_middle: config.start_cycle_in_middle(),
             scheme: Scheme::None,
             last_start: None,
+            running: true,
         };
         manager.scheme = match kind {
             MacType::MacNone => Scheme::None,
@@ -340,6 +343,9 @@ impl MacManager {
     /// When [`MacManager::poll`] next has something to report: the start of
     /// the next slot plus the guard time. `None` when no slot is configured.
     pub fn next_event_time(&self) -> Option<Micros> {
+        if !self.running {
+            return None;
+        }
         self.next_slot_start().map(|start| start + self.guard)
     }
 
@@ -363,6 +369,9 @@ impl MacManager {
     /// is already over is reported as [`SlotAction::Missed`].
     pub fn poll(&mut self, now: Micros) -> Vec<MacEvent> {
         let mut events = Vec::new();
+        if !self.running {
+            return events;
+        }
         while let Some(start) = self.next_slot_start() {
             if start + self.guard > now {
                 break;
@@ -440,6 +449,42 @@ impl MacManager {
         let removed = slots.remove(index);
         self.set_slots(slots, now)?;
         Ok(removed)
+    }
+
+    /// Whether the cycle runs: false after a `MACUpdate` stopped it
+    /// (`cycle_state: STOPPED`, or an update that emptied the cycle) and
+    /// until one starts it again.
+    pub fn running(&self) -> bool {
+        self.running
+    }
+
+    /// Applies a `MACUpdate` (see [`crate::update`]) as pAcommsHandler
+    /// does: ignored unless `dest` is this node; the cycle is edited, then
+    /// started or stopped by `cycle_state` when set (an emptied cycle
+    /// stops). The next slot is found as after [`MacManager::set_slots`].
+    ///
+    /// Errors, the cycle unchanged: [`AmacError::NotForThisNode`], an index
+    /// outside the cycle or a pop of an empty one
+    /// ([`AmacError::InvalidField`] of `goby.acomms.protobuf.MACUpdate`),
+    /// a slot this node cannot run (of `MACConfig`, as for the
+    /// configuration), a scheme without a slot list
+    /// ([`AmacError::WrongScheme`]).
+    pub fn apply_update(
+        &mut self,
+        update: &protos::goby::acomms::protobuf::MacUpdate,
+        now: Micros,
+    ) -> Result<crate::UpdateOutcome, AmacError> {
+        crate::update::check_dest(update, self.modem_id)?;
+        let before = self.cycle_if_listed()?;
+        let slots = crate::update::edit_cycle(&before, update)?;
+        let running = crate::update::running_after(update, self.running, slots.len());
+        self.set_slots(slots.clone(), now)?;
+        self.running = running;
+        Ok(crate::UpdateOutcome {
+            update_type: crate::update::update_type(update)?,
+            cycle: slots,
+            running,
+        })
     }
 
     fn cycle_if_listed(&self) -> Result<Vec<ModemTransmission>, AmacError> {
