@@ -458,6 +458,16 @@ impl MacManager {
         self.running
     }
 
+    /// Starts (`true`) or stops the cycle, as an update's `cycle_state`
+    /// does; a cycle started again continues from the next slot after
+    /// `now` (see [`MacManager::set_slots`]).
+    pub fn set_running(&mut self, running: bool, now: Micros) {
+        if running && !self.running {
+            self.restart_listed(now);
+        }
+        self.running = running;
+    }
+
     /// Applies a `MACUpdate` (see [`crate::update`]) as pAcommsHandler
     /// does: ignored unless `dest` is this node; the cycle is edited, then
     /// started or stopped by `cycle_state` when set (an emptied cycle

@@ -7,6 +7,8 @@
 //! {"file_send": {"dest": 3, "path": "/data/sonar.bin", "name": "sonar.bin"}}
 //! {"file_get": {"node": 3, "path": "logs/mission.log"}}
 //! {"transfers": {}}
+//! {"mac_update": {"src": 1, "dest": 2, "update_type": "PUSH_BACK", "slot": [{…}]}}
+//! {"mac_cycle": {}}
 //! ```
 
 use serde::de::{Deserialize, Deserializer};
@@ -125,6 +127,12 @@ pub enum Request {
     FileGet(FileGet),
     /// `transfers`: the transfers under way.
     Transfers,
+    /// `mac_update`: change this node's TDMA cycle with a
+    /// `goby.acomms.protobuf.MACUpdate` (proto3 JSON), as pAcommsHandler's
+    /// `MAC_CYCLE_UPDATE` does; answered with the cycle after it.
+    MacUpdate(Value),
+    /// `mac_cycle`: this node's TDMA cycle as it stands.
+    MacCycle,
 }
 
 impl Request {
@@ -146,8 +154,8 @@ impl Request {
 
     /// The request a JSON value holds (see [`parse`](Self::parse)). When
     /// an object holds several requests' keys, the first of `publish`,
-    /// `driver_specific`, `file_send`, `file_get`, `transfers` and
-    /// `subscribe` is taken; other keys are ignored.
+    /// `driver_specific`, `mac_update`, `mac_cycle`, `file_send`,
+    /// `file_get`, `transfers` and `subscribe` is taken; other keys are ignored.
     pub fn from_value(value: Value) -> Result<Request, String> {
         let Value::Object(mut object) = value else {
             return Err("not a JSON object".into());
@@ -167,6 +175,18 @@ impl Request {
                 .to_string();
             let msg = object.remove("msg");
             return Ok(Request::DriverSpecific { type_name, msg });
+        }
+        if let Some(update) = object.remove("mac_update") {
+            if !update.is_object() {
+                return Err(
+                    "\"mac_update\" must be a goby.acomms.protobuf.MACUpdate (a JSON object)"
+                        .into(),
+                );
+            }
+            return Ok(Request::MacUpdate(update));
+        }
+        if object.contains_key("mac_cycle") {
+            return Ok(Request::MacCycle);
         }
         for kind in ["file_send", "file_get", "transfers"] {
             if let Some(spec) = object.get(kind) {
@@ -190,7 +210,7 @@ impl Request {
                 .collect::<Result<Vec<_>, _>>()
                 .map(Request::Subscribe);
         }
-        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\" or \"transfers\"".into())
+        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\", \"transfers\", \"mac_update\" or \"mac_cycle\"".into())
     }
 
     /// Its line, without the newline.
@@ -270,6 +290,8 @@ impl Serialize for Request {
             Request::FileSend(spec) => map.serialize_entry("file_send", spec)?,
             Request::FileGet(spec) => map.serialize_entry("file_get", spec)?,
             Request::Transfers => map.serialize_entry("transfers", &Map::new())?,
+            Request::MacUpdate(update) => map.serialize_entry("mac_update", update)?,
+            Request::MacCycle => map.serialize_entry("mac_cycle", &Map::new())?,
         }
         map.end()
     }
@@ -305,6 +327,8 @@ mod tests {
                 path: "logs/mission.log".into(),
             }),
             Request::Transfers,
+            Request::MacUpdate(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
+            Request::MacCycle,
         ];
         for request in requests {
             let line = request.line();
@@ -337,6 +361,7 @@ mod tests {
                 "file_get: \"path\" (the file's path under the node's serve_dir) is missing",
             ),
             (r#"{"hello": 1}"#, "expected \"publish\""),
+            (r#"{"mac_update": 3}"#, "\"mac_update\" must be a goby.acomms.protobuf.MACUpdate"),
         ] {
             let got = Request::parse(line).expect_err(line);
             assert!(got.starts_with(error), "{line}: {got}");

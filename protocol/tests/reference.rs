@@ -4,8 +4,8 @@
 
 use gobyd_protocol::event::{
     Ack, Direction, DriverSpecific, DriverStatus, Dropped as DropEvent, Expire, LinkStatus, Lost,
-    MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw, Received,
-    Sent, Transfer, TransferDirection,
+    MacCycle, MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw,
+    Received, Sent, Transfer, TransferDirection,
 };
 use gobyd_protocol::{Accepted, Changed, Dropped, Event, FileGet, FileSend, Reply, Request, Topic};
 use serde_json::{json, Value};
@@ -58,6 +58,8 @@ fn requests() -> Vec<Request> {
             path: "logs/mission.log".into(),
         }),
         Request::Transfers,
+        Request::MacUpdate(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
+        Request::MacCycle,
     ];
     for r in &all {
         match r {
@@ -66,7 +68,9 @@ fn requests() -> Vec<Request> {
             | Request::DriverSpecific { .. }
             | Request::FileSend(_)
             | Request::FileGet(_)
-            | Request::Transfers => {}
+            | Request::Transfers
+            | Request::MacUpdate(_)
+            | Request::MacCycle => {}
         }
     }
     all
@@ -114,6 +118,9 @@ fn replies() -> Vec<Reply> {
         Reply::Transfers {
             transfers: vec![transfer()],
         },
+        Reply::MacCycle {
+            mac_cycle: json!({"slot": [], "running": false, "modem_id": 2}),
+        },
         Reply::error("bad"),
     ];
     for r in &all {
@@ -124,6 +131,7 @@ fn replies() -> Vec<Reply> {
             | Reply::FileSend { .. }
             | Reply::FileGet { .. }
             | Reply::Transfers { .. }
+            | Reply::MacCycle { .. }
             | Reply::Error { .. } => {}
         }
     }
@@ -192,6 +200,12 @@ fn events() -> Vec<Event> {
             joined: None,
             left: Some(3),
         }),
+        Event::MacCycle(MacCycle {
+            mac_cycle: json!({"slot": [], "running": false, "modem_id": 2}),
+            update: Some(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
+            from: "link".into(),
+            error: Some("for modem 3".into()),
+        }),
         Event::DriverStatus(DriverStatus {
             driver_status: "ready".into(),
             detail: "ready".into(),
@@ -219,6 +233,7 @@ fn events() -> Vec<Event> {
             | Event::ModemTransmit(_)
             | Event::MacSlotStart(_)
             | Event::MacCycleUpdate(_)
+            | Event::MacCycle(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_)
             | Event::Transfer(_)

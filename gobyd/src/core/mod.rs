@@ -23,6 +23,7 @@
 
 mod control;
 pub(crate) mod links;
+pub mod mac_update;
 mod receive;
 
 pub mod crash_point;
@@ -169,6 +170,9 @@ pub struct Core {
     clock: Arc<dyn Clock>,
     /// Routing, fragments and file transfer (`None`: off).
     network: Option<Network>,
+    /// The slots the configuration gives the first link (what a changed
+    /// cycle kept on disk was changed from, see [`mac_update`]).
+    configured_slots: Vec<protos::goby::acomms::protobuf::ModemTransmission>,
 }
 
 impl std::fmt::Debug for Core {
@@ -233,7 +237,8 @@ impl Core {
             .iter()
             .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
             .collect();
-        Ok(Self {
+        let configured_slots = mac_update::configured_slots(&config);
+        let mut core = Self {
             outbox,
             door,
             links,
@@ -262,7 +267,10 @@ impl Core {
             clock,
             network,
             always_taken: around.always_taken,
-        })
+            configured_slots,
+        };
+        core.restore_mac_cycle();
+        Ok(core)
     }
 
     /// What the interfaces reach the core by.

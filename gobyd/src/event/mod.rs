@@ -25,7 +25,9 @@ use tokio::sync::{broadcast, mpsc, watch};
 
 pub use modem::ModemEvent;
 pub use protos::goby::apps::protobuf::LinkStatus;
-pub use request::{AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply};
+pub use request::{
+    AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply, UpdateSource,
+};
 
 /// What the core reports.
 #[derive(Debug, Clone)]

@@ -1,8 +1,8 @@
 //! Events of the modem driver and the medium access control, as the
 //! daemon's core reports them to the autonomy interfaces: raw lines,
 //! transmissions heard and sent, the driver's status and driver-specific
-//! results (JSON topic `modem`), slot starts and auto-discovery's cycle
-//! changes (topic `mac`).
+//! results (JSON topic `modem`), slot starts, auto-discovery's cycle
+//! changes and `MACUpdate`s applied (topic `mac`).
 //!
 //! The core sends the typed events; each interface renders them in its
 //! own form (the JSON interface's lines are in the guide's
@@ -11,7 +11,7 @@
 use amac::MacEvent;
 use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};
 use prost_reflect::DynamicMessage;
-use protos::goby::acomms::protobuf::ModemTransmission;
+use protos::goby::acomms::protobuf::{MacCycle, MacUpdate, ModemTransmission};
 
 /// A modem driver or medium access event.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,6 +48,18 @@ pub enum ModemEvent {
         modem_id: i32,
         /// Joined (`true`) or left (`false`).
         joined: bool,
+    },
+    /// The TDMA cycle was changed by a `MACUpdate` (or the update was
+    /// refused).
+    MacCycle {
+        /// The cycle as it stands after it.
+        cycle: MacCycle,
+        /// The update.
+        update: Option<MacUpdate>,
+        /// Where it came from: `moos`, `json`, `mqtt`, `link`.
+        from: &'static str,
+        /// Why it was not applied (`None`: applied).
+        error: Option<String>,
     },
     /// A driver status report.
     Status(DriverStatus),

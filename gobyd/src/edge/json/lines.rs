@@ -13,6 +13,7 @@ use gobyd_protocol::event::{
 use gobyd_protocol::{Accepted, Changed, Dropped, Event, Reply, Request, Topic};
 use modemdriver::{RawDirection, TransmitOutcome};
 use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::{MacCycle, MacUpdate};
 use queue::QueueEvent;
 use serde_json::Value;
 
@@ -37,6 +38,10 @@ pub enum Input {
     /// A request of the network layer: send a file, ask for one, list the
     /// transfers.
     Network(NetworkRequest),
+    /// Change this node's TDMA cycle.
+    MacUpdate(MacUpdate),
+    /// This node's TDMA cycle as it stands.
+    MacCycle,
 }
 
 /// Reads one request line; messages may be of any type loaded in
@@ -66,6 +71,33 @@ pub fn input(request: Request, codec: &Codec) -> Result<Input, String> {
         Request::FileSend(_) | Request::FileGet(_) | Request::Transfers => {
             Ok(Input::Network(network_of(request)))
         }
+        Request::MacUpdate(update) => mac_update_of(update).map(Input::MacUpdate),
+        Request::MacCycle => Ok(Input::MacCycle),
+    }
+}
+
+/// A `goby.acomms.protobuf.MACUpdate` from its proto3 JSON (the JSON
+/// `mac_update` request, the MQTT `mac_update` topic). The error names
+/// the type and what is wrong.
+pub fn mac_update_of(value: Value) -> Result<MacUpdate, String> {
+    let desc = MacUpdate::default().descriptor();
+    let name = desc.full_name().to_string();
+    let message = DynamicMessage::deserialize(desc, value).map_err(|e| format!("{name}: {e}"))?;
+    message.transcode_to().map_err(|e| format!("{name}: {e}"))
+}
+
+/// A cycle as its proto3 JSON (`slot`, `running`, `modem_id`).
+pub fn mac_cycle_json(cycle: &MacCycle) -> Value {
+    message_json(&cycle.transcode_to_dynamic())
+}
+
+/// The reply to `mac_update` and `mac_cycle`: the cycle, or why not.
+pub fn mac_cycle_reply(outcome: Result<MacCycle, String>) -> Reply {
+    match outcome {
+        Ok(cycle) => Reply::MacCycle {
+            mac_cycle: mac_cycle_json(&cycle),
+        },
+        Err(e) => Reply::error(e),
     }
 }
 
@@ -245,7 +277,9 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             | QueueEvent::OwnBroadcastHeard { .. } => Some(Topic::Sent),
         },
         DaemonEvent::Modem(event) => Some(match event {
-            ModemEvent::SlotStart { .. } | ModemEvent::CycleUpdate { .. } => Topic::Mac,
+            ModemEvent::SlotStart { .. }
+            | ModemEvent::CycleUpdate { .. }
+            | ModemEvent::MacCycle { .. } => Topic::Mac,
             _ => Topic::Modem,
         }),
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
@@ -377,6 +411,19 @@ fn modem_line(event: &ModemEvent) -> Event {
             joined: joined.then_some(*modem_id),
             left: (!joined).then_some(*modem_id),
         }),
+        ModemEvent::MacCycle {
+            cycle,
+            update,
+            from,
+            error,
+        } => Event::MacCycle(line::MacCycle {
+            mac_cycle: mac_cycle_json(cycle),
+            update: update
+                .as_ref()
+                .map(|u| message_json(&u.transcode_to_dynamic())),
+            from: from.to_string(),
+            error: error.clone(),
+        }),
         ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
             driver_status: status.kind().to_string(),
             detail: status.to_string(),
@@ -463,6 +510,14 @@ mod tests {
             (
                 r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "NO_SUCH"}}"#,
                 "goby.acomms.protobuf.MicroModemSpecific: ",
+            ),
+            (
+                r#"{"mac_update": {"src": 1, "dest": 2, "update_type": "SHUFFLE"}}"#,
+                "goby.acomms.protobuf.MACUpdate: ",
+            ),
+            (
+                r#"{"mac_update": [1]}"#,
+                "must be a goby.acomms.protobuf.MACUpdate",
             ),
         ] {
             let err = parse_request(line, &pool()).unwrap_err();
