@@ -1474,6 +1474,26 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// Why a TDMA cycle of `slots`, run with the settings of `mac` on
+/// `driver`, would fail, as `--check` tells it for `mac.slot` (a rate the
+/// driver does not have, a slot too short for its packet): for a cycle
+/// changed at sea by a `MACUpdate`, each problem naming `mac.slot[I]` of
+/// the new cycle.
+pub fn cycle_problems(
+    mac: &MacConfig,
+    slots: &[protos::goby::acomms::protobuf::ModemTransmission],
+    driver: &DriverConfig,
+) -> Vec<Problem> {
+    let config = GobydConfig {
+        mac: Some(MacConfig {
+            slot: slots.to_vec(),
+            ..mac.clone()
+        }),
+        ..Default::default()
+    };
+    slot_problems(&config, driver)
+}
+
 /// Why a slot of `seconds` (less `guard`) cannot hold `packet`, with what
 /// would.
 fn slot_too_short(

@@ -2,7 +2,9 @@
 //! pAcommsHandler reads it, against the minimal in-process DB: an update
 //! for this node changes the cycle (its slot starts, `ACOMMS_MAC_SLOT_START`,
 //! follow it), one for another node and one written before gobyd
-//! connected are not applied, and a bad one is logged, the cycle unchanged.
+//! connected are not applied, and a bad one (an index outside the cycle, a
+//! slot the driver cannot fill, not an update) is refused or logged, the
+//! cycle unchanged.
 
 mod support;
 
@@ -73,6 +75,8 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
         "src: 2 dest: 1 update_type: ERASE first_iterator: 9",
         // Not an update.
         "@PB[goby.acomms.protobuf.MACUpdate] src: 2 dest: 1 update_type: SHUFFLE",
+        // A slot too short for its packet: refused as --check refuses it.
+        "src: 2 dest: 1 update_type: PUSH_BACK slot { src: 1 dest: 0 rate: 6 slot_seconds: 0.5 }",
         // For this node, the text format alone: a third slot, this node's.
         "src: 2 dest: 1 update_type: PUSH_BACK slot { src: 1 dest: 0 rate: 6 slot_seconds: 2 unique_id: 77 }",
     ] {
@@ -80,10 +84,10 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
             .notify_string("ACOMMS_MAC_CYCLE_UPDATE", value)
             .unwrap();
     }
-    // The mac_cycle events: two refusals (another node, index), then the
-    // push (the unparsable value never reaches the core).
+    // The mac_cycle events: three refusals (another node, index, slot),
+    // then the push (the unparsable value never reaches the core).
     let mut told = Vec::new();
-    while told.len() < 3 {
+    while told.len() < 4 {
         let e = tokio::time::timeout_at(deadline, events.recv())
             .await
             .expect("the updates are told")
@@ -105,7 +109,13 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
         told[1].1.as_deref().unwrap().contains("first_iterator: 9"),
         "{told:?}"
     );
-    assert_eq!(told[2], (3, None));
+    let slot = told[2].1.as_deref().unwrap();
+    assert!(
+        slot.contains("mac.slot[2].slot_seconds: 0.5 s is too short for a rate-6 packet"),
+        "{told:?}"
+    );
+    assert_eq!(told[2].0, 2);
+    assert_eq!(told[3], (3, None));
     // Its slot starts follow the new cycle.
     loop {
         let m = tokio::time::timeout_at(deadline, mail.recv())

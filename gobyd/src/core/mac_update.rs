@@ -5,21 +5,30 @@
 //! ([`MacCycleFile`]) before it takes effect, and told on the `mac`
 //! events; the cycle kept is restored at start.
 
-use protos::goby::acomms::protobuf::{MacCycle, MacUpdate, ModemTransmission};
+use protos::goby::acomms::protobuf::{MacConfig, MacCycle, MacUpdate, ModemTransmission};
 
 use super::link::mac_cycle::{Kept, MacCycleFile};
 use super::Core;
 use crate::event::{ModemEvent, UpdateSource};
 
-/// The slots the configuration gives the first link.
-pub(super) fn configured_slots(
-    config: &protos::goby::apps::protobuf::GobydConfig,
-) -> Vec<ModemTransmission> {
+/// The medium access settings the configuration gives the first link.
+pub(super) fn configured_mac(config: &protos::goby::apps::protobuf::GobydConfig) -> MacConfig {
     crate::config::links::links(config)
         .first()
         .and_then(|v| v.mac)
-        .map(|m| m.slot.clone())
+        .cloned()
         .unwrap_or_default()
+}
+
+/// Why the first link's driver cannot run `slots` (as `--check` tells it
+/// for the configured cycle), in one line; `None`: it can.
+fn driver_problems(core: &Core, slots: &[ModemTransmission]) -> Option<String> {
+    let driver = core.links[0].config.as_ref()?;
+    let problems = crate::config::cycle_problems(&core.configured_mac, slots, driver);
+    (!problems.is_empty()).then(|| {
+        let each: Vec<String> = problems.iter().map(|p| p.to_string()).collect();
+        format!("the cycle after the update cannot run: {}", each.join("; "))
+    })
 }
 
 impl Core {
@@ -38,7 +47,7 @@ impl Core {
     /// configuration (what happens is logged).
     pub(super) fn restore_mac_cycle(&mut self) {
         let file = MacCycleFile::in_dir(self.data_dir.path());
-        let kept = file.load(self.modem_id, &self.configured_slots);
+        let kept = file.load(self.modem_id, &self.configured_mac.slot);
         let now = self.clock.now();
         match kept {
             Ok(Kept::Nothing) => {}
@@ -81,12 +90,16 @@ impl Core {
         let now = self.clock.now();
         let mut mac = self.links[0].mac.clone();
         let applied = mac.apply_update(update, now).map_err(|e| e.to_string());
+        let applied = applied.and_then(|outcome| match driver_problems(self, &outcome.cycle) {
+            Some(problem) => Err(problem),
+            None => Ok(outcome),
+        });
         let kept = applied.and_then(|outcome| {
             let cycle = MacCycle {
                 slot: outcome.cycle,
                 running: Some(outcome.running),
                 modem_id: Some(self.modem_id),
-                configured_slot: self.configured_slots.clone(),
+                configured_slot: self.configured_mac.slot.clone(),
             };
             MacCycleFile::in_dir(self.data_dir.path())
                 .save(&cycle)

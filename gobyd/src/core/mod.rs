@@ -170,9 +170,10 @@ pub struct Core {
     clock: Arc<dyn Clock>,
     /// Routing, fragments and file transfer (`None`: off).
     network: Option<Network>,
-    /// The slots the configuration gives the first link (what a changed
-    /// cycle kept on disk was changed from, see [`mac_update`]).
-    configured_slots: Vec<protos::goby::acomms::protobuf::ModemTransmission>,
+    /// The medium access settings the configuration gives the first link
+    /// (what a cycle changed at sea was changed from, and is checked
+    /// against, see [`mac_update`]).
+    configured_mac: protos::goby::acomms::protobuf::MacConfig,
 }
 
 impl std::fmt::Debug for Core {
@@ -237,7 +238,7 @@ impl Core {
             .iter()
             .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
             .collect();
-        let configured_slots = mac_update::configured_slots(&config);
+        let configured_mac = mac_update::configured_mac(&config);
         let mut core = Self {
             outbox,
             door,
@@ -267,7 +268,7 @@ impl Core {
             clock,
             network,
             always_taken: around.always_taken,
-            configured_slots,
+            configured_mac,
         };
         core.restore_mac_cycle();
         Ok(core)
