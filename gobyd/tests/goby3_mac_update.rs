@@ -24,10 +24,10 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use moos::{ClientConfig, MoosClient, Value as MoosValue};
+use moos::Value as MoosValue;
 use serde_json::Value;
 use support::daemon::{free_tcp_port, free_udp_port, scratch, Gobyd};
-use support::goby3::{goby3, Json, Proc};
+use support::goby3::{goby3, moos_client, start_moosdb, Json, Proc};
 use support::node::{Entry, Node, Udp};
 
 /// Longest the exchange may take.
@@ -114,14 +114,7 @@ fn unique_ids(cycle: &Value) -> Vec<u64> {
 fn goby3_and_gobyd_apply_the_mac_updates_they_send_each_other() {
     let goby3 = goby3();
     let dir = scratch("goby3_mac_update", "udp");
-    let moos_port = free_tcp_port();
-    let mut db = Command::new(&goby3.moosdb);
-    db.arg(format!("--moos_port={moos_port}"))
-        .arg("--moos_community=goby3node")
-        .arg("--moos_suicide_disable")
-        .arg(format!("--audit_port={}", free_udp_port()))
-        .arg("--moos_no_colour");
-    let mut moosdb = Proc::spawn("moosdb", db, &dir);
+    let (mut moosdb, moos_port) = start_moosdb(&goby3, &dir, "goby3node");
     let (p1, p2) = (free_udp_port(), free_udp_port());
     let mission = mission_file(&dir, moos_port, p1, p2);
     let mut pah = Command::new(&goby3.pacommshandler);
@@ -151,21 +144,7 @@ fn goby3_and_gobyd_apply_the_mac_updates_they_send_each_other() {
     let mut gobyd_answer: Option<Value> = None;
     let mut goby3_slots: Vec<String> = Vec::new();
     runtime.block_on(async {
-        let deadline = Instant::now() + Duration::from_secs(20);
-        let (client, mut mail) = loop {
-            let cfg = ClientConfig::new("mac_test").with_address("127.0.0.1", moos_port);
-            match MoosClient::connect(cfg).await {
-                Ok(c) => break c,
-                Err(e) => {
-                    assert!(
-                        Instant::now() < deadline && moosdb.alive(),
-                        "cannot reach MOOSDB: {e}\n{}",
-                        moosdb.tail()
-                    );
-                    tokio::time::sleep(Duration::from_millis(100)).await;
-                }
-            }
-        };
+        let (client, mut mail) = moos_client("mac_test", moos_port, &mut moosdb).await;
         client
             .register("ACOMMS_MAC_SLOT_START", Duration::ZERO)
             .unwrap();
