@@ -106,8 +106,10 @@ pub enum Control {
         /// Done, or why the driver could not start again.
         reply: oneshot::Sender<Result<(), String>>,
     },
-    /// Apply a `MACUpdate` to this node's TDMA cycle (see
-    /// [`crate::core::mac_update`]).
+    /// Apply a `MACUpdate` to this node's TDMA cycle (the first link's),
+    /// as [`amac::MacManager::apply_update`] does, when its `dest` is this
+    /// node and the driver can run the cycle after it; the new cycle is
+    /// kept in the data directory (`mac_cycle`) before it takes effect.
     MacUpdate {
         /// The update.
         update: MacUpdate,
