@@ -22,6 +22,9 @@
 //! A cycle is changed at sea as Goby3 changes it, by a `MACUpdate`
 //! ([`update`], [`MacManager::apply_update`]).
 //!
+//! A fixed cycle may hold shared slots, slotted ALOHA inside TDMA
+//! ([`shared`]).
+//!
 //! [`simulation`] holds the Monte Carlo evaluation of the auto-discovery
 //! rules (thesis Figs. 2.11 and 2.12).
 
@@ -42,6 +45,7 @@ pub mod manager;
 pub use manager::{
     MacEvent, MacManager, SlotAction, SlotEvent, BROADCAST_ID, QUERY_DESTINATION_ID,
 };
+pub mod shared;
 pub mod simulation;
 pub mod update;
 

@@ -9,6 +9,7 @@ use crate::clock::{seconds_to_micros, Micros, MICROS_PER_DAY};
 use crate::discovery::{DiscoveryAction, DiscoveryNode, DiscoveryRule, DiscoverySettings};
 use crate::error::AmacError;
 use crate::schedule::{CycleLayout, Reference, SlotPosition};
+use crate::shared::{SharedChoice, SharedSlots};
 
 /// Modem id meaning "everyone"; a slot with this source is a quiet slot.
 pub const BROADCAST_ID: i32 = 0;
@@ -32,6 +33,15 @@ pub enum SlotAction {
     /// This node's slot, but it was over before [`MacManager::poll`] ran:
     /// nothing is initiated.
     Missed,
+    /// A shared slot (slotted ALOHA, [`crate::shared`]) this node may
+    /// initiate: [`SlotEvent::transmission`] carries this node as `src`.
+    /// The caller initiates it only when its most urgent queue has at
+    /// least the slot's `shared.min_priority`, and then tells
+    /// [`MacManager::shared_slot_used`].
+    Contend,
+    /// A shared slot this node lets go by (its random back-off after
+    /// using one).
+    SharedBackOff,
 }
 
 /// The start of one slot.
@@ -92,6 +102,10 @@ struct ListedCycle {
     slots: Vec<ModemTransmission>,
     layout: Option<CycleLayout>,
     next: Option<SlotPosition>,
+    /// Back-off in the shared slots (fixed scheme).
+    shared: SharedSlots,
+    /// `max_backoff_slots` of the last shared slot contended for.
+    last_max_backoff: u32,
 }
 
 /// Auto-discovery state.
@@ -196,8 +210,10 @@ impl MacManager {
                     slots: Vec::new(),
                     layout: None,
                     next: None,
+                    shared: SharedSlots::new(modem_id),
+                    last_max_backoff: 0,
                 };
-                manager.check_slots(&config.slot)?;
+                manager.check_slots(&config.slot, kind == MacType::MacPolled)?;
                 cycle.slots = config.slot.clone();
                 if kind == MacType::MacPolled {
                     Scheme::Polled(cycle)
@@ -237,8 +253,31 @@ impl MacManager {
         Ok(manager)
     }
 
-    fn check_slots(&self, slots: &[ModemTransmission]) -> Result<(), AmacError> {
+    fn check_slots(&self, slots: &[ModemTransmission], polled: bool) -> Result<(), AmacError> {
         for (i, slot) in slots.iter().enumerate() {
+            if let Some(shared) = &slot.shared {
+                if polled {
+                    return Err(AmacError::config_field(
+                        format!("slot[{i}].shared"),
+                        "a shared slot (slotted ALOHA) needs MAC_FIXED_DECENTRALIZED: with MAC_POLLED the master initiates every slot",
+                    ));
+                }
+                match shared.min_priority {
+                    Some(p) if p.is_finite() => {}
+                    Some(p) => {
+                        return Err(AmacError::config_field(
+                            format!("slot[{i}].shared.min_priority"),
+                            format!("must be a finite priority, not {p}"),
+                        ))
+                    }
+                    None => {
+                        return Err(AmacError::config_field(
+                            format!("slot[{i}].shared.min_priority"),
+                            "a shared slot needs a priority threshold: the priority a node's most urgent queue must reach to use it",
+                        ))
+                    }
+                }
+            }
             let length =
                 check_seconds(format!("slot[{i}].slot_seconds"), slot.slot_seconds(), 0.0)?;
             if self.guard >= length {
@@ -411,7 +450,7 @@ impl MacManager {
         slots: Vec<ModemTransmission>,
         now: Micros,
     ) -> Result<(), AmacError> {
-        self.check_slots(&slots)?;
+        self.check_slots(&slots, matches!(self.scheme, Scheme::Polled(_)))?;
         match &mut self.scheme {
             Scheme::Fixed(c) | Scheme::Polled(c) => c.slots = slots,
             _ => {
@@ -449,6 +488,20 @@ impl MacManager {
         let removed = slots.remove(index);
         self.set_slots(slots, now)?;
         Ok(removed)
+    }
+
+    /// This node initiated the shared slot it was told to contend for
+    /// ([`SlotAction::Contend`]): it lets a random number of shared slots
+    /// go by (0 to the slot's `max_backoff_slots`) before it contends
+    /// again. Returns the draw; 0 for a scheme without shared slots.
+    pub fn shared_slot_used(&mut self) -> u32 {
+        match &mut self.scheme {
+            Scheme::Fixed(c) => {
+                let max = c.last_max_backoff;
+                c.shared.used(max)
+            }
+            _ => 0,
+        }
     }
 
     /// Whether the cycle runs: false after a `MACUpdate` stopped it
@@ -524,6 +577,23 @@ fn start_listed(
     let mut transmission = c.slots[position.index].clone();
     transmission.time = u64::try_from(position.start + guard).ok();
     transmission.slot_index = Some(position.index as i32);
+    if let Some(shared) = transmission.shared.filter(|_| !polled) {
+        transmission.src = Some(modem_id);
+        let action = match (c.shared.next_slot(), position.end <= now) {
+            (SharedChoice::BackOff { .. }, _) => SlotAction::SharedBackOff,
+            (SharedChoice::Contend, true) => SlotAction::Missed,
+            (SharedChoice::Contend, false) => {
+                c.last_max_backoff = shared.max_backoff_slots();
+                SlotAction::Contend
+            }
+        };
+        events.push(MacEvent::Slot(Box::new(SlotEvent {
+            position,
+            action,
+            transmission,
+        })));
+        return Some(position.start);
+    }
     let ours = if polled {
         transmission.src() != BROADCAST_ID
     } else {
