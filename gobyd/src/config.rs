@@ -1288,7 +1288,8 @@ fn own_slot_problem(config: &GobydConfig) -> Option<(String, String)> {
         return None;
     }
     let id = mac.modem_id();
-    if mac.slot.iter().any(|s| s.src() == id) {
+    // A shared slot (slotted ALOHA) is every node's.
+    if mac.slot.iter().any(|s| s.src() == id || s.shared.is_some()) {
         return None;
     }
     Some((

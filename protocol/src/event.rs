@@ -261,12 +261,25 @@ pub struct ModemTransmit {
     pub reason: Option<String>,
 }
 
-/// `{"event": "mac_slot_start", "mac_slot_start": {…ModemTransmission…}}`.
+/// `{"event": "mac_slot_start", "mac_slot_start": {…ModemTransmission…},
+/// "shared": "used"|"below_threshold"|"back_off", "backoff", "priority"}`.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 #[serde(tag = "event", rename = "mac_slot_start")]
 pub struct MacSlotStart {
     /// The slot, proto3 JSON.
     pub mac_slot_start: Value,
+    /// For a shared slot (slotted ALOHA): `used` (this node initiated
+    /// it), `below_threshold` (its most urgent queue is below the slot's
+    /// `min_priority`) or `back_off` (it lets the slot go by).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shared: Option<String>,
+    /// With `used`: the shared slots it now lets go by.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backoff: Option<u32>,
+    /// With `below_threshold`: its most urgent queue's priority (absent:
+    /// nothing queued).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub priority: Option<f64>,
 }
 
 /// `{"event": "mac_cycle_update", "joined"|"left": MODEM_ID}`.

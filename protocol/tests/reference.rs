@@ -191,7 +191,18 @@ fn events() -> Vec<Event> {
             outcome: Outcome::Failed,
             reason: Some("busy".into()),
         }),
-        Event::MacSlotStart(MacSlotStart { mac_slot_start: t }),
+        Event::MacSlotStart(MacSlotStart {
+            mac_slot_start: t.clone(),
+            shared: Some("used".into()),
+            backoff: Some(2),
+            priority: None,
+        }),
+        Event::MacSlotStart(MacSlotStart {
+            mac_slot_start: t,
+            shared: Some("below_threshold".into()),
+            backoff: None,
+            priority: Some(0.5),
+        }),
         Event::MacCycleUpdate(MacCycleUpdate {
             joined: Some(3),
             left: None,

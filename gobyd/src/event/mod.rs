@@ -23,7 +23,7 @@ use protos::goby::acomms::protobuf::ModemTransmission;
 use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, watch};
 
-pub use modem::ModemEvent;
+pub use modem::{ModemEvent, SharedUse};
 pub use protos::goby::apps::protobuf::LinkStatus;
 pub use request::{
     AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply, UpdateSource,

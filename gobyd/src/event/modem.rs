@@ -13,6 +13,24 @@ use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};
 use prost_reflect::DynamicMessage;
 use protos::goby::acomms::protobuf::{MacCycle, MacUpdate, ModemTransmission};
 
+/// What a node did with a shared slot (slotted ALOHA inside TDMA).
+#[derive(Debug, Clone, PartialEq)]
+pub enum SharedUse {
+    /// It initiated it, and now lets `backoff` shared slots go by.
+    Used {
+        /// Shared slots it lets go by before it contends again.
+        backoff: u32,
+    },
+    /// It may have, but its most urgent queue's priority (`None`:
+    /// nothing queued) is below the slot's `min_priority`.
+    BelowThreshold {
+        /// The priority of its most urgent queue.
+        priority: Option<f64>,
+    },
+    /// It is backing off after using one.
+    BackOff,
+}
+
 /// A modem driver or medium access event.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ModemEvent {
@@ -41,6 +59,8 @@ pub enum ModemEvent {
         /// time left in the slot); `None`: the slot belongs to another
         /// node, or a driver-specific request takes it.
         initiated: Option<Box<ModemTransmission>>,
+        /// For a shared slot (slotted ALOHA), what this node did with it.
+        shared: Option<SharedUse>,
     },
     /// Auto-discovery changed the cycle.
     CycleUpdate {
@@ -94,6 +114,8 @@ impl ModemEvent {
             MacEvent::Slot(slot) => ModemEvent::SlotStart {
                 slot: slot.transmission.clone(),
                 initiated: None,
+                shared: (slot.action == amac::SlotAction::SharedBackOff)
+                    .then_some(SharedUse::BackOff),
             },
             MacEvent::Discovered { modem_id, .. } => ModemEvent::CycleUpdate {
                 modem_id: *modem_id,

@@ -21,7 +21,7 @@ pub use gobyd_protocol::message_json;
 
 use crate::event::{
     AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, NetworkRequest,
-    PublishReply, Reception, TransferEvent,
+    PublishReply, Reception, SharedUse, TransferEvent,
 };
 
 /// A request line as the core takes it.
@@ -404,9 +404,22 @@ fn modem_line(event: &ModemEvent) -> Event {
                 reason,
             })
         }
-        ModemEvent::SlotStart { slot, .. } => Event::MacSlotStart(MacSlotStart {
-            mac_slot_start: t(slot),
-        }),
+        ModemEvent::SlotStart { slot, shared, .. } => {
+            let (kind, backoff, priority) = match shared {
+                None => (None, None, None),
+                Some(SharedUse::Used { backoff }) => (Some("used"), Some(*backoff), None),
+                Some(SharedUse::BelowThreshold { priority }) => {
+                    (Some("below_threshold"), None, *priority)
+                }
+                Some(SharedUse::BackOff) => (Some("back_off"), None, None),
+            };
+            Event::MacSlotStart(MacSlotStart {
+                mac_slot_start: t(slot),
+                shared: kind.map(str::to_string),
+                backoff,
+                priority,
+            })
+        }
         ModemEvent::CycleUpdate { modem_id, joined } => Event::MacCycleUpdate(MacCycleUpdate {
             joined: joined.then_some(*modem_id),
             left: (!joined).then_some(*modem_id),
@@ -578,10 +591,29 @@ mod tests {
                 ..Default::default()
             },
             initiated: None,
+            shared: None,
         });
         assert_eq!(topic, Some(Topic::Mac));
         assert!(slot.starts_with(r#"{"event":"mac_slot_start","mac_slot_start":{"#));
         assert!(slot.contains(r#""src":1"#), "{slot}");
+        assert!(!slot.contains("shared"), "{slot}");
+        let (_, used) = line(ModemEvent::SlotStart {
+            slot: ModemTransmission::default(),
+            initiated: None,
+            shared: Some(SharedUse::Used { backoff: 2 }),
+        });
+        assert!(used.ends_with(r#","shared":"used","backoff":2}"#), "{used}");
+        let (_, below) = line(ModemEvent::SlotStart {
+            slot: ModemTransmission::default(),
+            initiated: None,
+            shared: Some(SharedUse::BelowThreshold {
+                priority: Some(0.5),
+            }),
+        });
+        assert!(
+            below.ends_with(r#","shared":"below_threshold","priority":0.5}"#),
+            "{below}"
+        );
         let (_, failed) = line(ModemEvent::Transmitted {
             transmission: ModemTransmission::default(),
             outcome: TransmitOutcome::Failed("busy".into()),
@@ -612,6 +644,7 @@ mod tests {
             &DaemonEvent::Modem(ModemEvent::SlotStart {
                 slot,
                 initiated: None,
+                shared: None,
             }),
             |_| String::new(),
         )

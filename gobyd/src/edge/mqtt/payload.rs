@@ -483,6 +483,7 @@ mod tests {
         let theirs = ModemEvent::SlotStart {
             slot: slot.clone(),
             initiated: None,
+            shared: None,
         };
         assert!(f.event(&DaemonEvent::Modem(theirs), 0).is_none());
         let ours = ModemEvent::SlotStart {
@@ -491,6 +492,7 @@ mod tests {
                 slot_seconds: Some(4.5),
                 ..slot
             })),
+            shared: None,
         };
         let out = f.event(&DaemonEvent::Modem(ours), 1_000_000).unwrap();
         assert_eq!(out.topic, "fleet/2/mac");
