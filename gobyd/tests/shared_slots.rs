@@ -142,5 +142,7 @@ fn check_refuses_a_shared_slot_without_a_threshold_naming_it() {
         err.contains("mac.slot[1].shared.min_priority: a shared slot needs a priority threshold"),
         "{err}"
     );
+    // With a threshold, accepted: node 1's only slot is the shared one.
+    gobyd::check::check(self::config(Some(0.5), &dir.join("data"))).expect("accepted");
     let _ = std::fs::remove_dir_all(&dir);
 }
