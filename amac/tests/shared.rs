@@ -98,3 +98,68 @@ fn a_shared_slot_without_a_threshold_or_in_polling_is_refused_by_name() {
         "{err}"
     );
 }
+
+/// Throughput of shared slots against offered load, by simulation: `n`
+/// nodes, each given a new message per slot with chance `load / n`, every
+/// node with a message contending as [`amac::shared::SharedSlots`] lets it;
+/// a slot carries a message when exactly one node sends. Returns messages
+/// carried per slot over `slots` slots.
+fn throughput(n: i32, load: f64, max_backoff: u32, slots: u32) -> f64 {
+    use rand::{Rng, SeedableRng};
+    let mut arrivals = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut nodes: Vec<(amac::shared::SharedSlots, u32)> = (1..=n)
+        .map(|id| (amac::shared::SharedSlots::new(id), 0))
+        .collect();
+    let mut carried = 0;
+    for _ in 0..slots {
+        for (_, backlog) in nodes.iter_mut() {
+            if arrivals.random_bool(load / f64::from(n)) {
+                *backlog += 1;
+            }
+        }
+        let mut senders = Vec::new();
+        for (i, (shared, backlog)) in nodes.iter_mut().enumerate() {
+            if *backlog > 0 && shared.next_slot() == amac::shared::SharedChoice::Contend {
+                shared.used(max_backoff);
+                senders.push(i);
+            }
+        }
+        if let [only] = senders[..] {
+            nodes[only].1 -= 1;
+            carried += 1;
+        }
+    }
+    f64::from(carried) / f64::from(slots)
+}
+
+#[test]
+fn throughput_against_offered_load_and_slotted_aloha_theory() {
+    println!("| offered load G | S, back-off 0-3 | S, back-off 0-20 | slotted ALOHA G·e^-G |");
+    println!("|---|---|---|---|");
+    let (mut peak_wide, mut saturated_narrow): (f64, f64) = (0.0, 1.0);
+    for load in [0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, 1.5, 2.0] {
+        let narrow = throughput(10, load, 3, 20_000);
+        let wide = throughput(10, load, 20, 20_000);
+        let theory = load * (-load).exp();
+        println!("| {load} | {narrow:.3} | {wide:.3} | {theory:.3} |");
+        peak_wide = peak_wide.max(wide);
+        if load >= 1.0 {
+            saturated_narrow = saturated_narrow.min(narrow);
+        }
+        // A light load is all carried.
+        if load <= 0.1 {
+            assert!((wide - load).abs() < 0.2 * load, "G {load}: S {wide}");
+        }
+    }
+    // A window of about twice the contenders keeps the channel near
+    // ALOHA's best (1/e); one much smaller than the contenders collapses
+    // under load (10 nodes each sending every 2.5 slots).
+    assert!(
+        (0.25..0.6).contains(&peak_wide),
+        "peak throughput {peak_wide}"
+    );
+    assert!(
+        saturated_narrow < 0.1,
+        "saturated, narrow window: {saturated_narrow}"
+    );
+}
