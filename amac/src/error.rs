@@ -26,6 +26,14 @@ pub enum AmacError {
         /// Name of the configured scheme.
         scheme: &'static str,
     },
+    /// A `MACUpdate` for another node's cycle.
+    #[error("the MACUpdate is for modem {dest}, not for this node (modem {modem_id})")]
+    NotForThisNode {
+        /// The update's `dest`.
+        dest: i32,
+        /// This node's modem id.
+        modem_id: i32,
+    },
 }
 
 impl AmacError {

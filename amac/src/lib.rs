@@ -19,6 +19,12 @@
 //! [`ModemTransmission`](protos::goby::acomms::protobuf::ModemTransmission) to
 //! hand to the modem driver.
 //!
+//! A cycle is changed at sea as Goby3 changes it, by a `MACUpdate`
+//! ([`update`], [`MacManager::apply_update`]).
+//!
+//! A fixed cycle may hold shared slots, slotted ALOHA inside TDMA
+//! ([`shared`]).
+//!
 //! [`simulation`] holds the Monte Carlo evaluation of the auto-discovery
 //! rules (thesis Figs. 2.11 and 2.12).
 
@@ -39,7 +45,11 @@ pub mod manager;
 pub use manager::{
     MacEvent, MacManager, SlotAction, SlotEvent, BROADCAST_ID, QUERY_DESTINATION_ID,
 };
+pub mod shared;
 pub mod simulation;
+pub mod update;
+
+pub use update::{edit_cycle, UpdateOutcome, MAC_UPDATE_NAME};
 
 /// The crate's README.md, whose examples run as doctests.
 #[cfg(doctest)]

@@ -9,6 +9,7 @@ use crate::clock::{seconds_to_micros, Micros, MICROS_PER_DAY};
 use crate::discovery::{DiscoveryAction, DiscoveryNode, DiscoveryRule, DiscoverySettings};
 use crate::error::AmacError;
 use crate::schedule::{CycleLayout, Reference, SlotPosition};
+use crate::shared::{SharedChoice, SharedSlots};
 
 /// Modem id meaning "everyone"; a slot with this source is a quiet slot.
 pub const BROADCAST_ID: i32 = 0;
@@ -32,6 +33,15 @@ pub enum SlotAction {
     /// This node's slot, but it was over before [`MacManager::poll`] ran:
     /// nothing is initiated.
     Missed,
+    /// A shared slot (slotted ALOHA, [`crate::shared`]) this node may
+    /// initiate: [`SlotEvent::transmission`] carries this node as `src`.
+    /// The caller initiates it only when its most urgent queue has at
+    /// least the slot's `shared.min_priority`, and then tells
+    /// [`MacManager::shared_slot_used`].
+    Contend,
+    /// A shared slot this node lets go by (its random back-off after
+    /// using one).
+    SharedBackOff,
 }
 
 /// The start of one slot.
@@ -92,6 +102,10 @@ struct ListedCycle {
     slots: Vec<ModemTransmission>,
     layout: Option<CycleLayout>,
     next: Option<SlotPosition>,
+    /// Back-off in the shared slots (fixed scheme).
+    shared: SharedSlots,
+    /// `max_backoff_slots` of the last shared slot contended for.
+    last_max_backoff: u32,
 }
 
 /// Auto-discovery state.
@@ -124,6 +138,8 @@ pub struct MacManager {
     scheme: Scheme,
     /// Start of the last slot reported.
     last_start: Option<Micros>,
+    /// Whether the cycle runs (a `MACUpdate` may stop it).
+    running: bool,
 }
 
 fn check_seconds(field: String, value: f64, minimum_exclusive: f64) -> Result<Micros, AmacError> {
@@ -185,6 +201,7 @@ impl MacManager {
             start_cycle_in_middle: config.start_cycle_in_middle(),
             scheme: Scheme::None,
             last_start: None,
+            running: true,
         };
         manager.scheme = match kind {
             MacType::MacNone => Scheme::None,
@@ -193,8 +210,10 @@ impl MacManager {
                     slots: Vec::new(),
                     layout: None,
                     next: None,
+                    shared: SharedSlots::new(modem_id),
+                    last_max_backoff: 0,
                 };
-                manager.check_slots(&config.slot)?;
+                manager.check_slots(&config.slot, kind == MacType::MacPolled)?;
                 cycle.slots = config.slot.clone();
                 if kind == MacType::MacPolled {
                     Scheme::Polled(cycle)
@@ -234,8 +253,31 @@ impl MacManager {
         Ok(manager)
     }
 
-    fn check_slots(&self, slots: &[ModemTransmission]) -> Result<(), AmacError> {
+    fn check_slots(&self, slots: &[ModemTransmission], polled: bool) -> Result<(), AmacError> {
         for (i, slot) in slots.iter().enumerate() {
+            if let Some(shared) = &slot.shared {
+                if polled {
+                    return Err(AmacError::config_field(
+                        format!("slot[{i}].shared"),
+                        "a shared slot (slotted ALOHA) needs MAC_FIXED_DECENTRALIZED: with MAC_POLLED the master initiates every slot",
+                    ));
+                }
+                match shared.min_priority {
+                    Some(p) if p.is_finite() => {}
+                    Some(p) => {
+                        return Err(AmacError::config_field(
+                            format!("slot[{i}].shared.min_priority"),
+                            format!("must be a finite priority, not {p}"),
+                        ))
+                    }
+                    None => {
+                        return Err(AmacError::config_field(
+                            format!("slot[{i}].shared.min_priority"),
+                            "a shared slot needs a priority threshold: the priority a node's most urgent queue must reach to use it",
+                        ))
+                    }
+                }
+            }
             let length =
                 check_seconds(format!("slot[{i}].slot_seconds"), slot.slot_seconds(), 0.0)?;
             if self.guard >= length {
@@ -340,6 +382,9 @@ impl MacManager {
     /// When [`MacManager::poll`] next has something to report: the start of
     /// the next slot plus the guard time. `None` when no slot is configured.
     pub fn next_event_time(&self) -> Option<Micros> {
+        if !self.running {
+            return None;
+        }
         self.next_slot_start().map(|start| start + self.guard)
     }
 
@@ -363,6 +408,9 @@ impl MacManager {
     /// is already over is reported as [`SlotAction::Missed`].
     pub fn poll(&mut self, now: Micros) -> Vec<MacEvent> {
         let mut events = Vec::new();
+        if !self.running {
+            return events;
+        }
         while let Some(start) = self.next_slot_start() {
             if start + self.guard > now {
                 break;
@@ -402,7 +450,7 @@ impl MacManager {
         slots: Vec<ModemTransmission>,
         now: Micros,
     ) -> Result<(), AmacError> {
-        self.check_slots(&slots)?;
+        self.check_slots(&slots, matches!(self.scheme, Scheme::Polled(_)))?;
         match &mut self.scheme {
             Scheme::Fixed(c) | Scheme::Polled(c) => c.slots = slots,
             _ => {
@@ -442,6 +490,66 @@ impl MacManager {
         Ok(removed)
     }
 
+    /// This node initiated the shared slot it was told to contend for
+    /// ([`SlotAction::Contend`]): it lets a random number of shared slots
+    /// go by (0 to the slot's `max_backoff_slots`) before it contends
+    /// again. Returns the draw; 0 for a scheme without shared slots.
+    pub fn shared_slot_used(&mut self) -> u32 {
+        match &mut self.scheme {
+            Scheme::Fixed(c) => {
+                let max = c.last_max_backoff;
+                c.shared.used(max)
+            }
+            _ => 0,
+        }
+    }
+
+    /// Whether the cycle runs: false after a `MACUpdate` stopped it
+    /// (`cycle_state: STOPPED`, or an update that emptied the cycle) and
+    /// until one starts it again.
+    pub fn running(&self) -> bool {
+        self.running
+    }
+
+    /// Starts (`true`) or stops the cycle, as an update's `cycle_state`
+    /// does; a cycle started again continues from the next slot after
+    /// `now` (see [`MacManager::set_slots`]).
+    pub fn set_running(&mut self, running: bool, now: Micros) {
+        if running && !self.running {
+            self.restart_listed(now);
+        }
+        self.running = running;
+    }
+
+    /// Applies a `MACUpdate` (see [`crate::update`]) as pAcommsHandler
+    /// does: ignored unless `dest` is this node; the cycle is edited, then
+    /// started or stopped by `cycle_state` when set (an emptied cycle
+    /// stops). The next slot is found as after [`MacManager::set_slots`].
+    ///
+    /// Errors, the cycle unchanged: [`AmacError::NotForThisNode`], an index
+    /// outside the cycle or a pop of an empty one
+    /// ([`AmacError::InvalidField`] of `goby.acomms.protobuf.MACUpdate`),
+    /// a slot this node cannot run (of `MACConfig`, as for the
+    /// configuration), a scheme without a slot list
+    /// ([`AmacError::WrongScheme`]).
+    pub fn apply_update(
+        &mut self,
+        update: &protos::goby::acomms::protobuf::MacUpdate,
+        now: Micros,
+    ) -> Result<crate::UpdateOutcome, AmacError> {
+        crate::update::check_dest(update, self.modem_id)?;
+        let before = self.cycle_if_listed()?;
+        let slots = crate::update::edit_cycle(&before, update)?;
+        let running = crate::update::running_after(update, self.running, slots.len());
+        self.set_slots(slots.clone(), now)?;
+        self.running = running;
+        Ok(crate::UpdateOutcome {
+            update_type: crate::update::update_type(update)?,
+            cycle: slots,
+            running,
+        })
+    }
+
     fn cycle_if_listed(&self) -> Result<Vec<ModemTransmission>, AmacError> {
         match &self.scheme {
             Scheme::Fixed(c) | Scheme::Polled(c) => Ok(c.slots.clone()),
@@ -469,6 +577,23 @@ fn start_listed(
     let mut transmission = c.slots[position.index].clone();
     transmission.time = u64::try_from(position.start + guard).ok();
     transmission.slot_index = Some(position.index as i32);
+    if let Some(shared) = transmission.shared.filter(|_| !polled) {
+        transmission.src = Some(modem_id);
+        let action = match (c.shared.next_slot(), position.end <= now) {
+            (SharedChoice::BackOff { .. }, _) => SlotAction::SharedBackOff,
+            (SharedChoice::Contend, true) => SlotAction::Missed,
+            (SharedChoice::Contend, false) => {
+                c.last_max_backoff = shared.max_backoff_slots();
+                SlotAction::Contend
+            }
+        };
+        events.push(MacEvent::Slot(Box::new(SlotEvent {
+            position,
+            action,
+            transmission,
+        })));
+        return Some(position.start);
+    }
     let ours = if polled {
         transmission.src() != BROADCAST_ID
     } else {

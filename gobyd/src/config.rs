@@ -1288,7 +1288,8 @@ fn own_slot_problem(config: &GobydConfig) -> Option<(String, String)> {
         return None;
     }
     let id = mac.modem_id();
-    if mac.slot.iter().any(|s| s.src() == id) {
+    // A shared slot (slotted ALOHA) is every node's.
+    if mac.slot.iter().any(|s| s.src() == id || s.shared.is_some()) {
         return None;
     }
     Some((
@@ -1474,6 +1475,26 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
+/// Why a TDMA cycle of `slots`, run with the settings of `mac` on
+/// `driver`, would fail, as `--check` tells it for `mac.slot` (a rate the
+/// driver does not have, a slot too short for its packet): for a cycle
+/// changed at sea by a `MACUpdate`, each problem naming `mac.slot[I]` of
+/// the new cycle.
+pub fn cycle_problems(
+    mac: &MacConfig,
+    slots: &[protos::goby::acomms::protobuf::ModemTransmission],
+    driver: &DriverConfig,
+) -> Vec<Problem> {
+    let config = GobydConfig {
+        mac: Some(MacConfig {
+            slot: slots.to_vec(),
+            ..mac.clone()
+        }),
+        ..Default::default()
+    };
+    slot_problems(&config, driver)
+}
+
 /// Why a slot of `seconds` (less `guard`) cannot hold `packet`, with what
 /// would.
 fn slot_too_short(
@@ -1528,20 +1549,26 @@ fn slot_too_short(
 /// the example types also get the roles of [`EXAMPLE_CONFIG`] (their
 /// `source` and `destination` fields), so that they are addressed the same
 /// with or without a configuration (a message to this node is delivered
-/// here, as Goby does).
+/// here, as Goby does). An entry of a built-in type without roles gets
+/// the type's ([`MAC_UPDATE_TYPE`]: `src` and `dest`).
 pub fn default_entries(queue: &mut QueueManagerConfig, loaded: &[String]) {
     let examples = parse(EXAMPLE_CONFIG, "example configuration")
         .ok()
         .and_then(|c| c.queue)
         .map(|q| q.message_entry)
         .unwrap_or_default();
+    for entry in &mut queue.message_entry {
+        if entry.role.is_empty() {
+            entry.role = built_in_roles(&entry.protobuf_name);
+        }
+    }
     for name in loaded {
         if !queue.message_entry.iter().any(|e| &e.protobuf_name == name) {
             let role = examples
                 .iter()
                 .find(|e| &e.protobuf_name == name)
                 .map(|e| e.role.clone())
-                .unwrap_or_default();
+                .unwrap_or_else(|| built_in_roles(name));
             queue.message_entry.push(QueuedMessageEntry {
                 protobuf_name: name.clone(),
                 role,
@@ -1549,6 +1576,30 @@ pub fn default_entries(queue: &mut QueueManagerConfig, loaded: &[String]) {
             });
         }
     }
+}
+
+/// Full name of the MAC update type (DCCL id 5), loaded when a queue
+/// entry names it.
+pub const MAC_UPDATE_TYPE: &str = "goby.acomms.protobuf.MACUpdate";
+
+/// The roles of a built-in type's queue entry when it gives none: a
+/// `MACUpdate` is sent from its `src` to its `dest`.
+fn built_in_roles(name: &str) -> Vec<protos::goby::acomms::protobuf::queued_message_entry::Role> {
+    use protos::goby::acomms::protobuf::queued_message_entry::{Role, RoleType};
+    if name != MAC_UPDATE_TYPE {
+        return Vec::new();
+    }
+    [
+        (RoleType::SourceId, "src"),
+        (RoleType::DestinationId, "dest"),
+    ]
+    .into_iter()
+    .map(|(kind, field)| Role {
+        r#type: kind as i32,
+        field: Some(field.into()),
+        ..Default::default()
+    })
+    .collect()
 }
 
 /// Environment variable read for the DCCL passphrase when the configuration
@@ -1756,16 +1807,28 @@ pub fn load_definitions(config: &GobydConfig) -> Result<Definitions, ConfigError
             );
         }
     }
-    // Built-in types a translator entry names (goby.moos.example.NodeReport).
-    for entry in &config.translator_entry {
-        if loaded.contains(&entry.protobuf_name) {
+    // Built-in types a translator entry names (goby.moos.example.NodeReport)
+    // or a queue entry names (goby.acomms.protobuf.MACUpdate, to change
+    // another node's TDMA cycle over the link).
+    let named = config
+        .translator_entry
+        .iter()
+        .map(|e| &e.protobuf_name)
+        .chain(
+            config
+                .queue
+                .iter()
+                .flat_map(|q| q.message_entry.iter().map(|e| &e.protobuf_name)),
+        );
+    for name in named {
+        if loaded.contains(name) {
             continue;
         }
-        if let Some(desc) = pool.get_message_by_name(&entry.protobuf_name) {
+        if let Some(desc) = pool.get_message_by_name(name) {
             loaded.extend(
                 codec
                     .load_file_messages(pool, desc.parent_file().name())
-                    .map_err(|e| ConfigError::Invalid(format!("{}: {e}", entry.protobuf_name)))?,
+                    .map_err(|e| ConfigError::Invalid(format!("{name}: {e}")))?,
             );
         }
     }
@@ -2015,6 +2078,28 @@ mod tests {
             defs.loaded,
             ["goby.example.Command", "goby.example.NavigationReport"]
         );
+    }
+
+    #[test]
+    fn a_queue_entry_for_mac_updates_loads_the_type_with_its_roles() {
+        let text = "queue { message_entry { protobuf_name: \"goby.acomms.protobuf.MACUpdate\" } }";
+        let config = complete(parse(text, "mac").unwrap()).unwrap();
+        let defs = load_definitions(&config).unwrap();
+        assert!(
+            defs.loaded.iter().any(|n| n == MAC_UPDATE_TYPE),
+            "{:?}",
+            defs.loaded
+        );
+        assert_eq!(defs.codec.id_of(MAC_UPDATE_TYPE).ok(), Some(5));
+        let mut queue = config.queue.clone().unwrap();
+        default_entries(&mut queue, &defs.loaded);
+        let entry = queue
+            .message_entry
+            .iter()
+            .find(|e| e.protobuf_name == MAC_UPDATE_TYPE)
+            .unwrap();
+        let roles: Vec<_> = entry.role.iter().map(|r| r.field()).collect();
+        assert_eq!(roles, ["src", "dest"]);
     }
 
     #[test]

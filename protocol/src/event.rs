@@ -34,6 +34,8 @@ pub enum Event {
     MacSlotStart(MacSlotStart),
     /// `mac_cycle_update`: auto-discovery changed the cycle.
     MacCycleUpdate(MacCycleUpdate),
+    /// `mac_cycle`: a `MACUpdate` changed the cycle (or was refused).
+    MacCycle(MacCycle),
     /// `driver_status`: the driver's status changed.
     DriverStatus(DriverStatus),
     /// `driver_specific`: a driver-specific result (ranging, ...).
@@ -67,7 +69,7 @@ impl Event {
             | Event::ModemTransmit(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_) => Topic::Modem,
-            Event::MacSlotStart(_) | Event::MacCycleUpdate(_) => Topic::Mac,
+            Event::MacSlotStart(_) | Event::MacCycleUpdate(_) | Event::MacCycle(_) => Topic::Mac,
             Event::Transfer(_) => Topic::Transfer,
             Event::LinkStatus(_) => Topic::Link,
             Event::Forecast(_) | Event::Environment(_) => Topic::Forecast,
@@ -103,6 +105,7 @@ impl<'de> Deserialize<'de> for Event {
             "modem_transmit" => Event::ModemTransmit(read(value)?),
             "mac_slot_start" => Event::MacSlotStart(read(value)?),
             "mac_cycle_update" => Event::MacCycleUpdate(read(value)?),
+            "mac_cycle" => Event::MacCycle(read(value)?),
             "driver_status" => Event::DriverStatus(read(value)?),
             "driver_specific" => Event::DriverSpecific(read(value)?),
             "transfer" => Event::Transfer(read(value)?),
@@ -274,12 +277,25 @@ pub struct ModemTransmit {
     pub reason: Option<String>,
 }
 
-/// `{"event": "mac_slot_start", "mac_slot_start": {…ModemTransmission…}}`.
+/// `{"event": "mac_slot_start", "mac_slot_start": {…ModemTransmission…},
+/// "shared": "used"|"below_threshold"|"back_off", "backoff", "priority"}`.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 #[serde(tag = "event", rename = "mac_slot_start")]
 pub struct MacSlotStart {
     /// The slot, proto3 JSON.
     pub mac_slot_start: Value,
+    /// For a shared slot (slotted ALOHA): `used` (this node initiated
+    /// it), `below_threshold` (its most urgent queue is below the slot's
+    /// `min_priority`) or `back_off` (it lets the slot go by).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shared: Option<String>,
+    /// With `used`: the shared slots it now lets go by.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backoff: Option<u32>,
+    /// With `below_threshold`: its most urgent queue's priority (absent:
+    /// nothing queued).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub priority: Option<f64>,
 }
 
 /// `{"event": "mac_cycle_update", "joined"|"left": MODEM_ID}`.
@@ -292,6 +308,24 @@ pub struct MacCycleUpdate {
     /// The node that left it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub left: Option<i32>,
+}
+
+/// `{"event": "mac_cycle", "mac_cycle": {…MACCycle…}, "update": {…MACUpdate…},
+/// "from": "moos"|"json"|"mqtt"|"link", "error"}`.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[serde(tag = "event", rename = "mac_cycle")]
+pub struct MacCycle {
+    /// The cycle after the update (`slot`, `running`, `modem_id`), proto3
+    /// JSON.
+    pub mac_cycle: Value,
+    /// The update, proto3 JSON.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub update: Option<Value>,
+    /// Where the update came from.
+    pub from: String,
+    /// Why it was not applied (absent: applied).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
 }
 
 /// `{"event": "driver_status", "driver_status": KIND, "detail"}`.
@@ -414,6 +448,19 @@ mod tests {
             left: None,
         });
         assert_eq!(cycle.line(), r#"{"event":"mac_cycle_update","joined":3}"#);
+        let changed = Event::MacCycle(MacCycle {
+            mac_cycle: json!({"slot": [{"src": 2}], "running": true, "modem_id": 2}),
+            update: Some(json!({"src": 1, "dest": 2, "update_type": "ASSIGN"})),
+            from: "link".into(),
+            error: None,
+        });
+        let line = changed.line();
+        assert!(
+            line.starts_with(r#"{"event":"mac_cycle","mac_cycle":{"#),
+            "{line}"
+        );
+        assert_eq!(serde_json::from_str::<Event>(&line).unwrap(), changed);
+        assert_eq!(changed.topic(), Some(Topic::Mac));
         assert_eq!(
             serde_json::from_value::<Event>(json!({"event": "nope"}))
                 .unwrap_err()

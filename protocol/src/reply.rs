@@ -65,6 +65,13 @@ pub enum Reply {
         /// Seconds.
         forecast: f64,
     },
+    /// To `mac_update` (the cycle after it) and `mac_cycle` (the cycle as
+    /// it stands): a `goby.acomms.protobuf.MACCycle`, proto3 JSON
+    /// (`slot`, `running`, `modem_id`).
+    MacCycle {
+        /// The cycle.
+        mac_cycle: Value,
+    },
     /// To a line that was not taken: why (bad JSON, unknown type, a value
     /// the codec would change, a line over 1 MiB, ...).
     Error {

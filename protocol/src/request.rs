@@ -10,6 +10,8 @@
 //! {"ctd": [{"time": 1700000000, "depth": 12.5, "temperature": 21.3, "salinity": 38.1}]}
 //! {"nav": {"x": 120.0, "y": -40.0, "depth": 30.0}}
 //! {"forecast": {}}
+//! {"mac_update": {"src": 1, "dest": 2, "update_type": "PUSH_BACK", "slot": [{…}]}}
+//! {"mac_cycle": {}}
 //! ```
 
 use serde::de::{Deserialize, Deserializer};
@@ -140,6 +142,12 @@ pub enum Request {
     /// `forecast`: make a forecast (as soon as the minimum interval
     /// allows); it comes as a `forecast` event on topic `forecast`.
     Forecast,
+    /// `mac_update`: change this node's TDMA cycle with a
+    /// `goby.acomms.protobuf.MACUpdate` (proto3 JSON), as pAcommsHandler's
+    /// `MAC_CYCLE_UPDATE` does; answered with the cycle after it.
+    MacUpdate(Value),
+    /// `mac_cycle`: this node's TDMA cycle as it stands.
+    MacCycle,
 }
 
 impl Request {
@@ -161,8 +169,8 @@ impl Request {
 
     /// The request a JSON value holds (see [`parse`](Self::parse)). When
     /// an object holds several requests' keys, the first of `publish`,
-    /// `driver_specific`, `file_send`, `file_get`, `transfers` and
-    /// `subscribe` is taken; other keys are ignored.
+    /// `driver_specific`, `mac_update`, `mac_cycle`, `file_send`,
+    /// `file_get`, `transfers` and `subscribe` is taken; other keys are ignored.
     pub fn from_value(value: Value) -> Result<Request, String> {
         let Value::Object(mut object) = value else {
             return Err("not a JSON object".into());
@@ -182,6 +190,18 @@ impl Request {
                 .to_string();
             let msg = object.remove("msg");
             return Ok(Request::DriverSpecific { type_name, msg });
+        }
+        if let Some(update) = object.remove("mac_update") {
+            if !update.is_object() {
+                return Err(
+                    "\"mac_update\" must be a goby.acomms.protobuf.MACUpdate (a JSON object)"
+                        .into(),
+                );
+            }
+            return Ok(Request::MacUpdate(update));
+        }
+        if object.contains_key("mac_cycle") {
+            return Ok(Request::MacCycle);
         }
         for kind in ["file_send", "file_get", "transfers"] {
             if let Some(spec) = object.get(kind) {
@@ -230,7 +250,7 @@ impl Request {
                 .collect::<Result<Vec<_>, _>>()
                 .map(Request::Subscribe);
         }
-        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\", \"transfers\", \"ctd\", \"nav\" or \"forecast\"".into())
+        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\", \"transfers\", \"ctd\", \"nav\", \"forecast\", \"mac_update\" or \"mac_cycle\"".into())
     }
 
     /// Its line, without the newline.
@@ -313,6 +333,8 @@ impl Serialize for Request {
             Request::Ctd(samples) => map.serialize_entry("ctd", samples)?,
             Request::Nav(point) => map.serialize_entry("nav", point)?,
             Request::Forecast => map.serialize_entry("forecast", &Map::new())?,
+            Request::MacUpdate(update) => map.serialize_entry("mac_update", update)?,
+            Request::MacCycle => map.serialize_entry("mac_cycle", &Map::new())?,
         }
         map.end()
     }
@@ -360,6 +382,8 @@ mod tests {
                 depth: 30.0,
             }),
             Request::Forecast,
+            Request::MacUpdate(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
+            Request::MacCycle,
         ];
         for request in requests {
             let line = request.line();
@@ -395,6 +419,7 @@ mod tests {
             (r#"{"ctd": [{"depth": 3}]}"#, "ctd[0]: missing field `temperature`"),
             (r#"{"ctd": 3}"#, "\"ctd\" must be a sample or a list"),
             (r#"{"nav": {"x": 1}}"#, "nav: missing field `y`"),
+            (r#"{"mac_update": 3}"#, "\"mac_update\" must be a goby.acomms.protobuf.MACUpdate"),
         ] {
             let got = Request::parse(line).expect_err(line);
             assert!(got.starts_with(error), "{line}: {got}");

@@ -4,8 +4,8 @@
 
 use gobyd_protocol::event::{
     Ack, Direction, DriverSpecific, DriverStatus, Dropped as DropEvent, Expire, LinkStatus, Lost,
-    MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw, Received,
-    Sent, Transfer, TransferDirection,
+    MacCycle, MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw,
+    Received, Sent, Transfer, TransferDirection,
 };
 use gobyd_protocol::forecast::{
     BandForecast, CtdSample, Environment, Forecast, PeerForecast, Point, RateFer,
@@ -105,6 +105,8 @@ fn requests() -> Vec<Request> {
             depth: 30.0,
         }),
         Request::Forecast,
+        Request::MacUpdate(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
+        Request::MacCycle,
     ];
     for r in &all {
         match r {
@@ -116,7 +118,9 @@ fn requests() -> Vec<Request> {
             | Request::Transfers
             | Request::Ctd(_)
             | Request::Nav(_)
-            | Request::Forecast => {}
+            | Request::Forecast
+            | Request::MacUpdate(_)
+            | Request::MacCycle => {}
         }
     }
     all
@@ -173,6 +177,9 @@ fn replies() -> Vec<Reply> {
             },
         },
         Reply::Forecast { forecast: 4.5 },
+        Reply::MacCycle {
+            mac_cycle: json!({"slot": [], "running": false, "modem_id": 2}),
+        },
         Reply::error("bad"),
     ];
     for r in &all {
@@ -186,6 +193,7 @@ fn replies() -> Vec<Reply> {
             | Reply::Ctd { .. }
             | Reply::Nav { .. }
             | Reply::Forecast { .. }
+            | Reply::MacCycle { .. }
             | Reply::Error { .. } => {}
         }
     }
@@ -254,7 +262,18 @@ fn events() -> Vec<Event> {
             outcome: Outcome::Failed,
             reason: Some("busy".into()),
         }),
-        Event::MacSlotStart(MacSlotStart { mac_slot_start: t }),
+        Event::MacSlotStart(MacSlotStart {
+            mac_slot_start: t.clone(),
+            shared: Some("used".into()),
+            backoff: Some(2),
+            priority: None,
+        }),
+        Event::MacSlotStart(MacSlotStart {
+            mac_slot_start: t,
+            shared: Some("below_threshold".into()),
+            backoff: None,
+            priority: Some(0.5),
+        }),
         Event::MacCycleUpdate(MacCycleUpdate {
             joined: Some(3),
             left: None,
@@ -262,6 +281,12 @@ fn events() -> Vec<Event> {
         Event::MacCycleUpdate(MacCycleUpdate {
             joined: None,
             left: Some(3),
+        }),
+        Event::MacCycle(MacCycle {
+            mac_cycle: json!({"slot": [], "running": false, "modem_id": 2}),
+            update: Some(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
+            from: "link".into(),
+            error: Some("for modem 3".into()),
         }),
         Event::DriverStatus(DriverStatus {
             driver_status: "ready".into(),
@@ -297,6 +322,7 @@ fn events() -> Vec<Event> {
             | Event::ModemTransmit(_)
             | Event::MacSlotStart(_)
             | Event::MacCycleUpdate(_)
+            | Event::MacCycle(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_)
             | Event::Transfer(_)

@@ -39,6 +39,16 @@ impl Core {
                 }
                 let _ = reply.send(outcome);
             }
+            Control::MacUpdate {
+                update,
+                from,
+                reply,
+            } => {
+                let _ = reply.send(self.mac_update(&update, from));
+            }
+            Control::MacCycle { reply } => {
+                let _ = reply.send(self.mac_cycle());
+            }
             Control::DriverSpecific { message, reply } => {
                 let outcome = self.take_specific_request(message);
                 if let Err(e) = &outcome {

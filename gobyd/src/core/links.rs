@@ -17,7 +17,7 @@ use super::link::{self, Link};
 use super::Core;
 use crate::config;
 use crate::error::DaemonError;
-use crate::event::{DaemonEvent, ModemEvent};
+use crate::event::{DaemonEvent, ModemEvent, SharedUse};
 
 /// Starts the driver named by the configuration (its settings checked as
 /// [`validate`](crate::check::validate) does).
@@ -362,7 +362,11 @@ impl Core {
                 .initiate()
                 .filter(|_| up)
                 .and_then(|_| self.links[i].specific_requests.pop_front());
-            let initiated = match (slot.initiate().filter(|_| up), &specific) {
+            // A shared slot is this node's when its data is urgent enough.
+            let contended = self.contend(i, slot, up);
+            let used = matches!(contended, Some(SharedUse::Used { .. }));
+            let mine = slot.initiate().or(used.then_some(&slot.transmission));
+            let initiated = match (mine.filter(|_| up), &specific) {
                 (Some(transmission), None) => {
                     let mut transmission = transmission.clone();
                     self.next_transmission = self.next_transmission.wrapping_add(1);
@@ -378,8 +382,16 @@ impl Core {
                 }
                 _ => None,
             };
-            if let ModemEvent::SlotStart { initiated: i, .. } = &mut reported {
+            if let ModemEvent::SlotStart {
+                initiated: i,
+                shared,
+                ..
+            } = &mut reported
+            {
                 *i = initiated.clone().map(Box::new);
+                if contended.is_some() {
+                    *shared = contended;
+                }
             }
             self.report(reported);
             if let Some(request) = specific {
@@ -411,6 +423,36 @@ impl Core {
                 }
             }
         }
+    }
+
+    /// What this node does with a shared slot it may contend for
+    /// ([`amac::SlotAction::Contend`]) on link `i`: it uses it when the
+    /// link is up and its most urgent queue has at least the slot's
+    /// `min_priority` (then it backs off, [`amac::MacManager::shared_slot_used`]);
+    /// `None` for any other slot.
+    fn contend(&mut self, i: usize, slot: &amac::SlotEvent, up: bool) -> Option<SharedUse> {
+        if slot.action != amac::SlotAction::Contend {
+            return None;
+        }
+        let threshold = slot.transmission.shared.as_ref()?.min_priority();
+        let priority = self.most_urgent();
+        if up && priority.is_some_and(|p| p >= threshold) {
+            let backoff = self.links[i].mac.shared_slot_used();
+            return Some(SharedUse::Used { backoff });
+        }
+        Some(SharedUse::BelowThreshold { priority })
+    }
+
+    /// The priority of the most urgent queue holding messages (`None`:
+    /// every queue is empty).
+    fn most_urgent(&self) -> Option<f64> {
+        let queue = self.outbox.queue();
+        queue
+            .configured()
+            .iter()
+            .filter(|name| queue.size(name).is_ok_and(|n| n > 0))
+            .filter_map(|name| queue.priority(name).ok())
+            .reduce(f64::max)
     }
 
     /// Stops the driver and starts it again from its configuration;

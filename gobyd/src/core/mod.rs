@@ -23,6 +23,7 @@
 
 mod control;
 pub(crate) mod links;
+pub mod mac_update;
 mod receive;
 
 pub mod crash_point;
@@ -169,6 +170,10 @@ pub struct Core {
     clock: Arc<dyn Clock>,
     /// Routing, fragments and file transfer (`None`: off).
     network: Option<Network>,
+    /// The medium access settings the configuration gives the first link
+    /// (what a cycle changed at sea was changed from, and is checked
+    /// against, see [`mac_update`]).
+    configured_mac: protos::goby::acomms::protobuf::MacConfig,
 }
 
 impl std::fmt::Debug for Core {
@@ -233,7 +238,8 @@ impl Core {
             .iter()
             .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
             .collect();
-        Ok(Self {
+        let configured_mac = mac_update::configured_mac(&config);
+        let mut core = Self {
             outbox,
             door,
             links,
@@ -262,7 +268,10 @@ impl Core {
             clock,
             network,
             always_taken: around.always_taken,
-        })
+            configured_mac,
+        };
+        core.restore_mac_cycle();
+        Ok(core)
     }
 
     /// What the interfaces reach the core by.

@@ -11,9 +11,12 @@ use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::broadcast;
 
+use protos::goby::acomms::protobuf::MacUpdate;
+
 use super::crash_point::CrashPoint;
 use super::delivery::FrameFaults;
 use super::Core;
+use crate::event::UpdateSource;
 use crate::event::{DaemonEvent, LinkSummary, MissionLog, Reception, SharedEvent, TransferEvent};
 
 impl Core {
@@ -174,6 +177,7 @@ impl Core {
         }
         let taker = self.taker_present();
         let (events, mission_log) = (&self.events, &mut self.mission_log);
+        let mut updates = Vec::new();
         let ack = self.delivery.receive(
             transmission,
             messages,
@@ -181,8 +185,9 @@ impl Core {
             &reception,
             (u64::try_from(now).unwrap_or(0), tokio::time::Instant::now()),
             taker,
-            handing_over(events, mission_log, now),
+            handing_over(events, mission_log, now, &mut updates),
         );
+        self.apply_received_updates(updates);
         if let (Some(network), Some(receipt)) = (&mut self.network, &receipt) {
             network.recorded(receipt, &mut self.outbox, now);
         }
@@ -209,12 +214,24 @@ impl Core {
         let taker = self.taker_present();
         let now = self.clock.now();
         let (events, mission_log) = (&self.events, &mut self.mission_log);
+        let mut updates = Vec::new();
         self.delivery.release(
             taker,
             tokio::time::Instant::now(),
             u64::try_from(now).unwrap_or(0),
-            handing_over(events, mission_log, now),
+            handing_over(events, mission_log, now, &mut updates),
         );
+        self.apply_received_updates(updates);
+    }
+
+    /// Applies the `MACUpdate`s handed over that are for this node (each
+    /// publication once: a retransmission is not handed over again).
+    fn apply_received_updates(&mut self, updates: Vec<MacUpdate>) {
+        for update in updates {
+            if update.dest == self.modem_id {
+                let _ = self.mac_update(&update, UpdateSource::Link);
+            }
+        }
     }
 
     /// Hands a queue event over: the event to the clients connected now
@@ -275,12 +292,21 @@ fn hand_over(
 
 /// The function that hands a received message over with its reception
 /// (see [`hand_over`]), for [`Delivery`](super::delivery::Delivery).
+/// The `MACUpdate`s among them are added to `updates`, for the core to
+/// apply.
 fn handing_over<'a>(
     events: &'a broadcast::Sender<SharedEvent>,
     mission_log: &'a mut Option<Box<dyn MissionLog>>,
     now: i64,
+    updates: &'a mut Vec<MacUpdate>,
 ) -> impl FnMut(ReceivedMessage, &Reception) + 'a {
     move |received, reception| {
+        if received.message.descriptor().full_name() == crate::config::MAC_UPDATE_TYPE {
+            match received.message.transcode_to::<MacUpdate>() {
+                Ok(update) => updates.push(update),
+                Err(e) => tracing::warn!("a received MACUpdate does not read: {e}"),
+            }
+        }
         hand_over(
             events,
             mission_log,

@@ -16,8 +16,12 @@
 //!   `@PB[full.Name] text format`; raw modem lines (`NMEA_IN`, `NMEA_OUT`,
 //!   `RAW_INCOMING`, `RAW_OUTGOING`), transmissions heard and sent by the
 //!   modem (`MODEM_RECEIVE`, `MODEM_TRANSMIT`) and slot starts
-//!   (`MAC_SLOT_START`). Read: `FLUSH_QUEUE` (empty a queue by DCCL id)
-//!   and `DRIVER_RESET` (restart the driver), see [`Control`].
+//!   (`MAC_SLOT_START`). Read: `FLUSH_QUEUE` (empty a queue by DCCL id),
+//!   `DRIVER_RESET` (restart the driver) and `MAC_CYCLE_UPDATE` (a
+//!   `goby.acomms.protobuf.MACUpdate` changing this node's TDMA cycle,
+//!   [`parse_mac_update`]), see [`Control`]. Like the flush and reset
+//!   requests, an update written before gobyd connected is not applied
+//!   again (the cycle it made is kept in the data directory).
 //! - Initial values (`moos.initializer`, Goby's `common { initializer }`):
 //!   written each time gobyd connects to the MOOSDB.
 //! - The plain interface: string values of the `send_var` variables are
@@ -44,8 +48,9 @@ use std::time::Duration;
 use dccl::Codec;
 use modemdriver::RawDirection;
 use moos::{ClientConfig, Mail, MoosClient, Value};
+use prost::Message;
 use prost_reflect::{DynamicMessage, ReflectMessage};
-use protos::goby::acomms::protobuf::{modem_transmission, ModemTransmission, QueueSize};
+use protos::goby::acomms::protobuf::{modem_transmission, MacUpdate, ModemTransmission, QueueSize};
 use protos::goby::apps::protobuf::gobyd_config::{MoosInterface, MoosVariables};
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{QueueEvent, ReceivedMessage};
@@ -53,6 +58,7 @@ use tokio::sync::{broadcast, mpsc, oneshot};
 
 use crate::edge::json::lines::{network_reply_value, network_request, transfer_value};
 use crate::edge::moos_forecast::ForecastVars;
+use crate::event::UpdateSource;
 use crate::event::{
     Control, CoreHandle, DaemonEvent, ForecastInput, ModemEvent, NetworkRequest, Publish,
     SharedEvent,
@@ -342,7 +348,10 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
         // pAcommsHandler reads MAC_CYCLE_UPDATE (it does not write it) and
         // has no variable for the driver's status: these stay in the log
         // and on the JSON interface.
-        ModemEvent::CycleUpdate { .. } | ModemEvent::Status(_) | ModemEvent::Specific(_) => {}
+        ModemEvent::CycleUpdate { .. }
+        | ModemEvent::MacCycle { .. }
+        | ModemEvent::Status(_)
+        | ModemEvent::Specific(_) => {}
     }
     out
 }
@@ -469,7 +478,14 @@ async fn bridge(
     registered.extend(translator.variables());
     let flush_var = settings.var(|v| v.queue_flush());
     let reset_var = settings.var(|v| v.driver_reset());
-    registered.extend(flush_var.iter().chain(&reset_var).cloned());
+    let mac_update_var = settings.var(|v| v.mac_cycle_update());
+    registered.extend(
+        flush_var
+            .iter()
+            .chain(&reset_var)
+            .chain(&mac_update_var)
+            .cloned(),
+    );
     // Registered with or without the network layer: without it a request
     // is answered on `file_reply_var` with the reason, never ignored.
     let file_send_var = settings.moos.file_send_var().to_string();
@@ -514,6 +530,11 @@ async fn bridge(
                 Some(m) if Some(&m.key) == reset_var.as_ref() => {
                     if fresh(&m, connected_at) {
                         reset(&control).await
+                    }
+                }
+                Some(m) if Some(&m.key) == mac_update_var.as_ref() => {
+                    if fresh(&m, connected_at) {
+                        mac_update(&control, &m).await
                     }
                 }
                 Some(m) if m.key == file_send_var || m.key == file_get_var => {
@@ -739,6 +760,61 @@ async fn file_request(
         settings.moos.file_reply_var(),
         &Value::String(reply.to_string()),
     );
+}
+
+/// A `goby.acomms.protobuf.MACUpdate` as pAcommsHandler reads
+/// `MAC_CYCLE_UPDATE`: `@PB[goby.acomms.protobuf.MACUpdate] text format`,
+/// the text format alone, or `goby.acomms.protobuf.MACUpdate:HEX` (the
+/// protobuf encoding). The error says what is wrong.
+pub fn parse_mac_update(value: &str) -> Result<MacUpdate, String> {
+    let name = "goby.acomms.protobuf.MACUpdate";
+    let desc = MacUpdate::default().descriptor();
+    let mut text = value.trim();
+    if let Some(rest) = text.strip_prefix("@PB[") {
+        let (prefix, body) = rest
+            .split_once(']')
+            .ok_or("\"@PB[\" without its closing \"]\"")?;
+        if prefix.trim() != name {
+            return Err(format!("expected {name}, not {}", prefix.trim()));
+        }
+        text = body;
+    } else if let Some(hex_text) = text.strip_prefix(name).and_then(|r| r.strip_prefix(':')) {
+        let bytes = hex::decode(hex_text.trim())
+            .map_err(|e| format!("{name}: the value after ':' is not hex ({e})"))?;
+        return MacUpdate::decode(bytes.as_slice())
+            .map_err(|e| format!("{name}: the bytes do not parse ({e})"));
+    }
+    let message =
+        DynamicMessage::parse_text_format(desc, text).map_err(|e| format!("{name}: {e}"))?;
+    message.transcode_to().map_err(|e| format!("{name}: {e}"))
+}
+
+/// Applies the update written to `MAC_CYCLE_UPDATE` (an update for
+/// another node is ignored, as pAcommsHandler ignores it, and logged).
+async fn mac_update(control: &mpsc::Sender<Control>, mail: &Mail) {
+    let update = match &mail.value {
+        Value::String(text) => parse_mac_update(text),
+        _ => Err("the value must be a string (@PB[goby.acomms.protobuf.MACUpdate] ...)".into()),
+    };
+    let update = match update {
+        Ok(update) => update,
+        Err(e) => {
+            tracing::warn!("MOOS: {}: {e}", mail.key);
+            return;
+        }
+    };
+    let (reply, answer) = oneshot::channel();
+    let request = Control::MacUpdate {
+        update,
+        from: UpdateSource::Moos,
+        reply,
+    };
+    if control.send(request).await.is_err() {
+        return;
+    }
+    if let Ok(Err(e)) = answer.await {
+        tracing::info!("MOOS: {}: {e}", mail.key);
+    }
 }
 
 /// Restarts the modem driver (`DRIVER_RESET`, whatever its value).

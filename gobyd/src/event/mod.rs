@@ -25,9 +25,11 @@ use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, watch};
 
 pub use forecast::{ForecastEvent, ForecastInput};
-pub use modem::ModemEvent;
+pub use modem::{ModemEvent, SharedUse};
 pub use protos::goby::apps::protobuf::LinkStatus;
-pub use request::{AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply};
+pub use request::{
+    AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply, UpdateSource,
+};
 
 /// What the core reports.
 #[derive(Debug, Clone)]

@@ -1,8 +1,8 @@
 //! Events of the modem driver and the medium access control, as the
 //! daemon's core reports them to the autonomy interfaces: raw lines,
 //! transmissions heard and sent, the driver's status and driver-specific
-//! results (JSON topic `modem`), slot starts and auto-discovery's cycle
-//! changes (topic `mac`).
+//! results (JSON topic `modem`), slot starts, auto-discovery's cycle
+//! changes and `MACUpdate`s applied (topic `mac`).
 //!
 //! The core sends the typed events; each interface renders them in its
 //! own form (the JSON interface's lines are in the guide's
@@ -11,7 +11,25 @@
 use amac::MacEvent;
 use modemdriver::{DriverEvent, DriverStatus, RawMessage, TransmitOutcome};
 use prost_reflect::DynamicMessage;
-use protos::goby::acomms::protobuf::ModemTransmission;
+use protos::goby::acomms::protobuf::{MacCycle, MacUpdate, ModemTransmission};
+
+/// What a node did with a shared slot (slotted ALOHA inside TDMA).
+#[derive(Debug, Clone, PartialEq)]
+pub enum SharedUse {
+    /// It initiated it, and now lets `backoff` shared slots go by.
+    Used {
+        /// Shared slots it lets go by before it contends again.
+        backoff: u32,
+    },
+    /// It may have, but its most urgent queue's priority (`None`:
+    /// nothing queued) is below the slot's `min_priority`.
+    BelowThreshold {
+        /// The priority of its most urgent queue.
+        priority: Option<f64>,
+    },
+    /// It is backing off after using one.
+    BackOff,
+}
 
 /// A modem driver or medium access event.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,6 +59,8 @@ pub enum ModemEvent {
         /// time left in the slot); `None`: the slot belongs to another
         /// node, or a driver-specific request takes it.
         initiated: Option<Box<ModemTransmission>>,
+        /// For a shared slot (slotted ALOHA), what this node did with it.
+        shared: Option<SharedUse>,
     },
     /// Auto-discovery changed the cycle.
     CycleUpdate {
@@ -48,6 +68,18 @@ pub enum ModemEvent {
         modem_id: i32,
         /// Joined (`true`) or left (`false`).
         joined: bool,
+    },
+    /// The TDMA cycle was changed by a `MACUpdate` (or the update was
+    /// refused).
+    MacCycle {
+        /// The cycle as it stands after it.
+        cycle: MacCycle,
+        /// The update.
+        update: Option<MacUpdate>,
+        /// Where it came from: `moos`, `json`, `mqtt`, `link`.
+        from: &'static str,
+        /// Why it was not applied (`None`: applied).
+        error: Option<String>,
     },
     /// A driver status report.
     Status(DriverStatus),
@@ -82,6 +114,8 @@ impl ModemEvent {
             MacEvent::Slot(slot) => ModemEvent::SlotStart {
                 slot: slot.transmission.clone(),
                 initiated: None,
+                shared: (slot.action == amac::SlotAction::SharedBackOff)
+                    .then_some(SharedUse::BackOff),
             },
             MacEvent::Discovered { modem_id, .. } => ModemEvent::CycleUpdate {
                 modem_id: *modem_id,

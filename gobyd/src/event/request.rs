@@ -8,7 +8,34 @@
 use prost_reflect::DynamicMessage;
 use tokio::sync::oneshot;
 
+use protos::goby::acomms::protobuf::{MacCycle, MacUpdate};
+
 use super::TransferEvent;
+
+/// Where an update came from, as the `mac` events and the log tell it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UpdateSource {
+    /// The MOOS variable `MAC_CYCLE_UPDATE`.
+    Moos,
+    /// A JSON client's `mac_update` request.
+    Json,
+    /// The MQTT topic `PREFIX/NODE/mac_update`.
+    Mqtt,
+    /// A `goby.acomms.protobuf.MACUpdate` received over the link.
+    Link,
+}
+
+impl UpdateSource {
+    /// Its name on the events: `moos`, `json`, `mqtt`, `link`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UpdateSource::Moos => "moos",
+            UpdateSource::Json => "json",
+            UpdateSource::Mqtt => "mqtt",
+            UpdateSource::Link => "link",
+        }
+    }
+}
 
 /// A message an interface wants sent, with where to send the reply.
 #[derive(Debug)]
@@ -78,6 +105,23 @@ pub enum Control {
     ResetDriver {
         /// Done, or why the driver could not start again.
         reply: oneshot::Sender<Result<(), String>>,
+    },
+    /// Apply a `MACUpdate` to this node's TDMA cycle (the first link's),
+    /// as [`amac::MacManager::apply_update`] does, when its `dest` is this
+    /// node and the driver can run the cycle after it; the new cycle is
+    /// kept in the data directory (`mac_cycle`) before it takes effect.
+    MacUpdate {
+        /// The update.
+        update: MacUpdate,
+        /// Where it came from.
+        from: UpdateSource,
+        /// The cycle after it, or why it was not applied.
+        reply: oneshot::Sender<Result<MacCycle, String>>,
+    },
+    /// This node's TDMA cycle as it stands.
+    MacCycle {
+        /// The cycle.
+        reply: oneshot::Sender<MacCycle>,
     },
     /// A file transfer request for the network layer (`docs/routing.md`).
     Network {

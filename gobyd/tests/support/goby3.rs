@@ -171,6 +171,45 @@ impl Drop for Proc {
     }
 }
 
+/// A MOOSDB of community `community` on a free port, its log in `dir`.
+pub fn start_moosdb(goby3: &Goby3, dir: &Path, community: &str) -> (Proc, u16) {
+    let port = crate::support::daemon::free_tcp_port();
+    let mut db = Command::new(&goby3.moosdb);
+    db.arg(format!("--moos_port={port}"))
+        .arg(format!("--moos_community={community}"))
+        .arg("--moos_suicide_disable")
+        .arg(format!(
+            "--audit_port={}",
+            crate::support::daemon::free_udp_port()
+        ))
+        .arg("--moos_no_colour");
+    (Proc::spawn("moosdb", db, dir), port)
+}
+
+/// A MOOS client `name` of the MOOSDB `moosdb` at `port`, connecting until
+/// it answers (20 s at the most, while it runs).
+pub async fn moos_client(
+    name: &str,
+    port: u16,
+    moosdb: &mut Proc,
+) -> (moos::MoosClient, moos::MailReceiver) {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let cfg = moos::ClientConfig::new(name).with_address("127.0.0.1", port);
+        match moos::MoosClient::connect(cfg).await {
+            Ok(c) => return c,
+            Err(e) => {
+                assert!(
+                    Instant::now() < deadline && moosdb.alive(),
+                    "cannot reach MOOSDB: {e}\n{}",
+                    moosdb.tail()
+                );
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }
+    }
+}
+
 /// One direction's numbers.
 #[derive(Debug, Default, Clone)]
 pub struct Tally {

@@ -19,6 +19,7 @@
 
 pub mod backoff;
 pub mod budget;
+pub mod mac_cycle;
 
 use std::collections::VecDeque;
 use std::future::Future;

@@ -174,6 +174,7 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             DaemonEvent::Modem(ModemEvent::SlotStart {
                 slot: short.clone(),
                 initiated: None,
+                shared: None,
             }),
             EV9,
         ),

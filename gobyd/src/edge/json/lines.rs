@@ -13,6 +13,7 @@ use gobyd_protocol::event::{
 use gobyd_protocol::{Accepted, Changed, Dropped, Event, Reply, Request, Topic};
 use modemdriver::{RawDirection, TransmitOutcome};
 use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::{MacCycle, MacUpdate};
 use queue::QueueEvent;
 use serde_json::Value;
 
@@ -20,7 +21,7 @@ pub use gobyd_protocol::message_json;
 
 use crate::event::{
     AcceptedMessage, DaemonEvent, ForecastEvent, LinkSummary, ModemEvent, NetworkReply,
-    NetworkRequest, PublishReply, Reception, TransferEvent,
+    NetworkRequest, PublishReply, Reception, SharedUse, TransferEvent,
 };
 
 /// A request line as the core takes it.
@@ -39,6 +40,10 @@ pub enum Input {
     Network(NetworkRequest),
     /// A request of the link forecast.
     Forecast(ForecastRequest),
+    /// Change this node's TDMA cycle.
+    MacUpdate(MacUpdate),
+    /// This node's TDMA cycle as it stands.
+    MacCycle,
 }
 
 /// What a client gives or asks of the link forecast.
@@ -82,6 +87,33 @@ pub fn input(request: Request, codec: &Codec) -> Result<Input, String> {
         Request::Ctd(samples) => Ok(Input::Forecast(ForecastRequest::Ctd(samples))),
         Request::Nav(point) => Ok(Input::Forecast(ForecastRequest::Nav(point))),
         Request::Forecast => Ok(Input::Forecast(ForecastRequest::Forecast)),
+        Request::MacUpdate(update) => mac_update_of(update).map(Input::MacUpdate),
+        Request::MacCycle => Ok(Input::MacCycle),
+    }
+}
+
+/// A `goby.acomms.protobuf.MACUpdate` from its proto3 JSON (the JSON
+/// `mac_update` request, the MQTT `mac_update` topic). The error names
+/// the type and what is wrong.
+pub fn mac_update_of(value: Value) -> Result<MacUpdate, String> {
+    let desc = MacUpdate::default().descriptor();
+    let name = desc.full_name().to_string();
+    let message = DynamicMessage::deserialize(desc, value).map_err(|e| format!("{name}: {e}"))?;
+    message.transcode_to().map_err(|e| format!("{name}: {e}"))
+}
+
+/// A cycle as its proto3 JSON (`slot`, `running`, `modem_id`).
+pub fn mac_cycle_json(cycle: &MacCycle) -> Value {
+    message_json(&cycle.transcode_to_dynamic())
+}
+
+/// The reply to `mac_update` and `mac_cycle`: the cycle, or why not.
+pub fn mac_cycle_reply(outcome: Result<MacCycle, String>) -> Reply {
+    match outcome {
+        Ok(cycle) => Reply::MacCycle {
+            mac_cycle: mac_cycle_json(&cycle),
+        },
+        Err(e) => Reply::error(e),
     }
 }
 
@@ -282,7 +314,9 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             | QueueEvent::OwnBroadcastHeard { .. } => Some(Topic::Sent),
         },
         DaemonEvent::Modem(event) => Some(match event {
-            ModemEvent::SlotStart { .. } | ModemEvent::CycleUpdate { .. } => Topic::Mac,
+            ModemEvent::SlotStart { .. }
+            | ModemEvent::CycleUpdate { .. }
+            | ModemEvent::MacCycle { .. } => Topic::Mac,
             _ => Topic::Modem,
         }),
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
@@ -427,12 +461,38 @@ fn modem_line(event: &ModemEvent) -> Event {
                 reason,
             })
         }
-        ModemEvent::SlotStart { slot, .. } => Event::MacSlotStart(MacSlotStart {
-            mac_slot_start: t(slot),
-        }),
+        ModemEvent::SlotStart { slot, shared, .. } => {
+            let (kind, backoff, priority) = match shared {
+                None => (None, None, None),
+                Some(SharedUse::Used { backoff }) => (Some("used"), Some(*backoff), None),
+                Some(SharedUse::BelowThreshold { priority }) => {
+                    (Some("below_threshold"), None, *priority)
+                }
+                Some(SharedUse::BackOff) => (Some("back_off"), None, None),
+            };
+            Event::MacSlotStart(MacSlotStart {
+                mac_slot_start: t(slot),
+                shared: kind.map(str::to_string),
+                backoff,
+                priority,
+            })
+        }
         ModemEvent::CycleUpdate { modem_id, joined } => Event::MacCycleUpdate(MacCycleUpdate {
             joined: joined.then_some(*modem_id),
             left: (!joined).then_some(*modem_id),
+        }),
+        ModemEvent::MacCycle {
+            cycle,
+            update,
+            from,
+            error,
+        } => Event::MacCycle(line::MacCycle {
+            mac_cycle: mac_cycle_json(cycle),
+            update: update
+                .as_ref()
+                .map(|u| message_json(&u.transcode_to_dynamic())),
+            from: from.to_string(),
+            error: error.clone(),
         }),
         ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
             driver_status: status.kind().to_string(),
@@ -521,6 +581,14 @@ mod tests {
                 r#"{"driver_specific": "goby.acomms.protobuf.MicroModemSpecific", "msg": {"type": "NO_SUCH"}}"#,
                 "goby.acomms.protobuf.MicroModemSpecific: ",
             ),
+            (
+                r#"{"mac_update": {"src": 1, "dest": 2, "update_type": "SHUFFLE"}}"#,
+                "goby.acomms.protobuf.MACUpdate: ",
+            ),
+            (
+                r#"{"mac_update": [1]}"#,
+                "must be a goby.acomms.protobuf.MACUpdate",
+            ),
         ] {
             let err = parse_request(line, &pool()).unwrap_err();
             assert!(err.contains(expected), "{line}: {err}");
@@ -580,10 +648,29 @@ mod tests {
                 ..Default::default()
             },
             initiated: None,
+            shared: None,
         });
         assert_eq!(topic, Some(Topic::Mac));
         assert!(slot.starts_with(r#"{"event":"mac_slot_start","mac_slot_start":{"#));
         assert!(slot.contains(r#""src":1"#), "{slot}");
+        assert!(!slot.contains("shared"), "{slot}");
+        let (_, used) = line(ModemEvent::SlotStart {
+            slot: ModemTransmission::default(),
+            initiated: None,
+            shared: Some(SharedUse::Used { backoff: 2 }),
+        });
+        assert!(used.ends_with(r#","shared":"used","backoff":2}"#), "{used}");
+        let (_, below) = line(ModemEvent::SlotStart {
+            slot: ModemTransmission::default(),
+            initiated: None,
+            shared: Some(SharedUse::BelowThreshold {
+                priority: Some(0.5),
+            }),
+        });
+        assert!(
+            below.ends_with(r#","shared":"below_threshold","priority":0.5}"#),
+            "{below}"
+        );
         let (_, failed) = line(ModemEvent::Transmitted {
             transmission: ModemTransmission::default(),
             outcome: TransmitOutcome::Failed("busy".into()),
@@ -614,6 +701,7 @@ mod tests {
             &DaemonEvent::Modem(ModemEvent::SlotStart {
                 slot,
                 initiated: None,
+                shared: None,
             }),
             |_| String::new(),
         )

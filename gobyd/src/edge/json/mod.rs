@@ -37,13 +37,14 @@ pub mod lines;
 #[cfg(test)]
 mod golden;
 
+use crate::event::UpdateSource;
 use crate::event::{
     Control, CoreHandle, DaemonEvent, ForecastInput, LinkStatus, ModemEvent, Publish, SharedEvent,
 };
 use gobyd_protocol::{Reply, Topic};
 use lines::{
-    event_line, event_topic, lost, network_reply, parse_request, publish_reply, ForecastRequest,
-    Input,
+    event_line, event_topic, lost, mac_cycle_reply, network_reply, parse_request, publish_reply,
+    ForecastRequest, Input,
 };
 
 pub use gobyd_protocol::MAX_LINE;
@@ -308,6 +309,30 @@ impl JsonInterface {
                 }))
             }
             Input::Forecast(request) => self.forecast_request(request).await,
+            Input::MacUpdate(update) => {
+                let (reply, outcome) = oneshot::channel();
+                let control = Control::MacUpdate {
+                    update,
+                    from: UpdateSource::Json,
+                    reply,
+                };
+                if self.control.send(control).await.is_err() {
+                    return Handled::Reply(shutting_down());
+                }
+                Handled::Waiting(answer(outcome, mac_cycle_reply))
+            }
+            Input::MacCycle => {
+                let (reply, outcome) = oneshot::channel();
+                if self
+                    .control
+                    .send(Control::MacCycle { reply })
+                    .await
+                    .is_err()
+                {
+                    return Handled::Reply(shutting_down());
+                }
+                Handled::Waiting(answer(outcome, |cycle| mac_cycle_reply(Ok(cycle))))
+            }
             Input::DriverSpecific(message) => {
                 let name = message.descriptor().full_name().to_string();
                 let (reply, outcome) = oneshot::channel();

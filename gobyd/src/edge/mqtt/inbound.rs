@@ -4,20 +4,24 @@
 //! message, comes once it is on disk). File requests (`file/send`,
 //! `file/get`, `file/list`) go to the core's network layer as the JSON
 //! interface's `file_send`, `file_get` and `transfers`, and are
-//! acknowledged after its reply too. Acknowledgements go out in the order
+//! acknowledged after its reply too, as are `goby.acomms.protobuf.MACUpdate`s
+//! on `mac_update` (a refusal's reason goes to `error`; the cycle after it
+//! comes on `mac_cycle`). Acknowledgements go out in the order
 //! the publications came.
 
 use std::sync::Arc;
 
 use dccl::Codec;
 use prost_reflect::DynamicMessage;
+use protos::goby::acomms::protobuf::{MacCycle, MacUpdate};
 use rumqttc::{AsyncClient, Publish as MqttPublish};
 use serde_json::Value;
 use tokio::sync::{mpsc, oneshot};
 
 use super::payload::{Formatter, Outgoing};
 use super::settings::Topics;
-use crate::edge::json::lines::network_request;
+use crate::edge::json::lines::{mac_update_of, network_request};
+use crate::event::UpdateSource;
 use crate::event::{Control, NetworkReply, NetworkRequest, Publish, PublishReply};
 
 /// Parses the payload of a `tx` topic into a message to send. The error is
@@ -83,6 +87,21 @@ enum Waiting {
     Core(MqttPublish, oneshot::Receiver<PublishReply>),
     /// A file request, with the core's network layer.
     Network(MqttPublish, oneshot::Receiver<Result<NetworkReply, String>>),
+    /// A MAC update, with the core (the cycle after it is published by
+    /// its `mac_cycle` event).
+    MacUpdate(MqttPublish, oneshot::Receiver<Result<MacCycle, String>>),
+}
+
+/// Parses the payload of the `mac_update` topic: a
+/// `goby.acomms.protobuf.MACUpdate` in proto3 JSON. The error is the
+/// reason published on `PREFIX/NODE/error`.
+pub fn parse_mac_update(payload: &[u8]) -> Result<MacUpdate, String> {
+    let value: Value = serde_json::from_slice(payload)
+        .map_err(|e| format!("goby.acomms.protobuf.MACUpdate: the payload is not JSON: {e}"))?;
+    if !value.is_object() {
+        return Err("goby.acomms.protobuf.MACUpdate: the payload must be a JSON object".into());
+    }
+    mac_update_of(value)
 }
 
 /// Runs the two tasks of inbound messages until `incoming` closes:
@@ -102,6 +121,27 @@ pub async fn run(
     let (waiting_tx, mut waiting_rx) = mpsc::unbounded_channel::<Waiting>();
     let submit = async move {
         while let Some(publish) = incoming.recv().await {
+            if publish.topic == topics.mac_update() {
+                let waiting = match parse_mac_update(&publish.payload) {
+                    Err(reason) => Waiting::Refused(publish, reason),
+                    Ok(update) => {
+                        let (reply, answer) = oneshot::channel();
+                        let request = Control::MacUpdate {
+                            update,
+                            from: UpdateSource::Mqtt,
+                            reply,
+                        };
+                        if control.send(request).await.is_err() {
+                            break;
+                        }
+                        Waiting::MacUpdate(publish, answer)
+                    }
+                };
+                if waiting_tx.send(waiting).is_err() {
+                    break;
+                }
+                continue;
+            }
             if let Some(kind) = topics.file_request(&publish.topic) {
                 let waiting = match parse_file_request(kind, &publish.payload) {
                     Err(reason) => Waiting::Refused(publish, reason),
@@ -148,6 +188,15 @@ pub async fn run(
             let (publish, notice) = match waiting {
                 Waiting::Refused(publish, reason) => {
                     let notice = formatter.error(&publish.topic, &reason);
+                    (publish, Some(notice))
+                }
+                Waiting::MacUpdate(publish, answer) => {
+                    let Ok(reply) = answer.await else {
+                        break;
+                    };
+                    let notice = reply
+                        .err()
+                        .map(|reason| formatter.error(&publish.topic, &reason));
                     (publish, notice)
                 }
                 Waiting::Core(publish, answer) => {
@@ -161,7 +210,7 @@ pub async fn run(
                             formatter.accepted(&publish.topic, &accepted, &publish.payload)
                         }
                     };
-                    (publish, notice)
+                    (publish, Some(notice))
                 }
                 Waiting::Network(publish, answer) => {
                     let Ok(reply) = answer.await else {
@@ -171,10 +220,12 @@ pub async fn run(
                         Err(reason) => formatter.error(&publish.topic, &reason),
                         Ok(reply) => formatter.file_reply(&publish.topic, &reply),
                     };
-                    (publish, notice)
+                    (publish, Some(notice))
                 }
             };
-            let _ = notices.send(notice);
+            if let Some(notice) = notice {
+                let _ = notices.send(notice);
+            }
             if let Err(e) = client.ack(&publish).await {
                 tracing::warn!("MQTT: cannot acknowledge {}: {e}", publish.topic);
             }

@@ -309,7 +309,11 @@ impl Loop {
             "MQTT: connected to {broker}"
         );
         let topics = &self.settings.topics;
-        let filters = topics.tx_filters().into_iter().chain(topics.file_filters());
+        let filters = topics
+            .tx_filters()
+            .into_iter()
+            .chain(topics.file_filters())
+            .chain([topics.mac_update()]);
         for filter in filters {
             if let Err(e) = self.client.try_subscribe(filter.clone(), self.settings.qos) {
                 tracing::error!("MQTT: cannot subscribe to {filter}: {e}");

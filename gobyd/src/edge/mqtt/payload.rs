@@ -11,6 +11,7 @@
 //! | `driver` | yes | `{"status", "time"}` |
 //! | `link` | yes | the last reception: `{"src", "dest", "rate", "frames", "time", ...}` |
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
+//! | `mac_cycle` | yes | the TDMA cycle after a `MACUpdate` (or its refusal): `{"slot", "running", "modem_id", "update", "from", "error", "time"}` |
 //! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::event::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
 //! | `file/reply` | no | the answer to a file request: the JSON interface's reply (`{"file_send", "joined", "transfer"}`, `{"file_get", "node"}` or `{"transfers"}`) with `"topic"` |
@@ -27,7 +28,7 @@ use serde_json::{json, Value};
 
 use super::settings::Topics;
 use crate::edge::json::lines::{
-    accepted_value, link_json, message_json, network_reply_value, transfer_value,
+    accepted_value, link_json, mac_cycle_json, message_json, network_reply_value, transfer_value,
 };
 use crate::event::{
     AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, Reception,
@@ -204,6 +205,28 @@ impl Formatter {
                 link_json(&LinkSummary::of(transmission, *time)),
                 true,
             ),
+            ModemEvent::MacCycle {
+                cycle,
+                update,
+                from,
+                error,
+            } => {
+                let mut payload = mac_cycle_json(cycle);
+                if let Some(o) = payload.as_object_mut() {
+                    if let Some(update) = update {
+                        o.insert(
+                            "update".into(),
+                            message_json(&update.transcode_to_dynamic()),
+                        );
+                    }
+                    o.insert("from".into(), json!(from));
+                    if let Some(error) = error {
+                        o.insert("error".into(), json!(error));
+                    }
+                    o.insert("time".into(), json!(seconds(now)));
+                }
+                Outgoing::new(t.node("mac_cycle"), payload, true)
+            }
             ModemEvent::SlotStart {
                 initiated: None, ..
             }
@@ -480,6 +503,7 @@ mod tests {
         let theirs = ModemEvent::SlotStart {
             slot: slot.clone(),
             initiated: None,
+            shared: None,
         };
         assert!(f.event(&DaemonEvent::Modem(theirs), 0).is_none());
         let ours = ModemEvent::SlotStart {
@@ -488,6 +512,7 @@ mod tests {
                 slot_seconds: Some(4.5),
                 ..slot
             })),
+            shared: None,
         };
         let out = f.event(&DaemonEvent::Modem(ours), 1_000_000).unwrap();
         assert_eq!(out.topic, "fleet/2/mac");

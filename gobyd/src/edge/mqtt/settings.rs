@@ -70,6 +70,13 @@ impl Topics {
         }
     }
 
+    /// The topic gobyd takes `goby.acomms.protobuf.MACUpdate`s on, proto3
+    /// JSON (`PREFIX/NODE/mac_update`); the cycle after each comes on
+    /// `PREFIX/NODE/mac_cycle` (retained).
+    pub fn mac_update(&self) -> String {
+        self.node("mac_update")
+    }
+
     /// Whether `topic` is a `tx` topic of every gateway
     /// (`PREFIX/all/tx/TYPE`) rather than of this node alone.
     pub fn is_every_gateway(&self, topic: &str) -> bool {

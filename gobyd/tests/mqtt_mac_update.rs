@@ -1,0 +1,88 @@
+//! `PREFIX/NODE/mac_update` and `PREFIX/NODE/mac_cycle` of gobyd's MQTT
+//! bridge against a real Mosquitto broker on loopback: an update changes
+//! the cycle and the cycle after it is published (retained); one for
+//! another node is refused on `error` and told on `mac_cycle` with its
+//! reason. Fails without Mosquitto (`.ci/mosquitto.sh` installs it).
+
+mod support;
+
+use std::process::{Child, Command, Stdio};
+
+use support::broker::{Broker, Watcher};
+use support::daemon::scratch;
+use support::node::{Node, Simulator};
+
+struct Killed(Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn srcs(v: &serde_json::Value) -> Vec<i64> {
+    v["slot"]
+        .as_array()
+        .map(|s| s.iter().filter_map(|t| t["src"].as_i64()).collect())
+        .unwrap_or_default()
+}
+
+#[test]
+fn mac_updates_from_the_broker_change_the_cycle() {
+    let dir = scratch("mqtt-mac-update", "one");
+    let broker = Broker::start(&dir, "mac_updates_from_the_broker_change_the_cycle");
+    let config = Node::new(1)
+        .driver(Simulator::alone().overhead(0.05))
+        .tdma(&[1, 2], 6, 1.2)
+        .json_tcp("")
+        .mqtt(
+            &broker.address(),
+            "fleet",
+            "reconnect_min_seconds: 0.1 reconnect_max_seconds: 1",
+        )
+        .data_dir(&dir.join("data"))
+        .raw_log(false)
+        .write(dir.join("node1.cfg"));
+    let watcher = Watcher::start(&broker.address(), "console-mac", "fleet/#");
+    let log = std::fs::File::create(dir.join("node1.log")).unwrap();
+    let _gobyd = Killed(
+        Command::new(env!("CARGO_BIN_EXE_gobyd"))
+            .arg("--config")
+            .arg(&config)
+            .env_remove("RUST_BACKTRACE")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("gobyd starts"),
+    );
+    watcher.wait_on("fleet/1/status", |v| (v["online"] == true).then_some(()));
+
+    watcher.publish(
+        "fleet/1/mac_update",
+        r#"{"src": 2, "dest": 3, "update_type": "CLEAR"}"#,
+    );
+    let error = watcher.wait_on("fleet/1/error", |v| Some(v.clone()));
+    assert_eq!(error["topic"], "fleet/1/mac_update", "{error}");
+    assert!(
+        error["error"].as_str().unwrap().contains("for modem 3"),
+        "{error}"
+    );
+    let refused = watcher.wait_on("fleet/1/mac_cycle", |v| Some(v.clone()));
+    assert_eq!(srcs(&refused), [1, 2], "{refused}");
+    assert!(refused["error"].is_string(), "{refused}");
+
+    watcher.publish(
+        "fleet/1/mac_update",
+        r#"{"src": 2, "dest": 1, "update_type": "PUSH_BACK", "slot": [{"src": 1, "dest": 0, "rate": 6, "slot_seconds": 2}]}"#,
+    );
+    let cycle = watcher.wait_on("fleet/1/mac_cycle", |v| {
+        v.get("error").is_none().then(|| v.clone())
+    });
+    assert_eq!(srcs(&cycle), [1, 2, 1], "{cycle}");
+    assert_eq!(cycle["from"], "mqtt", "{cycle}");
+    assert_eq!(cycle["running"], true, "{cycle}");
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&dir);
+}
