@@ -32,6 +32,7 @@
 #![warn(missing_docs)]
 
 pub mod check;
+pub mod clash;
 pub mod command;
 pub mod config;
 pub(crate) mod core;
