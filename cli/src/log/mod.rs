@@ -251,7 +251,11 @@ const CSV_HEADER: [&str; 12] = [
 /// holding the record's other fields as JSON.
 fn csv_row(r: &Record) -> String {
     let mut rest = r.fields.clone();
-    let mut node = |k: &str| rest.remove(k).map(|v| v.to_string()).unwrap_or_default();
+    let mut node = |k: &str| {
+        rest.shift_remove(k)
+            .map(|v| v.to_string())
+            .unwrap_or_default()
+    };
     let (src, dest, by) = (node("src"), node("dest"), node("by"));
     let (offset, line) = match r.at {
         Position::Offset(o) => (o.to_string(), String::new()),
