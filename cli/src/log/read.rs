@@ -253,19 +253,19 @@ fn mission_record(line: &[u8], number: usize) -> Result<Record, String> {
     let Value::Object(mut fields) = value else {
         return Err("not a JSON object".into());
     };
-    let t = fields.remove("t").and_then(|t| t.as_i64());
-    let kind = if let Some(msg) = fields.remove("msg") {
+    let t = fields.shift_remove("t").and_then(|t| t.as_i64());
+    let kind = if let Some(msg) = fields.shift_remove("msg") {
         msg.as_str().ok_or("\"msg\" is not a string")?.to_string()
     } else if fields.contains_key("raw") {
         "raw".to_string()
     } else {
         return Err("neither \"msg\" nor \"raw\"".into());
     };
-    let name = match fields.remove("name") {
+    let name = match fields.shift_remove("name") {
         Some(Value::String(name)) => Some(name),
         _ => None,
     };
-    let id = fields.remove("id").and_then(|id| id.as_u64());
+    let id = fields.shift_remove("id").and_then(|id| id.as_u64());
     Ok(Record {
         t,
         file: MISSION_LOG_FILE,
@@ -297,6 +297,16 @@ mod tests {
         assert!(log.notices[0]
             .text
             .starts_with("line 2: a record cut short"));
+    }
+
+    #[test]
+    fn a_record_keeps_the_order_of_its_fields() {
+        let log = log_of(b"{\"t\":1,\"msg\":\"ack\",\"name\":\"a.B\",\"by\":2,\"frame\":0,\"id\":4,\"value\":{}}\n");
+        let line = log.records[0].to_json().to_string();
+        assert_eq!(
+            line,
+            r#"{"t":1,"file":"raw.log","line":1,"record":"ack","type":"a.B","id":4,"by":2,"frame":0,"value":{}}"#
+        );
     }
 
     #[test]
