@@ -18,6 +18,9 @@
 #[path = "../../gobyd/tests/support/node.rs"]
 mod node;
 
+#[path = "support/gobyd_child.rs"]
+mod gobyd_child;
+
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -166,18 +169,7 @@ impl Drop for Pair {
 #[test]
 #[ignore = "the gobyd process of the other test, run by it"]
 fn gobyd_process() {
-    use clap::Parser;
-    let Some(config) = std::env::var_os("GOBY_FILE_TEST_GOBYD") else {
-        panic!(
-            "run by the other test of this file, with GOBY_FILE_TEST_GOBYD naming a configuration"
-        );
-    };
-    let cli = gobyd::command::GobydCli::parse_from([
-        std::ffi::OsString::from("gobyd"),
-        "--config".into(),
-        config,
-    ]);
-    std::process::exit(i32::from(gobyd::command::run_cli(cli)));
+    gobyd_child::run_gobyd_named_by("GOBY_FILE_TEST_GOBYD");
 }
 
 /// `goby file ARGS`, bounded in time (killed after [`PATIENCE`]).

@@ -23,6 +23,9 @@
 #[path = "../../gobyd/tests/support/node.rs"]
 mod node;
 
+#[path = "support/gobyd_child.rs"]
+mod gobyd_child;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpStream, UdpSocket};
@@ -61,18 +64,7 @@ fn free_udp_port() -> u16 {
 #[test]
 #[ignore = "the gobyd process of the other tests, run by them"]
 fn gobyd_process() {
-    use clap::Parser;
-    let Some(config) = std::env::var_os("GOBY_LOG_TEST_GOBYD") else {
-        panic!(
-            "run by the other tests of this file, with GOBY_LOG_TEST_GOBYD naming a configuration"
-        );
-    };
-    let cli = gobyd::command::GobydCli::parse_from([
-        std::ffi::OsString::from("gobyd"),
-        "--config".into(),
-        config,
-    ]);
-    std::process::exit(i32::from(gobyd::command::run_cli(cli)));
+    gobyd_child::run_gobyd_named_by("GOBY_LOG_TEST_GOBYD");
 }
 
 /// A running gobyd (killed with SIGKILL when dropped) and a JSON client.
