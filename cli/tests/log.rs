@@ -10,7 +10,8 @@
 //! for every message its clients were told was accepted, in the state the
 //! clients saw: acked (an `ack` event with its id), expired (an `expire`
 //! event) or still owed (neither). Node 2's records of messages handed over
-//! (`goby log --record in`) are those its client received. The capture
+//! (`goby log --record in`) are those its client received, and its inbox
+//! holds them all handed over. The capture
 //! `goby log pcap` writes holds the traffic, and (where tshark is
 //! installed) the dissector of `goby dccl wireshark` shows the notes of the
 //! messages in it.
@@ -389,6 +390,21 @@ fn goby_log_accounts_for_every_message_of_a_run_with_kills() {
         handed, seen2.received,
         "node 2's mission log against its client"
     );
+    // Its inbox: each message recorded was handed over, none waits.
+    let out = goby(&[
+        "log",
+        "summary",
+        data2.to_str().unwrap(),
+        "--format",
+        "json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let inbox = json_lines(&out)
+        .into_iter()
+        .find_map(|v| v.get("inbox").cloned())
+        .expect("the inbox's line");
+    assert_eq!(inbox["handed"], seen2.received.len(), "{inbox}");
+    assert_eq!(inbox["waiting"], 0, "{inbox}");
 
     // CSV: a header and one row per record, filtered by type and time.
     let out = goby(&[
@@ -559,6 +575,16 @@ fn damaged_files_are_named_with_the_place_and_never_stop_the_reading() {
         .filter_map(|v| v["state"].as_str().map(String::from))
         .collect();
     assert_eq!(states, ["acked", "owed"]);
+    // Not an inbox: refused, naming the file.
+    std::fs::write(data.join("inbox.log"), b"this is not an inbox").unwrap();
+    let out = goby(&["log", data.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("inbox.log: not a goby inbox"),
+        "{}",
+        text(&out.stderr)
+    );
+    std::fs::remove_file(data.join("inbox.log")).unwrap();
     // Not a journal: refused, naming the file.
     std::fs::write(&journal, b"this is not a journal").unwrap();
     let out = goby(&["log", data.to_str().unwrap()]);

@@ -55,6 +55,13 @@ pub mod json {
 
 /// The daemon's internals, for its own tests, benchmarks and fuzz targets
 /// (feature `internals`): no interface of the crate.
+/// The receiver's inbox file (`DATA_DIR/inbox.log`), for reading a data
+/// directory after a mission: its format and its records.
+pub mod inbox_file {
+    pub use crate::core::dedup::Identity;
+    pub use crate::core::inbox::{read_history, History, InboxEntry, Incoming, Record, INBOX};
+}
+
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {

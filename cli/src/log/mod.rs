@@ -1,13 +1,15 @@
 //! `goby log`: reads a `gobyd` data directory after a mission.
 //!
 //! - `goby log DIR` prints its records (the outbox journal's messages
-//!   accepted and removed; the mission log's messages out, in,
+//!   accepted and removed; the inbox's messages received and handed over;
+//!   the mission log's messages out, in,
 //!   acknowledged, expired and dropped, and its raw modem traffic) as JSON
 //!   lines or CSV, filtered by message type, node, record kind and time
 //!   ([`read`]);
 //! - `goby log summary DIR` tells, per type, what became of the messages
 //!   accepted (sent, acked, expired, dropped, still owed) and how many
-//!   were received, with the latency from acceptance to ack ([`summary`]);
+//!   were received, with the latency from acceptance to ack, and the
+//!   inbox's messages waiting for a client ([`summary`]);
 //! - `goby log pcap DIR -o FILE` writes the modem traffic as a pcap
 //!   capture that the dissector of `goby dccl wireshark` decodes
 //!   ([`pcap`]).
@@ -34,8 +36,8 @@ use read::{DataDirLog, Position, Record};
 #[command(
     args_conflicts_with_subcommands = true,
     subcommand_negates_reqs = true,
-    long_about = "Read a gobyd data directory after a mission: the outbox journal (outbox.journal) \
-    and the mission log (raw.log). Without a subcommand, print its records as JSON lines or CSV.\n\n\
+    long_about = "Read a gobyd data directory after a mission: the outbox journal (outbox.journal), \
+    the inbox (inbox.log) and the mission log (raw.log). Without a subcommand, print its records as JSON lines or CSV.\n\n\
     Examples:\n  \
     goby log /var/lib/gobyd --type Command --record ack\n  \
     goby log /var/lib/gobyd --format csv --since 2026-12-06T07:00:00Z > mission.csv\n  \
@@ -115,8 +117,8 @@ pub struct Filter {
     /// repeated).
     #[arg(long = "node", value_name = "ID")]
     pub nodes: Vec<i32>,
-    /// Only these kinds of record: accepted, removed (journal); out, in, ack, expire, drop, raw
-    /// (mission log). May be repeated.
+    /// Only these kinds of record: accepted, removed (journal); received, handed, seen (inbox);
+    /// out, in, ack, expire, drop, raw (mission log). May be repeated.
     #[arg(long = "record", value_name = "KIND")]
     pub kinds: Vec<String>,
     /// Only records at or after this time: RFC 3339 (2026-12-06T07:00:00Z) or seconds since 1970.
@@ -310,9 +312,16 @@ fn run_summary(
     let mut outgoing = summary::outgoing(&records);
     outgoing.retain(|m| type_matches(&args.types, Some(&m.name)));
     let types = summary::per_type(&records, &outgoing);
+    let inbox = log
+        .read
+        .contains(&read::INBOX_FILE)
+        .then(|| summary::inbox(&log.records));
     match args.format {
         SummaryFormat::Text => {
             write!(stdout, "{}", summary::table(&types))?;
+            if let Some(inbox) = inbox {
+                writeln!(stdout, "{}", inbox.line())?;
+            }
             if args.messages {
                 writeln!(stdout)?;
                 for m in &outgoing {
@@ -327,6 +336,9 @@ fn run_summary(
         SummaryFormat::Json => {
             for (name, s) in &types {
                 writeln!(stdout, "{}", s.to_json(name))?;
+            }
+            if let Some(inbox) = inbox {
+                writeln!(stdout, "{}", inbox.to_json())?;
             }
             if args.messages {
                 for m in &outgoing {

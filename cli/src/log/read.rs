@@ -1,8 +1,9 @@
 //! Reading a `gobyd` data directory after a mission: the outbox journal
-//! (`outbox.journal`, read with the queue crate's own reader) and the
-//! mission log (`raw.log`, one JSON object a line: raw modem traffic and
-//! every message out, in, acknowledged, expired or dropped), as one list of
-//! [`Record`]s in the order of each file.
+//! (`outbox.journal`, read with the queue crate's own reader), the inbox
+//! (`inbox.log`, with gobyd's reader: messages received, and handed over to
+//! the clients) and the mission log (`raw.log`, one JSON object a line: raw
+//! modem traffic and every message out, in, acknowledged, expired or
+//! dropped), as one list of [`Record`]s in the order of each file.
 //!
 //! Damage never stops the reading: a record torn at the end of a file (a
 //! daemon killed while writing it) is a [`Notice`] that is not an error;
@@ -21,6 +22,8 @@ use crate::CliError;
 pub const JOURNAL_FILE: &str = "outbox.journal";
 /// The mission log's file in a data directory.
 pub const MISSION_LOG_FILE: &str = "raw.log";
+/// The receiver's inbox in a data directory.
+pub const INBOX_FILE: &str = "inbox.log";
 
 /// Where a record is in its file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,8 +43,9 @@ pub struct Record {
     pub file: &'static str,
     /// Where in the file.
     pub at: Position,
-    /// What it records: `accepted` and `removed` (journal); `out`, `in`,
-    /// `ack`, `expire`, `drop` and `raw` (mission log).
+    /// What it records: `accepted` and `removed` (journal); `received`,
+    /// `handed` and `seen` (inbox); `out`, `in`, `ack`, `expire`, `drop`
+    /// and `raw` (mission log).
     pub kind: String,
     /// Full name of the message's type, when the record is about one.
     pub name: Option<String>,
@@ -131,13 +135,17 @@ pub fn read_data_dir(dir: &Path) -> Result<DataDirLog, CliError> {
         read_journal(&dir.join(JOURNAL_FILE), &bytes, &mut log)?;
         log.read.push(JOURNAL_FILE);
     }
+    if let Some(bytes) = read_if_present(&dir.join(INBOX_FILE))? {
+        read_inbox(&dir.join(INBOX_FILE), &bytes, &mut log)?;
+        log.read.push(INBOX_FILE);
+    }
     if let Some(bytes) = read_if_present(&dir.join(MISSION_LOG_FILE))? {
         read_mission_log(&dir.join(MISSION_LOG_FILE), &bytes, &mut log);
         log.read.push(MISSION_LOG_FILE);
     }
     if log.read.is_empty() {
         return Err(CliError::setup(format!(
-            "{}: holds neither {JOURNAL_FILE} nor {MISSION_LOG_FILE}: not a gobyd data directory",
+            "{}: holds none of {JOURNAL_FILE}, {INBOX_FILE}, {MISSION_LOG_FILE}: not a gobyd data directory",
             dir.display()
         )));
     }
@@ -192,7 +200,61 @@ fn read_journal(path: &Path, bytes: &[u8], log: &mut DataDirLog) -> Result<(), C
             },
         });
     }
-    for damage in history.damage {
+    tell_damage(path, &history.damage, log);
+    Ok(())
+}
+
+/// The inbox's records (received, handed, seen) and its damage.
+fn read_inbox(path: &Path, bytes: &[u8], log: &mut DataDirLog) -> Result<(), CliError> {
+    use gobyd::inbox_file::Record as InboxRecord;
+    let history = gobyd::inbox_file::read_history(bytes).ok_or_else(|| {
+        CliError::setup(format!(
+            "{}: not a goby inbox (unknown header)",
+            path.display()
+        ))
+    })?;
+    for (offset, record) in history.records {
+        let mut fields = Map::new();
+        let (kind, t) = match record {
+            InboxRecord::Received(entry) => {
+                let m = entry.incoming;
+                fields.insert("seq".into(), entry.seq.into());
+                fields.insert("src".into(), m.identity.src.into());
+                fields.insert("dest".into(), m.dest.into());
+                fields.insert("dccl_id".into(), m.identity.dccl_id.into());
+                if let Some(t) = m.role_time {
+                    fields.insert("role_time".into(), t.into());
+                }
+                fields.insert("bytes".into(), hex::encode(&m.bytes).into());
+                ("received", i64::try_from(entry.time).ok())
+            }
+            InboxRecord::Handed(seq) => {
+                fields.insert("seq".into(), seq.into());
+                ("handed", None)
+            }
+            InboxRecord::Seen(identity, time) => {
+                fields.insert("src".into(), identity.src.into());
+                fields.insert("dccl_id".into(), identity.dccl_id.into());
+                ("seen", i64::try_from(time).ok())
+            }
+        };
+        log.records.push(Record {
+            t,
+            file: INBOX_FILE,
+            at: Position::Offset(offset),
+            kind: kind.into(),
+            name: None,
+            id: None,
+            fields,
+        });
+    }
+    tell_damage(path, &history.damage, log);
+    Ok(())
+}
+
+/// A notice for each damaged span of the record log at `path`.
+fn tell_damage(path: &Path, damage: &[goby_store::record_log::Damage], log: &mut DataDirLog) {
+    for damage in damage {
         let text = if damage.tail {
             format!(
                 "offset {}: {} bytes of a record torn at the end of the file (a write cut short by a kill or power loss); the daemon drops them at its next start",
@@ -210,7 +272,6 @@ fn read_journal(path: &Path, bytes: &[u8], log: &mut DataDirLog) -> Result<(), C
             error: !damage.tail,
         });
     }
-    Ok(())
 }
 
 /// The mission log's records, one a line; lines that are not a record are

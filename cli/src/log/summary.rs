@@ -207,8 +207,60 @@ pub fn per_type(records: &[Record], outgoing: &[Outgoing]) -> BTreeMap<String, T
     out
 }
 
-/// The summary as a text table, one row a type.
+/// The receiver's inbox: messages recorded as they arrived, and of them
+/// those handed over to the clients and those waiting for one (handed
+/// over at the next start, or when a client connects).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct InboxSummary {
+    /// Messages recorded (a compaction keeps only those waiting).
+    pub recorded: usize,
+    /// Of those, handed over to the clients.
+    pub handed: usize,
+    /// Of those, not handed over yet.
+    pub waiting: usize,
+}
+
+impl InboxSummary {
+    /// The counts as one JSON object, `{"inbox": {...}}`.
+    pub fn to_json(&self) -> Value {
+        json!({"inbox": {"recorded": self.recorded, "handed": self.handed, "waiting": self.waiting}})
+    }
+
+    /// The counts in a sentence.
+    pub fn line(&self) -> String {
+        format!(
+            "inbox: {} messages recorded, {} handed over to the clients, {} waiting for one",
+            self.recorded, self.handed, self.waiting
+        )
+    }
+}
+
+/// The inbox's counts from the records of `inbox.log`.
+pub fn inbox(records: &[Record]) -> InboxSummary {
+    let seq = |r: &Record| r.fields.get("seq").and_then(Value::as_u64);
+    let inbox = records.iter().filter(|r| r.file == super::read::INBOX_FILE);
+    let handed: std::collections::HashSet<u64> = inbox
+        .clone()
+        .filter(|r| r.kind == "handed")
+        .filter_map(seq)
+        .collect();
+    let mut summary = InboxSummary::default();
+    for r in inbox.filter(|r| r.kind == "received") {
+        summary.recorded += 1;
+        if seq(r).is_some_and(|s| handed.contains(&s)) {
+            summary.handed += 1;
+        } else {
+            summary.waiting += 1;
+        }
+    }
+    summary
+}
+
+/// The summary as a text table, one row a type (nothing without a type).
 pub fn table(types: &BTreeMap<String, TypeSummary>) -> String {
+    if types.is_empty() {
+        return String::new();
+    }
     let header = [
         "type",
         "accepted",
@@ -308,5 +360,31 @@ mod tests {
             (4, 3, 1, 1, 1)
         );
         assert_eq!(s.latency_s(), Some((2.0, 2.0)));
+    }
+
+    #[test]
+    fn the_inbox_counts_what_waits_for_a_client() {
+        let inbox_record = |kind: &str, seq: u64| Record {
+            file: super::super::read::INBOX_FILE,
+            fields: [("seq".to_string(), Value::from(seq))]
+                .into_iter()
+                .collect(),
+            id: None,
+            ..record(kind, 0, 0)
+        };
+        let records = [
+            inbox_record("received", 1),
+            inbox_record("received", 2),
+            inbox_record("handed", 1),
+            inbox_record("received", 3),
+        ];
+        assert_eq!(
+            inbox(&records),
+            InboxSummary {
+                recorded: 3,
+                handed: 1,
+                waiting: 2
+            }
+        );
     }
 }

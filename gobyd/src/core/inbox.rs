@@ -135,10 +135,37 @@ fn seen_payload(id: &Identity, time: u64) -> Vec<u8> {
 }
 
 /// A record's content.
-enum Record {
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Record {
+    /// A message received from the link was recorded (before it was
+    /// handed over and acknowledged).
     Received(InboxEntry),
+    /// The message of this `seq` was handed over to the clients.
     Handed(u64),
+    /// A message of this identity was seen at this time (µs since the
+    /// epoch), for the duplicate filter (written by compaction).
     Seen(Identity, u64),
+}
+
+/// Every record an inbox file holds, read without touching the file: each
+/// with its offset, then the spans replay skips or cuts off. `None` when
+/// the bytes are not an inbox. A compaction keeps only the messages not
+/// yet handed over, and the identities still within the duplicate window.
+pub fn read_history(bytes: &[u8]) -> Option<History> {
+    let inspected = INBOX.inspect(bytes, parse)?;
+    Some(History {
+        records: inspected.records,
+        damage: inspected.damage,
+    })
+}
+
+/// What [`read_history`] found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct History {
+    /// The good records with their offsets, in file order.
+    pub records: Vec<(u64, Record)>,
+    /// The spans replay skips or cuts off (damaged records, a torn tail).
+    pub damage: Vec<goby_store::record_log::Damage>,
 }
 
 /// The record a payload holds; `None` for one the inbox did not write
