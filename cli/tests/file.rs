@@ -239,6 +239,35 @@ fn files_go_both_ways_between_two_gobyd_over_udp() {
     assert!(stderr.contains(" fragments held (100 %)"), "{stderr}");
     let arrived = dir.join("data2/files/survey.bin");
     assert_eq!(std::fs::read(&arrived).unwrap(), content);
+    // `goby log` shows the transfer from node 1's transfers.log: accepted,
+    // then ended.
+    let log = Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args([
+            "log",
+            dir.join("data1").to_str().unwrap(),
+            "--record",
+            "transfer",
+            "--record",
+            "transfer_end",
+        ])
+        .output()
+        .unwrap();
+    assert!(log.status.success(), "{}", text(&log.stderr));
+    let records: Vec<serde_json::Value> = text(&log.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let transfer = records
+        .iter()
+        .find(|r| r["record"] == "transfer" && r["dest"] == 2)
+        .unwrap_or_else(|| panic!("no transfer in {records:?}"));
+    assert_eq!(transfer["file"], "transfers.log", "{transfer}");
+    assert!(
+        records
+            .iter()
+            .any(|r| r["record"] == "transfer_end" && r["number"] == transfer["number"]),
+        "{records:?}"
+    );
 
     // Get: 2 asks 1 for a file it serves.
     let served = pattern(2000, 11);

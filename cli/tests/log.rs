@@ -368,7 +368,11 @@ fn goby_log_accounts_for_every_message_of_a_run_with_kills() {
         .find(|l| l.starts_with("goby.example.Command"))
         .unwrap_or_else(|| panic!("{table}"));
     let cells: Vec<&str> = row.split_whitespace().collect();
-    assert_eq!(cells[1..8], ["6", "6", "4", "1", "0", "1", "0"], "{table}");
+    // Accepted, acked, expired, dropped, owed, unknown; sent: all but p5
+    // at least (node 1 may have been killed before its slot came).
+    assert_eq!(cells[1], "6", "{table}");
+    assert_eq!(cells[3..8], ["4", "1", "0", "1", "0"], "{table}");
+    assert!(["5", "6"].contains(&cells[2]), "{table}");
 
     // Node 2 handed over what its client received (a message recorded but
     // not handed over by the kill would be handed over at its next start).

@@ -63,6 +63,12 @@ pub mod inbox_file {
     pub use crate::core::inbox::{read_history, History, InboxEntry, Incoming, Record, INBOX};
 }
 
+/// The network layer's transfers file (`DATA_DIR/transfers.log`), for
+/// reading a data directory after a mission: its format and its records.
+pub mod transfers_file {
+    pub use crate::core::network::transfers::{read_history, History, Record, TRANSFERS};
+}
+
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {

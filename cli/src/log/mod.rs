@@ -2,7 +2,7 @@
 //!
 //! - `goby log DIR` prints its records (the outbox journal's messages
 //!   accepted and removed; the inbox's messages received and handed over;
-//!   the mission log's messages out, in,
+//!   the transfers' records; the mission log's messages out, in,
 //!   acknowledged, expired and dropped, and its raw modem traffic) as JSON
 //!   lines or CSV, filtered by message type, node, record kind and time
 //!   ([`read`]);
@@ -37,7 +37,7 @@ use read::{DataDirLog, Position, Record};
     args_conflicts_with_subcommands = true,
     subcommand_negates_reqs = true,
     long_about = "Read a gobyd data directory after a mission: the outbox journal (outbox.journal), \
-    the inbox (inbox.log) and the mission log (raw.log). Without a subcommand, print its records as JSON lines or CSV.\n\n\
+    the inbox (inbox.log), the transfers (transfers.log) and the mission log (raw.log). Without a subcommand, print its records as JSON lines or CSV.\n\n\
     Examples:\n  \
     goby log /var/lib/gobyd --type Command --record ack\n  \
     goby log /var/lib/gobyd --format csv --since 2026-12-06T07:00:00Z > mission.csv\n  \
@@ -118,7 +118,8 @@ pub struct Filter {
     #[arg(long = "node", value_name = "ID")]
     pub nodes: Vec<i32>,
     /// Only these kinds of record: accepted, removed (journal); received, handed, seen (inbox);
-    /// out, in, ack, expire, drop, raw (mission log). May be repeated.
+    /// transfer, taken, held, transfer_end, fragment, transfer_received (transfers); out, in,
+    /// ack, expire, drop, raw (mission log). May be repeated.
     #[arg(long = "record", value_name = "KIND")]
     pub kinds: Vec<String>,
     /// Only records at or after this time: RFC 3339 (2026-12-06T07:00:00Z) or seconds since 1970.

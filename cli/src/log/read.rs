@@ -1,7 +1,8 @@
 //! Reading a `gobyd` data directory after a mission: the outbox journal
 //! (`outbox.journal`, read with the queue crate's own reader), the inbox
 //! (`inbox.log`, with gobyd's reader: messages received, and handed over to
-//! the clients) and the mission log (`raw.log`, one JSON object a line: raw
+//! the clients), the transfers (`transfers.log`, with gobyd's reader) and
+//! the mission log (`raw.log`, one JSON object a line: raw
 //! modem traffic and every message out, in, acknowledged, expired or
 //! dropped), as one list of [`Record`]s in the order of each file.
 //!
@@ -24,6 +25,8 @@ pub const JOURNAL_FILE: &str = "outbox.journal";
 pub const MISSION_LOG_FILE: &str = "raw.log";
 /// The receiver's inbox in a data directory.
 pub const INBOX_FILE: &str = "inbox.log";
+/// The network layer's transfers in a data directory.
+pub const TRANSFERS_FILE: &str = "transfers.log";
 
 /// Where a record is in its file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -44,8 +47,9 @@ pub struct Record {
     /// Where in the file.
     pub at: Position,
     /// What it records: `accepted` and `removed` (journal); `received`,
-    /// `handed` and `seen` (inbox); `out`, `in`, `ack`, `expire`, `drop`
-    /// and `raw` (mission log).
+    /// `handed` and `seen` (inbox); `transfer`, `taken`, `held`,
+    /// `transfer_end`, `fragment` and `transfer_received` (transfers);
+    /// `out`, `in`, `ack`, `expire`, `drop` and `raw` (mission log).
     pub kind: String,
     /// Full name of the message's type, when the record is about one.
     pub name: Option<String>,
@@ -139,13 +143,17 @@ pub fn read_data_dir(dir: &Path) -> Result<DataDirLog, CliError> {
         read_inbox(&dir.join(INBOX_FILE), &bytes, &mut log)?;
         log.read.push(INBOX_FILE);
     }
+    if let Some(bytes) = read_if_present(&dir.join(TRANSFERS_FILE))? {
+        read_transfers(&dir.join(TRANSFERS_FILE), &bytes, &mut log)?;
+        log.read.push(TRANSFERS_FILE);
+    }
     if let Some(bytes) = read_if_present(&dir.join(MISSION_LOG_FILE))? {
         read_mission_log(&dir.join(MISSION_LOG_FILE), &bytes, &mut log);
         log.read.push(MISSION_LOG_FILE);
     }
     if log.read.is_empty() {
         return Err(CliError::setup(format!(
-            "{}: holds none of {JOURNAL_FILE}, {INBOX_FILE}, {MISSION_LOG_FILE}: not a gobyd data directory",
+            "{}: holds none of {JOURNAL_FILE}, {INBOX_FILE}, {TRANSFERS_FILE}, {MISSION_LOG_FILE}: not a gobyd data directory",
             dir.display()
         )));
     }
@@ -245,6 +253,99 @@ fn read_inbox(path: &Path, bytes: &[u8], log: &mut DataDirLog) -> Result<(), Cli
             kind: kind.into(),
             name: None,
             id: None,
+            fields,
+        });
+    }
+    tell_damage(path, &history.damage, log);
+    Ok(())
+}
+
+/// The transfers' records and their damage: `transfer` (an outgoing
+/// transfer accepted), `taken` and `held` (fragments acknowledged by the
+/// next hop, held by the receiver), `transfer_end` (it ended), `fragment`
+/// (of an incoming transfer) and `transfer_received` (an incoming one
+/// ended).
+fn read_transfers(path: &Path, bytes: &[u8], log: &mut DataDirLog) -> Result<(), CliError> {
+    use gobyd::transfers_file::Record as T;
+    let history = gobyd::transfers_file::read_history(bytes).ok_or_else(|| {
+        CliError::setup(format!(
+            "{}: not a goby transfers file (unknown header)",
+            path.display()
+        ))
+    })?;
+    for (offset, record) in history.records {
+        let mut fields = Map::new();
+        let mut put = |k: &str, v: Value| {
+            fields.insert(k.into(), v);
+        };
+        let (kind, t, name, id) = match record {
+            T::Out {
+                number,
+                dest,
+                client_id,
+                created,
+                expires,
+                fragment_size,
+                ack,
+                type_name,
+                stream,
+            } => {
+                put("number", number.into());
+                put("dest", dest.into());
+                put("expires", expires.into());
+                put("fragment_size", fragment_size.into());
+                put("ack", ack.into());
+                put("stream_bytes", stream.len().into());
+                ("transfer", Some(created), Some(type_name), Some(client_id))
+            }
+            T::Taken(number, index) => {
+                put("number", number.into());
+                put("index", index.into());
+                ("taken", None, None, None)
+            }
+            T::Held(number, indexes) => {
+                put("number", number.into());
+                put("indexes", indexes.into());
+                ("held", None, None, None)
+            }
+            T::Sent(number) => {
+                put("number", number.into());
+                ("transfer_end", None, None, None)
+            }
+            T::Fragment {
+                origin,
+                number,
+                expires,
+                index,
+                data,
+            } => {
+                put("src", origin.into());
+                put("number", number.into());
+                put("expires", expires.into());
+                put("index", index.into());
+                put("bytes", hex::encode(data).into());
+                ("fragment", None, None, None)
+            }
+            T::Received {
+                origin,
+                number,
+                outcome,
+                until,
+            } => {
+                put("src", origin.into());
+                put("number", number.into());
+                put("outcome", outcome.into());
+                put("until", until.into());
+                ("transfer_received", None, None, None)
+            }
+        };
+        log.records.push(Record {
+            t,
+            file: TRANSFERS_FILE,
+            at: Position::Offset(offset),
+            kind: kind.into(),
+            name,
+            id,
             fields,
         });
     }
