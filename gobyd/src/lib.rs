@@ -60,13 +60,13 @@ pub mod json {
 /// directory after a mission: its format and its records.
 pub mod inbox_file {
     pub use crate::core::dedup::Identity;
-    pub use crate::core::inbox::{read_history, History, InboxEntry, Incoming, Record, INBOX};
+    pub use crate::core::inbox::{read_history, InboxEntry, Incoming, Record, INBOX};
 }
 
 /// The network layer's transfers file (`DATA_DIR/transfers.log`), for
 /// reading a data directory after a mission: its format and its records.
 pub mod transfers_file {
-    pub use crate::core::network::transfers::{read_history, History, Record, TRANSFERS};
+    pub use crate::core::network::transfers::{read_history, Record, TRANSFERS};
 }
 
 #[cfg(feature = "internals")]

@@ -395,30 +395,15 @@ pub enum Record {
     Removed(EntryId),
 }
 
-/// Every record a journal file holds, read without touching the file (see
-/// [`read_history`]).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct History {
-    /// The good records, each with its offset in the file, in file order.
-    /// A compaction keeps only the messages still owed: accepted records
-    /// of messages that left before it are gone.
-    pub records: Vec<(u64, Record)>,
-    /// The spans replay skips or cuts off (damaged records, a torn tail).
-    pub damage: Vec<record_log::Damage>,
-}
-
 /// Reads the bytes of a journal file as a history of records, without
 /// touching any file (for reading a data directory after a mission).
 /// `None` when the bytes are not a journal. A journal of the first format
 /// (`GOBYJNL1`) is read up to its first bad record; the rest is one span
-/// of damage.
-pub fn read_history(bytes: &[u8]) -> Option<History> {
+/// of damage. A compaction keeps only the messages still owed: accepted
+/// records of messages that left before it are gone.
+pub fn read_history(bytes: &[u8]) -> Option<record_log::Inspected<Record>> {
     if !bytes.starts_with(MAGIC_V1) {
-        let inspected = JOURNAL.inspect(bytes, parse_record)?;
-        return Some(History {
-            records: inspected.records,
-            damage: inspected.damage,
-        });
+        return JOURNAL.inspect(bytes, parse_record);
     }
     let mut records = Vec::new();
     let mut at = MAGIC_V1.len();
@@ -437,7 +422,7 @@ pub fn read_history(bytes: &[u8]) -> Option<History> {
         })
         .into_iter()
         .collect();
-    Some(History { records, damage })
+    Some(record_log::Inspected { records, damage })
 }
 
 fn accepted_size(entry: &JournalEntry) -> usize {

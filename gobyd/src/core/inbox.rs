@@ -41,7 +41,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::Path;
 
-use goby_store::record_log::{Format, LogError, RecordLog, CRC32 as CRC};
+use goby_store::record_log::{Format, Inspected, LogError, RecordLog, CRC32 as CRC};
 
 /// The inbox's file format: a record log ([`goby_store::record_log`]) of
 /// magic `GOBYINB1`.
@@ -151,21 +151,8 @@ pub enum Record {
 /// with its offset, then the spans replay skips or cuts off. `None` when
 /// the bytes are not an inbox. A compaction keeps only the messages not
 /// yet handed over, and the identities still within the duplicate window.
-pub fn read_history(bytes: &[u8]) -> Option<History> {
-    let inspected = INBOX.inspect(bytes, parse)?;
-    Some(History {
-        records: inspected.records,
-        damage: inspected.damage,
-    })
-}
-
-/// What [`read_history`] found.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct History {
-    /// The good records with their offsets, in file order.
-    pub records: Vec<(u64, Record)>,
-    /// The spans replay skips or cuts off (damaged records, a torn tail).
-    pub damage: Vec<goby_store::record_log::Damage>,
+pub fn read_history(bytes: &[u8]) -> Option<Inspected<Record>> {
+    INBOX.inspect(bytes, parse)
 }
 
 /// The record a payload holds; `None` for one the inbox did not write

@@ -28,7 +28,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::{Path, PathBuf};
 
-use goby_store::record_log::{Format, RecordLog};
+use goby_store::record_log::{Format, Inspected, RecordLog};
 use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
 use queue::{MessageId, Micros, PushOptions};
 
@@ -243,21 +243,8 @@ pub enum Record {
 /// Every record a `transfers.log` holds, read without touching the file:
 /// each with its offset, then the spans replay skips or cuts off. `None`
 /// when the bytes are not such a file.
-pub fn read_history(bytes: &[u8]) -> Option<History> {
-    let inspected = TRANSFERS.inspect(bytes, parse)?;
-    Some(History {
-        records: inspected.records,
-        damage: inspected.damage,
-    })
-}
-
-/// What [`read_history`] found.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct History {
-    /// The good records with their offsets, in file order.
-    pub records: Vec<(u64, Record)>,
-    /// The spans replay skips or cuts off (damaged records, a torn tail).
-    pub damage: Vec<goby_store::record_log::Damage>,
+pub fn read_history(bytes: &[u8]) -> Option<Inspected<Record>> {
+    TRANSFERS.inspect(bytes, parse)
 }
 
 fn parse(p: &[u8]) -> Option<Record> {
