@@ -44,6 +44,11 @@
 //! between nodes through `gobyd`'s JSON interface, with their progress;
 //! `goby file list` lists the transfers under way ([`file_cmd`]).
 //!
+//! `goby log DIR` reads a `gobyd` data directory after a mission: its
+//! records as JSON lines or CSV, `goby log summary DIR` what became of each
+//! message, `goby log pcap DIR -o FILE` the modem traffic as a capture
+//! ([`log`]).
+//!
 //! `goby completions SHELL` prints a shell completion script and `goby man
 //! DIR` writes the manual pages ([`generate_cmd`]).
 //!
@@ -72,6 +77,7 @@ mod frame_decoder;
 pub mod generate_cmd;
 pub mod iridium_emulate;
 mod lines;
+pub mod log;
 pub mod modem_cmd;
 pub mod moos_cmd;
 pub mod mqtt_cmd;
@@ -155,6 +161,9 @@ pub enum GobyCommand {
     /// The acoustic channel: BELLHOP environments (TL, rays, arrivals), sound speed from CTD casts, link forecasts and the best depth.
     #[command(subcommand)]
     Channel(channel_cmd::ChannelCommand),
+    /// Read a gobyd data directory after a mission: its records (JSON lines or CSV), a summary
+    /// (what became of each message), the modem traffic as a pcap capture.
+    Log(log::LogCli),
     /// Print a shell completion script for goby.
     Completions(generate_cmd::CompletionsArgs),
     /// Write goby's manual pages (goby.1 and one per subcommand) into a directory.
@@ -253,6 +262,7 @@ pub fn run_goby(
         GobyCommand::Moos(cmd) => moos_cmd::run(&cmd, stdout),
         GobyCommand::File(cmd) => file_cmd::run(&cmd, stdout),
         GobyCommand::Channel(cmd) => channel_cmd::run(&cmd, stdout),
+        GobyCommand::Log(cli) => log::run(&cli, stdout, stderr),
         GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
         GobyCommand::Man(args) => generate_cmd::man(&args, stdout),
     };

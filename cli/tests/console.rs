@@ -14,6 +14,9 @@
 #[path = "../../gobyd/tests/support/broker.rs"]
 mod broker;
 
+#[path = "support/gobyd_child.rs"]
+mod gobyd_child;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpStream, UdpSocket};
 use std::path::{Path, PathBuf};
@@ -162,18 +165,7 @@ impl Drop for Gateways {
 #[test]
 #[ignore = "the gateway process of the other tests, run by them"]
 fn gateway_process() {
-    use clap::Parser;
-    let Some(config) = std::env::var_os("GOBY_CONSOLE_GATEWAY") else {
-        panic!(
-            "run by the other tests of this file, with GOBY_CONSOLE_GATEWAY naming a configuration"
-        );
-    };
-    let cli = gobyd::command::GobydCli::parse_from([
-        std::ffi::OsString::from("gobyd"),
-        "--config".into(),
-        config,
-    ]);
-    std::process::exit(i32::from(gobyd::command::run_cli(cli)));
+    gobyd_child::run_gobyd_named_by("GOBY_CONSOLE_GATEWAY");
 }
 
 /// `goby console ARGS --listen 127.0.0.1:0`, killed when dropped.

@@ -18,6 +18,9 @@
 #[path = "../../gobyd/tests/support/node.rs"]
 mod node;
 
+#[path = "support/gobyd_child.rs"]
+mod gobyd_child;
+
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -166,18 +169,7 @@ impl Drop for Pair {
 #[test]
 #[ignore = "the gobyd process of the other test, run by it"]
 fn gobyd_process() {
-    use clap::Parser;
-    let Some(config) = std::env::var_os("GOBY_FILE_TEST_GOBYD") else {
-        panic!(
-            "run by the other test of this file, with GOBY_FILE_TEST_GOBYD naming a configuration"
-        );
-    };
-    let cli = gobyd::command::GobydCli::parse_from([
-        std::ffi::OsString::from("gobyd"),
-        "--config".into(),
-        config,
-    ]);
-    std::process::exit(i32::from(gobyd::command::run_cli(cli)));
+    gobyd_child::run_gobyd_named_by("GOBY_FILE_TEST_GOBYD");
 }
 
 /// `goby file ARGS`, bounded in time (killed after [`PATIENCE`]).
@@ -247,6 +239,35 @@ fn files_go_both_ways_between_two_gobyd_over_udp() {
     assert!(stderr.contains(" fragments held (100 %)"), "{stderr}");
     let arrived = dir.join("data2/files/survey.bin");
     assert_eq!(std::fs::read(&arrived).unwrap(), content);
+    // `goby log` shows the transfer from node 1's transfers.log: accepted,
+    // then ended.
+    let log = Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args([
+            "log",
+            dir.join("data1").to_str().unwrap(),
+            "--record",
+            "transfer",
+            "--record",
+            "transfer_end",
+        ])
+        .output()
+        .unwrap();
+    assert!(log.status.success(), "{}", text(&log.stderr));
+    let records: Vec<serde_json::Value> = text(&log.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let transfer = records
+        .iter()
+        .find(|r| r["record"] == "transfer" && r["dest"] == 2)
+        .unwrap_or_else(|| panic!("no transfer in {records:?}"));
+    assert_eq!(transfer["file"], "transfers.log", "{transfer}");
+    assert!(
+        records
+            .iter()
+            .any(|r| r["record"] == "transfer_end" && r["number"] == transfer["number"]),
+        "{records:?}"
+    );
 
     // Get: 2 asks 1 for a file it serves.
     let served = pattern(2000, 11);

@@ -17,8 +17,9 @@ use crate::error::DaemonError;
 /// with [`DriverSettings::Caller`](config::DriverSettings::Caller) when the
 /// caller gives the drivers): what it refuses the daemon never runs with, and
 /// what it accepts the daemon starts with unless something only starting
-/// shows (a port taken, a data directory held by another daemon, a serial
-/// device that is not a terminal).
+/// shows (a serial device that is not a terminal; what `--check` can see
+/// would clash on this machine, a port taken or a data directory held by
+/// another daemon, it tells beside: [`crate::clash`]).
 ///
 /// In order: the configuration is completed; every setting that cannot
 /// work is found at once ([`config::problems`]: each named by its field,

@@ -274,6 +274,8 @@ fn shutdown_signal() -> impl std::future::Future<Output = ()> {
 /// standard output says whether it is valid, the types it loads and its
 /// limits.
 fn check_cmd(cli: &GobydCli, config: GobydConfig, read: Option<&config::Read>) -> u8 {
+    // Told after the refusal, if any.
+    let as_given = config.clone();
     let notes = read.map_or(&[][..], |r| &r.notes[..]);
     let broker = mqtt_broker_note(cli, &config);
     let warning = config::passphrase_file_warning(&config);
@@ -287,13 +289,15 @@ fn check_cmd(cli: &GobydCli, config: GobydConfig, read: Option<&config::Read>) -
             for problem in log_problems {
                 eprintln!("gobyd: error: configuration: {problem}");
             }
+            tell_clashes(cli, &as_given);
             return EXIT_SETUP;
         }
     };
+    for problem in &log_problems {
+        eprintln!("gobyd: error: configuration: {problem}");
+    }
+    tell_clashes(cli, &as_given);
     if !log_problems.is_empty() {
-        for problem in log_problems {
-            eprintln!("gobyd: error: configuration: {problem}");
-        }
         return EXIT_SETUP;
     }
     for note in notes {
@@ -323,6 +327,22 @@ fn check_cmd(cli: &GobydCli, config: GobydConfig, read: Option<&config::Read>) -
         println!("{broker}");
     }
     EXIT_OK
+}
+
+/// Tells (on standard error) what would clash with `config` on this
+/// machine ([`clash`](crate::clash)), each as a warning: a lock or an
+/// address held now may be free when the daemon starts (a service
+/// restarted, a daemon checked while it runs), which only the start can
+/// tell, as for a serial port.
+fn tell_clashes(cli: &GobydCli, config: &GobydConfig) {
+    for clash in crate::clash::clashes(config, cli.config.as_deref()) {
+        let now = if clash.error {
+            "; a daemon started now would stop here"
+        } else {
+            ""
+        };
+        eprintln!("gobyd: warning: clash: {}{now}", clash.text);
+    }
 }
 
 /// Runs `gobyd` with a parsed command line; returns the exit status.
@@ -368,6 +388,23 @@ pub fn run_cli(cli: GobydCli) -> u8 {
         Ok(loaded) => loaded,
         Err(e) => {
             eprintln!("gobyd: error: {e}");
+            if cli.check {
+                // What else it can see, in the same run.
+                let lenient = cli
+                    .config
+                    .as_ref()
+                    .and_then(|path| std::fs::read_to_string(path).ok())
+                    .and_then(|text| config::read_leniently(&text))
+                    .map(|mut config| {
+                        if let Some(dir) = &cli.data_dir {
+                            config.data_dir = Some(dir.display().to_string());
+                        }
+                        config
+                    });
+                if let Some(config) = lenient {
+                    tell_clashes(&cli, &config);
+                }
+            }
             return EXIT_SETUP;
         }
     };

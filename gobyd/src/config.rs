@@ -22,6 +22,7 @@ use protos::goby::apps::protobuf::GobydConfig;
 pub mod goby;
 pub mod links;
 mod moos_lines;
+mod skip;
 
 /// A commented configuration that works as it is: `gobyd --example-config`.
 pub const EXAMPLE_CONFIG: &str = include_str!("example_config.pb.txt");
@@ -52,6 +53,17 @@ pub enum ConfigError {
     /// [`problems`]).
     #[error("configuration: {}", list_problems(.0))]
     Problems(Vec<Problem>),
+}
+
+impl ConfigError {
+    /// The message without where it is (for a [`ConfigError::Parse`],
+    /// the parser's reason).
+    fn reason(&self) -> String {
+        match self {
+            ConfigError::Parse { reason, .. } => reason.clone(),
+            other => other.to_string(),
+        }
+    }
 }
 
 /// One problem on its line; several, counted, one a line below.
@@ -282,7 +294,6 @@ pub fn nothing_configured(path: &Path, text: &str) -> Option<ConfigError> {
 /// cannot be read is reported at once ([`ConfigError::Problems`]), except
 /// text that is not protobuf text format (the parser stops at it).
 pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigError> {
-    let desc = GobydConfig::default().descriptor();
     let mut prepared = goby3_extensions(text);
     let moos_lines = match layout {
         Layout::File => Vec::new(),
@@ -292,24 +303,47 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
             lines
         }
     };
-    let mut dynamic =
-        DynamicMessage::parse_text_format(desc, &prepared).map_err(|e| ConfigError::Parse {
-            origin: match error_offset(&e) {
+    let parse_error = |e: &prost_reflect::text_format::ParseError, prepared: &str| {
+        let reason = with_goby_hint(
+            e.to_string(),
+            layout == Layout::File
+                && error_offset(e)
+                    .and_then(|o| prepared.get(o..))
+                    .is_some_and(|rest| rest.starts_with('=')),
+        );
+        ConfigError::Parse {
+            origin: match error_offset(e) {
                 Some(offset) => {
                     let (line, column) = line_and_column(text, offset);
                     format!("{origin}:{line}:{column}")
                 }
                 None => origin.to_string(),
             },
-            reason: with_goby_hint(
-                e.to_string(),
-                layout == Layout::File
-                    && error_offset(&e)
-                        .and_then(|o| prepared.get(o..))
-                        .is_some_and(|rest| rest.starts_with('=')),
-            ),
-        })?;
+            reason,
+        }
+    };
     let mut found = Findings::new(text, origin);
+    // Every key the configuration does not have, in one run: each is
+    // told and blanked, and the reading goes on without it.
+    let (parsed, unknown_keys) = parse_past_unknown_keys(&mut prepared);
+    let unknown = unknown_keys.len();
+    let mut first_unknown = None;
+    for (at, key, e) in &unknown_keys {
+        let error = parse_error(e, &prepared);
+        found.problem(Some(*at), key, error.reason());
+        first_unknown.get_or_insert(error);
+    }
+    let mut dynamic = match parsed {
+        Ok(dynamic) => dynamic,
+        Err(e) if unknown == 0 => return Err(parse_error(&e, &prepared)),
+        Err(e) => {
+            // Keys told already: this one with them.
+            let offset = error_offset(&e);
+            let reason = parse_error(&e, &prepared).reason();
+            found.problem(offset, &key_at(&prepared, offset), reason);
+            return Err(found.finish().expect_err("problems were found"));
+        }
+    };
     let assigned = goby::moos_lines(&mut dynamic, &moos_lines, &mut found);
     let places = Places::new(&prepared, assigned);
     goby::goby2_extensions(&mut dynamic, &places, &mut found);
@@ -360,7 +394,13 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
             found.note(places.offset(&view.field(&field)), NoteLevel::Warn, text);
         }
     }
-    let notes = found.finish()?;
+    let notes = match found.finish() {
+        // One unknown key and nothing else: the parser's error as it is.
+        Err(ConfigError::Problems(p)) if p.len() == 1 && unknown == 1 => {
+            return Err(first_unknown.expect("an unknown key was found"))
+        }
+        other => other?,
+    };
     Ok(Read {
         config,
         notes,
@@ -488,6 +528,78 @@ const GOBY3_DAEMON_HINT: &str = "this is a configuration of Goby3's gobyd, its m
 /// daemon is instead), an extension of a driver gobyd does not
 /// run, or a MOOS `KEY = value` line outside a mission file (`at_equals`:
 /// the parser stopped at an `=`).
+/// An error of the text format parser.
+type TextError = prost_reflect::text_format::ParseError;
+
+/// A key the configuration does not have: its offset, its name and the
+/// parser's error.
+type UnknownKey = (usize, String, TextError);
+
+/// Parses `prepared` as a configuration, blanking each key it does not
+/// have (in `prepared`, offsets kept) and parsing again: the configuration
+/// or the first error that is not such a key, and each key blanked with
+/// its offset, its name and the parser's error.
+fn parse_past_unknown_keys(
+    prepared: &mut String,
+) -> (Result<DynamicMessage, TextError>, Vec<UnknownKey>) {
+    let desc = GobydConfig::default().descriptor();
+    let mut unknown = Vec::new();
+    loop {
+        let e = match DynamicMessage::parse_text_format(desc.clone(), prepared) {
+            Ok(dynamic) => return (Ok(dynamic), unknown),
+            Err(e) => e,
+        };
+        let blanked = error_offset(&e)
+            .filter(|_| is_unknown_key(&e.to_string()) && unknown.len() < MAX_UNKNOWN_KEYS)
+            .and_then(|o| Some((o, skip::blank_field(prepared, o)?)));
+        let Some((at, blanked)) = blanked else {
+            return (Err(e), unknown);
+        };
+        unknown.push((at, key_at(prepared, Some(at)), e));
+        *prepared = blanked;
+    }
+}
+
+/// The configuration in `text` (a configuration file's) as far as it can
+/// be read: keys it does not have are left out, Goby's keys are not
+/// mapped; `None` when even that fails. For `--check`, to find what would
+/// clash with a configuration it refuses.
+pub fn read_leniently(text: &str) -> Option<GobydConfig> {
+    let mut prepared = goby3_extensions(text);
+    parse_past_unknown_keys(&mut prepared)
+        .0
+        .ok()?
+        .transcode_to::<GobydConfig>()
+        .ok()
+}
+
+/// Keys not known told in one run at most (the rest after a fix).
+const MAX_UNKNOWN_KEYS: usize = 64;
+
+/// Whether the parser's message is about a key the configuration does not
+/// have (a field or an extension not found).
+fn is_unknown_key(reason: &str) -> bool {
+    reason.contains("not found for message") || reason.starts_with("extension '")
+}
+
+/// The key written at `offset` of `text` (a name, or `[extension]`), for
+/// naming a problem there.
+fn key_at(text: &str, offset: Option<usize>) -> String {
+    let Some(rest) = offset.and_then(|o| text.get(o..)) else {
+        return "configuration".into();
+    };
+    let end = if rest.starts_with('[') {
+        rest.find(']').map_or(rest.len(), |e| e + 1)
+    } else {
+        rest.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '.'))
+            .unwrap_or(rest.len())
+    };
+    match &rest[..end] {
+        "" => "configuration".into(),
+        key => key.to_string(),
+    }
+}
+
 fn with_goby_hint(reason: String, at_equals: bool) -> String {
     if GOBY3_DAEMON_KEYS.iter().any(|key| {
         reason.contains(&format!(

@@ -32,6 +32,7 @@
 #![warn(missing_docs)]
 
 pub mod check;
+pub mod clash;
 pub mod command;
 pub mod config;
 pub(crate) mod core;
@@ -49,12 +50,26 @@ pub mod translator;
 /// them in its own way.
 pub mod json {
     pub use crate::edge::json::lines::{
-        event, event_line, event_topic, link_json, lost, message_json, network_reply, publish_reply,
+        event, event_line, event_topic, link_json, lost, message_json, message_of_json,
+        network_reply, publish_reply,
     };
 }
 
 /// The daemon's internals, for its own tests, benchmarks and fuzz targets
 /// (feature `internals`): no interface of the crate.
+/// The receiver's inbox file (`DATA_DIR/inbox.log`), for reading a data
+/// directory after a mission: its format and its records.
+pub mod inbox_file {
+    pub use crate::core::dedup::Identity;
+    pub use crate::core::inbox::{read_history, InboxEntry, Incoming, Record, INBOX};
+}
+
+/// The network layer's transfers file (`DATA_DIR/transfers.log`), for
+/// reading a data directory after a mission: its format and its records.
+pub mod transfers_file {
+    pub use crate::core::network::transfers::{read_history, Record, TRANSFERS};
+}
+
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {

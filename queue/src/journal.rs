@@ -384,9 +384,45 @@ impl Journal {
     }
 }
 
-enum Record {
+/// One record of a journal.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Record {
+    /// A message was accepted for sending.
     Accepted(JournalEntry),
+    /// The message of this id left its queue for good (acknowledged,
+    /// expired, dropped, or sent without an ack wanted); the journal does
+    /// not say which.
     Removed(EntryId),
+}
+
+/// Reads the bytes of a journal file as a history of records, without
+/// touching any file (for reading a data directory after a mission).
+/// `None` when the bytes are not a journal. A journal of the first format
+/// (`GOBYJNL1`) is read up to its first bad record; the rest is one span
+/// of damage. A compaction keeps only the messages still owed: accepted
+/// records of messages that left before it are gone.
+pub fn read_history(bytes: &[u8]) -> Option<record_log::Inspected<Record>> {
+    if !bytes.starts_with(MAGIC_V1) {
+        return JOURNAL.inspect(bytes, parse_record);
+    }
+    let mut records = Vec::new();
+    let mut at = MAGIC_V1.len();
+    while let Some((payload, next)) = record_log::unsynced_record_at(bytes, at) {
+        let Some(record) = parse_record(payload) else {
+            break;
+        };
+        records.push((at as u64, record));
+        at = next;
+    }
+    let damage = (at < bytes.len())
+        .then_some(record_log::Damage {
+            offset: at as u64,
+            len: (bytes.len() - at) as u64,
+            tail: true,
+        })
+        .into_iter()
+        .collect();
+    Some(record_log::Inspected { records, damage })
 }
 
 fn accepted_size(entry: &JournalEntry) -> usize {
@@ -511,6 +547,41 @@ mod tests {
             .iter()
             .map(|e| (e.id, e.message_name.as_str(), e.message.as_slice()))
             .collect()
+    }
+
+    #[test]
+    fn the_history_holds_every_record_with_its_offset_and_the_torn_tail() {
+        let dir = TempDir::new("history");
+        {
+            let (mut j, _) = Journal::open(dir.file()).unwrap();
+            j.accept("a.A", b"one", 10).unwrap();
+            j.accept("b.B", b"two", 20).unwrap();
+            j.remove(0).unwrap();
+        }
+        let mut bytes = std::fs::read(dir.file()).unwrap();
+        let full = bytes.len() as u64;
+        bytes.extend_from_slice(&encode_removed(1)[..5]);
+        let history = read_history(&bytes).unwrap();
+        let kinds: Vec<(u64, EntryId, bool)> = history
+            .records
+            .iter()
+            .map(|(at, r)| match r {
+                Record::Accepted(e) => (*at, e.id, true),
+                Record::Removed(id) => (*at, *id, false),
+            })
+            .collect();
+        let second = (MAGIC.len() + FRAMING + 1 + 8 + 8 + 2 + 3 + 3) as u64;
+        let third = second + (FRAMING + 1 + 8 + 8 + 2 + 3 + 3) as u64;
+        assert_eq!(kinds, [(8, 0, true), (second, 1, true), (third, 0, false)]);
+        assert_eq!(
+            history.damage,
+            [record_log::Damage {
+                offset: full,
+                len: 5,
+                tail: true
+            }]
+        );
+        assert!(read_history(b"GOBYINB1").is_none());
     }
 
     #[test]

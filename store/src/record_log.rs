@@ -153,6 +153,15 @@ impl Format {
                 },
                 header: Header::New,
                 end: magic.len(),
+                offsets: Vec::new(),
+                damage: (!bytes.is_empty())
+                    .then_some(Damage {
+                        offset: 0,
+                        len: bytes.len() as u64,
+                        tail: true,
+                    })
+                    .into_iter()
+                    .collect(),
             });
         }
         let header = if bytes.starts_with(magic) {
@@ -171,6 +180,8 @@ impl Format {
             return None;
         };
         let mut records = Vec::new();
+        let mut offsets = Vec::new();
+        let mut damage = Vec::new();
         let mut discarded_bytes = 0;
         let mut rewrite_advised = false;
         let mut at = magic.len();
@@ -185,7 +196,13 @@ impl Format {
             match record {
                 Some((record, next)) => {
                     records.push(record);
+                    offsets.push(at as u64);
                     if skipped > 0 {
+                        damage.push(Damage {
+                            offset: at as u64 - skipped,
+                            len: skipped,
+                            tail: false,
+                        });
                         discarded_bytes += skipped;
                         skipped = 0;
                         rewrite_advised = true;
@@ -208,9 +225,24 @@ impl Format {
                 return None;
             }
             discarded_bytes += magic.len() as u64;
+            damage.insert(
+                0,
+                Damage {
+                    offset: 0,
+                    len: magic.len() as u64,
+                    tail: false,
+                },
+            );
         }
         // A torn or damaged tail, with no good record after it.
         discarded_bytes += (bytes.len() - end) as u64;
+        if end < bytes.len() {
+            damage.push(Damage {
+                offset: end as u64,
+                len: (bytes.len() - end) as u64,
+                tail: true,
+            });
+        }
         Some(Scan {
             replayed: Replayed {
                 records,
@@ -219,6 +251,29 @@ impl Format {
             },
             header,
             end,
+            offsets,
+            damage,
+        })
+    }
+
+    /// Reads `bytes`, the content of a file of this format, as replay
+    /// would, without touching any file: each good record (its payload as
+    /// `parse` reads it) with its offset in the file, and each span replay
+    /// skips or cuts off. `None` when the bytes are not a file of this
+    /// format. For tools that read a data directory after a mission.
+    pub fn inspect<T>(
+        &self,
+        bytes: &[u8],
+        parse: impl FnMut(&[u8]) -> Option<T>,
+    ) -> Option<Inspected<T>> {
+        let scan = self.scan(bytes, parse)?;
+        Some(Inspected {
+            records: scan
+                .offsets
+                .into_iter()
+                .zip(scan.replayed.records)
+                .collect(),
+            damage: scan.damage,
         })
     }
 }
@@ -259,6 +314,33 @@ struct Scan<T> {
     header: Header,
     /// End of the last good record (of the header when there is none).
     end: usize,
+    /// Offset of each good record, in the order of `replayed.records`.
+    offsets: Vec<u64>,
+    /// Spans skipped or cut off, in file order.
+    damage: Vec<Damage>,
+}
+
+/// A span of a record log that replay skips (damaged records, a damaged
+/// header) or cuts off (a torn tail, with no good record after it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Damage {
+    /// Offset of its first byte in the file.
+    pub offset: u64,
+    /// Its length in bytes.
+    pub len: u64,
+    /// It runs to the end of the file: a write torn by a crash, most
+    /// often (a kill or power loss while appending).
+    pub tail: bool,
+}
+
+/// What [`Format::inspect`] found in a file, without repairing anything.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Inspected<T> {
+    /// The good records, each with the offset of its sync word, in file
+    /// order.
+    pub records: Vec<(u64, T)>,
+    /// The spans replay skips or cuts off, in file order.
+    pub damage: Vec<Damage>,
 }
 
 /// What replaying a record log found.
@@ -715,6 +797,45 @@ mod tests {
             expected.extend_from_slice(&payload);
             assert_eq!(format.frame(&payload), expected, "{}", format.name);
         }
+    }
+
+    #[test]
+    fn inspect_names_each_record_and_each_damaged_span_by_offset_and_touches_nothing() {
+        let records = [b"one".to_vec(), b"two".to_vec(), b"three".to_vec()];
+        let mut bytes = written(JOURNAL, &records);
+        let second = 8 + FRAMING + 3;
+        let third = second + FRAMING + 3;
+        // A flipped bit in the second record's payload, and a torn tail.
+        bytes[second + FRAMING] ^= 1;
+        bytes.extend_from_slice(&JOURNAL.frame(b"torn")[..7]);
+        let before = bytes.clone();
+        let inspected = JOURNAL.inspect(&bytes, |p| Some(p.to_vec())).unwrap();
+        assert_eq!(bytes, before);
+        assert_eq!(
+            inspected.records,
+            [(8, b"one".to_vec()), (third as u64, b"three".to_vec())]
+        );
+        let end = (third + FRAMING + 5) as u64;
+        assert_eq!(
+            inspected.damage,
+            [
+                Damage {
+                    offset: second as u64,
+                    len: (FRAMING + 3) as u64,
+                    tail: false
+                },
+                Damage {
+                    offset: end,
+                    len: 7,
+                    tail: true
+                }
+            ]
+        );
+        assert!(JOURNAL
+            .inspect(b"not a journal at all", |_| Some(()))
+            .is_none());
+        let torn_header = JOURNAL.inspect(&JOURNAL.magic[..5], |_| Some(())).unwrap();
+        assert_eq!(torn_header.damage[0].len, 5);
     }
 
     #[test]

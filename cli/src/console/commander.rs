@@ -64,7 +64,7 @@ impl Commander {
                 self.types.join(", ")
             )
         })?;
-        DynamicMessage::deserialize(desc.clone(), msg).map_err(|e| format!("{type_name}: {e}"))
+        gobyd::json::message_of_json(type_name, desc.clone(), msg.clone())
     }
 
     /// What sending `msg` of type `type_name` would do: `{"ok": true,
@@ -231,6 +231,13 @@ mod tests {
         assert_eq!(changed["back"]["note"], "a note lon");
         let bad = c.check("goby.example.Command", &json!({"destination": "two"}));
         assert_eq!(bad["ok"], false);
+        assert!(
+            bad["error"]
+                .as_str()
+                .unwrap()
+                .contains("goby.example.Command: field destination: invalid digit"),
+            "{bad}"
+        );
         let missing = c.check("goby.example.Command", &json!({"destination": 2}));
         assert_eq!(missing["ok"], false, "{missing}");
         let unknown = c.check("goby.example.Nothing", &json!({}));

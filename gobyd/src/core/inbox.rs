@@ -41,7 +41,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::Path;
 
-use goby_store::record_log::{Format, LogError, RecordLog, CRC32 as CRC};
+use goby_store::record_log::{Format, Inspected, LogError, RecordLog, CRC32 as CRC};
 
 /// The inbox's file format: a record log ([`goby_store::record_log`]) of
 /// magic `GOBYINB1`.
@@ -135,10 +135,24 @@ fn seen_payload(id: &Identity, time: u64) -> Vec<u8> {
 }
 
 /// A record's content.
-enum Record {
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Record {
+    /// A message received from the link was recorded (before it was
+    /// handed over and acknowledged).
     Received(InboxEntry),
+    /// The message of this `seq` was handed over to the clients.
     Handed(u64),
+    /// A message of this identity was seen at this time (µs since the
+    /// epoch), for the duplicate filter (written by compaction).
     Seen(Identity, u64),
+}
+
+/// Every record an inbox file holds, read without touching the file: each
+/// with its offset, then the spans replay skips or cuts off. `None` when
+/// the bytes are not an inbox. A compaction keeps only the messages not
+/// yet handed over, and the identities still within the duplicate window.
+pub fn read_history(bytes: &[u8]) -> Option<Inspected<Record>> {
+    INBOX.inspect(bytes, parse)
 }
 
 /// The record a payload holds; `None` for one the inbox did not write

@@ -3,10 +3,17 @@
 //!
 //! ```text
 //! {"t":1700000000123456,"raw":"out","bytes_hex":"2443434359432c...","text":"$CCCYC,..."}
-//! {"t":1700000000200000,"msg":"out","name":"goby.example.Command","frame":0,"value":{...}}
+//! {"t":1700000000200000,"msg":"out","name":"goby.example.Command","frame":0,"id":7,"value":{...}}
 //! {"t":1700000012000000,"msg":"in","name":"goby.example.NavigationReport","src":2,"value":{...}}
-//! {"t":1700000013000000,"msg":"ack","name":"goby.example.Command","by":2,"frame":0,"value":{...}}
+//! {"t":1700000013000000,"msg":"ack","name":"goby.example.Command","by":2,"frame":0,"id":7,"value":{...}}
+//! {"t":1700000600000000,"msg":"expire","name":"goby.example.Command","id":8,"value":{...}}
 //! ```
+//!
+//! `id` is the message's journal id, the one its client was given when
+//! the message was accepted (`{"accepted": ..., "id": 7}`); messages never
+//! journaled (addressed to this node) have none. `"expire"` and `"drop"`
+//! are messages that left their queue unacknowledged (their type's `ttl`
+//! passed; their queue was over `max_queue`).
 //!
 //! Raw records are what the driver wrote and read: NMEA lines for the
 //! Micro-Modem, datagrams for UDP, and for the acoustic simulator the
@@ -103,10 +110,12 @@ impl MissionLog for RawLog {
         }
     }
 
-    /// A message sent, acknowledged or received: `"msg": "out"` with its
-    /// `frame` (and with several links its `link`), `"ack"` with `by` and
-    /// `frame`, `"in"` with `src`, `dest` and its reception (`recovered`,
-    /// `link`, `route`). Other events are not logged.
+    /// A message sent, acknowledged, expired, dropped or received:
+    /// `"msg": "out"` with its `frame` (and with several links its
+    /// `link`), `"ack"` with `by` and `frame`, `"expire"`, `"drop"` (each
+    /// with the message's journal `id`, where it has one), `"in"` with
+    /// `src`, `dest` and its reception (`recovered`, `link`, `route`).
+    /// Other events are not logged.
     fn event(&mut self, time: i64, event: &DaemonEvent, link: Option<&str>) {
         let record = match event {
             DaemonEvent::Received {
@@ -117,7 +126,7 @@ impl MissionLog for RawLog {
                 event: QueueEvent::Received(received),
                 ..
             } => received_record(received, &Reception::default()),
-            DaemonEvent::Queue { event, .. } => queue_record(event),
+            DaemonEvent::Queue { event, entry } => queue_record(event, *entry),
             _ => None,
         };
         let Some((direction, name, value, mut extra)) = record else {
@@ -141,25 +150,33 @@ type LogRecord = (
     Vec<(&'static str, serde_json::Value)>,
 );
 
-/// The record of a message sent or acknowledged.
-fn queue_record(event: &QueueEvent) -> Option<LogRecord> {
-    match event {
-        QueueEvent::Sent { message, frame, .. } => Some((
-            "out",
-            message.descriptor().full_name().to_string(),
-            message_json(message),
-            vec![("frame", (*frame).into())],
-        )),
+/// The record of a message sent, acknowledged, expired or dropped, with
+/// its journal id `entry` (if any).
+fn queue_record(event: &QueueEvent, entry: Option<u64>) -> Option<LogRecord> {
+    let (direction, message, mut extra) = match event {
+        QueueEvent::Sent { message, frame, .. } => {
+            ("out", message, vec![("frame", (*frame).into())])
+        }
         QueueEvent::Acked {
             message, by, frame, ..
-        } => Some((
+        } => (
             "ack",
-            message.descriptor().full_name().to_string(),
-            message_json(message),
+            message,
             vec![("by", (*by).into()), ("frame", (*frame).into())],
-        )),
-        _ => None,
+        ),
+        QueueEvent::Expired { message, .. } => ("expire", message, Vec::new()),
+        QueueEvent::Dropped { message, .. } => ("drop", message, Vec::new()),
+        _ => return None,
+    };
+    if let Some(id) = entry {
+        extra.push(("id", id.into()));
     }
+    Some((
+        direction,
+        message.descriptor().full_name().to_string(),
+        message_json(message),
+        extra,
+    ))
 }
 
 /// The record of a received message, with its reception.

@@ -28,7 +28,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::{Path, PathBuf};
 
-use goby_store::record_log::{Format, RecordLog};
+use goby_store::record_log::{Format, Inspected, RecordLog};
 use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
 use queue::{MessageId, Micros, PushOptions};
 
@@ -183,33 +183,68 @@ fn i64_at(b: &[u8], at: usize) -> Option<i64> {
     Some(i64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
 }
 
-enum Record {
+/// One record of `transfers.log` (a record log of magic `GOBYXFR1`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Record {
+    /// An outgoing transfer was accepted.
     Out {
+        /// Its transfer number (on the wire).
         number: u16,
+        /// Its destination modem id.
         dest: i32,
+        /// The id its client was given.
         client_id: u64,
+        /// When it was accepted, µs since the epoch.
+        created: Micros,
+        /// When it expires, µs since the epoch.
         expires: Micros,
+        /// Bytes a fragment.
         fragment_size: u16,
+        /// Its end is acknowledged.
         ack: bool,
+        /// The type of the message it carries (or the file transfer's).
         type_name: String,
+        /// The whole stream (header and body).
         stream: Vec<u8>,
     },
+    /// The next hop acknowledged fragment `.1` of outgoing transfer `.0`.
     Taken(u16, u32),
+    /// The receiver holds these fragments of outgoing transfer `.0`.
     Held(u16, Vec<u32>),
+    /// Outgoing transfer `.0` ended.
     Sent(u16),
+    /// A fragment of an incoming transfer was received.
     Fragment {
+        /// The transfer's origin modem id.
         origin: i32,
+        /// Its transfer number.
         number: u16,
+        /// When it expires, µs since the epoch.
         expires: Micros,
+        /// The fragment's index.
         index: u32,
+        /// The fragment's bytes.
         data: Vec<u8>,
     },
+    /// An incoming transfer ended.
     Received {
+        /// Its origin modem id.
         origin: i32,
+        /// Its transfer number.
         number: u16,
+        /// Its outcome (`FragmentAck.Outcome`'s number).
         outcome: u8,
+        /// Remembered until then (µs since the epoch), so that a repeat
+        /// is known.
         until: Micros,
     },
+}
+
+/// Every record a `transfers.log` holds, read without touching the file:
+/// each with its offset, then the spans replay skips or cuts off. `None`
+/// when the bytes are not such a file.
+pub fn read_history(bytes: &[u8]) -> Option<Inspected<Record>> {
+    TRANSFERS.inspect(bytes, parse)
 }
 
 fn parse(p: &[u8]) -> Option<Record> {
@@ -221,6 +256,7 @@ fn parse(p: &[u8]) -> Option<Record> {
                 number: u16_at(b, 0)?,
                 dest: i32_at(b, 2)?,
                 client_id: u64_at(b, 6)?,
+                created: i64_at(b, 14)?,
                 expires: i64_at(b, 22)?,
                 fragment_size: u16_at(b, 30)?,
                 ack: *b.get(32)? != 0,
@@ -329,6 +365,7 @@ impl Transfers {
                     number,
                     dest,
                     client_id,
+                    created: _,
                     expires,
                     fragment_size,
                     ack,
@@ -1207,5 +1244,47 @@ impl Transfers {
     #[cfg(any(test, feature = "internals"))]
     pub fn relay_window(&self) -> usize {
         self.settings.relay_window
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_history_holds_each_record_with_its_offset_and_the_torn_tail() {
+        let fragment = frag_payload(3, 7, 1_000, 2, b"abc");
+        let mut sent = vec![K_SENT];
+        sent.extend_from_slice(&9u16.to_le_bytes());
+        sent.push(0);
+        let mut bytes = TRANSFERS.magic.to_vec();
+        TRANSFERS.frame_into(&mut bytes, &fragment);
+        let second = bytes.len() as u64;
+        TRANSFERS.frame_into(&mut bytes, &sent);
+        let whole = bytes.len() as u64;
+        bytes.extend_from_slice(&TRANSFERS.sync);
+        let history = read_history(&bytes).unwrap();
+        assert_eq!(
+            history.records,
+            [
+                (
+                    8,
+                    Record::Fragment {
+                        origin: 3,
+                        number: 7,
+                        expires: 1_000,
+                        index: 2,
+                        data: b"abc".to_vec()
+                    }
+                ),
+                (second, Record::Sent(9))
+            ]
+        );
+        assert_eq!(history.damage.len(), 1);
+        assert_eq!(
+            (history.damage[0].offset, history.damage[0].tail),
+            (whole, true)
+        );
+        assert!(read_history(b"GOBYJNLD").is_none());
     }
 }

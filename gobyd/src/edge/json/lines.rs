@@ -124,7 +124,28 @@ fn message(
     msg: Option<Value>,
 ) -> Result<DynamicMessage, String> {
     let msg = msg.ok_or_else(|| format!("{type_name}: \"msg\" is missing"))?;
-    DynamicMessage::deserialize(desc, msg).map_err(|e| format!("{type_name}: {e}"))
+    message_of_json(&type_name, desc, msg)
+}
+
+/// The message of type `desc` (named `type_name`) that the proto3 JSON
+/// `value` holds. The error names the type and the field whose value is
+/// wrong (`goby.example.Command: field destination: invalid digit found
+/// in string`; nested fields as `waypoint[0].x`).
+pub fn message_of_json(
+    type_name: &str,
+    desc: prost_reflect::MessageDescriptor,
+    value: Value,
+) -> Result<DynamicMessage, String> {
+    let mut track = serde_path_to_error::Track::new();
+    let tracked = serde_path_to_error::Deserializer::new(value, &mut track);
+    DynamicMessage::deserialize(desc, tracked).map_err(|e| {
+        let path = track.path();
+        if path.iter().next().is_none() {
+            format!("{type_name}: {e}")
+        } else {
+            format!("{type_name}: field {path}: {e}")
+        }
+    })
 }
 
 /// The network layer's request of a file request (`Transfers` for any
@@ -563,6 +584,14 @@ mod tests {
             (
                 r#"{"publish": "goby.example.Command", "msg": {"nope": 1}}"#,
                 "goby.example.Command: ",
+            ),
+            (
+                r#"{"publish": "goby.example.Command", "msg": {"destination": "two", "action": "GOTO"}}"#,
+                "goby.example.Command: field destination: invalid digit found in string",
+            ),
+            (
+                r#"{"publish": "goby.example.Command", "msg": {"destination": 2, "action": "GOTO", "waypoint": [{"x": 1, "y": 2}, {"x": "far", "y": 3}]}}"#,
+                "goby.example.Command: field waypoint[1].x: ",
             ),
             (r#"{"subscribe": ["ack", "weather"]}"#, "unknown topic"),
             (

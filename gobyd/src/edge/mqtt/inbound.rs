@@ -57,7 +57,7 @@ pub fn parse_tx(
             "{name}: the payload must be a JSON object (the message in proto3 JSON)"
         ));
     }
-    DynamicMessage::deserialize(desc, value).map_err(|e| format!("{name}: {e}"))
+    crate::edge::json::lines::message_of_json(name, desc, value)
 }
 
 /// Parses the payload of a file topic (`kind` the network layer's request

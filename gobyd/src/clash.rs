@@ -1,0 +1,151 @@
+//! What `gobyd --check` can see would clash with a configuration on this
+//! machine, told with everything else it finds in the same run:
+//!
+//! - another process (another `gobyd`) holds the data directory's lock
+//!   (`DATA_DIR/gobyd.lock`, see the core's data directory): the daemon
+//!   would refuse to start;
+//! - the JSON interface's TCP or UDP address is taken;
+//! - another configuration file in the same directory leaves `data_dir`
+//!   unset too: both daemons, started from there, would take the default
+//!   data directory (and, when both leave `json` unset, the same port).
+//!
+//! Nothing is created or kept: the lock is tried on the existing lock file
+//! and released at once, the addresses are bound and let go.
+
+use std::path::{Path, PathBuf};
+
+use protos::goby::apps::protobuf::GobydConfig;
+
+/// The lock file the daemon holds in its data directory.
+const LOCK_FILE: &str = "gobyd.lock";
+
+/// Configuration files looked at beside the one checked, by how their
+/// names end.
+const CONFIG_ENDINGS: [&str; 5] = [".pb.txt", ".pbtxt", ".textproto", ".cfg", ".conf"];
+
+/// A clash, in one sentence.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Clash {
+    /// A daemon started now would not start (a lock or an address held
+    /// now); otherwise it starts, and another one started the same way
+    /// would not. `--check` tells both as warnings: what holds them now
+    /// may be gone when the daemon starts.
+    pub error: bool,
+    /// What clashes, with what, and what to do.
+    pub text: String,
+}
+
+/// Each clash found for `config` (read from `file`, when it comes from
+/// one).
+pub fn clashes(config: &GobydConfig, file: Option<&Path>) -> Vec<Clash> {
+    let mut found = Vec::new();
+    let mut error = |text: String| found.push(Clash { error: true, text });
+    let data_dir = config.data_dir();
+    if let Some(holder) = lock_holder(Path::new(data_dir)) {
+        error(format!(
+            "data_dir: {data_dir:?} is in use by another gobyd{holder}: one daemon per data directory (give this one its own data_dir)"
+        ));
+    }
+    let json = config.json.clone().unwrap_or_default();
+    if let Some(e) = taken(json.tcp_bind(), |a| {
+        std::net::TcpListener::bind(a).map(drop)
+    }) {
+        error(format!(
+            "json.tcp_bind: {:?} is taken ({e}): another gobyd, or another program, listens there (give json {{ tcp_bind: \"127.0.0.1:PORT\" }} another port)",
+            json.tcp_bind()
+        ));
+    }
+    if let Some(e) = taken(json.udp_bind(), |a| std::net::UdpSocket::bind(a).map(drop)) {
+        error(format!(
+            "json.udp_bind: {:?} is taken ({e}): another program listens there",
+            json.udp_bind()
+        ));
+    }
+    if config.data_dir.is_none() {
+        for other in default_sharers(file) {
+            let text = format!(
+                "data_dir: not set, and not set in {} either: both daemons, started from one directory, take the default {data_dir:?}{} (give each configuration its own data_dir)",
+                other.display(),
+                if config.json.is_none() {
+                    format!(" and the JSON port {:?}", json.tcp_bind())
+                } else {
+                    String::new()
+                }
+            );
+            found.push(Clash { error: false, text });
+        }
+    }
+    found
+}
+
+/// " (pid N)" or "" when another process holds the lock of data directory
+/// `dir`; `None` when nobody does (or there is no lock file yet).
+fn lock_holder(dir: &Path) -> Option<String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(dir.join(LOCK_FILE)).ok()?;
+    match file.try_lock() {
+        Ok(()) => None,
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut text = String::new();
+            let _ = file.read_to_string(&mut text);
+            Some(match text.trim().parse::<u32>() {
+                Ok(pid) => format!(" (pid {pid})"),
+                Err(_) => String::new(),
+            })
+        }
+        Err(std::fs::TryLockError::Error(_)) => None,
+    }
+}
+
+/// Why address `bind` cannot be bound, when it is taken (an empty one is
+/// off; one that does not parse is told by the configuration's check).
+fn taken(bind: &str, try_bind: impl Fn(&str) -> std::io::Result<()>) -> Option<std::io::Error> {
+    if bind.is_empty() {
+        return None;
+    }
+    match try_bind(bind) {
+        Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => Some(e),
+        _ => None,
+    }
+}
+
+/// The other configuration files in `file`'s directory that leave
+/// `data_dir` unset (read leniently: keys they do not have are skipped),
+/// in name order.
+fn default_sharers(file: Option<&Path>) -> Vec<PathBuf> {
+    let Some(file) = file else {
+        return Vec::new();
+    };
+    let dir = match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let this = std::fs::canonicalize(file).ok();
+    let mut sharers: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            CONFIG_ENDINGS.iter().any(|end| name.ends_with(end))
+                && std::fs::canonicalize(p).ok() != this
+        })
+        .filter(|p| {
+            let Ok(text) = std::fs::read_to_string(p) else {
+                return false;
+            };
+            crate::config::read_leniently(&text)
+                // An empty or unrelated file is no daemon's configuration.
+                .filter(|c| {
+                    c.modem_id.is_some()
+                        || c.driver.is_some()
+                        || c.driver_cfg.is_some()
+                        || !c.link.is_empty()
+                })
+                .is_some_and(|c| c.data_dir.is_none())
+        })
+        .collect();
+    sharers.sort();
+    sharers
+}
