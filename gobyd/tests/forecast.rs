@@ -291,6 +291,11 @@ fn check_refuses_a_bad_forecast_section_naming_the_field_or_the_file_and_line() 
             "forecast.water.profile: a sound speed profile needs at least two points",
         ),
         (
+            // The bottom given beside it does not make one point a profile.
+            inline("profile { depth: 0 speed: 1520 }", "water_depth: 111"),
+            "forecast.water.profile: a sound speed profile needs at least two points, this one has 1",
+        ),
+        (
             inline(
                 "profile { depth: -5 speed: 1520 } profile { depth: 100 speed: 1500 }",
                 "",

@@ -71,6 +71,19 @@ impl Settings {
         let mut push = |field: &str, reason: String| {
             problems.push(Problem::new(format!("{FIELD}.{field}"), reason))
         };
+        if let Some((base, _)) = &loaded {
+            // Refused as the channel refuses it, before the bottom (a
+            // water_depth) would stretch one point down to it.
+            if base.profile.len() < 2 {
+                push(
+                    "water.profile",
+                    format!(
+                        "a sound speed profile needs at least two points, this one has {}",
+                        base.profile.len()
+                    ),
+                );
+            }
+        }
         let water_depth = config.water_depth;
         if let Some(d) = water_depth {
             if !(d.is_finite() && d > 0.0) {
