@@ -145,7 +145,10 @@ async function loadOnce() {
   const r = await fetch('/api/state');
   applySnapshot(await r.json());
   S.source = `${S.source} (a still picture: reload to update)`;
-  schedule();
+  // Drawn at once, not at the next animation frame: a headless browser
+  // with a virtual time budget may spend its budget before any frame
+  // comes, and dump a page never drawn.
+  render();
 }
 
 function connect() {
