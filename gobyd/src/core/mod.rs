@@ -190,12 +190,13 @@ impl Core {
     /// outbox (its journal replayed), the receive path (its inbox
     /// replayed), the network layer, and each link on its driver
     /// (`links`, in the order of the configuration's links), reading time
-    /// from `clock`.
+    /// from `clock` and drawing start numbers from `entropy`.
     pub(crate) fn open(
         checked: Checked,
         links: Vec<LinkStart>,
         data_dir: DataDir,
         clock: Arc<dyn Clock>,
+        entropy: &queue::Entropy,
         around: Surroundings,
     ) -> Result<Self, DaemonError> {
         let Checked {
@@ -209,7 +210,14 @@ impl Core {
                 .map(|d| d.codec)
                 .unwrap_or_default()
         });
-        let outbox = open_outbox(&config, &codec, &queue_config, data_dir.path(), &clock)?;
+        let outbox = open_outbox(
+            &config,
+            &codec,
+            &queue_config,
+            data_dir.path(),
+            &clock,
+            entropy,
+        )?;
         let delivery = open_delivery(&config, &queue_config, data_dir.path(), clock.now())?;
         let network = Network::open(
             &config,
@@ -618,8 +626,10 @@ fn open_outbox(
     queue_config: &protos::goby::acomms::protobuf::QueueManagerConfig,
     dir: &Path,
     clock: &Arc<dyn Clock>,
+    entropy: &queue::Entropy,
 ) -> Result<Outbox, DaemonError> {
-    let mut queue = QueueManager::with_clock(codec.clone(), queue_config, clock.clone())?;
+    let mut queue =
+        QueueManager::with_clock(codec.clone(), queue_config, clock.clone())?.number_from(entropy);
     if let Some(links) =
         config::links::queue_links(config, |n| codec.id_of(n).ok()).map_err(ConfigError::Invalid)?
     {
