@@ -151,6 +151,7 @@ async fn scenario(dir: &Path) -> String {
             .driver(driver)
             .clock(clock.clone())
             .seed(7 + id as u64)
+            .sync_in_line()
             .start()
             .await
             .expect("gobyd starts");
