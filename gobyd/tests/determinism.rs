@@ -126,7 +126,8 @@ fn navigation_report(source: i32, time: f64, x: f64) -> protos::goby::example::N
     }
 }
 
-/// Runs the scenario: three seeded nodes, 30 virtual minutes of traffic
+/// Runs the scenario: three seeded nodes syncing their journals in line
+/// ([`gobyd::daemon::Builder::sync_in_line`]), 30 virtual minutes of traffic
 /// (each node a report every 10 s and a command for the next node every
 /// minute), then 10 more minutes. Returns the transcript: every event of
 /// every node in the order they came, each with its virtual time in
