@@ -110,6 +110,9 @@ pub(crate) struct Surroundings {
     /// Something always takes received messages (a bridge, the UDP JSON
     /// interface): they are handed over at once, not held for a client.
     pub always_taken: bool,
+    /// The journal is synced on the core's task, not on a blocking thread
+    /// (a simulation in virtual time).
+    pub sync_in_line: bool,
 }
 
 /// The daemon's core, ready to [`run`](Core::run).
@@ -155,6 +158,8 @@ pub struct Core {
     commit: Arc<std::sync::Mutex<GroupCommit<WaitingReply>>>,
     /// The journal syncs under way, off the core's thread.
     syncs: JoinSet<()>,
+    /// Syncs run on the core's task ([`Surroundings::sync_in_line`]).
+    sync_in_line: bool,
     data_dir: DataDir,
     codec: Arc<dccl::Codec>,
     /// The receive path: messages received from the link, recorded
@@ -190,12 +195,13 @@ impl Core {
     /// outbox (its journal replayed), the receive path (its inbox
     /// replayed), the network layer, and each link on its driver
     /// (`links`, in the order of the configuration's links), reading time
-    /// from `clock`.
+    /// from `clock` and drawing start numbers from `entropy`.
     pub(crate) fn open(
         checked: Checked,
         links: Vec<LinkStart>,
         data_dir: DataDir,
         clock: Arc<dyn Clock>,
+        entropy: &queue::Entropy,
         around: Surroundings,
     ) -> Result<Self, DaemonError> {
         let Checked {
@@ -204,12 +210,23 @@ impl Core {
             loaded,
             queue: queue_config,
         } = checked;
+        let codec = Arc::new(on_clock((*codec).clone(), &clock));
         let door = Door::new(codec.clone(), &queue_config, || {
-            config::load_definitions(&config)
-                .map(|d| d.codec)
-                .unwrap_or_default()
+            on_clock(
+                config::load_definitions(&config)
+                    .map(|d| d.codec)
+                    .unwrap_or_default(),
+                &clock,
+            )
         });
-        let outbox = open_outbox(&config, &codec, &queue_config, data_dir.path(), &clock)?;
+        let outbox = open_outbox(
+            &config,
+            &codec,
+            &queue_config,
+            data_dir.path(),
+            &clock,
+            entropy,
+        )?;
         let delivery = open_delivery(&config, &queue_config, data_dir.path(), clock.now())?;
         let network = Network::open(
             &config,
@@ -259,6 +276,7 @@ impl Core {
             mission_log: around.mission_log,
             commit: Arc::new(std::sync::Mutex::new(GroupCommit::new(MAX_SYNCS))),
             syncs: JoinSet::new(),
+            sync_in_line: around.sync_in_line,
             data_dir,
             codec,
             delivery,
@@ -350,18 +368,27 @@ impl Core {
                 .unwrap_or(Duration::from_secs(3600));
             let restart_at = link::next_restart(&self.links);
             let first = self.first_link;
+            // Biased: when several branches are ready at once (at one
+            // instant of a simulation's virtual clock, or under load), they
+            // are taken in this order, not at random, so that the same
+            // inputs give the same events. Stopping first; then the timers,
+            // each ready once per due time, so none of them waits behind a
+            // busy channel; then what was started off the loop (syncs,
+            // driver restarts); then the driver's events, which carry
+            // deadlines (a data request is answered within its time);
+            // then control requests; publications last, so that a client
+            // publishing without pause cannot hold the modem's events
+            // back (each turn takes up to PUBLISH_BATCH of them).
             tokio::select! {
+                biased;
                 () = &mut shutdown => break,
-                Some(publish) = self.publish_rx.recv() => {
-                    self.publish(publish);
-                    // What else waits, in one turn: one sync, one round of
-                    // events for all of them.
-                    for _ in 1..PUBLISH_BATCH {
-                        match self.publish_rx.try_recv() {
-                            Ok(publish) => self.publish(publish),
-                            Err(_) => break,
-                        }
-                    }
+                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
+                () = sleep_until_opt(restart_at) => self.restart_due(),
+                () = sleep_until_opt(self.delivery.next_due()) => {}
+                _ = expire.tick() => {
+                    self.outbox.expire();
+                    self.roll_budgets();
+                    self.network_tick();
                 }
                 // A sync returned (its replies are sent): another may start.
                 Some(done) = self.syncs.join_next(), if !self.syncs.is_empty() => {
@@ -371,7 +398,12 @@ impl Core {
                         tracing::error!("journal sync: {e}");
                     }
                 }
-                Some(control) = self.control_rx.recv() => self.control_request(control).await,
+                Some(started) = self.starts.join_next(), if !self.starts.is_empty() => {
+                    match started {
+                        Ok((i, started)) => self.restarted(i, started),
+                        Err(e) => tracing::error!("link restart: {e}"),
+                    }
+                }
                 (i, event) = std::future::poll_fn(|cx| link::poll_events(&mut self.links, first, cx)) => {
                     self.first_link = (i + 1) % self.links.len();
                     match event {
@@ -385,19 +417,17 @@ impl Core {
                         }
                     }
                 }
-                () = sleep_until_opt(restart_at) => self.restart_due(),
-                Some(started) = self.starts.join_next(), if !self.starts.is_empty() => {
-                    match started {
-                        Ok((i, started)) => self.restarted(i, started),
-                        Err(e) => tracing::error!("link restart: {e}"),
+                Some(control) = self.control_rx.recv() => self.control_request(control).await,
+                Some(publish) = self.publish_rx.recv() => {
+                    self.publish(publish);
+                    // What else waits, in one turn: one sync, one round of
+                    // events for all of them.
+                    for _ in 1..PUBLISH_BATCH {
+                        match self.publish_rx.try_recv() {
+                            Ok(publish) => self.publish(publish),
+                            Err(_) => break,
+                        }
                     }
-                }
-                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
-                () = sleep_until_opt(self.delivery.next_due()) => {}
-                _ = expire.tick() => {
-                    self.outbox.expire();
-                    self.roll_budgets();
-                    self.network_tick();
                 }
             }
             self.release_held();
@@ -521,12 +551,18 @@ impl Core {
     /// accepted so far, the messages accepted while it runs wait for a
     /// later one, and it sends the replies it covers as it returns. A
     /// client hears "accepted" only once its message is on disk, while the
-    /// message itself may already be on its way to the modem.
+    /// message itself may already be on its way to the modem. With
+    /// [`Surroundings::sync_in_line`] the sync runs here, before the core
+    /// goes on.
     fn commit_replies(&mut self) {
         let Some(mark) = lock(&self.commit).start() else {
             return;
         };
         match self.outbox.sync_handle() {
+            Ok(handle) if self.sync_in_line => {
+                CrashPoint::Unsynced.reached();
+                send_synced(&self.commit, mark, handle.sync_data());
+            }
             Ok(handle) => {
                 let commit = self.commit.clone();
                 self.syncs.spawn_blocking(move || {
@@ -610,6 +646,15 @@ impl Core {
     }
 }
 
+/// `codec` reading the date its time codec restores (and the door checks
+/// times against) from the core's `clock`, not the system's: the same
+/// time on a vehicle, virtual time in a simulation.
+fn on_clock(mut codec: dccl::Codec, clock: &Arc<dyn Clock>) -> dccl::Codec {
+    let clock = clock.clone();
+    codec.set_clock(move || clock.now().div_euclid(1_000_000));
+    codec
+}
+
 /// Opens the outbox: the queue of the checked settings, its journal in
 /// `dir` replayed (what it tells, logged).
 fn open_outbox(
@@ -618,8 +663,10 @@ fn open_outbox(
     queue_config: &protos::goby::acomms::protobuf::QueueManagerConfig,
     dir: &Path,
     clock: &Arc<dyn Clock>,
+    entropy: &queue::Entropy,
 ) -> Result<Outbox, DaemonError> {
-    let mut queue = QueueManager::with_clock(codec.clone(), queue_config, clock.clone())?;
+    let mut queue =
+        QueueManager::with_clock(codec.clone(), queue_config, clock.clone())?.number_from(entropy);
     if let Some(links) =
         config::links::queue_links(config, |n| codec.id_of(n).ok()).map_err(ConfigError::Invalid)?
     {

@@ -366,6 +366,7 @@ impl Network {
             transfer_settings,
             &data_dir.join("transfers.log"),
             now,
+            &outbox.queue().entropy(),
         )?;
         let mut network = Network {
             me: config.modem_id(),
@@ -378,7 +379,10 @@ impl Network {
             recent: HashMap::new(),
             relaying: 0,
             transfers,
-            next_request: (queue::identity::random_start() % 65_536) as u16,
+            next_request: (queue::identity::start_number(
+                &outbox.queue().entropy(),
+                "network.request",
+            ) % 65_536) as u16,
             now_hint: now,
         };
         network.take_up(outbox, now);
@@ -1164,7 +1168,9 @@ impl Network {
         if receipt.owed_acks.is_empty() {
             return;
         }
-        let mut by_origin: HashMap<i32, Vec<u32>> = HashMap::new();
+        // By origin in order: the acks are journaled and queued in the
+        // same order every run.
+        let mut by_origin: std::collections::BTreeMap<i32, Vec<u32>> = Default::default();
         for (origin, number) in &receipt.owed_acks {
             by_origin.entry(*origin).or_default().push(*number);
         }

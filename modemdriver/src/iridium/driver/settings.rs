@@ -3,6 +3,8 @@
 
 use std::time::Duration;
 
+use goby_time::Entropy;
+
 use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, DriverConfig, IridiumDeviceType, IridiumDriverConfig,
 };
@@ -150,8 +152,17 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
-/// The machine's settings from the driver configuration, checked.
+/// The machine's settings from the driver configuration, checked; frame
+/// numbers start at random.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
+    settings_from(config, &Entropy::System)
+}
+
+/// The machine's settings as [`settings`], with the first frame number
+/// drawn from `entropy` (a simulation gives a seeded one,
+/// [`Entropy::started_at`] the time the driver starts, so that its runs
+/// are the same).
+pub fn settings_from(config: &DriverConfig, entropy: &Entropy) -> Result<Settings, DriverError> {
     problem::refuse(problems(config))?;
     let iridium = iridium_config(config);
     let reconnect = iridium.reconnect_interval_ms.map_or(
@@ -164,16 +175,33 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
         iridium,
         reconnect,
         deferred_ack: config.deferred_ack(),
-        first_frame: first_frame_number(),
+        first_frame: first_frame_number(entropy),
     })
 }
 
-/// A frame number drawn at random, so that a driver started again does not
-/// number its frames as before (an ack still on its way for a frame of the
-/// last run would otherwise credit a new frame of that number).
-pub fn first_frame_number() -> u32 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(crate::time::now_micros());
-    (hasher.finish() % u64::from(frame::FRAME_NUMBERS)) as u32
+/// A frame number drawn from `entropy` (at random on a vehicle), so that
+/// a driver started again does not number its frames as before (an ack
+/// still on its way for a frame of the last run would otherwise credit a
+/// new frame of that number).
+pub fn first_frame_number(entropy: &Entropy) -> u32 {
+    (entropy.draw("iridium.frame") % u64::from(frame::FRAME_NUMBERS)) as u32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_seeded_driver_numbers_its_frames_from_the_seed_and_its_start() {
+        let config = DriverConfig {
+            modem_id: Some(1),
+            serial_port: Some("/dev/ttyUSB0".into()),
+            ..Default::default()
+        };
+        let first = |entropy: Entropy| settings_from(&config, &entropy).unwrap().first_frame;
+        let a = Entropy::Seeded(3).started_at(1_000_000);
+        assert_eq!(first(a), first(a));
+        assert_ne!(first(a), first(Entropy::Seeded(3).started_at(61_000_000)));
+        assert!(first(a) < frame::FRAME_NUMBERS);
+    }
 }
