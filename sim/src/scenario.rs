@@ -87,6 +87,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         origin,
         base,
         found: Vec::new(),
+        start_s: 0,
     };
     let scenario = check.scenario(parsed);
     match check.found.is_empty() {
@@ -125,6 +126,8 @@ struct Check<'a> {
     origin: &'a str,
     base: &'a Path,
     found: Vec<String>,
+    /// The virtual start, seconds since the UNIX epoch.
+    start_s: i64,
 }
 
 impl Check<'_> {
@@ -149,8 +152,9 @@ impl Check<'_> {
             self.problem("drain_s", format!("{drain} is not 0 or more seconds"));
         }
         let start = start_micros(s.start_time());
-        if let Err(e) = &start {
-            self.problem("start_time", e.clone());
+        match &start {
+            Ok(micros) => self.start_s = micros.div_euclid(1_000_000),
+            Err(e) => self.problem("start_time", e.clone()),
         }
         let water = s.water.clone().unwrap_or_default();
         self.water(&water);
@@ -463,9 +467,18 @@ impl Check<'_> {
         };
         // One publication made and encoded now: a required field left out,
         // a value out of its field's range, is refused before the run.
+        // A time the receiver would restore on another date (the daemon
+        // refuses it at publication), checked at the start.
         let sample = stream.generator(0, i).message();
-        if let Err(e) = checked.codec.encode(&sample) {
-            self.problem(at, format!("its messages cannot be encoded: {e}"));
+        let moved = checked.codec.moved_dates_at(&sample, self.start_s);
+        let problem = match (checked.codec.encode(&sample), moved) {
+            (Err(e), _) | (Ok(_), Err(e)) => Some(e.to_string()),
+            (Ok(_), Ok(moved)) => moved
+                .first()
+                .map(|c| format!("field {}: {}", c.field, c.reason)),
+        };
+        if let Some(problem) = problem {
+            self.problem(at, format!("its first message is refused: {problem}"));
             return None;
         }
         Some(stream)

@@ -121,3 +121,27 @@ fn a_field_value_its_type_cannot_take_is_refused() {
         "{error}"
     );
 }
+
+#[test]
+fn a_time_far_from_the_start_is_refused_before_the_run() {
+    // The example fleet's buoy, its reports' time a day before the start.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/fleet.pb.txt");
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "start: 1780272000  step: 600",
+        "start: 1780185600  step: 600",
+        1,
+    );
+    let base = path.parent().unwrap();
+    let error = match parse(&text, "fleet.pb.txt", base) {
+        Ok(_) => panic!("accepted"),
+        Err(e) => e.to_string(),
+    };
+    let (line, column) = place_of(
+        &text,
+        "traffic {\n    type: \"goby.example.NavigationReport\"  dest: \"ship\"  poisson",
+    );
+    assert!(
+        error.starts_with(&format!("fleet.pb.txt:{line}:{column}: node[1].traffic[0]: its first message is refused: field time:")),
+        "{error}"
+    );
+}

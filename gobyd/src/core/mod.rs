@@ -204,10 +204,13 @@ impl Core {
             loaded,
             queue: queue_config,
         } = checked;
+        let codec = on_clock(codec, &clock);
         let door = Door::new(codec.clone(), &queue_config, || {
-            config::load_definitions(&config)
+            let mut fresh = config::load_definitions(&config)
                 .map(|d| d.codec)
-                .unwrap_or_default()
+                .unwrap_or_default();
+            set_codec_clock(&mut fresh, &clock);
+            fresh
         });
         let outbox = open_outbox(&config, &codec, &queue_config, data_dir.path(), &clock)?;
         let delivery = open_delivery(&config, &queue_config, data_dir.path(), clock.now())?;
@@ -608,6 +611,21 @@ impl Core {
     fn report(&self, event: ModemEvent) {
         let _ = self.events.send(Arc::new(DaemonEvent::Modem(event)));
     }
+}
+
+/// `codec` reading the dates of time fields against the daemon's `clock`
+/// (not the system's): the time a published message may carry, and the
+/// date a received one is restored to, follow the clock the node runs on
+/// (a virtual clock included).
+fn on_clock(mut codec: Arc<dccl::Codec>, clock: &Arc<dyn Clock>) -> Arc<dccl::Codec> {
+    set_codec_clock(Arc::make_mut(&mut codec), clock);
+    codec
+}
+
+/// Sets `codec`'s clock (seconds) to `clock`.
+fn set_codec_clock(codec: &mut dccl::Codec, clock: &Arc<dyn Clock>) {
+    let clock = clock.clone();
+    codec.set_clock(move || clock.now().div_euclid(1_000_000));
 }
 
 /// Opens the outbox: the queue of the checked settings, its journal in
