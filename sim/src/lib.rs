@@ -82,3 +82,8 @@ pub fn write(
     }
     Ok(written)
 }
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

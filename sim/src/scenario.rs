@@ -101,23 +101,11 @@ fn parse_error(e: &prost_reflect::text_format::ParseError, text: &str, origin: &
     use miette::Diagnostic;
     match e.labels().and_then(|mut l| l.next()).map(|l| l.offset()) {
         Some(offset) => {
-            let (line, column) = line_and_column(text, offset);
+            let (line, column) = gobyd::config::line_and_column(text, offset);
             format!("{origin}:{line}:{column}: {e}")
         }
         None => format!("{origin}: {e}"),
     }
-}
-
-/// 1-based line and column (in characters) of byte `offset` of `text`.
-fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
-    let mut offset = offset.min(text.len());
-    while !text.is_char_boundary(offset) {
-        offset -= 1;
-    }
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let column = before.rsplit('\n').next().unwrap_or("").chars().count() + 1;
-    (line, column)
 }
 
 /// The checks, collecting every problem with its place.
