@@ -608,35 +608,13 @@ async fn run<M: EmulatedModem>(
         *counters.lock().unwrap_or_else(|e| e.into_inner()) = modem.counters();
         connections.store(modem.shared().connections, Ordering::Relaxed);
         let wake = modem.next_deadline();
+        // Biased: what is ready at the same instant (of a simulation's virtual
+        // clock) is taken in this order, not at random, so that the same inputs
+        // give the same outputs: the test's controls first (a stop is prompt), the
+        // modem's timers (ready once per deadline, so a chatty host cannot hold
+        // them back), then the water, then the host's bytes.
         tokio::select! {
-            accepted = accept_opt(&listener) => {
-                if let Ok(stream) = accepted {
-                    let _ = stream.set_nodelay(true);
-                    host = Some(Box::new(stream));
-                    modem.connected();
-                    modem.shared().connections += 1;
-                }
-            }
-            read = read_opt(&mut host, &mut buf) => match read {
-                Ok(0) | Err(_) => {
-                    if listener.is_some() {
-                        host = None;
-                    } else {
-                        // A pty whose other end closed: it works again
-                        // once reopened.
-                        tokio::time::sleep(Duration::from_millis(20)).await;
-                    }
-                }
-                Ok(n) => modem.host(&buf[..n], Instant::now()),
-            },
-            Some(event) = next_backend_event(&mut backend) => match event {
-                DriverEvent::Received(mt) => modem.water(&mt, Instant::now()),
-                DriverEvent::DataRequest(request) => {
-                    let filled = request.template().clone();
-                    request.respond(filled);
-                }
-                _ => {}
-            },
+            biased;
             c = control.recv() => match c {
                 Some(EmulatorControl::DropConnection) => {
                     if listener.is_some() && host.take().is_some() {
@@ -656,6 +634,34 @@ async fn run<M: EmulatedModem>(
                 Some(other) => modem.shared().control(other),
             },
             () = sleep_until_opt(wake) => modem.timers(Instant::now()),
+            Some(event) = next_backend_event(&mut backend) => match event {
+                DriverEvent::Received(mt) => modem.water(&mt, Instant::now()),
+                DriverEvent::DataRequest(request) => {
+                    let filled = request.template().clone();
+                    request.respond(filled);
+                }
+                _ => {}
+            },
+            read = read_opt(&mut host, &mut buf) => match read {
+                Ok(0) | Err(_) => {
+                    if listener.is_some() {
+                        host = None;
+                    } else {
+                        // A pty whose other end closed: it works again
+                        // once reopened.
+                        tokio::time::sleep(Duration::from_millis(20)).await;
+                    }
+                }
+                Ok(n) => modem.host(&buf[..n], Instant::now()),
+            },
+            accepted = accept_opt(&listener) => {
+                if let Ok(stream) = accepted {
+                    let _ = stream.set_nodelay(true);
+                    host = Some(Box::new(stream));
+                    modem.connected();
+                    modem.shared().connections += 1;
+                }
+            }
         }
     }
 }

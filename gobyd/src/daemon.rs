@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use modemdriver::Driver;
 use protos::goby::apps::protobuf::GobydConfig;
-use queue::{Clock, SystemClock};
+use queue::{Clock, Entropy, SystemClock};
 use tokio::net::{TcpListener, UdpSocket};
 use tokio::sync::{broadcast, mpsc};
 use tokio::task::JoinSet;
@@ -59,6 +59,7 @@ pub struct Builder {
     config: GobydConfig,
     drivers: Vec<Driver>,
     clock: Arc<dyn Clock>,
+    seed: Option<u64>,
 }
 
 impl std::fmt::Debug for Builder {
@@ -95,6 +96,21 @@ impl Builder {
         self
     }
 
+    /// Draws the numbers the node starts from (publication numbers of an
+    /// empty journal, transfer and request numbers) from `seed` and the
+    /// clock's time at [`start`](Self::start) (see
+    /// [`Entropy::started_at`](queue::Entropy::started_at)) in place of
+    /// the operating system's random source: a simulation gives each
+    /// node a seed so that the same scenario runs the same way in every
+    /// process. Started again later on the same data directory, the node
+    /// still draws other numbers than in its last run, so a peer does not
+    /// take a new message for one it remembers. Drivers the caller starts
+    /// draw their own (the Micro-Modem's and Iridium's `settings_from`).
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = Some(seed);
+        self
+    }
+
     /// Checks the configuration ([`validate`]: a configuration
     /// `gobyd --check` refuses is refused here with the same error; with
     /// drivers given, their sections are not checked), takes the data
@@ -107,7 +123,12 @@ impl Builder {
             config,
             drivers,
             clock,
+            seed,
         } = self;
+        let entropy = seed.map_or(Entropy::System, |s| {
+            Entropy::Seeded(s).started_at(clock.now())
+        });
+        let clock = Started { clock, entropy };
         if drivers.is_empty() {
             return start_configured(config, clock).await;
         }
@@ -127,14 +148,17 @@ impl Builder {
     }
 }
 
+/// What a daemon reads time from, and draws its start numbers from.
+struct Started {
+    clock: Arc<dyn Clock>,
+    entropy: Entropy,
+}
+
 /// Starts the daemon on the drivers its configuration names (checked with
 /// them): one link that cannot start does not stop a daemon with `link`
 /// sections (it is started again after its back-off), but stops one with
 /// a top-level driver.
-async fn start_configured(
-    config: GobydConfig,
-    clock: Arc<dyn Clock>,
-) -> Result<Daemon, DaemonError> {
+async fn start_configured(config: GobydConfig, clock: Started) -> Result<Daemon, DaemonError> {
     let checked = validate(config, config::DriverSettings::Configured)?;
     let (limits, warnings) = frame_report(&checked);
     if let Some(limits) = limits {
@@ -173,6 +197,7 @@ impl Daemon {
             config,
             drivers: Vec::new(),
             clock: Arc::new(SystemClock),
+            seed: None,
         }
     }
 
@@ -184,8 +209,9 @@ impl Daemon {
         checked: Checked,
         drivers: Vec<LinkStart>,
         data_dir: DataDir,
-        clock: Arc<dyn Clock>,
+        started: Started,
     ) -> Result<Self, DaemonError> {
+        let Started { clock, entropy } = started;
         let config = checked.config.clone();
         let json = config.json.clone().unwrap_or_default();
         let mission_log: Option<Box<dyn MissionLog>> =
@@ -203,7 +229,7 @@ impl Daemon {
                 || config.mqtt.is_some()
                 || !json.udp_bind().is_empty(),
         };
-        let core = Core::open(checked, drivers, data_dir, clock.clone(), around)?;
+        let core = Core::open(checked, drivers, data_dir, clock.clone(), &entropy, around)?;
         let mut handle = core.handle();
         let mut interfaces = JoinSet::new();
         if let Some(forecast) = &config.forecast {

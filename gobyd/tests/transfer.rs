@@ -333,6 +333,7 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
             settings_for_inspection(&dir, node),
             &data_dir(&dir, node).join("transfers.log"),
             0,
+            &queue::Entropy::System,
         )
         .unwrap()
         .status();

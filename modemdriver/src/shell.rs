@@ -236,7 +236,14 @@ async fn run<M: Machine>(
     loop {
         shell.step(input).await;
         let wake = shell.machine.next_deadline();
+        // Biased: inputs ready at the same instant (of a simulation's virtual
+        // clock, or under load) are taken in this order, not at random, so that
+        // the same inputs give the same outputs. Commands and answers first (they
+        // come at the daemon's pace); the machine's deadline before the device's
+        // bytes, so that a device sending without pause cannot hold a timeout
+        // back (the deadline is ready once, the reads may be ready every turn).
         input = tokio::select! {
+            biased;
             command = ctx.commands.recv() => match command {
                 Some(DriverCommand::Stop(done)) => {
                     shell.step(Input::Stop).await;
@@ -246,6 +253,10 @@ async fn run<M: Machine>(
                 Some(command) => Input::Command(command),
                 None => return,
             },
+            (id, filled) = next_answer(&mut shell.answers), if !shell.answers.is_empty() => {
+                Input::Answer { id, filled }
+            }
+            () = sleep_until_opt(wake) => Input::Tick,
             read = recv_opt(&mut shell.link) => match read {
                 Ok(unit) => Input::Read(unit),
                 Err(e) => {
@@ -258,10 +269,6 @@ async fn run<M: Machine>(
                     })
                 }
             },
-            (id, filled) = next_answer(&mut shell.answers), if !shell.answers.is_empty() => {
-                Input::Answer { id, filled }
-            }
-            () = sleep_until_opt(wake) => Input::Tick,
         };
     }
 }

@@ -25,6 +25,7 @@
 //! This module encodes and decodes the trailer; it does no input or output.
 
 use dccl::Codec;
+use goby_time::Entropy;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::FrameIdentity;
 
@@ -147,14 +148,20 @@ impl TrailerCodec {
 /// A publication number to start from when nothing says which comes next
 /// (a new queue, an empty journal): drawn at random, so that a sender
 /// restarted with nothing on record does not reuse the numbers it gave
-/// its last messages.
+/// its last messages. The same as [`start_number`] from the system's
+/// entropy.
 pub fn random_start() -> u64 {
-    use std::hash::{BuildHasher, Hasher};
-    // The standard library seeds each `RandomState` from the system's
-    // random source.
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(0);
-    hasher.finish() >> 32
+    start_number(&Entropy::System, PUBLICATIONS)
+}
+
+/// What [`random_start`] draws for, from `entropy`.
+pub const PUBLICATIONS: &str = "queue.publication";
+
+/// A number (32 bits) to start a numbering from, drawn from `entropy` for
+/// `purpose` (see [`Entropy::draw`]): at random on a vehicle, a function
+/// of the seed, the start time and `purpose` in a simulation.
+pub fn start_number(entropy: &Entropy, purpose: &str) -> u64 {
+    entropy.draw(purpose) >> 32
 }
 
 #[cfg(test)]

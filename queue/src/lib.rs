@@ -69,6 +69,7 @@ mod role;
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
 pub use error::{QueueError, Result};
 pub use event::{MessageId, QueueEvent, ReceivedMessage};
+pub use goby_time::Entropy;
 pub use identity::{TrailerCodec, WireIdentity};
 pub use journal::{Encoding, EntryId, Journal, JournalEntry, JournalError, Replay};
 pub use links::{LinkIndex, LinkPolicy, LinkRule, LinkSpec, LinkState, Links};

@@ -134,6 +134,8 @@ pub struct QueueManager {
     next_seq: u64,
     /// Publication number of the next message pushed without one.
     next_number: u64,
+    /// Where start numbers are drawn from.
+    entropy: crate::Entropy,
     /// Frames sent end with a [`identity::FrameIdentity`] trailer.
     ///
     /// [`identity::FrameIdentity`]: protos::goby::acomms::protobuf::FrameIdentity
@@ -200,6 +202,7 @@ impl QueueManager {
             awaiting: Vec::new(),
             next_seq: 0,
             next_number: identity::random_start(),
+            entropy: crate::Entropy::System,
             send_identity: config.message_identity(),
             trailer: TrailerCodec::new(),
             subscribers: Vec::new(),
@@ -210,6 +213,25 @@ impl QueueManager {
             manager.configure_queue(entry)?;
         }
         Ok(manager)
+    }
+
+    /// Numbers the publications pushed without a number from a start drawn
+    /// from `entropy` ([`identity::start_number`] for
+    /// [`identity::PUBLICATIONS`]) in place of the system's random one
+    /// drawn at construction: a simulation gives a seeded
+    /// [`Entropy`](crate::Entropy) so that its runs are the same. Call it
+    /// before the first push.
+    pub fn number_from(mut self, entropy: &crate::Entropy) -> Self {
+        self.next_number = identity::start_number(entropy, identity::PUBLICATIONS);
+        self.entropy = *entropy;
+        self
+    }
+
+    /// Where this manager draws its start numbers from (the system's
+    /// unless [`number_from`](Self::number_from) said otherwise): for the
+    /// numberings kept beside it (the journal's).
+    pub fn entropy(&self) -> crate::Entropy {
+        self.entropy
     }
 
     /// Whether received frames are read for a [`FrameIdentity`] trailer:

@@ -7,9 +7,17 @@
 //! while `gobyd` uses the [`SystemClock`]; the modem drivers use
 //! [`now_micros`] and the UTC calendar helpers ([`civil`], [`hhmmss`]).
 //!
+//! The numbers components start from (publication and frame numbers) are
+//! drawn from an [`Entropy`]: the operating system's, or a seed's in a
+//! simulation.
+//!
 //! This crate depends on nothing, so every other crate can use it.
 
 #![warn(missing_docs)]
+
+mod entropy;
+
+pub use entropy::Entropy;
 
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::sync::Arc;

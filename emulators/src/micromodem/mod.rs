@@ -480,29 +480,13 @@ async fn run(
         .into_iter()
         .flatten()
         .min();
+        // Biased: what is ready at the same instant (of a simulation's virtual
+        // clock) is taken in this order, not at random, so that the same inputs
+        // give the same outputs: the test's controls first (a stop is prompt), the
+        // modem's timers (ready once per deadline, so a chatty host cannot hold
+        // them back), then the water, then the host's lines.
         tokio::select! {
-            received = async {
-                match &mut device {
-                    Some(d) => d.link.recv().await,
-                    None => std::future::pending().await,
-                }
-            } => match received {
-                Ok((line, ())) => {
-                    if silent_until.is_none() {
-                        modem.line(&line, backend.is_some());
-                    }
-                }
-                Err(_) => {
-                    // The host side closed; a pty keeps working once it reopens.
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                }
-            },
-            Some(event) = next_backend_event(&mut backend) => {
-                let away = device.is_none() || silent_until.is_some_and(|t| t > Instant::now());
-                if !(away && matches!(event, DriverEvent::Received(_))) {
-                    modem.backend_event(event);
-                }
-            }
+            biased;
             c = control.recv() => match c {
                 Some(EmulatorControl::Reset) => modem.reset(),
                 Some(EmulatorControl::Silence(d)) => silent_until = Some(Instant::now() + d),
@@ -548,6 +532,28 @@ async fn run(
                     }
                 }
             }
+            Some(event) = next_backend_event(&mut backend) => {
+                let away = device.is_none() || silent_until.is_some_and(|t| t > Instant::now());
+                if !(away && matches!(event, DriverEvent::Received(_))) {
+                    modem.backend_event(event);
+                }
+            }
+            received = async {
+                match &mut device {
+                    Some(d) => d.link.recv().await,
+                    None => std::future::pending().await,
+                }
+            } => match received {
+                Ok((line, ())) => {
+                    if silent_until.is_none() {
+                        modem.line(&line, backend.is_some());
+                    }
+                }
+                Err(_) => {
+                    // The host side closed; a pty keeps working once it reopens.
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+            },
         }
     }
 }

@@ -190,12 +190,13 @@ impl Core {
     /// outbox (its journal replayed), the receive path (its inbox
     /// replayed), the network layer, and each link on its driver
     /// (`links`, in the order of the configuration's links), reading time
-    /// from `clock`.
+    /// from `clock` and drawing start numbers from `entropy`.
     pub(crate) fn open(
         checked: Checked,
         links: Vec<LinkStart>,
         data_dir: DataDir,
         clock: Arc<dyn Clock>,
+        entropy: &queue::Entropy,
         around: Surroundings,
     ) -> Result<Self, DaemonError> {
         let Checked {
@@ -204,15 +205,23 @@ impl Core {
             loaded,
             queue: queue_config,
         } = checked;
-        let codec = on_clock(codec, &clock);
+        let codec = Arc::new(on_clock((*codec).clone(), &clock));
         let door = Door::new(codec.clone(), &queue_config, || {
-            let mut fresh = config::load_definitions(&config)
-                .map(|d| d.codec)
-                .unwrap_or_default();
-            set_codec_clock(&mut fresh, &clock);
-            fresh
+            on_clock(
+                config::load_definitions(&config)
+                    .map(|d| d.codec)
+                    .unwrap_or_default(),
+                &clock,
+            )
         });
-        let outbox = open_outbox(&config, &codec, &queue_config, data_dir.path(), &clock)?;
+        let outbox = open_outbox(
+            &config,
+            &codec,
+            &queue_config,
+            data_dir.path(),
+            &clock,
+            entropy,
+        )?;
         let delivery = open_delivery(&config, &queue_config, data_dir.path(), clock.now())?;
         let network = Network::open(
             &config,
@@ -353,18 +362,27 @@ impl Core {
                 .unwrap_or(Duration::from_secs(3600));
             let restart_at = link::next_restart(&self.links);
             let first = self.first_link;
+            // Biased: when several branches are ready at once (at one
+            // instant of a simulation's virtual clock, or under load), they
+            // are taken in this order, not at random, so that the same
+            // inputs give the same events. Stopping first; then the timers,
+            // each ready once per due time, so none of them waits behind a
+            // busy channel; then what was started off the loop (syncs,
+            // driver restarts); then the driver's events, which carry
+            // deadlines (a data request is answered within its time);
+            // then control requests; publications last, so that a client
+            // publishing without pause cannot hold the modem's events
+            // back (each turn takes up to PUBLISH_BATCH of them).
             tokio::select! {
+                biased;
                 () = &mut shutdown => break,
-                Some(publish) = self.publish_rx.recv() => {
-                    self.publish(publish);
-                    // What else waits, in one turn: one sync, one round of
-                    // events for all of them.
-                    for _ in 1..PUBLISH_BATCH {
-                        match self.publish_rx.try_recv() {
-                            Ok(publish) => self.publish(publish),
-                            Err(_) => break,
-                        }
-                    }
+                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
+                () = sleep_until_opt(restart_at) => self.restart_due(),
+                () = sleep_until_opt(self.delivery.next_due()) => {}
+                _ = expire.tick() => {
+                    self.outbox.expire();
+                    self.roll_budgets();
+                    self.network_tick();
                 }
                 // A sync returned (its replies are sent): another may start.
                 Some(done) = self.syncs.join_next(), if !self.syncs.is_empty() => {
@@ -374,7 +392,12 @@ impl Core {
                         tracing::error!("journal sync: {e}");
                     }
                 }
-                Some(control) = self.control_rx.recv() => self.control_request(control).await,
+                Some(started) = self.starts.join_next(), if !self.starts.is_empty() => {
+                    match started {
+                        Ok((i, started)) => self.restarted(i, started),
+                        Err(e) => tracing::error!("link restart: {e}"),
+                    }
+                }
                 (i, event) = std::future::poll_fn(|cx| link::poll_events(&mut self.links, first, cx)) => {
                     self.first_link = (i + 1) % self.links.len();
                     match event {
@@ -388,19 +411,17 @@ impl Core {
                         }
                     }
                 }
-                () = sleep_until_opt(restart_at) => self.restart_due(),
-                Some(started) = self.starts.join_next(), if !self.starts.is_empty() => {
-                    match started {
-                        Ok((i, started)) => self.restarted(i, started),
-                        Err(e) => tracing::error!("link restart: {e}"),
+                Some(control) = self.control_rx.recv() => self.control_request(control).await,
+                Some(publish) = self.publish_rx.recv() => {
+                    self.publish(publish);
+                    // What else waits, in one turn: one sync, one round of
+                    // events for all of them.
+                    for _ in 1..PUBLISH_BATCH {
+                        match self.publish_rx.try_recv() {
+                            Ok(publish) => self.publish(publish),
+                            Err(_) => break,
+                        }
                     }
-                }
-                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
-                () = sleep_until_opt(self.delivery.next_due()) => {}
-                _ = expire.tick() => {
-                    self.outbox.expire();
-                    self.roll_budgets();
-                    self.network_tick();
                 }
             }
             self.release_held();
@@ -613,19 +634,13 @@ impl Core {
     }
 }
 
-/// `codec` reading the dates of time fields against the daemon's `clock`
-/// (not the system's): the time a published message may carry, and the
-/// date a received one is restored to, follow the clock the node runs on
-/// (a virtual clock included).
-fn on_clock(mut codec: Arc<dccl::Codec>, clock: &Arc<dyn Clock>) -> Arc<dccl::Codec> {
-    set_codec_clock(Arc::make_mut(&mut codec), clock);
-    codec
-}
-
-/// Sets `codec`'s clock (seconds) to `clock`.
-fn set_codec_clock(codec: &mut dccl::Codec, clock: &Arc<dyn Clock>) {
+/// `codec` reading the date its time codec restores (and the door checks
+/// times against) from the core's `clock`, not the system's: the same
+/// time on a vehicle, virtual time in a simulation.
+fn on_clock(mut codec: dccl::Codec, clock: &Arc<dyn Clock>) -> dccl::Codec {
     let clock = clock.clone();
     codec.set_clock(move || clock.now().div_euclid(1_000_000));
+    codec
 }
 
 /// Opens the outbox: the queue of the checked settings, its journal in
@@ -636,8 +651,10 @@ fn open_outbox(
     queue_config: &protos::goby::acomms::protobuf::QueueManagerConfig,
     dir: &Path,
     clock: &Arc<dyn Clock>,
+    entropy: &queue::Entropy,
 ) -> Result<Outbox, DaemonError> {
-    let mut queue = QueueManager::with_clock(codec.clone(), queue_config, clock.clone())?;
+    let mut queue =
+        QueueManager::with_clock(codec.clone(), queue_config, clock.clone())?.number_from(entropy);
     if let Some(links) =
         config::links::queue_links(config, |n| codec.id_of(n).ok()).map_err(ConfigError::Invalid)?
     {

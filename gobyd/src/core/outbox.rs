@@ -90,7 +90,10 @@ impl Outbox {
         let events = queue.subscribe();
         let (mut journal, replay) = Journal::open(journal_path)?;
         // A message's journal id is its publication number on the wire.
-        journal.skip_ids_to(queue::identity::random_start());
+        journal.skip_ids_to(queue::identity::start_number(
+            &queue.entropy(),
+            queue::identity::PUBLICATIONS,
+        ));
         let mut outbox = Self {
             queue,
             journal,

@@ -449,7 +449,7 @@ impl IridiumShoreDriver {
             timeout,
             flush: shore.flush_mt_queue(),
             shore,
-            next_frame: super::driver::first_frame_number(),
+            next_frame: super::driver::first_frame_number(&goby_time::Entropy::System),
             next_client_id: 1,
             sent: VecDeque::new(),
             rudics_frame_bytes: rudics_frame_bytes(config),

@@ -661,7 +661,24 @@ async fn run(
             continue;
         }
         let wakeup = node.next_wakeup();
+        // Biased: branches ready at one instant (of a simulation's virtual
+        // clock) are taken in this order, not at random, so that the same
+        // inputs give the same events. What is already in the water is
+        // heard first (its times were set by the medium as it was sent), then
+        // the link computations that finished, then the daemon's commands;
+        // none of these is ready without end (packets and commands come at
+        // the rate of the transmissions), so none starves the others.
         tokio::select! {
+            biased;
+            Some(packet) = airborne.recv() => node.hear(packet),
+            Some((key, link)) = links.recv() => node.link_computed(key, link, &events),
+            packet = recv_udp(&node.udp) => match packet {
+                Ok(packet) => node.hear(Arc::new(packet)),
+                Err(reason) => events.status(DriverStatus::Unparseable {
+                    line: String::new(),
+                    reason,
+                }),
+            },
             command = ctx.commands.recv() => match command {
                 Some(DriverCommand::Initiate(mt)) => node.queue.push_back(mt),
                 Some(DriverCommand::Acknowledge(ack)) => node.acknowledge(&ack),
@@ -677,15 +694,6 @@ async fn run(
                     medium.leave(modem_id);
                     return;
                 }
-            },
-            Some(packet) = airborne.recv() => node.hear(packet),
-            Some((key, link)) = links.recv() => node.link_computed(key, link, &events),
-            packet = recv_udp(&node.udp) => match packet {
-                Ok(packet) => node.hear(Arc::new(packet)),
-                Err(reason) => events.status(DriverStatus::Unparseable {
-                    line: String::new(),
-                    reason,
-                }),
             },
             () = sleep_until_opt(wakeup) => {}
         }

@@ -366,6 +366,7 @@ impl Network {
             transfer_settings,
             &data_dir.join("transfers.log"),
             now,
+            &outbox.queue().entropy(),
         )?;
         let mut network = Network {
             me: config.modem_id(),
@@ -378,7 +379,10 @@ impl Network {
             recent: HashMap::new(),
             relaying: 0,
             transfers,
-            next_request: (queue::identity::random_start() % 65_536) as u16,
+            next_request: (queue::identity::start_number(
+                &outbox.queue().entropy(),
+                "network.request",
+            ) % 65_536) as u16,
             now_hint: now,
         };
         network.take_up(outbox, now);

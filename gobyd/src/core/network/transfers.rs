@@ -339,8 +339,16 @@ fn hex(bytes: &[u8]) -> String {
 
 impl Transfers {
     /// Opens `transfers.log` at `path` and takes up every transfer under
-    /// way. `now`: microseconds since the epoch.
-    pub fn open(me: i32, settings: Settings, path: &Path, now: Micros) -> io::Result<Self> {
+    /// way. `now`: microseconds since the epoch. New transfers are
+    /// numbered on from the last on record, else from a start drawn from
+    /// `entropy`.
+    pub fn open(
+        me: i32,
+        settings: Settings,
+        path: &Path,
+        now: Micros,
+        entropy: &queue::Entropy,
+    ) -> io::Result<Self> {
         let mut log = RecordLog::create_or_open(path, TRANSFERS)?;
         let bytes = log.read_all()?;
         let replayed = log.replay(&bytes, parse)?;
@@ -356,8 +364,10 @@ impl Transfers {
             sent: HashMap::new(),
             queued: HashMap::new(),
             finals: HashMap::new(),
-            next_number: (queue::identity::random_start() % 65_536) as u16,
-            next_client: CLIENT_ID_BASE + queue::identity::random_start() % (1 << 32),
+            next_number: (queue::identity::start_number(entropy, "transfers.number") % 65_536)
+                as u16,
+            next_client: CLIENT_ID_BASE
+                + queue::identity::start_number(entropy, "transfers.client") % (1 << 32),
         };
         for record in replayed.records {
             match record {

@@ -68,7 +68,8 @@ use crate::shell::{self, Device};
 
 pub use machine::Machine;
 pub use settings::{
-    first_frame_number, iridium_config, max_frame_bytes, problems, settings, Settings, DEFAULT_BAUD,
+    first_frame_number, iridium_config, max_frame_bytes, problems, settings, settings_from,
+    Settings, DEFAULT_BAUD,
 };
 pub use state::{DATA_REQUEST_TIMEOUT, MAX_WAITING};
 

@@ -3,6 +3,8 @@
 
 use std::time::Duration;
 
+use goby_time::Entropy;
+
 use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, DriverConfig, IridiumDeviceType, IridiumDriverConfig,
 };
@@ -150,8 +152,17 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
-/// The machine's settings from the driver configuration, checked.
+/// The machine's settings from the driver configuration, checked; frame
+/// numbers start at random.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
+    settings_from(config, &Entropy::System)
+}
+
+/// The machine's settings as [`settings`], with the first frame number
+/// drawn from `entropy` (a simulation gives a seeded one,
+/// [`Entropy::started_at`] the time the driver starts, so that its runs
+/// are the same).
+pub fn settings_from(config: &DriverConfig, entropy: &Entropy) -> Result<Settings, DriverError> {
     problem::refuse(problems(config))?;
     let iridium = iridium_config(config);
     let reconnect = iridium.reconnect_interval_ms.map_or(
@@ -164,16 +175,14 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
         iridium,
         reconnect,
         deferred_ack: config.deferred_ack(),
-        first_frame: first_frame_number(),
+        first_frame: first_frame_number(entropy),
     })
 }
 
-/// A frame number drawn at random, so that a driver started again does not
-/// number its frames as before (an ack still on its way for a frame of the
-/// last run would otherwise credit a new frame of that number).
-pub fn first_frame_number() -> u32 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(crate::time::now_micros());
-    (hasher.finish() % u64::from(frame::FRAME_NUMBERS)) as u32
+/// A frame number drawn from `entropy` (at random on a vehicle), so that
+/// a driver started again does not number its frames as before (an ack
+/// still on its way for a frame of the last run would otherwise credit a
+/// new frame of that number).
+pub fn first_frame_number(entropy: &Entropy) -> u32 {
+    (entropy.draw("iridium.frame") % u64::from(frame::FRAME_NUMBERS)) as u32
 }

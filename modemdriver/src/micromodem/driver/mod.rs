@@ -145,7 +145,7 @@ use crate::shell::{self, Device};
 
 pub use machine::Machine;
 pub use settings::{
-    problems, settings, Settings, DATA_REQUEST_TIMEOUT, DEFAULT_BAUD, HAND_OVER,
+    problems, settings, settings_from, Settings, DATA_REQUEST_TIMEOUT, DEFAULT_BAUD, HAND_OVER,
     MAX_PENDING_TRANSMISSIONS, PACKET_OVERHEAD, STATISTICS_SETTINGS,
 };
 

@@ -4,6 +4,8 @@
 
 use std::time::Duration;
 
+use goby_time::Entropy;
+
 use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, DriverConfig, MicroModemConfig, ModemTransmission,
 };
@@ -122,8 +124,17 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     problems
 }
 
-/// The machine's settings from the driver configuration, checked.
+/// The machine's settings from the driver configuration, checked; the
+/// application-ack frame numbers start at random.
 pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
+    settings_from(config, &Entropy::System)
+}
+
+/// The machine's settings as [`settings`], with the first application-ack
+/// frame number drawn from `entropy` (a simulation gives a seeded one,
+/// [`Entropy::started_at`] the time the driver starts, so that its runs
+/// are the same).
+pub fn settings_from(config: &DriverConfig, entropy: &Entropy) -> Result<Settings, DriverError> {
     problem::refuse(problems(config))?;
     let modem_id = u32::try_from(config::modem_id(config)?)
         .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
@@ -138,7 +149,7 @@ pub fn settings(config: &DriverConfig) -> Result<Settings, DriverError> {
         let mut acks = ApplicationAcks::new(
             modem_id,
             Duration::from_secs(u64::from(mm.application_ack_lifetime_seconds().max(1))),
-            first_frame_number(),
+            first_frame_number(entropy),
             now,
         )
         .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
@@ -195,11 +206,9 @@ fn resume_ack_state(acks: &mut ApplicationAcks, path: &std::path::Path, now: std
     }
 }
 
-/// A frame number drawn at random (from the standard library's randomly
-/// keyed hasher) to start the application-ack numbering at.
-fn first_frame_number() -> u32 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(crate::time::now_micros());
-    (hasher.finish() % u64::from(application_ack::FRAME_NUMBERS)) as u32
+/// A frame number drawn from `entropy` (at random on a vehicle) to start
+/// the application-ack numbering at.
+fn first_frame_number(entropy: &Entropy) -> u32 {
+    (entropy.draw("micromodem.application_ack.frame") % u64::from(application_ack::FRAME_NUMBERS))
+        as u32
 }
