@@ -169,9 +169,12 @@ async fn start_node(
     let driver =
         SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
             .map_err(|e| failed(&e))?;
+    // The node's start numbers (publication numbers and the like) drawn
+    // from the scenario's seed, not the operating system's.
     let daemon = Daemon::builder(config)
         .driver(driver)
         .clock(clock.clone())
+        .seed(mix(&[s.seed, node.modem_id as u64, 1]))
         .start()
         .await
         .map_err(|e| failed(&e))?;

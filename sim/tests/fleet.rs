@@ -66,3 +66,59 @@ fn the_same_scenario_gives_the_same_report_byte_for_byte() {
         goby_sim::report::ledger_csv(&third.ledger)
     );
 }
+
+/// Where a child process of [`the_same_scenario_gives_the_same_report_in_two_processes`]
+/// writes its report and ledger.
+const OUTPUT: &str = "GOBY_SIM_TEST_OUTPUT";
+
+/// The example fleet run in two child processes (this test's binary
+/// again, told by [`OUTPUT`] where to write), whose hashers' keys and
+/// tokio's seeds differ: the same report and ledger, byte for byte.
+#[test]
+fn the_same_scenario_gives_the_same_report_in_two_processes() {
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/fleet.pb.txt");
+    let scenario = goby_sim::scenario::load(&example).expect("accepted");
+    if let Some(dir) = std::env::var_os(OUTPUT) {
+        let outcome = goby_sim::run(&scenario).expect("the run ends");
+        goby_sim::write(&scenario, &outcome, Path::new(&dir)).expect("written");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("goby-sim-processes-{}", std::process::id()));
+    let exe = std::env::current_exe().unwrap();
+    let children: Vec<_> = ["a", "b"]
+        .iter()
+        .map(|name| {
+            let out = dir.join(name);
+            let child = std::process::Command::new(&exe)
+                .args([
+                    "the_same_scenario_gives_the_same_report_in_two_processes",
+                    "--exact",
+                    "--test-threads=1",
+                ])
+                .env(OUTPUT, &out)
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .unwrap();
+            (out, child)
+        })
+        .collect();
+    let mut outputs = Vec::new();
+    for (out, mut child) in children {
+        assert!(child.wait().unwrap().success(), "the run failed");
+        let read = |name: &str| std::fs::read_to_string(out.join(name)).unwrap();
+        outputs.push((read("report.json"), read("ledger.csv")));
+    }
+    assert!(outputs[0].1.lines().count() > 100, "{}", outputs[0].1);
+    assert!(
+        outputs[0].0 == outputs[1].0,
+        "the reports differ:\n{}\n---\n{}",
+        outputs[0].0,
+        outputs[1].0
+    );
+    let (a, b) = (&outputs[0].1, &outputs[1].1);
+    if let Some((x, y)) = a.lines().zip(b.lines()).find(|(x, y)| x != y) {
+        panic!("the ledgers differ:\n{x}\n{y}");
+    }
+    assert_eq!(a, b);
+    let _ = std::fs::remove_dir_all(&dir);
+}
