@@ -1,20 +1,15 @@
 //! `goby sim`: the example fleet runs and writes its report and ledger; a
 //! scenario with a mistake is refused before anything runs, at its place.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::Output;
+
+use common::{stderr_text, stdout_text};
 
 fn goby(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_goby"))
-        .args(args)
-        .env_remove("RUST_BACKTRACE")
-        .stdin(Stdio::null())
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
+    common::goby(args, "")
 }
 
 fn example() -> PathBuf {
@@ -39,8 +34,8 @@ fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let stdout = text(&run.stdout);
-    assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
+    let stdout = stdout_text(&run);
+    assert!(run.status.success(), "{stdout}{}", stderr_text(&run));
     assert!(
         stdout.starts_with("4 nodes, 7200 s of traffic and 1800 s of drain (seed 3) in "),
         "{stdout}"
@@ -88,7 +83,7 @@ fn a_scenario_with_a_mistake_is_refused_at_its_place() {
         dir.to_str().unwrap(),
     ]);
     assert_eq!(run.status.code(), Some(2));
-    let stderr = text(&run.stderr);
+    let stderr = stderr_text(&run);
     let at = text_in.find("dest: \"auv9\"").unwrap();
     let line = text_in[..at].matches('\n').count() + 1;
     let column = at - text_in[..at].rfind('\n').map_or(0, |n| n + 1) + 1;
