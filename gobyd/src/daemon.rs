@@ -60,6 +60,7 @@ pub struct Builder {
     drivers: Vec<Driver>,
     clock: Arc<dyn Clock>,
     seed: Option<u64>,
+    sync_in_line: bool,
 }
 
 impl std::fmt::Debug for Builder {
@@ -111,6 +112,18 @@ impl Builder {
         self
     }
 
+    /// Syncs the journal on the core's task, in line, instead of on a
+    /// blocking thread while the core goes on: the core then waits for
+    /// the disk at each group commit. For simulations in virtual time,
+    /// where a thread's end is ordered against the other events of a
+    /// virtual instant by real time (so the same inputs could give events
+    /// in another order); a vehicle's daemon leaves it off, so that the
+    /// modem is served while the disk syncs.
+    pub fn sync_in_line(mut self) -> Self {
+        self.sync_in_line = true;
+        self
+    }
+
     /// Checks the configuration ([`validate`]: a configuration
     /// `gobyd --check` refuses is refused here with the same error; with
     /// drivers given, their sections are not checked), takes the data
@@ -124,11 +137,16 @@ impl Builder {
             drivers,
             clock,
             seed,
+            sync_in_line,
         } = self;
         let entropy = seed.map_or(Entropy::System, |s| {
             Entropy::Seeded(s).started_at(clock.now())
         });
-        let clock = Started { clock, entropy };
+        let clock = Started {
+            clock,
+            entropy,
+            sync_in_line,
+        };
         if drivers.is_empty() {
             return start_configured(config, clock).await;
         }
@@ -148,10 +166,12 @@ impl Builder {
     }
 }
 
-/// What a daemon reads time from, and draws its start numbers from.
+/// What a daemon reads time from, draws its start numbers from, and
+/// whether it syncs its journal in line ([`Builder::sync_in_line`]).
 struct Started {
     clock: Arc<dyn Clock>,
     entropy: Entropy,
+    sync_in_line: bool,
 }
 
 /// Starts the daemon on the drivers its configuration names (checked with
@@ -198,6 +218,7 @@ impl Daemon {
             drivers: Vec::new(),
             clock: Arc::new(SystemClock),
             seed: None,
+            sync_in_line: false,
         }
     }
 
@@ -211,7 +232,11 @@ impl Daemon {
         data_dir: DataDir,
         started: Started,
     ) -> Result<Self, DaemonError> {
-        let Started { clock, entropy } = started;
+        let Started {
+            clock,
+            entropy,
+            sync_in_line,
+        } = started;
         let config = checked.config.clone();
         let json = config.json.clone().unwrap_or_default();
         let mission_log: Option<Box<dyn MissionLog>> =
@@ -228,6 +253,7 @@ impl Daemon {
             always_taken: config.moos.is_some()
                 || config.mqtt.is_some()
                 || !json.udp_bind().is_empty(),
+            sync_in_line,
         };
         let core = Core::open(checked, drivers, data_dir, clock.clone(), &entropy, around)?;
         let mut handle = core.handle();

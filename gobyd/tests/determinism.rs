@@ -13,7 +13,6 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use gobyd::daemon::Daemon;
-use gobyd::event::DaemonEvent;
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
@@ -151,6 +150,7 @@ async fn scenario(dir: &Path) -> String {
             .driver(driver)
             .clock(clock.clone())
             .seed(7 + id as u64)
+            .sync_in_line()
             .start()
             .await
             .expect("gobyd starts");
@@ -167,9 +167,6 @@ async fn scenario(dir: &Path) -> String {
                     }
                     Err(_) => break,
                 };
-                if matches!(event.as_ref(), DaemonEvent::Link(_)) {
-                    continue;
-                }
                 let t = clock.now() - START;
                 let mut transcript = transcript.lock().unwrap();
                 let _ = writeln!(transcript, "{t} {id} {event:?}");

@@ -110,6 +110,9 @@ pub(crate) struct Surroundings {
     /// Something always takes received messages (a bridge, the UDP JSON
     /// interface): they are handed over at once, not held for a client.
     pub always_taken: bool,
+    /// The journal is synced on the core's task, not on a blocking thread
+    /// (a simulation in virtual time).
+    pub sync_in_line: bool,
 }
 
 /// The daemon's core, ready to [`run`](Core::run).
@@ -155,6 +158,8 @@ pub struct Core {
     commit: Arc<std::sync::Mutex<GroupCommit<WaitingReply>>>,
     /// The journal syncs under way, off the core's thread.
     syncs: JoinSet<()>,
+    /// Syncs run on the core's task ([`Surroundings::sync_in_line`]).
+    sync_in_line: bool,
     data_dir: DataDir,
     codec: Arc<dccl::Codec>,
     /// The receive path: messages received from the link, recorded
@@ -271,6 +276,7 @@ impl Core {
             mission_log: around.mission_log,
             commit: Arc::new(std::sync::Mutex::new(GroupCommit::new(MAX_SYNCS))),
             syncs: JoinSet::new(),
+            sync_in_line: around.sync_in_line,
             data_dir,
             codec,
             delivery,
@@ -545,12 +551,18 @@ impl Core {
     /// accepted so far, the messages accepted while it runs wait for a
     /// later one, and it sends the replies it covers as it returns. A
     /// client hears "accepted" only once its message is on disk, while the
-    /// message itself may already be on its way to the modem.
+    /// message itself may already be on its way to the modem. With
+    /// [`Surroundings::sync_in_line`] the sync runs here, before the core
+    /// goes on.
     fn commit_replies(&mut self) {
         let Some(mark) = lock(&self.commit).start() else {
             return;
         };
         match self.outbox.sync_handle() {
+            Ok(handle) if self.sync_in_line => {
+                CrashPoint::Unsynced.reached();
+                send_synced(&self.commit, mark, handle.sync_data());
+            }
             Ok(handle) => {
                 let commit = self.commit.clone();
                 self.syncs.spawn_blocking(move || {

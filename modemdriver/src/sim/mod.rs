@@ -97,32 +97,40 @@ impl SimulatorDriver {
                 Some(UdpMedium::new(socket, peers))
             }
         };
-        Self::spawn(config, medium, udp, Arc::new(goby_time::SystemClock))
+        Self::spawn(config, medium, udp, None)
     }
 
     /// Starts a node on the given in-process channel only.
     pub fn start_on(config: &DriverConfig, medium: Arc<Medium>) -> Result<Driver, DriverError> {
-        Self::spawn(config, medium, None, Arc::new(goby_time::SystemClock))
+        Self::spawn(config, medium, None, None)
     }
 
     /// Starts a node on the given in-process channel only, reading time
     /// from `clock` (a [`crate::time::TokioClock`] under tokio's paused
     /// clock runs the channel in virtual time: its travel times and packet
-    /// durations are tokio sleeps).
+    /// durations are tokio sleeps). The links of an `acoustic_channel` are
+    /// computed in line, on the driver's task, not on a blocking thread:
+    /// a thread's result would come back at a moment of real time, which
+    /// orders it against the other events of a virtual instant at random;
+    /// in line, the same inputs give the same events.
     pub fn start_on_with_clock(
         config: &DriverConfig,
         medium: Arc<Medium>,
         clock: Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
-        Self::spawn(config, medium, None, clock)
+        Self::spawn(config, medium, None, Some(clock))
     }
 
+    /// `clock`: `None` for the system's, with the links computed on
+    /// blocking threads; given, in line.
     fn spawn(
         config: &DriverConfig,
         medium: Arc<Medium>,
         udp: Option<UdpMedium>,
-        clock: Arc<dyn goby_time::Clock>,
+        clock: Option<Arc<dyn goby_time::Clock>>,
     ) -> Result<Driver, DriverError> {
+        let links_in_line = clock.is_some();
+        let clock = clock.unwrap_or_else(|| Arc::new(goby_time::SystemClock));
         problem::refuse(problems(config))?;
         let modem_id = config::modem_id(config)?;
         let sim = sim_config(config)?.clone();
@@ -141,6 +149,7 @@ impl SimulatorDriver {
                     sim,
                     deferred_ack,
                     water,
+                    links_in_line,
                 },
                 medium,
                 udp,
@@ -328,6 +337,9 @@ struct Node {
     computing: HashSet<LinkKey>,
     /// Computed links come back here.
     computed: mpsc::UnboundedSender<(LinkKey, Result<water::Link, String>)>,
+    /// Links are computed on the driver's task (in virtual time), not on
+    /// blocking threads.
+    links_in_line: bool,
 }
 
 impl Node {
@@ -500,8 +512,8 @@ impl Node {
         );
     }
 
-    /// Computes the link of `key` on a blocking thread; it comes back on
-    /// `computed`.
+    /// Computes the link of `key` on a blocking thread (in line when
+    /// [`Node::links_in_line`]); it comes back on `computed`.
     fn compute_link(&mut self, key: LinkKey, from: Position, to: Position) {
         let Some(water) = &self.water else {
             return;
@@ -511,6 +523,11 @@ impl Node {
         }
         let forecaster = water.forecaster();
         let computed = self.computed.clone();
+        if self.links_in_line {
+            // Back through the channel all the same, in the order computed.
+            let _ = computed.send((key, water::compute(&forecaster, &from, &to)));
+            return;
+        }
         tokio::spawn(async move {
             let link = tokio::task::spawn_blocking(move || water::compute(&forecaster, &from, &to))
                 .await
@@ -545,7 +562,8 @@ impl Node {
     }
 
     /// Computes the links from every other configured node to this one
-    /// before the node is ready, off the driver's task.
+    /// before the node is ready, off the driver's task (on it when
+    /// [`Node::links_in_line`]).
     async fn prepare_links(&mut self, events: &EventSink) {
         let (Some(water), Some(me)) = (&self.water, self.position_of(self.modem_id)) else {
             return;
@@ -559,14 +577,19 @@ impl Node {
             .map(|p| (water.key(&p, &me), p))
             .collect();
         let forecaster = water.forecaster();
-        let links = tokio::task::spawn_blocking(move || {
+        let compute = move || {
             pairs
                 .into_iter()
                 .map(|(key, from)| (key, water::compute(&forecaster, &from, &me)))
                 .collect::<Vec<_>>()
-        })
-        .await
-        .unwrap_or_default();
+        };
+        let links = if self.links_in_line {
+            compute()
+        } else {
+            tokio::task::spawn_blocking(compute)
+                .await
+                .unwrap_or_default()
+        };
         for (key, link) in links {
             self.link_computed(key, link, events);
         }
@@ -615,6 +638,7 @@ struct Start {
     sim: SimulatorDriverConfig,
     deferred_ack: bool,
     water: Option<Water>,
+    links_in_line: bool,
 }
 
 async fn run(
@@ -629,6 +653,7 @@ async fn run(
         sim,
         deferred_ack,
         water,
+        links_in_line,
     } = start;
     let events = ctx.events.clone();
     let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
@@ -650,6 +675,7 @@ async fn run(
         pending: Vec::new(),
         computing: HashSet::new(),
         computed,
+        links_in_line,
     };
     node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);

@@ -1168,7 +1168,9 @@ impl Network {
         if receipt.owed_acks.is_empty() {
             return;
         }
-        let mut by_origin: HashMap<i32, Vec<u32>> = HashMap::new();
+        // By origin in order: the acks are journaled and queued in the
+        // same order every run.
+        let mut by_origin: std::collections::BTreeMap<i32, Vec<u32>> = Default::default();
         for (origin, number) in &receipt.owed_acks {
             by_origin.entry(*origin).or_default().push(*number);
         }

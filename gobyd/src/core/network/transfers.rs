@@ -732,8 +732,10 @@ impl Transfers {
                 }
             }
         }
-        let finals: Vec<((i32, u16), Outcome)> =
+        let mut finals: Vec<((i32, u16), Outcome)> =
             self.finals.iter().map(|(k, o)| (*k, *o)).collect();
+        // Queued in the order of their transfers, the same every run.
+        finals.sort_unstable_by_key(|(k, _)| *k);
         for ((origin, number), outcome) in finals {
             let waiting = self
                 .queued

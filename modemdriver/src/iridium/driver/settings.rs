@@ -186,3 +186,22 @@ pub fn settings_from(config: &DriverConfig, entropy: &Entropy) -> Result<Setting
 pub fn first_frame_number(entropy: &Entropy) -> u32 {
     (entropy.draw("iridium.frame") % u64::from(frame::FRAME_NUMBERS)) as u32
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_seeded_driver_numbers_its_frames_from_the_seed_and_its_start() {
+        let config = DriverConfig {
+            modem_id: Some(1),
+            serial_port: Some("/dev/ttyUSB0".into()),
+            ..Default::default()
+        };
+        let first = |entropy: Entropy| settings_from(&config, &entropy).unwrap().first_frame;
+        let a = Entropy::Seeded(3).started_at(1_000_000);
+        assert_eq!(first(a), first(a));
+        assert_ne!(first(a), first(Entropy::Seeded(3).started_at(61_000_000)));
+        assert!(first(a) < frame::FRAME_NUMBERS);
+    }
+}

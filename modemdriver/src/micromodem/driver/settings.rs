@@ -212,3 +212,31 @@ fn first_frame_number(entropy: &Entropy) -> u32 {
     (entropy.draw("micromodem.application_ack.frame") % u64::from(application_ack::FRAME_NUMBERS))
         as u32
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_seeded_driver_numbers_its_application_acks_from_the_seed_and_its_start() {
+        let config = DriverConfig {
+            modem_id: Some(1),
+            serial_port: Some("/dev/ttyUSB0".into()),
+            micromodem: Some(MicroModemConfig {
+                use_application_acks: Some(true),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let now = std::time::Instant::now();
+        let state = |entropy: Entropy| {
+            let settings = settings_from(&config, &entropy).unwrap();
+            settings.app_acks.expect("on").state(now, 0)
+        };
+        let a = Entropy::Seeded(3).started_at(1_000_000);
+        assert_eq!(state(a), state(a));
+        // 32 numbers: some later start draws another.
+        assert!((1..10)
+            .any(|m| state(a) != state(Entropy::Seeded(3).started_at(1_000_000 + m * 60_000_000))));
+    }
+}
