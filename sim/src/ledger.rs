@@ -314,3 +314,129 @@ impl Ledger {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gobyd::event::Reception;
+    use queue::ReceivedMessage;
+
+    fn command(note: &str) -> DynamicMessage {
+        protos::goby::example::Command {
+            destination: 2,
+            action: 1,
+            note: Some(note.into()),
+            ..Default::default()
+        }
+        .transcode_to_dynamic()
+    }
+
+    /// Two nodes (modem ids 1 and 2) sharing a codec of the example types.
+    fn ledger() -> Ledger {
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<protos::goby::example::Command>().unwrap();
+        let codec = Arc::new(codec);
+        Ledger::new(
+            [("a", 1), ("b", 2)]
+                .map(|(name, modem_id)| LedgerNode {
+                    name: name.into(),
+                    modem_id,
+                    codec: codec.clone(),
+                })
+                .to_vec(),
+        )
+    }
+
+    /// Publishes `message` at node 0 for node 1 as journal id `entry`, and
+    /// tells the ledger it was sent.
+    fn published(ledger: &mut Ledger, message: &DynamicMessage, entry: u64, time: Micros) -> usize {
+        let index = ledger.publish(0, 0, entry, message, Some(1), time);
+        ledger.accepted(index, Ok(Some(entry)));
+        let sent = QueueEvent::Sent {
+            message: message.clone(),
+            id: entry,
+            dccl_id: 125,
+            frame: 0,
+            awaiting_ack: true,
+            link: 0,
+        };
+        ledger.event(
+            0,
+            time + 1,
+            &DaemonEvent::Queue {
+                event: sent,
+                entry: Some(entry),
+            },
+        );
+        index
+    }
+
+    fn receive(ledger: &mut Ledger, message: &DynamicMessage, src: i32, time: Micros) {
+        let received = ReceivedMessage {
+            message: message.clone(),
+            dccl_id: 125,
+            src,
+            dest: 2,
+            time: None,
+            bytes: Vec::new(),
+            identity: None,
+        };
+        let reception = Reception {
+            link: None,
+            recovered: false,
+            route: None,
+        };
+        ledger.event(
+            1,
+            time,
+            &DaemonEvent::Received {
+                received,
+                reception,
+            },
+        );
+    }
+
+    #[test]
+    fn a_repeat_on_purpose_is_its_own_delivery_and_a_copy_beyond_is_a_duplicate() {
+        let mut ledger = ledger();
+        let same = command("same");
+        let first = published(&mut ledger, &same, 10, 1_000);
+        let second = published(&mut ledger, &same, 11, 2_000);
+        receive(&mut ledger, &same, 1, 5_000);
+        receive(&mut ledger, &same, 1, 6_000);
+        receive(&mut ledger, &same, 1, 7_000);
+        let p = ledger.publications();
+        assert_eq!(p[first].deliveries[&1], [5_000, 7_000]);
+        assert_eq!(p[second].deliveries[&1], [6_000]);
+        // From a node of no publication of it, or of another content: stray.
+        receive(&mut ledger, &same, 2, 8_000);
+        receive(&mut ledger, &command("other"), 1, 8_000);
+        assert_eq!(ledger.stray().len(), 2);
+    }
+
+    #[test]
+    fn events_heard_before_the_journal_id_are_kept_for_it() {
+        let mut ledger = ledger();
+        let message = command("early");
+        let index = ledger.publish(0, 0, 0, &message, Some(1), 1_000);
+        let acked = QueueEvent::Acked {
+            message: message.clone(),
+            id: Some(7),
+            dccl_id: 125,
+            frame: 0,
+            by: 2,
+        };
+        ledger.event(
+            0,
+            3_000,
+            &DaemonEvent::Queue {
+                event: acked,
+                entry: Some(7),
+            },
+        );
+        ledger.accepted(index, Ok(Some(7)));
+        assert_eq!(ledger.publications()[index].acked, Some(3_000));
+        ledger.owed(0, &BTreeSet::from([7]));
+        assert!(ledger.publications()[index].owed);
+    }
+}
