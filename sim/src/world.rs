@@ -170,11 +170,13 @@ async fn start_node(
         SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
             .map_err(|e| failed(&e))?;
     // The node's start numbers (publication numbers and the like) drawn
-    // from the scenario's seed, not the operating system's.
+    // from the scenario's seed, not the operating system's; its journal
+    // synced in line, so that no thread's real time orders its events.
     let daemon = Daemon::builder(config)
         .driver(driver)
         .clock(clock.clone())
         .seed(mix(&[s.seed, node.modem_id as u64, 1]))
+        .sync_in_line()
         .start()
         .await
         .map_err(|e| failed(&e))?;
