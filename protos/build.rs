@@ -22,6 +22,7 @@ const FILES: &[&str] = &[
     "goby/moos/translator.proto",
     "goby/moos/node_report.proto",
     "goby/apps/gobyd_config.proto",
+    "goby/sim/scenario.proto",
 ];
 
 /// Messages a driver's own `.proto` adds its sections to by extending

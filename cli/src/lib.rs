@@ -49,6 +49,10 @@
 //! message, `goby log pcap DIR -o FILE` the modem traffic as a capture
 //! ([`log`]).
 //!
+//! `goby sim SCENARIO` rehearses a fleet in virtual time: the scenario's
+//! nodes, each a `gobyd` on the simulated acoustic channel, its traffic, and
+//! a report of what was delivered, lost, expired or still owed ([`sim_cmd`]).
+//!
 //! `goby completions SHELL` prints a shell completion script and `goby man
 //! DIR` writes the manual pages ([`generate_cmd`]).
 //!
@@ -86,6 +90,7 @@ pub mod plot;
 pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
+pub mod sim_cmd;
 mod stop;
 pub mod wireshark;
 
@@ -164,6 +169,9 @@ pub enum GobyCommand {
     /// Read a gobyd data directory after a mission: its records (JSON lines or CSV), a summary
     /// (what became of each message), the modem traffic as a pcap capture.
     Log(log::LogCli),
+    /// Rehearse a fleet in virtual time: the scenario's nodes (each a gobyd on the simulated
+    /// acoustic channel) and traffic; a report of what was delivered, lost, expired or owed.
+    Sim(sim_cmd::SimArgs),
     /// Print a shell completion script for goby.
     Completions(generate_cmd::CompletionsArgs),
     /// Write goby's manual pages (goby.1 and one per subcommand) into a directory.
@@ -263,6 +271,7 @@ pub fn run_goby(
         GobyCommand::File(cmd) => file_cmd::run(&cmd, stdout),
         GobyCommand::Channel(cmd) => channel_cmd::run(&cmd, stdout),
         GobyCommand::Log(cli) => log::run(&cli, stdout, stderr),
+        GobyCommand::Sim(args) => sim_cmd::run(&args, stdout),
         GobyCommand::Completions(args) => generate_cmd::completions(&args, stdout),
         GobyCommand::Man(args) => generate_cmd::man(&args, stdout),
     };

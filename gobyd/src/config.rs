@@ -649,7 +649,7 @@ fn error_offset(e: &prost_reflect::text_format::ParseError) -> Option<usize> {
 }
 
 /// 1-based line and column (in characters) of a byte offset of `text`.
-fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
+pub fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
     let mut offset = offset.min(text.len());
     while !text.is_char_boundary(offset) {
         offset -= 1;

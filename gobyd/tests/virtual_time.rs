@@ -195,3 +195,61 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A node on a virtual clock far from the system's (2001-01-01) takes a
+/// report stamped with its own now: the codec checks and restores the
+/// dates of time fields against the daemon's clock, not the system's.
+#[tokio::test(start_paused = true)]
+async fn a_time_near_the_node_s_virtual_now_is_accepted() {
+    use prost_reflect::ReflectMessage;
+    let dir = scratch("virtual", "dates");
+    let clock = Arc::new(TokioClock::at(978_307_200_000_000));
+    let config = Node::new(1)
+        .driver(Simulator::pair(1500.0).deferred_ack())
+        .tdma(&[1, 2], 1, 10.0)
+        .queue(
+            Entry::new("goby.example.NavigationReport")
+                .role("SOURCE_ID", "source")
+                .role("DESTINATION_ID", "destination"),
+        )
+        .json_tcp("")
+        .data_dir(&dir.join("data"))
+        .config();
+    let mut driver_config = config.driver.clone().unwrap();
+    driver_config.modem_id = Some(1);
+    let driver =
+        SimulatorDriver::start_on_with_clock(&driver_config, Medium::new(), clock.clone()).unwrap();
+    let daemon = Daemon::builder(config)
+        .driver(driver)
+        .clock(clock.clone())
+        .start()
+        .await
+        .expect("gobyd starts");
+    let publisher = daemon.publisher();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let run = tokio::spawn(daemon.run(async move {
+        let _ = stopped.await;
+    }));
+    let report = protos::goby::example::NavigationReport {
+        source: 1,
+        destination: 2,
+        time: (clock.now() / 1_000_000) as f64,
+        x: 1.0,
+        y: 2.0,
+        z: -3.0,
+        ..Default::default()
+    };
+    let (reply, answer) = oneshot::channel();
+    publisher
+        .send(gobyd::event::Publish::new(
+            report.transcode_to_dynamic(),
+            reply,
+        ))
+        .await
+        .unwrap();
+    let answer = answer.await.expect("the daemon answers");
+    assert!(answer.is_ok(), "{answer:?}");
+    let _ = stop.send(());
+    run.await.unwrap().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -101,6 +101,15 @@ pub mod goby {
         }
     }
 
+    /// The scenario of a fleet rehearsal (`goby sim`).
+    pub mod sim {
+        /// `Scenario`: nodes, water, traffic, duration and report.
+        #[allow(missing_docs, clippy::all)]
+        pub mod protobuf {
+            include!(concat!(env!("OUT_DIR"), "/goby.sim.protobuf.rs"));
+        }
+    }
+
     /// The example messages shipped with the toolkit.
     #[allow(missing_docs, clippy::all)]
     pub mod example {

@@ -32,6 +32,7 @@ fn every_crate_has_a_readme_whose_links_resolve() {
         "gobyd",
         "cli",
         "python",
+        "sim",
     ] {
         let wanted = format!("{name}/README.md");
         assert!(

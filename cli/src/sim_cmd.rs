@@ -1,0 +1,88 @@
+//! `goby sim SCENARIO`: rehearses a fleet in virtual time (the scenario's
+//! nodes, each a `gobyd` in this process on the simulated acoustic
+//! channel, publishing the scenario's traffic), writes the report (JSON)
+//! and the ledger of every publication (CSV), and prints a summary.
+//! The work is [`goby_sim`]'s; this is its command line.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+
+use crate::{CliError, Status};
+
+/// Arguments of `goby sim`.
+#[derive(Debug, Args)]
+#[command(after_help = "Examples:\n  \
+    goby sim fleet.pb.txt --out run1\n  \
+    goby sim fleet.pb.txt --seed 8 --out run-seed8")]
+pub struct SimArgs {
+    /// The scenario (protobuf text format, goby.sim.protobuf.Scenario).
+    #[arg(value_name = "SCENARIO")]
+    pub scenario: PathBuf,
+    /// Seed of the run, in place of the scenario's.
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Directory for the report and the ledger (created if needed).
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    pub out: PathBuf,
+}
+
+/// Runs `goby sim`.
+pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    let mut scenario = goby_sim::scenario::load(&args.scenario)
+        .map_err(|e| CliError::setup(format!("the scenario is refused:\n{e}")))?;
+    if let Some(seed) = args.seed {
+        scenario.seed = seed;
+    }
+    let began = Instant::now();
+    let outcome = goby_sim::run(&scenario).map_err(|e| CliError::Failed(e.to_string()))?;
+    let wall = began.elapsed().as_secs_f64();
+    let written = goby_sim::write(&scenario, &outcome, &args.out)
+        .map_err(|e| CliError::Failed(e.to_string()))?;
+    let report = &outcome.report;
+    let virtual_s = (scenario.duration_micros + scenario.drain_micros) as f64 / 1e6;
+    writeln!(
+        stdout,
+        "{} nodes, {:.0} s of traffic and {:.0} s of drain (seed {}) in {wall:.2} s: {:.0}x real time",
+        scenario.nodes.len(),
+        scenario.duration_micros as f64 / 1e6,
+        scenario.drain_micros as f64 / 1e6,
+        scenario.seed,
+        virtual_s / wall.max(1e-9),
+    )?;
+    for (name, s) in report
+        .by_type
+        .iter()
+        .chain(std::iter::once((&"all".to_string(), &report.total)))
+    {
+        let latency = s.latency_us.as_ref().map_or("-".to_string(), |l| {
+            format!(
+                "{:.1}/{:.1}/{:.1} s",
+                l.p50 as f64 / 1e6,
+                l.p90 as f64 / 1e6,
+                l.max as f64 / 1e6
+            )
+        });
+        writeln!(
+            stdout,
+            "  {name}: published {}, delivered {}/{} ({:.1} %), duplicates {}, latency p50/p90/max {latency}, \
+             acked {}, expired {}, dropped {}, owed {}, lost {}",
+            s.published,
+            s.delivered,
+            s.expected,
+            s.delivery_ratio * 100.0,
+            s.duplicates,
+            s.acked,
+            s.expired,
+            s.dropped,
+            s.owed,
+            s.lost,
+        )?;
+    }
+    for path in written {
+        writeln!(stdout, "wrote {}", path.display())?;
+    }
+    Ok(Status::Ok)
+}

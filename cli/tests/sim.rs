@@ -1,0 +1,98 @@
+//! `goby sim`: the example fleet runs and writes its report and ledger; a
+//! scenario with a mistake is refused before anything runs, at its place.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use common::{stderr_text, stdout_text};
+
+fn goby(args: &[&str]) -> Output {
+    common::goby(args, "")
+}
+
+fn example() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/examples/fleet.pb.txt")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("goby-sim-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
+    let out = scratch("run");
+    let run = goby(&[
+        "sim",
+        example().to_str().unwrap(),
+        "--seed",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = stdout_text(&run);
+    assert!(run.status.success(), "{stdout}{}", stderr_text(&run));
+    assert!(
+        stdout.starts_with("4 nodes, 7200 s of traffic and 1800 s of drain (seed 3) in "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(
+            "goby.example.Command: published 24, delivered 24/24 (100.0 %), duplicates 0"
+        ),
+        "{stdout}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["run"]["seed"], 3);
+    assert_eq!(report["by_type"]["goby.example.Command"]["acked"], 24);
+    let ledger = std::fs::read_to_string(out.join("ledger.csv")).unwrap();
+    assert!(
+        ledger.starts_with("src,dest,type,stream,seq,published_us,"),
+        "{ledger}"
+    );
+    assert_eq!(
+        ledger
+            .lines()
+            .filter(|l| l.contains("goby.example.Command"))
+            .count(),
+        24
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn a_scenario_with_a_mistake_is_refused_at_its_place() {
+    let dir = scratch("refused");
+    let text_in =
+        std::fs::read_to_string(example())
+            .unwrap()
+            .replacen("dest: \"auv1\"", "dest: \"auv9\"", 1);
+    let path = dir.join("fleet.pb.txt");
+    std::fs::write(&path, &text_in).unwrap();
+    let gobyd = example().with_file_name("fleet-gobyd.pb.txt");
+    std::fs::copy(gobyd, dir.join("fleet-gobyd.pb.txt")).unwrap();
+    let run = goby(&[
+        "sim",
+        path.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(2));
+    let stderr = stderr_text(&run);
+    let at = text_in.find("dest: \"auv9\"").unwrap();
+    let line = text_in[..at].matches('\n').count() + 1;
+    let column = at - text_in[..at].rfind('\n').map_or(0, |n| n + 1) + 1;
+    assert!(
+        stderr.contains(&format!(
+            "fleet.pb.txt:{line}:{column}: node[0].traffic[0].dest: no node named \"auv9\""
+        )),
+        "{stderr}"
+    );
+    assert!(!dir.join("report.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,89 @@
+//! Fleet rehearsal in virtual time (`goby sim`): the same `gobyd` that goes
+//! on the vehicles, one per node, in one process, over the simulated
+//! acoustic channel, driven by a scenario; out comes a report of what was
+//! delivered, how late, and what was lost, expired or still owed.
+//!
+//! - [`scenario`]: the scenario file (`goby.sim.protobuf.Scenario`, protobuf
+//!   text format), checked before anything runs, each mistake named with
+//!   its file, line and column.
+//! - [`traffic`]: the streams of publications (period or Poisson, field
+//!   values constant, counted or drawn), seeded from the scenario's seed.
+//! - [`world`]: the nodes on one virtual clock and one medium, the run.
+//! - [`ledger`]: every publication and its fate.
+//! - [`report`]: the report (JSON) and the ledger (CSV).
+//!
+//! ```no_run
+//! let scenario = goby_sim::scenario::load("fleet.pb.txt".as_ref())?;
+//! let outcome = goby_sim::run(&scenario)?;
+//! println!("{}", outcome.report.to_json());
+//! # Ok::<(), goby_sim::SimError>(())
+//! ```
+
+pub mod ledger;
+pub mod report;
+pub mod scenario;
+pub mod traffic;
+pub mod world;
+
+use std::path::Path;
+
+pub use ledger::Ledger;
+pub use report::Report;
+pub use scenario::{Scenario, ScenarioError};
+
+/// Why a scenario did not run to its report.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The scenario was refused before anything ran.
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    /// The run failed (a node did not start or stopped with an error, an
+    /// event was missed, an output could not be written).
+    #[error("{0}")]
+    Run(String),
+}
+
+/// What a run gives.
+#[derive(Debug)]
+pub struct Outcome {
+    /// Every publication and its fate.
+    pub ledger: Ledger,
+    /// The summary of the ledger.
+    pub report: Report,
+}
+
+/// Runs `scenario` in virtual time (see [`world`]).
+pub fn run(scenario: &Scenario) -> Result<Outcome, SimError> {
+    let ledger = world::run(scenario)?;
+    let report = Report::new(scenario, &ledger);
+    Ok(Outcome { ledger, report })
+}
+
+/// Writes the report (JSON) and the ledger (CSV) into `dir` under the
+/// scenario's names for them; returns the paths written.
+pub fn write(
+    scenario: &Scenario,
+    outcome: &Outcome,
+    dir: &Path,
+) -> Result<Vec<std::path::PathBuf>, SimError> {
+    let failed = |e: std::io::Error, path: &Path| {
+        SimError::Run(format!("cannot write {}: {e}", path.display()))
+    };
+    std::fs::create_dir_all(dir).map_err(|e| failed(e, dir))?;
+    let outputs = [
+        (scenario.report.json(), outcome.report.to_json()),
+        (scenario.report.csv(), report::ledger_csv(&outcome.ledger)),
+    ];
+    let mut written = Vec::new();
+    for (name, text) in outputs {
+        let path = dir.join(name);
+        std::fs::write(&path, text).map_err(|e| failed(e, &path))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// The crate's README.md, whose examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

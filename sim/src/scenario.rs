@@ -1,0 +1,533 @@
+//! The scenario: `goby.sim.protobuf.Scenario` read from protobuf text
+//! format and checked before anything runs.
+//!
+//! Every mistake is refused at once, each naming where it is written
+//! (`FILE:LINE:COLUMN: node[1].traffic[0].dest: no node named "auv3"`) or,
+//! for what is not written, its path: an unknown destination node, a name
+//! or modem id used twice, a node's gobyd configuration that gobyd's own
+//! checks refuse (those `gobyd --check` runs, with the simulator's driver
+//! in place of the configuration's), a type the node's gobyd does not load,
+//! a field value its type cannot take, a period or rate that is not
+//! positive, a duration that is not positive.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use gobyd::config::{ConfigError, Problem};
+use gobyd::error::DaemonError;
+use prost_reflect::{DynamicMessage, MessageDescriptor, ReflectMessage};
+use protos::goby::acomms::protobuf::queued_message_entry::{role::RoleSetting, RoleType};
+use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+use protos::goby::apps::protobuf::GobydConfig;
+use protos::goby::sim::protobuf as pb;
+
+use crate::traffic::{Rate, Stream, ValueGen};
+
+/// A scenario that passed every check, ready to run ([`crate::run`]).
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// Seed of every random draw of the run.
+    pub seed: u64,
+    /// Virtual time of the start, microseconds since the UNIX epoch.
+    pub start_micros: i64,
+    /// Microseconds of traffic.
+    pub duration_micros: u64,
+    /// Microseconds after the traffic in which what is owed may still go.
+    pub drain_micros: u64,
+    /// The water of every node's simulated modem (positions, seed,
+    /// channel and UDP endpoints left unset: the run sets them).
+    pub water: SimulatorDriverConfig,
+    /// The nodes, in the order written.
+    pub nodes: Vec<Node>,
+    /// File names of the report (relative to the output directory).
+    pub report: pb::Report,
+}
+
+/// One node of a [`Scenario`].
+#[derive(Debug, Clone)]
+pub struct Node {
+    /// Its unique name.
+    pub name: String,
+    /// Its unique modem id.
+    pub modem_id: i32,
+    /// Its gobyd configuration, with the modem id set and the interfaces
+    /// off (the run sets the driver and the data directory).
+    pub config: GobydConfig,
+    /// The DCCL types its gobyd loads.
+    pub codec: Arc<dccl::Codec>,
+    /// x east, y north, depth down, metres.
+    pub position: [f64; 3],
+    /// What its autonomy publishes.
+    pub traffic: Vec<Stream>,
+}
+
+/// A scenario refused: every problem found, one a line.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{}", .0.join("\n"))]
+pub struct ScenarioError(pub Vec<String>);
+
+/// Reads and checks the scenario in the file `path` (a node's
+/// `gobyd_file` is read relative to its directory).
+pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| ScenarioError(vec![format!("cannot read {}: {e}", path.display())]))?;
+    parse(&text, &path.display().to_string(), &base_of(path))
+}
+
+/// Checks the scenario `text`; `origin` names it in errors, `base` is the
+/// directory a node's `gobyd_file` is read relative to.
+pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, ScenarioError> {
+    let desc = pb::Scenario::default().descriptor();
+    let parsed = DynamicMessage::parse_text_format(desc, text)
+        .map_err(|e| ScenarioError(vec![parse_error(&e, text, origin)]))?
+        .transcode_to::<pb::Scenario>()
+        .map_err(|e| ScenarioError(vec![format!("{origin}: {e}")]))?;
+    let mut check = Check {
+        text,
+        origin,
+        base,
+        found: Vec::new(),
+        start_s: 0,
+    };
+    let scenario = check.scenario(parsed);
+    match check.found.is_empty() {
+        true => Ok(scenario.expect("complete when nothing was found")),
+        false => Err(ScenarioError(check.found)),
+    }
+}
+
+/// The parser's error at its line and column.
+fn parse_error(e: &prost_reflect::text_format::ParseError, text: &str, origin: &str) -> String {
+    use miette::Diagnostic;
+    match e.labels().and_then(|mut l| l.next()).map(|l| l.offset()) {
+        Some(offset) => {
+            let (line, column) = gobyd::config::line_and_column(text, offset);
+            format!("{origin}:{line}:{column}: {e}")
+        }
+        None => format!("{origin}: {e}"),
+    }
+}
+
+/// The checks, collecting every problem with its place.
+struct Check<'a> {
+    text: &'a str,
+    origin: &'a str,
+    base: &'a Path,
+    found: Vec<String>,
+    /// The virtual start, seconds since the UNIX epoch.
+    start_s: i64,
+}
+
+impl Check<'_> {
+    /// A problem of the scenario's field `path`, placed where it is written.
+    fn problem(&mut self, path: impl Into<String>, reason: impl Into<String>) {
+        let mut problems = [Problem::new(path, reason)];
+        gobyd::config::locate(&mut problems, self.text, self.origin);
+        let [p] = problems;
+        self.found.push(match p.place {
+            Some(place) => format!("{place}: {}: {}", p.field, p.reason),
+            None => format!("{}: {}: {}", self.origin, p.field, p.reason),
+        });
+    }
+
+    fn scenario(&mut self, s: pb::Scenario) -> Option<Scenario> {
+        let duration = s.duration_s.unwrap_or(0.0);
+        if !(duration > 0.0 && duration.is_finite()) {
+            self.problem("duration_s", "give the seconds of traffic, more than 0");
+        }
+        let drain = s.drain_s();
+        if !(drain >= 0.0 && drain.is_finite()) {
+            self.problem("drain_s", format!("{drain} is not 0 or more seconds"));
+        }
+        let start = start_micros(s.start_time());
+        match &start {
+            Ok(micros) => self.start_s = micros.div_euclid(1_000_000),
+            Err(e) => self.problem("start_time", e.clone()),
+        }
+        let water = s.water.clone().unwrap_or_default();
+        self.water(&water);
+        if s.node.is_empty() {
+            self.problem("node", "a scenario needs at least one node");
+        }
+        self.names_and_ids(&s.node);
+        let mut nodes = Vec::new();
+        for (i, node) in s.node.iter().enumerate() {
+            nodes.push(self.node(i, node, &s.node));
+        }
+        let nodes: Option<Vec<Node>> = nodes.into_iter().collect();
+        Some(Scenario {
+            seed: s.seed(),
+            start_micros: start.ok()?,
+            duration_micros: (duration * 1e6) as u64,
+            drain_micros: (drain * 1e6) as u64,
+            water,
+            nodes: nodes?,
+            report: s.report.unwrap_or_default(),
+        })
+    }
+
+    fn water(&mut self, water: &SimulatorDriverConfig) {
+        let set_by_run = [
+            ("water.node", !water.node.is_empty()),
+            ("water.seed", water.seed.is_some()),
+            ("water.channel", water.channel.is_some()),
+            ("water.udp_local", water.udp_local.is_some()),
+            ("water.udp_peer", !water.udp_peer.is_empty()),
+        ];
+        for (path, set) in set_by_run {
+            if set {
+                self.problem(
+                    path,
+                    "set by the scenario (node positions, the seed, one in-process channel): \
+                     leave it out",
+                );
+            }
+        }
+        let loss = water.packet_loss();
+        if !(0.0..=1.0).contains(&loss) {
+            self.problem(
+                "water.packet_loss",
+                format!("{loss} is not a chance from 0 to 1"),
+            );
+        }
+    }
+
+    fn names_and_ids(&mut self, nodes: &[pb::Node]) {
+        for (i, node) in nodes.iter().enumerate() {
+            if node.name().is_empty() {
+                self.problem(format!("node[{i}].name"), "give the node a name");
+            } else if let Some(j) = nodes[..i].iter().position(|n| n.name() == node.name()) {
+                self.problem(
+                    format!("node[{i}].name"),
+                    format!("\"{}\" is node[{j}]'s name too", node.name()),
+                );
+            }
+            match node.modem_id {
+                None => self.problem(format!("node[{i}].modem_id"), "give the node's modem id"),
+                Some(id) if id <= 0 => self.problem(
+                    format!("node[{i}].modem_id"),
+                    format!("{id} is not valid: modem ids are 1 and up (0 is broadcast)"),
+                ),
+                Some(id) => {
+                    if let Some(j) = nodes[..i].iter().position(|n| n.modem_id == Some(id)) {
+                        self.problem(
+                            format!("node[{i}].modem_id"),
+                            format!("{id} is node[{j}]'s modem id too"),
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    fn node(&mut self, i: usize, node: &pb::Node, all: &[pb::Node]) -> Option<Node> {
+        let position = node.position.unwrap_or_default();
+        if position.depth().is_nan() || position.depth() < 0.0 {
+            self.problem(
+                format!("node[{i}].position.depth"),
+                format!(
+                    "{} is not a depth (metres down, 0 or more)",
+                    position.depth()
+                ),
+            );
+        }
+        let checked = self.gobyd(i, node)?;
+        let mut traffic = Vec::new();
+        for (j, t) in node.traffic.iter().enumerate() {
+            traffic.push(self.traffic(i, j, t, node, all, &checked));
+        }
+        Some(Node {
+            name: node.name().to_string(),
+            modem_id: node.modem_id(),
+            config: checked.config,
+            codec: checked.codec,
+            position: [position.x(), position.y(), position.depth()],
+            traffic: traffic.into_iter().collect::<Option<Vec<_>>>()?,
+        })
+    }
+
+    /// The node's gobyd configuration, checked as the daemon will run it.
+    fn gobyd(&mut self, i: usize, node: &pb::Node) -> Option<gobyd::check::Checked> {
+        use pb::node::Config;
+        let (config, file) = match &node.config {
+            None => {
+                self.problem(
+                    format!("node[{i}]"),
+                    "give the node's gobyd configuration: gobyd { ... } or gobyd_file",
+                );
+                return None;
+            }
+            Some(Config::Gobyd(config)) => (config.clone(), None),
+            Some(Config::GobydFile(name)) => {
+                let path = self.base.join(name);
+                let text = match std::fs::read_to_string(&path) {
+                    Ok(text) => text,
+                    Err(e) => {
+                        self.problem(
+                            format!("node[{i}].gobyd_file"),
+                            format!("cannot read {}: {e}", path.display()),
+                        );
+                        return None;
+                    }
+                };
+                let origin = path.display().to_string();
+                match gobyd::config::parse(&text, &origin) {
+                    Ok(config) => (config, Some((text, origin))),
+                    Err(e) => {
+                        self.found.push(format!("node[{i}].gobyd_file: {e}"));
+                        return None;
+                    }
+                }
+            }
+        };
+        let config = self.prepared(i, node, config)?;
+        match gobyd::check::validate(config, gobyd::config::DriverSettings::Caller) {
+            Ok(checked) => Some(checked),
+            Err(e) => {
+                self.gobyd_refused(i, e, file);
+                None
+            }
+        }
+    }
+
+    /// `config` as the node runs it: its modem id, the interfaces off.
+    fn prepared(
+        &mut self,
+        i: usize,
+        node: &pb::Node,
+        mut config: GobydConfig,
+    ) -> Option<GobydConfig> {
+        let id = node.modem_id.filter(|id| *id > 0)?;
+        if config.modem_id.is_some_and(|own| own != id) {
+            self.problem(
+                format!("node[{i}].gobyd.modem_id"),
+                format!("{} is not the node's modem_id ({id})", config.modem_id()),
+            );
+            return None;
+        }
+        if !config.link.is_empty() {
+            self.problem(
+                format!("node[{i}].gobyd.link"),
+                "a node of several links is not simulated yet: give one driver and mac",
+            );
+            return None;
+        }
+        config.modem_id = Some(id);
+        config.driver = Some(crate::world::driver_config(id, &[], &Default::default(), 0));
+        // The run publishes and listens in-process: no JSON, MQTT or MOOS
+        // interface, and no forecast (its ray traces run on other threads).
+        config.json = Some(protos::goby::apps::protobuf::gobyd_config::JsonInterface {
+            tcp_bind: Some(String::new()),
+            udp_bind: Some(String::new()),
+        });
+        config.mqtt = None;
+        config.moos = None;
+        config.forecast = None;
+        Some(config)
+    }
+
+    /// Reports gobyd's refusal of node `i`'s configuration, each problem
+    /// where it is written: in the scenario (inline) or in `file`.
+    fn gobyd_refused(&mut self, i: usize, e: DaemonError, file: Option<(String, String)>) {
+        let DaemonError::Config(ConfigError::Problems(problems)) = e else {
+            let path = match file {
+                Some(_) => "gobyd_file",
+                None => "gobyd",
+            };
+            self.problem(format!("node[{i}].{path}"), e.to_string());
+            return;
+        };
+        for mut p in problems {
+            match &file {
+                None => self.problem(format!("node[{i}].gobyd.{}", p.field), p.reason),
+                Some((text, origin)) => {
+                    gobyd::config::locate(std::slice::from_mut(&mut p), text, origin);
+                    let place = p.place.as_deref().unwrap_or(origin);
+                    self.found.push(format!(
+                        "{place}: {}: {} (node[{i}].gobyd_file)",
+                        p.field, p.reason
+                    ));
+                }
+            }
+        }
+    }
+
+    fn traffic(
+        &mut self,
+        i: usize,
+        j: usize,
+        t: &pb::Traffic,
+        node: &pb::Node,
+        all: &[pb::Node],
+        checked: &gobyd::check::Checked,
+    ) -> Option<Stream> {
+        let at = format!("node[{i}].traffic[{j}]");
+        let descriptor = match checked.codec.descriptor(t.r#type()) {
+            Some(d) => d,
+            None => {
+                self.problem(
+                    format!("{at}.type"),
+                    format!(
+                        "\"{}\" is not a type node \"{}\"'s gobyd loads (it loads {})",
+                        t.r#type(),
+                        node.name(),
+                        checked.loaded.join(", ")
+                    ),
+                );
+                return None;
+            }
+        };
+        let rate = self.rate(&at, t)?;
+        let dest = match &t.dest {
+            None => None,
+            Some(name) => match all.iter().position(|n| n.name() == name) {
+                None => {
+                    self.problem(format!("{at}.dest"), format!("no node named \"{name}\""));
+                    return None;
+                }
+                Some(d) if all[d].modem_id == node.modem_id => {
+                    self.problem(format!("{at}.dest"), "a node does not send to itself");
+                    return None;
+                }
+                Some(d) => Some((d, all[d].modem_id())),
+            },
+        };
+        let mut fixed = Vec::new();
+        let roles = role_fields(checked, &descriptor);
+        if let Some(field) = roles.source.as_ref() {
+            fixed.push((
+                field.clone(),
+                ValueGen::Counter {
+                    start: i64::from(node.modem_id()),
+                    step: 0,
+                    format: "%d".into(),
+                },
+            ));
+        }
+        match (&dest, roles.destination) {
+            (Some((_, id)), Some(field)) => fixed.push((
+                field,
+                ValueGen::Counter {
+                    start: i64::from(*id),
+                    step: 0,
+                    format: "%d".into(),
+                },
+            )),
+            (Some(_), None) => {
+                self.problem(
+                    format!("{at}.dest"),
+                    format!(
+                        "{} has no DESTINATION_ID role in node \"{}\"'s queue: it is sent to \
+                         every node (leave dest out)",
+                        descriptor.full_name(),
+                        node.name()
+                    ),
+                );
+                return None;
+            }
+            (None, _) => {}
+        }
+        let before = self.found.len();
+        for (k, field) in t.field.iter().enumerate() {
+            match crate::traffic::field_value(&descriptor, field) {
+                Ok(value) => fixed.push(value),
+                Err((part, reason)) => self.problem(format!("{at}.field[{k}]{part}"), reason),
+            }
+        }
+        if self.found.len() > before {
+            return None;
+        }
+        let start_s = t.start_s();
+        if !(start_s >= 0.0 && start_s.is_finite()) {
+            self.problem(
+                format!("{at}.start_s"),
+                format!("{start_s} is not 0 or more seconds"),
+            );
+            return None;
+        }
+        let stream = Stream {
+            index: j,
+            descriptor,
+            dest: dest.map(|(d, _)| d),
+            rate,
+            start_s,
+            fields: fixed,
+        };
+        // One publication made and encoded now: a required field left out,
+        // a value out of its field's range, is refused before the run.
+        // A time the receiver would restore on another date (the daemon
+        // refuses it at publication), checked at the start.
+        let sample = stream.generator(0, i).message();
+        let moved = checked.codec.moved_dates_at(&sample, self.start_s);
+        let problem = match (checked.codec.encode(&sample), moved) {
+            (Err(e), _) | (Ok(_), Err(e)) => Some(e.to_string()),
+            (Ok(_), Ok(moved)) => moved
+                .first()
+                .map(|c| format!("field {}: {}", c.field, c.reason)),
+        };
+        if let Some(problem) = problem {
+            self.problem(at, format!("its first message is refused: {problem}"));
+            return None;
+        }
+        Some(stream)
+    }
+
+    fn rate(&mut self, at: &str, t: &pb::Traffic) -> Option<Rate> {
+        use pb::traffic::Rate as R;
+        let (path, value, rate) = match t.rate {
+            None => {
+                self.problem(at, "give period_s or poisson_per_hour");
+                return None;
+            }
+            Some(R::PeriodS(p)) => ("period_s", p, Rate::Period(p)),
+            Some(R::PoissonPerHour(r)) => ("poisson_per_hour", r, Rate::Poisson(r)),
+        };
+        if !(value > 0.0 && value.is_finite()) {
+            self.problem(
+                format!("{at}.{path}"),
+                format!("{value} is not more than 0"),
+            );
+            return None;
+        }
+        Some(rate)
+    }
+}
+
+/// The fields a type's queue entry gives the source and destination
+/// roles (by field value).
+struct Roles {
+    source: Option<prost_reflect::FieldDescriptor>,
+    destination: Option<prost_reflect::FieldDescriptor>,
+}
+
+fn role_fields(checked: &gobyd::check::Checked, descriptor: &MessageDescriptor) -> Roles {
+    let entry = checked
+        .queue
+        .message_entry
+        .iter()
+        .find(|e| e.protobuf_name == descriptor.full_name());
+    let field = |kind: RoleType| {
+        let role = entry?
+            .role
+            .iter()
+            .find(|r| r.r#type() == kind && r.setting() == RoleSetting::FieldValue)?;
+        descriptor.get_field_by_name(role.field())
+    };
+    Roles {
+        source: field(RoleType::SourceId),
+        destination: field(RoleType::DestinationId),
+    }
+}
+
+/// `text` (RFC 3339) as microseconds since the UNIX epoch.
+fn start_micros(text: &str) -> Result<i64, String> {
+    let at = time::OffsetDateTime::parse(text, &time::format_description::well_known::Rfc3339)
+        .map_err(|e| format!("\"{text}\" is not an RFC 3339 time (2026-06-01T00:00:00Z): {e}"))?;
+    i64::try_from(at.unix_timestamp_nanos() / 1000)
+        .map_err(|_| format!("\"{text}\" is out of range"))
+}
+
+/// Where a scenario file's relative paths are read from.
+pub fn base_of(path: &Path) -> PathBuf {
+    path.parent().map(Path::to_path_buf).unwrap_or_default()
+}

@@ -1,0 +1,315 @@
+//! The world of a run: one `gobyd` per node, in this process, each on a
+//! simulator driver joined to one shared medium, every core and driver
+//! reading one virtual clock ([`TokioClock`] on tokio's paused clock, a
+//! current-thread runtime); the streams of publications; the listeners
+//! that enter every publication and event in the [`Ledger`].
+//!
+//! The run: the nodes start at the scenario's start time, the streams
+//! publish for its duration, the nodes go on for the drain, then stop; what
+//! each still owes is read from its journal. The data directories live in
+//! a temporary directory (under `TMPDIR`), removed at the end.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use gobyd::daemon::Daemon;
+use gobyd::event::{Publish, SharedEvent};
+use modemdriver::sim::medium::Medium;
+use modemdriver::sim::SimulatorDriver;
+use modemdriver::time::TokioClock;
+use protos::goby::acomms::protobuf::{
+    driver_config, simulator_driver_config::NodePosition, DriverConfig, DriverType,
+    SimulatorDriverConfig,
+};
+use queue::Clock;
+use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::time::Instant;
+
+use crate::ledger::{Ledger, LedgerNode};
+use crate::scenario::Scenario;
+use crate::traffic::{mix, Generator};
+use crate::SimError;
+
+/// The driver section of node `modem_id`: the acoustic channel simulator
+/// with the scenario's `water`, every node at `positions` (modem id; x,
+/// y, depth in metres), its losses drawn from `seed`; acks deferred to the
+/// daemon (sent once the message is recorded).
+pub fn driver_config(
+    modem_id: i32,
+    positions: &[(i32, [f64; 3])],
+    water: &SimulatorDriverConfig,
+    seed: u64,
+) -> DriverConfig {
+    let mut simulator = water.clone();
+    simulator.node = positions
+        .iter()
+        .map(|(id, [x, y, depth])| NodePosition {
+            modem_id: *id,
+            x: Some(*x),
+            y: Some(*y),
+            z: Some(-depth),
+        })
+        .collect();
+    simulator.seed = Some(seed);
+    DriverConfig {
+        driver: Some(driver_config::Driver::DriverType(
+            DriverType::DriverAcousticSimulator as i32,
+        )),
+        modem_id: Some(modem_id),
+        deferred_ack: Some(true),
+        simulator: Some(simulator),
+        ..Default::default()
+    }
+}
+
+/// Runs `scenario` on a current-thread runtime in virtual time; returns
+/// the ledger of the run.
+pub fn run(scenario: &Scenario) -> Result<Ledger, SimError> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .map_err(|e| SimError::Run(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(run_world(scenario))
+}
+
+/// A started node: where to publish, how to stop it, its run.
+struct Running {
+    publisher: mpsc::Sender<Publish>,
+    stop: oneshot::Sender<()>,
+    run: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
+    listener: tokio::task::JoinHandle<()>,
+}
+
+async fn run_world(s: &Scenario) -> Result<Ledger, SimError> {
+    let dir = tempfile::Builder::new()
+        .prefix("goby-sim-")
+        .tempdir()
+        .map_err(|e| SimError::Run(format!("cannot make the nodes' data directories: {e}")))?;
+    let clock = Arc::new(TokioClock::at(s.start_micros));
+    let start = Instant::now();
+    let ledger = Arc::new(Mutex::new(Ledger::new(
+        s.nodes
+            .iter()
+            .map(|n| LedgerNode {
+                name: n.name.clone(),
+                modem_id: n.modem_id,
+                codec: n.codec.clone(),
+            })
+            .collect(),
+    )));
+    let medium = Medium::new();
+    let mut nodes = Vec::new();
+    for i in 0..s.nodes.len() {
+        nodes.push(start_node(s, i, dir.path(), &medium, &clock, &ledger).await?);
+    }
+    let end_s = s.duration_micros as f64 / 1e6;
+    let mut streams = Vec::new();
+    for (i, node) in s.nodes.iter().enumerate() {
+        for stream in &node.traffic {
+            let publishing = Publishing {
+                node: i,
+                stream: stream.index,
+                dest: stream.dest,
+                generator: stream.generator(s.seed, i),
+                publisher: nodes[i].publisher.clone(),
+                ledger: ledger.clone(),
+                clock: clock.clone(),
+                start,
+                end_s,
+            };
+            streams.push(tokio::spawn(publishing.run()));
+        }
+    }
+    for stream in streams {
+        stream
+            .await
+            .map_err(|e| SimError::Run(format!("a stream of publications failed: {e}")))?;
+    }
+    tokio::time::sleep_until(start + Duration::from_micros(s.duration_micros + s.drain_micros))
+        .await;
+    stop_nodes(s, nodes).await?;
+    for (i, node) in s.nodes.iter().enumerate() {
+        let ids = owed(&dir.path().join(format!("node{i}")))
+            .map_err(|e| SimError::Run(format!("node {}: {e}", node.name)))?;
+        ledger.lock().expect("not poisoned").owed(i, &ids);
+    }
+    let ledger = Arc::try_unwrap(ledger)
+        .map_err(|_| SimError::Run("the ledger is still in use".into()))?
+        .into_inner()
+        .expect("not poisoned");
+    match ledger.failure() {
+        Some(reason) => Err(SimError::Run(reason.to_string())),
+        None => Ok(ledger),
+    }
+}
+
+/// Starts node `i` of `s` with its data directory in `dir`.
+async fn start_node(
+    s: &Scenario,
+    i: usize,
+    dir: &Path,
+    medium: &Arc<Medium>,
+    clock: &Arc<TokioClock>,
+    ledger: &Arc<Mutex<Ledger>>,
+) -> Result<Running, SimError> {
+    let node = &s.nodes[i];
+    let positions: Vec<(i32, [f64; 3])> =
+        s.nodes.iter().map(|n| (n.modem_id, n.position)).collect();
+    let seed = mix(&[s.seed, node.modem_id as u64]);
+    let driver_config = driver_config(node.modem_id, &positions, &s.water, seed);
+    let mut config = node.config.clone();
+    config.driver = Some(driver_config.clone());
+    config.data_dir = Some(dir.join(format!("node{i}")).display().to_string());
+    let failed = |e: &dyn std::fmt::Display| {
+        SimError::Run(format!("node {}: gobyd did not start: {e}", node.name))
+    };
+    let driver =
+        SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
+            .map_err(|e| failed(&e))?;
+    // The node's start numbers (publication numbers and the like) drawn
+    // from the scenario's seed, not the operating system's; its journal
+    // synced in line, so that no thread's real time orders its events.
+    let daemon = Daemon::builder(config)
+        .driver(driver)
+        .clock(clock.clone())
+        .seed(mix(&[s.seed, node.modem_id as u64, 1]))
+        .sync_in_line()
+        .start()
+        .await
+        .map_err(|e| failed(&e))?;
+    let listener = tokio::spawn(listen(
+        i,
+        node.name.clone(),
+        daemon.subscribe(),
+        ledger.clone(),
+        clock.clone(),
+    ));
+    let publisher = daemon.publisher();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let run = tokio::spawn(daemon.run(async move {
+        let _ = stopped.await;
+    }));
+    Ok(Running {
+        publisher,
+        stop,
+        run,
+        listener,
+    })
+}
+
+/// Stops every node and waits for its run and its listener to end.
+async fn stop_nodes(s: &Scenario, nodes: Vec<Running>) -> Result<(), SimError> {
+    let mut listeners = Vec::new();
+    let mut runs = Vec::new();
+    for node in nodes {
+        let _ = node.stop.send(());
+        runs.push(node.run);
+        listeners.push(node.listener);
+        drop(node.publisher);
+    }
+    for (run, node) in runs.into_iter().zip(&s.nodes) {
+        match run.await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(SimError::Run(format!("node {}: {e}", node.name))),
+            Err(e) => return Err(SimError::Run(format!("node {}: {e}", node.name))),
+        }
+    }
+    // Each listener has every event by now; one whose channel stays open
+    // (a sender kept by a task still ending) is stopped after a while.
+    for listener in listeners {
+        let abort = listener.abort_handle();
+        if tokio::time::timeout(Duration::from_secs(60), listener)
+            .await
+            .is_err()
+        {
+            abort.abort();
+        }
+    }
+    Ok(())
+}
+
+/// The journal ids a node still owes (its outbox journal, in `data_dir`).
+fn owed(data_dir: &Path) -> Result<BTreeSet<u64>, String> {
+    let path = data_dir.join("outbox.journal");
+    let (_, replay) =
+        queue::Journal::open(&path).map_err(|e| format!("cannot read what is owed: {e}"))?;
+    Ok(replay.entries.iter().map(|e| e.id).collect())
+}
+
+/// Enters every event of node `node` in the ledger; an event missed
+/// (the channel overflowed) fails the run.
+async fn listen(
+    node: usize,
+    name: String,
+    mut events: broadcast::Receiver<SharedEvent>,
+    ledger: Arc<Mutex<Ledger>>,
+    clock: Arc<TokioClock>,
+) {
+    loop {
+        match events.recv().await {
+            Ok(event) => ledger
+                .lock()
+                .expect("not poisoned")
+                .event(node, clock.now(), &event),
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                ledger.lock().expect("not poisoned").fail(format!(
+                    "node {name}: {n} of its events were missed (its event channel overflowed): \
+                     the report would be wrong"
+                ));
+                return;
+            }
+            Err(broadcast::error::RecvError::Closed) => return,
+        }
+    }
+}
+
+/// One stream of one node, publishing until the end of the traffic.
+struct Publishing {
+    node: usize,
+    stream: usize,
+    dest: Option<usize>,
+    generator: Generator,
+    publisher: mpsc::Sender<Publish>,
+    ledger: Arc<Mutex<Ledger>>,
+    clock: Arc<TokioClock>,
+    start: Instant,
+    end_s: f64,
+}
+
+impl Publishing {
+    async fn run(mut self) {
+        loop {
+            let at = self.generator.next_at();
+            if at >= self.end_s {
+                return;
+            }
+            tokio::time::sleep_until(self.start + Duration::from_secs_f64(at)).await;
+            let seq = self.generator.count();
+            let message = self.generator.message();
+            let index = self.ledger.lock().expect("not poisoned").publish(
+                self.node,
+                self.stream,
+                seq,
+                &message,
+                self.dest,
+                self.clock.now(),
+            );
+            let (reply, answer) = oneshot::channel();
+            let result = match self.publisher.send(Publish::new(message, reply)).await {
+                Err(_) => Err("the node stopped taking publications".to_string()),
+                Ok(()) => match answer.await {
+                    Ok(Ok(accepted)) => Ok(accepted.id),
+                    Ok(Err(refused)) => Err(refused),
+                    Err(_) => Err("the node did not answer".to_string()),
+                },
+            };
+            self.ledger
+                .lock()
+                .expect("not poisoned")
+                .accepted(index, result);
+        }
+    }
+}

@@ -1,0 +1,147 @@
+//! Scenarios with mistakes are refused before anything runs, each mistake
+//! named where it is written (file, line, column, field).
+
+mod support;
+
+use std::path::Path;
+
+use goby_sim::scenario::parse;
+
+/// Line and column (1-based) of the first `needle` in `text`.
+fn place_of(text: &str, needle: &str) -> (usize, usize) {
+    let offset = text.find(needle).expect("the needle is in the text");
+    let before = &text[..offset];
+    (
+        before.matches('\n').count() + 1,
+        before.rsplit('\n').next().unwrap().chars().count() + 1,
+    )
+}
+
+fn refusal(text: &str) -> String {
+    match parse(text, "fleet.pb.txt", Path::new(".")) {
+        Ok(_) => panic!("the scenario was accepted:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn the_ring_of_the_tests_is_accepted() {
+    let text = support::ring(4, 0.25, 3600, 300, 3600);
+    let scenario = parse(&text, "ring", Path::new(".")).expect("accepted");
+    assert_eq!(scenario.nodes.len(), 4);
+    assert_eq!(scenario.nodes[3].traffic[0].dest, Some(0));
+}
+
+#[test]
+fn an_unknown_destination_is_refused_at_its_line_and_column() {
+    let text = support::ring(3, 0.0, 600, 60, 60).replacen("dest: \"n3\"", "dest: \"n9\"", 1);
+    let error = refusal(&text);
+    let (line, column) = place_of(&text, "dest: \"n9\"");
+    assert_eq!(
+        error,
+        format!("fleet.pb.txt:{line}:{column}: node[1].traffic[0].dest: no node named \"n9\"")
+    );
+}
+
+#[test]
+fn a_gobyd_configuration_gobyd_refuses_is_refused_naming_the_node() {
+    let text = support::ring(2, 0.0, 600, 60, 60).replacen(
+        "slot { src: 2 dest: -1 rate: 1 slot_seconds: 10 }",
+        "slot { src: 2 dest: -1 rate: 1 slot_seconds: -10 }",
+        2,
+    );
+    let error = refusal(&text);
+    // Both nodes' configurations, each at its own place.
+    let second = text.rfind("slot_seconds: -10").unwrap();
+    let (line, _) = place_of(&text[..second], "\n");
+    let lines: Vec<&str> = error.lines().collect();
+    assert_eq!(lines.len(), 2, "{error}");
+    assert!(
+        lines[0].contains("node[0].gobyd.mac.slot[1].slot_seconds"),
+        "{error}"
+    );
+    assert!(
+        lines[1].contains("node[1].gobyd.mac.slot[1].slot_seconds"),
+        "{error}"
+    );
+    let written = text[..second].matches('\n').count() + 1;
+    assert!(
+        lines[1].starts_with(&format!("fleet.pb.txt:{written}:")),
+        "{error} (line {written}, {line})"
+    );
+}
+
+#[test]
+fn every_mistake_is_told_at_once() {
+    let text = support::ring(3, 0.0, 600, 60, 60)
+        .replacen("duration_s: 600", "duration_s: 0", 1)
+        .replacen("modem_id: 3", "modem_id: 2", 1)
+        .replacen("period_s: 60", "period_s: -5", 1)
+        .replacen(
+            "type: \"goby.example.Command\"\n    dest: \"n1\"",
+            "type: \"goby.example.Nope\"\n    dest: \"n1\"",
+            1,
+        )
+        .replacen("name: \"n2\"", "name: \"n1\"", 1);
+    let error = refusal(&text);
+    for expected in [
+        "duration_s: give the seconds of traffic, more than 0",
+        "node[1].name: \"n1\" is node[0]'s name too",
+        "node[2].modem_id: 2 is node[1]'s modem id too",
+        "node[0].traffic[0].period_s: -5 is not more than 0",
+        "node[2].traffic[0].type: \"goby.example.Nope\" is not a type",
+    ] {
+        assert!(error.contains(expected), "{expected:?} not in\n{error}");
+    }
+    for line in error.lines() {
+        assert!(line.starts_with("fleet.pb.txt:"), "{line}");
+    }
+}
+
+#[test]
+fn a_text_the_parser_cannot_read_is_refused_at_its_place() {
+    let text = "seed: 1\nduration_s: 60\nnode { name: \"a\" modem_id: 1 bogus: 3 }\n";
+    let error = refusal(text);
+    assert!(error.starts_with("fleet.pb.txt:3:30: "), "{error}");
+    assert!(error.contains("bogus"), "{error}");
+}
+
+#[test]
+fn a_field_value_its_type_cannot_take_is_refused() {
+    let text =
+        support::ring(2, 0.0, 600, 60, 60).replacen("constant: \"GOTO\"", "constant: \"FLY\"", 1);
+    let error = refusal(&text);
+    let (line, column) = place_of(&text, "field { name: \"action\"");
+    assert!(
+        error.starts_with(&format!("fleet.pb.txt:{line}:")),
+        "{error} ({line}:{column})"
+    );
+    assert!(
+        error.contains("node[0].traffic[0].field[0].constant: \"FLY\" is not a value"),
+        "{error}"
+    );
+}
+
+#[test]
+fn a_time_far_from_the_start_is_refused_before_the_run() {
+    // The example fleet's buoy, its reports' time a day before the start.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/fleet.pb.txt");
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "start: 1780272000  step: 600",
+        "start: 1780185600  step: 600",
+        1,
+    );
+    let base = path.parent().unwrap();
+    let error = match parse(&text, "fleet.pb.txt", base) {
+        Ok(_) => panic!("accepted"),
+        Err(e) => e.to_string(),
+    };
+    let (line, column) = place_of(
+        &text,
+        "traffic {\n    type: \"goby.example.NavigationReport\"  dest: \"ship\"  poisson",
+    );
+    assert!(
+        error.starts_with(&format!("fleet.pb.txt:{line}:{column}: node[1].traffic[0]: its first message is refused: field time:")),
+        "{error}"
+    );
+}
