@@ -782,8 +782,11 @@ impl QueueManager {
                     }
                     break;
                 }
-                match self.codec.decode_with_len(rest) {
-                    Ok((message, used)) => {
+                match self
+                    .codec
+                    .decode_with(rest, &dccl::DecodeOptions::default())
+                {
+                    Ok(dccl::Decoded { message, len: used }) => {
                         let used = used.min(rest.len());
                         decoded.push((message, &rest[..used], None));
                         if used == 0 {

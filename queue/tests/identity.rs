@@ -137,7 +137,11 @@ fn a_receiver_without_the_trailer_type_keeps_the_messages_before_it() {
     let codec = sender.manager.codec().clone();
     let mut rest = tx.frame[0].as_slice();
     let mut serials = Vec::new();
-    while let Ok((m, used)) = codec.decode_with_len(rest) {
+    while let Ok(dccl::Decoded {
+        message: m,
+        len: used,
+    }) = codec.decode_with(rest, &dccl::DecodeOptions::default())
+    {
         serials.push(serial(&m));
         rest = &rest[used..];
     }
