@@ -492,7 +492,7 @@ impl Codec {
 
     /// True when the loaded type `full_name` has `omit_id: true`: its
     /// messages carry no DCCL id and decode only by name
-    /// ([`Codec::decode_as_with_len`]).
+    /// ([`Codec::decode_with`] with [`DecodeOptions::as_type`]).
     pub fn omits_id(&self, full_name: &str) -> Result<bool> {
         Ok(self.get(full_name)?.omit_id)
     }

@@ -762,7 +762,7 @@ fn decode_all_of_stitched_messages() {
         Some(Value::Bytes(vec![1, 2, 3, 4].into()))
     );
 
-    // decode_with_len walks the same frame.
+    // decode_with walks the same frame.
     let mut rest = &frame[..];
     for (expected_len, name) in lengths.iter().zip(&names) {
         let dccl::Decoded {
@@ -814,7 +814,7 @@ fn unknown_id() {
         Error::UnknownId(300)
     ));
 
-    // decode_as_with_len checks the id.
+    // decoding as a type checks the id.
     let err = full
         .decode_with(&bytes, &dccl::DecodeOptions::as_type("rt.Blob"))
         .unwrap_err();
@@ -870,7 +870,7 @@ fn missing_required_field() {
         "waypoint.y",
     );
 
-    // encode_into leaves the buffer alone on error.
+    // encode_with leaves the buffer alone on error.
     let mut out = vec![0xee];
     assert!(codec
         .encode_with(
