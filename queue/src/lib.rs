@@ -38,7 +38,7 @@
 //!
 //! clock.advance_seconds(10.0);
 //! let mut request = ModemTransmission { max_frame_bytes: Some(32), ..Default::default() };
-//! sender.handle_modem_data_request(&mut request).unwrap();
+//! sender.handle_modem_data_request(&mut request, 0).unwrap();
 //! assert_eq!(request.dest, Some(0)); // no destination role: broadcast
 //! assert!(!request.frame[0].is_empty());
 //!
@@ -49,7 +49,7 @@
 //!     Arc::new(clock),
 //! ).unwrap();
 //! let events = receiver.subscribe();
-//! assert!(receiver.handle_modem_receive(&request).is_empty());
+//! assert!(receiver.handle_modem_receive(&request, 0).is_empty());
 //! assert!(events.try_iter().any(|e| matches!(e, QueueEvent::Received(_))));
 //! ```
 
