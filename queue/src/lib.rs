@@ -56,14 +56,14 @@
 #![warn(missing_docs)]
 
 pub mod clock;
-pub mod error;
-pub mod event;
+mod error;
+mod event;
 pub mod identity;
 pub mod journal;
 pub mod links;
-pub mod manager;
+mod manager;
 pub mod market;
-pub mod queue;
+mod queue;
 mod role;
 
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
@@ -72,8 +72,7 @@ pub use event::{MessageId, QueueEvent, ReceivedMessage};
 pub use identity::{TrailerCodec, WireIdentity};
 pub use journal::{Encoding, EntryId, Journal, JournalEntry, JournalError, Replay};
 pub use links::{LinkIndex, LinkPolicy, LinkRule, LinkSpec, LinkState, Links};
-pub use manager::{OnDemandProvider, PushOptions, QueueManager};
-pub use queue::QueueSettings;
+pub use manager::{PushOptions, QueueManager};
 
 /// Modem id meaning "every node".
 pub const BROADCAST_ID: i32 = 0;

@@ -24,7 +24,8 @@ use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
 
 /// Generates the message of a data-on-demand type at the moment of a data
 /// request (`None`: nothing to send this time).
-pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
+pub(crate) type OnDemandProvider =
+    Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
 
 /// What the caller knows of a message it queues ([`QueueManager::push`]);
 /// `PushOptions::default()` when it knows nothing more.
