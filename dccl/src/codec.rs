@@ -689,40 +689,36 @@ impl Codec {
             });
         }
         let log = ChangeLog::new();
-        let name = self.encode_input(msg.input(), out, Some(&log))?;
+        let loaded = self.encode_input(msg.input(), out, Some(&log))?;
         Ok(Encoded {
             len: out.len() - start,
-            changes: log.into_changes(&name),
+            changes: log.into_changes(loaded.descriptor.full_name()),
         })
     }
 
-    /// Encodes an [`Encodable`]'s input, appending to `out`; returns the
-    /// full name of its type when changes are logged (empty otherwise).
+    /// Encodes an [`Encodable`]'s input, appending to `out`; returns its
+    /// loaded type.
     fn encode_input(
         &self,
         input: Input<'_>,
         out: &mut Vec<u8>,
         changes: Option<&ChangeLog>,
-    ) -> Result<String> {
-        let name = |loaded: &LoadedMessage| match changes {
-            Some(_) => loaded.descriptor.full_name().to_string(),
-            None => String::new(),
-        };
+    ) -> Result<&LoadedMessage> {
         match input {
             Input::Dynamic(msg) => {
                 let loaded = self.get_by_descriptor(&msg.descriptor())?;
                 self.encode_source(loaded, Source::Dynamic(msg), out, false, changes)?;
-                Ok(name(loaded))
+                Ok(loaded)
             }
             Input::Typed(desc, protobuf) => {
                 let loaded = self.get_by_descriptor(&desc)?;
                 self.encode_protobuf(loaded, &protobuf, out, changes)?;
-                Ok(name(loaded))
+                Ok(loaded)
             }
             Input::Protobuf(p) => {
                 let loaded = self.get(p.full_name)?;
                 self.encode_protobuf(loaded, p.bytes, out, changes)?;
-                Ok(name(loaded))
+                Ok(loaded)
             }
         }
     }
