@@ -259,6 +259,46 @@ fn prost_and_dynamic_messages_encode_identically() {
 }
 
 #[test]
+fn every_kind_of_message_encodes_and_reports_changes_alike() {
+    let mut codec = Codec::new();
+    codec.set_clock(|| NOW);
+    codec.load_type::<NavigationReport>().unwrap();
+    // x far out of its bounds: a value the codec changes.
+    let report = NavigationReport {
+        x: 1.0e9,
+        ..report()
+    };
+    let protobuf = prost::Message::encode_to_vec(&report);
+    let name = "goby.example.NavigationReport";
+    let options = dccl::EncodeOptions::with_changes();
+    let encoded = |msg: &dyn Fn(&mut Vec<u8>) -> dccl::Result<dccl::Encoded>| {
+        let mut out = vec![0xaa];
+        let e = msg(&mut out).unwrap();
+        assert_eq!(e.len, out.len() - 1, "the bytes appended");
+        (out, e.changes)
+    };
+    let from_struct = encoded(&|out| codec.encode_with(&report, out, &options));
+    assert!(!from_struct.1.is_empty(), "x is reported changed");
+    assert_eq!(from_struct.1[0].field, "x");
+    assert_eq!(from_struct.0[1..], codec.encode(&report).unwrap());
+    let dynamic = report.transcode_to_dynamic();
+    assert_eq!(
+        encoded(&|out| codec.encode_with(&dynamic, out, &options)),
+        from_struct
+    );
+    let bytes = dccl::Protobuf::new(name, &protobuf);
+    assert_eq!(
+        encoded(&|out| codec.encode_with(&bytes, out, &options)),
+        from_struct
+    );
+    // Without changes asked for, none are listed.
+    let plain = codec
+        .encode_with(&report, &mut Vec::new(), &dccl::EncodeOptions::default())
+        .unwrap();
+    assert!(plain.changes.is_empty());
+}
+
+#[test]
 fn prost_command_with_embedded_messages() {
     let mut codec = Codec::new();
     codec.load_type::<Command>().unwrap();
