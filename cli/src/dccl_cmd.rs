@@ -665,7 +665,9 @@ pub(crate) fn moved_time_fields(
     if !has_time {
         return Vec::new();
     }
-    let Ok((back, _)) = codec.decode_as_with_len(&name, bytes) else {
+    let Ok(dccl::Decoded { message: back, .. }) =
+        codec.decode_with(bytes, &dccl::DecodeOptions::as_type(&name))
+    else {
         return Vec::new();
     };
     let mut moved = Vec::new();
@@ -791,9 +793,11 @@ pub(crate) fn encode(
         if let (true, Some(why)) = (job.strict, &not_as_encoded) {
             return Err(LineError::Bad(format!("cannot encode: {why}")));
         }
-        let (bytes, changes) = codec
-            .encode_with_changes(&msg)
-            .map_err(|e| LineError::Bad(e.to_string()))?;
+        let mut bytes = Vec::new();
+        let changes = codec
+            .encode_with(&msg, &mut bytes, &dccl::EncodeOptions::with_changes())
+            .map_err(|e| LineError::Bad(e.to_string()))?
+            .changes;
         for change in &changes {
             let warning = format!("{}.{}: {}", change.message, change.field, change.reason);
             warn(stderr, number, &warning)?;

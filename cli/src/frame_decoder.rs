@@ -95,12 +95,14 @@ impl FrameDecoder<'_> {
             {
                 break;
             }
-            let decoded = match self.as_type {
-                Some(name) => self.codec.decode_as_with_len(name, rest),
-                None => self.codec.decode_with_len(rest),
+            let options = dccl::DecodeOptions {
+                as_type: self.as_type,
             };
-            match decoded {
-                Ok((msg, used)) => {
+            match self.codec.decode_with(rest, &options) {
+                Ok(dccl::Decoded {
+                    message: msg,
+                    len: used,
+                }) => {
                     emit(&msg).map_err(FrameError::Output)?;
                     if used == 0 {
                         break;

@@ -536,8 +536,8 @@ log {{ raw_log: false }}
             if !messages.is_empty() && frame[at..].iter().all(|&b| b == 0) {
                 break;
             }
-            match codec.decode_with_len(&frame[at..]) {
-                Ok((msg, len)) => {
+            match codec.decode_with(&frame[at..], &dccl::DecodeOptions::default()) {
+                Ok(dccl::Decoded { message: msg, len }) => {
                     messages.push(dccl::short_debug_string(&msg));
                     at += len;
                 }

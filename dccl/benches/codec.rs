@@ -31,7 +31,9 @@ fn group(
         b.iter(|| {
             for m in messages {
                 out.clear();
-                codec.encode_into(black_box(m), &mut out).unwrap();
+                codec
+                    .encode_with(black_box(m), &mut out, &dccl::EncodeOptions::default())
+                    .unwrap();
                 black_box(&out);
             }
         })

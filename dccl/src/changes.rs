@@ -1,7 +1,7 @@
 //! Values the codec changes while encoding in libdccl's default (non-strict)
 //! mode: an out-of-range number sent as "not present", NaN sent as the
 //! minimum, a string or array truncated, an undefined enum value dropped.
-//! [`Codec::encode_with_changes`](crate::Codec::encode_with_changes) and
+//! [`Codec::encode_with`](crate::Codec::encode_with) with [`EncodeOptions::changes`](crate::EncodeOptions::changes) and
 //! [`Codec::check`](crate::Codec::check) report them; in strict mode each is
 //! an error instead.
 

@@ -16,6 +16,8 @@ use crate::codecs::arithmetic::{ArithmeticModel, ArithmeticSession, ArithmeticSt
 use crate::codecs::identifier;
 use crate::codecs::message::MessageCodec;
 use crate::crypto::CryptoKey;
+use crate::encode_decode::sealed::Input;
+use crate::encode_decode::{DecodeOptions, Decoded, Encodable, EncodeOptions, Encoded};
 use crate::error::{CodecError, Error, Result};
 use crate::field_codec::{
     DateShift, DecodeContext, EncodeContext, FieldCodec, FieldSpec, MessagePart,
@@ -490,7 +492,7 @@ impl Codec {
 
     /// True when the loaded type `full_name` has `omit_id: true`: its
     /// messages carry no DCCL id and decode only by name
-    /// ([`Codec::decode_as_with_len`]).
+    /// ([`Codec::decode_with`] with [`DecodeOptions::as_type`]).
     pub fn omits_id(&self, full_name: &str) -> Result<bool> {
         Ok(self.get(full_name)?.omit_id)
     }
@@ -639,38 +641,95 @@ impl Codec {
         Ok(loaded)
     }
 
-    /// Encodes a message of a loaded type.
-    pub fn encode(&self, msg: &DynamicMessage) -> Result<Vec<u8>> {
+    /// Encodes a message of a loaded type: a `DynamicMessage`, a
+    /// prost-generated struct or its protobuf bytes ([`Encodable`]).
+    /// Errors: the type is not loaded ([`Error::UnknownType`]); a value the
+    /// codec refuses ([`Error::Encode`], naming the message and the field).
+    pub fn encode<M: Encodable>(&self, msg: &M) -> Result<Vec<u8>> {
         let mut out = Vec::new();
-        self.encode_into(msg, &mut out)?;
+        self.encode_input(msg.input(), &mut out, None)?;
         Ok(out)
     }
 
-    /// Encodes a message, appending the bytes to `out` (several calls stitch
-    /// messages together; [`Codec::decode_all`] splits them).
-    pub fn encode_into(&self, msg: &DynamicMessage, out: &mut Vec<u8>) -> Result<()> {
-        self.encode_with(msg, out, false, None)
+    /// Encodes a message as [`Codec::encode`] does, appending the bytes to
+    /// `out` (several calls stitch messages together; [`Codec::decode_all`]
+    /// splits them; on an error `out` is left as it was), as `options` say:
+    /// with [`EncodeOptions::changes`], every value the codec changed on the
+    /// way is reported.
+    ///
+    /// ```
+    /// # let pool = dccl::compile_sources(&[("s.proto", r#"syntax = "proto2";
+    /// #   import "dccl/option_extensions.proto";
+    /// #   message Status { option (dccl.msg) = { id: 3 max_bytes: 8 codec_version: 4 };
+    /// #     required double depth = 1 [(dccl.field) = { min: 0 max: 100 precision: 1 }]; }"#)])?;
+    /// # let desc = pool.get_message_by_name("Status").unwrap();
+    /// # let mut codec = dccl::Codec::new();
+    /// # codec.load(&desc)?;
+    /// use dccl::EncodeOptions;
+    ///
+    /// let msg = prost_reflect::DynamicMessage::parse_text_format(desc, "depth: 250")?;
+    /// let mut frame = Vec::new();
+    /// let encoded = codec.encode_with(&msg, &mut frame, &EncodeOptions::with_changes())?;
+    /// assert_eq!(encoded.len, frame.len());
+    /// assert_eq!(encoded.changes[0].field, "depth"); // over its max: sent as not present
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn encode_with<M: Encodable>(
+        &self,
+        msg: &M,
+        out: &mut Vec<u8>,
+        options: &EncodeOptions,
+    ) -> Result<Encoded> {
+        let start = out.len();
+        if !options.changes {
+            self.encode_input(msg.input(), out, None)?;
+            return Ok(Encoded {
+                len: out.len() - start,
+                changes: Vec::new(),
+            });
+        }
+        let log = ChangeLog::new();
+        let loaded = self.encode_input(msg.input(), out, Some(&log))?;
+        Ok(Encoded {
+            len: out.len() - start,
+            changes: log.into_changes(loaded.descriptor.full_name()),
+        })
     }
 
-    /// Encodes a message (the same bytes as [`Codec::encode`]) and reports
-    /// every value the codec changed on the way: out-of-range numbers sent as
-    /// "not present", NaN sent as the minimum, strings, bytes and arrays
-    /// truncated, undefined enum values. In strict mode the first such value
-    /// is an error instead, as with `encode`.
-    pub fn encode_with_changes(&self, msg: &DynamicMessage) -> Result<(Vec<u8>, Vec<ValueChange>)> {
-        let log = ChangeLog::new();
-        let mut out = Vec::new();
-        self.encode_with(msg, &mut out, false, Some(&log))?;
-        Ok((out, log.into_changes(msg.descriptor().full_name())))
+    /// Encodes an [`Encodable`]'s input, appending to `out`; returns its
+    /// loaded type.
+    fn encode_input(
+        &self,
+        input: Input<'_>,
+        out: &mut Vec<u8>,
+        changes: Option<&ChangeLog>,
+    ) -> Result<&LoadedMessage> {
+        match input {
+            Input::Dynamic(msg) => {
+                let loaded = self.get_by_descriptor(&msg.descriptor())?;
+                self.encode_source(loaded, Source::Dynamic(msg), out, false, changes)?;
+                Ok(loaded)
+            }
+            Input::Typed(desc, protobuf) => {
+                let loaded = self.get_by_descriptor(&desc)?;
+                self.encode_protobuf(loaded, &protobuf, out, changes)?;
+                Ok(loaded)
+            }
+            Input::Protobuf(p) => {
+                let loaded = self.get(p.full_name)?;
+                self.encode_protobuf(loaded, p.bytes, out, changes)?;
+                Ok(loaded)
+            }
+        }
     }
 
     /// The values encoding `msg` would change (see
-    /// [`Codec::encode_with_changes`]), without encoding it for sending:
+    /// [`Codec::encode_with`]), without encoding it for sending:
     /// adaptive arithmetic models are left as they are.
     pub fn check(&self, msg: &DynamicMessage) -> Result<Vec<ValueChange>> {
         let log = ChangeLog::new();
         let mut out = Vec::new();
-        self.encode_with(msg, &mut out, true, Some(&log))?;
+        self.encode_dynamic(msg, &mut out, true, Some(&log))?;
         Ok(log.into_changes(msg.descriptor().full_name()))
     }
 
@@ -724,7 +783,7 @@ impl Codec {
             .then(|| ArithmeticSession::new(models, &self.arithmetic, keep))
     }
 
-    fn encode_with(
+    fn encode_dynamic(
         &self,
         msg: &DynamicMessage,
         out: &mut Vec<u8>,
@@ -735,16 +794,16 @@ impl Codec {
         self.encode_source(loaded, Source::Dynamic(msg), out, dry_run, changes)
     }
 
-    /// Encodes a message of the loaded type `full_name` given as protobuf
-    /// wire bytes, appending to `out`.
-    fn encode_protobuf_with(
+    /// Encodes a message of a loaded type given as protobuf wire bytes,
+    /// appending to `out`.
+    fn encode_protobuf(
         &self,
-        full_name: &str,
+        loaded: &LoadedMessage,
         protobuf: &[u8],
         out: &mut Vec<u8>,
         changes: Option<&ChangeLog>,
     ) -> Result<()> {
-        let loaded = self.get(full_name)?;
+        let full_name = loaded.descriptor.full_name();
         if let Some(wire) = &loaded.wire {
             if let Some(flat) = wire.plans.read(protobuf) {
                 let source = Source::Wire(wire, flat.root());
@@ -949,38 +1008,6 @@ impl Codec {
         }))
     }
 
-    /// Encodes a message of the loaded type `full_name` given as protobuf
-    /// wire bytes (its protobuf encoding, as any protobuf library writes
-    /// it), appending the DCCL bytes to `out`: the bytes [`Codec::encode`]
-    /// gives for the message those bytes decode to, without decoding them
-    /// to a `DynamicMessage` first when the type's codecs allow it (every
-    /// message field coded by the default message codec). Unknown fields
-    /// are ignored, as `encode` ignores them. Errors: the type is not
-    /// loaded ([`Error::UnknownType`]); the bytes are not a protobuf
-    /// message of the type ([`Error::Encode`], "not a valid protobuf message
-    /// of that type"); what `encode` refuses.
-    pub fn encode_protobuf_into(
-        &self,
-        full_name: &str,
-        protobuf: &[u8],
-        out: &mut Vec<u8>,
-    ) -> Result<()> {
-        self.encode_protobuf_with(full_name, protobuf, out, None)
-    }
-
-    /// [`Codec::encode_protobuf_into`], also reporting every value the
-    /// codec changed, as [`Codec::encode_with_changes`] does.
-    pub fn encode_protobuf_with_changes(
-        &self,
-        full_name: &str,
-        protobuf: &[u8],
-    ) -> Result<(Vec<u8>, Vec<ValueChange>)> {
-        let log = ChangeLog::new();
-        let mut out = Vec::new();
-        self.encode_protobuf_with(full_name, protobuf, &mut out, Some(&log))?;
-        Ok((out, log.into_changes(full_name)))
-    }
-
     /// Whether a field of the loaded type `full_name` is coded by a codec
     /// that restores a date from the receiver's clock (`dccl.time`): only
     /// such a type's messages can have [`Codec::moved_dates`].
@@ -988,17 +1015,11 @@ impl Codec {
         Ok(self.get(full_name)?.reads_clock)
     }
 
-    /// Encodes a prost-generated struct (deriving `ReflectMessage`) of a
-    /// loaded type; [`Codec::decode_typed`] decodes it back.
-    pub fn encode_typed<T: ReflectMessage>(&self, msg: &T) -> Result<Vec<u8>> {
-        self.encode(&msg.transcode_to_dynamic())
-    }
-
     /// Encoded size in bytes of a message.
     /// Adaptive arithmetic models are left as they are.
     pub fn size(&self, msg: &DynamicMessage) -> Result<usize> {
         let mut out = Vec::new();
-        self.encode_with(msg, &mut out, true, None)?;
+        self.encode_dynamic(msg, &mut out, true, None)?;
         Ok(out.len())
     }
 
@@ -1039,44 +1060,41 @@ impl Codec {
 
     /// Decodes the message at the start of `bytes`, its type found by its
     /// DCCL id. Bytes after the message are ignored
-    /// ([`Codec::decode_with_len`] tells where it ends, [`Codec::decode_all`]
+    /// ([`Codec::decode_with`] tells where it ends, [`Codec::decode_all`]
     /// decodes them too).
     pub fn decode(&self, bytes: &[u8]) -> Result<DynamicMessage> {
-        Ok(self.decode_with_len(bytes)?.0)
+        Ok(self.decode_with(bytes, &DecodeOptions::default())?.message)
     }
 
-    /// Decodes the message at the start of `bytes` (its type found by its
-    /// DCCL id) and returns it with its length: the number of bytes it took,
-    /// where the next message of a frame starts.
-    pub fn decode_with_len(&self, bytes: &[u8]) -> Result<(DynamicMessage, usize)> {
-        let id = self.read_id(bytes)?;
-        let loaded = self.by_id.get(&id).ok_or(Error::UnknownId(id))?;
-        self.decode_loaded(loaded, bytes)
-    }
-
-    /// Decodes the message at the start of `bytes` as one of the loaded type
-    /// `full_name` (the only way to decode types with `omit_id`; for other
-    /// types the id read must be that type's) and returns it with its
-    /// length in bytes, as [`Codec::decode_with_len`] does.
-    pub fn decode_as_with_len(
-        &self,
-        full_name: &str,
-        bytes: &[u8],
-    ) -> Result<(DynamicMessage, usize)> {
-        let loaded = self.get(full_name)?;
-        if !loaded.omit_id {
-            let id = self.read_id(bytes)?;
-            if id != loaded.id {
-                return Err(Error::Decode {
-                    location: crate::error::Location {
-                        message: full_name.to_string(),
-                        field: String::new(),
-                    },
-                    reason: format!("received id {id}, expected {}", loaded.id),
-                });
+    /// Decodes the message at the start of `bytes` as `options` say (its type
+    /// found by its DCCL id, or [`DecodeOptions::as_type`]) and returns it
+    /// with its length: the number of bytes it took, where the next message
+    /// of a frame starts.
+    pub fn decode_with(&self, bytes: &[u8], options: &DecodeOptions) -> Result<Decoded> {
+        let loaded = match options.as_type {
+            None => {
+                let id = self.read_id(bytes)?;
+                self.by_id.get(&id).ok_or(Error::UnknownId(id))?
             }
-        }
-        self.decode_loaded(loaded, bytes)
+            Some(full_name) => {
+                let loaded = self.get(full_name)?;
+                if !loaded.omit_id {
+                    let id = self.read_id(bytes)?;
+                    if id != loaded.id {
+                        return Err(Error::Decode {
+                            location: crate::error::Location {
+                                message: full_name.to_string(),
+                                field: String::new(),
+                            },
+                            reason: format!("received id {id}, expected {}", loaded.id),
+                        });
+                    }
+                }
+                loaded
+            }
+        };
+        let (message, len) = self.decode_loaded(loaded, bytes)?;
+        Ok(Decoded { message, len })
     }
 
     /// Decodes every message of a byte string holding several concatenated
@@ -1088,10 +1106,10 @@ impl Codec {
         let mut rest = bytes;
         while !rest.is_empty() {
             let offset = bytes.len() - rest.len();
-            let (msg, used) = self
-                .decode_with_len(rest)
+            let Decoded { message, len: used } = self
+                .decode_with(rest, &DecodeOptions::default())
                 .map_err(|e| leftover_error(e, offset, out.len()))?;
-            out.push(msg);
+            out.push(message);
             rest = &rest[used.min(rest.len())..];
             if used == 0 {
                 break;
@@ -1102,10 +1120,12 @@ impl Codec {
 
     /// Decodes the message at the start of `bytes` into the prost-generated
     /// struct `T` (deriving `ReflectMessage`), as its type: the counterpart
-    /// of [`Codec::encode_typed`].
+    /// of [`Codec::encode`] given such a struct.
     pub fn decode_typed<T: ReflectMessage + Default>(&self, bytes: &[u8]) -> Result<T> {
         let wanted = T::default().descriptor();
-        let (msg, _) = self.decode_as_with_len(wanted.full_name(), bytes)?;
+        let msg = self
+            .decode_with(bytes, &DecodeOptions::as_type(wanted.full_name()))?
+            .message;
         let name = msg.descriptor().full_name().to_string();
         msg.transcode_to::<T>().map_err(|e| Error::Decode {
             location: crate::error::Location {

@@ -34,7 +34,7 @@ pub struct EncodeContext<'a> {
     /// Definition hash of the root message (see [`Codec::hash`](crate::Codec::hash)).
     pub definition_hash: u64,
     /// Where values changed by the codec are recorded, when the caller asked
-    /// for them ([`Codec::encode_with_changes`](crate::Codec::encode_with_changes)).
+    /// for them ([`Codec::encode_with`](crate::Codec::encode_with) with [`EncodeOptions::changes`](crate::EncodeOptions::changes)).
     pub(crate) changes: Option<&'a ChangeLog>,
     /// The coding codec's arithmetic models and adaptive state.
     pub(crate) arithmetic: Option<&'a ArithmeticSession<'a>>,

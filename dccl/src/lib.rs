@@ -56,7 +56,7 @@
 //! they are declared in the `.proto` file, at every level of nesting. Values
 //! that do not fit are changed as libdccl changes them (out of range: not
 //! present; NaN: the minimum; strings and arrays: truncated);
-//! [`Codec::encode_with_changes`] and [`Codec::check`] list every such
+//! [`Codec::encode_with`] (with [`EncodeOptions::changes`]) and [`Codec::check`] list every such
 //! change ([`ValueChange`]), and strict mode ([`Codec::set_strict`]) refuses
 //! them. [`Codec::load_valid_messages`] loads every valid DCCL message of a
 //! file that also holds helper types and reports the others with the reason.
@@ -94,6 +94,7 @@ mod codecs;
 mod conditions;
 mod crypto;
 mod definition_hash;
+mod encode_decode;
 mod error;
 pub mod field;
 mod field_codec;
@@ -109,6 +110,7 @@ pub use changes::ValueChange;
 pub use codec::{Codec, FieldSize, FileLoad, SkippedType};
 pub use codecs::arithmetic::{ArithmeticModel, ArithmeticState};
 pub use conditions::{lua52_difference, ConditionOutcome, DefinitionWarning};
+pub use encode_decode::{DecodeOptions, Decoded, Encodable, EncodeOptions, Encoded, Protobuf};
 pub use error::{CodecError, Error, Location, Result};
 pub use field_codec::{DateShift, FieldCodec, FieldCodecFactory, FieldSpec, MessagePart};
 pub use loader::{compile_protos, compile_sources, pool_file_name};

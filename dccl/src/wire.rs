@@ -1,4 +1,4 @@
-//! Messages given as protobuf wire bytes ([`Codec::encode_protobuf`]),
+//! Messages given as protobuf wire bytes ([`Protobuf`](crate::Protobuf) given to [`Codec::encode`]),
 //! read into flat per-field slots from a plan made once per message type,
 //! and encoded from there without building a `DynamicMessage`.
 //!
@@ -12,7 +12,7 @@
 //! nesting deeper than 100) makes [`Plans::read`] answer `None`; the codec
 //! then decodes the bytes with prost-reflect, which words the error.
 //!
-//! [`Codec::encode_protobuf`]: crate::Codec::encode_protobuf
+//! [`Codec::encode`]: crate::Codec::encode
 
 use std::collections::HashMap;
 

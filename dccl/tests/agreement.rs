@@ -171,7 +171,10 @@ fn nan_codes_as_the_minimum_in_every_version() {
         let back = codec.decode(&codec.encode(&m).unwrap()).unwrap();
         let expected = msg(&pool, name, "r: -5 f: 2 list: 1 list: 0 list: 0.5");
         assert_eq!(back, expected, "{name}");
-        let (_, changes) = codec.encode_with_changes(&m).unwrap();
+        let changes = codec
+            .encode_with(&m, &mut Vec::new(), &dccl::EncodeOptions::with_changes())
+            .unwrap()
+            .changes;
         let fields: Vec<&str> = changes.iter().map(|c| c.field.as_str()).collect();
         assert_eq!(fields, ["r", "f", "list[1]"], "{name}");
         assert!(changes
@@ -391,16 +394,23 @@ message WithId {
     let m = msg(&pool, "NoId", "x: 200");
     let bytes = codec.encode(&m).unwrap();
     assert_eq!(hex(&bytes), "c8");
-    assert_eq!(codec.decode_as_with_len("NoId", &bytes).unwrap(), (m, 1));
+    assert_eq!(
+        codec
+            .decode_with(&bytes, &dccl::DecodeOptions::as_type("NoId"))
+            .unwrap(),
+        dccl::Decoded { message: m, len: 1 }
+    );
     // A type with an id checks it.
     let w = codec.encode(&msg(&pool, "WithId", "x: 1")).unwrap();
-    assert!(codec.decode_as_with_len("WithId", &w).is_ok());
+    assert!(codec
+        .decode_with(&w, &dccl::DecodeOptions::as_type("WithId"))
+        .is_ok());
     let err = codec
-        .decode_as_with_len("WithId", &[0x02, 0x01])
+        .decode_with(&[0x02, 0x01], &dccl::DecodeOptions::as_type("WithId"))
         .unwrap_err();
     assert!(err.to_string().contains("expected 100"), "{err}");
     assert!(matches!(
-        codec.decode_as_with_len("Nope", &bytes),
+        codec.decode_with(&bytes, &dccl::DecodeOptions::as_type("Nope")),
         Err(Error::UnknownType(_))
     ));
 }

@@ -115,7 +115,9 @@ fn decoder_reads_exactly_the_bits_written() {
     ];
     for text in inputs {
         let msg = DynamicMessage::parse_text_format(desc.clone(), text).unwrap();
-        sender.encode_into(&msg, &mut frame).unwrap();
+        sender
+            .encode_with(&msg, &mut frame, &dccl::EncodeOptions::default())
+            .unwrap();
     }
     let back = receiver.decode_all(&frame).unwrap();
     assert_eq!(back.len(), 2);

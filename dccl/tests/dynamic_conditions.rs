@@ -255,9 +255,17 @@ fn same_but_utf8_cut(ours: &str, theirs: &str) -> bool {
 /// (`ok TYPE\tDECODED\tBYTES_USED` or `err REASON`).
 fn compare_decode(ours: &Ours, hex: &str, reply: &str, tally: &mut Tally) {
     let bytes = hex::decode(hex).expect("hex");
-    let mine = ours.plain.decode_with_len(&bytes);
+    let mine = ours
+        .plain
+        .decode_with(&bytes, &dccl::DecodeOptions::default());
     match (reply.strip_prefix("ok "), mine) {
-        (Some(ok), Ok((m, used))) => {
+        (
+            Some(ok),
+            Ok(dccl::Decoded {
+                message: m,
+                len: used,
+            }),
+        ) => {
             let f: Vec<&str> = ok.split('\t').collect();
             let text = dccl::short_debug_string(&m);
             if f[1] == text && f[2] == used.to_string() {
@@ -278,7 +286,7 @@ fn compare_decode(ours: &Ours, hex: &str, reply: &str, tally: &mut Tally) {
             }
         }
         (None, Err(_)) => tally.count("frames refused by both"),
-        (None, Ok((m, _))) => {
+        (None, Ok(dccl::Decoded { message: m, .. })) => {
             if reply.contains("relinquish_bits") {
                 tally.count("frames decoded here, libdccl short of bits (known difference)");
             } else {
@@ -622,8 +630,11 @@ fn a_message_sent_as_given_decodes_as_it_was_encoded_and_one_that_does_not_is_to
         } else if let Some(why) = verdict {
             // libdccl decodes these to other values, or not at all.
             let bytes = ours.plain.encode(msg).expect("encodes");
-            match ours.plain.decode_as_with_len(ty, &bytes) {
-                Ok((_, len)) if len == bytes.len() => {
+            match ours
+                .plain
+                .decode_with(&bytes, &dccl::DecodeOptions::as_type(ty))
+            {
+                Ok(dccl::Decoded { len, .. }) if len == bytes.len() => {
                     assert!(why.contains("not as it was encoded: the sender"), "{why}");
                 }
                 Ok(_) => assert!(why.contains("and the rest as another message"), "{why}"),

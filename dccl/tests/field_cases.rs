@@ -85,8 +85,11 @@ fn check_encodings(
             dir.display()
         );
         let reference = hex::decode(hex).unwrap();
-        let (back, used) = codec
-            .decode_as_with_len(type_name, &reference)
+        let dccl::Decoded {
+            message: back,
+            len: used,
+        } = codec
+            .decode_with(&reference, &dccl::DecodeOptions::as_type(type_name))
             .unwrap_or_else(|e| panic!("{}: decoding {hex}: {e}", dir.display()));
         assert_eq!(used, reference.len(), "{}: {hex}", dir.display());
         assert_eq!(

@@ -432,7 +432,7 @@ proptest! {
         let first = codec.encode(&m).unwrap();
         prop_assert!(first.len() <= codec.max_size("prop.All4").unwrap());
         prop_assert!(first.len() >= codec.min_size("prop.All4").unwrap());
-        let (back, used) = codec.decode_with_len(&first).unwrap();
+        let dccl::Decoded { message: back, len: used } = codec.decode_with(&first, &dccl::DecodeOptions::default()).unwrap();
         prop_assert_eq!(used, first.len());
         check_v4(&back, &x)?;
         let second = codec.encode(&back).unwrap();
@@ -458,7 +458,7 @@ proptest! {
         for name in ["All3", "All2"] {
             let m = build(&desc(name), &x);
             let first = codec.encode(&m).unwrap();
-            let (back, used) = codec.decode_with_len(&first).unwrap();
+            let dccl::Decoded { message: back, len: used } = codec.decode_with(&first, &dccl::DecodeOptions::default()).unwrap();
             prop_assert_eq!(used, first.len(), "{}", name);
             let second = codec.encode(&back).unwrap();
             prop_assert_eq!(&second, &first, "{}", name);
@@ -501,9 +501,13 @@ fn any_bytes() -> impl Strategy<Value = Vec<u8>> {
 /// results (a panic fails the property).
 fn decode_everything(codec: &Codec, bytes: &[u8]) -> Result<(), TestCaseError> {
     let one = codec.decode(bytes);
-    let prefix = codec.decode_with_len(bytes);
+    let prefix = codec.decode_with(bytes, &dccl::DecodeOptions::default());
     prop_assert_eq!(one.is_ok(), prefix.is_ok());
-    if let Ok((m, used)) = &prefix {
+    if let Ok(dccl::Decoded {
+        message: m,
+        len: used,
+    }) = &prefix
+    {
         prop_assert!(
             *used >= 1 && *used <= bytes.len(),
             "used {} of {}",
@@ -522,7 +526,9 @@ fn decode_everything(codec: &Codec, bytes: &[u8]) -> Result<(), TestCaseError> {
     }
     let _ = codec.read_id(bytes);
     for name in codec.loaded() {
-        if let Ok((_, used)) = codec.decode_as_with_len(&name, bytes) {
+        if let Ok(dccl::Decoded { len: used, .. }) =
+            codec.decode_with(bytes, &dccl::DecodeOptions::as_type(&name))
+        {
             prop_assert!(used <= bytes.len());
         }
     }
@@ -557,11 +563,11 @@ proptest! {
                 let cut = &bytes[..k];
                 let err = codec.decode(cut);
                 prop_assert!(err.is_err(), "{} decoded from {} of {} bytes", name, k, bytes.len());
-                prop_assert!(codec.decode_with_len(cut).is_err());
-                prop_assert!(codec.decode_as_with_len(&full, cut).is_err());
+                prop_assert!(codec.decode_with(cut, &dccl::DecodeOptions::default()).is_err());
+                prop_assert!(codec.decode_with(cut, &dccl::DecodeOptions::as_type(&full)).is_err());
                 if k < head {
                     // Not even the header: the error says so, naming the message.
-                    if let Err(e) = codec.decode_as_with_len(&full, cut) {
+                    if let Err(e) = codec.decode_with(cut, &dccl::DecodeOptions::as_type(&full)) {
                         prop_assert!(matches!(e, dccl::Error::Decode { .. }), "{:?}", e);
                     }
                 }

@@ -1,5 +1,5 @@
-//! Messages given as protobuf wire bytes (`Codec::encode_protobuf_into`,
-//! `encode_protobuf_with_changes`) encode exactly as the `DynamicMessage`
+//! Messages given as protobuf wire bytes (`dccl::Protobuf` given to
+//! `Codec::encode` and `Codec::encode_with`) encode exactly as the `DynamicMessage`
 //! those bytes decode to: on every shared vector (version 4, versions 2 and
 //! 3, encrypted, strict mode), on other encodings of the same messages
 //! (fields shuffled, a field given twice, unknown fields, repeated fields
@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use dccl::prost_reflect::{DescriptorPool, DynamicMessage, ReflectMessage};
-use dccl::Codec;
+use dccl::{Codec, EncodeOptions, Protobuf};
 use prost::Message;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -52,14 +52,24 @@ fn messages(pool: &DescriptorPool, vectors: &str) -> Vec<DynamicMessage> {
 }
 
 /// What encoding `protobuf` as a `name` gives, both ways: through
-/// `encode_protobuf_with_changes`, and decoding with prost-reflect then
-/// `encode_with_changes`; the error's text when it fails.
+/// `Protobuf`, and decoding with prost-reflect then encoding the
+/// `DynamicMessage`, both reporting changes; the error's text when it fails.
 fn both(codec: &Codec, name: &str, protobuf: &[u8]) -> (String, String) {
     let show = |r: dccl::Result<(Vec<u8>, Vec<dccl::ValueChange>)>| match r {
         Ok((bytes, changes)) => format!("{} {changes:?}", hex::encode(bytes)),
         Err(e) => format!("error: {e}"),
     };
-    let fast = show(codec.encode_protobuf_with_changes(name, protobuf));
+    let with_changes = |msg: &dyn Fn(&mut Vec<u8>) -> dccl::Result<dccl::Encoded>| {
+        let mut bytes = Vec::new();
+        msg(&mut bytes).map(|e| (bytes, e.changes))
+    };
+    let fast = show(with_changes(&|out| {
+        codec.encode_with(
+            &Protobuf::new(name, protobuf),
+            out,
+            &EncodeOptions::with_changes(),
+        )
+    }));
     let desc = codec.descriptor(name).expect("loaded");
     let reference = show(
         DynamicMessage::decode(desc, protobuf)
@@ -70,12 +80,18 @@ fn both(codec: &Codec, name: &str, protobuf: &[u8]) -> (String, String) {
                 },
                 reason: format!("not a valid protobuf message of that type: {e}"),
             })
-            .and_then(|m| codec.encode_with_changes(&m)),
+            .and_then(|m| {
+                with_changes(&|out| codec.encode_with(&m, out, &EncodeOptions::with_changes()))
+            }),
     );
     let mut into = b"prefix".to_vec();
-    let plain = codec.encode_protobuf_into(name, protobuf, &mut into);
+    let plain = codec.encode_with(
+        &Protobuf::new(name, protobuf),
+        &mut into,
+        &EncodeOptions::default(),
+    );
     match &plain {
-        Ok(()) => assert!(fast.starts_with(&hex::encode(&into[6..]))),
+        Ok(_) => assert!(fast.starts_with(&hex::encode(&into[6..]))),
         Err(_) => assert_eq!(into, b"prefix", "an error leaves `out` as it was"),
     }
     (fast, reference)
@@ -233,8 +249,6 @@ fn encrypted_vectors_and_their_variants() {
 #[test]
 fn an_unknown_type_is_named() {
     let (codec, _) = load("vectors.proto", None);
-    let err = codec
-        .encode_protobuf_into("vec.Nope", &[], &mut Vec::new())
-        .unwrap_err();
+    let err = codec.encode(&Protobuf::new("vec.Nope", &[])).unwrap_err();
     assert!(err.to_string().contains("vec.Nope"), "{err}");
 }

@@ -7,7 +7,7 @@
 //! protobuf bytes alike.
 
 use dccl::prost_reflect::{DescriptorPool, DynamicMessage};
-use dccl::Codec;
+use dccl::{Codec, EncodeOptions, Protobuf};
 use prost::Message;
 
 const PROTO: &str = r#"syntax = "proto2";
@@ -50,7 +50,7 @@ fn setup() -> (Codec, DescriptorPool) {
 }
 
 /// What encoding the message `text` of `name` gives (hex, or the error),
-/// checked the same through `encode` and `encode_protobuf_into`.
+/// checked the same through `encode` and `Protobuf` bytes.
 fn encode(codec: &Codec, pool: &DescriptorPool, name: &str, text: &str) -> String {
     let desc = pool.get_message_by_name(name).unwrap();
     let msg = DynamicMessage::parse_text_format(desc, text).unwrap();
@@ -62,8 +62,12 @@ fn encode(codec: &Codec, pool: &DescriptorPool, name: &str, text: &str) -> Strin
     let mut out = Vec::new();
     let wire = show(
         codec
-            .encode_protobuf_into(name, &msg.encode_to_vec(), &mut out)
-            .map(|()| out),
+            .encode_with(
+                &Protobuf::new(name, &msg.encode_to_vec()),
+                &mut out,
+                &EncodeOptions::default(),
+            )
+            .map(|_| out),
     );
     assert_eq!(dynamic, wire, "{name} {{ {text} }}");
     dynamic

@@ -190,7 +190,7 @@ fn prost_struct_round_trip() {
     assert_eq!(codec.min_size("goby.example.NavigationReport").unwrap(), 15);
 
     let report = report();
-    let bytes = codec.encode_typed(&report).unwrap();
+    let bytes = codec.encode(&report).unwrap();
     assert_eq!(bytes.len(), 15);
     // id 124 -> 0xf8; source 3 and destination 7 in 5 bits each, header padded to 3 bytes.
     assert_eq!(&bytes[..3], &[0xf8, 0xe3, 0x00]);
@@ -204,9 +204,7 @@ fn prost_struct_round_trip() {
     rough.x = 123.44;
     rough.speed = Some(1.26);
     rough.time = (NOW - 100) as f64 + 0.3;
-    let back: NavigationReport = codec
-        .decode_typed(&codec.encode_typed(&rough).unwrap())
-        .unwrap();
+    let back: NavigationReport = codec.decode_typed(&codec.encode(&rough).unwrap()).unwrap();
     assert_eq!(back.x, 123.4);
     assert_eq!(back.speed, Some(1.25));
     assert_eq!(back.time, (NOW - 100) as f64);
@@ -219,9 +217,7 @@ fn prost_struct_round_trip() {
         battery_ok: None,
         ..report
     };
-    let back: NavigationReport = codec
-        .decode_typed(&codec.encode_typed(&sparse).unwrap())
-        .unwrap();
+    let back: NavigationReport = codec.decode_typed(&codec.encode(&sparse).unwrap()).unwrap();
     assert_eq!(back, sparse);
 }
 
@@ -231,7 +227,7 @@ fn prost_and_dynamic_messages_encode_identically() {
     codec.set_clock(|| NOW);
     codec.load_type::<NavigationReport>().unwrap();
     let report = report();
-    let from_struct = codec.encode_typed(&report).unwrap();
+    let from_struct = codec.encode(&report).unwrap();
     assert_eq!(
         codec.encode(&report.transcode_to_dynamic()).unwrap(),
         from_struct
@@ -263,6 +259,46 @@ fn prost_and_dynamic_messages_encode_identically() {
 }
 
 #[test]
+fn every_kind_of_message_encodes_and_reports_changes_alike() {
+    let mut codec = Codec::new();
+    codec.set_clock(|| NOW);
+    codec.load_type::<NavigationReport>().unwrap();
+    // x far out of its bounds: a value the codec changes.
+    let report = NavigationReport {
+        x: 1.0e9,
+        ..report()
+    };
+    let protobuf = prost::Message::encode_to_vec(&report);
+    let name = "goby.example.NavigationReport";
+    let options = dccl::EncodeOptions::with_changes();
+    let encoded = |msg: &dyn Fn(&mut Vec<u8>) -> dccl::Result<dccl::Encoded>| {
+        let mut out = vec![0xaa];
+        let e = msg(&mut out).unwrap();
+        assert_eq!(e.len, out.len() - 1, "the bytes appended");
+        (out, e.changes)
+    };
+    let from_struct = encoded(&|out| codec.encode_with(&report, out, &options));
+    assert!(!from_struct.1.is_empty(), "x is reported changed");
+    assert_eq!(from_struct.1[0].field, "x");
+    assert_eq!(from_struct.0[1..], codec.encode(&report).unwrap());
+    let dynamic = report.transcode_to_dynamic();
+    assert_eq!(
+        encoded(&|out| codec.encode_with(&dynamic, out, &options)),
+        from_struct
+    );
+    let bytes = dccl::Protobuf::new(name, &protobuf);
+    assert_eq!(
+        encoded(&|out| codec.encode_with(&bytes, out, &options)),
+        from_struct
+    );
+    // Without changes asked for, none are listed.
+    let plain = codec
+        .encode_with(&report, &mut Vec::new(), &dccl::EncodeOptions::default())
+        .unwrap();
+    assert!(plain.changes.is_empty());
+}
+
+#[test]
 fn prost_command_with_embedded_messages() {
     let mut codec = Codec::new();
     codec.load_type::<Command>().unwrap();
@@ -278,7 +314,7 @@ fn prost_command_with_embedded_messages() {
         ],
         note: Some("survey".to_string()),
     };
-    let bytes = codec.encode_typed(&cmd).unwrap();
+    let bytes = codec.encode(&cmd).unwrap();
     assert_eq!(codec.decode_typed::<Command>(&bytes).unwrap(), cmd);
 
     // More waypoints than max_repeat (3) are dropped, extra ones last.
@@ -289,15 +325,13 @@ fn prost_command_with_embedded_messages() {
             y: 0.0,
         })
         .collect();
-    let back: Command = codec
-        .decode_typed(&codec.encode_typed(&long).unwrap())
-        .unwrap();
+    let back: Command = codec.decode_typed(&codec.encode(&long).unwrap()).unwrap();
     assert_eq!(back.waypoint, long.waypoint[..3].to_vec());
 
     // Decoding bytes of another type into a struct is an error, not a panic.
     let mut both = codec.clone();
     both.load_type::<NavigationReport>().unwrap();
-    let nav = both.encode_typed(&report()).unwrap();
+    let nav = both.encode(&report()).unwrap();
     assert!(both.decode_typed::<Command>(&nav).is_err());
 }
 
@@ -702,7 +736,9 @@ fn encryption_with_per_id_exceptions() {
     // Encrypted and clear messages stitched in one frame split and decode.
     let mut frame = Vec::new();
     for m in [&secret, &clear, &secret2] {
-        keyed.encode_into(m, &mut frame).unwrap();
+        keyed
+            .encode_with(m, &mut frame, &dccl::EncodeOptions::default())
+            .unwrap();
     }
     assert_eq!(frame.len(), 2 * cipher.len() + clear_bytes.len());
     let all = keyed.decode_all(&frame).unwrap();
@@ -743,7 +779,9 @@ fn decode_all_of_stitched_messages() {
     let mut lengths = Vec::new();
     for m in [&first, &second, &third] {
         let before = frame.len();
-        codec.encode_into(m, &mut frame).unwrap();
+        codec
+            .encode_with(m, &mut frame, &dccl::EncodeOptions::default())
+            .unwrap();
         lengths.push(frame.len() - before);
         assert_eq!(&frame[before..], codec.encode(m).unwrap().as_slice());
     }
@@ -764,10 +802,15 @@ fn decode_all_of_stitched_messages() {
         Some(Value::Bytes(vec![1, 2, 3, 4].into()))
     );
 
-    // decode_with_len walks the same frame.
+    // decode_with walks the same frame.
     let mut rest = &frame[..];
     for (expected_len, name) in lengths.iter().zip(&names) {
-        let (m, used) = codec.decode_with_len(rest).unwrap();
+        let dccl::Decoded {
+            message: m,
+            len: used,
+        } = codec
+            .decode_with(rest, &dccl::DecodeOptions::default())
+            .unwrap();
         assert_eq!(used, *expected_len);
         assert_eq!(m.descriptor().full_name(), name.as_str());
         rest = &rest[used..];
@@ -811,8 +854,10 @@ fn unknown_id() {
         Error::UnknownId(300)
     ));
 
-    // decode_as_with_len checks the id.
-    let err = full.decode_as_with_len("rt.Blob", &bytes).unwrap_err();
+    // decoding as a type checks the id.
+    let err = full
+        .decode_with(&bytes, &dccl::DecodeOptions::as_type("rt.Blob"))
+        .unwrap_err();
     assert!(matches!(err, Error::Decode { .. }), "{err:?}");
     assert!(err.to_string().contains("rt.Blob"));
 
@@ -828,7 +873,12 @@ fn omit_id_needs_decode_as() {
     let codec = codec();
     let bytes = codec.encode(&msg("NoId", "n: 165")).unwrap();
     assert_eq!(bytes, vec![0xa5]);
-    let (back, used) = codec.decode_as_with_len("rt.NoId", &bytes).unwrap();
+    let dccl::Decoded {
+        message: back,
+        len: used,
+    } = codec
+        .decode_with(&bytes, &dccl::DecodeOptions::as_type("rt.NoId"))
+        .unwrap();
     assert_eq!(used, 1);
     assert_eq!(get(&back, "n"), Some(Value::U32(165)));
     // Read as an id, 0xa5 is id 82 (two-byte form, cut short) or unknown.
@@ -860,9 +910,15 @@ fn missing_required_field() {
         "waypoint.y",
     );
 
-    // encode_into leaves the buffer alone on error.
+    // encode_with leaves the buffer alone on error.
     let mut out = vec![0xee];
-    assert!(codec.encode_into(&msg("Bounds", ""), &mut out).is_err());
+    assert!(codec
+        .encode_with(
+            &msg("Bounds", ""),
+            &mut out,
+            &dccl::EncodeOptions::default()
+        )
+        .is_err());
     assert_eq!(out, vec![0xee]);
 }
 

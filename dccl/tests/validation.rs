@@ -679,7 +679,7 @@ fn unknown_type_on_encode_and_size_queries() {
         codec.max_size("val.NotLoaded").unwrap_err(),
         codec.min_size("val.NotLoaded").unwrap_err(),
         codec
-            .decode_as_with_len("val.NotLoaded", &[0x2a])
+            .decode_with(&[0x2a], &dccl::DecodeOptions::as_type("val.NotLoaded"))
             .unwrap_err(),
     ] {
         match &err {

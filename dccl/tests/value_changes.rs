@@ -1,8 +1,8 @@
 //! The report of values changed by encoding in the default (non-strict)
-//! mode: `Codec::encode_with_changes` and `Codec::check`.
+//! mode: `Codec::encode_with` reporting changes and `Codec::check`.
 
 use dccl::prost_reflect::DynamicMessage;
-use dccl::{Codec, Error, ValueChange};
+use dccl::{Codec, EncodeOptions, Error, ValueChange};
 
 const SOURCE: &str = r#"
 syntax = "proto2";
@@ -44,7 +44,11 @@ fn changes(
     text: &str,
 ) -> Vec<ValueChange> {
     let msg = DynamicMessage::parse_text_format(desc.clone(), text).unwrap();
-    let (bytes, changes) = codec.encode_with_changes(&msg).unwrap();
+    let mut bytes = Vec::new();
+    let changes = codec
+        .encode_with(&msg, &mut bytes, &EncodeOptions::with_changes())
+        .unwrap()
+        .changes;
     assert_eq!(
         bytes,
         codec.encode(&msg).unwrap(),
@@ -143,7 +147,9 @@ fn strict_mode_refuses_the_first_change() {
         let msg = DynamicMessage::parse_text_format(desc.clone(), text).unwrap();
         for err in [
             codec.encode(&msg).unwrap_err(),
-            codec.encode_with_changes(&msg).unwrap_err(),
+            codec
+                .encode_with(&msg, &mut Vec::new(), &EncodeOptions::with_changes())
+                .unwrap_err(),
             codec.check(&msg).unwrap_err(),
         ] {
             match err {
@@ -186,7 +192,11 @@ fn changes_libdccl_makes_even_in_strict_mode_are_reported_but_not_refused() {
     let desc = pool.get_message_by_name("S").unwrap();
     codec.load(&desc).unwrap();
     let msg = DynamicMessage::parse_text_format(desc, "k: 7 v: 1 v: 9 one: -3").unwrap();
-    let (bytes, c) = codec.encode_with_changes(&msg).unwrap();
+    let mut bytes = Vec::new();
+    let c = codec
+        .encode_with(&msg, &mut bytes, &EncodeOptions::with_changes())
+        .unwrap()
+        .changes;
     assert_eq!(bytes, codec.encode(&msg).unwrap());
     assert_eq!(
         fields(&c),

@@ -254,9 +254,11 @@ impl Codec {
         let encoded = if self.changes_ignored(py) {
             self.inner.encode(msg).map(|bytes| (bytes, Vec::new()))
         } else {
+            let mut bytes = Vec::new();
             self.inner
-                .encode_with_changes(msg)
-                .and_then(|(bytes, mut changes)| {
+                .encode_with(msg, &mut bytes, &dccl::EncodeOptions::with_changes())
+                .and_then(|encoded| {
+                    let mut changes = encoded.changes;
                     changes.extend(self.inner.moved_dates(msg)?);
                     Ok((bytes, changes))
                 })
@@ -305,8 +307,8 @@ impl Codec {
             }),
             Some(name) => self
                 .inner
-                .decode_as_with_len(name, data)
-                .map(|(msg, _)| msg)
+                .decode_with(data, &dccl::DecodeOptions::as_type(name))
+                .map(|d| d.message)
                 .map_err(to_py),
         }
     }
@@ -457,9 +459,17 @@ impl Codec {
             Err(e) => format!("error: {e}"),
         };
         let reference = DynamicMessage::decode(t.desc.clone(), data);
-        let direct = show(self.inner.encode_protobuf_with_changes(name, data));
+        let with_changes = |msg: &dyn Fn(&mut Vec<u8>) -> dccl::Result<dccl::Encoded>| {
+            let mut bytes = Vec::new();
+            msg(&mut bytes).map(|e| (bytes, e.changes))
+        };
+        let changes = dccl::EncodeOptions::with_changes();
+        let direct = show(with_changes(&|out| {
+            self.inner
+                .encode_with(&dccl::Protobuf::new(name, data), out, &changes)
+        }));
         let through = show(match &reference {
-            Ok(m) => self.inner.encode_with_changes(m),
+            Ok(m) => with_changes(&|out| self.inner.encode_with(m, out, &changes)),
             Err(e) => Err(dccl::Error::Encode {
                 location: dccl::Location {
                     message: name.to_string(),
@@ -532,19 +542,13 @@ impl Codec {
         let (bytes, changes) = if ignored || !self.inner.restores_dates(name).unwrap_or(true) {
             // The protobuf bytes encoded as they are (no dynamic message),
             // unless dates the receiver would move are to be told.
-            let encoded = if ignored {
-                let mut out = Vec::with_capacity(64);
-                self.inner
-                    .encode_protobuf_into(name, data, &mut out)
-                    .map(|()| (out, Vec::new()))
-            } else {
-                self.inner.encode_protobuf_with_changes(name, data)
-            };
-            encoded.map_err(|e| {
-                self.strict_error(e, |lenient| {
-                    lenient.encode_protobuf_into(name, data, &mut Vec::new())
-                })
-            })?
+            let protobuf = dccl::Protobuf::new(name, data);
+            let options = dccl::EncodeOptions { changes: !ignored };
+            let mut out = Vec::with_capacity(64);
+            let encoded = self.inner.encode_with(&protobuf, &mut out, &options);
+            encoded
+                .map(|e| (out, e.changes))
+                .map_err(|e| self.strict_error(e, |lenient| lenient.encode(&protobuf).map(drop)))?
         } else {
             let msg = self.parse_typed(t, data)?;
             self.encode_checked(py, &msg)?
@@ -673,7 +677,7 @@ impl Codec {
             for m in &messages {
                 out.clear();
                 self.inner
-                    .encode_into(black_box(m), &mut out)
+                    .encode_with(black_box(m), &mut out, &dccl::EncodeOptions::default())
                     .map_err(to_py)?;
                 black_box(&out);
             }

@@ -4,7 +4,7 @@
 //! descriptor look-ups for every field of every message: exactly
 //! prost-reflect's bytes (fields in number order, repeated fields packed as
 //! the descriptor says). Messages going the other way are encoded from
-//! their protobuf bytes by the `dccl` crate (`Codec::encode_protobuf_into`).
+//! their protobuf bytes by the `dccl` crate (`dccl::Protobuf` given to `Codec::encode`).
 
 use std::borrow::Cow;
 use std::collections::HashMap;

@@ -88,7 +88,7 @@ fn data_request(c: &mut Criterion) {
                 ..Default::default()
             };
             manager
-                .handle_modem_data_request(&mut request)
+                .handle_modem_data_request(&mut request, 0)
                 .expect("request");
             assert!(
                 !request.frame[0].is_empty(),
@@ -103,7 +103,7 @@ fn data_request(c: &mut Criterion) {
             ..Default::default()
         };
         manager
-            .handle_modem_data_request(&mut request)
+            .handle_modem_data_request(&mut request, 0)
             .expect("request");
         request.frame.remove(0)
     };

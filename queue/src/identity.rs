@@ -133,7 +133,7 @@ impl TrailerCodec {
     /// The identities of a trailer starting `bytes`; `None` when it does
     /// not decode.
     pub fn decode(&self, bytes: &[u8]) -> Option<Vec<WireIdentity>> {
-        let (message, _) = self.codec.decode_with_len(bytes).ok()?;
+        let message = self.codec.decode(bytes).ok()?;
         let trailer = message.transcode_to::<FrameIdentity>().ok()?;
         Some(
             trailer

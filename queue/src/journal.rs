@@ -46,7 +46,7 @@ use std::path::{Path, PathBuf};
 use crate::clock::Micros;
 use goby_store::record_log::{self, Format, LogError, MemoryFile, RecordLog, FRAMING, MAX_PAYLOAD};
 
-pub use goby_store::record_log::LogFile as JournalFile;
+pub(crate) use goby_store::record_log::LogFile as JournalFile;
 
 /// The journal's file format: a record log ([`goby_store::record_log`])
 /// of magic `GOBYJNLD`. `GOBYJNL2` journals, which hold no DCCL records,
@@ -172,7 +172,7 @@ impl Journal {
 
     /// Replays the journal held by `file` (named `path` in errors, and
     /// where compaction writes).
-    pub fn open_with(
+    pub(crate) fn open_with(
         path: impl AsRef<Path>,
         file: impl JournalFile + 'static,
     ) -> Result<(Self, Replay), JournalError> {
@@ -368,7 +368,7 @@ impl Journal {
     }
 
     /// Rewrites the file with the live records only.
-    pub fn compact(&mut self) -> Result<(), JournalError> {
+    pub(crate) fn compact(&mut self) -> Result<(), JournalError> {
         // Keep the id sequence going across compactions even if the newest
         // entries were removed: a removed record of the last id preserves it.
         let last = match self.next_id {

@@ -38,7 +38,7 @@
 //!
 //! clock.advance_seconds(10.0);
 //! let mut request = ModemTransmission { max_frame_bytes: Some(32), ..Default::default() };
-//! sender.handle_modem_data_request(&mut request).unwrap();
+//! sender.handle_modem_data_request(&mut request, 0).unwrap();
 //! assert_eq!(request.dest, Some(0)); // no destination role: broadcast
 //! assert!(!request.frame[0].is_empty());
 //!
@@ -49,21 +49,21 @@
 //!     Arc::new(clock),
 //! ).unwrap();
 //! let events = receiver.subscribe();
-//! assert!(receiver.handle_modem_receive(&request).is_empty());
+//! assert!(receiver.handle_modem_receive(&request, 0).is_empty());
 //! assert!(events.try_iter().any(|e| matches!(e, QueueEvent::Received(_))));
 //! ```
 
 #![warn(missing_docs)]
 
 pub mod clock;
-pub mod error;
-pub mod event;
+mod error;
+mod event;
 pub mod identity;
 pub mod journal;
 pub mod links;
-pub mod manager;
+mod manager;
 pub mod market;
-pub mod queue;
+mod queue;
 mod role;
 
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
@@ -73,8 +73,7 @@ pub use goby_time::Entropy;
 pub use identity::{TrailerCodec, WireIdentity};
 pub use journal::{Encoding, EntryId, Journal, JournalEntry, JournalError, Replay};
 pub use links::{LinkIndex, LinkPolicy, LinkRule, LinkSpec, LinkState, Links};
-pub use manager::{OnDemandProvider, PushOptions, QueueManager};
-pub use queue::QueueSettings;
+pub use manager::{PushOptions, QueueManager};
 
 /// Modem id meaning "every node".
 pub const BROADCAST_ID: i32 = 0;

@@ -2,7 +2,7 @@
 //! (an acoustic modem and Iridium, say) over one queue.
 //!
 //! Each link (a driver and its medium access) asks the queue for data *for
-//! itself* ([`QueueManager::handle_link_data_request`]); the queue offers
+//! itself* ([`QueueManager::handle_modem_data_request`]); the queue offers
 //! it only the messages its rules let that link carry at that moment. A
 //! type's rule ([`LinkRule`]) lists the links it may use and a policy:
 //!
@@ -31,7 +31,7 @@
 //! the receiver in any order, and the receiver suppresses each copy after
 //! the first it records.
 //!
-//! [`QueueManager::handle_link_data_request`]: crate::QueueManager::handle_link_data_request
+//! [`QueueManager::handle_modem_data_request`]: crate::QueueManager::handle_modem_data_request
 
 use std::collections::HashMap;
 

@@ -24,7 +24,8 @@ use crate::{BROADCAST_ID, QUERY_DESTINATION_ID, QUERY_SOURCE_ID};
 
 /// Generates the message of a data-on-demand type at the moment of a data
 /// request (`None`: nothing to send this time).
-pub type OnDemandProvider = Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
+pub(crate) type OnDemandProvider =
+    Box<dyn FnMut(&ModemTransmission) -> Option<DynamicMessage> + Send>;
 
 /// What the caller knows of a message it queues ([`QueueManager::push`]);
 /// `PushOptions::default()` when it knows nothing more.
@@ -247,9 +248,9 @@ impl QueueManager {
     }
 
     /// Serves several links from now on ([`crate::links`]): each asks for
-    /// data with [`handle_link_data_request`](Self::handle_link_data_request)
+    /// data with [`handle_modem_data_request`](Self::handle_modem_data_request)
     /// and hands over what it receives with
-    /// [`handle_link_receive`](Self::handle_link_receive); which link may
+    /// [`handle_modem_receive`](Self::handle_modem_receive); which link may
     /// carry a message when is `links`' rules'.
     pub fn set_links(&mut self, links: Links) {
         self.links = Some(links);
@@ -527,16 +528,12 @@ impl QueueManager {
     /// of the first message; a query source takes this node's id;
     /// `ack_requested` is set when any message sent wants an ack. Existing
     /// bytes in `request.frame` are kept and appended to.
-    pub fn handle_modem_data_request(&mut self, request: &mut ModemTransmission) -> Result<()> {
-        self.fill(request, 0)
-    }
-
-    /// Fills the frames of a data request of link `link` (see
-    /// [`set_links`](Self::set_links)) as
-    /// [`handle_modem_data_request`](Self::handle_modem_data_request) does,
-    /// with the messages the links' rules let that link carry now. An
-    /// error for a link that does not exist.
-    pub fn handle_link_data_request(
+    ///
+    /// `link`: the link the request is for, 0 without
+    /// [`set_links`](Self::set_links) (the only one); with links, the
+    /// messages the links' rules let that link carry now. An error for a
+    /// link that does not exist.
+    pub fn handle_modem_data_request(
         &mut self,
         request: &mut ModemTransmission,
         link: LinkIndex,
@@ -760,16 +757,11 @@ impl QueueManager {
     /// before the fault but those of types sent with ack in a transmission
     /// that asked for one (the frame is not acknowledged, so they come
     /// again). Returns the errors.
-    pub fn handle_modem_receive(&mut self, transmission: &ModemTransmission) -> Vec<QueueError> {
-        self.handle_link_receive(transmission, 0)
-    }
-
-    /// Handles a transmission received on link `link` (see
-    /// [`set_links`](Self::set_links)) as
-    /// [`handle_modem_receive`](Self::handle_modem_receive) does: an ACK
-    /// credits the messages that link carried (and removes them from every
-    /// link).
-    pub fn handle_link_receive(
+    ///
+    /// `link`: the link it was received on, 0 without
+    /// [`set_links`](Self::set_links) (the only one); an ACK credits the
+    /// messages that link carried (and removes them from every link).
+    pub fn handle_modem_receive(
         &mut self,
         transmission: &ModemTransmission,
         link: LinkIndex,
@@ -804,8 +796,11 @@ impl QueueManager {
                     }
                     break;
                 }
-                match self.codec.decode_with_len(rest) {
-                    Ok((message, used)) => {
+                match self
+                    .codec
+                    .decode_with(rest, &dccl::DecodeOptions::default())
+                {
+                    Ok(dccl::Decoded { message, len: used }) => {
                         let used = used.min(rest.len());
                         decoded.push((message, &rest[..used], None));
                         if used == 0 {

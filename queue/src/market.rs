@@ -334,7 +334,7 @@ impl DynamicQueueRunner {
                 max_num_frames: Some(1),
                 ..Default::default()
             };
-            manager.handle_modem_data_request(&mut request)?;
+            manager.handle_modem_data_request(&mut request, 0)?;
             let frame = request.frame.first().map(Vec::as_slice).unwrap_or_default();
             for m in self.codec.decode_all(frame)? {
                 let id = self

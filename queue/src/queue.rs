@@ -12,7 +12,7 @@ use crate::role::Roles;
 
 /// The settings of one queue, validated.
 #[derive(Debug, Clone)]
-pub struct QueueSettings {
+pub(crate) struct QueueSettings {
     /// Keep sent messages until acknowledged.
     pub ack: bool,
     /// Minimum time between two sends.
@@ -21,21 +21,19 @@ pub struct QueueSettings {
     pub max_queue: usize,
     /// Last in, first out.
     pub newest_first: bool,
-    /// Lifetime of a message, seconds (> 0); also the priority time constant.
-    pub ttl: f64,
-    /// Base value in the priority contest.
-    pub value_base: f64,
     /// Manipulators in force.
     pub manipulators: HashSet<Manipulator>,
-    /// `ttl` in microseconds.
+    /// The lifetime of a message (`ttl`, seconds > 0, also the priority
+    /// time constant), in microseconds.
     ttl_micros: Micros,
-    /// `value_base / ttl`, per microsecond.
+    /// `value_base / ttl` (the base value in the priority contest over
+    /// the lifetime), per microsecond.
     priority_rate: f64,
 }
 
 impl QueueSettings {
     /// Validates a configuration entry.
-    pub fn from_entry(entry: &QueuedMessageEntry) -> Result<Self> {
+    pub(crate) fn from_entry(entry: &QueuedMessageEntry) -> Result<Self> {
         let error = |reason: String| QueueError::Config {
             message: entry.protobuf_name.clone(),
             reason,
@@ -62,8 +60,6 @@ impl QueueSettings {
             blackout: i64::from(entry.blackout_time()) * MICROS_PER_SECOND as i64,
             max_queue: entry.max_queue() as usize,
             newest_first: entry.newest_first(),
-            ttl: f64::from(entry.ttl()),
-            value_base: entry.value_base(),
             manipulators,
             ttl_micros: i64::from(entry.ttl()) * MICROS_PER_SECOND as i64,
             priority_rate: entry.value_base() / f64::from(entry.ttl()) / MICROS_PER_SECOND,
@@ -71,7 +67,7 @@ impl QueueSettings {
     }
 
     /// Whether a manipulator is in force.
-    pub fn has(&self, m: Manipulator) -> bool {
+    pub(crate) fn has(&self, m: Manipulator) -> bool {
         self.manipulators.contains(&m)
     }
 }
@@ -138,7 +134,7 @@ pub(crate) struct Queue {
 }
 
 impl Queue {
-    pub fn new(
+    pub(crate) fn new(
         id: u32,
         descriptor: MessageDescriptor,
         settings: QueueSettings,
@@ -159,13 +155,13 @@ impl Queue {
     }
 
     /// Messages held, including those awaiting an ack.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.messages.len()
     }
 
     /// Whether a message can be given to `link` now (one not awaiting an
     /// ack there).
-    pub fn has_sendable_on(&self, link: LinkIndex) -> bool {
+    pub(crate) fn has_sendable_on(&self, link: LinkIndex) -> bool {
         self.messages.len() > self.busy[link]
     }
 
@@ -177,18 +173,18 @@ impl Queue {
     }
 
     /// `value_base · (now − t_last) / ttl`.
-    pub fn priority(&self, now: Micros) -> f64 {
+    pub(crate) fn priority(&self, now: Micros) -> f64 {
         (now - self.last_send_time) as f64 * self.settings.priority_rate
     }
 
-    pub fn in_blackout(&self, now: Micros) -> bool {
+    pub(crate) fn in_blackout(&self, now: Micros) -> bool {
         self.settings.blackout > 0
             && self.last_send_time.saturating_add(self.settings.blackout) > now
     }
 
     /// Index of the next message to give to `link`: the newest (or
     /// oldest) one not awaiting an ack there that `may` lets it carry.
-    pub fn next_index_on(
+    pub(crate) fn next_index_on(
         &self,
         link: LinkIndex,
         may: impl Fn(&QueuedMessage) -> bool,
@@ -208,13 +204,13 @@ impl Queue {
     }
 
     /// Time of the newest message held.
-    pub fn newest_time(&self) -> Option<Micros> {
+    pub(crate) fn newest_time(&self) -> Option<Micros> {
         self.messages.iter().map(|m| m.time).max()
     }
 
     /// Adds a message; returns those dropped because the queue overflowed
     /// (the oldest first).
-    pub fn push(&mut self, msg: QueuedMessage) -> Vec<QueuedMessage> {
+    pub(crate) fn push(&mut self, msg: QueuedMessage) -> Vec<QueuedMessage> {
         self.oldest_time = self.oldest_time.min(msg.time);
         self.messages.push_back(msg);
         let mut dropped = Vec::new();
@@ -232,7 +228,7 @@ impl Queue {
     /// (marked on `link`), or leaves the queue when no ack is wanted,
     /// unless `stay` (a flooding type without ack that other links are to
     /// carry too: it is marked as carried by `link`).
-    pub fn give_on(
+    pub(crate) fn give_on(
         &mut self,
         index: usize,
         link: LinkIndex,
@@ -277,7 +273,7 @@ impl Queue {
     }
 
     /// The message with sequence number `seq`, if still held.
-    pub fn get(&self, seq: u64) -> Option<&QueuedMessage> {
+    pub(crate) fn get(&self, seq: u64) -> Option<&QueuedMessage> {
         self.position(seq).map(|i| &self.messages[i])
     }
 
@@ -288,7 +284,7 @@ impl Queue {
     /// Removes message `seq` if it is awaiting an ack for `frame` of
     /// `link`; `hint` is where it probably is. (Acknowledged on one link,
     /// it leaves every link.)
-    pub fn take_acked_on(
+    pub(crate) fn take_acked_on(
         &mut self,
         seq: u64,
         hint: usize,
@@ -308,7 +304,7 @@ impl Queue {
     /// ack for `frame` there and was sent before `sent_before` (`None`:
     /// whenever it was sent). `hint` is where the message probably is.
     /// Returns whether it still awaits that ack.
-    pub fn stop_awaiting_on(
+    pub(crate) fn stop_awaiting_on(
         &mut self,
         seq: u64,
         hint: usize,
@@ -343,7 +339,7 @@ impl Queue {
     }
 
     /// Removes and returns the messages older than `ttl` at `now`.
-    pub fn expire(&mut self, now: Micros) -> Vec<QueuedMessage> {
+    pub(crate) fn expire(&mut self, now: Micros) -> Vec<QueuedMessage> {
         let ttl = self.settings.ttl_micros;
         if self.messages.is_empty() || self.oldest_time.saturating_add(ttl) >= now {
             return Vec::new();
@@ -371,7 +367,7 @@ impl Queue {
     }
 
     /// Empties the queue.
-    pub fn flush(&mut self) -> Vec<QueuedMessage> {
+    pub(crate) fn flush(&mut self) -> Vec<QueuedMessage> {
         self.busy = [0; MAX_LINKS];
         self.oldest_time = Micros::MAX;
         self.messages.drain(..).collect()

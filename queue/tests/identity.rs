@@ -25,7 +25,7 @@ fn node(modem_id: i32, identity: bool, ack: bool) -> Node {
 }
 
 fn received(node: &mut Node, tx: &ModemTransmission) -> Vec<ReceivedMessage> {
-    assert!(node.manager.handle_modem_receive(tx).is_empty());
+    assert!(node.manager.handle_modem_receive(tx, 0).is_empty());
     node.drain()
         .into_iter()
         .filter_map(|e| match e {
@@ -137,7 +137,11 @@ fn a_receiver_without_the_trailer_type_keeps_the_messages_before_it() {
     let codec = sender.manager.codec().clone();
     let mut rest = tx.frame[0].as_slice();
     let mut serials = Vec::new();
-    while let Ok((m, used)) = codec.decode_with_len(rest) {
+    while let Ok(dccl::Decoded {
+        message: m,
+        len: used,
+    }) = codec.decode_with(rest, &dccl::DecodeOptions::default())
+    {
         serials.push(serial(&m));
         rest = &rest[used..];
     }
@@ -225,10 +229,10 @@ message Clash {
         dest: Some(2),
         ..Default::default()
     };
-    sender.handle_modem_data_request(&mut tx).unwrap();
+    sender.handle_modem_data_request(&mut tx, 0).unwrap();
     tx.src = Some(1);
     assert_eq!(tx.frame[0], codec.encode(&message).unwrap(), "no trailer");
-    assert!(receiver.handle_modem_receive(&tx).is_empty());
+    assert!(receiver.handle_modem_receive(&tx, 0).is_empty());
     let got: Vec<ReceivedMessage> = events
         .try_iter()
         .filter_map(|e| match e {
@@ -256,7 +260,7 @@ fn a_frame_that_does_not_decode_delivers_only_what_will_not_come_again() {
         // An id no node here has loaded, then the rest of a message.
         tx.frame[0].extend_from_slice(&[0x7e, 0x55, 0x55]);
         tx.ack_requested = Some(true);
-        let errors = receiver.manager.handle_modem_receive(&tx);
+        let errors = receiver.manager.handle_modem_receive(&tx, 0);
         assert_eq!(errors.len(), 1, "{errors:?}");
         let delivered = receiver
             .drain()

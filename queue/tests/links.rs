@@ -74,7 +74,7 @@ fn request(node: &mut Node, link: usize, unique_id: u32) -> (ModemTransmission, 
         ..Default::default()
     };
     node.manager
-        .handle_link_data_request(&mut tx, link)
+        .handle_modem_data_request(&mut tx, link)
         .unwrap();
     let codec = node.manager.codec().clone();
     let serials = tx
@@ -97,7 +97,7 @@ fn identified_request(node: &mut Node, link: usize) -> ModemTransmission {
         ..Default::default()
     };
     node.manager
-        .handle_link_data_request(&mut tx, link)
+        .handle_modem_data_request(&mut tx, link)
         .unwrap();
     assert!(!tx.frame[0].is_empty());
     tx
@@ -148,9 +148,9 @@ fn priority_timeout_waits_on_the_first_link_then_lets_the_next_carry() {
     n.drain();
     // Iridium's ack removes it everywhere; acoustic's late ack credits
     // nothing, and neither link has it to send.
-    n.manager.handle_link_receive(&ack(4), IRIDIUM);
+    n.manager.handle_modem_receive(&ack(4), IRIDIUM);
     assert_eq!(acked(&n.drain()), vec![7]);
-    n.manager.handle_link_receive(&ack(2), ACOUSTIC);
+    n.manager.handle_modem_receive(&ack(2), ACOUSTIC);
     assert!(acked(&n.drain()).is_empty());
     n.clock.advance_seconds(600.0);
     assert!(request(&mut n, ACOUSTIC, 5).1.is_empty());
@@ -166,9 +166,9 @@ fn an_ack_counts_only_on_the_link_that_carried_the_message() {
     assert_eq!(carried, vec![7]);
     n.drain();
     // The same frame number and transmission number, heard on Iridium.
-    n.manager.handle_link_receive(&ack(2), IRIDIUM);
+    n.manager.handle_modem_receive(&ack(2), IRIDIUM);
     assert!(acked(&n.drain()).is_empty());
-    n.manager.handle_link_receive(&ack(2), ACOUSTIC);
+    n.manager.handle_modem_receive(&ack(2), ACOUSTIC);
     assert_eq!(acked(&n.drain()), vec![7]);
 }
 
@@ -233,9 +233,9 @@ fn flood_all_sends_on_every_link_at_once_and_one_ack_ends_it() {
     assert_eq!(request(&mut n, ACOUSTIC, 1).1, vec![5]);
     assert_eq!(request(&mut n, IRIDIUM, 2).1, vec![5]);
     n.drain();
-    n.manager.handle_link_receive(&ack(1), ACOUSTIC);
+    n.manager.handle_modem_receive(&ack(1), ACOUSTIC);
     assert_eq!(acked(&n.drain()), vec![5]);
-    n.manager.handle_link_receive(&ack(2), IRIDIUM);
+    n.manager.handle_modem_receive(&ack(2), IRIDIUM);
     assert!(acked(&n.drain()).is_empty());
 }
 
@@ -327,7 +327,7 @@ fn every_sending_of_a_type_of_several_links_is_marked_resent() {
         message_identity: Some(true),
         ..Default::default()
     });
-    assert!(receiver.manager.handle_modem_receive(&tx).is_empty());
+    assert!(receiver.manager.handle_modem_receive(&tx, 0).is_empty());
     let identities: Vec<_> = receiver
         .drain()
         .into_iter()
@@ -347,7 +347,7 @@ fn every_sending_of_a_type_of_several_links_is_marked_resent() {
     let mut n = node_with(Some(only), [1.0, 10.0], true);
     n.push("Status", 1, 2, 7);
     let tx = identified_request(&mut n, ACOUSTIC);
-    receiver.manager.handle_modem_receive(&tx);
+    receiver.manager.handle_modem_receive(&tx, 0);
     let resent: Vec<bool> = receiver
         .drain()
         .into_iter()
@@ -366,6 +366,6 @@ fn a_link_that_does_not_exist_is_refused() {
         max_frame_bytes: Some(32),
         ..Default::default()
     };
-    let err = n.manager.handle_link_data_request(&mut tx, 2).unwrap_err();
+    let err = n.manager.handle_modem_data_request(&mut tx, 2).unwrap_err();
     assert!(err.to_string().contains("link 2 does not exist"), "{err}");
 }

@@ -249,7 +249,7 @@ fn a_message_needing_an_ack_waits_for_a_frame_that_wants_acks() {
         dest: Some(2),
         ..Default::default()
     };
-    node.manager.handle_modem_data_request(&mut tx).unwrap();
+    node.manager.handle_modem_data_request(&mut tx, 0).unwrap();
     assert_eq!(contents(&codec, &tx.frame[0]), vec![("Contact".into(), 2)]);
     assert_eq!(tx.ack_requested, Some(false));
 
@@ -301,7 +301,7 @@ fn stitching_fills_one_frame_and_the_receiver_splits_it() {
     assert_eq!(tx.frame[0], expected, "frame = concatenated DCCL encodings");
 
     let mut receiver = Node::new(2, entries);
-    assert!(receiver.manager.handle_modem_receive(&tx).is_empty());
+    assert!(receiver.manager.handle_modem_receive(&tx, 0).is_empty());
     let got: Vec<(String, u32)> = receiver
         .drain()
         .into_iter()
@@ -348,11 +348,12 @@ fn several_frames_per_transmission_and_acks_by_frame() {
 
     // An ack addressed to another node changes nothing.
     node.manager
-        .handle_modem_receive(&ack_for(&[0, 1, 2], 2, 7));
+        .handle_modem_receive(&ack_for(&[0, 1, 2], 2, 7), 0);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 5);
 
     // Frames 0 and 2 acknowledged: 4 and 2 leave, reported.
-    node.manager.handle_modem_receive(&ack_for(&[0, 2], 2, 1));
+    node.manager
+        .handle_modem_receive(&ack_for(&[0, 2], 2, 1), 0);
     let events = node.drain();
     let acked: Vec<(u32, u32, i32)> = events
         .iter()
@@ -397,7 +398,7 @@ fn minimum_ack_wait_holds_a_sent_message_back() {
             frame_start: Some(1),
             ..Default::default()
         };
-        node.manager.handle_modem_data_request(&mut tx).unwrap();
+        node.manager.handle_modem_data_request(&mut tx, 0).unwrap();
         tx
     };
     node.clock.advance_seconds(10.0);
@@ -469,7 +470,7 @@ fn a_message_awaiting_its_ack_can_still_expire() {
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 0);
     // A late ack finds nothing and changes nothing.
     node.drain();
-    node.manager.handle_modem_receive(&ack_for(&[0], 2, 1));
+    node.manager.handle_modem_receive(&ack_for(&[0], 2, 1), 0);
     assert!(node.drain().is_empty());
 }
 
@@ -613,7 +614,7 @@ fn a_frame_that_does_not_decode_is_reported_and_the_rest_delivered() {
         ..Default::default()
     };
     receiver.drain();
-    let errors = receiver.manager.handle_modem_receive(&tx);
+    let errors = receiver.manager.handle_modem_receive(&tx, 0);
     let frames: Vec<usize> = errors
         .iter()
         .map(|e| match e {
@@ -658,7 +659,7 @@ fn received_messages_for_other_nodes_are_not_delivered_unless_promiscuous_and_ou
         ..Default::default()
     };
     node.drain();
-    assert!(node.manager.handle_modem_receive(&tx).is_empty());
+    assert!(node.manager.handle_modem_receive(&tx, 0).is_empty());
     let events = node.drain();
     let got = |events: &[QueueEvent]| -> Vec<(u32, i32, i32)> {
         events
@@ -688,7 +689,7 @@ fn received_messages_for_other_nodes_are_not_delivered_unless_promiscuous_and_ou
     let mut promiscuous = entry("Status");
     promiscuous.manipulator = vec![protos::goby::acomms::protobuf::Manipulator::Promiscuous as i32];
     node.manager.configure_queue(&promiscuous).unwrap();
-    node.manager.handle_modem_receive(&tx);
+    node.manager.handle_modem_receive(&tx, 0);
     assert_eq!(got(&node), vec![(1, 1, 3), (2, 1, 2), (3, 1, 0)]);
 }
 
@@ -721,7 +722,7 @@ fn static_roles_and_a_query_source() {
         max_frame_bytes: Some(64),
         ..Default::default()
     };
-    node.manager.handle_modem_data_request(&mut tx).unwrap();
+    node.manager.handle_modem_data_request(&mut tx, 0).unwrap();
     assert_eq!(tx.dest, Some(6));
     assert_eq!(tx.src, Some(1));
 }
@@ -760,7 +761,9 @@ fn bad_configurations_are_refused_with_the_message_named() {
     }
 
     let mut request = ModemTransmission::default();
-    let err = manager.handle_modem_data_request(&mut request).unwrap_err();
+    let err = manager
+        .handle_modem_data_request(&mut request, 0)
+        .unwrap_err();
     assert!(err.to_string().contains("max_frame_bytes"));
 }
 
@@ -853,7 +856,7 @@ fn numbered_request(node: &mut Node, bytes: u32, unique_id: u32) -> ModemTransmi
         unique_id: Some(unique_id),
         ..Default::default()
     };
-    node.manager.handle_modem_data_request(&mut tx).unwrap();
+    node.manager.handle_modem_data_request(&mut tx, 0).unwrap();
     tx
 }
 
@@ -895,20 +898,20 @@ fn an_ack_is_credited_only_to_the_transmission_and_node_it_answers() {
 
     // The late ack of transmission 100 (frame 0 too) does not credit 101.
     node.manager
-        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(100)));
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(100)), 0);
     assert!(acked_serials(&node.drain()).is_empty());
     // Nor does an ack of the right number from a node it was not sent to,
     // nor one that names no transmission.
     node.manager
-        .handle_modem_receive(&numbered_ack(&[0], 3, 1, Some(101)));
+        .handle_modem_receive(&numbered_ack(&[0], 3, 1, Some(101)), 0);
     node.manager
-        .handle_modem_receive(&numbered_ack(&[0], 2, 1, None));
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, None), 0);
     assert!(acked_serials(&node.drain()).is_empty());
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 3);
 
     // Its own ack removes it.
     node.manager
-        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(101)));
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(101)), 0);
     assert_eq!(acked_serials(&node.drain()), vec![12]);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 2);
 }

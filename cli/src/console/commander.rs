@@ -86,14 +86,16 @@ impl Commander {
             Ok(m) => m,
             Err(e) => return json!({"ok": false, "error": e}),
         };
-        let (bytes, changes) = match self.codec.encode_with_changes(&parsed) {
-            Ok(done) => done,
+        let mut bytes = Vec::new();
+        let options = dccl::EncodeOptions::with_changes();
+        let changes = match self.codec.encode_with(&parsed, &mut bytes, &options) {
+            Ok(done) => done.changes,
             Err(e) => return json!({"ok": false, "error": e.to_string()}),
         };
         let back = self
             .codec
-            .decode_as_with_len(type_name, &bytes)
-            .map(|(m, _)| message_json(&m))
+            .decode_with(&bytes, &dccl::DecodeOptions::as_type(type_name))
+            .map(|d| message_json(&d.message))
             .unwrap_or(Value::Null);
         let sent = message_json(&parsed);
         let mut said: Vec<String> = changes.iter().map(|c| c.field.clone()).collect();

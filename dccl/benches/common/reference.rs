@@ -117,7 +117,9 @@ pub fn time_ours(
         let start = Instant::now();
         for m in messages {
             out.clear();
-            codec.encode_into(black_box(m), &mut out).unwrap();
+            codec
+                .encode_with(black_box(m), &mut out, &dccl::EncodeOptions::default())
+                .unwrap();
             black_box(&out);
         }
         best_encode = best_encode.min(start.elapsed().as_secs_f64());

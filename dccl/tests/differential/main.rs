@@ -608,8 +608,8 @@ fn compare_decode(
         return;
     };
     let ours = ours
-        .decode_with_len(bytes)
-        .map(|(m, used)| (dccl::short_debug_string(&m), used));
+        .decode_with(bytes, &dccl::DecodeOptions::default())
+        .map(|d| (dccl::short_debug_string(&d.message), d.len));
     match (theirs[0].as_str(), ours) {
         ("ok", Ok((text, used))) => {
             if text != theirs[2] || used.to_string() != theirs[3] {

@@ -12,7 +12,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         battery_voltage: Some(24.3),
         ..Default::default()
     };
-    let bytes = codec.encode_typed(&status)?;
+    let bytes = codec.encode(&status)?;
     let back: Status = codec.decode_typed(&bytes)?;
     assert_eq!(back, status);
 

@@ -31,7 +31,7 @@ fn typed_and_dynamic_paths_give_the_same_bytes() -> Result<(), Box<dyn std::erro
         lines_done: None,
         fault: Some("leak sensor two".into()),
     };
-    let typed_bytes = typed.encode_typed(&status)?;
+    let typed_bytes = typed.encode(&status)?;
 
     let (dynamic_bytes, dynamic) = dynamic_encode(
         r#"vehicle: 3 mode: RETURNING depth: 612.3 battery_voltage: 21.7 fault: "leak sensor two""#,
@@ -59,7 +59,7 @@ fn typed_and_dynamic_paths_give_the_same_bytes() -> Result<(), Box<dyn std::erro
 fn main_example_message_matches_the_dynamic_path() -> Result<(), Box<dyn std::error::Error>> {
     let mut codec = dccl::Codec::new();
     codec.load_type::<Status>()?;
-    let bytes = codec.encode_typed(&Status {
+    let bytes = codec.encode(&Status {
         vehicle: 3,
         mode: Mode::Survey as i32,
         depth: 42.5,

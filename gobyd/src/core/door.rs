@@ -94,10 +94,12 @@ impl Door {
         // The one encoding of the message (the daemon's codec has no
         // adaptive model that encoding would advance: the configuration
         // check refuses them).
-        let (encoded, changes) = self
+        let mut encoded = Vec::new();
+        let changes = self
             .codec
-            .encode_with_changes(&message)
-            .map_err(|e| e.to_string())?;
+            .encode_with(&message, &mut encoded, &dccl::EncodeOptions::with_changes())
+            .map_err(|e| e.to_string())?
+            .changes;
         if changes.is_empty() {
             return Ok(Admitted {
                 message,

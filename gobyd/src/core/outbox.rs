@@ -240,7 +240,7 @@ impl Outbox {
         request: &mut ModemTransmission,
         link: queue::LinkIndex,
     ) -> Result<(), QueueError> {
-        self.queue.handle_link_data_request(request, link)
+        self.queue.handle_modem_data_request(request, link)
     }
 
     /// Hands a transmission (data or ack) received on link `link` to the
@@ -251,7 +251,7 @@ impl Outbox {
         transmission: &ModemTransmission,
         link: queue::LinkIndex,
     ) -> Vec<QueueError> {
-        self.queue.handle_link_receive(transmission, link)
+        self.queue.handle_modem_receive(transmission, link)
     }
 
     /// The queue's links, to tell their states (`None`: one link).

@@ -207,7 +207,7 @@ fn header_of(mt: &ModemTransmission) -> Result<IridiumHeader, FrameError> {
 pub fn encode_message(mt: &ModemTransmission) -> Result<Vec<u8>, FrameError> {
     let header = header_of(mt)?;
     let mut out = CODEC
-        .encode_typed(&header)
+        .encode(&header)
         .map_err(|e| FrameError::Header(e.to_string()))?;
     if let Some(frame) = mt.frame.first() {
         out.extend_from_slice(frame);
@@ -226,8 +226,12 @@ pub fn decode_message(bytes: &[u8]) -> Result<ModemTransmission, FrameError> {
             bytes.len()
         )));
     }
-    let (dynamic, used) = CODEC
-        .decode_as_with_len(IridiumHeader::default().descriptor().full_name(), bytes)
+    let name = IridiumHeader::default().descriptor();
+    let dccl::Decoded {
+        message: dynamic,
+        len: used,
+    } = CODEC
+        .decode_with(bytes, &dccl::DecodeOptions::as_type(name.full_name()))
         .map_err(|e| FrameError::Header(e.to_string()))?;
     let header: IridiumHeader = dynamic
         .transcode_to()

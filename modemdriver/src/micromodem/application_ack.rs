@@ -569,11 +569,12 @@ impl ApplicationAcks {
         }
         let decoded = self
             .codec
-            .decode_with_len(first)
+            .decode_with(first, &dccl::DecodeOptions::default())
             .map_err(|e| e.to_string())
-            .and_then(|(m, used)| {
-                m.transcode_to::<MicroModemApplicationAck>()
-                    .map(|a| (a, used))
+            .and_then(|d| {
+                d.message
+                    .transcode_to::<MicroModemApplicationAck>()
+                    .map(|a| (a, d.len))
                     .map_err(|e| e.to_string())
             });
         let (ack, used) = match decoded {

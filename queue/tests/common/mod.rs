@@ -156,7 +156,7 @@ impl Node {
             ..Default::default()
         };
         self.manager
-            .handle_modem_data_request(&mut tx)
+            .handle_modem_data_request(&mut tx, 0)
             .expect("data request");
         tx
     }
