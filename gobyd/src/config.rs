@@ -21,6 +21,7 @@ use protos::goby::apps::protobuf::GobydConfig;
 
 pub mod goby;
 pub mod links;
+pub mod mac_switcher;
 mod moos_lines;
 mod skip;
 
@@ -1111,6 +1112,7 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
             format!("{id} is not valid: modem ids are 1 and up (0 is broadcast)"),
         )]));
     }
+    mac_switcher::complete(&mut config, id).map_err(ConfigError::Problems)?;
     if links::has_link_sections(&config) {
         if let Some(top) = [
             ("driver", config.driver.is_some()),
@@ -1333,6 +1335,7 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
         }
     }
     problems.extend(links::link_problems(config));
+    problems.extend(mac_switcher::problems(config, driver));
     problems
 }
 

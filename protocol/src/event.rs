@@ -36,6 +36,9 @@ pub enum Event {
     MacCycleUpdate(MacCycleUpdate),
     /// `mac_cycle`: a `MACUpdate` changed the cycle (or was refused).
     MacCycle(MacCycle),
+    /// `mac_switch`: the MAC switcher switched, renewed a keep-alive, went
+    /// back to the default, or refused a request.
+    MacSwitch(crate::mac_switch::MacSwitch),
     /// `driver_status`: the driver's status changed.
     DriverStatus(DriverStatus),
     /// `driver_specific`: a driver-specific result (ranging, ...).
@@ -69,7 +72,10 @@ impl Event {
             | Event::ModemTransmit(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_) => Topic::Modem,
-            Event::MacSlotStart(_) | Event::MacCycleUpdate(_) | Event::MacCycle(_) => Topic::Mac,
+            Event::MacSlotStart(_)
+            | Event::MacCycleUpdate(_)
+            | Event::MacCycle(_)
+            | Event::MacSwitch(_) => Topic::Mac,
             Event::Transfer(_) => Topic::Transfer,
             Event::LinkStatus(_) => Topic::Link,
             Event::Forecast(_) | Event::Environment(_) => Topic::Forecast,
@@ -106,6 +112,7 @@ impl<'de> Deserialize<'de> for Event {
             "mac_slot_start" => Event::MacSlotStart(read(value)?),
             "mac_cycle_update" => Event::MacCycleUpdate(read(value)?),
             "mac_cycle" => Event::MacCycle(read(value)?),
+            "mac_switch" => Event::MacSwitch(read(value)?),
             "driver_status" => Event::DriverStatus(read(value)?),
             "driver_specific" => Event::DriverSpecific(read(value)?),
             "transfer" => Event::Transfer(read(value)?),

@@ -23,6 +23,7 @@
 
 mod control;
 pub(crate) mod links;
+pub mod mac_switcher;
 pub mod mac_update;
 mod receive;
 
@@ -174,6 +175,8 @@ pub struct Core {
     /// (what a cycle changed at sea was changed from, and is checked
     /// against, see [`mac_update`]).
     configured_mac: protos::goby::acomms::protobuf::MacConfig,
+    /// The MAC switcher, with the configuration's `mac_switcher`.
+    mac_switcher: Option<mac_switcher::MacSwitcher>,
 }
 
 impl std::fmt::Debug for Core {
@@ -269,7 +272,9 @@ impl Core {
             network,
             always_taken: around.always_taken,
             configured_mac,
+            mac_switcher: mac_switcher::MacSwitcher::of(&config),
         };
+        core.restore_mac_switch();
         core.restore_mac_cycle();
         Ok(core)
     }
@@ -345,6 +350,7 @@ impl Core {
                 .links
                 .iter()
                 .filter_map(|l| l.mac.next_event_time())
+                .chain(self.mac_switch_deadline())
                 .min()
                 .map(|t| Duration::from_micros((t - now).max(0) as u64))
                 .unwrap_or(Duration::from_secs(3600));
@@ -392,7 +398,10 @@ impl Core {
                         Err(e) => tracing::error!("link restart: {e}"),
                     }
                 }
-                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
+                () = tokio::time::sleep(mac_wait) => {
+                    self.mac_switch_lapse();
+                    self.mac_slots();
+                }
                 () = sleep_until_opt(self.delivery.next_due()) => {}
                 _ = expire.tick() => {
                     self.outbox.expire();

@@ -20,6 +20,7 @@
 pub mod backoff;
 pub mod budget;
 pub mod mac_cycle;
+pub mod mac_switch;
 
 use std::collections::VecDeque;
 use std::future::Future;
