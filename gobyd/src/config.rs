@@ -23,6 +23,7 @@ pub mod goby;
 pub mod links;
 pub mod mac_switcher;
 mod moos_lines;
+pub mod script;
 mod skip;
 
 /// A commented configuration that works as it is: `gobyd --example-config`.

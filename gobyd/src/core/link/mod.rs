@@ -82,6 +82,10 @@ pub struct Link {
     pub restarts: u32,
     /// Its byte budget, if it has one.
     pub budget: Option<Budget>,
+    /// The DCCL ids of the types the slot this node initiated last may
+    /// carry (scripted TDMA, the slot's `packet_type`s; empty: every
+    /// type): its data requests are filled with these alone.
+    pub slot_types: Vec<u32>,
 }
 
 impl std::fmt::Debug for Link {
