@@ -4,8 +4,8 @@
 
 use gobyd_protocol::event::{
     Ack, Direction, DriverSpecific, DriverStatus, Dropped as DropEvent, Expire, LinkStatus, Lost,
-    MacCycle, MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw,
-    Received, Sent, Transfer, TransferDirection,
+    MacCycle, MacCycleUpdate, MacRate, MacSlotStart, ModemReceive, ModemTransmit, Outcome,
+    QueueSize, Raw, Received, Sent, Transfer, TransferDirection,
 };
 use gobyd_protocol::forecast::{
     BandForecast, CtdSample, Environment, Forecast, PeerForecast, Point, RateFer,
@@ -311,6 +311,15 @@ fn events() -> Vec<Event> {
             from: Some("json".into()),
             error: Some("no MAC named \"loud\"".into()),
         }),
+        Event::MacRate(MacRate {
+            mac_rate: 5,
+            dest: 2,
+            slot_index: 0,
+            reason: "up".into(),
+            snr: Some(12.0),
+            packet_error: Some(0.01),
+            slot_limited: true,
+        }),
         Event::DriverStatus(DriverStatus {
             driver_status: "ready".into(),
             detail: "ready".into(),
@@ -347,6 +356,7 @@ fn events() -> Vec<Event> {
             | Event::MacCycleUpdate(_)
             | Event::MacCycle(_)
             | Event::MacSwitch(_)
+            | Event::MacRate(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_)
             | Event::Transfer(_)

@@ -101,6 +101,8 @@ pub(crate) fn open(
             restarts: 0,
             budget,
             slot_types: Vec::new(),
+            adaptive_rate: view.mac.is_some_and(|m| m.adaptive_rate()),
+            rates: Default::default(),
         };
         match started {
             Ok(driver) => {
@@ -410,7 +412,8 @@ impl Core {
                     tracing::error!("cannot start a driver-specific request: {e}");
                 }
             }
-            if let Some(transmission) = initiated {
+            if let Some(mut transmission) = initiated {
+                self.adapt_rate(i, &mut transmission);
                 self.links[i].slot_types = self.slot_types(&transmission);
                 tracing::debug!(
                     unique_id = self.next_transmission,

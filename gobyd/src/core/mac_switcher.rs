@@ -192,6 +192,7 @@ impl Core {
                 tracing::warn!("{e}");
             }
             self.links[0].mac = mac;
+            self.links[0].adaptive_rate = config.adaptive_rate();
             self.configured_mac = config;
         }
         Ok(())

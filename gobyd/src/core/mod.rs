@@ -25,6 +25,7 @@ mod control;
 pub(crate) mod links;
 pub mod mac_switcher;
 pub mod mac_update;
+pub(crate) mod rate_choice;
 mod receive;
 
 pub mod crash_point;
@@ -177,6 +178,9 @@ pub struct Core {
     configured_mac: protos::goby::acomms::protobuf::MacConfig,
     /// The MAC switcher, with the configuration's `mac_switcher`.
     mac_switcher: Option<mac_switcher::MacSwitcher>,
+    /// The core's own events, read for the link forecasts (rates chosen
+    /// from the link).
+    own_events: broadcast::Receiver<SharedEvent>,
 }
 
 impl std::fmt::Debug for Core {
@@ -233,7 +237,7 @@ impl Core {
                 .map(|l| l.status(clock.now(), restart_now))
                 .collect::<Vec<_>>(),
         );
-        let (events, _) = broadcast::channel(1024);
+        let (events, own_events) = broadcast::channel(1024);
         let (driver_status, _) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
@@ -273,6 +277,7 @@ impl Core {
             always_taken: around.always_taken,
             configured_mac,
             mac_switcher: mac_switcher::MacSwitcher::of(&config),
+            own_events,
         };
         core.restore_mac_switch();
         core.restore_mac_cycle();
@@ -573,6 +578,7 @@ impl Core {
             }
             DriverEvent::Received(transmission) => {
                 self.links[i].mac.handle_received(transmission.src());
+                self.heard_snr(i, &transmission);
                 self.receive(i, transmission);
             }
             DriverEvent::TransmitResult(result) => {

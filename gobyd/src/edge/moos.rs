@@ -362,6 +362,7 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
         ModemEvent::CycleUpdate { .. }
         | ModemEvent::MacCycle { .. }
         | ModemEvent::MacSwitch(_)
+        | ModemEvent::RateChoice { .. }
         | ModemEvent::Status(_)
         | ModemEvent::Specific(_) => {}
     }

@@ -103,6 +103,16 @@ pub enum ModemEvent {
     /// The MAC switcher switched, renewed a keep-alive, went back to the
     /// default, or refused a request.
     MacSwitch(MacSwitched),
+    /// The rate of a transmission was chosen from the link (a slot with
+    /// `adaptive_rate`).
+    RateChoice {
+        /// The destination it was chosen for.
+        dest: i32,
+        /// The slot's index in its cycle.
+        slot_index: i32,
+        /// The choice and why.
+        choice: crate::core::link::adaptive_rate::Choice,
+    },
     /// A driver status report.
     Status(DriverStatus),
     /// A driver-specific result (ranging, mini-packets ...).

@@ -17,6 +17,7 @@
 //! to MQTT (`PREFIX/NODE/link_status/NAME`, retained) and to MOOS
 //! (`ACOMMS_LINK_STATUS`), at start and whenever it changes.
 
+pub mod adaptive_rate;
 pub mod backoff;
 pub mod budget;
 pub mod mac_cycle;
@@ -86,6 +87,11 @@ pub struct Link {
     /// carry (scripted TDMA, the slot's `packet_type`s; empty: every
     /// type): its data requests are filled with these alone.
     pub slot_types: Vec<u32>,
+    /// Every slot's rate is chosen from the link (its MAC's
+    /// `adaptive_rate`).
+    pub adaptive_rate: bool,
+    /// What the rates chosen from the link are chosen from.
+    pub rates: crate::core::rate_choice::RateChooser,
 }
 
 impl std::fmt::Debug for Link {

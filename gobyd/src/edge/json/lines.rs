@@ -366,7 +366,8 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             ModemEvent::SlotStart { .. }
             | ModemEvent::CycleUpdate { .. }
             | ModemEvent::MacCycle { .. }
-            | ModemEvent::MacSwitch(_) => Topic::Mac,
+            | ModemEvent::MacSwitch(_)
+            | ModemEvent::RateChoice { .. } => Topic::Mac,
             _ => Topic::Modem,
         }),
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
@@ -545,6 +546,19 @@ fn modem_line(event: &ModemEvent) -> Event {
             error: error.clone(),
         }),
         ModemEvent::MacSwitch(switched) => Event::MacSwitch(mac_switch_line(switched)),
+        ModemEvent::RateChoice {
+            dest,
+            slot_index,
+            choice,
+        } => Event::MacRate(gobyd_protocol::event::MacRate {
+            mac_rate: choice.rate,
+            dest: *dest,
+            slot_index: *slot_index,
+            reason: choice.reason.name().to_string(),
+            snr: choice.snr,
+            packet_error: choice.packet_error,
+            slot_limited: choice.slot_limited,
+        }),
         ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
             driver_status: status.kind().to_string(),
             detail: status.to_string(),

@@ -243,6 +243,7 @@ impl Formatter {
             | ModemEvent::Raw(_)
             | ModemEvent::Transmitted { .. }
             | ModemEvent::CycleUpdate { .. }
+            | ModemEvent::RateChoice { .. }
             | ModemEvent::Specific(_) => return None,
         })
     }
