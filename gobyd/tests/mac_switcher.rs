@@ -27,21 +27,11 @@ const QUIET: f64 = 30.0;
 /// Node 1 alone on the simulator with a switcher of two MACs, each one
 /// slot of this node: "survey" (10 s, the default) and "quiet" (30 s).
 fn config(dir: &Path) -> protos::goby::apps::protobuf::GobydConfig {
-    let mac = |name: &str, seconds: f64| {
-        format!(
-            "mac {{ name: \"{name}\" mac {{ type: MAC_FIXED_DECENTRALIZED \
-             slot {{ src: 1 dest: -1 rate: 1 slot_seconds: {seconds} }} }} }}"
-        )
-    };
     Node::new(1)
         .driver(Simulator::alone())
         .json_tcp("")
         .data_dir(dir)
-        .extra(&format!(
-            "mac_switcher {{ default_mac: \"survey\" {} {} }}",
-            mac("survey", SURVEY),
-            mac("quiet", QUIET)
-        ))
+        .mac_switcher("survey", &[("survey", 1, SURVEY), ("quiet", 1, QUIET)])
         .config()
 }
 
