@@ -214,3 +214,29 @@ async fn an_unknown_mac_is_refused_naming_it_and_the_switchers_macs() {
     assert_eq!(refused.len(), 2, "{:?}", told.switches);
     node.stop().await;
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_lapse_goes_back_to_the_default_even_when_it_cannot_be_kept() {
+    let dir = scratch("mac-switcher", "unkept");
+    let clock = Arc::new(TokioClock::new());
+    let mut node = start(&dir, &clock).await;
+    node.switch(Some("quiet"), Some(60.0)).await.unwrap();
+    // The state can no longer be written (a directory in its place).
+    let kept = dir.join("mac_switch");
+    std::fs::remove_file(&kept).unwrap();
+    std::fs::create_dir(&kept).unwrap();
+    let told = node.told(Duration::from_secs(120), &clock).await;
+    let reasons: Vec<&str> = told.switches.iter().map(|(_, s)| s.reason).collect();
+    assert_eq!(
+        reasons,
+        ["requested", "keep_alive_lapsed"],
+        "{:?}",
+        told.switches
+    );
+    let state = node.switch(None, None).await.unwrap();
+    assert_eq!(state.active, "survey");
+    // A request that cannot be kept is refused.
+    let err = node.switch(Some("quiet"), None).await.unwrap_err();
+    assert!(err.contains("could not be kept"), "{err}");
+    node.stop().await;
+}

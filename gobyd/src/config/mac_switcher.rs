@@ -1,7 +1,7 @@
 //! The MAC switcher's section (`mac_switcher`): named medium access
 //! configurations for the first link, one of them the default
 //! (`default_mac`), switched between at sea (the daemon's side is
-//! [`crate::core::mac_switcher`]).
+//! the core's `mac_switcher` module).
 //!
 //! Completing a configuration puts the default's MAC where the first
 //! link's `mac` goes (`mac`, or `link[0].mac`), so that every check of a

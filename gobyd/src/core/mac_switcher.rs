@@ -132,10 +132,10 @@ impl Core {
         let Some(switch) = next.lapse(now) else {
             return;
         };
-        match self.take_switch(next, &switch) {
+        // The default runs even when the state cannot be kept: it is what
+        // the node must fall back to.
+        match self.switch_to(next, &switch, false) {
             Ok(()) => self.report_switch(&switch, None),
-            // The default runs anyway (it is what the node must fall back
-            // to); a restart may then run the lapsed MAC until it notices.
             Err(e) => tracing::error!("MAC switcher: {e}"),
         }
     }
@@ -167,6 +167,17 @@ impl Core {
     /// first, then the first link runs its MAC, built anew when another
     /// one runs. Errors: the MAC cannot be built or the state kept.
     fn take_switch(&mut self, next: Switcher, switch: &Switch) -> Result<(), String> {
+        self.switch_to(next, switch, true)
+    }
+
+    /// As [`take_switch`](Self::take_switch); with `must_keep` false a
+    /// state that cannot be kept is logged and the switch made anyway.
+    fn switch_to(
+        &mut self,
+        next: Switcher,
+        switch: &Switch,
+        must_keep: bool,
+    ) -> Result<(), String> {
         let Some(current) = self.mac_switcher.as_mut() else {
             return Ok(());
         };
@@ -183,9 +194,14 @@ impl Core {
             modem_id: Some(self.modem_id),
             names: next.names().to_vec(),
         };
-        MacSwitchFile::in_dir(self.data_dir.path())
+        let kept = MacSwitchFile::in_dir(self.data_dir.path())
             .save(&state)
-            .map_err(|e| format!("the switch could not be kept: {e}"))?;
+            .map_err(|e| format!("the switch could not be kept: {e}"));
+        match kept {
+            Err(e) if must_keep => return Err(e),
+            Err(e) => tracing::error!("MAC switcher: {e}; a restart may run the lapsed MAC until it sees the deadline passed"),
+            Ok(()) => {}
+        }
         current.switcher = next;
         if let Some(mac) = built {
             if let Err(e) = MacCycleFile::in_dir(self.data_dir.path()).remove() {
