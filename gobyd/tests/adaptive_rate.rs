@@ -100,8 +100,15 @@ async fn the_rate_follows_the_snr_heard_and_each_choice_is_told() {
         while let Ok(event) = tokio::time::timeout_at(until, events.recv()).await {
             let Ok(event) = event else { continue };
             let event: Arc<DaemonEvent> = event;
-            if let DaemonEvent::Modem(ModemEvent::RateChoice { dest, choice, .. }) = &*event {
-                seen.push((*dest, choice.rate, choice.reason.name()));
+            match &*event {
+                DaemonEvent::Modem(ModemEvent::RateChoice { dest, choice, .. }) => {
+                    seen.push((*dest, choice.rate, choice.reason.name()))
+                }
+                // The slot start tells the rate chosen.
+                DaemonEvent::Modem(ModemEvent::SlotStart {
+                    initiated: Some(t), ..
+                }) => assert_eq!(Some(t.rate()), seen.last().map(|s| s.1)),
+                _ => {}
             }
         }
         seen

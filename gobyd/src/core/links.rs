@@ -386,6 +386,12 @@ impl Core {
                 }
                 _ => None,
             };
+            // Its rate chosen from the link (a slot with `adaptive_rate`),
+            // as the slot start tells it.
+            let initiated = initiated.map(|mut t| {
+                self.adapt_rate(i, &mut t);
+                t
+            });
             if let ModemEvent::SlotStart {
                 initiated: i,
                 shared,
@@ -412,8 +418,7 @@ impl Core {
                     tracing::error!("cannot start a driver-specific request: {e}");
                 }
             }
-            if let Some(mut transmission) = initiated {
-                self.adapt_rate(i, &mut transmission);
+            if let Some(transmission) = initiated {
                 self.links[i].slot_types = self.slot_types(&transmission);
                 tracing::debug!(
                     unique_id = self.next_transmission,
