@@ -25,6 +25,10 @@
 //! A fixed cycle may hold shared slots, slotted ALOHA inside TDMA
 //! ([`shared`]).
 //!
+//! A node may hold several named MAC configurations and switch between
+//! them at sea, going back to a default when a keep-alive lapses
+//! ([`switcher`]).
+//!
 //! [`simulation`] holds the Monte Carlo evaluation of the auto-discovery
 //! rules (thesis Figs. 2.11 and 2.12).
 
@@ -47,8 +51,10 @@ pub use manager::{
 };
 pub mod shared;
 pub mod simulation;
+pub mod switcher;
 pub mod update;
 
+pub use switcher::{Switch, SwitchReason, Switcher};
 pub use update::{edit_cycle, UpdateOutcome, MAC_UPDATE_NAME};
 
 /// The crate's README.md, whose examples run as doctests.

@@ -69,6 +69,9 @@ pub fn validate(
     // once, at its place.
     let mut problems = entry_problems(&codec, &queue, configured, &defs.loaded);
     problems.extend(config::links::rule_problems(&config, &defs.loaded));
+    problems.extend(config::script::problems(&config, |name| {
+        codec.max_size(name).ok()
+    }));
     if problems.is_empty() {
         problems.extend(frame_problems(&codec, &queue, configured, &config));
     }
@@ -346,6 +349,33 @@ mod tests {
         for part in parts {
             assert!(err.contains(part), "{part:?} missing from {err}");
         }
+    }
+
+    #[tokio::test]
+    async fn a_scripted_slot_of_an_unknown_type_or_one_over_its_rates_frame_is_refused() {
+        let dir = scratch("script");
+        let err = refused(&format!(
+            "modem_id: 1\ndata_dir: \"{}\"\njson {{ tcp_bind: \"\" }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED \
+             slot {{ src: 1 rate: 1 slot_seconds: 10 packet_type: \"goby.example.Comand\" }} \
+             slot {{ src: 1 rate: 0 slot_seconds: 20 packet_type: \"goby.example.NavigationReport\" packet_type: \"any\" }} }}\n",
+            dir.display()
+        ))
+        .await;
+        assert_names(
+            &err,
+            &[
+                "mac.slot[0].packet_type[0]",
+                "\"goby.example.Comand\" is not a loaded DCCL type",
+            ],
+        );
+        let ok = format!(
+            "modem_id: 1\ndata_dir: \"{}\"\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED \
+             slot {{ src: 1 rate: 1 slot_seconds: 10 packet_type: \"goby.example.Command\" }} }}\n",
+            dir.display()
+        );
+        check(config::parse(&ok, "test").unwrap()).expect("a scripted slot of a loaded type");
     }
 
     #[tokio::test]

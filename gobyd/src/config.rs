@@ -21,7 +21,9 @@ use protos::goby::apps::protobuf::GobydConfig;
 
 pub mod goby;
 pub mod links;
+pub mod mac_switcher;
 mod moos_lines;
+pub mod script;
 mod skip;
 
 /// A commented configuration that works as it is: `gobyd --example-config`.
@@ -1111,6 +1113,7 @@ pub fn complete(mut config: GobydConfig) -> Result<GobydConfig, ConfigError> {
             format!("{id} is not valid: modem ids are 1 and up (0 is broadcast)"),
         )]));
     }
+    mac_switcher::complete(&mut config, id).map_err(ConfigError::Problems)?;
     if links::has_link_sections(&config) {
         if let Some(top) = [
             ("driver", config.driver.is_some()),
@@ -1333,6 +1336,7 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
         }
     }
     problems.extend(links::link_problems(config));
+    problems.extend(mac_switcher::problems(config, driver));
     problems
 }
 

@@ -11,15 +11,13 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
-use gobyd::daemon::Daemon;
 use gobyd::event::{Control, DaemonEvent, ModemEvent, Publish, UpdateSource};
 use modemdriver::sim::medium::Medium;
-use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::mac_update::UpdateType;
 use protos::goby::acomms::protobuf::{MacCycle, MacUpdate, MacUpdateSlot};
-use support::daemon::scratch;
+use support::daemon::{scratch, start_simulated};
 use support::node::{Entry, Node, Simulator};
 use tokio::sync::{broadcast, oneshot};
 
@@ -44,18 +42,7 @@ struct Running {
 }
 
 async fn start(id: i32, dir: &Path, medium: &Arc<Medium>, clock: &Arc<TokioClock>) -> Running {
-    let config = config(id, dir);
-    let mut driver_config = config.driver.clone().unwrap();
-    driver_config.modem_id = Some(id);
-    let driver =
-        SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
-            .unwrap();
-    let daemon = Daemon::builder(config)
-        .driver(driver)
-        .clock(clock.clone())
-        .start()
-        .await
-        .expect("gobyd starts");
+    let daemon = start_simulated(config(id, dir), medium, clock).await;
     let (stop, stopped) = oneshot::channel::<()>();
     Running {
         daemon_control: daemon.control(),

@@ -10,10 +10,10 @@ mod support;
 
 use std::time::Duration;
 
-use gobyd::daemon::Daemon;
 use gobyd::event::{Control, DaemonEvent, ModemEvent};
-use moos::{ClientConfig, MoosClient, Value};
+use moos::Value;
 use support::daemon::scratch;
+use support::moosdb::{mini_db_with_client, start_on_moos};
 use support::node::{Node, Simulator};
 use tokio::sync::oneshot;
 
@@ -21,17 +21,8 @@ const PATIENCE: Duration = Duration::from_secs(20);
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
-    let db = moos::testing::MiniDb::start("127.0.0.1:0", "macupdate")
-        .await
-        .unwrap();
     let dir = scratch("moos-mac-update", "update");
-    let (client, mut mail) =
-        MoosClient::connect(ClientConfig::new("autonomy").with_address("127.0.0.1", db.port()))
-            .await
-            .expect("the test client connects");
-    client
-        .register("ACOMMS_MAC_SLOT_START", Duration::ZERO)
-        .unwrap();
+    let (db, client, mut mail) = mini_db_with_client("macupdate", "ACOMMS_MAC_SLOT_START").await;
     // Written before gobyd connects: not applied when it does.
     client
         .notify_string(
@@ -49,25 +40,9 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
         .moos(db.port(), r#"name: "gobyd1""#)
         .extra("moos_var {}")
         .config();
-    let daemon = Daemon::builder(config).start().await.unwrap();
-    let control = daemon.control();
-    let mut events = daemon.subscribe();
-    let (stop, stopped) = oneshot::channel::<()>();
-    let run = tokio::spawn(daemon.run(async {
-        let _ = stopped.await;
-    }));
-
     // gobyd is connected once its slot starts come.
     let deadline = tokio::time::Instant::now() + PATIENCE;
-    loop {
-        let m = tokio::time::timeout_at(deadline, mail.recv())
-            .await
-            .expect("gobyd writes ACOMMS_MAC_SLOT_START")
-            .unwrap();
-        if m.key == "ACOMMS_MAC_SLOT_START" {
-            break;
-        }
-    }
+    let mut gobyd = start_on_moos(config, &mut mail, deadline).await;
     for value in [
         // For another node: ignored, as pAcommsHandler ignores it.
         "@PB[goby.acomms.protobuf.MACUpdate] src: 2 dest: 3 update_type: CLEAR",
@@ -88,7 +63,7 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
     // then the push (the unparsable value never reaches the core).
     let mut told = Vec::new();
     while told.len() < 4 {
-        let e = tokio::time::timeout_at(deadline, events.recv())
+        let e = tokio::time::timeout_at(deadline, gobyd.events.recv())
             .await
             .expect("the updates are told")
             .unwrap();
@@ -129,12 +104,15 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
         }
     }
     let (reply, answer) = oneshot::channel();
-    control.send(Control::MacCycle { reply }).await.unwrap();
+    gobyd
+        .control
+        .send(Control::MacCycle { reply })
+        .await
+        .unwrap();
     let cycle = answer.await.unwrap();
     assert_eq!(cycle.slot.len(), 3, "{cycle:?}");
     assert_eq!(cycle.slot[2].unique_id, Some(77));
-    let _ = stop.send(());
-    run.await.unwrap().unwrap();
+    gobyd.stop().await;
     client.close().await;
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,7 +2,10 @@
 //! bridge against a real Mosquitto broker on loopback: an update changes
 //! the cycle and the cycle after it is published (retained); one for
 //! another node is refused on `error` and told on `mac_cycle` with its
-//! reason. Fails without Mosquitto (`.ci/mosquitto.sh` installs it).
+//! reason. `PREFIX/NODE/mac_switch` switches the MAC switcher and
+//! `PREFIX/NODE/mac_active` tells which MAC runs (retained); an unknown MAC
+//! is refused on `error`. Fails without Mosquitto (`.ci/mosquitto.sh`
+//! installs it).
 
 mod support;
 
@@ -28,13 +31,11 @@ fn srcs(v: &serde_json::Value) -> Vec<i64> {
         .unwrap_or_default()
 }
 
-#[test]
-fn mac_updates_from_the_broker_change_the_cycle() {
-    let dir = scratch("mqtt-mac-update", "one");
-    let broker = Broker::start(&dir, "mac_updates_from_the_broker_change_the_cycle");
-    let config = Node::new(1)
-        .driver(Simulator::alone().overhead(0.05))
-        .tdma(&[1, 2], 6, 1.2)
+/// `gobyd` node 1 (its MAC, `mac`, a `Node` given the rest) bridged to
+/// `broker` under `fleet`, its data in `dir`; and a watcher of `fleet/#`,
+/// once gobyd is online.
+fn start(dir: &std::path::Path, broker: &Broker, mac: impl Fn(Node) -> Node) -> (Killed, Watcher) {
+    let config = mac(Node::new(1).driver(Simulator::alone().overhead(0.05)))
         .json_tcp("")
         .mqtt(
             &broker.address(),
@@ -46,7 +47,7 @@ fn mac_updates_from_the_broker_change_the_cycle() {
         .write(dir.join("node1.cfg"));
     let watcher = Watcher::start(&broker.address(), "console-mac", "fleet/#");
     let log = std::fs::File::create(dir.join("node1.log")).unwrap();
-    let _gobyd = Killed(
+    let gobyd = Killed(
         Command::new(env!("CARGO_BIN_EXE_gobyd"))
             .arg("--config")
             .arg(&config)
@@ -58,6 +59,14 @@ fn mac_updates_from_the_broker_change_the_cycle() {
             .expect("gobyd starts"),
     );
     watcher.wait_on("fleet/1/status", |v| (v["online"] == true).then_some(()));
+    (gobyd, watcher)
+}
+
+#[test]
+fn mac_updates_from_the_broker_change_the_cycle() {
+    let dir = scratch("mqtt-mac-update", "one");
+    let broker = Broker::start(&dir, "mac_updates_from_the_broker_change_the_cycle");
+    let (_gobyd, watcher) = start(&dir, &broker, |n| n.tdma(&[1, 2], 6, 1.2));
 
     watcher.publish(
         "fleet/1/mac_update",
@@ -83,6 +92,37 @@ fn mac_updates_from_the_broker_change_the_cycle() {
     assert_eq!(srcs(&cycle), [1, 2, 1], "{cycle}");
     assert_eq!(cycle["from"], "mqtt", "{cycle}");
     assert_eq!(cycle["running"], true, "{cycle}");
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn mac_switches_from_the_broker_switch_and_are_told_on_mac_active() {
+    let dir = scratch("mqtt-mac-update", "switch");
+    let broker = Broker::start(&dir, "mac_switches_from_the_broker");
+    let (_gobyd, watcher) = start(&dir, &broker, |n| {
+        n.mac_switcher("survey", &[("survey", 6, 1.0), ("quiet", 6, 2.0)])
+    });
+    watcher.publish("fleet/1/mac_switch", r#"{"mac": "loud"}"#);
+    let error = watcher.wait_on("fleet/1/error", |v| Some(v.clone()));
+    assert_eq!(error["topic"], "fleet/1/mac_switch", "{error}");
+    assert!(
+        error["error"].as_str().unwrap().contains("\"loud\""),
+        "{error}"
+    );
+    watcher.publish(
+        "fleet/1/mac_switch",
+        r#"{"mac": "quiet", "keep_alive_seconds": 600}"#,
+    );
+    let active = watcher.wait_on("fleet/1/mac_active", |v| {
+        (v["reason"] == "requested").then(|| v.clone())
+    });
+    assert_eq!(
+        (&active["mac_switch"], &active["previous"], &active["from"]),
+        (&"quiet".into(), &"survey".into(), &"mqtt".into()),
+        "{active}"
+    );
+    assert!(active["keep_alive_until"].as_f64().is_some(), "{active}");
     drop(broker);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -36,6 +36,11 @@ pub enum Event {
     MacCycleUpdate(MacCycleUpdate),
     /// `mac_cycle`: a `MACUpdate` changed the cycle (or was refused).
     MacCycle(MacCycle),
+    /// `mac_switch`: the MAC switcher switched, renewed a keep-alive, went
+    /// back to the default, or refused a request.
+    MacSwitch(crate::mac_switch::MacSwitch),
+    /// `mac_rate`: the rate chosen from the link for a transmission.
+    MacRate(MacRate),
     /// `driver_status`: the driver's status changed.
     DriverStatus(DriverStatus),
     /// `driver_specific`: a driver-specific result (ranging, ...).
@@ -69,7 +74,11 @@ impl Event {
             | Event::ModemTransmit(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_) => Topic::Modem,
-            Event::MacSlotStart(_) | Event::MacCycleUpdate(_) | Event::MacCycle(_) => Topic::Mac,
+            Event::MacSlotStart(_)
+            | Event::MacCycleUpdate(_)
+            | Event::MacCycle(_)
+            | Event::MacSwitch(_)
+            | Event::MacRate(_) => Topic::Mac,
             Event::Transfer(_) => Topic::Transfer,
             Event::LinkStatus(_) => Topic::Link,
             Event::Forecast(_) | Event::Environment(_) => Topic::Forecast,
@@ -106,6 +115,8 @@ impl<'de> Deserialize<'de> for Event {
             "mac_slot_start" => Event::MacSlotStart(read(value)?),
             "mac_cycle_update" => Event::MacCycleUpdate(read(value)?),
             "mac_cycle" => Event::MacCycle(read(value)?),
+            "mac_switch" => Event::MacSwitch(read(value)?),
+            "mac_rate" => Event::MacRate(read(value)?),
             "driver_status" => Event::DriverStatus(read(value)?),
             "driver_specific" => Event::DriverSpecific(read(value)?),
             "transfer" => Event::Transfer(read(value)?),
@@ -296,6 +307,32 @@ pub struct MacSlotStart {
     /// nothing queued).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub priority: Option<f64>,
+}
+
+/// `{"event": "mac_rate", "mac_rate": RATE, "dest", "slot_index",
+/// "reason", "snr", "packet_error", "slot_limited"}`.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[serde(tag = "event", rename = "mac_rate")]
+pub struct MacRate {
+    /// The modem rate chosen.
+    pub mac_rate: i32,
+    /// The destination it was chosen for (0: broadcast, -1: left to the
+    /// queue; both from the weakest peer).
+    pub dest: i32,
+    /// The slot's index in its cycle.
+    pub slot_index: i32,
+    /// Why: `no_link_data`, `first`, `kept`, `up`, `down`.
+    pub reason: String,
+    /// The SNR it was chosen from, dB (absent: none heard).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub snr: Option<f64>,
+    /// The chosen rate's estimated chance of losing the packet (absent: no
+    /// link data).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub packet_error: Option<f64>,
+    /// A faster rate would meet the target but does not fit the slot.
+    #[serde(default, skip_serializing_if = "crate::is_false")]
+    pub slot_limited: bool,
 }
 
 /// `{"event": "mac_cycle_update", "joined"|"left": MODEM_ID}`.

@@ -31,6 +31,7 @@
 
 pub mod event;
 pub mod forecast;
+pub mod mac_switch;
 pub mod message;
 pub mod reply;
 pub mod request;

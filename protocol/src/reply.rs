@@ -72,6 +72,11 @@ pub enum Reply {
         /// The cycle.
         mac_cycle: Value,
     },
+    /// To `mac_switch`: which MAC of the switcher runs after it.
+    MacSwitch {
+        /// Which runs.
+        mac_switch: crate::mac_switch::MacSwitchState,
+    },
     /// To a line that was not taken: why (bad JSON, unknown type, a value
     /// the codec would change, a line over 1 MiB, ...).
     Error {

@@ -12,6 +12,7 @@
 //! {"forecast": {}}
 //! {"mac_update": {"src": 1, "dest": 2, "update_type": "PUSH_BACK", "slot": [{…}]}}
 //! {"mac_cycle": {}}
+//! {"mac_switch": {"mac": "quiet", "keep_alive_seconds": 120}}
 //! ```
 
 use serde::de::{Deserialize, Deserializer};
@@ -148,6 +149,9 @@ pub enum Request {
     MacUpdate(Value),
     /// `mac_cycle`: this node's TDMA cycle as it stands.
     MacCycle,
+    /// `mac_switch`: switch to a named MAC of the switcher, or ask which
+    /// runs; answered with which runs after it.
+    MacSwitch(crate::mac_switch::MacSwitchRequest),
 }
 
 impl Request {
@@ -203,6 +207,13 @@ impl Request {
         if object.contains_key("mac_cycle") {
             return Ok(Request::MacCycle);
         }
+        if let Some(switch) = object.remove("mac_switch") {
+            return serde_json::from_value(switch)
+                .map(Request::MacSwitch)
+                .map_err(|e| {
+                    format!("mac_switch: {e} (a switch is {{\"mac\", \"keep_alive_seconds\"}})")
+                });
+        }
         for kind in ["file_send", "file_get", "transfers"] {
             if let Some(spec) = object.get(kind) {
                 return file_request(kind, spec);
@@ -250,7 +261,7 @@ impl Request {
                 .collect::<Result<Vec<_>, _>>()
                 .map(Request::Subscribe);
         }
-        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\", \"transfers\", \"ctd\", \"nav\", \"forecast\", \"mac_update\" or \"mac_cycle\"".into())
+        Err("expected \"publish\", \"subscribe\", \"driver_specific\", \"file_send\", \"file_get\", \"transfers\", \"ctd\", \"nav\", \"forecast\", \"mac_update\", \"mac_cycle\" or \"mac_switch\"".into())
     }
 
     /// Its line, without the newline.
@@ -335,6 +346,7 @@ impl Serialize for Request {
             Request::Forecast => map.serialize_entry("forecast", &Map::new())?,
             Request::MacUpdate(update) => map.serialize_entry("mac_update", update)?,
             Request::MacCycle => map.serialize_entry("mac_cycle", &Map::new())?,
+            Request::MacSwitch(switch) => map.serialize_entry("mac_switch", switch)?,
         }
         map.end()
     }
@@ -384,6 +396,10 @@ mod tests {
             Request::Forecast,
             Request::MacUpdate(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
             Request::MacCycle,
+            Request::MacSwitch(crate::mac_switch::MacSwitchRequest {
+                mac: Some("quiet".into()),
+                keep_alive_seconds: Some(120.0),
+            }),
         ];
         for request in requests {
             let line = request.line();

@@ -4,12 +4,13 @@
 
 use gobyd_protocol::event::{
     Ack, Direction, DriverSpecific, DriverStatus, Dropped as DropEvent, Expire, LinkStatus, Lost,
-    MacCycle, MacCycleUpdate, MacSlotStart, ModemReceive, ModemTransmit, Outcome, QueueSize, Raw,
-    Received, Sent, Transfer, TransferDirection,
+    MacCycle, MacCycleUpdate, MacRate, MacSlotStart, ModemReceive, ModemTransmit, Outcome,
+    QueueSize, Raw, Received, Sent, Transfer, TransferDirection,
 };
 use gobyd_protocol::forecast::{
     BandForecast, CtdSample, Environment, Forecast, PeerForecast, Point, RateFer,
 };
+use gobyd_protocol::mac_switch::{MacSwitch, MacSwitchRequest, MacSwitchState};
 use gobyd_protocol::{Accepted, Changed, Dropped, Event, FileGet, FileSend, Reply, Request, Topic};
 use serde_json::{json, Value};
 
@@ -107,6 +108,10 @@ fn requests() -> Vec<Request> {
         Request::Forecast,
         Request::MacUpdate(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
         Request::MacCycle,
+        Request::MacSwitch(MacSwitchRequest {
+            mac: Some("quiet".into()),
+            keep_alive_seconds: Some(120.0),
+        }),
     ];
     for r in &all {
         match r {
@@ -120,7 +125,8 @@ fn requests() -> Vec<Request> {
             | Request::Nav(_)
             | Request::Forecast
             | Request::MacUpdate(_)
-            | Request::MacCycle => {}
+            | Request::MacCycle
+            | Request::MacSwitch(_) => {}
         }
     }
     all
@@ -180,6 +186,14 @@ fn replies() -> Vec<Reply> {
         Reply::MacCycle {
             mac_cycle: json!({"slot": [], "running": false, "modem_id": 2}),
         },
+        Reply::MacSwitch {
+            mac_switch: MacSwitchState {
+                active: "quiet".into(),
+                default_mac: "survey".into(),
+                macs: vec!["survey".into(), "quiet".into()],
+                keep_alive_until: Some(1.7e9),
+            },
+        },
         Reply::error("bad"),
     ];
     for r in &all {
@@ -194,6 +208,7 @@ fn replies() -> Vec<Reply> {
             | Reply::Nav { .. }
             | Reply::Forecast { .. }
             | Reply::MacCycle { .. }
+            | Reply::MacSwitch { .. }
             | Reply::Error { .. } => {}
         }
     }
@@ -288,6 +303,23 @@ fn events() -> Vec<Event> {
             from: "link".into(),
             error: Some("for modem 3".into()),
         }),
+        Event::MacSwitch(MacSwitch {
+            mac_switch: "survey".into(),
+            previous: "quiet".into(),
+            reason: "keep_alive_lapsed".into(),
+            keep_alive_until: Some(1.7e9),
+            from: Some("json".into()),
+            error: Some("no MAC named \"loud\"".into()),
+        }),
+        Event::MacRate(MacRate {
+            mac_rate: 5,
+            dest: 2,
+            slot_index: 0,
+            reason: "up".into(),
+            snr: Some(12.0),
+            packet_error: Some(0.01),
+            slot_limited: true,
+        }),
         Event::DriverStatus(DriverStatus {
             driver_status: "ready".into(),
             detail: "ready".into(),
@@ -323,6 +355,8 @@ fn events() -> Vec<Event> {
             | Event::MacSlotStart(_)
             | Event::MacCycleUpdate(_)
             | Event::MacCycle(_)
+            | Event::MacSwitch(_)
+            | Event::MacRate(_)
             | Event::DriverStatus(_)
             | Event::DriverSpecific(_)
             | Event::Transfer(_)

@@ -538,16 +538,41 @@ impl QueueManager {
         request: &mut ModemTransmission,
         link: LinkIndex,
     ) -> Result<()> {
+        self.handle_modem_data_request_of(request, link, &[])
+    }
+
+    /// Fills the frames of a data request of link `link` as
+    /// [`handle_modem_data_request`](Self::handle_modem_data_request) does,
+    /// with messages of the types of DCCL ids `only` alone (a scripted TDMA
+    /// slot's packet types; empty: every type). An error for a link that
+    /// does not exist.
+    pub fn handle_modem_data_request_of(
+        &mut self,
+        request: &mut ModemTransmission,
+        link: LinkIndex,
+        only: &[u32],
+    ) -> Result<()> {
+        self.link_exists(link)?;
+        self.fill(request, link, only)
+    }
+
+    /// An error for a link that does not exist.
+    fn link_exists(&self, link: LinkIndex) -> Result<()> {
         let count = self.links.as_ref().map_or(1, Links::len);
         if link >= count {
             return Err(QueueError::Request(format!(
                 "link {link} does not exist (there are {count})"
             )));
         }
-        self.fill(request, link)
+        Ok(())
     }
 
-    fn fill(&mut self, request: &mut ModemTransmission, link: LinkIndex) -> Result<()> {
+    fn fill(
+        &mut self,
+        request: &mut ModemTransmission,
+        link: LinkIndex,
+        only: &[u32],
+    ) -> Result<()> {
         let max_frame_bytes = request
             .max_frame_bytes
             .ok_or_else(|| QueueError::Request("max_frame_bytes is not set".into()))?
@@ -570,8 +595,11 @@ impl QueueManager {
         // fixed once chosen).
         let mut contenders = std::mem::take(&mut self.scratch);
         contenders.clear();
-        contenders
-            .extend((0..self.queues.len()).filter_map(|index| self.contender(index, now, link)));
+        contenders.extend(
+            (0..self.queues.len())
+                .filter_map(|index| self.contender(index, now, link))
+                .filter(|c| only.is_empty() || only.contains(&c.dccl_id)),
+        );
         let mut contenders = BinaryHeap::from(contenders);
         let mut aside: Vec<Contender> = Vec::new();
 

@@ -46,6 +46,14 @@ impl Core {
             } => {
                 let _ = reply.send(self.mac_update(&update, from));
             }
+            Control::MacSwitch {
+                mac,
+                keep_alive_seconds,
+                from,
+                reply,
+            } => {
+                let _ = reply.send(self.mac_switch(mac, keep_alive_seconds, from));
+            }
             Control::MacCycle { reply } => {
                 let _ = reply.send(self.mac_cycle());
             }

@@ -100,6 +100,9 @@ pub(crate) fn open(
             last_error: None,
             restarts: 0,
             budget,
+            slot_types: Vec::new(),
+            adaptive_rate: view.mac.is_some_and(|m| m.adaptive_rate()),
+            rates: Default::default(),
         };
         match started {
             Ok(driver) => {
@@ -150,7 +153,8 @@ impl Core {
         let filled = if left == Some(0) {
             Ok(())
         } else {
-            self.outbox.data_request(request, i)
+            let only = self.links[i].slot_types.clone();
+            self.outbox.data_request_of(request, i, &only)
         };
         if let Err(e) = filled {
             tracing::warn!("data request: {e}");
@@ -382,6 +386,12 @@ impl Core {
                 }
                 _ => None,
             };
+            // Its rate chosen from the link (a slot with `adaptive_rate`),
+            // as the slot start tells it.
+            let initiated = initiated.map(|mut t| {
+                self.adapt_rate(i, &mut t);
+                t
+            });
             if let ModemEvent::SlotStart {
                 initiated: i,
                 shared,
@@ -409,6 +419,7 @@ impl Core {
                 }
             }
             if let Some(transmission) = initiated {
+                self.links[i].slot_types = self.slot_types(&transmission);
                 tracing::debug!(
                     unique_id = self.next_transmission,
                     slot = slot.position.index,
@@ -441,6 +452,36 @@ impl Core {
             return Some(SharedUse::Used { backoff });
         }
         Some(SharedUse::BelowThreshold { priority })
+    }
+
+    /// The DCCL ids of the types a scripted TDMA slot may carry (its
+    /// `packet_type`s; empty: every type, as for a slot without them or
+    /// with "any"). A name that is not loaded (refused by `--check`, but
+    /// possible in a cycle changed at sea) is logged and carries nothing.
+    fn slot_types(&self, slot: &ModemTransmission) -> Vec<u32> {
+        if slot.packet_type.iter().any(|t| t == "any") {
+            return Vec::new();
+        }
+        let ids: Vec<u32> = slot
+            .packet_type
+            .iter()
+            .filter_map(|name| match self.codec.id_of(name) {
+                Ok(id) => Some(id),
+                Err(_) => {
+                    tracing::warn!(
+                        "slot {}: packet_type {name} is not a loaded DCCL type",
+                        slot.slot_index()
+                    );
+                    None
+                }
+            })
+            .collect();
+        if ids.is_empty() && !slot.packet_type.is_empty() {
+            // None of its types is loaded: it carries nothing (no type
+            // has the largest id).
+            return vec![u32::MAX];
+        }
+        ids
     }
 
     /// The priority of the most urgent queue holding messages (`None`:

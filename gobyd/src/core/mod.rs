@@ -23,7 +23,9 @@
 
 mod control;
 pub(crate) mod links;
+pub mod mac_switcher;
 pub mod mac_update;
+pub(crate) mod rate_choice;
 mod receive;
 
 pub mod crash_point;
@@ -179,6 +181,11 @@ pub struct Core {
     /// (what a cycle changed at sea was changed from, and is checked
     /// against, see [`mac_update`]).
     configured_mac: protos::goby::acomms::protobuf::MacConfig,
+    /// The MAC switcher, with the configuration's `mac_switcher`.
+    mac_switcher: Option<mac_switcher::MacSwitcher>,
+    /// The core's own events, read for the link forecasts (rates chosen
+    /// from the link).
+    own_events: broadcast::Receiver<SharedEvent>,
 }
 
 impl std::fmt::Debug for Core {
@@ -247,7 +254,7 @@ impl Core {
                 .map(|l| l.status(clock.now(), restart_now))
                 .collect::<Vec<_>>(),
         );
-        let (events, _) = broadcast::channel(1024);
+        let (events, own_events) = broadcast::channel(1024);
         let (driver_status, _) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
@@ -287,7 +294,10 @@ impl Core {
             network,
             always_taken: around.always_taken,
             configured_mac,
+            mac_switcher: mac_switcher::MacSwitcher::of(&config),
+            own_events,
         };
+        core.restore_mac_switch();
         core.restore_mac_cycle();
         Ok(core)
     }
@@ -363,6 +373,7 @@ impl Core {
                 .links
                 .iter()
                 .filter_map(|l| l.mac.next_event_time())
+                .chain(self.mac_switch_deadline())
                 .min()
                 .map(|t| Duration::from_micros((t - now).max(0) as u64))
                 .unwrap_or(Duration::from_secs(3600));
@@ -382,7 +393,10 @@ impl Core {
             tokio::select! {
                 biased;
                 () = &mut shutdown => break,
-                () = tokio::time::sleep(mac_wait) => self.mac_slots(),
+                () = tokio::time::sleep(mac_wait) => {
+                    self.mac_switch_lapse();
+                    self.mac_slots();
+                }
                 () = sleep_until_opt(restart_at) => self.restart_due(),
                 () = sleep_until_opt(self.delivery.next_due()) => {}
                 _ = expire.tick() => {
@@ -600,6 +614,7 @@ impl Core {
             }
             DriverEvent::Received(transmission) => {
                 self.links[i].mac.handle_received(transmission.src());
+                self.heard_snr(i, &transmission);
                 self.receive(i, transmission);
             }
             DriverEvent::TransmitResult(result) => {

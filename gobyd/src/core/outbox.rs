@@ -243,6 +243,17 @@ impl Outbox {
         self.queue.handle_modem_data_request(request, link)
     }
 
+    /// As [`data_request`](Self::data_request), with messages of the
+    /// types of DCCL ids `only` alone (empty: every type).
+    pub fn data_request_of(
+        &mut self,
+        request: &mut ModemTransmission,
+        link: queue::LinkIndex,
+        only: &[u32],
+    ) -> Result<(), QueueError> {
+        self.queue.handle_modem_data_request_of(request, link, only)
+    }
+
     /// Hands a transmission (data or ack) received on link `link` to the
     /// queues; returns the frames that did not decode (the others are still
     /// delivered).

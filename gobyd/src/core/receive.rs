@@ -203,9 +203,10 @@ impl Core {
     /// side: a bridge or the UDP interface takes every message, or someone
     /// listens to the events (without those, the only listeners are the
     /// connected TCP JSON clients and the embedding program's
-    /// [`subscribe`](Self::subscribe) receivers).
+    /// [`subscribe`](Self::subscribe) receivers; the core's own receiver,
+    /// kept for the link forecasts, is not one).
     pub(super) fn taker_present(&self) -> bool {
-        self.always_taken || self.events.receiver_count() > 0
+        self.always_taken || self.events.receiver_count() > 1
     }
 
     /// Hands the held messages over once a taker is there (see

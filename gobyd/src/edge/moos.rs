@@ -22,6 +22,10 @@
 //!   [`parse_mac_update`]), see [`Control`]. Like the flush and reset
 //!   requests, an update written before gobyd connected is not applied
 //!   again (the cycle it made is kept in the data directory).
+//!   `MAC_SWITCH` (read with or without a `moos_var` section) switches the
+//!   MAC switcher: `NAME`, or `mac=NAME,keep_alive=SECONDS`
+//!   ([`parse_mac_switch`]); writing the same value again before the
+//!   keep-alive runs out renews it.
 //! - Initial values (`moos.initializer`, Goby's `common { initializer }`):
 //!   written each time gobyd connects to the MOOSDB.
 //! - The plain interface: string values of the `send_var` variables are
@@ -109,6 +113,13 @@ impl BridgeSettings {
         self.variables
             .as_ref()
             .map(|v| format!("{}{}", v.prefix(), name(v)))
+    }
+
+    /// The name of the MAC switcher's variable (`ACOMMS_MAC_SWITCH`),
+    /// read with or without a `moos_var` section.
+    fn mac_switch_var(&self) -> String {
+        let v = self.variables.clone().unwrap_or_default();
+        format!("{}{}", v.prefix(), v.mac_switch())
     }
 
     /// The name of the translator's error variable.
@@ -350,6 +361,8 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
         // and on the JSON interface.
         ModemEvent::CycleUpdate { .. }
         | ModemEvent::MacCycle { .. }
+        | ModemEvent::MacSwitch(_)
+        | ModemEvent::RateChoice { .. }
         | ModemEvent::Status(_)
         | ModemEvent::Specific(_) => {}
     }
@@ -479,11 +492,13 @@ async fn bridge(
     let flush_var = settings.var(|v| v.queue_flush());
     let reset_var = settings.var(|v| v.driver_reset());
     let mac_update_var = settings.var(|v| v.mac_cycle_update());
+    let mac_switch_var = settings.mac_switch_var();
     registered.extend(
         flush_var
             .iter()
             .chain(&reset_var)
             .chain(&mac_update_var)
+            .chain([&mac_switch_var])
             .cloned(),
     );
     // Registered with or without the network layer: without it a request
@@ -535,6 +550,11 @@ async fn bridge(
                 Some(m) if Some(&m.key) == mac_update_var.as_ref() => {
                     if fresh(&m, connected_at) {
                         mac_update(&control, &m).await
+                    }
+                }
+                Some(m) if m.key == mac_switch_var => {
+                    if fresh(&m, connected_at) {
+                        mac_switch(&control, &m).await
                     }
                 }
                 Some(m) if m.key == file_send_var || m.key == file_get_var => {
@@ -817,6 +837,70 @@ async fn mac_update(control: &mpsc::Sender<Control>, mail: &Mail) {
     }
 }
 
+/// The MAC and keep-alive seconds of a value of `MAC_SWITCH`: `NAME`, or
+/// `mac=NAME,keep_alive=SECONDS` (MOOS's `key=value` pairs, in any
+/// order). The error says what is wrong.
+pub fn parse_mac_switch(value: &str) -> Result<(String, Option<f64>), String> {
+    let value = value.trim();
+    if !value.contains('=') {
+        return match value {
+            "" => Err("empty: give the name of a MAC of mac_switcher".into()),
+            name => Ok((name.to_string(), None)),
+        };
+    }
+    let (mut mac, mut keep_alive) = (None, None);
+    for pair in value.split(',') {
+        let (key, v) = pair
+            .split_once('=')
+            .ok_or_else(|| format!("{pair:?} is not key=value"))?;
+        match key.trim() {
+            "mac" => mac = Some(v.trim().to_string()),
+            "keep_alive" => {
+                keep_alive = Some(
+                    v.trim()
+                        .parse::<f64>()
+                        .map_err(|_| format!("keep_alive={v}: not a number of seconds"))?,
+                )
+            }
+            other => {
+                return Err(format!(
+                    "unknown key {other:?} (mac=NAME,keep_alive=SECONDS)"
+                ))
+            }
+        }
+    }
+    let mac = mac.ok_or("mac=NAME is missing")?;
+    Ok((mac, keep_alive))
+}
+
+/// Switches the MAC as written to `MAC_SWITCH` (a refusal is logged; it
+/// is told on the `mac` events too).
+async fn mac_switch(control: &mpsc::Sender<Control>, mail: &Mail) {
+    let parsed = match &mail.value {
+        Value::String(text) => parse_mac_switch(text),
+        _ => Err("the value must be a string (NAME or mac=NAME,keep_alive=SECONDS)".into()),
+    };
+    let (mac, keep_alive_seconds) = match parsed {
+        Ok(parsed) => parsed,
+        Err(e) => {
+            tracing::warn!("MOOS: {}: {e}", mail.key);
+            return;
+        }
+    };
+    let (reply, answer) = oneshot::channel();
+    let request = Control::MacSwitch {
+        mac: Some(mac),
+        keep_alive_seconds,
+        from: UpdateSource::Moos,
+        reply,
+    };
+    if control.send(request).await.is_ok() {
+        if let Ok(Err(e)) = answer.await {
+            tracing::info!("MOOS: {}: {e}", mail.key);
+        }
+    }
+}
+
 /// Restarts the modem driver (`DRIVER_RESET`, whatever its value).
 async fn reset(control: &mpsc::Sender<Control>) {
     let (reply, answer) = oneshot::channel();
@@ -929,6 +1013,24 @@ async fn handle_mail(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mac_switch_value_is_a_name_or_key_value_pairs() {
+        assert_eq!(parse_mac_switch(" quiet "), Ok(("quiet".into(), None)));
+        assert_eq!(
+            parse_mac_switch("keep_alive=90,mac=quiet"),
+            Ok(("quiet".into(), Some(90.0)))
+        );
+        for (bad, says) in [
+            ("", "empty"),
+            ("mac=quiet,keep_alive=soon", "keep_alive=soon"),
+            ("keep_alive=9", "mac=NAME"),
+            ("mac=quiet,ttl=9", "\"ttl\""),
+        ] {
+            let err = parse_mac_switch(bad).unwrap_err();
+            assert!(err.contains(says), "{bad}: {err}");
+        }
+    }
 
     #[test]
     fn flush_requests_name_their_dccl_id() {

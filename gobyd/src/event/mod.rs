@@ -25,7 +25,7 @@ use queue::{QueueEvent, ReceivedMessage};
 use tokio::sync::{broadcast, mpsc, watch};
 
 pub use forecast::{ForecastEvent, ForecastInput};
-pub use modem::{ModemEvent, SharedUse};
+pub use modem::{MacSwitched, ModemEvent, SharedUse};
 pub use protos::goby::apps::protobuf::LinkStatus;
 pub use request::{
     AcceptedMessage, Control, NetworkReply, NetworkRequest, Publish, PublishReply, UpdateSource,

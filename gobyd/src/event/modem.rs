@@ -2,7 +2,8 @@
 //! daemon's core reports them to the autonomy interfaces: raw lines,
 //! transmissions heard and sent, the driver's status and driver-specific
 //! results (JSON topic `modem`), slot starts, auto-discovery's cycle
-//! changes and `MACUpdate`s applied (topic `mac`).
+//! changes, `MACUpdate`s applied and the MAC switcher's switches (topic
+//! `mac`).
 //!
 //! The core sends the typed events; each interface renders them in its
 //! own form (the JSON interface's lines are in the guide's
@@ -29,6 +30,24 @@ pub enum SharedUse {
     },
     /// It is backing off after using one.
     BackOff,
+}
+
+/// What the MAC switcher did (see [`amac::switcher`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MacSwitched {
+    /// The name of the MAC running after it.
+    pub active: String,
+    /// The name of the one that ran before.
+    pub previous: String,
+    /// Why ([`amac::SwitchReason::name`]), or `refused`.
+    pub reason: &'static str,
+    /// When the one running lapses, microseconds since the UNIX epoch
+    /// (`None`: it does not).
+    pub until: Option<i64>,
+    /// Where the request came from (`None`: a lapse or a start).
+    pub from: Option<&'static str>,
+    /// Why the request was refused (`None`: it was not).
+    pub error: Option<String>,
 }
 
 /// A modem driver or medium access event.
@@ -80,6 +99,19 @@ pub enum ModemEvent {
         from: &'static str,
         /// Why it was not applied (`None`: applied).
         error: Option<String>,
+    },
+    /// The MAC switcher switched, renewed a keep-alive, went back to the
+    /// default, or refused a request.
+    MacSwitch(MacSwitched),
+    /// The rate of a transmission was chosen from the link (a slot with
+    /// `adaptive_rate`).
+    RateChoice {
+        /// The destination it was chosen for.
+        dest: i32,
+        /// The slot's index in its cycle.
+        slot_index: i32,
+        /// The choice and why.
+        choice: crate::core::link::adaptive_rate::Choice,
     },
     /// A driver status report.
     Status(DriverStatus),

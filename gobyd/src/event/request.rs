@@ -118,6 +118,21 @@ pub enum Control {
         /// The cycle after it, or why it was not applied.
         reply: oneshot::Sender<Result<MacCycle, String>>,
     },
+    /// Switch to a named MAC of the switcher (`mac`; `None`: only ask
+    /// which runs), for `keep_alive_seconds` unless asked for again; the
+    /// state is kept in the data directory (`mac_switch`) before it takes
+    /// effect.
+    MacSwitch {
+        /// The name of the MAC to run.
+        mac: Option<String>,
+        /// Seconds it runs unless asked for again (`None`: until switched
+        /// again).
+        keep_alive_seconds: Option<f64>,
+        /// Where it came from.
+        from: UpdateSource,
+        /// Which MAC runs after it, or why it was refused.
+        reply: oneshot::Sender<Result<gobyd_protocol::mac_switch::MacSwitchState, String>>,
+    },
     /// This node's TDMA cycle as it stands.
     MacCycle {
         /// The cycle.

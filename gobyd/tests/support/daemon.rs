@@ -304,3 +304,27 @@ pub async fn publish_command_reply(
         .expect("the daemon takes publications");
     answer.await.expect("the daemon answers")
 }
+
+/// A daemon of `config` started in this process on the acoustic
+/// simulator's `medium`, its core and driver on `clock` (virtual time
+/// under tokio's paused clock).
+pub async fn start_simulated(
+    config: protos::goby::apps::protobuf::GobydConfig,
+    medium: &std::sync::Arc<modemdriver::sim::medium::Medium>,
+    clock: &std::sync::Arc<modemdriver::time::TokioClock>,
+) -> gobyd::daemon::Daemon {
+    let mut driver_config = config.driver.clone().unwrap();
+    driver_config.modem_id = Some(config.modem_id());
+    let driver = modemdriver::sim::SimulatorDriver::start_on_with_clock(
+        &driver_config,
+        medium.clone(),
+        clock.clone(),
+    )
+    .unwrap();
+    gobyd::daemon::Daemon::builder(config)
+        .driver(driver)
+        .clock(clock.clone())
+        .start()
+        .await
+        .expect("gobyd starts")
+}

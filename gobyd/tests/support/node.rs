@@ -207,6 +207,26 @@ impl Node {
         self
     }
 
+    /// A `mac_switcher { default_mac: "DEFAULT" mac { … } … }` section:
+    /// for each `(name, rate, slot_seconds)` of `macs` a fixed TDMA MAC of
+    /// one slot of this node, `slot { src: ID dest: -1 rate: RATE
+    /// slot_seconds: SLOT }`.
+    pub fn mac_switcher(self, default: &str, macs: &[(&str, u32, f64)]) -> Node {
+        let id = self.id;
+        let macs: String = macs
+            .iter()
+            .map(|(name, rate, seconds)| {
+                format!(
+                    " mac {{ name: \"{name}\" mac {{ type: MAC_FIXED_DECENTRALIZED \
+                     slot {{ src: {id} dest: -1 rate: {rate} slot_seconds: {seconds} }} }} }}"
+                )
+            })
+            .collect();
+        self.extra(&format!(
+            "mac_switcher {{ default_mac: \"{default}\"{macs} }}"
+        ))
+    }
+
     /// Text format fields added at the end, as they are (e.g. a
     /// `translator_entry { … }`); after those given before.
     pub fn extra(mut self, text: &str) -> Node {

@@ -56,17 +56,9 @@ impl MacCycleFile {
     /// `configured` slots. Errors: the file cannot be read or does not
     /// decode (the error names the file).
     pub fn load(&self, modem_id: i32, configured: &[ModemTransmission]) -> io::Result<Kept> {
-        let bytes = match std::fs::read(&self.path) {
-            Ok(bytes) => bytes,
-            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Kept::Nothing),
-            Err(e) => return Err(named(&self.path, e)),
+        let Some(cycle) = read_kept::<MacCycle>(&self.path)? else {
+            return Ok(Kept::Nothing);
         };
-        let cycle = MacCycle::decode(bytes.as_slice()).map_err(|e| {
-            named(
-                &self.path,
-                io::Error::new(io::ErrorKind::InvalidData, e.to_string()),
-            )
-        })?;
         if cycle.modem_id() != modem_id {
             return Ok(Kept::Stale(format!(
                 "it was written for modem {}, this node is modem {modem_id}",
@@ -83,9 +75,39 @@ impl MacCycleFile {
 
     /// Keeps `cycle` durably (see the module's documentation).
     pub fn save(&self, cycle: &MacCycle) -> io::Result<()> {
-        goby_store::file::write_atomically(&self.path, &cycle.encode_to_vec())
-            .map_err(|e| named(&self.path, e))
+        keep(&self.path, cycle)
     }
+
+    /// Forgets the changes (the configured cycle runs at the next start).
+    pub fn remove(&self) -> io::Result<()> {
+        match std::fs::remove_file(&self.path) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound => Err(named(&self.path, e)),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The protobuf message kept at `path` (`None`: there is no file).
+/// Errors: the file cannot be read or does not decode (the error names
+/// the file).
+pub(crate) fn read_kept<M: Message + Default>(path: &Path) -> io::Result<Option<M>> {
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(named(path, e)),
+    };
+    M::decode(bytes.as_slice()).map(Some).map_err(|e| {
+        named(
+            path,
+            io::Error::new(io::ErrorKind::InvalidData, e.to_string()),
+        )
+    })
+}
+
+/// Writes `message` to `path` durably (a new file synced, renamed over
+/// the old, the directory synced).
+pub(crate) fn keep<M: Message>(path: &Path, message: &M) -> io::Result<()> {
+    goby_store::file::write_atomically(path, &message.encode_to_vec()).map_err(|e| named(path, e))
 }
 
 fn named(path: &Path, e: io::Error) -> io::Error {

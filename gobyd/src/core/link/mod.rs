@@ -17,9 +17,11 @@
 //! to MQTT (`PREFIX/NODE/link_status/NAME`, retained) and to MOOS
 //! (`ACOMMS_LINK_STATUS`), at start and whenever it changes.
 
+pub mod adaptive_rate;
 pub mod backoff;
 pub mod budget;
 pub mod mac_cycle;
+pub mod mac_switch;
 
 use std::collections::VecDeque;
 use std::future::Future;
@@ -81,6 +83,15 @@ pub struct Link {
     pub restarts: u32,
     /// Its byte budget, if it has one.
     pub budget: Option<Budget>,
+    /// The DCCL ids of the types the slot this node initiated last may
+    /// carry (scripted TDMA, the slot's `packet_type`s; empty: every
+    /// type): its data requests are filled with these alone.
+    pub slot_types: Vec<u32>,
+    /// Every slot's rate is chosen from the link (its MAC's
+    /// `adaptive_rate`).
+    pub adaptive_rate: bool,
+    /// What the rates chosen from the link are chosen from.
+    pub rates: crate::core::rate_choice::RateChooser,
 }
 
 impl std::fmt::Debug for Link {

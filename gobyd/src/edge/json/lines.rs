@@ -44,6 +44,8 @@ pub enum Input {
     MacUpdate(MacUpdate),
     /// This node's TDMA cycle as it stands.
     MacCycle,
+    /// Switch to a named MAC of the switcher, or ask which runs.
+    MacSwitch(gobyd_protocol::mac_switch::MacSwitchRequest),
 }
 
 /// What a client gives or asks of the link forecast.
@@ -89,6 +91,7 @@ pub fn input(request: Request, codec: &Codec) -> Result<Input, String> {
         Request::Forecast => Ok(Input::Forecast(ForecastRequest::Forecast)),
         Request::MacUpdate(update) => mac_update_of(update).map(Input::MacUpdate),
         Request::MacCycle => Ok(Input::MacCycle),
+        Request::MacSwitch(switch) => Ok(Input::MacSwitch(switch)),
     }
 }
 
@@ -105,6 +108,31 @@ pub fn mac_update_of(value: Value) -> Result<MacUpdate, String> {
 /// A cycle as its proto3 JSON (`slot`, `running`, `modem_id`).
 pub fn mac_cycle_json(cycle: &MacCycle) -> Value {
     message_json(&cycle.transcode_to_dynamic())
+}
+
+/// The `mac_switch` event of a switch (the JSON line, the MQTT `mac`
+/// payload).
+pub fn mac_switch_line(
+    switched: &crate::event::MacSwitched,
+) -> gobyd_protocol::mac_switch::MacSwitch {
+    gobyd_protocol::mac_switch::MacSwitch {
+        mac_switch: switched.active.clone(),
+        previous: switched.previous.clone(),
+        reason: switched.reason.to_string(),
+        keep_alive_until: switched.until.map(|u| u as f64 / 1e6),
+        from: switched.from.map(str::to_string),
+        error: switched.error.clone(),
+    }
+}
+
+/// The reply to `mac_switch`: which MAC runs, or why not.
+pub fn mac_switch_reply(
+    outcome: Result<gobyd_protocol::mac_switch::MacSwitchState, String>,
+) -> Reply {
+    match outcome {
+        Ok(mac_switch) => Reply::MacSwitch { mac_switch },
+        Err(e) => Reply::error(e),
+    }
 }
 
 /// The reply to `mac_update` and `mac_cycle`: the cycle, or why not.
@@ -337,7 +365,9 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
         DaemonEvent::Modem(event) => Some(match event {
             ModemEvent::SlotStart { .. }
             | ModemEvent::CycleUpdate { .. }
-            | ModemEvent::MacCycle { .. } => Topic::Mac,
+            | ModemEvent::MacCycle { .. }
+            | ModemEvent::MacSwitch(_)
+            | ModemEvent::RateChoice { .. } => Topic::Mac,
             _ => Topic::Modem,
         }),
         DaemonEvent::Transfer(_) => Some(Topic::Transfer),
@@ -514,6 +544,20 @@ fn modem_line(event: &ModemEvent) -> Event {
                 .map(|u| message_json(&u.transcode_to_dynamic())),
             from: from.to_string(),
             error: error.clone(),
+        }),
+        ModemEvent::MacSwitch(switched) => Event::MacSwitch(mac_switch_line(switched)),
+        ModemEvent::RateChoice {
+            dest,
+            slot_index,
+            choice,
+        } => Event::MacRate(gobyd_protocol::event::MacRate {
+            mac_rate: choice.rate,
+            dest: *dest,
+            slot_index: *slot_index,
+            reason: choice.reason.name().to_string(),
+            snr: choice.snr,
+            packet_error: choice.packet_error,
+            slot_limited: choice.slot_limited,
         }),
         ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
             driver_status: status.kind().to_string(),

@@ -43,8 +43,8 @@ use crate::event::{
 };
 use gobyd_protocol::{Reply, Topic};
 use lines::{
-    event_line, event_topic, lost, mac_cycle_reply, network_reply, parse_request, publish_reply,
-    ForecastRequest, Input,
+    event_line, event_topic, lost, mac_cycle_reply, mac_switch_reply, network_reply, parse_request,
+    publish_reply, ForecastRequest, Input,
 };
 
 pub use gobyd_protocol::MAX_LINE;
@@ -320,6 +320,19 @@ impl JsonInterface {
                     return Handled::Reply(shutting_down());
                 }
                 Handled::Waiting(answer(outcome, mac_cycle_reply))
+            }
+            Input::MacSwitch(switch) => {
+                let (reply, outcome) = oneshot::channel();
+                let control = Control::MacSwitch {
+                    mac: switch.mac,
+                    keep_alive_seconds: switch.keep_alive_seconds,
+                    from: UpdateSource::Json,
+                    reply,
+                };
+                if self.control.send(control).await.is_err() {
+                    return Handled::Reply(shutting_down());
+                }
+                Handled::Waiting(answer(outcome, mac_switch_reply))
             }
             Input::MacCycle => {
                 let (reply, outcome) = oneshot::channel();

@@ -6,7 +6,8 @@
 //! interface's `file_send`, `file_get` and `transfers`, and are
 //! acknowledged after its reply too, as are `goby.acomms.protobuf.MACUpdate`s
 //! on `mac_update` (a refusal's reason goes to `error`; the cycle after it
-//! comes on `mac_cycle`). Acknowledgements go out in the order
+//! comes on `mac_cycle`), and switches of the MAC switcher on `mac_switch`
+//! (`{"mac", "keep_alive_seconds"}`; which MAC runs comes on `mac_active`). Acknowledgements go out in the order
 //! the publications came.
 
 use std::sync::Arc;
@@ -23,6 +24,7 @@ use super::settings::Topics;
 use crate::edge::json::lines::{mac_update_of, network_request};
 use crate::event::UpdateSource;
 use crate::event::{Control, NetworkReply, NetworkRequest, Publish, PublishReply};
+use gobyd_protocol::mac_switch::MacSwitchRequest;
 
 /// Parses the payload of a `tx` topic into a message to send. The error is
 /// the reason published on `PREFIX/NODE/error`.
@@ -87,9 +89,64 @@ enum Waiting {
     Core(MqttPublish, oneshot::Receiver<PublishReply>),
     /// A file request, with the core's network layer.
     Network(MqttPublish, oneshot::Receiver<Result<NetworkReply, String>>),
-    /// A MAC update, with the core (the cycle after it is published by
-    /// its `mac_cycle` event).
-    MacUpdate(MqttPublish, oneshot::Receiver<Result<MacCycle, String>>),
+    /// A MAC update or switch, with the core (what it did is published by
+    /// its `mac_cycle` or `mac_switch` event): a refusal's reason.
+    Mac(MqttPublish, Refusal),
+}
+
+/// The core's answer to a MAC request on MQTT: the reason when refused.
+type Refusal = std::pin::Pin<
+    Box<dyn std::future::Future<Output = Result<Option<String>, oneshot::error::RecvError>> + Send>,
+>;
+
+/// The refusal in the core's answer `answer`.
+fn refusal<T: Send + 'static>(answer: oneshot::Receiver<Result<T, String>>) -> Refusal {
+    Box::pin(async move { answer.await.map(|r| r.err()) })
+}
+
+/// The control request of a publication on a MAC topic (`mac_update`,
+/// `mac_switch`) with where its refusal comes; `None`: not a MAC topic;
+/// `Some(Err)`: the payload does not read (the reason).
+fn mac_request(
+    topics: &Topics,
+    publish: &MqttPublish,
+) -> Option<Result<(Control, Refusal), String>> {
+    if publish.topic == topics.mac_update() {
+        return Some(parse_mac_update(&publish.payload).map(|update| {
+            let (reply, answer) = oneshot::channel::<Result<MacCycle, String>>();
+            let from = UpdateSource::Mqtt;
+            (
+                Control::MacUpdate {
+                    update,
+                    from,
+                    reply,
+                },
+                refusal(answer),
+            )
+        }));
+    }
+    if publish.topic == topics.mac_switch() {
+        return Some(parse_mac_switch(&publish.payload).map(|switch| {
+            let (reply, answer) = oneshot::channel();
+            let request = Control::MacSwitch {
+                mac: switch.mac,
+                keep_alive_seconds: switch.keep_alive_seconds,
+                from: UpdateSource::Mqtt,
+                reply,
+            };
+            (request, refusal(answer))
+        }));
+    }
+    None
+}
+
+/// Parses the payload of the `mac_switch` topic: `{"mac": NAME,
+/// "keep_alive_seconds": S}`, as the JSON interface's `mac_switch`. The
+/// error is the reason published on `PREFIX/NODE/error`.
+pub fn parse_mac_switch(payload: &[u8]) -> Result<MacSwitchRequest, String> {
+    serde_json::from_slice(payload).map_err(|e| {
+        format!("mac_switch: {e} (the payload is {{\"mac\": NAME, \"keep_alive_seconds\": S}})")
+    })
 }
 
 /// Parses the payload of the `mac_update` topic: a
@@ -121,20 +178,14 @@ pub async fn run(
     let (waiting_tx, mut waiting_rx) = mpsc::unbounded_channel::<Waiting>();
     let submit = async move {
         while let Some(publish) = incoming.recv().await {
-            if publish.topic == topics.mac_update() {
-                let waiting = match parse_mac_update(&publish.payload) {
+            if let Some(request) = mac_request(&topics, &publish) {
+                let waiting = match request {
                     Err(reason) => Waiting::Refused(publish, reason),
-                    Ok(update) => {
-                        let (reply, answer) = oneshot::channel();
-                        let request = Control::MacUpdate {
-                            update,
-                            from: UpdateSource::Mqtt,
-                            reply,
-                        };
+                    Ok((request, refused)) => {
                         if control.send(request).await.is_err() {
                             break;
                         }
-                        Waiting::MacUpdate(publish, answer)
+                        Waiting::Mac(publish, refused)
                     }
                 };
                 if waiting_tx.send(waiting).is_err() {
@@ -190,13 +241,11 @@ pub async fn run(
                     let notice = formatter.error(&publish.topic, &reason);
                     (publish, Some(notice))
                 }
-                Waiting::MacUpdate(publish, answer) => {
-                    let Ok(reply) = answer.await else {
+                Waiting::Mac(publish, refused) => {
+                    let Ok(refused) = refused.await else {
                         break;
                     };
-                    let notice = reply
-                        .err()
-                        .map(|reason| formatter.error(&publish.topic, &reason));
+                    let notice = refused.map(|reason| formatter.error(&publish.topic, &reason));
                     (publish, notice)
                 }
                 Waiting::Core(publish, answer) => {

@@ -313,7 +313,7 @@ impl Loop {
             .tx_filters()
             .into_iter()
             .chain(topics.file_filters())
-            .chain([topics.mac_update()]);
+            .chain([topics.mac_update(), topics.mac_switch()]);
         for filter in filters {
             if let Err(e) = self.client.try_subscribe(filter.clone(), self.settings.qos) {
                 tracing::error!("MQTT: cannot subscribe to {filter}: {e}");

@@ -12,6 +12,7 @@
 //! | `link` | yes | the last reception: `{"src", "dest", "rate", "frames", "time", ...}` |
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
 //! | `mac_cycle` | yes | the TDMA cycle after a `MACUpdate` (or its refusal): `{"slot", "running", "modem_id", "update", "from", "error", "time"}` |
+//! | `mac_active` | yes | which MAC of the MAC switcher runs, after each switch, renewal, lapse or refusal: the JSON interface's `mac_switch` event (`{"mac_switch", "previous", "reason", "keep_alive_until", "from", "error"}`) with `"time"` |
 //! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::event::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
 //! | `file/reply` | no | the answer to a file request: the JSON interface's reply (`{"file_send", "joined", "transfer"}`, `{"file_get", "node"}` or `{"transfers"}`) with `"topic"` |
@@ -28,7 +29,8 @@ use serde_json::{json, Value};
 
 use super::settings::Topics;
 use crate::edge::json::lines::{
-    accepted_value, link_json, mac_cycle_json, message_json, network_reply_value, transfer_value,
+    accepted_value, link_json, mac_cycle_json, mac_switch_line, message_json, network_reply_value,
+    transfer_value,
 };
 use crate::event::{
     AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, Reception,
@@ -227,12 +229,21 @@ impl Formatter {
                 }
                 Outgoing::new(t.node("mac_cycle"), payload, true)
             }
+            ModemEvent::MacSwitch(switched) => {
+                let mut payload = json!(mac_switch_line(switched));
+                if let Some(o) = payload.as_object_mut() {
+                    o.remove("event");
+                    o.insert("time".into(), json!(seconds(now)));
+                }
+                Outgoing::new(t.node("mac_active"), payload, true)
+            }
             ModemEvent::SlotStart {
                 initiated: None, ..
             }
             | ModemEvent::Raw(_)
             | ModemEvent::Transmitted { .. }
             | ModemEvent::CycleUpdate { .. }
+            | ModemEvent::RateChoice { .. }
             | ModemEvent::Specific(_) => return None,
         })
     }

@@ -77,6 +77,13 @@ impl Topics {
         self.node("mac_update")
     }
 
+    /// The topic gobyd takes switches of its MAC switcher on
+    /// (`PREFIX/NODE/mac_switch`, `{"mac", "keep_alive_seconds"}`); which
+    /// MAC runs comes on `PREFIX/NODE/mac_active` (retained).
+    pub fn mac_switch(&self) -> String {
+        self.node("mac_switch")
+    }
+
     /// Whether `topic` is a `tx` topic of every gateway
     /// (`PREFIX/all/tx/TYPE`) rather than of this node alone.
     pub fn is_every_gateway(&self, topic: &str) -> bool {
