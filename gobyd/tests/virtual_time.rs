@@ -253,3 +253,81 @@ async fn a_time_near_the_node_s_virtual_now_is_accepted() {
     run.await.unwrap().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A node with a `forecast` section and no client: the forecast reads the
+/// core's events (for its peers' positions) but is no client, so a message
+/// received waits in the inbox for a client to connect, as without a
+/// forecast ([`gobyd`'s `RECOVERY_WAIT`], 30 s), rather than being handed
+/// over at once to nobody.
+#[tokio::test(start_paused = true)]
+async fn a_node_whose_only_listener_is_its_forecast_holds_what_it_received_for_a_client() {
+    let dir = scratch("virtual", "forecast-taker");
+    let clock = Arc::new(TokioClock::new());
+    let medium = Medium::new();
+    let node = |id: i32, dir: &std::path::Path| {
+        Node::new(id)
+            .driver(Simulator::pair(1500.0).deferred_ack().seed(id as u64))
+            .tdma(&[1, 2], 1, 10.0)
+            .queue(Entry::command().ack(true).ttl(7200))
+            .json_tcp("")
+            .data_dir(dir)
+    };
+    let one =
+        support::daemon::start_simulated(node(1, &dir.join("data1")).config(), &medium, &clock)
+            .await;
+    let forecast = "forecast { water { profile { depth: 0 speed: 1520 } \
+                    profile { depth: 100 speed: 1500 } } water_depth: 100 }";
+    let two = support::daemon::start_simulated(
+        node(2, &dir.join("data2")).extra(forecast).config(),
+        &medium,
+        &clock,
+    )
+    .await;
+    let publisher = one.publisher();
+    let mut events = one.subscribe();
+    let mut stops = Vec::new();
+    let mut runs = Vec::new();
+    for daemon in [one, two] {
+        let (stop, stopped) = oneshot::channel::<()>();
+        stops.push(stop);
+        runs.push(tokio::spawn(daemon.run(async move {
+            let _ = stopped.await;
+        })));
+    }
+    publish_command(&publisher, 2, "held").await;
+    // Node 2 has it on record once node 1 has its ack; 10 s later (within
+    // the wait for a client) both stop.
+    let until = tokio::time::Instant::now() + Duration::from_secs(300);
+    loop {
+        let event = tokio::time::timeout_at(until, events.recv())
+            .await
+            .expect("acknowledged within 300 s");
+        if let Ok(DaemonEvent::Queue {
+            event: QueueEvent::Acked { .. },
+            ..
+        }) = event.as_deref()
+        {
+            break;
+        }
+    }
+    tokio::time::sleep(Duration::from_secs(10)).await;
+    for stop in stops {
+        let _ = stop.send(());
+    }
+    for run in runs {
+        run.await.unwrap().unwrap();
+    }
+    let bytes = std::fs::read(dir.join("data2").join("inbox.log")).unwrap();
+    let history = gobyd::inbox_file::read_history(&bytes).expect("an inbox");
+    let (mut received, mut handed) = (0, 0);
+    for (_, record) in history.records {
+        match record {
+            gobyd::inbox_file::Record::Received(_) => received += 1,
+            gobyd::inbox_file::Record::Handed(_) => handed += 1,
+            gobyd::inbox_file::Record::Seen(..) => {}
+        }
+    }
+    assert_eq!(received, 1, "on record at node 2");
+    assert_eq!(handed, 0, "handed over at node 2 with no client there");
+    let _ = std::fs::remove_dir_all(&dir);
+}

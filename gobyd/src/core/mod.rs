@@ -44,6 +44,7 @@ pub mod route;
 use std::collections::HashMap;
 use std::future::Future;
 use std::path::Path;
+use std::sync::atomic::AtomicUsize;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -58,8 +59,8 @@ use tokio::task::JoinSet;
 use crate::config::{self, ConfigError};
 use crate::error::{io_error, DaemonError};
 use crate::event::{
-    AcceptedMessage, Control, CoreHandle, DaemonEvent, LinkStatus, MissionLog, ModemEvent, Publish,
-    PublishReply, SharedEvent,
+    AcceptedMessage, Control, CoreHandle, DaemonEvent, InternalListener, LinkStatus, MissionLog,
+    ModemEvent, Publish, PublishReply, SharedEvent,
 };
 use crash_point::CrashPoint;
 use data_dir::DataDir;
@@ -184,8 +185,12 @@ pub struct Core {
     /// The MAC switcher, with the configuration's `mac_switcher`.
     mac_switcher: Option<mac_switcher::MacSwitcher>,
     /// The core's own events, read for the link forecasts (rates chosen
-    /// from the link).
-    own_events: broadcast::Receiver<SharedEvent>,
+    /// from the link), with the guard that keeps the receiver from
+    /// counting as a client.
+    own_events: (broadcast::Receiver<SharedEvent>, InternalListener),
+    /// How many of the events' receivers are the daemon's own (see
+    /// [`CoreHandle::subscribe_internal`]).
+    internal_listeners: Arc<AtomicUsize>,
 }
 
 impl std::fmt::Debug for Core {
@@ -254,7 +259,12 @@ impl Core {
                 .map(|l| l.status(clock.now(), restart_now))
                 .collect::<Vec<_>>(),
         );
-        let (events, own_events) = broadcast::channel(1024);
+        let (events, own_receiver) = broadcast::channel(1024);
+        let internal_listeners = Arc::new(AtomicUsize::new(0));
+        let own_events = (
+            own_receiver,
+            InternalListener::new(internal_listeners.clone()),
+        );
         let (driver_status, _) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
@@ -296,6 +306,7 @@ impl Core {
             configured_mac,
             mac_switcher: mac_switcher::MacSwitcher::of(&config),
             own_events,
+            internal_listeners,
         };
         core.restore_mac_switch();
         core.restore_mac_cycle();
@@ -313,6 +324,7 @@ impl Core {
             codec: self.codec.clone(),
             names: self.names.clone(),
             forecast: None,
+            internal_listeners: self.internal_listeners.clone(),
         }
     }
 

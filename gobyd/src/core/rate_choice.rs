@@ -62,8 +62,8 @@ impl Core {
 
     /// The forecasts that came since the last look, kept by peer.
     fn take_forecasts(&mut self, i: usize) {
-        while let Ok(event) = self.own_events.try_recv().or_else(|e| match e {
-            tokio::sync::broadcast::error::TryRecvError::Lagged(_) => self.own_events.try_recv(),
+        while let Ok(event) = self.own_events.0.try_recv().or_else(|e| match e {
+            tokio::sync::broadcast::error::TryRecvError::Lagged(_) => self.own_events.0.try_recv(),
             other => Err(other),
         }) {
             if let DaemonEvent::Forecast(ForecastEvent::Forecast(f)) = &*event {

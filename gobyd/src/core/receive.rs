@@ -203,10 +203,14 @@ impl Core {
     /// side: a bridge or the UDP interface takes every message, or someone
     /// listens to the events (without those, the only listeners are the
     /// connected TCP JSON clients and the embedding program's
-    /// [`subscribe`](Self::subscribe) receivers; the core's own receiver,
-    /// kept for the link forecasts, is not one).
+    /// [`subscribe`](Self::subscribe) receivers; the daemon's own receivers,
+    /// the core's and the link forecast's, are not takers).
     pub(super) fn taker_present(&self) -> bool {
-        self.always_taken || self.events.receiver_count() > 1
+        self.always_taken
+            || self.events.receiver_count()
+                > self
+                    .internal_listeners
+                    .load(std::sync::atomic::Ordering::SeqCst)
     }
 
     /// Hands the held messages over once a taker is there (see

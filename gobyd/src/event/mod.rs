@@ -15,6 +15,7 @@ pub mod forecast;
 pub mod modem;
 pub mod request;
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use std::collections::HashMap;
@@ -184,6 +185,42 @@ pub struct CoreHandle {
     /// Where the link forecast's inputs go (`None`: no forecast
     /// configured).
     pub forecast: Option<mpsc::Sender<ForecastInput>>,
+    /// How many of the events' receivers belong to the daemon itself (the
+    /// link forecast, the core's own): those are no client, and a received
+    /// message is not handed over to them (see
+    /// [`subscribe_internal`](Self::subscribe_internal)).
+    pub internal_listeners: Arc<AtomicUsize>,
+}
+
+impl CoreHandle {
+    /// A receiver of the core's events for a part of the daemon itself,
+    /// not a client: while the guard lives, the receiver does not count as
+    /// someone a received message can be handed over to (without a client,
+    /// a received message waits in the inbox, unacknowledged). Keep the
+    /// guard as long as the receiver.
+    pub fn subscribe_internal(&self) -> (broadcast::Receiver<SharedEvent>, InternalListener) {
+        let guard = InternalListener::new(self.internal_listeners.clone());
+        (self.events.subscribe(), guard)
+    }
+}
+
+/// Counts a receiver of the core's events as the daemon's own while it
+/// lives (see [`CoreHandle::subscribe_internal`]).
+#[derive(Debug)]
+pub struct InternalListener(Arc<AtomicUsize>);
+
+impl InternalListener {
+    /// Counts one more internal receiver in `count` until dropped.
+    pub fn new(count: Arc<AtomicUsize>) -> Self {
+        count.fetch_add(1, Ordering::SeqCst);
+        InternalListener(count)
+    }
+}
+
+impl Drop for InternalListener {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 /// What the core writes down as it goes, in order: the mission log (what

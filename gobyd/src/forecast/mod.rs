@@ -70,8 +70,13 @@ pub fn start(
         clock,
         cancel: Arc::new(AtomicBool::new(false)),
     };
-    let received = core.events.subscribe();
-    tasks.spawn(service.run(rx, received));
+    // The forecast reads received messages for its peers' positions; it
+    // is no client, and a received message is not handed over to it.
+    let (received, listener) = core.subscribe_internal();
+    tasks.spawn(async move {
+        service.run(rx, received).await;
+        drop(listener);
+    });
     tx
 }
 
