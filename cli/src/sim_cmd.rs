@@ -36,6 +36,9 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     if let Some(seed) = args.seed {
         scenario.seed = seed;
     }
+    // The output directory is made and tried before the run, so that a
+    // long run does not end in a directory nobody can write to.
+    ready(&args.out)?;
     let began = Instant::now();
     let outcome = goby_sim::run(&scenario).map_err(|e| CliError::Failed(e.to_string()))?;
     let wall = began.elapsed().as_secs_f64();
@@ -67,12 +70,16 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         });
         writeln!(
             stdout,
-            "  {name}: published {}, delivered {}/{} ({:.1} %), duplicates {}, latency p50/p90/max {latency}, \
+            "  {name}: published {}, refused {}, delivered {}/{} ({}), duplicates {}, latency p50/p90/max {latency}, \
              acked {}, expired {}, dropped {}, owed {}, lost {}",
             s.published,
+            s.refused,
             s.delivered,
             s.expected,
-            s.delivery_ratio * 100.0,
+            match s.expected {
+                0 => "-".to_string(),
+                _ => format!("{:.1} %", s.delivery_ratio * 100.0),
+            },
             s.duplicates,
             s.acked,
             s.expired,
@@ -85,4 +92,19 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         writeln!(stdout, "wrote {}", path.display())?;
     }
     Ok(Status::Ok)
+}
+
+/// Makes `dir` and checks that a file can be written in it.
+fn ready(dir: &std::path::Path) -> Result<(), CliError> {
+    let refused = |e: std::io::Error| {
+        CliError::setup(format!(
+            "--out {}: cannot write the report there: {e}",
+            dir.display()
+        ))
+    };
+    std::fs::create_dir_all(dir).map_err(refused)?;
+    let probe = dir.join(format!(".goby-sim-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(refused)?;
+    std::fs::remove_file(&probe).map_err(refused)?;
+    Ok(())
 }

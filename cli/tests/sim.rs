@@ -42,7 +42,7 @@ fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
     );
     assert!(
         stdout.contains(
-            "goby.example.Command: published 24, delivered 24/24 (100.0 %), duplicates 0"
+            "goby.example.Command: published 24, refused 0, delivered 24/24 (100.0 %), duplicates 0"
         ),
         "{stdout}"
     );
@@ -94,5 +94,35 @@ fn a_scenario_with_a_mistake_is_refused_at_its_place() {
         "{stderr}"
     );
     assert!(!dir.join("report.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_output_directory_that_cannot_be_written_is_refused_before_the_run() {
+    let dir = scratch("out");
+    let file = dir.join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let out = file.join("run");
+    let run = goby(&[
+        "sim",
+        example().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(2), "{}", stdout_text(&run));
+    let stderr = stderr_text(&run);
+    assert!(
+        stderr.contains(&format!(
+            "--out {}: cannot write the report there",
+            out.display()
+        )),
+        "{stderr}"
+    );
+    // Refused before the run: no summary.
+    assert!(
+        !stdout_text(&run).contains("nodes,"),
+        "{}",
+        stdout_text(&run)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

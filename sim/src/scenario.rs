@@ -88,6 +88,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         base,
         found: Vec::new(),
         start_s: 0,
+        duration_s: 0.0,
     };
     let scenario = check.scenario(parsed);
     match check.found.is_empty() {
@@ -116,6 +117,22 @@ struct Check<'a> {
     found: Vec<String>,
     /// The virtual start, seconds since the UNIX epoch.
     start_s: i64,
+    /// The seconds of traffic (`duration_s`), for the streams' sizes.
+    duration_s: f64,
+}
+
+/// The longest `duration_s` or `drain_s` a run takes: a year.
+const MAX_SECONDS: f64 = 366.0 * 86_400.0;
+
+/// The most publications one stream may make in a run (about, for a
+/// Poisson stream): more is a mistake in its rate or the duration, and
+/// would hold the run for hours.
+const MAX_PUBLICATIONS: f64 = 1_000_000.0;
+
+fn too_long(seconds: f64) -> String {
+    format!(
+        "{seconds} s is more than a year ({MAX_SECONDS} s): a run is a mission's length or a few"
+    )
 }
 
 impl Check<'_> {
@@ -134,11 +151,16 @@ impl Check<'_> {
         let duration = s.duration_s.unwrap_or(0.0);
         if !(duration > 0.0 && duration.is_finite()) {
             self.problem("duration_s", "give the seconds of traffic, more than 0");
+        } else if duration > MAX_SECONDS {
+            self.problem("duration_s", too_long(duration));
         }
         let drain = s.drain_s();
         if !(drain >= 0.0 && drain.is_finite()) {
             self.problem("drain_s", format!("{drain} is not 0 or more seconds"));
+        } else if drain > MAX_SECONDS {
+            self.problem("drain_s", too_long(drain));
         }
+        self.duration_s = duration;
         let start = start_micros(s.start_time());
         match &start {
             Ok(micros) => self.start_s = micros.div_euclid(1_000_000),
@@ -146,6 +168,7 @@ impl Check<'_> {
         }
         let water = s.water.clone().unwrap_or_default();
         self.water(&water);
+        self.report(&s.report.clone().unwrap_or_default());
         if s.node.is_empty() {
             self.problem("node", "a scenario needs at least one node");
         }
@@ -192,6 +215,31 @@ impl Check<'_> {
         }
     }
 
+    /// The report's file names: plain names in the output directory, not
+    /// the same one twice.
+    fn report(&mut self, report: &pb::Report) {
+        for (path, name) in [("report.json", report.json()), ("report.csv", report.csv())] {
+            let plain = Path::new(name)
+                .file_name()
+                .is_some_and(|f| f == std::ffi::OsStr::new(name));
+            if !plain {
+                self.problem(
+                    path,
+                    format!("\"{name}\" is not a file name (the files go in the --out directory)"),
+                );
+            }
+        }
+        if report.json() == report.csv() {
+            self.problem(
+                "report.csv",
+                format!(
+                    "\"{}\" is the report's name too: give the ledger another",
+                    report.csv()
+                ),
+            );
+        }
+    }
+
     fn names_and_ids(&mut self, nodes: &[pb::Node]) {
         for (i, node) in nodes.iter().enumerate() {
             if node.name().is_empty() {
@@ -222,7 +270,15 @@ impl Check<'_> {
 
     fn node(&mut self, i: usize, node: &pb::Node, all: &[pb::Node]) -> Option<Node> {
         let position = node.position.unwrap_or_default();
-        if position.depth().is_nan() || position.depth() < 0.0 {
+        for (axis, value) in [("x", position.x()), ("y", position.y())] {
+            if !value.is_finite() {
+                self.problem(
+                    format!("node[{i}].position.{axis}"),
+                    format!("{value} is not a position (metres)"),
+                );
+            }
+        }
+        if !position.depth().is_finite() || position.depth() < 0.0 {
             self.problem(
                 format!("node[{i}].position.depth"),
                 format!(
@@ -257,7 +313,20 @@ impl Check<'_> {
                 );
                 return None;
             }
-            Some(Config::Gobyd(config)) => (config.clone(), None),
+            // Read again as gobyd reads its file, so that Goby3's section
+            // names (driver_cfg, mac_cfg, queue_cfg) and keys mean what
+            // they mean there.
+            Some(Config::Gobyd(config)) => {
+                let text = config.transcode_to_dynamic().to_text_format();
+                let origin = format!("{}: node[{i}].gobyd", self.origin);
+                match gobyd::config::parse(&text, &origin) {
+                    Ok(config) => (config, None),
+                    Err(e) => {
+                        self.found.push(format!("{e}"));
+                        return None;
+                    }
+                }
+            }
             Some(Config::GobydFile(name)) => {
                 let path = self.base.join(name);
                 let text = match std::fs::read_to_string(&path) {
@@ -404,7 +473,7 @@ impl Check<'_> {
                 },
             ));
         }
-        match (&dest, roles.destination) {
+        match (&dest, roles.destination.clone()) {
             (Some((_, id)), Some(field)) => fixed.push((
                 field,
                 ValueGen::Counter {
@@ -425,10 +494,41 @@ impl Check<'_> {
                 );
                 return None;
             }
-            (None, _) => {}
+            // Sent to every node: the destination role says broadcast (0).
+            (None, Some(field)) => fixed.push((
+                field,
+                ValueGen::Counter {
+                    start: 0,
+                    step: 0,
+                    format: "%d".into(),
+                },
+            )),
+            (None, None) => {}
         }
+
         let before = self.found.len();
         for (k, field) in t.field.iter().enumerate() {
+            let role = [
+                (&roles.source, "SOURCE_ID", "the sending node's modem id"),
+                (
+                    &roles.destination,
+                    "DESTINATION_ID",
+                    "the modem id of dest (0 without dest)",
+                ),
+            ]
+            .into_iter()
+            .find(|(f, _, _)| f.as_ref().is_some_and(|f| f.name() == field.name()));
+            if let Some((_, role, what)) = role {
+                self.problem(
+                    format!("{at}.field[{k}].name"),
+                    format!(
+                        "{} is the {role} role of {}'s queue entry: the run sets it to {what}",
+                        field.name(),
+                        descriptor.full_name()
+                    ),
+                );
+                continue;
+            }
             match crate::traffic::field_value(&descriptor, field) {
                 Ok(value) => fixed.push(value),
                 Err((part, reason)) => self.problem(format!("{at}.field[{k}]{part}"), reason),
@@ -445,6 +545,11 @@ impl Check<'_> {
             );
             return None;
         }
+        let clamped = checked
+            .queue
+            .message_entry
+            .iter()
+            .any(|e| e.protobuf_name == descriptor.full_name() && e.clamp_out_of_range());
         let stream = Stream {
             index: j,
             descriptor,
@@ -459,11 +564,19 @@ impl Check<'_> {
         // refuses it at publication), checked at the start.
         let sample = stream.generator(0, i).message();
         let moved = checked.codec.moved_dates_at(&sample, self.start_s);
-        let problem = match (checked.codec.encode(&sample), moved) {
-            (Err(e), _) | (Ok(_), Err(e)) => Some(e.to_string()),
-            (Ok(_), Ok(moved)) => moved
-                .first()
-                .map(|c| format!("field {}: {}", c.field, c.reason)),
+        let changed = checked
+            .codec
+            .check(&sample)
+            .map(|changes| if clamped { Vec::new() } else { changes });
+        let problem = match (checked.codec.encode(&sample), moved, changed) {
+            (Err(e), _, _) | (Ok(_), Err(e), _) | (Ok(_), _, Err(e)) => Some(e.to_string()),
+            (Ok(_), Ok(moved), Ok(changed)) => moved.first().or(changed.first()).map(|c| {
+                format!(
+                    "field {}: {} (the daemon refuses a value its type cannot carry unless the \
+                     queue entry says clamp_out_of_range: true)",
+                    c.field, c.reason
+                )
+            }),
         };
         if let Some(problem) = problem {
             self.problem(at, format!("its first message is refused: {problem}"));
@@ -486,6 +599,20 @@ impl Check<'_> {
             self.problem(
                 format!("{at}.{path}"),
                 format!("{value} is not more than 0"),
+            );
+            return None;
+        }
+        let count = match rate {
+            Rate::Period(p) => self.duration_s / p,
+            Rate::Poisson(per_hour) => per_hour * self.duration_s / 3600.0,
+        };
+        if count > MAX_PUBLICATIONS {
+            self.problem(
+                format!("{at}.{path}"),
+                format!(
+                    "{value} makes about {count:.0} publications in duration_s: at most \
+                     {MAX_PUBLICATIONS} per stream"
+                ),
             );
             return None;
         }

@@ -145,3 +145,101 @@ fn a_time_far_from_the_start_is_refused_before_the_run() {
         "{error}"
     );
 }
+
+#[test]
+fn a_value_the_daemon_would_refuse_is_refused_before_the_run() {
+    // Command.destination is 0 to 31: a stream to a node of modem id 40.
+    let text = support::ring(2, 0.0, 600, 60, 60).replacen("modem_id: 2", "modem_id: 40", 1);
+    let error = refusal(&text);
+    assert!(
+        error.contains("node[0].traffic[0]: its first message is refused: field destination:"),
+        "{error}"
+    );
+    assert!(error.contains("clamp_out_of_range"), "{error}");
+}
+
+#[test]
+fn a_field_a_role_fills_is_refused() {
+    let text = support::ring(2, 0.0, 600, 60, 60).replacen(
+        "field { name: \"action\" constant: \"GOTO\" }",
+        "field { name: \"destination\" constant: \"7\" }",
+        1,
+    );
+    let error = refusal(&text);
+    let (line, _) = place_of(&text, "field { name: \"destination\"");
+    assert!(
+        error.starts_with(&format!("fleet.pb.txt:{line}:")),
+        "{error}"
+    );
+    assert!(
+        error.contains("node[0].traffic[0].field[0].name: destination is the DESTINATION_ID role"),
+        "{error}"
+    );
+}
+
+#[test]
+fn runs_too_long_and_streams_too_large_are_refused() {
+    let text = support::ring(2, 0.0, 600, 60, 60)
+        .replacen("drain_s: 60", "drain_s: 1e14", 1)
+        .replacen("period_s: 60", "period_s: 0.0001", 1)
+        .replacen("position { x: 1000", "position { x: nan", 1);
+    let error = refusal(&text);
+    assert!(
+        error.contains("drain_s: 100000000000000 s is more than a year"),
+        "{error}"
+    );
+    assert!(
+        error.contains("node[0].traffic[0].period_s: 0.0001 makes about 6000000 publications"),
+        "{error}"
+    );
+    assert!(
+        error.contains("node[1].position.x: NaN is not a position"),
+        "{error}"
+    );
+    let huge =
+        support::ring(2, 0.0, 600, 60, 60).replacen("duration_s: 600", "duration_s: 1e300", 1);
+    let error = refusal(&huge);
+    assert!(
+        error.contains("duration_s: 1000000")
+            && error.contains("s is more than a year (31622400 s)"),
+        "{error}"
+    );
+}
+
+#[test]
+fn the_report_and_the_ledger_are_two_plain_file_names() {
+    let text =
+        support::ring(2, 0.0, 600, 60, 60) + "report { json: \"same.txt\" csv: \"same.txt\" }\n";
+    let error = refusal(&text);
+    assert!(
+        error.contains("report.csv: \"same.txt\" is the report's name too"),
+        "{error}"
+    );
+    let text = support::ring(2, 0.0, 600, 60, 60) + "report { json: \"../up.json\" }\n";
+    assert!(refusal(&text).contains("report.json: \"../up.json\" is not a file name"));
+}
+
+#[test]
+fn goby3_section_names_inline_are_read_as_gobyd_reads_them() {
+    // The ring's MAC as Goby3 names it, with 30 s slots.
+    let text = support::ring(2, 0.0, 600, 60, 60)
+        .replace("gobyd {\n    mac {", "gobyd {\n    mac_cfg {")
+        .replace("slot_seconds: 10", "slot_seconds: 30");
+    let scenario = parse(&text, "ring", Path::new(".")).expect("accepted");
+    let mac = scenario.nodes[0]
+        .config
+        .mac
+        .as_ref()
+        .expect("mac_cfg read as mac");
+    assert_eq!(mac.slot.len(), 2);
+    assert_eq!(mac.slot[0].slot_seconds(), 30.0);
+    // Both names: refused as gobyd refuses it.
+    let both = support::ring(2, 0.0, 600, 60, 60).replacen(
+        "gobyd {\n    mac {",
+        "gobyd {\n    mac_cfg { type: MAC_NONE }\n    mac {",
+        1,
+    );
+    let error = refusal(&both);
+    assert!(error.contains("node[0].gobyd"), "{error}");
+    assert!(error.contains("both mac and mac_cfg"), "{error}");
+}

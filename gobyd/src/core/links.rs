@@ -154,7 +154,7 @@ impl Core {
             Ok(())
         } else {
             let only = self.links[i].slot_types.clone();
-            self.outbox.data_request_of(request, i, &only)
+            self.outbox.data_request(request, i, &only)
         };
         if let Err(e) = filled {
             tracing::warn!("data request: {e}");

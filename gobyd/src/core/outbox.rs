@@ -234,18 +234,10 @@ impl Outbox {
 
     /// Fills the frames of a data request of link `link` from the queues
     /// (0, the only one, when the configuration has no `link` sections;
-    /// otherwise with the messages [`queue::links`]' rules let it carry).
+    /// otherwise with the messages [`queue::links`]' rules let it carry),
+    /// with messages of the types of DCCL ids `only` alone (empty: every
+    /// type; a scripted TDMA slot's packet types).
     pub fn data_request(
-        &mut self,
-        request: &mut ModemTransmission,
-        link: queue::LinkIndex,
-    ) -> Result<(), QueueError> {
-        self.queue.handle_modem_data_request(request, link)
-    }
-
-    /// As [`data_request`](Self::data_request), with messages of the
-    /// types of DCCL ids `only` alone (empty: every type).
-    pub fn data_request_of(
         &mut self,
         request: &mut ModemTransmission,
         link: queue::LinkIndex,
@@ -471,7 +463,7 @@ mod tests {
             max_num_frames: Some(1),
             ..Default::default()
         };
-        outbox.data_request(&mut tx, 0).unwrap();
+        outbox.data_request(&mut tx, 0, &[]).unwrap();
         outbox.events().unwrap();
         tx
     }
@@ -664,7 +656,7 @@ mod tests {
                 max_num_frames: Some(1),
                 ..Default::default()
             };
-            outbox.data_request(&mut tx, 0).unwrap();
+            outbox.data_request(&mut tx, 0, &[]).unwrap();
             let sent: Vec<_> = outbox
                 .events()
                 .unwrap()
