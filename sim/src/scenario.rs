@@ -89,6 +89,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         found: Vec::new(),
         start_s: 0,
         duration_s: 0.0,
+        water: SimulatorDriverConfig::default(),
     };
     let scenario = check.scenario(parsed);
     match check.found.is_empty() {
@@ -119,6 +120,8 @@ struct Check<'a> {
     start_s: i64,
     /// The seconds of traffic (`duration_s`), for the streams' sizes.
     duration_s: f64,
+    /// The simulated water, which each node's driver is checked with.
+    water: SimulatorDriverConfig,
 }
 
 /// The longest `duration_s` or `drain_s` a run takes: a year.
@@ -168,6 +171,7 @@ impl Check<'_> {
         }
         let water = s.water.clone().unwrap_or_default();
         self.water(&water);
+        self.water = water.clone();
         self.report(&s.report.clone().unwrap_or_default());
         if s.node.is_empty() {
             self.problem("node", "a scenario needs at least one node");
@@ -350,7 +354,7 @@ impl Check<'_> {
             }
         };
         let config = self.prepared(i, node, config)?;
-        match gobyd::check::validate(config, gobyd::config::DriverSettings::Caller) {
+        match gobyd::check::validate(config, gobyd::config::DriverSettings::Configured) {
             Ok(checked) => Some(checked),
             Err(e) => {
                 self.gobyd_refused(i, e, file);
@@ -382,7 +386,13 @@ impl Check<'_> {
             return None;
         }
         config.modem_id = Some(id);
-        config.driver = Some(crate::world::driver_config(id, &[], &Default::default(), 0));
+        // The simulator as the run starts it, so that its settings and the
+        // slots against its packets are checked as `gobyd --check` checks
+        // them (a slot too short for its rate's packet would drop every
+        // transmission in it).
+        let p = node.position.unwrap_or_default();
+        let own = [(id, [p.x(), p.y(), p.depth()])];
+        config.driver = Some(crate::world::driver_config(id, &own, &self.water, 0));
         // The run publishes and listens in-process: no JSON, MQTT or MOOS
         // interface, and no forecast (its ray traces run on other threads).
         config.json = Some(protos::goby::apps::protobuf::gobyd_config::JsonInterface {

@@ -243,3 +243,21 @@ fn goby3_section_names_inline_are_read_as_gobyd_reads_them() {
     assert!(error.contains("node[0].gobyd"), "{error}");
     assert!(error.contains("both mac and mac_cfg"), "{error}");
 }
+
+#[test]
+fn a_slot_too_short_for_its_rate_on_the_simulator_is_refused() {
+    // As `gobyd --check` refuses it: the simulator would drop every
+    // transmission in the slot.
+    let text = support::ring(2, 0.0, 600, 60, 60).replacen(
+        "slot { src: 1 dest: -1 rate: 1 slot_seconds: 10 }",
+        "slot { src: 1 dest: -1 rate: 5 slot_seconds: 2 }",
+        1,
+    );
+    let error = refusal(&text);
+    assert!(
+        error.contains(
+            "node[0].gobyd.mac.slot[0].slot_seconds: 2 s is too short for a rate-5 packet"
+        ),
+        "{error}"
+    );
+}
