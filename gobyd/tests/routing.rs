@@ -16,10 +16,8 @@ mod support;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
 use modemdriver::sim::medium::Medium;
-use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
 use protos::goby::example::Command;
 use queue::QueueEvent;
@@ -119,17 +117,7 @@ async fn start_nodes(
     };
     for id in 1..=count {
         let config = node(id, &dir.join(format!("data{id}"))).config();
-        let mut driver_config = config.driver.clone().unwrap();
-        driver_config.modem_id = Some(id);
-        let driver =
-            SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
-                .unwrap();
-        let daemon = Daemon::builder(config)
-            .driver(driver)
-            .clock(clock.clone())
-            .start()
-            .await
-            .expect("gobyd starts");
+        let daemon = support::daemon::start_simulated(config, &medium, &clock).await;
         fleet.publishers.push(daemon.publisher());
         let mut events = daemon.subscribe();
         let seen = seen.clone();

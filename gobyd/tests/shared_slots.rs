@@ -11,10 +11,8 @@ mod support;
 use std::sync::Arc;
 use std::time::Duration;
 
-use gobyd::daemon::Daemon;
 use gobyd::event::{DaemonEvent, ModemEvent, SharedUse};
 use modemdriver::sim::medium::Medium;
-use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
 use protos::goby::acomms::protobuf::{ModemTransmission, SharedSlot};
 use queue::QueueEvent;
@@ -55,16 +53,7 @@ async fn run(min_priority: f64, name: &str) -> (Vec<SharedUse>, bool) {
     let dir = scratch("shared-slots", name);
     let clock = Arc::new(TokioClock::new());
     let config = config(Some(min_priority), &dir.join("data"));
-    let mut driver_config = config.driver.clone().unwrap();
-    driver_config.modem_id = Some(1);
-    let driver =
-        SimulatorDriver::start_on_with_clock(&driver_config, Medium::new(), clock.clone()).unwrap();
-    let daemon = Daemon::builder(config)
-        .driver(driver)
-        .clock(clock)
-        .start()
-        .await
-        .expect("gobyd starts");
+    let daemon = support::daemon::start_simulated(config, &Medium::new(), &clock).await;
     let publisher = daemon.publisher();
     let mut events = daemon.subscribe();
     let (stop, stopped) = oneshot::channel::<()>();

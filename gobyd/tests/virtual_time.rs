@@ -16,10 +16,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use gobyd::daemon::Daemon;
 use gobyd::event::DaemonEvent;
 use modemdriver::sim::medium::Medium;
-use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
 use protos::goby::example::Command;
 use queue::{Clock, QueueEvent};
@@ -69,17 +67,7 @@ async fn two_hours_of_lossy_tdma_deliver_every_publication_once() {
     let mut runs = Vec::new();
     for id in [1, 2] {
         let config = config(id, &dir.join(format!("data{id}"))).config();
-        let mut driver_config = config.driver.clone().unwrap();
-        driver_config.modem_id = Some(id);
-        let driver =
-            SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
-                .unwrap();
-        let daemon = Daemon::builder(config)
-            .driver(driver)
-            .clock(clock.clone())
-            .start()
-            .await
-            .expect("gobyd starts");
+        let daemon = support::daemon::start_simulated(config, &medium, &clock).await;
         publishers.push(daemon.publisher());
         let mut events = daemon.subscribe();
         let seen = seen.clone();
@@ -215,16 +203,7 @@ async fn a_time_near_the_node_s_virtual_now_is_accepted() {
         .json_tcp("")
         .data_dir(&dir.join("data"))
         .config();
-    let mut driver_config = config.driver.clone().unwrap();
-    driver_config.modem_id = Some(1);
-    let driver =
-        SimulatorDriver::start_on_with_clock(&driver_config, Medium::new(), clock.clone()).unwrap();
-    let daemon = Daemon::builder(config)
-        .driver(driver)
-        .clock(clock.clone())
-        .start()
-        .await
-        .expect("gobyd starts");
+    let daemon = support::daemon::start_simulated(config, &Medium::new(), &clock).await;
     let publisher = daemon.publisher();
     let (stop, stopped) = oneshot::channel::<()>();
     let run = tokio::spawn(daemon.run(async move {
