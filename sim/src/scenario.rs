@@ -90,6 +90,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         start_s: 0,
         duration_s: 0.0,
         water: SimulatorDriverConfig::default(),
+        water_refused: Vec::new(),
     };
     let scenario = check.scenario(parsed);
     match check.found.is_empty() {
@@ -122,6 +123,9 @@ struct Check<'a> {
     duration_s: f64,
     /// The simulated water, which each node's driver is checked with.
     water: SimulatorDriverConfig,
+    /// The fields of each node's driver the water's problems are told
+    /// at (`driver.simulator.…`): told once, as `water.…`.
+    water_refused: Vec<String>,
 }
 
 /// The longest `duration_s` or `drain_s` a run takes: a year.
@@ -210,12 +214,12 @@ impl Check<'_> {
                 );
             }
         }
-        let loss = water.packet_loss();
-        if !(0.0..=1.0).contains(&loss) {
-            self.problem(
-                "water.packet_loss",
-                format!("{loss} is not a chance from 0 to 1"),
-            );
+        // The simulator driver's own checks, told as the scenario's water.
+        let driver = crate::world::driver_config(1, &[(1, [0.0; 3])], water, 0);
+        for p in modemdriver::sim::problems(&driver) {
+            let field = p.field.strip_prefix("simulator.").unwrap_or(&p.field);
+            self.problem(format!("water.{field}"), p.reason.clone());
+            self.water_refused.push(format!("driver.{}", p.field));
         }
     }
 
@@ -273,6 +277,12 @@ impl Check<'_> {
     }
 
     fn node(&mut self, i: usize, node: &pb::Node, all: &[pb::Node]) -> Option<Node> {
+        if node.position.is_none() {
+            self.problem(
+                format!("node[{i}]"),
+                "give the node's position { x y depth } (metres)",
+            );
+        }
         let position = node.position.unwrap_or_default();
         for (axis, value) in [("x", position.x()), ("y", position.y())] {
             if !value.is_finite() {
@@ -417,6 +427,9 @@ impl Check<'_> {
             return;
         };
         for mut p in problems {
+            if self.water_refused.contains(&p.field) {
+                continue;
+            }
             match &file {
                 None => self.problem(format!("node[{i}].gobyd.{}", p.field), p.reason),
                 Some((text, origin)) => {
@@ -518,6 +531,13 @@ impl Check<'_> {
 
         let before = self.found.len();
         for (k, field) in t.field.iter().enumerate() {
+            if let Some(first) = t.field[..k].iter().position(|f| f.name() == field.name()) {
+                self.problem(
+                    format!("{at}.field[{k}].name"),
+                    format!("{} is given by field[{first}] already", field.name()),
+                );
+                continue;
+            }
             let role = [
                 (&roles.source, "SOURCE_ID", "the sending node's modem id"),
                 (
@@ -552,6 +572,17 @@ impl Check<'_> {
             self.problem(
                 format!("{at}.start_s"),
                 format!("{start_s} is not 0 or more seconds"),
+            );
+            return None;
+        }
+        if start_s >= self.duration_s {
+            self.problem(
+                format!("{at}.start_s"),
+                format!(
+                    "{start_s} s is not before the traffic ends (duration_s {} s): the stream \
+                     would publish nothing",
+                    self.duration_s
+                ),
             );
             return None;
         }

@@ -202,6 +202,16 @@ pub fn field_value(
                     format!("{} is not a number or a string", f.name()),
                 ));
             }
+            if kind == Kind::String && !c.format().contains("%d") {
+                return Err(wrong(
+                    ".counter.format",
+                    format!(
+                        "\"{}\" has no %d for the count: every message would carry the same \
+                         text (give constant for that)",
+                        c.format()
+                    ),
+                ));
+            }
             ValueGen::Counter {
                 start: c.start(),
                 step: c.step(),

@@ -261,3 +261,64 @@ fn a_slot_too_short_for_its_rate_on_the_simulator_is_refused() {
         "{error}"
     );
 }
+
+#[test]
+fn the_water_is_refused_once_at_its_place_in_the_scenario() {
+    let text = support::ring(3, 0.0, 600, 60, 60).replacen(
+        "water { packet_loss: 0 }",
+        "water { packet_loss: 0 sound_speed: 0 }",
+        1,
+    );
+    let error = refusal(&text);
+    let (line, column) = place_of(&text, "sound_speed: 0");
+    assert_eq!(
+        error,
+        format!(
+            "fleet.pb.txt:{line}:{column}: water.sound_speed: 0 is not a speed (m/s, positive)"
+        )
+    );
+}
+
+#[test]
+fn a_node_without_a_position_is_refused() {
+    let text = support::ring(2, 0.0, 600, 60, 60).replacen("position { x: 0 depth: 10 }", "", 1);
+    let error = refusal(&text);
+    assert!(
+        error.contains("node[0]: give the node's position"),
+        "{error}"
+    );
+}
+
+#[test]
+fn a_stream_that_would_publish_nothing_or_the_same_text_is_refused() {
+    let ring = support::ring(2, 0.0, 600, 60, 60);
+    // Starts when the traffic has ended.
+    let late = ring.replacen("start_s: 7", "start_s: 600", 1);
+    let error = refusal(&late);
+    let (line, column) = place_of(&late, "start_s: 600");
+    assert!(
+        error.starts_with(&format!(
+            "fleet.pb.txt:{line}:{column}: node[0].traffic[0].start_s: 600 s is not before the \
+             traffic ends"
+        )),
+        "{error}"
+    );
+    // A numbered text without its number.
+    let same = ring.replacen("format: \"1-%d\"", "format: \"one\"", 1);
+    let error = refusal(&same);
+    assert!(
+        error.contains("node[0].traffic[0].field[1].counter.format: \"one\" has no %d"),
+        "{error}"
+    );
+    // One field given twice.
+    let twice = ring.replacen(
+        "field { name: \"action\" constant: \"GOTO\" }",
+        "field { name: \"action\" constant: \"GOTO\" }\n    field { name: \"action\" constant: \"STOP\" }",
+        1,
+    );
+    let error = refusal(&twice);
+    assert!(
+        error.contains("node[0].traffic[0].field[1].name: action is given by field[0] already"),
+        "{error}"
+    );
+}
