@@ -62,7 +62,6 @@ pub mod check;
 pub mod config;
 pub mod driver;
 pub mod evologics;
-pub mod file;
 pub mod iridium;
 pub mod kind;
 pub mod link;

@@ -326,12 +326,12 @@ impl<M: Machine> Shell<M> {
     }
 }
 
-/// Writes `state` to `path` whole ([`crate::file::write_atomic`]). When
+/// Writes `state` to `path` whole ([`goby_store::file::write_atomically`]). When
 /// that fails (e.g. a full disk) the file is emptied instead, so that the
 /// next start, finding no state it can read, starts afresh rather than
 /// from a state that is no longer true.
 fn keep(path: &std::path::Path, state: &str) {
-    if let Err(e) = crate::file::write_atomic(path, state.as_bytes()) {
+    if let Err(e) = goby_store::file::write_atomically(path, state.as_bytes()) {
         tracing::warn!(
             "keeping the driver's state in {}: {e}; the next start begins afresh",
             path.display()
