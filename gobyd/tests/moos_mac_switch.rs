@@ -1,7 +1,8 @@
 //! `ACOMMS_MAC_SWITCH` through `gobyd`'s MOOS interface against the
 //! minimal in-process DB: a switch with a keep-alive, the same value again
 //! renewing it, an unknown MAC refused, a value that does not read never
-//! reaching the core; each told on the `mac` events from `moos`.
+//! reaching the core; each told on the `mac` events from `moos`, and the
+//! running MAC written to `ACOMMS_MAC_ACTIVE`.
 
 mod support;
 
@@ -29,6 +30,9 @@ async fn mac_switch_switches_renews_and_refuses_as_told() {
     // gobyd is connected once its slot starts come.
     let deadline = tokio::time::Instant::now() + PATIENCE;
     let mut gobyd = start_on_moos(config, &mut mail, deadline).await;
+    client
+        .register("ACOMMS_MAC_ACTIVE", Duration::ZERO)
+        .unwrap();
     for value in [
         "mac=quiet,keep_alive=600",
         "keep_alive=600,mac=quiet",
@@ -60,6 +64,27 @@ async fn mac_switch_switches_renews_and_refuses_as_told() {
         told[2].3.as_deref().unwrap().contains("\"loud\""),
         "{told:?}"
     );
+    // The running MAC is written at each switch or renewal, not at a
+    // refusal.
+    let mut active = Vec::new();
+    while active.len() < 2 {
+        let m = tokio::time::timeout_at(deadline, mail.recv())
+            .await
+            .expect("MAC_ACTIVE is written")
+            .unwrap();
+        if let ("ACOMMS_MAC_ACTIVE", moos::Value::String(value)) = (m.key.as_str(), m.value) {
+            active.push(value);
+        }
+    }
+    for (value, reason) in active.iter().zip(["requested", "renewed"]) {
+        let head = format!("mac=quiet,reason={reason},keep_alive_until=");
+        let until: f64 = value
+            .strip_prefix(&head)
+            .unwrap_or_else(|| panic!("{value:?} starts {head:?}"))
+            .parse()
+            .unwrap();
+        assert!(until > 1.7e9, "{value}");
+    }
     gobyd.stop().await;
     client.close().await;
     let _ = std::fs::remove_dir_all(&dir);

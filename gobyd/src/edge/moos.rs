@@ -25,7 +25,9 @@
 //!   `MAC_SWITCH` (read with or without a `moos_var` section) switches the
 //!   MAC switcher: `NAME`, or `mac=NAME,keep_alive=SECONDS`
 //!   ([`parse_mac_switch`]); writing the same value again before the
-//!   keep-alive runs out renews it.
+//!   keep-alive runs out renews it. Each switch, renewal or lapse is
+//!   written to `MAC_ACTIVE` as `mac=NAME,reason=REASON` with
+//!   `,keep_alive_until=SECONDS` while the MAC has a keep-alive.
 //! - Initial values (`moos.initializer`, Goby's `common { initializer }`):
 //!   written each time gobyd connects to the MOOSDB.
 //! - The plain interface: string values of the `send_var` variables are
@@ -120,6 +122,14 @@ impl BridgeSettings {
     fn mac_switch_var(&self) -> String {
         let v = self.variables.clone().unwrap_or_default();
         format!("{}{}", v.prefix(), v.mac_switch())
+    }
+
+    /// The name of the variable the running MAC of the switcher is
+    /// written to (`ACOMMS_MAC_ACTIVE`), with or without a `moos_var`
+    /// section, as its `MAC_SWITCH` is read.
+    fn mac_active_var(&self) -> String {
+        let v = self.variables.clone().unwrap_or_default();
+        format!("{}{}", v.prefix(), v.mac_active())
     }
 
     /// The name of the translator's error variable.
@@ -356,6 +366,10 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
         ModemEvent::SlotStart { slot, .. } => {
             text(settings.var(|v| v.mac_slot_start()), transmission(slot))
         }
+        ModemEvent::MacSwitch(s) if s.error.is_none() => out.push((
+            settings.mac_active_var(),
+            Value::String(mac_active_value(s)),
+        )),
         // pAcommsHandler reads MAC_CYCLE_UPDATE (it does not write it) and
         // has no variable for the driver's status: these stay in the log
         // and on the JSON interface.
@@ -367,6 +381,17 @@ fn modem_publications(settings: &BridgeSettings, event: &ModemEvent) -> Vec<(Str
         | ModemEvent::Specific(_) => {}
     }
     out
+}
+
+/// The value of `MAC_ACTIVE` after the switch `s`:
+/// `mac=NAME,reason=REASON[,keep_alive_until=SECONDS]`, as `MAC_SWITCH`
+/// is written.
+fn mac_active_value(s: &crate::event::MacSwitched) -> String {
+    let mut value = format!("mac={},reason={}", s.active, s.reason);
+    if let Some(until) = s.until {
+        value += &format!(",keep_alive_until={}", until as f64 / 1e6);
+    }
+    value
 }
 
 /// A string as a protobuf text format string literal.
