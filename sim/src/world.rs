@@ -7,7 +7,7 @@
 //! The run: the nodes start at the scenario's start time, the streams
 //! publish for its duration, the nodes go on for the drain, then stop; what
 //! each still owes is read from its journal. The data directories live in
-//! a temporary directory (under `TMPDIR`), removed at the end.
+//! a temporary directory ([`data_root`]), removed at the end.
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -83,10 +83,33 @@ struct Running {
     listener: tokio::task::JoinHandle<()>,
 }
 
+/// The free space a RAM-backed `/dev/shm` needs for the nodes' data
+/// directories to go there: 1 GiB.
+const SHM_FREE_BYTES: u64 = 1 << 30;
+
+/// Where the nodes' data directories go: under `TMPDIR` when it is set;
+/// otherwise under `/dev/shm` (memory: a run's journals are thrown away at
+/// its end, and their syncs, which take most of a run's time on a disk,
+/// cost nothing there) when it is a writable directory with at least
+/// [`SHM_FREE_BYTES`] free; otherwise the system's temporary directory.
+pub fn data_root() -> std::path::PathBuf {
+    if std::env::var_os("TMPDIR").is_none() {
+        let shm = Path::new("/dev/shm");
+        let roomy = rustix::fs::statvfs(shm).is_ok_and(|s| {
+            s.f_bavail.saturating_mul(s.f_frsize) >= SHM_FREE_BYTES
+                && rustix::fs::access(shm, rustix::fs::Access::WRITE_OK).is_ok()
+        });
+        if roomy {
+            return shm.to_path_buf();
+        }
+    }
+    std::env::temp_dir()
+}
+
 async fn run_world(s: &Scenario) -> Result<Ledger, SimError> {
     let dir = tempfile::Builder::new()
         .prefix("goby-sim-")
-        .tempdir()
+        .tempdir_in(data_root())
         .map_err(|e| SimError::Run(format!("cannot make the nodes' data directories: {e}")))?;
     let clock = Arc::new(TokioClock::at(s.start_micros));
     let start = Instant::now();
