@@ -363,6 +363,13 @@ impl Check<'_> {
                 }
             }
         };
+        // Paths in it are read relative to the file they are written in
+        // (the gobyd file, or the scenario), not to where the run starts.
+        let written_in = match &file {
+            Some((_, origin)) => base_of(Path::new(origin)),
+            None => self.base.to_path_buf(),
+        };
+        let config = relative_to(config, &written_in);
         let config = self.prepared(i, node, config)?;
         match gobyd::check::validate(config, gobyd::config::DriverSettings::Configured) {
             Ok(checked) => Some(checked),
@@ -659,6 +666,23 @@ impl Check<'_> {
         }
         Some(rate)
     }
+}
+
+/// `config` with its `.proto` files and include directories that are
+/// relative paths taken relative to `dir`.
+fn relative_to(mut config: GobydConfig, dir: &Path) -> GobydConfig {
+    if let Some(dccl) = config.dccl.as_mut() {
+        for path in dccl
+            .proto_file
+            .iter_mut()
+            .chain(dccl.include_dir.iter_mut())
+        {
+            if Path::new(path.as_str()).is_relative() {
+                *path = dir.join(path.as_str()).display().to_string();
+            }
+        }
+    }
+    config
 }
 
 /// The fields a type's queue entry gives the source and destination

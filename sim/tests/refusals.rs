@@ -322,3 +322,61 @@ fn a_stream_that_would_publish_nothing_or_the_same_text_is_refused() {
         "{error}"
     );
 }
+
+#[test]
+fn a_proto_file_is_read_relative_to_the_file_that_names_it() {
+    let dir = std::env::temp_dir().join(format!("goby-sim-relative-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("defs")).unwrap();
+    std::fs::write(
+        dir.join("defs/ping.proto"),
+        "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage test.sim;\n\
+         message Ping {\n  option (dccl.msg) = { id: 60 max_bytes: 32 codec_version: 4 };\n  \
+         required int32 n = 1 [(dccl.field) = { min: 0 max: 1000 }];\n}\n",
+    )
+    .unwrap();
+    // Inline: relative to the scenario; in a gobyd file: relative to it.
+    let ring = support::ring(2, 0.0, 600, 60, 60);
+    let inline = ring
+        .replace(
+            "gobyd {\n",
+            "gobyd {\n    dccl { proto_file: \"defs/ping.proto\" }\n",
+        )
+        .replacen(
+            "type: \"goby.example.Command\"\n    dest: \"n2\"",
+            "type: \"test.sim.Ping\"",
+            1,
+        )
+        .replacen(
+            "field { name: \"action\" constant: \"GOTO\" }\n\n    field { name: \"note\" counter { format: \"1-%d\" } }",
+            "field { name: \"n\" counter { } }",
+            1,
+        );
+    assert!(inline.contains("test.sim.Ping") && inline.contains("name: \"n\""));
+    let scenario = parse(&inline, "fleet.pb.txt", &dir).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        scenario.nodes[0].traffic[0].descriptor.full_name(),
+        "test.sim.Ping"
+    );
+    std::fs::write(
+        dir.join("defs/gobyd.pb.txt"),
+        support::gobyd(2)
+            .trim_start_matches("gobyd {")
+            .trim_end()
+            .trim_end_matches('}')
+            .to_string()
+            + "\ndccl { proto_file: \"ping.proto\" }\n",
+    )
+    .unwrap();
+    let in_file = inline.replace(
+        &support::gobyd(2).replace(
+            "gobyd {\n",
+            "gobyd {\n    dccl { proto_file: \"defs/ping.proto\" }\n",
+        ),
+        "gobyd_file: \"defs/gobyd.pb.txt\"\n",
+    );
+    assert!(in_file.contains("gobyd_file"), "{in_file}");
+    let scenario = parse(&in_file, "fleet.pb.txt", &dir).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(scenario.nodes.len(), 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}
