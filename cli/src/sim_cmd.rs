@@ -29,6 +29,41 @@ pub struct SimArgs {
     pub out: PathBuf,
 }
 
+/// Completes on SIGINT or SIGTERM ([`crate::stop::interrupted`], listened
+/// for on a thread of its own: the run's runtime is on virtual time), so
+/// that an interrupted run removes its nodes' data directories and says how
+/// far it got instead of dying with them left behind.
+fn interrupted() -> impl std::future::Future<Output = ()> {
+    let (told, heard) = tokio::sync::oneshot::channel::<()>();
+    let (listening, ready) = std::sync::mpsc::channel::<()>();
+    let spawned = std::thread::Builder::new()
+        .name("goby-sim-signals".into())
+        .spawn(move || {
+            let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+            else {
+                return;
+            };
+            runtime.block_on(async move {
+                let signal = crate::stop::interrupted();
+                let _ = listening.send(());
+                signal.await;
+                let _ = told.send(());
+            });
+        });
+    // The handlers are in place before the run starts (or there are none:
+    // a signal then ends the process as usual).
+    if spawned.is_ok() {
+        let _ = ready.recv();
+    }
+    async move {
+        if heard.await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    }
+}
+
 /// Runs `goby sim`.
 pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let mut scenario = goby_sim::scenario::load(&args.scenario)
@@ -40,7 +75,8 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     // long run does not end in a directory nobody can write to.
     ready(&args.out)?;
     let began = Instant::now();
-    let outcome = goby_sim::run(&scenario).map_err(|e| CliError::Failed(e.to_string()))?;
+    let outcome = goby_sim::run_until(&scenario, interrupted())
+        .map_err(|e| CliError::Failed(e.to_string()))?;
     let wall = began.elapsed().as_secs_f64();
     let written = goby_sim::write(&scenario, &outcome, &args.out)
         .map_err(|e| CliError::Failed(e.to_string()))?;

@@ -126,3 +126,67 @@ fn an_output_directory_that_cannot_be_written_is_refused_before_the_run() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn an_interrupted_run_says_so_and_leaves_no_data_directories() {
+    use std::time::{Duration, Instant};
+    let dir = scratch("interrupted");
+    let examples = example().parent().unwrap().to_path_buf();
+    let text = std::fs::read_to_string(example())
+        .unwrap()
+        .replace("duration_s: 7200", "duration_s: 30000000");
+    std::fs::write(dir.join("long.pb.txt"), text).unwrap();
+    std::fs::copy(
+        examples.join("fleet-gobyd.pb.txt"),
+        dir.join("fleet-gobyd.pb.txt"),
+    )
+    .unwrap();
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(["sim", "long.pb.txt", "--out", "out"])
+        .current_dir(&dir)
+        .env("TMPDIR", &tmp)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("goby runs");
+    let running = |tmp: &Path| {
+        std::fs::read_dir(tmp)
+            .unwrap()
+            .filter_map(Result::ok)
+            .any(|e| e.file_name().to_string_lossy().starts_with("goby-sim-"))
+    };
+    let patience = Instant::now() + Duration::from_secs(60);
+    while !running(&tmp) {
+        assert!(Instant::now() < patience, "the run did not start");
+        assert!(child.try_wait().unwrap().is_none(), "goby sim ended early");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let patience = Instant::now() + Duration::from_secs(30);
+    while child.try_wait().unwrap().is_none() {
+        if Instant::now() > patience {
+            let _ = child.kill();
+            panic!("goby sim did not stop on SIGINT");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let run = child.wait_with_output().unwrap();
+    let stderr = stderr_text(&run);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("the run was interrupted at ") && stderr.contains("nothing is reported"),
+        "{stderr}"
+    );
+    assert!(
+        !running(&tmp),
+        "the nodes' data directories are left behind"
+    );
+    assert!(!dir.join("out/report.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

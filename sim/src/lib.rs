@@ -41,6 +41,13 @@ pub enum SimError {
     /// event was missed, an output could not be written).
     #[error("{0}")]
     Run(String),
+    /// The run was stopped before its end ([`run_until`]); its nodes' data
+    /// directories are removed and nothing is reported.
+    #[error("the run was interrupted at {virtual_s:.0} s of virtual time; nothing is reported")]
+    Interrupted {
+        /// How far the run got, seconds of virtual time from its start.
+        virtual_s: f64,
+    },
 }
 
 /// What a run gives.
@@ -54,7 +61,21 @@ pub struct Outcome {
 
 /// Runs `scenario` in virtual time (see [`world`]).
 pub fn run(scenario: &Scenario) -> Result<Outcome, SimError> {
-    let ledger = world::run(scenario)?;
+    run_until(scenario, std::future::pending())
+}
+
+/// Runs `scenario` in virtual time, stopping early when `stop` completes
+/// (an operator's Ctrl-C: the future may be completed from another
+/// thread, e.g. a `tokio::sync::oneshot` receiver).
+///
+/// # Errors
+/// As [`run`], and [`SimError::Interrupted`] when `stop` came first (the
+/// nodes' data directories are removed all the same).
+pub fn run_until(
+    scenario: &Scenario,
+    stop: impl std::future::Future<Output = ()>,
+) -> Result<Outcome, SimError> {
+    let ledger = world::run(scenario, stop)?;
     let report = Report::new(scenario, &ledger);
     Ok(Outcome { ledger, report })
 }

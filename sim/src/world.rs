@@ -65,14 +65,32 @@ pub fn driver_config(
 }
 
 /// Runs `scenario` on a current-thread runtime in virtual time; returns
-/// the ledger of the run.
-pub fn run(scenario: &Scenario) -> Result<Ledger, SimError> {
+/// the ledger of the run, or [`SimError::Interrupted`] when `stop`
+/// completes first (the data directories are removed either way).
+pub fn run(
+    scenario: &Scenario,
+    stop: impl std::future::Future<Output = ()>,
+) -> Result<Ledger, SimError> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .start_paused(true)
         .build()
         .map_err(|e| SimError::Run(format!("cannot start the runtime: {e}")))?;
-    runtime.block_on(run_world(scenario))
+    runtime.block_on(async {
+        let dir = tempfile::Builder::new()
+            .prefix("goby-sim-")
+            .tempdir_in(data_root())
+            .map_err(|e| SimError::Run(format!("cannot make the nodes' data directories: {e}")))?;
+        let began = Instant::now();
+        tokio::select! {
+            biased;
+            ran = run_world(scenario, dir.path()) => ran,
+            () = stop => Err(SimError::Interrupted {
+                virtual_s: began.elapsed().as_secs_f64(),
+            }),
+        }
+        // `dir` is removed here, after the nodes' tasks were dropped.
+    })
 }
 
 /// A started node: where to publish, how to stop it, its run.
@@ -106,11 +124,7 @@ pub fn data_root() -> std::path::PathBuf {
     std::env::temp_dir()
 }
 
-async fn run_world(s: &Scenario) -> Result<Ledger, SimError> {
-    let dir = tempfile::Builder::new()
-        .prefix("goby-sim-")
-        .tempdir_in(data_root())
-        .map_err(|e| SimError::Run(format!("cannot make the nodes' data directories: {e}")))?;
+async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
     let clock = Arc::new(TokioClock::at(s.start_micros));
     let start = Instant::now();
     let ledger = Arc::new(Mutex::new(Ledger::new(
@@ -126,7 +140,7 @@ async fn run_world(s: &Scenario) -> Result<Ledger, SimError> {
     let medium = Medium::new();
     let mut nodes = Vec::new();
     for i in 0..s.nodes.len() {
-        nodes.push(start_node(s, i, dir.path(), &medium, &clock, &ledger).await?);
+        nodes.push(start_node(s, i, dir, &medium, &clock, &ledger).await?);
     }
     let end_s = s.duration_micros as f64 / 1e6;
     let mut streams = Vec::new();
@@ -155,7 +169,7 @@ async fn run_world(s: &Scenario) -> Result<Ledger, SimError> {
         .await;
     stop_nodes(s, nodes).await?;
     for (i, node) in s.nodes.iter().enumerate() {
-        let ids = owed(&dir.path().join(format!("node{i}")))
+        let ids = owed(&dir.join(format!("node{i}")))
             .map_err(|e| SimError::Run(format!("node {}: {e}", node.name)))?;
         ledger.lock().expect("not poisoned").owed(i, &ids);
     }
