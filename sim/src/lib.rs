@@ -22,6 +22,7 @@
 pub mod ledger;
 pub mod report;
 pub mod scenario;
+pub mod track;
 pub mod traffic;
 pub mod world;
 

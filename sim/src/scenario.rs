@@ -21,6 +21,7 @@ use protos::goby::acomms::protobuf::SimulatorDriverConfig;
 use protos::goby::apps::protobuf::GobydConfig;
 use protos::goby::sim::protobuf as pb;
 
+use crate::track::{Place, Track};
 use crate::traffic::{Rate, Stream, ValueGen};
 
 /// A scenario that passed every check, ready to run ([`crate::run`]).
@@ -55,8 +56,8 @@ pub struct Node {
     pub config: GobydConfig,
     /// The DCCL types its gobyd loads.
     pub codec: Arc<dccl::Codec>,
-    /// x east, y north, depth down, metres.
-    pub position: [f64; 3],
+    /// Where it is over the run: fixed, or on its track.
+    pub place: Place,
     /// What its autonomy publishes.
     pub traffic: Vec<Stream>,
 }
@@ -130,6 +131,10 @@ struct Check<'a> {
 
 /// The longest `duration_s` or `drain_s` a run takes: a year.
 const MAX_SECONDS: f64 = 366.0 * 86_400.0;
+
+/// The fastest a node may go on its track, metres per second: faster than
+/// any vehicle or ship at sea.
+const MAX_SPEED: f64 = 30.0;
 
 /// The most publications one stream may make in a run (about, for a
 /// Poisson stream): more is a mistake in its rate or the duration, and
@@ -277,30 +282,7 @@ impl Check<'_> {
     }
 
     fn node(&mut self, i: usize, node: &pb::Node, all: &[pb::Node]) -> Option<Node> {
-        if node.position.is_none() {
-            self.problem(
-                format!("node[{i}]"),
-                "give the node's position { x y depth } (metres)",
-            );
-        }
-        let position = node.position.unwrap_or_default();
-        for (axis, value) in [("x", position.x()), ("y", position.y())] {
-            if !value.is_finite() {
-                self.problem(
-                    format!("node[{i}].position.{axis}"),
-                    format!("{value} is not a position (metres)"),
-                );
-            }
-        }
-        if !position.depth().is_finite() || position.depth() < 0.0 {
-            self.problem(
-                format!("node[{i}].position.depth"),
-                format!(
-                    "{} is not a depth (metres down, 0 or more)",
-                    position.depth()
-                ),
-            );
-        }
+        let place = self.place(i, node);
         let checked = self.gobyd(i, node)?;
         let mut traffic = Vec::new();
         for (j, t) in node.traffic.iter().enumerate() {
@@ -311,8 +293,97 @@ impl Check<'_> {
             modem_id: node.modem_id(),
             config: checked.config,
             codec: checked.codec,
-            position: [position.x(), position.y(), position.depth()],
+            place: place?,
             traffic: traffic.into_iter().collect::<Option<Vec<_>>>()?,
+        })
+    }
+
+    /// Where node `i` is: its `position`, or its `track`.
+    fn place(&mut self, i: usize, node: &pb::Node) -> Option<Place> {
+        let at = format!("node[{i}]");
+        match (&node.position, &node.track) {
+            (Some(_), Some(_)) => {
+                self.problem(
+                    format!("{at}.track"),
+                    "give position (a fixed node) or track (a moving one), not both",
+                );
+                None
+            }
+            (None, None) => {
+                self.problem(
+                    at,
+                    "give the node's position { x y depth } (metres), or its track { waypoint { x y \
+                     depth } ... speed_mps }",
+                );
+                None
+            }
+            (Some(p), None) => self.point(&format!("{at}.position"), p).map(Place::Fixed),
+            (None, Some(track)) => self.track(&format!("{at}.track"), track).map(Place::Track),
+        }
+    }
+
+    /// A position at `at`, checked: numbers, a depth of 0 or more, in the
+    /// modelled water.
+    fn point(&mut self, at: &str, position: &pb::Position) -> Option<[f64; 3]> {
+        let before = self.found.len();
+        for (axis, value) in [("x", position.x()), ("y", position.y())] {
+            if !value.is_finite() {
+                self.problem(
+                    format!("{at}.{axis}"),
+                    format!("{value} is not a position (metres)"),
+                );
+            }
+        }
+        let depth = position.depth();
+        if !depth.is_finite() || depth < 0.0 {
+            self.problem(
+                format!("{at}.depth"),
+                format!("{depth} is not a depth (metres down, 0 or more)"),
+            );
+        }
+        let point = [position.x(), position.y(), depth];
+        if self.found.len() == before && self.water.acoustic_channel.is_some() {
+            // Where the modelled water has no room for a modem (under the
+            // sea floor, out of the modelled range), as the driver says.
+            let driver = crate::world::driver_config(1, &[(1, point)], &self.water, 0);
+            for p in modemdriver::sim::problems(&driver) {
+                if p.field.starts_with("simulator.node[0]") {
+                    self.problem(format!("{at}.depth"), p.reason.clone());
+                }
+            }
+        }
+        (self.found.len() == before).then_some(point)
+    }
+
+    /// A track at `at`, checked: its waypoints, and a speed a vehicle can
+    /// go when it has somewhere to go.
+    fn track(&mut self, at: &str, track: &pb::Track) -> Option<Track> {
+        if track.waypoint.is_empty() {
+            self.problem(format!("{at}.waypoint"), "give at least one waypoint");
+            return None;
+        }
+        let waypoints: Vec<Option<[f64; 3]>> = track
+            .waypoint
+            .iter()
+            .enumerate()
+            .map(|(k, w)| self.point(&format!("{at}.waypoint[{k}]"), w))
+            .collect();
+        let waypoints: Vec<[f64; 3]> = waypoints.into_iter().collect::<Option<_>>()?;
+        let speed = track.speed_mps();
+        if waypoints.len() > 1 && !(speed > 0.0 && speed <= MAX_SPEED) {
+            self.problem(
+                format!("{at}.speed_mps"),
+                format!(
+                    "{speed} is not a speed a node can go: metres per second, more than 0 and at \
+                     most {MAX_SPEED}"
+                ),
+            );
+            return None;
+        }
+        Some(Track {
+            waypoints,
+            speed,
+            repeat: track.repeat(),
         })
     }
 
@@ -407,8 +478,7 @@ impl Check<'_> {
         // slots against its packets are checked as `gobyd --check` checks
         // them (a slot too short for its rate's packet would drop every
         // transmission in it).
-        let p = node.position.unwrap_or_default();
-        let own = [(id, [p.x(), p.y(), p.depth()])];
+        let own = [(id, start_of(node))];
         config.driver = Some(crate::world::driver_config(id, &own, &self.water, 0));
         // The run publishes and listens in-process: no JSON, MQTT or MOOS
         // interface, and no forecast (its ray traces run on other threads).
@@ -666,6 +736,21 @@ impl Check<'_> {
         }
         Some(rate)
     }
+}
+
+/// Where `node` is at the start, as written (its position, or its
+/// track's first waypoint; the origin when it has neither, which is
+/// refused apart).
+fn start_of(node: &pb::Node) -> [f64; 3] {
+    let p = node
+        .position
+        .or_else(|| {
+            node.track
+                .as_ref()
+                .and_then(|t| t.waypoint.first().copied())
+        })
+        .unwrap_or_default();
+    [p.x(), p.y(), p.depth()]
 }
 
 /// `config` with its `.proto` files and include directories that are

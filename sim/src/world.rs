@@ -17,6 +17,7 @@ use std::time::Duration;
 use gobyd::daemon::Daemon;
 use gobyd::event::{Publish, SharedEvent};
 use modemdriver::sim::medium::Medium;
+use modemdriver::sim::positions::Positions;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
 use protos::goby::acomms::protobuf::{
@@ -138,9 +139,17 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
             .collect(),
     )));
     let medium = Medium::new();
+    let places: Arc<dyn Positions> = Arc::new(crate::track::World {
+        start_micros: s.start_micros,
+        places: s
+            .nodes
+            .iter()
+            .map(|n| (n.modem_id, n.place.clone()))
+            .collect(),
+    });
     let mut nodes = Vec::new();
     for i in 0..s.nodes.len() {
-        nodes.push(start_node(s, i, dir, &medium, &clock, &ledger).await?);
+        nodes.push(start_node(s, i, dir, &medium, &clock, &places, &ledger).await?);
     }
     let end_s = s.duration_micros as f64 / 1e6;
     let mut streams = Vec::new();
@@ -190,11 +199,15 @@ async fn start_node(
     dir: &Path,
     medium: &Arc<Medium>,
     clock: &Arc<TokioClock>,
+    places: &Arc<dyn Positions>,
     ledger: &Arc<Mutex<Ledger>>,
 ) -> Result<Running, SimError> {
     let node = &s.nodes[i];
-    let positions: Vec<(i32, [f64; 3])> =
-        s.nodes.iter().map(|n| (n.modem_id, n.position)).collect();
+    let positions: Vec<(i32, [f64; 3])> = s
+        .nodes
+        .iter()
+        .map(|n| (n.modem_id, n.place.start()))
+        .collect();
     let seed = mix(&[s.seed, node.modem_id as u64]);
     let driver_config = driver_config(node.modem_id, &positions, &s.water, seed);
     let mut config = node.config.clone();
@@ -203,9 +216,13 @@ async fn start_node(
     let failed = |e: &dyn std::fmt::Display| {
         SimError::Run(format!("node {}: gobyd did not start: {e}", node.name))
     };
-    let driver =
-        SimulatorDriver::start_on_with_clock(&driver_config, medium.clone(), clock.clone())
-            .map_err(|e| failed(&e))?;
+    let driver = SimulatorDriver::start_in_world(
+        &driver_config,
+        medium.clone(),
+        clock.clone(),
+        places.clone(),
+    )
+    .map_err(|e| failed(&e))?;
     // The node's start numbers (publication numbers and the like) drawn
     // from the scenario's seed, not the operating system's; its journal
     // synced in line, so that no thread's real time orders its events.

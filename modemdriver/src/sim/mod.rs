@@ -20,6 +20,10 @@
 //!   of the packet's rate at the SNR a ray trace gives (goby-channel),
 //!   instead of `sound_speed` and `packet_loss`.
 //!
+//! - Moving nodes: started with [`SimulatorDriver::start_in_world`], the
+//!   positions come from a [`positions::Positions`] at each moment (the
+//!   sender's when a packet starts, the receiver's when it is heard).
+//!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
 //! node with an `ACK` packet, itself subject to the channel: on reception,
 //! or with `DriverConfig.deferred_ack` only when the layer above asks
@@ -30,6 +34,7 @@
 //! wall-clock start time; use real time (not tokio's paused clock) then.
 
 pub mod medium;
+pub mod positions;
 pub mod reception;
 pub mod udp_medium;
 pub mod water;
@@ -97,12 +102,12 @@ impl SimulatorDriver {
                 Some(UdpMedium::new(socket, peers))
             }
         };
-        Self::spawn(config, medium, udp, None)
+        Self::spawn(config, medium, udp, None, None)
     }
 
     /// Starts a node on the given in-process channel only.
     pub fn start_on(config: &DriverConfig, medium: Arc<Medium>) -> Result<Driver, DriverError> {
-        Self::spawn(config, medium, None, None)
+        Self::spawn(config, medium, None, None, None)
     }
 
     /// Starts a node on the given in-process channel only, reading time
@@ -118,7 +123,19 @@ impl SimulatorDriver {
         medium: Arc<Medium>,
         clock: Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
-        Self::spawn(config, medium, None, Some(clock))
+        Self::spawn(config, medium, None, Some(clock), None)
+    }
+
+    /// As [`SimulatorDriver::start_on_with_clock`], with the modems'
+    /// positions read from `positions` at each moment (nodes that move)
+    /// instead of the configuration's fixed `node` positions.
+    pub fn start_in_world(
+        config: &DriverConfig,
+        medium: Arc<Medium>,
+        clock: Arc<dyn goby_time::Clock>,
+        positions: Arc<dyn positions::Positions>,
+    ) -> Result<Driver, DriverError> {
+        Self::spawn(config, medium, None, Some(clock), Some(positions))
     }
 
     /// `clock`: `None` for the system's, with the links computed on
@@ -128,6 +145,7 @@ impl SimulatorDriver {
         medium: Arc<Medium>,
         udp: Option<UdpMedium>,
         clock: Option<Arc<dyn goby_time::Clock>>,
+        positions: Option<Arc<dyn positions::Positions>>,
     ) -> Result<Driver, DriverError> {
         let links_in_line = clock.is_some();
         let clock = clock.unwrap_or_else(|| Arc::new(goby_time::SystemClock));
@@ -150,6 +168,7 @@ impl SimulatorDriver {
                     deferred_ack,
                     water,
                     links_in_line,
+                    positions,
                 },
                 medium,
                 udp,
@@ -340,6 +359,8 @@ struct Node {
     /// Links are computed on the driver's task (in virtual time), not on
     /// blocking threads.
     links_in_line: bool,
+    /// Where the modems are now, when they move.
+    positions: Option<Arc<dyn positions::Positions>>,
 }
 
 impl Node {
@@ -348,7 +369,12 @@ impl Node {
         u64::try_from(self.clock.now()).unwrap_or(0)
     }
 
+    /// Where the modem `id` is now: from [`Node::positions`] when the
+    /// modems move, else the configuration's `node` position.
     fn position_of(&self, id: i32) -> Option<Position> {
+        if let Some(now) = self.positions.as_ref().and_then(|p| p.at(id, self.now())) {
+            return Some(now);
+        }
         self.sim
             .node
             .iter()
@@ -639,6 +665,7 @@ struct Start {
     deferred_ack: bool,
     water: Option<Water>,
     links_in_line: bool,
+    positions: Option<Arc<dyn positions::Positions>>,
 }
 
 async fn run(
@@ -654,6 +681,7 @@ async fn run(
         deferred_ack,
         water,
         links_in_line,
+        positions,
     } = start;
     let events = ctx.events.clone();
     let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
@@ -676,6 +704,7 @@ async fn run(
         computing: HashSet::new(),
         computed,
         links_in_line,
+        positions,
     };
     node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);
