@@ -11,8 +11,8 @@
 //! | `driver` | yes | `{"status", "time"}` |
 //! | `link` | yes | the last reception: `{"src", "dest", "rate", "frames", "time", ...}` |
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
-//! | `mac_cycle` | yes | the TDMA cycle after a `MACUpdate` (or its refusal): `{"slot", "running", "modem_id", "update", "from", "error", "time"}` |
-//! | `mac_active` | yes | which MAC of the MAC switcher runs, after each switch, renewal, lapse or refusal: the JSON interface's `mac_switch` event (`{"mac_switch", "previous", "reason", "keep_alive_until", "from", "error"}`) with `"time"` |
+//! | `mac_cycle` | yes | the TDMA cycle when the bridge starts (`"from": "start"`, no `update`), after a `MACUpdate` (or its refusal) and after a switch to another MAC (`"from": "switch"`): `{"slot", "running", "modem_id", "update", "from", "error", "time"}` |
+//! | `mac_active` | yes | which MAC of the MAC switcher runs, when the bridge starts (`"reason": "started"`) and after each switch, renewal, lapse or refusal: the JSON interface's `mac_switch` event (`{"mac_switch", "previous", "reason", "keep_alive_until", "from", "error"}`) with `"time"` |
 //! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::event::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
 //! | `file/reply` | no | the answer to a file request: the JSON interface's reply (`{"file_send", "joined", "transfer"}`, `{"file_get", "node"}` or `{"transfers"}`) with `"topic"` |
