@@ -220,8 +220,7 @@ pub enum Report {
     MacCycle(MacCycleReport),
     /// `mac_active` (retained): which MAC of its switcher runs.
     MacActive(MacActiveReport),
-    /// The rate the node chose from the link (from the JSON interface
-    /// only: the `mac_rate` event).
+    /// `mac_rate` (retained): the last rate the node chose from the link.
     MacRate(MacRateReport),
     /// `mac`: a TDMA slot this node transmits in.
     Mac {
@@ -446,6 +445,7 @@ impl Report {
             "forecast" => Report::Forecast(value.clone()),
             "mac_cycle" => Report::MacCycle(MacCycleReport::from_json(value)),
             "mac_active" => Report::MacActive(MacActiveReport::from_json(value)),
+            "mac_rate" => Report::MacRate(MacRateReport::from_json(value)),
             "mac" => Report::Mac {
                 rate: value["rate"].as_i64().unwrap_or(0),
                 slot_seconds: value["slot_seconds"].as_f64().unwrap_or(0.0),

@@ -2,7 +2,7 @@
 //! cycle (gobyd's retained MQTT `mac_cycle`, the JSON `mac_cycle` reply
 //! and event), which MAC of its switcher runs (MQTT `mac_active`, the JSON
 //! `mac_switch` reply and event), and the rate it chose from the link
-//! (the JSON `mac_rate` event). Read leniently: a key missing takes the
+//! (MQTT `mac_rate`, the JSON `mac_rate` event). Read leniently: a key missing takes the
 //! `.proto`'s default.
 
 use serde_json::Value;
@@ -155,8 +155,8 @@ impl MacActiveReport {
     }
 }
 
-/// The rate a node chose from the link for a transmission (the JSON
-/// `mac_rate` event).
+/// The rate a node chose from the link for a transmission (MQTT
+/// `mac_rate`, the JSON `mac_rate` event).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MacRateReport {
     /// The modem rate.
@@ -178,6 +178,21 @@ pub struct MacRateReport {
 }
 
 impl MacRateReport {
+    /// The MQTT `mac_rate` payload (the JSON `mac_rate` event with
+    /// `time`).
+    pub fn from_json(v: &Value) -> Self {
+        MacRateReport {
+            rate: v["mac_rate"].as_i64().unwrap_or(0),
+            dest: v["dest"].as_i64().unwrap_or(-1),
+            slot_index: v["slot_index"].as_i64().unwrap_or(0),
+            reason: v["reason"].as_str().unwrap_or("").to_string(),
+            snr: v["snr"].as_f64(),
+            packet_error: v["packet_error"].as_f64(),
+            slot_limited: v["slot_limited"].as_bool().unwrap_or(false),
+            time: v["time"].as_f64().unwrap_or(0.0),
+        }
+    }
+
     /// The JSON `mac_rate` event, heard at `time`.
     pub fn of_event(e: &gobyd_protocol::event::MacRate, time: f64) -> Self {
         MacRateReport {

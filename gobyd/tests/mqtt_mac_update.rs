@@ -6,7 +6,8 @@
 //! reason. `PREFIX/NODE/mac_switch` switches the MAC switcher and
 //! `PREFIX/NODE/mac_active` tells which MAC runs (retained, from the
 //! bridge's start on), and `mac_cycle` the cycle it runs; an unknown MAC
-//! is refused on `error`. Fails without Mosquitto (`.ci/mosquitto.sh`
+//! is refused on `error`; the rate chosen for a slot with `adaptive_rate`
+//! comes on `mac_rate` (retained). Fails without Mosquitto (`.ci/mosquitto.sh`
 //! installs it).
 
 mod support;
@@ -157,6 +158,37 @@ fn mac_switches_from_the_broker_switch_and_are_told_on_mac_active() {
     assert!(
         !seconds.is_empty() && seconds.iter().all(|s| *s == 2.0),
         "{cycle}"
+    );
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_rate_chosen_from_the_link_is_published_on_mac_rate() {
+    let dir = scratch("mqtt-mac-update", "rate");
+    let broker = Broker::start(&dir, "the_rate_chosen_from_the_link_is_published");
+    let (_gobyd, watcher) = start(&dir, &broker, |n| {
+        n.extra(
+            "mac { type: MAC_FIXED_DECENTRALIZED \
+             slot { src: 1 dest: 2 rate: 6 slot_seconds: 1.2 adaptive_rate: true } \
+             slot { src: 2 dest: 1 rate: 6 slot_seconds: 1.2 } }",
+        )
+    });
+    // Nothing heard from node 2 yet: the slot's own rate.
+    let rate = watcher.wait_on("fleet/1/mac_rate", |v| Some(v.clone()));
+    assert_eq!(
+        (
+            &rate["mac_rate"],
+            &rate["dest"],
+            &rate["slot_index"],
+            &rate["reason"]
+        ),
+        (&6.into(), &2.into(), &0.into(), &"no_link_data".into()),
+        "{rate}"
+    );
+    assert!(
+        rate["time"].as_f64().is_some() && rate.get("event").is_none(),
+        "{rate}"
     );
     drop(broker);
     let _ = std::fs::remove_dir_all(&dir);

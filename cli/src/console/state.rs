@@ -1078,7 +1078,7 @@ mod tests {
     }
 
     #[test]
-    fn the_cycle_and_the_mac_running_are_learned_from_the_retained_topics() {
+    fn the_cycle_the_mac_running_and_the_rate_are_learned_from_the_retained_topics() {
         let mut s = state();
         apply(
             &mut s,
@@ -1124,6 +1124,24 @@ mod tests {
         assert_eq!(mac["cycle"]["error"], "for modem 3", "{mac}");
         assert_eq!(mac["cycle"]["running"], false);
         assert_eq!(s.modem_id_of("auv1"), Some(1));
+        // The last rate chosen from the link.
+        apply(
+            &mut s,
+            "fleet/auv1/mac_rate",
+            r#"{"mac_rate": 5, "dest": 2, "slot_index": 0, "reason": "up", "snr": 20.5,
+                "packet_error": 0.01, "slot_limited": true, "time": 101}"#,
+        );
+        let rate = &s.snapshot()["nodes"][0]["mac"]["rate"];
+        assert_eq!(
+            (
+                &rate["rate"],
+                &rate["reason"],
+                &rate["snr"],
+                &rate["slot_limited"]
+            ),
+            (&json!(5), &json!("up"), &json!(20.5), &json!(true)),
+            "{rate}"
+        );
     }
 
     #[test]
