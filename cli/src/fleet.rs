@@ -357,6 +357,17 @@ pub struct AcceptedReport {
 }
 
 impl Report {
+    /// Marks a medium access state as the broker's retained value, handed
+    /// over on subscribing rather than published since (other reports are
+    /// left as they are).
+    pub fn mark_retained(&mut self) {
+        match self {
+            Report::MacCycle(c) => c.retained = true,
+            Report::MacActive(a) => a.retained = true,
+            _ => {}
+        }
+    }
+
     /// The report of a publication on `topic` under `prefix` (without its
     /// trailing `/`), with the node it concerns; `None` for a topic outside
     /// the picture (another prefix, `tx` topics, `all/...`, a kind not

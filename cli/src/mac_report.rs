@@ -78,6 +78,9 @@ pub struct MacCycleReport {
     pub error: Option<String>,
     /// When it was said, seconds since the UNIX epoch (0: not said).
     pub time: f64,
+    /// The broker's retained value, handed over on subscribing (not news:
+    /// it answers no request made since).
+    pub retained: bool,
 }
 
 impl MacCycleReport {
@@ -95,6 +98,7 @@ impl MacCycleReport {
             from: v["from"].as_str().unwrap_or("").to_string(),
             error: v["error"].as_str().map(str::to_string),
             time: v["time"].as_f64().unwrap_or(0.0),
+            retained: false,
         }
     }
 }
@@ -122,6 +126,8 @@ pub struct MacActiveReport {
     pub macs: Vec<String>,
     /// When it was said, seconds since the UNIX epoch (0: not said).
     pub time: f64,
+    /// The broker's retained value, handed over on subscribing.
+    pub retained: bool,
 }
 
 impl MacActiveReport {
@@ -139,6 +145,7 @@ impl MacActiveReport {
             default_mac: None,
             macs: Vec::new(),
             time: v["time"].as_f64().unwrap_or(0.0),
+            retained: false,
         }
     }
 

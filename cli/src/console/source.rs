@@ -152,7 +152,10 @@ async fn mqtt(
                 let _ = client.try_subscribe(filter.clone(), QoS::AtLeastOnce);
             }
             Ok(MqttEvent::Incoming(Packet::Publish(p))) => {
-                if let Some((node, report)) = Report::parse(&prefix, &p.topic, &p.payload) {
+                if let Some((node, mut report)) = Report::parse(&prefix, &p.topic, &p.payload) {
+                    if p.retain {
+                        report.mark_retained();
+                    }
                     hub.apply(&node, &report);
                 }
             }

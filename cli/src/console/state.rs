@@ -428,7 +428,7 @@ impl ConsoleState {
         match report {
             Report::MacCycle(c) => {
                 mac.take_cycle(c);
-                if c.from == "mqtt" {
+                if c.from == "mqtt" && !c.retained {
                     let outcome = match &c.error {
                         Some(e) => Err(e.clone()),
                         None => Ok(cycle_note(c.slots.len(), c.running)),
@@ -438,7 +438,7 @@ impl ConsoleState {
             }
             Report::MacActive(a) => {
                 mac.take_active(a);
-                if a.from.as_deref() == Some("mqtt") {
+                if a.from.as_deref() == Some("mqtt") && !a.retained {
                     let outcome = match (&a.error, a.reason.as_deref()) {
                         (Some(e), _) => Err(e.clone()),
                         (None, reason) => {
@@ -466,7 +466,9 @@ impl ConsoleState {
 
     /// The MQTT bridge of `node` told the outcome of a MAC update or switch
     /// it took from the broker: the oldest such command the page published
-    /// to it is applied (with a note) or refused (with the reason).
+    /// to it is applied (with a note) or refused (with the reason). A
+    /// retained value handed over on subscribing (after a reconnection)
+    /// answers no command and is not taken here.
     fn mac_settle(
         &mut self,
         node: &str,
@@ -1174,12 +1176,19 @@ mod tests {
             &json!({"mac": "loud"}),
             100.0,
         );
-        // The cycle at the bridge's start is nobody's answer.
+        // The cycle at the bridge's start is nobody's answer, nor is an
+        // old answer the broker hands over again on subscribing.
         apply(
             &mut s,
             "fleet/auv2/mac_cycle",
             r#"{"slot": [{"src": 1}, {"src": 2}], "modem_id": 2, "from": "start"}"#,
         );
+        let (node, mut old) = report(
+            "fleet/auv2/mac_cycle",
+            r#"{"slot": [{"src": 1}], "modem_id": 2, "from": "mqtt"}"#,
+        );
+        old.mark_retained();
+        s.apply(&node, &old, 100.0);
         assert_eq!(s.command_state(first), Some(CommandState::Published));
         let events = apply(
             &mut s,
