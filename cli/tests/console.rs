@@ -589,6 +589,29 @@ fn the_console_shows_each_nodes_mac_and_changes_it() {
     console.wait_state("auv1's new cycle", broker::PATIENCE, |s| {
         (cycle_of(s, "auv1")? == [(1, 8.0), (2, 8.0), (1, 12.0)]).then_some(())
     });
+    // The simple kinds, and stopping the cycle.
+    for (update, note) in [
+        (json!({"update_type": "POP_BACK"}), "2 slots, running"),
+        (
+            json!({"update_type": "NO_CHANGE", "cycle_state": "STOPPED"}),
+            "2 slots, stopped",
+        ),
+        (
+            json!({"update_type": "PUSH_FRONT", "slot": [{"src": 2, "dest": -1, "rate": 2, "slot_seconds": 8}],
+                   "cycle_state": "STARTED"}),
+            "3 slots, running",
+        ),
+    ] {
+        let answered = mac_request(&console, &json!({"node": "auv1", "update": update}));
+        assert_eq!(
+            (&answered["state"], &answered["note"]),
+            (&json!("applied"), &json!(note)),
+            "{update}: {answered}"
+        );
+    }
+    console.wait_state("auv1's cycle pushed in front", broker::PATIENCE, |s| {
+        (cycle_of(s, "auv1")? == [(2, 8.0), (1, 8.0), (2, 8.0)]).then_some(())
+    });
     // One the node refuses, with its reason; the cycle stays.
     let refused = mac_request(
         &console,
@@ -596,6 +619,15 @@ fn the_console_shows_each_nodes_mac_and_changes_it() {
     );
     assert_eq!(refused["state"], "refused", "{refused}");
     assert!(refused["note"].as_str().unwrap().contains('9'), "{refused}");
+    let cleared = mac_request(
+        &console,
+        &json!({"node": "auv1", "update": {"update_type": "CLEAR"}}),
+    );
+    assert_eq!(cleared["note"], "0 slots, stopped", "{cleared}");
+    console.wait_state("auv1's cycle cleared", broker::PATIENCE, |s| {
+        let mac = &node(s, "auv1")?["mac"]["cycle"];
+        (mac["slots"].as_array()?.is_empty() && mac["running"] == false).then_some(())
+    });
     // A switch, with a keep-alive.
     let switched = mac_request(
         &console,
