@@ -6,6 +6,8 @@ use std::fmt::Write as _;
 
 use serde_json::Value;
 
+use crate::mac_report::{MacActiveReport, MacCycleReport, MacRateReport};
+
 /// What is known of one node.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct NodeView {
@@ -54,7 +56,8 @@ impl Fleet {
 
     /// Takes one typed report of `node` into the picture; the line saying
     /// what it was (`None` for a status refresh that changes nothing, and
-    /// for the bridge's slot notices, which the table does not show).
+    /// for the bridge's slot notices and medium access state, which the
+    /// table does not show).
     pub fn apply(&mut self, node: &str, report: &Report) -> Option<String> {
         let view = self.nodes.entry(node.to_string()).or_default();
         let note = match report {
@@ -119,7 +122,10 @@ impl Fleet {
                 view.last.insert("forecast".into(), (time, note.clone()));
                 format!("forecast {note}")
             }
-            Report::Mac { .. } => return None,
+            Report::Mac { .. }
+            | Report::MacCycle(_)
+            | Report::MacActive(_)
+            | Report::MacRate(_) => return None,
         };
         Some(format!("{node} {note}"))
     }
@@ -209,6 +215,13 @@ pub enum Report {
     /// `forecast` (retained): the node's last link forecast, as gobyd's
     /// JSON `forecast` event (`own`, `peers`, `band` with `recommended`).
     Forecast(Value),
+    /// `mac_cycle` (retained): the node's TDMA cycle, as it stands when
+    /// its bridge starts and after each `MACUpdate` (or its refusal).
+    MacCycle(MacCycleReport),
+    /// `mac_active` (retained): which MAC of its switcher runs.
+    MacActive(MacActiveReport),
+    /// `mac_rate` (retained): the last rate the node chose from the link.
+    MacRate(MacRateReport),
     /// `mac`: a TDMA slot this node transmits in.
     Mac {
         /// Its rate.
@@ -344,6 +357,17 @@ pub struct AcceptedReport {
 }
 
 impl Report {
+    /// Marks a medium access state as the broker's retained value, handed
+    /// over on subscribing rather than published since (other reports are
+    /// left as they are).
+    pub fn mark_retained(&mut self) {
+        match self {
+            Report::MacCycle(c) => c.retained = true,
+            Report::MacActive(a) => a.retained = true,
+            _ => {}
+        }
+    }
+
     /// The report of a publication on `topic` under `prefix` (without its
     /// trailing `/`), with the node it concerns; `None` for a topic outside
     /// the picture (another prefix, `tx` topics, `all/...`, a kind not
@@ -430,6 +454,9 @@ impl Report {
                 topic: value["topic"].as_str().unwrap_or("?").to_string(),
             },
             "forecast" => Report::Forecast(value.clone()),
+            "mac_cycle" => Report::MacCycle(MacCycleReport::from_json(value)),
+            "mac_active" => Report::MacActive(MacActiveReport::from_json(value)),
+            "mac_rate" => Report::MacRate(MacRateReport::from_json(value)),
             "mac" => Report::Mac {
                 rate: value["rate"].as_i64().unwrap_or(0),
                 slot_seconds: value["slot_seconds"].as_f64().unwrap_or(0.0),

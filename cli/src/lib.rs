@@ -82,6 +82,7 @@ pub mod generate_cmd;
 pub mod iridium_emulate;
 mod lines;
 pub mod log;
+pub mod mac_report;
 pub mod modem_cmd;
 pub mod moos_cmd;
 pub mod mqtt_cmd;

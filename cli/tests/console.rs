@@ -5,7 +5,10 @@
 //! headless Chromium driven over the Chrome DevTools protocol: the map
 //! shows both nodes from the reports they send, a command filled in the
 //! commander's form and sent from it arrives at the other node, and its ack
-//! shows in the page. Screenshots, and the page's load time and update
+//! shows in the page; a node's TDMA cycle shows and a MAC update sent from
+//! the page's form changes it. Without a browser, each node's cycle and
+//! MAC switcher, learned from the broker and from the JSON interface, and
+//! MAC updates and switches sent through the console's interface. Screenshots, and the page's load time and update
 //! latency, are kept under the target directory
 //! (`CARGO_TARGET_TMPDIR/console/`). Fails without Mosquitto
 //! (`.ci/mosquitto.sh`); the browser test is ignored without Chromium
@@ -475,6 +478,204 @@ fn the_console_serves_the_fleet_and_sends_commands() {
         let c = s["commands"].as_array()?.iter().find(|c| c["id"] == id)?;
         (c["state"] == "acked").then_some(())
     });
+    drop(console);
+    drop(gateways);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The configuration at `path` (a quick start vehicle's) with a MAC
+/// switcher in place of its `mac`: `survey`, the cycle it had (the
+/// default), and `quiet`, whose second slot is twice as long.
+fn with_mac_switcher(path: &Path) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let start = text.find("\nmac {").expect("a mac section") + 1;
+    let end = start + text[start..].find("\n}\n").expect("its end") + 3;
+    let cycle = text[start + "mac {".len()..end - 3].replace('\n', " ");
+    let switcher = format!(
+        "mac_switcher {{\n  default_mac: \"survey\"\n  mac {{ name: \"survey\" mac {{{cycle} }} }}\n  \
+         mac {{ name: \"quiet\" mac {{ type: MAC_FIXED_DECENTRALIZED \
+         slot {{ src: 1 dest: -1 rate: 2 slot_seconds: 8 }} slot {{ src: 2 dest: -1 rate: 2 slot_seconds: 16 }} }} }}\n}}\n"
+    );
+    std::fs::write(
+        path,
+        format!("{}{switcher}{}", &text[..start], &text[end..]),
+    )
+    .unwrap();
+}
+
+/// The slots' sources and lengths of `node`'s cycle in a state.
+fn cycle_of(state: &Value, name: &str) -> Option<Vec<(i64, f64)>> {
+    let slots = node(state, name)?["mac"]["cycle"]["slots"].as_array()?;
+    Some(
+        slots
+            .iter()
+            .map(|s| (s["src"].as_i64().unwrap(), s["seconds"].as_f64().unwrap()))
+            .collect(),
+    )
+}
+
+/// Sends a MAC request to the console and waits for the answer of the
+/// node: the command as it ends (applied or refused).
+fn mac_request(console: &Console, body: &Value) -> Value {
+    let (status, sent) = console.request("POST", "/api/mac", Some(body));
+    assert_eq!(status, 200, "{body}: {sent}");
+    let id = sent["command"].as_u64().unwrap();
+    console.wait_state("the MAC request's answer", broker::PATIENCE, |s| {
+        let c = s["commands"].as_array()?.iter().find(|c| c["id"] == id)?;
+        (c["state"] != "published").then(|| c.clone())
+    })
+}
+
+#[test]
+fn the_console_shows_each_nodes_mac_and_changes_it() {
+    let dir = scratch("mac");
+    let broker = Broker::start(&dir, "the_console_shows_each_nodes_mac_and_changes_it");
+    let address = broker.address();
+    let configs = fleet_configs(&dir, &address);
+    with_mac_switcher(&configs[1]);
+    let gateways = Gateways::start(configs);
+    let console = Console::start(&["fleet", "--broker", &address]);
+    // From the retained topics each bridge publishes when it starts.
+    let state = console.wait_state("both cycles and auv2's MAC", broker::PATIENCE, |s| {
+        let cycles = cycle_of(s, "auv1").is_some() && cycle_of(s, "auv2").is_some();
+        (cycles && node(s, "auv2")?["mac"]["active"].is_object()).then(|| s.clone())
+    });
+    assert_eq!(cycle_of(&state, "auv1").unwrap(), [(1, 8.0), (2, 8.0)]);
+    let auv2 = &node(&state, "auv2").unwrap()["mac"];
+    assert_eq!(auv2["active"]["name"], "survey", "{auv2}");
+    assert_eq!(auv2["active"]["reason"], "started", "{auv2}");
+    assert_eq!(node(&state, "auv1").unwrap()["mac"]["active"], Value::Null);
+
+    // Bad input is refused by the console, saying what is wrong.
+    for (body, said) in [
+        (
+            json!({"node": "auv1", "update": {"update_type": "SHUFFLE"}}),
+            "SHUFFLE",
+        ),
+        (
+            json!({"node": "auv1", "update": {"update_type": "ASSIGN", "slot": [{"slot_seconds": "long"}]}}),
+            "MACUpdate",
+        ),
+        (
+            json!({"node": "auv1", "switch": {"mac": "quiet", "keep_alive_seconds": 0}}),
+            "keep_alive_seconds",
+        ),
+        (json!({"node": "auv1"}), "either"),
+        (
+            json!({"node": "auv9", "update": {"update_type": "CLEAR"}}),
+            "auv1, auv2",
+        ),
+    ] {
+        let (status, refused) = console.request("POST", "/api/mac", Some(&body));
+        assert_eq!(status, 400, "{body}: {refused}");
+        assert!(
+            refused["error"].as_str().unwrap().contains(said),
+            "{body}: {refused}"
+        );
+    }
+    let (status, _) = console.request("POST", "/api/mac", Some(&json!({"update": {}})));
+    assert_eq!(status, 422);
+
+    // An update through the broker: applied, and the cycle shown changes.
+    let assigned = mac_request(
+        &console,
+        &json!({"node": "auv1", "update": {"update_type": "ASSIGN", "slot": [
+            {"src": 1, "dest": -1, "rate": 2, "slot_seconds": 8},
+            {"src": 2, "dest": -1, "rate": 2, "slot_seconds": 8},
+            {"src": 1, "dest": -1, "rate": 2, "slot_seconds": 12}]}}),
+    );
+    assert_eq!(assigned["state"], "applied", "{assigned}");
+    assert_eq!(assigned["note"], "3 slots, running", "{assigned}");
+    console.wait_state("auv1's new cycle", broker::PATIENCE, |s| {
+        (cycle_of(s, "auv1")? == [(1, 8.0), (2, 8.0), (1, 12.0)]).then_some(())
+    });
+    // The simple kinds, and stopping the cycle.
+    for (update, note) in [
+        (json!({"update_type": "POP_BACK"}), "2 slots, running"),
+        (
+            json!({"update_type": "NO_CHANGE", "cycle_state": "STOPPED"}),
+            "2 slots, stopped",
+        ),
+        (
+            json!({"update_type": "PUSH_FRONT", "slot": [{"src": 2, "dest": -1, "rate": 2, "slot_seconds": 8}],
+                   "cycle_state": "STARTED"}),
+            "3 slots, running",
+        ),
+    ] {
+        let answered = mac_request(&console, &json!({"node": "auv1", "update": update}));
+        assert_eq!(
+            (&answered["state"], &answered["note"]),
+            (&json!("applied"), &json!(note)),
+            "{update}: {answered}"
+        );
+    }
+    console.wait_state("auv1's cycle pushed in front", broker::PATIENCE, |s| {
+        (cycle_of(s, "auv1")? == [(2, 8.0), (1, 8.0), (2, 8.0)]).then_some(())
+    });
+    // One the node refuses, with its reason; the cycle stays.
+    let refused = mac_request(
+        &console,
+        &json!({"node": "auv1", "update": {"update_type": "ERASE", "first_iterator": 9}}),
+    );
+    assert_eq!(refused["state"], "refused", "{refused}");
+    assert!(refused["note"].as_str().unwrap().contains('9'), "{refused}");
+    let cleared = mac_request(
+        &console,
+        &json!({"node": "auv1", "update": {"update_type": "CLEAR"}}),
+    );
+    assert_eq!(cleared["note"], "0 slots, stopped", "{cleared}");
+    console.wait_state("auv1's cycle cleared", broker::PATIENCE, |s| {
+        let mac = &node(s, "auv1")?["mac"]["cycle"];
+        (mac["slots"].as_array()?.is_empty() && mac["running"] == false).then_some(())
+    });
+    // A switch, with a keep-alive.
+    let switched = mac_request(
+        &console,
+        &json!({"node": "auv2", "switch": {"mac": "quiet", "keep_alive_seconds": 600}}),
+    );
+    assert_eq!(switched["state"], "applied", "{switched}");
+    let state = console.wait_state("auv2 quiet, and its cycle", broker::PATIENCE, |s| {
+        let quiet = node(s, "auv2")?["mac"]["active"]["name"] == "quiet";
+        (quiet && cycle_of(s, "auv2")? == [(1, 8.0), (2, 16.0)]).then(|| s.clone())
+    });
+    assert_eq!(
+        node(&state, "auv2").unwrap()["mac"]["cycle"]["from"],
+        "switch"
+    );
+    let active = &node(&state, "auv2").unwrap()["mac"]["active"];
+    assert_eq!(active["reason"], "requested", "{active}");
+    assert!(
+        active["keep_alive_until"].as_f64().unwrap() > now_ms() / 1000.0,
+        "{active}"
+    );
+    drop(console);
+
+    // auv2 through its JSON interface: asked at connection, changed by
+    // requests whose replies answer them.
+    let console = Console::start(&["--gobyd", &gateways.json[1], "--node", "auv2"]);
+    let state = console.wait_state("auv2's MAC on its JSON interface", broker::PATIENCE, |s| {
+        let mac = &node(s, "auv2")?["mac"];
+        (mac["cycle"].is_object() && mac["active"].is_object()).then(|| s.clone())
+    });
+    assert_eq!(cycle_of(&state, "auv2").unwrap(), [(1, 8.0), (2, 16.0)]);
+    let active = &node(&state, "auv2").unwrap()["mac"]["active"];
+    assert_eq!(active["name"], "quiet", "{active}");
+    assert_eq!(active["macs"], json!(["survey", "quiet"]), "{active}");
+    let pushed = mac_request(
+        &console,
+        &json!({"node": "auv2", "update": {"update_type": "PUSH_BACK",
+            "slot": [{"src": 2, "dest": -1, "rate": 2, "slot_seconds": 8}]}}),
+    );
+    assert_eq!(pushed["state"], "applied", "{pushed}");
+    console.wait_state("auv2's cycle pushed", broker::PATIENCE, |s| {
+        (cycle_of(s, "auv2")? == [(1, 8.0), (2, 16.0), (2, 8.0)]).then_some(())
+    });
+    let loud = mac_request(
+        &console,
+        &json!({"node": "auv2", "switch": {"mac": "loud"}}),
+    );
+    assert_eq!(loud["state"], "refused", "{loud}");
+    assert!(loud["note"].as_str().unwrap().contains("loud"), "{loud}");
     drop(console);
     drop(gateways);
     let _ = std::fs::remove_dir_all(&dir);
@@ -1012,6 +1213,52 @@ mod browser {
             "{fields}"
         );
         std::fs::write(out.join("laptop-acked.png"), page.screenshot()).unwrap();
+
+        // Medium access: auv1's cycle as its bridge published it, then
+        // changed from the form (bad input first, answered by the server).
+        page.eval("(() => { document.querySelector('#nodes tbody tr[data-node=\"auv1\"]').click(); return true; })()");
+        page.wait(
+            "auv1's cycle in the page",
+            "document.getElementById('mac-name').textContent === 'auv1' \
+             && document.querySelectorAll('#mac-bar > div').length === 2",
+            broker::PATIENCE,
+        );
+        let slots = "[...document.querySelectorAll('#mac-cycle tbody tr')]\
+            .map(r => [...r.cells].slice(0, 5).map(c => c.textContent).join(' '))";
+        assert_eq!(page.eval(slots), json!(["0 1 -1 2 8.0", "1 2 -1 2 8.0"]));
+        let send_mac = |page: &mut devtools::Page, slots: &str| {
+            let expression = format!(
+                "(() => {{ goby.lastMac = undefined; const k = document.getElementById('mac-kind'); \
+                 k.value = 'ASSIGN'; k.dispatchEvent(new Event('change')); \
+                 document.getElementById('mac-slots').value = {slots}; \
+                 document.getElementById('mac-send').click(); return true; }})()",
+                slots = json!(slots)
+            );
+            page.eval(&expression);
+            page.wait(
+                "the console's answer",
+                "goby.lastMac !== undefined",
+                broker::PATIENCE,
+            );
+        };
+        send_mac(&mut page, "1 -1 2 8\n2 -1 2 long");
+        let said = page.eval("[document.getElementById('mac-said').className, document.getElementById('mac-said').textContent]");
+        assert_eq!(said[0], "bad", "{said}");
+        assert!(said[1].as_str().unwrap().contains("MACUpdate"), "{said}");
+        send_mac(&mut page, "1 -1 2 8\n2 -1 2 8\n1 -1 2 12");
+        page.wait(
+            "the new cycle in the page",
+            "document.querySelectorAll('#mac-bar > div').length === 3 \
+             && document.getElementById('mac-said').className === 'good'",
+            broker::PATIENCE,
+        );
+        assert_eq!(
+            page.eval(slots),
+            json!(["0 1 -1 2 8.0", "1 2 -1 2 8.0", "2 1 -1 2 12.0"])
+        );
+        let said = page.eval("document.getElementById('mac-said').textContent");
+        assert_eq!(said, json!("mac_update to auv1: applied: 3 slots, running"));
+        std::fs::write(out.join("mac.png"), page.screenshot()).unwrap();
         // The guide's picture (docs/console.md): a laptop's window, a little
         // taller so that the commander's acked command shows, auv2 picked.
         page.call(

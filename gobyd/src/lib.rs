@@ -50,8 +50,8 @@ pub mod translator;
 /// them in its own way.
 pub mod json {
     pub use crate::edge::json::lines::{
-        event, event_line, event_topic, link_json, lost, message_json, message_of_json,
-        network_reply, publish_reply,
+        event, event_line, event_topic, link_json, lost, mac_update_of, message_json,
+        message_of_json, network_reply, publish_reply,
     };
 }
 

@@ -358,7 +358,8 @@ pub struct MacCycle {
     /// The update, proto3 JSON.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub update: Option<Value>,
-    /// Where the update came from.
+    /// Where the update came from (`moos`, `json`, `mqtt`, `link`), or
+    /// `switch`: the MAC switcher switched to another MAC, whose cycle it is.
     pub from: String,
     /// Why it was not applied (absent: applied).
     #[serde(default, skip_serializing_if = "Option::is_none")]

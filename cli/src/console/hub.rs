@@ -9,6 +9,7 @@ use serde_json::{json, Value};
 use tokio::sync::{broadcast, mpsc};
 
 use super::commander::Commander;
+use super::mac::MacRequest;
 use super::source::{Outbound, Source};
 use super::state::ConsoleState;
 use crate::fleet::Report;
@@ -105,6 +106,15 @@ impl Hub {
         }
     }
 
+    /// A MAC request the source sent was applied (with a note) or refused
+    /// (with the reason).
+    pub fn command_settled(&self, command: u64, outcome: Result<String, String>) {
+        let mut state = self.state();
+        if let Some(event) = state.command_settled(command, outcome, now()) {
+            self.send([event]);
+        }
+    }
+
     /// Sends `msg` of type `type_name` to `node`: checked first (it must
     /// parse as the type; a node the console has not heard is refused),
     /// then shown as published and handed to the source. The command's id,
@@ -116,6 +126,46 @@ impl Hub {
         msg: &Value,
     ) -> Result<u64, String> {
         self.commander.parse(type_name, msg)?;
+        self.dispatch(node, |_| {
+            Ok(Outbound {
+                command: 0,
+                topic: self.source.topic(node, type_name),
+                type_name: type_name.to_string(),
+                msg: msg.clone(),
+                mac: None,
+            })
+        })
+        .await
+    }
+
+    /// Sends the MAC update or switch of `request` to its node (its
+    /// `mac_update` or `mac_switch` topic, or the JSON interface's
+    /// request): checked first ([`MacRequest::prepare`]; a node the console
+    /// has not heard is refused), then shown as published. The command's
+    /// id, or why it was not sent.
+    pub async fn send_mac(&self, request: &MacRequest) -> Result<u64, String> {
+        let node = request.node.as_str();
+        self.dispatch(node, |state| {
+            let (kind, msg) = request.prepare(state.modem_id_of(node))?;
+            Ok(Outbound {
+                command: 0,
+                topic: self.source.mac_topic(node, kind),
+                type_name: kind.word().to_string(),
+                msg,
+                mac: Some(kind),
+            })
+        })
+        .await
+    }
+
+    /// Shows a command to a bridged `node` as published and hands it to
+    /// the source; `build` makes it (its id is given here) from the
+    /// picture, or says why not.
+    async fn dispatch(
+        &self,
+        node: &str,
+        build: impl FnOnce(&ConsoleState) -> Result<Outbound, String>,
+    ) -> Result<u64, String> {
         let (id, out) = {
             let mut state = self.state();
             let nodes = state.bridged_nodes();
@@ -129,18 +179,11 @@ impl Hub {
                     }
                 ));
             }
-            let topic = self.source.topic(node, type_name);
-            let (id, event) = state.command_sent(node, type_name, &topic, msg, now());
+            let mut out = build(&state)?;
+            let (id, event) = state.command_sent(node, &out.type_name, &out.topic, &out.msg, now());
             self.send([event]);
-            (
-                id,
-                Outbound {
-                    command: id,
-                    topic,
-                    type_name: type_name.to_string(),
-                    msg: msg.clone(),
-                },
-            )
+            out.command = id;
+            (id, out)
         };
         if self.outbound.send(out).await.is_err() {
             self.command_failed(id, "the console's source has stopped");

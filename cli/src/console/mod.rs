@@ -11,12 +11,14 @@
 //! style are in the binary; nothing is fetched from elsewhere.
 //!
 //! Modules: [`state`] is the picture of the fleet (sans-IO), [`schema`]
-//! the commander's forms, [`commander`] its codec, [`source`] the broker
+//! the commander's forms, [`commander`] its codec, [`mac`] each node's
+//! medium access and the requests that change it, [`source`] the broker
 //! or JSON interface it reads, [`hub`] what the server and the source
 //! share, [`server`] the routes.
 
 pub mod commander;
 pub mod hub;
+pub mod mac;
 pub mod schema;
 pub mod server;
 pub mod source;

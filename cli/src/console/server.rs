@@ -11,6 +11,7 @@
 //! | `GET /api/events` | server-sent events: a `snapshot` first, then `node`, `track`, `link`, `message`, `command`, `origin`, `source`, `gone` (one JSON object each, its kind in `event`, with `seq` but for `source`) |
 //! | `POST /api/check` | `{"type", "msg"}`: what the codec would do with it ([`Commander::check`](super::commander::Commander::check)) |
 //! | `POST /api/send` | `{"node", "type", "msg"}`: sent; `{"command": ID}`, or `400` with `{"error"}` |
+//! | `POST /api/mac` | `{"node", "update": {…MACUpdate…}}` or `{"node", "switch": {"mac", "keep_alive_seconds"}}`: sent to the node's MAC ([`MacRequest`]); `{"command": ID}`, or `400` with `{"error"}` |
 //!
 //! The `POST` bodies are read as JSON only with `Content-Type:
 //! application/json` (axum's `Json`: 415 without it, 400 for a body that is
@@ -32,6 +33,7 @@ use serde_json::{json, Value};
 use tokio::sync::broadcast::error::RecvError;
 
 use super::hub::Hub;
+use super::mac::MacRequest;
 
 const INDEX: &str = include_str!("assets/index.html");
 const SCRIPT: &str = include_str!("assets/console.js");
@@ -62,6 +64,7 @@ pub fn router(hub: Arc<Hub>) -> Router {
         .route("/api/events", get(events))
         .route("/api/check", post(check))
         .route("/api/send", post(send))
+        .route("/api/mac", post(mac))
         .with_state(hub)
 }
 
@@ -99,10 +102,19 @@ async fn check(State(hub): State<Arc<Hub>>, Json(draft): Json<Draft>) -> Json<Va
 }
 
 async fn send(State(hub): State<Arc<Hub>>, Json(draft): Json<Draft>) -> Response {
-    match hub
+    let sent = hub
         .send_command(&draft.node, &draft.type_name, &draft.msg)
-        .await
-    {
+        .await;
+    answer(sent)
+}
+
+async fn mac(State(hub): State<Arc<Hub>>, Json(request): Json<MacRequest>) -> Response {
+    answer(hub.send_mac(&request).await)
+}
+
+/// `{"command": ID}`, or status 400 with `{"error"}`.
+fn answer(sent: Result<u64, String>) -> Response {
+    match sent {
         Ok(id) => Json(json!({"command": id})).into_response(),
         Err(e) => (StatusCode::BAD_REQUEST, Json(json!({"error": e}))).into_response(),
     }

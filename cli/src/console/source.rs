@@ -4,6 +4,14 @@
 //! TCP (its events turned into the same reports, for one node). Each
 //! reconnects on its own (1 s apart) and says on the page whether it is
 //! connected.
+//!
+//! Medium access: on the broker the retained `mac_cycle` and `mac_active`
+//! of each node say its cycle and the MAC running; a MAC update or switch
+//! goes to the node's `mac_update` or `mac_switch` topic. On the JSON
+//! interface the console asks for the cycle (`mac_cycle`) and the MAC
+//! running (`mac_switch` without a name) at each connection, follows the
+//! `mac` events, and sends updates and switches as `mac_update` and
+//! `mac_switch` requests, whose replies say they were applied or refused.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -16,9 +24,11 @@ use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 
 use super::hub::Hub;
+use super::mac::MacKind;
 use crate::fleet::{
     AcceptedReport, BridgeStatus, LinkReport, QueueKind, QueueNotice, Report, RxReport,
 };
+use crate::mac_report::{MacActiveReport, MacCycleReport, MacRateReport};
 
 /// Where the fleet is read from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -62,6 +72,15 @@ impl Source {
             Source::Json { address, .. } => format!("json {address}"),
         }
     }
+
+    /// Where a MAC request of `kind` to `node` goes: the node's
+    /// `mac_update` or `mac_switch` topic, or the JSON interface.
+    pub fn mac_topic(&self, node: &str, kind: MacKind) -> String {
+        match self {
+            Source::Mqtt { prefix, .. } => format!("{prefix}/{node}/{}", kind.word()),
+            Source::Json { address, .. } => format!("json {address}"),
+        }
+    }
 }
 
 /// A command for the source to send.
@@ -73,8 +92,11 @@ pub struct Outbound {
     pub topic: String,
     /// Its type.
     pub type_name: String,
-    /// The message, proto3 JSON.
+    /// The message, proto3 JSON (for a MAC request: the `MACUpdate` or
+    /// the switch).
     pub msg: Value,
+    /// A MAC request rather than a message to publish.
+    pub mac: Option<MacKind>,
 }
 
 fn now() -> f64 {
@@ -130,7 +152,10 @@ async fn mqtt(
                 let _ = client.try_subscribe(filter.clone(), QoS::AtLeastOnce);
             }
             Ok(MqttEvent::Incoming(Packet::Publish(p))) => {
-                if let Some((node, report)) = Report::parse(&prefix, &p.topic, &p.payload) {
+                if let Some((node, mut report)) = Report::parse(&prefix, &p.topic, &p.payload) {
+                    if p.retain {
+                        report.mark_retained();
+                    }
                     hub.apply(&node, &report);
                 }
             }
@@ -146,37 +171,129 @@ async fn mqtt(
     }
 }
 
-/// The reports of one line from gobyd's JSON interface, for its node.
-/// `pending` holds the commands written, by request number (reply lines
-/// answer them in order).
-fn json_line_reports(
-    line: &str,
-    pending: &mut std::collections::VecDeque<(u64, Outbound)>,
-    now: f64,
-) -> Vec<Report> {
-    if let Ok(Numbered { reply, number }) = serde_json::from_str::<Numbered>(line) {
-        // Replies to lines other than publishes (the subscription) are
-        // not commands.
-        while pending.front().is_some_and(|(n, _)| *n < number) {
-            pending.pop_front();
+/// What one line of gobyd's JSON interface says.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Heard {
+    /// A report of its node.
+    Report(Box<Report>),
+    /// A MAC request from the page was answered: applied (with a note) or
+    /// refused (with the reason).
+    Settled {
+        /// The command's id on the page.
+        command: u64,
+        /// What became of it.
+        outcome: Result<String, String>,
+    },
+}
+
+impl Heard {
+    /// A report of the node.
+    fn of(report: Report) -> Heard {
+        Heard::Report(Box::new(report))
+    }
+}
+
+/// A request the console wrote to the JSON interface, awaiting its reply.
+#[derive(Debug, Clone)]
+pub enum Pending {
+    /// A command from the page.
+    Command(Box<Outbound>),
+    /// The cycle, asked for at each connection.
+    Cycle,
+    /// Which MAC runs, asked for at each connection.
+    Active,
+}
+
+/// The cycle of a JSON `mac_cycle` reply or event (`slot`, `running`,
+/// `modem_id`), told at `now` and come `from` where it says.
+fn cycle_report(cycle: &Value, from: &str, now: f64) -> MacCycleReport {
+    MacCycleReport {
+        from: from.to_string(),
+        time: now,
+        ..MacCycleReport::from_json(cycle)
+    }
+}
+
+/// What the reply to a request the console wrote says.
+fn reply_heard(reply: Reply, pending: Pending, now: f64) -> Vec<Heard> {
+    let out = match pending {
+        Pending::Cycle => {
+            return match reply {
+                Reply::MacCycle { mac_cycle } => vec![Heard::of(Report::MacCycle(cycle_report(
+                    &mac_cycle, "request", now,
+                )))],
+                _ => Vec::new(),
+            };
         }
-        let Some((_, out)) = pending.front().filter(|(n, _)| *n == number).cloned() else {
-            return Vec::new();
-        };
-        pending.pop_front();
-        return match reply {
-            Reply::Error { error } => vec![Report::Error {
-                error,
-                topic: out.topic,
-            }],
-            Reply::Accepted(accepted) => vec![Report::Accepted(AcceptedReport {
+        // An error: the node has no switcher, nothing to show.
+        Pending::Active => {
+            return match reply {
+                Reply::MacSwitch { mac_switch } => vec![Heard::of(Report::MacActive(
+                    MacActiveReport::of_state(&mac_switch, now),
+                ))],
+                _ => Vec::new(),
+            };
+        }
+        Pending::Command(out) => out,
+    };
+    let settled = |outcome| Heard::Settled {
+        command: out.command,
+        outcome,
+    };
+    match (out.mac, reply) {
+        (Some(_), Reply::Error { error }) => vec![settled(Err(error))],
+        (Some(MacKind::Update), Reply::MacCycle { mac_cycle }) => {
+            let cycle = MacCycleReport {
+                update: Some(out.msg.clone()),
+                ..cycle_report(&mac_cycle, "json", now)
+            };
+            let note = super::state::cycle_note(cycle.slots.len(), cycle.running);
+            vec![Heard::of(Report::MacCycle(cycle)), settled(Ok(note))]
+        }
+        (Some(MacKind::Switch), Reply::MacSwitch { mac_switch }) => {
+            let active = MacActiveReport {
+                reason: Some("requested".into()),
+                from: Some("json".into()),
+                ..MacActiveReport::of_state(&mac_switch, now)
+            };
+            let note = format!("{} runs", active.active);
+            vec![Heard::of(Report::MacActive(active)), settled(Ok(note))]
+        }
+        (None, Reply::Error { error }) => vec![Heard::of(Report::Error {
+            error,
+            topic: out.topic,
+        })],
+        (None, Reply::Accepted(accepted)) => {
+            vec![Heard::of(Report::Accepted(AcceptedReport {
                 type_name: out.type_name,
                 id: accepted.id.map_or(Value::Null, Value::from),
                 topic: out.topic,
                 msg: out.msg,
-            })],
-            _ => Vec::new(),
+            }))]
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// What one line from gobyd's JSON interface says, for its node.
+/// `pending` holds the requests written, by request number (reply lines
+/// answer them in order).
+fn json_line_heard(
+    line: &str,
+    pending: &mut std::collections::VecDeque<(u64, Pending)>,
+    now: f64,
+) -> Vec<Heard> {
+    if let Ok(Numbered { reply, number }) = serde_json::from_str::<Numbered>(line) {
+        // Replies to lines the console does not await (the subscription)
+        // say nothing.
+        while pending.front().is_some_and(|(n, _)| *n < number) {
+            pending.pop_front();
+        }
+        let Some((_, asked)) = pending.front().filter(|(n, _)| *n == number).cloned() else {
+            return Vec::new();
         };
+        pending.pop_front();
+        return reply_heard(reply, asked, now);
     }
     let Ok(event) = serde_json::from_str::<Event>(line) else {
         return Vec::new();
@@ -221,6 +338,16 @@ fn json_line_reports(
             time: now,
         },
         Event::Forecast(f) => Report::Forecast(serde_json::to_value(&f).unwrap_or_default()),
+        Event::MacCycle(c) => Report::MacCycle(MacCycleReport {
+            update: c.update,
+            error: c.error,
+            ..cycle_report(&c.mac_cycle, &c.from, now)
+        }),
+        Event::MacSwitch(m) => Report::MacActive(MacActiveReport {
+            time: now,
+            ..MacActiveReport::from_json(&serde_json::to_value(&m).unwrap_or_default())
+        }),
+        Event::MacRate(r) => Report::MacRate(MacRateReport::of_event(&r, now)),
         Event::ModemReceive(m) => {
             let t = &m.modem_receive;
             // 64-bit integers are strings in proto3 JSON: microseconds.
@@ -238,7 +365,20 @@ fn json_line_reports(
         }
         _ => return Vec::new(),
     };
-    vec![report]
+    vec![Heard::of(report)]
+}
+
+/// The JSON request of a command: a `publish`, or a `mac_update` or
+/// `mac_switch` (a switch that does not read as one asks only which MAC
+/// runs: the page's server checked it before).
+fn request_of(out: &Outbound) -> Request {
+    match out.mac {
+        None => Request::publish(out.type_name.clone(), out.msg.clone()),
+        Some(MacKind::Update) => Request::MacUpdate(out.msg.clone()),
+        Some(MacKind::Switch) => {
+            Request::MacSwitch(serde_json::from_value(out.msg.clone()).unwrap_or_default())
+        }
+    }
 }
 
 async fn json_interface(
@@ -281,12 +421,20 @@ async fn json_interface(
             Topic::QueueSize,
             Topic::Modem,
             Topic::Forecast,
+            Topic::Mac,
         ])
         .line();
-        let mut request = 1u64;
-        let mut pending = std::collections::VecDeque::new();
+        // The cycle and the MAC running as they stand: requests 2 and 3.
+        let asked = [
+            subscribe,
+            Request::MacCycle.line(),
+            Request::MacSwitch(Default::default()).line(),
+        ];
+        let mut request = 3u64;
+        let mut pending =
+            std::collections::VecDeque::from([(2, Pending::Cycle), (3, Pending::Active)]);
         let mut broken = write
-            .write_all(format!("{subscribe}\n").as_bytes())
+            .write_all(format!("{}\n", asked.join("\n")).as_bytes())
             .await
             .err()
             .map(|e| e.to_string());
@@ -294,8 +442,13 @@ async fn json_interface(
             tokio::select! {
                 line = lines.next_line() => match line {
                     Ok(Some(line)) => {
-                        for report in json_line_reports(&line, &mut pending, now()) {
-                            hub.apply(&node, &report);
+                        for heard in json_line_heard(&line, &mut pending, now()) {
+                            match heard {
+                                Heard::Report(report) => hub.apply(&node, &report),
+                                Heard::Settled { command, outcome } => {
+                                    hub.command_settled(command, outcome);
+                                }
+                            }
                         }
                     }
                     Ok(None) => broken = Some("the connection was closed".to_string()),
@@ -304,9 +457,9 @@ async fn json_interface(
                 out = outbound.recv() => {
                     let Some(out) = out else { return };
                     request += 1;
-                    let line = Request::publish(out.type_name.clone(), out.msg.clone()).line();
+                    let line = request_of(&out).line();
                     match write.write_all(format!("{line}\n").as_bytes()).await {
-                        Ok(()) => pending.push_back((request, out)),
+                        Ok(()) => pending.push_back((request, Pending::Command(Box::new(out)))),
                         Err(e) => {
                             hub.command_failed(out.command, &format!("not written: {e}"));
                             broken = Some(e.to_string());
@@ -315,8 +468,10 @@ async fn json_interface(
                 }
             }
         }
-        for (_, out) in pending.drain(..) {
-            hub.command_failed(out.command, "the JSON interface closed before replying");
+        for (_, asked) in pending.drain(..) {
+            if let Pending::Command(out) = asked {
+                hub.command_failed(out.command, "the JSON interface closed before replying");
+            }
         }
         hub.apply(
             &node,
@@ -339,8 +494,18 @@ mod tests {
     use super::*;
     use std::collections::VecDeque;
 
-    fn reports(value: &Value, pending: &mut VecDeque<(u64, Outbound)>, now: f64) -> Vec<Report> {
-        json_line_reports(&value.to_string(), pending, now)
+    fn heard(value: &Value, pending: &mut VecDeque<(u64, Pending)>) -> Vec<Heard> {
+        json_line_heard(&value.to_string(), pending, 5.0)
+    }
+
+    fn reports(value: &Value, pending: &mut VecDeque<(u64, Pending)>, _now: f64) -> Vec<Report> {
+        heard(value, pending)
+            .into_iter()
+            .filter_map(|h| match h {
+                Heard::Report(r) => Some(*r),
+                Heard::Settled { .. } => None,
+            })
+            .collect()
     }
 
     fn command(n: u64) -> Outbound {
@@ -349,7 +514,18 @@ mod tests {
             topic: "json 127.0.0.1:1".into(),
             type_name: "goby.example.Command".into(),
             msg: json!({"destination": 2}),
+            mac: None,
         }
+    }
+
+    fn mac_command(n: u64, kind: MacKind, msg: Value) -> Pending {
+        Pending::Command(Box::new(Outbound {
+            command: n,
+            topic: "json 127.0.0.1:1".into(),
+            type_name: kind.word().into(),
+            msg,
+            mac: Some(kind),
+        }))
     }
 
     #[test]
@@ -375,7 +551,10 @@ mod tests {
 
     #[test]
     fn json_lines_become_reports() {
-        let mut pending = VecDeque::from([(2, command(1)), (3, command(2))]);
+        let mut pending = VecDeque::from([
+            (2, Pending::Command(Box::new(command(1)))),
+            (3, Pending::Command(Box::new(command(2)))),
+        ]);
         // The subscription's reply is no command's.
         assert!(reports(&json!({"reply": 1, "subscribed": []}), &mut pending, 5.0).is_empty());
         let r = reports(
@@ -421,5 +600,112 @@ mod tests {
             })]
         ));
         assert!(reports(&json!({"event": "raw", "raw": "in"}), &mut pending, 5.0).is_empty());
+    }
+
+    /// A command settled: its id and what became of it.
+    type Settled = (u64, Result<String, String>);
+
+    /// The reports and the settled commands a line says.
+    fn split(heard: Vec<Heard>) -> (Vec<Report>, Vec<Settled>) {
+        let mut reports = Vec::new();
+        let mut settled = Vec::new();
+        for h in heard {
+            match h {
+                Heard::Report(r) => reports.push(*r),
+                Heard::Settled { command, outcome } => settled.push((command, outcome)),
+            }
+        }
+        (reports, settled)
+    }
+
+    #[test]
+    fn the_mac_is_asked_for_and_its_requests_answered() {
+        let cycle = json!({"slot": [{"src": 1, "rate": 1, "slot_seconds": 6}], "running": true, "modem_id": 1});
+        let mut pending = VecDeque::from([
+            (2, Pending::Cycle),
+            (3, Pending::Active),
+            (
+                4,
+                mac_command(7, MacKind::Update, json!({"update_type": "POP_BACK"})),
+            ),
+            (5, mac_command(8, MacKind::Switch, json!({"mac": "quiet"}))),
+            (
+                6,
+                mac_command(9, MacKind::Update, json!({"update_type": "ERASE"})),
+            ),
+        ]);
+        let (r, _) = split(heard(
+            &json!({"reply": 2, "mac_cycle": cycle}),
+            &mut pending,
+        ));
+        let [Report::MacCycle(c)] = r.as_slice() else {
+            panic!("{r:?}")
+        };
+        assert_eq!(
+            (c.slots.len(), c.modem_id, c.from.as_str()),
+            (1, Some(1), "request")
+        );
+        // No switcher: nothing to show.
+        assert!(heard(
+            &json!({"reply": 3, "error": "no MAC switcher"}),
+            &mut pending
+        )
+        .is_empty());
+        let (r, settled) = split(heard(
+            &json!({"reply": 4, "mac_cycle": {"slot": [], "running": false, "modem_id": 1}}),
+            &mut pending,
+        ));
+        assert!(
+            matches!(r.as_slice(), [Report::MacCycle(c)] if c.update == Some(json!({"update_type": "POP_BACK"}))),
+            "{r:?}"
+        );
+        assert_eq!(settled, [(7, Ok("0 slots, stopped".to_string()))]);
+        let (r, settled) = split(heard(
+            &json!({"reply": 5, "mac_switch": {"active": "quiet", "default_mac": "survey", "macs": ["survey", "quiet"]}}),
+            &mut pending,
+        ));
+        assert!(
+            matches!(r.as_slice(), [Report::MacActive(a)] if a.active == "quiet" && a.macs.len() == 2),
+            "{r:?}"
+        );
+        assert_eq!(settled, [(8, Ok("quiet runs".to_string()))]);
+        let (r, settled) = split(heard(
+            &json!({"reply": 6, "error": "first_iterator 4 is outside the cycle"}),
+            &mut pending,
+        ));
+        assert!(r.is_empty(), "{r:?}");
+        assert_eq!(
+            settled,
+            [(9, Err("first_iterator 4 is outside the cycle".to_string()))]
+        );
+        // The events of the `mac` topic.
+        let r = reports(
+            &json!({"event": "mac_switch", "mac_switch": "survey", "previous": "quiet",
+            "reason": "keep_alive_lapsed", "keep_alive_until": null}),
+            &mut pending,
+            5.0,
+        );
+        assert!(
+            matches!(r.as_slice(), [Report::MacActive(a)] if a.reason.as_deref() == Some("keep_alive_lapsed") && a.time == 5.0),
+            "{r:?}"
+        );
+        let r = reports(
+            &json!({"event": "mac_cycle", "mac_cycle": cycle, "from": "link", "error": "no"}),
+            &mut pending,
+            5.0,
+        );
+        assert!(
+            matches!(r.as_slice(), [Report::MacCycle(c)] if c.from == "link" && c.error.as_deref() == Some("no")),
+            "{r:?}"
+        );
+        let r = reports(
+            &json!({"event": "mac_rate", "mac_rate": 5, "dest": 2, "slot_index": 0, "reason": "up", "snr": 20.0}),
+            &mut pending,
+            5.0,
+        );
+        assert!(
+            matches!(r.as_slice(), [Report::MacRate(m)] if m.rate == 5 && m.snr == Some(20.0)),
+            "{r:?}"
+        );
     }
 }

@@ -17,6 +17,7 @@ use std::collections::{BTreeMap, VecDeque};
 
 use serde_json::{json, Map, Value};
 
+use super::mac::{MacKind, MacView};
 use crate::fleet::{Fleet, LinkReport, QueueKind, Report};
 
 /// Messages kept in the log (the oldest go first).
@@ -124,6 +125,8 @@ struct NodeExtra {
     bridged: bool,
     /// Its last link forecast (gobyd's `forecast` event).
     forecast: Option<Value>,
+    /// Its medium access: cycle, the MAC running, the last rate chosen.
+    mac: MacView,
 }
 
 /// The state of a command sent from the page.
@@ -141,6 +144,8 @@ pub enum CommandState {
     Expired,
     /// Pushed out of its full queue.
     Dropped,
+    /// A MAC update or switch the node applied.
+    Applied,
 }
 
 impl CommandState {
@@ -153,6 +158,7 @@ impl CommandState {
             CommandState::Refused => "refused",
             CommandState::Expired => "expired",
             CommandState::Dropped => "dropped",
+            CommandState::Applied => "applied",
         }
     }
 }
@@ -400,7 +406,8 @@ impl ConsoleState {
                     "event": "forecast", "seq": seq, "node": node, "forecast": f,
                 }));
             }
-            Report::Queue { .. } | Report::Mac { .. } => {}
+            // The medium access (`Queue` and `Mac` are in the table only).
+            _ => self.apply_mac(node, report, time, &mut events),
         }
         let summary = self.node_json(node, false);
         events.insert(
@@ -411,6 +418,106 @@ impl ConsoleState {
             .windows(2)
             .all(|w| w[0]["seq"].as_u64() < w[1]["seq"].as_u64()));
         events
+    }
+
+    /// A report of `node`'s medium access (its cycle, the MAC running,
+    /// a rate chosen): kept for the page, and, when it tells the outcome
+    /// of a request taken from the broker, the command settled.
+    fn apply_mac(&mut self, node: &str, report: &Report, time: f64, events: &mut Vec<Value>) {
+        let mac = &mut self.extra.get_mut(node).expect("entered").mac;
+        match report {
+            Report::MacCycle(c) => {
+                mac.take_cycle(c);
+                if c.from == "mqtt" && !c.retained {
+                    let outcome = match &c.error {
+                        Some(e) => Err(e.clone()),
+                        None => Ok(cycle_note(c.slots.len(), c.running)),
+                    };
+                    self.mac_settle(node, MacKind::Update, outcome, time, events);
+                }
+            }
+            Report::MacActive(a) => {
+                mac.take_active(a);
+                if a.from.as_deref() == Some("mqtt") && !a.retained {
+                    let outcome = match (&a.error, a.reason.as_deref()) {
+                        (Some(e), _) => Err(e.clone()),
+                        (None, reason) => {
+                            Ok(format!("{} runs ({})", a.active, reason.unwrap_or("?")))
+                        }
+                    };
+                    self.mac_settle(node, MacKind::Switch, outcome, time, events);
+                }
+            }
+            Report::MacRate(r) => {
+                mac.take_rate(r);
+            }
+            Report::Status(_)
+            | Report::Queue { .. }
+            | Report::Link(_)
+            | Report::Driver { .. }
+            | Report::Rx(_)
+            | Report::Queued(_)
+            | Report::Accepted(_)
+            | Report::Error { .. }
+            | Report::Forecast(_)
+            | Report::Mac { .. } => {}
+        }
+    }
+
+    /// The MQTT bridge of `node` told the outcome of a MAC update or switch
+    /// it took from the broker: the oldest such command the page published
+    /// to it is applied (with a note) or refused (with the reason). A
+    /// retained value handed over on subscribing (after a reconnection)
+    /// answers no command and is not taken here.
+    fn mac_settle(
+        &mut self,
+        node: &str,
+        kind: MacKind,
+        outcome: Result<String, String>,
+        time: f64,
+        events: &mut Vec<Value>,
+    ) {
+        let Some(c) = self.commands.iter_mut().find(|c| {
+            c.state == CommandState::Published
+                && c.node == node
+                && c.type_name == kind.word()
+                && c.topic.ends_with(&format!("/{}", kind.word()))
+        }) else {
+            return;
+        };
+        let id = c.id;
+        if let Some(event) = self.command_settled(id, outcome, time) {
+            events.push(event);
+        }
+    }
+
+    /// A command still published is applied (`Ok`, with a note) or
+    /// refused (`Err`, with the reason): the event that shows it, if it
+    /// was still published.
+    pub fn command_settled(
+        &mut self,
+        id: u64,
+        outcome: Result<String, String>,
+        now: f64,
+    ) -> Option<Value> {
+        let c = self
+            .commands
+            .iter_mut()
+            .find(|c| c.id == id && c.state == CommandState::Published)?;
+        (c.state, c.note) = match outcome {
+            Ok(note) => (CommandState::Applied, note),
+            Err(reason) => (CommandState::Refused, reason),
+        };
+        c.changed = now;
+        let view = command_json(c);
+        let seq = self.next_seq();
+        Some(json!({"event": "command", "seq": seq, "command": view}))
+    }
+
+    /// The modem id of `node`: from its status, else from its cycle.
+    pub fn modem_id_of(&self, node: &str) -> Option<i64> {
+        let e = self.extra.get(node)?;
+        e.modem_id.or_else(|| e.mac.modem_id())
     }
 
     /// A queue event of `node` about a message: the oldest accepted command
@@ -624,6 +731,7 @@ impl ConsoleState {
             "position": e.track.back().map(track_json),
             "link": e.links.back().map(|l| link_json(&l.0)),
             "forecast": e.forecast,
+            "mac": e.mac.json(),
         });
         if full {
             v["track"] = e.track.iter().map(track_json).collect();
@@ -649,6 +757,13 @@ impl ConsoleState {
     }
 }
 
+/// A cycle in a few words: `3 slots, running`.
+pub fn cycle_note(slots: usize, running: bool) -> String {
+    let plural = if slots == 1 { "" } else { "s" };
+    let state = if running { "running" } else { "stopped" };
+    format!("{slots} slot{plural}, {state}")
+}
+
 fn push_capped<T>(queue: &mut VecDeque<T>, item: T, cap: usize) {
     if queue.len() >= cap {
         queue.pop_front();
@@ -665,6 +780,9 @@ fn report_time(report: &Report) -> Option<f64> {
         Report::Rx(rx) => Some(rx.time),
         Report::Queued(n) => Some(n.time),
         Report::Forecast(f) => f["forecast"].as_f64(),
+        Report::MacCycle(c) => Some(c.time),
+        Report::MacActive(a) => Some(a.time),
+        Report::MacRate(r) => Some(r.time),
         Report::Queue { .. } | Report::Accepted(_) | Report::Error { .. } => None,
     }
 }
@@ -959,5 +1077,176 @@ mod tests {
             .unwrap()
             .iter()
             .any(|n| n["name"] == "modem 1"));
+    }
+
+    #[test]
+    fn the_cycle_the_mac_running_and_the_rate_are_learned_from_the_retained_topics() {
+        let mut s = state();
+        apply(
+            &mut s,
+            "fleet/auv1/status",
+            r#"{"online": true, "modem_id": 1}"#,
+        );
+        let events = apply(
+            &mut s,
+            "fleet/auv1/mac_cycle",
+            r#"{"slot": [{"src": 1, "dest": -1, "rate": 2, "slot_seconds": 8, "type": "DATA"},
+                         {"src": 2, "dest": -1, "rate": 2, "slot_seconds": 8,
+                          "packet_type": ["goby.example.Command"]}],
+                "running": true, "modem_id": 1, "from": "start", "time": 90}"#,
+        );
+        // The node's summary carries it to the page.
+        let summary = &events[0];
+        assert_eq!(summary["event"], "node");
+        let cycle = &summary["node"]["mac"]["cycle"];
+        assert_eq!(cycle["slots"].as_array().unwrap().len(), 2, "{cycle}");
+        assert_eq!(cycle["seconds"], 16.0);
+        assert_eq!(cycle["slots"][1]["packet_types"][0], "goby.example.Command");
+        assert_eq!(cycle["from"], "start");
+        apply(
+            &mut s,
+            "fleet/auv1/mac_active",
+            r#"{"mac_switch": "quiet", "previous": "survey", "reason": "keep_alive_lapsed",
+                "keep_alive_until": 200.5, "time": 95}"#,
+        );
+        let snap = s.snapshot();
+        let mac = &snap["nodes"][0]["mac"];
+        assert_eq!(mac["active"]["name"], "quiet", "{mac}");
+        assert_eq!(mac["active"]["reason"], "keep_alive_lapsed");
+        assert_eq!(mac["active"]["keep_alive_until"], 200.5);
+        assert_eq!(mac["cycle"]["slots"][0]["rate"], 2);
+        // A refused update leaves the cycle as it was, with the reason.
+        apply(
+            &mut s,
+            "fleet/auv1/mac_cycle",
+            r#"{"slot": [{"src": 1, "slot_seconds": 8}], "running": false, "modem_id": 1,
+                "from": "link", "error": "for modem 3", "time": 99}"#,
+        );
+        let mac = &s.snapshot()["nodes"][0]["mac"];
+        assert_eq!(mac["cycle"]["error"], "for modem 3", "{mac}");
+        assert_eq!(mac["cycle"]["running"], false);
+        assert_eq!(s.modem_id_of("auv1"), Some(1));
+        // The last rate chosen from the link.
+        apply(
+            &mut s,
+            "fleet/auv1/mac_rate",
+            r#"{"mac_rate": 5, "dest": 2, "slot_index": 0, "reason": "up", "snr": 20.5,
+                "packet_error": 0.01, "slot_limited": true, "time": 101}"#,
+        );
+        let rate = &s.snapshot()["nodes"][0]["mac"]["rate"];
+        assert_eq!(
+            (
+                &rate["rate"],
+                &rate["reason"],
+                &rate["snr"],
+                &rate["slot_limited"]
+            ),
+            (&json!(5), &json!("up"), &json!(20.5), &json!(true)),
+            "{rate}"
+        );
+    }
+
+    #[test]
+    fn mac_requests_sent_on_the_broker_are_applied_or_refused() {
+        let mut s = state();
+        apply(
+            &mut s,
+            "fleet/auv2/status",
+            r#"{"online": true, "modem_id": 2}"#,
+        );
+        let update = json!({"src": 2, "dest": 2, "update_type": "POP_BACK"});
+        let (first, _) = s.command_sent(
+            "auv2",
+            "mac_update",
+            "fleet/auv2/mac_update",
+            &update,
+            100.0,
+        );
+        let (second, _) = s.command_sent(
+            "auv2",
+            "mac_update",
+            "fleet/auv2/mac_update",
+            &update,
+            100.0,
+        );
+        let (switch, _) = s.command_sent(
+            "auv2",
+            "mac_switch",
+            "fleet/auv2/mac_switch",
+            &json!({"mac": "loud"}),
+            100.0,
+        );
+        // The cycle at the bridge's start is nobody's answer, nor is an
+        // old answer the broker hands over again on subscribing.
+        apply(
+            &mut s,
+            "fleet/auv2/mac_cycle",
+            r#"{"slot": [{"src": 1}, {"src": 2}], "modem_id": 2, "from": "start"}"#,
+        );
+        let (node, mut old) = report(
+            "fleet/auv2/mac_cycle",
+            r#"{"slot": [{"src": 1}], "modem_id": 2, "from": "mqtt"}"#,
+        );
+        old.mark_retained();
+        s.apply(&node, &old, 100.0);
+        assert_eq!(s.command_state(first), Some(CommandState::Published));
+        let events = apply(
+            &mut s,
+            "fleet/auv2/mac_cycle",
+            r#"{"slot": [{"src": 1}], "running": true, "modem_id": 2, "from": "mqtt",
+                "update": {"update_type": "POP_BACK"}}"#,
+        );
+        let settled = events
+            .iter()
+            .find(|e| e["event"] == "command")
+            .expect("the command settled");
+        assert_eq!(settled["command"]["state"], "applied");
+        assert_eq!(settled["command"]["note"], "1 slot, running");
+        assert_eq!(s.command_state(first), Some(CommandState::Applied));
+        assert_eq!(s.command_state(second), Some(CommandState::Published));
+        apply(
+            &mut s,
+            "fleet/auv2/mac_cycle",
+            r#"{"slot": [{"src": 1}], "modem_id": 2, "from": "mqtt", "error": "the cycle after the update cannot run"}"#,
+        );
+        assert_eq!(s.command_state(second), Some(CommandState::Refused));
+        apply(
+            &mut s,
+            "fleet/auv2/mac_active",
+            r#"{"mac_switch": "survey", "previous": "survey", "reason": "refused",
+                "from": "mqtt", "error": "no MAC named loud"}"#,
+        );
+        assert_eq!(s.command_state(switch), Some(CommandState::Refused));
+        let snap = s.snapshot();
+        let notes: Vec<&str> = snap["commands"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["note"].as_str().unwrap())
+            .collect();
+        assert_eq!(
+            notes,
+            [
+                "1 slot, running",
+                "the cycle after the update cannot run",
+                "no MAC named loud"
+            ]
+        );
+        // An answer from the JSON interface settles its command by id,
+        // once.
+        let (json_cmd, _) = s.command_sent(
+            "auv2",
+            "mac_switch",
+            "json 127.0.0.1:1",
+            &json!({"mac": "quiet"}),
+            100.0,
+        );
+        assert!(s
+            .command_settled(json_cmd, Ok("quiet runs".into()), 101.0)
+            .is_some());
+        assert!(s
+            .command_settled(json_cmd, Err("late".into()), 102.0)
+            .is_none());
+        assert_eq!(s.command_state(json_cmd), Some(CommandState::Applied));
     }
 }

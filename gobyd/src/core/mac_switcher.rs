@@ -4,7 +4,8 @@
 //! when the keep-alive runs out the default MAC runs again at once (the
 //! core wakes for the deadline as for a slot). Each switch is kept in the
 //! data directory ([`MacSwitchFile`]) before it takes effect and told on
-//! the `mac` events (`mac_switch`, with its reason); the state kept is
+//! the `mac` events (`mac_switch`, with its reason, and, for a switch to
+//! another MAC, `mac_cycle` with the cycle it runs); the state kept is
 //! restored at start, going back to the default when the deadline passed
 //! while the daemon was down.
 //!
@@ -214,7 +215,9 @@ impl Core {
         Ok(())
     }
 
-    /// Tells `switch` on the `mac` events and in the log.
+    /// Tells `switch` on the `mac` events and in the log; a switch to
+    /// another MAC also tells the cycle it runs now (a `mac_cycle` event
+    /// from `switch`, no update).
     fn report_switch(&self, switch: &Switch, from: Option<UpdateSource>) {
         tracing::info!(
             from = from.map(UpdateSource::name),
@@ -232,6 +235,14 @@ impl Core {
             from: from.map(UpdateSource::name),
             error: None,
         }));
+        if switch.changed() {
+            self.report(ModemEvent::MacCycle {
+                cycle: self.mac_cycle(),
+                update: None,
+                from: "switch",
+                error: None,
+            });
+        }
     }
 }
 

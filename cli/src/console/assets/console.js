@@ -190,6 +190,7 @@ function render() {
   renderNodes();
   drawMap();
   renderDetail();
+  renderMac();
 }
 
 function renderNodes() {
@@ -468,6 +469,153 @@ function renderDetail() {
     { name: 'frames', color: '#1f6f9a', points: series(links, 'frames') },
     { name: 'bad', color: '#b3261e', points: series(links, 'bad_frames') },
   ], 'no reception yet');
+}
+
+// ---------------------------------------------------------- medium access
+
+// The picked node's medium access (its `mac`: the cycle, the MAC of its
+// switcher running, the last rate chosen from the link), and the outcome
+// of the last MAC request sent from the page.
+const SLOT_COLORS = ['#7f7f7f', '#1f77b4', '#d62728', '#2ca02c', '#9467bd', '#ff7f0e', '#17becf', '#8c564b', '#e377c2', '#bcbd22'];
+let macSent = null;   // { id, node } of the last MAC request sent
+
+function slotText(s) {
+  const dest = s.dest === 0 ? 'all' : s.dest === -1 ? 'queue' : s.dest;
+  return `${s.src}→${dest} r${s.rate}`;
+}
+
+function macActiveText(a) {
+  if (!a) return 'no MAC switcher heard of';
+  const why = [a.reason, a.from ? `from ${a.from}` : ''].filter(Boolean).join(', ');
+  const until = a.keep_alive_until ? `, keep-alive until ${clock(a.keep_alive_until)} (in ${Math.max(0, Math.round(a.keep_alive_until - Date.now() / 1000))} s)` : '';
+  const macs = a.macs && a.macs.length ? `; MACs ${a.macs.join(', ')}${a.default_mac ? ', default ' + a.default_mac : ''}` : '';
+  return `${a.name}${why ? ' (' + why + ')' : ''}${until}${macs}${a.error ? '; refused: ' + a.error : ''}`;
+}
+
+function macCycleView(c) {
+  const bar = el('div', { class: 'mac-bar' + (c.running ? '' : ' stopped'), id: 'mac-bar', title: 'the cycle, each slot as wide as it is long' });
+  c.slots.forEach((s, i) => bar.append(el('div', {
+    style: `flex:${Math.max(s.seconds, 0.01)};background:${SLOT_COLORS[Math.abs(s.src) % SLOT_COLORS.length]}`,
+    title: `slot ${i}: ${slotText(s)}, ${fmt(s.seconds)} s, ${s.type}`,
+  }, slotText(s))));
+  const types = c.slots.some((s) => s.packet_types.length);
+  const head = ['#', 'src', 'dest', 'rate', 's', 'type'].concat(types ? ['packet types'] : [], ['']);
+  const table = el('table', { id: 'mac-cycle' }, el('thead', null, el('tr', null, ...head.map((h) => el('th', null, h)))));
+  const body = el('tbody');
+  c.slots.forEach((s, i) => body.append(el('tr', null,
+    el('td', { class: 'num' }, i), el('td', { class: 'num' }, s.src), el('td', { class: 'num' }, s.dest),
+    el('td', { class: 'num' }, s.rate), el('td', { class: 'num' }, fmt(s.seconds)), el('td', null, s.type),
+    types ? el('td', null, s.packet_types.map(short).join(', ') || 'any') : null,
+    el('td', null, [s.shared ? 'shared' : '', s.adaptive_rate ? 'adaptive rate' : ''].filter(Boolean).join(', ')))));
+  table.append(body);
+  return [bar, table];
+}
+
+function renderMac() {
+  const n = S.picked && S.nodes.get(S.picked);
+  $('mac-name').textContent = n ? n.name : '—';
+  const box = $('mac-view');
+  const said = $('mac-said');
+  if (macSent) {
+    const c = S.commands.get(macSent.id);
+    if (c && c.state !== 'published') {
+      said.textContent = `${c.type} to ${c.node}: ${c.state}${c.note ? ': ' + c.note : ''}`;
+      said.className = c.state === 'applied' ? 'good' : 'bad';
+    }
+  }
+  if (!n) { box.className = 'muted'; box.textContent = 'Pick a node in the table or on the map.'; return; }
+  box.className = '';
+  const mac = n.mac || {};
+  const c = mac.cycle;
+  const kv = el('dl', { class: 'kv' });
+  const row = (k, v) => kv.append(el('dt', null, k), el('dd', null, v));
+  row('MAC running', macActiveText(mac.active));
+  row('cycle', c ? `${c.slots.length} slot${c.slots.length === 1 ? '' : 's'}, ${fmt(c.seconds)} s, ${c.running ? 'running' : 'stopped'}` +
+    (c.update ? `; last ${c.update.update_type || 'update'} from ${c.from}` : c.from ? ` (${c.from})` : '') +
+    (c.time ? `, ${age(c.time)} ago` : '') + (c.error ? `; refused: ${c.error}` : '') : 'not heard yet');
+  const r = mac.rate;
+  if (r) row('rate chosen', `${r.rate} for ${r.dest} in slot ${r.slot_index} (${r.reason}${r.snr !== null && r.snr !== undefined ? `, SNR ${fmt(r.snr)} dB` : ''}${r.slot_limited ? ', limited by the slot' : ''})`);
+  box.replaceChildren(kv, ...(c ? macCycleView(c) : []));
+  const names = (mac.active && mac.active.macs) || [];
+  const list = $('mac-names');
+  if ([...list.options].map((o) => o.value).join() !== names.join()) list.replaceChildren(...names.map((m) => el('option', { value: m })));
+}
+
+// A number when the text is one, else the text itself (the server says
+// what is wrong with it).
+function numberOr(text) {
+  const t = text.trim();
+  const x = Number(t);
+  return t !== '' && Number.isFinite(x) ? x : t;
+}
+
+// `SRC DEST RATE SECONDS [TYPE]` a line: the slots of a MACUpdate.
+function slotsOf(text) {
+  return text.split('\n').map((l) => l.trim()).filter(Boolean).map((l) => {
+    const [src, dest, rate, seconds, type] = l.split(/[\s,]+/);
+    const slot = {};
+    if (src !== undefined) slot.src = numberOr(src);
+    if (dest !== undefined) slot.dest = numberOr(dest);
+    if (rate !== undefined) slot.rate = numberOr(rate);
+    if (seconds !== undefined) slot.slot_seconds = numberOr(seconds);
+    if (type !== undefined) slot.type = type;
+    return slot;
+  });
+}
+
+const WITH_SLOTS = ['ASSIGN', 'PUSH_BACK', 'PUSH_FRONT', 'INSERT'];
+const WITH_INDEX = ['INSERT', 'ERASE'];
+
+// The body of `POST /api/mac` the form says.
+function macDraft() {
+  const node = S.picked;
+  const kind = $('mac-kind').value;
+  if (kind === 'SWITCH') {
+    const sw = { mac: $('mac-switch').value.trim() };
+    if ($('mac-keep').value.trim() !== '') sw.keep_alive_seconds = numberOr($('mac-keep').value);
+    return { node, switch: sw };
+  }
+  const update = { update_type: kind };
+  if (WITH_SLOTS.includes(kind)) update.slot = slotsOf($('mac-slots').value);
+  if (WITH_INDEX.includes(kind)) {
+    update.first_iterator = numberOr($('mac-first').value);
+    update.second_iterator = numberOr($('mac-second').value);
+  }
+  if ($('mac-state').value) update.cycle_state = $('mac-state').value;
+  return { node, update };
+}
+
+function showMacRows() {
+  const kind = $('mac-kind').value;
+  $('mac-slots-row').hidden = !WITH_SLOTS.includes(kind);
+  $('mac-index-row').hidden = !WITH_INDEX.includes(kind);
+  $('mac-switch-row').hidden = kind !== 'SWITCH';
+  $('mac-state').parentElement.hidden = kind === 'SWITCH';
+}
+
+async function sendMac(e) {
+  e.preventDefault();
+  const said = $('mac-said');
+  said.className = 'muted';
+  const d = macDraft();
+  if (!d.node) { said.textContent = 'Pick a node first.'; return; }
+  try {
+    const r = await fetch('/api/mac', { method: 'POST', headers: { 'content-type': 'application/json' }, body: JSON.stringify(d) });
+    const answer = (r.headers.get('content-type') || '').includes('json') ? await r.json() : { error: await r.text() };
+    if (answer.error) {
+      said.textContent = `Not sent: ${answer.error}`;
+      said.className = 'bad';
+    } else {
+      macSent = { id: answer.command, node: d.node };
+      said.textContent = `Command ${answer.command} sent to ${d.node}; waiting for its answer.`;
+    }
+    goby.lastMac = answer;
+  } catch (err) {
+    said.textContent = `Not sent: ${err}`;
+    said.className = 'bad';
+    goby.lastMac = { error: String(err) };
+  }
+  schedule();
 }
 
 // ---------------------------------------------------------------- messages
@@ -784,6 +932,9 @@ async function loadForms() {
 
 mapSetup();
 $('commander').addEventListener('submit', send);
+$('mac-form').addEventListener('submit', sendMac);
+$('mac-kind').addEventListener('change', showMacRows);
+showMacRows();
 $('msg-selected').addEventListener('change', () => renderMessages());
 setInterval(schedule, 1000);   // ages move on
 loadForms().catch((e) => goby.errors.push(String(e)));

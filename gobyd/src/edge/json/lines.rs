@@ -125,6 +125,24 @@ pub fn mac_switch_line(
     }
 }
 
+/// The `mac_rate` event of a rate chosen from the link for `dest` in slot
+/// `slot_index` (the JSON line, the MQTT `mac_rate` payload).
+pub fn mac_rate_line(
+    dest: i32,
+    slot_index: i32,
+    choice: &crate::core::link::adaptive_rate::Choice,
+) -> gobyd_protocol::event::MacRate {
+    gobyd_protocol::event::MacRate {
+        mac_rate: choice.rate,
+        dest,
+        slot_index,
+        reason: choice.reason.name().to_string(),
+        snr: choice.snr,
+        packet_error: choice.packet_error,
+        slot_limited: choice.slot_limited,
+    }
+}
+
 /// The reply to `mac_switch`: which MAC runs, or why not.
 pub fn mac_switch_reply(
     outcome: Result<gobyd_protocol::mac_switch::MacSwitchState, String>,
@@ -550,15 +568,7 @@ fn modem_line(event: &ModemEvent) -> Event {
             dest,
             slot_index,
             choice,
-        } => Event::MacRate(gobyd_protocol::event::MacRate {
-            mac_rate: choice.rate,
-            dest: *dest,
-            slot_index: *slot_index,
-            reason: choice.reason.name().to_string(),
-            snr: choice.snr,
-            packet_error: choice.packet_error,
-            slot_limited: choice.slot_limited,
-        }),
+        } => Event::MacRate(mac_rate_line(*dest, *slot_index, choice)),
         ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
             driver_status: status.kind().to_string(),
             detail: status.to_string(),

@@ -19,10 +19,13 @@
 //! `PREFIX/NODE/file/list` (anything): the JSON interface's `file_send`,
 //! `file_get` and `transfers`, answered on `PREFIX/NODE/file/reply` (or
 //! `PREFIX/NODE/error`); the transfers' progress goes to
-//! `PREFIX/NODE/transfer`. Topics and payloads: [`payload`].
+//! `PREFIX/NODE/transfer`. When it starts, the bridge publishes the TDMA
+//! cycle and the running MAC as they stand on the retained `mac_cycle` and
+//! `mac_active` ([`mac_state`]). Topics and payloads: [`payload`].
 
 pub mod backlog;
 pub mod inbound;
+pub mod mac_state;
 pub mod payload;
 pub mod retained;
 pub mod settings;
@@ -126,6 +129,9 @@ impl Bridge {
         let (client, eventloop) = AsyncClient::new(settings.options.clone(), CLIENT_CAPACITY);
         let (incoming_tx, incoming_rx) = mpsc::unbounded_channel();
         let (notice_tx, notice_rx) = mpsc::unbounded_channel();
+        // Asked before the loop: the events that change them (taken from
+        // before the question) are published after them.
+        let mac_now = mac_state::current(control.clone(), &formatter, clock.as_ref()).await;
         let inbound = tokio::spawn(inbound::run(
             settings.topics.clone(),
             codec,
@@ -154,6 +160,9 @@ impl Bridge {
             incoming: incoming_tx,
             clock,
         };
+        for out in mac_now {
+            state.push(out);
+        }
         state.run(eventloop, events, notice_rx).await;
         inbound.abort();
     }

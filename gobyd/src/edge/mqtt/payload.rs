@@ -11,8 +11,9 @@
 //! | `driver` | yes | `{"status", "time"}` |
 //! | `link` | yes | the last reception: `{"src", "dest", "rate", "frames", "time", ...}` |
 //! | `mac` | no | a slot this node transmits in: `{"src", "dest", "rate", "slot_seconds", "time"}` |
-//! | `mac_cycle` | yes | the TDMA cycle after a `MACUpdate` (or its refusal): `{"slot", "running", "modem_id", "update", "from", "error", "time"}` |
-//! | `mac_active` | yes | which MAC of the MAC switcher runs, after each switch, renewal, lapse or refusal: the JSON interface's `mac_switch` event (`{"mac_switch", "previous", "reason", "keep_alive_until", "from", "error"}`) with `"time"` |
+//! | `mac_cycle` | yes | the TDMA cycle when the bridge starts (`"from": "start"`, no `update`), after a `MACUpdate` (or its refusal) and after a switch to another MAC (`"from": "switch"`): `{"slot", "running", "modem_id", "update", "from", "error", "time"}` |
+//! | `mac_active` | yes | which MAC of the MAC switcher runs, when the bridge starts (`"reason": "started"`) and after each switch, renewal, lapse or refusal: the JSON interface's `mac_switch` event (`{"mac_switch", "previous", "reason", "keep_alive_until", "from", "error"}`) with `"time"` |
+//! | `mac_rate` | yes | the last rate chosen from the link for a slot with `adaptive_rate`: the JSON interface's `mac_rate` event (`{"mac_rate", "dest", "slot_index", "reason", "snr", "packet_error", "slot_limited"}`) with `"time"` |
 //! | `link_status/NAME` | yes | link NAME's status: `{"name", "state", "driver", "last_error", "restarts", "budget_bytes", "spent_bytes", ...}` ([`crate::event::LinkStatus`]) |
 //! | `error` | no | `{"error", "topic"}` |
 //! | `file/reply` | no | the answer to a file request: the JSON interface's reply (`{"file_send", "joined", "transfer"}`, `{"file_get", "node"}` or `{"transfers"}`) with `"topic"` |
@@ -29,8 +30,8 @@ use serde_json::{json, Value};
 
 use super::settings::Topics;
 use crate::edge::json::lines::{
-    accepted_value, link_json, mac_cycle_json, mac_switch_line, message_json, network_reply_value,
-    transfer_value,
+    accepted_value, link_json, mac_cycle_json, mac_rate_line, mac_switch_line, message_json,
+    network_reply_value, transfer_value,
 };
 use crate::event::{
     AcceptedMessage, DaemonEvent, LinkSummary, ModemEvent, NetworkReply, Reception,
@@ -237,13 +238,24 @@ impl Formatter {
                 }
                 Outgoing::new(t.node("mac_active"), payload, true)
             }
+            ModemEvent::RateChoice {
+                dest,
+                slot_index,
+                choice,
+            } => {
+                let mut payload = json!(mac_rate_line(*dest, *slot_index, choice));
+                if let Some(o) = payload.as_object_mut() {
+                    o.remove("event");
+                    o.insert("time".into(), json!(seconds(now)));
+                }
+                Outgoing::new(t.node("mac_rate"), payload, true)
+            }
             ModemEvent::SlotStart {
                 initiated: None, ..
             }
             | ModemEvent::Raw(_)
             | ModemEvent::Transmitted { .. }
             | ModemEvent::CycleUpdate { .. }
-            | ModemEvent::RateChoice { .. }
             | ModemEvent::Specific(_) => return None,
         })
     }
