@@ -64,10 +64,10 @@ async fn mac_switch_switches_renews_and_refuses_as_told() {
         told[2].3.as_deref().unwrap().contains("\"loud\""),
         "{told:?}"
     );
-    // The running MAC is written at each switch or renewal, not at a
-    // refusal.
+    // The running MAC is written on connecting (the database hands it over
+    // on registration), then at each switch or renewal, not at a refusal.
     let mut active = Vec::new();
-    while active.len() < 2 {
+    while active.len() < 3 {
         let m = tokio::time::timeout_at(deadline, mail.recv())
             .await
             .expect("MAC_ACTIVE is written")
@@ -76,7 +76,8 @@ async fn mac_switch_switches_renews_and_refuses_as_told() {
             active.push(value);
         }
     }
-    for (value, reason) in active.iter().zip(["requested", "renewed"]) {
+    assert_eq!(active[0], "mac=survey,reason=started");
+    for (value, reason) in active[1..].iter().zip(["requested", "renewed"]) {
         let head = format!("mac=quiet,reason={reason},keep_alive_until=");
         let until: f64 = value
             .strip_prefix(&head)

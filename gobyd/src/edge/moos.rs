@@ -25,8 +25,9 @@
 //!   `MAC_SWITCH` (read with or without a `moos_var` section) switches the
 //!   MAC switcher: `NAME`, or `mac=NAME,keep_alive=SECONDS`
 //!   ([`parse_mac_switch`]); writing the same value again before the
-//!   keep-alive runs out renews it. Each switch, renewal or lapse is
-//!   written to `MAC_ACTIVE` as `mac=NAME,reason=REASON` with
+//!   keep-alive runs out renews it. The running MAC is written to
+//!   `MAC_ACTIVE` on connecting (`reason=started`) and at each switch,
+//!   renewal or lapse, as `mac=NAME,reason=REASON` with
 //!   `,keep_alive_until=SECONDS` while the MAC has a keep-alive.
 //! - Initial values (`moos.initializer`, Goby's `common { initializer }`):
 //!   written each time gobyd connects to the MOOSDB.
@@ -394,6 +395,30 @@ fn mac_active_value(s: &crate::event::MacSwitched) -> String {
     value
 }
 
+/// The value of `MAC_ACTIVE` on connecting: the switcher's running MAC,
+/// `mac=NAME,reason=started[,keep_alive_until=SECONDS]` (`None` without a
+/// `mac_switcher`, or when the core has stopped). Only asks: nothing is
+/// switched.
+async fn mac_running(control: &mpsc::Sender<Control>) -> Option<String> {
+    let (reply, state) = tokio::sync::oneshot::channel();
+    let asked = Control::MacSwitch {
+        mac: None,
+        keep_alive_seconds: None,
+        from: crate::event::UpdateSource::Moos,
+        reply,
+    };
+    control.send(asked).await.ok()?;
+    let state = state.await.ok()?.ok()?;
+    Some(mac_active_value(&crate::event::MacSwitched {
+        previous: state.active.clone(),
+        active: state.active,
+        reason: "started",
+        until: state.keep_alive_until.map(|t| (t * 1e6).round() as i64),
+        from: None,
+        error: None,
+    }))
+}
+
 /// A string as a protobuf text format string literal.
 fn text_format_string(s: &str) -> String {
     let mut out = String::with_capacity(s.len() + 2);
@@ -510,6 +535,9 @@ async fn bridge(
     let connected_at = unix_seconds();
     for (var, value) in initial_values(&settings.moos) {
         notify(&client, &var, &value);
+    }
+    if let Some(value) = mac_running(&control).await {
+        notify(&client, &settings.mac_active_var(), &Value::String(value));
     }
     let translator = settings.translator.clone();
     let mut registered: Vec<String> = settings.moos.send_var.clone();
