@@ -438,6 +438,40 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn adaptive_rate_is_refused_on_a_driver_without_the_micromodems_rates() {
+        let udp = "modem_id: 1\ndriver { driver_type: DRIVER_UDP udp { local { port: 0 } \
+                   remote { modem_id: 2 port: 50001 } } }\n\
+                   mac { type: MAC_FIXED_DECENTRALIZED adaptive_rate: true \
+                   slot { src: 1 dest: 2 rate: 1 slot_seconds: 10 } \
+                   slot { src: 1 dest: 2 rate: 1 slot_seconds: 10 adaptive_rate: true } }\n";
+        let err = refused(udp).await;
+        assert_names(
+            &err,
+            &[
+                "mac.adaptive_rate: true, but adaptive_rate chooses among the WHOI Micro-Modem's \
+                 rates (0, 1, 3, 5) and the DRIVER_UDP driver does not have them",
+                "mac.slot[1].adaptive_rate: true",
+            ],
+        );
+        assert!(!err.contains("slot[0]"), "{err}");
+        // The simulator models the Micro-Modem's rates: accepted there.
+        let dir = scratch("sim-adaptive");
+        let sim = format!(
+            "modem_id: 1\ndriver {{ driver_type: DRIVER_ACOUSTIC_SIMULATOR simulator {{ node {{ modem_id: 1 }} \
+             channel: \"validate-sim-adaptive\" }} }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED adaptive_rate: true \
+             slot {{ src: 1 dest: 2 rate: 1 slot_seconds: 10 adaptive_rate: true }} }}\n\
+             json {{ tcp_bind: \"\" }}\ndata_dir: \"{}\"\n",
+            dir.display()
+        );
+        let config = config::parse(&sim, "test").unwrap();
+        check(config.clone()).expect("adaptive_rate on the simulator");
+        let daemon = Daemon::builder(config).start().await.expect("starts");
+        daemon.run(async {}).await.unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[tokio::test]
     async fn out_of_range_addresses_and_numbers_are_refused_naming_each_field() {
         let err = refused(
             "modem_id: 1\ndriver { driver_type: DRIVER_UDP udp { local { port: 70000 } \

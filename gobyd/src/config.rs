@@ -1441,8 +1441,41 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
     // The Micro-Modem's and the simulator's: their rates are the Micro-Modem's.
     if modemdriver::check::data_packet_time(driver, 0).is_some() {
         problems.extend(slot_problems(config, driver));
+    } else {
+        problems.extend(adaptive_rate_problems(config, kind));
     }
     problems
+}
+
+/// `adaptive_rate` (on the MAC or a slot) on a driver without the
+/// Micro-Modem's rates: the rate is chosen among the Micro-Modem's (0, 1,
+/// 3, 5), which such a driver does not have, so there is nothing to
+/// choose between.
+fn adaptive_rate_problems(
+    config: &GobydConfig,
+    kind: &dyn modemdriver::kind::DriverKind,
+) -> Vec<Problem> {
+    let Some(mac) = config.mac.as_ref() else {
+        return Vec::new();
+    };
+    let reason = format!(
+        "true, but adaptive_rate chooses among the WHOI Micro-Modem's rates (0, 1, 3, 5) \
+         and the {} driver does not have them (the Micro-Modem's and the acoustic simulator's \
+         do); leave adaptive_rate out",
+        kind.about().named.name()
+    );
+    let slots = mac
+        .slot
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.adaptive_rate())
+        .map(|(i, _)| format!("mac.slot[{i}].adaptive_rate"));
+    mac.adaptive_rate()
+        .then(|| "mac.adaptive_rate".to_string())
+        .into_iter()
+        .chain(slots)
+        .map(|field| Problem::new(field, reason.clone()))
+        .collect()
 }
 
 /// The Micro-Modem settings gobyd needs besides what the driver checks:

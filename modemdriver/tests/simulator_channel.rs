@@ -259,6 +259,91 @@ async fn a_driver_with_a_bad_env_does_not_start() {
     );
 }
 
+/// The first reception at node 2 of a full packet of `rate` from node 1
+/// (nodes configured by `config(modem_id)`, on one virtual clock), how
+/// long after it was asked for it ended, and the clock then (microseconds).
+async fn first_reception(
+    config: &dyn Fn(i32) -> DriverConfig,
+    rate: i32,
+) -> (ModemTransmission, Duration, u64) {
+    let medium = Medium::new();
+    let clock = std::sync::Arc::new(modemdriver::time::TokioClock::new());
+    let start = |id| {
+        SimulatorDriver::start_on_with_clock(&config(id), medium.clone(), clock.clone()).unwrap()
+    };
+    let (mut a, mut b) = (start(1), start(2));
+    ready(&mut a).await;
+    ready(&mut b).await;
+    let t0 = Instant::now();
+    a.initiate_transmission(data(rate)).unwrap();
+    let pump = pump_full(a);
+    let got = received(&mut b, Duration::from_secs(30)).await;
+    let took = Instant::now() - t0;
+    let now = u64::try_from(goby_time::Clock::now(&*clock)).unwrap();
+    drop(pump.await.unwrap());
+    (got, took, now)
+}
+
+#[tokio::test(start_paused = true)]
+async fn each_reception_reports_its_links_snr_as_a_micromodem_does() {
+    let water = summer_600();
+    let traced = modemdriver::sim::water::Water::load(&water).unwrap();
+    let mut snrs = Vec::new();
+    for range in [2000.0, 8000.0] {
+        let (got, _, now) = first_reception(&|id| config(id, range, 30.0, &water, 1), 1).await;
+        let link = modemdriver::sim::water::compute(
+            &traced.forecaster(),
+            &modemdriver::sim::reception::Position::new(0.0, 0.0, -30.0),
+            &modemdriver::sim::reception::Position::new(range, 0.0, -30.0),
+        )
+        .unwrap();
+        assert_eq!(got.receive_stat.len(), 1, "{got:?}");
+        let stat = &got.receive_stat[0];
+        let snr = link.snr.unwrap();
+        assert_eq!(stat.snr_in, Some(snr.round() as i32), "{range} m: {stat:?}");
+        assert_eq!(
+            (stat.source, stat.dest, stat.rate),
+            (Some(1), Some(2), Some(1))
+        );
+        assert_eq!(
+            (stat.number_frames, stat.number_bad_frames),
+            (Some(3), Some(0))
+        );
+        assert_eq!(stat.carrier_freq, Some(25120));
+        // Stamped with the start of the arrival, on the node's clock: the
+        // reception ends a rate-1 packet later (0.5 s of overhead, 3 frames
+        // of 64 bytes at 250 bit/s: 6.644 s).
+        let on_water = now - stat.time.unwrap();
+        assert!(
+            on_water.abs_diff(6_644_000) <= 2_000,
+            "{on_water} µs between the stamp and the end"
+        );
+        snrs.push(stat.snr_in.unwrap());
+    }
+    assert!(snrs[0] > snrs[1] + 10, "SNR at 2 and 8 km: {snrs:?}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_rate_sets_the_time_on_the_water_and_flat_loss_reports_no_snr() {
+    let flat = |id| {
+        let mut c = config(id, 1500.0, 30.0, &summer_env(), 1);
+        if let Some(sim) = c.simulator.as_mut() {
+            sim.acoustic_channel = None;
+        }
+        c
+    };
+    let mut took = Vec::new();
+    for rate in [0, 1, 3, 5] {
+        let (got, t, _) = first_reception(&flat, rate).await;
+        assert!(got.receive_stat.is_empty(), "{got:?}");
+        took.push((t.as_secs_f64() * 100.0).round() / 100.0);
+    }
+    // 1 s of travel (1500 m at 1500 m/s), 0.5 s of overhead and the
+    // rate's frames: 32 bytes at 80 bit/s, 3 × 64 at 250, 2 × 256 at
+    // 1200 and 8 × 256 at 5300 bit/s.
+    assert_eq!(took, [4.7, 7.64, 4.91, 4.59], "seconds to each reception");
+}
+
 /// Delivery ratio against range at rates 1 and 5 in the summer water, for
 /// docs/channel.md.
 #[tokio::test(start_paused = true)]

@@ -14,8 +14,10 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::Arc;
 
-use gobyd::event::DaemonEvent;
+use gobyd::event::{DaemonEvent, ModemEvent};
+use modemdriver::TransmitOutcome;
 use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
 
 /// Microseconds since the UNIX epoch (virtual time).
@@ -101,6 +103,8 @@ pub struct Ledger {
     /// Publications by (sender, type, bytes), in order of publication.
     by_content: HashMap<(usize, String, Vec<u8>), Vec<usize>>,
     stray: Vec<Stray>,
+    /// Data packets sent, by (node, modem rate).
+    packets: BTreeMap<(usize, i32), u64>,
     failure: Option<String>,
 }
 
@@ -114,6 +118,7 @@ impl Ledger {
             pending: HashMap::new(),
             by_content: HashMap::new(),
             stray: Vec::new(),
+            packets: BTreeMap::new(),
             failure: None,
         }
     }
@@ -131,6 +136,12 @@ impl Ledger {
     /// Receptions no publication accounts for.
     pub fn stray(&self) -> &[Stray] {
         &self.stray
+    }
+
+    /// Data packets each node put on the water, by (node index, modem
+    /// rate).
+    pub fn packets(&self) -> &BTreeMap<(usize, i32), u64> {
+        &self.packets
     }
 
     /// Why the run cannot be trusted (an event missed), if so.
@@ -198,6 +209,12 @@ impl Ledger {
                 let type_name = received.message.descriptor().full_name().to_string();
                 let key = self.nodes[node].codec.encode(&received.message).ok();
                 self.received(node, time, received.src, type_name, key);
+            }
+            DaemonEvent::Modem(ModemEvent::Transmitted {
+                transmission,
+                outcome: TransmitOutcome::Sent,
+            }) if transmission.r#type() == TransmissionType::Data => {
+                *self.packets.entry((node, transmission.rate())).or_default() += 1;
             }
             DaemonEvent::Queue {
                 event,

@@ -28,6 +28,9 @@ pub struct Report {
     pub by_pair: BTreeMap<String, Stats>,
     /// Receptions no publication accounts for.
     pub stray_receptions: u64,
+    /// Data packets each node put on the water, by node name and modem
+    /// rate (`{"a": {"1": 40, "5": 72}}`).
+    pub packets: BTreeMap<String, BTreeMap<i32, u64>>,
 }
 
 /// What was run.
@@ -186,6 +189,16 @@ impl Report {
             by_type: by_type.into_iter().map(|(k, t)| (k, t.finish())).collect(),
             by_pair: by_pair.into_iter().map(|(k, t)| (k, t.finish())).collect(),
             stray_receptions: ledger.stray().len() as u64,
+            packets: ledger.packets().iter().fold(
+                BTreeMap::new(),
+                |mut by_node, (&(node, rate), &n)| {
+                    by_node
+                        .entry(names[node].to_string())
+                        .or_insert_with(BTreeMap::new)
+                        .insert(rate, n);
+                    by_node
+                },
+            ),
         }
     }
 

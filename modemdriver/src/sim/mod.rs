@@ -18,7 +18,11 @@
 //! - Modelled water: with `acoustic_channel` set ([`water`]), the delay
 //!   is the first arrival's travel time and the loss the frame-error rate
 //!   of the packet's rate at the SNR a ray trace gives (goby-channel),
-//!   instead of `sound_speed` and `packet_loss`.
+//!   instead of `sound_speed` and `packet_loss`. Each reception then
+//!   carries the receive statistics a Micro-Modem gives (`receive_stat`,
+//!   its `$CACST`): the link's SNR as `snr_in`, from which a node's
+//!   `adaptive_rate` chooses ([`water::Water::receive_statistics`]); with
+//!   flat loss there are none.
 //!
 //! - Moving nodes: started with [`SimulatorDriver::start_in_world`], the
 //!   positions come from a [`positions::Positions`] at each moment (the
@@ -504,6 +508,7 @@ impl Node {
             // Out of range: not heard at all (nor does it collide).
             return;
         }
+        let mut transmission = packet.transmission.clone();
         let (delay, loss) = match &self.water {
             None => match Duration::try_from_secs_f64(distance / self.sim.sound_speed()) {
                 Ok(delay) => (delay, self.sim.packet_loss()),
@@ -526,6 +531,20 @@ impl Node {
                     // Acks and the like: one frame at the packet's rate.
                     _ => link.packet_error(mt.rate(), 1),
                 };
+                // The receive statistics, stamped with the arrival on the
+                // node's clock.
+                let arrival = packet.start + delay;
+                let now = Instant::now();
+                let arrival_micros = if arrival >= now {
+                    self.now().saturating_add(micros(arrival - now))
+                } else {
+                    self.now().saturating_sub(micros(now - arrival))
+                };
+                transmission.receive_stat.extend(water.receive_statistics(
+                    link,
+                    mt,
+                    arrival_micros,
+                ));
                 (delay, loss)
             }
         };
@@ -533,7 +552,7 @@ impl Node {
         self.receiver.arrive(
             packet.start + delay,
             packet.start + delay + packet.duration,
-            packet.transmission.clone(),
+            transmission,
             lost,
         );
     }
@@ -641,6 +660,11 @@ impl Node {
             events.emit(DriverEvent::TransmitResult(result));
         }
     }
+}
+
+/// Whole microseconds of `d` (saturating).
+fn micros(d: Duration) -> u64 {
+    u64::try_from(d.as_micros()).unwrap_or(u64::MAX)
 }
 
 /// What the simulated modem put on or took off the water, for the raw log:

@@ -19,7 +19,10 @@ use channel::{
     ChannelError, ForecastConfig, Forecaster, HalfSpace, LinkForecast, MicroModemBand, Modem,
     NoiseModel, SspPoint, VolumeAttenuation,
 };
-use protos::goby::acomms::protobuf::{acoustic_channel, AcousticChannel};
+use protos::goby::acomms::protobuf::{
+    acoustic_channel, modem_transmission::TransmissionType, AcousticChannel, MicroModemPacketType,
+    MicroModemReceiveMode, MicroModemReceiveStatistics, ModemTransmission,
+};
 
 use super::reception::Position;
 use crate::problem::Problem;
@@ -149,6 +152,44 @@ impl Water {
     /// The forecaster, for computations off the driver's task.
     pub fn forecaster(&self) -> std::sync::Arc<Forecaster> {
         self.forecaster.clone()
+    }
+
+    /// The receive statistics a Micro-Modem gives (its `$CACST`) for
+    /// `transmission` heard intact over `link`, arriving at `time`
+    /// (microseconds since 1970): the link's SNR in the band as `snr_in`
+    /// (dB, rounded), the packet's source, destination, rate and frames
+    /// (none bad), the modem's carrier and bandwidth (Hz); for data, FSK
+    /// at rate 0 and PSK above. `None` when the link has no SNR (no ray
+    /// reaches).
+    pub fn receive_statistics(
+        &self,
+        link: &Link,
+        transmission: &ModemTransmission,
+        time: u64,
+    ) -> Option<MicroModemReceiveStatistics> {
+        let snr = link.snr.filter(|s| s.is_finite())?;
+        let modem = &self.forecaster.config().modem;
+        let data = transmission.r#type() == TransmissionType::Data;
+        let packet_type = match transmission.rate() {
+            _ if !data => None,
+            0 => Some(MicroModemPacketType::Fsk),
+            _ => Some(MicroModemPacketType::Psk),
+        };
+        Some(MicroModemReceiveStatistics {
+            mode: Some(MicroModemReceiveMode::ReceiveGood as i32),
+            time: Some(time),
+            rate: Some(transmission.rate()),
+            source: Some(transmission.src()),
+            dest: Some(transmission.dest()),
+            packet_type: packet_type.map(|t| t as i32),
+            number_frames: data
+                .then(|| i32::try_from(transmission.frame.len()).unwrap_or(i32::MAX)),
+            number_bad_frames: data.then_some(0),
+            snr_in: Some(snr.round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32),
+            carrier_freq: Some(modem.frequency.round() as i32),
+            bandwidth: Some(modem.bandwidth.round() as i32),
+            ..Default::default()
+        })
     }
 
     /// The key of the link from `from` to `to`.

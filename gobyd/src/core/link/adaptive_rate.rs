@@ -11,7 +11,8 @@
 //! thesis' FH-FSK statistics), and from the forecast's frame-error rate;
 //! with both, the worse counts. The fastest rate (most bytes a packet)
 //! whose packet-error estimate is at most [`Settings::target_packet_error`]
-//! is chosen among the rates whose packet fits the slot. Hysteresis keeps
+//! is chosen among the rates whose packet fits the slot; when none meets
+//! it, the fitting rate least likely to lose its packet. Hysteresis keeps
 //! it from flapping: a faster rate than the current one is taken only
 //! when it meets the target [`Settings::hysteresis_db`] below the
 //! measured SNR; the current rate is kept while it meets the target at
@@ -150,16 +151,24 @@ pub fn choose(
             .find(|c| (c.fits || !fitting) && packet_error(c, margin) <= target)
             .copied()
     };
-    let slowest = ordered.iter().find(|c| c.fits).copied();
+    // When none meets the target: the fitting rate least likely to lose
+    // its packet (the smallest of those equally likely). The smallest
+    // packet is not always the most robust: rate 0's FH-FSK loses more
+    // than rate 1's PSK at every SNR of the curves.
+    let most_robust = ordered
+        .iter()
+        .filter(|c| c.fits)
+        .min_by(|a, b| packet_error(a, 0.0).total_cmp(&packet_error(b, 0.0)))
+        .copied();
     let current = current.and_then(|r| ordered.iter().find(|c| c.fits && c.model.rate as i32 == r));
     let size = |c: &Candidate<'_>| c.model.frames * c.model.frame_bytes;
     let (chosen, reason) = match current {
         Some(cur) => match best(settings.hysteresis_db, true) {
             Some(up) if size(up) > size(cur) => (Some(up), Reason::Up),
             _ if packet_error(cur, 0.0) <= target => (Some(*cur), Reason::Kept),
-            _ => (best(0.0, true).or(slowest), Reason::Down),
+            _ => (best(0.0, true).or(most_robust), Reason::Down),
         },
-        None => (best(0.0, true).or(slowest), Reason::First),
+        None => (best(0.0, true).or(most_robust), Reason::First),
     };
     let Some(chosen) = chosen else {
         return none;
@@ -249,7 +258,21 @@ mod tests {
         assert_eq!(pick(10.0).rate, 5);
         assert_eq!(pick(3.0).rate, 3);
         assert_eq!(pick(-5.0).rate, 1);
-        assert_eq!(pick(-20.0).rate, 0, "nothing meets it: the slowest");
+        assert_eq!(pick(-20.0).rate, 0, "every rate loses all: the slowest");
+        // At -7 dB none meets the target; rate 1 loses the least (rate
+        // 0's FSK loses more than rate 1's PSK).
+        let weak = pick(-7.0);
+        assert!(weak.packet_error.unwrap() > 0.1, "{weak:?}");
+        assert_eq!(weak.rate, 1, "nothing meets it: the most robust");
+        let models = rates();
+        let error = |rate: u32| {
+            models
+                .iter()
+                .find(|m| m.rate == rate)
+                .unwrap()
+                .packet_error(-7.0)
+        };
+        assert!(error(1) < error(0), "{} {}", error(1), error(0));
         assert_eq!(pick(10.0).reason, Reason::First);
         let none = choose(Some(5), 1, LinkData::default(), &c, &s);
         assert_eq!((none.rate, none.reason), (1, Reason::NoLinkData));
