@@ -1,10 +1,12 @@
 //! ALOHA throughput measured against theory: a scenario of many senders
-//! contending for shared slots (slotted ALOHA inside TDMA) towards one
-//! receiver, and the throughput theory predicts for the load measured.
+//! sending to one receiver, contending for shared slots (slotted ALOHA
+//! inside TDMA) or on `MAC_ALOHA` (pure ALOHA), and the throughput theory
+//! predicts for the load measured.
 //!
-//! G is the data packets sent per shared slot, S those heard intact by
-//! the receiver per shared slot, both counted from what the run did
-//! ([`crate::slot_use`]). Theory:
+//! Slotted, G is the data packets sent per shared slot and S those heard
+//! intact by the receiver per shared slot; pure, both are per packet
+//! duration; all counted from what the run did ([`crate::slot_use`]).
+//! Theory:
 //!
 //! - [`slotted`]: `S = G·e^(−G)`, slotted ALOHA with Poisson attempts (an
 //!   infinite population), peak 1/e at G = 1;
@@ -13,11 +15,13 @@
 //!   a node's sending depends on its own messages and back-off draws only,
 //!   so the senders are independent whatever the back-off; the back-off
 //!   (not memoryless) shapes only how G follows the offered load, up to
-//!   [`saturation_g`] when every node always has data.
+//!   [`saturation_g`] when every node always has data;
+//! - [`pure`]: `S = G·e^(−2G)`, pure ALOHA with Poisson attempts, and
+//!   [`pure_finite`], `G·e^(−2G(N−1)/N)` with N senders sending at Poisson
+//!   times (a sender does not collide with itself).
 
 use std::path::Path;
 
-use crate::slot_use::SharedSlotUse;
 use crate::SimError;
 
 /// Slotted ALOHA's throughput for Poisson attempts: `G·e^(−G)` packets
@@ -41,20 +45,49 @@ pub fn saturation_g(n: u32, max_backoff_slots: u32) -> f64 {
     f64::from(n) / (1.0 + f64::from(max_backoff_slots) / 2.0)
 }
 
-/// A slotted-ALOHA rehearsal: `senders` nodes on a circle of `radius_m`
-/// around one receiver (so that packets sent in one slot arrive at it
-/// together), a cycle of one shared slot, every sender publishing
-/// `goby.example.Command` to the receiver at Poisson times, no acks (each
-/// message sent once), water losing nothing.
+/// Pure (unslotted) ALOHA's throughput for Poisson attempts: `G·e^(−2G)`
+/// packets per packet duration for `g` attempts per packet duration (a
+/// packet is lost when another starts within one packet duration either
+/// side of it); peak 1/(2e) ≈ 0.184 at G = 0.5.
+pub fn pure(g: f64) -> f64 {
+    g * (-2.0 * g).exp()
+}
+
+/// Pure ALOHA's throughput with `n` senders each sending at Poisson times,
+/// `g / n` packets per packet duration: a packet is lost when one of the
+/// `n − 1` others starts within one packet duration either side of it,
+/// `G·e^(−2G(n−1)/n)`.
+pub fn pure_finite(g: f64, n: u32) -> f64 {
+    let others = f64::from(n.saturating_sub(1)) / f64::from(n.max(1));
+    g * (-2.0 * g * others).exp()
+}
+
+/// How the senders share the medium.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Access {
+    /// A cycle of one shared slot (`MAC_FIXED_DECENTRALIZED`): slotted
+    /// ALOHA; G and S per slot.
+    Slotted {
+        /// The slot's length, seconds.
+        slot_seconds: f64,
+        /// The shared slot's `max_backoff_slots`.
+        max_backoff_slots: u32,
+    },
+    /// `MAC_ALOHA`: pure ALOHA; G and S per packet duration.
+    Pure,
+}
+
+/// An ALOHA rehearsal: `senders` nodes on a circle of `radius_m` around
+/// one receiver (so that packets sent together arrive at it together),
+/// every sender publishing `goby.example.Command` to the receiver at
+/// Poisson times, no acks (each message sent once), water losing nothing.
 #[derive(Debug, Clone, PartialEq)]
-pub struct SlottedSweep {
+pub struct Sweep {
     /// Nodes that send (the receiver is one more).
     pub senders: u32,
-    /// The shared slot's `max_backoff_slots`.
-    pub max_backoff_slots: u32,
-    /// The shared slot's length, seconds.
-    pub slot_seconds: f64,
-    /// The shared slot's Micro-Modem rate.
+    /// Slotted or pure ALOHA.
+    pub access: Access,
+    /// The Micro-Modem rate of every packet.
     pub rate: i32,
     /// The senders' distance from the receiver, metres.
     pub radius_m: f64,
@@ -64,60 +97,104 @@ pub struct SlottedSweep {
     pub seed: u64,
 }
 
-impl Default for SlottedSweep {
-    /// Ten senders, back-off 0 to 3, 2 s slots at rate 6 (1.14 s packets),
-    /// 300 m from the receiver, 8000 s (4000 slots), seed 1.
-    fn default() -> Self {
-        SlottedSweep {
+/// One load of a sweep: what was offered, measured and predicted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadPoint {
+    /// Publications per hour of each sender (Poisson).
+    pub per_hour: f64,
+    /// Slots (slotted) or packet durations (pure) of the run.
+    pub periods: f64,
+    /// Data packets the senders put on the water.
+    pub transmissions: u64,
+    /// Of those, the ones the receiver heard intact.
+    pub delivered: u64,
+    /// G: transmissions per period.
+    pub g: f64,
+    /// S: deliveries per period.
+    pub s: f64,
+    /// Theory for Poisson attempts at the measured G ([`slotted`] or
+    /// [`pure`]).
+    pub theory: f64,
+    /// Theory for this many independent senders at the measured G
+    /// ([`slotted_finite`] or [`pure_finite`]).
+    pub theory_finite: f64,
+}
+
+impl LoadPoint {
+    /// The standard error of S as measured, `sqrt(S·(1 − S) / periods)`
+    /// (a period carries a packet or not).
+    pub fn s_error(&self) -> f64 {
+        if self.periods <= 0.0 {
+            return 0.0;
+        }
+        (self.s * (1.0 - self.s).max(0.0) / self.periods).sqrt()
+    }
+}
+
+impl Sweep {
+    /// Ten senders, one 2 s shared slot at rate 6 (1.14 s packets),
+    /// back-off 0 to 3, 300 m from the receiver, 8000 s (4000 slots), seed 1.
+    pub fn slotted() -> Self {
+        Sweep {
             senders: 10,
-            max_backoff_slots: 3,
-            slot_seconds: 2.0,
+            access: Access::Slotted {
+                slot_seconds: 2.0,
+                max_backoff_slots: 3,
+            },
             rate: 6,
             radius_m: 300.0,
             duration_s: 8000.0,
             seed: 1,
         }
     }
-}
 
-/// One load of a sweep: what was offered, measured and predicted.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LoadPoint {
-    /// Publications per hour of each sender (Poisson).
-    pub per_hour: f64,
-    /// The shared slots as measured.
-    pub measured: SharedSlotUse,
-    /// [`slotted`] at the measured G.
-    pub slotted: f64,
-    /// [`slotted_finite`] at the measured G.
-    pub slotted_finite: f64,
-}
-
-impl LoadPoint {
-    /// The standard error of S as measured: a shared slot carries a
-    /// packet or not, `sqrt(S·(1 − S) / slots)` packets per slot.
-    pub fn s_error(&self) -> f64 {
-        let m = &self.measured;
-        if m.slots == 0 {
-            return 0.0;
+    /// Fifty senders on `MAC_ALOHA` at rate 6 (1.14 s packets), 300 m
+    /// from the receiver, 18 240 s (16 000 packet durations), seed 1.
+    pub fn pure() -> Self {
+        Sweep {
+            senders: 50,
+            access: Access::Pure,
+            duration_s: 18_240.0,
+            ..Sweep::slotted()
         }
-        (m.s * (1.0 - m.s) / m.slots as f64).sqrt()
     }
-}
 
-impl SlottedSweep {
+    /// The time on the water of one packet (the simulator's 0.5 s
+    /// overhead and whole frames at the rate's bit rate), seconds.
+    pub fn packet_seconds(&self) -> f64 {
+        modemdriver::rate::spec(self.rate).map_or(0.0, |spec| {
+            spec.packet_duration(std::time::Duration::from_millis(500))
+                .as_secs_f64()
+        })
+    }
+
+    /// The periods G and S are counted in: slots, or packet durations.
+    fn period_seconds(&self) -> f64 {
+        match self.access {
+            Access::Slotted { slot_seconds, .. } => slot_seconds,
+            Access::Pure => self.packet_seconds(),
+        }
+    }
+
     /// The gobyd section every node runs.
     fn gobyd(&self) -> String {
+        let mac = match self.access {
+            Access::Slotted {
+                slot_seconds,
+                max_backoff_slots,
+            } => format!(
+                "type: MAC_FIXED_DECENTRALIZED\n      \
+                 slot {{ src: 0 dest: -1 rate: {rate} slot_seconds: {slot_seconds} \
+                 shared {{ min_priority: 0 max_backoff_slots: {max_backoff_slots} }} }}",
+                rate = self.rate
+            ),
+            Access::Pure => format!("type: MAC_ALOHA rate: {}", self.rate),
+        };
         format!(
-            "gobyd {{\n    mac {{\n      type: MAC_FIXED_DECENTRALIZED\n      \
-             slot {{ src: 0 dest: -1 rate: {rate} slot_seconds: {slot} \
-             shared {{ min_priority: 0 max_backoff_slots: {backoff} }} }}\n    }}\n    \
+            "gobyd {{\n    mac {{\n      {mac}\n    }}\n    \
              queue {{\n      message_entry {{\n        protobuf_name: \"goby.example.Command\"\n        \
              ack: false\n        ttl: 7200\n        \
-             role {{ type: DESTINATION_ID field: \"destination\" }}\n      }}\n    }}\n  }}",
-            rate = self.rate,
-            slot = self.slot_seconds,
-            backoff = self.max_backoff_slots,
+             role {{ type: DESTINATION_ID field: \"destination\" }}\n      }}\n    }}\n  }}"
         )
     }
 
@@ -149,21 +226,47 @@ impl SlottedSweep {
         text
     }
 
-    /// Runs the scenario of `per_hour` and measures G and S.
+    /// Runs the scenario of `per_hour` and measures G and S: slotted, the
+    /// shared slots' (counted as they started); pure, every data packet's
+    /// over the run's packet durations.
     pub fn measure(&self, per_hour: f64) -> Result<LoadPoint, SimError> {
         let text = self.scenario_text(per_hour);
-        let scenario = crate::scenario::parse(&text, "slotted ALOHA sweep", Path::new("."))?;
-        let outcome = crate::run(&scenario)?;
-        let measured = outcome
-            .report
-            .slot_use
-            .shared
-            .ok_or_else(|| SimError::Run("no shared slot started".into()))?;
+        let scenario = crate::scenario::parse(&text, "ALOHA sweep", Path::new("."))?;
+        let slot_use = crate::run(&scenario)?.report.slot_use;
+        let (periods, transmissions, delivered) = match self.access {
+            Access::Slotted { .. } => {
+                let shared = slot_use
+                    .shared
+                    .ok_or_else(|| SimError::Run("no shared slot started".into()))?;
+                (shared.slots as f64, shared.transmissions, shared.delivered)
+            }
+            Access::Pure => (
+                self.duration_s / self.period_seconds(),
+                slot_use.transmissions,
+                slot_use.delivered,
+            ),
+        };
+        let per_period = |n: u64| {
+            if periods > 0.0 {
+                n as f64 / periods
+            } else {
+                0.0
+            }
+        };
+        let (g, s) = (per_period(transmissions), per_period(delivered));
+        let (theory, theory_finite) = match self.access {
+            Access::Slotted { .. } => (slotted(g), slotted_finite(g, self.senders)),
+            Access::Pure => (pure(g), pure_finite(g, self.senders)),
+        };
         Ok(LoadPoint {
             per_hour,
-            slotted: slotted(measured.g),
-            slotted_finite: slotted_finite(measured.g, self.senders),
-            measured,
+            periods,
+            transmissions,
+            delivered,
+            g,
+            s,
+            theory,
+            theory_finite,
         })
     }
 }
@@ -182,5 +285,12 @@ mod tests {
         // Many senders: Poisson attempts.
         assert!((slotted_finite(1.0, 100_000) - slotted(1.0)).abs() < 1e-5);
         assert_eq!(saturation_g(10, 3), 4.0);
+        // Pure ALOHA: half the vulnerable time of slotted, its peak at 0.5.
+        assert!((pure(0.5) - 0.5 * (-1.0f64).exp()).abs() < 1e-12);
+        assert!(pure(0.4) < pure(0.5) && pure(0.6) < pure(0.5));
+        assert!(pure_finite(0.5, 20) > pure(0.5));
+        assert!((pure_finite(0.5, 100_000) - pure(0.5)).abs() < 1e-5);
+        // A rate-6 packet of the simulator: 0.5 s and 6 × 32 bytes at 2400 bit/s.
+        assert!((Sweep::pure().packet_seconds() - 1.14).abs() < 1e-9);
     }
 }

@@ -457,6 +457,7 @@ impl Core {
                 }
             }
             self.release_held();
+            self.aloha_transmissions();
             let _ = self.forward_queue_events();
             self.commit_replies();
         }
@@ -630,6 +631,9 @@ impl Core {
                 self.receive(i, transmission);
             }
             DriverEvent::TransmitResult(result) => {
+                if let Some(aloha) = self.links[i].mac.aloha() {
+                    aloha.ended(result.transmission.unique_id());
+                }
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
                     tracing::warn!("transmission failed: {reason}");
