@@ -394,7 +394,11 @@ impl MacManager {
 
     /// When [`MacManager::poll`] next has something to report: the start of
     /// the next slot plus the guard time. `None` when no slot is configured.
+    /// For `MAC_ALOHA`: when a pause after a failed transmission ends.
     pub fn next_event_time(&self) -> Option<Micros> {
+        if let Scheme::Aloha(a) = &self.scheme {
+            return a.paused_until();
+        }
         if !self.running {
             return None;
         }
@@ -420,6 +424,9 @@ impl MacManager {
     /// before `now`), in order, and reports them. A slot of this node that
     /// is already over is reported as [`SlotAction::Missed`].
     pub fn poll(&mut self, now: Micros) -> Vec<MacEvent> {
+        if let Scheme::Aloha(a) = &mut self.scheme {
+            a.resume(now);
+        }
         let mut events = Vec::new();
         if !self.running {
             return events;

@@ -455,7 +455,7 @@ impl Core {
                 continue;
             };
             let unique_id = self.next_transmission.wrapping_add(1);
-            let Some(transmission) = aloha.ready(has_data, unique_id) else {
+            let Some(transmission) = aloha.ready(has_data, unique_id, self.clock.now()) else {
                 continue;
             };
             self.next_transmission = unique_id;

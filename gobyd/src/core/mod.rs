@@ -632,7 +632,8 @@ impl Core {
             }
             DriverEvent::TransmitResult(result) => {
                 if let Some(aloha) = self.links[i].mac.aloha() {
-                    aloha.ended(result.transmission.unique_id());
+                    let failed = matches!(result.outcome, TransmitOutcome::Failed(_));
+                    aloha.ended(result.transmission.unique_id(), failed, self.clock.now());
                 }
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
