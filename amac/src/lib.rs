@@ -1,5 +1,5 @@
 //! Medium access control for acoustic modems: time division multiple access
-//! (TDMA) in three schemes (thesis §2.4).
+//! (TDMA) in three schemes (thesis §2.4), and pure ALOHA.
 //!
 //! - **Fixed decentralized TDMA** ([`MacManager`] with `MAC_FIXED_DECENTRALIZED`):
 //!   a configured list of slots repeats as a cycle aligned to a reference
@@ -29,17 +29,22 @@
 //! them at sea, going back to a default when a keep-alive lapses
 //! ([`switcher`]).
 //!
+//! - **Pure ALOHA** (`MAC_ALOHA`, [`aloha`]): no slots; a node sends as
+//!   soon as it has data and its own previous transmission has ended.
+//!
 //! [`simulation`] holds the Monte Carlo evaluation of the auto-discovery
 //! rules (thesis Figs. 2.11 and 2.12).
 
 #![warn(missing_docs)]
 
+pub mod aloha;
 pub mod clock;
 pub mod discovery;
 pub mod error;
 pub mod schedule;
 pub mod timing;
 
+pub use aloha::Aloha;
 pub use clock::{Clock, ManualClock, Micros, SystemClock};
 pub use discovery::{DiscoveryAction, DiscoveryNode, DiscoveryRule, DiscoverySettings};
 pub use error::AmacError;

@@ -5,6 +5,7 @@ use protos::goby::acomms::protobuf::mac_config::MacRefTime;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::{MacConfig, MacType, ModemTransmission};
 
+use crate::aloha::Aloha;
 use crate::clock::{seconds_to_micros, Micros, MICROS_PER_DAY};
 use crate::discovery::{DiscoveryAction, DiscoveryNode, DiscoveryRule, DiscoverySettings};
 use crate::error::AmacError;
@@ -123,6 +124,7 @@ struct AutoCycle {
 #[derive(Debug, Clone)]
 enum Scheme {
     None,
+    Aloha(Aloha),
     Fixed(ListedCycle),
     Polled(ListedCycle),
     Auto(AutoCycle),
@@ -183,7 +185,7 @@ impl MacManager {
         let kind = config.r#type();
         if matches!(
             kind,
-            MacType::MacFixedDecentralized | MacType::MacAutoDecentralized
+            MacType::MacFixedDecentralized | MacType::MacAutoDecentralized | MacType::MacAloha
         ) && modem_id < 1
         {
             return Err(AmacError::config_field(
@@ -205,6 +207,7 @@ impl MacManager {
         };
         manager.scheme = match kind {
             MacType::MacNone => Scheme::None,
+            MacType::MacAloha => Scheme::Aloha(Aloha::new(modem_id, config.rate())),
             MacType::MacFixedDecentralized | MacType::MacPolled => {
                 let mut cycle = ListedCycle {
                     slots: Vec::new(),
@@ -302,6 +305,7 @@ impl MacManager {
     pub fn scheme_name(&self) -> &'static str {
         match self.scheme {
             Scheme::None => "MAC_NONE",
+            Scheme::Aloha(_) => "MAC_ALOHA",
             Scheme::Fixed(_) => "MAC_FIXED_DECENTRALIZED",
             Scheme::Polled(_) => "MAC_POLLED",
             Scheme::Auto(_) => "MAC_AUTO_DECENTRALIZED",
@@ -338,7 +342,7 @@ impl MacManager {
     /// holding the next slot.
     pub fn cycle(&self) -> Vec<ModemTransmission> {
         match &self.scheme {
-            Scheme::None => Vec::new(),
+            Scheme::None | Scheme::Aloha(_) => Vec::new(),
             Scheme::Fixed(c) | Scheme::Polled(c) => c.slots.clone(),
             Scheme::Auto(a) => a
                 .node
@@ -356,6 +360,15 @@ impl MacManager {
         match &self.scheme {
             Scheme::Auto(a) => a.node.known().to_vec(),
             _ => Vec::new(),
+        }
+    }
+
+    /// Pure ALOHA (`MAC_ALOHA`): the node's state, which the daemon
+    /// drives (no slots); `None` for the other schemes.
+    pub fn aloha(&mut self) -> Option<&mut Aloha> {
+        match &mut self.scheme {
+            Scheme::Aloha(a) => Some(a),
+            _ => None,
         }
     }
 
@@ -381,7 +394,11 @@ impl MacManager {
 
     /// When [`MacManager::poll`] next has something to report: the start of
     /// the next slot plus the guard time. `None` when no slot is configured.
+    /// For `MAC_ALOHA`: when a pause after a failed transmission ends.
     pub fn next_event_time(&self) -> Option<Micros> {
+        if let Scheme::Aloha(a) = &self.scheme {
+            return a.paused_until();
+        }
         if !self.running {
             return None;
         }
@@ -390,7 +407,7 @@ impl MacManager {
 
     fn next_slot_start(&self) -> Option<Micros> {
         match &self.scheme {
-            Scheme::None => None,
+            Scheme::None | Scheme::Aloha(_) => None,
             Scheme::Fixed(c) | Scheme::Polled(c) => c.next.map(|p| p.start),
             Scheme::Auto(a) => {
                 let start = a.next_k * a.slot_len;
@@ -407,6 +424,9 @@ impl MacManager {
     /// before `now`), in order, and reports them. A slot of this node that
     /// is already over is reported as [`SlotAction::Missed`].
     pub fn poll(&mut self, now: Micros) -> Vec<MacEvent> {
+        if let Scheme::Aloha(a) = &mut self.scheme {
+            a.resume(now);
+        }
         let mut events = Vec::new();
         if !self.running {
             return events;
@@ -425,7 +445,7 @@ impl MacManager {
         let modem_id = self.modem_id;
         let reference = self.reference;
         let start = match &mut self.scheme {
-            Scheme::None => return,
+            Scheme::None | Scheme::Aloha(_) => return,
             Scheme::Fixed(c) => start_listed(c, false, modem_id, reference, guard, now, events),
             Scheme::Polled(c) => start_listed(c, true, modem_id, reference, guard, now, events),
             Scheme::Auto(a) => start_auto(a, modem_id, reference, guard, now, events),

@@ -1572,6 +1572,15 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
     let Some(mac) = config.mac.as_ref() else {
         return problems;
     };
+    if mac.r#type() == MacType::MacAloha && modemdriver::rate::spec(mac.rate()).is_none() {
+        problems.push(Problem::new(
+            "mac.rate",
+            format!(
+                "{} is not a Micro-Modem rate (0-6): every transmission of MAC_ALOHA would fail",
+                mac.rate()
+            ),
+        ));
+    }
     for (i, slot) in mac.slot.iter().enumerate() {
         // A driver-specific slot's rate is checked with its kind (an FDP
         // slot's must be an FDP rate).

@@ -9,7 +9,8 @@
 //! the same sender are matched in order of publication, so a repeat on
 //! purpose counts as its own delivery and only copies beyond the number
 //! published count as duplicates). At the end, each publication still in
-//! its sender's journal is marked owed.
+//! its sender's journal is marked owed. The nodes' modem and medium
+//! access events are counted as slot use ([`crate::slot_use`]).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::Arc;
@@ -19,6 +20,8 @@ use modemdriver::TransmitOutcome;
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
+
+use crate::slot_use::{SlotTally, SlotUse};
 
 /// Microseconds since the UNIX epoch (virtual time).
 pub type Micros = i64;
@@ -105,6 +108,8 @@ pub struct Ledger {
     stray: Vec<Stray>,
     /// Data packets sent, by (node, modem rate).
     packets: BTreeMap<(usize, i32), u64>,
+    /// The nodes' slot use.
+    slots: SlotTally,
     failure: Option<String>,
 }
 
@@ -112,6 +117,7 @@ impl Ledger {
     /// An empty ledger of `nodes` (in the scenario's order).
     pub fn new(nodes: Vec<LedgerNode>) -> Self {
         Ledger {
+            slots: SlotTally::new(nodes.len()),
             nodes,
             publications: Vec::new(),
             entries: HashMap::new(),
@@ -142,6 +148,12 @@ impl Ledger {
     /// rate).
     pub fn packets(&self) -> &BTreeMap<(usize, i32), u64> {
         &self.packets
+    }
+
+    /// What the nodes did with the medium.
+    pub fn slot_use(&self) -> SlotUse {
+        let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
+        self.slots.finish(&names)
     }
 
     /// Why the run cannot be trusted (an event missed), if so.
@@ -204,6 +216,7 @@ impl Ledger {
 
     /// An event of node `node` at `time`.
     pub fn event(&mut self, node: usize, time: Micros, event: &DaemonEvent) {
+        self.slots.event(node, self.nodes[node].modem_id, event);
         match event {
             DaemonEvent::Received { received, .. } => {
                 let type_name = received.message.descriptor().full_name().to_string();

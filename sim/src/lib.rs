@@ -10,7 +10,10 @@
 //!   values constant, counted or drawn), seeded from the scenario's seed.
 //! - [`world`]: the nodes on one virtual clock and one medium, the run.
 //! - [`ledger`]: every publication and its fate.
+//! - [`slot_use`]: what the nodes did with the medium (slots, packets;
+//!   G and S of the shared slots).
 //! - [`report`]: the report (JSON) and the ledger (CSV).
+//! - [`aloha`]: ALOHA throughput measured against theory.
 //!
 //! ```no_run
 //! let scenario = goby_sim::scenario::load("fleet.pb.txt".as_ref())?;
@@ -19,9 +22,11 @@
 //! # Ok::<(), goby_sim::SimError>(())
 //! ```
 
+pub mod aloha;
 pub mod ledger;
 pub mod report;
 pub mod scenario;
+pub mod slot_use;
 pub mod track;
 pub mod traffic;
 pub mod world;

@@ -1,7 +1,8 @@
 //! The report of a run, from its [`Ledger`]: per message type and per pair
 //! of nodes, what was published, delivered (once, or more: duplicates),
 //! acknowledged, expired, dropped, still owed or lost, and the latency of
-//! first deliveries; as JSON, and the ledger itself as CSV.
+//! first deliveries; the nodes' slot use ([`crate::slot_use`]); as JSON,
+//! and the ledger itself as CSV.
 //!
 //! The same run gives the same bytes: maps are sorted, ratios have six
 //! decimals, times are virtual microseconds, and nothing of the machine
@@ -13,6 +14,7 @@ use serde::Serialize;
 
 use crate::ledger::{Ledger, Micros, Publication};
 use crate::scenario::Scenario;
+use crate::slot_use::SlotUse;
 
 /// The whole report.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -31,6 +33,9 @@ pub struct Report {
     /// Data packets each node put on the water, by node name and modem
     /// rate (`{"a": {"1": 40, "5": 72}}`).
     pub packets: BTreeMap<String, BTreeMap<i32, u64>>,
+    /// What the nodes did with the medium: slots, transmissions,
+    /// receptions; G and S of the shared slots.
+    pub slot_use: SlotUse,
 }
 
 /// What was run.
@@ -199,6 +204,7 @@ impl Report {
                     by_node
                 },
             ),
+            slot_use: ledger.slot_use(),
         }
     }
 

@@ -44,6 +44,23 @@ fn an_unknown_destination_is_refused_at_its_line_and_column() {
 }
 
 #[test]
+fn pure_aloha_at_a_rate_the_simulator_does_not_have_is_refused() {
+    let sweep = goby_sim::aloha::Sweep {
+        senders: 1,
+        rate: 9,
+        ..goby_sim::aloha::Sweep::pure()
+    };
+    let error = refusal(&sweep.scenario_text(10.0));
+    assert!(
+        error.contains("node[0].gobyd.mac.rate: 9 is not a Micro-Modem rate (0-6)"),
+        "{error}"
+    );
+    // At a rate it has, the same scenario is accepted.
+    let text = goby_sim::aloha::Sweep::pure().scenario_text(10.0);
+    parse(&text, "pure", Path::new(".")).expect("accepted");
+}
+
+#[test]
 fn a_gobyd_configuration_gobyd_refuses_is_refused_naming_the_node() {
     let text = support::ring(2, 0.0, 600, 60, 60).replacen(
         "slot { src: 2 dest: -1 rate: 1 slot_seconds: 10 }",

@@ -306,6 +306,10 @@ impl Core {
         match started {
             Ok(driver) => {
                 let link = &mut self.links[i];
+                // What the old driver had under way will not end.
+                if let Some(aloha) = link.mac.aloha() {
+                    aloha.reset();
+                }
                 link.driver_name = driver.name();
                 link.driver = Some(driver);
                 link.health = link::Health::Up;
@@ -432,6 +436,34 @@ impl Core {
                 if let Some(Err(e)) = outcome {
                     tracing::error!("cannot initiate a transmission: {e}");
                 }
+            }
+        }
+    }
+
+    /// Pure ALOHA (`MAC_ALOHA`, [`amac::aloha`]): each link so run whose
+    /// driver is up and whose own last transmission has ended sends at
+    /// once when a message waits, its destination left to the queue.
+    pub(super) fn aloha_transmissions(&mut self) {
+        for i in 0..self.links.len() {
+            let idle = self.links[i].mac.aloha().is_some_and(|a| !a.sending());
+            if !idle || self.links[i].driver.is_none() {
+                continue;
+            }
+            let has_data = self.most_urgent().is_some();
+            let link = &mut self.links[i];
+            let (Some(driver), Some(aloha)) = (link.driver.as_ref(), link.mac.aloha()) else {
+                continue;
+            };
+            let unique_id = self.next_transmission.wrapping_add(1);
+            let Some(transmission) = aloha.ready(has_data, unique_id, self.clock.now()) else {
+                continue;
+            };
+            self.next_transmission = unique_id;
+            link.slot_types = Vec::new();
+            tracing::debug!(unique_id, "initiating a transmission (ALOHA)");
+            if let Err(e) = driver.initiate_transmission(transmission) {
+                tracing::error!("cannot initiate a transmission: {e}");
+                aloha.reset();
             }
         }
     }

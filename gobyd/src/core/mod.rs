@@ -457,6 +457,7 @@ impl Core {
                 }
             }
             self.release_held();
+            self.aloha_transmissions();
             let _ = self.forward_queue_events();
             self.commit_replies();
         }
@@ -630,6 +631,10 @@ impl Core {
                 self.receive(i, transmission);
             }
             DriverEvent::TransmitResult(result) => {
+                if let Some(aloha) = self.links[i].mac.aloha() {
+                    let failed = matches!(result.outcome, TransmitOutcome::Failed(_));
+                    aloha.ended(result.transmission.unique_id(), failed, self.clock.now());
+                }
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
                     tracing::warn!("transmission failed: {reason}");

@@ -1,0 +1,148 @@
+//! Pure (unslotted) ALOHA (`MAC_ALOHA`, gobyd's own): a node sends a
+//! packet as soon as it has data and its own previous transmission has
+//! ended; no slots, no clock, no back-off. With Poisson offered traffic of
+//! G packets per packet duration its throughput is `G·e^(−2G)` (peak
+//! 1/(2e) ≈ 0.184 at G = 0.5): a packet is lost when another starts within
+//! one packet duration either side of it.
+//!
+//! A sans-IO state machine: the daemon tells it whether data waits
+//! ([`Aloha::ready`]) and when a transmission ended ([`Aloha::ended`]).
+//! After a transmission that failed (the modem away, an error) the node
+//! waits [`FAILED_PAUSE`] before it sends again, rather than ask a failing
+//! driver again at once, time after time.
+
+use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
+
+use crate::clock::Micros;
+use crate::manager::QUERY_DESTINATION_ID;
+
+/// How long a node waits after a failed transmission, microseconds.
+pub const FAILED_PAUSE: Micros = 1_000_000;
+
+/// One node's pure ALOHA.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Aloha {
+    modem_id: i32,
+    rate: i32,
+    /// The `unique_id` of this node's transmission under way.
+    in_flight: Option<u32>,
+    /// After a failed transmission: no sending before this time.
+    paused_until: Option<Micros>,
+}
+
+impl Aloha {
+    /// Node `modem_id` sending at `rate`, nothing under way.
+    pub fn new(modem_id: i32, rate: i32) -> Self {
+        Aloha {
+            modem_id,
+            rate,
+            in_flight: None,
+            paused_until: None,
+        }
+    }
+
+    /// With data waiting (`has_data`), no transmission of this node under
+    /// way and no pause after a failure at `now`: the transmission to
+    /// hand to the driver, numbered `unique_id` (its destination left to
+    /// the queue), now under way. `None` otherwise.
+    pub fn ready(
+        &mut self,
+        has_data: bool,
+        unique_id: u32,
+        now: Micros,
+    ) -> Option<ModemTransmission> {
+        self.resume(now);
+        if !has_data || self.in_flight.is_some() || self.paused_until.is_some() {
+            return None;
+        }
+        self.in_flight = Some(unique_id);
+        Some(ModemTransmission {
+            src: Some(self.modem_id),
+            dest: Some(QUERY_DESTINATION_ID),
+            rate: Some(self.rate),
+            r#type: Some(TransmissionType::Data as i32),
+            unique_id: Some(unique_id),
+            ..Default::default()
+        })
+    }
+
+    /// Transmission `unique_id` ended at `now` (sent, nothing to send, or
+    /// `failed`): when it is the one under way, this node may send again,
+    /// after [`FAILED_PAUSE`] if it failed. Returns whether it was.
+    pub fn ended(&mut self, unique_id: u32, failed: bool, now: Micros) -> bool {
+        if self.in_flight != Some(unique_id) {
+            return false;
+        }
+        self.in_flight = None;
+        if failed {
+            self.paused_until = Some(now + FAILED_PAUSE);
+        }
+        true
+    }
+
+    /// Ends a pause that is over by `now`.
+    pub fn resume(&mut self, now: Micros) {
+        if self.paused_until.is_some_and(|t| t <= now) {
+            self.paused_until = None;
+        }
+    }
+
+    /// When a pause after a failure ends (`None`: no pause): the daemon
+    /// wakes then to send what waits.
+    pub fn paused_until(&self) -> Option<Micros> {
+        self.paused_until
+    }
+
+    /// The transmission under way will not end (its driver stopped):
+    /// this node may send again, without a pause.
+    pub fn reset(&mut self) {
+        self.in_flight = None;
+        self.paused_until = None;
+    }
+
+    /// Whether a transmission of this node is under way.
+    pub fn sending(&self) -> bool {
+        self.in_flight.is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sends_when_data_waits_and_not_again_until_its_own_transmission_ends() {
+        let mut a = Aloha::new(3, 1);
+        assert_eq!(a.ready(false, 1, 0), None);
+        let t = a.ready(true, 1, 0).expect("data waits, nothing under way");
+        assert_eq!(
+            (t.src(), t.dest(), t.rate(), t.unique_id()),
+            (3, QUERY_DESTINATION_ID, 1, 1)
+        );
+        assert_eq!(t.r#type(), TransmissionType::Data);
+        assert!(a.sending());
+        assert_eq!(a.ready(true, 2, 0), None);
+        // Another transmission's end (an ack) does not free it.
+        assert!(!a.ended(7, false, 0));
+        assert_eq!(a.ready(true, 2, 0), None);
+        assert!(a.ended(1, false, 5));
+        assert_eq!(a.paused_until(), None);
+        assert_eq!(a.ready(true, 2, 5).map(|t| t.unique_id()), Some(2));
+        a.reset();
+        assert!(!a.sending());
+    }
+
+    #[test]
+    fn after_a_failed_transmission_it_waits_the_pause() {
+        let mut a = Aloha::new(3, 1);
+        a.ready(true, 1, 0).expect("sent");
+        assert!(a.ended(1, true, 100));
+        assert_eq!(a.paused_until(), Some(100 + FAILED_PAUSE));
+        assert_eq!(a.ready(true, 2, 100 + FAILED_PAUSE - 1), None);
+        assert!(a.ready(true, 2, 100 + FAILED_PAUSE).is_some());
+        // A pause over with nothing to send ends all the same.
+        assert!(a.ended(2, true, 0));
+        a.resume(FAILED_PAUSE);
+        assert_eq!(a.paused_until(), None);
+    }
+}
