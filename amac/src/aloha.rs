@@ -145,4 +145,25 @@ mod tests {
         a.resume(FAILED_PAUSE);
         assert_eq!(a.paused_until(), None);
     }
+
+    #[test]
+    fn a_mac_aloha_with_slots_is_refused_naming_them() {
+        use protos::goby::acomms::protobuf::{MacConfig, MacType, ModemTransmission};
+        let mut config = MacConfig {
+            modem_id: Some(3),
+            r#type: Some(MacType::MacAloha as i32),
+            ..Default::default()
+        };
+        assert!(crate::MacManager::new(&config, 0).is_ok());
+        config.slot.push(ModemTransmission {
+            src: Some(3),
+            slot_seconds: Some(10.0),
+            ..Default::default()
+        });
+        let err = crate::MacManager::new(&config, 0).unwrap_err().to_string();
+        assert!(
+            err.contains("slot[0]") && err.contains("MAC_ALOHA has no slots"),
+            "{err}"
+        );
+    }
 }

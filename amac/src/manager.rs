@@ -207,7 +207,16 @@ impl MacManager {
         };
         manager.scheme = match kind {
             MacType::MacNone => Scheme::None,
-            MacType::MacAloha => Scheme::Aloha(Aloha::new(modem_id, config.rate())),
+            MacType::MacAloha => {
+                if !config.slot.is_empty() {
+                    return Err(AmacError::config_field(
+                        "slot[0]",
+                        "MAC_ALOHA has no slots (a node sends as soon as a message waits): leave \
+                         slot out, or share slots with MAC_FIXED_DECENTRALIZED and shared { }",
+                    ));
+                }
+                Scheme::Aloha(Aloha::new(modem_id, config.rate()))
+            }
             MacType::MacFixedDecentralized | MacType::MacPolled => {
                 let mut cycle = ListedCycle {
                     slots: Vec::new(),
