@@ -151,8 +151,21 @@ fn check_seconds(field: String, value: f64, minimum_exclusive: f64) -> Result<Mi
             format!("must be a finite number of seconds above {minimum_exclusive}, not {value}"),
         ));
     }
+    if value > MAX_SLOT_SECONDS {
+        return Err(AmacError::config_field(
+            field,
+            format!(
+                "{value} s is longer than a day ({MAX_SLOT_SECONDS} s): a slot is seconds to \
+                 minutes (a slot of a MACUpdate sent over the link is at most 3600 s)"
+            ),
+        ));
+    }
     Ok(seconds_to_micros(value))
 }
+
+/// The longest slot (seconds): a day. Longer is a mistake, and a cycle of
+/// such slots would overflow the microsecond clock.
+pub const MAX_SLOT_SECONDS: f64 = 86_400.0;
 
 impl MacManager {
     /// Starts the medium access control described by `config` at time `now`.

@@ -50,12 +50,15 @@ pub struct CycleLayout {
 
 impl CycleLayout {
     /// A cycle of slots lasting `durations` each, in order. Every duration
-    /// must be positive and there must be at least one.
+    /// must be positive and there must be at least one (`None` otherwise,
+    /// or when the cycle's length overflows).
     pub fn new(durations: Vec<Micros>) -> Option<Self> {
         if durations.is_empty() || durations.iter().any(|&d| d <= 0) {
             return None;
         }
-        let total = durations.iter().sum();
+        let total = durations
+            .iter()
+            .try_fold(0 as Micros, |sum, &d| sum.checked_add(d))?;
         Some(Self { durations, total })
     }
 

@@ -146,3 +146,31 @@ fn schemes_without_a_slot_list_refuse_updates() {
         .unwrap_err();
     assert!(matches!(err, AmacError::WrongScheme { .. }), "{err}");
 }
+
+#[test]
+fn a_slot_longer_than_a_day_is_refused_in_an_update_and_in_the_configuration() {
+    let mut mac = node_two(DAY_START);
+    for seconds in [1e13, 1e308, 86_400.5] {
+        let u = update(
+            UpdateType::PushBack,
+            vec![update_slot(&slot(2, 0, 0, seconds))],
+        );
+        let err = mac.apply_update(&u, DAY_START).unwrap_err().to_string();
+        assert!(err.contains("longer than a day"), "{seconds}: {err}");
+    }
+    // The cycle is as it was, and runs.
+    assert_eq!(
+        initiated_until(&mut mac, DAY_START, DAY_START + 40 * S),
+        vec![10, 30]
+    );
+    let config = listed_config(
+        MacType::MacFixedDecentralized,
+        2,
+        vec![slot(1, 0, 0, 10.0), slot(2, 0, 0, 1e13)],
+    );
+    let err = MacManager::new(&config, DAY_START).unwrap_err().to_string();
+    assert!(
+        err.contains("slot[1].slot_seconds") && err.contains("longer than a day"),
+        "{err}"
+    );
+}

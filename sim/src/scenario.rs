@@ -88,7 +88,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         origin,
         base,
         found: Vec::new(),
-        start_s: 0,
+        start_s: None,
         duration_s: 0.0,
         water: SimulatorDriverConfig::default(),
         water_refused: Vec::new(),
@@ -118,8 +118,8 @@ struct Check<'a> {
     origin: &'a str,
     base: &'a Path,
     found: Vec<String>,
-    /// The virtual start, seconds since the UNIX epoch.
-    start_s: i64,
+    /// The virtual start, seconds since the UNIX epoch (`None`: refused).
+    start_s: Option<i64>,
     /// The seconds of traffic (`duration_s`), for the streams' sizes.
     duration_s: f64,
     /// The simulated water, which each node's driver is checked with.
@@ -131,6 +131,13 @@ struct Check<'a> {
 
 /// The longest `duration_s` or `drain_s` a run takes: a year.
 const MAX_SECONDS: f64 = 366.0 * 86_400.0;
+
+/// The farthest a node may be from the scenario's origin, east or north,
+/// metres: 10 000 km.
+const MAX_OFFSET: f64 = 1e7;
+
+/// The deepest a node may be, metres (the Challenger Deep is under 11 km).
+const MAX_DEPTH: f64 = 11_000.0;
 
 /// The fastest a node may go on its track, metres per second: faster than
 /// any vehicle or ship at sea.
@@ -172,10 +179,16 @@ impl Check<'_> {
         } else if drain > MAX_SECONDS {
             self.problem("drain_s", too_long(drain));
         }
-        self.duration_s = duration;
+        // A duration or a start refused above is not checked against again
+        // (no follow-on problems of the streams).
+        self.duration_s = if duration > 0.0 && duration <= MAX_SECONDS {
+            duration
+        } else {
+            0.0
+        };
         let start = start_micros(s.start_time());
         match &start {
-            Ok(micros) => self.start_s = micros.div_euclid(1_000_000),
+            Ok(micros) => self.start_s = Some(micros.div_euclid(1_000_000)),
             Err(e) => self.problem("start_time", e.clone()),
         }
         let water = s.water.clone().unwrap_or_default();
@@ -338,6 +351,14 @@ impl Check<'_> {
                     format!("{at}.{axis}"),
                     format!("{value} is not a position (metres)"),
                 );
+            } else if value.abs() > MAX_OFFSET {
+                self.problem(
+                    format!("{at}.{axis}"),
+                    format!(
+                        "{value:e} m is farther than {MAX_OFFSET:e} m from the origin: not a \
+                         place on this planet's oceans in a local grid"
+                    ),
+                );
             }
         }
         let depth = position.depth();
@@ -345,6 +366,11 @@ impl Check<'_> {
             self.problem(
                 format!("{at}.depth"),
                 format!("{depth} is not a depth (metres down, 0 or more)"),
+            );
+        } else if depth > MAX_DEPTH {
+            self.problem(
+                format!("{at}.depth"),
+                format!("{depth:e} m is deeper than any ocean ({MAX_DEPTH} m)"),
             );
         }
         let point = [position.x(), position.y(), depth];
@@ -376,7 +402,8 @@ impl Check<'_> {
             .collect();
         let waypoints: Vec<[f64; 3]> = waypoints.into_iter().collect::<Option<_>>()?;
         let speed = track.speed_mps();
-        if waypoints.len() > 1 && !(speed > 0.0 && speed <= MAX_SPEED) {
+        let needed = waypoints.len() > 1 || track.speed_mps.is_some();
+        if needed && !(speed > 0.0 && speed <= MAX_SPEED) {
             self.problem(
                 format!("{at}.speed_mps"),
                 format!(
@@ -658,7 +685,7 @@ impl Check<'_> {
             );
             return None;
         }
-        if start_s >= self.duration_s {
+        if self.duration_s > 0.0 && start_s >= self.duration_s {
             self.problem(
                 format!("{at}.start_s"),
                 format!(
@@ -687,7 +714,10 @@ impl Check<'_> {
         // A time the receiver would restore on another date (the daemon
         // refuses it at publication), checked at the start.
         let sample = stream.generator(0, i).message();
-        let moved = checked.codec.moved_dates_at(&sample, self.start_s);
+        let moved = match self.start_s {
+            Some(start_s) => checked.codec.moved_dates_at(&sample, start_s),
+            None => Ok(Vec::new()),
+        };
         let changed = checked
             .codec
             .check(&sample)

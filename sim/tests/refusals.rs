@@ -397,3 +397,19 @@ fn a_proto_file_is_read_relative_to_the_file_that_names_it() {
     assert_eq!(scenario.nodes.len(), 2);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_start_or_duration_refused_is_told_once_without_follow_on_problems() {
+    let ring = support::ring(2, 0.0, 600, 60, 60);
+    let bad_start = ring.replacen("2026-06-01T00:00:00Z", "2026-13-01T00:00:00Z", 1);
+    let error = refusal(&bad_start);
+    assert_eq!(error.lines().count(), 1, "{error}");
+    assert!(error.contains("start_time"), "{error}");
+    let bad_duration = ring.replacen("duration_s: 600", "duration_s: -5", 1);
+    let error = refusal(&bad_duration);
+    assert_eq!(error.lines().count(), 1, "{error}");
+    assert!(
+        error.contains("duration_s: give the seconds of traffic"),
+        "{error}"
+    );
+}

@@ -93,6 +93,18 @@ fn tracks_that_cannot_be_run_are_refused_at_their_place() {
             "node[1].track.waypoint[1].depth: -3 is not a depth",
         ),
         (
+            "track { waypoint { x: 0 } speed_mps: -1 }",
+            "node[1].track.speed_mps: -1 is not a speed",
+        ),
+        (
+            "track { waypoint { x: 1e300 } waypoint { x: -1e300 } speed_mps: 30 }",
+            "node[1].track.waypoint[0].x: 1e300 m is farther than 1e7 m",
+        ),
+        (
+            "track { waypoint { x: 0 depth: 5e6 } }",
+            "node[1].track.waypoint[0].depth: 5e6 m is deeper than any ocean",
+        ),
+        (
             "position { x: 1 } track { waypoint { x: 0 } }",
             "node[1].track: give position (a fixed node) or track (a moving one), not both",
         ),

@@ -48,11 +48,21 @@ impl MacSwitcher {
     }
 }
 
+/// The longest keep-alive, seconds: a year. A keep-alive is renewed by the
+/// process commanding the MAC; for one that never lapses, give none.
+const MAX_KEEP_ALIVE_SECONDS: f64 = 366.0 * 86_400.0;
+
 /// Microseconds of `seconds` (a keep-alive), or why not.
 fn keep_alive_micros(seconds: Option<f64>) -> Result<Option<i64>, String> {
     match seconds {
         None => Ok(None),
-        Some(s) if s.is_finite() && s > 0.0 => Ok(Some((s * 1e6).round() as i64)),
+        Some(s) if s.is_finite() && s > 0.0 && s <= MAX_KEEP_ALIVE_SECONDS => {
+            Ok(Some((s * 1e6).round() as i64))
+        }
+        Some(s) if s > MAX_KEEP_ALIVE_SECONDS => Err(format!(
+            "keep_alive_seconds {s} is more than a year ({MAX_KEEP_ALIVE_SECONDS} s): leave it \
+             out for a MAC that runs until switched again"
+        )),
         Some(s) => Err(format!(
             "keep_alive_seconds {s} is not a positive number of seconds (leave it out for no keep-alive)"
         )),
@@ -254,8 +264,11 @@ mod tests {
     fn a_keep_alive_must_be_a_positive_number_of_seconds() {
         assert_eq!(keep_alive_micros(None), Ok(None));
         assert_eq!(keep_alive_micros(Some(1.5)), Ok(Some(1_500_000)));
-        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 1e18, 1e300] {
             assert!(keep_alive_micros(Some(bad)).is_err(), "{bad}");
         }
+        assert!(keep_alive_micros(Some(1e300))
+            .unwrap_err()
+            .contains("more than a year"));
     }
 }
