@@ -193,6 +193,64 @@ async fn a_restart_keeps_the_mac_and_its_deadline_and_reverts_if_it_lapsed_while
     assert!(!kept.is_empty());
 }
 
+/// A `MACUpdate` pushing a slot of `seconds` at the back of node 1's cycle.
+fn push_back(seconds: f64) -> protos::goby::acomms::protobuf::MacUpdate {
+    use protos::goby::acomms::protobuf::{mac_update::UpdateType, MacUpdate, MacUpdateSlot};
+    let mut update = MacUpdate {
+        src: 1,
+        dest: 1,
+        slot: vec![MacUpdateSlot {
+            src: Some(1),
+            dest: Some(-1),
+            rate: Some(1),
+            slot_seconds: Some(seconds),
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    update.set_update_type(UpdateType::PushBack);
+    update
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_update_to_the_mac_switched_to_is_kept_across_a_restart() {
+    let dir = scratch("mac-switcher", "update-kept");
+    let clock = Arc::new(TokioClock::new());
+    let node = start(&dir, &clock).await;
+    node.switch(Some("quiet"), Some(600.0)).await.unwrap();
+    let (reply, answer) = oneshot::channel();
+    node.control
+        .send(Control::MacUpdate {
+            update: push_back(11.0),
+            from: UpdateSource::Json,
+            reply,
+        })
+        .await
+        .unwrap();
+    let cycle = answer.await.unwrap().expect("applied");
+    let lengths = |c: &protos::goby::acomms::protobuf::MacCycle| -> Vec<f64> {
+        c.slot.iter().map(|s| s.slot_seconds()).collect()
+    };
+    assert_eq!(lengths(&cycle), vec![QUIET, 11.0]);
+    node.stop().await;
+
+    let node = start(&dir, &clock).await;
+    let state = node.switch(None, None).await.unwrap();
+    assert_eq!(state.active, "quiet");
+    let (reply, answer) = oneshot::channel();
+    node.control
+        .send(Control::MacCycle { reply })
+        .await
+        .unwrap();
+    let cycle = answer.await.unwrap();
+    assert_eq!(
+        lengths(&cycle),
+        vec![QUIET, 11.0],
+        "the restarted node runs quiet as it was changed"
+    );
+    node.stop().await;
+}
+
 #[tokio::test(start_paused = true)]
 async fn an_unknown_mac_is_refused_naming_it_and_the_switchers_macs() {
     let dir = scratch("mac-switcher", "refused");

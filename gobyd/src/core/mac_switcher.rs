@@ -215,8 +215,13 @@ impl Core {
         }
         current.switcher = next;
         if let Some(mac) = built {
-            if let Err(e) = MacCycleFile::in_dir(self.data_dir.path()).remove() {
-                tracing::warn!("{e}");
+            // The changes made to the MAC that ran before are dropped; at a
+            // restore the kept changes are the restored MAC's own, and
+            // `restore_mac_cycle` runs them next.
+            if switch.reason != amac::SwitchReason::Restored {
+                if let Err(e) = MacCycleFile::in_dir(self.data_dir.path()).remove() {
+                    tracing::warn!("{e}");
+                }
             }
             self.links[0].mac = mac;
             self.links[0].adaptive_rate = config.adaptive_rate();
