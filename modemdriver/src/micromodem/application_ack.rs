@@ -296,7 +296,8 @@ pub struct Heard {
     /// Its ack message could not be decoded (the frame is left as it was).
     pub error: Option<String>,
     /// Its frame 0 holds data and no ack message: its sender does not use
-    /// application acks.
+    /// application acks in this kind of transmission (a data cycle of a
+    /// node with `FDP_ONLY`), or at all.
     pub plain: bool,
 }
 
