@@ -142,7 +142,7 @@ impl Link {
     /// A scenario run only when `GOBY3_FLEET_ONLY` names it: data cycles
     /// with application acks at both nodes, which Goby3 3.1.5 cannot do
     /// (it reads application acks in FDP packets only), kept to show what
-    /// happens; and the mixed cycle ([`MIXED`]), run once so far.
+    /// happens; and the mixed cycle ([`MIXED`]), run twice so far.
     fn probe(self) -> bool {
         matches!(
             self,
