@@ -11,6 +11,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use modemdriver::micromodem::application_ack::Mode as AckMode;
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
     driver_config, modem_transmission::TransmissionType, simulator_driver_config, DriverConfig,
@@ -1188,12 +1189,12 @@ fn complete_driver(driver: &mut DriverConfig, id: i32, prefix: &str) -> Result<(
     {
         // A modem acks on decode, before the daemon has kept the message:
         // acks are sent in software, after the inbox sync, unless the
-        // configuration says otherwise (e.g. to talk to peers without them).
-        driver
-            .micromodem
-            .get_or_insert_with(Default::default)
-            .use_application_acks
-            .get_or_insert(true);
+        // configuration says otherwise (e.g. to talk to peers without them,
+        // or `application_acks`, which takes precedence).
+        let mm = driver.micromodem.get_or_insert_with(Default::default);
+        if mm.application_acks.is_none() {
+            mm.use_application_acks.get_or_insert(true);
+        }
     }
     let is_simulator = driver.driver
         == Some(driver_config::Driver::DriverType(
@@ -2041,7 +2042,7 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
     let unset = driver
         .micromodem
         .as_ref()
-        .is_none_or(|m| m.use_application_acks.is_none());
+        .is_none_or(|m| m.use_application_acks.is_none() && m.application_acks.is_none());
     if !(micromodem && unset) {
         return None;
     }
@@ -2061,11 +2062,13 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
         }
         (_, true) => {
             "driver.micromodem.use_application_acks is not set: gobyd sends application acks in \
-             its data and FDP slots alike; in a fleet with Goby3 nodes no one setting serves both \
-             kinds of slot (Goby3 reads application acks in FDP packets only and cannot decode a \
-             data-cycle frame that starts with one, while without them FDP packets are never \
-             acknowledged): give the fleet FDP slots with use_application_acks: true everywhere, \
-             or data slots with it false everywhere"
+             its data and FDP slots alike; Goby3 reads application acks in FDP packets only and \
+             cannot decode a data-cycle frame that starts with one, while without them FDP packets \
+             are never acknowledged: in a fleet with Goby3 nodes, set application_acks: FDP_ONLY \
+             here (data cycles then go plain and are acked by the modem; acks owed ride in FDP \
+             packets), use_application_acks: true in the Goby3 nodes' \
+             [goby.acomms.micromodem.protobuf.config], and put a gobyd FDP slot between any two \
+             slots of a Goby3 node"
                 .to_string()
         }
     })
@@ -2077,25 +2080,31 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
 /// The slot's field and the text.
 fn fdp_without_acks_note(config: &GobydConfig) -> Option<(String, String)> {
     let driver = config.driver.as_ref()?;
-    let off = driver.driver
+    let micromodem = driver.driver
         == Some(driver_config::Driver::DriverType(
             DriverType::DriverWhoiMicromodem as i32,
-        ))
-        && driver
-            .micromodem
-            .as_ref()
-            .is_some_and(|m| m.use_application_acks == Some(false));
+        ));
+    // Turned off in so many words (unset, gobyd turns them on).
+    let off = match driver.micromodem.as_ref() {
+        Some(m) if micromodem && !AckMode::of(m).on() => match m.application_acks {
+            Some(_) => Some("application_acks is NONE"),
+            None => m
+                .use_application_acks
+                .map(|_| "use_application_acks is false"),
+        },
+        _ => None,
+    };
     let (fdp, _) = slot_kinds(config);
     let first = *fdp.first()?;
-    off.then(|| {
+    off.map(|off| {
         (
             format!("mac.slot[{first}]"),
             format!(
                 "mac.slot[{first}] is a Flexible Data Protocol slot and \
-                 driver.micromodem.use_application_acks is false: the modem acknowledges no FDP \
+                 driver.micromodem.{off}: the modem acknowledges no FDP \
                  packet, so no message sent in {} is ever acknowledged (those asking for acks are \
-                 sent again until their ttl); set use_application_acks: true, here and at every \
-                 node (Goby3's too)",
+                 sent again until their ttl); set use_application_acks: true (or \
+                 application_acks: FDP_ONLY), here and at every node (Goby3's too)",
                 if fdp.len() == 1 { "it" } else { "these slots" }
             ),
         )
@@ -2113,9 +2122,7 @@ pub fn application_acks(config: &GobydConfig) -> bool {
                 == Some(driver_config::Driver::DriverType(
                     DriverType::DriverWhoiMicromodem as i32,
                 ))
-                && d.micromodem
-                    .as_ref()
-                    .is_some_and(|m| m.use_application_acks())
+                && d.micromodem.as_ref().is_some_and(|m| AckMode::of(m).on())
         })
 }
 

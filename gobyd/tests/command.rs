@@ -447,13 +447,42 @@ fn check_reads_goby3_fdp_slots_and_says_what_they_need() {
             && err.contains("no message sent in these slots is ever acknowledged"),
         "{err}"
     );
-    // Data and FDP slots in one fleet with Goby3: no one setting serves both.
+    // Data and FDP slots in one fleet with Goby3: application acks in FDP
+    // packets only.
+    let mixed = "  slot { src: 1 rate: 1 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n  slot { src: 2 rate: 1 slot_seconds: 10 }\n";
+    let (code, err, _) = check(config("", mixed));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("set application_acks: FDP_ONLY")
+            && err.contains("a gobyd FDP slot between any two slots of a Goby3 node"),
+        "{err}"
+    );
+    let (code, err, text) = check(config(
+        "  micromodem { application_acks: FDP_ONLY }\n",
+        mixed,
+    ));
+    assert_eq!(code, Some(0), "{text}: {err}");
+    assert!(!err.contains("application_acks"), "{err}");
+    // Set both ways, they must agree.
     let (code, err, _) = check(config(
-        "",
-        "  slot { src: 1 rate: 1 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n  slot { src: 2 rate: 1 slot_seconds: 10 }\n",
+        "  micromodem { application_acks: FDP_ONLY use_application_acks: false }\n",
+        mixed,
+    ));
+    assert_ne!(code, Some(0), "{err}");
+    assert!(
+        err.contains("micromodem.application_acks") && err.contains("FDP_ONLY disagrees"),
+        "{err}"
+    );
+    // NONE is not turned on by gobyd's default.
+    let (code, err, _) = check(config(
+        "  micromodem { application_acks: NONE }\n",
+        goby3_slot,
     ));
     assert_eq!(code, Some(0), "{err}");
-    assert!(err.contains("no one setting serves both"), "{err}");
+    assert!(
+        err.contains("driver.micromodem.application_acks is NONE: the modem acknowledges no FDP"),
+        "{err}"
+    );
     for (slot, expected) in [
         (
             "  slot { src: 1 rate: 2 type: DRIVER_SPECIFIC micromodem { type: MICROMODEM_FLEXIBLE_DATA } slot_seconds: 10 }\n",

@@ -22,8 +22,10 @@
 //!
 //! `GOBY3_FLEET_ONLY=udp,mm1-rate0,...` runs only the scenarios named (of
 //! `udp`, `multicast`, `mm1-rate0`, `mm1-rate1`, `mm2-rate0`, `mm2-rate1`,
-//! `mm2-fdp`, and `mm2-rate1-app-acks`: data cycles with application acks
-//! at both nodes, run only when named, see [`Link::probe`]);
+//! `mm2-fdp`, and, run only when named (see [`Link::probe`]), `mm2-mixed`:
+//! a cycle of data and FDP slots, Goby3 with `use_application_acks: true`
+//! and gobyd with `application_acks: FDP_ONLY`, and `mm2-rate1-app-acks`:
+//! data cycles with application acks at both nodes);
 //! `GOBY3_FLEET_STATS_LAYOUT` is given to the emulators as
 //! `--stats-layout` (default: the firmware's own).
 //!
@@ -98,14 +100,28 @@ enum Link {
         /// `use_application_acks: true` at both nodes (else acks from the
         /// modem, Goby3's default).
         app_acks: bool,
+        /// The cycle [`MIXED`], data and FDP slots: Goby3 with
+        /// `use_application_acks: true`, gobyd with `application_acks:
+        /// FDP_ONLY`.
+        mixed: bool,
     },
 }
+
+/// The slots `(src, fdp)` of the mixed cycle: a gobyd (node 2) FDP slot
+/// between any two slots of Goby3 (node 1), so that the acks gobyd owes it
+/// reach it before it sends again.
+const MIXED: [(i32, bool); 5] = [(1, false), (2, true), (1, true), (2, false), (2, true)];
 
 impl Link {
     fn tag(self) -> String {
         match self {
             Link::Udp => "udp".to_string(),
             Link::Multicast => "multicast".to_string(),
+            Link::MicroModem {
+                generation,
+                mixed: true,
+                ..
+            } => format!("mm{generation}-mixed"),
             Link::MicroModem {
                 generation,
                 fdp: true,
@@ -126,7 +142,7 @@ impl Link {
     /// A scenario run only when `GOBY3_FLEET_ONLY` names it: data cycles
     /// with application acks at both nodes, which Goby3 3.1.5 cannot do
     /// (it reads application acks in FDP packets only), kept to show what
-    /// happens.
+    /// happens; and the mixed cycle ([`MIXED`]), run twice so far.
     fn probe(self) -> bool {
         matches!(
             self,
@@ -146,10 +162,17 @@ impl Link {
                 generation,
                 fdp,
                 app_acks,
+                mixed,
                 ..
             } => format!(
                 "Micro-Modem {generation} (emulated){}{}",
-                if fdp { ", FDP" } else { "" },
+                if mixed {
+                    ", data and FDP"
+                } else if fdp {
+                    ", FDP"
+                } else {
+                    ""
+                },
                 if app_acks { ", application acks" } else { "" }
             ),
         }
@@ -161,6 +184,25 @@ impl Link {
 
     fn fdp(self) -> bool {
         matches!(self, Link::MicroModem { fdp: true, .. })
+    }
+
+    fn mixed(self) -> bool {
+        matches!(self, Link::MicroModem { mixed: true, .. })
+    }
+
+    /// Slots in a cycle.
+    fn slots(self) -> u32 {
+        if self.mixed() {
+            MIXED.len() as u32
+        } else {
+            2
+        }
+    }
+
+    /// Longest the scenario may take to deliver and acknowledge everything
+    /// (each round): [`SCENARIO_LIMIT`] for a cycle of two slots.
+    fn limit(self) -> Duration {
+        SCENARIO_LIMIT * self.slots() / 2
     }
 
     fn rate(self) -> u32 {
@@ -184,11 +226,27 @@ impl Link {
 fn mission_file(dir: &Path, moos_port: u16, link: Link, driver_cfg: &str, proto: &Path) -> PathBuf {
     let rate = link.rate();
     let slot = link.slot_seconds();
-    let kind = if link.fdp() {
-        "DRIVER_SPECIFIC [goby.acomms.micromodem.protobuf.transmission] { type: MICROMODEM_FLEXIBLE_DATA }"
-    } else {
-        "DATA"
+    let kind = |fdp: bool| {
+        if fdp {
+            "DRIVER_SPECIFIC [goby.acomms.micromodem.protobuf.transmission] { type: MICROMODEM_FLEXIBLE_DATA }"
+        } else {
+            "DATA"
+        }
     };
+    let cycle: &[(i32, bool)] = if link.mixed() {
+        &MIXED
+    } else {
+        &[(1, link.fdp()), (2, link.fdp())]
+    };
+    let slots: String = cycle
+        .iter()
+        .map(|&(src, fdp)| {
+            format!(
+                "    slot {{ src: {src} dest: -1 rate: {rate} type: {} slot_seconds: {slot} }}\n",
+                kind(fdp)
+            )
+        })
+        .collect();
     let text = format!(
         r#"ServerHost = localhost
 ServerPort = {moos_port}
@@ -203,9 +261,7 @@ ProcessConfig = pAcommsHandler
   }}
   mac_cfg {{
     type: MAC_FIXED_DECENTRALIZED
-    slot {{ src: 1 dest: -1 rate: {rate} type: {kind} slot_seconds: {slot} }}
-    slot {{ src: 2 dest: -1 rate: {rate} type: {kind} slot_seconds: {slot} }}
-  }}
+{slots}  }}
   queue_cfg {{
     message_entry {{
       protobuf_name: "fleet.Tick"
@@ -328,9 +384,12 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
                 // ($CARDP), not in data cycles ($CARXD): FDP slots need
                 // them at both nodes (the modem acknowledges no FDP
                 // packet), data cycles need them off at both.
-                micromodem_driver(&pty2)
-                    .use_application_acks(link.app_acks())
-                    .into(),
+                if link.mixed() {
+                    micromodem_driver(&pty2).setting("application_acks: FDP_ONLY")
+                } else {
+                    micromodem_driver(&pty2).use_application_acks(link.app_acks())
+                }
+                .into(),
             )
         }
     };
@@ -343,7 +402,9 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
     // Node 2: gobyd.
     let json_port = free_tcp_port();
     let node = Node::new(2).driver(gobyd_driver);
-    let node = if link.fdp() {
+    let node = if link.mixed() {
+        node.mixed_tdma(&MIXED, link.rate(), link.slot_seconds())
+    } else if link.fdp() {
         node.fdp_tdma(&[1, 2], link.rate(), link.slot_seconds(), false)
     } else {
         node.tdma(&[1, 2], link.rate(), link.slot_seconds())
@@ -414,7 +475,7 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
             // The first round: one message each way, until delivered and
             // acked (see [`WARM_UP`]).
             publish(&mut json, WARM_UP);
-            let deadline = Instant::now() + SCENARIO_LIMIT;
+            let deadline = Instant::now() + link.limit();
             let warm =
                 |t: &Tally| t.delivered.contains_key(&WARM_UP) && t.acked.contains_key(&WARM_UP);
             while !(warm(&to_goby3) && warm(&from_goby3)) && Instant::now() < deadline {
@@ -439,7 +500,7 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
             from_goby3.published += 1;
             to_goby3.published += 1;
         }
-        let deadline = Instant::now() + SCENARIO_LIMIT;
+        let deadline = Instant::now() + link.limit();
         let mut done_at: Option<Instant> = None;
         loop {
             while let Ok(v) = json.lines.try_recv() {
@@ -453,7 +514,8 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
             let now = Instant::now();
             if to_goby3.complete() && from_goby3.complete() {
                 // Another full cycle: a repeat would show by then.
-                let settle = Duration::from_secs_f64(2.0 * link.slot_seconds() + 1.0);
+                let settle =
+                    Duration::from_secs_f64(f64::from(link.slots()) * link.slot_seconds() + 1.0);
                 match done_at {
                     None => done_at = Some(now),
                     Some(t) if now >= t + settle => break,
@@ -523,6 +585,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
         rate,
         fdp,
         app_acks,
+        mixed: false,
     };
     let links = links.into_iter().chain([
         mm(1, 0, false, false),
@@ -531,6 +594,13 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
         mm(2, 1, false, false),
         mm(2, 1, true, true),
         mm(2, 1, false, true),
+        Link::MicroModem {
+            generation: 2,
+            rate: 1,
+            fdp: false,
+            app_acks: true,
+            mixed: true,
+        },
     ]);
     let only = std::env::var("GOBY3_FLEET_ONLY").ok();
     let chosen: Vec<Link> = links
@@ -568,6 +638,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
             link.name(),
             match link {
                 Link::Udp | Link::Multicast => "-".to_string(),
+                Link::MicroModem { mixed: true, .. } => format!("data and FDP {}", link.rate()),
                 Link::MicroModem { fdp: true, .. } => format!("FDP {}", link.rate()),
                 _ => link.rate().to_string(),
             },

@@ -34,11 +34,10 @@ pub(crate) fn keep_application_acks_in(
     driver: &mut protos::goby::acomms::protobuf::DriverConfig,
     data_dir: &Path,
 ) {
-    if let Some(mm) = driver
-        .micromodem
-        .as_mut()
-        .filter(|mm| mm.use_application_acks() && mm.application_ack_state_file.is_none())
-    {
+    if let Some(mm) = driver.micromodem.as_mut().filter(|mm| {
+        modemdriver::micromodem::application_ack::Mode::of(mm).on()
+            && mm.application_ack_state_file.is_none()
+    }) {
         let path = data_dir.join("micromodem-application-acks");
         mm.application_ack_state_file = Some(path.to_string_lossy().into_owned());
     }
@@ -569,5 +568,41 @@ impl Core {
         self.links[i].driver_name = driver.name();
         self.links[i].driver = Some(driver);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protos::goby::acomms::protobuf::{
+        micro_modem_config::ApplicationAcks, DriverConfig, MicroModemConfig,
+    };
+
+    /// The frame numbers are kept for every setting that sends application
+    /// acks, `application_acks: FDP_ONLY` included (which gobyd leaves
+    /// `use_application_acks` unset beside).
+    #[test]
+    fn application_ack_numbers_are_kept_with_any_setting_that_sends_them() {
+        let kept = |mm: MicroModemConfig| {
+            let mut driver = DriverConfig {
+                micromodem: Some(mm),
+                ..Default::default()
+            };
+            keep_application_acks_in(&mut driver, Path::new("/data"));
+            driver.micromodem.unwrap().application_ack_state_file
+        };
+        let mode = |m: ApplicationAcks| MicroModemConfig {
+            application_acks: Some(m as i32),
+            ..Default::default()
+        };
+        let file = Some("/data/micromodem-application-acks".to_string());
+        assert_eq!(kept(mode(ApplicationAcks::FdpOnly)), file);
+        assert_eq!(kept(mode(ApplicationAcks::All)), file);
+        assert_eq!(kept(mode(ApplicationAcks::None)), None);
+        let flag = MicroModemConfig {
+            use_application_acks: Some(true),
+            ..Default::default()
+        };
+        assert_eq!(kept(flag), file);
     }
 }

@@ -73,10 +73,9 @@ impl Node {
         let mut text = format!("link {{\n  name: \"{name}\"\n");
         text += &driver.into().render();
         text += &Mac::Tdma {
-            srcs: srcs.to_vec(),
+            slots: srcs.iter().map(|&s| (s, String::new())).collect(),
             rate,
             slot_seconds,
-            kind: String::new(),
         }
         .render();
         if !more.is_empty() {
@@ -105,10 +104,9 @@ impl Node {
     /// `slot_seconds` the slot's length in seconds).
     pub fn tdma(mut self, srcs: &[i32], rate: u32, slot_seconds: f64) -> Node {
         self.mac = Some(Mac::Tdma {
-            srcs: srcs.to_vec(),
+            slots: srcs.iter().map(|&s| (s, String::new())).collect(),
             rate,
             slot_seconds,
-            kind: String::new(),
         });
         self
     }
@@ -125,16 +123,25 @@ impl Node {
         slot_seconds: f64,
         goby3_name: bool,
     ) -> Node {
-        let name = if goby3_name {
-            "[goby.acomms.micromodem.protobuf.transmission]"
-        } else {
-            "micromodem"
-        };
         self.mac = Some(Mac::Tdma {
-            srcs: srcs.to_vec(),
+            slots: srcs.iter().map(|&s| (s, fdp_kind(goby3_name))).collect(),
             rate,
             slot_seconds,
-            kind: format!(" type: DRIVER_SPECIFIC {name} {{ type: MICROMODEM_FLEXIBLE_DATA }}"),
+        });
+        self
+    }
+
+    /// As [`tdma`](Self::tdma), with the slots `(src, fdp)` in that order,
+    /// each a data slot or (`fdp`) a Flexible Data Protocol slot as
+    /// [`fdp_tdma`](Self::fdp_tdma) writes them.
+    pub fn mixed_tdma(mut self, slots: &[(i32, bool)], rate: u32, slot_seconds: f64) -> Node {
+        self.mac = Some(Mac::Tdma {
+            slots: slots
+                .iter()
+                .map(|&(s, fdp)| (s, if fdp { fdp_kind(false) } else { String::new() }))
+                .collect(),
+            rate,
+            slot_seconds,
         });
         self
     }
@@ -324,12 +331,23 @@ impl Node {
 enum Mac {
     None,
     Tdma {
-        srcs: Vec<i32>,
+        /// Each slot's source, and the text after its rate (its type and
+        /// settings).
+        slots: Vec<(i32, String)>,
         rate: u32,
         slot_seconds: f64,
-        /// Text after the rate of each slot (its type and settings).
-        kind: String,
     },
+}
+
+/// The text after a Flexible Data Protocol slot's rate, with Goby3's name
+/// for its settings when `goby3_name`.
+fn fdp_kind(goby3_name: bool) -> String {
+    let name = if goby3_name {
+        "[goby.acomms.micromodem.protobuf.transmission]"
+    } else {
+        "micromodem"
+    };
+    format!(" type: DRIVER_SPECIFIC {name} {{ type: MICROMODEM_FLEXIBLE_DATA }}")
 }
 
 impl Mac {
@@ -337,13 +355,12 @@ impl Mac {
         match self {
             Mac::None => "mac { type: MAC_NONE }\n".into(),
             Mac::Tdma {
-                srcs,
+                slots,
                 rate,
                 slot_seconds,
-                kind,
             } => {
                 let mut text = "mac {\n  type: MAC_FIXED_DECENTRALIZED\n".to_string();
-                for src in srcs {
+                for (src, kind) in slots {
                     text += &format!(
                         "  slot {{ src: {src} dest: -1 rate: {rate}{kind} slot_seconds: {slot_seconds} }}\n"
                     );

@@ -49,6 +49,23 @@
 //! at once: the numbers of its earlier run are held, unused, until their
 //! lifetime has passed, and an ack of one of them credits nothing.
 //!
+//! Goby3's pAcommsHandler reads the ack message in FDP packets only, and in
+//! a data cycle hands a frame 0 that starts with it to its queue, which
+//! cannot decode it (Goby3 3.1.5, `src/acomms/modemdriver/mm_driver.cpp`,
+//! `carxd` and `process_incoming_app_ack`). A fleet with Goby3 nodes that
+//! mixes data and FDP slots therefore runs [`Mode::FdpOnly`]: data cycles
+//! are plain DCCL acknowledged by the modem, FDP packets carry the ack
+//! message, and the acks owed — those for a Goby3 node's data cycles too,
+//! which it numbers `frame_start + i` in its own ack message — ride in FDP
+//! packets only.
+//!
+//! A node's numbering may go back (a Goby3 node starts again at 0 when its
+//! next packet would pass 31, and at each start, and then forgets the
+//! numbers it awaited acks for): acks still owed to it for its earlier
+//! numbers are then dropped, as an ack of one of them would credit its new
+//! use of the number. The cost is one retransmission, never a message
+//! taken for acked.
+//!
 //! This module keeps that bookkeeping; it does no input or output.
 
 use std::time::{Duration, Instant};
@@ -56,8 +73,9 @@ use std::time::{Duration, Instant};
 use dccl::Codec;
 use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::{
-    micro_modem_application_ack::AckPart, modem_transmission::TransmissionType,
-    MicroModemApplicationAck, ModemTransmission,
+    micro_modem_application_ack::AckPart, micro_modem_config::ApplicationAcks as ModeSetting,
+    modem_transmission::TransmissionType, MicroModemApplicationAck, MicroModemConfig,
+    ModemTransmission,
 };
 
 use crate::driver::Acknowledgement;
@@ -79,6 +97,97 @@ pub const DCCL_ID: u32 = 10;
 const BROADCAST: i32 = 0;
 /// Destination chosen by the layer above.
 const QUERY: i32 = -1;
+
+/// Which of a node's transmissions carry the ack message
+/// (`MicroModemConfig.application_acks`, else `use_application_acks`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// None: the modem acknowledges data cycles on decode.
+    None,
+    /// Data cycles and FDP packets alike.
+    All,
+    /// FDP packets only; data cycles are plain DCCL and ask the modem for
+    /// acks.
+    FdpOnly,
+}
+
+/// The kinds of transmission a node fills.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Carrier {
+    /// A data cycle (`$CCCYC`, `$CCTXD`).
+    DataCycle,
+    /// A Flexible Data Protocol packet (`$CCTDP`).
+    Fdp,
+}
+
+impl Mode {
+    /// The mode `mm` sets: `application_acks` when set, else
+    /// `use_application_acks` (unset: [`Mode::None`]).
+    pub fn of(mm: &MicroModemConfig) -> Mode {
+        match mm.application_acks.map(ModeSetting::try_from) {
+            Some(Ok(ModeSetting::None)) => Mode::None,
+            Some(Ok(ModeSetting::All)) => Mode::All,
+            Some(Ok(ModeSetting::FdpOnly)) => Mode::FdpOnly,
+            Some(Err(_)) | None if mm.use_application_acks() => Mode::All,
+            Some(Err(_)) | None => Mode::None,
+        }
+    }
+
+    /// Why `mm` sets both `application_acks` and `use_application_acks`
+    /// and they disagree (ALL and FDP_ONLY send application acks, NONE
+    /// does not), if it does.
+    pub fn conflict(mm: &MicroModemConfig) -> Option<String> {
+        let (setting, flag) = (mm.application_acks?, mm.use_application_acks?);
+        let mode = Mode::of(mm);
+        (mode.on() != flag).then(|| {
+            let name = ModeSetting::try_from(setting)
+                .map_or_else(|_| setting.to_string(), |m| m.as_str_name().to_string());
+            format!(
+                "{name} disagrees with use_application_acks: {flag}; application_acks takes \
+                 precedence: leave use_application_acks unset, or set it {}",
+                mode.on()
+            )
+        })
+    }
+
+    /// Whether the node sends application acks at all.
+    pub fn on(self) -> bool {
+        self != Mode::None
+    }
+
+    /// Whether a transmission of `kind` carries the ack message (and is
+    /// numbered by it); one that does not asks the modem for acks.
+    pub fn carries(self, kind: Carrier) -> bool {
+        match self {
+            Mode::None => false,
+            Mode::All => true,
+            Mode::FdpOnly => kind == Carrier::Fdp,
+        }
+    }
+}
+
+/// The numbers of a node's frames heard since its numbering last went
+/// back: from `first` (the `frame_start` it went back to) up to `end`
+/// (exclusive); `last` is the latest `frame_start` heard.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Run {
+    first: u32,
+    end: u32,
+    last: u32,
+}
+
+impl Run {
+    /// The bits of `mask` inside the run.
+    fn keep(&self, mask: u32) -> u32 {
+        let width = self.end.saturating_sub(self.first).min(FRAME_NUMBERS);
+        let bits = if width == FRAME_NUMBERS {
+            u32::MAX
+        } else {
+            ((1u32 << width) - 1) << self.first
+        };
+        mask & bits
+    }
+}
 
 /// A frame of ours that went out asking for an ack, by its number.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -148,6 +257,10 @@ pub struct ApplicationAcks {
     /// The numbers in use before the start are known ([`Self::resume`]):
     /// acks are credited from every node at once.
     resumed: bool,
+    /// Which transmissions carry the ack message.
+    mode: Mode,
+    /// Each node's numbering as heard, by node.
+    runs: [Option<Run>; MAX_MODEM_ID as usize + 1],
 }
 
 /// The first line of the state [`ApplicationAcks::state`] writes.
@@ -183,7 +296,8 @@ pub struct Heard {
     /// Its ack message could not be decoded (the frame is left as it was).
     pub error: Option<String>,
     /// Its frame 0 holds data and no ack message: its sender does not use
-    /// application acks.
+    /// application acks in this kind of transmission (a data cycle of a
+    /// node with `FDP_ONLY`), or at all.
     pub plain: bool,
 }
 
@@ -212,7 +326,23 @@ impl ApplicationAcks {
             started: now,
             heard_from: 0,
             resumed: false,
+            mode: Mode::All,
+            runs: [None; MAX_MODEM_ID as usize + 1],
         })
+    }
+
+    /// The same bookkeeping with the ack message carried as `mode` says
+    /// (from [`new`](Self::new): [`Mode::All`]).
+    pub fn with_mode(mut self, mode: Mode) -> Self {
+        self.mode = mode;
+        self
+    }
+
+    /// Whether a transmission of `kind` carries the ack message: only
+    /// those are [`prepare`](Self::prepare)d; the others ask the modem for
+    /// acks and carry none of those owed.
+    pub fn carries(&self, kind: Carrier) -> bool {
+        self.mode.carries(kind)
     }
 
     /// The frame numbers in use, as text to keep until the next start
@@ -484,16 +614,25 @@ impl ApplicationAcks {
     /// Handles a received data transmission: when frame 0 starts with an
     /// ack message, strips it, takes `frame_start` and `ack_requested` from
     /// it, and returns the acks of our frames it carries. A transmission
-    /// without one (a peer not using application acks) is left as it is.
-    /// Frames left empty at the end are removed (an ack-only transmission
-    /// has none left).
+    /// without one (a peer not using application acks, or using them in
+    /// FDP packets only, or whose frame 0 was lost) keeps its frames, and
+    /// its `frame_start` is cleared: its sender numbered none of them, so
+    /// no application ack is owed for them (the modem acknowledged them,
+    /// when asked). Frames left empty at the end are removed (an ack-only
+    /// transmission has none left).
     ///
     /// A transmission addressed to this node, or a broadcast with room for
     /// every ack its sender owed, counts as heard from its sender (acks
-    /// from it are credited from then on).
+    /// from it are credited from then on). A `frame_start` below the last
+    /// one heard from the sender (its numbering went back) drops the acks
+    /// still owed to it.
     pub fn receive(&mut self, mt: &mut ModemTransmission) -> Heard {
         let mut heard = Heard::default();
-        let ack = match self.take(mt) {
+        let taken = self.take(mt);
+        if !matches!(taken, Taken::Ack(_)) {
+            mt.frame_start = None;
+        }
+        let ack = match taken {
             Taken::Nothing => return heard,
             Taken::Plain => {
                 heard.plain = true;
@@ -511,6 +650,7 @@ impl ApplicationAcks {
         mt.frame_start = Some(ack.frame_start);
         mt.ack_requested = Some(ack.ack_requested);
         let from = mt.src();
+        self.heard_numbering(from, ack.frame_start, mt.frame.len() as u32);
         for part in &ack.part {
             if part.ack_dest != self.modem_id as i32 {
                 continue;
@@ -547,6 +687,33 @@ impl ApplicationAcks {
             }
         }
         heard
+    }
+
+    /// Notes that `node` numbered a transmission of `frames` frames from
+    /// `start`. When that is below the last `frame_start` heard from it,
+    /// its numbering went back (a wrap, or a restart): the acks owed to it
+    /// name its earlier numbers, and are dropped.
+    fn heard_numbering(&mut self, node: i32, start: u32, frames: u32) {
+        let Some(n) = u32::try_from(node).ok().filter(|&n| n <= MAX_MODEM_ID) else {
+            return;
+        };
+        let end = (start + frames).min(FRAME_NUMBERS);
+        let fresh = Run {
+            first: start,
+            end,
+            last: start,
+        };
+        match &mut self.runs[n as usize] {
+            Some(run) if start >= run.last => {
+                run.last = start;
+                run.end = run.end.max(end);
+            }
+            Some(run) => {
+                *run = fresh;
+                self.owed.retain(|o| o.node != n);
+            }
+            run @ None => *run = Some(fresh),
+        }
     }
 
     /// For a node that does not use application acks: strips the ack
@@ -596,12 +763,17 @@ impl ApplicationAcks {
 
     /// Owes acks for the frames of a received transmission (as returned by
     /// [`receive`](Self::receive)): those the layer above names, when the
-    /// data asked for acks and was addressed to this node.
+    /// data asked for acks, was addressed to this node and was numbered by
+    /// its sender's ack message (`frame_start` set). Numbers from before
+    /// the sender's numbering last went back are left out.
     pub fn acknowledge(&mut self, ack: &Acknowledgement, now: Instant) {
         let mt = &ack.received;
         if !Acknowledgement::wanted(mt, &[self.modem_id as i32]) {
             return;
         }
+        let Some(start) = mt.frame_start else {
+            return;
+        };
         let Some(node) = u32::try_from(mt.src()).ok().filter(|&n| n <= MAX_MODEM_ID) else {
             return;
         };
@@ -610,9 +782,10 @@ impl ApplicationAcks {
             .frames
             .iter()
             .filter(|&&i| mt.frame.get(i).is_some_and(|f| !f.is_empty()))
-            .map(|&i| mt.frame_start() as usize + i)
+            .map(|&i| start as usize + i)
             .filter(|&n| n < FRAME_NUMBERS as usize)
             .fold(0u32, |m, n| m | (1 << n));
+        let mask = self.runs[node as usize].map_or(mask, |run| run.keep(mask));
         if mask != 0 {
             self.owe(Owed {
                 node,
@@ -947,17 +1120,7 @@ mod tests {
     fn acks_alone_to_several_nodes_go_as_one_broadcast() {
         let mut b = acks(2);
         for src in [1, 3] {
-            b.acknowledge(
-                &Acknowledgement::all(ModemTransmission {
-                    src: Some(src),
-                    dest: Some(2),
-                    r#type: Some(TransmissionType::Data as i32),
-                    ack_requested: Some(true),
-                    frame: vec![vec![1]],
-                    ..Default::default()
-                }),
-                now(),
-            );
+            b.acknowledge(&Acknowledgement::all(received_from(src)), now());
         }
         let mut open = template(-1, 1, 1);
         let mut placed = b.prepare(&mut open, now()).unwrap();
@@ -982,7 +1145,14 @@ mod tests {
         let before = mt.clone();
         let heard = b.receive(&mut mt);
         assert!(heard.acks.is_empty() && heard.error.is_none());
-        assert_eq!(mt, before);
+        // Its frames as they were; numbered by no ack message.
+        assert_eq!(
+            mt,
+            ModemTransmission {
+                frame_start: None,
+                ..before
+            }
+        );
         // Id 10 but cut short: reported, left as it was.
         let mut cut = ModemTransmission {
             src: Some(1),
@@ -996,17 +1166,7 @@ mod tests {
     #[test]
     fn an_answer_that_drops_the_ack_message_is_refused_and_its_acks_owed_again() {
         let mut b = acks(2);
-        b.acknowledge(
-            &Acknowledgement::all(ModemTransmission {
-                src: Some(1),
-                dest: Some(2),
-                r#type: Some(TransmissionType::Data as i32),
-                ack_requested: Some(true),
-                frame: vec![vec![1]],
-                ..Default::default()
-            }),
-            now(),
-        );
+        b.acknowledge(&Acknowledgement::all(received_from(1)), now());
         let mut t = template(1, 1, 1);
         let mut placed = b.prepare(&mut t, now()).unwrap();
         assert!(!b.owes());
@@ -1265,5 +1425,108 @@ mod tests {
         let mut b = acks(2);
         let mut plain = sent.clone();
         assert!(b.receive(&mut plain).plain);
+    }
+    /// A transmission from `src` to node 2 as the driver hears it: frame 0
+    /// starts with an ack message numbering `frames` frames from `start`
+    /// (acknowledging nothing, asking for acks, as a Goby3 node sends its
+    /// data cycles and FDP packets).
+    fn numbered_from(src: u32, start: u32, frames: usize) -> ModemTransmission {
+        let mut first = acks(src).encode(&[], true, start).unwrap();
+        first.extend_from_slice(&[0xf8, 0x11]);
+        let mut frame = vec![first];
+        frame.resize(frames, vec![0xf8, 0x12]);
+        ModemTransmission {
+            src: Some(src as i32),
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            frame_start: Some(0),
+            frame,
+            ..Default::default()
+        }
+    }
+
+    /// Hears `mt` at node `b` and acknowledges every frame of it at once.
+    fn hear(b: &mut ApplicationAcks, mut mt: ModemTransmission) -> ModemTransmission {
+        b.receive(&mut mt);
+        b.acknowledge(&Acknowledgement::all(mt.clone()), now());
+        mt
+    }
+
+    /// Node 1 (a Goby3 node) numbers on (28, 29, then 30), then starts
+    /// again at 0 (its wrap at 32, or a restart) before node 2 could send
+    /// the acks it owes: those are for numbers node 1 has forgotten, and an
+    /// ack of 28 would credit its next use of 28. They are dropped, and so
+    /// is a late (deferred) acknowledgement of the earlier frames.
+    #[test]
+    fn acks_owed_to_a_node_whose_numbering_went_back_are_dropped() {
+        let mut b = acks(2);
+        let early = hear(&mut b, numbered_from(1, 28, 2));
+        assert_eq!(early.frame_start, Some(28));
+        hear(&mut b, numbered_from(1, 30, 1));
+        assert_eq!(b.owed.iter().map(|o| o.mask).sum::<u32>(), 0b111 << 28);
+        hear(&mut b, numbered_from(1, 0, 1));
+        b.acknowledge(&Acknowledgement::all(early), now());
+        let mut open = template(-1, 1, 9);
+        open.src = Some(2);
+        let placed = b.prepare(&mut open, now()).unwrap();
+        assert_eq!(nodes(&placed), vec![(1, 1)]);
+        // Another node's acks are kept when node 1's numbering goes back.
+        let mut c = acks(2);
+        hear(&mut c, numbered_from(3, 4, 1));
+        hear(&mut c, numbered_from(1, 9, 1));
+        hear(&mut c, numbered_from(1, 2, 1));
+        let mut open = template(-1, 1, 10);
+        open.src = Some(2);
+        let placed = c.prepare(&mut open, now()).unwrap();
+        assert_eq!(nodes(&placed), vec![(3, 1 << 4), (1, 1 << 2)]);
+    }
+
+    /// A data cycle without an ack message (from a node using application
+    /// acks in FDP packets only, or none) was acknowledged by the modem,
+    /// when asked: no application ack is owed for it, whatever frame
+    /// numbers it would be taken to have. Nor for one whose frame 0 (and
+    /// so its numbering) was lost.
+    #[test]
+    fn a_transmission_not_numbered_by_an_ack_message_is_owed_no_application_ack() {
+        let mut b = acks(2).with_mode(Mode::FdpOnly);
+        let mut plain = received_from(1);
+        assert!(b.receive(&mut plain).plain);
+        assert_eq!(plain.frame_start, None);
+        b.acknowledge(&Acknowledgement::all(plain), now());
+        let mut lost = numbered_from(3, 6, 2);
+        lost.frame[0].clear();
+        b.receive(&mut lost);
+        b.acknowledge(&Acknowledgement::all(lost), now());
+        assert!(!b.owes());
+        hear(&mut b, numbered_from(1, 6, 2));
+        assert!(b.owes());
+    }
+
+    #[test]
+    fn fdp_only_carries_the_ack_message_in_fdp_packets_only() {
+        let b = acks(2).with_mode(Mode::FdpOnly);
+        assert!(b.carries(Carrier::Fdp) && !b.carries(Carrier::DataCycle));
+        assert!(acks(2).carries(Carrier::DataCycle));
+        let mm = |mode: Option<ModeSetting>, flag: Option<bool>| MicroModemConfig {
+            application_acks: mode.map(|m| m as i32),
+            use_application_acks: flag,
+            ..Default::default()
+        };
+        assert_eq!(Mode::of(&mm(None, None)), Mode::None);
+        assert_eq!(Mode::of(&mm(None, Some(true))), Mode::All);
+        assert_eq!(
+            Mode::of(&mm(Some(ModeSetting::FdpOnly), Some(true))),
+            Mode::FdpOnly
+        );
+        assert_eq!(Mode::of(&mm(Some(ModeSetting::None), None)), Mode::None);
+        assert!(Mode::conflict(&mm(Some(ModeSetting::FdpOnly), Some(true))).is_none());
+        assert!(Mode::conflict(&mm(Some(ModeSetting::All), None)).is_none());
+        let e = Mode::conflict(&mm(Some(ModeSetting::FdpOnly), Some(false))).unwrap();
+        assert!(
+            e.contains("FDP_ONLY") && e.contains("use_application_acks"),
+            "{e}"
+        );
+        assert!(Mode::conflict(&mm(Some(ModeSetting::None), Some(true))).is_some());
     }
 }

@@ -8,7 +8,7 @@
 //! - [`fdp`]: Flexible Data Protocol rates and received packets.
 //! - [`ranging`]: LBL pings ($CCPDT, $CCPNT) and their travel times ($SNTTA).
 //! - [`application_ack`]: acks sent in software, after the data is kept
-//!   (`use_application_acks`).
+//!   (`application_acks`: in data cycles and FDP packets, or FDP packets only).
 //! - [`transmission`]: what a `DRIVER_SPECIFIC` transmission (a MAC slot
 //!   such as Goby3's FDP slot) asks of the modem.
 //! - [`driver`]: the driver ([`MicroModemDriver`]).

@@ -37,6 +37,7 @@ use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 
+use super::super::application_ack::Carrier;
 use super::super::sentence::{Cycle, MmSentence};
 use super::super::{firmware, ranging};
 use super::machine::Machine;
@@ -182,7 +183,10 @@ impl Machine {
     /// announces.
     fn cycle_command(&mut self) -> MmSentence {
         let me = self.modem_id;
-        let app_acks = self.app_acks.is_some();
+        let app_acks_in_data = self
+            .app_acks
+            .as_ref()
+            .is_some_and(|app| app.carries(Carrier::DataCycle));
         let pad_odd_fdp = self
             .startup
             .firmware
@@ -196,8 +200,9 @@ impl Machine {
                 let frames = have.clamp(1, spec.frames);
                 // Whether acks are wanted is the filled transmission's to
                 // say (the layer above knows what it queued); with
-                // application acks the modem is asked for none.
-                let ack = active.filled.as_ref().unwrap_or(mt).ack_requested() && !app_acks;
+                // application acks in data cycles the modem is asked for
+                // none.
+                let ack = active.filled.as_ref().unwrap_or(mt).ack_requested() && !app_acks_in_data;
                 (
                     MmSentence::Cycle {
                         from_modem: false,

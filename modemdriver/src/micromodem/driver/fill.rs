@@ -23,7 +23,7 @@ use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 
-use super::super::application_ack::Placed;
+use super::super::application_ack::{Carrier, Placed};
 use super::super::fdp;
 use super::machine::Machine;
 use super::settings::{packet_estimate, DATA_REQUEST_TIMEOUT};
@@ -35,9 +35,10 @@ use crate::slot::slot_end;
 
 impl Machine {
     /// Asks the layer above for the frames of the active data or FDP job
-    /// (at a `$CADRQ`, `max_bytes` of it). With application acks, frame 0
-    /// starts with the ack message (the acks placed are kept, to be owed
-    /// again if the transmission fails).
+    /// (at a `$CADRQ`, `max_bytes` of it). With application acks carried
+    /// in its kind of transmission, frame 0 starts with the ack message
+    /// (the acks placed are kept, to be owed again if the transmission
+    /// fails).
     pub(super) fn request_fill(&mut self, max_bytes: Option<u32>) {
         let Some(active) = &self.tx.active else {
             return;
@@ -56,9 +57,14 @@ impl Machine {
             _ => None,
         };
         let now = self.now.at.into_std();
+        let kind = match active.job {
+            Job::Fdp(_) => Carrier::Fdp,
+            _ => Carrier::DataCycle,
+        };
         let placed = match self
             .app_acks
             .as_mut()
+            .filter(|app| app.carries(kind))
             .map(|app| app.prepare(&mut template, now))
         {
             Some(Ok(placed)) => {

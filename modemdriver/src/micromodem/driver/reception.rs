@@ -17,9 +17,11 @@
 //! `$CAACK` becomes an `ACK` transmission naming the transmission it
 //! answers (`unique_id`): the last one of ours that went out asking for
 //! acks, when the ack comes from its destination, to this modem, for one
-//! of its frames, within `receive_timeout_ms` of the packet. With
-//! application acks, the ack message at the start of frame 0 is stripped
-//! and its acks reported ([`super::super::application_ack`]).
+//! of its frames, within `receive_timeout_ms` of the packet (data cycles
+//! sent with application acks off, or with `FDP_ONLY`). With application
+//! acks, the ack message at the start of frame 0 is stripped, from every
+//! reception that has one, and its acks reported
+//! ([`super::super::application_ack`]).
 
 use std::collections::BTreeMap;
 
@@ -28,6 +30,7 @@ use protos::goby::acomms::protobuf::{
     MicroModemTransmission, MicroModemTransmissionType, ModemTransmission,
 };
 
+use super::super::application_ack::Carrier;
 use super::super::fdp;
 use super::super::firmware;
 use super::super::sentence::{Cycle, FdpFrame};
@@ -35,6 +38,13 @@ use super::super::statistics::{ReceiveStatisticsSentence, TransmitStatisticsSent
 use super::machine::Machine;
 use super::state::{Active, Held, Incoming, Job, SentData, Stage};
 use crate::driver::{Acknowledgement, DriverEvent, DriverStatus, TransmitOutcome};
+
+/// Whether a received transmission is a Flexible Data Protocol packet.
+fn is_fdp(mt: &ModemTransmission) -> bool {
+    mt.micromodem
+        .as_ref()
+        .is_some_and(|m| m.r#type() == MicroModemTransmissionType::MicromodemFlexibleData)
+}
 
 /// `YYYYMMDD` (UTC) of `micros` since the epoch, to date the original
 /// `$CACST` layout.
@@ -57,28 +67,41 @@ impl Machine {
     /// With application acks, the ack message starting frame 0 is stripped
     /// and the acks it carries for our frames are reported first (as `ACK`
     /// transmissions); an ack-only transmission is not reported as data.
-    /// Without `deferred_ack`, acks for the frames are owed at once.
-    /// Without application acks, an ack message a peer sends anyway is
-    /// stripped so that its data is taken. A disagreement on application
-    /// acks is reported once per node (`DriverStatus::Degraded`).
+    /// Without `deferred_ack`, acks for the frames its ack message numbers
+    /// are owed at once (none for a transmission without one: the modem
+    /// acknowledged it, when asked). Without application acks, an ack
+    /// message a peer sends anyway is stripped so that its data is taken.
+    /// A transmission of a kind that should carry an ack message and does
+    /// not (a disagreement on application acks) is reported once per node
+    /// (`DriverStatus::Degraded`); with `FDP_ONLY`, data cycles carry none.
     fn report_reception(&mut self, mut transmission: ModemTransmission) {
         if let Some(t) = transmission.receive_stat.last().and_then(|s| s.time) {
             transmission.time = Some(t);
             transmission.time_source = Some(TimeSource::ModemTime as i32);
         }
         let src = transmission.src();
+        let kind = if is_fdp(&transmission) {
+            Carrier::Fdp
+        } else {
+            Carrier::DataCycle
+        };
         let heard = self
             .app_acks
             .as_mut()
-            .map(|app| app.receive(&mut transmission));
-        if let Some(heard) = heard {
-            if heard.plain && transmission.r#type() == TransmissionType::Data {
+            .map(|app| (app.carries(kind), app.receive(&mut transmission)));
+        if let Some((expected, heard)) = heard {
+            if heard.plain && expected && transmission.r#type() == TransmissionType::Data {
+                let what = match kind {
+                    Carrier::Fdp => "FDP packets",
+                    Carrier::DataCycle => "data cycles",
+                };
                 self.ack_mismatch(
                     src,
                     format!(
-                        "node {src} sends no application acks and this node does (use_application_acks): \
-                         its data is acked by its modem on decode, and data from here to it is never \
-                         acknowledged; set use_application_acks the same at both ends"
+                        "node {src} sends no application acks in {what} and this node does \
+                         (application_acks, or use_application_acks): its data is acked by its modem on \
+                         decode, if at all, and data from here to it is never acknowledged; set \
+                         application acks the same at both ends"
                     ),
                 );
             }
@@ -336,7 +359,11 @@ impl Machine {
             return;
         };
         let sent = filled.as_ref().unwrap_or(mt);
-        if !sent.ack_requested() || self.app_acks.is_some() {
+        let app_acks_in_data = self
+            .app_acks
+            .as_ref()
+            .is_some_and(|app| app.carries(Carrier::DataCycle));
+        if !sent.ack_requested() || app_acks_in_data {
             self.rx.last_sent = None;
             return;
         }

@@ -10,7 +10,7 @@ use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, DriverConfig, MicroModemConfig, ModemTransmission,
 };
 
-use super::super::application_ack::{self, ApplicationAcks};
+use super::super::application_ack::{self, ApplicationAcks, Mode};
 use crate::config;
 use crate::driver::DriverError;
 use crate::problem::{self, Problem};
@@ -25,7 +25,8 @@ pub struct Settings {
     pub mm: MicroModemConfig,
     /// Between attempts to open the device again.
     pub reconnect: Duration,
-    /// With `use_application_acks`.
+    /// With application acks (`application_acks` ALL or FDP_ONLY, or
+    /// `use_application_acks`).
     pub app_acks: Option<ApplicationAcks>,
     /// Application acks wait for the layer above (`DriverConfig.deferred_ack`).
     pub deferred_ack: bool,
@@ -109,19 +110,36 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             ));
         }
     }
+    if let Some(conflict) = Mode::conflict(&mm) {
+        problems.push(Problem::new("micromodem.application_acks", conflict));
+    }
     if let Some(id) = modem_id {
-        if mm.use_application_acks() && id > application_ack::MAX_MODEM_ID {
+        if Mode::of(&mm).on() && id > application_ack::MAX_MODEM_ID {
+            let (field, off) = ack_setting(&mm);
             problems.push(Problem::new(
-                "micromodem.use_application_acks",
+                field,
                 format!(
                     "modem_id {id}: the Micro-Modem's application acks name nodes 0-{}; use a lower id, \
-                     or set use_application_acks: false (acks then come from the modem, on decode)",
-                    application_ack::MAX_MODEM_ID
+                     or set {off} (acks then come from the modem, on decode)",
+                    application_ack::MAX_MODEM_ID,
                 ),
             ));
         }
     }
     problems
+}
+
+/// The field that turns application acks on in `mm` (`application_acks`
+/// when set, which takes precedence), and how to turn them off.
+fn ack_setting(mm: &MicroModemConfig) -> (&'static str, &'static str) {
+    if mm.application_acks.is_some() {
+        ("micromodem.application_acks", "application_acks: NONE")
+    } else {
+        (
+            "micromodem.use_application_acks",
+            "use_application_acks: false",
+        )
+    }
 }
 
 /// The machine's settings from the driver configuration, checked; the
@@ -139,12 +157,13 @@ pub fn settings_from(config: &DriverConfig, entropy: &Entropy) -> Result<Setting
     let modem_id = u32::try_from(config::modem_id(config)?)
         .map_err(|_| Problem::new("modem_id", "is negative").into_error())?;
     let mm = config.micromodem.clone().unwrap_or_default();
+    let mode = Mode::of(&mm);
     let ack_state_file = mm
         .application_ack_state_file
         .as_deref()
-        .filter(|p| mm.use_application_acks() && !p.is_empty())
+        .filter(|p| mode.on() && !p.is_empty())
         .map(std::path::PathBuf::from);
-    let app_acks = if mm.use_application_acks() {
+    let app_acks = if mode.on() {
         let now = std::time::Instant::now();
         let mut acks = ApplicationAcks::new(
             modem_id,
@@ -152,7 +171,8 @@ pub fn settings_from(config: &DriverConfig, entropy: &Entropy) -> Result<Setting
             first_frame_number(entropy),
             now,
         )
-        .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?;
+        .map_err(|e| DriverError::Config(format!("MicroModemApplicationAck: {e}")))?
+        .with_mode(mode);
         if let Some(path) = &ack_state_file {
             resume_ack_state(&mut acks, path, now);
         }
@@ -238,5 +258,36 @@ mod tests {
         // 32 numbers: some later start draws another.
         assert!((1..10)
             .any(|m| state(a) != state(Entropy::Seeded(3).started_at(1_000_000 + m * 60_000_000))));
+    }
+    /// `application_acks` and `use_application_acks` that disagree are
+    /// refused, naming the field that takes precedence.
+    #[test]
+    fn application_acks_that_disagree_with_use_application_acks_are_refused() {
+        use protos::goby::acomms::protobuf::micro_modem_config::ApplicationAcks as Setting;
+        let config = |mode: Setting, flag: Option<bool>| DriverConfig {
+            modem_id: Some(1),
+            serial_port: Some("/dev/ttyUSB0".into()),
+            micromodem: Some(MicroModemConfig {
+                application_acks: Some(mode as i32),
+                use_application_acks: flag,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let refused = problems(&config(Setting::FdpOnly, Some(false)));
+        assert_eq!(refused.len(), 1, "{refused:?}");
+        assert_eq!(refused[0].field, "micromodem.application_acks");
+        assert_eq!(problems(&config(Setting::None, Some(true))).len(), 1);
+        for (mode, flag) in [
+            (Setting::FdpOnly, Some(true)),
+            (Setting::FdpOnly, None),
+            (Setting::None, Some(false)),
+            (Setting::All, None),
+        ] {
+            let c = config(mode, flag);
+            assert!(problems(&c).is_empty(), "{mode:?} {flag:?}");
+            let on = settings(&c).unwrap().app_acks.is_some();
+            assert_eq!(on, mode != Setting::None, "{mode:?} {flag:?}");
+        }
     }
 }

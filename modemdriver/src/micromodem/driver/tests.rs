@@ -4,7 +4,8 @@
 use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, MicroModemConfig, ModemTransmission,
+    modem_transmission::TransmissionType, MicroModemApplicationAck, MicroModemConfig,
+    ModemTransmission,
 };
 use tokio::time::Instant;
 
@@ -157,12 +158,17 @@ impl Bench {
     /// A machine through its start-up (a Micro-Modem 1 echoing every
     /// command), `Ready`.
     fn ready(mm: MicroModemConfig) -> Bench {
+        Bench::ready_with(settings(mm))
+    }
+
+    /// As [`ready`](Self::ready), from `settings`.
+    fn ready_with(settings: Settings) -> Bench {
         let now = Now {
             at: Instant::now(),
             micros: START_MICROS,
         };
         let mut bench = Bench {
-            machine: Machine::new(settings(mm), now),
+            machine: Machine::new(settings, now),
             now,
         };
         let mut outputs = bench.input(Input::Tick);
@@ -542,15 +548,26 @@ fn a_polled_frame_is_written_when_its_answer_comes() {
 /// `micromodem { type: MICROMODEM_FLEXIBLE_DATA }`, rate 1) from a modem
 /// whose `$CAREV` gives `version`.
 fn fdp_slot_after_revision(version: &str) -> (Bench, Vec<Output>) {
-    use protos::goby::acomms::protobuf::{MicroModemTransmission, MicroModemTransmissionType};
     let mut bench = Bench::ready(MicroModemConfig::default());
-    bench.sentence(&MmSentence::Revision {
+    bench.sentence(&revision(version));
+    let outputs = bench.initiate(fdp_slot(bench.now.micros));
+    (bench, outputs)
+}
+
+/// `$CAREV` with `version`, which tells the modem's generation.
+fn revision(version: &str) -> MmSentence {
+    MmSentence::Revision {
         time: "221320".into(),
         ident: "AUV".into(),
         version: version.into(),
-    });
-    let opened = bench.now.micros;
-    let slot = ModemTransmission {
+    }
+}
+
+/// A Flexible Data Protocol slot to [`PEER`] as Goby3 writes it, opened at
+/// `opened` (µs).
+fn fdp_slot(opened: u64) -> ModemTransmission {
+    use protos::goby::acomms::protobuf::{MicroModemTransmission, MicroModemTransmissionType};
+    ModemTransmission {
         dest: Some(PEER as i32),
         rate: Some(1),
         r#type: Some(TransmissionType::DriverSpecific as i32),
@@ -561,9 +578,7 @@ fn fdp_slot_after_revision(version: &str) -> (Bench, Vec<Output>) {
         time: Some(opened),
         slot_seconds: Some(10.0),
         ..Default::default()
-    };
-    let outputs = bench.initiate(slot);
-    (bench, outputs)
+    }
 }
 
 /// The `$CCTDP` written for an FDP slot answered with `data`.
@@ -619,4 +634,211 @@ fn an_fdp_slot_is_refused_by_a_micromodem1() {
             DriverEvent::Status(DriverStatus::Unsupported { message }) if message.contains("Micro-Modem 1"))),
         "{outputs:?}"
     );
+}
+
+/// A Micro-Modem 2 (`$CAREV` 2.0.35490) whose driver sends application
+/// acks in FDP packets only (`application_acks: FDP_ONLY`), as its
+/// configuration sets it.
+fn fdp_only() -> Bench {
+    use protos::goby::acomms::protobuf::{micro_modem_config::ApplicationAcks, DriverConfig};
+    let config = DriverConfig {
+        modem_id: Some(ME as i32),
+        serial_port: Some("/dev/ttyUSB0".into()),
+        micromodem: Some(MicroModemConfig {
+            application_acks: Some(ApplicationAcks::FdpOnly as i32),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let settings = super::settings::settings_from(&config, &goby_time::Entropy::Seeded(1))
+        .expect("FDP_ONLY settings");
+    let mut bench = Bench::ready_with(settings);
+    bench.sentence(&revision("2.0.35490"));
+    bench
+}
+
+/// The DCCL codec of the application ack message.
+fn ack_codec() -> dccl::Codec {
+    use prost_reflect::ReflectMessage;
+    let mut codec = dccl::Codec::new();
+    codec
+        .load(&MicroModemApplicationAck::default().descriptor())
+        .expect("loads");
+    codec
+}
+
+/// `data` after an ack message numbering frames from `frame_start` and
+/// acknowledging nothing, as a Goby3 node starts frame 0 of its data
+/// cycles with `use_application_acks: true`.
+fn numbered(frame_start: u32, data: &[u8]) -> Vec<u8> {
+    use prost_reflect::ReflectMessage;
+    let ack = MicroModemApplicationAck {
+        part: Vec::new(),
+        ack_requested: true,
+        frame_start,
+    };
+    let mut frame = ack_codec()
+        .encode(&ack.transcode_to_dynamic())
+        .expect("encodes");
+    frame.extend_from_slice(data);
+    frame
+}
+
+/// The ack message starting `frame`, decoded.
+fn ack_message(frame: &[u8]) -> Option<MicroModemApplicationAck> {
+    let codec = ack_codec();
+    (codec.read_id(frame).ok() == Some(10))
+        .then(|| codec.decode_with(frame, &dccl::DecodeOptions::default()))
+        .and_then(Result::ok)
+        .and_then(|d| d.message.transcode_to::<MicroModemApplicationAck>().ok())
+}
+
+/// Runs a data transmission to [`PEER`] asking for acks through its cycle
+/// and returns what was written: the `$CCCYC` and the one `$CCTXD`.
+fn data_cycle_written(bench: &mut Bench) -> Vec<MmSentence> {
+    let opened = bench.now.micros;
+    let mut mt = data(opened, 10.0);
+    mt.ack_requested = Some(true);
+    let (id, template) = bench.initiate_and_request(mt);
+    assert!(
+        template.frame.is_empty(),
+        "no ack message placed: {template:?}"
+    );
+    let answer = ModemTransmission {
+        frame: vec![b"hello".to_vec()],
+        ack_requested: Some(true),
+        ..template
+    };
+    let mut written = writes(&bench.input(Input::Answer {
+        id,
+        filled: Some(answer),
+    }));
+    let outputs: Vec<Output> = written
+        .clone()
+        .iter()
+        .filter_map(echo)
+        .flat_map(|e| bench.sentence(&e))
+        .collect();
+    assert!(writes(&outputs).is_empty(), "{outputs:?}");
+    written.extend(writes(&bench.sentence(&MmSentence::DataRequest {
+        time: "221320".into(),
+        src: ME,
+        dest: PEER,
+        ack: true,
+        max_bytes: 32,
+        frame: 1,
+    })));
+    written
+}
+
+/// With `FDP_ONLY` a data cycle is plain DCCL (a Goby3 node decodes it as
+/// it is) and asks the modem for acks, which credit it as with
+/// application acks off (`$CAACK`). Fails with the ack message in every
+/// transmission (today's `use_application_acks: true`): the cycle asks
+/// the modem for no ack and its frame starts with the ack message.
+#[test]
+fn fdp_only_puts_no_ack_message_in_data_cycles_and_asks_the_modem() {
+    let mut bench = fdp_only();
+    let written = data_cycle_written(&mut bench);
+    assert!(
+        matches!(
+            written.as_slice(),
+            [
+                MmSentence::Cycle {
+                    from_modem: false,
+                    cycle: Cycle {
+                        dest: PEER,
+                        ack: true,
+                        frames: 1,
+                        ..
+                    }
+                },
+                MmSentence::TransmitData { ack: true, data, .. }
+            ] if data == b"hello"
+        ),
+        "{written:?}"
+    );
+    bench.sentence(&MmSentence::TransmitStart { bytes: 5 });
+    bench.sentence(&MmSentence::TransmitDone { bytes: 5 });
+    let outputs = bench.sentence(&MmSentence::Ack {
+        src: PEER,
+        dest: ME,
+        frame: 1,
+    });
+    let acks = received(&outputs);
+    assert!(
+        matches!(acks.as_slice(), [ack] if ack.r#type() == TransmissionType::Ack
+            && ack.unique_id == Some(7)),
+        "{outputs:?}"
+    );
+}
+
+/// With `FDP_ONLY` the acks owed for a Goby3 node's data cycle (numbered
+/// `frame_start + i` by the ack message starting its frame 0) do not
+/// ride in the next data cycle, which carries no ack message, but in the
+/// next FDP packet, which does. Fails when the data cycle carries them.
+#[test]
+fn fdp_only_owed_acks_wait_for_an_fdp_packet() {
+    let mut bench = fdp_only();
+    bench.sentence(&MmSentence::Cycle {
+        from_modem: true,
+        cycle: Cycle {
+            src: PEER,
+            dest: ME,
+            rate: 1,
+            ack: true,
+            frames: 2,
+        },
+    });
+    bench.sentence(&frame_from(PEER, 1, &numbered(5, b"one")));
+    let mut outputs = bench.sentence(&frame_from(PEER, 2, b"two"));
+    // Held for its statistics at most the statistics timeout.
+    bench.advance(Duration::from_secs(2));
+    outputs.extend(bench.input(Input::Tick));
+    let got = received(&outputs);
+    assert!(
+        matches!(got.as_slice(), [r] if r.frame_start == Some(5)
+            && r.frame == vec![b"one".to_vec(), b"two".to_vec()]),
+        "{outputs:?}"
+    );
+    // Our data cycle to that node goes as it is, the acks still owed.
+    let written = data_cycle_written(&mut bench);
+    assert!(
+        matches!(written.last(), Some(MmSentence::TransmitData { data, .. }) if data == b"hello"),
+        "{written:?}"
+    );
+    bench.sentence(&MmSentence::TransmitStart { bytes: 5 });
+    bench.sentence(&MmSentence::TransmitDone { bytes: 5 });
+    // Its statistics awaited at most the statistics timeout.
+    bench.advance(Duration::from_secs(2));
+    let outputs = bench.input(Input::Tick);
+    assert!(
+        matches!(results(&outputs).as_slice(), [(TransmitOutcome::Sent, _)]),
+        "{outputs:?}"
+    );
+    // The FDP packet carries them: frames 5 and 6 of the node.
+    let outputs = bench.initiate(fdp_slot(bench.now.micros));
+    let asked = requests(&outputs);
+    assert_eq!(asked.len(), 1, "{outputs:?}");
+    let (id, template) = (asked[0].0, asked[0].1.clone());
+    let mut answer = template.clone();
+    answer.frame[0].extend_from_slice(b"fdp");
+    answer.ack_requested = Some(true);
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(answer),
+    });
+    let data = match writes(&outputs).as_slice() {
+        [MmSentence::FdpTransmit {
+            dest: PEER, data, ..
+        }] => data.clone(),
+        other => panic!("one $CCTDP: {other:?}"),
+    };
+    let ack = ack_message(&data).expect("the FDP packet starts with the ack message");
+    assert_eq!(ack.part.len(), 1, "{ack:?}");
+    assert_eq!(
+        (ack.part[0].ack_dest, ack.part[0].acked_frames),
+        (PEER as i32, 0b11 << 5)
+    );
+    assert!(ack.ack_requested);
 }
