@@ -1635,8 +1635,9 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
 }
 
 /// Why a TDMA cycle of `slots`, run with the settings of `mac` on
-/// `driver`, would fail, as `--check` tells it for `mac.slot` (a rate the
-/// driver does not have, a slot too short for its packet): for a cycle
+/// `driver`, would fail, as `--check` tells it for `mac.slot` (a
+/// `DRIVER_SPECIFIC` slot the driver cannot carry out, a rate the driver
+/// does not have, a slot too short for its packet): for a cycle
 /// changed at sea by a `MACUpdate`, each problem naming `mac.slot[I]` of
 /// the new cycle.
 pub fn cycle_problems(
@@ -1649,9 +1650,15 @@ pub fn cycle_problems(
             slot: slots.to_vec(),
             ..mac.clone()
         }),
+        driver: Some(driver.clone()),
         ..Default::default()
     };
-    slot_problems(&config, driver)
+    let mut problems = match modemdriver::built_in::of(driver) {
+        Ok(kind) => driver_specific_slot_problems(&config, kind),
+        Err(_) => Vec::new(),
+    };
+    problems.extend(slot_problems(&config, driver));
+    problems
 }
 
 /// Why a slot of `seconds` (less `guard`) cannot hold `packet`, with what

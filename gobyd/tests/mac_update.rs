@@ -220,6 +220,20 @@ async fn updates_that_cannot_apply_are_refused_naming_the_field() {
         err.starts_with("goby.acomms.protobuf.MACUpdate.first_iterator: 7"),
         "{err}"
     );
+    // A slot the simulator cannot carry out, refused as `--check` refuses
+    // it in the configuration.
+    let mut specific = slot(2, 10.0);
+    specific.set_type(
+        protos::goby::acomms::protobuf::modem_transmission::TransmissionType::DriverSpecific,
+    );
+    let err = two
+        .update(update(2, UpdateType::PushBack, vec![specific]))
+        .await
+        .unwrap_err();
+    assert!(
+        err.contains("cannot run") && err.contains("mac.slot[2].type"),
+        "{err}"
+    );
     assert_eq!(two.cycle().await, before);
     // Refusals are told on the `mac` events too.
     let (cycle, from) = two.next_cycle_event(Duration::from_secs(1)).await.unwrap();

@@ -23,7 +23,10 @@ pub(super) fn configured_mac(config: &protos::goby::apps::protobuf::GobydConfig)
 /// Why the first link's driver cannot run `slots` (as `--check` tells it
 /// for the configured cycle), in one line; `None`: it can.
 fn driver_problems(core: &Core, slots: &[ModemTransmission]) -> Option<String> {
-    let driver = core.links[0].config.as_ref()?;
+    let driver = core.links[0]
+        .config
+        .as_ref()
+        .or(core.configured_driver.as_ref())?;
     let problems = crate::config::cycle_problems(&core.configured_mac, slots, driver);
     (!problems.is_empty()).then(|| {
         let each: Vec<String> = problems.iter().map(|p| p.to_string()).collect();

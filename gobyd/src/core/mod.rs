@@ -182,6 +182,10 @@ pub struct Core {
     /// (what a cycle changed at sea was changed from, and is checked
     /// against, see [`mac_update`]).
     configured_mac: protos::goby::acomms::protobuf::MacConfig,
+    /// The driver section the configuration gives the first link, which a
+    /// cycle changed at sea is checked against (also when the embedding
+    /// program started the driver itself).
+    configured_driver: Option<protos::goby::acomms::protobuf::DriverConfig>,
     /// The MAC switcher, with the configuration's `mac_switcher`.
     mac_switcher: Option<mac_switcher::MacSwitcher>,
     /// The core's own events, read for the link forecasts (rates chosen
@@ -273,6 +277,10 @@ impl Core {
             .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
             .collect();
         let configured_mac = mac_update::configured_mac(&config);
+        let configured_driver = crate::config::links::links(&config)
+            .first()
+            .and_then(|v| v.driver)
+            .cloned();
         let mut core = Self {
             outbox,
             door,
@@ -304,6 +312,7 @@ impl Core {
             network,
             always_taken: around.always_taken,
             configured_mac,
+            configured_driver,
             mac_switcher: mac_switcher::MacSwitcher::of(&config),
             own_events,
             internal_listeners,
