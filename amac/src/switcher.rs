@@ -153,7 +153,10 @@ impl Switcher {
     ) -> Result<Switch, String> {
         let to = self.index_of(active)?;
         if until.is_some_and(|u| now >= u) {
-            return Ok(self.go(self.default, None, SwitchReason::KeepAliveLapsedWhileDown));
+            // From the MAC that ran before the restart, which lapsed.
+            let mut lapsed = self.go(self.default, None, SwitchReason::KeepAliveLapsedWhileDown);
+            lapsed.from = active.to_string();
+            return Ok(lapsed);
         }
         Ok(self.go(to, until, SwitchReason::Restored))
     }
@@ -252,8 +255,8 @@ mod tests {
         let mut s = switcher();
         let sw = s.restore("quiet", Some(100 * S), 100 * S).unwrap();
         assert_eq!(
-            (sw.reason, sw.to.as_str()),
-            (SwitchReason::KeepAliveLapsedWhileDown, "survey")
+            (sw.reason, sw.from.as_str(), sw.to.as_str()),
+            (SwitchReason::KeepAliveLapsedWhileDown, "quiet", "survey")
         );
     }
 }
