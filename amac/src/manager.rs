@@ -280,6 +280,23 @@ impl MacManager {
 
     fn check_slots(&self, slots: &[ModemTransmission], polled: bool) -> Result<(), AmacError> {
         for (i, slot) in slots.iter().enumerate() {
+            // (-1, the default, is a slot no node initiates.)
+            if slot.src() < -1 {
+                return Err(AmacError::config_field(
+                    format!("slot[{i}].src"),
+                    format!("{} is not a modem id (0 or more)", slot.src()),
+                ));
+            }
+            if slot.dest() < -1 {
+                return Err(AmacError::config_field(
+                    format!("slot[{i}].dest"),
+                    format!(
+                        "{} is not a destination: a modem id, 0 for broadcast or -1 for the \
+                         queue's choice",
+                        slot.dest()
+                    ),
+                ));
+            }
             if let Some(shared) = &slot.shared {
                 if polled {
                     return Err(AmacError::config_field(

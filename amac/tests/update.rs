@@ -174,3 +174,34 @@ fn a_slot_longer_than_a_day_is_refused_in_an_update_and_in_the_configuration() {
         "{err}"
     );
 }
+
+#[test]
+fn a_slot_of_a_negative_source_or_a_destination_below_minus_one_is_refused() {
+    let mut mac = node_two(DAY_START);
+    let bad_src = update(
+        UpdateType::PushBack,
+        vec![update_slot(&slot(-3, 0, 0, 10.0))],
+    );
+    let err = mac
+        .apply_update(&bad_src, DAY_START)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("slot[2].src") && err.contains("-3"), "{err}");
+    let bad_dest = update(
+        UpdateType::PushBack,
+        vec![update_slot(&slot(2, -7, 0, 10.0))],
+    );
+    let err = mac
+        .apply_update(&bad_dest, DAY_START)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("slot[2].dest") && err.contains("-7"), "{err}");
+    // -1 (the queue's choice) and 0 (broadcast) are destinations.
+    for dest in [-1, 0] {
+        let ok = update(
+            UpdateType::PushBack,
+            vec![update_slot(&slot(2, dest, 0, 10.0))],
+        );
+        mac.apply_update(&ok, DAY_START).unwrap();
+    }
+}
