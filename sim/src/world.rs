@@ -110,7 +110,7 @@ const SHM_FREE_BYTES: u64 = 1 << 30;
 /// otherwise under `/dev/shm` (memory: a run's journals are thrown away at
 /// its end, and their syncs, which take most of a run's time on a disk,
 /// cost nothing there) when it is a writable directory with at least
-/// [`SHM_FREE_BYTES`] free; otherwise the system's temporary directory.
+/// 1 GiB free (`SHM_FREE_BYTES`); otherwise the system's temporary directory.
 pub fn data_root() -> std::path::PathBuf {
     if std::env::var_os("TMPDIR").is_none() {
         let shm = Path::new("/dev/shm");
