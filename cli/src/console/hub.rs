@@ -166,7 +166,11 @@ impl Hub {
         node: &str,
         build: impl FnOnce(&ConsoleState) -> Result<Outbound, String>,
     ) -> Result<u64, String> {
-        let (id, out) = {
+        // The command is numbered and handed to the source under one lock,
+        // so that commands reach the broker in the order of their numbers:
+        // a node's MQTT bridge answers MAC requests in the order it gets
+        // them, and the answers are matched to the oldest request waiting.
+        let (id, handed) = {
             let mut state = self.state();
             let nodes = state.bridged_nodes();
             if !nodes.iter().any(|n| n == node) {
@@ -183,10 +187,17 @@ impl Hub {
             let (id, event) = state.command_sent(node, &out.type_name, &out.topic, &out.msg, now());
             self.send([event]);
             out.command = id;
-            (id, out)
+            (id, self.outbound.try_send(out))
         };
-        if self.outbound.send(out).await.is_err() {
-            self.command_failed(id, "the console's source has stopped");
+        match handed {
+            Ok(()) => {}
+            Err(mpsc::error::TrySendError::Full(_)) => self.command_failed(
+                id,
+                "the console's source has too many commands waiting: send it again later",
+            ),
+            Err(mpsc::error::TrySendError::Closed(_)) => {
+                self.command_failed(id, "the console's source has stopped")
+            }
         }
         Ok(id)
     }
