@@ -24,6 +24,7 @@
 
 pub mod aloha;
 pub mod ledger;
+pub mod modem;
 pub mod report;
 pub mod scenario;
 pub mod slot_use;

@@ -233,7 +233,7 @@ impl Check<'_> {
             }
         }
         // The simulator driver's own checks, told as the scenario's water.
-        let driver = crate::world::driver_config(1, &[(1, [0.0; 3])], water, 0);
+        let driver = crate::modem::driver_config(1, &[(1, [0.0; 3])], water, 0);
         // (The stand-in node's position is not the water's: each node's
         // place is checked in it apart.)
         let water_only = |p: &modemdriver::problem::Problem| !p.field.starts_with("simulator.node");
@@ -377,7 +377,7 @@ impl Check<'_> {
         if self.found.len() == before && self.water.acoustic_channel.is_some() {
             // Where the modelled water has no room for a modem (under the
             // sea floor, out of the modelled range), as the driver says.
-            let driver = crate::world::driver_config(1, &[(1, point)], &self.water, 0);
+            let driver = crate::modem::driver_config(1, &[(1, point)], &self.water, 0);
             for p in modemdriver::sim::problems(&driver) {
                 if p.field.starts_with("simulator.node[0]") {
                     self.problem(format!("{at}.depth"), p.reason.clone());
@@ -512,7 +512,7 @@ impl Check<'_> {
         // them (a slot too short for its rate's packet would drop every
         // transmission in it).
         let own = [(id, start_of(node))];
-        config.driver = Some(crate::world::driver_config(id, &own, &self.water, 0));
+        config.driver = Some(crate::modem::driver_config(id, &own, &self.water, 0));
         // The run publishes and listens in-process: no JSON, MQTT or MOOS
         // interface, and no forecast (its ray traces run on other threads).
         config.json = Some(protos::goby::apps::protobuf::gobyd_config::JsonInterface {
