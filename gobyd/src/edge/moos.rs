@@ -540,52 +540,23 @@ async fn bridge(
         notify(&client, &settings.mac_active_var(), &Value::String(value));
     }
     let translator = settings.translator.clone();
-    let mut registered: Vec<String> = settings.moos.send_var.clone();
-    registered.extend(translator.variables());
-    let flush_var = settings.var(|v| v.queue_flush());
-    let reset_var = settings.var(|v| v.driver_reset());
-    let mac_update_var = settings.var(|v| v.mac_cycle_update());
-    let mac_switch_var = settings.mac_switch_var();
-    registered.extend(
-        flush_var
-            .iter()
-            .chain(&reset_var)
-            .chain(&mac_update_var)
-            .chain([&mac_switch_var])
-            .cloned(),
-    );
-    // Registered with or without the network layer: without it a request
-    // is answered on `file_reply_var` with the reason, never ignored.
-    let file_send_var = settings.moos.file_send_var().to_string();
-    let file_get_var = settings.moos.file_get_var().to_string();
-    registered.extend([file_send_var.clone(), file_get_var.clone()]);
-    if let Some(vars) = &settings.forecast {
-        registered.extend(vars.registered());
-    }
-    registered.sort();
-    registered.dedup();
-    for var in &registered {
-        if let Err(e) = client.register(var, Duration::ZERO) {
+    let vars = BridgeVars::of(&settings);
+    for var in vars.registered(&settings) {
+        if let Err(e) = client.register(&var, Duration::ZERO) {
             tracing::error!("MOOS: cannot register for {var}: {e}");
         }
     }
+    let BridgeVars {
+        flush_var,
+        reset_var,
+        mac_update_var,
+        mac_switch_var,
+        file_send_var,
+        file_get_var,
+    } = vars;
     // Timed triggers: one ticker per type.
     let (timed_tx, mut timed_rx) = mpsc::channel::<String>(16);
-    let mut tickers = tokio::task::JoinSet::new();
-    for (name, period) in translator.timed() {
-        let name = name.to_string();
-        let tx = timed_tx.clone();
-        tickers.spawn(async move {
-            let mut ticks = tokio::time::interval(period);
-            ticks.tick().await;
-            loop {
-                ticks.tick().await;
-                if tx.send(name.clone()).await.is_err() {
-                    break;
-                }
-            }
-        });
-    }
+    let mut tickers = tickers(&translator, timed_tx);
     let mut latest: HashMap<String, Value> = HashMap::new();
     loop {
         tokio::select! {
@@ -641,37 +612,7 @@ async fn bridge(
             }
             event = events.recv() => match event {
                 Ok(event) => {
-                    let values = match &*event {
-                        DaemonEvent::Received { received, .. } => {
-                            received_publications(&settings, received)
-                        }
-                        DaemonEvent::Queue { event, .. } => publications(&settings, event),
-                        DaemonEvent::RouteDropped(d) => publications(&settings, &d.expired),
-                        DaemonEvent::Modem(m) => modem_publications(&settings, m),
-                        DaemonEvent::Transfer(e) if settings.files => {
-                            let mut v = transfer_value(e);
-                            if let Some(o) = v.as_object_mut() {
-                                o.remove("event");
-                            }
-                            vec![(
-                                settings.moos.transfer_var().to_string(),
-                                Value::String(v.to_string()),
-                            )]
-                        }
-                        DaemonEvent::Transfer(_) => Vec::new(),
-                        DaemonEvent::Link(status) => settings
-                            .var(|v| v.link_status())
-                            .map(|var| {
-                                (var, Value::String(format_value(&status.transcode_to_dynamic())))
-                            })
-                            .into_iter()
-                            .collect(),
-                        DaemonEvent::Forecast(e) => settings
-                            .forecast
-                            .as_ref()
-                            .map(|v| v.publications(e))
-                            .unwrap_or_default(),
-                    };
+                    let values = event_values(&settings, &event);
                     for (var, value) in values {
                         notify(&client, &var, &value);
                     }
@@ -685,6 +626,113 @@ async fn bridge(
     }
     tickers.abort_all();
     client.close().await;
+}
+
+/// The variables the bridge acts on, besides the translator's and the
+/// forecast's.
+struct BridgeVars {
+    flush_var: Option<String>,
+    reset_var: Option<String>,
+    mac_update_var: Option<String>,
+    mac_switch_var: String,
+    file_send_var: String,
+    file_get_var: String,
+}
+
+impl BridgeVars {
+    fn of(settings: &BridgeSettings) -> Self {
+        BridgeVars {
+            flush_var: settings.var(|v| v.queue_flush()),
+            reset_var: settings.var(|v| v.driver_reset()),
+            mac_update_var: settings.var(|v| v.mac_cycle_update()),
+            mac_switch_var: settings.mac_switch_var(),
+            // Registered with or without the network layer: without it a
+            // request is answered on `file_reply_var` with the reason, never
+            // ignored.
+            file_send_var: settings.moos.file_send_var().to_string(),
+            file_get_var: settings.moos.file_get_var().to_string(),
+        }
+    }
+
+    /// Every variable the bridge registers for, sorted, each once.
+    fn registered(&self, settings: &BridgeSettings) -> Vec<String> {
+        let mut registered: Vec<String> = settings.moos.send_var.clone();
+        registered.extend(settings.translator.variables());
+        registered.extend(
+            self.flush_var
+                .iter()
+                .chain(&self.reset_var)
+                .chain(&self.mac_update_var)
+                .chain([
+                    &self.mac_switch_var,
+                    &self.file_send_var,
+                    &self.file_get_var,
+                ])
+                .cloned(),
+        );
+        if let Some(vars) = &settings.forecast {
+            registered.extend(vars.registered());
+        }
+        registered.sort();
+        registered.dedup();
+        registered
+    }
+}
+
+/// The variables and values a daemon event is published as.
+fn event_values(settings: &BridgeSettings, event: &DaemonEvent) -> Vec<(String, Value)> {
+    match event {
+        DaemonEvent::Received { received, .. } => received_publications(settings, received),
+        DaemonEvent::Queue { event, .. } => publications(settings, event),
+        DaemonEvent::RouteDropped(d) => publications(settings, &d.expired),
+        DaemonEvent::Modem(m) => modem_publications(settings, m),
+        DaemonEvent::Transfer(e) if settings.files => {
+            let mut v = transfer_value(e);
+            if let Some(o) = v.as_object_mut() {
+                o.remove("event");
+            }
+            vec![(
+                settings.moos.transfer_var().to_string(),
+                Value::String(v.to_string()),
+            )]
+        }
+        DaemonEvent::Transfer(_) => Vec::new(),
+        DaemonEvent::Link(status) => settings
+            .var(|v| v.link_status())
+            .map(|var| {
+                (
+                    var,
+                    Value::String(format_value(&status.transcode_to_dynamic())),
+                )
+            })
+            .into_iter()
+            .collect(),
+        DaemonEvent::Forecast(e) => settings
+            .forecast
+            .as_ref()
+            .map(|v| v.publications(e))
+            .unwrap_or_default(),
+    }
+}
+/// One ticker per timed type, each sending the type's name on `tx` every
+/// period (the first after one period).
+fn tickers(translator: &Translator, tx: mpsc::Sender<String>) -> tokio::task::JoinSet<()> {
+    let mut tickers = tokio::task::JoinSet::new();
+    for (name, period) in translator.timed() {
+        let name = name.to_string();
+        let tx = tx.clone();
+        tickers.spawn(async move {
+            let mut ticks = tokio::time::interval(period);
+            ticks.tick().await;
+            loop {
+                ticks.tick().await;
+                if tx.send(name.clone()).await.is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    tickers
 }
 
 /// The values of the `initializer`s, written on connecting (a number for

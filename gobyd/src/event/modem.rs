@@ -111,7 +111,7 @@ pub enum ModemEvent {
         /// The slot's index in its cycle.
         slot_index: i32,
         /// The choice and why.
-        choice: crate::core::link::adaptive_rate::Choice,
+        choice: Choice,
     },
     /// A driver status report.
     Status(DriverStatus),
@@ -168,4 +168,48 @@ impl ModemEvent {
             Err(_) => hex::encode(&raw.bytes),
         }
     }
+}
+
+/// Why a rate was chosen (its name on the `mac` events).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reason {
+    /// Nothing known of the link: the slot's own rate.
+    NoLinkData,
+    /// The first choice for this destination.
+    First,
+    /// The current rate still meets the target.
+    Kept,
+    /// A faster rate meets the target with the hysteresis margin.
+    Up,
+    /// The current rate no longer meets the target (or no longer fits the
+    /// slot): a slower one.
+    Down,
+}
+
+impl Reason {
+    /// `no_link_data`, `first`, `kept`, `up`, `down`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Reason::NoLinkData => "no_link_data",
+            Reason::First => "first",
+            Reason::Kept => "kept",
+            Reason::Up => "up",
+            Reason::Down => "down",
+        }
+    }
+}
+
+/// A rate chosen, with what it was chosen from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Choice {
+    /// The modem rate.
+    pub rate: i32,
+    /// Why.
+    pub reason: Reason,
+    /// The SNR estimate it was chosen from (dB; `None`: none heard).
+    pub snr: Option<f64>,
+    /// The chosen rate's packet-error estimate (`None`: no link data).
+    pub packet_error: Option<f64>,
+    /// A faster rate would have met the target but does not fit the slot.
+    pub slot_limited: bool,
 }

@@ -130,7 +130,7 @@ pub fn mac_switch_line(
 pub fn mac_rate_line(
     dest: i32,
     slot_index: i32,
-    choice: &crate::core::link::adaptive_rate::Choice,
+    choice: &crate::event::modem::Choice,
 ) -> gobyd_protocol::event::MacRate {
     gobyd_protocol::event::MacRate {
         mac_rate: choice.rate,
