@@ -441,28 +441,10 @@ fn value_text(v: &Value) -> &str {
     v.text.as_str()
 }
 
-/// Reads an `.env` file (`name` for errors; companions by extension).
-pub(super) fn read_env(
-    name: &str,
-    text: &str,
-    companions: &mut Companions<'_>,
-) -> Result<EnvFile, ParseError> {
-    let mut r = Records::new(name, text);
-    let title = r.read_one("title")?.text;
-    let frequency = r.read_number("frequency")?;
-    if frequency <= 0.0 {
-        return Err(r.error(
-            r.line() - 1,
-            "frequency",
-            format!("{frequency} Hz is not above zero"),
-        ));
-    }
-    let nmedia = r.read_count("number of media", 1, 1_000)?;
-    if nmedia != 1 {
-        return Err(r.error(r.line() - 1, "number of media", "BELLHOP takes one medium"));
-    }
-    let (top, _) = read_top_options(&mut r)?;
-    let volume_attenuation = match top.volume {
+/// The Francois-Garrison parameters after a top option asking for them
+/// (`F`), or the volume attenuation the option's letter names.
+fn read_volume_attenuation(r: &mut Records, letter: char) -> Result<VolumeAttenuation, ParseError> {
+    Ok(match letter {
         'T' => VolumeAttenuation::Thorp,
         'F' => {
             let v = r.read_numbers(4, "Francois-Garrison T, S, pH, z")?;
@@ -481,36 +463,40 @@ pub(super) fn read_env(
             }
         }
         _ => VolumeAttenuation::None,
-    };
-    let mut layer = Layer::default();
-    let surface = read_half_space(&mut r, top.bc, &mut layer, "top half-space")?;
-    let head = r.read_numbers(3, "number of SSP points, roughness, bottom depth")?;
-    if head.len() < 3 {
-        return Err(r.error(
-            r.line() - 1,
-            "number of SSP points, roughness, bottom depth",
-            "three values expected",
-        ));
-    }
-    let (surface_roughness, depth) = (head[1].0, head[2].0);
-    let profile = read_profile(&mut r, (depth, head[2].1), &mut layer)?;
+    })
+}
+
+/// The bottom option line: its boundary condition letter, whether a
+/// bathymetry file comes with it, and the bottom roughness.
+struct BottomOption {
+    bc: char,
+    roughness: f64,
+    bathymetry_file: bool,
+}
+
+/// Reads the bottom option line, which follows the profile (`last` is the
+/// profile's last depth, m; `depth_line` the line giving the bottom depth).
+fn read_bottom_option(
+    r: &mut Records,
+    last: f64,
+    depth_line: usize,
+) -> Result<BottomOption, ParseError> {
     let v = r.read(2, "bottom option")?;
     let first = v
         .first()
         .ok_or_else(|| r.error(r.line() - 1, "bottom option", "missing"))?;
     if !first.quoted && super::records::parse_number(&first.text).is_some() {
-        let last = profile[profile.len() - 1].depth;
         return Err(r.error(
             first.line,
             "bottom option",
             format!(
                 "a number where the bottom option (a quoted string) is expected: the profile ended at the bottom depth {last} m (line {}), so this SSP line is below the bottom",
-                head[2].1
+                depth_line
             ),
         ));
     }
     let bottom_option = value_text(first).to_string();
-    let bottom_roughness = match v.get(1) {
+    let roughness = match v.get(1) {
         Some(s) => r.number(s, "bottom roughness")?,
         None => 0.0,
     };
@@ -533,6 +519,52 @@ pub(super) fn read_env(
             ))
         }
     };
+    Ok(BottomOption {
+        bc: bot_bc,
+        roughness,
+        bathymetry_file,
+    })
+}
+
+/// Reads an `.env` file (`name` for errors; companions by extension).
+pub(super) fn read_env(
+    name: &str,
+    text: &str,
+    companions: &mut Companions<'_>,
+) -> Result<EnvFile, ParseError> {
+    let mut r = Records::new(name, text);
+    let title = r.read_one("title")?.text;
+    let frequency = r.read_number("frequency")?;
+    if frequency <= 0.0 {
+        return Err(r.error(
+            r.line() - 1,
+            "frequency",
+            format!("{frequency} Hz is not above zero"),
+        ));
+    }
+    let nmedia = r.read_count("number of media", 1, 1_000)?;
+    if nmedia != 1 {
+        return Err(r.error(r.line() - 1, "number of media", "BELLHOP takes one medium"));
+    }
+    let (top, _) = read_top_options(&mut r)?;
+    let volume_attenuation = read_volume_attenuation(&mut r, top.volume)?;
+    let mut layer = Layer::default();
+    let surface = read_half_space(&mut r, top.bc, &mut layer, "top half-space")?;
+    let head = r.read_numbers(3, "number of SSP points, roughness, bottom depth")?;
+    if head.len() < 3 {
+        return Err(r.error(
+            r.line() - 1,
+            "number of SSP points, roughness, bottom depth",
+            "three values expected",
+        ));
+    }
+    let (surface_roughness, depth) = (head[1].0, head[2].0);
+    let profile = read_profile(&mut r, (depth, head[2].1), &mut layer)?;
+    let BottomOption {
+        bc: bot_bc,
+        roughness: bottom_roughness,
+        bathymetry_file,
+    } = read_bottom_option(&mut r, profile[profile.len() - 1].depth, head[2].1)?;
     let bottom = read_half_space(&mut r, bot_bc, &mut layer, "bottom half-space")?;
     let (zmin, zmax) = (profile[0].depth as f32, depth as f32);
     let (sources, source_line) = read_vector(&mut r, "source depths")?;
