@@ -314,74 +314,8 @@ impl ConsoleState {
                     self.place(&sender, &rx.type_name, &rx.msg, time, &mut events);
                 }
             }
-            Report::Accepted(a) => {
-                self.extra.get_mut(node).expect("entered").accepted += 1;
-                let entry = json!({
-                    "kind": "accepted", "node": node, "time": time, "type": a.type_name,
-                    "id": a.id, "topic": a.topic, "msg": a.msg,
-                });
-                self.log(entry, &mut events);
-                let source = a
-                    .msg
-                    .as_object()
-                    .and_then(|m| number(m, &["source", "src"]));
-                let sender = match source {
-                    Some(id) if Some(id as i64) != self.extra[node].modem_id => {
-                        self.node_of_modem(id as i64)
-                    }
-                    _ => node.to_string(),
-                };
-                self.place(&sender, &a.type_name, &a.msg, time, &mut events);
-                let same = &self.same_message;
-                if let Some(c) = self.commands.iter_mut().find(|c| {
-                    c.state == CommandState::Published
-                        && c.node == node
-                        && c.topic == a.topic
-                        && (c.msg == a.msg || same(&c.type_name, &c.msg, &a.msg))
-                }) {
-                    c.state = CommandState::Accepted;
-                    c.journal_id = a.id.clone();
-                    c.changed = time;
-                    let view = command_json(c);
-                    let seq = self.next_seq();
-                    events.push(json!({"event": "command", "seq": seq, "command": view}));
-                }
-            }
-            Report::Queued(notice) => {
-                let e = self.extra.get_mut(node).expect("entered");
-                let (state, note) = match &notice.kind {
-                    QueueKind::Ack { by, .. } => {
-                        e.acks += 1;
-                        (CommandState::Acked, format!("by {by}"))
-                    }
-                    QueueKind::Expire => {
-                        e.expires += 1;
-                        (CommandState::Expired, String::new())
-                    }
-                    QueueKind::Drop => {
-                        e.drops += 1;
-                        (CommandState::Dropped, String::new())
-                    }
-                };
-                let mut entry = json!({
-                    "kind": notice.kind.word(), "node": node, "time": time,
-                    "type": notice.type_name, "msg": notice.msg,
-                });
-                if let QueueKind::Ack { by, frame } = notice.kind {
-                    entry["by"] = by.into();
-                    entry["frame"] = frame.into();
-                }
-                self.log(entry, &mut events);
-                self.settle(
-                    node,
-                    &notice.type_name,
-                    &notice.msg,
-                    state,
-                    note,
-                    time,
-                    &mut events,
-                );
-            }
+            Report::Accepted(a) => self.apply_accepted(node, a, time, &mut events),
+            Report::Queued(notice) => self.apply_queued(node, notice, time, &mut events),
             Report::Error { error, topic } => {
                 self.extra.get_mut(node).expect("entered").errors += 1;
                 let entry = json!({
@@ -418,6 +352,92 @@ impl ConsoleState {
             .windows(2)
             .all(|w| w[0]["seq"].as_u64() < w[1]["seq"].as_u64()));
         events
+    }
+
+    /// An accepted publication of `node`: logged, placed on the map, and
+    /// the command it answers marked accepted.
+    fn apply_accepted(
+        &mut self,
+        node: &str,
+        a: &crate::fleet::AcceptedReport,
+        time: f64,
+        events: &mut Vec<Value>,
+    ) {
+        self.extra.get_mut(node).expect("entered").accepted += 1;
+        let entry = json!({
+            "kind": "accepted", "node": node, "time": time, "type": a.type_name,
+            "id": a.id, "topic": a.topic, "msg": a.msg,
+        });
+        self.log(entry, events);
+        let source = a
+            .msg
+            .as_object()
+            .and_then(|m| number(m, &["source", "src"]));
+        let sender = match source {
+            Some(id) if Some(id as i64) != self.extra[node].modem_id => {
+                self.node_of_modem(id as i64)
+            }
+            _ => node.to_string(),
+        };
+        self.place(&sender, &a.type_name, &a.msg, time, events);
+        let same = &self.same_message;
+        if let Some(c) = self.commands.iter_mut().find(|c| {
+            c.state == CommandState::Published
+                && c.node == node
+                && c.topic == a.topic
+                && (c.msg == a.msg || same(&c.type_name, &c.msg, &a.msg))
+        }) {
+            c.state = CommandState::Accepted;
+            c.journal_id = a.id.clone();
+            c.changed = time;
+            let view = command_json(c);
+            let seq = self.next_seq();
+            events.push(json!({"event": "command", "seq": seq, "command": view}));
+        }
+    }
+
+    /// An ack, expiry or drop at `node`: counted, logged, and the command
+    /// it settles marked.
+    fn apply_queued(
+        &mut self,
+        node: &str,
+        notice: &crate::fleet::QueueNotice,
+        time: f64,
+        events: &mut Vec<Value>,
+    ) {
+        let e = self.extra.get_mut(node).expect("entered");
+        let (state, note) = match &notice.kind {
+            QueueKind::Ack { by, .. } => {
+                e.acks += 1;
+                (CommandState::Acked, format!("by {by}"))
+            }
+            QueueKind::Expire => {
+                e.expires += 1;
+                (CommandState::Expired, String::new())
+            }
+            QueueKind::Drop => {
+                e.drops += 1;
+                (CommandState::Dropped, String::new())
+            }
+        };
+        let mut entry = json!({
+            "kind": notice.kind.word(), "node": node, "time": time,
+            "type": notice.type_name, "msg": notice.msg,
+        });
+        if let QueueKind::Ack { by, frame } = notice.kind {
+            entry["by"] = by.into();
+            entry["frame"] = frame.into();
+        }
+        self.log(entry, events);
+        self.settle(
+            node,
+            &notice.type_name,
+            &notice.msg,
+            state,
+            note,
+            time,
+            events,
+        );
     }
 
     /// A report of `node`'s medium access (its cycle, the MAC running,
