@@ -7,7 +7,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use amac::MacManager;
-use modemdriver::{Driver, DriverEvent, DriverStatus, ModemTransmission};
+use modemdriver::{DataRequest, Driver, DriverEvent, DriverStatus, ModemTransmission};
 use prost_reflect::ReflectMessage;
 use protos::goby::apps::protobuf::GobydConfig;
 
@@ -128,12 +128,25 @@ pub(crate) fn open(
 }
 
 impl Core {
+    /// Answers a data request of link `i` with its frames filled
+    /// ([`fill`](Self::fill)), after the network layer, when there is one,
+    /// has put what it has to send in the outbox: the frames go from the
+    /// queue to the driver here.
+    pub(super) fn answer_data_request(&mut self, i: usize, request: DataRequest) {
+        if let Some(network) = &mut self.network {
+            network.data_request(&mut self.outbox, self.clock.now());
+        }
+        let mut filled = request.template().clone();
+        self.fill(i, &mut filled);
+        request.respond(filled);
+    }
+
     /// Fills the frames of a data request of link `i`: the link states
     /// told to the queue first (which links are up, what their budgets
     /// have left), the request cut to the bytes its budget has left, and
     /// what it carries counted against the budget and kept on disk before
     /// the driver has it.
-    pub(super) fn fill(&mut self, i: usize, request: &mut ModemTransmission) {
+    fn fill(&mut self, i: usize, request: &mut ModemTransmission) {
         let now = self.clock.now();
         self.tell_link_states(now);
         let left = self.links[i].budget.as_mut().map(|b| b.left(now));

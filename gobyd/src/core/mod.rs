@@ -626,14 +626,7 @@ impl Core {
         }
         self.link_health(i, &event);
         match event {
-            DriverEvent::DataRequest(request) => {
-                if let Some(network) = &mut self.network {
-                    network.data_request(&mut self.outbox, self.clock.now());
-                }
-                let mut filled = request.template().clone();
-                self.fill(i, &mut filled);
-                request.respond(filled);
-            }
+            DriverEvent::DataRequest(request) => self.answer_data_request(i, request),
             DriverEvent::Received(transmission) => {
                 self.links[i].mac.handle_received(transmission.src());
                 self.heard_snr(i, &transmission);
@@ -676,11 +669,6 @@ impl Core {
         }
     }
 
-    /// Fills the frames of a data request of link `i`: the link states
-    /// told to the queue first (which links are up, what their budgets
-    /// have left), the request cut to the bytes its budget has left, and
-    /// what it carries counted against the budget and kept on disk before
-    /// the driver has it.
     /// Sends a modem or medium access event to the interfaces.
     fn report(&self, event: ModemEvent) {
         let _ = self.events.send(Arc::new(DaemonEvent::Modem(event)));
