@@ -90,3 +90,53 @@ fn the_mixed_fleet_chapter_links_every_account_of_interoperating_with_goby3() {
         "no account found: {accounts:?}"
     );
 }
+
+/// `CONTRIBUTING.md`'s path of a publication names files that exist,
+/// functions those files define, its steps in order, and the number of
+/// files it crosses.
+#[test]
+fn the_path_of_a_publication_names_files_and_functions_that_exist() {
+    let root = guide_check::repository_root();
+    let text = std::fs::read_to_string(root.join("CONTRIBUTING.md")).expect("CONTRIBUTING.md");
+    let start = text
+        .find("### The path of a publication")
+        .expect("CONTRIBUTING.md has the path of a publication");
+    let section = &text[start..];
+    let section = &section[..section.find("\n## ").unwrap_or(section.len())];
+    let ticked = |cell: &str| -> Vec<String> {
+        cell.split('`')
+            .skip(1)
+            .step_by(2)
+            .map(str::to_string)
+            .collect()
+    };
+    let mut files: Vec<String> = Vec::new();
+    let mut steps = 0;
+    for row in section.lines().filter(|l| l.starts_with("| ")) {
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        let Ok(step) = cells[1].parse::<usize>() else {
+            continue;
+        };
+        steps += 1;
+        assert_eq!(step, steps, "step {step} is out of order");
+        let file = ticked(cells[2]).into_iter().next().expect("a file");
+        let code = std::fs::read_to_string(root.join(&file))
+            .unwrap_or_else(|e| panic!("step {step}: {file}: {e}"));
+        for function in ticked(cells[3]) {
+            let name = function.rsplit("::").next().expect("a name");
+            let defined = ["(", "<"]
+                .iter()
+                .any(|after| code.contains(&format!("fn {name}{after}")));
+            assert!(defined, "step {step}: {file} defines no function {name}");
+        }
+        if !files.contains(&file) {
+            files.push(file);
+        }
+    }
+    assert!(steps > 10, "only {steps} steps found");
+    let told = format!("That is {} files.", files.len());
+    assert!(
+        section.contains(&told),
+        "the page should say \"{told}\" (the files of its table)"
+    );
+}
