@@ -274,6 +274,8 @@ pub struct Measured {
     /// Requests at which types of different `V/ttl` tie exactly, in the
     /// prediction (the queue's tie rule).
     pub ties: u64,
+    /// The report's share of each type (full name).
+    pub share: std::collections::BTreeMap<String, crate::report::Share>,
 }
 
 impl Shares {
@@ -412,6 +414,7 @@ impl Shares {
             messages,
             frames,
             ties: queue_way.ties,
+            share: outcome.report.share.clone(),
         })
     }
 }

@@ -27,6 +27,13 @@ fn assert_predicted(m: &Measured) {
     assert_eq!(m.messages, m.frames, "messages and frames");
     assert!(m.frames >= 390, "{} frames in 400 slots", m.frames);
     for r in &m.rows {
+        // The report tells the share against the table's value base and ttl.
+        let share = &m.share[&r.glint.full_name()];
+        assert_eq!(
+            (share.value_base, share.ttl),
+            (r.glint.value_base(), r.glint.ttl as i32)
+        );
+        assert!((share.share - r.measured).abs() < 1e-6, "{share:?}");
         let low = r.predicted[0].min(r.predicted[1]);
         let high = r.predicted[0].max(r.predicted[1]);
         assert!(
