@@ -125,8 +125,8 @@ const START_S: i64 = 1_780_272_000;
 
 impl Discovery {
     /// `ids` with the default rule (`AUTO_RULE_THESIS_WITH_BACKOFF`),
-    /// C = 5, 15 s slots at rate 0 (3.7 s packets), on a circle of 500 m,
-    /// for `slots` slots.
+    /// C = 5, 15 s slots at rate 0 (3.7 s packets), on a circle of radius
+    /// 500 m, for `slots` slots.
     pub fn new(ids: &[i32], slots: u64) -> Self {
         Discovery {
             ids: ids.to_vec(),
