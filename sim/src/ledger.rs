@@ -21,6 +21,7 @@ use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
 
+use crate::discovery::{MacChange, MacRecord};
 use crate::slot_use::{SlotTally, SlotUse};
 
 /// Microseconds since the UNIX epoch (virtual time).
@@ -110,6 +111,8 @@ pub struct Ledger {
     packets: BTreeMap<(usize, i32), u64>,
     /// The nodes' slot use.
     slots: SlotTally,
+    /// Auto-discovery's changes and the data packets, in time order.
+    mac_log: Vec<MacRecord>,
     failure: Option<String>,
 }
 
@@ -125,6 +128,7 @@ impl Ledger {
             by_content: HashMap::new(),
             stray: Vec::new(),
             packets: BTreeMap::new(),
+            mac_log: Vec::new(),
             failure: None,
         }
     }
@@ -154,6 +158,12 @@ impl Ledger {
     pub fn slot_use(&self) -> SlotUse {
         let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
         self.slots.finish(&names)
+    }
+
+    /// Auto-discovery's changes of each node's cycle and every data packet
+    /// sent or heard intact, in time order ([`crate::discovery`]).
+    pub fn mac_log(&self) -> &[MacRecord] {
+        &self.mac_log
     }
 
     /// Why the run cannot be trusted (an event missed), if so.
@@ -217,6 +227,9 @@ impl Ledger {
     /// An event of node `node` at `time`.
     pub fn event(&mut self, node: usize, time: Micros, event: &DaemonEvent) {
         self.slots.event(node, self.nodes[node].modem_id, event);
+        if let Some(what) = MacChange::of(event) {
+            self.mac_log.push(MacRecord { node, time, what });
+        }
         match event {
             DaemonEvent::Received { received, .. } => {
                 let type_name = received.message.descriptor().full_name().to_string();

@@ -14,6 +14,10 @@
 //!   G and S of the shared slots).
 //! - [`report`]: the report (JSON) and the ledger (CSV).
 //! - [`aloha`]: ALOHA throughput measured against theory.
+//! - [`discovery`]: auto-discovery TDMA's convergence against the
+//!   thesis' simulation of it.
+//! - [`glint10`]: the GLINT10 message set's shares of a saturated link
+//!   against the queue's priority rule.
 //!
 //! ```no_run
 //! let scenario = goby_sim::scenario::load("fleet.pb.txt".as_ref())?;
@@ -23,6 +27,8 @@
 //! ```
 
 pub mod aloha;
+pub mod discovery;
+pub mod glint10;
 pub mod ledger;
 pub mod modem;
 pub mod report;

@@ -36,6 +36,53 @@ pub struct Report {
     /// What the nodes did with the medium: slots, transmissions,
     /// receptions; G and S of the shared slots.
     pub slot_use: SlotUse,
+    /// Per type (full name), its share of the link against its value base
+    /// and ttl ([`Share`]).
+    pub share: BTreeMap<String, Share>,
+}
+
+/// One type's share of the link: the messages of it its senders put in
+/// frames (a retransmission counts again; a frame of several messages
+/// counts each) over the messages of every type put in frames in the run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Share {
+    /// The value base of its queue (at its first sender).
+    pub value_base: f64,
+    /// The ttl of its queue, seconds (at its first sender).
+    pub ttl: i32,
+    /// Messages of it put in frames.
+    pub sendings: u64,
+    /// `sendings` over all messages put in frames (six decimals; 0 when
+    /// none was).
+    pub share: f64,
+}
+
+/// [`Share`] of each type published in `ledger`.
+fn shares(scenario: &Scenario, ledger: &Ledger) -> BTreeMap<String, Share> {
+    let mut out: BTreeMap<String, Share> = BTreeMap::new();
+    for p in ledger.publications() {
+        let share = out.entry(p.type_name.clone()).or_insert_with(|| {
+            let entry = scenario.nodes[p.src].config.queue.as_ref().and_then(|q| {
+                q.message_entry
+                    .iter()
+                    .find(|e| e.protobuf_name == p.type_name)
+            });
+            Share {
+                value_base: entry.map_or(1.0, |e| e.value_base()),
+                ttl: entry.map_or(0, |e| e.ttl()),
+                sendings: 0,
+                share: 0.0,
+            }
+        });
+        share.sendings += u64::from(p.sendings);
+    }
+    let all: u64 = out.values().map(|s| s.sendings).sum();
+    for s in out.values_mut() {
+        if all > 0 {
+            s.share = six_decimals(s.sendings as f64 / all as f64);
+        }
+    }
+    out
 }
 
 /// What was run.
@@ -205,6 +252,7 @@ impl Report {
                 },
             ),
             slot_use: ledger.slot_use(),
+            share: shares(scenario, ledger),
         }
     }
 
