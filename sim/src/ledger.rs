@@ -21,6 +21,8 @@ use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
 
+use crate::carriage::Carriage;
+use crate::medium_log::MediumLog;
 use crate::slot_use::{SlotTally, SlotUse};
 
 /// Microseconds since the UNIX epoch (virtual time).
@@ -110,6 +112,10 @@ pub struct Ledger {
     packets: BTreeMap<(usize, i32), u64>,
     /// The nodes' slot use.
     slots: SlotTally,
+    /// Which packets carried which journal entries.
+    carriage: Carriage,
+    /// What happened on the water.
+    medium: MediumLog,
     failure: Option<String>,
 }
 
@@ -125,6 +131,8 @@ impl Ledger {
             by_content: HashMap::new(),
             stray: Vec::new(),
             packets: BTreeMap::new(),
+            carriage: Carriage::default(),
+            medium: MediumLog::default(),
             failure: None,
         }
     }
@@ -154,6 +162,21 @@ impl Ledger {
     pub fn slot_use(&self) -> SlotUse {
         let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
         self.slots.finish(&names)
+    }
+
+    /// Which data packets carried which journal entries.
+    pub fn carriage(&self) -> &Carriage {
+        &self.carriage
+    }
+
+    /// What happened on the water (empty until [`Ledger::set_medium`]).
+    pub fn medium(&self) -> &MediumLog {
+        &self.medium
+    }
+
+    /// Enters what happened on the water, at the end of the run.
+    pub fn set_medium(&mut self, log: MediumLog) {
+        self.medium = log;
     }
 
     /// Why the run cannot be trusted (an event missed), if so.
@@ -217,6 +240,7 @@ impl Ledger {
     /// An event of node `node` at `time`.
     pub fn event(&mut self, node: usize, time: Micros, event: &DaemonEvent) {
         self.slots.event(node, self.nodes[node].modem_id, event);
+        self.carriage.event(node, event);
         match event {
             DaemonEvent::Received { received, .. } => {
                 let type_name = received.message.descriptor().full_name().to_string();
