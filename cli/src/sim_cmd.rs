@@ -98,14 +98,7 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         .iter()
         .chain(std::iter::once((&"all".to_string(), &report.total)))
     {
-        let latency = s.latency_us.as_ref().map_or("-".to_string(), |l| {
-            format!(
-                "{:.1}/{:.1}/{:.1} s",
-                l.p50 as f64 / 1e6,
-                l.p90 as f64 / 1e6,
-                l.max as f64 / 1e6
-            )
-        });
+        let latency = crate::sim_page::latency_text(s);
         writeln!(
             stdout,
             "  {name}: published {}, refused {}, delivered {}/{} ({}), duplicates {}, latency p50/p90/max {latency}, \

@@ -106,6 +106,15 @@ fn delivery_section(page: &mut String, report: &Report) {
     }
 }
 
+/// The latency quantiles of `s` as `p50/p90/max s` (seconds, one
+/// decimal), `-` when nothing was delivered.
+pub(crate) fn latency_text(s: &Stats) -> String {
+    s.latency_us.as_ref().map_or("-".to_string(), |l| {
+        let [p50, p90, max] = [l.p50, l.p90, l.max].map(|us| us as f64 / 1e6);
+        format!("{p50:.1}/{p90:.1}/{max:.1} s")
+    })
+}
+
 fn stats_table<'a>(
     page: &mut String,
     what: &str,
@@ -114,18 +123,11 @@ fn stats_table<'a>(
     let _ = write!(
         page,
         "<table><tr><th>{what}</th><th>published</th><th>refused</th><th>delivered / expected</th>\
-         <th>duplicates</th><th>latency p50 / p90 / max (s)</th><th>acked</th><th>expired</th>\
+         <th>duplicates</th><th>latency p50/p90/max</th><th>acked</th><th>expired</th>\
          <th>dropped</th><th>owed</th><th>lost</th></tr>"
     );
     for (name, s) in rows {
-        let latency = s.latency_us.as_ref().map_or("-".to_string(), |l| {
-            format!(
-                "{:.1} / {:.1} / {:.1}",
-                l.p50 as f64 / 1e6,
-                l.p90 as f64 / 1e6,
-                l.max as f64 / 1e6
-            )
-        });
+        let latency = latency_text(s);
         let _ = write!(
             page,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{} / {}</td><td>{}</td><td>{latency}</td>\

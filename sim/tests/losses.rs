@@ -2,6 +2,8 @@
 //! they are for, a sender whose packets reach that node while it transmits,
 //! one out of range; the report and the ledger name each cause, counted.
 
+mod support;
+
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -139,32 +141,7 @@ fn collisions_half_duplex_and_range_are_named_and_counted() {
 /// probability near 1.
 #[test]
 fn frame_errors_over_modelled_water_carry_the_links_snr() {
-    let env =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel/tests/data/bellhop/summer.env");
-    let gobyd = "mac { type: MAC_FIXED_DECENTRALIZED
-           slot { src: 1 dest: 2 rate: 5 slot_seconds: 12 }
-           slot { src: 2 dest: 1 rate: 5 slot_seconds: 12 } }
-         queue { message_entry { protobuf_name: \"goby.example.NavigationReport\" ack: false
-           role { type: SOURCE_ID field: \"source\" }
-           role { type: DESTINATION_ID field: \"destination\" } } }";
-    let node = |name: &str, id: i32, x: f64, to: &str| {
-        format!(
-            "node {{ name: \"{name}\" modem_id: {id} gobyd {{ {gobyd} }}
-               position {{ x: {x} y: 0 depth: 30 }}
-               traffic {{ type: \"goby.example.NavigationReport\" dest: \"{to}\" period_s: 24
-                 field {{ name: \"time\" counter {{ start: 1780272000 step: 24 }} }}
-                 field {{ name: \"x\" constant: \"{x}\" }}
-                 field {{ name: \"y\" constant: \"0\" }}
-                 field {{ name: \"z\" constant: \"-30\" }} }} }}\n"
-        )
-    };
-    let text = format!(
-        "seed: 3\nstart_time: \"2026-06-01T00:00:00Z\"\nduration_s: 240\ndrain_s: 30\n\
-         water {{ acoustic_channel {{ env: \"{}\" beams: 600 source_level_db: 160 }} }}\n{}{}",
-        env.display(),
-        node("a", 1, 0.0, "b"),
-        node("b", 2, 4000.0, "a"),
-    );
+    let text = support::summer_pair(4000.0, "", 5, 24, 240);
     let scenario = parse(&text, "modelled", Path::new(".")).expect("accepted");
     let outcome = goby_sim::run(&scenario).expect("the run ends");
     let total = &outcome.report.losses.total;
