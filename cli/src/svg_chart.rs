@@ -96,7 +96,7 @@ pub struct Series {
 }
 
 /// An x-y plot: points, or with `lines` a line through each series's
-/// points in their order; axes with five ticks each.
+/// points in their order; axes with round ticks ([`ticks`]).
 pub fn xy(title: &str, x_label: &str, y_label: &str, series: &[Series], lines: bool) -> String {
     const LEFT: f64 = 70.0;
     const TOP: f64 = 30.0;
@@ -129,18 +129,20 @@ pub fn xy(title: &str, x_label: &str, y_label: &str, series: &[Series], lines: b
         svg,
         r##"<rect x="{LEFT}" y="{TOP}" width="{W}" height="{H}" fill="none" stroke="#999"/>"##
     );
-    for i in 0..=4 {
-        let f = i as f64 / 4.0;
-        let (xv, yv) = (x0 + f * (x1 - x0), y0 + f * (y1 - y0));
+    for (v, label) in ticks(x0, x1) {
         let _ = write!(
             svg,
-            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"#,
-            px(xv),
-            TOP + H + 16.0,
-            tick(xv, x1 - x0),
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{label}</text>"#,
+            px(v),
+            TOP + H + 16.0
+        );
+    }
+    for (v, label) in ticks(y0, y1) {
+        let _ = write!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{label}</text>"#,
             LEFT - 6.0,
-            py(yv) + 4.0,
-            tick(yv, y1 - y0)
+            py(v) + 4.0
         );
     }
     let _ = write!(
@@ -185,11 +187,26 @@ pub fn xy(title: &str, x_label: &str, y_label: &str, series: &[Series], lines: b
     svg + "</svg>"
 }
 
-/// A tick label for `v` on an axis spanning `span`: the decimals the span
-/// needs.
-fn tick(v: f64, span: f64) -> String {
-    let decimals = (2.0 - span.abs().log10().floor()).clamp(0.0, 6.0) as usize;
-    format!("{v:.decimals$}")
+/// Ticks from `lo` to `hi` at a round step (1, 2 or 5 times a power of
+/// ten, about five of them), each with its label in the decimals the
+/// step needs.
+fn ticks(lo: f64, hi: f64) -> Vec<(f64, String)> {
+    let rough = (hi - lo) / 5.0;
+    let power = 10f64.powf(rough.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * power)
+        .find(|&s| s >= rough)
+        .unwrap_or(10.0 * power);
+    let decimals = (-step.log10().floor()).clamp(0.0, 6.0) as usize;
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last)
+        .map(|k| {
+            let v = k as f64 * step;
+            (v, format!("{v:.decimals$}"))
+        })
+        .collect()
 }
 
 /// The opening of a chart: its size, its font, its title.
@@ -255,6 +272,10 @@ mod tests {
             false,
         );
         assert_eq!(svg.matches("<circle").count(), 2);
+        let labels: Vec<String> = ticks(0.011, 1.0).into_iter().map(|t| t.1).collect();
+        assert_eq!(labels, ["0.2", "0.4", "0.6", "0.8", "1.0"]);
+        let labels: Vec<String> = ticks(20.0, 7150.0).into_iter().map(|t| t.1).collect();
+        assert_eq!(labels, ["2000", "4000", "6000"]);
         assert!(svg.contains(r#"cx="70.0" cy="290.0""#) && svg.contains(r#"cx="590.0" cy="30.0""#));
     }
 }
