@@ -111,6 +111,63 @@ fn page_is_written(out: &Path) {
     assert!(json["links"].as_object().is_some_and(|l| !l.is_empty()));
 }
 
+/// Over modelled water the page also charts each link's SNR over time and
+/// by range, a point per packet that carried one.
+#[test]
+fn over_modelled_water_the_page_charts_the_links_snr() {
+    let out = scratch("modelled");
+    let env =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel/tests/data/bellhop/summer.env");
+    let node = |name: &str, id: i32, x: f64, to: &str| {
+        format!(
+            "node {{ name: \"{name}\" modem_id: {id} position {{ x: {x} depth: 30 }}
+               gobyd {{ mac {{ type: MAC_FIXED_DECENTRALIZED
+                 slot {{ src: 1 dest: 2 rate: 1 slot_seconds: 12 }}
+                 slot {{ src: 2 dest: 1 rate: 1 slot_seconds: 12 }} }}
+               queue {{ message_entry {{ protobuf_name: \"goby.example.NavigationReport\"
+                 role {{ type: SOURCE_ID field: \"source\" }}
+                 role {{ type: DESTINATION_ID field: \"destination\" }} }} }} }}
+               traffic {{ type: \"goby.example.NavigationReport\" dest: \"{to}\" period_s: 24
+                 field {{ name: \"x\" constant: \"0\" }} field {{ name: \"y\" constant: \"0\" }}
+                 field {{ name: \"z\" constant: \"-30\" }}
+                 field {{ name: \"time\" constant: \"1780272000\" }} }} }}\n"
+        )
+    };
+    let scenario = out.join("summer.pb.txt");
+    let text = format!(
+        "seed: 1\nstart_time: \"2026-06-01T00:00:00Z\"\nduration_s: 240\ndrain_s: 30\n\
+         water {{ acoustic_channel {{ env: \"{}\" beams: 600 source_level_db: 160 }} }}\n{}{}",
+        env.display(),
+        node("a", 1, 0.0, "b"),
+        node("b", 2, 2000.0, "a")
+    );
+    std::fs::write(&scenario, text).unwrap();
+    let run = goby(&[
+        "sim",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", stderr_text(&run));
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<title>Link SNR over time, per pair</title>"));
+    assert!(page.contains("<title>Link SNR by range, per pair</title>"));
+    assert!(!page.contains("No SNR"));
+    let links = std::fs::read_to_string(out.join("links.csv")).unwrap();
+    let with_snr = links
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(6) != Some(""))
+        .count();
+    assert!(with_snr > 0, "{links}");
+    // Range over time, SNR over time, SNR by range: a point each.
+    assert_eq!(
+        page.matches("<circle").count(),
+        links.lines().count() - 1 + 2 * with_snr
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 /// The page of a run opened by headless Chromium: its charts are in the
 /// document the browser built.
 #[test]
