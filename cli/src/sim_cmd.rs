@@ -119,6 +119,21 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             s.lost,
         )?;
     }
+    let losses = &report.losses.total;
+    let counted = |counts: &std::collections::BTreeMap<String, u64>| {
+        let parts: Vec<String> = counts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        if parts.is_empty() {
+            "none".to_string()
+        } else {
+            parts.join(", ")
+        }
+    };
+    writeln!(
+        stdout,
+        "  packets at the node they were for: {}; not delivered: {}",
+        counted(&losses.packets),
+        counted(&losses.undelivered)
+    )?;
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
     }

@@ -50,6 +50,18 @@ fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["run"]["seed"], 3);
+    // The losses, summed: the same in the summary as in the report.
+    let total = &report["losses"]["total"];
+    let heard = total["packets"]["heard"].as_u64().unwrap();
+    let unheard = total["undelivered"]["unheard"].as_u64().unwrap();
+    assert_eq!(unheard, report["total"]["lost"].as_u64().unwrap());
+    assert!(
+        stdout.contains("  packets at the node they were for: frame_error ")
+            && stdout.contains(&format!(
+                ", heard {heard}; not delivered: unheard {unheard}\n"
+            )),
+        "{stdout}"
+    );
     assert_eq!(report["by_type"]["goby.example.Command"]["acked"], 24);
     let ledger = std::fs::read_to_string(out.join("ledger.csv")).unwrap();
     assert!(
