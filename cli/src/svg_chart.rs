@@ -96,7 +96,8 @@ pub struct Series {
 }
 
 /// An x-y plot: points, or with `lines` a line through each series's
-/// points in their order; axes with round ticks ([`ticks`]).
+/// points in their order; axes ticked at round steps (1, 2 or 5 times a
+/// power of ten).
 pub fn xy(title: &str, x_label: &str, y_label: &str, series: &[Series], lines: bool) -> String {
     const LEFT: f64 = 70.0;
     const TOP: f64 = 30.0;
