@@ -162,3 +162,160 @@ impl Losses {
         losses
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use gobyd::event::{DaemonEvent, ModemEvent};
+    use modemdriver::sim::observer::{Reception, Transmission};
+    use modemdriver::TransmitOutcome;
+    use prost_reflect::ReflectMessage;
+    use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
+    use queue::QueueEvent;
+
+    use super::*;
+    use crate::ledger::LedgerNode;
+    use crate::medium_log::MediumLog;
+
+    /// Nodes "a" (modem id 1) and "b" (2).
+    fn ledger() -> Ledger {
+        let mut codec = dccl::Codec::new();
+        codec.load_type::<protos::goby::example::Command>().unwrap();
+        let codec = Arc::new(codec);
+        Ledger::new(
+            [("a", 1), ("b", 2)]
+                .map(|(name, modem_id)| LedgerNode {
+                    name: name.into(),
+                    modem_id,
+                    codec: codec.clone(),
+                })
+                .to_vec(),
+        )
+    }
+
+    fn queue(ledger: &mut Ledger, entry: u64, event: QueueEvent) {
+        let event = DaemonEvent::Queue {
+            event,
+            entry: Some(entry),
+        };
+        ledger.event(0, 0, &event);
+    }
+
+    /// Node a sends a data packet at `start` µs.
+    fn packet(ledger: &mut Ledger, start: u64) {
+        let transmission = ModemTransmission {
+            r#type: Some(TransmissionType::Data as i32),
+            time: Some(start),
+            ..Default::default()
+        };
+        let event = DaemonEvent::Modem(ModemEvent::Transmitted {
+            transmission,
+            outcome: TransmitOutcome::Sent,
+        });
+        ledger.event(0, 0, &event);
+    }
+
+    fn reception(start_us: u64, fate: Fate) -> Reception {
+        Reception {
+            src: 1,
+            start_us,
+            receiver: 2,
+            time_us: start_us + 1,
+            range_m: 100.0,
+            snr_db: None,
+            loss_probability: Some(0.1),
+            fate,
+        }
+    }
+
+    #[test]
+    fn each_publication_is_told_its_packets_fates_and_why_it_was_not_delivered() {
+        let mut ledger = ledger();
+        let message = protos::goby::example::Command::default().transcode_to_dynamic();
+        let sent = |id| QueueEvent::Sent {
+            message: message.clone(),
+            id,
+            dccl_id: 125,
+            frame: 0,
+            awaiting_ack: true,
+            link: 0,
+        };
+        let expired = |id| QueueEvent::Expired {
+            message: message.clone(),
+            id,
+            dccl_id: 125,
+        };
+        let dropped = |id| QueueEvent::Dropped {
+            message: message.clone(),
+            id,
+            dccl_id: 125,
+        };
+        for entry in 1..=6 {
+            let index = ledger.publish(0, 0, entry, &message, Some(1), 0);
+            ledger.accepted(index, Ok(Some(entry)));
+        }
+        // 1: collided, then out of range; expired unacknowledged.
+        // 2: in the same two packets, then one the run did not settle; owed.
+        // 3: expired unsent; 4: dropped; 5: owed unsent; 6: refused below.
+        queue(&mut ledger, 1, sent(1));
+        queue(&mut ledger, 2, sent(2));
+        packet(&mut ledger, 100);
+        queue(&mut ledger, 1, sent(1));
+        queue(&mut ledger, 2, sent(2));
+        packet(&mut ledger, 200);
+        queue(&mut ledger, 2, sent(2));
+        packet(&mut ledger, 300);
+        queue(&mut ledger, 1, expired(1));
+        queue(&mut ledger, 3, expired(3));
+        queue(&mut ledger, 4, dropped(4));
+        ledger.owed(0, &[2, 5].into());
+        let refused = ledger.publish(0, 0, 7, &message, Some(1), 0);
+        ledger.accepted(refused, Err("no".into()));
+        ledger.set_medium(MediumLog {
+            transmissions: [100, 200, 300]
+                .map(|start_us| Transmission {
+                    src: 1,
+                    seq: start_us / 100,
+                    start_us,
+                    duration: Duration::from_secs(1),
+                    kind: TransmissionType::Data,
+                    rate: 1,
+                    dest: 2,
+                    frames: 1,
+                })
+                .to_vec(),
+            receptions: vec![
+                reception(100, Fate::Collision),
+                reception(200, Fate::OutOfRange),
+            ],
+        });
+        let fates = Fates::new(&ledger);
+        let whys: Vec<Why> = ledger
+            .publications()
+            .iter()
+            .map(|p| fates.why(&ledger, p, 1))
+            .collect();
+        let why = |packets: &[&'static str], undelivered| Why {
+            packets: packets.to_vec(),
+            undelivered: Some(undelivered),
+        };
+        assert_eq!(
+            whys,
+            [
+                why(&["collision", "out_of_range"], "expired_unacked"),
+                why(&["collision", "out_of_range", UNSETTLED], "owed_unacked"),
+                why(&[], "expired_unsent"),
+                why(&[], "dropped"),
+                why(&[], "owed_unsent"),
+                why(&[], "never_sent"),
+                why(&[], "refused"),
+            ]
+        );
+        let losses = Losses::new(&ledger);
+        assert_eq!(losses.by_pair["a->b"], losses.total);
+        assert_eq!(losses.total.packets["collision"], 2);
+        assert_eq!(losses.total.undelivered.values().sum::<u64>(), 7);
+    }
+}
