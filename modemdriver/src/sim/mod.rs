@@ -28,6 +28,12 @@
 //!   positions come from a [`positions::Positions`] at each moment (the
 //!   sender's when a packet starts, the receiver's when it is heard).
 //!
+//! - Observed: a medium made with [`medium::Medium::observed`] tells its
+//!   [`observer::Observer`] of every packet put on it and of its fate at
+//!   each node that could hear it (heard, collision, half duplex, out of
+//!   range, frame error, no ray), with the range, SNR and loss
+//!   probability of the link; without one, nothing of this is kept.
+//!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
 //! node with an `ACK` packet, itself subject to the channel: on reception,
 //! or with `DriverConfig.deferred_ack` only when the layer above asks

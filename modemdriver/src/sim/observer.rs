@@ -93,8 +93,8 @@ pub struct Reception {
     /// UNIX epoch): the end of the arrival, or the moment the packet was
     /// sent for one not heard at all.
     pub time_us: u64,
-    /// Distance between the sender (as it started) and the receiver (as
-    /// the packet reached it), metres.
+    /// Distance between the sender and the receiver as the packet
+    /// started, metres.
     pub range_m: f64,
     /// The link's SNR in the modem's band, dB (modelled water only; `None`
     /// in flat water or when no ray reaches).
