@@ -234,35 +234,46 @@ fn loss_table<'a>(
     rows: impl Iterator<Item = (&'a String, &'a LossCounts)>,
 ) {
     let rows: Vec<_> = rows.collect();
-    let reasons: Vec<&String> = rows
-        .iter()
-        .flat_map(|(_, c)| c.undelivered.keys())
-        .collect::<std::collections::BTreeSet<_>>()
+    // Columns: each packet fate, then each reason met in any row.
+    type Counts = fn(&LossCounts) -> &BTreeMap<String, u64>;
+    type Column = (String, Counts, String);
+    let mut columns: Vec<Column> = fates()
         .into_iter()
+        .map(|f| (format!("packets {f}"), packets_of as _, f.to_string()))
         .collect();
-    let _ = write!(page, "<table><tr><th>{what}</th>");
-    for f in fates() {
-        let _ = write!(page, "<th>packets {f}</th>");
+    let reasons: [(&str, Counts); 2] = [
+        ("undelivered", |c| &c.undelivered),
+        ("delivered, ack unheard", |c| &c.delivered_unacked),
+    ];
+    for (heading, counts) in reasons {
+        let keys: std::collections::BTreeSet<&String> =
+            rows.iter().flat_map(|(_, c)| counts(c).keys()).collect();
+        columns.extend(
+            keys.into_iter()
+                .map(|k| (format!("{heading}: {k}"), counts, k.clone())),
+        );
     }
-    for r in &reasons {
-        let _ = write!(page, "<th>undelivered: {}</th>", escape(r));
+    let _ = write!(page, "<table><tr><th>{what}</th>");
+    for (heading, _, _) in &columns {
+        let _ = write!(page, "<th>{}</th>", escape(heading));
     }
     *page += "</tr>";
     for (name, c) in rows {
         let _ = write!(page, "<tr><td>{}</td>", escape(name));
-        for f in fates() {
-            let _ = write!(page, "<td>{}</td>", c.packets.get(f).copied().unwrap_or(0));
-        }
-        for r in &reasons {
+        for (_, counts, key) in &columns {
             let _ = write!(
                 page,
                 "<td>{}</td>",
-                c.undelivered.get(*r).copied().unwrap_or(0)
+                counts(c).get(key).copied().unwrap_or(0)
             );
         }
         *page += "</tr>";
     }
     *page += "</table>\n";
+}
+
+fn packets_of(c: &LossCounts) -> &BTreeMap<String, u64> {
+    &c.packets
 }
 
 fn links_section(page: &mut String, links: &LinkQuality, start_us: i64) {

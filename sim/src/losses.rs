@@ -15,7 +15,10 @@
 //!   `owed_unacked` (still in the sender's journal at the end, never sent
 //!   or sent and not acknowledged), `unheard` (sent, not acknowledged nor
 //!   owed: every packet that carried it was lost), `never_sent` (none of
-//!   these: gone from the sender without a packet).
+//!   these: gone from the sender without a packet);
+//! - when it was delivered but its sender never heard the ack (the ack,
+//!   or every ack, was lost on the way back): `expired` (the sender gave
+//!   up at its ttl) or `owed` (still waiting at the end).
 //!
 //! The report counts both per type and per pair of nodes; the ledger CSV
 //! gives them per publication.
@@ -40,6 +43,9 @@ pub struct LossCounts {
     /// The fates of the data packets that carried them at the node they
     /// were for, by fate, delivered or not.
     pub packets: BTreeMap<String, u64>,
+    /// Those delivered whose ack their sender never heard, by what the
+    /// sender did: `expired` or `owed`.
+    pub delivered_unacked: BTreeMap<String, u64>,
 }
 
 /// What the report says of losses.
@@ -60,6 +66,9 @@ pub struct Why {
     pub packets: Vec<&'static str>,
     /// Why it was not delivered there (`None`: delivered).
     pub undelivered: Option<&'static str>,
+    /// Delivered there, its ack never heard by its sender: `expired` or
+    /// `owed`.
+    pub delivered_unacked: Option<&'static str>,
 }
 
 /// The fates of packets by (sender modem id, start µs, receiver modem id).
@@ -92,10 +101,18 @@ impl Fates {
                     .map_or(UNSETTLED, |f| f.name())
             })
             .collect();
-        let undelivered = (!p.deliveries.contains_key(&receiver)).then(|| undelivered(p));
+        let delivered = p.deliveries.contains_key(&receiver);
+        let undelivered = (!delivered).then(|| undelivered(p));
+        let unacked = delivered && p.dest == Some(receiver) && p.acked.is_none();
+        let delivered_unacked = match (unacked, p.expired.is_some(), p.owed) {
+            (true, true, _) => Some("expired"),
+            (true, false, true) => Some("owed"),
+            _ => None,
+        };
         Why {
             packets,
             undelivered,
+            delivered_unacked,
         }
     }
 }
@@ -130,6 +147,12 @@ impl LossCounts {
     fn add(&mut self, why: &Why) {
         if let Some(reason) = why.undelivered {
             *self.undelivered.entry(reason.to_string()).or_default() += 1;
+        }
+        if let Some(reason) = why.delivered_unacked {
+            *self
+                .delivered_unacked
+                .entry(reason.to_string())
+                .or_default() += 1;
         }
         for fate in &why.packets {
             *self.packets.entry(fate.to_string()).or_default() += 1;
@@ -256,7 +279,9 @@ mod tests {
             let index = ledger.publish(0, 0, entry, &message, Some(1), 0);
             ledger.accepted(index, Ok(Some(entry)));
         }
-        // 1: collided, then out of range; expired unacknowledged.
+        // 1: collided, then out of range, yet delivered (its packets'
+        // fates are those of b's modem; the delivery, its daemon's); its ack
+        // never heard: expired.
         // 2: in the same two packets, then one the run did not settle; owed.
         // 3: expired unsent; 4: dropped; 5: owed unsent; 6: refused below.
         queue(&mut ledger, 1, sent(1));
@@ -271,6 +296,23 @@ mod tests {
         queue(&mut ledger, 3, expired(3));
         queue(&mut ledger, 4, dropped(4));
         ledger.owed(0, &[2, 5].into());
+        let received = DaemonEvent::Received {
+            received: queue::ReceivedMessage {
+                message: message.clone(),
+                dccl_id: 125,
+                src: 1,
+                dest: 2,
+                time: None,
+                bytes: Vec::new(),
+                identity: None,
+            },
+            reception: gobyd::event::Reception {
+                link: None,
+                recovered: false,
+                route: None,
+            },
+        };
+        ledger.event(1, 150, &received);
         let refused = ledger.publish(0, 0, 7, &message, Some(1), 0);
         ledger.accepted(refused, Err("no".into()));
         ledger.set_medium(MediumLog {
@@ -300,11 +342,16 @@ mod tests {
         let why = |packets: &[&'static str], undelivered| Why {
             packets: packets.to_vec(),
             undelivered: Some(undelivered),
+            delivered_unacked: None,
         };
         assert_eq!(
             whys,
             [
-                why(&["collision", "out_of_range"], "expired_unacked"),
+                Why {
+                    packets: vec!["collision", "out_of_range"],
+                    undelivered: None,
+                    delivered_unacked: Some("expired"),
+                },
                 why(&["collision", "out_of_range", UNSETTLED], "owed_unacked"),
                 why(&[], "expired_unsent"),
                 why(&[], "dropped"),
@@ -316,6 +363,17 @@ mod tests {
         let losses = Losses::new(&ledger);
         assert_eq!(losses.by_pair["a->b"], losses.total);
         assert_eq!(losses.total.packets["collision"], 2);
-        assert_eq!(losses.total.undelivered.values().sum::<u64>(), 7);
+        assert_eq!(losses.total.undelivered.values().sum::<u64>(), 6);
+        assert_eq!(
+            losses.total.delivered_unacked,
+            BTreeMap::from([("expired".to_string(), 1)])
+        );
+        let csv = crate::report::ledger_csv(&ledger);
+        assert!(
+            csv.lines()
+                .nth(1)
+                .is_some_and(|row| row.ends_with(",ack_unheard,collision;out_of_range")),
+            "{csv}"
+        );
     }
 }

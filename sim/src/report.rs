@@ -246,8 +246,9 @@ pub const CSV_HEADER: &[&str] = &[
 /// The ledger as CSV: one row per publication and node it was for, in
 /// order of publication (times in virtual microseconds since the UNIX
 /// epoch, empty when it did not happen); `why` it was not delivered there
-/// and the fate there of each packet that carried it (`;` between them),
-/// as [`crate::losses`] names them.
+/// (or, delivered, `ack_unheard`: its sender never heard the ack) and the
+/// fate there of each packet that carried it (`;` between them), as
+/// [`crate::losses`] names them.
 pub fn ledger_csv(ledger: &Ledger) -> String {
     let names: Vec<&str> = ledger.nodes().iter().map(|n| n.name.as_str()).collect();
     let opt = |t: Option<Micros>| t.map(|t| t.to_string()).unwrap_or_default();
@@ -275,7 +276,10 @@ pub fn ledger_csv(ledger: &Ledger) -> String {
                 opt(p.expired),
                 opt(p.dropped),
                 p.owed.to_string(),
-                why.undelivered.unwrap_or_default().to_string(),
+                why.undelivered
+                    .or(why.delivered_unacked.map(|_| "ack_unheard"))
+                    .unwrap_or_default()
+                    .to_string(),
                 why.packets.join(";"),
             ];
             out += &row.join(",");

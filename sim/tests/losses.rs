@@ -52,6 +52,7 @@ fn counts(undelivered: &[(&str, u64)], packets: &[(&str, u64)]) -> LossCounts {
     LossCounts {
         undelivered: map(undelivered),
         packets: map(packets),
+        delivered_unacked: BTreeMap::new(),
     }
 }
 
