@@ -370,7 +370,7 @@ impl Ledger {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use gobyd::event::Reception;
     use queue::ReceivedMessage;
@@ -386,7 +386,7 @@ mod tests {
     }
 
     /// Two nodes (modem ids 1 and 2) sharing a codec of the example types.
-    fn ledger() -> Ledger {
+    pub(crate) fn ledger() -> Ledger {
         let mut codec = dccl::Codec::new();
         codec.load_type::<protos::goby::example::Command>().unwrap();
         let codec = Arc::new(codec);
@@ -425,7 +425,8 @@ mod tests {
         index
     }
 
-    fn receive(ledger: &mut Ledger, message: &DynamicMessage, src: i32, time: Micros) {
+    /// Node 1 receives `message` from modem id `src` at `time`.
+    pub(crate) fn receive(ledger: &mut Ledger, message: &DynamicMessage, src: i32, time: Micros) {
         let received = ReceivedMessage {
             message: message.clone(),
             dccl_id: 125,

@@ -188,7 +188,6 @@ impl Losses {
 
 #[cfg(test)]
 mod tests {
-    use std::sync::Arc;
     use std::time::Duration;
 
     use gobyd::event::{DaemonEvent, ModemEvent};
@@ -199,24 +198,8 @@ mod tests {
     use queue::QueueEvent;
 
     use super::*;
-    use crate::ledger::LedgerNode;
+    use crate::ledger::tests::ledger;
     use crate::medium_log::MediumLog;
-
-    /// Nodes "a" (modem id 1) and "b" (2).
-    fn ledger() -> Ledger {
-        let mut codec = dccl::Codec::new();
-        codec.load_type::<protos::goby::example::Command>().unwrap();
-        let codec = Arc::new(codec);
-        Ledger::new(
-            [("a", 1), ("b", 2)]
-                .map(|(name, modem_id)| LedgerNode {
-                    name: name.into(),
-                    modem_id,
-                    codec: codec.clone(),
-                })
-                .to_vec(),
-        )
-    }
 
     fn queue(ledger: &mut Ledger, entry: u64, event: QueueEvent) {
         let event = DaemonEvent::Queue {
@@ -296,23 +279,7 @@ mod tests {
         queue(&mut ledger, 3, expired(3));
         queue(&mut ledger, 4, dropped(4));
         ledger.owed(0, &[2, 5].into());
-        let received = DaemonEvent::Received {
-            received: queue::ReceivedMessage {
-                message: message.clone(),
-                dccl_id: 125,
-                src: 1,
-                dest: 2,
-                time: None,
-                bytes: Vec::new(),
-                identity: None,
-            },
-            reception: gobyd::event::Reception {
-                link: None,
-                recovered: false,
-                route: None,
-            },
-        };
-        ledger.event(1, 150, &received);
+        crate::ledger::tests::receive(&mut ledger, &message, 1, 150);
         let refused = ledger.publish(0, 0, 7, &message, Some(1), 0);
         ledger.accepted(refused, Err("no".into()));
         ledger.set_medium(MediumLog {
