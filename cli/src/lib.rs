@@ -92,7 +92,9 @@ pub mod position_cmd;
 mod proto_display;
 pub mod queue_cmd;
 pub mod sim_cmd;
+pub mod sim_page;
 mod stop;
+pub mod svg_chart;
 pub mod wireshark;
 
 use std::ffi::OsString;

@@ -1,7 +1,8 @@
 //! `goby sim SCENARIO`: rehearses a fleet in virtual time (the scenario's
 //! nodes, each a `gobyd` in this process on the simulated acoustic
-//! channel, publishing the scenario's traffic), writes the report (JSON)
-//! and the ledger of every publication (CSV), and prints a summary.
+//! channel, publishing the scenario's traffic), writes the report (JSON),
+//! the ledger of every publication (CSV), the link quality (CSV, JSON) and
+//! the page to read (HTML, [`crate::sim_page`]), and prints a summary.
 //! The work is [`goby_sim`]'s; this is its command line.
 
 use std::io::Write;
@@ -78,8 +79,9 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     let outcome = goby_sim::run_until(&scenario, interrupted())
         .map_err(|e| CliError::Failed(e.to_string()))?;
     let wall = began.elapsed().as_secs_f64();
-    let written = goby_sim::write(&scenario, &outcome, &args.out)
+    let mut written = goby_sim::write(&scenario, &outcome, &args.out)
         .map_err(|e| CliError::Failed(e.to_string()))?;
+    written.push(write_page(&scenario, &outcome, args)?);
     let report = &outcome.report;
     let virtual_s = (scenario.duration_micros + scenario.drain_micros) as f64 / 1e6;
     writeln!(
@@ -96,14 +98,7 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         .iter()
         .chain(std::iter::once((&"all".to_string(), &report.total)))
     {
-        let latency = s.latency_us.as_ref().map_or("-".to_string(), |l| {
-            format!(
-                "{:.1}/{:.1}/{:.1} s",
-                l.p50 as f64 / 1e6,
-                l.p90 as f64 / 1e6,
-                l.max as f64 / 1e6
-            )
-        });
+        let latency = crate::sim_page::latency_text(s);
         writeln!(
             stdout,
             "  {name}: published {}, refused {}, delivered {}/{} ({}), duplicates {}, latency p50/p90/max {latency}, \
@@ -124,10 +119,44 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
             s.lost,
         )?;
     }
+    let losses = &report.losses.total;
+    let counted = |counts: &std::collections::BTreeMap<String, u64>| {
+        let parts: Vec<String> = counts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        if parts.is_empty() {
+            "none".to_string()
+        } else {
+            parts.join(", ")
+        }
+    };
+    writeln!(
+        stdout,
+        "  packets at the node they were for: {}; not delivered: {}",
+        counted(&losses.packets),
+        counted(&losses.undelivered)
+    )?;
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
     }
     Ok(Status::Ok)
+}
+
+/// Writes the run's page ([`crate::sim_page`]) where the scenario's
+/// `report { html: ... }` says, in the output directory.
+fn write_page(
+    scenario: &goby_sim::Scenario,
+    outcome: &goby_sim::Outcome,
+    args: &SimArgs,
+) -> Result<PathBuf, CliError> {
+    let links = goby_sim::link_quality::LinkQuality::new(&outcome.ledger);
+    let title = args
+        .scenario
+        .file_name()
+        .map_or("scenario".into(), |n| n.to_string_lossy());
+    let page = crate::sim_page::render(&title, &outcome.report, &links, &outcome.ledger);
+    let path = args.out.join(scenario.report.html());
+    std::fs::write(&path, page)
+        .map_err(|e| CliError::Failed(format!("cannot write {}: {e}", path.display())))?;
+    Ok(path)
 }
 
 /// Makes `dir` and checks that a file can be written in it.

@@ -1,4 +1,5 @@
-//! `goby sim`: the example fleet runs and writes its report and ledger; a
+//! `goby sim`: the example fleet runs and writes its report, ledger, link
+//! quality and page (opened by a headless browser too); a
 //! scenario with a mistake is refused before anything runs, at its place.
 
 mod common;
@@ -49,6 +50,18 @@ fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["run"]["seed"], 3);
+    // The losses, summed: the same in the summary as in the report.
+    let total = &report["losses"]["total"];
+    let heard = total["packets"]["heard"].as_u64().unwrap();
+    let unheard = total["undelivered"]["unheard"].as_u64().unwrap();
+    assert_eq!(unheard, report["total"]["lost"].as_u64().unwrap());
+    assert!(
+        stdout.contains("  packets at the node they were for: frame_error ")
+            && stdout.contains(&format!(
+                ", heard {heard}; not delivered: unheard {unheard}\n"
+            )),
+        "{stdout}"
+    );
     assert_eq!(report["by_type"]["goby.example.Command"]["acked"], 24);
     let ledger = std::fs::read_to_string(out.join("ledger.csv")).unwrap();
     assert!(
@@ -62,7 +75,152 @@ fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
             .count(),
         24
     );
+    page_is_written(&out);
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The page of the run in `out`: well-formed (XHTML), each chart an SVG
+/// element with its title, the losses named by cause; and the link
+/// quality beside it.
+fn page_is_written(out: &Path) {
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: true,
+        ..Default::default()
+    };
+    let doc =
+        roxmltree::Document::parse_with_options(&page, options).expect("the page is well-formed");
+    let titles: Vec<&str> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("svg"))
+        .filter_map(|svg| svg.children().find(|c| c.has_tag_name("title")))
+        .filter_map(|t| t.text())
+        .collect();
+    assert_eq!(
+        titles,
+        [
+            "Delivery ratio per type",
+            "Delivery ratio per pair",
+            "Share of deliveries within a latency, per type",
+            "Packets by fate, per pair",
+            "Packets by range over time, by fate",
+            "Slots, transmissions and receptions, per node",
+        ]
+    );
+    // Nothing fetched: no script, no link, no image from elsewhere.
+    for tag in ["script", "link", "img", "iframe"] {
+        assert!(!doc.descendants().any(|n| n.has_tag_name(tag)), "{tag}");
+    }
+    // Every data packet of the run is a point of the link chart, and a
+    // row of links.csv.
+    let links = std::fs::read_to_string(out.join("links.csv")).unwrap();
+    assert!(links.starts_with("src,dst,time_us,kind,rate,range_m,snr_db,loss_probability,fate\n"));
+    let points = page.matches("<circle").count();
+    assert_eq!(points, links.lines().count() - 1);
+    assert!(points > 0);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("links.json")).unwrap()).unwrap();
+    assert!(json["links"].as_object().is_some_and(|l| !l.is_empty()));
+}
+
+/// Over modelled water the page also charts each link's SNR over time and
+/// by range, a point per packet that carried one.
+#[test]
+fn over_modelled_water_the_page_charts_the_links_snr() {
+    let out = scratch("modelled");
+    let env =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel/tests/data/bellhop/summer.env");
+    let node = |name: &str, id: i32, x: f64, to: &str| {
+        format!(
+            "node {{ name: \"{name}\" modem_id: {id} position {{ x: {x} depth: 30 }}
+               gobyd {{ mac {{ type: MAC_FIXED_DECENTRALIZED
+                 slot {{ src: 1 dest: 2 rate: 1 slot_seconds: 12 }}
+                 slot {{ src: 2 dest: 1 rate: 1 slot_seconds: 12 }} }}
+               queue {{ message_entry {{ protobuf_name: \"goby.example.NavigationReport\"
+                 role {{ type: SOURCE_ID field: \"source\" }}
+                 role {{ type: DESTINATION_ID field: \"destination\" }} }} }} }}
+               traffic {{ type: \"goby.example.NavigationReport\" dest: \"{to}\" period_s: 24
+                 field {{ name: \"x\" constant: \"0\" }} field {{ name: \"y\" constant: \"0\" }}
+                 field {{ name: \"z\" constant: \"-30\" }}
+                 field {{ name: \"time\" constant: \"1780272000\" }} }} }}\n"
+        )
+    };
+    let scenario = out.join("summer.pb.txt");
+    let text = format!(
+        "seed: 1\nstart_time: \"2026-06-01T00:00:00Z\"\nduration_s: 240\ndrain_s: 30\n\
+         water {{ acoustic_channel {{ env: \"{}\" beams: 600 source_level_db: 160 }} }}\n{}{}",
+        env.display(),
+        node("a", 1, 0.0, "b"),
+        node("b", 2, 2000.0, "a")
+    );
+    std::fs::write(&scenario, text).unwrap();
+    let run = goby(&[
+        "sim",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", stderr_text(&run));
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<title>Link SNR over time, per pair</title>"));
+    assert!(page.contains("<title>Link SNR by range, per pair</title>"));
+    assert!(!page.contains("No SNR"));
+    let links = std::fs::read_to_string(out.join("links.csv")).unwrap();
+    let with_snr = links
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(6) != Some(""))
+        .count();
+    assert!(with_snr > 0, "{links}");
+    // Range over time, SNR over time, SNR by range: a point each.
+    assert_eq!(
+        page.matches("<circle").count(),
+        links.lines().count() - 1 + 2 * with_snr
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The page of a run opened by headless Chromium: its charts are in the
+/// document the browser built.
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn the_page_opens_in_a_headless_browser() {
+    #[cfg(chromium)]
+    {
+        let out = scratch("browser");
+        let run = goby(&[
+            "sim",
+            example().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(run.status.success(), "{}", stderr_text(&run));
+        let page = out.join("report.html");
+        let dom = std::process::Command::new(env!("GOBY_CHROMIUM_PATH"))
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--no-first-run",
+            ])
+            .arg(format!("--user-data-dir={}", out.join("profile").display()))
+            .arg("--dump-dom")
+            .arg(format!("file://{}", page.display()))
+            .output()
+            .expect("chromium runs");
+        let dom = String::from_utf8_lossy(&dom.stdout);
+        let file = std::fs::read_to_string(&page).unwrap();
+        assert_eq!(dom.matches("<svg").count(), 6, "{dom}");
+        assert_eq!(
+            dom.matches("<circle").count(),
+            file.matches("<circle").count()
+        );
+        assert!(dom.contains("Packets by fate, per pair"));
+        let _ = std::fs::remove_dir_all(&out);
+    }
 }
 
 #[test]

@@ -21,7 +21,9 @@ use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
 
+use crate::carriage::Carriage;
 use crate::discovery::{MacChange, MacRecord};
+use crate::medium_log::MediumLog;
 use crate::slot_use::{SlotTally, SlotUse};
 
 /// Microseconds since the UNIX epoch (virtual time).
@@ -113,6 +115,10 @@ pub struct Ledger {
     slots: SlotTally,
     /// Auto-discovery's changes and the data packets, in time order.
     mac_log: Vec<MacRecord>,
+    /// Which packets carried which journal entries.
+    carriage: Carriage,
+    /// What happened on the water.
+    medium: MediumLog,
     failure: Option<String>,
 }
 
@@ -129,6 +135,8 @@ impl Ledger {
             stray: Vec::new(),
             packets: BTreeMap::new(),
             mac_log: Vec::new(),
+            carriage: Carriage::default(),
+            medium: MediumLog::default(),
             failure: None,
         }
     }
@@ -164,6 +172,21 @@ impl Ledger {
     /// sent or heard intact, in time order ([`crate::discovery`]).
     pub fn mac_log(&self) -> &[MacRecord] {
         &self.mac_log
+    }
+
+    /// Which data packets carried which journal entries.
+    pub fn carriage(&self) -> &Carriage {
+        &self.carriage
+    }
+
+    /// What happened on the water (empty until [`Ledger::set_medium`]).
+    pub fn medium(&self) -> &MediumLog {
+        &self.medium
+    }
+
+    /// Enters what happened on the water, at the end of the run.
+    pub fn set_medium(&mut self, log: MediumLog) {
+        self.medium = log;
     }
 
     /// Why the run cannot be trusted (an event missed), if so.
@@ -230,6 +253,7 @@ impl Ledger {
         if let Some(what) = MacChange::of(event) {
             self.mac_log.push(MacRecord { node, time, what });
         }
+        self.carriage.event(node, event);
         match event {
             DaemonEvent::Received { received, .. } => {
                 let type_name = received.message.descriptor().full_name().to_string();
@@ -359,7 +383,7 @@ impl Ledger {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use gobyd::event::Reception;
     use queue::ReceivedMessage;
@@ -375,7 +399,7 @@ mod tests {
     }
 
     /// Two nodes (modem ids 1 and 2) sharing a codec of the example types.
-    fn ledger() -> Ledger {
+    pub(crate) fn ledger() -> Ledger {
         let mut codec = dccl::Codec::new();
         codec.load_type::<protos::goby::example::Command>().unwrap();
         let codec = Arc::new(codec);
@@ -414,7 +438,8 @@ mod tests {
         index
     }
 
-    fn receive(ledger: &mut Ledger, message: &DynamicMessage, src: i32, time: Micros) {
+    /// Node 1 receives `message` from modem id `src` at `time`.
+    pub(crate) fn receive(ledger: &mut Ledger, message: &DynamicMessage, src: i32, time: Micros) {
         let received = ReceivedMessage {
             message: message.clone(),
             dccl_id: 125,

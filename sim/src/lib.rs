@@ -13,6 +13,11 @@
 //! - [`slot_use`]: what the nodes did with the medium (slots, packets;
 //!   G and S of the shared slots).
 //! - [`report`]: the report (JSON) and the ledger (CSV).
+//! - [`medium_log`], [`carriage`]: what happened on the water, and which
+//!   packets carried which publications.
+//! - [`losses`]: why each publication was or was not delivered, and the
+//!   fates of the packets that carried it.
+//! - [`link_quality`]: each directed link over time and range (JSON, CSV).
 //! - [`aloha`]: ALOHA throughput measured against theory.
 //! - [`discovery`]: auto-discovery TDMA's convergence against the
 //!   thesis' simulation of it.
@@ -27,9 +32,13 @@
 //! ```
 
 pub mod aloha;
+pub mod carriage;
 pub mod discovery;
 pub mod glint10;
 pub mod ledger;
+pub mod link_quality;
+pub mod losses;
+pub mod medium_log;
 pub mod modem;
 pub mod report;
 pub mod scenario;
@@ -93,8 +102,9 @@ pub fn run_until(
     Ok(Outcome { ledger, report })
 }
 
-/// Writes the report (JSON) and the ledger (CSV) into `dir` under the
-/// scenario's names for them; returns the paths written.
+/// Writes the report (JSON), the ledger (CSV) and the link quality (CSV,
+/// JSON) into `dir` under the scenario's names for them; returns the paths
+/// written. The HTML page is the command line's (`goby sim`).
 pub fn write(
     scenario: &Scenario,
     outcome: &Outcome,
@@ -104,9 +114,12 @@ pub fn write(
         SimError::Run(format!("cannot write {}: {e}", path.display()))
     };
     std::fs::create_dir_all(dir).map_err(|e| failed(e, dir))?;
+    let links = link_quality::LinkQuality::new(&outcome.ledger);
     let outputs = [
         (scenario.report.json(), outcome.report.to_json()),
         (scenario.report.csv(), report::ledger_csv(&outcome.ledger)),
+        (scenario.report.links_csv(), links.to_csv()),
+        (scenario.report.links_json(), links.to_json()),
     ];
     let mut written = Vec::new();
     for (name, text) in outputs {

@@ -13,6 +13,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::ledger::{Ledger, Micros, Publication};
+use crate::losses::{Fates, Losses};
 use crate::scenario::Scenario;
 use crate::slot_use::SlotUse;
 
@@ -36,6 +37,9 @@ pub struct Report {
     /// What the nodes did with the medium: slots, transmissions,
     /// receptions; G and S of the shared slots.
     pub slot_use: SlotUse,
+    /// Why publications were not delivered, and the fates of the packets
+    /// that carried them ([`crate::losses`]).
+    pub losses: Losses,
     /// Per type (full name), its share of the link against its value base
     /// and ttl ([`Share`]).
     pub share: BTreeMap<String, Share>,
@@ -253,6 +257,7 @@ impl Report {
             ),
             slot_use: ledger.slot_use(),
             share: shares(scenario, ledger),
+            losses: Losses::new(ledger),
         }
     }
 
@@ -282,17 +287,24 @@ pub const CSV_HEADER: &[&str] = &[
     "expired_us",
     "dropped_us",
     "owed",
+    "why",
+    "packets",
 ];
 
 /// The ledger as CSV: one row per publication and node it was for, in
 /// order of publication (times in virtual microseconds since the UNIX
-/// epoch, empty when it did not happen).
+/// epoch, empty when it did not happen); `why` it was not delivered there
+/// (or, delivered, `ack_unheard`: its sender never heard the ack) and the
+/// fate there of each packet that carried it (`;` between them), as
+/// [`crate::losses`] names them.
 pub fn ledger_csv(ledger: &Ledger) -> String {
     let names: Vec<&str> = ledger.nodes().iter().map(|n| n.name.as_str()).collect();
     let opt = |t: Option<Micros>| t.map(|t| t.to_string()).unwrap_or_default();
+    let fates = Fates::new(ledger);
     let mut out = CSV_HEADER.join(",") + "\n";
     for p in ledger.publications() {
         for r in ledger.receivers(p) {
+            let why = fates.why(ledger, p, r);
             let times = p.deliveries.get(&r);
             let first = times.map(|t| t[0]);
             let row = [
@@ -312,6 +324,11 @@ pub fn ledger_csv(ledger: &Ledger) -> String {
                 opt(p.expired),
                 opt(p.dropped),
                 p.owed.to_string(),
+                why.undelivered
+                    .or(why.delivered_unacked.map(|_| "ack_unheard"))
+                    .unwrap_or_default()
+                    .to_string(),
+                why.packets.join(";"),
             ];
             out += &row.join(",");
             out.push('\n');

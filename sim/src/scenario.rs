@@ -250,7 +250,14 @@ impl Check<'_> {
     /// The report's file names: plain names in the output directory, not
     /// the same one twice.
     fn report(&mut self, report: &pb::Report) {
-        for (path, name) in [("report.json", report.json()), ("report.csv", report.csv())] {
+        let names = [
+            ("report.json", report.json()),
+            ("report.csv", report.csv()),
+            ("report.html", report.html()),
+            ("report.links_csv", report.links_csv()),
+            ("report.links_json", report.links_json()),
+        ];
+        for (i, &(path, name)) in names.iter().enumerate() {
             let plain = Path::new(name)
                 .file_name()
                 .is_some_and(|f| f == std::ffi::OsStr::new(name));
@@ -259,16 +266,12 @@ impl Check<'_> {
                     path,
                     format!("\"{name}\" is not a file name (the files go in the --out directory)"),
                 );
+            } else if let Some((other, _)) = names[..i].iter().find(|(_, n)| *n == name) {
+                self.problem(
+                    path,
+                    format!("\"{name}\" is {other}'s name too: give each output its own"),
+                );
             }
-        }
-        if report.json() == report.csv() {
-            self.problem(
-                "report.csv",
-                format!(
-                    "\"{}\" is the report's name too: give the ledger another",
-                    report.csv()
-                ),
-            );
         }
     }
 

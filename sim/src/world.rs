@@ -103,7 +103,8 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
             })
             .collect(),
     )));
-    let medium = Medium::new();
+    let recorder = Arc::new(crate::medium_log::Recorder::default());
+    let medium = Medium::observed(recorder.clone());
     let places: Arc<dyn Positions> = Arc::new(crate::track::World {
         start_micros: s.start_micros,
         places: s
@@ -147,6 +148,10 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
             .map_err(|e| SimError::Run(format!("node {}: {e}", node.name)))?;
         ledger.lock().expect("not poisoned").owed(i, &ids);
     }
+    ledger
+        .lock()
+        .expect("not poisoned")
+        .set_medium(recorder.take());
     let ledger = Arc::try_unwrap(ledger)
         .map_err(|_| SimError::Run("the ledger is still in use".into()))?
         .into_inner()

@@ -7,46 +7,15 @@
 //! `snr_in`; from it each node chooses its rate: rate 5 near, a more
 //! robust rate far, where rate 5 delivers nothing.
 
+mod support;
+
 use std::collections::BTreeMap;
 use std::path::Path;
-
-/// The summer water: the committed `.env` of the channel crate.
-fn summer() -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../channel/tests/data/bellhop/summer.env")
-        .display()
-        .to_string()
-}
 
 /// A run of 10 minutes with nodes `range` m apart: `mac` the MAC's
 /// settings beyond its slots, `rate` the slots' rate.
 fn run(range: f64, mac: &str, rate: i32) -> goby_sim::Report {
-    let gobyd = format!(
-        "mac {{ type: MAC_FIXED_DECENTRALIZED {mac}
-           slot {{ src: 1 dest: 2 rate: {rate} slot_seconds: 12 }}
-           slot {{ src: 2 dest: 1 rate: {rate} slot_seconds: 12 }} }}
-         queue {{ message_entry {{ protobuf_name: \"goby.example.NavigationReport\" ack: false
-           role {{ type: SOURCE_ID field: \"source\" }}
-           role {{ type: DESTINATION_ID field: \"destination\" }} }} }}"
-    );
-    let node = |name: &str, id: i32, x: f64, to: &str| {
-        format!(
-            "node {{ name: \"{name}\" modem_id: {id} gobyd {{ {gobyd} }}
-               position {{ x: {x} y: 0 depth: 30 }}
-               traffic {{ type: \"goby.example.NavigationReport\" dest: \"{to}\" period_s: 2
-                 field {{ name: \"time\" counter {{ start: 1780272000 step: 2 }} }}
-                 field {{ name: \"x\" constant: \"{x}\" }}
-                 field {{ name: \"y\" constant: \"0\" }}
-                 field {{ name: \"z\" constant: \"-30\" }} }} }}\n"
-        )
-    };
-    let text = format!(
-        "seed: 3\nstart_time: \"2026-06-01T00:00:00Z\"\nduration_s: 600\ndrain_s: 30\n\
-         water {{ acoustic_channel {{ env: \"{}\" beams: 600 source_level_db: 160 }} }}\n{}{}",
-        summer(),
-        node("a", 1, 0.0, "b"),
-        node("b", 2, range, "a"),
-    );
+    let text = support::summer_pair(range, mac, rate, 2, 600);
     let scenario = goby_sim::scenario::parse(&text, "adaptive_rate", Path::new("."))
         .unwrap_or_else(|e| {
             panic!("{e}\n{text}");

@@ -57,6 +57,12 @@ fn the_same_scenario_gives_the_same_report_byte_for_byte() {
         goby_sim::report::ledger_csv(&first.ledger),
         goby_sim::report::ledger_csv(&second.ledger)
     );
+    let links = |o: &goby_sim::Outcome| {
+        let l = goby_sim::link_quality::LinkQuality::new(&o.ledger);
+        (l.to_json(), l.to_csv())
+    };
+    assert_eq!(links(&first), links(&second));
+    assert!(links(&first).1.lines().count() > 100);
     // A different seed draws different losses.
     let mut other = scenario.clone();
     other.seed += 1;
@@ -106,7 +112,7 @@ fn the_same_scenario_gives_the_same_report_in_two_processes() {
     for (out, mut child) in children {
         assert!(child.wait().unwrap().success(), "the run failed");
         let read = |name: &str| std::fs::read_to_string(out.join(name)).unwrap();
-        outputs.push((read("report.json"), read("ledger.csv")));
+        outputs.push((read("report.json"), read("ledger.csv") + &read("links.csv")));
     }
     assert!(outputs[0].1.lines().count() > 100, "{}", outputs[0].1);
     assert!(

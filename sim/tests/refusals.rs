@@ -229,7 +229,13 @@ fn the_report_and_the_ledger_are_two_plain_file_names() {
         support::ring(2, 0.0, 600, 60, 60) + "report { json: \"same.txt\" csv: \"same.txt\" }\n";
     let error = refusal(&text);
     assert!(
-        error.contains("report.csv: \"same.txt\" is the report's name too"),
+        error.contains("report.csv: \"same.txt\" is report.json's name too"),
+        "{error}"
+    );
+    let text = support::ring(2, 0.0, 600, 60, 60) + "report { html: \"ledger.csv\" }\n";
+    let error = refusal(&text);
+    assert!(
+        error.contains("report.html: \"ledger.csv\" is report.csv's name too"),
         "{error}"
     );
     let text = support::ring(2, 0.0, 600, 60, 60) + "report { json: \"../up.json\" }\n";

@@ -8,6 +8,7 @@ use protos::goby::acomms::protobuf::ModemTransmission;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
+use super::observer::Observer;
 use super::reception::Position;
 
 /// A packet put on the water.
@@ -32,6 +33,8 @@ pub struct Airborne {
 #[derive(Debug, Default)]
 pub struct Medium {
     nodes: Mutex<Vec<(i32, mpsc::UnboundedSender<Arc<Airborne>>)>>,
+    /// Told of every packet and its fate at each node, when set.
+    observer: Option<Arc<dyn Observer>>,
 }
 
 static NAMED: LazyLock<Mutex<HashMap<String, Weak<Medium>>>> =
@@ -41,6 +44,20 @@ impl Medium {
     /// A new channel of its own.
     pub fn new() -> Arc<Medium> {
         Arc::new(Medium::default())
+    }
+
+    /// A new channel of its own whose packets and their fates at each
+    /// node are told to `observer` ([`super::observer`]).
+    pub fn observed(observer: Arc<dyn Observer>) -> Arc<Medium> {
+        Arc::new(Medium {
+            nodes: Mutex::default(),
+            observer: Some(observer),
+        })
+    }
+
+    /// The observer, when the channel has one.
+    pub fn observer(&self) -> Option<&dyn Observer> {
+        self.observer.as_deref()
     }
 
     /// The in-process channel called `name`, created when no node uses it.

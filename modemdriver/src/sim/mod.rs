@@ -28,6 +28,12 @@
 //!   positions come from a [`positions::Positions`] at each moment (the
 //!   sender's when a packet starts, the receiver's when it is heard).
 //!
+//! - Observed: a medium made with [`medium::Medium::observed`] tells its
+//!   [`observer::Observer`] of every packet put on it and of its fate at
+//!   each node that could hear it (heard, collision, half duplex, out of
+//!   range, frame error, no ray), with the range, SNR and loss
+//!   probability of the link; without one, nothing of this is kept.
+//!
 //! Data addressed to a node with `ack_requested` is acknowledged by that
 //! node with an `ACK` packet, itself subject to the channel: on reception,
 //! or with `DriverConfig.deferred_ack` only when the layer above asks
@@ -38,12 +44,13 @@
 //! wall-clock start time; use real time (not tokio's paused clock) then.
 
 pub mod medium;
+pub mod observer;
 pub mod positions;
 pub mod reception;
 pub mod udp_medium;
 pub mod water;
 
-use std::collections::{HashSet, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -65,7 +72,8 @@ use crate::kind::{About, DriverKind, Named, PacketTime, Starting};
 use crate::problem::{self, Problem};
 use crate::rate;
 use medium::{Airborne, Medium};
-use reception::{Position, Receiver};
+use observer::Fate;
+use reception::{Position, Receiver, Spoiled};
 use udp_medium::UdpMedium;
 use water::{LinkKey, Water};
 
@@ -365,6 +373,9 @@ struct Node {
     links_in_line: bool,
     /// Where the modems are now, when they move.
     positions: Option<Arc<dyn positions::Positions>>,
+    /// The links of the receptions in progress, by (sender, start µs),
+    /// kept only when the medium has an observer.
+    observed_links: HashMap<(i32, u64), observer::Link>,
 }
 
 impl Node {
@@ -475,6 +486,18 @@ impl Node {
         });
         events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
         self.medium.transmit(packet.clone());
+        if let Some(observer) = self.medium.observer() {
+            observer.transmitted(&observer::Transmission {
+                src: self.modem_id,
+                seq: self.seq,
+                start_us: mt.time(),
+                duration,
+                kind: mt.r#type(),
+                rate: mt.rate(),
+                dest: mt.dest(),
+                frames: mt.frame.len(),
+            });
+        }
         if let Some(udp) = &self.udp {
             for reason in udp.transmit(&packet).await {
                 events.status(DriverStatus::LinkError { reason });
@@ -504,8 +527,10 @@ impl Node {
             return;
         };
         let distance = me.distance(&packet.position);
+        let unheard = |node: &Node, fate: Fate| node.observe_unheard(&packet, distance, fate);
         if self.sim.range() > 0.0 && distance > self.sim.range() {
             // Out of range: not heard at all (nor does it collide).
+            unheard(self, Fate::OutOfRange);
             return;
         }
         let mut transmission = packet.transmission.clone();
@@ -523,6 +548,7 @@ impl Node {
                 };
                 // No ray reaches: not heard at all.
                 let Some(delay) = link.delay else {
+                    unheard(self, Fate::NoRay);
                     return;
                 };
                 let mt = &packet.transmission;
@@ -549,12 +575,67 @@ impl Node {
             }
         };
         let lost = reception::draw_loss(self.sim.seed(), packet.src, packet.seq, loss);
+        if self.medium.observer().is_some() {
+            let snr_db = self.water.as_ref().and_then(|w| {
+                let key = w.key(&packet.position, &me);
+                w.link(&key).and_then(|l| l.snr)
+            });
+            self.observed_links.insert(
+                (packet.src, packet.transmission.time()),
+                observer::Link {
+                    range_m: distance,
+                    snr_db,
+                    loss_probability: Some(loss),
+                },
+            );
+        }
         self.receiver.arrive(
             packet.start + delay,
             packet.start + delay + packet.duration,
             transmission,
             lost,
         );
+    }
+
+    /// Tells the observer, if any, that `packet` is not heard here at all.
+    fn observe_unheard(&self, packet: &Airborne, range_m: f64, fate: Fate) {
+        if let Some(observer) = self.medium.observer() {
+            observer.reception(&observer::Reception {
+                src: packet.src,
+                start_us: packet.transmission.time(),
+                receiver: self.modem_id,
+                time_us: self.now(),
+                range_m,
+                snr_db: None,
+                loss_probability: None,
+                fate,
+            });
+        }
+    }
+
+    /// Tells the observer, if any, the fate of a reception that ended.
+    fn observe_settled(&mut self, mt: &ModemTransmission, spoiled: Option<Spoiled>) {
+        let Some(observer) = self.medium.observer() else {
+            return;
+        };
+        let Some(link) = self.observed_links.remove(&(mt.src(), mt.time())) else {
+            return;
+        };
+        observer.reception(&observer::Reception {
+            src: mt.src(),
+            start_us: mt.time(),
+            receiver: self.modem_id,
+            time_us: self.now(),
+            range_m: link.range_m,
+            snr_db: link.snr_db,
+            loss_probability: link.loss_probability,
+            fate: match spoiled {
+                None => Fate::Heard,
+                Some(Spoiled::Loss) => Fate::FrameError,
+                Some(Spoiled::Collision) => Fate::Collision,
+                Some(Spoiled::HalfDuplex) => Fate::HalfDuplex,
+            },
+        });
     }
 
     /// Computes the link of `key` on a blocking thread (in line when
@@ -641,7 +722,11 @@ impl Node {
     }
 
     fn deliver_due(&mut self, now: Instant, events: &EventSink) {
-        for mt in self.receiver.complete(now) {
+        for (mt, spoiled) in self.receiver.settle(now) {
+            self.observe_settled(&mt, spoiled);
+            if spoiled.is_some() {
+                continue;
+            }
             let ack = (!self.deferred_ack && Acknowledgement::wanted(&mt, &[self.modem_id]))
                 .then(|| Acknowledgement::all(mt.clone()).transmission())
                 .flatten();
@@ -729,6 +814,7 @@ async fn run(
         computed,
         links_in_line,
         positions,
+        observed_links: HashMap::new(),
     };
     node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);

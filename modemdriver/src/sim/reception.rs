@@ -42,12 +42,32 @@ pub fn draw_loss(seed: u64, src: i32, seq: u64, probability: f64) -> bool {
     ChaCha8Rng::seed_from_u64(key).random_bool(probability.min(1.0))
 }
 
+/// Why a reception was lost, the stronger cause first when several
+/// apply: a node that transmits hears nothing, overlapping arrivals are
+/// lost whatever the draw, and the loss draw is the fate of a reception
+/// otherwise clean.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Spoiled {
+    /// The loss draw (`packet_loss`, or the frame-error rate of the link).
+    Loss,
+    /// Another arrival overlapped it.
+    Collision,
+    /// The node transmitted while it arrived.
+    HalfDuplex,
+}
+
 #[derive(Debug)]
 struct Reception {
     start: Instant,
     end: Instant,
     transmission: ModemTransmission,
-    spoiled: bool,
+    spoiled: Option<Spoiled>,
+}
+
+impl Reception {
+    fn spoil(&mut self, cause: Spoiled) {
+        self.spoiled = self.spoiled.max(Some(cause));
+    }
 }
 
 /// Receptions in progress at one node, and the node's own transmissions.
@@ -72,29 +92,29 @@ impl Receiver {
         transmission: ModemTransmission,
         lost: bool,
     ) {
-        let mut spoiled = lost;
-        for r in &mut self.receptions {
-            if overlap((r.start, r.end), (start, end)) {
-                r.spoiled = true;
-                spoiled = true;
-            }
-        }
-        if self.transmissions.iter().any(|&t| overlap(t, (start, end))) {
-            spoiled = true;
-        }
-        self.receptions.push(Reception {
+        let mut arrival = Reception {
             start,
             end,
             transmission,
-            spoiled,
-        });
+            spoiled: lost.then_some(Spoiled::Loss),
+        };
+        for r in &mut self.receptions {
+            if overlap((r.start, r.end), (start, end)) {
+                r.spoil(Spoiled::Collision);
+                arrival.spoil(Spoiled::Collision);
+            }
+        }
+        if self.transmissions.iter().any(|&t| overlap(t, (start, end))) {
+            arrival.spoil(Spoiled::HalfDuplex);
+        }
+        self.receptions.push(arrival);
     }
 
     /// The node transmits from `start` to `end`: what it would hear meanwhile is lost.
     pub fn transmitting(&mut self, start: Instant, end: Instant) {
         for r in &mut self.receptions {
             if overlap((r.start, r.end), (start, end)) {
-                r.spoiled = true;
+                r.spoil(Spoiled::HalfDuplex);
             }
         }
         self.transmissions.push((start, end));
@@ -108,6 +128,16 @@ impl Receiver {
     /// Removes the receptions ended by `now` and returns those heard intact,
     /// in order of their end.
     pub fn complete(&mut self, now: Instant) -> Vec<ModemTransmission> {
+        self.settle(now)
+            .into_iter()
+            .filter(|(_, spoiled)| spoiled.is_none())
+            .map(|(mt, _)| mt)
+            .collect()
+    }
+
+    /// Removes the receptions ended by `now` and returns each, in order of
+    /// its end, with why it was lost (`None`: heard intact).
+    pub fn settle(&mut self, now: Instant) -> Vec<(ModemTransmission, Option<Spoiled>)> {
         let (mut done, pending): (Vec<_>, Vec<_>) = std::mem::take(&mut self.receptions)
             .into_iter()
             .partition(|r| r.end <= now);
@@ -117,8 +147,7 @@ impl Receiver {
         self.transmissions.retain(|&(_, end)| end > earliest);
         done.sort_by_key(|r| r.end);
         done.into_iter()
-            .filter(|r| !r.spoiled)
-            .map(|r| r.transmission)
+            .map(|r| (r.transmission, r.spoiled))
             .collect()
     }
 }
@@ -143,6 +172,36 @@ mod tests {
         rx.arrive(t0 + s(20), t0 + s(21), ModemTransmission::default(), false);
         rx.arrive(t0 + s(21), t0 + s(22), ModemTransmission::default(), false);
         assert_eq!(rx.complete(t0 + s(30)).len(), 2);
+    }
+
+    #[test]
+    fn a_lost_reception_names_its_strongest_cause() {
+        let t0 = Instant::now();
+        let s = Duration::from_secs;
+        let mut rx = Receiver::default();
+        let mt = ModemTransmission::default;
+        // Clean, lost to the draw, collided (both, one also drawn lost),
+        // and heard while transmitting (also collided and drawn lost).
+        rx.arrive(t0, t0 + s(1), mt(), false);
+        rx.arrive(t0 + s(2), t0 + s(3), mt(), true);
+        rx.arrive(t0 + s(4), t0 + s(6), mt(), false);
+        rx.arrive(t0 + s(5), t0 + s(7), mt(), true);
+        rx.arrive(t0 + s(8), t0 + s(10), mt(), true);
+        rx.arrive(t0 + s(9), t0 + s(11), mt(), false);
+        rx.transmitting(t0 + s(8), t0 + s(12));
+        let causes: Vec<_> = rx.settle(t0 + s(20)).into_iter().map(|(_, c)| c).collect();
+        use Spoiled::*;
+        assert_eq!(
+            causes,
+            [
+                None,
+                Some(Loss),
+                Some(Collision),
+                Some(Collision),
+                Some(HalfDuplex),
+                Some(HalfDuplex)
+            ]
+        );
     }
 
     #[test]
