@@ -279,6 +279,21 @@ impl Check<'_> {
         for (i, node) in nodes.iter().enumerate() {
             if node.name().is_empty() {
                 self.problem(format!("node[{i}].name"), "give the node a name");
+            } else if let Some(c) = node
+                .name()
+                .chars()
+                .find(|c| matches!(c, ',' | '"' | ';') || c.is_control())
+            {
+                // The name is a column of the ledger and links CSV files,
+                // and `;` separates the packets' fates in them.
+                self.problem(
+                    format!("node[{i}].name"),
+                    format!(
+                        "{:?} holds {c:?}: a node's name is a column of the CSV files, \
+                         so it holds no comma, double quote, semicolon or control character",
+                        node.name()
+                    ),
+                );
             } else if let Some(j) = nodes[..i].iter().position(|n| n.name() == node.name()) {
                 self.problem(
                     format!("node[{i}].name"),
