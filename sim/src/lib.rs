@@ -9,6 +9,8 @@
 //! - [`traffic`]: the streams of publications (period or Poisson, field
 //!   values constant, counted or drawn), seeded from the scenario's seed.
 //! - [`world`]: the nodes on one virtual clock and one medium, the run.
+//! - [`fault`]: what goes wrong in a run (a gobyd killed and started
+//!   again, a link down, a modem unplugged, garbled frames).
 //! - [`ledger`]: every publication and its fate.
 //! - [`slot_use`]: what the nodes did with the medium (slots, packets;
 //!   G and S of the shared slots).
@@ -23,6 +25,8 @@
 //! ```
 
 pub mod aloha;
+pub mod fault;
+mod incarnation;
 pub mod ledger;
 pub mod modem;
 pub mod report;
