@@ -16,6 +16,8 @@
 //!   G and S of the shared slots).
 //! - [`report`]: the report (JSON) and the ledger (CSV).
 //! - [`aloha`]: ALOHA throughput measured against theory.
+//! - [`sweep`]: the deterministic fault sweep (a random scenario of
+//!   faults per seed, its ledger checked).
 //!
 //! ```no_run
 //! let scenario = goby_sim::scenario::load("fleet.pb.txt".as_ref())?;
@@ -32,6 +34,7 @@ pub mod modem;
 pub mod report;
 pub mod scenario;
 pub mod slot_use;
+pub mod sweep;
 pub mod track;
 pub mod traffic;
 pub mod world;
