@@ -8,7 +8,8 @@
 //! checks refuse (those `gobyd --check` runs, with the simulator's driver
 //! in place of the configuration's), a type the node's gobyd does not load,
 //! a field value its type cannot take, a period or rate that is not
-//! positive, a duration that is not positive.
+//! positive, a duration that is not positive, a fault naming an unknown
+//! node or out of the run ([`crate::fault`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
