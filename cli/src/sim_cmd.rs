@@ -17,11 +17,20 @@ use crate::{CliError, Status};
 #[derive(Debug, Args)]
 #[command(after_help = "Examples:\n  \
     goby sim fleet.pb.txt --out run1\n  \
-    goby sim fleet.pb.txt --seed 8 --out run-seed8")]
+    goby sim fleet.pb.txt --seed 8 --out run-seed8\n  \
+    goby sim --sweep-seed 17 --out sweep17")]
 pub struct SimArgs {
     /// The scenario (protobuf text format, goby.sim.protobuf.Scenario).
-    #[arg(value_name = "SCENARIO")]
-    pub scenario: PathBuf,
+    #[arg(value_name = "SCENARIO", required_unless_present = "sweep_seed")]
+    pub scenario: Option<PathBuf>,
+    /// Runs the fault sweep's scenario of seed N (in place of SCENARIO),
+    /// writes it to the output directory (scenario.pb.txt) and checks the
+    /// sweep's invariants: the status is 1 when one is breached.
+    #[arg(long, value_name = "N", conflicts_with_all = ["scenario", "seed"])]
+    pub sweep_seed: Option<u64>,
+    /// Hours of traffic of the sweep's scenario.
+    #[arg(long, value_name = "H", default_value_t = goby_sim::sweep::HOURS, requires = "sweep_seed")]
+    pub sweep_hours: f64,
     /// Seed of the run, in place of the scenario's.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
@@ -67,14 +76,25 @@ fn interrupted() -> impl std::future::Future<Output = ()> {
 
 /// Runs `goby sim`.
 pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
-    let mut scenario = goby_sim::scenario::load(&args.scenario)
-        .map_err(|e| CliError::setup(format!("the scenario is refused:\n{e}")))?;
-    if let Some(seed) = args.seed {
-        scenario.seed = seed;
-    }
     // The output directory is made and tried before the run, so that a
     // long run does not end in a directory nobody can write to.
     ready(&args.out)?;
+    let refused = |e| CliError::setup(format!("the scenario is refused:\n{e}"));
+    let mut scenario = match (&args.scenario, args.sweep_seed) {
+        (_, Some(seed)) => {
+            let text = goby_sim::sweep::scenario_text(seed, args.sweep_hours);
+            let path = args.out.join("scenario.pb.txt");
+            std::fs::write(&path, &text)
+                .map_err(|e| CliError::Failed(format!("cannot write {}: {e}", path.display())))?;
+            goby_sim::scenario::parse(&text, &path.display().to_string(), &args.out)
+                .map_err(refused)?
+        }
+        (Some(path), None) => goby_sim::scenario::load(path).map_err(refused)?,
+        (None, None) => return Err(CliError::setup("give a SCENARIO or --sweep-seed N")),
+    };
+    if let Some(seed) = args.seed {
+        scenario.seed = seed;
+    }
     let began = Instant::now();
     let outcome = goby_sim::run_until(&scenario, interrupted())
         .map_err(|e| CliError::Failed(e.to_string()))?;
@@ -137,6 +157,9 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
     }
+    if let Some(seed) = args.sweep_seed {
+        return swept(seed, &outcome, stdout);
+    }
     Ok(Status::Ok)
 }
 
@@ -148,15 +171,44 @@ fn write_page(
     args: &SimArgs,
 ) -> Result<PathBuf, CliError> {
     let links = goby_sim::link_quality::LinkQuality::new(&outcome.ledger);
-    let title = args
-        .scenario
-        .file_name()
-        .map_or("scenario".into(), |n| n.to_string_lossy());
+    let title = match (&args.scenario, args.sweep_seed) {
+        (Some(path), _) => path
+            .file_name()
+            .map_or("scenario".into(), |n| n.to_string_lossy().into_owned()),
+        (None, Some(seed)) => format!("sweep seed {seed}"),
+        (None, None) => "scenario".to_string(),
+    };
     let page = crate::sim_page::render(&title, &outcome.report, &links, &outcome.ledger);
     let path = args.out.join(scenario.report.html());
     std::fs::write(&path, page)
         .map_err(|e| CliError::Failed(format!("cannot write {}: {e}", path.display())))?;
     Ok(path)
+}
+
+/// The sweep's invariants over the run of seed `seed`, told; a breach
+/// fails the command.
+fn swept(
+    seed: u64,
+    outcome: &goby_sim::Outcome,
+    stdout: &mut dyn Write,
+) -> Result<Status, CliError> {
+    let t = goby_sim::sweep::check(&outcome.ledger);
+    writeln!(
+        stdout,
+        "sweep seed {seed}: {} published ({} refused while down), {} delivered once, {} owed, \
+         {} lost, {} duplicated, {} repeats dropped",
+        t.published, t.refused, t.delivered_once, t.owed, t.lost, t.duplicated, t.repeats_dropped
+    )?;
+    for breach in &t.breaches {
+        writeln!(stdout, "  {breach}")?;
+    }
+    match t.passed() {
+        true => Ok(Status::Ok),
+        false => Err(CliError::Failed(format!(
+            "sweep seed {seed}: {} invariants breached",
+            t.breaches.len()
+        ))),
+    }
 }
 
 /// Makes `dir` and checks that a file can be written in it.

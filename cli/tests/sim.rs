@@ -348,3 +348,33 @@ fn an_interrupted_run_says_so_and_leaves_no_data_directories() {
     assert!(!dir.join("out/report.json").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_sweep_seed_runs_again_from_its_number_with_the_same_report() {
+    let mut reports = Vec::new();
+    for run in ["sweep-a", "sweep-b"] {
+        let out = scratch(run);
+        let ran = goby(&[
+            "sim",
+            "--sweep-seed",
+            "7",
+            "--sweep-hours",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stdout = stdout_text(&ran);
+        assert!(ran.status.success(), "{stdout}{}", stderr_text(&ran));
+        assert!(stdout.contains("sweep seed 7: "), "{stdout}");
+        assert!(
+            stdout.contains(" 0 lost, 0 duplicated, 0 repeats dropped"),
+            "{stdout}"
+        );
+        // The scenario is written beside the report, to be read and changed.
+        let scenario = std::fs::read_to_string(out.join("scenario.pb.txt")).unwrap();
+        assert!(scenario.contains("fault {"), "{scenario}");
+        reports.push(std::fs::read(out.join("report.json")).unwrap());
+        let _ = std::fs::remove_dir_all(&out);
+    }
+    assert_eq!(reports[0], reports[1]);
+}

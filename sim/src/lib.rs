@@ -9,6 +9,8 @@
 //! - [`traffic`]: the streams of publications (period or Poisson, field
 //!   values constant, counted or drawn), seeded from the scenario's seed.
 //! - [`world`]: the nodes on one virtual clock and one medium, the run.
+//! - [`fault`]: what goes wrong in a run (a gobyd killed and started
+//!   again, a link down, a modem unplugged, garbled frames).
 //! - [`ledger`]: every publication and its fate.
 //! - [`slot_use`]: what the nodes did with the medium (slots, packets;
 //!   G and S of the shared slots).
@@ -23,6 +25,8 @@
 //!   thesis' simulation of it.
 //! - [`glint10`]: the GLINT10 message set's shares of a saturated link
 //!   against the queue's priority rule.
+//! - [`sweep`]: the deterministic fault sweep (a random scenario of
+//!   faults per seed, its ledger checked).
 //!
 //! ```no_run
 //! let scenario = goby_sim::scenario::load("fleet.pb.txt".as_ref())?;
@@ -34,7 +38,9 @@
 pub mod aloha;
 pub mod carriage;
 pub mod discovery;
+pub mod fault;
 pub mod glint10;
+mod incarnation;
 pub mod ledger;
 pub mod link_quality;
 pub mod losses;
@@ -43,6 +49,7 @@ pub mod modem;
 pub mod report;
 pub mod scenario;
 pub mod slot_use;
+pub mod sweep;
 pub mod track;
 pub mod traffic;
 pub mod world;

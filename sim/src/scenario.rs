@@ -8,7 +8,8 @@
 //! checks refuse (those `gobyd --check` runs, with the simulator's driver
 //! in place of the configuration's), a type the node's gobyd does not load,
 //! a field value its type cannot take, a period or rate that is not
-//! positive, a duration that is not positive.
+//! positive, a duration that is not positive, a fault naming an unknown
+//! node or out of the run ([`crate::fault`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -40,6 +41,8 @@ pub struct Scenario {
     pub water: SimulatorDriverConfig,
     /// The nodes, in the order written.
     pub nodes: Vec<Node>,
+    /// What goes wrong, and when.
+    pub faults: Vec<crate::fault::Fault>,
     /// File names of the report (relative to the output directory).
     pub report: pb::Report,
 }
@@ -113,7 +116,7 @@ fn parse_error(e: &prost_reflect::text_format::ParseError, text: &str, origin: &
 }
 
 /// The checks, collecting every problem with its place.
-struct Check<'a> {
+pub(crate) struct Check<'a> {
     text: &'a str,
     origin: &'a str,
     base: &'a Path,
@@ -156,7 +159,7 @@ fn too_long(seconds: f64) -> String {
 
 impl Check<'_> {
     /// A problem of the scenario's field `path`, placed where it is written.
-    fn problem(&mut self, path: impl Into<String>, reason: impl Into<String>) {
+    pub(crate) fn problem(&mut self, path: impl Into<String>, reason: impl Into<String>) {
         let mut problems = [Problem::new(path, reason)];
         gobyd::config::locate(&mut problems, self.text, self.origin);
         let [p] = problems;
@@ -204,6 +207,7 @@ impl Check<'_> {
             nodes.push(self.node(i, node, &s.node));
         }
         let nodes: Option<Vec<Node>> = nodes.into_iter().collect();
+        let faults = crate::fault::check(self, &s.fault, &s.node, duration + drain);
         Some(Scenario {
             seed: s.seed(),
             start_micros: start.ok()?,
@@ -211,6 +215,7 @@ impl Check<'_> {
             drain_micros: (drain * 1e6) as u64,
             water,
             nodes: nodes?,
+            faults,
             report: s.report.unwrap_or_default(),
         })
     }

@@ -60,11 +60,11 @@ pub fn run(
 }
 
 /// A started node: where to publish, how to stop it, its run.
-struct Running {
-    publisher: mpsc::Sender<Publish>,
-    stop: oneshot::Sender<()>,
-    run: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
-    listener: tokio::task::JoinHandle<()>,
+pub(crate) struct Running {
+    pub(crate) publisher: mpsc::Sender<Publish>,
+    pub(crate) stop: oneshot::Sender<()>,
+    pub(crate) run: tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>,
+    pub(crate) listener: tokio::task::JoinHandle<()>,
 }
 
 /// The free space a RAM-backed `/dev/shm` needs for the nodes' data
@@ -113,9 +113,24 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
             .map(|n| (n.modem_id, n.place.clone()))
             .collect(),
     });
+    let ids: Vec<i32> = s.nodes.iter().map(|n| n.modem_id).collect();
+    if let Some(filter) = crate::fault::filter(&s.faults, &ids, s.seed, start) {
+        medium.set_filter(filter);
+    }
+    let world = World {
+        s,
+        dir,
+        medium: &medium,
+        clock: &clock,
+        places: &places,
+        ledger: &ledger,
+    };
     let mut nodes = Vec::new();
+    let mut doors = Vec::new();
     for i in 0..s.nodes.len() {
-        nodes.push(start_node(s, i, dir, &medium, &clock, &places, &ledger).await?);
+        let node = world.start_node(i, 0).await?;
+        doors.push(Arc::new(Mutex::new(Some(node.publisher.clone()))));
+        nodes.push(node);
     }
     let end_s = s.duration_micros as f64 / 1e6;
     let mut streams = Vec::new();
@@ -126,7 +141,7 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
                 stream: stream.index,
                 dest: stream.dest,
                 generator: stream.generator(s.seed, i),
-                publisher: nodes[i].publisher.clone(),
+                door: doors[i].clone(),
                 ledger: ledger.clone(),
                 clock: clock.clone(),
                 start,
@@ -135,14 +150,23 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
             streams.push(tokio::spawn(publishing.run()));
         }
     }
-    for stream in streams {
-        stream
-            .await
-            .map_err(|e| SimError::Run(format!("a stream of publications failed: {e}")))?;
-    }
+    let published = async {
+        for stream in streams {
+            stream
+                .await
+                .map_err(|e| SimError::Run(format!("a stream of publications failed: {e}")))?;
+        }
+        Ok::<(), SimError>(())
+    };
+    let (killed, published) = tokio::join!(
+        crate::incarnation::kills(&world, nodes, &doors, start),
+        published
+    );
+    published?;
+    let (nodes, dead) = killed?;
     tokio::time::sleep_until(start + Duration::from_micros(s.duration_micros + s.drain_micros))
         .await;
-    stop_nodes(s, nodes).await?;
+    stop_nodes(s, nodes, dead).await?;
     for (i, node) in s.nodes.iter().enumerate() {
         let ids = owed(&dir.join(format!("node{i}")))
             .map_err(|e| SimError::Run(format!("node {}: {e}", node.name)))?;
@@ -162,7 +186,54 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
     }
 }
 
+/// What starting a node takes: the scenario, where the nodes' data
+/// directories are, the water, the clock and the ledger.
+pub(crate) struct World<'a> {
+    s: &'a Scenario,
+    dir: &'a Path,
+    medium: &'a Arc<Medium>,
+    clock: &'a Arc<TokioClock>,
+    places: &'a Arc<dyn Positions>,
+    ledger: &'a Arc<Mutex<Ledger>>,
+}
+
+/// Where a stream publishes: the running gobyd of its node, or `None`
+/// while the node is down (killed, not started again yet).
+pub(crate) type Door = Arc<Mutex<Option<mpsc::Sender<Publish>>>>;
+
+/// The seed drawn from `parts` for the node's `generation`-th start (0:
+/// the first; each start after a kill draws anew, as a process started
+/// again gets new numbers from its operating system).
+fn generation_seed(parts: &[u64], generation: u64) -> u64 {
+    match generation {
+        0 => mix(parts),
+        g => mix(&[mix(parts), g]),
+    }
+}
+
+impl World<'_> {
+    /// The scenario of the run.
+    pub(crate) fn scenario(&self) -> &Scenario {
+        self.s
+    }
+
+    /// Starts node `i` (its `generation`-th start: 0 the first, more after
+    /// kills) with its data directory in the world's.
+    pub(crate) async fn start_node(&self, i: usize, generation: u64) -> Result<Running, SimError> {
+        let World {
+            s,
+            dir,
+            medium,
+            clock,
+            places,
+            ledger,
+        } = *self;
+        start_node(s, i, dir, medium, clock, places, ledger, generation).await
+    }
+}
+
 /// Starts node `i` of `s` with its data directory in `dir`.
+#[allow(clippy::too_many_arguments)]
 async fn start_node(
     s: &Scenario,
     i: usize,
@@ -171,6 +242,7 @@ async fn start_node(
     clock: &Arc<TokioClock>,
     places: &Arc<dyn Positions>,
     ledger: &Arc<Mutex<Ledger>>,
+    generation: u64,
 ) -> Result<Running, SimError> {
     let node = &s.nodes[i];
     let positions: Vec<(i32, [f64; 3])> = s
@@ -178,7 +250,7 @@ async fn start_node(
         .iter()
         .map(|n| (n.modem_id, n.place.start()))
         .collect();
-    let seed = mix(&[s.seed, node.modem_id as u64]);
+    let seed = generation_seed(&[s.seed, node.modem_id as u64], generation);
     let driver_config = driver_config(node.modem_id, &positions, &s.water, seed);
     let mut config = node.config.clone();
     config.driver = Some(driver_config.clone());
@@ -199,7 +271,10 @@ async fn start_node(
     let daemon = Daemon::builder(config)
         .driver(driver)
         .clock(clock.clone())
-        .seed(mix(&[s.seed, node.modem_id as u64, 1]))
+        .seed(generation_seed(
+            &[s.seed, node.modem_id as u64, 1],
+            generation,
+        ))
         .sync_in_line()
         .start()
         .await
@@ -224,9 +299,14 @@ async fn start_node(
     })
 }
 
-/// Stops every node and waits for its run and its listener to end.
-async fn stop_nodes(s: &Scenario, nodes: Vec<Running>) -> Result<(), SimError> {
-    let mut listeners = Vec::new();
+/// Stops every node and waits for its run and its listener to end (and
+/// for the listeners of killed gobyds, `dead`).
+async fn stop_nodes(
+    s: &Scenario,
+    nodes: Vec<Running>,
+    dead: Vec<tokio::task::JoinHandle<()>>,
+) -> Result<(), SimError> {
+    let mut listeners = dead;
     let mut runs = Vec::new();
     for node in nodes {
         let _ = node.stop.send(());
@@ -296,7 +376,7 @@ struct Publishing {
     stream: usize,
     dest: Option<usize>,
     generator: Generator,
-    publisher: mpsc::Sender<Publish>,
+    door: Door,
     ledger: Arc<Mutex<Ledger>>,
     clock: Arc<TokioClock>,
     start: Instant,
@@ -322,7 +402,16 @@ impl Publishing {
                 self.clock.now(),
             );
             let (reply, answer) = oneshot::channel();
-            let result = match self.publisher.send(Publish::new(message, reply)).await {
+            let publisher = self.door.lock().expect("not poisoned").clone();
+            let Some(publisher) = publisher else {
+                let down = "the node is down (killed, not started again yet)".to_string();
+                self.ledger
+                    .lock()
+                    .expect("not poisoned")
+                    .accepted(index, Err(down));
+                continue;
+            };
+            let result = match publisher.send(Publish::new(message, reply)).await {
                 Err(_) => Err("the node stopped taking publications".to_string()),
                 Ok(()) => match answer.await {
                     Ok(Ok(accepted)) => Ok(accepted.id),

@@ -431,3 +431,89 @@ fn a_node_name_that_would_break_the_csv_files_is_refused() {
         "{error}"
     );
 }
+
+#[test]
+fn a_fault_naming_an_unknown_node_is_refused_at_its_place() {
+    for (fault, needle, path) in [
+        (
+            "kill { node: \"n7\" at_s: 10 }",
+            "node: \"n7\"",
+            "fault[0].kill.node",
+        ),
+        (
+            "link_down { a: \"n1\" b: \"n7\" from_s: 1 to_s: 2 }",
+            "b: \"n7\"",
+            "fault[0].link_down.b",
+        ),
+        (
+            "unplug { node: \"n7\" at_s: 1 for_s: 2 }",
+            "node: \"n7\"",
+            "fault[0].unplug.node",
+        ),
+        (
+            "garble { node: \"n7\" probability: 0.5 }",
+            "node: \"n7\"",
+            "fault[0].garble.node",
+        ),
+    ] {
+        let text = support::ring(2, 0.0, 600, 60, 60) + &format!("fault {{ {fault} }}\n");
+        let (line, column) = place_of(&text, needle);
+        assert_eq!(
+            refusal(&text),
+            format!("fleet.pb.txt:{line}:{column}: {path}: no node named \"n7\"")
+        );
+    }
+}
+
+#[test]
+fn a_fault_outside_the_run_is_refused_at_its_place() {
+    // The run is 600 s of traffic and 60 of drain.
+    for (fault, needle, path, reason) in [
+        (
+            "kill { node: \"n1\" at_s: 700 }",
+            "at_s: 700",
+            "fault[0].kill.at_s",
+            "700 s is after the end of the run (660 s: duration_s plus drain_s)",
+        ),
+        (
+            "kill { node: \"n1\" at_s: 600 restart_after_s: 100 }",
+            "restart_after_s: 100",
+            "fault[0].kill.restart_after_s",
+            "700 s is after the end of the run (660 s: duration_s plus drain_s)",
+        ),
+        (
+            "link_down { a: \"n1\" b: \"n2\" from_s: 1 to_s: 661 }",
+            "to_s: 661",
+            "fault[0].link_down.to_s",
+            "661 s is after the end of the run (660 s: duration_s plus drain_s)",
+        ),
+        (
+            "unplug { node: \"n1\" at_s: -1 for_s: 2 }",
+            "at_s: -1",
+            "fault[0].unplug.at_s",
+            "-1 is not 0 or more seconds",
+        ),
+        (
+            "garble { node: \"n1\" probability: 1.5 }",
+            "probability: 1.5",
+            "fault[0].garble.probability",
+            "1.5 is not a probability of more than 0, at most 1",
+        ),
+    ] {
+        let text = support::ring(2, 0.0, 600, 60, 60) + &format!("fault {{ {fault} }}\n");
+        let (line, column) = place_of(&text, needle);
+        assert_eq!(
+            refusal(&text),
+            format!("fleet.pb.txt:{line}:{column}: {path}: {reason}")
+        );
+    }
+    // A node killed again while it is down.
+    let text = support::ring(2, 0.0, 600, 60, 60)
+        + "fault { kill { node: \"n1\" at_s: 100 restart_after_s: 60 } }\n\
+           fault { kill { node: \"n1\" at_s: 150 } }\n";
+    let error = refusal(&text);
+    assert!(
+        error.contains("fault[1].kill.at_s: node \"n1\" is down from 100 s to 160 s"),
+        "{error}"
+    );
+}

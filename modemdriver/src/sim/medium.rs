@@ -28,13 +28,33 @@ pub struct Airborne {
     pub transmission: ModemTransmission,
 }
 
+/// What becomes of a packet on its way to one receiver (its modem id):
+/// the packet as that receiver hears it (the same, or changed), or `None`
+/// when it does not reach it. A simulation's faults (a link down, a modem
+/// unplugged, garbled frames) are filters.
+pub type Filter = Arc<dyn Fn(&Arc<Airborne>, i32) -> Option<Arc<Airborne>> + Send + Sync>;
+
 /// The channel: every packet sent by one node is heard (subject to
 /// propagation, loss and collisions) by every other node that has joined.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct Medium {
     nodes: Mutex<Vec<(i32, mpsc::UnboundedSender<Arc<Airborne>>)>>,
     /// Told of every packet and its fate at each node, when set.
     observer: Option<Arc<dyn Observer>>,
+    filter: Mutex<Option<Filter>>,
+}
+
+impl std::fmt::Debug for Medium {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Medium")
+            .field("nodes", &self.nodes)
+            .field("observer", &self.observer)
+            .field(
+                "filtered",
+                &self.filter.lock().map(|f| f.is_some()).unwrap_or(false),
+            )
+            .finish()
+    }
 }
 
 static NAMED: LazyLock<Mutex<HashMap<String, Weak<Medium>>>> =
@@ -52,6 +72,7 @@ impl Medium {
         Arc::new(Medium {
             nodes: Mutex::default(),
             observer: Some(observer),
+            filter: Mutex::default(),
         })
     }
 
@@ -83,13 +104,32 @@ impl Medium {
         self.lock().retain(|(id, _)| *id != modem_id);
     }
 
-    /// Puts a packet on the water for every other node.
+    /// Passes every packet through `filter` on its way to each receiver
+    /// from now on (in place of any filter before).
+    pub fn set_filter(&self, filter: Filter) {
+        *self.filter.lock().unwrap_or_else(|e| e.into_inner()) = Some(filter);
+    }
+
+    /// Puts a packet on the water for every other node (as the filter, if
+    /// any, lets it reach each).
     pub fn transmit(&self, packet: Arc<Airborne>) {
+        let filter = self
+            .filter
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone();
         let mut nodes = self.lock();
         nodes.retain(|(_, tx)| !tx.is_closed());
         for (id, tx) in nodes.iter() {
-            if *id != packet.src {
-                let _ = tx.send(packet.clone());
+            if *id == packet.src {
+                continue;
+            }
+            let heard = match &filter {
+                None => Some(packet.clone()),
+                Some(filter) => filter(&packet, *id),
+            };
+            if let Some(heard) = heard {
+                let _ = tx.send(heard);
             }
         }
     }

@@ -1,0 +1,159 @@
+//! Faults in a run: a gobyd killed and started again on its data
+//! directory, a link down, a modem unplugged, garbled frames (the faults
+//! refused at their place in the file are in `refusals.rs`).
+
+mod support;
+
+use std::path::Path;
+
+use goby_sim::scenario::parse;
+use goby_sim::Outcome;
+
+fn run(text: &str) -> Outcome {
+    let scenario = parse(text, "faults", Path::new(".")).expect("accepted");
+    goby_sim::run(&scenario).expect("the run ends")
+}
+
+/// Every publication accepted was delivered once to its destination,
+/// after it was published; none is lost, owed or duplicated.
+fn every_accepted_delivered_once(outcome: &Outcome) {
+    for p in outcome.ledger.publications() {
+        if p.refused.is_some() {
+            assert!(p.deliveries.is_empty(), "refused but delivered: {p:?}");
+            continue;
+        }
+        let dest = p.dest.expect("addressed");
+        let copies = p.deliveries.get(&dest).map_or(0, Vec::len);
+        assert_eq!(copies, 1, "delivered {copies} times: {p:?}");
+    }
+    let total = &outcome.report.total;
+    assert_eq!(
+        (total.duplicates, total.lost, total.owed),
+        (0, 0, 0),
+        "{:#?}",
+        outcome.report
+    );
+    assert_eq!(outcome.report.stray_receptions, 0);
+}
+
+/// The first delivery at node `receiver` from node `src`, seconds from
+/// the start.
+fn deliveries_s(outcome: &Outcome, src: usize, receiver: usize) -> Vec<f64> {
+    let start = outcome.report.run.start_us;
+    let mut times: Vec<f64> = outcome
+        .ledger
+        .publications()
+        .iter()
+        .filter(|p| p.src == src)
+        .filter_map(|p| p.deliveries.get(&receiver))
+        .flatten()
+        .map(|t| (t - start) as f64 / 1e6)
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times
+}
+
+#[test]
+fn a_killed_gobyd_started_again_on_its_data_directory_owes_what_it_had_accepted() {
+    // n2 is killed at 1000 s (its queue holds what the loss kept back)
+    // and started again 300 s later.
+    let text = support::ring(3, 0.3, 3600, 60, 3600)
+        + "fault { kill { node: \"n2\" at_s: 1000 restart_after_s: 300 } }\n";
+    let outcome = run(&text);
+    every_accepted_delivered_once(&outcome);
+    // Refused while down, and only then.
+    let refused: Vec<f64> = outcome
+        .ledger
+        .publications()
+        .iter()
+        .filter(|p| p.refused.is_some())
+        .map(|p| (p.time - outcome.report.run.start_us) as f64 / 1e6)
+        .collect();
+    assert!(!refused.is_empty(), "nothing was refused while n2 was down");
+    assert!(
+        refused.iter().all(|t| (1000.0..1300.0).contains(t)),
+        "refused outside the kill: {refused:?}"
+    );
+    // What n2 had accepted before its kill and not yet delivered then was
+    // delivered after its new start (its journal replayed).
+    let late = outcome.ledger.publications().iter().any(|p| {
+        p.src == 1
+            && p.time < outcome.report.run.start_us + 1_000_000_000
+            && p.deliveries[&2][0] > outcome.report.run.start_us + 1_300_000_000
+    });
+    assert!(late, "nothing accepted before the kill was owed across it");
+}
+
+#[test]
+fn nothing_crosses_a_link_that_is_down_and_what_waited_goes_after() {
+    let text = support::ring(2, 0.0, 3600, 120, 3600)
+        + "fault { link_down { a: \"n1\" b: \"n2\" from_s: 0 to_s: 1800 } }\n";
+    let outcome = run(&text);
+    every_accepted_delivered_once(&outcome);
+    for (src, receiver) in [(0, 1), (1, 0)] {
+        let times = deliveries_s(&outcome, src, receiver);
+        assert!(
+            times[0] >= 1800.0,
+            "heard while the link was down: {times:?}"
+        );
+    }
+}
+
+#[test]
+fn an_unplugged_modem_neither_sends_nor_hears() {
+    let text = support::ring(3, 0.0, 3600, 120, 3600)
+        + "fault { unplug { node: \"n2\" at_s: 600 for_s: 1200 } }\n";
+    let outcome = run(&text);
+    every_accepted_delivered_once(&outcome);
+    // n1 -> n2 and n2 -> n3 stop in the window; n3 -> n1 goes on.
+    for (src, receiver) in [(0, 1), (1, 2)] {
+        let times = deliveries_s(&outcome, src, receiver);
+        assert!(
+            !times.iter().any(|t| (610.0..1800.0).contains(t)),
+            "heard while unplugged: {times:?}"
+        );
+    }
+    let times = deliveries_s(&outcome, 2, 0);
+    assert!(times.iter().any(|t| (610.0..1800.0).contains(t)));
+}
+
+#[test]
+fn garbled_frames_are_refused_not_delivered_as_other_messages() {
+    let text = support::ring(2, 0.0, 3600, 120, 3600)
+        + "fault { garble { node: \"n2\" probability: 1 from_s: 0 to_s: 1800 } }\n";
+    let outcome = run(&text);
+    every_accepted_delivered_once(&outcome);
+    let times = deliveries_s(&outcome, 0, 1);
+    assert!(
+        times[0] >= 1800.0,
+        "a garbled frame was delivered: {times:?}"
+    );
+    // The other way is not garbled.
+    assert!(deliveries_s(&outcome, 1, 0)[0] < 1800.0);
+}
+
+#[test]
+fn garbled_frames_past_the_crc_reach_the_decoder_and_the_run_goes_on() {
+    // DCCL carries no check of its own: bytes changed past the modem's
+    // CRC are decoded as whatever they say. The daemon must not fail on
+    // them; what they decode to is counted, not trusted.
+    let text = support::ring(2, 0.0, 1800, 120, 1800)
+        + "fault { garble { node: \"n2\" probability: 1 past_crc: true from_s: 0 to_s: 900 } }\n";
+    let outcome = run(&text);
+    let start = outcome.report.run.start_us;
+    // What the garbling did is in the report: receptions of no
+    // publication, or publications acknowledged yet never received as sent.
+    let total = &outcome.report.total;
+    assert!(
+        outcome.report.stray_receptions + total.lost > 0,
+        "the garbling changed nothing: {:#?}",
+        outcome.report
+    );
+    // Published after the window, all delivered once.
+    for p in outcome.ledger.publications() {
+        if p.time >= start + 900_000_000 {
+            let copies = p.deliveries.get(&p.dest.unwrap()).map_or(0, Vec::len);
+            assert_eq!(copies, 1, "{p:?}");
+        }
+    }
+}
