@@ -35,29 +35,35 @@ message Blob {
 }
 "#;
 
-fn config(id: i32, dir: &Path, rate: u32, slot: f64) -> protos::goby::apps::protobuf::GobydConfig {
-    let proto = dir.join("blob.proto");
-    if !proto.exists() {
-        std::fs::write(&proto, BLOB_PROTO).unwrap();
-    }
+/// Node `id` of the line 1 – 2 – 3: fixed TDMA at `rate` in `slot`-second
+/// slots, `loss` of the packets (data and acks) lost, commands acked.
+fn line_node(id: i32, dir: &Path, rate: u32, slot: f64, loss: f64) -> Node {
     let driver = Simulator::line(3, 1500.0)
         .range(2000.0)
         .deferred_ack()
-        .loss(0.2)
+        .loss(loss)
         .seed(id as u64 + 90)
         .overhead(0.5);
     Node::new(id)
         .driver(driver)
         .tdma(&[1, 2, 3], rate, slot)
         .queue(Entry::command().ack(true).ttl(7200))
+        .json_tcp("")
+        .data_dir(&data_dir(dir, id))
+}
+
+fn config(id: i32, dir: &Path, rate: u32, slot: f64) -> protos::goby::apps::protobuf::GobydConfig {
+    let proto = dir.join("blob.proto");
+    if !proto.exists() {
+        std::fs::write(&proto, BLOB_PROTO).unwrap();
+    }
+    line_node(id, dir, rate, slot, 0.2)
         .queue(
             Entry::new("test.Blob")
                 .role("DESTINATION_ID", "destination")
                 .ack(true)
                 .ttl(7200),
         )
-        .json_tcp("")
-        .data_dir(&data_dir(dir, id))
         .extra(&format!("dccl {{ proto_file: \"{}\" }}", proto.display()))
         .extra("network { route { hop: 1 hop: 2 hop: 3 } resend_seconds: 600 }")
         .config()
@@ -377,18 +383,7 @@ async fn a_file_through_the_relay_keeps_pace_with_the_tdma_limit() {
     let (rate, slot) = (2, 8.0);
     let configs: Vec<_> = (1..=3)
         .map(|id| {
-            let driver = Simulator::line(3, 1500.0)
-                .range(2000.0)
-                .deferred_ack()
-                .loss(0.0)
-                .seed(id as u64 + 90)
-                .overhead(0.5);
-            Node::new(id)
-                .driver(driver)
-                .tdma(&[1, 2, 3], rate, slot)
-                .queue(Entry::command().ack(true).ttl(7200))
-                .json_tcp("")
-                .data_dir(&data_dir(&dir, id))
+            line_node(id, &dir, rate, slot, 0.0)
                 .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
                 .config()
         })

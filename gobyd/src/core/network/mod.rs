@@ -1850,6 +1850,74 @@ mod tests {
         }
     }
 
+    /// A fragment of transfer format 1 (an older node's) is not misread:
+    /// its transfer is answered REFUSED, in the `FragmentAck` that format
+    /// reads, to its origin.
+    #[test]
+    fn a_format_1_fragment_is_refused_to_its_origin() {
+        use protos::goby::acomms::protobuf::FragmentV1;
+        let dir = std::env::temp_dir().join(format!("goby-net-v1-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = GobydConfig {
+            modem_id: Some(3),
+            network: Some(NetworkConfig::default()),
+            ..Default::default()
+        };
+        let mut codec = dccl::Codec::new();
+        let mut queue_config = QueueManagerConfig {
+            modem_id: Some(3),
+            ..Default::default()
+        };
+        prepare(&config, &mut codec, &mut queue_config, &[]).unwrap();
+        let codec = Arc::new(codec);
+        let queue = queue::QueueManager::new(codec.clone(), &queue_config).unwrap();
+        let (mut outbox, _) = Outbox::open(queue, &dir.join("outbox.journal")).unwrap();
+        // The queue's clock is the system's.
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_micros() as Micros;
+        let mut network = Network::open(&config, &queue_config, codec.clone(), &dir, &outbox, now)
+            .unwrap()
+            .unwrap();
+        let old = FragmentV1 {
+            next_hop: 3,
+            origin: 1,
+            final_dest: 3,
+            hop_count: 0,
+            lifetime: 600,
+            transfer: 4_321,
+            index: 0,
+            data: vec![7; 40],
+        };
+        let received = ReceivedMessage {
+            message: old.transcode_to_dynamic(),
+            dccl_id: 32004,
+            src: 1,
+            dest: 3,
+            time: None,
+            bytes: Vec::new(),
+            identity: None,
+        };
+        let receipt = network.receive(vec![received], &mut outbox, now);
+        assert!(receipt.arrived.is_empty() && receipt.transfers.is_empty());
+        network.data_request(&mut outbox, now);
+        let mut tx = protos::goby::acomms::protobuf::ModemTransmission {
+            max_frame_bytes: Some(64),
+            max_num_frames: Some(1),
+            ..Default::default()
+        };
+        outbox.data_request(&mut tx, 0, &[]).unwrap();
+        let answer = codec.decode(&tx.frame[0]).unwrap();
+        let Some(NetMessage::FragmentAck(ack)) = NetMessage::of(&answer) else {
+            panic!("not a FragmentAck: {answer:?}");
+        };
+        assert_eq!((ack.final_dest, ack.transfer), (1, 4_321));
+        assert_eq!(ack.outcome(), fragment_ack::Outcome::Refused);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// The bound the guide promises: a fragment's header (its DCCL id, its
     /// next hop, its place) is at most 6 bytes, so that a 64-byte frame
     /// keeps 90 % of its bytes for data; a long transfer's one more.
