@@ -348,6 +348,65 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The relay holds the transfer's channels (its bindings on record, its
+/// own channel's fragments in its journal): killed a third of the way and
+/// started again a minute later, it takes the transfer up, and the file is
+/// written once with the same bytes.
+#[tokio::test(start_paused = true)]
+async fn a_file_survives_a_restart_of_the_relay() {
+    let dir = scratch("transfer", "relay-restart");
+    let configs = (1..=3).map(|id| config(id, &dir, 5, 6.0)).collect();
+    let mut fleet = Fleet::start(configs).await;
+    let file = dir.join("sidescan.bin");
+    let content = pattern(30 * 1024, 5);
+    std::fs::write(&file, &content).unwrap();
+    let sent = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file.clone(),
+                name: None,
+            },
+        )
+        .await
+        .unwrap();
+    let id = sent["file_send"].as_u64().unwrap();
+    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
+    let held_at_3 = |seen: &[Seen]| {
+        transfer_at(seen, 3, "receiving")
+            .last()
+            .map_or(0, |e| e.held)
+    };
+    assert!(
+        until(&fleet, Duration::from_secs(3600), |s| held_at_3(s)
+            >= fragments / 3)
+        .await
+    );
+    fleet.kill(2).await;
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    fleet.start_node(2).await;
+    let done = until(&fleet, Duration::from_secs(4 * 3600), |s| {
+        transfer_at(s, 1, "complete").iter().any(|e| e.id == id)
+    })
+    .await;
+    let seen = fleet.seen();
+    assert!(
+        done,
+        "not complete in 4 virtual hours: {:?}",
+        transfer_at(&seen, 3, "receiving").last()
+    );
+    let written = transfer_at(&seen, 3, "complete");
+    assert_eq!(written.len(), 1, "{written:?}");
+    assert_eq!(
+        std::fs::read(written[0].path.as_ref().unwrap()).unwrap(),
+        content
+    );
+    assert!(transfer_at(&seen, 3, "failed").is_empty());
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn settings_for_inspection(
     dir: &Path,
     node: i32,
