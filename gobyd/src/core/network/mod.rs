@@ -1454,7 +1454,7 @@ impl Network {
             tracing::warn!(src, "a fragment from node {src} too short to read: dropped");
             return Forward::Skipped;
         };
-        let Some(b) = self.transfers.binding(src, place.channel) else {
+        let Some(b) = self.transfers.binding(src, place.channel, now) else {
             tracing::warn!(
                 src,
                 channel = place.channel,

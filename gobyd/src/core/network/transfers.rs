@@ -1490,9 +1490,13 @@ impl Transfers {
         true
     }
 
-    /// What node `src`'s channel `channel` is bound to, if known.
-    pub fn binding(&self, src: i32, channel: u8) -> Option<Binding> {
-        self.bindings.get(&(src, channel)).copied()
+    /// What node `src`'s channel `channel` is bound to at `now`, if known
+    /// (a binding past its transfer's lifetime is not).
+    pub fn binding(&self, src: i32, channel: u8, now: Micros) -> Option<Binding> {
+        self.bindings
+            .get(&(src, channel))
+            .filter(|b| b.expires > now)
+            .copied()
     }
 
     /// This node's channels toward its next hops.
