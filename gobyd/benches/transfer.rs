@@ -30,7 +30,7 @@ use gobyd::event::NetworkRequest;
 use gobyd::internals::fragment::{self, Content};
 use gobyd::internals::network::wire::{self, NetMessage};
 use node::{Entry, Node, Simulator};
-use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
+use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck, FragmentChannel};
 
 /// A link: the modem's rate (Micro-Modem rate number) and the TDMA
 /// slot, seconds.
@@ -194,6 +194,8 @@ struct Sizes {
     fragment_header: usize,
     /// A transfer's stream header (a file named `body.bin`).
     stream_header: usize,
+    /// A channel's binding, once a transfer on each hop.
+    binding: usize,
     /// A selective ack, as encoded.
     ack: usize,
 }
@@ -207,23 +209,38 @@ fn sizes(link: Link) -> Sizes {
     let fragment_data = gobyd::internals::network::fragment_data_bytes(&codec, frame)
         .expect("a fragment fits a frame");
     // A fragment as the sender writes it, near the end of a 100 KiB
-    // transfer: its header's fields are of fixed width, so any would do.
+    // transfer (short places: up to 2048 fragments): its header's fields
+    // are of fixed width, so any would do.
     let data = vec![0x5A; fragment_data];
+    let place = wire::Place {
+        channel: 3,
+        index: 1_700,
+        long: false,
+    };
     let encoded = codec
         .encode(
             &NetMessage::Fragment(Fragment {
+                next_hop: 2,
+                piece: wire::piece(place, &data).expect("the place fits"),
+            })
+            .to_dynamic(),
+        )
+        .expect("a fragment encodes");
+    let binding = codec
+        .encode(
+            &NetMessage::Channel(FragmentChannel {
                 next_hop: 2,
                 origin: 1,
                 final_dest: 3,
                 hop_count: 0,
                 lifetime: 86_000,
                 transfer: 40_123,
-                index: 420,
-                data: data.clone(),
+                channel: 3,
             })
             .to_dynamic(),
         )
-        .expect("a fragment encodes");
+        .expect("a binding encodes")
+        .len();
     assert!(encoded.len() <= frame, "the fragment overflows its frame");
     let ack = codec
         .encode(
@@ -255,6 +272,7 @@ fn sizes(link: Link) -> Sizes {
         fragment_data,
         fragment_header: encoded.len() - data.len(),
         stream_header: stream.len() - body.len(),
+        binding,
         ack: ack.len(),
     }
 }
@@ -338,8 +356,8 @@ fn table(link: Link, scratch: &Path) {
         100.0 * sizes.fragment_header as f64 / sizes.frame as f64
     );
     println!(
-        "Per transfer: a stream header of {} bytes (a file named body.bin); a selective ack is {} bytes.",
-        sizes.stream_header, sizes.ack
+        "Per transfer: a stream header of {} bytes (a file named body.bin), a channel's binding of {} bytes on each hop; a selective ack is {} bytes (its bitmap full).",
+        sizes.stream_header, sizes.binding, sizes.ack
     );
     let limit = 10.0 * 1024.0 / raw_bytes_per_second;
     println!(

@@ -35,29 +35,35 @@ message Blob {
 }
 "#;
 
-fn config(id: i32, dir: &Path, rate: u32, slot: f64) -> protos::goby::apps::protobuf::GobydConfig {
-    let proto = dir.join("blob.proto");
-    if !proto.exists() {
-        std::fs::write(&proto, BLOB_PROTO).unwrap();
-    }
+/// Node `id` of the line 1 – 2 – 3: fixed TDMA at `rate` in `slot`-second
+/// slots, `loss` of the packets (data and acks) lost, commands acked.
+fn line_node(id: i32, dir: &Path, rate: u32, slot: f64, loss: f64) -> Node {
     let driver = Simulator::line(3, 1500.0)
         .range(2000.0)
         .deferred_ack()
-        .loss(0.2)
+        .loss(loss)
         .seed(id as u64 + 90)
         .overhead(0.5);
     Node::new(id)
         .driver(driver)
         .tdma(&[1, 2, 3], rate, slot)
         .queue(Entry::command().ack(true).ttl(7200))
+        .json_tcp("")
+        .data_dir(&data_dir(dir, id))
+}
+
+fn config(id: i32, dir: &Path, rate: u32, slot: f64) -> protos::goby::apps::protobuf::GobydConfig {
+    let proto = dir.join("blob.proto");
+    if !proto.exists() {
+        std::fs::write(&proto, BLOB_PROTO).unwrap();
+    }
+    line_node(id, dir, rate, slot, 0.2)
         .queue(
             Entry::new("test.Blob")
                 .role("DESTINATION_ID", "destination")
                 .ack(true)
                 .ttl(7200),
         )
-        .json_tcp("")
-        .data_dir(&data_dir(dir, id))
         .extra(&format!("dccl {{ proto_file: \"{}\" }}", proto.display()))
         .extra("network { route { hop: 1 hop: 2 hop: 3 } resend_seconds: 600 }")
         .config()
@@ -342,6 +348,65 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The relay holds the transfer's channels (its bindings on record, its
+/// own channel's fragments in its journal): killed a third of the way and
+/// started again a minute later, it takes the transfer up, and the file is
+/// written once with the same bytes.
+#[tokio::test(start_paused = true)]
+async fn a_file_survives_a_restart_of_the_relay() {
+    let dir = scratch("transfer", "relay-restart");
+    let configs = (1..=3).map(|id| config(id, &dir, 5, 6.0)).collect();
+    let mut fleet = Fleet::start(configs).await;
+    let file = dir.join("sidescan.bin");
+    let content = pattern(30 * 1024, 5);
+    std::fs::write(&file, &content).unwrap();
+    let sent = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file.clone(),
+                name: None,
+            },
+        )
+        .await
+        .unwrap();
+    let id = sent["file_send"].as_u64().unwrap();
+    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
+    let held_at_3 = |seen: &[Seen]| {
+        transfer_at(seen, 3, "receiving")
+            .last()
+            .map_or(0, |e| e.held)
+    };
+    assert!(
+        until(&fleet, Duration::from_secs(3600), |s| held_at_3(s)
+            >= fragments / 3)
+        .await
+    );
+    fleet.kill(2).await;
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    fleet.start_node(2).await;
+    let done = until(&fleet, Duration::from_secs(4 * 3600), |s| {
+        transfer_at(s, 1, "complete").iter().any(|e| e.id == id)
+    })
+    .await;
+    let seen = fleet.seen();
+    assert!(
+        done,
+        "not complete in 4 virtual hours: {:?}",
+        transfer_at(&seen, 3, "receiving").last()
+    );
+    let written = transfer_at(&seen, 3, "complete");
+    assert_eq!(written.len(), 1, "{written:?}");
+    assert_eq!(
+        std::fs::read(written[0].path.as_ref().unwrap()).unwrap(),
+        content
+    );
+    assert!(transfer_at(&seen, 3, "failed").is_empty());
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn settings_for_inspection(
     dir: &Path,
     node: i32,
@@ -359,4 +424,81 @@ fn settings_for_inspection(
         ack_ttl: 0,
         remember: 0,
     }
+}
+
+/// A relay has one slot for both directions, and a packet goes to one
+/// node: the receiver's selective acks, forwarded to the origin at once,
+/// took the relay's packet from the fragments every cycle (half the TDMA
+/// limit). Held back while fragments wait, the relay's slot carries
+/// fragments: 10 KiB from 1 to 3 through 2 in 64-byte frames, no loss,
+/// arrive at 90 % of the TDMA limit or more (the limit: a slot's frames of fragment data in
+/// each cycle of three slots, as `docs/performance.md` measures it).
+#[tokio::test(start_paused = true)]
+async fn a_file_through_the_relay_keeps_pace_with_the_tdma_limit() {
+    let dir = scratch("transfer", "pace");
+    // Rate 2 (3 frames of 64 bytes) in 8 s slots: 178 fragments, about 60
+    // cycles, so that the cycle each hop's channel binding takes at the
+    // start weighs little.
+    let (rate, slot) = (2, 8.0);
+    let configs: Vec<_> = (1..=3)
+        .map(|id| {
+            line_node(id, &dir, rate, slot, 0.0)
+                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
+                .config()
+        })
+        .collect();
+    let frame = gobyd::internals::network::frame_bytes(&configs[0]);
+    let mut codec = dccl::Codec::new();
+    gobyd::internals::network::wire::load(&mut codec).unwrap();
+    let data = gobyd::internals::network::fragment_data_bytes(&codec, frame).unwrap();
+    let frames = modemdriver::rate::spec(rate as i32).unwrap().frames as f64;
+    let limit_bps = (frame as f64 * frames * 8.0 / slot) * data as f64 / frame as f64 / 3.0;
+    let fleet = Fleet::start(configs).await;
+    let file = dir.join("survey.bin");
+    let content = pattern(10 * 1024, 17);
+    std::fs::write(&file, &content).unwrap();
+    let start = tokio::time::Instant::now();
+    fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file,
+                name: None,
+            },
+        )
+        .await
+        .expect("the file is taken");
+    let mut written = None;
+    while written.is_none() && start.elapsed() < Duration::from_secs(4 * 3600) {
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        if !transfer_at(&fleet.seen(), 3, "complete").is_empty() {
+            written = Some(start.elapsed());
+        }
+    }
+    let written = written.expect("written at 3 within four virtual hours");
+    let seen = fleet.seen();
+    let complete = transfer_at(&seen, 3, "complete");
+    assert_eq!(
+        std::fs::read(complete[0].path.as_ref().unwrap()).unwrap(),
+        content
+    );
+    let goodput = content.len() as f64 * 8.0 / written.as_secs_f64();
+    assert!(
+        goodput >= 0.9 * limit_bps,
+        "10 KiB through the relay in {:.0} s: {goodput:.0} bit/s, {:.0} % of the TDMA limit ({limit_bps:.0} bit/s)",
+        written.as_secs_f64(),
+        100.0 * goodput / limit_bps
+    );
+    // The origin hears the end all the same.
+    assert!(
+        until(&fleet, Duration::from_secs(600), |s| !transfer_at(
+            s, 1, "complete"
+        )
+        .is_empty())
+        .await,
+        "the sender never heard the transfer complete"
+    );
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -338,6 +338,19 @@ fn read_transfers(path: &Path, bytes: &[u8], log: &mut DataDirLog) -> Result<(),
                 put("until", until.into());
                 ("transfer_received", None, None, None)
             }
+            T::Bind {
+                src,
+                channel,
+                binding,
+            } => {
+                put("src", src.into());
+                put("channel", channel.into());
+                put("origin", binding.origin.into());
+                put("dest", binding.final_dest.into());
+                put("number", binding.number.into());
+                put("expires", binding.expires.into());
+                ("channel_bound", None, None, None)
+            }
         };
         log.records.push(Record {
             t,

@@ -8,8 +8,10 @@
 //! # The stream
 //!
 //! A transfer carries one byte stream, its header then its body, cut into
-//! `fragment_size` pieces (the last one shorter), piece `i` in
-//! [`Fragment`](protos::goby::acomms::protobuf::Fragment) `index: i`:
+//! `fragment_size` pieces (the last one shorter), piece `i` in the
+//! [`Fragment`](protos::goby::acomms::protobuf::Fragment) whose place says
+//! index `i` (on a channel its sender bound to the transfer:
+//! [`crate::core::network::channels`]):
 //!
 //! ```text
 //! header = kind u8 | fragment_size u16 | body length u32 | SHA-256 of the body (32 bytes) | rest

@@ -24,17 +24,19 @@
 //! when the message's lifetime ends first; in between the message is on
 //! record in the origin's `routes.log` ([`origin`]).
 
+pub mod channels;
 pub mod origin;
 pub mod transfers;
 pub mod wire;
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use std::sync::Arc;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
-    FileRequest, QueueManagerConfig, QueuedMessageEntry, RouteAck, RoutedMessage,
+    fragment_ack, FileRequest, Fragment, FragmentChannel, QueueManagerConfig, QueuedMessageEntry,
+    RouteAck, RoutedMessage,
 };
 use protos::goby::apps::protobuf::{GobydConfig, NetworkConfig};
 use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
@@ -45,9 +47,10 @@ use crate::core::fragment::Content;
 use crate::core::outbox::{journaled_message, Accepted, Outbox};
 use crate::core::route::{NextHop, RouteTable, MAX_NETWORK_ID};
 use crate::event::RouteDropped;
+use channels::ChannelState;
 use origin::{Origin, Pending};
-use transfers::{Produced, TransferEvent, Transfers};
-use wire::{Header, NetMessage};
+use transfers::{Binding, Piece, Produced, TransferEvent, Transfers};
+use wire::{Header, NetMessage, Place};
 
 /// The `network` section in force (`None`: the layer is off), Goby3's
 /// `route_cfg` having been read into it.
@@ -66,6 +69,7 @@ fn default_entry(name: &str, ttl: i32) -> QueuedMessageEntry {
         "goby.acomms.protobuf.RoutedMessage" => (true, 2.0, false),
         "goby.acomms.protobuf.RouteAck" => (true, 3.0, false),
         "goby.acomms.protobuf.Fragment" => (true, 0.5, false),
+        "goby.acomms.protobuf.FragmentChannel" => (true, 1.0, false),
         "goby.acomms.protobuf.FragmentAck" => (true, 3.0, false),
         _ => (true, 2.0, false),
     };
@@ -111,7 +115,7 @@ pub fn prepare(
                     "dccl.proto_file",
                     format!(
                         "{name} has DCCL id {id}, which the network layer's own messages take \
-                         (ids 32002-32006, while the network section is set): give it another id"
+                         (ids 32002-32008, while the network section is set): give it another id"
                     ),
                 ));
             }
@@ -166,6 +170,15 @@ fn digest(parts: &[&[u8]]) -> u64 {
 }
 
 impl Forwarded {
+    /// The identity of fragment `index` of transfer `number` of `origin`.
+    fn fragment(origin: i32, number: u16, index: u32) -> Self {
+        Forwarded {
+            origin,
+            type_id: 3,
+            digest: digest(&[&u32::from(number).to_le_bytes(), &index.to_le_bytes()]),
+        }
+    }
+
     /// Its identity: what stays the same from hop to hop.
     fn of(message: &NetMessage) -> Self {
         let h = message.header();
@@ -175,10 +188,15 @@ impl Forwarded {
                 let numbers: Vec<u8> = m.number.iter().flat_map(|n| n.to_le_bytes()).collect();
                 (2, digest(&[&numbers]))
             }
-            NetMessage::Fragment(m) => (
-                3,
+            NetMessage::FragmentV1(m) => (
+                6,
                 digest(&[&m.transfer.to_le_bytes(), &m.index.to_le_bytes()]),
             ),
+            NetMessage::Channel(m) => (
+                7,
+                digest(&[&m.transfer.to_le_bytes(), &m.channel.to_le_bytes()]),
+            ),
+            NetMessage::Fragment(m) => (8, digest(&[&m.piece])),
             NetMessage::FragmentAck(m) => (4, digest(&[&prost::Message::encode_to_vec(m)])),
             NetMessage::FileRequest(m) => {
                 (5, digest(&[&m.request.to_le_bytes(), m.path.as_bytes()]))
@@ -240,6 +258,34 @@ enum Forward {
     /// The relay holds as many fragments as it may: not taken now (its
     /// hop must not be acknowledged).
     Full,
+    /// A fragment for this node, recorded (unsynced).
+    Kept,
+    /// The channel toward the next hop was bound (the binding journaled,
+    /// unsynced): the fragment is not taken until the binding is
+    /// acknowledged.
+    Bound,
+}
+
+/// This relay's channel toward a transfer's next hop.
+enum RelayChannel {
+    /// Open: fragments may go on it.
+    Open(i32, u8),
+    /// Not yet (its binding queued, or waiting for its ack, or every
+    /// channel taken); `journaled`: its binding was journaled now.
+    Waiting { journaled: bool },
+    /// The route does not reach the transfer's destination.
+    NoRoute,
+}
+
+/// What became of a channel's binding received.
+enum Channeled {
+    /// Recorded (unsynced); `journaled`: this relay's own binding toward
+    /// the next hop was journaled too (unsynced).
+    Recorded { journaled: bool },
+    /// Not for a transfer this node carries (the hop limit, no route).
+    Dropped,
+    /// Could not be recorded: the hop must not be acknowledged.
+    Failed,
 }
 
 /// The network layer's state.
@@ -257,6 +303,13 @@ pub struct Network {
     recent: HashMap<Forwarded, Micros>,
     /// Fragments this node holds for forwarding (in its journal).
     relaying: usize,
+    /// Selective acks (of transfers still receiving) this relay holds back
+    /// while it forwards fragments, the newest of each transfer, by
+    /// (receiver, origin, transfer number), with whether their hop was a
+    /// repeat: see [`Network::hold_back`].
+    held_acks: BTreeMap<(i32, i32, u32), (NetMessage, bool)>,
+    /// When this relay last forwarded a selective ack of each transfer.
+    acks_forwarded: HashMap<(i32, i32, u32), Micros>,
     /// The transfers of this node and to it.
     transfers: Transfers,
     /// The next number of a file request of this node's.
@@ -338,7 +391,7 @@ impl Network {
         let origin = Origin::open(&data_dir.join("routes.log"))?;
         let fragment_size = match settings.fragment_bytes() {
             0 => fragment_data_bytes(&codec, frame_bytes(config))?,
-            n => n as usize,
+            n => (n as usize).min(wire::MAX_FRAGMENT_DATA),
         };
         let receive_dir = {
             let dir = Path::new(settings.receive_dir());
@@ -378,6 +431,8 @@ impl Network {
             origin,
             recent: HashMap::new(),
             relaying: 0,
+            held_acks: BTreeMap::new(),
+            acks_forwarded: HashMap::new(),
             transfers,
             next_request: (queue::identity::start_number(
                 &outbox.queue().entropy(),
@@ -410,6 +465,28 @@ impl Network {
                 continue;
             };
             let expires = entry.time + self.net_ttl(net.type_name());
+            match &net {
+                NetMessage::Fragment(f) => {
+                    self.relaying += 1;
+                    if let Some((place, _)) = wire::read_piece(&f.piece) {
+                        self.transfers
+                            .channels()
+                            .reserve(f.next_hop, place.channel, None, 0);
+                    }
+                    continue;
+                }
+                NetMessage::Channel(b) => {
+                    let identity = (b.origin, b.transfer as u16);
+                    self.transfers.channels().reserve(
+                        b.next_hop,
+                        b.channel as u8,
+                        Some(identity),
+                        expires,
+                    );
+                    continue;
+                }
+                _ => {}
+            }
             if net.header().origin == self.me {
                 if let NetMessage::Routed(m) = &net {
                     if m.ack {
@@ -419,7 +496,6 @@ impl Network {
                 continue;
             }
             self.recent.insert(Forwarded::of(&net), expires.max(now));
-            self.relaying += usize::from(matches!(net, NetMessage::Fragment(_)));
         }
         for (entry, m, expires) in originated {
             if let Some(p) = self.pending_of(entry, &m, expires) {
@@ -655,8 +731,8 @@ impl Network {
             event,
             QueueEvent::Acked { .. } | QueueEvent::Expired { .. } | QueueEvent::Dropped { .. }
         );
-        if ended && entry.is_some() && matches!(message, NetMessage::Fragment(_)) {
-            self.relaying = self.relaying.saturating_sub(1);
+        if ended && entry.is_some() {
+            self.relayed_left(&message, matches!(event, QueueEvent::Acked { .. }));
         }
         let originated = match &message {
             NetMessage::Routed(m) if m.origin == self.me => Some(m.clone()),
@@ -781,12 +857,56 @@ impl Network {
                 continue;
             };
             let hop_resent = received.identity.is_some_and(|w| w.resent);
+            let message = match message {
+                NetMessage::Channel(b) => {
+                    match self.channel_bound(received.src, b, outbox, now) {
+                        Channeled::Recorded { journaled: j } => {
+                            recorded = true;
+                            journaled |= j;
+                        }
+                        Channeled::Dropped => {}
+                        Channeled::Failed => receipt.refuse_ack = true,
+                    }
+                    continue;
+                }
+                NetMessage::Fragment(f) => {
+                    match self.fragment_in(received.src, &f, outbox, now, &mut produced) {
+                        Forward::Journaled => journaled = true,
+                        Forward::Skipped => {}
+                        Forward::Full => receipt.refuse_ack = true,
+                        Forward::Kept => recorded = true,
+                        Forward::Bound => {
+                            journaled = true;
+                            receipt.refuse_ack = true;
+                        }
+                    }
+                    continue;
+                }
+                NetMessage::FragmentV1(f) => {
+                    if f.final_dest == self.me {
+                        self.transfers.refuse_v1(f.origin, f.transfer as u16, now);
+                    } else {
+                        tracing::warn!(
+                            src = received.src,
+                            origin = f.origin,
+                            "a fragment from node {} in transfer format 1 (gobyd 0.1.0): \
+                             not forwarded; every node of a transfer must run transfer format 2",
+                            f.origin
+                        );
+                    }
+                    continue;
+                }
+                other => other,
+            };
             let header = message.header();
             if header.final_dest != self.me {
+                let Some(message) = self.hold_back(message, hop_resent, now) else {
+                    continue;
+                };
                 match self.forward(message, hop_resent, outbox, now) {
                     Ok(Forward::Journaled) => journaled = true,
-                    Ok(Forward::Skipped) => {}
-                    Ok(Forward::Full) => receipt.refuse_ack = true,
+                    Ok(Forward::Skipped | Forward::Kept) => {}
+                    Ok(Forward::Full | Forward::Bound) => receipt.refuse_ack = true,
                     Err(e) => {
                         tracing::error!("cannot take a message to forward: {e}");
                         receipt.refuse_ack = true;
@@ -795,10 +915,6 @@ impl Network {
                 continue;
             }
             match message {
-                NetMessage::Fragment(f) => {
-                    recorded = true;
-                    self.transfers.fragment(f, now, &mut produced);
-                }
                 NetMessage::FragmentAck(a) => {
                     recorded = true;
                     self.transfers
@@ -963,7 +1079,33 @@ impl Network {
                 }
             }
             // Fragments, their acks and file requests are the transfers'.
-            NetMessage::Fragment(_) | NetMessage::FragmentAck(_) | NetMessage::FileRequest(_) => {}
+            NetMessage::Fragment(_)
+            | NetMessage::FragmentV1(_)
+            | NetMessage::Channel(_)
+            | NetMessage::FragmentAck(_)
+            | NetMessage::FileRequest(_) => {}
+        }
+    }
+
+    /// A message this relay forwarded (journaled) left its queue (`acked`:
+    /// taken by the next hop): its channel's count, and the fragments held.
+    fn relayed_left(&mut self, message: &NetMessage, acked: bool) {
+        match message {
+            NetMessage::Fragment(f) => {
+                self.relaying = self.relaying.saturating_sub(1);
+                if let Some((place, _)) = wire::read_piece(&f.piece) {
+                    self.transfers.channels().left(f.next_hop, place.channel);
+                }
+            }
+            NetMessage::Channel(b) => {
+                let c = b.channel as u8;
+                let channels = self.transfers.channels();
+                channels.left(b.next_hop, c);
+                if acked {
+                    channels.acked(b.next_hop, c, (b.origin, b.transfer as u16));
+                }
+            }
+            _ => {}
         }
     }
 
@@ -1038,14 +1180,11 @@ impl Network {
             );
             return Ok(Forward::Skipped);
         }
-        let fragment = matches!(message, NetMessage::Fragment(_));
-        if fragment && self.relaying >= self.transfers.settings().relay_window {
-            tracing::debug!(
-                origin = header.origin,
-                "{} fragments held for forwarding already: this one is not taken now",
-                self.relaying
-            );
-            return Ok(Forward::Full);
+        if let NetMessage::FragmentAck(a) = &message {
+            if a.outcome() != fragment_ack::Outcome::Receiving {
+                self.transfers
+                    .relayed_end(a.final_dest, a.transfer as u16, now);
+            }
         }
         if message.lists_hops() && (header.origin == self.me || header.hops.contains(&self.me)) {
             tracing::warn!(
@@ -1092,30 +1231,294 @@ impl Network {
         }
         let created = self.created_for(name, header.lifetime, now);
         outbox.accept(message.to_dynamic(), None, Some(created))?;
-        self.relaying += usize::from(fragment);
+        if let NetMessage::FragmentAck(a) = &message {
+            self.acks_forwarded
+                .insert((header.origin, header.final_dest, a.transfer), now);
+        }
         self.recent
             .insert(key, now + i64::from(header.lifetime) * SECOND);
         if self.recent.len() > RECENT_LIMIT {
             self.forget_recent(now, true);
         }
-        if fragment {
-            tracing::debug!(
-                origin = header.origin,
-                dest = header.final_dest,
-                next,
-                "fragment taken for forwarding"
-            );
-        } else {
-            tracing::info!(
-                origin = header.origin,
-                dest = header.final_dest,
-                next,
-                "{name} from node {} for node {} taken, forwarded to node {next}",
-                header.origin,
-                header.final_dest
-            );
-        }
+        tracing::info!(
+            origin = header.origin,
+            dest = header.final_dest,
+            next,
+            "{name} from node {} for node {} taken, forwarded to node {next}",
+            header.origin,
+            header.final_dest
+        );
         Ok(Forward::Journaled)
+    }
+
+    /// How long a relay forwarding fragments holds back the selective acks
+    /// of a transfer after forwarding one: a quarter of `resend_seconds`,
+    /// so that the origin hears what its receiver holds several times
+    /// before it would send again what it does not know held.
+    fn ack_interval(&self) -> Micros {
+        self.transfers.settings().resend_after / 4
+    }
+
+    /// A message for another node, unless it is a selective ack this relay
+    /// holds back (`None`). A relay has one slot for both directions, and
+    /// a packet goes to one node: an ack forwarded to a transfer's origin
+    /// takes the slot's packet from the fragments going the other way. An
+    /// ack of a transfer still receiving is therefore held, the newest of
+    /// each transfer (what a receiver holds only grows: a newer ack says
+    /// all an older one says), and forwarded by
+    /// [`release_acks`](Self::release_acks) when no fragment waits here, or
+    /// [`ack_interval`](Self::ack_interval) after the transfer's last ack
+    /// went (or its first was held). An ack of a transfer's end goes at
+    /// once, and replaces the one held.
+    fn hold_back(
+        &mut self,
+        message: NetMessage,
+        hop_resent: bool,
+        now: Micros,
+    ) -> Option<NetMessage> {
+        let NetMessage::FragmentAck(a) = &message else {
+            return Some(message);
+        };
+        let key = (a.origin, a.final_dest, a.transfer);
+        if a.outcome() != fragment_ack::Outcome::Receiving || self.ack_interval() <= 0 {
+            self.held_acks.remove(&key);
+            return Some(message);
+        }
+        tracing::debug!(
+            origin = a.origin,
+            dest = a.final_dest,
+            "a selective ack held back while fragments are forwarded"
+        );
+        self.acks_forwarded.entry(key).or_insert(now);
+        self.held_acks.insert(key, (message, hop_resent));
+        None
+    }
+
+    /// Forwards the selective acks held back that are due: every one when
+    /// no fragment waits here to be forwarded, else those whose
+    /// transfer's last ack went [`ack_interval`](Self::ack_interval) ago.
+    fn release_acks(&mut self, outbox: &mut Outbox, now: Micros) {
+        let interval = self.ack_interval();
+        let idle = self.relaying == 0;
+        let due: Vec<(i32, i32, u32)> = self
+            .held_acks
+            .keys()
+            .filter(|k| {
+                idle || self
+                    .acks_forwarded
+                    .get(k)
+                    .is_none_or(|at| now >= at + interval)
+            })
+            .copied()
+            .collect();
+        let mut journaled = false;
+        for key in due {
+            let Some((message, hop_resent)) = self.held_acks.remove(&key) else {
+                continue;
+            };
+            match self.forward(message, hop_resent, outbox, now) {
+                Ok(Forward::Journaled) => journaled = true,
+                Ok(_) => {}
+                Err(e) => tracing::error!("a selective ack held back not forwarded: {e}"),
+            }
+        }
+        if journaled {
+            if let Err(e) = outbox.sync() {
+                tracing::error!("journal sync of selective acks forwarded: {e}");
+            }
+        }
+        let held = &self.held_acks;
+        self.acks_forwarded
+            .retain(|k, at| held.contains_key(k) || now < *at + interval);
+    }
+
+    /// Node `src` bound its channel to a transfer: recorded (unsynced;
+    /// [`receive`](Self::receive) syncs); at a relay, its own channel
+    /// toward the next hop is bound too.
+    fn channel_bound(
+        &mut self,
+        src: i32,
+        b: FragmentChannel,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> Channeled {
+        let Ok(channel) = u8::try_from(b.channel) else {
+            return Channeled::Dropped;
+        };
+        if b.final_dest != self.me {
+            if b.origin == self.me {
+                tracing::warn!(
+                    dest = b.final_dest,
+                    "a transfer of this node's came back to it (a loop in the routes): dropped"
+                );
+                return Channeled::Dropped;
+            }
+            if b.hop_count as usize >= self.hop_limit {
+                tracing::warn!(
+                    origin = b.origin,
+                    dest = b.final_dest,
+                    "a transfer passed {} relays, the hop limit: dropped",
+                    b.hop_count
+                );
+                return Channeled::Dropped;
+            }
+        }
+        let binding = Binding {
+            origin: b.origin,
+            final_dest: b.final_dest,
+            number: b.transfer as u16,
+            hop_count: b.hop_count,
+            expires: now + i64::from(b.lifetime) * SECOND,
+        };
+        if !self.transfers.bind_in(src, channel, binding) {
+            return Channeled::Failed;
+        }
+        let journaled = b.final_dest != self.me
+            && matches!(
+                self.relay_channel(&binding, outbox, now),
+                RelayChannel::Waiting { journaled: true }
+            );
+        Channeled::Recorded { journaled }
+    }
+
+    /// This relay's channel toward the next hop of transfer `b`: open, or
+    /// its binding queued now (journaled, unsynced) or earlier.
+    fn relay_channel(&mut self, b: &Binding, outbox: &mut Outbox, now: Micros) -> RelayChannel {
+        let next = match self.table.link_dest(b.final_dest) {
+            Ok(next) => next,
+            Err(reason) => {
+                tracing::warn!(
+                    origin = b.origin,
+                    dest = b.final_dest,
+                    "a transfer for node {}: {reason}: dropped",
+                    b.final_dest
+                );
+                return RelayChannel::NoRoute;
+            }
+        };
+        let identity = (b.origin, b.number);
+        let channels = self.transfers.channels();
+        let c = match channels.find(next, identity) {
+            Some(ChannelState::Open(c)) => return RelayChannel::Open(next, c),
+            Some(ChannelState::Binding(c)) if !channels.idle(next, c) => {
+                return RelayChannel::Waiting { journaled: false }
+            }
+            Some(ChannelState::Binding(c)) => c,
+            None => match channels.bind(next, identity, b.expires) {
+                Some(c) => c,
+                None => {
+                    tracing::debug!(
+                        next,
+                        "every channel toward node {next} is taken: a fragment waits"
+                    );
+                    return RelayChannel::Waiting { journaled: false };
+                }
+            },
+        };
+        let lifetime = ((b.expires - now) / SECOND).clamp(1, i64::from(LIFETIME_MAX)) as u32;
+        let message = NetMessage::Channel(FragmentChannel {
+            next_hop: next,
+            origin: b.origin,
+            final_dest: b.final_dest,
+            hop_count: b.hop_count + 1,
+            lifetime,
+            transfer: u32::from(b.number),
+            channel: u32::from(c),
+        });
+        let created = self.created_for(message.type_name(), lifetime, now);
+        match outbox.accept(message.to_dynamic(), None, Some(created)) {
+            Ok(_) => {
+                self.transfers.channels().queued(next, c);
+                RelayChannel::Waiting { journaled: true }
+            }
+            Err(e) => {
+                tracing::error!("a channel's binding toward node {next} not queued: {e}");
+                self.transfers.channels().unbind(next, c);
+                RelayChannel::Waiting { journaled: false }
+            }
+        }
+    }
+
+    /// A fragment on channel `place.channel` of node `src`: kept (for this
+    /// node), forwarded on this relay's channel toward the next hop
+    /// (journaled, unsynced: custody), or not taken now.
+    fn fragment_in(
+        &mut self,
+        src: i32,
+        f: &Fragment,
+        outbox: &mut Outbox,
+        now: Micros,
+        produced: &mut Produced,
+    ) -> Forward {
+        let Some((place, data)) = wire::read_piece(&f.piece) else {
+            tracing::warn!(src, "a fragment from node {src} too short to read: dropped");
+            return Forward::Skipped;
+        };
+        let Some(b) = self.transfers.binding(src, place.channel, now) else {
+            tracing::warn!(
+                src,
+                channel = place.channel,
+                "a fragment on channel {} of node {src}, which this node knows bound to no \
+                 transfer: not taken",
+                place.channel
+            );
+            return Forward::Full;
+        };
+        if b.final_dest == self.me {
+            let piece = Piece {
+                origin: b.origin,
+                number: b.number,
+                expires: b.expires,
+                index: place.index,
+                data: data.to_vec(),
+            };
+            self.transfers.fragment(piece, now, produced);
+            return Forward::Kept;
+        }
+        let key = Forwarded::fragment(b.origin, b.number, place.index);
+        if self.recent.contains_key(&key) {
+            return Forward::Skipped;
+        }
+        if self.relaying >= self.transfers.settings().relay_window {
+            tracing::debug!(
+                origin = b.origin,
+                "{} fragments held for forwarding already: this one is not taken now",
+                self.relaying
+            );
+            return Forward::Full;
+        }
+        let (next, channel) = match self.relay_channel(&b, outbox, now) {
+            RelayChannel::Open(next, c) => (next, c),
+            RelayChannel::Waiting { journaled: true } => return Forward::Bound,
+            RelayChannel::Waiting { journaled: false } => return Forward::Full,
+            RelayChannel::NoRoute => return Forward::Skipped,
+        };
+        let Some(piece) = wire::piece(Place { channel, ..place }, data) else {
+            return Forward::Skipped;
+        };
+        let message = NetMessage::Fragment(Fragment {
+            next_hop: next,
+            piece,
+        });
+        let lifetime = ((b.expires - now) / SECOND).clamp(1, i64::from(LIFETIME_MAX)) as u32;
+        let created = self.created_for(message.type_name(), lifetime, now);
+        if let Err(e) = outbox.accept(message.to_dynamic(), None, Some(created)) {
+            tracing::error!("cannot take a fragment to forward: {e}");
+            return Forward::Full;
+        }
+        self.transfers.channels().queued(next, channel);
+        self.relaying += 1;
+        self.recent.insert(key, b.expires);
+        if self.recent.len() > RECENT_LIMIT {
+            self.forget_recent(now, true);
+        }
+        tracing::debug!(
+            origin = b.origin,
+            dest = b.final_dest,
+            next,
+            "fragment taken for forwarding"
+        );
+        Forward::Journaled
     }
 
     fn forget_recent(&mut self, now: Micros, crowded: bool) {
@@ -1208,6 +1611,7 @@ impl Network {
     /// transfers, selective acks owed).
     pub fn data_request(&mut self, outbox: &mut Outbox, now: Micros) {
         self.now_hint = now;
+        self.release_acks(outbox, now);
         self.transfers.top_up(outbox, &self.table, now);
     }
 
@@ -1364,33 +1768,34 @@ impl Network {
 }
 
 /// Bytes of a fragment's header on the water, its DCCL id included: what
-/// a frame holds besides the fragment's data.
-pub const FRAGMENT_HEADER: usize = 14;
+/// a frame holds besides the fragment's data (a transfer of at most
+/// [`wire::SHORT_FRAGMENTS`]; one more byte for a longer one).
+pub const FRAGMENT_HEADER: usize = 6;
 
 /// The data bytes of a fragment that fills a frame of `frame` bytes
 /// (`codec` holding the network layer's types, [`wire::load`]): the most
-/// whose fragment, with its header's fields at their widest, encodes to
-/// at most `frame` bytes (data bytes at most 1023). Errors when not even
-/// one data byte fits.
+/// whose fragment, with a short place ([`wire::Place`]) and a `next_hop` of
+/// 255, encodes to at most `frame` bytes (data bytes at most
+/// [`wire::MAX_FRAGMENT_DATA`]). Errors when not even one data byte fits.
 pub fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result<usize> {
     let probe = |d: usize| {
+        let place = Place {
+            channel: wire::CHANNELS - 1,
+            index: wire::SHORT_FRAGMENTS - 1,
+            long: false,
+        };
+        let piece = wire::piece(place, &vec![0xA5; d]).unwrap_or_default();
         codec
             .encode(
-                &NetMessage::Fragment(protos::goby::acomms::protobuf::Fragment {
+                &NetMessage::Fragment(Fragment {
                     next_hop: 255,
-                    origin: 255,
-                    final_dest: 255,
-                    hop_count: 7,
-                    lifetime: LIFETIME_MAX,
-                    transfer: 65_535,
-                    index: 1_048_575,
-                    data: vec![0xA5; d],
+                    piece,
                 })
                 .to_dynamic(),
             )
             .map(|b| b.len())
     };
-    let mut d = frame.min(1023);
+    let mut d = frame.min(wire::MAX_FRAGMENT_DATA);
     while d > 0 {
         match probe(d) {
             Ok(len) if len <= frame => return Ok(d),
@@ -1443,5 +1848,99 @@ mod tests {
             let d = fragment_data_bytes(&codec, frame).unwrap();
             assert_eq!(frame - d, FRAGMENT_HEADER, "frame of {frame} bytes");
         }
+    }
+
+    /// A fragment of transfer format 1 (an older node's) is not misread:
+    /// its transfer is answered REFUSED, in the `FragmentAck` that format
+    /// reads, to its origin.
+    #[test]
+    fn a_format_1_fragment_is_refused_to_its_origin() {
+        use protos::goby::acomms::protobuf::FragmentV1;
+        let dir = std::env::temp_dir().join(format!("goby-net-v1-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = GobydConfig {
+            modem_id: Some(3),
+            network: Some(NetworkConfig::default()),
+            ..Default::default()
+        };
+        let mut codec = dccl::Codec::new();
+        let mut queue_config = QueueManagerConfig {
+            modem_id: Some(3),
+            ..Default::default()
+        };
+        prepare(&config, &mut codec, &mut queue_config, &[]).unwrap();
+        let codec = Arc::new(codec);
+        let queue = queue::QueueManager::new(codec.clone(), &queue_config).unwrap();
+        let (mut outbox, _) = Outbox::open(queue, &dir.join("outbox.journal")).unwrap();
+        // The queue's clock is the system's.
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_micros() as Micros;
+        let mut network = Network::open(&config, &queue_config, codec.clone(), &dir, &outbox, now)
+            .unwrap()
+            .unwrap();
+        let old = FragmentV1 {
+            next_hop: 3,
+            origin: 1,
+            final_dest: 3,
+            hop_count: 0,
+            lifetime: 600,
+            transfer: 4_321,
+            index: 0,
+            data: vec![7; 40],
+        };
+        let received = ReceivedMessage {
+            message: old.transcode_to_dynamic(),
+            dccl_id: 32004,
+            src: 1,
+            dest: 3,
+            time: None,
+            bytes: Vec::new(),
+            identity: None,
+        };
+        let receipt = network.receive(vec![received], &mut outbox, now);
+        assert!(receipt.arrived.is_empty() && receipt.transfers.is_empty());
+        network.data_request(&mut outbox, now);
+        let mut tx = protos::goby::acomms::protobuf::ModemTransmission {
+            max_frame_bytes: Some(64),
+            max_num_frames: Some(1),
+            ..Default::default()
+        };
+        outbox.data_request(&mut tx, 0, &[]).unwrap();
+        let answer = codec.decode(&tx.frame[0]).unwrap();
+        let Some(NetMessage::FragmentAck(ack)) = NetMessage::of(&answer) else {
+            panic!("not a FragmentAck: {answer:?}");
+        };
+        assert_eq!((ack.final_dest, ack.transfer), (1, 4_321));
+        assert_eq!(ack.outcome(), fragment_ack::Outcome::Refused);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The bound the guide promises: a fragment's header (its DCCL id, its
+    /// next hop, its place) is at most 6 bytes, so that a 64-byte frame
+    /// keeps 90 % of its bytes for data; a long transfer's one more.
+    #[test]
+    fn a_fragment_header_is_at_most_six_bytes_and_a_64_byte_frame_keeps_90_percent() {
+        let mut codec = dccl::Codec::new();
+        wire::load(&mut codec).unwrap();
+        let header = |long: bool, index: u32| {
+            let place = Place {
+                channel: wire::CHANNELS - 1,
+                index,
+                long,
+            };
+            let data = vec![0x5A; 58];
+            let fragment = NetMessage::Fragment(Fragment {
+                next_hop: 255,
+                piece: wire::piece(place, &data).unwrap(),
+            });
+            codec.encode(&fragment.to_dynamic()).unwrap().len() - data.len()
+        };
+        assert!(header(false, wire::SHORT_FRAGMENTS - 1) <= 6);
+        assert!(header(true, wire::LONG_FRAGMENTS - 1) <= 7);
+        let d = fragment_data_bytes(&codec, 64).unwrap();
+        assert!(d * 10 >= 64 * 9, "{d} data bytes of 64");
     }
 }

@@ -14,6 +14,8 @@
 //! kind 4, sent:      number u16 | outcome u8                       (the transfer ended)
 //! kind 5, fragment:  origin i32 | number u16 | expires i64 µs | index u32 | data
 //! kind 6, received:  origin i32 | number u16 | outcome u8 | until i64 µs   (ended; remembered until)
+//! kind 7, channel:   src i32 | channel u8 | origin i32 | final dest i32 | number u16 | hop count u8
+//!                    | expires i64 µs                                  (node src bound its channel)
 //! ```
 //!
 //! (integers little-endian). The outgoing record holds the whole stream,
@@ -22,14 +24,16 @@
 //! it is acknowledged; a received transfer's body is handed over (a
 //! message) or written (a file) before its end is recorded, so a restart
 //! in between hands it over again (a message is then known to the
-//! duplicate filter).
+//! duplicate filter). A channel's binding ([`super::channels`]) is
+//! appended, and the file synced, before the hop that brought it is
+//! acknowledged: the fragments that follow on the channel name only it.
 
 use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::{Path, PathBuf};
 
 use goby_store::record_log::{Format, Inspected, RecordLog};
-use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck};
+use protos::goby::acomms::protobuf::{fragment_ack, Fragment, FragmentAck, FragmentChannel};
 use queue::{MessageId, Micros, PushOptions};
 
 use crate::core::fragment::{
@@ -38,7 +42,8 @@ use crate::core::fragment::{
 use crate::core::outbox::Outbox;
 use crate::core::route::RouteTable;
 
-use super::wire::NetMessage;
+use super::channels::{ChannelState, OutChannels};
+use super::wire::{self, NetMessage, Place};
 pub use crate::event::TransferEvent;
 
 /// The file format of `transfers.log`.
@@ -55,6 +60,7 @@ const K_HELD: u8 = 3;
 const K_SENT: u8 = 4;
 const K_FRAG: u8 = 5;
 const K_RECEIVED: u8 = 6;
+const K_BIND: u8 = 7;
 
 /// Client ids of transfers start here (above any journal id), so that a
 /// client tells them apart.
@@ -115,12 +121,59 @@ struct In {
     ack_due: bool,
 }
 
+/// A channel of another node bound to a transfer (as a
+/// [`FragmentChannel`] said): what the fragments on it belong to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Binding {
+    /// The transfer's origin.
+    pub origin: i32,
+    /// The node it is for in the end.
+    pub final_dest: i32,
+    /// The origin's number of the transfer.
+    pub number: u16,
+    /// The relays it passed before the node that bound the channel.
+    pub hop_count: u32,
+    /// When it expires, µs since the epoch.
+    pub expires: Micros,
+}
+
+/// A fragment for this node, its channel's binding read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Piece {
+    /// The transfer's origin.
+    pub origin: i32,
+    /// The origin's number of the transfer.
+    pub number: u16,
+    /// When the transfer expires, µs since the epoch.
+    pub expires: Micros,
+    /// The fragment's index.
+    pub index: u32,
+    /// Its data.
+    pub data: Vec<u8>,
+}
+
 /// What sits in the queue for the transfers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Queued {
-    Fragment { number: u16, index: u32 },
-    Ack { origin: i32, number: u16 },
-    Final { origin: i32, number: u16 },
+    Fragment {
+        number: u16,
+        index: u32,
+        next: i32,
+        channel: u8,
+    },
+    Channel {
+        number: u16,
+        next: i32,
+        channel: u8,
+    },
+    Ack {
+        origin: i32,
+        number: u16,
+    },
+    Final {
+        origin: i32,
+        number: u16,
+    },
 }
 
 /// What the transfers produce for the core.
@@ -154,6 +207,11 @@ pub struct Transfers {
     queued: HashMap<MessageId, Queued>,
     /// Last acks owed (the outcome of an ended received transfer).
     finals: HashMap<(i32, u16), Outcome>,
+    /// Other nodes' channels bound to transfers, by (node, channel).
+    bindings: HashMap<(i32, u8), Binding>,
+    /// This node's channels toward its next hops (its own transfers' and
+    /// those it relays).
+    channels: OutChannels,
     next_number: u16,
     next_client: u64,
 }
@@ -238,6 +296,15 @@ pub enum Record {
         /// is known.
         until: Micros,
     },
+    /// Node `src` bound its channel `channel` to a transfer.
+    Bind {
+        /// The node that bound it (the previous hop).
+        src: i32,
+        /// The channel.
+        channel: u8,
+        /// What it is bound to.
+        binding: Binding,
+    },
 }
 
 /// Every record a `transfers.log` holds, read without touching the file:
@@ -286,6 +353,17 @@ fn parse(p: &[u8]) -> Option<Record> {
             outcome: *b.get(6)?,
             until: i64_at(b, 7)?,
         },
+        K_BIND => Record::Bind {
+            src: i32_at(b, 0)?,
+            channel: *b.get(4)?,
+            binding: Binding {
+                origin: i32_at(b, 5)?,
+                final_dest: i32_at(b, 9)?,
+                number: u16_at(b, 13)?,
+                hop_count: u32::from(*b.get(15)?),
+                expires: i64_at(b, 16)?,
+            },
+        },
         _ => return None,
     })
 }
@@ -321,6 +399,18 @@ fn received_payload(origin: i32, number: u16, outcome: Outcome, until: Micros) -
     p.extend_from_slice(&number.to_le_bytes());
     p.push(outcome.number());
     p.extend_from_slice(&until.to_le_bytes());
+    p
+}
+
+fn bind_payload(src: i32, channel: u8, b: &Binding) -> Vec<u8> {
+    let mut p = vec![K_BIND];
+    p.extend_from_slice(&src.to_le_bytes());
+    p.push(channel);
+    p.extend_from_slice(&b.origin.to_le_bytes());
+    p.extend_from_slice(&b.final_dest.to_le_bytes());
+    p.extend_from_slice(&b.number.to_le_bytes());
+    p.push(b.hop_count.min(255) as u8);
+    p.extend_from_slice(&b.expires.to_le_bytes());
     p
 }
 
@@ -364,6 +454,8 @@ impl Transfers {
             sent: HashMap::new(),
             queued: HashMap::new(),
             finals: HashMap::new(),
+            bindings: HashMap::new(),
+            channels: OutChannels::default(),
             next_number: (queue::identity::start_number(entropy, "transfers.number") % 65_536)
                 as u16,
             next_client: CLIENT_ID_BASE
@@ -448,9 +540,17 @@ impl Transfers {
                         t.ended.insert((origin, number), (outcome, until));
                     }
                 }
+                Record::Bind {
+                    src,
+                    channel,
+                    binding,
+                } => {
+                    t.bindings.insert((src, channel), binding);
+                }
             }
         }
         t.ended.retain(|_, (_, until)| *until > now);
+        t.bindings.retain(|_, b| b.expires > now);
         for o in t.out.values_mut() {
             o.sending.restarted();
         }
@@ -469,6 +569,7 @@ impl Transfers {
                 .map(|i| i.incoming.held() as usize)
                 .sum::<usize>()
             + self.ended.len()
+            + self.bindings.len()
     }
 
     fn append(&mut self, payload: &[u8]) -> io::Result<()> {
@@ -496,6 +597,11 @@ impl Transfers {
         }
         for ((origin, number), (outcome, until)) in &self.ended {
             payloads.push(received_payload(*origin, *number, *outcome, *until));
+        }
+        let mut bindings: Vec<_> = self.bindings.iter().collect();
+        bindings.sort_unstable_by_key(|(k, _)| **k);
+        for ((src, channel), b) in bindings {
+            payloads.push(bind_payload(*src, *channel, b));
         }
         self.records = payloads.len();
         self.log.rewrite(&payloads)?;
@@ -528,12 +634,20 @@ impl Transfers {
                 self.settings.max_bytes
             ));
         }
-        let size = self.settings.fragment_size;
-        let stream = fragment::stream(content.clone(), size as u16, body);
-        let count = fragment::fragment_count(stream.len(), size);
-        if count > 1_048_575 {
+        // A transfer of more fragments than short places number gives a
+        // byte of each to its place.
+        let mut size = self.settings.fragment_size;
+        let mut stream = fragment::stream(content.clone(), size as u16, body);
+        let mut count = fragment::fragment_count(stream.len(), size);
+        if Place::long_for(count) && size > 1 {
+            size -= 1;
+            stream = fragment::stream(content.clone(), size as u16, body);
+            count = fragment::fragment_count(stream.len(), size);
+        }
+        if count > wire::LONG_FRAGMENTS {
             return Err(format!(
-                "{count} fragments of {size} bytes: more than a transfer may have (1048575)"
+                "{count} fragments of {size} bytes: more than a transfer may have ({})",
+                wire::LONG_FRAGMENTS
             ));
         }
         let number = self.free_number()?;
@@ -676,61 +790,26 @@ impl Transfers {
     }
 
     /// Tops the queue up before a data request: fragments of this node's
-    /// transfers up to the window, and the selective acks owed.
+    /// transfers up to the window (each transfer's channel toward its next
+    /// hop bound first: see [`super::channels`]), and the selective acks
+    /// owed.
     pub fn top_up(&mut self, outbox: &mut Outbox, table: &RouteTable, now: Micros) {
         let mut in_queue = self
             .queued
             .values()
-            .filter(|q| matches!(q, Queued::Fragment { .. }))
+            .filter(
+                |q| matches!(q, Queued::Fragment { number, .. } if self.out.contains_key(number)),
+            )
             .count();
         let numbers: Vec<u16> = self.out.keys().copied().collect();
-        'transfers: for number in numbers {
-            while in_queue < self.settings.window {
-                let Some(o) = self.out.get_mut(&number) else {
-                    continue 'transfers;
-                };
-                if o.expires <= now {
-                    continue 'transfers;
-                }
-                let Some(index) = o.sending.next(now, self.settings.resend_after) else {
-                    continue 'transfers;
-                };
-                let next = match table.link_dest(o.dest) {
-                    Ok(next) => next,
-                    Err(reason) => {
-                        tracing::warn!("transfer to node {}: {reason}", o.dest);
-                        o.sending.unsent(index);
-                        continue 'transfers;
-                    }
-                };
-                let lifetime = ((o.expires - now) / SECOND).clamp(1, 1_048_575) as u32;
-                let fragment = NetMessage::Fragment(Fragment {
-                    next_hop: next,
-                    origin: self.me,
-                    final_dest: o.dest,
-                    hop_count: 0,
-                    lifetime,
-                    transfer: u32::from(number),
-                    index,
-                    data: o.sending.data(index).to_vec(),
-                });
-                let options = PushOptions {
-                    created: Some(now + i64::from(lifetime) * SECOND - self.settings.fragment_ttl),
-                    ..Default::default()
-                };
-                match outbox.push_unjournaled(fragment.to_dynamic(), options) {
-                    Ok(Some(id)) => {
-                        self.queued.insert(id, Queued::Fragment { number, index });
-                        in_queue += 1;
-                    }
-                    Ok(None) => {}
-                    Err(e) => {
-                        tracing::error!("transfer {number}: fragment {index} not queued: {e}");
-                        o.sending.unsent(index);
-                        continue 'transfers;
-                    }
-                }
+        for number in numbers {
+            if in_queue >= self.settings.window {
+                break;
             }
+            let Some((next, channel)) = self.open_channel(number, outbox, table, now) else {
+                continue;
+            };
+            in_queue += self.queue_fragments(number, next, channel, in_queue, outbox, now);
         }
         let mut finals: Vec<((i32, u16), Outcome)> =
             self.finals.iter().map(|(k, o)| (*k, *o)).collect();
@@ -786,6 +865,131 @@ impl Transfers {
                 i.ack_due = false;
             }
         }
+    }
+
+    /// The channel toward its next hop on which transfer `number`'s
+    /// fragments may go now: `None` while there is none (its binding is
+    /// queued, or waits for the next hop's ack, or every channel is taken,
+    /// or the route does not reach its destination).
+    fn open_channel(
+        &mut self,
+        number: u16,
+        outbox: &mut Outbox,
+        table: &RouteTable,
+        now: Micros,
+    ) -> Option<(i32, u8)> {
+        let o = self.out.get(&number)?;
+        if o.expires <= now {
+            return None;
+        }
+        let next = match table.link_dest(o.dest) {
+            Ok(next) => next,
+            Err(reason) => {
+                tracing::warn!("transfer to node {}: {reason}", o.dest);
+                return None;
+            }
+        };
+        let identity = (self.me, number);
+        let channel = match self.channels.find(next, identity) {
+            Some(ChannelState::Open(c)) => return Some((next, c)),
+            Some(ChannelState::Binding(c)) => c,
+            None => self.channels.bind(next, identity, o.expires)?,
+        };
+        let binding = Queued::Channel {
+            number,
+            next,
+            channel,
+        };
+        if self.queued.values().any(|q| *q == binding) {
+            return None;
+        }
+        let lifetime = ((o.expires - now) / SECOND).clamp(1, 1_048_575) as u32;
+        let message = NetMessage::Channel(FragmentChannel {
+            next_hop: next,
+            origin: self.me,
+            final_dest: o.dest,
+            hop_count: 0,
+            lifetime,
+            transfer: u32::from(number),
+            channel: u32::from(channel),
+        });
+        let options = PushOptions {
+            created: Some(now + i64::from(lifetime) * SECOND - self.settings.fragment_ttl),
+            ..Default::default()
+        };
+        match outbox.push_unjournaled(message.to_dynamic(), options) {
+            Ok(Some(id)) => {
+                self.queued.insert(id, binding);
+                self.channels.queued(next, channel);
+            }
+            Ok(None) => {}
+            Err(e) => tracing::error!("transfer {number}: its channel's binding not queued: {e}"),
+        }
+        None
+    }
+
+    /// Queues fragments of transfer `number` on `channel` toward `next`,
+    /// while fewer than the window are in the queue (`in_queue` now);
+    /// returns how many.
+    fn queue_fragments(
+        &mut self,
+        number: u16,
+        next: i32,
+        channel: u8,
+        mut in_queue: usize,
+        outbox: &mut Outbox,
+        now: Micros,
+    ) -> usize {
+        let mut queued = 0;
+        while in_queue < self.settings.window {
+            let Some(o) = self.out.get_mut(&number) else {
+                break;
+            };
+            let Some(index) = o.sending.next(now, self.settings.resend_after) else {
+                break;
+            };
+            let place = Place {
+                channel,
+                index,
+                long: Place::long_for(o.sending.count()),
+            };
+            let Some(piece) = wire::piece(place, o.sending.data(index)) else {
+                o.sending.unsent(index);
+                break;
+            };
+            let lifetime = ((o.expires - now) / SECOND).clamp(1, 1_048_575) as u32;
+            let fragment = NetMessage::Fragment(Fragment {
+                next_hop: next,
+                piece,
+            });
+            let options = PushOptions {
+                created: Some(now + i64::from(lifetime) * SECOND - self.settings.fragment_ttl),
+                ..Default::default()
+            };
+            match outbox.push_unjournaled(fragment.to_dynamic(), options) {
+                Ok(Some(id)) => {
+                    self.queued.insert(
+                        id,
+                        Queued::Fragment {
+                            number,
+                            index,
+                            next,
+                            channel,
+                        },
+                    );
+                    self.channels.queued(next, channel);
+                    in_queue += 1;
+                    queued += 1;
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    tracing::error!("transfer {number}: fragment {index} not queued: {e}");
+                    o.sending.unsent(index);
+                    break;
+                }
+            }
+        }
+        queued
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -851,7 +1055,23 @@ impl Transfers {
             return;
         };
         match q {
-            Queued::Fragment { number, index } => {
+            Queued::Channel {
+                number,
+                next,
+                channel,
+            } => {
+                self.channels.left(next, channel);
+                if acked {
+                    self.channels.acked(next, channel, (self.me, number));
+                }
+            }
+            Queued::Fragment {
+                number,
+                index,
+                next,
+                channel,
+            } => {
+                self.channels.left(next, channel);
                 let Some(o) = self.out.get_mut(&number) else {
                     return;
                 };
@@ -887,9 +1107,9 @@ impl Transfers {
     /// A fragment for this node. Recorded (not synced: call
     /// [`sync`](Self::sync) before the reception is acknowledged); a whole
     /// transfer is finished: its message or file in `produced`.
-    pub fn fragment(&mut self, f: Fragment, now: Micros, produced: &mut Produced) {
+    pub fn fragment(&mut self, f: Piece, now: Micros, produced: &mut Produced) {
         let origin = f.origin;
-        let number = f.transfer as u16;
+        let number = f.number;
         let key = (origin, number);
         if let Some((outcome, _)) = self.ended.get(&key) {
             // Ended here already: the sender has not heard the last ack.
@@ -903,7 +1123,7 @@ impl Transfers {
             }
             return;
         }
-        let expires = now + i64::from(f.lifetime) * SECOND;
+        let expires = f.expires;
         let i = self.inc.entry(key).or_insert_with(|| In {
             expires,
             incoming: Incoming::new(),
@@ -1096,8 +1316,9 @@ impl Transfers {
         if let Err(e) = self.append(&p) {
             tracing::error!("{}: {e}", self.log.path().display());
         }
-        self.queued
-            .retain(|_, q| !matches!(q, Queued::Fragment { number: n, .. } if *n == number));
+        // Its fragments still queued stay counted on their channel, which
+        // is free once they leave the queue.
+        self.channels.done((self.me, number), now);
         self.sent.insert(number, now + self.settings.remember);
         let complete = outcome == Outcome::Complete;
         tracing::info!(
@@ -1245,11 +1466,69 @@ impl Transfers {
         }
         self.ended.retain(|_, (_, until)| *until > now);
         self.sent.retain(|_, until| *until > now);
+        self.bindings.retain(|_, b| b.expires > now);
+        self.channels.sweep(now);
         if self.records > 4 * self.live() + 4096 {
             if let Err(e) = self.rewrite() {
                 tracing::error!("{}: {e}", self.log.path().display());
             }
         }
+    }
+
+    /// Records that node `src` bound its channel `channel` to a transfer
+    /// (recorded, not synced: call [`sync`](Self::sync) before the hop is
+    /// acknowledged); `false` when it could not be recorded.
+    pub fn bind_in(&mut self, src: i32, channel: u8, binding: Binding) -> bool {
+        if self.bindings.get(&(src, channel)) == Some(&binding) {
+            return true;
+        }
+        if let Err(e) = self.append(&bind_payload(src, channel, &binding)) {
+            tracing::error!("{}: {e}", self.log.path().display());
+            return false;
+        }
+        self.bindings.insert((src, channel), binding);
+        true
+    }
+
+    /// What node `src`'s channel `channel` is bound to at `now`, if known
+    /// (a binding past its transfer's lifetime is not).
+    pub fn binding(&self, src: i32, channel: u8, now: Micros) -> Option<Binding> {
+        self.bindings
+            .get(&(src, channel))
+            .filter(|b| b.expires > now)
+            .copied()
+    }
+
+    /// This node's channels toward its next hops.
+    pub fn channels(&mut self) -> &mut OutChannels {
+        &mut self.channels
+    }
+
+    /// The end of a transfer this node relays went by (its receiver's last
+    /// ack): its channels are free once nothing on them waits.
+    pub fn relayed_end(&mut self, origin: i32, number: u16, now: Micros) {
+        self.channels.done((origin, number), now);
+    }
+
+    /// Answers a fragment of transfer format 1 (an older node's,
+    /// [`protos::goby::acomms::protobuf::FragmentV1`]) for this node: its
+    /// transfer is refused (a `FragmentAck` REFUSED, which that format
+    /// reads), once.
+    pub fn refuse_v1(&mut self, origin: i32, number: u16, now: Micros) {
+        if self.ended.contains_key(&(origin, number)) {
+            return;
+        }
+        tracing::warn!(
+            origin,
+            number,
+            "a fragment from node {origin} in transfer format 1 (gobyd 0.1.0): refused; \
+             every node of a transfer must run transfer format 2"
+        );
+        self.ended.insert(
+            (origin, number),
+            (Outcome::Refused, now + self.settings.remember),
+        );
+        self.finals.insert((origin, number), Outcome::Refused);
     }
 
     /// Fragments this node holds for forwarding (counted by the caller).

@@ -1,0 +1,216 @@
+//! The channels of transfers, hop by hop: a node sends a transfer's
+//! fragments to its next hop on a channel (0-15) it bound to the transfer
+//! for that hop ([`FragmentChannel`](protos::goby::acomms::protobuf::FragmentChannel)),
+//! so that each fragment carries only the channel and its index (6 bytes
+//! of header in a 64-byte frame, where naming the transfer's origin, final
+//! destination and number in every fragment took 14).
+//!
+//! Two rules keep a receiver from ever taking a fragment for another
+//! transfer's, across losses and restarts of either end:
+//!
+//! - fragments go on a channel only once the next hop acknowledged its
+//!   binding (the next hop records a binding, synced, before it
+//!   acknowledges it), so the receiver holds the binding they were sent
+//!   under;
+//! - a channel is bound again (to another transfer) only once none of the
+//!   fragments sent on it under the earlier binding waits in this node's
+//!   queue, so none can come after the new binding.
+//!
+//! Sans-IO: this module keeps the sender's side ([`OutChannels`]); the
+//! receiver's bindings are on record in `transfers.log`
+//! ([`super::transfers`]).
+
+use std::collections::BTreeMap;
+
+use queue::Micros;
+
+use super::wire::CHANNELS;
+
+/// A transfer end to end: its origin and the origin's number of it.
+pub type Identity = (i32, u16);
+
+/// One of this node's channels toward one next hop.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct OutChannel {
+    /// The transfer it is bound to (`None`: after a restart, fragments on
+    /// it wait in the journal but its binding is not known).
+    identity: Option<Identity>,
+    /// The next hop acknowledged the binding: fragments may go on it.
+    acked: bool,
+    /// This node's messages on it in the queue (its binding, fragments).
+    queued: usize,
+    /// From then on, with nothing queued, the channel is free (the
+    /// transfer ended, or its lifetime did).
+    free_from: Micros,
+}
+
+/// This node's channels toward its next hops.
+#[derive(Debug, Default)]
+pub struct OutChannels {
+    map: BTreeMap<(i32, u8), OutChannel>,
+}
+
+/// The state of a transfer's channel toward a next hop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelState {
+    /// Bound and acknowledged: fragments may go on it.
+    Open(u8),
+    /// Bound, the binding not yet acknowledged.
+    Binding(u8),
+}
+
+impl OutChannels {
+    /// The channel bound to `identity` toward `next`, if any.
+    pub fn find(&self, next: i32, identity: Identity) -> Option<ChannelState> {
+        self.map.iter().find_map(|((n, c), ch)| {
+            (*n == next && ch.identity == Some(identity)).then_some(if ch.acked {
+                ChannelState::Open(*c)
+            } else {
+                ChannelState::Binding(*c)
+            })
+        })
+    }
+
+    /// Binds a free channel toward `next` to `identity`, free again (once
+    /// nothing on it is queued) from `until` at the latest; `None` when
+    /// every channel toward `next` is taken.
+    pub fn bind(&mut self, next: i32, identity: Identity, until: Micros) -> Option<u8> {
+        let c = (0..CHANNELS).find(|c| !self.map.contains_key(&(next, *c)))?;
+        self.map.insert(
+            (next, c),
+            OutChannel {
+                identity: Some(identity),
+                acked: false,
+                queued: 0,
+                free_from: until,
+            },
+        );
+        Some(c)
+    }
+
+    /// Lets go of channel `c` toward `next` (its binding could not be
+    /// queued).
+    pub fn unbind(&mut self, next: i32, c: u8) {
+        if self.map.get(&(next, c)).is_some_and(|ch| ch.queued == 0) {
+            self.map.remove(&(next, c));
+        }
+    }
+
+    /// Whether nothing on channel `c` toward `next` is queued (a binding
+    /// not acknowledged and no longer queued must be queued again).
+    pub fn idle(&self, next: i32, c: u8) -> bool {
+        self.map.get(&(next, c)).is_none_or(|ch| ch.queued == 0)
+    }
+
+    /// A message on channel `c` toward `next` was queued.
+    pub fn queued(&mut self, next: i32, c: u8) {
+        if let Some(ch) = self.map.get_mut(&(next, c)) {
+            ch.queued += 1;
+        }
+    }
+
+    /// A message on channel `c` toward `next` left the queue.
+    pub fn left(&mut self, next: i32, c: u8) {
+        if let Some(ch) = self.map.get_mut(&(next, c)) {
+            ch.queued = ch.queued.saturating_sub(1);
+        }
+    }
+
+    /// The next hop acknowledged the binding of `c` to `identity`.
+    pub fn acked(&mut self, next: i32, c: u8, identity: Identity) {
+        if let Some(ch) = self.map.get_mut(&(next, c)) {
+            if ch.identity == Some(identity) {
+                ch.acked = true;
+            }
+        }
+    }
+
+    /// Transfer `identity` ended (at `now`): its channels are free once
+    /// nothing on them is queued.
+    pub fn done(&mut self, identity: Identity, now: Micros) {
+        for ch in self.map.values_mut() {
+            if ch.identity == Some(identity) {
+                ch.free_from = ch.free_from.min(now);
+            }
+        }
+    }
+
+    /// After a restart: a message on channel `c` toward `next` waits in
+    /// the journal, bound to `identity` when it says so (a binding).
+    pub fn reserve(&mut self, next: i32, c: u8, identity: Option<Identity>, until: Micros) {
+        let ch = self.map.entry((next, c)).or_insert(OutChannel {
+            identity,
+            acked: false,
+            queued: 0,
+            free_from: until,
+        });
+        if ch.identity.is_none() {
+            ch.identity = identity;
+        }
+        ch.free_from = ch.free_from.max(until);
+        ch.queued += 1;
+    }
+
+    /// Frees the channels with nothing queued whose transfer ended or
+    /// whose lifetime passed by `now`.
+    pub fn sweep(&mut self, now: Micros) {
+        self.map
+            .retain(|_, ch| ch.queued > 0 || (ch.identity.is_some() && ch.free_from > now));
+    }
+
+    /// Channels bound (for the logs and tests).
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// Whether no channel is bound.
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_channel_is_bound_again_only_once_nothing_sent_on_it_waits() {
+        let mut ch = OutChannels::default();
+        let a = (1, 7);
+        let c = ch.bind(2, a, 1_000).unwrap();
+        assert_eq!(ch.find(2, a), Some(ChannelState::Binding(c)));
+        ch.queued(2, c);
+        ch.acked(2, c, a);
+        assert_eq!(ch.find(2, a), Some(ChannelState::Open(c)));
+        ch.queued(2, c);
+        ch.left(2, c);
+        ch.done(a, 10);
+        ch.sweep(20);
+        // One fragment still queued: the channel stays a's.
+        assert_eq!(ch.find(2, a), Some(ChannelState::Open(c)));
+        assert_ne!(ch.bind(2, (1, 8), 1_000), Some(c));
+        ch.left(2, c);
+        ch.sweep(20);
+        assert_eq!(ch.find(2, a), None);
+        // Every channel toward node 2 taken: none to bind; another hop's
+        // are its own.
+        let mut full = OutChannels::default();
+        for n in 0..CHANNELS {
+            assert!(full.bind(2, (1, u16::from(n)), 1_000).is_some());
+        }
+        assert_eq!(full.bind(2, (1, 99), 1_000), None);
+        assert!(full.bind(3, (1, 99), 1_000).is_some());
+    }
+
+    #[test]
+    fn after_a_restart_a_channel_with_journaled_fragments_is_not_bound_again() {
+        let mut ch = OutChannels::default();
+        ch.reserve(3, 0, None, 0);
+        assert_eq!(ch.bind(3, (1, 5), 1_000), Some(1));
+        ch.sweep(10);
+        assert_eq!(ch.len(), 2);
+        ch.left(3, 0);
+        ch.sweep(10);
+        assert_eq!(ch.len(), 1);
+    }
+}
