@@ -158,14 +158,10 @@ impl OutChannels {
             .retain(|_, ch| ch.queued > 0 || (ch.identity.is_some() && ch.free_from > now));
     }
 
-    /// Channels bound (for the logs and tests).
-    pub fn len(&self) -> usize {
+    /// Channels bound.
+    #[cfg(test)]
+    fn len(&self) -> usize {
         self.map.len()
-    }
-
-    /// Whether no channel is bound.
-    pub fn is_empty(&self) -> bool {
-        self.map.is_empty()
     }
 }
 
