@@ -28,6 +28,7 @@ fn fate_colour(fate: &str) -> &'static str {
         "out_of_range" => "#7f7f7f",
         "frame_error" => "#9467bd",
         "no_ray" => "#8c564b",
+        "fault" => "#e377c2",
         _ => "#17becf",
     }
 }

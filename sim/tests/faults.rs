@@ -97,6 +97,20 @@ fn nothing_crosses_a_link_that_is_down_and_what_waited_goes_after() {
             "heard while the link was down: {times:?}"
         );
     }
+    // Every packet sent while the link was down is told kept by the fault
+    // at the other node, and none after.
+    use modemdriver::sim::observer::Fate;
+    let start = outcome.report.run.start_us;
+    let receptions = &outcome.ledger.medium().receptions;
+    let kept = receptions.iter().filter(|r| r.fate == Fate::Fault).count();
+    assert!(kept > 0, "{receptions:?}");
+    for r in receptions {
+        let sent_s = (r.start_us as i64 - start) as f64 / 1e6;
+        assert_eq!(r.fate == Fate::Fault, sent_s < 1800.0, "{r:?}");
+    }
+    // The report counts them by their cause, not as unsettled.
+    let packets = &outcome.report.losses.total.packets;
+    assert!(packets.get("fault").is_some_and(|n| *n > 0), "{packets:?}");
 }
 
 #[test]

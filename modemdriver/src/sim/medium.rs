@@ -26,11 +26,15 @@ pub struct Airborne {
     pub duration: Duration,
     /// What it carries.
     pub transmission: ModemTransmission,
+    /// A fault of the simulation keeps it from the node it is handed to
+    /// ([`Filter`]): that node does not hear it, and tells its observer so.
+    pub kept: bool,
 }
 
 /// What becomes of a packet on its way to one receiver (its modem id):
 /// the packet as that receiver hears it (the same, or changed), or `None`
-/// when it does not reach it. A simulation's faults (a link down, a modem
+/// when it does not reach it (the receiver is handed it marked
+/// [`Airborne::kept`], so that its fate there is told). A simulation's faults (a link down, a modem
 /// unplugged, garbled frames) are filters.
 pub type Filter = Arc<dyn Fn(&Arc<Airborne>, i32) -> Option<Arc<Airborne>> + Send + Sync>;
 
@@ -125,12 +129,15 @@ impl Medium {
                 continue;
             }
             let heard = match &filter {
-                None => Some(packet.clone()),
-                Some(filter) => filter(&packet, *id),
+                None => packet.clone(),
+                Some(filter) => filter(&packet, *id).unwrap_or_else(|| {
+                    Arc::new(Airborne {
+                        kept: true,
+                        ..(*packet).clone()
+                    })
+                }),
             };
-            if let Some(heard) = heard {
-                let _ = tx.send(heard);
-            }
+            let _ = tx.send(heard);
         }
     }
 

@@ -483,6 +483,7 @@ impl Node {
             start,
             duration,
             transmission: mt.clone(),
+            kept: false,
         });
         events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
         self.medium.transmit(packet.clone());
@@ -528,6 +529,11 @@ impl Node {
         };
         let distance = me.distance(&packet.position);
         let unheard = |node: &Node, fate: Fate| node.observe_unheard(&packet, distance, fate);
+        if packet.kept {
+            // A fault of the simulation keeps it from this node.
+            unheard(self, Fate::Fault);
+            return;
+        }
         if self.sim.range() > 0.0 && distance > self.sim.range() {
             // Out of range: not heard at all (nor does it collide).
             unheard(self, Fate::OutOfRange);

@@ -52,21 +52,25 @@ pub enum Fate {
     /// Not heard at all: in modelled water, no ray reaches the node (or
     /// the link could not be computed).
     NoRay,
+    /// Not heard at all: a fault of the simulation kept it from the node
+    /// (a link down, a modem unplugged: [`super::medium::Filter`]).
+    Fault,
 }
 
 impl Fate {
     /// Every fate, in the order of the enum.
-    pub const ALL: [Fate; 6] = [
+    pub const ALL: [Fate; 7] = [
         Fate::Heard,
         Fate::Collision,
         Fate::HalfDuplex,
         Fate::OutOfRange,
         Fate::FrameError,
         Fate::NoRay,
+        Fate::Fault,
     ];
 
     /// Its name in reports: `heard`, `collision`, `half_duplex`,
-    /// `out_of_range`, `frame_error`, `no_ray`.
+    /// `out_of_range`, `frame_error`, `no_ray`, `fault`.
     pub fn name(self) -> &'static str {
         match self {
             Fate::Heard => "heard",
@@ -75,6 +79,7 @@ impl Fate {
             Fate::OutOfRange => "out_of_range",
             Fate::FrameError => "frame_error",
             Fate::NoRay => "no_ray",
+            Fate::Fault => "fault",
         }
     }
 }

@@ -85,6 +85,7 @@ impl UdpMedium {
             start,
             duration: Duration::from_micros(packet.duration_micros),
             transmission,
+            kept: false,
         })
     }
 }
