@@ -620,24 +620,10 @@ impl Check<'_> {
         let mut fixed = Vec::new();
         let roles = role_fields(checked, &descriptor);
         if let Some(field) = roles.source.as_ref() {
-            fixed.push((
-                field.clone(),
-                ValueGen::Counter {
-                    start: i64::from(node.modem_id()),
-                    step: 0,
-                    format: "%d".into(),
-                },
-            ));
+            fixed.push((field.clone(), modem_id_value(node.modem_id())));
         }
         match (&dest, roles.destination.clone()) {
-            (Some((_, id)), Some(field)) => fixed.push((
-                field,
-                ValueGen::Counter {
-                    start: i64::from(*id),
-                    step: 0,
-                    format: "%d".into(),
-                },
-            )),
+            (Some((_, id)), Some(field)) => fixed.push((field, modem_id_value(*id))),
             (Some(_), None) => {
                 self.problem(
                     format!("{at}.dest"),
@@ -651,14 +637,7 @@ impl Check<'_> {
                 return None;
             }
             // Sent to every node: the destination role says broadcast (0).
-            (None, Some(field)) => fixed.push((
-                field,
-                ValueGen::Counter {
-                    start: 0,
-                    step: 0,
-                    format: "%d".into(),
-                },
-            )),
+            (None, Some(field)) => fixed.push((field, modem_id_value(0))),
             (None, None) => {}
         }
 
@@ -732,30 +711,7 @@ impl Check<'_> {
             start_s,
             fields: fixed,
         };
-        // One publication made and encoded now: a required field left out,
-        // a value out of its field's range, is refused before the run.
-        // A time the receiver would restore on another date (the daemon
-        // refuses it at publication), checked at the start.
-        let sample = stream.generator(0, i).message();
-        let moved = match self.start_s {
-            Some(start_s) => checked.codec.moved_dates_at(&sample, start_s),
-            None => Ok(Vec::new()),
-        };
-        let changed = checked
-            .codec
-            .check(&sample)
-            .map(|changes| if clamped { Vec::new() } else { changes });
-        let problem = match (checked.codec.encode(&sample), moved, changed) {
-            (Err(e), _, _) | (Ok(_), Err(e), _) | (Ok(_), _, Err(e)) => Some(e.to_string()),
-            (Ok(_), Ok(moved), Ok(changed)) => moved.first().or(changed.first()).map(|c| {
-                format!(
-                    "field {}: {} (the daemon refuses a value its type cannot carry unless the \
-                     queue entry says clamp_out_of_range: true)",
-                    c.field, c.reason
-                )
-            }),
-        };
-        if let Some(problem) = problem {
+        if let Some(problem) = first_message_problem(&stream, i, checked, clamped, self.start_s) {
             self.problem(at, format!("its first message is refused: {problem}"));
             return None;
         }
@@ -866,4 +822,50 @@ fn start_micros(text: &str) -> Result<i64, String> {
 /// Where a scenario file's relative paths are read from.
 pub fn base_of(path: &Path) -> PathBuf {
     path.parent().map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// A modem id as a field's value, the same in every message.
+fn modem_id_value(id: i32) -> ValueGen {
+    ValueGen::Counter {
+        start: i64::from(id),
+        step: 0,
+        format: "%d".into(),
+    }
+}
+
+/// Why the first message of `stream` (of node `node`) would be refused at
+/// publication, if it would: a required field left out, a value out of
+/// its field's range (unless its queue entry clamps), a time the receiver
+/// would restore on another date than `start_s`'s.
+fn first_message_problem(
+    stream: &Stream,
+    node: usize,
+    checked: &gobyd::check::Checked,
+    clamped: bool,
+    start_s: Option<i64>,
+) -> Option<String> {
+    // One publication made and encoded now: a required field left out,
+    // a value out of its field's range, is refused before the run.
+    // A time the receiver would restore on another date (the daemon
+    // refuses it at publication), checked at the start.
+    let sample = stream.generator(0, node).message();
+    let moved = match start_s {
+        Some(start_s) => checked.codec.moved_dates_at(&sample, start_s),
+        None => Ok(Vec::new()),
+    };
+    let changed = checked
+        .codec
+        .check(&sample)
+        .map(|changes| if clamped { Vec::new() } else { changes });
+    let problem = match (checked.codec.encode(&sample), moved, changed) {
+        (Err(e), _, _) | (Ok(_), Err(e), _) | (Ok(_), _, Err(e)) => Some(e.to_string()),
+        (Ok(_), Ok(moved), Ok(changed)) => moved.first().or(changed.first()).map(|c| {
+            format!(
+                "field {}: {} (the daemon refuses a value its type cannot carry unless the \
+                 queue entry says clamp_out_of_range: true)",
+                c.field, c.reason
+            )
+        }),
+    };
+    problem
 }
