@@ -18,7 +18,10 @@ use crate::{CliError, Status};
 #[command(after_help = "Examples:\n  \
     goby sim fleet.pb.txt --out run1\n  \
     goby sim fleet.pb.txt --seed 8 --out run-seed8\n  \
-    goby sim --sweep-seed 17 --out sweep17")]
+    goby sim --sweep-seed 17 --out sweep17\n\n\
+    Exit status: 0 the run ended and its outputs are written; 2 the scenario or \
+    the arguments are refused (nothing ran); 4 the run failed or an output could \
+    not be written; 1 a sweep seed breached an invariant.")]
 pub struct SimArgs {
     /// The scenario (protobuf text format, goby.sim.protobuf.Scenario).
     #[arg(value_name = "SCENARIO", required_unless_present = "sweep_seed")]
@@ -29,7 +32,8 @@ pub struct SimArgs {
     #[arg(long, value_name = "N", conflicts_with_all = ["scenario", "seed"])]
     pub sweep_seed: Option<u64>,
     /// Hours of traffic of the sweep's scenario.
-    #[arg(long, value_name = "H", default_value_t = goby_sim::sweep::HOURS, requires = "sweep_seed")]
+    #[arg(long, value_name = "H", default_value_t = goby_sim::sweep::HOURS, requires = "sweep_seed",
+          value_parser = sweep_hours)]
     pub sweep_hours: f64,
     /// Seed of the run, in place of the scenario's.
     #[arg(long, value_name = "N")]
@@ -92,6 +96,7 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         (Some(path), None) => goby_sim::scenario::load(path).map_err(refused)?,
         (None, None) => return Err(CliError::setup("give a SCENARIO or --sweep-seed N")),
     };
+    outputs_writable(&scenario, &args.out)?;
     if let Some(seed) = args.seed {
         scenario.seed = seed;
     }
@@ -209,6 +214,47 @@ fn swept(
             t.breaches.len()
         ))),
     }
+}
+
+/// `--sweep-hours`: at least one hour (the sweep's streams start within
+/// the first hour), at most a year.
+fn sweep_hours(text: &str) -> Result<f64, String> {
+    let hours: f64 = text
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number of hours"))?;
+    if (1.0..=8766.0).contains(&hours) {
+        Ok(hours)
+    } else {
+        Err(format!("{text} is not from 1 to 8766 hours (a year)"))
+    }
+}
+
+/// Checks, before the run, that each of the scenario's outputs can be
+/// written in `dir`: one that exists already must be a file this process
+/// may write (it is not changed here).
+fn outputs_writable(scenario: &goby_sim::Scenario, dir: &std::path::Path) -> Result<(), CliError> {
+    let r = &scenario.report;
+    for name in [r.json(), r.csv(), r.html(), r.links_csv(), r.links_json()] {
+        let path = dir.join(name);
+        let refused = |why: String| {
+            CliError::setup(format!(
+                "--out {}: cannot write {name} there: {why}",
+                dir.display()
+            ))
+        };
+        match std::fs::symlink_metadata(&path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(refused(e.to_string())),
+            Ok(m) if !m.is_file() => return Err(refused("it is not a file".into())),
+            Ok(_) => {
+                std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(&path)
+                    .map_err(|e| refused(e.to_string()))?;
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Makes `dir` and checks that a file can be written in it.

@@ -286,6 +286,51 @@ fn an_output_directory_that_cannot_be_written_is_refused_before_the_run() {
 }
 
 #[test]
+fn an_output_that_cannot_be_written_is_refused_before_the_run_and_nothing_is_overwritten() {
+    let out = scratch("page-dir");
+    // The page's name is taken by a directory; the report of an earlier run
+    // is there too.
+    std::fs::create_dir_all(out.join("report.html")).unwrap();
+    std::fs::write(out.join("report.json"), "earlier").unwrap();
+    let run = goby(&[
+        "sim",
+        example().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(2), "{}", stdout_text(&run));
+    let stderr = stderr_text(&run);
+    assert!(
+        stderr.contains("cannot write report.html there: it is not a file"),
+        "{stderr}"
+    );
+    assert!(
+        !stdout_text(&run).contains("nodes,"),
+        "{}",
+        stdout_text(&run)
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("report.json")).unwrap(),
+        "earlier"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn sweep_hours_that_make_no_sweep_are_refused() {
+    for hours in ["0", "0.5", "-1", "nan", "inf", "9000"] {
+        let arg = format!("--sweep-hours={hours}");
+        let run = goby(&["sim", "--sweep-seed", "5", &arg]);
+        assert_eq!(run.status.code(), Some(2), "{hours}: {}", stderr_text(&run));
+        assert!(
+            stderr_text(&run).contains("--sweep-hours"),
+            "{hours}: {}",
+            stderr_text(&run)
+        );
+    }
+}
+
+#[test]
 fn an_interrupted_run_says_so_and_leaves_no_data_directories() {
     use std::time::{Duration, Instant};
     let dir = scratch("interrupted");

@@ -282,8 +282,17 @@ impl Check<'_> {
 
     fn names_and_ids(&mut self, nodes: &[pb::Node]) {
         for (i, node) in nodes.iter().enumerate() {
-            if node.name().is_empty() {
+            if node.name().trim().is_empty() {
                 self.problem(format!("node[{i}].name"), "give the node a name");
+            } else if node.name().contains("->") {
+                // The report names a pair "a->b".
+                self.problem(
+                    format!("node[{i}].name"),
+                    format!(
+                        "{:?} holds \"->\", which the report puts between the names of a pair",
+                        node.name()
+                    ),
+                );
             } else if let Some(c) = node
                 .name()
                 .chars()

@@ -424,6 +424,14 @@ fn a_start_or_duration_refused_is_told_once_without_follow_on_problems() {
 fn a_node_name_that_would_break_the_csv_files_is_refused() {
     let ring = support::ring(2, 0.0, 600, 60, 60);
     assert!(ring.contains("name: \"n1\""), "{ring}");
+    for (name, told) in [
+        ("a->b", "\"a->b\" holds \"->\""),
+        ("  ", "give the node a name"),
+    ] {
+        let text = ring.replacen("name: \"n1\"", &format!("name: \"{name}\""), 1);
+        let error = refusal(&text);
+        assert!(error.contains(&format!("node[0].name: {told}")), "{error}");
+    }
     let comma = ring.replacen("name: \"n1\"", "name: \"auv,1\"", 1);
     let error = refusal(&comma);
     assert!(
