@@ -29,6 +29,7 @@ fn fate_colour(fate: &str) -> &'static str {
         "frame_error" => "#9467bd",
         "no_ray" => "#8c564b",
         "fault" => "#e377c2",
+        "garbled" => "#bcbd22",
         _ => "#17becf",
     }
 }

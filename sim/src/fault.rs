@@ -356,6 +356,7 @@ fn garbled(
         return packet.clone();
     }
     let mut changed = (**packet).clone();
+    changed.garbled = true;
     for frame in changed.transmission.frame.iter_mut() {
         if frame.is_empty() {
             continue;

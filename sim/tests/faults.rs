@@ -144,6 +144,33 @@ fn garbled_frames_are_refused_not_delivered_as_other_messages() {
     );
     // The other way is not garbled.
     assert!(deliveries_s(&outcome, 1, 0)[0] < 1800.0);
+    // Data packets n1 sent n2 in the window are told garbled there, not
+    // heard; nothing else is.
+    use modemdriver::sim::observer::Fate;
+    let start = outcome.report.run.start_us;
+    let medium = outcome.ledger.medium();
+    let data: std::collections::HashSet<(i32, u64)> = medium
+        .transmissions
+        .iter()
+        .filter(|t| {
+            t.kind == protos::goby::acomms::protobuf::modem_transmission::TransmissionType::Data
+        })
+        .map(|t| (t.src, t.start_us))
+        .collect();
+    let mut garbled = 0;
+    for r in &medium.receptions {
+        let sent_s = (r.start_us as i64 - start) as f64 / 1e6;
+        let expected = r.receiver == 2 && sent_s < 1800.0 && data.contains(&(r.src, r.start_us));
+        if r.fate == Fate::Garbled {
+            garbled += 1;
+        }
+        if expected {
+            assert_eq!(r.fate, Fate::Garbled, "{r:?}");
+        } else {
+            assert_ne!(r.fate, Fate::Garbled, "{r:?}");
+        }
+    }
+    assert!(garbled > 0);
 }
 
 #[test]

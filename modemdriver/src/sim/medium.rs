@@ -29,6 +29,9 @@ pub struct Airborne {
     /// A fault of the simulation keeps it from the node it is handed to
     /// ([`Filter`]): that node does not hear it, and tells its observer so.
     pub kept: bool,
+    /// A fault of the simulation garbled its frames on the way to the node
+    /// it is handed to (its fate there is told as garbled, not heard).
+    pub garbled: bool,
 }
 
 /// What becomes of a packet on its way to one receiver (its modem id):
@@ -133,6 +136,7 @@ impl Medium {
                 Some(filter) => filter(&packet, *id).unwrap_or_else(|| {
                     Arc::new(Airborne {
                         kept: true,
+                        garbled: false,
                         ..(*packet).clone()
                     })
                 }),

@@ -484,6 +484,7 @@ impl Node {
             duration,
             transmission: mt.clone(),
             kept: false,
+            garbled: false,
         });
         events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
         self.medium.transmit(packet.clone());
@@ -592,6 +593,7 @@ impl Node {
                     range_m: distance,
                     snr_db,
                     loss_probability: Some(loss),
+                    garbled: packet.garbled,
                 },
             );
         }
@@ -636,6 +638,7 @@ impl Node {
             snr_db: link.snr_db,
             loss_probability: link.loss_probability,
             fate: match spoiled {
+                None if link.garbled => Fate::Garbled,
                 None => Fate::Heard,
                 Some(Spoiled::Loss) => Fate::FrameError,
                 Some(Spoiled::Collision) => Fate::Collision,

@@ -55,11 +55,15 @@ pub enum Fate {
     /// Not heard at all: a fault of the simulation kept it from the node
     /// (a link down, a modem unplugged: [`super::medium::Filter`]).
     Fault,
+    /// Arrived, but a fault of the simulation garbled its frames
+    /// ([`super::medium::Airborne::garbled`]): the modem's frame check
+    /// dropped them, or, past the check, they were handed up changed.
+    Garbled,
 }
 
 impl Fate {
     /// Every fate, in the order of the enum.
-    pub const ALL: [Fate; 7] = [
+    pub const ALL: [Fate; 8] = [
         Fate::Heard,
         Fate::Collision,
         Fate::HalfDuplex,
@@ -67,10 +71,11 @@ impl Fate {
         Fate::FrameError,
         Fate::NoRay,
         Fate::Fault,
+        Fate::Garbled,
     ];
 
     /// Its name in reports: `heard`, `collision`, `half_duplex`,
-    /// `out_of_range`, `frame_error`, `no_ray`, `fault`.
+    /// `out_of_range`, `frame_error`, `no_ray`, `fault`, `garbled`.
     pub fn name(self) -> &'static str {
         match self {
             Fate::Heard => "heard",
@@ -80,6 +85,7 @@ impl Fate {
             Fate::FrameError => "frame_error",
             Fate::NoRay => "no_ray",
             Fate::Fault => "fault",
+            Fate::Garbled => "garbled",
         }
     }
 }
@@ -127,4 +133,6 @@ pub(crate) struct Link {
     pub range_m: f64,
     pub snr_db: Option<f64>,
     pub loss_probability: Option<f64>,
+    /// A fault of the simulation garbled its frames on the way here.
+    pub garbled: bool,
 }

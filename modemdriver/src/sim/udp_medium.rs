@@ -86,6 +86,7 @@ impl UdpMedium {
             duration: Duration::from_micros(packet.duration_micros),
             transmission,
             kept: false,
+            garbled: false,
         })
     }
 }
