@@ -15,7 +15,10 @@
 //!   `owed_unacked` (still in the sender's journal at the end, never sent
 //!   or sent and not acknowledged), `unheard` (sent, not acknowledged nor
 //!   owed: every packet that carried it was lost), `never_sent` (none of
-//!   these: gone from the sender without a packet);
+//!   these: gone from the sender without a packet); first of all,
+//!   `acked_undelivered`: its sender heard an ack from the node it was
+//!   for, which does not have it (a frame changed past the modem's check
+//!   carried the ack's identity: `garble { past_crc: true }`);
 //! - when it was delivered but its sender never heard the ack (the ack,
 //!   or every ack, was lost on the way back): `expired` (the sender gave
 //!   up at its ttl) or `owed` (still waiting at the end).
@@ -102,7 +105,13 @@ impl Fates {
             })
             .collect();
         let delivered = p.deliveries.contains_key(&receiver);
-        let undelivered = (!delivered).then(|| undelivered(p));
+        let undelivered = (!delivered).then(|| {
+            if p.dest == Some(receiver) && p.acked.is_some() {
+                "acked_undelivered"
+            } else {
+                undelivered(p)
+            }
+        });
         let unacked = delivered && p.dest == Some(receiver) && p.acked.is_none();
         let delivered_unacked = match (unacked, p.expired.is_some(), p.owed) {
             (true, true, _) => Some("expired"),

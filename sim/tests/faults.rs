@@ -190,6 +190,27 @@ fn garbled_frames_past_the_crc_reach_the_decoder_and_the_run_goes_on() {
         "the garbling changed nothing: {:#?}",
         outcome.report
     );
+    // Acknowledged yet not received: counted apart, each of them.
+    let acked_undelivered = outcome
+        .ledger
+        .publications()
+        .iter()
+        .filter(|p| p.acked.is_some() && !p.deliveries.contains_key(&p.dest.unwrap()))
+        .count() as u64;
+    assert!(acked_undelivered > 0, "no frame carried another's ack");
+    assert_eq!(
+        outcome
+            .report
+            .losses
+            .total
+            .undelivered
+            .get("acked_undelivered")
+            .copied()
+            .unwrap_or(0),
+        acked_undelivered,
+        "{:#?}",
+        outcome.report.losses
+    );
     // Published after the window, all delivered once.
     for p in outcome.ledger.publications() {
         if p.time >= start + 900_000_000 {
