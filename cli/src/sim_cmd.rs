@@ -108,6 +108,9 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         .map_err(|e| CliError::Failed(e.to_string()))?;
     written.push(write_page(&scenario, &outcome, args)?);
     let report = &outcome.report;
+    for fault in &report.run.faults {
+        writeln!(stdout, "fault: {fault}")?;
+    }
     let virtual_s = (scenario.duration_micros + scenario.drain_micros) as f64 / 1e6;
     writeln!(
         stdout,

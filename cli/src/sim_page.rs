@@ -79,6 +79,13 @@ fn run_section(page: &mut String, report: &Report) {
         nodes.join(", "),
         report.stray_receptions
     );
+    if !r.faults.is_empty() {
+        *page += "<p>Faults of the scenario:</p>\n<ul>\n";
+        for fault in &r.faults {
+            let _ = writeln!(page, "<li>{}</li>", escape(fault));
+        }
+        *page += "</ul>\n";
+    }
 }
 
 fn delivery_section(page: &mut String, report: &Report) {

@@ -82,6 +82,48 @@ pub enum Fault {
     },
 }
 
+impl Fault {
+    /// The fault in words, its nodes by their `names` (the report's
+    /// `run.faults`), e.g. `kill auv1 at 1800 s, started again at 2400 s`.
+    pub fn describe(&self, names: &[String]) -> String {
+        match *self {
+            Fault::Kill {
+                node,
+                at_s,
+                restart_after_s,
+            } => {
+                let again = at_s + restart_after_s;
+                format!(
+                    "kill {} at {at_s} s, started again at {again} s",
+                    names[node]
+                )
+            }
+            Fault::LinkDown { a, b, from_s, to_s } => format!(
+                "link_down {} and {} from {from_s} s to {to_s} s",
+                names[a], names[b]
+            ),
+            Fault::Unplug { node, from_s, to_s } => {
+                format!("unplug {} from {from_s} s to {to_s} s", names[node])
+            }
+            Fault::Garble {
+                node,
+                probability,
+                from_s,
+                to_s,
+                past_crc,
+            } => format!(
+                "garble at {} with probability {probability} from {from_s} s to {to_s} s{}",
+                names[node],
+                if past_crc {
+                    ", past the modem's check"
+                } else {
+                    ""
+                }
+            ),
+        }
+    }
+}
+
 /// Checks the scenario's `faults` against its `nodes` and the run's
 /// length `run_s` (seconds of traffic and drain); the problems go to `c`.
 pub(crate) fn check(

@@ -102,6 +102,8 @@ pub struct Run {
     pub drain_us: u64,
     /// Modem id by node name.
     pub nodes: BTreeMap<String, i32>,
+    /// The scenario's faults, in words, in the scenario's order.
+    pub faults: Vec<String>,
 }
 
 /// Counts of one group of publications. A publication is counted once
@@ -240,6 +242,11 @@ impl Report {
                     .iter()
                     .map(|n| (n.name.clone(), n.modem_id))
                     .collect(),
+                faults: {
+                    let names: Vec<String> =
+                        ledger.nodes().iter().map(|n| n.name.clone()).collect();
+                    scenario.faults.iter().map(|f| f.describe(&names)).collect()
+                },
             },
             total: total.finish(),
             by_type: by_type.into_iter().map(|(k, t)| (k, t.finish())).collect(),

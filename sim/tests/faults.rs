@@ -97,6 +97,10 @@ fn nothing_crosses_a_link_that_is_down_and_what_waited_goes_after() {
             "heard while the link was down: {times:?}"
         );
     }
+    assert_eq!(
+        outcome.report.run.faults,
+        ["link_down n1 and n2 from 0 s to 1800 s"]
+    );
     // Every packet sent while the link was down is told kept by the fault
     // at the other node, and none after.
     use modemdriver::sim::observer::Fate;
