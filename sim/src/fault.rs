@@ -185,7 +185,12 @@ impl Place<'_, '_> {
                 .problem(path, "give the time, seconds from the start of the run");
             return None;
         };
-        if !(value >= 0.0 && value.is_finite()) {
+        if !value.is_finite() {
+            self.c
+                .problem(path, format!("{value} is not a number of seconds"));
+            return None;
+        }
+        if value < 0.0 {
             self.c
                 .problem(path, format!("{value} is not 0 or more seconds"));
             return None;
@@ -276,7 +281,14 @@ impl Place<'_, '_> {
         self.at += ".unplug";
         let node = self.node("node", u.node.as_deref());
         let from_s = self.time("at_s", u.at_s);
-        let for_s = self.length("for_s", u.for_s.unwrap_or(0.0))?;
+        let Some(for_s) = u.for_s else {
+            self.c.problem(
+                format!("{}.for_s", self.at),
+                "give for_s, the seconds the modem is off the water",
+            );
+            return None;
+        };
+        let for_s = self.length("for_s", for_s)?;
         let (node, from_s) = (node?, from_s?);
         let to_s = self.within("for_s", from_s + for_s)?;
         Some(Fault::Unplug { node, from_s, to_s })
@@ -285,7 +297,13 @@ impl Place<'_, '_> {
     fn garble(&mut self, g: &pb::Garble) -> Option<Fault> {
         self.at += ".garble";
         let node = self.node("node", g.node.as_deref());
-        let probability = g.probability.unwrap_or(0.0);
+        let Some(probability) = g.probability else {
+            self.c.problem(
+                format!("{}.probability", self.at),
+                "give probability, the chance that a frame heard is garbled (more than 0, at most 1)",
+            );
+            return None;
+        };
         if !(probability > 0.0 && probability <= 1.0) {
             self.c.problem(
                 format!("{}.probability", self.at),

@@ -207,7 +207,14 @@ impl Check<'_> {
             nodes.push(self.node(i, node, &s.node));
         }
         let nodes: Option<Vec<Node>> = nodes.into_iter().collect();
-        let faults = crate::fault::check(self, &s.fault, &s.node, duration + drain);
+        // A duration refused above is not checked against (no follow-on
+        // problems of the faults).
+        let run_s = if self.duration_s > 0.0 {
+            self.duration_s + drain
+        } else {
+            f64::NAN
+        };
+        let faults = crate::fault::check(self, &s.fault, &s.node, run_s);
         Some(Scenario {
             seed: s.seed(),
             start_micros: start.ok()?,

@@ -525,3 +525,31 @@ fn a_fault_outside_the_run_is_refused_at_its_place() {
         "{error}"
     );
 }
+
+#[test]
+fn a_fault_missing_a_value_is_asked_for_it_and_a_refused_duration_brings_no_fault_problems() {
+    let ring = support::ring(2, 0.0, 600, 60, 60);
+    let error = refusal(&(ring.clone() + "fault { garble { node: \"n1\" } }\n"));
+    assert!(
+        error.contains("fault[0].garble.probability: give probability"),
+        "{error}"
+    );
+    let error = refusal(&(ring.clone() + "fault { unplug { node: \"n1\" at_s: 10 } }\n"));
+    assert!(
+        error.contains("fault[0].unplug.for_s: give for_s"),
+        "{error}"
+    );
+    let error = refusal(
+        &(ring.clone() + "fault { link_down { a: \"n1\" b: \"n2\" from_s: 0 to_s: inf } }\n"),
+    );
+    assert!(
+        error.contains("fault[0].link_down.to_s: inf is not a number of seconds"),
+        "{error}"
+    );
+    // No duration: told once, and the faults are not measured against it.
+    let no_duration = ring.replacen("duration_s: 600", "", 1)
+        + "fault { kill { node: \"n1\" at_s: 5000 restart_after_s: 60 } }\n";
+    let error = refusal(&no_duration);
+    assert!(error.contains("duration_s: give the seconds"), "{error}");
+    assert!(!error.contains("after the end of the run"), "{error}");
+}
