@@ -47,6 +47,7 @@ pub mod link_quality;
 pub mod losses;
 pub mod medium_log;
 pub mod modem;
+pub mod node_clock;
 pub mod report;
 pub mod scenario;
 pub mod slot_bounds;
