@@ -46,7 +46,7 @@ fn a_seed_gives_the_same_scenario_and_the_same_report_again() {
 }
 
 #[test]
-fn the_slot_check_finds_every_data_packet_of_a_run_outside_slots_a_second_late() {
+fn the_slot_check_finds_every_packet_of_a_run_outside_slots_a_second_late() {
     // The same run checked against its nodes' cycles laid a second later
     // than their MACs lay them: every packet (sent at its slot's start, the
     // sweep's guard being 0) then starts in the last second of the slot
