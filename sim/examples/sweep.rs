@@ -64,8 +64,8 @@ fn main() {
                 };
                 println!(
                     "seed {seed}: {} nodes, {} faults, {} published ({} refused while down), \
-                     {} delivered once, {} owed, {} lost, {} duplicated, {} repeats dropped \
-                     ({:.1} s)",
+                     {} delivered once, {} owed, {} lost, {} duplicated, {} repeats dropped, \
+                     {} of {} packets outside their slot ({:.1} s)",
                     tally.nodes,
                     tally.faults,
                     tally.published,
@@ -75,6 +75,8 @@ fn main() {
                     tally.lost,
                     tally.duplicated,
                     tally.repeats_dropped,
+                    tally.outside_slot,
+                    tally.packets,
                     ran.elapsed().as_secs_f64()
                 );
                 if !tally.passed() || one {
@@ -96,7 +98,7 @@ fn main() {
         .collect();
     println!(
         "{} seeds x {hours} h: {} published, {} delivered once, {} owed, {} lost, {} duplicated, \
-         {} repeats dropped; failed seeds {failed:?}; {:.1} s wall",
+         {} repeats dropped, {} of {} packets outside their slot; failed seeds {failed:?}; {:.1} s wall",
         tallies.len(),
         sum(|t| t.published),
         sum(|t| t.delivered_once),
@@ -104,6 +106,8 @@ fn main() {
         sum(|t| t.lost),
         sum(|t| t.duplicated),
         sum(|t| t.repeats_dropped),
+        sum(|t| t.outside_slot),
+        sum(|t| t.packets),
         began.elapsed().as_secs_f64()
     );
     if !failed.is_empty() {

@@ -14,6 +14,8 @@
 //!   packet number, the receiver). The modem's frame check drops them (the
 //!   frame is heard empty, as a Micro-Modem reports a bad CRC); with
 //!   `past_crc` its gobyd decodes the changed bytes.
+//! - `clock_step { node at_s by_s }`: the node's clock (its gobyd's and
+//!   its driver's) jumps by `by_s` seconds at `at_s` ([`crate::node_clock`]).
 //!
 //! Times are seconds of virtual time from the start of the run; a fault
 //! naming a node the scenario does not have, or out of the run (after
@@ -80,6 +82,15 @@ pub enum Fault {
         /// frame check drops the frame).
         past_crc: bool,
     },
+    /// The node's clock jumps by `by_s` (either way) at `at_s`.
+    ClockStep {
+        /// The node.
+        node: usize,
+        /// When.
+        at_s: f64,
+        /// By how much, seconds (not 0).
+        by_s: f64,
+    },
 }
 
 impl Fault {
@@ -143,13 +154,17 @@ pub(crate) fn check(
         use pb::fault::Kind;
         let one = match &fault.kind {
             None => {
-                at.c.problem(at.at.clone(), "give kill, link_down, unplug or garble");
+                at.c.problem(
+                    at.at.clone(),
+                    "give kill, link_down, unplug, garble or clock_step",
+                );
                 None
             }
             Some(Kind::Kill(k)) => at.kill(k, &checked),
             Some(Kind::LinkDown(l)) => at.link_down(l),
             Some(Kind::Unplug(u)) => at.unplug(u),
             Some(Kind::Garble(g)) => at.garble(g),
+            Some(Kind::ClockStep(k)) => at.clock_step(k),
         };
         checked.extend(one);
     }
@@ -327,6 +342,25 @@ impl Place<'_, '_> {
         })
     }
 
+    fn clock_step(&mut self, k: &pb::ClockStep) -> Option<Fault> {
+        self.at += ".clock_step";
+        let node = self.node("node", k.node.as_deref());
+        let at_s = self.time("at_s", k.at_s);
+        let by_s = k.by_s.unwrap_or(0.0);
+        if !(by_s != 0.0 && by_s.is_finite() && by_s.abs() <= 86_400.0) {
+            self.c.problem(
+                format!("{}.by_s", self.at),
+                format!("{by_s} is not a step of a clock: give seconds, not 0, at most a day either way"),
+            );
+            return None;
+        }
+        Some(Fault::ClockStep {
+            node: node?,
+            at_s: at_s?,
+            by_s,
+        })
+    }
+
     fn ordered(&mut self, from_s: f64, to_s: f64) -> Option<()> {
         if to_s <= from_s {
             self.c.problem(
@@ -345,7 +379,7 @@ impl Place<'_, '_> {
 pub(crate) fn filter(faults: &[Fault], ids: &[i32], seed: u64, start: Instant) -> Option<Filter> {
     let faults: Vec<Fault> = faults
         .iter()
-        .filter(|f| !matches!(f, Fault::Kill { .. }))
+        .filter(|f| !matches!(f, Fault::Kill { .. } | Fault::ClockStep { .. }))
         .cloned()
         .collect();
     if faults.is_empty() {
@@ -382,7 +416,7 @@ pub(crate) fn filter(faults: &[Fault], ids: &[i32], seed: u64, start: Instant) -
                         heard = garbled(&heard, receiver, probability, seed, past_crc);
                     }
                 }
-                Fault::Kill { .. } => {}
+                Fault::Kill { .. } | Fault::ClockStep { .. } => {}
             }
         }
         Some(heard)

@@ -12,6 +12,7 @@
 //! - [`fault`]: what goes wrong in a run (a gobyd killed and started
 //!   again, a link down, a modem unplugged, garbled frames).
 //! - [`ledger`]: every publication and its fate.
+//! - [`slot_bounds`]: no packet outside its sender's slots.
 //! - [`slot_use`]: what the nodes did with the medium (slots, packets;
 //!   G and S of the shared slots).
 //! - [`report`]: the report (JSON) and the ledger (CSV).
@@ -46,8 +47,10 @@ pub mod link_quality;
 pub mod losses;
 pub mod medium_log;
 pub mod modem;
+pub mod node_clock;
 pub mod report;
 pub mod scenario;
+pub mod slot_bounds;
 pub mod slot_use;
 pub mod sweep;
 pub mod track;

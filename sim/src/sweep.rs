@@ -12,6 +12,9 @@
 //!   repeat, the same content published again, counts as its own);
 //! - no deliberate repeat went missing (counted apart from the others);
 //! - no acknowledgement came before its delivery;
+//! - no packet outside its slot: every packet a node put on the water
+//!   started inside one of its own slots, after the guard, and ended by
+//!   the slot's end, by the node's own clock ([`crate::slot_bounds`]);
 //! - no reception that no publication accounts for.
 //!
 //! The same seed gives the same scenario and the same report, byte for
@@ -24,6 +27,8 @@ use std::path::Path;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 
 use crate::ledger::Ledger;
 use crate::{Outcome, SimError};
@@ -210,6 +215,11 @@ pub struct Tally {
     pub repeats_dropped: u64,
     /// Copies delivered beyond the first, any type.
     pub duplicated: u64,
+    /// Packets put on the water, acknowledgements apart, checked against
+    /// their sender's slots.
+    pub packets: u64,
+    /// Of those, the ones outside their sender's slots.
+    pub outside_slot: u64,
     /// Every breach of an invariant, described.
     pub breaches: Vec<String>,
 }
@@ -228,9 +238,28 @@ pub fn run_seed(seed: u64, hours: f64) -> Result<(Tally, Outcome), SimError> {
     let scenario = crate::scenario::parse(&text, &format!("sweep-seed-{seed}"), Path::new("."))?;
     let outcome = crate::run(&scenario)?;
     let mut tally = check(&outcome.ledger);
+    check_slots(
+        &crate::slot_bounds::cycles(&scenario.nodes),
+        &outcome.ledger,
+        &mut tally,
+    );
     tally.seed = seed;
     tally.faults = scenario.faults.len();
     Ok((tally, outcome))
+}
+
+/// Every packet on the water of `ledger` checked against `cycles`, the
+/// senders' slots: each one outside is a breach.
+pub fn check_slots(cycles: &[crate::slot_bounds::NodeCycle], ledger: &Ledger, t: &mut Tally) {
+    let medium = ledger.medium();
+    t.packets = medium
+        .transmissions
+        .iter()
+        .filter(|p| p.kind != TransmissionType::Ack)
+        .count() as u64;
+    let breaches = crate::slot_bounds::breaches(cycles, medium);
+    t.outside_slot = breaches.len() as u64;
+    t.breaches.extend(breaches);
 }
 
 /// The deliberate repeats of each sender, destination and stream are the

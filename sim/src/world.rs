@@ -258,10 +258,16 @@ async fn start_node(
     let failed = |e: &dyn std::fmt::Display| {
         SimError::Run(format!("node {}: gobyd did not start: {e}", node.name))
     };
+    // Its own clock: the run's, unless a fault steps it.
+    let own: Arc<dyn Clock> =
+        match crate::node_clock::NodeClock::of(clock, s.start_micros, i, &s.faults) {
+            Some(stepped) => Arc::new(stepped),
+            None => clock.clone(),
+        };
     let driver = SimulatorDriver::start_in_world(
         &driver_config,
         medium.clone(),
-        clock.clone(),
+        own.clone(),
         places.clone(),
     )
     .map_err(|e| failed(&e))?;
@@ -270,7 +276,7 @@ async fn start_node(
     // synced in line, so that no thread's real time orders its events.
     let daemon = Daemon::builder(config)
         .driver(driver)
-        .clock(clock.clone())
+        .clock(own)
         .seed(generation_seed(
             &[s.seed, node.modem_id as u64, 1],
             generation,
