@@ -131,6 +131,9 @@ impl Fault {
                     ""
                 }
             ),
+            Fault::ClockStep { node, at_s, by_s } => {
+                format!("clock_step {} at {at_s} s by {by_s:+} s", names[node])
+            }
         }
     }
 }
