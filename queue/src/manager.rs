@@ -127,7 +127,8 @@ pub struct QueueManager {
     /// `hold_retry_until_heard`: the longest a retry is held (`None`: not
     /// held).
     hold_retry: Option<Micros>,
-    /// When each node was last heard (any transmission received from it).
+    /// When each node was last heard (any transmission but an ack received
+    /// from it).
     heard: HashMap<i32, Micros>,
     max_frame_bytes: Option<usize>,
     /// Fewest bytes any configured type encodes to (at least 1).
@@ -802,12 +803,14 @@ impl QueueManager {
         transmission: &ModemTransmission,
         link: LinkIndex,
     ) -> Vec<QueueError> {
-        if let Some(src) = transmission.src {
-            self.heard.insert(src, self.clock.now());
-        }
         if transmission.r#type() == TransmissionType::Ack {
             self.process_ack(transmission, link);
             return Vec::new();
+        }
+        // A node is heard when it sends data of its own, not when its modem
+        // acks (an ack that credits nothing tells nothing of our messages).
+        if let Some(src) = transmission.src {
+            self.heard.insert(src, self.clock.now());
         }
         let mut errors = Vec::new();
         for (frame_index, frame) in transmission.frame.iter().enumerate() {

@@ -4,7 +4,9 @@
 mod common;
 
 use common::{contents, entry, Node};
-use protos::goby::acomms::protobuf::{ModemTransmission, QueueManagerConfig};
+use protos::goby::acomms::protobuf::{
+    modem_transmission::TransmissionType, ModemTransmission, QueueManagerConfig,
+};
 use queue::QueueError;
 
 /// A node (id 1) holding retries up to 60 s, with `minimum_ack_wait` 0.
@@ -36,7 +38,7 @@ fn send(node: &mut Node, unique_id: u32) -> Vec<u32> {
         .collect()
 }
 
-/// A transmission heard from node `src` (a data frame of nothing for us).
+/// A transmission heard from node `src` (data, of nothing for us).
 fn hear(node: &mut Node, src: i32) {
     let tx = ModemTransmission {
         src: Some(src),
@@ -81,6 +83,27 @@ fn a_retry_is_released_once_the_destination_was_heard() {
     // Heard before this second sending, not since: held again.
     node.clock.advance_seconds(12.0);
     assert_eq!(send(&mut node, 3), Vec::<u32>::new());
+}
+
+#[test]
+fn an_ack_from_the_destination_that_credits_nothing_is_not_hearing_it() {
+    let mut node = holding();
+    node.push("Status", 1, 2, 7);
+    node.clock.advance_seconds(1.0);
+    assert_eq!(send(&mut node, 1), vec![7]);
+    node.clock.advance_seconds(6.0);
+    // An ack of another transmission (a modem's ack matched to nothing).
+    let ack = ModemTransmission {
+        src: Some(2),
+        dest: Some(1),
+        r#type: Some(TransmissionType::Ack as i32),
+        acked_frame: vec![0],
+        unique_id: Some(99),
+        ..Default::default()
+    };
+    assert!(node.manager.handle_modem_receive(&ack, 0).is_empty());
+    node.clock.advance_seconds(6.0);
+    assert_eq!(send(&mut node, 2), Vec::<u32>::new());
 }
 
 #[test]
