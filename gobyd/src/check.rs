@@ -99,7 +99,8 @@ pub fn validate(
     })
 }
 
-/// The queue entries of `queue` the queue refuses: each of the first
+/// The settings of `queue` the queue refuses (a problem of `queue`, and
+/// then nothing else), or the queue entries it refuses: each of the first
 /// `configured` (written in the configuration) as a problem of its
 /// `queue.message_entry[i].protobuf_name` (with the DCCL types `loaded`
 /// when the entry's type is not one of them), each of the others (a loaded
@@ -110,6 +111,28 @@ fn entry_problems(
     configured: usize,
     loaded: &[String],
 ) -> Vec<config::Problem> {
+    // The settings of the queue itself (the ack wait, the hold of retries)
+    // are its own problem, not one of each entry.
+    let settings = protos::goby::acomms::protobuf::QueueManagerConfig {
+        message_entry: Vec::new(),
+        ..queue.clone()
+    };
+    if let Err(e) = QueueManager::new(codec.clone(), &settings) {
+        let reason = match e {
+            queue::QueueError::Config { reason, .. } => reason,
+            other => other.to_string(),
+        };
+        // The queue's reasons begin with the setting they are about.
+        let setting = reason.split(' ').next().unwrap_or_default();
+        let field = if !setting.is_empty()
+            && setting.bytes().all(|b| b.is_ascii_lowercase() || b == b'_')
+        {
+            format!("queue.{setting}")
+        } else {
+            "queue".to_string()
+        };
+        return vec![config::Problem::new(field, reason)];
+    }
     let mut problems = Vec::new();
     for (i, entry) in queue.message_entry.iter().enumerate() {
         let alone = protos::goby::acomms::protobuf::QueueManagerConfig {

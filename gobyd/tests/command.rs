@@ -109,6 +109,15 @@ fn gobyd_refuses_bad_configurations_with_their_place() {
             "mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 slot_seconds: -1 } }",
             "bad.pb.txt:1:51: mac.slot[0].slot_seconds: must be a finite number",
         ),
+        (
+            "queue { hold_retry_until_heard: true }",
+            "bad.pb.txt:1:9: queue.hold_retry_until_heard: hold_retry_until_heard is true but \
+             hold_retry_max_seconds is not set",
+        ),
+        (
+            "queue { hold_retry_until_heard: true hold_retry_max_seconds: -1 }",
+            "bad.pb.txt:1:38: queue.hold_retry_max_seconds: hold_retry_max_seconds -1 is not valid",
+        ),
     ] {
         let path = dir.join("bad.pb.txt");
         std::fs::write(&path, text).unwrap();

@@ -124,6 +124,12 @@ pub struct QueueManager {
     modem_id: i32,
     on_demand_skew: Micros,
     minimum_ack_wait: Micros,
+    /// `hold_retry_until_heard`: the longest a retry is held (`None`: not
+    /// held).
+    hold_retry: Option<Micros>,
+    /// When each node was last heard (any transmission but an ack received
+    /// from it).
+    heard: HashMap<i32, Micros>,
     max_frame_bytes: Option<usize>,
     /// Fewest bytes any configured type encodes to (at least 1).
     smallest_message: usize,
@@ -189,12 +195,15 @@ impl QueueManager {
                 "minimum_ack_wait_seconds {wait} is not valid"
             )));
         }
+        let hold_retry = hold_retry_setting(config).map_err(config_error)?;
         let mut manager = Self {
             codec,
             clock,
             modem_id: config.modem_id(),
             on_demand_skew: seconds_to_micros(skew),
             minimum_ack_wait: seconds_to_micros(wait),
+            hold_retry,
+            heard: HashMap::new(),
             max_frame_bytes: config.max_frame_bytes.map(|b| b as usize),
             smallest_message: usize::MAX,
             queues: Vec::new(),
@@ -798,6 +807,11 @@ impl QueueManager {
             self.process_ack(transmission, link);
             return Vec::new();
         }
+        // A node is heard when it sends data of its own, not when its modem
+        // acks (an ack that credits nothing tells nothing of our messages).
+        if let Some(src) = transmission.src {
+            self.heard.insert(src, self.clock.now());
+        }
         let mut errors = Vec::new();
         for (frame_index, frame) in transmission.frame.iter().enumerate() {
             let mut rest = frame.as_slice();
@@ -982,7 +996,10 @@ impl QueueManager {
     /// numbered transmission (`unique_id`) other than `transmission` keeps
     /// waiting up to `minimum_ack_wait_seconds`: its ack names its own
     /// transmission, so the reuse of frame numbers cannot confuse them; so
-    /// does a message awaiting its ack on another link than `link`.
+    /// does a message awaiting its ack on another link than `link`. With
+    /// `hold_retry_until_heard`, such a waiting message is released only
+    /// once its destination was heard after it was sent or it was sent
+    /// `hold_retry_max_seconds` ago (a broadcast awaits no ack: never held).
     fn clear_awaiting(
         &mut self,
         frame_start: u32,
@@ -998,10 +1015,25 @@ impl QueueManager {
             };
             let other_transmission =
                 a.link != link || (a.transmission.is_some() && a.transmission != transmission);
-            let limit = (a.frame < frame_start || other_transmission).then_some(sent_before);
+            let limit = (a.frame < frame_start || other_transmission)
+                .then(|| sent_before.min(self.retry_after(a.dest, now)));
             if self.queues[index].stop_awaiting_on(a.seq, a.hint, a.link, a.frame, limit) {
                 self.awaiting.push(a);
             }
+        }
+    }
+
+    /// A message to `dest` awaiting its ack may be sent again if it was sent
+    /// before this time, as far as `hold_retry_until_heard` goes: when
+    /// `dest` was last heard, or `hold_retry_max_seconds` ago, whichever is
+    /// later (`now`: not held).
+    fn retry_after(&self, dest: i32, now: Micros) -> Micros {
+        match self.hold_retry {
+            Some(hold) => {
+                let longest = now.saturating_sub(hold);
+                self.heard.get(&dest).map_or(longest, |&h| h.max(longest))
+            }
+            _ => now,
         }
     }
 
@@ -1180,4 +1212,23 @@ fn can_join(queue: &Queue, next: usize, remaining: usize, dest: i32, ack_forbidd
     m.encoded.len() <= remaining
         && (dest == QUERY_DESTINATION_ID || m.dest == BROADCAST_ID || m.dest == dest)
         && !(ack_forbidden && wants_ack && dest != BROADCAST_ID)
+}
+
+/// The longest hold of a retry `config` asks for with
+/// `hold_retry_until_heard` (`None`: off), or why it is not valid.
+fn hold_retry_setting(config: &QueueManagerConfig) -> std::result::Result<Option<Micros>, String> {
+    if !config.hold_retry_until_heard() {
+        return Ok(None);
+    }
+    match config.hold_retry_max_seconds {
+        None => Err(
+            "hold_retry_until_heard is true but hold_retry_max_seconds is not set \
+                     (the longest a retry is held, e.g. twice the MAC cycle)"
+                .into(),
+        ),
+        Some(max) if max.is_finite() && max > 0.0 => Ok(Some(seconds_to_micros(max))),
+        Some(max) => Err(format!(
+            "hold_retry_max_seconds {max} is not valid (a number of seconds above 0)"
+        )),
+    }
 }
