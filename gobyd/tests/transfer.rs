@@ -276,32 +276,7 @@ async fn a_50_kb_file_survives_restarts_of_both_ends() {
     let dir = scratch("transfer", "restarts");
     let configs = (1..=3).map(|id| config(id, &dir, 5, 6.0)).collect();
     let mut fleet = Fleet::start(configs).await;
-    let file = dir.join("mission.log");
-    let content = pattern(50 * 1024, 3);
-    std::fs::write(&file, &content).unwrap();
-    let sent = fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file.clone(),
-                name: None,
-            },
-        )
-        .await
-        .unwrap();
-    let id = sent["file_send"].as_u64().unwrap();
-    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
-    let held_at_3 = |seen: &[Seen]| {
-        transfer_at(seen, 3, "receiving")
-            .last()
-            .map_or(0, |e| e.held)
-    };
-    assert!(
-        until(&fleet, Duration::from_secs(3600), |s| held_at_3(s)
-            >= fragments / 3)
-        .await
-    );
+    let (id, fragments, content) = send_a_third(&mut fleet, &dir, "mission.log", 50, 3).await;
     fleet.kill(3).await;
     tokio::time::sleep(Duration::from_secs(60)).await;
     fleet.start_node(3).await;
@@ -357,32 +332,7 @@ async fn a_file_survives_a_restart_of_the_relay() {
     let dir = scratch("transfer", "relay-restart");
     let configs = (1..=3).map(|id| config(id, &dir, 5, 6.0)).collect();
     let mut fleet = Fleet::start(configs).await;
-    let file = dir.join("sidescan.bin");
-    let content = pattern(30 * 1024, 5);
-    std::fs::write(&file, &content).unwrap();
-    let sent = fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file.clone(),
-                name: None,
-            },
-        )
-        .await
-        .unwrap();
-    let id = sent["file_send"].as_u64().unwrap();
-    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
-    let held_at_3 = |seen: &[Seen]| {
-        transfer_at(seen, 3, "receiving")
-            .last()
-            .map_or(0, |e| e.held)
-    };
-    assert!(
-        until(&fleet, Duration::from_secs(3600), |s| held_at_3(s)
-            >= fragments / 3)
-        .await
-    );
+    let (id, fragments, content) = send_a_third(&mut fleet, &dir, "sidescan.bin", 30, 5).await;
     fleet.kill(2).await;
     tokio::time::sleep(Duration::from_secs(60)).await;
     fleet.start_node(2).await;
@@ -405,6 +355,47 @@ async fn a_file_survives_a_restart_of_the_relay() {
     assert!(transfer_at(&seen, 3, "failed").is_empty());
     fleet.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Node 1 sends node 3 a file of `kb` KiB (named `name`, its bytes from
+/// `seed`) through node 2; returns once node 3 holds a third of its
+/// fragments: the transfer's id, its fragments and the file's bytes.
+async fn send_a_third(
+    fleet: &mut Fleet,
+    dir: &Path,
+    name: &str,
+    kb: usize,
+    seed: u64,
+) -> (u64, u32, Vec<u8>) {
+    let file = dir.join(name);
+    let content = pattern(kb * 1024, seed);
+    std::fs::write(&file, &content).unwrap();
+    let sent = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file.clone(),
+                name: None,
+            },
+        )
+        .await
+        .unwrap();
+    let id = sent["file_send"].as_u64().unwrap();
+    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
+    assert!(
+        until(fleet, Duration::from_secs(3600), |s| held_at_3(s)
+            >= fragments / 3)
+        .await
+    );
+    (id, fragments, content)
+}
+
+/// Fragments node 3 holds of the transfer it is receiving.
+fn held_at_3(seen: &[Seen]) -> u32 {
+    transfer_at(seen, 3, "receiving")
+        .last()
+        .map_or(0, |e| e.held)
 }
 
 fn settings_for_inspection(
