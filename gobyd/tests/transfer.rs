@@ -332,7 +332,7 @@ async fn a_file_survives_a_restart_of_the_relay() {
     let dir = scratch("transfer", "relay-restart");
     let configs = (1..=3).map(|id| config(id, &dir, 5, 6.0)).collect();
     let mut fleet = Fleet::start(configs).await;
-    let (id, fragments, content) = send_a_third(&mut fleet, &dir, "sidescan.bin", 30, 5).await;
+    let (id, _, content) = send_a_third(&mut fleet, &dir, "sidescan.bin", 30, 5).await;
     fleet.kill(2).await;
     tokio::time::sleep(Duration::from_secs(60)).await;
     fleet.start_node(2).await;
