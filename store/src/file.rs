@@ -60,6 +60,7 @@ pub fn part_path(path: &Path) -> PathBuf {
 /// not synced ([`write_atomically`] does that too). On an error the part is
 /// removed and `path` is as it was.
 pub fn replace(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    crate::space::check(path)?;
     let part = part_path(path);
     let written = private_file_options()
         .write(true)

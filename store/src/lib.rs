@@ -3,7 +3,8 @@
 //! logs (records framed by a sync word, their length and a CRC-32, replayed
 //! so that damage costs only the records it touches), and [`file`](mod@file), files
 //! rewritten whole so that a crash leaves the old or the new one, private to
-//! their owner.
+//! their owner. [`space`] marks a directory full, so that its owners meet
+//! a full disk on purpose (`goby sim`'s `disk_full` fault).
 //!
 //! Each owner of a file defines its format next to itself; this crate owns
 //! what every file shares. It depends on no other goby crate, so that the
@@ -13,3 +14,4 @@
 
 pub mod file;
 pub mod record_log;
+pub mod space;

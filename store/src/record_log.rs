@@ -593,6 +593,9 @@ impl RecordLog {
             .format
             .scan(bytes, parse)
             .ok_or(LogError::NotOurs(self.format.name))?;
+        if scan.header != Header::Good {
+            crate::space::check(&self.path)?;
+        }
         match scan.header {
             Header::New => {
                 self.file.set_len(0)?;
@@ -661,6 +664,7 @@ impl RecordLog {
             self.file.set_len(self.len)?;
             self.dirty = false;
         }
+        crate::space::check(&self.path)?;
         if let Err(e) = self.file.write_at(self.len, record) {
             self.dirty = self.file.set_len(self.len).is_err();
             return Err(e.into());
