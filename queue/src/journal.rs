@@ -27,9 +27,11 @@
 //!   nothing is accepted that is not in the file; while the undo itself
 //!   fails, every new message is refused;
 //! - ids are `u64` and never wrap: when they run out, messages are refused
-//!   ([`JournalError::IdsExhausted`]). A journal that owes nothing when
-//!   opened goes on from a random id (below 2^32): a message's id is its
-//!   publication number on the wire (see [`crate::identity`]);
+//!   ([`JournalError::IdsExhausted`]). A message's id is its publication
+//!   number on the wire (see [`crate::identity`]): ids go on from the last
+//!   one given, across restarts and compactions, and a journal that has
+//!   given none (new, or every record lost) starts from a random id
+//!   (below 2^32, [`Journal::skip_ids_to`]);
 //! - damage between good records is left in place (the file is never cut
 //!   behind a good record) and skipped again at the next start.
 //!
@@ -253,14 +255,22 @@ impl Journal {
         self.live.is_empty()
     }
 
-    /// While nothing is owed, makes the next id at least `first` (ids
-    /// never go back). A caller that uses ids as publication numbers on the
-    /// wire (see [`crate::identity`]) starts an empty journal at a random
-    /// id, so that a journal compacted empty, or made anew, does not give
-    /// again the numbers of the last messages a receiver may remember.
+    /// While the journal has given no id (it is new, or every record of
+    /// it was lost), makes the next id `first`. A caller that uses ids as
+    /// publication numbers on the wire (see [`crate::identity`]) starts
+    /// such a journal at a random id, so that a data directory made anew
+    /// does not give again the numbers of the last messages a receiver may
+    /// remember. A journal that has given ids goes on from the last one
+    /// (kept through compactions, even when nothing is owed): its numbers
+    /// come in sequence, and a receiver takes none of them for one it
+    /// remembers until the numbers wrap (`identity::NUMBERS`
+    /// publications later). A jump to a random id at every start would
+    /// give, once in so many starts, the number of a publication the
+    /// receiver remembers: a deliberate repeat retransmitted under it
+    /// would be taken for that one and dropped.
     pub fn skip_ids_to(&mut self, first: EntryId) {
-        if self.live.is_empty() {
-            self.next_id = self.next_id.map(|n| n.max(first));
+        if self.next_id == Some(0) {
+            self.next_id = Some(first);
         }
     }
 
@@ -658,6 +668,29 @@ mod tests {
         let err = Journal::open(dir.file()).unwrap_err();
         assert!(matches!(err, JournalError::NotAJournal(_)), "{err}");
         assert_eq!(std::fs::read(dir.file()).unwrap(), b"important notes");
+    }
+
+    #[test]
+    fn ids_start_at_random_in_a_new_journal_only_and_go_on_across_restarts() {
+        let dir = TempDir::new("numbers");
+        {
+            let (mut j, _) = Journal::open(dir.file()).unwrap();
+            j.skip_ids_to(5_000);
+            let id = j.accept("a.A", b"one", 1).unwrap();
+            assert_eq!(id, 5_000);
+            j.remove(id).unwrap();
+        }
+        // Owing nothing, and compacted empty: it goes on from its last id,
+        // whatever the new start drawn.
+        let (mut j, _) = Journal::open(dir.file()).unwrap();
+        j.compact().unwrap();
+        drop(j);
+        for drawn in [9_999, 17] {
+            let (mut j, replay) = Journal::open(dir.file()).unwrap();
+            assert!(replay.entries.is_empty());
+            j.skip_ids_to(drawn);
+            assert_eq!(j.next_id(), Some(5_001), "drawn {drawn}");
+        }
     }
 
     #[test]
