@@ -9,7 +9,10 @@
 //! ```
 //!
 //! and its frame is acknowledged only once every message in it is recorded
-//! (or is a retransmission already on record). Which receptions are the
+//! (or is a retransmission already on record). A message that cannot be
+//! recorded (a full disk) is held and handed over all the same, and known
+//! in memory: its retransmissions are suppressed, and acknowledged once it
+//! is handed over ([`Delivery::record`]). Which receptions are the
 //! same publication is [`crate::core::dedup`]'s rule; the file is
 //! [`crate::core::inbox`]. Messages a previous run recorded and did not hand over
 //! are held first, flagged `recovered`.
@@ -43,6 +46,8 @@ pub const RECOVERY_WAIT: Duration = Duration::from_secs(30);
 struct Held {
     /// Its inbox record (`None`: it could not be recorded).
     seq: Option<u64>,
+    /// Which publication it is.
+    identity: Identity,
     received: ReceivedMessage,
     reception: Reception,
     since: Instant,
@@ -111,6 +116,7 @@ impl Delivery {
             match codec.decode(&incoming.bytes) {
                 Ok(message) => self.held.push(Held {
                     seq: Some(entry.seq),
+                    identity: incoming.identity,
                     received: ReceivedMessage {
                         message,
                         dccl_id: incoming.identity.dccl_id,
@@ -165,9 +171,13 @@ impl Delivery {
     /// Records the messages of one reception (`reception`) in the inbox,
     /// synced, and holds them for a taker; a retransmission of a
     /// publication on record is suppressed. Returns whether every message
-    /// is on record (else no frame of the reception may be acknowledged:
-    /// the messages are held all the same, and a retry may then reach the
-    /// clients twice). `now`: microseconds since the epoch.
+    /// is on record (else no frame of the reception may be acknowledged).
+    /// A message that cannot be recorded (a full disk) is held all the
+    /// same and remembered in memory: its retransmissions are suppressed
+    /// while this process runs, and the first one after its hand-over is
+    /// acknowledged. Only a restart between its hand-over and that
+    /// acknowledgement, the disk still full, can bring it to the clients
+    /// twice. `now`: microseconds since the epoch.
     pub fn record(
         &mut self,
         messages: Vec<ReceivedMessage>,
@@ -187,6 +197,16 @@ impl Delivery {
             );
             let resent = received.identity.is_some_and(|w| w.resent);
             if resent && self.inbox.is_duplicate(&identity, now) {
+                // Known, but held off the record (it could not be written):
+                // its frame is acknowledged once it is handed over, not
+                // before (the acknowledgement of a later retransmission).
+                if self
+                    .held
+                    .iter()
+                    .any(|h| h.seq.is_none() && h.identity == identity)
+                {
+                    all_on_record = false;
+                }
                 tracing::info!(
                     src = received.src,
                     dccl_id = received.dccl_id,
@@ -202,11 +222,12 @@ impl Delivery {
                 bytes: received.bytes.clone(),
             };
             match self.inbox.record(incoming, now) {
-                Ok(seq) => recorded.push((Some(seq), received)),
+                Ok(seq) => recorded.push((Some(seq), identity, received)),
                 Err(e) => {
                     tracing::error!("{}: {e}", self.inbox.path().display());
                     all_on_record = false;
-                    recorded.push((None, received));
+                    self.inbox.remember_unrecorded(identity, now);
+                    recorded.push((None, identity, received));
                 }
             }
         }
@@ -217,9 +238,10 @@ impl Delivery {
             }
             CrashPoint::Recorded.reached();
         }
-        for (seq, received) in recorded {
+        for (seq, identity, received) in recorded {
             self.held.push(Held {
                 seq,
+                identity,
                 received,
                 reception: reception.clone(),
                 since,
@@ -366,6 +388,33 @@ mod tests {
         // The record outlives the restart: 9 again is a retransmission.
         assert!(d.record(vec![message(9, true)], &reception, 5_000, t));
         assert!(d.next_due().is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn on_a_full_disk_a_message_is_held_off_the_record_and_its_retransmissions_suppressed() {
+        let dir = scratch("full");
+        let (mut d, _) = Delivery::open(&dir.join("inbox.log"), 60_000_000, 1_000).unwrap();
+        let t = Instant::now();
+        let reception = Reception::default();
+        goby_store::space::mark_full(&dir);
+        // Not on record: held, not to be acknowledged.
+        assert!(!d.record(vec![message(4, false)], &reception, 1_000, t));
+        // Its retransmission before the hand-over: suppressed, still not
+        // to be acknowledged (were the process killed now, it would be lost).
+        assert!(!d.record(vec![message(4, true)], &reception, 2_000, t));
+        let mut handed = Vec::new();
+        d.release(true, t, 3_000, |r, _| {
+            handed.push(r.identity.unwrap().number)
+        });
+        assert_eq!(handed, [4], "handed over once, off the record");
+        // After the hand-over a retransmission is suppressed and
+        // acknowledged: the client has it.
+        assert!(d.record(vec![message(4, true)], &reception, 4_000, t));
+        assert!(d.next_due().is_none(), "nothing held twice");
+        // Room again: what comes now is on record.
+        goby_store::space::mark_free(&dir);
+        assert!(d.record(vec![message(5, false)], &reception, 5_000, t));
         let _ = std::fs::remove_dir_all(&dir);
     }
 

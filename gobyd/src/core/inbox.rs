@@ -276,8 +276,13 @@ impl Inbox {
             next_seq,
             records,
         };
+        // Compacted when it holds damage or dead records; a full disk (or
+        // another failed write) leaves it as it is, whole and read again
+        // the same way, for a later compaction: the daemon still starts.
         if replayed.rewrite_advised || inbox.records > inbox.live() {
-            inbox.rewrite()?;
+            if let Err(e) = inbox.rewrite() {
+                tracing::warn!("{e}: left as it is, to be compacted later");
+            }
         }
         let replay = Replay {
             remembered: inbox.seen.len(),
@@ -330,6 +335,15 @@ impl Inbox {
         *t = (*t).max(now);
         self.pending.insert(entry.seq, entry);
         Ok(self.next_seq - 1)
+    }
+
+    /// Remembers `id`, received at `now`, in memory only: a message that
+    /// could not be recorded (a full disk) and is handed over all the same,
+    /// so that its retransmissions are known as such while this process
+    /// runs (after a restart they are not: see [`crate::core::delivery`]).
+    pub fn remember_unrecorded(&mut self, id: Identity, now: u64) {
+        let t = self.seen.entry(id).or_insert(now);
+        *t = (*t).max(now);
     }
 
     /// Remembers `id`, received at `time` and handed over already (a
@@ -472,6 +486,29 @@ mod tests {
     }
 
     const WINDOW: u64 = 10_000_000;
+
+    #[test]
+    fn an_inbox_opens_on_a_full_disk_uncompacted_and_as_it_was() {
+        let d = dir("full");
+        let path = d.join("inbox.log");
+        let (mut inbox, _) = Inbox::open(&path, WINDOW, 1_000).unwrap();
+        let a = inbox.record(incoming(2, b"\x01\x02"), 1_000).unwrap();
+        inbox.record(incoming(2, b"\x01\x03"), 1_000).unwrap();
+        inbox.sync().unwrap();
+        inbox.handed(a, 1_000).unwrap();
+        drop(inbox);
+        let before = std::fs::read(&path).unwrap();
+        // Its dead record would have it compacted at the start; the disk
+        // is full: it opens all the same, the file untouched.
+        goby_store::space::mark_full(&d);
+        let opened = Inbox::open(&path, WINDOW, 2_000);
+        goby_store::space::mark_free(&d);
+        let (inbox, replay) = opened.expect("opens on a full disk");
+        assert_eq!((replay.pending, replay.remembered), (1, 2));
+        assert_eq!(inbox.records, 3, "not compacted");
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+        let _ = std::fs::remove_dir_all(&d);
+    }
 
     #[test]
     fn a_message_recorded_and_not_handed_over_is_pending_after_a_restart() {

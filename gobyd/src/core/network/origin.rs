@@ -131,8 +131,12 @@ impl Origin {
             pending,
             records,
         };
+        // A compaction that fails (a full disk) leaves the file whole, to
+        // be compacted later: the daemon still starts.
         if replayed.rewrite_advised || origin.records > 2 * origin.pending.len() + 256 {
-            origin.rewrite()?;
+            if let Err(e) = origin.rewrite() {
+                tracing::warn!("{e}: left as it is, to be compacted later");
+            }
         }
         Ok(origin)
     }

@@ -554,8 +554,12 @@ impl Transfers {
         for o in t.out.values_mut() {
             o.sending.restarted();
         }
+        // A compaction that fails (a full disk) leaves the file whole, to
+        // be compacted later: the daemon still starts.
         if replayed.rewrite_advised || t.records > 4 * t.live() + 256 {
-            t.rewrite()?;
+            if let Err(e) = t.rewrite() {
+                tracing::warn!("{e}: left as it is, to be compacted later");
+            }
         }
         Ok(t)
     }
