@@ -203,7 +203,7 @@ fn swept(
     let t = goby_sim::sweep::check(&outcome.ledger);
     writeln!(
         stdout,
-        "sweep seed {seed}: {} published ({} refused while down), {} delivered once, {} owed, \
+        "sweep seed {seed}: {} published ({} refused: node down or disk full), {} delivered once, {} owed, \
          {} lost, {} duplicated, {} repeats dropped",
         t.published, t.refused, t.delivered_once, t.owed, t.lost, t.duplicated, t.repeats_dropped
     )?;

@@ -63,7 +63,7 @@ fn main() {
                     },
                 };
                 println!(
-                    "seed {seed}: {} nodes, {} faults, {} published ({} refused while down), \
+                    "seed {seed}: {} nodes, {} faults, {} published ({} refused: node down or disk full), \
                      {} delivered once, {} owed, {} lost, {} duplicated, {} repeats dropped, \
                      {} of {} packets outside their slot ({:.1} s)",
                     tally.nodes,
@@ -96,6 +96,18 @@ fn main() {
         .filter(|t| !t.passed())
         .map(|t| t.seed)
         .collect();
+    // The faults of the seeds' scenarios, by kind.
+    let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
+    for &seed in &seeds {
+        for line in scenario_text(seed, hours).lines() {
+            if let Some(kind) = line.strip_prefix("fault { ") {
+                let kind = kind.split_whitespace().next().unwrap_or("?");
+                *kinds.entry(kind.to_string()).or_default() += 1;
+            }
+        }
+    }
+    let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
+    println!("faults: {}", kinds.join(", "));
     println!(
         "{} seeds x {hours} h: {} published, {} delivered once, {} owed, {} lost, {} duplicated, \
          {} repeats dropped, {} of {} packets outside their slot; failed seeds {failed:?}; {:.1} s wall",

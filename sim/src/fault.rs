@@ -14,6 +14,10 @@
 //!   packet number, the receiver). The modem's frame check drops them (the
 //!   frame is heard empty, as a Micro-Modem reports a bad CRC); with
 //!   `past_crc` its gobyd decodes the changed bytes.
+//! - `disk_full { node at_s for_s }`: the disk under the node's data
+//!   directory is full for `for_s` seconds: every write its gobyd makes
+//!   there fails as on a full disk ([`goby_store::space`]; the run does it,
+//!   [`crate::world`]).
 //! - `clock_step { node at_s by_s }`: the node's clock (its gobyd's and
 //!   its driver's) jumps by `by_s` seconds at `at_s` ([`crate::node_clock`]).
 //!
@@ -82,6 +86,15 @@ pub enum Fault {
         /// frame check drops the frame).
         past_crc: bool,
     },
+    /// The disk under the node's data directory full in `[from_s, to_s)`.
+    DiskFull {
+        /// The node.
+        node: usize,
+        /// From when.
+        from_s: f64,
+        /// Until when.
+        to_s: f64,
+    },
     /// The node's clock jumps by `by_s` (either way) at `at_s`.
     ClockStep {
         /// The node.
@@ -131,6 +144,9 @@ impl Fault {
                     ""
                 }
             ),
+            Fault::DiskFull { node, from_s, to_s } => {
+                format!("disk_full at {} from {from_s} s to {to_s} s", names[node])
+            }
             Fault::ClockStep { node, at_s, by_s } => {
                 format!("clock_step {} at {at_s} s by {by_s:+} s", names[node])
             }
@@ -159,7 +175,7 @@ pub(crate) fn check(
             None => {
                 at.c.problem(
                     at.at.clone(),
-                    "give kill, link_down, unplug, garble or clock_step",
+                    "give kill, link_down, unplug, garble, disk_full or clock_step",
                 );
                 None
             }
@@ -167,6 +183,7 @@ pub(crate) fn check(
             Some(Kind::LinkDown(l)) => at.link_down(l),
             Some(Kind::Unplug(u)) => at.unplug(u),
             Some(Kind::Garble(g)) => at.garble(g),
+            Some(Kind::DiskFull(d)) => at.disk_full(d),
             Some(Kind::ClockStep(k)) => at.clock_step(k),
         };
         checked.extend(one);
@@ -312,6 +329,23 @@ impl Place<'_, '_> {
         Some(Fault::Unplug { node, from_s, to_s })
     }
 
+    fn disk_full(&mut self, d: &pb::DiskFull) -> Option<Fault> {
+        self.at += ".disk_full";
+        let node = self.node("node", d.node.as_deref());
+        let from_s = self.time("at_s", d.at_s);
+        let Some(for_s) = d.for_s else {
+            self.c.problem(
+                format!("{}.for_s", self.at),
+                "give for_s, the seconds the disk is full",
+            );
+            return None;
+        };
+        let for_s = self.length("for_s", for_s)?;
+        let (node, from_s) = (node?, from_s?);
+        let to_s = self.within("for_s", from_s + for_s)?;
+        Some(Fault::DiskFull { node, from_s, to_s })
+    }
+
     fn garble(&mut self, g: &pb::Garble) -> Option<Fault> {
         self.at += ".garble";
         let node = self.node("node", g.node.as_deref());
@@ -382,7 +416,12 @@ impl Place<'_, '_> {
 pub(crate) fn filter(faults: &[Fault], ids: &[i32], seed: u64, start: Instant) -> Option<Filter> {
     let faults: Vec<Fault> = faults
         .iter()
-        .filter(|f| !matches!(f, Fault::Kill { .. } | Fault::ClockStep { .. }))
+        .filter(|f| {
+            !matches!(
+                f,
+                Fault::Kill { .. } | Fault::ClockStep { .. } | Fault::DiskFull { .. }
+            )
+        })
         .cloned()
         .collect();
     if faults.is_empty() {
@@ -419,7 +458,7 @@ pub(crate) fn filter(faults: &[Fault], ids: &[i32], seed: u64, start: Instant) -
                         heard = garbled(&heard, receiver, probability, seed, past_crc);
                     }
                 }
-                Fault::Kill { .. } | Fault::ClockStep { .. } => {}
+                Fault::Kill { .. } | Fault::ClockStep { .. } | Fault::DiskFull { .. } => {}
             }
         }
         Some(heard)

@@ -39,6 +39,7 @@
 pub mod aloha;
 pub mod carriage;
 pub mod discovery;
+mod disk;
 pub mod fault;
 pub mod glint10;
 mod incarnation;

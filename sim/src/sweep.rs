@@ -1,8 +1,8 @@
 //! The deterministic fault sweep: from each seed a random scenario (2 to
 //! 5 nodes on fixed TDMA over lossy water; acknowledged commands,
 //! deliberate repeats of one command, unacknowledged broadcast navigation
-//! reports; a random schedule of kills, links down, unplugged modems and
-//! garbled frames over the hours of traffic; then an hour of drain), run,
+//! reports; a random schedule of kills, links down, unplugged modems, full
+//! disks, clock steps and garbled frames over the hours of traffic; then an hour of drain), run,
 //! and its ledger checked:
 //!
 //! - every accepted acknowledged publication was delivered exactly once to
@@ -143,8 +143,8 @@ fn node(rng: &mut ChaCha8Rng, id: i32, n: i32) -> String {
 }
 
 /// A schedule of 2 to 8 faults among `n` nodes: kills (a node not killed
-/// again while down), links down, modems unplugged, frames garbled (the
-/// modem's check drops them), within the traffic's `traffic_s`, ended by
+/// again while down), links down, modems unplugged, disks full, clocks
+/// stepped and set right, frames garbled (the modem's check drops them), within the traffic's `traffic_s`, ended by
 /// the run's `end_s`.
 fn faults(rng: &mut ChaCha8Rng, n: i32, traffic_s: f64, end_s: f64) -> String {
     let mut text = String::new();
@@ -156,7 +156,7 @@ fn faults(rng: &mut ChaCha8Rng, n: i32, traffic_s: f64, end_s: f64) -> String {
         let window = |rng: &mut ChaCha8Rng, longest: f64| {
             (rng.random_range(30.0..longest).round() + at).min(end_s)
         };
-        let line = match rng.random_range(0..4) {
+        let line = match rng.random_range(0..6) {
             0 => {
                 let back = window(rng, 900.0);
                 if down
@@ -180,6 +180,22 @@ fn faults(rng: &mut ChaCha8Rng, n: i32, traffic_s: f64, end_s: f64) -> String {
                 "unplug {{ node: \"n{node}\" at_s: {at} for_s: {} }}",
                 window(rng, 1200.0) - at
             ),
+            3 => format!(
+                "disk_full {{ node: \"n{node}\" at_s: {at} for_s: {} }}",
+                window(rng, 1800.0) - at
+            ),
+            4 => {
+                // A step of 1 to 30 s either way (the node's slots by its
+                // clock then overlap its neighbours'), set right up to 30
+                // minutes later, as a fix of the node's clock would.
+                let by = rng.random_range(1..=30) * if rng.random_bool(0.5) { 1 } else { -1 };
+                let back = window(rng, 1800.0);
+                format!(
+                    "clock_step {{ node: \"n{node}\" at_s: {at} by_s: {by} }} }}\n\
+                     fault {{ clock_step {{ node: \"n{node}\" at_s: {back} by_s: {} }}",
+                    -by
+                )
+            }
             _ => format!(
                 "garble {{ node: \"n{node}\" probability: {:.2} from_s: {at} to_s: {} }}",
                 rng.random_range(0.05..0.8),
@@ -200,9 +216,9 @@ pub struct Tally {
     pub nodes: usize,
     /// Faults of the scenario.
     pub faults: usize,
-    /// Publications made, and refused (their node was down).
+    /// Publications made.
     pub published: u64,
-    /// Refused by their node (down at the time).
+    /// Refused by their node (down, or its disk full, at the time).
     pub refused: u64,
     /// Accepted acknowledged publications delivered exactly once.
     pub delivered_once: u64,

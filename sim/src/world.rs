@@ -146,6 +146,7 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
                 clock: clock.clone(),
                 start,
                 end_s,
+                root: format!("{}/", dir.display()),
             };
             streams.push(tokio::spawn(publishing.run()));
         }
@@ -158,9 +159,10 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
         }
         Ok::<(), SimError>(())
     };
-    let (killed, published) = tokio::join!(
+    let (killed, published, ()) = tokio::join!(
         crate::incarnation::kills(&world, nodes, &doors, start),
-        published
+        published,
+        crate::disk::run(&s.faults, |i| crate::disk::data_dir(dir, i), start)
     );
     published?;
     let (nodes, dead) = killed?;
@@ -168,7 +170,7 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
         .await;
     stop_nodes(s, nodes, dead).await?;
     for (i, node) in s.nodes.iter().enumerate() {
-        let ids = owed(&dir.join(format!("node{i}")))
+        let ids = owed(&crate::disk::data_dir(dir, i))
             .map_err(|e| SimError::Run(format!("node {}: {e}", node.name)))?;
         ledger.lock().expect("not poisoned").owed(i, &ids);
     }
@@ -254,7 +256,7 @@ async fn start_node(
     let driver_config = driver_config(node.modem_id, &positions, &s.water, seed);
     let mut config = node.config.clone();
     config.driver = Some(driver_config.clone());
-    config.data_dir = Some(dir.join(format!("node{i}")).display().to_string());
+    config.data_dir = Some(crate::disk::data_dir(dir, i).display().to_string());
     let failed = |e: &dyn std::fmt::Display| {
         SimError::Run(format!("node {}: gobyd did not start: {e}", node.name))
     };
@@ -387,6 +389,10 @@ struct Publishing {
     clock: Arc<TokioClock>,
     start: Instant,
     end_s: f64,
+    /// The run's directory of data directories, with its separator: taken
+    /// out of the reasons of refusals (a full disk's names the file), so
+    /// that they read the same in every run.
+    root: String,
 }
 
 impl Publishing {
@@ -421,7 +427,7 @@ impl Publishing {
                 Err(_) => Err("the node stopped taking publications".to_string()),
                 Ok(()) => match answer.await {
                     Ok(Ok(accepted)) => Ok(accepted.id),
-                    Ok(Err(refused)) => Err(refused),
+                    Ok(Err(refused)) => Err(refused.replace(&self.root, "")),
                     Err(_) => Err("the node did not answer".to_string()),
                 },
             };

@@ -1,5 +1,5 @@
 //! Faults in a run: a gobyd killed and started again on its data
-//! directory, a link down, a modem unplugged, garbled frames (the faults
+//! directory, a link down, a modem unplugged, a full disk, garbled frames (the faults
 //! refused at their place in the file are in `refusals.rs`).
 
 mod support;
@@ -222,4 +222,51 @@ fn garbled_frames_past_the_crc_reach_the_decoder_and_the_run_goes_on() {
             assert_eq!(copies, 1, "{p:?}");
         }
     }
+}
+
+#[test]
+fn a_full_disk_refuses_publications_and_holds_back_acks_and_nothing_is_lost() {
+    // n2's disk is full from 600 s for 900 s: what n2's autonomy publishes
+    // then is refused (its journal cannot take it); what n1 sends it then
+    // cannot go on record: n2 hands it over, does not acknowledge it, and
+    // suppresses its retransmissions. Every accepted command arrives once.
+    let text = support::ring(2, 0.0, 3600, 120, 3600)
+        + "fault { disk_full { node: \"n2\" at_s: 600 for_s: 900 } }\n";
+    let outcome = run(&text);
+    every_accepted_delivered_once(&outcome);
+    assert_eq!(
+        outcome.report.run.faults,
+        ["disk_full at n2 from 600 s to 1500 s"]
+    );
+    let start = outcome.report.run.start_us;
+    let s = |t: i64| (t - start) as f64 / 1e6;
+    let refused: Vec<(usize, f64, &str)> = outcome
+        .ledger
+        .publications()
+        .iter()
+        .filter_map(|p| Some((p.src, s(p.time), p.refused.as_deref()?)))
+        .collect();
+    assert!(!refused.is_empty(), "nothing n2 published was refused");
+    for (src, t, why) in &refused {
+        assert_eq!(*src, 1, "refused at another node than n2: {refused:?}");
+        assert!((600.0..1500.0).contains(t), "refused outside: {refused:?}");
+        assert!(why.contains("no space left"), "refused for: {why}");
+    }
+    // n1's commands heard while n2's disk was full are handed over all the
+    // same (known in memory, off the record), once; their frames are
+    // acknowledged only after the hand-over (a retransmission's).
+    let mut held_off = 0;
+    for p in outcome.ledger.publications().iter().filter(|p| p.src == 0) {
+        let delivered = p.deliveries[&1][0];
+        if (600.0..1490.0).contains(&s(p.time)) {
+            held_off += 1;
+            assert!(s(delivered) < 1500.0, "not handed over while full: {p:?}");
+        }
+        let acked = p.acked.expect("acknowledged");
+        assert!(acked >= delivered, "acknowledged before delivered: {p:?}");
+    }
+    assert!(
+        held_off >= 5,
+        "{held_off} commands sent while the disk was full"
+    );
 }

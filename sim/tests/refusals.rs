@@ -463,6 +463,11 @@ fn a_fault_naming_an_unknown_node_is_refused_at_its_place() {
             "node: \"n7\"",
             "fault[0].garble.node",
         ),
+        (
+            "disk_full { node: \"n7\" at_s: 1 for_s: 2 }",
+            "node: \"n7\"",
+            "fault[0].disk_full.node",
+        ),
     ] {
         let text = support::ring(2, 0.0, 600, 60, 60) + &format!("fault {{ {fault} }}\n");
         let (line, column) = place_of(&text, needle);
@@ -502,6 +507,12 @@ fn a_fault_outside_the_run_is_refused_at_its_place() {
             "-1 is not 0 or more seconds",
         ),
         (
+            "disk_full { node: \"n1\" at_s: 600 for_s: 61 }",
+            "for_s: 61",
+            "fault[0].disk_full.for_s",
+            "661 s is after the end of the run (660 s: duration_s plus drain_s)",
+        ),
+        (
             "garble { node: \"n1\" probability: 1.5 }",
             "probability: 1.5",
             "fault[0].garble.probability",
@@ -537,6 +548,11 @@ fn a_fault_missing_a_value_is_asked_for_it_and_a_refused_duration_brings_no_faul
     let error = refusal(&(ring.clone() + "fault { unplug { node: \"n1\" at_s: 10 } }\n"));
     assert!(
         error.contains("fault[0].unplug.for_s: give for_s"),
+        "{error}"
+    );
+    let error = refusal(&(ring.clone() + "fault { disk_full { node: \"n1\" at_s: 10 } }\n"));
+    assert!(
+        error.contains("fault[0].disk_full.for_s: give for_s"),
         "{error}"
     );
     let error = refusal(

@@ -1,6 +1,7 @@
 //! A short run of the deterministic fault sweep (the long one is the
 //! `sweep` example: 200 seeds of 6 hours): random scenarios of kills,
-//! links down, unplugged modems and garbled frames, each seed's ledger
+//! links down, unplugged modems, full disks, clock steps and garbled
+//! frames, each seed's ledger
 //! checked against the sweep's invariants (no packet outside its slot
 //! among them); and a seed gives the same scenario and the same report
 //! again.
@@ -12,7 +13,10 @@ use goby_sim::sweep::{check_slots, run_seed, scenario_text, Tally, HOURS};
 fn a_few_seeds_of_faults_lose_nothing_duplicate_nothing_drop_no_repeat_and_keep_to_slots() {
     let mut faults = 0;
     let mut refused = 0;
-    for seed in [1, 2, 3, 4] {
+    // 31 and 85 once failed: a node killed while its disk was full did not
+    // start again; a deliberate repeat was dropped after its sender's
+    // restart jumped its publication numbers.
+    for seed in [1, 2, 3, 4, 31, 85] {
         let (tally, _) = run_seed(seed, HOURS).expect("the run ends");
         assert!(
             tally.passed(),
