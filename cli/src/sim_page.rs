@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write;
 
 use goby_sim::link_quality::LinkQuality;
-use goby_sim::losses::{LossCounts, UNSETTLED};
+use goby_sim::losses::{LossCounts, NODE_DOWN, UNSETTLED};
 use goby_sim::report::Stats;
 use goby_sim::{Ledger, Report};
 use modemdriver::sim::observer::Fate;
@@ -30,6 +30,7 @@ fn fate_colour(fate: &str) -> &'static str {
         "no_ray" => "#8c564b",
         "fault" => "#e377c2",
         "garbled" => "#bcbd22",
+        "node_down" => "#393b79",
         _ => "#17becf",
     }
 }
@@ -37,6 +38,7 @@ fn fate_colour(fate: &str) -> &'static str {
 /// Every packet fate, in the order the charts stack them.
 fn fates() -> Vec<&'static str> {
     let mut names: Vec<&str> = Fate::ALL.iter().map(|f| f.name()).collect();
+    names.push(NODE_DOWN);
     names.push(UNSETTLED);
     names
 }
@@ -204,7 +206,8 @@ fn losses_section(page: &mut String, report: &Report) {
     *page += "<h2 id=\"losses\">Losses</h2>\n<p>The fate, at the node each publication was for, \
               of every data packet that carried it: heard; collision (another packet arrived there \
               meanwhile); half_duplex (that node was transmitting); out_of_range; frame_error (the \
-              loss draw: packet_loss, or the frame-error rate at the link's SNR); no_ray; unsettled \
+              loss draw: packet_loss, or the frame-error rate at the link's SNR); no_ray; fault; \
+              garbled; node_down (that node's gobyd was killed, not started again yet); unsettled \
               (the run ended first). Then why the undelivered ones were not delivered.</p>\n";
     let order = fates();
     let legend: Vec<(&str, &str)> = order.iter().map(|f| (*f, fate_colour(f))).collect();

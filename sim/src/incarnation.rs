@@ -41,6 +41,8 @@ pub(crate) async fn kills(
     let s = world.scenario();
     let mut nodes: Vec<Option<Running>> = nodes.into_iter().map(Some).collect();
     let mut generations = vec![0u64; nodes.len()];
+    // When each node was killed, while it is down.
+    let mut killed_at: Vec<Option<i64>> = vec![None; nodes.len()];
     let mut dead = Vec::new();
     // (when, node, down: kill or start again), in order of time.
     let mut steps: Vec<(f64, usize, bool)> = Vec::new();
@@ -58,6 +60,7 @@ pub(crate) async fn kills(
                 .take()
                 .expect("a node is killed only while it runs");
             dead.push(kill(running, name).await?);
+            killed_at[i] = Some(world.now());
         } else {
             generations[i] += 1;
             let running = world.start_node(i, generations[i]).await.map_err(|e| {
@@ -66,6 +69,9 @@ pub(crate) async fn kills(
                 ))
             })?;
             *doors[i].lock().expect("not poisoned") = Some(running.publisher.clone());
+            if let Some(from) = killed_at[i].take() {
+                world.was_down(i, from);
+            }
             nodes[i] = Some(running);
         }
     }

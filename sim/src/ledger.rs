@@ -119,6 +119,9 @@ pub struct Ledger {
     carriage: Carriage,
     /// What happened on the water.
     medium: MediumLog,
+    /// When nodes were down (killed, not started again yet): (node, from,
+    /// until).
+    down: Vec<(usize, Micros, Micros)>,
     failure: Option<String>,
 }
 
@@ -137,6 +140,7 @@ impl Ledger {
             mac_log: Vec::new(),
             carriage: Carriage::default(),
             medium: MediumLog::default(),
+            down: Vec::new(),
             failure: None,
         }
     }
@@ -187,6 +191,19 @@ impl Ledger {
     /// Enters what happened on the water, at the end of the run.
     pub fn set_medium(&mut self, log: MediumLog) {
         self.medium = log;
+    }
+
+    /// Enters that node `node` was down (its gobyd killed, not started
+    /// again yet) from `from` until `until`.
+    pub fn down(&mut self, node: usize, from: Micros, until: Micros) {
+        self.down.push((node, from, until));
+    }
+
+    /// Whether node `node` was down at some moment from `from` to `to`.
+    pub fn was_down(&self, node: usize, from: Micros, to: Micros) -> bool {
+        self.down
+            .iter()
+            .any(|&(n, down, up)| n == node && down <= to && from < up)
     }
 
     /// Why the run cannot be trusted (an event missed), if so.

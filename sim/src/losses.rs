@@ -7,8 +7,10 @@
 //!   `heard`, `collision` (another arrival overlapped it), `half_duplex`
 //!   (the node was transmitting), `out_of_range`, `frame_error` (the loss
 //!   draw: `packet_loss`, or the frame-error rate at the link's SNR),
-//!   `no_ray` (modelled water: no ray reaches), or `unsettled` (the run
-//!   ended, or the node stopped, before the packet had reached it);
+//!   `no_ray` (modelled water: no ray reaches), `node_down` (the node's
+//!   gobyd was killed, not started again yet, while the packet was on its
+//!   way), or `unsettled` (the run ended before the packet had reached
+//!   it);
 //! - when it was not delivered, **why**: `refused` by its sender,
 //!   `dropped` from a full queue, `expired_unsent`, `expired_unacked`
 //!   (sent, but its ack never came back before its ttl), `owed_unsent`,
@@ -35,6 +37,14 @@ use crate::ledger::{Ledger, Publication};
 
 /// The fate of a packet at a node when the run gave it none.
 pub const UNSETTLED: &str = "unsettled";
+
+/// The fate of a packet at a node that was down (its gobyd killed, not
+/// started again yet) while the packet was on its way: no modem listened.
+pub const NODE_DOWN: &str = "node_down";
+
+/// How long after its end a packet may still be arriving (sound at
+/// 1 500 m/s over 15 km), for [`NODE_DOWN`].
+const ARRIVAL_US: u64 = 10_000_000;
 
 /// Counts of one group of publications (each counted once per node it
 /// was for).
@@ -74,20 +84,45 @@ pub struct Why {
     pub delivered_unacked: Option<&'static str>,
 }
 
-/// The fates of packets by (sender modem id, start µs, receiver modem id).
-pub struct Fates(HashMap<(i32, u64, i32), Fate>);
+/// The fates of packets by (sender modem id, start µs, receiver modem
+/// id), and their lengths by (sender modem id, start µs).
+pub struct Fates {
+    fates: HashMap<(i32, u64, i32), Fate>,
+    lengths: HashMap<(i32, u64), u64>,
+}
 
 impl Fates {
     /// The fates recorded in `ledger`'s medium log.
     pub fn new(ledger: &Ledger) -> Fates {
-        Fates(
-            ledger
-                .medium()
+        let medium = ledger.medium();
+        Fates {
+            fates: medium
                 .receptions
                 .iter()
                 .map(|r| ((r.src, r.start_us, r.receiver), r.fate))
                 .collect(),
-        )
+            lengths: medium
+                .transmissions
+                .iter()
+                .map(|t| ((t.src, t.start_us), t.duration.as_micros() as u64))
+                .collect(),
+        }
+    }
+
+    /// The fate of the packet `src` (modem id) started at `start` at node
+    /// `receiver` (index): as the water told it, else [`NODE_DOWN`] when
+    /// the node was down while it was on its way, else [`UNSETTLED`].
+    fn fate(&self, ledger: &Ledger, src: i32, start: u64, receiver: usize) -> &'static str {
+        let modem_id = ledger.nodes()[receiver].modem_id;
+        if let Some(fate) = self.fates.get(&(src, start, modem_id)) {
+            return fate.name();
+        }
+        let end = start + self.lengths.get(&(src, start)).copied().unwrap_or(0) + ARRIVAL_US;
+        let (start, end) = (start as i64, end as i64);
+        match ledger.was_down(receiver, start, end) {
+            true => NODE_DOWN,
+            false => UNSETTLED,
+        }
     }
 
     /// Why publication `p` was or was not delivered at node `receiver`.
@@ -98,11 +133,7 @@ impl Fates {
             .map(|e| ledger.carriage().packets(p.src, e))
             .unwrap_or_default()
             .iter()
-            .map(|&start| {
-                self.0
-                    .get(&(nodes[p.src].modem_id, start, nodes[receiver].modem_id))
-                    .map_or(UNSETTLED, |f| f.name())
-            })
+            .map(|&start| self.fate(ledger, nodes[p.src].modem_id, start, receiver))
             .collect();
         let delivered = p.deliveries.contains_key(&receiver);
         let undelivered = (!delivered).then(|| {

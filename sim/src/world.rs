@@ -219,6 +219,17 @@ impl World<'_> {
         self.s
     }
 
+    /// The run's clock now, microseconds since the UNIX epoch.
+    pub(crate) fn now(&self) -> i64 {
+        self.clock.now()
+    }
+
+    /// Enters in the ledger that node `i` was down from `from` until now.
+    pub(crate) fn was_down(&self, i: usize, from: i64) {
+        let now = self.now();
+        self.ledger.lock().expect("not poisoned").down(i, from, now);
+    }
+
     /// Starts node `i` (its `generation`-th start: 0 the first, more after
     /// kills) with its data directory in the world's.
     pub(crate) async fn start_node(&self, i: usize, generation: u64) -> Result<Running, SimError> {

@@ -82,6 +82,14 @@ fn a_killed_gobyd_started_again_on_its_data_directory_owes_what_it_had_accepted(
             && p.deliveries[&2][0] > outcome.report.run.start_us + 1_300_000_000
     });
     assert!(late, "nothing accepted before the kill was owed across it");
+    // What n1 sent n2 while n2 was down is told node_down; nothing is left
+    // unsettled.
+    let packets = &outcome.report.losses.total.packets;
+    assert!(
+        packets.get("node_down").is_some_and(|n| *n > 0),
+        "{packets:?}"
+    );
+    assert_eq!(packets.get("unsettled"), None, "{packets:?}");
 }
 
 #[test]
