@@ -314,36 +314,46 @@ impl Place<'_, '_> {
 
     fn unplug(&mut self, u: &pb::Unplug) -> Option<Fault> {
         self.at += ".unplug";
-        let node = self.node("node", u.node.as_deref());
-        let from_s = self.time("at_s", u.at_s);
-        let Some(for_s) = u.for_s else {
-            self.c.problem(
-                format!("{}.for_s", self.at),
-                "give for_s, the seconds the modem is off the water",
-            );
-            return None;
-        };
-        let for_s = self.length("for_s", for_s)?;
-        let (node, from_s) = (node?, from_s?);
-        let to_s = self.within("for_s", from_s + for_s)?;
+        let (node, from_s, to_s) = self.node_for(
+            u.node.as_deref(),
+            u.at_s,
+            u.for_s,
+            "the seconds the modem is off the water",
+        )?;
         Some(Fault::Unplug { node, from_s, to_s })
     }
 
     fn disk_full(&mut self, d: &pb::DiskFull) -> Option<Fault> {
         self.at += ".disk_full";
-        let node = self.node("node", d.node.as_deref());
-        let from_s = self.time("at_s", d.at_s);
-        let Some(for_s) = d.for_s else {
-            self.c.problem(
-                format!("{}.for_s", self.at),
-                "give for_s, the seconds the disk is full",
-            );
+        let (node, from_s, to_s) = self.node_for(
+            d.node.as_deref(),
+            d.at_s,
+            d.for_s,
+            "the seconds the disk is full",
+        )?;
+        Some(Fault::DiskFull { node, from_s, to_s })
+    }
+
+    /// A fault of a node from `at_s` for `for_s` (`for_s` being `what`):
+    /// the node, and the fault's start and end, each checked.
+    fn node_for(
+        &mut self,
+        node: Option<&str>,
+        at_s: Option<f64>,
+        for_s: Option<f64>,
+        what: &str,
+    ) -> Option<(usize, f64, f64)> {
+        let node = self.node("node", node);
+        let from_s = self.time("at_s", at_s);
+        let Some(for_s) = for_s else {
+            self.c
+                .problem(format!("{}.for_s", self.at), format!("give for_s, {what}"));
             return None;
         };
         let for_s = self.length("for_s", for_s)?;
         let (node, from_s) = (node?, from_s?);
         let to_s = self.within("for_s", from_s + for_s)?;
-        Some(Fault::DiskFull { node, from_s, to_s })
+        Some((node, from_s, to_s))
     }
 
     fn garble(&mut self, g: &pb::Garble) -> Option<Fault> {
