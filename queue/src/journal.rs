@@ -363,13 +363,17 @@ impl Journal {
     /// record is lost in a crash, the message is sent once more after the
     /// restart (a duplicate, never a loss).
     pub fn remove(&mut self, id: EntryId) -> Result<(), JournalError> {
-        let Some(entry) = self.live.remove(&id) else {
+        let Some(entry) = self.live.get(&id) else {
             return Ok(());
         };
-        self.live_bytes -= accepted_size(&entry) as u64;
+        let size = accepted_size(entry) as u64;
+        // Written first: a removal that cannot be written (a full disk)
+        // leaves the entry owed, here as in the file, to be removed again.
         self.log
             .append_with(|out| write_removed(out, id))
             .map_err(|e| JournalError::of(self.log.path(), e))?;
+        self.live.remove(&id);
+        self.live_bytes -= size;
         let len = self.log.file_len();
         if len > COMPACT_MIN_BYTES && self.live_bytes * 2 < len {
             self.compact()?;
@@ -668,6 +672,24 @@ mod tests {
         let err = Journal::open(dir.file()).unwrap_err();
         assert!(matches!(err, JournalError::NotAJournal(_)), "{err}");
         assert_eq!(std::fs::read(dir.file()).unwrap(), b"important notes");
+    }
+
+    #[test]
+    fn a_removal_that_cannot_be_written_leaves_the_entry_owed_to_be_removed_again() {
+        let dir = TempDir::new("full");
+        let (mut j, _) = Journal::open(dir.file()).unwrap();
+        let id = j.accept("a.A", b"one", 1).unwrap();
+        goby_store::space::mark_full(&dir.0);
+        let refused = j.remove(id);
+        goby_store::space::mark_free(&dir.0);
+        let e = refused.unwrap_err();
+        assert!(e.to_string().contains("no space left"), "{e}");
+        assert_eq!(j.len(), 1, "still owed, here as in the file");
+        j.remove(id).unwrap();
+        assert_eq!(j.len(), 0);
+        drop(j);
+        let (_, replay) = Journal::open(dir.file()).unwrap();
+        assert!(replay.entries.is_empty(), "removed in the file");
     }
 
     #[test]

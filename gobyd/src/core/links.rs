@@ -279,10 +279,9 @@ impl Core {
             link.backoff.failures()
         );
         link.last_error = Some(reason);
-        match self.outbox.transmitted(i, false) {
-            Ok(n) if n > 0 => tracing::info!("{n} messages queued again from the failed link"),
-            Ok(_) => {}
-            Err(e) => tracing::error!("journal: {e}"),
+        let n = self.outbox.transmitted(i, false);
+        if n > 0 {
+            tracing::info!("{n} messages queued again from the failed link");
         }
         self.report_link(i);
     }
@@ -558,9 +557,7 @@ impl Core {
         if let Err(e) = old.stop().await {
             tracing::warn!("driver stop: {e}");
         }
-        if let Err(e) = self.outbox.transmitted(i, false) {
-            tracing::error!("journal: {e}");
-        }
+        self.outbox.transmitted(i, false);
         let driver = match start_driver(&config).await {
             Ok(driver) => driver,
             Err(e) if self.links[i].supervised => {

@@ -641,12 +641,9 @@ impl Core {
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
                     tracing::warn!("transmission failed: {reason}");
                 }
-                match self.outbox.transmitted(i, went_out) {
-                    Ok(n) if n > 0 => {
-                        tracing::info!("{n} messages queued again after a failed transmission")
-                    }
-                    Ok(_) => {}
-                    Err(e) => tracing::error!("journal: {e}"),
+                let n = self.outbox.transmitted(i, went_out);
+                if n > 0 {
+                    tracing::info!("{n} messages queued again after a failed transmission")
                 }
             }
             DriverEvent::Raw(raw) => {

@@ -68,6 +68,10 @@ pub struct Outbox {
     /// (of each link): they leave the journal once it went out, and are
     /// queued again if it failed.
     in_flight: Vec<(queue::LinkIndex, EntryId, DynamicMessage)>,
+    /// Journal entries that left their queue for good but whose removal
+    /// could not be written (a full disk): written again before each
+    /// acceptance and each batch of events ([`Outbox::remove`]).
+    unremoved: Vec<EntryId>,
 }
 
 impl std::fmt::Debug for Outbox {
@@ -100,6 +104,7 @@ impl Outbox {
             events,
             entries: HashMap::new(),
             in_flight: Vec::new(),
+            unremoved: Vec::new(),
         };
         let mut report = OutboxReplay {
             discarded_bytes: replay.discarded_bytes,
@@ -124,9 +129,9 @@ impl Outbox {
                     outbox.entries.insert(id, entry.id);
                     report.requeued += 1;
                 }
-                Ok(None) => outbox.journal.remove(entry.id)?,
+                Ok(None) => outbox.remove(entry.id),
                 Err(reason) => {
-                    outbox.journal.remove(entry.id)?;
+                    outbox.remove(entry.id);
                     report.failed.push(ReplayFailure {
                         message_name: entry.message_name,
                         reason,
@@ -173,6 +178,7 @@ impl Outbox {
                 .encode(&message)
                 .map_err(QueueError::from)?,
         };
+        self.remove_again();
         let entry = self.journal.accept_unsynced(
             message.descriptor().full_name(),
             encoded.as_slice(),
@@ -190,11 +196,11 @@ impl Outbox {
                 Ok(Accepted::Queued(entry))
             }
             Ok(None) => {
-                self.journal.remove(entry)?;
+                self.remove(entry);
                 Ok(Accepted::Delivered)
             }
             Err(e) => {
-                self.journal.remove(entry)?;
+                self.remove(entry);
                 Err(e.into())
             }
         }
@@ -268,7 +274,7 @@ impl Outbox {
         let ids = self.queue.flush_ids(name)?;
         for id in &ids {
             if let Some(entry) = self.entries.remove(id) {
-                self.journal.remove(entry)?;
+                self.remove(entry);
             }
         }
         Ok(ids.len())
@@ -284,7 +290,8 @@ impl Outbox {
     /// sendings, acks, expiries and drops. Messages that left their queue
     /// for good are removed from the journal first; messages sent without
     /// ack wait for [`transmitted`](Self::transmitted).
-    pub fn events(&mut self) -> Result<Vec<(QueueEvent, Option<EntryId>)>, JournalError> {
+    pub fn events(&mut self) -> Vec<(QueueEvent, Option<EntryId>)> {
+        self.remove_again();
         let events: Vec<QueueEvent> = self.events.try_iter().collect();
         let mut out = Vec::with_capacity(events.len());
         for event in events {
@@ -294,7 +301,7 @@ impl Outbox {
                 | QueueEvent::Expired { id, .. }
                 | QueueEvent::Dropped { id, .. } => {
                     if let Some(entry) = self.entries.remove(id) {
-                        self.journal.remove(entry)?;
+                        self.remove(entry);
                         ended = Some(entry);
                     }
                 }
@@ -315,7 +322,37 @@ impl Outbox {
             }
             out.push((event, ended));
         }
-        Ok(out)
+        out
+    }
+
+    /// Removes `entry` (its message left its queue for good) from the
+    /// journal. A removal that cannot be written (a full disk) is kept and
+    /// written again later ([`remove_again`](Self::remove_again)): the
+    /// events go on all the same. Until it is written the journal still
+    /// owes the message, and a restart would send it once more, as a
+    /// retransmission its receiver suppresses.
+    fn remove(&mut self, entry: EntryId) {
+        if let Err(e) = self.journal.remove(entry) {
+            tracing::warn!("{e}: entry {entry} is removed once it can be written");
+            self.unremoved.push(entry);
+        }
+    }
+
+    /// Writes again the removals that could not be written.
+    fn remove_again(&mut self) {
+        if self.unremoved.is_empty() {
+            return;
+        }
+        let mut kept = Vec::new();
+        for entry in std::mem::take(&mut self.unremoved) {
+            if self.journal.remove(entry).is_err() {
+                kept.push(entry);
+            }
+        }
+        if kept.is_empty() {
+            tracing::info!("the journal's removals that waited are written");
+        }
+        self.unremoved = kept;
     }
 
     /// Settles the messages sent without ack in the transmission under way
@@ -323,11 +360,7 @@ impl Outbox {
     /// outcome): `went_out` removes them from the journal; otherwise (the
     /// driver failed to send) they are queued again with their original age.
     /// Returns how many were queued again.
-    pub fn transmitted(
-        &mut self,
-        link: queue::LinkIndex,
-        went_out: bool,
-    ) -> Result<usize, OutboxError> {
+    pub fn transmitted(&mut self, link: queue::LinkIndex, went_out: bool) -> usize {
         let (in_flight, others) = std::mem::take(&mut self.in_flight)
             .into_iter()
             .partition(|(l, _, _)| *l == link);
@@ -335,7 +368,7 @@ impl Outbox {
         let mut requeued = 0;
         for (_, entry, message) in in_flight {
             if went_out {
-                self.journal.remove(entry)?;
+                self.remove(entry);
                 continue;
             }
             // The bytes the journal keeps: the message is not encoded
@@ -354,10 +387,10 @@ impl Outbox {
                     self.entries.insert(id, entry);
                     requeued += 1;
                 }
-                Ok(None) | Err(_) => self.journal.remove(entry)?,
+                Ok(None) | Err(_) => self.remove(entry),
             }
         }
-        Ok(requeued)
+        requeued
     }
 }
 
@@ -464,7 +497,7 @@ mod tests {
             ..Default::default()
         };
         outbox.data_request(&mut tx, 0, &[]).unwrap();
-        outbox.events().unwrap();
+        outbox.events();
         tx
     }
 
@@ -515,7 +548,7 @@ mod tests {
                 ..Default::default()
             };
             outbox.receive(&ack, 0);
-            outbox.events().unwrap();
+            outbox.events();
             assert_eq!(outbox.owed(), 0);
             // Two more, sent but never acknowledged.
             outbox.accept(command(2, "c"), None, None).unwrap();
@@ -544,12 +577,12 @@ mod tests {
         assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 0);
         // Still owed until the driver says it went out.
         assert_eq!(outbox.owed(), 1);
-        assert_eq!(outbox.transmitted(0, false).unwrap(), 1);
+        assert_eq!(outbox.transmitted(0, false), 1);
         assert_eq!(outbox.queue().size("goby.example.Command").unwrap(), 1);
         clock.advance_seconds(1.0);
         let tx = request(&mut outbox);
         assert_eq!(notes(&outbox, &tx.frame[0]), ["x"]);
-        assert_eq!(outbox.transmitted(0, true).unwrap(), 0);
+        assert_eq!(outbox.transmitted(0, true), 0);
         assert_eq!(outbox.owed(), 0);
     }
 
@@ -567,7 +600,7 @@ mod tests {
         assert_eq!(outbox.owed(), 1);
         clock.advance_seconds(101.0);
         outbox.expire();
-        let events = outbox.events().unwrap();
+        let events = outbox.events();
         assert!(events
             .iter()
             .any(|(e, _)| matches!(e, QueueEvent::Expired { .. })));
@@ -649,7 +682,7 @@ mod tests {
             else {
                 panic!("not queued");
             };
-            outbox.events().unwrap();
+            outbox.events();
             clock.advance_seconds(1.0);
             let mut tx = ModemTransmission {
                 max_frame_bytes: Some(32),
@@ -659,7 +692,6 @@ mod tests {
             outbox.data_request(&mut tx, 0, &[]).unwrap();
             let sent: Vec<_> = outbox
                 .events()
-                .unwrap()
                 .into_iter()
                 .filter(|(e, _)| matches!(e, QueueEvent::Sent { .. }))
                 .map(|(_, entry)| entry)

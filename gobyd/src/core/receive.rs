@@ -26,13 +26,7 @@ impl Core {
         &mut self,
     ) -> Vec<(Option<u64>, prost_reflect::DynamicMessage)> {
         let mut dropped = Vec::new();
-        let events = match self.outbox.events() {
-            Ok(events) => events,
-            Err(e) => {
-                tracing::error!("journal: {e}");
-                return dropped;
-            }
-        };
+        let events = self.outbox.events();
         for (event, entry) in events {
             let Some((event, entry)) = self.network_view(event, entry) else {
                 continue;
@@ -105,13 +99,7 @@ impl Core {
             tracing::warn!(src = transmission.src(), "received: {e}");
             faults.note(&e);
         }
-        let events = match self.outbox.events() {
-            Ok(events) => events,
-            Err(e) => {
-                tracing::error!("journal: {e}");
-                Vec::new()
-            }
-        };
+        let events = self.outbox.events();
         let mut messages = Vec::new();
         for (event, entry) in events {
             match event {
