@@ -221,13 +221,15 @@ impl Place<'_, '_> {
             return None;
         };
         if !value.is_finite() {
-            self.c
-                .problem(path, format!("{value} is not a number of seconds"));
+            self.c.problem(
+                path,
+                format!("{} is not a number of seconds", seconds(value)),
+            );
             return None;
         }
         if value < 0.0 {
             self.c
-                .problem(path, format!("{value} is not 0 or more seconds"));
+                .problem(path, format!("{} is not 0 or more seconds", seconds(value)));
             return None;
         }
         self.within(field, value)
@@ -235,12 +237,18 @@ impl Place<'_, '_> {
 
     /// `value` when it is not after the run's end (a run of a length
     /// refused apart is not checked against).
+    /// `field` is a time, or a length after `at_s` (then the end it gives,
+    /// at_s plus it, is what is checked and named).
     fn within(&mut self, field: &str, value: f64) -> Option<f64> {
         if self.run_s.is_finite() && self.run_s > 0.0 && value > self.run_s {
+            let what = match field {
+                "restart_after_s" | "for_s" => format!("at_s + {field} = {}", seconds(value)),
+                _ => seconds(value),
+            };
             self.c.problem(
                 format!("{}.{field}", self.at),
                 format!(
-                    "{value} s is after the end of the run ({} s: duration_s plus drain_s)",
+                    "{what} s is after the end of the run ({} s: duration_s plus drain_s)",
                     self.run_s
                 ),
             );
@@ -254,7 +262,7 @@ impl Place<'_, '_> {
         if !(value > 0.0 && value.is_finite()) {
             self.c.problem(
                 format!("{}.{field}", self.at),
-                format!("{value} is not more than 0 seconds"),
+                format!("{} is not more than 0 seconds", seconds(value)),
             );
             return None;
         }
@@ -417,6 +425,15 @@ impl Place<'_, '_> {
             return None;
         }
         Some(())
+    }
+}
+
+/// `value` seconds as a problem names them: as written up to ten million,
+/// else in scientific notation (not three hundred digits).
+fn seconds(value: f64) -> String {
+    match value.abs() < 1e7 {
+        true => value.to_string(),
+        false => format!("{value:e}"),
     }
 }
 

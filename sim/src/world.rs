@@ -146,7 +146,7 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
                 clock: clock.clone(),
                 start,
                 end_s,
-                root: format!("{}/", dir.display()),
+                root: format!("{}/", crate::disk::data_dir(dir, i).display()),
             };
             streams.push(tokio::spawn(publishing.run()));
         }
@@ -400,9 +400,10 @@ struct Publishing {
     clock: Arc<TokioClock>,
     start: Instant,
     end_s: f64,
-    /// The run's directory of data directories, with its separator: taken
-    /// out of the reasons of refusals (a full disk's names the file), so
-    /// that they read the same in every run.
+    /// The node's data directory, with its separator: taken out of the
+    /// reasons of refusals (a full disk's names the file), so that they
+    /// read the same in every run (`journal outbox.journal: no space left
+    /// on device`).
     root: String,
 }
 

@@ -492,13 +492,19 @@ fn a_fault_outside_the_run_is_refused_at_its_place() {
             "kill { node: \"n1\" at_s: 600 restart_after_s: 100 }",
             "restart_after_s: 100",
             "fault[0].kill.restart_after_s",
-            "700 s is after the end of the run (660 s: duration_s plus drain_s)",
+            "at_s + restart_after_s = 700 s is after the end of the run (660 s: duration_s plus drain_s)",
         ),
         (
             "link_down { a: \"n1\" b: \"n2\" from_s: 1 to_s: 661 }",
             "to_s: 661",
             "fault[0].link_down.to_s",
             "661 s is after the end of the run (660 s: duration_s plus drain_s)",
+        ),
+        (
+            "unplug { node: \"n1\" at_s: 1e300 for_s: 2 }",
+            "at_s: 1e300",
+            "fault[0].unplug.at_s",
+            "1e300 s is after the end of the run (660 s: duration_s plus drain_s)",
         ),
         (
             "unplug { node: \"n1\" at_s: -1 for_s: 2 }",
@@ -510,7 +516,7 @@ fn a_fault_outside_the_run_is_refused_at_its_place() {
             "disk_full { node: \"n1\" at_s: 600 for_s: 61 }",
             "for_s: 61",
             "fault[0].disk_full.for_s",
-            "661 s is after the end of the run (660 s: duration_s plus drain_s)",
+            "at_s + for_s = 661 s is after the end of the run (660 s: duration_s plus drain_s)",
         ),
         (
             "garble { node: \"n1\" probability: 1.5 }",
