@@ -203,9 +203,9 @@ fn swept(
     let t = goby_sim::sweep::check(&outcome.ledger);
     writeln!(
         stdout,
-        "sweep seed {seed}: {} published ({} refused: node down or disk full), {} delivered once, {} owed, \
+        "sweep seed {seed}: {} published ({} refused: node down or disk full), {} delivered once ({} still owed), {} owed, \
          {} lost, {} duplicated, {} repeats dropped",
-        t.published, t.refused, t.delivered_once, t.owed, t.lost, t.duplicated, t.repeats_dropped
+        t.published, t.refused, t.delivered_once, t.delivered_owed, t.owed, t.lost, t.duplicated, t.repeats_dropped
     )?;
     for breach in &t.breaches {
         writeln!(stdout, "  {breach}")?;

@@ -64,13 +64,14 @@ fn main() {
                 };
                 println!(
                     "seed {seed}: {} nodes, {} faults, {} published ({} refused: node down or disk full), \
-                     {} delivered once, {} owed, {} lost, {} duplicated, {} repeats dropped, \
+                     {} delivered once ({} still owed), {} owed, {} lost, {} duplicated, {} repeats dropped, \
                      {} of {} packets outside their slot ({:.1} s)",
                     tally.nodes,
                     tally.faults,
                     tally.published,
                     tally.refused,
                     tally.delivered_once,
+                    tally.delivered_owed,
                     tally.owed,
                     tally.lost,
                     tally.duplicated,
@@ -109,11 +110,12 @@ fn main() {
     let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
     println!("faults: {}", kinds.join(", "));
     println!(
-        "{} seeds x {hours} h: {} published, {} delivered once, {} owed, {} lost, {} duplicated, \
+        "{} seeds x {hours} h: {} published, {} delivered once ({} still owed), {} owed, {} lost, {} duplicated, \
          {} repeats dropped, {} of {} packets outside their slot; failed seeds {failed:?}; {:.1} s wall",
         tallies.len(),
         sum(|t| t.published),
         sum(|t| t.delivered_once),
+        sum(|t| t.delivered_owed),
         sum(|t| t.owed),
         sum(|t| t.lost),
         sum(|t| t.duplicated),

@@ -224,6 +224,10 @@ pub struct Tally {
     pub delivered_once: u64,
     /// Accepted acknowledged publications still owed at the end.
     pub owed: u64,
+    /// Of those delivered once, the ones still owed at the end (their ack
+    /// not heard, or its removal from the journal not written yet): not a
+    /// breach, a restart would send them once more as retransmissions.
+    pub delivered_owed: u64,
     /// Accepted acknowledged publications neither delivered nor owed
     /// (deliberate repeats apart).
     pub lost: u64,
@@ -351,7 +355,10 @@ pub fn check(ledger: &Ledger) -> Tally {
                     t.breaches
                         .push(format!("publication {i} neither delivered nor owed: {p:?}"));
                 }
-                _ => t.delivered_once += u64::from(copies == 1),
+                _ => {
+                    t.delivered_once += u64::from(copies == 1);
+                    t.delivered_owed += u64::from(copies == 1 && p.owed);
+                }
             }
             // Repeats are told apart by order only: checked together below.
             if let (false, Some(acked), Some(first)) =
