@@ -14,10 +14,15 @@
 # Each check prints PASS, FAIL (then the script fails) or SKIP with the
 # reason (a tool missing: .ci/packaging.sh installs them). Run from
 # anywhere; PATH must hold cargo-zigbuild (the line .ci/packaging.sh prints).
+# The programs and the wheel are built in the `packaging` and `release`
+# profiles, or both in GOBY_PACKAGING_PROFILE when it is set (CI sets the
+# unoptimised `packaging-check`, Cargo.toml).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
 target_dir=${CARGO_TARGET_DIR:-target}
+profile=${GOBY_PACKAGING_PROFILE:-packaging}
+if [ -n "${GOBY_PACKAGING_PROFILE:-}" ]; then wheel_profile=(--profile "$GOBY_PACKAGING_PROFILE"); else wheel_profile=(--release); fi
 passed=0 failed=0 skipped=0
 pass() { echo "packaging: PASS $1"; passed=$((passed + 1)); }
 fail() { echo "packaging: FAIL $1"; failed=$((failed + 1)); }
@@ -65,7 +70,7 @@ else
     fi
     start=$(date +%s)
     if packaging/deb/build.sh "${arches[@]}" > "$work/debs" 2> "$work/build.log"; then
-        pass "packages built for ${arches[*]} in $(( $(date +%s) - start )) s"
+        pass "packages built for ${arches[*]} in $(( $(date +%s) - start )) s (profile $profile)"
     else
         tail -30 "$work/build.log"
         fail "packages built for ${arches[*]}"
@@ -142,13 +147,13 @@ elif ! rustup target list --installed 2>/dev/null | grep -qx aarch64-unknown-lin
     skip "arm64 wheel: the Rust target aarch64-unknown-linux-gnu is not installed"
 else
     start=$(date +%s)
-    if maturin build --release --zig --compatibility manylinux2014 --target aarch64-unknown-linux-gnu \
+    if maturin build "${wheel_profile[@]}" --zig --compatibility manylinux2014 --target aarch64-unknown-linux-gnu \
         -m python/Cargo.toml -o "$work/wheels" > "$work/wheel.log" 2>&1; then
         wheel=$(ls "$work"/wheels/dccl-*.whl)
         case $(basename "$wheel") in
             # Both tags, in the order maturin writes them.
             *-cp39-abi3-*manylinux_2_17_aarch64*.whl)
-                pass "arm64 wheel built in $(( $(date +%s) - start )) s: $(basename "$wheel")" ;;
+                pass "arm64 wheel built in $(( $(date +%s) - start )) s (${wheel_profile[*]}): $(basename "$wheel")" ;;
             *) fail "arm64 wheel tag: $(basename "$wheel")" ;;
         esac
         mkdir -p "$work/wheel" && (cd "$work/wheel" && python3 -m zipfile -e "$wheel" .)

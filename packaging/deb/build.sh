@@ -4,7 +4,8 @@
 #
 # The two programs are built with cargo-zigbuild for glibc 2.28 (Debian 10,
 # Ubuntu 20.04 and later, JetPack 5 on a Jetson: the vehicle computers in
-# use), in the `packaging` profile (release, stripped, no LTO); cargo-deb
+# use), in the `packaging` profile (release, stripped, no LTO; another
+# with GOBY_PACKAGING_PROFILE, as CI's `packaging-check`); cargo-deb
 # lays out the package from gobyd/Cargo.toml's [package.metadata.deb]. The
 # manual pages, the completion scripts and /etc/goby-rs/gobyd.pb.txt come
 # from the programs themselves (packaging/deb/generated/), run on this
@@ -38,10 +39,11 @@ if ! cargo deb --version >/dev/null 2>&1; then
     exit 1
 fi
 target_dir=${CARGO_TARGET_DIR:-target}
+profile=${GOBY_PACKAGING_PROFILE:-packaging}
 
 for arch in "${arches[@]}"; do
-    echo "packaging/deb/build.sh: building gobyd and goby for $arch (glibc $GLIBC)" >&2
-    cargo zigbuild --locked --profile packaging --target "$(triple "$arch").$GLIBC" \
+    echo "packaging/deb/build.sh: building gobyd and goby for $arch (glibc $GLIBC, profile $profile)" >&2
+    cargo zigbuild --locked --profile "$profile" --target "$(triple "$arch").$GLIBC" \
         -p gobyd -p goby-cli --bin gobyd --bin goby
 done
 
@@ -51,7 +53,7 @@ host_arch=$(dpkg --print-architecture 2>/dev/null || uname -m)
 run_dir=
 runner=()
 for arch in "${arches[@]}"; do
-    dir="$target_dir/$(triple "$arch")/packaging"
+    dir="$target_dir/$(triple "$arch")/$profile"
     if [ "$arch" = "$host_arch" ]; then
         run_dir=$dir; runner=(); break
     fi
@@ -92,7 +94,7 @@ done
 for arch in "${arches[@]}"; do
     # The profile already stripped the programs (cargo-deb's strip is the
     # host's, which cannot strip another architecture).
-    cargo deb -p gobyd --no-build --no-strip --profile packaging --target "$(triple "$arch")" \
+    cargo deb -p gobyd --no-build --no-strip --profile "$profile" --target "$(triple "$arch")" \
         --output "$target_dir/debian/" 2>&1 | tail -1 >&2
     ls "$target_dir/debian/"goby-rs_*_"$arch".deb
 done
