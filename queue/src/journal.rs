@@ -42,7 +42,6 @@
 //! the first bad record) are read and rewritten in this one.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use crate::clock::Micros;
@@ -352,7 +351,7 @@ impl Journal {
     /// A second handle on the journal file whose `sync_data` makes
     /// everything appended before the call durable (for syncing on another
     /// thread).
-    pub fn sync_handle(&self) -> Result<File, JournalError> {
+    pub fn sync_handle(&self) -> Result<goby_store::record_log::SyncHandle, JournalError> {
         self.log
             .sync_handle()
             .map_err(|e| JournalError::of(self.log.path(), e))
@@ -520,7 +519,7 @@ pub fn replay_bytes(bytes: &[u8]) -> Option<Replay> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::fs::OpenOptions;
+    use std::fs::{File, OpenOptions};
     use std::io;
 
     const MAGIC: &[u8; 8] = JOURNAL.magic;

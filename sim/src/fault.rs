@@ -4,6 +4,9 @@
 //! - `kill { node at_s restart_after_s }`: the node's gobyd is killed as by
 //!   SIGKILL and started again on the same data directory (the run does
 //!   it, [`crate::world`]).
+//! - `power_cut { node at_s restart_after_s }`: as a kill, and the node's
+//!   record logs then keep only what was synced and a part, drawn from the
+//!   seed, of what was written after ([`goby_store::power`]).
 //! - `link_down { a b from_s to_s }`: no packet between the two is heard.
 //! - `unplug { node at_s for_s }`: the node's modem neither puts packets on
 //!   the water nor hears any (its driver is not told: it sends into
@@ -42,7 +45,8 @@ use crate::traffic::mix;
 #[derive(Debug, Clone, PartialEq)]
 pub enum Fault {
     /// The node's gobyd killed at `at_s`, started again `restart_after_s`
-    /// later.
+    /// later; with `power_cut`, its power cut (its logs lose what was not
+    /// synced, or part of it) and back then.
     Kill {
         /// The node.
         node: usize,
@@ -50,6 +54,8 @@ pub enum Fault {
         at_s: f64,
         /// How long it stays down (> 0).
         restart_after_s: f64,
+        /// A power cut, not only a kill.
+        power_cut: bool,
     },
     /// No packet between `a` and `b` heard in `[from_s, to_s)`.
     LinkDown {
@@ -115,12 +121,19 @@ impl Fault {
                 node,
                 at_s,
                 restart_after_s,
+                power_cut,
             } => {
                 let again = at_s + restart_after_s;
-                format!(
-                    "kill {} at {at_s} s, started again at {again} s",
-                    names[node]
-                )
+                match power_cut {
+                    false => format!(
+                        "kill {} at {at_s} s, started again at {again} s",
+                        names[node]
+                    ),
+                    true => format!(
+                        "power_cut {} at {at_s} s, power back at {again} s",
+                        names[node]
+                    ),
+                }
             }
             Fault::LinkDown { a, b, from_s, to_s } => format!(
                 "link_down {} and {} from {from_s} s to {to_s} s",
@@ -175,11 +188,30 @@ pub(crate) fn check(
             None => {
                 at.c.problem(
                     at.at.clone(),
-                    "give kill, link_down, unplug, garble, disk_full or clock_step",
+                    "give kill, power_cut, link_down, unplug, garble, disk_full or clock_step",
                 );
                 None
             }
-            Some(Kind::Kill(k)) => at.kill(k, &checked),
+            Some(Kind::Kill(k)) => {
+                at.at += ".kill";
+                at.kill(
+                    k.node.as_deref(),
+                    k.at_s,
+                    k.restart_after_s(),
+                    false,
+                    &checked,
+                )
+            }
+            Some(Kind::PowerCut(p)) => {
+                at.at += ".power_cut";
+                at.kill(
+                    p.node.as_deref(),
+                    p.at_s,
+                    p.restart_after_s(),
+                    true,
+                    &checked,
+                )
+            }
             Some(Kind::LinkDown(l)) => at.link_down(l),
             Some(Kind::Unplug(u)) => at.unplug(u),
             Some(Kind::Garble(g)) => at.garble(g),
@@ -269,11 +301,18 @@ impl Place<'_, '_> {
         Some(value)
     }
 
-    fn kill(&mut self, k: &pb::Kill, before: &[Fault]) -> Option<Fault> {
-        self.at += ".kill";
-        let node = self.node("node", k.node.as_deref());
-        let at_s = self.time("at_s", k.at_s);
-        let restart_after_s = self.length("restart_after_s", k.restart_after_s())?;
+    /// A kill, or with `power_cut` a power cut (the same fields).
+    fn kill(
+        &mut self,
+        node: Option<&str>,
+        at_s: Option<f64>,
+        restart_after_s: f64,
+        power_cut: bool,
+        before: &[Fault],
+    ) -> Option<Fault> {
+        let node = self.node("node", node);
+        let at_s = self.time("at_s", at_s);
+        let restart_after_s = self.length("restart_after_s", restart_after_s)?;
         let (node, at_s) = (node?, at_s?);
         self.within("restart_after_s", at_s + restart_after_s)?;
         let down = before.iter().find_map(|f| match f {
@@ -281,6 +320,7 @@ impl Place<'_, '_> {
                 node: n,
                 at_s: a,
                 restart_after_s: r,
+                ..
             } if *n == node && at_s + restart_after_s >= *a && at_s <= a + r => Some((*a, a + r)),
             _ => None,
         });
@@ -288,8 +328,8 @@ impl Place<'_, '_> {
             self.c.problem(
                 format!("{}.at_s", self.at),
                 format!(
-                    "node \"{}\" is down from {from} s to {to} s (an earlier kill): kill it \
-                     again once it is back",
+                    "node \"{}\" is down from {from} s to {to} s (an earlier kill or power \
+                     cut): take it down again once it is back",
                     self.nodes[node].name()
                 ),
             );
@@ -299,6 +339,7 @@ impl Place<'_, '_> {
             node,
             at_s,
             restart_after_s,
+            power_cut,
         })
     }
 
@@ -535,16 +576,18 @@ fn garbled(
     Arc::new(changed)
 }
 
-/// The kills of `faults`, in order of time: (when, node, how long down).
-pub(crate) fn kills(faults: &[Fault]) -> Vec<(f64, usize, f64)> {
-    let mut kills: Vec<(f64, usize, f64)> = faults
+/// The kills and power cuts of `faults`, in order of time: (when, node,
+/// how long down, whether a power cut).
+pub(crate) fn kills(faults: &[Fault]) -> Vec<(f64, usize, f64, bool)> {
+    let mut kills: Vec<(f64, usize, f64, bool)> = faults
         .iter()
         .filter_map(|f| match *f {
             Fault::Kill {
                 node,
                 at_s,
                 restart_after_s,
-            } => Some((at_s, node, restart_after_s)),
+                power_cut,
+            } => Some((at_s, node, restart_after_s, power_cut)),
             _ => None,
         })
         .collect();

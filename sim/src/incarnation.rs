@@ -17,6 +17,11 @@
 //!   it: were anything of the old one still holding the directory, the
 //!   new one would be refused it and the run would fail saying so.
 //!
+//! A power cut is a kill, and then the node's record logs keep only what
+//! their last syncs covered and, as a disk may have written some of the
+//! rest, with even chances none of it or a part drawn from the seed (whole
+//! records or one torn halfway): [`goby_store::power::cut`].
+//!
 //! While a node is down its streams' publications are refused ("the node
 //! is down"): not accepted, so not owed.
 
@@ -25,6 +30,11 @@ use std::time::Duration;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::ledger::{CutLog, PowerCut};
+use crate::traffic::mix;
 use crate::world::{Door, Running, World};
 use crate::SimError;
 
@@ -44,14 +54,14 @@ pub(crate) async fn kills(
     // When each node was killed, while it is down.
     let mut killed_at: Vec<Option<i64>> = vec![None; nodes.len()];
     let mut dead = Vec::new();
-    // (when, node, down: kill or start again), in order of time.
-    let mut steps: Vec<(f64, usize, bool)> = Vec::new();
-    for (at_s, node, restart_after_s) in crate::fault::kills(&s.faults) {
-        steps.push((at_s, node, true));
-        steps.push((at_s + restart_after_s, node, false));
+    // (when, node, down: kill or start again, a power cut), in order of time.
+    let mut steps: Vec<(f64, usize, bool, bool)> = Vec::new();
+    for (at_s, node, restart_after_s, power_cut) in crate::fault::kills(&s.faults) {
+        steps.push((at_s, node, true, power_cut));
+        steps.push((at_s + restart_after_s, node, false, power_cut));
     }
     steps.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-    for (at_s, i, down) in steps {
+    for (at_s, i, down, power_cut) in steps {
         tokio::time::sleep_until(start + Duration::from_secs_f64(at_s)).await;
         let name = &s.nodes[i].name;
         if down {
@@ -60,6 +70,9 @@ pub(crate) async fn kills(
                 .take()
                 .expect("a node is killed only while it runs");
             dead.push(kill(running, name).await?);
+            if power_cut {
+                cut(world, i, at_s)?;
+            }
             killed_at[i] = Some(world.now());
         } else {
             generations[i] += 1;
@@ -80,6 +93,50 @@ pub(crate) async fn kills(
         .map(|n| n.expect("every killed node is started again before the end"))
         .collect();
     Ok((nodes, dead))
+}
+
+/// Cuts the power of node `i` at `at_s`, its daemon gone: its logs keep
+/// what was synced and, with even chances, nothing more or a part of the
+/// rest drawn from the scenario's seed, the node and the time.
+fn cut(world: &World<'_>, i: usize, at_s: f64) -> Result<(), SimError> {
+    const POWER: u64 = 0x0070_6f77_6572;
+    let s = world.scenario();
+    let mut rng = ChaCha8Rng::seed_from_u64(mix(&[
+        s.seed,
+        POWER,
+        s.nodes[i].modem_id as u64,
+        at_s.to_bits(),
+    ]));
+    let dir = world.data_dir(i);
+    let cuts = goby_store::power::cut(&dir, |unsynced| match rng.random_bool(0.5) {
+        true => 0,
+        false => rng.random_range(0..=unsynced),
+    })
+    .map_err(|e| {
+        SimError::Run(format!(
+            "node {}: its power cut at {at_s} s: {e}",
+            s.nodes[i].name
+        ))
+    })?;
+    let files = cuts
+        .into_iter()
+        .map(|c| CutLog {
+            file: c
+                .path
+                .strip_prefix(&dir)
+                .unwrap_or(&c.path)
+                .display()
+                .to_string(),
+            unsynced_bytes: c.before - c.synced,
+            kept_bytes: c.kept - c.synced,
+        })
+        .collect();
+    world.power_cut(PowerCut {
+        node: s.nodes[i].name.clone(),
+        at_s,
+        files,
+    });
+    Ok(())
 }
 
 /// Kills `node`'s daemon (see the [module](self)); returns its listener.

@@ -20,6 +20,7 @@ use modemdriver::TransmitOutcome;
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
+use serde::Serialize;
 
 use crate::carriage::Carriage;
 use crate::discovery::{MacChange, MacRecord};
@@ -122,7 +123,33 @@ pub struct Ledger {
     /// When nodes were down (killed, not started again yet): (node, from,
     /// until).
     down: Vec<(usize, Micros, Micros)>,
+    /// What each power cut left of the nodes' logs, in time order.
+    power_cuts: Vec<PowerCut>,
     failure: Option<String>,
+}
+
+/// What one power cut did to a node's record logs ([`goby_store::power`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PowerCut {
+    /// The node's name.
+    pub node: String,
+    /// When, seconds from the start of the run.
+    pub at_s: f64,
+    /// Each log of its data directory: what was written after its last
+    /// sync and what of it the disk kept, in order of file name.
+    pub files: Vec<CutLog>,
+}
+
+/// One record log at a power cut.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CutLog {
+    /// The file, relative to the node's data directory.
+    pub file: String,
+    /// Bytes written since its last sync.
+    pub unsynced_bytes: u64,
+    /// Of those, the bytes the disk kept (a record torn when they end
+    /// inside one; the daemon cuts it off as it starts).
+    pub kept_bytes: u64,
 }
 
 impl Ledger {
@@ -141,6 +168,7 @@ impl Ledger {
             carriage: Carriage::default(),
             medium: MediumLog::default(),
             down: Vec::new(),
+            power_cuts: Vec::new(),
             failure: None,
         }
     }
@@ -197,6 +225,16 @@ impl Ledger {
     /// again yet) from `from` until `until`.
     pub fn down(&mut self, node: usize, from: Micros, until: Micros) {
         self.down.push((node, from, until));
+    }
+
+    /// Enters what a power cut did.
+    pub fn power_cut(&mut self, cut: PowerCut) {
+        self.power_cuts.push(cut);
+    }
+
+    /// What the power cuts did, in time order.
+    pub fn power_cuts(&self) -> &[PowerCut] {
+        &self.power_cuts
     }
 
     /// Whether node `node` was down at some moment from `from` to `to`.

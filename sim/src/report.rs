@@ -104,6 +104,10 @@ pub struct Run {
     pub nodes: BTreeMap<String, i32>,
     /// The scenario's faults, in words, in the scenario's order.
     pub faults: Vec<String>,
+    /// What each power cut did to its node's logs, in time order (left
+    /// out when there was none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub power_cuts: Vec<crate::ledger::PowerCut>,
 }
 
 /// Counts of one group of publications. A publication is counted once
@@ -247,6 +251,7 @@ impl Report {
                         ledger.nodes().iter().map(|n| n.name.clone()).collect();
                     scenario.faults.iter().map(|f| f.describe(&names)).collect()
                 },
+                power_cuts: ledger.power_cuts().to_vec(),
             },
             total: total.finish(),
             by_type: by_type.into_iter().map(|(k, t)| (k, t.finish())).collect(),

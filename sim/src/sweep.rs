@@ -1,8 +1,8 @@
 //! The deterministic fault sweep: from each seed a random scenario (2 to
 //! 5 nodes on fixed TDMA over lossy water; acknowledged commands,
 //! deliberate repeats of one command, unacknowledged broadcast navigation
-//! reports; a random schedule of kills, links down, unplugged modems, full
-//! disks, clock steps and garbled frames over the hours of traffic; then an hour of drain), run,
+//! reports; a random schedule of kills, power cuts, links down, unplugged
+//! modems, full disks, clock steps and garbled frames over the hours of traffic; then an hour of drain), run,
 //! and its ledger checked:
 //!
 //! - every accepted acknowledged publication was delivered exactly once to
@@ -142,8 +142,8 @@ fn node(rng: &mut ChaCha8Rng, id: i32, n: i32) -> String {
     text + "}\n"
 }
 
-/// A schedule of 2 to 8 faults among `n` nodes: kills (a node not killed
-/// again while down), links down, modems unplugged, disks full, clocks
+/// A schedule of 2 to 8 faults among `n` nodes: kills and power cuts (a
+/// node not taken down again while down), links down, modems unplugged, disks full, clocks
 /// stepped and set right, frames garbled (the modem's check drops them), within the traffic's `traffic_s`, ended by
 /// the run's `end_s`.
 fn faults(rng: &mut ChaCha8Rng, n: i32, traffic_s: f64, end_s: f64) -> String {
@@ -166,8 +166,14 @@ fn faults(rng: &mut ChaCha8Rng, n: i32, traffic_s: f64, end_s: f64) -> String {
                     continue;
                 }
                 down.push((node, at, back));
+                // Half of them power cuts, told apart by the kill's own
+                // draws (the schedule's other draws stay as they were).
+                let kind = match crate::traffic::mix(&[at.to_bits(), node as u64]) & 1 {
+                    0 => "kill",
+                    _ => "power_cut",
+                };
                 format!(
-                    "kill {{ node: \"n{node}\" at_s: {at} restart_after_s: {} }}",
+                    "{kind} {{ node: \"n{node}\" at_s: {at} restart_after_s: {} }}",
                     back - at
                 )
             }

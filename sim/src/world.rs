@@ -114,6 +114,10 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
             .collect(),
     });
     let ids: Vec<i32> = s.nodes.iter().map(|n| n.modem_id).collect();
+    // A power cut needs to know what each log had synced when it comes.
+    if crate::fault::kills(&s.faults).iter().any(|k| k.3) {
+        goby_store::power::watch();
+    }
     if let Some(filter) = crate::fault::filter(&s.faults, &ids, s.seed, start) {
         medium.set_filter(filter);
     }
@@ -169,6 +173,7 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
     tokio::time::sleep_until(start + Duration::from_micros(s.duration_micros + s.drain_micros))
         .await;
     stop_nodes(s, nodes, dead).await?;
+    goby_store::power::forget(dir);
     for (i, node) in s.nodes.iter().enumerate() {
         let ids = owed(&crate::disk::data_dir(dir, i))
             .map_err(|e| SimError::Run(format!("node {}: {e}", node.name)))?;
@@ -222,6 +227,16 @@ impl World<'_> {
     /// The run's clock now, microseconds since the UNIX epoch.
     pub(crate) fn now(&self) -> i64 {
         self.clock.now()
+    }
+
+    /// Node `i`'s data directory.
+    pub(crate) fn data_dir(&self, i: usize) -> std::path::PathBuf {
+        crate::disk::data_dir(self.dir, i)
+    }
+
+    /// Enters in the ledger what a power cut did.
+    pub(crate) fn power_cut(&self, cut: crate::ledger::PowerCut) {
+        self.ledger.lock().expect("not poisoned").power_cut(cut);
     }
 
     /// Enters in the ledger that node `i` was down from `from` until now.

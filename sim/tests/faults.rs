@@ -315,3 +315,61 @@ fn a_full_disk_at_the_sender_keeps_neither_its_acks_nor_its_expiries_from_it() {
         "{expired_full} expired, {acked_full} acked while full"
     );
 }
+
+#[test]
+fn a_power_cut_loses_what_was_not_synced_and_nothing_accepted() {
+    // n2's power is cut at 1000 s and n3's at 2000 s: each daemon dies as
+    // killed, and its logs lose what their last syncs did not cover (all
+    // of it, or a part drawn from the seed). What was accepted was synced
+    // before it was accepted, and what was handed over was marked so on
+    // the disk: every command is delivered once, none lost.
+    let text = support::ring(3, 0.3, 3600, 60, 3600)
+        + "fault { power_cut { node: \"n2\" at_s: 1000 restart_after_s: 300 } }\n\
+           fault { power_cut { node: \"n3\" at_s: 2000 restart_after_s: 120 } }\n";
+    let outcome = run(&text);
+    every_accepted_delivered_once(&outcome);
+    let run = &outcome.report.run;
+    assert_eq!(
+        run.faults,
+        [
+            "power_cut n2 at 1000 s, power back at 1300 s",
+            "power_cut n3 at 2000 s, power back at 2120 s"
+        ]
+    );
+    // The cuts took something: the journals' removals of acknowledged
+    // messages are written but not synced at once (a restart that finds
+    // them missing sends those messages again, as retransmissions their
+    // receivers suppress).
+    let cuts: Vec<(&str, f64)> = run
+        .power_cuts
+        .iter()
+        .map(|c| (c.node.as_str(), c.at_s))
+        .collect();
+    assert_eq!(cuts, [("n2", 1000.0), ("n3", 2000.0)]);
+    let lost: u64 = run
+        .power_cuts
+        .iter()
+        .flat_map(|c| &c.files)
+        .map(|f| f.unsynced_bytes - f.kept_bytes)
+        .sum();
+    assert!(lost > 0, "nothing was lost: {:?}", run.power_cuts);
+    for cut in &run.power_cuts {
+        let files: Vec<&str> = cut.files.iter().map(|f| f.file.as_str()).collect();
+        assert!(files.contains(&"outbox.journal"), "{files:?}");
+        assert!(cut.files.iter().all(|f| f.kept_bytes <= f.unsynced_bytes));
+    }
+    // Refused while down, and only then.
+    let refused: Vec<f64> = outcome
+        .ledger
+        .publications()
+        .iter()
+        .filter(|p| p.refused.is_some())
+        .map(|p| (p.time - run.start_us) as f64 / 1e6)
+        .collect();
+    assert!(
+        refused
+            .iter()
+            .all(|t| (1000.0..1300.0).contains(t) || (2000.0..2120.0).contains(t)),
+        "refused outside the cuts: {refused:?}"
+    );
+}

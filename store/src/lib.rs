@@ -4,7 +4,9 @@
 //! so that damage costs only the records it touches), and [`file`](mod@file), files
 //! rewritten whole so that a crash leaves the old or the new one, private to
 //! their owner. [`space`] marks a directory full, so that its owners meet
-//! a full disk on purpose (`goby sim`'s `disk_full` fault).
+//! a full disk on purpose (`goby sim`'s `disk_full` fault), and [`power`]
+//! cuts a directory's record logs back to what a power cut leaves of them
+//! (its `power_cut` fault).
 //!
 //! Each owner of a file defines its format next to itself; this crate owns
 //! what every file shares. It depends on no other goby crate, so that the
@@ -13,5 +15,6 @@
 #![warn(missing_docs)]
 
 pub mod file;
+pub mod power;
 pub mod record_log;
 pub mod space;

@@ -529,6 +529,30 @@ pub struct RecordLog {
     /// The record being appended, kept between appends (no allocation per
     /// record once it is large enough).
     scratch: Vec<u8>,
+    /// The generation of the file's contents, for [`crate::power`]: new at
+    /// each replay and rewrite.
+    generation: u64,
+}
+
+/// A second handle on a record log's file, taken by
+/// [`RecordLog::sync_handle`]: its [`sync_data`](Self::sync_data) makes
+/// everything appended before it was taken durable, from any thread.
+#[derive(Debug)]
+pub struct SyncHandle {
+    file: File,
+    path: PathBuf,
+    generation: u64,
+    len: u64,
+}
+
+impl SyncHandle {
+    /// Waits until everything appended before the handle was taken is on
+    /// disk (`fdatasync`). Errors: the operating system's.
+    pub fn sync_data(&self) -> io::Result<()> {
+        self.file.sync_data()?;
+        crate::power::durable(&self.path, self.generation, self.len);
+        Ok(())
+    }
 }
 
 impl RecordLog {
@@ -571,6 +595,7 @@ impl RecordLog {
             dirty: false,
             stale: false,
             scratch: Vec::new(),
+            generation: 0,
         }
     }
 
@@ -615,6 +640,10 @@ impl RecordLog {
         }
         self.len = scan.end as u64;
         self.dirty = false;
+        // What it holds now is on the disk: synced by the repairs above, or
+        // found there.
+        self.generation = crate::power::generation();
+        crate::power::durable(&self.path, self.generation, self.len);
         Ok(scan.replayed)
     }
 
@@ -675,13 +704,20 @@ impl RecordLog {
 
     /// Waits until everything appended so far is on disk.
     pub fn sync(&mut self) -> io::Result<()> {
-        self.file.sync()
+        self.file.sync()?;
+        crate::power::durable(&self.path, self.generation, self.len);
+        Ok(())
     }
 
     /// A second handle on the file whose `sync_data` makes everything
     /// appended before the call durable (for syncing on another thread).
-    pub fn sync_handle(&self) -> io::Result<File> {
-        self.file.sync_handle()
+    pub fn sync_handle(&self) -> io::Result<SyncHandle> {
+        Ok(SyncHandle {
+            file: self.file.sync_handle()?,
+            path: self.path.clone(),
+            generation: self.generation,
+            len: self.len,
+        })
     }
 
     /// Replaces the file with one holding the records of `payloads` only,
@@ -710,6 +746,8 @@ impl RecordLog {
         }
         self.stale = false;
         self.file.sync_dir(&self.path)?;
+        self.generation = crate::power::generation();
+        crate::power::durable(&self.path, self.generation, self.len);
         Ok(())
     }
 

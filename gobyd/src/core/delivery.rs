@@ -260,7 +260,9 @@ impl Delivery {
     /// received, once `taker_present` or the oldest has waited
     /// [`RECOVERY_WAIT`] (then to whoever is there: the mission log at
     /// least); each is marked handed over in the inbox right after its
-    /// hand-over.
+    /// hand-over, and the marks are synced once they are all written. Only
+    /// a power cut between a hand-over and that sync (a disk sync's time)
+    /// can bring a message to the clients again, flagged `recovered`.
     pub fn release(
         &mut self,
         taker_present: bool,
@@ -282,6 +284,7 @@ impl Delivery {
                 RECOVERY_WAIT.as_secs()
             );
         }
+        let mut marked = false;
         for held in std::mem::take(&mut self.held) {
             if held.reception.recovered {
                 tracing::info!(
@@ -293,9 +296,17 @@ impl Delivery {
             hand_over(held.received, &held.reception);
             if let Some(seq) = held.seq {
                 self.mark_handed(seq, now_micros);
+                marked = true;
             }
         }
         CrashPoint::HandedOver.reached();
+        // The marks synced at once: a power cut after this finds them
+        // (one lost would bring its message to the clients again).
+        if marked {
+            if let Err(e) = self.inbox.sync() {
+                tracing::error!("{}: {e}", self.inbox.path().display());
+            }
+        }
     }
 
     fn mark_handed(&mut self, seq: u64, now: u64) {

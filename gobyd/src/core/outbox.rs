@@ -234,7 +234,7 @@ impl Outbox {
 
     /// A handle whose `sync_data` makes every message accepted so far
     /// durable, for syncing off the caller's thread.
-    pub fn sync_handle(&self) -> Result<std::fs::File, JournalError> {
+    pub fn sync_handle(&self) -> Result<goby_store::record_log::SyncHandle, JournalError> {
         self.journal.sync_handle()
     }
 
