@@ -6,10 +6,27 @@
 # library, for running arm64 programs here (Debian's packages, as root).
 # What cannot be installed is said here, and the tests needing it are
 # skipped, saying why. Prints the directory to put first on the PATH.
+# With --cargo-deb, installs cargo-deb only (.ci/run does it first, while
+# Debian's packages install).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${CARGO_TARGET_DIR:-target}/packaging-tools
 say() { echo ".ci/packaging.sh: $*" >&2; }
+
+# cargo-deb, built unoptimised (a quarter of the build's time) but for its
+# xz compressor, whose speed is all of cargo-deb's work on a package.
+install_cargo_deb() {
+    cargo deb --version >/dev/null 2>&1 && return 0
+    say "installing cargo-deb from crates.io"
+    cargo install --locked cargo-deb@3.8.0 \
+        --config 'profile.release.opt-level=0' \
+        --config 'profile.release.package.lzma-sys.opt-level=3' >&2 \
+        || say "cannot install cargo-deb: the packages will not be built"
+}
+if [ "${1:-}" = --cargo-deb ]; then
+    install_cargo_deb
+    exit 0
+fi
 
 if [ ! -x "$venv/bin/cargo-zigbuild" ] || [ ! -x "$venv/bin/maturin" ]; then
     say "installing cargo-zigbuild, ziglang and maturin from PyPI into $venv"
@@ -18,10 +35,7 @@ if [ ! -x "$venv/bin/cargo-zigbuild" ] || [ ! -x "$venv/bin/maturin" ]; then
         'cargo-zigbuild>=0.20' 'ziglang>=0.13' 'maturin>=1.9,<2' >&2 \
         || say "cannot install cargo-zigbuild, ziglang and maturin: the packages will not be built"
 fi
-if ! cargo deb --version >/dev/null 2>&1; then
-    say "installing cargo-deb from crates.io"
-    cargo install --locked cargo-deb@3.8.0 >&2 || say "cannot install cargo-deb: the packages will not be built"
-fi
+install_cargo_deb
 if command -v rustup >/dev/null && ! rustup target list --installed | grep -qx aarch64-unknown-linux-gnu; then
     say "adding the Rust target aarch64-unknown-linux-gnu"
     rustup target add aarch64-unknown-linux-gnu >&2 || say "cannot add aarch64-unknown-linux-gnu: arm64 will not be built"
