@@ -6,8 +6,8 @@
 # library, for running arm64 programs here (Debian's packages, as root).
 # What cannot be installed is said here, and the tests needing it are
 # skipped, saying why. Prints the directory to put first on the PATH.
-# With --cargo-deb, installs cargo-deb only (.ci/run does it first, while
-# Debian's packages install).
+# With --cargo-deb, installs cargo-deb only, and with --debian the Debian
+# packages only (.ci/run does each apart, beside other work).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${CARGO_TARGET_DIR:-target}/packaging-tools
@@ -23,10 +23,24 @@ install_cargo_deb() {
         --config 'profile.release.package.lzma-sys.opt-level=3' >&2 \
         || say "cannot install cargo-deb: the packages will not be built"
 }
-if [ "${1:-}" = --cargo-deb ]; then
-    install_cargo_deb
-    exit 0
-fi
+# qemu-user-static and the arm64 C library, to run arm64 programs here.
+install_debian() {
+    have_qemu() { command -v qemu-aarch64-static >/dev/null || command -v qemu-aarch64 >/dev/null; }
+    have_qemu && [ -d /usr/aarch64-linux-gnu/lib ] && return 0
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        say "installing qemu-user-static and libc6-arm64-cross"
+        apt-get update -qq >&2
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+            qemu-user-static libc6-arm64-cross >/dev/null \
+            || say "cannot install qemu-user-static: arm64 programs will not be run"
+    else
+        say "qemu-user-static not found and cannot be installed here (needs root and apt-get): arm64 programs will not be run"
+    fi
+}
+case "${1:-}" in
+    --cargo-deb) install_cargo_deb; exit 0 ;;
+    --debian) install_debian; exit 0 ;;
+esac
 
 if [ ! -x "$venv/bin/cargo-zigbuild" ] || [ ! -x "$venv/bin/maturin" ]; then
     say "installing cargo-zigbuild, ziglang and maturin from PyPI into $venv"
@@ -40,16 +54,5 @@ if command -v rustup >/dev/null && ! rustup target list --installed | grep -qx a
     say "adding the Rust target aarch64-unknown-linux-gnu"
     rustup target add aarch64-unknown-linux-gnu >&2 || say "cannot add aarch64-unknown-linux-gnu: arm64 will not be built"
 fi
-have_qemu() { command -v qemu-aarch64-static >/dev/null || command -v qemu-aarch64 >/dev/null; }
-if ! have_qemu || [ ! -d /usr/aarch64-linux-gnu/lib ]; then
-    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-        say "installing qemu-user-static and libc6-arm64-cross"
-        apt-get update -qq >&2
-        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-            qemu-user-static libc6-arm64-cross >/dev/null \
-            || say "cannot install qemu-user-static: arm64 programs will not be run"
-    else
-        say "qemu-user-static not found and cannot be installed here (needs root and apt-get): arm64 programs will not be run"
-    fi
-fi
+install_debian
 realpath -m "$venv/bin"
