@@ -207,7 +207,7 @@ fn losses_section(page: &mut String, report: &Report) {
               of every data packet that carried it: heard; collision (another packet arrived there \
               meanwhile); half_duplex (that node was transmitting); out_of_range; frame_error (the \
               loss draw: packet_loss, or the frame-error rate at the link's SNR); no_ray; fault; \
-              garbled; node_down (that node's gobyd was killed, not started again yet); unsettled \
+              garbled; node_down (that node's gobyd was killed or its power cut, not started again yet); unsettled \
               (the run ended first). Then why the undelivered ones were not delivered.</p>\n";
     let order = fates();
     let legend: Vec<(&str, &str)> = order.iter().map(|f| (*f, fate_colour(f))).collect();

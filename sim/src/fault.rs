@@ -291,6 +291,13 @@ impl Place<'_, '_> {
 
     /// A length of time, more than 0.
     fn length(&mut self, field: &str, value: f64) -> Option<f64> {
+        if value.is_nan() {
+            self.c.problem(
+                format!("{}.{field}", self.at),
+                format!("{} is not a number of seconds", seconds(value)),
+            );
+            return None;
+        }
         if !(value > 0.0 && value.is_finite()) {
             self.c.problem(
                 format!("{}.{field}", self.at),
@@ -315,22 +322,30 @@ impl Place<'_, '_> {
         let restart_after_s = self.length("restart_after_s", restart_after_s)?;
         let (node, at_s) = (node?, at_s?);
         self.within("restart_after_s", at_s + restart_after_s)?;
-        let down = before.iter().find_map(|f| match f {
+        // Against the kills and power cuts written before it (the later
+        // one in the file is the one refused), touching included: the node
+        // starts again at the very moment the other would take it down.
+        let down = before.iter().enumerate().find_map(|(j, f)| match f {
             Fault::Kill {
                 node: n,
                 at_s: a,
                 restart_after_s: r,
-                ..
-            } if *n == node && at_s + restart_after_s >= *a && at_s <= a + r => Some((*a, a + r)),
+                power_cut,
+            } if *n == node && at_s + restart_after_s >= *a && at_s <= a + r => {
+                let kind = if *power_cut { "power_cut" } else { "kill" };
+                Some((j, kind, *a, a + r))
+            }
             _ => None,
         });
-        if let Some((from, to)) = down {
+        if let Some((j, kind, from, to)) = down {
             self.c.problem(
                 format!("{}.at_s", self.at),
                 format!(
-                    "node \"{}\" is down from {from} s to {to} s (an earlier kill or power \
-                     cut): take it down again once it is back",
-                    self.nodes[node].name()
+                    "node \"{}\" is down from {from} s to {to} s (fault[{j}], a {kind}), \
+                     and this one would have it down from {at_s} s to {} s: the kills and \
+                     power cuts of one node may not overlap or touch",
+                    self.nodes[node].name(),
+                    at_s + restart_after_s
                 ),
             );
             return None;

@@ -120,7 +120,8 @@ pub struct Ledger {
     carriage: Carriage,
     /// What happened on the water.
     medium: MediumLog,
-    /// When nodes were down (killed, not started again yet): (node, from,
+    /// When nodes were down (killed or their power cut, not started again
+    /// yet): (node, from,
     /// until).
     down: Vec<(usize, Micros, Micros)>,
     /// What each power cut left of the nodes' logs, in time order.

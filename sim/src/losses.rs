@@ -8,7 +8,7 @@
 //!   (the node was transmitting), `out_of_range`, `frame_error` (the loss
 //!   draw: `packet_loss`, or the frame-error rate at the link's SNR),
 //!   `no_ray` (modelled water: no ray reaches), `node_down` (the node's
-//!   gobyd was killed, not started again yet, while the packet was on its
+//!   gobyd was killed or its power cut, not started again yet, while the packet was on its
 //!   way), or `unsettled` (the run ended before the packet had reached
 //!   it);
 //! - when it was not delivered, **why**: `refused` by its sender,

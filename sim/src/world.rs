@@ -205,7 +205,7 @@ pub(crate) struct World<'a> {
 }
 
 /// Where a stream publishes: the running gobyd of its node, or `None`
-/// while the node is down (killed, not started again yet).
+/// while the node is down (killed or its power cut, not started again yet).
 pub(crate) type Door = Arc<Mutex<Option<mpsc::Sender<Publish>>>>;
 
 /// The seed drawn from `parts` for the node's `generation`-th start (0:
@@ -443,7 +443,8 @@ impl Publishing {
             let (reply, answer) = oneshot::channel();
             let publisher = self.door.lock().expect("not poisoned").clone();
             let Some(publisher) = publisher else {
-                let down = "the node is down (killed, not started again yet)".to_string();
+                let down =
+                    "the node is down (killed or its power cut, not started again yet)".to_string();
                 self.ledger
                     .lock()
                     .expect("not poisoned")

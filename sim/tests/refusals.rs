@@ -541,6 +541,25 @@ fn a_fault_outside_the_run_is_refused_at_its_place() {
         error.contains("fault[1].kill.at_s: node \"n1\" is down from 100 s to 160 s"),
         "{error}"
     );
+    // A power cut written after a kill it overlaps, though earlier in time:
+    // the message names the kill and both spans.
+    let text = support::ring(2, 0.0, 600, 60, 60)
+        + "fault { kill { node: \"n1\" at_s: 300 restart_after_s: 60 } }\n\
+           fault { power_cut { node: \"n1\" at_s: 250 restart_after_s: 50 } }\n\
+           fault { power_cut { node: \"n2\" at_s: 10 restart_after_s: nan } }\n";
+    let error = refusal(&text);
+    assert!(
+        error.contains(
+            "fault[1].power_cut.at_s: node \"n1\" is down from 300 s to 360 s (fault[0], a \
+             kill), and this one would have it down from 250 s to 300 s: the kills and power \
+             cuts of one node may not overlap or touch"
+        ),
+        "{error}"
+    );
+    assert!(
+        error.contains("fault[2].power_cut.restart_after_s: NaN is not a number of seconds"),
+        "{error}"
+    );
 }
 
 #[test]

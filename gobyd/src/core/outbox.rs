@@ -72,6 +72,9 @@ pub struct Outbox {
     /// could not be written (a full disk): written again before each
     /// acceptance and each batch of events ([`Outbox::remove`]).
     unremoved: Vec<EntryId>,
+    /// Removals written since the journal's last sync: synced before the
+    /// events they go with are told ([`Outbox::sync_removals`]).
+    removed_unsynced: bool,
 }
 
 impl std::fmt::Debug for Outbox {
@@ -105,6 +108,7 @@ impl Outbox {
             entries: HashMap::new(),
             in_flight: Vec::new(),
             unremoved: Vec::new(),
+            removed_unsynced: false,
         };
         let mut report = OutboxReplay {
             discarded_bytes: replay.discarded_bytes,
@@ -288,8 +292,10 @@ impl Outbox {
     /// The queue events since the last call, each with the journal entry
     /// id (the id clients were given) of the message it is about: for
     /// sendings, acks, expiries and drops. Messages that left their queue
-    /// for good are removed from the journal first; messages sent without
-    /// ack wait for [`transmitted`](Self::transmitted).
+    /// for good are removed from the journal first, and the removals
+    /// synced, so that a client told of an ack or an expiry is never told
+    /// of it again after a power cut; messages sent without ack wait for
+    /// [`transmitted`](Self::transmitted).
     pub fn events(&mut self) -> Vec<(QueueEvent, Option<EntryId>)> {
         self.remove_again();
         let events: Vec<QueueEvent> = self.events.try_iter().collect();
@@ -322,7 +328,22 @@ impl Outbox {
             }
             out.push((event, ended));
         }
+        self.sync_removals();
         out
+    }
+
+    /// Syncs the removals written since the last sync, if any. A sync that
+    /// fails is tried again with the next removals; until then a power cut
+    /// may bring their messages back (a restart sends them once more, as
+    /// retransmissions their receivers suppress).
+    fn sync_removals(&mut self) {
+        if !self.removed_unsynced {
+            return;
+        }
+        match self.journal.sync() {
+            Ok(()) => self.removed_unsynced = false,
+            Err(e) => tracing::warn!("{e}: the journal's removals are synced later"),
+        }
     }
 
     /// Removes `entry` (its message left its queue for good) from the
@@ -332,9 +353,12 @@ impl Outbox {
     /// owes the message, and a restart would send it once more, as a
     /// retransmission its receiver suppresses.
     fn remove(&mut self, entry: EntryId) {
-        if let Err(e) = self.journal.remove(entry) {
-            tracing::warn!("{e}: entry {entry} is removed once it can be written");
-            self.unremoved.push(entry);
+        match self.journal.remove(entry) {
+            Ok(()) => self.removed_unsynced = true,
+            Err(e) => {
+                tracing::warn!("{e}: entry {entry} is removed once it can be written");
+                self.unremoved.push(entry);
+            }
         }
     }
 
@@ -345,8 +369,9 @@ impl Outbox {
         }
         let mut kept = Vec::new();
         for entry in std::mem::take(&mut self.unremoved) {
-            if self.journal.remove(entry).is_err() {
-                kept.push(entry);
+            match self.journal.remove(entry) {
+                Ok(()) => self.removed_unsynced = true,
+                Err(_) => kept.push(entry),
             }
         }
         if kept.is_empty() {
@@ -357,7 +382,8 @@ impl Outbox {
 
     /// Settles the messages sent without ack in the transmission under way
     /// on link `link` (those of the other links wait for their own
-    /// outcome): `went_out` removes them from the journal; otherwise (the
+    /// outcome): `went_out` removes them from the journal (synced, as
+    /// [`events`](Self::events) does); otherwise (the
     /// driver failed to send) they are queued again with their original age.
     /// Returns how many were queued again.
     pub fn transmitted(&mut self, link: queue::LinkIndex, went_out: bool) -> usize {
@@ -390,6 +416,7 @@ impl Outbox {
                 Ok(None) | Err(_) => self.remove(entry),
             }
         }
+        self.sync_removals();
         requeued
     }
 }
