@@ -91,13 +91,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("goby-store-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        create_private_dir(&dir).unwrap();
-        dir
-    }
+    use crate::scratch;
 
     #[test]
     fn a_file_written_atomically_is_whole_private_and_leaves_no_part() {

@@ -18,3 +18,13 @@ pub mod file;
 pub mod power;
 pub mod record_log;
 pub mod space;
+
+/// A fresh private directory `name` of the test process's own under the
+/// system's temporary directory (emptied first).
+#[cfg(test)]
+pub(crate) fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("goby-store-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    file::create_private_dir(&dir).unwrap();
+    dir
+}

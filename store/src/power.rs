@@ -140,6 +140,7 @@ pub fn forget(dir: &Path) {
 mod tests {
     use super::*;
     use crate::record_log::{Format, RecordLog};
+    use crate::scratch;
 
     const FORMAT: Format = Format {
         name: "power test log",
@@ -147,28 +148,6 @@ mod tests {
         sync: *b"PwRt",
         older: &[],
     };
-
-    /// A fresh directory of the test's own, removed when dropped.
-    struct Scratch(PathBuf);
-
-    impl Scratch {
-        fn new(name: &str) -> Self {
-            let dir =
-                std::env::temp_dir().join(format!("goby-power-{name}-{}", std::process::id()));
-            let _ = std::fs::remove_dir_all(&dir);
-            std::fs::create_dir_all(&dir).unwrap();
-            Scratch(dir)
-        }
-        fn path(&self) -> &Path {
-            &self.0
-        }
-    }
-
-    impl Drop for Scratch {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
 
     fn payloads(path: &Path) -> Vec<Vec<u8>> {
         let (_, replayed) = RecordLog::open(path, FORMAT, |p| Some(p.to_vec())).unwrap();
@@ -178,11 +157,11 @@ mod tests {
     #[test]
     fn a_cut_keeps_what_was_synced_and_what_the_disk_got_of_the_rest() {
         watch();
-        let dir = Scratch::new("cut");
-        let path = dir.path().join("node0").join("outbox.journal");
+        let dir = scratch("power-cut");
+        let path = dir.join("node0").join("outbox.journal");
         std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-        let beside = Scratch::new("beside");
-        let other = beside.path().join("outbox.journal");
+        let beside = scratch("power-beside");
+        let other = beside.join("outbox.journal");
         {
             let (mut log, _) = RecordLog::open(&path, FORMAT, |p| Some(p.to_vec())).unwrap();
             log.append(b"one").unwrap();
@@ -196,7 +175,7 @@ mod tests {
             log.append(b"elsewhere").unwrap();
         }
         // Nothing of the unsynced tail ("three", "four") reaches the disk.
-        let cuts = cut(dir.path(), |_| 0).unwrap();
+        let cuts = cut(&dir, |_| 0).unwrap();
         assert_eq!(cuts.len(), 1, "{cuts:?}");
         assert!(cuts[0].kept < cuts[0].before);
         assert_eq!(payloads(&path), vec![b"one".to_vec(), b"two".to_vec()]);
@@ -207,18 +186,20 @@ mod tests {
             let (mut log, _) = RecordLog::open(&path, FORMAT, |p| Some(p.to_vec())).unwrap();
             log.append(b"five").unwrap();
         }
-        let cuts = cut(dir.path(), |unsynced| unsynced - 2).unwrap();
+        let cuts = cut(&dir, |unsynced| unsynced - 2).unwrap();
         assert_eq!(cuts[0].before - cuts[0].kept, 2);
         assert_eq!(payloads(&path), vec![b"one".to_vec(), b"two".to_vec()]);
-        forget(dir.path());
-        assert!(cut(dir.path(), |_| 0).unwrap().is_empty());
+        forget(&dir);
+        assert!(cut(&dir, |_| 0).unwrap().is_empty());
+        let _ = std::fs::remove_dir_all(&dir);
+        let _ = std::fs::remove_dir_all(&beside);
     }
 
     #[test]
     fn a_rewrite_is_on_the_disk_and_an_older_sync_does_not_count_for_it() {
         watch();
-        let dir = Scratch::new("rewrite");
-        let path = dir.path().join("inbox.log");
+        let dir = scratch("power-rewrite");
+        let path = dir.join("inbox.log");
         let (mut log, _) = RecordLog::open(&path, FORMAT, |p| Some(p.to_vec())).unwrap();
         log.append(b"a long record before the rewrite").unwrap();
         let old = log.sync_handle().unwrap();
@@ -227,8 +208,9 @@ mod tests {
         // The older sync ends after the rewrite: it covers nothing of it.
         old.sync_data().unwrap();
         drop(log);
-        let cuts = cut(dir.path(), |_| 0).unwrap();
+        let cuts = cut(&dir, |_| 0).unwrap();
         assert!(cuts[0].kept < cuts[0].before, "{cuts:?}");
         assert_eq!(payloads(&path), vec![b"kept".to_vec()]);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
