@@ -237,7 +237,14 @@ fn sweep_hours(text: &str) -> Result<f64, String> {
 /// may write (it is not changed here).
 fn outputs_writable(scenario: &goby_sim::Scenario, dir: &std::path::Path) -> Result<(), CliError> {
     let r = &scenario.report;
-    for name in [r.json(), r.csv(), r.html(), r.links_csv(), r.links_json()] {
+    for name in [
+        r.json(),
+        r.csv(),
+        r.html(),
+        r.links_csv(),
+        r.links_json(),
+        r.replay(),
+    ] {
         let path = dir.join(name);
         let refused = |why: String| {
             CliError::setup(format!(

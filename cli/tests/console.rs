@@ -722,6 +722,20 @@ fn a_headless_screenshot_with_a_virtual_time_budget_returns() {
     browser::screenshot_returns();
 }
 
+/// A `goby sim` run replayed on the page: the page's clock is the run's
+/// (the header says the run's time, ages are counted from it), the AUVs
+/// move along their tracks, and the commander says a replay takes no
+/// commands.
+#[test]
+#[cfg_attr(
+    not(chromium),
+    ignore = "Chromium is not installed: `bash .ci/chromium.sh` installs Debian's package (the README's test command runs it)"
+)]
+fn a_replay_plays_on_the_page_in_the_run_s_time() {
+    #[cfg(chromium)]
+    browser::replay_plays();
+}
+
 #[cfg(chromium)]
 mod browser {
     use super::*;
@@ -1008,6 +1022,63 @@ mod browser {
         assert!(dom.contains("goby.example.Command"), "no commander: {dom}");
         drop(console);
         drop(broker);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    pub fn replay_plays() {
+        let dir = scratch("browser-replay");
+        let survey = repo().join("sim/examples/survey.pb.txt");
+        let run = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .args(["sim", survey.to_str().unwrap(), "--out"])
+            .arg(dir.join("run"))
+            .output()
+            .unwrap();
+        assert!(run.status.success(), "{run:?}");
+        let replay = dir.join("run/replay.jsonl");
+        // The run's 9 000 s in 3 s.
+        let console = Console::start(&["--replay", replay.to_str().unwrap(), "--warp", "3000"]);
+        let chromium = Chromium::start(&dir.join("profile"));
+        let mut page = chromium.page();
+        page.call("Page.enable", json!({}));
+        page.call("Page.navigate", json!({"url": console.url}));
+        // 2026-06-01T02:30:00Z, the run's end.
+        page.wait(
+            "the replay's end",
+            "typeof goby === 'object' && goby.state.clock === 1780281000 \
+             && goby.state.connection.connected === false",
+            broker::PATIENCE,
+        );
+        let pill = page.eval("document.getElementById('connection').textContent");
+        assert_eq!(
+            pill,
+            json!("run time 2026-06-01 02:30:00 UTC; the replay has ended (the run's end)")
+        );
+        // Ages in the run's time: the ship was last heard as the traffic
+        // ended, 30 minutes of drain before the run's end (not 56 years
+        // ago, as a wall clock would say).
+        let heard = page.eval(
+            "(() => { const n = goby.state.nodes.get('ship'); return goby.state.clock - n.last_heard; })()",
+        );
+        assert!(
+            heard
+                .as_f64()
+                .is_some_and(|s| (1800.0..2400.0).contains(&s)),
+            "{heard}"
+        );
+        let track = page.eval("goby.state.nodes.get('auv1').track.length");
+        assert!(track.as_u64().is_some_and(|n| n > 800), "{track}");
+        assert_eq!(
+            page.eval("document.getElementById('cmd-send').disabled"),
+            Value::Bool(true)
+        );
+        assert_eq!(
+            page.eval("document.getElementById('cmd-said').textContent"),
+            json!("a replay takes no commands")
+        );
+        assert_eq!(page.eval("goby.errors"), json!([]));
+        drop(page);
+        drop(chromium);
+        drop(console);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -17,6 +17,17 @@ fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/examples/fleet.pb.txt")
 }
 
+/// `goby sim SCENARIO --out OUT`, which must succeed.
+fn run_sim(scenario: &Path, out: &Path) {
+    let run = goby(&[
+        "sim",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", stderr_text(&run));
+}
+
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("goby-sim-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -154,13 +165,7 @@ fn over_modelled_water_the_page_charts_the_links_snr() {
         node("b", 2, 2000.0, "a")
     );
     std::fs::write(&scenario, text).unwrap();
-    let run = goby(&[
-        "sim",
-        scenario.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(run.status.success(), "{}", stderr_text(&run));
+    run_sim(&scenario, &out);
     let page = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(page.contains("<title>Link SNR over time, per pair</title>"));
     assert!(page.contains("<title>Link SNR by range, per pair</title>"));
@@ -422,4 +427,262 @@ fn a_sweep_seed_runs_again_from_its_number_with_the_same_report() {
         let _ = std::fs::remove_dir_all(&out);
     }
     assert_eq!(reports[0], reports[1]);
+}
+
+/// A GET on the console at `port`: the status and the body (the server
+/// closes the connection after it).
+fn get(port: u16, path: &str) -> (u16, String) {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(30)))
+        .unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut text = String::new();
+    stream.read_to_string(&mut text).unwrap();
+    let (head, body) = text.split_once("\r\n\r\n").unwrap();
+    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    (status, body.to_string())
+}
+
+/// A run with a moving node and a kill, replayed by `goby console
+/// --replay` at a high warp: when the replay has ended, the console's
+/// picture is the run's — each node's track the replay's positions, the
+/// moving node's last where its track ends, its messages received, queued
+/// and acknowledged as many as its gobyd told, its TDMA cycle, its link
+/// series in the run's time, its clock at the run's end —
+/// and a command to a node is refused (a replay sends nothing).
+#[test]
+fn a_run_replays_in_the_console() {
+    let out = scratch("replay");
+    let gobyd = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/examples/fleet-gobyd.pb.txt");
+    let scenario = out.join("replayed.pb.txt");
+    std::fs::write(
+        &scenario,
+        format!(
+            r#"
+seed: 5
+start_time: "2026-06-01T00:00:00Z"
+duration_s: 1200
+drain_s: 300
+water {{ packet_loss: 0.2 }}
+node {{
+  name: "ship"  modem_id: 1  gobyd_file: "{gobyd}"
+  position {{ x: 0  y: 0  depth: 5 }}
+  traffic {{
+    type: "goby.example.Command"  dest: "auv"  period_s: 300
+    field {{ name: "action"  constant: "GOTO" }}
+    field {{ name: "note"  counter {{ format: "c-%d" }} }}
+  }}
+}}
+node {{
+  name: "auv"  modem_id: 3  gobyd_file: "{gobyd}"
+  track {{
+    waypoint {{ x: 500  y: 0  depth: 10 }}
+    waypoint {{ x: 1500  y: 0  depth: 60 }}
+    speed_mps: 1.0
+  }}
+  traffic {{
+    type: "goby.example.NavigationReport"  dest: "ship"  period_s: 60
+    field {{ name: "time"  counter {{ start: 1780272000  step: 60 }} }}
+    field {{ name: "x"  uniform {{ min: -9000  max: -8000 }} }}
+    field {{ name: "y"  constant: "0" }}
+    field {{ name: "z"  constant: "-10" }}
+    field {{ name: "veh_class"  constant: "AUV" }}
+  }}
+}}
+fault {{ kill {{ node: "auv"  at_s: 600  restart_after_s: 60 }} }}
+"#,
+            gobyd = gobyd.display()
+        ),
+    )
+    .unwrap();
+    run_sim(&scenario, &out);
+    let path = out.join("replay.jsonl");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let of = |node: &str, key: &str| {
+        lines
+            .iter()
+            .filter(|l| l["node"] == node && l.get(key).is_some())
+            .collect::<Vec<_>>()
+    };
+    let event_count = |node: &str, kind: &str| {
+        of(node, "event")
+            .iter()
+            .filter(|l| l["event"]["event"] == kind)
+            .count()
+    };
+    // The file: the auv at its start, every 10 s along its 1 000 m (and
+    // the 51 m down) at 1 m/s, held at its last waypoint; the kill as
+    // down then up; what each gobyd told.
+    let positions = of("auv", "position");
+    assert_eq!(positions.len(), 102, "{positions:?}");
+    assert_eq!(positions[0]["position"]["x"], 500.0);
+    assert_eq!(positions.last().unwrap()["position"]["x"], 1500.0);
+    let statuses: Vec<&str> = of("auv", "status")
+        .iter()
+        .map(|l| l["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(statuses, ["up", "down", "up"]);
+    let ledger = std::fs::read_to_string(out.join("ledger.csv")).unwrap();
+    let commands = ledger.lines().filter(|l| l.contains("Command")).count();
+    assert_eq!(of("ship", "accepted").len(), commands);
+    let received_at_ship = event_count("ship", "received");
+    let acked_at_ship = event_count("ship", "ack");
+    assert!(received_at_ship > 5 && acked_at_ship > 0, "{text}");
+
+    // The console, at 20 000 virtual seconds a second: 1 500 s in 0.08 s.
+    let mut console = std::process::Command::new(env!("CARGO_BIN_EXE_goby"))
+        .args(["console", "--replay", path.to_str().unwrap()])
+        .args([
+            "--warp",
+            "20000",
+            "--listen",
+            "127.0.0.1:0",
+            "--duration",
+            "60",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(console.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    assert!(
+        line.contains("shows the replay of the goby sim run in")
+            && line.contains("(seed 5, 2 nodes, 1500 s) at 20000× its time (no commander types)"),
+        "{line}"
+    );
+    let port: u16 = line
+        .split("http://127.0.0.1:")
+        .nth(1)
+        .and_then(|r| r.split('/').next())
+        .and_then(|p| p.parse().ok())
+        .unwrap_or_else(|| panic!("no address in {line:?}"));
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    let state = loop {
+        let (status, body) = get(port, "/api/state");
+        assert_eq!(status, 200, "{body}");
+        let state: serde_json::Value = serde_json::from_str(&body).unwrap();
+        if state["connection"]["connected"] == false && state["clock"].is_number() {
+            break state;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the replay did not end: {state}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let _ = console.kill();
+    let _ = console.wait();
+    assert_eq!(
+        state["connection"]["detail"],
+        "the replay has ended (the run's end)"
+    );
+    assert_eq!(state["clock"], 1780272000.0 + 1500.0);
+    let node = |name: &str| {
+        state["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["name"] == name)
+            .unwrap_or_else(|| panic!("no {name} in {state}"))
+            .clone()
+    };
+    let auv = node("auv");
+    let ship = node("ship");
+    // The track is the scenario's, not the messages' own `x`.
+    assert_eq!(auv["track"].as_array().unwrap().len(), positions.len());
+    assert_eq!(auv["position"]["x"], 1500.0);
+    assert_eq!(auv["position"]["depth"], 60.0);
+    assert_eq!(auv["position"]["via"], "track");
+    assert_eq!(ship["track"].as_array().unwrap().len(), 1);
+    assert_eq!(auv["modem_id"], 3);
+    assert_eq!(auv["online"], true);
+    assert_eq!(ship["received"], received_at_ship);
+    assert_eq!(ship["acks"], acked_at_ship);
+    assert_eq!(ship["accepted"], commands);
+    // Each node's TDMA cycle, as it stood when its gobyd started (the four
+    // slots of the example configuration).
+    for n in [&auv, &ship] {
+        let slots = n["mac"]["cycle"]["slots"].as_array().unwrap();
+        assert_eq!(slots.len(), 4, "{n}");
+    }
+    // The link series in the run's time.
+    let links = ship["links"].as_array().unwrap();
+    assert!(!links.is_empty());
+    for l in links {
+        let t = l["t"].as_f64().unwrap();
+        assert!((1780272000.0..=1780273500.0).contains(&t), "{l}");
+    }
+    let messages = state["messages"].as_array().unwrap();
+    let count = |kind: &str, node: &str| {
+        messages
+            .iter()
+            .filter(|m| m["kind"] == kind && m["node"] == node)
+            .count()
+    };
+    assert_eq!(count("rx", "ship"), received_at_ship);
+    assert_eq!(count("accepted", "ship"), commands);
+    assert!(messages
+        .iter()
+        .any(|m| m["kind"] == "rx" && m["type"] == "goby.example.NavigationReport"));
+}
+
+/// A file that is not a replay is refused before anything is served,
+/// naming its line.
+#[test]
+fn a_file_that_is_not_a_replay_is_refused_naming_its_line() {
+    let out = scratch("not-replay");
+    let path = out.join("replay.jsonl");
+    let head = r#"{"replay":"goby sim","version":1,"seed":1,"start":1000000,"end":9000000,"nodes":[{"name":"a","modem_id":1}]}"#;
+    for (body, said) in [
+        ("{}\n".to_string(), "replay.jsonl:1: not a replay of goby sim"),
+        (
+            format!("{head}\n{{\"t\":2000000,\"node\":\"b\",\"status\":\"up\"}}\n"),
+            "replay.jsonl:2: node \"b\" is not among the first line's nodes",
+        ),
+        (
+            format!("{head}\n{{\"t\":3000000,\"node\":\"a\",\"status\":\"up\"}}\n{{\"t\":2000000,\"node\":\"a\",\"status\":\"up\"}}\n"),
+            "replay.jsonl:3: its time is before the line above's",
+        ),
+        (
+            format!("{head}\n{{\"t\":2000000,\"node\":\"a\",\"position\":{{\"x\":1}}}}\n"),
+            "replay.jsonl:2: a position without a number \"y\"",
+        ),
+        (
+            format!("{head}\n{{\"t\":2000000,\"node\":\"a\",\"event\":{{\"event\":\"nonsense\"}}}}\n"),
+            "replay.jsonl:2: not an event of gobyd's JSON interface",
+        ),
+    ] {
+        std::fs::write(&path, &body).unwrap();
+        let run = goby(&[
+            "console",
+            "--replay",
+            path.to_str().unwrap(),
+            "--listen",
+            "127.0.0.1:0",
+        ]);
+        assert_eq!(run.status.code(), Some(2), "{body}");
+        let stderr = stderr_text(&run);
+        assert!(stderr.contains(said), "{body}: {stderr}");
+    }
+    let run = goby(&["console", "--replay", path.to_str().unwrap(), "--warp", "0"]);
+    assert!(
+        stderr_text(&run).contains("--warp must be a positive number"),
+        "{}",
+        stderr_text(&run)
+    );
 }

@@ -126,6 +126,8 @@ pub struct Ledger {
     down: Vec<(usize, Micros, Micros)>,
     /// What each power cut left of the nodes' logs, in time order.
     power_cuts: Vec<PowerCut>,
+    /// What the console's replay of the run shows.
+    replay: crate::replay::Kept,
     failure: Option<String>,
 }
 
@@ -170,6 +172,7 @@ impl Ledger {
             medium: MediumLog::default(),
             down: Vec::new(),
             power_cuts: Vec::new(),
+            replay: crate::replay::Kept::default(),
             failure: None,
         }
     }
@@ -226,6 +229,35 @@ impl Ledger {
     /// again yet) from `from` until `until`.
     pub fn down(&mut self, node: usize, from: Micros, until: Micros) {
         self.down.push((node, from, until));
+    }
+
+    /// When nodes were down (killed or their power cut, not started again
+    /// yet): (node, from, until), in the order they came back.
+    pub fn down_spans(&self) -> &[(usize, Micros, Micros)] {
+        &self.down
+    }
+
+    /// What the run kept for its replay ([`crate::replay`]).
+    pub fn kept(&self) -> &crate::replay::Kept {
+        &self.replay
+    }
+
+    /// Keeps `event` of node `node` at `time` for the replay (if the
+    /// console shows it); [`event`](Self::event) enters it in the ledger.
+    pub fn keep(&mut self, node: usize, time: Micros, event: &gobyd::event::SharedEvent) {
+        self.replay.event(node, time, event);
+    }
+
+    /// Keeps a publication of node `node` made at `time`, and its
+    /// daemon's answer, for the replay.
+    pub fn keep_published(
+        &mut self,
+        node: usize,
+        time: Micros,
+        message: &DynamicMessage,
+        outcome: Result<Option<u64>, String>,
+    ) {
+        self.replay.published(node, time, message, outcome);
     }
 
     /// Enters what a power cut did.

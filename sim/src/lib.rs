@@ -21,6 +21,7 @@
 //! - [`losses`]: why each publication was or was not delivered, and the
 //!   fates of the packets that carried it.
 //! - [`link_quality`]: each directed link over time and range (JSON, CSV).
+//! - [`replay`]: the run as the fleet console replays it.
 //! - [`aloha`]: ALOHA throughput measured against theory.
 //! - [`discovery`]: auto-discovery TDMA's convergence against the
 //!   thesis' simulation of it.
@@ -49,6 +50,7 @@ pub mod losses;
 pub mod medium_log;
 pub mod modem;
 pub mod node_clock;
+pub mod replay;
 pub mod report;
 pub mod scenario;
 pub mod slot_bounds;
@@ -113,8 +115,8 @@ pub fn run_until(
     Ok(Outcome { ledger, report })
 }
 
-/// Writes the report (JSON), the ledger (CSV) and the link quality (CSV,
-/// JSON) into `dir` under the scenario's names for them; returns the paths
+/// Writes the report (JSON), the ledger (CSV), the link quality (CSV,
+/// JSON) and the console's replay (JSON lines) into `dir` under the scenario's names for them; returns the paths
 /// written. The HTML page is the command line's (`goby sim`).
 pub fn write(
     scenario: &Scenario,
@@ -131,6 +133,10 @@ pub fn write(
         (scenario.report.csv(), report::ledger_csv(&outcome.ledger)),
         (scenario.report.links_csv(), links.to_csv()),
         (scenario.report.links_json(), links.to_json()),
+        (
+            scenario.report.replay(),
+            replay::lines(scenario, &outcome.ledger),
+        ),
     ];
     let mut written = Vec::new();
     for (name, text) in outputs {

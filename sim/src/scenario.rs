@@ -268,6 +268,7 @@ impl Check<'_> {
             ("report.html", report.html()),
             ("report.links_csv", report.links_csv()),
             ("report.links_json", report.links_json()),
+            ("report.replay", report.replay()),
         ];
         for (i, &(path, name)) in names.iter().enumerate() {
             let plain = Path::new(name)

@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use gobyd::daemon::Daemon;
-use gobyd::event::{Publish, SharedEvent};
+use gobyd::event::{Control, DaemonEvent, ModemEvent, Publish, SharedEvent};
 use modemdriver::sim::medium::Medium;
 use modemdriver::sim::positions::Positions;
 use modemdriver::sim::SimulatorDriver;
@@ -321,6 +321,27 @@ async fn start_node(
         clock.clone(),
     ));
     let publisher = daemon.publisher();
+    // The cycle as it stands at the start, for the console's replay (a
+    // client of the JSON interface asks for it as it connects).
+    let control = daemon.control();
+    let (asker, now) = (ledger.clone(), clock.clone());
+    tokio::spawn(async move {
+        let (reply, answer) = oneshot::channel();
+        if control.send(Control::MacCycle { reply }).await.is_ok() {
+            if let Ok(cycle) = answer.await {
+                let event = Arc::new(DaemonEvent::Modem(ModemEvent::MacCycle {
+                    cycle,
+                    update: None,
+                    from: "start",
+                    error: None,
+                }));
+                asker
+                    .lock()
+                    .expect("not poisoned")
+                    .keep(i, now.now(), &event);
+            }
+        }
+    });
     let (stop, stopped) = oneshot::channel::<()>();
     let run = tokio::spawn(daemon.run(async move {
         let _ = stopped.await;
@@ -388,10 +409,12 @@ async fn listen(
 ) {
     loop {
         match events.recv().await {
-            Ok(event) => ledger
-                .lock()
-                .expect("not poisoned")
-                .event(node, clock.now(), &event),
+            Ok(event) => {
+                let mut ledger = ledger.lock().expect("not poisoned");
+                let now = clock.now();
+                ledger.event(node, now, &event);
+                ledger.keep(node, now, &event);
+            }
             Err(broadcast::error::RecvError::Lagged(n)) => {
                 ledger.lock().expect("not poisoned").fail(format!(
                     "node {name}: {n} of its events were missed (its event channel overflowed): \
@@ -445,13 +468,12 @@ impl Publishing {
             let Some(publisher) = publisher else {
                 let down =
                     "the node is down (killed or its power cut, not started again yet)".to_string();
-                self.ledger
-                    .lock()
-                    .expect("not poisoned")
-                    .accepted(index, Err(down));
+                let mut ledger = self.ledger.lock().expect("not poisoned");
+                ledger.keep_published(self.node, self.clock.now(), &message, Err(down.clone()));
+                ledger.accepted(index, Err(down));
                 continue;
             };
-            let result = match publisher.send(Publish::new(message, reply)).await {
+            let result = match publisher.send(Publish::new(message.clone(), reply)).await {
                 Err(_) => Err("the node stopped taking publications".to_string()),
                 Ok(()) => match answer.await {
                     Ok(Ok(accepted)) => Ok(accepted.id),
@@ -459,10 +481,9 @@ impl Publishing {
                     Err(_) => Err("the node did not answer".to_string()),
                 },
             };
-            self.ledger
-                .lock()
-                .expect("not poisoned")
-                .accepted(index, result);
+            let mut ledger = self.ledger.lock().expect("not poisoned");
+            ledger.keep_published(self.node, self.clock.now(), &message, result.clone());
+            ledger.accepted(index, result);
         }
     }
 }

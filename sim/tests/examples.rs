@@ -66,3 +66,42 @@ fn the_example_fleet_runs_and_every_command_arrives_once() {
     assert_eq!((report.total.refused, report.stray_receptions), (0, 0));
     assert_eq!(report.by_pair.len(), 5, "{:?}", report.by_pair.keys());
 }
+
+/// The example fleet on the move (`sim/examples/survey.pb.txt`, shown in
+/// `docs/sim.md` to be replayed in the console): it runs, every Command
+/// arrives once, and its replay moves both AUVs along their tracks (auv1's
+/// 4.2 km of survey lines at 1.5 m/s, 2 h 30 min: a position every 10 s).
+#[test]
+fn the_survey_example_runs_and_its_auvs_move_in_its_replay() {
+    let path = repository().join("sim/examples/survey.pb.txt");
+    let scenario = goby_sim::scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let commands = &outcome.report.by_type["goby.example.Command"];
+    assert_eq!(
+        (commands.published, commands.delivered, commands.duplicates),
+        (24, 24, 0),
+        "{:#?}",
+        outcome.report
+    );
+    let replay = goby_sim::replay::lines(&scenario, &outcome.ledger);
+    let positions = |node: &str| -> Vec<serde_json::Value> {
+        replay
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .filter(|l| l["node"] == node && l.get("position").is_some())
+            .map(|l| l["position"].clone())
+            .collect()
+    };
+    // 9 000 s at one every 10 s, and the end.
+    assert_eq!(positions("auv1").len(), 901);
+    assert_eq!(positions("auv2").len(), 901);
+    assert_eq!(positions("ship").len(), 1);
+    let xs: Vec<f64> = positions("auv1")
+        .iter()
+        .map(|p| p["x"].as_f64().unwrap())
+        .collect();
+    let (least, most) = xs
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(*x), b.max(*x)));
+    assert_eq!((least, most), (900.0, 1500.0));
+}

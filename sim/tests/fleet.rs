@@ -63,6 +63,8 @@ fn the_same_scenario_gives_the_same_report_byte_for_byte() {
     };
     assert_eq!(links(&first), links(&second));
     assert!(links(&first).1.lines().count() > 100);
+    let replay = |o: &goby_sim::Outcome| goby_sim::replay::lines(&scenario, &o.ledger);
+    assert_eq!(replay(&first), replay(&second));
     // A different seed draws different losses.
     let mut other = scenario.clone();
     other.seed += 1;
@@ -79,7 +81,8 @@ const OUTPUT: &str = "GOBY_SIM_TEST_OUTPUT";
 
 /// The example fleet run in two child processes (this test's binary
 /// again, told by [`OUTPUT`] where to write), whose hashers' keys and
-/// tokio's seeds differ: the same report and ledger, byte for byte.
+/// tokio's seeds differ: the same report, ledger, link quality and
+/// replay, byte for byte.
 #[test]
 fn the_same_scenario_gives_the_same_report_in_two_processes() {
     let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/fleet.pb.txt");
@@ -112,7 +115,10 @@ fn the_same_scenario_gives_the_same_report_in_two_processes() {
     for (out, mut child) in children {
         assert!(child.wait().unwrap().success(), "the run failed");
         let read = |name: &str| std::fs::read_to_string(out.join(name)).unwrap();
-        outputs.push((read("report.json"), read("ledger.csv") + &read("links.csv")));
+        outputs.push((
+            read("report.json"),
+            read("ledger.csv") + &read("links.csv") + &read("replay.jsonl"),
+        ));
     }
     assert!(outputs[0].1.lines().count() > 100, "{}", outputs[0].1);
     assert!(

@@ -42,6 +42,15 @@ impl Commander {
         })
     }
 
+    /// A commander with no types (a replay, which sends nothing).
+    pub(crate) fn none() -> Self {
+        Commander {
+            codec: Codec::default(),
+            types: Vec::new(),
+            descriptors: HashMap::new(),
+        }
+    }
+
     /// The names of the loaded types, sorted.
     pub fn types(&self) -> &[String] {
         &self.types

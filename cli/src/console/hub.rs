@@ -29,6 +29,9 @@ pub struct Hub {
     outbound: mpsc::Sender<Outbound>,
     /// Whether the source is connected, and what it last said.
     source_status: Mutex<(bool, String)>,
+    /// A replay's clock: the virtual time its page shows (`None`: the
+    /// wall clock's).
+    clock: Mutex<Option<f64>>,
 }
 
 fn now() -> f64 {
@@ -46,7 +49,12 @@ impl Hub {
         commander: Commander,
         origin: Option<(f64, f64)>,
     ) -> (Arc<Hub>, mpsc::Receiver<Outbound>) {
-        let state = ConsoleState::new(&source.describe(), origin, commander.same_message());
+        let mut state = ConsoleState::new(&source.describe(), origin, commander.same_message());
+        if let Source::Replay { .. } = source {
+            // The scenario's positions are the truth: a message's `x` and
+            // `y` are whatever its stream drew.
+            state.place_by_messages(false);
+        }
         let (events, _) = broadcast::channel(EVENTS_HELD);
         let (outbound, to_source) = mpsc::channel(256);
         let hub = Hub {
@@ -56,6 +64,7 @@ impl Hub {
             source,
             outbound,
             source_status: Mutex::new((false, "connecting".into())),
+            clock: Mutex::new(None),
         };
         (Arc::new(hub), to_source)
     }
@@ -72,10 +81,41 @@ impl Hub {
         }
     }
 
+    /// The time now: the replay's clock, or the wall clock's (seconds
+    /// since the UNIX epoch).
+    fn now(&self) -> f64 {
+        let clock = *self.clock.lock().unwrap_or_else(|p| p.into_inner());
+        clock.unwrap_or_else(now)
+    }
+
+    /// A replay's clock is at `time` (virtual seconds since the UNIX
+    /// epoch): the pages are told (`{"event": "clock", "time": T}`).
+    pub fn set_clock(&self, time: f64) {
+        self.advance_clock(time);
+        let _state = self.state();
+        self.send([json!({"event": "clock", "time": time})]);
+    }
+
+    /// A replay's clock is at `time`, the pages not told (the next
+    /// [`set_clock`](Self::set_clock) tells them).
+    pub fn advance_clock(&self, time: f64) {
+        *self.clock.lock().unwrap_or_else(|p| p.into_inner()) = Some(time);
+    }
+
+    /// `node` is at `x` metres east and `y` north of the origin, `depth`
+    /// metres down (a replay's position), now.
+    pub fn position(&self, node: &str, x: f64, y: f64, depth: f64) {
+        let time = self.now();
+        let mut state = self.state();
+        let events = state.position(node, x, y, depth, time);
+        self.send(events);
+    }
+
     /// Takes a report of `node` into the picture and tells the pages.
     pub fn apply(&self, node: &str, report: &Report) {
+        let time = self.now();
         let mut state = self.state();
-        let events = state.apply(node, report, now());
+        let events = state.apply(node, report, time);
         // Sent under the lock, so that the events keep the order of their
         // `seq` (a snapshot taken meanwhile is before or after them all).
         self.send(events);
@@ -125,6 +165,7 @@ impl Hub {
         type_name: &str,
         msg: &Value,
     ) -> Result<u64, String> {
+        self.takes_commands()?;
         self.commander.parse(type_name, msg)?;
         self.dispatch(node, |_| {
             Ok(Outbound {
@@ -144,6 +185,7 @@ impl Hub {
     /// has not heard is refused), then shown as published. The command's
     /// id, or why it was not sent.
     pub async fn send_mac(&self, request: &MacRequest) -> Result<u64, String> {
+        self.takes_commands()?;
         let node = request.node.as_str();
         self.dispatch(node, |state| {
             let (kind, msg) = request.prepare(state.modem_id_of(node))?;
@@ -156,6 +198,16 @@ impl Hub {
             })
         })
         .await
+    }
+
+    /// Whether the source takes commands (a replay takes none).
+    fn takes_commands(&self) -> Result<(), String> {
+        match self.source {
+            Source::Replay { .. } => {
+                Err("this is the replay of a goby sim run: it takes no commands".into())
+            }
+            _ => Ok(()),
+        }
     }
 
     /// Shows a command to a bridged `node` as published and hands it to
@@ -209,6 +261,7 @@ impl Hub {
         let state = self.state();
         let mut snapshot = state.snapshot();
         snapshot["connection"] = source;
+        snapshot["clock"] = json!(*self.clock.lock().unwrap_or_else(|p| p.into_inner()));
         (snapshot, self.events.subscribe())
     }
 

@@ -1,6 +1,7 @@
 //! `goby console`: the fleet in a web browser. A page served on a local
 //! port shows what the gateways (gobyd with its MQTT bridge) publish on
-//! the broker, or what one gobyd says on its JSON interface: a map of the
+//! the broker, what one gobyd says on its JSON interface, or a `goby sim`
+//! run replayed (its replay file): a map of the
 //! nodes from the positions their messages report, with tracks and the
 //! last time heard; per node its queues, acks and expiries, driver state
 //! and link quality over time (SNR, Doppler, bad frames from a WHOI
@@ -13,12 +14,13 @@
 //! Modules: [`state`] is the picture of the fleet (sans-IO), [`schema`]
 //! the commander's forms, [`commander`] its codec, [`mac`] each node's
 //! medium access and the requests that change it, [`source`] the broker
-//! or JSON interface it reads, [`hub`] what the server and the source
+//! or JSON interface it reads, [`replay`] a rehearsal played back, [`hub`] what the server and the source
 //! share, [`server`] the routes.
 
 pub mod commander;
 pub mod hub;
 pub mod mac;
+pub mod replay;
 pub mod schema;
 pub mod server;
 pub mod source;
@@ -39,18 +41,26 @@ use source::Source;
 
 /// Options of `goby console`.
 #[derive(Debug, Args)]
+#[command(mut_arg("file", |a| a.required(false).required_unless_present("replay")))]
 pub struct ConsoleArgs {
     /// The topic prefix the gateways publish under on the broker (their
-    /// `mqtt.topic_prefix`); not with --gobyd.
-    #[arg(value_name = "PREFIX", required_unless_present = "gobyd")]
+    /// `mqtt.topic_prefix`); not with --gobyd or --replay.
+    #[arg(value_name = "PREFIX", required_unless_present_any = ["gobyd", "replay"])]
     pub prefix: Option<String>,
     /// The MQTT broker, `HOST[:PORT]` (PORT 1883 when left out).
-    #[arg(long, default_value = "127.0.0.1:1883", conflicts_with = "gobyd")]
+    #[arg(long, default_value = "127.0.0.1:1883", conflicts_with_all = ["gobyd", "replay"])]
     pub broker: String,
     /// Read one gobyd's JSON interface (`HOST:PORT`, its `json.tcp_bind`)
     /// instead of a broker.
-    #[arg(long, value_name = "HOST:PORT", conflicts_with = "prefix")]
+    #[arg(long, value_name = "HOST:PORT", conflicts_with_all = ["prefix", "replay"])]
     pub gobyd: Option<String>,
+    /// Replay a `goby sim` run (its `replay.jsonl`) instead of reading a
+    /// live fleet; `-f` is then optional (the commander is off).
+    #[arg(long, value_name = "FILE", conflicts_with = "prefix")]
+    pub replay: Option<std::path::PathBuf>,
+    /// With --replay: virtual seconds played a wall second.
+    #[arg(long, default_value_t = 60.0, requires = "replay", value_name = "X")]
+    pub warp: f64,
     /// With --gobyd: the name the node is shown under.
     #[arg(long, default_value = "gobyd", requires = "gobyd")]
     pub node: String,
@@ -92,8 +102,25 @@ fn parse_origin(text: &str) -> Result<(f64, f64), CliError> {
     Ok((lat, lon))
 }
 
-/// The source the arguments name.
+/// The source the arguments name (a replay file read and checked).
 fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
+    if let Some(path) = &args.replay {
+        if !(args.warp.is_finite() && args.warp > 0.0) {
+            return Err(CliError::setup(format!(
+                "--warp must be a positive number of virtual seconds a second, not {}",
+                args.warp
+            )));
+        }
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| CliError::setup(format!("cannot read {name}: {e}")))?;
+        let replay = replay::Replay::parse(&text, &name).map_err(CliError::setup)?;
+        return Ok(Source::Replay {
+            path: name,
+            replay: Box::new(replay),
+            warp: args.warp,
+        });
+    }
     if let Some(address) = &args.gobyd {
         host_port(address, 0)
             .filter(|(_, p)| *p != 0)
@@ -141,10 +168,16 @@ pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
                 })
         })
         .transpose()?;
-    let defs = Definitions::compile(&args.proto)?;
-    let mut warnings = Vec::new();
-    let commander = Commander::load(&defs, &mut warnings)?;
-    let _ = std::io::stderr().write_all(&warnings);
+    // A replay needs no definitions: its messages come decoded.
+    let commander = if args.proto.file.is_empty() {
+        Commander::none()
+    } else {
+        let defs = Definitions::compile(&args.proto)?;
+        let mut warnings = Vec::new();
+        let commander = Commander::load(&defs, &mut warnings)?;
+        let _ = std::io::stderr().write_all(&warnings);
+        commander
+    };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -158,12 +191,15 @@ pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
         let address = listener
             .local_addr()
             .map_err(|e| CliError::setup(e.to_string()))?;
-        let types = commander.types().join(", ");
+        let types = match commander.types() {
+            [] => "no commander types".to_string(),
+            types => format!("commander types: {}", types.join(", ")),
+        };
         let described = source.describe();
         let (hub, outbound) = Hub::new(source.clone(), commander, origin);
         writeln!(
             stdout,
-            "goby console: http://{address}/ shows {described} (commander types: {types})"
+            "goby console: http://{address}/ shows {described} ({types})"
         )?;
         stdout.flush()?;
         tokio::spawn(source::run(source, hub.clone(), outbound));

@@ -31,7 +31,7 @@ use crate::fleet::{
 use crate::mac_report::{MacActiveReport, MacCycleReport, MacRateReport};
 
 /// Where the fleet is read from.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Source {
     /// An MQTT broker, the gateways publishing under `prefix/`.
     Mqtt {
@@ -49,6 +49,16 @@ pub enum Source {
         /// The name the node is shown under.
         node: String,
     },
+    /// The replay file of a `goby sim` run, played at `warp` times its
+    /// virtual time ([`super::replay`]).
+    Replay {
+        /// The file, as named on the command line.
+        path: String,
+        /// The file, read.
+        replay: Box<super::replay::Replay>,
+        /// Virtual seconds a wall second.
+        warp: f64,
+    },
 }
 
 impl Source {
@@ -61,6 +71,16 @@ impl Source {
             Source::Json { address, node } => {
                 format!("the JSON interface of gobyd at {address} (its node shown as {node:?})")
             }
+            Source::Replay {
+                path,
+                replay,
+                warp,
+            } => format!(
+                "the replay of the goby sim run in {path} (seed {}, {} nodes, {:.0} s) at {warp}× its time",
+                replay.seed,
+                replay.nodes.len(),
+                replay.end - replay.start
+            ),
         }
     }
 
@@ -70,6 +90,7 @@ impl Source {
         match self {
             Source::Mqtt { prefix, .. } => format!("{prefix}/{node}/tx/{type_name}"),
             Source::Json { address, .. } => format!("json {address}"),
+            Source::Replay { .. } => super::replay::AUTONOMY.to_string(),
         }
     }
 
@@ -79,6 +100,7 @@ impl Source {
         match self {
             Source::Mqtt { prefix, .. } => format!("{prefix}/{node}/{}", kind.word()),
             Source::Json { address, .. } => format!("json {address}"),
+            Source::Replay { .. } => "replay".to_string(),
         }
     }
 }
@@ -112,6 +134,9 @@ pub async fn run(source: Source, hub: Arc<Hub>, outbound: mpsc::Receiver<Outboun
     match source {
         Source::Mqtt { host, port, prefix } => mqtt(host, port, prefix, hub, outbound).await,
         Source::Json { address, node } => json_interface(address, node, hub, outbound).await,
+        Source::Replay { replay, warp, .. } => {
+            super::replay::play(*replay, warp, hub, outbound).await;
+        }
     }
 }
 
@@ -298,6 +323,16 @@ fn json_line_heard(
     let Ok(event) = serde_json::from_str::<Event>(line) else {
         return Vec::new();
     };
+    event_report(event, now)
+        .map(Heard::of)
+        .into_iter()
+        .collect()
+}
+
+/// The report of an event line of gobyd's JSON interface, told at `now`
+/// (seconds since the UNIX epoch); `None` for events the console does not
+/// show.
+pub fn event_report(event: Event, now: f64) -> Option<Report> {
     let queued = |kind, type_name, msg| {
         Report::Queued(QueueNotice {
             kind,
@@ -350,22 +385,22 @@ fn json_line_heard(
         Event::MacRate(r) => Report::MacRate(MacRateReport::of_event(&r, now)),
         Event::ModemReceive(m) => {
             let t = &m.modem_receive;
-            // 64-bit integers are strings in proto3 JSON: microseconds.
-            let micros = t["time"]
-                .as_str()
-                .and_then(|s| s.parse::<f64>().ok())
-                .or_else(|| t["time"].as_f64());
+            // Seconds since the UNIX epoch, as every time of the interface
+            // (docs/json-protocol.md), not the `.proto`'s microseconds.
+            let seconds = t["time"]
+                .as_f64()
+                .or_else(|| t["time"].as_str().and_then(|s| s.parse::<f64>().ok()));
             let mut summary = t.clone();
             summary["frames"] = t["frame"].as_array().map_or(0, Vec::len).into();
-            summary["time"] = json!(micros.map_or(now, |m| m / 1e6));
+            summary["time"] = json!(seconds.unwrap_or(now));
             if summary["src"].is_null() {
                 summary["src"] = json!(-1);
             }
             Report::Link(LinkReport::from_json(&summary))
         }
-        _ => return Vec::new(),
+        _ => return None,
     };
-    vec![Heard::of(report)]
+    Some(report)
 }
 
 /// The JSON request of a command: a `publish`, or a `mac_update` or
@@ -577,7 +612,7 @@ mod tests {
         );
         assert!(matches!(r.as_slice(), [Report::Rx(rx)] if rx.src == 1 && rx.time == 5.0));
         let r = reports(
-            &json!({"event": "modem_receive", "modem_receive": {"src": 1, "rate": 1, "time": "2500000", "frame": ["AA==", "AA=="],
+            &json!({"event": "modem_receive", "modem_receive": {"src": 1, "rate": 1, "time": 2.5, "frame": ["AA==", "AA=="],
                 "receive_stat": [{"snr_in": 7}]}}),
             &mut pending,
             5.0,

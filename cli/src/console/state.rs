@@ -201,6 +201,9 @@ pub struct ConsoleState {
     same_message: SameMessage,
     /// Where the fleet is read from, for the page's header.
     source: String,
+    /// Whether messages with a position place nodes (not in a replay,
+    /// whose positions are its own).
+    place_by_messages: bool,
 }
 
 impl ConsoleState {
@@ -219,7 +222,29 @@ impl ConsoleState {
             next_command: 1,
             same_message,
             source: source.to_string(),
+            place_by_messages: true,
         }
+    }
+
+    /// Whether messages that report a position place nodes on the map
+    /// (`true` at first).
+    pub fn place_by_messages(&mut self, yes: bool) {
+        self.place_by_messages = yes;
+    }
+
+    /// `node` is at `x` metres east and `y` north of the origin, `depth`
+    /// metres down, at `time` (a replay's position, `via` "track"); the
+    /// events for the page.
+    pub fn position(&mut self, node: &str, x: f64, y: f64, depth: f64, time: f64) -> Vec<Value> {
+        let mut events = Vec::new();
+        let fix = json!({"x": x, "y": y, "depth": depth, "time": time});
+        // Where a node is is not its being heard.
+        let heard = self.extra.get(node).map_or(0.0, |e| e.last_heard);
+        self.place_at(node, "track", &fix, time, &mut events);
+        if let Some(e) = self.extra.get_mut(node) {
+            e.last_heard = heard;
+        }
+        events
     }
 
     fn next_seq(&mut self) -> u64 {
@@ -612,6 +637,12 @@ impl ConsoleState {
 
     /// `msg` (of type `via`) reports where `node` is.
     fn place(&mut self, node: &str, via: &str, msg: &Value, time: f64, events: &mut Vec<Value>) {
+        if self.place_by_messages {
+            self.place_at(node, via, msg, time, events);
+        }
+    }
+
+    fn place_at(&mut self, node: &str, via: &str, msg: &Value, time: f64, events: &mut Vec<Value>) {
         let Some(fix) = fix_of(msg) else { return };
         let origin_before = self.origin;
         let at = self.map_point(fix);

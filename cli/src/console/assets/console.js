@@ -15,6 +15,7 @@ const S = {
   connection: { connected: false, detail: 'connecting' },
   picked: null,
   forms: [],
+  clock: null,           // a replay's virtual time (seconds since 1970); null: live
 };
 
 // What the tests and the measurements read: the state, and when each
@@ -52,7 +53,8 @@ function colorOf(name) {
   return PALETTE[(i < 0 ? 0 : i) % PALETTE.length];
 }
 
-const now = () => Date.now() / 1000;
+// A replay's clock, or the wall clock.
+const now = () => (S.clock ?? Date.now() / 1000);
 function age(t) {
   if (!t) return '—';
   const s = Math.max(0, now() - t);
@@ -79,6 +81,7 @@ function applySnapshot(snap) {
   S.seq = snap.seq;
   S.source = snap.source;
   if (snap.connection) S.connection = snap.connection;
+  S.clock = snap.clock ?? null;
   goby.snapshots += 1;
   // The first gateway is picked until the operator picks another.
   if (S.picked === null || !S.nodes.has(S.picked)) {
@@ -129,6 +132,7 @@ function applyEvent(ev) {
       break;
     case 'command': S.commands.set(ev.command.id, ev.command); renderCommands(); break;
     case 'source': S.connection = { connected: ev.connected, detail: ev.detail }; break;
+    case 'clock': S.clock = ev.time; break;
     default: break;
   }
   schedule();
@@ -185,8 +189,16 @@ function schedule() {
 function render() {
   $('source').textContent = S.source;
   const pill = $('connection');
-  pill.textContent = S.connection.connected ? 'connected' : S.connection.detail;
+  const replayed = S.clock === null ? '' : `run time ${new Date(S.clock * 1000).toISOString().slice(0, 19).replace('T', ' ')} UTC; `;
+  pill.textContent = replayed + (S.connection.connected ? (S.clock === null ? 'connected' : S.connection.detail) : S.connection.detail);
   pill.className = 'pill ' + (S.connection.connected ? 'up' : 'down');
+  // Only a replay has a clock of its own: it takes no commands.
+  if (S.clock !== null) {
+    for (const [send, said] of [['cmd-send', 'cmd-said'], ['mac-send', 'mac-said']]) {
+      $(send).disabled = true;
+      $(said).textContent = 'a replay takes no commands';
+    }
+  }
   renderNodes();
   drawMap();
   renderDetail();
@@ -487,7 +499,7 @@ function slotText(s) {
 function macActiveText(a) {
   if (!a) return 'no MAC switcher heard of';
   const why = [a.reason, a.from ? `from ${a.from}` : ''].filter(Boolean).join(', ');
-  const until = a.keep_alive_until ? `, keep-alive until ${clock(a.keep_alive_until)} (in ${Math.max(0, Math.round(a.keep_alive_until - Date.now() / 1000))} s)` : '';
+  const until = a.keep_alive_until ? `, keep-alive until ${clock(a.keep_alive_until)} (in ${Math.max(0, Math.round(a.keep_alive_until - now()))} s)` : '';
   const macs = a.macs && a.macs.length ? `; MACs ${a.macs.join(', ')}${a.default_mac ? ', default ' + a.default_mac : ''}` : '';
   return `${a.name}${why ? ' (' + why + ')' : ''}${until}${macs}${a.error ? '; refused: ' + a.error : ''}`;
 }
