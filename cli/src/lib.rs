@@ -157,8 +157,8 @@ pub enum GobyCommand {
     #[command(subcommand)]
     Mqtt(mqtt_cmd::MqttCommand),
     /// The fleet in a web browser: a map, the nodes' queues, links and
-    /// messages, and a commander (from the MQTT broker, or one gobyd's JSON
-    /// interface).
+    /// messages, and a commander (from the MQTT broker or one gobyd's JSON
+    /// interface), or a `goby sim` run replayed.
     Console(console::ConsoleArgs),
     /// A MOOS community: write variables (poke) and watch them (spy).
     #[command(subcommand)]

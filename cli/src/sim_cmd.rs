@@ -38,7 +38,8 @@ pub struct SimArgs {
     /// Seed of the run, in place of the scenario's.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
-    /// Directory for the report and the ledger (created if needed).
+    /// Directory for the report, the ledger, the link quality, the page
+    /// and the console's replay (created if needed).
     #[arg(long, value_name = "DIR", default_value = ".")]
     pub out: PathBuf,
 }
@@ -111,6 +112,11 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     for fault in &report.run.faults {
         writeln!(stdout, "fault: {fault}")?;
     }
+    for (node, modem) in &report.run.modems {
+        if modem != goby_sim::modem::SIMULATOR {
+            writeln!(stdout, "modem: {node}: {modem}")?;
+        }
+    }
     let virtual_s = (scenario.duration_micros + scenario.drain_micros) as f64 / 1e6;
     writeln!(
         stdout,
@@ -165,6 +171,11 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
     }
+    writeln!(
+        stdout,
+        "replay it in the console: goby console --replay {}",
+        args.out.join(scenario.report.replay()).display()
+    )?;
     if let Some(seed) = args.sweep_seed {
         return swept(seed, &outcome, stdout);
     }

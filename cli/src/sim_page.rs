@@ -81,6 +81,13 @@ fn run_section(page: &mut String, report: &Report) {
         nodes.join(", "),
         report.stray_receptions
     );
+    if r.modems.values().any(|m| m != goby_sim::modem::SIMULATOR) {
+        *page += "<p>Each node's simulated modem:</p>\n<ul>\n";
+        for (node, modem) in &r.modems {
+            let _ = writeln!(page, "<li>{}: {}</li>", escape(node), escape(modem));
+        }
+        *page += "</ul>\n";
+    }
     if !r.faults.is_empty() {
         *page += "<p>Faults of the scenario:</p>\n<ul>\n";
         for fault in &r.faults {

@@ -1065,6 +1065,12 @@ mod browser {
                 .is_some_and(|s| (1800.0..2400.0).contains(&s)),
             "{heard}"
         );
+        // auv1 moved to its last point at the end, but was last heard as
+        // the traffic ended: its age on the page is from then.
+        let auv1 = page.eval(
+            "(() => { const n = goby.state.nodes.get('auv1'); return goby.state.clock - n.last_heard; })()",
+        );
+        assert!(auv1.as_f64().is_some_and(|s| s > 1700.0), "{auv1}");
         let track = page.eval("goby.state.nodes.get('auv1').track.length");
         assert!(track.as_u64().is_some_and(|n| n > 800), "{track}");
         assert_eq!(

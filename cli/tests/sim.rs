@@ -540,8 +540,9 @@ fault {{ kill {{ node: "auv"  at_s: 600  restart_after_s: 60 }} }}
     assert!(received_at_ship > 5 && acked_at_ship > 0, "{text}");
 
     // The console, at 20 000 virtual seconds a second: 1 500 s in 0.08 s.
+    // The run's --out directory names its replay.
     let mut console = std::process::Command::new(env!("CARGO_BIN_EXE_goby"))
-        .args(["console", "--replay", path.to_str().unwrap()])
+        .args(["console", "--replay", out.to_str().unwrap()])
         .args([
             "--warp",
             "20000",
@@ -611,6 +612,13 @@ fault {{ kill {{ node: "auv"  at_s: 600  restart_after_s: 60 }} }}
     assert_eq!(ship["track"].as_array().unwrap().len(), 1);
     assert_eq!(auv["modem_id"], 3);
     assert_eq!(auv["online"], true);
+    // Killed and started again once: one restart.
+    assert_eq!(auv["reconnects"], 1);
+    // Heard when it last said something, not where the track last put it.
+    assert!(
+        auv["last_heard"].as_f64().unwrap() < 1780273500.0 - 60.0,
+        "{auv}"
+    );
     assert_eq!(ship["received"], received_at_ship);
     assert_eq!(ship["acks"], acked_at_ship);
     assert_eq!(ship["accepted"], commands);
@@ -666,6 +674,34 @@ fn a_file_that_is_not_a_replay_is_refused_naming_its_line() {
             format!("{head}\n{{\"t\":2000000,\"node\":\"a\",\"event\":{{\"event\":\"nonsense\"}}}}\n"),
             "replay.jsonl:2: not an event of gobyd's JSON interface",
         ),
+        (
+            format!("{head}\n{{\"t\":2000000,\"node\":\"a\",\"status\":\"up\",\"position\":{{\"x\":1,\"y\":2,\"depth\":3}}}}\n"),
+            "replay.jsonl:2: a line of one kind has position and status",
+        ),
+        (
+            format!("{head}\n{{\"t\":9000001,\"node\":\"a\",\"status\":\"up\"}}\n"),
+            "replay.jsonl:2: its time is after the run's end",
+        ),
+        (
+            format!("{head}\n{{\"t\":2.5,\"node\":\"a\",\"status\":\"up\"}}\n"),
+            "replay.jsonl:2: \"t\" is 2.5, not whole microseconds since 1970",
+        ),
+        (
+            format!("{head}\n{head}\n"),
+            "replay.jsonl:2: a replay's first line again: two replays in one file?",
+        ),
+        (
+            format!("{head}\n{{\"t\":2000000,\"node\":\"a\",\"sta"),
+            "replay.jsonl:2: not JSON at column 28: EOF while parsing a string",
+        ),
+        (
+            head.replace("\"end\":9000000", "\"end\":1"),
+            "replay.jsonl:1: its \"end\" is before its \"start\"",
+        ),
+        (
+            head.replace("}]}", "},{\"name\":\"a\",\"modem_id\":2}]}"),
+            "replay.jsonl:1: node \"a\" is named twice",
+        ),
     ] {
         std::fs::write(&path, &body).unwrap();
         let run = goby(&[
@@ -679,9 +715,39 @@ fn a_file_that_is_not_a_replay_is_refused_naming_its_line() {
         let stderr = stderr_text(&run);
         assert!(stderr.contains(said), "{body}: {stderr}");
     }
-    let run = goby(&["console", "--replay", path.to_str().unwrap(), "--warp", "0"]);
+    for warp in ["0", "1e-20", "2e9", "nan"] {
+        let run = goby(&[
+            "console",
+            "--replay",
+            path.to_str().unwrap(),
+            "--warp",
+            warp,
+        ]);
+        assert!(
+            stderr_text(&run).contains("--warp must be from 0.001 to 1000000000"),
+            "{warp}: {}",
+            stderr_text(&run)
+        );
+    }
+    // A pipe would be read for ever: refused, as is a directory without a
+    // replay.
+    let fifo = out.join("fifo");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let run = goby(&["console", "--replay", fifo.to_str().unwrap()]);
     assert!(
-        stderr_text(&run).contains("--warp must be a positive number"),
+        stderr_text(&run).contains("is not a file (a pipe or a device)"),
+        "{}",
+        stderr_text(&run)
+    );
+    let empty = out.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let run = goby(&["console", "--replay", empty.to_str().unwrap()]);
+    assert!(
+        stderr_text(&run).contains("is a directory without a replay.jsonl"),
         "{}",
         stderr_text(&run)
     );

@@ -111,6 +111,16 @@ pub trait DriverKind: Send + Sync + 'static {
         None
     }
 
+    /// The data packets of Goby rate `rate` when the acoustic channel
+    /// simulator sends as this modem (`simulator.modem`, with this
+    /// modem's settings in `config`): frames, frame size, bit rate and
+    /// probe/header time, as the driver reckons them; `None` when the
+    /// simulator cannot send as it (its timing is not known here) or the
+    /// rate is not one it has. By default its [`packet_time`](Self::packet_time).
+    fn simulated_packet(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+        self.packet_time(config, rate)
+    }
+
     /// The type of the driver-specific requests it takes
     /// ([`Driver::initiate_specific`]), when it takes any.
     fn specific(&self) -> Option<MessageDescriptor> {

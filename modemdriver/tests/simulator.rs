@@ -373,3 +373,92 @@ async fn with_deferred_ack_the_receiver_acks_only_when_asked() {
     assert_eq!(acks[0].acked_frame, vec![0, 1]);
     assert_eq!(acks[0].unique_id, Some(12));
 }
+
+/// Node `modem_id` of `nodes` sending as `modem` (`simulator.modem`), with
+/// that modem's settings in the same section.
+fn as_modem(modem_id: i32, nodes: &[(i32, f64)], modem: &str) -> DriverConfig {
+    let mut c = config(modem_id, nodes, 0.0, 1);
+    c.simulator.as_mut().unwrap().modem = Some(modem.into());
+    c.popoto = Some(protos::goby::acomms::protobuf::PopotoConfig {
+        max_frame_bytes: Some(64),
+        ..Default::default()
+    });
+    c
+}
+
+/// With `simulator.modem`, the simulated modem sends as that modem, as its
+/// driver reckons its packets: a Popoto's rate 1 is one 64-byte frame
+/// (its `max_frame_bytes`) at payload mode 4, 640 bit/s, after a second
+/// of signal and the driver's 1-byte header (1.8125 s on the water); a
+/// SeaTrac's is one 30-byte frame (its default) at 80 ms a byte after
+/// half a second and the header byte (2.98 s). Its ack takes the probe and
+/// header alone.
+#[tokio::test(start_paused = true)]
+async fn sent_as_a_popoto_or_a_seatrac_a_packet_takes_that_modem_s_frames_and_time() {
+    for (modem, frame_bytes, on_water_ms, ack_ms) in [
+        ("DRIVER_POPOTO", 64, 1812.5, 1012.5),
+        ("BLUEPRINT_SEATRAC", 30, 2980.0, 580.0),
+    ] {
+        let nodes = [(1, 0.0), (2, 1500.0)];
+        let medium = Medium::new();
+        let mut a = SimulatorDriver::start_on(&as_modem(1, &nodes, modem), medium.clone()).unwrap();
+        let mut b = SimulatorDriver::start_on(&as_modem(2, &nodes, modem), medium).unwrap();
+        let t0 = Instant::now();
+        a.initiate_transmission(data(2, 1, true)).unwrap();
+        let template = tokio::time::timeout(Duration::from_secs(60), async {
+            loop {
+                if let DriverEvent::DataRequest(r) = a.next_event().await.unwrap() {
+                    let t = r.template().clone();
+                    let mut filled = t.clone();
+                    filled.frame = vec![vec![7; frame_bytes]];
+                    r.respond(filled);
+                    return t;
+                }
+            }
+        })
+        .await
+        .unwrap();
+        assert_eq!(
+            (template.max_num_frames(), template.max_frame_bytes()),
+            (1, frame_bytes as u32),
+            "{modem}"
+        );
+        let got = received(&mut b, Duration::from_secs(60)).await;
+        // Tokio's timers round up to the millisecond.
+        let micros = |ms: f64| Duration::from_millis(ms.ceil() as u64);
+        // On the water, then 1 s of propagation.
+        assert_eq!(Instant::now() - t0, micros(on_water_ms + 1000.0), "{modem}");
+        assert_eq!(got.frame, vec![vec![7; frame_bytes]]);
+        let pump_b =
+            tokio::spawn(
+                async move { collect_received(&mut b, &[], Duration::from_secs(20)).await },
+            );
+        let ack = received(&mut a, Duration::from_secs(60)).await;
+        assert_eq!(ack.r#type(), TransmissionType::Ack);
+        assert_eq!(
+            Instant::now() - t0,
+            micros(on_water_ms + 1000.0) + micros(ack_ms + 1000.0),
+            "{modem}"
+        );
+        pump_b.await.unwrap();
+    }
+}
+
+/// A modem the simulator cannot send as is refused at start, naming the
+/// field and the modems it can send as.
+#[test]
+fn a_modem_the_simulator_cannot_send_as_is_refused() {
+    let nodes = [(1, 0.0)];
+    for (modem, said) in [
+        ("EVOLOGICS_S2C", "EVOLOGICS_S2C: its packets' timing is not known here"),
+        ("POPOTO", "\"POPOTO\" is not a modem the simulator sends as (one of DRIVER_WHOI_MICROMODEM, DRIVER_POPOTO, BLUEPRINT_SEATRAC)"),
+    ] {
+        let problems = modemdriver::sim::problems(&as_modem(1, &nodes, modem));
+        assert!(
+            problems
+                .iter()
+                .any(|p| p.field == "simulator.modem" && p.reason.starts_with(said)),
+            "{modem}: {problems:?}"
+        );
+    }
+}

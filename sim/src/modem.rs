@@ -10,14 +10,19 @@ use protos::goby::acomms::protobuf::{
 /// The driver section of node `modem_id`: the acoustic channel simulator
 /// with the scenario's `water`, every node at `positions` (modem id; x,
 /// y, depth in metres), its losses drawn from `seed`; acks deferred to the
-/// daemon (sent once the message is recorded).
+/// daemon (sent once the message is recorded). With `modem` (a section
+/// [`sends_as`] made), the simulated modem sends as that one.
 pub fn driver_config(
     modem_id: i32,
     positions: &[(i32, [f64; 3])],
     water: &SimulatorDriverConfig,
     seed: u64,
+    modem: Option<&DriverConfig>,
 ) -> DriverConfig {
     let mut simulator = water.clone();
+    simulator.modem = modem
+        .and_then(|m| m.simulator.as_ref())
+        .and_then(|s| s.modem.clone());
     simulator.node = positions
         .iter()
         .map(|(id, [x, y, depth])| NodePosition {
@@ -35,6 +40,45 @@ pub fn driver_config(
         modem_id: Some(modem_id),
         deferred_ack: Some(true),
         simulator: Some(simulator),
-        ..Default::default()
+        // The modem's own settings (its frame size), which the simulator
+        // reads as that modem's.
+        ..modem.cloned().unwrap_or_default()
+    }
+}
+
+/// The simulated modem of a node whose driver names no modem the
+/// simulator sends as, in words.
+pub const SIMULATOR: &str = "the simulator's (Micro-Modem rates)";
+
+/// What a node's own driver section `driver` makes of its simulated
+/// modem: the section to give [`driver_config`] when the simulator can
+/// send as that modem (its settings kept, `simulator.modem` naming it),
+/// and the modem in words for the report (`"DRIVER_POPOTO"`, `"the
+/// simulator's (Micro-Modem rates)"`, or why the modem's own timing is not
+/// simulated).
+pub fn sends_as(driver: Option<&DriverConfig>) -> (Option<DriverConfig>, String) {
+    let simulator = SIMULATOR.to_string();
+    let Some(driver) = driver else {
+        return (None, simulator);
+    };
+    let Ok(kind) = modemdriver::built_in::of(driver) else {
+        return (None, simulator);
+    };
+    let name = kind.about().named.name();
+    if kind.about().named == modemdriver::kind::Named::Type(DriverType::DriverAcousticSimulator) {
+        // The node's own simulator settings: the modem it names, if any.
+        return match driver.simulator.as_ref().and_then(|s| s.modem.clone()) {
+            Some(modem) => (Some(driver.clone()), modem),
+            None => (None, simulator),
+        };
+    }
+    let mut own = driver.clone();
+    own.simulator.get_or_insert_with(Default::default).modem = Some(name.to_string());
+    match modemdriver::sim::modem_of(&own) {
+        Ok(Some(_)) => (Some(own), name.to_string()),
+        _ => (
+            None,
+            format!("{SIMULATOR}: {name}'s timing is not known here"),
+        ),
     }
 }

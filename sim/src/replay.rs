@@ -20,11 +20,12 @@
 //! - `event` is the line of the node's JSON interface
 //!   ([`gobyd::json::event`]) for the events the console shows: receptions,
 //!   acks, expiries, drops, queue sizes, driver states, the modem's
-//!   receptions (link quality) and medium access (with the TDMA cycle
+//!   receptions of data (link quality) and medium access (with the TDMA cycle
 //!   as it stands at each start of the node's gobyd, a `mac_cycle` event
 //!   `from` `"start"`);
 //! - `accepted` is a publication of the node's autonomy queued (with its
-//!   journal id), `refused` one its daemon refused (with the reason);
+//!   journal id), `refused` one its daemon refused (with the reason; not
+//!   those made while it was down, which no daemon answered);
 //! - `position` is where the node is (metres east and north of the
 //!   scenario's origin, depth down): at the start, then every
 //!   [`POSITION_STEP_S`] seconds while it moves;
@@ -36,6 +37,7 @@
 
 use gobyd::event::{DaemonEvent, ModemEvent, SharedEvent};
 use prost_reflect::{DynamicMessage, ReflectMessage};
+use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use queue::QueueEvent;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
@@ -84,10 +86,13 @@ fn shown(event: &DaemonEvent) -> bool {
                 | QueueEvent::Dropped { .. }
                 | QueueEvent::QueueSize { .. }
         ),
+        // A reception of data (an ack is not a reception of frames).
+        DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) => {
+            transmission.r#type() == TransmissionType::Data
+        }
         DaemonEvent::Modem(event) => matches!(
             event,
-            ModemEvent::Received { .. }
-                | ModemEvent::Status(_)
+            ModemEvent::Status(_)
                 | ModemEvent::MacCycle { .. }
                 | ModemEvent::MacSwitch(_)
                 | ModemEvent::RateChoice { .. }

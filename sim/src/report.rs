@@ -102,6 +102,10 @@ pub struct Run {
     pub drain_us: u64,
     /// Modem id by node name.
     pub nodes: BTreeMap<String, i32>,
+    /// Each node's simulated modem by node name: the modem it sends as
+    /// (its frames and packet times as its driver states them,
+    /// `"DRIVER_POPOTO"`), or the simulator's Micro-Modem rates and why.
+    pub modems: BTreeMap<String, String>,
     /// The scenario's faults, in words, in the scenario's order.
     pub faults: Vec<String>,
     /// What each power cut did to its node's logs, in time order (left
@@ -245,6 +249,11 @@ impl Report {
                     .nodes()
                     .iter()
                     .map(|n| (n.name.clone(), n.modem_id))
+                    .collect(),
+                modems: scenario
+                    .nodes
+                    .iter()
+                    .map(|n| (n.name.clone(), n.modem.clone()))
                     .collect(),
                 faults: {
                     let names: Vec<String> =

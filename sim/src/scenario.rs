@@ -63,6 +63,9 @@ pub struct Node {
     pub place: Place,
     /// What its autonomy publishes.
     pub traffic: Vec<Stream>,
+    /// Its simulated modem in words: the modem it sends as
+    /// (`"DRIVER_POPOTO"`), or the simulator's own rates and why.
+    pub modem: String,
 }
 
 /// A scenario refused: every problem found, one a line.
@@ -95,6 +98,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         duration_s: 0.0,
         water: SimulatorDriverConfig::default(),
         water_refused: Vec::new(),
+        modems: Default::default(),
     };
     let scenario = check.scenario(parsed);
     match check.found.is_empty() {
@@ -130,6 +134,10 @@ pub(crate) struct Check<'a> {
     /// The fields of each node's driver the water's problems are told
     /// at (`driver.simulator.…`): told once, as `water.…`.
     water_refused: Vec<String>,
+    /// Each node's simulated modem ([`crate::modem::sends_as`]), by node
+    /// index: the modem it sends as (`None`: the simulator's own rates),
+    /// and in words.
+    modems: std::collections::BTreeMap<usize, (Option<String>, String)>,
 }
 
 /// The longest `duration_s` or `drain_s` a run takes: a year.
@@ -207,6 +215,7 @@ impl Check<'_> {
             nodes.push(self.node(i, node, &s.node));
         }
         let nodes: Option<Vec<Node>> = nodes.into_iter().collect();
+        self.one_modem_on_the_water();
         // A duration refused above is not checked against (no follow-on
         // problems of the faults).
         let run_s = if self.duration_s > 0.0 {
@@ -245,7 +254,7 @@ impl Check<'_> {
             }
         }
         // The simulator driver's own checks, told as the scenario's water.
-        let driver = crate::modem::driver_config(1, &[(1, [0.0; 3])], water, 0);
+        let driver = crate::modem::driver_config(1, &[(1, [0.0; 3])], water, 0, None);
         // (The stand-in node's position is not the water's: each node's
         // place is checked in it apart.)
         let water_only = |p: &modemdriver::problem::Problem| !p.field.starts_with("simulator.node");
@@ -354,7 +363,48 @@ impl Check<'_> {
             codec: checked.codec,
             place: place?,
             traffic: traffic.into_iter().collect::<Option<Vec<_>>>()?,
+            modem: self
+                .modems
+                .get(&i)
+                .map(|(_, words)| words.clone())
+                .unwrap_or_default(),
         })
+    }
+
+    /// Every node on the one water sends as the same modem: a Popoto does
+    /// not hear a Micro-Modem (the simulator's own rates are the
+    /// Micro-Modem's).
+    fn one_modem_on_the_water(&mut self) {
+        let named = |m: &Option<String>| {
+            m.clone()
+                .unwrap_or_else(|| crate::modem::SIMULATOR.to_string())
+        };
+        let family = |m: &Option<String>| match m.as_deref() {
+            None | Some("DRIVER_WHOI_MICROMODEM") => None,
+            Some(other) => Some(other.to_string()),
+        };
+        let Some((first, (modem, _))) = self.modems.first_key_value() else {
+            return;
+        };
+        let (first, modem) = (*first, modem.clone());
+        let other: Vec<(usize, Option<String>)> = self
+            .modems
+            .iter()
+            .filter(|(_, (m, _))| family(m) != family(&modem))
+            .map(|(i, (m, _))| (*i, m.clone()))
+            .collect();
+        for (i, m) in other {
+            self.problem(
+                format!("node[{i}].gobyd.driver"),
+                format!(
+                    "its simulated modem is {}, node[{first}]'s {}: the nodes of a run share one \
+                     water and one modem (a Popoto does not hear a Micro-Modem); give every \
+                     node the same modem",
+                    named(&m),
+                    named(&modem)
+                ),
+            );
+        }
     }
 
     /// Where node `i` is: its `position`, or its `track`.
@@ -417,7 +467,7 @@ impl Check<'_> {
         if self.found.len() == before && self.water.acoustic_channel.is_some() {
             // Where the modelled water has no room for a modem (under the
             // sea floor, out of the modelled range), as the driver says.
-            let driver = crate::modem::driver_config(1, &[(1, point)], &self.water, 0);
+            let driver = crate::modem::driver_config(1, &[(1, point)], &self.water, 0, None);
             for p in modemdriver::sim::problems(&driver) {
                 if p.field.starts_with("simulator.node[0]") {
                     self.problem(format!("{at}.depth"), p.reason.clone());
@@ -552,7 +602,20 @@ impl Check<'_> {
         // them (a slot too short for its rate's packet would drop every
         // transmission in it).
         let own = [(id, start_of(node))];
-        config.driver = Some(crate::modem::driver_config(id, &own, &self.water, 0));
+        // The simulated modem sends as the node's own where it can.
+        let (modem, words) = crate::modem::sends_as(config.driver.as_ref());
+        let sent_as = modem
+            .as_ref()
+            .and_then(|m| m.simulator.as_ref())
+            .and_then(|s| s.modem.clone());
+        self.modems.insert(i, (sent_as, words));
+        config.driver = Some(crate::modem::driver_config(
+            id,
+            &own,
+            &self.water,
+            0,
+            modem.as_ref(),
+        ));
         // The run publishes and listens in-process: no JSON, MQTT or MOOS
         // interface, and no forecast (its ray traces run on other threads).
         config.json = Some(protos::goby::apps::protobuf::gobyd_config::JsonInterface {

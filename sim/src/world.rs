@@ -279,7 +279,13 @@ async fn start_node(
         .map(|n| (n.modem_id, n.place.start()))
         .collect();
     let seed = generation_seed(&[s.seed, node.modem_id as u64], generation);
-    let driver_config = driver_config(node.modem_id, &positions, &s.water, seed);
+    let driver_config = driver_config(
+        node.modem_id,
+        &positions,
+        &s.water,
+        seed,
+        node.config.driver.as_ref(),
+    );
     let mut config = node.config.clone();
     config.driver = Some(driver_config.clone());
     config.data_dir = Some(crate::disk::data_dir(dir, i).display().to_string());
@@ -468,9 +474,11 @@ impl Publishing {
             let Some(publisher) = publisher else {
                 let down =
                     "the node is down (killed or its power cut, not started again yet)".to_string();
-                let mut ledger = self.ledger.lock().expect("not poisoned");
-                ledger.keep_published(self.node, self.clock.now(), &message, Err(down.clone()));
-                ledger.accepted(index, Err(down));
+                // (Not in the replay: no daemon answered.)
+                self.ledger
+                    .lock()
+                    .expect("not poisoned")
+                    .accepted(index, Err(down));
                 continue;
             };
             let result = match publisher.send(Publish::new(message.clone(), reply)).await {

@@ -54,16 +54,19 @@ pub struct ConsoleArgs {
     /// instead of a broker.
     #[arg(long, value_name = "HOST:PORT", conflicts_with_all = ["prefix", "replay"])]
     pub gobyd: Option<String>,
-    /// Replay a `goby sim` run (its `replay.jsonl`) instead of reading a
-    /// live fleet; `-f` is then optional (the commander is off).
+    /// Replay a `goby sim` run (its `replay.jsonl`, or the run's --out
+    /// directory holding it) instead of reading a live fleet; `-f` is then
+    /// optional (a replay takes no commands).
     #[arg(long, value_name = "FILE", conflicts_with = "prefix")]
     pub replay: Option<std::path::PathBuf>,
-    /// With --replay: virtual seconds played a wall second.
-    #[arg(long, default_value_t = 60.0, requires = "replay", value_name = "X")]
-    pub warp: f64,
-    /// With --gobyd: the name the node is shown under.
-    #[arg(long, default_value = "gobyd", requires = "gobyd")]
-    pub node: String,
+    /// With --replay: seconds of the run played a second, 0.001 to
+    /// 1000000000 [default: 60]. A long run at a high warp plays as fast as
+    /// the console can.
+    #[arg(long, requires = "replay", value_name = "X")]
+    pub warp: Option<f64>,
+    /// With --gobyd: the name the node is shown under [default: gobyd].
+    #[arg(long, requires = "gobyd")]
+    pub node: Option<String>,
     /// The message definitions of the commander's forms (and of the
     /// fleet's messages).
     #[command(flatten)]
@@ -102,23 +105,60 @@ fn parse_origin(text: &str) -> Result<(f64, f64), CliError> {
     Ok((lat, lon))
 }
 
+/// `--warp` when not given.
+const DEFAULT_WARP: f64 = 60.0;
+
+/// The `--warp` values taken.
+const WARPS: std::ops::RangeInclusive<f64> = 1e-3..=1e9;
+
+/// The replay file `path` names: a file, or `replay.jsonl` in a directory
+/// (a `goby sim --out` directory). Anything else (a FIFO, a device, which
+/// could be read for ever) is refused.
+fn replay_file(path: &std::path::Path) -> Result<std::path::PathBuf, CliError> {
+    let name = path.display();
+    let meta = std::fs::metadata(path).map_err(|e| CliError::setup(format!("{name}: {e}")))?;
+    if meta.is_dir() {
+        let inside = path.join("replay.jsonl");
+        return match inside.is_file() {
+            true => Ok(inside),
+            false => Err(CliError::setup(format!(
+                "{name} is a directory without a replay.jsonl: give the replay file goby sim wrote"
+            ))),
+        };
+    }
+    if !meta.is_file() {
+        return Err(CliError::setup(format!(
+            "{name} is not a file (a pipe or a device): give the replay file goby sim wrote"
+        )));
+    }
+    Ok(path.to_path_buf())
+}
+
 /// The source the arguments name (a replay file read and checked).
 fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
     if let Some(path) = &args.replay {
-        if !(args.warp.is_finite() && args.warp > 0.0) {
+        let warp = args.warp.unwrap_or(DEFAULT_WARP);
+        if !(WARPS.contains(&warp)) {
             return Err(CliError::setup(format!(
-                "--warp must be a positive number of virtual seconds a second, not {}",
-                args.warp
+                "--warp must be from 0.001 to 1000000000 seconds of the run a second, not {warp}"
             )));
         }
+        if args.proto.file.is_empty()
+            && (!args.proto.include.is_empty() || args.proto.arithmetic_models.is_some())
+        {
+            return Err(CliError::setup(
+                "-I and --arithmetic-models are for the commander's -f files, and none is given",
+            ));
+        }
+        let path = replay_file(path)?;
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path)
+        let bytes = std::fs::read(&path)
             .map_err(|e| CliError::setup(format!("cannot read {name}: {e}")))?;
-        let replay = replay::Replay::parse(&text, &name).map_err(CliError::setup)?;
+        let replay = replay::Replay::parse(&bytes, &name).map_err(CliError::setup)?;
         return Ok(Source::Replay {
             path: name,
             replay: Box::new(replay),
-            warp: args.warp,
+            warp,
         });
     }
     if let Some(address) = &args.gobyd {
@@ -127,7 +167,7 @@ fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
             .ok_or_else(|| CliError::setup(format!("--gobyd {address:?} is not HOST:PORT")))?;
         return Ok(Source::Json {
             address: address.trim().to_string(),
-            node: args.node.clone(),
+            node: args.node.clone().unwrap_or_else(|| "gobyd".into()),
         });
     }
     let prefix = args.prefix.as_deref().unwrap_or("").trim_end_matches('/');
@@ -153,6 +193,9 @@ fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
 /// Runs `goby console`: serves the page until interrupted (or for
 /// `--duration`). The first line on `stdout` is the page's address.
 pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
+    if args.warp.is_some() && args.replay.is_none() {
+        return Err(CliError::setup("--warp is for --replay"));
+    }
     let source = source_of(args)?;
     let origin = args.origin.as_deref().map(parse_origin).transpose()?;
     let duration = args

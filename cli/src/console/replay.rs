@@ -74,28 +74,61 @@ pub struct Replay {
 /// it (the topic of a gateway's `tx` publication).
 pub const AUTONOMY: &str = "autonomy";
 
-fn micros(v: &Value) -> Option<f64> {
-    v.as_i64().map(|m| m as f64 / 1e6)
+/// The kinds of line after the first: each line is one of them.
+const KINDS: [&str; 5] = ["position", "status", "event", "accepted", "refused"];
+
+/// The farthest a position may be from the origin, metres (10 000 km).
+const MAX_OFFSET: f64 = 1e7;
+
+/// A time of the file (whole microseconds since 1970) in seconds.
+fn micros(v: &Value, name: &str) -> Result<f64, String> {
+    match v.get(name) {
+        None | Some(Value::Null) => Err(format!("no {name:?}")),
+        Some(t) => t.as_i64().map(|m| m as f64 / 1e6).ok_or_else(|| {
+            format!("{name:?} is {t}, not whole microseconds since 1970 (a 64-bit integer)")
+        }),
+    }
+}
+
+/// `bytes` as JSON, or what is wrong with them (the column, not the line:
+/// the caller names the line).
+fn json(bytes: &[u8]) -> Result<Value, String> {
+    serde_json::from_slice(bytes).map_err(|e| {
+        let said = e.to_string();
+        let what = said.split(" at line ").next().unwrap_or(&said).to_string();
+        format!("not JSON at column {}: {what}", e.column())
+    })
+}
+
+/// The lines of `bytes` with their numbers (from 0), the first without a
+/// UTF-8 byte-order mark, blank ones left out.
+fn numbered(bytes: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    bytes
+        .split(|b| *b == b'\n')
+        .enumerate()
+        .filter(|(_, l)| !l.iter().all(u8::is_ascii_whitespace))
 }
 
 impl Replay {
-    /// Reads the replay `text` of the file `file` (named in errors).
+    /// Reads the replay `bytes` of the file `file` (named in errors).
     ///
     /// # Errors
-    /// `FILE:LINE: what is wrong` for the first line that is not a replay's
-    /// (not JSON, a field missing or of the wrong kind, a node not in the
-    /// first line, a time going back, another format version).
-    pub fn parse(text: &str, file: &str) -> Result<Replay, String> {
-        let mut lines = text.lines().enumerate();
+    /// `FILE:LINE: what is wrong` for the first line that is not a replay's:
+    /// not JSON (its column said), a field missing or of the wrong kind, a
+    /// node not in the first line or named twice there, a time before the
+    /// line above's or outside the run, a line of two kinds or of none, a
+    /// first line again (two replays in one file), another format version.
+    pub fn parse(bytes: &[u8], file: &str) -> Result<Replay, String> {
+        let mut lines = numbered(bytes);
         let at = |n: usize, what: String| format!("{file}:{}: {what}", n + 1);
-        let Some((_, first)) = lines.next() else {
+        let Some((n0, first)) = lines.next() else {
             return Err(format!("{file}: empty: not a replay of goby sim"));
         };
-        let head: Value = serde_json::from_str(first)
-            .map_err(|e| at(0, format!("not JSON ({e}): not a replay of goby sim")))?;
+        let head = json(first).map_err(|e| at(n0, format!("{e}: not a replay of goby sim")))?;
         if head["replay"] != "goby sim" {
             return Err(at(
-                0,
+                n0,
                 "not a replay of goby sim (its first line has no \"replay\": \"goby sim\"; \
                  the file is the replay.jsonl that goby sim writes)"
                     .into(),
@@ -103,36 +136,55 @@ impl Replay {
         }
         if head["version"].as_u64() != Some(VERSION) {
             return Err(at(
-                0,
+                n0,
                 format!(
                     "replay version {} is not the one this console reads ({VERSION})",
                     head["version"]
                 ),
             ));
         }
-        let field = |name: &str| micros(&head[name]).ok_or_else(|| at(0, format!("no {name:?}")));
-        let (start, end) = (field("start")?, field("end")?);
-        let mut nodes = Vec::new();
+        let start = micros(&head, "start").map_err(|e| at(n0, e))?;
+        let end = micros(&head, "end").map_err(|e| at(n0, e))?;
+        if end < start {
+            return Err(at(n0, "its \"end\" is before its \"start\"".into()));
+        }
+        let mut nodes: Vec<(String, i64)> = Vec::new();
         for node in head["nodes"].as_array().into_iter().flatten() {
             match (node["name"].as_str(), node["modem_id"].as_i64()) {
+                (Some(name), _) if nodes.iter().any(|(n, _)| n == name) => {
+                    return Err(at(n0, format!("node {name:?} is named twice")));
+                }
                 (Some(name), Some(id)) => nodes.push((name.to_string(), id)),
-                _ => return Err(at(0, format!("a node without name or modem_id: {node}"))),
+                _ => return Err(at(n0, format!("a node without name or modem_id: {node}"))),
             }
         }
         if nodes.is_empty() {
-            return Err(at(0, "no \"nodes\"".into()));
+            return Err(at(n0, "no \"nodes\"".into()));
         }
         let mut read = Vec::new();
-        let mut last = f64::MIN;
+        let mut last = start;
+        // Each node's starts so far: after the first, a restart.
+        let mut starts: std::collections::HashMap<String, u64> = Default::default();
         for (n, text) in lines {
-            if text.trim().is_empty() {
-                continue;
+            let v = json(text).map_err(|e| at(n, e))?;
+            if v.get("replay").is_some() {
+                return Err(at(
+                    n,
+                    "a replay's first line again: two replays in one file?".into(),
+                ));
             }
-            let v: Value =
-                serde_json::from_str(text).map_err(|e| at(n, format!("not JSON: {e}")))?;
-            let time = micros(&v["t"]).ok_or_else(|| at(n, "no \"t\"".into()))?;
+            let time = micros(&v, "t").map_err(|e| at(n, e))?;
             if time < last {
-                return Err(at(n, "its time is before the line above's".into()));
+                return Err(at(
+                    n,
+                    match time < start {
+                        true => "its time is before the run's start".into(),
+                        false => "its time is before the line above's".into(),
+                    },
+                ));
+            }
+            if time > end {
+                return Err(at(n, "its time is after the run's end".into()));
             }
             last = time;
             let node = v["node"].as_str().unwrap_or_default();
@@ -142,7 +194,15 @@ impl Replay {
                     format!("node {} is not among the first line's nodes", v["node"]),
                 ));
             }
-            let Some(step) = step_of(&v, time, &nodes, node).map_err(|e| at(n, e))? else {
+            let kinds: Vec<&str> = KINDS.into_iter().filter(|k| v.get(k).is_some()).collect();
+            if kinds.len() > 1 {
+                return Err(at(
+                    n,
+                    format!("a line of one kind has {}", kinds.join(" and ")),
+                ));
+            }
+            let ups = starts.entry(node.to_string()).or_default();
+            let Some(step) = step_of(&v, time, &nodes, node, ups).map_err(|e| at(n, e))? else {
                 continue;
             };
             read.push(Line {
@@ -162,18 +222,23 @@ impl Replay {
 }
 
 /// What the line `v` of `node` at `time` does; `None` for an event the
-/// console does not show.
+/// console does not show. `starts`: the node's starts so far (a status
+/// `up` after the first is a restart, counted as a reconnection).
 fn step_of(
     v: &Value,
     time: f64,
     nodes: &[(String, i64)],
     node: &str,
+    starts: &mut u64,
 ) -> Result<Option<Step>, String> {
     let report = |r: Report| Ok(Some(Step::Report(Box::new(r))));
     if let Some(p) = v.get("position") {
         let n = |k: &str| {
             p[k].as_f64()
-                .ok_or_else(|| format!("a position without a number {k:?}"))
+                .filter(|v| v.abs() <= MAX_OFFSET)
+                .ok_or_else(|| {
+                    format!("a position without a number {k:?} (metres, at most 10 000 km)")
+                })
         };
         return Ok(Some(Step::Position {
             x: n("x")?,
@@ -188,9 +253,13 @@ fn step_of(
             _ => return Err(format!("status {status} is neither \"up\" nor \"down\"")),
         };
         let modem_id = nodes.iter().find(|(n, _)| n == node).map(|(_, id)| *id);
+        if online {
+            *starts += 1;
+        }
         return report(Report::Status(BridgeStatus {
             online: Some(online),
             modem_id,
+            reconnects: starts.saturating_sub(1),
             time,
             ..Default::default()
         }));
@@ -198,7 +267,15 @@ fn step_of(
     if let Some(event) = v.get("event") {
         let event: Event = serde_json::from_value(event.clone())
             .map_err(|e| format!("not an event of gobyd's JSON interface: {e}"))?;
-        return Ok(event_report(event, time).map(|r| Step::Report(Box::new(r))));
+        let report = event_report(event, time).map(|mut r| {
+            // Heard when the line says, not when its sender began it (on
+            // the sender's clock, which a fault may have stepped).
+            if let Report::Link(link) = &mut r {
+                link.time = time;
+            }
+            Step::Report(Box::new(r))
+        });
+        return Ok(report);
     }
     if let Some(type_name) = v["accepted"].as_str() {
         return report(Report::Accepted(AcceptedReport {

@@ -239,11 +239,7 @@ impl ConsoleState {
         let mut events = Vec::new();
         let fix = json!({"x": x, "y": y, "depth": depth, "time": time});
         // Where a node is is not its being heard.
-        let heard = self.extra.get(node).map_or(0.0, |e| e.last_heard);
-        self.place_at(node, "track", &fix, time, &mut events);
-        if let Some(e) = self.extra.get_mut(node) {
-            e.last_heard = heard;
-        }
+        self.place_at(node, "track", &fix, time, false, &mut events);
         events
     }
 
@@ -638,11 +634,20 @@ impl ConsoleState {
     /// `msg` (of type `via`) reports where `node` is.
     fn place(&mut self, node: &str, via: &str, msg: &Value, time: f64, events: &mut Vec<Value>) {
         if self.place_by_messages {
-            self.place_at(node, via, msg, time, events);
+            self.place_at(node, via, msg, time, true, events);
         }
     }
 
-    fn place_at(&mut self, node: &str, via: &str, msg: &Value, time: f64, events: &mut Vec<Value>) {
+    /// `msg` places `node`; `heard`: it was heard from at `time` too.
+    fn place_at(
+        &mut self,
+        node: &str,
+        via: &str,
+        msg: &Value,
+        time: f64,
+        heard: bool,
+        events: &mut Vec<Value>,
+    ) {
         let Some(fix) = fix_of(msg) else { return };
         let origin_before = self.origin;
         let at = self.map_point(fix);
@@ -660,7 +665,9 @@ impl ConsoleState {
             via: via.to_string(),
         };
         let e = self.extra.entry(node.to_string()).or_default();
-        e.last_heard = e.last_heard.max(time);
+        if heard {
+            e.last_heard = e.last_heard.max(time);
+        }
         // The same report seen twice (queued at its sender, received at
         // another gateway) is one point.
         if e.track

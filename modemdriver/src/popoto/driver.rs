@@ -55,7 +55,7 @@ use super::wire::{Command, Interface, ParamValue, MAX_PAYLOAD, MODE_BIT_RATE, RA
 use crate::config;
 use crate::config::Reach;
 use crate::driver::{Driver, DriverError};
-use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::kind::{About, DriverKind, FrameLimits, Named, PacketTime, Starting};
 use crate::link::stream::Units;
 use crate::problem::{self, Problem};
 use crate::shell::{self, Device};
@@ -97,6 +97,25 @@ impl DriverKind for PopotoDriver {
 
     fn frame_limits(&self, config: &DriverConfig) -> Option<FrameLimits> {
         Some(frame_limits(config))
+    }
+
+    /// One frame of `max_frame_bytes` at the rate's payload mode, after
+    /// the driver's 1-byte header and the second of signal and header its
+    /// [`air_time`](super::machine::air_time) reckons.
+    fn simulated_packet(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+        let mode = *RATE_TO_MODE.get(usize::try_from(rate).ok()?)?;
+        let frame_bytes = u32::try_from(max_frame_bytes(config)).ok()?;
+        Some(PacketTime {
+            driver: "the Popoto",
+            spec: crate::rate::RateSpec {
+                rate,
+                frames: 1,
+                frame_bytes,
+                bits_per_second: f64::from(MODE_BIT_RATE[usize::from(mode)]),
+            },
+            overhead: super::machine::air_time(1, mode),
+            hand_over: std::time::Duration::ZERO,
+        })
     }
 
     fn specific(&self) -> Option<prost_reflect::MessageDescriptor> {

@@ -7,11 +7,11 @@ use std::time::Duration;
 use prost_reflect::{MessageDescriptor, ReflectMessage};
 use protos::goby::acomms::protobuf::{DriverConfig, SeatracConfig, SeatracSpecific};
 
-use super::machine::{air_time, beacon_of, Machine, Settings};
+use super::machine::{air_time, beacon_of, Machine, Settings, BYTE_TIME};
 use super::wire::{is_request, one_way_or_request, MAX_PACKET};
 use crate::config::{self, Reach};
 use crate::driver::{Driver, DriverError};
-use crate::kind::{About, DriverKind, FrameLimits, Named, Starting};
+use crate::kind::{About, DriverKind, FrameLimits, Named, PacketTime, Starting};
 use crate::link::stream::Units;
 use crate::problem::{self, Problem};
 use crate::shell::{self, Device};
@@ -66,6 +66,25 @@ impl DriverKind for SeatracDriver {
                  frame takes about {seconds:.1} s at 100 bit/s"
             ),
             each_way: false,
+        })
+    }
+
+    /// One frame of `max_frame_bytes` at every rate: a DAT packet of the
+    /// frame and the driver's 1-byte header, as
+    /// [`air_time`](super::machine::air_time) reckons it (80 ms a byte:
+    /// 100 bit/s).
+    fn simulated_packet(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
+        let frame_bytes = seatrac_config(config).max_frame_bytes();
+        Some(PacketTime {
+            driver: "the SeaTrac",
+            spec: crate::rate::RateSpec {
+                rate,
+                frames: 1,
+                frame_bytes,
+                bits_per_second: 8.0 / BYTE_TIME.as_secs_f64(),
+            },
+            overhead: air_time(1),
+            hand_over: Duration::ZERO,
         })
     }
 

@@ -57,7 +57,8 @@ use std::time::Duration;
 use prost_reflect::ReflectMessage;
 
 use protos::goby::acomms::protobuf::{
-    modem_transmission::TransmissionType, DriverConfig, ModemTransmission, SimulatorDriverConfig,
+    driver_config, modem_transmission::TransmissionType, DriverConfig, DriverType,
+    ModemTransmission, SimulatorDriverConfig,
 };
 use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
@@ -172,10 +173,12 @@ impl SimulatorDriver {
             .map_err(Problem::into_error)?;
         let airborne = medium.join(modem_id);
         let deferred_ack = config.deferred_ack();
+        let packets = config.clone();
         Ok(Driver::spawn_with_clock("simulator", clock, move |ctx| {
             run(
                 Start {
                     modem_id,
+                    packets,
                     sim,
                     deferred_ack,
                     water,
@@ -209,23 +212,94 @@ impl DriverKind for SimulatorDriver {
         problems(config)
     }
 
-    /// The rate's frames at its bit rate after `packet_overhead_seconds`.
+    /// The rate's frames at its bit rate after `packet_overhead_seconds`,
+    /// or, with `modem`, as that modem sends them ([`packet_of`]).
     fn packet_time(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
-        let overhead = config
-            .simulator
-            .as_ref()
-            .map_or(0.5, |s| s.packet_overhead_seconds());
-        Some(PacketTime {
-            driver: "the simulator",
-            spec: rate::spec(rate)?,
-            overhead: Duration::try_from_secs_f64(overhead).ok()?,
-            hand_over: Duration::ZERO,
-        })
+        packet_of(config, rate).ok()
     }
 
     fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
         Box::pin(async move { SimulatorDriver::start(config) })
     }
+}
+
+/// The modem the simulator sends as (`simulator.modem`): its kind and the
+/// driver section read as its own (the same settings, its driver type in
+/// place of the simulator's); `None` when unset.
+///
+/// # Errors
+/// Why the name is not one the simulator can send as.
+pub fn modem_of(
+    config: &DriverConfig,
+) -> Result<Option<(&'static dyn DriverKind, DriverConfig)>, String> {
+    let Some(name) = config.simulator.as_ref().and_then(|s| s.modem.as_deref()) else {
+        return Ok(None);
+    };
+    // Each kind but the simulator, with this section read as its own.
+    let kinds = crate::built_in::KINDS.iter().filter_map(|k| {
+        let named = k.about().named;
+        let driver = match named {
+            Named::Type(DriverType::DriverAcousticSimulator) => return None,
+            Named::Type(t) => driver_config::Driver::DriverType(t as i32),
+            Named::Name(n) => driver_config::Driver::DriverName(n.to_string()),
+        };
+        let modem = DriverConfig {
+            driver: Some(driver),
+            ..config.clone()
+        };
+        Some((named.name(), *k, modem))
+    });
+    let mut sendable = Vec::new();
+    let mut found = None;
+    for (kind_name, kind, modem) in kinds {
+        let sends = kind.simulated_packet(&modem, 0).is_some();
+        if sends {
+            sendable.push(kind_name);
+        }
+        if kind_name == name {
+            found = Some((sends, kind, modem));
+        }
+    }
+    match found {
+        Some((true, kind, modem)) => Ok(Some((kind, modem))),
+        Some((false, ..)) => Err(format!(
+            "{name}: its packets' timing is not known here, so the simulator cannot send as \
+             it (it sends as {}); leave modem out for the Micro-Modem's rates",
+            sendable.join(", ")
+        )),
+        None => Err(format!(
+            "{name:?} is not a modem the simulator sends as (one of {})",
+            sendable.join(", ")
+        )),
+    }
+}
+
+/// A data packet of `rate` as the simulator of `config` sends it: the
+/// Micro-Modem's rate after `packet_overhead_seconds`, or, with `modem`,
+/// that modem's frames and timing ([`DriverKind::simulated_packet`]).
+///
+/// # Errors
+/// Why there is no such packet: a rate the modem does not have, a modem
+/// the simulator cannot send as, an overhead that is not a time.
+pub fn packet_of(config: &DriverConfig, rate: i32) -> Result<PacketTime, String> {
+    if let Some((kind, modem)) = modem_of(config)? {
+        let name = kind.about().named.name();
+        return kind
+            .simulated_packet(&modem, rate)
+            .ok_or_else(|| format!("rate {rate} is not a rate of {name}"));
+    }
+    let overhead = config
+        .simulator
+        .as_ref()
+        .map_or(0.5, |s| s.packet_overhead_seconds());
+    Ok(PacketTime {
+        driver: "the simulator",
+        spec: rate::spec(rate)
+            .ok_or_else(|| format!("rate {rate} is not a Micro-Modem rate (0-6)"))?,
+        overhead: Duration::try_from_secs_f64(overhead)
+            .map_err(|_| format!("packet_overhead_seconds {overhead} is not a time"))?,
+        hand_over: Duration::ZERO,
+    })
 }
 
 /// Every problem of a simulator configuration that the driver refuses at
@@ -275,6 +349,9 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             "packet_overhead_seconds",
             format!("{overhead} is not a time in seconds (0 or more)"),
         );
+    }
+    if let Err(reason) = modem_of(config) {
+        problem("modem", reason);
     }
     if !sim.range().is_finite() || sim.range() < 0.0 {
         problem(
@@ -349,6 +426,8 @@ struct Node {
     /// Time for stamps and slots, microseconds since the epoch.
     clock: Arc<dyn goby_time::Clock>,
     modem_id: i32,
+    /// The driver section, whose `simulator.modem` says the packets.
+    packets: DriverConfig,
     /// Acks are sent when the layer above asks, not on reception.
     deferred_ack: bool,
     sim: SimulatorDriverConfig,
@@ -382,6 +461,11 @@ impl Node {
     /// Now on the node's clock, microseconds since the epoch.
     fn now(&self) -> u64 {
         u64::try_from(self.clock.now()).unwrap_or(0)
+    }
+
+    /// A data packet of `rate` as this node sends it ([`packet_of`]).
+    fn packet(&self, rate: i32) -> Result<PacketTime, String> {
+        packet_of(&self.packets, rate)
     }
 
     /// Where the modem `id` is now: from [`Node::positions`] when the
@@ -418,20 +502,23 @@ impl Node {
         }
         let duration = match mt.r#type() {
             TransmissionType::Data => {
-                let Some(spec) = rate::spec(mt.rate()) else {
-                    let reason = format!("rate {} is not a Micro-Modem rate (0-6)", mt.rate());
-                    events.emit(DriverEvent::TransmitResult(TransmitResult {
-                        transmission: mt,
-                        outcome: TransmitOutcome::Failed(reason),
-                    }));
-                    return;
+                let packet = match self.packet(mt.rate()) {
+                    Ok(packet) => packet,
+                    Err(reason) => {
+                        events.emit(DriverEvent::TransmitResult(TransmitResult {
+                            transmission: mt,
+                            outcome: TransmitOutcome::Failed(reason),
+                        }));
+                        return;
+                    }
                 };
+                let spec = packet.spec;
                 mt.max_num_frames = Some(
                     mt.max_num_frames
                         .map_or(spec.frames, |n| n.min(spec.frames)),
                 );
                 mt.max_frame_bytes = Some(spec.frame_bytes);
-                let duration = spec.packet_duration(self.overhead);
+                let duration = packet.on_water();
                 if crate::slot::too_late_at(&mt, duration, self.now()) {
                     events.status(DriverStatus::Skipped {
                         reason: "the slot of a transmission waiting for the channel has passed"
@@ -462,9 +549,12 @@ impl Node {
                     }));
                     return;
                 }
-                spec.packet_duration(self.overhead)
+                duration
             }
-            _ => self.overhead,
+            // Acks and driver-specific packets: the probe and header only.
+            _ => self
+                .packet(mt.rate())
+                .map_or(self.overhead, |packet| packet.overhead),
         };
         if mt.dest() == -1 {
             mt.dest = Some(0);
@@ -779,6 +869,8 @@ fn raw(direction: RawDirection, mt: &ModemTransmission) -> RawMessage {
 /// What a node starts with.
 struct Start {
     modem_id: i32,
+    /// The driver section, whose `simulator.modem` says the packets.
+    packets: DriverConfig,
     sim: SimulatorDriverConfig,
     deferred_ack: bool,
     water: Option<Water>,
@@ -795,6 +887,7 @@ async fn run(
 ) {
     let Start {
         modem_id,
+        packets,
         sim,
         deferred_ack,
         water,
@@ -807,6 +900,7 @@ async fn run(
     let mut node = Node {
         clock: ctx.clock.clone(),
         modem_id,
+        packets,
         deferred_ack,
         sim,
         medium: medium.clone(),

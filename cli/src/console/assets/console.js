@@ -62,10 +62,12 @@ function age(t) {
   if (s < 7200) return `${(s / 60).toFixed(0)} min`;
   return `${(s / 3600).toFixed(1)} h`;
 }
+// Times of day: local live, UTC in a replay (whose run is in UTC, as its
+// header says).
 function clock(t) {
   if (!t) return '';
   const d = new Date(t * 1000);
-  return d.toTimeString().slice(0, 8);
+  return S.clock === null ? d.toTimeString().slice(0, 8) : d.toISOString().slice(11, 19);
 }
 const short = (type) => (type || '').split('.').pop();
 const fmt = (v, digits = 1) => (v === null || v === undefined || Number.isNaN(v) ? '—' : Number(v).toFixed(digits));
