@@ -695,6 +695,10 @@ fn a_file_that_is_not_a_replay_is_refused_naming_its_line() {
             "replay.jsonl:2: not JSON at column 28: EOF while parsing a string",
         ),
         (
+            format!("{head}\n{}\n", "x".repeat(16 << 20)),
+            "replay.jsonl:2: longer than 16777216 bytes: no replay's line",
+        ),
+        (
             head.replace("\"end\":9000000", "\"end\":1"),
             "replay.jsonl:1: its \"end\" is before its \"start\"",
         ),
@@ -715,6 +719,17 @@ fn a_file_that_is_not_a_replay_is_refused_naming_its_line() {
         let stderr = stderr_text(&run);
         assert!(stderr.contains(said), "{body}: {stderr}");
     }
+    // A byte that is not UTF-8: the line and the column named.
+    let mut bytes = format!("{head}\n{{\"t\":2000000,\"node\":\"a\",\"status\":\"u").into_bytes();
+    bytes.extend_from_slice(b"\xff\"}\n");
+    std::fs::write(&path, &bytes).unwrap();
+    let run = goby(&["console", "--replay", path.to_str().unwrap()]);
+    assert!(
+        stderr_text(&run)
+            .contains("replay.jsonl:2: not JSON at column 36: invalid unicode code point"),
+        "{}",
+        stderr_text(&run)
+    );
     for warp in ["0", "1e-20", "2e9", "nan"] {
         let run = goby(&[
             "console",

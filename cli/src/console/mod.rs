@@ -152,9 +152,10 @@ fn source_of(args: &ConsoleArgs) -> Result<Source, CliError> {
         }
         let path = replay_file(path)?;
         let name = path.display().to_string();
-        let bytes = std::fs::read(&path)
+        let file = std::fs::File::open(&path)
             .map_err(|e| CliError::setup(format!("cannot read {name}: {e}")))?;
-        let replay = replay::Replay::parse(&bytes, &name).map_err(CliError::setup)?;
+        let replay =
+            replay::Replay::parse(std::io::BufReader::new(file), &name).map_err(CliError::setup)?;
         return Ok(Source::Replay {
             path: name,
             replay: Box::new(replay),

@@ -6,10 +6,13 @@
 //! as the page shows a fleet at sea. The page's clock is the run's: ages
 //! ("heard 12 s ago") are counted in virtual time.
 //!
-//! [`Replay::parse`] reads the whole file first (sans-IO), so that a file
-//! that is not a replay is refused, naming its line, before anything is
-//! served; [`play`] plays it into the [`Hub`].
+//! [`Replay::parse`] reads the whole file first, line by line, so that a
+//! file that is not a replay is refused, naming its line, before anything
+//! is served; [`play`] reads it again as it plays it into the [`Hub`],
+//! holding a bounded number of lines ahead (a week-long run's replay is not
+//! held in memory).
 
+use std::io::BufRead;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -55,9 +58,13 @@ pub struct Line {
     pub step: Step,
 }
 
-/// A replay file, read.
+/// A replay file, checked: its first line, and where it is. Its other
+/// lines are read again as they are played ([`Replay::lines`]), so that a
+/// long run's replay is not held in memory.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Replay {
+    /// The file, named in errors.
+    pub file: String,
     /// The run's seed.
     pub seed: u64,
     /// Its start and end, virtual seconds since the UNIX epoch.
@@ -66,9 +73,13 @@ pub struct Replay {
     pub end: f64,
     /// The nodes' names and modem ids, in the scenario's order.
     pub nodes: Vec<(String, i64)>,
-    /// The lines after the first, in time order.
-    pub lines: Vec<Line>,
+    /// How many lines are played (events the console does not show left
+    /// out).
+    pub played: usize,
 }
+
+/// The longest line read, bytes: a line longer is no replay's.
+pub const MAX_LINE: usize = 16 << 20;
 
 /// Where a publication of a node's autonomy came from, as the list shows
 /// it (the topic of a gateway's `tx` publication).
@@ -100,123 +111,219 @@ fn json(bytes: &[u8]) -> Result<Value, String> {
     })
 }
 
-/// The lines of `bytes` with their numbers (from 0), the first without a
-/// UTF-8 byte-order mark, blank ones left out.
-fn numbered(bytes: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
-    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    bytes
-        .split(|b| *b == b'\n')
-        .enumerate()
-        .filter(|(_, l)| !l.iter().all(u8::is_ascii_whitespace))
+/// The lines of `input` with their numbers (from 0), the first without a
+/// UTF-8 byte-order mark, blank ones left out; a line that cannot be read
+/// or is longer than [`MAX_LINE`] is an error (its number said).
+fn numbered(input: impl BufRead) -> impl Iterator<Item = (usize, Result<Vec<u8>, String>)> {
+    let mut first = true;
+    Split {
+        input,
+        failed: false,
+    }
+    .enumerate()
+    .map(move |(n, line)| {
+        let line = line.map(|mut l| {
+            if std::mem::take(&mut first) && l.starts_with(b"\xEF\xBB\xBF") {
+                l.drain(..3);
+            }
+            l
+        });
+        (n, line)
+    })
+    .filter(|(_, l)| !matches!(l, Ok(l) if l.iter().all(u8::is_ascii_whitespace)))
+}
+
+/// The lines of a reader, each at most [`MAX_LINE`] bytes; after an error,
+/// none.
+struct Split<R> {
+    input: R,
+    failed: bool,
+}
+
+impl<R: BufRead> Iterator for Split<R> {
+    type Item = Result<Vec<u8>, String>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.failed {
+            return None;
+        }
+        let mut line = Vec::new();
+        let limit = (MAX_LINE + 1) as u64;
+        let mut limited = <&mut R as std::io::Read>::take(&mut self.input, limit);
+        match limited.read_until(b'\n', &mut line) {
+            Ok(0) => None,
+            Ok(_) if line.len() > MAX_LINE => {
+                self.failed = true;
+                Some(Err(format!(
+                    "longer than {MAX_LINE} bytes: no replay's line"
+                )))
+            }
+            Ok(_) => {
+                if line.last() == Some(&b'\n') {
+                    line.pop();
+                }
+                Some(Ok(line))
+            }
+            Err(e) => {
+                self.failed = true;
+                Some(Err(format!("cannot be read: {e}")))
+            }
+        }
+    }
+}
+
+/// What is kept from line to line as a replay is read: the run, the time
+/// of the line above, each node's starts so far.
+struct Reader {
+    start: f64,
+    end: f64,
+    nodes: Vec<(String, i64)>,
+    last: f64,
+    starts: std::collections::HashMap<String, u64>,
+}
+
+impl Reader {
+    /// What line `v` does (`None`: nothing the console shows), or what is
+    /// wrong with it.
+    fn line(&mut self, v: &Value) -> Result<Option<Line>, String> {
+        if v.get("replay").is_some() {
+            return Err("a replay's first line again: two replays in one file?".into());
+        }
+        let time = micros(v, "t")?;
+        if time < self.last {
+            return Err(match time < self.start {
+                true => "its time is before the run's start".into(),
+                false => "its time is before the line above's".into(),
+            });
+        }
+        if time > self.end {
+            return Err("its time is after the run's end".into());
+        }
+        self.last = time;
+        let node = v["node"].as_str().unwrap_or_default();
+        if !self.nodes.iter().any(|(name, _)| name == node) {
+            return Err(format!(
+                "node {} is not among the first line's nodes",
+                v["node"]
+            ));
+        }
+        let kinds: Vec<&str> = KINDS.into_iter().filter(|k| v.get(k).is_some()).collect();
+        if kinds.len() > 1 {
+            return Err(format!("a line of one kind has {}", kinds.join(" and ")));
+        }
+        let starts = self.starts.entry(node.to_string()).or_default();
+        Ok(
+            step_of(v, time, &self.nodes, node, starts)?.map(|step| Line {
+                time,
+                node: node.to_string(),
+                step,
+            }),
+        )
+    }
 }
 
 impl Replay {
-    /// Reads the replay `bytes` of the file `file` (named in errors).
+    /// Reads and checks the replay `input` of the file `file` (named in
+    /// errors), line by line, keeping only its first.
     ///
     /// # Errors
     /// `FILE:LINE: what is wrong` for the first line that is not a replay's:
     /// not JSON (its column said), a field missing or of the wrong kind, a
     /// node not in the first line or named twice there, a time before the
     /// line above's or outside the run, a line of two kinds or of none, a
-    /// first line again (two replays in one file), another format version.
-    pub fn parse(bytes: &[u8], file: &str) -> Result<Replay, String> {
-        let mut lines = numbered(bytes);
+    /// first line again (two replays in one file), another format version,
+    /// a line too long or that cannot be read.
+    pub fn parse(input: impl BufRead, file: &str) -> Result<Replay, String> {
+        let mut replay = None;
+        let mut played = 0;
+        Self::read(input, file, &mut replay, |_| played += 1)?;
+        let mut replay =
+            replay.ok_or_else(|| format!("{file}: empty: not a replay of goby sim"))?;
+        replay.played = played;
+        Ok(replay)
+    }
+
+    /// Reads `input` again (the file checked as `self`), giving each line
+    /// played to `each`.
+    ///
+    /// # Errors
+    /// As [`parse`](Self::parse): the file changed since.
+    pub fn lines(&self, input: impl BufRead, each: impl FnMut(Line)) -> Result<(), String> {
+        Self::read(input, &self.file, &mut None, each)
+    }
+
+    /// The first line into `head`, each line after it played to `each`.
+    fn read(
+        input: impl BufRead,
+        file: &str,
+        head: &mut Option<Replay>,
+        mut each: impl FnMut(Line),
+    ) -> Result<(), String> {
         let at = |n: usize, what: String| format!("{file}:{}: {what}", n + 1);
+        let mut lines = numbered(input);
         let Some((n0, first)) = lines.next() else {
             return Err(format!("{file}: empty: not a replay of goby sim"));
         };
-        let head = json(first).map_err(|e| at(n0, format!("{e}: not a replay of goby sim")))?;
+        let first = first.map_err(|e| at(n0, e))?;
+        let replay = Self::head(&first, file).map_err(|e| at(n0, e))?;
+        let mut reader = Reader {
+            start: replay.start,
+            end: replay.end,
+            nodes: replay.nodes.clone(),
+            last: replay.start,
+            starts: Default::default(),
+        };
+        *head = Some(replay);
+        for (n, text) in lines {
+            let v = json(&text.map_err(|e| at(n, e))?).map_err(|e| at(n, e))?;
+            if let Some(line) = reader.line(&v).map_err(|e| at(n, e))? {
+                each(line);
+            }
+        }
+        Ok(())
+    }
+
+    /// The first line: what the run was.
+    fn head(first: &[u8], file: &str) -> Result<Replay, String> {
+        let head = json(first).map_err(|e| format!("{e}: not a replay of goby sim"))?;
         if head["replay"] != "goby sim" {
-            return Err(at(
-                n0,
+            return Err(
                 "not a replay of goby sim (its first line has no \"replay\": \"goby sim\"; \
                  the file is the replay.jsonl that goby sim writes)"
                     .into(),
-            ));
+            );
         }
         if head["version"].as_u64() != Some(VERSION) {
-            return Err(at(
-                n0,
-                format!(
-                    "replay version {} is not the one this console reads ({VERSION})",
-                    head["version"]
-                ),
+            return Err(format!(
+                "replay version {} is not the one this console reads ({VERSION})",
+                head["version"]
             ));
         }
-        let start = micros(&head, "start").map_err(|e| at(n0, e))?;
-        let end = micros(&head, "end").map_err(|e| at(n0, e))?;
+        let start = micros(&head, "start")?;
+        let end = micros(&head, "end")?;
         if end < start {
-            return Err(at(n0, "its \"end\" is before its \"start\"".into()));
+            return Err("its \"end\" is before its \"start\"".into());
         }
         let mut nodes: Vec<(String, i64)> = Vec::new();
         for node in head["nodes"].as_array().into_iter().flatten() {
             match (node["name"].as_str(), node["modem_id"].as_i64()) {
                 (Some(name), _) if nodes.iter().any(|(n, _)| n == name) => {
-                    return Err(at(n0, format!("node {name:?} is named twice")));
+                    return Err(format!("node {name:?} is named twice"));
                 }
                 (Some(name), Some(id)) => nodes.push((name.to_string(), id)),
-                _ => return Err(at(n0, format!("a node without name or modem_id: {node}"))),
+                _ => return Err(format!("a node without name or modem_id: {node}")),
             }
         }
         if nodes.is_empty() {
-            return Err(at(n0, "no \"nodes\"".into()));
-        }
-        let mut read = Vec::new();
-        let mut last = start;
-        // Each node's starts so far: after the first, a restart.
-        let mut starts: std::collections::HashMap<String, u64> = Default::default();
-        for (n, text) in lines {
-            let v = json(text).map_err(|e| at(n, e))?;
-            if v.get("replay").is_some() {
-                return Err(at(
-                    n,
-                    "a replay's first line again: two replays in one file?".into(),
-                ));
-            }
-            let time = micros(&v, "t").map_err(|e| at(n, e))?;
-            if time < last {
-                return Err(at(
-                    n,
-                    match time < start {
-                        true => "its time is before the run's start".into(),
-                        false => "its time is before the line above's".into(),
-                    },
-                ));
-            }
-            if time > end {
-                return Err(at(n, "its time is after the run's end".into()));
-            }
-            last = time;
-            let node = v["node"].as_str().unwrap_or_default();
-            if !nodes.iter().any(|(name, _)| name == node) {
-                return Err(at(
-                    n,
-                    format!("node {} is not among the first line's nodes", v["node"]),
-                ));
-            }
-            let kinds: Vec<&str> = KINDS.into_iter().filter(|k| v.get(k).is_some()).collect();
-            if kinds.len() > 1 {
-                return Err(at(
-                    n,
-                    format!("a line of one kind has {}", kinds.join(" and ")),
-                ));
-            }
-            let ups = starts.entry(node.to_string()).or_default();
-            let Some(step) = step_of(&v, time, &nodes, node, ups).map_err(|e| at(n, e))? else {
-                continue;
-            };
-            read.push(Line {
-                time,
-                node: node.to_string(),
-                step,
-            });
+            return Err("no \"nodes\"".into());
         }
         Ok(Replay {
+            file: file.to_string(),
             seed: head["seed"].as_u64().unwrap_or(0),
             start,
             end,
             nodes,
-            lines: read,
+            played: 0,
         })
     }
 }
@@ -303,12 +410,24 @@ const TICK: Duration = Duration::from_millis(250);
 /// says when it has ended. Commands from the page go nowhere: the hub
 /// refuses them before they reach `_outbound`.
 pub async fn play(replay: Replay, warp: f64, hub: Arc<Hub>, _outbound: mpsc::Receiver<Outbound>) {
+    // The file is read again on a thread of its own, a bounded queue of
+    // lines ahead of the playing.
+    let (lines, mut next) = mpsc::channel::<Line>(1024);
+    let reading = replay.clone();
+    let read = tokio::task::spawn_blocking(move || {
+        let file = std::fs::File::open(&reading.file)
+            .map_err(|e| format!("cannot read {} again: {e}", reading.file))?;
+        reading.lines(std::io::BufReader::new(file), |line| {
+            // The player stopped (the console is ending): nothing to do.
+            let _ = lines.blocking_send(line);
+        })
+    });
     let began = Instant::now();
     let wall = |t: f64| began + Duration::from_secs_f64(((t - replay.start) / warp).max(0.0));
     hub.set_clock(replay.start);
     hub.source_status(true, &format!("replaying at {warp}×"));
     let mut ticked = Instant::now();
-    for line in &replay.lines {
+    while let Some(line) = next.recv().await {
         let due = wall(line.time);
         // The clock ticks while the next line waits.
         while due > Instant::now() + TICK {
@@ -328,6 +447,10 @@ pub async fn play(replay: Replay, warp: f64, hub: Arc<Hub>, _outbound: mpsc::Rec
             Step::Report(report) => hub.apply(&line.node, report),
             Step::Position { x, y, depth } => hub.position(&line.node, *x, *y, *depth),
         }
+    }
+    if let Ok(Err(e)) = read.await {
+        hub.source_status(false, &format!("the replay stopped: {e}"));
+        return;
     }
     while wall(replay.end) > Instant::now() + TICK {
         tokio::time::sleep(TICK).await;
