@@ -1573,7 +1573,8 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
     let Some(mac) = config.mac.as_ref() else {
         return problems;
     };
-    if mac.r#type() == MacType::MacAloha && modemdriver::rate::spec(mac.rate()).is_none() {
+    let has = |rate: i32| modemdriver::check::data_packet_time(driver, rate).is_some();
+    if mac.r#type() == MacType::MacAloha && !has(mac.rate()) {
         problems.push(Problem::new(
             "mac.rate",
             format!(
@@ -1585,8 +1586,7 @@ fn slot_problems(config: &GobydConfig, driver: &DriverConfig) -> Vec<Problem> {
     for (i, slot) in mac.slot.iter().enumerate() {
         // A driver-specific slot's rate is checked with its kind (an FDP
         // slot's must be an FDP rate).
-        if slot.r#type() == TransmissionType::Data && modemdriver::rate::spec(slot.rate()).is_none()
-        {
+        if slot.r#type() == TransmissionType::Data && !has(slot.rate()) {
             problems.push(Problem::new(
                 format!("mac.slot[{i}].rate"),
                 format!(

@@ -16,7 +16,6 @@ use protos::goby::acomms::protobuf::DriverConfig;
 use crate::built_in;
 pub use crate::kind::{FrameLimits, PacketTime};
 use crate::problem::Problem;
-use crate::rate;
 
 /// Every problem of `config` that the driver it names would refuse at
 /// start, a configuration naming no driver built in first of all. For a
@@ -68,7 +67,6 @@ fn both_ways(config: &DriverConfig) -> Option<FrameLimits> {
 /// rates the driver does not have and for settings that are not valid
 /// (see [`problems`]).
 pub fn data_packet_time(config: &DriverConfig, rate: i32) -> Option<PacketTime> {
-    rate::spec(rate)?;
     built_in::of(config).ok()?.packet_time(config, rate)
 }
 

@@ -200,12 +200,29 @@ pub struct PacketTime {
     /// Time the driver allows on top of the packet when it hands the last
     /// frame over (the Micro-Modem driver's `HAND_OVER`).
     pub hand_over: Duration,
+    /// A packet takes its whole frames on the water whatever they hold
+    /// (the Micro-Modem), not only the bytes sent (the Popoto, the
+    /// SeaTrac).
+    pub whole_frames: bool,
 }
 
 impl PacketTime {
     /// Time on the water: the overhead and every frame's bits.
     pub fn on_water(&self) -> Duration {
         self.spec.packet_duration(self.overhead)
+    }
+
+    /// Time on the water of a packet whose frames hold `bytes` in all:
+    /// [`on_water`](Self::on_water) with whole frames, else the overhead
+    /// and those bytes at the bit rate.
+    pub fn on_water_holding(&self, bytes: usize) -> Duration {
+        match self.whole_frames {
+            true => self.on_water(),
+            false => {
+                self.overhead
+                    + Duration::from_secs_f64(bytes as f64 * 8.0 / self.spec.bits_per_second)
+            }
+        }
     }
 
     /// The shortest slot that can carry the packet: the driver starts no

@@ -387,30 +387,34 @@ fn as_modem(modem_id: i32, nodes: &[(i32, f64)], modem: &str) -> DriverConfig {
 }
 
 /// With `simulator.modem`, the simulated modem sends as that modem, as its
-/// driver reckons its packets: a Popoto's rate 1 is one 64-byte frame
-/// (its `max_frame_bytes`) at payload mode 4, 640 bit/s, after a second
-/// of signal and the driver's 1-byte header (1.8125 s on the water); a
-/// SeaTrac's is one 30-byte frame (its default) at 80 ms a byte after
-/// half a second and the header byte (2.98 s). Its ack takes the probe and
+/// driver reckons its packets: a Popoto's rate 1 offers one frame of its
+/// `max_frame_bytes` (64; 20 when the slot says 20) at payload mode 4,
+/// 640 bit/s, and 10 bytes take a second of signal, the driver's 1-byte
+/// header and the 10 bytes (1.1375 s); a SeaTrac's offers one 30-byte
+/// frame (its default), and 10 bytes take half a second, the header byte
+/// and the 10 bytes at 80 ms a byte (1.38 s). Its ack takes the probe and
 /// header alone.
 #[tokio::test(start_paused = true)]
 async fn sent_as_a_popoto_or_a_seatrac_a_packet_takes_that_modem_s_frames_and_time() {
-    for (modem, frame_bytes, on_water_ms, ack_ms) in [
-        ("DRIVER_POPOTO", 64, 1812.5, 1012.5),
-        ("BLUEPRINT_SEATRAC", 30, 2980.0, 580.0),
+    for (modem, slot_bytes, frame_bytes, on_water_ms, ack_ms) in [
+        ("DRIVER_POPOTO", None, 64, 1137.5, 1012.5),
+        ("DRIVER_POPOTO", Some(20), 20, 1137.5, 1012.5),
+        ("BLUEPRINT_SEATRAC", None, 30, 1380.0, 580.0),
     ] {
         let nodes = [(1, 0.0), (2, 1500.0)];
         let medium = Medium::new();
         let mut a = SimulatorDriver::start_on(&as_modem(1, &nodes, modem), medium.clone()).unwrap();
         let mut b = SimulatorDriver::start_on(&as_modem(2, &nodes, modem), medium).unwrap();
         let t0 = Instant::now();
-        a.initiate_transmission(data(2, 1, true)).unwrap();
+        let mut request = data(2, 1, true);
+        request.max_frame_bytes = slot_bytes;
+        a.initiate_transmission(request).unwrap();
         let template = tokio::time::timeout(Duration::from_secs(60), async {
             loop {
                 if let DriverEvent::DataRequest(r) = a.next_event().await.unwrap() {
                     let t = r.template().clone();
                     let mut filled = t.clone();
-                    filled.frame = vec![vec![7; frame_bytes]];
+                    filled.frame = vec![vec![7; 10]];
                     r.respond(filled);
                     return t;
                 }
@@ -428,7 +432,7 @@ async fn sent_as_a_popoto_or_a_seatrac_a_packet_takes_that_modem_s_frames_and_ti
         let micros = |ms: f64| Duration::from_millis(ms.ceil() as u64);
         // On the water, then 1 s of propagation.
         assert_eq!(Instant::now() - t0, micros(on_water_ms + 1000.0), "{modem}");
-        assert_eq!(got.frame, vec![vec![7; frame_bytes]]);
+        assert_eq!(got.frame, vec![vec![7; 10]]);
         let pump_b =
             tokio::spawn(
                 async move { collect_received(&mut b, &[], Duration::from_secs(20)).await },

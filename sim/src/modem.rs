@@ -55,30 +55,60 @@ pub const SIMULATOR: &str = "the simulator's (Micro-Modem rates)";
 /// send as that modem (its settings kept, `simulator.modem` naming it),
 /// and the modem in words for the report (`"DRIVER_POPOTO"`, `"the
 /// simulator's (Micro-Modem rates)"`, or why the modem's own timing is not
-/// simulated).
-pub fn sends_as(driver: Option<&DriverConfig>) -> (Option<DriverConfig>, String) {
-    let simulator = SIMULATOR.to_string();
-    let Some(driver) = driver else {
-        return (None, simulator);
+/// simulated), and the modem's kind (`None`: the simulator's own).
+///
+/// # Errors
+/// The problem of a section that names no driver built in (a misspelled
+/// `driver_name`), as `gobyd --check` says it.
+pub fn sends_as(driver: Option<&DriverConfig>) -> Result<SentAs, modemdriver::problem::Problem> {
+    let simulator = SentAs {
+        modem: None,
+        words: SIMULATOR.to_string(),
+        kind: None,
     };
-    let Ok(kind) = modemdriver::built_in::of(driver) else {
-        return (None, simulator);
+    let Some(driver) = driver.filter(|d| d.driver.is_some()) else {
+        return Ok(simulator);
     };
+    let kind = modemdriver::built_in::of(driver)?;
     let name = kind.about().named.name();
     if kind.about().named == modemdriver::kind::Named::Type(DriverType::DriverAcousticSimulator) {
         // The node's own simulator settings: the modem it names, if any.
-        return match driver.simulator.as_ref().and_then(|s| s.modem.clone()) {
-            Some(modem) => (Some(driver.clone()), modem),
-            None => (None, simulator),
-        };
+        return Ok(
+            match driver.simulator.as_ref().and_then(|s| s.modem.clone()) {
+                Some(modem) => SentAs {
+                    modem: Some(driver.clone()),
+                    words: modem.clone(),
+                    kind: Some(modem),
+                },
+                None => simulator,
+            },
+        );
     }
     let mut own = driver.clone();
     own.simulator.get_or_insert_with(Default::default).modem = Some(name.to_string());
-    match modemdriver::sim::modem_of(&own) {
-        Ok(Some(_)) => (Some(own), name.to_string()),
-        _ => (
-            None,
-            format!("{SIMULATOR}: {name}'s timing is not known here"),
-        ),
-    }
+    Ok(match modemdriver::sim::modem_of(&own) {
+        Ok(Some(_)) => SentAs {
+            modem: Some(own),
+            words: name.to_string(),
+            kind: Some(name.to_string()),
+        },
+        _ => SentAs {
+            modem: None,
+            words: format!("{SIMULATOR}: {name}'s timing is not known here"),
+            kind: Some(name.to_string()),
+        },
+    })
+}
+
+/// A node's simulated modem ([`sends_as`]).
+#[derive(Debug, Clone)]
+pub struct SentAs {
+    /// The driver section to give [`driver_config`] (`None`: the
+    /// simulator's own rates).
+    pub modem: Option<DriverConfig>,
+    /// In words, for the report.
+    pub words: String,
+    /// The modem the node's configuration names (`None`: none, or the
+    /// simulator without one), whether or not it is sent as.
+    pub kind: Option<String>,
 }

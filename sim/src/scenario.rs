@@ -135,8 +135,8 @@ pub(crate) struct Check<'a> {
     /// at (`driver.simulator.…`): told once, as `water.…`.
     water_refused: Vec<String>,
     /// Each node's simulated modem ([`crate::modem::sends_as`]), by node
-    /// index: the modem it sends as (`None`: the simulator's own rates),
-    /// and in words.
+    /// index: the modem its configuration names (`None`: none, or the
+    /// simulator without one), and in words.
     modems: std::collections::BTreeMap<usize, (Option<String>, String)>,
 }
 
@@ -371,9 +371,10 @@ impl Check<'_> {
         })
     }
 
-    /// Every node on the one water sends as the same modem: a Popoto does
-    /// not hear a Micro-Modem (the simulator's own rates are the
-    /// Micro-Modem's).
+    /// Every node on the one water has the same modem: a Popoto does not
+    /// hear a Micro-Modem (the simulator's own rates are the
+    /// Micro-Modem's; a node whose modem's timing is not known has its
+    /// modem all the same).
     fn one_modem_on_the_water(&mut self) {
         let named = |m: &Option<String>| {
             m.clone()
@@ -397,8 +398,8 @@ impl Check<'_> {
             self.problem(
                 format!("node[{i}].gobyd.driver"),
                 format!(
-                    "its simulated modem is {}, node[{first}]'s {}: the nodes of a run share one \
-                     water and one modem (a Popoto does not hear a Micro-Modem); give every \
+                    "its modem is {}, node[{first}]'s {}: the nodes of a run share one \
+                     water, and one kind of modem does not hear another's signals; give every \
                      node the same modem",
                     named(&m),
                     named(&modem)
@@ -603,12 +604,15 @@ impl Check<'_> {
         // transmission in it).
         let own = [(id, start_of(node))];
         // The simulated modem sends as the node's own where it can.
-        let (modem, words) = crate::modem::sends_as(config.driver.as_ref());
-        let sent_as = modem
-            .as_ref()
-            .and_then(|m| m.simulator.as_ref())
-            .and_then(|s| s.modem.clone());
-        self.modems.insert(i, (sent_as, words));
+        let sent = match crate::modem::sends_as(config.driver.as_ref()) {
+            Ok(sent) => sent,
+            Err(p) => {
+                self.problem(format!("node[{i}].gobyd.driver.{}", p.field), p.reason);
+                return None;
+            }
+        };
+        let modem = sent.modem.clone();
+        self.modems.insert(i, (sent.kind, sent.words));
         config.driver = Some(crate::modem::driver_config(
             id,
             &own,

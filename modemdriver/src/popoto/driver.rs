@@ -99,11 +99,12 @@ impl DriverKind for PopotoDriver {
         Some(frame_limits(config))
     }
 
-    /// One frame of `max_frame_bytes` at the rate's payload mode, after
-    /// the driver's 1-byte header and the second of signal and header its
-    /// [`air_time`](super::machine::air_time) reckons.
+    /// One frame of up to `max_frame_bytes` at the rate's payload mode
+    /// (a rate outside 0-5 at rate 0's, as the driver sends it), the bytes
+    /// sent after the driver's 1-byte header and the second of signal and
+    /// header its [`air_time`](super::machine::air_time) reckons.
     fn simulated_packet(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
-        let mode = *RATE_TO_MODE.get(usize::try_from(rate).ok()?)?;
+        let mode = super::wire::mode_of_rate(rate).unwrap_or(RATE_TO_MODE[0]);
         let frame_bytes = u32::try_from(max_frame_bytes(config)).ok()?;
         Some(PacketTime {
             driver: "the Popoto",
@@ -115,6 +116,7 @@ impl DriverKind for PopotoDriver {
             },
             overhead: super::machine::air_time(1, mode),
             hand_over: std::time::Duration::ZERO,
+            whole_frames: false,
         })
     }
 

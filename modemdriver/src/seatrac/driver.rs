@@ -69,8 +69,8 @@ impl DriverKind for SeatracDriver {
         })
     }
 
-    /// One frame of `max_frame_bytes` at every rate: a DAT packet of the
-    /// frame and the driver's 1-byte header, as
+    /// One frame of up to `max_frame_bytes` at every rate: a DAT packet of
+    /// the bytes sent and the driver's 1-byte header, as
     /// [`air_time`](super::machine::air_time) reckons it (80 ms a byte:
     /// 100 bit/s).
     fn simulated_packet(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
@@ -85,6 +85,7 @@ impl DriverKind for SeatracDriver {
             },
             overhead: air_time(1),
             hand_over: Duration::ZERO,
+            whole_frames: false,
         })
     }
 

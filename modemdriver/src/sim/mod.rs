@@ -218,6 +218,12 @@ impl DriverKind for SimulatorDriver {
         packet_of(config, rate).ok()
     }
 
+    /// With `modem`, that modem's.
+    fn frame_limits(&self, config: &DriverConfig) -> Option<crate::kind::FrameLimits> {
+        let (kind, modem) = modem_of(config).ok()??;
+        kind.frame_limits(&modem)
+    }
+
     fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
         Box::pin(async move { SimulatorDriver::start(config) })
     }
@@ -299,6 +305,7 @@ pub fn packet_of(config: &DriverConfig, rate: i32) -> Result<PacketTime, String>
         overhead: Duration::try_from_secs_f64(overhead)
             .map_err(|_| format!("packet_overhead_seconds {overhead} is not a time"))?,
         hand_over: Duration::ZERO,
+        whole_frames: true,
     })
 }
 
@@ -350,8 +357,23 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
             format!("{overhead} is not a time in seconds (0 or more)"),
         );
     }
-    if let Err(reason) = modem_of(config) {
-        problem("modem", reason);
+    // The modem's own settings, as its driver would refuse them (not how
+    // it is reached: nothing is).
+    let mut modem_problems = Vec::new();
+    match modem_of(config) {
+        Err(reason) => problem("modem", reason),
+        Ok(Some((kind, modem))) => {
+            let section = kind.about().section.unwrap_or_default();
+            modem_problems = kind
+                .problems(&modem)
+                .into_iter()
+                .filter(|p| {
+                    (p.field == "modem_id" && modem_id.is_some())
+                        || (!section.is_empty() && p.field.starts_with(&format!("{section}.")))
+                })
+                .collect();
+        }
+        Ok(None) => {}
     }
     if !sim.range().is_finite() || sim.range() < 0.0 {
         problem(
@@ -390,6 +412,7 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
         ));
     }
     problems.extend(acoustic_problems(sim));
+    problems.extend(modem_problems);
     problems
 }
 
@@ -517,7 +540,14 @@ impl Node {
                     mt.max_num_frames
                         .map_or(spec.frames, |n| n.min(spec.frames)),
                 );
-                mt.max_frame_bytes = Some(spec.frame_bytes);
+                // A modem that sends only the bytes given takes the
+                // slot's frame size when smaller (as its driver does).
+                mt.max_frame_bytes = Some(match packet.whole_frames {
+                    true => spec.frame_bytes,
+                    false => mt
+                        .max_frame_bytes
+                        .map_or(spec.frame_bytes, |b| b.min(spec.frame_bytes)),
+                });
                 let duration = packet.on_water();
                 if crate::slot::too_late_at(&mt, duration, self.now()) {
                     events.status(DriverStatus::Skipped {
@@ -549,7 +579,7 @@ impl Node {
                     }));
                     return;
                 }
-                duration
+                packet.on_water_holding(mt.frame.iter().map(Vec::len).sum())
             }
             // Acks and driver-specific packets: the probe and header only.
             _ => self

@@ -223,6 +223,7 @@ impl DriverKind for MicroModemDriver {
             spec: rate::spec(rate)?,
             overhead: PACKET_OVERHEAD,
             hand_over: HAND_OVER,
+            whole_frames: true,
         })
     }
 
