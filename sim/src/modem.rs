@@ -51,7 +51,7 @@ pub fn driver_config(
 pub const SIMULATOR: &str = "the simulator's (Micro-Modem rates)";
 
 /// What a node's own driver section `driver` makes of its simulated
-/// modem: the section to give [`driver_config`] when the simulator can
+/// modem: the section to give [`driver_config()`] when the simulator can
 /// send as that modem (its settings kept, `simulator.modem` naming it),
 /// and the modem in words for the report (`"DRIVER_POPOTO"`, `"the
 /// simulator's (Micro-Modem rates)"`, or why the modem's own timing is not
@@ -103,7 +103,7 @@ pub fn sends_as(driver: Option<&DriverConfig>) -> Result<SentAs, modemdriver::pr
 /// A node's simulated modem ([`sends_as`]).
 #[derive(Debug, Clone)]
 pub struct SentAs {
-    /// The driver section to give [`driver_config`] (`None`: the
+    /// The driver section to give [`driver_config()`] (`None`: the
     /// simulator's own rates).
     pub modem: Option<DriverConfig>,
     /// In words, for the report.

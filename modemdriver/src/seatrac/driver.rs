@@ -71,7 +71,7 @@ impl DriverKind for SeatracDriver {
 
     /// One frame of up to `max_frame_bytes` at every rate: a DAT packet of
     /// the bytes sent and the driver's 1-byte header, as
-    /// [`air_time`](super::machine::air_time) reckons it (80 ms a byte:
+    /// [`air_time`] reckons it (80 ms a byte:
     /// 100 bit/s).
     fn simulated_packet(&self, config: &DriverConfig, rate: i32) -> Option<PacketTime> {
         let frame_bytes = seatrac_config(config).max_frame_bytes();
