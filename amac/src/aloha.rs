@@ -9,7 +9,11 @@
 //! ([`Aloha::ready`]) and when a transmission ended ([`Aloha::ended`]).
 //! After a transmission that failed (the modem away, an error) the node
 //! waits [`FAILED_PAUSE`] before it sends again, rather than ask a failing
-//! driver again at once, time after time.
+//! driver again at once, time after time. After a packet that asks for an
+//! acknowledgement ([`Aloha::await_ack`]) it sends nothing until the ack
+//! is heard ([`Aloha::acked`]) or `ack_wait` has passed: sending again at
+//! once, it would be transmitting when the ack arrives (a modem is half
+//! duplex) and never hear one.
 
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 
@@ -28,17 +32,36 @@ pub struct Aloha {
     in_flight: Option<u32>,
     /// After a failed transmission: no sending before this time.
     paused_until: Option<Micros>,
+    /// How long an ack is awaited after a packet that asks for one.
+    ack_wait: Micros,
+    /// Awaiting an ack: no sending before this time (or the ack).
+    ack_until: Option<Micros>,
 }
 
 impl Aloha {
-    /// Node `modem_id` sending at `rate`, nothing under way.
-    pub fn new(modem_id: i32, rate: i32) -> Self {
+    /// Node `modem_id` sending at `rate`, nothing under way, awaiting an
+    /// ack for at most `ack_wait` (microseconds) after a packet that asks
+    /// for one.
+    pub fn new(modem_id: i32, rate: i32, ack_wait: Micros) -> Self {
         Aloha {
             modem_id,
             rate,
             in_flight: None,
             paused_until: None,
+            ack_wait,
+            ack_until: None,
         }
+    }
+
+    /// The packet that ended at `now` asked for an ack: nothing is sent
+    /// until it comes ([`acked`](Self::acked)) or `ack_wait` has passed.
+    pub fn await_ack(&mut self, now: Micros) {
+        self.ack_until = Some(now + self.ack_wait);
+    }
+
+    /// An ack for this node was heard: it may send again.
+    pub fn acked(&mut self) {
+        self.ack_until = None;
     }
 
     /// With data waiting (`has_data`), no transmission of this node under
@@ -52,7 +75,11 @@ impl Aloha {
         now: Micros,
     ) -> Option<ModemTransmission> {
         self.resume(now);
-        if !has_data || self.in_flight.is_some() || self.paused_until.is_some() {
+        if !has_data
+            || self.in_flight.is_some()
+            || self.paused_until.is_some()
+            || self.ack_until.is_some()
+        {
             return None;
         }
         self.in_flight = Some(unique_id);
@@ -80,17 +107,21 @@ impl Aloha {
         true
     }
 
-    /// Ends a pause that is over by `now`.
+    /// Ends a pause (after a failure, or awaiting an ack) that is over by
+    /// `now`.
     pub fn resume(&mut self, now: Micros) {
         if self.paused_until.is_some_and(|t| t <= now) {
             self.paused_until = None;
         }
+        if self.ack_until.is_some_and(|t| t <= now) {
+            self.ack_until = None;
+        }
     }
 
-    /// When a pause after a failure ends (`None`: no pause): the daemon
-    /// wakes then to send what waits.
+    /// When a pause (after a failure, or awaiting an ack) ends (`None`: no
+    /// pause): the daemon wakes then to send what waits.
     pub fn paused_until(&self) -> Option<Micros> {
-        self.paused_until
+        self.paused_until.max(self.ack_until)
     }
 
     /// The transmission under way will not end (its driver stopped):
@@ -98,6 +129,7 @@ impl Aloha {
     pub fn reset(&mut self) {
         self.in_flight = None;
         self.paused_until = None;
+        self.ack_until = None;
     }
 
     /// Whether a transmission of this node is under way.
@@ -112,7 +144,7 @@ mod tests {
 
     #[test]
     fn sends_when_data_waits_and_not_again_until_its_own_transmission_ends() {
-        let mut a = Aloha::new(3, 1);
+        let mut a = Aloha::new(3, 1, 10);
         assert_eq!(a.ready(false, 1, 0), None);
         let t = a.ready(true, 1, 0).expect("data waits, nothing under way");
         assert_eq!(
@@ -133,8 +165,26 @@ mod tests {
     }
 
     #[test]
+    fn after_a_packet_asking_for_an_ack_it_waits_for_the_ack_or_the_wait() {
+        let mut a = Aloha::new(3, 1, 1_000);
+        a.ready(true, 1, 0).expect("sent");
+        assert!(a.ended(1, false, 100));
+        a.await_ack(100);
+        assert_eq!(a.paused_until(), Some(1_100));
+        assert_eq!(a.ready(true, 2, 500), None, "the ack is awaited");
+        a.acked();
+        assert_eq!(a.paused_until(), None);
+        assert!(a.ready(true, 2, 500).is_some(), "the ack came");
+        // No ack: sent again once the wait is over.
+        assert!(a.ended(2, false, 600));
+        a.await_ack(600);
+        assert_eq!(a.ready(true, 3, 1_599), None);
+        assert!(a.ready(true, 3, 1_600).is_some());
+    }
+
+    #[test]
     fn after_a_failed_transmission_it_waits_the_pause() {
-        let mut a = Aloha::new(3, 1);
+        let mut a = Aloha::new(3, 1, 10);
         a.ready(true, 1, 0).expect("sent");
         assert!(a.ended(1, true, 100));
         assert_eq!(a.paused_until(), Some(100 + FAILED_PAUSE));

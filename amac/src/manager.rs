@@ -228,7 +228,23 @@ impl MacManager {
                          slot out, or share slots with MAC_FIXED_DECENTRALIZED and shared { }",
                     ));
                 }
-                Scheme::Aloha(Aloha::new(modem_id, config.rate()))
+                // The ack of a packet that asks for one is awaited for at
+                // most slot_seconds.
+                let ack_wait = config.slot_seconds();
+                if !(ack_wait.is_finite() && ack_wait > 0.0) {
+                    return Err(AmacError::config_field(
+                        "slot_seconds",
+                        format!(
+                            "{ack_wait} is not a time in seconds (MAC_ALOHA awaits an ack this \
+                             long at most)"
+                        ),
+                    ));
+                }
+                Scheme::Aloha(Aloha::new(
+                    modem_id,
+                    config.rate(),
+                    (ack_wait * 1e6) as Micros,
+                ))
             }
             MacType::MacFixedDecentralized | MacType::MacPolled => {
                 let mut cycle = ListedCycle {

@@ -71,3 +71,42 @@ fn assert_near_theory(m: &LoadPoint) {
         TOLERANCE_SIGMAS * sigma
     );
 }
+
+/// `MAC_ALOHA` with acknowledged messages: after a packet that asks for an
+/// ack, a node waits for the ack (or `slot_seconds`) before it sends again,
+/// so the ack finds it listening. Sending again at once, every ack arrived
+/// while the sender transmitted (half duplex): delivered, never acked.
+#[test]
+fn over_aloha_acknowledged_messages_are_acked() {
+    let gobyd = "gobyd { mac { type: MAC_ALOHA rate: 1 slot_seconds: 30 }
+        queue { message_entry { protobuf_name: \"goby.example.Command\" ack: true ttl: 3600
+          role { type: DESTINATION_ID field: \"destination\" } } } }";
+    let node = |name: &str, id: i32, x: f64, to: &str| {
+        format!(
+            "node {{ name: \"{name}\" modem_id: {id} {gobyd} position {{ x: {x} depth: 10 }}
+               traffic {{ type: \"goby.example.Command\" dest: \"{to}\" period_s: 120 start_s: {start}
+                 field {{ name: \"action\" constant: \"GOTO\" }}
+                 field {{ name: \"note\" counter {{ format: \"{name}-%d\" }} }} }} }}\n",
+            start = id * 30
+        )
+    };
+    let text = format!(
+        "seed: 4\nstart_time: \"2026-06-01T00:00:00Z\"\nduration_s: 1800\ndrain_s: 600\n{}{}",
+        node("a", 1, 0.0, "b"),
+        node("b", 2, 1000.0, "a")
+    );
+    let scenario = goby_sim::scenario::parse(&text, "aloha-acks", std::path::Path::new("."))
+        .expect("accepted");
+    let report = goby_sim::run(&scenario).expect("the run ends").report;
+    let commands = &report.by_type["goby.example.Command"];
+    assert_eq!(
+        (
+            commands.published,
+            commands.delivered,
+            commands.acked,
+            commands.duplicates
+        ),
+        (30, 30, 30, 0),
+        "{report:#?}"
+    );
+}

@@ -629,13 +629,28 @@ impl Core {
             DriverEvent::DataRequest(request) => self.answer_data_request(i, request),
             DriverEvent::Received(transmission) => {
                 self.links[i].mac.handle_received(transmission.src());
+                if transmission.r#type()
+                    == protos::goby::acomms::protobuf::modem_transmission::TransmissionType::Ack
+                    && transmission.dest() == self.modem_id
+                {
+                    if let Some(aloha) = self.links[i].mac.aloha() {
+                        aloha.acked();
+                    }
+                }
                 self.heard_snr(i, &transmission);
                 self.receive(i, transmission);
             }
             DriverEvent::TransmitResult(result) => {
                 if let Some(aloha) = self.links[i].mac.aloha() {
                     let failed = matches!(result.outcome, TransmitOutcome::Failed(_));
-                    aloha.ended(result.transmission.unique_id(), failed, self.clock.now());
+                    let now = self.clock.now();
+                    let t = &result.transmission;
+                    if aloha.ended(t.unique_id(), failed, now)
+                        && result.outcome == TransmitOutcome::Sent
+                        && t.ack_requested()
+                    {
+                        aloha.await_ack(now);
+                    }
                 }
                 let went_out = matches!(result.outcome, TransmitOutcome::Sent);
                 if let TransmitOutcome::Failed(reason) = &result.outcome {
