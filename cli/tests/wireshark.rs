@@ -370,8 +370,26 @@ log {{ raw_log: false }}
             clients[0].wait_for("\"received\":", FROM_2.len()).await;
             clients[0].wait_for("\"ack\":", 2).await;
             clients[1].wait_for("\"ack\":", 1).await;
-            // The last ack's datagram is captured before the capture stops.
-            tokio::time::sleep(Duration::from_millis(500)).await;
+            // Every datagram sent is in the capture file before the capture
+            // stops (tshark writes each as it takes it, and may lag behind
+            // the wire on a loaded machine; stopped, it writes no more):
+            // every message published and an ack.
+            let deadline = std::time::Instant::now() + Duration::from_secs(60);
+            loop {
+                let written = std::fs::read(capture_file).unwrap_or_default();
+                let payloads = udp_payloads(whole_records(&written));
+                let decoded = decoded(&payloads);
+                let messages = decoded.values().flatten().count();
+                let acks = decoded.values().any(Vec::is_empty);
+                if messages > FROM_1.len() + FROM_2.len() && acks {
+                    break;
+                }
+                assert!(
+                    std::time::Instant::now() < deadline,
+                    "the capture holds {messages} messages and acks: {acks}, after 60 s"
+                );
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
             capture.stop();
             let _ = stop_tx.send(true);
             for d in daemons {
@@ -380,10 +398,30 @@ log {{ raw_log: false }}
         });
     }
 
+    /// The pcap file `written` so far, cut after its last whole packet
+    /// (empty before its header is written).
+    fn whole_records(written: &[u8]) -> &[u8] {
+        if written.len() < 24 {
+            return &[];
+        }
+        let mut at = 24;
+        while at + 16 <= written.len() {
+            let len = u32::from_le_bytes(written[at + 8..at + 12].try_into().unwrap()) as usize;
+            if at + 16 + len > written.len() {
+                break;
+            }
+            at += 16 + len;
+        }
+        &written[..at]
+    }
+
     /// The UDP payloads of a pcap file of Ethernet (or Linux loopback)
     /// frames, by packet number (1 first, as tshark numbers them).
     fn udp_payloads(pcap: &[u8]) -> BTreeMap<usize, Vec<u8>> {
         let mut out = BTreeMap::new();
+        if pcap.is_empty() {
+            return out;
+        }
         let link = u32::from_le_bytes(pcap[20..24].try_into().unwrap());
         assert_eq!(link, 1, "an Ethernet capture of lo");
         let mut at = 24;

@@ -474,7 +474,9 @@ impl ConsoleState {
                         Some(e) => Err(e.clone()),
                         None => Ok(cycle_note(c.slots.len(), c.running)),
                     };
-                    self.mac_settle(node, MacKind::Update, outcome, time, events);
+                    let kind_of = |v: &Value| v.get("update_type").cloned();
+                    let answers = c.update.as_ref().and_then(kind_of);
+                    self.mac_settle(node, MacKind::Update, answers, outcome, time, events);
                 }
             }
             Report::MacActive(a) => {
@@ -486,7 +488,7 @@ impl ConsoleState {
                             Ok(format!("{} runs ({})", a.active, reason.unwrap_or("?")))
                         }
                     };
-                    self.mac_settle(node, MacKind::Switch, outcome, time, events);
+                    self.mac_settle(node, MacKind::Switch, None, outcome, time, events);
                 }
             }
             Report::MacRate(r) => {
@@ -507,13 +509,17 @@ impl ConsoleState {
 
     /// The MQTT bridge of `node` told the outcome of a MAC update or switch
     /// it took from the broker: the oldest such command the page published
-    /// to it is applied (with a note) or refused (with the reason). A
+    /// to it (of the update's `update_type`, when the outcome says it:
+    /// `answers`) is applied (with a note) or refused (with the reason). A
     /// retained value handed over on subscribing (after a reconnection)
-    /// answers no command and is not taken here.
+    /// answers no command and is not taken here; nor does an outcome
+    /// delivered again (MQTT's QoS 1 may) answer a later command of
+    /// another kind.
     fn mac_settle(
         &mut self,
         node: &str,
         kind: MacKind,
+        answers: Option<Value>,
         outcome: Result<String, String>,
         time: f64,
         events: &mut Vec<Value>,
@@ -523,6 +529,9 @@ impl ConsoleState {
                 && c.node == node
                 && c.type_name == kind.word()
                 && c.topic.ends_with(&format!("/{}", kind.word()))
+                && answers
+                    .as_ref()
+                    .is_none_or(|a| c.msg.get("update_type").is_none_or(|t| t == a))
         }) else {
             return;
         };
@@ -1268,6 +1277,26 @@ mod tests {
             r#"{"slot": [{"src": 1}], "modem_id": 2, "from": "mqtt", "error": "the cycle after the update cannot run"}"#,
         );
         assert_eq!(s.command_state(second), Some(CommandState::Refused));
+        // An ERASE refused, its outcome delivered again (QoS 1), then a
+        // CLEAR: the outcome delivered again is not the CLEAR's answer.
+        let erase = json!({"src": 2, "dest": 2, "update_type": "ERASE", "first_iterator": 9});
+        let (erased, _) =
+            s.command_sent("auv2", "mac_update", "fleet/auv2/mac_update", &erase, 101.0);
+        let refusal = r#"{"slot": [{"src": 1}], "modem_id": 2, "from": "mqtt",
+            "update": {"update_type": "ERASE", "first_iterator": 9}, "error": "9 is outside the cycle"}"#;
+        apply(&mut s, "fleet/auv2/mac_cycle", refusal);
+        assert_eq!(s.command_state(erased), Some(CommandState::Refused));
+        let clear = json!({"src": 2, "dest": 2, "update_type": "CLEAR"});
+        let (cleared, _) =
+            s.command_sent("auv2", "mac_update", "fleet/auv2/mac_update", &clear, 102.0);
+        apply(&mut s, "fleet/auv2/mac_cycle", refusal);
+        assert_eq!(s.command_state(cleared), Some(CommandState::Published));
+        apply(
+            &mut s,
+            "fleet/auv2/mac_cycle",
+            r#"{"slot": [], "running": false, "modem_id": 2, "from": "mqtt", "update": {"update_type": "CLEAR"}}"#,
+        );
+        assert_eq!(s.command_state(cleared), Some(CommandState::Applied));
         apply(
             &mut s,
             "fleet/auv2/mac_active",
@@ -1287,7 +1316,9 @@ mod tests {
             [
                 "1 slot, running",
                 "the cycle after the update cannot run",
-                "no MAC named loud"
+                "no MAC named loud",
+                "9 is outside the cycle",
+                "0 slots, stopped"
             ]
         );
         // An answer from the JSON interface settles its command by id,
