@@ -83,6 +83,23 @@ fn pump_numbered(mut driver: Driver) -> tokio::task::JoinHandle<(Driver, Vec<Ins
     })
 }
 
+/// Answers `driver`'s next data request with one `frame`; its template.
+async fn answer_data_request(driver: &mut Driver, frame: Vec<u8>) -> ModemTransmission {
+    tokio::time::timeout(Duration::from_secs(60), async {
+        loop {
+            if let DriverEvent::DataRequest(r) = driver.next_event().await.unwrap() {
+                let t = r.template().clone();
+                let mut filled = t.clone();
+                filled.frame = vec![frame];
+                r.respond(filled);
+                return t;
+            }
+        }
+    })
+    .await
+    .expect("a data request within 60 s")
+}
+
 fn number(mt: &ModemTransmission) -> u32 {
     u32::from_be_bytes(mt.frame[0][..4].try_into().unwrap())
 }
@@ -97,19 +114,7 @@ async fn delay_is_distance_over_sound_speed_plus_time_on_the_water() {
     let t0 = Instant::now();
     a.initiate_transmission(data(2, 0, true)).unwrap();
     // Rate 0: one 32-byte frame offered.
-    let template = tokio::time::timeout(Duration::from_secs(60), async {
-        loop {
-            if let DriverEvent::DataRequest(r) = a.next_event().await.unwrap() {
-                let t = r.template().clone();
-                let mut filled = t.clone();
-                filled.frame = vec![vec![7; 32]];
-                r.respond(filled);
-                return t;
-            }
-        }
-    })
-    .await
-    .unwrap();
+    let template = answer_data_request(&mut a, vec![7; 32]).await;
     assert_eq!(
         (template.max_num_frames(), template.max_frame_bytes()),
         (1, 32)
@@ -409,19 +414,7 @@ async fn sent_as_a_popoto_or_a_seatrac_a_packet_takes_that_modem_s_frames_and_ti
         let mut request = data(2, 1, true);
         request.max_frame_bytes = slot_bytes;
         a.initiate_transmission(request).unwrap();
-        let template = tokio::time::timeout(Duration::from_secs(60), async {
-            loop {
-                if let DriverEvent::DataRequest(r) = a.next_event().await.unwrap() {
-                    let t = r.template().clone();
-                    let mut filled = t.clone();
-                    filled.frame = vec![vec![7; 10]];
-                    r.respond(filled);
-                    return t;
-                }
-            }
-        })
-        .await
-        .unwrap();
+        let template = answer_data_request(&mut a, vec![7; 10]).await;
         assert_eq!(
             (template.max_num_frames(), template.max_frame_bytes()),
             (1, frame_bytes as u32),
