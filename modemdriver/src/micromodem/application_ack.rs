@@ -28,14 +28,21 @@
 //! an ack of a later use of the number. Owed acks therefore live at most
 //! `lifetime` (`application_ack_lifetime_seconds`): one not sent by then is
 //! dropped (the sender sends the data again, and the repeat is acked
-//! anew). And the sender does not use a number again within `lifetime` of
-//! a use still awaiting its ack, as long as other numbers are free; it
-//! starts its numbering at a number drawn at random.
+//! anew). An owed ack placed just before its lifetime ends still has to
+//! go out and cross, so the sender does not use a number again within
+//! twice the lifetime of a use still awaiting its ack (gobyd asks for a
+//! lifetime of at least two TDMA cycles, which covers both), as long as
+//! other numbers are free; it starts its numbering at a number drawn at
+//! random. When none is free (many acks lost), a number is used again,
+//! and an ack of it then credits nothing, since it may answer the earlier
+//! use: the number is free once that ack is heard, and the frames' data
+//! goes again under a number of its own. Costs a retransmission, never a
+//! message taken for acked.
 //!
 //! A restarted sender does not know which of its numbers other nodes still
 //! owe acks for (from its run before the restart), so until it has heard
 //! from a node (a transmission addressed to it, or a broadcast carrying
-//! every ack owed, which empties that node's acks owed to it) or
+//! every ack owed, which empties that node's acks owed to it) or twice
 //! `lifetime` has passed, it credits no ack from that node: its frames to
 //! the node still ask for acks, so the node answers and the next
 //! transmission is credited. A restart costs one round, never a message
@@ -47,7 +54,8 @@
 //! and [`resume`](ApplicationAcks::resume) takes them up again. A node that
 //! resumed its numbers, or that has no earlier run (no file), credits acks
 //! at once: the numbers of its earlier run are held, unused, until their
-//! lifetime has passed, and an ack of one of them credits nothing.
+//! lifetime has passed twice over, and an ack of one of them credits
+//! nothing.
 //!
 //! Goby3's pAcommsHandler reads the ack message in FDP packets only, and in
 //! a data cycle hands a frame 0 that starts with it to its queue, which
@@ -195,9 +203,11 @@ struct SentFrame {
     unique_id: Option<u32>,
     dest: i32,
     at: Instant,
-    /// Used by an earlier run of this node: held, but its ack credits
-    /// nothing (that transmission is not this run's).
-    earlier: bool,
+    /// Held, but an ack of the number credits nothing: the use is an
+    /// earlier run's (not this run's transmission), or the number was used
+    /// again while an ack of its earlier use could still come (the ack
+    /// may be that one's).
+    uncredited: bool,
 }
 
 /// Acks owed to one node.
@@ -219,9 +229,9 @@ pub struct Placed {
     parts: Vec<Owed>,
     /// The ack message as placed at the start of frame 0.
     placeholder: Vec<u8>,
-    /// Every frame number had a use awaiting its ack within the lifetime:
-    /// one is used again, and a late ack of its earlier use would be taken
-    /// for this one.
+    /// Every frame number had a use awaiting its ack within twice the
+    /// lifetime: one is used again, and an ack of it will credit nothing
+    /// (it may be a late ack of the earlier use).
     pub reused: bool,
 }
 
@@ -356,7 +366,7 @@ impl ApplicationAcks {
         for (n, sent) in self.sent.iter().enumerate() {
             let Some(s) = sent else { continue };
             let age = now.saturating_duration_since(s.at);
-            if age >= self.lifetime {
+            if age >= self.settling() {
                 continue;
             }
             let at = wall_micros.saturating_sub(age.as_micros() as u64);
@@ -413,12 +423,12 @@ impl ApplicationAcks {
                     let dest: i32 = dest.parse().map_err(|_| bad(l, "frame: bad destination"))?;
                     let at: u64 = at.parse().map_err(|_| bad(l, "frame: bad time"))?;
                     let age = Duration::from_micros(wall_micros.saturating_sub(at));
-                    if age < self.lifetime {
+                    if age < self.settling() {
                         sent[n] = Some(SentFrame {
                             unique_id: None,
                             dest,
                             at: now.checked_sub(age).unwrap_or(now),
-                            earlier: true,
+                            uncredited: true,
                         });
                     }
                 }
@@ -432,14 +442,21 @@ impl ApplicationAcks {
         Ok(())
     }
 
+    /// How long after its use a number awaiting its ack may still be
+    /// acked: twice the lifetime (the ack owed for its lifetime, then
+    /// sent and crossing).
+    fn settling(&self) -> Duration {
+        self.lifetime.saturating_mul(2)
+    }
+
     /// Whether an ack from `node` can be credited: it has been heard from
-    /// since the start, or the start is `lifetime` ago.
+    /// since the start, or the start is twice `lifetime` ago.
     fn credits(&self, node: i32, now: Instant) -> bool {
         let heard = u32::try_from(node)
             .ok()
             .filter(|&n| n <= MAX_MODEM_ID)
             .is_some_and(|n| self.heard_from & (1 << n) != 0);
-        self.resumed || heard || now.saturating_duration_since(self.started) >= self.lifetime
+        self.resumed || heard || now.saturating_duration_since(self.started) >= self.settling()
     }
 
     /// Whether acks are owed to anyone.
@@ -459,10 +476,10 @@ impl ApplicationAcks {
     /// left open goes to a node whose acks already waited a transmission.
     ///
     /// The frames are numbered from the next number on when those numbers
-    /// are free (never used, acked, or used longer than `lifetime` ago),
-    /// else from the first free run of numbers; with none free (many
-    /// frames lost within `lifetime`), from the next number anyway, and
-    /// [`Placed::reused`] says so.
+    /// are free (never used, acked, or used longer than twice `lifetime`
+    /// ago), else from the first free run of numbers; with none free (many
+    /// acks lost), from the next number anyway, and [`Placed::reused`] says
+    /// so (an ack of those numbers will credit nothing).
     pub fn prepare(
         &mut self,
         template: &mut ModemTransmission,
@@ -475,8 +492,9 @@ impl ApplicationAcks {
         if self.next_frame + frames > FRAME_NUMBERS {
             self.next_frame = 0;
         }
+        let settling = self.settling();
         let free = |n: u32| {
-            self.sent[n as usize].is_none_or(|s| now.saturating_duration_since(s.at) >= lifetime)
+            self.sent[n as usize].is_none_or(|s| now.saturating_duration_since(s.at) >= settling)
         };
         let starts = (0..FRAME_NUMBERS)
             .map(|i| (self.next_frame + i) % FRAME_NUMBERS)
@@ -586,15 +604,24 @@ impl ApplicationAcks {
         filled.frame[0].splice(0..len, bytes);
         let frames = (filled.frame.len() as u32).clamp(1, FRAME_NUMBERS - frame_start);
         // A number is held only while an ack of it may come and be
-        // credited (not to a node not heard from since a restart).
+        // credited (not to a node not heard from since a restart). One
+        // used again while an ack of its earlier use may still come is
+        // held uncredited; one used again without asking for an ack keeps
+        // its earlier use (whose ack it is, when it comes).
         let awaits = filled.ack_requested() && self.credits(dest, now);
+        let settling = self.settling();
         for n in frame_start..frame_start + frames {
-            self.sent[n as usize] = awaits.then_some(SentFrame {
-                unique_id: filled.unique_id,
-                dest,
-                at: now,
-                earlier: false,
-            });
+            let earlier =
+                self.sent[n as usize].filter(|s| now.saturating_duration_since(s.at) < settling);
+            self.sent[n as usize] = match (awaits, earlier) {
+                (true, earlier) => Some(SentFrame {
+                    unique_id: filled.unique_id,
+                    dest,
+                    at: now,
+                    uncredited: earlier.is_some(),
+                }),
+                (false, earlier) => earlier,
+            };
         }
         self.next_frame = frame_start + frames;
         Ok(())
@@ -664,8 +691,9 @@ impl ApplicationAcks {
                     continue;
                 };
                 self.sent[n as usize] = None;
-                if sent.earlier {
-                    // Acks a transmission of the run before the start.
+                if sent.uncredited {
+                    // Acks a transmission of the run before the start, or
+                    // maybe the earlier use of a number used again.
                     continue;
                 }
                 heard.acks.push(ModemTransmission {
@@ -848,7 +876,7 @@ mod tests {
 
     /// One moment for the tests that do not age anything.
     fn now() -> Instant {
-        base() + LIFETIME
+        base() + 2 * LIFETIME
     }
 
     fn hex(s: &str) -> Vec<u8> {
@@ -1234,8 +1262,10 @@ mod tests {
         }
         // Every run of three numbers held: one is used again, flagged.
         assert_eq!(send(&mut a, 3, true, t0), (0, true));
-        // Past the lifetime they are free again.
-        assert_eq!(send(&mut a, 3, true, t0 + LIFETIME), (3, false));
+        // Still held past the lifetime (a late ack may still cross) ...
+        assert_eq!(send(&mut a, 3, true, t0 + LIFETIME), (3, true));
+        // ... free past twice the lifetime.
+        assert_eq!(send(&mut a, 3, true, t0 + 2 * LIFETIME), (6, false));
 
         // Acked numbers are free at once; so are numbers sent without asking.
         let mut b = ApplicationAcks::new(1, LIFETIME, 0, base()).unwrap();
@@ -1250,6 +1280,59 @@ mod tests {
         for expected in [8, 16, 24, 0] {
             assert_eq!(send(&mut b, 8, false, t0), (expected, false));
         }
+    }
+
+    /// Every number awaits an ack (the acks lost): a number used again
+    /// credits no ack, as the ack may be the earlier use's (whose frame may
+    /// never have arrived), and that ack frees it; a use not asking for an
+    /// ack leaves the earlier use's ack to credit that one.
+    #[test]
+    fn an_ack_of_a_number_used_again_credits_nothing_and_frees_it() {
+        let mut a = ApplicationAcks::new(1, LIFETIME, 0, base()).unwrap();
+        let t0 = now();
+        let send = |a: &mut ApplicationAcks, ack: bool, id: u32| {
+            let mut t = template(2, 8, id);
+            let mut placed = a.prepare(&mut t, t0).unwrap();
+            let mut filled = fill(t, &[0xf8], ack);
+            filled.ack_requested = Some(ack);
+            while filled.frame.len() < 8 {
+                filled.frame.push(vec![0xf8]);
+            }
+            a.complete(&mut filled, &mut placed, t0).unwrap();
+            (filled.frame_start(), placed.reused)
+        };
+        for (id, start) in [(1, 0), (2, 8), (3, 16), (4, 24)] {
+            assert_eq!(send(&mut a, true, id), (start, false));
+        }
+        // Transmission 5 numbers 0-7 again: 2's ack of frame 0 may answer
+        // transmission 1 (its frame 0 may be lost); it credits nothing.
+        assert_eq!(send(&mut a, true, 5), (0, true));
+        let wall = 1_764_680_000_000_000u64;
+        assert!(a.state(t0, wall).contains("\nframe 0 2 "));
+        assert!(a.receive(&mut ack_from_2(&a, 1)).acks.is_empty());
+        // That ack heard, nothing more of frame 0's number can come: free.
+        assert!(!a.state(t0, wall).contains("\nframe 0 "));
+        // Numbers used once are credited as ever.
+        let acks = a.receive(&mut ack_from_2(&a, 1 << 8)).acks;
+        assert_eq!(acks.len(), 1, "transmission 2's frame 8, used once");
+        assert_eq!(acks[0].unique_id, Some(2));
+        // A use without ack keeps the earlier use awaited: 16-23 numbered
+        // again without asking, then 2's ack of 16 credits transmission 3.
+        let mut b = ApplicationAcks::new(1, LIFETIME, 16, base()).unwrap();
+        let mut t = template(2, 8, 3);
+        let mut placed = b.prepare(&mut t, t0).unwrap();
+        let mut filled = fill(t, &[0xf8], true);
+        while filled.frame.len() < 8 {
+            filled.frame.push(vec![0xf8]);
+        }
+        b.complete(&mut filled, &mut placed, t0).unwrap();
+        for (id, start) in [(6, 24), (7, 0), (8, 8)] {
+            assert_eq!(send(&mut b, true, id), (start, false));
+        }
+        assert_eq!(send(&mut b, false, 9), (16, true));
+        let acks = b.receive(&mut ack_from_2(&b, 1 << 16)).acks;
+        assert_eq!(acks.len(), 1);
+        assert_eq!(acks[0].unique_id, Some(3));
     }
 
     /// A sender restarted: a node may still owe acks for its frames of
@@ -1338,7 +1421,7 @@ mod tests {
     }
 
     #[test]
-    fn numbers_older_than_the_lifetime_are_not_held_after_a_restart() {
+    fn numbers_older_than_twice_the_lifetime_are_not_held_after_a_restart() {
         let t0 = base();
         let wall = 1_764_680_000_000_000u64;
         let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
@@ -1349,7 +1432,12 @@ mod tests {
         a.complete(&mut sent, &mut placed, t0).unwrap();
         let state = a.state(t0, wall);
         assert!(state.contains(&format!("frame {} 2 {wall}", sent.frame_start())));
-        let later = wall + LIFETIME.as_micros() as u64;
+        // Within twice the lifetime a late ack may still come: held.
+        let within = wall + LIFETIME.as_micros() as u64;
+        let mut b = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        b.resume(Some(&state), t0, within).unwrap();
+        assert!(b.state(t0, within).contains("frame "));
+        let later = wall + 2 * LIFETIME.as_micros() as u64;
         let mut b = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
         b.resume(Some(&state), t0, later).unwrap();
         assert!(!b.state(t0, later).contains("frame "));
@@ -1382,10 +1470,25 @@ mod tests {
     }
 
     #[test]
-    fn a_node_not_heard_from_is_credited_once_the_lifetime_has_passed() {
+    fn a_node_not_heard_from_is_credited_once_twice_the_lifetime_has_passed() {
         let t0 = base();
         let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
-        let later = t0 + LIFETIME;
+        // Within twice the lifetime a late ack of the run before may come.
+        let within = t0 + LIFETIME;
+        let mut to_b = template(2, 1, 8);
+        let mut placed = a.prepare(&mut to_b, within).unwrap();
+        let mut sent = fill(to_b, &[0xf8], true);
+        a.complete(&mut sent, &mut placed, within).unwrap();
+        let mut ack = ModemTransmission {
+            src: Some(2),
+            dest: Some(7),
+            frame: vec![a
+                .encode(&owed(&[(1, 1 << sent.frame_start())]), false, 3)
+                .unwrap()],
+            ..Default::default()
+        };
+        assert!(a.receive(&mut ack).acks.is_empty());
+        let later = t0 + 2 * LIFETIME;
         let mut to_b = template(2, 1, 9);
         let mut placed = a.prepare(&mut to_b, later).unwrap();
         let mut sent = fill(to_b, &[0xf8], true);

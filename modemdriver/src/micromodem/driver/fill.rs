@@ -71,8 +71,8 @@ impl Machine {
                 if placed.reused {
                     self.status(DriverStatus::Degraded {
                         reason: format!(
-                            "every application-ack frame number awaits an ack: frame {} is numbered again, \
-                             and a late ack of its earlier use would be taken for this one",
+                            "every application-ack frame number awaits an ack: frames from {} are numbered again, \
+                             and their acks will credit nothing (the data goes again)",
                             template.frame_start()
                         ),
                     });
