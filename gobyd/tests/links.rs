@@ -671,13 +671,28 @@ fn traffic_moves_to_iridium_when_the_acoustic_modem_dies_and_back_when_it_return
             (i - p.at) as f64 / 1e6
         );
     }
-    // Once the link was up again, acoustic carried both sides' commands.
+    // Once the link was up again, both sides' commands went over acoustic
+    // first, and most came over it (one whose acoustic sending went
+    // unacked, on a loaded machine, fails over to Iridium as it should).
     let after = notes_of(&published, |p| p.at > up_again + 1_000_000);
     assert!(!after.is_empty());
+    let mut over_acoustic = 0;
     for (from, note) in &after {
+        let outs = lines(&data[*from], "out");
+        let first = outs
+            .iter()
+            .filter(|(n, _, _)| n == note)
+            .min_by_key(|(_, t, _)| *t)
+            .map(|(_, _, l)| l.as_str());
+        assert_eq!(first, Some("acoustic"), "{note} first went over: {outs:?}");
         let over = delivery_of(&data, *from, note).map(|(_, l)| l);
-        assert_eq!(over.as_deref(), Some("acoustic"), "{note} came over");
+        over_acoustic += usize::from(over.as_deref() == Some("acoustic"));
     }
+    assert!(
+        over_acoustic * 2 > after.len(),
+        "{over_acoustic} of {} commands after the link came back came over acoustic",
+        after.len()
+    );
     assert!(
         fail_over_vehicle < MODEM_TIMEOUT,
         "{fail_over_vehicle} s: the vehicle's commands waited for the timeout, not for its link"

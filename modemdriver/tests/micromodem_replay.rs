@@ -452,6 +452,42 @@ async fn a_reset_mid_cycle_reconfigures_the_modem_and_runs_the_cycle_again() {
     assert_eq!(r[0].1.transmit_stat.len(), 1);
 }
 
+/// A reset once the modem had the frame: the modem is configured again,
+/// and the cycle is not run again with the same bytes (the packet may have
+/// gone out, and a receiver would take a second one for a new message):
+/// the transmission fails with its frame, for the layer above to send its
+/// messages again as possible repeats.
+#[tokio::test]
+async fn a_reset_after_the_modem_had_the_frames_fails_the_cycle_and_hands_them_back() {
+    let (lines, events) = replay(
+        &["startup.nmea", "reset_after_data.nmea"],
+        Some(data(1)),
+        &[RATE1_FRAME],
+    )
+    .await;
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("$CCCYC")).count(),
+        1,
+        "{lines:?}"
+    );
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("$CCTXD")).count(),
+        1,
+        "{lines:?}"
+    );
+    let st = statuses(&events);
+    assert!(st.contains(&DriverStatus::ModemReset), "{st:?}");
+    assert!(
+        !st.iter()
+            .any(|s| matches!(s, DriverStatus::Retrying { .. })),
+        "{st:?}"
+    );
+    let r = results(&events);
+    assert_eq!(r.len(), 1, "{events:?}");
+    assert!(matches!(r[0].0, TransmitOutcome::Failed(_)), "{r:?}");
+    assert_eq!(r[0].1.frame, vec![RATE1_FRAME.to_vec()]);
+}
+
 #[tokio::test]
 async fn flexible_data_packets_go_out_and_come_in_with_their_statistics() {
     let frame: &[u8] = b"flexible data packet from modem one";

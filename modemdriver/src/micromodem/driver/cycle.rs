@@ -31,7 +31,12 @@
 //!   the configuration echo, plus `response_timeout_ms`).
 //!
 //! A failed job is reported with its frames (the layer above queues their
-//! messages again).
+//! messages again). A job is attempted again with the same frames only
+//! while the modem has not been given them: once a `$CCTXD` (or the
+//! `$CCTDP` carrying an FDP packet) is written, the packet may be on the
+//! water whatever the modem says next, and a second one with the same
+//! bytes would reach the receiver as a new message; such a job fails, and
+//! the layer above sends the messages again marked as possible repeats.
 
 use std::time::Duration;
 
@@ -156,6 +161,9 @@ impl Machine {
             self.expect(wait, "no $SNTTA travel times");
             self.write(sentence);
             return true;
+        }
+        if matches!(sentence, MmSentence::FdpTransmit { .. }) {
+            active.handed = true;
         }
         self.send_awaiting(sentence, 1, true);
         true
@@ -310,7 +318,10 @@ impl Machine {
         let Some(active) = &mut self.tx.active else {
             return;
         };
-        let retry = active.job.data().is_some() && active.attempt < max;
+        // Frames the modem was given may have gone out: a new attempt would
+        // put the same bytes on the water, and a receiver would take the
+        // copy for a new message. The layer above sends them again instead.
+        let retry = active.job.data().is_some() && active.attempt < max && !active.handed;
         if retry {
             active.attempt += 1;
             active.restart();
@@ -564,6 +575,7 @@ impl Machine {
             .unwrap_or_default();
         active.stage = Stage::Running;
         active.requested = active.requested.max(drq.frame);
+        active.handed |= !data.is_empty();
         let last = drq.frame >= active.cycle_frames;
         let on_water = active.job.data().map(packet_estimate).unwrap_or_default();
         // The frame is written once: its echo is not awaited, so that a lost

@@ -82,10 +82,14 @@
 //! (`MICROMODEM_HARDWARE_CONTROL_REPLY`) from `$CAMER`.
 //!
 //! Robustness: lines with bad checksums or that cannot be parsed are reported
-//! and ignored; a command without answer is sent again (`max_retries`); a
-//! transmission interrupted by a modem error, a reset (`$CAREV` with ident
-//! `INIT`) or a timeout is attempted again (`max_cycle_attempts`) with the
-//! same frames; when the device vanishes the driver reports it, reopens it
+//! and ignored; a command without answer is sent again (`max_retries`),
+//! except the `$CCTDP` that carries an FDP packet's data; a transmission
+//! interrupted by a modem error, a reset (`$CAREV` with ident `INIT`) or a
+//! timeout is attempted again (`max_cycle_attempts`) with the same frames
+//! while the modem has not been given them (no `$CCTXD`, no `$CCTDP`
+//! written: once it has, the packet may have gone out, and the job fails
+//! so that the layer above sends its messages again as possible repeats);
+//! when the device vanishes the driver reports it, reopens it
 //! every reconnection interval, configures the modem again and goes on with
 //! the queued transmissions. A transmission that finally fails is reported
 //! with its frames so the layer above can queue them again.

@@ -279,7 +279,12 @@ impl Machine {
             command: command.clone(),
             attempt: a.attempt,
         });
-        if a.attempt <= self.mm.max_retries() {
+        // The `$CCTDP` carries its packet's data: the modem may have taken
+        // it and sent the packet with its echo lost, so it is not written
+        // again (the job fails; its messages go again, marked as possible
+        // repeats).
+        let carries_data = matches!(a.sentence, MmSentence::FdpTransmit { .. });
+        if a.attempt <= self.mm.max_retries() && !carries_data {
             self.send_command(a.sentence, a.attempt + 1, a.for_job, a.multi, a.clock_asked);
         } else if a.for_job {
             self.fail_active(format!("no answer to {command}"));

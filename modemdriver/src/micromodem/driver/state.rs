@@ -108,6 +108,12 @@ pub(super) struct Active {
     pub transmit_stats: Vec<MicroModemTransmitStatistics>,
     /// Application acks placed in its frame 0.
     pub placed: Option<Placed>,
+    /// The modem was given its frames (a `$CCTXD`, or the `$CCTDP` that
+    /// carries them): a packet with them may be on the water, even if the
+    /// modem then fails or falls silent, so they are never given again as
+    /// they are (the layer above sends their messages again, each marked
+    /// as a possible repeat).
+    pub handed: bool,
 }
 
 impl Active {
@@ -125,6 +131,7 @@ impl Active {
             requested: 0,
             transmit_stats: Vec::new(),
             placed: None,
+            handed: false,
         }
     }
 

@@ -198,6 +198,38 @@ impl Bench {
         panic!("the start-up did not end");
     }
 
+    /// Answers what the machine writes as the modem would (echoes) and
+    /// lets its timers pass, from `outputs` on, until `done` holds for all
+    /// the outputs so far (at most 200 rounds); returns them all.
+    fn answer_until(
+        &mut self,
+        outputs: Vec<Output>,
+        done: impl Fn(&[Output]) -> bool,
+    ) -> Vec<Output> {
+        let mut all = outputs;
+        let mut from = 0;
+        for _ in 0..200 {
+            if done(&all) {
+                break;
+            }
+            let answers: Vec<MmSentence> = writes(&all[from..]).iter().filter_map(echo).collect();
+            from = all.len();
+            if answers.is_empty() {
+                let Some(next) = self.machine.next_deadline() else {
+                    break;
+                };
+                self.now = self.now.after(next.saturating_duration_since(self.now.at));
+                let more = self.input(Input::Tick);
+                all.extend(more);
+            }
+            for answer in answers {
+                let more = self.sentence(&answer);
+                all.extend(more);
+            }
+        }
+        all
+    }
+
     fn input(&mut self, input: Input) -> Vec<Output> {
         self.machine.handle(self.now, input)
     }
@@ -841,4 +873,119 @@ fn fdp_only_owed_acks_wait_for_an_fdp_packet() {
         (PEER as i32, 0b11 << 5)
     );
     assert!(ack.ack_requested);
+}
+
+/// A modem reset (`$CAREV` with ident `INIT`) during a data cycle: before
+/// the modem has its frame the cycle is attempted again with the same
+/// frame; once a `$CCTXD` is written the packet may have gone out, so the
+/// job fails and hands its frames back (their messages go again, marked
+/// as possible repeats) instead of putting the same bytes on the water
+/// twice, which a receiver would take for a new message.
+#[test]
+fn frames_given_to_the_modem_are_never_given_again() {
+    let reset = MmSentence::Revision {
+        time: "221320".into(),
+        ident: "INIT".into(),
+        version: "0.94.0.52".into(),
+    };
+    let cycle_started = |bench: &mut Bench| {
+        let opened = bench.now.micros;
+        let (id, template) = bench.initiate_and_request(data(opened, 120.0));
+        let outputs = bench.input(Input::Answer {
+            id,
+            filled: Some(filled(&template)),
+        });
+        let cycle = writes(&outputs)
+            .into_iter()
+            .find_map(|s| echo(&s))
+            .expect("a $CCCYC");
+        bench.advance(Duration::from_millis(20));
+        bench.sentence(&cycle);
+        bench.advance(Duration::from_millis(20));
+    };
+    let cycles = |outputs: &[Output]| {
+        writes(outputs)
+            .iter()
+            .filter(|s| {
+                matches!(
+                    s,
+                    MmSentence::Cycle {
+                        from_modem: false,
+                        ..
+                    }
+                )
+            })
+            .count()
+    };
+
+    // Reset before the data request: the cycle starts again.
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    cycle_started(&mut bench);
+    let first = bench.sentence(&reset);
+    let outputs = bench.answer_until(first, |o| cycles(o) > 0 || !results(o).is_empty());
+    assert_eq!(cycles(&outputs), 1, "attempted again: {outputs:?}");
+    assert!(results(&outputs).is_empty(), "{outputs:?}");
+
+    // Reset once the frame is written: failed, the frame handed back.
+    let mut bench = Bench::ready(MicroModemConfig::default());
+    cycle_started(&mut bench);
+    let outputs = bench.sentence(&data_request(1));
+    assert!(
+        writes(&outputs)
+            .iter()
+            .any(|s| matches!(s, MmSentence::TransmitData { data, .. } if data == b"hello")),
+        "{outputs:?}"
+    );
+    bench.advance(Duration::from_millis(100));
+    let first = bench.sentence(&reset);
+    let outputs = bench.answer_until(first, |o| cycles(o) > 0 || !results(o).is_empty());
+    assert_eq!(cycles(&outputs), 0, "never attempted again: {outputs:?}");
+    match results(&outputs).as_slice() {
+        [(TransmitOutcome::Failed(_), mt)] => assert_eq!(mt.frame, vec![b"hello".to_vec()]),
+        other => panic!("one failed result with its frame: {other:?}"),
+    }
+}
+
+/// The `$CCTDP` of an FDP packet carries its data: unechoed (the echo lost,
+/// the modem perhaps sending), it is not written again; the job fails and
+/// hands its frame back.
+#[test]
+fn an_fdp_packet_unechoed_is_not_written_again() {
+    let (mut bench, outputs) = fdp_slot_after_revision("2.0.35490");
+    let (id, template) = match requests(&outputs).as_slice() {
+        [(id, t)] => (*id, (*t).clone()),
+        other => panic!("one data request: {other:?}"),
+    };
+    let outputs = bench.input(Input::Answer {
+        id,
+        filled: Some(ModemTransmission {
+            frame: vec![b"fdp".to_vec()],
+            ..template
+        }),
+    });
+    let tdp = |outputs: &[Output]| {
+        writes(outputs)
+            .iter()
+            .filter(|s| matches!(s, MmSentence::FdpTransmit { .. }))
+            .count()
+    };
+    assert_eq!(tdp(&outputs), 1, "{outputs:?}");
+    let mut later = Vec::new();
+    for _ in 0..10 {
+        let Some(next) = bench.machine.next_deadline() else {
+            break;
+        };
+        bench.now = bench
+            .now
+            .after(next.saturating_duration_since(bench.now.at));
+        later.extend(bench.input(Input::Tick));
+        if !results(&later).is_empty() {
+            break;
+        }
+    }
+    assert_eq!(tdp(&later), 0, "written once: {later:?}");
+    match results(&later).as_slice() {
+        [(TransmitOutcome::Failed(_), mt)] => assert_eq!(mt.frame, vec![b"fdp".to_vec()]),
+        other => panic!("one failed result with its frame: {other:?}"),
+    }
 }
