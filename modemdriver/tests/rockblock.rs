@@ -388,6 +388,51 @@ async fn a_refusing_service_is_retried_when_that_can_help_and_not_otherwise() {
     stop(r).await;
 }
 
+/// An MT endpoint that takes the POST and never answers: RockBLOCK may
+/// have queued the message, so it is not POSTed again (the vehicle would
+/// take the same bytes for a new message); the frame is handed back for its
+/// messages to go again, marked as possible repeats.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_mt_post_left_unanswered_is_not_made_again() {
+    use tokio::io::AsyncReadExt;
+    let r = rig(MoFormat::Json).await;
+    let silent = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = silent.local_addr().unwrap();
+    let (posts_tx, mut posts_rx) = mpsc::unbounded_channel::<Vec<u8>>();
+    let server = tokio::spawn(async move {
+        let mut held = Vec::new();
+        while let Ok((mut stream, _)) = silent.accept().await {
+            let mut request = vec![0u8; 4096];
+            let n = stream.read(&mut request).await.unwrap_or(0);
+            request.truncate(n);
+            let _ = posts_tx.send(request);
+            held.push(stream);
+        }
+    });
+    let mut config = shore_config(&r);
+    let shore_cfg = config.iridium_shore.as_mut().unwrap();
+    shore_cfg.mt_confirmation_timeout_ms = Some(1000);
+    shore_cfg.rockblock.as_mut().unwrap().server = Some(format!("http://{addr}"));
+    let mut shore = pump(IridiumShoreDriver::start(&config).await.unwrap(), 1);
+    shore.1.send(b"unanswered".to_vec()).unwrap();
+    shore.0.initiate_transmission(slot(2, 1)).unwrap();
+    let reason = until(&mut shore.2, "the frame handed back", |s| match s {
+        Seen::Result(TransmitOutcome::Failed(reason), _) => Some(reason.clone()),
+        Seen::Result(o, _) => panic!("{o:?}"),
+        Seen::Status(DriverStatus::Retrying { reason, .. }) => panic!("POSTed again: {reason}"),
+        _ => None,
+    })
+    .await;
+    assert!(reason.contains("no answer"), "{reason}");
+    // Past every back-off the configuration allows: one POST in all.
+    tokio::time::sleep(Duration::from_millis(3000)).await;
+    let first = posts_rx.try_recv().expect("one POST");
+    assert!(String::from_utf8_lossy(&first).starts_with("POST "));
+    assert!(posts_rx.try_recv().is_err(), "a second POST");
+    server.abort();
+    stop(r).await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mo_messages_wait_while_the_webhook_is_down() {
     let mut r = rig(MoFormat::Json).await;

@@ -27,9 +27,13 @@
 //!   (the service's `OK,<id>`) queues it, `Failed` (its frame handed back)
 //!   when it is refused, not answered within `mt_confirmation_timeout_ms`,
 //!   or cannot be reached. A RockBLOCK POST that fails in a way that may
-//!   pass later (no connection, no answer, an HTTP status other than 200,
-//!   `FAILED,99`) is made again after `rockblock.mt_retry_backoff_ms`,
-//!   doubled each time, up to `rockblock.mt_attempts` POSTs.
+//!   pass later and that queued nothing (no connection made, HTTP 429 or
+//!   503, `FAILED,99`) is made again after `rockblock.mt_retry_backoff_ms`,
+//!   doubled each time, up to `rockblock.mt_attempts` POSTs. One the
+//!   service may have queued (no answer in time, a broken or unknown
+//!   answer, another HTTP status) is not: the same bytes twice would reach
+//!   the vehicle as two messages. It fails, and the messages go again
+//!   marked as possible repeats.
 //! - Acks: data for this node that asks for one is answered with an ACK
 //!   sent as its own MT message at once (on reception, or with
 //!   `deferred_ack` when the layer above asks); an ACK received is given
@@ -1284,7 +1288,13 @@ async fn rockblock_webhook(
 }
 
 /// POSTs one MT message to RockBLOCK, again after a failure that may pass
-/// (up to `service.attempts` POSTs, reported as [`DriverStatus::Retrying`]).
+/// and left nothing queued (up to `service.attempts` POSTs, reported as
+/// [`DriverStatus::Retrying`]): no connection made, RockBLOCK's own
+/// `FAILED` answer with a code that may pass, or HTTP 429 or 503 (the
+/// request not served). A POST that may have been queued (no answer in
+/// time, a broken or unknown answer, another HTTP status) is not made
+/// again with the same bytes, which the vehicle would take for a new
+/// message: it fails, and its messages go again marked as possible repeats.
 async fn post_mt(service: &RockblockMt, request: &MtRequest, events: &EventSink) -> MtOutcome {
     let form = request.to_form().into_bytes();
     let mut wait = service.backoff;
@@ -1298,13 +1308,13 @@ async fn post_mt(service: &RockblockMt, request: &MtRequest, events: &EventSink)
         )
         .await
         {
-            Err(e) => (e, true),
+            Err(e) => (e.message, e.unsent),
             Ok(reply) if reply.status != 200 => (
                 format!(
                     "RockBLOCK MT endpoint {} answered HTTP {}",
                     service.url, reply.status
                 ),
-                true,
+                matches!(reply.status, 429 | 503),
             ),
             Ok(reply) => match MtReply::parse(&String::from_utf8_lossy(&reply.body)) {
                 Ok(MtReply::Queued { .. }) => return Ok(()),
@@ -1317,7 +1327,7 @@ async fn post_mt(service: &RockblockMt, request: &MtRequest, events: &EventSink)
                         "RockBLOCK MT endpoint {}: unexpected answer {e}",
                         service.url
                     ),
-                    true,
+                    false,
                 ),
             },
         };

@@ -21,9 +21,19 @@
 //!
 //! A failed session (MO status 5–36, no answer in `session_timeout_ms`)
 //! holds every session back for `retry_backoff_ms`, doubled at each
-//! failure in a row up to `retry_max_backoff_ms`; its message is tried
-//! again, with the same bytes, up to `session_attempts` sessions, then
-//! handed back as not sent (its frame with it). While the transceiver
+//! failure in a row up to `retry_max_backoff_ms`. A message whose session
+//! the transceiver reported failed is tried again, with the same bytes, up
+//! to `session_attempts` sessions, then handed back as not sent (its frame
+//! with it): the MOMSN moves on only with a session that succeeds, so if
+//! the gateway took the message all the same (it may), the retry reaches
+//! the shore under the same MOMSN, and the shore knows it for a repeat.
+//! A failed data message goes before any acknowledgement for that reason
+//! (an ack's session in between would move the MOMSN on). A data session
+//! whose outcome is not known (no answer in `session_timeout_ms`, the link
+//! lost or the transceiver silent while it ran) may have gone through, and
+//! the same bytes again would go under the next MOMSN, a new message to
+//! the shore: its message is handed back at once, for the layer above to
+//! send again marked as a possible repeat. While the transceiver
 //! reports no network service (`+CIEV:1,0`), sessions wait for it up to
 //! `service_wait_ms`. The MO buffer is written only when it does not hold
 //! the message already (a retry after a failed session goes straight to
@@ -126,7 +136,10 @@ impl Machine {
             return false;
         }
         let alert = self.sessions.ring;
-        let job = if !self.sessions.acks.is_empty() {
+        let data_retried = self.sessions.data.as_ref().is_some_and(|d| d.attempts > 0);
+        let job = if data_retried {
+            Job::Data
+        } else if !self.sessions.acks.is_empty() {
             Job::Ack
         } else if self.sessions.data.is_some() {
             Job::Data
@@ -261,16 +274,26 @@ impl Machine {
                 self.session_answered(active, reply);
             }
             (Purpose::Session, outcome) => {
-                let reason = match outcome {
-                    Outcome::Error => "ERROR in answer to the session command".to_string(),
-                    _ => format!(
+                let refused = matches!(outcome, Outcome::Error);
+                let reason = if refused {
+                    "ERROR in answer to the session command".to_string()
+                } else {
+                    format!(
                         "no answer to {} in {} s",
                         pending.command,
                         ms(self.settings.iridium.session_timeout_ms()).as_secs_f64()
-                    ),
+                    )
                 };
                 self.sessions.mo_buffer = MoBuffer::Unknown;
-                self.job_failed(&reason, true);
+                // Unanswered, a data session may have gone through: its
+                // bytes are not sent again (see the module's text).
+                let retry = refused || active.job != Job::Data;
+                let reason = if retry {
+                    reason
+                } else {
+                    format!("{reason} (it may have gone through: sent again as a possible repeat)")
+                };
+                self.job_failed(&reason, retry);
             }
             (Purpose::ReadMt, Outcome::Done(Some(Answer::Mt(bytes)))) => {
                 self.sessions.active = None;
@@ -401,11 +424,10 @@ impl Machine {
             }
             _ => {
                 if let Some(mo) = self.sessions.data.take() {
+                    let outcome = format!("given up after {attempt} SBD sessions: {reason}");
                     self.emit(DriverEvent::TransmitResult(TransmitResult {
                         transmission: mo.transmission,
-                        outcome: TransmitOutcome::Failed(format!(
-                            "not sent after {attempt} SBD sessions: {reason}"
-                        )),
+                        outcome: TransmitOutcome::Failed(outcome),
                     }));
                 }
             }
@@ -413,7 +435,18 @@ impl Machine {
     }
 
     /// The link was lost, or the transceiver went silent, during a step.
+    /// A data session under way may have gone through: its message is
+    /// handed back (see the module's text).
     pub(super) fn session_interrupted(&mut self, purpose: Purpose) {
+        let data_session =
+            purpose == Purpose::Session && self.sessions.active.is_some_and(|a| a.job == Job::Data);
+        if data_session {
+            self.job_failed(
+                "the link was lost, or the transceiver fell silent, during the session \
+                 (it may have gone through: sent again as a possible repeat)",
+                false,
+            );
+        }
         self.sessions.active = None;
         self.sessions.mo_buffer = MoBuffer::Unknown;
         if purpose == Purpose::ReadMt {

@@ -839,3 +839,84 @@ fn a_session_answer_nobody_awaits_is_recovered_while_ready() {
     // And a ring alert now goes to a session as usual.
     assert_eq!(written(&rig.bytes(b"SBDRING\r\n")), ["AT+SBDIXA\r"]);
 }
+
+/// A data session left unanswered (the transceiver silent past
+/// `session_timeout_ms`) may have gone through: the same bytes again would
+/// go under the next MOMSN, a new message to the shore. The frame is
+/// handed back at once (the layer above sends its messages again marked
+/// as possible repeats), and `AT+SBDIX` is never written again for it.
+#[test]
+fn an_unanswered_data_session_hands_its_frame_back_and_is_never_sent_again() {
+    let mut rig = Rig::new(true);
+    rig.start();
+    let out = rig.input(slot(1));
+    fill(&mut rig, &out, b"data");
+    rig.bytes(b"READY\r\n");
+    let out = rig.bytes(b"0\r\nOK\r\n");
+    assert_eq!(written(&out), ["AT+SBDIX\r"]);
+    let mut later = Vec::new();
+    for _ in 0..60 {
+        let out = rig.advance(Duration::from_secs(5));
+        // The transceiver answers what follows (its configuration again),
+        // never the session.
+        let answers = written(&out)
+            .iter()
+            .map(|w| match w.as_str() {
+                "AT+CGSN\r" => b"300234010753370\r\n\r\nOK\r\n".to_vec(),
+                "AT+SBDD2\r" => b"0\r\n\r\nOK\r\n".to_vec(),
+                "AT+SBDIX\r" => Vec::new(),
+                _ => b"OK\r\n".to_vec(),
+            })
+            .collect::<Vec<_>>();
+        later.extend(out);
+        for a in answers.into_iter().filter(|a| !a.is_empty()) {
+            later.extend(rig.bytes(&a));
+        }
+    }
+    let r = results(&later);
+    assert_eq!(r.len(), 1, "{later:?}");
+    assert!(
+        matches!(&r[0].outcome, TransmitOutcome::Failed(reason) if reason.contains("may have gone through")),
+        "{:?}",
+        r[0]
+    );
+    assert_eq!(r[0].transmission.frame, vec![b"data".to_vec()]);
+    assert!(
+        !written(&later).iter().any(|w| w.starts_with("AT+SBDIX")),
+        "{:?}",
+        written(&later)
+    );
+}
+
+/// A data message whose session failed (the MOMSN unchanged) goes again
+/// before an acknowledgement owed since: the ack's session would move the
+/// MOMSN on, and the shore would take the retry for a new message.
+#[test]
+fn a_failed_data_message_goes_again_before_an_acknowledgement() {
+    let mut rig = Rig::new(true);
+    rig.start();
+    let out = rig.input(slot(1));
+    fill(&mut rig, &out, b"data");
+    rig.bytes(b"READY\r\n");
+    rig.bytes(b"0\r\nOK\r\n");
+    let mt = frame::encode_sbd(&data_from_shore()).unwrap();
+    let reply = format!("+SBDIX: 18, 0, 1, 1, {}, 0\r\nOK\r\n", mt.len());
+    let out = rig.bytes(reply.as_bytes());
+    assert_eq!(written(&out), ["AT+SBDRB\r"]);
+    let out = rig.bytes(&sbdrb(&mt));
+    let got = received(&out);
+    assert_eq!(got.len(), 1);
+    let out = rig.input(Input::Command(DriverCommand::Acknowledge(
+        Acknowledgement::all(got[0].clone()),
+    )));
+    assert!(written(&out).is_empty(), "held back: {out:?}");
+    // After the back-off: the data's retry (the buffer holds it), not the
+    // ack's message.
+    assert_eq!(
+        written(&rig.advance(Duration::from_secs(1))),
+        ["AT+SBDIX\r"]
+    );
+    let out = rig.bytes(b"+SBDIX: 0, 5, 0, 0, 0, 0\r\nOK\r\n");
+    assert_eq!(results(&out)[0].outcome, TransmitOutcome::Sent);
+    assert!(written(&out)[0].starts_with("AT+SBDWB="), "then the ack");
+}

@@ -141,46 +141,83 @@ pub struct HttpReply {
     pub body: Vec<u8>,
 }
 
-/// POSTs `body` to `url` and reads the response, all within `timeout`;
-/// `Err` says what failed (no connection, TLS, no answer in time, a
-/// broken response).
+/// Why a POST got no answer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PostError {
+    /// What failed (no connection, TLS, no answer in time, a broken
+    /// response).
+    pub message: String,
+    /// The request never left: no connection, or no TLS session, was made.
+    /// Otherwise the server may have it, and may have acted on it.
+    pub unsent: bool,
+}
+
+impl PostError {
+    fn unsent(message: String) -> Self {
+        PostError {
+            message,
+            unsent: true,
+        }
+    }
+
+    fn maybe_taken(message: String) -> Self {
+        PostError {
+            message,
+            unsent: false,
+        }
+    }
+}
+
+impl fmt::Display for PostError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+/// POSTs `body` to `url` and reads the response, all within `timeout`.
+///
+/// # Errors
+/// What failed, and whether the request left ([`PostError::unsent`]).
 pub async fn post(
     url: &HttpUrl,
     content_type: &str,
     body: Vec<u8>,
     timeout: Duration,
-) -> Result<HttpReply, String> {
-    match tokio::time::timeout(timeout, post_now(url, content_type, body)).await {
-        Ok(r) => r,
-        Err(_) => Err(format!(
-            "no answer from {url} in {} ms",
-            timeout.as_millis()
-        )),
-    }
-}
-
-async fn post_now(url: &HttpUrl, content_type: &str, body: Vec<u8>) -> Result<HttpReply, String> {
-    let tcp = TcpStream::connect((url.host.as_str(), url.port))
-        .await
-        .map_err(|e| format!("cannot reach {url}: {e}"))?;
+) -> Result<HttpReply, PostError> {
+    let deadline = tokio::time::Instant::now() + timeout;
+    let late = || format!("no answer from {url} in {} ms", timeout.as_millis());
+    let tcp =
+        match tokio::time::timeout_at(deadline, TcpStream::connect((url.host.as_str(), url.port)))
+            .await
+        {
+            Err(_) => return Err(PostError::unsent(late())),
+            Ok(Err(e)) => return Err(PostError::unsent(format!("cannot reach {url}: {e}"))),
+            Ok(Ok(tcp)) => tcp,
+        };
     let _ = tcp.set_nodelay(true);
     if url.tls {
         #[cfg(feature = "rockblock-tls")]
         {
-            let tls = tls::connect(&url.host, tcp)
+            let tls = match tokio::time::timeout_at(deadline, tls::connect(&url.host, tcp)).await {
+                Err(_) => return Err(PostError::unsent(late())),
+                Ok(Err(e)) => return Err(PostError::unsent(format!("TLS with {url}: {e}"))),
+                Ok(Ok(tls)) => tls,
+            };
+            return tokio::time::timeout_at(deadline, exchange(url, tls, content_type, body))
                 .await
-                .map_err(|e| format!("TLS with {url}: {e}"))?;
-            return exchange(url, tls, content_type, body).await;
+                .unwrap_or_else(|_| Err(PostError::maybe_taken(late())));
         }
         #[cfg(not(feature = "rockblock-tls"))]
         {
             drop(tcp);
-            return Err(format!(
+            return Err(PostError::unsent(format!(
                 "{url}: HTTPS is not in this build (build with the feature rockblock-tls)"
-            ));
+            )));
         }
     }
-    exchange(url, tcp, content_type, body).await
+    tokio::time::timeout_at(deadline, exchange(url, tcp, content_type, body))
+        .await
+        .unwrap_or_else(|_| Err(PostError::maybe_taken(late())))
 }
 
 async fn exchange<IO>(
@@ -188,7 +225,7 @@ async fn exchange<IO>(
     io: IO,
     content_type: &str,
     body: Vec<u8>,
-) -> Result<HttpReply, String>
+) -> Result<HttpReply, PostError>
 where
     IO: AsyncRead + AsyncWrite + Unpin + Send + 'static,
 {
@@ -198,7 +235,7 @@ where
         .title_case_headers(true)
         .handshake(TokioIo::new(io))
         .await
-        .map_err(|e| format!("HTTP with {url}: {e}"))?;
+        .map_err(|e| PostError::unsent(format!("HTTP with {url}: {e}")))?;
     let request = Request::post(url.path.as_str())
         .header(HOST, url.host_header())
         .header(CONTENT_TYPE, content_type)
@@ -208,17 +245,18 @@ where
         )
         .header(CONNECTION, "close")
         .body(Full::new(Bytes::from(body)))
-        .map_err(|e| format!("HTTP request to {url}: {e}"))?;
+        .map_err(|e| PostError::unsent(format!("HTTP request to {url}: {e}")))?;
+    // From here on the request may have left.
     let exchange = async {
         let response = sender
             .send_request(request)
             .await
-            .map_err(|e| format!("HTTP with {url}: {e}"))?;
+            .map_err(|e| PostError::maybe_taken(format!("HTTP with {url}: {e}")))?;
         let status = response.status().as_u16();
         let body = Limited::new(response.into_body(), MAX_RESPONSE_BYTES)
             .collect()
             .await
-            .map_err(|e| format!("HTTP response from {url}: {e}"))?
+            .map_err(|e| PostError::maybe_taken(format!("HTTP response from {url}: {e}")))?
             .to_bytes()
             .to_vec();
         Ok(HttpReply { status, body })
@@ -232,7 +270,7 @@ where
         reply = &mut exchange => reply,
         ended = connection => match ended {
             Ok(()) => exchange.await,
-            Err(e) => Err(format!("HTTP with {url}: {e}")),
+            Err(e) => Err(PostError::maybe_taken(format!("HTTP with {url}: {e}"))),
         },
     }
 }
@@ -366,6 +404,7 @@ mod tests {
         let e = post(&url, "text/plain", Vec::new(), Duration::from_secs(5))
             .await
             .unwrap_err();
-        assert!(e.contains("cannot reach"), "{e}");
+        assert!(e.message.contains("cannot reach"), "{e}");
+        assert!(e.unsent, "nothing left: {e:?}");
     }
 }
