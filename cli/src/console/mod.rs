@@ -18,9 +18,11 @@
 //! share, [`server`] the routes.
 
 pub mod commander;
+pub mod feed;
 pub mod hub;
 pub mod mac;
 pub mod replay;
+pub mod report;
 pub mod schema;
 pub mod server;
 pub mod source;
@@ -246,7 +248,7 @@ pub fn run(args: &ConsoleArgs, stdout: &mut dyn Write) -> Result<Status, CliErro
             "goby console: http://{address}/ shows {described} ({types})"
         )?;
         stdout.flush()?;
-        tokio::spawn(source::run(source, hub.clone(), outbound));
+        tokio::spawn(feed::run(source, hub.clone(), outbound));
         let app = server::router(hub);
         // Not a graceful shutdown: the pages' event streams never end.
         tokio::select! {

@@ -8,21 +8,16 @@
 //!
 //! [`Replay::parse`] reads the whole file first, line by line, so that a
 //! file that is not a replay is refused, naming its line, before anything
-//! is served; [`play`] reads it again as it plays it into the [`Hub`],
-//! holding a bounded number of lines ahead (a week-long run's replay is not
-//! held in memory).
+//! is served; [`play`](super::feed::play) reads it again as it plays it
+//! into the [`Hub`](super::hub::Hub), holding a bounded number of lines
+//! ahead (a week-long run's replay is not held in memory).
 
 use std::io::BufRead;
-use std::sync::Arc;
-use std::time::Duration;
 
 use gobyd_protocol::Event;
 use serde_json::Value;
-use tokio::sync::mpsc;
-use tokio::time::Instant;
 
-use super::hub::Hub;
-use super::source::{event_report, Outbound};
+use super::report::event_report;
 use crate::fleet::{AcceptedReport, BridgeStatus, Report};
 
 /// The replay format this console reads (the first line's `version`).
@@ -400,63 +395,4 @@ fn step_of(
         });
     }
     Err("neither position, status, event, accepted nor refused".into())
-}
-
-/// The longest the page's clock goes without a tick, in wall time.
-const TICK: Duration = Duration::from_millis(250);
-
-/// Plays `replay` into `hub` at `warp` virtual seconds a wall second
-/// (each line when its time comes, the page's clock ticking in between);
-/// says when it has ended. Commands from the page go nowhere: the hub
-/// refuses them before they reach `_outbound`.
-pub async fn play(replay: Replay, warp: f64, hub: Arc<Hub>, _outbound: mpsc::Receiver<Outbound>) {
-    // The file is read again on a thread of its own, a bounded queue of
-    // lines ahead of the playing.
-    let (lines, mut next) = mpsc::channel::<Line>(1024);
-    let reading = replay.clone();
-    let read = tokio::task::spawn_blocking(move || {
-        let file = std::fs::File::open(&reading.file)
-            .map_err(|e| format!("cannot read {} again: {e}", reading.file))?;
-        reading.lines(std::io::BufReader::new(file), |line| {
-            // The player stopped (the console is ending): nothing to do.
-            let _ = lines.blocking_send(line);
-        })
-    });
-    let began = Instant::now();
-    let wall = |t: f64| began + Duration::from_secs_f64(((t - replay.start) / warp).max(0.0));
-    hub.set_clock(replay.start);
-    hub.source_status(true, &format!("replaying at {warp}×"));
-    let mut ticked = Instant::now();
-    while let Some(line) = next.recv().await {
-        let due = wall(line.time);
-        // The clock ticks while the next line waits.
-        while due > Instant::now() + TICK {
-            tokio::time::sleep(TICK).await;
-            let t = replay.start + began.elapsed().as_secs_f64() * warp;
-            hub.set_clock(t.min(line.time));
-            ticked = Instant::now();
-        }
-        tokio::time::sleep_until(due).await;
-        if ticked.elapsed() >= TICK {
-            hub.set_clock(line.time);
-            ticked = Instant::now();
-        } else {
-            hub.advance_clock(line.time);
-        }
-        match &line.step {
-            Step::Report(report) => hub.apply(&line.node, report),
-            Step::Position { x, y, depth } => hub.position(&line.node, *x, *y, *depth),
-        }
-    }
-    if let Ok(Err(e)) = read.await {
-        hub.source_status(false, &format!("the replay stopped: {e}"));
-        return;
-    }
-    while wall(replay.end) > Instant::now() + TICK {
-        tokio::time::sleep(TICK).await;
-        hub.set_clock(replay.start + began.elapsed().as_secs_f64() * warp);
-    }
-    tokio::time::sleep_until(wall(replay.end)).await;
-    hub.set_clock(replay.end);
-    hub.source_status(false, "the replay has ended (the run's end)");
 }
