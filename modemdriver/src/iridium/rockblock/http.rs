@@ -153,7 +153,7 @@ pub struct PostError {
 }
 
 impl PostError {
-    fn unsent(message: String) -> Self {
+    fn not_sent(message: String) -> Self {
         PostError {
             message,
             unsent: true,
@@ -190,8 +190,8 @@ pub async fn post(
         match tokio::time::timeout_at(deadline, TcpStream::connect((url.host.as_str(), url.port)))
             .await
         {
-            Err(_) => return Err(PostError::unsent(late())),
-            Ok(Err(e)) => return Err(PostError::unsent(format!("cannot reach {url}: {e}"))),
+            Err(_) => return Err(PostError::not_sent(late())),
+            Ok(Err(e)) => return Err(PostError::not_sent(format!("cannot reach {url}: {e}"))),
             Ok(Ok(tcp)) => tcp,
         };
     let _ = tcp.set_nodelay(true);
@@ -199,8 +199,8 @@ pub async fn post(
         #[cfg(feature = "rockblock-tls")]
         {
             let tls = match tokio::time::timeout_at(deadline, tls::connect(&url.host, tcp)).await {
-                Err(_) => return Err(PostError::unsent(late())),
-                Ok(Err(e)) => return Err(PostError::unsent(format!("TLS with {url}: {e}"))),
+                Err(_) => return Err(PostError::not_sent(late())),
+                Ok(Err(e)) => return Err(PostError::not_sent(format!("TLS with {url}: {e}"))),
                 Ok(Ok(tls)) => tls,
             };
             return tokio::time::timeout_at(deadline, exchange(url, tls, content_type, body))
@@ -210,7 +210,7 @@ pub async fn post(
         #[cfg(not(feature = "rockblock-tls"))]
         {
             drop(tcp);
-            return Err(PostError::unsent(format!(
+            return Err(PostError::not_sent(format!(
                 "{url}: HTTPS is not in this build (build with the feature rockblock-tls)"
             )));
         }
@@ -235,7 +235,7 @@ where
         .title_case_headers(true)
         .handshake(TokioIo::new(io))
         .await
-        .map_err(|e| PostError::unsent(format!("HTTP with {url}: {e}")))?;
+        .map_err(|e| PostError::not_sent(format!("HTTP with {url}: {e}")))?;
     let request = Request::post(url.path.as_str())
         .header(HOST, url.host_header())
         .header(CONTENT_TYPE, content_type)
@@ -245,7 +245,7 @@ where
         )
         .header(CONNECTION, "close")
         .body(Full::new(Bytes::from(body)))
-        .map_err(|e| PostError::unsent(format!("HTTP request to {url}: {e}")))?;
+        .map_err(|e| PostError::not_sent(format!("HTTP request to {url}: {e}")))?;
     // From here on the request may have left.
     let exchange = async {
         let response = sender
