@@ -4,7 +4,13 @@
 //! One transmission is under way at a time — a data packet or an
 //! acknowledgement handed to the modem and awaiting its `TxComplete`, or a
 //! range awaiting its report — with a data request before a data packet;
-//! everything else waits in order, acknowledgements first. Receptions are
+//! everything else waits in order, acknowledgements first. A packet whose
+//! `TxComplete` does not come in time is reported failed (its messages go
+//! again, marked as possible repeats), and no packet is offered until its
+//! answer (`TxComplete` or `MAC dumped packet`) has come late or as long
+//! again has passed: taken for the next packet's, a late `MAC dumped
+//! packet` would have the driver offer that packet again after the modem
+//! sent it, and a late `TxComplete` would report it sent before it was. Receptions are
 //! read as the modem writes them: a `Header` line, the statistics (`SNRdB`,
 //! `DopplerVelocity`, before or shortly after the data), the `Data` line.
 
@@ -126,6 +132,9 @@ pub struct Machine {
     ready: bool,
     fill: Fill,
     transmitting: Option<(Sending, Instant)>,
+    /// A packet's `TxComplete` did not come in time: its answer may still
+    /// come until then, and nothing is offered meanwhile.
+    late: Option<Instant>,
     retry: Option<(Instant, Sending)>,
     ranging: Option<(u8, Instant)>,
     acks: AwaitedAcks,
@@ -150,6 +159,7 @@ impl Machine {
             ready: false,
             fill: Fill::default(),
             transmitting: None,
+            late: None,
             retry: None,
             ranging: None,
             acks: AwaitedAcks::default(),
@@ -284,6 +294,17 @@ impl Machine {
     }
 
     fn alert(&mut self, alert: String) {
+        let answer = alert.contains(TX_COMPLETE) || alert.contains(MAC_DUMPED);
+        if answer && self.transmitting.is_none() && self.late.take().is_some() {
+            // The late answer of the packet given up: nothing more to wait for.
+            self.status(DriverStatus::ModemError {
+                message: format!(
+                    "{alert:?} came after its packet was given up (reported failed; its \
+                     messages go again, marked as possible repeats)"
+                ),
+            });
+            return;
+        }
         if alert.contains(TX_COMPLETE) {
             let Some((s, _)) = self.transmitting.take() else {
                 return;
@@ -509,6 +530,7 @@ impl Handlers for Machine {
             self.starting,
             self.fill.deadline(),
             self.transmitting.as_ref().map(|t| t.1),
+            self.late,
             self.retry.as_ref().map(|r| r.0),
             self.ranging.map(|r| r.1),
             self.held.as_ref().map(|h| h.1),
@@ -537,8 +559,12 @@ impl Handlers for Machine {
             });
         }
         self.fill.expire_data(now, &mut self.out);
+        if self.late.is_some_and(|t| t <= now) {
+            self.late = None;
+        }
         if self.transmitting.as_ref().is_some_and(|t| t.1 <= now) {
             let (s, _) = self.transmitting.take().expect("checked");
+            self.late = Some(now + self.s.response_timeout + air_time(s.payload.len(), s.mode));
             self.status(DriverStatus::ResponseTimeout {
                 command: format!("{TX_COMPLETE} of the packet to {}", id_of(s.dest)),
                 attempt: 1,
@@ -671,6 +697,7 @@ impl Handlers for Machine {
             }
         }
         self.ranging = None;
+        self.late = None;
         self.starting = None;
         self.ready = false;
     }
@@ -686,7 +713,11 @@ impl Handlers for Machine {
                 }
                 return;
             }
-            if self.fill.is_waiting() || self.transmitting.is_some() || self.ranging.is_some() {
+            if self.fill.is_waiting()
+                || self.transmitting.is_some()
+                || self.late.is_some()
+                || self.ranging.is_some()
+            {
                 return;
             }
             if let Some((at, _)) = &self.retry {
@@ -752,5 +783,171 @@ impl Handlers for Machine {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::{Input, Machine as _, Output};
+    use protos::goby::acomms::protobuf::{
+        driver_config::{ConnectionType, Driver as Kind},
+        popoto_config::Interface as ConfigInterface,
+        DriverConfig, DriverType, PopotoConfig,
+    };
+
+    fn machine() -> (Machine, Now) {
+        let config = DriverConfig {
+            driver: Some(Kind::DriverType(DriverType::DriverPopoto as i32)),
+            modem_id: Some(1),
+            connection_type: Some(ConnectionType::ConnectionTcpAsClient as i32),
+            tcp_server: Some("127.0.0.1".into()),
+            tcp_port: Some(17000),
+            popoto: Some(PopotoConfig {
+                interface: Some(ConfigInterface::JsonApi as i32),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let settings = super::super::driver::settings(&config).expect("valid settings");
+        let now = Now {
+            at: Instant::now(),
+            micros: 1_700_000_000_000_000,
+        };
+        (Machine::new(settings, now, true), now)
+    }
+
+    fn transmitted(out: &[Output]) -> usize {
+        out.iter()
+            .filter(|o| matches!(o, Output::Write(w) if String::from_utf8_lossy(w).contains("TransmitJSON")))
+            .count()
+    }
+
+    fn results(out: &[Output]) -> Vec<TransmitOutcome> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Event(DriverEvent::TransmitResult(r)) => Some(r.outcome.clone()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Asks for a packet to node 2 and fills it with `data`: what follows.
+    fn send(m: &mut Machine, now: Now, unique_id: u32, data: &[u8]) -> Vec<Output> {
+        let out = m.handle(
+            now,
+            Input::Command(DriverCommand::Initiate(ModemTransmission {
+                dest: Some(2),
+                rate: Some(1),
+                unique_id: Some(unique_id),
+                ..Default::default()
+            })),
+        );
+        let Some((id, template)) = out.iter().find_map(|o| match o {
+            Output::Request { id, template } => Some((*id, template.clone())),
+            _ => None,
+        }) else {
+            return out;
+        };
+        m.handle(
+            now,
+            Input::Answer {
+                id,
+                filled: Some(ModemTransmission {
+                    frame: vec![data.to_vec()],
+                    ..template
+                }),
+            },
+        )
+    }
+
+    /// A packet's `TxComplete` does not come in time: reported failed, and
+    /// the next packet is held until the late answer comes (here a `MAC
+    /// dumped packet`, which is the late packet's, not the next one's: the
+    /// next one goes once and is not offered again) or as long again has
+    /// passed.
+    #[test]
+    fn a_late_answer_is_never_taken_for_the_next_packets() {
+        let (mut m, mut now) = machine();
+        m.handle(now, Input::Tick);
+        m.handle(now, Input::Read(b"{\"BatteryVoltage\":24.0}\r".to_vec()));
+        let out = send(&mut m, now, 1, b"first");
+        assert_eq!(transmitted(&out), 1, "{out:?}");
+        let deadline = m.next_deadline().expect("TxComplete awaited");
+        now = now.after(deadline - now.at);
+        let out = m.handle(now, Input::Tick);
+        assert!(
+            matches!(results(&out).as_slice(), [TransmitOutcome::Failed(_)]),
+            "{out:?}"
+        );
+        // The next packet waits while the first's answer may still come.
+        let out = send(&mut m, now, 2, b"second");
+        assert_eq!(transmitted(&out), 0, "held: {out:?}");
+        now = now.after(Duration::from_millis(500));
+        let out = m.handle(
+            now,
+            Input::Read(b"{\"Alert\":\"MAC dumped packet\"}\r".to_vec()),
+        );
+        assert!(results(&out).is_empty(), "{out:?}");
+        let mut out = out;
+        if let Some((id, template)) = out.iter().find_map(|o| match o {
+            Output::Request { id, template } => Some((*id, template.clone())),
+            _ => None,
+        }) {
+            out = m.handle(
+                now,
+                Input::Answer {
+                    id,
+                    filled: Some(ModemTransmission {
+                        frame: vec![b"second".to_vec()],
+                        ..template
+                    }),
+                },
+            );
+        }
+        assert_eq!(
+            transmitted(&out),
+            1,
+            "offered once the late answer came: {out:?}"
+        );
+        let out = m.handle(now, Input::Read(b"{\"Alert\":\"TxComplete\"}\r".to_vec()));
+        assert_eq!(results(&out), vec![TransmitOutcome::Sent]);
+        assert_eq!(transmitted(&out), 0);
+
+        // No late answer at all: held as long again, then sent.
+        let out = send(&mut m, now, 3, b"third");
+        assert_eq!(transmitted(&out), 1);
+        let deadline = m.next_deadline().expect("TxComplete awaited");
+        now = now.after(deadline - now.at);
+        m.handle(now, Input::Tick);
+        let out = send(&mut m, now, 4, b"fourth");
+        assert_eq!(transmitted(&out), 0, "held: {out:?}");
+        let mut offered = 0;
+        for _ in 0..10 {
+            let Some(next) = m.next_deadline() else { break };
+            now = now.after(next.saturating_duration_since(now.at));
+            let out = m.handle(now, Input::Tick);
+            let out = match out.iter().find_map(|o| match o {
+                Output::Request { id, template } => Some((*id, template.clone())),
+                _ => None,
+            }) {
+                Some((id, template)) => m.handle(
+                    now,
+                    Input::Answer {
+                        id,
+                        filled: Some(ModemTransmission {
+                            frame: vec![b"fourth".to_vec()],
+                            ..template
+                        }),
+                    },
+                ),
+                None => out,
+            };
+            offered += transmitted(&out);
+            if offered > 0 {
+                break;
+            }
+        }
+        assert_eq!(offered, 1, "sent once the wait is over");
     }
 }

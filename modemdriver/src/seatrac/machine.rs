@@ -16,7 +16,13 @@
 //! water and, sent as a request, until the far beacon's answer
 //! (`CID_DAT_RECEIVE` with its ack flag, or `CID_PING_RESP`: the fix is
 //! reported) or the beacon's error (`CID_DAT_ERROR`, `CID_PING_ERROR`).
-//! Everything else waits in order, acknowledgements first.
+//! Everything else waits in order, acknowledgements first. A packet the
+//! beacon did not answer in time is reported failed (its messages go
+//! again, marked as possible repeats), and nothing is offered until its
+//! answer has come late or the response timeout has passed again: taken
+//! for the next packet's (answers name only their command), a late
+//! `XCVR_BUSY` would have the driver offer that packet again after the
+//! beacon took it.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -190,6 +196,10 @@ pub struct Machine {
     fill: Fill,
     on_water: Option<OnWater>,
     retry: Option<(Instant, Sending)>,
+    /// A send the beacon did not answer in time: its command's id, its
+    /// payload's length, and until when its answer may still come (nothing
+    /// is offered meanwhile).
+    late: Option<(u8, usize, Instant)>,
     acks: AwaitedAcks,
     pending: VecDeque<Job>,
 }
@@ -211,6 +221,7 @@ impl Machine {
             fill: Fill::default(),
             on_water: None,
             retry: None,
+            late: None,
             acks: AwaitedAcks::default(),
             pending: VecDeque::new(),
             s: settings,
@@ -392,6 +403,25 @@ impl Machine {
 
     /// The beacon's answer to `CID_DAT_SEND` or `CID_PING_SEND`.
     fn sending(&mut self, cid: u8, status: Cst) {
+        if self.asking.is_none() && self.late.is_some_and(|(c, _, _)| c == cid) {
+            // The late answer of a send given up: nothing more to wait for.
+            let (_, len, _) = self.late.take().expect("checked");
+            if status == Cst::OK {
+                // Taken after all: the transceiver is busy with it.
+                self.on_water = Some(OnWater {
+                    until: self.now.at + air_time(len),
+                    answer: None,
+                });
+            }
+            self.status(DriverStatus::ModemError {
+                message: format!(
+                    "the beacon answered {} to CID 0x{cid:02x} after it was given up (reported \
+                     failed; its messages go again, marked as possible repeats)",
+                    status.name()
+                ),
+            });
+            return;
+        }
         let Some((Asking::Send(s), _)) = self
             .asking
             .take_if(|(a, _)| matches!(a, Asking::Send(s) if s.command().cid() == cid))
@@ -747,6 +777,7 @@ impl Machine {
             }
         }
         self.on_water = None;
+        self.late = None;
         self.ready = false;
     }
 }
@@ -775,6 +806,7 @@ impl Handlers for Machine {
             self.fill.deadline(),
             water,
             self.retry.as_ref().map(|r| r.0),
+            self.late.map(|l| l.2),
             self.acks.deadline(),
             self.link.deadline(),
         ]
@@ -793,6 +825,9 @@ impl Handlers for Machine {
     fn timers(&mut self) {
         let now = self.now.at;
         self.link.tick(now, &mut self.out);
+        if self.late.is_some_and(|l| l.2 <= now) {
+            self.late = None;
+        }
         if self.asking.as_ref().is_some_and(|a| a.1 <= now) {
             let (asking, _) = self.asking.take().expect("checked");
             match asking {
@@ -804,6 +839,11 @@ impl Handlers for Machine {
                     attempt: 1,
                 }),
                 Asking::Send(s) => {
+                    self.late = Some((
+                        s.command().cid(),
+                        s.payload.len(),
+                        now + self.s.response_timeout,
+                    ));
                     let why = format!("no answer of the beacon to {}", s.words());
                     self.status(DriverStatus::ResponseTimeout {
                         command: format!("CID 0x{:02x}", s.command().cid()),
@@ -879,7 +919,7 @@ impl Handlers for Machine {
                 }
                 return;
             }
-            if self.fill.is_waiting() || self.on_water.is_some() {
+            if self.fill.is_waiting() || self.on_water.is_some() || self.late.is_some() {
                 return;
             }
             if let Some((at, _)) = &self.retry {
@@ -1046,6 +1086,72 @@ mod tests {
         assert_eq!(m.next_deadline(), Some(later.at));
         let out = m.handle(later, Input::Tick);
         assert!(matches!(outcome(&out), Some(TransmitOutcome::Failed(_))));
+    }
+
+    /// A send unanswered in time is reported failed, and the next waits
+    /// until its late answer has come (a late `XCVR_BUSY` is the first
+    /// packet's: the second is not offered again) or the timeout has passed
+    /// once more.
+    #[test]
+    fn a_late_answer_is_never_taken_for_the_next_packets() {
+        let now = Now {
+            at: Instant::now(),
+            micros: 1,
+        };
+        let mut m = ready(now);
+        assert_eq!(written(&data(now, &mut m)).len(), 1);
+        let later = now.after(Duration::from_secs(2));
+        let out = m.handle(later, Input::Tick);
+        assert!(matches!(outcome(&out), Some(TransmitOutcome::Failed(_))));
+        // The next packet is held.
+        let mt = ModemTransmission {
+            dest: Some(2),
+            r#type: Some(TransmissionType::Data as i32),
+            ..Default::default()
+        };
+        let out = m.handle(later, Input::Command(DriverCommand::Initiate(mt)));
+        assert!(
+            !out.iter().any(|o| matches!(o, Output::Request { .. })),
+            "held: {out:?}"
+        );
+        // The first packet's late XCVR_BUSY: it ends the wait, no more.
+        let busy = Reply::Sending {
+            cid: cid::DAT_SEND,
+            status: Cst::XCVR_BUSY,
+            beacon: 2,
+        };
+        let out = m.handle(later, line(&busy));
+        assert!(
+            !statuses(&out)
+                .iter()
+                .any(|s| matches!(s, DriverStatus::Retrying { .. })),
+            "{out:?}"
+        );
+        let Some((id, template)) = out.iter().find_map(|o| match o {
+            Output::Request { id, template } => Some((*id, template.clone())),
+            _ => None,
+        }) else {
+            panic!("the next packet's data request: {out:?}");
+        };
+        let out = m.handle(
+            later,
+            Input::Answer {
+                id,
+                filled: Some(ModemTransmission {
+                    frame: vec![b"y".to_vec()],
+                    ..template
+                }),
+            },
+        );
+        assert_eq!(written(&out).len(), 1, "offered once: {out:?}");
+        let ok = Reply::Sending {
+            cid: cid::DAT_SEND,
+            status: Cst::OK,
+            beacon: 2,
+        };
+        let out = m.handle(later, line(&ok));
+        assert_eq!(outcome(&out), Some(TransmitOutcome::Sent));
+        assert!(written(&out).is_empty());
     }
 
     /// A DAT packet of another program, or empty, or a garbled line, is

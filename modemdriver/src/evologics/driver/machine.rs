@@ -4,7 +4,12 @@
 //!
 //! One thing is under way at a time: a setting at start, a data request,
 //! a message the modem has not answered yet, or one it took and whose
-//! delivery report is awaited. Everything else waits in order.
+//! delivery report is awaited. Everything else waits in order. After a
+//! message the modem did not answer in time, nothing is written until its
+//! answer has come late or the response timeout has passed again: in
+//! command mode answers name no command, and a late `BUSY` taken for the
+//! next message's would have the driver send that one again after the
+//! modem took it.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -181,6 +186,9 @@ pub struct Machine {
     piggyback: bool,
     in_flight: Option<InFlight>,
     retry: Option<(Instant, Sending)>,
+    /// A message the modem did not answer in time: its answer may still
+    /// come until then, and nothing is written meanwhile.
+    late: Option<Instant>,
     pending: VecDeque<Job>,
     /// The far end of the last delivery, for AT?T.
     last_remote: Option<i32>,
@@ -208,6 +216,7 @@ impl Machine {
             piggyback: false,
             in_flight: None,
             retry: None,
+            late: None,
             pending: VecDeque::new(),
             last_remote: None,
             recent: VecDeque::new(),
@@ -261,6 +270,7 @@ impl Machine {
                     command,
                     attempt: 1,
                 });
+                self.late = Some(self.now.at + self.s.response_timeout);
                 // The modem may have taken it: its delivery report tells.
                 self.maybe_taken(*s);
             }
@@ -330,6 +340,16 @@ impl Machine {
 
     fn reply(&mut self, request: Option<String>, reply: Reply) {
         let Some(a) = self.awaiting.take() else {
+            if self.late.take().is_some() {
+                // The late answer of a message given up: nothing more to
+                // wait for (its delivery report, if any, still settles it).
+                return self.status(DriverStatus::ModemError {
+                    message: format!(
+                        "the answer {:?} came after its command was given up",
+                        String::from_utf8_lossy(&reply.body())
+                    ),
+                });
+            }
             return self.status(DriverStatus::Unparseable {
                 line: String::from_utf8_lossy(&reply.body()).into_owned(),
                 reason: "an answer while no command awaits one".into(),
@@ -766,6 +786,7 @@ impl Handlers for Machine {
             self.fill.deadline(),
             self.in_flight.as_ref().map(|f| f.deadline),
             self.retry.as_ref().map(|r| r.0),
+            self.late,
             self.link.deadline(),
         ]
     }
@@ -783,6 +804,9 @@ impl Handlers for Machine {
     fn timers(&mut self) {
         let now = self.now.at;
         self.link.tick(now, &mut self.out);
+        if self.late.is_some_and(|t| t <= now) {
+            self.late = None;
+        }
         if self.awaiting.as_ref().is_some_and(|a| a.deadline <= now) {
             let a = self.awaiting.take().expect("checked");
             self.no_answer(a);
@@ -931,6 +955,7 @@ impl Handlers for Machine {
             return;
         }
         self.decoder.clear();
+        self.late = None;
         self.status(DriverStatus::Disconnected { reason });
         // What was under way is not known to have gone: handed back.
         if let Some(a) = self.awaiting.take() {
@@ -968,6 +993,7 @@ impl Handlers for Machine {
         loop {
             if !self.link.is_up()
                 || self.awaiting.is_some()
+                || self.late.is_some()
                 || self.fill.is_waiting()
                 || self.in_flight.is_some()
             {

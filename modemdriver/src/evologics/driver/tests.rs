@@ -383,3 +383,55 @@ fn a_repeat_of_a_reception_is_dropped_within_the_window() {
         "after the window: a new message"
     );
 }
+
+/// A message the modem does not answer in time (sent without ack: handed
+/// back at once) holds the next until its late answer has come: a late
+/// `BUSY` is the first message's, and the second goes once.
+#[test]
+fn a_late_answer_is_never_taken_for_the_next_message() {
+    let mut b = Bench::new();
+    b.send(2, b"m", false);
+    let out = b.later(Duration::from_secs(3));
+    assert!(
+        matches!(&results(&out)[..], [TransmitOutcome::Failed(_)]),
+        "{out:?}"
+    );
+    // The next message is held.
+    let out = b.input(Input::Command(DriverCommand::Initiate(ModemTransmission {
+        dest: Some(2),
+        unique_id: Some(8),
+        ..Default::default()
+    })));
+    assert!(request(&out).is_none(), "held: {out:?}");
+    // The first one's late BUSY ends the wait, and nothing more.
+    let out = b.bytes(b"+++AT*SENDIM:18:BUSY BACKOFF STATE\r\n");
+    assert!(
+        !statuses(&out)
+            .iter()
+            .any(|s| matches!(s, DriverStatus::Retrying { .. })),
+        "{out:?}"
+    );
+    let (id, template) = request(&out).expect("the next message's data request");
+    let mut filled = template;
+    filled.frame = vec![b"n".to_vec()];
+    filled.ack_requested = Some(false);
+    let out = b.input(Input::Answer {
+        id,
+        filled: Some(filled),
+    });
+    assert_eq!(written(&out), vec![b"+++AT*SENDIM,1,2,noack,n\n".to_vec()]);
+    let out = b.bytes(b"+++AT*SENDIM:2:OK\r\n");
+    assert_eq!(results(&out), vec![TransmitOutcome::Sent]);
+    assert!(written(&out).is_empty());
+    // No late answer at all: held as long again, then the next goes.
+    b.send(2, b"o", false);
+    b.later(Duration::from_secs(3));
+    let out = b.input(Input::Command(DriverCommand::Initiate(ModemTransmission {
+        dest: Some(2),
+        unique_id: Some(9),
+        ..Default::default()
+    })));
+    assert!(request(&out).is_none(), "held: {out:?}");
+    let out = b.later(Duration::from_secs(3));
+    assert!(request(&out).is_some(), "free again: {out:?}");
+}
