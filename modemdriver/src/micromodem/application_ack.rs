@@ -1473,34 +1473,25 @@ mod tests {
     fn a_node_not_heard_from_is_credited_once_twice_the_lifetime_has_passed() {
         let t0 = base();
         let mut a = ApplicationAcks::new(1, LIFETIME, 0, t0).unwrap();
+        // One frame to 2 sent at `at`, and 2's ack of it.
+        let sent_and_acked = |a: &mut ApplicationAcks, id: u32, at: Instant| {
+            let mut to_b = template(2, 1, id);
+            let mut placed = a.prepare(&mut to_b, at).unwrap();
+            let mut sent = fill(to_b, &[0xf8], true);
+            a.complete(&mut sent, &mut placed, at).unwrap();
+            ModemTransmission {
+                src: Some(2),
+                dest: Some(7),
+                frame: vec![a
+                    .encode(&owed(&[(1, 1 << sent.frame_start())]), false, 3)
+                    .unwrap()],
+                ..Default::default()
+            }
+        };
         // Within twice the lifetime a late ack of the run before may come.
-        let within = t0 + LIFETIME;
-        let mut to_b = template(2, 1, 8);
-        let mut placed = a.prepare(&mut to_b, within).unwrap();
-        let mut sent = fill(to_b, &[0xf8], true);
-        a.complete(&mut sent, &mut placed, within).unwrap();
-        let mut ack = ModemTransmission {
-            src: Some(2),
-            dest: Some(7),
-            frame: vec![a
-                .encode(&owed(&[(1, 1 << sent.frame_start())]), false, 3)
-                .unwrap()],
-            ..Default::default()
-        };
+        let mut ack = sent_and_acked(&mut a, 8, t0 + LIFETIME);
         assert!(a.receive(&mut ack).acks.is_empty());
-        let later = t0 + 2 * LIFETIME;
-        let mut to_b = template(2, 1, 9);
-        let mut placed = a.prepare(&mut to_b, later).unwrap();
-        let mut sent = fill(to_b, &[0xf8], true);
-        a.complete(&mut sent, &mut placed, later).unwrap();
-        let mut ack = ModemTransmission {
-            src: Some(2),
-            dest: Some(7),
-            frame: vec![a
-                .encode(&owed(&[(1, 1 << sent.frame_start())]), false, 3)
-                .unwrap()],
-            ..Default::default()
-        };
+        let mut ack = sent_and_acked(&mut a, 9, t0 + 2 * LIFETIME);
         assert_eq!(a.receive(&mut ack).acks.len(), 1);
     }
 

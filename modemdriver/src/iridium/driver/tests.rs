@@ -172,6 +172,19 @@ fn fill(rig: &mut Rig, out: &[Output], frame_bytes: &[u8]) -> Vec<Output> {
     })
 }
 
+/// Asserts that `out` hands the frame `data` back, failed for a reason
+/// saying `why`, and nothing else.
+fn handed_back(out: &[Output], why: &str) {
+    let r = results(out);
+    assert_eq!(r.len(), 1, "{out:?}");
+    assert!(
+        matches!(&r[0].outcome, TransmitOutcome::Failed(reason) if reason.contains(why)),
+        "{:?}",
+        r[0]
+    );
+    assert_eq!(r[0].transmission.frame, vec![b"data".to_vec()]);
+}
+
 /// An MT message as the transceiver gives it after `AT+SBDRB`.
 fn sbdrb(message: &[u8]) -> Vec<u8> {
     let mut out = (message.len() as u16).to_be_bytes().to_vec();
@@ -303,14 +316,7 @@ fn failed_sessions_back_off_and_hand_the_frame_back_after_the_last_attempt() {
         ["AT+SBDIX\r"]
     );
     let out = rig.bytes(b"+SBDIX: 13, 0, 0, 0, 0, 0\r\nOK\r\n");
-    let r = results(&out);
-    assert_eq!(r.len(), 1, "{out:?}");
-    assert!(
-        matches!(&r[0].outcome, TransmitOutcome::Failed(reason) if reason.contains("3 SBD sessions")),
-        "{:?}",
-        r[0]
-    );
-    assert_eq!(r[0].transmission.frame, vec![b"data".to_vec()]);
+    handed_back(&out, "3 SBD sessions");
 }
 
 #[test]
@@ -873,14 +879,7 @@ fn an_unanswered_data_session_hands_its_frame_back_and_is_never_sent_again() {
             later.extend(rig.bytes(&a));
         }
     }
-    let r = results(&later);
-    assert_eq!(r.len(), 1, "{later:?}");
-    assert!(
-        matches!(&r[0].outcome, TransmitOutcome::Failed(reason) if reason.contains("may have gone through")),
-        "{:?}",
-        r[0]
-    );
-    assert_eq!(r[0].transmission.frame, vec![b"data".to_vec()]);
+    handed_back(&later, "may have gone through");
     assert!(
         !written(&later).iter().any(|w| w.starts_with("AT+SBDIX")),
         "{:?}",

@@ -248,6 +248,25 @@ impl Bench {
         self.input(Input::Command(DriverCommand::Initiate(mt)))
     }
 
+    /// Initiates data to the peer in a slot of `slot_seconds` opened now,
+    /// answers its data request with "hello", and echoes its `$CCCYC`:
+    /// the modem is about to ask for the frame.
+    fn cycle_echoed(&mut self, slot_seconds: f64) {
+        let opened = self.now.micros;
+        let (id, template) = self.initiate_and_request(data(opened, slot_seconds));
+        let outputs = self.input(Input::Answer {
+            id,
+            filled: Some(filled(&template)),
+        });
+        let cycle = writes(&outputs)
+            .into_iter()
+            .find_map(|s| echo(&s))
+            .expect("a $CCCYC");
+        self.advance(Duration::from_millis(20));
+        self.sentence(&cycle);
+        self.advance(Duration::from_millis(20));
+    }
+
     /// Initiates `mt` and returns its data request.
     fn initiate_and_request(&mut self, mt: ModemTransmission) -> (RequestId, ModemTransmission) {
         let outputs = self.initiate(mt);
@@ -513,19 +532,7 @@ fn a_data_request_too_late_for_the_slot_gets_no_frame() {
 #[test]
 fn a_data_request_in_time_gets_its_frame() {
     let mut bench = Bench::ready(MicroModemConfig::default());
-    let opened = bench.now.micros;
-    let (id, template) = bench.initiate_and_request(data(opened, 2.5));
-    let outputs = bench.input(Input::Answer {
-        id,
-        filled: Some(filled(&template)),
-    });
-    let cycle = writes(&outputs)
-        .into_iter()
-        .find_map(|s| echo(&s))
-        .expect("a $CCCYC");
-    bench.advance(Duration::from_millis(20));
-    bench.sentence(&cycle);
-    bench.advance(Duration::from_millis(20));
+    bench.cycle_echoed(2.5);
     let outputs = bench.sentence(&data_request(1));
     assert!(
         writes(&outputs)
@@ -888,21 +895,6 @@ fn frames_given_to_the_modem_are_never_given_again() {
         ident: "INIT".into(),
         version: "0.94.0.52".into(),
     };
-    let cycle_started = |bench: &mut Bench| {
-        let opened = bench.now.micros;
-        let (id, template) = bench.initiate_and_request(data(opened, 120.0));
-        let outputs = bench.input(Input::Answer {
-            id,
-            filled: Some(filled(&template)),
-        });
-        let cycle = writes(&outputs)
-            .into_iter()
-            .find_map(|s| echo(&s))
-            .expect("a $CCCYC");
-        bench.advance(Duration::from_millis(20));
-        bench.sentence(&cycle);
-        bench.advance(Duration::from_millis(20));
-    };
     let cycles = |outputs: &[Output]| {
         writes(outputs)
             .iter()
@@ -920,7 +912,7 @@ fn frames_given_to_the_modem_are_never_given_again() {
 
     // Reset before the data request: the cycle starts again.
     let mut bench = Bench::ready(MicroModemConfig::default());
-    cycle_started(&mut bench);
+    bench.cycle_echoed(120.0);
     let first = bench.sentence(&reset);
     let outputs = bench.answer_until(first, |o| cycles(o) > 0 || !results(o).is_empty());
     assert_eq!(cycles(&outputs), 1, "attempted again: {outputs:?}");
@@ -928,7 +920,7 @@ fn frames_given_to_the_modem_are_never_given_again() {
 
     // Reset once the frame is written: failed, the frame handed back.
     let mut bench = Bench::ready(MicroModemConfig::default());
-    cycle_started(&mut bench);
+    bench.cycle_echoed(120.0);
     let outputs = bench.sentence(&data_request(1));
     assert!(
         writes(&outputs)
