@@ -229,15 +229,23 @@ log {{ raw_log: false }}
     }
 
     /// tshark capturing the two ports on loopback into `file` (pcap).
+    ///
+    /// tshark may say it captures before its filter takes the first packet
+    /// (a loaded machine), so the capture is live only once a probe sent to
+    /// a third port it filters on (`probe`) is in the file. `probe` packets
+    /// are then left out of what the test reads ([`without_probes`]).
     struct Capture(std::process::Child);
 
     impl Capture {
-        fn start(file: &Path, ports: [u16; 2]) -> Capture {
+        fn start(file: &Path, ports: [u16; 2], probe: u16) -> Capture {
             let mut child = Command::new(env!("GOBY_TSHARK_PATH"))
                 .args(["-i", "lo", "-F", "pcap", "-w"])
                 .arg(file)
                 .arg("-f")
-                .arg(format!("udp port {} or udp port {}", ports[0], ports[1]))
+                .arg(format!(
+                    "udp port {} or udp port {} or udp port {probe}",
+                    ports[0], ports[1]
+                ))
                 .stdout(std::process::Stdio::null())
                 .stderr(std::process::Stdio::piped())
                 .spawn()
@@ -256,8 +264,23 @@ log {{ raw_log: false }}
                     .recv_timeout(Duration::from_secs(60))
                     .expect("tshark says it captures on lo (capturing needs root)");
                 if line.contains("Capturing on") {
+                    break;
+                }
+            }
+            let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+            let deadline = std::time::Instant::now() + Duration::from_secs(60);
+            loop {
+                socket.send_to(b"probe", ("127.0.0.1", probe)).unwrap();
+                std::thread::sleep(Duration::from_millis(100));
+                let written = std::fs::read(file).unwrap_or_default();
+                let all = whole_records(&written);
+                if without_probes(all, probe).len() < all.len() {
                     return capture;
                 }
+                assert!(
+                    std::time::Instant::now() < deadline,
+                    "no probe in the capture file 60 s after tshark said it captures"
+                );
             }
         }
 
@@ -322,7 +345,8 @@ log {{ raw_log: false }}
     }
 
     /// Two daemons exchange the messages while tshark captures them.
-    fn exchange(dir: &Path, capture_file: &Path, ports: [u16; 2]) {
+    /// The capture file holds no probe packets once it returns.
+    fn exchange(dir: &Path, capture_file: &Path, ports: [u16; 2], probe: u16) {
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
@@ -349,7 +373,7 @@ log {{ raw_log: false }}
                     let _ = stop.wait_for(|s| *s).await;
                 })));
             }
-            let capture = Capture::start(capture_file, ports);
+            let capture = Capture::start(capture_file, ports, probe);
             let now = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .unwrap()
@@ -377,7 +401,7 @@ log {{ raw_log: false }}
             let deadline = std::time::Instant::now() + Duration::from_secs(60);
             loop {
                 let written = std::fs::read(capture_file).unwrap_or_default();
-                let payloads = udp_payloads(whole_records(&written));
+                let payloads = udp_payloads(&without_probes(whole_records(&written), probe));
                 let decoded = decoded(&payloads);
                 let messages = decoded.values().flatten().count();
                 let acks = decoded.values().any(Vec::is_empty);
@@ -391,11 +415,38 @@ log {{ raw_log: false }}
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }
             capture.stop();
+            let written = std::fs::read(capture_file).unwrap();
+            std::fs::write(capture_file, without_probes(whole_records(&written), probe)).unwrap();
             let _ = stop_tx.send(true);
             for d in daemons {
                 let _ = d.await;
             }
         });
+    }
+
+    /// The pcap file `pcap` (whole records) without the packets to or from
+    /// port `probe`.
+    fn without_probes(pcap: &[u8], probe: u16) -> Vec<u8> {
+        if pcap.len() < 24 {
+            return Vec::new();
+        }
+        let mut out = pcap[..24].to_vec();
+        let mut at = 24;
+        while at + 16 <= pcap.len() {
+            let len = u32::from_le_bytes(pcap[at + 8..at + 12].try_into().unwrap()) as usize;
+            let record = &pcap[at..at + 16 + len];
+            at += 16 + len;
+            let ip = &record[16 + 14..];
+            let udp = &ip[usize::from(ip[0] & 0x0f) * 4..];
+            let ports = [
+                u16::from_be_bytes([udp[0], udp[1]]),
+                u16::from_be_bytes([udp[2], udp[3]]),
+            ];
+            if !ports.contains(&probe) {
+                out.extend_from_slice(record);
+            }
+        }
+        out
     }
 
     /// The pcap file `written` so far, cut after its last whole packet
@@ -861,7 +912,7 @@ log {{ raw_log: false }}
         let dir = scratch("capture");
         let ports = [free_udp_port(), free_udp_port()];
         let capture = dir.join("udp.pcap");
-        exchange(&dir, &capture, ports);
+        exchange(&dir, &capture, ports, free_udp_port());
         let (port0, port1) = (ports[0].to_string(), ports[1].to_string());
         let lua = dissector(
             &dir,
