@@ -417,6 +417,89 @@ fn settings_for_inspection(
     }
 }
 
+/// A relay's packet whose hop ack is lost leaves its fragments waiting
+/// there to go again, though the receiver has them: the receiver's
+/// selective ack, which the relay forwards, says so, and they leave the
+/// relay's queue unsent. With every hop ack from 3 to 2 lost but the
+/// first (its selective acks still heard), 2 KiB from 1 to 3 through 2 arrive, and
+/// the relay puts no fragment on the water twice (it did every one, some
+/// many times, each waiting its hop's ack).
+#[tokio::test(start_paused = true)]
+async fn a_relay_does_not_send_again_fragments_the_receiver_says_it_has() {
+    use modemdriver::sim::medium::Airborne;
+    use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+
+    let dir = scratch("transfer", "relay-held");
+    let configs: Vec<_> = (1..=3)
+        .map(|id| {
+            line_node(id, &dir, 2, 8.0, 0.0)
+                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
+                .config()
+        })
+        .collect();
+    let fleet = Fleet::start(configs).await;
+    // Frames of the relay's data packets to 3 (a fragment each, but the
+    // channel's binding).
+    let relayed = Arc::new(AtomicUsize::new(0));
+    let count = relayed.clone();
+    let acks = AtomicUsize::new(0);
+    fleet
+        .medium()
+        .set_filter(Arc::new(move |packet: &Arc<Airborne>, to: i32| {
+            let t = &packet.transmission;
+            // The first passes: the binding of the relay's channel to the
+            // transfer (fragments go on it once it is acknowledged).
+            if packet.src == 3
+                && to == 2
+                && t.r#type() == TransmissionType::Ack
+                && acks.fetch_add(1, Ordering::SeqCst) > 0
+            {
+                return None;
+            }
+            if packet.src == 2 && to == 3 && t.r#type() == TransmissionType::Data {
+                count.fetch_add(t.frame.len(), Ordering::SeqCst);
+            }
+            Some(packet.clone())
+        }));
+    let file = dir.join("log.bin");
+    let content = pattern(2 * 1024, 23);
+    std::fs::write(&file, &content).unwrap();
+    let sent = fleet
+        .network(
+            1,
+            NetworkRequest::SendFile {
+                dest: 3,
+                path: file,
+                name: None,
+            },
+        )
+        .await
+        .expect("the file is taken");
+    let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as usize;
+    assert!(
+        until(&fleet, Duration::from_secs(3600), |s| {
+            !transfer_at(s, 3, "complete").is_empty() && !transfer_at(s, 1, "complete").is_empty()
+        })
+        .await,
+        "2 KiB through the relay, written and its end heard, within a virtual hour"
+    );
+    let complete = transfer_at(&fleet.seen(), 3, "complete");
+    assert_eq!(
+        std::fs::read(complete[0].path.as_ref().unwrap()).unwrap(),
+        content
+    );
+    // Each fragment once, and the channel's binding.
+    let frames = relayed.load(Ordering::SeqCst);
+    assert!(
+        frames <= fragments + 3,
+        "{frames} frames from the relay to the receiver for {fragments} fragments"
+    );
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A relay has one slot for both directions, and a packet goes to one
 /// node: the receiver's selective acks, forwarded to the origin at once,
 /// took the relay's packet from the fragments every cycle (half the TDMA

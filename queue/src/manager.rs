@@ -928,6 +928,46 @@ impl QueueManager {
         Ok(ids)
     }
 
+    /// Takes the messages of type `name` that `pick` chooses (given each
+    /// one's id and message) as acknowledged by node `by`, though no ack
+    /// of the link came: a layer above learned another way that they
+    /// arrived (the network layer's selective ack of a transfer says its
+    /// receiver holds the fragments). Each leaves its queue, sent or not,
+    /// with a [`QueueEvent::Acked`] (its `frame`: the frame it was last
+    /// given in on a link, 0 if none); an ack of the link that comes later
+    /// finds nothing. Returns how many left.
+    ///
+    /// # Errors
+    /// `name` is not a configured type.
+    pub fn acknowledge_where(
+        &mut self,
+        name: &str,
+        by: i32,
+        pick: impl FnMut(MessageId, &DynamicMessage) -> bool,
+    ) -> Result<usize> {
+        let dccl_id = self.id_of_configured(name)?;
+        let index = self.index_of(dccl_id);
+        let taken = self.queues[index].take_where(pick);
+        let n = taken.len();
+        for m in taken {
+            let frame = m.marks.links().find_map(|l| m.marks.get(l)).unwrap_or(0);
+            self.emit(QueueEvent::Acked {
+                message: m.message,
+                id: Some(m.seq),
+                dccl_id,
+                frame,
+                by,
+            });
+        }
+        if n > 0 {
+            let seqs = &self.queues[index];
+            self.awaiting
+                .retain(|a| a.dccl_id != dccl_id || seqs.get(a.seq).is_some());
+            self.emit_size(index);
+        }
+        Ok(n)
+    }
+
     /// Messages held for a type (including those awaiting an ack).
     pub fn size(&self, name: &str) -> Result<usize> {
         let id = self.id_of_configured(name)?;

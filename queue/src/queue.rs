@@ -366,6 +366,23 @@ impl Queue {
         expired
     }
 
+    /// Removes and returns the messages `pick` chooses (given each one's
+    /// id and message), whether sent or not.
+    pub(crate) fn take_where(
+        &mut self,
+        mut pick: impl FnMut(u64, &DynamicMessage) -> bool,
+    ) -> Vec<QueuedMessage> {
+        let (taken, kept): (VecDeque<_>, VecDeque<_>) = self
+            .messages
+            .drain(..)
+            .partition(|m| pick(m.seq, &m.message));
+        self.messages = kept;
+        for m in &taken {
+            self.unmark(&m.marks);
+        }
+        taken.into()
+    }
+
     /// Empties the queue.
     pub(crate) fn flush(&mut self) -> Vec<QueuedMessage> {
         self.busy = [0; MAX_LINKS];

@@ -935,3 +935,63 @@ fn a_type_without_its_id_on_the_wire_is_refused_a_queue() {
         "{e}"
     );
 }
+
+/// Messages a layer above knows arrived (the network layer's selective
+/// ack) leave their queue as acknowledged, sent or not; a link ack that
+/// comes later for one finds nothing, and the others still wait for
+/// theirs.
+#[test]
+fn messages_acknowledged_another_way_leave_their_queue_and_a_later_link_ack_finds_nothing() {
+    let mut node = Node::new(1, vec![entry("Status")]);
+    for i in 0..4 {
+        node.push("Status", 1, 2, i);
+    }
+    let codec = node.manager.codec().clone();
+    let each = codec.size(&node.message("Status", 1, 2, 0)).unwrap() as u32;
+    node.clock.advance_seconds(1.0);
+    let tx = node.request(each, 3, -1);
+    let sent: Vec<u32> = tx
+        .frame
+        .iter()
+        .flat_map(|f| contents(&codec, f).into_iter().map(|(_, s)| s))
+        .collect();
+    assert_eq!(sent, vec![3, 2, 1], "newest first, one a frame");
+    node.drain();
+
+    // 3 (in frame 0) and 0 (never sent) are known to have arrived at 5.
+    let left = node
+        .manager
+        .acknowledge_where("test.queue.Status", 5, |_, m| [3, 0].contains(&serial(m)))
+        .unwrap();
+    assert_eq!(left, 2);
+    let events = node.drain();
+    let acked: Vec<(u32, u32, i32)> = events
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::Acked {
+                message, frame, by, ..
+            } => Some((serial(message), *frame, *by)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(acked, vec![(0, 0, 5), (3, 0, 5)], "in queue order");
+    assert_eq!(sizes(&events, 1), vec![2]);
+    assert!(matches!(
+        node.manager.acknowledge_where("test.Nope", 5, |_, _| true),
+        Err(QueueError::NotConfigured(_))
+    ));
+
+    // The link's ack of frames 0 and 1: only 2 (frame 1) is left to ack.
+    node.manager
+        .handle_modem_receive(&ack_for(&[0, 1], 2, 1), 0);
+    let acked: Vec<u32> = node
+        .drain()
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::Acked { message, .. } => Some(serial(message)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(acked, vec![2]);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
+}

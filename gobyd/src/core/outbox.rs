@@ -284,6 +284,21 @@ impl Outbox {
         Ok(ids.len())
     }
 
+    /// Takes the messages of type `name` that `pick` chooses (given each
+    /// one's queue id and message) as acknowledged by node `by`, though no
+    /// ack of the link came ([`QueueManager::acknowledge_where`]): their
+    /// [`QueueEvent::Acked`] events come with the next
+    /// [`events`](Self::events), which removes them from the journal.
+    /// Returns how many left.
+    pub fn acknowledge_where(
+        &mut self,
+        name: &str,
+        by: i32,
+        pick: impl FnMut(queue::MessageId, &DynamicMessage) -> bool,
+    ) -> Result<usize, OutboxError> {
+        Ok(self.queue.acknowledge_where(name, by, pick)?)
+    }
+
     /// Expires the messages older than their ttl.
     pub fn expire(&mut self) {
         self.queue.expire();

@@ -98,6 +98,11 @@ impl Fleet {
         fleet
     }
 
+    /// The water the nodes share (to set a [`Filter`](modemdriver::sim::medium::Filter) on).
+    pub fn medium(&self) -> &Arc<Medium> {
+        &self.medium
+    }
+
     /// Starts node `id` (again) from its configuration.
     pub async fn start_node(&mut self, id: i32) {
         let config = self.configs[(id - 1) as usize].clone();

@@ -35,15 +35,15 @@ use std::sync::Arc;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
-    fragment_ack, FileRequest, Fragment, FragmentChannel, QueueManagerConfig, QueuedMessageEntry,
-    RouteAck, RoutedMessage,
+    fragment_ack, FileRequest, Fragment, FragmentAck, FragmentChannel, QueueManagerConfig,
+    QueuedMessageEntry, RouteAck, RoutedMessage,
 };
 use protos::goby::apps::protobuf::{GobydConfig, NetworkConfig};
 use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
 use sha2::{Digest, Sha256};
 
 use crate::config::Problem;
-use crate::core::fragment::Content;
+use crate::core::fragment::{Content, Holding};
 use crate::core::outbox::{journaled_message, Accepted, Outbox};
 use crate::core::route::{NextHop, RouteTable, MAX_NETWORK_ID};
 use crate::event::RouteDropped;
@@ -900,6 +900,9 @@ impl Network {
             };
             let header = message.header();
             if header.final_dest != self.me {
+                if let NetMessage::FragmentAck(a) = &message {
+                    self.forwarded_held(received.src, a, outbox);
+                }
                 let Some(message) = self.hold_back(message, hop_resent, now) else {
                     continue;
                 };
@@ -917,8 +920,18 @@ impl Network {
             match message {
                 NetMessage::FragmentAck(a) => {
                     recorded = true;
+                    let held = self.transfers.queued_and_held(header.origin, &a);
                     self.transfers
                         .acknowledged(header.origin, &a, now, &mut produced);
+                    if !held.is_empty() {
+                        if let Err(e) =
+                            outbox.acknowledge_where(wire::FRAGMENT, header.origin, |id, _| {
+                                held.contains(&id)
+                            })
+                        {
+                            tracing::error!("fragments held by node {}: {e}", header.origin);
+                        }
+                    }
                 }
                 NetMessage::FileRequest(r) => {
                     self.transfers
@@ -1249,6 +1262,48 @@ impl Network {
             header.final_dest
         );
         Ok(Forward::Journaled)
+    }
+
+    /// At a relay: the fragments of a transfer waiting here to go to
+    /// `from` that `from`'s selective ack `a` (of the transfer's receiver,
+    /// on its way to the origin) says the receiver holds leave the queue,
+    /// acknowledged by the receiver. They wait when the hop's own ack of
+    /// the packet that carried them was lost; sent again, they would take
+    /// a slot of this relay, which carries the transfer's fragments and
+    /// its acks, for nothing. A channel is bound again only once nothing
+    /// on it waits here ([`channels`]), so every fragment on the
+    /// transfer's channel is the transfer's.
+    fn forwarded_held(&mut self, from: i32, a: &FragmentAck, outbox: &mut Outbox) {
+        if !matches!(
+            a.outcome(),
+            fragment_ack::Outcome::Receiving | fragment_ack::Outcome::Complete
+        ) {
+            return;
+        }
+        let identity = (a.final_dest, a.transfer as u16);
+        let Some(ChannelState::Open(channel)) = self.transfers.channels().find(from, identity)
+        else {
+            return;
+        };
+        let holding = Holding {
+            have: a.have,
+            beyond: a.beyond.clone().unwrap_or_default(),
+        };
+        let held = |_: u64, m: &DynamicMessage| match NetMessage::of(m) {
+            Some(NetMessage::Fragment(f)) if f.next_hop == from => wire::read_piece(&f.piece)
+                .is_some_and(|(p, _)| p.channel == channel && holding.holds(p.index)),
+            _ => false,
+        };
+        match outbox.acknowledge_where(wire::FRAGMENT, a.origin, held) {
+            Ok(0) => {}
+            Ok(n) => tracing::debug!(
+                origin = a.final_dest,
+                dest = a.origin,
+                "{n} fragments waiting to be forwarded are held by node {}: not sent again",
+                a.origin
+            ),
+            Err(e) => tracing::error!("fragments held by node {}: {e}", a.origin),
+        }
     }
 
     /// How long a relay forwarding fragments holds back the selective acks

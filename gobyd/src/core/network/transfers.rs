@@ -28,7 +28,7 @@
 //! appended, and the file synced, before the hop that brought it is
 //! acknowledged: the fragments that follow on the channel name only it.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io;
 use std::path::{Path, PathBuf};
 
@@ -1260,6 +1260,34 @@ impl Transfers {
         }
         self.ended.insert((origin, number), (outcome, until));
         self.finals.insert((origin, number), outcome);
+    }
+
+    /// The queue ids of this node's fragments of its transfer that node
+    /// `from`'s selective ack `ack` is about, still waiting in the queue
+    /// (unsent, or sent with the hop's ack not come) and said held by the
+    /// receiver: they need not go again.
+    pub fn queued_and_held(&self, from: i32, ack: &FragmentAck) -> HashSet<MessageId> {
+        let number = ack.transfer as u16;
+        if self.out.get(&number).is_none_or(|o| o.dest != from)
+            || !matches!(
+                ack.outcome(),
+                fragment_ack::Outcome::Receiving | fragment_ack::Outcome::Complete
+            )
+        {
+            return HashSet::new();
+        }
+        let holding = Holding {
+            have: ack.have,
+            beyond: ack.beyond.clone().unwrap_or_default(),
+        };
+        self.queued
+            .iter()
+            .filter(|(_, q)| {
+                matches!(q, Queued::Fragment { number: n, index, .. }
+                    if *n == number && holding.holds(*index))
+            })
+            .map(|(id, _)| *id)
+            .collect()
     }
 
     /// The selective ack of transfer `number` from its receiver `from`.

@@ -20,6 +20,9 @@ pub const TYPES: [(&str, u32); 7] = [
     ("goby.acomms.protobuf.Fragment", 32008),
 ];
 
+/// Full name of [`Fragment`] (`TYPES`' last).
+pub const FRAGMENT: &str = TYPES[6].0;
+
 /// Channels a node has toward each next hop (`FragmentChannel.channel`
 /// is 0-15).
 pub const CHANNELS: u8 = 16;
