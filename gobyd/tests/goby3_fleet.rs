@@ -328,7 +328,7 @@ fn emulator(
 
 /// One scenario: both nodes up, `N` messages each way; returns (Goby3 to
 /// gobyd, gobyd to Goby3).
-fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
+fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameSeen>) {
     let dir = scratch("goby3_fleet", &link.tag());
     let proto = dir.join("tick.proto");
     std::fs::write(&proto, TICK_PROTO).unwrap();
@@ -565,10 +565,123 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally) {
     drop(pacommshandler);
     drop(emulators);
     drop(moosdb);
+    let frames = frames_on_the_wire(&dir.join("gobyd-data").join("raw.log"));
     if complete {
         let _ = std::fs::remove_dir_all(&dir);
     }
-    (from_goby3, to_goby3)
+    (from_goby3, to_goby3, frames)
+}
+
+/// One data frame (a datagram's frame, a Micro-Modem frame, an FDP
+/// packet's data) on the wire between the two nodes, as gobyd's mission
+/// log holds it.
+#[derive(Debug, Clone)]
+struct FrameSeen {
+    /// `Goby3` (read by gobyd) or `gobyd` (written by it).
+    sender: &'static str,
+    /// Its bytes.
+    bytes: usize,
+    /// The `fleet.Tick` messages in it, and their bytes.
+    ticks: usize,
+    tick_bytes: usize,
+    /// Its other parts, in order: the types decoded (the application ack,
+    /// gobyd's identity trailer), or what did not decode.
+    other: Vec<String>,
+}
+
+/// The data frames of gobyd's mission log `raw_log`: those it wrote
+/// (`$CCTXD`, `$CCTDP`, datagrams out) and those it read (`$CARXD`,
+/// `$CARDP`, datagrams in), each taken apart with the types that can be
+/// in it (`fleet.Tick`, the Micro-Modem's application ack, gobyd's frame
+/// identity).
+fn frames_on_the_wire(raw_log: &Path) -> Vec<FrameSeen> {
+    use modemdriver::micromodem::sentence::MmSentence;
+    use prost::Message;
+    use prost_reflect::ReflectMessage;
+    use protos::goby::acomms::protobuf::{
+        modem_transmission::TransmissionType, FrameIdentity, MicroModemApplicationAck,
+        ModemTransmission,
+    };
+    let Ok(text) = std::fs::read_to_string(raw_log) else {
+        return Vec::new();
+    };
+    let mut codec = dccl::Codec::new();
+    let pool = dccl::compile_sources(&[("tick.proto", TICK_PROTO)]).unwrap();
+    codec
+        .load(&pool.get_message_by_name("fleet.Tick").unwrap())
+        .unwrap();
+    codec.load_type::<MicroModemApplicationAck>().unwrap();
+    codec.load_type::<FrameIdentity>().unwrap();
+    let mut seen = Vec::new();
+    for line in text.lines() {
+        let Ok(record) = serde_json::from_str::<serde_json::Value>(line) else {
+            continue;
+        };
+        let sender = match record["raw"].as_str() {
+            Some("out") => "gobyd",
+            Some("in") => "Goby3",
+            _ => continue,
+        };
+        let Some(bytes) = record["bytes_hex"]
+            .as_str()
+            .and_then(|h| hex::decode(h).ok())
+        else {
+            continue;
+        };
+        let frames: Vec<Vec<u8>> = if bytes.starts_with(b"$") {
+            match MmSentence::parse(bytes.trim_ascii_end()) {
+                Ok(MmSentence::TransmitData { data, .. })
+                | Ok(MmSentence::ReceiveData { data, .. })
+                | Ok(MmSentence::FdpTransmit { data, .. }) => vec![data],
+                Ok(MmSentence::FdpReceive { data_frames, .. }) => {
+                    vec![data_frames.into_iter().flat_map(|f| f.data).collect()]
+                }
+                _ => Vec::new(),
+            }
+        } else {
+            match ModemTransmission::decode(bytes.as_slice()) {
+                Ok(mt) if mt.r#type() == TransmissionType::Data => mt.frame,
+                _ => Vec::new(),
+            }
+        };
+        for frame in frames.into_iter().filter(|f| !f.is_empty()) {
+            let mut f = FrameSeen {
+                sender,
+                bytes: frame.len(),
+                ticks: 0,
+                tick_bytes: 0,
+                other: Vec::new(),
+            };
+            let mut at = 0;
+            while at < frame.len() && frame[at..].iter().any(|&b| b != 0) {
+                match codec.decode_with(&frame[at..], &dccl::DecodeOptions::default()) {
+                    Ok(d) => {
+                        let name = d.message.descriptor().full_name().to_string();
+                        if name == "fleet.Tick" {
+                            f.ticks += 1;
+                            f.tick_bytes += d.len;
+                        } else {
+                            f.other.push(format!(
+                                "{} {}",
+                                name.rsplit('.').next().unwrap_or(&name),
+                                d.len
+                            ));
+                        }
+                        at += d.len;
+                    }
+                    Err(_) => {
+                        f.other
+                            .push(format!("{} bytes not decoded", frame.len() - at));
+                        break;
+                    }
+                }
+            }
+            if f.ticks > 0 {
+                seen.push(f);
+            }
+        }
+    }
+    seen
 }
 
 #[test]
@@ -615,6 +728,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
         "GOBY3_FLEET_ONLY={only:?} names no scenario"
     );
     let mut rows = Vec::new();
+    let mut seen = Vec::new();
     for link in chosen {
         if matches!(link, Link::Multicast) {
             if let Some(why) = multicast_not_on_loopback() {
@@ -622,9 +736,45 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
                 continue;
             }
         }
-        let (from_goby3, to_goby3) = scenario(&goby3, &goby, link);
+        let (from_goby3, to_goby3, frames) = scenario(&goby3, &goby, link);
         for (direction, t) in [("Goby3 -> gobyd", from_goby3), ("gobyd -> Goby3", to_goby3)] {
             rows.push((link, direction, t));
+        }
+        seen.push((link, frames));
+    }
+    // The frames on each wire: bytes for the same messages from each
+    // sender (measured, printed, not asserted: gobyd's frames end with
+    // its identity trailer, docs/goby3.md).
+    println!();
+    println!("| driver | rate | sender | messages in the frame | frames | frame bytes | of them messages | the rest |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (link, frames) in &seen {
+        let mut groups: std::collections::BTreeMap<(&str, usize), Vec<&FrameSeen>> =
+            Default::default();
+        for f in frames {
+            groups.entry((f.sender, f.ticks)).or_default().push(f);
+        }
+        for ((sender, ticks), fs) in groups {
+            let range = |v: Vec<usize>| {
+                let (lo, hi) = (v.iter().min().unwrap(), v.iter().max().unwrap());
+                if lo == hi {
+                    lo.to_string()
+                } else {
+                    format!("{lo}-{hi}")
+                }
+            };
+            let mut rest: Vec<String> = fs.iter().map(|f| f.other.join(", ")).collect();
+            rest.sort();
+            rest.dedup();
+            println!(
+                "| {} | {} | {sender} | {ticks} | {} | {} | {} | {} |",
+                link.name(),
+                link.rate(),
+                fs.len(),
+                range(fs.iter().map(|f| f.bytes).collect()),
+                range(fs.iter().map(|f| f.tick_bytes).collect()),
+                rest.join("; ")
+            );
         }
     }
     println!();

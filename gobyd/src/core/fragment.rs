@@ -193,6 +193,23 @@ pub struct Holding {
 }
 
 impl Holding {
+    /// What the selective ack `ack` says its receiver holds.
+    pub fn of(ack: &protos::goby::acomms::protobuf::FragmentAck) -> Holding {
+        Holding {
+            have: ack.have,
+            beyond: ack.beyond.clone().unwrap_or_default(),
+        }
+    }
+
+    /// What the selective ack `ack` says its receiver holds, when that is
+    /// what it still holds: the ack of a transfer still receiving or
+    /// complete (`None` for one refused, expired or whose checksum did not
+    /// match).
+    pub fn still_held(ack: &protos::goby::acomms::protobuf::FragmentAck) -> Option<Holding> {
+        use protos::goby::acomms::protobuf::fragment_ack::Outcome;
+        matches!(ack.outcome(), Outcome::Receiving | Outcome::Complete).then(|| Holding::of(ack))
+    }
+
     /// Whether fragment `index` is said to be held.
     pub fn holds(&self, index: u32) -> bool {
         if index < self.have {

@@ -1274,20 +1274,13 @@ impl Network {
     /// on it waits here ([`channels`]), so every fragment on the
     /// transfer's channel is the transfer's.
     fn forwarded_held(&mut self, from: i32, a: &FragmentAck, outbox: &mut Outbox) {
-        if !matches!(
-            a.outcome(),
-            fragment_ack::Outcome::Receiving | fragment_ack::Outcome::Complete
-        ) {
+        let Some(holding) = Holding::still_held(a) else {
             return;
-        }
+        };
         let identity = (a.final_dest, a.transfer as u16);
         let Some(ChannelState::Open(channel)) = self.transfers.channels().find(from, identity)
         else {
             return;
-        };
-        let holding = Holding {
-            have: a.have,
-            beyond: a.beyond.clone().unwrap_or_default(),
         };
         let held = |_: u64, m: &DynamicMessage| match NetMessage::of(m) {
             Some(NetMessage::Fragment(f)) if f.next_hop == from => wire::read_piece(&f.piece)

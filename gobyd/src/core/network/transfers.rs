@@ -1268,18 +1268,12 @@ impl Transfers {
     /// receiver: they need not go again.
     pub fn queued_and_held(&self, from: i32, ack: &FragmentAck) -> HashSet<MessageId> {
         let number = ack.transfer as u16;
-        if self.out.get(&number).is_none_or(|o| o.dest != from)
-            || !matches!(
-                ack.outcome(),
-                fragment_ack::Outcome::Receiving | fragment_ack::Outcome::Complete
-            )
-        {
+        let Some(holding) = Holding::still_held(ack) else {
+            return HashSet::new();
+        };
+        if self.out.get(&number).is_none_or(|o| o.dest != from) {
             return HashSet::new();
         }
-        let holding = Holding {
-            have: ack.have,
-            beyond: ack.beyond.clone().unwrap_or_default(),
-        };
         self.queued
             .iter()
             .filter(|(_, q)| {
@@ -1305,10 +1299,7 @@ impl Transfers {
         if o.dest != from {
             return;
         }
-        let holding = Holding {
-            have: ack.have,
-            beyond: ack.beyond.clone().unwrap_or_default(),
-        };
+        let holding = Holding::of(ack);
         let new = o.sending.acknowledged(&holding);
         if !new.is_empty() {
             let p = held_payload(number, &new);
