@@ -1439,13 +1439,24 @@ fn driver_problems(config: &GobydConfig) -> Vec<Problem> {
         problems.extend(micromodem_problems(config));
     }
     problems.extend(driver_specific_slot_problems(config, kind));
-    // The Micro-Modem's and the simulator's: their rates are the Micro-Modem's.
-    if modemdriver::check::data_packet_time(driver, 0).is_some() {
-        problems.extend(slot_problems(config, driver));
-    } else {
-        problems.extend(adaptive_rate_problems(config, kind));
-    }
+    problems.extend(timing_problems(config, driver, kind));
     problems
+}
+
+/// The cycle's rates and slot lengths, on a driver whose packets take
+/// time on the water (the Micro-Modem's, the simulator's: their rates are
+/// the Micro-Modem's, [`slot_problems`]); on another, the adaptive rate it
+/// cannot have.
+fn timing_problems(
+    config: &GobydConfig,
+    driver: &DriverConfig,
+    kind: &dyn modemdriver::kind::DriverKind,
+) -> Vec<Problem> {
+    if modemdriver::check::data_packet_time(driver, 0).is_some() {
+        slot_problems(config, driver)
+    } else {
+        adaptive_rate_problems(config, kind)
+    }
 }
 
 /// `adaptive_rate` (on the MAC or a slot) on a driver without the
@@ -1653,11 +1664,12 @@ pub fn cycle_problems(
         driver: Some(driver.clone()),
         ..Default::default()
     };
-    let mut problems = match modemdriver::built_in::of(driver) {
-        Ok(kind) => driver_specific_slot_problems(&config, kind),
-        Err(_) => Vec::new(),
+    // A driver that is none (refused at start) has no cycle to run.
+    let Ok(kind) = modemdriver::built_in::of(driver) else {
+        return Vec::new();
     };
-    problems.extend(slot_problems(&config, driver));
+    let mut problems = driver_specific_slot_problems(&config, kind);
+    problems.extend(timing_problems(&config, driver, kind));
     problems
 }
 
@@ -2136,6 +2148,56 @@ pub fn application_acks(config: &GobydConfig) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A cycle changed at sea is checked as `--check` checks the
+    /// configured one: Micro-Modem rates and slot lengths only on a driver
+    /// whose packets take time on the water. On UDP (Goby3's `MACUpdate`
+    /// of rate-0 slots of 1 s, as its pAcommsHandler sends them) nothing
+    /// is wrong; on the simulator, a rate it lacks and a slot too short
+    /// for its packet are.
+    #[test]
+    fn a_cycle_changed_at_sea_is_checked_as_the_configured_one_is() {
+        use protos::goby::acomms::protobuf::{driver_config, UdpDriverConfig};
+        let slot = |src: i32, rate: i32, seconds: f64| ModemTransmission {
+            src: Some(src),
+            dest: Some(-1),
+            rate: Some(rate),
+            slot_seconds: Some(seconds),
+            ..Default::default()
+        };
+        let mac = MacConfig {
+            r#type: Some(MacType::MacFixedDecentralized as i32),
+            ..Default::default()
+        };
+        let udp = DriverConfig {
+            driver: Some(driver_config::Driver::DriverType(
+                DriverType::DriverUdp as i32,
+            )),
+            modem_id: Some(2),
+            udp: Some(UdpDriverConfig::default()),
+            ..Default::default()
+        };
+        let cycle = [slot(1, 0, 1.0), slot(2, 0, 1.0), slot(2, 0, 2.0)];
+        assert_eq!(cycle_problems(&mac, &cycle, &udp), Vec::new());
+        let simulator = DriverConfig {
+            driver: Some(driver_config::Driver::DriverType(
+                DriverType::DriverAcousticSimulator as i32,
+            )),
+            modem_id: Some(2),
+            ..Default::default()
+        };
+        let problems: Vec<String> =
+            cycle_problems(&mac, &[slot(1, 9, 10.0), slot(2, 0, 0.1)], &simulator)
+                .iter()
+                .map(|p| p.to_string())
+                .collect();
+        assert!(
+            problems.len() == 2
+                && problems[0].starts_with("mac.slot[0].rate: 9 is not a Micro-Modem rate")
+                && problems[1].starts_with("mac.slot[1].slot_seconds"),
+            "{problems:?}"
+        );
+    }
 
     #[test]
     fn log_levels_and_directives() {
