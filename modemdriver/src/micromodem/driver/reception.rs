@@ -17,13 +17,15 @@
 //! `$CAACK` becomes an `ACK` transmission naming the transmission it
 //! answers (`unique_id`): the last one of ours that went out asking for
 //! acks, when the ack comes from its destination, to this modem, for one
-//! of its frames, within `receive_timeout_ms` of the packet (data cycles
+//! of its frames, while the packet's slot lasts (at least
+//! `receive_timeout_ms` after it went out; data cycles
 //! sent with application acks off, or with `FDP_ONLY`). With application
 //! acks, the ack message at the start of frame 0 is stripped, from every
 //! reception that has one, and its acks reported
 //! ([`super::super::application_ack`]).
 
 use std::collections::BTreeMap;
+use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
     modem_transmission::{TimeSource, TransmissionType},
@@ -347,9 +349,21 @@ impl Machine {
     }
 
     /// The active data transmission went out (`$CATXF`): acks heard from
-    /// now on, until the receive timeout, answer it.
+    /// now on answer it while its slot lasts, and at least the receive
+    /// timeout. The receiving modem acknowledges at once, but its ack
+    /// comes after the packet has crossed and the ack has crossed back
+    /// (over 2.5 s at 1500 m with a 0.5 s ack), which a receive timeout
+    /// tuned for frames may not cover.
     pub(super) fn remember_sent(&mut self) {
-        let until = self.now.at + self.receive_timeout();
+        let slot_left = self
+            .tx
+            .active
+            .as_ref()
+            .and_then(|a| a.job.data())
+            .and_then(crate::slot::slot_end)
+            .map(|end| Duration::from_micros(end.saturating_sub(self.now.micros)))
+            .unwrap_or_default();
+        let until = self.now.at + self.receive_timeout().max(slot_left);
         let Some(Active {
             job: Job::Data(mt),
             filled,
@@ -377,8 +391,8 @@ impl Machine {
 
     /// The transmission an ack (`$CAACK` from `src` to `dest` for `frame`,
     /// from 1) answers: the last one sent, when the ack comes from its
-    /// destination, to us, for one of its frames, within the receive
-    /// timeout. An ack heard before our packet went out cannot answer it
+    /// destination, to us, for one of its frames, while its slot lasts
+    /// (at least the receive timeout). An ack heard before our packet went out cannot answer it
     /// (it belongs to an earlier cycle, or to someone else): `None` then,
     /// and nothing is credited.
     fn ack_belongs_to(&self, src: u32, dest: u32, frame: u32) -> Option<u32> {

@@ -679,13 +679,18 @@ fn an_fdp_slot_is_refused_by_a_micromodem1() {
 /// acks in FDP packets only (`application_acks: FDP_ONLY`), as its
 /// configuration sets it.
 fn fdp_only() -> Bench {
+    fdp_only_with(MicroModemConfig::default())
+}
+
+/// [`fdp_only`], with the other settings of `mm`.
+fn fdp_only_with(mm: MicroModemConfig) -> Bench {
     use protos::goby::acomms::protobuf::{micro_modem_config::ApplicationAcks, DriverConfig};
     let config = DriverConfig {
         modem_id: Some(ME as i32),
         serial_port: Some("/dev/ttyUSB0".into()),
         micromodem: Some(MicroModemConfig {
             application_acks: Some(ApplicationAcks::FdpOnly as i32),
-            ..Default::default()
+            ..mm
         }),
         ..Default::default()
     };
@@ -735,8 +740,13 @@ fn ack_message(frame: &[u8]) -> Option<MicroModemApplicationAck> {
 /// Runs a data transmission to [`PEER`] asking for acks through its cycle
 /// and returns what was written: the `$CCCYC` and the one `$CCTXD`.
 fn data_cycle_written(bench: &mut Bench) -> Vec<MmSentence> {
+    data_cycle_written_in(bench, 10.0)
+}
+
+/// [`data_cycle_written`], in a slot of `slot_seconds` opened now.
+fn data_cycle_written_in(bench: &mut Bench, slot_seconds: f64) -> Vec<MmSentence> {
     let opened = bench.now.micros;
-    let mut mt = data(opened, 10.0);
+    let mut mt = data(opened, slot_seconds);
     mt.ack_requested = Some(true);
     let (id, template) = bench.initiate_and_request(mt);
     assert!(
@@ -809,6 +819,42 @@ fn fdp_only_puts_no_ack_message_in_data_cycles_and_asks_the_modem() {
         matches!(acks.as_slice(), [ack] if ack.r#type() == TransmissionType::Ack
             && ack.unique_id == Some(7)),
         "{outputs:?}"
+    );
+}
+
+/// A `$CAACK` comes after the packet has crossed and the ack has crossed
+/// back (2.84 s after `$CATXF` between two emulated modems 1000 m apart,
+/// each way 0.67 s of travel and 0.5 s of packet): it answers the packet
+/// while its slot lasts, though the receive timeout (tuned for frames,
+/// 2.5 s here) has passed; after the slot, nothing. Fails when the window
+/// is the receive timeout: the data was never taken for acked, and went
+/// again and again (a Goby3 node delivered it six times).
+#[test]
+fn an_ack_answers_the_packet_while_its_slot_lasts() {
+    let mut bench = fdp_only_with(MicroModemConfig {
+        receive_timeout_ms: Some(2500),
+        ..Default::default()
+    });
+    data_cycle_written_in(&mut bench, 30.0);
+    bench.sentence(&MmSentence::TransmitStart { bytes: 5 });
+    bench.sentence(&MmSentence::TransmitDone { bytes: 5 });
+    let ack = MmSentence::Ack {
+        src: PEER,
+        dest: ME,
+        frame: 1,
+    };
+    bench.advance(Duration::from_millis(2840));
+    let outputs = bench.sentence(&ack);
+    assert!(
+        matches!(received(&outputs).as_slice(), [a] if a.r#type() == TransmissionType::Ack
+            && a.unique_id == Some(7)),
+        "{outputs:?}"
+    );
+    bench.advance(Duration::from_secs(30));
+    let outputs = bench.sentence(&ack);
+    assert!(
+        matches!(received(&outputs).as_slice(), [a] if a.unique_id.is_none()),
+        "after the slot: {outputs:?}"
     );
 }
 
