@@ -640,6 +640,8 @@ fn frames_on_the_wire(raw_log: &Path) -> Vec<FrameSeen> {
             }
         } else {
             match ModemTransmission::decode(bytes.as_slice()) {
+                // Multicast: gobyd hears its own datagrams too.
+                Ok(mt) if sender == "Goby3" && mt.src() == 2 => Vec::new(),
                 Ok(mt) if mt.r#type() == TransmissionType::Data => mt.frame,
                 _ => Vec::new(),
             }
