@@ -112,6 +112,27 @@ fn note(message: &DynamicMessage) -> String {
 }
 
 /// Waits (virtual time) until `done` holds, at most `limit`.
+/// Node `from` sends the file at `path` to node `dest`; its answer
+/// (`file_send`, the transfer).
+async fn send_file(
+    fleet: &Fleet,
+    from: i32,
+    dest: i32,
+    path: std::path::PathBuf,
+) -> serde_json::Value {
+    fleet
+        .network(
+            from,
+            NetworkRequest::SendFile {
+                dest,
+                path,
+                name: None,
+            },
+        )
+        .await
+        .expect("the file is taken")
+}
+
 async fn until(fleet: &Fleet, limit: Duration, done: impl Fn(&[Seen]) -> bool) -> bool {
     let end = tokio::time::Instant::now() + limit;
     while tokio::time::Instant::now() < end {
@@ -145,31 +166,11 @@ async fn a_large_message_and_a_file_cross_the_relay_and_commands_overtake_them()
     let file = dir.join("survey.bin");
     let content = pattern(6000, 11);
     std::fs::write(&file, &content).unwrap();
-    let sent = fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file.clone(),
-                name: None,
-            },
-        )
-        .await
-        .expect("the file is taken");
+    let sent = send_file(&fleet, 1, 3, file.clone()).await;
     let file_id = sent["file_send"].as_u64().unwrap();
     assert_eq!(sent["joined"], false);
     // Sending it again joins the transfer.
-    let again = fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file.clone(),
-                name: None,
-            },
-        )
-        .await
-        .unwrap();
+    let again = send_file(&fleet, 1, 3, file.clone()).await;
     assert_eq!(
         (again["file_send"].as_u64(), &again["joined"]),
         (Some(file_id), &true.into())
@@ -370,17 +371,7 @@ async fn send_a_third(
     let file = dir.join(name);
     let content = pattern(kb * 1024, seed);
     std::fs::write(&file, &content).unwrap();
-    let sent = fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file.clone(),
-                name: None,
-            },
-        )
-        .await
-        .unwrap();
+    let sent = send_file(&fleet, 1, 3, file.clone()).await;
     let id = sent["file_send"].as_u64().unwrap();
     let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
     assert!(
@@ -466,17 +457,7 @@ async fn a_relay_does_not_send_again_fragments_the_receiver_says_it_has() {
     let file = dir.join("log.bin");
     let content = pattern(2 * 1024, 23);
     std::fs::write(&file, &content).unwrap();
-    let sent = fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file,
-                name: None,
-            },
-        )
-        .await
-        .expect("the file is taken");
+    let sent = send_file(&fleet, 1, 3, file).await;
     let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as usize;
     assert!(
         until(&fleet, Duration::from_secs(3600), |s| {
@@ -532,17 +513,7 @@ async fn a_file_through_the_relay_keeps_pace_with_the_tdma_limit() {
     let content = pattern(10 * 1024, 17);
     std::fs::write(&file, &content).unwrap();
     let start = tokio::time::Instant::now();
-    fleet
-        .network(
-            1,
-            NetworkRequest::SendFile {
-                dest: 3,
-                path: file,
-                name: None,
-            },
-        )
-        .await
-        .expect("the file is taken");
+    send_file(&fleet, 1, 3, file).await;
     let mut written = None;
     while written.is_none() && start.elapsed() < Duration::from_secs(4 * 3600) {
         tokio::time::sleep(Duration::from_secs(1)).await;

@@ -8,6 +8,19 @@ use protos::goby::acomms::protobuf::{
 };
 use queue::{MessageId, PushOptions, QueueError, QueueEvent};
 
+/// The messages `events` says were acked: serial, frame, by whom.
+fn acked_by(events: &[QueueEvent]) -> Vec<(u32, u32, i32)> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            QueueEvent::Acked {
+                message, frame, by, ..
+            } => Some((serial(message), *frame, *by)),
+            _ => None,
+        })
+        .collect()
+}
+
 fn ack_for(frames: &[i32], from: i32, to: i32) -> ModemTransmission {
     ModemTransmission {
         src: Some(from),
@@ -355,15 +368,7 @@ fn several_frames_per_transmission_and_acks_by_frame() {
     node.manager
         .handle_modem_receive(&ack_for(&[0, 2], 2, 1), 0);
     let events = node.drain();
-    let acked: Vec<(u32, u32, i32)> = events
-        .iter()
-        .filter_map(|e| match e {
-            QueueEvent::Acked {
-                message, frame, by, ..
-            } => Some((serial(message), *frame, *by)),
-            _ => None,
-        })
-        .collect();
+    let acked = acked_by(&events);
     assert_eq!(acked, vec![(4, 0, 2), (2, 2, 2)]);
     assert_eq!(sizes(&events, 1), vec![4, 3]);
 
@@ -965,15 +970,7 @@ fn messages_acknowledged_another_way_leave_their_queue_and_a_later_link_ack_find
         .unwrap();
     assert_eq!(left, 2);
     let events = node.drain();
-    let acked: Vec<(u32, u32, i32)> = events
-        .iter()
-        .filter_map(|e| match e {
-            QueueEvent::Acked {
-                message, frame, by, ..
-            } => Some((serial(message), *frame, *by)),
-            _ => None,
-        })
-        .collect();
+    let acked = acked_by(&events);
     assert_eq!(acked, vec![(0, 0, 5), (3, 0, 5)], "in queue order");
     assert_eq!(sizes(&events, 1), vec![2]);
     assert!(matches!(
@@ -984,14 +981,7 @@ fn messages_acknowledged_another_way_leave_their_queue_and_a_later_link_ack_find
     // The link's ack of frames 0 and 1: only 2 (frame 1) is left to ack.
     node.manager
         .handle_modem_receive(&ack_for(&[0, 1], 2, 1), 0);
-    let acked: Vec<u32> = node
-        .drain()
-        .iter()
-        .filter_map(|e| match e {
-            QueueEvent::Acked { message, .. } => Some(serial(message)),
-            _ => None,
-        })
-        .collect();
+    let acked: Vec<u32> = acked_by(&node.drain()).iter().map(|a| a.0).collect();
     assert_eq!(acked, vec![2]);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
 }
