@@ -371,7 +371,7 @@ async fn send_a_third(
     let file = dir.join(name);
     let content = pattern(kb * 1024, seed);
     std::fs::write(&file, &content).unwrap();
-    let sent = send_file(&fleet, 1, 3, file.clone()).await;
+    let sent = send_file(fleet, 1, 3, file.clone()).await;
     let id = sent["file_send"].as_u64().unwrap();
     let fragments = sent["transfer"]["fragments"].as_u64().unwrap() as u32;
     assert!(
