@@ -1,11 +1,13 @@
 //! A mixed fleet: Goby3's own `pAcommsHandler` (built from source, with a
-//! real MOOSDB) as node 1 and `gobyd` as node 2, over Goby3's UDP driver
-//! and over emulated WHOI Micro-Modems 1 and 2 (`goby modem emulate` on
+//! real MOOSDB) as node 1 and `gobyd` as node 2, over Goby3's UDP driver,
+//! over emulated WHOI Micro-Modems 1 and 2 (`goby modem emulate` on
 //! pseudo-terminals, the two emulators joined over UDP) at rates 0 and 1,
-//! and over Micro-Modem 2s in Flexible Data Protocol slots (Goby3's
+//! over Micro-Modem 2s in Flexible Data Protocol slots (Goby3's
 //! `DRIVER_SPECIFIC` slot with `MICROMODEM_FLEXIBLE_DATA`, both nodes with
-//! `use_application_acks: true`).
-//! Each node publishes [`N`] `fleet.Tick` messages (a DCCL type of this
+//! `use_application_acks: true`), and over emulated Popotos (each node on
+//! the modem's shell, the one interface Goby3's driver speaks) and
+//! Teledyne Benthos ATM-900s, on pseudo-terminals likewise.
+//! Each node publishes [`messages`] `fleet.Tick` messages (a DCCL type of this
 //! test, `tick.proto` written by it) to the other, acks asked for; every
 //! message must be delivered once, every one acknowledged, none expired,
 //! no duplicates. A table of the numbers per driver, rate and direction is
@@ -22,10 +24,11 @@
 //!
 //! `GOBY3_FLEET_ONLY=udp,mm1-rate0,...` runs only the scenarios named (of
 //! `udp`, `multicast`, `mm1-rate0`, `mm1-rate1`, `mm2-rate0`, `mm2-rate1`,
-//! `mm2-fdp`, and, run only when named (see [`Link::probe`]), `mm2-mixed`:
+//! `mm2-fdp`, `popoto`, `benthos`, and, run only when named (see [`Link::probe`]), `mm2-mixed`:
 //! a cycle of data and FDP slots, Goby3 with `use_application_acks: true`
 //! and gobyd with `application_acks: FDP_ONLY`, and `mm2-rate1-app-acks`:
 //! data cycles with application acks at both nodes);
+//! `GOBY3_FLEET_MESSAGES=1` publishes 1 message each way (1 to 5), not 5;
 //! `GOBY3_FLEET_STATS_LAYOUT` is given to the emulators as
 //! `--stats-layout` (default: the firmware's own).
 //!
@@ -44,15 +47,26 @@ use std::time::{Duration, Instant};
 use moos::{ClientConfig, MoosClient, Value as MoosValue};
 use support::daemon::{free_tcp_port, free_udp_port, scratch, Gobyd};
 use support::goby3::{
-    count_goby3, count_gobyd, goby3, goby_bin, Goby3, Json, Proc, Tally, TICK_PROTO,
+    count_goby3, count_gobyd, frames_seen, goby3, goby_bin, print_frame_table, raw_records,
+    FrameSeen, Goby3, Json, Proc, Tally, TICK_PROTO,
 };
 use support::micromodem::micromodem_driver;
 use support::node::{Driver, Entry, Multicast, Node, Udp};
 
-/// Messages each way.
-const N: u32 = 5;
+/// Messages each way: 5, or `GOBY3_FLEET_MESSAGES` (1 to 5; published
+/// together, they go in one frame each way).
+fn messages() -> u32 {
+    match std::env::var("GOBY3_FLEET_MESSAGES") {
+        Ok(v) => v
+            .parse()
+            .ok()
+            .filter(|n| (1..=5).contains(n))
+            .unwrap_or_else(|| panic!("GOBY3_FLEET_MESSAGES={v}: expected 1 to 5")),
+        Err(_) => 5,
+    }
+}
 /// Number of the message each node sends first, alone, in the scenarios
-/// with application acks, before the [`N`] counted: a round that lets both
+/// with application acks, before the [`messages`] counted: a round that lets both
 /// nodes past their start. Goby3 misses its first slot after it set the
 /// modem's clock (its MAC starts again), so data sent to it before then is
 /// sent again, unacknowledged, in the next slot, and Goby3, which has no
@@ -105,6 +119,11 @@ enum Link {
         /// FDP_ONLY`.
         mixed: bool,
     },
+    /// Emulated Popotos, each host on the modem's shell (`pshell`) over a
+    /// pseudo-terminal: Goby3's driver speaks only the shell.
+    Popoto,
+    /// Emulated Teledyne Benthos ATM-900s on pseudo-terminals.
+    Benthos,
 }
 
 /// The slots `(src, fdp)` of the mixed cycle: a gobyd (node 2) FDP slot
@@ -136,6 +155,8 @@ impl Link {
                 "mm{generation}-rate{rate}{}",
                 if app_acks { "-app-acks" } else { "" }
             ),
+            Link::Popoto => "popoto".to_string(),
+            Link::Benthos => "benthos".to_string(),
         }
     }
 
@@ -175,6 +196,8 @@ impl Link {
                 },
                 if app_acks { ", application acks" } else { "" }
             ),
+            Link::Popoto => "Popoto (emulated, shell)".into(),
+            Link::Benthos => "Benthos ATM-900 (emulated)".into(),
         }
     }
 
@@ -209,6 +232,10 @@ impl Link {
         match self {
             Link::Udp | Link::Multicast => 0,
             Link::MicroModem { rate, .. } => rate,
+            // 640 bit/s (Goby3's `setRate640`; gobyd's payload mode 1).
+            Link::Popoto => 1,
+            // `@TxRate=5`, as both drivers write it.
+            Link::Benthos => 5,
         }
     }
 
@@ -219,6 +246,7 @@ impl Link {
             Link::Udp | Link::Multicast => 1.0,
             Link::MicroModem { rate: 0, .. } => 10.0,
             Link::MicroModem { .. } => 12.0,
+            Link::Popoto | Link::Benthos => 8.0,
         }
     }
 }
@@ -287,12 +315,13 @@ ProcessConfig = pAcommsHandler
     path
 }
 
-/// An emulated Micro-Modem of `generation` with modem id `id`, its
-/// pseudo-terminal at `link`, joined over UDP to the other emulator.
+/// An emulated modem of `kind` (`goby modem emulate`'s arguments naming
+/// it) with modem id `id`, its pseudo-terminal at `link`, joined over UDP
+/// to the other emulator.
 fn emulator(
     goby: &Path,
     dir: &Path,
-    generation: u8,
+    kind: &[&str],
     id: u32,
     ports: (u16, u16),
     link: &Path,
@@ -300,13 +329,13 @@ fn emulator(
     let other = 3 - id;
     let mut command = Command::new(goby);
     command
-        .args(["modem", "emulate", "--micromodem", &generation.to_string()])
+        .args(["modem", "emulate"])
+        .args(kind)
         .args(["--modem-id", &id.to_string()])
         .arg("--link")
         .arg(link)
         .args(["--udp-local", &ports.0.to_string()])
         .args(["--udp-peer", &format!("{other}@127.0.0.1:{}", ports.1)])
-        .args(["--revision-interval", "5"])
         .env_remove("RUST_BACKTRACE");
     if let Ok(layout) = std::env::var("GOBY3_FLEET_STATS_LAYOUT") {
         command.args(["--stats-layout", &layout]);
@@ -326,7 +355,7 @@ fn emulator(
     p
 }
 
-/// One scenario: both nodes up, `N` messages each way; returns (Goby3 to
+/// One scenario: both nodes up, [`messages`] messages each way; returns (Goby3 to
 /// gobyd, gobyd to Goby3).
 fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameSeen>) {
     let dir = scratch("goby3_fleet", &link.tag());
@@ -366,8 +395,10 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
         Link::MicroModem { generation, .. } => {
             let (e1, e2) = (free_udp_port(), free_udp_port());
             let (pty1, pty2) = (dir.join("modem1"), dir.join("modem2"));
-            emulators.push(emulator(goby, &dir, generation, 1, (e1, e2), &pty1));
-            emulators.push(emulator(goby, &dir, generation, 2, (e2, e1), &pty2));
+            let generation = generation.to_string();
+            let kind = ["--micromodem", &generation, "--revision-interval", "5"];
+            emulators.push(emulator(goby, &dir, &kind, 1, (e1, e2), &pty1));
+            emulators.push(emulator(goby, &dir, &kind, 2, (e2, e1), &pty2));
             (
                 format!(
                     "    driver_type: DRIVER_WHOI_MICROMODEM\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"\n    serial_baud: 19200{}",
@@ -390,6 +421,42 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
                     micromodem_driver(&pty2).use_application_acks(link.app_acks())
                 }
                 .into(),
+            )
+        }
+        Link::Popoto | Link::Benthos => {
+            let (e1, e2) = (free_udp_port(), free_udp_port());
+            let (pty1, pty2) = (dir.join("modem1"), dir.join("modem2"));
+            let kind: &[&str] = match link {
+                Link::Popoto => &["--kind", "popoto", "--pty"],
+                _ => &["--kind", "benthos"],
+            };
+            emulators.push(emulator(goby, &dir, kind, 1, (e1, e2), &pty1));
+            emulators.push(emulator(goby, &dir, kind, 2, (e2, e1), &pty2));
+            let (goby3_type, gobyd_section) = match link {
+                // Goby3's payload mode is the one of its start-up; each
+                // transmission's rate sets its speed.
+                Link::Popoto => (
+                    "DRIVER_POPOTO\n    [goby.acomms.popoto.protobuf.config] { start_timeout: 10 }",
+                    "popoto { start_timeout: 10 }",
+                ),
+                _ => (
+                    "DRIVER_BENTHOS_ATM900\n    [goby.acomms.benthos.protobuf.config] { max_frame_size: 32 }",
+                    "benthos { max_frame_size: 32 }",
+                ),
+            };
+            let gobyd_type = match link {
+                Link::Popoto => "DRIVER_POPOTO",
+                _ => "DRIVER_BENTHOS_ATM900",
+            };
+            (
+                format!(
+                    "    driver_type: {goby3_type}\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"",
+                    pty1.display()
+                ),
+                Driver::Text(format!(
+                    "driver {{\n  driver_type: {gobyd_type}\n  serial_port: \"{}\"\n  {gobyd_section}\n}}\n",
+                    pty2.display()
+                )),
             )
         }
     };
@@ -495,7 +562,7 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
                 tokio::time::sleep(Duration::from_millis(50)).await;
             }
         }
-        for n in 0..N {
+        for n in 0..messages() {
             publish(&mut json, n);
             from_goby3.published += 1;
             to_goby3.published += 1;
@@ -537,9 +604,10 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
     let (warm_from, warm_to) = (from_goby3.take_round(WARM_UP), to_goby3.take_round(WARM_UP));
     if link.app_acks() {
         println!(
-            "{}: first round (one message each way before the {N}): Goby3 -> gobyd delivered {} acked {}, \
+            "{}: first round (one message each way before the {}): Goby3 -> gobyd delivered {} acked {}, \
              gobyd -> Goby3 delivered {} acked {}",
             link.name(),
+            messages(),
             warm_from.delivered.get(&WARM_UP).copied().unwrap_or(0),
             warm_from.acked.get(&WARM_UP).copied().unwrap_or(0),
             warm_to.delivered.get(&WARM_UP).copied().unwrap_or(0),
@@ -565,125 +633,141 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
     drop(pacommshandler);
     drop(emulators);
     drop(moosdb);
-    let frames = frames_on_the_wire(&dir.join("gobyd-data").join("raw.log"));
+    let frames = frames_on_the_wire(&dir.join("gobyd-data").join("raw.log"), link);
     if complete {
         let _ = std::fs::remove_dir_all(&dir);
     }
     (from_goby3, to_goby3, frames)
 }
 
-/// One data frame (a datagram's frame, a Micro-Modem frame, an FDP
-/// packet's data) on the wire between the two nodes, as gobyd's mission
-/// log holds it.
-#[derive(Debug, Clone)]
-struct FrameSeen {
-    /// `Goby3` (read by gobyd) or `gobyd` (written by it).
-    sender: &'static str,
-    /// Its bytes.
-    bytes: usize,
-    /// The `fleet.Tick` messages in it, and their bytes.
-    ticks: usize,
-    tick_bytes: usize,
-    /// Its other parts, in order: the types decoded (the application ack,
-    /// gobyd's identity trailer), or what did not decode.
-    other: Vec<String>,
+/// The data frames of gobyd's mission log `raw_log` over `link`: those it
+/// wrote (`$CCTXD`, `$CCTDP`, datagrams out, a Popoto's `transmitJSON`
+/// payload, an ATM-900's packet online) and those it read (`$CARXD`,
+/// `$CARDP`, datagrams in, a Popoto's `Data`, an ATM-900's `DATA(…)`),
+/// each taken apart with the types that can be in it (`fleet.Tick`, the
+/// Micro-Modem's application ack, gobyd's frame identity). A Popoto frame
+/// is counted without Goby3's header byte before it, an ATM-900 frame
+/// without the packet's header and in bytes, not base-255 digits: the
+/// frame as a queue fills it, as on the other wires.
+fn frames_on_the_wire(raw_log: &Path, link: Link) -> Vec<FrameSeen> {
+    let raw = raw_records(raw_log);
+    let sent = match link {
+        Link::Popoto => popoto_frames(&raw),
+        Link::Benthos => benthos_frames(&raw),
+        _ => raw
+            .iter()
+            .map(|(sender, bytes)| (*sender, datagram_frames(sender, bytes)))
+            .collect(),
+    };
+    frames_seen(sent)
 }
 
-/// The data frames of gobyd's mission log `raw_log`: those it wrote
-/// (`$CCTXD`, `$CCTDP`, datagrams out) and those it read (`$CARXD`,
-/// `$CARDP`, datagrams in), each taken apart with the types that can be
-/// in it (`fleet.Tick`, the Micro-Modem's application ack, gobyd's frame
-/// identity).
-fn frames_on_the_wire(raw_log: &Path) -> Vec<FrameSeen> {
+/// The data frames of one record of a Micro-Modem's sentences or a UDP
+/// datagram, written or read by gobyd (`sender` the one who sent them).
+fn datagram_frames(sender: &str, bytes: &[u8]) -> Vec<Vec<u8>> {
     use modemdriver::micromodem::sentence::MmSentence;
     use prost::Message;
-    use prost_reflect::ReflectMessage;
-    use protos::goby::acomms::protobuf::{
-        modem_transmission::TransmissionType, FrameIdentity, MicroModemApplicationAck,
-        ModemTransmission,
-    };
-    let Ok(text) = std::fs::read_to_string(raw_log) else {
-        return Vec::new();
-    };
-    let mut codec = dccl::Codec::new();
-    let pool = dccl::compile_sources(&[("tick.proto", TICK_PROTO)]).unwrap();
-    codec
-        .load(&pool.get_message_by_name("fleet.Tick").unwrap())
-        .unwrap();
-    codec.load_type::<MicroModemApplicationAck>().unwrap();
-    codec.load_type::<FrameIdentity>().unwrap();
-    let mut seen = Vec::new();
-    for line in text.lines() {
-        let Ok(record) = serde_json::from_str::<serde_json::Value>(line) else {
-            continue;
-        };
-        let sender = match record["raw"].as_str() {
-            Some("out") => "gobyd",
-            Some("in") => "Goby3",
-            _ => continue,
-        };
-        let Some(bytes) = record["bytes_hex"]
-            .as_str()
-            .and_then(|h| hex::decode(h).ok())
-        else {
-            continue;
-        };
-        let frames: Vec<Vec<u8>> = if bytes.starts_with(b"$") {
-            match MmSentence::parse(bytes.trim_ascii_end()) {
-                Ok(MmSentence::TransmitData { data, .. })
-                | Ok(MmSentence::ReceiveData { data, .. })
-                | Ok(MmSentence::FdpTransmit { data, .. }) => vec![data],
-                Ok(MmSentence::FdpReceive { data_frames, .. }) => {
-                    vec![data_frames.into_iter().flat_map(|f| f.data).collect()]
-                }
-                _ => Vec::new(),
+    use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
+    if bytes.starts_with(b"$") {
+        match MmSentence::parse(bytes.trim_ascii_end()) {
+            Ok(MmSentence::TransmitData { data, .. })
+            | Ok(MmSentence::ReceiveData { data, .. })
+            | Ok(MmSentence::FdpTransmit { data, .. }) => vec![data],
+            Ok(MmSentence::FdpReceive { data_frames, .. }) => {
+                vec![data_frames.into_iter().flat_map(|f| f.data).collect()]
             }
-        } else {
-            match ModemTransmission::decode(bytes.as_slice()) {
-                // Multicast: gobyd hears its own datagrams too.
-                Ok(mt) if sender == "Goby3" && mt.src() == 2 => Vec::new(),
-                Ok(mt) if mt.r#type() == TransmissionType::Data => mt.frame,
-                _ => Vec::new(),
-            }
-        };
-        for frame in frames.into_iter().filter(|f| !f.is_empty()) {
-            let mut f = FrameSeen {
-                sender,
-                bytes: frame.len(),
-                ticks: 0,
-                tick_bytes: 0,
-                other: Vec::new(),
-            };
-            let mut at = 0;
-            while at < frame.len() && frame[at..].iter().any(|&b| b != 0) {
-                match codec.decode_with(&frame[at..], &dccl::DecodeOptions::default()) {
-                    Ok(d) => {
-                        let name = d.message.descriptor().full_name().to_string();
-                        if name == "fleet.Tick" {
-                            f.ticks += 1;
-                            f.tick_bytes += d.len;
-                        } else {
-                            f.other.push(format!(
-                                "{} {}",
-                                name.rsplit('.').next().unwrap_or(&name),
-                                d.len
-                            ));
-                        }
-                        at += d.len;
-                    }
-                    Err(_) => {
-                        f.other
-                            .push(format!("{} bytes not decoded", frame.len() - at));
-                        break;
-                    }
-                }
-            }
-            if f.ticks > 0 {
-                seen.push(f);
-            }
+            _ => Vec::new(),
+        }
+    } else {
+        match ModemTransmission::decode(bytes) {
+            // Multicast: gobyd hears its own datagrams too.
+            Ok(mt) if sender == "Goby3" && mt.src() == 2 => Vec::new(),
+            Ok(mt) if mt.r#type() == TransmissionType::Data => mt.frame,
+            _ => Vec::new(),
         }
     }
-    seen
+}
+
+/// The bytes of each direction of a byte stream, joined, as lines ending
+/// in `end`.
+fn stream_lines<'a>(
+    raw: &'a [(&'static str, Vec<u8>)],
+    sender: &'a str,
+    end: &'a str,
+) -> impl Iterator<Item = String> + 'a {
+    let joined: Vec<u8> = raw
+        .iter()
+        .filter(|(s, _)| *s == sender)
+        .flat_map(|(_, b)| b.iter().copied())
+        .collect();
+    String::from_utf8_lossy(&joined)
+        .split(end)
+        .map(str::to_string)
+        .collect::<Vec<_>>()
+        .into_iter()
+}
+
+/// The data frames of a Popoto's shell: gobyd's `transmitJSON` payloads and
+/// the modem's `Data` lines, each without Goby3's header byte (an ack's
+/// payload, the header byte alone, leaves no frame).
+fn popoto_frames(raw: &[(&'static str, Vec<u8>)]) -> Vec<(&'static str, Vec<Vec<u8>>)> {
+    use modemdriver::popoto::wire::{parse_modem_line, ModemLine};
+    let mut out = Vec::new();
+    for line in stream_lines(raw, "gobyd", "\n") {
+        let Some(json) = line.strip_prefix("transmitJSON ") else {
+            continue;
+        };
+        let v: serde_json::Value = serde_json::from_str(json).unwrap();
+        let data: Vec<u8> = v["Payload"]["Data"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| b.as_u64().unwrap() as u8)
+            .collect();
+        out.push(("gobyd", vec![data.get(1..).unwrap_or_default().to_vec()]));
+    }
+    for line in stream_lines(raw, "Goby3", "\r\n") {
+        if let Ok(Some(ModemLine::Data(data))) = parse_modem_line(&line) {
+            out.push(("Goby3", vec![data.get(1..).unwrap_or_default().to_vec()]));
+        }
+    }
+    out
+}
+
+/// The data frames of an ATM-900: the packets gobyd writes online (the
+/// write after `ATO`'s `CONNECT`) and the modem's `DATA(…)` receptions.
+fn benthos_frames(raw: &[(&'static str, Vec<u8>)]) -> Vec<(&'static str, Vec<Vec<u8>>)> {
+    use modemdriver::benthos::wire::{parse_modem_line, ModemLine, Packet, PacketKind};
+    let data = |p: Packet| match p.kind {
+        PacketKind::Data { .. } => p.frames,
+        _ => Vec::new(),
+    };
+    let mut out = Vec::new();
+    let mut online = false;
+    for (sender, bytes) in raw.iter().filter(|(s, _)| *s == "gobyd") {
+        if online {
+            out.push((*sender, data(Packet::decode(bytes).unwrap())));
+        }
+        online = bytes.as_slice() == b"ATO\r";
+    }
+    let mut reception: Option<Vec<u8>> = None;
+    for line in stream_lines(raw, "Goby3", "\r\n") {
+        match parse_modem_line(&line) {
+            Ok(ModemLine::Data { bytes, .. }) => reception = Some(bytes),
+            Ok(ModemLine::Hex(more)) => {
+                if let Some(r) = reception.as_mut() {
+                    r.extend(more);
+                }
+            }
+            Ok(ModemLine::EndOfPacket) => {
+                if let Some(r) = reception.take() {
+                    out.push(("Goby3", data(Packet::decode(&r).unwrap())));
+                }
+            }
+            _ => {}
+        }
+    }
+    out
 }
 
 #[test]
@@ -716,6 +800,8 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
             app_acks: true,
             mixed: true,
         },
+        Link::Popoto,
+        Link::Benthos,
     ]);
     let only = std::env::var("GOBY3_FLEET_ONLY").ok();
     let chosen: Vec<Link> = links
@@ -747,38 +833,12 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
     // The frames on each wire: bytes for the same messages from each
     // sender (measured, printed, not asserted: gobyd's frames end with
     // its identity trailer, docs/goby3.md).
-    println!();
-    println!("| driver | rate | sender | messages in the frame | frames | frame bytes | of them messages | the rest |");
-    println!("|---|---|---|---|---|---|---|---|");
-    for (link, frames) in &seen {
-        let mut groups: std::collections::BTreeMap<(&str, usize), Vec<&FrameSeen>> =
-            Default::default();
-        for f in frames {
-            groups.entry((f.sender, f.ticks)).or_default().push(f);
-        }
-        for ((sender, ticks), fs) in groups {
-            let range = |v: Vec<usize>| {
-                let (lo, hi) = (v.iter().min().unwrap(), v.iter().max().unwrap());
-                if lo == hi {
-                    lo.to_string()
-                } else {
-                    format!("{lo}-{hi}")
-                }
-            };
-            let mut rest: Vec<String> = fs.iter().map(|f| f.other.join(", ")).collect();
-            rest.sort();
-            rest.dedup();
-            println!(
-                "| {} | {} | {sender} | {ticks} | {} | {} | {} | {} |",
-                link.name(),
-                link.rate(),
-                fs.len(),
-                range(fs.iter().map(|f| f.bytes).collect()),
-                range(fs.iter().map(|f| f.tick_bytes).collect()),
-                rest.join("; ")
-            );
-        }
-    }
+    print_frame_table(
+        &seen
+            .into_iter()
+            .map(|(link, frames)| (link.name(), link.rate().to_string(), frames))
+            .collect::<Vec<_>>(),
+    );
     println!();
     println!(
         "| driver | rate | direction | published | delivered | acked | duplicates | expired |"
@@ -790,6 +850,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
             link.name(),
             match link {
                 Link::Udp | Link::Multicast => "-".to_string(),
+                Link::Popoto | Link::Benthos => link.rate().to_string(),
                 Link::MicroModem { mixed: true, .. } => format!("data and FDP {}", link.rate()),
                 Link::MicroModem { fdp: true, .. } => format!("FDP {}", link.rate()),
                 _ => link.rate().to_string(),
@@ -803,14 +864,19 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
     }
     for (link, direction, t) in &rows {
         let what = format!("{} rate {} {direction}", link.name(), link.rate());
-        assert_eq!(t.published, N, "{what}");
+        assert_eq!(t.published, messages(), "{what}");
         assert_eq!(
             t.delivered.len() as u32,
-            N,
+            messages(),
             "{what}: delivered {:?}",
             t.delivered
         );
-        assert_eq!(t.acked.len() as u32, N, "{what}: acked {:?}", t.acked);
+        assert_eq!(
+            t.acked.len() as u32,
+            messages(),
+            "{what}: acked {:?}",
+            t.acked
+        );
         assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
         assert_eq!(t.expired, 0, "{what}");
     }

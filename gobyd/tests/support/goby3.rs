@@ -328,3 +328,145 @@ pub fn count_goby3(key: &str, text: &str, to_goby3: &mut Tally, from_goby3: &mut
         _ => {}
     }
 }
+
+/// One data frame on the wire between a Goby3 node and a gobyd (a
+/// datagram's frame, a Micro-Modem frame, an FDP packet's data, a Popoto
+/// payload's or an ATM-900 packet's frame, an SBD message's frame), as
+/// gobyd's mission log holds it.
+#[derive(Debug, Clone)]
+pub struct FrameSeen {
+    /// `Goby3` (read by gobyd) or `gobyd` (written by it).
+    pub sender: &'static str,
+    /// Its bytes.
+    pub bytes: usize,
+    /// The `fleet.Tick` messages in it, and their bytes.
+    pub ticks: usize,
+    pub tick_bytes: usize,
+    /// Its other parts, in order: the types decoded (the application ack,
+    /// gobyd's identity trailer), or what did not decode; and what carried
+    /// it, where that is told (an SBD message's bytes).
+    pub other: Vec<String>,
+}
+
+/// Each write and read of gobyd's mission log `raw_log` (`raw` records),
+/// in order: `("gobyd", bytes)` written, `("Goby3", bytes)` read. Empty
+/// when there is no such file.
+pub fn raw_records(raw_log: &Path) -> Vec<(&'static str, Vec<u8>)> {
+    let Ok(text) = std::fs::read_to_string(raw_log) else {
+        return Vec::new();
+    };
+    text.lines()
+        .filter_map(|line| {
+            let record = serde_json::from_str::<Value>(line).ok()?;
+            let sender = match record["raw"].as_str() {
+                Some("out") => "gobyd",
+                Some("in") => "Goby3",
+                _ => return None,
+            };
+            let bytes = hex::decode(record["bytes_hex"].as_str()?).ok()?;
+            Some((sender, bytes))
+        })
+        .collect()
+}
+
+/// The frames `sent` (each sender's frames, by transmission) taken apart
+/// with the types that can be in them (`fleet.Tick`, the Micro-Modem's
+/// application ack, gobyd's frame identity); empty frames and frames with
+/// no `fleet.Tick` left out.
+pub fn frames_seen(sent: Vec<(&'static str, Vec<Vec<u8>>)>) -> Vec<FrameSeen> {
+    frames_seen_with(sent.into_iter().map(|(s, f)| (s, f, None)).collect())
+}
+
+/// One transmission of frames: its sender (`gobyd` or `Goby3`), its
+/// frames, and what carried them, in words, if told (`Some("SBD message
+/// 23 bytes")`).
+pub type Carried = (&'static str, Vec<Vec<u8>>, Option<String>);
+
+/// [`frames_seen`], each transmission with what carried it ([`Carried`]).
+pub fn frames_seen_with(sent: Vec<Carried>) -> Vec<FrameSeen> {
+    use prost_reflect::ReflectMessage;
+    use protos::goby::acomms::protobuf::{FrameIdentity, MicroModemApplicationAck};
+    let mut codec = dccl::Codec::new();
+    let pool = dccl::compile_sources(&[("tick.proto", TICK_PROTO)]).unwrap();
+    codec
+        .load(&pool.get_message_by_name("fleet.Tick").unwrap())
+        .unwrap();
+    codec.load_type::<MicroModemApplicationAck>().unwrap();
+    codec.load_type::<FrameIdentity>().unwrap();
+    let mut seen = Vec::new();
+    for (sender, frames, carrier) in sent {
+        for frame in frames.into_iter().filter(|f| !f.is_empty()) {
+            let mut f = FrameSeen {
+                sender,
+                bytes: frame.len(),
+                ticks: 0,
+                tick_bytes: 0,
+                other: Vec::new(),
+            };
+            let mut at = 0;
+            while at < frame.len() && frame[at..].iter().any(|&b| b != 0) {
+                match codec.decode_with(&frame[at..], &dccl::DecodeOptions::default()) {
+                    Ok(d) => {
+                        let name = d.message.descriptor().full_name().to_string();
+                        if name == "fleet.Tick" {
+                            f.ticks += 1;
+                            f.tick_bytes += d.len;
+                        } else {
+                            f.other.push(format!(
+                                "{} {}",
+                                name.rsplit('.').next().unwrap_or(&name),
+                                d.len
+                            ));
+                        }
+                        at += d.len;
+                    }
+                    Err(_) => {
+                        f.other
+                            .push(format!("{} bytes not decoded", frame.len() - at));
+                        break;
+                    }
+                }
+            }
+            if f.ticks > 0 {
+                f.other.extend(carrier.clone());
+                seen.push(f);
+            }
+        }
+    }
+    seen
+}
+
+/// Prints, per wire (`(driver, rate, frames)`), the frames of each sender
+/// grouped by the messages in them: how many, their bytes, the messages'
+/// bytes, and the rest (a markdown table; `--nocapture`).
+pub fn print_frame_table(wires: &[(String, String, Vec<FrameSeen>)]) {
+    println!();
+    println!("| driver | rate | sender | messages in the frame | frames | frame bytes | of them messages | the rest |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (driver, rate, frames) in wires {
+        let mut groups: BTreeMap<(&str, usize), Vec<&FrameSeen>> = BTreeMap::new();
+        for f in frames {
+            groups.entry((f.sender, f.ticks)).or_default().push(f);
+        }
+        for ((sender, ticks), fs) in groups {
+            let range = |v: Vec<usize>| {
+                let (lo, hi) = (v.iter().min().unwrap(), v.iter().max().unwrap());
+                if lo == hi {
+                    lo.to_string()
+                } else {
+                    format!("{lo}-{hi}")
+                }
+            };
+            let mut rest: Vec<String> = fs.iter().map(|f| f.other.join(", ")).collect();
+            rest.sort();
+            rest.dedup();
+            println!(
+                "| {driver} | {rate} | {sender} | {ticks} | {} | {} | {} | {} |",
+                fs.len(),
+                range(fs.iter().map(|f| f.bytes).collect()),
+                range(fs.iter().map(|f| f.tick_bytes).collect()),
+                rest.join("; ")
+            );
+        }
+    }
+}

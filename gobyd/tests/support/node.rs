@@ -460,6 +460,8 @@ pub enum Driver {
     Evologics(Evologics),
     /// `DRIVER_IRIDIUM` or `DRIVER_IRIDIUM_SHORE`.
     Iridium(Iridium),
+    /// A `driver { … }` section written out whole.
+    Text(String),
 }
 
 impl Driver {
@@ -471,6 +473,7 @@ impl Driver {
             Driver::Multicast(m) => m.render(),
             Driver::Evologics(e) => e.render(),
             Driver::Iridium(i) => i.render(),
+            Driver::Text(t) => t.clone(),
         }
     }
 }
