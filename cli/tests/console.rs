@@ -1048,11 +1048,16 @@ mod browser {
              && goby.state.connection.connected === false",
             broker::PATIENCE,
         );
-        let pill = page.eval("document.getElementById('connection').textContent");
-        assert_eq!(
-            pill,
-            json!("run time 2026-06-01 02:30:00 UTC; the replay has ended (the run's end)")
+        // The pill is drawn at the page's next frame after the state
+        // changed: waited for, then compared (a mismatch shows its text).
+        let ended = "run time 2026-06-01 02:30:00 UTC; the replay has ended (the run's end)";
+        page.wait(
+            "the pill of the replay's end",
+            &format!("document.getElementById('connection').textContent === {ended:?}"),
+            broker::PATIENCE,
         );
+        let pill = page.eval("document.getElementById('connection').textContent");
+        assert_eq!(pill, json!(ended));
         // Ages in the run's time: the ship was last heard as the traffic
         // ended, 30 minutes of drain before the run's end (not 56 years
         // ago, as a wall clock would say).
