@@ -23,6 +23,14 @@
 //!   emulator's key, which Goby3 cannot check: JWT check off) to Goby3's
 //!   DRIVER_IRIDIUM_SHORE (`SBD_ROCKBLOCK`, node 2) and takes its MT POSTs.
 //!
+//! - `goby3-vehicle-rudics`: Goby3's DRIVER_IRIDIUM (node 1) on an emulated
+//!   9523 (`--voice`) dials at its slots (rate 1, Goby3's RUDICS rate); the
+//!   emulated gateway connects each call to gobyd's DRIVER_IRIDIUM_SHORE's
+//!   `rudics_server_port` (node 2), which sends on the calls;
+//! - `goby3-shore-rudics`: gobyd's DRIVER_IRIDIUM (node 1) on the emulated
+//!   9523 dials; the calls reach Goby3's DRIVER_IRIDIUM_SHORE's
+//!   `rudics_server_port` (node 2).
+//!
 //! And with no pAcommsHandler: gobyd's vehicle on the pseudo-terminal of
 //! `goby_rockblock_simulator` and gobyd's shore (`SBD_ROCKBLOCK`, JWT check
 //! off: the simulator signs nothing) on its webhook and MT endpoint
@@ -33,6 +41,9 @@
 //! directory (`bin/pAcommsHandler` and `bin/goby_rockblock_simulator` in
 //! it), as `goby3_fleet.rs`; ignored otherwise.
 //! `GOBY3_IRIDIUM_ONLY=goby3-vehicle,...` runs only the pairings named;
+//! each pairing prints the frames it carried (SBD messages and RUDICS
+//! packets read from gobyd's mission log; a RockBLOCK shore's HTTP is not
+//! read), Goby3's and gobyd's;
 //! `GOBY3_IRIDIUM_KEEP=1` keeps every run's directory (the configurations,
 //! each process's log, gobyd's raw log) and prints where it is;
 //! `GOBY3_IRIDIUM_QUEUE="message_identity: false"` adds a setting to gobyd's
@@ -83,6 +94,12 @@ enum Pairing {
     Rockblock,
     RockblockService,
     Goby3VehicleRockblock,
+    /// Goby3's vehicle on an emulated 9523 dials; the emulated gateway
+    /// connects the call to gobyd's shore's RUDICS server.
+    Goby3VehicleRudics,
+    /// gobyd's vehicle on an emulated 9523 dials; the call reaches Goby3's
+    /// shore's RUDICS server.
+    Goby3ShoreRudics,
 }
 
 impl Pairing {
@@ -93,20 +110,39 @@ impl Pairing {
             Pairing::Rockblock => "rockblock",
             Pairing::RockblockService => "rockblock-service",
             Pairing::Goby3VehicleRockblock => "goby3-vehicle-rockblock",
+            Pairing::Goby3VehicleRudics => "goby3-vehicle-rudics",
+            Pairing::Goby3ShoreRudics => "goby3-shore-rudics",
+        }
+    }
+
+    /// The TDMA slots' rate: 1 on calls (Goby3's RUDICS rate), else 0 (SBD).
+    fn rate(self) -> u32 {
+        match self {
+            Pairing::Goby3VehicleRudics | Pairing::Goby3ShoreRudics => 1,
+            _ => 0,
         }
     }
 
     /// Goby3's node id.
     fn goby3_id(self) -> i32 {
         match self {
-            Pairing::Goby3Vehicle | Pairing::Goby3VehicleRockblock => 1,
+            Pairing::Goby3Vehicle
+            | Pairing::Goby3VehicleRockblock
+            | Pairing::Goby3VehicleRudics => 1,
             _ => 2,
         }
     }
 }
 
 /// A pAcommsHandler mission for node `id` with `driver_cfg`.
-fn mission(dir: &Path, moos_port: u16, id: i32, driver_cfg: &str, proto: &Path) -> PathBuf {
+fn mission(
+    dir: &Path,
+    moos_port: u16,
+    id: i32,
+    rate: u32,
+    driver_cfg: &str,
+    proto: &Path,
+) -> PathBuf {
     let text = format!(
         r#"ServerHost = localhost
 ServerPort = {moos_port}
@@ -121,8 +157,8 @@ ProcessConfig = pAcommsHandler
   }}
   mac_cfg {{
     type: MAC_FIXED_DECENTRALIZED
-    slot {{ src: 1 dest: -1 rate: 0 type: DATA slot_seconds: {SLOT_SECONDS} }}
-    slot {{ src: 2 dest: -1 rate: 0 type: DATA slot_seconds: {SLOT_SECONDS} }}
+    slot {{ src: 1 dest: -1 rate: {rate} type: DATA slot_seconds: {SLOT_SECONDS} }}
+    slot {{ src: 2 dest: -1 rate: {rate} type: DATA slot_seconds: {SLOT_SECONDS} }}
   }}
   queue_cfg {{
     minimum_ack_wait_seconds: {ACK_WAIT}
@@ -179,9 +215,22 @@ fn await_path(path: &Path, p: &mut Proc) {
 /// `goby modem emulate-iridium`: one 9603 at `link`, its gateway
 /// delivering MO to `mo_port` and taking MT on `mt_port`.
 fn emulator(goby: &Path, dir: &Path, link: &Path, mo_port: u16, mt_port: u16) -> Proc {
+    emulator_with(goby, dir, link, mo_port, mt_port, &[])
+}
+
+/// [`emulator`] with more of its arguments (`--voice`, `--rudics-shore`).
+fn emulator_with(
+    goby: &Path,
+    dir: &Path,
+    link: &Path,
+    mo_port: u16,
+    mt_port: u16,
+    more: &[&str],
+) -> Proc {
     let mut command = Command::new(goby);
     command
         .args(["modem", "emulate-iridium", "--imei", IMEI])
+        .args(more)
         .arg("--link")
         .arg(link)
         .args(["--mo-directip", &format!("127.0.0.1:{mo_port}")])
@@ -318,10 +367,56 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally, Vec<Fra
                 gobyd_vehicle(&link),
             )
         }
+        Pairing::Goby3VehicleRudics | Pairing::Goby3ShoreRudics => {
+            let link = dir.join("rudics");
+            let rudics_port = free_tcp_port();
+            let shore = format!("127.0.0.1:{rudics_port}");
+            helpers.push(emulator_with(
+                goby,
+                &dir,
+                &link,
+                mo_port,
+                mt_port,
+                &["--voice", "--rudics-shore", &shore],
+            ));
+            let voice = "DEVICE_VOICE_ENABLED_ISU";
+            if which == Pairing::Goby3VehicleRudics {
+                (
+                    format!(
+                        "    driver_type: DRIVER_IRIDIUM\n    connection_type: CONNECTION_SERIAL\n    serial_port: \"{}\"\n    serial_baud: 19200\n    [goby.acomms.iridium.protobuf.config] {{\n      device: {voice}\n      use_dtr: false\n      remote {{ iridium_number: \"00881600005\" modem_id: 2 }}\n      hangup_seconds_after_empty: 10\n      handshake_hangup_seconds: 2\n    }}",
+                        link.display()
+                    ),
+                    Iridium::shore(mo_port, mt_port, &[(1, IMEI)])
+                        .device(voice)
+                        .setting(&format!("rudics_server_port: {rudics_port}"))
+                        .shore_iridium("handshake_hangup_seconds: 2 hangup_seconds_after_empty: 10")
+                        ,
+                )
+            } else {
+                (
+                    format!(
+                        "    driver_type: DRIVER_IRIDIUM_SHORE\n    [goby.acomms.iridium.protobuf.shore_config] {{\n      sbd_type: SBD_DIRECTIP\n      mo_sbd_server_port: {mo_port}\n      mt_sbd_server_address: \"127.0.0.1\"\n      mt_sbd_server_port: {mt_port}\n      rudics_server_port: {rudics_port}\n      modem_id_to_imei {{ modem_id: 1 imei: \"{IMEI}\" }}\n      device: {voice}\n    }}\n    [goby.acomms.iridium.protobuf.config] {{ hangup_seconds_after_empty: 10 handshake_hangup_seconds: 2 }}"
+                    ),
+                    gobyd_vehicle(&link)
+                        .device(voice)
+                        .setting("remote { iridium_number: \"00881600005\" modem_id: 2 }")
+                        .setting("hangup_seconds_after_empty: 10")
+                        .setting("handshake_hangup_seconds: 2")
+                        ,
+                )
+            }
+        }
     };
     let goby3_id = which.goby3_id();
     let gobyd_id = 3 - goby3_id;
-    let mission = mission(&dir, moos_port, goby3_id, &goby3_driver, &proto);
+    let mission = mission(
+        &dir,
+        moos_port,
+        goby3_id,
+        which.rate(),
+        &goby3_driver,
+        &proto,
+    );
     let mut pah = Command::new(&goby3.pacommshandler);
     pah.arg(&mission)
         .env("LD_LIBRARY_PATH", &goby3.library_path);
@@ -330,7 +425,7 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally, Vec<Fra
     let json_port = free_tcp_port();
     let mut config = Node::new(gobyd_id)
         .driver(gobyd_driver)
-        .tdma(&[1, 2], 0, SLOT_SECONDS)
+        .tdma(&[1, 2], which.rate(), SLOT_SECONDS)
         .queue_setting(&format!("minimum_ack_wait_seconds: {ACK_WAIT}"));
     if let Some(extra) = std::env::var("GOBY3_IRIDIUM_QUEUE")
         .ok()
@@ -460,11 +555,44 @@ fn pairing(goby3: &Goby3, goby: &Path, which: Pairing) -> (Tally, Tally, Vec<Fra
     drop(pacommshandler);
     drop(helpers);
     drop(moosdb);
-    let frames = frames_seen_with(iridium_frames(&raw_records(
-        &dir.join("gobyd-data").join("raw.log"),
-    )));
+    let raw = raw_records(&dir.join("gobyd-data").join("raw.log"));
+    let frames = frames_seen_with(match which.rate() {
+        1 => rudics_frames(&raw),
+        _ => iridium_frames(&raw),
+    });
     finish(&dir, complete);
     (from_goby3, to_goby3, frames)
+}
+
+/// The RUDICS packets of gobyd's mission log (on the transceiver's serial
+/// line while a call is up, or on the shore's connection of a call), each
+/// with its frames: every CR-ended piece of each direction's bytes that
+/// reads as a packet (its CRC-32 checked), decoded with Goby3's Iridium
+/// header.
+fn rudics_frames(raw: &[(&'static str, Vec<u8>)]) -> Vec<Carried> {
+    use modemdriver::iridium::frame::decode_message;
+    use modemdriver::iridium::rudics;
+    let mut out = Vec::new();
+    for sender in ["gobyd", "Goby3"] {
+        let joined: Vec<u8> = raw
+            .iter()
+            .filter(|(s, _)| *s == sender)
+            .flat_map(|(_, b)| b.iter().copied())
+            .collect();
+        for piece in joined.split_inclusive(|&b| b == b'\r') {
+            let Ok(message) = rudics::decode(piece) else {
+                continue;
+            };
+            if let Ok(mt) = decode_message(&message) {
+                out.push((
+                    sender,
+                    mt.frame,
+                    Some(format!("RUDICS packet of {} bytes", message.len())),
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// The SBD messages of gobyd's mission log, each with its frames: over a
@@ -532,6 +660,8 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
         Pairing::Rockblock,
         Pairing::RockblockService,
         Pairing::Goby3VehicleRockblock,
+        Pairing::Goby3VehicleRudics,
+        Pairing::Goby3ShoreRudics,
     ]
     .into_iter()
     .filter(|p| {
@@ -549,8 +679,9 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
         let (from_goby3, to_goby3, frames) = pairing(&goby3, &goby, which);
         rows.push((which, "Goby3 -> gobyd", from_goby3));
         rows.push((which, "gobyd -> Goby3", to_goby3));
+        let wire = if which.rate() == 1 { "RUDICS" } else { "SBD" };
         wires.push((
-            format!("Iridium SBD, {}", which.tag()),
+            format!("Iridium {wire}, {}", which.tag()),
             "-".to_string(),
             frames,
         ));
