@@ -32,6 +32,13 @@
 //! `GOBY3_FLEET_STATS_LAYOUT` is given to the emulators as
 //! `--stats-layout` (default: the firmware's own).
 //!
+//! [`goby3_and_gobyd_keep_delivering_and_acking_across_restarts`] runs UDP,
+//! `mm1-rate0` and `mm2-fdp` (or those of them `GOBY3_FLEET_ONLY` names) in
+//! three rounds of [`messages`] each way: both nodes just started; gobyd
+//! killed and started again on its data directory; pAcommsHandler killed
+//! and started again (each kill once everything before is delivered and
+//! acked); every message of every round must be delivered once and acked.
+//!
 //! Node 1's configuration is written Goby3's way (a `.moos` mission file,
 //! `driver_cfg` with Goby3's extensions; its UDP remote without a modem
 //! id, which hears everything); node 2's the way gobyd's are.
@@ -355,10 +362,43 @@ fn emulator(
     p
 }
 
-/// One scenario: both nodes up, [`messages`] messages each way; returns (Goby3 to
+/// What comes before a round of a scenario's messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Round {
+    /// Both nodes just started.
+    First,
+    /// gobyd killed (SIGKILL) once everything before was delivered and
+    /// acked, and started again on its data directory.
+    GobydRestarted,
+    /// pAcommsHandler killed likewise and started again.
+    Goby3Restarted,
+}
+
+impl Round {
+    fn words(self) -> &'static str {
+        match self {
+            Round::First => "",
+            Round::GobydRestarted => "after gobyd's restart ",
+            Round::Goby3Restarted => "after Goby3's restart ",
+        }
+    }
+}
+
+/// One scenario: both nodes up, [`messages`] messages each way in each of
+/// `rounds` (the counts of every round together); returns (Goby3 to
 /// gobyd, gobyd to Goby3).
-fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameSeen>) {
-    let dir = scratch("goby3_fleet", &link.tag());
+fn scenario(
+    goby3: &Goby3,
+    goby: &Path,
+    link: Link,
+    rounds: &[Round],
+) -> (Tally, Tally, Vec<FrameSeen>) {
+    let tag = if rounds.len() > 1 {
+        format!("{}-restarts", link.tag())
+    } else {
+        link.tag()
+    };
+    let dir = scratch("goby3_fleet", &tag);
     let proto = dir.join("tick.proto");
     std::fs::write(&proto, TICK_PROTO).unwrap();
 
@@ -461,10 +501,13 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
         }
     };
     let mission = mission_file(&dir, moos_port, link, &goby3_driver, &proto);
-    let mut pah = Command::new(&goby3.pacommshandler);
-    pah.arg(&mission)
-        .env("LD_LIBRARY_PATH", &goby3.library_path);
-    let mut pacommshandler = Proc::spawn("pAcommsHandler", pah, &dir);
+    let start_pacommshandler = |name: &str| {
+        let mut pah = Command::new(&goby3.pacommshandler);
+        pah.arg(&mission)
+            .env("LD_LIBRARY_PATH", &goby3.library_path);
+        Proc::spawn(name, pah, &dir)
+    };
+    let mut pacommshandler = start_pacommshandler("pAcommsHandler");
 
     // Node 2: gobyd.
     let json_port = free_tcp_port();
@@ -491,7 +534,7 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
         .data_dir(&dir.join("gobyd-data"))
         .raw_log(true)
         .write(dir.join("gobyd.cfg"));
-    let gobyd = Gobyd::start_unconnected(&config, &[]);
+    let mut gobyd = Some(Gobyd::start_unconnected(&config, &[]));
     let mut json = Json::connect(json_port);
     json.send(r#"{"subscribe": ["ack", "expire"]}"#);
 
@@ -538,14 +581,58 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
                 r#"{{"publish": "fleet.Tick", "msg": {{"src": 2, "dest": 1, "n": {n}}}}}"#
             ));
         };
-        if link.app_acks() {
-            // The first round: one message each way, until delivered and
-            // acked (see [`WARM_UP`]).
-            publish(&mut json, WARM_UP);
+        for (round, restart) in rounds.iter().enumerate() {
+            match restart {
+                Round::First => {}
+                Round::GobydRestarted => {
+                    if let Some(g) = gobyd.take() {
+                        g.kill();
+                    }
+                    gobyd = Some(Gobyd::start_unconnected(&config, &[]));
+                    json = Json::connect(json_port);
+                    json.send(r#"{"subscribe": ["ack", "expire"]}"#);
+                }
+                Round::Goby3Restarted => {
+                    pacommshandler = start_pacommshandler(&format!("pAcommsHandler-{round}"));
+                    // Time for it to subscribe to TICK_OUT again.
+                    tokio::time::sleep(Duration::from_secs(3)).await;
+                }
+            }
+            let warm_up = WARM_UP - round as u32;
+            if link.app_acks() {
+                // The first round after a start: one message each way,
+                // until delivered and acked (see [`WARM_UP`]).
+                publish(&mut json, warm_up);
+                let deadline = Instant::now() + link.limit();
+                let warm = |t: &Tally| {
+                    t.delivered.contains_key(&warm_up) && t.acked.contains_key(&warm_up)
+                };
+                while !(warm(&to_goby3) && warm(&from_goby3)) && Instant::now() < deadline {
+                    while let Ok(v) = json.lines.try_recv() {
+                        count_gobyd(&v, &mut to_goby3, &mut from_goby3);
+                    }
+                    while let Ok(m) = mail.try_recv() {
+                        if let MoosValue::String(text) = &m.value {
+                            count_goby3(&m.key, text, &mut to_goby3, &mut from_goby3);
+                        }
+                    }
+                    assert!(
+                        pacommshandler.alive(),
+                        "pAcommsHandler exited\n{}",
+                        pacommshandler.tail()
+                    );
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+            }
+            let first = from_goby3.published;
+            for n in first..first + messages() {
+                publish(&mut json, n);
+                from_goby3.published += 1;
+                to_goby3.published += 1;
+            }
             let deadline = Instant::now() + link.limit();
-            let warm =
-                |t: &Tally| t.delivered.contains_key(&WARM_UP) && t.acked.contains_key(&WARM_UP);
-            while !(warm(&to_goby3) && warm(&from_goby3)) && Instant::now() < deadline {
+            let mut done_at: Option<Instant> = None;
+            loop {
                 while let Ok(v) = json.lines.try_recv() {
                     count_gobyd(&v, &mut to_goby3, &mut from_goby3);
                 }
@@ -554,6 +641,21 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
                         count_goby3(&m.key, text, &mut to_goby3, &mut from_goby3);
                     }
                 }
+                let now = Instant::now();
+                if to_goby3.complete() && from_goby3.complete() {
+                    // Another full cycle: a repeat would show by then.
+                    let settle = Duration::from_secs_f64(
+                        f64::from(link.slots()) * link.slot_seconds() + 1.0,
+                    );
+                    match done_at {
+                        None => done_at = Some(now),
+                        Some(t) if now >= t + settle => break,
+                        _ => {}
+                    }
+                }
+                if now >= deadline {
+                    break;
+                }
                 assert!(
                     pacommshandler.alive(),
                     "pAcommsHandler exited\n{}",
@@ -561,58 +663,29 @@ fn scenario(goby3: &Goby3, goby: &Path, link: Link) -> (Tally, Tally, Vec<FrameS
                 );
                 tokio::time::sleep(Duration::from_millis(50)).await;
             }
-        }
-        for n in 0..messages() {
-            publish(&mut json, n);
-            from_goby3.published += 1;
-            to_goby3.published += 1;
-        }
-        let deadline = Instant::now() + link.limit();
-        let mut done_at: Option<Instant> = None;
-        loop {
-            while let Ok(v) = json.lines.try_recv() {
-                count_gobyd(&v, &mut to_goby3, &mut from_goby3);
-            }
-            while let Ok(m) = mail.try_recv() {
-                if let MoosValue::String(text) = &m.value {
-                    count_goby3(&m.key, text, &mut to_goby3, &mut from_goby3);
-                }
-            }
-            let now = Instant::now();
-            if to_goby3.complete() && from_goby3.complete() {
-                // Another full cycle: a repeat would show by then.
-                let settle =
-                    Duration::from_secs_f64(f64::from(link.slots()) * link.slot_seconds() + 1.0);
-                match done_at {
-                    None => done_at = Some(now),
-                    Some(t) if now >= t + settle => break,
-                    _ => {}
-                }
-            }
-            if now >= deadline {
+            if !(to_goby3.complete() && from_goby3.complete()) {
+                // The rounds after this one would count nothing new.
                 break;
             }
-            assert!(
-                pacommshandler.alive(),
-                "pAcommsHandler exited\n{}",
-                pacommshandler.tail()
-            );
-            tokio::time::sleep(Duration::from_millis(50)).await;
         }
         client.close().await;
     });
-    let (warm_from, warm_to) = (from_goby3.take_round(WARM_UP), to_goby3.take_round(WARM_UP));
-    if link.app_acks() {
-        println!(
-            "{}: first round (one message each way before the {}): Goby3 -> gobyd delivered {} acked {}, \
-             gobyd -> Goby3 delivered {} acked {}",
-            link.name(),
-            messages(),
-            warm_from.delivered.get(&WARM_UP).copied().unwrap_or(0),
-            warm_from.acked.get(&WARM_UP).copied().unwrap_or(0),
-            warm_to.delivered.get(&WARM_UP).copied().unwrap_or(0),
-            warm_to.acked.get(&WARM_UP).copied().unwrap_or(0),
-        );
+    for (round, restart) in rounds.iter().enumerate() {
+        let warm_up = WARM_UP - round as u32;
+        let (warm_from, warm_to) = (from_goby3.take_round(warm_up), to_goby3.take_round(warm_up));
+        if link.app_acks() {
+            println!(
+                "{}: first round {}(one message each way before the {}): Goby3 -> gobyd delivered {} acked {}, \
+                 gobyd -> Goby3 delivered {} acked {}",
+                link.name(),
+                restart.words(),
+                messages(),
+                warm_from.delivered.get(&warm_up).copied().unwrap_or(0),
+                warm_from.acked.get(&warm_up).copied().unwrap_or(0),
+                warm_to.delivered.get(&warm_up).copied().unwrap_or(0),
+                warm_to.acked.get(&warm_up).copied().unwrap_or(0),
+            );
+        }
     }
     // Kept with its logs unless everything went as it must.
     let clean = |t: &Tally| t.complete() && t.duplicates() == 0 && t.expired == 0;
@@ -824,7 +897,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
                 continue;
             }
         }
-        let (from_goby3, to_goby3, frames) = scenario(&goby3, &goby, link);
+        let (from_goby3, to_goby3, frames) = scenario(&goby3, &goby, link, &[Round::First]);
         for (direction, t) in [("Goby3 -> gobyd", from_goby3), ("gobyd -> Goby3", to_goby3)] {
             rows.push((link, direction, t));
         }
@@ -877,6 +950,79 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
             "{what}: acked {:?}",
             t.acked
         );
+        assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
+        assert_eq!(t.expired, 0, "{what}");
+    }
+}
+
+#[test]
+#[cfg_attr(
+    not(goby3_build),
+    ignore = "needs a Goby3 build: GOBY3_BUILD=<goby3 build dir> cargo test -p gobyd --test goby3_fleet -- --nocapture"
+)]
+fn goby3_and_gobyd_keep_delivering_and_acking_across_restarts() {
+    let goby3 = goby3();
+    let goby = goby_bin();
+    let links = [
+        Link::Udp,
+        Link::MicroModem {
+            generation: 1,
+            rate: 0,
+            fdp: false,
+            app_acks: false,
+            mixed: false,
+        },
+        Link::MicroModem {
+            generation: 2,
+            rate: 1,
+            fdp: true,
+            app_acks: true,
+            mixed: false,
+        },
+    ];
+    let only = std::env::var("GOBY3_FLEET_ONLY").ok();
+    let rounds = [Round::First, Round::GobydRestarted, Round::Goby3Restarted];
+    let mut rows = Vec::new();
+    for link in links.into_iter().filter(|l| match only.as_deref() {
+        Some(o) => o.split(',').any(|t| t.trim() == l.tag()),
+        None => true,
+    }) {
+        let (from_goby3, to_goby3, _) = scenario(&goby3, &goby, link, &rounds);
+        rows.push((link, "Goby3 -> gobyd", from_goby3));
+        rows.push((link, "gobyd -> Goby3", to_goby3));
+    }
+    println!();
+    println!(
+        "| driver | rate | direction | published (3 rounds) | delivered | acked | duplicates | expired |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for (link, direction, t) in &rows {
+        println!(
+            "| {} | {} | {direction} | {} | {} | {} | {} | {} |",
+            link.name(),
+            link.rate(),
+            t.published,
+            t.delivered.len(),
+            t.acked.len(),
+            t.duplicates(),
+            t.expired
+        );
+    }
+    for (link, direction, t) in &rows {
+        let what = format!(
+            "{} rate {} {direction}, across restarts",
+            link.name(),
+            link.rate()
+        );
+        let all = messages() * rounds.len() as u32;
+        assert_eq!(t.published, all, "{what}");
+        assert_eq!(
+            t.delivered.len() as u32,
+            all,
+            "{what}: delivered {:?}",
+            t.delivered
+        );
+        assert_eq!(t.acked.len() as u32, all, "{what}: acked {:?}", t.acked);
         assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
         assert_eq!(t.expired, 0, "{what}");
     }
