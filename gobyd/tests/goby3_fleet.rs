@@ -33,7 +33,8 @@
 //! `--stats-layout` (default: the firmware's own).
 //!
 //! [`goby3_and_gobyd_keep_delivering_and_acking_across_restarts`] runs UDP,
-//! `mm1-rate0` and `mm2-fdp` (or those of them `GOBY3_FLEET_ONLY` names) in
+//! `mm1-rate0`, `mm2-fdp`, `popoto` and `benthos` (or those of them
+//! `GOBY3_FLEET_ONLY` names) in
 //! three rounds of [`messages`] each way: both nodes just started; gobyd
 //! killed and started again on its data directory; pAcommsHandler killed
 //! and started again (each kill once everything before is delivered and
@@ -979,6 +980,8 @@ fn goby3_and_gobyd_keep_delivering_and_acking_across_restarts() {
             app_acks: true,
             mixed: false,
         },
+        Link::Popoto,
+        Link::Benthos,
     ];
     let only = std::env::var("GOBY3_FLEET_ONLY").ok();
     let rounds = [Round::First, Round::GobydRestarted, Round::Goby3Restarted];
