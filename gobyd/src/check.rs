@@ -176,7 +176,8 @@ fn entry_problems(
 /// the driver sends ([`modemdriver::check::largest_frame`]: the EvoLogics
 /// S2C's burst size): such a message would never go. With several links,
 /// larger than the largest frame of every link the type may use
-/// ([`config::links`]).
+/// ([`config::links`]), with its identity trailer (such a type never goes
+/// without it).
 fn frame_problems(
     codec: &Arc<dccl::Codec>,
     queue: &protos::goby::acomms::protobuf::QueueManagerConfig,
@@ -209,9 +210,25 @@ fn frame_problems(
         else {
             continue;
         };
-        if limits.is_empty() || limits.iter().any(|(largest, _, _)| size <= *largest) {
+        // A type of several links carries its identity trailer in every
+        // frame (the queue never sends it without: `queue::links`).
+        let trailer = if allowed.len() > 1 && queue.message_identity.unwrap_or(true) {
+            queue::identity::TrailerCodec::new().size(1)
+        } else {
+            0
+        };
+        if limits.is_empty()
+            || limits
+                .iter()
+                .any(|(largest, _, _)| size + trailer <= *largest)
+        {
             continue;
         }
+        let with_trailer = if trailer > 0 {
+            format!(" (with the identity trailer of {trailer} bytes a type of several links carries, {} bytes)", size + trailer)
+        } else {
+            String::new()
+        };
         let field = if i < configured {
             format!("queue.message_entry[{i}].protobuf_name")
         } else {
@@ -225,8 +242,8 @@ fn frame_problems(
                 modemdriver::check::limits(driver).unwrap_or_default()
             ),
             many => format!(
-                "{} encodes to up to {size} bytes, more than the largest frame of every link it may use \
-                 ({}): it could never be sent",
+                "{} encodes to up to {size} bytes{with_trailer}, more than the largest frame of every link \
+                 it may use ({}): it could never be sent",
                 entry.protobuf_name,
                 many.iter()
                     .map(|(largest, view, _)| format!("{}: {largest} bytes", view.name))

@@ -179,3 +179,42 @@ fn a_benthos_ping_slot_is_checked_as_the_driver_runs_it() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_type_of_several_links_must_fit_their_frames_with_its_identity() {
+    let dir = std::env::temp_dir().join(format!("gobyd-check-links-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("links.cfg");
+    // goby.example.Command encodes to up to 25 bytes; its trailer alone
+    // takes 4 more.
+    let link = |name: &str, port: u16, bytes: u32| {
+        format!(
+            "link {{\n  name: \"{name}\"\n  driver {{ driver_type: DRIVER_POPOTO connection_type: CONNECTION_TCP_AS_CLIENT \
+             tcp_server: \"127.0.0.1\" tcp_port: {port} popoto {{ max_frame_bytes: {bytes} }} }}\n  \
+             mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 10 }} }}\n}}\n"
+        )
+    };
+    let two = |bytes: u32, extra: &str| {
+        format!(
+            "modem_id: 1\ndata_dir: \"{}\"\n{}{}{extra}",
+            dir.join("data").display(),
+            link("a", 17000, bytes),
+            link("b", 17001, bytes)
+        )
+    };
+    let (code, _, err) = check(&path, &two(27, ""));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains(
+            "goby.example.Command encodes to up to 25 bytes (with the identity trailer of 4 bytes \
+             a type of several links carries, 29 bytes), more than the largest frame of every link"
+        ),
+        "{err}"
+    );
+    let (code, out, err) = check(&path, &two(29, ""));
+    assert_eq!(code, Some(0), "{out}{err}");
+    // Frames without identity: the message alone must fit.
+    let (code, out, err) = check(&path, &two(27, "queue { message_identity: false }\n"));
+    assert_eq!(code, Some(0), "{out}{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -28,6 +28,8 @@
 //! a cycle of data and FDP slots, Goby3 with `use_application_acks: true`
 //! and gobyd with `application_acks: FDP_ONLY`, and `mm2-rate1-app-acks`:
 //! data cycles with application acks at both nodes);
+//! `GOBY3_FLEET_KEEP=1` keeps every scenario's directory (configurations,
+//! each process's log, gobyd's raw log) and prints where it is;
 //! `GOBY3_FLEET_MESSAGES=1` publishes 1 message each way (1 to 5), not 5;
 //! `GOBY3_FLEET_STATS_LAYOUT` is given to the emulators as
 //! `--stats-layout` (default: the firmware's own).
@@ -708,7 +710,9 @@ fn scenario(
     drop(emulators);
     drop(moosdb);
     let frames = frames_on_the_wire(&dir.join("gobyd-data").join("raw.log"), link);
-    if complete {
+    if std::env::var_os("GOBY3_FLEET_KEEP").is_some_and(|v| !v.is_empty()) {
+        println!("kept {}", dir.display());
+    } else if complete {
         let _ = std::fs::remove_dir_all(&dir);
     }
     (from_goby3, to_goby3, frames)

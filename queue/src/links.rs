@@ -10,8 +10,9 @@
 //!   next one may too once `timeout` has passed since the message was
 //!   queued without its being acknowledged (or sent, for a type without
 //!   ack), the one after that another `timeout` later, and so on. A link
-//!   that is down, or whose budget has not the bytes of the message left,
-//!   is skipped at once: the next link takes its turn.
+//!   that is down, or whose budget has not the bytes of the message left
+//!   (with its identity trailer, when frames carry one), is skipped at
+//!   once: the next link takes its turn.
 //! - [`LinkPolicy::CheapestFirst`]: the same, the links taken in the order
 //!   of their `cost` (lowest first; equal costs in the order listed).
 //! - [`LinkPolicy::FloodAll`]: every listed link that is up and within its

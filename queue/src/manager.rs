@@ -637,7 +637,11 @@ impl QueueManager {
                 };
                 let remaining = free.saturating_sub(reserve);
                 // A first message too large to carry its identity in this
-                // frame still goes, alone and without it.
+                // frame still goes, alone and without it, unless its type
+                // may travel over several links: a copy without identity
+                // would be delivered beside the other links' copies, so it
+                // waits for a frame with room for both (or for another
+                // link).
                 let alone = self.send_identity && ids.is_empty();
                 let room = if alone { free } else { remaining };
                 if room < self.smallest_message {
@@ -646,6 +650,10 @@ impl QueueManager {
                 let dest = request.dest();
                 let mut winner = None;
                 while let Some(c) = contenders.pop() {
+                    let room = match &self.links {
+                        Some(links) if alone && links.several(c.dccl_id) => remaining,
+                        _ => room,
+                    };
                     if let Some(next) = self.next_on(c.index, link, now) {
                         if can_join(&self.queues[c.index], next, room, dest, ack_forbidden) {
                             winner = Some((c, next));
@@ -711,7 +719,12 @@ impl QueueManager {
                 let m = &self.queues[index].messages[next];
                 (
                     links.several(contender.dccl_id),
-                    links.others_to_carry(contender.dccl_id, link, m.marks.mask(), m.encoded.len()),
+                    links.others_to_carry(
+                        contender.dccl_id,
+                        link,
+                        m.marks.mask(),
+                        self.wire_len(m.encoded.len()),
+                    ),
                 )
             }
             None => (false, false),
@@ -1001,6 +1014,22 @@ impl QueueManager {
             .expect("configured ids have queues")
     }
 
+    /// The bytes a message of `len` bytes takes on a link that may carry
+    /// it: its own, and with `message_identity` on, its identity (a frame
+    /// of it alone ends with a trailer of [`TrailerCodec::size`]`(1)`
+    /// bytes; each further message adds less than that). A link's budget
+    /// and largest frame must hold them all: a message of a type that may
+    /// travel over several links never goes without its identity (see
+    /// [`Self::fill`]'s frames), so a link whose budget holds the message
+    /// but not its trailer is passed over at once for the next.
+    fn wire_len(&self, len: usize) -> usize {
+        if self.send_identity {
+            len + self.trailer.size(1)
+        } else {
+            len
+        }
+    }
+
     /// The message of queue `index` to give to `link` now, if any: the
     /// next not awaiting an ack there that the link rules let it carry.
     fn next_on(&self, index: usize, link: LinkIndex, now: Micros) -> Option<usize> {
@@ -1008,7 +1037,7 @@ impl QueueManager {
         match &self.links {
             None => q.next_index_on(link, |_| true),
             Some(links) => q.next_index_on(link, |m| {
-                links.may_carry(q.id, link, m.queued_at, m.encoded.len(), now)
+                links.may_carry(q.id, link, m.queued_at, self.wire_len(m.encoded.len()), now)
             }),
         }
     }

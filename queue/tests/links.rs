@@ -213,6 +213,67 @@ fn a_link_down_or_over_budget_is_skipped_at_once_and_taken_again_when_back() {
     assert_eq!(request(&mut n, IRIDIUM, 2).1, vec![3]);
 }
 
+/// The frame a data request of `link` for node 2, one frame of at most
+/// `max_frame_bytes`, comes back with (not decoded: it may end with a
+/// trailer).
+fn frame_of(node: &mut Node, link: usize, max_frame_bytes: usize) -> Vec<u8> {
+    let mut tx = ModemTransmission {
+        src: Some(1),
+        dest: Some(2),
+        max_frame_bytes: Some(max_frame_bytes as u32),
+        max_num_frames: Some(1),
+        ..Default::default()
+    };
+    node.manager
+        .handle_modem_data_request(&mut tx, link)
+        .unwrap();
+    tx.frame.into_iter().next().unwrap_or_default()
+}
+
+#[test]
+fn a_message_of_several_links_never_goes_without_its_identity() {
+    let mut n = node_with(priority(60.0), [1.0, 10.0], true);
+    let size = n
+        .manager
+        .codec()
+        .size(&n.message("Status", 1, 2, 6))
+        .unwrap();
+    // Acoustic's budget holds the message but not its trailer: the
+    // message would overspend it, so Iridium takes it at once, with its
+    // identity (a trailer of 4 bytes).
+    let poor = LinkState {
+        up: true,
+        budget_left: Some(size + 2),
+    };
+    n.manager.links_mut().unwrap().set_state(ACOUSTIC, poor);
+    n.push("Status", 1, 2, 6);
+    assert_eq!(frame_of(&mut n, ACOUSTIC, 32), Vec::<u8>::new());
+    assert_eq!(frame_of(&mut n, IRIDIUM, 32).len(), size + 4);
+
+    // A frame of room for the message alone (the budget left when the
+    // daemon cut the request to it): the message does not go in it bare,
+    // where the receiver would deliver it beside another link's copy.
+    let mut n = node_with(priority(60.0), [1.0, 10.0], true);
+    n.push("Status", 1, 2, 7);
+    assert_eq!(frame_of(&mut n, ACOUSTIC, size), Vec::<u8>::new());
+    // With room for both, it goes, identified.
+    assert_eq!(frame_of(&mut n, ACOUSTIC, 32).len(), size + 4);
+
+    // A type of one link still goes bare in such a frame (no other copy
+    // can arrive).
+    let mut n = node_with(
+        Some(LinkRule::new(
+            vec![ACOUSTIC],
+            LinkPolicy::PriorityTimeout,
+            60.0,
+        )),
+        [1.0, 10.0],
+        true,
+    );
+    n.push("Status", 1, 2, 8);
+    assert_eq!(frame_of(&mut n, ACOUSTIC, size).len(), size);
+}
+
 #[test]
 fn cheapest_first_starts_with_the_lowest_cost() {
     let rule = LinkRule::new(vec![ACOUSTIC, IRIDIUM], LinkPolicy::CheapestFirst, 30.0);
