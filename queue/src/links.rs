@@ -11,8 +11,9 @@
 //!   queued without its being acknowledged (or sent, for a type without
 //!   ack), the one after that another `timeout` later, and so on. A link
 //!   that is down, or whose budget has not the bytes of the message left
-//!   (with its identity trailer, when frames carry one), is skipped at
-//!   once: the next link takes its turn.
+//!   (with its identity trailer, when frames carry one: a type of several
+//!   links never goes without it), is skipped at once: the next link takes
+//!   its turn.
 //! - [`LinkPolicy::CheapestFirst`]: the same, the links taken in the order
 //!   of their `cost` (lowest first; equal costs in the order listed).
 //! - [`LinkPolicy::FloodAll`]: every listed link that is up and within its

@@ -723,7 +723,7 @@ impl QueueManager {
                         contender.dccl_id,
                         link,
                         m.marks.mask(),
-                        self.wire_len(m.encoded.len()),
+                        self.wire_len(contender.dccl_id, m.encoded.len()),
                     ),
                 )
             }
@@ -1014,19 +1014,21 @@ impl QueueManager {
             .expect("configured ids have queues")
     }
 
-    /// The bytes a message of `len` bytes takes on a link that may carry
-    /// it: its own, and with `message_identity` on, its identity (a frame
-    /// of it alone ends with a trailer of [`TrailerCodec::size`]`(1)`
-    /// bytes; each further message adds less than that). A link's budget
-    /// and largest frame must hold them all: a message of a type that may
-    /// travel over several links never goes without its identity (see
-    /// [`Self::fill`]'s frames), so a link whose budget holds the message
-    /// but not its trailer is passed over at once for the next.
-    fn wire_len(&self, len: usize) -> usize {
-        if self.send_identity {
-            len + self.trailer.size(1)
-        } else {
-            len
+    /// The bytes a message of type `dccl_id` and `len` bytes takes on a
+    /// link that may carry it: its own, and for a type that may travel over
+    /// several links, with `message_identity` on, its identity (a frame of
+    /// it alone ends with a trailer of [`TrailerCodec::size`]`(1)` bytes;
+    /// each further message adds less than that). Such a message never
+    /// goes without its identity (see [`Self::fill`]'s frames), so a link
+    /// whose budget or largest frame holds the message but not its trailer
+    /// is passed over at once for the next. A type of one link may go
+    /// without (no other copy can arrive): its own bytes.
+    fn wire_len(&self, dccl_id: u32, len: usize) -> usize {
+        match &self.links {
+            Some(links) if self.send_identity && links.several(dccl_id) => {
+                len + self.trailer.size(1)
+            }
+            _ => len,
         }
     }
 
@@ -1037,7 +1039,13 @@ impl QueueManager {
         match &self.links {
             None => q.next_index_on(link, |_| true),
             Some(links) => q.next_index_on(link, |m| {
-                links.may_carry(q.id, link, m.queued_at, self.wire_len(m.encoded.len()), now)
+                links.may_carry(
+                    q.id,
+                    link,
+                    m.queued_at,
+                    self.wire_len(q.id, m.encoded.len()),
+                    now,
+                )
             }),
         }
     }

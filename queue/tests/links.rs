@@ -272,6 +272,14 @@ fn a_message_of_several_links_never_goes_without_its_identity() {
     );
     n.push("Status", 1, 2, 8);
     assert_eq!(frame_of(&mut n, ACOUSTIC, size).len(), size);
+    // And a budget of its bytes alone lets it go.
+    let poor = LinkState {
+        up: true,
+        budget_left: Some(size),
+    };
+    n.manager.links_mut().unwrap().set_state(ACOUSTIC, poor);
+    n.push("Status", 1, 2, 9);
+    assert_eq!(frame_of(&mut n, ACOUSTIC, size).len(), size);
 }
 
 #[test]
