@@ -942,21 +942,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_both_ways() {
     }
     for (link, direction, t) in &rows {
         let what = format!("{} rate {} {direction}", link.name(), link.rate());
-        assert_eq!(t.published, messages(), "{what}");
-        assert_eq!(
-            t.delivered.len() as u32,
-            messages(),
-            "{what}: delivered {:?}",
-            t.delivered
-        );
-        assert_eq!(
-            t.acked.len() as u32,
-            messages(),
-            "{what}: acked {:?}",
-            t.acked
-        );
-        assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
-        assert_eq!(t.expired, 0, "{what}");
+        t.assert_each_once(&what, messages());
     }
 }
 
@@ -1021,16 +1007,6 @@ fn goby3_and_gobyd_keep_delivering_and_acking_across_restarts() {
             link.name(),
             link.rate()
         );
-        let all = messages() * rounds.len() as u32;
-        assert_eq!(t.published, all, "{what}");
-        assert_eq!(
-            t.delivered.len() as u32,
-            all,
-            "{what}: delivered {:?}",
-            t.delivered
-        );
-        assert_eq!(t.acked.len() as u32, all, "{what}: acked {:?}", t.acked);
-        assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
-        assert_eq!(t.expired, 0, "{what}");
+        t.assert_each_once(&what, messages() * rounds.len() as u32);
     }
 }

@@ -705,21 +705,7 @@ fn goby3_and_gobyd_deliver_and_ack_every_message_over_iridium() {
     }
     for (which, direction, t) in &rows {
         let what = format!("{} {direction}", which.tag());
-        assert_eq!(t.published, messages(), "{what}");
-        assert_eq!(
-            t.delivered.len() as u32,
-            messages(),
-            "{what}: delivered {:?}",
-            t.delivered
-        );
-        assert_eq!(
-            t.acked.len() as u32,
-            messages(),
-            "{what}: acked {:?}",
-            t.acked
-        );
-        assert_eq!(t.duplicates(), 0, "{what}: delivered {:?}", t.delivered);
-        assert_eq!(t.expired, 0, "{what}");
+        t.assert_each_once(&what, messages());
     }
 }
 

@@ -230,6 +230,31 @@ impl Tally {
         self.delivered.values().map(|c| c - 1).sum()
     }
 
+    /// Asserts (naming the run `what`) that `expected` messages were
+    /// published, each delivered once and acknowledged, none expired.
+    pub fn assert_each_once(&self, what: &str, expected: u32) {
+        assert_eq!(self.published, expected, "{what}");
+        assert_eq!(
+            self.delivered.len() as u32,
+            expected,
+            "{what}: delivered {:?}",
+            self.delivered
+        );
+        assert_eq!(
+            self.acked.len() as u32,
+            expected,
+            "{what}: acked {:?}",
+            self.acked
+        );
+        assert_eq!(
+            self.duplicates(),
+            0,
+            "{what}: delivered {:?}",
+            self.delivered
+        );
+        assert_eq!(self.expired, 0, "{what}");
+    }
+
     /// The counts of message number `n` (a first round sent alone), taken
     /// out.
     pub fn take_round(&mut self, n: u32) -> Tally {
