@@ -101,13 +101,18 @@ async fn the_rate_follows_the_snr_heard_and_each_choice_is_told() {
             let Ok(event) = event else { continue };
             let event: Arc<DaemonEvent> = event;
             match &*event {
-                DaemonEvent::Modem(ModemEvent::RateChoice { dest, choice, .. }) => {
-                    seen.push((*dest, choice.rate, choice.reason.name()))
-                }
+                DaemonEvent::Modem {
+                    event: ModemEvent::RateChoice { dest, choice, .. },
+                    ..
+                } => seen.push((*dest, choice.rate, choice.reason.name())),
                 // The slot start tells the rate chosen.
-                DaemonEvent::Modem(ModemEvent::SlotStart {
-                    initiated: Some(t), ..
-                }) => assert_eq!(Some(t.rate()), seen.last().map(|s| s.1)),
+                DaemonEvent::Modem {
+                    event:
+                        ModemEvent::SlotStart {
+                            initiated: Some(t), ..
+                        },
+                    ..
+                } => assert_eq!(Some(t.rate()), seen.last().map(|s| s.1)),
                 _ => {}
             }
         }

@@ -200,14 +200,20 @@ async fn run(faults: Faults) -> Tally {
         let repeats = repeats.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
-                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Skipped { reason })) =
-                    e.as_ref()
+                if let DaemonEvent::Modem {
+                    event: ModemEvent::Status(DriverStatus::Skipped { reason }),
+                    ..
+                } = e.as_ref()
                 {
                     if reason.contains("repeating") {
                         *repeats.lock().unwrap() += 1;
                     }
                 }
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
+                if let DaemonEvent::Modem {
+                    event: ModemEvent::Received { transmission, .. },
+                    ..
+                } = e.as_ref()
+                {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {

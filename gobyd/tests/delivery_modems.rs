@@ -385,7 +385,11 @@ async fn run(faults: Faults) -> Tally {
         let receptions = receptions.clone();
         tokio::spawn(async move {
             while let Ok(e) = link_events.recv().await {
-                if let DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) = e.as_ref() {
+                if let DaemonEvent::Modem {
+                    event: ModemEvent::Received { transmission, .. },
+                    ..
+                } = e.as_ref()
+                {
                     if transmission.r#type() == TransmissionType::Data
                         && !transmission.frame.is_empty()
                     {

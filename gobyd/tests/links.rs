@@ -294,6 +294,8 @@ fn traffic_moves_to_iridium_when_acoustic_goes_silent_and_back_when_it_returns()
         assert_eq!(firsts[1 - from][note].1, "acoustic", "{note} came over");
     }
 
+    // The vehicle's client hears the modem and MAC events from here on.
+    assert!(vehicle.send(r#"{"subscribe": ["modem", "mac"]}"#));
     // The acoustic channel goes silent.
     relay.silence(true);
     let silenced = now_micros();
@@ -348,6 +350,18 @@ fn traffic_moves_to_iridium_when_acoustic_goes_silent_and_back_when_it_returns()
         assert_eq!(firsts[1 - from][note].1, "acoustic", "{note} came over");
     }
     let fail_back = first_over(&data, &back, "acoustic", restored).expect("over acoustic");
+
+    // The modem and MAC events (told since before the silence) name
+    // their link: each link's slots, and a transmission over each.
+    for (kind, link) in [
+        ("mac_slot_start", "acoustic"),
+        ("mac_slot_start", "iridium"),
+        ("modem_transmit", "acoustic"),
+        ("modem_transmit", "iridium"),
+    ] {
+        let told = vehicle.wait_for(LIMIT, |v| v["event"] == kind && v["link"] == link);
+        assert!(told.is_some(), "no {kind} event naming link {link}");
+    }
 
     // Each message once, none twice, all acknowledged.
     std::thread::sleep(Duration::from_secs(2));

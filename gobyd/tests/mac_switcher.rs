@@ -94,12 +94,14 @@ impl Running {
         while let Ok(event) = tokio::time::timeout_at(until, self.events.recv()).await {
             let Ok(event) = event else { continue };
             match &*event {
-                DaemonEvent::Modem(ModemEvent::MacSwitch(s)) => {
-                    told.switches.push((clock.now(), s.clone()))
-                }
-                DaemonEvent::Modem(ModemEvent::SlotStart { slot, .. }) => {
-                    told.slots.push(slot.slot_seconds())
-                }
+                DaemonEvent::Modem {
+                    event: ModemEvent::MacSwitch(s),
+                    ..
+                } => told.switches.push((clock.now(), s.clone())),
+                DaemonEvent::Modem {
+                    event: ModemEvent::SlotStart { slot, .. },
+                    ..
+                } => told.slots.push(slot.slot_seconds()),
                 _ => {}
             }
         }

@@ -91,7 +91,11 @@ impl Running {
                 .await
                 .ok()?;
             if let Ok(event) = event {
-                if let DaemonEvent::Modem(ModemEvent::MacCycle { cycle, from, .. }) = &*event {
+                if let DaemonEvent::Modem {
+                    event: ModemEvent::MacCycle { cycle, from, .. },
+                    ..
+                } = &*event
+                {
                     return Some((cycle.clone(), from.to_string()));
                 }
             }
@@ -104,7 +108,11 @@ impl Running {
         let mut out = Vec::new();
         while let Ok(event) = tokio::time::timeout_at(until, self.events.recv()).await {
             if let Ok(event) = event {
-                if let DaemonEvent::Modem(ModemEvent::SlotStart { slot, .. }) = &*event {
+                if let DaemonEvent::Modem {
+                    event: ModemEvent::SlotStart { slot, .. },
+                    ..
+                } = &*event
+                {
                     out.push((slot.src(), slot.slot_seconds()));
                 }
             }

@@ -47,7 +47,11 @@ async fn mac_switch_switches_renews_and_refuses_as_told() {
             .await
             .expect("the switches are told")
             .unwrap();
-        if let DaemonEvent::Modem(ModemEvent::MacSwitch(s)) = e.as_ref() {
+        if let DaemonEvent::Modem {
+            event: ModemEvent::MacSwitch(s),
+            ..
+        } = e.as_ref()
+        {
             assert_eq!(s.from, Some("moos"), "{s:?}");
             told.push((
                 s.active.clone(),

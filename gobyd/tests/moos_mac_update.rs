@@ -67,9 +67,12 @@ async fn mac_cycle_update_changes_the_cycle_as_pacommshandler_does() {
             .await
             .expect("the updates are told")
             .unwrap();
-        if let DaemonEvent::Modem(ModemEvent::MacCycle {
-            cycle, from, error, ..
-        }) = e.as_ref()
+        if let DaemonEvent::Modem {
+            event: ModemEvent::MacCycle {
+                cycle, from, error, ..
+            },
+            ..
+        } = e.as_ref()
         {
             assert_eq!(*from, "moos");
             told.push((cycle.slot.len(), error.clone()));

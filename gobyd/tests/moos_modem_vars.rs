@@ -110,7 +110,11 @@ fn readies(events: &mut broadcast::Receiver<SharedEvent>) -> usize {
     loop {
         match events.try_recv() {
             Ok(e) => {
-                if let DaemonEvent::Modem(ModemEvent::Status(DriverStatus::Ready)) = e.as_ref() {
+                if let DaemonEvent::Modem {
+                    event: ModemEvent::Status(DriverStatus::Ready),
+                    ..
+                } = e.as_ref()
+                {
                     let line =
                         gobyd::json::event_line(e.as_ref(), |_| String::new()).expect("a line");
                     assert!(line.contains(r#""event":"driver_status""#), "{line}");

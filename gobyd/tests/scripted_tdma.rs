@@ -101,11 +101,15 @@ async fn each_scripted_slot_carries_its_own_types_alone() {
     while let Ok(event) = tokio::time::timeout_at(until, events.recv()).await {
         let Ok(event) = event else { continue };
         match &*event {
-            DaemonEvent::Modem(ModemEvent::SlotStart {
-                slot: s,
-                initiated: Some(_),
+            DaemonEvent::Modem {
+                event:
+                    ModemEvent::SlotStart {
+                        slot: s,
+                        initiated: Some(_),
+                        ..
+                    },
                 ..
-            }) => slot = Some(s.slot_index()),
+            } => slot = Some(s.slot_index()),
             DaemonEvent::Queue {
                 event: QueueEvent::Sent { message, .. },
                 ..

@@ -71,9 +71,13 @@ async fn run(min_priority: f64, name: &str) -> (Vec<SharedUse>, bool) {
             published = true;
         }
         match &*event {
-            DaemonEvent::Modem(ModemEvent::SlotStart {
-                shared: Some(s), ..
-            }) => uses.push(s.clone()),
+            DaemonEvent::Modem {
+                event:
+                    ModemEvent::SlotStart {
+                        shared: Some(s), ..
+                    },
+                ..
+            } => uses.push(s.clone()),
             DaemonEvent::Queue {
                 event: QueueEvent::Sent { .. },
                 ..

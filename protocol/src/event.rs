@@ -253,6 +253,11 @@ pub struct Raw {
     /// Where it came from or went, where there is one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub peer: Option<String>,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "modem_receive", "modem_receive": {…ModemTransmission…}}`.
@@ -261,6 +266,11 @@ pub struct Raw {
 pub struct ModemReceive {
     /// The transmission, proto3 JSON.
     pub modem_receive: Value,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// What became of a transmission this node made.
@@ -286,6 +296,11 @@ pub struct ModemTransmit {
     /// Why it failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "mac_slot_start", "mac_slot_start": {…ModemTransmission…},
@@ -307,6 +322,11 @@ pub struct MacSlotStart {
     /// nothing queued).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub priority: Option<f64>,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "mac_rate", "mac_rate": RATE, "dest", "slot_index",
@@ -333,6 +353,11 @@ pub struct MacRate {
     /// A faster rate would meet the target but does not fit the slot.
     #[serde(default, skip_serializing_if = "crate::is_false")]
     pub slot_limited: bool,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "mac_cycle_update", "joined"|"left": MODEM_ID}`.
@@ -345,6 +370,11 @@ pub struct MacCycleUpdate {
     /// The node that left it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub left: Option<i32>,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "mac_cycle", "mac_cycle": {…MACCycle…}, "update": {…MACUpdate…},
@@ -364,6 +394,11 @@ pub struct MacCycle {
     /// Why it was not applied (absent: applied).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "driver_status", "driver_status": KIND, "detail"}`.
@@ -374,6 +409,11 @@ pub struct DriverStatus {
     pub driver_status: String,
     /// In words.
     pub detail: String,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "driver_specific", "driver_specific": TYPE, "msg"}`.
@@ -384,6 +424,11 @@ pub struct DriverSpecific {
     pub driver_specific: String,
     /// The result.
     pub msg: Value,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `{"event": "transfer", "transfer": ID, "direction", "peer", "name",
@@ -484,13 +529,25 @@ mod tests {
         let cycle = Event::MacCycleUpdate(MacCycleUpdate {
             joined: Some(3),
             left: None,
+            link: None,
         });
         assert_eq!(cycle.line(), r#"{"event":"mac_cycle_update","joined":3}"#);
+        // With several links, the link's name last.
+        let on_link = Event::MacCycleUpdate(MacCycleUpdate {
+            joined: Some(3),
+            left: None,
+            link: Some("acoustic".into()),
+        });
+        assert_eq!(
+            on_link.line(),
+            r#"{"event":"mac_cycle_update","joined":3,"link":"acoustic"}"#
+        );
         let changed = Event::MacCycle(MacCycle {
             mac_cycle: json!({"slot": [{"src": 2}], "running": true, "modem_id": 2}),
             update: Some(json!({"src": 1, "dest": 2, "update_type": "ASSIGN"})),
             from: "link".into(),
             error: None,
+            link: None,
         });
         let line = changed.line();
         assert!(

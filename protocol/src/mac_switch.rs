@@ -61,4 +61,9 @@ pub struct MacSwitch {
     /// Why the request was refused (absent: it was not).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// The link it happened on, by its name, when the daemon has `link`
+    /// sections (absent for the one link of a top-level `driver`; a
+    /// `MACUpdate` or a MAC switch acts on the first link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }

@@ -268,40 +268,48 @@ fn events() -> Vec<Event> {
             raw: Direction::In,
             line: "$CARXD".into(),
             peer: Some("127.0.0.1:5000".into()),
+            link: None,
         }),
         Event::ModemReceive(ModemReceive {
             modem_receive: t.clone(),
+            link: None,
         }),
         Event::ModemTransmit(ModemTransmit {
             modem_transmit: t.clone(),
             outcome: Outcome::Failed,
             reason: Some("busy".into()),
+            link: Some("acoustic".into()),
         }),
         Event::MacSlotStart(MacSlotStart {
             mac_slot_start: t.clone(),
             shared: Some("used".into()),
             backoff: Some(2),
             priority: None,
+            link: Some("acoustic".into()),
         }),
         Event::MacSlotStart(MacSlotStart {
             mac_slot_start: t,
             shared: Some("below_threshold".into()),
             backoff: None,
             priority: Some(0.5),
+            link: None,
         }),
         Event::MacCycleUpdate(MacCycleUpdate {
             joined: Some(3),
             left: None,
+            link: None,
         }),
         Event::MacCycleUpdate(MacCycleUpdate {
             joined: None,
             left: Some(3),
+            link: None,
         }),
         Event::MacCycle(MacCycle {
             mac_cycle: json!({"slot": [], "running": false, "modem_id": 2}),
             update: Some(json!({"src": 1, "dest": 2, "update_type": "CLEAR"})),
             from: "link".into(),
             error: Some("for modem 3".into()),
+            link: None,
         }),
         Event::MacSwitch(MacSwitch {
             mac_switch: "survey".into(),
@@ -310,6 +318,7 @@ fn events() -> Vec<Event> {
             keep_alive_until: Some(1.7e9),
             from: Some("json".into()),
             error: Some("no MAC named \"loud\"".into()),
+            link: Some("acoustic".into()),
         }),
         Event::MacRate(MacRate {
             mac_rate: 5,
@@ -319,14 +328,17 @@ fn events() -> Vec<Event> {
             snr: Some(12.0),
             packet_error: Some(0.01),
             slot_limited: true,
+            link: None,
         }),
         Event::DriverStatus(DriverStatus {
             driver_status: "ready".into(),
             detail: "ready".into(),
+            link: None,
         }),
         Event::DriverSpecific(DriverSpecific {
             driver_specific: "goby.acomms.protobuf.MicroModemSpecific".into(),
             msg: json!({}),
+            link: None,
         }),
         Event::Transfer(transfer()),
         Event::LinkStatus(LinkStatus {

@@ -32,10 +32,14 @@ impl Carriage {
                 event: QueueEvent::Sent { .. },
                 entry: Some(entry),
             } => self.placed.entry(node).or_default().push(*entry),
-            DaemonEvent::Modem(ModemEvent::Transmitted {
-                transmission,
-                outcome,
-            }) if transmission.r#type() == TransmissionType::Data => {
+            DaemonEvent::Modem {
+                event:
+                    ModemEvent::Transmitted {
+                        transmission,
+                        outcome,
+                    },
+                ..
+            } if transmission.r#type() == TransmissionType::Data => {
                 let placed = self.placed.remove(&node).unwrap_or_default();
                 if *outcome != TransmitOutcome::Sent {
                     return;
@@ -79,7 +83,7 @@ mod tests {
     }
 
     fn transmitted(time: u64, outcome: TransmitOutcome) -> DaemonEvent {
-        DaemonEvent::Modem(ModemEvent::Transmitted {
+        DaemonEvent::modem(ModemEvent::Transmitted {
             transmission: ModemTransmission {
                 r#type: Some(TransmissionType::Data as i32),
                 time: Some(time),

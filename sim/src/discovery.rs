@@ -57,7 +57,7 @@ pub enum MacChange {
 impl MacChange {
     /// The change `event` tells of, if any.
     pub fn of(event: &DaemonEvent) -> Option<Self> {
-        let DaemonEvent::Modem(event) = event else {
+        let DaemonEvent::Modem { event, .. } = event else {
             return None;
         };
         match event {

@@ -348,10 +348,14 @@ impl Ledger {
                 let key = self.nodes[node].codec.encode(&received.message).ok();
                 self.received(node, time, received.src, type_name, key);
             }
-            DaemonEvent::Modem(ModemEvent::Transmitted {
-                transmission,
-                outcome: TransmitOutcome::Sent,
-            }) if transmission.r#type() == TransmissionType::Data => {
+            DaemonEvent::Modem {
+                event:
+                    ModemEvent::Transmitted {
+                        transmission,
+                        outcome: TransmitOutcome::Sent,
+                    },
+                ..
+            } if transmission.r#type() == TransmissionType::Data => {
                 *self.packets.entry((node, transmission.rate())).or_default() += 1;
             }
             DaemonEvent::Queue {

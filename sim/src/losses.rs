@@ -256,7 +256,7 @@ mod tests {
             time: Some(start),
             ..Default::default()
         };
-        let event = DaemonEvent::Modem(ModemEvent::Transmitted {
+        let event = DaemonEvent::modem(ModemEvent::Transmitted {
             transmission,
             outcome: TransmitOutcome::Sent,
         });

@@ -87,10 +87,11 @@ fn shown(event: &DaemonEvent) -> bool {
                 | QueueEvent::QueueSize { .. }
         ),
         // A reception of data (an ack is not a reception of frames).
-        DaemonEvent::Modem(ModemEvent::Received { transmission, .. }) => {
-            transmission.r#type() == TransmissionType::Data
-        }
-        DaemonEvent::Modem(event) => matches!(
+        DaemonEvent::Modem {
+            event: ModemEvent::Received { transmission, .. },
+            ..
+        } => transmission.r#type() == TransmissionType::Data,
+        DaemonEvent::Modem { event, .. } => matches!(
             event,
             ModemEvent::Status(_)
                 | ModemEvent::MacCycle { .. }

@@ -95,7 +95,7 @@ impl SlotTally {
 
     /// An event of node `node`, whose modem id is `modem_id`.
     pub fn event(&mut self, node: usize, modem_id: i32, event: &DaemonEvent) {
-        let DaemonEvent::Modem(event) = event else {
+        let DaemonEvent::Modem { event, .. } = event else {
             return;
         };
         let n = &mut self.nodes[node];
@@ -208,7 +208,7 @@ mod tests {
             transmission: p.clone(),
             outcome: TransmitOutcome::Sent,
         };
-        t.event(node, modem_id, &DaemonEvent::Modem(event));
+        t.event(node, modem_id, &DaemonEvent::modem(event));
     }
 
     fn heard(t: &mut SlotTally, node: usize, modem_id: i32, p: &ModemTransmission) {
@@ -216,7 +216,7 @@ mod tests {
             transmission: p.clone(),
             time: 0,
         };
-        t.event(node, modem_id, &DaemonEvent::Modem(event));
+        t.event(node, modem_id, &DaemonEvent::modem(event));
     }
 
     fn slot_start(t: &mut SlotTally, node: usize, time: u64, shared: Option<SharedUse>) {
@@ -229,7 +229,7 @@ mod tests {
             initiated: None,
             shared,
         };
-        t.event(node, node as i32 + 1, &DaemonEvent::Modem(event));
+        t.event(node, node as i32 + 1, &DaemonEvent::modem(event));
     }
 
     #[test]

@@ -335,7 +335,7 @@ async fn start_node(
         let (reply, answer) = oneshot::channel();
         if control.send(Control::MacCycle { reply }).await.is_ok() {
             if let Ok(cycle) = answer.await {
-                let event = Arc::new(DaemonEvent::Modem(ModemEvent::MacCycle {
+                let event = Arc::new(DaemonEvent::modem(ModemEvent::MacCycle {
                     cycle,
                     update: None,
                     from: "start",

@@ -372,7 +372,7 @@ impl Core {
         for event in events {
             let mut reported = ModemEvent::of_mac(&event);
             let amac::MacEvent::Slot(slot) = &event else {
-                self.report(reported);
+                self.report(i, reported);
                 continue;
             };
             // A driver-specific request takes this node's slot in place of
@@ -408,17 +408,17 @@ impl Core {
                 t
             });
             if let ModemEvent::SlotStart {
-                initiated: i,
+                initiated: told,
                 shared,
                 ..
             } = &mut reported
             {
-                *i = initiated.clone().map(Box::new);
+                *told = initiated.clone().map(Box::new);
                 if contended.is_some() {
                     *shared = contended;
                 }
             }
-            self.report(reported);
+            self.report(i, reported);
             if let Some(request) = specific {
                 tracing::info!(
                     slot = slot.position.index,

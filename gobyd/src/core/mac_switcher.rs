@@ -120,14 +120,17 @@ impl Core {
             Err(e) => {
                 tracing::warn!(from = from.name(), "MAC switch to {name:?} refused: {e}");
                 let active = current.switcher.active().to_string();
-                self.report(ModemEvent::MacSwitch(MacSwitched {
-                    active: active.clone(),
-                    previous: active,
-                    reason: "refused",
-                    until: current.switcher.until(),
-                    from: Some(from.name()),
-                    error: Some(e.clone()),
-                }));
+                self.report(
+                    0,
+                    ModemEvent::MacSwitch(MacSwitched {
+                        active: active.clone(),
+                        previous: active,
+                        reason: "refused",
+                        until: current.switcher.until(),
+                        from: Some(from.name()),
+                        error: Some(e.clone()),
+                    }),
+                );
                 Err(e)
             }
         }
@@ -242,21 +245,27 @@ impl Core {
             switch.to,
             switch.from
         );
-        self.report(ModemEvent::MacSwitch(MacSwitched {
-            active: switch.to.clone(),
-            previous: switch.from.clone(),
-            reason: switch.reason.name(),
-            until: switch.until,
-            from: from.map(UpdateSource::name),
-            error: None,
-        }));
-        if switch.changed() {
-            self.report(ModemEvent::MacCycle {
-                cycle: self.mac_cycle(),
-                update: None,
-                from: "switch",
+        self.report(
+            0,
+            ModemEvent::MacSwitch(MacSwitched {
+                active: switch.to.clone(),
+                previous: switch.from.clone(),
+                reason: switch.reason.name(),
+                until: switch.until,
+                from: from.map(UpdateSource::name),
                 error: None,
-            });
+            }),
+        );
+        if switch.changed() {
+            self.report(
+                0,
+                ModemEvent::MacCycle {
+                    cycle: self.mac_cycle(),
+                    update: None,
+                    from: "switch",
+                    error: None,
+                },
+            );
         }
     }
 }

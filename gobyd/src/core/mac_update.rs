@@ -110,12 +110,15 @@ impl Core {
         });
         if let Err(e) = kept {
             tracing::warn!(from = from.name(), "MAC cycle update not applied: {e}");
-            self.report(ModemEvent::MacCycle {
-                cycle: self.mac_cycle(),
-                update: Some(update.clone()),
-                from: from.name(),
-                error: Some(e.clone()),
-            });
+            self.report(
+                0,
+                ModemEvent::MacCycle {
+                    cycle: self.mac_cycle(),
+                    update: Some(update.clone()),
+                    from: from.name(),
+                    error: Some(e.clone()),
+                },
+            );
             return Err(e);
         }
         self.links[0].mac = mac;
@@ -127,12 +130,15 @@ impl Core {
             "MAC cycle updated: {}",
             dccl_text(update)
         );
-        self.report(ModemEvent::MacCycle {
-            cycle: cycle.clone(),
-            update: Some(update.clone()),
-            from: from.name(),
-            error: None,
-        });
+        self.report(
+            0,
+            ModemEvent::MacCycle {
+                cycle: cycle.clone(),
+                update: Some(update.clone()),
+                from: from.name(),
+                error: None,
+            },
+        );
         Ok(cycle)
     }
 }

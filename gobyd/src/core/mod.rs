@@ -622,7 +622,7 @@ impl Core {
             self.driver_status.send_replace(Some(status.clone()));
         }
         if let Some(reported) = ModemEvent::of_driver(&event, self.clock.now()) {
-            self.report(reported);
+            self.report(i, reported);
         }
         self.link_health(i, &event);
         match event {
@@ -681,9 +681,13 @@ impl Core {
         }
     }
 
-    /// Sends a modem or medium access event to the interfaces.
-    fn report(&self, event: ModemEvent) {
-        let _ = self.events.send(Arc::new(DaemonEvent::Modem(event)));
+    /// Sends a modem or medium access event of link `i` to the
+    /// interfaces (named by the link when the node has `link` sections).
+    fn report(&self, i: usize, event: ModemEvent) {
+        let link = self.several.then(|| self.links[i].name.clone());
+        let _ = self
+            .events
+            .send(Arc::new(DaemonEvent::Modem { event, link }));
     }
 }
 

@@ -131,11 +131,14 @@ impl Core {
             snr = choice.snr,
             "rate chosen from the link"
         );
-        self.report(ModemEvent::RateChoice {
-            dest,
-            slot_index: transmission.slot_index(),
-            choice,
-        });
+        self.report(
+            i,
+            ModemEvent::RateChoice {
+                dest,
+                slot_index: transmission.slot_index(),
+                choice,
+            },
+        );
     }
 }
 

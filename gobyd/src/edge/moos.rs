@@ -685,7 +685,7 @@ fn event_values(settings: &BridgeSettings, event: &DaemonEvent) -> Vec<(String, 
         DaemonEvent::Received { received, .. } => received_publications(settings, received),
         DaemonEvent::Queue { event, .. } => publications(settings, event),
         DaemonEvent::RouteDropped(d) => publications(settings, &d.expired),
-        DaemonEvent::Modem(m) => modem_publications(settings, m),
+        DaemonEvent::Modem { event: m, .. } => modem_publications(settings, m),
         DaemonEvent::Transfer(e) if settings.files => {
             let mut v = transfer_value(e);
             if let Some(o) = v.as_object_mut() {

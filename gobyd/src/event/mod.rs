@@ -51,7 +51,14 @@ pub enum DaemonEvent {
         entry: Option<u64>,
     },
     /// A modem driver or medium access event.
-    Modem(ModemEvent),
+    Modem {
+        /// The event.
+        event: ModemEvent,
+        /// The link it happened on, by its name, when the node has `link`
+        /// sections (`None` for the one link of a top-level `driver`). A
+        /// `MACUpdate` or a MAC switch acts on the first link.
+        link: Option<String>,
+    },
     /// A transfer's progress or end (a message larger than a frame, a
     /// file; the network layer's).
     Transfer(TransferEvent),
@@ -64,6 +71,13 @@ pub enum DaemonEvent {
     /// The link forecast (`forecast` in the configuration): a forecast
     /// made, or its environment changed.
     Forecast(ForecastEvent),
+}
+
+impl DaemonEvent {
+    /// A modem or medium access event of a node's one link (no link name).
+    pub fn modem(event: ModemEvent) -> Self {
+        DaemonEvent::Modem { event, link: None }
+    }
 }
 
 /// A routed message dropped on its way (the network layer's hop limit).

@@ -149,7 +149,7 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             EV5,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Raw(RawMessage {
+            DaemonEvent::modem(ModemEvent::Raw(RawMessage {
                 direction: RawDirection::Incoming,
                 bytes: b"$CARXD".to_vec(),
                 peer: None,
@@ -157,21 +157,21 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             EV6,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Received {
+            DaemonEvent::modem(ModemEvent::Received {
                 transmission: short.clone(),
                 time: 1,
             }),
             EV7,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Transmitted {
+            DaemonEvent::modem(ModemEvent::Transmitted {
                 transmission: short.clone(),
                 outcome: TransmitOutcome::Failed("x".into()),
             }),
             EV8,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::SlotStart {
+            DaemonEvent::modem(ModemEvent::SlotStart {
                 slot: short.clone(),
                 initiated: None,
                 shared: None,
@@ -179,18 +179,18 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             EV9,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::CycleUpdate {
+            DaemonEvent::modem(ModemEvent::CycleUpdate {
                 modem_id: 3,
                 joined: true,
             }),
             EV10,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Status(modemdriver::DriverStatus::Ready)),
+            DaemonEvent::modem(ModemEvent::Status(modemdriver::DriverStatus::Ready)),
             EV11,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Specific(plain.clone())),
+            DaemonEvent::modem(ModemEvent::Specific(plain.clone())),
             EV12,
         ),
         (DaemonEvent::Transfer(transfer(false)), EV13),
@@ -241,7 +241,7 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             EX2,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Raw(RawMessage {
+            DaemonEvent::modem(ModemEvent::Raw(RawMessage {
                 direction: RawDirection::Outgoing,
                 bytes: vec![0xff, 0x00],
                 peer: Some("127.0.0.1:9".into()),
@@ -249,28 +249,28 @@ fn events() -> Vec<(DaemonEvent, &'static str)> {
             EX3,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Transmitted {
+            DaemonEvent::modem(ModemEvent::Transmitted {
                 transmission: long.clone(),
                 outcome: TransmitOutcome::Sent,
             }),
             EX4,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Transmitted {
+            DaemonEvent::modem(ModemEvent::Transmitted {
                 transmission: long.clone(),
                 outcome: TransmitOutcome::NothingToSend,
             }),
             EX5,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::CycleUpdate {
+            DaemonEvent::modem(ModemEvent::CycleUpdate {
                 modem_id: 4,
                 joined: false,
             }),
             EX6,
         ),
         (
-            DaemonEvent::Modem(ModemEvent::Status(modemdriver::DriverStatus::ModemSilent {
+            DaemonEvent::modem(ModemEvent::Status(modemdriver::DriverStatus::ModemSilent {
                 seconds: 2.5,
             })),
             EX7,

@@ -122,6 +122,7 @@ pub fn mac_switch_line(
         keep_alive_until: switched.until.map(|u| u as f64 / 1e6),
         from: switched.from.map(str::to_string),
         error: switched.error.clone(),
+        link: None,
     }
 }
 
@@ -140,6 +141,7 @@ pub fn mac_rate_line(
         snr: choice.snr,
         packet_error: choice.packet_error,
         slot_limited: choice.slot_limited,
+        link: None,
     }
 }
 
@@ -380,7 +382,7 @@ pub fn event_topic(event: &DaemonEvent) -> Option<Topic> {
             | QueueEvent::OnDemandRejected { .. }
             | QueueEvent::OwnBroadcastHeard { .. } => Some(Topic::Sent),
         },
-        DaemonEvent::Modem(event) => Some(match event {
+        DaemonEvent::Modem { event, .. } => Some(match event {
             ModemEvent::SlotStart { .. }
             | ModemEvent::CycleUpdate { .. }
             | ModemEvent::MacCycle { .. }
@@ -411,7 +413,7 @@ pub fn event(event: &DaemonEvent, queue_name: impl Fn(u32) -> String) -> Option<
             reception,
         } => Event::Received(received_line(received, reception)),
         DaemonEvent::Queue { event, entry } => queue_line(event, *entry, queue_name)?,
-        DaemonEvent::Modem(event) => modem_line(event),
+        DaemonEvent::Modem { event, link } => modem_line(event, link.as_ref()),
         DaemonEvent::Transfer(e) => Event::Transfer(transfer(e)),
         DaemonEvent::Link(status) => Event::LinkStatus(line::LinkStatus {
             link_status: message_json(&status.transcode_to_dynamic()),
@@ -500,9 +502,11 @@ fn queue_line(
     })
 }
 
-/// The line of a modem or medium access event (see [`ModemEvent`]).
-fn modem_line(event: &ModemEvent) -> Event {
+/// The line of a modem or medium access event (see [`ModemEvent`]) of
+/// `link` (its name, with several links).
+fn modem_line(event: &ModemEvent, link: Option<&String>) -> Event {
     let t = transmission_json;
+    let link = link.cloned();
     match event {
         ModemEvent::Raw(raw) => Event::Raw(Raw {
             raw: match raw.direction {
@@ -511,9 +515,11 @@ fn modem_line(event: &ModemEvent) -> Event {
             },
             line: ModemEvent::raw_text(raw),
             peer: raw.peer.clone(),
+            link,
         }),
         ModemEvent::Received { transmission, .. } => Event::ModemReceive(ModemReceive {
             modem_receive: t(transmission),
+            link,
         }),
         ModemEvent::Transmitted {
             transmission,
@@ -528,6 +534,7 @@ fn modem_line(event: &ModemEvent) -> Event {
                 modem_transmit: t(transmission),
                 outcome,
                 reason,
+                link,
             })
         }
         ModemEvent::SlotStart { slot, shared, .. } => {
@@ -544,11 +551,13 @@ fn modem_line(event: &ModemEvent) -> Event {
                 shared: kind.map(str::to_string),
                 backoff,
                 priority,
+                link,
             })
         }
         ModemEvent::CycleUpdate { modem_id, joined } => Event::MacCycleUpdate(MacCycleUpdate {
             joined: joined.then_some(*modem_id),
             left: (!joined).then_some(*modem_id),
+            link,
         }),
         ModemEvent::MacCycle {
             cycle,
@@ -562,20 +571,31 @@ fn modem_line(event: &ModemEvent) -> Event {
                 .map(|u| message_json(&u.transcode_to_dynamic())),
             from: from.to_string(),
             error: error.clone(),
+            link,
         }),
-        ModemEvent::MacSwitch(switched) => Event::MacSwitch(mac_switch_line(switched)),
+        ModemEvent::MacSwitch(switched) => {
+            Event::MacSwitch(gobyd_protocol::mac_switch::MacSwitch {
+                link,
+                ..mac_switch_line(switched)
+            })
+        }
         ModemEvent::RateChoice {
             dest,
             slot_index,
             choice,
-        } => Event::MacRate(mac_rate_line(*dest, *slot_index, choice)),
+        } => Event::MacRate(gobyd_protocol::event::MacRate {
+            link,
+            ..mac_rate_line(*dest, *slot_index, choice)
+        }),
         ModemEvent::Status(status) => Event::DriverStatus(DriverStatus {
             driver_status: status.kind().to_string(),
             detail: status.to_string(),
+            link,
         }),
         ModemEvent::Specific(message) => Event::DriverSpecific(DriverSpecific {
             driver_specific: message.descriptor().full_name().to_string(),
             msg: message_json(message),
+            link,
         }),
     }
 }
@@ -714,7 +734,7 @@ mod tests {
     fn modem_lines_carry_their_kind_and_topic() {
         use modemdriver::RawMessage;
         let line = |e: ModemEvent| {
-            let e = DaemonEvent::Modem(e);
+            let e = DaemonEvent::modem(e);
             (event_topic(&e), event_line(&e, |_| String::new()).unwrap())
         };
         let (topic, raw) = line(ModemEvent::Raw(RawMessage {
@@ -781,7 +801,7 @@ mod tests {
             ..Default::default()
         };
         let line = event_line(
-            &DaemonEvent::Modem(ModemEvent::SlotStart {
+            &DaemonEvent::modem(ModemEvent::SlotStart {
                 slot,
                 initiated: None,
                 shared: None,

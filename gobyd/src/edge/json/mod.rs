@@ -269,7 +269,7 @@ impl JsonInterface {
                 let mut now = Vec::new();
                 let status = self.driver_status.borrow().clone();
                 if let Some(status) = status.filter(|_| modem_now) {
-                    now.push(DaemonEvent::Modem(ModemEvent::Status(status)));
+                    now.push(DaemonEvent::modem(ModemEvent::Status(status)));
                 }
                 if link_now {
                     let links = self.link_status.borrow().clone();

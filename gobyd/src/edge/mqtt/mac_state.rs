@@ -71,6 +71,6 @@ pub async fn current(
     let now = clock.now();
     events
         .into_iter()
-        .filter_map(|event| formatter.event(&DaemonEvent::Modem(event), now))
+        .filter_map(|event| formatter.event(&DaemonEvent::modem(event), now))
         .collect()
 }

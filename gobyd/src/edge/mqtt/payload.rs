@@ -89,7 +89,7 @@ impl Formatter {
                 reception,
             } => Some(self.received(received, reception, now)),
             DaemonEvent::Queue { event, .. } => self.queue_event(event, now),
-            DaemonEvent::Modem(event) => self.modem_event(event, now),
+            DaemonEvent::Modem { event, .. } => self.modem_event(event, now),
             DaemonEvent::Transfer(e) => {
                 let mut payload = transfer_value(e);
                 if let Some(o) = payload.as_object_mut() {
@@ -420,7 +420,7 @@ mod tests {
         let f = formatter();
         let event = heard(1, 3, 2_000_000);
         let link = f
-            .event(&DaemonEvent::Modem(event.clone()), 2_000_000)
+            .event(&DaemonEvent::modem(event.clone()), 2_000_000)
             .unwrap();
         assert_eq!(link.topic, "fleet/2/link");
         assert!(link.retain);
@@ -461,13 +461,13 @@ mod tests {
         };
         let its_own = LinkSummary::shared(transmission, *time);
         let link = f
-            .event(&DaemonEvent::Modem(first.clone()), 1_000_000)
+            .event(&DaemonEvent::modem(first.clone()), 1_000_000)
             .unwrap();
         // ... and another reception from node 1 (rate 5; e.g. a relay of
         // node 1's, or the next transmission while this message waited for
         // a taker) came in before it was handed over.
         let second = f
-            .event(&DaemonEvent::Modem(heard(1, 5, 2_000_000)), 2_000_000)
+            .event(&DaemonEvent::modem(heard(1, 5, 2_000_000)), 2_000_000)
             .unwrap();
         assert_eq!(payload(&second)["rate"], 5);
         let rx = f
@@ -493,7 +493,7 @@ mod tests {
     fn a_recovered_message_has_no_link() {
         let f = formatter();
         // A reception from the same source after the restart ...
-        f.event(&DaemonEvent::Modem(heard(1, 3, 1_000_000)), 1_000_000)
+        f.event(&DaemonEvent::modem(heard(1, 3, 1_000_000)), 1_000_000)
             .unwrap();
         // ... does not lend its statistics to a message received before.
         let rx = f
@@ -528,7 +528,7 @@ mod tests {
             initiated: None,
             shared: None,
         };
-        assert!(f.event(&DaemonEvent::Modem(theirs), 0).is_none());
+        assert!(f.event(&DaemonEvent::modem(theirs), 0).is_none());
         let ours = ModemEvent::SlotStart {
             slot: slot.clone(),
             initiated: Some(Box::new(ModemTransmission {
@@ -537,7 +537,7 @@ mod tests {
             })),
             shared: None,
         };
-        let out = f.event(&DaemonEvent::Modem(ours), 1_000_000).unwrap();
+        let out = f.event(&DaemonEvent::modem(ours), 1_000_000).unwrap();
         assert_eq!(out.topic, "fleet/2/mac");
         assert!(!out.retain);
         let v = payload(&out);
