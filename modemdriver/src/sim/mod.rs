@@ -39,6 +39,12 @@
 //! or with `DriverConfig.deferred_ack` only when the layer above asks
 //! ([`DriverCommand::Acknowledge`]), for the frames it names.
 //!
+//! - Satellite: with `satellite` set ([`satellite`]), the nodes reach each
+//!   other as through Iridium SBD instead of the water: sessions of fixed
+//!   length, a latency through the gateway, only from and to antennas at
+//!   the surface (a message for a node below waits at the gateway until a
+//!   session of its own at the surface), no collisions, no half duplex.
+//!
 //! Nodes in several processes: with `udp_local` and `udp_peer` set, each
 //! packet also goes to the peers over UDP ([`udp_medium`]), with its
 //! wall-clock start time; use real time (not tokio's paused clock) then.
@@ -47,6 +53,7 @@ pub mod medium;
 pub mod observer;
 pub mod positions;
 pub mod reception;
+pub mod satellite;
 pub mod udp_medium;
 pub mod water;
 
@@ -218,8 +225,11 @@ impl DriverKind for SimulatorDriver {
         packet_of(config, rate).ok()
     }
 
-    /// With `modem`, that modem's.
+    /// With `modem`, that modem's; with `satellite`, its frame.
     fn frame_limits(&self, config: &DriverConfig) -> Option<crate::kind::FrameLimits> {
+        if let Some(link) = config.simulator.as_ref().and_then(|s| s.satellite.as_ref()) {
+            return satellite::Satellite::of(link).ok().map(|s| s.frame_limits());
+        }
         let (kind, modem) = modem_of(config).ok()??;
         kind.frame_limits(&modem)
     }
@@ -288,6 +298,17 @@ pub fn modem_of(
 /// Why there is no such packet: a rate the modem does not have, a modem
 /// the simulator cannot send as, an overhead that is not a time.
 pub fn packet_of(config: &DriverConfig, rate: i32) -> Result<PacketTime, String> {
+    if let Some(link) = config.simulator.as_ref().and_then(|s| s.satellite.as_ref()) {
+        return satellite::Satellite::of(link)
+            .map(|s| s.packet(rate))
+            .map_err(|problems| {
+                problems
+                    .iter()
+                    .map(|p| format!("{}: {}", p.field, p.reason))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            });
+    }
     if let Some((kind, modem)) = modem_of(config)? {
         let name = kind.about().named.name();
         return kind
@@ -413,6 +434,22 @@ pub fn problems(config: &DriverConfig) -> Vec<Problem> {
     }
     problems.extend(acoustic_problems(sim));
     problems.extend(modem_problems);
+    if let Some(link) = &sim.satellite {
+        if let Err(bad) = satellite::Satellite::of(link) {
+            problems.extend(bad);
+        }
+        for (set, field) in [
+            (sim.acoustic_channel.is_some(), "acoustic_channel"),
+            (sim.modem.is_some(), "modem"),
+        ] {
+            if set {
+                problems.push(Problem::new(
+                    "simulator.satellite",
+                    format!("a satellite link has no {field}: a link is the water or a satellite"),
+                ));
+            }
+        }
+    }
     problems
 }
 
@@ -478,12 +515,34 @@ struct Node {
     /// The links of the receptions in progress, by (sender, start µs),
     /// kept only when the medium has an observer.
     observed_links: HashMap<(i32, u64), observer::Link>,
+    /// The satellite link in place of the water (`None`: the water).
+    satellite: Option<satellite::Satellite>,
+    /// Messages for this node waiting at the satellite gateway (it was
+    /// below the surface when they came), in order of arrival.
+    held: Vec<ModemTransmission>,
 }
 
 impl Node {
     /// Now on the node's clock, microseconds since the epoch.
     fn now(&self) -> u64 {
         u64::try_from(self.clock.now()).unwrap_or(0)
+    }
+
+    /// How deep this node's antenna is when it is on a satellite link and
+    /// below the surface (`None`: on the water, or at the surface).
+    fn below_the_satellites(&self) -> Option<f64> {
+        let link = self.satellite?;
+        link.submerged(&self.position_of(self.modem_id)?)
+    }
+
+    /// A session at the surface ending at `end`: the modem is busy until
+    /// then, and what waits at the gateway for this node comes with its
+    /// end (an SBD session sends and receives at once).
+    fn pick_up_held(&mut self, end: Instant) {
+        self.busy_until = self.busy_until.max(end);
+        for held in std::mem::take(&mut self.held) {
+            self.receiver.arrive(end, end, held, false);
+        }
     }
 
     /// A data packet of `rate` as this node sends it ([`packet_of`]).
@@ -522,6 +581,22 @@ impl Node {
         };
         if mt.src.is_none() || mt.src() == -1 {
             mt.src = Some(self.modem_id);
+        }
+        if let Some(depth) = self.below_the_satellites() {
+            let reason = format!(
+                "no satellite in view: the antenna is {depth:.1} m deep (surface_depth {} m)",
+                self.satellite.map_or(0.0, |s| s.surface_depth)
+            );
+            match mt.r#type() {
+                TransmissionType::Data => events.emit(DriverEvent::TransmitResult(TransmitResult {
+                    transmission: mt,
+                    outcome: TransmitOutcome::Failed(reason),
+                })),
+                // An ack (or other packet) from under water is not sent;
+                // its message's sender sends it again.
+                _ => events.status(DriverStatus::Skipped { reason }),
+            }
+            return;
         }
         let duration = match mt.r#type() {
             TransmissionType::Data => {
@@ -577,6 +652,10 @@ impl Node {
                         transmission: mt,
                         outcome: TransmitOutcome::NothingToSend,
                     }));
+                    if self.satellite.is_some() {
+                        // A session all the same: a mailbox check.
+                        self.pick_up_held(Instant::now() + duration);
+                    }
                     return;
                 }
                 packet.on_water_holding(mt.frame.iter().map(Vec::len).sum())
@@ -593,7 +672,11 @@ impl Node {
         let start = Instant::now();
         let end = start + duration;
         self.busy_until = end;
-        self.receiver.transmitting(start, end);
+        if self.satellite.is_some() {
+            self.pick_up_held(end);
+        } else {
+            self.receiver.transmitting(start, end);
+        }
         self.seq += 1;
         let position = self.position_of(self.modem_id).unwrap_or_default();
         let packet = Arc::new(Airborne {
@@ -661,6 +744,26 @@ impl Node {
             return;
         }
         let mut transmission = packet.transmission.clone();
+        if let Some(link) = self.satellite {
+            // At the gateway when the session ends, here the latency later
+            // (held there if this node is below the surface then).
+            let arrival = packet.start + packet.duration + link.latency;
+            let loss = self.sim.packet_loss();
+            let lost = reception::draw_loss(self.sim.seed(), packet.src, packet.seq, loss);
+            if self.medium.observer().is_some() {
+                self.observed_links.insert(
+                    (packet.src, packet.transmission.time()),
+                    observer::Link {
+                        range_m: distance,
+                        snr_db: None,
+                        loss_probability: Some(loss),
+                        garbled: packet.garbled,
+                    },
+                );
+            }
+            self.receiver.arrive(arrival, arrival, transmission, lost);
+            return;
+        }
         let (delay, loss) = match &self.water {
             None => match Duration::try_from_secs_f64(distance / self.sim.sound_speed()) {
                 Ok(delay) => (delay, self.sim.packet_loss()),
@@ -856,6 +959,11 @@ impl Node {
             if spoiled.is_some() {
                 continue;
             }
+            if self.below_the_satellites().is_some() {
+                // At the gateway until a session at the surface.
+                self.held.push(mt);
+                continue;
+            }
             let ack = (!self.deferred_ack && Acknowledgement::wanted(&mt, &[self.modem_id]))
                 .then(|| Acknowledgement::all(mt.clone()).transmission())
                 .flatten();
@@ -927,6 +1035,10 @@ async fn run(
     let events = ctx.events.clone();
     let overhead = Duration::from_secs_f64(sim.packet_overhead_seconds());
     let (computed, mut links) = mpsc::unbounded_channel();
+    let satellite = sim
+        .satellite
+        .as_ref()
+        .and_then(|l| satellite::Satellite::of(l).ok());
     let mut node = Node {
         clock: ctx.clock.clone(),
         modem_id,
@@ -948,6 +1060,8 @@ async fn run(
         links_in_line,
         positions,
         observed_links: HashMap::new(),
+        satellite,
+        held: Vec::new(),
     };
     node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);
