@@ -168,6 +168,13 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         counted(&losses.packets),
         counted(&losses.undelivered)
     )?;
+    if let Some(satellite) = &report.satellite_use {
+        writeln!(
+            stdout,
+            "  satellite: sessions with data {}, heard by the node they were for {}",
+            satellite.transmissions, satellite.delivered
+        )?;
+    }
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
     }

@@ -1686,6 +1686,21 @@ fn slot_too_short(
     let least = packet.shortest_slot().as_secs_f64() + guard;
     // Rounded up to the tenth of a second above.
     let least_text = format!("{:.1}", (least * 10.0).ceil() / 10.0);
+    if !spec.bits_per_second.is_finite() {
+        // A session of fixed length whatever it holds (the simulator's
+        // satellite link).
+        let guarded = match guard > 0.0 {
+            true => format!(" and the MAC's guard_seconds {guard}"),
+            false => String::new(),
+        };
+        return format!(
+            "{seconds} s is too short for a session of {} s on {}{guarded}, so the driver would \
+             drop every transmission in this slot as not fitting; make slot_seconds at least \
+             {least_text}",
+            packet.overhead.as_secs_f64(),
+            packet.driver,
+        );
+    }
     let data = packet.on_water().as_secs_f64() - packet.overhead.as_secs_f64();
     let mut parts = vec![format!(
         "{} of {} bytes at {} bit/s take{} {:.2} s",

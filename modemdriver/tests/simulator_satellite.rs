@@ -15,7 +15,9 @@ use modemdriver::sim::positions::Positions;
 use modemdriver::sim::reception::Position;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
-use modemdriver::{Acknowledgement, Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission};
+use modemdriver::{
+    Acknowledgement, Driver, DriverConfig, DriverEvent, DriverStatus, ModemTransmission,
+};
 use modemdriver::{TransmitOutcome, TransmitResult};
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::acomms::protobuf::simulator_driver_config::NodePosition;
@@ -100,7 +102,11 @@ async fn a_message_takes_its_session_then_the_gateway_s_latency() {
     let frame = vec![7u8; 259];
     let sent = result(&mut shore, std::slice::from_ref(&frame)).await;
     assert_eq!(sent.outcome, TransmitOutcome::Sent);
-    assert_eq!(t0.elapsed(), Duration::from_secs(20), "the session's length");
+    assert_eq!(
+        t0.elapsed(),
+        Duration::from_secs(20),
+        "the session's length"
+    );
     let got = received(&mut vehicle, Duration::from_secs(60)).await;
     assert_eq!(got.frame, vec![frame]);
     assert_eq!(t0.elapsed(), Duration::from_secs(25), "session and latency");
@@ -190,4 +196,28 @@ fn a_satellite_link_with_water_or_a_modem_is_refused_by_name() {
             .any(|t| t.contains("a satellite link has no modem")),
         "{told:?}"
     );
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_gateway_hands_messages_over_first_in_first_out() {
+    let (mut shore, mut vehicle) = pair(false);
+    let t0 = Instant::now();
+    // A, sent while the vehicle is down: held at the gateway.
+    shore.initiate_transmission(data(2)).unwrap();
+    let a = vec![1u8; 8];
+    result(&mut shore, std::slice::from_ref(&a)).await;
+    // B, sent once it is up: at the gateway after A, so behind it.
+    tokio::time::sleep_until(t0 + Duration::from_secs(SURFACES_S + 10)).await;
+    shore.initiate_transmission(data(2)).unwrap();
+    let b = vec![2u8; 8];
+    result(&mut shore, std::slice::from_ref(&b)).await;
+    let early = collect_received(&mut vehicle, &[], Duration::from_secs(30)).await;
+    assert!(early.is_empty(), "B overtook A: {early:?}");
+    // The vehicle's session picks up both, in order.
+    let asked = t0.elapsed();
+    vehicle.initiate_transmission(data(1)).unwrap();
+    let first = received(&mut vehicle, Duration::from_secs(60)).await;
+    let second = received(&mut vehicle, Duration::from_secs(60)).await;
+    assert_eq!((first.frame, second.frame), (vec![a], vec![b]));
+    assert_eq!(t0.elapsed(), asked + Duration::from_secs(20));
 }

@@ -96,6 +96,21 @@ pub struct LedgerNode {
     pub modem_id: i32,
     /// Its codec (to compare what was sent with what was received).
     pub codec: Arc<dccl::Codec>,
+    /// Where each of its links goes, in order ([`crate::scenario::Node::links`]).
+    pub links: Vec<crate::scenario::Medium>,
+    /// The name of its link on the satellite, with `link` sections.
+    pub satellite_link: Option<String>,
+}
+
+impl LedgerNode {
+    /// Whether a modem event of this node's link `link` (its name; `None`
+    /// for the one link of a top-level driver) happened on the satellite.
+    pub fn on_satellite(&self, link: Option<&String>) -> bool {
+        match link {
+            Some(name) => self.satellite_link.as_ref() == Some(name),
+            None => self.links == [crate::scenario::Medium::Satellite],
+        }
+    }
 }
 
 /// Every publication of a run; see the [module](self).
@@ -112,8 +127,11 @@ pub struct Ledger {
     stray: Vec<Stray>,
     /// Data packets sent, by (node, modem rate).
     packets: BTreeMap<(usize, i32), u64>,
-    /// The nodes' slot use.
+    /// The nodes' slot use on the water.
     slots: SlotTally,
+    /// The nodes' slot use on the satellite (`None`: no node has a link
+    /// there).
+    satellite: Option<SlotTally>,
     /// Auto-discovery's changes and the data packets, in time order.
     mac_log: Vec<MacRecord>,
     /// Which packets carried which journal entries.
@@ -160,6 +178,10 @@ impl Ledger {
     pub fn new(nodes: Vec<LedgerNode>) -> Self {
         Ledger {
             slots: SlotTally::new(nodes.len()),
+            satellite: nodes
+                .iter()
+                .any(|n| n.links.contains(&crate::scenario::Medium::Satellite))
+                .then(|| SlotTally::new(nodes.len())),
             nodes,
             publications: Vec::new(),
             entries: HashMap::new(),
@@ -198,10 +220,17 @@ impl Ledger {
         &self.packets
     }
 
-    /// What the nodes did with the medium.
+    /// What the nodes did with the water.
     pub fn slot_use(&self) -> SlotUse {
         let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
         self.slots.finish(&names)
+    }
+
+    /// What the nodes did with the satellite (`None`: no node has a link
+    /// there).
+    pub fn satellite_use(&self) -> Option<SlotUse> {
+        let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
+        self.satellite.as_ref().map(|t| t.finish(&names))
     }
 
     /// Auto-discovery's changes of each node's cycle and every data packet
@@ -337,6 +366,16 @@ impl Ledger {
 
     /// An event of node `node` at `time`.
     pub fn event(&mut self, node: usize, time: Micros, event: &DaemonEvent) {
+        if let DaemonEvent::Modem { link, .. } = event {
+            if self.nodes[node].on_satellite(link.as_ref()) {
+                // The satellite's sessions: its own tally, not the water's
+                // packets, cycles or losses.
+                if let Some(tally) = &mut self.satellite {
+                    tally.event(node, self.nodes[node].modem_id, event);
+                }
+                return;
+            }
+        }
         self.slots.event(node, self.nodes[node].modem_id, event);
         if let Some(what) = MacChange::of(event) {
             self.mac_log.push(MacRecord { node, time, what });
@@ -501,6 +540,8 @@ pub(crate) mod tests {
                     name: name.into(),
                     modem_id,
                     codec: codec.clone(),
+                    links: vec![crate::scenario::Medium::Water],
+                    satellite_link: None,
                 })
                 .to_vec(),
         )

@@ -3,7 +3,7 @@
 //! places (what the run starts, and what the scenario is checked with).
 
 use protos::goby::acomms::protobuf::{
-    driver_config, simulator_driver_config::NodePosition, DriverConfig, DriverType,
+    driver_config, simulator_driver_config::NodePosition, DriverConfig, DriverType, SatelliteLink,
     SimulatorDriverConfig,
 };
 
@@ -111,4 +111,83 @@ pub struct SentAs {
     /// The modem the node's configuration names (`None`: none, or the
     /// simulator without one), whether or not it is sent as.
     pub kind: Option<String>,
+}
+
+/// Whether `driver` is an Iridium modem's or shore station's
+/// (`DRIVER_IRIDIUM`, `DRIVER_IRIDIUM_SHORE`): the run puts its link on
+/// the satellite, not on the water.
+pub fn is_satellite(driver: Option<&DriverConfig>) -> bool {
+    let iridium = [DriverType::DriverIridium, DriverType::DriverIridiumShore];
+    matches!(
+        driver.and_then(|d| d.driver.as_ref()),
+        Some(driver_config::Driver::DriverType(t))
+            if iridium.iter().any(|i| *i as i32 == *t)
+    )
+}
+
+/// Whether `driver` is a shore station's (`DRIVER_IRIDIUM_SHORE`): on the
+/// gateway's side of the satellite, reached wherever it is placed.
+pub fn is_shore(driver: Option<&DriverConfig>) -> bool {
+    let shore = DriverType::DriverIridiumShore as i32;
+    driver.and_then(|d| d.driver.as_ref()) == Some(&driver_config::Driver::DriverType(shore))
+}
+
+/// The driver section of node `modem_id`'s satellite link: the simulator
+/// on `satellite`, every node at `positions` (their depths decide who
+/// sees the satellites; a shore station, `DRIVER_IRIDIUM_SHORE`, is
+/// reached at any depth), its losses drawn from `seed`; acks deferred to
+/// the daemon. A session's frame is `satellite.frame_bytes` when given,
+/// else the largest the node's own Iridium section `own` sends (329 bytes
+/// MO from a 9602/9603, 259 MT from a shore).
+pub fn satellite_config(
+    modem_id: i32,
+    positions: &[(i32, [f64; 3])],
+    satellite: &SatelliteLink,
+    seed: u64,
+    own: Option<&DriverConfig>,
+) -> DriverConfig {
+    let mut link = *satellite;
+    if is_shore(own) {
+        // A shore station is on the gateway's side (DirectIP, RUDICS over
+        // the Internet): reached wherever the scenario places it.
+        link.surface_depth = Some(f64::MAX);
+    }
+    if link.frame_bytes.is_none() {
+        link.frame_bytes = own
+            .and_then(modemdriver::check::largest_frame)
+            .and_then(|b| u32::try_from(b).ok());
+    }
+    let water = SimulatorDriverConfig {
+        satellite: Some(link),
+        ..Default::default()
+    };
+    driver_config(modem_id, positions, &water, seed, None)
+}
+
+/// A satellite link in words, for the report.
+pub fn satellite_words(satellite: &SatelliteLink) -> String {
+    format!(
+        "Iridium SBD, simulated: sessions of {} s, {} s through the gateway, from and to \
+         antennas at most {} m deep",
+        satellite.session_seconds(),
+        satellite.latency_seconds(),
+        satellite.surface_depth()
+    )
+}
+
+/// A simulator driver section made by [`satellite_config`] for the
+/// scenario's check, with every node at `positions` and its losses drawn
+/// from `seed`, as the run starts it.
+pub fn placed(section: &DriverConfig, positions: &[(i32, [f64; 3])], seed: u64) -> DriverConfig {
+    let water = section.simulator.clone().unwrap_or_default();
+    driver_config(
+        section.modem_id(),
+        positions,
+        &SimulatorDriverConfig {
+            modem: None,
+            ..water
+        },
+        seed,
+        None,
+    )
 }

@@ -37,6 +37,11 @@ pub struct Report {
     /// What the nodes did with the medium: slots, transmissions,
     /// receptions; G and S of the shared slots.
     pub slot_use: SlotUse,
+    /// What the nodes with an Iridium link did with the satellite: their
+    /// slots, sessions that carried data (`transmissions`) and data
+    /// heard (left out when no node has a link there).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub satellite_use: Option<SlotUse>,
     /// Why publications were not delivered, and the fates of the packets
     /// that carried them ([`crate::losses`]).
     pub losses: Losses,
@@ -277,6 +282,7 @@ impl Report {
                 },
             ),
             slot_use: ledger.slot_use(),
+            satellite_use: ledger.satellite_use(),
             share: shares(scenario, ledger),
             losses: Losses::new(ledger),
         }

@@ -18,7 +18,7 @@ use gobyd::config::{ConfigError, Problem};
 use gobyd::error::DaemonError;
 use prost_reflect::{DynamicMessage, MessageDescriptor, ReflectMessage};
 use protos::goby::acomms::protobuf::queued_message_entry::{role::RoleSetting, RoleType};
-use protos::goby::acomms::protobuf::SimulatorDriverConfig;
+use protos::goby::acomms::protobuf::{DriverConfig, SatelliteLink, SimulatorDriverConfig};
 use protos::goby::apps::protobuf::GobydConfig;
 use protos::goby::sim::protobuf as pb;
 
@@ -39,6 +39,8 @@ pub struct Scenario {
     /// The water of every node's simulated modem (positions, seed,
     /// channel and UDP endpoints left unset: the run sets them).
     pub water: SimulatorDriverConfig,
+    /// The satellite link of the nodes with an Iridium driver.
+    pub satellite: SatelliteLink,
     /// The nodes, in the order written.
     pub nodes: Vec<Node>,
     /// What goes wrong, and when.
@@ -64,8 +66,34 @@ pub struct Node {
     /// What its autonomy publishes.
     pub traffic: Vec<Stream>,
     /// Its simulated modem in words: the modem it sends as
-    /// (`"DRIVER_POPOTO"`), or the simulator's own rates and why.
+    /// (`"DRIVER_POPOTO"`), or the simulator's own rates and why (empty
+    /// for a node on the satellite alone).
     pub modem: String,
+    /// Where each of its links goes, in the order of its `link` sections
+    /// (the one link of a top-level `driver`).
+    pub links: Vec<Medium>,
+    /// The name of its link on the satellite, with `link` sections.
+    pub satellite_link: Option<String>,
+}
+
+/// Where a node's link goes: the water, or the satellite.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Medium {
+    /// The scenario's water, its simulated modem sending as the node's.
+    Water,
+    /// The satellite (an Iridium driver), [`Scenario::satellite`].
+    Satellite,
+}
+
+/// Where a node's links go, as the check found them.
+#[derive(Debug, Clone, Default)]
+struct NodeLinks {
+    /// Each link's medium, in order.
+    media: Vec<Medium>,
+    /// The name of its link on the satellite, with `link` sections.
+    satellite_link: Option<String>,
+    /// Its link on the satellite in words.
+    satellite_words: Option<String>,
 }
 
 /// A scenario refused: every problem found, one a line.
@@ -99,6 +127,8 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scenario, Scenario
         water: SimulatorDriverConfig::default(),
         water_refused: Vec::new(),
         modems: Default::default(),
+        satellite: SatelliteLink::default(),
+        links: Default::default(),
     };
     let scenario = check.scenario(parsed);
     match check.found.is_empty() {
@@ -136,8 +166,13 @@ pub(crate) struct Check<'a> {
     water_refused: Vec<String>,
     /// Each node's simulated modem ([`crate::modem::sends_as`]), by node
     /// index: the modem its configuration names (`None`: none, or the
-    /// simulator without one), and in words.
+    /// simulator without one), and in words (nodes on the water only).
     modems: std::collections::BTreeMap<usize, (Option<String>, String)>,
+    /// The satellite link of the Iridium drivers.
+    satellite: SatelliteLink,
+    /// Each node's links' media, the name of its satellite link and that
+    /// link in words, by node index.
+    links: std::collections::BTreeMap<usize, NodeLinks>,
 }
 
 /// The longest `duration_s` or `drain_s` a run takes: a year.
@@ -205,6 +240,9 @@ impl Check<'_> {
         let water = s.water.clone().unwrap_or_default();
         self.water(&water);
         self.water = water.clone();
+        let satellite = s.satellite.unwrap_or_default();
+        self.satellite(&satellite);
+        self.satellite = satellite;
         self.report(&s.report.clone().unwrap_or_default());
         if s.node.is_empty() {
             self.problem("node", "a scenario needs at least one node");
@@ -230,6 +268,7 @@ impl Check<'_> {
             duration_micros: (duration * 1e6) as u64,
             drain_micros: (drain * 1e6) as u64,
             water,
+            satellite,
             nodes: nodes?,
             faults,
             report: s.report.unwrap_or_default(),
@@ -265,6 +304,17 @@ impl Check<'_> {
             let field = p.field.strip_prefix("simulator.").unwrap_or(&p.field);
             self.problem(format!("water.{field}"), p.reason.clone());
             self.water_refused.push(format!("driver.{}", p.field));
+        }
+    }
+
+    /// The satellite's settings, as the simulator driver checks them.
+    fn satellite(&mut self, satellite: &SatelliteLink) {
+        let driver = crate::modem::satellite_config(1, &[(1, [0.0; 3])], satellite, 0, None);
+        for p in modemdriver::sim::problems(&driver) {
+            if let Some(field) = p.field.strip_prefix("simulator.satellite.") {
+                self.problem(format!("satellite.{field}"), p.reason.clone());
+                self.water_refused.push(format!("driver.{}", p.field));
+            }
         }
     }
 
@@ -363,12 +413,26 @@ impl Check<'_> {
             codec: checked.codec,
             place: place?,
             traffic: traffic.into_iter().collect::<Option<Vec<_>>>()?,
-            modem: self
-                .modems
+            modem: self.modem_words(i),
+            links: self
+                .links
                 .get(&i)
-                .map(|(_, words)| words.clone())
+                .map(|l| l.media.clone())
                 .unwrap_or_default(),
+            satellite_link: self.links.get(&i).and_then(|l| l.satellite_link.clone()),
         })
+    }
+
+    /// Node `i`'s simulated modems in words: its modem on the water, its
+    /// link on the satellite, or both (`"DRIVER_WHOI_MICROMODEM; iridium:
+    /// Iridium SBD, simulated: …"`).
+    fn modem_words(&self, i: usize) -> String {
+        let water = self.modems.get(&i).map(|(_, words)| words.clone());
+        let satellite = self.links.get(&i).and_then(|l| l.satellite_words.clone());
+        match (water, satellite) {
+            (Some(w), Some(s)) => format!("{w}; {s}"),
+            (w, s) => w.or(s).unwrap_or_default(),
+        }
     }
 
     /// Every node on the one water has the same modem: a Popoto does not
@@ -590,36 +654,92 @@ impl Check<'_> {
             );
             return None;
         }
-        if !config.link.is_empty() {
-            self.problem(
-                format!("node[{i}].gobyd.link"),
-                "a node of several links is not simulated yet: give one driver and mac",
-            );
-            return None;
-        }
         config.modem_id = Some(id);
         // The simulator as the run starts it, so that its settings and the
         // slots against its packets are checked as `gobyd --check` checks
         // them (a slot too short for its rate's packet would drop every
         // transmission in it).
         let own = [(id, start_of(node))];
-        // The simulated modem sends as the node's own where it can.
-        let sent = match crate::modem::sends_as(config.driver.as_ref()) {
-            Ok(sent) => sent,
-            Err(p) => {
-                self.problem(format!("node[{i}].gobyd.driver.{}", p.field), p.reason);
+        let mut media = Vec::new();
+        let mut satellite_link = None;
+        let mut satellite_words = None;
+        let mut on_water: Option<String> = None;
+        let links: Vec<(String, Option<String>, &mut Option<DriverConfig>)> =
+            match config.link.is_empty() {
+                true => vec![("driver".into(), None, &mut config.driver)],
+                false => config
+                    .link
+                    .iter_mut()
+                    .enumerate()
+                    .map(|(k, l)| (format!("link[{k}].driver"), l.name.clone(), &mut l.driver))
+                    .collect(),
+            };
+        for (at, name, driver) in links {
+            if crate::modem::is_satellite(driver.as_ref()) {
+                if satellite_link.is_some() || media.contains(&Medium::Satellite) {
+                    self.problem(
+                        format!("node[{i}].gobyd.{at}"),
+                        "a second Iridium link: a node has one link on the satellite",
+                    );
+                    return None;
+                }
+                media.push(Medium::Satellite);
+                let words = crate::modem::satellite_words(&self.satellite);
+                let shore = crate::modem::is_shore(driver.as_ref());
+                satellite_words = Some(match (&name, shore) {
+                    (Some(n), true) => format!("{n}: {words}; a shore station, reached anywhere"),
+                    (Some(n), false) => format!("{n}: {words}"),
+                    (None, true) => format!("{words}; a shore station, reached anywhere"),
+                    (None, false) => words,
+                });
+                satellite_link = name;
+                *driver = Some(crate::modem::satellite_config(
+                    id,
+                    &own,
+                    &self.satellite,
+                    0,
+                    driver.as_ref(),
+                ));
+                continue;
+            }
+            if let Some(first) = &on_water {
+                self.problem(
+                    format!("node[{i}].gobyd.{at}"),
+                    format!(
+                        "a second link on the water ({first} is one): a node has one modem \
+                         on the water, and one link on the satellite (an Iridium driver)"
+                    ),
+                );
                 return None;
             }
-        };
-        let modem = sent.modem.clone();
-        self.modems.insert(i, (sent.kind, sent.words));
-        config.driver = Some(crate::modem::driver_config(
-            id,
-            &own,
-            &self.water,
-            0,
-            modem.as_ref(),
-        ));
+            on_water = Some(name.unwrap_or_else(|| "its driver".into()));
+            // The simulated modem sends as the node's own where it can.
+            let sent = match crate::modem::sends_as(driver.as_ref()) {
+                Ok(sent) => sent,
+                Err(p) => {
+                    self.problem(format!("node[{i}].gobyd.{at}.{}", p.field), p.reason);
+                    return None;
+                }
+            };
+            let modem = sent.modem.clone();
+            self.modems.insert(i, (sent.kind, sent.words));
+            media.push(Medium::Water);
+            *driver = Some(crate::modem::driver_config(
+                id,
+                &own,
+                &self.water,
+                0,
+                modem.as_ref(),
+            ));
+        }
+        self.links.insert(
+            i,
+            NodeLinks {
+                media,
+                satellite_link,
+                satellite_words,
+            },
+        );
         // The run publishes and listens in-process: no JSON, MQTT or MOOS
         // interface, and no forecast (its ray traces run on other threads).
         config.json = Some(protos::goby::apps::protobuf::gobyd_config::JsonInterface {
@@ -644,7 +764,12 @@ impl Check<'_> {
             return;
         };
         for mut p in problems {
-            if self.water_refused.contains(&p.field) {
+            // A link's driver is told as the top-level one is.
+            let bare = match p.field.strip_prefix("link[") {
+                Some(rest) => rest.split_once("].").map_or(p.field.as_str(), |(_, f)| f),
+                None => p.field.as_str(),
+            };
+            if self.water_refused.iter().any(|f| f == bare) {
                 continue;
             }
             match &file {

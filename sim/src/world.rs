@@ -20,6 +20,7 @@ use modemdriver::sim::medium::Medium;
 use modemdriver::sim::positions::Positions;
 use modemdriver::sim::SimulatorDriver;
 use modemdriver::time::TokioClock;
+use protos::goby::acomms::protobuf::DriverConfig;
 use queue::Clock;
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::time::Instant;
@@ -100,11 +101,16 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
                 name: n.name.clone(),
                 modem_id: n.modem_id,
                 codec: n.codec.clone(),
+                links: n.links.clone(),
+                satellite_link: n.satellite_link.clone(),
             })
             .collect(),
     )));
     let recorder = Arc::new(crate::medium_log::Recorder::default());
     let medium = Medium::observed(recorder.clone());
+    // The satellite of the nodes with an Iridium link: a channel of its
+    // own, which the faults of the water do not touch.
+    let satellite = Medium::new();
     let places: Arc<dyn Positions> = Arc::new(crate::track::World {
         start_micros: s.start_micros,
         places: s
@@ -125,6 +131,7 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
         s,
         dir,
         medium: &medium,
+        satellite: &satellite,
         clock: &clock,
         places: &places,
         ledger: &ledger,
@@ -199,6 +206,7 @@ pub(crate) struct World<'a> {
     s: &'a Scenario,
     dir: &'a Path,
     medium: &'a Arc<Medium>,
+    satellite: &'a Arc<Medium>,
     clock: &'a Arc<TokioClock>,
     places: &'a Arc<dyn Positions>,
     ledger: &'a Arc<Mutex<Ledger>>,
@@ -248,46 +256,29 @@ impl World<'_> {
     /// Starts node `i` (its `generation`-th start: 0 the first, more after
     /// kills) with its data directory in the world's.
     pub(crate) async fn start_node(&self, i: usize, generation: u64) -> Result<Running, SimError> {
-        let World {
-            s,
-            dir,
-            medium,
-            clock,
-            places,
-            ledger,
-        } = *self;
-        start_node(s, i, dir, medium, clock, places, ledger, generation).await
+        start_node(self, i, generation).await
     }
 }
 
-/// Starts node `i` of `s` with its data directory in `dir`.
-#[allow(clippy::too_many_arguments)]
-async fn start_node(
-    s: &Scenario,
-    i: usize,
-    dir: &Path,
-    medium: &Arc<Medium>,
-    clock: &Arc<TokioClock>,
-    places: &Arc<dyn Positions>,
-    ledger: &Arc<Mutex<Ledger>>,
-    generation: u64,
-) -> Result<Running, SimError> {
+/// Starts node `i` of the world's scenario, its data directory in the
+/// world's: one simulated driver a link, on the water or the satellite.
+async fn start_node(world: &World<'_>, i: usize, generation: u64) -> Result<Running, SimError> {
+    let World {
+        s,
+        dir,
+        medium,
+        satellite,
+        clock,
+        places,
+        ledger,
+    } = *world;
     let node = &s.nodes[i];
     let positions: Vec<(i32, [f64; 3])> = s
         .nodes
         .iter()
         .map(|n| (n.modem_id, n.place.start()))
         .collect();
-    let seed = generation_seed(&[s.seed, node.modem_id as u64], generation);
-    let driver_config = driver_config(
-        node.modem_id,
-        &positions,
-        &s.water,
-        seed,
-        node.config.driver.as_ref(),
-    );
     let mut config = node.config.clone();
-    config.driver = Some(driver_config.clone());
     config.data_dir = Some(crate::disk::data_dir(dir, i).display().to_string());
     let failed = |e: &dyn std::fmt::Display| {
         SimError::Run(format!("node {}: gobyd did not start: {e}", node.name))
@@ -298,18 +289,46 @@ async fn start_node(
             Some(stepped) => Arc::new(stepped),
             None => clock.clone(),
         };
-    let driver = SimulatorDriver::start_in_world(
-        &driver_config,
-        medium.clone(),
-        own.clone(),
-        places.clone(),
-    )
-    .map_err(|e| failed(&e))?;
+    // Each link's simulated modem, in the order of the links: on the
+    // water, sending as the node's own, or on the satellite.
+    let sections: Vec<&mut Option<DriverConfig>> = match config.link.is_empty() {
+        true => vec![&mut config.driver],
+        false => config.link.iter_mut().map(|l| &mut l.driver).collect(),
+    };
+    let mut drivers = Vec::new();
+    for (section, on) in sections.into_iter().zip(&node.links) {
+        let (placed, channel) = match on {
+            crate::scenario::Medium::Water => (
+                driver_config(
+                    node.modem_id,
+                    &positions,
+                    &s.water,
+                    generation_seed(&[s.seed, node.modem_id as u64], generation),
+                    section.as_ref(),
+                ),
+                medium,
+            ),
+            crate::scenario::Medium::Satellite => (
+                crate::modem::placed(
+                    &section.clone().unwrap_or_default(),
+                    &positions,
+                    generation_seed(&[s.seed, node.modem_id as u64, 2], generation),
+                ),
+                satellite,
+            ),
+        };
+        drivers.push(
+            SimulatorDriver::start_in_world(&placed, channel.clone(), own.clone(), places.clone())
+                .map_err(|e| failed(&e))?,
+        );
+        *section = Some(placed);
+    }
     // The node's start numbers (publication numbers and the like) drawn
     // from the scenario's seed, not the operating system's; its journal
     // synced in line, so that no thread's real time orders its events.
-    let daemon = Daemon::builder(config)
-        .driver(driver)
+    let daemon = drivers
+        .into_iter()
+        .fold(Daemon::builder(config), |b, d| b.driver(d))
         .clock(own)
         .seed(generation_seed(
             &[s.seed, node.modem_id as u64, 1],

@@ -105,3 +105,28 @@ fn the_survey_example_runs_and_its_auvs_move_in_its_replay() {
         .fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(*x), b.max(*x)));
     assert_eq!((least, most), (900.0, 1500.0));
 }
+
+/// The example of two links (`sim/examples/surfacing.pb.txt`, shown in
+/// `docs/sim.md`): every command arrives once and is acked, some of them
+/// over the satellite.
+#[test]
+fn the_surfacing_example_runs_and_every_command_arrives_once() {
+    let path = repository().join("sim/examples/surfacing.pb.txt");
+    let scenario = goby_sim::scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let report = &outcome.report;
+    let commands = &report.by_type["goby.example.Command"];
+    assert_eq!(commands.published, 20, "{report:#?}");
+    assert_eq!(
+        (commands.delivered, commands.acked, commands.duplicates),
+        (20, 20, 0),
+        "{report:#?}"
+    );
+    let satellite = report.satellite_use.as_ref().expect("a satellite link");
+    assert!(satellite.delivered > 0, "{satellite:#?}");
+    assert!(
+        report.run.modems["auv"].contains("iridium: Iridium SBD"),
+        "{:?}",
+        report.run.modems
+    );
+}

@@ -17,7 +17,10 @@
 //! for a window (`duplicate_window_seconds`, by default the longest `ttl`
 //! of the queue: a sender stops retrying a message once it expired), and
 //!
-//! - delivers every first sending (`resent` clear), and remembers it;
+//! - delivers every first sending (`resent` clear), and remembers it,
+//!   except the late first sending of a publication it has had only as a
+//!   retransmission (held on its way while a copy overtook it: kept in
+//!   memory for the window, [`crate::core::delivery`]), which it suppresses;
 //! - suppresses a `resent` one it remembers (and acknowledges it: its
 //!   sender must stop retrying), and delivers one it does not;
 //! - delivers every message that came without identity (from a sender with

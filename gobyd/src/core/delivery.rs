@@ -22,7 +22,7 @@
 //! the mission log) and sends the acknowledgement it returns to the
 //! driver; and [`Delivery::release`] whenever a taker may have come.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 use std::time::Duration;
 
@@ -81,6 +81,13 @@ impl FrameFaults {
 pub struct Delivery {
     inbox: Inbox,
     held: Vec<Held>,
+    /// Publications received first as a `resent` copy, whose first sending
+    /// has not come (it may still, late, by another way: a frame held at
+    /// a satellite gateway while a copy crossed the water), with when;
+    /// kept for the duplicate window, in memory.
+    awaiting_original: HashMap<Identity, u64>,
+    /// The duplicate window, microseconds.
+    window: u64,
 }
 
 impl Delivery {
@@ -101,6 +108,8 @@ impl Delivery {
         let delivery = Delivery {
             inbox,
             held: Vec::new(),
+            awaiting_original: HashMap::new(),
+            window: window_micros,
         };
         Ok((delivery, replay))
     }
@@ -196,6 +205,32 @@ impl Delivery {
                 &received.bytes,
             );
             let resent = received.identity.is_some_and(|w| w.resent);
+            // The first sending of a publication received already as a
+            // retransmission: it came late, by another way. (One not
+            // awaited is a new publication, even with the number and
+            // bytes of one remembered: numbers wrap.)
+            let late_original = !resent
+                && self
+                    .awaiting_original
+                    .remove(&identity)
+                    .is_some_and(|t| t.saturating_add(self.window) > now);
+            if late_original {
+                if self
+                    .held
+                    .iter()
+                    .any(|h| h.seq.is_none() && h.identity == identity)
+                {
+                    all_on_record = false;
+                }
+                tracing::info!(
+                    src = received.src,
+                    dccl_id = received.dccl_id,
+                    number = received.identity.map(|w| w.number),
+                    "the first sending of a message already received as a retransmission: \
+                     suppressed"
+                );
+                continue;
+            }
             if resent && self.inbox.is_duplicate(&identity, now) {
                 // Known, but held off the record (it could not be written):
                 // its frame is acknowledged once it is handed over, not
@@ -214,6 +249,12 @@ impl Delivery {
                     "a retransmission of a message already received: suppressed"
                 );
                 continue;
+            }
+            if resent {
+                let window = self.window;
+                self.awaiting_original
+                    .retain(|_, t| t.saturating_add(window) > now);
+                self.awaiting_original.insert(identity, now);
             }
             let incoming = Incoming {
                 identity,
@@ -399,6 +440,40 @@ mod tests {
         // The record outlives the restart: 9 again is a retransmission.
         assert!(d.record(vec![message(9, true)], &reception, 5_000, t));
         assert!(d.next_due().is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_first_sending_after_its_retransmission_is_suppressed_once() {
+        let dir = scratch("late");
+        let (mut d, _) = Delivery::open(&dir.join("inbox.log"), 60_000_000, 1_000).unwrap();
+        let t = Instant::now();
+        let reception = Reception::default();
+        // A retransmission of 5 comes first (its first sending held at a
+        // gateway): held for the clients.
+        assert!(d.record(vec![message(5, true)], &reception, 1_000, t));
+        // Then its first sending: suppressed, and acknowledged.
+        assert!(d.record(vec![message(5, false)], &reception, 2_000, t));
+        // Another first sending of number 5 with these bytes is a new
+        // publication (numbers wrap): held.
+        assert!(d.record(vec![message(5, false)], &reception, 3_000, t));
+        let mut handed = Vec::new();
+        d.release(true, t, 4_000, |r, _| {
+            handed.push(r.identity.unwrap().number)
+        });
+        assert_eq!(
+            handed,
+            [5, 5],
+            "the retransmission and the later publication"
+        );
+        // A first sending awaited past the window is a new publication.
+        assert!(d.record(vec![message(6, true)], &reception, 5_000, t));
+        assert!(d.record(vec![message(6, false)], &reception, 70_000_000, t));
+        let mut late = Vec::new();
+        d.release(true, t, 70_000_001, |r, _| {
+            late.push(r.identity.unwrap().number)
+        });
+        assert_eq!(late, [6, 6]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

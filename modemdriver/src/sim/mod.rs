@@ -228,7 +228,9 @@ impl DriverKind for SimulatorDriver {
     /// With `modem`, that modem's; with `satellite`, its frame.
     fn frame_limits(&self, config: &DriverConfig) -> Option<crate::kind::FrameLimits> {
         if let Some(link) = config.simulator.as_ref().and_then(|s| s.satellite.as_ref()) {
-            return satellite::Satellite::of(link).ok().map(|s| s.frame_limits());
+            return satellite::Satellite::of(link)
+                .ok()
+                .map(|s| s.frame_limits());
         }
         let (kind, modem) = modem_of(config).ok()??;
         kind.frame_limits(&modem)
@@ -588,10 +590,12 @@ impl Node {
                 self.satellite.map_or(0.0, |s| s.surface_depth)
             );
             match mt.r#type() {
-                TransmissionType::Data => events.emit(DriverEvent::TransmitResult(TransmitResult {
-                    transmission: mt,
-                    outcome: TransmitOutcome::Failed(reason),
-                })),
+                TransmissionType::Data => {
+                    events.emit(DriverEvent::TransmitResult(TransmitResult {
+                        transmission: mt,
+                        outcome: TransmitOutcome::Failed(reason),
+                    }))
+                }
                 // An ack (or other packet) from under water is not sent;
                 // its message's sender sends it again.
                 _ => events.status(DriverStatus::Skipped { reason }),
@@ -959,8 +963,10 @@ impl Node {
             if spoiled.is_some() {
                 continue;
             }
-            if self.below_the_satellites().is_some() {
-                // At the gateway until a session at the surface.
+            if self.below_the_satellites().is_some() || !self.held.is_empty() {
+                // At the gateway until a session at the surface, behind
+                // what waits there already (the gateway's queue is first
+                // in, first out).
                 self.held.push(mt);
                 continue;
             }

@@ -1,0 +1,230 @@
+//! Nodes of two links, acoustic and Iridium: an AUV runs out of the
+//! ship's acoustic range under water and surfaces at the end of its line;
+//! the ship (a shore station's Iridium, reached anywhere) and the AUV
+//! send each other acknowledged commands, acoustic first and Iridium after
+//! two minutes without an ack. What the AUV sends out of range goes when
+//! it surfaces, over the satellite, and every command is delivered once.
+
+use std::path::Path;
+
+use goby_sim::scenario::parse;
+
+/// A node's gobyd: link "acoustic" (TDMA, 10 s slots at rate 1) and link
+/// "iridium" (`driver`, 30 s slots), commands over acoustic and, after
+/// 120 s without an ack, Iridium too; a message sent waits 60 s for its
+/// ack before it goes again (a satellite round trip, two sessions and two
+/// latencies, is 50 s), as the shipped two-links configurations do.
+fn gobyd(driver: &str) -> String {
+    gobyd_preferring(driver, "acoustic", "iridium")
+}
+
+/// As [`gobyd`], commands over `first` and, after 120 s without an ack,
+/// `then` too.
+fn gobyd_preferring(driver: &str, first: &str, then: &str) -> String {
+    format!(
+        r#"gobyd {{
+    link {{ name: "acoustic" driver {{ driver_type: DRIVER_WHOI_MICROMODEM }}
+      mac {{ type: MAC_FIXED_DECENTRALIZED
+        slot {{ src: 1 dest: -1 rate: 1 slot_seconds: 10 }}
+        slot {{ src: 2 dest: -1 rate: 1 slot_seconds: 10 }} }} }}
+    link {{ name: "iridium" driver {{ driver_type: {driver} }}
+      mac {{ type: MAC_FIXED_DECENTRALIZED
+        slot {{ src: 1 dest: -1 slot_seconds: 30 }}
+        slot {{ src: 2 dest: -1 slot_seconds: 30 }} }} }}
+    link_rule {{ protobuf_name: "goby.example.Command" link: "{first}" link: "{then}"
+      policy: LINK_POLICY_PRIORITY_TIMEOUT timeout_seconds: 120 }}
+    queue {{ minimum_ack_wait_seconds: 60 message_entry {{ protobuf_name: "goby.example.Command" ack: true ttl: 7200
+      role {{ type: DESTINATION_ID field: "destination" }} }} }}
+  }}"#
+    )
+}
+
+/// When the AUV's antenna reaches 0.5 m on its way up, seconds from the
+/// start: 3500 m at 20 m at 1.5 m/s, then up from 20 m over 300 m.
+const SURFACED_S: f64 = 3500.0 / 1.5 + 292.5 / 1.5;
+
+/// How far the ship's modem hears, metres.
+const RANGE_M: f64 = 2000.0;
+
+fn scenario() -> String {
+    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
+    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
+    speed_mps: 1.5 }";
+    two_nodes(&gobyd("DRIVER_IRIDIUM_SHORE"), track)
+}
+
+/// The ship (`ship`, its gobyd section) at the origin and the AUV (two
+/// links, acoustic first) on `track`, each sending the other a command
+/// every 300 s for 3000 s, 1800 s of drain.
+fn two_nodes(ship: &str, track: &str) -> String {
+    let command = |dest: &str, tag: &str, start: u32| {
+        format!(
+            r#"traffic {{ type: "goby.example.Command" dest: "{dest}" period_s: 300 start_s: {start}
+      field {{ name: "action" constant: "GOTO" }}
+      field {{ name: "note" counter {{ format: "{tag}-%d" }} }} }}"#
+        )
+    };
+    format!(
+        r#"seed: 11
+start_time: "2026-06-01T00:00:00Z"
+duration_s: 3000
+drain_s: 1800
+water {{ packet_loss: 0 range: {RANGE_M} }}
+node {{ name: "ship" modem_id: 1 position {{ depth: 0 }}
+  {ship}
+  {to_auv} }}
+node {{ name: "auv" modem_id: 2
+  {track}
+  {auv}
+  {to_ship} }}
+"#,
+        auv = gobyd("DRIVER_IRIDIUM"),
+        to_auv = command("auv", "s", 7),
+        to_ship = command("ship", "a", 19),
+    )
+}
+
+#[test]
+fn out_of_range_under_water_commands_go_over_the_satellite_once_the_auv_surfaces() {
+    let text = scenario();
+    let scenario = parse(&text, "satellite", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        scenario.nodes[1].links,
+        [
+            goby_sim::scenario::Medium::Water,
+            goby_sim::scenario::Medium::Satellite
+        ]
+    );
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let report = &outcome.report;
+    let start = scenario.start_micros;
+    let publications = outcome.ledger.publications();
+    assert_eq!(publications.len(), 20, "10 commands each way");
+    let mut late = 0;
+    for p in publications {
+        let deliveries: Vec<i64> = p.deliveries.values().flatten().copied().collect();
+        assert_eq!(deliveries.len(), 1, "{p:?}: delivered once");
+        assert!(p.acked.is_some(), "{p:?}: acked");
+        let published_s = (p.time - start) as f64 / 1e6;
+        let delivered_s = (deliveries[0] - start) as f64 / 1e6;
+        // The AUV passes the ship's range at about 1000 s; what either
+        // sends after (plus the slots' wait) can only cross once it is up.
+        if published_s < 1000.0 {
+            // In range: over the water, in a slot or two.
+            assert!(
+                delivered_s - published_s < 60.0,
+                "published at {published_s} s in range, delivered at {delivered_s} s"
+            );
+        }
+        if published_s > 1100.0 {
+            assert!(
+                delivered_s >= SURFACED_S,
+                "published at {published_s} s, delivered at {delivered_s} s, before the AUV \
+                 surfaced ({SURFACED_S} s)"
+            );
+            late += 1;
+        }
+    }
+    assert!(late >= 10, "{late} commands published out of range");
+    let satellite = report.satellite_use.as_ref().expect("a satellite link");
+    let auv = &satellite.by_node["auv"];
+    assert!(auv.transmissions > 0, "{satellite:?}");
+    assert!(satellite.delivered > 0, "{satellite:?}");
+    assert_eq!(report.total.duplicates, 0);
+    println!(
+        "satellite: {} published, {} delivered once; {late} published out of range, all \
+         after the AUV surfaced at {SURFACED_S:.0} s; satellite sessions with data {}, heard {}",
+        publications.len(),
+        report.total.delivered,
+        satellite.transmissions,
+        satellite.delivered
+    );
+}
+
+#[test]
+fn a_second_link_on_the_water_or_the_satellite_and_bad_satellite_settings_are_refused() {
+    let text = scenario();
+    // The AUV's acoustic link made an Iridium one: two on the satellite.
+    let two_satellites = text.replacen(
+        "driver_type: DRIVER_WHOI_MICROMODEM }",
+        "driver_type: DRIVER_IRIDIUM }",
+        2,
+    );
+    let e = parse(&two_satellites, "two", Path::new(".")).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("node[0].gobyd.link[1].driver: a second Iridium link"),
+        "{e}"
+    );
+    // Its Iridium link made acoustic: two on the water.
+    let two_waters = text.replace(
+        "driver_type: DRIVER_IRIDIUM }",
+        "driver_type: DRIVER_WHOI_MICROMODEM }",
+    );
+    let e = parse(&two_waters, "two", Path::new(".")).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("node[1].gobyd.link[1].driver: a second link on the water (acoustic is one)"),
+        "{e}"
+    );
+    let bad = format!("satellite {{ latency_seconds: -5 session_seconds: 40 }}\n{text}");
+    let e = parse(&bad, "bad", Path::new(".")).unwrap_err();
+    let told = e.to_string();
+    assert!(
+        told.contains("satellite.latency_seconds: -5 is not a time in seconds"),
+        "{told}"
+    );
+    // Said once, at the scenario's satellite, not again at each node.
+    assert_eq!(told.lines().count(), 1, "{told}");
+    // A 40 s session does not fit the nodes' 30 s Iridium slots: refused
+    // as gobyd --check refuses such a slot.
+    let long = format!("satellite {{ session_seconds: 40 }}\n{text}");
+    let e = parse(&long, "long", Path::new(".")).unwrap_err();
+    assert!(e.to_string().contains("link[1].mac.slot"), "{e}");
+}
+
+/// The ship prefers Iridium for its commands, the AUV lingering at 20 m
+/// within acoustic range and surfacing at about 1700 s: each command goes
+/// first to the satellite gateway, where it waits for the AUV, then after
+/// two minutes without an ack over the water, which brings it. When the
+/// AUV surfaces, the gateway hands over the copies it held, after the
+/// water's (the sendings of a type of several links are all marked
+/// `resent`): each is suppressed, and every command reaches the AUV's
+/// client once.
+#[test]
+fn copies_held_at_the_gateway_and_come_after_the_water_s_are_not_delivered_again() {
+    let track = "track { waypoint { x: 1000 depth: 20 } waypoint { x: 3250 depth: 20 }
+    waypoint { x: 3250 y: 300 depth: 0 } waypoint { x: 3250 y: 900 depth: 0 }
+    speed_mps: 1.5 }";
+    let ship = gobyd_preferring("DRIVER_IRIDIUM_SHORE", "iridium", "acoustic");
+    // In range (the ship hears 2000 m) the whole run.
+    let text = two_nodes(&ship, track).replace("range: 2000", "range: 5000");
+    let scenario = parse(&text, "gateway", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let report = &outcome.report;
+    let start = scenario.start_micros;
+    let to_auv: Vec<_> = outcome
+        .ledger
+        .publications()
+        .iter()
+        .filter(|p| p.src == 0)
+        .collect();
+    assert_eq!(to_auv.len(), 10);
+    // Surfaced (0.5 m) 1500 s + 292.5 m / 1.5 m/s in.
+    let surfaced_s = 2250.0 / 1.5 + 292.5 / 1.5;
+    let mut before = 0;
+    for p in &to_auv {
+        let deliveries: Vec<i64> = p.deliveries.values().flatten().copied().collect();
+        assert_eq!(deliveries.len(), 1, "{p:?}: delivered once");
+        assert!(p.acked.is_some(), "{p:?}: acked");
+        before += usize::from(((deliveries[0] - start) as f64 / 1e6) < surfaced_s);
+    }
+    // Those sent while it was down came over the water.
+    assert!(before >= 5, "{before} delivered before the AUV surfaced");
+    assert_eq!(report.total.duplicates, 0);
+    let satellite = report.satellite_use.as_ref().expect("a satellite link");
+    assert!(
+        satellite.by_node["auv"].receptions > 0,
+        "the AUV heard the gateway's held messages: {satellite:?}"
+    );
+}
