@@ -76,14 +76,34 @@ impl RateSpec {
     /// header) plus every frame's bits at the bit rate (the modem sends whole
     /// frames).
     pub fn packet_duration(&self, overhead: Duration) -> Duration {
-        let bits = f64::from(self.frames * self.frame_bytes * 8);
-        overhead + Duration::from_secs_f64(bits / self.bits_per_second)
+        let bits = f64::from(self.frames) * f64::from(self.frame_bytes) * 8.0;
+        let seconds = bits / self.bits_per_second;
+        // Whatever the settings (a frame size no modem has, a rate of 0 bit/s),
+        // a time, never a panic: the longest one there is.
+        overhead.saturating_add(Duration::try_from_secs_f64(seconds).unwrap_or(Duration::MAX))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_packet_of_any_size_or_rate_has_a_time() {
+        let huge = RateSpec {
+            rate: 0,
+            frames: u32::MAX,
+            frame_bytes: u32::MAX,
+            bits_per_second: 80.0,
+        };
+        let t = huge.packet_duration(Duration::from_secs(1));
+        assert!(t > Duration::from_secs(1_000_000_000), "{t:?}");
+        let stopped = RateSpec {
+            bits_per_second: 0.0,
+            ..huge
+        };
+        assert_eq!(stopped.packet_duration(Duration::ZERO), Duration::MAX);
+    }
 
     #[test]
     fn table_matches_the_micromodem() {

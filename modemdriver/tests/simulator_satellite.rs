@@ -1,8 +1,9 @@
 //! The simulator's satellite link (`simulator { satellite {} }`), on
-//! tokio's paused clock: sessions of fixed length, the gateway's latency,
-//! and only antennas at the surface reach the satellites. Node 1 is a
-//! shore station at the surface; node 2 a vehicle at 30 m that surfaces
-//! at 100 s.
+//! tokio's paused clock: sessions of fixed length, the gateway's latency
+//! and queue, and only antennas at the surface reach the satellites.
+//! Node 1 is a modem at the surface (or a shore station); node 2 a vehicle
+//! at 30 m that surfaces at 100 s; node 3, where there is one, at the
+//! surface.
 
 mod common;
 
@@ -41,13 +42,17 @@ impl Positions for Dive {
     fn at(&self, modem_id: i32, micros: u64) -> Option<Position> {
         let up = self.surfaced || micros >= (START as u64) + SURFACES_S * 1_000_000;
         Some(match (modem_id, up) {
-            (1, _) | (2, true) => Position::new(0.0, 0.0, 0.0),
-            _ => Position::new(1_000.0, 0.0, -30.0),
+            (2, false) => Position::new(1_000.0, 0.0, -30.0),
+            _ => Position::new(0.0, 0.0, 0.0),
         })
     }
 }
 
 fn config(me: i32) -> DriverConfig {
+    config_of(me, SatelliteLink::default())
+}
+
+fn config_of(me: i32, link: SatelliteLink) -> DriverConfig {
     let node = |modem_id| NodePosition {
         modem_id,
         ..Default::default()
@@ -57,8 +62,8 @@ fn config(me: i32) -> DriverConfig {
         // Acks when asked (as gobyd asks once the message is recorded).
         deferred_ack: Some(true),
         simulator: Some(SimulatorDriverConfig {
-            node: vec![node(1), node(2)],
-            satellite: Some(SatelliteLink::default()),
+            node: vec![node(1), node(2), node(3)],
+            satellite: Some(link),
             ..Default::default()
         }),
         ..Default::default()
@@ -66,15 +71,25 @@ fn config(me: i32) -> DriverConfig {
 }
 
 /// The shore (1) and the vehicle (2) on a satellite channel of their own.
-fn pair(surfaced: bool) -> (Driver, Driver) {
+/// Nodes of `configs` on a satellite channel of their own, the vehicle
+/// (2) at the surface from the start with `surfaced`.
+fn nodes(surfaced: bool, configs: &[DriverConfig]) -> Vec<Driver> {
     let medium = Medium::new();
     let clock = Arc::new(TokioClock::at(START));
     let dive: Arc<dyn Positions> = Arc::new(Dive { surfaced });
-    let start = |id| {
-        SimulatorDriver::start_in_world(&config(id), medium.clone(), clock.clone(), dive.clone())
-            .unwrap()
-    };
-    (start(1), start(2))
+    configs
+        .iter()
+        .map(|c| {
+            SimulatorDriver::start_in_world(c, medium.clone(), clock.clone(), dive.clone()).unwrap()
+        })
+        .collect()
+}
+
+/// The modem at the surface (1) and the vehicle (2).
+fn pair(surfaced: bool) -> (Driver, Driver) {
+    let mut two = nodes(surfaced, &[config(1), config(2)]);
+    let vehicle = two.pop().unwrap();
+    (two.pop().unwrap(), vehicle)
 }
 
 fn data(dest: i32) -> ModemTransmission {
@@ -95,21 +110,70 @@ async fn result(driver: &mut Driver, frames: &[Vec<u8>]) -> TransmitResult {
 }
 
 #[tokio::test(start_paused = true)]
-async fn a_message_takes_its_session_then_the_gateway_s_latency() {
+async fn a_message_takes_its_session_the_gateway_s_latency_and_the_receiver_s_session() {
     let (mut shore, mut vehicle) = pair(true);
     let t0 = Instant::now();
     shore.initiate_transmission(data(2)).unwrap();
     let frame = vec![7u8; 259];
     let sent = result(&mut shore, std::slice::from_ref(&frame)).await;
     assert_eq!(sent.outcome, TransmitOutcome::Sent);
-    assert_eq!(
-        t0.elapsed(),
-        Duration::from_secs(20),
-        "the session's length"
-    );
+    assert_eq!(t0.elapsed(), Duration::from_secs(20), "the session");
+    // In the vehicle's queue at 25 s; its ring alert starts a session,
+    // which brings the message at its end.
     let got = received(&mut vehicle, Duration::from_secs(60)).await;
     assert_eq!(got.frame, vec![frame]);
+    assert_eq!(
+        t0.elapsed(),
+        Duration::from_secs(45),
+        "session, latency, session"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_shore_station_has_no_sessions_and_hears_on_arrival() {
+    let shore = SatelliteLink {
+        shore: Some(true),
+        ..Default::default()
+    };
+    let mut two = nodes(true, &[config_of(1, shore), config(2)]);
+    let mut vehicle = two.pop().unwrap();
+    let mut shore = two.pop().unwrap();
+    let t0 = Instant::now();
+    vehicle.initiate_transmission(data(1)).unwrap();
+    result(&mut vehicle, &[vec![3u8; 12]]).await;
+    let got = received(&mut shore, Duration::from_secs(60)).await;
+    assert_eq!(got.frame, vec![vec![3u8; 12]]);
     assert_eq!(t0.elapsed(), Duration::from_secs(25), "session and latency");
+    // Its own message is at the gateway at once.
+    let t1 = Instant::now();
+    shore.initiate_transmission(data(2)).unwrap();
+    let sent = result(&mut shore, &[vec![4u8; 12]]).await;
+    assert_eq!(sent.outcome, TransmitOutcome::Sent);
+    assert_eq!(t1.elapsed(), Duration::ZERO);
+    received(&mut vehicle, Duration::from_secs(60)).await;
+    assert_eq!(
+        t1.elapsed(),
+        Duration::from_secs(25),
+        "latency, then a session"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn only_the_node_a_message_is_for_hears_it() {
+    let mut three = nodes(true, &[config(1), config(2), config(3)]);
+    let mut third = three.pop().unwrap();
+    let mut vehicle = three.pop().unwrap();
+    let mut first = three.pop().unwrap();
+    first.initiate_transmission(data(2)).unwrap();
+    result(&mut first, &[vec![5u8; 4]]).await;
+    received(&mut vehicle, Duration::from_secs(60)).await;
+    let heard = collect_received(&mut third, &[], Duration::from_secs(60)).await;
+    assert!(heard.is_empty(), "node 3 heard node 2's message: {heard:?}");
+    // A broadcast reaches both.
+    first.initiate_transmission(data(0)).unwrap();
+    result(&mut first, &[vec![6u8; 4]]).await;
+    received(&mut vehicle, Duration::from_secs(60)).await;
+    received(&mut third, Duration::from_secs(60)).await;
 }
 
 #[tokio::test(start_paused = true)]
@@ -127,28 +191,54 @@ async fn a_session_from_under_water_fails() {
 }
 
 #[tokio::test(start_paused = true)]
-async fn a_message_for_a_vehicle_under_water_waits_at_the_gateway_for_its_next_session() {
+async fn messages_for_a_vehicle_under_water_wait_at_the_gateway_one_a_session() {
     let (mut shore, mut vehicle) = pair(false);
     let t0 = Instant::now();
-    shore.initiate_transmission(data(2)).unwrap();
-    let frame = vec![9u8; 40];
-    let sent = result(&mut shore, std::slice::from_ref(&frame)).await;
-    assert_eq!(sent.outcome, TransmitOutcome::Sent, "the gateway took it");
-    // At the gateway at 25 s; the vehicle is down until 100 s and, once
-    // up, hears nothing until it starts a session of its own.
-    let heard = collect_received(&mut vehicle, &[], Duration::from_secs(140)).await;
-    assert!(heard.is_empty(), "heard under water: {heard:?}");
-    let asked = t0.elapsed();
-    assert!(asked >= Duration::from_secs(SURFACES_S), "{asked:?}");
-    // A mailbox check: a slot of its own, with nothing to send.
-    vehicle.initiate_transmission(data(1)).unwrap();
-    let got = received(&mut vehicle, Duration::from_secs(60)).await;
-    assert_eq!(got.frame, vec![frame]);
+    let (a, b) = (vec![9u8; 40], vec![8u8; 40]);
+    for frame in [&a, &b] {
+        shore.initiate_transmission(data(2)).unwrap();
+        let sent = result(&mut shore, std::slice::from_ref(frame)).await;
+        assert_eq!(sent.outcome, TransmitOutcome::Sent, "the gateway took it");
+    }
+    // In its queue at 25 and 45 s; the vehicle is down until 100 s, looks
+    // every 10 s, and once up makes sessions, one message each.
+    let first = received(&mut vehicle, Duration::from_secs(200)).await;
+    let at = t0.elapsed();
+    assert_eq!(first.frame, vec![a]);
+    let up = Duration::from_secs(SURFACES_S);
+    assert!(
+        at >= up + Duration::from_secs(20) && at <= up + Duration::from_secs(30),
+        "the first at {at:?}"
+    );
+    let second = received(&mut vehicle, Duration::from_secs(60)).await;
+    assert_eq!(second.frame, vec![b]);
     assert_eq!(
         t0.elapsed(),
-        asked + Duration::from_secs(20),
-        "picked up at the end of its session"
+        at + Duration::from_secs(20),
+        "the next session"
     );
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_gateway_s_queue_outlives_the_vehicle_s_driver() {
+    let medium = Medium::new();
+    let clock = Arc::new(TokioClock::at(START));
+    let dive: Arc<dyn Positions> = Arc::new(Dive { surfaced: false });
+    let start = |id| {
+        SimulatorDriver::start_in_world(&config(id), medium.clone(), clock.clone(), dive.clone())
+            .unwrap()
+    };
+    let mut shore = start(1);
+    let vehicle = start(2);
+    shore.initiate_transmission(data(2)).unwrap();
+    result(&mut shore, &[vec![1u8; 4]]).await;
+    tokio::time::sleep(Duration::from_secs(30)).await;
+    assert_eq!(medium.waiting(2), 1, "at the gateway");
+    // The vehicle reboots under water; up again, it has the message.
+    drop(vehicle);
+    let mut vehicle = start(2);
+    let got = received(&mut vehicle, Duration::from_secs(200)).await;
+    assert_eq!(got.frame, vec![vec![1u8; 4]]);
 }
 
 #[tokio::test(start_paused = true)]
@@ -201,23 +291,14 @@ fn a_satellite_link_with_water_or_a_modem_is_refused_by_name() {
 #[tokio::test(start_paused = true)]
 async fn the_gateway_hands_messages_over_first_in_first_out() {
     let (mut shore, mut vehicle) = pair(false);
-    let t0 = Instant::now();
-    // A, sent while the vehicle is down: held at the gateway.
-    shore.initiate_transmission(data(2)).unwrap();
-    let a = vec![1u8; 8];
-    result(&mut shore, std::slice::from_ref(&a)).await;
-    // B, sent once it is up: at the gateway after A, so behind it.
-    tokio::time::sleep_until(t0 + Duration::from_secs(SURFACES_S + 10)).await;
-    shore.initiate_transmission(data(2)).unwrap();
-    let b = vec![2u8; 8];
-    result(&mut shore, std::slice::from_ref(&b)).await;
-    let early = collect_received(&mut vehicle, &[], Duration::from_secs(30)).await;
-    assert!(early.is_empty(), "B overtook A: {early:?}");
-    // The vehicle's session picks up both, in order.
-    let asked = t0.elapsed();
-    vehicle.initiate_transmission(data(1)).unwrap();
-    let first = received(&mut vehicle, Duration::from_secs(60)).await;
-    let second = received(&mut vehicle, Duration::from_secs(60)).await;
-    assert_eq!((first.frame, second.frame), (vec![a], vec![b]));
-    assert_eq!(t0.elapsed(), asked + Duration::from_secs(20));
+    let frames: Vec<Vec<u8>> = (1..=4u8).map(|i| vec![i; 8]).collect();
+    for frame in &frames {
+        shore.initiate_transmission(data(2)).unwrap();
+        result(&mut shore, std::slice::from_ref(frame)).await;
+    }
+    let mut got = Vec::new();
+    for _ in &frames {
+        got.push(received(&mut vehicle, Duration::from_secs(300)).await.frame[0].clone());
+    }
+    assert_eq!(got, frames);
 }

@@ -2,7 +2,7 @@
 //! fills each frame of a data request, acks, expiry and received frames.
 
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::{BinaryHeap, HashMap, VecDeque};
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
 
@@ -47,6 +47,10 @@ pub struct PushOptions {
     /// message's type's are refused.
     pub encoded: Option<Vec<u8>>,
 }
+
+/// The most sendings kept for acks that come after their message went
+/// out again ([`QueueManager`]'s `sendings`).
+const SENDINGS_KEPT: usize = 4096;
 
 /// A sent message awaiting its acknowledgement.
 #[derive(Debug, Clone, Copy)]
@@ -138,6 +142,10 @@ pub struct QueueManager {
     by_name: HashMap<String, u32>,
     on_demand: HashMap<u32, OnDemandProvider>,
     awaiting: Vec<AwaitingAck>,
+    /// Every sending in a numbered transmission of a message still queued,
+    /// newest last (at most [`SENDINGS_KEPT`]): an ack of an earlier
+    /// sending, come after the message went out again, still credits it.
+    sendings: VecDeque<AwaitingAck>,
     next_seq: u64,
     /// Publication number of the next message pushed without one.
     next_number: u64,
@@ -210,6 +218,7 @@ impl QueueManager {
             by_name: HashMap::new(),
             on_demand: HashMap::new(),
             awaiting: Vec::new(),
+            sendings: VecDeque::new(),
             next_seq: 0,
             next_number: identity::random_start(),
             entropy: crate::Entropy::System,
@@ -744,7 +753,7 @@ impl QueueManager {
         let loopback_as_sent = queue.settings.has(Manipulator::LoopbackAsSent);
         if sent.ack_requested {
             filling.packet_ack = true;
-            self.awaiting.push(AwaitingAck {
+            let awaiting = AwaitingAck {
                 link,
                 frame: frame_number,
                 transmission: request.unique_id,
@@ -752,7 +761,14 @@ impl QueueManager {
                 dccl_id: contender.dccl_id,
                 seq: sent.seq,
                 hint: sent.index,
-            });
+            };
+            self.awaiting.push(awaiting);
+            if awaiting.transmission.is_some() {
+                if self.sendings.len() == SENDINGS_KEPT {
+                    self.sendings.pop_front();
+                }
+                self.sendings.push_back(awaiting);
+            }
         }
         if filling.first_message {
             filling.first_message = false;
@@ -1084,6 +1100,13 @@ impl QueueManager {
         now: Micros,
         link: LinkIndex,
     ) {
+        // The sendings of messages no longer queued credit nothing.
+        let queues = &self.queues;
+        self.sendings.retain(|a| {
+            queues
+                .binary_search_by_key(&a.dccl_id, |q| q.id)
+                .is_ok_and(|i| queues[i].get(a.seq).is_some())
+        });
         let awaiting = std::mem::take(&mut self.awaiting);
         let sent_before = now.saturating_sub(self.minimum_ack_wait);
         for a in awaiting {
@@ -1158,10 +1181,13 @@ impl QueueManager {
     /// message's destination), be addressed to this node, name the frame
     /// that carried the message, and belong to the same transmission
     /// (`ack.unique_id` equal to the data request's; both unset for a link
-    /// layer that does not number its transmissions). An ack that matches
-    /// nothing awaiting (late, for an older transmission, from another node)
-    /// is ignored: the message stays queued and is sent again. With several
-    /// links, only the messages `link` carried are credited.
+    /// layer that does not number its transmissions). An ack of an earlier
+    /// numbered transmission of a message sent again since (late: it came
+    /// through a satellite gateway, or after `minimum_ack_wait_seconds`)
+    /// credits it all the same; one that matches nothing (from another
+    /// node, of an unnumbered transmission whose frame numbers were used
+    /// again) is ignored: the message stays queued and is sent again. With
+    /// several links, only the messages `link` carried are credited.
     fn process_ack(&mut self, ack: &ModemTransmission, link: LinkIndex) {
         if ack.dest() != self.modem_id {
             return;
@@ -1170,19 +1196,39 @@ impl QueueManager {
             let Ok(frame) = u32::try_from(frame) else {
                 continue;
             };
+            let answers = |a: &AwaitingAck| {
+                a.link == link
+                    && a.frame == frame
+                    && a.dest == ack.src()
+                    && a.transmission == ack.unique_id
+            };
             let (hits, rest): (Vec<AwaitingAck>, Vec<AwaitingAck>) =
-                self.awaiting.iter().partition(|a| {
-                    a.link == link
-                        && a.frame == frame
-                        && a.dest == ack.src()
-                        && a.transmission == ack.unique_id
-                });
+                self.awaiting.iter().partition(|a| answers(a));
             self.awaiting = rest;
-            for a in hits {
+            // An earlier sending of a message sent again since (numbered
+            // transmissions only: their acks name them).
+            let earlier: Vec<AwaitingAck> = match ack.unique_id {
+                Some(_) => self
+                    .sendings
+                    .iter()
+                    .filter(|a| answers(a))
+                    .copied()
+                    .collect(),
+                None => Vec::new(),
+            };
+            for (a, late) in hits
+                .into_iter()
+                .map(|a| (a, false))
+                .chain(earlier.into_iter().map(|a| (a, true)))
+            {
                 let Ok(index) = self.queues.binary_search_by_key(&a.dccl_id, |q| q.id) else {
                     continue;
                 };
-                if let Some(m) = self.queues[index].take_acked_on(a.seq, a.hint, a.link, frame) {
+                let taken = match late {
+                    false => self.queues[index].take_acked_on(a.seq, a.hint, a.link, frame),
+                    true => self.queues[index].take(a.seq, a.hint),
+                };
+                if let Some(m) = taken {
                     self.emit(QueueEvent::Acked {
                         message: m.message,
                         id: Some(m.seq),

@@ -300,6 +300,15 @@ impl Queue {
         Some(m)
     }
 
+    /// Removes message `seq` whatever it awaits (acknowledged by an ack
+    /// of an earlier sending of it); `hint` is where it probably is.
+    pub(crate) fn take(&mut self, seq: u64, hint: usize) -> Option<QueuedMessage> {
+        let i = self.locate(seq, hint)?;
+        let m = self.messages.remove(i)?;
+        self.unmark(&m.marks);
+        Some(m)
+    }
+
     /// Makes message `seq` sendable again on `link` if it still awaits an
     /// ack for `frame` there and was sent before `sent_before` (`None`:
     /// whenever it was sent). `hint` is where the message probably is.

@@ -901,12 +901,8 @@ fn an_ack_is_credited_only_to_the_transmission_and_node_it_answers() {
     assert_eq!(contents(&codec, &second.frame[0])[0].1, 12);
     node.drain();
 
-    // The late ack of transmission 100 (frame 0 too) does not credit 101.
-    node.manager
-        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(100)), 0);
-    assert!(acked_serials(&node.drain()).is_empty());
-    // Nor does an ack of the right number from a node it was not sent to,
-    // nor one that names no transmission.
+    // An ack of the right number from a node it was not sent to, or one
+    // that names no transmission, credits nothing.
     node.manager
         .handle_modem_receive(&numbered_ack(&[0], 3, 1, Some(101)), 0);
     node.manager
@@ -914,11 +910,53 @@ fn an_ack_is_credited_only_to_the_transmission_and_node_it_answers() {
     assert!(acked_serials(&node.drain()).is_empty());
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 3);
 
-    // Its own ack removes it.
+    // The late ack of transmission 100 (frame 0 too) credits what 100
+    // carried there, 11, not 101's 12.
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(100)), 0);
+    assert_eq!(acked_serials(&node.drain()), vec![11]);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 2);
+
+    // Its own ack removes 12.
     node.manager
         .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(101)), 0);
     assert_eq!(acked_serials(&node.drain()), vec![12]);
-    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 2);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
+}
+
+#[test]
+fn the_ack_of_an_earlier_sending_credits_a_message_sent_again_once() {
+    let mut node = Node::new(1, vec![entry("Status")]);
+    node.push("Status", 1, 2, 7);
+    let codec = node.manager.codec().clone();
+    let each = codec.size(&node.message("Status", 1, 2, 0)).unwrap() as u32;
+    node.clock.advance_seconds(1.0);
+    let first = numbered_request(&mut node, each, 200);
+    assert_eq!(contents(&codec, &first.frame[0])[0].1, 7);
+    // No ack yet: sent again in 201 (a satellite round trip is long).
+    node.clock.advance_seconds(30.0);
+    let again = numbered_request(&mut node, each, 201);
+    assert_eq!(contents(&codec, &again.frame[0])[0].1, 7);
+    node.drain();
+    // The ack of 200 comes now: the receiver has it.
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(200)), 0);
+    assert_eq!(acked_serials(&node.drain()), vec![7]);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 0);
+    // The ack of 201 after it credits nothing more.
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 2, 1, Some(201)), 0);
+    assert!(acked_serials(&node.drain()).is_empty());
+    // Nor does an ack of 200 from a node it was not for, before.
+    node.push("Status", 1, 2, 8);
+    node.clock.advance_seconds(1.0);
+    numbered_request(&mut node, each, 202);
+    node.clock.advance_seconds(30.0);
+    numbered_request(&mut node, each, 203);
+    node.drain();
+    node.manager
+        .handle_modem_receive(&numbered_ack(&[0], 3, 1, Some(202)), 0);
+    assert!(acked_serials(&node.drain()).is_empty());
 }
 
 #[test]

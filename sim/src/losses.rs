@@ -9,8 +9,9 @@
 //!   draw: `packet_loss`, or the frame-error rate at the link's SNR),
 //!   `no_ray` (modelled water: no ray reaches), `node_down` (the node's
 //!   gobyd was killed or its power cut, not started again yet, while the packet was on its
-//!   way), or `unsettled` (the run ended before the packet had reached
-//!   it);
+//!   way), `no_modem` (the node has no modem on the water: its only link
+//!   is on the satellite), or `unsettled` (the run ended before the packet
+//!   had reached it);
 //! - when it was not delivered, **why**: `refused` by its sender,
 //!   `dropped` from a full queue, `expired_unsent`, `expired_unacked`
 //!   (sent, but its ack never came back before its ttl), `owed_unsent`,
@@ -37,6 +38,9 @@ use crate::ledger::{Ledger, Publication};
 
 /// The fate of a packet at a node when the run gave it none.
 pub const UNSETTLED: &str = "unsettled";
+
+/// The fate of a packet on the water at a node with no modem there.
+pub const NO_MODEM: &str = "no_modem";
 
 /// The fate of a packet at a node that was down (its gobyd killed, not
 /// started again yet) while the packet was on its way: no modem listened.
@@ -110,12 +114,16 @@ impl Fates {
     }
 
     /// The fate of the packet `src` (modem id) started at `start` at node
-    /// `receiver` (index): as the water told it, else [`NODE_DOWN`] when
-    /// the node was down while it was on its way, else [`UNSETTLED`].
+    /// `receiver` (index): as the water told it, else [`NO_MODEM`] at a
+    /// node with no modem on the water, [`NODE_DOWN`] when the node was
+    /// down while it was on its way, else [`UNSETTLED`].
     fn fate(&self, ledger: &Ledger, src: i32, start: u64, receiver: usize) -> &'static str {
-        let modem_id = ledger.nodes()[receiver].modem_id;
-        if let Some(fate) = self.fates.get(&(src, start, modem_id)) {
+        let node = &ledger.nodes()[receiver];
+        if let Some(fate) = self.fates.get(&(src, start, node.modem_id)) {
             return fate.name();
+        }
+        if !node.links.contains(&crate::scenario::Medium::Water) {
+            return NO_MODEM;
         }
         let end = start + self.lengths.get(&(src, start)).copied().unwrap_or(0) + ARRIVAL_US;
         let (start, end) = (start as i64, end as i64);

@@ -150,7 +150,13 @@ pub fn satellite_config(
     if is_shore(own) {
         // A shore station is on the gateway's side (DirectIP, RUDICS over
         // the Internet): reached wherever the scenario places it.
-        link.surface_depth = Some(f64::MAX);
+        link.shore = Some(true);
+    }
+    if link.frame_bytes.is_none() {
+        // The node's own driver's frame each way: what it sends.
+        link.frame_bytes = own
+            .and_then(modemdriver::check::frame_limits)
+            .and_then(|l| u32::try_from(l.outgoing).ok());
     }
     if link.frame_bytes.is_none() {
         link.frame_bytes = own

@@ -228,3 +228,44 @@ fn copies_held_at_the_gateway_and_come_after_the_water_s_are_not_delivered_again
         "the AUV heard the gateway's held messages: {satellite:?}"
     );
 }
+
+/// A ship on the satellite alone (a top-level `DRIVER_IRIDIUM_SHORE`, no
+/// `link` sections): every command crosses once, over the satellite, and
+/// the AUV's acoustic packets, which no modem of the ship hears, are told
+/// as such (`no_modem`), not as unsettled.
+#[test]
+fn a_ship_on_the_satellite_alone_gets_every_command_once() {
+    let ship = r#"gobyd {
+    driver { driver_type: DRIVER_IRIDIUM_SHORE }
+    mac { type: MAC_FIXED_DECENTRALIZED
+      slot { src: 1 dest: -1 slot_seconds: 30 }
+      slot { src: 2 dest: -1 slot_seconds: 30 } }
+    queue { minimum_ack_wait_seconds: 60 message_entry { protobuf_name: "goby.example.Command"
+      ack: true ttl: 7200 role { type: DESTINATION_ID field: "destination" } } }
+  }"#;
+    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
+    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
+    speed_mps: 1.5 }";
+    let text = two_nodes(ship, track);
+    let scenario = parse(&text, "alone", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        scenario.nodes[0].links,
+        [goby_sim::scenario::Medium::Satellite]
+    );
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let report = &outcome.report;
+    assert_eq!(report.total.published, 20);
+    assert_eq!(
+        (
+            report.total.delivered,
+            report.total.acked,
+            report.total.duplicates
+        ),
+        (20, 20, 0),
+        "{:#?}",
+        report.total
+    );
+    let fates = &report.losses.total.packets;
+    assert!(fates.contains_key("no_modem"), "{fates:?}");
+    assert!(!fates.contains_key("unsettled"), "{fates:?}");
+}

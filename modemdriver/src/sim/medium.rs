@@ -1,6 +1,6 @@
 //! The shared "water" of the simulator's nodes in one process.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, LazyLock, Mutex, Weak};
 use std::time::Duration;
 
@@ -49,6 +49,10 @@ pub struct Medium {
     /// Told of every packet and its fate at each node, when set.
     observer: Option<Arc<dyn Observer>>,
     filter: Mutex<Option<Filter>>,
+    /// On a satellite channel, the messages waiting at the gateway for each
+    /// node (its MT queue), first in, first out: they outlive the node's
+    /// driver, as a gateway's queue outlives a vehicle's reboot.
+    mailboxes: Mutex<HashMap<i32, VecDeque<ModemTransmission>>>,
 }
 
 impl std::fmt::Debug for Medium {
@@ -77,9 +81,8 @@ impl Medium {
     /// node are told to `observer` ([`super::observer`]).
     pub fn observed(observer: Arc<dyn Observer>) -> Arc<Medium> {
         Arc::new(Medium {
-            nodes: Mutex::default(),
             observer: Some(observer),
-            filter: Mutex::default(),
+            ..Medium::default()
         })
     }
 
@@ -143,6 +146,36 @@ impl Medium {
             };
             let _ = tx.send(heard);
         }
+    }
+
+    /// Leaves `mt` at the gateway for node `modem_id`, behind what waits
+    /// there already.
+    pub fn post(&self, modem_id: i32, mt: ModemTransmission) {
+        self.mailboxes
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .entry(modem_id)
+            .or_default()
+            .push_back(mt);
+    }
+
+    /// The oldest message waiting at the gateway for node `modem_id`, taken
+    /// from there (`None`: nothing waits).
+    pub fn collect(&self, modem_id: i32) -> Option<ModemTransmission> {
+        self.mailboxes
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get_mut(&modem_id)?
+            .pop_front()
+    }
+
+    /// How many messages wait at the gateway for node `modem_id`.
+    pub fn waiting(&self, modem_id: i32) -> usize {
+        self.mailboxes
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&modem_id)
+            .map_or(0, VecDeque::len)
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(i32, mpsc::UnboundedSender<Arc<Airborne>>)>> {

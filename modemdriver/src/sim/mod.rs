@@ -85,6 +85,10 @@ use reception::{Position, Receiver, Spoiled};
 use udp_medium::UdpMedium;
 use water::{LinkKey, Water};
 
+/// How often a node below the surface with messages waiting at the
+/// satellite gateway looks whether it has come up (and so makes a session).
+const SURFACE_LOOK: Duration = Duration::from_secs(10);
+
 /// How long the simulator waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
 
@@ -519,9 +523,9 @@ struct Node {
     observed_links: HashMap<(i32, u64), observer::Link>,
     /// The satellite link in place of the water (`None`: the water).
     satellite: Option<satellite::Satellite>,
-    /// Messages for this node waiting at the satellite gateway (it was
-    /// below the surface when they came), in order of arrival.
-    held: Vec<ModemTransmission>,
+    /// When the satellite sessions under way end, each bringing one
+    /// message waiting at the gateway for this node.
+    pickups: Vec<Instant>,
 }
 
 impl Node {
@@ -537,14 +541,57 @@ impl Node {
         link.submerged(&self.position_of(self.modem_id)?)
     }
 
-    /// A session at the surface ending at `end`: the modem is busy until
-    /// then, and what waits at the gateway for this node comes with its
-    /// end (an SBD session sends and receives at once).
-    fn pick_up_held(&mut self, end: Instant) {
+    /// A satellite session at the surface ending at `end`: the modem is
+    /// busy until then, and the oldest message waiting at the gateway for
+    /// this node comes with its end (an SBD session sends and receives at
+    /// once).
+    fn session_until(&mut self, end: Instant) {
         self.busy_until = self.busy_until.max(end);
-        for held in std::mem::take(&mut self.held) {
-            self.receiver.arrive(end, end, held, false);
+        if self.satellite.is_some_and(|s| !s.shore) {
+            self.pickups.push(end);
         }
+    }
+
+    /// The satellite's side of [`deliver_due`](Self::deliver_due): each
+    /// session ended by `now` brings one message waiting at the gateway;
+    /// while messages wait, a node at the surface and idle starts a
+    /// session of its own (the ring alert: a mailbox check).
+    fn satellite_due(&mut self, now: Instant, events: &EventSink) {
+        let Some(link) = self.satellite.filter(|s| !s.shore) else {
+            return;
+        };
+        let (due, later): (Vec<_>, Vec<_>) = self.pickups.iter().partition(|t| **t <= now);
+        self.pickups = later;
+        for _ in due {
+            if let Some(mt) = self.medium.collect(self.modem_id) {
+                self.hand_over(mt, events);
+            }
+        }
+        if self.pickups.is_empty()
+            && self.queue.is_empty()
+            && now >= self.busy_until
+            && self.medium.waiting(self.modem_id) > 0
+            && self.below_the_satellites().is_none()
+        {
+            self.session_until(now + link.session());
+        }
+    }
+
+    /// When the satellite's side needs the node next: a session's end, or,
+    /// while messages wait at the gateway, the end of the modem's work or
+    /// (below the surface) a look at whether it has come up.
+    fn satellite_wakeup(&self) -> Option<Instant> {
+        self.satellite.filter(|s| !s.shore)?;
+        if let Some(first) = self.pickups.iter().min() {
+            return Some(*first);
+        }
+        if self.medium.waiting(self.modem_id) == 0 {
+            return None;
+        }
+        Some(match self.below_the_satellites() {
+            Some(_) => Instant::now() + SURFACE_LOOK,
+            None => self.busy_until.max(Instant::now()),
+        })
     }
 
     /// A data packet of `rate` as this node sends it ([`packet_of`]).
@@ -571,6 +618,7 @@ impl Node {
             tx,
             self.receiver.next_end(),
             self.results.iter().map(|(t, _)| *t).min(),
+            self.satellite_wakeup(),
         ]
         .into_iter()
         .flatten()
@@ -628,7 +676,11 @@ impl Node {
                         .map_or(spec.frame_bytes, |b| b.min(spec.frame_bytes)),
                 });
                 let duration = packet.on_water();
-                if crate::slot::too_late_at(&mt, duration, self.now()) {
+                // A satellite session is not bound to the slot that asked
+                // for it (the Iridium driver queues it behind the session
+                // under way), so a mailbox check does not cost a slot.
+                let bound = self.satellite.is_none();
+                if bound && crate::slot::too_late_at(&mt, duration, self.now()) {
                     events.status(DriverStatus::Skipped {
                         reason: "the slot of a transmission waiting for the channel has passed"
                             .into(),
@@ -640,7 +692,7 @@ impl Node {
                     // The answer may come too late for the packet to end
                     // within its slot: then it is not sent (its messages are
                     // queued again, as for any failed transmission).
-                    if crate::slot::too_late_at(&mt, duration, self.now()) {
+                    if bound && crate::slot::too_late_at(&mt, duration, self.now()) {
                         events.emit(DriverEvent::TransmitResult(TransmitResult {
                             transmission: mt,
                             outcome: TransmitOutcome::Failed(
@@ -658,7 +710,7 @@ impl Node {
                     }));
                     if self.satellite.is_some() {
                         // A session all the same: a mailbox check.
-                        self.pick_up_held(Instant::now() + duration);
+                        self.session_until(Instant::now() + duration);
                     }
                     return;
                 }
@@ -677,7 +729,7 @@ impl Node {
         let end = start + duration;
         self.busy_until = end;
         if self.satellite.is_some() {
-            self.pick_up_held(end);
+            self.session_until(end);
         } else {
             self.receiver.transmitting(start, end);
         }
@@ -749,8 +801,13 @@ impl Node {
         }
         let mut transmission = packet.transmission.clone();
         if let Some(link) = self.satellite {
-            // At the gateway when the session ends, here the latency later
-            // (held there if this node is below the surface then).
+            // Only the node it is for (every node, a broadcast).
+            let dest = packet.transmission.dest();
+            if dest != 0 && dest != self.modem_id {
+                return;
+            }
+            // At the gateway when the session ends, in this node's queue
+            // there the latency later.
             let arrival = packet.start + packet.duration + link.latency;
             let loss = self.sim.packet_loss();
             let lost = reception::draw_loss(self.sim.seed(), packet.src, packet.seq, loss);
@@ -957,29 +1014,35 @@ impl Node {
         }
     }
 
+    /// Hands a reception over to the layer above (and queues its ack when
+    /// the driver acks on reception).
+    fn hand_over(&mut self, mt: ModemTransmission, events: &EventSink) {
+        let ack = (!self.deferred_ack && Acknowledgement::wanted(&mt, &[self.modem_id]))
+            .then(|| Acknowledgement::all(mt.clone()).transmission())
+            .flatten();
+        events.emit(DriverEvent::Raw(raw(RawDirection::Incoming, &mt)));
+        events.emit(DriverEvent::Received(mt));
+        if let Some(ack) = ack {
+            // Acknowledgements go first.
+            self.queue.push_front(ack);
+        }
+    }
+
     fn deliver_due(&mut self, now: Instant, events: &EventSink) {
         for (mt, spoiled) in self.receiver.settle(now) {
             self.observe_settled(&mt, spoiled);
             if spoiled.is_some() {
                 continue;
             }
-            if self.below_the_satellites().is_some() || !self.held.is_empty() {
-                // At the gateway until a session at the surface, behind
-                // what waits there already (the gateway's queue is first
-                // in, first out).
-                self.held.push(mt);
+            if self.satellite.is_some_and(|s| !s.shore) {
+                // In this node's queue at the gateway, behind what waits
+                // there already, until a session brings it.
+                self.medium.post(self.modem_id, mt);
                 continue;
             }
-            let ack = (!self.deferred_ack && Acknowledgement::wanted(&mt, &[self.modem_id]))
-                .then(|| Acknowledgement::all(mt.clone()).transmission())
-                .flatten();
-            events.emit(DriverEvent::Raw(raw(RawDirection::Incoming, &mt)));
-            events.emit(DriverEvent::Received(mt));
-            if let Some(ack) = ack {
-                // Acknowledgements go first.
-                self.queue.push_front(ack);
-            }
+            self.hand_over(mt, events);
         }
+        self.satellite_due(now, events);
         let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.results)
             .into_iter()
             .partition(|(t, _)| *t <= now);
@@ -1067,7 +1130,7 @@ async fn run(
         positions,
         observed_links: HashMap::new(),
         satellite,
-        held: Vec::new(),
+        pickups: Vec::new(),
     };
     node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);

@@ -2,15 +2,19 @@
 //! `satellite` settings ([`SatelliteLink`]) and what they make of a packet.
 //!
 //! - A session takes `session_seconds`: the modem is busy, and what it sends
-//!   reaches the gateway at the session's end, then the node it is for
-//!   `latency_seconds` later, whatever the range.
+//!   reaches the gateway at the session's end, then the queue of the node
+//!   it is for (its MT queue, first in, first out; [`super::medium::Medium::post`])
+//!   `latency_seconds` later, whatever the range; only that node hears it
+//!   (every node of the channel, a broadcast).
 //! - An antenna deeper than `surface_depth` (metres) sees no satellite: a
-//!   session started there fails, and a message for that node waits at the
-//!   gateway until a session it starts at the surface picks it up (each
-//!   slot of its own is a mailbox check, as an SBD session sends and
-//!   receives at once).
+//!   session started there fails. At the surface, every session brings one
+//!   message of the node's queue at its end (an SBD session sends and
+//!   receives at once), and while messages wait the node makes sessions of
+//!   its own, one after another (the ring alert, a mailbox check).
 //! - One frame of `frame_bytes` a session; no collisions, no half duplex
 //!   (the constellation, not the nodes, shares the channel).
+//! - A `shore` station is on the gateway's side: any depth, no sessions,
+//!   what comes for it handed over on arrival.
 
 use std::time::Duration;
 
@@ -20,6 +24,14 @@ use super::reception::Position;
 use crate::kind::{FrameLimits, PacketTime};
 use crate::problem::Problem;
 use crate::rate::RateSpec;
+
+/// The largest frame a session carries, bytes: a voice-enabled
+/// transceiver's (9523) MO message, 1960 bytes, less the Iridium driver's
+/// 11 of header and CRC.
+pub const MAX_FRAME_BYTES: u32 = 1949;
+
+/// The longest session or latency, a day.
+const MAX_TIME: Duration = Duration::from_secs(86_400);
 
 /// The satellite link of a simulator's settings, checked.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,6 +44,8 @@ pub struct Satellite {
     pub surface_depth: f64,
     /// Bytes of a session's one frame.
     pub frame_bytes: u32,
+    /// On the gateway's side (a shore station): no sessions, any depth.
+    pub shore: bool,
 }
 
 impl Satellite {
@@ -58,11 +72,33 @@ impl Satellite {
                 format!("{surface_depth} is not a depth (metres, 0 or more)"),
             ));
         }
-        if link.frame_bytes() == 0 {
+        if !(1..=MAX_FRAME_BYTES).contains(&link.frame_bytes()) {
             problems.push(Problem::new(
                 "simulator.satellite.frame_bytes",
-                "0: a session carries at least one byte",
+                format!(
+                    "{} is not a frame of an SBD message: 1 to {MAX_FRAME_BYTES} bytes (the \
+                     largest, a 9523's MO message of 1960 less the Iridium driver's header and CRC)",
+                    link.frame_bytes()
+                ),
             ));
+        }
+        if session.is_some_and(|s| s.is_zero()) {
+            problems.push(Problem::new(
+                "simulator.satellite.session_seconds",
+                "0: a session takes some time (an SBD session, about 10 to 30 s)",
+            ));
+        }
+        for (field, d) in [("session_seconds", session), ("latency_seconds", latency)] {
+            if d.is_some_and(|d| d > MAX_TIME) {
+                problems.push(Problem::new(
+                    format!("simulator.satellite.{field}"),
+                    format!(
+                        "{} s is more than a day ({} s): not a time the satellite takes",
+                        d.unwrap_or_default().as_secs_f64(),
+                        MAX_TIME.as_secs()
+                    ),
+                ));
+            }
         }
         match (session, latency) {
             (Some(session), Some(latency)) if problems.is_empty() => Ok(Satellite {
@@ -70,6 +106,7 @@ impl Satellite {
                 latency,
                 surface_depth,
                 frame_bytes: link.frame_bytes(),
+                shore: link.shore(),
             }),
             _ => Err(problems),
         }
@@ -86,7 +123,7 @@ impl Satellite {
                 frame_bytes: self.frame_bytes,
                 bits_per_second: f64::INFINITY,
             },
-            overhead: self.session,
+            overhead: self.session(),
             hand_over: Duration::ZERO,
             whole_frames: true,
         }
@@ -106,11 +143,20 @@ impl Satellite {
         }
     }
 
+    /// How long a session of this node takes (none for a shore station).
+    pub fn session(&self) -> Duration {
+        match self.shore {
+            true => Duration::ZERO,
+            false => self.session,
+        }
+    }
+
     /// How deep the antenna at `at` is when it is below the surface
-    /// (`None`: at the surface, where it sees the satellites).
+    /// (`None`: at the surface, where it sees the satellites, or a shore
+    /// station).
     pub fn submerged(&self, at: &Position) -> Option<f64> {
         let depth = -at.z;
-        (depth > self.surface_depth).then_some(depth)
+        (!self.shore && depth > self.surface_depth).then_some(depth)
     }
 }
 
@@ -136,6 +182,58 @@ mod tests {
         assert_eq!(link.submerged(&Position::new(0.0, 0.0, 0.0)), None);
         assert_eq!(link.submerged(&Position::new(0.0, 0.0, -0.5)), None);
         assert_eq!(link.submerged(&Position::new(0.0, 0.0, -30.0)), Some(30.0));
+        let shore = Satellite {
+            shore: true,
+            ..link
+        };
+        assert_eq!(shore.submerged(&Position::new(0.0, 0.0, -30.0)), None);
+        assert_eq!(shore.packet(0).on_water(), Duration::ZERO);
+    }
+
+    #[test]
+    fn frames_no_sbd_message_has_and_times_past_a_day_are_refused() {
+        for (bad, field) in [
+            (
+                SatelliteLink {
+                    frame_bytes: Some(600_000_000),
+                    ..Default::default()
+                },
+                "frame_bytes",
+            ),
+            (
+                SatelliteLink {
+                    frame_bytes: Some(1950),
+                    ..Default::default()
+                },
+                "frame_bytes",
+            ),
+            (
+                SatelliteLink {
+                    session_seconds: Some(0.0),
+                    ..Default::default()
+                },
+                "session_seconds",
+            ),
+            (
+                SatelliteLink {
+                    latency_seconds: Some(1e12),
+                    ..Default::default()
+                },
+                "latency_seconds",
+            ),
+        ] {
+            let problems = Satellite::of(&bad).unwrap_err();
+            assert_eq!(
+                problems[0].field,
+                format!("simulator.satellite.{field}"),
+                "{problems:?}"
+            );
+        }
+        let largest = SatelliteLink {
+            frame_bytes: Some(MAX_FRAME_BYTES),
+            ..Default::default()
+        };
+        assert!(Satellite::of(&largest).is_ok());
     }
 
     #[test]
@@ -145,6 +243,7 @@ mod tests {
             latency_seconds: Some(-1.0),
             surface_depth: Some(-2.0),
             frame_bytes: Some(0),
+            shore: None,
         };
         let problems = Satellite::of(&bad).unwrap_err();
         let fields: Vec<&str> = problems.iter().map(|p| p.field.as_str()).collect();
