@@ -7,9 +7,11 @@
 //!
 //! A sans-IO state machine: the daemon tells it whether data waits
 //! ([`Aloha::ready`]) and when a transmission ended ([`Aloha::ended`]).
-//! After a transmission that failed (the modem away, an error) the node
-//! waits [`FAILED_PAUSE`] before it sends again, rather than ask a failing
-//! driver again at once, time after time. After a packet that asks for an
+//! After a transmission that failed (the modem away, an error), or that
+//! carried nothing (what waits is not this link's to carry, or not yet:
+//! a link rule's timeout, a spent budget), the node waits [`FAILED_PAUSE`]
+//! before it tries again, rather than ask the driver again at once, time
+//! after time, at one instant. After a packet that asks for an
 //! acknowledgement ([`Aloha::await_ack`]) it sends nothing until the ack
 //! is heard ([`Aloha::acked`]) or `ack_wait` has passed: sending again at
 //! once, it would be transmitting when the ack arrives (a modem is half
@@ -20,7 +22,8 @@ use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, Modem
 use crate::clock::Micros;
 use crate::manager::QUERY_DESTINATION_ID;
 
-/// How long a node waits after a failed transmission, microseconds.
+/// How long a node waits after a transmission that failed or carried
+/// nothing, microseconds.
 pub const FAILED_PAUSE: Micros = 1_000_000;
 
 /// One node's pure ALOHA.
@@ -93,15 +96,16 @@ impl Aloha {
         })
     }
 
-    /// Transmission `unique_id` ended at `now` (sent, nothing to send, or
-    /// `failed`): when it is the one under way, this node may send again,
-    /// after [`FAILED_PAUSE`] if it failed. Returns whether it was.
-    pub fn ended(&mut self, unique_id: u32, failed: bool, now: Micros) -> bool {
+    /// Transmission `unique_id` ended at `now`, sent (`went_out`) or not
+    /// (it failed, or carried nothing): when it is the one under way, this
+    /// node may send again, after [`FAILED_PAUSE`] if it did not go out.
+    /// Returns whether it was.
+    pub fn ended(&mut self, unique_id: u32, went_out: bool, now: Micros) -> bool {
         if self.in_flight != Some(unique_id) {
             return false;
         }
         self.in_flight = None;
-        if failed {
+        if !went_out {
             self.paused_until = Some(now + FAILED_PAUSE);
         }
         true
@@ -155,9 +159,9 @@ mod tests {
         assert!(a.sending());
         assert_eq!(a.ready(true, 2, 0), None);
         // Another transmission's end (an ack) does not free it.
-        assert!(!a.ended(7, false, 0));
+        assert!(!a.ended(7, true, 0));
         assert_eq!(a.ready(true, 2, 0), None);
-        assert!(a.ended(1, false, 5));
+        assert!(a.ended(1, true, 5));
         assert_eq!(a.paused_until(), None);
         assert_eq!(a.ready(true, 2, 5).map(|t| t.unique_id()), Some(2));
         a.reset();
@@ -168,7 +172,7 @@ mod tests {
     fn after_a_packet_asking_for_an_ack_it_waits_for_the_ack_or_the_wait() {
         let mut a = Aloha::new(3, 1, 1_000);
         a.ready(true, 1, 0).expect("sent");
-        assert!(a.ended(1, false, 100));
+        assert!(a.ended(1, true, 100));
         a.await_ack(100);
         assert_eq!(a.paused_until(), Some(1_100));
         assert_eq!(a.ready(true, 2, 500), None, "the ack is awaited");
@@ -176,7 +180,7 @@ mod tests {
         assert_eq!(a.paused_until(), None);
         assert!(a.ready(true, 2, 500).is_some(), "the ack came");
         // No ack: sent again once the wait is over.
-        assert!(a.ended(2, false, 600));
+        assert!(a.ended(2, true, 600));
         a.await_ack(600);
         assert_eq!(a.ready(true, 3, 1_599), None);
         assert!(a.ready(true, 3, 1_600).is_some());
@@ -186,14 +190,26 @@ mod tests {
     fn after_a_failed_transmission_it_waits_the_pause() {
         let mut a = Aloha::new(3, 1, 10);
         a.ready(true, 1, 0).expect("sent");
-        assert!(a.ended(1, true, 100));
+        assert!(a.ended(1, false, 100));
         assert_eq!(a.paused_until(), Some(100 + FAILED_PAUSE));
         assert_eq!(a.ready(true, 2, 100 + FAILED_PAUSE - 1), None);
         assert!(a.ready(true, 2, 100 + FAILED_PAUSE).is_some());
         // A pause over with nothing to send ends all the same.
-        assert!(a.ended(2, true, 0));
+        assert!(a.ended(2, false, 0));
         a.resume(FAILED_PAUSE);
         assert_eq!(a.paused_until(), None);
+    }
+
+    #[test]
+    fn after_a_transmission_that_carried_nothing_it_waits_the_pause() {
+        // Data waits, but not for this link (or not yet): the driver found
+        // nothing to send. Asked again at once, it would find nothing again,
+        // for ever, at one instant.
+        let mut a = Aloha::new(3, 1, 10);
+        a.ready(true, 1, 0).expect("data waits");
+        assert!(a.ended(1, false, 0));
+        assert_eq!(a.ready(true, 2, 0), None);
+        assert!(a.ready(true, 2, FAILED_PAUSE).is_some());
     }
 
     #[test]

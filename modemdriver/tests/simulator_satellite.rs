@@ -233,12 +233,45 @@ async fn the_gateway_s_queue_outlives_the_vehicle_s_driver() {
     shore.initiate_transmission(data(2)).unwrap();
     result(&mut shore, &[vec![1u8; 4]]).await;
     tokio::time::sleep(Duration::from_secs(30)).await;
-    assert_eq!(medium.waiting(2), 1, "at the gateway");
-    // The vehicle reboots under water; up again, it has the message.
+    assert_eq!(medium.waiting(2, Instant::now()), 1, "at the gateway");
+    // The vehicle reboots under water, and a second message comes while
+    // it is down; up again, it has both, in order.
     drop(vehicle);
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    shore.initiate_transmission(data(2)).unwrap();
+    result(&mut shore, &[vec![2u8; 4]]).await;
+    tokio::time::sleep(Duration::from_secs(10)).await;
     let mut vehicle = start(2);
-    let got = received(&mut vehicle, Duration::from_secs(200)).await;
-    assert_eq!(got.frame, vec![vec![1u8; 4]]);
+    let first = received(&mut vehicle, Duration::from_secs(200)).await;
+    let second = received(&mut vehicle, Duration::from_secs(60)).await;
+    assert_eq!(
+        (first.frame, second.frame),
+        (vec![vec![1u8; 4]], vec![vec![2u8; 4]])
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn what_comes_for_a_shore_station_while_it_is_down_waits_for_it() {
+    let medium = Medium::new();
+    let clock = Arc::new(TokioClock::at(START));
+    let dive: Arc<dyn Positions> = Arc::new(Dive { surfaced: true });
+    let shore_link = SatelliteLink {
+        shore: Some(true),
+        ..Default::default()
+    };
+    let start = |config: DriverConfig| {
+        SimulatorDriver::start_in_world(&config, medium.clone(), clock.clone(), dive.clone())
+            .unwrap()
+    };
+    let shore = start(config_of(1, shore_link));
+    let mut vehicle = start(config(2));
+    drop(shore);
+    vehicle.initiate_transmission(data(1)).unwrap();
+    result(&mut vehicle, &[vec![7u8; 4]]).await;
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    let mut shore = start(config_of(1, shore_link));
+    let got = received(&mut shore, Duration::from_secs(10)).await;
+    assert_eq!(got.frame, vec![vec![7u8; 4]]);
 }
 
 #[tokio::test(start_paused = true)]

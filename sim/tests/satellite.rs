@@ -269,3 +269,46 @@ fn a_ship_on_the_satellite_alone_gets_every_command_once() {
     assert!(fates.contains_key("no_modem"), "{fates:?}");
     assert!(!fates.contains_key("unsettled"), "{fates:?}");
 }
+
+/// A ship whose commands go over Iridium first and over its acoustic link,
+/// on `MAC_ALOHA`, only after 120 s without an ack: until then its ALOHA
+/// finds nothing it may carry. It waits a second before asking again (it
+/// asked again at once, for ever, at one instant: the run's clock stopped).
+#[test]
+fn an_aloha_link_with_nothing_it_may_carry_yet_does_not_stop_the_clock() {
+    let ship = r#"gobyd {
+    link { name: "acoustic" driver { driver_type: DRIVER_WHOI_MICROMODEM } mac { type: MAC_ALOHA } }
+    link { name: "iridium" driver { driver_type: DRIVER_IRIDIUM_SHORE }
+      mac { type: MAC_FIXED_DECENTRALIZED
+        slot { src: 1 dest: -1 slot_seconds: 30 } slot { src: 2 dest: -1 slot_seconds: 30 } } }
+    link_rule { protobuf_name: "goby.example.Command" link: "iridium" link: "acoustic"
+      policy: LINK_POLICY_PRIORITY_TIMEOUT timeout_seconds: 120 }
+    queue { minimum_ack_wait_seconds: 60 message_entry { protobuf_name: "goby.example.Command"
+      ack: true ttl: 7200 role { type: DESTINATION_ID field: "destination" } } }
+  }"#;
+    let track = "position { x: 1000 depth: 0 }";
+    let text = two_nodes(ship, track).replace("duration_s: 3000", "duration_s: 900");
+    let scenario = parse(&text, "aloha", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    // A real-time limit: a clock that stops never ends the run.
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    std::thread::spawn(move || {
+        std::thread::sleep(std::time::Duration::from_secs(120));
+        let _ = stop.send(());
+    });
+    let outcome = goby_sim::run_until(&scenario, async {
+        let _ = stopped.await;
+    })
+    .expect("the run ends");
+    let report = &outcome.report;
+    assert_eq!(report.total.published, 6);
+    assert_eq!(
+        (
+            report.total.delivered,
+            report.total.acked,
+            report.total.duplicates
+        ),
+        (6, 6, 0),
+        "{:#?}",
+        report.total
+    );
+}

@@ -642,10 +642,12 @@ impl Core {
             }
             DriverEvent::TransmitResult(result) => {
                 if let Some(aloha) = self.links[i].mac.aloha() {
-                    let failed = matches!(result.outcome, TransmitOutcome::Failed(_));
+                    // One that failed or carried nothing (what waits is
+                    // not this link's yet) pauses before the next.
+                    let went_out = result.outcome == TransmitOutcome::Sent;
                     let now = self.clock.now();
                     let t = &result.transmission;
-                    if aloha.ended(t.unique_id(), failed, now)
+                    if aloha.ended(t.unique_id(), went_out, now)
                         && result.outcome == TransmitOutcome::Sent
                         && t.ack_requested()
                     {

@@ -1,6 +1,6 @@
 //! The shared "water" of the simulator's nodes in one process.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::sync::{Arc, LazyLock, Mutex, Weak};
 use std::time::Duration;
 
@@ -49,10 +49,14 @@ pub struct Medium {
     /// Told of every packet and its fate at each node, when set.
     observer: Option<Arc<dyn Observer>>,
     filter: Mutex<Option<Filter>>,
-    /// On a satellite channel, the messages waiting at the gateway for each
-    /// node (its MT queue), first in, first out: they outlive the node's
-    /// driver, as a gateway's queue outlives a vehicle's reboot.
-    mailboxes: Mutex<HashMap<i32, VecDeque<ModemTransmission>>>,
+    /// On a satellite channel, the messages for each node at the gateway
+    /// (its MT queue, or a shore station's MO), first in, first out, each
+    /// from when it is there: they outlive the node's driver, as a
+    /// gateway's queue outlives a vehicle's reboot or a shore's restart.
+    mailboxes: Mutex<HashMap<i32, VecDeque<(Instant, ModemTransmission)>>>,
+    /// Every node that ever joined (the nodes a broadcast is for, up or
+    /// down).
+    members: Mutex<BTreeSet<i32>>,
 }
 
 impl std::fmt::Debug for Medium {
@@ -106,6 +110,10 @@ impl Medium {
     pub fn join(&self, modem_id: i32) -> mpsc::UnboundedReceiver<Arc<Airborne>> {
         let (tx, rx) = mpsc::unbounded_channel();
         self.lock().push((modem_id, tx));
+        self.members
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(modem_id);
         rx
     }
 
@@ -148,34 +156,53 @@ impl Medium {
         }
     }
 
-    /// Leaves `mt` at the gateway for node `modem_id`, behind what waits
-    /// there already.
-    pub fn post(&self, modem_id: i32, mt: ModemTransmission) {
+    /// Every node that ever joined the channel.
+    pub fn members(&self) -> Vec<i32> {
+        let members = self.members.lock().unwrap_or_else(|e| e.into_inner());
+        members.iter().copied().collect()
+    }
+
+    /// Leaves `mt` at the gateway for node `modem_id` from `at`, behind
+    /// what is there already.
+    pub fn post(&self, modem_id: i32, at: Instant, mt: ModemTransmission) {
         self.mailboxes
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .entry(modem_id)
             .or_default()
-            .push_back(mt);
+            .push_back((at, mt));
     }
 
-    /// The oldest message waiting at the gateway for node `modem_id`, taken
-    /// from there (`None`: nothing waits).
-    pub fn collect(&self, modem_id: i32) -> Option<ModemTransmission> {
-        self.mailboxes
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .get_mut(&modem_id)?
-            .pop_front()
+    /// The oldest message at the gateway for node `modem_id` by `now`,
+    /// taken from there (`None`: none is there yet).
+    pub fn collect(&self, modem_id: i32, now: Instant) -> Option<ModemTransmission> {
+        let mut mailboxes = self.mailboxes.lock().unwrap_or_else(|e| e.into_inner());
+        let queue = mailboxes.get_mut(&modem_id)?;
+        match queue.front() {
+            Some((at, _)) if *at <= now => queue.pop_front().map(|(_, mt)| mt),
+            _ => None,
+        }
     }
 
-    /// How many messages wait at the gateway for node `modem_id`.
-    pub fn waiting(&self, modem_id: i32) -> usize {
+    /// How many messages are at the gateway for node `modem_id` by `now`.
+    pub fn waiting(&self, modem_id: i32, now: Instant) -> usize {
         self.mailboxes
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .get(&modem_id)
-            .map_or(0, VecDeque::len)
+            .map_or(0, |q| q.iter().take_while(|(at, _)| *at <= now).count())
+    }
+
+    /// When the next message on its way to the gateway for node
+    /// `modem_id` is there (`None`: none is on its way).
+    pub fn next_arrival(&self, modem_id: i32, now: Instant) -> Option<Instant> {
+        self.mailboxes
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&modem_id)?
+            .iter()
+            .map(|(at, _)| *at)
+            .find(|at| *at > now)
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(i32, mpsc::UnboundedSender<Arc<Airborne>>)>> {

@@ -557,41 +557,77 @@ impl Node {
     /// while messages wait, a node at the surface and idle starts a
     /// session of its own (the ring alert: a mailbox check).
     fn satellite_due(&mut self, now: Instant, events: &EventSink) {
-        let Some(link) = self.satellite.filter(|s| !s.shore) else {
+        let Some(link) = self.satellite else {
             return;
         };
+        if link.shore {
+            // On the gateway's side: everything there is handed over.
+            while let Some(mt) = self.medium.collect(self.modem_id, now) {
+                self.hand_over(mt, events);
+            }
+            return;
+        }
         let (due, later): (Vec<_>, Vec<_>) = self.pickups.iter().partition(|t| **t <= now);
         self.pickups = later;
-        for _ in due {
-            if let Some(mt) = self.medium.collect(self.modem_id) {
+        for t in due {
+            if let Some(mt) = self.medium.collect(self.modem_id, t) {
                 self.hand_over(mt, events);
             }
         }
         if self.pickups.is_empty()
             && self.queue.is_empty()
             && now >= self.busy_until
-            && self.medium.waiting(self.modem_id) > 0
+            && self.medium.waiting(self.modem_id, now) > 0
             && self.below_the_satellites().is_none()
         {
             self.session_until(now + link.session());
         }
     }
 
-    /// When the satellite's side needs the node next: a session's end, or,
-    /// while messages wait at the gateway, the end of the modem's work or
-    /// (below the surface) a look at whether it has come up.
+    /// When the satellite's side needs the node next: a session's end; a
+    /// message's arrival at the gateway; while messages wait there, the
+    /// end of the modem's work or (below the surface) a look at whether it
+    /// has come up.
     fn satellite_wakeup(&self) -> Option<Instant> {
-        self.satellite.filter(|s| !s.shore)?;
-        if let Some(first) = self.pickups.iter().min() {
-            return Some(*first);
+        let link = self.satellite?;
+        let now = Instant::now();
+        let arrival = self.medium.next_arrival(self.modem_id, now);
+        if link.shore {
+            return arrival;
         }
-        if self.medium.waiting(self.modem_id) == 0 {
-            return None;
+        let waiting = (self.medium.waiting(self.modem_id, now) > 0 && self.pickups.is_empty())
+            .then(|| match self.below_the_satellites() {
+                Some(_) => now + SURFACE_LOOK,
+                None => self.busy_until.max(now),
+            });
+        [self.pickups.iter().min().copied(), arrival, waiting]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    /// Leaves what this node sends on the satellite, `packet`, at the
+    /// gateway for the node it is for (every other node, a broadcast),
+    /// from its session's end and the latency on.
+    fn post(&self, packet: &Airborne, link: satellite::Satellite) {
+        let at = packet.start + packet.duration + link.latency;
+        let dest = packet.transmission.dest();
+        let lost = reception::draw_loss(
+            self.sim.seed(),
+            packet.src,
+            packet.seq,
+            self.sim.packet_loss(),
+        );
+        if lost {
+            return;
         }
-        Some(match self.below_the_satellites() {
-            Some(_) => Instant::now() + SURFACE_LOOK,
-            None => self.busy_until.max(Instant::now()),
-        })
+        let to = match dest {
+            0 => self.medium.members(),
+            d => vec![d],
+        };
+        for d in to.into_iter().filter(|d| *d != self.modem_id) {
+            self.medium.post(d, at, packet.transmission.clone());
+        }
     }
 
     /// A data packet of `rate` as this node sends it ([`packet_of`]).
@@ -746,6 +782,9 @@ impl Node {
             garbled: false,
         });
         events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
+        if let Some(link) = self.satellite {
+            self.post(&packet, link);
+        }
         self.medium.transmit(packet.clone());
         if let Some(observer) = self.medium.observer() {
             observer.transmitted(&observer::Transmission {
@@ -800,29 +839,9 @@ impl Node {
             return;
         }
         let mut transmission = packet.transmission.clone();
-        if let Some(link) = self.satellite {
-            // Only the node it is for (every node, a broadcast).
-            let dest = packet.transmission.dest();
-            if dest != 0 && dest != self.modem_id {
-                return;
-            }
-            // At the gateway when the session ends, in this node's queue
-            // there the latency later.
-            let arrival = packet.start + packet.duration + link.latency;
-            let loss = self.sim.packet_loss();
-            let lost = reception::draw_loss(self.sim.seed(), packet.src, packet.seq, loss);
-            if self.medium.observer().is_some() {
-                self.observed_links.insert(
-                    (packet.src, packet.transmission.time()),
-                    observer::Link {
-                        range_m: distance,
-                        snr_db: None,
-                        loss_probability: Some(loss),
-                        garbled: packet.garbled,
-                    },
-                );
-            }
-            self.receiver.arrive(arrival, arrival, transmission, lost);
+        if self.satellite.is_some() {
+            // Left at the gateway by its sender ([`Node::post`]): heard
+            // here only as a wake-up, to look at what is there.
             return;
         }
         let (delay, loss) = match &self.water {
@@ -1032,12 +1051,6 @@ impl Node {
         for (mt, spoiled) in self.receiver.settle(now) {
             self.observe_settled(&mt, spoiled);
             if spoiled.is_some() {
-                continue;
-            }
-            if self.satellite.is_some_and(|s| !s.shore) {
-                // In this node's queue at the gateway, behind what waits
-                // there already, until a session brings it.
-                self.medium.post(self.modem_id, mt);
                 continue;
             }
             self.hand_over(mt, events);
