@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write;
 
 use goby_sim::link_quality::LinkQuality;
-use goby_sim::losses::{LossCounts, NODE_DOWN, UNSETTLED};
+use goby_sim::losses::{LossCounts, NODE_DOWN, NO_MODEM, UNSETTLED};
 use goby_sim::report::Stats;
 use goby_sim::{Ledger, Report};
 use modemdriver::sim::observer::Fate;
@@ -39,6 +39,7 @@ fn fate_colour(fate: &str) -> &'static str {
 fn fates() -> Vec<&'static str> {
     let mut names: Vec<&str> = Fate::ALL.iter().map(|f| f.name()).collect();
     names.push(NODE_DOWN);
+    names.push(NO_MODEM);
     names.push(UNSETTLED);
     names
 }
@@ -60,6 +61,7 @@ pub fn render(title: &str, report: &Report, links: &LinkQuality, ledger: &Ledger
     losses_section(&mut page, report);
     links_section(&mut page, links, report.run.start_us);
     slot_section(&mut page, report);
+    satellite_section(&mut page, report);
     page += "</body></html>\n";
     page
 }
@@ -400,4 +402,45 @@ fn slot_section(page: &mut String, report: &Report) {
             s.slots, s.transmissions, s.delivered, s.g, s.s
         );
     }
+}
+
+/// The satellite's sessions per node, when a node has a link there.
+fn satellite_section(page: &mut String, report: &Report) {
+    let Some(u) = &report.satellite_use else {
+        return;
+    };
+    *page += "<h2 id=\"satellite\">Satellite (Iridium)</h2>\n";
+    let rows: Vec<Bar> = u
+        .by_node
+        .iter()
+        .filter(|(_, n)| n.slots + n.transmissions + n.receptions > 0)
+        .flat_map(|(name, n)| {
+            [
+                Bar {
+                    label: format!("{name} slots"),
+                    parts: vec![(n.slots as f64, PALETTE[7])],
+                },
+                Bar {
+                    label: format!("{name} sessions with data"),
+                    parts: vec![(n.transmissions as f64, PALETTE[0])],
+                },
+                Bar {
+                    label: format!("{name} received"),
+                    parts: vec![(n.receptions as f64, PALETTE[2])],
+                },
+            ]
+        })
+        .collect();
+    *page += &bars(
+        "Slots, sessions with data and messages received on the satellite, per node",
+        &rows,
+        0.0,
+        &[],
+        |t| format!("{t:.0}"),
+    );
+    let _ = writeln!(
+        page,
+        "<p>Sessions with data: {}; heard by the node they were for: {}.</p>",
+        u.transmissions, u.delivered
+    );
 }

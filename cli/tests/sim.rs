@@ -35,6 +35,42 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// The example of two links (acoustic and Iridium): the summary and the
+/// page tell the satellite's sessions.
+#[test]
+fn the_surfacing_example_tells_the_satellite_in_its_summary_and_page() {
+    let out = scratch("surfacing");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/examples/surfacing.pb.txt");
+    let run = goby(&[
+        "sim",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = stdout_text(&run);
+    assert!(run.status.success(), "{stdout}{}", stderr_text(&run));
+    assert!(
+        stdout.contains("modem: auv: DRIVER_WHOI_MICROMODEM; iridium: Iridium SBD, simulated"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("delivered 20/20 (100.0 %), duplicates 0"),
+        "{stdout}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let sessions = report["satellite_use"]["transmissions"].as_u64().unwrap();
+    assert!(sessions > 0, "{}", report["satellite_use"]);
+    assert!(
+        stdout.contains(&format!("  satellite: sessions with data {sessions}, ")),
+        "{stdout}"
+    );
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<h2 id=\"satellite\">Satellite (Iridium)</h2>"));
+    assert!(page.contains(&format!("<p>Sessions with data: {sessions}; ")));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 #[test]
 fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
     let out = scratch("run");
