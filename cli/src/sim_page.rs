@@ -363,26 +363,7 @@ fn links_section(page: &mut String, links: &LinkQuality, start_us: i64) {
 fn slot_section(page: &mut String, report: &Report) {
     let u = &report.slot_use;
     *page += "<h2 id=\"slots\">Slot use</h2>\n";
-    let rows: Vec<Bar> = u
-        .by_node
-        .iter()
-        .flat_map(|(name, n)| {
-            [
-                Bar {
-                    label: format!("{name} slots"),
-                    parts: vec![(n.slots as f64, PALETTE[7])],
-                },
-                Bar {
-                    label: format!("{name} transmissions"),
-                    parts: vec![(n.transmissions as f64, PALETTE[0])],
-                },
-                Bar {
-                    label: format!("{name} receptions"),
-                    parts: vec![(n.receptions as f64, PALETTE[2])],
-                },
-            ]
-        })
-        .collect();
+    let rows = node_bars(u.by_node.iter(), ["transmissions", "receptions"]);
     *page += &bars(
         "Slots, transmissions and receptions, per node",
         &rows,
@@ -410,27 +391,12 @@ fn satellite_section(page: &mut String, report: &Report) {
         return;
     };
     *page += "<h2 id=\"satellite\">Satellite (Iridium)</h2>\n";
-    let rows: Vec<Bar> = u
-        .by_node
-        .iter()
-        .filter(|(_, n)| n.slots + n.transmissions + n.receptions > 0)
-        .flat_map(|(name, n)| {
-            [
-                Bar {
-                    label: format!("{name} slots"),
-                    parts: vec![(n.slots as f64, PALETTE[7])],
-                },
-                Bar {
-                    label: format!("{name} sessions with data"),
-                    parts: vec![(n.transmissions as f64, PALETTE[0])],
-                },
-                Bar {
-                    label: format!("{name} received"),
-                    parts: vec![(n.receptions as f64, PALETTE[2])],
-                },
-            ]
-        })
-        .collect();
+    let rows = node_bars(
+        u.by_node
+            .iter()
+            .filter(|(_, n)| n.slots + n.transmissions + n.receptions > 0),
+        ["sessions with data", "received"],
+    );
     *page += &bars(
         "Slots, sessions with data and messages received on the satellite, per node",
         &rows,
@@ -443,4 +409,25 @@ fn satellite_section(page: &mut String, report: &Report) {
         "<p>Sessions with data: {}; heard by the node they were for: {}.</p>",
         u.transmissions, u.delivered
     );
+}
+
+/// Three bars a node: its slots, its transmissions and its receptions,
+/// labelled `words` after the node's name for the last two.
+fn node_bars<'a>(
+    nodes: impl Iterator<Item = (&'a String, &'a goby_sim::slot_use::NodeSlotUse)>,
+    words: [&str; 2],
+) -> Vec<Bar> {
+    nodes
+        .flat_map(|(name, n)| {
+            [
+                ("slots", n.slots, PALETTE[7]),
+                (words[0], n.transmissions, PALETTE[0]),
+                (words[1], n.receptions, PALETTE[2]),
+            ]
+            .map(|(what, count, colour)| Bar {
+                label: format!("{name} {what}"),
+                parts: vec![(count as f64, colour)],
+            })
+        })
+        .collect()
 }

@@ -214,24 +214,8 @@ impl Delivery {
                     .awaiting_original
                     .remove(&identity)
                     .is_some_and(|t| t.saturating_add(self.window) > now);
-            if late_original {
-                if self
-                    .held
-                    .iter()
-                    .any(|h| h.seq.is_none() && h.identity == identity)
-                {
-                    all_on_record = false;
-                }
-                tracing::info!(
-                    src = received.src,
-                    dccl_id = received.dccl_id,
-                    number = received.identity.map(|w| w.number),
-                    "the first sending of a message already received as a retransmission: \
-                     suppressed"
-                );
-                continue;
-            }
-            if resent && self.inbox.is_duplicate(&identity, now) {
+            let repeat = resent && self.inbox.is_duplicate(&identity, now);
+            if late_original || repeat {
                 // Known, but held off the record (it could not be written):
                 // its frame is acknowledged once it is handed over, not
                 // before (the acknowledgement of a later retransmission).
@@ -246,7 +230,12 @@ impl Delivery {
                     src = received.src,
                     dccl_id = received.dccl_id,
                     number = received.identity.map(|w| w.number),
-                    "a retransmission of a message already received: suppressed"
+                    "{}: suppressed",
+                    match late_original {
+                        true =>
+                            "the first sending of a message already received as a retransmission",
+                        false => "a retransmission of a message already received",
+                    }
                 );
                 continue;
             }
