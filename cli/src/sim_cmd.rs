@@ -169,9 +169,14 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         counted(&losses.undelivered)
     )?;
     if let Some(satellite) = &report.satellite_use {
+        let failed: u64 = satellite.by_node.values().map(|n| n.failed).sum();
+        let failed = match failed {
+            0 => String::new(),
+            n => format!("; failed {n} (below the surface, or the session failed)"),
+        };
         writeln!(
             stdout,
-            "  satellite: sessions with data {}, heard by the node they were for {}",
+            "  satellite: sessions with data {}, heard by the node they were for {}{failed}",
             satellite.transmissions, satellite.delivered
         )?;
     }

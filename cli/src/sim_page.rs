@@ -404,9 +404,11 @@ fn satellite_section(page: &mut String, report: &Report) {
         &[],
         |t| format!("{t:.0}"),
     );
+    let failed: u64 = u.by_node.values().map(|n| n.failed).sum();
     let _ = writeln!(
         page,
-        "<p>Sessions with data: {}; heard by the node they were for: {}.</p>",
+        "<p>Sessions with data: {}; heard by the node they were for: {}; failed (no \
+         satellite in view, or the session failed): {failed}.</p>",
         u.transmissions, u.delivered
     );
 }

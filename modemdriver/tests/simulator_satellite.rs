@@ -335,3 +335,126 @@ async fn the_gateway_hands_messages_over_first_in_first_out() {
     }
     assert_eq!(got, frames);
 }
+
+/// The link error a driver tells next (within `limit` of virtual time),
+/// its data requests answered with `frames`.
+async fn link_error(driver: &mut Driver, frames: &[Vec<u8>], limit: Duration) -> String {
+    wait_for(driver, frames, limit, |e| match e {
+        DriverEvent::Status(DriverStatus::LinkError { reason }) => Some(reason.clone()),
+        _ => None,
+    })
+    .await
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_share_of_sessions_fail_and_what_they_carried_goes_nowhere() {
+    let flaky = SatelliteLink {
+        session_failure: Some(0.5),
+        ..Default::default()
+    };
+    let mut two = nodes(true, &[config_of(1, flaky), config_of(2, flaky)]);
+    let mut vehicle = two.pop().unwrap();
+    let mut shore = two.pop().unwrap();
+    let (mut sent, mut failed) = (Vec::new(), 0);
+    for i in 0..40u8 {
+        let t0 = Instant::now();
+        shore.initiate_transmission(data(2)).unwrap();
+        let r = result(&mut shore, &[vec![i; 8]]).await;
+        assert_eq!(
+            t0.elapsed(),
+            Duration::from_secs(20),
+            "a session, failed or not"
+        );
+        match r.outcome {
+            TransmitOutcome::Sent => sent.push(vec![i; 8]),
+            TransmitOutcome::Failed(reason) => {
+                assert!(reason.contains("session failed"), "{reason}");
+                failed += 1;
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+    // Half, drawn: far from none and from all.
+    assert!((10..=30).contains(&failed), "{failed} of 40 failed");
+    // What the gateway took arrives, each once, in order; the vehicle's
+    // own sessions fail too, and it makes more until the queue is empty.
+    let mut got = Vec::new();
+    for _ in &sent {
+        got.push(
+            received(&mut vehicle, Duration::from_secs(3_600))
+                .await
+                .frame[0]
+                .clone(),
+        );
+    }
+    assert_eq!(got, sent);
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_gateway_keeps_queue_limit_messages_for_a_node_and_tells_the_sender_of_more() {
+    let small = SatelliteLink {
+        queue_limit: Some(2),
+        ..Default::default()
+    };
+    // The vehicle is under water until 100 s: its queue at the gateway
+    // fills.
+    let mut two = nodes(false, &[config_of(1, small), config_of(2, small)]);
+    let mut vehicle = two.pop().unwrap();
+    let mut shore = two.pop().unwrap();
+    for i in 1..=2u8 {
+        shore.initiate_transmission(data(2)).unwrap();
+        assert_eq!(
+            result(&mut shore, &[vec![i; 4]]).await.outcome,
+            TransmitOutcome::Sent
+        );
+    }
+    shore.initiate_transmission(data(2)).unwrap();
+    let refused = link_error(&mut shore, &[vec![3u8; 4]], Duration::from_secs(60)).await;
+    assert!(
+        refused.contains("refused a message for modem 2"),
+        "{refused}"
+    );
+    assert!(refused.contains("full (2 messages"), "{refused}");
+    // The session itself went (the gateway took the MO message).
+    assert_eq!(result(&mut shore, &[]).await.outcome, TransmitOutcome::Sent);
+    let first = received(&mut vehicle, Duration::from_secs(300)).await;
+    let second = received(&mut vehicle, Duration::from_secs(300)).await;
+    assert_eq!(
+        (first.frame, second.frame),
+        (vec![vec![1u8; 4]], vec![vec![2u8; 4]])
+    );
+    // Once it has them, there is room again.
+    shore.initiate_transmission(data(2)).unwrap();
+    assert_eq!(
+        result(&mut shore, &[vec![4u8; 4]]).await.outcome,
+        TransmitOutcome::Sent
+    );
+    assert_eq!(
+        received(&mut vehicle, Duration::from_secs(300)).await.frame,
+        vec![vec![4u8; 4]]
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_message_for_a_node_the_gateway_does_not_know_is_refused() {
+    let medium = Medium::new();
+    medium.enrol([1, 2]);
+    let clock = Arc::new(TokioClock::at(START));
+    let dive: Arc<dyn Positions> = Arc::new(Dive { surfaced: true });
+    let mut shore =
+        SimulatorDriver::start_in_world(&config(1), medium.clone(), clock, dive).unwrap();
+    shore.initiate_transmission(data(3)).unwrap();
+    let refused = link_error(&mut shore, &[vec![5u8; 4]], Duration::from_secs(60)).await;
+    assert!(
+        refused.contains("modem 3")
+            && refused.contains("no node of that modem id has an Iridium link"),
+        "{refused}"
+    );
+    // A broadcast is for the nodes enrolled, up or not yet up.
+    result(&mut shore, &[]).await;
+    shore.initiate_transmission(data(0)).unwrap();
+    result(&mut shore, &[vec![5u8; 4]]).await;
+    tokio::time::sleep(Duration::from_secs(30)).await;
+    assert_eq!(medium.waiting(2, Instant::now()), 1);
+    assert_eq!(medium.waiting(3, Instant::now()), 0);
+}

@@ -172,11 +172,16 @@ pub fn satellite_config(
 
 /// A satellite link in words, for the report.
 pub fn satellite_words(satellite: &SatelliteLink) -> String {
+    let failing = match satellite.session_failure() {
+        f if f > 0.0 => format!(", {} % of them failing", f * 100.0),
+        _ => String::new(),
+    };
     format!(
-        "Iridium SBD, simulated: sessions of {} s, {} s through the gateway, from and to \
-         antennas at most {} m deep",
+        "Iridium SBD, simulated: sessions of {} s{failing}, {} s through the gateway (at most {} \
+         messages a node held there), from and to antennas at most {} m deep",
         satellite.session_seconds(),
         satellite.latency_seconds(),
+        satellite.queue_limit(),
         satellite.surface_depth()
     )
 }

@@ -254,6 +254,16 @@ impl Check<'_> {
         }
         let nodes: Option<Vec<Node>> = nodes.into_iter().collect();
         self.one_modem_on_the_water();
+        // Settings that apply to no node are a mistake, not a default
+        // (checked once every node's links are known).
+        let on_satellite = |n: &Node| n.links.contains(&Medium::Satellite);
+        if s.satellite.is_some() && nodes.as_ref().is_some_and(|n| !n.iter().any(on_satellite)) {
+            self.problem(
+                "satellite",
+                "no node has an Iridium link (DRIVER_IRIDIUM or DRIVER_IRIDIUM_SHORE, as its \
+                 driver or a link's): give one a link on the satellite, or leave the section out",
+            );
+        }
         // A duration refused above is not checked against (no follow-on
         // problems of the faults).
         let run_s = if self.duration_s > 0.0 {
@@ -629,7 +639,7 @@ impl Check<'_> {
             None => self.base.to_path_buf(),
         };
         let config = relative_to(config, &written_in);
-        let config = self.prepared(i, node, config)?;
+        let config = self.prepared(i, node, config, file.as_ref())?;
         match gobyd::check::validate(config, gobyd::config::DriverSettings::Configured) {
             Ok(checked) => Some(checked),
             Err(e) => {
@@ -639,12 +649,15 @@ impl Check<'_> {
         }
     }
 
-    /// `config` as the node runs it: its modem id, the interfaces off.
+    /// `config` as the node runs it: its modem id, the interfaces off. Its
+    /// problems are told where they are written: in the scenario, or in
+    /// `file` (its text and name).
     fn prepared(
         &mut self,
         i: usize,
         node: &pb::Node,
         mut config: GobydConfig,
+        file: Option<&(String, String)>,
     ) -> Option<GobydConfig> {
         let id = node.modem_id.filter(|id| *id > 0)?;
         if config.modem_id.is_some_and(|own| own != id) {
@@ -677,10 +690,8 @@ impl Check<'_> {
         for (at, name, driver) in links {
             if crate::modem::is_satellite(driver.as_ref()) {
                 if satellite_link.is_some() || media.contains(&Medium::Satellite) {
-                    self.problem(
-                        format!("node[{i}].gobyd.{at}"),
-                        "a second Iridium link: a node has one link on the satellite",
-                    );
+                    let reason = "a second Iridium link: a node has one link on the satellite";
+                    self.config_problem(i, Problem::new(at, reason), file);
                     return None;
                 }
                 media.push(Medium::Satellite);
@@ -703,13 +714,11 @@ impl Check<'_> {
                 continue;
             }
             if let Some(first) = &on_water {
-                self.problem(
-                    format!("node[{i}].gobyd.{at}"),
-                    format!(
-                        "a second link on the water ({first} is one): a node has one modem \
-                         on the water, and one link on the satellite (an Iridium driver)"
-                    ),
+                let reason = format!(
+                    "a second link on the water ({first} is one): a node has one modem on the \
+                     water, and one link on the satellite (an Iridium driver)"
                 );
+                self.config_problem(i, Problem::new(at, reason), file);
                 return None;
             }
             on_water = Some(name.unwrap_or_else(|| "its driver".into()));
@@ -717,7 +726,8 @@ impl Check<'_> {
             let sent = match crate::modem::sends_as(driver.as_ref()) {
                 Ok(sent) => sent,
                 Err(p) => {
-                    self.problem(format!("node[{i}].gobyd.{at}.{}", p.field), p.reason);
+                    let field = format!("{at}.{}", p.field);
+                    self.config_problem(i, Problem::new(field, p.reason), file);
                     return None;
                 }
             };
@@ -763,7 +773,7 @@ impl Check<'_> {
             self.problem(format!("node[{i}].{path}"), e.to_string());
             return;
         };
-        for mut p in problems {
+        for p in problems {
             // A link's driver is told as the top-level one is.
             let bare = match p.field.strip_prefix("link[") {
                 Some(rest) => rest.split_once("].").map_or(p.field.as_str(), |(_, f)| f),
@@ -772,16 +782,23 @@ impl Check<'_> {
             if self.water_refused.iter().any(|f| f == bare) {
                 continue;
             }
-            match &file {
-                None => self.problem(format!("node[{i}].gobyd.{}", p.field), p.reason),
-                Some((text, origin)) => {
-                    gobyd::config::locate(std::slice::from_mut(&mut p), text, origin);
-                    let place = p.place.as_deref().unwrap_or(origin);
-                    self.found.push(format!(
-                        "{place}: {}: {} (node[{i}].gobyd_file)",
-                        p.field, p.reason
-                    ));
-                }
+            self.config_problem(i, p, file.as_ref());
+        }
+    }
+
+    /// A problem `p` of node `i`'s gobyd configuration (its field a path in
+    /// that configuration), told where it is written: in the scenario
+    /// (inline), or at its line in `file` (its text and name).
+    fn config_problem(&mut self, i: usize, mut p: Problem, file: Option<&(String, String)>) {
+        match file {
+            None => self.problem(format!("node[{i}].gobyd.{}", p.field), p.reason),
+            Some((text, origin)) => {
+                gobyd::config::locate(std::slice::from_mut(&mut p), text, origin);
+                let place = p.place.as_deref().unwrap_or(origin);
+                self.found.push(format!(
+                    "{place}: {}: {} (node[{i}].gobyd_file)",
+                    p.field, p.reason
+                ));
             }
         }
     }

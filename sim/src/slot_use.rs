@@ -35,6 +35,15 @@ pub struct NodeSlotUse {
     pub transmissions: u64,
     /// Data packets it heard intact (for it or not).
     pub receptions: u64,
+    /// Data packets its modem failed to send (a satellite session that
+    /// failed or found no satellite in view, a packet too late for its
+    /// slot); left out of the report when none did.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub failed: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// The shared slots of a run (slotted ALOHA): G and S.
@@ -125,6 +134,10 @@ impl SlotTally {
                 self.sent
                     .push((key(transmission), transmission.shared.is_some()));
             }
+            ModemEvent::Transmitted {
+                transmission,
+                outcome: TransmitOutcome::Failed(_),
+            } if is_data(transmission) => n.failed += 1,
             ModemEvent::Received { transmission, .. } if is_data(transmission) => {
                 n.receptions += 1;
                 let dest = transmission.dest();

@@ -111,6 +111,14 @@ async fn run_world(s: &Scenario, dir: &Path) -> Result<Ledger, SimError> {
     // The satellite of the nodes with an Iridium link: a channel of its
     // own, which the faults of the water do not touch.
     let satellite = Medium::new();
+    // The gateway knows the nodes on the satellite from the start: a
+    // message for a node without an Iridium link is refused there.
+    satellite.enrol(
+        s.nodes
+            .iter()
+            .filter(|n| n.links.contains(&crate::scenario::Medium::Satellite))
+            .map(|n| n.modem_id),
+    );
     let places: Arc<dyn Positions> = Arc::new(crate::track::World {
         start_micros: s.start_micros,
         places: s

@@ -312,3 +312,100 @@ fn an_aloha_link_with_nothing_it_may_carry_yet_does_not_stop_the_clock() {
         report.total
     );
 }
+
+/// The ship of [`a_ship_on_the_satellite_alone_gets_every_command_once`]:
+/// a top-level `DRIVER_IRIDIUM_SHORE`.
+const SHIP_ON_THE_SATELLITE: &str = r#"gobyd {
+    driver { driver_type: DRIVER_IRIDIUM_SHORE }
+    mac { type: MAC_FIXED_DECENTRALIZED
+      slot { src: 1 dest: -1 slot_seconds: 30 }
+      slot { src: 2 dest: -1 slot_seconds: 30 } }
+    queue { minimum_ack_wait_seconds: 60 message_entry { protobuf_name: "goby.example.Command"
+      ack: true ttl: 7200 role { type: DESTINATION_ID field: "destination" } } }
+  }"#;
+
+/// A third of the sessions fail (the AUV's, the ship being a shore
+/// station): they cost time, not messages. Each command is still
+/// delivered once and acked, and the report counts the failed sessions.
+#[test]
+fn sessions_that_fail_cost_time_not_commands() {
+    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
+    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
+    speed_mps: 1.5 }";
+    let text = format!(
+        "satellite {{ session_failure: 0.33 }}\n{}",
+        two_nodes(SHIP_ON_THE_SATELLITE, track)
+    );
+    let scenario = parse(&text, "failing", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let report = &outcome.report;
+    assert_eq!(
+        (
+            report.total.published,
+            report.total.delivered,
+            report.total.acked,
+            report.total.duplicates
+        ),
+        (20, 20, 20, 0),
+        "{:#?}",
+        report.total
+    );
+    let satellite = report.satellite_use.as_ref().expect("a satellite link");
+    let auv = &satellite.by_node["auv"];
+    assert!(auv.failed > 0, "no failed session counted: {satellite:?}");
+    assert_eq!(
+        satellite.by_node["ship"].failed, 0,
+        "a shore station has no sessions"
+    );
+    let json = serde_json::to_string(report).unwrap();
+    assert!(json.contains("\"failed\":"), "counted in report.json");
+}
+
+/// Settings for no node, and a second link written in a node's
+/// `gobyd_file`, are refused where they are written.
+#[test]
+fn a_satellite_for_no_node_and_a_second_link_in_a_gobyd_file_are_refused_where_written() {
+    let plain = r#"gobyd {
+    driver { driver_type: DRIVER_WHOI_MICROMODEM }
+    mac { type: MAC_FIXED_DECENTRALIZED
+      slot { src: 1 dest: -1 rate: 1 slot_seconds: 10 }
+      slot { src: 2 dest: -1 rate: 1 slot_seconds: 10 } }
+    queue { message_entry { protobuf_name: "goby.example.Command"
+      role { type: DESTINATION_ID field: "destination" } } }
+  }"#;
+    let acoustic_only =
+        two_nodes(plain, "position { x: 500 depth: 20 }").replace(&gobyd("DRIVER_IRIDIUM"), plain);
+    assert!(parse(&acoustic_only, "plain", Path::new(".")).is_ok());
+    let text = format!("satellite {{ session_seconds: 15 }}\n{acoustic_only}");
+    let e = parse(&text, "plain", Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("satellite: no node has an Iridium link"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+
+    let dir = std::env::temp_dir().join(format!("goby-sim-second-link-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let auv = gobyd("DRIVER_IRIDIUM").replacen(
+        "driver_type: DRIVER_IRIDIUM }",
+        "driver_type: DRIVER_WHOI_MICROMODEM }",
+        1,
+    );
+    let body = auv
+        .trim_start_matches("gobyd {")
+        .trim_end()
+        .trim_end_matches('}');
+    std::fs::write(dir.join("auv.pb.txt"), body).unwrap();
+    let in_file = scenario().replace(&gobyd("DRIVER_IRIDIUM"), "gobyd_file: \"auv.pb.txt\"");
+    assert!(in_file.contains("gobyd_file"));
+    let e = parse(&in_file, "two", &dir).unwrap_err().to_string();
+    let file = dir.join("auv.pb.txt").display().to_string();
+    // At the second link's line (the file's line 6) in the file, not at
+    // the scenario's node.
+    assert!(
+        e.contains(&format!("{file}:6:"))
+            && e.contains("link[1].driver: a second link on the water (acoustic is one)")
+            && e.contains("(node[1].gobyd_file)"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

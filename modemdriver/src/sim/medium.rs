@@ -57,6 +57,30 @@ pub struct Medium {
     /// Every node that ever joined (the nodes a broadcast is for, up or
     /// down).
     members: Mutex<BTreeSet<i32>>,
+    /// Every node the gateway knows, when told beforehand ([`Medium::enrol`]):
+    /// a message for another is refused.
+    roster: Mutex<Option<BTreeSet<i32>>>,
+}
+
+/// Why the gateway refused a message ([`Medium::post`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refused {
+    /// No node of that modem id is on the satellite.
+    Unknown,
+    /// The node's queue at the gateway holds this many already.
+    Full(usize),
+}
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refused::Unknown => write!(f, "no node of that modem id has an Iridium link"),
+            Refused::Full(n) => write!(
+                f,
+                "its queue at the gateway is full ({n} messages; simulator.satellite.queue_limit)"
+            ),
+        }
+    }
 }
 
 impl std::fmt::Debug for Medium {
@@ -156,21 +180,46 @@ impl Medium {
         }
     }
 
-    /// Every node that ever joined the channel.
+    /// Tells the gateway beforehand which nodes are on the satellite (as a
+    /// run that starts them all knows): a broadcast is for them, and a
+    /// message for any other node is refused.
+    pub fn enrol(&self, modem_ids: impl IntoIterator<Item = i32>) {
+        *self.roster.lock().unwrap_or_else(|e| e.into_inner()) =
+            Some(modem_ids.into_iter().collect());
+    }
+
+    /// The nodes a broadcast is for: those enrolled, else every node that
+    /// ever joined the channel.
     pub fn members(&self) -> Vec<i32> {
+        if let Some(roster) = &*self.roster.lock().unwrap_or_else(|e| e.into_inner()) {
+            return roster.iter().copied().collect();
+        }
         let members = self.members.lock().unwrap_or_else(|e| e.into_inner());
         members.iter().copied().collect()
     }
 
     /// Leaves `mt` at the gateway for node `modem_id` from `at`, behind
-    /// what is there already.
-    pub fn post(&self, modem_id: i32, at: Instant, mt: ModemTransmission) {
-        self.mailboxes
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .entry(modem_id)
-            .or_default()
-            .push_back((at, mt));
+    /// what is there already (on its way or waiting), unless the node is
+    /// not enrolled or `limit` messages are there for it.
+    pub fn post(
+        &self,
+        modem_id: i32,
+        at: Instant,
+        mt: ModemTransmission,
+        limit: usize,
+    ) -> Result<(), Refused> {
+        let roster = self.roster.lock().unwrap_or_else(|e| e.into_inner());
+        if roster.as_ref().is_some_and(|r| !r.contains(&modem_id)) {
+            return Err(Refused::Unknown);
+        }
+        drop(roster);
+        let mut mailboxes = self.mailboxes.lock().unwrap_or_else(|e| e.into_inner());
+        let queue = mailboxes.entry(modem_id).or_default();
+        if queue.len() >= limit {
+            return Err(Refused::Full(queue.len()));
+        }
+        queue.push_back((at, mt));
+        Ok(())
     }
 
     /// The oldest message at the gateway for node `modem_id` by `now`,

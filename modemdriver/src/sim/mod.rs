@@ -89,6 +89,10 @@ use water::{LinkKey, Water};
 /// satellite gateway looks whether it has come up (and so makes a session).
 const SURFACE_LOOK: Duration = Duration::from_secs(10);
 
+/// Mixed into the seed for the satellite sessions' failures, so that they
+/// are drawn apart from the packets' losses.
+const SESSION_DRAWS: u64 = 0x5E55_1075_F417_0001;
+
 /// How long the simulator waits for the layer above to fill a data request.
 pub const DATA_REQUEST_TIMEOUT: Duration = Duration::from_secs(1);
 
@@ -526,6 +530,9 @@ struct Node {
     /// When the satellite sessions under way end, each bringing one
     /// message waiting at the gateway for this node.
     pickups: Vec<Instant>,
+    /// The satellite sessions this node has started (1, 2, ...), each
+    /// failure drawn by its number.
+    sessions: u64,
 }
 
 impl Node {
@@ -542,14 +549,24 @@ impl Node {
     }
 
     /// A satellite session at the surface ending at `end`: the modem is
-    /// busy until then, and the oldest message waiting at the gateway for
-    /// this node comes with its end (an SBD session sends and receives at
-    /// once).
-    fn session_until(&mut self, end: Instant) {
+    /// busy until then, and unless the session fails (`false`; drawn from
+    /// the seed with `session_failure`), the oldest message waiting at the
+    /// gateway for this node comes with its end (an SBD session sends and
+    /// receives at once). A shore station makes no sessions: it never
+    /// fails.
+    fn session_until(&mut self, end: Instant) -> bool {
         self.busy_until = self.busy_until.max(end);
-        if self.satellite.is_some_and(|s| !s.shore) {
-            self.pickups.push(end);
+        let Some(link) = self.satellite.filter(|s| !s.shore) else {
+            return true;
+        };
+        self.sessions += 1;
+        // A stream of its own, apart from the packets' losses.
+        let seed = self.sim.seed() ^ SESSION_DRAWS;
+        if reception::draw_loss(seed, self.modem_id, self.sessions, link.failure) {
+            return false;
         }
+        self.pickups.push(end);
+        true
     }
 
     /// The satellite's side of [`deliver_due`](Self::deliver_due): each
@@ -580,7 +597,7 @@ impl Node {
             && self.medium.waiting(self.modem_id, now) > 0
             && self.below_the_satellites().is_none()
         {
-            self.session_until(now + link.session());
+            let _ = self.session_until(now + link.session());
         }
     }
 
@@ -608,8 +625,9 @@ impl Node {
 
     /// Leaves what this node sends on the satellite, `packet`, at the
     /// gateway for the node it is for (every other node, a broadcast),
-    /// from its session's end and the latency on.
-    fn post(&self, packet: &Airborne, link: satellite::Satellite) {
+    /// from its session's end and the latency on. A node the gateway
+    /// refuses it for is told as a link error.
+    fn post(&self, packet: &Airborne, link: satellite::Satellite, events: &EventSink) {
         let at = packet.start + packet.duration + link.latency;
         let dest = packet.transmission.dest();
         let lost = reception::draw_loss(
@@ -625,8 +643,16 @@ impl Node {
             0 => self.medium.members(),
             d => vec![d],
         };
+        let limit = usize::try_from(link.queue_limit).unwrap_or(usize::MAX);
         for d in to.into_iter().filter(|d| *d != self.modem_id) {
-            self.medium.post(d, at, packet.transmission.clone());
+            if let Err(why) = self.medium.post(d, at, packet.transmission.clone(), limit) {
+                events.status(DriverStatus::LinkError {
+                    reason: format!(
+                        "the gateway refused a message for modem {d} (packet {}): {why}",
+                        packet.seq
+                    ),
+                });
+            }
         }
     }
 
@@ -746,7 +772,7 @@ impl Node {
                     }));
                     if self.satellite.is_some() {
                         // A session all the same: a mailbox check.
-                        self.session_until(Instant::now() + duration);
+                        let _ = self.session_until(Instant::now() + duration);
                     }
                     return;
                 }
@@ -764,11 +790,13 @@ impl Node {
         let start = Instant::now();
         let end = start + duration;
         self.busy_until = end;
-        if self.satellite.is_some() {
-            self.session_until(end);
-        } else {
-            self.receiver.transmitting(start, end);
-        }
+        let reached = match self.satellite {
+            Some(_) => self.session_until(end),
+            None => {
+                self.receiver.transmitting(start, end);
+                true
+            }
+        };
         self.seq += 1;
         let position = self.position_of(self.modem_id).unwrap_or_default();
         let packet = Arc::new(Airborne {
@@ -782,8 +810,8 @@ impl Node {
             garbled: false,
         });
         events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
-        if let Some(link) = self.satellite {
-            self.post(&packet, link);
+        if let Some(link) = self.satellite.filter(|_| reached) {
+            self.post(&packet, link, events);
         }
         self.medium.transmit(packet.clone());
         if let Some(observer) = self.medium.observer() {
@@ -803,11 +831,19 @@ impl Node {
                 events.status(DriverStatus::LinkError { reason });
             }
         }
+        let outcome = match reached {
+            true => TransmitOutcome::Sent,
+            false => TransmitOutcome::Failed(
+                "the satellite session failed (simulator.satellite.session_failure): nothing \
+                 reached the gateway"
+                    .into(),
+            ),
+        };
         self.results.push((
             end,
             TransmitResult {
                 transmission: mt,
-                outcome: TransmitOutcome::Sent,
+                outcome,
             },
         ));
     }
@@ -1144,6 +1180,7 @@ async fn run(
         observed_links: HashMap::new(),
         satellite,
         pickups: Vec::new(),
+        sessions: 0,
     };
     node.prepare_links(&events).await;
     events.status(DriverStatus::Ready);

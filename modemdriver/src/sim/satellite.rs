@@ -15,6 +15,10 @@
 //!   (the constellation, not the nodes, shares the channel).
 //! - A `shore` station is on the gateway's side: any depth, no sessions,
 //!   what comes for it handed over on arrival.
+//! - A share `session_failure` of the sessions fail (each drawn from the
+//!   seed): the session takes its time, and nothing goes or comes.
+//! - The gateway keeps at most `queue_limit` messages for a node (50, as
+//!   Iridium's MT queue); one more is refused, and its sender is told.
 
 use std::time::Duration;
 
@@ -46,6 +50,10 @@ pub struct Satellite {
     pub frame_bytes: u32,
     /// On the gateway's side (a shore station): no sessions, any depth.
     pub shore: bool,
+    /// The share of sessions that fail, 0 to less than 1.
+    pub failure: f64,
+    /// The messages the gateway keeps for a node, 1 or more.
+    pub queue_limit: u32,
 }
 
 impl Satellite {
@@ -82,6 +90,19 @@ impl Satellite {
                 ),
             ));
         }
+        let failure = link.session_failure();
+        if !(0.0..1.0).contains(&failure) {
+            problems.push(Problem::new(
+                "simulator.satellite.session_failure",
+                format!("{failure} is not a share of sessions that fail: 0 (none) to less than 1"),
+            ));
+        }
+        if link.queue_limit() == 0 {
+            problems.push(Problem::new(
+                "simulator.satellite.queue_limit",
+                "0: the gateway keeps at least one message for a node (Iridium's MT queue, 50)",
+            ));
+        }
         if session.is_some_and(|s| s.is_zero()) {
             problems.push(Problem::new(
                 "simulator.satellite.session_seconds",
@@ -107,6 +128,8 @@ impl Satellite {
                 surface_depth,
                 frame_bytes: link.frame_bytes(),
                 shore: link.shore(),
+                failure,
+                queue_limit: link.queue_limit(),
             }),
             _ => Err(problems),
         }
@@ -174,6 +197,7 @@ mod tests {
         assert_eq!(packet.on_water_holding(259), Duration::from_secs(20));
         assert_eq!((packet.spec.frames, packet.spec.frame_bytes), (1, 259));
         assert_eq!(link.frame_limits().outgoing, 259);
+        assert_eq!((link.failure, link.queue_limit), (0.0, 50));
     }
 
     #[test]
@@ -221,6 +245,27 @@ mod tests {
                 },
                 "latency_seconds",
             ),
+            (
+                SatelliteLink {
+                    session_failure: Some(1.0),
+                    ..Default::default()
+                },
+                "session_failure",
+            ),
+            (
+                SatelliteLink {
+                    session_failure: Some(f64::NAN),
+                    ..Default::default()
+                },
+                "session_failure",
+            ),
+            (
+                SatelliteLink {
+                    queue_limit: Some(0),
+                    ..Default::default()
+                },
+                "queue_limit",
+            ),
         ] {
             let problems = Satellite::of(&bad).unwrap_err();
             assert_eq!(
@@ -243,7 +288,7 @@ mod tests {
             latency_seconds: Some(-1.0),
             surface_depth: Some(-2.0),
             frame_bytes: Some(0),
-            shore: None,
+            ..Default::default()
         };
         let problems = Satellite::of(&bad).unwrap_err();
         let fields: Vec<&str> = problems.iter().map(|p| p.field.as_str()).collect();
