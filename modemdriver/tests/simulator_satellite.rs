@@ -458,3 +458,35 @@ async fn a_message_for_a_node_the_gateway_does_not_know_is_refused() {
     assert_eq!(medium.waiting(2, Instant::now()), 1);
     assert_eq!(medium.waiting(3, Instant::now()), 0);
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_session_that_fails_after_the_gateway_took_the_message_delivers_it_all_the_same() {
+    let flaky = SatelliteLink {
+        session_failure: Some(0.5),
+        taken_when_failed: Some(1.0),
+        ..Default::default()
+    };
+    let mut two = nodes(true, &[config_of(1, flaky), config_of(2, flaky)]);
+    let mut vehicle = two.pop().unwrap();
+    let mut shore = two.pop().unwrap();
+    let mut failed = 0;
+    let frames: Vec<Vec<u8>> = (0..20u8).map(|i| vec![i; 8]).collect();
+    for frame in &frames {
+        shore.initiate_transmission(data(2)).unwrap();
+        let r = result(&mut shore, std::slice::from_ref(frame)).await;
+        failed += usize::from(matches!(r.outcome, TransmitOutcome::Failed(_)));
+    }
+    assert!(failed > 0, "no session failed");
+    // Every one reached the gateway, failed or not: the vehicle gets them
+    // all (its sender would send the failed ones again).
+    let mut got = Vec::new();
+    for _ in &frames {
+        got.push(
+            received(&mut vehicle, Duration::from_secs(3_600))
+                .await
+                .frame[0]
+                .clone(),
+        );
+    }
+    assert_eq!(got, frames);
+}

@@ -409,3 +409,41 @@ fn a_satellite_for_no_node_and_a_second_link_in_a_gobyd_file_are_refused_where_w
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Sessions that fail after the gateway took the message (as Iridium's
+/// now and then do): the message reaches its node, and its sender, told
+/// of a failure, sends it again. The copy is marked `resent`, and the
+/// receiver delivers the message once.
+#[test]
+fn a_message_the_gateway_took_before_its_session_failed_is_delivered_once() {
+    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
+    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
+    speed_mps: 1.5 }";
+    let text = format!(
+        "satellite {{ session_failure: 0.4 taken_when_failed: 1 }}\n{}",
+        two_nodes(SHIP_ON_THE_SATELLITE, track)
+    );
+    let scenario = parse(&text, "taken", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let report = &outcome.report;
+    assert_eq!(
+        (
+            report.total.published,
+            report.total.delivered,
+            report.total.acked,
+            report.total.duplicates
+        ),
+        (20, 20, 20, 0),
+        "{:#?}",
+        report.total
+    );
+    let satellite = report.satellite_use.as_ref().expect("a satellite link");
+    let (auv, ship) = (&satellite.by_node["auv"], &satellite.by_node["ship"]);
+    // The ship heard the AUV's data more often than the AUV's sessions
+    // with data went through: the copies of the failed ones, suppressed.
+    assert!(auv.failed > 0, "{satellite:?}");
+    assert!(
+        ship.receptions > auv.transmissions,
+        "no message of a failed session arrived: {satellite:?}"
+    );
+}

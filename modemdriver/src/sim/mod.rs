@@ -549,24 +549,29 @@ impl Node {
     }
 
     /// A satellite session at the surface ending at `end`: the modem is
-    /// busy until then, and unless the session fails (`false`; drawn from
-    /// the seed with `session_failure`), the oldest message waiting at the
-    /// gateway for this node comes with its end (an SBD session sends and
-    /// receives at once). A shore station makes no sessions: it never
-    /// fails.
-    fn session_until(&mut self, end: Instant) -> bool {
+    /// busy until then, and unless the session fails (drawn from the seed
+    /// with `session_failure`), the oldest message waiting at the gateway
+    /// for this node comes with its end (an SBD session sends and receives
+    /// at once). A shore station makes no sessions: it never fails.
+    fn session_until(&mut self, end: Instant) -> Session {
         self.busy_until = self.busy_until.max(end);
         let Some(link) = self.satellite.filter(|s| !s.shore) else {
-            return true;
+            return Session::Whole;
         };
         self.sessions += 1;
-        // A stream of its own, apart from the packets' losses.
+        // Streams of their own, apart from the packets' losses.
         let seed = self.sim.seed() ^ SESSION_DRAWS;
         if reception::draw_loss(seed, self.modem_id, self.sessions, link.failure) {
-            return false;
+            let taken = reception::draw_loss(
+                seed.rotate_left(17),
+                self.modem_id,
+                self.sessions,
+                link.taken_when_failed,
+            );
+            return Session::Failed { taken };
         }
         self.pickups.push(end);
-        true
+        Session::Whole
     }
 
     /// The satellite's side of [`deliver_due`](Self::deliver_due): each
@@ -790,11 +795,11 @@ impl Node {
         let start = Instant::now();
         let end = start + duration;
         self.busy_until = end;
-        let reached = match self.satellite {
+        let session = match self.satellite {
             Some(_) => self.session_until(end),
             None => {
                 self.receiver.transmitting(start, end);
-                true
+                Session::Whole
             }
         };
         self.seq += 1;
@@ -810,6 +815,7 @@ impl Node {
             garbled: false,
         });
         events.emit(DriverEvent::Raw(raw(RawDirection::Outgoing, &mt)));
+        let reached = !matches!(session, Session::Failed { taken: false });
         if let Some(link) = self.satellite.filter(|_| reached) {
             self.post(&packet, link, events);
         }
@@ -831,12 +837,12 @@ impl Node {
                 events.status(DriverStatus::LinkError { reason });
             }
         }
-        let outcome = match reached {
-            true => TransmitOutcome::Sent,
-            false => TransmitOutcome::Failed(
-                "the satellite session failed (simulator.satellite.session_failure): nothing \
-                 reached the gateway"
-                    .into(),
+        // A session that fails after the gateway took the message is told
+        // as any failure: the modem cannot tell them apart.
+        let outcome = match session {
+            Session::Whole => TransmitOutcome::Sent,
+            Session::Failed { .. } => TransmitOutcome::Failed(
+                "the satellite session failed (simulator.satellite.session_failure)".into(),
             ),
         };
         self.results.push((
@@ -1120,6 +1126,17 @@ fn raw(direction: RawDirection, mt: &ModemTransmission) -> RawMessage {
         bytes: prost::Message::encode_to_vec(mt),
         peer: Some(format!("modem {peer}")),
     }
+}
+
+/// What became of a satellite session ([`Node::session_until`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Session {
+    /// It went through: what it sent is at the gateway, and it brings
+    /// what waits there.
+    Whole,
+    /// It failed: it brings nothing; what it sent is at the gateway all
+    /// the same when `taken`.
+    Failed { taken: bool },
 }
 
 /// What a node starts with.

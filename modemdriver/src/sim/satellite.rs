@@ -16,7 +16,9 @@
 //! - A `shore` station is on the gateway's side: any depth, no sessions,
 //!   what comes for it handed over on arrival.
 //! - A share `session_failure` of the sessions fail (each drawn from the
-//!   seed): the session takes its time, and nothing goes or comes.
+//!   seed): the session takes its time, and nothing comes; nothing goes
+//!   either, but in a share `taken_when_failed` of them, where the gateway
+//!   had taken the message before the failure.
 //! - The gateway keeps at most `queue_limit` messages for a node (50, as
 //!   Iridium's MT queue); one more is refused, and its sender is told.
 
@@ -52,6 +54,9 @@ pub struct Satellite {
     pub shore: bool,
     /// The share of sessions that fail, 0 to less than 1.
     pub failure: f64,
+    /// Of those, the share in which the gateway had taken the message,
+    /// 0 to 1.
+    pub taken_when_failed: f64,
     /// The messages the gateway keeps for a node, 1 or more.
     pub queue_limit: u32,
 }
@@ -97,6 +102,13 @@ impl Satellite {
                 format!("{failure} is not a share of sessions that fail: 0 (none) to less than 1"),
             ));
         }
+        let taken = link.taken_when_failed();
+        if !(0.0..=1.0).contains(&taken) {
+            problems.push(Problem::new(
+                "simulator.satellite.taken_when_failed",
+                format!("{taken} is not a share of the failed sessions: 0 (none) to 1 (all)"),
+            ));
+        }
         if link.queue_limit() == 0 {
             problems.push(Problem::new(
                 "simulator.satellite.queue_limit",
@@ -129,6 +141,7 @@ impl Satellite {
                 frame_bytes: link.frame_bytes(),
                 shore: link.shore(),
                 failure,
+                taken_when_failed: taken,
                 queue_limit: link.queue_limit(),
             }),
             _ => Err(problems),
@@ -258,6 +271,13 @@ mod tests {
                     ..Default::default()
                 },
                 "session_failure",
+            ),
+            (
+                SatelliteLink {
+                    taken_when_failed: Some(1.5),
+                    ..Default::default()
+                },
+                "taken_when_failed",
             ),
             (
                 SatelliteLink {
