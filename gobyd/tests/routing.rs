@@ -87,6 +87,8 @@ fn note(message: &prost_reflect::DynamicMessage) -> String {
 
 struct Fleet {
     publishers: Vec<tokio::sync::mpsc::Sender<gobyd::event::Publish>>,
+    /// Each node's JSON interface over TCP, where it has one.
+    json: Vec<Option<std::net::SocketAddr>>,
     stops: Vec<oneshot::Sender<()>>,
     runs: Vec<tokio::task::JoinHandle<Result<(), gobyd::error::DaemonError>>>,
     seen: Arc<Mutex<Vec<Seen>>>,
@@ -111,6 +113,7 @@ async fn start_nodes(
     let seen: Arc<Mutex<Vec<Seen>>> = Arc::default();
     let mut fleet = Fleet {
         publishers: Vec::new(),
+        json: Vec::new(),
         stops: Vec::new(),
         runs: Vec::new(),
         seen: seen.clone(),
@@ -119,6 +122,7 @@ async fn start_nodes(
         let config = node(id, &dir.join(format!("data{id}"))).config();
         let daemon = support::daemon::start_simulated(config, &medium, &clock).await;
         fleet.publishers.push(daemon.publisher());
+        fleet.json.push(daemon.json_tcp_addr());
         let mut events = daemon.subscribe();
         let seen = seen.clone();
         tokio::spawn(async move {
@@ -346,8 +350,30 @@ const ROUTED_MESSAGE: u32 = 32002;
 
 #[tokio::test(start_paused = true)]
 async fn custody_at_the_relay_shows_on_its_queue_size() {
+    use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
     let dir = scratch("routing", "custody");
-    let fleet = start(&dir, 0.0).await;
+    // The relay's clients see it too, on its JSON interface, by the
+    // network type's name.
+    let fleet = start_with(&dir, |id, data| match id {
+        2 => config(id, data, 0.0).json_tcp("127.0.0.1:0"),
+        _ => config(id, data, 0.0),
+    })
+    .await;
+    let relay_json = fleet.json[1].expect("the relay's JSON interface");
+    let mut client = tokio::net::TcpStream::connect(relay_json).await.unwrap();
+    client
+        .write_all(b"{\"subscribe\": [\"queue_size\"]}\n")
+        .await
+        .unwrap();
+    let lines: Arc<Mutex<Vec<String>>> = Arc::default();
+    let heard = lines.clone();
+    tokio::spawn(async move {
+        let mut reader = BufReader::new(client).lines();
+        while let Ok(Some(line)) = reader.next_line().await {
+            heard.lock().unwrap().push(line);
+        }
+    });
+    tokio::time::sleep(Duration::from_secs(1)).await;
     publish_command(&fleet.publishers[0], 3, "held by 2").await;
     tokio::time::sleep(Duration::from_secs(300)).await;
     assert_eq!(
@@ -371,6 +397,13 @@ async fn custody_at_the_relay_shows_on_its_queue_size() {
     // Taken into the relay's custody, then handed on to node 3.
     assert_eq!(relay.first(), Some(&1), "{relay:?}");
     assert_eq!(relay.last(), Some(&0), "{relay:?}");
+    let lines = lines.lock().unwrap().clone();
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains(r#""queue_size":"goby.acomms.protobuf.RoutedMessage","size":1"#)),
+        "{lines:#?}"
+    );
     fleet.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
 }

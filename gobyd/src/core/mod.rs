@@ -223,7 +223,7 @@ impl Core {
         let Checked {
             config,
             codec,
-            loaded,
+            loaded: _,
             queue: queue_config,
         } = checked;
         let codec = Arc::new(on_clock((*codec).clone(), &clock));
@@ -272,7 +272,10 @@ impl Core {
         let (driver_status, _) = watch::channel(None);
         let (publish_tx, publish_rx) = mpsc::channel(256);
         let (control_tx, control_rx) = mpsc::channel(16);
-        let names: HashMap<u32, String> = loaded
+        // Every type the codec holds: the user's, and the network layer's
+        // own (a relay's queues hold `RoutedMessage` and `RouteAck`).
+        let names: HashMap<u32, String> = codec
+            .loaded()
             .iter()
             .filter_map(|n| codec.id_of(n).ok().map(|id| (id, n.clone())))
             .collect();
