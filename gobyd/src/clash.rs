@@ -4,7 +4,8 @@
 //! - another process (another `gobyd`) holds the data directory's lock
 //!   (`DATA_DIR/gobyd.lock`, see the core's data directory): the daemon
 //!   would refuse to start;
-//! - the JSON interface's TCP or UDP address is taken;
+//! - the JSON interface's TCP or UDP address is taken, or is not an
+//!   address of this machine (an interface not up yet, or a typo);
 //! - another configuration file in the same directory leaves `data_dir`
 //!   unset too: both daemons, started from there, would take the default
 //!   data directory (and, when both leave `json` unset, the same port).
@@ -47,19 +48,21 @@ pub fn clashes(config: &GobydConfig, file: Option<&Path>) -> Vec<Clash> {
         ));
     }
     let json = config.json.clone().unwrap_or_default();
-    if let Some(e) = taken(json.tcp_bind(), |a| {
-        std::net::TcpListener::bind(a).map(drop)
-    }) {
-        error(format!(
+    match taken(json.tcp_bind(), |a| std::net::TcpListener::bind(a).map(drop)) {
+        Some(Unbound::Taken(e)) => error(format!(
             "json.tcp_bind: {:?} is taken ({e}): another gobyd, or another program, listens there (give json {{ tcp_bind: \"127.0.0.1:PORT\" }} another port)",
             json.tcp_bind()
-        ));
+        )),
+        Some(Unbound::NotHere(e)) => error(not_here("json.tcp_bind", json.tcp_bind(), &e)),
+        None => {}
     }
-    if let Some(e) = taken(json.udp_bind(), |a| std::net::UdpSocket::bind(a).map(drop)) {
-        error(format!(
+    match taken(json.udp_bind(), |a| std::net::UdpSocket::bind(a).map(drop)) {
+        Some(Unbound::Taken(e)) => error(format!(
             "json.udp_bind: {:?} is taken ({e}): another program listens there",
             json.udp_bind()
-        ));
+        )),
+        Some(Unbound::NotHere(e)) => error(not_here("json.udp_bind", json.udp_bind(), &e)),
+        None => {}
     }
     if config.data_dir.is_none() {
         for other in default_sharers(file) {
@@ -97,14 +100,32 @@ fn lock_holder(dir: &Path) -> Option<String> {
     }
 }
 
-/// Why address `bind` cannot be bound, when it is taken (an empty one is
-/// off; one that does not parse is told by the configuration's check).
-fn taken(bind: &str, try_bind: impl Fn(&str) -> std::io::Result<()>) -> Option<std::io::Error> {
+/// Why an address cannot be bound now.
+enum Unbound {
+    /// Another socket holds it.
+    Taken(std::io::Error),
+    /// No interface of this machine has its IP address.
+    NotHere(std::io::Error),
+}
+
+/// The sentence for `field`'s `bind`, not an address of this machine.
+fn not_here(field: &str, bind: &str, e: &std::io::Error) -> String {
+    format!(
+        "{field}: {bind:?} is not an address of this machine now ({e}): the daemon would not \
+         start unless an interface has it by then (0.0.0.0 listens on all of them)"
+    )
+}
+
+/// Why address `bind` cannot be bound, when it is taken or not this
+/// machine's (an empty one is off; one that does not parse is told by the
+/// configuration's check).
+fn taken(bind: &str, try_bind: impl Fn(&str) -> std::io::Result<()>) -> Option<Unbound> {
     if bind.is_empty() {
         return None;
     }
     match try_bind(bind) {
-        Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => Some(e),
+        Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => Some(Unbound::Taken(e)),
+        Err(e) if e.kind() == std::io::ErrorKind::AddrNotAvailable => Some(Unbound::NotHere(e)),
         _ => None,
     }
 }

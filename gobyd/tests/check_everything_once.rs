@@ -128,5 +128,21 @@ fn unknown_keys_unmappable_keys_and_clashes_are_all_told_in_one_run() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(err.contains("warning: clash: data_dir: not set"), "{err}");
     assert!(!err.contains("error"), "{err}");
+    // An address no interface here has (a documentation address, never
+    // this machine's; nothing is sent to it): told, as a daemon started
+    // now would stop.
+    std::fs::write(
+        dir.join("alpha.pb.txt"),
+        "modem_id: 1\njson { tcp_bind: \"192.0.2.1:47397\" }\n",
+    )
+    .unwrap();
+    let out = check(&dir, "alpha.pb.txt");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(
+            "warning: clash: json.tcp_bind: \"192.0.2.1:47397\" is not an address of this machine now"
+        ),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1137,5 +1137,40 @@ fn check_accepts_links_and_refuses_bad_rules_naming_where_they_are() {
     ] {
         assert!(err.contains(&part), "{part:?} missing from {err}");
     }
+
+    // Two links on one device: the second driver would never start.
+    std::fs::write(
+        &path,
+        TWO_LINKS.replace("local { port: 0 }", "local { port: 47311 }"),
+    )
+    .unwrap();
+    let (code, _, err) = check(&path);
+    assert_eq!(code, Some(2), "{err}");
+    let part =
+        format!("{file}:9:50: link[1].driver.udp.local.port: UDP port 47311 is link[0]'s too");
+    assert!(err.contains(&part), "{part:?} missing from {err}");
+    let serial = |port: &str| {
+        format!("driver {{ driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"{port}\" }}")
+    };
+    let modems = TWO_LINKS.replacen(
+        "driver { driver_type: DRIVER_UDP udp { local { port: 0 } remote { modem_id: 2 port: 50902 } } }",
+        &serial("/dev/ttyUSB0"),
+        1,
+    );
+    let modems = modems.replacen(
+        "driver { driver_type: DRIVER_UDP udp { local { port: 0 } remote { modem_id: 2 port: 50903 } } }",
+        &serial("/dev/ttyUSB0"),
+        1,
+    );
+    std::fs::write(&path, &modems).unwrap();
+    let (code, _, err) = check(&path);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("link[1].driver.serial_port: serial port \"/dev/ttyUSB0\" is link[0]'s too"),
+        "{err}"
+    );
+    std::fs::write(&path, modems.replacen("/dev/ttyUSB0", "/dev/ttyUSB1", 1)).unwrap();
+    let (_, _, err) = check(&path);
+    assert!(!err.contains("is link[0]'s too"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -207,6 +207,21 @@ pub fn link_problems(config: &GobydConfig) -> Vec<Problem> {
                 ));
             }
         }
+        let device_of = |l: &gobyd_config::Link| l.driver.as_ref().and_then(device);
+        if let Some((at, what)) = device_of(link) {
+            let before = config.link[..i]
+                .iter()
+                .position(|l| device_of(l).is_some_and(|(_, w)| w == what));
+            if let Some(first) = before {
+                problems.push(Problem::new(
+                    field(&format!("driver.{at}")),
+                    format!(
+                        "{what} is link[{first}]'s too: two drivers cannot hold one device \
+                         (give each link its own)"
+                    ),
+                ));
+            }
+        }
         let (min, max) = (link.restart_min_seconds(), link.restart_max_seconds());
         if !(min.is_finite() && min > 0.0) {
             problems.push(Problem::new(
@@ -221,6 +236,31 @@ pub fn link_problems(config: &GobydConfig) -> Vec<Problem> {
         }
     }
     problems
+}
+
+/// The device a link's driver holds for itself, as `(field, words)`: a
+/// UDP driver's local port, a serial line. Two links may not hold one
+/// (the second would never start); a TCP client's server may serve
+/// several.
+fn device(driver: &DriverConfig) -> Option<(&'static str, String)> {
+    use protos::goby::acomms::protobuf::driver_config::{ConnectionType, Driver};
+    use protos::goby::acomms::protobuf::DriverType;
+    let kind = match &driver.driver {
+        Some(Driver::DriverType(t)) => DriverType::try_from(*t).ok(),
+        _ => None,
+    };
+    match kind {
+        Some(DriverType::DriverUdp) => {
+            let port = driver.udp.as_ref()?.local.port;
+            (port != 0).then(|| ("udp.local.port", format!("UDP port {port}")))
+        }
+        Some(DriverType::DriverUdpMulticast | DriverType::DriverAcousticSimulator) | None => None,
+        Some(_) => {
+            let serial = driver.connection_type() == ConnectionType::ConnectionSerial;
+            let port = driver.serial_port().trim();
+            (serial && !port.is_empty()).then(|| ("serial_port", format!("serial port {port:?}")))
+        }
+    }
 }
 
 /// The problems of the `link_rule`s, against the links of `config` and
