@@ -55,8 +55,6 @@ pub mod json {
     };
 }
 
-/// The daemon's internals, for its own tests, benchmarks and fuzz targets
-/// (feature `internals`): no interface of the crate.
 /// The receiver's inbox file (`DATA_DIR/inbox.log`), for reading a data
 /// directory after a mission: its format and its records.
 pub mod inbox_file {
@@ -65,11 +63,16 @@ pub mod inbox_file {
 }
 
 /// The network layer's transfers file (`DATA_DIR/transfers.log`), for
-/// reading a data directory after a mission: its format and its records.
+/// reading a data directory after a mission: its format and its records;
+/// and the network layer's own types, which it journals in the outbox
+/// (`is_network_type`).
 pub mod transfers_file {
     pub use crate::core::network::transfers::{read_history, Record, TRANSFERS};
+    pub use crate::core::network::wire::is_network_type;
 }
 
+/// The daemon's internals, for its own tests, benchmarks and fuzz targets
+/// (feature `internals`): no interface of the crate.
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {

@@ -478,5 +478,39 @@ async fn a_hop_limit_drop_is_told_to_the_origin_at_once_naming_the_relay_and_the
         1
     );
     fleet.stop().await;
+    // The origin's mission log: both publications accepted, as the type
+    // the client published (the journal holds their wrappers), and the one
+    // dropped as expired there, naming the relay and its limit.
+    let log = std::fs::read_to_string(dir.join("data1").join("raw.log")).unwrap();
+    let records: Vec<serde_json::Value> = log
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    let accepted: Vec<u64> = records
+        .iter()
+        .filter(|r| r["msg"] == "accepted" && r["name"] == "goby.example.Command")
+        .filter_map(|r| r["id"].as_u64())
+        .collect();
+    assert_eq!(accepted.len(), 2, "{log}");
+    let expired: Vec<&serde_json::Value> =
+        records.iter().filter(|r| r["msg"] == "expire").collect();
+    assert_eq!(expired.len(), 1, "{log}");
+    let e = expired[0];
+    assert_eq!(
+        (
+            &e["name"],
+            &e["relay"],
+            &e["hop_limit"],
+            &e["value"]["note"]
+        ),
+        (
+            &serde_json::json!("goby.example.Command"),
+            &serde_json::json!(3),
+            &serde_json::json!(1),
+            &serde_json::json!("too far")
+        ),
+        "{e}"
+    );
+    assert!(accepted.contains(&e["id"].as_u64().unwrap()), "{log}");
     let _ = std::fs::remove_dir_all(&dir);
 }

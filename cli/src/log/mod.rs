@@ -313,6 +313,7 @@ fn run_summary(
     let mut outgoing = summary::outgoing(&records);
     outgoing.retain(|m| type_matches(&args.types, Some(&m.name)));
     let types = summary::per_type(&records, &outgoing);
+    let held = summary::network_held(&records).len();
     let inbox = log
         .read
         .contains(&read::INBOX_FILE)
@@ -320,6 +321,13 @@ fn run_summary(
     match args.format {
         SummaryFormat::Text => {
             write!(stdout, "{}", summary::table(&types))?;
+            if held > 0 {
+                writeln!(
+                    stdout,
+                    "network layer: {held} messages of its own (held for other nodes as a \
+                     relay, or route acks), no client's"
+                )?;
+            }
             if let Some(inbox) = inbox {
                 writeln!(stdout, "{}", inbox.line())?;
             }
@@ -337,6 +345,9 @@ fn run_summary(
         SummaryFormat::Json => {
             for (name, s) in &types {
                 writeln!(stdout, "{}", s.to_json(name))?;
+            }
+            if held > 0 {
+                writeln!(stdout, "{}", serde_json::json!({ "network_layer": held }))?;
             }
             if let Some(inbox) = inbox {
                 writeln!(stdout, "{}", inbox.to_json())?;

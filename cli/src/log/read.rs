@@ -49,7 +49,8 @@ pub struct Record {
     /// What it records: `accepted` and `removed` (journal); `received`,
     /// `handed` and `seen` (inbox); `transfer`, `taken`, `held`,
     /// `transfer_end`, `fragment` and `transfer_received` (transfers);
-    /// `out`, `in`, `ack`, `expire`, `drop` and `raw` (mission log).
+    /// `accepted`, `out`, `in`, `ack`, `expire`, `drop` and `raw` (mission
+    /// log).
     pub kind: String,
     /// Full name of the message's type, when the record is about one.
     pub name: Option<String>,
@@ -157,7 +158,42 @@ pub fn read_data_dir(dir: &Path) -> Result<DataDirLog, CliError> {
             dir.display()
         )));
     }
+    name_wrapped_publications(&mut log.records);
     Ok(log)
+}
+
+/// The network layer journals a publication it carries (a message routed
+/// through a relay) as its wrapper, and at its queue time (its expiry less
+/// the wrapper type's `ttl`), not at its acceptance. Where the mission
+/// log has the publication's `accepted` record (the type its client
+/// published, and when), the journal's record is told as that type and
+/// time, the wrapper kept as `carried_as` and the queue time as
+/// `queue_t`.
+pub(crate) fn name_wrapped_publications(records: &mut [Record]) {
+    let accepted: std::collections::HashMap<u64, (Option<String>, Option<i64>)> = records
+        .iter()
+        .filter(|r| r.file == MISSION_LOG_FILE && r.kind == "accepted")
+        .filter_map(|r| Some((r.id?, (r.name.clone(), r.t))))
+        .collect();
+    for r in records
+        .iter_mut()
+        .filter(|r| r.file == JOURNAL_FILE && r.kind == "accepted")
+    {
+        let Some((name, t)) = r.id.and_then(|id| accepted.get(&id)) else {
+            continue;
+        };
+        if name.is_none() || *name == r.name {
+            continue;
+        }
+        if let Some(wrapper) = r.name.take() {
+            r.fields.insert("carried_as".into(), wrapper.into());
+        }
+        if let Some(queue_t) = r.t {
+            r.fields.insert("queue_t".into(), queue_t.into());
+        }
+        r.name = name.clone();
+        r.t = *t;
+    }
 }
 
 fn read_if_present(path: &Path) -> Result<Option<Vec<u8>>, CliError> {

@@ -13,9 +13,15 @@
 //! - `unknown`: it left the journal with nothing in the mission log to say
 //!   why (the mission log was off, or lost to damage).
 //!
-//! Latency is from acceptance (the journal's time) to the ack, for the
-//! acked messages whose acceptance the journal still holds (a compaction
+//! Latency is from acceptance to the ack: the mission log's `accepted`
+//! record (written once the message is saved), or for a daemon that wrote
+//! none, the journal's time while the journal still holds it (a compaction
 //! keeps only what is owed).
+//!
+//! Where the mission log has `accepted` records, a journal entry without
+//! one is no client's publication: a message the network layer holds for
+//! another node (a relay's custody) or makes itself (a route ack). Those
+//! are counted apart ([`network_held`]), not as accepted here.
 
 use std::collections::BTreeMap;
 
@@ -65,6 +71,8 @@ struct Seen {
     name: Option<String>,
     accepted: Option<i64>,
     accepted_seen: bool,
+    /// The mission log has its `accepted` record.
+    accepted_logged: bool,
     removed: bool,
     sent: Option<i64>,
     acked: Option<i64>,
@@ -72,8 +80,11 @@ struct Seen {
     dropped: bool,
 }
 
-/// Every message accepted for sending, by id, from `records`.
+/// Every message accepted for sending, by id, from `records` (without
+/// the network layer's own, [`network_held`]).
 pub fn outgoing(records: &[Record]) -> Vec<Outgoing> {
+    let logged = logs_acceptance(records);
+    let held = network_held(records);
     let mut by_id: BTreeMap<u64, Seen> = BTreeMap::new();
     for r in records {
         let Some(id) = r.id else { continue };
@@ -89,9 +100,18 @@ pub fn outgoing(records: &[Record]) -> Vec<Outgoing> {
             seen.name = r.name.clone();
         }
         match kind {
+            "accepted" if r.file == super::read::MISSION_LOG_FILE => {
+                seen.accepted_logged = true;
+                // The client's type and the time it was saved: ahead of
+                // the journal's.
+                seen.name = r.name.clone().or(seen.name.take());
+                seen.accepted = r.t.or(seen.accepted);
+            }
             "accepted" => {
                 seen.accepted_seen = true;
-                seen.accepted = seen.accepted.or(r.t);
+                if !seen.accepted_logged {
+                    seen.accepted = seen.accepted.or(r.t);
+                }
             }
             "removed" => seen.removed = true,
             "out" => seen.sent = seen.sent.or(r.t),
@@ -102,6 +122,7 @@ pub fn outgoing(records: &[Record]) -> Vec<Outgoing> {
     }
     by_id
         .into_iter()
+        .filter(|(id, s)| !(logged && !s.accepted_logged && held.contains(id)))
         .map(|(id, s)| {
             let owed = s.accepted_seen && !s.removed;
             let state = if s.acked.is_some() {
@@ -126,6 +147,40 @@ pub fn outgoing(records: &[Record]) -> Vec<Outgoing> {
                 state,
             }
         })
+        .collect()
+}
+
+/// Whether the mission log records acceptances (a daemon that writes
+/// `accepted` records, with the mission log on).
+fn logs_acceptance(records: &[Record]) -> bool {
+    records
+        .iter()
+        .any(|r| r.file == super::read::MISSION_LOG_FILE && r.kind == "accepted")
+}
+
+/// The journal ids of the network layer's own messages (a relay's
+/// custody, route acks): journaled as a network type, with no `accepted`
+/// record in a mission log that has them. Empty when the mission log
+/// records no acceptance (it cannot tell them from a client's).
+pub fn network_held(records: &[Record]) -> std::collections::BTreeSet<u64> {
+    if !logs_acceptance(records) {
+        return Default::default();
+    }
+    let logged: std::collections::HashSet<u64> = records
+        .iter()
+        .filter(|r| r.file == super::read::MISSION_LOG_FILE && r.kind == "accepted")
+        .filter_map(|r| r.id)
+        .collect();
+    records
+        .iter()
+        .filter(|r| r.file == super::read::JOURNAL_FILE && r.kind == "accepted")
+        .filter(|r| {
+            r.name
+                .as_deref()
+                .is_some_and(gobyd::transfers_file::is_network_type)
+        })
+        .filter_map(|r| r.id)
+        .filter(|id| !logged.contains(id))
         .collect()
 }
 
@@ -360,6 +415,48 @@ mod tests {
             (4, 3, 1, 1, 1)
         );
         assert_eq!(s.latency_s(), Some((2.0, 2.0)));
+    }
+
+    /// A routed Command: journaled as its wrapper at its queue time, its
+    /// acceptance in the mission log; and a relay's custody, journaled with
+    /// no acceptance.
+    #[test]
+    fn a_routed_publication_is_its_client_s_type_from_its_logged_acceptance() {
+        use super::super::read::{JOURNAL_FILE, MISSION_LOG_FILE};
+        let at = |file: &'static str, kind: &str, id: u64, t: i64, name: &str| Record {
+            file,
+            name: Some(name.into()),
+            ..record(kind, id, t)
+        };
+        let routed = "goby.acomms.protobuf.RoutedMessage";
+        let mut records = vec![
+            at(JOURNAL_FILE, "accepted", 7, 1_000_000, routed),
+            at(JOURNAL_FILE, "accepted", 8, 5_000_000, routed),
+            at(JOURNAL_FILE, "removed", 8, 0, routed),
+            at(MISSION_LOG_FILE, "accepted", 7, 1_200_000_000, "a.Command"),
+            at(MISSION_LOG_FILE, "out", 7, 1_201_000_000, "a.Command"),
+            at(MISSION_LOG_FILE, "ack", 7, 1_274_500_000, "a.Command"),
+        ];
+        super::super::read::name_wrapped_publications(&mut records);
+        assert_eq!(records[0].name.as_deref(), Some("a.Command"));
+        assert_eq!(records[0].t, Some(1_200_000_000));
+        assert_eq!(records[0].fields["carried_as"], routed);
+        assert_eq!(records[0].fields["queue_t"], 1_000_000);
+        let out = outgoing(&records);
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert_eq!(
+            (out[0].id, out[0].name.as_str(), out[0].state),
+            (7, "a.Command", "acked")
+        );
+        assert_eq!(out[0].latency(), Some(74_500_000));
+        assert_eq!(network_held(&records).into_iter().collect::<Vec<_>>(), [8]);
+        let types = per_type(&records, &out);
+        assert_eq!(types.keys().collect::<Vec<_>>(), ["a.Command"]);
+        // Without acceptances in the mission log (an older daemon), every
+        // journal entry is counted as before.
+        records.retain(|r| !(r.file == MISSION_LOG_FILE && r.kind == "accepted"));
+        assert!(network_held(&records).is_empty());
+        assert_eq!(outgoing(&records).len(), 2);
     }
 
     #[test]

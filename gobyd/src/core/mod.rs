@@ -530,6 +530,9 @@ impl Core {
             };
         match accepted {
             Ok(Accepted::Queued(id)) => {
+                if let Some(log) = &mut self.mission_log {
+                    log.accepted(now, id, &name);
+                }
                 let dropped = self.forward_queue_events();
                 // What the queue's max_queue asks for: normal operation
                 // (the JSON and MQTT replies name each dropped message).

@@ -2,6 +2,7 @@
 //! and out, one JSON object per line, for replay after a mission.
 //!
 //! ```text
+//! {"t":1700000000100000,"msg":"accepted","name":"goby.example.Command","id":7}
 //! {"t":1700000000123456,"raw":"out","bytes_hex":"2443434359432c...","text":"$CCCYC,..."}
 //! {"t":1700000000200000,"msg":"out","name":"goby.example.Command","frame":0,"id":7,"value":{...}}
 //! {"t":1700000012000000,"msg":"in","name":"goby.example.NavigationReport","src":2,"value":{...}}
@@ -10,10 +11,13 @@
 //! ```
 //!
 //! `id` is the message's journal id, the one its client was given when
-//! the message was accepted (`{"accepted": ..., "id": 7}`); messages never
+//! the message was accepted (`{"accepted": ..., "id": 7}`, logged as
+//! `"accepted"` as the journal takes it, with the type the client
+//! published: a routed message is journaled as its wrapper); messages never
 //! journaled (addressed to this node) have none. `"expire"` and `"drop"`
 //! are messages that left their queue unacknowledged (their type's `ttl`
-//! passed; their queue was over `max_queue`).
+//! passed, or a relay dropped it for the hop limit, naming `relay` and
+//! `hop_limit`; their queue was over `max_queue`).
 //!
 //! Raw records are what the driver wrote and read: NMEA lines for the
 //! Micro-Modem, datagrams for UDP, and for the acoustic simulator the
@@ -92,7 +96,10 @@ impl RawLog {
         for (k, v) in extra {
             record[*k] = v.clone();
         }
-        record["value"] = value;
+        // An acceptance has no value here: the journal holds the message.
+        if !value.is_null() {
+            record["value"] = value;
+        }
         self.write(&record)
     }
 
@@ -110,12 +117,12 @@ impl MissionLog for RawLog {
         }
     }
 
-    /// A message sent, acknowledged, expired, dropped or received:
-    /// `"msg": "out"` with its `frame` (and with several links its
-    /// `link`), `"ack"` with `by` and `frame`, `"expire"`, `"drop"` (each
-    /// with the message's journal `id`, where it has one), `"in"` with
-    /// `src`, `dest` and its reception (`recovered`, `link`, `route`).
-    /// Other events are not logged.
+    /// A message sent, acknowledged, expired, dropped or received: `"out"`
+    /// with its `frame` (and with several links its `link`), `"ack"` with
+    /// `by` and `frame`, `"expire"` (with `relay` and `hop_limit` when a
+    /// relay dropped it), `"drop"` (each with the message's journal `id`,
+    /// where it has one), `"in"` with `src`, `dest` and its reception
+    /// (`recovered`, `link`, `route`). Other events are not logged.
     fn event(&mut self, time: i64, event: &DaemonEvent, link: Option<&str>) {
         let record = match event {
             DaemonEvent::Received {
@@ -127,6 +134,14 @@ impl MissionLog for RawLog {
                 ..
             } => received_record(received, &Reception::default()),
             DaemonEvent::Queue { event, entry } => queue_record(event, *entry),
+            // A relay dropped it for the hop limit: it expired there.
+            DaemonEvent::RouteDropped(d) => queue_record(&d.expired, Some(d.entry)).map(
+                |(direction, name, value, mut extra)| {
+                    extra.push(("relay", d.relay.into()));
+                    extra.push(("hop_limit", d.hop_limit.into()));
+                    (direction, name, value, extra)
+                },
+            ),
             _ => None,
         };
         let Some((direction, name, value, mut extra)) = record else {
@@ -136,6 +151,13 @@ impl MissionLog for RawLog {
             extra.push(("link", name.into()));
         }
         if let Err(e) = self.message(time, direction, &name, value, &extra) {
+            tracing::error!("raw log: {e}");
+        }
+    }
+
+    fn accepted(&mut self, time: i64, entry: u64, name: &str) {
+        let extra = [("id", entry.into())];
+        if let Err(e) = self.message(time, "accepted", name, Value::Null, &extra) {
             tracing::error!("raw log: {e}");
         }
     }

@@ -250,6 +250,11 @@ pub trait MissionLog: Send {
     /// An event handed over to the interfaces at `time`; `link`: with
     /// several links, the name of the link a sending went over.
     fn event(&mut self, time: i64, event: &DaemonEvent, link: Option<&str>);
+
+    /// A publication accepted for sending at `time`, journal id `entry`,
+    /// of type `name` (the type its client published: the network layer
+    /// journals a routed message as its wrapper).
+    fn accepted(&mut self, time: i64, entry: u64, name: &str);
 }
 
 #[cfg(test)]
