@@ -30,7 +30,18 @@ pub fn validate(
     config: GobydConfig,
     driver: config::DriverSettings,
 ) -> Result<Checked, DaemonError> {
-    let config = config::complete(config)?;
+    let config = match config::complete(config.clone()) {
+        Ok(completed) => completed,
+        Err(ConfigError::Problems(mut problems)) => {
+            // The link rules against the DCCL types, told beside (every
+            // problem at once, not one stage at a time).
+            if let Ok(defs) = config::load_definitions(&config) {
+                problems.extend(config::links::rule_problems(&config, &defs.loaded));
+            }
+            return Err(ConfigError::Problems(problems).into());
+        }
+        Err(e) => return Err(e.into()),
+    };
     let mut problems = config::problems(&config, driver);
     if let Some(forecast) = &config.forecast {
         if let Err(p) = crate::forecast::settings::Settings::load(

@@ -314,8 +314,18 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
                     .and_then(|o| prepared.get(o..))
                     .is_some_and(|rest| rest.starts_with('=')),
         );
+        // At the end of the input, the place is that of the section left
+        // open (the parser gives none).
+        let (offset, reason) = match (error_offset(e), unclosed_section(prepared)) {
+            (Some(offset), _) => (Some(offset), reason),
+            (None, Some(open)) => (
+                Some(open),
+                format!("{reason}: the section opened here has no closing '}}'"),
+            ),
+            (None, None) => (None, reason),
+        };
         ConfigError::Parse {
-            origin: match error_offset(e) {
+            origin: match offset {
                 Some(offset) => {
                     let (line, column) = line_and_column(text, offset);
                     format!("{origin}:{line}:{column}")
@@ -643,6 +653,37 @@ fn with_goby_hint(reason: String, at_equals: bool) -> String {
         );
     }
     reason
+}
+
+/// Byte offset of the innermost `{` (or `<`) of `text` left without its
+/// closing brace, strings and comments skipped (`None`: every section is
+/// closed).
+fn unclosed_section(text: &str) -> Option<usize> {
+    let bytes = text.as_bytes();
+    let mut open = Vec::new();
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'#' => {
+                while i < bytes.len() && bytes[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            quote @ (b'"' | b'\'') => {
+                i += 1;
+                while i < bytes.len() && bytes[i] != quote && bytes[i] != b'\n' {
+                    i += if bytes[i] == b'\\' { 2 } else { 1 };
+                }
+            }
+            b'{' | b'<' => open.push(i),
+            b'}' | b'>' => {
+                open.pop();
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    open.pop()
 }
 
 /// Byte offset of a text-format error, if the parser gives one.
@@ -2570,6 +2611,16 @@ mod tests {
             .to_string();
         assert!(err.starts_with("f.cfg:2:9: "), "{err}");
         assert_eq!(line_and_column("ab\ncé\nx", 6), (2, 3));
+        // A section left open: the place of its brace (a brace in a string
+        // or a comment is no section's).
+        let text =
+            "modem_id: 1\ndriver { driver_type: DRIVER_UDP # }\n  udp { local { port: 0 } }\n";
+        let err = parse(text, "f.cfg").unwrap_err().to_string();
+        assert!(err.starts_with("f.cfg:2:8: "), "{err}");
+        assert!(
+            err.ends_with("the section opened here has no closing '}'"),
+            "{err}"
+        );
     }
 
     #[test]

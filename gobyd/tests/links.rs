@@ -1121,12 +1121,14 @@ fn check_accepts_links_and_refuses_bad_rules_naming_where_they_are() {
     );
 
     // A link's own settings, and its driver's, named within the link.
+    // The rules are told with them, not after they are mended.
     std::fs::write(
         &path,
         TWO_LINKS
             .replace("name: \"iridium\"", "name: \"acoustic\"")
             .replace("bytes: 2000 ", "")
-            .replace("port: 50903", "port: 70000"),
+            .replace("port: 50903", "port: 70000")
+            + "link_rule { protobuf_name: \"goby.Foo\" link: \"satellite\" }\n",
     )
     .unwrap();
     let (code, _, err) = check(&path);
@@ -1134,6 +1136,8 @@ fn check_accepts_links_and_refuses_bad_rules_naming_where_they_are() {
     for part in [
         format!("{file}:8:3: link[1].name: \"acoustic\" is the name of link[0] too"),
         format!("{file}:11:3: link[1].budget.bytes: missing"),
+        format!("{file}:13:13: link_rule[0].protobuf_name: \"goby.Foo\" is not a DCCL type"),
+        format!("{file}:13:39: link_rule[0].link[0]: \"satellite\" is not a link of this node"),
     ] {
         assert!(err.contains(&part), "{part:?} missing from {err}");
     }

@@ -61,6 +61,19 @@ pub fn with_serial_port(config: &DriverConfig, mut problems: Vec<Problem>) -> Ve
     problems
 }
 
+/// At a driver's start: an error when the serial port at `path` is not
+/// there to open ([`serial_port_problem`]), told as the device's, not the
+/// configuration's (a modem unplugged at sea is no configuration error).
+pub fn serial_port_ready(path: &str) -> Result<(), DriverError> {
+    match serial_port_problem(path) {
+        None => Ok(()),
+        Some(p) => Err(DriverError::io(
+            "the modem's serial port",
+            std::io::Error::other(p.reason),
+        )),
+    }
+}
+
 /// Why the serial port at `path` cannot be opened, if that shows without
 /// opening it: it does not exist, is not a character device (a serial
 /// port, a USB adapter, a pseudo-terminal), or is a character device of
@@ -155,5 +168,15 @@ mod tests {
         std::fs::remove_file(&file).unwrap();
         // A character device that is not a terminal: see
         // `a_serial_port_must_be_a_terminal`.
+    }
+
+    #[test]
+    fn a_serial_port_gone_at_start_is_the_device_s_error_not_the_configuration_s() {
+        let gone = serial_port_ready("/no/such/tty").unwrap_err().to_string();
+        assert!(
+            gone.starts_with("the modem's serial port: \"/no/such/tty\" does not exist"),
+            "{gone}"
+        );
+        assert!(!gone.contains("configuration"), "{gone}");
     }
 }

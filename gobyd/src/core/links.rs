@@ -86,10 +86,16 @@ pub(crate) fn open(
                 None => b.exhaust(),
             }
         }
+        // Its kind's name until a driver has started (a link whose driver
+        // fails at start is named by its kind all the same).
+        let kind_name = driver_config
+            .as_ref()
+            .and_then(|c| modemdriver::built_in::of(c).ok())
+            .map_or("", |k| k.about().short_name);
         let mut link = Link {
             name: view.name.clone(),
             driver: None,
-            driver_name: "",
+            driver_name: kind_name,
             mac: MacManager::new(view.mac.expect("completed"), now)?,
             config: driver_config,
             specific_requests: Default::default(),

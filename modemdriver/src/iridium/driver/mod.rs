@@ -123,11 +123,7 @@ impl IridiumDriver {
         clock: std::sync::Arc<dyn goby_time::Clock>,
     ) -> Result<Driver, DriverError> {
         let settings = settings(config)?;
-        problem::refuse(
-            problem::serial_port_problem(config.serial_port())
-                .into_iter()
-                .collect(),
-        )?;
+        problem::serial_port_ready(config.serial_port())?;
         let device = Device::new(
             Endpoint::Serial {
                 path: config.serial_port().to_string(),

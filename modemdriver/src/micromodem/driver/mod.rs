@@ -172,11 +172,7 @@ impl MicroModemDriver {
         script: FaultScript,
     ) -> Result<Driver, DriverError> {
         let mut settings = settings(config)?;
-        problem::refuse(
-            problem::serial_port_problem(config.serial_port())
-                .into_iter()
-                .collect(),
-        )?;
+        problem::serial_port_ready(config.serial_port())?;
         let device = Device {
             endpoint: Endpoint::serial(
                 config.serial_port(),
