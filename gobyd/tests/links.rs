@@ -1141,6 +1141,12 @@ fn check_accepts_links_and_refuses_bad_rules_naming_where_they_are() {
     ] {
         assert!(err.contains(&part), "{part:?} missing from {err}");
     }
+    // A budget of nothing: the link could never send.
+    std::fs::write(&path, TWO_LINKS.replace("bytes: 2000 ", "bytes: 0 ")).unwrap();
+    let (code, _, err) = check(&path);
+    assert_eq!(code, Some(2), "{err}");
+    let part = format!("{file}:11:12: link[1].budget.bytes: 0: the link could never send");
+    assert!(err.contains(&part), "{part:?} missing from {err}");
 
     // Two links on one device: the second driver would never start.
     std::fs::write(

@@ -193,11 +193,17 @@ pub fn link_problems(config: &GobydConfig) -> Vec<Problem> {
             ));
         }
         if let Some(budget) = &link.budget {
-            if budget.bytes.is_none() {
-                problems.push(Problem::new(
+            match budget.bytes {
+                None => problems.push(Problem::new(
                     field("budget.bytes"),
                     "missing: give the bytes the link may send per period",
-                ));
+                )),
+                Some(0) => problems.push(Problem::new(
+                    field("budget.bytes"),
+                    "0: the link could never send (give it the bytes it may send per period, or \
+                     leave it out of the link rules)",
+                )),
+                Some(_) => {}
             }
             let period = budget.period_seconds();
             if !(period.is_finite() && period >= 1.0) {
