@@ -5,7 +5,8 @@
 //!   (`DATA_DIR/gobyd.lock`, see the core's data directory): the daemon
 //!   would refuse to start;
 //! - the JSON interface's TCP or UDP address is taken, or is not an
-//!   address of this machine (an interface not up yet, or a typo);
+//!   address of this machine (an interface not up yet, or a typo), and so
+//!   is a UDP driver's local port (the top-level driver's or a link's);
 //! - another configuration file in the same directory leaves `data_dir`
 //!   unset too: both daemons, started from there, would take the default
 //!   data directory (and, when both leave `json` unset, the same port).
@@ -64,6 +65,16 @@ pub fn clashes(config: &GobydConfig, file: Option<&Path>) -> Vec<Clash> {
         Some(Unbound::NotHere(e)) => error(not_here("json.udp_bind", json.udp_bind(), &e)),
         None => {}
     }
+    for (field, bind) in udp_driver_binds(config) {
+        match taken(&bind, |a| std::net::UdpSocket::bind(a).map(drop)) {
+            Some(Unbound::Taken(e)) => error(format!(
+                "{field}: {bind:?} is taken ({e}): another gobyd, or another program, listens \
+                 there (give the driver another port)"
+            )),
+            Some(Unbound::NotHere(e)) => error(not_here(&field, &bind, &e)),
+            None => {}
+        }
+    }
     if config.data_dir.is_none() {
         for other in default_sharers(file) {
             let text = format!(
@@ -79,6 +90,35 @@ pub fn clashes(config: &GobydConfig, file: Option<&Path>) -> Vec<Clash> {
         }
     }
     found
+}
+
+/// Each UDP driver's local address with a port of its own (not 0), with
+/// its field: the top-level driver's, then each link's.
+fn udp_driver_binds(config: &GobydConfig) -> Vec<(String, String)> {
+    use protos::goby::acomms::protobuf::{driver_config::Driver, DriverType};
+    let drivers = std::iter::once(("driver".to_string(), config.driver.as_ref())).chain(
+        config
+            .link
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (format!("link[{i}].driver"), l.driver.as_ref())),
+    );
+    drivers
+        .filter_map(|(field, driver)| {
+            let driver = driver?;
+            let udp = DriverType::DriverUdp as i32;
+            if driver.driver != Some(Driver::DriverType(udp)) {
+                return None;
+            }
+            let local = &driver.udp.as_ref()?.local;
+            (local.port != 0).then(|| {
+                (
+                    format!("{field}.udp.local"),
+                    format!("{}:{}", local.ip(), local.port),
+                )
+            })
+        })
+        .collect()
 }
 
 /// " (pid N)" or "" when another process holds the lock of data directory

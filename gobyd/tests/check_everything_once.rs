@@ -144,5 +144,26 @@ fn unknown_keys_unmappable_keys_and_clashes_are_all_told_in_one_run() {
         ),
         "{err}"
     );
+    // A link's UDP driver on a port another program holds.
+    let udp = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let held = udp.local_addr().unwrap();
+    std::fs::write(
+        dir.join("alpha.pb.txt"),
+        format!(
+            "modem_id: 1\nlink {{ name: \"radio\" driver {{ driver_type: DRIVER_UDP \
+             udp {{ local {{ port: {} }} remote {{ modem_id: 2 port: 9 }} }} }} }}\n",
+            held.port()
+        ),
+    )
+    .unwrap();
+    let out = check(&dir, "alpha.pb.txt");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!(
+            "warning: clash: link[0].driver.udp.local: \"{held}\" is taken"
+        )),
+        "{err}"
+    );
+    drop(udp);
     std::fs::remove_dir_all(&dir).unwrap();
 }
