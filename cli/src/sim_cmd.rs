@@ -169,16 +169,7 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
         counted(&losses.undelivered)
     )?;
     if let Some(satellite) = &report.satellite_use {
-        let failed: u64 = satellite.by_node.values().map(|n| n.failed).sum();
-        let failed = match failed {
-            0 => String::new(),
-            n => format!("; failed {n} (below the surface, or the session failed)"),
-        };
-        writeln!(
-            stdout,
-            "  satellite: sessions with data {}, heard by the node they were for {}{failed}",
-            satellite.transmissions, satellite.delivered
-        )?;
+        writeln!(stdout, "  satellite: {}", satellite_use_words(satellite))?;
     }
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
@@ -196,6 +187,33 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
 
 /// Writes the run's page ([`crate::sim_page`]) where the scenario's
 /// `report { html: ... }` says, in the output directory.
+/// What the nodes did with the satellite, in words (the summary's line,
+/// the page's paragraph): the data sent and heard, the data that failed
+/// to go and the messages the gateway refused, when there were some.
+pub(crate) fn satellite_use_words(u: &goby_sim::slot_use::SlotUse) -> String {
+    let failed: u64 = u.by_node.values().map(|n| n.failed).sum();
+    let refused: u64 = u.by_node.values().map(|n| n.refused).sum();
+    let mut words = format!(
+        "data sent {} (a vehicle's in a session each, a shore station's at once), heard by the \
+         node it was for {}",
+        u.transmissions, u.delivered
+    );
+    if failed > 0 {
+        words += &format!(
+            "; data that failed to go {failed} (below the surface, or the session failed), {} \
+             of it heard all the same (the gateway had taken it)",
+            u.delivered_after_failure
+        );
+    }
+    if refused > 0 {
+        words += &format!(
+            "; messages the gateway refused {refused} (the receiver's queue there full, or no \
+             Iridium link)"
+        );
+    }
+    words
+}
+
 fn write_page(
     scenario: &goby_sim::Scenario,
     outcome: &goby_sim::Outcome,

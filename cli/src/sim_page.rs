@@ -395,21 +395,23 @@ fn satellite_section(page: &mut String, report: &Report) {
         u.by_node
             .iter()
             .filter(|(_, n)| n.slots + n.transmissions + n.receptions > 0),
-        ["sessions with data", "received"],
+        ["data sent", "received"],
     );
     *page += &bars(
-        "Slots, sessions with data and messages received on the satellite, per node",
+        "Slots, data sent and messages received on the satellite, per node",
         &rows,
         0.0,
         &[],
         |t| format!("{t:.0}"),
     );
-    let failed: u64 = u.by_node.values().map(|n| n.failed).sum();
+    let words = crate::sim_cmd::satellite_use_words(u);
+    let mut words = words.chars();
+    let first = words.next().map(|c| c.to_uppercase().to_string());
     let _ = writeln!(
         page,
-        "<p>Sessions with data: {}; heard by the node they were for: {}; failed (no \
-         satellite in view, or the session failed): {failed}.</p>",
-        u.transmissions, u.delivered
+        "<p>{}{}.</p>",
+        first.unwrap_or_default(),
+        escape(words.as_str())
     );
 }
 

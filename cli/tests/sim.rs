@@ -62,12 +62,12 @@ fn the_surfacing_example_tells_the_satellite_in_its_summary_and_page() {
     let sessions = report["satellite_use"]["transmissions"].as_u64().unwrap();
     assert!(sessions > 0, "{}", report["satellite_use"]);
     assert!(
-        stdout.contains(&format!("  satellite: sessions with data {sessions}, ")),
+        stdout.contains(&format!("  satellite: data sent {sessions} (")),
         "{stdout}"
     );
     let page = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(page.contains("<h2 id=\"satellite\">Satellite (Iridium)</h2>"));
-    assert!(page.contains(&format!("<p>Sessions with data: {sessions}; ")));
+    assert!(page.contains(&format!("<p>Data sent {sessions} (")));
     let _ = std::fs::remove_dir_all(&out);
 }
 

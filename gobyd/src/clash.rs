@@ -66,13 +66,24 @@ pub fn clashes(config: &GobydConfig, file: Option<&Path>) -> Vec<Clash> {
         None => {}
     }
     for (field, bind) in udp_driver_binds(config) {
-        match taken(&bind, |a| std::net::UdpSocket::bind(a).map(drop)) {
-            Some(Unbound::Taken(e)) => error(format!(
+        let text = match taken(&bind, |a| std::net::UdpSocket::bind(a).map(drop)) {
+            Some(Unbound::Taken(e)) => format!(
                 "{field}: {bind:?} is taken ({e}): another gobyd, or another program, listens \
                  there (give the driver another port)"
-            )),
-            Some(Unbound::NotHere(e)) => error(not_here(&field, &bind, &e)),
-            None => {}
+            ),
+            Some(Unbound::NotHere(e)) => not_here(&field, &bind, &e),
+            None => continue,
+        };
+        // The top-level driver stops the daemon; a link's is started again
+        // and again, its link down meanwhile.
+        match field.starts_with("link[") {
+            true => found.push(Clash {
+                error: false,
+                text: format!(
+                    "{text}; the daemon starts, and the link stays down until it is free"
+                ),
+            }),
+            false => found.push(Clash { error: true, text }),
         }
     }
     if config.data_dir.is_none() {

@@ -306,7 +306,9 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
             lines
         }
     };
-    let parse_error = |e: &prost_reflect::text_format::ParseError, prepared: &str| {
+    // Where a parse error is, and what: the parser's place, or at the end
+    // of the input that of the section left open (the parser gives none).
+    let located = |e: &prost_reflect::text_format::ParseError, prepared: &str| {
         let reason = with_goby_hint(
             e.to_string(),
             layout == Layout::File
@@ -314,16 +316,17 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
                     .and_then(|o| prepared.get(o..))
                     .is_some_and(|rest| rest.starts_with('=')),
         );
-        // At the end of the input, the place is that of the section left
-        // open (the parser gives none).
-        let (offset, reason) = match (error_offset(e), unclosed_section(prepared)) {
+        match (error_offset(e), unclosed_section(prepared)) {
             (Some(offset), _) => (Some(offset), reason),
             (None, Some(open)) => (
                 Some(open),
                 format!("{reason}: the section opened here has no closing '}}'"),
             ),
             (None, None) => (None, reason),
-        };
+        }
+    };
+    let parse_error = |e: &prost_reflect::text_format::ParseError, prepared: &str| {
+        let (offset, reason) = located(e, prepared);
         ConfigError::Parse {
             origin: match offset {
                 Some(offset) => {
@@ -351,8 +354,7 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
         Err(e) if unknown == 0 => return Err(parse_error(&e, &prepared)),
         Err(e) => {
             // Keys told already: this one with them.
-            let offset = error_offset(&e);
-            let reason = parse_error(&e, &prepared).reason();
+            let (offset, reason) = located(&e, &prepared);
             found.problem(offset, &key_at(&prepared, offset), reason);
             return Err(found.finish().expect_err("problems were found"));
         }
@@ -2619,6 +2621,15 @@ mod tests {
         assert!(err.starts_with("f.cfg:2:8: "), "{err}");
         assert!(
             err.ends_with("the section opened here has no closing '}'"),
+            "{err}"
+        );
+        // And with other problems told beside it.
+        let text = "modem_id: 1\nlink {\n  name: \"a\"\n  frobnicate: 1\n";
+        let err = parse(text, "f.cfg").unwrap_err().to_string();
+        assert!(err.contains("f.cfg:4:3: frobnicate"), "{err}");
+        assert!(
+            err.contains("f.cfg:2:6: configuration: expected '}'")
+                && err.contains("the section opened here has no closing '}'"),
             "{err}"
         );
     }

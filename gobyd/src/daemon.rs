@@ -200,7 +200,7 @@ async fn start_configured(config: GobydConfig, clock: Started) -> Result<Daemon,
             Ok(driver) => Ok(driver),
             // One link that cannot start does not stop the others: it
             // is started again after its back-off.
-            Err(e) if several => Err(e.to_string()),
+            Err(e) if several => Err(crate::core::links::start_error(e)),
             Err(e) => return Err(e),
         };
         drivers.push((started, Some(driver_config)));
@@ -242,8 +242,10 @@ impl Daemon {
         let mission_log: Option<Box<dyn MissionLog>> =
             if config.log.clone().unwrap_or_default().raw_log() {
                 let path = data_dir.path().join("raw.log");
-                let log = RawLog::open(&path)
+                let mut log = RawLog::open(&path)
                     .map_err(io_error(format!("cannot open {}", path.display())))?;
+                log.start(clock.now(), config.modem_id())
+                    .map_err(io_error(format!("cannot write {}", path.display())))?;
                 Some(Box::new(log))
             } else {
                 None

@@ -179,13 +179,15 @@ mod tests {
             crate::udp::UdpDriver::start(&udp).await.unwrap_err(),
         );
 
+        // A serial port that is not there: refused at start too, told as
+        // the device's (at sea, a modem unplugged), in the check's words.
         let mut mm = of_type(DriverType::DriverWhoiMicromodem);
         mm.serial_port = Some("/no/such/tty".into());
         let found = problems(&mm);
         assert_eq!(found[0].field, "serial_port");
-        refused(
-            &found,
-            crate::micromodem::MicroModemDriver::start(&mm).unwrap_err(),
-        );
+        let err = crate::micromodem::MicroModemDriver::start(&mm)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(err, format!("the modem's serial port: {}", found[0].reason));
     }
 }

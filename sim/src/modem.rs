@@ -170,18 +170,33 @@ pub fn satellite_config(
     driver_config(modem_id, positions, &water, seed, None)
 }
 
-/// A satellite link in words, for the report.
-pub fn satellite_words(satellite: &SatelliteLink) -> String {
-    let failing = match satellite.session_failure() {
-        f if f > 0.0 => format!(", {} % of them failing", f * 100.0),
-        _ => String::new(),
+/// A satellite link in words, for the report: a vehicle's (`shore`
+/// false) or a shore station's, which makes no sessions.
+pub fn satellite_words(satellite: &SatelliteLink, shore: bool) -> String {
+    let gateway = format!(
+        "{} s through the gateway (at most {} messages a node held there)",
+        satellite.latency_seconds(),
+        satellite.queue_limit()
+    );
+    if shore {
+        return format!(
+            "Iridium SBD, simulated: a shore station on the gateway's side, without sessions, \
+             reached anywhere; {gateway}"
+        );
+    }
+    let failing = match (satellite.session_failure(), satellite.taken_when_failed()) {
+        (f, _) if f <= 0.0 => String::new(),
+        (f, t) if t <= 0.0 => format!(", {} % of them failing", f * 100.0),
+        (f, t) => format!(
+            ", {} % of them failing ({} % of those after the gateway took the message)",
+            f * 100.0,
+            t * 100.0
+        ),
     };
     format!(
-        "Iridium SBD, simulated: sessions of {} s{failing}, {} s through the gateway (at most {} \
-         messages a node held there), from and to antennas at most {} m deep",
+        "Iridium SBD, simulated: sessions of {} s{failing}, {gateway}, from and to antennas at \
+         most {} m deep",
         satellite.session_seconds(),
-        satellite.latency_seconds(),
-        satellite.queue_limit(),
         satellite.surface_depth()
     )
 }

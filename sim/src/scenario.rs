@@ -255,9 +255,10 @@ impl Check<'_> {
         let nodes: Option<Vec<Node>> = nodes.into_iter().collect();
         self.one_modem_on_the_water();
         // Settings that apply to no node are a mistake, not a default
-        // (checked once every node's links are known).
-        let on_satellite = |n: &Node| n.links.contains(&Medium::Satellite);
-        if s.satellite.is_some() && nodes.as_ref().is_some_and(|n| !n.iter().any(on_satellite)) {
+        // (told once every node's links are known, whatever else is wrong).
+        let every_node_linked = self.links.len() == s.node.len();
+        let on_satellite = |l: &NodeLinks| l.media.contains(&Medium::Satellite);
+        if s.satellite.is_some() && every_node_linked && !self.links.values().any(on_satellite) {
             self.problem(
                 "satellite",
                 "no node has an Iridium link (DRIVER_IRIDIUM or DRIVER_IRIDIUM_SHORE, as its \
@@ -695,13 +696,11 @@ impl Check<'_> {
                     return None;
                 }
                 media.push(Medium::Satellite);
-                let words = crate::modem::satellite_words(&self.satellite);
                 let shore = crate::modem::is_shore(driver.as_ref());
-                satellite_words = Some(match (&name, shore) {
-                    (Some(n), true) => format!("{n}: {words}; a shore station, reached anywhere"),
-                    (Some(n), false) => format!("{n}: {words}"),
-                    (None, true) => format!("{words}; a shore station, reached anywhere"),
-                    (None, false) => words,
+                let words = crate::modem::satellite_words(&self.satellite, shore);
+                satellite_words = Some(match &name {
+                    Some(n) => format!("{n}: {words}"),
+                    None => words,
                 });
                 satellite_link = name;
                 *driver = Some(crate::modem::satellite_config(

@@ -13,7 +13,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 
 use gobyd::event::{DaemonEvent, ModemEvent, SharedUse};
-use modemdriver::driver::TransmitOutcome;
+use modemdriver::driver::{DriverStatus, TransmitOutcome};
 use protos::goby::acomms::protobuf::{modem_transmission::TransmissionType, ModemTransmission};
 use serde::Serialize;
 
@@ -40,6 +40,11 @@ pub struct NodeSlotUse {
     /// slot); left out of the report when none did.
     #[serde(skip_serializing_if = "is_zero")]
     pub failed: u64,
+    /// Messages it sent that the satellite gateway refused (the
+    /// receiver's queue there full, or the receiver without an Iridium
+    /// link); left out when none were.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub refused: u64,
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -69,6 +74,11 @@ pub struct SlotUse {
     /// Of those, the ones heard intact by their destination (a broadcast:
     /// by any node).
     pub delivered: u64,
+    /// Of the data packets whose sending failed, those their destination
+    /// heard all the same (a satellite session that failed after the
+    /// gateway took its message); left out when none were.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub delivered_after_failure: u64,
     /// The shared slots (`None`: no node saw one).
     pub shared: Option<SharedSlotUse>,
     /// Per node, by name.
@@ -91,6 +101,8 @@ pub struct SlotTally {
     sent: Vec<(PacketKey, bool)>,
     /// Data packets heard intact by their destination.
     delivered: HashSet<PacketKey>,
+    /// Data packets whose sending failed.
+    failed: HashSet<PacketKey>,
 }
 
 impl SlotTally {
@@ -137,7 +149,15 @@ impl SlotTally {
             ModemEvent::Transmitted {
                 transmission,
                 outcome: TransmitOutcome::Failed(_),
-            } if is_data(transmission) => n.failed += 1,
+            } if is_data(transmission) => {
+                n.failed += 1;
+                self.failed.insert(key(transmission));
+            }
+            ModemEvent::Status(DriverStatus::LinkError { reason })
+                if reason.starts_with(modemdriver::sim::satellite::GATEWAY_REFUSED) =>
+            {
+                n.refused += 1
+            }
             ModemEvent::Received { transmission, .. } if is_data(transmission) => {
                 n.receptions += 1;
                 let dest = transmission.dest();
@@ -172,6 +192,7 @@ impl SlotTally {
         SlotUse {
             transmissions: self.sent.len() as u64,
             delivered: delivered(false),
+            delivered_after_failure: self.failed.intersection(&self.delivered).count() as u64,
             shared,
             by_node: names
                 .iter()

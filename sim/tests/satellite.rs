@@ -382,6 +382,15 @@ fn a_satellite_for_no_node_and_a_second_link_in_a_gobyd_file_are_refused_where_w
         .to_string();
     assert!(e.contains("satellite: no node has an Iridium link"), "{e}");
     assert_eq!(e.lines().count(), 1, "{e}");
+    // Told with a mistake of a node's traffic, not after it is mended.
+    let no_action = text.replacen(r#"field { name: "action" constant: "GOTO" }"#, "", 1);
+    let e = parse(&no_action, "plain", Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("satellite: no node has an Iridium link") && e.contains("traffic[0]"),
+        "{e}"
+    );
 
     let dir = std::env::temp_dir().join(format!("goby-sim-second-link-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -445,5 +454,9 @@ fn a_message_the_gateway_took_before_its_session_failed_is_delivered_once() {
     assert!(
         ship.receptions > auv.transmissions,
         "no message of a failed session arrived: {satellite:?}"
+    );
+    assert!(
+        satellite.delivered_after_failure > 0,
+        "counted as heard all the same: {satellite:?}"
     );
 }

@@ -49,8 +49,8 @@ pub struct Record {
     /// What it records: `accepted` and `removed` (journal); `received`,
     /// `handed` and `seen` (inbox); `transfer`, `taken`, `held`,
     /// `transfer_end`, `fragment` and `transfer_received` (transfers);
-    /// `accepted`, `out`, `in`, `ack`, `expire`, `drop` and `raw` (mission
-    /// log).
+    /// `start`, `accepted`, `out`, `in`, `ack`, `expire`, `drop` and `raw`
+    /// (mission log).
     pub kind: String,
     /// Full name of the message's type, when the record is about one.
     pub name: Option<String>,

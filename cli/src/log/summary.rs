@@ -150,12 +150,13 @@ pub fn outgoing(records: &[Record]) -> Vec<Outgoing> {
         .collect()
 }
 
-/// Whether the mission log records acceptances (a daemon that writes
-/// `accepted` records, with the mission log on).
+/// Whether the mission log records acceptances: a daemon that writes
+/// `accepted` records writes a `start` record as it starts (a node that
+/// publishes nothing, a relay, has only that).
 fn logs_acceptance(records: &[Record]) -> bool {
-    records
-        .iter()
-        .any(|r| r.file == super::read::MISSION_LOG_FILE && r.kind == "accepted")
+    records.iter().any(|r| {
+        r.file == super::read::MISSION_LOG_FILE && matches!(r.kind.as_str(), "accepted" | "start")
+    })
 }
 
 /// The journal ids of the network layer's own messages (a relay's
@@ -457,6 +458,21 @@ mod tests {
         records.retain(|r| !(r.file == MISSION_LOG_FILE && r.kind == "accepted"));
         assert!(network_held(&records).is_empty());
         assert_eq!(outgoing(&records).len(), 2);
+        // A relay whose clients published nothing: its log's start record
+        // says acceptances are logged, so what it journaled is its own.
+        let relay = vec![
+            at(MISSION_LOG_FILE, "start", 0, 1, ""),
+            at(JOURNAL_FILE, "accepted", 3, 10, routed),
+            at(
+                JOURNAL_FILE,
+                "accepted",
+                4,
+                10,
+                "goby.acomms.protobuf.RouteAck",
+            ),
+        ];
+        assert_eq!(network_held(&relay).into_iter().collect::<Vec<_>>(), [3, 4]);
+        assert!(outgoing(&relay).is_empty());
     }
 
     #[test]

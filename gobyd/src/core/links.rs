@@ -27,6 +27,15 @@ pub async fn start_driver(
     Ok(modemdriver::built_in::start(config).await?)
 }
 
+/// Why a link's driver could not start, in words (the driver's own error
+/// without the daemon's `driver:` before it: the link's words name it).
+pub(crate) fn start_error(e: DaemonError) -> String {
+    match e {
+        DaemonError::Driver(e) => e.to_string(),
+        other => other.to_string(),
+    }
+}
+
 /// A Micro-Modem with application acks keeps its frame numbers in the data
 /// directory (`micromodem.application_ack_state_file`, unless set), so
 /// that after a restart acks are credited at once.
@@ -118,8 +127,9 @@ pub(crate) fn open(
                 let wait = link.backoff.failed();
                 tracing::error!(
                     link = view.name,
-                    "link {}: the driver could not start: {e}; starting it again in {:.1} s",
+                    "link {}: the {} driver could not start: {e}; starting it again in {:.1} s",
                     view.name,
+                    link.driver_name,
                     wait.as_secs_f64()
                 );
                 link.last_error = Some(e);
@@ -311,7 +321,7 @@ impl Core {
             self.links[i].health = link::Health::Restarting;
             tracing::info!(link = self.links[i].name, "starting the driver again");
             self.starts.spawn(async move {
-                let started = start_driver(&config).await.map_err(|e| e.to_string());
+                let started = start_driver(&config).await.map_err(start_error);
                 (i, started)
             });
             self.report_link(i);
@@ -339,7 +349,10 @@ impl Core {
                 );
                 self.report_link(i);
             }
-            Err(e) => self.link_failed(i, format!("the driver could not start: {e}")),
+            Err(e) => {
+                let kind = self.links[i].driver_name;
+                self.link_failed(i, format!("the {kind} driver could not start: {e}"))
+            }
         }
     }
 

@@ -2,6 +2,7 @@
 //! and out, one JSON object per line, for replay after a mission.
 //!
 //! ```text
+//! {"t":1700000000000000,"msg":"start","modem_id":1}
 //! {"t":1700000000100000,"msg":"accepted","name":"goby.example.Command","id":7}
 //! {"t":1700000000123456,"raw":"out","bytes_hex":"2443434359432c...","text":"$CCCYC,..."}
 //! {"t":1700000000200000,"msg":"out","name":"goby.example.Command","frame":0,"id":7,"value":{...}}
@@ -54,6 +55,13 @@ impl RawLog {
             path: path.to_path_buf(),
             out: BufWriter::new(file),
         })
+    }
+
+    /// Logs the daemon's start, as node `modem_id`: `"msg": "start"`.
+    /// The records after it are of that node, and its acceptances are
+    /// logged (`"msg": "accepted"`).
+    pub fn start(&mut self, time: i64, modem_id: i32) -> io::Result<()> {
+        self.write(&json!({ "t": time, "msg": "start", "modem_id": modem_id }))
     }
 
     /// Logs a raw line or datagram.

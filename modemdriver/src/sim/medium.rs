@@ -77,7 +77,7 @@ impl std::fmt::Display for Refused {
             Refused::Unknown => write!(f, "no node of that modem id has an Iridium link"),
             Refused::Full(n) => write!(
                 f,
-                "its queue at the gateway is full ({n} messages; simulator.satellite.queue_limit)"
+                "its queue at the gateway is full ({n} messages, the satellite's queue_limit)"
             ),
         }
     }

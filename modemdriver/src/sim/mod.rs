@@ -653,7 +653,8 @@ impl Node {
             if let Err(why) = self.medium.post(d, at, packet.transmission.clone(), limit) {
                 events.status(DriverStatus::LinkError {
                     reason: format!(
-                        "the gateway refused a message for modem {d} (packet {}): {why}",
+                        "{} for modem {d} (packet {}): {why}",
+                        satellite::GATEWAY_REFUSED,
                         packet.seq
                     ),
                 });

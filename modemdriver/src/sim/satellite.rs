@@ -36,6 +36,10 @@ use crate::rate::RateSpec;
 /// 11 of header and CRC.
 pub const MAX_FRAME_BYTES: u32 = 1949;
 
+/// How the simulator's link error of a message the gateway refused
+/// begins (a refusal of [`super::medium::Medium::post`]).
+pub const GATEWAY_REFUSED: &str = "the gateway refused a message";
+
 /// The longest session or latency, a day.
 const MAX_TIME: Duration = Duration::from_secs(86_400);
 
