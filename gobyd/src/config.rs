@@ -399,6 +399,9 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
         };
         found.problem(places.offset(top), top, mixed_forms(top));
     }
+    if let Some((field, text)) = gateway_window_note(&config) {
+        found.note(places.offset(&field), NoteLevel::Info, text);
+    }
     for view in links::links(&config) {
         let single = view.single(&config);
         if let Some(text) = mixed_fleet_ack_note(&single) {
@@ -2152,6 +2155,43 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
 }
 
 /// For a Micro-Modem with Flexible Data Protocol slots and
+/// A node with an Iridium link (a vehicle's modem or a shore station) and
+/// no `duplicate_window_seconds`: the gateway holds copies of a message
+/// while the vehicle is down, and one that arrives longer than the window
+/// (the longest `ttl`) after the message's first arrival is delivered
+/// again. The field of the first Iridium driver and the text.
+fn gateway_window_note(config: &GobydConfig) -> Option<(String, String)> {
+    if config.duplicate_window_seconds.is_some()
+        || config
+            .queue
+            .as_ref()
+            .is_some_and(|q| q.message_identity == Some(false))
+    {
+        return None;
+    }
+    let iridium = [DriverType::DriverIridium, DriverType::DriverIridiumShore];
+    let view = links::links(config).into_iter().find(|v| {
+        matches!(
+            v.driver.and_then(|d| d.driver.as_ref()),
+            Some(driver_config::Driver::DriverType(t)) if iridium.iter().any(|i| *i as i32 == *t)
+        )
+    })?;
+    let ttl = config
+        .queue
+        .as_ref()
+        .and_then(|q| q.message_entry.iter().map(|e| e.ttl()).max())
+        .unwrap_or(1800);
+    Some((
+        view.field("driver.driver_type"),
+        format!(
+            "an Iridium link: the gateway holds copies of a message while a vehicle is down, and \
+             a copy that arrives more than duplicate_window_seconds (unset: the longest ttl, {ttl} \
+             s) after the message's first arrival is delivered again; set duplicate_window_seconds \
+             to the ttl and the longest time a vehicle stays down"
+        ),
+    ))
+}
+
 /// `use_application_acks: false`: nothing sent in those slots is ever
 /// acknowledged (the modem acknowledges no FDP packet), as Goby3 warns.
 /// The slot's field and the text.

@@ -1243,3 +1243,31 @@ fn check_accepts_the_simulator_over_modelled_water_and_names_a_bad_env_by_line()
     assert!(err.contains("none.env"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// An Iridium link without `duplicate_window_seconds`: `--check` says that
+/// a copy held at the gateway past the window (the longest ttl) is
+/// delivered again, naming the driver; not once the window is set.
+#[test]
+fn an_iridium_link_without_a_duplicate_window_is_told_what_the_gateway_can_hold() {
+    let dir = scratch("command", "gateway-window");
+    let shipped =
+        std::fs::read_to_string(workspace_dir().join("gobyd/config/iridium-shore.pb.txt")).unwrap();
+    let path = dir.join("shore.pb.txt");
+    let check = |text: &str| {
+        std::fs::write(&path, text).unwrap();
+        let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+        (out.status.code(), stderr_text(&out))
+    };
+    let (code, err) = check(&shipped);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("shore.pb.txt:7:3: an Iridium link: the gateway holds copies")
+            && err.contains("(unset: the longest ttl, 1800 s)")
+            && err.contains("set duplicate_window_seconds to the ttl and the longest time"),
+        "{err}"
+    );
+    let (code, err) = check(&format!("duplicate_window_seconds: 14400\n{shipped}"));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(!err.contains("an Iridium link: the gateway holds"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
