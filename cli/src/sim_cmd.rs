@@ -207,8 +207,8 @@ pub(crate) fn satellite_use_words(u: &goby_sim::slot_use::SlotUse) -> String {
     }
     if refused > 0 {
         words += &format!(
-            "; messages the gateway refused {refused} (the receiver's queue there full, or no \
-             Iridium link)"
+            "; messages the gateway refused {refused} (data and acks alike; the receiver's \
+             queue there full, or no Iridium link)"
         );
     }
     words

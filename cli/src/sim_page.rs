@@ -395,10 +395,10 @@ fn satellite_section(page: &mut String, report: &Report) {
         u.by_node
             .iter()
             .filter(|(_, n)| n.slots + n.transmissions + n.receptions > 0),
-        ["data sent", "received"],
+        ["data sent", "data heard"],
     );
     *page += &bars(
-        "Slots, data sent and messages received on the satellite, per node",
+        "Slots, data sent and data heard on the satellite (transmissions, each of one or more messages), per node",
         &rows,
         0.0,
         &[],

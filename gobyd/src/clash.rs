@@ -86,6 +86,27 @@ pub fn clashes(config: &GobydConfig, file: Option<&Path>) -> Vec<Clash> {
             false => found.push(Clash { error: true, text }),
         }
     }
+    // A link's serial adapter not there now: the daemon starts, that link
+    // down until it is (a lone driver's is refused by the check).
+    for (i, link) in config.link.iter().enumerate() {
+        let Some(port) = link.driver.as_ref().map(|d| d.serial_port()) else {
+            continue;
+        };
+        let serial = link.driver.as_ref().is_some_and(|d| {
+            d.connection_type()
+                == protos::goby::acomms::protobuf::driver_config::ConnectionType::ConnectionSerial
+        });
+        if serial && modemdriver::problem::serial_port_absent(port) {
+            found.push(Clash {
+                error: false,
+                text: format!(
+                    "link[{i}].driver.serial_port: {port:?} does not exist now (is the modem's \
+                     serial adapter plugged in, and is this its path?): the daemon starts, and the \
+                     link stays down, its driver started again, until it is there"
+                ),
+            });
+        }
+    }
     if config.data_dir.is_none() {
         for other in default_sharers(file) {
             let text = format!(

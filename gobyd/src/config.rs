@@ -1379,7 +1379,18 @@ pub fn problems(config: &GobydConfig, driver: DriverSettings) -> Vec<Problem> {
             problems.push(Problem::new(view.field(&field), reason));
         }
         if driver == DriverSettings::Configured {
-            problems.extend(links::within(&view, driver_problems(&single)));
+            // A link of several whose serial adapter is not there now starts
+            // down and is started again until it is (`gobyd --check` warns,
+            // [`crate::clash`]); a lone driver's stops the daemon.
+            let absent = links::has_link_sections(config)
+                && single
+                    .driver
+                    .as_ref()
+                    .is_some_and(|d| modemdriver::problem::serial_port_absent(d.serial_port()));
+            let own = driver_problems(&single)
+                .into_iter()
+                .filter(|p| !(absent && p.field == "driver.serial_port"));
+            problems.extend(links::within(&view, own.collect()));
         }
     }
     problems.extend(links::link_problems(config));

@@ -1182,5 +1182,32 @@ fn check_accepts_links_and_refuses_bad_rules_naming_where_they_are() {
     std::fs::write(&path, modems.replacen("/dev/ttyUSB0", "/dev/ttyUSB1", 1)).unwrap();
     let (_, _, err) = check(&path);
     assert!(!err.contains("is link[0]'s too"), "{err}");
+
+    // A link's serial adapter not there now: a warning, the daemon starts
+    // with that link down; a lone driver's is refused.
+    let absent = "/dev/goby-no-such-modem";
+    let unplugged = TWO_LINKS
+        .replacen(
+            "driver { driver_type: DRIVER_UDP udp { local { port: 0 } remote { modem_id: 2 port: 50902 } } }",
+            &serial(absent),
+            1,
+        )
+        .replace("slot_seconds: 2 }", "slot_seconds: 6 }");
+    std::fs::write(&path, &unplugged).unwrap();
+    let (code, _, err) = check(&path);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains(&format!(
+            "warning: clash: link[0].driver.serial_port: \"{absent}\" does not exist now"
+        )) && err.contains("the link stays down"),
+        "{err}"
+    );
+    std::fs::write(&path, format!("modem_id: 1\n{}\n", serial(absent))).unwrap();
+    let (code, _, err) = check(&path);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains(&format!("driver.serial_port: \"{absent}\" does not exist")),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -61,6 +61,14 @@ pub fn with_serial_port(config: &DriverConfig, mut problems: Vec<Problem>) -> Ve
     problems
 }
 
+/// Whether nothing is at `path` now (a serial adapter not plugged in, or
+/// not yet up): the one [`serial_port_problem`] a link of several may
+/// start with, down until it is there.
+pub fn serial_port_absent(path: &str) -> bool {
+    !path.is_empty()
+        && matches!(std::fs::metadata(path), Err(e) if e.kind() == std::io::ErrorKind::NotFound)
+}
+
 /// At a driver's start: an error when the serial port at `path` is not
 /// there to open ([`serial_port_problem`]), told as the device's, not the
 /// configuration's (a modem unplugged at sea is no configuration error).

@@ -40,9 +40,9 @@ pub struct NodeSlotUse {
     /// slot); left out of the report when none did.
     #[serde(skip_serializing_if = "is_zero")]
     pub failed: u64,
-    /// Messages it sent that the satellite gateway refused (the
-    /// receiver's queue there full, or the receiver without an Iridium
-    /// link); left out when none were.
+    /// Messages it sent, data and acks alike, that the satellite gateway
+    /// refused (the receiver's queue there full, or the receiver without an
+    /// Iridium link); left out when none were.
     #[serde(skip_serializing_if = "is_zero")]
     pub refused: u64,
 }
