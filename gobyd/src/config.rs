@@ -668,18 +668,11 @@ fn unclosed_section(text: &str) -> Option<usize> {
     let mut open = Vec::new();
     let mut i = 0;
     while i < bytes.len() {
+        if let Some(past) = past_comment_or_string(bytes, i) {
+            i = past;
+            continue;
+        }
         match bytes[i] {
-            b'#' => {
-                while i < bytes.len() && bytes[i] != b'\n' {
-                    i += 1;
-                }
-            }
-            quote @ (b'"' | b'\'') => {
-                i += 1;
-                while i < bytes.len() && bytes[i] != quote && bytes[i] != b'\n' {
-                    i += if bytes[i] == b'\\' { 2 } else { 1 };
-                }
-            }
             b'{' | b'<' => open.push(i),
             b'}' | b'>' => {
                 open.pop();
@@ -689,6 +682,28 @@ fn unclosed_section(text: &str) -> Option<usize> {
         i += 1;
     }
     open.pop()
+}
+
+/// Where the text format's comment (`#` to the line's end) or string
+/// (quoted, on one line) starting at `i` ends: the comment's newline, or
+/// past the string's closing quote (`None`: neither starts at `i`).
+fn past_comment_or_string(bytes: &[u8], mut i: usize) -> Option<usize> {
+    match bytes[i] {
+        b'#' => {
+            while i < bytes.len() && bytes[i] != b'\n' {
+                i += 1;
+            }
+            Some(i)
+        }
+        quote @ (b'"' | b'\'') => {
+            i += 1;
+            while i < bytes.len() && bytes[i] != quote && bytes[i] != b'\n' {
+                i += if bytes[i] == b'\\' { 2 } else { 1 };
+            }
+            Some(i + 1)
+        }
+        _ => None,
+    }
 }
 
 /// Byte offset of a text-format error, if the parser gives one.
@@ -721,19 +736,11 @@ fn goby3_extensions(text: &str) -> String {
     let mut i = 0;
     let mut copied = 0;
     while i < bytes.len() {
+        if let Some(past) = past_comment_or_string(bytes, i) {
+            i = past;
+            continue;
+        }
         match bytes[i] {
-            b'#' => {
-                while i < bytes.len() && bytes[i] != b'\n' {
-                    i += 1;
-                }
-            }
-            quote @ (b'"' | b'\'') => {
-                i += 1;
-                while i < bytes.len() && bytes[i] != quote && bytes[i] != b'\n' {
-                    i += if bytes[i] == b'\\' { 2 } else { 1 };
-                }
-                i += 1;
-            }
             b'[' => {
                 let Some(len) = text[i..].find(']') else {
                     break;

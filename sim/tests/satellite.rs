@@ -46,11 +46,39 @@ const SURFACED_S: f64 = 3500.0 / 1.5 + 292.5 / 1.5;
 /// How far the ship's modem hears, metres.
 const RANGE_M: f64 = 2000.0;
 
-fn scenario() -> String {
-    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
+/// The AUV's track: 3.5 km at 20 m, out of the ship's acoustic range,
+/// then up to the surface at the end of its line.
+const OUT_AND_UP: &str = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
     waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
     speed_mps: 1.5 }";
-    two_nodes(&gobyd("DRIVER_IRIDIUM_SHORE"), track)
+
+fn scenario() -> String {
+    two_nodes(&gobyd("DRIVER_IRIDIUM_SHORE"), OUT_AND_UP)
+}
+
+/// The ship on the satellite alone ([`SHIP_ON_THE_SATELLITE`]) and the AUV
+/// on [`OUT_AND_UP`], with the scenario's `satellite` section `satellite`
+/// (empty: the defaults): the scenario, and its run, in which each of the
+/// 20 commands is delivered once and acked.
+fn ship_on_the_satellite(satellite: &str) -> (goby_sim::Scenario, goby_sim::Outcome) {
+    let text = format!(
+        "{satellite}\n{}",
+        two_nodes(SHIP_ON_THE_SATELLITE, OUT_AND_UP)
+    );
+    let scenario = parse(&text, "ship", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let total = &outcome.report.total;
+    assert_eq!(
+        (
+            total.published,
+            total.delivered,
+            total.acked,
+            total.duplicates
+        ),
+        (20, 20, 20, 0),
+        "{total:#?}"
+    );
+    (scenario, outcome)
 }
 
 /// The ship (`ship`, its gobyd section) at the origin and the AUV (two
@@ -235,37 +263,12 @@ fn copies_held_at_the_gateway_and_come_after_the_water_s_are_not_delivered_again
 /// as such (`no_modem`), not as unsettled.
 #[test]
 fn a_ship_on_the_satellite_alone_gets_every_command_once() {
-    let ship = r#"gobyd {
-    driver { driver_type: DRIVER_IRIDIUM_SHORE }
-    mac { type: MAC_FIXED_DECENTRALIZED
-      slot { src: 1 dest: -1 slot_seconds: 30 }
-      slot { src: 2 dest: -1 slot_seconds: 30 } }
-    queue { minimum_ack_wait_seconds: 60 message_entry { protobuf_name: "goby.example.Command"
-      ack: true ttl: 7200 role { type: DESTINATION_ID field: "destination" } } }
-  }"#;
-    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
-    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
-    speed_mps: 1.5 }";
-    let text = two_nodes(ship, track);
-    let scenario = parse(&text, "alone", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    let (scenario, outcome) = ship_on_the_satellite("");
     assert_eq!(
         scenario.nodes[0].links,
         [goby_sim::scenario::Medium::Satellite]
     );
-    let outcome = goby_sim::run(&scenario).expect("the run ends");
-    let report = &outcome.report;
-    assert_eq!(report.total.published, 20);
-    assert_eq!(
-        (
-            report.total.delivered,
-            report.total.acked,
-            report.total.duplicates
-        ),
-        (20, 20, 0),
-        "{:#?}",
-        report.total
-    );
-    let fates = &report.losses.total.packets;
+    let fates = &outcome.report.losses.total.packets;
     assert!(fates.contains_key("no_modem"), "{fates:?}");
     assert!(!fates.contains_key("unsettled"), "{fates:?}");
 }
@@ -329,27 +332,8 @@ const SHIP_ON_THE_SATELLITE: &str = r#"gobyd {
 /// delivered once and acked, and the report counts the failed sessions.
 #[test]
 fn sessions_that_fail_cost_time_not_commands() {
-    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
-    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
-    speed_mps: 1.5 }";
-    let text = format!(
-        "satellite {{ session_failure: 0.33 }}\n{}",
-        two_nodes(SHIP_ON_THE_SATELLITE, track)
-    );
-    let scenario = parse(&text, "failing", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
-    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let (_, outcome) = ship_on_the_satellite("satellite { session_failure: 0.33 }");
     let report = &outcome.report;
-    assert_eq!(
-        (
-            report.total.published,
-            report.total.delivered,
-            report.total.acked,
-            report.total.duplicates
-        ),
-        (20, 20, 20, 0),
-        "{:#?}",
-        report.total
-    );
     let satellite = report.satellite_use.as_ref().expect("a satellite link");
     let auv = &satellite.by_node["auv"];
     assert!(auv.failed > 0, "no failed session counted: {satellite:?}");
@@ -425,27 +409,9 @@ fn a_satellite_for_no_node_and_a_second_link_in_a_gobyd_file_are_refused_where_w
 /// receiver delivers the message once.
 #[test]
 fn a_message_the_gateway_took_before_its_session_failed_is_delivered_once() {
-    let track = "track { waypoint { x: 500 depth: 20 } waypoint { x: 4000 depth: 20 }
-    waypoint { x: 4000 y: 300 depth: 0 } waypoint { x: 4000 y: 900 depth: 0 }
-    speed_mps: 1.5 }";
-    let text = format!(
-        "satellite {{ session_failure: 0.4 taken_when_failed: 1 }}\n{}",
-        two_nodes(SHIP_ON_THE_SATELLITE, track)
-    );
-    let scenario = parse(&text, "taken", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
-    let outcome = goby_sim::run(&scenario).expect("the run ends");
+    let (_, outcome) =
+        ship_on_the_satellite("satellite { session_failure: 0.4 taken_when_failed: 1 }");
     let report = &outcome.report;
-    assert_eq!(
-        (
-            report.total.published,
-            report.total.delivered,
-            report.total.acked,
-            report.total.duplicates
-        ),
-        (20, 20, 20, 0),
-        "{:#?}",
-        report.total
-    );
     let satellite = report.satellite_use.as_ref().expect("a satellite link");
     let (auv, ship) = (&satellite.by_node["auv"], &satellite.by_node["ship"]);
     // The ship heard the AUV's data more often than the AUV's sessions
