@@ -2,7 +2,7 @@
 //! DCCL message of a real capture (two gobyd exchanging the messages of
 //! `tests/wireshark/messages.proto`, every field codec the dissector
 //! decodes and dynamic conditions, over the UDP driver on loopback, acks
-//! and frame trailers included) as `goby dccl decode` prints it, and every
+//! and the frames' identities included) as `goby dccl decode` prints it, and every
 //! frame of the committed dynamic-conditions instances (libdccl's
 //! encodings and random frames, `dccl/tests/data/dynamic-conditions`) as
 //! the codec decodes it; types it cannot decode are refused by name. The
@@ -490,49 +490,58 @@ log {{ raw_log: false }}
         out
     }
 
-    /// What `goby dccl decode` prints for each packet's frames, one line a
-    /// message (the frame trailer's type from queue.proto).
-    fn decoded(payloads: &BTreeMap<usize, Vec<u8>>) -> BTreeMap<usize, Vec<String>> {
+    /// What `goby dccl decode` prints for `frame`, one line a message (the
+    /// frame identity's type from queue.proto).
+    fn decode_frame(frame: &[u8]) -> Vec<String> {
         let protos = Path::new(env!("CARGO_MANIFEST_DIR")).join("../protos/proto");
+        let hex = hex::encode(frame);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .args(["dccl", "decode", "-f"])
+            .arg(messages_proto())
+            .arg("-f")
+            .arg(protos.join("goby/acomms/queue.proto"))
+            .arg("-I")
+            .arg(&protos)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        use std::io::Write;
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(hex.as_bytes())
+            .unwrap();
+        let done = child.wait_with_output().unwrap();
+        assert!(
+            done.status.success(),
+            "goby dccl decode {hex}: {}",
+            String::from_utf8_lossy(&done.stderr)
+        );
+        String::from_utf8(done.stdout)
+            .unwrap()
+            .lines()
+            .map(String::from)
+            .collect()
+    }
+
+    /// What `goby dccl decode` prints for each packet's frames, one line a
+    /// message (the frame identity's type from queue.proto).
+    fn decoded(payloads: &BTreeMap<usize, Vec<u8>>) -> BTreeMap<usize, Vec<String>> {
         let mut out = BTreeMap::new();
         for (&number, payload) in payloads {
             let mt = ModemTransmission::decode(payload.as_slice()).expect("a ModemTransmission");
-            let mut lines = Vec::new();
-            for frame in &mt.frame {
-                let hex = hex::encode(frame);
-                let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
-                    .args(["dccl", "decode", "-f"])
-                    .arg(messages_proto())
-                    .arg("-f")
-                    .arg(protos.join("goby/acomms/queue.proto"))
-                    .arg("-I")
-                    .arg(&protos)
-                    .stdin(std::process::Stdio::piped())
-                    .stdout(std::process::Stdio::piped())
-                    .stderr(std::process::Stdio::piped())
-                    .spawn()
-                    .unwrap();
-                use std::io::Write;
-                child
-                    .stdin
-                    .take()
-                    .unwrap()
-                    .write_all(hex.as_bytes())
-                    .unwrap();
-                let done = child.wait_with_output().unwrap();
-                assert!(
-                    done.status.success(),
-                    "goby dccl decode {hex}: {}",
-                    String::from_utf8_lossy(&done.stderr)
-                );
-                lines.extend(
-                    String::from_utf8(done.stdout)
-                        .unwrap()
-                        .lines()
-                        .map(String::from),
-                );
-            }
-            out.insert(number, lines);
+            // The frames, then gobyd's identities of their messages (the
+            // protobuf's field order, as tshark shows them).
+            let identities = mt.frame_identity.iter().filter(|f| !f.is_empty());
+            let lines = mt
+                .frame
+                .iter()
+                .chain(identities)
+                .flat_map(|f| decode_frame(f));
+            out.insert(number, lines.collect());
         }
         out
     }
@@ -928,7 +937,7 @@ log {{ raw_log: false }}
             "tshark's messages, packet by packet, are goby dccl decode's"
         );
         // The capture holds what was published, acks (no frame) and
-        // gobyd's frame trailers.
+        // gobyd's frame identities (beside the frames, on UDP).
         let all: Vec<&String> = expected.values().flatten().collect();
         assert!(all.len() > FROM_1.len() + FROM_2.len(), "{all:?}");
         assert!(
@@ -943,7 +952,7 @@ log {{ raw_log: false }}
         );
         assert!(
             all.iter().any(|m| m.starts_with("entry: ")),
-            "a frame trailer: {all:?}"
+            "a frame identity: {all:?}"
         );
         // Messages with dynamic conditions, as goby dccl decode prints them.
         for mission in [
@@ -955,10 +964,21 @@ log {{ raw_log: false }}
         }
         assert!(expected.values().any(Vec::is_empty), "an ack: {expected:?}");
 
-        // The same frames, one a packet of link type USER0, as raw frames.
+        // The same frames, one a packet of link type USER0, as raw frames,
+        // each with its identity as a modem carries it (the trailer).
         let frames: Vec<Vec<u8>> = payloads
             .values()
-            .flat_map(|p| ModemTransmission::decode(p.as_slice()).unwrap().frame)
+            .flat_map(|p| {
+                let mt = ModemTransmission::decode(p.as_slice()).unwrap();
+                let mut identities = mt.frame_identity.into_iter();
+                mt.frame
+                    .into_iter()
+                    .map(|mut f| {
+                        f.extend(identities.next().unwrap_or_default());
+                        f
+                    })
+                    .collect::<Vec<_>>()
+            })
             .collect();
         let raw = dir.join("frames.pcap");
         let now = std::time::SystemTime::now()
@@ -968,7 +988,7 @@ log {{ raw_log: false }}
         std::fs::write(&raw, user0_pcap(&frames, now)).unwrap();
         let user_lua = user0_dissector(&dir, &messages_proto());
         let shown: Vec<String> = dissected(&raw, &user_lua).into_values().flatten().collect();
-        let wanted: Vec<String> = expected.into_values().flatten().collect();
+        let wanted: Vec<String> = frames.iter().flat_map(|f| decode_frame(f)).collect();
         assert_eq!(
             shown, wanted,
             "the raw frames' messages are goby dccl decode's"

@@ -149,3 +149,109 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The next DATA datagram on `socket`.
+async fn next_data(socket: &UdpSocket) -> ModemTransmission {
+    let mut buf = vec![0u8; 4096];
+    tokio::time::timeout(LIMIT, async {
+        loop {
+            let (n, _) = socket.recv_from(&mut buf).await.unwrap();
+            let mt = ModemTransmission::decode(&buf[..n]).unwrap();
+            if mt.r#type() == TransmissionType::Data && !mt.frame.iter().all(Vec::is_empty) {
+                return mt;
+            }
+        }
+    })
+    .await
+    .expect("a data transmission")
+}
+
+#[tokio::test]
+async fn over_udp_the_identity_goes_beside_the_frames_both_ways() {
+    let dir = scratch("acknowledge", "beside");
+    let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let port = free_udp_port();
+    let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
+    let daemon = Daemon::builder(config.config())
+        .start()
+        .await
+        .expect("gobyd starts");
+    let publisher = daemon.publisher();
+    let mut events = daemon.subscribe();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let run = tokio::spawn(daemon.run(async move {
+        let _ = stopped.await;
+    }));
+
+    let mut codec = dccl::Codec::new();
+    codec.load(&Command::default().descriptor()).unwrap();
+    let trailer = TrailerCodec::new();
+
+    // Sent: the frame is the message's DCCL bytes alone (Goby3's frame),
+    // its identity in `frame_identity`.
+    let out = Command {
+        destination: 2,
+        action: 2,
+        note: Some("out".into()),
+        ..Default::default()
+    };
+    let (reply, accepted) = tokio::sync::oneshot::channel();
+    publisher
+        .send(gobyd::event::Publish::new(
+            out.transcode_to_dynamic(),
+            reply,
+        ))
+        .await
+        .unwrap();
+    accepted.await.unwrap().expect("accepted");
+    let sent = next_data(&peer).await;
+    let plain_out = codec.encode(&out.transcode_to_dynamic()).unwrap();
+    assert_eq!(sent.frame[0], plain_out, "no trailer in the frame");
+    let ids = trailer
+        .decode(&sent.frame_identity[0])
+        .expect("the frame's identity beside it");
+    assert_eq!(ids.len(), 1);
+    assert!(!ids[0].resent);
+
+    // Received: identities beside the frames tell a retransmission from a
+    // repeat on purpose, as a trailer does.
+    let command = Command {
+        destination: 1,
+        action: 1,
+        note: Some("once".into()),
+        ..Default::default()
+    };
+    let plain = codec.encode(&command.transcode_to_dynamic()).unwrap();
+    let to = format!("127.0.0.1:{port}");
+    let sendings = [(1700, false), (1700, true), (1701, false)];
+    for (i, (number, resent)) in sendings.into_iter().enumerate() {
+        let unique_id = 90 + i as u32;
+        let data = ModemTransmission {
+            src: Some(2),
+            dest: Some(1),
+            r#type: Some(TransmissionType::Data as i32),
+            ack_requested: Some(true),
+            unique_id: Some(unique_id),
+            frame: vec![plain.clone()],
+            frame_identity: vec![trailer.encode(&[WireIdentity::new(number, resent)])],
+            ..Default::default()
+        };
+        peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
+        assert_eq!(next_ack(&peer).await.unique_id, Some(unique_id));
+    }
+
+    let _ = stop.send(());
+    run.await.unwrap().unwrap();
+    let mut handed = 0;
+    while let Ok(e) = events.try_recv() {
+        if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
+            assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
+            handed += 1;
+        }
+    }
+    assert_eq!(
+        handed, 2,
+        "the publication once, then the repeat on purpose"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

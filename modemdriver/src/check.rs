@@ -45,6 +45,13 @@ pub fn largest_frame(config: &DriverConfig) -> Option<usize> {
     both_ways(config).map(|l| l.outgoing)
 }
 
+/// Whether the driver of `config` carries the whole `ModemTransmission`
+/// ([`DriverKind::carries_transmission`](crate::kind::DriverKind::carries_transmission)):
+/// `false` for a configuration naming no driver built in.
+pub fn carries_transmission(config: &DriverConfig) -> bool {
+    built_in::of(config).is_ok_and(|k| k.carries_transmission())
+}
+
 /// The frame limits of `config`'s driver when they differ each way
 /// (Iridium SBD's MO and MT messages): `None` for drivers whose frames are
 /// set by the rate, not limited, or limited alike both ways ([`limits`]).

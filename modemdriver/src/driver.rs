@@ -453,7 +453,9 @@ impl DataRequest {
 /// `max_frame_bytes` long (longer ones are dropped, and reported in the
 /// statuses returned); `src`, `rate` and `frame_start` are kept from the
 /// template, `dest` taken from the answer when the template's is -1,
-/// trailing empty frames dropped. With no answer, the template as it was.
+/// trailing empty frames dropped, each kept frame's `frame_identity` kept
+/// beside it (a dropped frame's dropped). With no answer, the template as
+/// it was.
 pub(crate) fn checked_answer(
     template: &ModemTransmission,
     filled: Option<ModemTransmission>,
@@ -464,12 +466,15 @@ pub(crate) fn checked_answer(
     let mut problems = Vec::new();
     let mut out = template.clone();
     out.frame.clear();
+    out.frame_identity.clear();
+    let mut identities = filled.frame_identity.into_iter();
     if template.dest() == -1 {
         out.dest = filled.dest;
     }
     out.ack_requested = filled.ack_requested.or(template.ack_requested);
     let max_frames = template.max_num_frames() as usize;
     for (i, frame) in filled.frame.into_iter().enumerate() {
+        let identity = identities.next().unwrap_or_default();
         if i >= max_frames {
             problems.push(DriverStatus::DataRejected {
                 reason: format!(
@@ -487,13 +492,21 @@ pub(crate) fn checked_answer(
                     ),
                 });
                 out.frame.push(Vec::new());
+                out.frame_identity.push(Vec::new());
             }
-            _ => out.frame.push(frame),
+            _ => {
+                out.frame.push(frame);
+                out.frame_identity.push(identity);
+            }
         }
     }
     // Trailing empty frames carry nothing.
     while out.frame.last().is_some_and(|f| f.is_empty()) {
         out.frame.pop();
+    }
+    out.frame_identity.truncate(out.frame.len());
+    while out.frame_identity.last().is_some_and(|f| f.is_empty()) {
+        out.frame_identity.pop();
     }
     (out, problems)
 }

@@ -121,6 +121,16 @@ pub trait DriverKind: Send + Sync + 'static {
         self.packet_time(config, rate)
     }
 
+    /// Whether the whole `ModemTransmission` crosses its link (its protobuf
+    /// encoding, as the UDP drivers send it), so that what the queue writes
+    /// beside the frames reaches the receiver: each frame's identity then
+    /// goes in `frame_identity` rather than as a trailer in the frame
+    /// (the queue's `FrameIdentity`). `false` for a modem, which carries the frames
+    /// alone.
+    fn carries_transmission(&self) -> bool {
+        false
+    }
+
     /// The type of the driver-specific requests it takes
     /// ([`Driver::initiate_specific`]), when it takes any.
     fn specific(&self) -> Option<MessageDescriptor> {

@@ -109,6 +109,10 @@ impl DriverKind for UdpDriver {
         problems(config)
     }
 
+    fn carries_transmission(&self) -> bool {
+        true
+    }
+
     fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
         Box::pin(UdpDriver::start(config))
     }

@@ -211,6 +211,10 @@ impl DriverKind for UdpMulticastDriver {
         problems(config)
     }
 
+    fn carries_transmission(&self) -> bool {
+        true
+    }
+
     fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
         Box::pin(async move { UdpMulticastDriver::start(config) })
     }

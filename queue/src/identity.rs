@@ -19,6 +19,13 @@
 //! frame at it and keeps the messages before it (with a warning in its
 //! log).
 //!
+//! On a link that carries the whole `ModemTransmission` (the UDP drivers:
+//! [`QueueManager::set_identity_beside_frames`]) the same encoding goes
+//! beside the frame, in the transmission's `frame_identity`, rather than at
+//! its end: the frame is plain DCCL, as Goby3 sends it.
+//!
+//! [`QueueManager::set_identity_beside_frames`]: crate::QueueManager::set_identity_beside_frames
+//!
 //! Sizes: [`TrailerCodec::size`]`(n)` bytes for `n` messages, 4 for one, then
 //! 1.5 per further message; at most [`MAX_MESSAGES`] messages a frame.
 //!

@@ -155,6 +155,12 @@ pub struct QueueManager {
     ///
     /// [`identity::FrameIdentity`]: protos::goby::acomms::protobuf::FrameIdentity
     send_identity: bool,
+    /// By link: its frames' identities go beside them, in the
+    /// transmission's `frame_identity`, not in a trailer (a link that
+    /// carries the whole transmission: [`set_identity_beside_frames`]).
+    ///
+    /// [`set_identity_beside_frames`]: Self::set_identity_beside_frames
+    identity_beside: [bool; crate::links::MAX_LINKS],
     trailer: TrailerCodec,
     subscribers: Vec<Sender<QueueEvent>>,
     /// Storage of the priority contest, kept between data requests.
@@ -223,6 +229,7 @@ impl QueueManager {
             next_number: identity::random_start(),
             entropy: crate::Entropy::System,
             send_identity: config.message_identity(),
+            identity_beside: [false; crate::links::MAX_LINKS],
             trailer: TrailerCodec::new(),
             subscribers: Vec::new(),
             scratch: Vec::new(),
@@ -263,6 +270,22 @@ impl QueueManager {
         self.queues
             .binary_search_by_key(&identity::DCCL_ID, |q| q.id)
             .is_err()
+    }
+
+    /// Whether link `link` carries the whole `ModemTransmission` (the UDP
+    /// drivers' datagrams), so that the identity of its frames' messages,
+    /// with `message_identity` on, goes beside the frames in the
+    /// transmission's `frame_identity` (entry `i` the [`FrameIdentity`] of
+    /// frame `i`) instead of as a trailer at each frame's end: the frames are
+    /// then plain DCCL, Goby3's byte for byte, and every byte of them is the
+    /// messages'. Off for every link until said; ignored for a link index
+    /// past [`MAX_LINKS`](crate::links::MAX_LINKS).
+    ///
+    /// [`FrameIdentity`]: protos::goby::acomms::protobuf::FrameIdentity
+    pub fn set_identity_beside_frames(&mut self, link: LinkIndex, beside: bool) {
+        if let Some(b) = self.identity_beside.get_mut(link) {
+            *b = beside;
+        }
     }
 
     /// Serves several links from now on ([`crate::links`]): each asks for
@@ -623,6 +646,9 @@ impl QueueManager {
 
         let frame_start = request.frame_start();
         let frames = request.max_num_frames();
+        // The frames' identities go beside them (no room kept in a frame).
+        let beside = self.send_identity && self.identity_beside.get(link) == Some(&true);
+        let trailing = self.send_identity && !beside;
         for slot in 0..frames as usize {
             let frame_number = frame_start + slot as u32;
             if request.frame.len() <= slot {
@@ -639,7 +665,7 @@ impl QueueManager {
                 }
                 let used = request.frame[slot].len();
                 let free = max_frame_bytes.saturating_sub(used);
-                let reserve = if self.send_identity {
+                let reserve = if trailing {
                     self.trailer.size(ids.len() + 1)
                 } else {
                     0
@@ -651,7 +677,7 @@ impl QueueManager {
                 // would be delivered beside the other links' copies, so it
                 // waits for a frame with room for both (or for another
                 // link).
-                let alone = self.send_identity && ids.is_empty();
+                let alone = trailing && ids.is_empty();
                 let room = if alone { free } else { remaining };
                 if room < self.smallest_message {
                     break;
@@ -693,7 +719,14 @@ impl QueueManager {
             }
             if self.send_identity && !bare && !ids.is_empty() {
                 let trailer = self.trailer.encode(&ids);
-                request.frame[slot].extend_from_slice(&trailer);
+                if beside {
+                    if request.frame_identity.len() <= slot {
+                        request.frame_identity.resize(slot + 1, Vec::new());
+                    }
+                    request.frame_identity[slot] = trailer;
+                } else {
+                    request.frame[slot].extend_from_slice(&trailer);
+                }
             }
         }
         request.ack_requested = Some(filling.packet_ack);
@@ -885,6 +918,21 @@ impl QueueManager {
                             source,
                         });
                         break;
+                    }
+                }
+            }
+            // Identities written beside the frame (a link that carries the
+            // whole transmission) name its messages as a trailer would.
+            if let Some(ids) = transmission
+                .frame_identity
+                .get(frame_index)
+                .filter(|b| !b.is_empty() && decoded.iter().all(|d| d.2.is_none()))
+                .and_then(|b| self.trailer.decode(b))
+            {
+                if ids.len() <= decoded.len() {
+                    let first = decoded.len() - ids.len();
+                    for (d, id) in decoded[first..].iter_mut().zip(ids) {
+                        d.2 = Some(id);
                     }
                 }
             }

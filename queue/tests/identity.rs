@@ -126,6 +126,50 @@ fn without_identity_frames_are_plain_dccl_and_received_messages_have_none() {
 }
 
 #[test]
+fn on_a_link_that_carries_the_transmission_the_identity_goes_beside_the_frames() {
+    // A UDP link: the frames are plain DCCL (Goby3's bytes), every byte the
+    // messages', and the identities travel in `frame_identity`.
+    let mut sender = node(1, true, true);
+    sender.manager.set_identity_beside_frames(0, true);
+    let mut receiver = node(2, true, true);
+    sender.push("Status", 1, 2, 4);
+    sender.push("Status", 1, 2, 5);
+    sender.push("Status", 1, 2, 6);
+    sender.clock.advance_seconds(10.0);
+    let first = sender.request(64, 2, -1);
+    let codec = sender.manager.codec().clone();
+    let encoded = codec.encode(&sender.message("Status", 1, 2, 4)).unwrap();
+    assert_eq!(first.frame.len(), 2);
+    assert_eq!(first.frame[0].len(), 3 * encoded.len(), "no trailer");
+    assert_eq!(first.frame_identity.len(), 1, "{:?}", first.frame_identity);
+    let trailer = queue::TrailerCodec::new();
+    assert_eq!(first.frame_identity[0].len(), trailer.size(3));
+    let a = received(&mut receiver, &first);
+    assert_eq!(a.len(), 3);
+    assert!(a.iter().all(|r| r.identity.is_some_and(|i| !i.resent)));
+    // No ack came: sent again, the same numbers, marked resent.
+    sender.clock.advance_seconds(10.0);
+    let again = sender.request(64, 1, -1);
+    assert_eq!(again.frame[0].len(), 3 * encoded.len());
+    let b = received(&mut receiver, &again);
+    assert_eq!(b.len(), 3);
+    let numbers = |got: &[ReceivedMessage]| {
+        let mut n: Vec<u16> = got.iter().map(|r| r.identity.unwrap().number).collect();
+        n.sort();
+        n
+    };
+    assert_eq!(numbers(&a), numbers(&b));
+    assert!(b.iter().all(|r| r.identity.unwrap().resent));
+    // Another link of the same queue still ends its frames with the trailer.
+    let mut other = node(1, true, false);
+    other.push("Status", 1, 2, 7);
+    other.clock.advance_seconds(10.0);
+    let tx = other.request(64, 1, -1);
+    assert!(tx.frame_identity.is_empty());
+    assert_eq!(tx.frame[0].len(), encoded.len() + trailer.size(1));
+}
+
+#[test]
 fn a_receiver_without_the_trailer_type_keeps_the_messages_before_it() {
     // What Goby3 does with a frame it cannot decode to the end: the
     // messages decoded so far are kept.

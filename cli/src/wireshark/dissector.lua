@@ -896,10 +896,11 @@ local uf = {
   acked_frame = ProtoField.int32("goby_udp.acked_frame", "Acknowledged frame"),
   unique_id = ProtoField.uint32("goby_udp.unique_id", "Unique id"),
   frame = ProtoField.bytes("goby_udp.frame", "Frame"),
+  frame_identity = ProtoField.bytes("goby_udp.frame_identity", "Frame identity (gobyd)"),
   other = ProtoField.string("goby_udp.other", "Other field"),
 }
 goby_udp.fields = { uf.src, uf.dest, uf.time, uf.type, uf.rate, uf.ack_requested,
-  uf.frame_start, uf.acked_frame, uf.unique_id, uf.frame, uf.other }
+  uf.frame_start, uf.acked_frame, uf.unique_id, uf.frame, uf.frame_identity, uf.other }
 
 -- A varint at bytes[at ..]: (low 32 bits exact, the whole as a double, next offset).
 local function varint(bytes, at, last)
@@ -961,6 +962,11 @@ function goby_udp.dissector(tvb, pinfo, tree)
           local frame = tvb(at, len)
           local sub = root:add(uf.frame, frame)
           frames = frames + dissect_frame(frame:tvb(), sub, ctx)
+        elseif number == 37 and len > 0 then
+          -- gobyd's identity of a frame's messages, beside the frames.
+          local identity = tvb(at, len)
+          local sub = root:add(uf.frame_identity, identity)
+          frames = frames + dissect_frame(identity:tvb(), sub, ctx)
         elseif number == 20 then
           local p = at
           while p < at + len do

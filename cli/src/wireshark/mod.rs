@@ -2,9 +2,10 @@
 //! messages of the user's `.proto` files, which decodes them, header and
 //! fields, found by their DCCL id, inside the UDP driver's datagrams (each
 //! a protobuf `goby.acomms.protobuf.ModemTransmission`, whose `frame`s hold
-//! DCCL messages back to back, then gobyd's `FrameIdentity` trailer and
-//! zero padding) and inside captures of raw frames (one frame a packet,
-//! on a `USER` link type).
+//! DCCL messages back to back, then zero padding, and whose
+//! `frame_identity` entries hold gobyd's `FrameIdentity` of each frame's
+//! messages) and inside captures of raw frames (one frame a packet, on a
+//! `USER` link type; a frame a modem carried ends with gobyd's trailer).
 //!
 //! The dissector is a schema written from the loaded types (each field's
 //! codec and its parameters, as DCCL's default codecs derive them from the

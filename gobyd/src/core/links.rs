@@ -166,7 +166,11 @@ impl Core {
         let now = self.clock.now();
         self.tell_link_states(now);
         let left = self.links[i].budget.as_mut().map(|b| b.left(now));
-        let before: usize = request.frame.iter().map(Vec::len).sum();
+        // The frames' bytes, and their identities where they go beside.
+        let bytes_of = |r: &ModemTransmission| -> usize {
+            r.frame.iter().chain(&r.frame_identity).map(Vec::len).sum()
+        };
+        let before = bytes_of(request);
         if let Some(left) = left {
             let left = usize::try_from(left).unwrap_or(usize::MAX);
             let bytes = request.max_frame_bytes.map_or(usize::MAX, |b| b as usize);
@@ -187,7 +191,7 @@ impl Core {
         if let Err(e) = filled {
             tracing::warn!("data request: {e}");
         }
-        let after: usize = request.frame.iter().map(Vec::len).sum();
+        let after = bytes_of(request);
         let spent = after.saturating_sub(before);
         if let (Some(budget), true) = (self.links[i].budget.as_mut(), spent > 0) {
             budget.spend(spent as u64, now);

@@ -725,6 +725,14 @@ fn open_outbox(
     {
         queue.set_links(links);
     }
+    // A UDP link carries the whole transmission: its frames' identities
+    // go beside them, and the frames are Goby3's.
+    for view in config::links::links(config) {
+        let beside = view
+            .driver
+            .is_some_and(modemdriver::check::carries_transmission);
+        queue.set_identity_beside_frames(view.index, beside);
+    }
     let journal_path = dir.join("outbox.journal");
     let (outbox, replay) = Outbox::open(queue, &journal_path)?;
     if replay.requeued > 0 || replay.discarded_bytes > 0 {
