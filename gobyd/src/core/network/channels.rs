@@ -11,10 +11,26 @@
 //! - fragments go on a channel only once the next hop acknowledged its
 //!   binding (the next hop records a binding, synced, before it
 //!   acknowledges it), so the receiver holds the binding they were sent
-//!   under;
+//!   under — unless the channel is *clean* (below);
 //! - a channel is bound again (to another transfer) only once none of the
 //!   fragments sent on it under the earlier binding waits in this node's
 //!   queue, so none can come after the new binding.
+//!
+//! A channel toward a next hop is clean when no node can hold a binding of
+//! it to a transfer still receiving: this node never bound it (its
+//! `transfers.log` was new when it started), or the last transfer it bound
+//! it to ended by its receiver's word (a selective ack saying complete,
+//! refused, checksum mismatch or expired, which every node between
+//! passed on). A transfer bound to a clean channel sends its first
+//! fragments *early*, with the binding ahead of them in the same packet,
+//! not a cycle later after its ack: a short transfer gains the cycle. Where
+//! the binding is lost and its fragments arrive, a node holds the
+//! channel unbound (they are refused and come again) or bound to a
+//! transfer that ended (they are acknowledged and dropped; the receiver's
+//! selective ack asks for them again), never to one still receiving. A
+//! transfer that ended any other way (its lifetime at this node, a
+//! restart) leaves its channels unclean, and the next binding of each
+//! waits for its ack.
 //!
 //! Sans-IO: this module keeps the sender's side ([`OutChannels`]); the
 //! receiver's bindings are on record in `transfers.log`
@@ -37,6 +53,8 @@ struct OutChannel {
     identity: Option<Identity>,
     /// The next hop acknowledged the binding: fragments may go on it.
     acked: bool,
+    /// Bound while clean: fragments may go before the binding's ack.
+    early: bool,
     /// This node's messages on it in the queue (its binding, fragments).
     queued: usize,
     /// From then on, with nothing queued, the channel is free (the
@@ -48,6 +66,12 @@ struct OutChannel {
 #[derive(Debug, Default)]
 pub struct OutChannels {
     map: BTreeMap<(i32, u8), OutChannel>,
+    /// Channels known clean (`true`) or not (`false`) since this node
+    /// started; the others are as [`Self::fresh`] says.
+    clean: BTreeMap<(i32, u8), bool>,
+    /// This node never bound a channel before it started (its
+    /// `transfers.log` was new): every channel not in `clean` is clean.
+    fresh: bool,
 }
 
 /// The state of a transfer's channel toward a next hop.
@@ -55,37 +79,77 @@ pub struct OutChannels {
 pub enum ChannelState {
     /// Bound and acknowledged: fragments may go on it.
     Open(u8),
+    /// Bound while clean, the binding not yet acknowledged: fragments may
+    /// go on it, behind the binding.
+    Early(u8),
     /// Bound, the binding not yet acknowledged.
     Binding(u8),
 }
 
 impl OutChannels {
+    /// No channel bound yet, every one clean when `fresh` (this node's
+    /// `transfers.log` is new: it never bound one), else every one unclean.
+    pub fn new(fresh: bool) -> Self {
+        OutChannels {
+            fresh,
+            ..Default::default()
+        }
+    }
+
     /// The channel bound to `identity` toward `next`, if any.
     pub fn find(&self, next: i32, identity: Identity) -> Option<ChannelState> {
         self.map.iter().find_map(|((n, c), ch)| {
             (*n == next && ch.identity == Some(identity)).then_some(if ch.acked {
                 ChannelState::Open(*c)
+            } else if ch.early {
+                ChannelState::Early(*c)
             } else {
                 ChannelState::Binding(*c)
             })
         })
     }
 
+    /// Whether channel `c` toward `next` is clean (see the module).
+    fn is_clean(&self, next: i32, c: u8) -> bool {
+        self.clean.get(&(next, c)).copied().unwrap_or(self.fresh)
+    }
+
     /// Binds a free channel toward `next` to `identity`, free again (once
-    /// nothing on it is queued) from `until` at the latest; `None` when
-    /// every channel toward `next` is taken.
+    /// nothing on it is queued) from `until` at the latest: a clean one
+    /// when there is one ([`ChannelState::Early`]), else the first free
+    /// ([`ChannelState::Binding`]); `None` when every channel toward `next`
+    /// is taken. The channel is unclean from now until the transfer ends
+    /// by its receiver's word ([`cleared`](Self::cleared)).
     pub fn bind(&mut self, next: i32, identity: Identity, until: Micros) -> Option<u8> {
-        let c = (0..CHANNELS).find(|c| !self.map.contains_key(&(next, *c)))?;
+        let free = |c: &u8| !self.map.contains_key(&(next, *c));
+        let c = (0..CHANNELS)
+            .filter(free)
+            .find(|c| self.is_clean(next, *c))
+            .or_else(|| (0..CHANNELS).find(free))?;
+        let early = self.is_clean(next, c);
+        self.clean.insert((next, c), false);
         self.map.insert(
             (next, c),
             OutChannel {
                 identity: Some(identity),
                 acked: false,
+                early,
                 queued: 0,
                 free_from: until,
             },
         );
         Some(c)
+    }
+
+    /// Transfer `identity` ended by its receiver's word (its selective ack
+    /// with an outcome, which every node between passed on): the channels
+    /// bound to it are clean.
+    pub fn cleared(&mut self, identity: Identity) {
+        for (key, ch) in &self.map {
+            if ch.identity == Some(identity) {
+                self.clean.insert(*key, true);
+            }
+        }
     }
 
     /// Lets go of channel `c` toward `next` (its binding could not be
@@ -141,12 +205,14 @@ impl OutChannels {
         let ch = self.map.entry((next, c)).or_insert(OutChannel {
             identity,
             acked: false,
+            early: false,
             queued: 0,
             free_from: until,
         });
         if ch.identity.is_none() {
             ch.identity = identity;
         }
+        self.clean.insert((next, c), false);
         ch.free_from = ch.free_from.max(until);
         ch.queued += 1;
     }
@@ -196,6 +262,53 @@ mod tests {
         }
         assert_eq!(full.bind(2, (1, 99), 1_000), None);
         assert!(full.bind(3, (1, 99), 1_000).is_some());
+    }
+
+    #[test]
+    fn a_clean_channel_carries_fragments_before_its_binding_is_acknowledged() {
+        // A node that never bound a channel: each is clean.
+        let mut ch = OutChannels::new(true);
+        let (a, b, c) = ((1, 1), (1, 2), (1, 3));
+        let first = ch.bind(2, a, 1_000).unwrap();
+        assert_eq!(ch.find(2, a), Some(ChannelState::Early(first)));
+        ch.acked(2, first, a);
+        assert_eq!(ch.find(2, a), Some(ChannelState::Open(first)));
+        // Ended by its lifetime here, not by the receiver's word: the
+        // channel is unclean, and the next transfer takes a clean one.
+        ch.done(a, 10);
+        ch.sweep(20);
+        let second = ch.bind(2, b, 1_000).unwrap();
+        assert_ne!(second, first);
+        assert_eq!(ch.find(2, b), Some(ChannelState::Early(second)));
+        // Ended by the receiver's word: clean again, and taken first.
+        ch.cleared(b);
+        ch.done(b, 30);
+        ch.sweep(40);
+        assert_eq!(ch.bind(2, c, 1_000), Some(second));
+        assert_eq!(ch.find(2, c), Some(ChannelState::Early(second)));
+        // Every clean channel taken: an unclean one waits for its ack.
+        for n in 0..CHANNELS - 1 {
+            assert!(ch.bind(2, (1, 100 + u16::from(n)), 1_000).is_some());
+        }
+        let mut states: Vec<_> = (0..CHANNELS - 1)
+            .filter_map(|n| ch.find(2, (1, 100 + u16::from(n))))
+            .collect();
+        states.retain(|s| matches!(s, ChannelState::Binding(_)));
+        assert_eq!(states, [ChannelState::Binding(first)]);
+    }
+
+    #[test]
+    fn after_a_restart_no_channel_is_clean_until_a_receiver_ends_its_transfer() {
+        let mut ch = OutChannels::new(false);
+        let (a, b) = ((1, 1), (1, 2));
+        let c = ch.bind(2, a, 1_000).unwrap();
+        assert_eq!(ch.find(2, a), Some(ChannelState::Binding(c)));
+        ch.acked(2, c, a);
+        ch.cleared(a);
+        ch.done(a, 10);
+        ch.sweep(20);
+        assert_eq!(ch.bind(2, b, 1_000), Some(c));
+        assert_eq!(ch.find(2, b), Some(ChannelState::Early(c)));
     }
 
     #[test]

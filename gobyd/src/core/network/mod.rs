@@ -1278,7 +1278,8 @@ impl Network {
             return;
         };
         let identity = (a.final_dest, a.transfer as u16);
-        let Some(ChannelState::Open(channel)) = self.transfers.channels().find(from, identity)
+        let Some(ChannelState::Open(channel) | ChannelState::Early(channel)) =
+            self.transfers.channels().find(from, identity)
         else {
             return;
         };
@@ -1448,10 +1449,15 @@ impl Network {
         let channels = self.transfers.channels();
         let c = match channels.find(next, identity) {
             Some(ChannelState::Open(c)) => return RelayChannel::Open(next, c),
+            // Bound while clean: the fragments go behind the binding, which
+            // is queued, or is queued again now.
+            Some(ChannelState::Early(c)) if !channels.idle(next, c) => {
+                return RelayChannel::Open(next, c)
+            }
             Some(ChannelState::Binding(c)) if !channels.idle(next, c) => {
                 return RelayChannel::Waiting { journaled: false }
             }
-            Some(ChannelState::Binding(c)) => c,
+            Some(ChannelState::Early(c) | ChannelState::Binding(c)) => c,
             None => match channels.bind(next, identity, b.expires) {
                 Some(c) => c,
                 None => {
@@ -1476,8 +1482,14 @@ impl Network {
         let created = self.created_for(message.type_name(), lifetime, now);
         match outbox.accept(message.to_dynamic(), None, Some(created)) {
             Ok(_) => {
-                self.transfers.channels().queued(next, c);
-                RelayChannel::Waiting { journaled: true }
+                let channels = self.transfers.channels();
+                channels.queued(next, c);
+                if matches!(channels.find(next, identity), Some(ChannelState::Early(_))) {
+                    // The binding journaled now is synced with the fragment.
+                    RelayChannel::Open(next, c)
+                } else {
+                    RelayChannel::Waiting { journaled: true }
+                }
             }
             Err(e) => {
                 tracing::error!("a channel's binding toward node {next} not queued: {e}");

@@ -439,6 +439,9 @@ impl Transfers {
         now: Micros,
         entropy: &queue::Entropy,
     ) -> io::Result<Self> {
+        // A node that never had a transfers.log never bound a channel: each
+        // is clean (`super::channels`).
+        let fresh = !path.exists();
         let mut log = RecordLog::create_or_open(path, TRANSFERS)?;
         let bytes = log.read_all()?;
         let replayed = log.replay(&bytes, parse)?;
@@ -455,7 +458,7 @@ impl Transfers {
             queued: HashMap::new(),
             finals: HashMap::new(),
             bindings: HashMap::new(),
-            channels: OutChannels::default(),
+            channels: OutChannels::new(fresh),
             next_number: (queue::identity::start_number(entropy, "transfers.number") % 65_536)
                 as u16,
             next_client: CLIENT_ID_BASE
@@ -896,16 +899,22 @@ impl Transfers {
         let identity = (self.me, number);
         let channel = match self.channels.find(next, identity) {
             Some(ChannelState::Open(c)) => return Some((next, c)),
-            Some(ChannelState::Binding(c)) => c,
+            Some(ChannelState::Early(c) | ChannelState::Binding(c)) => c,
             None => self.channels.bind(next, identity, o.expires)?,
         };
+        // Bound while clean: its fragments go behind the binding, at once.
+        let early = matches!(
+            self.channels.find(next, identity),
+            Some(ChannelState::Early(_))
+        )
+        .then_some((next, channel));
         let binding = Queued::Channel {
             number,
             next,
             channel,
         };
         if self.queued.values().any(|q| *q == binding) {
-            return None;
+            return early;
         }
         let lifetime = ((o.expires - now) / SECOND).clamp(1, 1_048_575) as u32;
         let message = NetMessage::Channel(FragmentChannel {
@@ -925,11 +934,14 @@ impl Transfers {
             Ok(Some(id)) => {
                 self.queued.insert(id, binding);
                 self.channels.queued(next, channel);
+                early
             }
-            Ok(None) => {}
-            Err(e) => tracing::error!("transfer {number}: its channel's binding not queued: {e}"),
+            Ok(None) => None,
+            Err(e) => {
+                tracing::error!("transfer {number}: its channel's binding not queued: {e}");
+                None
+            }
         }
-        None
     }
 
     /// Queues fragments of transfer `number` on `channel` toward `next`,
@@ -1315,7 +1327,12 @@ impl Transfers {
             fragment_ack::Outcome::Expired => Some(Outcome::Expired),
         };
         match outcome {
-            Some(outcome) => self.end(number, outcome, now, produced),
+            Some(outcome) => {
+                // Ended by the receiver's word: no node holds its channels
+                // bound to a transfer still receiving.
+                self.channels.cleared((self.me, number));
+                self.end(number, outcome, now, produced)
+            }
             None => {
                 if !new.is_empty() {
                     if let Some(o) = self.out.get(&number) {
@@ -1530,6 +1547,7 @@ impl Transfers {
     /// The end of a transfer this node relays went by (its receiver's last
     /// ack): its channels are free once nothing on them waits.
     pub fn relayed_end(&mut self, origin: i32, number: u16, now: Micros) {
+        self.channels.cleared((origin, number));
         self.channels.done((origin, number), now);
     }
 
