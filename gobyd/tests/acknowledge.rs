@@ -20,7 +20,7 @@ use prost_reflect::ReflectMessage;
 use protos::goby::acomms::protobuf::modem_transmission::TransmissionType;
 use protos::goby::example::Command;
 use queue::{TrailerCodec, WireIdentity};
-use support::daemon::{free_udp_port, scratch};
+use support::daemon::{free_udp_port, publish_command_reply, scratch};
 use support::node::{Entry, Node, Udp};
 use tokio::net::UdpSocket;
 
@@ -38,20 +38,42 @@ fn config(port: u16, peer: u16, data_dir: &std::path::Path) -> Node {
         .raw_log(true)
 }
 
+/// The messages the daemon handed over (each a `Command` noted "once").
+fn handed_over(
+    events: &mut tokio::sync::broadcast::Receiver<std::sync::Arc<DaemonEvent>>,
+) -> usize {
+    let mut handed = 0;
+    while let Ok(e) = events.try_recv() {
+        if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
+            assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
+            handed += 1;
+        }
+    }
+    handed
+}
+
 /// The next ACK datagram on `socket`.
 async fn next_ack(socket: &UdpSocket) -> ModemTransmission {
+    next_where(socket, |mt| mt.r#type() == TransmissionType::Ack).await
+}
+
+/// The next datagram on `socket` that `wanted` takes.
+async fn next_where(
+    socket: &UdpSocket,
+    wanted: impl Fn(&ModemTransmission) -> bool,
+) -> ModemTransmission {
     let mut buf = vec![0u8; 4096];
     tokio::time::timeout(LIMIT, async {
         loop {
             let (n, _) = socket.recv_from(&mut buf).await.unwrap();
             let mt = ModemTransmission::decode(&buf[..n]).unwrap();
-            if mt.r#type() == TransmissionType::Ack {
+            if wanted(&mt) {
                 return mt;
             }
         }
     })
     .await
-    .expect("an ack")
+    .expect("the datagram waited for")
 }
 
 #[tokio::test]
@@ -136,34 +158,12 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
 
     let _ = stop.send(());
     run.await.unwrap().unwrap();
-    let mut handed = 0;
-    while let Ok(e) = events.try_recv() {
-        if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
-            assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
-            handed += 1;
-        }
-    }
+    let handed = handed_over(&mut events);
     assert_eq!(
         handed, 5,
         "the publication once, the same content published again, the one whose first sending was lost, two receptions without identity"
     );
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// The next DATA datagram on `socket`.
-async fn next_data(socket: &UdpSocket) -> ModemTransmission {
-    let mut buf = vec![0u8; 4096];
-    tokio::time::timeout(LIMIT, async {
-        loop {
-            let (n, _) = socket.recv_from(&mut buf).await.unwrap();
-            let mt = ModemTransmission::decode(&buf[..n]).unwrap();
-            if mt.r#type() == TransmissionType::Data && !mt.frame.iter().all(Vec::is_empty) {
-                return mt;
-            }
-        }
-    })
-    .await
-    .expect("a data transmission")
 }
 
 #[tokio::test]
@@ -189,22 +189,19 @@ async fn over_udp_the_identity_goes_beside_the_frames_both_ways() {
 
     // Sent: the frame is the message's DCCL bytes alone (Goby3's frame),
     // its identity in `frame_identity`.
+    publish_command_reply(&publisher, 2, "out")
+        .await
+        .expect("accepted");
     let out = Command {
         destination: 2,
-        action: 2,
+        action: 1,
         note: Some("out".into()),
         ..Default::default()
     };
-    let (reply, accepted) = tokio::sync::oneshot::channel();
-    publisher
-        .send(gobyd::event::Publish::new(
-            out.transcode_to_dynamic(),
-            reply,
-        ))
-        .await
-        .unwrap();
-    accepted.await.unwrap().expect("accepted");
-    let sent = next_data(&peer).await;
+    let sent = next_where(&peer, |mt| {
+        mt.r#type() == TransmissionType::Data && !mt.frame.iter().all(Vec::is_empty)
+    })
+    .await;
     let plain_out = codec.encode(&out.transcode_to_dynamic()).unwrap();
     assert_eq!(sent.frame[0], plain_out, "no trailer in the frame");
     let ids = trailer
@@ -242,13 +239,7 @@ async fn over_udp_the_identity_goes_beside_the_frames_both_ways() {
 
     let _ = stop.send(());
     run.await.unwrap().unwrap();
-    let mut handed = 0;
-    while let Ok(e) = events.try_recv() {
-        if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
-            assert_eq!(r.message.transcode_to::<Command>().unwrap().note(), "once");
-            handed += 1;
-        }
-    }
+    let handed = handed_over(&mut events);
     assert_eq!(
         handed, 2,
         "the publication once, then the repeat on purpose"

@@ -52,6 +52,23 @@ fn line_node(id: i32, dir: &Path, rate: u32, slot: f64, loss: f64) -> Node {
         .data_dir(&data_dir(dir, id))
 }
 
+/// The configurations of the line 1 – 2 – 3 (as [`line_node`]) with
+/// Goby3's static route `hop: 1 hop: 2 hop: 3` and the network layer on.
+fn routed_line(
+    dir: &Path,
+    rate: u32,
+    slot: f64,
+    loss: f64,
+) -> Vec<protos::goby::apps::protobuf::GobydConfig> {
+    (1..=3)
+        .map(|id| {
+            line_node(id, dir, rate, slot, loss)
+                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
+                .config()
+        })
+        .collect()
+}
+
 fn config(id: i32, dir: &Path, rate: u32, slot: f64) -> protos::goby::apps::protobuf::GobydConfig {
     let proto = dir.join("blob.proto");
     if !proto.exists() {
@@ -423,13 +440,7 @@ async fn a_relay_does_not_send_again_fragments_the_receiver_says_it_has() {
     use std::sync::Arc;
 
     let dir = scratch("transfer", "relay-held");
-    let configs: Vec<_> = (1..=3)
-        .map(|id| {
-            line_node(id, &dir, 2, 8.0, 0.0)
-                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
-                .config()
-        })
-        .collect();
+    let configs = routed_line(&dir, 2, 8.0, 0.0);
     let fleet = Fleet::start(configs).await;
     // Frames of the relay's data packets to 3 (a fragment each, but the
     // channel's binding).
@@ -495,13 +506,7 @@ async fn a_file_through_the_relay_keeps_pace_with_the_tdma_limit() {
     // cycles, so that the cycle each hop's channel binding takes at the
     // start weighs little.
     let (rate, slot) = (2, 8.0);
-    let configs: Vec<_> = (1..=3)
-        .map(|id| {
-            line_node(id, &dir, rate, slot, 0.0)
-                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
-                .config()
-        })
-        .collect();
+    let configs = routed_line(&dir, rate, slot, 0.0);
     let frame = gobyd::internals::network::frame_bytes(&configs[0]);
     let mut codec = dccl::Codec::new();
     gobyd::internals::network::wire::load(&mut codec).unwrap();
@@ -557,13 +562,7 @@ async fn a_short_file_goes_in_the_packet_of_its_channels_binding() {
     // channel, the fragments would wait a cycle for the binding's ack.
     let dir = scratch("transfer", "early");
     let (rate, slot) = (5, 6.0);
-    let configs: Vec<_> = (1..=3)
-        .map(|id| {
-            line_node(id, &dir, rate, slot, 0.0)
-                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
-                .config()
-        })
-        .collect();
+    let configs = routed_line(&dir, rate, slot, 0.0);
     let fleet = Fleet::start(configs).await;
     let cycle = Duration::from_secs_f64(3.0 * slot);
     // More transfers than channels (16): the later ones reuse channels
@@ -625,13 +624,7 @@ async fn transfers_on_clean_channels_stay_whole_when_bindings_are_lost() {
     // once with its own bytes.
     let dir = scratch("transfer", "early-lossy");
     let (rate, slot) = (5, 6.0);
-    let configs: Vec<_> = (1..=3)
-        .map(|id| {
-            line_node(id, &dir, rate, slot, 0.3)
-                .extra("network { route { hop: 1 hop: 2 hop: 3 } }")
-                .config()
-        })
-        .collect();
+    let configs = routed_line(&dir, rate, slot, 0.3);
     let fleet = Fleet::start(configs).await;
     let mut contents = Vec::new();
     for round in 0..20usize {
