@@ -170,6 +170,13 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
     )?;
     if let Some(satellite) = &report.satellite_use {
         writeln!(stdout, "  satellite: {}", satellite_use_words(satellite))?;
+        if report.total.expired > 0 {
+            writeln!(
+                stdout,
+                "  hint: {}",
+                satellite_expiry_hint(report.total.expired)
+            )?;
+        }
     }
     for path in written {
         writeln!(stdout, "wrote {}", path.display())?;
@@ -187,6 +194,18 @@ pub fn run(args: &SimArgs, stdout: &mut dyn Write) -> Result<Status, CliError> {
 
 /// Writes the run's page ([`crate::sim_page`]) where the scenario's
 /// `report { html: ... }` says, in the output directory.
+/// Why messages may expire in a run with a satellite link, and what to set
+/// (the summary's hint when `expired` of them did).
+fn satellite_expiry_hint(expired: u64) -> String {
+    format!(
+        "{expired} expired in a run with a satellite link: a vehicle's messages wait for its \
+         sessions, and copies sent again while it is down queue at the gateway ahead of newer \
+         messages; give the Iridium links a minimum_ack_wait_seconds of about the time a vehicle \
+         stays down and the types a ttl longer than the longest dive (docs/sim.md, \
+         \"Iridium, on the satellite\")"
+    )
+}
+
 /// What the nodes did with the satellite, in words (the summary's line,
 /// the page's paragraph): the data sent and heard, the data that failed
 /// to go and the messages the gateway refused, when there were some.

@@ -71,6 +71,42 @@ fn the_surfacing_example_tells_the_satellite_in_its_summary_and_page() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// The same example with a ttl shorter than the AUV's time out of reach:
+/// messages expire, and the summary says what to set.
+#[test]
+fn expiries_on_the_satellite_come_with_a_hint() {
+    let out = scratch("surfacing-ttl");
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/examples");
+    for name in [
+        "surfacing.pb.txt",
+        "surfacing-ship.pb.txt",
+        "surfacing-auv.pb.txt",
+    ] {
+        let text = std::fs::read_to_string(examples.join(name)).unwrap();
+        std::fs::write(out.join(name), text.replace("ttl: 7200", "ttl: 600")).unwrap();
+    }
+    let run = goby(&[
+        "sim",
+        out.join("surfacing.pb.txt").to_str().unwrap(),
+        "--out",
+        out.join("run").to_str().unwrap(),
+    ]);
+    let stdout = stdout_text(&run);
+    assert!(run.status.success(), "{stdout}{}", stderr_text(&run));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run/report.json")).unwrap())
+            .unwrap();
+    let expired = report["total"]["expired"].as_u64().unwrap();
+    assert!(expired > 0, "{}", report["total"]);
+    assert!(
+        stdout.contains(&format!(
+            "  hint: {expired} expired in a run with a satellite link: a vehicle's messages wait"
+        )) && stdout.contains("minimum_ack_wait_seconds"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 #[test]
 fn the_example_fleet_runs_and_writes_its_report_and_ledger() {
     let out = scratch("run");

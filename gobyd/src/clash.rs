@@ -7,9 +7,15 @@
 //! - the JSON interface's TCP or UDP address is taken, or is not an
 //!   address of this machine (an interface not up yet, or a typo), and so
 //!   is a UDP driver's local port (the top-level driver's or a link's);
+//! - a link's serial port (its modem's adapter) does not exist now: the
+//!   daemon starts, that link down until it is there (a lone driver's
+//!   missing port is refused by the check itself);
 //! - another configuration file in the same directory leaves `data_dir`
 //!   unset too: both daemons, started from there, would take the default
 //!   data directory (and, when both leave `json` unset, the same port).
+//!
+//! A clash that stops the daemon is an error; one that leaves only a link
+//! down (a link's UDP port or serial adapter) is a warning.
 //!
 //! Nothing is created or kept: the lock is tried on the existing lock file
 //! and released at once, the addresses are bound and let go.

@@ -404,7 +404,8 @@ pub fn read(text: &str, origin: &str, layout: Layout) -> Result<Read, ConfigErro
     }
     for view in links::links(&config) {
         let single = view.single(&config);
-        if let Some(text) = mixed_fleet_ack_note(&single) {
+        let setting = view.field("driver.micromodem.use_application_acks");
+        if let Some(text) = mixed_fleet_ack_note(&single, &setting) {
             let field = view.field("driver.driver_type");
             found.note(places.offset(&field), NoteLevel::Info, text);
         }
@@ -2130,8 +2131,9 @@ fn slot_kinds(config: &GobydConfig) -> (Vec<usize>, bool) {
 /// needs. Goby3's pAcommsHandler reads application acks in Flexible Data
 /// Protocol packets only: in data cycles it takes its acks from the modem
 /// and cannot decode a frame that starts with the ack message; the modem
-/// acknowledges no FDP packet.
-fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
+/// acknowledges no FDP packet. `setting`: where the setting is written
+/// (`driver.micromodem.use_application_acks`, or within a `link`).
+fn mixed_fleet_ack_note(config: &GobydConfig, setting: &str) -> Option<String> {
     let driver = config.driver.as_ref()?;
     let micromodem = driver.driver
         == Some(driver_config::Driver::DriverType(
@@ -2145,29 +2147,26 @@ fn mixed_fleet_ack_note(config: &GobydConfig) -> Option<String> {
         return None;
     }
     Some(match slot_kinds(config) {
-        (fdp, _) if fdp.is_empty() => {
-            "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+        (fdp, _) if fdp.is_empty() => format!(
+            "{setting} is not set: gobyd sends application acks, \
              which Goby3's pAcommsHandler cannot read in a data cycle (in a fleet with Goby3 nodes, \
              set it false on every gobyd node)"
-                .to_string()
-        }
-        (_, false) => {
-            "driver.micromodem.use_application_acks is not set: gobyd sends application acks, \
+        ),
+        (_, false) => format!(
+            "{setting} is not set: gobyd sends application acks, \
              as its Flexible Data Protocol slots need (the modem acknowledges no FDP packet); in a \
              fleet with Goby3 nodes, set use_application_acks: true in their \
              [goby.acomms.micromodem.protobuf.config] too"
-                .to_string()
-        }
+        ),
         (_, true) => {
-            "driver.micromodem.use_application_acks is not set: gobyd sends application acks in \
+            format!("{setting} is not set: gobyd sends application acks in \
              its data and FDP slots alike; Goby3 reads application acks in FDP packets only and \
              cannot decode a data-cycle frame that starts with one, while without them FDP packets \
              are never acknowledged: in a fleet with Goby3 nodes, set application_acks: FDP_ONLY \
              here (data cycles then go plain and are acked by the modem; acks owed ride in FDP \
              packets), use_application_acks: true in the Goby3 nodes' \
              [goby.acomms.micromodem.protobuf.config], and put a gobyd FDP slot between any two \
-             slots of a Goby3 node"
-                .to_string()
+             slots of a Goby3 node")
         }
     })
 }
@@ -2312,6 +2311,28 @@ mod tests {
                 && problems[0].starts_with("mac.slot[0].rate: 9 is not a Micro-Modem rate")
                 && problems[1].starts_with("mac.slot[1].slot_seconds"),
             "{problems:?}"
+        );
+    }
+
+    /// The note on a Micro-Modem's application acks names the setting
+    /// where it is written: within its `link` in the link form.
+    #[test]
+    fn the_application_ack_note_names_the_links_setting() {
+        let text = r#"modem_id: 1
+link {
+  name: "acoustic"
+  driver { driver_type: DRIVER_WHOI_MICROMODEM serial_port: "/dev/ttyUSB9" }
+  mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 rate: 0 slot_seconds: 10 } }
+}
+"#;
+        let read = read(text, "gobyd.pb.txt", Layout::File).expect("read");
+        let notes: Vec<String> = read.notes.iter().map(ToString::to_string).collect();
+        assert!(
+            notes.iter().any(|n| n.contains(
+                "link[0].driver.micromodem.use_application_acks is not set: gobyd sends \
+                 application acks, which Goby3's pAcommsHandler cannot read"
+            )),
+            "{notes:?}"
         );
     }
 
