@@ -180,6 +180,10 @@ struct CommandView {
     journal_id: Value,
     /// Who acknowledged it, or why it was refused.
     note: String,
+    /// A MAC request refused by its outcome on `mac_cycle` or
+    /// `mac_active`: the bridge tells the same refusal on `error` too, and
+    /// that notice is this command's, not a later one's.
+    echo_due: bool,
 }
 
 /// Whether two JSON forms of a message of a type are the same message
@@ -343,7 +347,16 @@ impl ConsoleState {
                     "kind": "error", "node": node, "time": time, "topic": topic, "error": error,
                 });
                 self.log(entry, &mut events);
-                if let Some(c) = self.commands.iter_mut().find(|c| {
+                // A MAC request's refusal comes on its outcome's topic and
+                // here both, in either order: the notice of one already
+                // refused that way answers no later command.
+                if let Some(c) = self
+                    .commands
+                    .iter_mut()
+                    .find(|c| c.echo_due && c.node == node && &c.topic == topic && &c.note == error)
+                {
+                    c.echo_due = false;
+                } else if let Some(c) = self.commands.iter_mut().find(|c| {
                     c.state == CommandState::Published && c.node == node && &c.topic == topic
                 }) {
                     c.state = CommandState::Refused;
@@ -536,6 +549,8 @@ impl ConsoleState {
             return;
         };
         let id = c.id;
+        // The bridge tells a refusal on `error` too.
+        c.echo_due = outcome.is_err();
         if let Some(event) = self.command_settled(id, outcome, time) {
             events.push(event);
         }
@@ -731,6 +746,7 @@ impl ConsoleState {
             changed: now,
             journal_id: Value::Null,
             note: String::new(),
+            echo_due: false,
         };
         let view = command_json(&c);
         push_capped(&mut self.commands, c, COMMANDS_KEPT);
@@ -1291,6 +1307,15 @@ mod tests {
             s.command_sent("auv2", "mac_update", "fleet/auv2/mac_update", &clear, 102.0);
         apply(&mut s, "fleet/auv2/mac_cycle", refusal);
         assert_eq!(s.command_state(cleared), Some(CommandState::Published));
+        // The bridge tells the ERASE's refusal on `error` as well, here
+        // after the CLEAR went out: it is the ERASE's, not the CLEAR's.
+        apply(
+            &mut s,
+            "fleet/auv2/error",
+            r#"{"error": "9 is outside the cycle", "topic": "fleet/auv2/mac_update"}"#,
+        );
+        assert_eq!(s.command_state(cleared), Some(CommandState::Published));
+        assert_eq!(s.command_state(erased), Some(CommandState::Refused));
         apply(
             &mut s,
             "fleet/auv2/mac_cycle",
