@@ -36,6 +36,13 @@ impl MacKind {
             MacKind::Switch => "mac_switch",
         }
     }
+
+    /// The kind whose [`word`](Self::word) is `word`.
+    pub fn of_word(word: &str) -> Option<Self> {
+        [MacKind::Update, MacKind::Switch]
+            .into_iter()
+            .find(|k| k.word() == word)
+    }
 }
 
 /// What the console knows of one node's medium access.

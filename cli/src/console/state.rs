@@ -180,10 +180,20 @@ struct CommandView {
     journal_id: Value,
     /// Who acknowledged it, or why it was refused.
     note: String,
-    /// A MAC request refused by its outcome on `mac_cycle` or
-    /// `mac_active`: the bridge tells the same refusal on `error` too, and
-    /// that notice is this command's, not a later one's.
-    echo_due: bool,
+    /// A MAC request refused on one of the two topics the bridge tells a
+    /// refusal on (its outcome's, `mac_cycle` or `mac_active`, and
+    /// `error`): the same refusal still to come on the other is this
+    /// command's, not a later one's.
+    echo_due: Option<Echo>,
+}
+
+/// Where the other telling of a MAC request's refusal is still to come.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Echo {
+    /// On the node's `error` topic.
+    Error,
+    /// On its outcome's topic (`mac_cycle`, `mac_active`).
+    Outcome,
 }
 
 /// Whether two JSON forms of a message of a type are the same message
@@ -350,15 +360,18 @@ impl ConsoleState {
                 // A MAC request's refusal comes on its outcome's topic and
                 // here both, in either order: the notice of one already
                 // refused that way answers no later command.
-                if let Some(c) = self
-                    .commands
-                    .iter_mut()
-                    .find(|c| c.echo_due && c.node == node && &c.topic == topic && &c.note == error)
-                {
-                    c.echo_due = false;
+                if let Some(c) = self.commands.iter_mut().find(|c| {
+                    c.echo_due == Some(Echo::Error)
+                        && c.node == node
+                        && &c.topic == topic
+                        && &c.note == error
+                }) {
+                    c.echo_due = None;
                 } else if let Some(c) = self.commands.iter_mut().find(|c| {
                     c.state == CommandState::Published && c.node == node && &c.topic == topic
                 }) {
+                    // A MAC request's outcome comes on its own topic too.
+                    c.echo_due = MacKind::of_word(&c.type_name).map(|_| Echo::Outcome);
                     c.state = CommandState::Refused;
                     c.note = error.clone();
                     c.changed = time;
@@ -537,20 +550,37 @@ impl ConsoleState {
         time: f64,
         events: &mut Vec<Value>,
     ) {
+        let answered = |c: &CommandView| {
+            answers
+                .as_ref()
+                .is_none_or(|a| c.msg.get("update_type").is_none_or(|t| t == a))
+        };
+        // The refusal of a request already refused on `error`.
+        if let Err(reason) = &outcome {
+            if let Some(c) = self.commands.iter_mut().find(|c| {
+                c.echo_due == Some(Echo::Outcome)
+                    && c.node == node
+                    && c.type_name == kind.word()
+                    && &c.note == reason
+            }) {
+                if answered(c) {
+                    c.echo_due = None;
+                    return;
+                }
+            }
+        }
         let Some(c) = self.commands.iter_mut().find(|c| {
             c.state == CommandState::Published
                 && c.node == node
                 && c.type_name == kind.word()
                 && c.topic.ends_with(&format!("/{}", kind.word()))
-                && answers
-                    .as_ref()
-                    .is_none_or(|a| c.msg.get("update_type").is_none_or(|t| t == a))
+                && answered(c)
         }) else {
             return;
         };
         let id = c.id;
         // The bridge tells a refusal on `error` too.
-        c.echo_due = outcome.is_err();
+        c.echo_due = outcome.is_err().then_some(Echo::Error);
         if let Some(event) = self.command_settled(id, outcome, time) {
             events.push(event);
         }
@@ -746,7 +776,7 @@ impl ConsoleState {
             changed: now,
             journal_id: Value::Null,
             note: String::new(),
-            echo_due: false,
+            echo_due: None,
         };
         let view = command_json(&c);
         push_capped(&mut self.commands, c, COMMANDS_KEPT);
@@ -1322,6 +1352,23 @@ mod tests {
             r#"{"slot": [], "running": false, "modem_id": 2, "from": "mqtt", "update": {"update_type": "CLEAR"}}"#,
         );
         assert_eq!(s.command_state(cleared), Some(CommandState::Applied));
+        // The other order: a second ERASE refused on `error` first; its
+        // outcome on `mac_cycle`, come after a third ERASE went out, is
+        // the second's, not the third's.
+        let (second_erase, _) =
+            s.command_sent("auv2", "mac_update", "fleet/auv2/mac_update", &erase, 103.0);
+        apply(
+            &mut s,
+            "fleet/auv2/error",
+            r#"{"error": "9 is outside the cycle", "topic": "fleet/auv2/mac_update"}"#,
+        );
+        assert_eq!(s.command_state(second_erase), Some(CommandState::Refused));
+        let (third_erase, _) =
+            s.command_sent("auv2", "mac_update", "fleet/auv2/mac_update", &erase, 104.0);
+        apply(&mut s, "fleet/auv2/mac_cycle", refusal);
+        assert_eq!(s.command_state(third_erase), Some(CommandState::Published));
+        apply(&mut s, "fleet/auv2/mac_cycle", refusal);
+        assert_eq!(s.command_state(third_erase), Some(CommandState::Refused));
         apply(
             &mut s,
             "fleet/auv2/mac_active",
@@ -1343,7 +1390,9 @@ mod tests {
                 "the cycle after the update cannot run",
                 "no MAC named loud",
                 "9 is outside the cycle",
-                "0 slots, stopped"
+                "0 slots, stopped",
+                "9 is outside the cycle",
+                "9 is outside the cycle"
             ]
         );
         // An answer from the JSON interface settles its command by id,
