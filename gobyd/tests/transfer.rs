@@ -268,6 +268,12 @@ async fn a_large_message_and_a_file_cross_the_relay_and_commands_overtake_them()
         .iter()
         .any(|e| e.id == file_id));
     assert_eq!(written.iter().filter(|e| e.name == "survey.bin").count(), 1);
+    // The message's transfer is named by its type at the receiver too.
+    assert_eq!(
+        written.iter().filter(|e| e.name == "test.Blob").count(),
+        1,
+        "{written:?}"
+    );
     // The commands: each once at 3, acked end to end, before the file
     // was whole.
     let file_done = seen

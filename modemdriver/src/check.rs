@@ -45,6 +45,14 @@ pub fn largest_frame(config: &DriverConfig) -> Option<usize> {
     both_ways(config).map(|l| l.outgoing)
 }
 
+/// The largest frame the driver of `config` sends at Goby rate `rate`
+/// ([`DriverKind::frame_at_rate`](crate::kind::DriverKind::frame_at_rate)):
+/// `None` for a configuration naming no driver built in, or a rate it
+/// does not have.
+pub fn frame_at_rate(config: &DriverConfig, rate: i32) -> Option<usize> {
+    built_in::of(config).ok()?.frame_at_rate(config, rate)
+}
+
 /// Whether the driver of `config` carries the whole `ModemTransmission`
 /// ([`DriverKind::carries_transmission`](crate::kind::DriverKind::carries_transmission)):
 /// `false` for a configuration naming no driver built in.

@@ -121,6 +121,18 @@ pub trait DriverKind: Send + Sync + 'static {
         self.packet_time(config, rate)
     }
 
+    /// The largest frame it sends at Goby rate `rate`, bytes, as the data
+    /// requests of a slot at that rate will ask for: by default a
+    /// Micro-Modem's frame at the rate (the WHOI rate table), which the
+    /// drivers whose frames a rate sets otherwise say for themselves; `None`
+    /// for a rate it does not have.
+    fn frame_at_rate(&self, config: &DriverConfig, rate: i32) -> Option<usize> {
+        match self.packet_time(config, rate) {
+            Some(p) => Some(p.spec.frame_bytes as usize),
+            None => crate::rate::spec(rate).map(|s| s.frame_bytes as usize),
+        }
+    }
+
     /// Whether the whole `ModemTransmission` crosses its link (its protobuf
     /// encoding, as the UDP drivers send it), so that what the queue writes
     /// beside the frames reaches the receiver: each frame's identity then

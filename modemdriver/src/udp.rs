@@ -113,6 +113,14 @@ impl DriverKind for UdpDriver {
         true
     }
 
+    /// `udp.max_frame_size` at every rate (the driver's frame limit).
+    fn frame_at_rate(&self, config: &DriverConfig, _rate: i32) -> Option<usize> {
+        let udp = config.udp.as_ref()?;
+        usize::try_from(udp.max_frame_size())
+            .ok()
+            .filter(|b| *b > 0)
+    }
+
     fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
         Box::pin(UdpDriver::start(config))
     }

@@ -215,6 +215,17 @@ impl DriverKind for UdpMulticastDriver {
         true
     }
 
+    /// The frame of `rate_to_bytes` for the rate, else `max_frame_size`.
+    fn frame_at_rate(&self, config: &DriverConfig, rate: i32) -> Option<usize> {
+        let s = settings(config).ok()?;
+        let bytes = s
+            .rate_to_bytes
+            .iter()
+            .find(|(r, _)| *r == rate)
+            .map_or(s.max_frame_size, |(_, b)| *b);
+        usize::try_from(bytes).ok()
+    }
+
     fn start<'a>(&'a self, config: &'a DriverConfig) -> Starting<'a> {
         Box::pin(async move { UdpMulticastDriver::start(config) })
     }

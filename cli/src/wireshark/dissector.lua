@@ -895,12 +895,17 @@ local uf = {
   frame_start = ProtoField.uint32("goby_udp.frame_start", "First frame"),
   acked_frame = ProtoField.int32("goby_udp.acked_frame", "Acknowledged frame"),
   unique_id = ProtoField.uint32("goby_udp.unique_id", "Unique id"),
+  max_num_frames = ProtoField.uint32("goby_udp.max_num_frames", "Most frames"),
+  max_frame_bytes = ProtoField.uint32("goby_udp.max_frame_bytes", "Most bytes a frame"),
+  slot_seconds = ProtoField.double("goby_udp.slot_seconds", "Slot (s)"),
+  slot_index = ProtoField.int32("goby_udp.slot_index", "Slot index"),
   frame = ProtoField.bytes("goby_udp.frame", "Frame"),
   frame_identity = ProtoField.bytes("goby_udp.frame_identity", "Frame identity (gobyd)"),
   other = ProtoField.string("goby_udp.other", "Other field"),
 }
 goby_udp.fields = { uf.src, uf.dest, uf.time, uf.type, uf.rate, uf.ack_requested,
-  uf.frame_start, uf.acked_frame, uf.unique_id, uf.frame, uf.frame_identity, uf.other }
+  uf.frame_start, uf.acked_frame, uf.unique_id, uf.max_num_frames, uf.max_frame_bytes,
+  uf.slot_seconds, uf.slot_index, uf.frame, uf.frame_identity, uf.other }
 
 -- A varint at bytes[at ..]: (low 32 bits exact, the whole as a double, next offset).
 local function varint(bytes, at, last)
@@ -951,6 +956,9 @@ function goby_udp.dissector(tvb, pinfo, tree)
         elseif number == 15 then root:add(uf.frame_start, range, low)
         elseif number == 20 then root:add(uf.acked_frame, range, int32_of(low))
         elseif number == 31 then root:add(uf.unique_id, range, low)
+        elseif number == 11 then root:add(uf.max_num_frames, range, low)
+        elseif number == 12 then root:add(uf.max_frame_bytes, range, low)
+        elseif number == 33 then root:add(uf.slot_index, range, int32_of(low))
         else root:add(uf.other, range, number .. ": " .. int_text(whole)) end
       elseif wire == 2 then
         local len
@@ -982,7 +990,11 @@ function goby_udp.dissector(tvb, pinfo, tree)
       elseif wire == 1 or wire == 5 then
         local len = (wire == 1) and 8 or 4
         if at + len > last then error("field " .. number .. " runs past the datagram", 0) end
-        root:add(uf.other, tvb(start, at + len - start), tostring(number))
+        if number == 30 and wire == 1 then
+          root:add_le(uf.slot_seconds, tvb(at, 8))
+        else
+          root:add(uf.other, tvb(start, at + len - start), tostring(number))
+        end
         at = at + len
       else
         error("wire type " .. wire .. " of field " .. number .. " is not a ModemTransmission's", 0)

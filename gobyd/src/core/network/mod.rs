@@ -960,6 +960,7 @@ impl Network {
     /// (to the receive path), messages settled (`ack` or `expire`), events.
     fn produced(&mut self, produced: Produced, receipt: &mut Receipt) {
         receipt.refuse_ack |= produced.refuse_ack;
+        let mut events = produced.events;
         for (origin, number, bytes) in produced.messages {
             let Ok(message) = self.codec.decode(&bytes) else {
                 tracing::warn!(
@@ -967,6 +968,12 @@ impl Network {
                 );
                 continue;
             };
+            // Its transfer's events name its type, known once it is whole.
+            for e in events.iter_mut().filter(|e| {
+                !e.outgoing && e.peer == origin && e.id == u64::from(number) && e.name.is_empty()
+            }) {
+                e.name = message.descriptor().full_name().to_string();
+            }
             let Ok(dccl_id) = self.codec.id_of(message.descriptor().full_name()) else {
                 continue;
             };
@@ -1008,7 +1015,7 @@ impl Network {
             };
             receipt.events.push((event, Some(id)));
         }
-        receipt.transfers.extend(produced.events);
+        receipt.transfers.extend(events);
     }
 
     /// A network message for this node.
@@ -1878,12 +1885,17 @@ pub fn frame_bytes(config: &GobydConfig) -> usize {
         .iter()
         .map(|view| {
             let from_driver = view.driver.and_then(modemdriver::check::largest_frame);
+            // The frames of this node's slots, at their rates, as its
+            // driver sends them (a UDP driver's are its max_frame_size).
+            let at_rate = |rate: i32| match view.driver {
+                Some(driver) => modemdriver::check::frame_at_rate(driver, rate),
+                None => modemdriver::rate::spec(rate).map(|s| s.frame_bytes as usize),
+            };
             let from_slots = view.mac.and_then(|mac| {
                 mac.slot
                     .iter()
                     .filter(|s| s.src.is_none_or(|src| src == me))
-                    .filter_map(|s| modemdriver::rate::spec(s.rate()))
-                    .map(|spec| spec.frame_bytes as usize)
+                    .filter_map(|s| at_rate(s.rate()))
                     .min()
             });
             from_slots.or(from_driver).unwrap_or(64)
@@ -1899,6 +1911,33 @@ fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The frame a node's fragments fill is its driver's at its slots'
+    /// rates: a Micro-Modem's rate-0 frame is 32 bytes, a UDP driver's
+    /// frame its `max_frame_size` whatever the rate.
+    #[test]
+    fn the_frame_of_a_fragment_is_the_drivers_at_its_slots_rates() {
+        let config = |driver: &str| {
+            let text = format!(
+                "modem_id: 1\ndriver {{ {driver} }}\n\
+                 mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 0 slot_seconds: 2 }} }}\n"
+            );
+            crate::config::read(&text, "gobyd.pb.txt", crate::config::Layout::File)
+                .expect("read")
+                .config
+        };
+        let udp = config(
+            "driver_type: DRIVER_UDP udp { local { port: 56101 } \
+             remote { modem_id: 2 ip: \"127.0.0.1\" port: 56102 } max_frame_size: 500 }",
+        );
+        assert_eq!(frame_bytes(&udp), 500);
+        let multicast = config(
+            "driver_type: DRIVER_UDP_MULTICAST udp_multicast { rate_to_bytes { rate: 0 bytes: 96 } }",
+        );
+        assert_eq!(frame_bytes(&multicast), 96);
+        let micromodem = config("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\"");
+        assert_eq!(frame_bytes(&micromodem), 32);
+    }
 
     #[test]
     fn a_fragment_fills_its_frame_and_its_header_is_what_the_guide_says() {
