@@ -52,6 +52,13 @@ fn handed_over(
     handed
 }
 
+/// Sends `data` to `to` and waits for its ack (the ack names its
+/// `unique_id`).
+async fn send_answered(peer: &UdpSocket, to: &str, data: &ModemTransmission) {
+    peer.send_to(&data.encode_to_vec(), to).await.unwrap();
+    assert_eq!(next_ack(peer).await.unique_id, data.unique_id);
+}
+
 /// The next ACK datagram on `socket`.
 async fn next_ack(socket: &UdpSocket) -> ModemTransmission {
     next_where(socket, |mt| mt.r#type() == TransmissionType::Ack).await
@@ -140,20 +147,17 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
     // The same content published again: a new publication, handed over.
     data.frame[0] = with_identity(1501, false);
     data.unique_id = Some(79);
-    peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
-    assert_eq!(next_ack(&peer).await.unique_id, Some(79));
+    send_answered(&peer, &to, &data).await;
     // A retransmission of a publication whose first sending never came
     // (numbered 1502): handed over.
     data.frame[0] = with_identity(1502, true);
     data.unique_id = Some(80);
-    peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
-    assert_eq!(next_ack(&peer).await.unique_id, Some(80));
+    send_answered(&peer, &to, &data).await;
     // Without identity (a Goby3 sender), twice: each reception handed over.
     data.frame[0] = plain.clone();
     for unique_id in [81, 82] {
         data.unique_id = Some(unique_id);
-        peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
-        assert_eq!(next_ack(&peer).await.unique_id, Some(unique_id));
+        send_answered(&peer, &to, &data).await;
     }
 
     let _ = stop.send(());
@@ -233,8 +237,7 @@ async fn over_udp_the_identity_goes_beside_the_frames_both_ways() {
             frame_identity: vec![trailer.encode(&[WireIdentity::new(number, resent)])],
             ..Default::default()
         };
-        peer.send_to(&data.encode_to_vec(), &to).await.unwrap();
-        assert_eq!(next_ack(&peer).await.unique_id, Some(unique_id));
+        send_answered(&peer, &to, &data).await;
     }
 
     let _ = stop.send(());
