@@ -108,6 +108,7 @@ pub fn prepare(
         Ok(_) => Vec::new(),
         Err(problems) => problems,
     };
+    problems.extend(fragment_bytes_problem(config, network.fragment_bytes()));
     for name in loaded {
         if let Ok(id) = codec.id_of(name) {
             if wire::is_network_id(id) {
@@ -1874,6 +1875,64 @@ pub fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result
     )))
 }
 
+/// What is wrong with `fragment_bytes` (0: unset, fitted to the frame):
+/// more than a fragment holds, or, where this node's frames are known
+/// (a driver whose frame a slot's rate sets, or a UDP driver's), more than
+/// its smallest frame holds with the fragment's header: its fragments
+/// would never go.
+fn fragment_bytes_problem(config: &GobydConfig, fragment_bytes: u32) -> Option<Problem> {
+    let field = "network.fragment_bytes";
+    let n = fragment_bytes as usize;
+    if n == 0 {
+        return None;
+    }
+    if n > wire::MAX_FRAGMENT_DATA {
+        return Some(Problem::new(
+            field,
+            format!(
+                "{n}: a fragment holds at most {} bytes of data",
+                wire::MAX_FRAGMENT_DATA
+            ),
+        ));
+    }
+    let me = config.modem_id();
+    let known = crate::config::links::links(config)
+        .iter()
+        .filter_map(|view| {
+            let driver = view.driver?;
+            let rates: Vec<i32> = view
+                .mac?
+                .slot
+                .iter()
+                .filter(|s| s.src.is_none_or(|src| src == me))
+                .map(|s| s.rate())
+                .collect();
+            let set_by_rate = |r: &i32| modemdriver::check::data_packet_time(driver, *r).is_some();
+            let known = modemdriver::check::carries_transmission(driver)
+                || (!rates.is_empty() && rates.iter().all(set_by_rate));
+            if !known {
+                return None;
+            }
+            rates
+                .iter()
+                .filter_map(|r| modemdriver::check::frame_at_rate(driver, *r))
+                .min()
+                .or_else(|| modemdriver::check::largest_frame(driver))
+        })
+        .min()?;
+    (n + FRAGMENT_HEADER > known).then(|| {
+        Problem::new(
+            field,
+            format!(
+                "{n} bytes of data and a fragment's {FRAGMENT_HEADER} of header do not fit this \
+                 node's smallest frame, {known} bytes (its slots' rates): no fragment would ever \
+                 go; give at most {} or leave it unset (fragments then fill the frame)",
+                known.saturating_sub(FRAGMENT_HEADER)
+            ),
+        )
+    })
+}
+
 /// The smallest frame this node sends in its TDMA slots (by their rates),
 /// bytes; the driver's largest frame, or 64, when the slots do not say
 /// (what a fragment fills when `network.fragment_bytes` is 0). With
@@ -1937,6 +1996,44 @@ mod tests {
         assert_eq!(frame_bytes(&multicast), 96);
         let micromodem = config("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\"");
         assert_eq!(frame_bytes(&micromodem), 32);
+    }
+
+    /// A `fragment_bytes` that no frame of the node holds is refused where
+    /// the frames are known, and one over what a fragment holds always.
+    #[test]
+    fn a_fragment_size_no_frame_holds_is_refused() {
+        let config = |driver: &str| {
+            let text = format!(
+                "modem_id: 1\ndriver {{ {driver} }}\n\
+                 mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 0 slot_seconds: 2 }} }}\n"
+            );
+            crate::config::read(&text, "gobyd.pb.txt", crate::config::Layout::File)
+                .expect("read")
+                .config
+        };
+        let udp = config(
+            "driver_type: DRIVER_UDP udp { local { port: 56101 } \
+             remote { modem_id: 2 ip: \"127.0.0.1\" port: 56102 } max_frame_size: 100 }",
+        );
+        let said = |c: &GobydConfig, n| fragment_bytes_problem(c, n).map(|p| p.to_string());
+        assert_eq!(said(&udp, 0), None);
+        assert_eq!(said(&udp, 94), None);
+        let too_big = said(&udp, 200).expect("refused");
+        assert!(
+            too_big.starts_with("network.fragment_bytes: 200 bytes of data")
+                && too_big.contains("smallest frame, 100 bytes")
+                && too_big.contains("give at most 94"),
+            "{too_big}"
+        );
+        let over = said(&udp, 300).expect("refused");
+        assert!(over.contains("at most 253 bytes of data"), "{over}");
+        // A Micro-Modem at rate 0: 32-byte frames.
+        let micromodem = config("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\"");
+        assert!(said(&micromodem, 30).is_some());
+        assert_eq!(said(&micromodem, 26), None);
+        // Iridium's frames are not set by the slots' rates: not judged here.
+        let iridium = config("driver_type: DRIVER_IRIDIUM serial_port: \"/dev/null\"");
+        assert_eq!(said(&iridium, 200), None);
     }
 
     #[test]
