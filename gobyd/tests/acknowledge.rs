@@ -38,10 +38,28 @@ fn config(port: u16, peer: u16, data_dir: &std::path::Path) -> Node {
         .raw_log(true)
 }
 
-/// The messages the daemon handed over (each a `Command` noted "once").
-fn handed_over(
+/// Node 1 started (data in `dir`), a bare socket playing node 2, and
+/// node 1's UDP port.
+async fn started(dir: &std::path::Path) -> (UdpSocket, u16, Daemon) {
+    let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let port = free_udp_port();
+    let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
+    let daemon = Daemon::builder(config.config())
+        .start()
+        .await
+        .expect("gobyd starts");
+    (peer, port, daemon)
+}
+
+/// Stops the daemon (`stop`, its task `run`), then counts the messages it
+/// handed over (each a `Command` noted "once").
+async fn stopped_and_handed<E: std::fmt::Debug>(
+    stop: tokio::sync::oneshot::Sender<()>,
+    run: tokio::task::JoinHandle<Result<(), E>>,
     events: &mut tokio::sync::broadcast::Receiver<std::sync::Arc<DaemonEvent>>,
 ) -> usize {
+    let _ = stop.send(());
+    run.await.unwrap().unwrap();
     let mut handed = 0;
     while let Ok(e) = events.try_recv() {
         if let DaemonEvent::Received { received: r, .. } = e.as_ref() {
@@ -86,13 +104,7 @@ async fn next_where(
 #[tokio::test]
 async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications_all_handed_over() {
     let dir = scratch("acknowledge", "frames");
-    let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
-    let port = free_udp_port();
-    let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
-    let daemon = Daemon::builder(config.config())
-        .start()
-        .await
-        .expect("gobyd starts");
+    let (peer, port, daemon) = started(&dir).await;
     let inbox = daemon.data_dir().join("inbox.log");
     let mut events = daemon.subscribe();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
@@ -160,9 +172,7 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
         send_answered(&peer, &to, &data).await;
     }
 
-    let _ = stop.send(());
-    run.await.unwrap().unwrap();
-    let handed = handed_over(&mut events);
+    let handed = stopped_and_handed(stop, run, &mut events).await;
     assert_eq!(
         handed, 5,
         "the publication once, the same content published again, the one whose first sending was lost, two receptions without identity"
@@ -173,13 +183,7 @@ async fn only_frames_recorded_or_retransmitted_are_acknowledged_and_publications
 #[tokio::test]
 async fn over_udp_the_identity_goes_beside_the_frames_both_ways() {
     let dir = scratch("acknowledge", "beside");
-    let peer = UdpSocket::bind("127.0.0.1:0").await.unwrap();
-    let port = free_udp_port();
-    let config = config(port, peer.local_addr().unwrap().port(), &dir.join("data"));
-    let daemon = Daemon::builder(config.config())
-        .start()
-        .await
-        .expect("gobyd starts");
+    let (peer, port, daemon) = started(&dir).await;
     let publisher = daemon.publisher();
     let mut events = daemon.subscribe();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
@@ -240,9 +244,7 @@ async fn over_udp_the_identity_goes_beside_the_frames_both_ways() {
         send_answered(&peer, &to, &data).await;
     }
 
-    let _ = stop.send(());
-    run.await.unwrap().unwrap();
-    let handed = handed_over(&mut events);
+    let handed = stopped_and_handed(stop, run, &mut events).await;
     assert_eq!(
         handed, 2,
         "the publication once, then the repeat on purpose"

@@ -509,8 +509,7 @@ async fn a_relay_does_not_send_again_fragments_the_receiver_says_it_has() {
 async fn a_file_through_the_relay_keeps_pace_with_the_tdma_limit() {
     let dir = scratch("transfer", "pace");
     // Rate 2 (3 frames of 64 bytes) in 8 s slots: 178 fragments, about 60
-    // cycles, so that the cycle each hop's channel binding takes at the
-    // start weighs little.
+    // cycles, so that the start (the pipeline filling) weighs little.
     let (rate, slot) = (2, 8.0);
     let configs = routed_line(&dir, rate, slot, 0.0);
     let frame = gobyd::internals::network::frame_bytes(&configs[0]);

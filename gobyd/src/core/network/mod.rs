@@ -1971,20 +1971,23 @@ fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {
 mod tests {
     use super::*;
 
+    /// Node 1 on `driver` (a `driver` section's body) with one slot of its
+    /// own at rate 0.
+    fn config(driver: &str) -> GobydConfig {
+        let text = format!(
+            "modem_id: 1\ndriver {{ {driver} }}\n\
+             mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 0 slot_seconds: 2 }} }}\n"
+        );
+        crate::config::read(&text, "gobyd.pb.txt", crate::config::Layout::File)
+            .expect("read")
+            .config
+    }
+
     /// The frame a node's fragments fill is its driver's at its slots'
     /// rates: a Micro-Modem's rate-0 frame is 32 bytes, a UDP driver's
     /// frame its `max_frame_size` whatever the rate.
     #[test]
     fn the_frame_of_a_fragment_is_the_drivers_at_its_slots_rates() {
-        let config = |driver: &str| {
-            let text = format!(
-                "modem_id: 1\ndriver {{ {driver} }}\n\
-                 mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 0 slot_seconds: 2 }} }}\n"
-            );
-            crate::config::read(&text, "gobyd.pb.txt", crate::config::Layout::File)
-                .expect("read")
-                .config
-        };
         let udp = config(
             "driver_type: DRIVER_UDP udp { local { port: 56101 } \
              remote { modem_id: 2 ip: \"127.0.0.1\" port: 56102 } max_frame_size: 500 }",
@@ -2002,15 +2005,6 @@ mod tests {
     /// the frames are known, and one over what a fragment holds always.
     #[test]
     fn a_fragment_size_no_frame_holds_is_refused() {
-        let config = |driver: &str| {
-            let text = format!(
-                "modem_id: 1\ndriver {{ {driver} }}\n\
-                 mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: 0 slot_seconds: 2 }} }}\n"
-            );
-            crate::config::read(&text, "gobyd.pb.txt", crate::config::Layout::File)
-                .expect("read")
-                .config
-        };
         let udp = config(
             "driver_type: DRIVER_UDP udp { local { port: 56101 } \
              remote { modem_id: 2 ip: \"127.0.0.1\" port: 56102 } max_frame_size: 100 }",
