@@ -936,6 +936,15 @@ impl QueueManager {
                     }
                 }
             }
+            // A link that may deliver the transmission again (an Iridium
+            // gateway): each message may be a repeat of one on record.
+            if transmission.may_repeat() {
+                for d in &mut decoded {
+                    if let Some(id) = &mut d.2 {
+                        id.resent = true;
+                    }
+                }
+            }
             let faulted = matches!(errors.last(), Some(QueueError::Frame { frame, .. }) if *frame == frame_index);
             for (message, bytes, identity) in decoded {
                 // A frame that did not decode is not acknowledged: what was

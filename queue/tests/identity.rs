@@ -170,6 +170,28 @@ fn on_a_link_that_carries_the_transmission_the_identity_goes_beside_the_frames()
 }
 
 #[test]
+fn a_reception_the_link_may_deliver_again_is_taken_as_possibly_resent() {
+    // An Iridium gateway posts an MO message again when its delivery was
+    // not answered: its messages, first sendings as sent, are each taken
+    // as possibly resent, so that a copy on record is suppressed.
+    let mut sender = node(1, true, false);
+    let mut receiver = node(2, true, false);
+    sender.push("Status", 1, 2, 9);
+    sender.clock.advance_seconds(10.0);
+    let mut tx = sender.request(32, 1, -1);
+    assert!(
+        !received(&mut receiver, &tx.clone())[0]
+            .identity
+            .unwrap()
+            .resent
+    );
+    tx.may_repeat = Some(true);
+    let again = received(&mut receiver, &tx);
+    assert_eq!(again.len(), 1);
+    assert!(again[0].identity.unwrap().resent);
+}
+
+#[test]
 fn a_receiver_without_the_trailer_type_keeps_the_messages_before_it() {
     // What Goby3 does with a frame it cannot decode to the end: the
     // messages decoded so far are kept.

@@ -1135,6 +1135,10 @@ impl Shore {
             }
         }
         mt.time = time.map(|t| t * 1_000_000);
+        // The gateway posts it again when its delivery was not answered
+        // (the shore killed before its answer went): after a restart the
+        // repeat is not known here, and the receiver's record tells it.
+        mt.may_repeat = Some(true);
         self.deliver(mt, events)
     }
 
