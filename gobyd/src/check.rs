@@ -188,13 +188,18 @@ fn entry_problems(
 /// S2C's burst size): such a message would never go. With several links,
 /// larger than the largest frame of every link the type may use
 /// ([`config::links`]), with its identity trailer (such a type never goes
-/// without it).
+/// without it). None with the network layer on: it sends a message larger
+/// than a frame to one node in fragments (and refuses a broadcast of one
+/// when it is published, saying why).
 fn frame_problems(
     codec: &Arc<dccl::Codec>,
     queue: &protos::goby::acomms::protobuf::QueueManagerConfig,
     configured: usize,
     config: &GobydConfig,
 ) -> Vec<config::Problem> {
+    if config.network.is_some() {
+        return Vec::new();
+    }
     let views = config::links::links(config);
     let rules = config::links::queue_links(config, |n| codec.id_of(n).ok())
         .ok()
@@ -330,7 +335,8 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
                 (Some(links), Some(id)) => links.order(id).contains(&view.index),
                 _ => true,
             };
-            if !may_use {
+            // With the network layer on, it goes to one node in fragments.
+            if !may_use || config.network.is_some() {
                 continue;
             }
             if let Ok(size) = checked.codec.max_size(name) {

@@ -66,6 +66,13 @@ fn check_knows_the_popoto_limits() {
         err.contains("more than the 8 bytes of the driver's largest frame"),
         "{err}"
     );
+    // With the network layer on, it goes to one node in fragments of
+    // the frame's size.
+    let (code, out, err) = check(
+        &path,
+        &format!("{}network {{ }}\n", config("max_frame_bytes: 8")),
+    );
+    assert_eq!(code, Some(0), "{out}{err}");
     for (extra, expected) in [
         (
             "payload_mode: 7",

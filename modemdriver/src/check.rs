@@ -11,7 +11,7 @@
 //! what only starting shows: a UDP port already taken, a serial device
 //! that is not a terminal.
 
-use protos::goby::acomms::protobuf::DriverConfig;
+use protos::goby::acomms::protobuf::{DriverConfig, ModemTransmission};
 
 use crate::built_in;
 pub use crate::kind::{FrameLimits, PacketTime};
@@ -45,12 +45,13 @@ pub fn largest_frame(config: &DriverConfig) -> Option<usize> {
     both_ways(config).map(|l| l.outgoing)
 }
 
-/// The largest frame the driver of `config` sends at Goby rate `rate`
-/// ([`DriverKind::frame_at_rate`](crate::kind::DriverKind::frame_at_rate)):
+/// The largest frame a data request of TDMA slot `slot` offers on the
+/// driver of `config`, bytes
+/// ([`DriverKind::frame_in_slot`](crate::kind::DriverKind::frame_in_slot)):
 /// `None` for a configuration naming no driver built in, or a rate it
 /// does not have.
-pub fn frame_at_rate(config: &DriverConfig, rate: i32) -> Option<usize> {
-    built_in::of(config).ok()?.frame_at_rate(config, rate)
+pub fn frame_in_slot(config: &DriverConfig, slot: &ModemTransmission) -> Option<usize> {
+    built_in::of(config).ok()?.frame_in_slot(config, slot)
 }
 
 /// Whether the driver of `config` carries the whole `ModemTransmission`

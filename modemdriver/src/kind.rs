@@ -121,14 +121,21 @@ pub trait DriverKind: Send + Sync + 'static {
         self.packet_time(config, rate)
     }
 
-    /// The largest frame it sends at Goby rate `rate`, bytes, as the data
-    /// requests of a slot at that rate will ask for: by default a
-    /// Micro-Modem's frame at the rate (the WHOI rate table), which the
-    /// drivers whose frames a rate sets otherwise say for themselves; `None`
-    /// for a rate it does not have.
-    fn frame_at_rate(&self, config: &DriverConfig, rate: i32) -> Option<usize> {
-        match self.packet_time(config, rate) {
-            Some(p) => Some(p.spec.frame_bytes as usize),
+    /// The largest frame a data request of TDMA slot `slot` will offer,
+    /// bytes: by default the frame of the slot's rate when the rate sets
+    /// the packet ([`packet_time`](Self::packet_time)), else the driver's
+    /// largest outgoing frame ([`frame_limits`](Self::frame_limits)), else
+    /// a Micro-Modem's frame at the rate (the WHOI rate table); `None` for
+    /// a rate it does not have. What fills whole frames (fragments of a
+    /// transfer) is sized by it, so a kind whose frame depends on more
+    /// than the rate (EvoLogics: burst data only to one node) says so.
+    fn frame_in_slot(&self, config: &DriverConfig, slot: &ModemTransmission) -> Option<usize> {
+        let rate = slot.rate();
+        if let Some(p) = self.packet_time(config, rate) {
+            return Some(p.spec.frame_bytes as usize);
+        }
+        match self.frame_limits(config) {
+            Some(limits) => Some(limits.outgoing),
             None => crate::rate::spec(rate).map(|s| s.frame_bytes as usize),
         }
     }

@@ -113,8 +113,8 @@ impl DriverKind for UdpDriver {
         true
     }
 
-    /// `udp.max_frame_size` at every rate (the driver's frame limit).
-    fn frame_at_rate(&self, config: &DriverConfig, _rate: i32) -> Option<usize> {
+    /// `udp.max_frame_size` in every slot (the driver's frame limit).
+    fn frame_in_slot(&self, config: &DriverConfig, _slot: &ModemTransmission) -> Option<usize> {
         let udp = config.udp.as_ref()?;
         usize::try_from(udp.max_frame_size())
             .ok()

@@ -29,7 +29,7 @@
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, SocketAddrV4};
 
-use protos::goby::acomms::protobuf::{DriverConfig, UdpMulticastDriverConfig};
+use protos::goby::acomms::protobuf::{DriverConfig, ModemTransmission, UdpMulticastDriverConfig};
 use tokio::net::UdpSocket;
 
 use crate::config;
@@ -215,8 +215,10 @@ impl DriverKind for UdpMulticastDriver {
         true
     }
 
-    /// The frame of `rate_to_bytes` for the rate, else `max_frame_size`.
-    fn frame_at_rate(&self, config: &DriverConfig, rate: i32) -> Option<usize> {
+    /// The frame of `rate_to_bytes` for the slot's rate, else
+    /// `max_frame_size`.
+    fn frame_in_slot(&self, config: &DriverConfig, slot: &ModemTransmission) -> Option<usize> {
+        let rate = slot.rate();
         let s = settings(config).ok()?;
         let bytes = s
             .rate_to_bytes

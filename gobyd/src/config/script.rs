@@ -4,9 +4,9 @@
 //! queue is asked for those types alone.
 //!
 //! Refused, naming the place: a type that is not loaded, and a type whose
-//! largest encoding does not fit one frame of the slot's rate on a driver
-//! whose packets take their rate's time (the Micro-Modem, the simulator):
-//! it could never go in that slot. A slot too short for its rate's packet
+//! largest encoding does not fit one frame of the slot, as its driver
+//! offers it (a Micro-Modem's frame of the slot's rate, a SeaTrac's frame
+//! limit): it could never go in that slot. A slot too short for its rate's packet
 //! is refused as every slot is (`mac.slot[I].slot_seconds`).
 
 use protos::goby::acomms::protobuf::{MacConfig, ModemTransmission};
@@ -67,8 +67,9 @@ fn mac_problems(
                 problems.push(Problem::new(
                     field,
                     format!(
-                        "{name} encodes to up to {size} bytes, more than the {frame}-byte frame of rate {}: \
-                         it could never go in this slot (give the slot a higher rate)",
+                        "{name} encodes to up to {size} bytes, more than the {frame}-byte frame of this \
+                         slot (rate {}): it could never go in this slot (give it a rate or a link with \
+                         larger frames)",
                         slot.rate()
                     ),
                 ));
@@ -78,14 +79,13 @@ fn mac_problems(
     problems
 }
 
-/// Bytes in one frame of `slot`'s rate on `driver`, for a driver whose
-/// packets take their rate's time (`None`: another driver).
+/// Bytes in one frame of `slot` on `driver`, as its data requests offer
+/// them ([`modemdriver::check::frame_in_slot`]).
 fn frame_bytes(
     driver: &protos::goby::acomms::protobuf::DriverConfig,
     slot: &ModemTransmission,
 ) -> Option<usize> {
-    let packet = modemdriver::check::data_packet_time(driver, slot.rate())?;
-    Some(packet.spec.frame_bytes as usize)
+    modemdriver::check::frame_in_slot(driver, slot)
 }
 
 #[cfg(test)]
@@ -116,7 +116,7 @@ mod tests {
             "{p:?}"
         );
         assert!(
-            p[0].reason.contains("32-byte frame of rate 0"),
+            p[0].reason.contains("32-byte frame of this slot (rate 0)"),
             "{}",
             p[0].reason
         );

@@ -35,8 +35,8 @@ use std::sync::Arc;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
-    fragment_ack, FileRequest, Fragment, FragmentAck, FragmentChannel, QueueManagerConfig,
-    QueuedMessageEntry, RouteAck, RoutedMessage,
+    fragment_ack, FileRequest, Fragment, FragmentAck, FragmentChannel, ModemTransmission,
+    QueueManagerConfig, QueuedMessageEntry, RouteAck, RoutedMessage,
 };
 use protos::goby::apps::protobuf::{GobydConfig, NetworkConfig};
 use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
@@ -1876,10 +1876,9 @@ pub fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result
 }
 
 /// What is wrong with `fragment_bytes` (0: unset, fitted to the frame):
-/// more than a fragment holds, or, where this node's frames are known
-/// (a driver whose frame a slot's rate sets, or a UDP driver's), more than
-/// its smallest frame holds with the fragment's header: its fragments
-/// would never go.
+/// more than a fragment holds, or more than this node's smallest frame
+/// ([`frame_bytes`]) holds with the fragment's header: its fragments would
+/// never go.
 fn fragment_bytes_problem(config: &GobydConfig, fragment_bytes: u32) -> Option<Problem> {
     let field = "network.fragment_bytes";
     let n = fragment_bytes as usize;
@@ -1895,72 +1894,53 @@ fn fragment_bytes_problem(config: &GobydConfig, fragment_bytes: u32) -> Option<P
             ),
         ));
     }
-    let me = config.modem_id();
-    let known = crate::config::links::links(config)
-        .iter()
-        .filter_map(|view| {
-            let driver = view.driver?;
-            let rates: Vec<i32> = view
-                .mac?
-                .slot
-                .iter()
-                .filter(|s| s.src.is_none_or(|src| src == me))
-                .map(|s| s.rate())
-                .collect();
-            let set_by_rate = |r: &i32| modemdriver::check::data_packet_time(driver, *r).is_some();
-            let known = modemdriver::check::carries_transmission(driver)
-                || (!rates.is_empty() && rates.iter().all(set_by_rate));
-            if !known {
-                return None;
-            }
-            rates
-                .iter()
-                .filter_map(|r| modemdriver::check::frame_at_rate(driver, *r))
-                .min()
-                .or_else(|| modemdriver::check::largest_frame(driver))
-        })
-        .min()?;
+    let known = smallest_frame(config)?;
     (n + FRAGMENT_HEADER > known).then(|| {
         Problem::new(
             field,
             format!(
                 "{n} bytes of data and a fragment's {FRAGMENT_HEADER} of header do not fit this \
-                 node's smallest frame, {known} bytes (its slots' rates): no fragment would ever \
-                 go; give at most {} or leave it unset (fragments then fill the frame)",
+                 node's smallest frame, {known} bytes (its driver's, in its slots): no fragment \
+                 would ever go; give at most {} or leave it unset (fragments then fill the frame)",
                 known.saturating_sub(FRAGMENT_HEADER)
             ),
         )
     })
 }
 
-/// The smallest frame this node sends in its TDMA slots (by their rates),
-/// bytes; the driver's largest frame, or 64, when the slots do not say
-/// (what a fragment fills when `network.fragment_bytes` is 0). With
-/// several links ([`crate::config::links`]), the smallest of every link's:
-/// a fragment goes over whichever link carries it.
-pub fn frame_bytes(config: &GobydConfig) -> usize {
+/// The smallest frame this node sends in its TDMA slots, bytes, as its
+/// driver offers them in each ([`modemdriver::check::frame_in_slot`]: a
+/// Micro-Modem's by the slot's rate, a SeaTrac's or an ATM-900's its
+/// frame limit, an EvoLogics' an instant message unless the slot names
+/// one node); the driver's largest frame when the node has no slot of its
+/// own. With several links ([`crate::config::links`]), the smallest of
+/// every link's: a fragment goes over whichever link carries it. `None`
+/// when no link says.
+fn smallest_frame(config: &GobydConfig) -> Option<usize> {
     let me = config.modem_id();
     crate::config::links::links(config)
         .iter()
-        .map(|view| {
-            let from_driver = view.driver.and_then(modemdriver::check::largest_frame);
-            // The frames of this node's slots, at their rates, as its
-            // driver sends them (a UDP driver's are its max_frame_size).
-            let at_rate = |rate: i32| match view.driver {
-                Some(driver) => modemdriver::check::frame_at_rate(driver, rate),
-                None => modemdriver::rate::spec(rate).map(|s| s.frame_bytes as usize),
+        .filter_map(|view| {
+            let in_slot = |slot: &ModemTransmission| match view.driver {
+                Some(driver) => modemdriver::check::frame_in_slot(driver, slot),
+                None => modemdriver::rate::spec(slot.rate()).map(|s| s.frame_bytes as usize),
             };
             let from_slots = view.mac.and_then(|mac| {
                 mac.slot
                     .iter()
                     .filter(|s| s.src.is_none_or(|src| src == me))
-                    .filter_map(|s| at_rate(s.rate()))
+                    .filter_map(in_slot)
                     .min()
             });
-            from_slots.or(from_driver).unwrap_or(64)
+            from_slots.or_else(|| view.driver.and_then(modemdriver::check::largest_frame))
         })
         .min()
-        .unwrap_or(64)
+}
+
+/// The frame a fragment fills when `network.fragment_bytes` is 0, bytes:
+/// this node's [smallest frame](smallest_frame), or 64 when nothing says.
+pub fn frame_bytes(config: &GobydConfig) -> usize {
+    smallest_frame(config).unwrap_or(64)
 }
 
 fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {
@@ -1983,11 +1963,11 @@ mod tests {
             .config
     }
 
-    /// The frame a node's fragments fill is its driver's at its slots'
-    /// rates: a Micro-Modem's rate-0 frame is 32 bytes, a UDP driver's
-    /// frame its `max_frame_size` whatever the rate.
+    /// The frame a node's fragments fill is its driver's in its slots: a
+    /// Micro-Modem's rate-0 frame is 32 bytes, a UDP driver's frame its
+    /// `max_frame_size` whatever the rate, a SeaTrac's 30 bytes.
     #[test]
-    fn the_frame_of_a_fragment_is_the_drivers_at_its_slots_rates() {
+    fn the_frame_of_a_fragment_is_the_drivers_in_its_slots() {
         let udp = config(
             "driver_type: DRIVER_UDP udp { local { port: 56101 } \
              remote { modem_id: 2 ip: \"127.0.0.1\" port: 56102 } max_frame_size: 500 }",
@@ -1999,6 +1979,39 @@ mod tests {
         assert_eq!(frame_bytes(&multicast), 96);
         let micromodem = config("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\"");
         assert_eq!(frame_bytes(&micromodem), 32);
+        // Modems whose frame no rate sets: their frame limit in every slot
+        // (not the Micro-Modem's frame of the slot's rate, which a SeaTrac
+        // or an ATM-900 does not send: a fragment of that size was never
+        // queued).
+        let seatrac = config("driver_name: \"BLUEPRINT_SEATRAC\" serial_port: \"/dev/null\"");
+        assert_eq!(frame_bytes(&seatrac), 30);
+        let benthos = |rate: i32| {
+            let mut c = config("driver_type: DRIVER_BENTHOS_ATM900 serial_port: \"/dev/null\"");
+            c.mac.as_mut().unwrap().slot[0].rate = Some(rate);
+            c
+        };
+        assert_eq!(frame_bytes(&benthos(0)), 64);
+        assert_eq!(frame_bytes(&benthos(5)), 64);
+        let popoto = config("driver_type: DRIVER_POPOTO serial_port: \"/dev/null\"");
+        assert_eq!(frame_bytes(&popoto), 255);
+        let iridium = config(
+            "driver_type: DRIVER_IRIDIUM serial_port: \"/dev/null\" \
+             iridium { device: DEVICE_IRIDIUM_9602_9603 }",
+        );
+        assert_eq!(
+            frame_bytes(&iridium),
+            329,
+            "an MO message of 340 bytes less 11"
+        );
+        // EvoLogics: an instant message in a slot that leaves the
+        // destination to the queue, burst data in one naming a node.
+        let evologics = |dest: i32| {
+            let mut c = config("driver_name: \"EVOLOGICS_S2C\" serial_port: \"/dev/null\"");
+            c.mac.as_mut().unwrap().slot[0].dest = Some(dest);
+            c
+        };
+        assert_eq!(frame_bytes(&evologics(-1)), 64);
+        assert_eq!(frame_bytes(&evologics(2)), 1024);
     }
 
     /// A `fragment_bytes` that no frame of the node holds is refused where
@@ -2025,7 +2038,15 @@ mod tests {
         let micromodem = config("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\"");
         assert!(said(&micromodem, 30).is_some());
         assert_eq!(said(&micromodem, 26), None);
-        // Iridium's frames are not set by the slots' rates: not judged here.
+        // A SeaTrac's frames are 30 bytes at every rate.
+        let seatrac = config("driver_name: \"BLUEPRINT_SEATRAC\" serial_port: \"/dev/null\"");
+        assert_eq!(said(&seatrac, 24), None);
+        let seatrac_too_big = said(&seatrac, 26).expect("refused");
+        assert!(
+            seatrac_too_big.contains("smallest frame, 30 bytes"),
+            "{seatrac_too_big}"
+        );
+        // Iridium's: an MO message's.
         let iridium = config("driver_type: DRIVER_IRIDIUM serial_port: \"/dev/null\"");
         assert_eq!(said(&iridium, 200), None);
     }

@@ -62,7 +62,7 @@ use std::time::Duration;
 
 use protos::goby::acomms::protobuf::{
     driver_config::ConnectionType, evologics_config::Framing as ConfigFraming, DriverConfig,
-    EvologicsConfig,
+    EvologicsConfig, ModemTransmission,
 };
 
 use super::codec::Framing;
@@ -141,6 +141,19 @@ impl DriverKind for EvologicsDriver {
             incoming: im.max(burst),
             text,
             each_way: false,
+        })
+    }
+
+    /// Burst data's frame when the slot names one node and burst data is
+    /// on, else an instant message's (a slot of `dest: -1` leaves the
+    /// destination to the queue, so its data request offers an instant
+    /// message's frame, as [`machine`] builds it).
+    fn frame_in_slot(&self, config: &DriverConfig, slot: &ModemTransmission) -> Option<usize> {
+        let (im, burst) = frame_limits(config);
+        Some(if slot.dest() > 0 && burst > 0 {
+            burst.max(im)
+        } else {
+            im
         })
     }
 
