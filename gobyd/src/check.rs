@@ -5,6 +5,7 @@
 use std::sync::Arc;
 
 use amac::MacManager;
+use protos::goby::acomms::protobuf::ModemTransmission;
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{Clock, QueueManager, SystemClock};
 
@@ -314,13 +315,16 @@ pub fn definition_warnings(checked: &Checked) -> Vec<String> {
 ///
 /// With `link` sections, for each link with such limits (its lines begin
 /// `link NAME: `), each type warned about only when it may use that link.
+///
+/// The warnings also hold each type larger than every frame this node's
+/// own TDMA slots offer ([`slot_frame_warnings`]), whatever the driver.
 pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
     let config = &checked.config;
     let rules = config::links::queue_links(config, |n| checked.codec.id_of(n).ok())
         .ok()
         .flatten();
     let mut lines = Vec::new();
-    let mut warnings = Vec::new();
+    let mut warnings = slot_frame_warnings(checked);
     let mut sbd = None;
     for view in config::links::links(config) {
         let Some(limits) = view.driver.and_then(modemdriver::check::frame_limits) else {
@@ -353,7 +357,7 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
         sbd.get_or_insert(limits);
     }
     let Some(limits) = sbd else {
-        return (None, Vec::new());
+        return (None, warnings);
     };
     let wait = checked.queue.minimum_ack_wait_seconds();
     if wait < MIN_SBD_ACK_WAIT_SECONDS {
@@ -366,6 +370,96 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
         ));
     }
     (Some(lines.join("\n")), warnings)
+}
+
+/// A warning for each loaded DCCL type that fits a frame of the driver
+/// (else `--check` refuses it) but no frame this node's own slots of fixed
+/// TDMA offer ([`modemdriver::check::frame_in_slot`]: a Micro-Modem's of
+/// the slots' rates, an EvoLogics instant message in a slot of `dest: -1`)
+/// on any link the type may use: a message of it that large waits until a
+/// slot offers a larger frame (a `MACUpdate` to a higher rate, a slot
+/// naming one node). None with the network layer on (it fragments such a
+/// message), with a MAC switcher, or for a link whose slots are not fixed
+/// TDMA or whose frames are not known.
+pub fn slot_frame_warnings(checked: &Checked) -> Vec<String> {
+    let config = &checked.config;
+    if config.network.is_some() || config.mac_switcher.is_some() {
+        return Vec::new();
+    }
+    let me = config.modem_id();
+    let views = config::links::links(config);
+    // Each link's largest frame in its own slots (`None`: not known).
+    let in_slots: Vec<Option<usize>> = views
+        .iter()
+        .map(|view| {
+            let (driver, mac) = (view.driver?, view.mac?);
+            if mac.r#type() != protos::goby::acomms::protobuf::MacType::MacFixedDecentralized {
+                return None;
+            }
+            let own: Vec<&ModemTransmission> = mac
+                .slot
+                .iter()
+                .filter(|s| s.src.is_none_or(|src| src == me))
+                .collect();
+            if own.is_empty() {
+                return None;
+            }
+            own.iter()
+                .map(|slot| modemdriver::check::frame_in_slot(driver, slot))
+                .collect::<Option<Vec<usize>>>()?
+                .into_iter()
+                .max()
+        })
+        .collect();
+    let rules = config::links::queue_links(config, |n| checked.codec.id_of(n).ok())
+        .ok()
+        .flatten();
+    let mut warnings = Vec::new();
+    for name in &checked.loaded {
+        let Ok(size) = checked.codec.max_size(name) else {
+            continue;
+        };
+        let allowed: Vec<usize> = match (&rules, checked.codec.id_of(name).ok()) {
+            (Some(links), Some(id)) => links.order(id).to_vec(),
+            _ => (0..views.len()).collect(),
+        };
+        // Every link it may use has known slot frames, all too small, and
+        // a driver frame it fits (a type no frame holds is refused).
+        let Some(frames) = allowed
+            .iter()
+            .map(|&k| in_slots.get(k).copied().flatten().map(|f| (k, f)))
+            .collect::<Option<Vec<(usize, usize)>>>()
+        else {
+            continue;
+        };
+        let fits_a_driver = allowed.iter().any(|&k| {
+            views[k]
+                .driver
+                .and_then(modemdriver::check::largest_frame)
+                .is_none_or(|largest| size <= largest)
+        });
+        if frames.is_empty() || frames.iter().any(|&(_, f)| size <= f) || !fits_a_driver {
+            continue;
+        }
+        let offered = frames
+            .iter()
+            .map(|&(k, f)| {
+                let view = &views[k];
+                match view.section {
+                    Some(_) => format!("link {}: {f} bytes", view.name),
+                    None => format!("{f} bytes"),
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        warnings.push(format!(
+            "{name} encodes to up to {size} bytes, more than every frame this node's TDMA slots \
+             offer (the largest, {offered}): a message of it that large waits until a slot offers \
+             a larger frame (a higher rate, by MACUpdate; on an EvoLogics, a slot naming one node \
+             for burst data), or goes in fragments with the network layer on"
+        ));
+    }
+    warnings
 }
 
 /// Checks a configuration without starting anything ([`validate`], the
@@ -433,6 +527,47 @@ mod tests {
             dir.display()
         );
         check(config::parse(&ok, "test").unwrap()).expect("a scripted slot of a loaded type");
+    }
+
+    /// A type larger than every frame of the node's slots (but not than
+    /// the driver's) is warned of, naming the frame; not once a slot's rate
+    /// holds it, nor with the network layer on.
+    #[test]
+    fn a_type_over_every_frame_of_the_nodes_slots_is_warned_of() {
+        let dir = scratch("slot-frames");
+        let proto = dir.join("big.proto");
+        std::fs::write(
+            &proto,
+            "syntax = \"proto2\";\nimport \"dccl/option_extensions.proto\";\npackage test;\n\
+             message Big {\n  option (dccl.msg) = { id: 120 max_bytes: 60 codec_version: 4 };\n  \
+             required bytes data = 1 [(dccl.field).max_length = 50];\n}\n",
+        )
+        .unwrap();
+        let warnings = |rate: u32, extra: &str| {
+            let text = format!(
+                "modem_id: 1\ndata_dir: \"{}\"\ndccl {{ proto_file: \"{}\" }}\n\
+                 mac {{ type: MAC_FIXED_DECENTRALIZED slot {{ src: 1 rate: {rate} slot_seconds: 10 }} \
+                 slot {{ src: 2 rate: 5 slot_seconds: 10 }} }}\n{extra}",
+                dir.display(),
+                proto.display()
+            );
+            let checked = validate(
+                config::parse(&text, "test").unwrap(),
+                config::DriverSettings::Configured,
+            )
+            .expect("valid");
+            slot_frame_warnings(&checked)
+        };
+        let at_rate_0 = warnings(0, "");
+        assert_eq!(at_rate_0.len(), 1, "{at_rate_0:?}");
+        assert!(
+            at_rate_0[0].starts_with("test.Big encodes to up to 52 bytes")
+                && at_rate_0[0].contains("(the largest, 32 bytes)"),
+            "{at_rate_0:?}"
+        );
+        // Node 2's rate-5 slot is not this node's.
+        assert_eq!(warnings(2, ""), Vec::<String>::new());
+        assert_eq!(warnings(0, "network { }\n"), Vec::<String>::new());
     }
 
     #[tokio::test]
