@@ -599,6 +599,17 @@ fn emulate_stream(
             "--usbl: the {kind} modem has no USBL heads"
         )));
     }
+    // A SeaTrac waits for a request's answer only from within its range
+    // timeout: beacons that far apart answer too late.
+    let range_timeout = emulators::seatrac::EmulatorConfig::default().range_timeout_m;
+    if kind == "seatrac" && args.modem_ids.len() > 1 && args.spacing >= range_timeout {
+        eprintln!(
+            "note: beacons {} m apart (--spacing) are at or past a SeaTrac's range timeout \
+             ({range_timeout} m): every request (MSG_REQ*, a ping) goes unanswered \
+             (CST_XCVR_RESP_TIMEOUT); give a smaller --spacing for answers",
+            args.spacing
+        );
+    }
     // On TCP unless --pty (an Ethernet interface); on a pseudo-terminal
     // unless --tcp-port (a serial line, TCP through a serial server).
     let (on_tcp, tcp_port) = match emulation.host {

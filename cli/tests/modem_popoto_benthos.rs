@@ -204,3 +204,46 @@ fn two_emulated_benthos_modems_on_ptys() {
         refused(bad);
     }
 }
+
+/// Emulated SeaTrac beacons as far apart as a beacon's range timeout
+/// (1000 m, the default `--spacing`) answer no request in time: the
+/// emulator says so when it starts, and not at 500 m.
+#[test]
+fn seatracs_at_their_range_timeout_are_told_of() {
+    let stderr_of = |spacing: Option<&str>| {
+        let mut args = vec![
+            "modem",
+            "emulate",
+            "--kind",
+            "seatrac",
+            "--modem-id",
+            "1",
+            "--modem-id",
+            "2",
+        ];
+        if let Some(s) = spacing {
+            args.extend(["--spacing", s]);
+        }
+        let mut child = Command::new(env!("CARGO_BIN_EXE_goby"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("goby runs");
+        let mut lines = BufReader::new(child.stdout.take().expect("piped")).lines();
+        for _ in 0..2 {
+            let line = lines.next().expect("a `modem ID: WHERE` line").unwrap();
+            assert!(line.starts_with("modem "), "{line}");
+        }
+        let _ = child.kill();
+        let out = child.wait_with_output().expect("ends");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let told = stderr_of(None);
+    assert!(
+        told.contains("note: beacons 1000 m apart (--spacing) are at or past a SeaTrac's range timeout (1000 m)"),
+        "{told}"
+    );
+    let near = stderr_of(Some("500"));
+    assert!(!near.contains("range timeout"), "{near}");
+}

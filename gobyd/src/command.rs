@@ -320,7 +320,8 @@ fn check_cmd(cli: &GobydCli, config: GobydConfig, read: Option<&config::Read>) -
     if config::links::has_link_sections(&checked.config) {
         println!("{}", config::links::summary(&checked.config));
     }
-    for limits in [limits, frame_limits].into_iter().flatten() {
+    let fragments = crate::core::network::fragments_told(&checked.config, &checked.codec);
+    for limits in [limits, frame_limits, fragments].into_iter().flatten() {
         println!("{limits}");
     }
     if let Some(broker) = broker {

@@ -1023,6 +1023,25 @@ fn check_knows_the_evologics_limits() {
         text.contains("driver EVOLOGICS_S2C: one frame per transmission; up to 64 bytes as an instant message (AT*SENDIM), up to 1024 bytes as burst data (AT*SEND) to one node"),
         "{text}"
     );
+    // With the network layer on, the fragments' size: an instant
+    // message's frame, which a slot of `dest: -1` offers.
+    std::fs::write(
+        &path,
+        driver("")
+            + "mac { type: MAC_FIXED_DECENTRALIZED slot { src: 1 dest: -1 slot_seconds: 10 } }\n\
+               network { }\n",
+    )
+    .unwrap();
+    let out = gobyd(&["--check", "--config", path.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert_eq!(out.status.code(), Some(0), "{text}{}", stderr_text(&out));
+    assert!(
+        text.contains(
+            "network: a message larger than a frame, or a file, goes in fragments of 58 bytes \
+             of data (64 with their header: the smallest frame of this node's slots)"
+        ),
+        "{text}"
+    );
     std::fs::write(
         &path,
         driver("evologics { im_max_bytes: 16 burst_max_bytes: 0 }"),

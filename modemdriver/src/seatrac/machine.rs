@@ -517,10 +517,13 @@ impl Machine {
             return;
         }
         w.answer = None;
-        let what = if ping { "ping" } else { "data request" };
+        let what = if ping { "ping" } else { "DAT request" };
         if status == Cst::XCVR_RESP_TIMEOUT {
             self.status(DriverStatus::ResponseTimeout {
-                command: format!("the answer of beacon {beacon} to a {what}"),
+                command: format!(
+                    "the {what} sent to beacon {beacon} (CST_XCVR_RESP_TIMEOUT: none within \
+                     the beacon's range timeout)"
+                ),
                 attempt: 1,
             });
         } else {
@@ -667,8 +670,8 @@ impl Machine {
             if deadline <= now {
                 self.status(DriverStatus::ResponseTimeout {
                     command: format!(
-                        "the answer of beacon {dest} to a {}, or the beacon's error",
-                        if ping { "ping" } else { "data request" }
+                        "the {} sent to beacon {dest} (neither its answer nor the beacon's error came)",
+                        if ping { "ping" } else { "DAT request" }
                     ),
                     attempt: 1,
                 });

@@ -390,10 +390,7 @@ impl Network {
             })
             .collect();
         let origin = Origin::open(&data_dir.join("routes.log"))?;
-        let fragment_size = match settings.fragment_bytes() {
-            0 => fragment_data_bytes(&codec, frame_bytes(config))?,
-            n => (n as usize).min(wire::MAX_FRAGMENT_DATA),
-        };
+        let fragment_size = fragment_size(config, settings, &codec)?;
         let receive_dir = {
             let dir = Path::new(settings.receive_dir());
             if dir.is_absolute() {
@@ -1906,6 +1903,38 @@ fn fragment_bytes_problem(config: &GobydConfig, fragment_bytes: u32) -> Option<P
             ),
         )
     })
+}
+
+/// The data bytes of each fragment: `network.fragment_bytes`, or when it
+/// is 0 as many as fill the node's [frame](frame_bytes) with the header.
+fn fragment_size(
+    config: &GobydConfig,
+    settings: &NetworkConfig,
+    codec: &dccl::Codec,
+) -> std::io::Result<usize> {
+    Ok(match settings.fragment_bytes() {
+        0 => fragment_data_bytes(codec, frame_bytes(config))?,
+        n => (n as usize).min(wire::MAX_FRAGMENT_DATA),
+    })
+}
+
+/// What `gobyd --check` tells of the network layer's fragments, when it is
+/// on: `network: a message larger than a frame, or a file, goes in
+/// fragments of 58 bytes of data (64 with their header: the smallest frame
+/// of this node's slots)`. `codec`: with the layer's types loaded.
+pub fn fragments_told(config: &GobydConfig, codec: &dccl::Codec) -> Option<String> {
+    let settings = config.network.as_ref()?;
+    let data = fragment_size(config, settings, codec).ok()?;
+    let whole = data + FRAGMENT_HEADER;
+    let source = if settings.fragment_bytes() == 0 {
+        "the smallest frame of this node's slots"
+    } else {
+        "network.fragment_bytes"
+    };
+    Some(format!(
+        "network: a message larger than a frame, or a file, goes in fragments of {data} bytes \
+         of data ({whole} with their header: {source})"
+    ))
 }
 
 /// The smallest frame this node sends in its TDMA slots, bytes, as its
