@@ -5,7 +5,6 @@
 use std::sync::Arc;
 
 use amac::MacManager;
-use protos::goby::acomms::protobuf::ModemTransmission;
 use protos::goby::apps::protobuf::GobydConfig;
 use queue::{Clock, QueueManager, SystemClock};
 
@@ -392,20 +391,14 @@ pub fn slot_frame_warnings(checked: &Checked) -> Vec<String> {
     let in_slots: Vec<Option<usize>> = views
         .iter()
         .map(|view| {
-            let (driver, mac) = (view.driver?, view.mac?);
-            if mac.r#type() != protos::goby::acomms::protobuf::MacType::MacFixedDecentralized {
+            let fixed = view.mac?.r#type()
+                == protos::goby::acomms::protobuf::MacType::MacFixedDecentralized;
+            let frames = view.own_slot_frames(me);
+            if !fixed || view.driver.is_none() || frames.is_empty() {
                 return None;
             }
-            let own: Vec<&ModemTransmission> = mac
-                .slot
-                .iter()
-                .filter(|s| s.src.is_none_or(|src| src == me))
-                .collect();
-            if own.is_empty() {
-                return None;
-            }
-            own.iter()
-                .map(|slot| modemdriver::check::frame_in_slot(driver, slot))
+            frames
+                .into_iter()
                 .collect::<Option<Vec<usize>>>()?
                 .into_iter()
                 .max()

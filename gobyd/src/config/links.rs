@@ -39,6 +39,25 @@ pub struct LinkView<'a> {
 }
 
 impl LinkView<'_> {
+    /// The frame each TDMA slot of node `me` on this link offers, bytes, in
+    /// the MAC's order: as its driver offers it
+    /// ([`modemdriver::check::frame_in_slot`]), or a Micro-Modem's frame of
+    /// the slot's rate when the link names no driver; `None` for a slot
+    /// whose frame is not known. Empty without a MAC or a slot of `me`'s.
+    pub fn own_slot_frames(&self, me: i32) -> Vec<Option<usize>> {
+        let Some(mac) = self.mac else {
+            return Vec::new();
+        };
+        mac.slot
+            .iter()
+            .filter(|s| s.src.is_none_or(|src| src == me))
+            .map(|slot| match self.driver {
+                Some(driver) => modemdriver::check::frame_in_slot(driver, slot),
+                None => modemdriver::rate::spec(slot.rate()).map(|s| s.frame_bytes as usize),
+            })
+            .collect()
+    }
+
     /// The path of `field` of the link (`driver.udp.local.port`,
     /// `mac.slot[0]`, `budget.bytes`) from the top of the configuration.
     pub fn field(&self, field: &str) -> String {

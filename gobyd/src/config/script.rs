@@ -9,7 +9,7 @@
 //! limit): it could never go in that slot. A slot too short for its rate's packet
 //! is refused as every slot is (`mac.slot[I].slot_seconds`).
 
-use protos::goby::acomms::protobuf::{MacConfig, ModemTransmission};
+use protos::goby::acomms::protobuf::MacConfig;
 use protos::goby::apps::protobuf::GobydConfig;
 
 use super::{links, Problem};
@@ -50,7 +50,7 @@ fn mac_problems(
 ) -> Vec<Problem> {
     let mut problems = Vec::new();
     for (i, slot) in mac.slot.iter().enumerate() {
-        let frame = driver.and_then(|d| frame_bytes(d, slot));
+        let frame = driver.and_then(|d| modemdriver::check::frame_in_slot(d, slot));
         for (j, name) in slot.packet_type.iter().enumerate() {
             let field = format!("{place}.slot[{i}].packet_type[{j}]");
             if name == "any" {
@@ -77,15 +77,6 @@ fn mac_problems(
         }
     }
     problems
-}
-
-/// Bytes in one frame of `slot` on `driver`, as its data requests offer
-/// them ([`modemdriver::check::frame_in_slot`]).
-fn frame_bytes(
-    driver: &protos::goby::acomms::protobuf::DriverConfig,
-    slot: &ModemTransmission,
-) -> Option<usize> {
-    modemdriver::check::frame_in_slot(driver, slot)
 }
 
 #[cfg(test)]

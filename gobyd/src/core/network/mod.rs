@@ -35,8 +35,8 @@ use std::sync::Arc;
 
 use prost_reflect::{DynamicMessage, ReflectMessage};
 use protos::goby::acomms::protobuf::{
-    fragment_ack, FileRequest, Fragment, FragmentAck, FragmentChannel, ModemTransmission,
-    QueueManagerConfig, QueuedMessageEntry, RouteAck, RoutedMessage,
+    fragment_ack, FileRequest, Fragment, FragmentAck, FragmentChannel, QueueManagerConfig,
+    QueuedMessageEntry, RouteAck, RoutedMessage,
 };
 use protos::goby::apps::protobuf::{GobydConfig, NetworkConfig};
 use queue::{Micros, QueueEvent, ReceivedMessage, WireIdentity};
@@ -1950,17 +1950,7 @@ fn smallest_frame(config: &GobydConfig) -> Option<usize> {
     crate::config::links::links(config)
         .iter()
         .filter_map(|view| {
-            let in_slot = |slot: &ModemTransmission| match view.driver {
-                Some(driver) => modemdriver::check::frame_in_slot(driver, slot),
-                None => modemdriver::rate::spec(slot.rate()).map(|s| s.frame_bytes as usize),
-            };
-            let from_slots = view.mac.and_then(|mac| {
-                mac.slot
-                    .iter()
-                    .filter(|s| s.src.is_none_or(|src| src == me))
-                    .filter_map(in_slot)
-                    .min()
-            });
+            let from_slots = view.own_slot_frames(me).into_iter().flatten().min();
             from_slots.or_else(|| view.driver.and_then(modemdriver::check::largest_frame))
         })
         .min()
