@@ -538,6 +538,19 @@ async fn a_file_through_the_relay_keeps_pace_with_the_tdma_limit() {
         std::fs::read(complete[0].path.as_ref().unwrap()).unwrap(),
         content
     );
+    // Its progress at the receiver: each event names the file, its size
+    // and its fragments (the first comes once its header is held), about
+    // one a sixteenth of its fragments.
+    let progress = transfer_at(&seen, 3, "receiving");
+    assert!((2..=17).contains(&progress.len()), "{progress:?}");
+    for (k, e) in progress.iter().enumerate() {
+        assert_eq!(
+            (e.name.as_str(), e.bytes, e.fragments),
+            ("survey.bin", content.len() as u64, complete[0].fragments),
+            "{e:?}"
+        );
+        assert!(k == 0 || e.held > progress[k - 1].held, "{progress:?}");
+    }
     let goodput = content.len() as f64 * 8.0 / written.as_secs_f64();
     assert!(
         goodput >= 0.9 * limit_bps,

@@ -251,6 +251,10 @@ pub enum Outcome {
     Refused,
     /// Its lifetime ended first.
     Expired,
+    /// At its sender: a fragment could not be queued toward its next hop
+    /// (the queue refused it, for good: larger than the link's frames, or
+    /// not encodable). Never on the water.
+    Unqueued,
 }
 
 impl Outcome {
@@ -262,6 +266,7 @@ impl Outcome {
             Outcome::ChecksumMismatch => 2,
             Outcome::Refused => 3,
             Outcome::Expired => 4,
+            Outcome::Unqueued => 5,
         }
     }
 
@@ -272,6 +277,7 @@ impl Outcome {
             2 => Outcome::ChecksumMismatch,
             3 => Outcome::Refused,
             4 => Outcome::Expired,
+            5 => Outcome::Unqueued,
             _ => return None,
         })
     }
@@ -283,6 +289,7 @@ impl Outcome {
             Outcome::ChecksumMismatch => "its SHA-256 did not match at the receiver",
             Outcome::Refused => "the receiver could not keep or write it",
             Outcome::Expired => "its lifetime ended before it was whole",
+            Outcome::Unqueued => "a fragment of it could not be queued toward its next hop",
         }
     }
 }

@@ -719,76 +719,30 @@ impl Node {
             return;
         }
         let duration = match mt.r#type() {
-            TransmissionType::Data => {
-                let packet = match self.packet(mt.rate()) {
-                    Ok(packet) => packet,
-                    Err(reason) => {
-                        events.emit(DriverEvent::TransmitResult(TransmitResult {
-                            transmission: mt,
-                            outcome: TransmitOutcome::Failed(reason),
-                        }));
-                        return;
-                    }
-                };
-                let spec = packet.spec;
-                mt.max_num_frames = Some(
-                    mt.max_num_frames
-                        .map_or(spec.frames, |n| n.min(spec.frames)),
-                );
-                // A modem that sends only the bytes given takes the
-                // slot's frame size when smaller (as its driver does).
-                mt.max_frame_bytes = Some(match packet.whole_frames {
-                    true => spec.frame_bytes,
-                    false => mt
-                        .max_frame_bytes
-                        .map_or(spec.frame_bytes, |b| b.min(spec.frame_bytes)),
-                });
-                let duration = packet.on_water();
-                // A satellite session is not bound to the slot that asked
-                // for it (the Iridium driver queues it behind the session
-                // under way), so a mailbox check does not cost a slot.
-                let bound = self.satellite.is_none();
-                if bound && crate::slot::too_late_at(&mt, duration, self.now()) {
-                    events.status(DriverStatus::Skipped {
-                        reason: "the slot of a transmission waiting for the channel has passed"
-                            .into(),
-                    });
-                    return;
+            TransmissionType::Data => match self.data_packet(mt, events).await {
+                Some((filled, duration)) => {
+                    mt = filled;
+                    duration
                 }
-                if mt.frame.is_empty() {
-                    mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
-                    // The answer may come too late for the packet to end
-                    // within its slot: then it is not sent (its messages are
-                    // queued again, as for any failed transmission).
-                    if bound && crate::slot::too_late_at(&mt, duration, self.now()) {
-                        events.emit(DriverEvent::TransmitResult(TransmitResult {
-                            transmission: mt,
-                            outcome: TransmitOutcome::Failed(
-                                "the data came too late for the packet to end within its slot"
-                                    .into(),
-                            ),
-                        }));
-                        return;
-                    }
-                }
-                if mt.frame.iter().all(|f| f.is_empty()) && !mt.always_initiate() {
-                    events.emit(DriverEvent::TransmitResult(TransmitResult {
-                        transmission: mt,
-                        outcome: TransmitOutcome::NothingToSend,
-                    }));
-                    if self.satellite.is_some() {
-                        // A session all the same: a mailbox check.
-                        let _ = self.session_until(Instant::now() + duration);
-                    }
-                    return;
-                }
-                packet.on_water_holding(mt.frame.iter().map(Vec::len).sum())
-            }
+                None => return,
+            },
             // Acks and driver-specific packets: the probe and header only.
             _ => self
                 .packet(mt.rate())
                 .map_or(self.overhead, |packet| packet.overhead),
         };
+        self.put_on_water(mt, duration, events).await;
+    }
+
+    /// Sends `mt`, `duration` long on the water: to the medium (and the
+    /// satellite's gateway, the UDP bridge and the observer); its result
+    /// is told at its end.
+    async fn put_on_water(
+        &mut self,
+        mut mt: ModemTransmission,
+        duration: Duration,
+        events: &EventSink,
+    ) {
         if mt.dest() == -1 {
             mt.dest = Some(0);
         }
@@ -853,6 +807,79 @@ impl Node {
                 outcome,
             },
         ));
+    }
+
+    /// A data transmission's packet: its frames sized to the packet of
+    /// its rate and filled by a data request when empty, with its time on
+    /// the water; `None` when it is not sent (its result or a status
+    /// told).
+    async fn data_packet(
+        &mut self,
+        mut mt: ModemTransmission,
+        events: &EventSink,
+    ) -> Option<(ModemTransmission, Duration)> {
+        let packet = match self.packet(mt.rate()) {
+            Ok(packet) => packet,
+            Err(reason) => {
+                events.emit(DriverEvent::TransmitResult(TransmitResult {
+                    transmission: mt,
+                    outcome: TransmitOutcome::Failed(reason),
+                }));
+                return None;
+            }
+        };
+        let spec = packet.spec;
+        mt.max_num_frames = Some(
+            mt.max_num_frames
+                .map_or(spec.frames, |n| n.min(spec.frames)),
+        );
+        // A modem that sends only the bytes given takes the
+        // slot's frame size when smaller (as its driver does).
+        mt.max_frame_bytes = Some(match packet.whole_frames {
+            true => spec.frame_bytes,
+            false => mt
+                .max_frame_bytes
+                .map_or(spec.frame_bytes, |b| b.min(spec.frame_bytes)),
+        });
+        let duration = packet.on_water();
+        // A satellite session is not bound to the slot that asked
+        // for it (the Iridium driver queues it behind the session
+        // under way), so a mailbox check does not cost a slot.
+        let bound = self.satellite.is_none();
+        if bound && crate::slot::too_late_at(&mt, duration, self.now()) {
+            events.status(DriverStatus::Skipped {
+                reason: "the slot of a transmission waiting for the channel has passed".into(),
+            });
+            return None;
+        }
+        if mt.frame.is_empty() {
+            mt = events.request_data(mt, DATA_REQUEST_TIMEOUT).await;
+            // The answer may come too late for the packet to end
+            // within its slot: then it is not sent (its messages are
+            // queued again, as for any failed transmission).
+            if bound && crate::slot::too_late_at(&mt, duration, self.now()) {
+                events.emit(DriverEvent::TransmitResult(TransmitResult {
+                    transmission: mt,
+                    outcome: TransmitOutcome::Failed(
+                        "the data came too late for the packet to end within its slot".into(),
+                    ),
+                }));
+                return None;
+            }
+        }
+        if mt.frame.iter().all(|f| f.is_empty()) && !mt.always_initiate() {
+            events.emit(DriverEvent::TransmitResult(TransmitResult {
+                transmission: mt,
+                outcome: TransmitOutcome::NothingToSend,
+            }));
+            if self.satellite.is_some() {
+                // A session all the same: a mailbox check.
+                let _ = self.session_until(Instant::now() + duration);
+            }
+            return None;
+        }
+        let duration = packet.on_water_holding(mt.frame.iter().map(Vec::len).sum());
+        Some((mt, duration))
     }
 
     /// A deferred ack asked for by the layer above: queued first.

@@ -2148,6 +2148,61 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// A fragment the queue refuses (here larger than the queue's frames)
+    /// ends its transfer at the next tick, telling the client why, instead
+    /// of waiting for the transfer's lifetime.
+    #[test]
+    fn a_transfer_whose_fragment_the_queue_refuses_fails_saying_why() {
+        let dir = std::env::temp_dir().join(format!("goby-net-unq-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = GobydConfig {
+            modem_id: Some(3),
+            network: Some(NetworkConfig {
+                fragment_bytes: Some(200),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let mut codec = dccl::Codec::new();
+        let mut queue_config = QueueManagerConfig {
+            modem_id: Some(3),
+            ..Default::default()
+        };
+        prepare(&config, &mut codec, &mut queue_config, &[]).unwrap();
+        queue_config.max_frame_bytes = Some(64);
+        let codec = Arc::new(codec);
+        let queue = queue::QueueManager::new(codec.clone(), &queue_config).unwrap();
+        let (mut outbox, _) = Outbox::open(queue, &dir.join("outbox.journal")).unwrap();
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_micros() as Micros;
+        let mut network = Network::open(&config, &queue_config, codec.clone(), &dir, &outbox, now)
+            .unwrap()
+            .unwrap();
+        let file = dir.join("sonar.bin");
+        std::fs::write(&file, vec![5u8; 1000]).unwrap();
+        let (started, _) = network.send_file(1, &file, None, now).unwrap();
+        assert_eq!(started.state, "sending");
+        network.data_request(&mut outbox, now);
+        let receipt = network.tick(now + SECOND);
+        let ended: Vec<_> = receipt
+            .transfers
+            .iter()
+            .filter(|t| t.id == started.id && t.outgoing)
+            .collect();
+        assert_eq!(ended.len(), 1, "{:?}", receipt.transfers);
+        assert_eq!(ended[0].state, "failed");
+        let reason = ended[0].reason.as_deref().unwrap_or_default();
+        assert!(
+            reason.starts_with("fragment 0 could not be queued: ") && reason.contains("64"),
+            "{reason}"
+        );
+        assert!(network.transfers().is_empty());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// The bound the guide promises: a fragment's header (its DCCL id, its
     /// next hop, its place) is at most 6 bytes, so that a 64-byte frame
     /// keeps 90 % of its bytes for data; a long transfer's one more.

@@ -110,6 +110,8 @@ struct Out {
     content: Content,
     body_len: u64,
     sha256: [u8; 32],
+    /// Why a fragment of it could not be queued: it ends at the next tick.
+    unqueued: Option<String>,
 }
 
 /// A transfer this node receives.
@@ -119,6 +121,9 @@ struct In {
     incoming: Incoming,
     /// A selective ack is owed (new fragments since the last one queued).
     ack_due: bool,
+    /// Fragments held when its last `receiving` event was told (0: none
+    /// told yet).
+    told: u32,
 }
 
 /// A channel of another node bound to a transfer (as a
@@ -494,6 +499,7 @@ impl Transfers {
                             content: header.content,
                             body_len: u64::from(header.body_len),
                             sha256: header.sha256,
+                            unqueued: None,
                         },
                     );
                 }
@@ -528,6 +534,7 @@ impl Transfers {
                         expires,
                         incoming: Incoming::new(),
                         ack_due: true,
+                        told: 0,
                     });
                     i.expires = i.expires.max(expires);
                     i.incoming.hold(index, data);
@@ -670,6 +677,7 @@ impl Transfers {
             content,
             body_len: body.len() as u64,
             sha256: fragment::sha256(body),
+            unqueued: None,
         };
         let payload = out_payload(number, &out, now);
         self.append(&payload)
@@ -999,8 +1007,11 @@ impl Transfers {
                 }
                 Ok(None) => {}
                 Err(e) => {
+                    // The queue's refusals are for good: the transfer ends
+                    // (at the next tick, which tells its client why).
                     tracing::error!("transfer {number}: fragment {index} not queued: {e}");
                     o.sending.unsent(index);
+                    o.unqueued = Some(format!("fragment {index} could not be queued: {e}"));
                     break;
                 }
             }
@@ -1033,6 +1044,8 @@ impl Transfers {
             Some(Outcome::ChecksumMismatch) => fragment_ack::Outcome::ChecksumMismatch,
             Some(Outcome::Refused) => fragment_ack::Outcome::Refused,
             Some(Outcome::Expired) => fragment_ack::Outcome::Expired,
+            // A receiver does not end so; were it to, it could not keep it.
+            Some(Outcome::Unqueued) => fragment_ack::Outcome::Refused,
         };
         let ack = NetMessage::FragmentAck(FragmentAck {
             next_hop: next,
@@ -1144,6 +1157,7 @@ impl Transfers {
             expires,
             incoming: Incoming::new(),
             ack_due: true,
+            told: 0,
         });
         i.expires = i.expires.max(expires);
         i.ack_due = true;
@@ -1173,10 +1187,20 @@ impl Transfers {
             return;
         }
         let Some(whole) = i.incoming.whole() else {
-            if i.incoming.held() % 16 == 1 {
+            // Progress: first once its header is held (its name, size and
+            // fragments known), then at each sixteenth of its fragments.
+            let (held, told) = (i.incoming.held(), i.told);
+            let due = i
+                .incoming
+                .count()
+                .is_some_and(|count| told == 0 || held >= told.saturating_add((count / 16).max(1)));
+            if due {
                 produced
                     .events
                     .push(self.in_event(origin, number, i, "receiving", None, None));
+                if let Some(i) = self.inc.get_mut(&key) {
+                    i.told = held;
+                }
             }
             return;
         };
@@ -1383,7 +1407,10 @@ impl Transfers {
             }
         }
         let state = if complete { "complete" } else { "failed" };
-        let reason = (!complete).then(|| outcome.text().to_string());
+        let reason = match (&o.unqueued, outcome) {
+            (Some(why), Outcome::Unqueued) => Some(why.clone()),
+            _ => (!complete).then(|| outcome.text().to_string()),
+        };
         let mut event = self.out_event(number, &o, state, reason);
         if complete {
             event.held = event.fragments;
@@ -1472,16 +1499,21 @@ impl Transfers {
         self.log.sync()
     }
 
-    /// The passing of time: transfers whose lifetime ended fail.
+    /// The passing of time: transfers whose lifetime ended fail, as do
+    /// those a fragment of which the queue refused.
     pub fn tick(&mut self, now: Micros, produced: &mut Produced) {
-        let due: Vec<u16> = self
+        let due: Vec<(u16, bool)> = self
             .out
             .iter()
-            .filter(|(_, o)| o.expires <= now)
-            .map(|(n, _)| *n)
+            .filter(|(_, o)| o.expires <= now || o.unqueued.is_some())
+            .map(|(n, o)| (*n, o.unqueued.is_some()))
             .collect();
-        for number in due {
-            self.end(number, Outcome::Expired, now, produced);
+        for (number, unqueued) in due {
+            let outcome = match unqueued {
+                true => Outcome::Unqueued,
+                false => Outcome::Expired,
+            };
+            self.end(number, outcome, now, produced);
         }
         let due: Vec<(i32, u16)> = self
             .inc
