@@ -1969,6 +1969,7 @@ fn ttl_of(ttls: &HashMap<&'static str, Micros>, name: &str) -> Micros {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::PathBuf;
 
     /// Node 1 on `driver` (a `driver` section's body) with one slot of its
     /// own at rate 0.
@@ -2083,15 +2084,25 @@ mod tests {
     /// A fragment of transfer format 1 (an older node's) is not misread:
     /// its transfer is answered REFUSED, in the `FragmentAck` that format
     /// reads, to its origin.
-    #[test]
-    fn a_format_1_fragment_is_refused_to_its_origin() {
-        use protos::goby::acomms::protobuf::FragmentV1;
-        let dir = std::env::temp_dir().join(format!("goby-net-v1-{}", std::process::id()));
+    /// Node 3's network layer (`network`) over its outbox, in a fresh
+    /// directory `goby-net-{name}-PID`, its queue's frames at most
+    /// `max_frame` bytes; with the time now (the queue's clock is the
+    /// system's).
+    struct Node3 {
+        dir: PathBuf,
+        codec: Arc<dccl::Codec>,
+        outbox: Outbox,
+        network: Network,
+        now: Micros,
+    }
+
+    fn node_3(name: &str, network: NetworkConfig, max_frame: Option<u32>) -> Node3 {
+        let dir = std::env::temp_dir().join(format!("goby-net-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let config = GobydConfig {
             modem_id: Some(3),
-            network: Some(NetworkConfig::default()),
+            network: Some(network),
             ..Default::default()
         };
         let mut codec = dccl::Codec::new();
@@ -2100,17 +2111,36 @@ mod tests {
             ..Default::default()
         };
         prepare(&config, &mut codec, &mut queue_config, &[]).unwrap();
+        queue_config.max_frame_bytes = max_frame.or(queue_config.max_frame_bytes);
         let codec = Arc::new(codec);
         let queue = queue::QueueManager::new(codec.clone(), &queue_config).unwrap();
-        let (mut outbox, _) = Outbox::open(queue, &dir.join("outbox.journal")).unwrap();
-        // The queue's clock is the system's.
+        let (outbox, _) = Outbox::open(queue, &dir.join("outbox.journal")).unwrap();
         let now = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .unwrap()
             .as_micros() as Micros;
-        let mut network = Network::open(&config, &queue_config, codec.clone(), &dir, &outbox, now)
+        let network = Network::open(&config, &queue_config, codec.clone(), &dir, &outbox, now)
             .unwrap()
             .unwrap();
+        Node3 {
+            dir,
+            codec,
+            outbox,
+            network,
+            now,
+        }
+    }
+
+    #[test]
+    fn a_format_1_fragment_is_refused_to_its_origin() {
+        use protos::goby::acomms::protobuf::FragmentV1;
+        let Node3 {
+            dir,
+            codec,
+            mut outbox,
+            mut network,
+            now,
+        } = node_3("v1", NetworkConfig::default(), None);
         let old = FragmentV1 {
             next_hop: 3,
             origin: 1,
@@ -2153,34 +2183,20 @@ mod tests {
     /// of waiting for the transfer's lifetime.
     #[test]
     fn a_transfer_whose_fragment_the_queue_refuses_fails_saying_why() {
-        let dir = std::env::temp_dir().join(format!("goby-net-unq-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let config = GobydConfig {
-            modem_id: Some(3),
-            network: Some(NetworkConfig {
+        let Node3 {
+            dir,
+            mut outbox,
+            mut network,
+            now,
+            ..
+        } = node_3(
+            "unqueued",
+            NetworkConfig {
                 fragment_bytes: Some(200),
                 ..Default::default()
-            }),
-            ..Default::default()
-        };
-        let mut codec = dccl::Codec::new();
-        let mut queue_config = QueueManagerConfig {
-            modem_id: Some(3),
-            ..Default::default()
-        };
-        prepare(&config, &mut codec, &mut queue_config, &[]).unwrap();
-        queue_config.max_frame_bytes = Some(64);
-        let codec = Arc::new(codec);
-        let queue = queue::QueueManager::new(codec.clone(), &queue_config).unwrap();
-        let (mut outbox, _) = Outbox::open(queue, &dir.join("outbox.journal")).unwrap();
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_micros() as Micros;
-        let mut network = Network::open(&config, &queue_config, codec.clone(), &dir, &outbox, now)
-            .unwrap()
-            .unwrap();
+            },
+            Some(64),
+        );
         let file = dir.join("sonar.bin");
         std::fs::write(&file, vec![5u8; 1000]).unwrap();
         let (started, _) = network.send_file(1, &file, None, now).unwrap();
