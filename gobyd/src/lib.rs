@@ -28,7 +28,8 @@
 //! outbox and its journal, the receive path, the links, the network layer)
 //! and the interfaces (JSON, MOOS, MQTT, the mission log) are the crate's
 //! own.
-
+// No function outside tests over 150 lines (clippy.toml sets the bound).
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
 #![warn(missing_docs)]
 
 pub mod check;
