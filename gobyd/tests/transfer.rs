@@ -685,3 +685,42 @@ async fn transfers_on_clean_channels_stay_whole_when_bindings_are_lost() {
     fleet.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A broadcast is never fragmented: one larger than every frame the node
+/// could send (a rate-5 frame here, less the identity trailer) is refused
+/// when published, saying why, rather than accepted to wait for good; a
+/// broadcast that fits is accepted, and a message as large to one node
+/// goes in fragments.
+#[tokio::test(start_paused = true)]
+async fn a_broadcast_larger_than_every_frame_is_refused_when_published() {
+    let dir = scratch("transfer", "broadcast");
+    let configs = (1..=3).map(|id| config(id, &dir, 2, 8.0)).collect();
+    let fleet = Fleet::start(configs).await;
+    let answer = |message: DynamicMessage| {
+        let publisher = fleet.publisher(1).clone();
+        async move {
+            let (reply, answer) = tokio::sync::oneshot::channel();
+            publisher
+                .send(gobyd::event::Publish::new(message, reply))
+                .await
+                .unwrap();
+            answer.await.unwrap()
+        }
+    };
+    let refused = answer(blob(&dir, 0, pattern(1500, 3)))
+        .await
+        .expect_err("a broadcast of 1500 bytes is refused");
+    assert!(
+        refused.contains("test.Blob: a broadcast of 15")
+            && refused.contains("larger than every frame this node sends (at most 252 bytes"),
+        "{refused}"
+    );
+    answer(blob(&dir, 0, pattern(100, 3)))
+        .await
+        .expect("a broadcast that fits a frame is accepted");
+    answer(blob(&dir, 3, pattern(1500, 3)))
+        .await
+        .expect("the same to one node goes in fragments");
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}

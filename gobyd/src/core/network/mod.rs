@@ -292,6 +292,9 @@ enum Channeled {
 /// The network layer's state.
 pub struct Network {
     me: i32,
+    /// The most a broadcast's DCCL encoding may take to fit a frame this
+    /// node sends ([`largest_broadcast`]); `None`: no link says.
+    largest_broadcast: Option<usize>,
     table: RouteTable,
     hop_limit: usize,
     codec: Arc<dccl::Codec>,
@@ -421,6 +424,7 @@ impl Network {
         )?;
         let mut network = Network {
             me: config.modem_id(),
+            largest_broadcast: largest_broadcast(config, queue),
             table,
             hop_limit: settings.hop_limit() as usize,
             codec,
@@ -558,7 +562,19 @@ impl Network {
             Ok(Some(dest)) => i32::try_from(dest).ok()?,
             _ => return None,
         };
-        if dest == queue::BROADCAST_ID || dest == self.me {
+        if dest == queue::BROADCAST_ID {
+            // Never fragmented: one no frame holds would wait for good.
+            return match self.largest_broadcast {
+                Some(largest) if encoded.len() > largest => Some(Err(format!(
+                    "{name}: a broadcast of {} bytes is larger than every frame this node sends \
+                     (at most {largest} bytes of messages): only a message to one node goes in \
+                     fragments",
+                    encoded.len()
+                ))),
+                _ => None,
+            };
+        }
+        if dest == self.me {
             return None;
         }
         match self.table.next_hop(dest) {
@@ -1956,6 +1972,40 @@ fn smallest_frame(config: &GobydConfig) -> Option<usize> {
         .min()
 }
 
+/// The most bytes of messages a frame this node could ever send holds, a
+/// broadcast's bound: on each link, the driver's largest frame, or for a
+/// driver whose rate sets its frame (Micro-Modem, simulator) the frame of
+/// its largest rate (a `MACUpdate` may give any rate), less the identity
+/// trailer of one message where the queue writes it into the frame; the
+/// largest of every link's. `None` when a link does not say.
+fn largest_broadcast(config: &GobydConfig, queue: &QueueManagerConfig) -> Option<usize> {
+    let trailer = queue::identity::TrailerCodec::new().size(1);
+    let mut largest = None;
+    for view in crate::config::links::links(config) {
+        let driver = view.driver?;
+        let frame = modemdriver::check::largest_frame(driver).or_else(|| {
+            (0..=15)
+                .filter_map(|rate| {
+                    let slot = protos::goby::acomms::protobuf::ModemTransmission {
+                        rate: Some(rate),
+                        ..Default::default()
+                    };
+                    modemdriver::check::frame_in_slot(driver, &slot)
+                })
+                .max()
+        })?;
+        let beside = view
+            .driver
+            .is_some_and(modemdriver::check::carries_transmission);
+        let room = match queue.message_identity.unwrap_or(true) && !beside {
+            true => frame.saturating_sub(trailer),
+            false => frame,
+        };
+        largest = largest.max(Some(room));
+    }
+    largest
+}
+
 /// The frame a fragment fills when `network.fragment_bytes` is 0, bytes:
 /// this node's [smallest frame](smallest_frame), or 64 when nothing says.
 pub fn frame_bytes(config: &GobydConfig) -> usize {
@@ -2217,6 +2267,40 @@ mod tests {
         );
         assert!(network.transfers().is_empty());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A broadcast's bound is the largest frame the node could ever send,
+    /// less the identity trailer where the queue writes it into the frame:
+    /// a Micro-Modem's at rate 5 (whatever its slots), a SeaTrac's frame
+    /// limit, a UDP driver's `max_frame_size` (its identity beside the
+    /// frames). `gobyd --test transfer` checks the refusal it sets.
+    #[test]
+    fn a_broadcasts_bound_is_the_largest_frame_the_node_could_send() {
+        let bound =
+            |driver: &str| largest_broadcast(&config(driver), &QueueManagerConfig::default());
+        assert_eq!(
+            bound("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\""),
+            Some(252)
+        );
+        assert_eq!(
+            bound("driver_name: \"BLUEPRINT_SEATRAC\" serial_port: \"/dev/null\""),
+            Some(26)
+        );
+        assert_eq!(
+            bound("driver_type: DRIVER_UDP udp { local { port: 56101 } max_frame_size: 500 }"),
+            Some(500)
+        );
+        let without_identity = QueueManagerConfig {
+            message_identity: Some(false),
+            ..Default::default()
+        };
+        assert_eq!(
+            largest_broadcast(
+                &config("driver_type: DRIVER_WHOI_MICROMODEM serial_port: \"/dev/null\""),
+                &without_identity
+            ),
+            Some(256)
+        );
     }
 
     /// The bound the guide promises: a fragment's header (its DCCL id, its
