@@ -102,7 +102,8 @@ pub struct SendArgs {
     /// The receiving node (its modem id).
     #[arg(value_name = "NODE")]
     pub node: i32,
-    /// The file (on gobyd's machine).
+    /// The file, on gobyd's machine (a relative path from this command's
+    /// working directory: it is made absolute for gobyd).
     #[arg(value_name = "PATH")]
     pub path: PathBuf,
     /// Its name at the receiver (default: its own name).

@@ -247,7 +247,8 @@ pub enum Outcome {
     Complete,
     /// Whole at the receiver, and its checksum did not match.
     ChecksumMismatch,
-    /// The receiver could not keep or write it.
+    /// The receiver refused it: larger than its `max_transfer_bytes`, or it
+    /// could not record or write it.
     Refused,
     /// Its lifetime ended first.
     Expired,
@@ -287,7 +288,10 @@ impl Outcome {
         match self {
             Outcome::Complete => "complete",
             Outcome::ChecksumMismatch => "its SHA-256 did not match at the receiver",
-            Outcome::Refused => "the receiver could not keep or write it",
+            Outcome::Refused => {
+                "the receiver refused it (larger than its network.max_transfer_bytes, or it could \
+                 not record or write it: its log says which)"
+            }
             Outcome::Expired => "its lifetime ended before it was whole",
             Outcome::Unqueued => "a fragment of it could not be queued toward its next hop",
         }

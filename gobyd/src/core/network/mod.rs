@@ -109,6 +109,7 @@ pub fn prepare(
         Err(problems) => problems,
     };
     problems.extend(fragment_bytes_problem(config, network.fragment_bytes()));
+    problems.extend(setting_problems(network));
     for name in loaded {
         if let Ok(id) = codec.id_of(name) {
             if wire::is_network_id(id) {
@@ -1888,6 +1889,50 @@ pub fn fragment_data_bytes(codec: &dccl::Codec, frame: usize) -> std::io::Result
     )))
 }
 
+/// The `network` settings that would not work as written: a window of
+/// no fragments, a largest transfer of no bytes, a lifetime of no
+/// seconds, a resend time that is not a number of seconds above 0.
+fn setting_problems(network: &NetworkConfig) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let zero = |value: Option<u32>, field: &str, what: &str| {
+        (value == Some(0)).then(|| {
+            Problem::new(
+                format!("network.{field}"),
+                format!("0 {what}: nothing would go; leave it out for its default"),
+            )
+        })
+    };
+    problems.extend(zero(
+        network.window,
+        "window",
+        "fragments in the queue at a time",
+    ));
+    problems.extend(zero(
+        network.relay_window,
+        "relay_window",
+        "fragments a relay holds",
+    ));
+    problems.extend(zero(
+        network.max_transfer_bytes,
+        "max_transfer_bytes",
+        "bytes of the largest transfer",
+    ));
+    problems.extend(zero(
+        network.file_ttl,
+        "file_ttl",
+        "seconds of a file's lifetime",
+    ));
+    if let Some(resend) = network.resend_seconds {
+        if !(resend.is_finite() && resend > 0.0) {
+            problems.push(Problem::new(
+                "network.resend_seconds",
+                format!("{resend} is not a number of seconds above 0"),
+            ));
+        }
+    }
+    problems
+}
+
 /// What is wrong with `fragment_bytes` (0: unset, fitted to the frame):
 /// more than a fragment holds, or more than this node's smallest frame
 /// ([`frame_bytes`]) holds with the fragment's header: its fragments would
@@ -2267,6 +2312,41 @@ mod tests {
         );
         assert!(network.transfers().is_empty());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Settings that would not work as written are refused by `--check`,
+    /// each naming its field.
+    #[test]
+    fn network_settings_of_nothing_are_refused() {
+        let problems = setting_problems(&NetworkConfig {
+            window: Some(0),
+            relay_window: Some(0),
+            max_transfer_bytes: Some(0),
+            file_ttl: Some(0),
+            resend_seconds: Some(0.0),
+            ..Default::default()
+        });
+        let fields: Vec<String> = problems.iter().map(|p| p.to_string()).collect();
+        assert_eq!(fields.len(), 5, "{fields:?}");
+        for (k, field) in [
+            "network.window: 0 fragments",
+            "network.relay_window: 0",
+            "network.max_transfer_bytes: 0",
+            "network.file_ttl: 0",
+            "network.resend_seconds: 0 is not",
+        ]
+        .iter()
+        .enumerate()
+        {
+            assert!(fields[k].starts_with(field), "{fields:?}");
+        }
+        assert!(setting_problems(&NetworkConfig::default()).is_empty());
+        assert!(setting_problems(&NetworkConfig {
+            window: Some(1),
+            resend_seconds: Some(60.0),
+            ..Default::default()
+        })
+        .is_empty());
     }
 
     /// A broadcast's bound is the largest frame the node could ever send,

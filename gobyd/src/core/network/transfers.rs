@@ -1183,6 +1183,13 @@ impl Transfers {
             .header()
             .is_some_and(|h| h.body_len as usize > self.settings.max_bytes);
         if too_large {
+            tracing::warn!(
+                origin,
+                number,
+                "transfer from node {origin}: {} bytes, more than network.max_transfer_bytes ({}): refused",
+                i.incoming.header().map_or(0, |h| h.body_len),
+                self.settings.max_bytes
+            );
             self.finish(key, Outcome::Refused, None, None, now, produced);
             return;
         }
