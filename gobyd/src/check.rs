@@ -324,6 +324,7 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
         .flatten();
     let mut lines = Vec::new();
     let mut warnings = slot_frame_warnings(checked);
+    warnings.extend(serve_dir_warning(config));
     let mut sbd = None;
     for view in config::links::links(config) {
         let Some(limits) = view.driver.and_then(modemdriver::check::frame_limits) else {
@@ -369,6 +370,23 @@ pub fn frame_report(checked: &Checked) -> (Option<String>, Vec<String>) {
         ));
     }
     (Some(lines.join("\n")), warnings)
+}
+
+/// A warning when `network.serve_dir` is set but is not a directory here
+/// (relative: to the directory `gobyd` runs in): every `file_get` of
+/// another node is then refused, saying so, until it is.
+fn serve_dir_warning(config: &GobydConfig) -> Option<String> {
+    let dir = config.network.as_ref()?.serve_dir.as_deref()?;
+    let path = std::path::Path::new(dir);
+    let what = match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => return None,
+        Ok(_) => "is not a directory",
+        Err(_) => "does not exist",
+    };
+    Some(format!(
+        "network.serve_dir: {dir:?} {what} (relative: to the directory gobyd runs in): \
+         every file another node asks for is refused until it is a directory"
+    ))
 }
 
 /// A warning for each loaded DCCL type that fits a frame of the driver
@@ -464,6 +482,31 @@ pub fn check(config: GobydConfig) -> Result<Vec<String>, DaemonError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `network.serve_dir` set but not a directory is warned of: missing,
+    /// or a file; a directory, or no `serve_dir`, is not.
+    #[test]
+    fn a_serve_dir_that_is_no_directory_is_warned_of() {
+        let with = |dir: Option<&str>| GobydConfig {
+            network: Some(protos::goby::apps::protobuf::NetworkConfig {
+                serve_dir: dir.map(str::to_string),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let here = std::env::temp_dir();
+        let missing = here.join(format!("goby-no-such-dir-{}", std::process::id()));
+        let file = here.join(format!("goby-serve-file-{}", std::process::id()));
+        std::fs::write(&file, b"x").unwrap();
+        let missing_text = serve_dir_warning(&with(missing.to_str())).unwrap_or_default();
+        assert!(missing_text.contains("does not exist"), "{missing_text}");
+        let file_text = serve_dir_warning(&with(file.to_str())).unwrap_or_default();
+        assert!(file_text.contains("is not a directory"), "{file_text}");
+        assert_eq!(serve_dir_warning(&with(here.to_str())), None);
+        assert_eq!(serve_dir_warning(&with(None)), None);
+        assert_eq!(serve_dir_warning(&GobydConfig::default()), None);
+        let _ = std::fs::remove_file(&file);
+    }
     use crate::daemon::Daemon;
 
     /// A scratch directory of this test process.
