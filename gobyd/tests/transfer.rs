@@ -428,6 +428,7 @@ fn settings_for_inspection(
         fragment_ttl: 0,
         ack_ttl: 0,
         remember: 0,
+        silence: 300_000_000,
     }
 }
 
@@ -721,6 +722,63 @@ async fn a_broadcast_larger_than_every_frame_is_refused_when_published() {
     answer(blob(&dir, 3, pattern(1500, 3)))
         .await
         .expect("the same to one node goes in fragments");
+    fleet.stop().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A transfer to a node that never answers (node 9: on the subnet, so
+/// sent straight to it, but no such node) does not hold up a transfer
+/// through another hop for its lifetime. Before, its fragments and its
+/// channel's binding went again at every slot of node 1 (the queue's next
+/// messages were theirs) and the window was the node's: the file to node
+/// 3 was not written in a virtual hour (the first transfer's lifetime is
+/// a day). Now the window is each next hop's, and a hop that acknowledges
+/// nothing for twenty cycles (here 480 s) has this node's messages toward
+/// it taken back out of the queue, to be tried again later.
+#[tokio::test(start_paused = true)]
+async fn a_transfer_to_a_silent_node_does_not_hold_up_the_others() {
+    let dir = scratch("transfer", "silent");
+    let configs = (1..=3).map(|id| config(id, &dir, 2, 8.0)).collect();
+    let fleet = Fleet::start(configs).await;
+    let lost = dir.join("lost.bin");
+    std::fs::write(&lost, pattern(3000, 5)).unwrap();
+    let first = send_file(&fleet, 1, 9, lost).await;
+    assert_eq!(first["transfer"]["state"], "sending", "{first}");
+    tokio::time::sleep(Duration::from_secs(120)).await;
+    let file = dir.join("survey.bin");
+    let content = pattern(1024, 6);
+    std::fs::write(&file, &content).unwrap();
+    let start = tokio::time::Instant::now();
+    send_file(&fleet, 1, 3, file).await;
+    let done = until(&fleet, Duration::from_secs(3600), |s| {
+        transfer_at(s, 3, "complete")
+            .iter()
+            .any(|e| e.name == "survey.bin")
+    })
+    .await;
+    let seen = fleet.seen();
+    assert!(
+        done,
+        "the file to node 3 not written within a virtual hour: {:?}",
+        transfer_at(&seen, 3, "receiving").last()
+    );
+    // Written in about 600 s here (20 % loss, through the relay): the
+    // first 480 s while node 9 is not yet silent share node 1's slots.
+    assert!(
+        start.elapsed() < Duration::from_secs(1800),
+        "the file to node 3 took {:?}",
+        start.elapsed()
+    );
+    let written: Vec<_> = transfer_at(&seen, 3, "complete")
+        .into_iter()
+        .filter(|e| e.name == "survey.bin")
+        .collect();
+    assert_eq!(
+        std::fs::read(written[0].path.as_ref().unwrap()).unwrap(),
+        content
+    );
+    // The transfer to node 9 is still under way, not failed.
+    assert!(transfer_at(&seen, 1, "failed").is_empty());
     fleet.stop().await;
     let _ = std::fs::remove_dir_all(&dir);
 }

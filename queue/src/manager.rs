@@ -1054,6 +1054,35 @@ impl QueueManager {
         Ok(n)
     }
 
+    /// Takes the messages of type `name` that `pick` chooses (given each
+    /// one's id and message) out of their queue, sent or not, without an
+    /// ack or an expiry: the layer above that pushed them takes them back
+    /// (the network layer, from a next hop that does not answer). Returns
+    /// their ids; no event tells of them but the queue's size.
+    ///
+    /// # Errors
+    /// `name` is not a configured type.
+    pub fn withdraw_where(
+        &mut self,
+        name: &str,
+        pick: impl FnMut(MessageId, &DynamicMessage) -> bool,
+    ) -> Result<Vec<MessageId>> {
+        let dccl_id = self.id_of_configured(name)?;
+        let index = self.index_of(dccl_id);
+        let taken: Vec<MessageId> = self.queues[index]
+            .take_where(pick)
+            .into_iter()
+            .map(|m| m.seq)
+            .collect();
+        if !taken.is_empty() {
+            let seqs = &self.queues[index];
+            self.awaiting
+                .retain(|a| a.dccl_id != dccl_id || seqs.get(a.seq).is_some());
+            self.emit_size(index);
+        }
+        Ok(taken)
+    }
+
     /// Messages held for a type (including those awaiting an ack).
     pub fn size(&self, name: &str) -> Result<usize> {
         let id = self.id_of_configured(name)?;

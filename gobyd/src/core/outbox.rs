@@ -299,6 +299,19 @@ impl Outbox {
         Ok(self.queue.acknowledge_where(name, by, pick)?)
     }
 
+    /// Takes the unjournaled messages of type `name` that `pick` chooses
+    /// out of the queue without an ack or an expiry
+    /// ([`QueueManager::withdraw_where`]): the network layer takes back
+    /// what it pushed with [`push_unjournaled`](Self::push_unjournaled).
+    /// Returns their ids.
+    pub fn withdraw_unjournaled(
+        &mut self,
+        name: &str,
+        pick: impl FnMut(queue::MessageId, &DynamicMessage) -> bool,
+    ) -> Result<Vec<queue::MessageId>, OutboxError> {
+        Ok(self.queue.withdraw_where(name, pick)?)
+    }
+
     /// Expires the messages older than their ttl.
     pub fn expire(&mut self) {
         self.queue.expire();

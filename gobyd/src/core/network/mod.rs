@@ -25,6 +25,7 @@
 //! record in the origin's `routes.log` ([`origin`]).
 
 pub mod channels;
+pub mod hops;
 pub mod origin;
 pub mod transfers;
 pub mod wire;
@@ -415,6 +416,7 @@ impl Network {
             fragment_ttl: ttl_of(&net_ttl, "goby.acomms.protobuf.Fragment"),
             ack_ttl: ttl_of(&net_ttl, "goby.acomms.protobuf.FragmentAck"),
             remember: 3600 * SECOND,
+            silence: silence(config),
         };
         let transfers = Transfers::open(
             config.modem_id(),
@@ -2049,6 +2051,18 @@ fn largest_broadcast(config: &GobydConfig, queue: &QueueManagerConfig) -> Option
         largest = largest.max(Some(room));
     }
     largest
+}
+
+/// How long this node's messages toward a next hop wait with no ack from
+/// it before it counts as silent ([`hops`]): twenty of the longest TDMA
+/// cycle of this node's links, at least 300 s (µs).
+fn silence(config: &GobydConfig) -> Micros {
+    let longest = crate::config::links::links(config)
+        .iter()
+        .filter_map(|view| view.mac)
+        .map(|mac| mac.slot.iter().map(|s| s.slot_seconds()).sum::<f64>())
+        .fold(0.0, f64::max);
+    ((20.0 * longest).max(300.0) * 1e6) as Micros
 }
 
 /// The frame a fragment fills when `network.fragment_bytes` is 0, bytes:

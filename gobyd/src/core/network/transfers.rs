@@ -43,6 +43,7 @@ use crate::core::outbox::Outbox;
 use crate::core::route::RouteTable;
 
 use super::channels::{ChannelState, OutChannels};
+use super::hops::Hops;
 use super::wire::{self, NetMessage, Place};
 pub use crate::event::TransferEvent;
 
@@ -73,7 +74,8 @@ const SECOND: Micros = 1_000_000;
 pub struct Settings {
     /// Data bytes of each fragment.
     pub fragment_size: usize,
-    /// Fragments of this node's transfers in the queue at a time.
+    /// Fragments of this node's transfers in the queue at a time, toward
+    /// each next hop.
     pub window: usize,
     /// When a fragment taken by the next hop and not held is sent again.
     pub resend_after: Micros,
@@ -95,6 +97,9 @@ pub struct Settings {
     /// How long a received transfer is remembered once ended (fragments
     /// of it coming late are acknowledged, not taken again).
     pub remember: Micros,
+    /// How long messages toward a next hop wait with no ack from it before
+    /// it counts as silent ([`super::hops`]), µs.
+    pub silence: Micros,
 }
 
 /// One of this node's transfers.
@@ -217,6 +222,8 @@ pub struct Transfers {
     /// This node's channels toward its next hops (its own transfers' and
     /// those it relays).
     channels: OutChannels,
+    /// How the next hops of this node's transfers answer.
+    hops: Hops,
     next_number: u16,
     next_client: u64,
 }
@@ -451,6 +458,7 @@ impl Transfers {
         let bytes = log.read_all()?;
         let replayed = log.replay(&bytes, parse)?;
         drop(bytes);
+        let silence = settings.silence;
         let mut t = Transfers {
             me,
             settings,
@@ -464,6 +472,7 @@ impl Transfers {
             finals: HashMap::new(),
             bindings: HashMap::new(),
             channels: OutChannels::new(fresh),
+            hops: Hops::new(silence),
             next_number: (queue::identity::start_number(entropy, "transfers.number") % 65_536)
                 as u16,
             next_client: CLIENT_ID_BASE
@@ -809,22 +818,41 @@ impl Transfers {
     /// hop bound first: see [`super::channels`]), and the selective acks
     /// owed.
     pub fn top_up(&mut self, outbox: &mut Outbox, table: &RouteTable, now: Micros) {
-        let mut in_queue = self
-            .queued
-            .values()
-            .filter(
-                |q| matches!(q, Queued::Fragment { number, .. } if self.out.contains_key(number)),
-            )
-            .count();
+        for hop in self.hops.review(now) {
+            self.withdraw_toward(hop, outbox, now);
+        }
+        // The window is each next hop's (and a silent hop's smaller: see
+        // [`super::hops`]), so that a hop that does not answer holds only
+        // the transfers through it.
+        let mut in_queue: HashMap<i32, usize> = HashMap::new();
+        for q in self.queued.values() {
+            if let Queued::Fragment { number, next, .. } = q {
+                if self.out.contains_key(number) {
+                    *in_queue.entry(*next).or_default() += 1;
+                }
+            }
+        }
         let numbers: Vec<u16> = self.out.keys().copied().collect();
         for number in numbers {
-            if in_queue >= self.settings.window {
-                break;
+            let Some(hop) = self
+                .out
+                .get(&number)
+                .and_then(|o| table.link_dest(o.dest).ok())
+            else {
+                // open_channel says why.
+                let _ = self.open_channel(number, outbox, table, now);
+                continue;
+            };
+            let window = self.hops.window(hop, self.settings.window);
+            let waiting = in_queue.get(&hop).copied().unwrap_or(0);
+            if window == 0 || waiting >= window {
+                continue;
             }
             let Some((next, channel)) = self.open_channel(number, outbox, table, now) else {
                 continue;
             };
-            in_queue += self.queue_fragments(number, next, channel, in_queue, outbox, now);
+            let queued = self.queue_fragments(number, next, channel, waiting, window, outbox, now);
+            *in_queue.entry(next).or_default() += queued;
         }
         let mut finals: Vec<((i32, u16), Outcome)> =
             self.finals.iter().map(|(k, o)| (*k, *o)).collect();
@@ -942,6 +970,7 @@ impl Transfers {
             Ok(Some(id)) => {
                 self.queued.insert(id, binding);
                 self.channels.queued(next, channel);
+                self.hops.queued(next, now);
                 early
             }
             Ok(None) => None,
@@ -952,20 +981,55 @@ impl Transfers {
         }
     }
 
+    /// Takes this node's fragments and channel bindings toward `hop`, which
+    /// has acknowledged none of them for `silence`, back out of the queue
+    /// (they go again when it is probed: [`super::hops`]).
+    fn withdraw_toward(&mut self, hop: i32, outbox: &mut Outbox, now: Micros) {
+        let ids: HashSet<MessageId> = self
+            .queued
+            .iter()
+            .filter(|(_, q)| {
+                matches!(q, Queued::Fragment { next, .. } | Queued::Channel { next, .. } if *next == hop)
+            })
+            .map(|(id, _)| *id)
+            .collect();
+        let mut taken = Vec::new();
+        for name in [wire::FRAGMENT, wire::CHANNEL] {
+            match outbox.withdraw_unjournaled(name, |id, _| ids.contains(&id)) {
+                Ok(ids) => taken.extend(ids),
+                Err(e) => tracing::error!("{name} toward node {hop} not taken back: {e}"),
+            }
+        }
+        tracing::warn!(
+            hop,
+            "node {hop} acknowledged nothing of this node's for {} s: its {} fragments and \
+             bindings taken back out of the queue; transfers through it wait, and it is tried \
+             again in {} s",
+            self.settings.silence / SECOND,
+            taken.len(),
+            4 * self.settings.silence / SECOND
+        );
+        for id in taken {
+            self.left_queue(id, false, now);
+        }
+    }
+
     /// Queues fragments of transfer `number` on `channel` toward `next`,
     /// while fewer than the window are in the queue (`in_queue` now);
     /// returns how many.
+    #[allow(clippy::too_many_arguments)]
     fn queue_fragments(
         &mut self,
         number: u16,
         next: i32,
         channel: u8,
         mut in_queue: usize,
+        window: usize,
         outbox: &mut Outbox,
         now: Micros,
     ) -> usize {
         let mut queued = 0;
-        while in_queue < self.settings.window {
+        while in_queue < window {
             let Some(o) = self.out.get_mut(&number) else {
                 break;
             };
@@ -1002,6 +1066,7 @@ impl Transfers {
                         },
                     );
                     self.channels.queued(next, channel);
+                    self.hops.queued(next, now);
                     in_queue += 1;
                     queued += 1;
                 }
@@ -1090,6 +1155,7 @@ impl Transfers {
                 channel,
             } => {
                 self.channels.left(next, channel);
+                self.hops.left(next, acked, now);
                 if acked {
                     self.channels.acked(next, channel, (self.me, number));
                 }
@@ -1101,6 +1167,7 @@ impl Transfers {
                 channel,
             } => {
                 self.channels.left(next, channel);
+                self.hops.left(next, acked, now);
                 let Some(o) = self.out.get_mut(&number) else {
                     return;
                 };

@@ -23,6 +23,9 @@ pub const TYPES: [(&str, u32); 7] = [
 /// Full name of [`Fragment`] (`TYPES`' last).
 pub const FRAGMENT: &str = TYPES[6].0;
 
+/// Full name of [`FragmentChannel`].
+pub const CHANNEL: &str = TYPES[5].0;
+
 /// Channels a node has toward each next hop (`FragmentChannel.channel`
 /// is 0-15).
 pub const CHANNELS: u8 = 16;
