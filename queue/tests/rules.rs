@@ -1023,3 +1023,46 @@ fn messages_acknowledged_another_way_leave_their_queue_and_a_later_link_ack_find
     assert_eq!(acked, vec![2]);
     assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
 }
+
+/// `withdraw_where` takes the chosen messages back out of their queue,
+/// sent or not, with no ack and no expiry: only the queue's size tells of
+/// it, and an ack of the link that comes later finds nothing.
+#[test]
+fn messages_withdrawn_leave_with_no_ack_and_no_expiry() {
+    let mut status = entry("Status");
+    status.ack = Some(true);
+    let mut node = Node::new(1, vec![status]);
+    let ids: Vec<_> = (0..3)
+        .map(|i| node.push("Status", 1, 5, i).unwrap())
+        .collect();
+    let codec = node.manager.codec().clone();
+    node.clock.advance_seconds(1.0);
+    let each = codec.size(&node.message("Status", 1, 5, 0)).unwrap() as u32;
+    let tx = node.request(each, 1, -1);
+    assert_eq!(tx.frame.len(), 1);
+    node.drain();
+    let taken = node
+        .manager
+        .withdraw_where("test.queue.Status", |id, _| id != ids[1])
+        .unwrap();
+    assert_eq!(taken.len(), 2);
+    assert!(taken.contains(&ids[0]) && taken.contains(&ids[2]));
+    let events = node.drain();
+    assert!(acked_by(&events).is_empty(), "{events:?}");
+    assert!(
+        !events
+            .iter()
+            .any(|e| matches!(e, QueueEvent::Expired { .. })),
+        "{events:?}"
+    );
+    assert_eq!(sizes(&events, 1), vec![1]);
+    assert_eq!(node.manager.size("test.queue.Status").unwrap(), 1);
+    // The link's ack of the frame sent: nothing withdrawn is credited.
+    node.manager.handle_modem_receive(&ack_for(&[0], 5, 1), 0);
+    let credited: Vec<u32> = acked_by(&node.drain()).iter().map(|a| a.0).collect();
+    assert!(credited.iter().all(|&s| s == 1), "{credited:?}");
+    assert!(node
+        .manager
+        .withdraw_where("test.Nope", |_, _| true)
+        .is_err());
+}
