@@ -10,7 +10,7 @@
 //! of this node's fragments may wait in the queue toward it:
 //!
 //! - *answering* (the start, and after any ack from it): the window;
-//! - *silent*: messages toward it waited `silence` with no ack from it;
+//! - *silent*: messages sent toward it waited `silence` with no ack from it;
 //!   the network layer takes them back out of the queue, and none goes
 //!   toward it for four times `silence`;
 //! - *probing*, after that: one fragment (and the channel's binding); an
@@ -73,21 +73,30 @@ impl Hops {
         }
     }
 
-    /// A message toward `hop` entered the queue at `now`.
-    pub fn queued(&mut self, hop: i32, now: Micros) {
-        let h = self.hops.entry(hop).or_default();
-        h.outstanding += 1;
-        h.waiting_since.get_or_insert(now);
+    /// A message toward `hop` entered the queue.
+    pub fn queued(&mut self, hop: i32) {
+        self.hops.entry(hop).or_default().outstanding += 1;
     }
 
-    /// A message toward `hop` left the queue at `now`, acknowledged or not
+    /// A message toward `hop` went on the water at `now`: from then on, its
+    /// ack (or another) is awaited. One that waits for a frame (behind
+    /// stronger traffic) does not count.
+    pub fn sent(&mut self, hop: i32, now: Micros) {
+        let h = self.hops.entry(hop).or_default();
+        if h.outstanding > 0 {
+            h.waiting_since.get_or_insert(now);
+        }
+    }
+
+    /// A message toward `hop` left the queue, acknowledged or not
     /// (expired, taken back).
-    pub fn left(&mut self, hop: i32, acked: bool, now: Micros) {
+    pub fn left(&mut self, hop: i32, acked: bool) {
         let h = self.hops.entry(hop).or_default();
         h.outstanding = h.outstanding.saturating_sub(1);
         if acked {
             h.mode = Mode::Answering;
-            h.waiting_since = (h.outstanding > 0).then_some(now);
+            // Those still queued count from their next sending.
+            h.waiting_since = None;
         } else if h.outstanding == 0 {
             h.waiting_since = None;
         }
@@ -101,7 +110,7 @@ impl Hops {
             match h.mode {
                 Mode::Silent { until } if until <= now => {
                     h.mode = Mode::Probing;
-                    h.waiting_since = (h.outstanding > 0).then_some(now);
+                    h.waiting_since = None;
                 }
                 Mode::Silent { .. } => {}
                 Mode::Answering | Mode::Probing => {
@@ -140,39 +149,49 @@ mod tests {
     #[test]
     fn a_hop_that_never_acks_falls_silent_then_is_probed() {
         let mut hops = Hops::new(100 * S);
-        hops.queued(9, 0);
-        hops.queued(9, 10 * S);
-        assert_eq!(hops.review(99 * S), Vec::<i32>::new());
+        hops.queued(9);
+        hops.queued(9);
+        // Queued, not sent (behind stronger traffic): not waiting.
+        assert_eq!(hops.review(1_000 * S), Vec::<i32>::new());
+        hops.sent(9, 1_000 * S);
+        hops.sent(9, 1_010 * S);
+        assert_eq!(hops.review(1_099 * S), Vec::<i32>::new());
         assert_eq!(hops.window(9, 16), 16);
-        assert_eq!(hops.review(100 * S), vec![9]);
+        assert_eq!(hops.review(1_100 * S), vec![9]);
         assert_eq!(hops.window(9, 16), 0);
         // Taken back out of the queue.
-        hops.left(9, false, 100 * S);
-        hops.left(9, false, 100 * S);
-        assert_eq!(hops.review(499 * S), Vec::<i32>::new());
+        hops.left(9, false);
+        hops.left(9, false);
+        assert_eq!(hops.review(1_499 * S), Vec::<i32>::new());
         assert_eq!(hops.window(9, 16), 0);
-        assert_eq!(hops.review(500 * S), Vec::<i32>::new());
+        assert_eq!(hops.review(1_500 * S), Vec::<i32>::new());
         assert_eq!(hops.window(9, 16), 1, "probed");
-        hops.queued(9, 510 * S);
-        assert_eq!(hops.review(610 * S), vec![9], "silent again");
-        hops.left(9, false, 610 * S);
+        hops.queued(9);
+        hops.sent(9, 1_510 * S);
+        assert_eq!(hops.review(1_610 * S), vec![9], "silent again");
+        hops.left(9, false);
         assert_eq!(hops.window(9, 16), 0);
     }
 
     #[test]
     fn an_ack_keeps_a_hop_answering_and_ends_a_probe() {
         let mut hops = Hops::new(100 * S);
-        hops.queued(2, 0);
-        hops.queued(2, 0);
-        hops.left(2, true, 90 * S);
-        // The one still waiting counts from the ack.
-        assert_eq!(hops.review(180 * S), Vec::<i32>::new());
-        assert_eq!(hops.review(190 * S), vec![2]);
-        hops.left(2, false, 190 * S);
-        assert_eq!(hops.review(590 * S), Vec::<i32>::new());
+        hops.queued(2);
+        hops.queued(2);
+        hops.sent(2, 0);
+        hops.sent(2, 0);
+        hops.left(2, true);
+        // The one still queued counts from its next sending.
+        assert_eq!(hops.review(500 * S), Vec::<i32>::new());
+        hops.sent(2, 500 * S);
+        assert_eq!(hops.review(599 * S), Vec::<i32>::new());
+        assert_eq!(hops.review(600 * S), vec![2]);
+        hops.left(2, false);
+        assert_eq!(hops.review(1_000 * S), Vec::<i32>::new());
         assert_eq!(hops.window(2, 16), 1);
-        hops.queued(2, 600 * S);
-        hops.left(2, true, 620 * S);
+        hops.queued(2);
+        hops.sent(2, 1_000 * S);
+        hops.left(2, true);
         assert_eq!(hops.window(2, 16), 16, "answering again");
         // Nothing waiting: never silent.
         assert_eq!(hops.review(10_000 * S), Vec::<i32>::new());

@@ -724,6 +724,11 @@ impl Network {
         }
         let now = self.now_hint;
         // The transfers' fragments and acks (never journaled).
+        if let (QueueEvent::Sent { id, .. }, None) = (&event, entry) {
+            if self.transfers.owns(*id) {
+                self.transfers.sent(*id, now);
+            }
+        }
         match (&event, entry) {
             (QueueEvent::Acked { id: Some(id), .. }, None) if self.transfers.owns(*id) => {
                 self.transfers.left_queue(*id, true, now);

@@ -970,7 +970,7 @@ impl Transfers {
             Ok(Some(id)) => {
                 self.queued.insert(id, binding);
                 self.channels.queued(next, channel);
-                self.hops.queued(next, now);
+                self.hops.queued(next);
                 early
             }
             Ok(None) => None,
@@ -1066,7 +1066,7 @@ impl Transfers {
                         },
                     );
                     self.channels.queued(next, channel);
-                    self.hops.queued(next, now);
+                    self.hops.queued(next);
                     in_queue += 1;
                     queued += 1;
                 }
@@ -1141,6 +1141,16 @@ impl Transfers {
         self.queued.contains_key(&id)
     }
 
+    /// Message `id` of the transfers went on the water (its next hop's
+    /// ack is awaited from now: [`super::hops`]).
+    pub fn sent(&mut self, id: MessageId, now: Micros) {
+        if let Some(Queued::Fragment { next, .. } | Queued::Channel { next, .. }) =
+            self.queued.get(&id)
+        {
+            self.hops.sent(*next, now);
+        }
+    }
+
     /// A queue event of one of the transfers' messages (`acked`: the next
     /// hop took it; otherwise it left the queue untaken: expired or
     /// dropped).
@@ -1155,7 +1165,7 @@ impl Transfers {
                 channel,
             } => {
                 self.channels.left(next, channel);
-                self.hops.left(next, acked, now);
+                self.hops.left(next, acked);
                 if acked {
                     self.channels.acked(next, channel, (self.me, number));
                 }
@@ -1167,7 +1177,7 @@ impl Transfers {
                 channel,
             } => {
                 self.channels.left(next, channel);
-                self.hops.left(next, acked, now);
+                self.hops.left(next, acked);
                 let Some(o) = self.out.get_mut(&number) else {
                     return;
                 };
