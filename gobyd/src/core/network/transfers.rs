@@ -834,21 +834,22 @@ impl Transfers {
         }
         let numbers: Vec<u16> = self.out.keys().copied().collect();
         for number in numbers {
-            let Some(hop) = self
-                .out
-                .get(&number)
-                .and_then(|o| table.link_dest(o.dest).ok())
-            else {
-                // open_channel says why.
-                let _ = self.open_channel(number, outbox, table, now);
+            let Some(o) = self.out.get(&number).filter(|o| o.expires > now) else {
                 continue;
             };
-            let window = self.hops.window(hop, self.settings.window);
-            let waiting = in_queue.get(&hop).copied().unwrap_or(0);
+            let next = match table.link_dest(o.dest) {
+                Ok(next) => next,
+                Err(reason) => {
+                    tracing::warn!("transfer to node {}: {reason}", o.dest);
+                    continue;
+                }
+            };
+            let window = self.hops.window(next, self.settings.window);
+            let waiting = in_queue.get(&next).copied().unwrap_or(0);
             if window == 0 || waiting >= window {
                 continue;
             }
-            let Some((next, channel)) = self.open_channel(number, outbox, table, now) else {
+            let Some(channel) = self.open_channel(number, next, outbox, now) else {
                 continue;
             };
             let queued = self.queue_fragments(number, next, channel, waiting, window, outbox, now);
@@ -910,31 +911,20 @@ impl Transfers {
         }
     }
 
-    /// The channel toward its next hop on which transfer `number`'s
+    /// The channel toward next hop `next` on which transfer `number`'s
     /// fragments may go now: `None` while there is none (its binding is
-    /// queued, or waits for the next hop's ack, or every channel is taken,
-    /// or the route does not reach its destination).
+    /// queued, or waits for the next hop's ack, or every channel is taken).
     fn open_channel(
         &mut self,
         number: u16,
+        next: i32,
         outbox: &mut Outbox,
-        table: &RouteTable,
         now: Micros,
-    ) -> Option<(i32, u8)> {
+    ) -> Option<u8> {
         let o = self.out.get(&number)?;
-        if o.expires <= now {
-            return None;
-        }
-        let next = match table.link_dest(o.dest) {
-            Ok(next) => next,
-            Err(reason) => {
-                tracing::warn!("transfer to node {}: {reason}", o.dest);
-                return None;
-            }
-        };
         let identity = (self.me, number);
         let channel = match self.channels.find(next, identity) {
-            Some(ChannelState::Open(c)) => return Some((next, c)),
+            Some(ChannelState::Open(c)) => return Some(c),
             Some(ChannelState::Early(c) | ChannelState::Binding(c)) => c,
             None => self.channels.bind(next, identity, o.expires)?,
         };
@@ -943,7 +933,7 @@ impl Transfers {
             self.channels.find(next, identity),
             Some(ChannelState::Early(_))
         )
-        .then_some((next, channel));
+        .then_some(channel);
         let binding = Queued::Channel {
             number,
             next,
